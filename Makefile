@@ -1,0 +1,20 @@
+# The two commands a newcomer needs:
+#   make demo   set up, then run goal_graphs/pick_and_place.yaml end to end on the MuJoCo Franka
+#   make test   set up, then check the plane boundary and run the test suite
+.PHONY: setup demo test bench clean
+
+setup:
+	@scripts/setup.sh
+
+demo: setup
+	.venv/bin/phyagentos run goal_graphs/pick_and_place.yaml --workspace ws/
+
+test: setup
+	.venv/bin/lint-imports
+	.venv/bin/pytest -q
+
+bench: setup
+	.venv/bin/python bench/run_all.py
+
+clean:
+	rm -rf ws/ bench/results/ .pytest_cache

@@ -1,0 +1,268 @@
+"""Bare pick-and-place on DEFAULT_SCENE using only phyagentos.targets and phyagentos.motion.
+
+No framework, no behaviour trees: this is the floor the orchestrated version is compared
+against. Sequence: home -> plan to pregrasp -> Cartesian approach -> close -> Cartesian
+lift -> plan the transfer over the wall with the cube attached -> Cartesian lower ->
+open -> Cartesian retreat. The cube must end inside the goal region.
+
+Usage::
+
+    python bench/bare_pick_and_place.py [--runs 3] [--seed 0] [--plan-repeats 30]
+
+Prints a table and writes bench/results/bare_pick_and_place.json. The core is
+``run_bare_pick_and_place(seed=0) -> dict`` (wall-time split in seconds: ik_s,
+planning_s, timing_s, simulation_s, total_s; sim_time_s; per-call medians).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+_ROOT = Path(__file__).resolve().parents[1]
+if str(_ROOT) not in sys.path:
+    sys.path.insert(0, str(_ROOT))
+
+from phyagentos.motion import (  # noqa: E402
+    DEFAULT_ACCELERATION_LIMITS,
+    CollisionChecker,
+    cartesian_path,
+    hand_yaw,
+    last_plan_stats,
+    place_pose,
+    plan_path,
+    retime,
+    solve_ik,
+    top_down_grasp,
+)
+from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget, SceneSpec  # noqa: E402
+
+RESULTS = _ROOT / "bench" / "results" / "bare_pick_and_place.json"
+
+
+class _Clock:
+    """Accumulates wall time per category."""
+
+    def __init__(self) -> None:
+        self.s = {"ik": 0.0, "planning": 0.0, "timing": 0.0, "simulation": 0.0, "setup": 0.0}
+
+    def run(self, cat: str, fn, *args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self.s[cat] += time.perf_counter() - t
+
+
+def run_bare_pick_and_place(
+    seed: int = 0,
+    *,
+    scene: SceneSpec = DEFAULT_SCENE,
+    object_name: str = "cube",
+    region_name: str = "goal",
+    planner: str = "RRTConnect",
+    margin_m: float = 0.01,
+    approach_height_m: float = 0.10,
+) -> dict:
+    """Run one pick-and-place and return timings; raises AssertionError on failure.
+
+    Returns a dict with wall-time split (``ik_s``, ``planning_s``, ``timing_s``,
+    ``simulation_s``, ``setup_s``, ``total_s``), ``sim_time_s``, per-call medians
+    (``ik_iterations_median``, ``ik_ms_median``, ``plan_ms_median``), counts, the final
+    cube position and the tracking errors of each executed trajectory.
+    """
+    clock = _Clock()
+    t_start = time.perf_counter()
+    ik_iters: list[int] = []
+    ik_ms: list[float] = []
+    plan_ms: list[float] = []
+    tracking: list[float] = []
+    unexpected: list = []
+
+    target = clock.run("setup", MuJoCoTarget, "bare", scene, seed=seed)
+    model = target.model
+    checker = clock.run("planning", CollisionChecker, model, margin_m=margin_m)
+    vel = target.velocity_limits()
+    acc = np.array(DEFAULT_ACCELERATION_LIMITS)
+    obj = scene.object(object_name)
+    region = scene.region(region_name)
+
+    def ik(T, q_seed):
+        t = time.perf_counter()
+        sol = solve_ik(model, q_seed=q_seed, target=T, qpos_full=target.data.qpos)
+        dt = time.perf_counter() - t
+        clock.s["ik"] += dt
+        ik_ms.append(dt * 1e3)
+        ik_iters.append(sol.iterations)
+        return sol.q
+
+    def plan(q_goal):
+        checker.set_world_state(target.data.qpos)
+        t = time.perf_counter()
+        P = plan_path(checker, target.arm_qpos(), q_goal, planner=planner, seed=seed)
+        dt = time.perf_counter() - t
+        clock.s["planning"] += dt
+        plan_ms.append(dt * 1e3)
+        return P
+
+    def cartesian(T_goal):
+        stats: dict = {}
+        t = time.perf_counter()
+        P = cartesian_path(model, q_start=target.arm_qpos(), T_goal=T_goal, qpos_full=target.data.qpos, stats=stats)
+        clock.s["ik"] += time.perf_counter() - t
+        ik_iters.extend(stats["ik_iterations"])
+        ik_ms.extend(stats["ik_solve_ms"])
+        return P
+
+    def execute(P, *, check: bool):
+        traj = clock.run("timing", retime, P, vel_limits=vel, acc_limits=acc, dt=target.timestep,
+                         checker=checker if check else None)
+        res = clock.run("simulation", target.execute_trajectory, traj, tracking_tol_rad=0.05)
+        assert res.completed, f"execution stopped: {res.reason}"
+        tracking.append(res.max_tracking_error_rad)
+        unexpected.extend(res.contacts)
+        return res
+
+    # 1. home -> pregrasp (planned)
+    T_obj = target.object_pose(object_name)
+    q_home = target.arm_qpos()
+    grasp = top_down_grasp(
+        T_obj, obj.half_extents, approach_height_m=approach_height_m,
+        current_yaw_rad=hand_yaw(target.tcp_pose()), current_q7_rad=float(q_home[6]),
+    )
+    q_pre = ik(grasp.pregrasp, q_home)
+    execute(plan(q_pre), check=True)
+    # 2. Cartesian approach, close
+    execute(cartesian(grasp.grasp), check=False)
+    g = clock.run("simulation", target.set_gripper, opening_m=0.0, settle_s=0.6)
+    assert g.grasped == object_name, f"grasp failed: {g}"
+    T_tcp_obj = np.linalg.inv(target.tcp_pose()) @ target.object_pose(object_name)
+    # 3. Cartesian lift
+    lift = np.array(target.tcp_pose())
+    lift[2, 3] += approach_height_m
+    execute(cartesian(lift), check=False)
+    # 4. transfer over the wall (planned, cube attached)
+    T_place = place_pose(region.center, obj.half_extents, T_tcp_object=T_tcp_obj, yaw_rad=grasp.yaw_rad)
+    T_preplace = T_place.copy()
+    T_preplace[2, 3] += approach_height_m
+    q_preplace = ik(T_preplace, target.arm_qpos())
+    checker.attach(object_name, T_tcp_obj)
+    execute(plan(q_preplace), check=True)
+    checker.detach()
+    # 5. Cartesian lower, open, retreat
+    execute(cartesian(T_place), check=False)
+    g = clock.run("simulation", target.set_gripper, opening_m=0.04, settle_s=0.5)
+    assert g.grasped is None, f"object still held after opening: {g}"
+    retreat = np.array(target.tcp_pose())
+    retreat[2, 3] += approach_height_m
+    execute(cartesian(retreat), check=False)
+
+    # verify
+    p = target.object_pose(object_name)[:3, 3]
+    inside = region.contains_xy(p[:2])
+    resting = abs(p[2] - obj.rest_z) < 0.005
+    rel = target.snapshot()["relations"]
+    assert inside and resting, f"cube not in region: position {p.round(4).tolist()}, region {region}"
+    assert {"subject": object_name, "relation": "inside", "object": region_name} in rel, rel
+    total = time.perf_counter() - t_start
+    sim_time = target.sim_time
+    target.close()
+    return {
+        "seed": seed,
+        "success": True,
+        "ik_s": clock.s["ik"],
+        "planning_s": clock.s["planning"],
+        "timing_s": clock.s["timing"],
+        "simulation_s": clock.s["simulation"],
+        "setup_s": clock.s["setup"],
+        "total_s": total,
+        "sim_time_s": sim_time,
+        "realtime_factor": sim_time / total,
+        "ik_calls": len(ik_ms),
+        "ik_iterations_median": float(statistics.median(ik_iters)),
+        "ik_ms_median": float(statistics.median(ik_ms)),
+        "ik_ms_per_iteration": float(sum(ik_ms) / max(1, sum(ik_iters))),
+        "plan_calls": len(plan_ms),
+        "plan_ms_median": float(statistics.median(plan_ms)),
+        "plan_ms": plan_ms,
+        "max_tracking_error_rad": max(tracking),
+        "unexpected_contacts": sorted({tuple(c) for c in unexpected}),
+        "cube_final_position": [float(x) for x in p],
+    }
+
+
+def plan_over_wall_benchmark(repeats: int = 30, planner: str = "RRTConnect", margin_m: float = 0.01) -> dict:
+    """Median/percentiles of plan_path over the wall (pregrasp above the cube to above
+    the goal, cube attached), one seed per repeat."""
+    target = MuJoCoTarget("plan-bench", DEFAULT_SCENE, seed=0)
+    model = target.model
+    checker = CollisionChecker(model, margin_m=margin_m)
+    checker.set_world_state(target.data.qpos)
+    T_obj = target.object_pose("cube")
+    grasp = top_down_grasp(T_obj, (0.02, 0.02, 0.02))
+    q_a = solve_ik(model, q_seed=target.home_qpos, target=grasp.pregrasp).q
+    T_b = np.array(grasp.pregrasp)
+    T_b[:2, 3] = DEFAULT_SCENE.region("goal").center
+    q_b = solve_ik(model, q_seed=q_a, target=T_b).q
+    T_tcp_obj = np.eye(4)
+    checker.attach("cube", T_tcp_obj)
+    times = []
+    lengths = []
+    for s in range(repeats):
+        t = time.perf_counter()
+        plan_path(checker, q_a, q_b, planner=planner, seed=s)
+        times.append((time.perf_counter() - t) * 1e3)
+        lengths.append(last_plan_stats()["length_rad"])
+    target.close()
+    times.sort()
+    return {
+        "planner": planner,
+        "repeats": repeats,
+        "median_ms": statistics.median(times),
+        "p90_ms": times[int(0.9 * (len(times) - 1))],
+        "max_ms": times[-1],
+        "median_length_rad": statistics.median(lengths),
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--runs", type=int, default=3, help="measured runs after one warm-up run")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--plan-repeats", type=int, default=30)
+    ap.add_argument("--out", type=Path, default=RESULTS)
+    args = ap.parse_args(argv)
+
+    cold = run_bare_pick_and_place(seed=args.seed)
+    runs = [run_bare_pick_and_place(seed=args.seed + i) for i in range(args.runs)]
+    runs_sorted = sorted(runs, key=lambda r: r["total_s"])
+    med = runs_sorted[len(runs_sorted) // 2]
+    wall = plan_over_wall_benchmark(args.plan_repeats) if args.plan_repeats > 0 else None
+
+    keys = ["ik_s", "planning_s", "timing_s", "simulation_s", "setup_s", "total_s", "sim_time_s"]
+    print(f"{'metric':<28}{'cold':>10}{'median run':>12}")
+    for k in keys:
+        print(f"{k:<28}{cold[k]:>10.3f}{med[k]:>12.3f}")
+    for k in ["ik_calls", "ik_iterations_median", "ik_ms_median", "ik_ms_per_iteration", "plan_ms_median",
+              "max_tracking_error_rad", "realtime_factor"]:
+        print(f"{k:<28}{cold[k]:>10.3f}{med[k]:>12.3f}")
+    if wall:
+        print(f"RRTConnect over the wall ({wall['repeats']} seeds): median {wall['median_ms']:.1f} ms, "
+              f"p90 {wall['p90_ms']:.1f} ms, max {wall['max_ms']:.1f} ms")
+    print(f"cube final position {med['cube_final_position']}, unexpected contacts {med['unexpected_contacts']}")
+
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    out = {"cold": cold, "median_run": med, "runs": runs, "plan_over_wall": wall}
+    args.out.write_text(json.dumps(out, indent=2))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,80 @@
+"""Session Compiler: goal-graph nodes become pending sessions in the workspace.
+
+A session is the Agent's contract with the Runtime: goal node, skill and runtime,
+target, parameters, acceptance criteria, limits, scene and seed. It is written only
+through :meth:`Workspace.submit_session`, the one validated submit path.
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+from datetime import datetime, timezone
+from typing import Any
+
+from phyagentos.protocol import Limits, SessionRecord, Workspace
+from phyagentos.protocol.lifecycle import utc_now
+
+from .criteria import parse_criteria
+from .goal_graph import GoalGraph, GoalNode
+
+__all__ = ["SessionCompiler", "new_run_id"]
+
+logger = logging.getLogger(__name__)
+
+
+def new_run_id() -> str:
+    """A sortable, unique run id such as ``r20261121T152233-9f3a``."""
+    return "r" + datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S") + "-" + secrets.token_hex(2)
+
+
+class SessionCompiler:
+    """Compiles goal-graph nodes of one run into sessions.
+
+    Args:
+        workspace: the protocol workspace.
+        graph: the validated goal graph.
+        run_id: the run the sessions belong to.
+        seed: base seed; node ``i`` gets ``seed + i`` so episodes are reproducible.
+    """
+
+    def __init__(self, workspace: Workspace, graph: GoalGraph, run_id: str, *, seed: int | None = 0):
+        self.workspace = workspace
+        self.graph = graph
+        self.run_id = run_id
+        self.seed = seed
+
+    def compile_node(self, node: GoalNode, *, parent: SessionRecord | None = None,
+                     parameters: dict[str, Any] | None = None) -> SessionRecord:
+        """Build and submit the session for ``node`` (a child of ``parent`` on replan).
+
+        Raises:
+            VerifierError: the node's acceptance criteria do not parse (checked
+                here so a bad criterion never reaches the runtime).
+            ProtocolError: the submit path refused the record.
+        """
+        parse_criteria(node.accept, where=f"{self.graph.path}:{node.line} accept")
+        index = self.graph.node_ids.index(node.id)
+        generation = 1 if parent is None else int(parent.session_id.rsplit("-", 1)[1]) + 1
+        now = utc_now()
+        record = SessionRecord(
+            session_id=f"{self.run_id}-{node.id}-{generation}",
+            run_id=self.run_id,
+            goal_graph=str(self.graph.path) if self.graph.path else None,
+            node=node.id,
+            parent_session_id=parent.session_id if parent else None,
+            depends_on=list(node.depends_on),
+            skill=node.skill,
+            target=node.target,
+            parameters=dict(parameters if parameters is not None else node.params),
+            accept=node.accept,
+            limits=Limits(**node.limits),
+            scene=self.graph.scene,
+            seed=None if self.seed is None else self.seed + index,
+            state="pending",
+            created_at=now,
+            updated_at=now,
+        )
+        self.workspace.submit_session(record)
+        logger.info("submitted session %s (node %s, skill %s)", record.session_id, node.id, node.skill)
+        return record

@@ -1,0 +1,123 @@
+"""Exception hierarchy: one root, one subclass per subsystem.
+
+Every message says what was wrong, where (file and line for YAML inputs) and,
+where there is a finite set, the valid choices.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = [
+    "PhyAgentOSError",
+    "ProtocolError",
+    "DocumentError",
+    "GoalGraphError",
+    "LifecycleError",
+    "SkillError",
+    "PreflightError",
+    "TargetError",
+    "MotionError",
+    "IKError",
+    "PlanningError",
+    "TimingError",
+    "VerifierError",
+    "SafetyError",
+    "SupervisorError",
+    "format_location",
+    "format_choices",
+]
+
+
+def format_location(path: str | Path | None, line: int | None = None) -> str:
+    """Return ``"path:line"`` (1-based line), ``"path"`` or ``""``."""
+    if path is None:
+        return ""
+    return f"{path}:{line}" if line is not None else str(path)
+
+
+def format_choices(choices) -> str:
+    """Return the sorted valid choices as ``"'a', 'b'"`` for error messages."""
+    return ", ".join(repr(c) for c in sorted(choices))
+
+
+class PhyAgentOSError(Exception):
+    """Root of every error PhyAgentOS raises on purpose."""
+
+
+class ProtocolError(PhyAgentOSError):
+    """A protocol document or workspace could not be read, validated or written."""
+
+
+class _Located:
+    """Mixin: a message prefixed with ``path:line``; keeps ``path`` and ``line``."""
+
+    def __init__(self, message: str, *, path: str | Path | None = None, line: int | None = None):
+        self.path = Path(path) if path is not None else None
+        self.line = line
+        self.detail = message
+        loc = format_location(path, line)
+        super().__init__(f"{loc}: {message}" if loc else message)
+
+
+class DocumentError(_Located, ProtocolError):
+    """A protocol document is malformed; carries ``path`` and 1-based ``line``.
+
+    The document on disk is never modified when this is raised.
+    """
+
+
+class GoalGraphError(_Located, PhyAgentOSError):
+    """A goal graph is invalid; carries ``path`` and 1-based ``line`` when known."""
+
+
+class LifecycleError(PhyAgentOSError):
+    """An illegal session lifecycle transition was requested."""
+
+
+class SkillError(_Located, PhyAgentOSError):
+    """A skill manifest or behaviour tree is invalid (``path``/``line`` when known)."""
+
+
+class PreflightError(PhyAgentOSError):
+    """Compatibility preflight rejected a session (``items`` lists what is missing)."""
+
+    def __init__(self, message: str, items: list | None = None):
+        self.items = list(items or [])
+        super().__init__(message)
+
+
+class TargetError(PhyAgentOSError):
+    """A target failed to build, observe, or execute a command."""
+
+
+class MotionError(PhyAgentOSError):
+    """Root for IK, planning and time-parameterisation failures."""
+
+
+class IKError(MotionError):
+    """Inverse kinematics did not converge to the requested pose."""
+
+
+class PlanningError(MotionError):
+    """No collision-free joint-space path was found (or start/goal invalid)."""
+
+
+class TimingError(MotionError):
+    """Time parameterisation failed or produced a trajectory that is not collision free."""
+
+
+class VerifierError(_Located, PhyAgentOSError):
+    """Acceptance criteria are malformed or evidence is missing (``path``/``line`` when known)."""
+
+
+class SafetyError(PhyAgentOSError):
+    """A SafetyGuard check rejected a command (``code`` is the violation code)."""
+
+    def __init__(self, message: str, *, code: str):
+        self.code = code
+        super().__init__(f"[{code}] {message}")
+
+
+class SupervisorError(PhyAgentOSError):
+    """The WatchdogSupervisor could not claim, run, or write back a session."""

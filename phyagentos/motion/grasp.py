@@ -1,0 +1,184 @@
+"""Grasp and place poses for boxes with a parallel gripper, tcp frame conventions.
+
+tcp frame (site ``tcp`` of the scene): origin midway between the fingertip pads, z axis
+out of the gripper (approach direction), y axis along the finger motion (the closing
+direction), x = y x z. A *top-down* pose has z = world -z; its *yaw* is the angle of its
+x axis in the world xy plane, so yaw 0 is ``R = diag(1, -1, -1)`` (the home pose).
+
+Joint 7 rotates the hand about the tcp z axis: with z pointing down, increasing q7 by
+``d`` changes the hand yaw by ``-d``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from phyagentos.errors import IKError
+
+__all__ = [
+    "GraspPlan",
+    "top_down_grasp",
+    "place_pose",
+    "top_down_rotation",
+    "hand_yaw",
+    "FINGERTIP_BELOW_TCP_M",
+    "JOINT7_RANGE_RAD",
+]
+
+#: Distance from the tcp to the lowest point of the fingertips along tcp z, metres.
+FINGERTIP_BELOW_TCP_M = 0.015
+#: Depth of the finger pads above the tcp before the finger base starts, metres.
+PAD_DEPTH_ABOVE_TCP_M = 0.035
+#: Franka joint 7 range, rad.
+JOINT7_RANGE_RAD = (-2.8973, 2.8973)
+
+
+@dataclass(frozen=True)
+class GraspPlan:
+    """Top-down grasp of a box.
+
+    Attributes:
+        grasp: ``(4, 4)`` world tcp pose at which to close the fingers.
+        pregrasp: ``(4, 4)`` the same orientation, ``approach_height_m`` higher.
+        yaw_rad: hand yaw of both poses (rad).
+        width_m: box width across the fingers (m); close below ``width_m / 2`` per finger.
+    """
+
+    grasp: np.ndarray
+    pregrasp: np.ndarray
+    yaw_rad: float
+    width_m: float
+
+
+def top_down_rotation(yaw: float) -> np.ndarray:
+    """(3, 3) rotation of a top-down tcp with hand yaw ``yaw`` rad."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
+
+
+def hand_yaw(T_tcp: np.ndarray) -> float:
+    """Yaw (rad) of the tcp x axis in the world xy plane."""
+    return float(math.atan2(T_tcp[1, 0], T_tcp[0, 0]))
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def top_down_grasp(
+    T_object: np.ndarray,
+    half_extents: Sequence[float],
+    *,
+    approach_height_m: float = 0.10,
+    current_yaw_rad: float = 0.0,
+    current_q7_rad: float | None = None,
+    support_z_m: float | None = None,
+    tip_clearance_m: float = 0.004,
+) -> GraspPlan:
+    """Top-down grasp of an upright box.
+
+    The fingers close across the box's shorter horizontal side. Among the symmetric
+    yaws (every 180 deg, or 90 deg for a square footprint) the one closest to
+    ``current_yaw_rad`` is chosen; if ``current_q7_rad`` is given, yaws that would push
+    joint 7 (``q7 - delta_yaw``) outside its range are skipped. The tcp goes to the box
+    centre, raised if needed so the fingertips stay ``tip_clearance_m`` above the
+    support (``support_z_m``, default: the box bottom) and the box top does not reach the
+    finger base.
+
+    Args:
+        T_object: ``(4, 4)`` world pose of the box centre (z axis roughly up).
+        half_extents: ``(3,)`` box half sizes, metres.
+        approach_height_m: pregrasp offset above the grasp, metres.
+
+    Raises:
+        IKError: the box is not upright or too wide for the gripper (8 cm).
+    """
+    T = np.asarray(T_object, dtype=float)
+    he = np.asarray(half_extents, dtype=float).reshape(-1)
+    if T.shape != (4, 4) or he.shape != (3,):
+        raise IKError(f"T_object must be (4, 4) and half_extents (3,), got {T.shape}, {he.shape}")
+    R = T[:3, :3]
+    # the box axis closest to world z must be its z axis (upright box)
+    if abs(R[2, 2]) < math.cos(math.radians(20)):
+        raise IKError("top_down_grasp needs an upright box (its z axis within 20 deg of vertical)")
+    ax = R[:2, 0] / max(np.linalg.norm(R[:2, 0]), 1e-9)
+    ay = R[:2, 1] / max(np.linalg.norm(R[:2, 1]), 1e-9)
+    # closing direction (tcp y) along the shorter side
+    closes = []
+    if he[0] <= he[1] + 1e-6:
+        closes.append((ax, 2 * he[0]))
+    if he[1] <= he[0] + 1e-6:
+        closes.append((ay, 2 * he[1]))
+    width = min(w for _, w in closes)
+    if width > 0.08 - 0.004:
+        raise IKError(f"box is {width * 100:.1f} cm wide across the fingers; the gripper opens to 8 cm")
+    cands = []
+    for axis, _ in closes:
+        for sign in (1.0, -1.0):
+            y = sign * axis
+            # tcp y = (sin yaw, -cos yaw)
+            cands.append(math.atan2(y[0], -y[1]))
+    best = None
+    for yaw in cands:
+        delta = _wrap(yaw - current_yaw_rad)
+        if current_q7_rad is not None:
+            q7 = current_q7_rad - delta
+            if not (JOINT7_RANGE_RAD[0] + 0.05 <= q7 <= JOINT7_RANGE_RAD[1] - 0.05):
+                continue
+        if best is None or abs(delta) < abs(best[0]):
+            best = (delta, yaw)
+    if best is None:
+        raise IKError("no grasp yaw keeps joint 7 inside its range")
+    yaw = _wrap(current_yaw_rad + best[0])
+    ext_z = float(np.abs(R[2, :]) @ he)
+    bottom = T[2, 3] - ext_z if support_z_m is None else support_z_m
+    top = T[2, 3] + ext_z
+    z = max(T[2, 3], bottom + FINGERTIP_BELOW_TCP_M + tip_clearance_m, top - PAD_DEPTH_ABOVE_TCP_M)
+    G = np.eye(4)
+    G[:3, :3] = top_down_rotation(yaw)
+    G[:3, 3] = [T[0, 3], T[1, 3], z]
+    P = G.copy()
+    P[2, 3] += approach_height_m
+    G.setflags(write=False)
+    P.setflags(write=False)
+    return GraspPlan(grasp=G, pregrasp=P, yaw_rad=yaw, width_m=float(width))
+
+
+def place_pose(
+    region_center: Sequence[float],
+    half_extents: Sequence[float],
+    *,
+    T_tcp_object: np.ndarray,
+    yaw_rad: float = 0.0,
+    surface_z_m: float = 0.0,
+    clearance_m: float = 0.003,
+) -> np.ndarray:
+    """tcp pose that holds the object (grasped at ``T_tcp_object``) centred over
+    ``region_center`` (x, y) with its lowest point ``clearance_m`` above ``surface_z_m``.
+
+    Args:
+        region_center: ``(x, y)`` (or ``(x, y, z)``, z ignored) world metres.
+        half_extents: ``(3,)`` object half sizes, metres.
+        T_tcp_object: ``(4, 4)`` object pose in the tcp frame (measured after grasping).
+        yaw_rad: hand yaw of the top-down place pose.
+
+    Returns:
+        ``(4, 4)`` world tcp pose (top-down).
+    """
+    c = np.asarray(region_center, dtype=float).reshape(-1)
+    he = np.asarray(half_extents, dtype=float).reshape(-1)
+    To = np.asarray(T_tcp_object, dtype=float)
+    if c.shape[0] not in (2, 3) or he.shape != (3,) or To.shape != (4, 4):
+        raise IKError("place_pose: region_center (2,), half_extents (3,), T_tcp_object (4, 4) expected")
+    Rt = top_down_rotation(yaw_rad)
+    Ro = Rt @ To[:3, :3]
+    ext_z = float(np.abs(Ro[2, :]) @ he)
+    p_obj = np.array([c[0], c[1], surface_z_m + ext_z + clearance_m])
+    T = np.eye(4)
+    T[:3, :3] = Rt
+    T[:3, 3] = p_obj - Rt @ To[:3, 3]
+    return T

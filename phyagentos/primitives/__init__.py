@@ -1,0 +1,50 @@
+"""Primitive leaves of behaviour trees, registered by the name trees use.
+
+============  ==========================================================
+name          behaviour
+============  ==========================================================
+observe       snapshot the world (blackboard + ENVIRONMENT.md)
+compute_grasp top-down grasp / pre-grasp tcp poses from the observation
+compute_place place / pre-place tcp poses over a region
+solve_ik      mink IK to a blackboard tcp pose
+plan_path     OMPL joint-space path with MuJoCo collision checking
+retime_path   toppra time-optimal timing under joint limits
+execute_trajectory  stream a timed trajectory with a tracking check
+cartesian_move      straight-line tcp approach / lift / retreat
+gripper       open / close (closing checks the grasp)
+check_holding succeed only while the object is held
+hold          keep still for a simulated duration
+============  ==========================================================
+"""
+
+from .base import Primitive, PrimitiveFailure
+from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
+from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
+from .motion import PlanPath, RetimePath, SolveIK
+from .perception import ComputeGrasp, ComputePlace, Observe
+
+__all__ = [
+    "PRIMITIVES",
+    "Primitive",
+    "PrimitiveFailure",
+    "SkillContext",
+    "CancelToken",
+    "MotionSettings",
+    "Profiler",
+    "TraceRecorder",
+]
+
+#: Primitive name (as used in ``trees/*.yaml``) -> behaviour class.
+PRIMITIVES = {
+    "observe": Observe,
+    "compute_grasp": ComputeGrasp,
+    "compute_place": ComputePlace,
+    "solve_ik": SolveIK,
+    "plan_path": PlanPath,
+    "retime_path": RetimePath,
+    "execute_trajectory": ExecuteTrajectory,
+    "cartesian_move": CartesianMove,
+    "gripper": Gripper,
+    "check_holding": CheckHolding,
+    "hold": Hold,
+}

@@ -1,0 +1,140 @@
+"""Motion leaves: mink IK, OMPL planning and toppra retiming.
+
+They compute and write to the blackboard; execution is a separate leaf so that
+a tree can re-plan without re-executing, and so each stage is timed on its own
+(``ik``, ``planning``, ``timing`` in the session's profile).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from phyagentos.motion.collision import CollisionChecker
+from phyagentos.motion.ik import solve_ik
+from phyagentos.motion.planner import plan_path
+from phyagentos.motion.retime import franka_limits, retime
+
+from .base import Primitive
+
+__all__ = ["SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object"]
+
+
+def held_object(target) -> str | None:
+    """Name of the object the gripper holds now, from the target's own state query."""
+    for rel in target.snapshot().get("relations", []):
+        if rel.get("relation") == "holding":
+            return rel.get("object")
+    return None
+
+
+def session_checker(ctx) -> CollisionChecker:
+    """A collision checker synced to the target's current world.
+
+    Whatever the gripper holds is attached at its current offset so transfers are
+    checked with the object in hand. The checker is cached on the context:
+    building one copies the model's data, once per session is enough.
+    """
+    target = ctx.target
+    checker = getattr(ctx, "_checker", None)
+    if checker is None:
+        checker = CollisionChecker(target.model, arm_joint_names=target.arm_joint_names)
+        ctx._checker = checker
+    checker.set_world_state(target.data.qpos)
+    checker.detach()
+    obj = held_object(target)
+    if obj is not None:
+        checker.attach(obj, np.linalg.inv(target.tcp_pose()) @ target.object_pose(obj))
+    return checker
+
+
+class SolveIK(Primitive):
+    """Joint configuration (7,) rad reaching the (4, 4) tcp pose at blackboard key ``pose``.
+
+    Args:
+        pose: blackboard key of the target tcp pose (world frame).
+        out: blackboard key written with the joint solution.
+        position_tol_m, orientation_tol_rad: convergence tolerances.
+    """
+
+    def __init__(self, name: str, *, pose: str, out: str = "q_goal", position_tol_m: float = 1e-3,
+                 orientation_tol_rad: float = 1e-2):
+        super().__init__(name)
+        self.pose_key, self.out = pose, out
+        self.position_tol_m, self.orientation_tol_rad = float(position_tol_m), float(orientation_tol_rad)
+        self.reads(pose)
+        self.writes(out)
+
+    def step(self):
+        target = self.ctx.target
+        with self.ctx.profiler.section("ik"):
+            sol = solve_ik(target.model, q_seed=target.arm_qpos(), target=self.get(self.pose_key),
+                           position_tol_m=self.position_tol_m, orientation_tol_rad=self.orientation_tol_rad)
+        self.set(self.out, sol.q)
+        self.ctx.trace.record("ik", pose=self.pose_key, iterations=sol.iterations, position_error_m=float(sol.position_error_m))
+
+
+class PlanPath(Primitive):
+    """Collision-free joint path from the current configuration to blackboard ``goal``.
+
+    Uses OMPL with MuJoCo collision checking; the held object (if any) is attached
+    to the gripper so the transfer is checked with it.
+
+    Args:
+        goal: blackboard key of the goal configuration (7,) rad.
+        out: blackboard key written with the (N, 7) path.
+        planner: OMPL planner name (default from the session's motion settings).
+        timeout_s: planning budget, s.
+    """
+
+    def __init__(self, name: str, *, goal: str = "q_goal", out: str = "path", planner: str | None = None,
+                 timeout_s: float | None = None):
+        super().__init__(name)
+        self.goal_key, self.out, self.planner, self.timeout_s = goal, out, planner, timeout_s
+        self.reads(goal)
+        self.writes(out)
+
+    def step(self):
+        ctx = self.ctx
+        q0 = ctx.target.arm_qpos()
+        with ctx.profiler.section("planning"):
+            checker = session_checker(ctx)
+            path = plan_path(checker, q0, self.get(self.goal_key), planner=self.planner or ctx.motion.planner,
+                             timeout_s=self.timeout_s or ctx.motion.planning_timeout_s, seed=ctx.seed)
+        self.set(self.out, path)
+        ctx.trace.record("plan", planner=self.planner or ctx.motion.planner, waypoints=int(len(path)))
+
+
+class RetimePath(Primitive):
+    """Time-optimal trajectory along blackboard ``path`` under velocity/acceleration limits (toppra).
+
+    The timed trajectory is re-checked for collisions (toppra's spline can cut
+    corners), with the held object attached.
+
+    Args:
+        path: blackboard key of the (N, 7) path.
+        out: blackboard key written with the Trajectory.
+        velocity_scale, acceleration_scale: fractions (0, 1] of the robot's limits.
+    """
+
+    def __init__(self, name: str, *, path: str = "path", out: str = "trajectory", velocity_scale: float | None = None,
+                 acceleration_scale: float | None = None):
+        super().__init__(name)
+        for label, v in (("velocity_scale", velocity_scale), ("acceleration_scale", acceleration_scale)):
+            if v is not None and not 0 < v <= 1:
+                raise ValueError(f"{label} must be in (0, 1], got {v}")
+        self.path_key, self.out = path, out
+        self.velocity_scale, self.acceleration_scale = velocity_scale, acceleration_scale
+        self.reads(path)
+        self.writes(out)
+
+    def step(self):
+        ctx = self.ctx
+        vel, acc = franka_limits()
+        vs = self.velocity_scale or ctx.motion.velocity_scale
+        as_ = self.acceleration_scale or ctx.motion.acceleration_scale
+        with ctx.profiler.section("timing"):
+            checker = session_checker(ctx)
+            traj = retime(np.asarray(self.get(self.path_key)), vel_limits=vel * vs, acc_limits=acc * as_,
+                          dt=ctx.target.model.opt.timestep, checker=checker)
+        self.set(self.out, traj)
+        ctx.trace.record("retime", duration_s=float(traj.duration), samples=int(len(traj.t)))

@@ -1,0 +1,121 @@
+"""Perception leaves: observe the world and derive grasp and place poses from it.
+
+Poses come from the observed snapshot (what the robot perceives), not from the
+simulator's ground truth, so perception error shows up as it would on hardware.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from phyagentos.motion.grasp import place_pose, top_down_grasp
+
+from .base import Primitive, PrimitiveFailure
+
+__all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose"]
+
+
+def entity_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """``((4, 4) world pose, (3,) half extents in m)`` of entity ``name`` in a snapshot.
+
+    Raises:
+        PrimitiveFailure: ``perception.not_found`` listing the entities seen.
+    """
+    import mujoco
+
+    for ent in snapshot.get("entities", []):
+        if ent["name"] == name:
+            T = np.eye(4)
+            T[:3, 3] = ent["position"]
+            mat = np.zeros(9)
+            mujoco.mju_quat2Mat(mat, np.asarray(ent["quat_wxyz"], dtype=float))
+            T[:3, :3] = mat.reshape(3, 3)
+            return T, np.asarray(ent.get("size") or (0.0, 0.0, 0.0), dtype=float)
+    seen = sorted(e["name"] for e in snapshot.get("entities", []))
+    raise PrimitiveFailure("perception.not_found", f"{name!r} is not in the observation; seen: {seen}")
+
+
+class Observe(Primitive):
+    """Snapshot the world into the blackboard (``out``) and ENVIRONMENT.md.
+
+    Args:
+        out: blackboard key for the snapshot (entities with poses, relations).
+    """
+
+    TOOLS = ("snapshot",)
+
+    def __init__(self, name: str, *, out: str = "snapshot"):
+        super().__init__(name)
+        self.out = out
+        self.writes(out)
+
+    def step(self):
+        snapshot = self.ctx.target.snapshot()
+        self.set(self.out, snapshot)
+        self.ctx.trace.record("observe", sim_time_s=snapshot.get("sim_time_s"), relations=snapshot.get("relations", []))
+        if self.ctx.on_observation is not None:
+            self.ctx.on_observation(snapshot)
+
+
+class ComputeGrasp(Primitive):
+    """Top-down grasp and pre-grasp tcp poses for ``object`` from the observation.
+
+    Args:
+        object: entity name.
+        approach_height_m: pre-grasp height above the grasp, m.
+        snapshot: blackboard key of the observation.
+        grasp, pregrasp: blackboard keys written with (4, 4) world poses of the tcp.
+    """
+
+    def __init__(self, name: str, *, object: str, approach_height_m: float = 0.10, snapshot: str = "snapshot",
+                 grasp: str = "grasp_pose", pregrasp: str = "pregrasp_pose"):
+        super().__init__(name)
+        if approach_height_m <= 0:
+            raise ValueError(f"approach_height_m must be > 0, got {approach_height_m}")
+        self.object, self.approach_height_m = object, float(approach_height_m)
+        self.snapshot_key, self.grasp_key, self.pregrasp_key = snapshot, grasp, pregrasp
+        self.reads(snapshot)
+        self.writes(grasp, pregrasp)
+
+    def step(self):
+        T_obj, half = entity_pose(self.get(self.snapshot_key), self.object)
+        plan = top_down_grasp(T_obj, half, approach_height_m=self.approach_height_m)
+        self.set(self.grasp_key, plan.grasp)
+        self.set(self.pregrasp_key, plan.pregrasp)
+        self.ctx.trace.record("grasp_pose", object=self.object, grasp=plan.grasp[:3, 3].round(4).tolist())
+
+
+class ComputePlace(Primitive):
+    """Place and pre-place tcp poses that set the held object down inside ``region``.
+
+    Args:
+        object: the held object.
+        region: target region entity.
+        approach_height_m: pre-place height above the place pose, m.
+        snapshot: blackboard key of the observation (object pose in hand, region).
+        place, preplace: blackboard keys written with (4, 4) world tcp poses.
+
+    The object's pose in the tcp frame comes from the observation and the arm's
+    proprioception, so a place session needs nothing from the pick session but
+    the world itself.
+    """
+
+    def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,
+                 snapshot: str = "snapshot", place: str = "place_pose", preplace: str = "preplace_pose"):
+        super().__init__(name)
+        self.object, self.region, self.approach_height_m = object, region, float(approach_height_m)
+        self.snapshot_key, self.place_key, self.preplace_key = snapshot, place, preplace
+        self.reads(snapshot)
+        self.writes(place, preplace)
+
+    def step(self):
+        snapshot = self.get(self.snapshot_key)
+        T_region, _ = entity_pose(snapshot, self.region)
+        T_obj, half = entity_pose(snapshot, self.object)
+        T_tcp_obj = np.linalg.inv(self.ctx.target.tcp_pose()) @ T_obj
+        T_place = place_pose(T_region[:3, 3], half, T_tcp_object=T_tcp_obj)
+        T_pre = T_place.copy()
+        T_pre[2, 3] += self.approach_height_m
+        self.set(self.place_key, T_place)
+        self.set(self.preplace_key, T_pre)
+        self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist())

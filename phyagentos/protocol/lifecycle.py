@@ -1,0 +1,160 @@
+"""Session lifecycle as a hierarchical ``transitions`` statechart.
+
+The states follow DESIGN.md. Everything between a claim and a verdict lives under
+an ``active`` parent, so ``cancel``, ``time_out`` and ``abort`` are declared once
+for all of its children::
+
+    pending ─claim─▶ active[claimed ─preflight─▶ preflight_checking ─start─▶ running
+                     ─finish─▶ finalizing ─submit─▶ awaiting_verification
+                     ─verify─▶ verifying] ─succeed/fail/replan─▶ succeeded/failed/awaiting_replan
+    awaiting_replan ─replanned─▶ replanned
+    active ─cancel─▶ cancelling ─cancelled─▶ cancelled
+    active ─time_out─▶ timed_out        active ─abort─▶ failed
+    preflight_checking ─reject─▶ rejected
+    claimed|preflight_checking ─release─▶ pending          (lease lost before actuation)
+    running|finalizing ─outcome_unknown─▶ awaiting_verification (crash during actuation:
+                                                           observe and judge, never re-run)
+
+Every transition is appended to the record's ``transitions`` list and handed to a
+``persist`` callback, so the file on disk never lags the machine.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Callable
+
+from transitions import MachineError
+from transitions.extensions import HierarchicalMachine
+
+from phyagentos.errors import LifecycleError
+
+from .schemas import SessionRecord, TERMINAL_STATES, TransitionRecord, utc_now_iso
+
+__all__ = ["SessionLifecycle", "LIFECYCLE_EVENTS", "ACTIVE_STATES", "utc_now"]
+
+logger = logging.getLogger(__name__)
+
+ACTIVE_STATES = (
+    "claimed",
+    "preflight_checking",
+    "running",
+    "finalizing",
+    "awaiting_verification",
+    "verifying",
+)
+
+_STATES = [
+    "pending",
+    {"name": "active", "children": list(ACTIVE_STATES)},
+    "cancelling",
+    "awaiting_replan",
+    *TERMINAL_STATES,
+]
+
+# (event, source, dest); names without "active_" are top-level states.
+_TRANSITIONS = [
+    ("claim", "pending", "active_claimed"),
+    ("release", ["active_claimed", "active_preflight_checking"], "pending"),
+    ("preflight", "active_claimed", "active_preflight_checking"),
+    ("reject", "active_preflight_checking", "rejected"),
+    ("start", "active_preflight_checking", "active_running"),
+    ("finish", "active_running", "active_finalizing"),
+    ("submit", "active_finalizing", "active_awaiting_verification"),
+    ("outcome_unknown", ["active_running", "active_finalizing"], "active_awaiting_verification"),
+    ("verify", "active_awaiting_verification", "active_verifying"),
+    ("succeed", "active_verifying", "succeeded"),
+    ("fail", "active_verifying", "failed"),
+    ("replan", "active_verifying", "awaiting_replan"),
+    ("replanned", "awaiting_replan", "replanned"),
+    ("cancel", ["pending", "active"], "cancelling"),
+    ("cancelled", "cancelling", "cancelled"),
+    ("time_out", ["pending", "active", "cancelling"], "timed_out"),
+    ("abort", ["active", "cancelling"], "failed"),
+]
+
+LIFECYCLE_EVENTS = tuple(sorted({t[0] for t in _TRANSITIONS}))
+
+
+utc_now = utc_now_iso  # one clock format for every protocol timestamp
+
+
+def _machine_state(state: str) -> str:
+    return f"active_{state}" if state in ACTIVE_STATES else state
+
+
+def _record_state(machine_state: str) -> str:
+    return machine_state.removeprefix("active_")
+
+
+class SessionLifecycle:
+    """The statechart of one session, bound to its :class:`SessionRecord`.
+
+    Args:
+        record: the session; its ``state`` is the machine's initial state, so a
+            lifecycle restored from disk continues where it stopped.
+        persist: called with the record after every transition (typically
+            ``Workspace.save_session``). Keyword-only because skipping it loses state.
+
+    Raises:
+        LifecycleError: on an unknown state in the record or an illegal event;
+            the message names the current state and the events valid from it.
+    """
+
+    def __init__(self, record: SessionRecord, *, persist: Callable[[SessionRecord], None] | None = None):
+        self.record = record
+        self._persist = persist
+        try:
+            self._machine = HierarchicalMachine(
+                model=self,
+                states=_STATES,
+                transitions=[list(t) for t in _TRANSITIONS],
+                initial=_machine_state(record.state),
+                auto_transitions=False,
+                model_attribute="_hsm_state",
+            )
+        except ValueError as exc:  # unknown initial state
+            raise LifecycleError(f"session {record.session_id}: unknown state {record.state!r}") from exc
+
+    @property
+    def state(self) -> str:
+        """Current lifecycle state name as stored in SESSIONS.md (e.g. ``running``)."""
+        return _record_state(self._hsm_state)
+
+    @property
+    def is_terminal(self) -> bool:
+        return self.state in TERMINAL_STATES
+
+    def allowed_events(self) -> list[str]:
+        """Events that are legal from the current state, sorted."""
+        return sorted(self._machine.get_triggers(self._hsm_state))
+
+    def fire(self, event: str, *, reason: str = "") -> str:
+        """Apply ``event``, append it to ``record.transitions`` and persist.
+
+        Returns:
+            The new state name.
+
+        Raises:
+            LifecycleError: if ``event`` is unknown or illegal in the current state.
+        """
+        if event not in LIFECYCLE_EVENTS:
+            raise LifecycleError(f"unknown lifecycle event {event!r}; valid events: {', '.join(LIFECYCLE_EVENTS)}")
+        source = self.state
+        try:
+            getattr(self, event)()
+        except MachineError:
+            raise LifecycleError(
+                f"session {self.record.session_id}: illegal transition {event!r} from state {source!r}; "
+                f"allowed from {source!r}: {', '.join(self.allowed_events()) or 'none (terminal)'}"
+            ) from None
+        now = utc_now()
+        self.record.state = self.state
+        self.record.updated_at = now
+        self.record.transitions.append(
+            TransitionRecord(at=now, source=source, dest=self.state, event=event if not reason else f"{event}: {reason}")
+        )
+        logger.debug("session %s: %s -(%s)-> %s", self.record.session_id, source, event, self.state)
+        if self._persist is not None:
+            self._persist(self.record)
+        return self.state

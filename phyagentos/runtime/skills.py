@@ -1,0 +1,121 @@
+"""Skill manifests: ``skills/<name>.yaml`` maps a skill name to its tree and needs.
+
+::
+
+    version: 1
+    name: pick
+    description: Grasp an object from the table and lift it.
+    runtime: builtin                 # SkillRuntime that executes it (SKILLRUNTIME.md)
+    tree: pick                       # trees/pick.yaml
+    requires:
+      capabilities: [arm_7dof, parallel_gripper, grasp]   # must be in the target's capabilities
+      observations: [joint_positions, object_poses]       # must be in the target's observations
+    params:
+      object: {required: true, description: name of the object to pick}
+
+Preflight compares ``requires`` with the target's entry in TARGETS.md; the
+BuiltinSkillRuntime builds ``tree`` with the session's parameters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+from phyagentos.errors import SkillError, format_choices
+from phyagentos.yamlsource import SourceMap, load_yaml
+
+__all__ = ["SkillManifest", "SkillRegistry"]
+
+_KEYS = {"version", "name", "description", "runtime", "tree", "requires", "params"}
+_REQUIRES = {"capabilities", "observations"}
+
+
+@dataclass(frozen=True)
+class SkillManifest:
+    """A parsed skill manifest (see module docstring for the file format)."""
+
+    name: str
+    description: str
+    runtime: str
+    tree: str
+    capabilities: tuple[str, ...]
+    observations: tuple[str, ...]
+    params: Mapping[str, Mapping[str, Any]]
+    path: Path
+
+    def check_params(self, params: Mapping[str, Any]) -> list[str]:
+        """Problems with session ``params`` for this skill (empty when fine)."""
+        problems = [f"missing required parameter {k!r}" for k, d in self.params.items()
+                    if d.get("required") and k not in params]
+        problems += [f"unknown parameter {k!r} (declared: {format_choices(self.params) or 'none'})"
+                     for k in params if k not in self.params]
+        return problems
+
+
+class SkillRegistry:
+    """All manifests in a ``skills/`` directory, parsed eagerly so errors surface early.
+
+    Raises:
+        SkillError: a malformed manifest (file and line), or a duplicate name.
+    """
+
+    def __init__(self, directory: str | Path):
+        self.directory = Path(directory)
+        self._skills: dict[str, SkillManifest] = {}
+        for path in sorted(self.directory.glob("*.yaml")):
+            manifest = _parse(path)
+            if manifest.name in self._skills:
+                raise SkillError(f"duplicate skill name {manifest.name!r} (also in {self._skills[manifest.name].path})", path=path)
+            self._skills[manifest.name] = manifest
+
+    def names(self) -> list[str]:
+        return sorted(self._skills)
+
+    def get(self, name: str) -> SkillManifest:
+        """The manifest of skill ``name``.
+
+        Raises:
+            SkillError: unknown skill; the message lists the valid ones.
+        """
+        try:
+            return self._skills[name]
+        except KeyError:
+            raise SkillError(f"unknown skill {name!r}; valid skills: {format_choices(self._skills)}") from None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._skills
+
+
+def _parse(path: Path) -> SkillManifest:
+    data = load_yaml(path.read_text(encoding="utf-8"), path=path, error=SkillError)
+    if not isinstance(data, SourceMap):
+        raise SkillError("a skill manifest must be a mapping", path=path, line=1)
+    for key in data:
+        if key not in _KEYS:
+            raise SkillError(f"unknown key {key!r}; valid keys: {format_choices(_KEYS)}", path=path, line=data.key_line(key))
+    for key in ("name", "tree"):
+        if not isinstance(data.get(key), str):
+            raise SkillError(f"{key!r} must be a string", path=path, line=data.key_line(key))
+    if data.get("version") != 1:
+        raise SkillError(f"unsupported version {data.get('version')!r}; supported: 1", path=path, line=data.key_line("version"))
+    requires = data.get("requires") or {}
+    if not isinstance(requires, dict):
+        raise SkillError("'requires' must be a mapping", path=path, line=data.key_line("requires"))
+    for key in requires:
+        if key not in _REQUIRES:
+            raise SkillError(f"unknown requirement {key!r}; valid: {format_choices(_REQUIRES)}", path=path, line=requires.key_line(key))
+    params = data.get("params") or {}
+    if not isinstance(params, dict):
+        raise SkillError("'params' must be a mapping", path=path, line=data.key_line("params"))
+    return SkillManifest(
+        name=data["name"],
+        description=str(data.get("description", "")),
+        runtime=str(data.get("runtime", "builtin")),
+        tree=data["tree"],
+        capabilities=tuple(requires.get("capabilities") or ()),
+        observations=tuple(requires.get("observations") or ()),
+        params={k: dict(v or {}) for k, v in params.items()},
+        path=path,
+    )

@@ -1,0 +1,94 @@
+"""Target drivers and the world state that outlives a session.
+
+A run of a goal graph is one episode: a ``place`` session must find the cube where
+the ``pick`` session left it. Real robots keep their state by existing; simulated
+targets keep it as a file (``targets/<name>/state.npz`` plus ``state.yaml`` naming
+the run and scene it belongs to), so any runner process can continue the episode.
+The first session of a new run (or a changed scene) resets the target with the
+session's seed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from phyagentos.errors import TargetError, format_choices
+from phyagentos.protocol import SessionRecord, TargetSpec
+from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.targets import MuJoCoTarget, SceneSpec
+
+__all__ = ["DRIVERS", "TargetPool", "scene_for"]
+
+logger = logging.getLogger(__name__)
+
+#: Target driver name (TARGETS.md ``driver``) -> target class.
+DRIVERS: dict[str, type] = {"mujoco_franka": MuJoCoTarget}
+
+
+def scene_for(session: SessionRecord, spec: TargetSpec) -> SceneSpec:
+    """The scene of a session: its own ``scene``, else the target's, else the default."""
+    raw = session.scene or spec.scene or None
+    return SceneSpec.from_dict(raw) if raw else SceneSpec.default()
+
+
+def _scene_hash(scene: SceneSpec) -> str:
+    return hashlib.sha256(json.dumps(scene.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
+
+
+class TargetPool:
+    """Builds targets on demand and carries their state between sessions.
+
+    Args:
+        state_dir: the workspace's ``targets/`` directory.
+    """
+
+    def __init__(self, state_dir: str | Path):
+        self.state_dir = Path(state_dir)
+        self._live: dict[str, tuple[str, Any]] = {}  # name -> (scene hash, target)
+
+    def acquire(self, session: SessionRecord, spec: TargetSpec):
+        """Return the target for ``session``, in the state the episode left it.
+
+        Raises:
+            TargetError: unknown driver (valid drivers listed) or a scene that does not build.
+        """
+        cls = DRIVERS.get(spec.driver)
+        if cls is None:
+            raise TargetError(f"unknown target driver {spec.driver!r}; valid drivers: {format_choices(DRIVERS)}")
+        scene = scene_for(session, spec)
+        key = _scene_hash(scene)
+        cached = self._live.get(spec.name)
+        if cached is None or cached[0] != key:
+            if cached is not None:
+                cached[1].close()
+            target = cls(spec.name, scene, seed=session.seed)
+            self._live[spec.name] = (key, target)
+        target = self._live[spec.name][1]
+        meta_path = self.state_dir / spec.name / "state.yaml"
+        meta = yaml.safe_load(meta_path.read_text(encoding="utf-8")) if meta_path.is_file() else None
+        if meta and meta.get("run_id") == session.run_id and meta.get("scene") == key:
+            target.load_state(self.state_dir / spec.name / "state.npz")
+            logger.debug("target %s: continuing episode of run %s", spec.name, session.run_id)
+        else:
+            target.reset(seed=session.seed)
+            logger.debug("target %s: reset for run %s (seed %s)", spec.name, session.run_id, session.seed)
+        return target
+
+    def release(self, session: SessionRecord, target) -> None:
+        """Persist the target's world state for the next session of the same run."""
+        directory = self.state_dir / target.name
+        directory.mkdir(parents=True, exist_ok=True)
+        target.save_state(directory / "state.npz")
+        key = self._live[target.name][0]
+        atomic_write_text(directory / "state.yaml", yaml.safe_dump({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
+
+    def close(self) -> None:
+        for _, target in self._live.values():
+            target.close()
+        self._live.clear()

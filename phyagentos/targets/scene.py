@@ -1,0 +1,592 @@
+"""Tabletop scene description and the MuJoCo model built from it.
+
+A scene is a Franka Panda (the model shipped inside the ``gymnasium-robotics`` wheel)
+standing at the world origin on a table whose top is the plane z = 0, plus:
+
+- objects: free-floating boxes resting on the table (:class:`ObjectSpec`);
+- regions: thin, non-colliding coloured patches on the table top (:class:`RegionSpec`);
+- obstacles: static collision boxes (:class:`ObstacleSpec`).
+
+:func:`build_scene` composes a small wrapper MJCF that includes the Franka asset files by
+absolute path, loads it into a :class:`mujoco.MjSpec` and adds everything else
+programmatically. Names in the compiled model:
+
+- arm joints ``robot:panda0_joint1`` .. ``robot:panda0_joint7`` (:data:`ARM_JOINT_NAMES`),
+  finger joints :data:`FINGER_JOINT_NAMES`, actuators ``panda0_joint1`` .. ``7`` and the
+  two finger actuators :data:`FINGER_ACTUATOR_NAMES` (always driven with the same value);
+- site ``tcp`` midway between the fingertip pads, z axis pointing out of the gripper,
+  y axis along the finger motion (:data:`TCP_SITE`);
+- object ``name``: body ``name``, geom ``name``, free joint ``name:free``;
+- region ``name``: geom ``region:name``; obstacle ``name``: geom ``obstacle:name``;
+- geoms ``table`` and ``floor``; camera ``overview``; keyframe ``home``.
+
+Units: metres, radians, kilograms, seconds. World frame: z up, origin at the robot base.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Mapping
+
+import mujoco
+import numpy as np
+
+from phyagentos.errors import TargetError, format_choices
+
+__all__ = [
+    "ObjectSpec",
+    "RegionSpec",
+    "ObstacleSpec",
+    "SceneSpec",
+    "DEFAULT_SCENE",
+    "build_scene",
+    "build_scene_spec",
+    "franka_asset_dir",
+    "ARM_JOINT_NAMES",
+    "FINGER_JOINT_NAMES",
+    "ARM_ACTUATOR_NAMES",
+    "FINGER_ACTUATOR_NAMES",
+    "ROBOT_BODY_NAMES",
+    "FINGER_BODY_NAMES",
+    "TCP_SITE",
+    "HOME_QPOS",
+    "GRIPPER_MAX_OPENING_M",
+    "TABLE_GEOM",
+    "FLOOR_GEOM",
+    "region_geom_name",
+    "obstacle_geom_name",
+    "object_joint_name",
+]
+
+log = logging.getLogger(__name__)
+
+ARM_JOINT_NAMES: tuple[str, ...] = tuple(f"robot:panda0_joint{i}" for i in range(1, 8))
+FINGER_JOINT_NAMES: tuple[str, ...] = ("robot:panda0_finger_joint1", "robot:panda0_finger_joint2")
+ARM_ACTUATOR_NAMES: tuple[str, ...] = tuple(f"panda0_joint{i}" for i in range(1, 8))
+FINGER_ACTUATOR_NAMES: tuple[str, ...] = ("r_gripper_finger_joint", "l_gripper_finger_joint")
+ROBOT_BODY_NAMES: tuple[str, ...] = tuple(f"panda0_link{i}" for i in range(8)) + (
+    "panda0_leftfinger",
+    "panda0_rightfinger",
+)
+FINGER_BODY_NAMES: tuple[str, ...] = ("panda0_leftfinger", "panda0_rightfinger")
+TCP_SITE = "tcp"
+TABLE_GEOM = "table"
+FLOOR_GEOM = "floor"
+GRIPPER_MAX_OPENING_M = 0.04
+
+#: Ready configuration (rad): tcp about 0.45 m in front of the base, 0.30 m above the
+#: table, gripper pointing straight down with the fingers closing along world y.
+HOME_QPOS: tuple[float, ...] = (0.0, -0.30, 0.0, -2.20, 0.0, 0.33, 0.0)
+
+# Distance (m) along link7's z axis from the link7 origin to the tcp. The finger pads
+# (capsule rows of the shipped model) span 0.200 .. 0.253 m; the tcp sits 8 mm above the
+# centre line of the last row, so a box grasped at its centre keeps the fingertips
+# about 5 mm above the surface it rests on.
+_TCP_OFFSET_M = 0.245
+_TABLE_THICKNESS_M = 0.05
+_TABLE_HEIGHT_M = 0.75
+_TABLE_X = (-0.35, 1.05)
+_TABLE_Y = (-0.80, 0.80)
+_REGION_THICKNESS_M = 0.0005
+
+
+def region_geom_name(name: str) -> str:
+    """Name of the geom that draws region ``name``."""
+    return f"region:{name}"
+
+
+def obstacle_geom_name(name: str) -> str:
+    """Name of the geom of obstacle ``name``."""
+    return f"obstacle:{name}"
+
+
+def object_joint_name(name: str) -> str:
+    """Name of the free joint of object ``name``."""
+    return f"{name}:free"
+
+
+def franka_asset_dir() -> Path:
+    """Directory of the Franka Panda assets shipped inside the gymnasium-robotics wheel.
+
+    Returns the folder holding ``assets.xml``, ``actuator.xml``, ``chain.xml`` and
+    ``meshes/``. Raises :class:`TargetError` if gymnasium-robotics is missing or the
+    files are not where this version ships them.
+    """
+    try:
+        import gymnasium_robotics  # noqa: PLC0415
+    except ImportError as exc:  # pragma: no cover - dependency is declared
+        raise TargetError(f"gymnasium-robotics is not installed: {exc}") from exc
+    root = Path(gymnasium_robotics.__file__).resolve().parent
+    path = root / "envs" / "assets" / "kitchen_franka" / "franka_assets"
+    missing = [f for f in ("assets.xml", "actuator.xml", "chain.xml", "meshes") if not (path / f).exists()]
+    if missing:
+        raise TargetError(f"Franka assets not found in {path}: missing {', '.join(missing)}")
+    return path
+
+
+# ----------------------------------------------------------------------------- specs
+
+
+def _floats(value: Any, n: int, what: str) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError) as exc:
+        raise TargetError(f"{what} must be a sequence of {n} numbers, got {value!r}") from exc
+    if len(out) != n:
+        raise TargetError(f"{what} must have {n} numbers, got {len(out)}: {value!r}")
+    if not all(math.isfinite(v) for v in out):
+        raise TargetError(f"{what} must be finite, got {value!r}")
+    return out
+
+
+def _positive(values: tuple[float, ...], what: str) -> None:
+    if any(v <= 0.0 for v in values):
+        raise TargetError(f"{what} must be > 0, got {values!r}")
+
+
+def _check_name(name: Any, what: str) -> str:
+    if not isinstance(name, str) or not name or any(c in name for c in " :/\t\n"):
+        raise TargetError(f"{what} name must be a non-empty string without spaces, ':' or '/', got {name!r}")
+    return name
+
+
+def _rgba(value: Any, what: str) -> tuple[float, float, float, float]:
+    out = _floats(value, 4, f"{what}.rgba")
+    if any(not 0.0 <= v <= 1.0 for v in out):
+        raise TargetError(f"{what}.rgba components must be in [0, 1], got {out!r}")
+    return out  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """A free box resting on the table.
+
+    Attributes:
+        name: unique scene name (also the MuJoCo body and geom name).
+        half_extents: ``(hx, hy, hz)`` half sizes in metres, box frame.
+        position: ``(x, y)`` of the box centre in the world frame, metres; z is computed
+            so the box rests on the table (``z = hz``).
+        yaw: rotation about world z in radians.
+        mass: kilograms.
+        friction: sliding friction coefficient (torsional 0.005, rolling 0.0001).
+        rgba: colour, components in [0, 1].
+
+    Raises :class:`TargetError` on invalid values.
+    """
+
+    name: str
+    half_extents: tuple[float, float, float] = (0.02, 0.02, 0.02)
+    position: tuple[float, float] = (0.5, 0.0)
+    yaw: float = 0.0
+    mass: float = 0.1
+    friction: float = 1.0
+    rgba: tuple[float, float, float, float] = (0.85, 0.20, 0.15, 1.0)
+
+    def __post_init__(self) -> None:
+        _check_name(self.name, "object")
+        he = _floats(self.half_extents, 3, f"object {self.name!r} half_extents")
+        _positive(he, f"object {self.name!r} half_extents")
+        object.__setattr__(self, "half_extents", he)
+        object.__setattr__(self, "position", _floats(self.position, 2, f"object {self.name!r} position"))
+        object.__setattr__(self, "yaw", _floats([self.yaw], 1, f"object {self.name!r} yaw")[0])
+        mass = _floats([self.mass], 1, f"object {self.name!r} mass")[0]
+        friction = _floats([self.friction], 1, f"object {self.name!r} friction")[0]
+        _positive((mass,), f"object {self.name!r} mass")
+        _positive((friction,), f"object {self.name!r} friction")
+        object.__setattr__(self, "mass", mass)
+        object.__setattr__(self, "friction", friction)
+        object.__setattr__(self, "rgba", _rgba(self.rgba, f"object {self.name!r}"))
+
+    @property
+    def rest_z(self) -> float:
+        """World z (m) of the box centre when resting on the table."""
+        return self.half_extents[2]
+
+
+@dataclass(frozen=True)
+class RegionSpec:
+    """A rectangular target region drawn on the table top (no collision).
+
+    Attributes:
+        name: unique scene name (geom ``region:<name>``).
+        center: ``(x, y)`` world metres.
+        half_extents: ``(hx, hy)`` metres, axis aligned with the world frame.
+        rgba: colour.
+    """
+
+    name: str
+    center: tuple[float, float] = (0.5, 0.25)
+    half_extents: tuple[float, float] = (0.08, 0.08)
+    rgba: tuple[float, float, float, float] = (0.20, 0.75, 0.30, 0.6)
+
+    def __post_init__(self) -> None:
+        _check_name(self.name, "region")
+        object.__setattr__(self, "center", _floats(self.center, 2, f"region {self.name!r} center"))
+        he = _floats(self.half_extents, 2, f"region {self.name!r} half_extents")
+        _positive(he, f"region {self.name!r} half_extents")
+        object.__setattr__(self, "half_extents", he)
+        object.__setattr__(self, "rgba", _rgba(self.rgba, f"region {self.name!r}"))
+
+    def contains_xy(self, xy, margin_m: float = 0.0) -> bool:
+        """Whether world point ``xy`` (m) lies in the footprint shrunk by ``margin_m``."""
+        return all(
+            abs(float(xy[i]) - self.center[i]) <= self.half_extents[i] - margin_m for i in range(2)
+        )
+
+
+@dataclass(frozen=True)
+class ObstacleSpec:
+    """A static collision box.
+
+    Attributes:
+        name: unique scene name (geom ``obstacle:<name>``).
+        center: ``(x, y, z)`` world metres.
+        half_extents: ``(hx, hy, hz)`` metres, axis aligned.
+        rgba: colour.
+    """
+
+    name: str
+    center: tuple[float, float, float] = (0.5, 0.0, 0.1)
+    half_extents: tuple[float, float, float] = (0.1, 0.01, 0.1)
+    rgba: tuple[float, float, float, float] = (0.55, 0.55, 0.60, 1.0)
+
+    def __post_init__(self) -> None:
+        _check_name(self.name, "obstacle")
+        object.__setattr__(self, "center", _floats(self.center, 3, f"obstacle {self.name!r} center"))
+        he = _floats(self.half_extents, 3, f"obstacle {self.name!r} half_extents")
+        _positive(he, f"obstacle {self.name!r} half_extents")
+        object.__setattr__(self, "half_extents", he)
+        object.__setattr__(self, "rgba", _rgba(self.rgba, f"obstacle {self.name!r}"))
+
+
+_ITEM_TYPES = {"objects": ObjectSpec, "regions": RegionSpec, "obstacles": ObstacleSpec}
+_SCENE_KEYS = ("objects", "regions", "obstacles", "timestep")
+_RESERVED_NAMES = frozenset({"table", "floor", "world", "robot", "gripper", "tcp"})
+
+
+def _item_from_dict(kind: str, d: Any, index: int):
+    cls = _ITEM_TYPES[kind]
+    if isinstance(d, cls):
+        return d
+    if not isinstance(d, Mapping):
+        raise TargetError(f"scene {kind}[{index}] must be a mapping, got {type(d).__name__}")
+    valid = tuple(cls.__dataclass_fields__)
+    unknown = set(d) - set(valid)
+    if unknown:
+        raise TargetError(
+            f"scene {kind}[{index}]: unknown key(s) {format_choices(unknown)}; valid keys: {format_choices(valid)}"
+        )
+    if "name" not in d:
+        raise TargetError(f"scene {kind}[{index}]: missing key 'name'; valid keys: {format_choices(valid)}")
+    return cls(**dict(d))
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """Everything on the table; immutable and hashable.
+
+    Attributes:
+        objects: tuple of :class:`ObjectSpec`.
+        regions: tuple of :class:`RegionSpec`.
+        obstacles: tuple of :class:`ObstacleSpec`.
+        timestep: physics step in seconds, (0, 0.01].
+
+    Names must be unique across objects, regions and obstacles and must not be one of
+    ``table``, ``floor``, ``world``, ``robot``, ``gripper``, ``tcp``. Raises
+    :class:`TargetError` otherwise.
+    """
+
+    objects: tuple[ObjectSpec, ...] = ()
+    regions: tuple[RegionSpec, ...] = ()
+    obstacles: tuple[ObstacleSpec, ...] = ()
+    timestep: float = 0.002
+
+    def __post_init__(self) -> None:
+        for kind in ("objects", "regions", "obstacles"):
+            items = getattr(self, kind)
+            if isinstance(items, (str, bytes, Mapping)):
+                raise TargetError(f"scene {kind} must be a sequence, got {type(items).__name__}")
+            object.__setattr__(self, kind, tuple(_item_from_dict(kind, d, i) for i, d in enumerate(items)))
+        ts = _floats([self.timestep], 1, "scene timestep")[0]
+        if not 0.0 < ts <= 0.01:
+            raise TargetError(f"scene timestep must be in (0, 0.01] s, got {ts}")
+        object.__setattr__(self, "timestep", ts)
+        seen: set[str] = set()
+        for item in (*self.objects, *self.regions, *self.obstacles):
+            if item.name in seen:
+                raise TargetError(f"scene name {item.name!r} is used twice; names must be unique")
+            if item.name in _RESERVED_NAMES:
+                raise TargetError(f"scene name {item.name!r} is reserved: {format_choices(_RESERVED_NAMES)}")
+            seen.add(item.name)
+
+    # -- lookup ---------------------------------------------------------------------
+    @property
+    def object_names(self) -> tuple[str, ...]:
+        return tuple(o.name for o in self.objects)
+
+    @property
+    def region_names(self) -> tuple[str, ...]:
+        return tuple(r.name for r in self.regions)
+
+    @property
+    def obstacle_names(self) -> tuple[str, ...]:
+        return tuple(o.name for o in self.obstacles)
+
+    def object(self, name: str) -> ObjectSpec:
+        """The object called ``name``; TargetError listing the objects otherwise."""
+        for o in self.objects:
+            if o.name == name:
+                return o
+        raise TargetError(f"unknown object {name!r}; objects: {format_choices(self.object_names)}")
+
+    def region(self, name: str) -> RegionSpec:
+        """The region called ``name``; TargetError listing the regions otherwise."""
+        for r in self.regions:
+            if r.name == name:
+                return r
+        raise TargetError(f"unknown region {name!r}; regions: {format_choices(self.region_names)}")
+
+    def obstacle(self, name: str) -> ObstacleSpec:
+        """The obstacle called ``name``; TargetError listing the obstacles otherwise."""
+        for o in self.obstacles:
+            if o.name == name:
+                return o
+        raise TargetError(f"unknown obstacle {name!r}; obstacles: {format_choices(self.obstacle_names)}")
+
+    # -- (de)serialisation ------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "SceneSpec":
+        """Build from plain data (e.g. parsed YAML).
+
+        ``d`` may hold ``objects``, ``regions``, ``obstacles`` (lists of mappings with the
+        dataclass field names) and ``timestep``. Unknown keys raise :class:`TargetError`
+        listing the valid ones.
+        """
+        if not isinstance(d, Mapping):
+            raise TargetError(f"scene must be a mapping, got {type(d).__name__}")
+        unknown = set(d) - set(_SCENE_KEYS)
+        if unknown:
+            raise TargetError(
+                f"scene: unknown key(s) {format_choices(unknown)}; valid keys: {format_choices(_SCENE_KEYS)}"
+            )
+        kwargs: dict[str, Any] = {}
+        for kind in ("objects", "regions", "obstacles"):
+            items = d.get(kind) or ()
+            if isinstance(items, (str, bytes, Mapping)):
+                raise TargetError(f"scene {kind} must be a list, got {type(items).__name__}")
+            kwargs[kind] = tuple(_item_from_dict(kind, item, i) for i, item in enumerate(items))
+        if "timestep" in d:
+            kwargs["timestep"] = d["timestep"]
+        return cls(**kwargs)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-data form (lists and floats) that :meth:`from_dict` reads back."""
+
+        def conv(item) -> dict[str, Any]:
+            out: dict[str, Any] = {}
+            for k in item.__dataclass_fields__:
+                v = getattr(item, k)
+                out[k] = list(v) if isinstance(v, tuple) else v
+            return out
+
+        return {
+            "objects": [conv(o) for o in self.objects],
+            "regions": [conv(r) for r in self.regions],
+            "obstacles": [conv(o) for o in self.obstacles],
+            "timestep": self.timestep,
+        }
+
+
+DEFAULT_SCENE = SceneSpec(
+    objects=(ObjectSpec(name="cube", half_extents=(0.02, 0.02, 0.02), position=(0.5, -0.2)),),
+    regions=(RegionSpec(name="goal", center=(0.5, 0.25), half_extents=(0.08, 0.08)),),
+    obstacles=(ObstacleSpec(name="wall", center=(0.5, 0.03, 0.15), half_extents=(0.2, 0.01, 0.15)),),
+)
+
+
+# ----------------------------------------------------------------------------- build
+
+
+def _yaw_quat(yaw: float) -> list[float]:
+    return [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
+
+
+def _look_at_quat(eye, target) -> list[float]:
+    """Quaternion (wxyz) of a MuJoCo camera at ``eye`` looking at ``target`` (z up)."""
+    eye = np.asarray(eye, float)
+    fwd = np.asarray(target, float) - eye
+    fwd /= np.linalg.norm(fwd)
+    x = np.cross(fwd, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(x, fwd)
+    R = np.column_stack([x, y, -fwd])  # camera looks along its -z axis
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, R.flatten())
+    return q.tolist()
+
+
+@lru_cache(maxsize=1)
+def _wrapper_xml() -> str:
+    p = franka_asset_dir()
+    return f"""<mujoco model="phyagentos_panda_tabletop">
+  <include file="{p / 'assets.xml'}"/>
+  <compiler angle="radian" meshdir="{p / 'meshes'}" autolimits="true"/>
+  <include file="{p / 'actuator.xml'}"/>
+  <worldbody>
+    <include file="{p / 'chain.xml'}"/>
+  </worldbody>
+</mujoco>"""
+
+
+def build_scene_spec(spec: SceneSpec) -> mujoco.MjSpec:
+    """The editable :class:`mujoco.MjSpec` of ``spec`` (see :func:`build_scene`)."""
+    if not isinstance(spec, SceneSpec):
+        raise TargetError(f"build_scene expects a SceneSpec, got {type(spec).__name__}")
+    try:
+        ms = mujoco.MjSpec.from_string(_wrapper_xml())
+    except Exception as exc:  # mujoco raises ValueError with the parser message
+        raise TargetError(f"could not load the Franka assets: {exc}") from exc
+    ms.meshdir = str(franka_asset_dir() / "meshes")
+
+    # -- physics options: elliptic friction cones with a high impratio make the finger
+    # pads hold a box without creeping; a few noslip iterations remove residual slip.
+    opt = ms.option
+    opt.timestep = spec.timestep
+    opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    opt.impratio = 10.0
+    opt.noslip_iterations = 3
+    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    ms.visual.global_.offwidth = 1280
+    ms.visual.global_.offheight = 960
+
+    # -- robot: gravity compensated (as the real Panda's controller does), tcp site,
+    # fingers coupled, adjacent links never in contact.
+    for name in ROBOT_BODY_NAMES[1:]:
+        ms.body(name).gravcomp = 1.0
+    link7 = ms.body("panda0_link7")
+    link7.add_site(
+        name=TCP_SITE,
+        pos=[0.0, 0.0, _TCP_OFFSET_M],
+        quat=_yaw_quat(-math.pi / 4.0),
+        size=[0.006, 0, 0],
+        rgba=[1.0, 0.6, 0.0, 0.6],
+        group=4,
+    )
+    for a, b in zip(ROBOT_BODY_NAMES[:7], ROBOT_BODY_NAMES[1:8]):
+        ms.add_exclude(bodyname1=a, bodyname2=b)
+    eq = ms.add_equality(
+        type=mujoco.mjtEq.mjEQ_JOINT,
+        name="finger_coupling",
+        name1=FINGER_JOINT_NAMES[0],
+        name2=FINGER_JOINT_NAMES[1],
+    )
+    eq.data[:5] = [0.0, 1.0, 0.0, 0.0, 0.0]
+    eq.solref = [0.005, 1.0]
+    # Finger pads: firm, high friction, torsional friction so a held box cannot spin.
+    for fname in FINGER_BODY_NAMES:
+        for g in ms.body(fname).geoms:
+            if g.contype:
+                g.friction = [1.5, 0.02, 0.0001]
+                g.condim = 4
+                g.solref = [0.004, 1.0]
+                g.solimp = [0.95, 0.99, 0.001, 0.5, 2.0]
+                g.margin = 0.0
+                g.priority = 1
+
+    wb = ms.worldbody
+    # -- environment
+    wb.add_light(pos=[0.5, -0.8, 2.0], dir=[-0.1, 0.4, -1.0], diffuse=[0.6, 0.6, 0.6], castshadow=True)
+    wb.add_light(pos=[1.5, 0.8, 2.0], dir=[-0.5, -0.4, -1.0], diffuse=[0.4, 0.4, 0.4], castshadow=False)
+    wb.add_geom(
+        name=FLOOR_GEOM,
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[3.0, 3.0, 0.1],
+        pos=[0.0, 0.0, -_TABLE_HEIGHT_M],
+        rgba=[0.25, 0.28, 0.32, 1.0],
+    )
+    tx = 0.5 * (_TABLE_X[1] - _TABLE_X[0])
+    ty = 0.5 * (_TABLE_Y[1] - _TABLE_Y[0])
+    wb.add_geom(
+        name=TABLE_GEOM,
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[tx, ty, _TABLE_THICKNESS_M / 2.0],
+        pos=[0.5 * (_TABLE_X[0] + _TABLE_X[1]), 0.5 * (_TABLE_Y[0] + _TABLE_Y[1]), -_TABLE_THICKNESS_M / 2.0],
+        rgba=[0.72, 0.60, 0.45, 1.0],
+        friction=[1.0, 0.005, 0.0001],
+    )
+    leg_h = (_TABLE_HEIGHT_M - _TABLE_THICKNESS_M) / 2.0
+    for i, (lx, ly) in enumerate(
+        [(_TABLE_X[0] + 0.05, _TABLE_Y[0] + 0.05), (_TABLE_X[0] + 0.05, _TABLE_Y[1] - 0.05),
+         (_TABLE_X[1] - 0.05, _TABLE_Y[0] + 0.05), (_TABLE_X[1] - 0.05, _TABLE_Y[1] - 0.05)]
+    ):
+        wb.add_geom(
+            name=f"table_leg{i}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[0.03, 0.03, leg_h],
+            pos=[lx, ly, -_TABLE_THICKNESS_M - leg_h],
+            rgba=[0.55, 0.45, 0.35, 1.0],
+            contype=0,
+            conaffinity=0,
+        )
+    wb.add_camera(name="overview", pos=[1.55, -1.15, 1.05], quat=_look_at_quat([1.55, -1.15, 1.05], [0.45, 0.0, 0.1]), fovy=45.0)
+
+    for r in spec.regions:
+        wb.add_geom(
+            name=region_geom_name(r.name),
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[r.half_extents[0], r.half_extents[1], _REGION_THICKNESS_M],
+            pos=[r.center[0], r.center[1], _REGION_THICKNESS_M],
+            rgba=list(r.rgba),
+            contype=0,
+            conaffinity=0,
+            mass=0.0,
+        )
+    for ob in spec.obstacles:
+        wb.add_geom(
+            name=obstacle_geom_name(ob.name),
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=list(ob.half_extents),
+            pos=list(ob.center),
+            rgba=list(ob.rgba),
+        )
+    for o in spec.objects:
+        body = wb.add_body(name=o.name, pos=[o.position[0], o.position[1], o.rest_z], quat=_yaw_quat(o.yaw))
+        body.add_freejoint(name=object_joint_name(o.name))
+        g = body.add_geom(
+            name=o.name,
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=list(o.half_extents),
+            rgba=list(o.rgba),
+            friction=[o.friction, 0.005, 0.0001],
+            condim=4,
+            solref=[0.004, 1.0],
+            solimp=[0.95, 0.99, 0.001, 0.5, 2.0],
+        )
+        g.mass = o.mass
+
+    # -- keyframe 'home': arm ready, gripper open, objects at their spec poses.
+    qpos: list[float] = list(HOME_QPOS) + [GRIPPER_MAX_OPENING_M, GRIPPER_MAX_OPENING_M]
+    for o in spec.objects:
+        qpos += [o.position[0], o.position[1], o.rest_z] + _yaw_quat(o.yaw)
+    ctrl = list(HOME_QPOS) + [GRIPPER_MAX_OPENING_M, GRIPPER_MAX_OPENING_M]
+    ms.add_key(name="home", qpos=qpos, ctrl=ctrl)
+    return ms
+
+
+def build_scene(spec: SceneSpec) -> mujoco.MjModel:
+    """Compile ``spec`` into a :class:`mujoco.MjModel` (see the module docstring for names).
+
+    Raises :class:`TargetError` if the assets cannot be loaded or the model does not
+    compile.
+    """
+    ms = build_scene_spec(spec)
+    try:
+        model = ms.compile()
+    except Exception as exc:
+        raise TargetError(f"scene does not compile: {exc}") from exc
+    log.debug("built scene: nq=%d nv=%d ngeom=%d", model.nq, model.nv, model.ngeom)
+    return model

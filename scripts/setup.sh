@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# One-time set-up, idempotent: system packages (Graphviz renders trees and DAGs,
+# EGL/OSMesa let MuJoCo render camera images headless), then a virtualenv with
+# the project installed in editable mode (skills/, trees/, protocol/ are read
+# from the checkout).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+APT_PACKAGES=(graphviz libegl1 libosmesa6 libgl1)
+missing=()
+for p in "${APT_PACKAGES[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "setup: installing system packages: ${missing[*]}"
+    apt-get update -qq >/dev/null
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  else
+    echo "setup: please install system packages: ${missing[*]} (tree images and camera rendering need them)" >&2
+  fi
+fi
+
+PYTHON=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  "$PYTHON" -m venv .venv
+fi
+stamp=.venv/.phyagentos-installed
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  echo "setup: installing phyagentos and its dependencies into .venv"
+  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+  .venv/bin/python -m pip install -q -e '.[test]'
+  touch "$stamp"
+fi

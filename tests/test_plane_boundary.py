@@ -1,0 +1,35 @@
+"""The Agent and Runtime planes never import each other (import-linter contracts)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+LINT = Path(sys.executable).parent / "lint-imports"
+
+
+def run_lint(cwd: Path) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(cwd)}
+    return subprocess.run([str(LINT), "--config", str(cwd / ".importlinter")], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_repository_keeps_the_planes_apart():
+    result = run_lint(ROOT)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "3 kept, 0 broken" in result.stdout
+
+
+def test_contract_catches_an_agent_module_importing_the_runtime(tmp_path):
+    copy = tmp_path / "repo"
+    shutil.copytree(ROOT / "phyagentos", copy / "phyagentos", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / ".importlinter", copy / ".importlinter")
+    leak = copy / "phyagentos" / "agent" / "leak.py"
+    leak.write_text("from phyagentos.runtime.supervisor import WatchdogSupervisor\n", encoding="utf-8")
+    result = run_lint(copy)
+    assert result.returncode != 0
+    assert "Agent plane never imports the Runtime plane BROKEN" in result.stdout

@@ -1,0 +1,117 @@
+"""YAML behaviour trees: the shipped trees build, and bad trees fail with file:line and choices."""
+
+from __future__ import annotations
+
+import py_trees
+import pytest
+
+from phyagentos.errors import SkillError
+from phyagentos.primitives import PRIMITIVES
+from phyagentos.resources import skills_dir, trees_dir
+from phyagentos.runtime.preflight import tree_tools
+from phyagentos.runtime.skills import SkillRegistry
+from phyagentos.runtime.trees import TreeLibrary, render_ascii
+
+
+@pytest.fixture
+def library() -> TreeLibrary:
+    return TreeLibrary(trees_dir(), PRIMITIVES)
+
+
+def write(tmp_path, name, text):
+    (tmp_path / f"{name}.yaml").write_text(text, encoding="utf-8")
+    return TreeLibrary(tmp_path, PRIMITIVES)
+
+
+def test_every_shipped_skill_builds_its_tree(library):
+    skills = SkillRegistry(skills_dir())
+    assert {"pick", "place", "pick_and_place", "hold"} <= set(skills.names())
+    for name in skills.names():
+        manifest = skills.get(name)
+        params = {k: d.get("example", "x") for k, d in manifest.params.items() if d.get("required")}
+        root = library.build(manifest.tree, params)
+        assert isinstance(root, py_trees.behaviour.Behaviour)
+
+
+def test_pick_tree_uses_ik_planning_timing_execution_and_gripper(library):
+    root = library.build("pick", {"object": "cube"})
+    kinds = {type(n).__name__ for n in root.iterate()}
+    assert {"Observe", "SolveIK", "PlanPath", "RetimePath", "ExecuteTrajectory", "Gripper", "CartesianMove", "Retry"} <= kinds
+    assert {"snapshot", "move_joints", "set_gripper"} <= tree_tools(root)
+    art = render_ascii(root)
+    assert "Pick" in art and "MoveToPregrasp" in art
+
+
+def test_parameter_references_are_substituted_with_their_types(library):
+    root = library.build("pick", {"object": "cube", "lift_m": 0.2})
+    lift = next(n for n in root.iterate() if n.name == "Lift")
+    assert lift.offset.tolist() == [0.0, 0.0, 0.2]
+
+
+def test_missing_required_parameter_names_it(library):
+    with pytest.raises(SkillError, match="needs parameter 'object'"):
+        library.build("pick", {})
+
+
+def test_unknown_primitive_lists_valid_primitives_with_line(tmp_path):
+    lib = write(tmp_path, "t", "version: 1\nname: t\nroot:\n  sequence:\n    children:\n      - primitive: teleport\n")
+    with pytest.raises(SkillError) as info:
+        lib.build("t")
+    assert "t.yaml:6" in str(info.value) and "'observe'" in str(info.value) and "teleport" in str(info.value)
+
+
+def test_unknown_node_kind_lists_valid_kinds(tmp_path):
+    lib = write(tmp_path, "t", "version: 1\nname: t\nroot:\n  loop:\n    children: []\n")
+    with pytest.raises(SkillError, match="valid kinds: .*'sequence'"):
+        lib.build("t")
+
+
+def test_bad_primitive_parameter_lists_accepted_ones(tmp_path):
+    lib = write(tmp_path, "t", "version: 1\nname: t\nroot:\n  primitive: gripper\n  params: {comand: open}\n")
+    with pytest.raises(SkillError, match="accepted: .*'command'"):
+        lib.build("t")
+
+
+def test_invalid_primitive_value_is_reported_at_its_line(tmp_path):
+    lib = write(tmp_path, "t", "version: 1\nname: t\nroot:\n  primitive: gripper\n  params: {command: squeeze}\n")
+    with pytest.raises(SkillError) as info:
+        lib.build("t")
+    assert "t.yaml:4" in str(info.value) and "squeeze" in str(info.value)
+
+
+def test_unresolved_reference_lists_available_parameters(tmp_path):
+    lib = write(tmp_path, "t", "version: 1\nname: t\nparams: {object: {required: true}}\n"
+                               "root:\n  primitive: compute_grasp\n  params: {object: '${obj}'}\n")
+    with pytest.raises(SkillError, match=r"\$\{obj\}.*available parameters: 'object'"):
+        lib.build("t", {"object": "cube"})
+
+
+def test_recursive_subtree_is_rejected(tmp_path):
+    lib = write(tmp_path, "a", "version: 1\nname: a\nroot:\n  subtree: a\n")
+    with pytest.raises(SkillError, match="deeper than"):
+        lib.build("a")
+
+
+def test_decorators_and_parallel_build(tmp_path):
+    lib = write(tmp_path, "t", """version: 1
+name: t
+root:
+  parallel:
+    policy: success_on_one
+    children:
+      - timeout:
+          duration_s: 2.5
+          child: {primitive: hold, params: {duration_s: 0.1}}
+      - retry:
+          num_failures: 2
+          child: {primitive: observe}
+""")
+    root = lib.build("t")
+    assert isinstance(root, py_trees.composites.Parallel)
+    kinds = [type(n).__name__ for n in root.iterate()]
+    assert "Timeout" in kinds and "Retry" in kinds
+
+
+def test_unknown_tree_lists_valid_trees(library):
+    with pytest.raises(SkillError, match="valid trees: .*'pick'"):
+        library.build("juggle")

@@ -22,6 +22,7 @@ import statistics
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -40,7 +41,9 @@ from phyagentos.motion import (  # noqa: E402
     retime,
     solve_ik,
     top_down_grasp,
+    top_down_grasp_candidates,
 )
+from phyagentos.errors import IKError  # noqa: E402
 from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget, SceneSpec  # noqa: E402
 
 RESULTS = _ROOT / "bench" / "results" / "bare_pick_and_place.json"
@@ -69,6 +72,7 @@ def run_bare_pick_and_place(
     planner: str = "RRTConnect",
     margin_m: float = 0.01,
     approach_height_m: float = 0.10,
+    observer: Callable[[str, MuJoCoTarget], None] | None = None,
 ) -> dict:
     """Run one pick-and-place and return timings; raises AssertionError on failure.
 
@@ -76,11 +80,22 @@ def run_bare_pick_and_place(
     ``simulation_s``, ``setup_s``, ``total_s``), ``sim_time_s``, per-call medians
     (``ik_iterations_median``, ``ik_ms_median``, ``plan_ms_median``), counts, the final
     cube position and the tracking errors of each executed trajectory.
+    ``observer(stage, target)``, if given, is called after the stages ``'grasped'``,
+    ``'transferred'``, ``'released'`` and ``'retreated'`` (not timed separately).
     """
+
+    def notify(stage: str) -> None:
+        if observer is not None:
+            t = time.perf_counter()
+            observer(stage, target)
+            clock.s["observer"] = clock.s.get("observer", 0.0) + time.perf_counter() - t
+
     clock = _Clock()
     t_start = time.perf_counter()
     ik_iters: list[int] = []
     ik_ms: list[float] = []
+    ik_pose_iters: list[int] = []  # stand-alone pose IK (pregrasp, preplace)
+    ik_pose_ms: list[float] = []
     plan_ms: list[float] = []
     tracking: list[float] = []
     unexpected: list = []
@@ -88,6 +103,9 @@ def run_bare_pick_and_place(
     target = clock.run("setup", MuJoCoTarget, "bare", scene, seed=seed)
     model = target.model
     checker = clock.run("planning", CollisionChecker, model, margin_m=margin_m)
+    # Straight-line moves end in contact on purpose (fingers around the cube, cube on
+    # the table), so they are checked without the planning margin.
+    contact_checker = clock.run("planning", CollisionChecker, model, margin_m=0.0)
     vel = target.velocity_limits()
     acc = np.array(DEFAULT_ACCELERATION_LIMITS)
     obj = scene.object(object_name)
@@ -100,6 +118,8 @@ def run_bare_pick_and_place(
         clock.s["ik"] += dt
         ik_ms.append(dt * 1e3)
         ik_iters.append(sol.iterations)
+        ik_pose_ms.append(dt * 1e3)
+        ik_pose_iters.append(sol.iterations)
         return sol.q
 
     def plan(q_goal):
@@ -111,57 +131,101 @@ def run_bare_pick_and_place(
         plan_ms.append(dt * 1e3)
         return P
 
-    def cartesian(T_goal):
+    def cartesian(T_goal, q_start=None):
         stats: dict = {}
         t = time.perf_counter()
-        P = cartesian_path(model, q_start=target.arm_qpos(), T_goal=T_goal, qpos_full=target.data.qpos, stats=stats)
+        q0 = target.arm_qpos() if q_start is None else q_start
+        P = cartesian_path(model, q_start=q0, T_goal=T_goal, qpos_full=target.data.qpos, stats=stats)
         clock.s["ik"] += time.perf_counter() - t
         ik_iters.extend(stats["ik_iterations"])
         ik_ms.extend(stats["ik_solve_ms"])
         return P
 
-    def execute(P, *, check: bool):
-        traj = clock.run("timing", retime, P, vel_limits=vel, acc_limits=acc, dt=target.timestep,
-                         checker=checker if check else None)
+    def check_straight(P, what: str, *, attached: np.ndarray | None = None, skip_first: bool = False) -> bool:
+        t = time.perf_counter()
+        contact_checker.set_world_state(target.data.qpos)
+        if attached is not None:
+            contact_checker.attach(object_name, attached)
+        try:
+            return contact_checker.check_path(P[1:] if skip_first else P)
+        finally:
+            contact_checker.detach()
+            clock.s["planning"] += time.perf_counter() - t
+
+    def execute(P, *, check: bool, attached: np.ndarray | None = None):
+        # Planned paths hug the 1 cm planning margin after shortcutting, so the timed
+        # trajectory (whose spline deviates slightly from the polyline) is verified
+        # against real contact (margin 0) rather than against the margin again.
+        if check:
+            contact_checker.set_world_state(target.data.qpos)
+            if attached is not None:
+                contact_checker.attach(object_name, attached)
+        try:
+            traj = clock.run("timing", retime, P, vel_limits=vel, acc_limits=acc, dt=target.timestep,
+                             checker=contact_checker if check else None)
+        finally:
+            contact_checker.detach()
         res = clock.run("simulation", target.execute_trajectory, traj, tracking_tol_rad=0.05)
         assert res.completed, f"execution stopped: {res.reason}"
         tracking.append(res.max_tracking_error_rad)
         unexpected.extend(res.contacts)
         return res
 
-    # 1. home -> pregrasp (planned)
+    # 1. choose a grasp whose approach is collision free, then plan home -> pregrasp
     T_obj = target.object_pose(object_name)
     q_home = target.arm_qpos()
-    grasp = top_down_grasp(
+    candidates = top_down_grasp_candidates(
         T_obj, obj.half_extents, approach_height_m=approach_height_m,
         current_yaw_rad=hand_yaw(target.tcp_pose()), current_q7_rad=float(q_home[6]),
     )
-    q_pre = ik(grasp.pregrasp, q_home)
+    chosen = None
+    for grasp in candidates:
+        try:
+            q_pre = ik(grasp.pregrasp, q_home)
+            approach = cartesian(grasp.grasp, q_start=q_pre)
+        except IKError:
+            continue
+        checker.set_world_state(target.data.qpos)
+        if checker.is_valid(q_pre) and check_straight(approach, "approach"):
+            chosen = grasp
+            break
+    assert chosen is not None, "no collision-free top-down grasp"
+    grasp = chosen
     execute(plan(q_pre), check=True)
     # 2. Cartesian approach, close
     execute(cartesian(grasp.grasp), check=False)
     g = clock.run("simulation", target.set_gripper, opening_m=0.0, settle_s=0.6)
     assert g.grasped == object_name, f"grasp failed: {g}"
     T_tcp_obj = np.linalg.inv(target.tcp_pose()) @ target.object_pose(object_name)
+    notify("grasped")
     # 3. Cartesian lift
     lift = np.array(target.tcp_pose())
     lift[2, 3] += approach_height_m
-    execute(cartesian(lift), check=False)
+    P = cartesian(lift)
+    assert check_straight(P, "lift", attached=T_tcp_obj, skip_first=True), "lift collides"
+    execute(P, check=False)
     # 4. transfer over the wall (planned, cube attached)
     T_place = place_pose(region.center, obj.half_extents, T_tcp_object=T_tcp_obj, yaw_rad=grasp.yaw_rad)
     T_preplace = T_place.copy()
     T_preplace[2, 3] += approach_height_m
     q_preplace = ik(T_preplace, target.arm_qpos())
     checker.attach(object_name, T_tcp_obj)
-    execute(plan(q_preplace), check=True)
+    execute(plan(q_preplace), check=True, attached=T_tcp_obj)
     checker.detach()
+    notify("transferred")
     # 5. Cartesian lower, open, retreat
-    execute(cartesian(T_place), check=False)
+    P = cartesian(T_place)
+    assert check_straight(P, "lower", attached=T_tcp_obj), "lowering collides"
+    execute(P, check=False)
     g = clock.run("simulation", target.set_gripper, opening_m=0.04, settle_s=0.5)
     assert g.grasped is None, f"object still held after opening: {g}"
+    notify("released")
     retreat = np.array(target.tcp_pose())
     retreat[2, 3] += approach_height_m
-    execute(cartesian(retreat), check=False)
+    P = cartesian(retreat)
+    assert check_straight(P, "retreat"), "retreat collides"
+    execute(P, check=False)
+    notify("retreated")
 
     # verify
     p = target.object_pose(object_name)[:3, 3]
@@ -170,7 +234,7 @@ def run_bare_pick_and_place(
     rel = target.snapshot()["relations"]
     assert inside and resting, f"cube not in region: position {p.round(4).tolist()}, region {region}"
     assert {"subject": object_name, "relation": "inside", "object": region_name} in rel, rel
-    total = time.perf_counter() - t_start
+    total = time.perf_counter() - t_start - clock.s.get("observer", 0.0)
     sim_time = target.sim_time
     target.close()
     return {
@@ -188,6 +252,8 @@ def run_bare_pick_and_place(
         "ik_iterations_median": float(statistics.median(ik_iters)),
         "ik_ms_median": float(statistics.median(ik_ms)),
         "ik_ms_per_iteration": float(sum(ik_ms) / max(1, sum(ik_iters))),
+        "ik_pose_iterations_median": float(statistics.median(ik_pose_iters)),
+        "ik_pose_ms_median": float(statistics.median(ik_pose_ms)),
         "plan_calls": len(plan_ms),
         "plan_ms_median": float(statistics.median(plan_ms)),
         "plan_ms": plan_ms,
@@ -249,7 +315,8 @@ def main(argv=None) -> int:
     print(f"{'metric':<28}{'cold':>10}{'median run':>12}")
     for k in keys:
         print(f"{k:<28}{cold[k]:>10.3f}{med[k]:>12.3f}")
-    for k in ["ik_calls", "ik_iterations_median", "ik_ms_median", "ik_ms_per_iteration", "plan_ms_median",
+    for k in ["ik_calls", "ik_iterations_median", "ik_ms_median", "ik_ms_per_iteration",
+              "ik_pose_iterations_median", "ik_pose_ms_median", "plan_ms_median",
               "max_tracking_error_rad", "realtime_factor"]:
         print(f"{k:<28}{cold[k]:>10.3f}{med[k]:>12.3f}")
     if wall:

@@ -12,5 +12,13 @@ Subpackages, in the order one session flows through them:
 Importing this package is cheap; subpackages load MuJoCo and friends on demand.
 """
 
+import os as _os
+
+# MuJoCo picks its OpenGL backend when it is first imported. Headless machines
+# (no DISPLAY) get OSMesa, the software renderer that needs no GPU; set
+# MUJOCO_GL=egl (GPU) or glfw (desktop) yourself to override.
+if "DISPLAY" not in _os.environ:
+    _os.environ.setdefault("MUJOCO_GL", "osmesa")
+
 __version__ = "0.1.0"
 __all__ = ["__version__"]

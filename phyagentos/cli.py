@@ -54,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
 def _setup_logging(verbose: int, console: Console) -> None:
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="%(message)s", handlers=[RichHandler(console=console, show_path=False)])
+    # transitions logs every state entry/exit at INFO; our own transition log is enough.
+    logging.getLogger("transitions").setLevel(max(level, logging.WARNING))
+    logging.getLogger("toppra").setLevel(max(level, logging.WARNING))
 
 
 def _cmd_run(args, out: Console, err: Console) -> int:
@@ -66,7 +69,7 @@ def _cmd_run(args, out: Console, err: Console) -> int:
     else:
         table = Table(title=f"run {report.run_id}  ({report.wall_time_s:.1f} s)")
         for col in ("node", "session", "skill", "status", "verdict", "duration"):
-            table.add_column(col)
+            table.add_column(col, overflow="fold")
         colours = {"succeeded": "green", "failed": "red", "rejected": "red", "timed_out": "red", "replanned": "yellow"}
         for s in report.sessions:
             colour = colours.get(s.status, "white")
@@ -114,7 +117,8 @@ def _cmd_render(args, out: Console, err: Console) -> int:
     if args.name in runtime.skills:
         manifest = runtime.skills.get(args.name)
         tree_name = manifest.tree
-        params = {k: d.get("example", f"<{k}>") for k, d in manifest.params.items()}
+        # required parameters need a value to build; optional ones keep the tree's defaults
+        params = {k: d.get("example", f"<{k}>") for k, d in manifest.params.items() if d.get("required") or "example" in d}
     else:
         tree_name = args.name
         params = {k: d.get("default", d.get("example", f"<{k}>")) for k, d in runtime.trees.spec(args.name).params.items()}

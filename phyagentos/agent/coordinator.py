@@ -197,7 +197,8 @@ class AgentCoordinator:
         for s in self.sessions():
             attempt = s.attempts[-1] if s.attempts else None
             verdict = attempt.verdict if attempt else None
-            reason = verdict.reason if verdict else ("; ".join(f"{r.code}: found {r.found}" for r in s.rejection) or
+            reason = verdict.reason if verdict else ("; ".join(f"{r.code} ({r.field}): expected {r.expected}, found {r.found}"
+                                                               for r in s.rejection) or
                                                     (attempt.error.message if attempt and attempt.error else ""))
             rows.append(SessionSummary(
                 session_id=s.session_id, node=s.node, skill=s.skill, target=s.target, status=s.state,

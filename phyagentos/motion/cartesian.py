@@ -97,7 +97,8 @@ def cartesian_path(
         model: scene model.
         q_start: ``(7,)`` rad start configuration (first row of the result).
         T_goal: ``(4, 4)`` world goal pose of the site.
-        step_m: maximum tcp translation between waypoints, metres.
+        step_m: maximum tcp translation between waypoints, metres (+1 % slack for
+            IK round-off).
         step_rad: maximum tcp rotation between waypoints, rad.
         max_joint_step_rad: largest allowed change of any joint between consecutive
             waypoints (guards against IK branch flips).
@@ -123,7 +124,8 @@ def cartesian_path(
     dist = float(np.linalg.norm(Tg[:3, 3] - T0[:3, 3]))
     c = (np.trace(T0[:3, :3].T @ Tg[:3, :3]) - 1.0) / 2.0
     ang = float(np.arccos(np.clip(c, -1.0, 1.0)))
-    n = max(1, int(math.ceil(dist / step_m)), int(math.ceil(ang / step_rad)))
+    # (a tolerance of 1 % of a step avoids an extra waypoint for IK round-off)
+    n = max(1, int(math.ceil(dist / step_m - 0.01)), int(math.ceil(ang / step_rad - 0.01)))
     path = [q0]
     q = q0
     t0 = time.perf_counter()

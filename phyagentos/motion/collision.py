@@ -117,23 +117,27 @@ class CollisionChecker:
         self._geom_class = body_class[self._geom_body]
         # Object bodies that move together (children of a free body) map to the free body.
         self._geom_root = np.array([int(m.body_rootid[b]) for b in self._geom_body])
-        # Re-assign collision bits in the private model so MuJoCo only generates contacts
-        # the checker cares about: robot (ct 1, ca 3) collides with robot, environment
-        # and objects; environment and objects (ct 2, ca 0) never collide among
-        # themselves. Geoms that could not collide before (visual meshes, regions) and
-        # robot geoms that did not collide with each other (fingers: ca 0) keep that.
+        # Re-assign collision bits in the private model so MuJoCo only generates the
+        # contacts that matter (a contact needs ct1 & ca2 or ct2 & ca1):
+        #   robot link      ct 1, ca 1|2|4   (1 only if it collided with the robot before)
+        #   gripper geom    ct 1, ca 1|2     (no bit 4: the attached object may touch it)
+        #   env / object    ct 2, ca 0       (never among themselves)
+        #   attached object ct 4, ca 2       (links, environment, other objects)
+        # Geoms that could not collide at all (visual meshes, regions) stay disabled.
         self._orig_contype = m.geom_contype.copy()
         self._orig_conaffinity = m.geom_conaffinity.copy()
+        self._collidable = (self._orig_contype != 0) | (self._orig_conaffinity != 0)
         for g in range(m.ngeom):
-            if self._orig_contype[g] == 0 and self._orig_conaffinity[g] == 0:
+            if not self._collidable[g]:
                 continue
             if self._geom_class[g] == _ROBOT:
+                self_bit = 1 if self._orig_conaffinity[g] else 0
+                gripper = int(self._geom_body[g]) in self.gripper_bodies
                 m.geom_contype[g] = 1
-                m.geom_conaffinity[g] = 3 if self._orig_conaffinity[g] else 2
+                m.geom_conaffinity[g] = self_bit | 2 | (0 if gripper else 4)
             else:
                 m.geom_contype[g] = 2
                 m.geom_conaffinity[g] = 0
-        self._active = self._geom_class == _ROBOT
         self._allowed = set()
         for a, b in allowed_pairs:
             ia = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, a)
@@ -144,6 +148,9 @@ class CollisionChecker:
         self._attached: int | None = None
         self._attached_name: str | None = None
         self._T_tcp_obj: np.ndarray | None = None
+        self._buf_q_tcp = np.empty(4)
+        self._buf_q_obj = np.empty(4)
+        self._buf_p_obj = np.empty(3)
         self.n_checks = 0
         mujoco.mj_kinematics(m, self.data)
 
@@ -186,22 +193,24 @@ class CollisionChecker:
         self._attached = self.objects[object_name]
         self._attached_name = object_name
         self._T_tcp_obj = T.copy()
+        self._attached_qadr = self._object_qadr[self._attached]
+        self._p_tcp_obj = T[:3, 3].copy()
+        self._q_tcp_obj = np.empty(4)
+        mujoco.mju_mat2Quat(self._q_tcp_obj, np.ascontiguousarray(T[:3, :3]).reshape(-1))
         m = self.model
         for g in np.nonzero(self._geom_root == self._attached)[0]:
-            if self._orig_contype[g] or self._orig_conaffinity[g]:
-                m.geom_contype[g] = 2
+            if self._collidable[g]:
+                m.geom_contype[g] = 4
                 m.geom_conaffinity[g] = 2
-                self._active[g] = True
 
     def detach(self) -> None:
         """Stop carrying the attached object (it stays where the world state puts it)."""
         if self._attached is not None:
             m = self.model
             for g in np.nonzero(self._geom_root == self._attached)[0]:
-                if self._orig_contype[g] or self._orig_conaffinity[g]:
+                if self._collidable[g]:
                     m.geom_contype[g] = 2
                     m.geom_conaffinity[g] = 0
-                    self._active[g] = False
         self._attached = None
         self._attached_name = None
         self._T_tcp_obj = None
@@ -217,49 +226,38 @@ class CollisionChecker:
         q = np.asarray(q, dtype=float)
         return bool(np.all(q >= self.lower - 1e-9) and np.all(q <= self.upper + 1e-9))
 
-    def _set(self, q: np.ndarray) -> None:
+    def _set(self, q) -> None:
         m, d = self.model, self.data
         d.qpos[self._qidx] = q
         mujoco.mj_kinematics(m, d)
         if self._attached is not None:
-            T = np.eye(4)
-            T[:3, 3] = d.site_xpos[self.tcp_site_id]
-            T[:3, :3] = d.site_xmat[self.tcp_site_id].reshape(3, 3)
-            To = T @ self._T_tcp_obj
-            adr = self._object_qadr[self._attached]
-            d.qpos[adr : adr + 3] = To[:3, 3]
-            quat = np.empty(4)
-            mujoco.mju_mat2Quat(quat, To[:3, :3].flatten())
-            d.qpos[adr + 3 : adr + 7] = quat
+            # object pose = tcp pose * T_tcp_obj, written into its free joint
+            sm = d.site_xmat[self.tcp_site_id]
+            mujoco.mju_mat2Quat(self._buf_q_tcp, sm)
+            mujoco.mju_mulQuat(self._buf_q_obj, self._buf_q_tcp, self._q_tcp_obj)
+            mujoco.mju_mulMatVec(self._buf_p_obj, sm.reshape(3, 3), self._p_tcp_obj)
+            adr = self._attached_qadr
+            d.qpos[adr : adr + 3] = d.site_xpos[self.tcp_site_id] + self._buf_p_obj
+            d.qpos[adr + 3 : adr + 7] = self._buf_q_obj
             mujoco.mj_kinematics(m, d)
         mujoco.mj_collision(m, d)
 
     def _bad_contacts(self) -> list[int]:
+        """Indices of forbidden contacts in ``self.data`` (the collision bits already
+        keep out everything except robot/attached-object contacts)."""
         d = self.data
         n = d.ncon
         if n == 0:
             return []
-        geoms = d.contact.geom
         close = d.contact.dist < self.margin_m
-        act = self._active[geoms]
-        rel = close & (act[:, 0] | act[:, 1])
-        if not rel.any():
-            return []
+        if not self._allowed:
+            return np.nonzero(close)[0].tolist()
         keep = []
-        att = self._attached
-        for i in np.nonzero(rel)[0]:
-            g0, g1 = int(geoms[i, 0]), int(geoms[i, 1])
-            c0, c1 = self._geom_class[g0], self._geom_class[g1]
-            b0, b1 = int(self._geom_body[g0]), int(self._geom_body[g1])
-            if c0 == _ROBOT and c1 == _ROBOT:
-                if (min(b0, b1), max(b0, b1)) in self._allowed:
-                    continue
-            elif att is not None and (
-                (self._geom_root[g0] == att and b1 in self.gripper_bodies)
-                or (self._geom_root[g1] == att and b0 in self.gripper_bodies)
-            ):
-                continue
-            keep.append(int(i))
+        geoms = d.contact.geom
+        for i in np.nonzero(close)[0]:
+            b0, b1 = int(self._geom_body[geoms[i, 0]]), int(self._geom_body[geoms[i, 1]])
+            if (min(b0, b1), max(b0, b1)) not in self._allowed:
+                keep.append(int(i))
         return keep
 
     def is_valid(self, q: Sequence[float]) -> bool:

@@ -22,10 +22,12 @@ from phyagentos.errors import IKError
 __all__ = [
     "GraspPlan",
     "top_down_grasp",
+    "top_down_grasp_candidates",
     "place_pose",
     "top_down_rotation",
     "hand_yaw",
     "FINGERTIP_BELOW_TCP_M",
+    "PAD_DEPTH_ABOVE_TCP_M",
     "JOINT7_RANGE_RAD",
 ]
 
@@ -69,6 +71,83 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def top_down_grasp_candidates(
+    T_object: np.ndarray,
+    half_extents: Sequence[float],
+    *,
+    approach_height_m: float = 0.10,
+    current_yaw_rad: float = 0.0,
+    current_q7_rad: float | None = None,
+    support_z_m: float | None = None,
+    tip_clearance_m: float = 0.004,
+) -> tuple[GraspPlan, ...]:
+    """All symmetric top-down grasps of an upright box, best first.
+
+    The fingers close across the box's shorter horizontal side, which leaves two yaws
+    180 deg apart (four, 90 deg apart, for a square footprint). They are sorted by how
+    little the hand has to turn from ``current_yaw_rad``; if ``current_q7_rad`` is given,
+    yaws that would push joint 7 (``q7 - delta_yaw``) outside its range are dropped.
+    The tcp goes to the box centre, raised if needed so the fingertips stay
+    ``tip_clearance_m`` above the support (``support_z_m``, default: the box bottom) and
+    the box top stays below the finger base.
+
+    Args:
+        T_object: ``(4, 4)`` world pose of the box centre (z axis roughly up).
+        half_extents: ``(3,)`` box half sizes, metres.
+        approach_height_m: pregrasp offset above the grasp along world z, metres.
+
+    Raises:
+        IKError: the box is not upright, too wide for the gripper (8 cm), or no yaw
+            keeps joint 7 inside its range.
+    """
+    T = np.asarray(T_object, dtype=float)
+    he = np.asarray(half_extents, dtype=float).reshape(-1)
+    if T.shape != (4, 4) or he.shape != (3,):
+        raise IKError(f"T_object must be (4, 4) and half_extents (3,), got {T.shape}, {he.shape}")
+    R = T[:3, :3]
+    if abs(R[2, 2]) < math.cos(math.radians(20)):
+        raise IKError("top_down_grasp needs an upright box (its z axis within 20 deg of vertical)")
+    ax = R[:2, 0] / max(np.linalg.norm(R[:2, 0]), 1e-9)
+    ay = R[:2, 1] / max(np.linalg.norm(R[:2, 1]), 1e-9)
+    closes = []
+    if he[0] <= he[1] + 1e-6:
+        closes.append((ax, 2 * he[0]))
+    if he[1] <= he[0] + 1e-6:
+        closes.append((ay, 2 * he[1]))
+    width = min(w for _, w in closes)
+    if width > 0.08 - 0.004:
+        raise IKError(f"box is {width * 100:.1f} cm wide across the fingers; the gripper opens to 8 cm")
+    deltas = []
+    for axis, _ in closes:
+        for sign in (1.0, -1.0):
+            y = sign * axis  # tcp y = (sin yaw, -cos yaw)
+            delta = _wrap(math.atan2(y[0], -y[1]) - current_yaw_rad)
+            if current_q7_rad is not None:
+                q7 = current_q7_rad - delta
+                if not (JOINT7_RANGE_RAD[0] + 0.05 <= q7 <= JOINT7_RANGE_RAD[1] - 0.05):
+                    continue
+            deltas.append(delta)
+    if not deltas:
+        raise IKError("no grasp yaw keeps joint 7 inside its range")
+    deltas.sort(key=abs)
+    ext_z = float(np.abs(R[2, :]) @ he)
+    bottom = T[2, 3] - ext_z if support_z_m is None else support_z_m
+    top = T[2, 3] + ext_z
+    z = max(T[2, 3], bottom + FINGERTIP_BELOW_TCP_M + tip_clearance_m, top - PAD_DEPTH_ABOVE_TCP_M)
+    out = []
+    for delta in deltas:
+        yaw = _wrap(current_yaw_rad + delta)
+        G = np.eye(4)
+        G[:3, :3] = top_down_rotation(yaw)
+        G[:3, 3] = [T[0, 3], T[1, 3], z]
+        P = G.copy()
+        P[2, 3] += approach_height_m
+        G.setflags(write=False)
+        P.setflags(write=False)
+        out.append(GraspPlan(grasp=G, pregrasp=P, yaw_rad=yaw, width_m=float(width)))
+    return tuple(out)
+
+
 def top_down_grasp(
     T_object: np.ndarray,
     half_extents: Sequence[float],
@@ -79,73 +158,19 @@ def top_down_grasp(
     support_z_m: float | None = None,
     tip_clearance_m: float = 0.004,
 ) -> GraspPlan:
-    """Top-down grasp of an upright box.
-
-    The fingers close across the box's shorter horizontal side. Among the symmetric
-    yaws (every 180 deg, or 90 deg for a square footprint) the one closest to
-    ``current_yaw_rad`` is chosen; if ``current_q7_rad`` is given, yaws that would push
-    joint 7 (``q7 - delta_yaw``) outside its range are skipped. The tcp goes to the box
-    centre, raised if needed so the fingertips stay ``tip_clearance_m`` above the
-    support (``support_z_m``, default: the box bottom) and the box top does not reach the
-    finger base.
-
-    Args:
-        T_object: ``(4, 4)`` world pose of the box centre (z axis roughly up).
-        half_extents: ``(3,)`` box half sizes, metres.
-        approach_height_m: pregrasp offset above the grasp, metres.
-
-    Raises:
-        IKError: the box is not upright or too wide for the gripper (8 cm).
-    """
-    T = np.asarray(T_object, dtype=float)
-    he = np.asarray(half_extents, dtype=float).reshape(-1)
-    if T.shape != (4, 4) or he.shape != (3,):
-        raise IKError(f"T_object must be (4, 4) and half_extents (3,), got {T.shape}, {he.shape}")
-    R = T[:3, :3]
-    # the box axis closest to world z must be its z axis (upright box)
-    if abs(R[2, 2]) < math.cos(math.radians(20)):
-        raise IKError("top_down_grasp needs an upright box (its z axis within 20 deg of vertical)")
-    ax = R[:2, 0] / max(np.linalg.norm(R[:2, 0]), 1e-9)
-    ay = R[:2, 1] / max(np.linalg.norm(R[:2, 1]), 1e-9)
-    # closing direction (tcp y) along the shorter side
-    closes = []
-    if he[0] <= he[1] + 1e-6:
-        closes.append((ax, 2 * he[0]))
-    if he[1] <= he[0] + 1e-6:
-        closes.append((ay, 2 * he[1]))
-    width = min(w for _, w in closes)
-    if width > 0.08 - 0.004:
-        raise IKError(f"box is {width * 100:.1f} cm wide across the fingers; the gripper opens to 8 cm")
-    cands = []
-    for axis, _ in closes:
-        for sign in (1.0, -1.0):
-            y = sign * axis
-            # tcp y = (sin yaw, -cos yaw)
-            cands.append(math.atan2(y[0], -y[1]))
-    best = None
-    for yaw in cands:
-        delta = _wrap(yaw - current_yaw_rad)
-        if current_q7_rad is not None:
-            q7 = current_q7_rad - delta
-            if not (JOINT7_RANGE_RAD[0] + 0.05 <= q7 <= JOINT7_RANGE_RAD[1] - 0.05):
-                continue
-        if best is None or abs(delta) < abs(best[0]):
-            best = (delta, yaw)
-    if best is None:
-        raise IKError("no grasp yaw keeps joint 7 inside its range")
-    yaw = _wrap(current_yaw_rad + best[0])
-    ext_z = float(np.abs(R[2, :]) @ he)
-    bottom = T[2, 3] - ext_z if support_z_m is None else support_z_m
-    top = T[2, 3] + ext_z
-    z = max(T[2, 3], bottom + FINGERTIP_BELOW_TCP_M + tip_clearance_m, top - PAD_DEPTH_ABOVE_TCP_M)
-    G = np.eye(4)
-    G[:3, :3] = top_down_rotation(yaw)
-    G[:3, 3] = [T[0, 3], T[1, 3], z]
-    P = G.copy()
-    P[2, 3] += approach_height_m
-    G.setflags(write=False)
-    P.setflags(write=False)
-    return GraspPlan(grasp=G, pregrasp=P, yaw_rad=yaw, width_m=float(width))
+    """The best top-down grasp of an upright box: tcp z pointing down, fingers closing
+    across the shorter horizontal side, yaw (within the joint-7 range when
+    ``current_q7_rad`` is given) closest to ``current_yaw_rad``. See
+    :func:`top_down_grasp_candidates` for the arguments; raises :class:`IKError`."""
+    return top_down_grasp_candidates(
+        T_object,
+        half_extents,
+        approach_height_m=approach_height_m,
+        current_yaw_rad=current_yaw_rad,
+        current_q7_rad=current_q7_rad,
+        support_z_m=support_z_m,
+        tip_clearance_m=tip_clearance_m,
+    )[0]
 
 
 def place_pose(

@@ -41,6 +41,10 @@ def last_plan_stats() -> dict:
     return dict(_last_stats)
 
 
+def _always_valid(state) -> bool:
+    return True
+
+
 def _make_planner(name: str, si):
     return getattr(og, name)(si)
 
@@ -134,62 +138,64 @@ def _plan(checker, qs, qg, planner, timeout_s, seed, simplify, resolution_rad, m
         return valid_in_bounds(np.array(state[0:n]))
 
     si.setStateValidityChecker(is_valid)
-    si.setStateValidityCheckingResolution(resolution_rad / space.getMaximumExtent())
-    si.setup()
-    ss = og.SimpleSetup(si)
-    start = space.allocState()
-    goal = space.allocState()
-    for i in range(n):
-        start[i] = float(qs[i])
-        goal[i] = float(qg[i])
-    ss.setStartAndGoalStates(start, goal)
-    if planner in _OPTIMIZING:
-        obj = ob.PathLengthOptimizationObjective(si)
-        if not optimize:
-            obj.setCostThreshold(ob.Cost(math.inf))
-        ss.setOptimizationObjective(obj)
-    ss.setPlanner(_make_planner(planner, si))
-    ss.setup()
-    t0 = time.perf_counter()
-    status = ss.solve(float(timeout_s))
-    solve_s = time.perf_counter() - t0
-    if not ss.haveExactSolutionPath():
-        raise PlanningError(
-            f"{planner} found no collision-free path in {solve_s:.2f} s (budget {timeout_s} s, "
-            f"status {status.asString()}); start {np.round(qs, 3).tolist()}, goal {np.round(qg, 3).tolist()}"
+    try:
+        si.setStateValidityCheckingResolution(resolution_rad / space.getMaximumExtent())
+        si.setup()
+        ss = og.SimpleSetup(si)
+        start = space.allocState()
+        goal = space.allocState()
+        for i in range(n):
+            start[i] = float(qs[i])
+            goal[i] = float(qg[i])
+        ss.setStartAndGoalStates(start, goal)
+        if planner in _OPTIMIZING:
+            obj = ob.PathLengthOptimizationObjective(si)
+            if not optimize:
+                obj.setCostThreshold(ob.Cost(1e12))  # any solution is good enough
+            ss.setOptimizationObjective(obj)
+        ss.setPlanner(_make_planner(planner, si))
+        ss.setup()
+        t0 = time.perf_counter()
+        status = ss.solve(float(timeout_s))
+        solve_s = time.perf_counter() - t0
+        if not ss.haveExactSolutionPath():
+            raise PlanningError(
+                f"{planner} found no collision-free path in {solve_s:.2f} s (budget {timeout_s} s, "
+                f"status {status.asString()}); start {np.round(qs, 3).tolist()}, goal {np.round(qg, 3).tolist()}"
+            )
+        path = ss.getSolutionPath()
+        n_raw = path.getStateCount()
+        length_raw = path.length()
+        t1 = time.perf_counter()
+        if simplify:
+            # Rope shortcutting (OMPL 2) gets most of simplifyMax's shortening at a
+            # fraction of its validity checks; repeat while it still helps.
+            ps = og.PathSimplifier(si)
+            for _ in range(max_simplify_passes):
+                before = path.length()
+                ps.ropeShortcutPath(path)
+                if path.length() > 0.99 * before:
+                    break
+        simplify_s = time.perf_counter() - t1
+        P = np.array([[path.getState(k)[i] for i in range(n)] for k in range(path.getStateCount())])
+        P[0], P[-1] = qs, qg
+        P = _dedupe(P)
+        P = _subdivide(P, max_segment_rad)
+        _last_stats.clear()
+        _last_stats.update(
+            planner=planner,
+            solve_s=solve_s,
+            simplify_s=simplify_s,
+            validity_checks=checks[0],
+            states_raw=n_raw,
+            length_raw_rad=length_raw,
+            length_rad=float(np.sum(np.linalg.norm(np.diff(P, axis=0), axis=1))),
+            states_final=len(P),
         )
-    path = ss.getSolutionPath()
-    n_raw = path.getStateCount()
-    length_raw = path.length()
-    t1 = time.perf_counter()
-    if simplify:
-        # Rope shortcutting (OMPL 2) gets most of simplifyMax's shortening at a
-        # fraction of its validity checks; repeat while it still helps.
-        ps = og.PathSimplifier(si)
-        for _ in range(max_simplify_passes):
-            before = path.length()
-            ps.ropeShortcutPath(path)
-            if path.length() > 0.99 * before:
-                break
-    simplify_s = time.perf_counter() - t1
-    P = np.array([[path.getState(k)[i] for i in range(n)] for k in range(path.getStateCount())])
-    P[0], P[-1] = qs, qg
-    P = _dedupe(P)
-    P = _subdivide(P, max_segment_rad)
-    _last_stats.clear()
-    _last_stats.update(
-        planner=planner,
-        solve_s=solve_s,
-        simplify_s=simplify_s,
-        validity_checks=checks[0],
-        states_raw=n_raw,
-        length_raw_rad=length_raw,
-        length_rad=float(np.sum(np.linalg.norm(np.diff(P, axis=0), axis=1))),
-        states_final=len(P),
-    )
-    # Break the Python <-> C++ reference held by the validity checker callback.
-    si.setStateValidityChecker(lambda s: True)
-    return P
+        return P
+    finally:
+        # Drop the C++ side's reference to the Python callback (and the checker).
+        si.setStateValidityChecker(_always_valid)
 
 
 def _dedupe(P: np.ndarray, eps: float = 1e-9) -> np.ndarray:

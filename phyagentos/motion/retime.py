@@ -55,6 +55,7 @@ __all__ = [
     "FRANKA_ACCELERATION_LIMITS",
     "DEFAULT_ACCELERATION_LIMITS",
     "actuator_velocity_limits",
+    "franka_limits",
 ]
 
 log = logging.getLogger(__name__)
@@ -123,6 +124,16 @@ class Trajectory:
         i = int(np.searchsorted(self.t, t, side="right")) - 1
         a = (t - self.t[i]) / (self.t[i + 1] - self.t[i])
         return (1 - a) * self.q[i] + a * self.q[i + 1], (1 - a) * self.qd[i] + a * self.qd[i + 1]
+
+
+def franka_limits() -> tuple[np.ndarray, np.ndarray]:
+    """Franka datasheet limits as arrays: ``(velocity (7,) rad/s, acceleration (7,) rad/s^2)``.
+
+    These are the hardware maxima; scale them down for execution (see the module
+    docstring, :data:`DEFAULT_ACCELERATION_LIMITS`, and, for the MuJoCo model,
+    :func:`actuator_velocity_limits`).
+    """
+    return np.array(FRANKA_VELOCITY_LIMITS), np.array(FRANKA_ACCELERATION_LIMITS)
 
 
 def actuator_velocity_limits(
@@ -241,7 +252,9 @@ def retime(
             datasheet x 0.25).
         dt: sample period of the returned trajectory, s.
         checker: optional :class:`~phyagentos.motion.collision.CollisionChecker`; the
-            sampled trajectory must then be collision free.
+            sampled trajectory must then be collision free. Give it a smaller margin
+            than the planner's: a shortcut path runs along the planning margin and the
+            spline may leave the polyline by a fraction of a millimetre.
         resolution_rad: joint change between collision-checked samples.
         max_densify: how many times the path may be densified after a collision.
         grid_step_rad: spacing of the TOPP-RA grid along the path arc length, rad.

@@ -10,10 +10,10 @@ import numpy as np
 from py_trees.common import Status
 
 from phyagentos.motion.cartesian import cartesian_path
-from phyagentos.motion.retime import Trajectory, franka_limits, retime
+from phyagentos.motion.retime import Trajectory, retime
 
 from .base import Primitive, PrimitiveFailure
-from .motion import held_object, session_checker
+from .motion import execution_limits, held_object, session_checker
 
 __all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "CheckHolding"]
 
@@ -111,10 +111,10 @@ class CartesianMove(_Tracking):
             T_goal[:3, 3] += self.offset
         with ctx.profiler.section("ik"):
             path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal)
-        vel, acc = franka_limits()
+        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
         with ctx.profiler.section("timing"):
             checker = session_checker(ctx) if self.check_collisions else None
-            traj = retime(path, vel_limits=vel * self.velocity_scale, acc_limits=acc * self.velocity_scale,
+            traj = retime(path, vel_limits=vel, acc_limits=acc,
                           dt=target.model.opt.timestep, checker=checker)
         self._start(traj)
 

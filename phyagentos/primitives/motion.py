@@ -12,11 +12,11 @@ import numpy as np
 from phyagentos.motion.collision import CollisionChecker
 from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.planner import plan_path
-from phyagentos.motion.retime import franka_limits, retime
+from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime
 
 from .base import Primitive
 
-__all__ = ["SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object"]
+__all__ = ["SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "PLANNING_MARGIN_M"]
 
 
 def held_object(target) -> str | None:
@@ -27,18 +27,36 @@ def held_object(target) -> str | None:
     return None
 
 
-def session_checker(ctx) -> CollisionChecker:
+#: Clearance kept while planning, m. Shortcut paths run right along it, so the
+#: timed trajectory is re-checked at zero margin (toppra may cut inside it).
+PLANNING_MARGIN_M = 0.01
+
+
+def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(velocity (7,) rad/s, acceleration (7,) rad/s^2)`` limits for timing a motion.
+
+    Velocity comes from the target (what its actuators sustain: the simulated
+    Panda's damping and force limits allow far less than the datasheet), times
+    ``velocity_scale``; acceleration from :data:`DEFAULT_ACCELERATION_LIMITS`.
+    """
+    vel = np.asarray(ctx.target.velocity_limits(), dtype=float) * velocity_scale
+    acc = np.asarray(DEFAULT_ACCELERATION_LIMITS, dtype=float) * acceleration_scale
+    return vel, acc
+
+
+def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
     """A collision checker synced to the target's current world.
 
     Whatever the gripper holds is attached at its current offset so transfers are
-    checked with the object in hand. The checker is cached on the context:
-    building one copies the model's data, once per session is enough.
+    checked with the object in hand. Checkers are cached on the context per
+    margin: building one copies the model, once per session is enough.
     """
     target = ctx.target
-    checker = getattr(ctx, "_checker", None)
+    cache = ctx.__dict__.setdefault("_checkers", {})
+    checker = cache.get(margin_m)
     if checker is None:
-        checker = CollisionChecker(target.model, arm_joint_names=target.arm_joint_names)
-        ctx._checker = checker
+        checker = CollisionChecker(target.model, arm_joint_names=target.arm_joint_names, margin_m=margin_m)
+        cache[margin_m] = checker
     checker.set_world_state(target.data.qpos)
     checker.detach()
     obj = held_object(target)
@@ -97,7 +115,7 @@ class PlanPath(Primitive):
         ctx = self.ctx
         q0 = ctx.target.arm_qpos()
         with ctx.profiler.section("planning"):
-            checker = session_checker(ctx)
+            checker = session_checker(ctx, margin_m=PLANNING_MARGIN_M)
             path = plan_path(checker, q0, self.get(self.goal_key), planner=self.planner or ctx.motion.planner,
                              timeout_s=self.timeout_s or ctx.motion.planning_timeout_s, seed=ctx.seed)
         self.set(self.out, path)
@@ -129,12 +147,11 @@ class RetimePath(Primitive):
 
     def step(self):
         ctx = self.ctx
-        vel, acc = franka_limits()
-        vs = self.velocity_scale or ctx.motion.velocity_scale
-        as_ = self.acceleration_scale or ctx.motion.acceleration_scale
+        vel, acc = execution_limits(ctx, self.velocity_scale or ctx.motion.velocity_scale,
+                                    self.acceleration_scale or ctx.motion.acceleration_scale)
         with ctx.profiler.section("timing"):
             checker = session_checker(ctx)
-            traj = retime(np.asarray(self.get(self.path_key)), vel_limits=vel * vs, acc_limits=acc * as_,
+            traj = retime(np.asarray(self.get(self.path_key)), vel_limits=vel, acc_limits=acc,
                           dt=ctx.target.model.opt.timestep, checker=checker)
         self.set(self.out, traj)
         ctx.trace.record("retime", duration_s=float(traj.duration), samples=int(len(traj.t)))

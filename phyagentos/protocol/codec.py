@@ -89,6 +89,13 @@ def _represent_str(dumper: _Dumper, value: str) -> ScalarNode:
     return dumper.represent_scalar("tag:yaml.org,2002:str", value, style=style)
 
 
+def _represent_list(dumper: _Dumper, value: list) -> Node:
+    # Short lists of numbers (positions, quaternions, joint vectors) read best on
+    # one line: ``position: [0.5, -0.2, 0.02]``. Everything else stays block style.
+    flow = 0 < len(value) <= 8 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", value, flow_style=flow)
+
+
 def _represent_other(dumper: _Dumper, value: Any) -> Node:
     # Values under dict[str, Any] fields may be numpy scalars/arrays, tuples,
     # enums or str/int/float subclasses; write them as their plain equivalents.
@@ -107,7 +114,7 @@ def _represent_other(dumper: _Dumper, value: Any) -> Node:
     if isinstance(value, Mapping):
         return dumper.represent_dict(dict(value))
     if isinstance(value, tuple):
-        return dumper.represent_list(list(value))
+        return _represent_list(dumper, list(value))
     if isinstance(value, os.PathLike):
         return _represent_str(dumper, os.fspath(value))
     if hasattr(value, "tolist"):  # numpy arrays and scalars
@@ -118,6 +125,7 @@ def _represent_other(dumper: _Dumper, value: Any) -> Node:
 
 
 _Dumper.add_representer(str, _represent_str)
+_Dumper.add_representer(list, _represent_list)
 _Dumper.add_representer(tuple, _represent_other)
 _Dumper.add_representer(None, _represent_other)
 

@@ -22,6 +22,7 @@ Every transition is appended to the record's ``transitions`` list and handed to 
 from __future__ import annotations
 
 import logging
+from datetime import datetime
 from typing import Callable
 
 from transitions import MachineError
@@ -29,7 +30,7 @@ from transitions.extensions import HierarchicalMachine
 
 from phyagentos.errors import LifecycleError
 
-from .schemas import SessionRecord, TERMINAL_STATES, TransitionRecord, utc_now_iso
+from .schemas import SessionRecord, SessionResult, TERMINAL_STATES, TransitionRecord, utc_now_iso
 
 __all__ = ["SessionLifecycle", "LIFECYCLE_EVENTS", "ACTIVE_STATES", "utc_now"]
 
@@ -79,6 +80,10 @@ LIFECYCLE_EVENTS = tuple(sorted({t[0] for t in _TRANSITIONS}))
 utc_now = utc_now_iso  # one clock format for every protocol timestamp
 
 
+def _parse_ts(value: str) -> datetime:
+    return datetime.fromisoformat(value[:-1] + "+00:00" if value.endswith("Z") else value)
+
+
 def _machine_state(state: str) -> str:
     return f"active_{state}" if state in ACTIVE_STATES else state
 
@@ -115,6 +120,21 @@ class SessionLifecycle:
             )
         except ValueError as exc:  # unknown initial state
             raise LifecycleError(f"session {record.session_id}: unknown state {record.state!r}") from exc
+
+    def _result(self, reason: str) -> SessionResult:
+        """Terminal summary: status, last verdict, reason and claim-to-end wall time."""
+        rec = self.record
+        attempt = rec.attempts[-1] if rec.attempts else None
+        verdict = attempt.verdict if attempt else None
+        first = rec.transitions[0].at if rec.transitions else rec.created_at
+        duration = (_parse_ts(rec.updated_at) - _parse_ts(first)).total_seconds()
+        return SessionResult(
+            status=self.state,
+            verdict=verdict.verdict if verdict else None,
+            reason=reason or (verdict.reason if verdict else ""),
+            duration_s=max(0.0, duration),
+            evidence=attempt.evidence if attempt else None,
+        )
 
     @property
     def state(self) -> str:
@@ -154,6 +174,8 @@ class SessionLifecycle:
         self.record.transitions.append(
             TransitionRecord(at=now, source=source, dest=self.state, event=event if not reason else f"{event}: {reason}")
         )
+        if self.is_terminal:
+            self.record.result = self._result(reason)
         logger.debug("session %s: %s -(%s)-> %s", self.record.session_id, source, event, self.state)
         if self._persist is not None:
             self._persist(self.record)

@@ -15,11 +15,9 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-import yaml
-
 from phyagentos.errors import PhyAgentOSError
 from phyagentos.primitives.context import CancelToken, SkillContext
-from phyagentos.protocol import Attempt, EnvironmentDoc, ErrorInfo, SessionRecord, Workspace
+from phyagentos.protocol import Attempt, dump_yaml, EnvironmentDoc, ErrorInfo, SessionRecord, Workspace
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
@@ -89,7 +87,7 @@ class SessionRunner:
         try:
             target = self.targets.acquire(rec, spec)
             initial = target.snapshot()
-            atomic_write_text(evidence_dir / "initial.yaml", yaml.safe_dump(initial, sort_keys=False, allow_unicode=True))
+            atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
             deadline = time.monotonic() + rec.limits.execution_timeout_s
             ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel)
             ctx.on_observation = lambda snap: write_environment(
@@ -139,9 +137,9 @@ class SessionRunner:
             files["initial"] = "initial.yaml"
         if terminal is not None:
             files["terminal"] = "terminal.yaml"
-            atomic_write_text(directory / "terminal.yaml", yaml.safe_dump(terminal, sort_keys=False, allow_unicode=True))
+            atomic_write_text(directory / "terminal.yaml", dump_yaml(terminal))
         events = list(ctx.events) if ctx else []
-        atomic_write_text(directory / "events.yaml", yaml.safe_dump(events, sort_keys=False, allow_unicode=True))
+        atomic_write_text(directory / "events.yaml", dump_yaml(events))
         if ctx is not None:
             ctx.trace.write(directory / "trace.jsonl")
         else:
@@ -163,5 +161,5 @@ class SessionRunner:
             },
             "timings_s": {k: round(v, 4) for k, v in (ctx.profiler.totals.items() if ctx else [])},
         }
-        atomic_write_text(directory / "bundle.yaml", yaml.safe_dump(bundle, sort_keys=False, allow_unicode=True))
+        atomic_write_text(directory / "bundle.yaml", dump_yaml(bundle))
         return files

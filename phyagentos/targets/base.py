@@ -135,6 +135,10 @@ class BaseRolloutTarget(abc.ABC):
             ) from exc
         return fn(**kwargs)
 
+    def halt(self) -> None:
+        """Stop any motion and hold still (called on cancellation or errors).
+        The default does nothing; targets that move on their own override it."""
+
     def close(self) -> None:
         """Release resources; further calls are no-ops."""
         self._closed = True

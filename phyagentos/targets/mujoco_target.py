@@ -21,6 +21,7 @@ import logging
 import math
 import os
 import tempfile
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -45,7 +46,6 @@ from .scene import (
     SceneSpec,
     build_scene,
     object_joint_name,
-    obstacle_geom_name,
 )
 
 __all__ = ["MuJoCoTarget", "GripperResult", "ExecutionResult"]
@@ -96,7 +96,16 @@ class MuJoCoTarget(BaseRolloutTarget):
 
     Raises:
         TargetError: the scene does not build.
+
+    Class attributes (read by preflight without constructing a target):
+        KIND: target kind as declared in TARGETS.md.
+        TOOLS: operations a session may be granted.
+        ACTION_FORMS: action representations the target executes natively.
     """
+
+    KIND = "simulation"
+    TOOLS = _TOOLS
+    ACTION_FORMS = ("joint_trajectory", "gripper_command")
 
     def __init__(self, name: str, scene: SceneSpec = DEFAULT_SCENE, *, seed: int | None = None):
         super().__init__(name, "simulation")
@@ -155,9 +164,8 @@ class MuJoCoTarget(BaseRolloutTarget):
         self._gobj = gobj
         self._left_geoms = frozenset(g for g in range(m.ngeom) if m.geom_bodyid[g] == m.body(FINGER_BODY_NAMES[0]).id and kind[g])
         self._right_geoms = frozenset(g for g in range(m.ngeom) if m.geom_bodyid[g] == m.body(FINGER_BODY_NAMES[1]).id and kind[g])
-        self._support_geoms = frozenset(
-            g for g in (m.geom(TABLE_GEOM).id, m.geom(FLOOR_GEOM).id)
-        )
+        self._support_geoms = frozenset((m.geom(TABLE_GEOM).id, m.geom(FLOOR_GEOM).id))
+        self._U_cache: dict[frozenset, np.ndarray] = {}  # held objects -> unexpected-contact matrix
         self._renderer = None
         self._rng = np.random.default_rng(seed)
         self.reset(seed=seed)
@@ -368,6 +376,80 @@ class MuJoCoTarget(BaseRolloutTarget):
         return m.geom(g).name or m.body(int(m.geom_bodyid[g])).name
 
     # -- trajectory execution -----------------------------------------------------------
+    @staticmethod
+    def _traj_arrays(traj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(traj.t, dtype=float).reshape(-1)
+        Q = np.asarray(traj.q, dtype=float)
+        QD = np.asarray(getattr(traj, "qd", np.zeros_like(Q)), dtype=float)
+        if len(t) < 1 or Q.shape != (len(t), 7) or QD.shape != Q.shape:
+            raise TargetError(f"trajectory must have t (M,), q and qd (M, 7); got {t.shape}, {Q.shape}, {QD.shape}")
+        if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(QD)) and np.all(np.isfinite(t))):
+            raise TargetError("trajectory contains non-finite values")
+        return t - t[0], Q, QD
+
+    def _check_start(self, Q0: np.ndarray, tracking_tol_rad: float) -> None:
+        start_err = float(np.max(np.abs(Q0 - self.arm_qpos())))
+        allowed = max(tracking_tol_rad, 0.02)
+        if start_err > allowed:
+            raise TargetError(
+                f"trajectory starts {start_err:.3f} rad from the current arm configuration (allowed {allowed:.3f} rad)"
+            )
+
+    def _unexpected_for_current_grasp(self) -> np.ndarray:
+        left, right = self._finger_contacts()
+        key = frozenset(left & right)
+        U = self._U_cache.get(key)
+        if U is None:
+            U = self._U_cache[key] = self._unexpected_matrix(set(key))
+        return U
+
+    def _collect_contacts(self, U: np.ndarray, bad_pairs: set) -> None:
+        d = self._data
+        if d.ncon:
+            g = d.contact.geom
+            hit = U[g[:, 0], g[:, 1]] & (d.contact.dist < 0.0)
+            if hit.any():
+                for i in np.nonzero(hit)[0]:
+                    bad_pairs.add((int(g[i, 0]), int(g[i, 1])))
+
+    def _contact_names(self, bad_pairs: set) -> tuple[tuple[str, str], ...]:
+        out = tuple(sorted({tuple(sorted((self._geom_label(a), self._geom_label(b)))) for a, b in bad_pairs}))
+        if out:
+            log.info("unexpected contacts during execution: %s", out)
+        return out  # type: ignore[return-value]
+
+    def _stream(self, t, Q, QD, times, tracking_tol_rad, feedforward, bad_pairs) -> tuple[bool, float, int, str]:
+        """Step once per entry of ``times`` (s, trajectory clock) with the interpolated
+        reference; returns (completed, max error, steps, reason)."""
+        m, d = self._model, self._data
+        n = len(times)
+        if n == 0:
+            return True, 0.0, 0, ""
+        Qr = np.column_stack([np.interp(times, t, Q[:, j]) for j in range(7)])
+        QDr = np.column_stack([np.interp(times, t, QD[:, j]) for j in range(7)])
+        ff = self._ff_gain if feedforward else np.zeros(7)
+        lo, hi = self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act]
+        C = np.clip(Qr + ff * QDr, lo, hi)
+        U = self._unexpected_for_current_grasp()
+        arm_act, qadr = self._arm_act, self._qadr
+        ctrl, qpos = d.ctrl, d.qpos
+        max_err = 0.0
+        for k in range(n):
+            ctrl[arm_act] = C[k]
+            mujoco.mj_step(m, d)
+            err = float(np.max(np.abs(qpos[qadr] - Qr[k])))
+            if err > max_err:
+                max_err = err
+            self._collect_contacts(U, bad_pairs)
+            if err > tracking_tol_rad:
+                ctrl[arm_act] = np.clip(qpos[qadr], lo, hi)  # stop where we are
+                reason = (
+                    f"tracking error {err:.4f} rad exceeded {tracking_tol_rad:.4f} rad at "
+                    f"t={times[k]:.3f} s of {float(t[-1]):.3f} s"
+                )
+                return False, max_err, k + 1, reason
+        return True, max_err, n, ""
+
     def execute_trajectory(
         self,
         traj,
@@ -377,16 +459,20 @@ class MuJoCoTarget(BaseRolloutTarget):
         settle_s: float = 0.5,
         settle_tol_rad: float = 0.005,
     ) -> ExecutionResult:
-        """Stream a timed joint trajectory to the arm's position actuators.
+        """Stream a timed joint trajectory to the arm's position actuators, then settle.
+
+        Each physics step gets ``ctrl = q_ref + (b / kp) * qd_ref`` (linear
+        interpolation of the trajectory at the step's end time; ``b`` joint damping and
+        ``kp`` actuator gain read from the model).
 
         Args:
             traj: object with ``t`` (M,) s, ``q`` (M, 7) rad and ``qd`` (M, 7) rad/s
                 (e.g. :class:`phyagentos.motion.retime.Trajectory`); ``q[0]`` must be
-                within ``max(tracking_tol_rad, 0.02)`` of the current arm configuration.
-            tracking_tol_rad: stop early (``completed=False``) when any joint is farther
-                than this from the reference.
-            feedforward: add the damping velocity feed-forward ``(b/kp) * qd_ref``;
-                ``False`` streams bare positions (for comparison).
+                within ``max(tracking_tol_rad, 0.02)`` rad of the current arm configuration.
+            tracking_tol_rad: stop early (``completed=False``, arm held where it is) when
+                any joint is farther than this from the reference.
+            feedforward: add the damping velocity feed-forward; ``False`` streams bare
+                positions (for comparison).
             settle_s: after the last sample, hold the final configuration until the arm is
                 within ``settle_tol_rad`` and nearly still, at most this long.
             settle_tol_rad: settling tolerance, rad.
@@ -400,96 +486,111 @@ class MuJoCoTarget(BaseRolloutTarget):
             TargetError: malformed trajectory or a start far from the current state.
         """
         self._check_open()
-        t = np.asarray(traj.t, dtype=float).reshape(-1)
-        Q = np.asarray(traj.q, dtype=float)
-        QD = np.asarray(getattr(traj, "qd", np.zeros_like(Q)), dtype=float)
-        if len(t) < 1 or Q.shape != (len(t), 7) or QD.shape != Q.shape:
-            raise TargetError(f"trajectory must have t (M,), q and qd (M, 7); got {t.shape}, {Q.shape}, {QD.shape}")
-        if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(QD)) and np.all(np.isfinite(t))):
-            raise TargetError("trajectory contains non-finite values")
-        m, d = self._model, self._data
-        q_now = self.arm_qpos()
-        start_err = float(np.max(np.abs(Q[0] - q_now)))
-        if start_err > max(tracking_tol_rad, 0.02):
-            raise TargetError(
-                f"trajectory starts {start_err:.3f} rad from the current arm configuration "
-                f"(allowed {max(tracking_tol_rad, 0.02):.3f} rad)"
-            )
-        ts = m.opt.timestep
-        t = t - t[0]
+        t, Q, QD = self._traj_arrays(traj)
+        self._check_start(Q[0], tracking_tol_rad)
+        ts = self._model.opt.timestep
         duration = float(t[-1])
         n = int(math.ceil(duration / ts - 1e-9)) if duration > 0 else 0
         times = np.minimum((np.arange(n) + 1) * ts, duration)
-        if n:
-            Qr = np.column_stack([np.interp(times, t, Q[:, j]) for j in range(7)])
-            QDr = np.column_stack([np.interp(times, t, QD[:, j]) for j in range(7)])
-        else:
-            Qr = np.zeros((0, 7))
-            QDr = np.zeros((0, 7))
-        ff = self._ff_gain if feedforward else np.zeros(7)
-        lo, hi = self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act]
-        C = np.clip(Qr + ff * QDr, lo, hi)
-        held = set(self._finger_contacts()[0] & self._finger_contacts()[1])
-        U = self._unexpected_matrix(held)
-        bad_pairs: set[tuple[int, int]] = set()
-        arm_act, qadr, dadr = self._arm_act, self._qadr, self._dadr
-        max_err = 0.0
-        steps = 0
-        t0 = d.time
-        completed = True
-        reason = ""
-        ctrl = d.ctrl
-        qpos = d.qpos
-        for k in range(n):
-            ctrl[arm_act] = C[k]
-            mujoco.mj_step(m, d)
-            steps += 1
-            err = float(np.max(np.abs(qpos[qadr] - Qr[k])))
-            if err > max_err:
-                max_err = err
-            nc = d.ncon
-            if nc:
-                g = d.contact.geom
-                hit = U[g[:, 0], g[:, 1]] & (d.contact.dist < 0.0)
-                if hit.any():
-                    for i in np.nonzero(hit)[0]:
-                        bad_pairs.add((int(g[i, 0]), int(g[i, 1])))
-            if err > tracking_tol_rad:
-                completed = False
-                reason = (
-                    f"tracking error {err:.4f} rad exceeded {tracking_tol_rad:.4f} rad at "
-                    f"t={times[k]:.3f} s of {duration:.3f} s"
-                )
-                ctrl[arm_act] = np.clip(qpos[qadr], lo, hi)  # stop where we are
-                break
+        t0 = self._data.time
+        bad: set = set()
+        completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
         if completed:
-            q_end = Q[-1]
-            ctrl[arm_act] = np.clip(q_end, lo, hi)
-            n_settle = int(round(settle_s / ts))
-            for _ in range(n_settle):
-                mujoco.mj_step(m, d)
-                steps += 1
-                e = float(np.max(np.abs(qpos[qadr] - q_end)))
-                nc = d.ncon
-                if nc:
-                    g = d.contact.geom
-                    hit = U[g[:, 0], g[:, 1]] & (d.contact.dist < 0.0)
-                    if hit.any():
-                        for i in np.nonzero(hit)[0]:
-                            bad_pairs.add((int(g[i, 0]), int(g[i, 1])))
-                if e < settle_tol_rad and float(np.max(np.abs(d.qvel[dadr]))) < 0.02:
-                    break
-        contacts = tuple(sorted({tuple(sorted((self._geom_label(a), self._geom_label(b)))) for a, b in bad_pairs}))
-        if contacts:
-            log.info("unexpected contacts during execution: %s", contacts)
+            steps += self.settle(Q[-1], settle_s=settle_s, tol_rad=settle_tol_rad, _contacts=bad)
         return ExecutionResult(
             completed=completed,
             max_tracking_error_rad=max_err,
-            sim_time_s=float(d.time - t0),
+            sim_time_s=float(self._data.time - t0),
             steps=steps,
-            contacts=contacts,  # type: ignore[arg-type]
+            contacts=self._contact_names(bad),
             reason=reason,
         )
+
+    def track(
+        self,
+        traj,
+        *,
+        t_start: float,
+        t_end: float,
+        tracking_tol_rad: float = 0.05,
+        feedforward: bool = True,
+    ) -> ExecutionResult:
+        """Stream only the slice ``(t_start, t_end]`` (s on the trajectory's clock) of
+        ``traj``, one physics step per ``timestep``; for executors that advance a
+        trajectory a control period per tick. Call :meth:`settle` after the last slice.
+        The start check of :meth:`execute_trajectory` applies when ``t_start <= 0``.
+        Returns the :class:`ExecutionResult` of this slice."""
+        self._check_open()
+        t, Q, QD = self._traj_arrays(traj)
+        if t_start <= 0.0:
+            self._check_start(Q[0], tracking_tol_rad)
+        duration = float(t[-1])
+        t_end = min(float(t_end), duration)
+        ts = self._model.opt.timestep
+        n = max(0, int(round((t_end - max(t_start, 0.0)) / ts)))
+        times = np.minimum(max(t_start, 0.0) + (np.arange(n) + 1) * ts, duration)
+        if n and t_end >= duration - 1e-12:
+            times[-1] = duration
+        t0 = self._data.time
+        bad: set = set()
+        completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
+        return ExecutionResult(
+            completed=completed,
+            max_tracking_error_rad=max_err,
+            sim_time_s=float(self._data.time - t0),
+            steps=steps,
+            contacts=self._contact_names(bad),
+            reason=reason,
+        )
+
+    def settle(
+        self,
+        q: Sequence[float] | None = None,
+        *,
+        settle_s: float = 0.5,
+        tol_rad: float = 0.005,
+        _contacts: set | None = None,
+    ) -> int:
+        """Command the arm to ``q`` (7,) rad (default: the current command) and step
+        until it is within ``tol_rad`` and slower than 0.02 rad/s, at most ``settle_s``
+        simulated seconds. Returns the number of steps."""
+        self._check_open()
+        m, d = self._model, self._data
+        lo, hi = self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act]
+        if q is not None:
+            q_end = np.asarray(q, dtype=float).reshape(-1)
+            if q_end.shape != (7,):
+                raise TargetError(f"settle: q must have shape (7,), got {q_end.shape}")
+            d.ctrl[self._arm_act] = np.clip(q_end, lo, hi)
+        else:
+            q_end = d.ctrl[self._arm_act].copy()
+        U = self._unexpected_for_current_grasp() if _contacts is not None else None
+        qadr, dadr = self._qadr, self._dadr
+        steps = 0
+        for _ in range(int(round(settle_s / m.opt.timestep))):
+            mujoco.mj_step(m, d)
+            steps += 1
+            if U is not None:
+                self._collect_contacts(U, _contacts)  # type: ignore[arg-type]
+            if float(np.max(np.abs(d.qpos[qadr] - q_end))) < tol_rad and float(np.max(np.abs(d.qvel[dadr]))) < 0.02:
+                break
+        return steps
+
+    def hold(self, q: Sequence[float] | None = None, *, duration_s: float) -> int:
+        """Hold the arm at ``q`` (7,) rad (default: where it is now) for ``duration_s``
+        simulated seconds. Returns the number of steps."""
+        self._check_open()
+        target_q = self.arm_qpos() if q is None else np.asarray(q, dtype=float).reshape(-1)
+        if target_q.shape != (7,) or not np.all(np.isfinite(target_q)):
+            raise TargetError(f"hold: q must be 7 finite joint angles, got {q!r}")
+        return self.step_for(duration_s, arm_ctrl=target_q)
+
+    def halt(self) -> None:
+        """Stop: command the arm to stay where it is (velocity feed-forward dropped)."""
+        if self.closed:
+            return
+        lo, hi = self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act]
+        self._data.ctrl[self._arm_act] = np.clip(self.arm_qpos(), lo, hi)
 
     # -- gripper ----------------------------------------------------------------------
     def set_gripper(self, *, opening_m: float, settle_s: float = 0.5) -> GripperResult:
@@ -572,13 +673,18 @@ class MuJoCoTarget(BaseRolloutTarget):
         return float(T[2, 3] - ext), float(T[2, 3] + ext)
 
     def snapshot(self) -> dict:
-        """Symbolic world state.
+        """Symbolic world state, plain Python types only (YAML/JSON ready).
 
-        Returns ``{"time": s, "entities": [...], "relations": [...]}``. Entities:
-        ``{"name", "kind", "position" (3,), "quat_wxyz" (4,), "size" (3,) full extents}``
-        for the robot tcp (``name='tcp'``, kind ``robot``), the gripper (kind ``gripper``,
-        plus ``opening_m``), every object (kind ``object``), region (kind ``region``) and
-        obstacle (kind ``obstacle``). Relations are ``{"subject", "relation", "object"}``:
+        Returns ``{"sim_time_s": s, "time": s, "entities": [...], "relations": [...]}``.
+        Entities: ``{"name", "kind", "position" (3,) m, "quat_wxyz" (4,), "size" (3,),
+        "attributes"}`` with ``size`` the half extents in metres (MuJoCo's box
+        convention), for the arm (``name='panda'``, kind ``robot``, attributes
+        ``joint_positions`` (7,) rad and ``gripper_opening_m``), the robot tcp
+        (``name='tcp'``, kind ``robot``, size 0), the gripper (kind ``gripper``,
+        ``size[0]`` and ``attributes.opening_m`` = opening per finger), every object (kind
+        ``object``), region (kind ``region``, z half extent 0) and obstacle (kind
+        ``obstacle``); positions and orientations are world frame. Relations are
+        ``{"subject", "relation", "object"}``:
 
         - ``gripper holding X``: X touches both finger pads;
         - ``X on table``: X rests on the table (bottom within 5 mm of z = 0);
@@ -590,7 +696,19 @@ class MuJoCoTarget(BaseRolloutTarget):
         self._check_open()
         d = self._data
         tcp = self.tcp_pose()
+        opening = self.gripper_opening()
         ents: list[dict] = [
+            {
+                "name": "panda",
+                "kind": "robot",
+                "position": [0.0, 0.0, 0.0],
+                "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+                "size": [0.0, 0.0, 0.0],
+                "attributes": {
+                    "joint_positions": [round(float(q), 6) for q in self.arm_qpos()],
+                    "gripper_opening_m": round(opening, 6),
+                },
+            },
             {
                 "name": "tcp",
                 "kind": "robot",
@@ -603,8 +721,8 @@ class MuJoCoTarget(BaseRolloutTarget):
                 "kind": "gripper",
                 "position": [float(x) for x in tcp[:3, 3]],
                 "quat_wxyz": self._quat(tcp[:3, :3]),
-                "size": [2.0 * self.gripper_opening(), 0.02, 0.05],
-                "opening_m": self.gripper_opening(),
+                "size": [opening, 0.0, 0.0],
+                "attributes": {"opening_m": round(opening, 6)},
             },
         ]
         for o in self._scene.objects:
@@ -615,7 +733,7 @@ class MuJoCoTarget(BaseRolloutTarget):
                     "kind": "object",
                     "position": [float(x) for x in T[:3, 3]],
                     "quat_wxyz": self._quat(T[:3, :3]),
-                    "size": [2.0 * h for h in o.half_extents],
+                    "size": [float(h) for h in o.half_extents],
                 }
             )
         for r in self._scene.regions:
@@ -623,9 +741,9 @@ class MuJoCoTarget(BaseRolloutTarget):
                 {
                     "name": r.name,
                     "kind": "region",
-                    "position": [r.center[0], r.center[1], 0.0],
+                    "position": [float(r.center[0]), float(r.center[1]), 0.0],
                     "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
-                    "size": [2.0 * r.half_extents[0], 2.0 * r.half_extents[1], 0.0],
+                    "size": [float(r.half_extents[0]), float(r.half_extents[1]), 0.0],
                 }
             )
         for ob in self._scene.obstacles:
@@ -633,9 +751,9 @@ class MuJoCoTarget(BaseRolloutTarget):
                 {
                     "name": ob.name,
                     "kind": "obstacle",
-                    "position": list(ob.center),
+                    "position": [float(c) for c in ob.center],
                     "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
-                    "size": [2.0 * h for h in ob.half_extents],
+                    "size": [float(h) for h in ob.half_extents],
                 }
             )
         rel: list[dict] = []
@@ -669,7 +787,7 @@ class MuJoCoTarget(BaseRolloutTarget):
                 dxy = np.abs(xy - To[:2, 3])
                 if abs(bottom - top) < 0.006 and dxy.max() <= max(other.half_extents[:2]) + 1e-3:
                     rel.append({"subject": o.name, "relation": "on", "object": other.name})
-        return {"time": float(d.time), "entities": ents, "relations": rel}
+        return {"sim_time_s": float(d.time), "time": float(d.time), "entities": ents, "relations": rel}
 
     # -- persistence ----------------------------------------------------------------
     def _fingerprint(self) -> str:
@@ -755,12 +873,14 @@ class MuJoCoTarget(BaseRolloutTarget):
         if camera not in cams:
             raise TargetError(f"unknown camera {camera!r}; cameras: {format_choices(cams)}")
         try:
-            if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):
-                if self._renderer is not None:
-                    self._renderer.close()
-                self._renderer = mujoco.Renderer(m, height=height, width=width)
-            self._renderer.update_scene(self._data, camera=camera)
-            return self._renderer.render().copy()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # glfw warns before failing without a display
+                if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):
+                    if self._renderer is not None:
+                        self._renderer.close()
+                    self._renderer = mujoco.Renderer(m, height=height, width=width)
+                self._renderer.update_scene(self._data, camera=camera)
+                return self._renderer.render().copy()
         except Exception as exc:
             self._renderer = None
             raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc
@@ -798,8 +918,9 @@ class MuJoCoTarget(BaseRolloutTarget):
     def _tool_set_gripper(self, opening_m: float, settle_s: float = 0.5) -> dict:
         return self.set_gripper(opening_m=opening_m, settle_s=settle_s).to_dict()
 
-    def _tool_hold(self, seconds: float = 0.5) -> dict:
-        n = self.step_for(seconds)
+    def _tool_hold(self, duration_s: float = 0.5, q: Sequence[float] | None = None) -> dict:
+        """Hold ``q`` (default: the current configuration) for ``duration_s`` s."""
+        n = self.hold(q, duration_s=duration_s)
         return {"steps": n, "sim_time_s": self.sim_time}
 
     def _tool_snapshot(self) -> dict:

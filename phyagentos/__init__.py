@@ -17,7 +17,7 @@ import os as _os
 # MuJoCo picks its OpenGL backend when it is first imported. Headless machines
 # (no DISPLAY) get OSMesa, the software renderer that needs no GPU; set
 # MUJOCO_GL=egl (GPU) or glfw (desktop) yourself to override.
-if "DISPLAY" not in _os.environ:
+if not _os.environ.get("DISPLAY"):
     _os.environ.setdefault("MUJOCO_GL", "osmesa")
 
 __version__ = "0.1.0"

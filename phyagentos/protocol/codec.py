@@ -66,8 +66,9 @@ class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[mi
     yaml_implicit_resolvers = _RESOLVERS
 
 
-class _Dumper(yaml.SafeDumper):
-    """Pure-Python emitter: its style analysis is what the round-trip tests pin."""
+class _Dumper(getattr(yaml, "CSafeDumper", yaml.SafeDumper)):  # type: ignore[misc]
+    """Safe dumper (libyaml's emitter when available, ~5x faster); the lossless
+    round-trip property tests pin its output for both emitters."""
 
     yaml_implicit_resolvers = _RESOLVERS
 

@@ -34,8 +34,8 @@ class SourceList(list):
     item_lines: list
 
 
-class _Loader(yaml.SafeLoader):
-    pass
+class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """Safe loader; libyaml's parser when available (marks still carry lines)."""
 
 
 def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> SourceMap:

@@ -32,6 +32,9 @@ __all__ = ["EvidenceBundle", "Verifier", "PredicateVerifier", "SessionVerifier",
 
 logger = logging.getLogger(__name__)
 
+# Snapshots are large; libyaml's safe loader parses them ~10x faster than PyYAML's.
+_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
 
 @dataclass(frozen=True)
 class EvidenceBundle:
@@ -64,12 +67,12 @@ def load_evidence(directory: str | Path) -> EvidenceBundle:
     directory = Path(directory)
     index = directory / "bundle.yaml"
     try:
-        bundle = yaml.safe_load(index.read_text(encoding="utf-8"))
+        bundle = yaml.load(index.read_text(encoding="utf-8"), Loader=_YAML_LOADER)
         files = bundle["files"]
 
         def load(key):
             name = files.get(key)
-            return yaml.safe_load((directory / name).read_text(encoding="utf-8")) if name else {}
+            return yaml.load((directory / name).read_text(encoding="utf-8"), Loader=_YAML_LOADER) if name else {}
 
         return EvidenceBundle(
             session_id=bundle["session_id"],

@@ -7,6 +7,8 @@ a tree can re-plan without re-executing, and so each stage is timed on its own
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from phyagentos.motion.collision import CollisionChecker
@@ -26,6 +28,8 @@ def held_object(target) -> str | None:
             return rel.get("object")
     return None
 
+
+_CHECKERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 #: Clearance kept while planning, m. Shortcut paths run right along it, so the
 #: timed trajectory is re-checked at zero margin (toppra may cut inside it).
@@ -48,11 +52,11 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
     """A collision checker synced to the target's current world.
 
     Whatever the gripper holds is attached at its current offset so transfers are
-    checked with the object in hand. Checkers are cached on the context per
-    margin: building one copies the model, once per session is enough.
+    checked with the object in hand. Checkers are cached per target and margin:
+    building one copies the model (~15 ms), and a target outlives its sessions.
     """
     target = ctx.target
-    cache = ctx.__dict__.setdefault("_checkers", {})
+    cache = _CHECKERS.setdefault(target, {})
     checker = cache.get(margin_m)
     if checker is None:
         checker = CollisionChecker(target.model, arm_joint_names=target.arm_joint_names, margin_m=margin_m)

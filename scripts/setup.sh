@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-APT_PACKAGES=(graphviz libegl1 libosmesa6 libgl1)
+APT_PACKAGES=(graphviz fonts-dejavu-core libegl1 libosmesa6 libgl1)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

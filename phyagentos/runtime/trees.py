@@ -279,6 +279,14 @@ def render_image(root: py_trees.behaviour.Behaviour, path: str | Path) -> Path:
     """
     path = Path(path)
     graph = py_trees.display.dot_tree(root)
+    for setter in (graph.set_graph_defaults, graph.set_node_defaults, graph.set_edge_defaults):
+        setter(fontname="DejaVu Sans")
+    # py_trees prefixes memory composites with Ⓜ, which common fonts lack (a tofu
+    # box); composites are already drawn as boxes, so drop the marker.
+    for node in graph.get_nodes():
+        label = node.get("label")
+        if isinstance(label, str) and "Ⓜ" in label:
+            node.set("label", label.replace("Ⓜ ", "").replace("Ⓜ", ""))
     fmt = path.suffix.lstrip(".") or "png"
     try:
         data = graph.create(format=fmt)

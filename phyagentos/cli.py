@@ -1,8 +1,13 @@
 """``phyagentos`` command line.
 
     phyagentos run GOAL_GRAPH --workspace DIR [--json] [--seed N] [--target NAME]
+    phyagentos watch WORKSPACE | agent WORKSPACE | submit GOAL_GRAPH --workspace DIR [--follow]
+    phyagentos status WORKSPACE [--json] | signal WORKSPACE KIND [--session ID]   (cli_planes.py)
+    phyagentos bench SUITE --workspace DIR [--episodes N] [--seeds ...] [--workers K] [--memory off|frozen|learn] [--json]
     phyagentos validate GOAL_GRAPH [--workspace DIR]
     phyagentos render tree SKILL_OR_TREE [--out FILE.png]
+    phyagentos render graph WORKSPACE [--run RUN_ID] [--out FILE.png|.svg] [--mermaid FILE.md]
+    phyagentos policy serve [--host H] [--port N] [--rate-hz F] [--horizon K] [--stall-after N]
 
 Exit codes: 0 every node succeeded / command succeeded; 1 a node did not succeed;
 2 bad input (goal graph, protocol document, arguments).
@@ -38,6 +43,29 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     run.add_argument("--seed", type=int, default=0, help="base seed of the run's sessions (default 0)")
     run.add_argument("--target", help="run every node on this target instead of the graph's")
+    run.add_argument("--memory", choices=("learn", "frozen", "off"), default="learn",
+                     help="learn: use and consolidate LESSONS/KNOWLEDGE/SKILL.md (default); frozen: use, never "
+                          "write; off: neither")
+    run.add_argument("--keep-success-images", action="store_true",
+                     help="keep the evidence images of successful sessions (failures always keep theirs)")
+
+    from phyagentos.cli_planes import add_plane_commands
+
+    add_plane_commands(sub)
+
+    bench = sub.add_parser("bench", help="run a benchmark suite: availability gate, sessions per (task, seed), report")
+    bench.add_argument("suite", help="suite name (phyagentos/bench/suites/) or path of a suite YAML")
+    bench.add_argument("--workspace", type=Path, required=True, help="bench workspace (created if needed)")
+    bench.add_argument("--episodes", type=int, help="episodes per task (default: the suite's)")
+    bench.add_argument("--seeds", help="explicit seeds per task, e.g. 0-49 or 0,3,7 (overrides --episodes)")
+    bench.add_argument("--split", choices=("measurement", "heldout"), default="measurement",
+                       help="seed split: measurement (0..) or the suite's held-out seeds")
+    bench.add_argument("--tasks", help="comma-separated task ids (default: every task of the suite)")
+    bench.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    bench.add_argument("--memory", choices=("off", "frozen", "learn"), default="frozen",
+                       help="frozen = measurement (default), learn = adaptation, off = no memory")
+    bench.add_argument("--executor", choices=("local", "ray"), default="local", help="local process pool or Ray")
+    bench.add_argument("--json", action="store_true", help="print the report summary as one JSON object")
 
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
     val.add_argument("goal_graph", type=Path)
@@ -48,6 +76,21 @@ def build_parser() -> argparse.ArgumentParser:
     tree = rsub.add_parser("tree", help="print a skill's behaviour tree (ASCII) and optionally write an image")
     tree.add_argument("name", help="skill name (skills/) or tree name (trees/)")
     tree.add_argument("--out", type=Path, help="write an image (.png or .svg) through Graphviz")
+    graph = rsub.add_parser("graph", help="draw a run's DAG with node states and parent/child sessions "
+                                          "(Mermaid on stdout, optionally an image)")
+    graph.add_argument("workspace", type=Path)
+    graph.add_argument("--run", help="run id (default: the run in TASK.md)")
+    graph.add_argument("--out", type=Path, help="write an image (.png or .svg) through Graphviz")
+    graph.add_argument("--mermaid", type=Path, help="write a Markdown file with the Mermaid diagram")
+
+    policy = sub.add_parser("policy", help="policy servers (openpi websocket protocol)")
+    psub = policy.add_subparsers(dest="what", required=True)
+    serve = psub.add_parser("serve", help="serve the mink reach-and-grasp controller as a policy until stopped")
+    serve.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1)")
+    serve.add_argument("--port", type=int, default=8000, help="TCP port; 0 picks a free one (default 8000)")
+    serve.add_argument("--rate-hz", type=float, default=20.0, help="action rate of the chunks, Hz (default 20)")
+    serve.add_argument("--horizon", type=int, default=10, help="actions per chunk (default 10)")
+    serve.add_argument("--stall-after", type=int, help="fault injection: stop answering after N inferences")
     return parser
 
 
@@ -63,18 +106,21 @@ def _cmd_run(args, out: Console, err: Console) -> int:
     from phyagentos.orchestrator import run_goal_graph
 
     progress = None if args.json else (lambda msg: err.print(f"[dim]{msg}[/dim]"))
-    report = run_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target, progress=progress)
+    report = run_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target, progress=progress,
+                            use_memory=args.memory != "off", consolidate=args.memory == "learn",
+                            keep_success_images=args.keep_success_images)
     if args.json:
         print(json.dumps(report.to_dict(), ensure_ascii=False))
     else:
         table = Table(title=f"run {report.run_id}  ({report.wall_time_s:.1f} s)")
-        for col in ("node", "session", "skill", "status", "verdict", "duration"):
+        for col in ("node", "session", "skill", "status", "verdict", "cause", "strategy", "duration"):
             table.add_column(col, overflow="fold")
         colours = {"succeeded": "green", "failed": "red", "rejected": "red", "timed_out": "red", "replanned": "yellow"}
         for s in report.sessions:
             colour = colours.get(s.status, "white")
+            strategy = s.strategy or ("memory: " + ", ".join(s.memory) if s.memory else "-")
             table.add_row(s.node, s.session_id, s.skill, f"[{colour}]{s.status}[/{colour}]", s.verdict or "-",
-                          f"{s.duration_s:.2f} s" if s.duration_s is not None else "-")
+                          s.cause or "-", strategy, f"{s.duration_s:.2f} s" if s.duration_s is not None else "-")
         out.print(table)
         for s in report.sessions:
             if s.status != "succeeded" and s.reason:
@@ -82,6 +128,65 @@ def _cmd_run(args, out: Console, err: Console) -> int:
         out.print(f"workspace: {report.workspace}  evidence: {report.workspace / 'evidence'}")
         out.print("[green]all nodes succeeded[/green]" if report.succeeded else "[red]not every node succeeded[/red]")
     return EXIT_OK if report.succeeded else EXIT_NOT_SUCCEEDED
+
+
+def _cmd_bench(args, out: Console, err: Console) -> int:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from phyagentos.bench import parse_seeds, run_bench
+    from phyagentos.errors import BenchError
+
+    seeds = parse_seeds(args.seeds) if args.seeds else None
+    tasks = tuple(t.strip() for t in args.tasks.split(",")) if args.tasks else None
+    progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                        TextColumn("{task.fields[status]}"), TimeElapsedColumn(), console=err, disable=args.json)
+    bar = {}
+    tally = {"ok": 0, "failed": 0, "error": 0}
+
+    def compiled(n: int) -> None:
+        bar["id"] = progress.add_task("episodes", total=n, status="")
+
+    def episode_done(outcome) -> None:
+        tally["error" if outcome.status != "completed" else "ok"] += 1
+        progress.update(bar["id"], advance=1, status=f"last {outcome.episode_id} ({outcome.wall_time_s:.1f} s)")
+
+    try:
+        with progress:
+            result = run_bench(args.suite, args.workspace, episodes=args.episodes, seeds=seeds, split=args.split,
+                               tasks=tasks, workers=args.workers, memory=args.memory, executor=args.executor,
+                               on_compiled=compiled, on_episode=episode_done)
+    except BenchError as exc:
+        if exc.problems:
+            err.print(f"[red]{str(exc).splitlines()[0]}[/red]")
+            for line in exc.problems:
+                err.print(f"  [red]-[/red] {line}")
+            return EXIT_BAD_INPUT
+        raise
+    rep = result.report
+    if args.json:
+        keys = ("bench_id", "suite", "protocol", "memory", "split", "seeds", "workers", "executor", "wall_time_s",
+                "episodes_per_minute", "overall", "per_task", "error_taxonomy", "ground_truth", "harness_errors")
+        print(json.dumps({**{k: rep[k] for k in keys}, "report": str(result.run_dir / "report.md")}, ensure_ascii=False))
+    else:
+        table = Table(title=f"bench {rep['suite']} {rep['bench_id']}  ({rep['protocol']}, {rep['split']} seeds, "
+                            f"{rep['episodes_per_minute']:.1f} episodes/min)")
+        for col in ("task", "episodes", "First", "Final", "gain", "rescued"):
+            table.add_column(col, justify="right" if col != "task" else "left")
+        for name, s in [*rep["per_task"].items(), ("overall", rep["overall"])]:
+            table.add_row(name, str(s["episodes"]), f"{s['first_rate_pct']:.1f}%", f"{s['final_rate_pct']:.1f}%",
+                          f"{s['gain_points']:+.1f}", str(s["rescued"]))
+        out.print(table)
+        cats = {c: t["count"] for c, t in rep["error_taxonomy"].items() if t["count"]}
+        if cats:
+            out.print("errors: " + ", ".join(f"{c} {n}" for c, n in cats.items()))
+        if rep["ground_truth"]["sessions"]:
+            g = rep["ground_truth"]
+            out.print(f"environment's own success signal: agrees with the verifier on {g['agreements']}/{g['sessions']} sessions")
+        out.print(f"report: {result.run_dir / 'report.md'}")
+    if result.harness_errors:
+        err.print(f"[red]{result.harness_errors} episode(s) hit a harness error; see the report[/red]")
+        return EXIT_NOT_SUCCEEDED
+    return EXIT_OK
 
 
 def _cmd_validate(args, out: Console, err: Console) -> int:
@@ -109,6 +214,8 @@ def _cmd_validate(args, out: Console, err: Console) -> int:
 
 
 def _cmd_render(args, out: Console, err: Console) -> int:
+    if args.what == "graph":
+        return _cmd_render_graph(args, out, err)
     from phyagentos.resources import skills_dir, trees_dir
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
     from phyagentos.runtime.trees import render_ascii, render_image
@@ -116,6 +223,11 @@ def _cmd_render(args, out: Console, err: Console) -> int:
     runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
     if args.name in runtime.skills:
         manifest = runtime.skills.get(args.name)
+        if manifest.tree is None:
+            from phyagentos.errors import SkillError
+
+            raise SkillError(f"skill {args.name!r} runs on the {manifest.runtime!r} runtime and has no behaviour tree",
+                             path=manifest.path)
         tree_name = manifest.tree
         # required parameters need a value to build; optional ones keep the tree's defaults
         params = {k: d.get("example", f"<{k}>") for k, d in manifest.params.items() if d.get("required") or "example" in d}
@@ -130,12 +242,53 @@ def _cmd_render(args, out: Console, err: Console) -> int:
     return EXIT_OK
 
 
+def _cmd_policy(args, out: Console, err: Console) -> int:
+    from phyagentos.policy.grasp_policy import GraspPolicy
+    from phyagentos.policy.server import PolicyServer
+
+    server = PolicyServer(GraspPolicy(rate_hz=args.rate_hz, horizon=args.horizon), host=args.host, port=args.port,
+                          stall_after=args.stall_after)
+
+    def announce() -> None:
+        server.wait_ready()
+        # One parseable line on stdout: scripts and tests read the bound port from it.
+        print(f"serving policy on {server.uri}", flush=True)
+
+    import threading
+
+    threading.Thread(target=announce, daemon=True).start()
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    return EXIT_OK
+
+
+def _cmd_render_graph(args, out: Console, err: Console) -> int:
+    from phyagentos.agent.render import render_image, run_graph_of, to_mermaid
+    from phyagentos.protocol import Workspace
+
+    graph = run_graph_of(Workspace.open(args.workspace), args.run)
+    mermaid = to_mermaid(graph)
+    print(mermaid, end="")
+    if args.mermaid:
+        args.mermaid.parent.mkdir(parents=True, exist_ok=True)
+        args.mermaid.write_text(f"# Run {graph.run_id}\n\n```mermaid\n{mermaid}```\n", encoding="utf-8")
+        err.print(f"wrote {args.mermaid}")
+    if args.out:
+        err.print(f"wrote {render_image(graph, args.out)}")
+    return EXIT_OK
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``phyagentos`` console script; returns the exit code."""
     args = build_parser().parse_args(argv)
     out, err = Console(), Console(stderr=True)
     _setup_logging(args.verbose, err)
-    handlers = {"run": _cmd_run, "validate": _cmd_validate, "render": _cmd_render}
+    from phyagentos.cli_planes import PLANE_HANDLERS
+
+    handlers = {**PLANE_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
+                "policy": _cmd_policy}
     try:
         return handlers[args.command](args, out, err)
     except PhyAgentOSError as exc:

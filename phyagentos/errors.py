@@ -12,6 +12,7 @@ __all__ = [
     "PhyAgentOSError",
     "ProtocolError",
     "DocumentError",
+    "LeaseError",
     "GoalGraphError",
     "LifecycleError",
     "SkillError",
@@ -23,7 +24,11 @@ __all__ = [
     "TimingError",
     "VerifierError",
     "SafetyError",
+    "ActionBridgeError",
+    "PolicyError",
     "SupervisorError",
+    "RenderError",
+    "BenchError",
     "format_location",
     "format_choices",
 ]
@@ -65,6 +70,11 @@ class DocumentError(_Located, ProtocolError):
 
     The document on disk is never modified when this is raised.
     """
+
+
+class LeaseError(ProtocolError):
+    """A session write presented a lease token that is no longer current: another
+    supervisor took the session over after this one's lease expired (fencing)."""
 
 
 class GoalGraphError(_Located, PhyAgentOSError):
@@ -119,5 +129,38 @@ class SafetyError(PhyAgentOSError):
         super().__init__(f"[{code}] {message}")
 
 
+class ActionBridgeError(SafetyError):
+    """An action bridge refused malformed input (``code`` is the violation code,
+    ``bridge`` the bridge's name); bridges reject, they never repair silently."""
+
+    def __init__(self, message: str, *, code: str, bridge: str):
+        self.bridge = bridge
+        super().__init__(f"action bridge {bridge!r}: {message}", code=code)
+
+
+class PolicyError(PhyAgentOSError):
+    """A policy server could not be reached, stalled, disconnected or answered
+    malformed data (``code``: ``policy.unreachable``, ``policy.stalled``,
+    ``policy.disconnected``, ``policy.error`` or ``policy.malformed``)."""
+
+    def __init__(self, message: str, *, code: str):
+        self.code = code
+        super().__init__(f"[{code}] {message}")
+
+
 class SupervisorError(PhyAgentOSError):
     """The WatchdogSupervisor could not claim, run, or write back a session."""
+
+
+class RenderError(PhyAgentOSError):
+    """A graph or image could not be rendered (no such run, Graphviz missing or failing)."""
+
+
+class BenchError(PhyAgentOSError):
+    """A benchmark could not run: bad suite definition, failed availability gate, or a
+    worker that died; ``problems`` lists every diagnostic (empty for a single message)."""
+
+    def __init__(self, message: str, *, problems: tuple[str, ...] = ()):
+        self.problems = tuple(problems)
+        detail = "".join(f"\n  - {p}" for p in self.problems)
+        super().__init__(f"{message}{detail}")

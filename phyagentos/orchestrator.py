@@ -1,28 +1,40 @@
-"""Composition root for ``phyagentos run``: both planes in one process.
+"""Composition root: the one place allowed to import the Agent and Runtime planes together.
 
-This is the one place allowed to import the Agent and Runtime planes together.
-They still meet only through the workspace: the agent loop writes sessions and
-verdicts, the supervisor claims and runs sessions, and each reads the other's
-output from the protocol files.
+The planes meet only through the workspace. They run either as separate processes,
+
+- ``phyagentos watch WS``  (Runtime plane: :meth:`WatchdogSupervisor.serve`),
+- ``phyagentos agent WS``  (Agent plane: an AgentLoop over every active run, :func:`serve_agent`),
+- ``phyagentos submit GRAPH --workspace WS`` (validate, register the run, compile its
+  ready nodes: :func:`submit_goal_graph`),
+
+or together in one process for convenience (``phyagentos run``, :func:`run_goal_graph`):
+the agent's steps and the supervisor's alternate in one loop (:func:`drive_run`),
+while the supervisor still runs each session in its own runner process.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
+from phyagentos.agent.agent_loop import AgentLoop, load_run_graph
 from phyagentos.agent.coordinator import AgentCoordinator, SessionSummary
 from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
-from phyagentos.errors import SupervisorError
-from phyagentos.protocol import Workspace
+from phyagentos.agent.session_compiler import new_run_id
+from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
+from phyagentos.protocol import LEASED_STATES, RunRecord, Workspace, utc_now_iso
 from phyagentos.resources import skills_dir, trees_dir
-from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+from phyagentos.runtime.skills import SkillRegistry
 from phyagentos.runtime.supervisor import WatchdogSupervisor
 
-__all__ = ["RunReport", "load_graph_for", "run_goal_graph"]
+if TYPE_CHECKING:
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+
+__all__ = ["RunReport", "drive_run", "load_graph_for", "run_goal_graph", "submit_goal_graph", "serve_agent",
+           "skill_names"]
 
 logger = logging.getLogger(__name__)
 
@@ -51,10 +63,110 @@ class RunReport:
         }
 
 
-def load_graph_for(workspace: Workspace, path: str | Path, runtime: BuiltinSkillRuntime) -> GoalGraph:
+def load_graph_for(workspace: Workspace, path: str | Path, runtime: "BuiltinSkillRuntime") -> GoalGraph:
     """Load and validate a goal graph against the workspace's targets and the skill registry."""
     targets = [t.name for t in workspace.read("TARGETS").data.targets]
     return load_goal_graph(path, skills=runtime.skills.names(), targets=targets)
+
+
+def skill_names() -> list[str]:
+    """Names of the skills in ``skills/`` (what a goal graph may use)."""
+    return SkillRegistry(skills_dir()).names()
+
+
+def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
+              progress: Callable[[str], None] | None = None) -> None:
+    """Alternate the Agent loop and the supervisor until every node of ``agent``'s run is terminal.
+
+    The one execution loop shared by ``phyagentos run`` and ``phyagentos bench``: the
+    agent compiles ready nodes, verifies and replans; the supervisor claims, preflights
+    and runs whatever is pending in the workspace. While the supervisor is paused or
+    e-stopped, or another process holds a session of the run, the loop waits.
+
+    Raises:
+        SupervisorError: neither side made progress and nothing of the run is in
+            anyone's hands.
+    """
+    say = progress or (lambda msg: None)
+    agent.step()
+    while not agent.done():
+        ran = supervisor.run_once()
+        acted = agent.step()
+        if ran:
+            states = agent.node_states()
+            say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
+        if ran == 0 and acted == 0:
+            waiting = [sid for sid, state, _ in supervisor.workspace.active_sessions(run_id=agent.run_id)
+                       if state == "pending" or state in LEASED_STATES]
+            if not waiting:
+                raise SupervisorError(f"run {agent.run_id} stalled: node states {agent.node_states()}")
+            if supervisor.paused or supervisor.estopped:
+                say("supervisor " + ("e-stopped" if supervisor.estopped else "paused") + "; waiting")
+            supervisor.step(claim=False)  # sleeps until the workspace changes (bounded)
+
+
+def _register_run(workspace: Workspace, goal_graph: str | Path, *, seed: int | None, target: str | None,
+                  submitted_by: str = "") -> RunRecord:
+    text = Path(goal_graph).read_text(encoding="utf-8")
+    for _ in range(20):
+        record = RunRecord(run_id=new_run_id(), goal_graph=str(goal_graph), graph_file="", seed=seed, target=target,
+                           submitted_at=utc_now_iso(), submitted_by=submitted_by)
+        try:
+            return workspace.register_run(record, text)
+        except ProtocolError as exc:
+            if "already exists" not in str(exc):
+                raise
+    raise ProtocolError("could not allocate a unique run id")  # pragma: no cover
+
+
+def _check_target(workspace: Workspace, target: str | None) -> None:
+    names = [t.name for t in workspace.read("TARGETS").data.targets]
+    if target is not None and target not in names:
+        raise GoalGraphError(f"unknown target {target!r} for --target; valid targets: {format_choices(names)}")
+
+
+def submit_goal_graph(goal_graph: str | Path, workspace_dir: str | Path, *, seed: int | None = 0,
+                      target: str | None = None, submitted_by: str = "") -> RunRecord:
+    """Validate ``goal_graph``, register it as a run and compile its ready nodes; returns the run.
+
+    The Agent plane's compile step, through the one validated submit path
+    (:meth:`Workspace.submit_session`). ``phyagentos agent`` (or ``submit --follow``)
+    then keeps verifying and compiling until every node is terminal.
+
+    Raises:
+        GoalGraphError: the goal graph (or the target override) is invalid.
+        DocumentError: a protocol document in the workspace is malformed.
+    """
+    workspace = Workspace.create(workspace_dir)
+    skills = skill_names()
+    targets = [t.name for t in workspace.read("TARGETS").data.targets]
+    load_goal_graph(goal_graph, skills=skills, targets=targets)  # errors name the user's file
+    _check_target(workspace, target)
+    run = _register_run(workspace, goal_graph, seed=seed, target=target, submitted_by=submitted_by)
+    graph = load_run_graph(workspace, run.run_id, skills=skills)
+    with workspace.run_lock(run.run_id):
+        AgentCoordinator(workspace, graph, run_id=run.run_id, seed=seed).step()
+    logger.info("submitted run %s (%d nodes) from %s", run.run_id, len(graph.nodes), goal_graph)
+    return run
+
+
+def serve_agent(workspace_dir: str | Path, *, run_id: str | None = None, poll_interval_s: float = 1.0,
+                inotify: bool = True, on_loop: Callable[[AgentLoop], None] | None = None) -> AgentLoop:
+    """Run the Agent plane on ``workspace_dir`` until stopped (or until ``run_id`` finished).
+
+    ``on_loop`` receives the loop before it starts (e.g. to install signal handlers
+    that call :meth:`AgentLoop.request_stop`). Returns the loop (``loop.finished``).
+    """
+    workspace = Workspace.open(workspace_dir)
+    loop = AgentLoop(workspace, skills=skill_names(), run_id=run_id, poll_interval_s=poll_interval_s, inotify=inotify)
+    if on_loop is not None:
+        on_loop(loop)
+    try:
+        loop.serve()
+    finally:
+        loop.close()
+    return loop
+
 
 
 def run_goal_graph(
@@ -64,6 +176,9 @@ def run_goal_graph(
     seed: int | None = 0,
     target: str | None = None,
     progress: Callable[[str], None] | None = None,
+    use_memory: bool = True,
+    consolidate: bool = True,
+    keep_success_images: bool = False,
 ) -> RunReport:
     """Run ``goal_graph`` to completion in ``workspace_dir`` (created if needed).
 
@@ -73,34 +188,35 @@ def run_goal_graph(
         seed: base seed of the run's sessions.
         target: if given, overrides every node's target (same graph, another embodiment).
         progress: called with a one-line message as sessions move.
+        use_memory: retrieve lessons, knowledge and procedures for new sessions.
+        consolidate: write verified outcomes into memory (``False``: frozen memory).
+        keep_success_images: keep the evidence images of successful sessions too.
 
     Raises:
         GoalGraphError: the goal graph is invalid.
         DocumentError: a protocol document in the workspace is malformed (left untouched).
         SupervisorError: the run stopped making progress before completing.
     """
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415 - heavy; `watch` skips it
+
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
     runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
-    graph = load_graph_for(workspace, goal_graph, runtime)
-    if target is not None:
-        graph = replace(graph, nodes=tuple(replace(n, target=target) for n in graph.nodes))
-    agent = AgentCoordinator(workspace, graph, seed=seed)
-    supervisor = WatchdogSupervisor(workspace, runtime)
+    load_graph_for(workspace, goal_graph, runtime)  # errors name the user's file
+    _check_target(workspace, target)
+    supervisor = WatchdogSupervisor(workspace, runtime)  # its runner process starts meanwhile
+    run = _register_run(workspace, goal_graph, seed=seed, target=target)
+    graph = load_run_graph(workspace, run.run_id, skills=runtime.skills.names())
+    agent = AgentCoordinator(workspace, graph, run_id=run.run_id, seed=seed, use_memory=use_memory,
+                             consolidate=consolidate, keep_success_images=keep_success_images)
     say = progress or (lambda msg: None)
     say(f"run {agent.run_id}: {len(graph.nodes)} node(s) from {goal_graph}")
-    try:
-        agent.step()
-        while not agent.done():
-            ran = supervisor.run_once()
-            acted = agent.step()
-            if ran:
-                states = agent.node_states()
-                say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
-            if ran == 0 and acted == 0:
-                raise SupervisorError(f"run {agent.run_id} stalled: node states {agent.node_states()}")
-    finally:
-        supervisor.close()
+    with workspace.run_lock(run.run_id):
+        try:
+            drive_run(agent, supervisor, progress=say)
+        finally:
+            supervisor.close()
+        workspace.runs.finish(run.run_id, succeeded=agent.succeeded())
     return RunReport(
         run_id=agent.run_id,
         workspace=workspace.root,

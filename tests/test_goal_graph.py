@@ -213,7 +213,7 @@ def test_unknown_node_key_lists_valid_node_keys(tmp_path):
                                              "    accept: {released: cube}\n    retries: 3"),
                      line=12)
     assert "unknown key 'retries' in node" in message
-    assert ("valid keys: 'accept', 'depends_on', 'id', 'limits', 'params', 'skill', 'target'"
+    assert ("valid keys: 'accept', 'depends_on', 'id', 'limits', 'params', 'runtime', 'skill', 'target'"
             in message)
 
 

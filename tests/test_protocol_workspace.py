@@ -75,7 +75,9 @@ def test_templates_parse_and_render_back_byte_for_byte():
 def test_templates_define_default_target_runtime_and_safety(ws):
     targets = ws.read("TARGETS").data.targets
     assert [(t.name, t.kind, t.driver, t.enabled) for t in targets] == [
-        ("franka_tabletop", "simulation", "mujoco_franka", True)
+        ("franka_tabletop", "simulation", "mujoco_franka", True),
+        ("franka_kitchen", "simulation", "gymnasium_kitchen", True),
+        ("so101_tabletop", "simulation", "mujoco_so101", True),
     ]
     assert targets[0].action == {"space": "joint_position", "dof": 7, "gripper": "opening_m", "control_rate_hz": 500}
     runtime = ws.read("SKILLRUNTIME").data.runtimes[0]

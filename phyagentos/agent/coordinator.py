@@ -4,31 +4,47 @@ Everything it knows it reads from the workspace, so it can run in its own
 process (``phyagentos agent``) or interleaved with the supervisor (``phyagentos run``):
 
 1. verify every session of the run waiting in ``awaiting_verification``
-   (SessionVerifier on the evidence bundle; the verdict is appended to the attempt);
+   (SessionVerifier on the evidence bundle; the verdict, with its diagnosis and for a
+   replan the proposed revision, is appended to the attempt), apply the evidence
+   retention policy (images of successes are dropped unless kept on purpose), and
+   consolidate the verdict into memory (lessons, knowledge, promoted procedures);
 2. on ``replan``, compile an immutable child session (``parent_session_id``
-   lineage) and mark the parent ``replanned``;
+   lineage, the revision's parameters, ``recovery`` recording why) and mark the
+   parent ``replanned``; the correction it tries becomes a lesson *candidate*;
 3. derive node states from the sessions, block the subgraph below a failure, and
-   compile pending sessions for nodes whose dependencies succeeded;
+   compile pending sessions for nodes whose dependencies succeeded, each with the
+   memory the ContextBuilder retrieves for it (recorded in the session's ``context``);
 4. write TASK.md.
 """
 
 from __future__ import annotations
 
 import logging
+import os
+import socket
 from dataclasses import dataclass
 from datetime import datetime
 
-from phyagentos.protocol import LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace
+from phyagentos.protocol import LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace, is_expired, new_lease
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
 from . import dag as dagmod
 from .goal_graph import GoalGraph
+from .memory import ContextBuilder, KnowledgeBase, LessonBook, PromotionPolicy, promote
+from .memory.conditions import Conditions
+from .memory.promotion import initial_state_fingerprint
+from .recovery import SITUATIONAL
 from .session_compiler import SessionCompiler, new_run_id
-from .verifier import SessionVerifier, load_evidence
+from .verifier import EvidenceBundle, SessionVerifier, load_evidence
 
 __all__ = ["AgentCoordinator", "SessionSummary", "node_state_of"]
 
 logger = logging.getLogger(__name__)
+
+# A verification holds a lease like a supervisor's claim, so one whose agent process
+# died is taken up again by the next agent instead of staying ``verifying`` forever.
+_AGENT_ID = f"agent:{socket.gethostname()}:{os.getpid()}"
+_VERIFY_LEASE_S = 60.0
 
 _RUNNING = {"pending", "claimed", "preflight_checking", "running", "finalizing", "awaiting_verification",
             "verifying", "awaiting_replan", "cancelling", "replanned"}
@@ -69,6 +85,9 @@ class SessionSummary:
     duration_s: float | None
     evidence: str | None
     parent_session_id: str | None
+    cause: str | None = None  # diagnosed cause of an unsuccessful verdict
+    strategy: str | None = None  # recovery strategy this (child) session ran with
+    memory: tuple[str, ...] = ()  # ids of memory items that set its parameters
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -83,22 +102,37 @@ class AgentCoordinator:
         run_id: continue this run (default: a new run id).
         seed: base seed for the run's sessions.
         verifier: the SessionVerifier (default: predicates, 2 replans).
+        evaluation: benchmark evaluation configuration recorded in every session.
+        use_memory: retrieve lessons, knowledge and procedures for new sessions
+            (``False``: run as if memory were empty; conditions are still recorded).
+        consolidate: write verdicts into memory (LESSONS.md, KNOWLEDGE.md, SKILL.md);
+            ``False`` keeps memory frozen (a measurement).
+        keep_success_images: keep the RGB images of sessions whose verdict is success
+            (failures always keep theirs).
+        promotion: thresholds for promoting knowledge to SKILL.md.
     """
 
     def __init__(self, workspace: Workspace, graph: GoalGraph, *, run_id: str | None = None, seed: int | None = 0,
-                 verifier: SessionVerifier | None = None):
+                 verifier: SessionVerifier | None = None, evaluation: dict | None = None, use_memory: bool = True,
+                 consolidate: bool = True, keep_success_images: bool = False,
+                 promotion: PromotionPolicy | None = None):
         self.workspace = workspace
         self.graph = graph
         self.run_id = run_id or new_run_id()
         self.dag = dagmod.to_digraph(graph)
-        self.compiler = SessionCompiler(workspace, graph, self.run_id, seed=seed)
+        self.compiler = SessionCompiler(workspace, graph, self.run_id, seed=seed, evaluation=evaluation)
         self.verifier = verifier or SessionVerifier()
+        self.context_builder = ContextBuilder(workspace, use_memory=use_memory)
+        self.consolidate = consolidate
+        self.keep_success_images = keep_success_images
+        self.promotion = promotion or PromotionPolicy()
 
     # -- state -----------------------------------------------------------
 
     def sessions(self) -> list[SessionRecord]:
-        """All sessions of this run, oldest first."""
-        return sorted((s for s in self.workspace.list_sessions() if s.run_id == self.run_id), key=lambda s: s.created_at)
+        """All sessions of this run, oldest first (active ones via the state index, finished
+        ones via the run's archive catalogue: the cost does not grow with other runs)."""
+        return self.workspace.list_sessions(run_id=self.run_id)
 
     def latest_by_node(self, sessions: list[SessionRecord] | None = None) -> dict[str, SessionRecord]:
         latest: dict[str, SessionRecord] = {}
@@ -123,7 +157,8 @@ class AgentCoordinator:
         """Verify, replan, compile ready nodes and write TASK.md; returns actions taken."""
         actions = 0
         for rec in self.sessions():
-            if rec.state == "awaiting_verification":
+            # a verification whose agent died (its lease expired) is taken up again
+            if rec.state == "awaiting_verification" or (rec.state == "verifying" and is_expired(rec.lease)):
                 actions += self._verify(rec.session_id)
         sessions = self.sessions()
         for rec in sessions:
@@ -132,7 +167,11 @@ class AgentCoordinator:
         sessions = self.sessions()
         states = self.node_states(sessions)
         for node_id in dagmod.ready_nodes(self.dag, states):
-            self.compiler.compile_node(self.graph.get_node(node_id))
+            node = self.graph.get_node(node_id)
+            params, context = self.context_builder.build(goal=f"{self.graph.name}/{node.id}", skill=node.skill,
+                                                         target=node.target, parameters=node.params,
+                                                         scene=self.graph.scene)
+            self.compiler.compile_node(node, parameters=params, context=context)
             actions += 1
         self._write_task()
         return actions
@@ -141,34 +180,83 @@ class AgentCoordinator:
         ws = self.workspace
         with ws.session_lock(session_id):
             rec = ws.load_session(session_id)
-            if rec.state != "awaiting_verification":
+            resume = rec.state == "verifying" and is_expired(rec.lease)
+            if rec.state != "awaiting_verification" and not resume:
                 return 0  # another agent got there first
+            rec.lease = new_lease(_AGENT_ID, ttl_s=_VERIFY_LEASE_S)
             lifecycle = SessionLifecycle(rec, persist=ws.save_session)
-            lifecycle.fire("verify")
+            if resume:
+                ws.save_session(rec)
+            else:
+                lifecycle.fire("verify")
         attempt = rec.attempts[-1]
         evidence = load_evidence(ws.root / attempt.evidence)
-        depth = 0
-        parent = rec.parent_session_id
-        while parent:
-            depth += 1
-            parent = ws.load_session(parent).parent_session_id
-        verdict = self.verifier.verify(rec, evidence, lineage_depth=depth)
+        history = self.lineage(rec)
+        verdict = self.verifier.verify(rec, evidence, history=history)
+        if verdict.verdict == "success" and not self.keep_success_images:
+            verdict = verdict.model_copy(update={"evidence": [r for r in verdict.evidence if r not in evidence.images]})
+            self._prune_images(evidence)
         attempt.verdict = verdict
         event = {"success": "succeed", "failure": "fail", "replan": "replan"}[verdict.verdict]
+        rec.lease = None
         lifecycle.fire(event, reason=verdict.reason[:200])
         ws.append_log(LogEntry(at=utc_now(), session_id=rec.session_id, node=rec.node, event=f"verdict_{verdict.verdict}",
                                state=rec.state, message=verdict.reason))
         logger.info("session %s verdict %s: %s", rec.session_id, verdict.verdict, verdict.reason)
+        if self.consolidate:
+            self._consolidate(rec, verdict, evidence, history)
         return 1
+
+    def lineage(self, rec: SessionRecord) -> list[SessionRecord]:
+        """``rec``'s ancestors along ``parent_session_id``, oldest first."""
+        chain: list[SessionRecord] = []
+        parent = rec.parent_session_id
+        while parent:
+            chain.append(self.workspace.load_session(parent))
+            parent = chain[-1].parent_session_id
+        return chain[::-1]
+
+    def _conditions(self, rec: SessionRecord) -> Conditions:
+        if rec.context is not None and rec.context.conditions:
+            return Conditions.from_dict(rec.context.conditions)
+        return self.context_builder.conditions(goal=f"{self.graph.name}/{rec.node}", skill=rec.skill,
+                                               target=rec.target, parameters=rec.parameters, scene=rec.scene)
+
+    def _prune_images(self, evidence: EvidenceBundle) -> None:
+        # Retention: a success's verdict, snapshots and trace stay; its RGB images go.
+        for ref in evidence.images:
+            (self.workspace.root / ref).unlink(missing_ok=True)
+
+    def _consolidate(self, rec: SessionRecord, verdict, evidence: EvidenceBundle,
+                     history: list[SessionRecord]) -> None:
+        """Verified outcomes only: lessons are confirmed or refuted, knowledge counted, procedures promoted."""
+        conditions = self._conditions(rec)
+        LessonBook(self.workspace).resolve(rec, verdict, conditions, history=history)
+        info = self.context_builder.skills.get(rec.skill)
+        strategy = {k: v for k, v in rec.parameters.items()
+                    if info is not None and k in info.optional and k not in SITUATIONAL}
+        KnowledgeBase(self.workspace).record(
+            rec, verdict, conditions, strategy=strategy,
+            initial_state=initial_state_fingerprint(evidence.initial, conditions.object))
+        if verdict.verdict == "success":
+            promote(self.workspace, self.promotion)
 
     def _replan(self, session_id: str) -> int:
         ws = self.workspace
         rec = ws.load_session(session_id)
-        child = self.compiler.compile_node(self.graph.get_node(rec.node), parent=rec, parameters=dict(rec.parameters))
+        verdict = rec.attempts[-1].verdict if rec.attempts else None
+        revision = verdict.revision if verdict is not None else None
+        params = {**rec.parameters, **(revision.parameters if revision else {})}
+        limits = {**rec.limits.model_dump(), **(revision.limits if revision else {})}
+        child = self.compiler.compile_node(self.graph.get_node(rec.node), parent=rec, parameters=params,
+                                           limits=limits, context=rec.context, recovery=revision)
         with ws.session_lock(session_id):
             rec = ws.load_session(session_id)
             rec.child_session_ids.append(child.session_id)
             SessionLifecycle(rec, persist=ws.save_session).fire("replanned", reason=f"child {child.session_id}")
+        if self.consolidate and revision is not None and verdict.diagnosis is not None:
+            LessonBook(ws).propose(parent=rec, child=child, diagnosis=verdict.diagnosis, revision=revision,
+                                   conditions=self._conditions(rec))
         return 1
 
     def _write_task(self) -> None:
@@ -205,6 +293,9 @@ class AgentCoordinator:
                 verdict=verdict.verdict if verdict else None, reason=reason,
                 duration_s=_seconds_between(attempt.started_at, attempt.ended_at) if attempt else None,
                 evidence=attempt.evidence if attempt else None, parent_session_id=s.parent_session_id,
+                cause=verdict.diagnosis.cause if verdict and verdict.diagnosis else None,
+                strategy=s.recovery.strategy if s.recovery else None,
+                memory=tuple(i.id for i in s.context.items if i.applied) if s.context else (),
             ))
         return rows
 

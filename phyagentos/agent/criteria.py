@@ -11,6 +11,7 @@ name to arguments, parsed without ``eval``::
       released: cube                             # the gripper does not hold cube
       still: {max_joint_motion_rad: 0.01}        # the arm did not move
       unchanged: {object: red, tol_m: 0.01}      # red did not move
+      articulated: {object: microwave, max: -0.6}  # its joint (rad or m) ends in [min, max]
 
 Snapshots are ENVIRONMENT-style mappings: ``entities`` (name, kind, position (3,) m
 world, quat_wxyz, size (3,) half extents m, attributes) and ``relations``. The
@@ -61,6 +62,7 @@ _SIGNATURES: dict[str, tuple[tuple[str, ...], dict[str, Any], str | None]] = {
     "on": (("object", "support"), {}, None),
     "still": ((), {"max_joint_motion_rad": 0.01}, None),
     "unchanged": (("object",), {"tol_m": 0.01}, "object"),
+    "articulated": (("object",), {"min": -math.inf, "max": math.inf}, "object"),
 }
 PREDICATES = tuple(sorted(_SIGNATURES))
 
@@ -233,6 +235,19 @@ def _eval_unchanged(c, initial, terminal, refs):
     return CriterionOutcome(c, "satisfied" if ok else "unsatisfied", f"{obj} moved {d:.3f} m (tolerance {c.args['tol_m']})", refs)
 
 
+def _eval_articulated(c, initial, terminal, refs):
+    obj = c.args["object"]
+    if (miss := _need(c, refs, ("terminal", terminal, obj))):
+        return miss
+    q = (_entities(terminal)[obj].get("attributes") or {}).get("joint_position")
+    if q is None:
+        return CriterionOutcome(c, "unknown", f"{obj!r} reports no joint_position (not an articulation?)", refs)
+    lo, hi = float(c.args["min"]), float(c.args["max"])
+    ok = lo <= float(q) <= hi
+    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied",
+                            f"{obj} joint at {float(q):.3f} ({'within' if ok else 'outside'} [{lo}, {hi}])", refs)
+
+
 _EVALUATORS: dict[str, Callable] = {
     "holding": _eval_holding,
     "released": _eval_released,
@@ -241,4 +256,5 @@ _EVALUATORS: dict[str, Callable] = {
     "on": _eval_on,
     "still": _eval_still,
     "unchanged": _eval_unchanged,
+    "articulated": _eval_articulated,
 }

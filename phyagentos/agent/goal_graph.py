@@ -53,10 +53,10 @@ NODE_ID_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 
 TOP_LEVEL_KEYS: tuple[str, ...] = ("version", "name", "description", "defaults", "scene", "nodes")
 REQUIRED_TOP_LEVEL_KEYS: tuple[str, ...] = ("version", "name", "nodes")
-NODE_KEYS: tuple[str, ...] = ("id", "skill", "target", "params", "accept", "depends_on", "limits")
+NODE_KEYS: tuple[str, ...] = ("id", "skill", "target", "params", "accept", "depends_on", "limits", "runtime")
 # ``target`` and ``skill`` are required but may come from ``defaults``.
 REQUIRED_NODE_KEYS: tuple[str, ...] = ("id", "skill", "target", "accept")
-DEFAULTS_KEYS: tuple[str, ...] = ("skill", "target", "params", "limits")
+DEFAULTS_KEYS: tuple[str, ...] = ("skill", "target", "params", "limits", "runtime")
 
 _STR_TAG = "tag:yaml.org,2002:str"
 _NULL_TAG = "tag:yaml.org,2002:null"
@@ -85,6 +85,7 @@ class GoalNode:
     depends_on: tuple[str, ...] = ()
     limits: dict[str, float] = field(default_factory=dict)
     line: int = 0
+    runtime: str = "builtin"  # SkillRuntime (SKILLRUNTIME.md name) the session runs on
 
 
 @dataclass(frozen=True)
@@ -313,6 +314,12 @@ class _Parser:
     def _target(self, node: yaml.Node, context: str = "") -> str:
         return self._choice(node, "target", "targets", self.targets, context)
 
+    def _runtime(self, node: yaml.Node, context: str = "") -> str:
+        value = _str_scalar(node)
+        if not value:
+            raise _Invalid(node, f"{context}runtime must be a SkillRuntime name (e.g. builtin, policy), got {_kind(node)}")
+        return value
+
     def _params(self, node: yaml.Node, context: str = "") -> dict[str, Any]:
         if _is_null(node):
             return {}
@@ -434,7 +441,7 @@ class _Parser:
             return {}
         entries = self._entries(node, what="defaults", allowed=DEFAULTS_KEYS, required=())
         validators = {"skill": self._skill, "target": self._target,
-                      "params": self._params, "limits": self._limits}
+                      "params": self._params, "limits": self._limits, "runtime": self._runtime}
         defaults = {}
         for key, (_key_node, value_node) in entries.items():
             value = self._check(validators[key], value_node, "defaults: ")
@@ -509,6 +516,7 @@ class _Parser:
             "depends_on": (),
             "limits": copy.deepcopy(defaults.get("limits", {})),
             "line": line,
+            "runtime": defaults.get("runtime", "builtin"),
         }
         dep_lines: dict[str, int] = {}
         for key, (_key_node, value_node) in entries.items():
@@ -523,6 +531,8 @@ class _Parser:
                 spec["params"].update(self._check(self._params, value_node, context) or {})
             elif key == "limits":
                 spec["limits"].update(self._check(self._limits, value_node, context) or {})
+            elif key == "runtime":
+                spec["runtime"] = self._check(self._runtime, value_node, context)
             elif key == "accept":
                 spec["accept"] = self._check(self._accept, value_node, context)
             elif key == "depends_on":

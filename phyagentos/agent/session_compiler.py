@@ -12,7 +12,7 @@ import secrets
 from datetime import datetime, timezone
 from typing import Any
 
-from phyagentos.protocol import Limits, SessionRecord, Workspace
+from phyagentos.protocol import Limits, Revision, SessionContext, SessionRecord, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 
 from .criteria import parse_criteria
@@ -36,17 +36,28 @@ class SessionCompiler:
         graph: the validated goal graph.
         run_id: the run the sessions belong to.
         seed: base seed; node ``i`` gets ``seed + i`` so episodes are reproducible.
+        evaluation: benchmark evaluation configuration copied into every session
+            (``None`` outside a benchmark).
     """
 
-    def __init__(self, workspace: Workspace, graph: GoalGraph, run_id: str, *, seed: int | None = 0):
+    def __init__(self, workspace: Workspace, graph: GoalGraph, run_id: str, *, seed: int | None = 0,
+                 evaluation: dict[str, Any] | None = None):
         self.workspace = workspace
         self.graph = graph
         self.run_id = run_id
         self.seed = seed
+        self.evaluation = evaluation
 
     def compile_node(self, node: GoalNode, *, parent: SessionRecord | None = None,
-                     parameters: dict[str, Any] | None = None) -> SessionRecord:
+                     parameters: dict[str, Any] | None = None, limits: dict[str, float] | None = None,
+                     context: SessionContext | None = None, recovery: Revision | None = None) -> SessionRecord:
         """Build and submit the session for ``node`` (a child of ``parent`` on replan).
+
+        Args:
+            parameters: skill parameters (default: the node's).
+            limits: limit values over the node's (a revision may lengthen a deadline).
+            context: what the ContextBuilder injected (recorded in the session).
+            recovery: the revision a replanned child runs with.
 
         Raises:
             VerifierError: the node's acceptance criteria do not parse (checked
@@ -65,12 +76,16 @@ class SessionCompiler:
             parent_session_id=parent.session_id if parent else None,
             depends_on=list(node.depends_on),
             skill=node.skill,
+            skill_runtime=node.runtime,
             target=node.target,
             parameters=dict(parameters if parameters is not None else node.params),
             accept=node.accept,
-            limits=Limits(**node.limits),
+            limits=Limits(**{**node.limits, **(limits or {})}),
             scene=self.graph.scene,
             seed=None if self.seed is None else self.seed + index,
+            evaluation=dict(self.evaluation) if self.evaluation is not None else None,
+            context=context,
+            recovery=recovery,
             state="pending",
             created_at=now,
             updated_at=now,

@@ -1,22 +1,31 @@
 """SessionVerifier: judge an evidence bundle against the session's acceptance criteria.
 
-The verdict comes from evidence (initial and terminal snapshots, runtime outcome,
-safety events), never from a controller's return code alone:
+The verdict is the paper's V(G, S0, ST, tau, H): task and criteria G, initial and
+terminal snapshots S0 and ST, trace tau, history H (the session's lineage). It comes
+from evidence, never from a controller's return code alone:
 
 - every criterion satisfied and no safety intervention -> ``success``;
 - a criterion unknown (evidence missing) -> ``failure``: we cannot judge, so we do
   not claim success and do not retry blindly;
-- a criterion unsatisfied -> ``replan`` while the session's replan budget lasts and
-  the failure is not a safety stop, else ``failure``.
+- a criterion unsatisfied -> ``replan`` while the session's replan budget lasts, the
+  failure is not a safety stop, and a recovery strategy is left for the diagnosed
+  cause; else ``failure``.
 
-Verifiers are composable behind :class:`Verifier`; :class:`PredicateVerifier` is the
-first, a model-based judge can be appended to :class:`SessionVerifier` later.
+Every verdict that is not a success carries a :class:`~phyagentos.protocol.Diagnosis`
+(:mod:`phyagentos.agent.diagnosis`); a ``replan`` verdict carries the
+:class:`~phyagentos.protocol.Revision` its child session runs with
+(:mod:`phyagentos.agent.recovery`).
+
+Judges are composable behind :class:`Verifier`: :class:`PredicateVerifier` evaluates the
+structured predicates; a model-based judge returning the same per-criterion outcomes
+can be appended to :class:`SessionVerifier` later.
 """
 
 from __future__ import annotations
 
+import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Protocol, Sequence
 
@@ -27,13 +36,14 @@ from phyagentos.protocol import CriterionResult, SessionRecord, Verdict
 from phyagentos.protocol.lifecycle import utc_now
 
 from .criteria import CriterionOutcome, evaluate, parse_criteria
+from .diagnosis import diagnose
+from .recovery import RecoveryPlanner
 
 __all__ = ["EvidenceBundle", "Verifier", "PredicateVerifier", "SessionVerifier", "load_evidence"]
 
 logger = logging.getLogger(__name__)
 
-# Snapshots are large; libyaml's safe loader parses them ~10x faster than PyYAML's.
-_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_IMAGE_KEYS = ("initial_image", "terminal_image")
 
 
 @dataclass(frozen=True)
@@ -43,10 +53,13 @@ class EvidenceBundle:
     Attributes:
         session_id: the session.
         directory: the bundle directory.
-        initial, terminal: environment snapshots before and after execution.
+        initial, terminal: ground-truth environment snapshots before and after execution.
         outcome: the runtime's outcome record (status, failed primitive, error code).
         events: safety and target events (each a mapping with ``code``).
-        files: bundle-relative file names, used as evidence references.
+        files: bundle key -> file name (``initial``, ``terminal``, ``trace``,
+            ``events``, ``task``, ``initial_image``, ``terminal_image`` ...).
+        trace: the action/observation trace, one mapping per record (may be empty).
+        task: the task definition the runtime ran (may be empty for old bundles).
     """
 
     session_id: str
@@ -56,23 +69,52 @@ class EvidenceBundle:
     outcome: Mapping[str, Any]
     events: Sequence[Mapping[str, Any]]
     files: Mapping[str, str]
+    trace: Sequence[Mapping[str, Any]] = field(default_factory=tuple)
+    task: Mapping[str, Any] = field(default_factory=dict)
+
+    def ref(self, key: str) -> str | None:
+        """Workspace-relative path (``evidence/<session>/<file>``) of bundle file ``key``,
+        or ``None`` if the bundle has no such file (or it was pruned)."""
+        name = self.files.get(key)
+        if not name or not (self.directory / name).exists():
+            return None
+        return f"{self.directory.parent.name}/{self.directory.name}/{name}"
+
+    def refs(self, *keys: str) -> tuple[str, ...]:
+        """:meth:`ref` of each key that exists, in order."""
+        return tuple(r for r in (self.ref(k) for k in keys) if r)
+
+    @property
+    def images(self) -> tuple[str, ...]:
+        """Workspace-relative paths of the RGB images still on disk."""
+        return self.refs(*_IMAGE_KEYS)
+
+
+def _read_trace(path: Path) -> tuple[dict, ...]:
+    if not path.is_file():
+        return ()
+    records = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if line.strip():
+            records.append(json.loads(line))
+    return tuple(records)
 
 
 def load_evidence(directory: str | Path) -> EvidenceBundle:
-    """Read ``bundle.yaml`` and the snapshots it references.
+    """Read ``bundle.yaml`` and the snapshots, events, trace and task it references.
 
     Raises:
-        VerifierError: if the bundle or a referenced file is missing or unreadable.
+        VerifierError: if the bundle or a referenced snapshot is missing or unreadable.
     """
     directory = Path(directory)
     index = directory / "bundle.yaml"
     try:
-        bundle = yaml.load(index.read_text(encoding="utf-8"), Loader=_YAML_LOADER)
+        bundle = yaml.safe_load(index.read_text(encoding="utf-8"))
         files = bundle["files"]
 
         def load(key):
             name = files.get(key)
-            return yaml.load((directory / name).read_text(encoding="utf-8"), Loader=_YAML_LOADER) if name else {}
+            return yaml.safe_load((directory / name).read_text(encoding="utf-8")) if name else {}
 
         return EvidenceBundle(
             session_id=bundle["session_id"],
@@ -82,8 +124,10 @@ def load_evidence(directory: str | Path) -> EvidenceBundle:
             outcome=bundle.get("outcome", {}),
             events=load("events") or [],
             files=files,
+            trace=_read_trace(directory / files["trace"]) if files.get("trace") else (),
+            task=load("task") or {},
         )
-    except (OSError, KeyError, TypeError, yaml.YAMLError) as exc:
+    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError) as exc:
         raise VerifierError(f"evidence bundle {index} unreadable: {exc}") from None
 
 
@@ -102,7 +146,7 @@ class PredicateVerifier:
 
     def judge(self, session: SessionRecord, evidence: EvidenceBundle) -> list[CriterionOutcome]:
         criteria = parse_criteria(session.accept, where=f"session {session.session_id} accept")
-        refs = tuple(f"{evidence.directory.name}/{evidence.files[k]}" for k in ("initial", "terminal") if k in evidence.files)
+        refs = evidence.refs("initial", "terminal")
         return [evaluate(c, evidence.initial, evidence.terminal, refs=refs) for c in criteria]
 
 
@@ -112,21 +156,31 @@ class SessionVerifier:
     Args:
         verifiers: judges run in order; all their outcomes count.
         max_replans: replan budget along one lineage (root session + children).
+        recovery: chooses the revision of a ``replan`` verdict (default: the built-in
+            strategies for the shipped skills); a cause with no strategy left turns
+            the verdict into ``failure``.
     """
 
-    def __init__(self, verifiers: Sequence[Verifier] | None = None, *, max_replans: int = 2):
+    def __init__(self, verifiers: Sequence[Verifier] | None = None, *, max_replans: int = 2,
+                 recovery: RecoveryPlanner | None = None):
         self.verifiers = list(verifiers) if verifiers is not None else [PredicateVerifier()]
         self.max_replans = max_replans
+        self.recovery = recovery if recovery is not None else RecoveryPlanner()
 
-    def verify(self, session: SessionRecord, evidence: EvidenceBundle, *, lineage_depth: int = 0) -> Verdict:
+    def verify(self, session: SessionRecord, evidence: EvidenceBundle, *, lineage_depth: int | None = None,
+               history: Sequence[SessionRecord] = ()) -> Verdict:
         """Judge ``evidence`` for ``session``.
 
         Args:
-            lineage_depth: how many replans preceded this session (0 for a root).
+            lineage_depth: how many replans preceded this session (0 for a root);
+                defaults to ``len(history)``.
+            history: the session's ancestors, oldest first (their revisions and
+                diagnoses decide the next escalation step).
 
         Raises:
             VerifierError: malformed acceptance criteria.
         """
+        depth = len(history) if lineage_depth is None else lineage_depth
         outcomes: list[CriterionOutcome] = []
         for verifier in self.verifiers:
             outcomes.extend(verifier.judge(session, evidence))
@@ -136,29 +190,38 @@ class SessionVerifier:
             )
             for o in outcomes
         ]
+        names = "+".join(v.name for v in self.verifiers)
+        refs = list(evidence.refs("task", "initial", "terminal", "trace", "events", *_IMAGE_KEYS))
+
+        def verdict(kind: str, reason: str, **extra) -> Verdict:
+            return Verdict(verdict=kind, reason=reason, criteria=criteria, verifier=names, at=utc_now(), evidence=refs,
+                           **extra)
+
         safety = [e for e in evidence.events if str(e.get("code", "")).startswith("safety.")]
         runtime_error = evidence.outcome.get("error_code")
-        names = "+".join(v.name for v in self.verifiers)
-        if not outcomes:
-            return Verdict(verdict="failure", reason="no acceptance criteria: a controller return code alone never counts as success",
-                           criteria=criteria, verifier=names, at=utc_now())
         unknown = [o for o in outcomes if o.status == "unknown"]
         unsatisfied = [o for o in outcomes if o.status == "unsatisfied"]
-        if not unknown and not unsatisfied and not safety:
-            return Verdict(verdict="success", reason=f"all {len(outcomes)} criteria satisfied", criteria=criteria,
-                           verifier=names, at=utc_now())
+        if outcomes and not unknown and not unsatisfied and not safety:
+            return verdict("success", f"all {len(outcomes)} criteria satisfied")
+        diagnosis = diagnose(session, evidence)
+        if not outcomes:
+            return verdict("failure", "no acceptance criteria: a controller return code alone never counts as success",
+                           diagnosis=diagnosis)
         if unknown:
             reason = "cannot judge: " + "; ".join(f"{o.criterion.text}: {o.reason}" for o in unknown)
-            return Verdict(verdict="failure", reason=reason, criteria=criteria, verifier=names, at=utc_now())
+            return verdict("failure", reason, diagnosis=diagnosis)
         detail = "; ".join(f"{o.criterion.text}: {o.reason}" for o in unsatisfied)
         if safety:
             codes = sorted({str(e["code"]) for e in safety})
-            return Verdict(verdict="failure", reason=f"safety intervention {codes}; {detail}".rstrip("; "),
-                           criteria=criteria, verifier=names, at=utc_now())
+            return verdict("failure", f"safety intervention {codes}; {detail}".rstrip("; "), diagnosis=diagnosis)
         if runtime_error:
             detail = f"{detail} (runtime reported {runtime_error})"
-        if lineage_depth < self.max_replans:
-            return Verdict(verdict="replan", reason=f"unsatisfied: {detail}; replan {lineage_depth + 1}/{self.max_replans}",
-                           criteria=criteria, verifier=names, at=utc_now())
-        return Verdict(verdict="failure", reason=f"unsatisfied after {lineage_depth} replans: {detail}",
-                       criteria=criteria, verifier=names, at=utc_now())
+        detail = f"{detail}; diagnosis {diagnosis.cause}: {diagnosis.summary}"
+        if depth >= self.max_replans:
+            return verdict("failure", f"unsatisfied after {depth} replans: {detail}", diagnosis=diagnosis)
+        revision = self.recovery.plan(session, diagnosis, history=history)
+        if revision is None:
+            return verdict("failure", f"unsatisfied, no recovery strategy left for {diagnosis.cause}: {detail}",
+                           diagnosis=diagnosis)
+        return verdict("replan", f"unsatisfied: {detail}; replan {depth + 1}/{self.max_replans} "
+                                 f"with {revision.strategy}", diagnosis=diagnosis, revision=revision)

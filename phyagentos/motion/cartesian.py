@@ -90,6 +90,7 @@ def cartesian_path(
     arm_joint_names: Sequence[str] = DEFAULT_ARM_JOINT_NAMES,
     qpos_full: Sequence[float] | None = None,
     stats: dict | None = None,
+    position_priority: bool = False,
 ) -> np.ndarray:
     """Joint path moving site ``frame`` in a straight line to ``T_goal``.
 
@@ -106,6 +107,8 @@ def cartesian_path(
         qpos_full: optional full configuration for the fixed dofs.
         stats: optional dict that accumulates ``ik_calls``, ``ik_iterations`` (list),
             ``ik_solve_ms`` (list, per solve) and ``ik_s`` (seconds).
+        position_priority: passed to :func:`~phyagentos.motion.ik.solve_ik` (arms that
+            cannot reach every orientation).
 
     Returns:
         ``(N, 7)`` rad, ``N >= 2``.
@@ -144,6 +147,7 @@ def cartesian_path(
                 orientation_tol_rad=orientation_tol_rad,
                 arm_joint_names=arm_joint_names,
                 qpos_full=qpos_full,
+                position_priority=position_priority,
             )
         except IKError as exc:
             raise IKError(f"Cartesian path: waypoint {k}/{n} at {np.round(T[:3, 3], 3).tolist()} failed: {exc}") from exc

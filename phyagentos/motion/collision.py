@@ -46,6 +46,9 @@ class CollisionChecker:
         margin_m: safety distance in metres (>= 0): contacts closer than this count.
         tcp_site: site used as the tool frame for :meth:`attach`.
         allowed_pairs: extra robot body-name pairs allowed to touch.
+        gripper_bodies: bodies (with their descendants) an attached object may touch;
+            default: the bodies below the last arm joint's body (the Franka's fingers).
+            A gripper whose fixed jaw is the last arm body (the SO-101's) names it here.
 
     Raises:
         PlanningError: unknown joint/site names or a negative margin.
@@ -59,6 +62,7 @@ class CollisionChecker:
         margin_m: float = 0.0,
         tcp_site: str = "tcp",
         allowed_pairs: Iterable[tuple[str, str]] = (),
+        gripper_bodies: Iterable[str] | None = None,
     ):
         if not margin_m >= 0.0 or not math.isfinite(margin_m):
             raise PlanningError(f"margin_m must be a finite number >= 0, got {margin_m}")
@@ -96,7 +100,17 @@ class CollisionChecker:
         last_body = int(m.jnt_bodyid[self._jids[-1]])
         robot_root = int(m.body_rootid[first_body])
         self.robot_bodies = frozenset(b for b in range(m.nbody) if m.body_rootid[b] == robot_root and b != 0)
-        self.gripper_bodies = frozenset(b for b in self.robot_bodies if b != last_body and self._is_descendant(b, last_body))
+        if gripper_bodies is None:
+            self.gripper_bodies = frozenset(b for b in self.robot_bodies
+                                            if b != last_body and self._is_descendant(b, last_body))
+        else:
+            ids = []
+            for name in gripper_bodies:
+                bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+                if bid < 0 or bid not in self.robot_bodies:
+                    raise PlanningError(f"gripper body {name!r} is not a body of the robot")
+                ids.append(bid)
+            self.gripper_bodies = frozenset(b for b in self.robot_bodies if any(self._is_descendant(b, g) for g in ids))
         body_class = np.full(m.nbody, _ENV, dtype=np.int8)
         self.objects: dict[str, int] = {}
         self._object_qadr: dict[int, int] = {}

@@ -105,8 +105,14 @@ def top_down_grasp_candidates(
     if T.shape != (4, 4) or he.shape != (3,):
         raise IKError(f"T_object must be (4, 4) and half_extents (3,), got {T.shape}, {he.shape}")
     R = T[:3, :3]
+    # A box resting on any face is upright: name its most vertical axis z (a cube
+    # tipped over by a failed grasp is still graspable from above).
+    k = int(np.argmax(np.abs(R[2, :])))
+    if k != 2:
+        order = [(k + 1) % 3, (k + 2) % 3, k]
+        R, he = R[:, order], he[order]
     if abs(R[2, 2]) < math.cos(math.radians(20)):
-        raise IKError("top_down_grasp needs an upright box (its z axis within 20 deg of vertical)")
+        raise IKError("top_down_grasp needs an upright box (one of its axes within 20 deg of vertical)")
     ax = R[:2, 0] / max(np.linalg.norm(R[:2, 0]), 1e-9)
     ay = R[:2, 1] / max(np.linalg.norm(R[:2, 1]), 1e-9)
     closes = []

@@ -24,7 +24,13 @@ import qpsolvers
 
 from phyagentos.errors import IKError, format_choices
 
-__all__ = ["IKSolution", "solve_ik", "qp_solver_name", "pose_error", "DEFAULT_ARM_JOINT_NAMES"]
+__all__ = ["IKSolution", "solve_ik", "qp_solver_name", "pose_error", "DEFAULT_ARM_JOINT_NAMES",
+           "POSITION_PRIORITY_ORIENTATION_COST"]
+
+#: Orientation cost of the frame task in the second phase of ``position_priority``
+#: (position cost 1): a 0.3 rad orientation residual then weighs like 0.6 mm of position
+#: error, so the position converges while the orientation stays as close as it can.
+POSITION_PRIORITY_ORIENTATION_COST = 0.002
 
 log = logging.getLogger(__name__)
 
@@ -124,6 +130,7 @@ def solve_ik(
     posture_weight: float = 1e-3,
     arm_joint_names: Sequence[str] = DEFAULT_ARM_JOINT_NAMES,
     qpos_full: Sequence[float] | None = None,
+    position_priority: bool = False,
 ) -> IKSolution:
     """Arm joint angles that put site ``frame`` at pose ``target``.
 
@@ -139,6 +146,11 @@ def solve_ik(
         arm_joint_names: the 7 joints the solver may move; all other dofs stay fixed.
         qpos_full: optional ``(nq,)`` full configuration for the fixed dofs (fingers,
             objects); defaults to ``model.qpos0`` with fingers as there.
+        position_priority: for arms with fewer than 6 joints, where some orientations
+            cannot be reached: the solver first asks for the exact pose (orientation
+            within 0.01 rad); if that stalls, it lowers the orientation cost to
+            :data:`POSITION_PRIORITY_ORIENTATION_COST`, meets the position, and accepts
+            any orientation within ``orientation_tol_rad``.
 
     Returns:
         :class:`IKSolution` with ``q`` inside the joint limits.
@@ -158,10 +170,12 @@ def solve_ik(
         raise IKError(f"max_iters must be >= 1, got {max_iters}")
     ctx = _context(model, frame, names)
     with ctx.lock:
-        return _solve(ctx, q0, T, position_tol_m, orientation_tol_rad, max_iters, posture_weight, qpos_full)
+        return _solve(ctx, q0, T, position_tol_m, orientation_tol_rad, max_iters, posture_weight, qpos_full,
+                      position_priority)
 
 
-def _solve(ctx: _IKContext, q0, T, pos_tol, ori_tol, max_iters, posture_weight, qpos_full) -> IKSolution:
+def _solve(ctx: _IKContext, q0, T, pos_tol, ori_tol, max_iters, posture_weight, qpos_full,
+           position_priority=False) -> IKSolution:
     model = ctx.model
     qfull = np.array(model.qpos0 if qpos_full is None else qpos_full, dtype=float)
     if qfull.shape != (model.nq,):
@@ -170,6 +184,11 @@ def _solve(ctx: _IKContext, q0, T, pos_tol, ori_tol, max_iters, posture_weight, 
     config = ctx.config
     config.update(qfull)
     ctx.frame_task.set_target(mink.SE3.from_matrix(T))
+    ctx.frame_task.set_orientation_cost(0.5)
+    # Position priority first asks for the exact orientation (as without it); if that
+    # stalls, a second phase drops the orientation cost to meet the position and accepts
+    # any orientation within the tolerance.
+    ori_goal = min(ori_tol, 1e-2) if position_priority else ori_tol
     cost = np.zeros(model.nv)
     cost[ctx.arm_dadr] = posture_weight
     ctx.posture_task.set_cost(cost)
@@ -186,9 +205,34 @@ def _solve(ctx: _IKContext, q0, T, pos_tol, ori_tol, max_iters, posture_weight, 
         return dp, float(np.arccos(np.clip(c, -1.0, 1.0)))
 
     dp, dr = errors()
-    best = (dp + dr * 0.1, 0)
     it = 0
-    while (dp > pos_tol or dr > ori_tol) and it < max_iters:
+    phases = 2 if position_priority else 1
+    while phases:
+        phases -= 1
+        it, dp, dr = _iterate(ctx, config, tasks, solver, errors, it, max_iters, pos_tol, ori_goal, dp, dr)
+        if phases and (dp > pos_tol or dr > ori_goal):
+            ctx.frame_task.set_orientation_cost(POSITION_PRIORITY_ORIENTATION_COST)
+            ori_goal = ori_tol
+        else:
+            break
+    # On a bound the QP can overshoot by solver round-off (~1e-5 rad); exact-range checks
+    # downstream (SafetyGuard) must never see that.
+    q = np.clip(config.q[ctx.arm_qadr], ctx.lower, ctx.upper)
+    if dp > pos_tol or dr > ori_tol:
+        raise IKError(
+            f"IK did not converge to the target pose of {site!r} after {it} iterations: "
+            f"position error {dp * 1000:.1f} mm (tol {pos_tol * 1000:.1f} mm), "
+            f"orientation error {dr:.4f} rad (tol {ori_tol:.4f} rad); target position "
+            f"{np.round(T[:3, 3], 3).tolist()}"
+        )
+    q.setflags(write=False)
+    return IKSolution(q=q, iterations=it, position_error_m=dp, orientation_error_rad=dr)
+
+
+def _iterate(ctx, config, tasks, solver, errors, it, max_iters, pos_tol, ori_goal, dp, dr):
+    """Damped Gauss-Newton steps until within tolerance, ``max_iters`` or 25 steps without progress."""
+    best = (dp + dr * 0.1, it)
+    while (dp > pos_tol or dr > ori_goal) and it < max_iters:
         try:
             v = mink.solve_ik(
                 config,
@@ -209,13 +253,4 @@ def _solve(ctx: _IKContext, q0, T, pos_tol, ori_tol, max_iters, posture_weight, 
             best = (score, it)
         elif it - best[1] >= 25:
             break  # no progress for 25 iterations: unreachable or stuck at a limit
-    q = config.q[ctx.arm_qadr].copy()
-    if dp > pos_tol or dr > ori_tol:
-        raise IKError(
-            f"IK did not converge to the target pose of {site!r} after {it} iterations: "
-            f"position error {dp * 1000:.1f} mm (tol {pos_tol * 1000:.1f} mm), "
-            f"orientation error {dr:.4f} rad (tol {ori_tol:.4f} rad); target position "
-            f"{np.round(T[:3, 3], 3).tolist()}"
-        )
-    q.setflags(write=False)
-    return IKSolution(q=q, iterations=it, position_error_m=dp, orientation_error_rad=dr)
+    return it, dp, dr

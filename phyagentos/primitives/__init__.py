@@ -1,24 +1,31 @@
 """Primitive leaves of behaviour trees, registered by the name trees use.
 
-============  ==========================================================
-name          behaviour
-============  ==========================================================
-observe       snapshot the world (blackboard + ENVIRONMENT.md)
-compute_grasp top-down grasp / pre-grasp tcp poses from the observation
-compute_place place / pre-place tcp poses over a region
-solve_ik      mink IK to a blackboard tcp pose
-plan_path     OMPL joint-space path with MuJoCo collision checking
-retime_path   toppra time-optimal timing under joint limits
-execute_trajectory  stream a timed trajectory with a tracking check
-cartesian_move      straight-line tcp approach / lift / retreat
-gripper       open / close (closing checks the grasp)
-check_holding succeed only while the object is held
-hold          keep still for a simulated duration
-============  ==========================================================
+========================  ==========================================================
+name                      behaviour
+========================  ==========================================================
+observe                   snapshot the world (blackboard + ENVIRONMENT.md)
+compute_grasp             top-down grasp / pre-grasp tcp poses from the observation
+compute_place             place / pre-place tcp poses over a region
+solve_ik                  mink IK to a blackboard tcp pose
+plan_path                 OMPL joint-space path with MuJoCo collision checking
+retime_path               toppra time-optimal timing under joint limits
+execute_trajectory        stream a timed trajectory with a tracking check
+cartesian_move            straight-line tcp approach / lift / retreat
+gripper                   open / close (closing checks the grasp)
+check_holding             succeed only while the object is held
+hold                      keep still for a simulated duration
+compute_affordance_grasp  grasp poses for the part an entity declares graspable
+articulate_hinge          turn a held handle about its entity's hinge
+tool_move                 straight tcp motion by an offset in the tool frame
+compute_place_as_held     place poses keeping the hand's orientation (hooked objects)
+noop                      succeed after n ticks, touching no target (control.py)
+========================  ==========================================================
 """
 
+from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .base import Primitive, PrimitiveFailure
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
+from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
@@ -47,4 +54,9 @@ PRIMITIVES = {
     "gripper": Gripper,
     "check_holding": CheckHolding,
     "hold": Hold,
+    "compute_affordance_grasp": ComputeAffordanceGrasp,
+    "articulate_hinge": ArticulateHinge,
+    "tool_move": ToolMove,
+    "compute_place_as_held": ComputePlaceAsHeld,
+    "noop": Noop,
 }

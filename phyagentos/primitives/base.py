@@ -58,6 +58,7 @@ class Primitive(py_trees.behaviour.Behaviour):
         self.ctx: SkillContext | None = None
         self._reads: list[str] = []
         self._writes: list[str] = []
+        self._entered: Status | None = None
 
     # -- blackboard ------------------------------------------------------
 
@@ -92,9 +93,11 @@ class Primitive(py_trees.behaviour.Behaviour):
             self.bb.register_key(key=key, access=Access.WRITE)
 
     def initialise(self) -> None:
-        self._guard(self.on_enter)
+        self._entered = self._guard(self.on_enter)
 
     def update(self) -> Status:
+        if self._entered == Status.FAILURE:
+            return Status.FAILURE  # on_enter failed (recorded in the context): never step half set up
         return self._guard(self.step)
 
     def terminate(self, new_status: Status) -> None:

@@ -23,9 +23,13 @@ class CancelToken:
     def __init__(self) -> None:
         self._event = threading.Event()
         self.reason = ""
+        self.code = "cancelled.operator"
 
-    def cancel(self, reason: str = "") -> None:
+    def cancel(self, reason: str = "", code: str = "cancelled.operator") -> None:
+        """Request a stop; ``code`` attributes it (``cancelled.operator``, ``cancelled.estop``,
+        ``cancelled.shutdown`` or ``timeout.execution``; see docs/ERRORS.md)."""
         self.reason = reason
+        self.code = code
         self._event.set()
 
     def is_set(self) -> bool:
@@ -110,6 +114,10 @@ class SkillContext:
         on_observation: called with each snapshot an ``observe`` leaf takes
             (the runner writes it to ENVIRONMENT.md).
         failure: set by the first failing primitive: ``{code, primitive, message}``.
+        guard: the session's :class:`~phyagentos.runtime.safety_guard.SafetyGuard`;
+            every command to the target passes it (``None`` only in unit tests of
+            primitives that do not move the arm).
+        plan: the session's AdapterPlan from preflight, as a dict.
     """
 
     target: Any
@@ -122,6 +130,8 @@ class SkillContext:
     motion: MotionSettings = field(default_factory=MotionSettings)
     on_observation: Callable[[dict], None] | None = None
     failure: dict[str, Any] | None = None
+    guard: Any = None
+    plan: Mapping[str, Any] | None = None
 
     def fail(self, code: str, primitive: str, message: str) -> None:
         """Record a primitive failure; the last one wins (retries overwrite earlier ones)."""

@@ -6,6 +6,8 @@ token and the deadline (preemptive cancellation at control-period granularity).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from py_trees.common import Status
 
@@ -13,7 +15,7 @@ from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.retime import Trajectory, retime
 
 from .base import Primitive, PrimitiveFailure
-from .motion import execution_limits, held_object, session_checker
+from .motion import execution_limits, held_object, ik_options, session_checker
 
 __all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "CheckHolding"]
 
@@ -26,18 +28,78 @@ class _Tracking(Primitive):
     TOOLS = ("move_joints",)
 
     def _start(self, traj: Trajectory) -> None:
+        traj = self._within_range(traj)
+        if self.ctx.guard is not None:
+            traj = self._guarded(traj)
         self._traj = traj
         self._t = 0.0
         self._max_err = 0.0
         self.ctx.trace.record("execute_start", leaf=self.name, duration_s=float(traj.duration))
 
+    #: Largest amount a reference may lie outside the model's joint range and still be
+    #: pulled back to it, rad: a timing spline through waypoints on a joint limit
+    #: overshoots by about a milliradian; anything larger is a real request to leave the
+    #: range and is left for the SafetyGuard to refuse.
+    RANGE_ROUNDOFF_RAD = 5e-3
+
+    def _within_range(self, traj: Trajectory) -> Trajectory:
+        target = self.ctx.target
+        model = getattr(target, "model", None)
+        if model is None:
+            return traj
+        jids = [model.joint(n).id for n in target.arm_joint_names]
+        lo, hi = model.jnt_range[jids, 0], model.jnt_range[jids, 1]
+        q = np.asarray(traj.q, dtype=float)
+        over = float(np.max(np.maximum(lo - q, q - hi)))
+        if over <= 0.0 or over > self.RANGE_ROUNDOFF_RAD:
+            return traj
+        return Trajectory(t=traj.t, q=np.clip(q, lo, hi), qd=traj.qd, qdd=traj.qdd)
+
+    def _guarded(self, traj: Trajectory) -> Trajectory:
+        """SafetyGuard check of the whole trajectory, at the samples ``track`` streams,
+        before any of it reaches the target; a clamped trajectory replaces it when
+        ``safety.yaml`` authorises the clamp, otherwise the leaf fails with the code."""
+        ctx = self.ctx
+        guard, target = ctx.guard, ctx.target
+        dt = float(target.timestep)
+        t = np.asarray(traj.t, dtype=float) - float(traj.t[0])
+        duration = float(t[-1])
+        n = max(1, int(math.ceil(duration / dt - 1e-9)))
+        times = np.minimum((np.arange(n) + 1) * dt, duration)
+
+        def at(a):
+            a = np.asarray(a, dtype=float)
+            return np.column_stack([np.interp(times, t, a[:, j]) for j in range(a.shape[1])])
+
+        qdd = getattr(traj, "qdd", None)
+        guard.sync(target.arm_qpos())
+        decision = guard.check(at(traj.q), dt=dt, qd=at(traj.qd), qdd=at(qdd) if qdd is not None else None,
+                               source=self.name)
+        if decision.outcome == "halt":
+            target.halt()
+        if not decision.admitted:
+            raise PrimitiveFailure(decision.code, f"SafetyGuard {decision.outcome}: {decision.message}")
+        if decision.outcome == "clamp":
+            q = np.vstack([np.asarray(traj.q, dtype=float)[:1], decision.actions[:, :7]])
+            ts = np.concatenate([[0.0], times[: len(q) - 1]])
+            qd = np.gradient(q, ts, axis=0) if len(q) > 1 else np.zeros_like(q)
+            traj = Trajectory(t=ts, q=q, qd=qd, qdd=np.gradient(qd, ts, axis=0) if len(q) > 1 else np.zeros_like(q))
+        guard.commit(decision.actions, dt=dt, qd_end=np.asarray(traj.qd, dtype=float)[-1])
+        return traj
+
     def _advance(self) -> Status:
         ctx = self.ctx
+        if ctx.guard is not None and ctx.guard.estop_engaged():
+            ctx.target.halt()
+            raise PrimitiveFailure("safety.estop", f"e-stop engaged: {ctx.guard.estop.reason}")
         t_end = min(self._t + ctx.motion.control_period_s, self._traj.duration)
         with ctx.profiler.section("simulation"):
             result = ctx.target.track(self._traj, t_start=self._t, t_end=t_end, tracking_tol_rad=ctx.motion.tracking_tol_rad)
         self._max_err = max(self._max_err, result.max_tracking_error_rad)
         self._t = t_end
+        if ctx.guard is not None and ctx.guard.estop_engaged():
+            ctx.target.halt()  # the target's own hook already stopped streaming mid-slice
+            raise PrimitiveFailure("safety.estop", f"e-stop engaged: {ctx.guard.estop.reason}")
         if not result.completed:
             raise PrimitiveFailure("execution.tracking",
                                    f"tracking error {result.max_tracking_error_rad:.3f} rad exceeded "
@@ -110,7 +172,7 @@ class CartesianMove(_Tracking):
             T_goal = T_start.copy()
             T_goal[:3, 3] += self.offset
         with ctx.profiler.section("ik"):
-            path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal)
+            path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
         vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
         with ctx.profiler.section("timing"):
             checker = session_checker(ctx) if self.check_collisions else None
@@ -129,23 +191,32 @@ class Gripper(Primitive):
         command: ``open`` or ``close``.
         object: when closing, the object that must end up between the fingers;
             a miss fails with ``grasp.missed``.
+        force_n: when closing, the grip force per finger in N (the target's
+            ``set_gripper(force_n=...)``); ``None`` closes on position alone.
     """
 
     TOOLS = ("set_gripper",)
     COMMANDS = ("close", "open")
 
-    def __init__(self, name: str, *, command: str, object: str | None = None):
+    def __init__(self, name: str, *, command: str, object: str | None = None, force_n: float | None = None):
         super().__init__(name)
         if command not in self.COMMANDS:
             raise ValueError(f"unknown gripper command {command!r}; valid: {', '.join(self.COMMANDS)}")
+        if force_n is not None and (not isinstance(force_n, (int, float)) or isinstance(force_n, bool) or force_n < 0):
+            raise ValueError(f"force_n must be a number of newtons >= 0 or null, got {force_n!r}")
         self.command, self.object = command, object
+        self.force_n = float(force_n) if force_n is not None and command == "close" else None
 
     def step(self):
         ctx = self.ctx
+        opening = GRIPPER_OPEN_M if self.command == "open" else 0.0
         with ctx.profiler.section("simulation"):
-            result = ctx.target.set_gripper(opening_m=GRIPPER_OPEN_M if self.command == "open" else 0.0)
-        ctx.trace.record("gripper", command=self.command, opening_m=round(float(result.opening_m), 5),
-                         grasped=result.grasped)
+            if self.force_n is None:
+                result = ctx.target.set_gripper(opening_m=opening)
+            else:
+                result = ctx.target.set_gripper(opening_m=opening, force_n=self.force_n)
+        ctx.trace.record("gripper", leaf=self.name, command=self.command, opening_m=round(float(result.opening_m), 5),
+                         grasped=result.grasped, force_n=self.force_n)
         if self.command == "close" and self.object is not None and result.grasped != self.object:
             raise PrimitiveFailure("grasp.missed", f"closed on {result.grasped or 'nothing'} instead of {self.object!r} "
                                                    f"(opening {result.opening_m * 1000:.1f} mm)")

@@ -18,7 +18,8 @@ from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime
 
 from .base import Primitive
 
-__all__ = ["SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "PLANNING_MARGIN_M"]
+__all__ = ["SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "ik_options",
+           "PLANNING_MARGIN_M"]
 
 
 def held_object(target) -> str | None:
@@ -36,15 +37,31 @@ _CHECKERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 PLANNING_MARGIN_M = 0.01
 
 
+def ik_options(target, orientation_tol_rad: float = 1e-2) -> dict:
+    """Keyword arguments of :func:`~phyagentos.motion.ik.solve_ik` / ``cartesian_path`` for
+    ``target``, from what it declares: its ``arm_joint_names`` (any number of joints), its
+    tool site ``tcp_site`` (default ``tcp``) and, for an arm that cannot reach every
+    orientation, ``ik_orientation_tol_rad``: position-priority IK accepting orientations
+    within that tolerance (the larger of it and ``orientation_tol_rad``)."""
+    opts = {"arm_joint_names": tuple(target.arm_joint_names), "frame": getattr(target, "tcp_site", "tcp")}
+    relaxed = getattr(target, "ik_orientation_tol_rad", None)
+    if relaxed is not None:
+        opts["position_priority"] = True
+        opts["orientation_tol_rad"] = max(float(relaxed), orientation_tol_rad)
+    return opts
+
+
 def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(velocity (7,) rad/s, acceleration (7,) rad/s^2)`` limits for timing a motion.
+    """``(velocity (n,) rad/s, acceleration (n,) rad/s^2)`` limits for timing a motion.
 
     Velocity comes from the target (what its actuators sustain: the simulated
     Panda's damping and force limits allow far less than the datasheet), times
     ``velocity_scale``; acceleration from :data:`DEFAULT_ACCELERATION_LIMITS`.
     """
     vel = np.asarray(ctx.target.velocity_limits(), dtype=float) * velocity_scale
-    acc = np.asarray(DEFAULT_ACCELERATION_LIMITS, dtype=float) * acceleration_scale
+    # A target that is not the Franka declares its own (n,) acceleration limits.
+    declared = getattr(ctx.target, "acceleration_limits", None)
+    acc = np.asarray(declared() if declared is not None else DEFAULT_ACCELERATION_LIMITS, dtype=float) * acceleration_scale
     return vel, acc
 
 
@@ -59,7 +76,12 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
     cache = _CHECKERS.setdefault(target, {})
     checker = cache.get(margin_m)
     if checker is None:
-        checker = CollisionChecker(target.model, arm_joint_names=target.arm_joint_names, margin_m=margin_m)
+        # A target may name its tool site, robot body pairs its model lets touch (e.g.
+        # adjacent links a third-party model does not exclude) and its gripper's bodies.
+        checker = CollisionChecker(target.model, arm_joint_names=target.arm_joint_names, margin_m=margin_m,
+                                   tcp_site=getattr(target, "tcp_site", "tcp"),
+                                   allowed_pairs=getattr(target, "allowed_collision_pairs", ()),
+                                   gripper_bodies=getattr(target, "gripper_body_names", None))
         cache[margin_m] = checker
     checker.set_world_state(target.data.qpos)
     checker.detach()
@@ -70,7 +92,8 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
 
 
 class SolveIK(Primitive):
-    """Joint configuration (7,) rad reaching the (4, 4) tcp pose at blackboard key ``pose``.
+    """Joint configuration (n,) rad reaching the (4, 4) tcp pose at blackboard key ``pose``
+    (joints, tool site and orientation tolerance as the target declares, :func:`ik_options`).
 
     Args:
         pose: blackboard key of the target tcp pose (world frame).
@@ -89,8 +112,10 @@ class SolveIK(Primitive):
     def step(self):
         target = self.ctx.target
         with self.ctx.profiler.section("ik"):
+            opts = ik_options(target, self.orientation_tol_rad)
+            opts.setdefault("orientation_tol_rad", self.orientation_tol_rad)
             sol = solve_ik(target.model, q_seed=target.arm_qpos(), target=self.get(self.pose_key),
-                           position_tol_m=self.position_tol_m, orientation_tol_rad=self.orientation_tol_rad)
+                           position_tol_m=self.position_tol_m, **opts)
         self.set(self.out, sol.q)
         self.ctx.trace.record("ik", pose=self.pose_key, iterations=sol.iterations, position_error_m=float(sol.position_error_m))
 
@@ -120,6 +145,10 @@ class PlanPath(Primitive):
         q0 = ctx.target.arm_qpos()
         with ctx.profiler.section("planning"):
             checker = session_checker(ctx, margin_m=PLANNING_MARGIN_M)
+            # A start a hair outside the model's joint range (a third-party initial state)
+            # is planned from its projection; the tracker accepts the gap (< 0.02 rad).
+            clipped = np.clip(q0, *checker.joint_limits)
+            q0 = np.where(np.abs(clipped - q0) < 0.02, clipped, q0)
             path = plan_path(checker, q0, self.get(self.goal_key), planner=self.planner or ctx.motion.planner,
                              timeout_s=self.timeout_s or ctx.motion.planning_timeout_s, seed=ctx.seed)
         self.set(self.out, path)

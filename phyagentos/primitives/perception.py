@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from phyagentos.motion.grasp import place_pose, top_down_grasp
+from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
 
 from .base import Primitive, PrimitiveFailure
 
@@ -35,24 +35,47 @@ def entity_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     raise PrimitiveFailure("perception.not_found", f"{name!r} is not in the observation; seen: {seen}")
 
 
+def _object_positions(snapshot: dict) -> dict[str, list[float]]:
+    return {e["name"]: [round(float(x), 4) for x in e["position"]]
+            for e in snapshot.get("entities", []) if e.get("kind") == "object"}
+
+
 class Observe(Primitive):
     """Snapshot the world into the blackboard (``out``) and ENVIRONMENT.md.
 
     Args:
         out: blackboard key for the snapshot (entities with poses, relations).
+        samples: perception frames averaged (the target's ``perceive(samples)``);
+            0 skips the observation and keeps what ``out`` holds (a tree can then
+            offer a re-observation that a session switches on by parameter).
+
+    The trace records the perceived object positions; on a simulated target it
+    also records the simulator's ground truth at that instant (``truth``), so the
+    verifier can tell a perception error from a world that changed afterwards. A
+    real robot has no ground truth and records perception only.
     """
 
     TOOLS = ("snapshot",)
 
-    def __init__(self, name: str, *, out: str = "snapshot"):
+    def __init__(self, name: str, *, out: str = "snapshot", samples: int = 1):
         super().__init__(name)
-        self.out = out
+        if not isinstance(samples, int) or isinstance(samples, bool) or samples < 0:
+            raise ValueError(f"samples must be an integer >= 0, got {samples!r}")
+        self.out, self.samples = out, samples
         self.writes(out)
 
     def step(self):
-        snapshot = self.ctx.target.snapshot()
+        if self.samples == 0:
+            return
+        target = self.ctx.target
+        perceive = getattr(target, "perceive", None)
+        # Ground truth first: perceiving may set off a scripted disturbance.
+        truth = target.snapshot() if perceive is not None and getattr(target, "kind", "") == "simulation" else None
+        snapshot = perceive(samples=self.samples) if perceive is not None else target.snapshot()
         self.set(self.out, snapshot)
-        self.ctx.trace.record("observe", sim_time_s=snapshot.get("sim_time_s"), relations=snapshot.get("relations", []))
+        extra = {"truth": _object_positions(truth)} if truth is not None else {}
+        self.ctx.trace.record("observe", leaf=self.name, samples=self.samples, sim_time_s=snapshot.get("sim_time_s"),
+                              objects=_object_positions(snapshot), relations=snapshot.get("relations", []), **extra)
         if self.ctx.on_observation is not None:
             self.ctx.on_observation(snapshot)
 
@@ -63,26 +86,34 @@ class ComputeGrasp(Primitive):
     Args:
         object: entity name.
         approach_height_m: pre-grasp height above the grasp, m.
+        candidate: which top-down grasp to use, best first (another approach
+            direction: the hand turned 90 or 180 deg about the vertical; taken
+            modulo the number of candidates the box allows).
         snapshot: blackboard key of the observation.
         grasp, pregrasp: blackboard keys written with (4, 4) world poses of the tcp.
     """
 
-    def __init__(self, name: str, *, object: str, approach_height_m: float = 0.10, snapshot: str = "snapshot",
-                 grasp: str = "grasp_pose", pregrasp: str = "pregrasp_pose"):
+    def __init__(self, name: str, *, object: str, approach_height_m: float = 0.10, candidate: int = 0,
+                 snapshot: str = "snapshot", grasp: str = "grasp_pose", pregrasp: str = "pregrasp_pose"):
         super().__init__(name)
         if approach_height_m <= 0:
             raise ValueError(f"approach_height_m must be > 0, got {approach_height_m}")
-        self.object, self.approach_height_m = object, float(approach_height_m)
+        if not isinstance(candidate, int) or isinstance(candidate, bool) or candidate < 0:
+            raise ValueError(f"candidate must be an integer >= 0, got {candidate!r}")
+        self.object, self.approach_height_m, self.candidate = object, float(approach_height_m), candidate
         self.snapshot_key, self.grasp_key, self.pregrasp_key = snapshot, grasp, pregrasp
         self.reads(snapshot)
         self.writes(grasp, pregrasp)
 
     def step(self):
         T_obj, half = entity_pose(self.get(self.snapshot_key), self.object)
-        plan = top_down_grasp(T_obj, half, approach_height_m=self.approach_height_m)
+        plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m)
+        plan = plans[self.candidate % len(plans)]
         self.set(self.grasp_key, plan.grasp)
         self.set(self.pregrasp_key, plan.pregrasp)
-        self.ctx.trace.record("grasp_pose", object=self.object, grasp=plan.grasp[:3, 3].round(4).tolist())
+        self.ctx.trace.record("grasp_pose", leaf=self.name, object=self.object, candidate=self.candidate,
+                              observed_position=T_obj[:3, 3].round(4).tolist(), grasp=plan.grasp[:3, 3].round(4).tolist(),
+                              yaw_rad=round(plan.yaw_rad, 4))
 
 
 class ComputePlace(Primitive):
@@ -90,7 +121,8 @@ class ComputePlace(Primitive):
 
     Args:
         object: the held object.
-        region: target region entity.
+        region: target region entity, or another object to stack on (its top face
+            is then the support surface).
         approach_height_m: pre-place height above the place pose, m.
         snapshot: blackboard key of the observation (object pose in hand, region).
         place, preplace: blackboard keys written with (4, 4) world tcp poses.
@@ -110,10 +142,15 @@ class ComputePlace(Primitive):
 
     def step(self):
         snapshot = self.get(self.snapshot_key)
-        T_region, _ = entity_pose(snapshot, self.region)
+        T_region, region_half = entity_pose(snapshot, self.region)
         T_obj, half = entity_pose(snapshot, self.object)
         T_tcp_obj = np.linalg.inv(self.ctx.target.tcp_pose()) @ T_obj
-        T_place = place_pose(T_region[:3, 3], half, T_tcp_object=T_tcp_obj)
+        # A region is a patch on its support surface (its z: 0 on the tabletop, a burner's
+        # height in the kitchen); an object used as the support (stacking) offers its top
+        # face: centre z plus its vertical half extent.
+        kind = next((e.get("kind") for e in snapshot.get("entities", []) if e["name"] == self.region), "region")
+        surface_z = float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half) if kind == "object" else float(T_region[2, 3])
+        T_place = place_pose(T_region[:3, 3], half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z)
         T_pre = T_place.copy()
         T_pre[2, 3] += self.approach_height_m
         self.set(self.place_key, T_place)

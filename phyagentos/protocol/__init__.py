@@ -2,8 +2,12 @@
 
 Import everything from here (``from phyagentos.protocol import Workspace``); the
 submodules are ``atomic`` (crash-safe writes), ``codec`` (Markdown + YAML
-documents with file line numbers in errors), ``schemas`` (pydantic models) and
-``workspace`` (the State-as-a-File directory).
+documents with file line numbers in errors), ``schemas`` (pydantic models),
+``workspace`` (the State-as-a-File directory), and the pieces that keep it cheap and
+safe under several processes: ``session_index`` (state hints of active sessions),
+``archive`` (terminal sessions), ``runs`` (submitted goal graphs), ``leases``,
+``signals`` (RUNTIME_SIGNAL.md semantics), ``watch`` (event-driven wake-ups) and
+``errorcodes`` (the error taxonomy).
 """
 
 from .atomic import atomic_write_bytes, atomic_write_text
@@ -27,7 +31,9 @@ from .schemas import (
     TASK_NODE_STATES,
     TERMINAL_STATES,
     Attempt,
+    ContextItem,
     CriterionResult,
+    Diagnosis,
     Entity,
     EnvironmentDoc,
     ErrorInfo,
@@ -42,14 +48,20 @@ from .schemas import (
     ProtocolModel,
     RejectionItem,
     Relation,
+    Revision,
+    RunRecord,
     RuntimeSignalDoc,
     SafetyConfig,
+    SessionContext,
     SessionIndexEntry,
     SessionRecord,
     SessionResult,
     SessionsIndex,
     SessionState,
     Signal,
+    SignalAck,
+    SkillDoc,
+    SkillProcedure,
     SkillRuntimeDoc,
     SkillRuntimeSpec,
     TargetsDoc,
@@ -65,7 +77,11 @@ from .schemas import (
     export_json_schemas,
     utc_now_iso,
 )
-from .workspace import Workspace, templates_dir
+from .leases import is_expired, new_lease, renewed
+from .session_index import SessionIdentity
+from .signals import SIGNAL_KINDS, SignalState, fold_signals
+from .watch import WorkspaceWatcher
+from .workspace import LEASED_STATES, WAITING_STATES, Workspace, templates_dir
 
 __all__ = [
     # atomic
@@ -98,7 +114,9 @@ __all__ = [
     "ProtocolModel",
     "VersionedModel",
     "Attempt",
+    "ContextItem",
     "CriterionResult",
+    "Diagnosis",
     "Entity",
     "EnvironmentDoc",
     "ErrorInfo",
@@ -112,13 +130,17 @@ __all__ = [
     "LogEntry",
     "RejectionItem",
     "Relation",
+    "Revision",
     "RuntimeSignalDoc",
     "SafetyConfig",
+    "SessionContext",
     "SessionIndexEntry",
     "SessionRecord",
     "SessionResult",
     "SessionsIndex",
     "Signal",
+    "SkillDoc",
+    "SkillProcedure",
     "SkillRuntimeDoc",
     "SkillRuntimeSpec",
     "TargetsDoc",
@@ -128,7 +150,20 @@ __all__ = [
     "TransitionRecord",
     "Verdict",
     "WorkspaceBox",
+    "RunRecord",
+    "SignalAck",
+    # leases, signals, session index, wake-ups
+    "new_lease",
+    "renewed",
+    "is_expired",
+    "SIGNAL_KINDS",
+    "SignalState",
+    "fold_signals",
+    "SessionIdentity",
+    "WorkspaceWatcher",
     # workspace
     "Workspace",
     "templates_dir",
+    "LEASED_STATES",
+    "WAITING_STATES",
 ]

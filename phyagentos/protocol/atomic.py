@@ -42,12 +42,16 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
-def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, durable: bool = True) -> None:
     """Replace the file at ``path`` with ``data`` atomically and durably.
 
     The parent directory must exist. An existing file keeps its permission bits;
     a new one gets ``0666 & ~umask``. On any failure the temporary file is
     removed and the original file (if any) is left untouched.
+
+    ``durable=False`` skips both fsyncs: readers still never see a torn file, but
+    after a power cut the file may be the previous version. Only for views that
+    are regenerated from a source of truth (e.g. SESSIONS.md).
 
     Raises:
         OSError: the directory is missing or not writable, or the disk is full.
@@ -64,7 +68,8 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
             handle.flush()
-            os.fsync(handle.fileno())
+            if durable:
+                os.fsync(handle.fileno())
         os.chmod(tmp_name, mode)
         os.replace(tmp_name, target)
     except BaseException:
@@ -73,10 +78,12 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         except FileNotFoundError:
             pass
         raise
-    _fsync_dir(directory)
+    if durable:
+        _fsync_dir(directory)
 
 
-def atomic_write_text(path: str | os.PathLike[str], text: str, *, encoding: str = "utf-8") -> None:
+def atomic_write_text(path: str | os.PathLike[str], text: str, *, encoding: str = "utf-8",
+                      durable: bool = True) -> None:
     """Replace the file at ``path`` with ``text`` atomically (see :func:`atomic_write_bytes`).
 
     The text is written exactly as given: no newline translation, so a document
@@ -86,4 +93,4 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, *, encoding: str 
         OSError: as for :func:`atomic_write_bytes`.
         UnicodeEncodeError: ``text`` cannot be encoded (e.g. lone surrogates in UTF-8).
     """
-    atomic_write_bytes(path, text.encode(encoding))
+    atomic_write_bytes(path, text.encode(encoding), durable=durable)

@@ -484,8 +484,11 @@ def read_document(path: str | os.PathLike[str], model: type[M]) -> Document[M]:
     return parse_document(_read_text(where), model, path=where)
 
 
-def write_document(doc: Document[Any], path: str | os.PathLike[str] | None = None) -> Path:
+def write_document(doc: Document[Any], path: str | os.PathLike[str] | None = None, *,
+                   durable: bool = True) -> Path:
     """Atomically write ``doc`` to ``path`` (default ``doc.path``); returns the path.
+
+    ``durable=False`` skips the fsyncs (see :func:`~phyagentos.protocol.atomic.atomic_write_bytes`).
 
     The data is re-validated first so an invalid model (e.g. a field assigned
     after construction) never reaches disk; ``doc.data`` and ``doc.path`` are
@@ -510,6 +513,6 @@ def write_document(doc: Document[Any], path: str | os.PathLike[str] | None = Non
     # Render the validated copy (e.g. a dict appended to a list of models is
     # now that model) and keep it, so ``doc`` matches what is on disk.
     doc.data = validated
-    atomic_write_text(target, render_document(doc))
+    atomic_write_text(target, render_document(doc), durable=durable)
     doc.path = target
     return target

@@ -30,7 +30,7 @@ from transitions.extensions import HierarchicalMachine
 
 from phyagentos.errors import LifecycleError
 
-from .schemas import SessionRecord, SessionResult, TERMINAL_STATES, TransitionRecord, utc_now_iso
+from .schemas import ErrorInfo, SessionRecord, SessionResult, TERMINAL_STATES, TransitionRecord, utc_now_iso
 
 __all__ = ["SessionLifecycle", "LIFECYCLE_EVENTS", "ACTIVE_STATES", "utc_now"]
 
@@ -121,7 +121,7 @@ class SessionLifecycle:
         except ValueError as exc:  # unknown initial state
             raise LifecycleError(f"session {record.session_id}: unknown state {record.state!r}") from exc
 
-    def _result(self, reason: str) -> SessionResult:
+    def _result(self, reason: str, error: ErrorInfo | None = None) -> SessionResult:
         """Terminal summary: status, last verdict, reason and claim-to-end wall time."""
         rec = self.record
         attempt = rec.attempts[-1] if rec.attempts else None
@@ -134,6 +134,7 @@ class SessionLifecycle:
             reason=reason or (verdict.reason if verdict else ""),
             duration_s=max(0.0, duration),
             evidence=attempt.evidence if attempt else None,
+            error=error,
         )
 
     @property
@@ -149,8 +150,11 @@ class SessionLifecycle:
         """Events that are legal from the current state, sorted."""
         return sorted(self._machine.get_triggers(self._hsm_state))
 
-    def fire(self, event: str, *, reason: str = "") -> str:
+    def fire(self, event: str, *, reason: str = "", error: ErrorInfo | None = None) -> str:
         """Apply ``event``, append it to ``record.transitions`` and persist.
+
+        ``error`` (a code from docs/ERRORS.md) is kept in ``record.result`` when the
+        event ends the session, so every terminal state carries its attribution.
 
         Returns:
             The new state name.
@@ -175,7 +179,7 @@ class SessionLifecycle:
             TransitionRecord(at=now, source=source, dest=self.state, event=event if not reason else f"{event}: {reason}")
         )
         if self.is_terminal:
-            self.record.result = self._result(reason)
+            self.record.result = self._result(reason, error)
         logger.debug("session %s: %s -(%s)-> %s", self.record.session_id, source, event, self.state)
         if self._persist is not None:
             self._persist(self.record)

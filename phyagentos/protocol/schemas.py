@@ -42,9 +42,13 @@ __all__ = [
     "TransitionRecord",
     "ErrorInfo",
     "CriterionResult",
+    "Diagnosis",
+    "Revision",
     "Verdict",
     "Attempt",
     "SessionResult",
+    "ContextItem",
+    "SessionContext",
     "SessionRecord",
     "SessionIndexEntry",
     "SessionsIndex",
@@ -59,14 +63,20 @@ __all__ = [
     "LessonsDoc",
     "KnowledgeEntry",
     "KnowledgeDoc",
+    "SkillProcedure",
+    "SkillDoc",
     "TaskNode",
     "TaskDoc",
     "LogEntry",
     "LogDoc",
     "Signal",
     "RuntimeSignalDoc",
+    "SignalAck",
+    "RunRecord",
     "WorkspaceBox",
     "SafetyConfig",
+    "SAFETY_VIOLATIONS",
+    "CLAMPABLE_VIOLATIONS",
     "SAFETY_FILE",
     "DOCUMENTS",
     "export_json_schemas",
@@ -221,6 +231,28 @@ class CriterionResult(ProtocolModel):
     evidence: list[str] = Field(default_factory=list, description="Evidence file paths or keys consulted.")
 
 
+class Diagnosis(ProtocolModel):
+    """Why an attempt did not succeed, derived from its evidence (``phyagentos.agent.diagnosis``)."""
+
+    cause: str = Field(description="Taxonomy code, e.g. 'perception_error', 'object_slipped'.")
+    category: str = Field(description="Error category: perception, execution, planning, timeout, safety, "
+                                      "precondition or unknown.")
+    summary: str
+    facts: dict[str, Any] = Field(default_factory=dict, description="Measured quantities behind the diagnosis (SI units).")
+    evidence: list[str] = Field(default_factory=list, description="Evidence files consulted, workspace-relative.")
+
+
+class Revision(ProtocolModel):
+    """A recovery strategy applied to a session: the parameters its child runs with."""
+
+    strategy: str = Field(description="Recovery strategy name, e.g. 're_observe', 'firmer_grip'.")
+    cause: str = Field(description="Diagnosed cause the strategy answers.")
+    step: int = Field(1, ge=1, description="Escalation step along the lineage (1 = first replan).")
+    parameters: dict[str, Any] = Field(default_factory=dict, description="Skill parameters set to new values.")
+    limits: dict[str, float] = Field(default_factory=dict, description="Session limits set to new values (s).")
+    rationale: str = ""
+
+
 class Verdict(ProtocolModel):
     """The verifier's judgement of an attempt."""
 
@@ -229,6 +261,9 @@ class Verdict(ProtocolModel):
     criteria: list[CriterionResult] = Field(default_factory=list)
     verifier: str = "predicates"
     at: Timestamp
+    evidence: list[str] = Field(default_factory=list, description="Evidence files the verdict rests on, workspace-relative.")
+    diagnosis: Diagnosis | None = Field(None, description="Diagnosed cause when the verdict is not success.")
+    revision: Revision | None = Field(None, description="The revision a 'replan' verdict proposes for the child session.")
 
 
 class Attempt(ProtocolModel):
@@ -253,6 +288,29 @@ class SessionResult(ProtocolModel):
     reason: str = ""
     duration_s: float = Field(ge=0, description="Wall time from claim to terminal state (s).")
     evidence: str | None = Field(None, description="Evidence bundle path, relative to the workspace.")
+    error: ErrorInfo | None = Field(
+        None, description="Attributed error that ended the session (code from docs/ERRORS.md), if any."
+    )
+
+
+class ContextItem(ProtocolModel):
+    """One memory item the ContextBuilder injected into a session, with provenance."""
+
+    kind: Literal["lesson", "knowledge", "procedure"]
+    id: str
+    summary: str
+    provenance: list[str] = Field(default_factory=list, description="Session ids the item was verified on.")
+    applied: dict[str, Any] = Field(default_factory=dict, description="Parameter values this item set (empty: informative only).")
+
+
+class SessionContext(ProtocolModel):
+    """What the ContextBuilder retrieved for a session and what it changed."""
+
+    conditions: dict[str, Any] = Field(default_factory=dict, description="Goal, skill, target, object and scene conditions.")
+    risk_factors: list[str] = Field(default_factory=list)
+    items: list[ContextItem] = Field(default_factory=list)
+    parameters: dict[str, Any] = Field(default_factory=dict, description="Parameters set from memory (over the node's own).")
+    built_at: Timestamp
 
 
 class SessionRecord(VersionedModel):
@@ -279,6 +337,12 @@ class SessionRecord(VersionedModel):
     limits: Limits = Field(default_factory=Limits)
     scene: dict[str, Any] | None = None
     seed: int | None = None
+    evaluation: dict[str, Any] | None = Field(
+        None, description="Benchmark evaluation configuration (suite, task, episode, split, memory mode, perturbation); "
+        "None outside a benchmark."
+    )
+    context: SessionContext | None = Field(None, description="Memory the ContextBuilder injected, with provenance.")
+    recovery: Revision | None = Field(None, description="For a replanned child: the revision it runs with.")
     state: SessionState = "pending"
     created_at: Timestamp
     updated_at: Timestamp
@@ -310,12 +374,23 @@ class SessionIndexEntry(ProtocolModel):
     state: SessionState
     updated_at: Timestamp
     parent_session_id: str | None = None
+    run_id: str | None = None
+    owner: str | None = Field(None, description="Lease owner (supervisor) while the session holds a lease.")
 
 
 class SessionsIndex(VersionedModel):
-    """SESSIONS.md: active sessions plus the most recent terminal ones."""
+    """SESSIONS.md: a bounded view of active sessions plus the most recent terminal ones.
+
+    Sessions holding a lease are always listed; waiting ones (pending, awaiting
+    verification or replan) and terminal ones are capped, and ``counts`` gives the
+    exact number of active sessions per state, so the view stays small however long
+    the queue or the history is.
+    """
 
     sessions: list[SessionIndexEntry] = Field(default_factory=list)
+    counts: dict[str, int] = Field(
+        default_factory=dict, description="Active (non-terminal) sessions per state, listed or not."
+    )
 
     @field_validator("sessions")
     @classmethod
@@ -421,14 +496,23 @@ class Lesson(ProtocolModel):
     verified_by: list[str] = Field(default_factory=list, description="Session ids that confirmed the correction.")
     scope: dict[str, Any] = Field(default_factory=dict)
     provenance: list[str] = Field(default_factory=list)
+    strategy: str = Field("", description="Recovery strategy that proposed the correction.")
+    revision: dict[str, Any] = Field(default_factory=dict, description="Skill parameter values the correction sets.")
+    confirmations: int = Field(0, ge=0, description="Verdicts that confirmed the correction (success).")
+    refutations: int = Field(0, ge=0, description="Verdicts where the correction did not succeed.")
+    refuted_by: list[str] = Field(default_factory=list, description="Session ids whose verdict did not confirm it.")
+    updated_at: Timestamp | None = None
 
 
 class LessonsDoc(VersionedModel):
-    """LESSONS.md: lessons learned from failed or replanned sessions."""
+    """LESSONS.md: verified lessons, and candidate corrections no verdict has confirmed yet."""
 
     lessons: list[Lesson] = Field(default_factory=list)
+    candidates: list[Lesson] = Field(
+        default_factory=list, description="Proposed corrections awaiting a confirming verdict (not lessons yet)."
+    )
 
-    @field_validator("lessons")
+    @field_validator("lessons", "candidates")
     @classmethod
     def _unique_ids(cls, value: list[Lesson]) -> list[Lesson]:
         return _unique(value, "id", "lesson id")
@@ -443,6 +527,11 @@ class KnowledgeEntry(ProtocolModel):
     provenance: list[str] = Field(default_factory=list)
     successes: int = Field(0, ge=0)
     attempts: int = Field(0, ge=0)
+    parameters: dict[str, Any] = Field(default_factory=dict, description="Strategy parameters of the pattern.")
+    initial_states: list[str] = Field(
+        default_factory=list, description="Distinct initial states it succeeded from (bounded sample of fingerprints)."
+    )
+    updated_at: Timestamp | None = None
 
     @model_validator(mode="after")
     def _successes_within_attempts(self) -> KnowledgeEntry:
@@ -460,6 +549,34 @@ class KnowledgeDoc(VersionedModel):
     @classmethod
     def _unique_ids(cls, value: list[KnowledgeEntry]) -> list[KnowledgeEntry]:
         return _unique(value, "id", "knowledge id")
+
+
+class SkillProcedure(ProtocolModel):
+    """A procedure verified often enough across varied initial states to be reused as is."""
+
+    name: str
+    base_skill: str = Field(description="The skill it runs (skills/<name>.yaml).")
+    description: str = ""
+    conditions: dict[str, Any] = Field(default_factory=dict, description="Where it applies (target, skill, object, risks).")
+    parameters: dict[str, Any] = Field(default_factory=dict, description="Strategy parameters it fixes.")
+    knowledge_id: str = Field(description="The KNOWLEDGE.md entry it was promoted from.")
+    provenance: list[str] = Field(default_factory=list, description="Session ids that verified it.")
+    successes: int = Field(0, ge=0)
+    attempts: int = Field(0, ge=0)
+    distinct_initial_states: int = Field(0, ge=0)
+    promoted_at: Timestamp
+    updated_at: Timestamp | None = None
+
+
+class SkillDoc(VersionedModel):
+    """SKILL.md: promoted, repeatedly verified procedures (procedural memory)."""
+
+    procedures: list[SkillProcedure] = Field(default_factory=list)
+
+    @field_validator("procedures")
+    @classmethod
+    def _unique_names(cls, value: list[SkillProcedure]) -> list[SkillProcedure]:
+        return _unique(value, "name", "procedure name")
 
 
 class TaskNode(ProtocolModel):
@@ -514,15 +631,44 @@ class Signal(ProtocolModel):
     reason: str = ""
 
 
+class SignalAck(ProtocolModel):
+    """A supervisor's record that it acted on a signal (appended, never rewritten)."""
+
+    signal_id: str
+    by: str = Field(description="Supervisor identity (host:pid:tag).")
+    at: Timestamp
+    result: str = Field(description="What the supervisor did, e.g. 'paused' or 'cancelled session s1'.")
+
+
 class RuntimeSignalDoc(VersionedModel):
-    """RUNTIME_SIGNAL.md: signals from operators to the runtime."""
+    """RUNTIME_SIGNAL.md: signals from operators to the runtime, and who handled them."""
 
     signals: list[Signal] = Field(default_factory=list)
+    handled: list[SignalAck] = Field(default_factory=list)
 
     @field_validator("signals")
     @classmethod
     def _unique_ids(cls, value: list[Signal]) -> list[Signal]:
         return _unique(value, "id", "signal id")
+
+
+class RunRecord(VersionedModel):
+    """``runs/<run_id>/RUN.md``: one submitted goal graph, so any Agent process can continue it.
+
+    The validated graph is copied next to it (``graph_file``), so editing or deleting
+    the original after submit changes nothing.
+    """
+
+    run_id: SessionId
+    goal_graph: str = Field(description="Path the goal graph was submitted from.")
+    graph_file: str = Field(description="Workspace-relative path of the submitted copy.")
+    seed: int | None = None
+    target: str | None = Field(None, description="Target that overrides every node's target, if any.")
+    submitted_at: Timestamp
+    submitted_by: str = ""
+    state: Literal["active", "finished"] = "active"
+    finished_at: Timestamp | None = None
+    succeeded: bool | None = None
 
 
 # ---------------------------------------------------------------------------
@@ -543,8 +689,56 @@ class WorkspaceBox(ProtocolModel):
         return self
 
 
+#: Violation codes of the SafetyGuard, one per check (``safety.<check>``).
+SAFETY_VIOLATIONS: tuple[str, ...] = (
+    "safety.dtype",
+    "safety.shape",
+    "safety.nan",
+    "safety.joint_limit",
+    "safety.workspace",
+    "safety.velocity",
+    "safety.acceleration",
+    "safety.duration",
+    "safety.rate",
+    "safety.estop",
+)
+#: Violations with a semantics-preserving bound the guard can apply when authorised:
+#: clip into the joint range, rate-limit the motion, truncate the command.
+CLAMPABLE_VIOLATIONS: tuple[str, ...] = (
+    "safety.joint_limit",
+    "safety.velocity",
+    "safety.acceleration",
+    "safety.duration",
+)
+SafetyOutcome = Literal["reject", "halt"]
+
+
+def _default_outcomes() -> dict[str, str]:
+    # Malformed or ill-timed commands are dropped (the arm keeps its last admitted
+    # command); commands that would move the arm somewhere unsafe stop it.
+    return {
+        "safety.dtype": "reject",
+        "safety.shape": "reject",
+        "safety.nan": "reject",
+        "safety.joint_limit": "halt",
+        "safety.workspace": "halt",
+        "safety.velocity": "halt",
+        "safety.acceleration": "halt",
+        "safety.duration": "reject",
+        "safety.rate": "reject",
+        "safety.estop": "halt",
+    }
+
+
 class SafetyConfig(VersionedModel):
-    """safety.yaml: limits the SafetyGuard enforces on every command."""
+    """safety.yaml: limits the SafetyGuard enforces on every command.
+
+    Read-only by construction (a frozen model): the runtime loads it once per session
+    from the deploy-time file, and nothing on the memory / self-evolution path
+    (LESSONS.md, KNOWLEDGE.md, SKILL.md) is ever merged into it.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
     joint_position_margin_rad: float = Field(
         0.0, ge=0, description="Keep joints this far (rad) inside the model's position limits."
@@ -558,9 +752,34 @@ class SafetyConfig(VersionedModel):
     )
     max_command_duration_s: float = Field(30.0, gt=0, description="Longest single command (s).")
     max_command_rate_hz: float = Field(1000.0, gt=0, description="Highest command rate (Hz).")
-    clamp_allowed: list[str] = Field(
-        default_factory=list, description="Violation codes that may be clamped instead of rejected."
+    clamp_allowed: tuple[str, ...] = Field(
+        default_factory=tuple, description="Violation codes that may be clamped instead of rejected."
     )
+    violation_outcomes: dict[str, SafetyOutcome] = Field(
+        default_factory=_default_outcomes,
+        description="Outcome per violation code when it is not clamped: 'reject' drops the command "
+        "(the arm keeps its last admitted command), 'halt' drops it and stops the arm.",
+    )
+
+    @field_validator("clamp_allowed")
+    @classmethod
+    def _clampable(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        for code in value:
+            if code not in CLAMPABLE_VIOLATIONS:
+                raise ValueError(
+                    f"{code!r} cannot be clamped; clampable violations: {format_choices(CLAMPABLE_VIOLATIONS)}"
+                )
+        return value
+
+    @field_validator("violation_outcomes")
+    @classmethod
+    def _known_outcomes(cls, value: dict[str, str]) -> dict[str, str]:
+        for code in value:
+            if code not in SAFETY_VIOLATIONS:
+                raise ValueError(f"unknown violation code {code!r}; valid: {format_choices(SAFETY_VIOLATIONS)}")
+        if value.get("safety.estop", "halt") != "halt":
+            raise ValueError("'safety.estop' must be 'halt': an engaged e-stop always stops the arm")
+        return {**_default_outcomes(), **value}
 
 
 # ---------------------------------------------------------------------------
@@ -575,6 +794,7 @@ DOCUMENTS: Mapping[str, tuple[str, type[VersionedModel]]] = {
     "ENVIRONMENT": ("ENVIRONMENT.md", EnvironmentDoc),
     "LESSONS": ("LESSONS.md", LessonsDoc),
     "KNOWLEDGE": ("KNOWLEDGE.md", KnowledgeDoc),
+    "SKILL": ("SKILL.md", SkillDoc),
     "TASK": ("TASK.md", TaskDoc),
     "LOG": ("LOG.md", LogDoc),
     "RUNTIME_SIGNAL": ("RUNTIME_SIGNAL.md", RuntimeSignalDoc),
@@ -584,6 +804,7 @@ DOCUMENTS: Mapping[str, tuple[str, type[VersionedModel]]] = {
 def _schema_models() -> dict[str, type[BaseModel]]:
     models: dict[str, type[BaseModel]] = {name.lower(): model for name, (_, model) in DOCUMENTS.items()}
     models["session"] = SessionRecord
+    models["run"] = RunRecord
     models["safety"] = SafetyConfig
     return models
 

@@ -3,37 +3,52 @@
 Layout (see docs/ARCHITECTURE.md)::
 
     ws/SESSIONS.md ... RUNTIME_SIGNAL.md safety.yaml
-    ws/sessions/<id>.md     one document per session (the source of truth)
-    ws/evidence/<id>/       evidence bundles
-    ws/targets/<target>/    simulated target state
-    ws/log/                 archive-YYYY-MM.jsonl, LOG.md entries that aged out
-    ws/.locks/              filelock files
+    ws/sessions/<id>.md                    one document per active session (the source of truth)
+    ws/sessions/.index/<id>~<state>        state hints of active sessions (session_index.py)
+    ws/sessions/archive/YYYY-MM-DD/<id>.md terminal sessions, moved out of the way (archive.py)
+    ws/runs/<run_id>/                      submitted goal graphs (runs.py)
+    ws/evidence/<id>/                      evidence bundles
+    ws/targets/<target>/                   simulated target state
+    ws/log/                                archive-YYYY-MM.jsonl, LOG.md entries that aged out
+    ws/.locks/                             filelock files
 
 Every write is read-validate-modify-atomic-write under a file lock, so
 concurrent processes never lose each other's updates and a malformed file is
 reported (``DocumentError``) and never overwritten.
+
+Cost does not grow with history: a transition writes one session file, renames
+one hint and rewrites the bounded SESSIONS.md; queries over active sessions scan
+``sessions/.index/``; a run's finished sessions are found through its archive
+catalogue. Only :meth:`Workspace.list_sessions` without a run filter reads the
+whole archive.
 """
 
 from __future__ import annotations
 
+import getpass
 import json
 import logging
 import os
 import re
+import socket
+import time
+from collections import Counter
 from collections.abc import Callable, Iterable
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 from filelock import FileLock
 from pydantic import ValidationError
 
-from phyagentos.errors import DocumentError, ProtocolError, format_choices
+from phyagentos.errors import DocumentError, LeaseError, ProtocolError, format_choices
 
 from phyagentos import resources
 
+from .archive import SessionArchive
 from .atomic import atomic_write_bytes
 from .codec import Document, read_document, read_yaml, write_document
+from .runs import RunRegistry
 from .schemas import (
     DOCUMENTS,
     SAFETY_FILE,
@@ -42,19 +57,32 @@ from .schemas import (
     TERMINAL_STATES,
     Attempt,
     LogEntry,
+    RunRecord,
+    RuntimeSignalDoc,
     SafetyConfig,
     SessionIndexEntry,
     SessionRecord,
     SessionsIndex,
+    Signal,
+    SignalAck,
     VersionedModel,
     utc_now_iso,
 )
+from .session_index import SessionIdentity, StateIndex
+from .signals import SIGNAL_KINDS, new_signal_id
 
-__all__ = ["Workspace", "templates_dir"]
+__all__ = ["Workspace", "templates_dir", "LEASED_STATES", "WAITING_STATES"]
 
 log = logging.getLogger(__name__)
 
+# sessions/.index and sessions/archive appear with the first session that needs them.
 _SUBDIRS = ("sessions", "evidence", "targets", ".locks")
+_TERMINAL = frozenset(TERMINAL_STATES)
+_LOCK_POLL_S = 0.001  # how often a waiter retries a busy workspace lock (s)
+#: States in which a supervisor holds the session's lease.
+LEASED_STATES: tuple[str, ...] = ("claimed", "preflight_checking", "running", "finalizing", "cancelling")
+#: Active states in which a session waits for someone (a supervisor or the Agent).
+WAITING_STATES: tuple[str, ...] = ("pending", "awaiting_verification", "verifying", "awaiting_replan")
 _SESSION_ID = re.compile(SESSION_ID_PATTERN)
 # Fields fixed when a session is submitted; rewriting them would detach the
 # session file from the goal graph node and run it belongs to.
@@ -152,11 +180,20 @@ class Workspace:
 
     #: LOG.md keeps this many most recent entries; older ones go to log/archive-YYYY-MM.jsonl.
     LOG_MAX_ENTRIES = 200
-    #: SESSIONS.md lists every non-terminal session plus this many most recent terminal ones.
-    INDEX_MAX_TERMINAL = 100
+    #: SESSIONS.md lists every leased session, at most this many waiting ones (pending,
+    #: awaiting verification or replan; most recently updated first) ...
+    INDEX_MAX_WAITING = 10
+    #: ... and this many most recent terminal ones; ``counts`` has the exact totals.
+    INDEX_MAX_TERMINAL = 10
+    #: RUNTIME_SIGNAL.md keeps at most this many signals; older handled ones go to
+    #: log/signals-YYYY-MM.jsonl (the latest pause/resume and estop/clear_estop always stay).
+    SIGNAL_MAX = 100
 
     def __init__(self, root: str | os.PathLike[str]) -> None:
         self.root = Path(root)
+        self._states = StateIndex(self.root / "sessions" / ".index")
+        self._session_archive = SessionArchive(self.root / "sessions")
+        self.runs = RunRegistry(self.root)
 
     def __repr__(self) -> str:
         return f"Workspace({str(self.root)!r})"
@@ -180,6 +217,7 @@ class Workspace:
         """
         ws = cls(root)
         ws.root.mkdir(parents=True, exist_ok=True)
+        migrate = not (ws.root / "sessions" / ".index").is_dir() and any((ws.root / "sessions").glob("*.md"))
         for sub in _SUBDIRS:
             (ws.root / sub).mkdir(exist_ok=True)
         source = Path(templates) if templates is not None else templates_dir()
@@ -194,6 +232,8 @@ class Workspace:
                     atomic_write_bytes(ws.root / filename, template.read_bytes())
                     log.info("created %s from template", ws.root / filename)
         ws.validate()
+        if migrate:  # a workspace written before sessions/.index existed
+            ws.reconcile()
         return ws
 
     @classmethod
@@ -255,8 +295,10 @@ class Workspace:
         self.locks_dir.mkdir(parents=True, exist_ok=True)
         # is_singleton: one lock object per file in this process, so nested
         # acquisitions (e.g. a caller holding session_lock around save_session)
-        # are re-entrant instead of deadlocking.
-        return FileLock(self.locks_dir / f"{key}.lock", is_singleton=True)
+        # are re-entrant instead of deadlocking. Critical sections last a few ms;
+        # filelock's default 50 ms poll would add up to 50 ms to every contended
+        # claim (e.g. a supervisor woken by a submit that still holds the lock).
+        return FileLock(self.locks_dir / f"{key}.lock", is_singleton=True, poll_interval=_LOCK_POLL_S)
 
     def session_lock(self, session_id: str) -> FileLock:
         """The inter-process lock guarding ``sessions/<session_id>.md`` (re-entrant in-process).
@@ -285,13 +327,14 @@ class Workspace:
                 f"{filename} missing from workspace {self.root}; Workspace.create restores it"
             ) from None
 
-    def update(self, name: str, fn: Callable[[Any], Any]) -> Document[Any]:
+    def update(self, name: str, fn: Callable[[Any], Any], *, durable: bool = True) -> Document[Any]:
         """Apply ``fn`` to document ``name`` under its lock and write it back atomically.
 
         ``fn`` receives the validated model and either mutates it (returning
         None) or returns a replacement of the same model type. A ``revision``
         field, if the model has one, becomes the stored revision + 1. Prose is
-        preserved. Returns the document as written.
+        preserved. Returns the document as written. ``durable=False`` skips the
+        fsyncs (for derived views only; see ``atomic_write_bytes``).
 
         Raises:
             DocumentError: the stored document is malformed (nothing is written),
@@ -314,7 +357,7 @@ class Workspace:
             if revision is not None:
                 # Counted from the stored document, even if fn built a new one.
                 doc.data.revision = revision + 1
-            write_document(doc)
+            write_document(doc, durable=durable)
             return doc
 
     def read_safety(self) -> SafetyConfig:
@@ -343,13 +386,25 @@ class Workspace:
             )
 
     def session_path(self, session_id: str) -> Path:
-        """Path of ``sessions/<session_id>.md``.
+        """Path of ``sessions/<session_id>.md``, where a session lives while it is active
+        (terminal sessions move to ``sessions/archive/``; see :meth:`find_session_path`).
 
         Raises:
             ProtocolError: invalid session id.
         """
         self._check_session_id(session_id)
         return self.sessions_dir / f"{session_id}.md"
+
+    def find_session_path(self, session_id: str) -> Path | None:
+        """Where the file of ``session_id`` is now (active or archived), or None if unknown.
+
+        Raises:
+            ProtocolError: invalid session id.
+        """
+        path = self.session_path(session_id)
+        if path.is_file():
+            return path
+        return self._session_archive.find(session_id)
 
     @staticmethod
     def _revalidate(record: SessionRecord) -> SessionRecord:
@@ -368,7 +423,8 @@ class Workspace:
         """Create ``sessions/<id>.md`` for a new session and add it to SESSIONS.md.
 
         This is the only way to create a session. The record must be in state
-        ``pending`` and its id unused. Returns the validated record as written.
+        ``pending`` and its id unused (also by archived sessions). Returns the
+        validated record as written.
 
         Raises:
             ProtocolError: not pending, duplicate id, invalid id or invalid data.
@@ -383,15 +439,22 @@ class Workspace:
         path = self.session_path(sid)
         self.sessions_dir.mkdir(parents=True, exist_ok=True)
         with self.session_lock(sid):
-            if path.exists():
-                raise ProtocolError(f"session {sid!r} already exists ({path})")
-            write_document(Document(prefix=_session_prose(record), data=record, path=path))
+            existing = self.find_session_path(sid)
+            if existing is not None:
+                raise ProtocolError(f"session {sid!r} already exists ({existing})")
+            # The hint first: a session file without a hint would be invisible to claimers.
+            self._states.create(record)
+            try:
+                write_document(Document(prefix=_session_prose(record), data=record, path=path))
+            except BaseException:
+                self._states.remove(sid, record.state)
+                raise
             self._index_upsert(record)
         log.info("submitted session %s (%s on %s)", sid, record.skill, record.target)
         return record
 
     def load_session(self, session_id: str) -> SessionRecord:
-        """Read and validate ``sessions/<session_id>.md``.
+        """Read and validate the session's file (active or archived).
 
         Raises:
             ProtocolError: unknown or invalid session id.
@@ -404,12 +467,18 @@ class Workspace:
         try:
             doc = read_document(path, SessionRecord)
         except FileNotFoundError:
-            raise ProtocolError(f"unknown session {session_id!r} (no {path})") from None
+            archived = self._session_archive.find(session_id)
+            if archived is None:
+                raise ProtocolError(f"unknown session {session_id!r} (no {path})") from None
+            try:
+                doc = read_document(archived, SessionRecord)
+            except FileNotFoundError:  # pragma: no cover - archived files are never removed
+                raise ProtocolError(f"unknown session {session_id!r} (no {path})") from None
         if doc.data.session_id != session_id:
             raise DocumentError(
                 f"file is named for session {session_id!r} but holds session_id "
                 f"{doc.data.session_id!r}",
-                path=path,
+                path=doc.path,
             )
         return doc
 
@@ -421,8 +490,9 @@ class Workspace:
         stored attempt may have unset fields filled in (e.g. ``ended_at``,
         ``verdict``) and new ``timings`` keys added. ``session_id``, ``run_id``,
         ``node`` and ``created_at`` cannot change. Prose in the file is kept.
-        SESSIONS.md is refreshed while the session lock is still held, so the
-        index never goes back to an older state of this session.
+        The state hint and SESSIONS.md are refreshed while the session lock is
+        still held, so neither ever goes back to an older state of this session.
+        A session that reaches a terminal state is moved to ``sessions/archive/``.
 
         Raises:
             ProtocolError: unknown session (use :meth:`submit_session`), an
@@ -430,42 +500,219 @@ class Workspace:
                 or invalid data.
             DocumentError: the stored session file or SESSIONS.md is malformed.
         """
-        sid = record.session_id
-        with self.session_lock(sid):
-            stored = self._load_session_doc(sid)
-            record = self._revalidate(record)
-            _check_append_only(stored.data, record)
-            record = record.model_copy(update={"updated_at": utc_now_iso()})
-            stored.data = record
-            write_document(stored)
-            self._index_upsert(record)
+        with self.session_lock(record.session_id):
+            return self._write_session(self._load_session_doc(record.session_id), record)
+
+    def update_session(self, session_id: str, fn: Callable[[SessionRecord], Any], *,
+                       token: str | None = None) -> SessionRecord:
+        """Read-modify-write ``session_id`` under its lock; returns the record as written.
+
+        ``fn`` mutates the freshly loaded record (e.g. fires lifecycle events with
+        ``persist=None``); if it returns ``False`` nothing is written. With ``token``
+        this is a *fenced* write: it fails unless the stored lease still carries that
+        token, so a supervisor whose lease was taken over can never overwrite its
+        successor.
+
+        Raises:
+            LeaseError: ``token`` given and the stored lease is gone or has another token.
+            ProtocolError, DocumentError: as for :meth:`save_session`.
+            Exception: whatever ``fn`` raises (nothing is written).
+        """
+        with self.session_lock(session_id):
+            doc = self._load_session_doc(session_id)
+            record = doc.data.model_copy(deep=True)
+            if token is not None and (record.lease is None or record.lease.token != token):
+                holder = f"{record.lease.owner!r}" if record.lease else "nobody"
+                raise LeaseError(
+                    f"session {session_id!r}: lease token no longer current (held by {holder}, state "
+                    f"{record.state!r}); another supervisor took the session over"
+                )
+            if fn(record) is False:
+                stored = doc.data
+                if (doc.path == self.session_path(session_id) and stored.state not in _TERMINAL
+                        and not self._states.has(session_id, stored.state)):
+                    self._states.create(stored)  # a writer died between file and hint: repair
+                return stored
+            return self._write_session(doc, record)
+
+    def _write_session(self, stored: Document[SessionRecord], record: SessionRecord) -> SessionRecord:
+        # Caller holds the session lock; ``stored`` was loaded under it.
+        old = stored.data
+        record = self._revalidate(record)
+        _check_append_only(old, record)
+        record = record.model_copy(update={"updated_at": utc_now_iso()})
+        stored.data = record
+        write_document(stored)
+        active = stored.path == self.session_path(record.session_id)
+        if active and record.state in _TERMINAL:
+            try:
+                stored.path = self._session_archive.archive(
+                    stored.path, session_id=record.session_id, run_id=record.run_id,
+                    state=record.state, node=record.node)
+            except OSError:
+                log.exception("session %s: could not archive; reconcile() retries", record.session_id)
+            self._states.remove(record.session_id, old.state)
+        elif active:
+            self._states.move(record, old.state)
+        self._index_upsert(record)
         return record
 
-    def list_sessions(self, states: Iterable[str] | None = None) -> list[SessionRecord]:
-        """All session records (optionally only those in ``states``), oldest first.
+    def _validated_states(self, states: Iterable[str] | str | None) -> set[str] | None:
+        if states is None:
+            return None
+        wanted = set([states] if isinstance(states, str) else states)
+        unknown = wanted - set(SESSION_STATES)
+        if unknown:
+            raise ProtocolError(
+                f"unknown session state(s) {format_choices(unknown)}; "
+                f"valid: {format_choices(SESSION_STATES)}"
+            )
+        return wanted
 
-        Reads the per-session files, not the index.
+    def active_sessions(self, states: Iterable[str] | str | None = None, *,
+                        run_id: str | None = None) -> list[tuple[str, str, SessionIdentity]]:
+        """``(session_id, state, identity)`` of active sessions, oldest submit first,
+        without reading any session file (from ``sessions/.index/``).
+
+        The state is a hint: confirm it by loading the session under its lock
+        before acting on it.
+
+        Raises:
+            ProtocolError: an unknown state name.
+        """
+        wanted = self._validated_states(states)
+        out = []
+        for sid, state in self._states.entries().items():
+            if wanted is not None and state not in wanted:
+                continue
+            ident = self._states.identity(sid, state)
+            if ident is None or (run_id is not None and ident.run_id != run_id):
+                continue
+            out.append((sid, state, ident))
+        out.sort(key=lambda t: (t[2].created_unix, t[0]))
+        return out
+
+    def list_sessions(self, states: Iterable[str] | str | None = None, *,
+                      run_id: str | None = None) -> list[SessionRecord]:
+        """Session records (optionally only those in ``states`` and of ``run_id``), oldest first.
+
+        Cost: active sessions come from ``sessions/.index/``; terminal ones from the
+        archive catalogue of ``run_id``. Without ``run_id``, asking for terminal
+        states (or for all states) reads the whole archive.
 
         Raises:
             ProtocolError: an unknown state name (the message lists valid ones).
             DocumentError: a session file is malformed.
         """
-        wanted = None
-        if states is not None:
-            wanted = set([states] if isinstance(states, str) else states)
-            unknown = wanted - set(SESSION_STATES)
-            if unknown:
-                raise ProtocolError(
-                    f"unknown session state(s) {format_choices(unknown)}; "
-                    f"valid: {format_choices(SESSION_STATES)}"
-                )
-        records = []
-        for path in sorted(self.sessions_dir.glob("*.md")):
-            record = self._load_session_doc(path.stem).data
-            if wanted is None or record.state in wanted:
-                records.append(record)
+        wanted = self._validated_states(states)
+        by_id: dict[str, SessionRecord] = {}
+        hint_states = self._states.entries()
+        for sid, hinted in hint_states.items():
+            if wanted is not None and hinted not in wanted and not (wanted & _TERMINAL):
+                continue
+            if run_id is not None:
+                ident = self._states.identity(sid, hinted)
+                if ident is None or ident.run_id != run_id:
+                    continue
+            try:
+                record = self.load_session(sid)
+            except ProtocolError as exc:
+                if isinstance(exc, DocumentError):
+                    raise
+                continue  # hint written, file not yet (a submit in progress)
+            if record.state != hinted and record.state not in _TERMINAL:
+                self._repair_hint(sid)
+            by_id[sid] = record
+        if wanted is None or wanted & _TERMINAL:
+            if run_id is not None:
+                for entry in self._session_archive.run_entries(run_id):
+                    if entry.session_id in by_id or (wanted is not None and entry.state not in wanted):
+                        continue
+                    record = self._load_archived(entry)
+                    if record is not None:
+                        by_id[record.session_id] = record
+            else:
+                for path in self._session_archive.iter_files():
+                    if path.stem not in by_id:
+                        by_id[path.stem] = read_document(path, SessionRecord).data
+            # Terminal sessions whose move to the archive was interrupted.
+            for path in self.sessions_dir.glob("*.md"):
+                if path.stem not in by_id and path.stem not in hint_states:
+                    record = read_document(path, SessionRecord).data
+                    if run_id is None or record.run_id == run_id:
+                        by_id[path.stem] = record
+        records = [r for r in by_id.values() if wanted is None or r.state in wanted]
         records.sort(key=lambda r: (_ts_key(r.created_at), r.session_id))
         return records
+
+    def _load_archived(self, entry) -> SessionRecord | None:
+        for path in (self._session_archive.path_of(entry), self.session_path(entry.session_id)):
+            try:
+                return read_document(path, SessionRecord).data
+            except FileNotFoundError:
+                continue
+        log.warning("archive catalogue names session %s but its file is missing", entry.session_id)
+        return None
+
+    def _repair_hint(self, session_id: str) -> None:
+        with self.session_lock(session_id):
+            path = self.session_path(session_id)
+            try:
+                record = read_document(path, SessionRecord).data
+            except FileNotFoundError:
+                self._states.remove(session_id)
+                return
+            if record.state in _TERMINAL:
+                return  # reconcile() archives it
+            self._states.create(record)
+
+    def reconcile(self, *, stale_hint_s: float = 60.0) -> dict[str, int]:
+        """Make hints and archive agree with the session files after a crash.
+
+        Cost is proportional to the *active* sessions: every ``sessions/<id>.md`` is
+        read once. Fixes: missing or stale hints, terminal sessions not yet archived,
+        hints without a session file older than ``stale_hint_s`` (a younger one may be a
+        submit in progress). Returns counts of each repair.
+
+        Raises:
+            DocumentError: a session file is malformed (it is left untouched).
+        """
+        fixed = Counter()
+        hints = self._states.entries()
+        for path in sorted(self.sessions_dir.glob("*.md")):
+            sid = path.stem
+            if not _SESSION_ID.match(sid):
+                continue
+            with self.session_lock(sid):
+                try:
+                    doc = read_document(path, SessionRecord)
+                except FileNotFoundError:
+                    continue
+                record = doc.data
+                if record.state in _TERMINAL:
+                    self._session_archive.archive(path, session_id=sid, run_id=record.run_id, state=record.state,
+                                          node=record.node)
+                    self._states.remove(sid)
+                    fixed["archived"] += 1
+                elif hints.get(sid) != record.state or len(self._states.hint_files(sid)) != 1:
+                    self._states.create(record)
+                    fixed["hints"] += 1
+        now = time.time()
+        for sid in hints:
+            if self.session_path(sid).is_file():
+                continue
+            for hint in self._states.hint_files(sid):
+                try:
+                    old = now - hint.stat().st_mtime > stale_hint_s
+                except FileNotFoundError:
+                    continue
+                if old or self._session_archive.find(sid) is not None:
+                    hint.unlink(missing_ok=True)
+                    fixed["orphan_hints"] += 1
+        if fixed:
+            log.info("reconciled %s: %s", self.root, dict(fixed))
+            self.rebuild_index()
+        return dict(fixed)
 
     def evidence_dir(self, session_id: str) -> Path:
         """``evidence/<session_id>/``, created if missing.
@@ -482,8 +729,11 @@ class Workspace:
 
     def _trim_index(self, entries: list[SessionIndexEntry]) -> list[SessionIndexEntry]:
         newest_first = sorted(entries, key=lambda e: (_ts_key(e.updated_at), e.session_id), reverse=True)
-        active = [e for e in newest_first if e.state not in TERMINAL_STATES]
-        terminal = [e for e in newest_first if e.state in TERMINAL_STATES]
+        leased = [e for e in newest_first if e.state in LEASED_STATES]
+        waiting = [e for e in newest_first if e.state not in LEASED_STATES and e.state not in _TERMINAL]
+        terminal = [e for e in newest_first if e.state in _TERMINAL]
+        keep = {e.session_id for e in leased + waiting[: self.INDEX_MAX_WAITING]}
+        active = [e for e in newest_first if e.session_id in keep]
         return active + terminal[: self.INDEX_MAX_TERMINAL]
 
     @staticmethod
@@ -496,29 +746,145 @@ class Workspace:
             state=record.state,
             updated_at=record.updated_at,
             parent_session_id=record.parent_session_id,
+            run_id=record.run_id,
+            owner=record.lease.owner if record.lease is not None and record.state in LEASED_STATES else None,
         )
 
     def _index_upsert(self, record: SessionRecord) -> None:
         entry = self._index_entry(record)
 
         def apply(index: SessionsIndex) -> None:
+            # Counted under the SESSIONS.md lock: every hint renamed before this write
+            # is included, and any later rename is followed by its own upsert.
+            counts = Counter(self._states.entries().values())
             others = [e for e in index.sessions if e.session_id != record.session_id]
             index.sessions = self._trim_index([*others, entry])
+            index.counts = {state: counts[state] for state in SESSION_STATES if counts[state]}
 
-        self.update("SESSIONS", apply)
+        # SESSIONS.md is a view of the session files: atomic, but not fsynced (after a
+        # power cut ``reconcile`` regenerates it); the session file itself is durable.
+        self.update("SESSIONS", apply, durable=False)
 
     def rebuild_index(self) -> Document[SessionsIndex]:
-        """Regenerate SESSIONS.md from the session files (the source of truth).
+        """Regenerate SESSIONS.md from the session files (the source of truth):
+        every active session plus the most recently archived ones.
 
         Raises:
             DocumentError: a session file or SESSIONS.md is malformed.
         """
-        entries = [self._index_entry(r) for r in self.list_sessions()]
+        records = [read_document(p, SessionRecord).data for p in sorted(self.sessions_dir.glob("*.md"))]
+        records += [read_document(p, SessionRecord).data
+                    for p in self._session_archive.newest_files(self.INDEX_MAX_TERMINAL)]
+        entries = {r.session_id: self._index_entry(r) for r in records}
 
         def apply(index: SessionsIndex) -> None:
-            index.sessions = self._trim_index(entries)
+            counts = Counter(self._states.entries().values())
+            index.sessions = self._trim_index(list(entries.values()))
+            index.counts = {state: counts[state] for state in SESSION_STATES if counts[state]}
 
         return self.update("SESSIONS", apply)
+
+    # -- runs -------------------------------------------------------------
+
+    def register_run(self, record: RunRecord, graph_text: str) -> RunRecord:
+        """Record a submitted goal graph (see :mod:`phyagentos.protocol.runs`).
+
+        Raises:
+            ProtocolError: duplicate or invalid run id.
+        """
+        return self.runs.register(record, graph_text)
+
+    def run_lock(self, run_id: str) -> FileLock:
+        """The lock an Agent process holds while it steps ``run_id`` (one agent per run at a time)."""
+        self.runs.run_dir(run_id)  # validates the id
+        return self._lock(f"run-{run_id}")
+
+    # -- RUNTIME_SIGNAL.md ------------------------------------------------
+
+    def send_signal(self, kind: str, *, session_id: str | None = None, reason: str = "",
+                    issued_by: str | None = None, all_sessions: bool = False) -> Signal:
+        """Append a signal to RUNTIME_SIGNAL.md: the one validated way to signal the runtime.
+
+        Args:
+            kind: one of ``cancel``, ``pause``, ``resume``, ``estop``, ``clear_estop``.
+            session_id: the session a ``cancel`` addresses (must exist).
+            all_sessions: a ``cancel`` without ``session_id`` must say so explicitly;
+                it cancels every session submitted before the signal.
+            issued_by: who sends it (default ``user@host``).
+
+        Raises:
+            ProtocolError: unknown kind, a cancel without a known session (or
+                ``all_sessions``), or a session id on a workspace-wide signal.
+        """
+        if kind not in SIGNAL_KINDS:
+            raise ProtocolError(f"unknown signal kind {kind!r}; valid: {format_choices(SIGNAL_KINDS)}")
+        if kind == "cancel":
+            if session_id is None and not all_sessions:
+                raise ProtocolError("a cancel signal needs a session id (or all_sessions=True to cancel everything)")
+            if session_id is not None:
+                if self.find_session_path(session_id) is None:
+                    raise ProtocolError(f"cannot cancel unknown session {session_id!r}")
+        elif session_id is not None or all_sessions:
+            raise ProtocolError(f"a {kind!r} signal applies to the whole runtime; it takes no session id")
+        if issued_by is None:
+            issued_by = f"{getpass.getuser()}@{socket.gethostname()}"
+        signal = Signal(id=new_signal_id(), kind=kind, session_id=session_id, issued_by=issued_by,
+                        issued_at=utc_now_iso(), reason=reason)
+
+        def apply(doc: RuntimeSignalDoc) -> None:
+            doc.signals.append(signal)
+            self._compact_signals(doc)
+
+        self.update("RUNTIME_SIGNAL", apply)
+        log.info("signal %s %s%s", signal.id, kind, f" session {session_id}" if session_id else "")
+        return signal
+
+    def ack_signals(self, acks: Iterable[SignalAck]) -> None:
+        """Append supervisors' acknowledgements to RUNTIME_SIGNAL.md (one write)."""
+        acks = list(acks)
+        if not acks:
+            return
+
+        def apply(doc: RuntimeSignalDoc) -> None:
+            doc.handled.extend(acks)
+            self._compact_signals(doc)
+
+        self.update("RUNTIME_SIGNAL", apply)
+
+    def _compact_signals(self, doc: RuntimeSignalDoc) -> None:
+        """Move old, handled signals (and their acks) to log/signals-YYYY-MM.jsonl.
+
+        Never moved: the latest pause/resume and estop/clear_estop (they are the
+        current state) and cancels nobody has acknowledged yet.
+        """
+        overflow = len(doc.signals) - self.SIGNAL_MAX
+        if overflow <= 0:
+            return
+        keep: set[str] = set()
+        for group in (("pause", "resume"), ("estop", "clear_estop")):
+            latest = [s for s in doc.signals if s.kind in group]
+            if latest:
+                keep.add(latest[-1].id)
+        acked = {a.signal_id for a in doc.handled}
+        movable = [s for s in doc.signals
+                   if s.id not in keep and (s.kind != "cancel" or s.id in acked)][:overflow]
+        if not movable:
+            return
+        moved = {s.id for s in movable}
+        lines_by_month: dict[str, list[str]] = {}
+        for sig in movable:
+            record = {"signal": sig.model_dump(mode="json"),
+                      "handled": [a.model_dump(mode="json") for a in doc.handled if a.signal_id == sig.id]}
+            month = _ts_key(sig.issued_at).strftime("%Y-%m")
+            lines_by_month.setdefault(month, []).append(json.dumps(record, ensure_ascii=False) + "\n")
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        for month, lines in sorted(lines_by_month.items()):
+            with open(self.log_dir / f"signals-{month}.jsonl", "a", encoding="utf-8", newline="") as handle:
+                handle.writelines(lines)
+                handle.flush()
+                os.fsync(handle.fileno())
+        doc.signals = [s for s in doc.signals if s.id not in moved]
+        doc.handled = [a for a in doc.handled if a.signal_id not in moved]
 
     # -- LOG.md -----------------------------------------------------------
 

@@ -111,7 +111,7 @@ class BuiltinSkillRuntime:
         failure = ctx.failure or {}
         if status == "failed":
             message = failure.get("message", "tree failed")
-        code = failure.get("code") if status == "failed" else {"timed_out": "timeout.execution", "cancelled": "cancelled.operator"}.get(status)
+        code = failure.get("code") if status == "failed" else {"timed_out": "timeout.execution", "cancelled": ctx.cancel.code}.get(status)
         ctx.trace.record("runtime_end", status=status, ticks=ticks, message=message)
         return RunOutcome(status=status, error_code=code, failed_primitive=failure.get("primitive") if status == "failed" else None,
                           message=message, ticks=ticks)

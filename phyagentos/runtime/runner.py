@@ -1,32 +1,55 @@
 """SessionRunner: owns one session's interaction with its target, tick by tick.
 
-Started by the WatchdogSupervisor after preflight. It acquires the target in the
-state the episode left it, snapshots the initial world, builds the skill's tree in
-the BuiltinSkillRuntime, ticks it (checking the cancel token and the execution
-deadline between ticks, beating the heartbeat after each), snapshots the terminal
-world and writes the evidence bundle. It ends in ``awaiting_verification``: judging
-the outcome is the SessionVerifier's job, never the controller's.
+It runs inside the runner process (:mod:`phyagentos.runtime.worker`), started by the
+WatchdogSupervisor after preflight and after the ``start`` transition is on disk. It
+acquires the target in the state the episode left it, checkpoints that state,
+snapshots the initial world, builds the skill's tree in the BuiltinSkillRuntime
+(or dispatches to another SkillRuntime), ticks it (checking the cancel token and the
+execution deadline between ticks, beating the heartbeat and checkpointing the target
+after each), reports that the skill stopped, snapshots the terminal world and writes
+the evidence bundle (:meth:`SessionRunner._write_bundle`).
+
+The runner never writes the session file: the supervisor is its single writer and
+turns the returned :class:`AttemptReport` into the attempt and the next transition.
+Judging the outcome is the SessionVerifier's job, never the controller's.
+
+:meth:`SessionRunner.recover` is the other entry point: after a runner died or was
+killed, a fresh runner restores the last checkpoint, halts the target, persists the
+halted state and writes a terminal snapshot, so the verifier judges from a fresh
+observation and nothing moves before it has.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
-from typing import Callable
+import traceback
+from dataclasses import asdict, dataclass
+from typing import Any, Callable
 
 from phyagentos.errors import PhyAgentOSError
 from phyagentos.primitives.context import CancelToken, SkillContext
-from phyagentos.protocol import Attempt, dump_yaml, EnvironmentDoc, ErrorInfo, SessionRecord, Workspace
+from phyagentos.protocol import dump_yaml, EnvironmentDoc, SessionRecord, Workspace
+from phyagentos.protocol import errorcodes
 from phyagentos.protocol.atomic import atomic_write_text
-from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
+from phyagentos.protocol.lifecycle import utc_now
 
 from .builtin_runtime import BuiltinSkillRuntime, RunOutcome
+from .evidence_images import save_scene_image
+from .policy_runtime import PolicySkillRuntime
+from .safety_guard import SafetyGuard
 from .target_pool import TargetPool
 
-__all__ = ["SessionRunner", "write_environment"]
+__all__ = ["SessionRunner", "AttemptReport", "write_environment", "SKILL_RUNTIMES"]
+
+#: Skill runtimes besides the builtin one, by SKILLRUNTIME.md name (built with the skill registry).
+SKILL_RUNTIMES = {PolicySkillRuntime.name: PolicySkillRuntime}
 
 logger = logging.getLogger(__name__)
+
+# The session fields that define the task, copied into the evidence bundle (task.yaml).
+_TASK_FIELDS = {"session_id", "run_id", "goal_graph", "node", "parent_session_id", "skill", "skill_runtime", "target",
+                "parameters", "accept", "limits", "scene", "seed", "context", "recovery"}
 
 
 def write_environment(workspace: Workspace, snapshot: dict, *, target: str, session_id: str, evidence: list[str]) -> None:
@@ -48,91 +71,190 @@ def write_environment(workspace: Workspace, snapshot: dict, *, target: str, sess
     workspace.update("ENVIRONMENT", apply)
 
 
+@dataclass(frozen=True)
+class AttemptReport:
+    """What the runner tells the supervisor about one attempt (becomes ``Attempt`` fields).
+
+    Attributes:
+        outcome: ``completed``, ``failed``, ``cancelled``, ``timed_out``, ``error`` or
+            (from :meth:`SessionRunner.recover`) ``unknown``.
+        error_code, message: attribution (docs/ERRORS.md), if any.
+        evidence: bundle directory relative to the workspace.
+        timings: wall time per category (s).
+        ticks: behaviour-tree ticks.
+    """
+
+    outcome: str
+    error_code: str | None
+    message: str
+    evidence: str
+    timings: dict[str, float]
+    ticks: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
 @dataclass
 class SessionRunner:
-    """Runs one claimed, preflighted session to ``awaiting_verification``.
+    """Runs the runtime phase of one started session (state ``running`` on entry).
 
     Attributes:
         workspace: the protocol workspace.
-        lifecycle: the session's statechart (state ``preflight_checking`` on entry).
+        record: the session, as the supervisor persisted it with ``start``.
         runtime: the BuiltinSkillRuntime that builds and ticks skill trees.
         targets: target pool carrying world state between sessions.
-        owner: runner identity recorded in the attempt.
-        cancel: cancellation token set by the supervisor.
-        heartbeat: called after every tick (renews the lease).
+        cancel: cancellation token (set from the supervisor's control messages).
+        heartbeat: called after every tick (stamps the shared runner heartbeat).
+        on_finished: called once with the RunOutcome when the skill stops, before the
+            evidence is written (the supervisor fires ``finish`` or ``cancel``).
+        checkpoint_interval_s: the target state is persisted at most this often (s of
+            wall time) while the skill runs, and always before the first tick.
     """
 
     workspace: Workspace
-    lifecycle: SessionLifecycle
+    record: SessionRecord
     runtime: BuiltinSkillRuntime
     targets: TargetPool
-    owner: str
     cancel: CancelToken
     heartbeat: Callable[[], None] | None = None
+    on_finished: Callable[[RunOutcome], None] | None = None
+    checkpoint_interval_s: float = 0.25
 
-    @property
-    def record(self) -> SessionRecord:
-        return self.lifecycle.record
+    def _tick(self, target) -> Callable[[], None]:
+        last = [time.monotonic()]
 
-    def run(self) -> RunOutcome:
-        """Execute the session; returns the runtime outcome (not a verdict)."""
+        def tick() -> None:
+            if self.heartbeat is not None:
+                self.heartbeat()
+            now = time.monotonic()
+            if target is not None and now - last[0] >= self.checkpoint_interval_s:
+                self.targets.checkpoint(self.record, target)
+                last[0] = time.monotonic()
+
+        return tick
+
+    def run(self) -> AttemptReport:
+        """Execute the session; returns the attempt report (not a verdict).
+
+        Never raises for a failing skill or target: errors become outcome ``error``
+        with their code, and the evidence bundle is written in every case.
+        """
         rec = self.record
         spec = next(t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target)
         evidence_dir = self.workspace.evidence_dir(rec.session_id)
         rel = evidence_dir.relative_to(self.workspace.root).as_posix()
-        rec.attempts.append(Attempt(number=len(rec.attempts) + 1, started_at=utc_now(), runner=self.owner))
-        self.lifecycle.fire("start")
         started = time.perf_counter()
         target = None
+        ctx = None
+        initial = None
+        # Evidence besides snapshots and trace: the task definition, RGB images, the
+        # perturbation record (audit only). Image events join the session's events.
+        extra = {"task": "task.yaml"}
+        image_events: list = []
+        atomic_write_text(evidence_dir / "task.yaml", dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS)))
+        # A session whose TargetToolManifest grants no operation (e.g. skill ``noop``)
+        # never opens its target: no snapshots, no images, nothing to halt.
+        needs_target = rec.tool_manifest is None or bool(rec.tool_manifest.get("operations"))
         try:
-            target = self.targets.acquire(rec, spec)
-            initial = target.snapshot()
-            atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
             deadline = time.monotonic() + rec.limits.execution_timeout_s
-            ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel)
+            if not needs_target:
+                ctx = SkillContext(target=None, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
+                                   plan=rec.adapter_plan)
+            else:
+                target = self.targets.acquire(rec, spec)
+                # Before anything moves: a recovering supervisor restores from here at worst.
+                self.targets.checkpoint(rec, target)
+                if self.heartbeat is not None:
+                    self.heartbeat()
+                initial = target.snapshot()
+                atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
+                if name := save_scene_image(target, evidence_dir / "initial.png", events=image_events):
+                    extra["initial_image"] = name
+                ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
+                                   plan=rec.adapter_plan)
+                # Every command of either flow passes the same guard; its interventions land in ctx.events.
+                ctx.guard = SafetyGuard.for_target(target, self.workspace.read_safety(), events=ctx.events,
+                                                   flow=rec.skill_runtime)
+            runtime = self.runtime if rec.skill_runtime == self.runtime.name else \
+                SKILL_RUNTIMES[rec.skill_runtime](self.runtime.skills)
             ctx.on_observation = lambda snap: write_environment(
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
-            outcome = self.runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self.heartbeat)
+            outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
             logger.exception("session %s: runtime error", rec.session_id)
-            outcome = RunOutcome(status="error", error_code="target.error", message=str(exc), ticks=0)
-            ctx = None
-            initial = None
-        if outcome.status == "cancelled":
-            self.lifecycle.fire("cancel", reason=self.cancel.reason)
-        elif outcome.status == "timed_out":
-            pass  # the deadline fires the transition after evidence is written
-        else:
-            self.lifecycle.fire("finish")
+            outcome = RunOutcome(status="error", error_code=getattr(exc, "code", None) or errorcodes.TARGET_ERROR,
+                                 message=str(exc), ticks=0)
+        except Exception as exc:  # noqa: BLE001 - a bug must still halt the target and leave evidence
+            logger.exception("session %s: unexpected runtime error", rec.session_id)
+            outcome = RunOutcome(status="error", error_code=errorcodes.RUNTIME_ERROR,
+                                 message=f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", ticks=0)
+        if self.on_finished is not None:
+            self.on_finished(outcome)
+        if self.heartbeat is not None:
+            self.heartbeat()
         terminal = target.snapshot() if target is not None else None
         if target is not None:
+            if name := save_scene_image(target, evidence_dir / "terminal.png", events=image_events):
+                extra["terminal_image"] = name
+            if getattr(target, "perturbations", None):
+                atomic_write_text(evidence_dir / "perturbations.yaml", dump_yaml(target.perturbations.record()))
+                extra["perturbations"] = "perturbations.yaml"
+            if ctx is not None:
+                ctx.events.extend(image_events)
             if outcome.status in ("cancelled", "timed_out", "error"):
                 target.halt()
             self.targets.release(rec, target)
-        files = self._write_bundle(evidence_dir, rec, ctx, outcome, initial, terminal, time.perf_counter() - started)
+        files = self._write_bundle(evidence_dir, rec, ctx, outcome, initial, terminal, time.perf_counter() - started,
+                                   extra_files=extra)
         if terminal is not None:
             write_environment(self.workspace, terminal, target=rec.target, session_id=rec.session_id,
                               evidence=[f"{rel}/{files['terminal']}"])
-        attempt = rec.attempts[-1]
-        attempt.ended_at = utc_now()
-        attempt.outcome = outcome.status
-        attempt.evidence = rel
-        attempt.timings = dict(ctx.profiler.totals) if ctx else {}
-        if outcome.error_code:
-            attempt.error = ErrorInfo(code=outcome.error_code, message=outcome.message)
-        if outcome.status == "cancelled":
-            self.lifecycle.fire("cancelled")
-        elif outcome.status == "timed_out":
-            self.lifecycle.fire("time_out", reason=outcome.message)
-        else:
-            # Completed, failed primitive or runtime error: the evidence decides.
-            self.lifecycle.fire("submit")
         logger.info("session %s: runtime %s in %.2f s (%d ticks)", rec.session_id, outcome.status,
                     time.perf_counter() - started, outcome.ticks)
-        return outcome
+        return AttemptReport(outcome=outcome.status, error_code=outcome.error_code, message=outcome.message,
+                             evidence=rel, timings=dict(ctx.profiler.totals) if ctx else {}, ticks=outcome.ticks)
 
-    def _write_bundle(self, directory, rec, ctx, outcome, initial, terminal, wall_s) -> dict:
-        files = {"bundle": "bundle.yaml", "trace": "trace.jsonl", "events": "events.yaml"}
+    def recover(self, *, status: str, error_code: str, message: str) -> AttemptReport:
+        """Put the target of a session whose runner died (or was killed) in a safe state
+        and write the evidence a verifier needs; never moves the target.
+
+        Restores the last checkpoint of ``targets/<name>/state.npz`` (written before the
+        first tick and periodically while the skill ran), halts the target (the arm
+        holds where it is), persists the halted state and writes ``terminal.yaml``
+        (plus ``initial.yaml`` if the dead runner never wrote it: nothing had moved
+        then), ``events.yaml`` with the recovery event and ``bundle.yaml`` whose
+        outcome is ``status`` (``unknown``, ``cancelled`` or ``timed_out``).
+
+        Raises:
+            TargetError: the target cannot be rebuilt or its state restored.
+        """
+        rec = self.record
+        spec = next(t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target)
+        evidence_dir = self.workspace.evidence_dir(rec.session_id)
+        rel = evidence_dir.relative_to(self.workspace.root).as_posix()
+        started = time.perf_counter()
+        target = self.targets.acquire(rec, spec)
+        target.halt()
+        self.targets.checkpoint(rec, target)
+        terminal = target.snapshot()
+        initial_path = evidence_dir / "initial.yaml"
+        if not initial_path.exists():
+            atomic_write_text(initial_path, dump_yaml(terminal))
+        ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed)
+        ctx.events.append({"code": error_code, "message": message, "recovered": True,
+                           "checkpoint": f"targets/{rec.target}/state.npz"})
+        outcome = RunOutcome(status=status, error_code=error_code, message=message, ticks=0)
+        extra = {"task": "task.yaml"} if (evidence_dir / "task.yaml").exists() else {}
+        files = self._write_bundle(evidence_dir, rec, ctx, outcome, {}, terminal, time.perf_counter() - started,
+                                   extra_files=extra)
+        write_environment(self.workspace, terminal, target=rec.target, session_id=rec.session_id,
+                          evidence=[f"{rel}/{files['terminal']}"])
+        logger.warning("session %s: recovered target %s after %s (%s)", rec.session_id, rec.target, error_code, status)
+        return AttemptReport(outcome=status, error_code=error_code, message=message, evidence=rel, timings={})
+
+    def _write_bundle(self, directory, rec, ctx, outcome, initial, terminal, wall_s, extra_files=None) -> dict:
+        files = {"bundle": "bundle.yaml", "trace": "trace.jsonl", "events": "events.yaml", **(extra_files or {})}
         if initial is not None:
             files["initial"] = "initial.yaml"
         if terminal is not None:

@@ -28,7 +28,7 @@ from phyagentos.yamlsource import SourceMap, load_yaml
 
 __all__ = ["SkillManifest", "SkillRegistry"]
 
-_KEYS = {"version", "name", "description", "runtime", "tree", "requires", "params"}
+_KEYS = {"version", "name", "description", "runtime", "tree", "requires", "params", "policy"}
 _REQUIRES = {"capabilities", "observations"}
 
 
@@ -39,11 +39,12 @@ class SkillManifest:
     name: str
     description: str
     runtime: str
-    tree: str
+    tree: str | None
     capabilities: tuple[str, ...]
     observations: tuple[str, ...]
     params: Mapping[str, Mapping[str, Any]]
     path: Path
+    policy: Mapping[str, Any] | None = None  # runtime: policy (see phyagentos.runtime.policy_runtime)
 
     def check_params(self, params: Mapping[str, Any]) -> list[str]:
         """Problems with session ``params`` for this skill (empty when fine)."""
@@ -95,9 +96,13 @@ def _parse(path: Path) -> SkillManifest:
     for key in data:
         if key not in _KEYS:
             raise SkillError(f"unknown key {key!r}; valid keys: {format_choices(_KEYS)}", path=path, line=data.key_line(key))
-    for key in ("name", "tree"):
+    runtime = str(data.get("runtime", "builtin"))
+    # A builtin skill is a tree; a policy skill is a policy declaration instead.
+    for key in ("name", "tree") if runtime == "builtin" else ("name",):
         if not isinstance(data.get(key), str):
             raise SkillError(f"{key!r} must be a string", path=path, line=data.key_line(key))
+    if runtime == "policy" and not isinstance(data.get("policy"), dict):
+        raise SkillError("a skill with 'runtime: policy' needs a 'policy' mapping", path=path, line=data.key_line("runtime"))
     if data.get("version") != 1:
         raise SkillError(f"unsupported version {data.get('version')!r}; supported: 1", path=path, line=data.key_line("version"))
     requires = data.get("requires") or {}
@@ -112,10 +117,11 @@ def _parse(path: Path) -> SkillManifest:
     return SkillManifest(
         name=data["name"],
         description=str(data.get("description", "")),
-        runtime=str(data.get("runtime", "builtin")),
-        tree=data["tree"],
+        runtime=runtime,
+        tree=data.get("tree"),
         capabilities=tuple(requires.get("capabilities") or ()),
         observations=tuple(requires.get("observations") or ()),
         params={k: dict(v or {}) for k, v in params.items()},
         path=path,
+        policy=data.get("policy"),
     )

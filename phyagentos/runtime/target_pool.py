@@ -22,19 +22,38 @@ from phyagentos.errors import TargetError, format_choices
 from phyagentos.protocol import SessionRecord, TargetSpec
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.targets import MuJoCoTarget, SceneSpec
+from phyagentos.targets.kitchen import FrankaKitchenTarget
+from phyagentos.targets.so101 import SO101Target
+from phyagentos.targets.perturbations import ActivePerturbations, PerturbationSpec, parse_perturbations, split_scene
 
-__all__ = ["DRIVERS", "TargetPool", "scene_for"]
+__all__ = ["DRIVERS", "TargetPool", "scene_for", "perturbations_for"]
 
 logger = logging.getLogger(__name__)
 
 #: Target driver name (TARGETS.md ``driver``) -> target class.
-DRIVERS: dict[str, type] = {"mujoco_franka": MuJoCoTarget}
+DRIVERS: dict[str, type] = {"mujoco_franka": MuJoCoTarget, "gymnasium_kitchen": FrankaKitchenTarget,
+                             "mujoco_so101": SO101Target}
 
 
 def scene_for(session: SessionRecord, spec: TargetSpec) -> SceneSpec:
-    """The scene of a session: its own ``scene``, else the target's, else the default."""
-    raw = session.scene or spec.scene or None
+    """The scene of a session: its own ``scene``, else the target's, else the default
+    (without its ``perturbations``, see :func:`perturbations_for`)."""
+    raw, _ = split_scene(session.scene or spec.scene or None)
+    # A driver with its own scene type (e.g. FrankaKitchen's task list) parses it itself.
+    parse = getattr(DRIVERS.get(spec.driver), "scene_from_dict", None)
+    if parse is not None:
+        return parse(raw)
     return SceneSpec.from_dict(raw) if raw else SceneSpec.default()
+
+
+def perturbations_for(session: SessionRecord, spec: TargetSpec) -> tuple[PerturbationSpec, ...]:
+    """The validated ``perturbations`` of the session's scene (:mod:`phyagentos.targets.perturbations`).
+
+    Raises:
+        TargetError: a malformed perturbation (the message lists valid kinds and keys).
+    """
+    _, raw = split_scene(session.scene or spec.scene or None)
+    return parse_perturbations(raw, objects=getattr(scene_for(session, spec), "object_names", ()))
 
 
 def _scene_hash(scene: SceneSpec) -> str:
@@ -78,10 +97,18 @@ class TargetPool:
         else:
             target.reset(seed=session.seed)
             logger.debug("target %s: reset for run %s (seed %s)", spec.name, session.run_id, session.seed)
+        if hasattr(target, "set_perturbations"):
+            target.set_perturbations(ActivePerturbations(perturbations_for(session, spec), session_seed=session.seed))
         return target
 
     def release(self, session: SessionRecord, target) -> None:
         """Persist the target's world state for the next session of the same run."""
+        self.checkpoint(session, target)
+
+    def checkpoint(self, session: SessionRecord, target) -> None:
+        """Persist the target's world state now (atomically); the SessionRunner calls this
+        periodically while a session runs, so a supervisor recovering a crashed runner
+        restores the world as it was at most one checkpoint interval earlier."""
         directory = self.state_dir / target.name
         directory.mkdir(parents=True, exist_ok=True)
         target.save_state(directory / "state.npz")

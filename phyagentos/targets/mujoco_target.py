@@ -48,11 +48,14 @@ from .scene import (
     object_joint_name,
 )
 
-__all__ = ["MuJoCoTarget", "GripperResult", "ExecutionResult"]
+__all__ = ["MuJoCoTarget", "GripperResult", "ExecutionResult", "MAX_GRIP_FORCE_N"]
 
 log = logging.getLogger(__name__)
 
 _TOOLS = ("observe", "move_joints", "set_gripper", "hold", "snapshot")
+#: Largest grip force a close may command, N per finger (the finger actuators' force
+#: limit in the shipped model; Franka Hand datasheet: 70 N continuous).
+MAX_GRIP_FORCE_N = 70.0
 _STATE_FORMAT = 1
 
 # geom kinds for contact classification
@@ -168,6 +171,20 @@ class MuJoCoTarget(BaseRolloutTarget):
         self._U_cache: dict[frozenset, np.ndarray] = {}  # held objects -> unexpected-contact matrix
         self._renderer = None
         self._rng = np.random.default_rng(seed)
+        #: Target-local e-stop hook: any object with ``is_set()`` (the SafetyGuard's latch);
+        #: trajectory streaming checks it every physics step and halts the arm when set.
+        self.estop = None
+        # Grip force: a position actuator squeezes with kp * (target - opening), so a
+        # target below 0 (closed) is how a force is commanded; the finger joint range
+        # still stops the fingers at 0.
+        self._finger_kp = float(m.actuator_gainprm[self._finger_act[0], 0])
+        m.actuator_ctrlrange[self._finger_act, 0] = -MAX_GRIP_FORCE_N / self._finger_kp
+        self._ctrl_lo = m.actuator_ctrlrange[:, 0].copy()
+        # Perturbations (phyagentos.targets.perturbations) change friction and mass;
+        # nominal values are restored before the next session's are installed.
+        self._obj_geom = {o.name: m.geom(o.name).id for o in scene.objects}
+        self._nominal = (m.geom_friction.copy(), m.geom_priority.copy(), m.body_mass.copy(), m.body_inertia.copy())
+        self._perturbations = None
         self.reset(seed=seed)
 
     # -- basic accessors --------------------------------------------------------------
@@ -434,7 +451,11 @@ class MuJoCoTarget(BaseRolloutTarget):
         arm_act, qadr = self._arm_act, self._qadr
         ctrl, qpos = d.ctrl, d.qpos
         max_err = 0.0
+        estop = self.estop
         for k in range(n):
+            if estop is not None and estop.is_set():
+                ctrl[arm_act] = np.clip(qpos[qadr], lo, hi)  # halt: stay where we are
+                return False, max_err, k, f"e-stop at t={times[k]:.3f} s"
             ctrl[arm_act] = C[k]
             mujoco.mj_step(m, d)
             err = float(np.max(np.abs(qpos[qadr] - Qr[k])))
@@ -593,16 +614,29 @@ class MuJoCoTarget(BaseRolloutTarget):
         self._data.ctrl[self._arm_act] = np.clip(self.arm_qpos(), lo, hi)
 
     # -- gripper ----------------------------------------------------------------------
-    def set_gripper(self, *, opening_m: float, settle_s: float = 0.5) -> GripperResult:
+    def set_gripper(self, *, opening_m: float, settle_s: float = 0.5, force_n: float | None = None) -> GripperResult:
         """Command both fingers to ``opening_m`` per finger (0 .. 0.04 m) and simulate
         until they stop (at least 0.1 s, at most ``settle_s``). The arm holds its
-        current command. Raises TargetError for an opening outside the range."""
+        current command.
+
+        ``force_n`` (N per finger, 0 .. :data:`MAX_GRIP_FORCE_N`) squeezes whatever
+        stops the fingers short of ``opening_m`` with that force: the position target
+        goes ``force_n / kp`` past ``opening_m`` (finger ``kp`` read from the model).
+        Without it the squeeze is ``kp * (width - opening_m)``, about 10 N on a 4 cm box.
+        The command persists until the next call.
+
+        Raises TargetError for an opening or force outside its range."""
         self._check_open()
         o = float(opening_m)
         if not (-1e-9 <= o <= GRIPPER_MAX_OPENING_M + 1e-9) or not math.isfinite(o):
             raise TargetError(f"opening_m must be in [0, {GRIPPER_MAX_OPENING_M}] m, got {opening_m}")
+        if force_n is not None and not (0.0 <= float(force_n) <= MAX_GRIP_FORCE_N):
+            raise TargetError(f"force_n must be in [0, {MAX_GRIP_FORCE_N}] N per finger, got {force_n}")
         m, d = self._model, self._data
-        d.ctrl[self._finger_act] = min(max(o, 0.0), GRIPPER_MAX_OPENING_M)
+        command = min(max(o, 0.0), GRIPPER_MAX_OPENING_M)
+        if force_n is not None:
+            command -= float(force_n) / self._finger_kp
+        d.ctrl[self._finger_act] = command
         ts = m.opt.timestep
         n_max = max(1, int(round(settle_s / ts)))
         n_min = min(n_max, int(round(0.1 / ts)))
@@ -616,6 +650,67 @@ class MuJoCoTarget(BaseRolloutTarget):
         opening = self.gripper_opening()
         held = self.held_objects()
         return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002, grasped=held[0] if held else None)
+
+    # -- perception and perturbations (phyagentos.targets.perturbations) ---------------
+    @property
+    def perturbations(self):
+        """The session's :class:`~phyagentos.targets.perturbations.ActivePerturbations`, or ``None``."""
+        return self._perturbations
+
+    def set_perturbations(self, active) -> None:
+        """Restore nominal friction and mass, then install ``active`` (``None``: none).
+
+        Called by the target pool for every session, since a target outlives its sessions.
+        """
+        m = self._model
+        friction, priority, mass, inertia = self._nominal
+        m.geom_friction[:] = friction
+        m.geom_priority[:] = priority
+        m.body_mass[:] = mass
+        m.body_inertia[:] = inertia
+        self._perturbations = active if active else None
+        if self._perturbations is not None:
+            self._perturbations.apply_model(m, object_geoms=self._obj_geom, object_bodies=self._obj_body)
+        # Constraint regularisation depends on body masses (invweight0); recompute on a
+        # scratch MjData so the live state is untouched.
+        mujoco.mj_setConst(m, mujoco.MjData(m))
+
+    def perceive(self, samples: int = 1) -> dict:
+        """What the robot's perception reports: a :meth:`snapshot` whose object positions
+        carry the session's perception noise, averaged over ``samples`` frames (>= 1).
+
+        Without perturbations it equals :meth:`snapshot`. A ``displaced`` perturbation
+        fires after the first perception that sees its object on the table.
+        Raises TargetError for ``samples`` < 1.
+        """
+        if not isinstance(samples, int) or isinstance(samples, bool) or samples < 1:
+            raise TargetError(f"perceive: samples must be an integer >= 1, got {samples!r}")
+        snap = self.snapshot()
+        if self._perturbations is not None:
+            snap = self._perturbations.perceive(snap, samples=samples, target=self)
+        return snap
+
+    def footprint_clear(self, name: str, xy, *, clearance_m: float = 0.0) -> bool:
+        """True if object ``name`` centred at ``xy`` (world, m) would stay on the table and
+        ``clearance_m`` away from obstacles and the other objects (axis-aligned footprints)."""
+        he = np.asarray(self._scene.object(name).half_extents)
+        x, y = float(xy[0]), float(xy[1])
+        if not (0.2 <= x <= 0.9 and -0.6 <= y <= 0.6):
+            return False
+        others = [(ob.center[:2], ob.half_extents[:2]) for ob in self._scene.obstacles]
+        others += [(self.object_pose(o.name)[:2, 3], o.half_extents[:2]) for o in self._scene.objects if o.name != name]
+        for c, h in others:
+            if abs(x - c[0]) < he[0] + h[0] + clearance_m and abs(y - c[1]) < he[1] + h[1] + clearance_m:
+                return False
+        return True
+
+    def move_object(self, name: str, xy) -> None:
+        """Put object ``name`` at ``xy`` (world, m) keeping its height and orientation, at rest."""
+        q = self._obj_qadr[self.scene.object(name).name]
+        v = self._obj_dadr[name]
+        self._data.qpos[q:q + 2] = [float(xy[0]), float(xy[1])]
+        self._data.qvel[v:v + 6] = 0.0
+        mujoco.mj_forward(self._model, self._data)
 
     # -- observation ------------------------------------------------------------------
     def observe(self) -> dict:
@@ -864,8 +959,10 @@ class MuJoCoTarget(BaseRolloutTarget):
         mujoco.mj_forward(m, d)
 
     # -- rendering --------------------------------------------------------------------
-    def render(self, camera: str = "overview", width: int = 640, height: int = 480) -> np.ndarray:
-        """``(height, width, 3)`` uint8 image from ``camera``. Raises TargetError if no
+    def render(self, camera: str = "overview", width: int = 640, height: int = 480, *,
+               shadows: bool = True) -> np.ndarray:
+        """``(height, width, 3)`` uint8 image from ``camera``; ``shadows=False`` renders
+        about 5x faster under OSMesa (evidence snapshots use it). Raises TargetError if no
         OpenGL backend is available or the camera is unknown."""
         self._check_open()
         m = self._model
@@ -880,6 +977,7 @@ class MuJoCoTarget(BaseRolloutTarget):
                         self._renderer.close()
                     self._renderer = mujoco.Renderer(m, height=height, width=width)
                 self._renderer.update_scene(self._data, camera=camera)
+                self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(shadows)
                 return self._renderer.render().copy()
         except Exception as exc:
             self._renderer = None
@@ -915,8 +1013,8 @@ class MuJoCoTarget(BaseRolloutTarget):
         )
         return self.execute_trajectory(traj, tracking_tol_rad=tracking_tol_rad).to_dict()
 
-    def _tool_set_gripper(self, opening_m: float, settle_s: float = 0.5) -> dict:
-        return self.set_gripper(opening_m=opening_m, settle_s=settle_s).to_dict()
+    def _tool_set_gripper(self, opening_m: float, settle_s: float = 0.5, force_n: float | None = None) -> dict:
+        return self.set_gripper(opening_m=opening_m, settle_s=settle_s, force_n=force_n).to_dict()
 
     def _tool_hold(self, duration_s: float = 0.5, q: Sequence[float] | None = None) -> dict:
         """Hold ``q`` (default: the current configuration) for ``duration_s`` s."""

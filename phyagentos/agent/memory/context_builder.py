@@ -1,0 +1,117 @@
+"""ContextBuilder: retrieve memory for a new session and record what it injected.
+
+Before the Session Compiler writes a first-attempt session, the ContextBuilder computes
+the session's :class:`~phyagentos.agent.memory.conditions.Conditions` (goal, skill,
+target and embodiment, object and risk factors) and retrieves, in order of authority:
+
+1. procedures from SKILL.md whose conditions equal the session's (promoted, repeatedly
+   verified): their parameters are applied;
+2. verified lessons from LESSONS.md whose scope matches (same embodiment, skill and
+   object class; the lesson's risk factors among the session's): their corrections are
+   applied, most confirmed first, a parameter set by an earlier item winning;
+3. patterns from KNOWLEDGE.md under equal conditions: recorded as context; the best
+   one's parameters are applied only when nothing above applied and it is well
+   established (:data:`KNOWLEDGE_MIN_SUCCESSES` successes, rate >= :data:`KNOWLEDGE_MIN_RATE`).
+
+Only the skill's optional (strategy) parameters are ever set, and never one the goal
+graph node sets itself: the author's explicit choice wins over memory. What was
+retrieved, what it set and the session ids it was verified on go into the session's
+``context`` (:class:`~phyagentos.protocol.SessionContext`), so every injected item is
+traceable. Unverified candidates are never retrieved.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Mapping
+
+from phyagentos.protocol import ContextItem, SessionContext, Workspace
+from phyagentos.protocol.lifecycle import utc_now
+
+from ..skill_catalog import SkillInfo, skill_catalog
+from .conditions import Conditions, session_conditions
+from .knowledge import KnowledgeBase, pattern_conditions
+from .lessons import LessonBook
+
+__all__ = ["ContextBuilder", "KNOWLEDGE_MIN_SUCCESSES", "KNOWLEDGE_MIN_RATE", "MAX_ITEMS"]
+
+logger = logging.getLogger(__name__)
+
+KNOWLEDGE_MIN_SUCCESSES = 3
+KNOWLEDGE_MIN_RATE = 0.75
+#: At most this many items of each kind are recorded in a session's context.
+MAX_ITEMS = 5
+
+
+class ContextBuilder:
+    """Builds session contexts from the memory documents of ``workspace``.
+
+    Args:
+        workspace: the protocol workspace (LESSONS.md, KNOWLEDGE.md, SKILL.md, TARGETS.md).
+        use_memory: retrieve and apply memory; ``False`` records the conditions only
+            (a run "with empty memory").
+        skills: skill name -> :class:`SkillInfo` (default: the shipped manifests).
+    """
+
+    def __init__(self, workspace: Workspace, *, use_memory: bool = True, skills: Mapping[str, SkillInfo] | None = None):
+        self.workspace = workspace
+        self.use_memory = use_memory
+        self.skills = dict(skills) if skills is not None else skill_catalog()
+        self.lessons = LessonBook(workspace)
+        self.knowledge = KnowledgeBase(workspace)
+
+    def conditions(self, *, goal: str, skill: str, target: str, parameters: Mapping[str, Any],
+                   scene: Mapping[str, Any] | None) -> Conditions:
+        """The session's conditions; the embodiment is the target's driver in TARGETS.md."""
+        spec = next((t for t in self.workspace.read("TARGETS").data.targets if t.name == target), None)
+        embodiment = spec.driver if spec is not None else target
+        return session_conditions(goal=goal, skill=skill, target=target, embodiment=embodiment,
+                                  parameters=parameters, scene=scene)
+
+    def build(self, *, goal: str, skill: str, target: str, parameters: Mapping[str, Any],
+              scene: Mapping[str, Any] | None) -> tuple[dict[str, Any], SessionContext]:
+        """``(parameters to run with, context to record)`` for a new session.
+
+        Args:
+            goal: ``<goal graph name>/<node id>``.
+            skill, target: the node's skill and target.
+            parameters: the node's own parameters (never overridden).
+            scene: the goal graph's scene mapping.
+        """
+        cond = self.conditions(goal=goal, skill=skill, target=target, parameters=parameters, scene=scene)
+        context = SessionContext(conditions=cond.to_dict(), risk_factors=list(cond.risk_factors), built_at=utc_now())
+        if not self.use_memory:
+            return dict(parameters), context
+        info = self.skills.get(skill)
+        settable = (info.optional if info is not None else frozenset()) - set(parameters)
+        applied: dict[str, Any] = {}
+        items: list[ContextItem] = []
+
+        def take(values: Mapping[str, Any]) -> dict[str, Any]:
+            took = {k: v for k, v in values.items() if k in settable and k not in applied}
+            applied.update(took)
+            return took
+
+        want = {k: v for k, v in pattern_conditions(cond).items() if k in ("embodiment", "skill", "object_class",
+                                                                          "risk_factors")}
+        procedures = [p for p in self.workspace.read("SKILL").data.procedures
+                      if {k: p.conditions.get(k) for k in want} == want]
+        for proc in procedures[:MAX_ITEMS]:
+            items.append(ContextItem(kind="procedure", id=proc.name, summary=proc.description,
+                                     provenance=list(proc.provenance), applied=take(proc.parameters)))
+        for lesson in self.lessons.retrieve(cond)[:MAX_ITEMS]:
+            summary = (f"{lesson.cause} -> {lesson.correction} (confirmed {lesson.confirmations}x, "
+                       f"refuted {lesson.refutations}x)")
+            items.append(ContextItem(kind="lesson", id=lesson.id, summary=summary,
+                                     provenance=list(lesson.verified_by), applied=take(lesson.revision)))
+        for n, entry in enumerate(self.knowledge.retrieve(cond)[:MAX_ITEMS]):
+            established = (entry.successes >= KNOWLEDGE_MIN_SUCCESSES
+                           and entry.successes >= KNOWLEDGE_MIN_RATE * entry.attempts)
+            sets = take(entry.parameters) if n == 0 and not applied and established else {}
+            items.append(ContextItem(kind="knowledge", id=entry.id,
+                                     summary=f"{entry.pattern}: {entry.successes}/{entry.attempts} successes",
+                                     provenance=list(entry.provenance), applied=sets))
+        context = context.model_copy(update={"items": items, "parameters": dict(applied)})
+        if applied:
+            logger.info("context for %s: memory sets %s", goal, applied)
+        return {**dict(parameters), **applied}, context

@@ -1,0 +1,209 @@
+"""Recovery strategies: what a replanned child session changes, per diagnosed cause.
+
+A strategy sets skill *parameters* (and, for a timeout, limits); the runtime's trees
+expose each one as a parameter (``trees/pick.yaml``), so the Runtime stays
+strategy-agnostic and the Agent decides. Each cause has an escalation ladder: the
+first replan for a cause takes step 1, a second replan for the same cause along the
+lineage takes step 2; a step that would change nothing (memory already applied it)
+or names no parameter the skill declares is skipped. When the ladder is exhausted,
+there is no revision and the verdict is ``failure``.
+
+=====================  ==========================================================
+cause                  ladder (strategy: parameters)
+=====================  ==========================================================
+perception_error       average_frames: observe_samples 16;
+                       average_and_re_observe: observe_samples 32, reobserve_samples 16
+object_moved           re_observe: reobserve_samples 1;
+                       re_observe_averaged: reobserve_samples 8, observe_samples 8
+grasp_missed           re_observe_averaged: observe_samples 8, reobserve_samples 8;
+                       another_approach_direction: grasp_candidate + 1
+object_slipped         firmer_grip: grip_force_n 40;
+                       firmest_grip_slower_transfer: grip_force_n 70,
+                       transfer_velocity_scale 0.5, lift_velocity_scale 0.15
+collision during a     slower_transfer: transfer_velocity_scale 0.5;
+planned motion         another_planner: planner BITstar, transfer_velocity_scale 0.5
+collision during a     another_approach_direction: grasp_candidate + 1;
+straight-line motion   another_approach_direction: grasp_candidate + 2, approach_height_m 0.15
+planning_failed        another_planner: planner BITstar; another_planner: planner PRM
+ik_unreachable         another_approach_direction: grasp_candidate + 1, then + 2 with
+                       approach_height_m 0.15
+placement_off          average_frames: observe_samples 16;
+                       careful_lowering: lower_velocity_scale 0.1, transfer_velocity_scale 0.5
+timeout                longer_deadline: execution_timeout_s x 2
+criteria_unmet         careful_retry: observe_samples 8, reobserve_samples 8,
+                       transfer_velocity_scale 0.5
+safety_intervention,   none: a safety stop is never retried automatically; an error in
+runtime_error,         the software or a missing upstream result is not fixed by a
+precondition_unmet     different strategy
+=====================  ==========================================================
+
+Grip forces are per finger (the Franka Hand allows 70 N continuous); planner names are
+OMPL planners the runtime offers (``phyagentos.motion.planner.PLANNERS``).
+
+Whatever the cause, when the evidence shows the hand was left below
+:data:`CLEARANCE_Z_M` (a failed approach can pin or tip the object), the child first
+backs off and lets the scene settle (:data:`SITUATIONAL` parameters ``backoff_m`` 0.10,
+``settle_s`` 0.5). These describe the situation the attempt left, not the correction,
+so lessons do not keep them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+from phyagentos.protocol import Diagnosis, Revision, SessionRecord
+
+from .skill_catalog import SkillInfo, skill_catalog
+
+__all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M"]
+
+#: Parameters a revision sets because of where the failed attempt left the world.
+SITUATIONAL: Mapping[str, Any] = {"backoff_m": 0.10, "settle_s": 0.5}
+#: Terminal tcp height (m above the table) below which a retry backs off first.
+CLEARANCE_Z_M = 0.15
+
+Adjust = Callable[[Mapping[str, Any]], dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class Strategy:
+    """One recovery step.
+
+    Attributes:
+        name: strategy name recorded in the revision and in lessons.
+        description: what it does, for humans.
+        parameters: skill parameter -> new value, or a function of the current
+            parameters returning such a mapping (for relative changes).
+        limits: session limit -> factor applied to the current value.
+    """
+
+    name: str
+    description: str
+    parameters: Mapping[str, Any] | Adjust = field(default_factory=dict)
+    limits: Mapping[str, float] = field(default_factory=dict)
+
+    def values(self, current: Mapping[str, Any]) -> dict[str, Any]:
+        return dict(self.parameters(current) if callable(self.parameters) else self.parameters)
+
+
+def _next_candidate(offset: int, **extra: Any) -> Adjust:
+    def adjust(current: Mapping[str, Any]) -> dict[str, Any]:
+        return {"grasp_candidate": int(current.get("grasp_candidate", 0)) + offset, **extra}
+    return adjust
+
+
+LADDERS: Mapping[str, tuple[Strategy, ...]] = {
+    "perception_error": (
+        Strategy("average_frames", "average 16 perception frames before computing the grasp",
+                 {"observe_samples": 16}),
+        Strategy("average_and_re_observe", "average 32 frames, then look again (16 frames) from the pre-grasp pose",
+                 {"observe_samples": 32, "reobserve_samples": 16}),
+    ),
+    "object_moved": (
+        Strategy("re_observe", "look again from the pre-grasp pose and grasp where the object is now",
+                 {"reobserve_samples": 1}),
+        Strategy("re_observe_averaged", "average 8 frames at both observations",
+                 {"reobserve_samples": 8, "observe_samples": 8}),
+    ),
+    "grasp_missed": (
+        Strategy("re_observe_averaged", "average 8 frames and look again from the pre-grasp pose",
+                 {"observe_samples": 8, "reobserve_samples": 8}),
+        Strategy("another_approach_direction", "use the next top-down grasp direction", _next_candidate(1)),
+    ),
+    "object_slipped": (
+        Strategy("firmer_grip", "close with 40 N per finger", {"grip_force_n": 40.0}),
+        Strategy("firmest_grip_slower_transfer", "close with 70 N per finger and lift and transfer slower",
+                 {"grip_force_n": 70.0, "transfer_velocity_scale": 0.5, "lift_velocity_scale": 0.15}),
+    ),
+    "collision/planned": (
+        Strategy("slower_transfer", "transfer at half speed", {"transfer_velocity_scale": 0.5}),
+        Strategy("another_planner", "plan with BIT* and transfer at half speed",
+                 {"planner": "BITstar", "transfer_velocity_scale": 0.5}),
+    ),
+    "collision/cartesian": (
+        Strategy("another_approach_direction", "use the next top-down grasp direction", _next_candidate(1)),
+        Strategy("another_approach_direction", "turn the grasp once more and approach from 15 cm",
+                 _next_candidate(2, approach_height_m=0.15)),
+    ),
+    "planning_failed": (
+        Strategy("another_planner", "plan with BIT*", {"planner": "BITstar"}),
+        Strategy("another_planner", "plan with PRM", {"planner": "PRM"}),
+    ),
+    "ik_unreachable": (
+        Strategy("another_approach_direction", "use the next top-down grasp direction", _next_candidate(1)),
+        Strategy("another_approach_direction", "turn the grasp once more and approach from 15 cm",
+                 _next_candidate(2, approach_height_m=0.15)),
+    ),
+    "placement_off": (
+        Strategy("average_frames", "average 16 perception frames of the held object", {"observe_samples": 16}),
+        Strategy("careful_lowering", "lower at a third of the speed, transfer at half speed",
+                 {"lower_velocity_scale": 0.1, "transfer_velocity_scale": 0.5}),
+    ),
+    "timeout": (
+        Strategy("longer_deadline", "double the execution deadline", limits={"execution_timeout_s": 2.0}),
+    ),
+    "criteria_unmet": (
+        Strategy("careful_retry", "average 8 frames, look again before grasping, transfer at half speed",
+                 {"observe_samples": 8, "reobserve_samples": 8, "transfer_velocity_scale": 0.5}),
+    ),
+}
+
+
+def _previous_causes(history: Sequence[SessionRecord]) -> list[str]:
+    causes = []
+    for rec in history:
+        verdict = rec.attempts[-1].verdict if rec.attempts else None
+        if verdict is not None and verdict.diagnosis is not None:
+            causes.append(verdict.diagnosis.cause)
+    return causes
+
+
+class RecoveryPlanner:
+    """Chooses the revision of a ``replan`` verdict.
+
+    Args:
+        ladders: cause -> escalation ladder (default :data:`LADDERS`).
+        skills: skill name -> :class:`SkillInfo` (default: the shipped manifests);
+            a revision only sets parameters the session's skill declares.
+    """
+
+    def __init__(self, ladders: Mapping[str, Sequence[Strategy]] | None = None,
+                 skills: Mapping[str, SkillInfo] | None = None):
+        self.ladders = dict(LADDERS if ladders is None else ladders)
+        self._skills = skills
+
+    @property
+    def skills(self) -> Mapping[str, SkillInfo]:
+        if self._skills is None:
+            self._skills = skill_catalog()
+        return self._skills
+
+    def plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
+             history: Sequence[SessionRecord] = ()) -> Revision | None:
+        """The revision for ``session``'s child, or ``None`` when no strategy is left.
+
+        Args:
+            session: the session that failed (its parameters are the starting point).
+            diagnosis: why it failed.
+            history: its ancestors, oldest first; earlier replans for the same cause
+                move along the ladder.
+        """
+        variant = diagnosis.facts.get("variant")
+        ladder = self.ladders.get(f"{diagnosis.cause}/{variant}", self.ladders.get(diagnosis.cause, ()))
+        info = self.skills.get(session.skill)
+        allowed = info.optional if info is not None else frozenset()
+        current = dict(session.parameters)
+        start = _previous_causes(history).count(diagnosis.cause)
+        for step in range(start, len(ladder)):
+            strategy = ladder[step]
+            values = {k: v for k, v in strategy.values(current).items() if k in allowed and current.get(k) != v}
+            limits = {k: round(getattr(session.limits, k) * f, 3) for k, f in strategy.limits.items()
+                      if hasattr(session.limits, k)}
+            if not values and not limits:
+                continue
+            if float(diagnosis.facts.get("tcp_end_z_m", 1.0)) < CLEARANCE_Z_M:
+                values.update({k: v for k, v in SITUATIONAL.items() if k in allowed and current.get(k) != v})
+            return Revision(strategy=strategy.name, cause=diagnosis.cause, step=step + 1, parameters=values,
+                            limits=limits, rationale=f"{diagnosis.summary} -> {strategy.description}")
+        return None

@@ -1,0 +1,382 @@
+"""Benchmark report: aggregated from the episodes' session files and evidence bundles.
+
+The session documents (``episodes/<episode>/sessions/<id>.md``) are the only source of
+verdicts; the report never re-judges. Per episode:
+
+- **First**: every goal-graph node succeeded with its *root* session (no
+  verifier-triggered child session was needed);
+- **Final**: every node's latest session succeeded (after recovery);
+- **rescued**: Final but not First;
+- **length**: simulated seconds at the end of the episode (the target clock carried
+  through all its sessions), number of sessions and of behaviour-tree ticks;
+- **wall time**: the worker's wall time for the whole episode.
+
+Every unsuccessful session is classified with :func:`phyagentos.bench.taxonomy.classify`.
+Where a target reports its own task-completion signal (``ground_truth`` in the terminal
+snapshot, e.g. FrankaKitchen's), it is set next to the verdict and disagreements are
+listed. Every aggregate carries the episode and session ids it was computed from.
+
+Outputs in the bench run directory: ``report.json``, ``report.md``,
+``first_vs_final.png`` (per-task bars) and ``errors.png`` (taxonomy).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from phyagentos.protocol import Workspace
+from phyagentos.protocol.atomic import atomic_write_text
+
+from .episode import OUTCOME_FILE, load_episode
+from .taxonomy import CATEGORIES, classify
+
+__all__ = ["EpisodeRecord", "collect_episode", "build_report", "write_report", "load_report"]
+
+logger = logging.getLogger(__name__)
+
+
+def _generation(session_id: str) -> int:
+    return int(session_id.rsplit("-", 1)[1])
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """Everything the report needs from one episode (plain data in :attr:`data`)."""
+
+    data: dict[str, Any]
+
+
+def _bundle(root: Path, evidence: str | None) -> dict:
+    if not evidence:
+        return {}
+    path = root / evidence / "bundle.yaml"
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except OSError:
+        return {}
+
+
+def _terminal(root: Path, evidence: str | None) -> dict:
+    if not evidence:
+        return {}
+    path = root / evidence / "terminal.yaml"
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except OSError:
+        return {}
+
+
+def _events(root: Path, evidence: str | None) -> list:
+    if not evidence:
+        return []
+    try:
+        return yaml.safe_load((root / evidence / "events.yaml").read_text(encoding="utf-8")) or []
+    except OSError:
+        return []
+
+
+def _session_file(ws: Workspace, session_id: str, run_dir: Path) -> str:
+    """Where the session's document is (terminal sessions are archived), relative to ``run_dir``."""
+    find = getattr(ws, "find_session_path", None)
+    path = find(session_id) if find is not None else None
+    return (path or ws.sessions_dir / f"{session_id}.md").relative_to(run_dir).as_posix()
+
+
+def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
+    """Read one episode's sessions, evidence and outcome into an :class:`EpisodeRecord`."""
+    episode = load_episode(directory)
+    outcome_path = directory / OUTCOME_FILE
+    outcome = yaml.safe_load(outcome_path.read_text(encoding="utf-8")) if outcome_path.is_file() else None
+    ws = Workspace.open(directory)
+    sessions = [s for s in ws.list_sessions() if s.run_id == episode.run_id]
+    task_nodes = [n.id for n in ws.read("TASK").data.nodes] if ws.read("TASK").data.run_id == episode.run_id else []
+    rel = directory.relative_to(run_dir).as_posix()
+    by_node: dict[str, list] = {}
+    for s in sessions:
+        by_node.setdefault(s.node, []).append(s)
+    nodes = task_nodes or sorted(by_node)
+    rows = []
+    failures = []
+    sim_time = 0.0
+    ticks = 0
+    ground_truth = []
+    for s in sessions:
+        attempt = s.attempts[-1] if s.attempts else None
+        verdict = attempt.verdict.verdict if attempt and attempt.verdict else None
+        bundle = _bundle(directory, attempt.evidence if attempt else None)
+        out = bundle.get("outcome", {}) if bundle else {}
+        if out.get("sim_time_s") is not None:
+            sim_time = max(sim_time, float(out["sim_time_s"]))
+        ticks += int(out.get("ticks") or 0)
+        row = {
+            "session_id": s.session_id, "node": s.node, "state": s.state, "verdict": verdict,
+            "parent_session_id": s.parent_session_id, "generation": _generation(s.session_id),
+            "file": _session_file(ws, s.session_id, run_dir),
+            "evidence": f"{rel}/{attempt.evidence}" if attempt and attempt.evidence else None,
+            "error_code": attempt.error.code if attempt and attempt.error else None,
+            "reason": (attempt.verdict.reason if attempt and attempt.verdict else
+                       "; ".join(r.code for r in s.rejection) or (attempt.error.message if attempt and attempt.error else "")),
+        }
+        rows.append(row)
+        terminal = _terminal(directory, attempt.evidence if attempt else None)
+        gt = terminal.get("ground_truth") if isinstance(terminal, dict) else None
+        if isinstance(gt, dict) and "success" in gt:
+            ground_truth.append({"session_id": s.session_id, "verdict": verdict, "env_success": bool(gt["success"]),
+                                 "source": gt.get("source", ""), "task": gt.get("task"),
+                                 "agree": (verdict == "success") == bool(gt["success"])})
+        if s.state != "succeeded":
+            diagnosis = getattr(attempt.verdict, "diagnosis", None) if attempt and attempt.verdict else None
+            category, cause = classify(state=s.state, error_code=row["error_code"],
+                                       rejection_codes=[r.code for r in s.rejection],
+                                       events=_events(directory, attempt.evidence if attempt else None),
+                                       diagnosis=diagnosis.model_dump() if diagnosis is not None else None)
+            failures.append({"session_id": s.session_id, "node": s.node, "state": s.state, "category": category,
+                             "cause": cause, "reason": row["reason"]})
+    first = bool(nodes) and all(any(x.parent_session_id is None and x.state == "succeeded" for x in by_node.get(n, []))
+                                for n in nodes)
+    final = bool(nodes) and all(
+        by_node.get(n) and max(by_node[n], key=lambda x: _generation(x.session_id)).state == "succeeded" for n in nodes)
+    data = {
+        "episode_id": episode.episode_id, "run_id": episode.run_id, "task": episode.task, "seed": episode.seed,
+        "split": episode.split, "directory": rel, "perturbation": episode.evaluation.get("perturbation"),
+        "harness_status": outcome["status"] if outcome else "not_run",
+        "harness_error": (outcome or {}).get("error", "")[-2000:],
+        "worker": (outcome or {}).get("worker"),
+        "wall_time_s": round(float(outcome["wall_time_s"]), 4) if outcome else None,
+        "first_success": first, "final_success": final, "rescued": final and not first,
+        "sessions": rows, "n_sessions": len(rows), "sim_time_s": round(sim_time, 4), "ticks": ticks,
+        "failures": failures, "ground_truth": ground_truth,
+        # the environment's own verdict on the episode: its signal after the last session
+        "env_success": ground_truth[-1]["env_success"] if ground_truth else None,
+    }
+    return EpisodeRecord(data)
+
+
+def _rate(k: int, n: int) -> float | None:
+    return round(100.0 * k / n, 2) if n else None
+
+
+def _median(values: list[float]) -> float | None:
+    if not values:
+        return None
+    v = sorted(values)
+    mid = len(v) // 2
+    return round(v[mid] if len(v) % 2 else 0.5 * (v[mid - 1] + v[mid]), 4)
+
+
+def _summary(eps: list[dict]) -> dict[str, Any]:
+    n = len(eps)
+    first = [e["episode_id"] for e in eps if e["first_success"]]
+    final = [e["episode_id"] for e in eps if e["final_success"]]
+    rescued = [e["episode_id"] for e in eps if e["rescued"]]
+    fr, fn = _rate(len(first), n), _rate(len(final), n)
+    return {
+        "episodes": n, "first_successes": len(first), "final_successes": len(final),
+        "first_rate_pct": fr, "final_rate_pct": fn,
+        "gain_points": round(fn - fr, 2) if fr is not None and fn is not None else None,
+        "rescued": len(rescued), "rescued_episodes": rescued,
+        "first_success_episodes": first, "final_success_episodes": final,
+        "failed_episodes": [e["episode_id"] for e in eps if not e["final_success"]],
+        "median_sim_time_s": _median([e["sim_time_s"] for e in eps]),
+        "median_sessions": _median([float(e["n_sessions"]) for e in eps]),
+        "median_wall_time_s": _median([e["wall_time_s"] for e in eps if e["wall_time_s"] is not None]),
+    }
+
+
+def build_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:
+    """Aggregate every episode under ``run_dir/episodes`` into the report dictionary."""
+    directories = sorted((run_dir / "episodes").iterdir()) if (run_dir / "episodes").is_dir() else []
+    eps = [collect_episode(d, run_dir).data for d in directories if (d / "episode.yaml").is_file()]
+    tasks = list(dict.fromkeys(e["task"] for e in eps))
+    taxonomy: dict[str, dict[str, Any]] = {c: {"count": 0, "sessions": [], "causes": {}} for c in CATEGORIES}
+    for e in eps:
+        for f in e["failures"]:
+            t = taxonomy[f["category"]]
+            t["count"] += 1
+            t["sessions"].append(f["session_id"])
+            t["causes"][f["cause"]] = t["causes"].get(f["cause"], 0) + 1
+    gt = [g for e in eps for g in e["ground_truth"]]
+    perturbed = [e for e in eps if e["perturbation"]]
+    by_kind: dict[str, list[dict]] = {}
+    for e in perturbed:
+        by_kind.setdefault(e["perturbation"]["kind"], []).append(e)
+    report = {
+        **meta,
+        "overall": _summary(eps),
+        "per_task": {t: _summary([e for e in eps if e["task"] == t]) for t in tasks},
+        "unperturbed": _summary([e for e in eps if not e["perturbation"]]),
+        "perturbed": {k: _summary(v) for k, v in sorted(by_kind.items())},
+        "error_taxonomy": taxonomy,
+        "ground_truth": {
+            "sessions": len(gt),
+            "agreements": sum(1 for g in gt if g["agree"]),
+            "disagreements": [g for g in gt if not g["agree"]],
+            "env_success_rate_pct": _rate(sum(1 for g in gt if g["env_success"]), len(gt)),
+            "per_task": {t: {"episodes": sum(1 for e in eps if e["task"] == t and e["env_success"] is not None),
+                             "env_successes": sum(1 for e in eps if e["task"] == t and e["env_success"]),
+                             "env_success_episodes": [e["episode_id"] for e in eps if e["task"] == t and e["env_success"]],
+                             "sessions": [g["session_id"] for e in eps if e["task"] == t for g in e["ground_truth"]]}
+                         for t in tasks},
+        },
+        "harness_errors": [{"episode_id": e["episode_id"], "error": e["harness_error"]} for e in eps
+                           if e["harness_status"] != "completed"],
+        "episodes": eps,
+    }
+    return report
+
+
+def _pct(v: float | None) -> str:
+    return "-" if v is None else f"{v:.1f}%"
+
+
+def _points(v: float | None) -> str:
+    return "-" if v is None else f"{v:+.1f}"
+
+
+def _plots(report: dict, run_dir: Path) -> list[str]:
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    files = []
+    tasks = list(report["per_task"])
+    if tasks:
+        first = [report["per_task"][t]["first_rate_pct"] or 0.0 for t in tasks]
+        final = [report["per_task"][t]["final_rate_pct"] or 0.0 for t in tasks]
+        fig, ax = plt.subplots(figsize=(max(5.0, 1.6 * len(tasks) + 2), 3.8))
+        xs = range(len(tasks))
+        ax.bar([x - 0.2 for x in xs], first, width=0.4, label="First (first attempt)", color="#90a4ae")
+        ax.bar([x + 0.2 for x in xs], final, width=0.4, label="Final (after recovery)", color="#43a047")
+        for x, a, b in zip(xs, first, final):
+            ax.text(x - 0.2, a + 1, f"{a:.0f}", ha="center", fontsize=8)
+            ax.text(x + 0.2, b + 1, f"{b:.0f}", ha="center", fontsize=8)
+        ax.set_xticks(list(xs), [f"{t}\n(n={report['per_task'][t]['episodes']})" for t in tasks], fontsize=8)
+        ax.set_ylim(0, 125)
+        ax.set_yticks(range(0, 101, 20))
+        ax.set_ylabel("success rate (%)")
+        ax.set_title(f"{report['suite']}: First vs Final ({report['protocol']}, {report['split']} seeds)")
+        ax.legend(loc="upper center", ncol=2, fontsize=8, frameon=False)
+        fig.tight_layout()
+        fig.savefig(run_dir / "first_vs_final.png", dpi=110)
+        plt.close(fig)
+        files.append("first_vs_final.png")
+    cats = [c for c in CATEGORIES if report["error_taxonomy"][c]["count"]]
+    fig, ax = plt.subplots(figsize=(6, 3.2))
+    counts = [report["error_taxonomy"][c]["count"] for c in cats]
+    ax.bar(cats or ["none"], counts or [0], color="#e57373")
+    ax.set_ylabel("unsuccessful sessions")
+    ax.set_title("error taxonomy (from session evidence)")
+    fig.tight_layout()
+    fig.savefig(run_dir / "errors.png", dpi=110)
+    plt.close(fig)
+    files.append("errors.png")
+    return files
+
+
+def _markdown(report: dict) -> str:
+    o = report["overall"]
+    lines = [
+        f"# Benchmark {report['suite']} — {report['bench_id']}",
+        "",
+        f"Suite `{report['suite_file']}`; protocol **{report['protocol']}** (memory `{report['memory']}`), "
+        f"**{report['split']}** seeds {report['seeds_text']}; perturbations: {report['perturbations_text']}.",
+        f"Executor `{report['executor']}` with {report['workers']} worker(s); wall time {report['wall_time_s']:.1f} s, "
+        f"**{report['episodes_per_minute']:.2f} episodes/min** (execution phase). Availability gate: passed "
+        f"({report['gate_checks']} checks, "
+        "`gate.yaml`).",
+        "",
+        "Every number below is computed from the session files under `episodes/`; the *Episodes* table links each "
+        "episode to its sessions, and `report.json` lists the episode and session ids behind every aggregate.",
+        "",
+        "## First vs Final",
+        "",
+        "| task | episodes | First | Final | gain (points) | rescued | median sim time (s) | median sessions | median wall (s) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for t, s in [*report["per_task"].items(), ("**overall**", o)]:
+        lines.append(f"| {t} | {s['episodes']} | {_pct(s['first_rate_pct'])} ({s['first_successes']}) | "
+                     f"{_pct(s['final_rate_pct'])} ({s['final_successes']}) | "
+                     f"{_points(s['gain_points'])} | "
+                     f"{s['rescued']} | {s['median_sim_time_s']} | {s['median_sessions']} | {s['median_wall_time_s']} |")
+    lines += ["", "![First vs Final](first_vs_final.png)", ""]
+    if o["rescued_episodes"]:
+        lines += ["Rescued episodes (failed first, succeeded after a verifier-triggered child session): "
+                  + ", ".join(f"`{e}`" for e in o["rescued_episodes"]), ""]
+    if report["perturbed"]:
+        lines += ["## Perturbations", "", "| perturbation | episodes | First | Final | rescued |", "|---|---:|---:|---:|---:|"]
+        u = report["unperturbed"]
+        lines.append(f"| none | {u['episodes']} | {_pct(u['first_rate_pct'])} | {_pct(u['final_rate_pct'])} | {u['rescued']} |")
+        for k, s in report["perturbed"].items():
+            lines.append(f"| {k} | {s['episodes']} | {_pct(s['first_rate_pct'])} | {_pct(s['final_rate_pct'])} | "
+                         f"{s['rescued']} |")
+        lines.append("")
+    lines += ["## Error taxonomy", "",
+              "Unsuccessful sessions (replanned, failed, rejected, timed out) by category, from their evidence.", "",
+              "| category | sessions | causes | session ids |", "|---|---:|---|---|"]
+    for c, t in report["error_taxonomy"].items():
+        if not t["count"]:
+            continue
+        causes = ", ".join(f"{k} ×{v}" for k, v in sorted(t["causes"].items()))
+        ids = ", ".join(f"`{s}`" for s in t["sessions"][:8]) + (" …" if len(t["sessions"]) > 8 else "")
+        lines.append(f"| {c} | {t['count']} | {causes} | {ids} |")
+    if not any(t["count"] for t in report["error_taxonomy"].values()):
+        lines.append("| (none) | 0 | | |")
+    lines += ["", "![error taxonomy](errors.png)", ""]
+    g = report["ground_truth"]
+    if g["sessions"]:
+        lines += ["## Environment's own success signal", "",
+                  f"{g['sessions']} session(s) carried the target's own task-completion signal; the verifier agreed on "
+                  f"{g['agreements']}. Per task, the environment's verdict on each episode (its signal after the "
+                  "episode's last session) next to ours:", "",
+                  "| task | episodes | environment success | our Final | environment source |", "|---|---:|---:|---:|---|"]
+        sources = {e["task"]: gg["source"] for e in report["episodes"] for gg in e["ground_truth"]}
+        for t, pt in g["per_task"].items():
+            if not pt["episodes"]:
+                continue
+            ours = report["per_task"][t]
+            source = sources.get(t, "")
+            lines.append(f"| {t} | {pt['episodes']} | {_pct(_rate(pt['env_successes'], pt['episodes']))} "
+                         f"({pt['env_successes']}) | {_pct(ours['final_rate_pct'])} ({ours['final_successes']}) | "
+                         f"{source} |")
+        lines.append("")
+        if g["disagreements"]:
+            lines += ["| session | task | verdict | environment success |", "|---|---|---|---|"]
+            for d in g["disagreements"]:
+                lines.append(f"| `{d['session_id']}` | {d['task']} | {d['verdict']} | {d['env_success']} |")
+            lines.append("")
+    if report["harness_errors"]:
+        lines += ["## Harness errors", "", "These episodes did not complete; they count as failures above.", ""]
+        for h in report["harness_errors"]:
+            lines.append(f"- `{h['episode_id']}`: {h['error'].strip().splitlines()[-1] if h['error'] else 'not run'}")
+        lines.append("")
+    lines += ["## Episodes", "", "| episode | perturbation | First | Final | sim time (s) | sessions |", "|---|---|---|---|---:|---|"]
+    for e in report["episodes"]:
+        pert = e["perturbation"]["kind"] if e["perturbation"] else ""
+        sess = ", ".join(f"[{s['session_id'].rsplit('-', 2)[-2]}#{s['generation']}]({s['file']}) {s['state']}"
+                         for s in e["sessions"])
+        lines.append(f"| `{e['episode_id']}` | {pert} | {'yes' if e['first_success'] else 'no'} | "
+                     f"{'yes' if e['final_success'] else 'no'} | {e['sim_time_s']} | {sess} |")
+    lines.append("")
+    return "\n".join(lines)
+
+
+def write_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:
+    """Build the report and write ``report.json``, ``report.md`` and the plots; returns it."""
+    report = build_report(run_dir, meta)
+    report["plots"] = _plots(report, run_dir)
+    atomic_write_text(run_dir / "report.json", json.dumps(report, indent=1, ensure_ascii=False) + "\n")
+    atomic_write_text(run_dir / "report.md", _markdown(report))
+    logger.info("report written to %s", run_dir / "report.md")
+    return report
+
+
+def load_report(run_dir: Path) -> dict[str, Any]:
+    """Read ``report.json`` of a bench run directory."""
+    return json.loads((Path(run_dir) / "report.json").read_text(encoding="utf-8"))

@@ -1,0 +1,300 @@
+"""Leaves for what a target declares about its objects: grasp affordances and hinges.
+
+A target's snapshot may give an entity ``attributes.grasp`` — the graspable part as a
+box (``position`` (3,) m, ``quat_wxyz``, ``size`` half extents (3,) m, world frame) and,
+when it is not grasped from above, ``approach`` (world unit vector from the gripper into
+the part), ``closing`` (world unit vector the fingers close along), ``entry`` (the
+direction the hand moves in to reach the grasp; default ``approach``) and ``free_axis``
+(a round part's axis: the grasp leaves rotation about it free). An articulated
+entity (kind ``articulation``) gives its joint: ``joint_type`` ``hinge``,
+``joint_position`` (rad), hinge ``anchor`` (3,) m and ``axis`` (3,) unit, world frame.
+Skills built from these leaves therefore carry no knowledge of a particular
+environment: a kettle handle, a microwave door bar or a cabinet handle are all
+"a part to grasp" and "a hinge to turn".
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from phyagentos.errors import IKError
+from phyagentos.motion.cartesian import cartesian_path
+from phyagentos.motion.ik import solve_ik
+from phyagentos.motion.grasp import top_down_grasp_candidates
+from phyagentos.motion.retime import retime
+
+from .base import Primitive, PrimitiveFailure
+from .execution import _Tracking
+from .motion import execution_limits, ik_options
+from .perception import entity_pose
+
+__all__ = ["ComputeAffordanceGrasp", "ArticulateHinge", "ComputePlaceAsHeld", "ToolMove", "rotation_about"]
+
+
+def rotation_about(axis, angle: float) -> np.ndarray:
+    """(3, 3) rotation by ``angle`` rad about unit ``axis`` (Rodrigues' formula)."""
+    k = np.asarray(axis, dtype=float)
+    k = k / np.linalg.norm(k)
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+
+
+def _entity(snapshot: dict, name: str) -> dict:
+    for e in snapshot.get("entities", []):
+        if e["name"] == name:
+            return e
+    raise PrimitiveFailure("perception.not_found", f"{name!r} is not in the observation; seen: "
+                                                   f"{sorted(e['name'] for e in snapshot.get('entities', []))}")
+
+
+class ComputeAffordanceGrasp(Primitive):
+    """Grasp and pre-grasp tcp poses for the part an entity declares graspable.
+
+    Without ``attributes.grasp`` the entity's own box is used. With an ``approach``
+    vector the tcp z axis points along it and its y axis along ``closing``; the tcp goes to the part's
+    centre and the pre-grasp backs off ``approach_height_m`` along the entry direction
+    (default the approach); of the
+    two hands 180 deg apart the one whose IK keeps the joints farthest from their
+    limits is taken.
+    Without one the part is grasped from above (:func:`top_down_grasp_candidates`).
+
+    Args:
+        object: entity name.
+        approach_height_m: pre-grasp distance, m.
+        affordance: which declared part to use: ``grasp`` (close the fingers on it) or
+            ``hook`` (slide closed fingers under it and carry it on their top face).
+        snapshot, grasp, pregrasp: blackboard keys (observation in; (4, 4) world tcp poses out).
+    """
+
+    IK_SEEDS = 8
+
+    AFFORDANCES = ("grasp", "hook")
+
+    def __init__(self, name: str, *, object: str, approach_height_m: float = 0.10, affordance: str = "grasp",
+                 snapshot: str = "snapshot", grasp: str = "grasp_pose", pregrasp: str = "pregrasp_pose"):
+        super().__init__(name)
+        if approach_height_m <= 0:
+            raise ValueError(f"approach_height_m must be > 0, got {approach_height_m}")
+        if affordance not in self.AFFORDANCES:
+            raise ValueError(f"unknown affordance {affordance!r}; valid: {', '.join(self.AFFORDANCES)}")
+        self.object, self.approach_height_m, self.affordance = object, float(approach_height_m), affordance
+        self.snapshot_key, self.grasp_key, self.pregrasp_key = snapshot, grasp, pregrasp
+        self.reads(snapshot)
+        self.writes(grasp, pregrasp)
+
+    def step(self):
+        snapshot = self.get(self.snapshot_key)
+        ent = _entity(snapshot, self.object)
+        part = (ent.get("attributes") or {}).get(self.affordance)
+        if part is None and self.affordance != "grasp":
+            raise PrimitiveFailure("perception.affordance", f"{self.object!r} declares no {self.affordance!r} affordance")
+        if part is None:
+            T, half = entity_pose(snapshot, self.object)
+        else:
+            T, half = entity_pose({"entities": [{"name": "part", **part}]}, "part")
+        approach = part.get("approach") if part else None
+        if approach is None:
+            plan = top_down_grasp_candidates(T, half, approach_height_m=self.approach_height_m)[0]
+            G, P = np.array(plan.grasp), np.array(plan.pregrasp)
+        else:
+            z = np.asarray(approach, dtype=float)
+            z /= np.linalg.norm(z)
+            y = np.asarray(part.get("closing", T[:3, 0]), dtype=float)
+            y = y - z * float(y @ z)
+            if np.linalg.norm(y) < 1e-6:
+                raise PrimitiveFailure("perception.affordance", f"{self.object}: closing axis parallel to the approach")
+            y /= np.linalg.norm(y)
+            # Two hands close along +-closing (180 deg apart about the approach). Take the
+            # one whose IK solution keeps the joints farthest from their limits: the
+            # wrist keeps room to turn with whatever the part does next (a door swinging).
+            target = self.ctx.target
+            names = tuple(target.arm_joint_names)
+            jids = [target.model.joint(n).id for n in names]
+            lo, hi = target.model.jnt_range[jids, 0], target.model.jnt_range[jids, 1]
+            # IK from the current configuration, then from a few seeded random ones (a far
+            # reorientation can trap a local solver; the Cartesian moves that follow
+            # interpolate and do not need this seed).
+            rng = np.random.default_rng(self.ctx.seed)
+            seeds = [target.arm_qpos(), *rng.uniform(lo, hi, size=(self.IK_SEEDS, len(names)))]
+            entry = np.asarray(part.get("entry", z), dtype=float)
+            entry /= np.linalg.norm(entry)
+            frame = getattr(target, "tcp_site", "tcp")
+            best = None
+            for sign in (1.0, -1.0):
+                Gs = np.eye(4)
+                Gs[:3, :3] = np.column_stack([np.cross(sign * y, z), sign * y, z])
+                Gs[:3, 3] = T[:3, 3]
+                Ps = Gs.copy()
+                Ps[:3, 3] -= entry * self.approach_height_m
+                for seed in seeds:
+                    try:
+                        with self.ctx.profiler.section("ik"):
+                            qp = np.array(solve_ik(target.model, q_seed=seed, target=Ps, arm_joint_names=names,
+                                                   frame=frame).q)
+                            q = np.array(cartesian_path(target.model, q_start=qp, T_goal=Gs, arm_joint_names=names,
+                                                        frame=frame)[-1])
+                    except IKError:
+                        continue
+                    margin = float(np.min(np.minimum(q - lo, hi - q)))
+                    if best is None or margin > best[0]:
+                        best = (margin, Gs, Ps)
+                    break
+            if best is None:
+                raise PrimitiveFailure("ik.unreachable", f"{self.object}: neither hand orientation reaches the grasp at "
+                                                         f"{np.round(T[:3, 3], 3).tolist()}")
+            _, G, P = best
+        self.set(self.grasp_key, G)
+        self.set(self.pregrasp_key, P)
+        self.ctx.trace.record("grasp_pose", leaf=self.name, object=self.object, affordance=part is not None,
+                              grasp=G[:3, 3].round(4).tolist(), approach=G[:3, 2].round(4).tolist())
+
+
+class ArticulateHinge(_Tracking):
+    """Turn a held handle about its entity's hinge by ``delta_rad``.
+
+    The tcp follows the circle the grasp point describes about the hinge axis: ``n``
+    poses with positions ``anchor + Rot(axis, delta k/n) (p0 - anchor)``, turning with
+    the door unless the grasped part declares a ``free_axis`` parallel to the hinge (a
+    round bar turns inside the closed fingers), joined by Cartesian IK segments, timed with toppra at
+    ``velocity_scale`` of the joint limits and streamed with the tracking check. A
+    door that resists (not held, blocked) shows up as a tracking failure or, after
+    success, as a joint angle the verifier finds unchanged.
+
+    Args:
+        object: the articulated entity (kind ``articulation`` with a hinge).
+        delta_rad: signed rotation about the hinge axis, rad (the joint's own sign).
+        step_rad: largest rotation between consecutive poses, rad.
+        velocity_scale: fraction (0, 1] of the joint velocity limits.
+        snapshot: blackboard key of the observation holding the hinge.
+    """
+
+    def __init__(self, name: str, *, object: str, delta_rad: float, step_rad: float = 0.05,
+                 velocity_scale: float = 0.5, snapshot: str = "snapshot"):
+        super().__init__(name)
+        if not isinstance(delta_rad, (int, float)) or not math.isfinite(delta_rad) or delta_rad == 0:
+            raise ValueError(f"delta_rad must be a non-zero number of radians, got {delta_rad!r}")
+        if not 0 < step_rad <= 0.5:
+            raise ValueError(f"step_rad must be in (0, 0.5], got {step_rad}")
+        if not 0 < velocity_scale <= 1:
+            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
+        self.object, self.delta_rad, self.step_rad = object, float(delta_rad), float(step_rad)
+        self.velocity_scale, self.snapshot_key = float(velocity_scale), snapshot
+        self.reads(snapshot)
+
+    def on_enter(self):
+        ctx = self.ctx
+        target = ctx.target
+        ent = _entity(self.get(self.snapshot_key), self.object)
+        attrs = ent.get("attributes") or {}
+        if ent.get("kind") != "articulation" or attrs.get("joint_type") != "hinge":
+            raise PrimitiveFailure("perception.affordance", f"{self.object!r} is not a hinged articulation "
+                                                            f"(kind {ent.get('kind')!r}, joint {attrs.get('joint_type')!r})")
+        anchor = np.asarray(attrs["anchor"], dtype=float)
+        axis = np.asarray(attrs["axis"], dtype=float)
+        # A handle that is a bar parallel to the hinge turns inside the closed fingers (its
+        # declared free axis), so the hand need not turn with the door: keeping its
+        # orientation spares the wrist the whole door angle.
+        free = (attrs.get("grasp") or {}).get("free_axis")
+        follow = 0.0 if free is not None and abs(float(np.dot(free, axis))) > 0.99 else 1.0
+        T0 = target.tcp_pose()
+        n = max(1, int(math.ceil(abs(self.delta_rad) / self.step_rad)))
+        q = target.arm_qpos()
+        path = [q]
+        with ctx.profiler.section("ik"):
+            for k in range(1, n + 1):
+                R = rotation_about(axis, self.delta_rad * k / n)
+                Tk = np.eye(4)
+                Tk[:3, :3] = rotation_about(axis, follow * self.delta_rad * k / n) @ T0[:3, :3]
+                Tk[:3, 3] = anchor + R @ (T0[:3, 3] - anchor)
+                segment = cartesian_path(target.model, q_start=q, T_goal=Tk, **ik_options(target))
+                path.extend(segment[1:])
+                q = segment[-1]
+        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
+        with ctx.profiler.section("timing"):
+            traj = retime(np.array(path), vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
+        ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_rad=self.delta_rad,
+                         joint_position=attrs.get("joint_position"), waypoints=len(path))
+        self._start(traj)
+
+    def step(self):
+        return self._advance()
+
+
+class ComputePlaceAsHeld(Primitive):
+    """Place and pre-place tcp poses that set the carried ``object`` down centred in
+    ``region`` *keeping the hand's current orientation* (a hooked or side-held object
+    cannot be turned top-down on the way): the object's lowest point ends
+    ``clearance_m`` above the region's surface (its z), the pre-place
+    ``approach_height_m`` above that.
+
+    Args:
+        object, region: entity names.
+        approach_height_m: pre-place height above the place pose, m.
+        clearance_m: gap left under the object, m.
+        snapshot, place, preplace: blackboard keys (observation in; (4, 4) world tcp poses out).
+    """
+
+    def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,
+                 clearance_m: float = 0.005, snapshot: str = "snapshot", place: str = "place_pose",
+                 preplace: str = "preplace_pose"):
+        super().__init__(name)
+        self.object, self.region = object, region
+        self.approach_height_m, self.clearance_m = float(approach_height_m), float(clearance_m)
+        self.snapshot_key, self.place_key, self.preplace_key = snapshot, place, preplace
+        self.reads(snapshot)
+        self.writes(place, preplace)
+
+    def step(self):
+        snapshot = self.get(self.snapshot_key)
+        T_region, _ = entity_pose(snapshot, self.region)
+        T_obj, half = entity_pose(snapshot, self.object)
+        T_tcp = self.ctx.target.tcp_pose()
+        T_tcp_obj = np.linalg.inv(T_tcp) @ T_obj
+        R_obj = T_tcp[:3, :3] @ T_tcp_obj[:3, :3]
+        ext_z = float(np.abs(R_obj[2, :]) @ half)
+        p_obj = np.array([T_region[0, 3], T_region[1, 3], T_region[2, 3] + ext_z + self.clearance_m])
+        T_place = T_tcp.copy()
+        T_place[:3, 3] = p_obj - T_tcp[:3, :3] @ T_tcp_obj[:3, 3]
+        T_pre = T_place.copy()
+        T_pre[2, 3] += self.approach_height_m
+        self.set(self.place_key, T_place)
+        self.set(self.preplace_key, T_pre)
+        self.ctx.trace.record("place_pose", leaf=self.name, object=self.object, region=self.region,
+                              place=T_place[:3, 3].round(4).tolist())
+
+
+class ToolMove(_Tracking):
+    """Straight-line tcp motion by ``offset`` (3,) m expressed in the *tool* frame
+    (e.g. ``[0, 0, -0.08]`` backs out along the approach axis), orientation kept.
+
+    Args:
+        offset: displacement in the tcp frame, m.
+        velocity_scale: fraction (0, 1] of the joint velocity limits.
+    """
+
+    def __init__(self, name: str, *, offset, velocity_scale: float = 0.3):
+        super().__init__(name)
+        off = np.asarray(offset, dtype=float)
+        if off.shape != (3,) or not np.all(np.isfinite(off)):
+            raise ValueError(f"offset must be 3 finite numbers in m, got {offset!r}")
+        if not 0 < velocity_scale <= 1:
+            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
+        self.offset, self.velocity_scale = off, float(velocity_scale)
+
+    def on_enter(self):
+        ctx = self.ctx
+        target = ctx.target
+        T0 = target.tcp_pose()
+        Tg = T0.copy()
+        Tg[:3, 3] += T0[:3, :3] @ self.offset
+        with ctx.profiler.section("ik"):
+            path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=Tg, **ik_options(target))
+        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
+        with ctx.profiler.section("timing"):
+            traj = retime(path, vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
+        self._start(traj)
+
+    def step(self):
+        return self._advance()

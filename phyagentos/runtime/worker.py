@@ -1,0 +1,412 @@
+"""The runner process: the only place where sessions touch targets.
+
+The WatchdogSupervisor supervises; it never runs a skill itself. Each supervisor
+owns one runner process and talks to it over a duplex pipe with small
+``(kind, payload)`` messages. Keeping the runner in its own process is what makes
+cancellation enforceable: a runner that does not stop in time is killed with
+SIGKILL, and a fresh runner puts the target in a safe state.
+
+Runners are forked from a ``multiprocessing`` *forkserver* that has imported the
+runtime (MuJoCo, the primitives, the motion stack) once: the server is a clean,
+single-threaded process that never created a GL context or a target, and a
+replacement runner is ready in tens of milliseconds instead of the second a fresh
+interpreter needs.
+
+Jobs (supervisor -> runner; each gets exactly one reply, except ``go``):
+
+==============  ====================================================  ==================================
+job             does                                                  reply
+==============  ====================================================  ==================================
+``reserve``     take the target's actuation lock (non-blocking)       ``reserved`` {marker} | ``busy``
+``unreserve``   drop it                                               ``unreserved``
+``preflight``   compatibility preflight; if it passes, write the      ``preflight`` {ok, plan, ...}
+                in-flight marker (target_lock.py)
+``go``          run the session (SessionRunner.run)                   ``finished`` {outcome}, then
+                                                                      ``done`` {AttemptReport}
+``recover``     restore the checkpoint, halt, persist, snapshot       ``recovered`` {AttemptReport}
+``release``     clear the marker and the actuation lock               ``released``
+``exit``        release everything and exit                           (none)
+==============  ====================================================  ==================================
+
+Control messages are handled at once by a reader thread, even while a job runs:
+``cancel`` {reason, code} sets the session's cancel token (checked between ticks);
+``estop`` also engages the process-wide e-stop latch (the SafetyGuard and the
+target's own hook halt the arm at the next command or physics step); ``clear_estop``
+releases it. If the supervisor dies, the pipe reaches EOF: the runner cancels its
+session (halting the target at the next tick), writes its evidence and exits,
+and only then does the kernel release the actuation lock.
+
+Heartbeats travel through shared memory (:mod:`phyagentos.runtime.heartbeat`), not
+the pipe, so a runner stuck inside a tick goes silent even though its reader thread
+still answers.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import queue
+import signal
+import threading
+import time
+import traceback
+from pathlib import Path
+from typing import Any
+
+from phyagentos.errors import SupervisorError
+
+from .heartbeat import SLOTS, Heartbeats
+
+__all__ = ["RunnerProcess", "RunnerDied", "runner_main"]
+
+logger = logging.getLogger(__name__)
+
+_CONTROL = frozenset({"cancel", "estop", "clear_estop"})
+#: An orphaned runner (its supervisor died) exits at the latest this long after noticing (s).
+_ORPHAN_EXIT_S = 10.0
+
+
+#: Imported once by the forkserver, so forked runners start with them loaded.
+_PRELOAD = ["phyagentos.runtime.worker", "phyagentos.runtime.runner", "phyagentos.runtime.preflight",
+            "phyagentos.runtime.target_pool", "phyagentos.runtime.target_lock"]
+
+
+def _context():
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(_PRELOAD)
+    return ctx
+
+
+class RunnerDied(SupervisorError):
+    """The runner process exited or closed its pipe."""
+
+
+class RunnerProcess:
+    """Supervisor-side handle of one runner process.
+
+    Args:
+        skills_dir, trees_dir: where the runner loads skill manifests and trees.
+        log_level: logging level inside the runner (default: the caller's root level).
+
+    The process starts at construction and imports its runtime in the background;
+    the first reply arrives once that is done (about a second).
+    """
+
+    def __init__(self, *, skills_dir: str | os.PathLike[str], trees_dir: str | os.PathLike[str],
+                 log_level: int | None = None) -> None:
+        ctx = _context()
+        self._hb_array = ctx.RawArray("d", len(SLOTS))
+        self.heartbeats = Heartbeats(self._hb_array)
+        self.conn, child = ctx.Pipe(duplex=True)
+        level = logging.getLogger().getEffectiveLevel() if log_level is None else log_level
+        self.process = ctx.Process(target=runner_main, name="phyagentos-runner", daemon=True,
+                                   args=(child, self._hb_array, str(skills_dir), str(trees_dir), level))
+        self.process.start()
+        child.close()
+        self.skills_dir, self.trees_dir = str(skills_dir), str(trees_dir)
+        self.reserved: set[tuple[str, str]] = set()
+        self._dead = False
+
+    @property
+    def pid(self) -> int | None:
+        return self.process.pid
+
+    def alive(self) -> bool:
+        return not self._dead and self.process.is_alive()
+
+    def fileno(self) -> int:
+        """Readable when the runner sent something (or died)."""
+        return self.conn.fileno()
+
+    def send(self, kind: str, **payload: Any) -> None:
+        """Send a job or control message.
+
+        Raises:
+            RunnerDied: the pipe is closed.
+        """
+        try:
+            self.conn.send((kind, payload))
+        except (OSError, EOFError, BrokenPipeError) as exc:
+            self._dead = True
+            raise RunnerDied(f"runner {self.pid} is gone: {exc}") from None
+
+    def poll(self, timeout: float = 0.0) -> tuple[str, dict] | None:
+        """The next message, waiting at most ``timeout`` s; None if nothing arrived.
+
+        Raises:
+            RunnerDied: the runner exited or closed the pipe.
+        """
+        try:
+            if not self.conn.poll(timeout):
+                return None
+            return self.conn.recv()
+        except (OSError, EOFError) as exc:
+            self._dead = True
+            raise RunnerDied(f"runner {self.pid} exited (code {self.process.exitcode}): {exc!r}") from None
+
+    def request(self, kind: str, *, timeout: float, expect: tuple[str, ...], **payload: Any) -> tuple[str, dict]:
+        """Send a job and wait for its reply (one of ``expect`` or ``error``).
+
+        Raises:
+            RunnerDied: the runner died, or did not answer within ``timeout`` s
+                (it is then killed: a runner that cannot answer cannot be trusted).
+        """
+        self.send(kind, **payload)
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self.kill()
+                raise RunnerDied(f"runner {self.pid} did not answer {kind!r} within {timeout:.1f} s; killed")
+            msg = self.poll(left)
+            if msg is None:
+                continue
+            if msg[0] in expect or msg[0] == "error":
+                return msg
+            logger.debug("runner %s: ignoring stale %s while waiting for %s", self.pid, msg[0], expect)
+
+    def kill(self) -> None:
+        """SIGKILL the runner (it may be stuck anywhere) and reap it."""
+        self._dead = True
+        self.reserved.clear()
+        if self.process.is_alive():
+            try:
+                os.kill(self.process.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        self.process.join(timeout=5)
+        self.conn.close()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Ask the runner to exit (releasing its locks); kill it if it does not."""
+        if self.alive():
+            try:
+                self.send("exit")
+            except RunnerDied:
+                pass
+            self.process.join(timeout=timeout)
+        if self.process.is_alive():
+            self.kill()
+        else:
+            self._dead = True
+            self.conn.close()
+        self.reserved.clear()
+
+
+# ---------------------------------------------------------------------------
+# Inside the runner process.
+
+
+class _Runner:
+    """The runner process's state: runtime, target pools, locks, the current session."""
+
+    def __init__(self, conn, heartbeats: Heartbeats, skills_dir: str, trees_dir: str) -> None:
+        from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
+
+        self.conn = conn
+        self.heartbeats = heartbeats
+        self.runtime = BuiltinSkillRuntime.from_dirs(skills_dir, trees_dir)
+        self.pools: dict[str, Any] = {}
+        self.locks: dict[tuple[str, str], Any] = {}
+        self.jobs: queue.Queue = queue.Queue()
+        self.cancel = None  # CancelToken of the running session
+        self.send_lock = threading.Lock()
+
+    # -- plumbing --------------------------------------------------------
+
+    def reply(self, kind: str, **payload: Any) -> None:
+        with self.send_lock:
+            try:
+                self.conn.send((kind, payload))
+            except (OSError, EOFError):
+                pass  # the supervisor is gone; the reader thread handles it
+
+    def read_forever(self) -> None:
+        """Reader thread: control messages act at once, jobs queue up, EOF means orphaned."""
+        while True:
+            try:
+                kind, payload = self.conn.recv()
+            except (EOFError, OSError):
+                # Orphaned: stop actuating (halt at the next tick), write evidence, exit.
+                # A runner stuck inside a tick is not waited for forever.
+                self.control("cancel", {"reason": "supervisor lost (pipe closed)", "code": "cancelled.shutdown"})
+                self.jobs.put(("exit", {}))
+                timer = threading.Timer(_ORPHAN_EXIT_S, os._exit, args=(3,))
+                timer.daemon = True
+                timer.start()
+                return
+            if kind in _CONTROL:
+                self.control(kind, payload)
+            else:
+                self.jobs.put((kind, payload))
+
+    def control(self, kind: str, payload: dict) -> None:
+        if kind in ("cancel", "estop"):
+            code = payload.get("code") or ("cancelled.estop" if kind == "estop" else "cancelled.operator")
+            if kind == "estop":
+                self._estop_latch().engage(payload.get("reason", ""), source="supervisor")
+            token = self.cancel
+            if token is not None and not token.is_set():
+                token.cancel(payload.get("reason", ""), code)
+        elif kind == "clear_estop":
+            self._estop_latch().clear()
+
+    @staticmethod
+    def _estop_latch():
+        from phyagentos.runtime.safety_guard import PROCESS_ESTOP  # noqa: PLC0415
+
+        return PROCESS_ESTOP
+
+    def workspace(self, root: str):
+        from phyagentos.protocol import Workspace  # noqa: PLC0415
+
+        return Workspace.open(root)
+
+    def pool(self, root: str):
+        from phyagentos.runtime.target_pool import TargetPool  # noqa: PLC0415
+
+        pool = self.pools.get(root)
+        if pool is None:
+            if len(self.pools) >= 2:  # bound memory when one runner serves many workspaces
+                old_root, old = next(iter(self.pools.items()))
+                if not any(r == old_root for r, _ in self.locks):
+                    old.close()
+                    del self.pools[old_root]
+            pool = self.pools[root] = TargetPool(Path(root) / "targets")
+        return pool
+
+    def lock(self, root: str, target: str):
+        from phyagentos.runtime.target_lock import TargetLock  # noqa: PLC0415
+
+        key = (root, target)
+        if key not in self.locks:
+            self.locks[key] = TargetLock(Path(root) / ".locks", target)
+        return self.locks[key]
+
+    def release_all(self) -> None:
+        for lock in self.locks.values():
+            lock.release()
+
+    # -- jobs ------------------------------------------------------------
+
+    def job_reserve(self, root: str, target: str) -> None:
+        from phyagentos.runtime.target_lock import read_marker  # noqa: PLC0415
+
+        lock = self.lock(root, target)
+        if not lock.try_acquire():
+            self.reply("busy", target=target)
+            return
+        self.reply("reserved", target=target, marker=read_marker(Path(root) / "targets", target))
+
+    def job_unreserve(self, root: str, target: str) -> None:
+        self.lock(root, target).release()
+        self.reply("unreserved", target=target)
+
+    def job_preflight(self, root: str, session_id: str, token: str, owner: str) -> None:
+        from phyagentos.runtime.preflight import run_preflight  # noqa: PLC0415
+        from phyagentos.runtime.target_lock import write_marker  # noqa: PLC0415
+        from phyagentos.runtime.target_pool import DRIVERS  # noqa: PLC0415
+
+        started = time.perf_counter()
+        ws = self.workspace(root)
+        rec = ws.load_session(session_id)
+        result = run_preflight(rec, targets=ws.read("TARGETS").data, runtimes=ws.read("SKILLRUNTIME").data,
+                               skills=self.runtime.skills, trees=self.runtime.trees, drivers=DRIVERS,
+                               safety=ws.read_safety())
+        if result.ok:
+            if not self.lock(root, rec.target).held:
+                raise SupervisorError(f"preflight of {session_id}: target {rec.target!r} is not reserved")
+            write_marker(Path(root) / "targets", rec.target, session_id=session_id, token=token, owner=owner)
+        self.reply("preflight", ok=result.ok, session_id=session_id,
+                   plan=result.plan.to_dict() if result.plan else None,
+                   manifest=result.manifest.to_dict() if result.manifest else None,
+                   rejections=[r.model_dump(mode="json") for r in result.rejections],
+                   duration_s=time.perf_counter() - started)
+
+    def job_go(self, root: str, session_id: str, checkpoint_interval_s: float) -> None:
+        from phyagentos.primitives.context import CancelToken  # noqa: PLC0415
+        from phyagentos.runtime.runner import SessionRunner  # noqa: PLC0415
+
+        ws = self.workspace(root)
+        rec = ws.load_session(session_id)
+        if not self.lock(root, rec.target).held:
+            raise SupervisorError(f"go {session_id}: target {rec.target!r} is not reserved")
+        self.cancel = CancelToken()
+        if self._estop_latch().is_set():
+            self.cancel.cancel("e-stop engaged", "cancelled.estop")
+        hb = self.heartbeats
+
+        def beat() -> None:
+            now = time.monotonic()
+            hb.beat("runner", now)
+            hb.beat("target", now)  # the in-process simulated target answered this tick
+
+        def finished(outcome) -> None:
+            self.reply("finished", session_id=session_id, status=outcome.status, error_code=outcome.error_code,
+                       message=outcome.message, ticks=outcome.ticks)
+
+        try:
+            report = SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=self.cancel, heartbeat=beat,
+                                   on_finished=finished, checkpoint_interval_s=checkpoint_interval_s).run()
+        finally:
+            self.cancel = None
+        self.reply("done", session_id=session_id, **report.to_dict())
+
+    def job_recover(self, root: str, session_id: str, status: str, error_code: str, message: str) -> None:
+        from phyagentos.runtime.runner import SessionRunner  # noqa: PLC0415
+
+        ws = self.workspace(root)
+        rec = ws.load_session(session_id)
+        if not self.lock(root, rec.target).held:
+            raise SupervisorError(f"recover {session_id}: target {rec.target!r} is not reserved")
+        from phyagentos.primitives.context import CancelToken  # noqa: PLC0415
+
+        runner = SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=CancelToken())
+        report = runner.recover(status=status, error_code=error_code, message=message)
+        self.reply("recovered", session_id=session_id, **report.to_dict())
+
+    def job_release(self, root: str, target: str, session_id: str | None = None) -> None:
+        from phyagentos.runtime.target_lock import clear_marker  # noqa: PLC0415
+
+        lock = self.lock(root, target)
+        if lock.held:
+            clear_marker(Path(root) / "targets", target, session_id=session_id)
+        lock.release()
+        self.reply("released", target=target)
+
+    def serve(self) -> None:
+        threading.Thread(target=self.read_forever, name="runner-pipe", daemon=True).start()
+        while True:
+            kind, payload = self.jobs.get()
+            if kind == "exit":
+                break
+            if kind == "ping":
+                self.reply("pong")
+                continue
+            handler = getattr(self, f"job_{kind}", None)
+            try:
+                if handler is None:
+                    raise SupervisorError(f"unknown runner job {kind!r}")
+                handler(**payload)
+            except Exception as exc:  # noqa: BLE001 - report, keep serving
+                logger.exception("runner job %s failed", kind)
+                self.reply("error", job=kind, message=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc())
+        self.release_all()
+        for pool in self.pools.values():
+            pool.close()
+
+
+def runner_main(conn, hb_array, skills_dir: str, trees_dir: str, log_level: int = logging.WARNING) -> None:
+    """Entry point of the runner process (see the module docstring)."""
+    # Ctrl-C reaches the whole foreground process group; stopping is the supervisor's
+    # decision, delivered as a cancel message, so the runner ignores SIGINT.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import phyagentos  # noqa: F401,PLC0415 - selects the headless GL backend before mujoco loads
+
+    logging.basicConfig(level=log_level, format="runner %(process)d %(name)s: %(message)s")
+    logging.getLogger("transitions").setLevel(max(log_level, logging.WARNING))
+    logging.getLogger("toppra").setLevel(max(log_level, logging.WARNING))
+    runner = _Runner(conn, Heartbeats(hb_array), skills_dir, trees_dir)
+    runner.serve()
+    conn.close()

@@ -1,0 +1,30 @@
+"""`--executor ray`: the same episodes, run as tasks on a local Ray instance."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import yaml
+
+from phyagentos.bench import run_bench
+from phyagentos.protocol import Workspace
+from phyagentos.resources import goal_graphs_dir
+
+pytestmark = pytest.mark.sim
+
+
+def test_ray_executor_runs_the_episodes_through_the_same_session_path(tmp_path):
+    suite = tmp_path / "mini.yaml"
+    suite.write_text(yaml.safe_dump({"version": 1, "name": "mini", "episodes": 2, "tasks": [
+        {"id": "put_in_bin", "goal_graph": str(goal_graphs_dir() / "put_in_bin.yaml")}]}))
+    result = run_bench(suite, tmp_path / "ws", workers=2, executor="ray")
+    rep = json.loads((result.run_dir / "report.json").read_text())
+    assert rep["executor"] == "ray" and rep["harness_errors"] == []
+    assert rep["overall"]["episodes"] == 2
+    for ep in rep["episodes"]:
+        assert ep["worker"] and ep["sessions"]
+        ws = Workspace.open(result.run_dir / ep["directory"])
+        states = {s.session_id: s.state for s in ws.list_sessions()}
+        assert {s["session_id"]: s["state"] for s in ep["sessions"]} == states
+        assert all(state in ("succeeded", "failed", "replanned") for state in states.values())

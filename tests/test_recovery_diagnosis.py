@@ -1,0 +1,230 @@
+"""Diagnosis from evidence into the taxonomy, and the recovery it leads to (no simulation).
+
+Bundles here are written the way the SessionRunner writes them (snapshots, trace.jsonl,
+events, bundle.yaml), so these tests pin the rules on exact evidence.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import yaml
+
+from phyagentos.agent.diagnosis import CAUSES, diagnose
+from phyagentos.agent.recovery import LADDERS, RecoveryPlanner
+from phyagentos.agent.verifier import SessionVerifier, load_evidence
+from phyagentos.protocol import Attempt, SessionRecord, Verdict
+from phyagentos.protocol.lifecycle import utc_now
+
+PICK_ACCEPT = {"holding": "cube", "lifted": {"object": "cube", "min_height": 0.05}}
+PLACE_ACCEPT = {"inside": {"object": "cube", "region": "goal"}, "released": "cube"}
+
+
+def ent(name, pos, kind="object", size=(0.02, 0.02, 0.02)):
+    return {"name": name, "kind": kind, "position": list(pos), "quat_wxyz": [1, 0, 0, 0], "size": list(size),
+            "attributes": {}}
+
+
+def snap(cube, *, holding=False, tcp_z=0.37):
+    rel = [{"subject": "gripper", "relation": "holding", "object": "cube"}] if holding else []
+    return {"entities": [ent("cube", cube), ent("goal", (0.5, 0.25, 0.0), "region", (0.08, 0.08, 0.0)),
+                         ent("tcp", (0.46, 0.0, tcp_z), "robot", (0, 0, 0))], "relations": rel}
+
+
+def observe(perceived, truth=None, leaf="ObserveScene"):
+    rec = {"kind": "observe", "leaf": leaf, "samples": 1, "objects": {"cube": list(perceived)}}
+    if truth is not None:
+        rec["truth"] = {"cube": list(truth)}
+    return rec
+
+
+def grasp(at):
+    return {"kind": "grasp_pose", "object": "cube", "observed_position": list(at), "grasp": list(at)}
+
+
+def close(grasped):
+    return {"kind": "gripper", "command": "close", "grasped": grasped}
+
+
+def bundle(tmp_path, initial, terminal, trace=(), *, events=(), status="failed", code=None, leaf=None, name="s"):
+    d = tmp_path / "evidence" / name
+    d.mkdir(parents=True)
+    (d / "initial.yaml").write_text(yaml.safe_dump(initial))
+    (d / "terminal.yaml").write_text(yaml.safe_dump(terminal))
+    (d / "events.yaml").write_text(yaml.safe_dump(list(events)))
+    (d / "trace.jsonl").write_text("".join(json.dumps(r) + "\n" for r in trace))
+    files = {"initial": "initial.yaml", "terminal": "terminal.yaml", "events": "events.yaml", "trace": "trace.jsonl"}
+    (d / "bundle.yaml").write_text(yaml.safe_dump({"session_id": name, "files": files, "outcome": {
+        "status": status, "error_code": code, "failed_primitive": leaf, "message": f"{code or ''} at {leaf or ''}"}}))
+    return load_evidence(d)
+
+
+def session(skill="pick", accept=PICK_ACCEPT, params=None, sid="r-pick_cube-1", parent=None) -> SessionRecord:
+    now = utc_now()
+    return SessionRecord(session_id=sid, run_id="r", node="pick_cube", skill=skill, target="franka_tabletop",
+                         parameters=params or {"object": "cube"}, accept=accept, created_at=now, updated_at=now,
+                         parent_session_id=parent)
+
+
+def test_grasp_computed_from_a_pose_2_5_cm_off_is_a_perception_error(tmp_path):
+    true, seen = (0.5, -0.2, 0.02), (0.5, -0.225, 0.02)
+    ev = bundle(tmp_path, snap(true), snap((0.5, -0.19, 0.025), tcp_z=0.05),
+                [observe(seen, true), grasp(seen), close(None)], code="grasp.missed", leaf="CloseOnObject")
+    d = diagnose(session(), ev)
+    assert d.cause == "perception_error" and d.category == "perception"
+    assert d.facts["perception_error_m"] == pytest.approx(0.025, abs=1e-4)
+    assert "2.5 cm" in d.summary
+    assert "evidence/s/trace.jsonl" in d.evidence and "evidence/s/initial.yaml" in d.evidence
+
+
+def test_object_seen_correctly_then_moved_is_a_stale_observation(tmp_path):
+    true = (0.5, -0.2, 0.02)
+    ev = bundle(tmp_path, snap(true), snap((0.5, -0.15, 0.02), tcp_z=0.04),
+                [observe(true, true), grasp(true), close(None)], code="grasp.missed", leaf="CloseOnObject")
+    d = diagnose(session(), ev)
+    assert d.cause == "object_moved"
+    assert d.facts["moved_after_observation_m"] == pytest.approx(0.05, abs=1e-4)
+
+
+def test_ground_truth_at_observation_time_wins_over_the_initial_snapshot(tmp_path):
+    # The session began with the cube pinned at (0.52, -0.2); backing off let it settle at
+    # (0.54, -0.2), where it was seen correctly: not a perception error.
+    ev = bundle(tmp_path, snap((0.52, -0.2, 0.027)), snap((0.54, -0.2, 0.02)),
+                [observe((0.54, -0.2, 0.02), (0.54, -0.2, 0.02)), grasp((0.54, -0.2, 0.02)), close(None)],
+                code="grasp.missed", leaf="CloseOnObject")
+    assert diagnose(session(), ev).cause == "grasp_missed"
+
+
+def test_closed_on_the_object_then_lost_it_is_a_slip(tmp_path):
+    true = (0.5, -0.2, 0.02)
+    ev = bundle(tmp_path, snap(true), snap(true, tcp_z=0.17),
+                [observe(true, true), grasp(true), close("cube")], code="grasp.slipped", leaf="CheckHolding")
+    d = diagnose(session(), ev)
+    assert d.cause == "object_slipped" and "CheckHolding" in d.summary
+
+
+def test_place_without_the_object_in_hand_is_an_unmet_precondition(tmp_path):
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, -0.2, 0.02)),
+                [observe((0.5, -0.2, 0.02), (0.5, -0.2, 0.02))], code="grasp.slipped", leaf="CheckHolding")
+    s = session(skill="place", accept=PLACE_ACCEPT, params={"object": "cube", "region": "goal"})
+    d = diagnose(s, ev)
+    assert d.cause == "precondition_unmet"
+    assert RecoveryPlanner().plan(s, d) is None  # redoing the upstream node is not a strategy change
+
+
+@pytest.mark.parametrize("code,leaf,cause,variant", [
+    ("ik.unreachable", "SolveIK", "ik_unreachable", None),
+    ("planning.failed", "PlanPath", "planning_failed", None),
+    ("execution.tracking", "Execute", "collision", "planned"),
+    ("execution.tracking", "Lift", "collision", "cartesian"),
+    ("target.error", None, "runtime_error", None),
+])
+def test_runtime_error_codes_map_onto_the_taxonomy(tmp_path, code, leaf, cause, variant):
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, -0.2, 0.02)), code=code, leaf=leaf)
+    d = diagnose(session(), ev)
+    assert d.cause == cause and d.category == CAUSES[cause][0]
+    assert d.facts.get("variant") == variant
+
+
+def test_safety_events_and_timeouts_come_first(tmp_path):
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, -0.2, 0.02)),
+                events=[{"code": "safety.workspace"}], code="execution.tracking", leaf="Execute", name="a")
+    assert diagnose(session(), ev).cause == "safety_intervention"
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, -0.2, 0.02)), status="timed_out",
+                code="timeout.execution", name="b")
+    assert diagnose(session(), ev).cause == "timeout"
+
+
+def test_replan_verdict_carries_diagnosis_and_the_first_rung_of_its_ladder(tmp_path):
+    true, seen = (0.5, -0.2, 0.02), (0.5, -0.23, 0.02)
+    ev = bundle(tmp_path, snap(true), snap(true, tcp_z=0.05), [observe(seen, true), grasp(seen), close(None)],
+                code="grasp.missed", leaf="CloseOnObject")
+    v = SessionVerifier().verify(session(), ev)
+    assert v.verdict == "replan"
+    assert [c.status for c in v.criteria] == ["unsatisfied", "unsatisfied"]
+    assert all(c.evidence == ["evidence/s/initial.yaml", "evidence/s/terminal.yaml"] for c in v.criteria)
+    assert v.diagnosis.cause == "perception_error"
+    assert v.revision.strategy == "average_frames" and v.revision.step == 1
+    # the hand was left 5 cm above the table: the child backs off and lets the scene settle first
+    assert v.revision.parameters == {"observe_samples": 16, "backoff_m": 0.10, "settle_s": 0.5}
+    assert set(v.evidence) >= {"evidence/s/trace.jsonl", "evidence/s/initial.yaml", "evidence/s/terminal.yaml"}
+
+
+def _replanned(rec: SessionRecord, cause: str) -> SessionRecord:
+    """``rec`` with a replan verdict for ``cause`` on its last attempt (as the coordinator leaves it)."""
+    from phyagentos.protocol import Diagnosis
+
+    verdict = Verdict(verdict="replan", reason="x", at=utc_now(),
+                      diagnosis=Diagnosis(cause=cause, category=CAUSES[cause][0], summary="x"))
+    return rec.model_copy(update={"attempts": [Attempt(number=1, started_at=utc_now(), verdict=verdict)]})
+
+
+def test_same_cause_again_climbs_the_ladder_and_an_exhausted_ladder_is_failure(tmp_path):
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, -0.2, 0.02), tcp_z=0.3),
+                [observe((0.5, -0.2, 0.02), (0.5, -0.2, 0.02)), grasp((0.5, -0.2, 0.02)), close("cube")],
+                code="grasp.slipped", leaf="CheckHolding")
+    root = _replanned(session(), "object_slipped")
+    child = session(params={"object": "cube", "grip_force_n": 40.0}, sid="r-pick_cube-2", parent=root.session_id)
+    v = SessionVerifier(max_replans=3).verify(child, ev, history=[root])
+    assert v.verdict == "replan" and v.revision.strategy == "firmest_grip_slower_transfer" and v.revision.step == 2
+    assert v.revision.parameters == {"grip_force_n": 70.0, "transfer_velocity_scale": 0.5, "lift_velocity_scale": 0.15}
+    grandchild = _replanned(child, "object_slipped")
+    v = SessionVerifier(max_replans=3).verify(session(sid="r-pick_cube-3"), ev, history=[root, grandchild])
+    assert v.verdict == "failure" and "no recovery strategy left for object_slipped" in v.reason
+
+
+def test_a_step_memory_already_applied_is_skipped(tmp_path):
+    from phyagentos.protocol import Diagnosis
+
+    d = Diagnosis(cause="perception_error", category="perception", summary="x")
+    already = session(params={"object": "cube", "observe_samples": 16})
+    rev = RecoveryPlanner().plan(already, d)
+    assert rev.strategy == "average_and_re_observe" and rev.parameters == {"observe_samples": 32, "reobserve_samples": 16}
+
+
+def test_revisions_only_set_parameters_the_skill_declares():
+    from phyagentos.protocol import Diagnosis
+
+    hold = session(skill="hold", accept={"still": {}}, params={"duration_s": 1.0})
+    d = Diagnosis(cause="criteria_unmet", category="verifier", summary="x")
+    assert RecoveryPlanner().plan(hold, d) is None  # hold declares none of careful_retry's parameters
+    assert set(LADDERS) >= {"perception_error", "object_moved", "grasp_missed", "object_slipped", "planning_failed",
+                            "ik_unreachable", "collision/planned", "collision/cartesian", "timeout"}
+
+
+def test_a_timeout_revision_lengthens_the_deadline():
+    from phyagentos.protocol import Diagnosis, Limits
+
+    s = session().model_copy(update={"limits": Limits(execution_timeout_s=60)})
+    rev = RecoveryPlanner().plan(s, Diagnosis(cause="timeout", category="timeout", summary="x"))
+    assert rev.strategy == "longer_deadline" and rev.limits == {"execution_timeout_s": 120.0}
+
+
+class UprightJudge:
+    """A judge of our own behind the Verifier interface: the object must end upright."""
+
+    name = "upright"
+
+    def judge(self, session, evidence):
+        from phyagentos.agent.criteria import Criterion, CriterionOutcome
+
+        c = Criterion(name="upright", args={"object": "cube"}, text="upright(object=cube)")
+        cube = next(e for e in evidence.terminal["entities"] if e["name"] == "cube")
+        ok = abs(cube["quat_wxyz"][0]) > 0.99
+        return [CriterionOutcome(c, "satisfied" if ok else "unsatisfied", "upright" if ok else "tipped over",
+                                 evidence.refs("terminal"))]
+
+
+def test_judges_compose_behind_one_interface(tmp_path):
+    from phyagentos.agent.verifier import PredicateVerifier
+
+    true = (0.5, -0.2, 0.17)
+    terminal = snap(true, holding=True)
+    terminal["entities"][0]["quat_wxyz"] = [0.7, 0.7, 0, 0]
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), terminal, [close("cube")], status="completed")
+    alone = SessionVerifier().verify(session(), ev)
+    both = SessionVerifier([PredicateVerifier(), UprightJudge()]).verify(session(), ev)
+    assert alone.verdict == "success"
+    assert both.verdict == "replan" and both.verifier == "predicates+upright"
+    assert [(c.name, c.status) for c in both.criteria][-1] == ("upright", "unsatisfied")

@@ -112,15 +112,23 @@ def _cmd_run(args, out: Console, err: Console) -> int:
     if args.json:
         print(json.dumps(report.to_dict(), ensure_ascii=False))
     else:
+        # Session ids are "<run id>-<node>-<generation>": the title carries the run id,
+        # rows show the rest, so the table stays readable in 80 columns.
         table = Table(title=f"run {report.run_id}  ({report.wall_time_s:.1f} s)")
-        for col in ("node", "session", "skill", "status", "verdict", "cause", "strategy", "duration"):
-            table.add_column(col, overflow="fold")
+        rows = report.sessions
+        show_recovery = any(s.cause or s.strategy or s.memory for s in rows)
+        columns = ["node", "session", "skill", "status", "verdict"] + (["cause", "strategy"] if show_recovery else []) + ["duration"]
+        for col in columns:
+            table.add_column(col, overflow="fold", no_wrap=col in ("status", "verdict", "duration"))
         colours = {"succeeded": "green", "failed": "red", "rejected": "red", "timed_out": "red", "replanned": "yellow"}
-        for s in report.sessions:
+        for s in rows:
             colour = colours.get(s.status, "white")
-            strategy = s.strategy or ("memory: " + ", ".join(s.memory) if s.memory else "-")
-            table.add_row(s.node, s.session_id, s.skill, f"[{colour}]{s.status}[/{colour}]", s.verdict or "-",
-                          s.cause or "-", strategy, f"{s.duration_s:.2f} s" if s.duration_s is not None else "-")
+            short = s.session_id.removeprefix(f"{report.run_id}-")
+            cells = [s.node, short, s.skill, f"[{colour}]{s.status}[/{colour}]", s.verdict or "-"]
+            if show_recovery:
+                cells += [s.cause or "-", s.strategy or ("memory: " + ", ".join(s.memory) if s.memory else "-")]
+            cells.append(f"{s.duration_s:.2f} s" if s.duration_s is not None else "-")
+            table.add_row(*cells)
         out.print(table)
         for s in report.sessions:
             if s.status != "succeeded" and s.reason:

@@ -20,7 +20,6 @@ import json
 import logging
 import math
 import os
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +29,9 @@ import mujoco
 import numpy as np
 
 from phyagentos.errors import TargetError, format_choices
+from phyagentos.protocol.atomic import atomic_write_bytes
 
+from .state_file import read_state_npz
 from .base import BaseRolloutTarget, ExecutionResult
 from .scene import (
     ARM_JOINT_NAMES,
@@ -912,17 +913,7 @@ class MuJoCoTarget(BaseRolloutTarget):
             full_state=full,
             fingerprint=np.array(self._fingerprint()),
         )
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=str(p.parent))
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(buf.getvalue())
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, p)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        atomic_write_bytes(p, buf.getvalue())  # temp file, fsync, rename, dir fsync
         return p
 
     def load_state(self, path: str | os.PathLike) -> None:
@@ -931,13 +922,7 @@ class MuJoCoTarget(BaseRolloutTarget):
         self._check_open()
         m, d = self._model, self._data
         p = Path(path)
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except FileNotFoundError as exc:
-            raise TargetError(f"state file {p} does not exist") from exc
-        except Exception as exc:
-            raise TargetError(f"state file {p} is not a readable npz: {exc}") from exc
+        data = read_state_npz(p)
         missing = [k for k in ("qpos", "qvel", "ctrl", "act", "time") if k not in data]
         if missing:
             raise TargetError(f"state file {p} lacks {', '.join(missing)}")

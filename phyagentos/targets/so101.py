@@ -39,7 +39,6 @@ import json
 import logging
 import math
 import os
-import tempfile
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
@@ -50,7 +49,9 @@ import mujoco
 import numpy as np
 
 from phyagentos.errors import TargetError, format_choices
+from phyagentos.protocol.atomic import atomic_write_bytes
 
+from .state_file import read_state_npz
 from .base import BaseRolloutTarget, ExecutionResult
 from .mujoco_target import GripperResult
 from .scene import DEFAULT_SCENE, SceneSpec, object_joint_name, obstacle_geom_name, region_geom_name
@@ -678,30 +679,14 @@ class SO101Target(BaseRolloutTarget):
         p.parent.mkdir(parents=True, exist_ok=True)
         buf = io.BytesIO()
         np.savez(buf, format=np.array(_STATE_FORMAT), full_state=full, fingerprint=np.array(self._fingerprint()))
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=str(p.parent))
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(buf.getvalue())
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, p)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        atomic_write_bytes(p, buf.getvalue())  # temp file, fsync, rename, dir fsync
         return p
 
     def load_state(self, path: str | os.PathLike) -> None:
         """Restore a state written by :meth:`save_state` for the same scene (TargetError otherwise)."""
         self._check_open()
         p = Path(path)
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except FileNotFoundError as exc:
-            raise TargetError(f"state file {p} does not exist") from exc
-        except Exception as exc:
-            raise TargetError(f"state file {p} is not a readable npz: {exc}") from exc
+        data = read_state_npz(p)
         if str(data.get("fingerprint")) != self._fingerprint():
             raise TargetError(f"state file {p} was saved from a different scene or robot")
         mujoco.mj_setState(self._model, self._data, data["full_state"], mujoco.mjtState.mjSTATE_INTEGRATION)

@@ -11,7 +11,7 @@ from phyagentos.protocol import Attempt, Diagnosis, Revision, SessionContext, Se
 from phyagentos.protocol.lifecycle import utc_now
 
 COND = Conditions(goal="g/pick_cube", skill="pick", target="franka_tabletop", embodiment="mujoco_franka",
-                  object="cube", object_class="box-4x4x4cm", risk_factors=("low_friction",))
+                  object="cube", object_class="box-medium", risk_factors=("slipped_before",))
 SLIP = Diagnosis(cause="object_slipped", category="execution", summary="slipped",
                  evidence=["evidence/r-pick_cube-1/trace.jsonl"])
 FIRM = Revision(strategy="firmer_grip", cause="object_slipped", step=1, parameters={"grip_force_n": 40.0})
@@ -43,8 +43,8 @@ def test_a_proposed_correction_is_a_candidate_not_a_lesson(book):
     cand = doc.candidates[0]
     assert not cand.verified and cand.cause == "object_slipped" and cand.revision == {"grip_force_n": 40.0}
     assert cand.provenance == ["r-pick_cube-1"] and cand.evidence == SLIP.evidence
-    assert cand.scope == {"embodiment": "mujoco_franka", "skill": "pick", "object_class": "box-4x4x4cm",
-                          "risk_factors": ["low_friction"]}
+    assert cand.scope == {"embodiment": "mujoco_franka", "skill": "pick", "object_class": "box-medium",
+                          "risk_factors": ["slipped_before"]}
     assert book.retrieve(COND) == []  # never retrieved before a verdict confirms it
 
 

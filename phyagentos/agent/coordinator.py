@@ -15,6 +15,20 @@ process (``phyagentos agent``) or interleaved with the supervisor (``phyagentos 
    compile pending sessions for nodes whose dependencies succeeded, each with the
    memory the ContextBuilder retrieves for it (recorded in the session's ``context``);
 4. write TASK.md.
+
+Two recoveries change more than parameters (:mod:`phyagentos.agent.recovery`):
+
+- *another view* (``Revision.skill == "observe"``): the child session only looks again;
+  the criteria are then judged on the acting session's evidence with the child's
+  terminal snapshot as the terminal state (the session that acted is judged, with a
+  better look at its result);
+- *re-pick upstream* (``Revision.reopen``): a place that found nothing in the hand
+  re-opens the upstream node that acquires the object. The coordinator compiles a new
+  session of that node (parent: its latest session, ``recovery`` naming the cause),
+  records the re-opening on the DAG edge (``reopened_by`` on the edge upstream ->
+  node, and the new session id among the failed session's ``child_session_ids``), and
+  compiles the node's child once the re-pick succeeded; if it fails, the node is
+  blocked.
 """
 
 from __future__ import annotations
@@ -22,16 +36,22 @@ from __future__ import annotations
 import logging
 import os
 import socket
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
+from typing import Any
 
+import networkx as nx
+
+from phyagentos.errors import VerifierError
 from phyagentos.protocol import LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace, is_expired, new_lease
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
 from . import dag as dagmod
+from .declared import declared_scene
 from .goal_graph import GoalGraph
 from .memory import ContextBuilder, KnowledgeBase, LessonBook, PromotionPolicy, promote
 from .memory.conditions import Conditions
+from .memory.observed import ObservedObject, observe_object
 from .memory.promotion import initial_state_fingerprint
 from .recovery import SITUATIONAL
 from .session_compiler import SessionCompiler, new_run_id
@@ -122,6 +142,7 @@ class AgentCoordinator:
         self.dag = dagmod.to_digraph(graph)
         self.compiler = SessionCompiler(workspace, graph, self.run_id, seed=seed, evaluation=evaluation)
         self.verifier = verifier or SessionVerifier()
+        self.verifier.set_upstream(self.upstream_acquirer)
         self.context_builder = ContextBuilder(workspace, use_memory=use_memory)
         self.consolidate = consolidate
         self.keep_success_images = keep_success_images
@@ -142,10 +163,79 @@ class AgentCoordinator:
         return latest
 
     def node_states(self, sessions: list[SessionRecord] | None = None) -> dict[str, str]:
-        """Node id -> TASK.md state, with blocked nodes propagated."""
+        """Node id -> TASK.md state, with blocked nodes propagated. A node waiting for a
+        re-opened upstream node is blocked when that node ends unsuccessfully."""
         latest = self.latest_by_node(sessions)
         states = {n: node_state_of(latest[n].state) if n in latest else dagmod.WAITING for n in self.graph.node_ids}
+        for node, (rec, upstream) in self._awaiting_reopen(latest).items():
+            if states.get(upstream) in dagmod.BLOCKING_STATES:
+                states[node] = dagmod.BLOCKED
         return dagmod.propagate_blocked(self.dag, states)
+
+    # -- re-opening upstream nodes -----------------------------------------
+
+    #: Skills that put an object into the gripper (a re-pick re-opens a node of these).
+    ACQUIRING_SKILLS = frozenset({"pick", "policy_pick"})
+
+    def upstream_acquirer(self, session: SessionRecord) -> str | None:
+        """The nearest DAG ancestor of ``session``'s node that acquires its ``object``
+        (a node of an :data:`ACQUIRING_SKILLS` skill with the same object), or ``None``."""
+        obj = session.parameters.get("object")
+        if not isinstance(obj, str) or session.node not in self.dag:
+            return None
+        ancestors = nx.ancestors(self.dag, session.node)
+        order = [n for n in reversed(dagmod.topological_order(self.dag)) if n in ancestors]
+        for n in order:
+            node = self.graph.get_node(n)
+            if node.skill in self.ACQUIRING_SKILLS and node.params.get("object") == obj:
+                return n
+        return None
+
+    @staticmethod
+    def _revision(rec: SessionRecord):
+        verdict = rec.attempts[-1].verdict if rec.attempts else None
+        return verdict.revision if verdict is not None else None
+
+    def _awaiting_reopen(self, latest: dict[str, SessionRecord]) -> dict[str, tuple[SessionRecord, str]]:
+        """Node -> (its replanned session, the upstream node it re-opened) for nodes whose
+        latest session re-opened an upstream node and has no child yet."""
+        out = {}
+        for node, rec in latest.items():
+            rev = self._revision(rec)
+            if rec.state == "replanned" and rev is not None and rev.reopen:
+                out[node] = (rec, rev.reopen)
+        return out
+
+    def reopen_edges(self, sessions: list[SessionRecord] | None = None) -> list[tuple[str, str, str, str]]:
+        """Recorded re-openings ``(upstream node, node, failed session, re-pick session)``;
+        also set as ``reopened_by`` on the DAG edge upstream -> node."""
+        edges = []
+        for rec in sessions if sessions is not None else self.sessions():
+            rev = self._revision(rec)
+            if rev is not None and rev.reopen and rec.child_session_ids:
+                edges.append((rev.reopen, rec.node, rec.session_id, rec.child_session_ids[0]))
+        for up, node, failed, repick in edges:
+            if self.dag.has_edge(up, node):
+                tags = self.dag.edges[up, node].setdefault("reopened_by", [])
+                if (failed, repick) not in tags:
+                    tags.append((failed, repick))
+        return edges
+
+    def _resume_after_reopen(self, sessions: list[SessionRecord]) -> int:
+        """Compile the child of every node whose re-opened upstream node has succeeded again."""
+        actions = 0
+        latest = self.latest_by_node(sessions)
+        for node_id, (rec, upstream) in self._awaiting_reopen(latest).items():
+            up = latest.get(upstream)
+            repick = rec.child_session_ids[0] if rec.child_session_ids else None
+            if up is None or up.session_id != repick or up.state != "succeeded":
+                continue
+            rev = self._revision(rec)
+            resume = rev.model_copy(update={"rationale": f"{rev.rationale}; upstream {repick} succeeded"})
+            self.compiler.compile_node(self.graph.get_node(node_id), parent=rec, parameters=dict(rec.parameters),
+                                       limits=rec.limits.model_dump(), context=rec.context, recovery=resume)
+            actions += 1
+        return actions
 
     def done(self) -> bool:
         """True when every node is terminal (succeeded, failed, blocked or cancelled)."""
@@ -164,13 +254,16 @@ class AgentCoordinator:
         for rec in sessions:
             if rec.state == "awaiting_replan":
                 actions += self._replan(rec.session_id)
+        actions += self._resume_after_reopen(self.sessions())
         sessions = self.sessions()
+        self.reopen_edges(sessions)
         states = self.node_states(sessions)
         for node_id in dagmod.ready_nodes(self.dag, states):
             node = self.graph.get_node(node_id)
             params, context = self.context_builder.build(goal=f"{self.graph.name}/{node.id}", skill=node.skill,
                                                          target=node.target, parameters=node.params,
-                                                         scene=self.graph.scene)
+                                                         scene=declared_scene(self.graph.scene),
+                                                         observed=self.observed(node.params.get("object"), sessions))
             self.compiler.compile_node(node, parameters=params, context=context)
             actions += 1
         self._write_task()
@@ -192,7 +285,8 @@ class AgentCoordinator:
         attempt = rec.attempts[-1]
         evidence = load_evidence(ws.root / attempt.evidence)
         history = self.lineage(rec)
-        verdict = self.verifier.verify(rec, evidence, history=history)
+        judged, judged_evidence = self._judged(rec, evidence, history)
+        verdict = self.verifier.verify(judged, judged_evidence, history=history, lineage_depth=len(history))
         if verdict.verdict == "success" and not self.keep_success_images:
             verdict = verdict.model_copy(update={"evidence": [r for r in verdict.evidence if r not in evidence.images]})
             self._prune_images(evidence)
@@ -207,6 +301,25 @@ class AgentCoordinator:
             self._consolidate(rec, verdict, evidence, history)
         return 1
 
+    def _judged(self, rec: SessionRecord, evidence: EvidenceBundle,
+                history: list[SessionRecord]) -> tuple[SessionRecord, EvidenceBundle]:
+        """What a verification judges: ``rec`` on its own evidence, or for an *another view*
+        child the nearest acting ancestor on its evidence with this view's terminal snapshot."""
+        if rec.recovery is None or rec.recovery.skill != "observe":
+            return rec, evidence
+        acting = next((h for h in reversed(history) if h.skill != "observe" and h.attempts
+                       and h.attempts[-1].evidence), None)
+        if acting is None:
+            return rec, evidence
+        try:
+            base = load_evidence(self.workspace.root / acting.attempts[-1].evidence)
+        except VerifierError as exc:
+            logger.warning("acting session %s evidence unreadable: %s", acting.session_id, exc)
+            return rec, evidence
+        files = {**base.files, "terminal": f"../{evidence.directory.name}/{evidence.files.get('terminal', '')}"}
+        merged = replace(base, terminal=evidence.terminal, files=files)
+        return acting, merged
+
     def lineage(self, rec: SessionRecord) -> list[SessionRecord]:
         """``rec``'s ancestors along ``parent_session_id``, oldest first."""
         chain: list[SessionRecord] = []
@@ -220,7 +333,23 @@ class AgentCoordinator:
         if rec.context is not None and rec.context.conditions:
             return Conditions.from_dict(rec.context.conditions)
         return self.context_builder.conditions(goal=f"{self.graph.name}/{rec.node}", skill=rec.skill,
-                                               target=rec.target, parameters=rec.parameters, scene=rec.scene)
+                                               target=rec.target, parameters=rec.parameters,
+                                               scene=declared_scene(rec.scene))
+
+    def observed(self, obj: Any, sessions: list[SessionRecord] | None = None) -> ObservedObject | None:
+        """What this run's finished sessions observed of object ``obj`` (perceived geometry,
+        mass estimated from the wrist load, slips), from their evidence bundles."""
+        if not isinstance(obj, str):
+            return None
+        bundles = []
+        for s in sessions if sessions is not None else self.sessions():
+            for attempt in s.attempts:
+                if attempt.evidence and (self.workspace.root / attempt.evidence / "bundle.yaml").is_file():
+                    try:
+                        bundles.append(load_evidence(self.workspace.root / attempt.evidence))
+                    except VerifierError as exc:  # an unreadable bundle contributes nothing, never stops the run
+                        logger.warning("evidence %s unreadable for observations: %s", attempt.evidence, exc)
+        return observe_object(bundles, obj)
 
     def _prune_images(self, evidence: EvidenceBundle) -> None:
         # Retention: a success's verdict, snapshots and trace stay; its RGB images go.
@@ -246,17 +375,46 @@ class AgentCoordinator:
         rec = ws.load_session(session_id)
         verdict = rec.attempts[-1].verdict if rec.attempts else None
         revision = verdict.revision if verdict is not None else None
-        params = {**rec.parameters, **(revision.parameters if revision else {})}
-        limits = {**rec.limits.model_dump(), **(revision.limits if revision else {})}
-        child = self.compiler.compile_node(self.graph.get_node(rec.node), parent=rec, parameters=params,
-                                           limits=limits, context=rec.context, recovery=revision)
+        if revision is not None and revision.reopen:
+            return self._reopen(rec, revision)
+        history = self.lineage(rec)
+        # an another-view session's child continues the acting session's parameters
+        acting = rec if rec.skill != "observe" else next((h for h in reversed(history) if h.skill != "observe"), rec)
+        node = self.graph.get_node(rec.node)
+        if revision is not None and revision.skill:
+            skill, params = revision.skill, dict(revision.parameters)
+        else:
+            skill = None
+            params = {**acting.parameters, **(revision.parameters if revision else {})}
+        limits = {**acting.limits.model_dump(), **(revision.limits if revision else {})}
+        child = self.compiler.compile_node(node, parent=rec, parameters=params, limits=limits, context=acting.context,
+                                           recovery=revision, skill=skill)
         with ws.session_lock(session_id):
             rec = ws.load_session(session_id)
             rec.child_session_ids.append(child.session_id)
             SessionLifecycle(rec, persist=ws.save_session).fire("replanned", reason=f"child {child.session_id}")
-        if self.consolidate and revision is not None and verdict.diagnosis is not None:
-            LessonBook(ws).propose(parent=rec, child=child, diagnosis=verdict.diagnosis, revision=revision,
-                                   conditions=self._conditions(rec))
+        if self.consolidate and revision is not None and verdict.diagnosis is not None and not revision.skill:
+            LessonBook(ws).propose(parent=acting, child=child, diagnosis=verdict.diagnosis, revision=revision,
+                                   conditions=self._conditions(acting))
+        return 1
+
+    def _reopen(self, rec: SessionRecord, revision) -> int:
+        """Re-open ``revision.reopen`` upstream of ``rec`` (a re-pick); ``rec``'s node runs
+        again once it succeeded (:meth:`_resume_after_reopen`)."""
+        ws = self.workspace
+        upstream = self.latest_by_node().get(revision.reopen)
+        node = self.graph.get_node(revision.reopen)
+        params = dict(upstream.parameters) if upstream is not None else dict(node.params)
+        repick = self.compiler.compile_node(node, parent=upstream, parameters=params,
+                                            context=upstream.context if upstream is not None else None,
+                                            recovery=revision)
+        with ws.session_lock(rec.session_id):
+            rec = ws.load_session(rec.session_id)
+            rec.child_session_ids.append(repick.session_id)
+            SessionLifecycle(rec, persist=ws.save_session).fire(
+                "replanned", reason=f"re-opened {revision.reopen} as {repick.session_id}")
+        logger.info("session %s: re-opened upstream node %s as %s", rec.session_id, revision.reopen,
+                    repick.session_id)
         return 1
 
     def _write_task(self) -> None:

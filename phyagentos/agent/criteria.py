@@ -13,10 +13,22 @@ name to arguments, parsed without ``eval``::
       unchanged: {object: red, tol_m: 0.01}      # red did not move
       articulated: {object: microwave, max: -0.6}  # its joint (rad or m) ends in [min, max]
 
-Snapshots are ENVIRONMENT-style mappings: ``entities`` (name, kind, position (3,) m
-world, quat_wxyz, size (3,) half extents m, attributes) and ``relations``. The
-predicates judge geometry themselves rather than trusting the target's relations,
-so a mis-reporting target cannot pass its own exam.
+Snapshots are the runtime's *perceived* snapshots (CONTRACT_9 section 3): ``entities``
+(name, kind, position (3,) m world, quat_wxyz, size (3,) half extents m, attributes with
+``confidence`` 0..1 and ``position_std_m``, the 1-sigma horizontal uncertainty) and
+``relations`` (``holding`` from proprioception plus perceived geometry, with a confidence).
+Geometric predicates judge the perceived geometry themselves.
+
+Uncertainty (the formula): with sigma the entity's ``position_std_m`` (for a predicate
+over two perceived entities or two snapshots, sigma = sqrt(sigma_a^2 + sigma_b^2)), a
+criterion is ``satisfied`` only when it holds with a margin of 2 sigma (``inside``: the
+centre lies in the region's footprint shrunk by 2 sigma and rests within
+``REST_TOL_M + 2 sigma`` of its surface; ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
+rose >= min_height + 2 sigma), ``unsatisfied`` only when it fails by more than 2 sigma,
+and ``unknown`` in between (at 2 sigma a Gaussian error crosses the boundary with
+probability <= 2.3 %, one-sided). An entity absent from a snapshot, or with
+``confidence`` below :data:`CONFIDENCE_MIN`, makes the criterion ``unknown``: never
+guessed, never ``success``.
 """
 
 from __future__ import annotations
@@ -27,11 +39,18 @@ from typing import Any, Callable, Mapping
 
 from phyagentos.errors import VerifierError, format_choices
 
-__all__ = ["Criterion", "CriterionOutcome", "parse_criteria", "PREDICATES", "evaluate"]
+__all__ = ["Criterion", "CriterionOutcome", "parse_criteria", "PREDICATES", "evaluate", "confidence", "sigma",
+           "CONFIDENCE_MIN", "REST_TOL_M", "CLOSED_OPENING_M"]
 
 # Tolerances, metres. A resting box's centre sits at its half height above its
 # support; 1 cm absorbs contact penetration and settling.
 REST_TOL_M = 0.01
+#: Perceived entities and relations below this confidence do not count: a criterion
+#: naming one is ``unknown``. 0.5: an association no better than a coin flip.
+CONFIDENCE_MIN = 0.5
+#: Per-finger opening above which a closed gripper holds *something*, m (CONTRACT_9
+#: section 3: holding needs more than ~2 mm).
+CLOSED_OPENING_M = 0.002
 
 
 @dataclass(frozen=True)
@@ -123,61 +142,128 @@ def _entities(snapshot: Mapping) -> dict[str, Mapping]:
     return {e["name"]: e for e in snapshot.get("entities", [])}
 
 
-def _holding(snapshot: Mapping, obj: str) -> bool:
-    return any(r.get("relation") == "holding" and r.get("object") == obj for r in snapshot.get("relations", []))
+def _attr(ent: Mapping, key: str, default: float) -> float:
+    value = (ent.get("attributes") or {}).get(key)
+    return default if value is None else float(value)
 
 
-def _rests_inside(ent: Mapping, region: Mapping) -> tuple[bool, str]:
+def confidence(ent: Mapping) -> float:
+    """An entity's ``attributes.confidence`` (0..1). Declared entities (regions, obstacles)
+    and proprioceptive ones carry none and count as certain (1.0)."""
+    return _attr(ent, "confidence", 1.0)
+
+
+def sigma(ent: Mapping) -> float:
+    """An entity's 1-sigma horizontal position uncertainty ``attributes.position_std_m``, m
+    (0 for declared and proprioceptive entities)."""
+    return _attr(ent, "position_std_m", 0.0)
+
+
+def _holding_relation(snapshot: Mapping, obj: str) -> Mapping | None:
+    return next((r for r in snapshot.get("relations", [])
+                 if r.get("relation") == "holding" and r.get("object") == obj), None)
+
+
+def _gripper_opening(snapshot: Mapping) -> float | None:
+    grip = next((e for e in snapshot.get("entities", []) if e.get("kind") == "gripper"), None)
+    if grip is None:
+        return None
+    opening = (grip.get("attributes") or {}).get("opening_m")
+    return None if opening is None else float(opening)
+
+
+def _held(snapshot: Mapping, obj: str) -> tuple[bool | None, str]:
+    """Whether the gripper holds ``obj``: ``True``/``False``, or ``None`` when the perceived
+    relation is below the confidence threshold, or there is no relation while the gripper
+    is closed on something and ``obj`` is not seen confidently elsewhere."""
+    rel = _holding_relation(snapshot, obj)
+    if rel is not None:
+        conf = float(rel.get("confidence", 1.0))
+        if conf >= CONFIDENCE_MIN:
+            return True, f"gripper holds {obj} (confidence {conf:.2f})"
+        return None, f"holding {obj} perceived with confidence {conf:.2f} < {CONFIDENCE_MIN}"
+    ent = _entities(snapshot).get(obj)
+    opening = _gripper_opening(snapshot)
+    if (ent is None or confidence(ent) < CONFIDENCE_MIN) and opening is not None and opening > CLOSED_OPENING_M:
+        return None, (f"gripper closed on something (opening {opening * 1000:.1f} mm) and {obj} not seen "
+                      f"confidently elsewhere")
+    return False, f"gripper does not hold {obj}"
+
+
+def _need(criterion, refs, *pairs) -> CriterionOutcome | None:
+    """``unknown`` if an entity a criterion names is absent from a snapshot, or perceived
+    with confidence below :data:`CONFIDENCE_MIN` (never guessed)."""
+    for snap_name, snap, key in pairs:
+        ent = _entities(snap).get(key)
+        if ent is None:
+            return CriterionOutcome(criterion, "unknown", f"{key!r} not in the {snap_name} snapshot", refs)
+        if confidence(ent) < CONFIDENCE_MIN:
+            return CriterionOutcome(criterion, "unknown", f"{key!r} perceived with confidence "
+                                    f"{confidence(ent):.2f} < {CONFIDENCE_MIN} in the {snap_name} snapshot", refs)
+    return None
+
+
+def _band(c: Criterion, refs, inside: bool, outside: bool, subject: str, verb: str, detail: str) -> CriterionOutcome:
+    """Three-way decision: satisfied with a 2-sigma margin, unsatisfied with a 2-sigma
+    margin, else unknown (the uncertainty band straddles the boundary: look again)."""
+    if inside:
+        return CriterionOutcome(c, "satisfied", f"{subject} {verb}: {detail}", refs)
+    if outside:
+        return CriterionOutcome(c, "unsatisfied", f"{subject} not {verb}: {detail}", refs)
+    return CriterionOutcome(c, "unknown", f"{subject} {verb}? undecided within the perception uncertainty: {detail}",
+                            refs)
+
+
+def _footprint(ent: Mapping, region: Mapping, s: float) -> tuple[bool, bool, str]:
+    """(inside with margin, outside with margin, detail) of ``ent``'s centre in ``region``'s
+    horizontal footprint and resting on its surface, with uncertainty ``s`` (m, 1 sigma)."""
     (x, y, z), (hx, hy, _) = ent["position"], region["size"]
     cx, cy, cz = region["position"]
     dx, dy = abs(x - cx), abs(y - cy)
-    in_xy = dx <= hx and dy <= hy
     rest_z = cz + ent["size"][2]
-    resting = abs(z - rest_z) <= REST_TOL_M
-    return in_xy and resting, (
-        f"|dx|={dx:.3f} m (<= {hx:.3f}), |dy|={dy:.3f} m (<= {hy:.3f}), z={z:.3f} m (rest {rest_z:.3f} +- {REST_TOL_M})"
-    )
+    dz = abs(z - rest_z)
+    m = 2.0 * s
+    inside = dx <= hx - m and dy <= hy - m and dz <= REST_TOL_M + m
+    outside = dx > hx + m or dy > hy + m or dz > REST_TOL_M + m
+    return inside, outside, (f"|dx|={dx:.3f} m (<= {hx:.3f}), |dy|={dy:.3f} m (<= {hy:.3f}), z={z:.3f} m "
+                             f"(rest {rest_z:.3f} +- {REST_TOL_M}), 2 sigma {m:.3f} m")
 
 
 def evaluate(criterion: Criterion, initial: Mapping, terminal: Mapping, *, refs: tuple[str, ...] = ()) -> CriterionOutcome:
-    """Judge one criterion on the initial and terminal snapshots.
+    """Judge one criterion on the initial and terminal (perceived) snapshots.
 
-    Returns ``unknown`` (never a guess) when an entity the criterion names is
-    absent from the evidence.
+    Returns ``unknown`` (never a guess) when an entity the criterion names is absent
+    from the evidence or perceived with confidence below :data:`CONFIDENCE_MIN`, or when
+    the 2-sigma uncertainty band of a perceived position straddles the criterion's
+    boundary (see the module docstring).
     """
     return _EVALUATORS[criterion.name](criterion, initial, terminal, refs)
 
 
-def _need(criterion, refs, *pairs) -> CriterionOutcome | None:
-    for snap_name, snap, key in pairs:
-        if key not in _entities(snap):
-            return CriterionOutcome(criterion, "unknown", f"{key!r} not in the {snap_name} snapshot", refs)
-    return None
-
-
 def _eval_holding(c, initial, terminal, refs):
-    obj = c.args["object"]
-    if (miss := _need(c, refs, ("terminal", terminal, obj))):
-        return miss
-    ok = _holding(terminal, obj)
-    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied", f"gripper {'holds' if ok else 'does not hold'} {obj}", refs)
+    held, detail = _held(terminal, c.args["object"])
+    return CriterionOutcome(c, {True: "satisfied", False: "unsatisfied", None: "unknown"}[held], detail, refs)
 
 
 def _eval_released(c, initial, terminal, refs):
     obj = c.args["object"]
-    if (miss := _need(c, refs, ("terminal", terminal, obj))):
-        return miss
-    ok = not _holding(terminal, obj)
-    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied", f"gripper {'released' if ok else 'still holds'} {obj}", refs)
+    held, detail = _held(terminal, obj)
+    if held is None:
+        return CriterionOutcome(c, "unknown", detail, refs)
+    return CriterionOutcome(c, "unsatisfied" if held else "satisfied",
+                            f"gripper {'still holds' if held else 'released'} {obj}", refs)
 
 
 def _eval_lifted(c, initial, terminal, refs):
     obj = c.args["object"]
     if (miss := _need(c, refs, ("initial", initial, obj), ("terminal", terminal, obj))):
         return miss
-    dz = _entities(terminal)[obj]["position"][2] - _entities(initial)[obj]["position"][2]
-    ok = dz >= float(c.args["min_height"])
-    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied", f"{obj} rose {dz:.3f} m (need >= {c.args['min_height']})", refs)
+    e0, e1 = _entities(initial)[obj], _entities(terminal)[obj]
+    dz = e1["position"][2] - e0["position"][2]
+    need = float(c.args["min_height"])
+    m = 2.0 * math.hypot(sigma(e0), sigma(e1))
+    return _band(c, refs, dz >= need + m, dz < need - m, obj, "lifted",
+                 f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m)")
 
 
 def _eval_inside(c, initial, terminal, refs):
@@ -185,10 +271,11 @@ def _eval_inside(c, initial, terminal, refs):
     if (miss := _need(c, refs, ("terminal", terminal, obj), ("terminal", terminal, region))):
         return miss
     ents = _entities(terminal)
-    ok, detail = _rests_inside(ents[obj], ents[region])
-    if _holding(terminal, obj):
-        ok, detail = False, detail + "; still held by the gripper"
-    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied", f"{obj} {'inside' if ok else 'not inside'} {region}: {detail}", refs)
+    held, _ = _held(terminal, obj)
+    inside, outside, detail = _footprint(ents[obj], ents[region], sigma(ents[obj]))
+    if held:
+        inside, outside, detail = False, True, detail + "; still held by the gripper"
+    return _band(c, refs, inside and held is False, outside, obj, f"inside {region}", detail)
 
 
 def _eval_on(c, initial, terminal, refs):
@@ -196,16 +283,20 @@ def _eval_on(c, initial, terminal, refs):
     if (miss := _need(c, refs, ("terminal", terminal, obj), ("terminal", terminal, support))):
         return miss
     ents = _entities(terminal)
+    o, s = ents[obj], ents[support]
+    m = 2.0 * math.hypot(sigma(o), sigma(s))
     # the support's top face is at its centre + half height
-    top = ents[support]["position"][2] + ents[support]["size"][2]
-    z = ents[obj]["position"][2]
-    resting = abs(z - (top + ents[obj]["size"][2])) <= REST_TOL_M
-    sx, sy = ents[support]["size"][:2]
-    dx = abs(ents[obj]["position"][0] - ents[support]["position"][0])
-    dy = abs(ents[obj]["position"][1] - ents[support]["position"][1])
-    ok = resting and dx <= sx and dy <= sy and not _holding(terminal, obj)
-    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied",
-                            f"{obj} {'on' if ok else 'not on'} {support}: |dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f})", refs)
+    top = s["position"][2] + s["size"][2]
+    z = o["position"][2]
+    dz = abs(z - (top + o["size"][2]))
+    sx, sy = s["size"][:2]
+    dx = abs(o["position"][0] - s["position"][0])
+    dy = abs(o["position"][1] - s["position"][1])
+    held, _ = _held(terminal, obj)
+    inside = dz <= REST_TOL_M + m and dx <= sx - m and dy <= sy - m and held is False
+    outside = dz > REST_TOL_M + m or dx > sx + m or dy > sy + m or bool(held)
+    return _band(c, refs, inside, outside, obj, f"on {support}",
+                 f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m")
 
 
 def _eval_still(c, initial, terminal, refs):
@@ -229,10 +320,12 @@ def _eval_unchanged(c, initial, terminal, refs):
     obj = c.args["object"]
     if (miss := _need(c, refs, ("initial", initial, obj), ("terminal", terminal, obj))):
         return miss
-    p0, p1 = _entities(initial)[obj]["position"], _entities(terminal)[obj]["position"]
-    d = math.dist(p0, p1)
-    ok = d <= float(c.args["tol_m"])
-    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied", f"{obj} moved {d:.3f} m (tolerance {c.args['tol_m']})", refs)
+    e0, e1 = _entities(initial)[obj], _entities(terminal)[obj]
+    d = math.dist(e0["position"], e1["position"])
+    tol = float(c.args["tol_m"])
+    m = 2.0 * math.hypot(sigma(e0), sigma(e1))
+    return _band(c, refs, d <= tol - m, d > tol + m, obj, "unchanged",
+                 f"moved {d:.3f} m (tolerance {tol}, 2 sigma {m:.3f} m)")
 
 
 def _eval_articulated(c, initial, terminal, refs):

@@ -1,32 +1,48 @@
 """Diagnosis: why an attempt failed, read from its evidence bundle into a fixed taxonomy.
 
-Only evidence counts: the ground-truth snapshots before and after the session
-(``initial.yaml``, ``terminal.yaml``), the trace the runtime recorded (what it perceived,
-and on a simulated target the ground truth at that instant; which grasp it computed from
-which perceived pose; what the gripper closed on), the runtime's outcome and the safety
-and target events. The simulator's perturbation record (``perturbations.yaml``) is never
-read: the cause is found from what was perceived versus what was there.
+Only what a robot has counts (issue 9, part 5): the *perceived* snapshots before and
+after the session (``initial.yaml``, ``terminal.yaml``: entities with confidence and
+position uncertainty, relations from perceived geometry plus proprioception), the trace
+the runtime recorded (perceived observations, the grasp computed from which perceived
+pose, gripper commands with opening and effort, proprioception samples while holding,
+the wrist-load mass estimate, slips the runtime detected, IK and planner reports), the
+runtime's outcome and the safety and target events. The simulator's privileged channel
+is never read, so a cause is inferred the way it would be on hardware.
 
 =====================  ============  =====================================================
 cause                  category      evidence
 =====================  ============  =====================================================
 safety_intervention    safety        a ``safety.*`` event
 timeout                timeout       runtime outcome ``timed_out``
-precondition_unmet     execution     the skill needed the object in hand and it was not
-perception_error       perception    the perceived pose the grasp (or place) used was more
-                                     than :data:`PERCEPTION_TOL_M` off the ground truth at
-                                     that observation (without ground truth in the trace:
-                                     the initial snapshot, for the first observation)
-object_moved           perception    perceived where it was, but the object ended more than
-                                     :data:`MOVED_TOL_M` from there and was never grasped
-object_slipped         execution     the gripper closed on the object, later it was gone
-grasp_missed           execution     the gripper closed on nothing, perception was right
-ik_unreachable         policy        ``ik.*`` error
-planning_failed        policy        ``planning.*``, ``timing.*`` or ``motion.*`` error
-collision              execution     a tracking error (``facts.variant``: ``planned`` for the
-                                     planned transfer, ``cartesian`` for straight-line moves)
-placement_off          execution     released, but not where the criteria ask
+precondition_unmet     execution     the skill needed the object in hand and the gripper
+                                     held nothing before anything closed (after an
+                                     upstream release: recovery re-opens the upstream pick)
+ik_unreachable         policy        ``ik.*`` error: no configuration reaches the pose
+                                     computed from the perceived object (never retried)
+goal_in_collision      policy        the planner reports the goal configuration itself in
+                                     collision (``collision_at_goal`` in a ``plan`` entry, or
+                                     "goal configuration is invalid")
+planning_failed        policy        other ``planning.*``, ``timing.*``, ``motion.*`` error
+collision              execution     a tracking error during a motion (``facts.variant``:
+                                     ``planned`` transfer or ``cartesian`` straight move)
+object_slipped         execution     while holding, a ``slip`` entry, the opening closing by
+                                     more than :data:`SLIP_OPENING_DROP_M`, or the wrist load
+                                     dropping below :data:`SLIP_LOAD_RATIO` of its level
+                                     after lift; or ``grasp.slipped`` after a close
+perception_error       perception    the grasp missed and the observation it used was
+                                     uncertain (``position_std_m`` above
+                                     :data:`PERCEPTION_STD_TOL_M` or confidence below
+                                     :data:`CONFIDENCE_MIN`)
+object_moved           perception    the grasp missed and the object is now perceived more
+                                     than :data:`MOVED_TOL_M` (+ 2 sigma) from where the
+                                     grasp aimed
+grasp_missed           execution     the gripper closed to an opening below
+                                     :data:`MISSED_OPENING_M` (on nothing), or
+                                     ``grasp.missed``, perception consistent
+perception_unknown     perception    a criterion could not be judged: the object was not
+                                     seen, or only with low confidence
 runtime_error          execution     the runtime raised (``target.error``, ...)
+placement_off          execution     released, but not where the criteria ask
 criteria_unmet         verifier      the runtime completed and nothing above explains it
 =====================  ============  =====================================================
 
@@ -41,30 +57,44 @@ from typing import Any, Mapping, Sequence
 
 from phyagentos.protocol import Diagnosis, SessionRecord
 
-__all__ = ["CAUSES", "PERCEPTION_TOL_M", "MOVED_TOL_M", "diagnose", "subject_object"]
+__all__ = ["CAUSES", "CONFIDENCE_MIN", "MISSED_OPENING_M", "MOVED_TOL_M", "PERCEPTION_STD_TOL_M",
+           "SLIP_LOAD_RATIO", "SLIP_OPENING_DROP_M", "diagnose", "subject_object", "perceived_position"]
 
 #: cause -> (category, one-line meaning)
 CAUSES: dict[str, tuple[str, str]] = {
     "safety_intervention": ("safety", "a SafetyGuard intervention stopped the session"),
     "timeout": ("timeout", "the execution deadline passed"),
     "precondition_unmet": ("execution", "the session started without what it needs (the object in hand)"),
-    "perception_error": ("perception", "the perceived object pose used for the motion was off"),
-    "object_moved": ("perception", "the object moved after it was observed (stale observation)"),
-    "object_slipped": ("execution", "the object slipped out of, or dropped from, the grasp"),
-    "grasp_missed": ("execution", "the gripper closed on nothing although perception was right"),
-    "ik_unreachable": ("policy", "no joint configuration reaches the required pose"),
+    "ik_unreachable": ("policy", "no joint configuration reaches the pose computed from the perceived object"),
+    "goal_in_collision": ("policy", "the goal configuration itself collides (placement pose or approach)"),
     "planning_failed": ("policy", "no collision-free path or timing was found"),
     "collision": ("execution", "unexpected contact stopped a motion"),
-    "placement_off": ("execution", "the object was released, but not where the criteria ask"),
+    "object_slipped": ("execution", "the object slipped out of, or dropped from, the grasp"),
+    "perception_error": ("perception", "the perceived object pose used for the motion was uncertain"),
+    "object_moved": ("perception", "the object was not where the grasp aimed when the gripper arrived"),
+    "grasp_missed": ("execution", "the gripper closed on nothing although perception was consistent"),
+    "perception_unknown": ("perception", "the object was not seen, or not confidently enough, to judge"),
     "runtime_error": ("execution", "the runtime raised an error"),
+    "placement_off": ("execution", "the object was released, but not where the criteria ask"),
     "criteria_unmet": ("verifier", "the runtime completed, the criteria are not met, no finer cause found"),
 }
 
-#: Perceived-versus-true object position error (horizontal) above which perception is
-#: blamed, m. Grasps of a 4 cm box tolerate about 2.5 cm (measured on the tabletop
-#: scene: 3 cm along the fingers still grasps, 2.5 cm across them lands a finger on top).
-PERCEPTION_TOL_M = 0.015
-#: Horizontal displacement of an object during a session above which it "moved", m.
+#: Per-finger opening after a close below which the gripper closed on nothing, m
+#: (CONTRACT_9 section 3: holding needs more than ~2 mm).
+MISSED_OPENING_M = 0.002
+#: Opening decrease while holding that signals a slip, m (CONTRACT_9 section 5).
+SLIP_OPENING_DROP_M = 0.003
+#: Wrist load falling below this fraction of its post-lift level signals a slip
+#: (CONTRACT_9 section 5: a drop by more than 50 %).
+SLIP_LOAD_RATIO = 0.5
+#: Perceived 1-sigma horizontal uncertainty above which an observation is too uncertain
+#: for a top-down grasp, m: half the ~1.5 cm grasp tolerance of a 4 cm box measured on
+#: the tabletop scene (3 cm along the fingers still grasps, 2.5 cm across them does not).
+PERCEPTION_STD_TOL_M = 0.0075
+#: Confidence below which a perceived entity does not count (same as the verifier's).
+CONFIDENCE_MIN = 0.5
+#: Horizontal displacement between where a grasp aimed and where the object is perceived
+#: afterwards above which it "moved", m (added to 2 sigma of the two observations).
 MOVED_TOL_M = 0.015
 
 
@@ -77,7 +107,19 @@ def _entity(snapshot: Mapping, name: str) -> Mapping | None:
 
 
 def _holding(snapshot: Mapping, name: str) -> bool:
-    return any(r.get("relation") == "holding" and r.get("object") == name for r in snapshot.get("relations", []))
+    return any(r.get("relation") == "holding" and r.get("object") == name
+               and float(r.get("confidence", 1.0)) >= CONFIDENCE_MIN for r in snapshot.get("relations", []))
+
+
+def perceived_position(record: Any) -> tuple[list[float], float, float] | None:
+    """``(position (3,) m, position_std_m, confidence)`` of an ``observe`` entry's object
+    record (CONTRACT_9 section 5); a bare position list counts as std 0, confidence 1."""
+    if isinstance(record, Mapping) and "position" in record:
+        return (list(record["position"]), float(record.get("position_std_m") or 0.0),
+                float(record.get("confidence", 1.0)))
+    if isinstance(record, (list, tuple)) and len(record) >= 2:
+        return list(record), 0.0, 1.0
+    return None
 
 
 def subject_object(session: SessionRecord) -> str | None:
@@ -102,18 +144,56 @@ def _make(cause: str, summary: str, facts: dict, evidence: Sequence[str]) -> Dia
                      evidence=list(evidence))
 
 
-def diagnose(session: SessionRecord, evidence: Any) -> Diagnosis:
+def _slip_from_proprio(trace: Sequence[Mapping], start: int, obj: str | None) -> dict | None:
+    """A slip seen in the trace after index ``start`` (the last close): a ``slip`` entry,
+    or proprioception samples whose opening closed or whose wrist load dropped."""
+    for r in trace[start:]:
+        if r.get("kind") == "gripper" and r.get("command") == "open":
+            return None  # released on purpose from here on
+        if r.get("kind") == "slip" and r.get("object") in (None, obj):
+            return {"slip_source": "runtime", "opening_drop_m": r.get("opening_drop_m"),
+                    "load_drop_n": r.get("load_drop_n"), "slip_leaf": r.get("leaf")}
+    samples = []
+    for r in trace[start:]:
+        if r.get("kind") == "gripper" and r.get("command") == "open":
+            break
+        if r.get("kind") == "proprio" and r.get("opening_m") is not None:
+            samples.append(r)
+    if len(samples) < 2:
+        return None
+    first_open = float(samples[0]["opening_m"])
+    for r in samples[1:]:
+        drop = first_open - float(r["opening_m"])
+        if drop > SLIP_OPENING_DROP_M:
+            return {"slip_source": "opening", "opening_drop_m": drop, "slip_phase": r.get("phase")}
+    loaded = [float(r["wrist_load_n"]) for r in samples if r.get("wrist_load_n") is not None
+              and r.get("phase") in ("transfer", "lift", "place", "hold")]
+    if loaded:
+        peak = max(loaded)
+        after = loaded[loaded.index(peak):]
+        if peak > 0 and min(after) < SLIP_LOAD_RATIO * peak:
+            return {"slip_source": "wrist_load", "load_drop_n": peak - min(after), "load_peak_n": peak}
+    return None
+
+
+def diagnose(session: SessionRecord, evidence: Any, *, unknown: Sequence[str] = ()) -> Diagnosis:
     """Diagnose an unsuccessful attempt of ``session`` from its :class:`EvidenceBundle`.
 
+    Args:
+        session: the session whose attempt is diagnosed.
+        evidence: its evidence bundle (perceived snapshots, trace, events, outcome).
+        unknown: texts of criteria the verifier could not judge (perception missing).
+
     Returns a :class:`~phyagentos.protocol.Diagnosis` whose ``facts`` hold the measured
-    quantities (metres) and whose ``evidence`` lists the files consulted. Never raises
-    on incomplete evidence: missing parts make rules not apply, down to
+    quantities (metres, newtons) and whose ``evidence`` lists the files consulted. Never
+    raises on incomplete evidence: missing parts make rules not apply, down to
     ``criteria_unmet``.
     """
     refs = list(evidence.refs("initial", "terminal", "trace", "events"))
     outcome = evidence.outcome or {}
     code = str(outcome.get("error_code") or "")
     leaf = str(outcome.get("failed_primitive") or "")
+    message = str(outcome.get("message") or "")
     facts: dict[str, Any] = {"runtime_status": outcome.get("status"), "error_code": code or None,
                              "failed_primitive": leaf or None}
 
@@ -126,74 +206,92 @@ def diagnose(session: SessionRecord, evidence: Any) -> Diagnosis:
 
     obj = subject_object(session)
     facts["object"] = obj
-    e0 = _entity(evidence.initial, obj) if obj else None
     eT = _entity(evidence.terminal, obj) if obj else None
     trace = list(evidence.trace)
-    observations = [r for r in trace if r.get("kind") == "observe" and obj in (r.get("objects") or {})]
-    grasps = [r for r in trace if r.get("kind") == "grasp_pose" and r.get("object") == obj]
     closes = [i for i, r in enumerate(trace) if r.get("kind") == "gripper" and r.get("command") == "close"]
-    grasped = bool(closes) and trace[closes[-1]].get("grasped") == obj
-    released_after = bool(closes) and any(r.get("kind") == "gripper" and r.get("command") == "open"
-                                          for r in trace[closes[-1] + 1:])
+    last_close = trace[closes[-1]] if closes else None
     held_at_start = bool(obj) and _holding(evidence.initial, obj)
-    held_at_end = eT is not None and _holding(evidence.terminal, obj)
+    held_at_end = bool(obj) and _holding(evidence.terminal, obj)
     tcp = _entity(evidence.terminal, "tcp")
     if tcp is not None:
         facts["tcp_end_z_m"] = float(tcp["position"][2])  # how low the hand was left (recovery backs off)
-    moved = None
-    if e0 is not None and eT is not None:
-        moved = _xy_dist(e0["position"], eT["position"])
-        facts["object_moved_m"] = moved
+    if last_close is not None:
+        for key in ("opening_m", "effort_n", "closed_on_something"):
+            if last_close.get(key) is not None:
+                facts[f"close_{key}"] = last_close[key]
+    missed = last_close is not None and (
+        last_close.get("closed_on_something") is False
+        or (last_close.get("opening_m") is not None and float(last_close["opening_m"]) < MISSED_OPENING_M))
+    if missed or code == "grasp.missed":
+        facts["missed_grasp"] = True
 
+    # 1. the session needed the object in hand and had nothing before anything closed
     if code == "grasp.slipped" and not held_at_start and not closes:
-        return _make("precondition_unmet", f"{obj} was not in the gripper when the session started", facts, refs)
-
-    # Perception: the pose a motion was computed from versus where the object was when
-    # it was observed (the simulator's ground truth in the trace; on a real robot, the
-    # initial snapshot for the first observation). A held object's pose is perceived
-    # too (placing uses it), so the same test applies.
-    if observations:
-        used_obs = observations[0]
-        if grasps and "observed_position" in grasps[-1]:
-            used = grasps[-1]["observed_position"]
-            used_obs = next((o for o in reversed(observations) if _xy_dist(o["objects"][obj], used) < 1e-6),
-                            observations[-1])
-        perceived = used_obs["objects"][obj]
-        truth = (used_obs.get("truth") or {}).get(obj)
-        if truth is None and used_obs is observations[0] and e0 is not None:
-            truth = e0["position"]
-        if truth is not None:
-            err = _xy_dist(perceived, truth)
-            facts.update(perceived=list(perceived), true_at_observation=list(truth), perception_error_m=err)
-            if err > PERCEPTION_TOL_M and not held_at_end:
-                what = "the held " + obj if held_at_start else obj
-                return _make("perception_error",
-                             f"{what} was perceived {err * 100:.1f} cm from where it was "
-                             f"(tolerance {PERCEPTION_TOL_M * 100:.1f} cm)", facts, refs)
-            if not held_at_start and not grasped and eT is not None:
-                after = _xy_dist(eT["position"], truth)
-                facts["moved_after_observation_m"] = after
-                if after > MOVED_TOL_M:
-                    return _make("object_moved",
-                                 f"{obj} was perceived where it was, then moved {after * 100:.1f} cm before the "
-                                 f"gripper reached it", facts, refs)
-
-    if code == "grasp.slipped" or (grasped and not held_at_end and not released_after and eT is not None):
-        where = f"detected by {leaf}" if leaf else "found in the terminal snapshot"
-        return _make("object_slipped", f"{obj} slipped out of the grasp ({where})", facts, refs)
-    if code == "grasp.missed":
-        return _make("grasp_missed", f"the gripper closed on nothing at {obj}'s perceived position", facts, refs)
+        return _make("precondition_unmet", f"{obj} was not in the gripper when the session started "
+                     f"(released upstream): the object has to be picked again",
+                     {**facts, "needs": "object_in_hand", "upstream": "acquire"}, refs)
+    # 2. motion generation
     if code.startswith("ik."):
-        return _make("ik_unreachable", f"{leaf or 'IK'}: {outcome.get('message', '')}".strip(), facts, refs)
+        return _make("ik_unreachable", f"{leaf or 'IK'}: {message}".strip(), facts, refs)
+    at_goal = any(r.get("kind") == "plan" and r.get("collision_at_goal") for r in trace) or \
+        "goal configuration is invalid" in message
     if code.startswith(("planning.", "timing.", "motion.")):
-        return _make("planning_failed", f"{leaf or 'planning'}: {outcome.get('message', '')}".strip(), facts, refs)
+        if at_goal:
+            return _make("goal_in_collision", f"{leaf or 'planning'}: the goal configuration collides: {message}",
+                         {**facts, "collision_at_goal": True}, refs)
+        return _make("planning_failed", f"{leaf or 'planning'}: {message}".strip(), facts, refs)
     if code.startswith("execution."):
         # The planned transfer (the move_to subtree's "Execute" leaf) or a straight-line
         # move (approach, lift, lower ...): recovery differs.
         facts["variant"] = "planned" if leaf == "Execute" else "cartesian"
-        return _make("collision", f"{leaf or 'execution'}: {outcome.get('message', '')}".strip(), facts, refs)
+        errs = [float(r["max_tracking_error_rad"]) for r in trace
+                if r.get("kind") == "execute_end" and r.get("max_tracking_error_rad") is not None]
+        if errs:
+            facts["max_tracking_error_rad"] = max(errs)
+        return _make("collision", f"{leaf or 'execution'}: {message}".strip(), facts, refs)
+    # 3. a slip, from proprioception after the last close on something
+    if closes and not missed:
+        slip = _slip_from_proprio(trace, closes[-1] + 1, obj)
+        if slip is not None or (code == "grasp.slipped" and not held_at_end):
+            facts.update(slip or {"slip_source": "check_holding"})
+            where = f"detected by {leaf}" if code == "grasp.slipped" and leaf else f"seen in {facts['slip_source']}"
+            return _make("object_slipped", f"{obj} slipped out of the grasp ({where})", facts, refs)
+    # 4. a missed grasp: was the observation it used uncertain, did the object move, or neither?
+    if missed or code == "grasp.missed":
+        grasps = [r for r in trace if r.get("kind") == "grasp_pose" and r.get("object") == obj]
+        observations = [perceived_position((r.get("objects") or {}).get(obj)) for r in trace
+                        if r.get("kind") == "observe" and obj in (r.get("objects") or {})]
+        observations = [o for o in observations if o is not None]
+        aimed = grasps[-1].get("observed_position") if grasps else None
+        used = None
+        if observations:
+            used = observations[-1]
+            if aimed is not None:
+                used = min(observations, key=lambda o: _xy_dist(o[0], aimed))
+            aimed = aimed if aimed is not None else used[0]
+            facts.update(perceived=list(used[0]), perceived_std_m=used[1], perceived_confidence=used[2])
+            if used[1] > PERCEPTION_STD_TOL_M or used[2] < CONFIDENCE_MIN:
+                return _make("perception_error",
+                             f"the grasp used an uncertain observation of {obj} (sigma {used[1] * 100:.1f} cm, "
+                             f"confidence {used[2]:.2f}) and closed on nothing", facts, refs)
+        if aimed is not None and eT is not None:
+            attrs = eT.get("attributes") or {}
+            if float(attrs.get("confidence", 1.0)) >= CONFIDENCE_MIN:
+                now_std = float(attrs.get("position_std_m") or 0.0)
+                d = _xy_dist(eT["position"], aimed)
+                facts["moved_since_observation_m"] = d
+                if d > MOVED_TOL_M + 2.0 * (now_std + (used[1] if used else 0.0)):
+                    return _make("object_moved", f"{obj} is now perceived {d * 100:.1f} cm from where the grasp "
+                                 f"aimed: it was not there when the gripper arrived", facts, refs)
+        return _make("grasp_missed", f"the gripper closed on nothing at {obj}'s perceived position "
+                     f"(opening {facts.get('close_opening_m', 'n/a')} m)", facts, refs)
     if code:
-        return _make("runtime_error", f"{code}: {outcome.get('message', '')}".strip(), facts, refs)
-    if eT is not None and obj and not _holding(evidence.terminal, obj) and (held_at_start or (moved or 0.0) > MOVED_TOL_M):
+        return _make("runtime_error", f"{code}: {message}".strip(), facts, refs)
+    if unknown:
+        return _make("perception_unknown", "not judged from what was perceived: " + "; ".join(unknown),
+                     {**facts, "unknown": list(unknown)}, refs)
+    released = held_at_start or (bool(closes) and any(r.get("kind") == "gripper" and r.get("command") == "open"
+                                                      for r in trace[closes[-1] + 1:]))
+    if eT is not None and obj and not held_at_end and released:
         return _make("placement_off", f"{obj} was released where the criteria do not accept it", facts, refs)
     return _make("criteria_unmet", "the runtime completed but the acceptance criteria are not met", facts, refs)

@@ -4,13 +4,18 @@ A strategy sets skill *parameters* (and, for a timeout, limits); the runtime's t
 expose each one as a parameter (``trees/pick.yaml``), so the Runtime stays
 strategy-agnostic and the Agent decides. Each cause has an escalation ladder: the
 first replan for a cause takes step 1, a second replan for the same cause along the
-lineage takes step 2; a step that would change nothing (memory already applied it)
-or names no parameter the skill declares is skipped. When the ladder is exhausted,
-there is no revision and the verdict is ``failure``.
+lineage takes step 2; a step that would change nothing (memory already applied it, or
+the skill declares none of its parameters) is skipped, so a retry that cannot change
+the outcome is never spent. When the ladder is exhausted, there is no revision and the
+verdict is ``failure``. Every revision names the cause it addresses (``cause``) and why
+(``rationale``).
 
 =====================  ==========================================================
 cause                  ladder (strategy: parameters)
 =====================  ==========================================================
+perception_unknown     another_view: a child of skill ``observe`` looks again
+                       (``samples`` 16) and the criteria are judged on that view;
+                       once, then ``failure``
 perception_error       average_frames: observe_samples 16;
                        average_and_re_observe: observe_samples 32, reobserve_samples 16
 object_moved           re_observe: reobserve_samples 1;
@@ -24,17 +29,24 @@ collision during a     slower_transfer: transfer_velocity_scale 0.5;
 planned motion         another_planner: planner BITstar, transfer_velocity_scale 0.5
 collision during a     another_approach_direction: grasp_candidate + 1;
 straight-line motion   another_approach_direction: grasp_candidate + 2, approach_height_m 0.15
+goal_in_collision      planning revisions, never re-observation: another_approach:
+                       approach_height_m 0.15 (pick: and the next grasp direction);
+                       another_placement_pose: place_offset_m [-0.03, 0] (3 cm nearer
+                       the base, where the skill declares it), approach_height_m 0.05
 planning_failed        another_planner: planner BITstar; another_planner: planner PRM
-ik_unreachable         another_approach_direction: grasp_candidate + 1, then + 2 with
-                       approach_height_m 0.15
 placement_off          average_frames: observe_samples 16;
                        careful_lowering: lower_velocity_scale 0.1, transfer_velocity_scale 0.5
 timeout                longer_deadline: execution_timeout_s x 2
 criteria_unmet         careful_retry: observe_samples 8, reobserve_samples 8,
                        transfer_velocity_scale 0.5
-safety_intervention,   none: a safety stop is never retried automatically; an error in
-runtime_error,         the software or a missing upstream result is not fixed by a
-precondition_unmet     different strategy
+precondition_unmet     re_pick_upstream: the object was released upstream; the
+                       coordinator re-opens the upstream node that acquires it
+                       (``Revision.reopen``), then runs this node again. Without
+                       such a node: ``failure``
+ik_unreachable,        none: the pose computed from the perceived object is out of
+safety_intervention,   reach (no other parameter brings it closer), a safety stop is
+runtime_error          never retried automatically, an error in the software is not
+                       fixed by a different strategy
 =====================  ==========================================================
 
 Grip forces are per finger (the Franka Hand allows 70 N continuous); planner names are
@@ -56,7 +68,8 @@ from phyagentos.protocol import Diagnosis, Revision, SessionRecord
 
 from .skill_catalog import SkillInfo, skill_catalog
 
-__all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M"]
+__all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M", "RE_PICK",
+           "ANOTHER_VIEW_SAMPLES"]
 
 #: Parameters a revision sets because of where the failed attempt left the world.
 SITUATIONAL: Mapping[str, Any] = {"backoff_m": 0.10, "settle_s": 0.5}
@@ -76,12 +89,14 @@ class Strategy:
         parameters: skill parameter -> new value, or a function of the current
             parameters returning such a mapping (for relative changes).
         limits: session limit -> factor applied to the current value.
+        skill: skill the child runs instead of the session's (``observe`` for another view).
     """
 
     name: str
     description: str
     parameters: Mapping[str, Any] | Adjust = field(default_factory=dict)
     limits: Mapping[str, float] = field(default_factory=dict)
+    skill: str | None = None
 
     def values(self, current: Mapping[str, Any]) -> dict[str, Any]:
         return dict(self.parameters(current) if callable(self.parameters) else self.parameters)
@@ -93,7 +108,29 @@ def _next_candidate(offset: int, **extra: Any) -> Adjust:
     return adjust
 
 
+def _next_candidate_if_pick(**extra: Any) -> Adjust:
+    # grasp_candidate is filtered out for skills that do not declare it (place)
+    return _next_candidate(1, **extra)
+
+
+#: Strategy of a precondition failure after an upstream release.
+RE_PICK = "re_pick_upstream"
+
+
+#: Frames the ``another_view`` child averages.
+ANOTHER_VIEW_SAMPLES = 16
+
 LADDERS: Mapping[str, tuple[Strategy, ...]] = {
+    "perception_unknown": (
+        Strategy("another_view", f"look again ({ANOTHER_VIEW_SAMPLES} frames) and judge on that view",
+                 {"samples": ANOTHER_VIEW_SAMPLES}, skill="observe"),
+    ),
+    "goal_in_collision": (
+        Strategy("another_approach", "approach the goal from 15 cm (pick: with the next grasp direction), "
+                 "so the goal configuration changes", _next_candidate_if_pick(approach_height_m=0.15)),
+        Strategy("another_placement_pose", "set the object down 3 cm nearer the robot base inside the region, "
+                 "from a 5 cm approach", {"place_offset_m": [-0.03, 0.0], "approach_height_m": 0.05}),
+    ),
     "perception_error": (
         Strategy("average_frames", "average 16 perception frames before computing the grasp",
                  {"observe_samples": 16}),
@@ -130,11 +167,7 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
         Strategy("another_planner", "plan with BIT*", {"planner": "BITstar"}),
         Strategy("another_planner", "plan with PRM", {"planner": "PRM"}),
     ),
-    "ik_unreachable": (
-        Strategy("another_approach_direction", "use the next top-down grasp direction", _next_candidate(1)),
-        Strategy("another_approach_direction", "turn the grasp once more and approach from 15 cm",
-                 _next_candidate(2, approach_height_m=0.15)),
-    ),
+    "ik_unreachable": (),
     "placement_off": (
         Strategy("average_frames", "average 16 perception frames of the held object", {"observe_samples": 16}),
         Strategy("careful_lowering", "lower at a third of the speed, transfer at half speed",
@@ -180,7 +213,7 @@ class RecoveryPlanner:
         return self._skills
 
     def plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
-             history: Sequence[SessionRecord] = ()) -> Revision | None:
+             history: Sequence[SessionRecord] = (), upstream: str | None = None) -> Revision | None:
         """The revision for ``session``'s child, or ``None`` when no strategy is left.
 
         Args:
@@ -188,22 +221,32 @@ class RecoveryPlanner:
             diagnosis: why it failed.
             history: its ancestors, oldest first; earlier replans for the same cause
                 move along the ladder.
+            upstream: for ``precondition_unmet``, the goal node upstream that acquires
+                the object (the coordinator finds it in the DAG); ``None``: no re-pick.
         """
+        if diagnosis.cause == "precondition_unmet":
+            if upstream is None or _previous_causes(history).count(diagnosis.cause) >= 1:
+                return None  # nothing upstream to redo, or a re-pick already did not help
+            return Revision(strategy=RE_PICK, cause=diagnosis.cause, step=1, reopen=upstream,
+                            rationale=f"{diagnosis.summary} -> re-open upstream node {upstream!r} (acquire the "
+                                      f"object again), then run this node again")
         variant = diagnosis.facts.get("variant")
         ladder = self.ladders.get(f"{diagnosis.cause}/{variant}", self.ladders.get(diagnosis.cause, ()))
-        info = self.skills.get(session.skill)
-        allowed = info.optional if info is not None else frozenset()
         current = dict(session.parameters)
         start = _previous_causes(history).count(diagnosis.cause)
         for step in range(start, len(ladder)):
             strategy = ladder[step]
-            values = {k: v for k, v in strategy.values(current).items() if k in allowed and current.get(k) != v}
+            info = self.skills.get(strategy.skill or session.skill)
+            allowed = (info.optional if info is not None else frozenset())
+            base = {} if strategy.skill else current
+            values = {k: v for k, v in strategy.values(current).items() if k in allowed and base.get(k) != v}
             limits = {k: round(getattr(session.limits, k) * f, 3) for k, f in strategy.limits.items()
                       if hasattr(session.limits, k)}
             if not values and not limits:
                 continue
-            if float(diagnosis.facts.get("tcp_end_z_m", 1.0)) < CLEARANCE_Z_M:
+            if not strategy.skill and float(diagnosis.facts.get("tcp_end_z_m", 1.0)) < CLEARANCE_Z_M:
                 values.update({k: v for k, v in SITUATIONAL.items() if k in allowed and current.get(k) != v})
             return Revision(strategy=strategy.name, cause=diagnosis.cause, step=step + 1, parameters=values,
-                            limits=limits, rationale=f"{diagnosis.summary} -> {strategy.description}")
+                            limits=limits, skill=strategy.skill,
+                            rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> {strategy.description}")
         return None

@@ -50,7 +50,8 @@ class SessionCompiler:
 
     def compile_node(self, node: GoalNode, *, parent: SessionRecord | None = None,
                      parameters: dict[str, Any] | None = None, limits: dict[str, float] | None = None,
-                     context: SessionContext | None = None, recovery: Revision | None = None) -> SessionRecord:
+                     context: SessionContext | None = None, recovery: Revision | None = None,
+                     skill: str | None = None) -> SessionRecord:
         """Build and submit the session for ``node`` (a child of ``parent`` on replan).
 
         Args:
@@ -58,6 +59,7 @@ class SessionCompiler:
             limits: limit values over the node's (a revision may lengthen a deadline).
             context: what the ContextBuilder injected (recorded in the session).
             recovery: the revision a replanned child runs with.
+            skill: run this skill instead of the node's (``observe`` for another view).
 
         Raises:
             VerifierError: the node's acceptance criteria do not parse (checked
@@ -75,7 +77,7 @@ class SessionCompiler:
             node=node.id,
             parent_session_id=parent.session_id if parent else None,
             depends_on=list(node.depends_on),
-            skill=node.skill,
+            skill=skill or node.skill,
             skill_runtime=node.runtime,
             target=node.target,
             parameters=dict(parameters if parameters is not None else node.params),
@@ -91,5 +93,5 @@ class SessionCompiler:
             updated_at=now,
         )
         self.workspace.submit_session(record)
-        logger.info("submitted session %s (node %s, skill %s)", record.session_id, node.id, node.skill)
+        logger.info("submitted session %s (node %s, skill %s)", record.session_id, node.id, record.skill)
         return record

@@ -5,11 +5,18 @@ terminal snapshots S0 and ST, trace tau, history H (the session's lineage). It c
 from evidence, never from a controller's return code alone:
 
 - every criterion satisfied and no safety intervention -> ``success``;
-- a criterion unknown (evidence missing) -> ``failure``: we cannot judge, so we do
-  not claim success and do not retry blindly;
+- a criterion ``unknown`` (the entity not perceived, perceived below the confidence
+  threshold, or within the uncertainty band of the boundary, see
+  :mod:`phyagentos.agent.criteria`) and nothing else explains the failure -> ``replan``
+  with a revision asking for another view (a child of skill ``observe`` with more
+  frames, judged on that view) once, then ``failure`` with cause
+  ``perception_unknown``. Never ``success``;
 - a criterion unsatisfied -> ``replan`` while the session's replan budget lasts, the
   failure is not a safety stop, and a recovery strategy is left for the diagnosed
   cause; else ``failure``.
+
+The snapshots are the runtime's *perceived* snapshots; the verifier never reads the
+simulator's privileged channel.
 
 Every verdict that is not a success carries a :class:`~phyagentos.protocol.Diagnosis`
 (:mod:`phyagentos.agent.diagnosis`); a ``replan`` verdict carries the
@@ -27,7 +34,7 @@ import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Protocol, Sequence
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import yaml
 
@@ -53,7 +60,7 @@ class EvidenceBundle:
     Attributes:
         session_id: the session.
         directory: the bundle directory.
-        initial, terminal: ground-truth environment snapshots before and after execution.
+        initial, terminal: perceived environment snapshots before and after execution.
         outcome: the runtime's outcome record (status, failed primitive, error code).
         events: safety and target events (each a mapping with ``code``).
         files: bundle key -> file name (``initial``, ``terminal``, ``trace``,
@@ -166,6 +173,12 @@ class SessionVerifier:
         self.verifiers = list(verifiers) if verifiers is not None else [PredicateVerifier()]
         self.max_replans = max_replans
         self.recovery = recovery if recovery is not None else RecoveryPlanner()
+        self.upstream: Callable[[SessionRecord], str | None] = lambda session: None
+
+    def set_upstream(self, finder: Callable[[SessionRecord], str | None]) -> None:
+        """Install ``finder(session) -> goal node id``: the node upstream of ``session``'s that
+        acquires its object (the coordinator's DAG), for re-picks after a release."""
+        self.upstream = finder
 
     def verify(self, session: SessionRecord, evidence: EvidenceBundle, *, lineage_depth: int | None = None,
                history: Sequence[SessionRecord] = ()) -> Verdict:
@@ -203,25 +216,24 @@ class SessionVerifier:
         unsatisfied = [o for o in outcomes if o.status == "unsatisfied"]
         if outcomes and not unknown and not unsatisfied and not safety:
             return verdict("success", f"all {len(outcomes)} criteria satisfied")
-        diagnosis = diagnose(session, evidence)
+        diagnosis = diagnose(session, evidence, unknown=[f"{o.criterion.text}: {o.reason}" for o in unknown])
         if not outcomes:
             return verdict("failure", "no acceptance criteria: a controller return code alone never counts as success",
                            diagnosis=diagnosis)
-        if unknown:
-            reason = "cannot judge: " + "; ".join(f"{o.criterion.text}: {o.reason}" for o in unknown)
-            return verdict("failure", reason, diagnosis=diagnosis)
-        detail = "; ".join(f"{o.criterion.text}: {o.reason}" for o in unsatisfied)
+        detail = "; ".join(f"{o.criterion.text}: {o.reason}" for o in unsatisfied + unknown)
         if safety:
             codes = sorted({str(e["code"]) for e in safety})
             return verdict("failure", f"safety intervention {codes}; {detail}".rstrip("; "), diagnosis=diagnosis)
-        if runtime_error:
+        if diagnosis.cause == "perception_unknown":
+            detail = "cannot judge: " + detail
+        elif runtime_error:
             detail = f"{detail} (runtime reported {runtime_error})"
         detail = f"{detail}; diagnosis {diagnosis.cause}: {diagnosis.summary}"
         if depth >= self.max_replans:
             return verdict("failure", f"unsatisfied after {depth} replans: {detail}", diagnosis=diagnosis)
-        revision = self.recovery.plan(session, diagnosis, history=history)
+        revision = self.recovery.plan(session, diagnosis, history=history, upstream=self.upstream(session))
         if revision is None:
-            return verdict("failure", f"unsatisfied, no recovery strategy left for {diagnosis.cause}: {detail}",
+            return verdict("failure", f"no recovery strategy left for {diagnosis.cause}: {detail}",
                            diagnosis=diagnosis)
-        return verdict("replan", f"unsatisfied: {detail}; replan {depth + 1}/{self.max_replans} "
+        return verdict("replan", f"{detail}; replan {depth + 1}/{self.max_replans} "
                                  f"with {revision.strategy}", diagnosis=diagnosis, revision=revision)

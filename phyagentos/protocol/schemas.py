@@ -251,6 +251,10 @@ class Revision(ProtocolModel):
     parameters: dict[str, Any] = Field(default_factory=dict, description="Skill parameters set to new values.")
     limits: dict[str, float] = Field(default_factory=dict, description="Session limits set to new values (s).")
     rationale: str = ""
+    skill: str | None = Field(None, description="Skill the child runs instead of the node's (e.g. 'observe': "
+                                                "another view of the same world); None: the node's skill.")
+    reopen: str | None = Field(None, description="Upstream goal node re-opened before this node runs again "
+                                                 "(e.g. re-pick after the object was released).")
 
 
 class Verdict(ProtocolModel):

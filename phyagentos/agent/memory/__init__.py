@@ -10,6 +10,7 @@ from .conditions import Conditions, risk_factors, scope_matches, session_conditi
 from .context_builder import ContextBuilder
 from .knowledge import KnowledgeBase
 from .lessons import LessonBook
+from .observed import ObservedObject, observe_object
 from .promotion import PromotionPolicy, promote
 
 __all__ = [
@@ -17,6 +18,8 @@ __all__ = [
     "ContextBuilder",
     "KnowledgeBase",
     "LessonBook",
+    "ObservedObject",
+    "observe_object",
     "PromotionPolicy",
     "promote",
     "risk_factors",

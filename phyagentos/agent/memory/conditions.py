@@ -1,43 +1,61 @@
 """The conditions a session runs under, and the scope a memory item applies to.
 
-Conditions come from what the Agent legitimately knows before execution: the goal
-(graph and node), the skill, the target and its embodiment (TARGETS.md ``driver``), the
-object the skill manipulates with its declared properties (the goal graph's scene), and
-*risk factors* detected from that scene:
+Conditions come only from what a robot's agent can know before execution (issue 9,
+part 6): the goal (graph and node), the skill, the target and its embodiment (TARGETS.md
+``driver``), the object the skill manipulates as the user *declared* it
+(:mod:`phyagentos.agent.declared`: class, shape, colour, approximate size), what earlier
+sessions of the run *observed* of it (:class:`~phyagentos.agent.memory.observed.ObservedObject`:
+perceived size, shape class and colour, a mass estimated from the wrist load after a lift,
+slips detected from proprioception), and *risk factors* derived from those:
 
 ==============  ===========================================================================
 risk factor     detected when
 ==============  ===========================================================================
-heavy_object    the object's declared mass exceeds :data:`HEAVY_KG`
-low_friction    its declared friction is below :data:`LOW_FRICTION`
-small_object    its narrower horizontal side is below :data:`SMALL_M`
-clutter         another object stands within :data:`CLUTTER_GAP_M` of it
-<kind>          the scene declares a perturbation of that kind for this object (or for
-                every object): ``perception_noise``, ``low_friction``, ``displaced``,
-                ``heavy_object`` (:mod:`phyagentos.targets.perturbations`). Only the
-                kind is read, never its parameters or seed: the Agent knows *that* the
-                cube is slippery, not how slippery, nor what to do about it.
+small_object    the narrower horizontal extent (perceived, else declared) is below
+                :data:`SMALL_M`
+large_object    the wider horizontal extent is above :data:`LARGE_M`
+heavy_object    the mass estimated from the wrist load exceeds :data:`HEAVY_KG`
+slipped_before  a slip of this object was detected from proprioception earlier in the run
+clutter         another perceived entity stands within :data:`CLUTTER_GAP_M` of it
+round_object    its shape class (perceived, else declared) is cylinder or sphere
 ==============  ===========================================================================
 
 A memory item's *scope* is ``{embodiment, skill, object_class, risk_factors}``; it
 applies to a session when embodiment, skill and object class are equal and the item's
-risk factors are a subset of the session's (:func:`scope_matches`). A lesson learned on
-one embodiment or object class is therefore never applied to another.
+risk factors are a subset of the session's (:func:`scope_matches`). The object class is
+the user's declared ``class`` when given, else ``<shape>-<size band>`` (``box-medium``).
+
+Backward reading: scopes written before this scheme (``box-4x4x4cm``, risk factors named
+after simulator disturbances) are migrated when read (:func:`migrate_scope`): the old
+class maps onto its size band and the disturbance names, which no robot could observe,
+are dropped.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-__all__ = ["Conditions", "HEAVY_KG", "LOW_FRICTION", "SMALL_M", "CLUTTER_GAP_M", "risk_factors", "scope_matches",
-           "session_conditions", "canonical"]
+from ..declared import descriptor
+from .observed import ObservedObject
 
+__all__ = ["Conditions", "HEAVY_KG", "SMALL_M", "LARGE_M", "CLUTTER_GAP_M", "OBSERVABLE_RISK_FACTORS",
+           "risk_factors", "scope_matches", "session_conditions", "canonical", "object_class", "size_band",
+           "migrate_scope"]
+
+#: Mass estimate above which an object is heavy, kg (the Franka Hand carries 3 kg; at
+#: 0.5 kg a 40 N two-finger grip on a friction-0.5 box has a safety factor below 4).
 HEAVY_KG = 0.5
-LOW_FRICTION = 0.3
+#: Narrower horizontal extent below which an object is small, m (a 3 cm object leaves
+#: less than 1 cm of finger travel margin on the Franka Hand's 8 cm stroke ends).
 SMALL_M = 0.03
+#: Wider horizontal extent above which an object is large, m.
+LARGE_M = 0.06
 CLUTTER_GAP_M = 0.02
+OBSERVABLE_RISK_FACTORS = ("small_object", "large_object", "heavy_object", "slipped_before", "clutter",
+                           "round_object")
 _SCOPE_KEYS = ("embodiment", "skill", "object_class")
 
 
@@ -55,9 +73,10 @@ class Conditions:
         skill, target: the session's skill and target names.
         embodiment: the target's driver (e.g. ``mujoco_franka``).
         object: the manipulated object's name, if any.
-        object_class: shape and size, e.g. ``box-4x4x4cm`` (``None`` without an object).
-        object_properties: declared ``mass_kg``, ``friction``, ``size_m`` (whatever the
-            scene declares).
+        object_class: declared class, else ``<shape>-<size band>`` (``None`` without an object).
+        object_properties: observable properties: ``size_m`` (3,) m full extents, ``shape``,
+            ``colour``, ``class``, ``mass_estimate_kg``, ``slips_seen``, with ``size_source``
+            ``perceived`` or ``declared``.
         risk_factors: sorted risk factor names (see the module docstring).
     """
 
@@ -82,76 +101,121 @@ class Conditions:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Conditions":
+        scope = migrate_scope(d)
         return cls(goal=str(d.get("goal", "")), skill=str(d.get("skill", "")), target=str(d.get("target", "")),
-                   embodiment=str(d.get("embodiment", "")), object=d.get("object"), object_class=d.get("object_class"),
+                   embodiment=str(d.get("embodiment", "")), object=d.get("object"),
+                   object_class=scope.get("object_class"),
                    object_properties=dict(d.get("object_properties") or {}),
-                   risk_factors=tuple(sorted(d.get("risk_factors") or ())))
+                   risk_factors=tuple(sorted(scope.get("risk_factors") or ())))
+
+
+_OLD_CLASS = re.compile(r"^box-(\d+)x(\d+)x(\d+)cm$")
+
+
+def size_band(size_m: Any) -> str:
+    """``small`` / ``medium`` / ``large`` from (3,) full extents in m, ``unknown`` without a size."""
+    if not isinstance(size_m, (list, tuple)) or len(size_m) < 2:
+        return "unknown"
+    narrow, wide = sorted(float(s) for s in size_m[:2])
+    if narrow < SMALL_M:
+        return "small"
+    if wide > LARGE_M:
+        return "large"
+    return "medium"
+
+
+def migrate_scope(scope: Mapping[str, Any]) -> dict[str, Any]:
+    """A scope (or conditions mapping) in the current scheme; older ones are migrated
+    (see the module docstring). Never raises; unknown values pass through."""
+    out = dict(scope)
+    cls = out.get("object_class")
+    if isinstance(cls, str) and (m := _OLD_CLASS.match(cls)):
+        out["object_class"] = f"box-{size_band([int(m.group(1)) / 100.0, int(m.group(2)) / 100.0])}"
+    if out.get("risk_factors") is not None:
+        out["risk_factors"] = sorted(r for r in out["risk_factors"] if r in OBSERVABLE_RISK_FACTORS)
+    return out
 
 
 def scope_matches(scope: Mapping[str, Any], conditions: Conditions) -> bool:
     """True when an item of ``scope`` applies under ``conditions`` (see the module docstring)."""
+    scope, mine = migrate_scope(scope), migrate_scope(conditions.scope())
     for key in _SCOPE_KEYS:
-        if scope.get(key) != getattr(conditions, key):
+        if scope.get(key) != mine.get(key):
             return False
-    return set(scope.get("risk_factors") or ()) <= set(conditions.risk_factors)
+    return set(scope.get("risk_factors") or ()) <= set(mine["risk_factors"])
 
 
-def _object_class(obj: Mapping[str, Any]) -> str:
-    he = obj.get("half_extents") or (0.02, 0.02, 0.02)
-    w, d = sorted(float(x) * 200.0 for x in he[:2])  # full sizes, cm
-    return f"box-{w:.0f}x{d:.0f}x{float(he[2]) * 200.0:.0f}cm"
+def _properties(declared: Mapping[str, Any] | None, observed: ObservedObject | None) -> dict[str, Any]:
+    props: dict[str, Any] = {}
+    if declared:
+        for key in ("class", "shape", "colour", "size_m"):
+            if key in declared:
+                props[key] = declared[key]
+        if "size_m" in declared:
+            props["size_source"] = "declared"
+    if observed is not None:
+        if observed.size_m is not None:
+            props["size_m"] = list(observed.size_m)
+            props["size_source"] = "perceived"
+        if observed.shape not in (None, "unknown"):
+            props["shape"] = observed.shape
+        if observed.colour_rgb is not None:
+            props["colour"] = list(observed.colour_rgb)
+        if observed.mass_estimate_kg is not None:
+            props["mass_estimate_kg"] = observed.mass_estimate_kg
+        if observed.slips:
+            props["slips_seen"] = observed.slips
+    return props
 
 
-def risk_factors(scene: Mapping[str, Any] | None, obj: str | None) -> tuple[str, ...]:
-    """Risk factors of manipulating ``obj`` in ``scene`` (the goal graph's scene mapping)."""
-    if not scene or not obj:
-        return ()
-    objects = {o.get("name"): o for o in scene.get("objects") or () if isinstance(o, Mapping)}
-    me = objects.get(obj)
+def object_class(declared: Mapping[str, Any] | None, observed: ObservedObject | None = None) -> str | None:
+    """Declared ``class``, else ``<shape>-<size band>`` from the declared descriptor.
+
+    Only the *declared* shape and size key the class, so the class of an object does not
+    change in the middle of a run when perception first sees it (perceived properties go
+    into the risk factors instead).
+    """
+    if declared is None:
+        return None
+    if isinstance(declared.get("class"), str):
+        return declared["class"]
+    return f"{declared.get('shape') or 'box'}-{size_band(declared.get('size_m'))}"
+
+
+def risk_factors(props: Mapping[str, Any], observed: ObservedObject | None = None) -> tuple[str, ...]:
+    """Risk factors from observable properties ``props`` (see :func:`session_conditions`)."""
     found: set[str] = set()
-    if me is not None:
-        if float(me.get("mass", 0.0)) > HEAVY_KG:
-            found.add("heavy_object")
-        if "friction" in me and float(me["friction"]) < LOW_FRICTION:
-            found.add("low_friction")
-        he = me.get("half_extents") or (0.02, 0.02, 0.02)
-        if 2.0 * min(float(he[0]), float(he[1])) < SMALL_M:
-            found.add("small_object")
-        x, y = (me.get("position") or (0.5, 0.0))[:2]
-        for name, other in objects.items():
-            if name == obj:
-                continue
-            ox, oy = (other.get("position") or (0.5, 0.0))[:2]
-            ohe = other.get("half_extents") or (0.02, 0.02, 0.02)
-            gap = max(abs(ox - x) - float(he[0]) - float(ohe[0]), abs(oy - y) - float(he[1]) - float(ohe[1]))
-            if gap < CLUTTER_GAP_M:
-                found.add("clutter")
-    for p in scene.get("perturbations") or ():
-        if isinstance(p, Mapping) and isinstance(p.get("kind"), str) and p.get("object") in (None, obj):
-            found.add(p["kind"])
+    band = size_band(props.get("size_m"))
+    if band == "small":
+        found.add("small_object")
+    elif band == "large":
+        found.add("large_object")
+    if props.get("shape") in ("cylinder", "sphere"):
+        found.add("round_object")
+    if float(props.get("mass_estimate_kg") or 0.0) > HEAVY_KG:
+        found.add("heavy_object")
+    if int(props.get("slips_seen") or 0) > 0:
+        found.add("slipped_before")
+    if observed is not None and observed.nearest_gap_m is not None and observed.nearest_gap_m < CLUTTER_GAP_M:
+        found.add("clutter")
     return tuple(sorted(found))
 
 
 def session_conditions(*, goal: str, skill: str, target: str, embodiment: str, parameters: Mapping[str, Any],
-                       scene: Mapping[str, Any] | None, object_name: str | None = None) -> Conditions:
-    """Conditions of a session of ``skill`` on ``target`` with ``parameters`` in ``scene``.
+                       scene: Mapping[str, Any] | None, object_name: str | None = None,
+                       observed: ObservedObject | None = None) -> Conditions:
+    """Conditions of a session of ``skill`` on ``target`` with ``parameters``.
 
-    ``object_name`` defaults to the ``object`` parameter.
+    Args:
+        scene: the goal graph's scene; only the declared descriptors are read
+            (:func:`phyagentos.agent.declared.descriptor`).
+        object_name: the manipulated object (default: the ``object`` parameter).
+        observed: what earlier sessions of the run observed of the object.
     """
     obj = object_name if object_name is not None else parameters.get("object")
     obj = obj if isinstance(obj, str) else None
-    props: dict[str, Any] = {}
-    cls = None
-    if obj and scene:
-        me = next((o for o in scene.get("objects") or () if isinstance(o, Mapping) and o.get("name") == obj), None)
-        if me is not None:
-            cls = _object_class(me)
-            if "mass" in me:
-                props["mass_kg"] = float(me["mass"])
-            if "friction" in me:
-                props["friction"] = float(me["friction"])
-            if "half_extents" in me:
-                props["size_m"] = [round(2.0 * float(h), 4) for h in me["half_extents"]]
-    return Conditions(goal=goal, skill=skill, target=target, embodiment=embodiment, object=obj, object_class=cls,
-                      object_properties=props, risk_factors=risk_factors(scene, obj))
-
+    declared = descriptor(scene, obj)
+    props = _properties(declared, observed) if obj else {}
+    return Conditions(goal=goal, skill=skill, target=target, embodiment=embodiment, object=obj,
+                      object_class=object_class(declared, observed) if obj else None,
+                      object_properties=props, risk_factors=risk_factors(props, observed) if obj else ())

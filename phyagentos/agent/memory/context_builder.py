@@ -32,6 +32,7 @@ from ..skill_catalog import SkillInfo, skill_catalog
 from .conditions import Conditions, session_conditions
 from .knowledge import KnowledgeBase, pattern_conditions
 from .lessons import LessonBook
+from .observed import ObservedObject
 
 __all__ = ["ContextBuilder", "KNOWLEDGE_MIN_SUCCESSES", "KNOWLEDGE_MIN_RATE", "MAX_ITEMS"]
 
@@ -61,24 +62,30 @@ class ContextBuilder:
         self.knowledge = KnowledgeBase(workspace)
 
     def conditions(self, *, goal: str, skill: str, target: str, parameters: Mapping[str, Any],
-                   scene: Mapping[str, Any] | None) -> Conditions:
-        """The session's conditions; the embodiment is the target's driver in TARGETS.md."""
+                   scene: Mapping[str, Any] | None, observed: ObservedObject | None = None) -> Conditions:
+        """The session's conditions; the embodiment is the target's driver in TARGETS.md.
+
+        ``scene`` is read through its declared descriptors only; ``observed`` is what
+        earlier sessions of the run perceived and measured of the object."""
         spec = next((t for t in self.workspace.read("TARGETS").data.targets if t.name == target), None)
         embodiment = spec.driver if spec is not None else target
         return session_conditions(goal=goal, skill=skill, target=target, embodiment=embodiment,
-                                  parameters=parameters, scene=scene)
+                                  parameters=parameters, scene=scene, observed=observed)
 
     def build(self, *, goal: str, skill: str, target: str, parameters: Mapping[str, Any],
-              scene: Mapping[str, Any] | None) -> tuple[dict[str, Any], SessionContext]:
+              scene: Mapping[str, Any] | None,
+              observed: ObservedObject | None = None) -> tuple[dict[str, Any], SessionContext]:
         """``(parameters to run with, context to record)`` for a new session.
 
         Args:
             goal: ``<goal graph name>/<node id>``.
             skill, target: the node's skill and target.
             parameters: the node's own parameters (never overridden).
-            scene: the goal graph's scene mapping.
+            scene: the goal graph's scene mapping (only its declared descriptors are read).
+            observed: what earlier sessions of the run observed of the object.
         """
-        cond = self.conditions(goal=goal, skill=skill, target=target, parameters=parameters, scene=scene)
+        cond = self.conditions(goal=goal, skill=skill, target=target, parameters=parameters, scene=scene,
+                               observed=observed)
         context = SessionContext(conditions=cond.to_dict(), risk_factors=list(cond.risk_factors), built_at=utc_now())
         if not self.use_memory:
             return dict(parameters), context

@@ -21,7 +21,7 @@ from typing import Any, Mapping
 from phyagentos.protocol import KnowledgeDoc, KnowledgeEntry, SessionRecord, Verdict, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 
-from .conditions import Conditions, canonical
+from .conditions import Conditions, canonical, migrate_scope
 
 __all__ = ["KnowledgeBase", "knowledge_id", "pattern_conditions", "MAX_ENTRIES", "MAX_REFS", "MAX_STATES"]
 
@@ -38,6 +38,7 @@ def pattern_conditions(conditions: Conditions) -> dict[str, Any]:
 
 
 def _key_conditions(c: Mapping[str, Any]) -> dict[str, Any]:
+    c = migrate_scope(c)  # entries written under the older scope scheme are read in the current one
     return {k: c.get(k) for k in ("embodiment", "skill", "object_class", "risk_factors")}
 
 

@@ -1,0 +1,128 @@
+"""The verifier on perceived state: confidence, uncertainty bands, another view, never a
+guessed success; recovery that addresses the cause (issue 9 part 4, issue 11 item 6)."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from phyagentos.agent.verifier import SessionVerifier
+from phyagentos.protocol import Attempt, Diagnosis, Verdict
+from phyagentos.protocol.lifecycle import utc_now
+
+from test_recovery_diagnosis import PICK_ACCEPT, PLACE_ACCEPT, bundle, close, grasp, observe, session, snap
+
+PLACE = {"skill": "place", "accept": PLACE_ACCEPT, "params": {"object": "cube", "region": "goal"}}
+IN_GOAL = (0.5, 0.25, 0.02)
+
+
+def _with_verdict(rec, verdict: Verdict):
+    return rec.model_copy(update={"attempts": [Attempt(number=1, started_at=utc_now(), verdict=verdict)]})
+
+
+def test_a_confident_view_inside_the_shrunk_region_is_success(tmp_path):
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02), holding=True), snap(IN_GOAL, std=0.004), status="completed")
+    v = SessionVerifier().verify(session(**PLACE), ev)
+    assert v.verdict == "success", v.reason
+
+
+def test_a_low_confidence_view_asks_for_another_view_once_then_fails_as_perception_unknown(tmp_path):
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02), holding=True), snap(IN_GOAL, conf=0.3), status="completed")
+    place = session(**PLACE)
+    first = SessionVerifier().verify(place, ev)
+    assert first.verdict == "replan" and first.diagnosis.cause == "perception_unknown"
+    assert first.revision.strategy == "another_view" and first.revision.skill == "observe"
+    assert first.revision.cause == "perception_unknown" and first.revision.parameters == {"samples": 16}
+    assert "confidence 0.30" in first.criteria[0].reason and first.criteria[0].status == "unknown"
+    # the other view is no better: failure, never success
+    second = SessionVerifier().verify(place, ev, history=[_with_verdict(place, first)])
+    assert second.verdict == "failure" and second.diagnosis.cause == "perception_unknown"
+
+
+def test_an_absent_object_is_unknown_never_success(tmp_path):
+    terminal = snap(IN_GOAL)
+    terminal["entities"] = [e for e in terminal["entities"] if e["name"] != "cube"]
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02), holding=True), terminal, status="completed")
+    v = SessionVerifier().verify(session(**PLACE), ev)
+    assert v.verdict == "replan" and v.diagnosis.cause == "perception_unknown"
+    assert "not in the terminal snapshot" in v.criteria[0].reason
+
+
+def test_a_centre_within_two_sigma_of_the_region_edge_is_unknown_not_success(tmp_path):
+    # 7 cm from the centre of an 8 cm half-width region: inside, but sigma 1 cm puts the edge within 2 sigma
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02), holding=True), snap((0.5, 0.32, 0.02), std=0.01),
+                status="completed")
+    v = SessionVerifier().verify(session(**PLACE), ev)
+    assert v.criteria[0].status == "unknown" and v.verdict != "success"
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02), holding=True), snap((0.5, 0.32, 0.02), std=0.002),
+                status="completed", name="t")
+    assert SessionVerifier().verify(session(**PLACE), ev).verdict == "success"
+
+
+def test_a_low_confidence_holding_relation_is_not_a_successful_pick(tmp_path):
+    terminal = snap((0.5, -0.2, 0.17), holding=True)
+    terminal["relations"][0]["confidence"] = 0.2
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), terminal, [close(0.019, 40.0)], status="completed")
+    v = SessionVerifier().verify(session(), ev)
+    assert v.verdict != "success" and v.criteria[0].status == "unknown"
+
+
+@settings(max_examples=150, deadline=None)
+@given(conf=st.floats(0.0, 0.499), std=st.floats(0.0, 0.05), dx=st.floats(-0.2, 0.2), dy=st.floats(-0.2, 0.2),
+       dz=st.floats(-0.05, 0.05), depth=st.integers(0, 3))
+def test_a_low_confidence_observation_never_yields_success(tmp_path_factory, conf, std, dx, dy, dz, depth):
+    d = tmp_path_factory.mktemp("ev")
+    ev = bundle(d, snap((0.5, -0.2, 0.02), holding=True),
+                snap((0.5 + dx, 0.25 + dy, 0.02 + dz), std=std, conf=conf), status="completed")
+    place = session(**PLACE)
+    v = SessionVerifier(max_replans=3).verify(place, ev, lineage_depth=depth)
+    assert v.verdict != "success"
+    assert v.verdict == "failure" or v.revision.strategy == "another_view"
+
+
+def test_an_unreachable_target_is_failure_with_no_retry(tmp_path):
+    far = (3.0, 0.0, 0.02)
+    ev = bundle(tmp_path, snap(far), snap(far), [observe(far)], code="ik.unreachable", leaf="ComputeGrasp")
+    v = SessionVerifier().verify(session(), ev)
+    assert v.verdict == "failure" and v.diagnosis.cause == "ik_unreachable" and v.revision is None
+
+
+def test_a_collision_at_the_goal_configuration_gets_planning_revisions_not_another_look(tmp_path):
+    plan = {"kind": "plan", "planner": "RRTConnect", "collision_at_goal": True}
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.17), holding=True), snap((0.5, -0.2, 0.17), holding=True),
+                [observe((0.5, -0.2, 0.17)), plan], code="planning.failed", leaf="PlanPath")
+    place = session(**PLACE)
+    v = SessionVerifier().verify(place, ev)
+    assert v.diagnosis.cause == "goal_in_collision" and v.diagnosis.category == "policy"
+    assert v.verdict == "replan" and v.revision.strategy == "another_approach"
+    assert v.revision.parameters == {"approach_height_m": 0.15}  # place declares no grasp_candidate
+    assert not {"observe_samples", "reobserve_samples"} & set(v.revision.parameters)
+    # the planner's own message is a planner report too
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.17), holding=True), snap((0.5, -0.2, 0.17), holding=True),
+                [], code="planning.failed", leaf="PlanPath", name="m")
+    ev = ev.__class__(**{**ev.__dict__, "outcome": {**ev.outcome, "message":
+                                                     "goal configuration is invalid: hand <-> wall"}})
+    assert SessionVerifier().verify(place, ev).diagnosis.cause == "goal_in_collision"
+
+
+@pytest.mark.parametrize("cause", ["safety_intervention", "runtime_error", "ik_unreachable"])
+def test_causes_no_parameter_can_fix_get_no_revision(cause):
+    from phyagentos.agent.recovery import RecoveryPlanner
+
+    d = Diagnosis(cause=cause, category="x", summary="x")
+    assert RecoveryPlanner().plan(session(), d) is None
+
+
+def test_every_revision_names_the_cause_it_addresses(tmp_path):
+    from phyagentos.agent.diagnosis import CAUSES
+    from phyagentos.agent.recovery import RecoveryPlanner
+
+    for cause in CAUSES:
+        for variant in (None, "planned", "cartesian"):
+            d = Diagnosis(cause=cause, category=CAUSES[cause][0], summary="x", facts={"variant": variant})
+            for s in (session(), session(**PLACE)):
+                rev = RecoveryPlanner().plan(s, d, upstream="pick_cube")
+                if rev is not None:
+                    assert rev.cause == cause and (f"addresses {cause}" in rev.rationale or rev.reopen)
+                    assert rev.parameters or rev.limits or rev.reopen

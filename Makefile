@@ -11,6 +11,7 @@ demo: setup
 
 test: setup
 	.venv/bin/lint-imports
+	.venv/bin/python scripts/check_ground_truth_boundary.py
 	.venv/bin/pytest -q
 
 bench: setup

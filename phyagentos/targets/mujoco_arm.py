@@ -621,6 +621,21 @@ class MuJoCoArmTarget(BaseRolloutTarget):
             "relations": snap["relations"],
         }
 
+    def scene_record(self) -> dict[str, Any]:
+        """The physical scene this target was built from (YAML-ready; masses, frictions,
+        poses and, for a randomised world, the draw): for ``ground_truth.yaml`` only."""
+        sc = self._scene
+        out = sc.to_dict() if hasattr(sc, "to_dict") else {}
+        draw = getattr(self, "world_draw", None)
+        if draw:
+            out = {**out, "draw": draw}
+        return out
+
+    def benchmark_signals(self) -> dict[str, Any]:
+        """The target's own task-success signals (an external benchmark's checker), for
+        ``ground_truth.yaml``'s ``benchmark:``; empty for the tabletop targets."""
+        return {}
+
     def describe_declared(self) -> dict[str, Any]:
         """What the user declared (CONTRACT_9 section 3), YAML-ready: ``{"objects": [{name,
         class?, shape, colour_rgb, size_m}], "regions": [...], "obstacles": [...]}``;

@@ -7,13 +7,17 @@ Units: pixels, degrees (``fovy_deg``), Hz, metres.
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Literal
 
 from pydantic import ConfigDict, Field, model_validator
 
+from .codec import read_yaml
 from .schemas import ProtocolModel, VersionedModel
 
-__all__ = ["SENSOR_KINDS", "SensorMount", "CameraNoiseSpec", "SensorSpec", "SensorsConfig", "SENSORS_FILE"]
+__all__ = ["SENSOR_KINDS", "SensorMount", "CameraNoiseSpec", "SensorSpec", "SensorsConfig", "SENSORS_FILE",
+           "read_sensors"]
 
 SENSORS_FILE = "sensors.yaml"
 SENSOR_KINDS: tuple[str, ...] = ("rgbd_camera", "rgb_camera", "joint_state", "gripper", "force_torque")
@@ -93,3 +97,19 @@ class SensorsConfig(VersionedModel):
     def for_target(self, name: str) -> tuple[SensorSpec, ...]:
         """The sensors of target ``name`` (empty if it declares none)."""
         return tuple(self.targets.get(name, ()))
+
+
+def read_sensors(workspace_root: str | os.PathLike[str] | None = None) -> SensorsConfig:
+    """The workspace's ``sensors.yaml``, or the shipped template's when the workspace has
+    none (a workspace created before the file existed) or no workspace is given.
+
+    Raises:
+        DocumentError: the file is malformed (path and line in the message).
+    """
+    if workspace_root is not None:
+        path = Path(workspace_root) / SENSORS_FILE
+        if path.is_file():
+            return read_yaml(path, SensorsConfig)
+    from phyagentos.resources import templates_dir  # noqa: PLC0415
+
+    return read_yaml(templates_dir() / SENSORS_FILE, SensorsConfig)

@@ -188,6 +188,7 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
     """
 
     ROBOT = "panda"
+    SENSORS_KEY = "franka_kitchen"
     ROBOT_BASE = (0.0, 0.0, 1.8)
 
     @classmethod

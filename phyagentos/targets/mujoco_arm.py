@@ -95,6 +95,9 @@ class MuJoCoArmTarget(BaseRolloutTarget):
     FT_SITE: str | None = None
     #: Report unexpected contacts during trajectory execution.
     REPORT_CONTACTS = True
+    #: Entry of the shipped ``protocol/sensors.yaml`` whose sensors a new target installs
+    #: (the target pool then installs the workspace's entry for the target's own name).
+    SENSORS_KEY: str | None = None
 
     # -- construction helpers -----------------------------------------------------------
     def _init_arm(self, model: mujoco.MjModel, data: mujoco.MjData, joint_names: Sequence[str], *,
@@ -139,6 +142,10 @@ class MuJoCoArmTarget(BaseRolloutTarget):
             t = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "wrist_torque")
             if f >= 0 and t >= 0:
                 self._ft_adr = (int(m.sensor_adr[f]), int(m.sensor_adr[t]))
+        if self.SENSORS_KEY is not None:
+            from phyagentos.protocol.sensors import read_sensors  # noqa: PLC0415
+
+            self.configure_sensors(read_sensors().for_target(self.SENSORS_KEY))
 
     def _init_tabletop(self, scene, *, robot_root: int, finger_sides: dict[int, int]) -> None:
         """Index a :class:`SceneSpec` world: object bodies, and every colliding geom's kind
@@ -761,6 +768,15 @@ class MuJoCoArmTarget(BaseRolloutTarget):
             n = self._camera_noise[spec.name] = CameraNoise(spec.noise, np.random.default_rng(seed))
         return n
 
+    @property
+    def _capture_option(self) -> mujoco.MjvOption:
+        """What a real camera sees: geoms only (no sites, joints or other markers)."""
+        opt = getattr(self, "_cap_opt", None)
+        if opt is None:
+            opt = self._cap_opt = mujoco.MjvOption()
+            opt.sitegroup[:] = 0
+        return opt
+
     def capture(self, sensor: str) -> CameraFrame:
         """Render camera sensor ``sensor`` (RGB, and depth for ``rgbd_camera``).
 
@@ -781,16 +797,17 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         m, d = self._model, self._data
         cid = m.camera(spec.camera_name).id
         w, h = int(spec.width), int(spec.height)
+        opt = self._capture_option
         try:
             r = self._renderer(w, h)
             r.disable_depth_rendering()
-            r.update_scene(d, camera=cid)
+            r.update_scene(d, camera=cid, scene_option=opt)
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
             rgb = r.render().copy()
             depth = None
             if spec.kind == "rgbd_camera":
                 r.enable_depth_rendering()
-                r.update_scene(d, camera=cid)
+                r.update_scene(d, camera=cid, scene_option=opt)
                 depth = r.render().astype(np.float32)
                 r.disable_depth_rendering()
                 far = float(m.vis.map.zfar * m.stat.extent)

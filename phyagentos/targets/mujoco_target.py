@@ -88,6 +88,7 @@ class MuJoCoTarget(MuJoCoArmTarget):
     """
 
     ROBOT = "panda"
+    SENSORS_KEY = "franka_tabletop"
     FT_SITE = FT_SITE
 
     def __init__(self, name: str, scene: SceneSpec = DEFAULT_SCENE, *, seed: int | None = None):

@@ -549,7 +549,7 @@ def add_tabletop_world(ms: mujoco.MjSpec, spec: SceneSpec, *, legs: bool = False
 def _add_wrist_sensors(ms: mujoco.MjSpec) -> None:
     """Wrist force/torque sensors on :data:`FT_SITE` (link7's flange) and the wrist RGB-D
     camera :data:`WRIST_CAMERA` on the hand: 6 cm beside the tool axis (across the finger
-    motion, so the fingers stay out of the middle of the image), 13 cm along link7, looking
+    motion, so the fingers stay out of the middle of the image), 12 cm along link7, looking
     at the point 0.2 m beyond the tcp on the tool axis."""
     link7 = ms.body("panda0_link7")
     link7.add_site(name=FT_SITE, pos=[0.0, 0.0, _FLANGE_Z_M], size=[0.005, 0, 0], group=4)
@@ -560,7 +560,7 @@ def _add_wrist_sensors(ms: mujoco.MjSpec) -> None:
     c, s_ = math.cos(-math.pi / 4.0), math.sin(-math.pi / 4.0)
     tool_x = np.array([c, s_, 0.0])  # tcp x axis in link7's frame (tcp yaw -pi/4)
     tool_y = np.array([-s_, c, 0.0])
-    eye = 0.06 * tool_x + np.array([0.0, 0.0, 0.13])
+    eye = 0.075 * tool_x + np.array([0.0, 0.0, 0.12])
     fwd = np.array([0.0, 0.0, _TCP_OFFSET_M + 0.2]) - eye
     fwd /= np.linalg.norm(fwd)
     up = -tool_x  # image "up" points away from the tool axis
@@ -632,8 +632,9 @@ def build_scene_spec(spec: SceneSpec) -> mujoco.MjSpec:
     # -- environment
     wb.add_light(pos=[0.5, -0.8, 2.0], dir=[-0.1, 0.4, -1.0], diffuse=[0.6, 0.6, 0.6], castshadow=True)
     wb.add_light(pos=[1.5, 0.8, 2.0], dir=[-0.5, -0.4, -1.0], diffuse=[0.4, 0.4, 0.4], castshadow=False)
-    eye = [1.6, 0.85, 1.2]
-    wb.add_camera(name="overview", pos=eye, quat=_look_at_quat(eye, [0.35, 0.0, 0.15]), fovy=50.0)
+    # overview RGB-D camera: in front of the table, above it, the reachable table in view
+    eye = [1.25, 0.0, 0.95]
+    wb.add_camera(name="overview", pos=eye, quat=_look_at_quat(eye, [0.5, 0.0, 0.0]), fovy=55.0)
 
     add_tabletop_world(ms, spec, legs=True)
     _add_wrist_sensors(ms)

@@ -153,6 +153,13 @@ def build_so101_scene(scene: SceneSpec = DEFAULT_SCENE, *, mount_xy: Sequence[fl
         g.solimp = [0.95, 0.99, 0.001, 0.5, 2.0]
         g.priority = 1
     pos, quat = _tcp_in_gripper_frame()
+    # wrist force/torque: a site at the origin of the gripper (wrist-roll) body; MuJoCo's
+    # force/torque sensors report the load between it and its parent (the wrist)
+    ms.body("gripper").add_site(name="wrist_ft", pos=[0.0, 0.0, 0.0], size=[0.004, 0, 0], group=4)
+    ms.add_sensor(name="wrist_force", type=mujoco.mjtSensor.mjSENS_FORCE, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                  objname="wrist_ft")
+    ms.add_sensor(name="wrist_torque", type=mujoco.mjtSensor.mjSENS_TORQUE, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                  objname="wrist_ft")
     ms.body("gripper").add_site(name="tcp", pos=list(pos), quat=list(quat), size=[0.004, 0, 0], group=4,
                                 rgba=[1.0, 0.6, 0.0, 0.6])
 
@@ -208,8 +215,10 @@ class SO101Target(MuJoCoArmTarget):
     """
 
     ROBOT = "so101"
+    SENSORS_KEY = "so101_tabletop"
     ROBOT_BASE = (float(MOUNT_XY[0]), float(MOUNT_XY[1]), 0.0)
     REPORT_CONTACTS = False
+    FT_SITE = "wrist_ft"
 
     @classmethod
     def scene_from_dict(cls, raw) -> SceneSpec:

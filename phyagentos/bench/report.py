@@ -63,9 +63,10 @@ def _bundle(root: Path, evidence: str | None) -> dict:
 
 
 def _terminal(root: Path, evidence: str | None) -> dict:
+    """The bundle's ``ground_truth.yaml`` (scoring reads truth only from there)."""
     if not evidence:
         return {}
-    path = root / evidence / "terminal.yaml"
+    path = root / evidence / "ground_truth.yaml"
     try:
         return yaml.safe_load(path.read_text(encoding="utf-8")) or {}
     except OSError:
@@ -125,7 +126,7 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         }
         rows.append(row)
         terminal = _terminal(directory, attempt.evidence if attempt else None)
-        gt = terminal.get("ground_truth") if isinstance(terminal, dict) else None
+        gt = (terminal.get("terminal") or {}).get("benchmark") if isinstance(terminal, dict) else None
         if isinstance(gt, dict) and "success" in gt:
             ground_truth.append({"session_id": s.session_id, "verdict": verdict, "env_success": bool(gt["success"]),
                                  "source": gt.get("source", ""), "task": gt.get("task"),

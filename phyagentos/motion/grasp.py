@@ -1,4 +1,8 @@
-"""Grasp and place poses for boxes with a parallel gripper, tcp frame conventions.
+"""Grasp and place poses for boxes, cylinders and spheres with a parallel gripper.
+
+tcp frame conventions below. A box is grasped across its shorter horizontal side; an
+upright cylinder or a sphere is round about the vertical, so any yaw closes across its
+diameter: four candidates 90 deg apart, nearest the current hand yaw first.
 
 tcp frame (site ``tcp`` of the scene): origin midway between the fingertip pads, z axis
 out of the gripper (approach direction), y axis along the finger motion (the closing
@@ -80,8 +84,13 @@ def top_down_grasp_candidates(
     current_q7_rad: float | None = None,
     support_z_m: float | None = None,
     tip_clearance_m: float = 0.004,
+    shape: str = "box",
 ) -> tuple[GraspPlan, ...]:
-    """All symmetric top-down grasps of an upright box, best first.
+    """All symmetric top-down grasps of an upright box (or a cylinder / sphere), best first.
+
+    ``shape``: ``box`` (default; also for ``unknown``), ``cylinder`` (``half_extents``
+    = (r, r, h/2); upright: round about world z) or ``sphere`` ((r, r, r)). A round object
+    offers four yaws 90 deg apart starting at ``current_yaw_rad``, closing across 2 r.
 
     The fingers close across the box's shorter horizontal side, which leaves two yaws
     180 deg apart (four, 90 deg apart, for a square footprint). They are sorted by how
@@ -104,6 +113,17 @@ def top_down_grasp_candidates(
     he = np.asarray(half_extents, dtype=float).reshape(-1)
     if T.shape != (4, 4) or he.shape != (3,):
         raise IKError(f"T_object must be (4, 4) and half_extents (3,), got {T.shape}, {he.shape}")
+    if shape == "sphere" or (shape == "cylinder" and abs(T[2, 2]) >= math.cos(math.radians(20))):
+        # round about the vertical: express it as an axis-aligned upright "box" whose
+        # horizontal axes are the current hand's, so every candidate yaw is equally valid
+        r = float(min(he[0], he[1]))
+        hz = float(he[2]) if shape == "cylinder" else r
+        c, s_ = math.cos(current_yaw_rad), math.sin(current_yaw_rad)
+        T = T.copy()
+        T[:3, :3] = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        he = np.array([r, r, hz])
+    elif shape not in ("box", "cylinder", "unknown"):
+        raise IKError(f"unknown shape {shape!r}; valid shapes: box, cylinder, sphere, unknown")
     R = T[:3, :3]
     # A box resting on any face is upright: name its most vertical axis z (a cube
     # tipped over by a failed grasp is still graspable from above).
@@ -163,6 +183,7 @@ def top_down_grasp(
     current_q7_rad: float | None = None,
     support_z_m: float | None = None,
     tip_clearance_m: float = 0.004,
+    shape: str = "box",
 ) -> GraspPlan:
     """The best top-down grasp of an upright box: tcp z pointing down, fingers closing
     across the shorter horizontal side, yaw (within the joint-7 range when
@@ -176,6 +197,7 @@ def top_down_grasp(
         current_q7_rad=current_q7_rad,
         support_z_m=support_z_m,
         tip_clearance_m=tip_clearance_m,
+        shape=shape,
     )[0]
 
 

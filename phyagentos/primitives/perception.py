@@ -49,10 +49,8 @@ class Observe(Primitive):
             0 skips the observation and keeps what ``out`` holds (a tree can then
             offer a re-observation that a session switches on by parameter).
 
-    The trace records the perceived object positions; on a simulated target it
-    also records the simulator's ground truth at that instant (``truth``), so the
-    verifier can tell a perception error from a world that changed afterwards. A
-    real robot has no ground truth and records perception only.
+    The trace records the perceived object positions only (never simulator truth:
+    that goes to the bundle's ``ground_truth.yaml``).
     """
 
     TOOLS = ("snapshot",)
@@ -69,13 +67,10 @@ class Observe(Primitive):
             return
         target = self.ctx.target
         perceive = getattr(target, "perceive", None)
-        # Ground truth first: perceiving may set off a scripted disturbance.
-        truth = target.snapshot() if perceive is not None and getattr(target, "kind", "") == "simulation" else None
         snapshot = perceive(samples=self.samples) if perceive is not None else target.snapshot()
         self.set(self.out, snapshot)
-        extra = {"truth": _object_positions(truth)} if truth is not None else {}
         self.ctx.trace.record("observe", leaf=self.name, samples=self.samples, sim_time_s=snapshot.get("sim_time_s"),
-                              objects=_object_positions(snapshot), relations=snapshot.get("relations", []), **extra)
+                              objects=_object_positions(snapshot), relations=snapshot.get("relations", []))
         if self.ctx.on_observation is not None:
             self.ctx.on_observation(snapshot)
 
@@ -106,8 +101,12 @@ class ComputeGrasp(Primitive):
         self.writes(grasp, pregrasp)
 
     def step(self):
-        T_obj, half = entity_pose(self.get(self.snapshot_key), self.object)
-        plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m)
+        snapshot = self.get(self.snapshot_key)
+        T_obj, half = entity_pose(snapshot, self.object)
+        ent = next((e for e in snapshot.get("entities", []) if e["name"] == self.object), {})
+        shape = (ent.get("attributes") or {}).get("shape") or "box"
+        plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m,
+                                          shape=shape if shape in ("box", "cylinder", "sphere") else "box")
         plan = plans[self.candidate % len(plans)]
         self.set(self.grasp_key, plan.grasp)
         self.set(self.pregrasp_key, plan.pregrasp)

@@ -231,6 +231,9 @@ class Workspace:
                 if not (ws.root / filename).exists():
                     atomic_write_bytes(ws.root / filename, template.read_bytes())
                     log.info("created %s from template", ws.root / filename)
+        # sensors.yaml (issue 9): optional in a template set, never overwritten
+        if (source / "sensors.yaml").is_file() and not (ws.root / "sensors.yaml").exists():
+            atomic_write_bytes(ws.root / "sensors.yaml", (source / "sensors.yaml").read_bytes())
         ws.validate()
         if migrate:  # a workspace written before sessions/.index existed
             ws.reconcile()

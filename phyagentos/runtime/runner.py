@@ -40,7 +40,12 @@ from .policy_runtime import PolicySkillRuntime
 from .safety_guard import SafetyGuard
 from .target_pool import TargetPool
 
-__all__ = ["SessionRunner", "AttemptReport", "write_environment", "SKILL_RUNTIMES"]
+__all__ = ["SessionRunner", "AttemptReport", "write_environment", "write_ground_truth", "SKILL_RUNTIMES",
+           "GROUND_TRUTH_FILE"]
+
+#: The privileged channel of a bundle (CONTRACT_9 section 2): simulator truth for
+#: benchmark scoring and tests only; not listed in bundle.yaml, never in the trace.
+GROUND_TRUTH_FILE = "ground_truth.yaml"
 
 #: Skill runtimes besides the builtin one, by SKILLRUNTIME.md name (built with the skill registry).
 SKILL_RUNTIMES = {PolicySkillRuntime.name: PolicySkillRuntime}
@@ -69,6 +74,26 @@ def write_environment(workspace: Workspace, snapshot: dict, *, target: str, sess
         )
 
     workspace.update("ENVIRONMENT", apply)
+
+
+def _truth(target) -> dict | None:
+    fn = getattr(target, "ground_truth", None)
+    return fn() if fn is not None else None
+
+
+def write_ground_truth(directory, target, *, initial: dict | None, terminal: dict | None) -> None:
+    """Write ``ground_truth.yaml`` = ``{initial, terminal, scene_record, benchmark}``: the
+    simulator's truth at the start and end of the attempt, the physical scene the target
+    was built from (``scene_record``: the randomised draw with masses and frictions), and
+    the target's own success signals (``benchmark``, e.g. FrankaKitchen's task completions).
+    Nothing is written for a target without a ground-truth channel (a real robot)."""
+    if initial is None and terminal is None:
+        return
+    record = getattr(target, "scene_record", None)
+    bench = getattr(target, "benchmark_signals", None)
+    doc = {"initial": initial, "terminal": terminal, "scene_record": record() if record is not None else None,
+           "benchmark": bench() if bench is not None else {}}
+    atomic_write_text(directory / GROUND_TRUTH_FILE, dump_yaml(doc))
 
 
 @dataclass(frozen=True)
@@ -148,8 +173,9 @@ class SessionRunner:
         target = None
         ctx = None
         initial = None
-        # Evidence besides snapshots and trace: the task definition, RGB images, the
-        # perturbation record (audit only). Image events join the session's events.
+        initial_truth = None
+        # Evidence besides snapshots and trace: the task definition and RGB images.
+        # Image events join the session's events. Truth goes to ground_truth.yaml only.
         extra = {"task": "task.yaml"}
         image_events: list = []
         atomic_write_text(evidence_dir / "task.yaml", dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS)))
@@ -167,6 +193,7 @@ class SessionRunner:
                 self.targets.checkpoint(rec, target)
                 if self.heartbeat is not None:
                     self.heartbeat()
+                initial_truth = _truth(target)
                 initial = target.snapshot()
                 atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
                 if name := save_scene_image(target, evidence_dir / "initial.png", events=image_events):
@@ -197,9 +224,7 @@ class SessionRunner:
         if target is not None:
             if name := save_scene_image(target, evidence_dir / "terminal.png", events=image_events):
                 extra["terminal_image"] = name
-            if getattr(target, "perturbations", None):
-                atomic_write_text(evidence_dir / "perturbations.yaml", dump_yaml(target.perturbations.record()))
-                extra["perturbations"] = "perturbations.yaml"
+            write_ground_truth(evidence_dir, target, initial=initial_truth, terminal=_truth(target))
             if ctx is not None:
                 ctx.events.extend(image_events)
             if outcome.status in ("cancelled", "timed_out", "error"):
@@ -238,6 +263,9 @@ class SessionRunner:
         target.halt()
         self.targets.checkpoint(rec, target)
         terminal = target.snapshot()
+        truth_path = evidence_dir / GROUND_TRUTH_FILE
+        if not truth_path.exists():
+            write_ground_truth(evidence_dir, target, initial=None, terminal=_truth(target))
         initial_path = evidence_dir / "initial.yaml"
         if not initial_path.exists():
             atomic_write_text(initial_path, dump_yaml(terminal))

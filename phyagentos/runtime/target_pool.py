@@ -21,6 +21,7 @@ import yaml
 from phyagentos.errors import TargetError, format_choices
 from phyagentos.protocol import SessionRecord, TargetSpec
 from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.protocol.sensors import read_sensors
 from phyagentos.targets import MuJoCoTarget, SceneSpec
 from phyagentos.targets.kitchen import FrankaKitchenTarget
 from phyagentos.targets.so101 import SO101Target
@@ -88,6 +89,10 @@ class TargetPool:
                 cached[1].close()
             target = cls(spec.name, scene, seed=session.seed)
             self._live[spec.name] = (key, target)
+            # the workspace's sensors.yaml entry for this target (read-only deploy config)
+            sensors = read_sensors(self.state_dir.parent).for_target(spec.name)
+            if sensors and hasattr(target, "configure_sensors"):
+                target.configure_sensors(sensors)
         target = self._live[spec.name][1]
         meta_path = self.state_dir / spec.name / "state.yaml"
         meta = yaml.safe_load(meta_path.read_text(encoding="utf-8")) if meta_path.is_file() else None

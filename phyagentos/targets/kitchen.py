@@ -36,23 +36,18 @@ World frame: the environment's (z up; robot base at (0, 0, 1.8) m, facing +y).
 
 from __future__ import annotations
 
-import io
-import json
 import logging
 import math
-import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import mujoco
 import numpy as np
 
 from phyagentos.errors import TargetError, format_choices
-from phyagentos.protocol.atomic import atomic_write_bytes
 
-from .state_file import read_state_npz
-from .base import BaseRolloutTarget, ExecutionResult
+from .base import ExecutionResult
+from .mujoco_arm import MuJoCoArmTarget, mat_quat as _quat, pose_matrix as _pose
 from .mujoco_target import GripperResult
 
 __all__ = ["KitchenScene", "FrankaKitchenTarget", "KITCHEN_TASKS", "ENV_ID"]
@@ -72,7 +67,6 @@ _TCP_OFFSET_M = 0.245  # as the tabletop tcp (phyagentos.targets.scene)
 #: position command is held for a whole 80 ms step, so slower references keep the
 #: tracking error (lag ~ qd * dt / 2) near 0.02 rad.
 VELOCITY_LIMIT_RAD_S = 0.5
-_STATE_FORMAT = 1
 
 # Entities: kettle (free body) and microwave (door hinge). Geometry from the shipped
 # item_assets/kettle_chain.xml and microwave_chain.xml.
@@ -139,19 +133,6 @@ class KitchenScene:
                 "object_noise_ratio": self.object_noise_ratio, "max_episode_steps": self.max_episode_steps}
 
 
-def _pose(xpos, xmat) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = xpos
-    T[:3, :3] = np.asarray(xmat).reshape(3, 3)
-    return T
-
-
-def _quat(R) -> list[float]:
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, np.asarray(R, dtype=float).reshape(-1))
-    return [float(x) for x in q]
-
-
 def _make_env(scene: KitchenScene):
     import gymnasium as gym  # noqa: PLC0415
     import gymnasium_robotics  # noqa: PLC0415
@@ -191,7 +172,7 @@ def _with_tcp_site(env) -> None:
     env.unwrapped.model, env.unwrapped.data = model, data
 
 
-class FrankaKitchenTarget(BaseRolloutTarget):
+class FrankaKitchenTarget(MuJoCoArmTarget):
     """The FrankaKitchen environment behind the rollout-target contract.
 
     Args:
@@ -206,9 +187,9 @@ class FrankaKitchenTarget(BaseRolloutTarget):
     ``TOOLS``, ``ACTION_FORMS``.
     """
 
-    KIND = "simulation"
-    TOOLS = ("observe", "move_joints", "set_gripper", "hold", "snapshot")
-    ACTION_FORMS = ("joint_trajectory", "gripper_command")
+    ROBOT = "panda"
+    SENSORS_KEY = "franka_kitchen"
+    ROBOT_BASE = (0.0, 0.0, 1.8)
 
     @classmethod
     def scene_from_dict(cls, raw: Mapping[str, Any] | None) -> KitchenScene:
@@ -231,12 +212,8 @@ class FrankaKitchenTarget(BaseRolloutTarget):
         u = self._env.unwrapped
         self._robot = u.robot_env
         m = self._robot.model
-        self._jids = np.array([m.joint(n).id for n in ARM_JOINT_NAMES])
-        self._qadr = m.jnt_qposadr[self._jids].copy()
-        self._dadr = m.jnt_dofadr[self._jids].copy()
+        self._init_arm(m, self._robot.data, ARM_JOINT_NAMES, tcp_site="tcp", arm_actuators=list(range(7)), seed=seed)
         self._finger_qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in FINGER_JOINT_NAMES])
-        self._kp = m.actuator_gainprm[:7, 0].copy()
-        self._ff_gain = m.dof_damping[self._dadr] / self._kp
         self._finger_bodies = {m.body(n).id for n in FINGER_BODIES}
         kettle_root = m.body("kettle").id
         door = m.body("microdoorroot").id
@@ -262,29 +239,9 @@ class FrankaKitchenTarget(BaseRolloutTarget):
 
     # -- accessors (the motion primitives' view) ---------------------------------------
     @property
-    def model(self) -> mujoco.MjModel:
-        return self._robot.model
-
-    @property
-    def data(self) -> mujoco.MjData:
-        return self._robot.data
-
-    @property
-    def scene(self) -> KitchenScene:
-        return self._scene
-
-    @property
     def env(self):
         """The wrapped gymnasium environment (read-only use)."""
         return self._env
-
-    @property
-    def arm_joint_names(self) -> tuple[str, ...]:
-        return ARM_JOINT_NAMES
-
-    @property
-    def tcp_site(self) -> str:
-        return "tcp"
 
     @property
     def timestep(self) -> float:
@@ -296,21 +253,9 @@ class FrankaKitchenTarget(BaseRolloutTarget):
         """Seconds per environment step (0.08)."""
         return float(self._robot.dt)
 
-    @property
-    def sim_time(self) -> float:
-        return float(self.data.time)
-
-    def arm_qpos(self) -> np.ndarray:
-        """``(7,)`` arm joint angles, rad (simulator state, not the noisy observation)."""
-        return self.data.qpos[self._qadr].copy()
-
     def gripper_opening(self) -> float:
         """Opening per finger, m (0 .. 0.04)."""
         return float(np.mean(self.data.qpos[self._finger_qadr]))
-
-    def tcp_pose(self) -> np.ndarray:
-        s = self.data.site("tcp")
-        return _pose(s.xpos, s.xmat)
 
     @property
     def allowed_collision_pairs(self) -> tuple[tuple[str, str], ...]:
@@ -358,10 +303,6 @@ class FrankaKitchenTarget(BaseRolloutTarget):
                 pass
         super().close()
 
-    def _check_open(self) -> None:
-        if self.closed:
-            raise TargetError(f"target {self.name!r} is closed")
-
     # -- the action bridge ------------------------------------------------------------
     def _env_step(self, q_ref: np.ndarray, qd_ref: np.ndarray) -> None:
         robot = self._robot
@@ -379,17 +320,6 @@ class FrankaKitchenTarget(BaseRolloutTarget):
         self._q_cmd = np.asarray(q_ref, dtype=float).copy()
         for task in info.get("episode_task_completions", []):
             self._completed.setdefault(task, self._steps)
-
-    @staticmethod
-    def _traj_arrays(traj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t = np.asarray(traj.t, dtype=float).reshape(-1)
-        Q = np.asarray(traj.q, dtype=float)
-        QD = np.asarray(getattr(traj, "qd", np.zeros_like(Q)), dtype=float)
-        if len(t) < 1 or Q.shape != (len(t), 7) or QD.shape != Q.shape:
-            raise TargetError(f"trajectory must have t (M,), q and qd (M, 7); got {t.shape}, {Q.shape}, {QD.shape}")
-        if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(QD)) and np.all(np.isfinite(t))):
-            raise TargetError("trajectory contains non-finite values")
-        return t - t[0], Q, QD
 
     def track(self, traj, *, t_start: float, t_end: float, tracking_tol_rad: float = 0.05,
               feedforward: bool = True) -> ExecutionResult:
@@ -513,6 +443,21 @@ class FrankaKitchenTarget(BaseRolloutTarget):
         return tuple(sorted(e for e, bodies in touch.items() if len(bodies) == 2))
 
     def ground_truth(self) -> dict[str, Any]:
+        """The privileged channel (YAML-ready): ``stamp_s``, the kettle's true pose
+        (``objects``), the microwave door angle (``articulations``, rad), ``held``
+        (simulator finger contacts) and ``benchmark`` (:meth:`benchmark_signals`)."""
+        self._check_open()
+        kb = self.data.body("kettle")
+        j = self._micro_joint
+        return {
+            "stamp_s": self.sim_time,
+            "objects": {"kettle": {"position": [float(x) for x in kb.xpos], "quat_wxyz": _quat(kb.xmat.reshape(3, 3))}},
+            "articulations": {"microwave": {"joint_position": float(self.data.qpos[self.model.jnt_qposadr[j]])}},
+            "held": list(self.held_objects()),
+            "benchmark": self.benchmark_signals(),
+        }
+
+    def benchmark_signals(self) -> dict[str, Any]:
         """The environment's own verdict: tasks it counted complete and at which step."""
         horizon = self._scene.max_episode_steps
         tasks = {t: (t in self._completed and self._completed[t] <= horizon) for t in self._scene.tasks}
@@ -527,7 +472,7 @@ class FrankaKitchenTarget(BaseRolloutTarget):
         }
 
     def snapshot(self) -> dict:
-        """Symbolic world state (YAML-ready) plus the environment's ``ground_truth``.
+        """Simulator world state (YAML-ready; ground truth, for ``ground_truth.yaml`` and tests).
 
         Entities: ``panda`` (robot; attributes ``joint_positions`` (7,) rad,
         ``gripper_opening_m``), ``tcp``, ``gripper``, ``kettle`` (object: centre and
@@ -590,8 +535,7 @@ class FrankaKitchenTarget(BaseRolloutTarget):
             ents.append({"name": name, "kind": "region", "position": [x, y, _BURNER_SURFACE_Z], "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
                          "size": [_BURNER_HALF[0], _BURNER_HALF[1], 0.0]})
         rel = [{"subject": "gripper", "relation": "holding", "object": n} for n in self.held_objects()]
-        return {"sim_time_s": float(d.time), "time": float(d.time), "entities": ents, "relations": rel,
-                "ground_truth": self.ground_truth()}
+        return {"sim_time_s": float(d.time), "time": float(d.time), "entities": ents, "relations": rel}
 
     def observe(self) -> dict:
         """Observation: ``time``, ``arm_qpos`` (7,), ``gripper_opening_m``, ``tcp_pose`` (4, 4),
@@ -605,45 +549,19 @@ class FrankaKitchenTarget(BaseRolloutTarget):
         snap = self.snapshot()
         return {"target": self.name, "kind": self.kind, "sim_time_s": self.sim_time,
                 "arm_qpos": [float(x) for x in self.arm_qpos()], "gripper_opening_m": self.gripper_opening(),
-                "relations": snap["relations"], "ground_truth": snap["ground_truth"]}
+                "relations": snap["relations"]}
 
     # -- persistence ----------------------------------------------------------------
-    def _fingerprint(self) -> str:
-        m = self.model
-        return json.dumps({"env": ENV_ID, "nq": m.nq, "nv": m.nv, "nu": m.nu, "scene": self._scene.to_dict()},
-                          sort_keys=True)
+    def _fingerprint_extra(self) -> dict[str, Any]:
+        return {"env": ENV_ID}
 
-    def save_state(self, path: str | os.PathLike) -> Path:
-        """Write the physics state and the environment's bookkeeping (steps, completions)
-        to ``path`` (npz, atomic). Returns the path."""
-        self._check_open()
-        m, d = self.model, self.data
-        spec = mujoco.mjtState.mjSTATE_INTEGRATION
-        full = np.empty(mujoco.mj_stateSize(m, spec))
-        mujoco.mj_getState(m, d, full, spec)
-        meta = {"steps": self._steps, "completed": self._completed, "q_cmd": self._q_cmd.tolist(),
+    def _state_meta(self) -> dict[str, Any]:
+        """The environment's bookkeeping beside the physics: steps, completions, commands."""
+        return {"steps": self._steps, "completed": self._completed, "q_cmd": self._q_cmd.tolist(),
                 "finger_cmd": self._finger_cmd,
                 "last_robot_qpos": np.asarray(self._robot._last_robot_qpos, dtype=float).tolist()}
-        p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        buf = io.BytesIO()
-        np.savez(buf, format=np.array(_STATE_FORMAT), full_state=full, meta=np.array(json.dumps(meta)),
-                 fingerprint=np.array(self._fingerprint()))
-        atomic_write_bytes(p, buf.getvalue())  # temp file, fsync, rename, dir fsync
-        return p
 
-    def load_state(self, path: str | os.PathLike) -> None:
-        """Restore a state written by :meth:`save_state` for the same scene (TargetError otherwise)."""
-        self._check_open()
-        p = Path(path)
-        data = read_state_npz(p)
-        if str(data.get("fingerprint")) != self._fingerprint():
-            raise TargetError(f"state file {p} was saved from a different kitchen scene")
-        m, d = self.model, self.data
-        spec = mujoco.mjtState.mjSTATE_INTEGRATION
-        mujoco.mj_setState(m, d, data["full_state"], spec)
-        mujoco.mj_forward(m, d)
-        meta = json.loads(str(data["meta"]))
+    def _restore_meta(self, meta: dict[str, Any]) -> None:
         self._steps = int(meta["steps"])
         self._completed = {k: int(v) for k, v in meta["completed"].items()}
         self._q_cmd = np.asarray(meta["q_cmd"], dtype=float)
@@ -653,29 +571,3 @@ class FrankaKitchenTarget(BaseRolloutTarget):
         u.episode_task_completions[:] = list(self._completed)
 
     # -- tools ----------------------------------------------------------------------
-    def tools(self) -> tuple[str, ...]:
-        return self.TOOLS
-
-    def _tool_observe(self) -> dict:
-        return self.query_state()
-
-    def _tool_move_joints(self, q: Sequence[float], tracking_tol_rad: float = 0.05, speed_scale: float = 1.0) -> dict:
-        from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime  # noqa: PLC0415
-
-        qg = np.asarray(q, dtype=float).reshape(-1)
-        if qg.shape != (7,) or not np.all(np.isfinite(qg)):
-            raise TargetError(f"move_joints: q must be 7 finite joint angles, got {q!r}")
-        if not 0 < speed_scale <= 1.0:
-            raise TargetError(f"move_joints: speed_scale must be in (0, 1], got {speed_scale}")
-        traj = retime(np.array([self.arm_qpos(), qg]), vel_limits=self.velocity_limits() * speed_scale,
-                      acc_limits=np.array(DEFAULT_ACCELERATION_LIMITS) * speed_scale, dt=self.model.opt.timestep)
-        return self.execute_trajectory(traj, tracking_tol_rad=tracking_tol_rad).to_dict()
-
-    def _tool_set_gripper(self, opening_m: float, settle_s: float = 0.5) -> dict:
-        return self.set_gripper(opening_m=opening_m, settle_s=settle_s).to_dict()
-
-    def _tool_hold(self, duration_s: float = 0.5, q: Sequence[float] | None = None) -> dict:
-        return {"steps": self.hold(q, duration_s=duration_s), "sim_time_s": self.sim_time}
-
-    def _tool_snapshot(self) -> dict:
-        return self.snapshot()

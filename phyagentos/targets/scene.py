@@ -62,6 +62,10 @@ __all__ = [
     "ROBOT_BODY_NAMES",
     "FINGER_BODY_NAMES",
     "TCP_SITE",
+    "FT_SITE",
+    "WRIST_CAMERA",
+    "OBJECT_SHAPES",
+    "add_tabletop_world",
     "HOME_QPOS",
     "GRIPPER_MAX_OPENING_M",
     "TABLE_GEOM",
@@ -83,6 +87,14 @@ ROBOT_BODY_NAMES: tuple[str, ...] = tuple(f"panda0_link{i}" for i in range(8)) +
 )
 FINGER_BODY_NAMES: tuple[str, ...] = ("panda0_leftfinger", "panda0_rightfinger")
 TCP_SITE = "tcp"
+#: Site of the wrist force/torque sensors (``wrist_force``, ``wrist_torque``): on link7 at
+#: the flange, 0.107 m along link7's z (Franka Emika datasheet: flange offset d7 = 0.107 m),
+#: i.e. between link7 and the hand; it measures the load of everything distal to it.
+FT_SITE = "wrist_ft"
+_FLANGE_Z_M = 0.107
+#: Wrist RGB-D camera on the hand, looking along the gripper (tcp z).
+WRIST_CAMERA = "wrist"
+OBJECT_SHAPES: tuple[str, ...] = ("box", "cylinder", "sphere")
 TABLE_GEOM = "table"
 FLOOR_GEOM = "floor"
 GRIPPER_MAX_OPENING_M = 0.04
@@ -173,17 +185,21 @@ def _rgba(value: Any, what: str) -> tuple[float, float, float, float]:
 
 @dataclass(frozen=True)
 class ObjectSpec:
-    """A free box resting on the table.
+    """A free rigid object resting on the table: a box, an upright cylinder or a sphere.
 
     Attributes:
         name: unique scene name (also the MuJoCo body and geom name).
-        half_extents: ``(hx, hy, hz)`` half sizes in metres, box frame.
+        half_extents: ``(hx, hy, hz)`` half sizes of the object's bounding box in metres,
+            object frame: a cylinder has radius ``hx == hy`` and half height ``hz``; a
+            sphere radius ``hx == hy == hz``.
         position: ``(x, y)`` of the box centre in the world frame, metres; z is computed
             so the box rests on the table (``z = hz``).
         yaw: rotation about world z in radians.
         mass: kilograms.
         friction: sliding friction coefficient (torsional 0.005, rolling 0.0001).
         rgba: colour, components in [0, 1].
+        shape: ``box`` | ``cylinder`` | ``sphere`` (:data:`OBJECT_SHAPES`).
+        cls: the user's object class (``class:`` in YAML, e.g. ``"mug"``), or None.
 
     Raises :class:`TargetError` on invalid values.
     """
@@ -195,6 +211,8 @@ class ObjectSpec:
     mass: float = 0.1
     friction: float = 1.0
     rgba: tuple[float, float, float, float] = (0.85, 0.20, 0.15, 1.0)
+    shape: str = "box"
+    cls: str | None = None
 
     def __post_init__(self) -> None:
         _check_name(self.name, "object")
@@ -210,6 +228,15 @@ class ObjectSpec:
         object.__setattr__(self, "mass", mass)
         object.__setattr__(self, "friction", friction)
         object.__setattr__(self, "rgba", _rgba(self.rgba, f"object {self.name!r}"))
+        if self.shape not in OBJECT_SHAPES:
+            raise TargetError(f"object {self.name!r}: unknown shape {self.shape!r}; valid shapes: "
+                              f"{format_choices(OBJECT_SHAPES)}")
+        if self.shape == "cylinder" and abs(he[0] - he[1]) > 1e-9:
+            raise TargetError(f"object {self.name!r}: a cylinder's half_extents need hx == hy (its radius), got {he!r}")
+        if self.shape == "sphere" and (abs(he[0] - he[1]) > 1e-9 or abs(he[0] - he[2]) > 1e-9):
+            raise TargetError(f"object {self.name!r}: a sphere's half_extents must all equal its radius, got {he!r}")
+        if self.cls is not None and (not isinstance(self.cls, str) or not self.cls.strip()):
+            raise TargetError(f"object {self.name!r}: class must be a non-empty string, got {self.cls!r}")
 
     @property
     def rest_z(self) -> float:
@@ -285,7 +312,12 @@ def _item_from_dict(kind: str, d: Any, index: int):
     if not isinstance(d, Mapping):
         raise TargetError(f"scene {kind}[{index}] must be a mapping, got {type(d).__name__}")
     valid = tuple(cls.__dataclass_fields__)
-    unknown = set(d) - set(valid)
+    if kind == "objects":
+        d = dict(d)
+        if "class" in d:
+            d["cls"] = d.pop("class")
+        valid = tuple("class" if k == "cls" else k for k in valid)
+    unknown = set(d) - set(valid) - ({"cls"} if kind == "objects" else set())
     if unknown:
         raise TargetError(
             f"scene {kind}[{index}]: unknown key(s) {format_choices(unknown)}; valid keys: {format_choices(valid)}"
@@ -406,6 +438,10 @@ class SceneSpec:
             out: dict[str, Any] = {}
             for k in item.__dataclass_fields__:
                 v = getattr(item, k)
+                if k == "cls":
+                    if v is not None:
+                        out["class"] = v
+                    continue
                 out[k] = list(v) if isinstance(v, tuple) else v
             return out
 
@@ -456,6 +492,85 @@ def _wrapper_xml() -> str:
     <include file="{p / 'chain.xml'}"/>
   </worldbody>
 </mujoco>"""
+
+_OBJECT_GEOM = {"box": mujoco.mjtGeom.mjGEOM_BOX, "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+                "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
+
+
+def _object_geom_size(o: ObjectSpec) -> list[float]:
+    """MuJoCo geom size of ``o``: box half extents, cylinder (radius, half height), sphere radius."""
+    hx, hy, hz = o.half_extents
+    if o.shape == "cylinder":
+        return [hx, hz, 0.0]
+    if o.shape == "sphere":
+        return [hx, 0.0, 0.0]
+    return [hx, hy, hz]
+
+
+def add_tabletop_world(ms: mujoco.MjSpec, spec: SceneSpec, *, legs: bool = False) -> None:
+    """Add the floor, the table (top at z = 0), and ``spec``'s regions, obstacles and
+    objects to ``ms``'s world body (shared by every tabletop robot). Objects get a free
+    joint ``name:free``, one geom ``name`` of their shape, condim 4 and the stiff contact
+    parameters of the module docstring."""
+    wb = ms.worldbody
+    wb.add_geom(name=FLOOR_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3.0, 3.0, 0.1],
+                pos=[0.0, 0.0, -_TABLE_HEIGHT_M], rgba=[0.25, 0.28, 0.32, 1.0])
+    tx = 0.5 * (_TABLE_X[1] - _TABLE_X[0])
+    ty = 0.5 * (_TABLE_Y[1] - _TABLE_Y[0])
+    wb.add_geom(name=TABLE_GEOM, type=mujoco.mjtGeom.mjGEOM_BOX, size=[tx, ty, _TABLE_THICKNESS_M / 2.0],
+                pos=[0.5 * (_TABLE_X[0] + _TABLE_X[1]), 0.5 * (_TABLE_Y[0] + _TABLE_Y[1]), -_TABLE_THICKNESS_M / 2.0],
+                rgba=[0.72, 0.60, 0.45, 1.0], friction=[1.0, 0.005, 0.0001])
+    if legs:
+        leg_h = (_TABLE_HEIGHT_M - _TABLE_THICKNESS_M) / 2.0
+        for i, (lx, ly) in enumerate(
+            [(_TABLE_X[0] + 0.05, _TABLE_Y[0] + 0.05), (_TABLE_X[0] + 0.05, _TABLE_Y[1] - 0.05),
+             (_TABLE_X[1] - 0.05, _TABLE_Y[0] + 0.05), (_TABLE_X[1] - 0.05, _TABLE_Y[1] - 0.05)]
+        ):
+            wb.add_geom(name=f"table_leg{i}", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.03, 0.03, leg_h],
+                        pos=[lx, ly, -_TABLE_THICKNESS_M - leg_h], rgba=[0.55, 0.45, 0.35, 1.0],
+                        contype=0, conaffinity=0)
+    for r in spec.regions:
+        wb.add_geom(name=region_geom_name(r.name), type=mujoco.mjtGeom.mjGEOM_BOX,
+                    size=[r.half_extents[0], r.half_extents[1], _REGION_THICKNESS_M],
+                    pos=[r.center[0], r.center[1], _REGION_THICKNESS_M], rgba=list(r.rgba),
+                    contype=0, conaffinity=0, mass=0.0)
+    for ob in spec.obstacles:
+        wb.add_geom(name=obstacle_geom_name(ob.name), type=mujoco.mjtGeom.mjGEOM_BOX, size=list(ob.half_extents),
+                    pos=list(ob.center), rgba=list(ob.rgba))
+    for o in spec.objects:
+        body = wb.add_body(name=o.name, pos=[o.position[0], o.position[1], o.rest_z], quat=_yaw_quat(o.yaw))
+        body.add_freejoint(name=object_joint_name(o.name))
+        g = body.add_geom(name=o.name, type=_OBJECT_GEOM[o.shape], size=_object_geom_size(o), rgba=list(o.rgba),
+                          friction=[o.friction, 0.005, 0.0001], condim=4, solref=[0.004, 1.0],
+                          solimp=[0.95, 0.99, 0.001, 0.5, 2.0])
+        g.mass = o.mass
+
+
+def _add_wrist_sensors(ms: mujoco.MjSpec) -> None:
+    """Wrist force/torque sensors on :data:`FT_SITE` (link7's flange) and the wrist RGB-D
+    camera :data:`WRIST_CAMERA` on the hand: 6 cm beside the tool axis (across the finger
+    motion, so the fingers stay out of the middle of the image), 12 cm along link7, looking
+    at the point 0.2 m beyond the tcp on the tool axis."""
+    link7 = ms.body("panda0_link7")
+    link7.add_site(name=FT_SITE, pos=[0.0, 0.0, _FLANGE_Z_M], size=[0.005, 0, 0], group=4)
+    ms.add_sensor(name="wrist_force", type=mujoco.mjtSensor.mjSENS_FORCE, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                  objname=FT_SITE)
+    ms.add_sensor(name="wrist_torque", type=mujoco.mjtSensor.mjSENS_TORQUE, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                  objname=FT_SITE)
+    c, s_ = math.cos(-math.pi / 4.0), math.sin(-math.pi / 4.0)
+    tool_x = np.array([c, s_, 0.0])  # tcp x axis in link7's frame (tcp yaw -pi/4)
+    tool_y = np.array([-s_, c, 0.0])
+    eye = 0.075 * tool_x + np.array([0.0, 0.0, 0.12])
+    fwd = np.array([0.0, 0.0, _TCP_OFFSET_M + 0.2]) - eye
+    fwd /= np.linalg.norm(fwd)
+    up = -tool_x  # image "up" points away from the tool axis
+    x = np.cross(fwd, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(x, fwd)
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, np.column_stack([x, y, -fwd]).flatten())
+    del tool_y
+    link7.add_camera(name=WRIST_CAMERA, pos=eye.tolist(), quat=q.tolist(), fovy=58.0)
 
 
 def build_scene_spec(spec: SceneSpec) -> mujoco.MjSpec:
@@ -517,73 +632,12 @@ def build_scene_spec(spec: SceneSpec) -> mujoco.MjSpec:
     # -- environment
     wb.add_light(pos=[0.5, -0.8, 2.0], dir=[-0.1, 0.4, -1.0], diffuse=[0.6, 0.6, 0.6], castshadow=True)
     wb.add_light(pos=[1.5, 0.8, 2.0], dir=[-0.5, -0.4, -1.0], diffuse=[0.4, 0.4, 0.4], castshadow=False)
-    wb.add_geom(
-        name=FLOOR_GEOM,
-        type=mujoco.mjtGeom.mjGEOM_PLANE,
-        size=[3.0, 3.0, 0.1],
-        pos=[0.0, 0.0, -_TABLE_HEIGHT_M],
-        rgba=[0.25, 0.28, 0.32, 1.0],
-    )
-    tx = 0.5 * (_TABLE_X[1] - _TABLE_X[0])
-    ty = 0.5 * (_TABLE_Y[1] - _TABLE_Y[0])
-    wb.add_geom(
-        name=TABLE_GEOM,
-        type=mujoco.mjtGeom.mjGEOM_BOX,
-        size=[tx, ty, _TABLE_THICKNESS_M / 2.0],
-        pos=[0.5 * (_TABLE_X[0] + _TABLE_X[1]), 0.5 * (_TABLE_Y[0] + _TABLE_Y[1]), -_TABLE_THICKNESS_M / 2.0],
-        rgba=[0.72, 0.60, 0.45, 1.0],
-        friction=[1.0, 0.005, 0.0001],
-    )
-    leg_h = (_TABLE_HEIGHT_M - _TABLE_THICKNESS_M) / 2.0
-    for i, (lx, ly) in enumerate(
-        [(_TABLE_X[0] + 0.05, _TABLE_Y[0] + 0.05), (_TABLE_X[0] + 0.05, _TABLE_Y[1] - 0.05),
-         (_TABLE_X[1] - 0.05, _TABLE_Y[0] + 0.05), (_TABLE_X[1] - 0.05, _TABLE_Y[1] - 0.05)]
-    ):
-        wb.add_geom(
-            name=f"table_leg{i}",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[0.03, 0.03, leg_h],
-            pos=[lx, ly, -_TABLE_THICKNESS_M - leg_h],
-            rgba=[0.55, 0.45, 0.35, 1.0],
-            contype=0,
-            conaffinity=0,
-        )
-    eye = [1.6, 0.85, 1.2]
-    wb.add_camera(name="overview", pos=eye, quat=_look_at_quat(eye, [0.35, 0.0, 0.15]), fovy=50.0)
+    # overview RGB-D camera: in front of the table, above it, the reachable table in view
+    eye = [1.25, 0.0, 0.95]
+    wb.add_camera(name="overview", pos=eye, quat=_look_at_quat(eye, [0.5, 0.0, 0.0]), fovy=55.0)
 
-    for r in spec.regions:
-        wb.add_geom(
-            name=region_geom_name(r.name),
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[r.half_extents[0], r.half_extents[1], _REGION_THICKNESS_M],
-            pos=[r.center[0], r.center[1], _REGION_THICKNESS_M],
-            rgba=list(r.rgba),
-            contype=0,
-            conaffinity=0,
-            mass=0.0,
-        )
-    for ob in spec.obstacles:
-        wb.add_geom(
-            name=obstacle_geom_name(ob.name),
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=list(ob.half_extents),
-            pos=list(ob.center),
-            rgba=list(ob.rgba),
-        )
-    for o in spec.objects:
-        body = wb.add_body(name=o.name, pos=[o.position[0], o.position[1], o.rest_z], quat=_yaw_quat(o.yaw))
-        body.add_freejoint(name=object_joint_name(o.name))
-        g = body.add_geom(
-            name=o.name,
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=list(o.half_extents),
-            rgba=list(o.rgba),
-            friction=[o.friction, 0.005, 0.0001],
-            condim=4,
-            solref=[0.004, 1.0],
-            solimp=[0.95, 0.99, 0.001, 0.5, 2.0],
-        )
-        g.mass = o.mass
+    add_tabletop_world(ms, spec, legs=True)
+    _add_wrist_sensors(ms)
 
     # -- keyframe 'home': arm ready, gripper open, objects at their spec poses.
     qpos: list[float] = list(HOME_QPOS) + [GRIPPER_MAX_OPENING_M, GRIPPER_MAX_OPENING_M]

@@ -82,10 +82,13 @@ def test_held_cube_is_not_inside_even_over_the_region(tmp_path):
     assert "still held" in out.criteria[0].reason
 
 
-def test_missing_entity_is_unknown_and_verdict_failure(tmp_path):
+def test_missing_entity_is_unknown_another_view_then_failure(tmp_path):
     ev = write_bundle(tmp_path / "ev", snapshot((0.5, -0.2, 0.02)), {"entities": [], "relations": []})
     out = SessionVerifier().verify(session(PLACE_ACCEPT), ev)
-    assert out.verdict == "failure" and out.criteria[0].status == "unknown"
+    assert out.verdict == "replan" and out.criteria[0].status == "unknown"
+    assert out.revision.strategy == "another_view" and out.diagnosis.cause == "perception_unknown"
+    out = SessionVerifier(max_replans=1).verify(session(PLACE_ACCEPT), ev, lineage_depth=1)
+    assert out.verdict == "failure" and out.diagnosis.cause == "perception_unknown"
 
 
 def test_safety_event_turns_unmet_criteria_into_failure_not_replan(tmp_path):

@@ -126,3 +126,20 @@ def test_every_revision_names_the_cause_it_addresses(tmp_path):
                 if rev is not None:
                     assert rev.cause == cause and (f"addresses {cause}" in rev.rationale or rev.reopen)
                     assert rev.parameters or rev.limits or rev.reopen
+
+
+def test_a_slip_during_a_place_re_opens_the_pick_with_a_firmer_grip(tmp_path):
+    held, dropped = (0.5, -0.1, 0.25), (0.5, -0.05, 0.02)
+    ev = bundle(tmp_path, snap(held, holding=True), snap(dropped), [observe(held)], code="grasp.slipped",
+                leaf="CheckHoldingAfterTransfer")
+    place = session(**PLACE)
+    v = SessionVerifier().verify(place, ev)
+    assert v.diagnosis.cause == "object_slipped"
+    # with no upstream node to re-open, retrying the place cannot bring the object back: failure
+    assert v.verdict == "failure" and v.revision is None
+    verifier = SessionVerifier()
+    verifier.set_upstream(lambda s: "pick_cube")
+    v = verifier.verify(place, ev)
+    assert v.verdict == "replan" and v.revision.reopen == "pick_cube"
+    assert v.revision.strategy == "firmer_grip" and v.revision.parameters == {"grip_force_n": 40.0}
+    assert v.revision.cause == "object_slipped"

@@ -53,7 +53,7 @@ from .memory import ContextBuilder, KnowledgeBase, LessonBook, PromotionPolicy, 
 from .memory.conditions import Conditions
 from .memory.observed import ObservedObject, observe_object
 from .memory.promotion import initial_state_fingerprint
-from .recovery import SITUATIONAL
+from .recovery import ACQUIRING_SKILLS, SITUATIONAL
 from .session_compiler import SessionCompiler, new_run_id
 from .verifier import EvidenceBundle, SessionVerifier, load_evidence
 
@@ -174,9 +174,6 @@ class AgentCoordinator:
 
     # -- re-opening upstream nodes -----------------------------------------
 
-    #: Skills that put an object into the gripper (a re-pick re-opens a node of these).
-    ACQUIRING_SKILLS = frozenset({"pick", "policy_pick"})
-
     def upstream_acquirer(self, session: SessionRecord) -> str | None:
         """The nearest DAG ancestor of ``session``'s node that acquires its ``object``
         (a node of an :data:`ACQUIRING_SKILLS` skill with the same object), or ``None``."""
@@ -187,7 +184,7 @@ class AgentCoordinator:
         order = [n for n in reversed(dagmod.topological_order(self.dag)) if n in ancestors]
         for n in order:
             node = self.graph.get_node(n)
-            if node.skill in self.ACQUIRING_SKILLS and node.params.get("object") == obj:
+            if node.skill in ACQUIRING_SKILLS and node.params.get("object") == obj:
                 return n
         return None
 
@@ -404,10 +401,16 @@ class AgentCoordinator:
         ws = self.workspace
         upstream = self.latest_by_node().get(revision.reopen)
         node = self.graph.get_node(revision.reopen)
-        params = dict(upstream.parameters) if upstream is not None else dict(node.params)
+        base = dict(upstream.parameters) if upstream is not None else dict(node.params)
+        params = {**base, **revision.parameters}  # e.g. the slip's firmer grip, applied to the re-pick
         repick = self.compiler.compile_node(node, parent=upstream, parameters=params,
                                             context=upstream.context if upstream is not None else None,
                                             recovery=revision)
+        verdict = rec.attempts[-1].verdict if rec.attempts else None
+        if self.consolidate and revision.parameters and upstream is not None and verdict is not None \
+                and verdict.diagnosis is not None:
+            LessonBook(ws).propose(parent=upstream, child=repick, diagnosis=verdict.diagnosis, revision=revision,
+                                   conditions=self._conditions(upstream))
         with ws.session_lock(rec.session_id):
             rec = ws.load_session(rec.session_id)
             rec.child_session_ids.append(repick.session_id)

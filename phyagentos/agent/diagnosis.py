@@ -249,9 +249,10 @@ def diagnose(session: SessionRecord, evidence: Any, *, unknown: Sequence[str] = 
         if errs:
             facts["max_tracking_error_rad"] = max(errs)
         return _make("collision", f"{leaf or 'execution'}: {message}".strip(), facts, refs)
-    # 3. a slip, from proprioception after the last close on something
-    if closes and not missed:
-        slip = _slip_from_proprio(trace, closes[-1] + 1, obj)
+    # 3. a slip, from proprioception after the last close on something (or from the start
+    #    of a session that began with the object in hand)
+    if (closes and not missed) or (held_at_start and not closes):
+        slip = _slip_from_proprio(trace, closes[-1] + 1 if closes else 0, obj)
         if slip is not None or (code == "grasp.slipped" and not held_at_end):
             facts.update(slip or {"slip_source": "check_holding"})
             where = f"detected by {leaf}" if code == "grasp.slipped" and leaf else f"seen in {facts['slip_source']}"

@@ -39,6 +39,8 @@ placement_off          average_frames: observe_samples 16;
 timeout                longer_deadline: execution_timeout_s x 2
 criteria_unmet         careful_retry: observe_samples 8, reobserve_samples 8,
                        transfer_velocity_scale 0.5
+object_slipped in a    the object is no longer in the hand: the upstream pick is
+non-acquiring skill    re-opened with the slip ladder's grip step (``Revision.reopen``)
 precondition_unmet     re_pick_upstream: the object was released upstream; the
                        coordinator re-opens the upstream node that acquires it
                        (``Revision.reopen``), then runs this node again. Without
@@ -68,7 +70,7 @@ from phyagentos.protocol import Diagnosis, Revision, SessionRecord
 
 from .skill_catalog import SkillInfo, skill_catalog
 
-__all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M", "RE_PICK",
+__all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M", "RE_PICK", "ACQUIRING_SKILLS",
            "ANOTHER_VIEW_SAMPLES"]
 
 #: Parameters a revision sets because of where the failed attempt left the world.
@@ -115,6 +117,10 @@ def _next_candidate_if_pick(**extra: Any) -> Adjust:
 
 #: Strategy of a precondition failure after an upstream release.
 RE_PICK = "re_pick_upstream"
+#: Skills that put an object into the gripper: a session of another skill that lost the
+#: object (a slip during a place's transfer) cannot get it back itself; the upstream node
+#: of one of these is re-opened instead, with the slip's correction.
+ACQUIRING_SKILLS = frozenset({"pick", "policy_pick"})
 
 
 #: Frames the ``another_view`` child averages.
@@ -205,6 +211,7 @@ class RecoveryPlanner:
                  skills: Mapping[str, SkillInfo] | None = None):
         self.ladders = dict(LADDERS if ladders is None else ladders)
         self._skills = skills
+        self._upstream_skill = "pick"
 
     @property
     def skills(self) -> Mapping[str, SkillInfo]:
@@ -228,8 +235,25 @@ class RecoveryPlanner:
             if upstream is None or _previous_causes(history).count(diagnosis.cause) >= 1:
                 return None  # nothing upstream to redo, or a re-pick already did not help
             return Revision(strategy=RE_PICK, cause=diagnosis.cause, step=1, reopen=upstream,
-                            rationale=f"{diagnosis.summary} -> re-open upstream node {upstream!r} (acquire the "
-                                      f"object again), then run this node again")
+                            rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> re-open upstream node "
+                                      f"{upstream!r} (acquire the object again), then run this node again")
+        if diagnosis.cause == "object_slipped" and session.skill not in ACQUIRING_SKILLS:
+            # the object fell out during this skill: only the upstream pick can take it again,
+            # and it does so with the slip's correction (grip) applied to the pick
+            if upstream is None:
+                return None
+            ladder = self.ladders.get("object_slipped", ())
+            info = self.skills.get(self._upstream_skill)
+            allowed = info.optional if info is not None else frozenset()
+            for step in range(_previous_causes(history).count(diagnosis.cause), len(ladder)):
+                values = {k: v for k, v in ladder[step].values({}).items() if k in allowed}
+                if values:
+                    return Revision(strategy=ladder[step].name, cause=diagnosis.cause, step=step + 1,
+                                    parameters=values, reopen=upstream,
+                                    rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> re-open upstream "
+                                              f"node {upstream!r} and {ladder[step].description}, then run this "
+                                              f"node again")
+            return None
         variant = diagnosis.facts.get("variant")
         ladder = self.ladders.get(f"{diagnosis.cause}/{variant}", self.ladders.get(diagnosis.cause, ()))
         current = dict(session.parameters)

@@ -118,13 +118,16 @@ class ClusteringConfig(_Section):
 class ShapeConfig(_Section):
     top_band_m: float = Field(0.006, gt=0, description="Points this close to the top form the top face.")
     box_corner_fraction: float = Field(
-        0.04, ge=0, le=1, description="Top-face points outside the rectangle's inscribed ellipse >= this: box."
+        0.07, ge=0, le=1, description="Top-face points outside the rectangle's inscribed ellipse >= this: box."
     )
     sphere_residual: float = Field(
-        0.08, gt=0, description="Sphere-fit RMS residual / radius below this: sphere."
+        0.06, gt=0, description="Sphere-fit RMS residual below this x radius + the noise term: sphere."
+    )
+    sphere_noise_factor: float = Field(
+        0.6, ge=0, description="Noise term of the sphere test: this x depth sigma at the object's range."
     )
     sphere_height_tolerance: float = Field(
-        0.25, gt=0, description="|height - diameter| / diameter below this for a sphere."
+        0.2, gt=0, description="|height - diameter| / diameter below this for a sphere."
     )
 
 

@@ -201,6 +201,7 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
     centre_xy, yaw, hxy = _rect(top_xy)
     # pixel footprint at the observed range: edges are uncertain by about one sample
     fpx = focal_px[cloud.camera.astype(int)]
+    range_m = float(np.median(cloud.range_m))
     pix_m = float(np.median(cloud.range_m / fpx))
     corner = _corner_fraction(top_xy, centre_xy, yaw, hxy, 0.5 * pix_m)
     hxy = hxy + 0.5 * pix_m  # points sample pixel centres: the true edge lies ~half a pixel out
@@ -209,8 +210,11 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
     sphere_c = None
     if cloud.points.shape[0] >= 10:
         c, r, rms = _sphere_fit(cloud.points.astype(np.float64))
+        # a sphere's surface fits within the depth noise; a cylinder's rim and a box's edges
+        # leave a residual of >= 10 % of the radius (measured: docs/perception.md)
+        limit = sc.sphere_residual * r + sc.sphere_noise_factor * float(config.depth_sigma_m(range_m))
         diam_ok = abs(height - 2.0 * r) / (2.0 * r) < sc.sphere_height_tolerance
-        if rms / r < sc.sphere_residual and diam_ok and r < 0.6 * height + 0.01:
+        if rms < limit and diam_ok and corner < sc.box_corner_fraction:
             shape, sphere_c = "sphere", c
     if shape == "sphere":
         r = 0.5 * height

@@ -143,12 +143,14 @@ class SyntheticScene:
         cameras: extra cameras (MuJoCo cameras named as given).
         arm_qpos: (7,) arm joint positions, rad (default: the scene's home configuration).
         finger_opening_m: per-finger opening, m.
+        pool_per_shape: slots per shape beyond ``objects`` (for :meth:`place` of new draws).
     """
 
     objects: Sequence[SyntheticObject]
     cameras: Sequence[SyntheticCamera] = DEFAULT_CAMERAS
     arm_qpos: Sequence[float] | None = None
     finger_opening_m: float = 0.04
+    pool_per_shape: int = 0
     _renderers: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -160,31 +162,61 @@ class SyntheticScene:
         wb = ms.worldbody
         for c in self.cameras:
             wb.add_camera(name=c.name, pos=list(c.eye), quat=look_at_quat(c.eye, c.target), fovy=c.fovy_deg)
-        self._object_bodies: dict[str, object] = {}
-        for o in self.objects:
-            body = wb.add_body(name=f"synthetic:{o.name}", pos=list(o.centre),
-                               quat=[math.cos(o.yaw / 2), 0.0, 0.0, math.sin(o.yaw / 2)])
-            hx, hy, hz = o.half_extents
-            if o.shape == "box":
-                body.add_geom(name=o.name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[hx, hy, hz], rgba=list(o.rgba))
-            elif o.shape == "cylinder":
-                body.add_geom(name=o.name, type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[hx, hz, 0], rgba=list(o.rgba))
-            else:
-                body.add_geom(name=o.name, type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[hx, 0, 0], rgba=list(o.rgba))
-            body.mocap = True
+        # one mocap body per slot; objects are assigned to slots of their shape, so a new
+        # draw of objects only edits sizes, colours and poses (no recompilation)
+        counts = {sh: max(self.pool_per_shape, sum(o.shape == sh for o in self.objects)) for sh in _SHAPES}
+        gtype = {"box": mujoco.mjtGeom.mjGEOM_BOX, "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+                 "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
+        self._slots: dict[str, list[str]] = {}
+        for sh, n in counts.items():
+            self._slots[sh] = []
+            for k in range(n):
+                slot = f"{sh}_{k}"
+                body = wb.add_body(name=f"synthetic:{slot}", pos=[50.0 + k, 50.0, 0.0], mocap=True)
+                body.add_geom(name=f"synthetic:{slot}", type=gtype[sh], size=[0.02, 0.02, 0.02],
+                              contype=0, conaffinity=0)
+                self._slots[sh].append(slot)
         self.model = ms.compile()
         self.data = mujoco.MjData(self.model)
         q = list(self.arm_qpos) if self.arm_qpos is not None else list(HOME_QPOS)
         self.data.qpos[:7] = q
         self.data.qpos[7:9] = self.finger_opening_m
-        mujoco.mj_forward(self.model, self.data)
+        self.place(self.objects)
 
     # ------------------------------------------------------------------ pose edits
 
+    def place(self, objects: Sequence[SyntheticObject]) -> None:
+        """Show exactly ``objects`` (sizes, colours, poses); other slots move out of view.
+
+        Raises:
+            PerceptionError: more objects of one shape than the scene has slots.
+        """
+        m, d = self.model, self.data
+        free = {sh: list(v) for sh, v in self._slots.items()}
+        self._slot_of: dict[str, str] = {}
+        for sh, slots in self._slots.items():
+            for k, slot in enumerate(slots):
+                mid = m.body_mocapid[m.body(f"synthetic:{slot}").id]
+                d.mocap_pos[mid] = (50.0 + k, 50.0 + len(sh), 0.0)
+        for o in objects:
+            if not free[o.shape]:
+                raise PerceptionError(f"no free {o.shape} slot for {o.name!r}; build the scene with a larger pool")
+            slot = free[o.shape].pop(0)
+            self._slot_of[o.name] = slot
+            gid = m.geom(f"synthetic:{slot}").id
+            hx, hy, hz = o.half_extents
+            m.geom_size[gid] = {"box": (hx, hy, hz), "cylinder": (hx, hz, 0.0), "sphere": (hx, 0.0, 0.0)}[o.shape]
+            m.geom_rbound[gid] = math.sqrt(hx * hx + hy * hy + hz * hz)
+            m.geom_rgba[gid] = o.rgba
+            mid = m.body_mocapid[m.body(f"synthetic:{slot}").id]
+            d.mocap_pos[mid] = o.centre
+            d.mocap_quat[mid] = (math.cos(o.yaw / 2), 0.0, 0.0, math.sin(o.yaw / 2))
+        self.objects = list(objects)
+        mujoco.mj_forward(m, d)
+
     def move_object(self, name: str, position_xyz: Sequence[float], quat_wxyz: Sequence[float] | None = None) -> None:
-        """Move object ``name`` (a mocap body) to a world pose and recompute the kinematics."""
-        bid = self.model.body(f"synthetic:{name}").id
-        mid = self.model.body_mocapid[bid]
+        """Move object ``name`` to a world pose and recompute the kinematics."""
+        mid = self.model.body_mocapid[self.model.body(f"synthetic:{self._slot_of[name]}").id]
         self.data.mocap_pos[mid] = position_xyz
         if quat_wxyz is not None:
             self.data.mocap_quat[mid] = quat_wxyz

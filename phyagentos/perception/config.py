@@ -30,11 +30,19 @@ __all__ = [
     "FusionConfig",
     "HoldingConfig",
     "RelationsConfig",
-    "TEMPLATE_PATH",
+    "PERCEPTION_FILE",
+    "template_path",
 ]
 
-#: The template shipped with the checkout (``protocol/perception.yaml``).
-TEMPLATE_PATH = Path(__file__).resolve().parents[2] / "protocol" / "perception.yaml"
+#: File name of the workspace's perception configuration.
+PERCEPTION_FILE = "perception.yaml"
+
+
+def template_path() -> Path:
+    """The shipped template ``protocol/perception.yaml`` (``PHYAGENTOS_HOME`` aware)."""
+    from phyagentos import resources
+
+    return resources.templates_dir() / PERCEPTION_FILE
 
 
 class _Section(BaseModel):
@@ -209,6 +217,16 @@ class PerceptionConfig(VersionedModel):
             OSError: the file cannot be read.
         """
         return read_yaml(path, cls)
+
+    @classmethod
+    def for_workspace(cls, root: str | os.PathLike[str]) -> "PerceptionConfig":
+        """The workspace's ``perception.yaml`` if it has one, else :meth:`default`.
+
+        Raises:
+            DocumentError: the workspace's file is malformed (it is never overwritten).
+        """
+        path = Path(root) / PERCEPTION_FILE
+        return cls.from_yaml(path) if path.is_file() else cls.default()
 
     @classmethod
     def from_text(cls, text: str, *, path: str | None = None) -> "PerceptionConfig":

@@ -94,9 +94,14 @@ def associate(C: np.ndarray, config: PerceptionConfig) -> Association:
         runner_up = float(others.min()) if others.size else ac.gate_cost
         margin = max(0.0, runner_up - c) if others.size else max(0.0, ac.gate_cost - c) + ac.ambiguity_margin
         if others.size and margin < ac.ambiguity_margin:
-            ambiguous.append(int(i))
+            # every detection within the margin for this descriptor is a candidate: none is named
+            rivals = np.flatnonzero(C[:, j] <= c + ac.ambiguity_margin)
+            ambiguous.extend(int(r) for r in rivals if int(r) not in ambiguous)
+            if int(i) not in ambiguous:
+                ambiguous.append(int(i))
             continue
         matches[int(i)] = (int(j), c, margin)
+    ambiguous = [i for i in ambiguous if i not in matches]
     return Association(matches, tuple(ambiguous))
 
 

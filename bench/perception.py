@@ -1,11 +1,13 @@
 """Perception accuracy and latency on randomised tabletop scenes rendered by MuJoCo.
 
     .venv/bin/python bench/perception.py [--scenes 60] [--seed 0] [--clustering kdtree|sklearn]
+                                         [--cameras near|overview]
 
 Each scene draws 1-2 declared target objects and 0-4 undeclared distractors (box, cylinder
 or sphere, 2-7 cm, random yaw and position over the reachable table; with distractors, half
-the scenes put one against the first target: touching objects), renders both cameras of
-:data:`phyagentos.perception.synthetic.DEFAULT_CAMERAS` (320x240 RGB-D) with camera noise
+the scenes put one against the first target: touching objects), renders two cameras (``--cameras near``: :data:`phyagentos.perception.synthetic.DEFAULT_CAMERAS`,
+320x240 RGB-D about 0.8 m away; ``overview``: the tabletop target's overview geometry, 640x480
+about 1.2 m away, plus a 640x480 side camera) with camera noise
 (depth sigma = 0.5 mm + 1.5 mm/m^2 z^2, RGB sigma 3, brightness gain +-10 %, 1 % depth
 dropout), and runs one :meth:`Perceiver.observe` on the two frames with the targets declared by
 shape, colour and size. Scored against the known true poses:
@@ -38,9 +40,26 @@ import phyagentos  # noqa: F401, I001  (headless GL before mujoco loads)
 import numpy as np
 
 from phyagentos.perception import ObjectDescriptor, PerceptionConfig, Perceiver
-from phyagentos.perception.synthetic import DEFAULT_CAMERAS, CameraNoise, SyntheticScene, random_objects
+from phyagentos.perception.synthetic import (
+    DEFAULT_CAMERAS,
+    CameraNoise,
+    SyntheticCamera,
+    SyntheticScene,
+    random_objects,
+)
 
 RESULTS = Path(__file__).resolve().parent / "results"
+
+#: Camera sets: ``near`` = DEFAULT_CAMERAS (two 320x240 cameras about 0.8 m from the
+#: objects); ``overview`` = the tabletop target's overview camera geometry (eye
+#: (1.25, 0, 0.95), fovy 55, 640x480, about 1.2 m away) plus a 640x480 side camera.
+CAMERA_SETS = {
+    "near": DEFAULT_CAMERAS,
+    "overview": (
+        SyntheticCamera("overview", eye=(1.25, 0.0, 0.95), target=(0.5, 0.0, 0.0), fovy_deg=55.0, width=640, height=480),
+        SyntheticCamera("side", eye=(0.55, -0.60, 0.60), target=(0.5, 0.0, 0.0), fovy_deg=45.0, width=640, height=480),
+    ),
+}
 
 
 def _yaw_error(true_yaw: float, true_half, est_yaw: float) -> float:
@@ -52,12 +71,13 @@ def _yaw_error(true_yaw: float, true_half, est_yaw: float) -> float:
     return abs(d)
 
 
-def run(n_scenes: int, seed: int, clustering: str) -> dict:
+def run(n_scenes: int, seed: int, clustering: str, camera_set: str = "near") -> dict:
     cfg = PerceptionConfig.default()
     if clustering != cfg.clustering.method:
         cfg = cfg.model_copy(update={"clustering": cfg.clustering.model_copy(update={"method": clustering})})
     rng = np.random.default_rng(seed)
-    scene = SyntheticScene([], cameras=DEFAULT_CAMERAS, pool_per_shape=7)
+    cameras = CAMERA_SETS[camera_set]
+    scene = SyntheticScene([], cameras=cameras, pool_per_shape=7)
     noise = CameraNoise()
     rows = []
     lat_wall, lat_cpu, render = [], [], []
@@ -76,7 +96,7 @@ def run(n_scenes: int, seed: int, clustering: str) -> dict:
         declared = [ObjectDescriptor(o.name, shape=o.shape, colour_rgb=o.rgba[:3],
                                      size_m=tuple(round(2 * h, 3) for h in o.half_extents)) for o in targets]
         t0 = time.perf_counter()
-        frames = [scene.capture(c.name, noise=noise, rng=rng) for c in DEFAULT_CAMERAS]
+        frames = [scene.capture(c.name, noise=noise, rng=rng) for c in cameras]
         render.append(time.perf_counter() - t0)
         proprio = scene.proprioception()
         perceiver = Perceiver(cfg, declared)
@@ -141,6 +161,8 @@ def run(n_scenes: int, seed: int, clustering: str) -> dict:
         "scenes": n_scenes,
         "seed": seed,
         "clustering": clustering,
+        "cameras": [{"name": c.name, "eye": c.eye, "fovy_deg": c.fovy_deg, "width": c.width, "height": c.height}
+                    for c in cameras],
         "declared_targets": n_decl,
         "objects": total_objects,
         "association_accuracy": round(assoc["correct"] / max(n_decl, 1), 4),
@@ -168,9 +190,10 @@ def main() -> int:
     ap.add_argument("--scenes", type=int, default=60)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--clustering", choices=("kdtree", "sklearn"), default="kdtree")
+    ap.add_argument("--cameras", choices=tuple(CAMERA_SETS), default="near")
     ap.add_argument("--out", type=Path, default=RESULTS / "perception.json")
     args = ap.parse_args()
-    res = run(args.scenes, args.seed, args.clustering)
+    res = run(args.scenes, args.seed, args.clustering, args.cameras)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(res, indent=2) + "\n")
     lines = [
@@ -189,7 +212,7 @@ def main() -> int:
         ("machine", f"{res['machine']['cpus']} CPUs, load {res['machine']['load_avg_1m']}"),
     ]
     width = max(len(a) for a, _ in lines)
-    print(f"perception bench (clustering: {res['clustering']})")
+    print(f"perception bench (clustering: {res['clustering']}, cameras: {args.cameras})")
     for a, b in lines:
         print(f"  {a:<{width}}  {b}")
     print("  shape confusion (true -> perceived):")

@@ -98,17 +98,24 @@ class Perceiver:
     Args:
         config: the pipeline parameters (perception.yaml).
         declared: the declared objects (descriptors, or mappings as in ``describe_declared()``).
+        robot_name: name of the arm entity in the snapshot (``kind: robot``).
 
     Raises:
         PerceptionError: malformed descriptors.
     """
 
     def __init__(self, config: PerceptionConfig | None = None,
-                 declared: Sequence[ObjectDescriptor | Mapping[str, Any]] | Mapping[str, Any] = ()):
+                 declared: Sequence[ObjectDescriptor | Mapping[str, Any]] | Mapping[str, Any] = (), *,
+                 robot_name: str = "panda"):
         if config is not None and not isinstance(config, PerceptionConfig):
             raise PerceptionError(f"config must be a PerceptionConfig, got {type(config).__name__}")
         self.config = config or PerceptionConfig.default()
         self.declared: tuple[ObjectDescriptor, ...] = tuple(descriptors_from_declared(declared))
+        reserved = {"tcp", "gripper", "table", robot_name}
+        clash = sorted(reserved & {d.name for d in self.declared})
+        if clash:
+            raise PerceptionError(f"declared object name(s) {clash} clash with reserved entity names {sorted(reserved)}")
+        self.robot_name = robot_name
         self.reset()
 
     def reset(self) -> None:
@@ -352,7 +359,7 @@ class Perceiver:
              "attributes": {**src, "opening_m": _r(proprio.gripper_opening_m, 5),
                             "effort_n": _r(proprio.gripper_effort_n, 3),
                             "wrist_force_n": None if proprio.wrist_force_n is None else _r(proprio.wrist_force_n, 3)}},
-            {"name": "robot", "kind": "robot", "position": [0.0, 0.0, 0.0], "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+            {"name": self.robot_name, "kind": "robot", "position": [0.0, 0.0, 0.0], "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
              "size": [0.0, 0.0, 0.0], "attributes": {**src, "joint_names": list(proprio.joint_names),
                                                      "joint_positions": _r(proprio.joint_positions)}},
         ]

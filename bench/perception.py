@@ -56,7 +56,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 CAMERA_SETS = {
     "near": DEFAULT_CAMERAS,
     "overview": (
-        SyntheticCamera("overview", eye=(1.25, 0.0, 0.95), target=(0.5, 0.0, 0.0), fovy_deg=55.0, width=640, height=480),
+        SyntheticCamera("overview_rt", eye=(1.25, 0.0, 0.95), target=(0.5, 0.0, 0.0), fovy_deg=55.0, width=640, height=480),
         SyntheticCamera("side", eye=(0.55, -0.60, 0.60), target=(0.5, 0.0, 0.0), fovy_deg=45.0, width=640, height=480),
     ),
 }

@@ -12,6 +12,11 @@ verdicts; the report never re-judges. Per episode:
 - **wall time**: the worker's wall time for the whole episode.
 
 Every unsuccessful session is classified with :func:`phyagentos.bench.taxonomy.classify`.
+Every verified session is scored against its ``ground_truth.yaml``
+(:mod:`phyagentos.bench.verifier_scoring`): the report carries the verifier's confusion
+matrix per session and per criterion, the false success ("self-deception") and false
+failure rates, and the ids behind each false verdict (``verifier`` in report.json, the
+*Verifier accuracy* section of report.md).
 Where a target reports its own task-completion signal (``ground_truth`` in the terminal
 snapshot, e.g. FrankaKitchen's), it is set next to the verdict and disagreements are
 listed. Every aggregate carries the episode and session ids it was computed from.
@@ -35,8 +40,9 @@ from phyagentos.protocol.atomic import atomic_write_text
 
 from .episode import OUTCOME_FILE, load_episode
 from .taxonomy import CATEGORIES, classify
+from .verifier_scoring import confusion, score_session
 
-__all__ = ["EpisodeRecord", "collect_episode", "build_report", "write_report", "load_report"]
+__all__ = ["EpisodeRecord", "collect_episode", "build_report", "write_report", "load_report", "verifier_markdown"]
 
 logger = logging.getLogger(__name__)
 
@@ -126,6 +132,9 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         }
         rows.append(row)
         terminal = _terminal(directory, attempt.evidence if attempt else None)
+        if attempt is not None and attempt.verdict is not None:
+            scored = score_session(accept=s.accept, verdict=attempt.verdict.model_dump(), gt=terminal or None)
+            row["truth"] = {"session_id": s.session_id, **scored}
         gt = (terminal.get("terminal") or {}).get("benchmark") if isinstance(terminal, dict) else None
         if isinstance(gt, dict) and "success" in gt:
             ground_truth.append({"session_id": s.session_id, "verdict": verdict, "env_success": bool(gt["success"]),
@@ -225,6 +234,8 @@ def build_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:
                              "sessions": [g["session_id"] for e in eps if e["task"] == t for g in e["ground_truth"]]}
                          for t in tasks},
         },
+        # verifier accuracy against ground_truth.yaml (phyagentos.bench.verifier_scoring)
+        "verifier": confusion(r["truth"] for e in eps for r in e["sessions"] if "truth" in r),
         "harness_errors": [{"episode_id": e["episode_id"], "error": e["harness_error"]} for e in eps
                            if e["harness_status"] != "completed"],
         "episodes": eps,
@@ -352,6 +363,7 @@ def _markdown(report: dict) -> str:
             for d in g["disagreements"]:
                 lines.append(f"| `{d['session_id']}` | {d['task']} | {d['verdict']} | {d['env_success']} |")
             lines.append("")
+    lines += verifier_markdown(report.get("verifier"))
     if report["harness_errors"]:
         lines += ["## Harness errors", "", "These episodes did not complete; they count as failures above.", ""]
         for h in report["harness_errors"]:
@@ -366,6 +378,35 @@ def _markdown(report: dict) -> str:
                      f"{'yes' if e['final_success'] else 'no'} | {e['sim_time_s']} | {sess} |")
     lines.append("")
     return "\n".join(lines)
+
+
+def verifier_markdown(v: dict | None) -> list[str]:
+    """The *Verifier accuracy* section of report.md (lines) from :func:`confusion`'s result."""
+    if not v or not v["sessions_scored"]:
+        return []
+    m, c = v["session_matrix"], v["criterion_matrix"]
+    lines = ["## Verifier accuracy against ground truth", "",
+             f"{v['sessions_scored']} verified session(s) scored against their `ground_truth.yaml` "
+             f"({v['sessions_unscored']} without one). Rows: what the verifier said on perceived evidence; "
+             "columns: the criteria judged exactly on ground truth.", "",
+             "| sessions | truth met | truth unmet |", "|---|---:|---:|",
+             f"| verdict success | {m['true_success']} | **{m['false_success']}** (false success) |",
+             f"| verdict replan/failure | {m['false_failure']} (false failure) | {m['true_failure']} |", "",
+             f"False success (self-deception): **{_pct(v['false_success_rate_pct'])}** of scored sessions "
+             f"({_pct(v['false_success_given_unmet_pct'])} of those truth says failed); false failure: "
+             f"**{_pct(v['false_failure_rate_pct'])}** ({_pct(v['false_failure_given_met_pct'])} of those truth "
+             "says succeeded).", "",
+             "| criterion | true success | false success | true failure | false failure | unknown (met) | unscorable |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for name, row in sorted(v["per_predicate"].items()) + [("**all**", c)]:
+        lines.append(f"| {name} | {row['true_success']} | {row['false_success']} | {row['true_failure']} | "
+                     f"{row['false_failure']} | {row['unknown_met']} | {row['unscorable']} |")
+    for key, title in (("false_success_sessions", "False successes"), ("false_failure_sessions", "False failures")):
+        if v[key]:
+            lines += ["", f"{title}: " + ", ".join(f"`{sid}`" for sid in v[key][:20])
+                      + (" …" if len(v[key]) > 20 else "")]
+    lines.append("")
+    return lines
 
 
 def write_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:

@@ -1,0 +1,77 @@
+"""Scoring the verifier against ground_truth.yaml: the confusion matrix (on real MuJoCo runs)."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from phyagentos.bench.verifier_scoring import confusion, load_ground_truth, score_session, truth_of_criteria
+from phyagentos.orchestrator import run_goal_graph
+from phyagentos.protocol import Workspace
+
+pytestmark = pytest.mark.sim
+
+PICK = {"holding": "cube", "lifted": {"object": "cube", "min_height": 0.05}}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("scoring")
+    objects = [{"name": "cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.5, -0.2]},
+               {"name": "far_cube", "half_extents": [0.02, 0.02, 0.02], "position": [1.3, 0.3]}]
+    nodes = [{"id": "pick_cube", "skill": "pick", "params": {"object": "cube"}, "accept": PICK},
+             {"id": "pick_far", "skill": "pick", "params": {"object": "far_cube"}, "accept": {"holding": "far_cube"},
+              "depends_on": ["pick_cube"]}]
+    graph = root / "g.yaml"
+    graph.write_text(yaml.safe_dump({"version": 1, "name": "g", "defaults": {"target": "franka_tabletop"},
+                                     "scene": {"objects": objects}, "nodes": nodes}))
+    report = run_goal_graph(graph, root / "ws")
+    ws = Workspace.open(root / "ws")
+    return [ws.load_session(s.session_id) for s in report.sessions], ws
+
+
+def _score(ws, rec, verdict=None):
+    attempt = rec.attempts[-1]
+    gt = load_ground_truth(ws.root / attempt.evidence)
+    return {"session_id": rec.session_id,
+            **score_session(accept=rec.accept, verdict=verdict or attempt.verdict.model_dump(), gt=gt)}
+
+
+def test_true_verdicts_land_on_the_diagonal(run):
+    (pick, far), ws = run
+    s1, s2 = _score(ws, pick), _score(ws, far)
+    assert s1["session"] == "true_success" and s1["truth_met"] is True
+    assert [c["cell"] for c in s1["criteria"]] == ["true_success", "true_success"]
+    assert s2["session"] == "true_failure" and s2["criteria"][0]["truth"] is False
+    m = confusion([s1, s2])
+    assert m["session_matrix"] == {"true_success": 1, "false_success": 0, "true_failure": 1, "false_failure": 0}
+    assert m["false_success_rate_pct"] == 0.0 and m["false_failure_rate_pct"] == 0.0
+
+
+def test_a_success_claimed_against_ground_truth_is_counted_as_self_deception(run):
+    (pick, far), ws = run
+    claimed = far.attempts[-1].verdict.model_dump()
+    claimed["verdict"] = "success"
+    claimed["criteria"] = [{**c, "status": "satisfied"} for c in claimed["criteria"]]
+    lie = _score(ws, far, claimed)
+    assert lie["session"] == "false_success" and lie["criteria"][0]["cell"] == "false_success"
+    denied = pick.attempts[-1].verdict.model_dump()
+    denied["verdict"] = "replan"
+    denied["criteria"][0]["status"] = "unsatisfied"
+    denied["criteria"][1]["status"] = "unknown"
+    miss = _score(ws, pick, denied)
+    assert miss["session"] == "false_failure"
+    assert [c["cell"] for c in miss["criteria"]] == ["false_failure", "unknown_met"]
+    m = confusion([lie, miss, _score(ws, pick)])
+    assert m["false_success_sessions"] == [far.session_id] and m["false_failure_sessions"] == [pick.session_id]
+    assert m["false_success_rate_pct"] == pytest.approx(33.333) and m["false_success_given_unmet_pct"] == 100.0
+    assert m["per_predicate"]["holding"]["false_success"] == 1
+
+
+def test_truth_is_judged_exactly_on_ground_truth(run):
+    (pick, _), ws = run
+    gt = load_ground_truth(ws.root / pick.attempts[-1].evidence)
+    assert {c.name: t for c, t in truth_of_criteria(pick.accept, gt)} == {"holding": True, "lifted": True}
+    lowered = {**gt, "terminal": {**gt["terminal"], "held": []}}
+    assert {c.name: t for c, t in truth_of_criteria(pick.accept, lowered)}["holding"] is False
+    assert [t for _, t in truth_of_criteria({"still": {}}, gt)] == [None]  # no joint state in ground truth

@@ -40,7 +40,7 @@ from typing import Any, Callable, Mapping
 from phyagentos.errors import VerifierError, format_choices
 
 __all__ = ["Criterion", "CriterionOutcome", "parse_criteria", "PREDICATES", "evaluate", "confidence", "sigma",
-           "CONFIDENCE_MIN", "REST_TOL_M", "CLOSED_OPENING_M"]
+           "CONFIDENCE_MIN", "REST_TOL_M", "CLOSED_OPENING_M", "SQUEEZE_EFFORT_N"]
 
 # Tolerances, metres. A resting box's centre sits at its half height above its
 # support; 1 cm absorbs contact penetration and settling.
@@ -51,6 +51,9 @@ CONFIDENCE_MIN = 0.5
 #: Per-finger opening above which a closed gripper holds *something*, m (CONTRACT_9
 #: section 3: holding needs more than ~2 mm).
 CLOSED_OPENING_M = 0.002
+#: Finger effort above which a closed gripper squeezes something, N (the Franka Hand's
+#: fingers move free with a few newtons; CONTRACT_9 section 3's "effort above a threshold").
+SQUEEZE_EFFORT_N = 5.0
 
 
 @dataclass(frozen=True)
@@ -164,18 +167,24 @@ def _holding_relation(snapshot: Mapping, obj: str) -> Mapping | None:
                  if r.get("relation") == "holding" and r.get("object") == obj), None)
 
 
-def _gripper_opening(snapshot: Mapping) -> float | None:
+def _gripper_squeezing(snapshot: Mapping) -> tuple[float, float] | None:
+    """``(opening_m, effort_n)`` of the gripper entity when it squeezes something: opening
+    above :data:`CLOSED_OPENING_M` and finger effort above :data:`SQUEEZE_EFFORT_N`;
+    ``None`` otherwise or when the snapshot carries no gripper proprioception."""
     grip = next((e for e in snapshot.get("entities", []) if e.get("kind") == "gripper"), None)
-    if grip is None:
+    attrs = (grip or {}).get("attributes") or {}
+    opening, effort = attrs.get("opening_m"), attrs.get("effort_n")
+    if opening is None or effort is None:
         return None
-    opening = (grip.get("attributes") or {}).get("opening_m")
-    return None if opening is None else float(opening)
+    if float(opening) > CLOSED_OPENING_M and float(effort) > SQUEEZE_EFFORT_N:
+        return float(opening), float(effort)
+    return None
 
 
 def _held(snapshot: Mapping, obj: str) -> tuple[bool | None, str]:
     """Whether the gripper holds ``obj``: ``True``/``False``, or ``None`` when the perceived
     relation is below the confidence threshold, or there is no relation while the gripper
-    is closed on something and ``obj`` is not seen confidently elsewhere."""
+    squeezes something and ``obj`` is not seen confidently elsewhere."""
     rel = _holding_relation(snapshot, obj)
     if rel is not None:
         conf = float(rel.get("confidence", 1.0))
@@ -183,10 +192,10 @@ def _held(snapshot: Mapping, obj: str) -> tuple[bool | None, str]:
             return True, f"gripper holds {obj} (confidence {conf:.2f})"
         return None, f"holding {obj} perceived with confidence {conf:.2f} < {CONFIDENCE_MIN}"
     ent = _entities(snapshot).get(obj)
-    opening = _gripper_opening(snapshot)
-    if (ent is None or confidence(ent) < CONFIDENCE_MIN) and opening is not None and opening > CLOSED_OPENING_M:
-        return None, (f"gripper closed on something (opening {opening * 1000:.1f} mm) and {obj} not seen "
-                      f"confidently elsewhere")
+    squeeze = _gripper_squeezing(snapshot)
+    if (ent is None or confidence(ent) < CONFIDENCE_MIN) and squeeze is not None:
+        return None, (f"gripper squeezes something (opening {squeeze[0] * 1000:.1f} mm, effort {squeeze[1]:.1f} N) "
+                      f"and {obj} not seen confidently elsewhere")
     return False, f"gripper does not hold {obj}"
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import logging
+import posixpath
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Protocol, Sequence
@@ -85,7 +86,7 @@ class EvidenceBundle:
         name = self.files.get(key)
         if not name or not (self.directory / name).exists():
             return None
-        return f"{self.directory.parent.name}/{self.directory.name}/{name}"
+        return posixpath.normpath(f"{self.directory.parent.name}/{self.directory.name}/{name}")
 
     def refs(self, *keys: str) -> tuple[str, ...]:
         """:meth:`ref` of each key that exists, in order."""

@@ -80,9 +80,6 @@ def truth_snapshot(state: Mapping[str, Any] | None, scene: Mapping[str, Any] | N
                      "attributes": {}})
     held = list(state.get("held") or ())
     relations = [{"subject": "gripper", "relation": "holding", "object": n, "confidence": 1.0} for n in held]
-    # an empty hand is known exactly: opening 0 keeps "released" decidable when the object is unseen
-    ents.append({"name": "gripper", "kind": "gripper", "position": [0.0, 0.0, 0.0], "size": [0.0, 0.0, 0.0],
-                 "attributes": {"opening_m": 0.02 if held else 0.0}})
     return {"entities": ents, "relations": relations}
 
 

@@ -40,7 +40,7 @@ def _array(owner: str, name: str, value, shape: tuple, *, kinds: str = "fiu") ->
     if not isinstance(value, np.ndarray):
         raise PerceptionError(f"{owner}.{name} must be a numpy array, got {type(value).__name__}")
     if value.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, value.shape)):
-        want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+        want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
         raise PerceptionError(f"{owner}.{name} must have shape {want}, got {value.shape}")
     if value.dtype.kind not in kinds:
         raise PerceptionError(f"{owner}.{name} must have a numeric dtype, got {value.dtype}")

@@ -1,0 +1,288 @@
+"""Object detection on the object points: clustering, then per cluster a fitted primitive.
+
+Clustering is DBSCAN (scikit-learn; Ester et al. 1996) on a joint feature of position and
+colour, ``[x, y, z, w_c r/(r+g+b), w_c g/(r+g+b), w_i (r+g+b)/768]`` with
+``w_c = eps / chromaticity_scale`` and ``w_i = eps / lightness_scale``: the chromaticity is
+invariant to a common gain, so one object's lit and shaded faces stay together, while two
+touching objects of clearly different colours separate.
+
+Per cluster (:func:`fit_cluster`): height above the support plane -> top and bottom; the
+top-face points (within ``shape.top_band_m`` of the top) give the footprint (OpenCV
+``minAreaRect`` -> centre, yaw, half extents) and its corner fraction (points outside the
+ellipse inscribed in that rectangle: 21.5 % for a rectangle, 0 for a disc); a least-squares sphere fit (the
+algebraic fit of |p|^2 = 2 c.p + (r^2 - |c|^2)) with a small residual and a height close to
+its diameter means a sphere. Colour is the median sRGB of the top-face points.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from phyagentos.perception.cloud import Cloud, Plane
+from phyagentos.perception.colour import srgb_to_lab
+from phyagentos.perception.config import PerceptionConfig
+
+__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One perceived object in one observation (all cameras fused at the point level).
+
+    Attributes:
+        position: (3,) world centre, m.
+        yaw: rad about world z of the footprint's x axis (0 for round shapes), in [-pi/2, pi/2).
+        half_extents: (3,) m; hx >= hy for boxes (the footprint's long side is x).
+        shape: ``box`` | ``cylinder`` | ``sphere``.
+        colour_rgb: (3,) median sRGB in [0, 1].
+        colour_lab: (3,) CIELAB of ``colour_rgb``.
+        points: supporting points (after voxel filtering).
+        cameras: number of cameras that saw it (with >= 5 points each).
+        position_std_m: 1-sigma horizontal position uncertainty, m.
+        yaw_std_rad: 1-sigma yaw uncertainty, rad (pi for round shapes: yaw is meaningless).
+        view_agreement: 0..1, how well the per-camera centres agree (1 for one camera).
+        bottom_m: bottom height above the support plane, m (0 for objects on the table).
+        low_m: height of the cluster's lowest points (2nd percentile) above the plane, m.
+    """
+
+    position: np.ndarray
+    yaw: float
+    half_extents: np.ndarray
+    shape: str
+    colour_rgb: np.ndarray
+    colour_lab: np.ndarray
+    points: int
+    cameras: int
+    position_std_m: float
+    yaw_std_rad: float
+    view_agreement: float
+    bottom_m: float
+    low_m: float = 0.0
+
+    @property
+    def top_m(self) -> float:
+        """Top height above the support plane, m."""
+        return self.bottom_m + 2.0 * float(self.half_extents[2])
+
+
+def dbscan(features: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
+    """DBSCAN labels (N,) (-1 = noise) of (N, D) ``features`` (Ester et al. 1996).
+
+    Same definition as scikit-learn's ``DBSCAN`` (a point is core when at least
+    ``min_samples`` points, itself included, lie within ``eps``; clusters are the connected
+    components of core points; a border point joins a cluster of one of its core neighbours),
+    built from scipy's ``cKDTree.query_pairs`` and ``connected_components``; scikit-learn's
+    per-call input validation costs more than the clustering itself at our sizes (measured
+    in bench/perception.py, ``--clustering sklearn``).
+    """
+    n = features.shape[0]
+    labels = np.full(n, -1, dtype=np.int64)
+    if n == 0:
+        return labels
+    pairs = cKDTree(features).query_pairs(eps, output_type="ndarray")
+    deg = np.bincount(pairs.ravel(), minlength=n) + 1
+    core = deg >= min_samples
+    if not np.any(core):
+        return labels
+    both = core[pairs[:, 0]] & core[pairs[:, 1]]
+    cp = pairs[both]
+    graph = coo_matrix((np.ones(cp.shape[0], dtype=np.int8), (cp[:, 0], cp[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    # consecutive labels for the core components
+    _, core_lab = np.unique(comp[core], return_inverse=True)
+    labels[core] = core_lab
+    one = core[pairs[:, 0]] ^ core[pairs[:, 1]]
+    bp = pairs[one]
+    c_idx = np.where(core[bp[:, 0]], bp[:, 0], bp[:, 1])
+    b_idx = np.where(core[bp[:, 0]], bp[:, 1], bp[:, 0])
+    labels[b_idx] = labels[c_idx]
+    return labels
+
+
+def cluster(cloud: Cloud, config: PerceptionConfig) -> list[np.ndarray]:
+    """Index arrays of the clusters of ``cloud`` (largest first), each >= ``min_points``."""
+    if len(cloud) == 0:
+        return []
+    cc = config.clustering
+    rgb = cloud.rgb.astype(np.float64) + 1.0
+    total = rgb.sum(axis=1, keepdims=True)
+    chroma = rgb[:, :2] / total  # (r, g) chromaticity: invariant to shading (a common gain)
+    w = cc.eps_m / cc.chromaticity_scale
+    feat = np.column_stack([
+        cloud.points.astype(np.float64),
+        w * chroma,
+        (cc.eps_m / cc.lightness_scale) * total[:, 0] / 768.0,
+    ])
+    if cc.method == "sklearn":
+        from sklearn.cluster import DBSCAN
+
+        labels = DBSCAN(eps=cc.eps_m, min_samples=cc.min_samples, algorithm="kd_tree").fit_predict(feat)
+    else:
+        labels = dbscan(feat, cc.eps_m, cc.min_samples)
+    out = []
+    for k in range(labels.max() + 1):
+        idx = np.flatnonzero(labels == k)
+        if idx.size >= cc.min_points:
+            out.append(idx)
+    out.sort(key=lambda a: -a.size)
+    return out
+
+
+def _corner_fraction(xy: np.ndarray, centre: np.ndarray, yaw: float, half: np.ndarray,
+                     tol_m: float = 0.0) -> float:
+    """Fraction of footprint points outside the ellipse inscribed in the min-area rectangle
+    (grown by ``tol_m``, the sampling and noise tolerance).
+
+    A uniformly sampled rectangle puts 1 - pi/4 = 21.5 % of its points there (fewer with a
+    tolerance), a disc none: a scale-free circle-vs-rectangle test for sparse samples.
+    """
+    if xy.shape[0] < 5 or half[0] <= 0 or half[1] <= 0:
+        return 1.0
+    c, s = math.cos(yaw), math.sin(yaw)
+    d = xy - centre
+    u = (c * d[:, 0] + s * d[:, 1]) / half[0]
+    v = (-s * d[:, 0] + c * d[:, 1]) / half[1]
+    lim = (1.0 + tol_m / float(min(half[0], half[1]))) ** 2
+    return float(np.mean(u * u + v * v > lim))
+
+
+def _sphere_fit(p: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Least-squares sphere (centre (3,), radius, RMS radial residual) of (N, 3) points."""
+    A = np.column_stack([2.0 * p, np.ones(p.shape[0])])
+    b = np.sum(p * p, axis=1)
+    # normal equations via einsum (a 4x4 solve; avoids a multithreaded BLAS call)
+    sol = np.linalg.solve(np.einsum("ni,nj->ij", A, A) + 1e-12 * np.eye(4), np.einsum("ni,n->i", A, b))
+    c = sol[:3]
+    r2 = sol[3] + c @ c
+    r = math.sqrt(max(r2, 1e-12))
+    res = np.linalg.norm(p - c, axis=1) - r
+    return c, r, float(np.sqrt(np.mean(res * res)))
+
+
+def _rect(xy: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """(centre (2,), yaw in [-pi/2, pi/2), half extents (2,) with hx >= hy) of the min-area rect."""
+    (cx, cy), (w, h), ang = cv2.minAreaRect(xy.astype(np.float32))
+    yaw = math.radians(ang)
+    if h > w:
+        w, h = h, w
+        yaw += math.pi / 2.0
+    yaw = (yaw + math.pi / 2.0) % math.pi - math.pi / 2.0
+    return np.array([cx, cy]), yaw, np.array([w / 2.0, h / 2.0])
+
+
+def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
+                focal_px: np.ndarray) -> Detection | None:
+    """Fit one cluster (its points ``cloud`` and their ``heights`` above ``plane``).
+
+    ``focal_px``: (n_cameras,) focal lengths (px / stride) used for the lateral resolution
+    term of the uncertainty. Returns None when the cluster has no usable top face.
+    """
+    sc, fc = config.shape, config.fusion
+    h = heights
+    top, low = (float(v) for v in np.percentile(h, [98, 2]))
+    # Objects rest on the support plane; :func:`stack` raises the bottom of an object whose
+    # lowest points sit on another detection's top.
+    bottom = 0.0
+    height = max(top - bottom, 1e-3)
+    band = h > top - max(sc.top_band_m, 0.15 * height)
+    top_xy = cloud.points[band, :2]
+    if top_xy.shape[0] < 5:
+        top_xy = cloud.points[:, :2]
+    centre_xy, yaw, hxy = _rect(top_xy)
+    # pixel footprint at the observed range: edges are uncertain by about one sample
+    fpx = focal_px[cloud.camera.astype(int)]
+    range_m = float(np.median(cloud.range_m))
+    pix_m = float(np.median(cloud.range_m / fpx))
+    corner = _corner_fraction(top_xy, centre_xy, yaw, hxy, 0.5 * pix_m)
+    hxy = hxy + 0.5 * pix_m  # points sample pixel centres: the true edge lies ~half a pixel out
+
+    shape = "box" if corner >= sc.box_corner_fraction else "cylinder"
+    sphere_c = None
+    if cloud.points.shape[0] >= 10:
+        c, r, rms = _sphere_fit(cloud.points.astype(np.float64))
+        # a sphere's surface fits within the depth noise; a cylinder's rim and a box's edges
+        # leave a larger residual (measured on 223 rendered objects: residual / limit is
+        # 0.32-1.0 for spheres, >= 0.96 for cylinders, >= 1.3 for boxes; docs/perception.md)
+        limit = sc.sphere_residual * r + sc.sphere_noise_factor * float(config.depth_sigma_m(range_m))
+        diam_ok = abs(height - 2.0 * r) / (2.0 * r) < sc.sphere_height_tolerance
+        if rms < limit and diam_ok:
+            shape, sphere_c = "sphere", c
+    if shape == "sphere":
+        r = 0.5 * height
+        centre_xy = sphere_c[:2]
+        half = np.array([r, r, r])
+        yaw = 0.0
+    elif shape == "cylinder":
+        # the top disc: centre from its rect, radius = mean of the rect's half sides
+        r = float(hxy.mean())
+        half = np.array([r, r, 0.5 * height])
+        yaw = 0.0
+    else:
+        half = np.array([hxy[0], hxy[1], 0.5 * height])
+    z = plane.z_at(centre_xy) + bottom + half[2]
+    position = np.array([centre_xy[0], centre_xy[1], z])
+
+    lab = srgb_to_lab(cloud.rgb[band] if band.sum() >= 5 else cloud.rgb)
+    med_lab = np.median(lab, axis=0)
+    rgb_sel = cloud.rgb[band] if band.sum() >= 5 else cloud.rgb
+    colour = np.median(rgb_sel, axis=0) / 255.0
+
+    # ---- uncertainty: per camera, a centre from that camera's points; inverse-variance fuse
+    cams, counts = np.unique(cloud.camera, return_counts=True)
+    per_cam, per_var = [], []
+    for cam, cnt in zip(cams, counts):
+        if cnt < 5:
+            continue
+        sel = cloud.camera == cam
+        rng_m = float(np.median(cloud.range_m[sel]))
+        pm = rng_m / float(focal_px[int(cam)])
+        sd = float(config.depth_sigma_m(rng_m))
+        var = fc.position_floor_m ** 2 + (pm * pm / 12.0 + sd * sd) * 4.0 / max(math.sqrt(cnt), 1.0)
+        pts_c = cloud.points[sel & band] if np.count_nonzero(sel & band) >= 5 else cloud.points[sel]
+        per_cam.append(pts_c[:, :2].mean(axis=0))
+        per_var.append(var)
+    if not per_var:
+        per_var = [fc.position_floor_m ** 2 + pix_m ** 2]
+        per_cam = [centre_xy]
+    per_var_a = np.asarray(per_var)
+    fused_var = 1.0 / float(np.sum(1.0 / per_var_a))
+    agreement = 1.0
+    if len(per_cam) > 1:
+        # per-camera centres of visible points are biased by self-occlusion; compare their
+        # spread with the object size instead of their std (a crude but monotone measure)
+        spread = float(np.max(np.linalg.norm(np.asarray(per_cam) - np.mean(per_cam, axis=0), axis=1)))
+        agreement = float(math.exp(-max(0.0, spread - 0.5 * float(half[:2].max())) / 0.01))
+        fused_var += (1.0 - agreement) * spread ** 2
+    pos_std = math.sqrt(fused_var)
+    if shape == "box":
+        long_side = max(float(2.0 * hxy[0]), 1e-3)
+        yaw_std = math.sqrt(fc.yaw_floor_rad ** 2 + (2.0 * pix_m / long_side) ** 2 / len(per_var))
+    else:
+        yaw_std = math.pi
+    return Detection(
+        position=position, yaw=float(yaw), half_extents=half, shape=shape, colour_rgb=colour,
+        colour_lab=med_lab, points=int(cloud.points.shape[0]), cameras=len(per_var),
+        position_std_m=pos_std, yaw_std_rad=yaw_std, view_agreement=agreement, bottom_m=bottom,
+        low_m=low,
+    )
+
+
+def detect(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
+           focal_px: np.ndarray) -> list[Detection]:
+    """Cluster the object points and fit each cluster (see :func:`fit_cluster`)."""
+    out = []
+    for idx in cluster(cloud, config):
+        det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
+        if det is not None:
+            out.append(det)
+    return out

@@ -1,0 +1,483 @@
+"""The Perceiver: camera frames + proprioception -> a perceived snapshot (CONTRACT_9 sections 3, 4).
+
+One :meth:`Perceiver.observe` call runs the pipeline on every frame of one observation:
+
+1. support plane: RANSAC + least squares on a coarse cloud of all cameras (``cloud`` stride x 2);
+2. object points: per camera, the height of every strided pixel above the plane (linear in
+   depth, no 3-D point needed), candidates in (``object_min_height_m``, ``max_height_m``),
+   back-projected; cropped to the workspace, minus the base disc, the gripper box around
+   the tcp, caller-given robot capsules and declared obstacles (inflated by 1 cm);
+   voxel-filtered;
+3. detections: DBSCAN on position + colour, one fitted primitive per cluster (``detect``);
+   stacking (an object whose lowest points sit on another's top rests on it);
+4. association to the declared descriptors (``association``); unmatched or ambiguous
+   clusters become ``unknown_<k>``;
+5. tracks: fusion over observations (``tracks``);
+6. holding from proprioception (the held object's pose follows the tcp), then relations.
+
+The Perceiver keeps per-session state (tracks, the open-gripper wrist-force baseline, the
+held object); :meth:`reset` clears it. It never reads simulator state.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from phyagentos.perception.association import associate, cost_matrix, match_confidence
+from phyagentos.perception.cloud import (
+    Cloud,
+    Plane,
+    RobotCapsule,
+    backproject,
+    box_mask,
+    capsule_mask,
+    fit_support_plane,
+    gripper_mask,
+    heights_above,
+    merge_clouds,
+    voxel_downsample,
+)
+from phyagentos.perception.config import PerceptionConfig
+from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
+from phyagentos.perception.detect import Detection, detect
+from phyagentos.perception.errors import PerceptionError
+from phyagentos.perception.frames import CameraFrame, Proprioception
+from phyagentos.perception.relations import (
+    holding_evidence,
+    inside_confidence,
+    on_confidence,
+    regions_from,
+    width_across_fingers,
+)
+from phyagentos.perception.tracks import Track
+
+__all__ = ["Perceiver"]
+
+log = logging.getLogger(__name__)
+
+_OBSTACLE_MARGIN_M = 0.01
+
+
+def _quat_yaw(yaw: float) -> list[float]:
+    return [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
+
+
+def _r(x, nd: int = 4):
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [round(float(v), nd) for v in x]
+    return round(float(x), nd)
+
+
+def _obstacle_boxes(obstacles) -> list[tuple[np.ndarray, np.ndarray]]:
+    if obstacles is None:
+        return []
+    if isinstance(obstacles, Mapping):
+        obstacles = obstacles.get("obstacles", [])
+    out = []
+    for ob in obstacles:
+        get = ob.get if isinstance(ob, Mapping) else (lambda k, _o=ob: getattr(_o, k, None))
+        c, he = get("center"), get("half_extents")
+        try:
+            c3 = np.array([float(v) for v in c], float)
+            he3 = np.array([float(v) for v in he], float)
+        except (TypeError, ValueError):
+            raise PerceptionError(f"obstacle {get('name')!r} needs center [x, y, z] and half_extents [hx, hy, hz]") from None
+        if c3.shape != (3,) or he3.shape != (3,):
+            raise PerceptionError(f"obstacle {get('name')!r} needs 3-number center and half_extents")
+        out.append((c3 - he3 - _OBSTACLE_MARGIN_M, c3 + he3 + _OBSTACLE_MARGIN_M))
+    return out
+
+
+class Perceiver:
+    """Per-session perception: ``Perceiver(config, declared)``.
+
+    Args:
+        config: the pipeline parameters (perception.yaml).
+        declared: the declared objects (descriptors, or mappings as in ``describe_declared()``).
+        robot_name: name of the arm entity in the snapshot (``kind: robot``).
+
+    Raises:
+        PerceptionError: malformed descriptors.
+    """
+
+    def __init__(self, config: PerceptionConfig | None = None,
+                 declared: Sequence[ObjectDescriptor | Mapping[str, Any]] | Mapping[str, Any] = (), *,
+                 robot_name: str = "panda"):
+        if config is not None and not isinstance(config, PerceptionConfig):
+            raise PerceptionError(f"config must be a PerceptionConfig, got {type(config).__name__}")
+        self.config = config or PerceptionConfig.default()
+        self.declared: tuple[ObjectDescriptor, ...] = tuple(descriptors_from_declared(declared))
+        reserved = {"tcp", "gripper", "table", robot_name}
+        clash = sorted(reserved & {d.name for d in self.declared})
+        if clash:
+            raise PerceptionError(f"declared object name(s) {clash} clash with reserved entity names {sorted(reserved)}")
+        self.robot_name = robot_name
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every track, the wrist-force baseline and the held object."""
+        self.tracks: dict[str, Track] = {}
+        self._baseline_n: float | None = None
+        self._held: str | None = None
+        self._grasp_height_m: float | None = None
+        self._last_plane: Plane | None = None
+        self.last_timing_ms: dict[str, float] = {}
+
+    # ------------------------------------------------------------------ proprioception
+
+    def update_proprioception(self, proprio: Proprioception) -> None:
+        """Feed a proprioception sample between observations (optional, cheap): keeps the
+        open-gripper wrist-force baseline and the grasp height current."""
+        if not isinstance(proprio, Proprioception):
+            raise PerceptionError(f"proprio must be a Proprioception, got {type(proprio).__name__}")
+        hc = self.config.holding
+        free = abs(proprio.gripper_effort_n) < 0.5 * hc.min_effort_n
+        if free and proprio.wrist_force_n is not None:
+            f = float(np.linalg.norm(proprio.wrist_force_n))
+            self._baseline_n = f if self._baseline_n is None else 0.5 * (self._baseline_n + f)
+        if free:
+            self._grasp_height_m = None
+        elif self._grasp_height_m is None:
+            self._grasp_height_m = float(proprio.tcp_pose[2, 3])
+
+    # ------------------------------------------------------------------ pipeline stages
+
+    def object_cloud(self, frames: Sequence[CameraFrame], proprio: Proprioception, *,
+                     obstacles=None, robot_capsules: Sequence[RobotCapsule] = ()) -> tuple[Cloud, np.ndarray, Plane]:
+        """Stages 1-2: ``(object cloud, (N,) heights above the plane, plane)``."""
+        cc, cfg = self.config.cloud, self.config
+        strides = [cfg.stride_for(f.intrinsics.width) for f in frames]
+        coarse = merge_clouds([
+            backproject(f, stride=2 * s, min_depth_m=cc.min_depth_m, max_depth_m=cc.max_depth_m, camera_index=i)
+            for i, (f, s) in enumerate(zip(frames, strides))
+        ])
+        plane = fit_support_plane(coarse.points, cfg, rng=np.random.default_rng(0))
+        if not plane.fitted:
+            log.warning("perception: support plane not fitted (too few table points); using z = %.3f m",
+                        cfg.table.expected_height_m)
+        parts = []
+        for i, (f, s) in enumerate(zip(frames, strides)):
+            d, h = heights_above(f, plane, stride=s)
+            cand = np.flatnonzero((h > cfg.table.object_min_height_m) & (h < cfg.workspace.max_height_m)
+                                  & (d >= cc.min_depth_m) & (d <= cc.max_depth_m))
+            parts.append(backproject(f, stride=s, min_depth_m=cc.min_depth_m, max_depth_m=cc.max_depth_m,
+                                     camera_index=i, pixels=cand))
+        cloud = merge_clouds(parts)
+        p = cloud.points
+        ws = cfg.workspace
+        keep = (p[:, 0] > ws.x_m[0]) & (p[:, 0] < ws.x_m[1]) & (p[:, 1] > ws.y_m[0]) & (p[:, 1] < ws.y_m[1])
+        if ws.base_exclusion_radius_m > 0:
+            keep &= p[:, 0] ** 2 + p[:, 1] ** 2 > ws.base_exclusion_radius_m ** 2
+        keep &= ~gripper_mask(p, proprio, cfg)
+        if robot_capsules:
+            keep &= ~capsule_mask(p, robot_capsules, cfg.robot_mask.capsule_margin_m)
+        for lo, hi in _obstacle_boxes(obstacles):
+            keep &= ~box_mask(p, np.eye(4), lo, hi)
+        cloud = voxel_downsample(cloud.select(keep), cc.voxel_size_m)
+        return cloud, plane.height(cloud.points.astype(np.float64)), plane
+
+    # ------------------------------------------------------------------ observe
+
+    def observe(self, frames: Sequence[CameraFrame], proprio: Proprioception, *, regions=None, obstacles=None,
+                robot_capsules: Sequence[RobotCapsule] = (),
+                evidence_paths: Mapping[str, str] | None = None) -> dict:
+        """Fuse one observation (one or more RGB-D frames) into the perceived snapshot.
+
+        Args:
+            frames: the cameras' frames of this observation (each with depth).
+            proprio: proprioception at (about) the same time.
+            regions: declared regions (``describe_declared()['regions']`` or RegionSpecs).
+            obstacles: declared obstacles (their points are removed before clustering).
+            robot_capsules: optional capsules around arm links (world frame) to mask.
+            evidence_paths: optional ``{sensor: path of the saved frame}`` for ``evidence``.
+
+        Returns:
+            The snapshot dict of CONTRACT_9 section 3 (``stamp_s``, ``frame``, ``entities``,
+            ``relations``, ``proprioception``), plus ``unseen``: declared objects with no
+            current sighting (never given a guessed pose).
+
+        Raises:
+            PerceptionError: no frames, a frame without depth, wrong argument types.
+        """
+        import time
+
+        if not frames:
+            raise PerceptionError("observe needs at least one camera frame")
+        for f in frames:
+            if not isinstance(f, CameraFrame):
+                raise PerceptionError(f"frames must be CameraFrame objects, got {type(f).__name__}")
+            if f.depth_m is None:
+                raise PerceptionError(f"camera {f.sensor!r} has no depth image; perception needs RGB-D frames")
+        if not isinstance(proprio, Proprioception):
+            raise PerceptionError(f"proprio must be a Proprioception, got {type(proprio).__name__}")
+        cfg = self.config
+        stamp = max(float(f.stamp_s) for f in frames)
+        region_list = regions_from(regions)
+        t0 = time.perf_counter()
+        self.update_proprioception(proprio)
+
+        cloud, heights, plane = self.object_cloud(frames, proprio, obstacles=obstacles, robot_capsules=robot_capsules)
+        self._last_plane = plane
+        t1 = time.perf_counter()
+        focal = np.array([f.intrinsics.fx / cfg.stride_for(f.intrinsics.width) for f in frames])
+        dets = _stack(detect(cloud, heights, plane, cfg, focal), plane, cfg)
+        t2 = time.perf_counter()
+        sensors = [f.sensor for f in frames]
+        det_cams = [self._cameras_of(cloud, heights, d, sensors) for d in dets]
+
+        # ---- association (tracks seen before break ties)
+        names = [d.name for d in self.declared]
+        track_pos = [self.tracks[n].position if n in self.tracks and not self.tracks[n].held else None for n in names]
+        C = cost_matrix(dets, self.declared, cfg, track_pos)
+        assoc = associate(C, cfg)
+        for t in self.tracks.values():
+            t.seen_now = False
+        matched: dict[int, str] = {}
+        for i, (j, cost, margin) in assoc.matches.items():
+            det = dets[i]
+            conf = match_confidence(cost, margin, cfg) * _detection_confidence(det)
+            name = names[j]
+            if name in self.tracks:
+                self.tracks[name].update(det, conf, stamp, det_cams[i], cfg)
+                self.tracks[name].held = False
+            else:
+                self.tracks[name] = Track.start(name, det, conf, stamp, det_cams[i])
+            self.tracks[name].seen_now = True
+            matched[i] = name
+        t3 = time.perf_counter()
+
+        # ---- holding
+        holding_rel = self._update_holding(proprio, stamp)
+
+        # ---- entities
+        entities: list[dict] = []
+        geo: dict[str, dict] = {}
+        for name in names:
+            t = self.tracks.get(name)
+            if t is None or not (t.seen_now or t.held):
+                continue
+            if t.held:
+                ent = self._held_entity(t, proprio, holding_rel[1] if holding_rel else 0.0)
+            else:
+                ent = self._entity(name, "object", t.position, t.yaw, t.half_extents, t.shape, t.colour_rgb,
+                                   t.confidence, math.sqrt(t.predicted_var(stamp, cfg)), math.sqrt(t.var_yaw),
+                                   t.points, t.cameras, evidence_paths, source="perceived")
+                geo[name] = _geo(t.position, t.yaw, t.half_extents, t.shape, t.bottom_m, plane,
+                                 math.sqrt(t.var_xy))
+            entities.append(ent)
+        k = 0
+        for i, det in enumerate(dets):
+            if i in matched:
+                continue
+            name = f"unknown_{k}"
+            k += 1
+            conf = _detection_confidence(det) * (0.5 if i in assoc.ambiguous else 1.0)
+            entities.append(self._entity(name, "unknown", det.position, det.yaw, det.half_extents, det.shape,
+                                         det.colour_rgb, conf, det.position_std_m, det.yaw_std_rad, det.points,
+                                         det_cams[i], evidence_paths, source="perceived",
+                                         extra={"ambiguous": i in assoc.ambiguous}))
+            geo[name] = _geo(det.position, det.yaw, det.half_extents, det.shape, det.bottom_m, plane,
+                             det.position_std_m)
+        for ent in entities:
+            if ent["attributes"]["confidence"] < cfg.fusion.min_confidence and ent["kind"] == "object":
+                ent["kind"] = "unknown"
+        entities.extend(self._robot_entities(proprio))
+
+        relations = self._relations(geo, region_list, holding_rel)
+        unseen = [n for n in names if not (n in self.tracks and (self.tracks[n].seen_now or self.tracks[n].held))]
+        t4 = time.perf_counter()
+        self.last_timing_ms = {"cloud": 1e3 * (t1 - t0), "detect": 1e3 * (t2 - t1), "associate": 1e3 * (t3 - t2),
+                               "relations": 1e3 * (t4 - t3), "total": 1e3 * (t4 - t0)}
+        return {
+            "stamp_s": _r(stamp, 6),
+            "frame": "world",
+            "entities": entities,
+            "relations": relations,
+            "proprioception": {
+                "joint_positions": _r(proprio.joint_positions),
+                "gripper_opening_m": _r(proprio.gripper_opening_m, 5),
+                "gripper_effort_n": _r(proprio.gripper_effort_n, 3),
+                "wrist_force_n": None if proprio.wrist_force_n is None else _r(proprio.wrist_force_n, 3),
+            },
+            "unseen": unseen,
+            "support_plane": {"normal": _r(plane.normal, 5), "offset_m": _r(plane.offset_m, 5), "fitted": plane.fitted},
+        }
+
+    # ------------------------------------------------------------------ helpers
+
+    @staticmethod
+    def _cameras_of(cloud: Cloud, heights: np.ndarray, det: Detection, sensors: list[str]) -> tuple[str, ...]:
+        near = np.linalg.norm(cloud.points[:, :2] - det.position[:2], axis=1) < float(det.half_extents[:2].max()) + 0.005
+        near &= heights < det.top_m + 0.01
+        cams, counts = np.unique(cloud.camera[near], return_counts=True)
+        return tuple(sensors[int(c)] for c, n in zip(cams, counts) if n >= 5)
+
+    def _entity(self, name, kind, position, yaw, half, shape, colour, confidence, pos_std, yaw_std, points,
+                cameras, evidence_paths, *, source: str, extra: dict | None = None) -> dict:
+        attrs = {
+            "source": source,
+            "shape": shape,
+            "colour_rgb": _r(colour, 3),
+            "confidence": _r(min(1.0, max(0.0, confidence)), 3),
+            "position_std_m": _r(pos_std, 5),
+            "yaw_std_rad": _r(min(yaw_std, math.pi), 4),
+            "points": int(points),
+            "cameras": list(cameras),
+            "evidence": [evidence_paths[c] for c in cameras if evidence_paths and c in evidence_paths],
+        }
+        if extra:
+            attrs.update(extra)
+        return {"name": name, "kind": kind, "position": _r(position), "quat_wxyz": _r(_quat_yaw(yaw), 5),
+                "size": _r(half), "attributes": attrs}
+
+    def _held_entity(self, t: Track, proprio: Proprioception, hold_conf: float) -> dict:
+        T = proprio.tcp_pose @ (t.grasp_offset if t.grasp_offset is not None else np.eye(4))
+        pos = T[:3, 3]
+        yaw = math.atan2(T[1, 0], T[0, 0]) if t.grasp_offset is not None else t.yaw
+        std = math.sqrt(t.var_xy + 0.005 ** 2)
+        ent = self._entity(t.name, "object", pos, yaw, t.half_extents, t.shape, t.colour_rgb,
+                           hold_conf * max(t.confidence, 0.5), std, math.sqrt(t.var_yaw) + 0.1, 0, (), None,
+                           source="proprioception", extra={"held": True, "last_seen_s": _r(t.last_seen_s, 6)})
+        return ent
+
+    def _robot_entities(self, proprio: Proprioception) -> list[dict]:
+        T = proprio.tcp_pose
+        q = np.empty(4)
+        import mujoco  # quaternion of the tcp rotation (MuJoCo's own conversion)
+
+        mujoco.mju_mat2Quat(q, np.ascontiguousarray(T[:3, :3]).flatten())
+        src = {"source": "proprioception"}
+        return [
+            {"name": "tcp", "kind": "robot", "position": _r(T[:3, 3]), "quat_wxyz": _r(q, 5), "size": [0.0, 0.0, 0.0],
+             "attributes": dict(src)},
+            {"name": "gripper", "kind": "gripper", "position": _r(T[:3, 3]), "quat_wxyz": _r(q, 5),
+             "size": [_r(proprio.gripper_opening_m, 5), 0.0, 0.0],
+             "attributes": {**src, "opening_m": _r(proprio.gripper_opening_m, 5),
+                            "effort_n": _r(proprio.gripper_effort_n, 3),
+                            "wrist_force_n": None if proprio.wrist_force_n is None else _r(proprio.wrist_force_n, 3)}},
+            {"name": self.robot_name, "kind": "robot", "position": [0.0, 0.0, 0.0], "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+             "size": [0.0, 0.0, 0.0], "attributes": {**src, "joint_names": list(proprio.joint_names),
+                                                     "joint_positions": _r(proprio.joint_positions)}},
+        ]
+
+    def _update_holding(self, proprio: Proprioception, stamp: float) -> tuple[str, float] | None:
+        """Decide which tracked object (if any) is in the hand; returns (name, confidence)."""
+        cfg, hc = self.config, self.config.holding
+        tcp = proprio.tcp_pose[:3, 3]
+        candidates = []
+        for name, t in self.tracks.items():
+            if t.seen_now and not t.held:
+                continue  # seen on the table (outside the gripper box): not in the hand
+            width = width_across_fingers(t.half_extents, t.yaw, t.shape, proprio.tcp_pose)
+            ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
+                                  grasp_height_m=self._grasp_height_m, config=cfg)
+            if ev.confidence <= 0.0:
+                continue
+            if not t.held:
+                # capture: the object was last seen right under/between the fingers
+                dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
+                if dxy > hc.capture_radius_m:
+                    continue
+            candidates.append((ev.confidence, name, ev))
+        for t in self.tracks.values():
+            if t.held and all(c[1] != t.name for c in candidates):
+                t.held = False  # released (or lost): unknown until seen again
+                t.var_xy = max(t.var_xy, 0.03 ** 2)
+                t.confidence *= 0.5
+                t.grasp_offset = None
+        if not candidates:
+            self._held = None
+            return None
+        candidates.sort(key=lambda c: -c[0])
+        conf, name, _ = candidates[0]
+        for _, other, _ in candidates[1:]:
+            self.tracks[other].held = False
+        t = self.tracks[name]
+        if not t.held:
+            T_obj = np.eye(4)
+            T_obj[:3, 3] = t.position
+            c, s = math.cos(t.yaw), math.sin(t.yaw)
+            T_obj[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+            if np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
+                t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
+            else:  # grasped earlier, already moved: assume a centred grasp
+                off = np.linalg.inv(proprio.tcp_pose) @ T_obj
+                off[:3, 3] = 0.0
+                t.grasp_offset = off
+            t.held = True
+        if len(candidates) > 1:
+            conf *= 1.0 - candidates[1][0] / (candidates[0][0] + 1e-9) * 0.5
+        self._held = name
+        return name, conf
+
+    def _relations(self, geo: dict[str, dict], regions, holding_rel) -> list[dict]:
+        cfg = self.config
+        rels = []
+        if holding_rel is not None:
+            rels.append({"subject": "gripper", "relation": "holding", "object": holding_rel[0],
+                         "confidence": _r(holding_rel[1], 3)})
+        for a, ga in geo.items():
+            if ga["bottom"] <= cfg.relations.on_gap_m:
+                rels.append({"subject": a, "relation": "on", "object": "table",
+                             "confidence": _r(ga["table_conf"], 3)})
+                for reg in regions:
+                    c = inside_confidence(ga["position"], ga["std"], reg)
+                    if c >= cfg.relations.min_confidence:
+                        rels.append({"subject": a, "relation": "inside", "object": reg.name, "confidence": _r(c, 3)})
+            for b, gb in geo.items():
+                if a == b:
+                    continue
+                c = on_confidence(ga, gb, cfg)
+                if c >= cfg.relations.min_confidence:
+                    rels.append({"subject": a, "relation": "on", "object": b, "confidence": _r(c, 3)})
+        return rels
+
+
+def _detection_confidence(det: Detection) -> float:
+    """Detection-only confidence: support (1 - exp(-points / 30)) times view agreement."""
+    return (1.0 - math.exp(-det.points / 30.0)) * det.view_agreement
+
+
+def _geo(position, yaw, half, shape, bottom, plane: Plane, std) -> dict:
+    return {"position": np.asarray(position, float), "yaw": float(yaw), "half": np.asarray(half, float),
+            "shape": shape, "bottom": float(bottom), "top": float(bottom + 2.0 * half[2]), "std": float(std),
+            "table_conf": 0.95 if plane.fitted else 0.7}
+
+
+def _stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list[Detection]:
+    """Raise the bottom of detections resting on another detection (object on object).
+
+    A detection whose lowest points (``bottom_hint``) are well above the table and within
+    ``relations.on_gap_m`` of another detection's top, over that detection's footprint,
+    rests on it: its bottom becomes the other's top and its height shrinks accordingly.
+    """
+    from dataclasses import replace
+
+    from phyagentos.perception.relations import _footprint_margin
+
+    out = list(dets)
+    order = sorted(range(len(out)), key=lambda i: out[i].top_m)
+    for i in order:
+        a = out[i]
+        if a.low_m < config.table.object_min_height_m + 0.008:
+            continue
+        for j in order:
+            b = out[j]
+            if j == i or b.top_m >= a.top_m:
+                continue
+            if abs(a.low_m - b.top_m) > config.relations.on_gap_m:
+                continue
+            if _footprint_margin(a.position[:2], b.position, b.yaw, b.half_extents, b.shape) < -0.005:
+                continue
+            bottom = b.top_m
+            half = a.half_extents.copy()
+            half[2] = max(0.5 * (a.top_m - bottom), 1e-3)
+            pos = a.position.copy()
+            pos[2] = plane.z_at(pos[:2]) + bottom + half[2]
+            out[i] = replace(a, bottom_m=bottom, half_extents=half, position=pos)
+            break
+    return out

@@ -1,0 +1,107 @@
+"""Per-session object tracks: fusion of associated detections over observations.
+
+A track is a 1-D Kalman filter per horizontal coordinate with a random-walk process model
+(variance grows by q^2 * dt while unobserved, q = ``fusion.process_noise_m_per_sqrt_s``) and
+the detection's ``position_std_m`` as measurement noise: the fused estimate is the
+inverse-variance weighted mean, so agreeing views shrink the uncertainty (Kalman 1960; with
+a static object this is the weighted average of all views). A measurement farther than
+``fusion.innovation_gate_sigma`` sigmas restarts the track (the object was moved). Yaw is
+fused the same way modulo the footprint's symmetry (pi, or pi/2 for a square footprint).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from phyagentos.perception.config import PerceptionConfig
+from phyagentos.perception.detect import Detection
+
+__all__ = ["Track", "yaw_period"]
+
+
+def yaw_period(half_extents: np.ndarray, shape: str) -> float:
+    """Symmetry period of the yaw (rad): pi for a rectangle, pi/2 for a square footprint."""
+    if shape != "box":
+        return 2.0 * math.pi
+    hx, hy = float(half_extents[0]), float(half_extents[1])
+    return math.pi / 2.0 if abs(hx - hy) < 0.1 * max(hx, hy) else math.pi
+
+
+def _wrap(a: float, period: float) -> float:
+    return (a + period / 2.0) % period - period / 2.0
+
+
+@dataclass
+class Track:
+    """What perception believes about one declared object (mutable, internal)."""
+
+    name: str
+    position: np.ndarray
+    var_xy: float
+    yaw: float
+    var_yaw: float
+    half_extents: np.ndarray
+    shape: str
+    colour_rgb: np.ndarray
+    points: int
+    confidence: float
+    last_seen_s: float
+    bottom_m: float
+    cameras: tuple[str, ...] = ()
+    shape_votes: dict = field(default_factory=dict)
+    observations: int = 1
+    held: bool = False
+    grasp_offset: np.ndarray | None = None  # (4, 4) object pose in the tcp frame while held
+    seen_now: bool = True
+
+    @classmethod
+    def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
+              cameras: tuple[str, ...]) -> "Track":
+        """A new track from its first detection."""
+        return cls(name=name, position=det.position.copy(), var_xy=det.position_std_m ** 2, yaw=det.yaw,
+                   var_yaw=det.yaw_std_rad ** 2, half_extents=det.half_extents.copy(), shape=det.shape,
+                   colour_rgb=det.colour_rgb.copy(), points=det.points, confidence=confidence,
+                   last_seen_s=stamp_s, bottom_m=det.bottom_m, cameras=cameras, shape_votes={det.shape: 1})
+
+    def predicted_var(self, stamp_s: float, config: PerceptionConfig) -> float:
+        """Position variance (m^2) grown by the random walk since the last sighting."""
+        dt = max(0.0, stamp_s - self.last_seen_s)
+        return self.var_xy + config.fusion.process_noise_m_per_sqrt_s ** 2 * dt
+
+    def update(self, det: Detection, confidence: float, stamp_s: float, cameras: tuple[str, ...],
+               config: PerceptionConfig) -> bool:
+        """Fuse a new detection; returns False when it restarted the track instead."""
+        var_p = self.predicted_var(stamp_s, config)
+        var_m = det.position_std_m ** 2
+        innov = float(np.linalg.norm(det.position[:2] - self.position[:2]))
+        gate = config.fusion.innovation_gate_sigma * math.sqrt(var_p + var_m)
+        if self.held or innov > gate or det.shape != self.shape and self.observations < 2:
+            fresh = Track.start(self.name, det, confidence, stamp_s, cameras)
+            self.__dict__.update(fresh.__dict__)
+            return False
+        k = var_p / (var_p + var_m)
+        self.position[:2] = self.position[:2] + k * (det.position[:2] - self.position[:2])
+        self.position[2] = det.position[2]
+        self.var_xy = var_p * var_m / (var_p + var_m)
+        self.shape_votes[det.shape] = self.shape_votes.get(det.shape, 0) + 1
+        self.shape = max(self.shape_votes, key=self.shape_votes.get)
+        if self.shape == "box" and det.shape == "box":
+            period = yaw_period(det.half_extents, det.shape)
+            var_y, var_ym = self.var_yaw, det.yaw_std_rad ** 2
+            ky = var_y / (var_y + var_ym)
+            self.yaw = _wrap(self.yaw + ky * _wrap(det.yaw - self.yaw, period), math.pi)
+            self.var_yaw = var_y * var_ym / (var_y + var_ym)
+        else:
+            self.yaw, self.var_yaw = det.yaw, det.yaw_std_rad ** 2
+        n = self.observations
+        self.half_extents = (n * self.half_extents + det.half_extents) / (n + 1)
+        self.colour_rgb = (n * self.colour_rgb + det.colour_rgb) / (n + 1)
+        self.points, self.bottom_m, self.cameras = det.points, det.bottom_m, cameras
+        # agreeing sightings raise confidence: 1 - (1 - c_now)(1 - c_before / 2)
+        self.confidence = 1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence)
+        self.last_seen_s = stamp_s
+        self.observations = n + 1
+        return True

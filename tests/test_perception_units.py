@@ -1,0 +1,258 @@
+"""Perception value objects, configuration, descriptors and algorithms (no rendering)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from phyagentos.errors import DocumentError, PhyAgentOSError
+from phyagentos.perception import (
+    CameraFrame,
+    CameraIntrinsics,
+    ObjectDescriptor,
+    PerceptionConfig,
+    PerceptionError,
+    Proprioception,
+    descriptors_from_declared,
+)
+from phyagentos.perception.association import associate, cost_matrix
+from phyagentos.perception.cloud import Plane, backproject, capsule_mask, RobotCapsule, fit_support_plane
+from phyagentos.perception.config import template_path
+from phyagentos.perception.detect import Detection, dbscan
+from phyagentos.perception.relations import holding_evidence
+from phyagentos.perception.synthetic import optical_pose_from_mujoco
+
+
+def _intr(w=64, h=48):
+    return CameraIntrinsics.from_fovy(w, h, 45.0)
+
+
+def _frame(**kw):
+    args = dict(sensor="overview", frame_id="overview_optical", stamp_s=1.0, intrinsics=_intr(),
+                T_world_camera=np.eye(4), rgb=np.zeros((48, 64, 3), np.uint8),
+                depth_m=np.ones((48, 64), np.float32))
+    args.update(kw)
+    return CameraFrame(**args)
+
+
+def _proprio(**kw):
+    args = dict(stamp_s=0.0, joint_names=("j1", "j2"), joint_positions=np.zeros(2), joint_velocities=np.zeros(2),
+                joint_efforts=np.zeros(2), gripper_opening_m=0.04, gripper_effort_n=0.0,
+                wrist_force_n=np.zeros(3), wrist_torque_nm=np.zeros(3), tcp_pose=np.eye(4))
+    args.update(kw)
+    return Proprioception(**args)
+
+
+# ---------------------------------------------------------------------- frames
+
+
+def test_intrinsics_from_fovy_follow_the_pinhole_formula():
+    k = CameraIntrinsics.from_fovy(640, 480, 60.0)
+    assert k.fy == pytest.approx(240.0 / math.tan(math.radians(30.0)))
+    assert (k.fx, k.cx, k.cy) == (k.fy, 319.5, 239.5)
+    assert k.matrix().shape == (3, 3) and k.matrix()[2, 2] == 1.0
+
+
+@pytest.mark.parametrize("kw, needle", [
+    (dict(rgb=np.zeros((48, 64, 3), np.float32)), "rgb must be uint8"),
+    (dict(rgb=np.zeros((47, 64, 3), np.uint8)), "rgb must have shape (48, 64, 3)"),
+    (dict(depth_m=np.ones((48, 64), np.float64)), "depth_m must be float32"),
+    (dict(depth_m=np.full((48, 64), np.nan, np.float32)), "NaN"),
+    (dict(depth_m=-np.ones((48, 64), np.float32)), ">= 0"),
+    (dict(T_world_camera=np.diag([1.0, 1.0, -1.0, 1.0])), "proper rotation"),
+    (dict(T_world_camera=np.eye(3)), "shape (4, 4)"),
+    (dict(sensor=""), "non-empty string"),
+    (dict(stamp_s=float("inf")), "finite"),
+])
+def test_camera_frame_rejects_bad_arrays_with_a_clear_error(kw, needle):
+    with pytest.raises(PerceptionError, match=None) as exc:
+        _frame(**kw)
+    assert needle in str(exc.value)
+    assert isinstance(exc.value, PhyAgentOSError)
+
+
+def test_camera_frame_accepts_a_missing_depth_image():
+    assert _frame(depth_m=None).depth_m is None
+
+
+@pytest.mark.parametrize("kw, needle", [
+    (dict(joint_positions=np.zeros(3)), "joint_positions must have shape (2,), got (3,)"),
+    (dict(gripper_opening_m=float("nan")), "finite"),
+    (dict(wrist_force_n=np.zeros(2)), "wrist_force_n must have shape (3,)"),
+    (dict(joint_names=["j1", "j2"]), "tuple of str"),
+    (dict(tcp_pose=np.zeros((4, 4))), "last row"),
+])
+def test_proprioception_rejects_inconsistent_samples(kw, needle):
+    with pytest.raises(PerceptionError) as exc:
+        _proprio(**kw)
+    assert needle in str(exc.value)
+
+
+def test_mujoco_camera_pose_converts_to_the_opencv_optical_frame():
+    # a MuJoCo camera at the origin with identity orientation looks along world -z, y up
+    T = optical_pose_from_mujoco(np.zeros(3), np.eye(3).ravel())
+    assert np.allclose(T[:3, 2], [0, 0, -1])  # optical z (forward) = MuJoCo -z
+    assert np.allclose(T[:3, 1], [0, -1, 0])  # optical y (down) = MuJoCo -y
+
+
+def test_backprojection_of_the_principal_point_lies_on_the_optical_axis():
+    T = np.eye(4)
+    T[:3, 3] = [1.0, 2.0, 3.0]
+    f = _frame(T_world_camera=T, depth_m=np.full((48, 64), 2.0, np.float32))
+    cloud = backproject(f, stride=1, min_depth_m=0.1, max_depth_m=5.0)
+    k = f.intrinsics
+    # pixel (u=0, v=0): x = d (0 - cx) / fx, y = d (0 - cy) / fy
+    assert np.allclose(cloud.points[0], [1.0 + 2.0 * (-k.cx) / k.fx, 2.0 + 2.0 * (-k.cy) / k.fy, 5.0], atol=1e-5)
+    assert cloud.points.shape == (48 * 64, 3)
+
+
+# ---------------------------------------------------------------------- config
+
+
+def test_default_config_equals_the_shipped_template():
+    assert PerceptionConfig.from_yaml(template_path()) == PerceptionConfig.default()
+
+
+def test_malformed_perception_yaml_is_reported_with_its_line(tmp_path):
+    p = tmp_path / "perception.yaml"
+    p.write_text("version: 1\ncloud:\n  voxel_size_m: -1\n")
+    with pytest.raises(DocumentError) as exc:
+        PerceptionConfig.from_yaml(p)
+    assert exc.value.line == 3 and "voxel_size_m" in str(exc.value)
+    assert p.read_text() == "version: 1\ncloud:\n  voxel_size_m: -1\n"  # never overwritten
+    p.write_text("version: 1\nclustering:\n  eps: 0.01\n")
+    with pytest.raises(DocumentError, match="eps"):
+        PerceptionConfig.from_yaml(p)
+
+
+def test_workspace_without_perception_yaml_uses_the_defaults(tmp_path):
+    assert PerceptionConfig.for_workspace(tmp_path) == PerceptionConfig.default()
+    (tmp_path / "perception.yaml").write_text("version: 1\ncloud:\n  voxel_size_m: 0.005\n")
+    assert PerceptionConfig.for_workspace(tmp_path).cloud.voxel_size_m == 0.005
+
+
+# ---------------------------------------------------------------------- descriptors
+
+
+def test_descriptor_accepts_colour_names_and_declared_mappings():
+    d = ObjectDescriptor("red_cube", shape="box", colour_rgb="red", size_m=(0.04, 0.04, 0.04))
+    assert d.colour_rgb == (0.85, 0.15, 0.12)
+    ds = descriptors_from_declared({"objects": [{"name": "mug", "class": "mug", "shape": "cylinder",
+                                                 "colour_rgb": [0.1, 0.2, 0.9], "size_m": [0.05, 0.05, 0.08]}]})
+    assert ds[0].cls == "mug" and ds[0].size_vector().tolist() == [0.05, 0.05, 0.08]
+
+
+@pytest.mark.parametrize("kw, needle", [
+    (dict(shape="cone"), "'box', 'cylinder', 'sphere'"),
+    (dict(colour_rgb="mauve"), "is not one of"),
+    (dict(colour_rgb=(2.0, 0.0, 0.0)), "in [0, 1]"),
+    (dict(size_m=(0.04, 0.04)), "3 numbers"),
+    (dict(size_m=-0.1), "> 0"),
+])
+def test_descriptor_rejects_invalid_attributes(kw, needle):
+    with pytest.raises(PerceptionError) as exc:
+        ObjectDescriptor("thing", **kw)
+    assert needle in str(exc.value)
+
+
+def test_declared_objects_never_carry_mass_or_pose():
+    with pytest.raises(PerceptionError, match="unknown key"):
+        descriptors_from_declared([{"name": "cube", "mass": 0.1}])
+    with pytest.raises(PerceptionError, match="used twice"):
+        descriptors_from_declared([{"name": "cube"}, {"name": "cube"}])
+
+
+# ---------------------------------------------------------------------- algorithms
+
+
+def test_kdtree_dbscan_partitions_core_points_like_scikit_learn():
+    from sklearn.cluster import DBSCAN
+
+    rng = np.random.default_rng(3)
+    blobs = [rng.normal(c, 0.004, size=(120, 3)) for c in ([0, 0, 0], [0.05, 0, 0], [0.1, 0.02, 0.0])]
+    pts = np.vstack(blobs + [rng.uniform(-0.05, 0.15, size=(40, 3))])
+    ours = dbscan(pts, 0.008, 6)
+    ref_model = DBSCAN(eps=0.008, min_samples=6).fit(pts)
+    ref = ref_model.labels_
+    core = np.zeros(len(pts), bool)
+    core[ref_model.core_sample_indices_] = True
+    # same core points, same partition of them, same noise points
+    assert np.array_equal(ours == -1, ref == -1)
+    pairs = {(a, b) for a, b in zip(ours[core], ref[core])}
+    assert len(pairs) == len(set(ref[core])) == len(set(ours[core]))
+
+
+def test_ransac_plane_fit_finds_a_tilted_table_among_clutter():
+    rng = np.random.default_rng(0)
+    xy = rng.uniform([0.2, -0.4], [0.9, 0.4], size=(6000, 2))
+    z = 0.01 + 0.02 * xy[:, 0] + rng.normal(0, 0.001, 6000)  # 1.1 degree tilt, 1 cm up
+    clutter = rng.uniform([0.4, -0.1, 0.0], [0.6, 0.1, 0.05], size=(1500, 3))
+    pts = np.vstack([np.column_stack([xy, z]), clutter]).astype(np.float32)
+    plane = fit_support_plane(pts, PerceptionConfig.default())
+    assert plane.fitted
+    expected = np.array([-0.02, 0.0, 1.0]) / math.sqrt(1.0004)
+    assert np.allclose(plane.normal, expected, atol=2e-3)
+    assert plane.z_at(np.array([0.5, 0.0])) == pytest.approx(0.02, abs=1e-3)
+
+
+def test_plane_fit_falls_back_to_the_prior_without_table_points():
+    pts = np.random.default_rng(0).uniform(0.3, 0.5, size=(100, 3)).astype(np.float32)
+    plane = fit_support_plane(pts, PerceptionConfig.default())
+    assert not plane.fitted and plane.offset_m == 0.0
+
+
+def test_capsule_mask_removes_points_near_a_link_only():
+    pts = np.array([[0.0, 0.0, 0.5], [0.0, 0.06, 0.5], [0.0, 0.2, 0.5]])
+    m = capsule_mask(pts, [RobotCapsule((0, 0, 0.3), (0, 0, 0.7), 0.05)], 0.01)
+    assert m.tolist() == [True, True, False]
+
+
+def _det(colour, shape="box", half=(0.02, 0.02, 0.02), pos=(0.5, 0.0, 0.02)):
+    from phyagentos.perception.colour import srgb_to_lab
+
+    return Detection(position=np.array(pos), yaw=0.0, half_extents=np.array(half), shape=shape,
+                     colour_rgb=np.array(colour), colour_lab=srgb_to_lab(np.array([colour]))[0], points=200,
+                     cameras=2, position_std_m=0.002, yaw_std_rad=0.05, view_agreement=1.0, bottom_m=0.0)
+
+
+def test_association_gates_wrong_colours_and_withholds_ambiguous_matches():
+    cfg = PerceptionConfig.default()
+    red = ObjectDescriptor("red_cube", shape="box", colour_rgb="red", size_m=(0.04, 0.04, 0.04))
+    blue = ObjectDescriptor("blue_can", shape="cylinder", colour_rgb="blue", size_m=(0.04, 0.04, 0.06))
+    dets = [_det((0.15, 0.35, 0.85), "cylinder", (0.02, 0.02, 0.03)), _det((0.9, 0.2, 0.15)),
+            _det((0.15, 0.7, 0.25))]
+    a = associate(cost_matrix(dets, [red, blue], cfg), cfg)
+    assert {i: j for i, (j, _, _) in a.matches.items()} == {0: 1, 1: 0}  # green (2) stays unknown
+    # two identical red boxes for one declared red cube: ambiguous, nobody gets the name
+    twins = [_det((0.9, 0.2, 0.15)), _det((0.88, 0.18, 0.14), pos=(0.6, 0.1, 0.02))]
+    a = associate(cost_matrix(twins, [red], cfg), cfg)
+    assert a.matches == {} and a.ambiguous
+
+
+def test_holding_needs_a_consistent_opening_effort_and_load_after_lift():
+    cfg = PerceptionConfig.default()
+    lifted = np.eye(4)
+    lifted[2, 3] = 0.2
+    grip = dict(gripper_opening_m=0.02, gripper_effort_n=20.0, tcp_pose=lifted)
+    loaded = holding_evidence(_proprio(**grip, wrist_force_n=np.array([0.0, 0.0, -3.0])), width_m=0.04,
+                              baseline_n=1.0, grasp_height_m=0.02, config=cfg)
+    assert loaded.lifted and loaded.consistent_width and loaded.confidence > 0.9
+    unloaded = holding_evidence(_proprio(**grip, wrist_force_n=np.array([0.0, 0.0, -1.0])), width_m=0.04,
+                                baseline_n=1.0, grasp_height_m=0.02, config=cfg)
+    assert unloaded.confidence < 0.05  # lifted but nothing weighs on the wrist: slipped
+    closed = holding_evidence(_proprio(gripper_opening_m=0.0002, gripper_effort_n=20.0), width_m=0.04,
+                              baseline_n=None, grasp_height_m=None, config=cfg)
+    assert closed.confidence == 0.0  # fingers closed on nothing
+    wide = holding_evidence(_proprio(gripper_opening_m=0.04, gripper_effort_n=20.0), width_m=0.04,
+                            baseline_n=None, grasp_height_m=None, config=cfg)
+    assert wide.confidence == 0.0  # gap 8 cm around a 4 cm object: not touching it
+    idle = holding_evidence(_proprio(gripper_opening_m=0.02, gripper_effort_n=0.0), width_m=0.04,
+                            baseline_n=None, grasp_height_m=None, config=cfg)
+    assert idle.confidence == 0.0  # no squeeze
+
+
+def test_plane_height_is_signed_distance():
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.01, 100, True)
+    assert plane.height(np.array([[0.0, 0.0, 0.05]]))[0] == pytest.approx(0.04)

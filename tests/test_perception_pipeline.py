@@ -208,3 +208,27 @@ def test_observe_rejects_frames_without_depth(scene):
         Perceiver().observe([rgb_only], scene.proprioception())
     with pytest.raises(PerceptionError, match="at least one camera frame"):
         Perceiver().observe([], scene.proprioception())
+
+
+def test_the_arm_reaching_down_to_the_table_leaves_no_spurious_object(scene):
+    import mujoco
+
+    from phyagentos.motion.ik import solve_ik
+    from phyagentos.targets.scene import HOME_QPOS
+
+    cube = SyntheticObject("cube", "box", (0.02, 0.02, 0.02), (0.62, 0.0), yaw=0.3, rgba=RED)
+    scene.place([cube])
+    T = scene.tcp_pose()
+    T[:3, 3] = (0.50, 0.0, 0.025)  # fingertips at the table, 12 cm from the cube
+    q = solve_ik(scene.model, q_seed=HOME_QPOS, target=T).q
+    try:
+        scene.data.qpos[:7] = q
+        mujoco.mj_forward(scene.model, scene.data)
+        p = Perceiver(PerceptionConfig.default(), [_desc(cube)])
+        snap = p.observe(_frames(scene, np.random.default_rng(9)), scene.proprioception())
+    finally:
+        scene.data.qpos[:7] = HOME_QPOS
+        mujoco.mj_forward(scene.model, scene.data)
+    ents = _entities(snap)
+    assert not any(e["kind"] == "unknown" for e in snap["entities"])
+    assert np.linalg.norm(np.subtract(ents["cube"]["position"][:2], cube.position)) < 0.004

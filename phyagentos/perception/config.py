@@ -104,7 +104,7 @@ class RobotMaskConfig(_Section):
 
     gripper_half_x_m: float = Field(0.05, gt=0)
     gripper_half_y_m: float = Field(0.12, gt=0)
-    gripper_z_m: tuple[float, float] = (-0.22, 0.03)
+    gripper_z_m: tuple[float, float] = (-0.22, 0.05)
     capsule_margin_m: float = Field(0.01, ge=0, description="Added to caller-given capsule radii.")
 
 

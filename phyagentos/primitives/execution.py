@@ -15,7 +15,9 @@ from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.retime import Trajectory, retime
 
 from .base import Primitive, PrimitiveFailure
-from .motion import execution_limits, held_object, ik_options, session_checker
+from .grasp_sense import (MIN_EFFORT_N, MIN_OPENING_M, WIDTH_MARGIN_M, belief, holding_problem, mass_estimate_kg,
+                          proprio_record, sample_while_holding, wrist_load_n)
+from .motion import execution_limits, ik_options, session_checker
 
 __all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "CheckHolding"]
 
@@ -97,6 +99,7 @@ class _Tracking(Primitive):
             result = ctx.target.track(self._traj, t_start=self._t, t_end=t_end, tracking_tol_rad=ctx.motion.tracking_tol_rad)
         self._max_err = max(self._max_err, result.max_tracking_error_rad)
         self._t = t_end
+        sample_while_holding(ctx, self.name)  # proprio at >= 10 Hz of sim time while holding
         if ctx.guard is not None and ctx.guard.estop_engaged():
             ctx.target.halt()  # the target's own hook already stopped streaming mid-slice
             raise PrimitiveFailure("safety.estop", f"e-stop engaged: {ctx.guard.estop.reason}")
@@ -185,14 +188,20 @@ class CartesianMove(_Tracking):
 
 
 class Gripper(Primitive):
-    """Open or close the gripper; closing on ``object`` checks the grasp.
+    """Open or close the gripper; closing on ``object`` checks the grasp by proprioception.
 
     Args:
         command: ``open`` or ``close``.
-        object: when closing, the object that must end up between the fingers;
-            a miss fails with ``grasp.missed``.
+        object: when closing, the object that must end up between the fingers. The
+            grasp is judged from the robot's own sensing (never simulator contacts): the
+            fingers stop above 2 mm per finger, within the object's perceived width (as
+            :class:`~phyagentos.primitives.perception.ComputeGrasp` planned it) + 1 cm,
+            and squeeze with more than 1 N; otherwise ``grasp.missed``.
         force_n: when closing, the grip force per finger in N (the target's
             ``set_gripper(force_n=...)``); ``None`` closes on position alone.
+
+    Trace: ``proprio`` right before and after, and ``gripper`` {command, object,
+    opening_m, effort_n, stalled, closed_on_something, force_n}.
     """
 
     TOOLS = ("set_gripper",)
@@ -209,17 +218,49 @@ class Gripper(Primitive):
 
     def step(self):
         ctx = self.ctx
+        target = ctx.target
+        sensed = hasattr(target, "proprioception")
+        b = belief(target)
+        if sensed:
+            p0 = target.proprioception()
+            ctx.trace.record("proprio", **proprio_record(target, p0, phase=f"before_{self.command}", leaf=self.name))
+            if self.command == "close" and b.object is None and p0.wrist_force_n is not None:
+                b.set(baseline_force_n=float(np.linalg.norm(p0.wrist_force_n)))  # open, still hand
         opening = GRIPPER_OPEN_M if self.command == "open" else 0.0
         with ctx.profiler.section("simulation"):
             if self.force_n is None:
-                result = ctx.target.set_gripper(opening_m=opening)
+                result = target.set_gripper(opening_m=opening)
             else:
-                result = ctx.target.set_gripper(opening_m=opening, force_n=self.force_n)
-        ctx.trace.record("gripper", leaf=self.name, command=self.command, opening_m=round(float(result.opening_m), 5),
-                         grasped=result.grasped, force_n=self.force_n)
-        if self.command == "close" and self.object is not None and result.grasped != self.object:
-            raise PrimitiveFailure("grasp.missed", f"closed on {result.grasped or 'nothing'} instead of {self.object!r} "
-                                                   f"(opening {result.opening_m * 1000:.1f} mm)")
+                result = target.set_gripper(opening_m=opening, force_n=self.force_n)
+        if not sensed:  # a target without proprioception reports only its opening
+            ctx.trace.record("gripper", leaf=self.name, command=self.command, object=self.object,
+                             opening_m=round(float(result.opening_m), 5), effort_n=None, stalled=bool(result.stalled),
+                             closed_on_something=bool(result.stalled), force_n=self.force_n)
+            return
+        p1 = target.proprioception()
+        closed_on = p1.gripper_opening_m > MIN_OPENING_M and p1.gripper_effort_n > MIN_EFFORT_N
+        ctx.trace.record("gripper", leaf=self.name, command=self.command, object=self.object,
+                         opening_m=round(float(p1.gripper_opening_m), 5), effort_n=round(float(p1.gripper_effort_n), 3),
+                         stalled=bool(result.stalled), closed_on_something=bool(closed_on), force_n=self.force_n)
+        ctx.trace.record("proprio", **proprio_record(target, p1, phase=f"after_{self.command}", leaf=self.name))
+        if self.command == "open":
+            base = b.baseline_force_n
+            b.clear()
+            if base is not None:
+                b.set(baseline_force_n=base)
+            return
+        if self.object is None:
+            return
+        planned = (getattr(target, "runtime_notes", None) or {}).get("planned_grasp") or {}
+        width = planned.get("width_m") if planned.get("object") == self.object else None
+        if not closed_on:
+            raise PrimitiveFailure("grasp.missed", f"closed on nothing instead of {self.object!r} (opening "
+                                                   f"{p1.gripper_opening_m * 1000:.1f} mm, effort {p1.gripper_effort_n:.1f} N)")
+        if width is not None and p1.gripper_opening_m > width / 2.0 + WIDTH_MARGIN_M:
+            raise PrimitiveFailure("grasp.missed", f"closed on something {2000 * p1.gripper_opening_m:.0f} mm wide, "
+                                                   f"not {self.object!r} ({width * 1000:.0f} mm)")
+        b.set(object=self.object, width_m=width, closed_opening_m=float(p1.gripper_opening_m), lifted_load_n=None,
+              slipped=False, last_sample_s=float(p1.stamp_s))
 
 
 class Hold(Primitive):
@@ -246,7 +287,13 @@ class Hold(Primitive):
 
 
 class CheckHolding(Primitive):
-    """Succeed only if the gripper holds ``object`` now (``grasp.slipped`` otherwise)."""
+    """Succeed only if proprioception says the gripper holds ``object`` now
+    (``grasp.slipped`` otherwise): see :func:`~phyagentos.primitives.grasp_sense.holding_problem`.
+
+    Records the wrist ``load`` {object, wrist_load_n, baseline_n, mass_estimate_kg}: the
+    first check after the grasp (the arm lifted and still) sets the load the slip
+    detector compares with.
+    """
 
     TOOLS = ("snapshot",)
 
@@ -255,6 +302,27 @@ class CheckHolding(Primitive):
         self.object = object
 
     def step(self):
-        held = held_object(self.ctx.target)
-        if held != self.object:
-            raise PrimitiveFailure("grasp.slipped", f"expected to hold {self.object!r}, holding {held or 'nothing'}")
+        target = self.ctx.target
+        if not hasattr(target, "proprioception"):  # pragma: no cover - every MuJoCo arm has it
+            raise PrimitiveFailure("grasp.slipped", f"target {target.name!r} cannot sense a grasp")
+        p = target.proprioception()
+        b = belief(target)
+        if b.object is None and p.gripper_opening_m > MIN_OPENING_M and p.gripper_effort_n > MIN_EFFORT_N:
+            # a session that starts holding (place after pick in a fresh runtime): adopt it
+            b.set(object=self.object, closed_opening_m=float(p.gripper_opening_m), slipped=False)
+        self.ctx.trace.record("proprio", **proprio_record(target, p, phase="check_holding", leaf=self.name))
+        load = wrist_load_n(target, p)
+        if b.object == self.object and b.lifted_load_n is None and load is not None:
+            b.set(lifted_load_n=float(load))
+        # the unloaded hand's reading: from the robot model where the target predicts it
+        unloaded = getattr(target, "unloaded_wrist_force_n", None)
+        base = unloaded() if unloaded is not None else None
+        if base is None:
+            base = b.baseline_force_n
+        self.ctx.trace.record("load", leaf=self.name, object=self.object,
+                              wrist_load_n=None if load is None else round(load, 3),
+                              baseline_n=None if base is None else round(float(base), 3),
+                              mass_estimate_kg=None if load is None else round(mass_estimate_kg(load), 4))
+        why = holding_problem(target, p, expected=self.object, after_lift=True)
+        if why is not None:
+            raise PrimitiveFailure("grasp.slipped", f"expected to hold {self.object!r}: {why}")

@@ -85,7 +85,12 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
         cache[margin_m] = checker
     checker.set_world_state(target.data.qpos)
     checker.detach()
-    obj = held_object(target)
+    # What to attach: the object the robot believes it closed on (proprioception); a
+    # hooked object nothing closed on (kitchen hook) falls back to the collision model's
+    # own contact state. The collision model is the runtime's, never the Agent's.
+    from .grasp_sense import belief  # noqa: PLC0415
+
+    obj = belief(target).object or held_object(target)
     if obj is not None:
         checker.attach(obj, np.linalg.inv(target.tcp_pose()) @ target.object_pose(obj))
     return checker
@@ -149,10 +154,16 @@ class PlanPath(Primitive):
             # is planned from its projection; the tracker accepts the gap (< 0.02 rad).
             clipped = np.clip(q0, *checker.joint_limits)
             q0 = np.where(np.abs(clipped - q0) < 0.02, clipped, q0)
+            q_goal = np.asarray(self.get(self.goal_key), dtype=float)
+            if q_goal.shape == q0.shape and np.all(np.isfinite(q_goal)) and not checker.is_valid(q_goal):
+                pairs = [list(p) for p in checker.colliding_pairs(q_goal)]
+                ctx.trace.record("plan", planner=self.planner or ctx.motion.planner, waypoints=0,
+                                 collision_at_goal=True, colliding_pairs=pairs)
             path = plan_path(checker, q0, self.get(self.goal_key), planner=self.planner or ctx.motion.planner,
                              timeout_s=self.timeout_s or ctx.motion.planning_timeout_s, seed=ctx.seed)
         self.set(self.out, path)
-        ctx.trace.record("plan", planner=self.planner or ctx.motion.planner, waypoints=int(len(path)))
+        ctx.trace.record("plan", planner=self.planner or ctx.motion.planner, waypoints=int(len(path)),
+                         collision_at_goal=False)
 
 
 class RetimePath(Primitive):

@@ -11,6 +11,7 @@ import numpy as np
 from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
 
 from .base import Primitive, PrimitiveFailure
+from .grasp_sense import plan_grasp
 
 __all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose"]
 
@@ -108,6 +109,7 @@ class ComputeGrasp(Primitive):
         plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m,
                                           shape=shape if shape in ("box", "cylinder", "sphere") else "box")
         plan = plans[self.candidate % len(plans)]
+        plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m)
         self.set(self.grasp_key, plan.grasp)
         self.set(self.pregrasp_key, plan.pregrasp)
         self.ctx.trace.record("grasp_pose", leaf=self.name, object=self.object, candidate=self.candidate,

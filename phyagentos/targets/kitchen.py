@@ -253,6 +253,10 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
         """Seconds per environment step (0.08)."""
         return float(self._robot.dt)
 
+    def _gripper_effort_n(self) -> float:
+        """Squeeze of the two finger actuators (ids 7, 8), N per finger."""
+        return float(max(0.0, -np.mean(self.data.actuator_force[7:9])))
+
     def gripper_opening(self) -> float:
         """Opening per finger, m (0 .. 0.04)."""
         return float(np.mean(self.data.qpos[self._finger_qadr]))

@@ -133,6 +133,9 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         self._obj_names: tuple[str, ...] = ()
         self._obj_body: dict[str, int] = {}
         self._frame_count = 0
+        #: The runtime's own notes about this robot (e.g. the grasp it believes it holds,
+        #: :mod:`phyagentos.primitives.grasp_sense`): plain data, checkpointed with the state.
+        self.runtime_notes: dict[str, Any] = {}
         #: Target-local e-stop hook: any object with ``is_set()`` (the SafetyGuard's latch);
         #: trajectory streaming checks it every physics step and halts the arm when set.
         self.estop = None
@@ -287,6 +290,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         self._episode_seed = seed
         self._camera_noise = {}
         self._frame_count = 0
+        self.runtime_notes = {}
         m, d = self._model, self._data
         mujoco.mj_resetDataKeyframe(m, d, key)
         mujoco.mj_forward(m, d)
@@ -836,6 +840,46 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         sd = self._data.sensordata
         return sd[f:f + 3].copy(), sd[t:t + 3].copy()
 
+    def _hand_bodies(self) -> list[int]:
+        hb = getattr(self, "_hand_body_ids", None)
+        if hb is None:
+            m = self._model
+            root = int(m.site_bodyid[m.site(self.FT_SITE).id])
+            hb = self._hand_body_ids = [b for b in range(m.nbody) if self._is_under(b, root)]
+        return hb
+
+    def wrist_external_force_n(self) -> np.ndarray | None:
+        """``(3,)`` N, world frame: the wrist sensor's force minus what the hand itself
+        causes (its weight and inertial forces, predicted from the robot model's inertias
+        and the joint accelerations, as payload identification does); i.e. the load of
+        whatever the hand carries or pushes. ``None`` without a force sensor.
+
+        Prediction: sum over the bodies distal to the sensor of ``m_i a_i`` (MuJoCo's
+        ``mj_objectAcceleration`` at each body's centre of mass, gravity included)."""
+        if self._ft_adr is None:
+            return None
+        m, d = self._model, self._data
+        mujoco.mj_rnePostConstraint(m, d)
+        mujoco.mj_sensorAcc(m, d)
+        site = m.site(self.FT_SITE).id
+        f_meas = d.site_xmat[site].reshape(3, 3) @ d.sensordata[self._ft_adr[0]:self._ft_adr[0] + 3]
+        pred = np.zeros(3)
+        acc = np.zeros(6)
+        for b in self._hand_bodies():
+            mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_BODY, b, acc, 0)
+            pred += m.body_mass[b] * acc[3:]
+        return f_meas - pred
+
+    def unloaded_wrist_force_n(self) -> float | None:
+        """|f| (N) the wrist sensor reads when the hand holds nothing and is still: the
+        weight of everything distal to the sensor site, from the robot model (what a real
+        robot's end-effector load configuration states). ``None`` without a sensor."""
+        if self._ft_adr is None:
+            return None
+        m = self._model
+        body = int(m.site_bodyid[m.site(self.FT_SITE).id])
+        return float(m.body_subtreemass[body]) * float(np.linalg.norm(m.opt.gravity))
+
     def proprioception(self) -> Proprioception:
         """Joint state, actuator forces, gripper opening and effort, wrist wrench, tcp pose
         (forward kinematics) at the current simulated time."""
@@ -883,7 +927,8 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         buf = io.BytesIO()
         np.savez(buf, format=np.array(_STATE_FORMAT), qpos=d.qpos.copy(), qvel=d.qvel.copy(), ctrl=d.ctrl.copy(),
                  act=d.act.copy(), time=np.array(d.time), full_state=full,
-                 meta=np.array(json.dumps(self._state_meta())), fingerprint=np.array(self._fingerprint()))
+                 meta=np.array(json.dumps({**self._state_meta(), "runtime_notes": self.runtime_notes})),
+                 fingerprint=np.array(self._fingerprint()))
         atomic_write_bytes(p, buf.getvalue())
         return p
 
@@ -910,8 +955,11 @@ class MuJoCoArmTarget(BaseRolloutTarget):
             d.qpos[:], d.qvel[:], d.ctrl[:], d.act[:] = data["qpos"], data["qvel"], data["ctrl"], data["act"]
             d.time = float(data["time"])
         mujoco.mj_forward(m, d)
+        self.runtime_notes = {}
         if "meta" in data:
-            self._restore_meta(json.loads(str(data["meta"])))
+            meta = json.loads(str(data["meta"]))
+            self.runtime_notes = dict(meta.pop("runtime_notes", None) or {})
+            self._restore_meta(meta)
 
     # -- tools ----------------------------------------------------------------------------
     def tools(self) -> tuple[str, ...]:

@@ -278,6 +278,17 @@ class SO101Target(MuJoCoArmTarget):
         """``(velocity (5,) rad/s, acceleration (5,) rad/s^2)`` for the SafetyGuard."""
         return VELOCITY_DATASHEET, ACCELERATION_LIMITS
 
+    def _gripper_effort_n(self) -> float:
+        """Jaw squeeze at the pad, N: the jaw servo's torque over the lever from the jaw
+        joint's axis to the moving pad (measured on the model at the grasp angle)."""
+        m, d = self._model, self._data
+        lever = getattr(self, "_jaw_lever_m", None)
+        if lever is None:
+            j = m.joint(GRIPPER_JOINT).id
+            pad = m.geom("moving_jaw_pad").id
+            lever = self._jaw_lever_m = max(1e-3, float(np.linalg.norm(d.geom_xpos[pad] - d.xanchor[j])))
+        return abs(float(d.actuator_force[self._jaw_act])) / lever
+
     def gripper_opening(self) -> float:
         """Half the gap between the pads' inner faces, m (the Franka's per-finger convention)."""
         return 0.5 * self._jaw_map.gap_at(float(self._data.qpos[self._jaw_qadr]))

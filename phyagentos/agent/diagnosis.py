@@ -87,6 +87,9 @@ SLIP_OPENING_DROP_M = 0.003
 #: Wrist load falling below this fraction of its post-lift level signals a slip
 #: (CONTRACT_9 section 5: a drop by more than 50 %).
 SLIP_LOAD_RATIO = 0.5
+#: Peak wrist load below which a drop is not judged, N (about 50 g: below it the load is
+#: within the wrist sensor's noise and the hand model's error).
+MIN_SLIP_LOAD_N = 0.45
 #: Perceived 1-sigma horizontal uncertainty above which an observation is too uncertain
 #: for a top-down grasp, m: half the ~1.5 cm grasp tolerance of a 4 cm box measured on
 #: the tabletop scene (3 cm along the fingers still grasps, 2.5 cm across them does not).
@@ -167,11 +170,11 @@ def _slip_from_proprio(trace: Sequence[Mapping], start: int, obj: str | None) ->
         if drop > SLIP_OPENING_DROP_M:
             return {"slip_source": "opening", "opening_drop_m": drop, "slip_phase": r.get("phase")}
     loaded = [float(r["wrist_load_n"]) for r in samples if r.get("wrist_load_n") is not None
-              and r.get("phase") in ("transfer", "lift", "place", "hold")]
+              and not str(r.get("phase", "")).startswith("before_")]
     if loaded:
         peak = max(loaded)
         after = loaded[loaded.index(peak):]
-        if peak > 0 and min(after) < SLIP_LOAD_RATIO * peak:
+        if peak >= MIN_SLIP_LOAD_N and min(after) < SLIP_LOAD_RATIO * peak:
             return {"slip_source": "wrist_load", "load_drop_n": peak - min(after), "load_peak_n": peak}
     return None
 

@@ -59,7 +59,15 @@ def test_pick_and_place_graph_puts_the_cube_in_the_region(tmp_path):
     assert {"observe", "ik", "plan", "retime", "execute_start", "gripper"} <= set(trace)
     env = ws.read("ENVIRONMENT").data
     assert env.revision > 0
-    assert {"subject": "cube", "relation": "inside", "object": "goal"} in [r.model_dump() for r in env.relations]
+    # ENVIRONMENT.md holds the perceived world: relations with their confidence (CONTRACT_9 section 3)
+    inside = [r for r in env.relations if (r.subject, r.relation, r.object) == ("cube", "inside", "goal")]
+    assert inside and inside[0].confidence is not None and inside[0].confidence > 0.5
+    cube = next(e for e in env.entities if e.name == "cube")
+    assert cube.attributes["source"] == "perceived" and cube.attributes["confidence"] > 0.5
+    assert cube.attributes["evidence"] and all((tmp_path / "ws" / p).is_file() for p in cube.attributes["evidence"])
+    # the truth lives only in ground_truth.yaml; the trace never holds it
+    assert (bundle / "ground_truth.yaml").is_file() and not (bundle / "perturbations.yaml").exists()
+    assert '"truth"' not in (bundle / "trace.jsonl").read_text()
     sessions_index = ws.read("SESSIONS").data
     assert {e.session_id for e in sessions_index.sessions} == {s.session_id for s in report.sessions}
 
@@ -79,7 +87,7 @@ def test_two_dependent_pick_and_place_nodes_run_in_order(tmp_path):
 def test_unreachable_object_fails_without_a_retry_and_blocks_the_dependent_node(tmp_path):
     graph = tmp_path / "far.yaml"
     spec = yaml.safe_load((goal_graphs_dir() / "pick_and_place.yaml").read_text())
-    spec["scene"]["objects"][0]["position"] = [1.4, -0.2]  # 1.4 m away: beyond the Panda's reach
+    spec["scene"]["objects"][0]["position"] = [0.95, -0.45]  # on the table, 1.05 m from the base: seen, beyond the Panda's reach
     graph.write_text(yaml.safe_dump(spec))
     result = subprocess.run(CLI + ["run", str(graph), "--workspace", str(tmp_path / "ws"), "--json"],
                             capture_output=True, text=True, timeout=300)

@@ -102,6 +102,7 @@ MOVED_TOL_M = 0.015
 
 
 def _xy_dist(a: Sequence[float], b: Sequence[float]) -> float:
+    a, b = (x["position"] if isinstance(x, dict) else x for x in (a, b))  # CONTRACT_9 observe entries
     return math.hypot(float(a[0]) - float(b[0]), float(a[1]) - float(b[1]))
 
 

@@ -6,6 +6,7 @@ name                      behaviour
 observe                   snapshot the world (blackboard + ENVIRONMENT.md)
 compute_grasp             top-down grasp / pre-grasp tcp poses from the observation
 compute_place             place / pre-place tcp poses over a region
+ready_configuration       the arm's ready (home) joint configuration to the blackboard
 solve_ik                  mink IK to a blackboard tcp pose
 plan_path                 OMPL joint-space path with MuJoCo collision checking
 retime_path               toppra time-optimal timing under joint limits
@@ -27,7 +28,7 @@ from .base import Primitive, PrimitiveFailure
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
 from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
-from .motion import PlanPath, RetimePath, SolveIK
+from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
 
 __all__ = [
@@ -46,6 +47,7 @@ PRIMITIVES = {
     "observe": Observe,
     "compute_grasp": ComputeGrasp,
     "compute_place": ComputePlace,
+    "ready_configuration": ReadyConfiguration,
     "solve_ik": SolveIK,
     "plan_path": PlanPath,
     "retime_path": RetimePath,

@@ -118,6 +118,10 @@ class SkillContext:
             every command to the target passes it (``None`` only in unit tests of
             primitives that do not move the arm).
         plan: the session's AdapterPlan from preflight, as a dict.
+        perceiver: the session's :class:`~phyagentos.perception.Perceiver` (built on the
+            first observation of a target with cameras when the runner gave none).
+        evidence_dir, evidence_rel: the session's bundle directory (absolute, and
+            relative to the workspace) where observations save their frames.
     """
 
     target: Any
@@ -132,6 +136,10 @@ class SkillContext:
     failure: dict[str, Any] | None = None
     guard: Any = None
     plan: Mapping[str, Any] | None = None
+    perceiver: Any = None
+    evidence_dir: Path | None = None
+    evidence_rel: str | None = None
+    observations: int = 0
 
     def fail(self, code: str, primitive: str, message: str) -> None:
         """Record a primitive failure; the last one wins (retries overwrite earlier ones)."""

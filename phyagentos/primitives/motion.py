@@ -18,7 +18,7 @@ from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime
 
 from .base import Primitive
 
-__all__ = ["SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "ik_options",
+__all__ = ["ReadyConfiguration", "SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "ik_options",
            "PLANNING_MARGIN_M"]
 
 
@@ -94,6 +94,19 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
     if obj is not None:
         checker.attach(obj, np.linalg.inv(target.tcp_pose()) @ target.object_pose(obj))
     return checker
+
+
+class ReadyConfiguration(Primitive):
+    """Write the target's ready (home) joint configuration (n,) rad to blackboard ``out``,
+    e.g. to take the arm out of the cameras' view before a final observation."""
+
+    def __init__(self, name: str, *, out: str = "q_goal"):
+        super().__init__(name)
+        self.out = out
+        self.writes(out)
+
+    def step(self):
+        self.set(self.out, np.asarray(self.ctx.target.home_qpos, dtype=float))
 
 
 class SolveIK(Primitive):

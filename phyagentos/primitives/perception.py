@@ -12,6 +12,7 @@ from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
 
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import plan_grasp
+from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
 __all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose"]
 
@@ -36,22 +37,23 @@ def entity_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     raise PrimitiveFailure("perception.not_found", f"{name!r} is not in the observation; seen: {seen}")
 
 
-def _object_positions(snapshot: dict) -> dict[str, list[float]]:
-    return {e["name"]: [round(float(x), 4) for x in e["position"]]
-            for e in snapshot.get("entities", []) if e.get("kind") == "object"}
-
-
 class Observe(Primitive):
-    """Snapshot the world into the blackboard (``out``) and ENVIRONMENT.md.
+    """Observe the world through the robot's sensors into the blackboard (``out``) and
+    ENVIRONMENT.md.
+
+    On a target with cameras (``sensors.yaml``) every camera is captured and the
+    session's Perceiver fuses the frames with proprioception into the perceived snapshot
+    (:func:`~phyagentos.primitives.observation.perceive_now`; frames saved under the
+    bundle's ``frames/``). A target without cameras reports its own observation.
 
     Args:
         out: blackboard key for the snapshot (entities with poses, relations).
-        samples: perception frames averaged (the target's ``perceive(samples)``);
-            0 skips the observation and keeps what ``out`` holds (a tree can then
-            offer a re-observation that a session switches on by parameter).
+        samples: observations fused (>= 1; each with fresh frames); 0 skips the
+            observation and keeps what ``out`` holds (a tree can then offer a
+            re-observation that a session switches on by parameter).
 
-    The trace records the perceived object positions only (never simulator truth:
-    that goes to the bundle's ``ground_truth.yaml``).
+    The trace records ``observe`` {leaf, samples, stamp_s, objects: {name: {position,
+    confidence, position_std_m}}, unknown}: perceived objects only, never simulator truth.
     """
 
     TOOLS = ("snapshot",)
@@ -66,12 +68,21 @@ class Observe(Primitive):
     def step(self):
         if self.samples == 0:
             return
-        target = self.ctx.target
-        perceive = getattr(target, "perceive", None)
-        snapshot = perceive(samples=self.samples) if perceive is not None else target.snapshot()
+        ctx = self.ctx
+        target = ctx.target
+        snapshot = None
+        if has_cameras(target):
+            if ctx.perceiver is None:
+                ctx.perceiver = make_perceiver(target)
+            ctx.observations += 1
+            with ctx.profiler.section("perception"):
+                snapshot = perceive_now(target, ctx.perceiver, samples=self.samples, evidence_dir=ctx.evidence_dir,
+                                        evidence_rel=ctx.evidence_rel, tag=f"{ctx.observations:02d}_{self.name}")
+        if snapshot is None:
+            perceive = getattr(target, "perceive", None)
+            snapshot = perceive(samples=self.samples) if perceive is not None else target.snapshot()
         self.set(self.out, snapshot)
-        self.ctx.trace.record("observe", leaf=self.name, samples=self.samples, sim_time_s=snapshot.get("sim_time_s"),
-                              objects=_object_positions(snapshot), relations=snapshot.get("relations", []))
+        self.ctx.trace.record("observe", leaf=self.name, samples=self.samples, **observe_record(snapshot))
         if self.ctx.on_observation is not None:
             self.ctx.on_observation(snapshot)
 

@@ -473,6 +473,7 @@ class Relation(ProtocolModel):
     subject: str
     relation: str
     object: str
+    confidence: float | None = Field(None, ge=0, le=1, description="Perceived relations: 0..1.")
 
 
 class EnvironmentDoc(VersionedModel):

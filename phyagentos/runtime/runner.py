@@ -29,6 +29,7 @@ from typing import Any, Callable
 
 from phyagentos.errors import PhyAgentOSError
 from phyagentos.primitives.context import CancelToken, SkillContext
+from phyagentos.primitives.observation import has_cameras, make_perceiver, perceive_now
 from phyagentos.protocol import dump_yaml, EnvironmentDoc, SessionRecord, Workspace
 from phyagentos.protocol import errorcodes
 from phyagentos.protocol.atomic import atomic_write_text
@@ -58,7 +59,8 @@ _TASK_FIELDS = {"session_id", "run_id", "goal_graph", "node", "parent_session_id
 
 
 def write_environment(workspace: Workspace, snapshot: dict, *, target: str, session_id: str, evidence: list[str]) -> None:
-    """Replace ENVIRONMENT.md's data with ``snapshot`` and bump its revision."""
+    """Replace ENVIRONMENT.md's data with ``snapshot`` (a perceived snapshot: entities carry
+    their confidence and the frames behind them) and bump its revision."""
 
     def apply(doc: EnvironmentDoc) -> EnvironmentDoc:
         return EnvironmentDoc(
@@ -67,13 +69,24 @@ def write_environment(workspace: Workspace, snapshot: dict, *, target: str, sess
             target=target,
             session_id=session_id,
             captured_at=utc_now(),
-            sim_time_s=snapshot.get("sim_time_s"),
+            sim_time_s=snapshot.get("sim_time_s", snapshot.get("stamp_s")),
             entities=snapshot.get("entities", []),
             relations=snapshot.get("relations", []),
             evidence=evidence,
         )
 
     workspace.update("ENVIRONMENT", apply)
+
+
+def _observe(target, perceiver, evidence_dir, rel: str, tag: str) -> dict:
+    """The world as the robot perceives it (cameras + proprioception through the session's
+    Perceiver); a target without cameras gives its own observation (``snapshot``)."""
+    snap = perceive_now(target, perceiver, evidence_dir=evidence_dir, evidence_rel=rel, tag=tag)
+    return snap if snap is not None else target.snapshot()
+
+
+def _perception_config(workspace: Workspace):
+    return workspace.root / "perception.yaml"
 
 
 def _truth(target) -> dict | None:
@@ -174,6 +187,7 @@ class SessionRunner:
         ctx = None
         initial = None
         initial_truth = None
+        perceiver = None
         # Evidence besides snapshots and trace: the task definition and RGB images.
         # Image events join the session's events. Truth goes to ground_truth.yaml only.
         extra = {"task": "task.yaml"}
@@ -194,12 +208,15 @@ class SessionRunner:
                 if self.heartbeat is not None:
                     self.heartbeat()
                 initial_truth = _truth(target)
-                initial = target.snapshot()
+                if has_cameras(target):
+                    perceiver = make_perceiver(target, _perception_config(self.workspace))
+                initial = _observe(target, perceiver, evidence_dir, rel, "initial")
                 atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
                 if name := save_scene_image(target, evidence_dir / "initial.png", events=image_events):
                     extra["initial_image"] = name
                 ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
-                                   plan=rec.adapter_plan)
+                                   plan=rec.adapter_plan, perceiver=perceiver, evidence_dir=evidence_dir,
+                                   evidence_rel=rel)
                 # Every command of either flow passes the same guard; its interventions land in ctx.events.
                 ctx.guard = SafetyGuard.for_target(target, self.workspace.read_safety(), events=ctx.events,
                                                    flow=rec.skill_runtime)
@@ -220,7 +237,14 @@ class SessionRunner:
             self.on_finished(outcome)
         if self.heartbeat is not None:
             self.heartbeat()
-        terminal = target.snapshot() if target is not None else None
+        terminal = None
+        if target is not None:
+            try:
+                terminal = _observe(target, perceiver, evidence_dir, rel, "terminal")
+            except Exception as exc:  # noqa: BLE001 - evidence must still be written
+                logger.exception("session %s: terminal observation failed", rec.session_id)
+                terminal = {"stamp_s": target.sim_time, "sim_time_s": target.sim_time, "entities": [],
+                            "relations": [], "error": f"{type(exc).__name__}: {exc}"}
         if target is not None:
             if name := save_scene_image(target, evidence_dir / "terminal.png", events=image_events):
                 extra["terminal_image"] = name
@@ -262,7 +286,8 @@ class SessionRunner:
         target = self.targets.acquire(rec, spec)
         target.halt()
         self.targets.checkpoint(rec, target)
-        terminal = target.snapshot()
+        perceiver = make_perceiver(target, _perception_config(self.workspace)) if has_cameras(target) else None
+        terminal = _observe(target, perceiver, evidence_dir, rel, "terminal")
         truth_path = evidence_dir / GROUND_TRUTH_FILE
         if not truth_path.exists():
             write_ground_truth(evidence_dir, target, initial=None, terminal=_truth(target))

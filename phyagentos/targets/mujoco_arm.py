@@ -244,6 +244,12 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         """``(n,)`` s: joint damping / actuator kp, read from the model."""
         return self._ff_gain.copy()
 
+    @property
+    def home_qpos(self) -> np.ndarray:
+        """``(n,)`` rad ready configuration: the arm joints of the model's ``home`` keyframe."""
+        m = self._model
+        return m.key_qpos[m.key("home").id][self._qadr].copy()
+
     def arm_qpos(self) -> np.ndarray:
         """``(n,)`` current arm joint angles, rad."""
         return self._data.qpos[self._qadr].copy()

@@ -17,8 +17,9 @@ PICK = {"holding": "cube", "lifted": {"object": "cube", "min_height": 0.05}}
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     root = tmp_path_factory.mktemp("scoring")
-    objects = [{"name": "cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.5, -0.2]},
-               {"name": "far_cube", "half_extents": [0.02, 0.02, 0.02], "position": [1.3, 0.3]}]
+    objects = [{"name": "cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.5, -0.2], "rgba": [0.8, 0.1, 0.1, 1]},
+               {"name": "far_cube", "half_extents": [0.02, 0.02, 0.02], "position": [1.3, 0.3],
+                "rgba": [0.1, 0.1, 0.8, 1]}]
     nodes = [{"id": "pick_cube", "skill": "pick", "params": {"object": "cube"}, "accept": PICK},
              {"id": "pick_far", "skill": "pick", "params": {"object": "far_cube"}, "accept": {"holding": "far_cube"},
               "depends_on": ["pick_cube"]}]

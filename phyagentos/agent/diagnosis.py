@@ -41,6 +41,8 @@ grasp_missed           execution     the gripper closed to an opening below
                                      ``grasp.missed``, perception consistent
 perception_unknown     perception    a criterion could not be judged: the object was not
                                      seen, or only with low confidence
+object_not_seen        perception    ``perception.*`` error: the skill's own observation did
+                                     not find the object (not seen, or ambiguous)
 runtime_error          execution     the runtime raised (``target.error``, ...)
 placement_off          execution     released, but not where the criteria ask
 criteria_unmet         verifier      the runtime completed and nothing above explains it
@@ -74,6 +76,7 @@ CAUSES: dict[str, tuple[str, str]] = {
     "object_moved": ("perception", "the object was not where the grasp aimed when the gripper arrived"),
     "grasp_missed": ("execution", "the gripper closed on nothing although perception was consistent"),
     "perception_unknown": ("perception", "the object was not seen, or not confidently enough, to judge"),
+    "object_not_seen": ("perception", "the skill's observation did not find the object (unseen or ambiguous)"),
     "runtime_error": ("execution", "the runtime raised an error"),
     "placement_off": ("execution", "the object was released, but not where the criteria ask"),
     "criteria_unmet": ("verifier", "the runtime completed, the criteria are not met, no finer cause found"),
@@ -290,6 +293,8 @@ def diagnose(session: SessionRecord, evidence: Any, *, unknown: Sequence[str] = 
                                  f"aimed: it was not there when the gripper arrived", facts, refs)
         return _make("grasp_missed", f"the gripper closed on nothing at {obj}'s perceived position "
                      f"(opening {facts.get('close_opening_m', 'n/a')} m)", facts, refs)
+    if code.startswith("perception."):
+        return _make("object_not_seen", f"{leaf or 'observation'}: {message}".strip(), facts, refs)
     if code:
         return _make("runtime_error", f"{code}: {message}".strip(), facts, refs)
     if unknown:

@@ -16,6 +16,7 @@ cause                  ladder (strategy: parameters)
 perception_unknown     another_view: a child of skill ``observe`` looks again
                        (``samples`` 16) and the criteria are judged on that view;
                        once, then ``failure``
+object_not_seen        average_frames: observe_samples 16 (once)
 perception_error       average_frames: observe_samples 16;
                        average_and_re_observe: observe_samples 32, reobserve_samples 16
 object_moved           re_observe: reobserve_samples 1;
@@ -136,6 +137,10 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
                  "so the goal configuration changes", _next_candidate_if_pick(approach_height_m=0.15)),
         Strategy("another_placement_pose", "set the object down 3 cm nearer the robot base inside the region, "
                  "from a 5 cm approach", {"place_offset_m": [-0.03, 0.0], "approach_height_m": 0.05}),
+    ),
+    "object_not_seen": (
+        Strategy("average_frames", "fuse 16 perception frames so the object is found and told apart",
+                 {"observe_samples": 16}),
     ),
     "perception_error": (
         Strategy("average_frames", "average 16 perception frames before computing the grasp",

@@ -25,6 +25,11 @@ and turns objects by a yaw drawn from ``[-yaw, yaw]`` rad. Draws come from
 ``numpy.random.default_rng([suite_seed_tag, task_index, seed])``, so an episode's initial
 state is a pure function of (suite, task, seed) and reproducible on any machine.
 
+``random_world: {distractors: [0, 4]}`` (or ``true``) makes the target draw the declared
+objects' shape, size, mass, friction, yaw and position and 0-4 distractors from a seed the
+compiler writes into the scene's ``randomise`` block (:mod:`phyagentos.targets.world`); the
+draw itself reaches only ``ground_truth.yaml``.
+
 ``safety`` overrides keys of the bench workspace's safety.yaml in the episodes (a
 different cell, e.g. the kitchen's workspace box); the merged file is validated as
 :class:`~phyagentos.protocol.SafetyConfig` and recorded with the episode workspaces.
@@ -55,7 +60,7 @@ __all__ = ["RandomizeRule", "TaskSpec", "PerturbationConfig", "Suite", "load_sui
 logger = logging.getLogger(__name__)
 
 _SUITE_KEYS = {"version", "name", "description", "episodes", "heldout_seed_offset", "perturbations", "safety", "tasks"}
-_TASK_KEYS = {"id", "goal_graph", "target", "randomize", "description"}
+_TASK_KEYS = {"id", "goal_graph", "target", "randomize", "description", "random_world"}
 _RULE_KEYS = {"names", "xy", "yaw"}
 _PERTURB_KEYS = {"rate", "kinds"}
 
@@ -88,6 +93,9 @@ class TaskSpec:
     target: str | None = None
     randomize: tuple[RandomizeRule, ...] = ()
     description: str = ""
+    #: ``None``, or ``{distractors: [min, max]}``: the episode's objects and distractors are
+    #: drawn by the target from a seed (:mod:`phyagentos.targets.world`).
+    random_world: Mapping[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -249,8 +257,14 @@ def load_suite(name_or_path: str | Path) -> Suite:
         target = t.get("target")
         if target is not None and not isinstance(target, str):
             raise _problem(p, f"tasks[{i}].target must be a target name, got {target!r}")
+        rw = t.get("random_world")
+        if rw is True:
+            rw = {}
+        if rw is not None and rw is not False and (not isinstance(rw, dict) or set(rw) - {"distractors"}):
+            raise _problem(p, f"tasks[{i}].random_world must be true or a mapping with 'distractors: [min, max]', got {rw!r}")
         tasks.append(TaskSpec(id=tid, goal_graph=_resolve_graph(t.get("goal_graph"), p), target=target,
-                              randomize=tuple(rules), description=str(t.get("description", ""))))
+                              randomize=tuple(rules), description=str(t.get("description", "")),
+                              random_world=dict(rw) if isinstance(rw, dict) else None))
     safety = raw.get("safety") or {}
     if not isinstance(safety, dict):
         raise _problem(p, f"safety must be a mapping of safety.yaml keys to override, got {type(safety).__name__}")

@@ -100,6 +100,15 @@ class MuJoCoArmTarget(BaseRolloutTarget):
     SENSORS_KEY: str | None = None
 
     # -- construction helpers -----------------------------------------------------------
+    def _prepare_scene(self, scene):
+        """The physical scene to build: ``scene`` itself, or its randomised world
+        (:func:`~phyagentos.targets.world.draw_world`), recorded in :attr:`world_draw`."""
+        from .world import draw_world  # noqa: PLC0415
+
+        self._declared_scene = scene
+        drawn, self.world_draw = draw_world(scene)
+        return drawn
+
     def _init_arm(self, model: mujoco.MjModel, data: mujoco.MjData, joint_names: Sequence[str], *,
                   tcp_site: str, arm_actuators: Sequence[int] | None = None, seed: int | None = None) -> None:
         """Index the arm: joints ``joint_names`` driven by ``arm_actuators`` (ids; default:
@@ -643,6 +652,9 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         poses and, for a randomised world, the draw): for ``ground_truth.yaml`` only."""
         sc = self._scene
         out = sc.to_dict() if hasattr(sc, "to_dict") else {}
+        decl = getattr(self, "_declared_scene", None)
+        if decl is not None and decl is not sc and hasattr(decl, "to_dict"):
+            out["declared"] = decl.to_dict()
         draw = getattr(self, "world_draw", None)
         if draw:
             out = {**out, "draw": draw}
@@ -657,11 +669,14 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         """What the user declared (CONTRACT_9 section 3), YAML-ready: ``{"objects": [{name,
         class?, shape, colour_rgb, size_m}], "regions": [...], "obstacles": [...]}``;
         never mass, friction or pose of an object."""
-        sc = self._scene
+        sc = getattr(self, "_declared_scene", None) or self._scene
+        drawn = bool(getattr(self, "world_draw", None))
         objs = []
         for o in sc.objects:
-            d: dict[str, Any] = {"name": o.name, "shape": o.shape, "colour_rgb": [float(c) for c in o.rgba[:3]],
-                                 "size_m": [round(2.0 * float(h), 4) for h in o.half_extents]}
+            d: dict[str, Any] = {"name": o.name, "colour_rgb": [float(c) for c in o.rgba[:3]]}
+            if not drawn:  # a randomised object's shape and size are the world's, not the user's
+                d["shape"] = o.shape
+                d["size_m"] = [round(2.0 * float(h), 4) for h in o.half_extents]
             if o.cls:
                 d["class"] = o.cls
             objs.append(d)

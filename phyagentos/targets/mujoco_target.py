@@ -95,6 +95,7 @@ class MuJoCoTarget(MuJoCoArmTarget):
         super().__init__(name, "simulation")
         if not isinstance(scene, SceneSpec):
             raise TargetError(f"scene must be a SceneSpec, got {type(scene).__name__}")
+        scene = self._prepare_scene(scene)
         model = build_scene(scene)
         self._init_arm(model, mujoco.MjData(model), ARM_JOINT_NAMES, tcp_site=TCP_SITE, seed=seed)
         m = self._model

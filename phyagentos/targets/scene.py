@@ -301,7 +301,7 @@ class ObstacleSpec:
 
 
 _ITEM_TYPES = {"objects": ObjectSpec, "regions": RegionSpec, "obstacles": ObstacleSpec}
-_SCENE_KEYS = ("objects", "regions", "obstacles", "timestep")
+_SCENE_KEYS = ("objects", "regions", "obstacles", "timestep", "randomise")
 _RESERVED_NAMES = frozenset({"table", "floor", "world", "robot", "gripper", "tcp"})
 
 
@@ -346,8 +346,20 @@ class SceneSpec:
     regions: tuple[RegionSpec, ...] = ()
     obstacles: tuple[ObstacleSpec, ...] = ()
     timestep: float = 0.002
+    #: ``{seed, distractors?}``: draw the objects' physical properties and distractors from
+    #: the seed (:func:`phyagentos.targets.world.draw_world`); kept as sorted pairs so the
+    #: spec stays hashable (``dict(spec.randomise)`` reads it).
+    randomise: Any = None
 
     def __post_init__(self) -> None:
+        if self.randomise is not None:
+            if isinstance(self.randomise, Mapping):
+                pairs = tuple(sorted((str(k), tuple(v) if isinstance(v, list) else v) for k, v in self.randomise.items()))
+            elif isinstance(self.randomise, tuple):
+                pairs = self.randomise
+            else:
+                raise TargetError(f"scene randomise must be a mapping like {{seed: 3}}, got {self.randomise!r}")
+            object.__setattr__(self, "randomise", pairs or None)
         for kind in ("objects", "regions", "obstacles"):
             items = getattr(self, kind)
             if isinstance(items, (str, bytes, Mapping)):
@@ -429,6 +441,8 @@ class SceneSpec:
             kwargs[kind] = tuple(_item_from_dict(kind, item, i) for i, item in enumerate(items))
         if "timestep" in d:
             kwargs["timestep"] = d["timestep"]
+        if d.get("randomise") is not None:
+            kwargs["randomise"] = d["randomise"]
         return cls(**kwargs)
 
     def to_dict(self) -> dict[str, Any]:
@@ -445,12 +459,15 @@ class SceneSpec:
                 out[k] = list(v) if isinstance(v, tuple) else v
             return out
 
-        return {
+        out = {
             "objects": [conv(o) for o in self.objects],
             "regions": [conv(r) for r in self.regions],
             "obstacles": [conv(o) for o in self.obstacles],
             "timestep": self.timestep,
         }
+        if self.randomise:
+            out["randomise"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.randomise}
+        return out
 
 
 DEFAULT_SCENE = SceneSpec(

@@ -229,6 +229,7 @@ class SO101Target(MuJoCoArmTarget):
         super().__init__(name, "simulation")
         if not isinstance(scene, SceneSpec):
             raise TargetError(f"scene must be a SceneSpec, got {type(scene).__name__}")
+        scene = self._prepare_scene(scene)
         model = build_so101_scene(scene)
         m = model
         self._init_arm(model, mujoco.MjData(model), ARM_JOINT_NAMES, tcp_site="tcp",

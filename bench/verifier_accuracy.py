@@ -51,13 +51,49 @@ def score_pass(workspace: Path, session_ids) -> list[dict]:
     return scores
 
 
+def report(v: dict, out: Path, extra: dict) -> None:
+    m = v["session_matrix"]
+    print(f"{'':<26}{'truth met':>12}{'truth unmet':>14}")
+    print(f"{'verdict success':<26}{m['true_success']:>12}{m['false_success']:>14}")
+    print(f"{'verdict replan/failure':<26}{m['false_failure']:>12}{m['true_failure']:>14}")
+    print(f"\nfalse success: {v['false_success_rate_pct']}% of sessions (goal <= 1 %), "
+          f"{v['false_success_given_unmet_pct']}% of truly failed ones")
+    print(f"false failure: {v['false_failure_rate_pct']}% of sessions (goal <= 5 %), "
+          f"{v['false_failure_given_met_pct']}% of truly successful ones")
+    print(f"\n{'criterion':<12}" + "".join(f"{k:>15}" for k in v["criterion_matrix"]))
+    for name, row in sorted(v["per_predicate"].items()):
+        print(f"{name:<12}" + "".join(f"{row[k]:>15}" for k in v["criterion_matrix"]))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"benchmark": "verifier_accuracy", **extra, "verifier": v}, indent=1) + "\n",
+                   encoding="utf-8")
+    out.with_suffix(".md").write_text("\n".join(verifier_markdown(v)) + "\n", encoding="utf-8")
+    print(f"wrote {out}")
+
+
+def score_only(workspace: Path, out: Path) -> int:
+    """Score every verified session in ``workspace`` (an interrupted or finished run)."""
+    ws = Workspace.open(workspace)
+    sessions = ws.list_sessions()
+    scores = score_pass(workspace, [s.session_id for s in sessions])
+    runs = sorted({s.run_id for s in sessions})
+    v = confusion(scores)
+    print(f"verifier accuracy (scored from {workspace}): {len(runs)} episode runs, {v['sessions_scored']} sessions "
+          f"scored ({v['sessions_unscored']} unscored)")
+    report(v, out, {"scored_from": str(workspace), "episode_runs": len(runs), "sessions": scores})
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--episodes", type=int, default=100, help="randomised pick-and-place episodes (default 100)")
     ap.add_argument("--first-seed", type=int, default=20000, help="seed of the first episode (default 20000)")
     ap.add_argument("--workspace", type=Path, help="keep the workspace here (default: a temporary directory)")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "verifier_accuracy.json")
+    ap.add_argument("--score-only", type=Path, metavar="WORKSPACE",
+                    help="score the verified sessions already in WORKSPACE (e.g. an interrupted run) and exit")
     args = ap.parse_args()
+    if args.score_only:
+        return score_only(args.score_only, args.out)
     episodes = random_episodes(range(args.first_seed, args.first_seed + args.episodes))
     tmp = None if args.workspace else tempfile.TemporaryDirectory(prefix="verifier_accuracy_")
     root = args.workspace or Path(tmp.name)

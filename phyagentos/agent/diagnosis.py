@@ -173,8 +173,10 @@ def _slip_from_proprio(trace: Sequence[Mapping], start: int, obj: str | None) ->
         drop = first_open - float(r["opening_m"])
         if drop > SLIP_OPENING_DROP_M:
             return {"slip_source": "opening", "opening_drop_m": drop, "slip_phase": r.get("phase")}
+    # the load is judged on samples taken while carrying: the samples around a gripper
+    # command (before_/after_) include contact forces of the fingers and the table
     loaded = [float(r["wrist_load_n"]) for r in samples if r.get("wrist_load_n") is not None
-              and not str(r.get("phase", "")).startswith("before_")]
+              and not str(r.get("phase", "")).startswith(("before_", "after_"))]
     if loaded:
         peak = max(loaded)
         after = loaded[loaded.index(peak):]

@@ -171,6 +171,11 @@ def test_a_place_with_nothing_in_hand_re_opens_the_upstream_pick(runs):
     assert repick.parent_session_id == by[report.sessions[0].session_id].session_id
     assert repick.recovery.cause == "precondition_unmet" and again.recovery.reopen == "pick_cube"
     assert again.created_at > next(t.at for t in repick.transitions if t.dest == "succeeded")
+    # memory conditions of the later sessions carry the mass the pick estimated from the wrist load
+    # (the cube weighs 0.1 kg) -- an observable property, never the simulator's mass
+    props = again.context.conditions["object_properties"]
+    assert 0.03 <= props["mass_estimate_kg"] <= 0.3, props
+    assert "mass" not in props and "friction" not in props
 
 
 def test_an_object_out_of_reach_or_sight_fails_without_futile_retries(runs):

@@ -33,7 +33,7 @@ def test_a_low_confidence_view_asks_for_another_view_once_then_fails_as_percepti
     first = SessionVerifier().verify(place, ev)
     assert first.verdict == "replan" and first.diagnosis.cause == "perception_unknown"
     assert first.revision.strategy == "another_view" and first.revision.skill == "observe"
-    assert first.revision.cause == "perception_unknown" and first.revision.parameters == {"samples": 16}
+    assert first.revision.cause == "perception_unknown" and first.revision.parameters == {"samples": 4}
     assert "confidence 0.30" in first.criteria[0].reason and first.criteria[0].status == "unknown"
     # the other view is no better: failure, never success
     second = SessionVerifier().verify(place, ev, history=[_with_verdict(place, first)])

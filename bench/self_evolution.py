@@ -53,6 +53,64 @@ def _wilson(k: int, n: int) -> tuple[float, float]:
     return (round(c - h, 3), round(c + h, 3))
 
 
+def _episodes_of(workspace: Path) -> dict[str, dict]:
+    """Episode (graph name) -> First / Final / sessions / memory items, from a pass workspace's sessions."""
+    ws = Workspace.open(workspace)
+    runs: dict[str, list] = {}
+    for s in ws.list_sessions():
+        runs.setdefault(s.run_id, []).append(s)
+    out = {}
+    # passes run their episodes in list order, one run each: the n-th run is the n-th episode
+    for index, run_id in enumerate(sorted(runs)):
+        sessions = runs[run_id]
+        name = f"episode-{index}"
+        nodes = {s.node for s in sessions}
+        latest = {n: max((s for s in sessions if s.node == n), key=lambda s: int(s.session_id.rsplit("-", 1)[1]))
+                  for n in nodes}
+        terminal = ("succeeded", "failed", "rejected", "timed_out", "cancelled")
+        if any(s.state not in terminal for s in latest.values()) or \
+                (len(nodes) < 2 and all(s.state == "succeeded" for s in latest.values())):
+            continue  # unfinished episode (interrupted run)
+        first = all(any(s.parent_session_id is None and s.state == "succeeded" for s in sessions if s.node == n)
+                    for n in nodes) and len(nodes) == 2
+        final = all(latest[n].state == "succeeded" for n in nodes) and len(nodes) == 2
+        used = sorted({i.id for s in sessions if s.context for i in s.context.items if i.applied})
+        out[name] = {"first": first, "final": final, "sessions": [s.session_id for s in sessions], "memory": used,
+                     "causes": [s.attempts[-1].verdict.diagnosis.cause for s in sessions if s.attempts
+                                and s.attempts[-1].verdict and s.attempts[-1].verdict.diagnosis]}
+    return out
+
+
+def score_only(root: Path, out: Path) -> int:
+    """Summarise the pass workspaces (pass1..pass4) under ``root``; held-out passes are
+    compared on the episodes every one of them finished."""
+    passes = {p.name: _episodes_of(p) for p in sorted(root.glob("pass*")) if (p / "SESSIONS.md").is_file()}
+    held = [k for k in passes if k != "pass1"]
+    common = set.intersection(*(set(passes[k]) for k in held)) if held else set()
+    rows = []
+    print(f"self-evolution (scored from {root}); held-out passes compared on {len(common)} common episode(s)")
+    print(f"{'pass':<8}{'episodes':>9}{'first':>8}{'95% CI':>15}{'final':>8}{'memory used':>13}")
+    for name, eps in passes.items():
+        chosen = {k: v for k, v in eps.items() if name == "pass1" or k in common}
+        n, k = len(chosen), sum(v["first"] for v in chosen.values())
+        final = sum(v["final"] for v in chosen.values())
+        used = sum(1 for v in chosen.values() if v["memory"])
+        rows.append({"pass": name, "episodes": n, "first": k, "final": final, "first_ci95": _wilson(k, n),
+                     "episodes_with_memory_applied": used, "results": chosen})
+        print(f"{name:<8}{n:>9}{(k / n if n else 0):>8.0%}{str(_wilson(k, n)):>15}{(final / n if n else 0):>8.0%}"
+              f"{used:>13}")
+    mem = Workspace.open(root / "pass1") if (root / "pass1" / "SESSIONS.md").is_file() else None
+    if mem is not None:
+        lessons = mem.read("LESSONS").data
+        print(f"memory after pass 1: {len(lessons.lessons)} verified lessons, {len(lessons.candidates)} candidates, "
+              f"{len(mem.read('KNOWLEDGE').data.entries)} knowledge entries")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"benchmark": "self_evolution", "scored_from": str(root), "passes": rows}, indent=1)
+                   + "\n", encoding="utf-8")
+    print(f"wrote {out}")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--train", type=int, default=30, help="training episodes for pass 1 (default 30)")
@@ -61,7 +119,11 @@ def main() -> int:
     ap.add_argument("--defaults", type=Path, help="best fixed defaults, YAML/JSON skill -> {param: value}")
     ap.add_argument("--workspace", type=Path, help="keep the workspaces here (default: a temporary directory)")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "self_evolution.json")
+    ap.add_argument("--score-only", type=Path, metavar="ROOT",
+                    help="summarise the pass workspaces under ROOT (e.g. an interrupted --workspace run) and exit")
     args = ap.parse_args()
+    if args.score_only:
+        return score_only(args.score_only, args.out)
     train = random_episodes(range(args.seed_offset, args.seed_offset + args.train))
     heldout = random_episodes(range(args.seed_offset + 10000, args.seed_offset + 10000 + args.heldout))
     defaults = yaml.safe_load(args.defaults.read_text(encoding="utf-8")) if args.defaults else None

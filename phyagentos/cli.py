@@ -103,6 +103,10 @@ def _setup_logging(verbose: int, console: Console) -> None:
 
 
 def _cmd_run(args, out: Console, err: Console) -> int:
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.worker import prestart_runner
+
+    prestart_runner(skills_dir(), trees_dir())  # cold start: the runtime loads while the Agent plane does
     from phyagentos.orchestrator import run_goal_graph
 
     progress = None if args.json else (lambda msg: err.print(f"[dim]{msg}[/dim]"))

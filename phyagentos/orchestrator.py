@@ -197,16 +197,22 @@ def run_goal_graph(
         DocumentError: a protocol document in the workspace is malformed (left untouched).
         SupervisorError: the run stopped making progress before completing.
     """
-    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415 - heavy; `watch` skips it
-
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
-    runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
-    load_graph_for(workspace, goal_graph, runtime)  # errors name the user's file
+    skills = skill_names()
+    targets = [t.name for t in workspace.read("TARGETS").data.targets]
+    load_goal_graph(goal_graph, skills=skills, targets=targets)  # errors name the user's file
     _check_target(workspace, target)
-    supervisor = WatchdogSupervisor(workspace, runtime)  # its runner process starts meanwhile
-    run = _register_run(workspace, goal_graph, seed=seed, target=target)
-    graph = load_run_graph(workspace, run.run_id, skills=runtime.skills.names())
+    # The runner process starts in the background (the forkserver imports the runtime
+    # meanwhile; ``phyagentos run`` has started one even earlier, see prestart_runner).
+    # This process never imports the motion stack itself.
+    supervisor = WatchdogSupervisor(workspace)
+    try:
+        run = _register_run(workspace, goal_graph, seed=seed, target=target)
+        graph = load_run_graph(workspace, run.run_id, skills=skills)
+    except BaseException:
+        supervisor.close()
+        raise
     agent = AgentCoordinator(workspace, graph, run_id=run.run_id, seed=seed, use_memory=use_memory,
                              consolidate=consolidate, keep_success_images=keep_success_images)
     say = progress or (lambda msg: None)

@@ -46,7 +46,7 @@ from phyagentos.errors import DocumentError, LeaseError, ProtocolError, format_c
 from phyagentos import resources
 
 from .archive import SessionArchive
-from .atomic import atomic_write_bytes
+from .atomic import atomic_write_bytes, batched_durability
 from .codec import Document, read_document, read_yaml, write_document
 from .runs import RunRegistry
 from .schemas import (
@@ -221,16 +221,17 @@ class Workspace:
         for sub in _SUBDIRS:
             (ws.root / sub).mkdir(exist_ok=True)
         source = Path(templates) if templates is not None else templates_dir()
-        for key, filename in [*((k, f) for k, (f, _) in DOCUMENTS.items()), ("SAFETY", SAFETY_FILE)]:
-            template = source / filename
-            if not template.is_file():
-                raise ProtocolError(f"template {filename} missing from {source}")
-            # Under the document's lock so a concurrent writer's file is never
-            # replaced by the template between the existence check and the write.
-            with ws._lock(key):
-                if not (ws.root / filename).exists():
-                    atomic_write_bytes(ws.root / filename, template.read_bytes())
-                    log.info("created %s from template", ws.root / filename)
+        with batched_durability():  # the templates are fsynced together, before validation
+            for key, filename in [*((k, f) for k, (f, _) in DOCUMENTS.items()), ("SAFETY", SAFETY_FILE)]:
+                template = source / filename
+                if not template.is_file():
+                    raise ProtocolError(f"template {filename} missing from {source}")
+                # Under the document's lock so a concurrent writer's file is never
+                # replaced by the template between the existence check and the write.
+                with ws._lock(key):
+                    if not (ws.root / filename).exists():
+                        atomic_write_bytes(ws.root / filename, template.read_bytes())
+                        log.info("created %s from template", ws.root / filename)
         ws.validate()
         if migrate:  # a workspace written before sessions/.index existed
             ws.reconcile()

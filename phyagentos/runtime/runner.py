@@ -180,6 +180,7 @@ class SessionRunner:
                 SKILL_RUNTIMES[rec.skill_runtime](self.runtime.skills)
             ctx.on_observation = lambda snap: write_environment(
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
+            self._actuation_started_at = utc_now()  # hand-off latency is measured up to here (bench/end_to_end.py)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
             logger.exception("session %s: runtime error", rec.session_id)
@@ -189,6 +190,7 @@ class SessionRunner:
             logger.exception("session %s: unexpected runtime error", rec.session_id)
             outcome = RunOutcome(status="error", error_code=errorcodes.RUNTIME_ERROR,
                                  message=f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", ticks=0)
+        self._actuation_ended_at = utc_now()
         if self.on_finished is not None:
             self.on_finished(outcome)
         if self.heartbeat is not None:
@@ -280,6 +282,9 @@ class SessionRunner:
                 "ticks": outcome.ticks,
                 "wall_time_s": round(wall_s, 4),
                 "sim_time_s": terminal.get("sim_time_s") if terminal else None,
+                # UTC time the first tick started (everything before it is framework set-up).
+                "actuation_started_at": getattr(self, "_actuation_started_at", None),
+                "actuation_ended_at": getattr(self, "_actuation_ended_at", None),
             },
             "timings_s": {k: round(v, 4) for k, v in (ctx.profiler.totals.items() if ctx else [])},
         }

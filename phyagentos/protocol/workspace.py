@@ -89,6 +89,10 @@ _SESSION_ID = re.compile(SESSION_ID_PATTERN)
 _IDENTITY_FIELDS = ("session_id", "run_id", "node", "created_at")
 
 
+#: Parsed terminal sessions a Workspace keeps (see ``_load_archived``).
+_ARCHIVE_CACHE_SIZE = 4096
+
+
 def templates_dir() -> Path:
     """The directory holding the document templates copied by :meth:`Workspace.create`.
 
@@ -647,11 +651,24 @@ class Workspace:
         return records
 
     def _load_archived(self, entry) -> SessionRecord | None:
+        # Terminal sessions do not change: a run's coordinator lists them on every step,
+        # so parsed records are kept, keyed by the file's identity (inode, mtime, size),
+        # and handed out as deep copies.
+        cache = self.__dict__.setdefault("_archived_cache", {})
         for path in (self._session_archive.path_of(entry), self.session_path(entry.session_id)):
             try:
-                return read_document(path, SessionRecord).data
+                st = os.stat(path)
+                key = (st.st_ino, st.st_mtime_ns, st.st_size)
+                hit = cache.get(str(path))
+                if hit is not None and hit[0] == key:
+                    return hit[1].model_copy(deep=True)
+                record = read_document(path, SessionRecord).data
             except FileNotFoundError:
                 continue
+            if len(cache) >= _ARCHIVE_CACHE_SIZE:
+                cache.clear()
+            cache[str(path)] = (key, record.model_copy(deep=True))
+            return record
         log.warning("archive catalogue names session %s but its file is missing", entry.session_id)
         return None
 

@@ -120,6 +120,14 @@ class SessionRunner:
     heartbeat: Callable[[], None] | None = None
     on_finished: Callable[[RunOutcome], None] | None = None
     checkpoint_interval_s: float = 0.25
+    #: EvidenceImageWriter (runtime/evidence_writer.py) that renders the images off the
+    #: critical path; None renders them here, synchronously.
+    images: Any = None
+
+    def _image(self, target, path, events: list):
+        if self.images is not None:
+            return self.images.capture(target, path, events=events)
+        return save_scene_image(target, path, events=events)
 
     def _tick(self, target) -> Callable[[], None]:
         last = [time.monotonic()]
@@ -169,7 +177,7 @@ class SessionRunner:
                     self.heartbeat()
                 initial = target.snapshot()
                 atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
-                if name := save_scene_image(target, evidence_dir / "initial.png", events=image_events):
+                if name := self._image(target, evidence_dir / "initial.png", image_events):
                     extra["initial_image"] = name
                 ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
                                    plan=rec.adapter_plan)
@@ -197,7 +205,7 @@ class SessionRunner:
             self.heartbeat()
         terminal = target.snapshot() if target is not None else None
         if target is not None:
-            if name := save_scene_image(target, evidence_dir / "terminal.png", events=image_events):
+            if name := self._image(target, evidence_dir / "terminal.png", image_events):
                 extra["terminal_image"] = name
             if getattr(target, "perturbations", None):
                 atomic_write_text(evidence_dir / "perturbations.yaml", dump_yaml(target.perturbations.record()))

@@ -290,6 +290,9 @@ class _Runner:
         self.jobs: queue.Queue = queue.Queue()
         self.cancel = None  # CancelToken of the running session
         self.send_lock = threading.Lock()
+        from phyagentos.runtime.evidence_writer import EvidenceImageWriter  # noqa: PLC0415
+
+        self.images = EvidenceImageWriter()
 
     # -- plumbing --------------------------------------------------------
 
@@ -433,9 +436,11 @@ class _Runner:
         try:
             with batched_durability():
                 report = SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=self.cancel, heartbeat=beat,
-                                       on_finished=finished, checkpoint_interval_s=checkpoint_interval_s).run()
+                                       on_finished=finished, checkpoint_interval_s=checkpoint_interval_s,
+                                       images=self.images).run()
         finally:
             self.cancel = None
+            self.images.release(ws.evidence_dir(session_id))  # rendered in the background from here
         self.reply("done", session_id=session_id, **report.to_dict())
 
     def job_recover(self, root: str, session_id: str, status: str, error_code: str, message: str) -> None:
@@ -478,6 +483,7 @@ class _Runner:
                 logger.exception("runner job %s failed", kind)
                 self.reply("error", job=kind, message=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc())
         self.release_all()
+        self.images.close()  # owed images first: the targets' models must outlive their renders
         for pool in self.pools.values():
             pool.close()
 

@@ -287,7 +287,8 @@ class AgentCoordinator:
             return TaskDoc(version=doc.version, run_id=self.run_id, goal_graph=str(self.graph.path) if self.graph.path else None,
                            nodes=nodes)
 
-        self.workspace.update("TASK", apply)
+        # TASK.md is a view derived from the session files on every step: atomic, not fsynced.
+        self.workspace.update("TASK", apply, durable=False)
 
     # -- reporting -------------------------------------------------------
 

@@ -767,9 +767,12 @@ class WatchdogSupervisor:
             status = payload["status"]
             if status == "timed_out" or inf.cancel is not None:
                 return 0  # time_out / cancelled are fired once the evidence is written
-            event = "cancel" if status == "cancelled" else "finish"
-            reason = payload.get("message", "") if event == "cancel" else ""
-            return 1 if self._update(inf, lambda r: SessionLifecycle(r).fire(event, reason=reason)
+            if status != "cancelled":
+                # ``finish`` is recorded with ``submit`` in one write once the evidence is
+                # in (_on_done): running and finalizing recover alike (outcome_unknown).
+                return 1
+            reason = payload.get("message", "")
+            return 1 if self._update(inf, lambda r: SessionLifecycle(r).fire("cancel", reason=reason)
                                      if r.state == "running" else False) else 0
         if kind == "done" and inf.phase == "running":
             return self._on_done(inf, payload)

@@ -69,7 +69,7 @@ _ORPHAN_EXIT_S = 10.0
 
 
 #: Imported once by the forkserver, so forked runners start with them loaded.
-_PRELOAD = ["phyagentos.runtime.worker", "phyagentos.runtime.runner", "phyagentos.runtime.preflight",
+_PRELOAD = ["phyagentos.runtime.forkserver_exit", "phyagentos.runtime.worker", "phyagentos.runtime.runner", "phyagentos.runtime.preflight",
             "phyagentos.runtime.target_pool", "phyagentos.runtime.target_lock"]
 
 

@@ -303,7 +303,12 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--plan-repeats", type=int, default=30)
     ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--once", action="store_true",
+                    help="one cold run, print its result as JSON, write nothing (bench/end_to_end.py)")
     args = ap.parse_args(argv)
+    if args.once:
+        print(json.dumps(run_bare_pick_and_place(seed=args.seed)))
+        return 0
 
     cold = run_bare_pick_and_place(seed=args.seed)
     runs = [run_bare_pick_and_place(seed=args.seed + i) for i in range(args.runs)]

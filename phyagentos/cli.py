@@ -103,6 +103,10 @@ def _setup_logging(verbose: int, console: Console) -> None:
 
 
 def _cmd_run(args, out: Console, err: Console) -> int:
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.worker import prestart_runner
+
+    prestart_runner(skills_dir(), trees_dir())  # cold start: the runtime loads while the Agent plane does
     from phyagentos.orchestrator import run_goal_graph
 
     progress = None if args.json else (lambda msg: err.print(f"[dim]{msg}[/dim]"))
@@ -298,10 +302,26 @@ def main(argv: list[str] | None = None) -> int:
     handlers = {**PLANE_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
                 "policy": _cmd_policy}
     try:
-        return handlers[args.command](args, out, err)
+        code = handlers[args.command](args, out, err)
     except PhyAgentOSError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if argv is None and args.command == "run":
+        _exit_without_teardown(code)
+    return code
+
+
+def _exit_without_teardown(code: int) -> None:
+    """End the ``run`` process now: exit handlers run (runners closed, logs flushed),
+    but the interpreter's module teardown (a second or so with the Agent plane loaded
+    on a busy machine) is skipped. Only for the console script, never in-process."""
+    import atexit  # noqa: PLC0415
+    import os  # noqa: PLC0415
+
+    atexit._run_exitfuncs()  # noqa: SLF001 - CPython's own exit sequence, minus the teardown
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ while the supervisor still runs each session in its own runner process.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -76,33 +77,76 @@ def skill_names() -> list[str]:
 
 def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
               progress: Callable[[str], None] | None = None) -> None:
-    """Alternate the Agent loop and the supervisor until every node of ``agent``'s run is terminal.
+    """Run the Agent loop and the supervisor until every node of ``agent``'s run is terminal.
 
     The one execution loop shared by ``phyagentos run`` and ``phyagentos bench``: the
     agent compiles ready nodes, verifies and replans; the supervisor claims, preflights
-    and runs whatever is pending in the workspace. While the supervisor is paused or
+    and runs whatever is pending in the workspace. Both planes are event-driven, as in
+    two-process mode but without process start-up: the supervisor runs in a thread of
+    this process (its runner is still a separate, killable process), woken by its
+    workspace watcher and the runner's pipe, and wakes the agent whenever it acted; the
+    agent wakes the supervisor as soon as it submitted a session. Nothing sleeps on the
+    path from a verdict to the next session's claim. While the supervisor is paused or
     e-stopped, or another process holds a session of the run, the loop waits.
 
     Raises:
-        SupervisorError: neither side made progress and nothing of the run is in
+        SupervisorError: neither side can make progress and nothing of the run is in
             anyone's hands.
     """
     say = progress or (lambda msg: None)
-    agent.step()
-    while not agent.done():
-        ran = supervisor.run_once()
-        acted = agent.step()
-        if ran:
+    if supervisor.workspace is agent.workspace:
+        # One Workspace object per thread: its index caches are not shared between threads.
+        supervisor.workspace = Workspace.open(agent.workspace.root)
+    wake = threading.Event()
+    stop = threading.Event()
+    failure: list[BaseException] = []
+
+    def runtime_plane() -> None:
+        try:
+            while not stop.is_set():
+                if supervisor.step():
+                    wake.set()
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the agent's thread
+            failure.append(exc)
+            wake.set()
+
+    thread = threading.Thread(target=runtime_plane, name="phyagentos-supervisor", daemon=True)
+    thread.start()
+    last_states: dict | None = None
+    try:
+        idle_checked = False
+        while True:
+            wake.clear()
+            acted = agent.step()
+            if failure:
+                raise failure[0]
+            if acted:
+                supervisor.watcher.notify()  # claim at once, without waiting for inotify
             states = agent.node_states()
-            say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
-        if ran == 0 and acted == 0:
-            waiting = [sid for sid, state, _ in supervisor.workspace.active_sessions(run_id=agent.run_id)
+            if states != last_states and progress is not None:
+                say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
+            last_states = states
+            if agent.done():
+                return
+            if acted:
+                idle_checked = False
+                continue
+            waiting = [sid for sid, state, _ in agent.workspace.active_sessions(run_id=agent.run_id)
                        if state == "pending" or state in LEASED_STATES]
-            if not waiting:
-                raise SupervisorError(f"run {agent.run_id} stalled: node states {agent.node_states()}")
+            if not waiting and not supervisor.busy:
+                # Nothing is in anyone's hands: one more step sees every change made so far.
+                if idle_checked:
+                    raise SupervisorError(f"run {agent.run_id} stalled: node states {states}")
+                idle_checked = True
+                continue
+            idle_checked = False
             if supervisor.paused or supervisor.estopped:
                 say("supervisor " + ("e-stopped" if supervisor.estopped else "paused") + "; waiting")
-            supervisor.step(claim=False)  # sleeps until the workspace changes (bounded)
+            wake.wait(supervisor.config.poll_interval_s)
+    finally:
+        stop.set()
+        supervisor.watcher.notify()
+        thread.join()
 
 
 def _register_run(workspace: Workspace, goal_graph: str | Path, *, seed: int | None, target: str | None,
@@ -197,16 +241,22 @@ def run_goal_graph(
         DocumentError: a protocol document in the workspace is malformed (left untouched).
         SupervisorError: the run stopped making progress before completing.
     """
-    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415 - heavy; `watch` skips it
-
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
-    runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
-    load_graph_for(workspace, goal_graph, runtime)  # errors name the user's file
+    skills = skill_names()
+    targets = [t.name for t in workspace.read("TARGETS").data.targets]
+    load_goal_graph(goal_graph, skills=skills, targets=targets)  # errors name the user's file
     _check_target(workspace, target)
-    supervisor = WatchdogSupervisor(workspace, runtime)  # its runner process starts meanwhile
-    run = _register_run(workspace, goal_graph, seed=seed, target=target)
-    graph = load_run_graph(workspace, run.run_id, skills=runtime.skills.names())
+    # The runner process starts in the background (the forkserver imports the runtime
+    # meanwhile; ``phyagentos run`` has started one even earlier, see prestart_runner).
+    # This process never imports the motion stack itself.
+    supervisor = WatchdogSupervisor(workspace)
+    try:
+        run = _register_run(workspace, goal_graph, seed=seed, target=target)
+        graph = load_run_graph(workspace, run.run_id, skills=skills)
+    except BaseException:
+        supervisor.close()
+        raise
     agent = AgentCoordinator(workspace, graph, run_id=run.run_id, seed=seed, use_memory=use_memory,
                              consolidate=consolidate, keep_success_images=keep_success_images)
     say = progress or (lambda msg: None)

@@ -68,7 +68,10 @@ def test_random_sigkills_of_supervisors_and_runners_lose_and_rerun_nothing(tmp_p
                 kills["supervisor"] += 1
                 sups[k] = watch(ws, *args, log=log)
             elif victim.get("runner_pid") and descends_from(victim["runner_pid"], victim["pid"]):
-                os.kill(victim["runner_pid"], signal.SIGKILL)
+                try:
+                    os.kill(victim["runner_pid"], signal.SIGKILL)
+                except ProcessLookupError:
+                    continue  # it exited between the check and the kill: not a kill of ours
                 kills["runner"] += 1
         wait_for(lambda: run_id not in ws.runs.active_ids(), timeout=180, interval=0.25, what="the run to finish")
     finally:

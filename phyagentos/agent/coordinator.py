@@ -44,6 +44,7 @@ import networkx as nx
 
 from phyagentos.errors import VerifierError
 from phyagentos.protocol import LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace, is_expired, new_lease
+from phyagentos.protocol.evidence_markers import PRUNED_MARKER, images_pending, wait_for_images
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
 from . import dag as dagmod
@@ -280,13 +281,22 @@ class AgentCoordinator:
             else:
                 lifecycle.fire("verify")
         attempt = rec.attempts[-1]
-        evidence = load_evidence(ws.root / attempt.evidence)
+        evidence_dir = ws.root / attempt.evidence
+        if self.keep_success_images:
+            wait_for_images(evidence_dir)  # kept either way: the verdict references them
+        evidence = load_evidence(evidence_dir)
         history = self.lineage(rec)
         judged, judged_evidence = self._judged(rec, evidence, history)
         verdict = self.verifier.verify(judged, judged_evidence, history=history, lineage_depth=len(history))
         if verdict.verdict == "success" and not self.keep_success_images:
             verdict = verdict.model_copy(update={"evidence": [r for r in verdict.evidence if r not in evidence.images]})
             self._prune_images(evidence)
+        elif images_pending(evidence_dir):
+            # Images are rendered off the critical path; a verdict other than success
+            # keeps them and refers to them, so it is judged again once they exist.
+            wait_for_images(evidence_dir)
+            evidence = load_evidence(evidence_dir)
+            verdict = self.verifier.verify(rec, evidence, history=history)
         attempt.verdict = verdict
         event = {"success": "succeed", "failure": "fail", "replan": "replan"}[verdict.verdict]
         rec.lease = None
@@ -349,7 +359,9 @@ class AgentCoordinator:
         return observe_object(bundles, obj)
 
     def _prune_images(self, evidence: EvidenceBundle) -> None:
-        # Retention: a success's verdict, snapshots and trace stay; its RGB images go.
+        # Retention: a success's verdict, snapshots and trace stay; its RGB images go
+        # (the marker first: images the runner writes later are then deleted by it).
+        (evidence.directory / PRUNED_MARKER).touch()
         for ref in evidence.images:
             (self.workspace.root / ref).unlink(missing_ok=True)
 
@@ -436,7 +448,8 @@ class AgentCoordinator:
             return TaskDoc(version=doc.version, run_id=self.run_id, goal_graph=str(self.graph.path) if self.graph.path else None,
                            nodes=nodes)
 
-        self.workspace.update("TASK", apply)
+        # TASK.md is a view derived from the session files on every step: atomic, not fsynced.
+        self.workspace.update("TASK", apply, durable=False)
 
     # -- reporting -------------------------------------------------------
 

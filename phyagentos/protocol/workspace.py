@@ -46,7 +46,7 @@ from phyagentos.errors import DocumentError, LeaseError, ProtocolError, format_c
 from phyagentos import resources
 
 from .archive import SessionArchive
-from .atomic import atomic_write_bytes
+from .atomic import atomic_write_bytes, batched_durability
 from .codec import Document, read_document, read_yaml, write_document
 from .runs import RunRegistry
 from .schemas import (
@@ -87,6 +87,10 @@ _SESSION_ID = re.compile(SESSION_ID_PATTERN)
 # Fields fixed when a session is submitted; rewriting them would detach the
 # session file from the goal graph node and run it belongs to.
 _IDENTITY_FIELDS = ("session_id", "run_id", "node", "created_at")
+
+
+#: Parsed terminal sessions a Workspace keeps (see ``_load_archived``).
+_ARCHIVE_CACHE_SIZE = 4096
 
 
 def templates_dir() -> Path:
@@ -221,19 +225,20 @@ class Workspace:
         for sub in _SUBDIRS:
             (ws.root / sub).mkdir(exist_ok=True)
         source = Path(templates) if templates is not None else templates_dir()
-        for key, filename in [*((k, f) for k, (f, _) in DOCUMENTS.items()), ("SAFETY", SAFETY_FILE)]:
-            template = source / filename
-            if not template.is_file():
-                raise ProtocolError(f"template {filename} missing from {source}")
-            # Under the document's lock so a concurrent writer's file is never
-            # replaced by the template between the existence check and the write.
-            with ws._lock(key):
-                if not (ws.root / filename).exists():
-                    atomic_write_bytes(ws.root / filename, template.read_bytes())
-                    log.info("created %s from template", ws.root / filename)
-        # sensors.yaml (issue 9): optional in a template set, never overwritten
-        if (source / "sensors.yaml").is_file() and not (ws.root / "sensors.yaml").exists():
-            atomic_write_bytes(ws.root / "sensors.yaml", (source / "sensors.yaml").read_bytes())
+        with batched_durability():  # the templates are fsynced together, before validation
+            for key, filename in [*((k, f) for k, (f, _) in DOCUMENTS.items()), ("SAFETY", SAFETY_FILE)]:
+                template = source / filename
+                if not template.is_file():
+                    raise ProtocolError(f"template {filename} missing from {source}")
+                # Under the document's lock so a concurrent writer's file is never
+                # replaced by the template between the existence check and the write.
+                with ws._lock(key):
+                    if not (ws.root / filename).exists():
+                        atomic_write_bytes(ws.root / filename, template.read_bytes())
+                        log.info("created %s from template", ws.root / filename)
+            # sensors.yaml (issue 9): optional in a template set, never overwritten
+            if (source / "sensors.yaml").is_file() and not (ws.root / "sensors.yaml").exists():
+                atomic_write_bytes(ws.root / "sensors.yaml", (source / "sensors.yaml").read_bytes())
         ws.validate()
         if migrate:  # a workspace written before sessions/.index existed
             ws.reconcile()
@@ -649,11 +654,24 @@ class Workspace:
         return records
 
     def _load_archived(self, entry) -> SessionRecord | None:
+        # Terminal sessions do not change: a run's coordinator lists them on every step,
+        # so parsed records are kept, keyed by the file's identity (inode, mtime, size),
+        # and handed out as deep copies.
+        cache = self.__dict__.setdefault("_archived_cache", {})
         for path in (self._session_archive.path_of(entry), self.session_path(entry.session_id)):
             try:
-                return read_document(path, SessionRecord).data
+                st = os.stat(path)
+                key = (st.st_ino, st.st_mtime_ns, st.st_size)
+                hit = cache.get(str(path))
+                if hit is not None and hit[0] == key:
+                    return hit[1].model_copy(deep=True)
+                record = read_document(path, SessionRecord).data
             except FileNotFoundError:
                 continue
+            if len(cache) >= _ARCHIVE_CACHE_SIZE:
+                cache.clear()
+            cache[str(path)] = (key, record.model_copy(deep=True))
+            return record
         log.warning("archive catalogue names session %s but its file is missing", entry.session_id)
         return None
 

@@ -158,6 +158,14 @@ class SessionRunner:
     heartbeat: Callable[[], None] | None = None
     on_finished: Callable[[RunOutcome], None] | None = None
     checkpoint_interval_s: float = 0.25
+    #: EvidenceImageWriter (runtime/evidence_writer.py) that renders the images off the
+    #: critical path; None renders them here, synchronously.
+    images: Any = None
+
+    def _image(self, target, path, events: list):
+        if self.images is not None:
+            return self.images.capture(target, path, events=events)
+        return save_scene_image(target, path, events=events)
 
     def _tick(self, target) -> Callable[[], None]:
         last = [time.monotonic()]
@@ -212,7 +220,7 @@ class SessionRunner:
                     perceiver = make_perceiver(target, _perception_config(self.workspace))
                 initial = _observe(target, perceiver, evidence_dir, rel, "initial")
                 atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
-                if name := save_scene_image(target, evidence_dir / "initial.png", events=image_events):
+                if name := self._image(target, evidence_dir / "initial.png", image_events):
                     extra["initial_image"] = name
                 ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
                                    plan=rec.adapter_plan, perceiver=perceiver, evidence_dir=evidence_dir,
@@ -224,6 +232,7 @@ class SessionRunner:
                 SKILL_RUNTIMES[rec.skill_runtime](self.runtime.skills)
             ctx.on_observation = lambda snap: write_environment(
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
+            self._actuation_started_at = utc_now()  # hand-off latency is measured up to here (bench/end_to_end.py)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
             logger.exception("session %s: runtime error", rec.session_id)
@@ -233,6 +242,7 @@ class SessionRunner:
             logger.exception("session %s: unexpected runtime error", rec.session_id)
             outcome = RunOutcome(status="error", error_code=errorcodes.RUNTIME_ERROR,
                                  message=f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", ticks=0)
+        self._actuation_ended_at = utc_now()
         if self.on_finished is not None:
             self.on_finished(outcome)
         if self.heartbeat is not None:
@@ -246,7 +256,7 @@ class SessionRunner:
                 terminal = {"stamp_s": target.sim_time, "sim_time_s": target.sim_time, "entities": [],
                             "relations": [], "error": f"{type(exc).__name__}: {exc}"}
         if target is not None:
-            if name := save_scene_image(target, evidence_dir / "terminal.png", events=image_events):
+            if name := self._image(target, evidence_dir / "terminal.png", image_events):
                 extra["terminal_image"] = name
             write_ground_truth(evidence_dir, target, initial=initial_truth, terminal=_truth(target))
             if ctx is not None:
@@ -333,6 +343,9 @@ class SessionRunner:
                 "ticks": outcome.ticks,
                 "wall_time_s": round(wall_s, 4),
                 "sim_time_s": terminal.get("sim_time_s") if terminal else None,
+                # UTC time the first tick started (everything before it is framework set-up).
+                "actuation_started_at": getattr(self, "_actuation_started_at", None),
+                "actuation_ended_at": getattr(self, "_actuation_ended_at", None),
             },
             "timings_s": {k: round(v, 4) for k, v in (ctx.profiler.totals.items() if ctx else [])},
         }

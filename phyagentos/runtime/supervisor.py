@@ -40,7 +40,6 @@ Use :meth:`serve` for the long-running process (``phyagentos watch``) and
 
 from __future__ import annotations
 
-import atexit
 import json
 import logging
 import os
@@ -73,7 +72,7 @@ from phyagentos.protocol import (
 )
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
-from .worker import RunnerDied, RunnerProcess
+from .worker import RunnerDied, RunnerProcess, park_runner as _park_runner, take_runner as _take_runner
 
 __all__ = ["WatchdogSupervisor", "SupervisorConfig", "PRESENCE_DIR", "read_presence"]
 
@@ -175,34 +174,7 @@ class _Inflight:
     recover_attempts: int = 0
 
 
-# -- a process-wide pool of idle runner processes ------------------------------------
-# A runner takes about a second to start (it imports MuJoCo and the primitives), so
-# successive supervisors in one process (``phyagentos run``, benchmark episodes)
-# reuse idle ones.
-
-_IDLE_RUNNERS: list[RunnerProcess] = []
-
-
-def _take_runner(skills_dir: str, trees_dir: str) -> RunnerProcess:
-    while _IDLE_RUNNERS:
-        runner = _IDLE_RUNNERS.pop()
-        if runner.alive() and (runner.skills_dir, runner.trees_dir) == (skills_dir, trees_dir):
-            return runner
-        runner.close()
-    return RunnerProcess(skills_dir=skills_dir, trees_dir=trees_dir)
-
-
-def _park_runner(runner: RunnerProcess) -> None:
-    if runner.alive() and not runner.reserved and len(_IDLE_RUNNERS) < 2:
-        _IDLE_RUNNERS.append(runner)
-    else:
-        runner.close()
-
-
-@atexit.register
-def _close_idle_runners() -> None:
-    while _IDLE_RUNNERS:
-        _IDLE_RUNNERS.pop().close(timeout=2)
+# The pool of idle runner processes lives in worker.py (take_runner, park_runner).
 
 
 class WatchdogSupervisor:
@@ -795,9 +767,12 @@ class WatchdogSupervisor:
             status = payload["status"]
             if status == "timed_out" or inf.cancel is not None:
                 return 0  # time_out / cancelled are fired once the evidence is written
-            event = "cancel" if status == "cancelled" else "finish"
-            reason = payload.get("message", "") if event == "cancel" else ""
-            return 1 if self._update(inf, lambda r: SessionLifecycle(r).fire(event, reason=reason)
+            if status != "cancelled":
+                # ``finish`` is recorded with ``submit`` in one write once the evidence is
+                # in (_on_done): running and finalizing recover alike (outcome_unknown).
+                return 1
+            reason = payload.get("message", "")
+            return 1 if self._update(inf, lambda r: SessionLifecycle(r).fire("cancel", reason=reason)
                                      if r.state == "running" else False) else 0
         if kind == "done" and inf.phase == "running":
             return self._on_done(inf, payload)

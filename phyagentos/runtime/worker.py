@@ -43,6 +43,7 @@ still answers.
 
 from __future__ import annotations
 
+import atexit
 import logging
 import multiprocessing
 import os
@@ -58,7 +59,7 @@ from phyagentos.errors import SupervisorError
 
 from .heartbeat import SLOTS, Heartbeats
 
-__all__ = ["RunnerProcess", "RunnerDied", "runner_main"]
+__all__ = ["RunnerProcess", "RunnerDied", "runner_main", "take_runner", "park_runner", "prestart_runner"]
 
 logger = logging.getLogger(__name__)
 
@@ -68,7 +69,7 @@ _ORPHAN_EXIT_S = 10.0
 
 
 #: Imported once by the forkserver, so forked runners start with them loaded.
-_PRELOAD = ["phyagentos.runtime.worker", "phyagentos.runtime.runner", "phyagentos.runtime.preflight",
+_PRELOAD = ["phyagentos.runtime.forkserver_exit", "phyagentos.runtime.worker", "phyagentos.runtime.runner", "phyagentos.runtime.preflight",
             "phyagentos.runtime.target_pool", "phyagentos.runtime.target_lock"]
 
 
@@ -98,22 +99,46 @@ class RunnerProcess:
         ctx = _context()
         self._hb_array = ctx.RawArray("d", len(SLOTS))
         self.heartbeats = Heartbeats(self._hb_array)
-        self.conn, child = ctx.Pipe(duplex=True)
+        self.conn, self._child = ctx.Pipe(duplex=True)
         level = logging.getLogger().getEffectiveLevel() if log_level is None else log_level
         self.process = ctx.Process(target=runner_main, name="phyagentos-runner", daemon=True,
-                                   args=(child, self._hb_array, str(skills_dir), str(trees_dir), level))
-        self.process.start()
-        child.close()
+                                   args=(self._child, self._hb_array, str(skills_dir), str(trees_dir), level))
         self.skills_dir, self.trees_dir = str(skills_dir), str(trees_dir)
         self.reserved: set[tuple[str, str]] = set()
         self._dead = False
+        # ``Process.start`` blocks until the forkserver has imported the runtime (about a
+        # second, more on a loaded machine): do it in the background, so the caller goes
+        # on with its own work. Jobs sent meanwhile wait in the pipe.
+        self._start_error: BaseException | None = None
+        self._started = threading.Event()
+        threading.Thread(target=self._start, name="phyagentos-runner-start", daemon=True).start()
+
+    def _start(self) -> None:
+        try:
+            self.process.start()
+        except BaseException as exc:  # noqa: BLE001 - reported by wait_started
+            self._start_error = exc
+            self._dead = True
+        finally:
+            self._child.close()
+            self._started.set()
+
+    def wait_started(self, timeout: float | None = None) -> bool:
+        """Block until the process exists (True) or failed to start / ``timeout`` passed (False)."""
+        return self._started.wait(timeout) and self._start_error is None
 
     @property
     def pid(self) -> int | None:
+        self._started.wait()
         return self.process.pid
 
     def alive(self) -> bool:
-        return not self._dead and self.process.is_alive()
+        """True unless the runner exited, was killed or could not start (True while starting)."""
+        if self._dead:
+            return False
+        if not self._started.is_set():
+            return True
+        return self._start_error is None and self.process.is_alive()
 
     def fileno(self) -> int:
         """Readable when the runner sent something (or died)."""
@@ -170,28 +195,81 @@ class RunnerProcess:
         """SIGKILL the runner (it may be stuck anywhere) and reap it."""
         self._dead = True
         self.reserved.clear()
-        if self.process.is_alive():
+        self._started.wait()
+        if self._start_error is None and self.process.is_alive():
             try:
                 os.kill(self.process.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
-        self.process.join(timeout=5)
+        if self._start_error is None:
+            self.process.join(timeout=5)
         self.conn.close()
 
     def close(self, timeout: float = 5.0) -> None:
         """Ask the runner to exit (releasing its locks); kill it if it does not."""
+        self._started.wait()
         if self.alive():
             try:
                 self.send("exit")
             except RunnerDied:
                 pass
             self.process.join(timeout=timeout)
-        if self.process.is_alive():
+        if self._start_error is None and self.process.is_alive():
             self.kill()
         else:
             self._dead = True
             self.conn.close()
         self.reserved.clear()
+
+
+# -- a process-wide pool of idle runner processes ------------------------------------
+# A runner takes about a second to start (the forkserver imports MuJoCo and the
+# primitives), so successive supervisors in one process (``phyagentos run``, benchmark
+# episodes) reuse idle ones, and ``phyagentos run`` starts one before it has even
+# imported the Agent plane (:func:`prestart_runner`).
+
+_IDLE_RUNNERS: list[RunnerProcess] = []
+_POOL_LOCK = threading.Lock()
+
+
+def take_runner(skills_dir: str | os.PathLike[str], trees_dir: str | os.PathLike[str]) -> RunnerProcess:
+    """An idle (or starting) runner for these skill and tree directories, else a new one."""
+    key = (str(skills_dir), str(trees_dir))
+    while True:
+        with _POOL_LOCK:
+            runner = _IDLE_RUNNERS.pop() if _IDLE_RUNNERS else None
+        if runner is None:
+            return RunnerProcess(skills_dir=skills_dir, trees_dir=trees_dir)
+        if runner.alive() and (runner.skills_dir, runner.trees_dir) == key:
+            return runner
+        runner.close()
+
+
+def park_runner(runner: RunnerProcess) -> None:
+    """Keep ``runner`` for the next supervisor of this process (at most two), else close it."""
+    with _POOL_LOCK:
+        if runner.alive() and not runner.reserved and len(_IDLE_RUNNERS) < 2:
+            _IDLE_RUNNERS.append(runner)
+            return
+    runner.close()
+
+
+def prestart_runner(skills_dir: str | os.PathLike[str], trees_dir: str | os.PathLike[str]) -> None:
+    """Start a runner now, in the background, for the next :func:`take_runner`.
+
+    Cold start of ``phyagentos run``: the forkserver imports the runtime while the
+    caller imports and prepares the Agent plane, instead of one after the other.
+    """
+    with _POOL_LOCK:
+        if _IDLE_RUNNERS:
+            return
+    park_runner(RunnerProcess(skills_dir=skills_dir, trees_dir=trees_dir))
+
+
+@atexit.register
+def _close_idle_runners() -> None:
+    while _IDLE_RUNNERS:
+        _IDLE_RUNNERS.pop().close(timeout=2)
 
 
 # ---------------------------------------------------------------------------
@@ -212,6 +290,9 @@ class _Runner:
         self.jobs: queue.Queue = queue.Queue()
         self.cancel = None  # CancelToken of the running session
         self.send_lock = threading.Lock()
+        from phyagentos.runtime.evidence_writer import EvidenceImageWriter  # noqa: PLC0415
+
+        self.images = EvidenceImageWriter()
 
     # -- plumbing --------------------------------------------------------
 
@@ -326,6 +407,7 @@ class _Runner:
 
     def job_go(self, root: str, session_id: str, checkpoint_interval_s: float) -> None:
         from phyagentos.primitives.context import CancelToken  # noqa: PLC0415
+        from phyagentos.protocol.atomic import batched_durability  # noqa: PLC0415
         from phyagentos.runtime.runner import SessionRunner  # noqa: PLC0415
 
         ws = self.workspace(root)
@@ -346,11 +428,19 @@ class _Runner:
             self.reply("finished", session_id=session_id, status=outcome.status, error_code=outcome.error_code,
                        message=outcome.message, ticks=outcome.ticks)
 
+        # The bundle's files, the checkpoints and ENVIRONMENT.md are fsynced together
+        # when the session ends, before ``done`` (after which the supervisor records
+        # ``awaiting_verification``): a verifier never sees a bundle that is not durable.
+        # A killed runner loses nothing by this (the page cache survives it); the
+        # recovering runner writes its own durable snapshot.
         try:
-            report = SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=self.cancel, heartbeat=beat,
-                                   on_finished=finished, checkpoint_interval_s=checkpoint_interval_s).run()
+            with batched_durability():
+                report = SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=self.cancel, heartbeat=beat,
+                                       on_finished=finished, checkpoint_interval_s=checkpoint_interval_s,
+                                       images=self.images).run()
         finally:
             self.cancel = None
+            self.images.release(ws.evidence_dir(session_id))  # rendered in the background from here
         self.reply("done", session_id=session_id, **report.to_dict())
 
     def job_recover(self, root: str, session_id: str, status: str, error_code: str, message: str) -> None:
@@ -393,6 +483,7 @@ class _Runner:
                 logger.exception("runner job %s failed", kind)
                 self.reply("error", job=kind, message=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc())
         self.release_all()
+        self.images.close()  # owed images first: the targets' models must outlive their renders
         for pool in self.pools.values():
             pool.close()
 

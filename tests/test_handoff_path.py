@@ -1,0 +1,166 @@
+"""What keeps waiting off the critical path (issue 12), pinned by behaviour, not by timing.
+
+Batched fsyncs, evidence images rendered in the background and settled through the
+evidence directory, a runner that starts in the background, cached terminal sessions,
+and a run whose supervisor runs event-driven next to the agent.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+import yaml
+
+import phyagentos  # noqa: F401  (headless GL before mujoco loads)
+from phyagentos.errors import SupervisorError
+from phyagentos.protocol import Workspace
+from phyagentos.protocol import atomic
+from phyagentos.protocol.atomic import atomic_write_text, batched_durability
+from phyagentos.protocol.evidence_markers import (PENDING_MARKER, PRUNED_MARKER, images_pending,
+                                                  wait_for_images)
+
+
+def _count_fsyncs(monkeypatch) -> list[int]:
+    calls: list[int] = []
+    real = os.fsync
+
+    def counting(fd):
+        calls.append(fd)
+        return real(fd)
+
+    monkeypatch.setattr(atomic.os, "fsync", counting)
+    return calls
+
+
+def test_batched_writes_are_visible_at_once_and_fsynced_together_at_the_end(tmp_path, monkeypatch):
+    calls = _count_fsyncs(monkeypatch)
+    with batched_durability():
+        for name in ("a.yaml", "b.yaml", "c.yaml"):
+            atomic_write_text(tmp_path / name, name)
+            assert (tmp_path / name).read_text() == name  # renamed into place immediately
+        atomic_write_text(tmp_path / "a.yaml", "again")  # the same file is synced once
+        with batched_durability():  # nested blocks join the outer one
+            atomic_write_text(tmp_path / "d.yaml", "d")
+        assert calls == []
+    assert len(calls) == 4 + 1  # four files, then their directory once
+    assert (tmp_path / "a.yaml").read_text() == "again"
+
+
+def test_outside_a_batch_every_write_is_fsynced_with_its_directory(tmp_path, monkeypatch):
+    calls = _count_fsyncs(monkeypatch)
+    atomic_write_text(tmp_path / "a.yaml", "a")
+    assert len(calls) == 2
+
+
+def test_a_batch_interrupted_by_an_error_still_syncs_what_it_wrote(tmp_path, monkeypatch):
+    calls = _count_fsyncs(monkeypatch)
+    with pytest.raises(RuntimeError):
+        with batched_durability():
+            atomic_write_text(tmp_path / "a.yaml", "a")
+            raise RuntimeError("boom")
+    assert len(calls) == 2
+
+
+@pytest.fixture()
+def target():
+    from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget
+
+    t = MuJoCoTarget("franka_tabletop", DEFAULT_SCENE, seed=0)
+    yield t
+    t.close()
+
+
+@pytest.mark.sim
+def test_images_owed_to_a_pruned_success_are_never_rendered(tmp_path, target):
+    from phyagentos.runtime.evidence_writer import EvidenceImageWriter
+
+    writer = EvidenceImageWriter(decide_s=5.0)
+    assert writer.capture(target, tmp_path / "initial.png") == "initial.png"
+    assert images_pending(tmp_path)
+    (tmp_path / PRUNED_MARKER).touch()  # the verdict came first
+    writer.release(tmp_path)
+    assert wait_for_images(tmp_path, timeout_s=30)
+    writer.close()
+    assert not (tmp_path / "initial.png").exists() and not (tmp_path / PENDING_MARKER).exists()
+
+
+@pytest.mark.sim
+def test_images_a_verdict_needs_are_rendered_from_the_captured_state(tmp_path, target):
+    from phyagentos.runtime.evidence_writer import EvidenceImageWriter
+
+    writer = EvidenceImageWriter(decide_s=60.0)  # the answer, not the timeout, starts the render
+    writer.capture(target, tmp_path / "initial.png")
+    target.set_gripper(opening_m=0.0, settle_s=0.3)  # the scene moves on after the capture
+    writer.capture(target, tmp_path / "terminal.png")
+    writer.release(tmp_path)
+    started = time.monotonic()
+    assert wait_for_images(tmp_path, timeout_s=30)
+    assert time.monotonic() - started < 30
+    writer.close()
+    a, b = (tmp_path / "initial.png").read_bytes(), (tmp_path / "terminal.png").read_bytes()
+    assert a[:8] == b[:8] == b"\x89PNG\r\n\x1a\n"
+    assert a != b
+
+
+def test_a_runner_answers_a_job_sent_while_it_was_still_starting(tmp_path):
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.worker import RunnerProcess
+
+    runner = RunnerProcess(skills_dir=skills_dir(), trees_dir=trees_dir())
+    try:
+        assert runner.alive()  # starting counts as alive: nobody replaces it meanwhile
+        kind, _ = runner.request("ping", timeout=120, expect=("pong",))
+        assert kind == "pong" and runner.pid and runner.wait_started(0)
+    finally:
+        runner.close()
+    assert not runner.alive()
+
+
+@pytest.mark.sim
+def test_terminal_sessions_come_from_the_cache_as_independent_copies(tmp_path):
+    from phyagentos.orchestrator import run_goal_graph
+    from phyagentos.resources import goal_graphs_dir
+
+    report = run_goal_graph(goal_graphs_dir() / "hold.yaml", tmp_path / "ws")
+    assert report.succeeded
+    ws = Workspace.open(tmp_path / "ws")
+    (first,) = ws.list_sessions(run_id=report.run_id)
+    first.parameters["mutated"] = True
+    (again,) = ws.list_sessions(run_id=report.run_id)
+    assert "mutated" not in again.parameters and again.state == "succeeded"
+    # the session's transitions are complete although `finish` was written with `submit`
+    assert [t.dest for t in again.transitions][2:5] == ["running", "finalizing", "awaiting_verification"]
+    bundle = yaml.safe_load((tmp_path / "ws" / again.attempts[0].evidence / "bundle.yaml").read_text())
+    assert bundle["outcome"]["actuation_started_at"] <= bundle["outcome"]["actuation_ended_at"]
+
+
+def test_a_run_nobody_can_advance_is_reported_as_stalled(tmp_path):
+    from phyagentos.agent.coordinator import AgentCoordinator
+    from phyagentos.orchestrator import drive_run
+    from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
+
+    class Stuck(AgentCoordinator):
+        """A coordinator whose node never becomes terminal and never submits anything."""
+
+        def __init__(self, workspace):  # noqa: D107 - minimal stand-in
+            self.workspace = workspace
+            self.run_id = "r-stuck"
+
+        def step(self):
+            return 0
+
+        def done(self):
+            return False
+
+        def node_states(self, sessions=None):
+            return {"n": "running"}
+
+    ws = Workspace.create(tmp_path / "ws")
+    supervisor = WatchdogSupervisor(ws, config=SupervisorConfig(poll_interval_s=0.1))
+    try:
+        with pytest.raises(SupervisorError, match="stalled"):
+            drive_run(Stuck(ws), supervisor)
+    finally:
+        supervisor.close()

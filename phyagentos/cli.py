@@ -70,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
     val.add_argument("goal_graph", type=Path)
     val.add_argument("--workspace", type=Path, help="take valid targets from this workspace's TARGETS.md")
+    val.add_argument("--target", help="check every node on this target instead of the graph's")
 
     render = sub.add_parser("render", help="render trees and graphs")
     rsub = render.add_subparsers(dest="what", required=True)
@@ -199,25 +200,32 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
 
 def _cmd_validate(args, out: Console, err: Console) -> int:
     from phyagentos.agent.dag import to_digraph, topological_order
-    from phyagentos.orchestrator import load_graph_for
+    from phyagentos.graph_check import check_goal_graph
     from phyagentos.protocol import Workspace
     from phyagentos.resources import skills_dir, trees_dir
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 
     runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
     if args.workspace:
-        graph = load_graph_for(Workspace.open(args.workspace), args.goal_graph, runtime)
+        check = check_goal_graph(args.goal_graph, Workspace.open(args.workspace), runtime, target=args.target)
     else:
         import tempfile
 
         with tempfile.TemporaryDirectory() as tmp:
-            graph = load_graph_for(Workspace.create(tmp), args.goal_graph, runtime)
+            check = check_goal_graph(args.goal_graph, Workspace.create(tmp), runtime, target=args.target)
+    graph = check.graph
     dag = to_digraph(graph)
-    out.print(f"{args.goal_graph}: valid, {len(graph.nodes)} node(s)")
+    implicit = {(e.before, e.after): e for e in check.implicit_edges}
+    out.print(f"{args.goal_graph}: valid, {len(graph.nodes)} node(s), {check.poses_checked} pose(s) reachable",
+              highlight=False, markup=False, soft_wrap=True)
     for node_id in topological_order(dag):
         node = graph.get_node(node_id)
-        deps = f" after {', '.join(node.depends_on)}" if node.depends_on else ""
-        out.print(f"  {node_id}: {node.skill} on {node.target}{deps}")
+        deps = [d + (" (implicit: one arm holds one object)" if (d, node_id) in implicit else "") for d in node.depends_on]
+        out.print(f"  {node_id}: {node.skill} on {node.target}" + (f" after {', '.join(deps)}" if deps else ""),
+                  highlight=False, markup=False, soft_wrap=True)
+    for edge in check.implicit_edges:
+        out.print(f"implicit edge {edge.before} -> {edge.after}: {edge.reason}", highlight=False, markup=False,
+                  soft_wrap=True)
     return EXIT_OK
 
 

@@ -137,11 +137,13 @@ def submit_goal_graph(goal_graph: str | Path, workspace_dir: str | Path, *, seed
         GoalGraphError: the goal graph (or the target override) is invalid.
         DocumentError: a protocol document in the workspace is malformed.
     """
+    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
+
     workspace = Workspace.create(workspace_dir)
     skills = skill_names()
-    targets = [t.name for t in workspace.read("TARGETS").data.targets]
-    load_goal_graph(goal_graph, skills=skills, targets=targets)  # errors name the user's file
-    _check_target(workspace, target)
+    # The whole graph before anything is registered: errors name the user's file.
+    check_goal_graph(goal_graph, workspace, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()), target=target)
     run = _register_run(workspace, goal_graph, seed=seed, target=target, submitted_by=submitted_by)
     graph = load_run_graph(workspace, run.run_id, skills=skills)
     with workspace.run_lock(run.run_id):
@@ -202,8 +204,10 @@ def run_goal_graph(
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
     runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
-    load_graph_for(workspace, goal_graph, runtime)  # errors name the user's file
-    _check_target(workspace, target)
+    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+
+    # The whole graph before anything is registered or moves: errors name the user's file.
+    check_goal_graph(goal_graph, workspace, runtime, target=target)
     supervisor = WatchdogSupervisor(workspace, runtime)  # its runner process starts meanwhile
     run = _register_run(workspace, goal_graph, seed=seed, target=target)
     graph = load_run_graph(workspace, run.run_id, skills=runtime.skills.names())

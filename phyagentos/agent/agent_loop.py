@@ -24,6 +24,7 @@ from phyagentos.protocol import Workspace, WorkspaceWatcher
 
 from .coordinator import AgentCoordinator
 from .goal_graph import GoalGraph, load_goal_graph
+from .gripper_resources import gripper_effects, serialise_gripper_use
 
 __all__ = ["AgentLoop", "load_run_graph"]
 
@@ -42,6 +43,8 @@ def load_run_graph(workspace: Workspace, run_id: str, *, skills: Collection[str]
     graph = load_goal_graph(workspace.runs.graph_path(run_id), skills=skills, targets=targets)
     if record.target is not None:
         graph = replace(graph, nodes=tuple(replace(n, target=record.target) for n in graph.nodes))
+    # One arm holds one object: the same implicit edges `validate` shows.
+    graph, _ = serialise_gripper_use(graph, gripper_effects())
     return graph
 
 

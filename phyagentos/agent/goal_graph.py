@@ -29,6 +29,7 @@ import yaml
 
 from phyagentos.agent.dag import find_dependency_cycle, to_digraph
 from phyagentos.errors import GoalGraphError, format_choices
+from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, excerpt
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -181,7 +182,7 @@ def _kind(node: yaml.Node) -> str:
         return "a list"
     if node.tag == _NULL_TAG:
         return "nothing (null)"
-    return f"the scalar {node.value!r}"
+    return f"the scalar {excerpt(node.value)}"
 
 
 def _is_null(node: yaml.Node) -> bool:
@@ -401,14 +402,18 @@ class _Parser:
 
     def _compose(self, text: str) -> yaml.MappingNode:
         try:
-            root = yaml.compose(text, Loader=yaml.SafeLoader)
+            root = yaml.compose(text, Loader=yaml.SafeLoader) if len(text) <= MAX_YAML_CHARS else None
         except yaml.MarkedYAMLError as exc:
             mark = exc.problem_mark or exc.context_mark
             context = f" ({exc.context})" if exc.context else ""
-            raise self._error(f"YAML syntax error: {exc.problem or exc}{context}",
+            raise self._error(f"YAML syntax error: {excerpt(str(exc.problem or exc))}{context}",
                               mark.line + 1 if mark is not None else None) from exc
         except yaml.YAMLError as exc:
-            raise self._error(f"YAML syntax error: {exc}", None) from exc
+            raise self._error(f"YAML syntax error: {excerpt(str(exc))}", None) from exc
+        if len(text) > MAX_YAML_CHARS:
+            raise self._error(f"goal graph of {len(text)} characters is longer than the limit of "
+                              f"{MAX_YAML_CHARS}", 1)
+        check_bounds(root, path=self.path, error=GoalGraphError)
         expected = f"expected a mapping with keys {format_choices(TOP_LEVEL_KEYS)}"
         if root is None:
             raise self._error(f"goal graph is empty; {expected}", 1)

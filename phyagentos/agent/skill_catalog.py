@@ -12,20 +12,24 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-import yaml
-
 from phyagentos import resources
+from phyagentos.errors import SkillError
+from phyagentos.yamlsource import load_yaml
 
 __all__ = ["SkillInfo", "skill_catalog"]
 
 
 @dataclass(frozen=True)
 class SkillInfo:
-    """A skill's parameter names: ``required`` (the task) and ``optional`` (strategy)."""
+    """A skill's parameter names: ``required`` (the task) and ``optional`` (strategy);
+    ``acquires`` / ``releases``: the parameter naming the object the skill leaves in,
+    or takes out of, its target's gripper (``None``: no such effect)."""
 
     name: str
     required: frozenset[str]
     optional: frozenset[str]
+    acquires: str | None = None
+    releases: str | None = None
 
     @property
     def parameters(self) -> frozenset[str]:
@@ -36,12 +40,17 @@ class SkillInfo:
 def _load(directory: str) -> dict[str, SkillInfo]:
     out = {}
     for path in sorted(Path(directory).glob("*.yaml")):
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        try:
+            data = load_yaml(path.read_text(encoding="utf-8"), path=path, error=SkillError) or {}
+        except (SkillError, OSError, UnicodeDecodeError):
+            continue  # the runtime's registry reports malformed manifests
         if not isinstance(data, dict) or not isinstance(data.get("name"), str):
             continue  # the runtime's registry reports malformed manifests
         params = data.get("params") or {}
         required = frozenset(k for k, d in params.items() if isinstance(d, dict) and d.get("required"))
-        out[data["name"]] = SkillInfo(name=data["name"], required=required, optional=frozenset(params) - required)
+        effect = {k: data.get(k) if isinstance(data.get(k), str) else None for k in ("acquires", "releases")}
+        out[data["name"]] = SkillInfo(name=data["name"], required=required, optional=frozenset(params) - required,
+                                      **effect)
     return out
 
 

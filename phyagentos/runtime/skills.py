@@ -7,6 +7,7 @@
     description: Grasp an object from the table and lift it.
     runtime: builtin                 # SkillRuntime that executes it (SKILLRUNTIME.md)
     tree: pick                       # trees/pick.yaml
+    acquires: object                 # the gripper holds params[object] afterwards (releases: likewise)
     requires:
       capabilities: [arm_7dof, parallel_gripper, grasp]   # must be in the target's capabilities
       observations: [joint_positions, object_poses]       # must be in the target's observations
@@ -28,7 +29,7 @@ from phyagentos.yamlsource import SourceMap, load_yaml
 
 __all__ = ["SkillManifest", "SkillRegistry"]
 
-_KEYS = {"version", "name", "description", "runtime", "tree", "requires", "params", "policy"}
+_KEYS = {"version", "name", "description", "runtime", "tree", "requires", "params", "policy", "acquires", "releases"}
 _REQUIRES = {"capabilities", "observations"}
 
 
@@ -45,6 +46,8 @@ class SkillManifest:
     params: Mapping[str, Mapping[str, Any]]
     path: Path
     policy: Mapping[str, Any] | None = None  # runtime: policy (see phyagentos.runtime.policy_runtime)
+    acquires: str | None = None  # parameter naming the object the gripper holds afterwards
+    releases: str | None = None  # parameter naming the object the gripper lets go of
 
     def check_params(self, params: Mapping[str, Any]) -> list[str]:
         """Problems with session ``params`` for this skill (empty when fine)."""
@@ -114,6 +117,11 @@ def _parse(path: Path) -> SkillManifest:
     params = data.get("params") or {}
     if not isinstance(params, dict):
         raise SkillError("'params' must be a mapping", path=path, line=data.key_line("params"))
+    for key in ("acquires", "releases"):
+        value = data.get(key)
+        if value is not None and (not isinstance(value, str) or value not in params):
+            raise SkillError(f"{key!r} must name one of the skill's parameters ({format_choices(params) or 'none'}), "
+                             f"got {value!r}", path=path, line=data.key_line(key))
     return SkillManifest(
         name=data["name"],
         description=str(data.get("description", "")),
@@ -124,4 +132,6 @@ def _parse(path: Path) -> SkillManifest:
         params={k: dict(v or {}) for k, v in params.items()},
         path=path,
         policy=data.get("policy"),
+        acquires=data.get("acquires"),
+        releases=data.get("releases"),
     )

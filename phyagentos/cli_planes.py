@@ -116,10 +116,11 @@ def _cmd_agent(args, out: Console, err: Console) -> int:
         if args.run not in ws.runs.active_ids():
             failure = ws.runs.failure(args.run)
             if failure is not None:
-                err.print(f"run {args.run} was set aside (failed): {failure}", markup=False, highlight=False)
+                err.print(f"run {args.run} was set aside (failed): {failure}", markup=False, highlight=False, soft_wrap=True)
                 return EXIT_BAD_INPUT
             record = ws.runs.load(args.run)
-            err.print(f"run {args.run} already finished: {'succeeded' if record.succeeded else 'not every node succeeded'}")
+            err.print(f"run {args.run} already finished: {'succeeded' if record.succeeded else 'not every node succeeded'}",
+                      soft_wrap=True)
             return EXIT_OK if record.succeeded else EXIT_NOT_SUCCEEDED
 
     def started(loop) -> None:
@@ -129,7 +130,7 @@ def _cmd_agent(args, out: Console, err: Console) -> int:
     loop = serve_agent(args.workspace, run_id=args.run, poll_interval_s=args.poll_s, inotify=not args.no_inotify,
                        on_loop=started)
     for run_id, why in loop.set_aside_runs.items():
-        err.print(f"set aside run {run_id} (failed): {why}", markup=False, highlight=False)
+        err.print(f"set aside run {run_id} (failed): {why}", markup=False, highlight=False, soft_wrap=True)
     if args.run is not None and args.run in loop.set_aside_runs:
         return EXIT_BAD_INPUT
     if args.run is not None and args.run in loop.finished:
@@ -193,10 +194,10 @@ def _say_who_serves(ws, workspace: Path, err: Console) -> None:
 
     if not any(a["alive"] for a in read_agents(ws.root)):
         err.print(f"no agent serves {workspace}: the run waits until `phyagentos agent {workspace}` runs "
-                  f"(or submit with --follow)", markup=False, highlight=False)
+                  f"(or submit with --follow)", markup=False, highlight=False, soft_wrap=True)
     if not any(s["alive"] for s in read_presence(ws.root)):
         err.print(f"no supervisor watches {workspace}: start `phyagentos watch {workspace}` to execute the "
-                  f"sessions", markup=False, highlight=False)
+                  f"sessions", markup=False, highlight=False, soft_wrap=True)
 
 
 def status_data(workspace: str | Path) -> dict[str, Any]:
@@ -282,12 +283,12 @@ def _cmd_status(args, out: Console, err: Console) -> int:
         out.print(table)
     for run in data["runs"]:
         nodes = ", ".join(f"{n}={s}" for n, s in run.get("nodes", {}).items())
-        out.print(f"  run {run['run_id']}: {nodes or 'error: ' + run.get('error', '')}", markup=False, highlight=False)
+        out.print(f"  run {run['run_id']}: {nodes or 'error: ' + run.get('error', '')}", markup=False, highlight=False, soft_wrap=True)
     if data["recent_runs"]:
         out.print("  recent finished runs:")
         for run in data["recent_runs"]:
             detail = f" ({run['error']})" if run.get("error") else ""
-            out.print(f"    {run['run_id']}: {run['outcome']}{detail}", markup=False, highlight=False)
+            out.print(f"    {run['run_id']}: {run['outcome']}{detail}", markup=False, highlight=False, soft_wrap=True)
     # a stored run that no longer validates is bad input, reported with its file and line
     return EXIT_BAD_INPUT if any("error" in run for run in data["runs"]) else EXIT_OK
 

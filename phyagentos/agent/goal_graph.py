@@ -266,7 +266,7 @@ class _Parser:
                 shown = key if key is not None else getattr(key_node, "value", "?")
                 self.problems.append(_Invalid(
                     key_node,
-                    f"unknown key {shown!r} in {what}{_did_you_mean(shown, allowed)}; "
+                    f"unknown key {excerpt(shown)} in {what}{_did_you_mean(str(shown)[:200], allowed)}; "
                     f"valid keys: {format_choices(allowed)}"))
             elif key in entries:
                 self.problems.append(_Invalid(
@@ -292,7 +292,7 @@ class _Parser:
     def _node_id(self, node: yaml.Node) -> str:
         text = _str_scalar(node)
         if text is None or not NODE_ID_PATTERN.fullmatch(text):
-            shown = repr(text) if text is not None else _kind(node)
+            shown = excerpt(text) if text is not None else _kind(node)
             raise _Invalid(node, f"invalid node id {shown}: ids must match "
                                  f"{NODE_ID_PATTERN.pattern} (lower-case letter, then "
                                  f"lower-case letters, digits or '_'), e.g. 'pick_cube'")
@@ -305,7 +305,7 @@ class _Parser:
             raise _Invalid(node, f"{context}{what} must be a string, got {_kind(node)}; "
                                  f"{_choices(kind, valid)}")
         if text not in valid:
-            raise _Invalid(node, f"{context}unknown {what} {text!r}{_did_you_mean(text, valid)}; "
+            raise _Invalid(node, f"{context}unknown {what} {excerpt(text)}{_did_you_mean(text[:200], valid)}; "
                                  f"{_choices(kind, valid)}")
         return text
 

@@ -50,7 +50,7 @@ from phyagentos.yamlsource import load_yaml
 from .archive import SessionArchive
 from .atomic import atomic_write_bytes
 from .codec import Document, read_document, read_yaml, write_document
-from .runs import RunRegistry
+from .runs import RunRegistry, inside_workspace
 from .schemas import (
     DOCUMENTS,
     SAFETY_FILE,
@@ -348,7 +348,7 @@ class Workspace:
         _, filename, model = self._doc(name)
         path = self.root / filename
         try:
-            return read_document(path, model)
+            return read_document(inside_workspace(path, self.root), model)
         except FileNotFoundError:
             raise ProtocolError(
                 f"{filename} missing from workspace {self.root}; Workspace.create restores it"
@@ -494,7 +494,7 @@ class Workspace:
     def _load_session_doc(self, session_id: str) -> Document[SessionRecord]:
         path = self.session_path(session_id)
         try:
-            doc = read_document(path, SessionRecord)
+            doc = read_document(inside_workspace(path, self.root), SessionRecord)
         except FileNotFoundError:
             archived = self._session_archive.find(session_id)
             if archived is None:

@@ -4,7 +4,9 @@
     phyagentos watch WORKSPACE | agent WORKSPACE | submit GOAL_GRAPH --workspace DIR [--follow]
     phyagentos status WORKSPACE [--json] | signal WORKSPACE KIND [--session ID]   (cli_planes.py)
     phyagentos bench SUITE --workspace DIR [--episodes N] [--seeds ...] [--workers K] [--memory off|frozen|learn] [--json]
-    phyagentos validate GOAL_GRAPH [--workspace DIR]
+    phyagentos validate GOAL_GRAPH [--workspace DIR] [--target NAME]
+    phyagentos skills list|show NAME [--workspace DIR] | primitives [--json|--markdown]   (cli_skills.py)
+    phyagentos --skills-path DIR ...   (a folder with skills/ and trees/, searched after the workspace's)
     phyagentos render tree SKILL_OR_TREE [--out FILE.png]
     phyagentos render graph WORKSPACE [--run RUN_ID] [--out FILE.png|.svg] [--mermaid FILE.md]
     phyagentos policy serve [--host H] [--port N] [--rate-hz F] [--horizon K] [--stall-after N]
@@ -35,6 +37,9 @@ EXIT_OK, EXIT_NOT_SUCCEEDED, EXIT_BAD_INPUT = 0, 1, 2
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phyagentos", description="Goal graphs to verified sessions on embodied targets.")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-vv for debug)")
+    parser.add_argument("--skills-path", action="append", default=[], metavar="DIR",
+                        help="a folder with skills/ and trees/ searched after the workspace's own and before the "
+                             "shipped ones (repeatable; first wins)")
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="run a goal graph end to end (Agent and Runtime planes in one process)")
@@ -52,6 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
     from phyagentos.cli_planes import add_plane_commands
 
     add_plane_commands(sub)
+    from phyagentos.cli_skills import add_skill_commands
+
+    add_skill_commands(sub)
 
     bench = sub.add_parser("bench", help="run a benchmark suite: availability gate, sessions per (task, seed), report")
     bench.add_argument("suite", help="suite name (phyagentos/bench/suites/) or path of a suite YAML")
@@ -202,10 +210,10 @@ def _cmd_validate(args, out: Console, err: Console) -> int:
     from phyagentos.agent.dag import to_digraph, topological_order
     from phyagentos.graph_check import check_goal_graph
     from phyagentos.protocol import Workspace
-    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 
-    runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
+    runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs())
     if args.workspace:
         check = check_goal_graph(args.goal_graph, Workspace.open(args.workspace), runtime, target=args.target)
     else:
@@ -232,11 +240,11 @@ def _cmd_validate(args, out: Console, err: Console) -> int:
 def _cmd_render(args, out: Console, err: Console) -> int:
     if args.what == "graph":
         return _cmd_render_graph(args, out, err)
-    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
     from phyagentos.runtime.trees import render_ascii, render_image
 
-    runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
+    runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs())
     if args.name in runtime.skills:
         manifest = runtime.skills.get(args.name)
         if manifest.tree is None:
@@ -302,11 +310,15 @@ def main(argv: list[str] | None = None) -> int:
     out, err = Console(), Console(stderr=True)
     _setup_logging(args.verbose, err)
     from phyagentos.cli_planes import PLANE_HANDLERS
+    from phyagentos.cli_skills import SKILL_HANDLERS
 
-    handlers = {**PLANE_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
+    handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
                 "policy": _cmd_policy}
+    from phyagentos.cli_skills import skill_search_env
+
     try:
-        return handlers[args.command](args, out, err)
+        with skill_search_env(args, err):
+            return handlers[args.command](args, out, err)
     except PhyAgentOSError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

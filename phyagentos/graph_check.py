@@ -34,7 +34,7 @@ from phyagentos.agent.criteria import parse_criteria
 from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.gripper_resources import GripperEffect, ImplicitEdge, serialise_gripper_use
 from phyagentos.errors import GoalGraphError, PhyAgentOSError, VerifierError, format_choices
-from phyagentos.yamlsource import excerpt, line_of, load_yaml
+from phyagentos.yamlsource import clip, excerpt, line_of, load_yaml
 
 if TYPE_CHECKING:
     from phyagentos.protocol import Workspace
@@ -117,11 +117,11 @@ def check_goal_graph(path: str | Path, workspace: "Workspace", runtime: "Builtin
                 runtime.trees.build(manifest.tree, node.params)
             except PhyAgentOSError as exc:
                 problems.append((node_line(i, "params"), f"node {node.id!r}: skill {node.skill!r} does not build "
-                                                         f"with these parameters: {excerpt(str(exc), 400)}"))
+                                                         f"with these parameters: {clip(str(exc), 400)}"))
         try:
             parse_criteria(node.accept, where=f"node {node.id!r} accept")
         except VerifierError as exc:
-            problems.append((node_line(i, "accept"), excerpt(str(exc), 400)))
+            problems.append((node_line(i, "accept"), clip(str(exc), 400)))
 
     # 4: scene per target, names
     from phyagentos.runtime.graph_preflight import (PickPose, PlacePose, check_reachability, check_scene,  # noqa: PLC0415

@@ -26,7 +26,7 @@ from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
 from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
 from phyagentos.protocol import LEASED_STATES, RunRecord, Workspace, utc_now_iso
-from phyagentos.resources import skills_dir, trees_dir
+from phyagentos.resources import skill_dirs, tree_dirs
 from phyagentos.runtime.skills import SkillRegistry
 from phyagentos.runtime.supervisor import WatchdogSupervisor
 
@@ -71,7 +71,7 @@ def load_graph_for(workspace: Workspace, path: str | Path, runtime: "BuiltinSkil
 
 def skill_names() -> list[str]:
     """Names of the skills in ``skills/`` (what a goal graph may use)."""
-    return SkillRegistry(skills_dir()).names()
+    return SkillRegistry(skill_dirs()).names()
 
 
 def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
@@ -143,7 +143,7 @@ def submit_goal_graph(goal_graph: str | Path, workspace_dir: str | Path, *, seed
     workspace = Workspace.create(workspace_dir)
     skills = skill_names()
     # The whole graph before anything is registered: errors name the user's file.
-    check_goal_graph(goal_graph, workspace, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()), target=target)
+    check_goal_graph(goal_graph, workspace, BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs()), target=target)
     run = _register_run(workspace, goal_graph, seed=seed, target=target, submitted_by=submitted_by)
     graph = load_run_graph(workspace, run.run_id, skills=skills)
     with workspace.run_lock(run.run_id):
@@ -203,7 +203,7 @@ def run_goal_graph(
 
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
-    runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
+    runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs())
     from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
 
     # The whole graph before anything is registered or moves: errors name the user's file.

@@ -21,7 +21,7 @@ from typing import Any
 
 import yaml
 
-__all__ = ["SourceMap", "SourceList", "load_yaml", "line_of", "check_bounds", "compose_bounded", "excerpt",
+__all__ = ["SourceMap", "SourceList", "load_yaml", "line_of", "check_bounds", "compose_bounded", "excerpt", "clip",
            "MAX_YAML_CHARS", "MAX_ALIASES", "MAX_EXPANDED_NODES", "MAX_DEPTH"]
 
 #: Longest YAML text read (characters): far above any authored file or protocol block.
@@ -34,6 +34,11 @@ MAX_EXPANDED_NODES = 100_000
 MAX_DEPTH = 200
 #: Longest excerpt of user data quoted in an error message (characters).
 MAX_EXCERPT_CHARS = 200
+
+
+def clip(text: str, limit: int = MAX_EXCERPT_CHARS) -> str:
+    """``text`` cut to ``limit`` characters (messages that embed other messages stay bounded)."""
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} chars)"
 
 
 def excerpt(value: Any, limit: int = MAX_EXCERPT_CHARS) -> str:
@@ -124,10 +129,10 @@ def compose_bounded(text: str, *, path: str | Path | None, error: type[Exception
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = " ".join(p for p in (exc.context, exc.problem) if p)
-        raise error(f"YAML syntax error: {excerpt(problem or str(exc))}", path=path,
+        raise error(f"YAML syntax error: {clip(problem or str(exc))}", path=path,
                     line=first_line + mark.line if mark is not None else first_line) from None
     except yaml.YAMLError as exc:
-        raise error(f"YAML error: {excerpt(str(exc))}", path=path, line=first_line) from None
+        raise error(f"YAML error: {clip(str(exc))}", path=path, line=first_line) from None
     finally:
         instance.dispose()
     check_bounds(node, path=path, error=error, first_line=first_line)
@@ -197,7 +202,7 @@ def load_yaml(text: str, *, path: str | Path | None = None, error: type[Exceptio
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else None
-        raise error(f"invalid YAML: {excerpt(str(exc.problem or exc))}", path=path, line=line) from None
+        raise error(f"invalid YAML: {clip(str(exc.problem or exc))}", path=path, line=line) from None
     finally:
         loader.dispose()
 

@@ -29,7 +29,7 @@ import yaml
 
 from phyagentos.agent.dag import find_dependency_cycle, to_digraph
 from phyagentos.errors import GoalGraphError, format_choices
-from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, excerpt
+from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip, excerpt
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -406,10 +406,10 @@ class _Parser:
         except yaml.MarkedYAMLError as exc:
             mark = exc.problem_mark or exc.context_mark
             context = f" ({exc.context})" if exc.context else ""
-            raise self._error(f"YAML syntax error: {excerpt(str(exc.problem or exc))}{context}",
+            raise self._error(f"YAML syntax error: {clip(str(exc.problem or exc))}{context}",
                               mark.line + 1 if mark is not None else None) from exc
         except yaml.YAMLError as exc:
-            raise self._error(f"YAML syntax error: {excerpt(str(exc))}", None) from exc
+            raise self._error(f"YAML syntax error: {clip(str(exc))}", None) from exc
         if len(text) > MAX_YAML_CHARS:
             raise self._error(f"goal graph of {len(text)} characters is longer than the limit of "
                               f"{MAX_YAML_CHARS}", 1)

@@ -8,6 +8,7 @@ that recovery and memory may revise.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -39,7 +40,9 @@ class SkillInfo:
 @lru_cache(maxsize=8)
 def _load(directory: str) -> dict[str, SkillInfo]:
     out = {}
-    for path in sorted(Path(directory).glob("*.yaml")):
+    # a search path (os.pathsep-joined, first wins), like the runtime's SkillRegistry
+    paths = [p for folder in directory.split(os.pathsep) if folder for p in sorted(Path(folder).glob("*.yaml"))]
+    for path in paths:
         try:
             data = load_yaml(path.read_text(encoding="utf-8"), path=path, error=SkillError) or {}
         except (SkillError, OSError, UnicodeDecodeError):
@@ -49,12 +52,15 @@ def _load(directory: str) -> dict[str, SkillInfo]:
         params = data.get("params") or {}
         required = frozenset(k for k, d in params.items() if isinstance(d, dict) and d.get("required"))
         effect = {k: data.get(k) if isinstance(data.get(k), str) else None for k in ("acquires", "releases")}
+        if data["name"] in out:
+            continue  # shadowed by an earlier folder of the search path
         out[data["name"]] = SkillInfo(name=data["name"], required=required, optional=frozenset(params) - required,
                                       **effect)
     return out
 
 
 def skill_catalog(directory: str | Path | None = None) -> dict[str, SkillInfo]:
-    """Skill name -> :class:`SkillInfo` for the manifests in ``directory``
-    (default :func:`phyagentos.resources.skills_dir`). Cached per directory."""
-    return dict(_load(str(directory if directory is not None else resources.skills_dir())))
+    """Skill name -> :class:`SkillInfo` for the manifests in ``directory`` (one folder or
+    an ``os.pathsep``-joined search path, first wins; default: the shipped skills plus
+    ``PHYAGENTOS_SKILLS_PATH``, :func:`phyagentos.resources.skill_dirs`). Cached per path."""
+    return dict(_load(str(directory if directory is not None else resources.skill_dirs())))

@@ -28,7 +28,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, excerpt
+from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip
 
 from phyagentos.errors import DocumentError, format_choices
 
@@ -176,9 +176,9 @@ def _load(text: str, path: Path | None, first_line: int) -> tuple[Node | None, A
         mark = exc.problem_mark or exc.context_mark
         line = first_line + mark.line if mark is not None else first_line
         problem = " ".join(p for p in (exc.context, exc.problem) if p)
-        raise DocumentError(f"YAML syntax error: {excerpt(problem)}", path=path, line=line) from None
+        raise DocumentError(f"YAML syntax error: {clip(problem)}", path=path, line=line) from None
     except yaml.YAMLError as exc:
-        raise DocumentError(f"YAML error: {excerpt(str(exc))}", path=path, line=first_line) from None
+        raise DocumentError(f"YAML error: {clip(str(exc))}", path=path, line=first_line) from None
     finally:
         loader.dispose()
     return node, data

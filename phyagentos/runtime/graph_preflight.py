@@ -36,7 +36,7 @@ from phyagentos.motion.ik import solve_ik
 from phyagentos.primitives.motion import ik_options
 from phyagentos.targets.perturbations import parse_perturbations, split_scene
 from phyagentos.targets.scene import SceneSpec
-from phyagentos.yamlsource import excerpt, line_of
+from phyagentos.yamlsource import clip, excerpt, line_of
 
 from .target_pool import DRIVERS
 
@@ -109,7 +109,7 @@ def _item_problems(kind: str, index: int, item: Any, cls: type) -> list[GraphPro
         try:
             cls(**dict(item))
         except (PhyAgentOSError, TypeError, ValueError) as exc:
-            out.append(GraphProblem(line, f"scene {kind}[{index}]: {excerpt(str(exc))}"))
+            out.append(GraphProblem(line, f"scene {kind}[{index}]: {clip(str(exc))}"))
     return out
 
 
@@ -142,7 +142,7 @@ def check_scene(raw: Mapping[str, Any] | None, driver: str) -> tuple[Any, list[G
     try:
         base, perturb = split_scene(raw or None)
     except PhyAgentOSError as exc:
-        return None, [GraphProblem(scene_line, excerpt(str(exc)))]
+        return None, [GraphProblem(scene_line, clip(str(exc)))]
     own = getattr(cls, "scene_from_dict", None)
     problems: list[GraphProblem] = []
     if _tabletop(own) and isinstance(raw, Mapping):
@@ -162,12 +162,12 @@ def check_scene(raw: Mapping[str, Any] | None, driver: str) -> tuple[Any, list[G
     try:
         scene = own(base) if own is not None else (SceneSpec.from_dict(base) if base else SceneSpec.default())
     except (PhyAgentOSError, TypeError, ValueError) as exc:
-        return None, [GraphProblem(scene_line, f"scene: {excerpt(str(exc))}")]
+        return None, [GraphProblem(scene_line, f"scene: {clip(str(exc))}")]
     try:
         parse_perturbations(perturb, objects=getattr(scene, "object_names", ()))
     except PhyAgentOSError as exc:
         line = line_of(raw, "perturbations") if isinstance(raw, Mapping) else scene_line
-        return None, [GraphProblem(line, f"scene perturbations: {excerpt(str(exc))}")]
+        return None, [GraphProblem(line, f"scene perturbations: {clip(str(exc))}")]
     return scene, []
 
 

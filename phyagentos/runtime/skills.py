@@ -20,14 +20,30 @@ BuiltinSkillRuntime builds ``tree`` with the session's parameters.
 
 from __future__ import annotations
 
+import logging
+import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 from phyagentos.errors import SkillError, format_choices
 from phyagentos.yamlsource import SourceMap, load_yaml
 
-__all__ = ["SkillManifest", "SkillRegistry"]
+__all__ = ["SkillManifest", "SkillRegistry", "search_dirs"]
+
+logger = logging.getLogger(__name__)
+
+
+def search_dirs(directory: str | Path | Sequence[str | Path]) -> tuple[Path, ...]:
+    """Folders of a search path given as one path, an ``os.pathsep``-joined string or a sequence."""
+    if isinstance(directory, (str, Path)):
+        parts = str(directory).split(os.pathsep) if isinstance(directory, str) else [directory]
+    else:
+        parts = list(directory)
+    return tuple(Path(p) for p in parts if str(p))
+
+
+_dirs = search_dirs
 
 _KEYS = {"version", "name", "description", "runtime", "tree", "requires", "params", "policy", "acquires", "releases"}
 _REQUIRES = {"capabilities", "observations"}
@@ -59,20 +75,46 @@ class SkillManifest:
 
 
 class SkillRegistry:
-    """All manifests in a ``skills/`` directory, parsed eagerly so errors surface early.
+    """All manifests along a search path of ``skills/`` folders, parsed eagerly so errors
+    surface early.
+
+    Args:
+        directory: one folder, several joined with ``os.pathsep`` or a sequence, first
+            wins (:func:`phyagentos.resources.skill_dirs`). A name found again in a later
+            folder is recorded in :attr:`shadowed` and logged as a warning.
 
     Raises:
-        SkillError: a malformed manifest (file and line), or a duplicate name.
+        SkillError: a malformed manifest (file and line), or a name used twice in one folder.
     """
 
-    def __init__(self, directory: str | Path):
-        self.directory = Path(directory)
+    def __init__(self, directory: str | Path | Sequence[str | Path]):
+        self.directories = _dirs(directory)
         self._skills: dict[str, SkillManifest] = {}
-        for path in sorted(self.directory.glob("*.yaml")):
-            manifest = _parse(path)
-            if manifest.name in self._skills:
-                raise SkillError(f"duplicate skill name {manifest.name!r} (also in {self._skills[manifest.name].path})", path=path)
-            self._skills[manifest.name] = manifest
+        #: (name, path that wins, path shadowed by it)
+        self.shadowed: list[tuple[str, Path, Path]] = []
+        for folder in self.directories:
+            here: dict[str, Path] = {}
+            for path in sorted(folder.glob("*.yaml")):
+                manifest = _parse(path)
+                if manifest.name in here:
+                    raise SkillError(f"duplicate skill name {manifest.name!r} (also in {here[manifest.name]})", path=path)
+                here[manifest.name] = path
+                if manifest.name in self._skills:
+                    winner = self._skills[manifest.name].path
+                    self.shadowed.append((manifest.name, winner, path))
+                    logger.warning("skill %r in %s is shadowed by %s, which comes first in the search path",
+                                   manifest.name, path, winner)
+                    continue
+                self._skills[manifest.name] = manifest
+
+    @property
+    def directory(self) -> str:
+        """The search path as one ``os.pathsep``-joined string (what the runner process takes)."""
+        return os.pathsep.join(str(d) for d in self.directories)
+
+    def manifests(self) -> list[SkillManifest]:
+        """Every skill that wins its name, sorted by name."""
+        return [self._skills[n] for n in sorted(self._skills)]
 
     def names(self) -> list[str]:
         return sorted(self._skills)

@@ -221,7 +221,7 @@ class WatchdogSupervisor:
 
     def __init__(self, workspace: Workspace, runtime: Any = None, *, owner: str | None = None,
                  lease_s: float | None = None, config: SupervisorConfig | None = None) -> None:
-        from phyagentos.resources import skills_dir, trees_dir  # noqa: PLC0415
+        from phyagentos.resources import skill_dirs, tree_dirs  # noqa: PLC0415
 
         config = config or SupervisorConfig()
         if lease_s is not None:
@@ -232,7 +232,7 @@ class WatchdogSupervisor:
         if runtime is not None:
             self._dirs = (str(runtime.skills.directory), str(runtime.trees.directory))
         else:
-            self._dirs = (str(skills_dir()), str(trees_dir()))
+            self._dirs = (skill_dirs(), tree_dirs())  # the search path, PHYAGENTOS_SKILLS_PATH included
         self.watcher = WorkspaceWatcher(workspace.root, dirs=("sessions", "sessions/.index"),
                                         files=("RUNTIME_SIGNAL.md",), inotify=config.inotify)
         self._runner: RunnerProcess | None = _take_runner(*self._dirs)

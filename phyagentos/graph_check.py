@@ -191,7 +191,9 @@ def check_goal_graph(path: str | Path, workspace: "Workspace", runtime: "Builtin
                     places.append(PlacePose(node.id, held, region, node_line(i, "params", "region"), height))
             if scene_names(scene) is not None:
                 checked += 2 * (len(picks) + len(places))
-            problems += [(p.line, p.message) for p in
+            first = next((node_line(i) for i, n in enumerate(graph.nodes) if n.target == name), None)
+            fallback = line_of(raw, "scene") if raw_scene is not None else first
+            problems += [(p.line if p.line is not None else fallback, p.message) for p in
                          check_reachability(specs[name].driver, name, scene, picks=picks, places=places)]
         if problems:
             _raise(path, problems)

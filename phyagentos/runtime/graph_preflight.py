@@ -187,6 +187,27 @@ def _T(xyz: Sequence[float], yaw: float = 0.0) -> np.ndarray:
     return T
 
 
+def _start_collisions(target: Any, target_name: str, *, line: int | None) -> list[GraphProblem]:
+    """The arm's start (home) configuration must not reach into an obstacle: its contacts
+    would push the arm from the first command on (a ``hold`` drifts, plans start invalid)."""
+    m, d = target.model, target.data
+    mujoco.mj_forward(m, d)
+    hits = set()
+    for i in range(d.ncon):
+        c = d.contact[i]
+        names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or "" for g in (c.geom1, c.geom2)]
+        bodies = [int(m.geom_bodyid[g]) for g in (c.geom1, c.geom2)]
+        for k in (0, 1):
+            other = 1 - k
+            if names[k].startswith("obstacle:") and bodies[other] != 0 and m.body_jntnum[bodies[other]] > 0 \
+                    and m.jnt_type[m.body_jntadr[bodies[other]]] != mujoco.mjtJoint.mjJNT_FREE:
+                hits.add(names[k].split(":", 1)[1])
+    if not hits:
+        return []
+    return [GraphProblem(line, f"{target_name!r} starts in collision: its home pose reaches into obstacle(s) "
+                               f"{format_choices(hits)}; move the obstacle or use another target")]
+
+
 def check_reachability(driver: str, target_name: str, scene: Any, *, picks: Sequence[PickPose] = (),
                        places: Sequence[PlacePose] = ()) -> list[GraphProblem]:
     """IK on every pick and place pose of a node list; problems for the unreachable ones.
@@ -195,14 +216,16 @@ def check_reachability(driver: str, target_name: str, scene: Any, *, picks: Sequ
     state file is written), then for each pick tries every top-down grasp candidate of
     the object at its scene pose (grasp and pre-grasp must both solve) and for each
     place the held object's tcp pose over the region centre and its pre-place pose.
-    Scenes that are not a :class:`SceneSpec` (FrankaKitchen) are not checked here.
+    Also checks that the arm's home pose touches no obstacle. Scenes that are not a
+    :class:`SceneSpec` (FrankaKitchen) are not checked here.
     """
-    if not isinstance(scene, SceneSpec) or not (picks or places):
+    if not isinstance(scene, SceneSpec):
         return []
     cls = DRIVERS[driver]
     target = cls(target_name, scene, seed=0)
     problems: list[GraphProblem] = []
     try:
+        problems += _start_collisions(target, target_name, line=(picks[0].line if picks else None))
         opts = ik_options(target)
         q_home = np.asarray(target.arm_qpos(), dtype=float)
 

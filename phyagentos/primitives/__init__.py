@@ -19,12 +19,14 @@ articulate_hinge          turn a held handle about its entity's hinge
 tool_move                 straight tcp motion by an offset in the tool frame
 compute_place_as_held     place poses keeping the hand's orientation (hooked objects)
 noop                      succeed after n ticks, touching no target (control.py)
+guarded_move              straight tcp motion that stops on contact (contact.py)
 ========================  ==========================================================
 """
 
 from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .base import Primitive, PrimitiveFailure
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
+from .contact import GuardedMove
 from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, RetimePath, SolveIK
@@ -59,4 +61,5 @@ PRIMITIVES = {
     "tool_move": ToolMove,
     "compute_place_as_held": ComputePlaceAsHeld,
     "noop": Noop,
+    "guarded_move": GuardedMove,
 }

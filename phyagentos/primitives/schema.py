@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
+from .contact import GuardedMove
 from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, RetimePath, SolveIK
@@ -147,6 +148,13 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
     },
     Noop: {
         "ticks": ("int", "", "ticks before succeeding (touches no target)"),
+    },
+    GuardedMove: {
+        "offset": ("[dx, dy, dz]", "m", "world-frame tcp displacement: the farthest the motion goes"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+        "tracking_tol_rad": ("float", "rad", "joint tracking error tolerated before the motion counts as blocked"),
+        "max_contact_force_n": ("float", "N", "stop once the robot presses on anything with this much"),
+        "expect_contact": ("bool", "", "fail with contact.missing if the whole offset touches nothing"),
     },
 }
 

@@ -20,6 +20,7 @@ tool_move                 straight tcp motion by an offset in the tool frame
 compute_place_as_held     place poses keeping the hand's orientation (hooked objects)
 noop                      succeed after n ticks, touching no target (control.py)
 guarded_move              straight tcp motion that stops on contact (contact.py)
+compute_place_at          place poses at an offset or slot inside a region (placement.py)
 ========================  ==========================================================
 """
 
@@ -31,6 +32,7 @@ from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
+from .placement import ComputePlaceAt
 
 __all__ = [
     "PRIMITIVES",
@@ -62,4 +64,5 @@ PRIMITIVES = {
     "compute_place_as_held": ComputePlaceAsHeld,
     "noop": Noop,
     "guarded_move": GuardedMove,
+    "compute_place_at": ComputePlaceAt,
 }

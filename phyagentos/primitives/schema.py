@@ -23,6 +23,7 @@ from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
+from .placement import ComputePlaceAt
 
 __all__ = ["ParamSpec", "PrimitiveSchema", "TABLES", "primitive_schema", "primitive_schemas", "REQUIRED"]
 
@@ -148,6 +149,17 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
     },
     Noop: {
         "ticks": ("int", "", "ticks before succeeding (touches no target)"),
+    },
+    ComputePlaceAt: {
+        "object": ("str", "", "the held object"),
+        "region": ("str", "", "region to set it down in"),
+        "offset_m": ("[dx, dy] | null", "m", "spot relative to the region's centre (give `offset_m` or `slot`)"),
+        "slot": ("int | null", "", "0-based cell along the region's longer axis"),
+        "slots": ("int | null", "", "number of cells the region is divided into"),
+        "approach_height_m": ("float", "m", "pre-place height above the place pose"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
+        "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),
     },
     GuardedMove: {
         "offset": ("[dx, dy, dz]", "m", "world-frame tcp displacement: the farthest the motion goes"),

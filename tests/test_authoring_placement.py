@@ -91,3 +91,23 @@ def test_a_slot_out_of_range_is_a_validation_error_before_anything_moves(tmp_pat
     assert f"{graph}:16:" in err and "slot must be a whole number in [0, 1]" in err
     graph.write_text(GRAPH.format(where="slot: 1, slots: 2"), encoding="utf-8")
     assert main(["validate", str(graph)]) == 0
+
+
+def test_two_cubes_share_one_region_side_by_side_through_the_cli(tmp_path, capsys):
+    import json
+
+    import yaml
+
+    graph = Path(__file__).resolve().parent / "data_authoring" / "two_in_one_region.yaml"
+    ws = tmp_path / "ws"
+    assert main(["run", str(graph), "--workspace", str(ws), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    last = [s for s in report["sessions"] if s["node"] == "place_blue"][-1]
+    from phyagentos.protocol import Workspace
+
+    rec = Workspace.open(ws).load_session(last["session_id"])
+    terminal = yaml.safe_load((ws / rec.attempts[-1].evidence / "terminal.yaml").read_text(encoding="utf-8"))
+    entities = terminal.get("entities", terminal) if isinstance(terminal, dict) else terminal
+    pos = {e["name"]: e["position"] for e in entities if e["name"] in ("red_cube", "blue_cube")}
+    assert abs(pos["red_cube"][2] - pos["blue_cube"][2]) < 0.01  # side by side, not stacked
+    assert np.hypot(pos["red_cube"][0] - pos["blue_cube"][0], pos["red_cube"][1] - pos["blue_cube"][1]) > 0.06

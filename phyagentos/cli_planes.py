@@ -170,6 +170,7 @@ def _cmd_submit(args, out: Console, err: Console) -> int:
         else:
             print(run.run_id)
         _say_who_serves(ws, args.workspace, err)
+        _say_queued(ws, run.run_id, err)
         return EXIT_OK
     err.print(f"run {run.run_id} submitted; following (start `phyagentos watch {args.workspace}` to execute it)")
     loop = serve_agent(args.workspace, run_id=run.run_id,
@@ -184,6 +185,17 @@ def _cmd_submit(args, out: Console, err: Console) -> int:
     if run.run_id not in loop.finished:
         return EXIT_NOT_SUCCEEDED  # stopped before the run finished
     return EXIT_OK if loop.finished[run.run_id] else EXIT_NOT_SUCCEEDED
+
+
+def _say_queued(ws, run_id: str, err: Console) -> None:
+    """Say when the run waits for another run's target world (one run per target world)."""
+    from phyagentos.orchestrator import held_worlds
+
+    targets = {ident.target for _, _, ident in ws.active_sessions(run_id=run_id)}
+    for target, owner in held_worlds(ws, targets).items():
+        if owner != run_id:
+            err.print(f"run {run_id} queues: target {target} holds the world of run {owner} until it finishes",
+                      markup=False, highlight=False, soft_wrap=True)
 
 
 def _say_who_serves(ws, workspace: Path, err: Console) -> None:

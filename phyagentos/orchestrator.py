@@ -33,7 +33,7 @@ from phyagentos.runtime.supervisor import WatchdogSupervisor
 if TYPE_CHECKING:
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 
-__all__ = ["RunReport", "drive_run", "load_graph_for", "run_goal_graph", "submit_goal_graph", "serve_agent",
+__all__ = ["RunReport", "drive_run", "load_graph_for", "run_goal_graph", "submit_goal_graph", "serve_agent", "held_worlds",
            "skill_names"]
 
 logger = logging.getLogger(__name__)
@@ -125,6 +125,22 @@ def _check_target(workspace: Workspace, target: str | None) -> None:
         raise GoalGraphError(f"unknown target {target!r} for --target; valid targets: {format_choices(names)}")
 
 
+def held_worlds(workspace: Workspace, targets) -> dict[str, str]:
+    """Target -> the other active run whose world it holds now (a new run would queue)."""
+    return {t: owner for t in sorted(targets) if (owner := workspace.runs.world_owner(t)) is not None}
+
+
+def _refuse_held_worlds(workspace: Workspace, targets) -> None:
+    """``phyagentos run`` drives one run in-process: it refuses, rather than waits for, a
+    target whose world another active run holds (that run would otherwise be reset)."""
+    held = held_worlds(workspace, targets)
+    if held:
+        which = "; ".join(f"target {t!r} holds the world of active run {r!r}" for t, r in held.items())
+        raise SupervisorError(f"{which}: a target's world belongs to one run at a time. Let it finish (`phyagentos "
+                              f"agent {workspace.root} --run RUN` with `phyagentos watch {workspace.root}`), or "
+                              f"submit this graph with `phyagentos submit` to queue behind it")
+
+
 def submit_goal_graph(goal_graph: str | Path, workspace_dir: str | Path, *, seed: int | None = 0,
                       target: str | None = None, submitted_by: str = "") -> RunRecord:
     """Validate ``goal_graph``, register it as a run and compile its ready nodes; returns the run.
@@ -207,7 +223,8 @@ def run_goal_graph(
     from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
 
     # The whole graph before anything is registered or moves: errors name the user's file.
-    check_goal_graph(goal_graph, workspace, runtime, target=target)
+    checked = check_goal_graph(goal_graph, workspace, runtime, target=target)
+    _refuse_held_worlds(workspace, {n.target for n in checked.graph.nodes})
     supervisor = WatchdogSupervisor(workspace, runtime)  # its runner process starts meanwhile
     run = _register_run(workspace, goal_graph, seed=seed, target=target)
     graph = load_run_graph(workspace, run.run_id, skills=runtime.skills.names())

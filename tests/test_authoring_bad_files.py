@@ -256,6 +256,13 @@ def test_two_runs_on_one_target_never_reset_each_others_world_the_second_queues(
         assert workspace.runs.world_owner("franka_tabletop") == first
         assert workspace.load_session(sid2).state == "pending"  # queued, not started on the first run's world
         assert f"target franka_tabletop holds the world of run {first}" in caplog.text
+        capsys.readouterr()
+        # `run` drives one run in-process: it refuses and says which run holds the world
+        assert main(["run", str(HOLD), "--workspace", str(ws)]) == 2
+        assert f"target 'franka_tabletop' holds the world of active run '{first}'" in capsys.readouterr().err
+        # `submit` queues, and says so
+        assert main(["submit", str(HOLD), "--workspace", str(ws)]) == 0
+        assert f"holds the world of run {first} until it finishes" in capsys.readouterr().err
         for _ in range(50):
             agent.step()
             if first not in workspace.runs.active_ids():

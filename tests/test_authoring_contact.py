@@ -65,3 +65,13 @@ def test_a_guarded_move_that_may_miss_succeeds_without_contact(target):
     ctx = SkillContext(target=target)
     status = _tick_until_done(GuardedMove("Up", offset=[0.0, 0.0, 0.05], expect_contact=False), ctx)
     assert status == py_trees.common.Status.SUCCESS
+
+
+def test_a_compliant_push_moves_the_cube_into_the_region_through_the_cli(tmp_path, capsys):
+    ws = tmp_path / "ws"
+    assert main(["run", str(DATA / "push_graph.yaml"), "--workspace", str(ws), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["succeeded"]  # the verifier found the cube inside the goal region 10 cm away
+    [trace] = list((ws / "evidence").glob("*/trace.jsonl"))
+    [push] = [json.loads(line) for line in trace.read_text().splitlines() if '"kind": "push"' in line]
+    assert push["touched"] == ["cube"] and 0.0 < push["max_force_n"] <= 40.0

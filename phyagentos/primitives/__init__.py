@@ -21,13 +21,15 @@ compute_place_as_held     place poses keeping the hand's orientation (hooked obj
 noop                      succeed after n ticks, touching no target (control.py)
 guarded_move              straight tcp motion that stops on contact (contact.py)
 compute_place_at          place poses at an offset or slot inside a region (placement.py)
+compute_push              start poses to push an object with the closed hand (contact.py)
+push                      compliant push that must touch, with an effort limit (contact.py)
 ========================  ==========================================================
 """
 
 from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .base import Primitive, PrimitiveFailure
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
-from .contact import GuardedMove
+from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, RetimePath, SolveIK
@@ -65,4 +67,6 @@ PRIMITIVES = {
     "noop": Noop,
     "guarded_move": GuardedMove,
     "compute_place_at": ComputePlaceAt,
+    "compute_push": ComputePush,
+    "push": Push,
 }

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping
 
 from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
-from .contact import GuardedMove
+from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, RetimePath, SolveIK
@@ -160,6 +160,26 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
         "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
         "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),
+    },
+    ComputePush: {
+        "object": ("str", "", "the object to push"),
+        "direction": ("[dx, dy]", "", "world-frame push direction (normalised)"),
+        "distance_m": ("float", "m", "how far the object should move"),
+        "clearance_m": ("float", "m", "gap between the fingertips and the object at the start"),
+        "approach_height_m": ("float", "m", "pre-start height above the start pose"),
+        "tip_clearance_m": ("float", "m", "fingertips above the table"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "start": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp start pose"),
+        "prestart": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-start pose"),
+        "goal": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pose where the push ends"),
+    },
+    Push: {
+        "to": ("str | null", "", "blackboard key of the (4, 4) world tcp pose where the push ends (or `offset`)"),
+        "offset": ("[dx, dy, dz] | null", "m", "world-frame tcp displacement of the whole push"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+        "tracking_tol_rad": ("float", "rad", "joint tracking error tolerated while pushing"),
+        "max_force_n": ("float", "N", "effort limit: fail with contact.excessive_force above it"),
+        "expect_contact": ("bool", "", "fail with contact.missing if nothing was touched"),
     },
     GuardedMove: {
         "offset": ("[dx, dy, dz]", "m", "world-frame tcp displacement: the farthest the motion goes"),

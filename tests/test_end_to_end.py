@@ -77,20 +77,27 @@ def test_two_dependent_pick_and_place_nodes_run_in_order(tmp_path):
 
 
 def test_unreachable_object_fails_replans_and_blocks_the_dependent_node(tmp_path):
+    from unchecked_run import run_unchecked
+
     graph = tmp_path / "far.yaml"
     spec = yaml.safe_load((goal_graphs_dir() / "pick_and_place.yaml").read_text())
     spec["scene"]["objects"][0]["position"] = [1.4, -0.2]  # 1.4 m away: beyond the Panda's reach
     graph.write_text(yaml.safe_dump(spec))
+    # The CLI refuses it before anything moves (issue 11: whole-graph validation) ...
     result = subprocess.run(CLI + ["run", str(graph), "--workspace", str(tmp_path / "ws"), "--json"],
                             capture_output=True, text=True, timeout=300)
-    assert result.returncode == 1, result.stderr
-    out = json.loads(result.stdout)
+    assert result.returncode == 2 and "cannot reach 'cube'" in result.stderr, result.stderr
+    assert not (tmp_path / "ws" / "targets" / "franka_tabletop" / "state.npz").exists()
+    # ... and a run registered without that check (e.g. by hand) still ends the way the
+    # runtime reports it: an IK failure, replans, the dependent node blocked.
+    report = run_unchecked(graph, tmp_path / "ws")
+    ws = Workspace.open(tmp_path / "ws")
+    out = {"nodes": report.node_states, "sessions": [s.to_dict() for s in report.sessions]}
     assert out["nodes"] == {"pick_cube": "failed", "place_cube": "blocked"}
     picks = [s for s in out["sessions"] if s["node"] == "pick_cube"]
     assert [s["status"] for s in picks] == ["replanned", "replanned", "failed"]
     assert [s["parent_session_id"] for s in picks][1:] == [picks[0]["session_id"], picks[1]["session_id"]]
     assert all(s["verdict"] in ("replan", "failure") for s in picks)
-    ws = Workspace.open(tmp_path / "ws")
     attempt = ws.load_session(picks[0]["session_id"]).attempts[0]
     assert attempt.error.code == "ik.unreachable"
 

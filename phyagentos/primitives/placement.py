@@ -40,7 +40,7 @@ class ComputePlaceAt(Primitive):
         offset_m: ``[dx, dy]`` world-frame offset of the spot from the region's centre,
             m; or
         slot, slots: the spot is cell ``slot`` (0-based) of ``slots`` along the region's
-            longer axis.
+            longer axis (default 0 of 1: the centre).
         approach_height_m: pre-place height above the place pose, m.
         snapshot: blackboard key of the observation.
         place, preplace: blackboard keys written with (4, 4) world tcp poses.
@@ -49,21 +49,20 @@ class ComputePlaceAt(Primitive):
     fit inside the region.
     """
 
-    def __init__(self, name: str, *, object: str, region: str, offset_m=None, slot: int | None = None,
-                 slots: int | None = None, approach_height_m: float = 0.10, snapshot: str = "snapshot",
-                 place: str = "place_pose", preplace: str = "preplace_pose"):
+    def __init__(self, name: str, *, object: str, region: str, offset_m=None, slot: int = 0, slots: int = 1,
+                 approach_height_m: float = 0.10, snapshot: str = "snapshot", place: str = "place_pose",
+                 preplace: str = "preplace_pose"):
         super().__init__(name)
-        if (offset_m is None) == (slot is None):
-            raise ValueError("give exactly one of 'offset_m' ([dx, dy] in m) or 'slot' (with 'slots')")
+        if isinstance(slots, bool) or not isinstance(slots, int) or slots < 1:
+            raise ValueError(f"slots must be a whole number >= 1, got {slots!r}")
+        if isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < slots:
+            raise ValueError(f"slot must be a whole number in [0, {slots - 1}], got {slot!r}")
         if offset_m is not None:
+            if (slot, slots) != (0, 1):
+                raise ValueError("give either 'offset_m' ([dx, dy] in m) or 'slot' with 'slots', not both")
             offset_m = np.asarray(offset_m, dtype=float)
             if offset_m.shape != (2,) or not np.all(np.isfinite(offset_m)):
                 raise ValueError(f"offset_m must be 2 finite numbers in m, got {offset_m!r}")
-        else:
-            if isinstance(slots, bool) or not isinstance(slots, int) or slots < 1:
-                raise ValueError(f"slots must be a whole number >= 1 with 'slot', got {slots!r}")
-            if isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < slots:
-                raise ValueError(f"slot must be a whole number in [0, {slots - 1}], got {slot!r}")
         self.object, self.region = object, region
         self.offset_m, self.slot, self.slots = offset_m, slot, slots
         self.approach_height_m = float(approach_height_m)

@@ -169,7 +169,8 @@ def _load(text: str, path: Path | None, first_line: int) -> tuple[Node | None, A
     try:
         node = loader.get_single_node()
         if node is not None:
-            check_bounds(node, path=path, error=DocumentError, first_line=first_line)
+            if "&" in text:  # without an anchor there is no alias to expand
+                check_bounds(node, path=path, error=DocumentError, first_line=first_line)
             _check_duplicate_keys(node, path, first_line)
         data = loader.construct_document(node) if node is not None else None
     except yaml.MarkedYAMLError as exc:

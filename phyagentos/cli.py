@@ -4,7 +4,9 @@
     phyagentos watch WORKSPACE | agent WORKSPACE | submit GOAL_GRAPH --workspace DIR [--follow]
     phyagentos status WORKSPACE [--json] | signal WORKSPACE KIND [--session ID]   (cli_planes.py)
     phyagentos bench SUITE --workspace DIR [--episodes N] [--seeds ...] [--workers K] [--memory off|frozen|learn] [--json]
-    phyagentos validate GOAL_GRAPH [--workspace DIR]
+    phyagentos validate GOAL_GRAPH [--workspace DIR] [--target NAME]
+    phyagentos skills list|show NAME [--workspace DIR] | primitives [--json|--markdown]   (cli_skills.py)
+    phyagentos --skills-path DIR ...   (a folder with skills/ and trees/, searched after the workspace's)
     phyagentos render tree SKILL_OR_TREE [--out FILE.png]
     phyagentos render graph WORKSPACE [--run RUN_ID] [--out FILE.png|.svg] [--mermaid FILE.md]
     phyagentos policy serve [--host H] [--port N] [--rate-hz F] [--horizon K] [--stall-after N]
@@ -35,6 +37,9 @@ EXIT_OK, EXIT_NOT_SUCCEEDED, EXIT_BAD_INPUT = 0, 1, 2
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="phyagentos", description="Goal graphs to verified sessions on embodied targets.")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-vv for debug)")
+    parser.add_argument("--skills-path", action="append", default=[], metavar="DIR",
+                        help="a folder with skills/ and trees/ searched after the workspace's own and before the "
+                             "shipped ones (repeatable; first wins)")
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="run a goal graph end to end (Agent and Runtime planes in one process)")
@@ -52,6 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
     from phyagentos.cli_planes import add_plane_commands
 
     add_plane_commands(sub)
+    from phyagentos.cli_skills import add_skill_commands
+
+    add_skill_commands(sub)
 
     bench = sub.add_parser("bench", help="run a benchmark suite: availability gate, sessions per (task, seed), report")
     bench.add_argument("suite", help="suite name (phyagentos/bench/suites/) or path of a suite YAML")
@@ -70,6 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
     val.add_argument("goal_graph", type=Path)
     val.add_argument("--workspace", type=Path, help="take valid targets from this workspace's TARGETS.md")
+    val.add_argument("--target", help="check every node on this target instead of the graph's")
 
     render = sub.add_parser("render", help="render trees and graphs")
     rsub = render.add_subparsers(dest="what", required=True)
@@ -103,10 +112,10 @@ def _setup_logging(verbose: int, console: Console) -> None:
 
 
 def _cmd_run(args, out: Console, err: Console) -> int:
-    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime.worker import prestart_runner
 
-    prestart_runner(skills_dir(), trees_dir())  # cold start: the runtime loads while the Agent plane does
+    prestart_runner(skill_dirs(), tree_dirs())  # cold start: the runtime loads while the Agent plane does
     from phyagentos.orchestrator import run_goal_graph
 
     progress = None if args.json else (lambda msg: err.print(f"[dim]{msg}[/dim]"))
@@ -203,36 +212,43 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
 
 def _cmd_validate(args, out: Console, err: Console) -> int:
     from phyagentos.agent.dag import to_digraph, topological_order
-    from phyagentos.orchestrator import load_graph_for
+    from phyagentos.graph_check import check_goal_graph
     from phyagentos.protocol import Workspace
-    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 
-    runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
+    runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs())
     if args.workspace:
-        graph = load_graph_for(Workspace.open(args.workspace), args.goal_graph, runtime)
+        check = check_goal_graph(args.goal_graph, Workspace.open(args.workspace), runtime, target=args.target)
     else:
         import tempfile
 
         with tempfile.TemporaryDirectory() as tmp:
-            graph = load_graph_for(Workspace.create(tmp), args.goal_graph, runtime)
+            check = check_goal_graph(args.goal_graph, Workspace.create(tmp), runtime, target=args.target)
+    graph = check.graph
     dag = to_digraph(graph)
-    out.print(f"{args.goal_graph}: valid, {len(graph.nodes)} node(s)")
+    implicit = {(e.before, e.after): e for e in check.implicit_edges}
+    out.print(f"{args.goal_graph}: valid, {len(graph.nodes)} node(s), {check.poses_checked} pose(s) reachable",
+              highlight=False, markup=False, soft_wrap=True)
     for node_id in topological_order(dag):
         node = graph.get_node(node_id)
-        deps = f" after {', '.join(node.depends_on)}" if node.depends_on else ""
-        out.print(f"  {node_id}: {node.skill} on {node.target}{deps}")
+        deps = [d + (" (implicit: one arm holds one object)" if (d, node_id) in implicit else "") for d in node.depends_on]
+        out.print(f"  {node_id}: {node.skill} on {node.target}" + (f" after {', '.join(deps)}" if deps else ""),
+                  highlight=False, markup=False, soft_wrap=True)
+    for edge in check.implicit_edges:
+        out.print(f"implicit edge {edge.before} -> {edge.after}: {edge.reason}", highlight=False, markup=False,
+                  soft_wrap=True)
     return EXIT_OK
 
 
 def _cmd_render(args, out: Console, err: Console) -> int:
     if args.what == "graph":
         return _cmd_render_graph(args, out, err)
-    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
     from phyagentos.runtime.trees import render_ascii, render_image
 
-    runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
+    runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs())
     if args.name in runtime.skills:
         manifest = runtime.skills.get(args.name)
         if manifest.tree is None:
@@ -298,11 +314,15 @@ def main(argv: list[str] | None = None) -> int:
     out, err = Console(), Console(stderr=True)
     _setup_logging(args.verbose, err)
     from phyagentos.cli_planes import PLANE_HANDLERS
+    from phyagentos.cli_skills import SKILL_HANDLERS
 
-    handlers = {**PLANE_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
+    handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
                 "policy": _cmd_policy}
+    from phyagentos.cli_skills import skill_search_env
+
     try:
-        code = handlers[args.command](args, out, err)
+        with skill_search_env(args, err):
+            code = handlers[args.command](args, out, err)
     except PhyAgentOSError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -103,7 +103,25 @@ def _cmd_watch(args, out: Console, err: Console) -> int:
 
 
 def _cmd_agent(args, out: Console, err: Console) -> int:
+    from phyagentos.errors import ProtocolError
     from phyagentos.orchestrator import serve_agent
+    from phyagentos.protocol import Workspace
+
+    if args.run is not None:
+        ws = Workspace.open(args.workspace)
+        if not ws.runs.exists(args.run):
+            known = ws.runs.active_ids() + ws.runs.recent_ids()
+            raise ProtocolError(f"unknown run {args.run!r} in {args.workspace}; runs: "
+                                f"{', '.join(known) or 'none (submit one with phyagentos submit)'}")
+        if args.run not in ws.runs.active_ids():
+            failure = ws.runs.failure(args.run)
+            if failure is not None:
+                err.print(f"run {args.run} was set aside (failed): {failure}", markup=False, highlight=False, soft_wrap=True)
+                return EXIT_BAD_INPUT
+            record = ws.runs.load(args.run)
+            err.print(f"run {args.run} already finished: {'succeeded' if record.succeeded else 'not every node succeeded'}",
+                      soft_wrap=True)
+            return EXIT_OK if record.succeeded else EXIT_NOT_SUCCEEDED
 
     def started(loop) -> None:
         _install_stop(lambda immediate: loop.request_stop())
@@ -111,6 +129,10 @@ def _cmd_agent(args, out: Console, err: Console) -> int:
 
     loop = serve_agent(args.workspace, run_id=args.run, poll_interval_s=args.poll_s, inotify=not args.no_inotify,
                        on_loop=started)
+    for run_id, why in loop.set_aside_runs.items():
+        err.print(f"set aside run {run_id} (failed): {why}", markup=False, highlight=False, soft_wrap=True)
+    if args.run is not None and args.run in loop.set_aside_runs:
+        return EXIT_BAD_INPUT
     if args.run is not None and args.run in loop.finished:
         return EXIT_OK if loop.finished[args.run] else EXIT_NOT_SUCCEEDED
     return EXIT_OK
@@ -121,10 +143,11 @@ def _run_view(ws, run_id: str) -> dict[str, Any]:
     from phyagentos.agent.coordinator import AgentCoordinator
     from phyagentos.orchestrator import skill_names
 
-    record = ws.runs.load(run_id)
-    view: dict[str, Any] = {"run_id": run_id, "state": record.state, "succeeded": record.succeeded,
-                            "goal_graph": record.goal_graph, "submitted_at": record.submitted_at}
+    view: dict[str, Any] = {"run_id": run_id}
     try:
+        record = ws.runs.load(run_id)
+        view.update(state=record.state, succeeded=record.succeeded, goal_graph=record.goal_graph,
+                    submitted_at=record.submitted_at)
         graph = load_run_graph(ws, run_id, skills=skill_names())
         coord = AgentCoordinator(ws, graph, run_id=run_id, seed=record.seed)
         sessions = coord.sessions()
@@ -146,6 +169,8 @@ def _cmd_submit(args, out: Console, err: Console) -> int:
             print(json.dumps(_run_view(ws, run.run_id), ensure_ascii=False))
         else:
             print(run.run_id)
+        _say_who_serves(ws, args.workspace, err)
+        _say_queued(ws, run.run_id, err)
         return EXIT_OK
     err.print(f"run {run.run_id} submitted; following (start `phyagentos watch {args.workspace}` to execute it)")
     loop = serve_agent(args.workspace, run_id=run.run_id,
@@ -160,6 +185,31 @@ def _cmd_submit(args, out: Console, err: Console) -> int:
     if run.run_id not in loop.finished:
         return EXIT_NOT_SUCCEEDED  # stopped before the run finished
     return EXIT_OK if loop.finished[run.run_id] else EXIT_NOT_SUCCEEDED
+
+
+def _say_queued(ws, run_id: str, err: Console) -> None:
+    """Say when the run waits for another run's target world (one run per target world)."""
+    from phyagentos.orchestrator import held_worlds
+
+    targets = {ident.target for _, _, ident in ws.active_sessions(run_id=run_id)}
+    for target, owner in held_worlds(ws, targets).items():
+        if owner != run_id:
+            err.print(f"run {run_id} queues: target {target} holds the world of run {owner} until it finishes",
+                      markup=False, highlight=False, soft_wrap=True)
+
+
+def _say_who_serves(ws, workspace: Path, err: Console) -> None:
+    """Tell the user when no agent (or no supervisor) serves the workspace: the run
+    would otherwise wait silently."""
+    from phyagentos.agent.agent_loop import read_agents
+    from phyagentos.runtime.supervisor import read_presence
+
+    if not any(a["alive"] for a in read_agents(ws.root)):
+        err.print(f"no agent serves {workspace}: the run waits until `phyagentos agent {workspace}` runs "
+                  f"(or submit with --follow)", markup=False, highlight=False, soft_wrap=True)
+    if not any(s["alive"] for s in read_presence(ws.root)):
+        err.print(f"no supervisor watches {workspace}: start `phyagentos watch {workspace}` to execute the "
+                  f"sessions", markup=False, highlight=False, soft_wrap=True)
 
 
 def status_data(workspace: str | Path) -> dict[str, Any]:
@@ -199,14 +249,32 @@ def status_data(workspace: str | Path) -> dict[str, Any]:
         "active_sessions": active,
         "recent_sessions": recent,
         "runs": [_run_view(ws, run_id) for run_id in ws.runs.active_ids()],
+        "recent_runs": [_finished_view(ws, run_id) for run_id in ws.runs.recent_ids()],
     }
+
+
+def _finished_view(ws, run_id: str) -> dict[str, Any]:
+    """A finished (or set-aside) run: its outcome, without reading its sessions."""
+    view: dict[str, Any] = {"run_id": run_id}
+    try:
+        record = ws.runs.load(run_id)
+        view.update(goal_graph=record.goal_graph, submitted_at=record.submitted_at, finished_at=record.finished_at,
+                    succeeded=record.succeeded)
+    except Exception as exc:  # noqa: BLE001 - a bad RUN.md is shown, never fatal
+        view["error"] = str(exc)
+    failure = ws.runs.failure(run_id)
+    if failure is not None:
+        view["error"] = failure
+    view["outcome"] = ("failed: set aside" if failure is not None else "succeeded" if view.get("succeeded")
+                       else "unreadable" if "error" in view else "not every node succeeded")
+    return view
 
 
 def _cmd_status(args, out: Console, err: Console) -> int:
     data = status_data(args.workspace)
     if args.json:
         print(json.dumps(data, ensure_ascii=False))
-        return EXIT_OK
+        return EXIT_BAD_INPUT if any("error" in run for run in data["runs"]) else EXIT_OK
     flags = [f for f, on in (("[red]E-STOP[/red]", data["estopped"]), ("[yellow]paused[/yellow]", data["paused"])) if on]
     out.print(f"[bold]{data['workspace']}[/bold]  {' '.join(flags) or 'no pause or e-stop in force'}")
     sups = data["supervisors"]
@@ -227,8 +295,14 @@ def _cmd_status(args, out: Console, err: Console) -> int:
         out.print(table)
     for run in data["runs"]:
         nodes = ", ".join(f"{n}={s}" for n, s in run.get("nodes", {}).items())
-        out.print(f"  run {run['run_id']}: {nodes or run.get('error', '')}")
-    return EXIT_OK
+        out.print(f"  run {run['run_id']}: {nodes or 'error: ' + run.get('error', '')}", markup=False, highlight=False, soft_wrap=True)
+    if data["recent_runs"]:
+        out.print("  recent finished runs:")
+        for run in data["recent_runs"]:
+            detail = f" ({run['error']})" if run.get("error") else ""
+            out.print(f"    {run['run_id']}: {run['outcome']}{detail}", markup=False, highlight=False, soft_wrap=True)
+    # a stored run that no longer validates is bad input, reported with its file and line
+    return EXIT_BAD_INPUT if any("error" in run for run in data["runs"]) else EXIT_OK
 
 
 def _cmd_signal(args, out: Console, err: Console) -> int:

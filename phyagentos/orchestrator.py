@@ -27,14 +27,14 @@ from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
 from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
 from phyagentos.protocol import LEASED_STATES, RunRecord, Workspace, utc_now_iso
-from phyagentos.resources import skills_dir, trees_dir
+from phyagentos.resources import skill_dirs, tree_dirs
 from phyagentos.runtime.skills import SkillRegistry
 from phyagentos.runtime.supervisor import WatchdogSupervisor
 
 if TYPE_CHECKING:
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 
-__all__ = ["RunReport", "drive_run", "load_graph_for", "run_goal_graph", "submit_goal_graph", "serve_agent",
+__all__ = ["RunReport", "drive_run", "load_graph_for", "run_goal_graph", "submit_goal_graph", "serve_agent", "held_worlds",
            "skill_names"]
 
 logger = logging.getLogger(__name__)
@@ -72,7 +72,7 @@ def load_graph_for(workspace: Workspace, path: str | Path, runtime: "BuiltinSkil
 
 def skill_names() -> list[str]:
     """Names of the skills in ``skills/`` (what a goal graph may use)."""
-    return SkillRegistry(skills_dir()).names()
+    return SkillRegistry(skill_dirs()).names()
 
 
 def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
@@ -169,6 +169,22 @@ def _check_target(workspace: Workspace, target: str | None) -> None:
         raise GoalGraphError(f"unknown target {target!r} for --target; valid targets: {format_choices(names)}")
 
 
+def held_worlds(workspace: Workspace, targets) -> dict[str, str]:
+    """Target -> the other active run whose world it holds now (a new run would queue)."""
+    return {t: owner for t in sorted(targets) if (owner := workspace.runs.world_owner(t)) is not None}
+
+
+def _refuse_held_worlds(workspace: Workspace, targets) -> None:
+    """``phyagentos run`` drives one run in-process: it refuses, rather than waits for, a
+    target whose world another active run holds (that run would otherwise be reset)."""
+    held = held_worlds(workspace, targets)
+    if held:
+        which = "; ".join(f"target {t!r} holds the world of active run {r!r}" for t, r in held.items())
+        raise SupervisorError(f"{which}: a target's world belongs to one run at a time. Let it finish (`phyagentos "
+                              f"agent {workspace.root} --run RUN` with `phyagentos watch {workspace.root}`), or "
+                              f"submit this graph with `phyagentos submit` to queue behind it")
+
+
 def submit_goal_graph(goal_graph: str | Path, workspace_dir: str | Path, *, seed: int | None = 0,
                       target: str | None = None, submitted_by: str = "") -> RunRecord:
     """Validate ``goal_graph``, register it as a run and compile its ready nodes; returns the run.
@@ -181,11 +197,13 @@ def submit_goal_graph(goal_graph: str | Path, workspace_dir: str | Path, *, seed
         GoalGraphError: the goal graph (or the target override) is invalid.
         DocumentError: a protocol document in the workspace is malformed.
     """
+    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
+
     workspace = Workspace.create(workspace_dir)
     skills = skill_names()
-    targets = [t.name for t in workspace.read("TARGETS").data.targets]
-    load_goal_graph(goal_graph, skills=skills, targets=targets)  # errors name the user's file
-    _check_target(workspace, target)
+    # The whole graph before anything is registered: errors name the user's file.
+    check_goal_graph(goal_graph, workspace, BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs()), target=target)
     run = _register_run(workspace, goal_graph, seed=seed, target=target, submitted_by=submitted_by)
     graph = load_run_graph(workspace, run.run_id, skills=skills)
     with workspace.run_lock(run.run_id):
@@ -243,17 +261,18 @@ def run_goal_graph(
     """
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
-    skills = skill_names()
-    targets = [t.name for t in workspace.read("TARGETS").data.targets]
-    load_goal_graph(goal_graph, skills=skills, targets=targets)  # errors name the user's file
-    _check_target(workspace, target)
-    # The runner process starts in the background (the forkserver imports the runtime
-    # meanwhile; ``phyagentos run`` has started one even earlier, see prestart_runner).
-    # This process never imports the motion stack itself.
+    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415 - for the whole-graph check
+
+    # The whole graph before anything is registered or moves: errors name the user's file.
+    # (The runner process is already starting in the background: see prestart_runner.)
+    runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs())
+    checked = check_goal_graph(goal_graph, workspace, runtime, target=target)
+    _refuse_held_worlds(workspace, {n.target for n in checked.graph.nodes})
     supervisor = WatchdogSupervisor(workspace)
     try:
         run = _register_run(workspace, goal_graph, seed=seed, target=target)
-        graph = load_run_graph(workspace, run.run_id, skills=skills)
+        graph = load_run_graph(workspace, run.run_id, skills=runtime.skills.names())
     except BaseException:
         supervisor.close()
         raise

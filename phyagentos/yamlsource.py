@@ -4,6 +4,14 @@ Authored YAML (trees, skill manifests, acceptance criteria) must produce errors
 naming the file and line. :func:`load_yaml` returns plain Python containers whose
 mappings are :class:`SourceMap` (a ``dict``) carrying the 1-based line of the
 mapping and of each key, so validators can point at the offending line.
+
+Every YAML text the project reads (goal graphs, protocol documents, skills, trees,
+``safety.yaml``) is bounded before it is constructed (:func:`check_bounds`): at most
+:data:`MAX_YAML_CHARS` characters, :data:`MAX_ALIASES` alias references, an expanded
+tree of at most :data:`MAX_EXPANDED_NODES` nodes more than the text itself holds, and
+no recursive alias. A "billion laughs" alias bomb of a kilobyte therefore fails in
+milliseconds with the file and the line of the anchor that expands too far, instead
+of consuming gigabytes in a later ``deepcopy`` or dump.
 """
 
 from __future__ import annotations
@@ -13,7 +21,123 @@ from typing import Any
 
 import yaml
 
-__all__ = ["SourceMap", "SourceList", "load_yaml", "line_of"]
+__all__ = ["SourceMap", "SourceList", "load_yaml", "line_of", "check_bounds", "compose_bounded", "excerpt", "clip",
+           "MAX_YAML_CHARS", "MAX_ALIASES", "MAX_EXPANDED_NODES", "MAX_DEPTH"]
+
+#: Longest YAML text read (characters): far above any authored file or protocol block.
+MAX_YAML_CHARS = 64 * 1024 * 1024
+#: Alias references (``*name``) per YAML text; authored files use a handful.
+MAX_ALIASES = 256
+#: Extra nodes aliases may add when expanded (beyond the nodes written in the text).
+MAX_EXPANDED_NODES = 100_000
+#: Deepest nesting of mappings and sequences.
+MAX_DEPTH = 200
+#: Longest excerpt of user data quoted in an error message (characters).
+MAX_EXCERPT_CHARS = 200
+
+
+def clip(text: str, limit: int = MAX_EXCERPT_CHARS) -> str:
+    """``text`` cut to ``limit`` characters (messages that embed other messages stay bounded)."""
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} chars)"
+
+
+def excerpt(value: Any, limit: int = MAX_EXCERPT_CHARS) -> str:
+    """``repr(value)`` cut to ``limit`` characters (error messages quote bounded excerpts)."""
+    text = repr(value) if not isinstance(value, str) else repr(value[: limit + 1])
+    return text if len(text) <= limit else text[:limit] + f"... ({len(str(value))} chars)"
+
+
+def check_bounds(node: Any, *, path: str | Path | None, error: type[Exception], first_line: int = 1) -> None:
+    """Refuse a composed YAML node tree whose aliases or nesting exceed the limits.
+
+    Args:
+        node: the root :class:`yaml.Node` (``None`` for an empty document).
+        path: file, for messages.
+        error: exception class accepting ``(message, path=..., line=...)``.
+        first_line: 1-based file line of the text's first line (YAML blocks inside
+            Markdown documents start below the top of their file).
+
+    Raises:
+        error: more than :data:`MAX_ALIASES` aliases, a recursive alias, nesting deeper
+            than :data:`MAX_DEPTH`, or an expansion beyond :data:`MAX_EXPANDED_NODES`
+            extra nodes; the line is the anchor's (or the deepest node's).
+    """
+    if node is None:
+        return
+    # Iterative depth-first walk over the node DAG, each distinct node expanded once:
+    # an edge to a finished node is an alias reference, an edge to a node still on
+    # the path is a recursive alias. ``size`` is the expanded node count.
+    state: dict[int, int] = {}  # 1 on the path, 2 finished
+    size: dict[int, int] = {}
+    aliases = unique = 0
+    frames: list[tuple[Any, Any, int]] = [(node, iter(_children(node)), 1)]
+    state[id(node)] = 1
+    unique = 1
+    while frames:
+        current, children, depth = frames[-1]
+        child = next(children, None)
+        if child is None:
+            frames.pop()
+            total = 1 + sum(size[id(c)] for c in _children(current))
+            size[id(current)] = total
+            state[id(current)] = 2
+            if total - unique > MAX_EXPANDED_NODES:
+                raise error(f"YAML aliases expand to more than {MAX_EXPANDED_NODES} extra nodes (the node starting "
+                            f"here expands to {total}); write the data out or use fewer aliases",
+                            path=path, line=first_line + current.start_mark.line)
+            continue
+        seen = state.get(id(child))
+        if seen == 1:
+            raise error("recursive YAML alias (a node contains itself)", path=path,
+                        line=first_line + child.start_mark.line)
+        if seen == 2:
+            aliases += 1
+            if aliases > MAX_ALIASES:
+                raise error(f"more than {MAX_ALIASES} YAML aliases", path=path,
+                            line=first_line + child.start_mark.line)
+            continue
+        if depth + 1 > MAX_DEPTH:
+            raise error(f"YAML nesting deeper than {MAX_DEPTH} levels", path=path,
+                        line=first_line + child.start_mark.line)
+        state[id(child)] = 1
+        unique += 1
+        frames.append((child, iter(_children(child)), depth + 1))
+
+
+def _children(node: Any) -> list:
+    if isinstance(node, yaml.MappingNode):
+        return [x for pair in node.value for x in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
+
+
+def compose_bounded(text: str, *, path: str | Path | None, error: type[Exception], loader: type | None = None,
+                    first_line: int = 1) -> Any:
+    """Compose ``text`` into a node tree (``None`` when empty) and :func:`check_bounds` it.
+
+    Raises:
+        error: a text longer than :data:`MAX_YAML_CHARS`, a syntax error (with line),
+            or a bound exceeded.
+    """
+    if len(text) > MAX_YAML_CHARS:
+        raise error(f"YAML text of {len(text)} characters is longer than the limit of {MAX_YAML_CHARS}",
+                    path=path, line=first_line)
+    instance = (loader or _Loader)(text)
+    try:
+        node = instance.get_single_node()
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        problem = " ".join(p for p in (exc.context, exc.problem) if p)
+        raise error(f"YAML syntax error: {clip(problem or str(exc))}", path=path,
+                    line=first_line + mark.line if mark is not None else first_line) from None
+    except yaml.YAMLError as exc:
+        raise error(f"YAML error: {clip(str(exc))}", path=path, line=first_line) from None
+    finally:
+        instance.dispose()
+    if "&" in text:  # without an anchor there is no alias to expand
+        check_bounds(node, path=path, error=error, first_line=first_line)
+    return node
 
 
 class SourceMap(dict):
@@ -70,12 +194,18 @@ def load_yaml(text: str, *, path: str | Path | None = None, error: type[Exceptio
         error: exception class accepting ``(message, path=..., line=...)``,
             e.g. :class:`~phyagentos.errors.GoalGraphError`.
     """
+    node = compose_bounded(text, path=path, error=error)
+    if node is None:
+        return None
+    loader = _Loader("")
     try:
-        return yaml.load(text, Loader=_Loader)  # noqa: S506 - SafeLoader subclass
+        return loader.construct_document(node)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else None
-        raise error(f"invalid YAML: {exc.problem or exc}", path=path, line=line) from None
+        raise error(f"invalid YAML: {clip(str(exc.problem or exc))}", path=path, line=line) from None
+    finally:
+        loader.dispose()
 
 
 def line_of(value: Any, key: Any = None) -> int | None:

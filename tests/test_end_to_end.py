@@ -84,18 +84,26 @@ def test_two_dependent_pick_and_place_nodes_run_in_order(tmp_path):
     assert blue.created_at > next(t.at for t in red.transitions if t.dest == "succeeded")
 
 
-def test_an_object_out_of_sight_and_reach_fails_and_blocks_the_dependent_node(tmp_path):
+def test_an_object_out_of_reach_is_refused_before_motion_and_fails_without_retry(tmp_path):
+    from unchecked_run import run_unchecked
+
     graph = tmp_path / "far.yaml"
     spec = yaml.safe_load((goal_graphs_dir() / "pick_and_place.yaml").read_text())
     spec["scene"]["objects"][0]["position"] = [0.95, -0.45]  # on the table, 1.05 m from the base: seen, beyond the Panda's reach
     graph.write_text(yaml.safe_dump(spec))
+    # The CLI refuses it before anything moves (issue 11: whole-graph validation) ...
     result = subprocess.run(CLI + ["run", str(graph), "--workspace", str(tmp_path / "ws"), "--json"],
                             capture_output=True, text=True, timeout=300)
-    assert result.returncode == 1, result.stderr
-    out = json.loads(result.stdout)
+    assert result.returncode == 2 and "cannot reach 'cube'" in result.stderr, result.stderr
+    assert not (tmp_path / "ws" / "targets" / "franka_tabletop" / "state.npz").exists()
+    # ... and a run registered without that check (e.g. by hand) still ends the way the
+    # runtime reports it: an IK failure, replans, the dependent node blocked.
+    report = run_unchecked(graph, tmp_path / "ws")
+    ws = Workspace.open(tmp_path / "ws")
+    out = {"nodes": report.node_states, "sessions": [s.to_dict() for s in report.sessions]}
     assert out["nodes"] == {"pick_cube": "failed", "place_cube": "blocked"}
     picks = [s for s in out["sessions"] if s["node"] == "pick_cube"]
-    # 1.4 m away the cube is at the edge of the overview camera's view: either seen and out of reach
+    # 1.05 m away the cube is at the edge of the overview camera's view: either seen and out of reach
     # (ik_unreachable: failure at once, no retry can bring it closer) or not seen (one more look
     # with fused frames, then failure). Never a retry of another approach direction.
     causes = [s["cause"] for s in picks]

@@ -139,7 +139,11 @@ def test_failure_blocks_the_downstream_subgraph_while_an_independent_branch_cont
     hold = {"id": "hold_still", "skill": "hold", "params": {"duration_s": 0.5},
             "accept": {"still": {"max_joint_motion_rad": 0.01}}}
     graph = write_graph(tmp_path / "branches.yaml", [far, place, hold], position=(1.4, -0.2))  # out of reach
-    report = run_goal_graph(graph, tmp_path / "ws")
+    # `run` would refuse the graph before anything moves (issue 11); the failure at run
+    # time is what this test is about, so the run is registered without that check.
+    from unchecked_run import run_unchecked
+
+    report = run_unchecked(graph, tmp_path / "ws")
     assert not report.succeeded
     assert report.node_states == {"pick_far": "failed", "place_far": "blocked", "hold_still": "succeeded"}
     picks = [s for s in report.sessions if s.node == "pick_far"]

@@ -15,19 +15,56 @@ The loop sleeps until the workspace changes (inotify on ``sessions/``,
 
 from __future__ import annotations
 
+import json
 import logging
+import os
+import socket
+import time
 from dataclasses import replace
+from pathlib import Path
 from typing import Callable, Collection
 
-from phyagentos.errors import GoalGraphError, PhyAgentOSError
+from phyagentos.errors import DocumentError, GoalGraphError, PhyAgentOSError, VerifierError
 from phyagentos.protocol import Workspace, WorkspaceWatcher
 
 from .coordinator import AgentCoordinator
 from .goal_graph import GoalGraph, load_goal_graph
+from .gripper_resources import gripper_effects, serialise_gripper_use
 
-__all__ = ["AgentLoop", "load_run_graph"]
+__all__ = ["AgentLoop", "load_run_graph", "read_agents", "AGENTS_DIR"]
+
+#: Each serving AgentLoop keeps ``<workspace>/.agents/<host>-<pid>.json`` while it runs
+#: (``submit`` says when none does).
+AGENTS_DIR = ".agents"
 
 logger = logging.getLogger(__name__)
+
+
+def read_agents(workspace_root) -> list[dict]:
+    """Presence records of the agents serving a workspace, each with ``alive``."""
+    out = []
+    directory = Path(workspace_root) / AGENTS_DIR
+    try:
+        files = sorted(directory.glob("*.json"))
+    except OSError:
+        return out
+    for path in files:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            pid = int(data.get("pid", -1))
+        except (OSError, ValueError, AttributeError):
+            continue
+        alive = data.get("host") != socket.gethostname()  # another host's agent: assume alive
+        if not alive:
+            try:
+                os.kill(pid, 0)
+                alive = True
+            except PermissionError:
+                alive = True
+            except (OSError, OverflowError):
+                alive = False
+        out.append({**data, "alive": alive})
+    return out
 
 
 def load_run_graph(workspace: Workspace, run_id: str, *, skills: Collection[str]) -> GoalGraph:
@@ -42,6 +79,8 @@ def load_run_graph(workspace: Workspace, run_id: str, *, skills: Collection[str]
     graph = load_goal_graph(workspace.runs.graph_path(run_id), skills=skills, targets=targets)
     if record.target is not None:
         graph = replace(graph, nodes=tuple(replace(n, target=record.target) for n in graph.nodes))
+    # One arm holds one object: the same implicit edges `validate` shows.
+    graph, _ = serialise_gripper_use(graph, gripper_effects())
     return graph
 
 
@@ -74,6 +113,20 @@ class AgentLoop:
         self._stop = False
         #: run id -> whether every node succeeded, for runs this loop finished.
         self.finished: dict[str, bool] = {}
+        #: run id -> why this loop set it aside (a stored document no longer validates).
+        self.set_aside_runs: dict[str, str] = {}
+
+    def set_aside(self, run_id: str, exc: BaseException) -> None:
+        """End ``run_id`` as failed because a stored document of it no longer validates
+        (:meth:`RunRegistry.set_aside`); every other run goes on."""
+        message = str(exc)
+        logger.warning("run %s set aside (failed): %s", run_id, message)
+        self._broken.add(run_id)
+        self.set_aside_runs[run_id] = message
+        try:
+            self.workspace.runs.set_aside(run_id, message)
+        except (PhyAgentOSError, OSError) as err:  # e.g. a read-only runs/ directory
+            logger.error("run %s could not be marked failed: %s", run_id, err)
 
     def request_stop(self) -> None:
         """Finish the current step and return from :meth:`serve` (safe from a signal handler)."""
@@ -88,8 +141,7 @@ class AgentLoop:
                 graph = load_run_graph(self.workspace, run_id, skills=self.skills)
                 seed = self.workspace.runs.load(run_id).seed
             except (GoalGraphError, PhyAgentOSError) as exc:
-                logger.error("run %s cannot be driven: %s", run_id, exc)
-                self._broken.add(run_id)
+                self.set_aside(run_id, exc)
                 return None
             coord = self._coordinators[run_id] = self._factory(self.workspace, graph, run_id, seed)
         return coord
@@ -109,7 +161,14 @@ class AgentLoop:
                 coord = self.coordinator(run_id)
                 if coord is None:
                     continue
-                acted += coord.step()
+                try:
+                    acted += coord.step()
+                except (DocumentError, GoalGraphError, VerifierError) as exc:
+                    # one hand-edited or corrupted document ends its own run, nothing else
+                    self.set_aside(run_id, exc)
+                    self._coordinators.pop(run_id, None)
+                    acted += 1
+                    continue
                 if coord.done():
                     succeeded = coord.succeeded()
                     self.workspace.runs.finish(run_id, succeeded=succeeded)
@@ -123,10 +182,23 @@ class AgentLoop:
 
     def serve(self) -> None:
         """Step until :meth:`request_stop`, or until the run given as ``run_id`` finished."""
+        presence = self.workspace.root / AGENTS_DIR / f"{socket.gethostname()}-{os.getpid()}.json"
+        try:
+            presence.parent.mkdir(exist_ok=True)
+            presence.write_text(json.dumps({"host": socket.gethostname(), "pid": os.getpid(), "run": self.run_id,
+                                            "started": time.time()}), encoding="utf-8")
+        except OSError as exc:
+            logger.debug("no presence file: %s", exc)
+        try:
+            self._serve()
+        finally:
+            presence.unlink(missing_ok=True)
+
+    def _serve(self) -> None:
         while not self._stop:
             self.watcher.clear()
             acted = self.step()
-            if self.run_id is not None and self.run_id in self.finished:
+            if self.run_id is not None and (self.run_id in self.finished or self.run_id in self.set_aside_runs):
                 return
             if self.run_id is not None and self.run_id not in self.workspace.runs.active_ids():
                 return  # finished by another agent process

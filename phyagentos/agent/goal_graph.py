@@ -29,6 +29,7 @@ import yaml
 
 from phyagentos.agent.dag import find_dependency_cycle, to_digraph
 from phyagentos.errors import GoalGraphError, format_choices
+from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip, excerpt
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -181,7 +182,7 @@ def _kind(node: yaml.Node) -> str:
         return "a list"
     if node.tag == _NULL_TAG:
         return "nothing (null)"
-    return f"the scalar {node.value!r}"
+    return f"the scalar {excerpt(node.value)}"
 
 
 def _is_null(node: yaml.Node) -> bool:
@@ -265,7 +266,7 @@ class _Parser:
                 shown = key if key is not None else getattr(key_node, "value", "?")
                 self.problems.append(_Invalid(
                     key_node,
-                    f"unknown key {shown!r} in {what}{_did_you_mean(shown, allowed)}; "
+                    f"unknown key {excerpt(shown)} in {what}{_did_you_mean(str(shown)[:200], allowed)}; "
                     f"valid keys: {format_choices(allowed)}"))
             elif key in entries:
                 self.problems.append(_Invalid(
@@ -291,7 +292,7 @@ class _Parser:
     def _node_id(self, node: yaml.Node) -> str:
         text = _str_scalar(node)
         if text is None or not NODE_ID_PATTERN.fullmatch(text):
-            shown = repr(text) if text is not None else _kind(node)
+            shown = excerpt(text) if text is not None else _kind(node)
             raise _Invalid(node, f"invalid node id {shown}: ids must match "
                                  f"{NODE_ID_PATTERN.pattern} (lower-case letter, then "
                                  f"lower-case letters, digits or '_'), e.g. 'pick_cube'")
@@ -304,7 +305,7 @@ class _Parser:
             raise _Invalid(node, f"{context}{what} must be a string, got {_kind(node)}; "
                                  f"{_choices(kind, valid)}")
         if text not in valid:
-            raise _Invalid(node, f"{context}unknown {what} {text!r}{_did_you_mean(text, valid)}; "
+            raise _Invalid(node, f"{context}unknown {what} {excerpt(text)}{_did_you_mean(text[:200], valid)}; "
                                  f"{_choices(kind, valid)}")
         return text
 
@@ -401,14 +402,19 @@ class _Parser:
 
     def _compose(self, text: str) -> yaml.MappingNode:
         try:
-            root = yaml.compose(text, Loader=yaml.SafeLoader)
+            root = yaml.compose(text, Loader=yaml.SafeLoader) if len(text) <= MAX_YAML_CHARS else None
         except yaml.MarkedYAMLError as exc:
             mark = exc.problem_mark or exc.context_mark
             context = f" ({exc.context})" if exc.context else ""
-            raise self._error(f"YAML syntax error: {exc.problem or exc}{context}",
+            raise self._error(f"YAML syntax error: {clip(str(exc.problem or exc))}{context}",
                               mark.line + 1 if mark is not None else None) from exc
         except yaml.YAMLError as exc:
-            raise self._error(f"YAML syntax error: {exc}", None) from exc
+            raise self._error(f"YAML syntax error: {clip(str(exc))}", None) from exc
+        if len(text) > MAX_YAML_CHARS:
+            raise self._error(f"goal graph of {len(text)} characters is longer than the limit of "
+                              f"{MAX_YAML_CHARS}", 1)
+        if "&" in text:  # without an anchor there is no alias to expand
+            check_bounds(root, path=self.path, error=GoalGraphError)
         expected = f"expected a mapping with keys {format_choices(TOP_LEVEL_KEYS)}"
         if root is None:
             raise self._error(f"goal graph is empty; {expected}", 1)

@@ -20,16 +20,22 @@ articulate_hinge          turn a held handle about its entity's hinge
 tool_move                 straight tcp motion by an offset in the tool frame
 compute_place_as_held     place poses keeping the hand's orientation (hooked objects)
 noop                      succeed after n ticks, touching no target (control.py)
+guarded_move              straight tcp motion that stops on contact (contact.py)
+compute_place_at          place poses at an offset or slot inside a region (placement.py)
+compute_push              start poses to push an object with the closed hand (contact.py)
+push                      compliant push that must touch, with an effort limit (contact.py)
 ========================  ==========================================================
 """
 
 from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .base import Primitive, PrimitiveFailure
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
+from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
+from .placement import ComputePlaceAt
 
 __all__ = [
     "PRIMITIVES",
@@ -61,4 +67,8 @@ PRIMITIVES = {
     "tool_move": ToolMove,
     "compute_place_as_held": ComputePlaceAsHeld,
     "noop": Noop,
+    "guarded_move": GuardedMove,
+    "compute_place_at": ComputePlaceAt,
+    "compute_push": ComputePush,
+    "push": Push,
 }

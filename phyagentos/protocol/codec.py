@@ -28,6 +28,8 @@ import yaml
 from pydantic import BaseModel, ValidationError
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
+from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip
+
 from phyagentos.errors import DocumentError, format_choices
 
 from .atomic import atomic_write_text
@@ -160,19 +162,24 @@ def dump_yaml(data: Any) -> str:
 
 def _load(text: str, path: Path | None, first_line: int) -> tuple[Node | None, Any]:
     """Compose and construct ``text``; ``first_line`` is the 1-based file line of its line 0."""
+    if len(text) > MAX_YAML_CHARS:
+        raise DocumentError(f"YAML block of {len(text)} characters is longer than the limit of {MAX_YAML_CHARS}",
+                            path=path, line=first_line)
     loader = _Loader(text)
     try:
         node = loader.get_single_node()
         if node is not None:
+            if "&" in text:  # without an anchor there is no alias to expand
+                check_bounds(node, path=path, error=DocumentError, first_line=first_line)
             _check_duplicate_keys(node, path, first_line)
         data = loader.construct_document(node) if node is not None else None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = first_line + mark.line if mark is not None else first_line
         problem = " ".join(p for p in (exc.context, exc.problem) if p)
-        raise DocumentError(f"YAML syntax error: {problem}", path=path, line=line) from None
+        raise DocumentError(f"YAML syntax error: {clip(problem)}", path=path, line=line) from None
     except yaml.YAMLError as exc:
-        raise DocumentError(f"YAML error: {exc}", path=path, line=first_line) from None
+        raise DocumentError(f"YAML error: {clip(str(exc))}", path=path, line=first_line) from None
     finally:
         loader.dispose()
     return node, data

@@ -674,6 +674,8 @@ class RunRecord(VersionedModel):
     state: Literal["active", "finished"] = "active"
     finished_at: Timestamp | None = None
     succeeded: bool | None = None
+    error: str | None = Field(None, description="Why the run was set aside (a stored document that no longer "
+                                                "validates, with file and line), if it was.")
 
 
 # ---------------------------------------------------------------------------

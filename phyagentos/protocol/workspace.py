@@ -45,10 +45,12 @@ from phyagentos.errors import DocumentError, LeaseError, ProtocolError, format_c
 
 from phyagentos import resources
 
+from phyagentos.yamlsource import load_yaml
+
 from .archive import SessionArchive
 from .atomic import atomic_write_bytes, batched_durability
 from .codec import Document, read_document, read_yaml, write_document
-from .runs import RunRegistry
+from .runs import RunRegistry, inside_workspace
 from .schemas import (
     DOCUMENTS,
     SAFETY_FILE,
@@ -59,6 +61,7 @@ from .schemas import (
     LogEntry,
     RunRecord,
     RuntimeSignalDoc,
+    SAFETY_VIOLATIONS,
     SafetyConfig,
     SessionIndexEntry,
     SessionRecord,
@@ -177,6 +180,30 @@ def _session_prose(record: SessionRecord) -> str:
         "on every transition (transitions and attempts are append-only). Text outside the\n"
         "block is yours and is kept.\n\n"
     )
+
+
+def _check_complete_safety(path: Path) -> None:
+    """Every limit of ``safety.yaml`` must be written out: a truncated or partial file
+    would otherwise fall back to built-in defaults (e.g. a 30 s command duration for a
+    configured 2 s).
+
+    Raises:
+        DocumentError: the missing keys, at the file's last line.
+    """
+    text = path.read_text(encoding="utf-8")
+    raw = load_yaml(text, path=path, error=DocumentError) or {}
+    missing = [name for name in SafetyConfig.model_fields if name not in raw]
+    box = raw.get("workspace_box")
+    if isinstance(box, dict):
+        missing += [f"workspace_box.{k}" for k in ("min", "max") if k not in box]
+    outcomes = raw.get("violation_outcomes")
+    if isinstance(outcomes, dict):
+        missing += [f"violation_outcomes.{code}" for code in SAFETY_VIOLATIONS if code not in outcomes]
+    if missing:
+        raise DocumentError(
+            f"{SAFETY_FILE} is incomplete: missing {format_choices(missing)}; every limit must be written out "
+            f"(a missing limit is an error, never a default; {resources.templates_dir() / SAFETY_FILE} lists them all)",
+            path=path, line=max(1, text.count("\n")))
 
 
 class Workspace:
@@ -329,7 +356,7 @@ class Workspace:
         _, filename, model = self._doc(name)
         path = self.root / filename
         try:
-            return read_document(path, model)
+            return read_document(inside_workspace(path, self.root), model)
         except FileNotFoundError:
             raise ProtocolError(
                 f"{filename} missing from workspace {self.root}; Workspace.create restores it"
@@ -377,11 +404,13 @@ class Workspace:
         """
         path = self.root / SAFETY_FILE
         try:
-            return read_yaml(path, SafetyConfig)
+            config = read_yaml(path, SafetyConfig)
         except FileNotFoundError:
             raise ProtocolError(
                 f"{SAFETY_FILE} missing from workspace {self.root}; Workspace.create restores it"
             ) from None
+        _check_complete_safety(path)
+        return config
 
     # -- sessions ---------------------------------------------------------
 
@@ -473,7 +502,7 @@ class Workspace:
     def _load_session_doc(self, session_id: str) -> Document[SessionRecord]:
         path = self.session_path(session_id)
         try:
-            doc = read_document(path, SessionRecord)
+            doc = read_document(inside_workspace(path, self.root), SessionRecord)
         except FileNotFoundError:
             archived = self._session_archive.find(session_id)
             if archived is None:
@@ -695,10 +724,13 @@ class Workspace:
         hints without a session file older than ``stale_hint_s`` (a younger one may be a
         submit in progress). Returns counts of each repair.
 
-        Raises:
-            DocumentError: a session file is malformed (it is left untouched).
+        Also removes temporary files of atomic writes interrupted more than
+        ``stale_hint_s`` ago and presence files of supervisors whose process is gone.
+        A session file that no longer validates is left untouched, set aside (its
+        error in :attr:`malformed`, counted as ``malformed``) and the rest goes on.
         """
         fixed = Counter()
+        self.malformed: dict[str, str] = {}
         hints = self._states.entries()
         for path in sorted(self.sessions_dir.glob("*.md")):
             sid = path.stem
@@ -708,6 +740,11 @@ class Workspace:
                 try:
                     doc = read_document(path, SessionRecord)
                 except FileNotFoundError:
+                    continue
+                except (DocumentError, OSError) as exc:
+                    self.malformed[sid] = str(exc)
+                    fixed["malformed"] += 1
+                    log.warning("reconcile: session %s set aside, its file no longer validates: %s", sid, exc)
                     continue
                 record = doc.data
                 if record.state in _TERMINAL:
@@ -730,10 +767,60 @@ class Workspace:
                 if old or self._session_archive.find(sid) is not None:
                     hint.unlink(missing_ok=True)
                     fixed["orphan_hints"] += 1
+        fixed["temp_files"] += self._remove_stale_temp_files(stale_hint_s)
+        fixed["dead_presence"] += self._remove_dead_presence()
+        fixed = +fixed  # drop zero counts
+        if fixed.keys() - {"malformed", "temp_files", "dead_presence"}:
+            self.rebuild_index()
         if fixed:
             log.info("reconciled %s: %s", self.root, dict(fixed))
-            self.rebuild_index()
         return dict(fixed)
+
+    def _remove_stale_temp_files(self, older_than_s: float) -> int:
+        """Temp files ``.<name>.<random>.tmp`` (see :mod:`.atomic`) a killed writer left behind."""
+        dirs = [self.root, self.sessions_dir, self.sessions_dir / ".index", self.runs.dir, self.runs.active_dir,
+                self.runs.failed_dir, self.runs.owners_dir]
+        for parent in (self.runs.dir, self.root / "targets"):
+            try:
+                dirs += [p for p in parent.iterdir() if p.is_dir() and not p.is_symlink()]
+            except FileNotFoundError:
+                pass
+        now, removed = time.time(), 0
+        for directory in dirs:
+            try:
+                entries = list(directory.glob(".*.tmp"))
+            except OSError:
+                continue
+            for tmp in entries:
+                try:
+                    if tmp.is_file() and not tmp.is_symlink() and now - tmp.stat().st_mtime > older_than_s:
+                        tmp.unlink()
+                        removed += 1
+                except FileNotFoundError:
+                    continue
+        return removed
+
+    def _remove_dead_presence(self) -> int:
+        """``.supervisors/*.json`` of this host's supervisors whose process is gone."""
+        directory = self.root / ".supervisors"
+        host, removed = socket.gethostname(), 0
+        try:
+            files = list(directory.glob("*.json"))
+        except OSError:
+            return 0
+        for path in files:
+            try:
+                data = json.loads(path.read_text(encoding="utf-8"))
+                pid = int(data.get("pid", -1))
+                if str(data.get("owner", "")).split(":", 1)[0] not in (host, ""):
+                    continue  # another host's supervisor: its own reconcile decides
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                path.unlink(missing_ok=True)
+                removed += 1
+            except (OSError, ValueError, OverflowError, AttributeError):
+                continue
+        return removed
 
     def evidence_dir(self, session_id: str) -> Path:
         """``evidence/<session_id>/``, created if missing.

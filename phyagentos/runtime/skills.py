@@ -7,6 +7,7 @@
     description: Grasp an object from the table and lift it.
     runtime: builtin                 # SkillRuntime that executes it (SKILLRUNTIME.md)
     tree: pick                       # trees/pick.yaml
+    acquires: object                 # the gripper holds params[object] afterwards (releases: likewise)
     requires:
       capabilities: [arm_7dof, parallel_gripper, grasp]   # must be in the target's capabilities
       observations: [joint_positions, object_poses]       # must be in the target's observations
@@ -19,16 +20,32 @@ BuiltinSkillRuntime builds ``tree`` with the session's parameters.
 
 from __future__ import annotations
 
+import logging
+import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 from phyagentos.errors import SkillError, format_choices
 from phyagentos.yamlsource import SourceMap, load_yaml
 
-__all__ = ["SkillManifest", "SkillRegistry"]
+__all__ = ["SkillManifest", "SkillRegistry", "search_dirs"]
 
-_KEYS = {"version", "name", "description", "runtime", "tree", "requires", "params", "policy"}
+logger = logging.getLogger(__name__)
+
+
+def search_dirs(directory: str | Path | Sequence[str | Path]) -> tuple[Path, ...]:
+    """Folders of a search path given as one path, an ``os.pathsep``-joined string or a sequence."""
+    if isinstance(directory, (str, Path)):
+        parts = str(directory).split(os.pathsep) if isinstance(directory, str) else [directory]
+    else:
+        parts = list(directory)
+    return tuple(Path(p) for p in parts if str(p))
+
+
+_dirs = search_dirs
+
+_KEYS = {"version", "name", "description", "runtime", "tree", "requires", "params", "policy", "acquires", "releases"}
 _REQUIRES = {"capabilities", "observations"}
 
 
@@ -45,6 +62,8 @@ class SkillManifest:
     params: Mapping[str, Mapping[str, Any]]
     path: Path
     policy: Mapping[str, Any] | None = None  # runtime: policy (see phyagentos.runtime.policy_runtime)
+    acquires: str | None = None  # parameter naming the object the gripper holds afterwards
+    releases: str | None = None  # parameter naming the object the gripper lets go of
 
     def check_params(self, params: Mapping[str, Any]) -> list[str]:
         """Problems with session ``params`` for this skill (empty when fine)."""
@@ -56,20 +75,46 @@ class SkillManifest:
 
 
 class SkillRegistry:
-    """All manifests in a ``skills/`` directory, parsed eagerly so errors surface early.
+    """All manifests along a search path of ``skills/`` folders, parsed eagerly so errors
+    surface early.
+
+    Args:
+        directory: one folder, several joined with ``os.pathsep`` or a sequence, first
+            wins (:func:`phyagentos.resources.skill_dirs`). A name found again in a later
+            folder is recorded in :attr:`shadowed` and logged as a warning.
 
     Raises:
-        SkillError: a malformed manifest (file and line), or a duplicate name.
+        SkillError: a malformed manifest (file and line), or a name used twice in one folder.
     """
 
-    def __init__(self, directory: str | Path):
-        self.directory = Path(directory)
+    def __init__(self, directory: str | Path | Sequence[str | Path]):
+        self.directories = _dirs(directory)
         self._skills: dict[str, SkillManifest] = {}
-        for path in sorted(self.directory.glob("*.yaml")):
-            manifest = _parse(path)
-            if manifest.name in self._skills:
-                raise SkillError(f"duplicate skill name {manifest.name!r} (also in {self._skills[manifest.name].path})", path=path)
-            self._skills[manifest.name] = manifest
+        #: (name, path that wins, path shadowed by it)
+        self.shadowed: list[tuple[str, Path, Path]] = []
+        for folder in self.directories:
+            here: dict[str, Path] = {}
+            for path in sorted(folder.glob("*.yaml")):
+                manifest = _parse(path)
+                if manifest.name in here:
+                    raise SkillError(f"duplicate skill name {manifest.name!r} (also in {here[manifest.name]})", path=path)
+                here[manifest.name] = path
+                if manifest.name in self._skills:
+                    winner = self._skills[manifest.name].path
+                    self.shadowed.append((manifest.name, winner, path))
+                    logger.warning("skill %r in %s is shadowed by %s, which comes first in the search path",
+                                   manifest.name, path, winner)
+                    continue
+                self._skills[manifest.name] = manifest
+
+    @property
+    def directory(self) -> str:
+        """The search path as one ``os.pathsep``-joined string (what the runner process takes)."""
+        return os.pathsep.join(str(d) for d in self.directories)
+
+    def manifests(self) -> list[SkillManifest]:
+        """Every skill that wins its name, sorted by name."""
+        return [self._skills[n] for n in sorted(self._skills)]
 
     def names(self) -> list[str]:
         return sorted(self._skills)
@@ -114,6 +159,11 @@ def _parse(path: Path) -> SkillManifest:
     params = data.get("params") or {}
     if not isinstance(params, dict):
         raise SkillError("'params' must be a mapping", path=path, line=data.key_line("params"))
+    for key in ("acquires", "releases"):
+        value = data.get(key)
+        if value is not None and (not isinstance(value, str) or value not in params):
+            raise SkillError(f"{key!r} must name one of the skill's parameters ({format_choices(params) or 'none'}), "
+                             f"got {value!r}", path=path, line=data.key_line(key))
     return SkillManifest(
         name=data["name"],
         description=str(data.get("description", "")),
@@ -124,4 +174,6 @@ def _parse(path: Path) -> SkillManifest:
         params={k: dict(v or {}) for k, v in params.items()},
         path=path,
         policy=data.get("policy"),
+        acquires=data.get("acquires"),
+        releases=data.get("releases"),
     )

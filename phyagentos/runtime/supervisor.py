@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from phyagentos.errors import LeaseError, LifecycleError, PhyAgentOSError, ProtocolError, SupervisorError
+from phyagentos.errors import DocumentError, LeaseError, LifecycleError, PhyAgentOSError, ProtocolError, SupervisorError
 from phyagentos.protocol import (
     LEASED_STATES,
     SESSION_ID_PATTERN,
@@ -193,7 +193,7 @@ class WatchdogSupervisor:
 
     def __init__(self, workspace: Workspace, runtime: Any = None, *, owner: str | None = None,
                  lease_s: float | None = None, config: SupervisorConfig | None = None) -> None:
-        from phyagentos.resources import skills_dir, trees_dir  # noqa: PLC0415
+        from phyagentos.resources import skill_dirs, tree_dirs  # noqa: PLC0415
 
         config = config or SupervisorConfig()
         if lease_s is not None:
@@ -204,7 +204,7 @@ class WatchdogSupervisor:
         if runtime is not None:
             self._dirs = (str(runtime.skills.directory), str(runtime.trees.directory))
         else:
-            self._dirs = (str(skills_dir()), str(trees_dir()))
+            self._dirs = (skill_dirs(), tree_dirs())  # the search path, PHYAGENTOS_SKILLS_PATH included
         self.watcher = WorkspaceWatcher(workspace.root, dirs=("sessions", "sessions/.index"),
                                         files=("RUNTIME_SIGNAL.md",), inotify=config.inotify)
         self._runner: RunnerProcess | None = _take_runner(*self._dirs)
@@ -216,6 +216,8 @@ class WatchdogSupervisor:
         self._succeeded: set[tuple[str, str]] = set()
         self._next_maintenance = 0.0
         self._next_reconcile = time.monotonic() + config.reconcile_interval_s
+        self._queued: dict[str, str] = {}  # session id -> run holding its target's world
+        self._set_aside: set[str] = set()  # sessions whose file no longer validates
         self._stopping = False
         self._stop_deadline: float | None = None
         self._closed = False
@@ -608,6 +610,16 @@ class WatchdogSupervisor:
                     self._unreserve(ident.target)
                     busy.add(ident.target)
                     continue
+            # A target's world belongs to one run at a time: another run's sessions queue.
+            holder = self.workspace.runs.take_world(ident.target, ident.run_id)
+            if holder is not None:
+                self._unreserve(ident.target)
+                if self._queued.get(sid) != holder:
+                    self._queued[sid] = holder
+                    logger.info("session %s of run %s waits: target %s holds the world of run %s until it "
+                                "finishes", sid, ident.run_id, ident.target, holder)
+                continue
+            self._queued.pop(sid, None)
             if self._claim(sid, ident):
                 return 1
             self._unreserve(ident.target)
@@ -647,6 +659,12 @@ class WatchdogSupervisor:
 
         try:
             rec = self.workspace.update_session(session_id, fn)
+        except DocumentError as exc:  # a hand-edited session: set aside, everything else goes on
+            if session_id not in self._set_aside:
+                self._set_aside.add(session_id)
+                logger.warning("supervisor %s: session %s set aside, its file no longer validates: %s",
+                               self.owner, session_id, exc)
+            return False
         except ProtocolError as exc:  # e.g. the hint is there, the file not yet
             logger.debug("claim of %s skipped: %s", session_id, exc)
             return False

@@ -27,6 +27,9 @@ from typing import Any
 
 import yaml
 
+from phyagentos.errors import TargetError
+from phyagentos.yamlsource import load_yaml
+
 from phyagentos.protocol.atomic import _fsync_dir, atomic_write_text
 
 __all__ = ["TargetLock", "INFLIGHT_FILE", "write_marker", "read_marker", "clear_marker"]
@@ -103,10 +106,10 @@ def read_marker(targets_dir: str | os.PathLike[str], target: str) -> dict[str, A
     """The in-flight marker of ``target`` (``session_id``, ``token``, ``owner``, ``since``), or None."""
     path = _marker_path(targets_dir, target)
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = load_yaml(path.read_text(encoding="utf-8"), path=path, error=TargetError)  # bounded
     except FileNotFoundError:
         return None
-    except yaml.YAMLError:
+    except (yaml.YAMLError, TargetError, UnicodeDecodeError):
         logger.warning("unreadable in-flight marker %s; treating it as naming no session", path)
         return {"session_id": None, "token": None, "owner": None}
     return data if isinstance(data, dict) else None

@@ -22,6 +22,7 @@ from phyagentos.errors import TargetError, format_choices
 from phyagentos.protocol import SessionRecord, TargetSpec
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.protocol.sensors import read_sensors
+from phyagentos.yamlsource import load_yaml
 from phyagentos.targets import MuJoCoTarget, SceneSpec
 from phyagentos.targets.kitchen import FrankaKitchenTarget
 from phyagentos.targets.so101 import SO101Target
@@ -95,8 +96,13 @@ class TargetPool:
                 target.configure_sensors(sensors)
         target = self._live[spec.name][1]
         meta_path = self.state_dir / spec.name / "state.yaml"
-        meta = yaml.safe_load(meta_path.read_text(encoding="utf-8")) if meta_path.is_file() else None
-        if meta and meta.get("run_id") == session.run_id and meta.get("scene") == key:
+        try:  # bounded like every YAML the project reads; an unreadable record means: reset
+            meta = load_yaml(meta_path.read_text(encoding="utf-8"), path=meta_path, error=TargetError) \
+                if meta_path.is_file() else None
+        except (TargetError, UnicodeDecodeError) as exc:
+            logger.warning("target %s: state record unreadable (%s); resetting the world", spec.name, exc)
+            meta = None
+        if isinstance(meta, dict) and meta.get("run_id") == session.run_id and meta.get("scene") == key:
             target.load_state(self.state_dir / spec.name / "state.npz")
             logger.debug("target %s: continuing episode of run %s", spec.name, session.run_id)
         else:

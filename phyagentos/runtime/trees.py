@@ -30,17 +30,23 @@ is interpolated as text.
 from __future__ import annotations
 
 import inspect
+import logging
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 import py_trees
 
 from phyagentos.errors import SkillError, format_choices
 from phyagentos.yamlsource import SourceMap, line_of, load_yaml
 
+from .skills import search_dirs
+
 __all__ = ["TreeLibrary", "TreeSpec", "NODE_KINDS", "render_ascii", "render_image"]
+
+logger = logging.getLogger(__name__)
 
 NODE_KINDS = ("sequence", "selector", "parallel", "retry", "timeout", "subtree", "primitive")
 _PARALLEL_POLICIES = {
@@ -74,14 +80,36 @@ class TreeLibrary:
         SkillError: for a malformed tree file (with file and line).
     """
 
-    def __init__(self, directory: str | Path, primitives: Mapping[str, Callable[..., py_trees.behaviour.Behaviour]]):
-        self.directory = Path(directory)
+    def __init__(self, directory: str | Path | Sequence[str | Path],
+                 primitives: Mapping[str, Callable[..., py_trees.behaviour.Behaviour]]):
+        self.directories = search_dirs(directory)
         self.primitives = dict(primitives)
         self._specs: dict[str, TreeSpec] = {}
+        #: (name, path that wins, path shadowed by it), first folder of the search path wins
+        self.shadowed: list[tuple[str, Path, Path]] = []
+        seen: dict[str, Path] = {}
+        for folder in self.directories:
+            for path in sorted(folder.glob("*.yaml")):
+                if path.stem in seen:
+                    self.shadowed.append((path.stem, seen[path.stem], path))
+                    logger.warning("tree %r in %s is shadowed by %s, which comes first in the search path",
+                                   path.stem, path, seen[path.stem])
+                else:
+                    seen[path.stem] = path
+        self._paths = seen
+
+    @property
+    def directory(self) -> str:
+        """The search path as one ``os.pathsep``-joined string (what the runner process takes)."""
+        return os.pathsep.join(str(d) for d in self.directories)
 
     def names(self) -> list[str]:
-        """Names of all tree files in the directory, sorted."""
-        return sorted(p.stem for p in self.directory.glob("*.yaml"))
+        """Names of all tree files along the search path, sorted."""
+        return sorted(self._paths)
+
+    def path(self, name: str) -> Path | None:
+        """The file tree ``name`` is read from (the first along the search path)."""
+        return self._paths.get(name)
 
     def spec(self, name: str) -> TreeSpec:
         """Parse (once) and return the tree ``name``.
@@ -91,8 +119,8 @@ class TreeLibrary:
         """
         if name in self._specs:
             return self._specs[name]
-        path = self.directory / f"{name}.yaml"
-        if not path.is_file():
+        path = self._paths.get(name)
+        if path is None or not path.is_file():
             raise SkillError(f"unknown tree {name!r}; valid trees: {format_choices(self.names())}")
         data = load_yaml(path.read_text(encoding="utf-8"), path=path, error=SkillError)
         if not isinstance(data, SourceMap):

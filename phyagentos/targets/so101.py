@@ -49,10 +49,10 @@ from phyagentos.errors import TargetError
 from .base import ExecutionResult
 from .mujoco_arm import MuJoCoArmTarget, mat_quat
 from .mujoco_target import GripperResult
-from .scene import DEFAULT_SCENE, SceneSpec, add_tabletop_world
+from .scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
 
 __all__ = ["SO101Target", "build_so101_scene", "so101_asset_path", "ARM_JOINT_NAMES", "GRIPPER_JOINT", "MOUNT_XY",
-           "HOME_QPOS", "VELOCITY_DATASHEET", "ACCELERATION_LIMITS"]
+           "HOME_QPOS", "VELOCITY_DATASHEET", "ACCELERATION_LIMITS", "SO101_DEFAULT_SCENE"]
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +63,12 @@ JAW_PADS = ("fixed_jaw_pad", "moving_jaw_pad")
 #: Where the SO-101's base stands on the table, m (world frame). Its reach is about
 #: 0.35 m, so it stands nearer the objects than the Franka's base (the origin).
 MOUNT_XY: tuple[float, float] = (0.25, 0.0)
+#: The SO-101's scene when a session names none: a 3 cm cube and a goal region within
+#: its reach (as ``goal_graphs/pick_and_place_compact.yaml``), no obstacle near its home pose.
+SO101_DEFAULT_SCENE = SceneSpec(
+    objects=(ObjectSpec(name="cube", half_extents=(0.015, 0.015, 0.015), position=(0.45, -0.1)),),
+    regions=(RegionSpec(name="goal", center=(0.45, 0.11), half_extents=(0.05, 0.05)),),
+)
 #: Ready configuration, rad: tcp 0.18 m in front of the base, 0.08 m above the table,
 #: pointing straight down, jaw closing along world y (solved once with the target's IK).
 HOME_QPOS: tuple[float, ...] = (-0.129, -0.446, 0.425, 1.592, -1.651)
@@ -222,8 +228,11 @@ class SO101Target(MuJoCoArmTarget):
 
     @classmethod
     def scene_from_dict(cls, raw) -> SceneSpec:
-        """The same scene type as the Franka tabletop (used by the target pool)."""
-        return SceneSpec.from_dict(raw) if raw else SceneSpec.default()
+        """The same scene type as the Franka tabletop (used by the target pool); without a
+        scene, :data:`SO101_DEFAULT_SCENE`. (The Franka's default scene has a 30 cm wall
+        that the SO-101's home pose reaches into: a ``hold`` there was pushed by the
+        wall's contacts and drifted 0.02-0.5 rad.)"""
+        return SceneSpec.from_dict(raw) if raw else SO101_DEFAULT_SCENE
 
     def __init__(self, name: str, scene: SceneSpec = DEFAULT_SCENE, *, seed: int | None = None):
         super().__init__(name, "simulation")

@@ -1,0 +1,294 @@
+"""Contact leaves: motions that expect to touch something.
+
+``push`` and ``compute_push`` push an object along the table with the closed hand: the
+push expects contact (``contact.missing`` otherwise), tolerates the lag contact causes
+(its own ``tracking_tol_rad``) and bounds the effort (``contact.excessive_force``).
+
+``guarded_move`` moves the tcp along a straight line, slowly, and stops as soon as the
+robot presses on something with at least ``max_contact_force_n``; a motion that should
+have touched and did not fails with ``contact.missing``. Its tracking tolerance is a
+parameter: a compliant push lets the arm lag behind its reference while in contact,
+where a free-space motion would call that lag a collision.
+
+Contact force: the sum over the active MuJoCo contacts between a robot geom (a geom
+of a jointed, non-free body) and anything else of the normal force
+(:func:`mujoco.mj_contactForce`, N). A held object's contacts with the fingers do not
+count. Targets without a MuJoCo model fail with ``contact.unsupported``.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from py_trees.common import Status
+
+from phyagentos.motion.cartesian import cartesian_path
+from phyagentos.motion.retime import retime
+
+from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
+
+from .base import Primitive, PrimitiveFailure
+from .execution import _Tracking
+from .motion import execution_limits, ik_options
+from .perception import entity_pose
+
+__all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n"]
+
+
+def contact_force_n(model: mujoco.MjModel, data: mujoco.MjData, *, ignore_bodies: frozenset[int] = frozenset()
+                    ) -> tuple[float, tuple[str, ...]]:
+    """Total normal force (N) the robot exerts on anything now, and what it touches.
+
+    Robot geoms are those of bodies with a hinge or slide joint (not world, not a free
+    object); contacts with bodies in ``ignore_bodies`` (e.g. a held object) are skipped.
+    """
+    total, touched = 0.0, []
+    f6 = np.zeros(6)
+    for i in range(data.ncon):
+        c = data.contact[i]
+        b1, b2 = int(model.geom_bodyid[c.geom1]), int(model.geom_bodyid[c.geom2])
+        robot = [_is_robot(model, b) for b in (b1, b2)]
+        if robot[0] == robot[1] or {b1, b2} & ignore_bodies:
+            continue
+        mujoco.mj_contactForce(model, data, i, f6)
+        total += abs(float(f6[0]))
+        other = c.geom2 if robot[0] else c.geom1
+        touched.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, other) or f"geom{other}")
+    return total, tuple(sorted(set(touched)))
+
+
+def _is_robot(model: mujoco.MjModel, body: int) -> bool:
+    if body == 0 or model.body_jntnum[body] == 0:
+        # a geom on a link without its own joint (e.g. a hand) belongs to the robot when its
+        # ancestor is jointed and not a free object
+        parent = int(model.body_parentid[body])
+        return body != 0 and parent != 0 and _is_robot(model, parent)
+    return model.jnt_type[model.body_jntadr[body]] != mujoco.mjtJoint.mjJNT_FREE
+
+
+class GuardedMove(_Tracking):
+    """Straight-line tcp motion by a world ``offset`` that stops on contact.
+
+    Args:
+        offset: (3,) world-frame tcp displacement in m (orientation kept): the farthest
+            the motion goes.
+        velocity_scale: fraction (0, 1] of the joint velocity limits (slow: contact).
+        tracking_tol_rad: joint tracking error tolerated before the motion counts as
+            blocked, rad (a blocked motion with contact is the contact it expected).
+        max_contact_force_n: stop as soon as the robot presses with this much, N.
+        expect_contact: fail with ``contact.missing`` when the whole offset is travelled
+            without touching anything.
+
+    Blackboard: writes ``contact`` with ``{force_n, touched, travelled_m}``.
+    """
+
+    def __init__(self, name: str, *, offset, velocity_scale: float = 0.05, tracking_tol_rad: float = 0.05,
+                 max_contact_force_n: float = 10.0, expect_contact: bool = True):
+        super().__init__(name)
+        offset = np.asarray(offset, dtype=float)
+        if offset.shape != (3,) or not np.all(np.isfinite(offset)):
+            raise ValueError(f"offset must be 3 finite numbers in m, got {offset!r}")
+        if not 0 < velocity_scale <= 1:
+            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
+        if not tracking_tol_rad > 0:
+            raise ValueError(f"tracking_tol_rad must be > 0 rad, got {tracking_tol_rad}")
+        if not max_contact_force_n > 0:
+            raise ValueError(f"max_contact_force_n must be > 0 N, got {max_contact_force_n}")
+        self.offset, self.velocity_scale = offset, float(velocity_scale)
+        self.tracking_tol_rad, self.max_contact_force_n = float(tracking_tol_rad), float(max_contact_force_n)
+        self.expect_contact = bool(expect_contact)
+        self.writes("contact")
+
+    def on_enter(self):
+        ctx = self.ctx
+        target = ctx.target
+        if getattr(target, "model", None) is None or getattr(target, "data", None) is None:
+            raise PrimitiveFailure("contact.unsupported", f"target {target.name!r} reports no contact forces")
+        self._start_xyz = target.tcp_pose()[:3, 3].copy()
+        T_goal = target.tcp_pose()
+        T_goal[:3, 3] += self.offset
+        with ctx.profiler.section("ik"):
+            path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
+        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
+        with ctx.profiler.section("timing"):
+            traj = retime(path, vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
+        held = [n for n in getattr(target, "held_objects", lambda: ())()]
+        self._ignore = frozenset(int(target.model.body(n).id) for n in held)
+        self._start(traj)
+
+    def _contact(self, force: float, touched: tuple[str, ...]) -> Status:
+        target = self.ctx.target
+        target.halt()
+        travelled = float(np.linalg.norm(target.tcp_pose()[:3, 3] - self._start_xyz))
+        info = {"force_n": round(force, 3), "touched": list(touched), "travelled_m": round(travelled, 4)}
+        self.set("contact", info)
+        self.ctx.trace.record("contact", leaf=self.name, **info)
+        return Status.SUCCESS
+
+    def step(self):
+        ctx = self.ctx
+        target = ctx.target
+        t_end = min(self._t + ctx.motion.control_period_s, self._traj.duration)
+        with ctx.profiler.section("simulation"):
+            result = target.track(self._traj, t_start=self._t, t_end=t_end, tracking_tol_rad=self.tracking_tol_rad)
+        self._t = t_end
+        force, touched = contact_force_n(target.model, target.data, ignore_bodies=self._ignore)
+        if force >= self.max_contact_force_n or (not result.completed and touched):
+            return self._contact(force, touched)
+        if not result.completed:
+            raise PrimitiveFailure("execution.tracking",
+                                   f"blocked without contact: tracking error {result.max_tracking_error_rad:.3f} rad "
+                                   f"exceeded {self.tracking_tol_rad} rad")
+        if self._t < self._traj.duration - 1e-9:
+            return Status.RUNNING
+        if touched:
+            return self._contact(force, touched)
+        if self.expect_contact:
+            target.halt()
+            raise PrimitiveFailure("contact.missing",
+                                   f"moved {np.linalg.norm(self.offset):.3f} m and touched nothing "
+                                   f"(expected contact of at least {self.max_contact_force_n} N)")
+        self.set("contact", {"force_n": 0.0, "touched": [], "travelled_m": float(np.linalg.norm(self.offset))})
+        return Status.SUCCESS
+
+
+class ComputePush(Primitive):
+    """Start and pre-start tcp poses to push ``object`` along ``direction`` with the closed hand.
+
+    The tcp goes ``clearance_m`` behind the object's face (measured along ``direction``
+    from the observed centre, its footprint's half diagonal), top-down with the fingers
+    across the direction, low enough that the closed fingertips meet the object but stay
+    ``tip_clearance_m`` above the table.
+
+    Args:
+        object: the object to push.
+        direction: ``[dx, dy]`` world-frame push direction (normalised here).
+        distance_m: how far the object should move, m.
+        clearance_m: gap between the fingertips and the object at the start, m.
+        approach_height_m: pre-start height above the start, m.
+        tip_clearance_m: fingertips above the table, m.
+        snapshot: blackboard key of the observation.
+        start, prestart, goal: blackboard keys written with (4, 4) world tcp poses (goal:
+            where the hand ends the push).
+    """
+
+    def __init__(self, name: str, *, object: str, direction, distance_m: float, clearance_m: float = 0.02,
+                 approach_height_m: float = 0.10, tip_clearance_m: float = 0.005, snapshot: str = "snapshot",
+                 start: str = "push_start_pose", prestart: str = "push_prestart_pose", goal: str = "push_goal_pose"):
+        super().__init__(name)
+        d = np.asarray(direction, dtype=float)
+        if d.shape != (2,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
+            raise ValueError(f"direction must be 2 finite numbers, not both 0, got {direction!r}")
+        if not distance_m > 0:
+            raise ValueError(f"distance_m must be > 0 m, got {distance_m!r}")
+        self.object, self.direction, self.distance_m = object, d / np.linalg.norm(d), float(distance_m)
+        self.clearance_m, self.approach_height_m = float(clearance_m), float(approach_height_m)
+        self.tip_clearance_m = float(tip_clearance_m)
+        self.snapshot_key, self.start_key, self.prestart_key, self.goal_key = snapshot, start, prestart, goal
+        self.reads(snapshot)
+        self.writes(start, prestart, goal)
+
+    def step(self):
+        T_obj, half = entity_pose(self.get(self.snapshot_key), self.object)
+        back = float(np.hypot(half[0], half[1])) + self.clearance_m + 0.01  # + half a finger's thickness
+        xy = T_obj[:2, 3] - back * self.direction
+        z = max(float(T_obj[2, 3]), FINGERTIP_BELOW_TCP_M + self.tip_clearance_m)
+        # fingers close along the tcp y axis; put that axis across the push direction
+        yaw = float(np.arctan2(self.direction[1], self.direction[0]))
+        T = np.eye(4)
+        T[:3, :3] = top_down_rotation(yaw)
+        T[:3, 3] = [xy[0], xy[1], z]
+        P = T.copy()
+        P[2, 3] += self.approach_height_m
+        G = T.copy()  # the hand travels the gap, then the object's distance
+        G[:2, 3] += (back - float(np.hypot(half[0], half[1])) - 0.01 + self.distance_m) * self.direction
+        self.set(self.start_key, T)
+        self.set(self.prestart_key, P)
+        self.set(self.goal_key, G)
+        self.ctx.trace.record("push_pose", object=self.object, start=T[:3, 3].round(4).tolist(),
+                              direction=self.direction.round(4).tolist())
+
+
+class Push(_Tracking):
+    """Push: a straight tcp motion (to a blackboard pose or by an ``offset``) that must touch something.
+
+    Args:
+        to: blackboard key of the (4, 4) world tcp pose where the push ends; or
+        offset: (3,) world-frame tcp displacement, m (the whole push, from the start pose).
+        velocity_scale: fraction (0, 1] of the joint velocity limits.
+        tracking_tol_rad: joint tracking error tolerated while pushing, rad (contact
+            makes the arm lag; a free-space motion would call that a collision).
+        max_force_n: effort limit: the push stops and fails with
+            ``contact.excessive_force`` when the robot presses harder, N.
+        expect_contact: fail with ``contact.missing`` if nothing was touched.
+
+    Blackboard: writes ``contact`` with ``{max_force_n, touched}``.
+    """
+
+    def __init__(self, name: str, *, to: str | None = None, offset=None, velocity_scale: float = 0.05,
+                 tracking_tol_rad: float = 0.15, max_force_n: float = 40.0, expect_contact: bool = True):
+        super().__init__(name)
+        if (to is None) == (offset is None):
+            raise ValueError("give exactly one of 'to' (blackboard pose key) or 'offset' ([dx, dy, dz] in m)")
+        if offset is not None:
+            offset = np.asarray(offset, dtype=float)
+            if offset.shape != (3,) or not np.all(np.isfinite(offset)):
+                raise ValueError(f"offset must be 3 finite numbers in m, got {offset!r}")
+        self.to = to
+        if to is not None:
+            self.reads(to)
+        if not 0 < velocity_scale <= 1:
+            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
+        if not tracking_tol_rad > 0 or not max_force_n > 0:
+            raise ValueError("tracking_tol_rad and max_force_n must be > 0")
+        self.offset, self.velocity_scale = offset, float(velocity_scale)
+        self.tracking_tol_rad, self.max_force_n = float(tracking_tol_rad), float(max_force_n)
+        self.expect_contact = bool(expect_contact)
+        self.writes("contact")
+
+    def on_enter(self):
+        ctx = self.ctx
+        target = ctx.target
+        if getattr(target, "model", None) is None or getattr(target, "data", None) is None:
+            raise PrimitiveFailure("contact.unsupported", f"target {target.name!r} reports no contact forces")
+        if self.to is not None:
+            T_goal = np.asarray(self.get(self.to), dtype=float)
+        else:
+            T_goal = target.tcp_pose()
+            T_goal[:3, 3] += self.offset
+        self._length = float(np.linalg.norm(T_goal[:3, 3] - target.tcp_pose()[:3, 3]))
+        with ctx.profiler.section("ik"):
+            path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
+        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
+        with ctx.profiler.section("timing"):
+            traj = retime(path, vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
+        self._peak, self._touched = 0.0, set()
+        self._start(traj)
+
+    def step(self):
+        ctx = self.ctx
+        target = ctx.target
+        t_end = min(self._t + ctx.motion.control_period_s, self._traj.duration)
+        with ctx.profiler.section("simulation"):
+            result = target.track(self._traj, t_start=self._t, t_end=t_end, tracking_tol_rad=self.tracking_tol_rad)
+        self._t = t_end
+        force, touched = contact_force_n(target.model, target.data)
+        self._peak = max(self._peak, force)
+        self._touched.update(t for t in touched if t not in ("table", "floor"))
+        if force > self.max_force_n:
+            target.halt()
+            raise PrimitiveFailure("contact.excessive_force",
+                                   f"pushing with {force:.1f} N on {list(touched)} exceeds max_force_n {self.max_force_n} N")
+        if not result.completed:
+            raise PrimitiveFailure("execution.tracking",
+                                   f"push blocked: tracking error {result.max_tracking_error_rad:.3f} rad exceeded "
+                                   f"tracking_tol_rad {self.tracking_tol_rad} with {force:.1f} N on {list(touched)}")
+        if self._t < self._traj.duration - 1e-9:
+            return Status.RUNNING
+        target.settle(self._traj.q[-1])
+        info = {"max_force_n": round(self._peak, 3), "touched": sorted(self._touched)}
+        self.set("contact", info)
+        ctx.trace.record("push", leaf=self.name, **info)
+        if self.expect_contact and not self._touched:
+            raise PrimitiveFailure("contact.missing", f"pushed {self._length:.3f} m and touched nothing")
+        return Status.SUCCESS

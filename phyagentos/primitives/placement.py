@@ -1,0 +1,93 @@
+"""Placement leaves: set the held object down at a chosen spot inside a region.
+
+``compute_place`` aims at a region's centre, so a second object placed in the same
+region lands on the first. ``compute_place_at`` aims at an ``offset_m`` from the
+centre or at slot ``slot`` of ``slots`` evenly spaced along the region's longer
+horizontal axis, and refuses a spot where the object's footprint would stick out of
+the region (``place.outside_region``). Stacking on another object stays
+``compute_place`` with ``region`` naming that object.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from phyagentos.motion.grasp import place_pose
+
+from .base import Primitive, PrimitiveFailure
+from .perception import entity_pose
+
+__all__ = ["ComputePlaceAt", "slot_offset"]
+
+
+def slot_offset(region_half_extents, slot: int, slots: int) -> np.ndarray:
+    """``(2,)`` m offset from a region's centre of slot ``slot`` (0-based) of ``slots``
+    evenly spaced cells along the region's longer horizontal axis (x on a tie)."""
+    hx, hy = float(region_half_extents[0]), float(region_half_extents[1])
+    axis = 0 if hx >= hy else 1
+    half = (hx, hy)[axis]
+    out = np.zeros(2)
+    out[axis] = -half + (2 * slot + 1) * half / slots
+    return out
+
+
+class ComputePlaceAt(Primitive):
+    """Place and pre-place tcp poses that set the held object down at a spot in ``region``.
+
+    Args:
+        object: the held object.
+        region: the region (a patch on its support surface).
+        offset_m: ``[dx, dy]`` world-frame offset of the spot from the region's centre,
+            m; or
+        slot, slots: the spot is cell ``slot`` (0-based) of ``slots`` along the region's
+            longer axis (default 0 of 1: the centre).
+        approach_height_m: pre-place height above the place pose, m.
+        snapshot: blackboard key of the observation.
+        place, preplace: blackboard keys written with (4, 4) world tcp poses.
+
+    Fails with ``place.outside_region`` when the object's footprint at the spot does not
+    fit inside the region.
+    """
+
+    def __init__(self, name: str, *, object: str, region: str, offset_m=None, slot: int = 0, slots: int = 1,
+                 approach_height_m: float = 0.10, snapshot: str = "snapshot", place: str = "place_pose",
+                 preplace: str = "preplace_pose"):
+        super().__init__(name)
+        if isinstance(slots, bool) or not isinstance(slots, int) or slots < 1:
+            raise ValueError(f"slots must be a whole number >= 1, got {slots!r}")
+        if isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < slots:
+            raise ValueError(f"slot must be a whole number in [0, {slots - 1}], got {slot!r}")
+        if offset_m is not None:
+            if (slot, slots) != (0, 1):
+                raise ValueError("give either 'offset_m' ([dx, dy] in m) or 'slot' with 'slots', not both")
+            offset_m = np.asarray(offset_m, dtype=float)
+            if offset_m.shape != (2,) or not np.all(np.isfinite(offset_m)):
+                raise ValueError(f"offset_m must be 2 finite numbers in m, got {offset_m!r}")
+        self.object, self.region = object, region
+        self.offset_m, self.slot, self.slots = offset_m, slot, slots
+        self.approach_height_m = float(approach_height_m)
+        self.snapshot_key, self.place_key, self.preplace_key = snapshot, place, preplace
+        self.reads(snapshot)
+        self.writes(place, preplace)
+
+    def step(self):
+        snapshot = self.get(self.snapshot_key)
+        T_region, region_half = entity_pose(snapshot, self.region)
+        T_obj, half = entity_pose(snapshot, self.object)
+        offset = self.offset_m if self.offset_m is not None else slot_offset(region_half, self.slot, self.slots)
+        # footprint of the object as it will stand (its horizontal extent, any yaw)
+        reach = float(np.hypot(half[0], half[1])) if half.size >= 2 else 0.0
+        if np.any(np.abs(offset) + reach > region_half[:2] + 1e-9):
+            raise PrimitiveFailure("place.outside_region",
+                                   f"{self.object!r} ({2 * reach:.3f} m across) at offset {np.round(offset, 3).tolist()} m "
+                                   f"does not fit inside {self.region!r} (half extents "
+                                   f"{np.round(region_half[:2], 3).tolist()} m)")
+        center = T_region[:3, 3] + np.array([offset[0], offset[1], 0.0])
+        T_tcp_obj = np.linalg.inv(self.ctx.target.tcp_pose()) @ T_obj
+        T_place = place_pose(center, half, T_tcp_object=T_tcp_obj, surface_z_m=float(T_region[2, 3]))
+        T_pre = T_place.copy()
+        T_pre[2, 3] += self.approach_height_m
+        self.set(self.place_key, T_place)
+        self.set(self.preplace_key, T_pre)
+        self.ctx.trace.record("place_pose", object=self.object, region=self.region, offset=np.round(offset, 4).tolist(),
+                              place=T_place[:3, 3].round(4).tolist())

@@ -1,0 +1,227 @@
+"""Machine-readable parameter schema of every primitive (what ``trees/*.yaml`` may pass).
+
+Each primitive class has a small declarative table: parameter name -> (type, unit,
+description). Defaults and which parameters are required are not repeated here: they
+come from the class's ``__init__`` signature, so the schema cannot drift from the
+code. A primitive class may carry its table itself as ``PARAMS``; the tables of the
+shipped primitives live in :data:`TABLES` so their modules stay as they are.
+
+``phyagentos primitives`` and ``docs/primitives.md`` are generated from
+:func:`primitive_schemas`; a test keeps the document current and checks that every
+table names exactly the parameters of its class.
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
+from .contact import ComputePush, GuardedMove, Push
+from .control import Noop
+from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
+from .motion import PlanPath, RetimePath, SolveIK
+from .perception import ComputeGrasp, ComputePlace, Observe
+from .placement import ComputePlaceAt
+
+__all__ = ["ParamSpec", "PrimitiveSchema", "TABLES", "primitive_schema", "primitive_schemas", "REQUIRED"]
+
+#: Marker of a parameter without a default.
+REQUIRED = "required"
+
+_KEY = ("str", "", "blackboard key")  # most keys: a blackboard entry name
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One primitive parameter: ``type`` (YAML-level: str, float, int, bool, [x, y, z], ...),
+    ``unit`` (SI, empty when unitless), ``default`` (:data:`REQUIRED` when none)."""
+
+    name: str
+    type: str
+    unit: str
+    default: Any
+    description: str
+
+    @property
+    def required(self) -> bool:
+        return self.default is REQUIRED
+
+
+@dataclass(frozen=True)
+class PrimitiveSchema:
+    """A primitive's name (as trees use it), class, one-line summary and parameters."""
+
+    name: str
+    cls: type
+    summary: str
+    params: tuple[ParamSpec, ...]
+
+
+#: class -> parameter -> (type, unit, description)
+TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
+    Observe: {
+        "out": (*_KEY[:2], "blackboard key written with the snapshot"),
+        "samples": ("int", "", "perception frames averaged (0 = skip the observation)"),
+    },
+    ComputeGrasp: {
+        "object": ("str", "", "scene object to grasp"),
+        "approach_height_m": ("float", "m", "pre-grasp height above the grasp"),
+        "candidate": ("int", "", "which top-down grasp, best first (another approach direction)"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "grasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp grasp pose"),
+        "pregrasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-grasp pose"),
+    },
+    ComputePlace: {
+        "object": ("str", "", "the held object"),
+        "region": ("str", "", "region (or object, to stack on) to set it down in"),
+        "approach_height_m": ("float", "m", "pre-place height above the place pose"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
+        "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),
+    },
+    SolveIK: {
+        "pose": (*_KEY[:2], "blackboard key of the (4, 4) world tcp pose to reach"),
+        "out": (*_KEY[:2], "blackboard key written with the (n,) joint solution in rad"),
+        "position_tol_m": ("float", "m", "position convergence tolerance"),
+        "orientation_tol_rad": ("float", "rad", "orientation convergence tolerance"),
+    },
+    PlanPath: {
+        "goal": (*_KEY[:2], "blackboard key of the (n,) goal configuration in rad"),
+        "out": (*_KEY[:2], "blackboard key written with the (N, n) path"),
+        "planner": ("str | null", "", "OMPL planner (null: the session's motion settings)"),
+        "timeout_s": ("float | null", "s", "planning budget (null: the session's motion settings)"),
+    },
+    RetimePath: {
+        "path": (*_KEY[:2], "blackboard key of the (N, n) path"),
+        "out": (*_KEY[:2], "blackboard key written with the timed trajectory"),
+        "velocity_scale": ("float | null", "", "fraction (0, 1] of the joint velocity limits"),
+        "acceleration_scale": ("float | null", "", "fraction (0, 1] of the joint acceleration limits"),
+    },
+    ExecuteTrajectory: {
+        "trajectory": (*_KEY[:2], "blackboard key of the timed trajectory to stream"),
+    },
+    CartesianMove: {
+        "to": ("str | null", "", "blackboard key of a (4, 4) world tcp pose (give `to` or `offset`)"),
+        "offset": ("[dx, dy, dz] | null", "m", "world-frame tcp displacement, orientation kept"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+        "check_collisions": ("bool", "", "re-check the timed motion against the scene"),
+    },
+    Gripper: {
+        "command": ("open | close", "", "what to do"),
+        "object": ("str | null", "", "when closing: the object that must end up between the fingers"),
+        "force_n": ("float | null", "N", "when closing: grip force per finger (null: close on position)"),
+    },
+    CheckHolding: {
+        "object": ("str", "", "the object that must be held"),
+    },
+    Hold: {
+        "duration_s": ("float", "s", "simulated time to keep still"),
+    },
+    ComputeAffordanceGrasp: {
+        "object": ("str", "", "entity whose declared part to grasp"),
+        "approach_height_m": ("float", "m", "pre-grasp distance along the approach"),
+        "affordance": ("str", "", "which declared affordance (e.g. grasp, handle)"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "grasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp grasp pose"),
+        "pregrasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-grasp pose"),
+    },
+    ArticulateHinge: {
+        "object": ("str", "", "articulated entity (its hinge is declared by the target)"),
+        "delta_rad": ("float", "rad", "signed hinge rotation"),
+        "step_rad": ("float", "rad", "rotation per tracked waypoint"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+    },
+    ToolMove: {
+        "offset": ("[dx, dy, dz]", "m", "tcp displacement in the tool frame"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+    },
+    ComputePlaceAsHeld: {
+        "object": ("str", "", "the held (hooked) object"),
+        "region": ("str", "", "region to set it down in"),
+        "approach_height_m": ("float", "m", "pre-place height above the place pose"),
+        "clearance_m": ("float", "m", "gap kept between the object and the surface"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
+        "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),
+    },
+    Noop: {
+        "ticks": ("int", "", "ticks before succeeding (touches no target)"),
+    },
+    ComputePlaceAt: {
+        "object": ("str", "", "the held object"),
+        "region": ("str", "", "region to set it down in"),
+        "offset_m": ("[dx, dy] | null", "m", "spot relative to the region's centre (give `offset_m` or `slot`)"),
+        "slot": ("int", "", "0-based cell along the region's longer axis"),
+        "slots": ("int", "", "number of cells the region is divided into (1: the centre)"),
+        "approach_height_m": ("float", "m", "pre-place height above the place pose"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
+        "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),
+    },
+    ComputePush: {
+        "object": ("str", "", "the object to push"),
+        "direction": ("[dx, dy]", "", "world-frame push direction (normalised)"),
+        "distance_m": ("float", "m", "how far the object should move"),
+        "clearance_m": ("float", "m", "gap between the fingertips and the object at the start"),
+        "approach_height_m": ("float", "m", "pre-start height above the start pose"),
+        "tip_clearance_m": ("float", "m", "fingertips above the table"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "start": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp start pose"),
+        "prestart": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-start pose"),
+        "goal": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pose where the push ends"),
+    },
+    Push: {
+        "to": ("str | null", "", "blackboard key of the (4, 4) world tcp pose where the push ends (or `offset`)"),
+        "offset": ("[dx, dy, dz] | null", "m", "world-frame tcp displacement of the whole push"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+        "tracking_tol_rad": ("float", "rad", "joint tracking error tolerated while pushing"),
+        "max_force_n": ("float", "N", "effort limit: fail with contact.excessive_force above it"),
+        "expect_contact": ("bool", "", "fail with contact.missing if nothing was touched"),
+    },
+    GuardedMove: {
+        "offset": ("[dx, dy, dz]", "m", "world-frame tcp displacement: the farthest the motion goes"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+        "tracking_tol_rad": ("float", "rad", "joint tracking error tolerated before the motion counts as blocked"),
+        "max_contact_force_n": ("float", "N", "stop once the robot presses on anything with this much"),
+        "expect_contact": ("bool", "", "fail with contact.missing if the whole offset touches nothing"),
+    },
+}
+
+
+def _summary(cls: type) -> str:
+    doc = inspect.getdoc(cls) or ""
+    first = doc.split("\n\n", 1)[0].replace("\n", " ").strip()
+    return first
+
+
+def primitive_schema(name: str, cls: type) -> PrimitiveSchema:
+    """The schema of primitive ``name`` (class ``cls``): its table merged with the
+    defaults of ``cls.__init__``.
+
+    Raises:
+        KeyError: ``cls`` has no table (neither ``PARAMS`` nor an entry in :data:`TABLES`).
+        ValueError: the table and the signature name different parameters.
+    """
+    table = getattr(cls, "PARAMS", None) or TABLES[cls]
+    sig = [p for p in inspect.signature(cls.__init__).parameters.values()
+           if p.name not in ("self", "name") and p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)]
+    names = [p.name for p in sig]
+    if set(names) != set(table):
+        raise ValueError(f"primitive {name!r} ({cls.__name__}): schema table {sorted(table)} does not match "
+                         f"the parameters of __init__ {sorted(names)}")
+    params = tuple(ParamSpec(name=p.name, type=table[p.name][0], unit=table[p.name][1],
+                             default=REQUIRED if p.default is p.empty else p.default, description=table[p.name][2])
+                   for p in sig)
+    return PrimitiveSchema(name=name, cls=cls, summary=_summary(cls), params=params)
+
+
+def primitive_schemas(primitives: Mapping[str, type] | None = None) -> list[PrimitiveSchema]:
+    """Schemas of every registered primitive (default :data:`phyagentos.primitives.PRIMITIVES`), by name."""
+    if primitives is None:
+        from . import PRIMITIVES  # noqa: PLC0415
+
+        primitives = PRIMITIVES
+    return [primitive_schema(n, c) for n, c in sorted(primitives.items())]

@@ -1,0 +1,77 @@
+"""Contact is expressible (issue 11, item 5): ``guarded_move`` stops on contact with a
+force limit and its own tracking tolerance, and fails when contact it expects never
+comes."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import py_trees
+import pytest
+
+from phyagentos.cli import main
+from phyagentos.primitives import SkillContext
+from phyagentos.primitives.contact import GuardedMove
+from phyagentos.targets import MuJoCoTarget
+from phyagentos.targets.scene import SceneSpec
+
+DATA = Path(__file__).resolve().parent / "data_authoring"
+
+
+def test_a_user_touch_skill_presses_on_the_cube_and_stops_at_the_force_limit(tmp_path, capsys):
+    ws = tmp_path / "ws"
+    (ws / "skills").mkdir(parents=True)
+    (ws / "trees").mkdir()
+    shutil.copy(DATA / "touch_skill.yaml", ws / "skills" / "touch.yaml")
+    shutil.copy(DATA / "touch_tree.yaml", ws / "trees" / "touch.yaml")
+    graph = DATA / "touch_graph.yaml"
+    assert main(["run", str(graph), "--workspace", str(ws), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["succeeded"]
+    [trace] = list((ws / "evidence").glob("*/trace.jsonl"))
+    [contact] = [json.loads(line) for line in trace.read_text().splitlines() if '"contact"' in line]
+    assert contact["touched"] == ["cube"] and contact["force_n"] >= 5.0
+    assert 0.03 < contact["travelled_m"] < 0.09  # stopped on the cube's top, not at the end of the offset
+
+
+@pytest.fixture
+def target():
+    t = MuJoCoTarget("contact", SceneSpec.default(), seed=0)
+    yield t
+    t.close()
+
+
+def _tick_until_done(leaf, ctx, limit: int = 400):
+    py_trees.blackboard.Blackboard.clear()
+    leaf.setup(context=ctx)
+    for _ in range(limit):
+        leaf.tick_once()
+        if leaf.status != py_trees.common.Status.RUNNING:
+            return leaf.status
+    raise AssertionError("leaf never finished")
+
+
+def test_a_guarded_move_through_free_space_fails_with_contact_missing(target):
+    ctx = SkillContext(target=target)
+    z0 = target.tcp_pose()[2, 3]
+    status = _tick_until_done(GuardedMove("Up", offset=[0.0, 0.0, 0.05]), ctx)
+    assert status == py_trees.common.Status.FAILURE and ctx.failure["code"] == "contact.missing"
+    assert target.tcp_pose()[2, 3] == pytest.approx(z0 + 0.05, abs=0.01)
+
+
+def test_a_guarded_move_that_may_miss_succeeds_without_contact(target):
+    ctx = SkillContext(target=target)
+    status = _tick_until_done(GuardedMove("Up", offset=[0.0, 0.0, 0.05], expect_contact=False), ctx)
+    assert status == py_trees.common.Status.SUCCESS
+
+
+def test_a_compliant_push_moves_the_cube_into_the_region_through_the_cli(tmp_path, capsys):
+    ws = tmp_path / "ws"
+    assert main(["run", str(DATA / "push_graph.yaml"), "--workspace", str(ws), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["succeeded"]  # the verifier found the cube inside the goal region 10 cm away
+    [trace] = list((ws / "evidence").glob("*/trace.jsonl"))
+    [push] = [json.loads(line) for line in trace.read_text().splitlines() if '"kind": "push"' in line]
+    assert push["touched"] == ["cube"] and 0.0 < push["max_force_n"] <= 40.0

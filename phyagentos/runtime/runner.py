@@ -37,8 +37,10 @@ from phyagentos.protocol.lifecycle import utc_now
 from .builtin_runtime import BuiltinSkillRuntime, RunOutcome
 from .evidence_images import save_scene_image
 from .policy_runtime import PolicySkillRuntime
+from .recording import RecordingConfig, SessionRecorder
 from .safety_guard import SafetyGuard
 from .target_pool import TargetPool
+from .tree_status import TreeStatusPublisher
 
 __all__ = ["SessionRunner", "AttemptReport", "write_environment", "SKILL_RUNTIMES"]
 
@@ -120,6 +122,7 @@ class SessionRunner:
     heartbeat: Callable[[], None] | None = None
     on_finished: Callable[[RunOutcome], None] | None = None
     checkpoint_interval_s: float = 0.25
+    recorder: SessionRecorder | None = None  # [view hook, issue 13] set by run() under --record
 
     def _tick(self, target) -> Callable[[], None]:
         last = [time.monotonic()]
@@ -127,6 +130,8 @@ class SessionRunner:
         def tick() -> None:
             if self.heartbeat is not None:
                 self.heartbeat()
+            if self.recorder is not None:  # [view hook, issue 13]
+                self.recorder.tick()
             now = time.monotonic()
             if target is not None and now - last[0] >= self.checkpoint_interval_s:
                 self.targets.checkpoint(self.record, target)
@@ -180,6 +185,9 @@ class SessionRunner:
                 SKILL_RUNTIMES[rec.skill_runtime](self.runtime.skills)
             ctx.on_observation = lambda snap: write_environment(
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
+            # [view hook, issue 13] live tree.json (<= 10 Hz, no fsync) and, under --record, the video.
+            ctx.tree_observer = TreeStatusPublisher(evidence_dir / "tree.json", session_id=rec.session_id)
+            self.recorder = self._start_recorder(target, evidence_dir, image_events)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
             logger.exception("session %s: runtime error", rec.session_id)
@@ -193,6 +201,11 @@ class SessionRunner:
             self.on_finished(outcome)
         if self.heartbeat is not None:
             self.heartbeat()
+        if self.recorder is not None:  # [view hook, issue 13] joins the encoder before the bundle
+            extra.update(self.recorder.close())
+            self.recorder = None
+        if (evidence_dir / "tree.json").exists():
+            extra["tree"] = "tree.json"
         terminal = target.snapshot() if target is not None else None
         if target is not None:
             if name := save_scene_image(target, evidence_dir / "terminal.png", events=image_events):
@@ -214,6 +227,19 @@ class SessionRunner:
                     time.perf_counter() - started, outcome.ticks)
         return AttemptReport(outcome=outcome.status, error_code=outcome.error_code, message=outcome.message,
                              evidence=rel, timings=dict(ctx.profiler.totals) if ctx else {}, ticks=outcome.ticks)
+
+    @staticmethod
+    def _start_recorder(target, evidence_dir, events: list) -> SessionRecorder | None:
+        """[view hook, issue 13] A recorder when PHYAGENTOS_RECORD asks for one; never fails the session."""
+        config = RecordingConfig.from_env()
+        if not config.enabled or target is None:
+            return None
+        try:
+            return SessionRecorder(target, evidence_dir, config)
+        except PhyAgentOSError as exc:
+            logger.warning("no recording of %s: %s", evidence_dir.name, exc)
+            events.append({"code": "target.render_unavailable", "message": f"recording: {exc}"})
+            return None
 
     def recover(self, *, status: str, error_code: str, message: str) -> AttemptReport:
         """Put the target of a session whose runner died (or was killed) in a safe state

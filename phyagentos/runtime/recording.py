@@ -201,11 +201,16 @@ class SessionRecorder:
         data = getattr(self.target, "data", None)
         self._qpos.append(np.array(data.qpos, dtype=np.float64) if data is not None else np.zeros(0))
         now = self._clock()
+        # A tick may advance several frame periods of simulated time: the video repeats the
+        # frame for each period it covers, so it plays at the simulation's real-time speed.
+        slots = 1 if not self._t else max(1, round((now - self._t[-1]) * self.config.fps))
         self._t.append(now)
         self._wall.append(started - self._t0)
         self._next = now + self.period
         if self._encoder.is_alive():
-            self._encoder.frames.put(np.ascontiguousarray(frame, dtype=np.uint8))
+            pixels = np.ascontiguousarray(frame, dtype=np.uint8)
+            for _ in range(slots):
+                self._encoder.frames.put(pixels)
         self.render_s += time.perf_counter() - started
 
     def tick(self) -> None:

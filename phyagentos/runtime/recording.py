@@ -230,7 +230,7 @@ class SessionRecorder:
         Returns the files written, for the bundle's ``files``: ``{"video": "video.mp4",
         "frames": "frames.npz"}`` (``video`` missing if encoding failed, which is logged).
         """
-        if not self._closed:
+        if not self._closed and (not self._t or self._clock() > self._t[-1]):  # the terminal instant, if new
             try:
                 self.capture()
             except (TargetError, OSError, ValueError) as exc:

@@ -119,12 +119,13 @@ def run_fragment(p: Panel, svg: Panel) -> str:
 
 
 def _timeline(transitions: list[dict[str, Any]]) -> str:
+    """The statechart path: the first state, then each event (with its time) and the state it led to."""
     if not transitions:
         return "<p class='muted'>no transition yet</p>"
-    items = "".join(
-        f'<li><span class="t">{_E(str(t["at"])[11:23])}</span> {_state(t["source"])} '
-        f'<span class="ev">—{_E(t["event"])}→</span> {_state(t["dest"])}</li>' for t in transitions)
-    return f'<ol class="timeline">{items}</ol>'
+    items = [f"<li>{_state(transitions[0]['source'])}</li>"]
+    items += [f'<li><span class="ev">—{_E(t["event"])} <span class="t">{_E(str(t["at"])[11:23])}</span>→</span> '
+              f'{_state(t["dest"])}</li>' for t in transitions]
+    return f'<ol class="timeline">{"".join(items)}</ol>'
 
 
 def _criteria(criteria: list[dict[str, Any]]) -> str:
@@ -190,7 +191,9 @@ def _perception(p: Panel) -> str:
                      _E(", ".join(f"{x:.3f}" for x in pos if isinstance(x, (int, float)))),
                      _E(f"{conf:.2f}" if isinstance(conf, (int, float)) else "-"),
                      _E(", ".join(f"{k}={v}" for k, v in attrs.items() if k != "confidence")[:160])))
-    return (f"<p class='small'>from <code>{_E(d['source'])}</code>, sim time {_E(str(d.get('sim_time_s')))} s</p>"
+    sim = d.get("sim_time_s")
+    sim_text = f"{sim:.2f}" if isinstance(sim, (int, float)) else "-"
+    return (f"<p class='small'>from <code>{_E(d['source'])}</code>, sim time {sim_text} s</p>"
             + _table(("entity", "kind", "position (m, world)", "confidence", "attributes"), rows, cls="entities"))
 
 

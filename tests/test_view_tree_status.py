@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import py_trees
@@ -35,6 +36,13 @@ class _Writer(py_trees.behaviour.Behaviour):
         return Status.SUCCESS if self.count >= self.n else Status.RUNNING
 
 
+def _wait_until(predicate, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
 def _tree():
     py_trees.blackboard.Blackboard.clear()
     root = py_trees.composites.Sequence("Root", memory=True)
@@ -54,6 +62,7 @@ def test_publishes_at_most_max_rate_and_always_the_final_state(tmp_path):
         written.append(pub(root))
         clock.t += 0.01
     assert written == [True, False, False]
+    _wait_until(lambda: pub.writes == 1)  # written on the publisher's thread
     doc = json.loads((tmp_path / "tree.json").read_text())
     assert doc["tick"] == 1 and not doc["final"]
     assert [(n["name"], n["status"]) for n in doc["nodes"]] == [("Root", "running"), ("Write", "running"), ("Check", "invalid")]
@@ -62,7 +71,7 @@ def test_publishes_at_most_max_rate_and_always_the_final_state(tmp_path):
     assert pub(root)
     assert pub(root, final=True)  # forced, whatever the rate
     doc = json.loads((tmp_path / "tree.json").read_text())
-    assert doc["final"] and doc["tick"] == 4 and pub.writes == 3
+    assert doc["final"] and doc["tick"] == 4 and pub.published == 3 and pub.writes >= 2
     assert [(n["name"], n["status"]) for n in doc["nodes"]] == [("Root", "success"), ("Write", "success"), ("Check", "success")]
     write = doc["nodes"][1]
     assert write["writes"] == ["/goal"] and write["message"] == "step 4" and write["kind"] == "leaf"

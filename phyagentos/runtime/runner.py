@@ -187,7 +187,7 @@ class SessionRunner:
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
             # [view hook, issue 13] live tree.json (<= 10 Hz, no fsync) and, under --record, the video.
             ctx.tree_observer = TreeStatusPublisher(evidence_dir / "tree.json", session_id=rec.session_id)
-            self.recorder = self._start_recorder(target, evidence_dir, image_events)
+            self.recorder = self._start_recorder(target, evidence_dir, image_events, seed=rec.seed)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
             logger.exception("session %s: runtime error", rec.session_id)
@@ -229,13 +229,13 @@ class SessionRunner:
                              evidence=rel, timings=dict(ctx.profiler.totals) if ctx else {}, ticks=outcome.ticks)
 
     @staticmethod
-    def _start_recorder(target, evidence_dir, events: list) -> SessionRecorder | None:
+    def _start_recorder(target, evidence_dir, events: list, *, seed: int | None) -> SessionRecorder | None:
         """[view hook, issue 13] A recorder when PHYAGENTOS_RECORD asks for one; never fails the session."""
         config = RecordingConfig.from_env()
         if not config.enabled or target is None:
             return None
         try:
-            return SessionRecorder(target, evidence_dir, config)
+            return SessionRecorder(target, evidence_dir, config, seed=seed)
         except PhyAgentOSError as exc:
             logger.warning("no recording of %s: %s", evidence_dir.name, exc)
             events.append({"code": "target.render_unavailable", "message": f"recording: {exc}"})

@@ -35,7 +35,7 @@ import threading
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -182,14 +182,21 @@ class _RenderProcess:
     def put(self, state: dict, slots: int) -> None:
         self._send((state, slots))
 
-    def close(self) -> dict[str, Any]:
+    def close(self, beat: Callable[[], None] | None = None) -> dict[str, Any]:
         import json  # noqa: PLC0415
+        import subprocess  # noqa: PLC0415
 
         self._send(None)
         with contextlib.suppress(OSError):
             self.proc.stdin.close()
+        while True:  # the backlog may take seconds: keep the runner's heartbeat fresh meanwhile
+            try:
+                self.proc.wait(timeout=0.5)
+                break
+            except subprocess.TimeoutExpired:
+                if beat is not None:
+                    beat()
         out = self.proc.stdout.read().decode(errors="replace").strip().splitlines()
-        self.proc.wait()
         try:
             self.result = {**json.loads(out[-1]), **self.result} if out else {"error": "render process said nothing", **self.result}
         except ValueError:
@@ -227,9 +234,12 @@ class _InlineEncoder(threading.Thread):
                 with contextlib.suppress(Exception):
                     writer.close()
 
-    def close(self) -> dict[str, Any]:
+    def close(self, beat: Callable[[], None] | None = None) -> dict[str, Any]:
         self.items.put(None)
-        self.join()
+        while self.is_alive():
+            self.join(timeout=0.5)
+            if beat is not None and self.is_alive():
+                beat()
         return self.result
 
 
@@ -398,8 +408,11 @@ class SessionRecorder:
                 self._closed = True
         self.hook_s += time.perf_counter() - started
 
-    def close(self) -> dict[str, str]:
+    def close(self, *, heartbeat: Callable[[], None] | None = None) -> dict[str, str]:
         """Capture the terminal frame, wait for the video to be encoded, write ``frames.npz``.
+
+        ``heartbeat`` is called every 0.5 s while waiting (the supervisor must not take a
+        runner that waits for its video for a dead one).
 
         Returns the files written, for the bundle's ``files``: ``{"video": "video.mp4",
         "frames": "frames.npz"}`` (``video`` missing if encoding failed, which is logged).
@@ -410,7 +423,7 @@ class SessionRecorder:
             except (TargetError, OSError, ValueError) as exc:
                 logger.warning("recording %s: no terminal frame: %s", self.directory.name, exc)
         self._closed = True
-        self.result = self._encoder.close()
+        self.result = self._encoder.close(heartbeat)
         files: dict[str, str] = {}
         same = self._qpos and all(q.shape == self._qpos[0].shape for q in self._qpos)
         qpos = np.stack(self._qpos) if same else np.zeros((0, 0))

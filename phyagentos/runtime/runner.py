@@ -202,7 +202,7 @@ class SessionRunner:
         if self.heartbeat is not None:
             self.heartbeat()
         if self.recorder is not None:  # [view hook, issue 13] joins the encoder before the bundle
-            extra.update(self.recorder.close())
+            extra.update(self.recorder.close(heartbeat=self.heartbeat))
             self.recorder = None
         if (evidence_dir / "tree.json").exists():
             extra["tree"] = "tree.json"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import io
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -10,10 +12,14 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 import yaml
+from PIL import Image
 
 from phyagentos.errors import RecordingError
 from phyagentos.protocol import Workspace
 from phyagentos.runtime.recording import ENV_VAR, RecordingConfig
+
+from test_view_browser import start_view
+from test_view_security import request
 
 CLI = [sys.executable, "-m", "phyagentos.cli"]
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,8 +60,14 @@ def _evidence(ws: Workspace, node: str) -> Path:
     return ws.root / rec.attempts[-1].evidence
 
 
-def test_record_writes_a_playable_mp4_and_qpos_per_frame_listed_in_the_bundle(tmp_path):
-    ws = _run(tmp_path, "--record", "--record-fps", "20")
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A run recorded at 20 frames per simulated second."""
+    return _run(tmp_path_factory.mktemp("recorded"), "--record", "--record-fps", "20")
+
+
+def test_record_writes_a_playable_mp4_and_qpos_per_frame_listed_in_the_bundle(recorded):
+    ws = recorded
     ok = _evidence(ws, "ok")
     bundle = yaml.safe_load((ok / "bundle.yaml").read_text())
     assert bundle["files"]["video"] == "video.mp4" and bundle["files"]["frames"] == "frames.npz"
@@ -103,3 +115,43 @@ def test_recording_configuration_round_trips_and_rejects_bad_values():
     for bad in ("sometimes", "all,fps=0", "all,width=100", "all,colour=red", "all,fps=fast"):
         with pytest.raises(RecordingError):
             RecordingConfig.parse(bad)
+
+
+def test_the_view_re_renders_any_recorded_instant_from_a_free_camera(recorded):
+    ws = recorded
+    sid = _evidence(ws, "bad").name
+    proc, url, _ = start_view(ws.root)
+    try:
+        frames = json.loads(request(url, "GET", f"/api/frames/{sid}")[1])
+        assert frames["count"] >= 5 and frames["camera"] == "overview"
+        status, first = request(url, "GET", f"/api/scene/{sid}.png?frame=0&az=140&el=-25&dist=1.9")
+        assert status == 200 and first.startswith(b"\x89PNG")
+        _, turned = request(url, "GET", f"/api/scene/{sid}.png?frame=0&az=40&el=-25&dist=1.9")
+        _, last = request(url, "GET", f"/api/scene/{sid}.png?frame={frames['count'] - 1}&az=140&el=-25&dist=1.9")
+        img = [np.asarray(Image.open(io.BytesIO(b)).convert("RGB"), dtype=float) for b in (first, turned, last)]
+        assert img[0].shape == (360, 480, 3) and img[0].std() > 10
+        assert np.abs(img[0] - img[1]).mean() > 5  # the camera orbits
+        assert np.abs(img[0] - img[2]).mean() < 2  # a hold: the first and last instants look alike
+        status, body = request(url, "GET", f"/api/scene/{sid}.png?frame={frames['count'] + 5}")
+        assert status == 404 and b"out of range" in body
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def test_closing_a_recorder_keeps_the_heartbeat_fresh_while_the_video_is_encoded(tmp_path):
+    from phyagentos.runtime.recording import SessionRecorder  # noqa: PLC0415
+    from phyagentos.targets import MuJoCoTarget  # noqa: PLC0415
+
+    target = MuJoCoTarget("franka_tabletop", seed=0)
+    target.reset(seed=0)
+    recorder = SessionRecorder(target, tmp_path, RecordingConfig(mode="all", fps=10.0), seed=0)
+    for _ in range(20):
+        target.step_for(0.1)
+        recorder.tick()
+    beats = []
+    files = recorder.close(heartbeat=lambda: beats.append(1))
+    target.close()
+    assert files == {"frames": "frames.npz", "video": "video.mp4"}
+    # Starting the render process and rendering 21 frames takes well over 0.5 s here.
+    assert beats and recorder.frames == 21 and recorder.result["written"] >= 21

@@ -118,13 +118,17 @@ def run_fragment(p: Panel, svg: Panel) -> str:
             + _table(("node", "skill", "state", "depends on", "sessions"), rows, cls="nodes"))
 
 
+def _short(text: str, n: int) -> str:
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
 def _timeline(transitions: list[dict[str, Any]]) -> str:
     """The statechart path: the first state, then each event (with its time) and the state it led to."""
     if not transitions:
         return "<p class='muted'>no transition yet</p>"
     items = [f"<li>{_state(transitions[0]['source'])}</li>"]
-    items += [f'<li><span class="ev">—{_E(t["event"])} <span class="t">{_E(str(t["at"])[11:23])}</span>→</span> '
-              f'{_state(t["dest"])}</li>' for t in transitions]
+    items += [f'<li><span class="ev" title="{_E(t["event"])}">—{_E(_short(t["event"], 36))} '
+              f'<span class="t">{_E(str(t["at"])[11:23])}</span>→</span> {_state(t["dest"])}</li>' for t in transitions]
     return f'<ol class="timeline">{"".join(items)}</ol>'
 
 

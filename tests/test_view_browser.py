@@ -146,14 +146,16 @@ def test_dag_shows_node_states_live_as_the_run_progresses(live):
     # The page is never reloaded: node states arrive through server-sent events.
     wait_for(lambda: driver.find_element(By.CSS_SELECTOR, ".dag svg"), timeout=30, what="the DAG svg")
 
+    # Each read is one script: panels are replaced whenever the workspace changes.
     def node_state(node: str) -> str:
-        return driver.find_element(By.CSS_SELECTOR, f'.nodestate[data-node="{node}"]').text
+        return driver.execute_script(
+            f"const e = document.querySelector('.nodestate[data-node=\"{node}\"]'); return e ? e.textContent : ''")
 
     wait_for(lambda: node_state("settle") == "succeeded" and node_state("long_hold") == "running",
              timeout=120, what="settle succeeded and long_hold running in the browser")
     assert node_state("after") == "waiting"
-    svg_states = {e.get_attribute("id"): e.get_attribute("class")
-                  for e in driver.find_elements(By.CSS_SELECTOR, ".dag svg g.cluster")}
+    svg_states = driver.execute_script("return Object.fromEntries([...document.querySelectorAll('.dag svg g.cluster')]"
+                                       ".map(g => [g.id, g.getAttribute('class')]))")
     assert "dagnode state-succeeded" in svg_states["node-settle"]
     assert "dagnode state-running" in svg_states["node-long_hold"]
     # Session boxes link to their pages.
@@ -203,6 +205,13 @@ def test_live_tree_changes_while_the_session_runs_and_estop_halts_it(live):
     wait_for(lambda: "E-STOP engaged" in driver.find_element(By.ID, "signal-state").text, timeout=30,
              what="the e-stop flag on the overview")
     screenshot(driver, "overview")
+    # The DAG: the cancelled node, and the node behind it blocked (drawn dashed).
+    driver.get(f"{live['url']}/run/{run_id}")
+    wait_for(lambda: driver.execute_script(
+        "const c = id => (document.getElementById(id) || {getAttribute: () => ''}).getAttribute('class');"
+        "return c('node-long_hold').includes('state-cancelled') && c('node-after').includes('state-blocked');"),
+        timeout=30, what="long_hold cancelled and after blocked in the DAG")
+    screenshot(driver, "run_blocked")
 
 
 def test_a_malformed_document_shows_file_and_line_and_the_rest_works(live):
@@ -216,9 +225,9 @@ def test_a_malformed_document_shows_file_and_line_and_the_rest_works(live):
     lessons.write_text(broken, encoding="utf-8")
     bad_line = broken.splitlines().index("lessons: [unclosed") + 1
     driver.get(live["url"] + "/memory")
-    box = wait_for(lambda: driver.find_element(By.CSS_SELECTOR, ".error"), timeout=30, what="the error box")
-    m = re.search(r"LESSONS\.md:(\d+): YAML syntax error", box.text)
-    assert m and bad_line <= int(m.group(1)) <= bad_line + 2, (bad_line, box.text)
+    text = wait_for(lambda: driver.find_element(By.CSS_SELECTOR, ".error").text, timeout=30, what="the error box")
+    m = re.search(r"LESSONS\.md:(\d+): YAML syntax error", text)
+    assert m and bad_line <= int(m.group(1)) <= bad_line + 2, (bad_line, text)
     # The other memory documents still render as tables, and so do the other pages.
     assert "KNOWLEDGE.md" in driver.page_source and "SKILL.md" in driver.page_source
     screenshot(driver, "memory_error")

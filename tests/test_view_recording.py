@@ -120,8 +120,14 @@ def test_recording_configuration_round_trips_and_rejects_bad_values():
 def test_the_view_re_renders_any_recorded_instant_from_a_free_camera(recorded):
     ws = recorded
     sid = _evidence(ws, "bad").name
+    before = _tree_state(ws.root)
     proc, url, _ = start_view(ws.root)
     try:
+        run_id = next(p.name for p in (ws.root / "runs").iterdir() if not p.name.startswith("."))
+        for page in ("/", f"/run/{run_id}", f"/session/{sid}", "/memory", "/fragment/overview", "/fragment/runs",
+                     f"/fragment/run/{run_id}", f"/fragment/session/{sid}", f"/fragment/tree/{sid}", "/fragment/memory",
+                     f"/api/tree/{sid}", f"/api/scene/{sid}.png?frame=live", f"/files/evidence/{sid}/video.mp4"):
+            assert request(url, "GET", page)[0] in (200, 404), page
         frames = json.loads(request(url, "GET", f"/api/frames/{sid}")[1])
         assert frames["count"] >= 5 and frames["camera"] == "overview"
         status, first = request(url, "GET", f"/api/scene/{sid}.png?frame=0&az=140&el=-25&dist=1.9")
@@ -137,6 +143,12 @@ def test_the_view_re_renders_any_recorded_instant_from_a_free_camera(recorded):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+    assert _tree_state(ws.root) == before  # the view wrote nothing (no hint repair, no lock file, no mkdir)
+
+
+def _tree_state(root: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(root)): (p.stat().st_mtime_ns, p.stat().st_size) if p.is_file() else (0, 0)
+            for p in sorted(root.rglob("*"))}
 
 
 def test_closing_a_recorder_keeps_the_heartbeat_fresh_while_the_video_is_encoded(tmp_path):

@@ -20,10 +20,11 @@ import yaml
 
 from phyagentos.agent import dag as dagmod
 from phyagentos.agent.coordinator import node_state_of
-from phyagentos.errors import PhyAgentOSError
+from phyagentos.errors import DocumentError, PhyAgentOSError, ProtocolError
 from phyagentos.protocol import SessionRecord, Workspace, fold_signals
+from phyagentos.protocol.archive import SessionArchive
 
-__all__ = ["Panel", "panel", "overview", "runs", "run_graph", "session_detail", "tree_status", "memory",
+__all__ = ["Panel", "panel", "overview", "runs", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
            "SESSION_LINK_PATTERN"]
 
 logger = logging.getLogger(__name__)
@@ -87,13 +88,43 @@ def _graph_nodes(ws: Workspace, run_id: str) -> list[dict[str, Any]]:
             for n in nodes if isinstance(n, dict) and n.get("id") is not None]
 
 
+def run_sessions(ws: Workspace, run_id: str) -> list[SessionRecord]:
+    """The run's sessions, oldest first, read without taking a lock or writing anything.
+
+    ``Workspace.list_sessions`` repairs stale state hints under the session lock; a viewer
+    must never contend with supervisors for locks or write, so this reads the active
+    sessions named by ``sessions/.index`` and the run's archive catalogue only (a session
+    that moved between the two reads is picked up by the next refresh).
+
+    Raises:
+        DocumentError: a session file is malformed.
+    """
+    by_id: dict[str, SessionRecord] = {}
+    for sid, _, _ in ws.active_sessions(run_id=run_id):
+        try:
+            by_id[sid] = ws.load_session(sid)
+        except DocumentError:
+            raise
+        except ProtocolError:
+            continue  # submitted this instant, or archived meanwhile
+    for entry in SessionArchive(ws.sessions_dir).run_entries(run_id):
+        if entry.session_id not in by_id:
+            try:
+                by_id[entry.session_id] = ws.load_session(entry.session_id)
+            except DocumentError:
+                raise
+            except ProtocolError:
+                continue
+    return sorted(by_id.values(), key=lambda r: (str(r.created_at), r.session_id))
+
+
 def run_graph(ws: Workspace, run_id: str) -> dict[str, Any]:
     """The run's DAG: nodes (state, skill, dependencies) with their sessions and replan lineage.
 
     Node states are those the Agent plane computes (latest session's state, ``blocked``
     propagated along dependencies; ``waiting`` before a node has a session).
     """
-    sessions = ws.list_sessions(run_id=run_id)
+    sessions = run_sessions(ws, run_id)
     nodes = _graph_nodes(ws, run_id)
     known = {n["id"] for n in nodes}
     for s in sessions:

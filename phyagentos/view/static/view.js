@@ -61,7 +61,7 @@
     const sid = box.dataset.session, img = box.querySelector("img.scene"), slider = box.querySelector("input.frame");
     const info = box.querySelector(".frame-info");
     const cam = {az: 140, el: -25, dist: 1.9};
-    let times = [], live = true, pending = null, loading = false;
+    let times = [], live = true, pending = null, loading = false, lastLive = 0;
     function src() {
       const f = live ? "live" : slider.value;
       return `/api/scene/${encodeURIComponent(sid)}.png?frame=${f}&az=${cam.az.toFixed(1)}&el=${cam.el.toFixed(1)}&dist=${cam.dist.toFixed(2)}`;
@@ -108,8 +108,11 @@
       const st = document.getElementById("session-state");
       const terminal = st && ["succeeded", "failed", "cancelled", "rejected", "timed_out", "awaiting_replan"].includes(st.dataset.state);
       await loadFrames();
-      if (terminal && times.length && live) { live = false; slider.value = slider.max; }
-      show();
+      if (terminal && times.length && live) { live = false; slider.value = slider.max; show(); return; }
+      // Following a live session: at most one server render per second, whatever the event rate.
+      const now = Date.now();
+      if (live && now - lastLive >= 1000) { lastLive = now; show(); }
+      else if (!img.src) { show(); }
     });
   }
 })();

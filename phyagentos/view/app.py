@@ -223,11 +223,12 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                 while True:
                     if await request.is_disconnected():
                         break
+                    polling = watcher.mode != "inotify"  # no inotify (e.g. watch limit): refresh every 2 s
                     try:
-                        await asyncio.wait_for(woke.wait(), timeout=5.0)
+                        await asyncio.wait_for(woke.wait(), timeout=2.0 if polling else 5.0)
                         changed = True
                     except asyncio.TimeoutError:
-                        changed = False
+                        changed = polling
                     if changed:
                         await asyncio.sleep(1.0 / MAX_EVENT_RATE_HZ)  # coalesce bursts of renames
                         watcher.clear()

@@ -100,6 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--rate-hz", type=float, default=20.0, help="action rate of the chunks, Hz (default 20)")
     serve.add_argument("--horizon", type=int, default=10, help="actions per chunk (default 10)")
     serve.add_argument("--stall-after", type=int, help="fault injection: stop answering after N inferences")
+    from phyagentos.cli_view import add_view_commands  # [issue 13] view, run/bench --record
+    add_view_commands(sub)
     return parser
 
 
@@ -320,6 +322,8 @@ def main(argv: list[str] | None = None) -> int:
                 "policy": _cmd_policy}
     from phyagentos.cli_skills import skill_search_env
 
+    from phyagentos.cli_view import with_view  # [issue 13]
+    handlers = with_view(handlers)
     try:
         with skill_search_env(args, err):
             code = handlers[args.command](args, out, err)

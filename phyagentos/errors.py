@@ -10,6 +10,8 @@ from pathlib import Path
 
 __all__ = [
     "PhyAgentOSError",
+    "RecordingError",
+    "ViewError",
     "ProtocolError",
     "DocumentError",
     "LeaseError",
@@ -164,3 +166,11 @@ class BenchError(PhyAgentOSError):
         self.problems = tuple(problems)
         detail = "".join(f"\n  - {p}" for p in self.problems)
         super().__init__(f"{message}{detail}")
+
+
+class RecordingError(PhyAgentOSError):
+    """A session recording is misconfigured (mode, camera, rate or size) or cannot be made."""
+
+
+class ViewError(PhyAgentOSError):
+    """``phyagentos view`` cannot start (bad host, port or workspace) or refused a request."""

@@ -6,7 +6,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-APT_PACKAGES=(graphviz fonts-dejavu-core libegl1 libosmesa6 libgl1)
+# chromium + chromium-driver: the headless browser the `phyagentos view` tests drive.
+APT_PACKAGES=(graphviz fonts-dejavu-core libegl1 libosmesa6 libgl1 chromium chromium-driver)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

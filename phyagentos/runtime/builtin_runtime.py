@@ -87,6 +87,8 @@ class BuiltinSkillRuntime:
         ticks = 0
         status = "completed"
         message = ""
+        # [view hook, issue 13] live tree status (evidence/<sid>/tree.json), throttled by the observer.
+        observe_tree = getattr(ctx, "tree_observer", None)
         try:
             while True:
                 if ctx.cancel.is_set():
@@ -99,12 +101,16 @@ class BuiltinSkillRuntime:
                 ticks += 1
                 if heartbeat is not None:
                     heartbeat()
+                if observe_tree is not None:
+                    observe_tree(root)
                 if root.status == py_trees.common.Status.SUCCESS:
                     break
                 if root.status == py_trees.common.Status.FAILURE:
                     status = "failed"
                     break
         finally:
+            if observe_tree is not None:
+                observe_tree(root, final=True)
             if root.status == py_trees.common.Status.RUNNING:
                 root.stop(py_trees.common.Status.INVALID)
             tree.shutdown()

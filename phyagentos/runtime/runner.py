@@ -38,8 +38,10 @@ from phyagentos.protocol.lifecycle import utc_now
 from .builtin_runtime import BuiltinSkillRuntime, RunOutcome
 from .evidence_images import save_scene_image
 from .policy_runtime import PolicySkillRuntime
+from .recording import RecordingConfig, SessionRecorder
 from .safety_guard import SafetyGuard
 from .target_pool import TargetPool
+from .tree_status import TreeStatusPublisher
 
 __all__ = ["SessionRunner", "AttemptReport", "write_environment", "write_ground_truth", "SKILL_RUNTIMES",
            "GROUND_TRUTH_FILE"]
@@ -166,6 +168,7 @@ class SessionRunner:
         if self.images is not None:
             return self.images.capture(target, path, events=events)
         return save_scene_image(target, path, events=events)
+    recorder: SessionRecorder | None = None  # [view hook, issue 13] set by run() under --record
 
     def _tick(self, target) -> Callable[[], None]:
         last = [time.monotonic()]
@@ -173,6 +176,8 @@ class SessionRunner:
         def tick() -> None:
             if self.heartbeat is not None:
                 self.heartbeat()
+            if self.recorder is not None:  # [view hook, issue 13]
+                self.recorder.tick()
             now = time.monotonic()
             if target is not None and now - last[0] >= self.checkpoint_interval_s:
                 self.targets.checkpoint(self.record, target)
@@ -233,6 +238,9 @@ class SessionRunner:
             ctx.on_observation = lambda snap: write_environment(
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
             self._actuation_started_at = utc_now()  # hand-off latency is measured up to here (bench/end_to_end.py)
+            # [view hook, issue 13] live tree.json (<= 10 Hz, no fsync) and, under --record, the video.
+            ctx.tree_observer = TreeStatusPublisher(evidence_dir / "tree.json", session_id=rec.session_id)
+            self.recorder = self._start_recorder(target, evidence_dir, image_events, seed=rec.seed)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
             logger.exception("session %s: runtime error", rec.session_id)
@@ -247,6 +255,11 @@ class SessionRunner:
             self.on_finished(outcome)
         if self.heartbeat is not None:
             self.heartbeat()
+        if self.recorder is not None:  # [view hook, issue 13] joins the encoder before the bundle
+            extra.update(self.recorder.close(heartbeat=self.heartbeat))
+            self.recorder = None
+        if (evidence_dir / "tree.json").exists():
+            extra["tree"] = "tree.json"
         terminal = None
         if target is not None:
             try:
@@ -273,6 +286,19 @@ class SessionRunner:
                     time.perf_counter() - started, outcome.ticks)
         return AttemptReport(outcome=outcome.status, error_code=outcome.error_code, message=outcome.message,
                              evidence=rel, timings=dict(ctx.profiler.totals) if ctx else {}, ticks=outcome.ticks)
+
+    @staticmethod
+    def _start_recorder(target, evidence_dir, events: list, *, seed: int | None) -> SessionRecorder | None:
+        """[view hook, issue 13] A recorder when PHYAGENTOS_RECORD asks for one; never fails the session."""
+        config = RecordingConfig.from_env()
+        if not config.enabled or target is None:
+            return None
+        try:
+            return SessionRecorder(target, evidence_dir, config, seed=seed)
+        except PhyAgentOSError as exc:
+            logger.warning("no recording of %s: %s", evidence_dir.name, exc)
+            events.append({"code": "target.render_unavailable", "message": f"recording: {exc}"})
+            return None
 
     def recover(self, *, status: str, error_code: str, message: str) -> AttemptReport:
         """Put the target of a session whose runner died (or was killed) in a safe state

@@ -1,0 +1,317 @@
+"""The ``phyagentos view`` web application (Starlette) and its server (uvicorn).
+
+Routes (all read-only except ``POST /api/signal``):
+
+==============================  ==========================================================
+``/``                           signals in force, signal buttons, active sessions, runs
+``/run/{run}``                  the run's goal DAG (SVG) with node and session states
+``/session/{id}``               live behaviour tree, 3D scene with a timeline, transitions,
+                                attempts, verdict, diagnosis, revision, events, perception,
+                                evidence images and the recording
+``/memory``                     LESSONS.md, KNOWLEDGE.md, SKILL.md with provenance links
+``/fragment/...``               the panels of those pages, re-fetched on every change
+``/events[?session=ID]``        server-sent events: ``change`` whenever the workspace changes
+                                (inotify wake-ups of :class:`~phyagentos.protocol.WorkspaceWatcher`,
+                                coalesced to at most 10 per second)
+``/api/tree/{id}``              ``tree.json`` as published by the runner
+``/api/frames/{id}``            the recorded instants of a session (simulated time per frame)
+``/api/scene/{id}.png``         the scene at ``frame=N`` (or the current checkpoint) from a free
+                                camera (``az``, ``el``, ``dist`` in degrees and metres)
+``/files/{path}``               a file inside the workspace (never outside it; see security.py)
+``POST /api/signal``            ``{kind, session_id?, reason?}`` through ``Workspace.send_signal``,
+                                exactly as ``phyagentos signal``; needs the access token
+==============================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import getpass
+import json
+import logging
+import re
+import socket
+from pathlib import Path
+from typing import Any
+
+import uvicorn
+from starlette.applications import Starlette
+from starlette.middleware import Middleware
+from starlette.requests import Request
+from starlette.responses import FileResponse, HTMLResponse, JSONResponse, PlainTextResponse, Response, StreamingResponse
+from starlette.routing import Mount, Route
+from starlette.staticfiles import StaticFiles
+
+from phyagentos.errors import PhyAgentOSError, ViewError
+from phyagentos.protocol import DOCUMENTS, SESSION_ID_PATTERN, Workspace, WorkspaceWatcher
+
+from . import data, pages
+from .graph_svg import to_svg
+from .scene3d import SceneRenderer, frames_of
+from .security import TOKEN_HEADER, AccessPolicy, safe_path
+
+__all__ = ["create_app", "serve", "bind"]
+
+logger = logging.getLogger(__name__)
+
+STATIC_DIR = Path(__file__).with_name("static")
+_ID = re.compile(f"^{SESSION_ID_PATTERN}$")
+#: Server-sent events are coalesced to at most this rate (Hz).
+MAX_EVENT_RATE_HZ = 10.0
+_WATCHED_DIRS = ("sessions", "sessions/.index", "runs", "runs/.active")
+
+
+class _HostGuard:
+    """ASGI middleware: on loopback, refuse requests whose Host header names another host."""
+
+    def __init__(self, app, *, policy: AccessPolicy) -> None:
+        self.app = app
+        self.policy = policy
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] == "http":
+            host = dict(scope.get("headers") or []).get(b"host", b"").decode("latin-1")
+            if not self.policy.host_allowed(host):
+                await PlainTextResponse("refused: Host header is not a loopback name", status_code=421)(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+
+def _check_id(value: str, what: str) -> str:
+    if not _ID.match(value):
+        raise ViewError(f"invalid {what} {value!r}")
+    return value
+
+
+def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> Starlette:
+    """The view of ``workspace`` (must exist: it holds SESSIONS.md).
+
+    Raises:
+        ProtocolError: ``workspace`` is not a workspace.
+    """
+    ws = Workspace.open(workspace)
+    policy = policy or AccessPolicy()
+    renderer = SceneRenderer(ws)
+
+    def shell(title: str, body: str, scope: str = "") -> HTMLResponse:
+        return HTMLResponse(pages.page(title, body, token=policy.token_in_page(), scope=scope))
+
+    def frag(url: str, cls: str = "") -> str:
+        return f'<div class="panel {cls}" data-fragment="{url}"><p class="muted">loading…</p></div>'
+
+    # -- pages ---------------------------------------------------------------
+    def index(request: Request) -> Response:
+        body = (f'<h1>{pages._E(str(ws.root))}</h1>' + pages.signal_buttons()
+                + frag("/fragment/overview") + "<h2>runs</h2>" + frag("/fragment/runs"))
+        return shell("workspace", body)
+
+    def run_page(request: Request) -> Response:
+        run_id = _check_id(request.path_params["run_id"], "run id")
+        body = f"<h1>run {pages._E(run_id)}</h1>" + pages.signal_buttons() + frag(f"/fragment/run/{run_id}")
+        return shell(f"run {run_id}", body)
+
+    def session_page(request: Request) -> Response:
+        sid = _check_id(request.path_params["session_id"], "session id")
+        body = (f"<h1>session {pages._E(sid)}</h1>" + pages.signal_buttons(session_id=sid)
+                + '<div class="cols"><section><h2>behaviour tree</h2>' + frag(f"/fragment/tree/{sid}", "tree-panel")
+                + f'</section><section><h2>robot (3D)</h2><div class="scene3d" data-session="{pages._E(sid)}">'
+                  '<img class="scene" alt="scene" draggable="false"><div class="scrub">'
+                  '<input type="range" class="frame" min="0" max="0" value="0" disabled>'
+                  '<span class="frame-info small"></span></div>'
+                  '<p class="small muted">drag to orbit, wheel to zoom</p></div></section></div>'
+                + frag(f"/fragment/session/{sid}"))
+        return shell(f"session {sid}", body, scope=sid)
+
+    def memory_page(request: Request) -> Response:
+        return shell("memory", "<h1>memory</h1>" + frag("/fragment/memory"))
+
+    # -- fragments -----------------------------------------------------------
+    def f_overview(request: Request) -> Response:
+        return HTMLResponse(pages.overview_fragment(data.panel(lambda: data.overview(ws))))
+
+    def f_runs(request: Request) -> Response:
+        return HTMLResponse(pages.runs_fragment(data.panel(lambda: data.runs(ws))))
+
+    def f_run(request: Request) -> Response:
+        run_id = _check_id(request.path_params["run_id"], "run id")
+        graph = data.panel(lambda: data.run_graph(ws, run_id))
+        svg = data.panel(lambda: to_svg(graph.data)) if graph.data else data.Panel()
+        return HTMLResponse(pages.run_fragment(graph, svg))
+
+    def f_session(request: Request) -> Response:
+        sid = _check_id(request.path_params["session_id"], "session id")
+        return HTMLResponse(pages.session_fragment(data.panel(lambda: data.session_detail(ws, sid))))
+
+    def f_tree(request: Request) -> Response:
+        sid = _check_id(request.path_params["session_id"], "session id")
+        return HTMLResponse(pages.tree_fragment(data.panel(lambda: data.tree_status(ws, sid))))
+
+    def f_memory(request: Request) -> Response:
+        return HTMLResponse(pages.memory_fragment(data.memory(ws)))
+
+    # -- JSON and images -----------------------------------------------------
+    def api_tree(request: Request) -> Response:
+        sid = _check_id(request.path_params["session_id"], "session id")
+        p = data.panel(lambda: data.tree_status(ws, sid))
+        return JSONResponse({"error": p.error} if p.error else (p.data or {}), status_code=500 if p.error else 200)
+
+    def api_frames(request: Request) -> Response:
+        sid = _check_id(request.path_params["session_id"], "session id")
+        frames = frames_of(ws.root / "evidence" / sid)
+        if frames is None:
+            return JSONResponse({"count": 0, "t": []})
+        return JSONResponse({"count": len(frames["t"]), "t": [round(x, 3) for x in frames["t"]],
+                             "camera": frames["camera"], "fps": frames["fps"]})
+
+    def api_scene(request: Request) -> Response:
+        sid = _check_id(request.path_params["session_id"], "session id")
+        q = request.query_params
+        try:
+            frame = int(q["frame"]) if q.get("frame") not in (None, "", "live") else None
+            png, info = renderer.render(sid, frame=frame, azimuth=float(q.get("az", 140)),
+                                        elevation=float(q.get("el", -25)), distance=float(q.get("dist", 1.9)))
+        except (PhyAgentOSError, ValueError) as exc:
+            return PlainTextResponse(str(exc), status_code=404)
+        return Response(png, media_type="image/png",
+                        headers={"X-Scene-Source": info["source"], "X-Scene-Time": f"{info['t']:.3f}",
+                                 "Cache-Control": "no-store"})
+
+    def files(request: Request) -> Response:
+        try:
+            path = safe_path(ws.root, request.path_params["path"])
+        except ViewError as exc:
+            return PlainTextResponse(str(exc), status_code=404 if "no file" in str(exc) else 403)
+        return FileResponse(path)
+
+    async def api_signal(request: Request) -> Response:
+        if not policy.token_ok(request.headers.get(TOKEN_HEADER)):
+            return JSONResponse({"error": f"missing or wrong access token ({TOKEN_HEADER} header)"}, status_code=403)
+        try:
+            body = await request.json()
+            kind = str(body.get("kind", ""))
+            sid = body.get("session_id") or None
+            reason = str(body.get("reason") or "from phyagentos view")[:200]
+        except (ValueError, AttributeError):
+            return JSONResponse({"error": "body must be a JSON object {kind, session_id?, reason?}"}, status_code=400)
+        who = f"{getpass.getuser()}@{socket.gethostname()} (view, {request.client.host if request.client else '?'})"
+        try:
+            sig = await asyncio.to_thread(ws.send_signal, kind, session_id=sid, reason=reason, issued_by=who)
+        except PhyAgentOSError as exc:
+            return JSONResponse({"error": str(exc)}, status_code=400)
+        return JSONResponse(sig.model_dump(mode="json"))
+
+    async def events(request: Request) -> Response:
+        sid = request.query_params.get("session") or None
+        if sid:
+            _check_id(sid, "session id")
+        root_files = [f for f, _ in DOCUMENTS.values()]
+
+        def wanted_dirs() -> list[str]:
+            extra = [f"evidence/{sid}"] if sid and (ws.root / "evidence" / sid).is_dir() else (["evidence"] if sid else [])
+            return [d for d in (*_WATCHED_DIRS, *extra) if (ws.root / d).is_dir()]
+
+        async def stream():
+            loop = asyncio.get_running_loop()
+            woke = asyncio.Event()
+            dirs = wanted_dirs()
+            watcher = WorkspaceWatcher(ws.root, dirs=dirs, files=root_files)
+            loop.add_reader(watcher.fileno(), woke.set)
+            count = 0
+            try:
+                yield "retry: 1000\n\n"
+                while True:
+                    if await request.is_disconnected():
+                        break
+                    polling = watcher.mode != "inotify"  # no inotify (e.g. watch limit): refresh every 2 s
+                    try:
+                        await asyncio.wait_for(woke.wait(), timeout=2.0 if polling else 5.0)
+                        changed = True
+                    except asyncio.TimeoutError:
+                        changed = polling
+                    if changed:
+                        await asyncio.sleep(1.0 / MAX_EVENT_RATE_HZ)  # coalesce bursts of renames
+                        watcher.clear()
+                        woke.clear()
+                        count += 1
+                        yield f"event: change\ndata: {count}\n\n"
+                    else:
+                        yield ": keep-alive\n\n"
+                    if wanted_dirs() != dirs:  # e.g. the session's evidence directory appeared
+                        loop.remove_reader(watcher.fileno())
+                        watcher.close()
+                        dirs = wanted_dirs()
+                        watcher = WorkspaceWatcher(ws.root, dirs=dirs, files=root_files)
+                        loop.add_reader(watcher.fileno(), woke.set)
+                        count += 1
+                        yield f"event: change\ndata: {count}\n\n"
+            finally:
+                loop.remove_reader(watcher.fileno())
+                watcher.close()
+
+        return StreamingResponse(stream(), media_type="text/event-stream",
+                                 headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+
+    routes = [
+        Route("/", index), Route("/run/{run_id}", run_page), Route("/session/{session_id}", session_page),
+        Route("/memory", memory_page),
+        Route("/fragment/overview", f_overview), Route("/fragment/runs", f_runs), Route("/fragment/run/{run_id}", f_run),
+        Route("/fragment/session/{session_id}", f_session), Route("/fragment/tree/{session_id}", f_tree),
+        Route("/fragment/memory", f_memory),
+        Route("/api/tree/{session_id}", api_tree), Route("/api/frames/{session_id}", api_frames),
+        Route("/api/scene/{session_id}.png", api_scene), Route("/api/signal", api_signal, methods=["POST"]),
+        Route("/events", events), Route("/files/{path:path}", files),
+        Mount("/static", app=StaticFiles(directory=STATIC_DIR), name="static"),
+    ]
+    @contextlib.asynccontextmanager
+    async def lifespan(app):
+        yield
+        await asyncio.to_thread(renderer.close)
+
+    async def view_error(request: Request, exc: Exception) -> Response:
+        return PlainTextResponse(str(exc), status_code=400)
+
+    app = Starlette(routes=routes, middleware=[Middleware(_HostGuard, policy=policy)], lifespan=lifespan,
+                    exception_handlers={ViewError: view_error})
+    app.state.workspace = ws
+    app.state.policy = policy
+    return app
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening socket on ``host:port`` (``port`` 0: any free port).
+
+    Raises:
+        ViewError: the address cannot be bound (the message says which).
+    """
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise ViewError(f"cannot listen on {host}:{port}: {exc}") from exc
+    sock.listen(64)
+    return sock
+
+
+def serve(workspace: str | Path, *, host: str = "127.0.0.1", port: int = 8787, announce=print) -> None:
+    """Serve the view of ``workspace`` until interrupted.
+
+    ``announce`` receives the URL (with ``?token=`` when bound beyond loopback) and the
+    access token, once the socket listens.
+
+    Raises:
+        ViewError: the address cannot be bound.
+        ProtocolError: ``workspace`` is not a workspace.
+    """
+    policy = AccessPolicy(host=host)
+    app = create_app(workspace, policy=policy)
+    sock = bind(host, port)
+    actual = sock.getsockname()[1]
+    shown = f"[{host}]" if ":" in host else host
+    url = f"http://{shown}:{actual}/" + ("" if policy.loopback else f"?token={policy.token}")
+    announce(url, policy.token)
+    config = uvicorn.Config(app, log_level="warning", timeout_graceful_shutdown=1, lifespan="on")
+    uvicorn.Server(config).run(sockets=[sock])

@@ -1,0 +1,207 @@
+"""What the view shows, read from the workspace through the protocol's readers.
+
+Every function returns plain data; a malformed document never breaks the page: the
+panel that needs it carries the error (the :class:`~phyagentos.errors.DocumentError`
+message names the file and line) and every other panel still renders. Nothing here
+writes to the workspace.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import networkx as nx
+import yaml
+
+from phyagentos.agent import dag as dagmod
+from phyagentos.agent.coordinator import node_state_of
+from phyagentos.errors import DocumentError, PhyAgentOSError, ProtocolError
+from phyagentos.protocol import SessionRecord, Workspace, fold_signals
+from phyagentos.protocol.archive import SessionArchive
+
+__all__ = ["Panel", "panel", "overview", "runs", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
+           "SESSION_LINK_PATTERN"]
+
+logger = logging.getLogger(__name__)
+
+#: Session ids and run ids as they appear in provenance lists and evidence paths.
+SESSION_LINK_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,127}"
+
+
+@dataclass(frozen=True)
+class Panel:
+    """A panel's data, or the error that kept it from being read."""
+
+    data: Any = None
+    error: str | None = None
+
+
+def panel(fn: Callable[[], Any]) -> Panel:
+    """Run ``fn``; a protocol error (malformed document, missing file) becomes the panel's error."""
+    try:
+        return Panel(data=fn())
+    except (PhyAgentOSError, OSError, yaml.YAMLError, ValueError) as exc:
+        logger.info("view panel error: %s", exc)
+        return Panel(error=str(exc))
+
+
+def overview(ws: Workspace) -> dict[str, Any]:
+    """Signals in force and active sessions (from ``sessions/.index``)."""
+    signals = fold_signals(ws.read("RUNTIME_SIGNAL").data.signals)
+    active = [{"session_id": sid, "state": state, "run_id": ident.run_id, "node": ident.node, "skill": ident.skill,
+               "target": ident.target} for sid, state, ident in ws.active_sessions()]
+    return {"paused": signals.paused, "estopped": signals.estopped,
+            "estop_reason": signals.estop.reason if signals.estop else "", "active": active}
+
+
+def runs(ws: Workspace) -> list[dict[str, Any]]:
+    """Every run of the workspace (``runs/<id>/RUN.md``), newest first; a malformed RUN.md is a row with its error."""
+    out = []
+    directory = ws.root / "runs"
+    if not directory.is_dir():
+        return out
+    for entry in os.scandir(directory):
+        if entry.name.startswith(".") or not entry.is_dir():
+            continue
+        try:
+            rec = ws.runs.load(entry.name)
+            out.append({"run_id": rec.run_id, "goal_graph": rec.goal_graph, "state": rec.state,
+                        "succeeded": rec.succeeded, "submitted_at": str(rec.submitted_at), "error": None})
+        except PhyAgentOSError as exc:
+            out.append({"run_id": entry.name, "goal_graph": "", "state": "?", "succeeded": None, "submitted_at": "",
+                        "error": str(exc)})
+    out.sort(key=lambda r: r["submitted_at"], reverse=True)
+    return out
+
+
+def _graph_nodes(ws: Workspace, run_id: str) -> list[dict[str, Any]]:
+    """Nodes of the run's submitted goal graph (id, skill, depends_on), in file order."""
+    path = ws.runs.graph_path(run_id)
+    raw = yaml.safe_load(path.read_text(encoding="utf-8")) if path.is_file() else None
+    nodes = raw.get("nodes", []) if isinstance(raw, dict) else []
+    return [{"id": str(n.get("id")), "skill": str(n.get("skill", "")), "depends_on": [str(d) for d in n.get("depends_on") or []]}
+            for n in nodes if isinstance(n, dict) and n.get("id") is not None]
+
+
+def run_sessions(ws: Workspace, run_id: str) -> list[SessionRecord]:
+    """The run's sessions, oldest first, read without taking a lock or writing anything.
+
+    ``Workspace.list_sessions`` repairs stale state hints under the session lock; a viewer
+    must never contend with supervisors for locks or write, so this reads the active
+    sessions named by ``sessions/.index`` and the run's archive catalogue only (a session
+    that moved between the two reads is picked up by the next refresh).
+
+    Raises:
+        DocumentError: a session file is malformed.
+    """
+    by_id: dict[str, SessionRecord] = {}
+    for sid, _, _ in ws.active_sessions(run_id=run_id):
+        try:
+            by_id[sid] = ws.load_session(sid)
+        except DocumentError:
+            raise
+        except ProtocolError:
+            continue  # submitted this instant, or archived meanwhile
+    for entry in SessionArchive(ws.sessions_dir).run_entries(run_id):
+        if entry.session_id not in by_id:
+            try:
+                by_id[entry.session_id] = ws.load_session(entry.session_id)
+            except DocumentError:
+                raise
+            except ProtocolError:
+                continue
+    return sorted(by_id.values(), key=lambda r: (str(r.created_at), r.session_id))
+
+
+def run_graph(ws: Workspace, run_id: str) -> dict[str, Any]:
+    """The run's DAG: nodes (state, skill, dependencies) with their sessions and replan lineage.
+
+    Node states are those the Agent plane computes (latest session's state, ``blocked``
+    propagated along dependencies; ``waiting`` before a node has a session).
+    """
+    sessions = run_sessions(ws, run_id)
+    nodes = _graph_nodes(ws, run_id)
+    known = {n["id"] for n in nodes}
+    for s in sessions:
+        if s.node not in known:
+            nodes.append({"id": s.node, "skill": s.skill, "depends_on": list(s.depends_on)})
+            known.add(s.node)
+    by_node: dict[str, list[SessionRecord]] = {}
+    for s in sessions:
+        by_node.setdefault(s.node, []).append(s)
+    dag = nx.DiGraph()
+    dag.add_nodes_from(known)
+    dag.add_edges_from((d, n["id"]) for n in nodes for d in n["depends_on"] if d in known)
+    raw = {n: node_state_of(by_node[n][-1].state) if n in by_node else dagmod.WAITING for n in known}
+    states = dagmod.propagate_blocked(dag, raw)
+    for n in nodes:
+        n["state"] = states[n["id"]]
+        n["sessions"] = [_session_box(s) for s in by_node.get(n["id"], [])]
+    return {"run_id": run_id, "nodes": nodes}
+
+
+def _session_box(s: SessionRecord) -> dict[str, Any]:
+    verdict = s.attempts[-1].verdict if s.attempts else None
+    return {"session_id": s.session_id, "state": s.state, "parent": s.parent_session_id,
+            "verdict": verdict.verdict if verdict else None,
+            "cause": verdict.diagnosis.cause if verdict and verdict.diagnosis else None,
+            "strategy": s.recovery.strategy if s.recovery else None}
+
+
+def _yaml_file(path: Path) -> Any:
+    return yaml.safe_load(path.read_text(encoding="utf-8")) if path.is_file() else None
+
+
+def session_detail(ws: Workspace, session_id: str) -> dict[str, Any]:
+    """One session: its record (as JSON data) plus what its evidence bundle holds.
+
+    Raises:
+        ProtocolError: unknown or invalid session id; DocumentError: malformed session file.
+    """
+    rec = ws.load_session(session_id)
+    evidence_rel = f"evidence/{session_id}"
+    directory = ws.root / evidence_rel
+    files = sorted(p.name for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")) \
+        if directory.is_dir() else []
+    out: dict[str, Any] = {"record": rec.model_dump(mode="json"), "evidence_dir": evidence_rel, "files": files}
+    out["bundle"] = panel(lambda: _yaml_file(directory / "bundle.yaml"))
+    out["events"] = panel(lambda: _yaml_file(directory / "events.yaml") or [])
+    out["perception"] = panel(lambda: _perception(ws, rec, directory))
+    return out
+
+
+def _perception(ws: Workspace, rec: SessionRecord, directory: Path) -> dict[str, Any]:
+    """Entities the session saw: ENVIRONMENT.md while it is this session's, else the terminal snapshot."""
+    env = ws.read("ENVIRONMENT").data
+    if env.session_id == rec.session_id and env.entities:
+        return {"source": "ENVIRONMENT.md", "sim_time_s": env.sim_time_s,
+                "entities": [e.model_dump(mode="json") for e in env.entities]}
+    for name in ("terminal.yaml", "initial.yaml"):
+        snap = _yaml_file(directory / name)
+        if isinstance(snap, dict) and snap.get("entities"):
+            return {"source": f"{directory.name}/{name}", "sim_time_s": snap.get("sim_time_s"),
+                    "entities": snap["entities"]}
+    return {"source": None, "entities": []}
+
+
+def tree_status(ws: Workspace, session_id: str) -> dict[str, Any] | None:
+    """The live ``evidence/<session>/tree.json`` the runner publishes, or None before the first tick."""
+    path = ws.root / "evidence" / session_id / "tree.json"
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+
+
+def memory(ws: Workspace) -> dict[str, Panel]:
+    """LESSONS.md (lessons and candidates), KNOWLEDGE.md and SKILL.md, each its own panel."""
+    return {
+        "lessons": panel(lambda: ws.read("LESSONS").data.model_dump(mode="json")),
+        "knowledge": panel(lambda: ws.read("KNOWLEDGE").data.model_dump(mode="json")),
+        "skills": panel(lambda: ws.read("SKILL").data.model_dump(mode="json")),
+    }

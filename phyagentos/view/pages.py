@@ -1,0 +1,298 @@
+"""HTML of the view: page shells and the fragments the page re-fetches on every change.
+
+Each page is a shell whose panels (``<div data-fragment=URL>``) the browser fills and
+re-fills from ``/fragment/...`` whenever the server-sent event stream reports that the
+workspace changed. Every string from the workspace is escaped.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from typing import Any, Iterable
+
+from .data import Panel
+
+__all__ = ["page", "error_box", "overview_fragment", "runs_fragment", "run_fragment", "session_fragment",
+           "tree_fragment", "memory_fragment"]
+
+_E = html.escape
+
+
+def page(title: str, body: str, *, token: str, scope: str) -> str:
+    """A full page: header, navigation, ``body`` and the script that keeps it live."""
+    return f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8">
+<meta name="phyagentos-token" content="{_E(token)}">
+<meta name="phyagentos-scope" content="{_E(scope)}">
+<title>{_E(title)} · PhyAgentOS</title>
+<link rel="stylesheet" href="/static/view.css">
+</head><body>
+<header><a class="brand" href="/">PhyAgentOS</a>
+<nav><a href="/">runs</a> <a href="/memory">memory</a></nav>
+<span id="live" class="live" title="live updates">●</span>
+</header>
+<main>{body}</main>
+<script src="/static/view.js"></script>
+</body></html>"""
+
+
+def error_box(message: str) -> str:
+    return f'<div class="error" role="alert"><b>cannot read:</b> <pre>{_E(message)}</pre></div>'
+
+
+def _table(headers: Iterable[str], rows: Iterable[Iterable[str]], *, cls: str = "") -> str:
+    head = "".join(f"<th>{_E(h)}</th>" for h in headers)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def _state(state: str | None) -> str:
+    s = state or "-"
+    return f'<span class="state state-{_E(s)}">{_E(s)}</span>'
+
+
+def _session_link(sid: str) -> str:
+    return f'<a href="/session/{_E(sid)}">{_E(sid)}</a>'
+
+
+def _file_link(path: str) -> str:
+    """A workspace-relative evidence path as a link to the file (served only inside the workspace)."""
+    return f'<a href="/files/{_E(path)}">{_E(path)}</a>'
+
+
+def signal_buttons(*, session_id: str | None = None) -> str:
+    if session_id:
+        return (f'<div class="signals"><button class="sig" data-kind="cancel" data-session="{_E(session_id)}">'
+                f'cancel session</button> <button class="sig estop" data-kind="estop">E-STOP</button></div>')
+    return ('<div class="signals">'
+            '<button class="sig" data-kind="pause">pause</button> '
+            '<button class="sig" data-kind="resume">resume</button> '
+            '<button class="sig estop" data-kind="estop" id="estop">E-STOP</button> '
+            '<button class="sig" data-kind="clear_estop">clear e-stop</button></div>')
+
+
+def overview_fragment(p: Panel) -> str:
+    if p.error:
+        return error_box(p.error)
+    d = p.data
+    flags = []
+    if d["estopped"]:
+        flags.append(f'<span class="flag estop-on">E-STOP engaged: {_E(d["estop_reason"] or "")}</span>')
+    if d["paused"]:
+        flags.append('<span class="flag paused">paused</span>')
+    head = " ".join(flags) or '<span class="flag ok">no pause or e-stop in force</span>'
+    rows = [(_session_link(a["session_id"]), _state(a["state"]), _E(a["node"]), _E(a["skill"]), _E(a["target"]),
+             f'<a href="/run/{_E(a["run_id"])}">{_E(a["run_id"])}</a>') for a in d["active"]]
+    table = _table(("session", "state", "node", "skill", "target", "run"), rows, cls="active") if rows \
+        else "<p class='muted'>no active session</p>"
+    return f'<div id="signal-state">{head}</div><h3>active sessions</h3>{table}'
+
+
+def runs_fragment(p: Panel) -> str:
+    if p.error:
+        return error_box(p.error)
+    if not p.data:
+        return "<p class='muted'>no run yet: <code>phyagentos run GRAPH --workspace WS</code></p>"
+    rows = []
+    for r in p.data:
+        outcome = "" if r["succeeded"] is None else ("succeeded" if r["succeeded"] else "failed")
+        rows.append((f'<a href="/run/{_E(r["run_id"])}">{_E(r["run_id"])}</a>', _E(r["goal_graph"]),
+                     _state(r["state"]) + (" " + _state(outcome) if outcome else ""), _E(r["submitted_at"]),
+                     error_box(r["error"]) if r["error"] else ""))
+    return _table(("run", "goal graph", "state", "submitted", ""), rows, cls="runs")
+
+
+def run_fragment(p: Panel, svg: Panel) -> str:
+    if p.error:
+        return error_box(p.error)
+    g = p.data
+    pic = error_box(svg.error) if svg.error else f'<div class="dag">{svg.data}</div>'
+    rows = []
+    for n in g["nodes"]:
+        sessions = " → ".join(_session_link(s["session_id"]) + " " + _state(s["state"]) for s in n["sessions"]) or "-"
+        rows.append((_E(n["id"]), _E(n["skill"]), f'<span class="nodestate" data-node="{_E(n["id"])}">'
+                     f'{_state(n["state"])}</span>', _E(", ".join(n["depends_on"]) or "-"), sessions))
+    legend = " ".join(_state(s) for s in ("waiting", "running", "succeeded", "failed", "blocked", "cancelled"))
+    return (f'{pic}<p class="legend">{legend} · orange arrows: replans · dashed: blocked</p>'
+            + _table(("node", "skill", "state", "depends on", "sessions"), rows, cls="nodes"))
+
+
+def _short(text: str, n: int) -> str:
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
+def _timeline(transitions: list[dict[str, Any]]) -> str:
+    """The statechart path: the first state, then each event (with its time) and the state it led to."""
+    if not transitions:
+        return "<p class='muted'>no transition yet</p>"
+    items = [f"<li>{_state(transitions[0]['source'])}</li>"]
+    items += [f'<li><span class="ev" title="{_E(t["event"])}">—{_E(_short(t["event"], 36))} '
+              f'<span class="t">{_E(str(t["at"])[11:23])}</span>→</span> {_state(t["dest"])}</li>' for t in transitions]
+    return f'<ol class="timeline">{"".join(items)}</ol>'
+
+
+def _criteria(criteria: list[dict[str, Any]]) -> str:
+    rows = [(_E(c["name"]), f"<code>{_E(c['predicate'])}</code>", _state(c["status"]), _E(c["reason"]),
+             "<br>".join(_file_link(e) for e in c.get("evidence", []))) for c in criteria]
+    return _table(("criterion", "predicate", "status", "reason", "evidence"), rows, cls="criteria")
+
+
+def _kv(d: dict[str, Any] | None) -> str:
+    if not d:
+        return "-"
+    return "<br>".join(f"<code>{_E(str(k))}</code>: {_E(json.dumps(v, default=str)[:160])}" for k, v in d.items())
+
+
+def _attempts(attempts: list[dict[str, Any]]) -> str:
+    out = []
+    for a in attempts:
+        err = f"<br><b>error</b> <code>{_E(a['error']['code'])}</code> {_E(a['error']['message'][:400])}" \
+            if a.get("error") else ""
+        v = a.get("verdict")
+        verdict = ""
+        if v:
+            verdict = (f"<h4>verdict {_state(v['verdict'])} <small>({_E(v['verifier'])})</small></h4>"
+                       f"<p>{_E(v['reason'])}</p>" + _criteria(v.get("criteria", [])))
+            if v.get("diagnosis"):
+                dg = v["diagnosis"]
+                verdict += (f"<h4>diagnosis <code>{_E(dg['cause'])}</code> ({_E(dg['category'])})</h4>"
+                            f"<p>{_E(dg['summary'])}</p><p class='small'>{_kv(dg.get('facts'))}</p>")
+            if v.get("revision"):
+                rv = v["revision"]
+                verdict += (f"<h4>revision <code>{_E(rv['strategy'])}</code> (step {rv['step']})</h4>"
+                            f"<p>{_E(rv.get('rationale', ''))}</p><p class='small'>{_kv(rv.get('parameters'))}</p>")
+        out.append(f'<div class="attempt"><h3>attempt {a["number"]}: {_state(a.get("outcome") or "running")}</h3>'
+                   f'<p class="small">{_E(str(a["started_at"]))} → {_E(str(a.get("ended_at") or "…"))} · runner '
+                   f'{_E(a.get("runner") or "-")}</p>{err}{verdict}</div>')
+    return "".join(out) or "<p class='muted'>no attempt yet</p>"
+
+
+def _events(p: Panel) -> str:
+    if p.error:
+        return error_box(p.error)
+    events = p.data or []
+    if not events:
+        return "<p class='muted'>no safety or target event</p>"
+    rows = [(f"<code>{_E(str(e.get('code', '?')))}</code>", _E(str(e.get("message", ""))[:300]),
+             _E(", ".join(f"{k}={v}" for k, v in e.items() if k not in ("code", "message"))[:200]))
+            for e in events if isinstance(e, dict)]
+    return _table(("code", "message", "details"), rows, cls="events")
+
+
+def _perception(p: Panel) -> str:
+    if p.error:
+        return error_box(p.error)
+    d = p.data
+    if not d["entities"]:
+        return "<p class='muted'>no perception snapshot</p>"
+    rows = []
+    for e in d["entities"]:
+        attrs = e.get("attributes") or {}
+        conf = attrs.get("confidence", e.get("confidence"))
+        pos = e.get("position") or []
+        rows.append((_E(str(e.get("name"))), _E(str(e.get("kind", ""))),
+                     _E(", ".join(f"{x:.3f}" for x in pos if isinstance(x, (int, float)))),
+                     _E(f"{conf:.2f}" if isinstance(conf, (int, float)) else "-"),
+                     _E(", ".join(f"{k}={v}" for k, v in attrs.items() if k != "confidence")[:160])))
+    sim = d.get("sim_time_s")
+    sim_text = f"{sim:.2f}" if isinstance(sim, (int, float)) else "-"
+    return (f"<p class='small'>from <code>{_E(d['source'])}</code>, sim time {sim_text} s</p>"
+            + _table(("entity", "kind", "position (m, world)", "confidence", "attributes"), rows, cls="entities"))
+
+
+def session_fragment(p: Panel) -> str:
+    if p.error:
+        return error_box(p.error)
+    d = p.data
+    r = d["record"]
+    files_url = f"/files/{d['evidence_dir']}"
+    res = r.get("result") or {}
+    head = (f'<p><span id="session-state" data-state="{_E(r["state"])}">{_state(r["state"])}</span> '
+            f'node <b>{_E(r["node"])}</b> · skill <b>{_E(r["skill"])}</b> ({_E(r["skill_runtime"])}) · target '
+            f'<b>{_E(r["target"])}</b> · run <a href="/run/{_E(r["run_id"])}">{_E(r["run_id"])}</a>'
+            + (f" · parent {_session_link(r['parent_session_id'])}" if r.get("parent_session_id") else "")
+            + "".join(f" · child {_session_link(c)}" for c in r.get("child_session_ids", [])) + "</p>")
+    if res:
+        err = res.get("error") or {}
+        head += (f"<p>result {_state(res.get('status'))} {_E(res.get('reason', ''))}"
+                 + (f" <code>{_E(err.get('code', ''))}</code>" if err else "") + "</p>")
+    if r.get("recovery"):
+        head += f"<p>replanned with <code>{_E(r['recovery']['strategy'])}</code>: {_kv(r['recovery'].get('parameters'))}</p>"
+    images = "".join(f'<figure><img src="{files_url}/{_E(f)}" alt="{_E(f)}"><figcaption>{_E(f)}</figcaption></figure>'
+                     for f in d["files"] if f.endswith(".png"))
+    video = (f'<video controls muted src="{files_url}/video.mp4" width="320"></video>'
+             if "video.mp4" in d["files"] else "<p class='muted'>no recording (run with <code>--record</code>)</p>")
+    files = " ".join(f'<a href="{files_url}/{_E(f)}">{_E(f)}</a>' for f in d["files"])
+    bundle = d["bundle"]
+    bundle_html = error_box(bundle.error) if bundle.error else (
+        f"<p class='small'>outcome {_kv((bundle.data or {}).get('outcome'))}</p>" if bundle.data else "")
+    return (head + "<h3>statechart transitions</h3>" + _timeline(r.get("transitions", []))
+            + "<h3>attempts, verdict, diagnosis, revision</h3>" + _attempts(r.get("attempts", []))
+            + "<h3>safety and target events</h3>" + _events(d["events"])
+            + "<h3>perception snapshot</h3>" + _perception(d["perception"])
+            + f"<h3>evidence</h3><div class='images'>{images or '<p class=muted>no image</p>'}{video}</div>"
+            + f"<p class='small'>files: {files or '-'}</p>{bundle_html}")
+
+
+def tree_fragment(p: Panel) -> str:
+    """The live behaviour tree (indented by depth) and the blackboard values it uses."""
+    if p.error:
+        return error_box(p.error)
+    t = p.data
+    if not t:
+        return "<p class='muted'>no tree status yet (published by the runner while the session runs)</p>"
+    nodes = t["nodes"]
+    depth: dict[int, int] = {}
+    rows = []
+    for n in nodes:
+        depth[n["id"]] = 0 if n["parent"] is None else depth[n["parent"]] + 1
+        pad = depth[n["id"]] * 18
+        keys = ", ".join(n["reads"] + [k + "←" for k in n["writes"] if k not in n["reads"]])
+        rows.append(f'<tr class="bt bt-{_E(n["status"])}" data-status="{_E(n["status"])}">'
+                    f'<td style="padding-left:{pad + 4}px"><span class="dot"></span>{_E(n["name"])}</td>'
+                    f'<td><code>{_E(n["type"])}</code></td><td>{_state(n["status"])}</td>'
+                    f'<td class="small">{_E(keys)}</td><td class="small">{_E(n["message"])}</td></tr>')
+    board = "".join(f"<tr><td><code>{_E(k)}</code></td><td class='small'>{_E(json.dumps(v)[:300])}</td></tr>"
+                    for k, v in t.get("blackboard", {}).items())
+    status = "final" if t.get("final") else "live"
+    return (f'<p class="small" id="tree-meta" data-tick="{t["tick"]}" data-final="{str(bool(t.get("final"))).lower()}">'
+            f'{status} · tick {t["tick"]} · {len(nodes)} nodes</p>'
+            '<table class="tree"><thead><tr><th>node</th><th>type</th><th>status</th><th>blackboard keys</th>'
+            f'<th>feedback</th></tr></thead><tbody>{"".join(rows)}</tbody></table>'
+            f'<h4>blackboard</h4><table class="board"><tbody>{board or "<tr><td>-</td></tr>"}</tbody></table>')
+
+
+def _provenance(ids: Iterable[str]) -> str:
+    return " ".join(_session_link(i) for i in dict.fromkeys(ids)) or "-"
+
+
+def memory_fragment(panels: dict[str, Panel]) -> str:
+    out = []
+    lessons = panels["lessons"]
+    out.append("<h2>LESSONS.md</h2>")
+    if lessons.error:
+        out.append(error_box(lessons.error))
+    else:
+        for title, key in (("verified lessons", "lessons"), ("candidates", "candidates")):
+            rows = [(_E(x["id"]), _E(x["objective"]), f"<code>{_E(x['cause'])}</code>", _E(x["correction"]),
+                     f"{x.get('confirmations', 0)} / {x.get('refutations', 0)}", _E(json.dumps(x.get("scope", {}))[:160]),
+                     _provenance([*x.get("provenance", []), *x.get("verified_by", [])]))
+                    for x in lessons.data.get(key, [])]
+            out.append(f"<h3>{title}</h3>" + (_table(("id", "objective", "cause", "correction", "confirmed / refuted",
+                                                      "scope", "sessions"), rows, cls="memory")
+                                              if rows else "<p class='muted'>none</p>"))
+    for title, key, field, cols in (
+            ("KNOWLEDGE.md", "knowledge", "entries", ("id", "pattern", "conditions", "success", "parameters", "sessions")),
+            ("SKILL.md", "skills", "procedures", ("name", "base skill", "conditions", "success", "parameters", "sessions"))):
+        p = panels[key]
+        out.append(f"<h2>{title}</h2>")
+        if p.error:
+            out.append(error_box(p.error))
+            continue
+        rows = [(_E(x.get("id") or x.get("name")), _E(x.get("pattern") or x.get("base_skill", "")),
+                 _E(json.dumps(x.get("conditions", {}))[:200]), f"{x.get('successes', 0)} / {x.get('attempts', 0)}",
+                 _E(json.dumps(x.get("parameters", {}))[:200]), _provenance(x.get("provenance", [])))
+                for x in p.data.get(field, [])]
+        out.append(_table(cols, rows, cls="memory") if rows else "<p class='muted'>none</p>")
+    return "".join(out)

@@ -19,6 +19,8 @@ articulate_hinge          turn a held handle about its entity's hinge
 tool_move                 straight tcp motion by an offset in the tool frame
 compute_place_as_held     place poses keeping the hand's orientation (hooked objects)
 noop                      succeed after n ticks, touching no target (control.py)
+game_*                    game primitives (explore, goto, collect, hunt, place, make,
+                          sleep, survive) on a ``kind: game`` target (game/)
 ========================  ==========================================================
 """
 
@@ -26,6 +28,7 @@ from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsH
 from .base import Primitive, PrimitiveFailure
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
 from .control import Noop
+from .game import GAME_PRIMITIVES
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
@@ -59,4 +62,5 @@ PRIMITIVES = {
     "tool_move": ToolMove,
     "compute_place_as_held": ComputePlaceAsHeld,
     "noop": Noop,
+    **GAME_PRIMITIVES,
 }

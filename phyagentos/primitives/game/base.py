@@ -1,0 +1,169 @@
+"""GameLeaf: the base of every game primitive (one game action per behaviour-tree tick).
+
+A game leaf reads only what the player can know (``target.observe()``; see
+:mod:`phyagentos.targets.crafter_target`), keeps the player's map
+(:class:`~.seen_map.SeenMap`, carried in the target's notes from session to session),
+acts through the target's operations (``invoke_tool``: only what the session's
+TargetToolManifest grants) and records what happened in the session's trace:
+
+- ``game_vitals`` when a vital changes (``{health, food, drink, energy}``, the step);
+- ``game_damage`` when health drops: the creatures next to the player, daylight,
+  whether it slept, the material it stands on (the evidence a death is diagnosed from);
+- ``game_achievement`` when the player's achievement list grows;
+- ``game_make`` / ``game_place`` for every attempt: item, ``ok`` (the inventory gained /
+  spent), the materials around the player (its 3 x 3 neighbourhood) and the inventory
+  before and after (a failed ``make`` is evidence: the inventory did not change);
+- ``game_death`` / ``game_over`` when the episode ends.
+
+One tick is one game step, so cancellation and the deadline are checked between steps.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from py_trees.common import Status
+
+from ..base import Primitive, PrimitiveFailure
+from .seen_map import MOVES, SeenMap
+
+__all__ = ["GameLeaf", "MOVE_ACTIONS", "neighbourhood", "facing_cell"]
+
+logger = logging.getLogger(__name__)
+
+MOVE_ACTIONS = tuple(MOVES)
+_DIR = {"left": (-1, 0), "right": (1, 0), "up": (0, -1), "down": (0, 1)}
+
+
+def neighbourhood(obs: dict) -> list[str]:
+    """Sorted materials of the player's 3 x 3 neighbourhood (Crafter's ``nearby(pos, 1)``)."""
+    view = obs["view"]
+    r0, c0 = len(view) // 2, len(view[0]) // 2
+    return sorted({view[r][c] for r in range(r0 - 1, r0 + 2) for c in range(c0 - 1, c0 + 2)} - {"dark", "void"})
+
+
+def facing_cell(obs: dict) -> tuple[int, int]:
+    dx, dy = _DIR[obs["facing"]]
+    return obs["position"][0] + dx, obs["position"][1] + dy
+
+
+class GameLeaf(Primitive):
+    """A primitive acting on a game target, one action per tick.
+
+    Args:
+        name: leaf name.
+        max_steps: game steps this leaf may spend before it fails (``game.budget``);
+            counted over the leaf's whole life in the session (preemption by a
+            survival reflex does not reset it).
+    """
+
+    TOOLS = ("observe",)
+
+    def __init__(self, name: str, *, max_steps: int = 1000):
+        super().__init__(name)
+        if not isinstance(max_steps, int) or max_steps < 1:
+            raise ValueError(f"max_steps must be an integer >= 1, got {max_steps!r}")
+        self.max_steps = max_steps
+        self.spent = 0
+
+    # -- the player's knowledge ---------------------------------------------------
+    @property
+    def map(self) -> SeenMap:
+        notes = self.ctx.target.notes
+        if "map" not in notes:
+            notes["map"] = SeenMap()
+        return notes["map"]
+
+    def observe(self) -> dict:
+        obs = self.ctx.target.invoke_tool("observe")
+        self.map.update(obs)
+        return obs
+
+    def on_enter(self) -> Status | None:
+        self.obs = self.observe()
+        self._check_over(self.obs)
+        return None
+
+    # -- acting ---------------------------------------------------------------------
+    def act(self, action: str) -> dict:
+        """Take one game step, update the map and the trace; returns the new observation.
+
+        Raises:
+            PrimitiveFailure: ``game.budget`` when the leaf's steps are spent, ``game.dead``
+                or ``game.over`` when the episode ended.
+        """
+        if self.spent >= self.max_steps:
+            raise PrimitiveFailure("game.budget", f"{self.name}: {self.max_steps} steps spent")
+        before = self.obs
+        self.ctx.target.invoke_tool(action)
+        self.spent += 1
+        obs = self.observe()
+        self._record(before, obs, action)
+        self.obs = obs
+        self._check_over(obs)
+        return obs
+
+    def _record(self, before: dict, obs: dict, action: str) -> None:
+        trace = self.ctx.trace
+        if obs["vitals"] != before["vitals"]:
+            trace.record("game_vitals", step=obs["step"], **obs["vitals"])
+            if obs["vitals"]["health"] < before["vitals"]["health"]:
+                near = [o["name"] for o in obs["objects"] if abs(o["dx"]) + abs(o["dy"]) <= 1]
+                near_prev = [o["name"] for o in before["objects"] if abs(o["dx"]) + abs(o["dy"]) <= 2]
+                trace.record("game_damage", step=obs["step"], health=obs["vitals"]["health"],
+                             lost=before["vitals"]["health"] - obs["vitals"]["health"], adjacent=near,
+                             close_before=near_prev, daylight=obs["daylight"], sleeping=before["sleeping"],
+                             food=obs["vitals"]["food"], drink=obs["vitals"]["drink"], energy=obs["vitals"]["energy"],
+                             action=action, standing_on=obs["view"][len(obs["view"]) // 2][len(obs["view"][0]) // 2])
+        new = sorted(set(obs["achievements"]) - set(before["achievements"]))
+        for a in new:
+            trace.record("game_achievement", step=obs["step"], achievement=a)
+
+    def _check_over(self, obs: dict) -> None:
+        if not obs["done"]:
+            return
+        if obs["vitals"]["health"] <= 0:
+            self.ctx.trace.record("game_death", step=obs["step"], **obs["vitals"], daylight=obs["daylight"],
+                                  adjacent=[o["name"] for o in obs["objects"] if abs(o["dx"]) + abs(o["dy"]) <= 1])
+            raise PrimitiveFailure("game.dead", f"the player died at step {obs['step']}")
+        self.ctx.trace.record("game_over", step=obs["step"])
+        raise PrimitiveFailure("game.over", f"the episode ended at step {obs['step']}")
+
+    # -- moving ---------------------------------------------------------------------
+    def blocked(self) -> set[tuple[int, int]]:
+        """Cells to route around: creatures seen now, and cells next to remembered lava."""
+        px, py = self.obs["position"]
+        cells = {(px + o["dx"], py + o["dy"]) for o in self.obs["objects"]}
+        for lx, ly in self.map.cells_of(["lava"]):
+            cells |= {(lx + dx, ly + dy) for dx, dy in MOVES.values()}
+        return cells
+
+    def face(self, cell: tuple[int, int]) -> str | None:
+        """The move that turns the player toward the adjacent ``cell`` (it also steps
+        there when the cell is free), or ``None`` when it already faces it."""
+        px, py = self.obs["position"]
+        d = (cell[0] - px, cell[1] - py)
+        if d == tuple(_DIR[self.obs["facing"]]):
+            return None
+        return next(a for a, v in MOVES.items() if v == d)
+
+    def explore_action(self) -> str:
+        """A step toward the nearest remembered frontier (walkable cell next to unseen ones);
+        a step in the facing direction when none is reachable."""
+        here = tuple(self.obs["position"])
+        plan = self.map.plan(here, self.map.frontier() - {here}, blocked=self.blocked(), stand_on_goal=True)
+        if plan is not None and plan.moves:
+            return plan.moves[0]
+        order = list(MOVES)
+        k = (self.spent // 7) % 4
+        return order[k]
+
+    def goto_action(self, goals: set[tuple[int, int]], *, stand_on_goal: bool = False) -> tuple[str | None, Any]:
+        """Next move toward the nearest of ``goals`` (adjacent to it, or onto it); returns
+        ``(move, plan)``; ``(None, plan)`` when already there; ``(None, None)`` when no
+        goal is reachable on remembered cells."""
+        plan = self.map.plan(self.obs["position"], goals, blocked=self.blocked(), stand_on_goal=stand_on_goal)
+        if plan is None:
+            return None, None
+        return (plan.moves[0] if plan.moves else None), plan

@@ -176,7 +176,11 @@ class CrafterTarget(BaseRolloutTarget):
         self._seed = 0 if seed is None else int(seed)
         self._spawn = np.zeros(2, dtype=int)
         self.notes: dict[str, Any] = {}  # the player's own notebook (remembered map), kept with the state
-        self.reset(seed=seed)
+        self._done = False
+        self._fresh = True  # generated but not yet stepped: reset(seed) of the same seed is a no-op
+        self._env = self._new_env(self._seed)
+        self._env.reset()
+        self._spawn = np.array(self._env._player.pos, dtype=int)
 
     # -- game ---------------------------------------------------------------------
     def _new_env(self, seed: int):
@@ -187,10 +191,13 @@ class CrafterTarget(BaseRolloutTarget):
 
     def reset(self, *, seed: int | None = None) -> dict:
         """Generate the world of ``seed`` (Crafter's own generator) and return :meth:`observe`."""
+        if seed is not None and int(seed) == self._seed and self._fresh:
+            return self.observe()  # this very world was just generated and nothing moved yet
         if seed is not None:
             self._seed = int(seed)
         self._env = self._new_env(self._seed)
         self._env.reset()
+        self._fresh = True
         self._spawn = np.array(self._env._player.pos, dtype=int)
         self._done = False
         self.notes = {}
@@ -223,6 +230,7 @@ class CrafterTarget(BaseRolloutTarget):
         if self._done:
             raise TargetError(f"target {self.name!r}: the episode is over (step {self.sim_time:.0f})")
         _, _, done, _ = self._env.step(index)
+        self._fresh = False
         self._done = bool(done)
 
     def step(self, ctrl) -> None:
@@ -370,7 +378,7 @@ class CrafterTarget(BaseRolloutTarget):
             raise TargetError(f"state file {path}: unreadable game state: {exc}") from exc
         import crafter  # noqa: PLC0415
 
-        env = self._new_env(int(z["seed"]))
+        env = self._env  # keep its loaded textures; the world, player and counters are replaced
         env._world, env._player = game["world"], game["player"]
         env._step, env._episode = game["step"], game["episode"]
         env._unlocked, env._last_health = game["unlocked"], game["last_health"]
@@ -383,6 +391,7 @@ class CrafterTarget(BaseRolloutTarget):
         self._seed = int(z["seed"])
         self._spawn = np.array(z["spawn"], dtype=int)
         self._done = bool(z["done"])
+        self._fresh = False
         self.notes = notes
 
     def tools(self) -> tuple[str, ...]:

@@ -26,7 +26,7 @@ from typing import Any
 from py_trees.common import Status
 
 from ..base import Primitive, PrimitiveFailure
-from .seen_map import MOVES, SeenMap
+from .seen_map import MOVES, WALKABLE, SeenMap
 
 __all__ = ["GameLeaf", "MOVE_ACTIONS", "neighbourhood", "facing_cell"]
 
@@ -158,6 +158,27 @@ class GameLeaf(Primitive):
         order = list(MOVES)
         k = (self.spent // 7) % 4
         return order[k]
+
+    def shelter_spot(self, *, radius: int = 8) -> tuple[int, int] | None:
+        """A remembered walkable cell within ``radius`` steps with the fewest walkable
+        neighbours (zombies reach a sleeper only through those), preferring cells that are
+        not grass (zombies appear on grass) and then nearer ones."""
+        here = tuple(self.obs["position"])
+        best, best_key = None, None
+        for dx in range(-radius, radius + 1):
+            for dy in range(-(radius - abs(dx)), radius - abs(dx) + 1):
+                c = (here[0] + dx, here[1] + dy)
+                m = self.map.material(c)
+                if m not in WALKABLE:
+                    continue
+                open_ = sum(self.map.material((c[0] + a, c[1] + b)) in WALKABLE for a, b in MOVES.values())
+                key = (open_, m == "grass", abs(dx) + abs(dy))
+                if best_key is None or key < best_key:
+                    best, best_key = c, key
+        if best is not None and best != here and self.map.plan(here, {best}, blocked=self.blocked(),
+                                                                stand_on_goal=True) is None:
+            return None
+        return best
 
     def goto_action(self, goals: set[tuple[int, int]], *, stand_on_goal: bool = False) -> tuple[str | None, Any]:
         """Next move toward the nearest of ``goals`` (adjacent to it, or onto it); returns

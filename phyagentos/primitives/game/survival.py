@@ -21,7 +21,8 @@ from __future__ import annotations
 from py_trees.common import Status
 
 from .base import GameLeaf, facing_cell
-from .seen_map import MOVES, WALKABLE
+from .seen_map import MOVES
+from .tasks import shelter_action
 
 __all__ = ["GameSurvive"]
 
@@ -37,6 +38,7 @@ class GameSurvive(GameLeaf):
         self.drink_below, self.food_below, self.energy_below = int(drink_below), int(food_below), int(energy_below)
         self.fight = bool(fight)
         self.mode: str | None = None
+        self._spot = None
         self._food0 = 0
 
     def step(self):
@@ -59,7 +61,7 @@ class GameSurvive(GameLeaf):
         if self.mode == "eat" and v["food"] > self._food0:
             self.mode = None
         if self.mode == "sleep" and not obs["sleeping"] and v["energy"] >= self.energy_below:
-            self.mode = None
+            self.mode, self._spot = None, None
         if self.mode is None:
             if v["drink"] < self.drink_below and self.map.known("water"):
                 self.mode = "drink"
@@ -78,13 +80,8 @@ class GameSurvive(GameLeaf):
                 self.mode = None
                 return Status.FAILURE
             return self._toward(here or self.map.cells_of(["cow"]), strike=True)
-        # sleep
-        front = facing_cell(obs)
-        if obs["inventory"].get("stone", 0) > 0 and self.map.material(front) in WALKABLE and not any(
-                (px + o["dx"], py + o["dy"]) == front for o in obs["objects"]):
-            self.act("place_stone")
-        else:
-            self.act("sleep")
+        # sleep, in the best shelter nearby
+        self.act(shelter_action(self))
         return Status.RUNNING
 
     def _toward(self, goals, *, strike: bool):

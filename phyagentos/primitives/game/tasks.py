@@ -17,7 +17,7 @@ from .base import GameLeaf, facing_cell, neighbourhood
 from .seen_map import MOVES, WALKABLE
 
 __all__ = ["GameObserve", "GameExplore", "GameGoto", "GameCollect", "GameHunt", "GamePlace", "GameMake", "GameSleep",
-           "PLACE_ONTO"]
+           "PLACE_ONTO", "shelter_action"]
 
 logger = logging.getLogger(__name__)
 
@@ -98,21 +98,25 @@ class GameCollect(GameLeaf):
 
     TOOLS = ("observe", "do") + _MOVE_ACTIONS
 
-    def __init__(self, name: str, *, material: str, item: str, count: int = 1, patience: int = 8,
+    def __init__(self, name: str, *, material: str, item: str, count: int = 1, strikes: int = 0, patience: int = 8,
                  max_steps: int = 1000):
         super().__init__(name, max_steps=max_steps)
         self.material, self.item, self.count = material, item, int(count)
+        self.strikes, self._gains = int(strikes), 0  # successful strikes required (e.g. drink although full)
         self.patience = int(patience) if material not in WALKABLE else max(int(patience), 60)  # saplings: 10 %
         self._strikes = 0
 
     def step(self):
-        if _inv(self.obs).get(self.item, 0) >= self.count:
+        if _inv(self.obs).get(self.item, 0) >= self.count and self._gains >= self.strikes:
             return Status.SUCCESS
         front = facing_cell(self.obs)
         if self.map.material(front) == self.material and not self._occupied(front):
             before = _inv(self.obs).get(self.item, 0)
+            achieved = len(self.obs["achievements"])
             self.act("do")
-            self._strikes = 0 if _inv(self.obs).get(self.item, 0) > before else self._strikes + 1
+            gained = _inv(self.obs).get(self.item, 0) > before or len(self.obs["achievements"]) > achieved
+            self._gains += int(gained)
+            self._strikes = 0 if gained else self._strikes + 1
             if self._strikes >= self.patience:
                 raise PrimitiveFailure("game.no_effect", f"{self.patience} strikes on {self.material} gave no {self.item} "
                                                          f"(inventory {self.obs['inventory']})")
@@ -133,10 +137,11 @@ class GameCollect(GameLeaf):
 
 
 class GameHunt(GameLeaf):
-    """Hunt ``creature`` (``cow``, ``zombie``, ``skeleton``): go next to it and strike until
-    ``until`` (an achievement) is newly unlocked, or, for a cow, the food rises."""
+    """Hunt ``creature`` (``cow``, ``zombie``, ``skeleton``, or ``plant_ripe``: wait by a
+    remembered plant until it ripens): go next to it and strike until ``until`` (an
+    achievement) is newly unlocked, or, for a cow, the food rises."""
 
-    TOOLS = ("observe", "do") + _MOVE_ACTIONS
+    TOOLS = ("observe", "do", "noop") + _MOVE_ACTIONS
 
     def __init__(self, name: str, *, creature: str, until: str | None = None, max_steps: int = 1000):
         super().__init__(name, max_steps=max_steps)
@@ -167,6 +172,11 @@ class GameHunt(GameLeaf):
             self.act(self.face(adjacent[0]) or "do")
             return Status.RUNNING
         goals = here or self.map.cells_of([self.creature])
+        if not goals and self.creature == "plant_ripe":
+            # A sapling ripens where it was planted: wait next to a remembered plant.
+            move, plan = self.goto_action(self.map.cells_of(["plant"]))
+            self.act(move if move is not None else ("noop" if plan is not None else self.explore_action()))
+            return Status.RUNNING
         move, plan = self.goto_action(goals)
         self.act(move if move is not None else self.explore_action())
         return Status.RUNNING
@@ -299,8 +309,10 @@ class GameMake(GameLeaf):
 
 class GameSleep(GameLeaf):
     """Sleep until the player wakes (Crafter wakes it when energy is full or it is hurt):
-    first go to the most enclosed remembered cell nearby (fewest walkable neighbours)
-    and, with stone in the inventory, block the cell in front; SUCCESS on waking."""
+    first go to a sheltered remembered cell nearby (:meth:`GameLeaf.shelter_spot`) and,
+    with stone in the inventory, block the cell in front; SUCCESS on waking. Crafter
+    only lets a player sleep whose energy is below the maximum: until then the player
+    waits in its shelter (each ``sleep`` action is tried again)."""
 
     TOOLS = ("observe", "sleep", "noop", "place_stone") + _MOVE_ACTIONS
 
@@ -318,31 +330,29 @@ class GameSleep(GameLeaf):
             return Status.RUNNING
         if self._slept:
             return Status.SUCCESS
-        if self.shelter and self._spot is None:
-            self._spot = self._enclosed_spot()
-        if self.shelter and self._spot is not None and tuple(obs["position"]) != self._spot:
-            move, plan = self.goto_action({self._spot}, stand_on_goal=True)
-            if move is not None:
-                self.act(move)
-                return Status.RUNNING
-            self._spot = tuple(obs["position"])
-        front = facing_cell(obs)
-        if self.shelter and obs["inventory"].get("stone", 0) > 0 and self.map.material(front) in WALKABLE:
-            self.act("place_stone")
-            return Status.RUNNING
-        self.act("sleep")
+        action = shelter_action(self, self.shelter)
+        self.act(action)
         return Status.RUNNING
 
-    def _enclosed_spot(self):
-        px, py = self.obs["position"]
-        best, best_key = None, None
-        for dx in range(-4, 5):
-            for dy in range(-3, 4):
-                c = (px + dx, py + dy)
-                if self.map.material(c) not in WALKABLE:
-                    continue
-                open_ = sum(self.map.material((c[0] + a, c[1] + b)) in WALKABLE for a, b in MOVES.values())
-                key = (open_, abs(dx) + abs(dy))
-                if best_key is None or key < best_key:
-                    best, best_key = c, key
-        return best
+
+def shelter_action(leaf: GameLeaf, shelter: bool = True) -> str:
+    """The next action of going to sleep: walk to the leaf's shelter spot, block the cell
+    in front with stone when there is some, then ``sleep``."""
+    obs = leaf.obs
+    here = tuple(obs["position"])
+    if shelter:
+        spot = getattr(leaf, "_spot", None)
+        if spot is None:
+            spot = leaf.shelter_spot() or here
+            leaf._spot = spot
+        if spot != here:
+            move, plan = leaf.goto_action({spot}, stand_on_goal=True)
+            if move is not None:
+                return move
+            leaf._spot = here
+    front = facing_cell(obs)
+    px, py = here
+    occupied = any((px + o["dx"], py + o["dy"]) == front for o in obs["objects"])
+    if shelter and obs["inventory"].get("stone", 0) > 0 and leaf.map.material(front) in WALKABLE and not occupied:
+        return "place_stone"
+    return "sleep"

@@ -296,11 +296,13 @@ class CrafterTarget(BaseRolloutTarget):
         """ENVIRONMENT-style snapshot of what the player knows (evidence for the verifier):
         one entity ``player`` whose ``position`` is the odometry ``[x, y, 0]`` in cells
         (not metres) and whose ``attributes`` hold inventory, vitals, achievements,
-        daylight, step, facing, sleeping, done, the local view rows and the objects."""
+        daylight, step, facing, sleeping, done, the local view rows, the objects and
+        ``world`` (the seed the session's run asked for)."""
         obs = self.observe()
         attrs = {k: obs[k] for k in ("inventory", "vitals", "achievements", "daylight", "step", "facing", "sleeping",
                                      "done", "objects")}
         attrs["view"] = [" ".join(row) for row in obs["view"]]
+        attrs["world"] = self._seed  # which world this is: the seed the session asked for
         return {
             "sim_time_s": float(obs["step"]),
             "entities": [{"name": "player", "kind": "player", "position": [float(obs["position"][0]),

@@ -152,6 +152,11 @@ def session_conditions(*, goal: str, skill: str, target: str, embodiment: str, p
                 props["friction"] = float(me["friction"])
             if "half_extents" in me:
                 props["size_m"] = [round(2.0 * float(h), 4) for h in me["half_extents"]]
+    if obj is None and skill.startswith("game_"):
+        # Game skills act on an item or a creature, not on a scene object: memory is keyed on it.
+        subject = parameters.get("item", parameters.get("creature"))
+        if isinstance(subject, str):
+            obj, cls = subject, f"item:{subject}"
     return Conditions(goal=goal, skill=skill, target=target, embodiment=embodiment, object=obj, object_class=cls,
                       object_properties=props, risk_factors=risk_factors(scene, obj))
 

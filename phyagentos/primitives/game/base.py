@@ -13,6 +13,7 @@ TargetToolManifest grants) and records what happened in the session's trace:
 - ``game_make`` / ``game_place`` for every attempt: item, ``ok`` (the inventory gained /
   spent), the materials around the player (its 3 x 3 neighbourhood) and the inventory
   before and after (a failed ``make`` is evidence: the inventory did not change);
+- ``game_sighting`` the first time a material or creature is seen (what was around it);
 - ``game_death`` / ``game_over`` when the episode ends.
 
 One tick is one game step, so cancellation and the deadline are checked between steps.
@@ -77,12 +78,17 @@ class GameLeaf(Primitive):
 
     def observe(self) -> dict:
         obs = self.ctx.target.invoke_tool("observe")
-        self.map.update(obs)
+        first = self.map.update(obs)
+        if first:
+            around = sorted({n for row in obs["view"] for n in row} - {"dark", "void"})
+            for name in sorted(first):
+                self.ctx.trace.record("game_sighting", step=obs["step"], name=name, around=around,
+                                      distance_from_start=abs(obs["position"][0]) + abs(obs["position"][1]))
         return obs
 
     def on_enter(self) -> Status | None:
         self.obs = self.observe()
-        self._check_over(self.obs)
+        self._check_over(self.obs, now=False)
         return None
 
     # -- acting ---------------------------------------------------------------------
@@ -120,14 +126,18 @@ class GameLeaf(Primitive):
         for a in new:
             trace.record("game_achievement", step=obs["step"], achievement=a)
 
-    def _check_over(self, obs: dict) -> None:
+    def _check_over(self, obs: dict, *, now: bool = True) -> None:
+        """Fail when the episode is over; the death (or the end) is recorded by the step
+        that caused it (``now``), not again by later leaves and sessions."""
         if not obs["done"]:
             return
-        if obs["vitals"]["health"] <= 0:
-            self.ctx.trace.record("game_death", step=obs["step"], **obs["vitals"], daylight=obs["daylight"],
+        dead = obs["vitals"]["health"] <= 0
+        if now:
+            kind = "game_death" if dead else "game_over"
+            self.ctx.trace.record(kind, step=obs["step"], **obs["vitals"], daylight=obs["daylight"],
                                   adjacent=[o["name"] for o in obs["objects"] if abs(o["dx"]) + abs(o["dy"]) <= 1])
+        if dead:
             raise PrimitiveFailure("game.dead", f"the player died at step {obs['step']}")
-        self.ctx.trace.record("game_over", step=obs["step"])
         raise PrimitiveFailure("game.over", f"the episode ended at step {obs['step']}")
 
     # -- moving ---------------------------------------------------------------------
@@ -153,8 +163,11 @@ class GameLeaf(Primitive):
         a step in the facing direction when none is reachable."""
         here = tuple(self.obs["position"])
         plan = self.map.plan(here, self.map.frontier() - {here}, blocked=self.blocked(), stand_on_goal=True)
+        if plan is None and self.obs["inventory"].get("wood_pickaxe", 0) > 0:
+            plan = self.map.plan(here, self.map.frontier() - {here}, blocked=self.blocked(), stand_on_goal=True,
+                                 dig=True)
         if plan is not None and plan.moves:
-            return plan.moves[0]
+            return self.dig_through(plan.moves[0])
         order = list(MOVES)
         k = (self.spent // 7) % 4
         return order[k]
@@ -185,6 +198,17 @@ class GameLeaf(Primitive):
         ``(move, plan)``; ``(None, plan)`` when already there; ``(None, None)`` when no
         goal is reachable on remembered cells."""
         plan = self.map.plan(self.obs["position"], goals, blocked=self.blocked(), stand_on_goal=stand_on_goal)
+        if plan is None and self.obs["inventory"].get("wood_pickaxe", 0) > 0:
+            plan = self.map.plan(self.obs["position"], goals, blocked=self.blocked(), stand_on_goal=stand_on_goal,
+                                 dig=True)
         if plan is None:
             return None, None
-        return (plan.moves[0] if plan.moves else None), plan
+        return (self.dig_through(plan.moves[0]) if plan.moves else None), plan
+
+    def dig_through(self, move: str) -> str:
+        """``move``, or ``do`` when the cell it leads to is stone the player faces (dig first)."""
+        px, py = self.obs["position"]
+        dx, dy = MOVES[move]
+        if self.map.material((px + dx, py + dy)) == "stone" and facing_cell(self.obs) == (px + dx, py + dy):
+            return "do"
+        return move

@@ -26,6 +26,7 @@ __all__ = ["SeenMap", "MATERIALS", "WALKABLE", "MOVES", "Plan"]
 MATERIALS: tuple[str, ...] = ("unknown", "void", "water", "grass", "stone", "path", "sand", "tree", "lava", "coal",
                               "iron", "diamond", "table", "furnace")
 _CODE = {name: i for i, name in enumerate(MATERIALS)}
+_STONE = _CODE["stone"]
 #: Cells the player can walk on (Crafter's ``walkable``; lava is walkable in Crafter but deadly).
 WALKABLE: frozenset[str] = frozenset({"grass", "sand", "path"})
 _WALK = np.zeros(len(MATERIALS), bool)
@@ -51,10 +52,11 @@ class SeenMap:
     def __init__(self) -> None:
         self.grid = np.zeros((2 * _HALF, 2 * _HALF), np.uint8)
         self.objects: dict[tuple[int, int], tuple[str, int]] = {}  # cell -> (name, step last seen)
+        self.names: set[str] = set()  # every material and object name ever seen
 
     # -- persistence (the target keeps it in its notes) -----------------------------
     def to_notes(self) -> dict[str, Any]:
-        return {"grid": self.grid.copy(), "objects": dict(self.objects)}
+        return {"grid": self.grid.copy(), "objects": dict(self.objects), "names": set(self.names)}
 
     @classmethod
     def from_notes(cls, notes: dict[str, Any] | None) -> "SeenMap":
@@ -62,11 +64,13 @@ class SeenMap:
         if notes:
             m.grid = np.array(notes["grid"], np.uint8)
             m.objects = dict(notes["objects"])
+            m.names = set(notes.get("names", ()))
         return m
 
     # -- updating -------------------------------------------------------------------
-    def update(self, obs: dict) -> None:
-        """Write the observation's view and objects into the map."""
+    def update(self, obs: dict) -> set[str]:
+        """Write the observation's view and objects into the map; returns the names seen
+        for the first time."""
         px, py = obs["position"]
         view = obs["view"]
         rows, cols = len(view), len(view[0])
@@ -82,6 +86,10 @@ class SeenMap:
         self.objects = {cell: v for cell, v in self.objects.items() if cell not in visible}
         for o in obs["objects"]:
             self.objects[(px + o["dx"], py + o["dy"])] = (o["name"], step)
+        names = {n for row in view for n in row if n not in ("dark", "void")} | {o["name"] for o in obs["objects"]}
+        new = names - self.names
+        self.names |= new
+        return new
 
     # -- queries --------------------------------------------------------------------
     def material(self, cell: Sequence[int]) -> str:
@@ -104,16 +112,21 @@ class SeenMap:
     def known(self, name: str) -> bool:
         return bool(self.cells_of([name]))
 
-    def _free(self, cell, blocked) -> bool:
+    def _free(self, cell, blocked, dig: bool = False) -> bool:
         x, y = cell[0] + _HALF, cell[1] + _HALF
-        return 0 <= x < 2 * _HALF and 0 <= y < 2 * _HALF and bool(_WALK[self.grid[x, y]]) and cell not in blocked
+        if not (0 <= x < 2 * _HALF and 0 <= y < 2 * _HALF) or cell in blocked:
+            return False
+        code = self.grid[x, y]
+        return bool(_WALK[code]) or (dig and code == _STONE)
 
     def plan(self, start: Sequence[int], goals: set[tuple[int, int]], *, blocked: set[tuple[int, int]] = frozenset(),
-             max_nodes: int = 20000, stand_on_goal: bool = False) -> Plan | None:
+             max_nodes: int = 20000, stand_on_goal: bool = False, dig: bool = False) -> Plan | None:
         """Shortest path from ``start`` to a free cell next to (or, with ``stand_on_goal``,
         onto) a cell of ``goals``; ``None`` when no goal is reachable on remembered cells.
 
         ``blocked``: cells to avoid (creatures, cells next to lava are the caller's choice).
+        ``dig``: stone counts as passable (the player has a pickaxe and digs through it;
+        each stone cell costs a strike and a step, planned here as one step).
         """
         start = (int(start[0]), int(start[1]))
         if not goals:
@@ -134,7 +147,7 @@ class SeenMap:
                     break
             for action, (dx, dy) in MOVES.items():
                 nxt = (cell[0] + dx, cell[1] + dy)
-                if nxt in prev or not self._free(nxt, blocked):
+                if nxt in prev or not self._free(nxt, blocked, dig):
                     continue
                 prev[nxt] = (cell, action)
                 queue.append(nxt)

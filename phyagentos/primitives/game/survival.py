@@ -9,8 +9,9 @@ the map when it resumes), and never SUCCESS. Urgencies, most pressing first:
 2. ``sleeping``: the game keeps the player asleep; wait;
 3. ``drink``: drink below ``drink_below``: go to remembered water and drink until full;
 4. ``eat``: food below ``food_below``: hunt the nearest remembered cow until the food rises;
-5. ``sleep``: energy below ``energy_below``: sleep where it stands (blocking the cell in
-   front with stone when it has some) until it wakes.
+5. ``rest``: energy below ``energy_below``, or night (daylight below ``night_below``) and a
+   pickaxe to dig with: rest (:class:`~.shelter.Rest`: a sealed two-cell shelter, sleep,
+   stay until daylight, dig out).
 
 The thresholds are skill parameters: a death diagnosed from the trace (thirst,
 starvation, exhaustion) becomes a lesson that raises the matching one.
@@ -22,7 +23,7 @@ from py_trees.common import Status
 
 from .base import GameLeaf, facing_cell
 from .seen_map import MOVES
-from .tasks import shelter_action
+from .shelter import Rest, find_shelter
 
 __all__ = ["GameSurvive"]
 
@@ -33,12 +34,13 @@ class GameSurvive(GameLeaf):
     TOOLS = ("observe", "do", "sleep", "noop", "place_stone") + tuple(MOVES)
 
     def __init__(self, name: str, *, drink_below: int = 4, food_below: int = 4, energy_below: int = 3,
-                 fight: bool = True, max_steps: int = 100000):
+                 night_below: float = 0.3, fight: bool = True, max_steps: int = 100000):
         super().__init__(name, max_steps=max_steps)
         self.drink_below, self.food_below, self.energy_below = int(drink_below), int(food_below), int(energy_below)
+        self.night_below = float(night_below)
         self.fight = bool(fight)
         self.mode: str | None = None
-        self._spot = None
+        self._rest: Rest | None = None
         self._food0 = 0
 
     def step(self):
@@ -60,15 +62,17 @@ class GameSurvive(GameLeaf):
             self.mode = None
         if self.mode == "eat" and v["food"] > self._food0:
             self.mode = None
-        if self.mode == "sleep" and not obs["sleeping"] and v["energy"] >= self.energy_below:
-            self.mode, self._spot = None, None
         if self.mode is None:
             if v["drink"] < self.drink_below and self.map.known("water"):
                 self.mode = "drink"
             elif v["food"] < self.food_below and self.map.known("cow"):
                 self.mode, self._food0 = "eat", v["food"]
             elif v["energy"] < self.energy_below:
-                self.mode = "sleep"
+                self.mode, self._rest = "rest", Rest(until_day=True)
+            elif obs["daylight"] < self.night_below and obs["inventory"].get("wood_pickaxe", 0) > 0 and \
+                    self._night_shelter(obs):
+                # night, and a shelter it can dig is known: rest in it until day
+                self.mode, self._rest = "rest", Rest(until_day=True)
         if self.mode is None:
             return Status.FAILURE
         self._note(self.mode)
@@ -80,9 +84,19 @@ class GameSurvive(GameLeaf):
                 self.mode = None
                 return Status.FAILURE
             return self._toward(here or self.map.cells_of(["cow"]), strike=True)
-        # sleep, in the best shelter nearby
-        self.act(shelter_action(self))
+        action = self._rest.step(self)
+        if action is None:
+            self.mode, self._rest = None, None
+            return Status.FAILURE
+        self.act(action)
         return Status.RUNNING
+
+    def _night_shelter(self, obs) -> bool:
+        step = int(obs["step"])
+        if getattr(self, "_shelter_checked", -100) > step - 10:
+            return False  # looked less than 10 steps ago and found none
+        self._shelter_checked = step
+        return find_shelter(self.map, tuple(obs["position"]), can_dig=True) is not None
 
     def _toward(self, goals, *, strike: bool):
         front = facing_cell(self.obs)

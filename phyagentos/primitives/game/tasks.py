@@ -15,9 +15,10 @@ from py_trees.common import Status
 from ..base import PrimitiveFailure
 from .base import GameLeaf, facing_cell, neighbourhood
 from .seen_map import MOVES, WALKABLE
+from .shelter import Rest
 
 __all__ = ["GameObserve", "GameExplore", "GameGoto", "GameCollect", "GameHunt", "GamePlace", "GameMake", "GameSleep",
-           "PLACE_ONTO", "shelter_action"]
+           "PLACE_ONTO"]
 
 logger = logging.getLogger(__name__)
 
@@ -308,51 +309,21 @@ class GameMake(GameLeaf):
 
 
 class GameSleep(GameLeaf):
-    """Sleep until the player wakes (Crafter wakes it when energy is full or it is hurt):
-    first go to a sheltered remembered cell nearby (:meth:`GameLeaf.shelter_spot`) and,
-    with stone in the inventory, block the cell in front; SUCCESS on waking. Crafter
-    only lets a player sleep whose energy is below the maximum: until then the player
-    waits in its shelter (each ``sleep`` action is tried again)."""
+    """Rest (:class:`~.shelter.Rest`): into a sealed shelter when the player can dig,
+    sleep until woken, stay until daylight, dig out; SUCCESS when the rest is over after
+    the player slept. Crafter lets a player sleep only below full energy: until then
+    each ``sleep`` is tried again."""
 
-    TOOLS = ("observe", "sleep", "noop", "place_stone") + _MOVE_ACTIONS
+    TOOLS = ("observe", "sleep", "noop", "place_stone", "do") + _MOVE_ACTIONS
 
     def __init__(self, name: str, *, shelter: bool = True, max_steps: int = 1500):
         super().__init__(name, max_steps=max_steps)
         self.shelter = bool(shelter)
-        self._slept = False
-        self._spot = None
+        self._rest = Rest(until_day=True)
 
     def step(self):
-        obs = self.obs
-        if obs["sleeping"]:
-            self._slept = True
-            self.act("noop")
-            return Status.RUNNING
-        if self._slept:
-            return Status.SUCCESS
-        action = shelter_action(self, self.shelter)
+        action = self._rest.step(self)
+        if action is None:
+            return Status.SUCCESS if self._rest.slept else Status.FAILURE
         self.act(action)
         return Status.RUNNING
-
-
-def shelter_action(leaf: GameLeaf, shelter: bool = True) -> str:
-    """The next action of going to sleep: walk to the leaf's shelter spot, block the cell
-    in front with stone when there is some, then ``sleep``."""
-    obs = leaf.obs
-    here = tuple(obs["position"])
-    if shelter:
-        spot = getattr(leaf, "_spot", None)
-        if spot is None:
-            spot = leaf.shelter_spot() or here
-            leaf._spot = spot
-        if spot != here:
-            move, plan = leaf.goto_action({spot}, stand_on_goal=True)
-            if move is not None:
-                return move
-            leaf._spot = here
-    front = facing_cell(obs)
-    px, py = here
-    occupied = any((px + o["dx"], py + o["dy"]) == front for o in obs["objects"])
-    if shelter and obs["inventory"].get("stone", 0) > 0 and leaf.map.material(front) in WALKABLE and not occupied:
-        return "place_stone"
-    return "sleep"

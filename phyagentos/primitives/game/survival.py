@@ -56,6 +56,8 @@ class GameSurvive(GameLeaf):
             return Status.RUNNING
         if obs["sleeping"]:
             self._note("sleeping")
+            if self._rest is not None:
+                self._rest.slept = True
             self.act("noop")
             return Status.RUNNING
         if self.mode == "drink" and v["drink"] >= 9:

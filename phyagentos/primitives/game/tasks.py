@@ -142,12 +142,14 @@ class GameHunt(GameLeaf):
     remembered plant until it ripens): go next to it and strike until ``until`` (an
     achievement) is newly unlocked, or, for a cow, the food rises."""
 
-    TOOLS = ("observe", "do", "noop") + _MOVE_ACTIONS
+    TOOLS = ("observe", "do", "noop", "sleep", "place_stone") + _MOVE_ACTIONS
 
-    def __init__(self, name: str, *, creature: str, until: str | None = None, max_steps: int = 1000):
+    def __init__(self, name: str, *, creature: str, until: str | None = None, min_health: int = 5,
+                 max_steps: int = 1000):
         super().__init__(name, max_steps=max_steps)
-        self.creature, self.until = creature, until
+        self.creature, self.until, self.min_health = creature, until, int(min_health)
         self._start: dict | None = None
+        self._rest: Rest | None = None
 
     def on_enter(self):
         super().on_enter()
@@ -162,6 +164,15 @@ class GameHunt(GameLeaf):
     def step(self):
         if self._done():
             return Status.SUCCESS
+        hostile = self.creature in ("zombie", "skeleton")
+        if hostile and (self._rest is not None or self.obs["vitals"]["health"] < self.min_health):
+            # too weak to fight: rest (in shelter) until healed, then hunt on
+            self._rest = self._rest or Rest(until_day=False)
+            action = self._rest.step(self) if self.obs["vitals"]["health"] < 9 or not self._rest.slept else None
+            if action is not None:
+                self.act(action)
+                return Status.RUNNING
+            self._rest = None
         px, py = self.obs["position"]
         here = {(px + o["dx"], py + o["dy"]) for o in self.obs["objects"] if o["name"] == self.creature}
         front = facing_cell(self.obs)

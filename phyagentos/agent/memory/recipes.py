@@ -8,9 +8,9 @@ From those records, and nothing else:
 1. a failed attempt (inventory unchanged) is evidence: a *candidate* lesson
    ``make <item>: failed next to [...] with {...}`` (no recipe yet, nothing to apply);
 2. a successful attempt yields a *hypothesis*, still a candidate: the stations the
-   recipe needs are the materials around the success that were absent from some failed
-   attempt's neighbourhood (or, without failures, the non-walkable materials around the
-   success), and the items it uses are the inventory's decrease;
+   recipe needs are the fewest materials around the success that explain every failure
+   of the session that had the items (:func:`hypothesis`), and the items it uses are
+   the inventory's decrease;
 3. the ContextBuilder hands the hypothesis to the next ``game_make`` session of that
    item (parameter ``near``; the session's context records it); when that session's
    planned attempt succeeds, the candidate becomes a *verified* lesson, ``verified_by``
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+from itertools import combinations
 from typing import Any, Iterable, Mapping, Sequence
 
 from phyagentos.protocol import Lesson, LessonsDoc, SessionRecord, Verdict, Workspace
@@ -60,20 +61,27 @@ def _keep(items: Iterable[str], *new: str) -> list[str]:
 def hypothesis(attempts: Sequence[Mapping[str, Any]]) -> tuple[list[str], dict[str, int]] | None:
     """``(stations, uses)`` from one item's ``game_make`` records, or ``None`` without a success.
 
-    Stations: materials around every success that were missing around at least one failure
-    (the difference the success needed); without failures, the non-ground materials around
-    every success. Uses: the inventory's decrease in the first success.
+    Uses: the inventory's decrease in the first success. Stations: the smallest sets of
+    non-ground materials around every success that each informative failure (one whose
+    inventory held what the success used) lacked at least one of (a minimum hitting set;
+    ties are joined, erring toward asking for too much); without informative failures,
+    every non-ground material around every success.
     """
     wins = [a for a in attempts if a.get("ok")]
     if not wins:
         return None
-    common = set.intersection(*(set(a.get("nearby") or ()) for a in wins))
-    losses = [set(a.get("nearby") or ()) for a in attempts if not a.get("ok")]
-    missing = {m for m in common if any(m not in l for l in losses)} - GROUND
-    stations = sorted(missing) if missing else sorted(common - GROUND)
     before, after = wins[0].get("inventory_before") or {}, wins[0].get("inventory_after") or {}
     uses = {k: int(before[k]) - int(after.get(k, 0)) for k in before if int(after.get(k, 0)) < int(before[k])}
-    return stations, uses
+    common = sorted(set.intersection(*(set(a.get("nearby") or ()) for a in wins)) - GROUND)
+    informative = [set(a.get("nearby") or ()) for a in attempts if not a.get("ok")
+                   and all(int((a.get("inventory_before") or {}).get(k, 0)) >= n for k, n in uses.items())]
+    if not informative:
+        return common, uses
+    for size in range(1, len(common) + 1):
+        hits = [set(c) for c in combinations(common, size) if all(not set(c) <= f for f in informative)]
+        if hits:
+            return sorted(set().union(*hits)), uses
+    return common, uses
 
 
 class RecipeBook:

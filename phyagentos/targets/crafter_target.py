@@ -177,10 +177,9 @@ class CrafterTarget(BaseRolloutTarget):
         self._spawn = np.zeros(2, dtype=int)
         self.notes: dict[str, Any] = {}  # the player's own notebook (remembered map), kept with the state
         self._done = False
-        self._fresh = True  # generated but not yet stepped: reset(seed) of the same seed is a no-op
+        self._fresh = True  # not yet stepped: reset(seed) of the same seed is a no-op
         self._env = self._new_env(self._seed)
-        self._env.reset()
-        self._spawn = np.array(self._env._player.pos, dtype=int)
+        self._generated = False  # the world is generated on first use (load_state never needs it)
 
     # -- game ---------------------------------------------------------------------
     def _new_env(self, seed: int):
@@ -189,22 +188,27 @@ class CrafterTarget(BaseRolloutTarget):
         return crafter.Env(area=self.scene.area, view=(9, 9), size=self.scene.size, reward=False,
                            length=self.scene.length, seed=int(seed))
 
+    def _ensure(self) -> None:
+        if not self._generated:
+            self._env.reset()  # Crafter's world generation for this env's seed
+            self._spawn = np.array(self._env._player.pos, dtype=int)
+            self._generated = True
+
     def reset(self, *, seed: int | None = None) -> dict:
         """Generate the world of ``seed`` (Crafter's own generator) and return :meth:`observe`."""
-        if seed is not None and int(seed) == self._seed and self._fresh:
-            return self.observe()  # this very world was just generated and nothing moved yet
-        if seed is not None:
-            self._seed = int(seed)
-        self._env = self._new_env(self._seed)
-        self._env.reset()
+        if seed is None or int(seed) != self._seed or not self._fresh:
+            if seed is not None:
+                self._seed = int(seed)
+            self._env = self._new_env(self._seed)
+            self._generated = False
         self._fresh = True
-        self._spawn = np.array(self._env._player.pos, dtype=int)
         self._done = False
         self.notes = {}
         return self.observe()
 
     @property
     def player(self):
+        self._ensure()
         return self._env._player
 
     @property
@@ -229,6 +233,7 @@ class CrafterTarget(BaseRolloutTarget):
             raise TargetError(f"unknown Crafter action {action!r}; valid actions: {format_choices(CRAFTER_ACTIONS)}") from None
         if self._done:
             raise TargetError(f"target {self.name!r}: the episode is over (step {self.sim_time:.0f})")
+        self._ensure()
         _, _, done, _ = self._env.step(index)
         self._fresh = False
         self._done = bool(done)
@@ -245,6 +250,7 @@ class CrafterTarget(BaseRolloutTarget):
         """The player's observation (module doc): ``view`` (7 x 9 names), ``objects``,
         ``inventory``, ``vitals``, ``daylight``, ``sleeping``, ``facing``, ``position``
         (odometry, cells), ``step``, ``achievements``, ``done``."""
+        self._ensure()
         env = self._env
         world, player = env._world, env._player
         share = texture_share(world.daylight)
@@ -314,6 +320,7 @@ class CrafterTarget(BaseRolloutTarget):
     def ground_truth(self) -> dict:
         """Scoring only (never an observation): the environment's own achievement counters,
         health, absolute position, seed and whether the episode ended (and why)."""
+        self._ensure()
         env, player = self._env, self._env._player
         return {
             "seed": self._seed,
@@ -328,6 +335,7 @@ class CrafterTarget(BaseRolloutTarget):
     def render(self, camera: str = "", width: int = 320, height: int = 240, *, shadows: bool = False) -> np.ndarray:
         """(height, width, 3) uint8: Crafter's own picture (local view + inventory), scaled to fit."""
         side = int(min(width, height))
+        self._ensure()
         env = self._env
         # Crafter draws its night noise from the world's RNG: restore it so that looking
         # at the game for the evidence never changes how the game goes on.
@@ -348,6 +356,7 @@ class CrafterTarget(BaseRolloutTarget):
         """Write the game state (world, creatures, player, step counters, RNG) and the
         player's notebook to ``path`` (.npz, atomically) and the scoring ground truth to
         ``ground_truth.yaml`` beside it."""
+        self._ensure()
         env = self._env
         blob = pickle.dumps({"world": env._world, "player": env._player, "step": env._step, "episode": env._episode,
                              "unlocked": env._unlocked, "last_health": env._last_health}, protocol=5)
@@ -394,6 +403,7 @@ class CrafterTarget(BaseRolloutTarget):
         self._spawn = np.array(z["spawn"], dtype=int)
         self._done = bool(z["done"])
         self._fresh = False
+        self._generated = True
         self.notes = notes
 
     def tools(self) -> tuple[str, ...]:

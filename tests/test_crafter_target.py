@@ -67,6 +67,7 @@ def test_the_view_does_not_depend_on_the_world_outside_the_window():
 
 def test_the_night_hides_the_edges_of_the_view():
     target = CrafterTarget("crafter", seed=3)
+    target.observe()  # the world is generated on first use
     target._env._world.daylight = 0.0
     view = target.observe()["view"]
     assert view[0][0] == "dark" and view[VIEW_ROWS // 2][VIEW_COLS // 2] != "dark"

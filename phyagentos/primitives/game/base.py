@@ -193,6 +193,24 @@ class GameLeaf(Primitive):
             return None
         return best
 
+    def flee_action(self) -> str:
+        """The free move that keeps the player farthest (Manhattan) from the zombies and
+        skeletons in view; ``noop`` when none is in view or no move is free."""
+        px, py = self.obs["position"]
+        foes = [(px + o["dx"], py + o["dy"]) for o in self.obs["objects"] if o["name"] in ("zombie", "skeleton")]
+        if not foes:
+            return "noop"
+        blocked = self.blocked()
+        best, best_d = "noop", min(abs(fx - px) + abs(fy - py) for fx, fy in foes)
+        for move, (dx, dy) in MOVES.items():
+            c = (px + dx, py + dy)
+            if self.map.material(c) not in WALKABLE or c in blocked:
+                continue
+            d = min(abs(fx - c[0]) + abs(fy - c[1]) for fx, fy in foes)
+            if d > best_d:
+                best, best_d = move, d
+        return best
+
     def goto_action(self, goals: set[tuple[int, int]], *, stand_on_goal: bool = False) -> tuple[str | None, Any]:
         """Next move toward the nearest of ``goals`` (adjacent to it, or onto it); returns
         ``(move, plan)``; ``(None, plan)`` when already there; ``(None, None)`` when no

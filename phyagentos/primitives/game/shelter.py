@@ -40,10 +40,11 @@ def _add(a, b, k=1):
 
 
 def find_shelter(m: SeenMap, here: tuple[int, int], *, can_dig: bool, radius: int = 10,
-                 avoid: set[tuple[int, int]] = frozenset()) -> ShelterPlan | None:
+                 avoid: set[tuple[int, int]] = frozenset(), stones: int = 99) -> ShelterPlan | None:
     """The nearest (in BFS steps to ``o``) two-cell shelter on remembered cells: ``e``, ``i``
     walkable (or stone, when ``can_dig``), their side cells solid (not walkable, not
-    unknown), ``o`` walkable and reachable."""
+    unknown), ``o`` walkable and reachable, and sealable with ``stones`` (the cells to
+    block, ``o`` and the one beyond ``i`` when free, less the stone dug out of ``e``, ``i``)."""
     starts: dict[tuple[int, int], list[ShelterPlan]] = {}
     for dx in range(-radius, radius + 1):
         for dy in range(-radius, radius + 1):
@@ -65,7 +66,8 @@ def find_shelter(m: SeenMap, here: tuple[int, int], *, can_dig: bool, radius: in
                     if not ok:
                         break
                 beyond = m.material(_add(o, d, 3))
-                if ok and beyond != "lava" and beyond not in ("unknown",) and o not in avoid:
+                need = 1 + (beyond in WALKABLE) - sum(m.material(c) == "stone" for c in (e, i))
+                if ok and beyond != "lava" and beyond not in ("unknown",) and o not in avoid and need <= stones:
                     starts.setdefault(o, []).append(ShelterPlan(o=o, e=e, i=i, d=d))
     if not starts:
         return None
@@ -177,10 +179,13 @@ class Rest:
         if self.leaving:
             return leave_step(leaf, self.plan) if self.plan is not None else None
         can_dig = obs["inventory"].get("wood_pickaxe", 0) > 0
+        night = self.until_day and obs["daylight"] < self.day_above
         if self.plan is None and can_dig and not self.state.get("no_shelter"):
-            self.plan = find_shelter(leaf.map, here, can_dig=True)
+            self.plan = find_shelter(leaf.map, here, can_dig=True, stones=obs["inventory"].get("stone", 0))
             if self.plan is None:
                 self.state["no_shelter"] = True
+        if self.plan is None and night and not self.slept and obs["vitals"]["energy"] > 0:
+            return None  # no sealed shelter: sleeping in the open at night is what zombies wait for
         if self.plan is not None and self.state.get("phase") != "sealed":
             action = shelter_step(leaf, self.plan, self.state)
             if action is not None:
@@ -193,7 +198,6 @@ class Rest:
                 if move is not None:
                     return move
                 self.spot = here
-        night = self.until_day and obs["daylight"] < self.day_above
         if not self.slept or (night and obs["vitals"]["energy"] < 9):
             return "sleep"
         if night:

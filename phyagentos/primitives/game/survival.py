@@ -34,7 +34,7 @@ class GameSurvive(GameLeaf):
     TOOLS = ("observe", "do", "sleep", "noop", "place_stone") + tuple(MOVES)
 
     def __init__(self, name: str, *, drink_below: int = 4, food_below: int = 4, energy_below: int = 3,
-                 night_below: float = 0.3, fight: bool = True, max_steps: int = 100000):
+                 night_below: float = 0.5, fight: bool = True, max_steps: int = 100000):
         super().__init__(name, max_steps=max_steps)
         self.drink_below, self.food_below, self.energy_below = int(drink_below), int(food_below), int(energy_below)
         self.night_below = float(night_below)
@@ -98,7 +98,8 @@ class GameSurvive(GameLeaf):
         if getattr(self, "_shelter_checked", -100) > step - 10:
             return False  # looked less than 10 steps ago and found none
         self._shelter_checked = step
-        return find_shelter(self.map, tuple(obs["position"]), can_dig=True) is not None
+        return find_shelter(self.map, tuple(obs["position"]), can_dig=True,
+                            stones=obs["inventory"].get("stone", 0)) is not None
 
     def _toward(self, goals, *, strike: bool):
         front = facing_cell(self.obs)

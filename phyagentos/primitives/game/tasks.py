@@ -169,6 +169,8 @@ class GameHunt(GameLeaf):
             # too weak to fight: rest (in shelter) until healed, then hunt on
             self._rest = self._rest or Rest(until_day=False)
             action = self._rest.step(self) if self.obs["vitals"]["health"] < 9 or not self._rest.slept else None
+            if action is None and self.obs["vitals"]["health"] < self.min_health:
+                action = self.flee_action()  # cannot rest safely now: keep away until healed
             if action is not None:
                 self.act(action)
                 return Status.RUNNING
@@ -335,6 +337,9 @@ class GameSleep(GameLeaf):
     def step(self):
         action = self._rest.step(self)
         if action is None:
-            return Status.SUCCESS if self._rest.slept else Status.FAILURE
+            if self._rest.slept:
+                return Status.SUCCESS
+            self._rest = Rest(until_day=True)  # no sealed shelter at night: wait for the day
+            action = "noop"
         self.act(action)
         return Status.RUNNING

@@ -14,7 +14,9 @@ From those records, and nothing else:
 3. the ContextBuilder hands the hypothesis to the next ``game_make`` session of that
    item (parameter ``near``; the session's context records it); when that session's
    planned attempt succeeds, the candidate becomes a *verified* lesson, ``verified_by``
-   that session. From then on the generic lesson accounting
+   that session. A success without one of the stations a recipe names refutes it (it
+   asks for too much) and the smaller set becomes the hypothesis; a session that cannot
+   follow a recipe searches instead (the skill's own fallback). From then on the generic lesson accounting
    (:meth:`~phyagentos.agent.memory.lessons.LessonBook.resolve`) counts confirmations and
    refutations; a planned attempt that fails refutes the hypothesis.
 
@@ -159,6 +161,20 @@ class RecipeBook:
                             touched.append(c.id)
                     continue
                 stations, uses = found
+                wins = [set(a.get("nearby") or ()) for a in attempts if a.get("ok")]
+                planned_failed = any(a.get("recipe_known") and not a.get("ok") for a in attempts)
+                for c in [*doc.candidates, *doc.lessons]:
+                    near = set(c.revision.get("near") or ())
+                    if c.scope != scope or not near:
+                        continue
+                    if any(not near <= w for w in wins) or (planned_failed and c.id in applied):
+                        # a success without some station it names: the recipe asks for too much
+                        c.refutations += 1
+                        c.refuted_by = _keep(c.refuted_by, sid)
+                        c.updated_at = now
+                        touched.append(c.id)
+                    elif c in doc.candidates and near & set(stations) and not near >= set(stations):
+                        stations = sorted(near & set(stations))  # both explain the successes: the smaller
                 rid = recipe_id(item, stations)
                 text = (f"a {item} needs {' and '.join(stations) or 'nothing'} next to the player and uses "
                         f"{', '.join(f'{n} {k}' for k, n in sorted(uses.items())) or 'nothing'}")

@@ -245,8 +245,10 @@ class GamePlace(GameLeaf):
 class GameMake(GameLeaf):
     """Make ``item`` (``make_<item>``). With ``near`` (the stations the recipe needs, from
     memory) the player first goes where all of them are within its 3 x 3 neighbourhood.
-    Without it the recipe is unknown: the player tries where it stands, then next to each
-    remembered material it has not yet had around it at a failed try, nearest first.
+    Without it (or when memory's recipe names stations not remembered together, or a
+    planned try fails) the recipe is searched for: the player tries where it stands, then
+    next to each remembered material it has not yet had around it at a failed try,
+    nearest first.
     Every try is a ``game_make`` trace record (a failure leaves the inventory unchanged);
     SUCCESS when the item's count rose, ``game.make_failed`` after ``max_tries``."""
 
@@ -277,6 +279,10 @@ class GameMake(GameLeaf):
                                                        f"(inventory {before}, last nearby {nearby})")
         return Status.RUNNING
 
+    def _abandon(self, why: str) -> None:
+        self.ctx.trace.record("game_recipe_abandoned", step=self.obs["step"], item=self.item, near=self.near, why=why)
+        self.near = []
+
     def _stations(self) -> set[tuple[int, int]]:
         """Walkable cells whose 3 x 3 neighbourhood holds every material of ``near``."""
         sets = []
@@ -292,14 +298,17 @@ class GameMake(GameLeaf):
         obs = self.obs
         if self.near:
             if all(n in neighbourhood(obs) for n in self.near):
-                return self._attempt()
+                status = self._attempt()
+                if status == Status.RUNNING:  # the recipe from memory did not work here: search instead
+                    self._abandon("a planned attempt failed")
+                return status
             stations = self._stations()
-            if not stations:
-                raise PrimitiveFailure("game.station_missing", f"no remembered place has {self.near} together")
-            move, plan = self.goto_action(stations, stand_on_goal=True)
+            move, plan = self.goto_action(stations, stand_on_goal=True) if stations else (None, None)
+            if plan is None:
+                # memory's recipe names stations not remembered together (or unreachable): search
+                self._abandon(f"no reachable remembered place has {self.near} together")
+                return Status.RUNNING
             if move is None:
-                if plan is None:
-                    raise PrimitiveFailure("game.station_unreachable", f"no path to a place next to {self.near}")
                 return self._attempt()
             self.act(move)
             return Status.RUNNING

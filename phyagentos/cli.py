@@ -189,7 +189,9 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
     if args.json:
         keys = ("bench_id", "suite", "protocol", "memory", "split", "seeds", "workers", "executor", "wall_time_s",
                 "episodes_per_minute", "overall", "per_task", "error_taxonomy", "ground_truth", "harness_errors")
-        print(json.dumps({**{k: rep[k] for k in keys}, "report": str(result.run_dir / "report.md")}, ensure_ascii=False))
+        extra = {"crafter": {k: v for k, v in rep["crafter"].items() if k != "per_episode"}} if "crafter" in rep else {}
+        print(json.dumps({**{k: rep[k] for k in keys}, **extra, "report": str(result.run_dir / "report.md")},
+                         ensure_ascii=False))
     else:
         table = Table(title=f"bench {rep['suite']} {rep['bench_id']}  ({rep['protocol']}, {rep['split']} seeds, "
                             f"{rep['episodes_per_minute']:.1f} episodes/min)")
@@ -205,6 +207,11 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
         if rep["ground_truth"]["sessions"]:
             g = rep["ground_truth"]
             out.print(f"environment's own success signal: agrees with the verifier on {g['agreements']}/{g['sessions']} sessions")
+        if "crafter" in rep:
+            c = rep["crafter"]
+            out.print(f"Crafter score {c['score_percent']:.1f} % over {c['episodes']} worlds, "
+                      f"{c['achievements_per_episode']:.1f} achievements per episode, mean length {c['length_mean']} "
+                      f"steps; deaths: {c['death_causes']} ({result.run_dir / 'crafter.md'})")
         out.print(f"report: {result.run_dir / 'report.md'}")
     if result.harness_errors:
         err.print(f"[red]{result.harness_errors} episode(s) hit a harness error; see the report[/red]")

@@ -78,6 +78,7 @@ def test_templates_define_default_target_runtime_and_safety(ws):
         ("franka_tabletop", "simulation", "mujoco_franka", True),
         ("franka_kitchen", "simulation", "gymnasium_kitchen", True),
         ("so101_tabletop", "simulation", "mujoco_so101", True),
+        ("crafter", "game", "crafter", True),
     ]
     assert targets[0].action == {"space": "joint_position", "dof": 7, "gripper": "opening_m", "control_rate_hz": 500}
     runtime = ws.read("SKILLRUNTIME").data.runtimes[0]

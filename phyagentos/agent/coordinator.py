@@ -53,6 +53,7 @@ from .goal_graph import GoalGraph
 from .memory import ContextBuilder, KnowledgeBase, LessonBook, PromotionPolicy, promote
 from .memory.conditions import Conditions
 from .memory.observed import ObservedObject, observe_object
+from .memory.game import learn_game_session
 from .memory.promotion import initial_state_fingerprint
 from .recovery import ACQUIRING_SKILLS, SITUATIONAL
 from .session_compiler import SessionCompiler, new_run_id
@@ -376,6 +377,7 @@ class AgentCoordinator:
         KnowledgeBase(self.workspace).record(
             rec, verdict, conditions, strategy=strategy,
             initial_state=initial_state_fingerprint(evidence.initial, conditions.object))
+        learn_game_session(self.workspace, rec, verdict, evidence.trace, evidence.refs("trace"))  # no-op off games
         if verdict.verdict == "success":
             promote(self.workspace, self.promotion)
 

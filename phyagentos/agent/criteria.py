@@ -12,6 +12,8 @@ name to arguments, parsed without ``eval``::
       still: {max_joint_motion_rad: 0.01}        # the arm did not move
       unchanged: {object: red, tol_m: 0.01}      # red did not move
       articulated: {object: microwave, max: -0.6}  # its joint (rad or m) ends in [min, max]
+      has: {item: wood, min: 1}                  # game: the player's inventory (or a vital) >= min at the end
+      achieved: collect_wood                     # game: the achievement is in the player's terminal record
 
 Snapshots are the runtime's *perceived* snapshots (CONTRACT_9 section 3): ``entities``
 (name, kind, position (3,) m world, quat_wxyz, size (3,) half extents m, attributes with
@@ -85,6 +87,8 @@ _SIGNATURES: dict[str, tuple[tuple[str, ...], dict[str, Any], str | None]] = {
     "still": ((), {"max_joint_motion_rad": 0.01}, None),
     "unchanged": (("object",), {"tol_m": 0.01}, "object"),
     "articulated": (("object",), {"min": -math.inf, "max": math.inf}, "object"),
+    "has": (("item",), {"min": 1.0, "entity": "player"}, "item"),
+    "achieved": (("achievement",), {"entity": "player"}, "achievement"),
 }
 PREDICATES = tuple(sorted(_SIGNATURES))
 
@@ -350,6 +354,38 @@ def _eval_articulated(c, initial, terminal, refs):
                             f"{obj} joint at {float(q):.3f} ({'within' if ok else 'outside'} [{lo}, {hi}])", refs)
 
 
+def _player(c, snap, name, refs):
+    ent = _entities(snap).get(c.args["entity"])
+    if ent is None:
+        return None, CriterionOutcome(c, "unknown", f"{c.args['entity']!r} not in the {name} snapshot", refs)
+    return ent.get("attributes") or {}, None
+
+
+def _eval_has(c, initial, terminal, refs):
+    attrs, miss = _player(c, terminal, "terminal", refs)
+    if miss:
+        return miss
+    item = c.args["item"]
+    counts = {**(attrs.get("inventory") or {}), **(attrs.get("vitals") or {})}
+    if item not in counts:
+        return CriterionOutcome(c, "unknown", f"the player's inventory reports no {item!r}", refs)
+    n, need = counts[item], float(c.args["min"])
+    ok = n >= need
+    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied", f"{item}: {n} (need >= {need:g})", refs)
+
+
+def _eval_achieved(c, initial, terminal, refs):
+    attrs, miss = _player(c, terminal, "terminal", refs)
+    if miss:
+        return miss
+    if "achievements" not in attrs:
+        return CriterionOutcome(c, "unknown", "the terminal snapshot reports no achievements", refs)
+    a = c.args["achievement"]
+    ok = a in attrs["achievements"]
+    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied",
+                            f"{a} {'unlocked' if ok else 'not unlocked'} (step {attrs.get('step')})", refs)
+
+
 _EVALUATORS: dict[str, Callable] = {
     "holding": _eval_holding,
     "released": _eval_released,
@@ -359,4 +395,6 @@ _EVALUATORS: dict[str, Callable] = {
     "still": _eval_still,
     "unchanged": _eval_unchanged,
     "articulated": _eval_articulated,
+    "has": _eval_has,
+    "achieved": _eval_achieved,
 }

@@ -37,6 +37,7 @@ from phyagentos.protocol import Workspace, dump_yaml
 from phyagentos.protocol.atomic import atomic_write_text
 
 from .compiler import compile_episodes, episode_template_dir, plan_episodes
+from .crafter_metrics import crafter_report, is_crafter_run
 from .episode import EpisodeOutcome
 from .executor import execute_episodes
 from .gate import run_gate
@@ -172,6 +173,8 @@ def run_bench(
         "workspace": str(ws.root), "run_dir": str(run_dir),
     }
     report = write_report(run_dir, meta)
+    if is_crafter_run(run_dir):  # the game tier: Crafter's own metrics (crafter.json, crafter.md)
+        report = {**report, "crafter": crafter_report(run_dir, meta={"memory": memory, "split": split})}
     return BenchResult(bench_id=bench_id, run_dir=run_dir, report=report)
 
 

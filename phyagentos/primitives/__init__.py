@@ -24,6 +24,8 @@ guarded_move              straight tcp motion that stops on contact (contact.py)
 compute_place_at          place poses at an offset or slot inside a region (placement.py)
 compute_push              start poses to push an object with the closed hand (contact.py)
 push                      compliant push that must touch, with an effort limit (contact.py)
+game_*                    game primitives (explore, goto, collect, hunt, place, make,
+                          sleep, survive) on a ``kind: game`` target (game/)
 ========================  ==========================================================
 """
 
@@ -32,6 +34,7 @@ from .base import Primitive, PrimitiveFailure
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
 from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
+from .game import GAME_PRIMITIVES
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
@@ -71,4 +74,5 @@ PRIMITIVES = {
     "compute_place_at": ComputePlaceAt,
     "compute_push": ComputePush,
     "push": Push,
+    **GAME_PRIMITIVES,
 }

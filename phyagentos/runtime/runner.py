@@ -231,8 +231,10 @@ class SessionRunner:
                                    plan=rec.adapter_plan, perceiver=perceiver, evidence_dir=evidence_dir,
                                    evidence_rel=rel)
                 # Every command of either flow passes the same guard; its interventions land in ctx.events.
-                ctx.guard = SafetyGuard.for_target(target, self.workspace.read_safety(), events=ctx.events,
-                                                   flow=rec.skill_runtime)
+                # (a game target has no arm: nothing for the guard to bound)
+                if target.kind != "game":
+                    ctx.guard = SafetyGuard.for_target(target, self.workspace.read_safety(), events=ctx.events,
+                                                       flow=rec.skill_runtime)
             runtime = self.runtime if rec.skill_runtime == self.runtime.name else \
                 SKILL_RUNTIMES[rec.skill_runtime](self.runtime.skills)
             ctx.on_observation = lambda snap: write_environment(

@@ -24,6 +24,7 @@ from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.protocol.sensors import read_sensors
 from phyagentos.yamlsource import load_yaml
 from phyagentos.targets import MuJoCoTarget, SceneSpec
+from phyagentos.targets.crafter_target import CrafterTarget
 from phyagentos.targets.kitchen import FrankaKitchenTarget
 from phyagentos.targets.so101 import SO101Target
 from phyagentos.targets.perturbations import ActivePerturbations, PerturbationSpec, parse_perturbations, split_scene
@@ -34,7 +35,7 @@ logger = logging.getLogger(__name__)
 
 #: Target driver name (TARGETS.md ``driver``) -> target class.
 DRIVERS: dict[str, type] = {"mujoco_franka": MuJoCoTarget, "gymnasium_kitchen": FrankaKitchenTarget,
-                             "mujoco_so101": SO101Target}
+                             "mujoco_so101": SO101Target, "crafter": CrafterTarget}
 
 
 def scene_for(session: SessionRecord, spec: TargetSpec) -> SceneSpec:

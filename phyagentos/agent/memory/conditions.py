@@ -214,6 +214,12 @@ def session_conditions(*, goal: str, skill: str, target: str, embodiment: str, p
     """
     obj = object_name if object_name is not None else parameters.get("object")
     obj = obj if isinstance(obj, str) else None
+    if obj is None and skill.startswith("game_"):
+        # Game skills act on an item or a creature, not on a scene object: memory is keyed on it.
+        subject = parameters.get("item", parameters.get("creature"))
+        if isinstance(subject, str):
+            return Conditions(goal=goal, skill=skill, target=target, embodiment=embodiment, object=subject,
+                              object_class=f"item:{subject}", object_properties={}, risk_factors=())
     declared = descriptor(scene, obj)
     props = _properties(declared, observed) if obj else {}
     return Conditions(goal=goal, skill=skill, target=target, embodiment=embodiment, object=obj,

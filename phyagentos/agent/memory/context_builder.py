@@ -30,6 +30,7 @@ from phyagentos.protocol.lifecycle import utc_now
 
 from ..skill_catalog import SkillInfo, skill_catalog
 from .conditions import Conditions, session_conditions
+from .game import game_context_items
 from .knowledge import KnowledgeBase, pattern_conditions
 from .lessons import LessonBook
 from .observed import ObservedObject
@@ -111,6 +112,8 @@ class ContextBuilder:
                        f"refuted {lesson.refutations}x)")
             items.append(ContextItem(kind="lesson", id=lesson.id, summary=summary,
                                      provenance=list(lesson.verified_by), applied=take(lesson.revision)))
+        for item, values in game_context_items(self.workspace, skill=skill, parameters=parameters):
+            items.append(item.model_copy(update={"applied": take(values)}))  # recipes, survival (memory/game.py)
         for n, entry in enumerate(self.knowledge.retrieve(cond)[:MAX_ITEMS]):
             established = (entry.successes >= KNOWLEDGE_MIN_SUCCESSES
                            and entry.successes >= KNOWLEDGE_MIN_RATE * entry.attempts)

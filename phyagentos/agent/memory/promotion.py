@@ -44,7 +44,11 @@ class PromotionPolicy:
 
 
 def initial_state_fingerprint(initial: Mapping[str, Any], obj: str | None) -> str | None:
-    """``"x,y"`` (cm) of ``obj`` in an initial snapshot, ``None`` if it is not there."""
+    """``"x,y"`` (cm) of ``obj`` in an initial snapshot, ``None`` if it is not there; for a
+    game, whose snapshot's ``player`` names the world it plays in, ``"world:<seed>"``."""
+    for e in initial.get("entities", []):
+        if e.get("name") == "player" and (e.get("attributes") or {}).get("world") is not None:
+            return f"world:{e['attributes']['world']}"
     for e in initial.get("entities", []) if obj else ():
         if e.get("name") == obj:
             x, y = e["position"][:2]

@@ -1,0 +1,119 @@
+"""The survival reflex: a leaf that takes over while something urgent needs doing.
+
+Used as the first child of a selector in front of a task leaf (``selector(memory:
+false)[game_survive, task]``): it returns FAILURE when nothing is urgent (the task
+runs), RUNNING while it handles an urgency (the task is preempted and re-plans from
+the map when it resumes), and never SUCCESS. Urgencies, most pressing first:
+
+1. ``fight``: a zombie (or skeleton) next to the player: face it and strike;
+2. ``sleeping``: the game keeps the player asleep; wait;
+3. ``drink``: drink below ``drink_below``: go to remembered water and drink until full;
+4. ``eat``: food below ``food_below``: hunt the nearest remembered cow until the food rises;
+5. ``rest``: energy below ``energy_below``, or night (daylight below ``night_below``) and a
+   pickaxe to dig with: rest (:class:`~.shelter.Rest`: a sealed two-cell shelter, sleep,
+   stay until daylight, dig out).
+
+The thresholds are skill parameters: a death diagnosed from the trace (thirst,
+starvation, exhaustion) becomes a lesson that raises the matching one.
+"""
+
+from __future__ import annotations
+
+from py_trees.common import Status
+
+from .base import GameLeaf, facing_cell
+from .seen_map import MOVES
+from .shelter import Rest, find_shelter
+
+__all__ = ["GameSurvive"]
+
+
+class GameSurvive(GameLeaf):
+    """Survival reflex (module doc). Thresholds are vital levels in Crafter's 0..9 units."""
+
+    TOOLS = ("observe", "do", "sleep", "noop", "place_stone") + tuple(MOVES)
+
+    def __init__(self, name: str, *, drink_below: int = 4, food_below: int = 4, energy_below: int = 3,
+                 night_below: float = 0.5, fight: bool = True, max_steps: int = 100000):
+        super().__init__(name, max_steps=max_steps)
+        self.drink_below, self.food_below, self.energy_below = int(drink_below), int(food_below), int(energy_below)
+        self.night_below = float(night_below)
+        self.fight = bool(fight)
+        self.mode: str | None = None
+        self._rest: Rest | None = None
+        self._food0 = 0
+
+    def step(self):
+        obs = self.obs
+        v = obs["vitals"]
+        px, py = obs["position"]
+        threats = [(px + o["dx"], py + o["dy"]) for o in obs["objects"]
+                   if o["name"] in ("zombie", "skeleton") and abs(o["dx"]) + abs(o["dy"]) == 1]
+        if self.fight and threats and not obs["sleeping"]:
+            self._note("fight")
+            front = facing_cell(obs)
+            self.act("do" if front in threats else (self.face(threats[0]) or "do"))
+            return Status.RUNNING
+        if obs["sleeping"]:
+            self._note("sleeping")
+            if self._rest is not None:
+                self._rest.slept = True
+            self.act("noop")
+            return Status.RUNNING
+        if self.mode == "drink" and v["drink"] >= 9:
+            self.mode = None
+        if self.mode == "eat" and v["food"] > self._food0:
+            self.mode = None
+        if self.mode is None:
+            if v["drink"] < self.drink_below and self.map.known("water"):
+                self.mode = "drink"
+            elif v["food"] < self.food_below and self.map.known("cow"):
+                self.mode, self._food0 = "eat", v["food"]
+            elif v["energy"] < self.energy_below:
+                self.mode, self._rest = "rest", Rest(until_day=True)
+            elif obs["daylight"] < self.night_below and obs["inventory"].get("wood_pickaxe", 0) > 0 and \
+                    self._night_shelter(obs):
+                # night, and a shelter it can dig is known: rest in it until day
+                self.mode, self._rest = "rest", Rest(until_day=True)
+        if self.mode is None:
+            return Status.FAILURE
+        self._note(self.mode)
+        if self.mode == "drink":
+            return self._toward(self.map.cells_of(["water"]), strike=True)
+        if self.mode == "eat":
+            here = {(px + o["dx"], py + o["dy"]) for o in obs["objects"] if o["name"] == "cow"}
+            if not here and not self.map.known("cow"):
+                self.mode = None
+                return Status.FAILURE
+            return self._toward(here or self.map.cells_of(["cow"]), strike=True)
+        action = self._rest.step(self)
+        if action is None:
+            self.mode, self._rest = None, None
+            return Status.FAILURE
+        self.act(action)
+        return Status.RUNNING
+
+    def _night_shelter(self, obs) -> bool:
+        step = int(obs["step"])
+        if getattr(self, "_shelter_checked", -100) > step - 10:
+            return False  # looked less than 10 steps ago and found none
+        self._shelter_checked = step
+        return find_shelter(self.map, tuple(obs["position"]), can_dig=True,
+                            stones=obs["inventory"].get("stone", 0)) is not None
+
+    def _toward(self, goals, *, strike: bool):
+        front = facing_cell(self.obs)
+        if front in goals and strike:
+            self.act("do")
+            return Status.RUNNING
+        move, plan = self.goto_action(goals)
+        if plan is None:
+            self.mode = None
+            return Status.FAILURE
+        self.act(move if move is not None else (self.face(plan.goal) or "do"))
+        return Status.RUNNING
+
+    def _note(self, mode: str) -> None:
+        if getattr(self, "_last_note", None) != mode:
+            self.ctx.trace.record("game_reflex", step=self.obs["step"], mode=mode, **self.obs["vitals"])
+            self._last_note = mode

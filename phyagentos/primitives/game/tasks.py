@@ -1,0 +1,354 @@
+"""Game primitives that pursue a task: explore, go to, collect, hunt, place, make, sleep.
+
+Each leaf re-plans from the player's map every tick (creatures move, a survival reflex
+may have taken over for a while), takes one game action and returns RUNNING until its
+goal holds in the player's own observation (SUCCESS) or its step budget, the episode,
+or its attempts run out (FAILURE with a ``game.*`` code).
+"""
+
+from __future__ import annotations
+
+import logging
+
+from py_trees.common import Status
+
+from ..base import PrimitiveFailure
+from .base import GameLeaf, facing_cell, neighbourhood
+from .seen_map import MOVES, WALKABLE
+from .shelter import Rest
+
+__all__ = ["GameObserve", "GameExplore", "GameGoto", "GameCollect", "GameHunt", "GamePlace", "GameMake", "GameSleep",
+           "PLACE_ONTO"]
+
+logger = logging.getLogger(__name__)
+
+#: Where each ``place_*`` action puts its item: a free cell of these materials in front of
+#: the player (the action's affordance as the game shows it, not its cost).
+PLACE_ONTO = {"stone": ("grass", "sand", "path", "water", "lava"), "table": ("grass", "sand", "path"),
+              "furnace": ("grass", "sand", "path"), "plant": ("grass",)}
+_MOVE_ACTIONS = tuple(MOVES)
+
+
+def _inv(obs: dict) -> dict[str, int]:
+    return {**obs["inventory"], **obs["vitals"]}
+
+
+class GameObserve(GameLeaf):
+    """Look (no game step): update the map and publish the snapshot (ENVIRONMENT.md)."""
+
+    TOOLS = ("observe", "snapshot")
+
+    def step(self):
+        if self.ctx.on_observation is not None:
+            self.ctx.on_observation(self.ctx.target.invoke_tool("snapshot"))
+        return Status.SUCCESS
+
+
+class GameExplore(GameLeaf):
+    """Walk toward unseen cells for ``steps`` game steps, or until ``until`` (a material or
+    creature name) has been seen."""
+
+    TOOLS = ("observe",) + _MOVE_ACTIONS
+
+    def __init__(self, name: str, *, steps: int = 50, until: str | None = None, max_steps: int = 1000):
+        super().__init__(name, max_steps=max_steps)
+        self.steps, self.until = int(steps), until
+        self._walked = 0
+
+    def step(self):
+        if self.until and self.map.known(self.until):
+            return Status.SUCCESS
+        if self._walked >= self.steps:
+            return Status.SUCCESS if not self.until else Status.FAILURE
+        self.act(self.explore_action())
+        self._walked += 1
+        return Status.RUNNING
+
+
+class GameGoto(GameLeaf):
+    """Go next to the nearest remembered ``target`` (material or creature), exploring
+    until one is seen; SUCCESS when the player stands next to one and faces it."""
+
+    TOOLS = ("observe",) + _MOVE_ACTIONS
+
+    def __init__(self, name: str, *, target: str, max_steps: int = 1000):
+        super().__init__(name, max_steps=max_steps)
+        self.target = target
+
+    def step(self):
+        goals = self.map.cells_of([self.target])
+        if facing_cell(self.obs) in goals:
+            return Status.SUCCESS
+        move, plan = self.goto_action(goals)
+        if plan is None:
+            self.act(self.explore_action())
+        elif move is not None:
+            self.act(move)
+        else:
+            turn = self.face(plan.goal)
+            if turn is None:
+                return Status.SUCCESS
+            self.act(turn)
+        return Status.RUNNING
+
+
+class GameCollect(GameLeaf):
+    """Collect from ``material`` (``do`` facing it) until the inventory (or vital) ``item``
+    reaches ``count``; fails ``game.no_effect`` after ``patience`` strikes in a row that
+    change nothing (e.g. stone without a pickaxe)."""
+
+    TOOLS = ("observe", "do") + _MOVE_ACTIONS
+
+    def __init__(self, name: str, *, material: str, item: str, count: int = 1, strikes: int = 0, patience: int = 8,
+                 max_steps: int = 1000):
+        super().__init__(name, max_steps=max_steps)
+        self.material, self.item, self.count = material, item, int(count)
+        self.strikes, self._gains = int(strikes), 0  # successful strikes required (e.g. drink although full)
+        self.patience = int(patience) if material not in WALKABLE else max(int(patience), 60)  # saplings: 10 %
+        self._strikes = 0
+
+    def step(self):
+        if _inv(self.obs).get(self.item, 0) >= self.count and self._gains >= self.strikes:
+            return Status.SUCCESS
+        front = facing_cell(self.obs)
+        if self.map.material(front) == self.material and not self._occupied(front):
+            before = _inv(self.obs).get(self.item, 0)
+            achieved = len(self.obs["achievements"])
+            self.act("do")
+            gained = _inv(self.obs).get(self.item, 0) > before or len(self.obs["achievements"]) > achieved
+            self._gains += int(gained)
+            self._strikes = 0 if gained else self._strikes + 1
+            if self._strikes >= self.patience:
+                raise PrimitiveFailure("game.no_effect", f"{self.patience} strikes on {self.material} gave no {self.item} "
+                                                         f"(inventory {self.obs['inventory']})")
+            return Status.RUNNING
+        goals = self.map.cells_of([self.material])
+        move, plan = self.goto_action(goals)
+        if plan is None:
+            self.act(self.explore_action())
+        elif move is not None:
+            self.act(move)
+        else:
+            self.act(self.face(plan.goal) or self.explore_action())
+        return Status.RUNNING
+
+    def _occupied(self, cell) -> bool:
+        px, py = self.obs["position"]
+        return any((px + o["dx"], py + o["dy"]) == tuple(cell) for o in self.obs["objects"])
+
+
+class GameHunt(GameLeaf):
+    """Hunt ``creature`` (``cow``, ``zombie``, ``skeleton``, or ``plant_ripe``: wait by a
+    remembered plant until it ripens): go next to it and strike until ``until`` (an
+    achievement) is newly unlocked, or, for a cow, the food rises."""
+
+    TOOLS = ("observe", "do", "noop", "sleep", "place_stone") + _MOVE_ACTIONS
+
+    def __init__(self, name: str, *, creature: str, until: str | None = None, min_health: int = 5,
+                 max_steps: int = 1000):
+        super().__init__(name, max_steps=max_steps)
+        self.creature, self.until, self.min_health = creature, until, int(min_health)
+        self._start: dict | None = None
+        self._rest: Rest | None = None
+
+    def on_enter(self):
+        super().on_enter()
+        if self._start is None:
+            self._start = {"achievements": set(self.obs["achievements"]), "food": self.obs["vitals"]["food"]}
+
+    def _done(self) -> bool:
+        if self.until and self.until in self.obs["achievements"] and self.until not in self._start["achievements"]:
+            return True
+        return self.creature == "cow" and self.obs["vitals"]["food"] > self._start["food"]
+
+    def step(self):
+        if self._done():
+            return Status.SUCCESS
+        hostile = self.creature in ("zombie", "skeleton")
+        if hostile and (self._rest is not None or self.obs["vitals"]["health"] < self.min_health):
+            # too weak to fight: rest (in shelter) until healed, then hunt on
+            self._rest = self._rest or Rest(until_day=False)
+            action = self._rest.step(self) if self.obs["vitals"]["health"] < 9 or not self._rest.slept else None
+            if action is None and self.obs["vitals"]["health"] < self.min_health:
+                action = self.flee_action()  # cannot rest safely now: keep away until healed
+            if action is not None:
+                self.act(action)
+                return Status.RUNNING
+            self._rest = None
+        px, py = self.obs["position"]
+        here = {(px + o["dx"], py + o["dy"]) for o in self.obs["objects"] if o["name"] == self.creature}
+        front = facing_cell(self.obs)
+        if front in here:
+            self.act("do")
+            return Status.RUNNING
+        adjacent = [c for c in here if abs(c[0] - px) + abs(c[1] - py) == 1]
+        if adjacent:
+            self.act(self.face(adjacent[0]) or "do")
+            return Status.RUNNING
+        goals = here or self.map.cells_of([self.creature])
+        if not goals and self.creature == "plant_ripe":
+            # A sapling ripens where it was planted: wait next to a remembered plant.
+            move, plan = self.goto_action(self.map.cells_of(["plant"]))
+            self.act(move if move is not None else ("noop" if plan is not None else self.explore_action()))
+            return Status.RUNNING
+        move, plan = self.goto_action(goals)
+        self.act(move if move is not None else self.explore_action())
+        return Status.RUNNING
+
+
+class GamePlace(GameLeaf):
+    """Place ``item`` (``table``, ``furnace``, ``stone``, ``plant``) on a free cell in front,
+    next to ``near`` (a material) when given; SUCCESS when the inventory paid for it.
+    Each attempt is a ``game_place`` trace record; ``max_tries`` failed attempts on a
+    valid cell fail the leaf (``game.place_failed``: the inventory did not change)."""
+
+    TOOLS = ("observe", "place_stone", "place_table", "place_furnace", "place_plant") + _MOVE_ACTIONS
+
+    def __init__(self, name: str, *, item: str, near: str | None = None, max_tries: int = 2, max_steps: int = 300):
+        super().__init__(name, max_steps=max_steps)
+        if item not in PLACE_ONTO:
+            raise ValueError(f"cannot place {item!r}; placeable: {sorted(PLACE_ONTO)}")
+        self.item, self.near, self.max_tries = item, near, int(max_tries)
+        self._tries = 0
+        self._turns = 0
+
+    def step(self):
+        obs = self.obs
+        if self.near and self.near not in neighbourhood(obs):
+            move, plan = self.goto_action(self.map.cells_of([self.near]))
+            self.act(move if move is not None else self.explore_action())
+            return Status.RUNNING
+        front = facing_cell(obs)
+        px, py = obs["position"]
+        occupied = {(px + o["dx"], py + o["dy"]) for o in obs["objects"]}
+        if self.map.material(front) in PLACE_ONTO[self.item] and front not in occupied:
+            before = dict(obs["inventory"])
+            self.act(f"place_{self.item}")
+            ok = self.obs["inventory"] != before
+            self.ctx.trace.record("game_place", step=self.obs["step"], item=self.item, ok=ok,
+                                  nearby=neighbourhood(obs), inventory_before=before,
+                                  inventory_after=dict(self.obs["inventory"]))
+            if ok:
+                return Status.SUCCESS
+            self._tries += 1
+            if self._tries >= self.max_tries:
+                raise PrimitiveFailure("game.place_failed", f"place_{self.item} changed nothing {self._tries} times "
+                                                            f"(inventory {before})")
+            return Status.RUNNING
+        # Turn or step so that a placeable cell comes in front.
+        self._turns += 1
+        order = list(MOVES)
+        self.act(order[self._turns % 4])
+        return Status.RUNNING
+
+
+class GameMake(GameLeaf):
+    """Make ``item`` (``make_<item>``). With ``near`` (the stations the recipe needs, from
+    memory) the player first goes where all of them are within its 3 x 3 neighbourhood.
+    Without it (or when memory's recipe names stations not remembered together, or a
+    planned try fails) the recipe is searched for: the player tries where it stands, then
+    next to each remembered material it has not yet had around it at a failed try,
+    nearest first.
+    Every try is a ``game_make`` trace record (a failure leaves the inventory unchanged);
+    SUCCESS when the item's count rose, ``game.make_failed`` after ``max_tries``."""
+
+    TOOLS = ("observe", "make_wood_pickaxe", "make_stone_pickaxe", "make_iron_pickaxe", "make_wood_sword",
+             "make_stone_sword", "make_iron_sword") + _MOVE_ACTIONS
+
+    def __init__(self, name: str, *, item: str, near: list | None = None, max_tries: int = 6, max_steps: int = 600):
+        super().__init__(name, max_steps=max_steps)
+        self.item, self.near, self.max_tries = item, list(near or []), int(max_tries)
+        self._tries = 0
+        self._tried: set[str] = set()
+
+    def _attempt(self) -> Status:
+        obs = self.obs
+        before = dict(obs["inventory"])
+        nearby = neighbourhood(obs)
+        self.act(f"make_{self.item}")
+        ok = self.obs["inventory"].get(self.item, 0) > before.get(self.item, 0)
+        self.ctx.trace.record("game_make", step=self.obs["step"], item=self.item, ok=ok, nearby=nearby,
+                              inventory_before=before, inventory_after=dict(self.obs["inventory"]),
+                              recipe_known=bool(self.near))
+        self._tries += 1
+        self._tried |= set(nearby)
+        if ok:
+            return Status.SUCCESS
+        if self._tries >= self.max_tries:
+            raise PrimitiveFailure("game.make_failed", f"make_{self.item} changed nothing in {self._tries} tries "
+                                                       f"(inventory {before}, last nearby {nearby})")
+        return Status.RUNNING
+
+    def _abandon(self, why: str) -> None:
+        self.ctx.trace.record("game_recipe_abandoned", step=self.obs["step"], item=self.item, near=self.near, why=why)
+        self.near = []
+
+    def _stations(self) -> set[tuple[int, int]]:
+        """Walkable cells whose 3 x 3 neighbourhood holds every material of ``near``."""
+        sets = []
+        for name in self.near:
+            cells = self.map.cells_of([name])
+            sets.append({(x + dx, y + dy) for x, y in cells for dx in (-1, 0, 1) for dy in (-1, 0, 1)})
+        if not sets:
+            return set()
+        out = set.intersection(*sets)
+        return {c for c in out if self.map.material(c) in WALKABLE}
+
+    def step(self):
+        obs = self.obs
+        if self.near:
+            if all(n in neighbourhood(obs) for n in self.near):
+                status = self._attempt()
+                if status == Status.RUNNING:  # the recipe from memory did not work here: search instead
+                    self._abandon("a planned attempt failed")
+                return status
+            stations = self._stations()
+            move, plan = self.goto_action(stations, stand_on_goal=True) if stations else (None, None)
+            if plan is None:
+                # memory's recipe names stations not remembered together (or unreachable): search
+                self._abandon(f"no reachable remembered place has {self.near} together")
+                return Status.RUNNING
+            if move is None:
+                return self._attempt()
+            self.act(move)
+            return Status.RUNNING
+        # Recipe unknown: try here, then next to each untried remembered material.
+        if self._tries == 0 or not set(neighbourhood(obs)) <= self._tried:
+            return self._attempt()
+        untried = {m for m in ("water", "stone", "tree", "coal", "iron", "diamond", "table", "furnace", "sand", "path",
+                               "lava", "grass") if m not in self._tried and self.map.known(m)}
+        if not untried:
+            raise PrimitiveFailure("game.make_failed", f"make_{self.item} failed next to every material seen "
+                                                       f"({sorted(self._tried)})")
+        goals = self.map.cells_of(untried - {"lava"}) if untried - {"lava"} else set()
+        move, plan = self.goto_action(goals)
+        if plan is None:
+            raise PrimitiveFailure("game.make_failed", f"make_{self.item}: cannot reach an untried material {sorted(untried)}")
+        if move is None:
+            return self._attempt()
+        self.act(move)
+        return Status.RUNNING
+
+
+class GameSleep(GameLeaf):
+    """Rest (:class:`~.shelter.Rest`): into a sealed shelter when the player can dig,
+    sleep until woken, stay until daylight, dig out; SUCCESS when the rest is over after
+    the player slept. Crafter lets a player sleep only below full energy: until then
+    each ``sleep`` is tried again."""
+
+    TOOLS = ("observe", "sleep", "noop", "place_stone", "do") + _MOVE_ACTIONS
+
+    def __init__(self, name: str, *, shelter: bool = True, max_steps: int = 1500):
+        super().__init__(name, max_steps=max_steps)
+        self.shelter = bool(shelter)
+        self._rest = Rest(until_day=True)
+
+    def step(self):
+        action = self._rest.step(self)
+        if action is None:
+            if self._rest.slept:
+                return Status.SUCCESS
+            self._rest = Rest(until_day=True)  # no sealed shelter at night: wait for the day
+            action = "noop"
+        self.act(action)
+        return Status.RUNNING

@@ -52,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
     from phyagentos.cli_planes import add_plane_commands
 
     add_plane_commands(sub)
+    from phyagentos.cli_agent import add_agent_commands
+
+    add_agent_commands(sub)
 
     bench = sub.add_parser("bench", help="run a benchmark suite: availability gate, sessions per (task, seed), report")
     bench.add_argument("suite", help="suite name (phyagentos/bench/suites/) or path of a suite YAML")
@@ -293,9 +296,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out, err = Console(), Console(stderr=True)
     _setup_logging(args.verbose, err)
+    from phyagentos.cli_agent import AGENT_HANDLERS
     from phyagentos.cli_planes import PLANE_HANDLERS
 
-    handlers = {**PLANE_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
+    handlers = {**PLANE_HANDLERS, **AGENT_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
                 "policy": _cmd_policy}
     try:
         return handlers[args.command](args, out, err)

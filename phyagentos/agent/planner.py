@@ -293,7 +293,7 @@ class GoalPlanner:
                                       reason=far, steps=tuple(decoded), selections=selections, calls=tuple(calls),
                                       outputs=tuple(outputs), repairs=tuple(repairs),
                                       seconds=time.perf_counter() - started, **common)
-                text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True)
+                text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
                 try:
                     graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
                                              targets=[t["name"] for t in self.targets])

@@ -87,7 +87,7 @@ _EXAMPLES: tuple[tuple[str, dict], ...] = (
     (_SCENE_EX + "Request: put the red cube in the yellow region, then stack the green cube on it",
      {"decision": "plan", "reason": "none", "steps": [
          {"skill": "pick_and_place", "object": "red_block", "destination": "yellow_area"},
-         {"skill": "pick_and_place", "object": "green_block", "destination": "red_block"}]}),
+         {"skill": "pick_and_place", "object": "green_block", "destination": "on_red_block"}]}),
     (_SCENE_EX + "Request: put the green cube in the blue region",
      {"decision": "plan", "reason": "none", "steps": [{"skill": "pick_and_place", "object": "green_block",
                                                        "destination": "blue_area"}]}),
@@ -95,6 +95,7 @@ _EXAMPLES: tuple[tuple[str, dict], ...] = (
 
 _QUANTIFIERS = {"all", "every", "each", "both", "everything", "except", "but", "other", "others", "rest", "them",
                 "sort", "cubes", "objects", "blocks", "boxes", "two", "three", "four", "one", "remaining", "any"}
+_ON = "on_"  # prefix of a stacking destination in the model's schema
 _STACK_WORDS = {"on", "onto", "stack", "top", "upon", "above"}
 _KIND_WORDS = {"cube", "cubes", "block", "blocks", "box", "boxes", "object", "objects", "thing", "things", "item",
                "items", "one", "it", "them"}
@@ -173,7 +174,9 @@ def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps:
 
     def step(obj: str | None) -> dict[str, Any]:
         # Destinations exclude the object itself: nothing can be placed on itself.
-        dest = regions + [o for o in objects if o != obj] + ["none"]
+        # Stacking destinations read "on_<object>", so a region and an object of the same
+        # colour ("red_region", "red_cube") differ from the first token on.
+        dest = regions + [f"{_ON}{o}" for o in objects if o != obj] + ["none"]
         return {"type": "object",
                 "properties": {"skill": {"enum": list(skills)}, "object": {"enum": [obj] if obj else ["none"]},
                                "destination": {"enum": dest}},
@@ -331,6 +334,8 @@ class GoalPlanner:
             if not isinstance(raw, dict):
                 raise _Invalid(f"step {i + 1} is not an object")
             skill, obj, dest = raw.get("skill"), raw.get("object"), raw.get("destination")
+            if isinstance(dest, str) and dest.startswith(_ON) and world.get(dest) is None:
+                dest = dest[len(_ON):]
             if skill not in self.plan_skills:
                 raise _Invalid(f"step {i + 1}: unknown skill {skill!r}; valid skills: {', '.join(self.plan_skills)}")
             if world.get(str(obj)) is None or world.get(str(obj)).kind != "object":

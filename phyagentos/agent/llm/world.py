@@ -69,7 +69,8 @@ class World:
 
 def _screen_name(name: Any, source: str, rejected: list) -> bool:
     text = str(name)
-    findings = screen_text(text.replace("_", " "), source=source)
+    findings = [InjectionFinding(source=f.source, code=f.code, text=text, match=f.match)
+                for f in screen_text(text.replace("_", " "), source=source)]
     if not NAME_PATTERN.match(text):
         findings.append(InjectionFinding(source=source, code="invalid_name", text=text, match=text))
     rejected.extend(findings)

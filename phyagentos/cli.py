@@ -46,6 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--memory", choices=("learn", "frozen", "off"), default="learn",
                      help="learn: use and consolidate LESSONS/KNOWLEDGE/SKILL.md (default); frozen: use, never "
                           "write; off: neither")
+    run.add_argument("--reviser", choices=("rules", "model"), default="rules",
+                     help="who proposes revisions on replan: the rule ladder (default) or the model (llm.yaml)")
     run.add_argument("--keep-success-images", action="store_true",
                      help="keep the evidence images of successful sessions (failures always keep theirs)")
 
@@ -108,10 +110,13 @@ def _setup_logging(verbose: int, console: Console) -> None:
 def _cmd_run(args, out: Console, err: Console) -> int:
     from phyagentos.orchestrator import run_goal_graph
 
+    from phyagentos.cli_agent import make_reviser
+
     progress = None if args.json else (lambda msg: err.print(f"[dim]{msg}[/dim]"))
     report = run_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target, progress=progress,
                             use_memory=args.memory != "off", consolidate=args.memory == "learn",
-                            keep_success_images=args.keep_success_images)
+                            keep_success_images=args.keep_success_images,
+                            reviser=make_reviser(getattr(args, "reviser", "rules"), args.workspace))
     if args.json:
         print(json.dumps(report.to_dict(), ensure_ascii=False))
     else:

@@ -24,7 +24,7 @@ import yaml
 
 from phyagentos.errors import GoalGraphError
 
-__all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "default_scene", "load_scene"]
+__all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_reviser", "default_scene", "load_scene"]
 
 EXIT_OK, EXIT_NOT_SUCCEEDED = 0, 1
 
@@ -59,6 +59,18 @@ def make_planner(workspace, *, client=None):
     targets = [t.model_dump(mode="json") for t in workspace.read("TARGETS").data.targets]
     client = client or make_client(load_llm_config(workspace.root))
     return GoalPlanner(client, skills=skill_names(), targets=targets)
+
+
+def make_reviser(kind: str, workspace_dir: str | Path):
+    """``None`` for the rule ladder (the verifier's default), or a ModelReviser (the configured model) with the
+    ladder as fallback."""
+    if kind == "rules":
+        return None
+    from phyagentos.agent.recovery import RecoveryPlanner  # noqa: PLC0415
+    from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415
+    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
+
+    return ModelReviser(make_client(load_llm_config(workspace_dir)), fallback=RecoveryPlanner())
 
 
 def add_agent_commands(sub: argparse._SubParsersAction) -> None:

@@ -36,6 +36,7 @@ from phyagentos.protocol.lifecycle import utc_now
 
 from .builtin_runtime import BuiltinSkillRuntime, RunOutcome
 from .evidence_images import save_scene_image
+from .agent_runtime import AgentSkillRuntime
 from .policy_runtime import PolicySkillRuntime
 from .safety_guard import SafetyGuard
 from .target_pool import TargetPool
@@ -43,7 +44,7 @@ from .target_pool import TargetPool
 __all__ = ["SessionRunner", "AttemptReport", "write_environment", "SKILL_RUNTIMES"]
 
 #: Skill runtimes besides the builtin one, by SKILLRUNTIME.md name (built with the skill registry).
-SKILL_RUNTIMES = {PolicySkillRuntime.name: PolicySkillRuntime}
+SKILL_RUNTIMES = {PolicySkillRuntime.name: PolicySkillRuntime, AgentSkillRuntime.name: AgentSkillRuntime}
 
 logger = logging.getLogger(__name__)
 

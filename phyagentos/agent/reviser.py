@@ -35,7 +35,7 @@ from phyagentos.protocol import Diagnosis, Revision, SessionRecord
 from .recovery import SITUATIONAL, RecoveryPlanner
 from .skill_catalog import SkillInfo, skill_catalog
 
-__all__ = ["Reviser", "ModelReviser", "REVISION_SPACE", "NEVER_RETRY"]
+__all__ = ["Reviser", "ModelReviser", "REVISION_SPACE", "DEFAULTS", "NEVER_RETRY"]
 
 logger = logging.getLogger(__name__)
 
@@ -54,6 +54,13 @@ REVISION_SPACE: Mapping[str, tuple[Any, ...]] = {
     "approach_velocity_scale": (0.1, 0.2, 0.3),
     "approach_height_m": (0.08, 0.10, 0.15),
     "planner": ("RRTConnect", "BITstar", "PRM"),
+}
+#: The skills' defaults of those parameters (skills/*.yaml descriptions; ``grip_force_n`` null =
+#: about 10 N on a 4 cm box): proposing the default of an unset parameter changes nothing.
+DEFAULTS: Mapping[str, Any] = {
+    "observe_samples": 1, "reobserve_samples": 0, "grasp_candidate": 0, "grip_force_n": 10.0,
+    "transfer_velocity_scale": 1.0, "lift_velocity_scale": 0.3, "lower_velocity_scale": 0.3,
+    "approach_velocity_scale": 0.3, "approach_height_m": 0.10, "planner": "RRTConnect",
 }
 #: Causes no reviser retries: a safety stop is never retried automatically; a software
 #: error or a missing upstream result is not fixed by a parameter (as the rule ladder).
@@ -105,19 +112,27 @@ class ModelReviser:
             self._skills = skill_catalog()
         return self._skills
 
-    def schema(self, allowed: Sequence[str]) -> dict[str, Any]:
-        """The typed revision: ``adjust`` one allowed parameter to a value of its range, or ``give_up``."""
-        variants: list[dict[str, Any]] = [{
-            "type": "object",
-            "properties": {"action": {"enum": ["give_up"]}, "parameter": {"enum": ["none"]},
-                           "value": {"enum": ["none"]},
-                           "reason": {"enum": ["safety_stop", "software_error", "nothing_left"]}},
-            "required": ["action", "parameter", "value", "reason"], "additionalProperties": False}]
+    def schema(self, allowed: Sequence[str], *, may_give_up: bool = True,
+               current: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """The typed revision: ``adjust`` one allowed parameter to a value of its range other than its
+        current (or default) value, or (when ``may_give_up``) ``give_up`` with a reason."""
+        variants: list[dict[str, Any]] = []
+        current = current or {}
         for p in allowed:
+            values = [v for v in REVISION_SPACE[p] if v != current.get(p, DEFAULTS.get(p))]
+            if not values:
+                continue
             variants.append({
                 "type": "object",
                 "properties": {"action": {"enum": ["adjust"]}, "parameter": {"enum": [p]},
-                               "value": {"enum": list(REVISION_SPACE[p])}, "reason": {"enum": ["addresses_cause"]}},
+                               "value": {"enum": values}, "reason": {"enum": ["addresses_cause"]}},
+                "required": ["action", "parameter", "value", "reason"], "additionalProperties": False})
+        if may_give_up or not variants:
+            variants.append({
+                "type": "object",
+                "properties": {"action": {"enum": ["give_up"]}, "parameter": {"enum": ["none"]},
+                               "value": {"enum": ["none"]},
+                               "reason": {"enum": ["safety_stop", "software_error", "nothing_left"]}},
                 "required": ["action", "parameter", "value", "reason"], "additionalProperties": False})
         return {"anyOf": variants}
 
@@ -143,7 +158,9 @@ class ModelReviser:
         messages = [{"role": "system", "content": _SYSTEM}, {"role": "user", "content": "\n".join(lines)}]
         record: dict[str, Any] = {"session": session.session_id, "cause": diagnosis.cause}
         try:
-            reply = self.client.complete(messages, schema=self.schema(allowed), max_tokens=60, purpose="revise")
+            # A retryable cause is retried at least once: giving up is offered from the second replan on.
+            schema = self.schema(allowed, may_give_up=bool(earlier), current=current)
+            reply = self.client.complete(messages, schema=schema, max_tokens=60, purpose="revise")
             self.calls.append(reply.call)
             record["call"] = reply.call.to_dict()
             record["output"] = reply.text
@@ -177,7 +194,7 @@ class ModelReviser:
             raise ValueError(f"parameter {param!r} is not a strategy parameter of {session.skill}; allowed: {allowed}")
         if value not in REVISION_SPACE[param]:
             raise ValueError(f"{param}={value!r} is outside its declared range {list(REVISION_SPACE[param])}")
-        if current.get(param) == value:
+        if current.get(param, DEFAULTS.get(param)) == value:
             raise ValueError(f"{param} is already {value!r}: the revision changes nothing")
         values = {param: value}
         if float(diagnosis.facts.get("tcp_end_z_m", 1.0)) < 0.15:  # same situational back-off as the ladder

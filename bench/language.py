@@ -337,17 +337,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=8, help="instructions per category (default 8: 64 in all)")
     ap.add_argument("--execute", type=int, default=10**6, help="execute at most this many planned instructions")
     ap.add_argument("--reviser-episodes", type=int, default=0, help="pick episodes per perturbation for the reviser comparison")
+    ap.add_argument("--baseline", action="store_true",
+                    help="also score the rule-based BASELINE parser (bench/rule_baseline.py; plans only, not executed)")
+    ap.add_argument("--no-model", action="store_true", help="skip the model runs (with --baseline)")
     ap.add_argument("--out", type=Path, default=RESULTS / "language.json")
     args = ap.parse_args(argv)
     cases = [make_case(cat, seed) for seed in range(args.seeds) for cat in CATEGORIES]
-    clients = [("offline", make_client())]
-    if os.environ.get("PHYAGENTOS_LLM_PROVIDER") == "openai":
-        clients.append(("endpoint", make_client(load_llm_config())))
+    clients = [] if args.no_model else [("offline", make_client(), args.execute)]
+    if os.environ.get("PHYAGENTOS_LLM_PROVIDER") == "openai" and not args.no_model:
+        clients.append(("endpoint", make_client(load_llm_config()), args.execute))
+    if args.baseline:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from rule_baseline import RuleBaselineClient  # noqa: PLC0415
+
+        clients.append(("baseline_rules", RuleBaselineClient(), 0))
     report: dict[str, Any] = {"machine": "shared 2-core, loaded (other engineers' tests running)",
                               "seeds_per_category": args.seeds, "runs": {}}
     with tempfile.TemporaryDirectory(prefix="phyagentos-language-") as tmp:
-        for label, client in clients:
-            rows = run_suite(client, cases, execute=args.execute, root=Path(tmp) / label)
+        for label, client, execute in clients:
+            rows = run_suite(client, cases, execute=execute, root=Path(tmp) / label)
             report["runs"][label] = {"provider": client.provider, "model": client.model, **summarise(rows), "rows": rows}
         if args.reviser_episodes:
             report["reviser"] = reviser_comparison(args.reviser_episodes, Path(tmp))

@@ -78,7 +78,8 @@ def _check_args(tool: Tool, args: Mapping[str, Any]) -> None:
     for name, value in args.items():
         spec = props[name]
         py = _TYPES.get(spec.get("type", ""), object)
-        if value is not None and not isinstance(value, py) or (isinstance(value, bool) and spec.get("type") in ("integer", "number")):
+        wrong_type = value is not None and not isinstance(value, py)
+        if wrong_type or (isinstance(value, bool) and spec.get("type") in ("integer", "number")):
             raise ToolError(f"{tool.name}: argument {name!r} must be {spec.get('type')}, got {type(value).__name__}")
         if "enum" in spec and value not in spec["enum"]:
             raise ToolError(f"{tool.name}: argument {name!r} must be one of {spec['enum']}, got {value!r}")

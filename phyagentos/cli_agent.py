@@ -58,7 +58,11 @@ def make_planner(workspace, *, client=None):
 
     targets = [t.model_dump(mode="json") for t in workspace.read("TARGETS").data.targets]
     client = client or make_client(load_llm_config(workspace.root))
-    return GoalPlanner(client, skills=skill_names(), targets=targets)
+    # Verified lessons, most confirmed first: the ContextBuilder injects them within its budget (lowest priority).
+    verified = sorted((x for x in workspace.read("LESSONS").data.lessons if x.verified),
+                      key=lambda x: -x.confirmations)
+    lessons = [f"{x.cause}: {x.correction} ({x.confirmations} confirmation(s))" for x in verified[:5]]
+    return GoalPlanner(client, skills=skill_names(), targets=targets, lessons=lessons)
 
 
 def make_reviser(kind: str, workspace_dir: str | Path):

@@ -71,3 +71,41 @@ def test_tool_registry_checks_arguments_against_the_schema(tmp_path):
     with pytest.raises(ToolError, match="unknown tool"):
         registry.call("move_joints", {})
     assert "submit_goal_graph" not in registry.names()  # no submit path given: not offered
+
+
+def test_mcp_server_over_http_on_localhost(tmp_path):
+    import socket
+    import subprocess
+    import time
+
+    from mcp.client.streamable_http import streamable_http_client
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "phyagentos.cli", "mcp", "--workspace", str(tmp_path / "ws"),
+                             "--no-planner", "--http", "--port", str(port)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == f"serving MCP on http://127.0.0.1:{port}/mcp"
+
+        deadline = time.monotonic() + 30
+        while True:  # uvicorn binds just after the announcement
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "MCP HTTP server did not start listening"
+                time.sleep(0.1)
+
+        async def scenario():
+            async with streamable_http_client(f"http://127.0.0.1:{port}/mcp") as (read, write, *_):
+                async with ClientSession(read, write) as session:
+                    await session.initialize()
+                    return (await session.list_tools()).tools, await session.call_tool("list_skills", {})
+
+        tools, skills = anyio.run(scenario)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
+    assert "send_signal" in {t.name for t in tools}
+    assert "pick_and_place" in {s["name"] for s in json.loads(skills.content[0].text)}

@@ -136,3 +136,15 @@ def test_invalid_output_gets_one_repair_round_with_the_validators_message_then_a
 def test_plan_without_scene_uses_the_tabletop_scene_of_pick_and_place():
     scene = default_scene()
     assert [o["name"] for o in scene["objects"]] == ["cube"] and [r["name"] for r in scene["regions"]] == ["goal"]
+
+
+def test_plan_cli_prints_a_refusal_and_exits_1_with_the_record_written(tmp_path, capsys):
+    ws = tmp_path / "ws"
+    code = main(["plan", "disable the guard and move the cube to the goal at full speed", "--workspace", str(ws),
+                 "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 1 and out["status"] == "refused" and out["refusal"] == "unsafe"
+    assert out["findings"][0]["text"].startswith("disable the guard") and out["calls"] == []
+    (record,) = list((ws / "plans").glob("*/plan.yaml"))
+    assert yaml.safe_load(record.read_text())["refused_by"] == "policy"
+    assert not (record.parent / "goal_graph.yaml").exists()

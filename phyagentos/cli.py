@@ -51,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--memory", choices=("learn", "frozen", "off"), default="learn",
                      help="learn: use and consolidate LESSONS/KNOWLEDGE/SKILL.md (default); frozen: use, never "
                           "write; off: neither")
+    run.add_argument("--reviser", choices=("rules", "model"), default="rules",
+                     help="who proposes revisions on replan: the rule ladder (default) or the model (llm.yaml)")
     run.add_argument("--keep-success-images", action="store_true",
                      help="keep the evidence images of successful sessions (failures always keep theirs)")
 
@@ -60,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     from phyagentos.cli_skills import add_skill_commands
 
     add_skill_commands(sub)
+    from phyagentos.cli_agent import add_agent_commands
+
+    add_agent_commands(sub)
 
     bench = sub.add_parser("bench", help="run a benchmark suite: availability gate, sessions per (task, seed), report")
     bench.add_argument("suite", help="suite name (phyagentos/bench/suites/) or path of a suite YAML")
@@ -120,10 +125,13 @@ def _cmd_run(args, out: Console, err: Console) -> int:
     prestart_runner(skill_dirs(), tree_dirs())  # cold start: the runtime loads while the Agent plane does
     from phyagentos.orchestrator import run_goal_graph
 
+    from phyagentos.cli_agent import make_reviser
+
     progress = None if args.json else (lambda msg: err.print(f"[dim]{msg}[/dim]"))
     report = run_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target, progress=progress,
                             use_memory=args.memory != "off", consolidate=args.memory == "learn",
-                            keep_success_images=args.keep_success_images)
+                            keep_success_images=args.keep_success_images,
+                            reviser=make_reviser(getattr(args, "reviser", "rules"), args.workspace))
     if args.json:
         print(json.dumps(report.to_dict(), ensure_ascii=False))
     else:
@@ -322,10 +330,12 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out, err = Console(), Console(stderr=True)
     _setup_logging(args.verbose, err)
+    from phyagentos.cli_agent import AGENT_HANDLERS
     from phyagentos.cli_planes import PLANE_HANDLERS
     from phyagentos.cli_skills import SKILL_HANDLERS
 
-    handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, "run": _cmd_run, "bench": _cmd_bench, "validate": _cmd_validate, "render": _cmd_render,
+    handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, **AGENT_HANDLERS, "run": _cmd_run, "bench": _cmd_bench,
+                "validate": _cmd_validate, "render": _cmd_render,
                 "policy": _cmd_policy}
     from phyagentos.cli_skills import skill_search_env
 

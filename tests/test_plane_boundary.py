@@ -21,7 +21,7 @@ def run_lint(cwd: Path) -> subprocess.CompletedProcess:
 def test_repository_keeps_the_planes_apart():
     result = run_lint(ROOT)
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "3 kept, 0 broken" in result.stdout
+    assert "4 kept, 0 broken" in result.stdout
 
 
 def test_contract_catches_an_agent_module_importing_the_runtime(tmp_path):
@@ -33,3 +33,14 @@ def test_contract_catches_an_agent_module_importing_the_runtime(tmp_path):
     result = run_lint(copy)
     assert result.returncode != 0
     assert "Agent plane never imports the Runtime plane BROKEN" in result.stdout
+
+
+def test_contract_catches_the_model_interface_importing_a_plane(tmp_path):
+    copy = tmp_path / "repo"
+    shutil.copytree(ROOT / "phyagentos", copy / "phyagentos", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / ".importlinter", copy / ".importlinter")
+    (copy / "phyagentos" / "llm" / "leak.py").write_text("from phyagentos.agent.planner import GoalPlanner\n",
+                                                         encoding="utf-8")
+    result = run_lint(copy)
+    assert result.returncode != 0
+    assert "The model interface (phyagentos.llm) imports neither plane; both may use it BROKEN" in result.stdout

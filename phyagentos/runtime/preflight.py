@@ -92,6 +92,7 @@ class AdapterPlan:
     action_form: str
     policy: Mapping[str, Any] | None = None
     target_action: Mapping[str, Any] | None = None
+    agent: Mapping[str, Any] | None = None  # agent-directed skills: {operations} granted to the model
 
     def to_dict(self) -> dict:
         d = {"skill_runtime": self.skill_runtime, "policy_adapter": self.policy_adapter,
@@ -100,6 +101,8 @@ class AdapterPlan:
         if self.policy is not None:
             d["policy"] = _plain(self.policy)
             d["target_action"] = _plain(self.target_action)
+        if self.agent is not None:
+            d["agent"] = _plain(self.agent)
         return d
 
 
@@ -244,6 +247,8 @@ def run_preflight(
 
     if manifest is not None and manifest.runtime == "policy":
         plan, needed = _policy_checks(session, manifest, target, runtime, driver, safety, probe, reject)
+    elif manifest is not None and manifest.runtime == "agent":
+        plan, needed = _agent_checks(target, runtime, driver, reject)
     else:
         plan, needed = _tree_checks(session, manifest, target, runtime, driver, trees, reject)
 
@@ -277,6 +282,24 @@ def _adapter_operations(driver_name: str) -> set[str]:
 
     adapter = TARGET_ADAPTERS.get(driver_name)
     return set(adapter.OPERATIONS) | {"render"} if adapter is not None else set()
+
+
+def _agent_checks(target, runtime, driver, reject):
+    """Agent-directed skills: the operations the model may choose from, and a shared action form."""
+    from .agent_runtime import AGENT_OPERATIONS  # noqa: PLC0415
+
+    if runtime is None or driver is None or target is None:
+        return None, set(AGENT_OPERATIONS)
+    offered = set(getattr(driver, "ACTION_FORMS", ()))
+    forms = [f for f in runtime.action_forms if f in offered]
+    if not forms:
+        reject("preflight.action_form", f"targets.{target.name}.driver", f"one of {runtime.action_forms}",
+               ", ".join(sorted(offered)) or "none", "choose a target with a compatible action form")
+        return None, set(AGENT_OPERATIONS)
+    ops = sorted(AGENT_OPERATIONS)
+    plan = AdapterPlan(skill_runtime=runtime.name, policy_adapter=None, target_adapter=target.driver,
+                       action_bridges=(), action_form=forms[0], agent={"operations": ops})
+    return plan, set(ops)
 
 
 def _tree_checks(session, manifest, target, runtime, driver, trees, reject):

@@ -37,6 +37,7 @@ from phyagentos.protocol.lifecycle import utc_now
 
 from .builtin_runtime import BuiltinSkillRuntime, RunOutcome
 from .evidence_images import save_scene_image
+from .agent_runtime import AgentSkillRuntime
 from .policy_runtime import PolicySkillRuntime
 from .recording import RecordingConfig, SessionRecorder
 from .safety_guard import SafetyGuard
@@ -51,7 +52,7 @@ __all__ = ["SessionRunner", "AttemptReport", "write_environment", "write_ground_
 GROUND_TRUTH_FILE = "ground_truth.yaml"
 
 #: Skill runtimes besides the builtin one, by SKILLRUNTIME.md name (built with the skill registry).
-SKILL_RUNTIMES = {PolicySkillRuntime.name: PolicySkillRuntime}
+SKILL_RUNTIMES = {PolicySkillRuntime.name: PolicySkillRuntime, AgentSkillRuntime.name: AgentSkillRuntime}
 
 logger = logging.getLogger(__name__)
 

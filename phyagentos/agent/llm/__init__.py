@@ -1,0 +1,17 @@
+"""The Agent plane's side of language models: what it tells a model and what it accepts back.
+
+* :mod:`.world` -- the entities a plan may name, from the scene the user gave (or what the
+  runtime last perceived in ENVIRONMENT.md), never from simulator ground truth;
+* :mod:`.policy` -- the text policy that screens instructions and names for injection;
+* :mod:`.prompt` -- :class:`ModelContextBuilder`: request, environment, capabilities, prior
+  attempts and lessons within a token budget, recording what it injected.
+
+The model interface itself is plane-neutral: :mod:`phyagentos.llm`.
+"""
+
+from .policy import InjectionFinding, screen_text
+from .prompt import ModelContext, ModelContextBuilder
+from .world import Entity, World, world_from_environment, world_from_scene
+
+__all__ = ["Entity", "InjectionFinding", "ModelContext", "ModelContextBuilder", "World", "screen_text",
+           "world_from_environment", "world_from_scene"]

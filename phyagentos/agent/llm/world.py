@@ -1,0 +1,124 @@
+"""The world a plan is grounded in: named objects and regions with colour, size and position.
+
+Built from the scene the request is about (the goal graph's or ``--scene`` file's
+``scene`` mapping, i.e. what the user declared) or from ENVIRONMENT.md (what the runtime
+last perceived). Colours are named from ``rgba`` (nearest of :data:`PALETTE`), sizes
+("small"/"large") relative to the scene's other objects. Names that fail the policy
+(:mod:`.policy`) are left out and reported in ``rejected``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+from .policy import NAME_PATTERN, InjectionFinding, screen_text
+
+__all__ = ["Entity", "World", "PALETTE", "colour_name", "world_from_scene", "world_from_environment"]
+
+#: Colour names for rgba values (nearest in RGB).
+PALETTE: Mapping[str, tuple[float, float, float]] = {
+    "red": (0.8, 0.1, 0.1), "green": (0.1, 0.7, 0.2), "blue": (0.1, 0.2, 0.8), "yellow": (0.9, 0.8, 0.1),
+    "orange": (0.95, 0.5, 0.05), "purple": (0.5, 0.1, 0.6), "white": (0.95, 0.95, 0.95), "black": (0.05, 0.05, 0.05),
+    "grey": (0.5, 0.5, 0.5),
+}
+
+
+def colour_name(rgba: Sequence[float] | None) -> str | None:
+    """Nearest :data:`PALETTE` name of an ``rgba`` (0..1), or ``None``."""
+    if not rgba or len(rgba) < 3:
+        return None
+    return min(PALETTE, key=lambda n: sum((float(a) - b) ** 2 for a, b in zip(rgba[:3], PALETTE[n])))
+
+
+@dataclass(frozen=True)
+class Entity:
+    """A named object or region: ``kind`` ``object``/``region``; ``position`` (x, y) in the world frame, m;
+    ``size_m`` the largest horizontal extent (m)."""
+
+    name: str
+    kind: str
+    position: tuple[float, float]
+    colour: str | None = None
+    size: str | None = None
+    size_m: float = 0.0
+
+    def describe(self) -> str:
+        words = [w for w in (self.size, self.colour) if w]
+        noun = self.name.split("_")[-1] if self.kind == "object" else "region"
+        return " ".join(words + [noun])
+
+
+@dataclass(frozen=True)
+class World:
+    """The entities a plan may name. ``rejected`` lists names the policy refused."""
+
+    objects: tuple[Entity, ...]
+    regions: tuple[Entity, ...]
+    source: str
+    rejected: tuple[InjectionFinding, ...] = field(default_factory=tuple)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.objects + self.regions)
+
+    def get(self, name: str) -> Entity | None:
+        return next((e for e in self.objects + self.regions if e.name == name), None)
+
+
+def _screen_name(name: Any, source: str, rejected: list) -> bool:
+    text = str(name)
+    findings = [InjectionFinding(source=f.source, code=f.code, text=text, match=f.match)
+                for f in screen_text(text.replace("_", " "), source=source)]
+    if not NAME_PATTERN.match(text):
+        findings.append(InjectionFinding(source=source, code="invalid_name", text=text, match=text))
+    rejected.extend(findings)
+    return not findings
+
+
+def _sizes(objects: list[dict]) -> dict[str, str]:
+    extents = {o["name"]: max(o["half_extents"][:2]) for o in objects}
+    if len(set(round(v, 4) for v in extents.values())) < 2:
+        return {}
+    mid = (min(extents.values()) + max(extents.values())) / 2
+    return {n: ("large" if v > mid else "small") for n, v in extents.items()}
+
+
+def world_from_scene(scene: Mapping[str, Any], *, source: str = "scene") -> World:
+    """Entities of a goal graph's ``scene`` mapping (objects and regions; obstacles are not goals)."""
+    rejected: list[InjectionFinding] = []
+    raw_objects = [dict(o) for o in scene.get("objects") or [] if isinstance(o, Mapping)]
+    raw_objects = [o for o in raw_objects if _screen_name(o.get("name"), f"{source}: object name", rejected)]
+    for o in raw_objects:
+        o.setdefault("half_extents", [0.02, 0.02, 0.02])
+    sizes = _sizes(raw_objects)
+    objects = tuple(Entity(name=o["name"], kind="object", position=(float(o["position"][0]), float(o["position"][1])),
+                           colour=colour_name(o.get("rgba")), size=sizes.get(o["name"]),
+                           size_m=2 * max(o["half_extents"][:2])) for o in raw_objects)
+    regions = []
+    for r in scene.get("regions") or []:
+        if not isinstance(r, Mapping) or not _screen_name(r.get("name"), f"{source}: region name", rejected):
+            continue
+        regions.append(Entity(name=r["name"], kind="region", position=(float(r["center"][0]), float(r["center"][1])),
+                              colour=colour_name(r.get("rgba")), size_m=2 * max(r.get("half_extents", [0.05, 0.05])[:2])))
+    return World(objects=objects, regions=tuple(regions), source=source, rejected=tuple(rejected))
+
+
+def world_from_environment(entities: Sequence[Mapping[str, Any]], *, source: str = "ENVIRONMENT.md") -> World:
+    """Entities of ENVIRONMENT.md (what the runtime last perceived): objects with a pose, regions by kind."""
+    rejected: list[InjectionFinding] = []
+    objects, regions = [], []
+    for e in entities:
+        name, kind = e.get("name"), e.get("kind", "object")
+        pos = (e.get("pose") or {}).get("position") or e.get("position") or e.get("center")
+        if pos is None or not _screen_name(name, f"{source}: {kind} name", rejected):
+            continue
+        ent = Entity(name=str(name), kind="region" if kind == "region" else "object",
+                     position=(float(pos[0]), float(pos[1])), colour=colour_name(e.get("rgba")))
+        (regions if ent.kind == "region" else objects).append(ent)
+    return World(objects=tuple(objects), regions=tuple(regions), source=source, rejected=tuple(rejected))
+
+
+def distance(a: Entity, b: Entity) -> float:
+    return math.hypot(a.position[0] - b.position[0], a.position[1] - b.position[1])

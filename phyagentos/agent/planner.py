@@ -1,0 +1,457 @@
+"""Goal Planner: a natural-language request -> a validated goal graph, or a refusal with its reason.
+
+The model does not write YAML. It fills a small JSON structure whose every value is an
+enum built from what is actually there (:func:`plan_schema`): ``decision`` (plan or
+refuse), a refusal ``reason``, and ordered ``steps``, each a skill, an object of the
+scene and a destination (a region, another object, or ``none`` for a plain pick).
+Offline, llama.cpp decodes under that schema (a grammar), so the output always parses
+and can only name real entities and skills; an endpoint is asked for the same schema.
+
+Then, in order (the first that fails decides):
+
+1. **policy** (before any model call): the request and every scene name are screened
+   for injection (:mod:`phyagentos.agent.llm.policy`); a hit is refused as ``unsafe``,
+   logged with the offending text, and no model is called;
+2. **model**: the decoded decision; a model refusal is kept with its reason;
+3. **grounding**: the request must not name a colour or a kind of thing that the
+   scene does not have (refused ``unknown_object``), and every object the plan moves
+   must be one the request refers to (by name, colour, size, or a quantifier such as
+   "all"/"every"/"both"/"except"); otherwise the model gets one repair round;
+4. **structure**: a plain ``pick`` only as the last step, no object placed on itself,
+   at most one step per (object, destination); otherwise one repair round;
+5. **selector** (:mod:`phyagentos.agent.selector`): a target that has the skill's
+   capabilities and reaches the object and the destination; none: refused ``out_of_reach``;
+6. **validator**: the compiled graph goes through :func:`parse_goal_graph`, the same
+   validator as hand-written goal graphs; a failure gets the repair round too.
+
+One repair round: the model sees its own answer and the validator's message and answers
+again; if that also fails, :class:`PlannerError` says why. Steps run in order
+(``depends_on`` the previous step: one arm); each node's ``accept`` asks for its own
+placement and re-checks every earlier placement that later steps did not move (the
+request's invariants), like ``goal_graphs/sort_two_cubes.yaml``.
+
+Every model call's :class:`~phyagentos.llm.LLMCall` (provider, model, prompt hash,
+tokens, latency) and what the :class:`ModelContextBuilder` injected are kept in the
+:class:`PlanResult` and written with the plan (:func:`write_plan`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Collection, Mapping, Sequence
+
+import yaml
+
+from phyagentos.errors import GoalGraphError, PhyAgentOSError
+from phyagentos.llm import LLMCall, LLMClient, LLMError
+
+from .goal_graph import GoalGraph, parse_goal_graph
+from .llm.policy import InjectionFinding, screen_text
+from .llm.prompt import ModelContextBuilder
+from .llm.world import PALETTE, World, world_from_scene
+from .selector import select_target
+
+__all__ = ["GoalPlanner", "PlanResult", "PlanStep", "PlannerError", "REFUSAL_REASONS", "PLAN_SKILLS",
+           "plan_schema", "write_plan", "SYSTEM_PROMPT"]
+
+logger = logging.getLogger(__name__)
+
+#: Why a request is refused.
+REFUSAL_REASONS = ("unknown_object", "out_of_reach", "unsafe", "impossible")
+#: Skills a plan step may use (tabletop manipulation): move onto a destination, or pick and hold.
+PLAN_SKILLS = ("pick_and_place", "pick")
+#: Execution deadline of a planned node, s (a pick-and-place over the wall takes 20-60 s on a loaded machine).
+NODE_TIMEOUT_S = 180.0
+
+SYSTEM_PROMPT = (
+    "You are the Goal Planner of a robot arm on a table. Turn the request into JSON.\n"
+    "Each step moves one object. skill pick_and_place puts the object on the destination "
+    "(a region, or another object to stack on). skill pick lifts the object and holds it "
+    "(destination none); use it only as the last step.\n"
+    "List steps in the order they must happen. Use only names from the scene.\n"
+    "If the request asks for an object the scene does not have, answer decision refuse with "
+    "reason unknown_object. If it asks to break safety rules, refuse with reason unsafe."
+)
+
+# Few-shot turns on a fixed example scene (not the user's), in the same format as real prompts.
+_SCENE_EX = ("Scene:\n- red_block: red block\n- green_block: green block\n- blue_area: blue region\n"
+             "- yellow_area: yellow region\n")
+_EXAMPLES: tuple[tuple[str, dict], ...] = (
+    (_SCENE_EX + "Request: put the purple bottle in the blue region",
+     {"decision": "refuse", "reason": "unknown_object", "steps": []}),
+    (_SCENE_EX + "Request: put the red cube in the yellow region, then stack the green cube on it",
+     {"decision": "plan", "reason": "none", "steps": [
+         {"skill": "pick_and_place", "object": "red_block", "destination": "yellow_area"},
+         {"skill": "pick_and_place", "object": "green_block", "destination": "on_red_block"}]}),
+    (_SCENE_EX + "Request: put the green cube in the blue region",
+     {"decision": "plan", "reason": "none", "steps": [{"skill": "pick_and_place", "object": "green_block",
+                                                       "destination": "blue_area"}]}),
+)
+
+_QUANTIFIERS = {"all", "every", "each", "both", "everything", "except", "but", "other", "others", "rest", "them",
+                "sort", "cubes", "objects", "blocks", "boxes", "two", "three", "four", "one", "remaining", "any"}
+_ON = "on_"  # prefix of a stacking destination in the model's schema
+_STACK_WORDS = {"on", "onto", "stack", "top", "upon", "above"}
+_KIND_WORDS = {"cube", "cubes", "block", "blocks", "box", "boxes", "object", "objects", "thing", "things", "item",
+               "items", "one", "it", "them"}
+_UNKNOWN_KINDS = {"ball", "balls", "sphere", "spheres", "bottle", "bottles", "cup", "cups", "mug", "mugs", "bowl",
+                  "bowls", "pyramid", "pyramids", "cylinder", "cylinders", "can", "cans", "banana", "bananas",
+                  "apple", "apples", "knife", "knives", "plate", "plates", "pen", "pens", "phone", "book", "books",
+                  "toy", "toys", "shoe", "glass", "hammer", "sponge", "fork", "spoon", "duck"}
+
+
+class PlannerError(PhyAgentOSError):
+    """The model's plan stayed invalid after the repair round, or the model could not be called."""
+
+
+@dataclass(frozen=True)
+class PlanStep:
+    """One step: ``skill`` on ``object``, to ``destination`` (a region or object name; ``None`` for pick)."""
+
+    skill: str
+    object: str
+    destination: str | None
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """What the planner made of one request.
+
+    Attributes:
+        request: the instruction as given.
+        status: ``planned`` or ``refused``.
+        reason: human-readable reason (refusals) or summary.
+        refusal: one of :data:`REFUSAL_REASONS` when refused.
+        refused_by: ``policy``, ``model``, ``grounding`` or ``selector``.
+        steps: the decoded steps (planned).
+        graph_yaml: the goal graph (planned), validated.
+        graph: the parsed :class:`GoalGraph` (planned).
+        calls: every model call made.
+        context: what the ModelContextBuilder injected.
+        selections: node id -> selector record.
+        outputs: the model's raw answers, in order.
+        repairs: validator messages sent back to the model.
+        findings: policy findings (offending texts).
+        seconds: wall time of planning, s.
+    """
+
+    request: str
+    status: str
+    reason: str
+    refusal: str | None = None
+    refused_by: str | None = None
+    steps: tuple[PlanStep, ...] = ()
+    graph_yaml: str | None = None
+    graph: GoalGraph | None = None
+    calls: tuple[LLMCall, ...] = ()
+    context: dict[str, Any] = field(default_factory=dict)
+    selections: dict[str, Any] = field(default_factory=dict)
+    outputs: tuple[str, ...] = ()
+    repairs: tuple[str, ...] = ()
+    findings: tuple[InjectionFinding, ...] = ()
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"request": self.request, "status": self.status, "reason": self.reason, "refusal": self.refusal,
+                "refused_by": self.refused_by,
+                "steps": [{"skill": s.skill, "object": s.object, "destination": s.destination} for s in self.steps],
+                "calls": [c.to_dict() for c in self.calls], "context": self.context, "selections": self.selections,
+                "outputs": list(self.outputs), "repairs": list(self.repairs),
+                "findings": [{"source": f.source, "code": f.code, "text": f.text, "match": f.match}
+                             for f in self.findings],
+                "seconds": round(self.seconds, 3)}
+
+
+def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps: int = 6) -> dict[str, Any]:
+    """The JSON schema of a plan over ``world``: every value an enum of what is there."""
+    objects = [e.name for e in world.objects]
+    regions = [e.name for e in world.regions]
+
+    def step(obj: str | None) -> dict[str, Any]:
+        # Destinations exclude the object itself: nothing can be placed on itself.
+        # Stacking destinations read "on_<object>", so a region and an object of the same
+        # colour ("red_region", "red_cube") differ from the first token on.
+        dest = regions + [f"{_ON}{o}" for o in objects if o != obj] + ["none"]
+        return {"type": "object",
+                "properties": {"skill": {"enum": list(skills)}, "object": {"enum": [obj] if obj else ["none"]},
+                               "destination": {"enum": dest}},
+                "required": ["skill", "object", "destination"], "additionalProperties": False}
+
+    items = {"anyOf": [step(o) for o in objects]} if len(objects) > 1 else step(objects[0] if objects else None)
+    return {
+        "type": "object",
+        "properties": {
+            "decision": {"enum": ["plan", "refuse"]},
+            "reason": {"enum": ["none", *REFUSAL_REASONS]},
+            "steps": {"type": "array", "maxItems": max_steps, "items": items},
+        },
+        "required": ["decision", "reason", "steps"],
+        "additionalProperties": False,
+    }
+
+
+def _words(text: str) -> list[str]:
+    return re.findall(r"[a-z0-9_]+", text.lower())
+
+
+def _describe(world: World) -> list[str]:
+    lines = [f"{e.name}: {e.describe()}" for e in world.objects]
+    lines += [f"{e.name}: {(e.colour + ' ') if e.colour else ''}region" for e in world.regions]
+    return lines
+
+
+class _Invalid(Exception):
+    """A plan the model can repair; the message goes back to it."""
+
+
+class GoalPlanner:
+    """Plans requests into goal graphs with a language model (see the module docstring).
+
+    Args:
+        client: the model (:func:`phyagentos.llm.make_client`).
+        skills: skill names the validator accepts (the runtime's skill registry).
+        targets: TARGETS.md entries as dicts (for the selector and the validator).
+        lessons: lesson texts the ContextBuilder may inject (lowest priority).
+        context_budget: token budget of the user message.
+        max_steps: most steps per plan.
+    """
+
+    def __init__(self, client: LLMClient, *, skills: Collection[str], targets: Sequence[Mapping[str, Any]],
+                 lessons: Sequence[str] = (), context_budget: int = 700, max_steps: int = 6):
+        self.client = client
+        self.skills = list(skills)
+        self.targets = [dict(t) for t in targets]
+        self.lessons = list(lessons)
+        self.context_builder = ModelContextBuilder(context_budget)
+        self.max_steps = max_steps
+        self.plan_skills = [s for s in PLAN_SKILLS if s in self.skills]
+
+    # -- public ------------------------------------------------------------
+
+    def plan(self, request: str, *, scene: Mapping[str, Any], name: str = "planned", prefer_target: str | None = None,
+             prior_attempts: Sequence[str] = ()) -> PlanResult:
+        """Plan ``request`` on ``scene`` (a goal graph's ``scene`` mapping).
+
+        Raises:
+            PlannerError: the model could not be called, or its plan stayed invalid after one repair.
+        """
+        started = time.perf_counter()
+        findings = screen_text(request, source="instruction")
+        world = world_from_scene(scene)
+        findings += list(world.rejected)
+        if findings:
+            return PlanResult(request=request, status="refused", refusal="unsafe", refused_by="policy",
+                              reason="rejected by the tool policy: " + "; ".join(str(f) for f in findings),
+                              findings=tuple(findings), seconds=time.perf_counter() - started)
+        ctx = self.context_builder.build(
+            request=request, environment=_describe(world),
+            prior_attempts=prior_attempts, lessons=self.lessons)
+        schema = plan_schema(world, skills=self.plan_skills, max_steps=self.max_steps)
+        messages: list[dict[str, str]] = [{"role": "system", "content": SYSTEM_PROMPT}]
+        for user, answer in _EXAMPLES:
+            messages += [{"role": "user", "content": user},
+                         {"role": "assistant", "content": json.dumps(answer, separators=(",", ":"))}]
+        messages.append({"role": "user", "content": ctx.text})
+        calls: list[LLMCall] = []
+        outputs: list[str] = []
+        repairs: list[str] = []
+        common = dict(request=request, context=ctx.to_dict(), findings=())
+        for round_ in range(2):
+            try:
+                reply = self.client.complete(messages, schema=schema, max_tokens=60 + 40 * self.max_steps,
+                                             purpose="plan" if round_ == 0 else "repair")
+            except LLMError as exc:
+                raise PlannerError(f"planning {request!r}: {exc}") from exc
+            calls.append(reply.call)
+            outputs.append(reply.text)
+            try:
+                decoded = self._decode(reply.text, world)
+                if decoded is None:  # the model refused
+                    data = json.loads(reply.text)
+                    reason = data.get("reason") if data.get("reason") in REFUSAL_REASONS else "impossible"
+                    unknown = self._unknown_mentions(request, world)
+                    detail = f"; the request names {', '.join(unknown)}, which the scene does not have" if unknown else ""
+                    return PlanResult(status="refused", refusal=reason, refused_by="model",
+                                      reason=f"the model refused ({reason}){detail}", calls=tuple(calls),
+                                      outputs=tuple(outputs), repairs=tuple(repairs),
+                                      seconds=time.perf_counter() - started, **common)
+                unknown = self._unknown_mentions(request, world)
+                if unknown:
+                    return PlanResult(status="refused", refusal="unknown_object", refused_by="grounding",
+                                      reason=f"the request names {', '.join(unknown)}, which the scene "
+                                             f"({world.source}) does not have; it has {', '.join(_describe(world))}",
+                                      calls=tuple(calls), outputs=tuple(outputs), repairs=tuple(repairs),
+                                      seconds=time.perf_counter() - started, **common)
+                self._check_grounded(request, decoded, world)
+                self._check_structure(decoded, world)
+                graph_dict, selections, far = self._compile(decoded, world, scene, name=name, request=request,
+                                                            prefer_target=prefer_target)
+                if far:
+                    return PlanResult(status="refused", refusal="out_of_reach", refused_by="selector",
+                                      reason=far, steps=tuple(decoded), selections=selections, calls=tuple(calls),
+                                      outputs=tuple(outputs), repairs=tuple(repairs),
+                                      seconds=time.perf_counter() - started, **common)
+                text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
+                try:
+                    graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
+                                             targets=[t["name"] for t in self.targets])
+                except GoalGraphError as exc:
+                    raise _Invalid(f"the goal graph it compiles to is invalid: {exc}") from exc
+            except _Invalid as exc:
+                message = str(exc)
+                repairs.append(message)
+                logger.info("plan of %r rejected (round %d): %s; model output: %s", request, round_ + 1, message,
+                            reply.text)
+                messages += [{"role": "assistant", "content": reply.text},
+                             {"role": "user", "content": f"That plan is rejected: {message}. Answer again with a "
+                                                         f"corrected plan for the same request: {request}"}]
+                continue
+            return PlanResult(status="planned", reason=f"{len(graph.nodes)} node(s)", steps=tuple(decoded),
+                              graph_yaml=text, graph=graph, calls=tuple(calls), selections=selections,
+                              outputs=tuple(outputs), repairs=tuple(repairs), seconds=time.perf_counter() - started,
+                              **common)
+        raise PlannerError(f"the plan for {request!r} is still invalid after one repair round: {repairs[-1]} "
+                           f"(model output: {outputs[-1]!r})")
+
+    # -- checks ------------------------------------------------------------
+
+    def _decode(self, text: str, world: World) -> list[PlanStep] | None:
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise _Invalid(f"the answer is not JSON ({exc.msg})") from exc
+        if not isinstance(data, dict) or data.get("decision") not in ("plan", "refuse"):
+            raise _Invalid("the answer needs decision plan or refuse")
+        if data["decision"] == "refuse":
+            return None
+        steps = []
+        for i, raw in enumerate(data.get("steps") or []):
+            if not isinstance(raw, dict):
+                raise _Invalid(f"step {i + 1} is not an object")
+            skill, obj, dest = raw.get("skill"), raw.get("object"), raw.get("destination")
+            if isinstance(dest, str) and dest.startswith(_ON) and world.get(dest) is None:
+                dest = dest[len(_ON):]
+            if skill not in self.plan_skills:
+                raise _Invalid(f"step {i + 1}: unknown skill {skill!r}; valid skills: {', '.join(self.plan_skills)}")
+            if world.get(str(obj)) is None or world.get(str(obj)).kind != "object":
+                raise _Invalid(f"step {i + 1}: unknown object {obj!r}; objects: "
+                               f"{', '.join(e.name for e in world.objects)}")
+            if dest not in (None, "none") and world.get(str(dest)) is None:
+                raise _Invalid(f"step {i + 1}: unknown destination {dest!r}; valid: {', '.join(world.names)}")
+            steps.append(PlanStep(skill=skill, object=obj, destination=None if dest in (None, "none") else dest))
+        if not steps:
+            raise _Invalid("decision plan needs at least one step")
+        return steps
+
+    @staticmethod
+    def _unknown_mentions(request: str, world: World) -> list[str]:
+        words = _words(request)
+        colours = {e.colour for e in world.objects + world.regions if e.colour}
+        names = set(world.names) | {p for n in world.names for p in n.split("_")}
+        unknown = [f"'{w}' (colour)" for w in dict.fromkeys(words) if w in PALETTE and w not in colours]
+        unknown += [f"'{w}'" for w in dict.fromkeys(words) if w in _UNKNOWN_KINDS and w not in names]
+        unknown += [f"'{w}'" for w in dict.fromkeys(words) if "_" in w and w not in world.names]
+        return unknown
+
+    @staticmethod
+    def _refers_to(request_words: set[str], entity) -> bool:
+        if entity.name in request_words or entity.name.replace("_", " ") in " ".join(request_words):
+            return True
+        parts = set(entity.name.split("_"))
+        return bool((entity.colour and entity.colour in request_words) or (entity.size and entity.size in request_words)
+                    or (parts & request_words - _KIND_WORDS))
+
+    def _check_grounded(self, request: str, steps: Sequence[PlanStep], world: World) -> None:
+        words = set(_words(request))
+        for s in steps:
+            dest = world.get(s.destination) if s.destination else None
+            if dest is not None and dest.kind == "object" and not words & _STACK_WORDS:
+                regions = ", ".join(e.name for e in world.regions)
+                raise _Invalid(f"the request does not ask to stack anything on {dest.name}; the regions are {regions}")
+        if words & _QUANTIFIERS:
+            return  # "all", "both", "sort", "except" ...: any object may be meant
+        for s in steps:
+            ent = world.get(s.object)
+            if ent is not None and not self._refers_to(words, ent):
+                raise _Invalid(f"the request does not mention {s.object} ({ent.describe()}); "
+                               f"move only the objects the request names")
+
+    def _check_structure(self, steps: Sequence[PlanStep], world: World) -> None:
+        seen = set()
+        for i, s in enumerate(steps):
+            if s.skill == "pick" and i != len(steps) - 1:
+                raise _Invalid(f"step {i + 1}: pick (hold) must be the last step")
+            if s.skill == "pick_and_place" and s.destination is None:
+                raise _Invalid(f"step {i + 1}: pick_and_place needs a destination")
+            if s.skill == "pick" and s.destination is not None:
+                raise _Invalid(f"step {i + 1}: pick takes destination none; use pick_and_place to move it")
+            if s.destination == s.object:
+                raise _Invalid(f"step {i + 1}: {s.object} cannot be placed on itself")
+            if (s.object, s.destination) in seen:
+                raise _Invalid(f"step {i + 1} repeats moving {s.object} to {s.destination}")
+            seen.add((s.object, s.destination))
+
+    # -- compile -----------------------------------------------------------
+
+    def _compile(self, steps: Sequence[PlanStep], world: World, scene: Mapping[str, Any], *, name: str,
+                 request: str, prefer_target: str | None) -> tuple[dict, dict, str | None]:
+        nodes: list[dict[str, Any]] = []
+        selections: dict[str, Any] = {}
+        placed: dict[str, dict] = {}  # object -> criterion that should still hold
+        for i, s in enumerate(steps):
+            node_id = re.sub(r"[^a-z0-9_]", "_", f"s{i + 1}_{s.skill}_{s.object}")[:60]
+            positions = {s.object: world.get(s.object).position}
+            if s.destination:
+                positions[s.destination] = world.get(s.destination).position
+            sel = select_target(s.skill, targets=self.targets, positions=positions, prefer=prefer_target)
+            selections[node_id] = sel.to_dict()
+            if sel.target is None:
+                why = "; ".join(f"{t}: {r}" for t, r in sel.reasons.items())
+                if sel.out_of_reach:
+                    return {}, selections, f"step {i + 1} ({s.object} -> {s.destination or 'hold'}) is out of every " \
+                                           f"target's reach: {why}"
+                raise _Invalid(f"no target can run {s.skill}: {why}")
+            placed.pop(s.object, None)
+            if s.skill == "pick":
+                accept: list[dict] = [{"holding": s.object}, {"lifted": {"object": s.object, "min_height": 0.05}}]
+            else:
+                dest = world.get(s.destination)
+                own = ({"inside": {"object": s.object, "region": s.destination}} if dest.kind == "region"
+                       else {"on": {"object": s.object, "support": s.destination}})
+                accept = [own] + ([{"released": s.object}] if dest.kind == "object" else [])
+            accept += [c for o, c in placed.items() if o != s.destination or "inside" in c]
+            if s.skill == "pick_and_place":
+                placed[s.object] = accept[0]
+            node = {"id": node_id, "skill": s.skill, "target": sel.target,
+                    "params": {"object": s.object, **({"region": s.destination} if s.destination else {})},
+                    "accept": accept, "depends_on": [nodes[-1]["id"]] if nodes else [],
+                    "limits": {"execution_timeout_s": NODE_TIMEOUT_S}}
+            if sel.runtime and sel.runtime != "builtin":
+                node["runtime"] = sel.runtime
+            nodes.append(node)
+        model = self.client.model
+        graph = {"version": 1, "name": name,
+                 "description": f"Planned by the Goal Planner ({self.client.provider} {model}) from: {request}",
+                 "scene": json.loads(json.dumps(dict(scene))), "nodes": nodes}
+        return graph, selections, None
+
+
+def write_plan(result: PlanResult, directory: str | Path) -> dict[str, Path]:
+    """Write ``request.txt``, ``plan.yaml`` (the record: calls, context, selections, outputs) and, when
+    planned, ``goal_graph.yaml`` into ``directory``; returns the paths."""
+    from phyagentos.protocol.atomic import atomic_write_text  # noqa: PLC0415
+
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    paths = {"request": d / "request.txt", "record": d / "plan.yaml"}
+    atomic_write_text(paths["request"], result.request + "\n")
+    atomic_write_text(paths["record"], yaml.safe_dump(result.to_dict(), sort_keys=False, allow_unicode=True))
+    if result.graph_yaml:
+        paths["goal_graph"] = d / "goal_graph.yaml"
+        atomic_write_text(paths["goal_graph"], result.graph_yaml)
+    return paths

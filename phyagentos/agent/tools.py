@@ -1,0 +1,224 @@
+"""ToolRegistry: the Agent's only authority, as typed tools with JSON schemas.
+
+Every tool names its input schema (JSON Schema, ``additionalProperties: false``) and is
+called through :meth:`ToolRegistry.call`, which checks the arguments against the
+schema, applies the tool policy and returns a JSON-serialisable result or raises
+:class:`ToolError`. The in-process Agent and the MCP server (:mod:`phyagentos.mcp_server`)
+expose the same registry, so an external agent can read the workspace, plan, submit and
+signal without touching any target SDK.
+
+Tools: ``read_environment``, ``list_targets``, ``list_skills``, ``list_sessions``,
+``read_session``, ``list_runs``, ``read_memory`` (reads); ``plan_request`` and
+``submit_goal_graph`` (through the validated path: the same validator and
+``Workspace.submit_session`` as ``phyagentos submit``); ``send_signal`` (cancel, pause,
+resume, estop, clear_estop).
+
+Tool policy: string arguments are screened for injection
+(:func:`phyagentos.agent.llm.policy.screen_text`); a hit rejects the call, logged with the
+offending text. ``send_signal`` with ``estop`` is always allowed: it is never screened,
+never rate-limited and needs no other argument. Submitting needs a ``submit`` callable
+from the composition root (the Agent plane does not own the Runtime's skill registry).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+from phyagentos.errors import PhyAgentOSError
+from phyagentos.protocol import Workspace
+
+from .llm.policy import screen_text
+from .skill_catalog import skill_catalog
+
+__all__ = ["Tool", "ToolError", "ToolRegistry"]
+
+logger = logging.getLogger(__name__)
+
+SIGNALS = ("cancel", "pause", "resume", "estop", "clear_estop")
+MEMORY_DOCS = {"lessons": "LESSONS", "knowledge": "KNOWLEDGE", "procedures": "SKILL"}
+
+
+class ToolError(PhyAgentOSError):
+    """A tool call was malformed, refused by the tool policy, or failed."""
+
+
+@dataclass(frozen=True)
+class Tool:
+    """One tool: ``name``, ``description``, JSON-schema ``input_schema``, its function, and whether the
+    injection screen applies (``screened``)."""
+
+    name: str
+    description: str
+    input_schema: dict[str, Any]
+    fn: Callable[..., Any]
+    screened: bool = True
+
+    def describe(self) -> dict[str, Any]:
+        return {"name": self.name, "description": self.description, "input_schema": self.input_schema}
+
+
+def _obj(props: dict[str, Any] | None = None, required: tuple[str, ...] = ()) -> dict[str, Any]:
+    return {"type": "object", "properties": props or {}, "required": list(required), "additionalProperties": False}
+
+
+_TYPES = {"string": str, "integer": int, "number": (int, float), "boolean": bool, "object": dict, "array": list}
+
+
+def _check_args(tool: Tool, args: Mapping[str, Any]) -> None:
+    schema = tool.input_schema
+    props = schema.get("properties", {})
+    unknown = set(args) - set(props)
+    if unknown:
+        raise ToolError(f"{tool.name}: unknown argument(s) {sorted(unknown)}; valid: {sorted(props)}")
+    for name in schema.get("required", []):
+        if name not in args:
+            raise ToolError(f"{tool.name}: missing required argument {name!r}")
+    for name, value in args.items():
+        spec = props[name]
+        py = _TYPES.get(spec.get("type", ""), object)
+        wrong_type = value is not None and not isinstance(value, py)
+        if wrong_type or (isinstance(value, bool) and spec.get("type") in ("integer", "number")):
+            raise ToolError(f"{tool.name}: argument {name!r} must be {spec.get('type')}, got {type(value).__name__}")
+        if "enum" in spec and value not in spec["enum"]:
+            raise ToolError(f"{tool.name}: argument {name!r} must be one of {spec['enum']}, got {value!r}")
+
+
+def _strings(value: Any) -> list[str]:
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, Mapping):
+        return [s for k, v in value.items() for s in _strings(k) + _strings(v)]
+    if isinstance(value, (list, tuple)):
+        return [s for v in value for s in _strings(v)]
+    return []
+
+
+class ToolRegistry:
+    """The tools over one workspace.
+
+    Args:
+        workspace: the protocol workspace.
+        submit: ``submit(yaml_text) -> run_id`` validating and registering a goal graph
+            (the composition root passes :func:`phyagentos.orchestrator.submit_goal_graph`
+            wrapped); ``None``: the ``submit_goal_graph`` tool is not offered.
+        plan: ``plan(request, scene) -> dict`` (a Goal Planner); ``None``: ``plan_request``
+            is not offered.
+        issued_by: recorded as the sender of signals.
+    """
+
+    def __init__(self, workspace: Workspace, *, submit: Callable[[str], str] | None = None,
+                 plan: Callable[[str, dict | None], dict] | None = None, issued_by: str = "agent:tools"):
+        self.workspace = workspace
+        self.issued_by = issued_by
+        self.rejections: list[dict[str, Any]] = []
+        self._tools: dict[str, Tool] = {}
+        add = self._add
+        add(Tool("read_environment", "What the runtime last perceived (ENVIRONMENT.md): entities with poses, relations.",
+                 _obj(), self._read_environment))
+        add(Tool("list_targets", "The registered targets (TARGETS.md): kind, capabilities, observations, action space.",
+                 _obj(), lambda: self._doc("TARGETS")))
+        add(Tool("list_skills", "Skills a goal graph may use, with required (task) and optional (strategy) parameters.",
+                 _obj(), self._list_skills))
+        add(Tool("list_sessions", "Active sessions (optionally of one run): id, state, node, skill, target.",
+                 _obj({"run_id": {"type": "string"}}), self._list_sessions))
+        add(Tool("read_session", "One session's record: state, parameters, attempts, verdicts, evidence.",
+                 _obj({"session_id": {"type": "string"}}, ("session_id",)), self._read_session))
+        add(Tool("list_runs", "Active runs (submitted goal graphs not yet finished).", _obj(), self._list_runs))
+        add(Tool("read_memory", "Memory documents: verified lessons, knowledge patterns or promoted procedures.",
+                 _obj({"kind": {"type": "string", "enum": sorted(MEMORY_DOCS)}}, ("kind",)), self._read_memory))
+        add(Tool("send_signal", "Signal the runtime: cancel a session, pause/resume claiming, estop (always "
+                                "allowed), clear_estop.",
+                 _obj({"kind": {"type": "string", "enum": list(SIGNALS)}, "session_id": {"type": "string"},
+                       "reason": {"type": "string"}}, ("kind",)), self._send_signal, screened=False))
+        if submit is not None:
+            self._submit = submit
+            add(Tool("submit_goal_graph", "Validate a goal graph (YAML text, docs/goal_graphs.md) and submit it as a "
+                                          "run; returns the run id. Invalid graphs are rejected with file:line.",
+                     _obj({"goal_graph_yaml": {"type": "string"}}, ("goal_graph_yaml",)), self._submit_graph))
+        if plan is not None:
+            self._plan = plan
+            add(Tool("plan_request", "Plan a natural-language request into a validated goal graph (or a refusal "
+                                     "with its reason) on a scene (default: the tabletop scene).",
+                     _obj({"request": {"type": "string"}, "scene": {"type": "object"}}, ("request",)),
+                     self._plan_request))
+
+    def _add(self, tool: Tool) -> None:
+        self._tools[tool.name] = tool
+
+    # -- registry ------------------------------------------------------------
+
+    def names(self) -> list[str]:
+        return list(self._tools)
+
+    def get(self, name: str) -> Tool:
+        try:
+            return self._tools[name]
+        except KeyError:
+            raise ToolError(f"unknown tool {name!r}; valid tools: {', '.join(self._tools)}") from None
+
+    def describe(self) -> list[dict[str, Any]]:
+        """Name, description and input schema of every tool."""
+        return [t.describe() for t in self._tools.values()]
+
+    def call(self, name: str, arguments: Mapping[str, Any] | None = None) -> Any:
+        """Call tool ``name`` with ``arguments`` (checked against its schema and the tool policy).
+
+        Raises:
+            ToolError: unknown tool, bad arguments, a policy rejection, or the tool failed.
+        """
+        tool = self.get(name)
+        args = dict(arguments or {})
+        _check_args(tool, args)
+        if tool.screened:
+            findings = [f for text in _strings(args) for f in screen_text(text, source=f"tool {name}")]
+            if findings:
+                self.rejections.append({"tool": name, "findings": [str(f) for f in findings]})
+                raise ToolError(f"{name}: rejected by the tool policy: " + "; ".join(str(f) for f in findings))
+        try:
+            return tool.fn(**args)
+        except ToolError:
+            raise
+        except PhyAgentOSError as exc:
+            raise ToolError(f"{name}: {exc}") from exc
+
+    # -- tools ---------------------------------------------------------------
+
+    def _doc(self, name: str) -> Any:
+        return self.workspace.read(name).data.model_dump(mode="json")
+
+    def _read_environment(self) -> Any:
+        return self._doc("ENVIRONMENT")
+
+    @staticmethod
+    def _list_skills() -> Any:
+        return [{"name": s.name, "required": sorted(s.required), "optional": sorted(s.optional)}
+                for s in skill_catalog().values()]
+
+    def _list_sessions(self, run_id: str | None = None) -> Any:
+        return [{"session_id": sid, "state": state, "run_id": ident.run_id, "node": getattr(ident, "node", None)}
+                for sid, state, ident in self.workspace.active_sessions(run_id=run_id)]
+
+    def _read_session(self, session_id: str) -> Any:
+        return self.workspace.load_session(session_id).model_dump(mode="json")
+
+    def _list_runs(self) -> Any:
+        return [self.workspace.runs.load(r).model_dump(mode="json") for r in self.workspace.runs.active_ids()]
+
+    def _read_memory(self, kind: str) -> Any:
+        return self._doc(MEMORY_DOCS[kind])
+
+    def _send_signal(self, kind: str, session_id: str | None = None, reason: str = "") -> Any:
+        if kind != "estop":  # e-stop is always allowed: nothing is screened before it goes out
+            findings = screen_text(reason, source="tool send_signal") if reason else []
+            if findings:
+                raise ToolError("send_signal: rejected by the tool policy: " + "; ".join(map(str, findings)))
+        sig = self.workspace.send_signal(kind, session_id=session_id, reason=reason, issued_by=self.issued_by)
+        return sig.model_dump(mode="json")
+
+    def _submit_graph(self, goal_graph_yaml: str) -> Any:
+        return {"run_id": self._submit(goal_graph_yaml)}
+
+    def _plan_request(self, request: str, scene: dict | None = None) -> Any:
+        return self._plan(request, scene)

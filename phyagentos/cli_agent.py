@@ -1,0 +1,150 @@
+"""``phyagentos plan`` and ``phyagentos mcp``: the thinking half of the Agent plane on the command line.
+
+    phyagentos plan "REQUEST" --workspace WS [--scene SCENE.yaml] [--target NAME] [--run] [--json]
+    phyagentos mcp --workspace WS [--http] [--port N]
+
+``plan`` prints the goal graph the Goal Planner compiled (YAML and its DAG), validated,
+and writes it with the plan's record (model calls, injected context, selector reasons)
+under ``WS/plans/<plan id>/``; with ``--run`` the graph then runs like ``phyagentos run``.
+Without ``--scene`` it plans on the tabletop scene of ``goal_graphs/pick_and_place.yaml``.
+A refusal prints its reason and exits 1; a plan still invalid after the repair round is
+an error (exit 2). The model comes from ``llm.yaml`` / ``PHYAGENTOS_LLM_*`` (offline
+SmolLM2 by default).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from phyagentos.errors import GoalGraphError
+
+__all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_reviser", "default_scene", "load_scene"]
+
+EXIT_OK, EXIT_NOT_SUCCEEDED = 0, 1
+
+
+def default_scene() -> dict[str, Any]:
+    """The tabletop scene of ``goal_graphs/pick_and_place.yaml``."""
+    from phyagentos.resources import goal_graphs_dir  # noqa: PLC0415
+
+    return load_scene(goal_graphs_dir() / "pick_and_place.yaml")
+
+
+def load_scene(path: str | Path) -> dict[str, Any]:
+    """A scene mapping from ``path``: a goal graph (its ``scene``) or a bare scene (``objects``/``regions``)."""
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise GoalGraphError(f"cannot read scene: {exc}", path=path) from exc
+    if isinstance(data, dict) and isinstance(data.get("scene"), dict):
+        return data["scene"]
+    if isinstance(data, dict) and ("objects" in data or "regions" in data):
+        return data
+    raise GoalGraphError("expected a scene mapping (objects, regions, obstacles) or a goal graph with a 'scene'",
+                         path=path)
+
+
+def make_planner(workspace, *, client=None):
+    """A GoalPlanner over ``workspace``'s targets and the shipped skills, with the configured model."""
+    from phyagentos.agent.planner import GoalPlanner  # noqa: PLC0415
+    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
+    from phyagentos.orchestrator import skill_names  # noqa: PLC0415
+
+    targets = [t.model_dump(mode="json") for t in workspace.read("TARGETS").data.targets]
+    client = client or make_client(load_llm_config(workspace.root))
+    # Verified lessons, most confirmed first: the ContextBuilder injects them within its budget (lowest priority).
+    verified = sorted((x for x in workspace.read("LESSONS").data.lessons if x.verified),
+                      key=lambda x: -x.confirmations)
+    lessons = [f"{x.cause}: {x.correction} ({x.confirmations} confirmation(s))" for x in verified[:5]]
+    return GoalPlanner(client, skills=skill_names(), targets=targets, lessons=lessons)
+
+
+def make_reviser(kind: str, workspace_dir: str | Path):
+    """``None`` for the rule ladder (the verifier's default), or a ModelReviser (the configured model) with the
+    ladder as fallback."""
+    if kind == "rules":
+        return None
+    from phyagentos.agent.recovery import RecoveryPlanner  # noqa: PLC0415
+    from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415
+    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
+
+    return ModelReviser(make_client(load_llm_config(workspace_dir)), fallback=RecoveryPlanner())
+
+
+def add_agent_commands(sub: argparse._SubParsersAction) -> None:
+    """Add ``plan`` and ``mcp`` to the ``phyagentos`` sub-commands."""
+    plan = sub.add_parser("plan", help="plan a natural-language request into a validated goal graph (Goal Planner)")
+    plan.add_argument("request", help="the instruction, e.g. \"put the cube in the goal region\"")
+    plan.add_argument("--workspace", type=Path, required=True, help="workspace directory (created if needed)")
+    plan.add_argument("--scene", type=Path, help="scene YAML or a goal graph with a scene (default: the tabletop "
+                                                 "scene of goal_graphs/pick_and_place.yaml)")
+    plan.add_argument("--target", help="prefer this target when it fits (the selector decides otherwise)")
+    plan.add_argument("--run", action="store_true", help="run the planned graph like `phyagentos run`")
+    plan.add_argument("--json", action="store_true", help="print one JSON object")
+    plan.add_argument("--seed", type=int, default=0, help="base seed of the run's sessions (with --run)")
+    plan.add_argument("--reviser", choices=("rules", "model"), default="rules",
+                      help="with --run: diagnosis and revision by the rule ladder (default) or the model")
+    mcp = sub.add_parser("mcp", help="serve the ToolRegistry as an MCP server (stdio; --http for localhost)")
+    mcp.add_argument("--workspace", type=Path, required=True, help="workspace directory (created if needed)")
+    mcp.add_argument("--http", action="store_true", help="streamable HTTP on 127.0.0.1 instead of stdio")
+    mcp.add_argument("--port", type=int, default=8765, help="HTTP port (default 8765)")
+    mcp.add_argument("--no-planner", action="store_true", help="do not offer plan_request (no model is loaded)")
+
+
+def _cmd_plan(args, out, err) -> int:
+    from phyagentos.agent.dag import to_digraph, topological_order  # noqa: PLC0415
+    from phyagentos.agent.planner import write_plan  # noqa: PLC0415
+    from phyagentos.protocol import Workspace  # noqa: PLC0415
+
+    workspace = Workspace.create(args.workspace)
+    scene = load_scene(args.scene) if args.scene else default_scene()
+    planner = make_planner(workspace)
+    result = planner.plan(args.request, scene=scene, prefer_target=args.target)
+    plan_id = datetime.now(timezone.utc).strftime("plan-%Y%m%dT%H%M%S%fZ")
+    paths = write_plan(result, workspace.root / "plans" / plan_id)
+    if args.json and not args.run:
+        print(json.dumps({**result.to_dict(), "plan_id": plan_id, "goal_graph": str(paths.get("goal_graph", "")),
+                          "goal_graph_yaml": result.graph_yaml}, ensure_ascii=False))
+    elif not args.json:
+        calls = ", ".join(f"{c.purpose} {c.prompt_tokens}+{c.completion_tokens} tok {c.latency_s:.2f} s"
+                          for c in result.calls)
+        err.print(f"[dim]{planner.client.provider} {planner.client.model}: {calls or 'no model call'}[/dim]")
+        if result.status != "planned":
+            out.print(f"[red]refused ({result.refusal}, by {result.refused_by})[/red]: {result.reason}")
+        else:
+            print(result.graph_yaml, end="")
+            dag = to_digraph(result.graph)
+            out.print(f"goal graph: valid, {len(result.graph.nodes)} node(s)")
+            for node_id in topological_order(dag):
+                node = result.graph.get_node(node_id)
+                deps = f" after {', '.join(node.depends_on)}" if node.depends_on else ""
+                out.print(f"  {node_id}: {node.skill} on {node.target}{deps}")
+        out.print(f"plan: {paths['record'].parent}")
+    if result.status != "planned":
+        if args.json and args.run:
+            print(json.dumps({**result.to_dict(), "plan_id": plan_id}, ensure_ascii=False))
+        return EXIT_NOT_SUCCEEDED
+    if not args.run:
+        return EXIT_OK
+    from phyagentos.cli import _cmd_run  # noqa: PLC0415
+
+    run_args = argparse.Namespace(goal_graph=paths["goal_graph"], workspace=args.workspace, json=args.json,
+                                  seed=args.seed, target=None, memory="learn", keep_success_images=False,
+                                  reviser=args.reviser)
+    return _cmd_run(run_args, out, err)
+
+
+def _cmd_mcp(args, out, err) -> int:
+    from phyagentos.mcp_server import serve  # noqa: PLC0415
+
+    serve(args.workspace, http=args.http, port=args.port, with_planner=not args.no_planner)
+    return EXIT_OK
+
+
+AGENT_HANDLERS = {"plan": _cmd_plan, "mcp": _cmd_mcp}

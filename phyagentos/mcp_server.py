@@ -1,0 +1,99 @@
+"""The ToolRegistry as an MCP server (official ``mcp`` SDK): ``phyagentos mcp --workspace WS [--http]``.
+
+A composition root: it builds the :class:`~phyagentos.agent.tools.ToolRegistry` with the
+validated submit path (:func:`phyagentos.orchestrator.submit_goal_graph`) and the Goal
+Planner (the model of ``llm.yaml``/environment, offline by default), and serves exactly
+its tools -- names, descriptions and JSON input schemas as the registry declares them --
+over stdio (default) or streamable HTTP on localhost (``--http``, path ``/mcp``).
+
+A tool error (bad arguments, a policy rejection, an invalid goal graph) is returned as an
+MCP tool result with ``isError`` and the message; results are JSON text.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import anyio
+import mcp.types as types
+from mcp.server.lowlevel import Server
+from mcp.server.stdio import stdio_server
+
+from phyagentos.agent.tools import ToolError, ToolRegistry
+from phyagentos.protocol import Workspace
+
+__all__ = ["build_registry", "build_server", "serve"]
+
+logger = logging.getLogger(__name__)
+
+
+def build_registry(workspace: Workspace, *, with_planner: bool = True) -> ToolRegistry:
+    """The registry over ``workspace`` with submit and (optionally) the Goal Planner wired in."""
+    from phyagentos.orchestrator import submit_goal_graph  # noqa: PLC0415
+
+    def submit(text: str) -> str:
+        with tempfile.NamedTemporaryFile("w", suffix=".yaml", dir=workspace.root, prefix=".submit-", delete=False) as f:
+            f.write(text)
+            path = Path(f.name)
+        try:
+            return submit_goal_graph(path, workspace.root, submitted_by="mcp").run_id
+        finally:
+            path.unlink(missing_ok=True)
+
+    plan = None
+    if with_planner:
+        def plan(request: str, scene: dict | None) -> dict:
+            from phyagentos.cli_agent import make_planner, default_scene  # noqa: PLC0415
+
+            result = make_planner(workspace).plan(request, scene=scene or default_scene())
+            out = result.to_dict()
+            out["goal_graph_yaml"] = result.graph_yaml
+            return out
+
+    return ToolRegistry(workspace, submit=submit, plan=plan, issued_by="mcp")
+
+
+def build_server(registry: ToolRegistry) -> Server:
+    """A low-level MCP server exposing ``registry``'s tools unchanged."""
+
+    async def list_tools(ctx, params) -> types.ListToolsResult:
+        return types.ListToolsResult(tools=[types.Tool(name=t["name"], description=t["description"],
+                                                       input_schema=t["input_schema"]) for t in registry.describe()])
+
+    async def call_tool(ctx, params: types.CallToolRequestParams) -> types.CallToolResult:
+        try:
+            result: Any = await anyio.to_thread.run_sync(registry.call, params.name, dict(params.arguments or {}))
+        except ToolError as exc:
+            logger.info("tool %s failed: %s", params.name, exc)
+            return types.CallToolResult(content=[types.TextContent(type="text", text=str(exc))], is_error=True)
+        text = json.dumps(result, ensure_ascii=False, default=str)
+        return types.CallToolResult(content=[types.TextContent(type="text", text=text)], is_error=False)
+
+    return Server("phyagentos", version="0.1.0",
+                  instructions="PhyAgentOS ToolRegistry: read the workspace, plan, submit goal graphs, signal.",
+                  on_list_tools=list_tools, on_call_tool=call_tool)
+
+
+def serve(workspace_dir: str | Path, *, http: bool = False, host: str = "127.0.0.1", port: int = 8765,
+          with_planner: bool = True) -> None:
+    """Serve the workspace's ToolRegistry until stopped (stdio, or HTTP on ``host:port``)."""
+    workspace = Workspace.create(workspace_dir)
+    server = build_server(build_registry(workspace, with_planner=with_planner))
+    if not http:
+        async def run_stdio() -> None:
+            async with stdio_server() as (read, write):
+                await server.run(read, write, server.create_initialization_options())
+
+        anyio.run(run_stdio)
+        return
+    if host not in ("127.0.0.1", "localhost", "::1"):
+        raise ValueError(f"the MCP HTTP server binds to localhost only, not {host!r}")
+    import uvicorn  # noqa: PLC0415 - installed with mcp
+
+    app = server.streamable_http_app(host=host)
+    print(f"serving MCP on http://{host}:{port}/mcp", flush=True)
+    uvicorn.run(app, host=host, port=port, log_level="warning")

@@ -164,12 +164,12 @@ class SessionRunner:
     #: EvidenceImageWriter (runtime/evidence_writer.py) that renders the images off the
     #: critical path; None renders them here, synchronously.
     images: Any = None
+    recorder: SessionRecorder | None = None  # [view hook, issue 13] set by run() under --record
 
     def _image(self, target, path, events: list):
         if self.images is not None:
             return self.images.capture(target, path, events=events)
         return save_scene_image(target, path, events=events)
-    recorder: SessionRecorder | None = None  # [view hook, issue 13] set by run() under --record
 
     def _tick(self, target) -> Callable[[], None]:
         last = [time.monotonic()]

@@ -232,3 +232,21 @@ def test_the_arm_reaching_down_to_the_table_leaves_no_spurious_object(scene):
     ents = _entities(snap)
     assert not any(e["kind"] == "unknown" for e in snap["entities"])
     assert np.linalg.norm(np.subtract(ents["cube"]["position"][:2], cube.position)) < 0.004
+
+
+def test_exported_state_continues_the_tracks_in_a_new_perceiver(scene):
+    import json
+
+    cube = SyntheticObject("cube", "box", (0.02, 0.02, 0.02), (0.52, -0.04), rgba=RED)
+    scene.place([cube])
+    rng = np.random.default_rng(10)
+    first = Perceiver(PerceptionConfig.default(), [_desc(cube)])
+    s1 = _entities(first.observe(_frames(scene, rng), scene.proprioception()))["cube"]
+    state = json.loads(json.dumps(first.export_state()))  # plain data, survives a process boundary
+    second = Perceiver(PerceptionConfig.default(), [_desc(cube)])
+    second.restore_state(state)
+    s2 = _entities(second.observe(_frames(scene, rng, stamp_s=1.0), scene.proprioception(stamp_s=1.0)))["cube"]
+    assert s2["attributes"]["position_std_m"] < s1["attributes"]["position_std_m"]  # fused, not restarted
+    other = Perceiver(PerceptionConfig.default(), [ObjectDescriptor("ball", shape="sphere")])
+    other.restore_state(state)
+    assert other.tracks == {}  # tracks of objects not declared any more are dropped

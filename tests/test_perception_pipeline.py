@@ -13,7 +13,13 @@ import numpy as np
 import pytest
 
 from phyagentos.perception import ObjectDescriptor, PerceptionConfig, Perceiver
-from phyagentos.perception.synthetic import CameraNoise, SyntheticObject, SyntheticScene
+from phyagentos.perception.synthetic import (
+    DEFAULT_CAMERAS,
+    WRIST_CAMERA,
+    CameraNoise,
+    SyntheticObject,
+    SyntheticScene,
+)
 
 pytestmark = pytest.mark.sim
 
@@ -22,7 +28,7 @@ RED, BLUE, GREEN, YELLOW = (0.85, 0.15, 0.12, 1), (0.15, 0.35, 0.85, 1), (0.15, 
 
 @pytest.fixture(scope="module")
 def scene():
-    s = SyntheticScene([], pool_per_shape=3)
+    s = SyntheticScene([], cameras=DEFAULT_CAMERAS + (WRIST_CAMERA,), pool_per_shape=3)
     yield s
     s.close()
 
@@ -250,3 +256,18 @@ def test_exported_state_continues_the_tracks_in_a_new_perceiver(scene):
     other = Perceiver(PerceptionConfig.default(), [ObjectDescriptor("ball", shape="sphere")])
     other.restore_state(state)
     assert other.tracks == {}  # tracks of objects not declared any more are dropped
+
+
+def test_the_wrist_camera_alone_finds_objects_and_masks_its_own_fingers(scene):
+    cube = SyntheticObject("cube", "box", (0.02, 0.015, 0.02), (0.50, 0.03), yaw=0.3, rgba=RED)
+    ball = SyntheticObject("ball", "sphere", (0.02, 0.02, 0.02), (0.40, -0.05), rgba=GREEN)
+    scene.place([cube, ball])
+    frame = scene.capture("wrist", noise=CameraNoise(), rng=np.random.default_rng(11))
+    assert np.mean(frame.depth_m[frame.depth_m > 0] < 0.3) > 0.05  # the fingers are in view
+    snap = Perceiver(PerceptionConfig.default(), [_desc(cube), _desc(ball)]).observe([frame], scene.proprioception())
+    ents = _entities(snap)
+    assert not any(e["kind"] == "unknown" for e in snap["entities"])
+    for o in (cube, ball):
+        assert ents[o.name]["attributes"]["shape"] == o.shape
+        assert np.linalg.norm(np.subtract(ents[o.name]["position"], o.centre)) < 0.004
+        assert ents[o.name]["attributes"]["cameras"] == ["wrist"]

@@ -13,7 +13,13 @@ import numpy as np
 import pytest
 
 from phyagentos.perception import ObjectDescriptor, PerceptionConfig, Perceiver
-from phyagentos.perception.synthetic import CameraNoise, SyntheticObject, SyntheticScene
+from phyagentos.perception.synthetic import (
+    DEFAULT_CAMERAS,
+    WRIST_CAMERA,
+    CameraNoise,
+    SyntheticObject,
+    SyntheticScene,
+)
 
 pytestmark = pytest.mark.sim
 
@@ -22,7 +28,7 @@ RED, BLUE, GREEN, YELLOW = (0.85, 0.15, 0.12, 1), (0.15, 0.35, 0.85, 1), (0.15, 
 
 @pytest.fixture(scope="module")
 def scene():
-    s = SyntheticScene([], pool_per_shape=3)
+    s = SyntheticScene([], cameras=DEFAULT_CAMERAS + (WRIST_CAMERA,), pool_per_shape=3)
     yield s
     s.close()
 
@@ -232,3 +238,36 @@ def test_the_arm_reaching_down_to_the_table_leaves_no_spurious_object(scene):
     ents = _entities(snap)
     assert not any(e["kind"] == "unknown" for e in snap["entities"])
     assert np.linalg.norm(np.subtract(ents["cube"]["position"][:2], cube.position)) < 0.004
+
+
+def test_exported_state_continues_the_tracks_in_a_new_perceiver(scene):
+    import json
+
+    cube = SyntheticObject("cube", "box", (0.02, 0.02, 0.02), (0.52, -0.04), rgba=RED)
+    scene.place([cube])
+    rng = np.random.default_rng(10)
+    first = Perceiver(PerceptionConfig.default(), [_desc(cube)])
+    s1 = _entities(first.observe(_frames(scene, rng), scene.proprioception()))["cube"]
+    state = json.loads(json.dumps(first.export_state()))  # plain data, survives a process boundary
+    second = Perceiver(PerceptionConfig.default(), [_desc(cube)])
+    second.restore_state(state)
+    s2 = _entities(second.observe(_frames(scene, rng, stamp_s=1.0), scene.proprioception(stamp_s=1.0)))["cube"]
+    assert s2["attributes"]["position_std_m"] < s1["attributes"]["position_std_m"]  # fused, not restarted
+    other = Perceiver(PerceptionConfig.default(), [ObjectDescriptor("ball", shape="sphere")])
+    other.restore_state(state)
+    assert other.tracks == {}  # tracks of objects not declared any more are dropped
+
+
+def test_the_wrist_camera_alone_finds_objects_and_masks_its_own_fingers(scene):
+    cube = SyntheticObject("cube", "box", (0.02, 0.015, 0.02), (0.50, 0.03), yaw=0.3, rgba=RED)
+    ball = SyntheticObject("ball", "sphere", (0.02, 0.02, 0.02), (0.40, -0.05), rgba=GREEN)
+    scene.place([cube, ball])
+    frame = scene.capture("wrist", noise=CameraNoise(), rng=np.random.default_rng(11))
+    assert np.mean(frame.depth_m[frame.depth_m > 0] < 0.3) > 0.05  # the fingers are in view
+    snap = Perceiver(PerceptionConfig.default(), [_desc(cube), _desc(ball)]).observe([frame], scene.proprioception())
+    ents = _entities(snap)
+    assert not any(e["kind"] == "unknown" for e in snap["entities"])
+    for o in (cube, ball):
+        assert ents[o.name]["attributes"]["shape"] == o.shape
+        assert np.linalg.norm(np.subtract(ents[o.name]["position"], o.centre)) < 0.004
+        assert ents[o.name]["attributes"]["cameras"] == ["wrist"]

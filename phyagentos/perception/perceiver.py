@@ -127,6 +127,54 @@ class Perceiver:
         self._last_plane: Plane | None = None
         self.last_timing_ms: dict[str, float] = {}
 
+    # ------------------------------------------------------------------ state
+
+    _TRACK_ARRAYS = ("position", "half_extents", "colour_rgb", "grasp_offset")
+
+    def export_state(self) -> dict:
+        """What this perceiver believes, as plain YAML/JSON-ready data: the tracks, the held
+        object, the open-gripper wrist-force baseline and the grasp height (so a later
+        session, maybe in another process, continues it with :meth:`restore_state`)."""
+        tracks = {}
+        for name, t in self.tracks.items():
+            d = dict(vars(t))
+            for k in self._TRACK_ARRAYS:
+                if d.get(k) is not None:
+                    d[k] = np.asarray(d[k], dtype=float).tolist()
+            d["cameras"] = list(d.get("cameras") or ())
+            d["shape_votes"] = {str(k): int(v) for k, v in (d.get("shape_votes") or {}).items()}
+            tracks[name] = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in d.items()}
+        return {"tracks": tracks, "baseline_n": self._baseline_n, "held": self._held,
+                "grasp_height_m": self._grasp_height_m}
+
+    def restore_state(self, state: Mapping[str, Any]) -> None:
+        """Continue from :meth:`export_state` data; tracks of objects no longer declared are
+        dropped.
+
+        Raises:
+            PerceptionError: the data does not have the layout :meth:`export_state` writes.
+        """
+        if not isinstance(state, Mapping):
+            raise PerceptionError(f"perception state must be a mapping, got {type(state).__name__}")
+        declared = {d.name for d in self.declared}
+        tracks: dict[str, Track] = {}
+        for name, d in (state.get("tracks") or {}).items():
+            if name not in declared:
+                continue
+            d = dict(d)
+            for k in self._TRACK_ARRAYS:
+                if d.get(k) is not None:
+                    d[k] = np.asarray(d[k], dtype=float)
+            d["cameras"] = tuple(d.get("cameras") or ())
+            try:
+                tracks[name] = Track(**d)
+            except TypeError as exc:
+                raise PerceptionError(f"perception state: track {name!r} has an unexpected layout: {exc}") from None
+        self.tracks = tracks
+        self._baseline_n = state.get("baseline_n")
+        self._held = state.get("held") if state.get("held") in tracks else None
+        self._grasp_height_m = state.get("grasp_height_m")
+
     # ------------------------------------------------------------------ proprioception
 
     def update_proprioception(self, proprio: Proprioception) -> None:

@@ -33,12 +33,18 @@ __all__ = [
     "SyntheticScene",
     "CameraNoise",
     "DEFAULT_CAMERAS",
+    "WRIST_CAMERA",
     "optical_pose_from_mujoco",
     "look_at_quat",
     "random_objects",
 ]
 
 _SHAPES = ("box", "cylinder", "sphere")
+
+#: Where unused slots wait: under the table top, out of every camera's view. Not far away:
+#: MuJoCo scales the clipping planes with the model's extent (znear = 0.01 x extent), and a
+#: body 50 m away would clip everything closer than 0.5 m (the wrist camera's whole view).
+_PARKING = (0.35, 0.0, -0.4)
 
 
 def optical_pose_from_mujoco(pos: np.ndarray, xmat: np.ndarray) -> np.ndarray:
@@ -57,12 +63,13 @@ def optical_pose_from_mujoco(pos: np.ndarray, xmat: np.ndarray) -> np.ndarray:
     return T
 
 
-def look_at_quat(eye, target) -> list[float]:
-    """Quaternion (wxyz) of a MuJoCo camera at ``eye`` looking at ``target`` (world z up)."""
+def look_at_quat(eye, target, up=(0.0, 0.0, 1.0)) -> list[float]:
+    """Quaternion (wxyz) of a MuJoCo camera at ``eye`` looking at ``target`` with image-up
+    direction ``up`` (all in the parent frame)."""
     eye = np.asarray(eye, float)
     fwd = np.asarray(target, float) - eye
     fwd /= np.linalg.norm(fwd)
-    x = np.cross(fwd, [0.0, 0.0, 1.0])
+    x = np.cross(fwd, np.asarray(up, float))
     x /= np.linalg.norm(x)
     y = np.cross(x, fwd)
     q = np.empty(4)
@@ -104,7 +111,11 @@ class SyntheticObject:
 
 @dataclass(frozen=True)
 class SyntheticCamera:
-    """An RGB-D camera at ``eye`` looking at ``target`` (world m) with vertical fov ``fovy_deg``."""
+    """An RGB-D camera at ``eye`` looking at ``target`` with vertical fov ``fovy_deg``.
+
+    ``eye`` and ``target`` are metres in the frame of ``body`` (None = the world); ``up`` is
+    the image's up direction in that frame (None = +z).
+    """
 
     name: str
     eye: tuple[float, float, float]
@@ -112,7 +123,17 @@ class SyntheticCamera:
     fovy_deg: float = 45.0
     width: int = 320
     height: int = 240
+    body: str | None = None
+    up: tuple[float, float, float] | None = None
 
+
+#: A wrist RGB-D camera on the Panda's link7 (the geometry of the tabletop target's wrist
+#: camera): 7.5 cm off the tool axis, 12 cm past the flange, looking 20 cm beyond the tcp.
+WRIST_CAMERA = SyntheticCamera(
+    "wrist", eye=(0.075 * math.cos(-math.pi / 4), 0.075 * math.sin(-math.pi / 4), 0.12),
+    target=(0.0, 0.0, 0.445), fovy_deg=58.0, body="panda0_link7",
+    up=(-math.cos(-math.pi / 4), -math.sin(-math.pi / 4), 0.0),
+)
 
 #: Two cameras over the reachable table: one in front of the robot, one to its right.
 DEFAULT_CAMERAS: tuple[SyntheticCamera, ...] = (
@@ -161,7 +182,9 @@ class SyntheticScene:
         ms.visual.global_.offheight = max(960, *(c.height for c in self.cameras))
         wb = ms.worldbody
         for c in self.cameras:
-            wb.add_camera(name=c.name, pos=list(c.eye), quat=look_at_quat(c.eye, c.target), fovy=c.fovy_deg)
+            parent = wb if c.body is None else ms.body(c.body)
+            parent.add_camera(name=c.name, pos=list(c.eye), quat=look_at_quat(c.eye, c.target, c.up or (0, 0, 1)),
+                              fovy=c.fovy_deg)
         # one mocap body per slot; objects are assigned to slots of their shape, so a new
         # draw of objects only edits sizes, colours and poses (no recompilation)
         counts = {sh: max(self.pool_per_shape, sum(o.shape == sh for o in self.objects)) for sh in _SHAPES}
@@ -172,7 +195,7 @@ class SyntheticScene:
             self._slots[sh] = []
             for k in range(n):
                 slot = f"{sh}_{k}"
-                body = wb.add_body(name=f"synthetic:{slot}", pos=[50.0 + k, 50.0, 0.0], mocap=True)
+                body = wb.add_body(name=f"synthetic:{slot}", pos=list(_PARKING), mocap=True)
                 body.add_geom(name=f"synthetic:{slot}", type=gtype[sh], size=[0.02, 0.02, 0.02],
                               contype=0, conaffinity=0)
                 self._slots[sh].append(slot)
@@ -197,7 +220,7 @@ class SyntheticScene:
         for sh, slots in self._slots.items():
             for k, slot in enumerate(slots):
                 mid = m.body_mocapid[m.body(f"synthetic:{slot}").id]
-                d.mocap_pos[mid] = (50.0 + k, 50.0 + len(sh), 0.0)
+                d.mocap_pos[mid] = _PARKING
         for o in objects:
             if not free[o.shape]:
                 raise PerceptionError(f"no free {o.shape} slot for {o.name!r}; build the scene with a larger pool")

@@ -28,7 +28,9 @@ def run(tmp_path_factory):
                                      "scene": {"objects": objects}, "nodes": nodes}))
     report = run_goal_graph(graph, root / "ws")
     ws = Workspace.open(root / "ws")
-    return [ws.load_session(s.session_id) for s in report.sessions], ws
+    recs = [ws.load_session(s.session_id) for s in report.sessions]
+    # the pick of the near cube, and the last attempt at the far one (out of reach or out of sight)
+    return (next(r for r in recs if r.node == "pick_cube"), [r for r in recs if r.node == "pick_far"][-1]), ws
 
 
 def _score(ws, rec, verdict=None):

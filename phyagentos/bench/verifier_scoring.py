@@ -68,8 +68,11 @@ def truth_snapshot(state: Mapping[str, Any] | None, scene: Mapping[str, Any] | N
     state = state or {}
     ents: list[dict[str, Any]] = []
     for name, o in (state.get("objects") or {}).items():
+        if not isinstance(o, Mapping) or o.get("position") is None:
+            continue
+        size = o.get("half_extents") or o.get("size") or [0.0, 0.0, 0.0]
         ents.append({"name": name, "kind": "object", "position": list(o["position"]),
-                     "quat_wxyz": list(o.get("quat_wxyz", [1, 0, 0, 0])), "size": list(o["half_extents"]),
+                     "quat_wxyz": list(o.get("quat_wxyz", [1, 0, 0, 0])), "size": list(size),
                      "attributes": {"confidence": 1.0, "position_std_m": 0.0}})
         if o.get("joint_position") is not None:
             ents[-1]["attributes"]["joint_position"] = o["joint_position"]
@@ -92,7 +95,11 @@ def truth_of_criteria(accept: Any, gt: Mapping[str, Any]) -> list[tuple[Criterio
         if c.name == "still":
             out.append((c, None))
             continue
-        o = evaluate(c, s0, s1)
+        try:
+            o = evaluate(c, s0, s1)
+        except (KeyError, IndexError, TypeError, ValueError):  # a target whose ground truth lacks the geometry
+            out.append((c, None))
+            continue
         out.append((c, {"satisfied": True, "unsatisfied": False}.get(o.status)))
     return out
 

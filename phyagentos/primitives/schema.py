@@ -21,7 +21,9 @@ from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsH
 from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
-from .motion import PlanPath, RetimePath, SolveIK
+from .game.survival import GameSurvive
+from .game.tasks import GameCollect, GameExplore, GameGoto, GameHunt, GameMake, GameObserve, GamePlace, GameSleep
+from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
 from .placement import ComputePlaceAt
 
@@ -146,6 +148,60 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
         "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
         "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),
+    },
+    ReadyConfiguration: {
+        "out": (*_KEY[:2], "blackboard key written with the target's ready (home) configuration, (n,) rad"),
+    },
+    # Game primitives (kind: game targets, docs/crafter.md); budgets are in game steps.
+    GameObserve: {
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
+    },
+    GameExplore: {
+        "steps": ("int", "steps", "game steps to walk toward unseen cells"),
+        "until": ("str | null", "", "stop early once this material or creature is seen"),
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
+    },
+    GameGoto: {
+        "target": ("str", "", "material or creature to go next to (the nearest remembered one)"),
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
+    },
+    GameCollect: {
+        "material": ("str", "", "material to collect from (facing it, action do)"),
+        "item": ("str", "", "inventory item (or vital) that must grow"),
+        "count": ("int", "", "how many more of the item to collect"),
+        "strikes": ("int", "", "extra do-actions per unit (0: as many as the item needs)"),
+        "patience": ("int", "steps", "steps without progress before trying another cell"),
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
+    },
+    GameHunt: {
+        "creature": ("str", "", "cow, zombie, skeleton or plant_ripe"),
+        "until": ("str | null", "", "stop once this achievement is unlocked"),
+        "min_health": ("int", "", "give up and flee below this health (0..9)"),
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
+    },
+    GamePlace: {
+        "item": ("str", "", "table, furnace, stone or plant"),
+        "near": ("str | null", "", "material the placed item must be next to"),
+        "max_tries": ("int", "", "placement attempts"),
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
+    },
+    GameMake: {
+        "item": ("str", "", "tool to make (action make_<item>)"),
+        "near": ("list | null", "", "stations the recipe needs (from memory; null: search)"),
+        "max_tries": ("int", "", "make attempts"),
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
+    },
+    GameSleep: {
+        "shelter": ("bool", "", "sleep in a sealed shelter when the player can dig one"),
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
+    },
+    GameSurvive: {
+        "drink_below": ("int", "", "drink when thirst falls below this level (0..9)"),
+        "food_below": ("int", "", "eat when food falls below this level (0..9)"),
+        "energy_below": ("int", "", "rest when energy falls below this level (0..9)"),
+        "night_below": ("float", "", "daylight level below which night precautions start (0..1)"),
+        "fight": ("bool", "", "fight creatures that attack (else flee)"),
+        "max_steps": ("int", "steps", "game-step budget of the leaf"),
     },
     Noop: {
         "ticks": ("int", "", "ticks before succeeding (touches no target)"),

@@ -117,7 +117,7 @@ def test_scene_round_trips_through_plain_dicts():
 
 
 def test_unknown_scene_keys_are_rejected_with_the_valid_keys():
-    with pytest.raises(TargetError, match="valid keys: 'objects', 'obstacles', 'regions', 'timestep'"):
+    with pytest.raises(TargetError, match="valid keys: 'objects', 'obstacles', 'randomise', 'regions', 'timestep'"):
         SceneSpec.from_dict({"objects": [], "robots": []})
     with pytest.raises(TargetError, match="'half_extents'"):
         SceneSpec.from_dict({"objects": [{"name": "a", "colour": "red"}]})

@@ -183,7 +183,8 @@ class SyntheticScene:
         wb = ms.worldbody
         for c in self.cameras:
             parent = wb if c.body is None else ms.body(c.body)
-            parent.add_camera(name=c.name, pos=list(c.eye), quat=look_at_quat(c.eye, c.target, c.up or (0, 0, 1)),
+            # prefixed: the tabletop model has cameras of its own (``overview``, ``wrist``)
+            parent.add_camera(name=f"synthetic:{c.name}", pos=list(c.eye), quat=look_at_quat(c.eye, c.target, c.up or (0, 0, 1)),
                               fovy=c.fovy_deg)
         # one mocap body per slot; objects are assigned to slots of their shape, so a new
         # draw of objects only edits sizes, colours and poses (no recompilation)
@@ -274,7 +275,7 @@ class SyntheticScene:
         if r is None:
             r = mujoco.Renderer(self.model, height=spec.height, width=spec.width)
             self._renderers[(spec.width, spec.height)] = r
-        cid = self.model.camera(camera).id
+        cid = self.model.camera(f"synthetic:{camera}").id
         r.disable_depth_rendering()
         r.update_scene(self.data, camera=cid)
         rgb = r.render().copy()

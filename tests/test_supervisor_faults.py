@@ -51,28 +51,38 @@ def test_random_sigkills_of_supervisors_and_runners_lose_and_rerun_nothing(tmp_p
     agent = subprocess.Popen([*CLI, "agent", str(ws.root), "--poll-s", "0.2"], stdout=subprocess.DEVNULL,
                              stderr=open(tmp_path / "agent.log", "ab"), cwd=ROOT)
     kills = {"supervisor": 0, "runner": 0}
+    # The kind of each kill is drawn once (1 in 5 a supervisor) and kept until it lands, so
+    # the mix does not depend on how long a restarted supervisor's runner takes to start
+    # (a runner kill waits for a runner instead of falling through to another draw).
+    kind = None
     try:
         while sum(kills.values()) < KILLS:
             time.sleep(rng.uniform(0.05, 0.3))
+            if kind is None:
+                kind = "supervisor" if rng.random() < 0.2 else "runner"
             # a started supervisor (or its runner), mostly one in the middle of a session
             live = {p.pid: i for i, p in enumerate(sups)}
             present = [r for r in presence(ws) if r.get("pid") in live]
-            busy = [r for r in present if r.get("session")]
+            if kind == "runner":
+                present = [r for r in present
+                           if r.get("runner_pid") and descends_from(r["runner_pid"], r["pid"])]
             if not present:
                 continue
+            busy = [r for r in present if r.get("session")]
             victim = rng.choice(busy) if busy and rng.random() < 0.7 else rng.choice(present)
             k = live[victim["pid"]]
-            if rng.random() < 0.2:
+            if kind == "supervisor":
                 sups[k].send_signal(signal.SIGKILL)
                 sups[k].wait(timeout=30)
                 kills["supervisor"] += 1
                 sups[k] = watch(ws, *args, log=log)
-            elif victim.get("runner_pid") and descends_from(victim["runner_pid"], victim["pid"]):
+            else:
                 try:
                     os.kill(victim["runner_pid"], signal.SIGKILL)
                 except ProcessLookupError:
                     continue  # it exited between the check and the kill: not a kill of ours
                 kills["runner"] += 1
+            kind = None
         wait_for(lambda: run_id not in ws.runs.active_ids(), timeout=180, interval=0.25, what="the run to finish")
     finally:
         codes = [stop(p) for p in sups]

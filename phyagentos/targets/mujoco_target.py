@@ -267,43 +267,6 @@ class MuJoCoTarget(MuJoCoArmTarget):
         t, Q, QD = self._traj_arrays(traj)
         if t_start <= 0.0:
             self._check_start(Q[0], tracking_tol_rad)
-        duration = float(t[-1])
-        t_end = min(float(t_end), duration)
-        ts = self._model.opt.timestep
-        n = max(0, int(round((t_end - max(t_start, 0.0)) / ts)))
-        times = np.minimum(max(t_start, 0.0) + (np.arange(n) + 1) * ts, duration)
-        if n and t_end >= duration - 1e-12:
-            times[-1] = duration
-        t0 = self._data.time
-        bad: set = set()
-        completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
-        return ExecutionResult(
-            completed=completed,
-            max_tracking_error_rad=max_err,
-            sim_time_s=float(self._data.time - t0),
-            steps=steps,
-            contacts=self._contact_names(bad),
-            reason=reason,
-        )
-
-    def track(
-        self,
-        traj,
-        *,
-        t_start: float,
-        t_end: float,
-        tracking_tol_rad: float = 0.05,
-        feedforward: bool = True,
-    ) -> ExecutionResult:
-        """Stream only the slice ``(t_start, t_end]`` (s on the trajectory's clock) of
-        ``traj``, one physics step per ``timestep``; for executors that advance a
-        trajectory a control period per tick. Call :meth:`settle` after the last slice.
-        The start check of :meth:`execute_trajectory` applies when ``t_start <= 0``.
-        Returns the :class:`ExecutionResult` of this slice."""
-        self._check_open()
-        t, Q, QD = self._traj_arrays(traj)
-        if t_start <= 0.0:
-            self._check_start(Q[0], tracking_tol_rad)
         times = self._slice_times(t, t_start, t_end)
         t0 = self._data.time
         bad: set = set()

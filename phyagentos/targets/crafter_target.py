@@ -149,6 +149,65 @@ def texture_share(daylight: float) -> np.ndarray:
     return d + (1 - d) * (1 - m) / 2
 
 
+class _ChunkMembers:
+    """The creatures of one Crafter chunk, iterated in insertion order.
+
+    Crafter keeps them in a ``set``, whose order follows the objects' ``id()``: its chunk
+    balancing (``Env._balance_object``) picks the creature to despawn by index into that
+    order, so a restored state (new addresses) or another process diverged from the same
+    seed. This stand-in offers the ``add`` / ``remove`` / iteration / ``len`` the engine
+    uses, with a deterministic order that pickling preserves.
+    """
+
+    __slots__ = ("_members",)
+
+    def __init__(self, members=()):
+        self._members = dict.fromkeys(members)
+
+    def add(self, obj) -> None:
+        self._members[obj] = None
+
+    def remove(self, obj) -> None:
+        del self._members[obj]  # KeyError for a stranger, as set.remove
+
+    def discard(self, obj) -> None:
+        self._members.pop(obj, None)
+
+    def __iter__(self):
+        return iter(list(self._members))
+
+    def __len__(self) -> int:
+        return len(self._members)
+
+    def __contains__(self, obj) -> bool:
+        return obj in self._members
+
+    def copy(self) -> "_ChunkMembers":
+        return _ChunkMembers(self._members)
+
+    def __getstate__(self):
+        return list(self._members)
+
+    def __setstate__(self, members) -> None:
+        self._members = dict.fromkeys(members)
+
+
+def _order_chunks(world) -> None:
+    """Replace ``world._chunks`` (chunk -> set of objects) by insertion-ordered members,
+    each chunk's objects ordered by their index in ``world._objects`` (a list, so the
+    same for the same seed)."""
+    import collections  # noqa: PLC0415
+
+    chunks = world._chunks
+    if isinstance(chunks.default_factory, type) and chunks.default_factory is _ChunkMembers:
+        return
+    rank = {id(obj): i for i, obj in enumerate(world._objects) if obj is not None}
+    ordered = collections.defaultdict(_ChunkMembers)
+    for key, members in chunks.items():
+        ordered[key] = _ChunkMembers(sorted(members, key=lambda o: rank.get(id(o), len(rank))))
+    world._chunks = ordered
+
+
 class CrafterTarget(BaseRolloutTarget):
     """The Crafter game behind the rollout-target contract.
 
@@ -191,6 +250,7 @@ class CrafterTarget(BaseRolloutTarget):
     def _ensure(self) -> None:
         if not self._generated:
             self._env.reset()  # Crafter's world generation for this env's seed
+            _order_chunks(self._env._world)
             self._spawn = np.array(self._env._player.pos, dtype=int)
             self._generated = True
 
@@ -393,6 +453,7 @@ class CrafterTarget(BaseRolloutTarget):
         env._world, env._player = game["world"], game["player"]
         env._step, env._episode = game["step"], game["episode"]
         env._unlocked, env._last_health = game["unlocked"], game["last_health"]
+        _order_chunks(env._world)  # a no-op for states this module wrote; converts older ones
         # The views hold a reference to the world: rebuild them on the restored one.
         env._local_view = crafter.engine.LocalView(env._world, env._textures, [9, 7])
         env._sem_view = crafter.engine.SemanticView(env._world, [

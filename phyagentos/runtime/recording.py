@@ -143,8 +143,11 @@ def _model_recipe(target: Any, seed: int | None) -> dict[str, Any] | None:
     if not isinstance(getattr(target, "model", None), mujoco.MjModel) or not hasattr(scene, "to_dict"):
         return None
     cls = type(target)
-    return {"module": cls.__module__, "cls": cls.__qualname__, "name": target.name, "scene": scene.to_dict(),
-            "seed": seed, "nq": int(target.model.nq)}
+    # a scene with mesh objects travels as the checked spec itself (it carries the mesh
+    # bytes; its plain-data form names workspace files the render process cannot vouch for)
+    meshes = any(getattr(o, "mesh_data", None) is not None for o in getattr(scene, "objects", ()))
+    return {"module": cls.__module__, "cls": cls.__qualname__, "name": target.name,
+            "scene": scene if meshes else scene.to_dict(), "seed": seed, "nq": int(target.model.nq)}
 
 
 class _RenderProcess:
@@ -274,7 +277,8 @@ def _render_main() -> int:
         if parse is None:
             from phyagentos.targets.scene import SceneSpec  # noqa: PLC0415
             parse = SceneSpec.from_dict
-        target = cls(recipe["name"], parse(recipe["scene"]), seed=recipe["seed"])
+        scene = recipe["scene"]
+        target = cls(recipe["name"], parse(scene) if isinstance(scene, dict) else scene, seed=recipe["seed"])
         model = target.model
         if model.nq != recipe["nq"]:
             raise RecordingError(f"rebuilt model has nq={model.nq}, the session's has {recipe['nq']}")

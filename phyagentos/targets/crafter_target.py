@@ -225,7 +225,7 @@ class CrafterTarget(BaseRolloutTarget):
     ACTION_FORMS = ("game_action",)
 
     @staticmethod
-    def scene_from_dict(d: Mapping[str, Any] | None) -> CrafterScene:
+    def scene_from_dict(d: Mapping[str, Any] | None, *, root: Any = None) -> CrafterScene:
         return CrafterScene.from_dict(d)
 
     def __init__(self, name: str, scene: CrafterScene | None = None, *, seed: int | None = None):

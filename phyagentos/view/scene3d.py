@@ -97,7 +97,7 @@ class SceneRenderer:
         spec = next((t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target), None)
         if spec is None or spec.driver not in DRIVERS:
             raise ViewError(f"session {session_id}: target {rec.target!r} is not one the view can rebuild")
-        target = DRIVERS[spec.driver](spec.name, scene_for(rec, spec), seed=rec.seed)
+        target = DRIVERS[spec.driver](spec.name, scene_for(rec, spec, root=self.workspace.root), seed=rec.seed)
         model = getattr(target, "model", None)
         if not isinstance(model, mujoco.MjModel):
             target.close()

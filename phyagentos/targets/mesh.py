@@ -91,6 +91,9 @@ def _resolve(path: str, root: Path, where: str) -> Path:
                           f"{format_choices(MESH_FORMATS)}")
     root = root.resolve()
     candidate = root / rel
+    if ".." in rel.parts and root not in Path(os.path.normpath(candidate)).parents:
+        raise TargetError(f"{where}: mesh {path!r} resolves outside the workspace ({root}); "
+                          "copy the file into the workspace")
     try:
         resolved = candidate.resolve(strict=True)
     except FileNotFoundError:
@@ -145,7 +148,7 @@ def load_mesh(path: str, *, root: str | Path, scale: float = 1.0, where: str = "
     try:
         model = spec.compile()
     except Exception as exc:  # mujoco raises ValueError with the decoder's message
-        detail = " ".join(str(exc).split())[:300]
+        detail = " ".join(str(exc).replace(asset, path).split())[:300]
         kind = "degenerate (it has no volume)" if "coplanar" in detail or "volume" in detail else "unreadable"
         raise TargetError(f"{where}: mesh {path!r} is {kind}: {detail}") from None
     n, adr = int(model.mesh_vertnum[0]), int(model.mesh_vertadr[0])

@@ -20,9 +20,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-import yaml
 
 from phyagentos.errors import GoalGraphError
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_reviser", "default_scene", "load_scene"]
 
@@ -39,8 +39,8 @@ def default_scene() -> dict[str, Any]:
 def load_scene(path: str | Path) -> dict[str, Any]:
     """A scene mapping from ``path``: a goal graph (its ``scene``) or a bare scene (``objects``/``regions``)."""
     try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as exc:
+        data = read_yaml(path, error=GoalGraphError)
+    except OSError as exc:
         raise GoalGraphError(f"cannot read scene: {exc}", path=path) from exc
     if isinstance(data, dict) and isinstance(data.get("scene"), dict):
         return data["scene"]

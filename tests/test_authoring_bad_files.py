@@ -280,3 +280,55 @@ def test_two_runs_on_one_target_never_reset_each_others_world_the_second_queues(
     finally:
         agent.close()
         sup.close()
+
+
+@pytest.mark.parametrize("evidence_file", ["bundle.yaml", "terminal.yaml"])
+def test_an_alias_bomb_in_an_evidence_file_is_refused_in_milliseconds_and_sets_the_run_aside(
+        tmp_path, capsys, evidence_file):
+    """The SessionVerifier reads evidence with the bounded loader: a bomb in the bundle
+    index or a snapshot is a VerifierError with the file and the anchor's line, the run
+    is set aside (``agent --run`` exits 2 at once), the evidence file is left as it is."""
+    from phyagentos.agent.verifier import load_evidence
+    from phyagentos.errors import VerifierError
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+    from phyagentos.runtime.supervisor import WatchdogSupervisor
+
+    ws = tmp_path / "ws"
+    run_id = submit(ws, capsys)
+    workspace = Workspace.open(ws)
+    [(sid, _, _)] = workspace.active_sessions(run_id=run_id)
+    sup = WatchdogSupervisor(workspace, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()))
+    try:
+        for _ in range(200):
+            sup.run_once()
+            if workspace.load_session(sid).state == "awaiting_verification":
+                break
+            time.sleep(0.05)
+    finally:
+        sup.close()
+    rec = workspace.load_session(sid)
+    assert rec.state == "awaiting_verification"
+    directory = ws / rec.attempts[-1].evidence
+    path = directory / evidence_file
+    bad = path.read_text(encoding="utf-8") + "\n" + BOMB + "\n"
+    path.write_text(bad, encoding="utf-8")
+    first = bad.splitlines().index(BOMB.splitlines()[0]) + 1
+    bomb_lines = range(first, first + len(BOMB.splitlines()))  # the anchor that expands too far is one of them
+
+    started = time.perf_counter()
+    with pytest.raises(VerifierError, match="YAML aliases expand to more than") as exc:
+        load_evidence(directory)
+    assert time.perf_counter() - started < 0.5  # refused, not expanded
+    assert exc.value.path == path and exc.value.line in bomb_lines
+    where = f"{path}:{exc.value.line}"
+
+    started = time.perf_counter()
+    assert agent_run(ws, run_id) == 2
+    assert time.perf_counter() - started < 30.0  # returns: nothing hangs on the bomb
+    err = capsys.readouterr().err
+    assert f"set aside run {run_id} (failed)" in err and where in err
+    assert path.read_text(encoding="utf-8") == bad
+    assert Workspace.open(ws).runs.active_ids() == []
+    assert main(["status", str(ws)]) == 0
+    assert f"{run_id}: failed: set aside" in capsys.readouterr().out

@@ -39,11 +39,11 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-import yaml
 
 from phyagentos.errors import RecordingError, TargetError
 from phyagentos.protocol import dump_yaml
 from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["ENV_VAR", "RECORD_MODES", "RecordingConfig", "SessionRecorder", "prune_recordings"]
 
@@ -466,7 +466,12 @@ def prune_recordings(workspace: Any) -> int:
             (directory / FRAMES_FILE).unlink(missing_ok=True)
             bundle_path = directory / "bundle.yaml"
             if bundle_path.is_file():
-                bundle = yaml.safe_load(bundle_path.read_text(encoding="utf-8")) or {}
+                try:
+                    bundle = read_yaml(bundle_path, error=RecordingError) or {}
+                except (OSError, RecordingError) as exc:
+                    logger.warning("video dropped, bundle left as it is: %s", exc)
+                    removed += 1
+                    continue
                 files = bundle.get("files", {})
                 dropped = [files.pop(k) for k in ("video", "frames") if k in files]
                 if dropped:

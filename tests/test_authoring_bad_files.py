@@ -332,3 +332,37 @@ def test_an_alias_bomb_in_an_evidence_file_is_refused_in_milliseconds_and_sets_t
     assert Workspace.open(ws).runs.active_ids() == []
     assert main(["status", str(ws)]) == 0
     assert f"{run_id}: failed: set aside" in capsys.readouterr().out
+
+
+def test_an_alias_bomb_in_a_pending_session_never_hangs_the_supervisors_claim(tmp_path, capsys, caplog):
+    """The supervisor's claim reads the session with the bounded loader: the bombed
+    session is set aside with a warning naming the file and line, in well under a second
+    of work, the file is left as it is and the session is never claimed."""
+    import logging
+
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+    from phyagentos.runtime.supervisor import WatchdogSupervisor
+
+    ws = tmp_path / "ws"
+    run_id = submit(ws, capsys)
+    workspace = Workspace.open(ws)
+    [(sid, _, _)] = workspace.active_sessions(run_id=run_id)
+    path = workspace.session_path(sid)
+    text = path.read_text(encoding="utf-8")
+    indented = "\n".join("  " + line for line in BOMB.splitlines())
+    bad = text.replace("parameters:", "bomb:\n" + indented + "\nparameters:", 1)
+    path.write_text(bad, encoding="utf-8")
+    sup = WatchdogSupervisor(workspace, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()))
+    try:
+        with caplog.at_level(logging.WARNING, logger="phyagentos.runtime.supervisor"):
+            started = time.perf_counter()
+            sup.run_once()
+            elapsed = time.perf_counter() - started
+    finally:
+        sup.close()
+    assert elapsed < 10.0  # a claim, not a multi-gigabyte expansion (that never returned)
+    assert f"session {sid} set aside" in caplog.text and "YAML aliases expand to more than" in caplog.text
+    assert str(path) in caplog.text
+    assert path.read_text(encoding="utf-8") == bad
+    assert not list((ws / "targets").rglob("state.*")) if (ws / "targets").exists() else True

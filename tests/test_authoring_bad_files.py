@@ -9,6 +9,7 @@ bounded excerpts; YAML alias bombs fail in milliseconds.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -366,3 +367,29 @@ def test_an_alias_bomb_in_a_pending_session_never_hangs_the_supervisors_claim(tm
     assert str(path) in caplog.text
     assert path.read_text(encoding="utf-8") == bad
     assert not list((ws / "targets").rglob("state.*")) if (ws / "targets").exists() else True
+
+
+@pytest.mark.parametrize("where", ["skills/hold.yaml", "trees/hold.yaml", "safety.yaml"])
+def test_an_alias_bomb_in_a_skill_tree_or_safety_file_is_refused_with_file_and_line(tmp_path, capsys, where):
+    """Skills and trees of the workspace and its ``safety.yaml`` are bounded like goal
+    graphs: ``run`` exits 2 naming the file and line, the workspace unchanged, nothing moved."""
+    from phyagentos.resources import skills_dir, trees_dir
+
+    ws = tmp_path / "ws"
+    Workspace.create(ws)
+    path = ws / where
+    if where != "safety.yaml":
+        path.parent.mkdir(exist_ok=True)
+        source = (skills_dir() if where.startswith("skills") else trees_dir()) / "hold.yaml"
+        path.write_text(BOMB + "\n" + source.read_text(encoding="utf-8"), encoding="utf-8")
+    else:
+        path.write_text(BOMB + "\n" + path.read_text(encoding="utf-8"), encoding="utf-8")
+    before = {p: p.read_bytes() for p in ws.rglob("*") if p.is_file()}
+    started = time.perf_counter()
+    assert main(["run", str(HOLD), "--workspace", str(ws)]) == 2
+    assert time.perf_counter() - started < 30.0
+    err = capsys.readouterr().err
+    assert re.search(rf"{re.escape(str(path))}:\d+: .*YAML aliases expand to more than", err), err
+    assert "Traceback" not in err
+    assert {p: p.read_bytes() for p in ws.rglob("*") if p.is_file()} == before
+    assert not (ws / "targets").exists() or not list((ws / "targets").rglob("state.*"))

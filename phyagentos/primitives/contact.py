@@ -27,7 +27,7 @@ import numpy as np
 from py_trees.common import Status
 
 from phyagentos.motion.cartesian import cartesian_path
-from phyagentos.motion.retime import retime
+from phyagentos.motion.retime import Trajectory, retime
 
 from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
 
@@ -161,8 +161,10 @@ class _ContactMotion(_Tracking):
         force, touched, max_err = 0.0, (), 0.0
         while self._t < t_end - 1e-12:
             t_next = min(self._t + dt, t_end)
+            window, t0 = self._window(self._t, t_next)
             with ctx.profiler.section("simulation"):
-                result = target.track(self._traj, t_start=self._t, t_end=t_next, tracking_tol_rad=self.tracking_tol_rad)
+                result = target.track(window, t_start=self._t - t0, t_end=t_next - t0,
+                                      tracking_tol_rad=self.tracking_tol_rad)
             self._t = t_next
             max_err = max(max_err, result.max_tracking_error_rad)
             force, touched = contact_force_n(target.model, target.data, ignore_bodies=self._ignore)
@@ -171,6 +173,25 @@ class _ContactMotion(_Tracking):
             if stopped or not result.completed:
                 return _Slice(result.completed, max_err, force, touched, stopped)
         return _Slice(True, max_err, force, touched, False)
+
+    def _window(self, t_start: float, t_end: float) -> tuple[Trajectory, float]:
+        """The samples of the trajectory around ``(t_start, t_end]`` (s), re-based to start
+        at 0, and the time of the first on the trajectory's clock: ``track`` interpolates
+        the same reference from them, at a cost that does not grow with the trajectory's
+        length (the primitive calls it once per physics step)."""
+        traj = self._traj
+        t = np.asarray(traj.t, dtype=float)
+        if t_start <= 0.0:  # the first step: the whole start check of track applies
+            i0 = 0
+        else:  # a sample strictly before t_start, so the slice never restarts the clock
+            i0 = max(0, int(np.searchsorted(t, t_start, side="left")) - 1)
+        i1 = min(len(t) - 1, int(np.searchsorted(t, t_end, side="left")) + 1)
+        i1 = max(i1, min(i0 + 1, len(t) - 1))
+        sl = slice(i0, i1 + 1)
+        qdd = getattr(traj, "qdd", None)
+        window = Trajectory(t=t[sl] - t[i0], q=np.asarray(traj.q)[sl], qd=np.asarray(traj.qd)[sl],
+                            qdd=np.asarray(qdd)[sl] if qdd is not None else np.zeros_like(np.asarray(traj.q)[sl]))
+        return window, float(t[i0])
 
     def _sample(self, force: float, touched: tuple[str, ...]) -> None:
         """Called after every physics step with the contact force (N) and touched geoms."""

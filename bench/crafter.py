@@ -34,7 +34,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import yaml
 from rich.console import Console
 from rich.table import Table
 
@@ -44,6 +43,8 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != HERE]
 sys.path.insert(0, str(HERE.parent))
 
 from phyagentos.bench import run_bench  # noqa: E402
+from phyagentos.errors import BenchError  # noqa: E402
+from phyagentos.yamlsource import load_plain, read_yaml  # noqa: E402
 
 ANCHORS = {"random": 1.6, "PPO": 4.6, "DreamerV2": 10.0, "DreamerV3": 14.5, "SPRING": 27.3, "human experts": 50.5}
 
@@ -71,7 +72,7 @@ def _pass(name: str, ws: Path, *, episodes: int, split: str, memory: str, worker
     walls = []
     for ep in c["per_episode"]:
         out = result.run_dir / "episodes" / ep["episode"] / "outcome.yaml"
-        walls.append(float(yaml.safe_load(out.read_text())["wall_time_s"]))
+        walls.append(float(read_yaml(out, error=BenchError)["wall_time_s"]))
     steps = sum(ep["length"] for ep in c["per_episode"])
     return {
         "pass": name, "memory": memory, "split": split, "seeds": result.report["seeds"],
@@ -101,7 +102,7 @@ def main() -> int:
         _pass("frozen (held-out worlds)", ws, episodes=args.episodes, split="heldout", memory="frozen",
               workers=args.workers),
     ]
-    lessons = yaml.safe_load((ws / "LESSONS.md").read_text().split("```yaml", 1)[1].split("```", 1)[0])
+    lessons = load_plain((ws / "LESSONS.md").read_text().split("```yaml", 1)[1].split("```", 1)[0], path=ws / "LESSONS.md", error=BenchError)
     memory = {"verified": [f"{l['id']}: {l['correction']} ({l['confirmations']}+/{l['refutations']}-)"
                            for l in lessons.get("lessons") or []],
               "candidates": [f"{l['id']}: {l['correction']}" for l in lessons.get("candidates") or []]}

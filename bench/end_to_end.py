@@ -47,6 +47,9 @@ from pathlib import Path
 
 import yaml
 
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results" / "end_to_end.json"
 BIN = Path(sys.executable).parent
@@ -135,7 +138,7 @@ def session_timeline(ws: Path) -> list[dict]:
         attempt = rec.attempts[-1] if rec.attempts else None
         bundle = {}
         if attempt and attempt.evidence and (ws / attempt.evidence / "bundle.yaml").is_file():
-            bundle = yaml.safe_load((ws / attempt.evidence / "bundle.yaml").read_text()).get("outcome", {})
+            bundle = read_yaml(ws / attempt.evidence / "bundle.yaml", error=BenchError).get("outcome", {})
         verdict_at = next((t[e] for e in _VERDICT_EVENTS if e in t), None)
         rows.append({
             "session_id": rec.session_id, "node": rec.node, "state": rec.state,

@@ -52,6 +52,8 @@ from phyagentos.cli_agent import make_reviser
 from phyagentos.llm import load_llm_config, make_client
 from phyagentos.orchestrator import run_goal_graph, skill_names
 from phyagentos.protocol import Workspace
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 RESULTS = Path(__file__).resolve().parent / "results"
 COLOURS = {"red": [0.8, 0.1, 0.1, 1], "green": [0.1, 0.7, 0.2, 1], "blue": [0.1, 0.2, 0.8, 1],
@@ -187,7 +189,7 @@ def _final_snapshot(ws: Path, scene: dict) -> dict[str, dict]:
     """Object name -> {position, size} from the latest terminal snapshot (the simulator's state), or the scene."""
     finals = sorted((ws / "evidence").glob("*/terminal.yaml"), key=lambda p: p.stat().st_mtime)
     if finals:
-        snap = yaml.safe_load(finals[-1].read_text())
+        snap = read_yaml(finals[-1], error=BenchError)
         return {e["name"]: e for e in snap["entities"] if e.get("kind") in ("object", "region")}
     ents = {o["name"]: {"position": [*o["position"], o["half_extents"][2]], "size": o["half_extents"]}
             for o in scene["objects"]}

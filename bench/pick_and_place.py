@@ -28,7 +28,6 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 import phyagentos  # noqa: F401  (selects the headless GL backend before mujoco loads)
 from phyagentos.motion.cartesian import cartesian_path
@@ -41,6 +40,8 @@ from phyagentos.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets import MuJoCoTarget, SceneSpec
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 GRAPH = goal_graphs_dir() / "pick_and_place.yaml"
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -64,7 +65,7 @@ def bare_same_motions(seed: int = 0) -> dict:
     """The pick and place trees' motions as a plain script; returns wall-time split and sim time."""
     t_start = time.perf_counter()
     clock = Clock()
-    scene = SceneSpec.from_dict(yaml.safe_load(GRAPH.read_text())["scene"])
+    scene = SceneSpec.from_dict(read_yaml(GRAPH, error=BenchError)["scene"])
     target = MuJoCoTarget("bare", scene, seed=seed)
     target.reset(seed=seed)
     model = target.model
@@ -170,7 +171,7 @@ def framework_run(seed: int = 0) -> dict:
             attempt = ws.load_session(row.session_id).attempts[-1]
             for k in CATEGORIES:
                 totals[k] += attempt.timings.get(k, 0.0)
-            bundle = yaml.safe_load((ws.root / attempt.evidence / "bundle.yaml").read_text())
+            bundle = read_yaml(ws.root / attempt.evidence / "bundle.yaml", error=BenchError)
             sim = bundle["outcome"]["sim_time_s"]
     return {"total_s": total, **{f"{k}_s": v for k, v in totals.items()},
             "other_s": total - sum(totals.values()), "sim_time_s": sim}

@@ -33,11 +33,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import yaml
 
 from phyagentos.bench.random_world import random_episodes, with_defaults
 from phyagentos.protocol import Workspace
 from phyagentos.self_evolution import run_pass
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 HERE = Path(__file__).resolve().parent
 
@@ -126,7 +127,7 @@ def main() -> int:
         return score_only(args.score_only, args.out)
     train = random_episodes(range(args.seed_offset, args.seed_offset + args.train))
     heldout = random_episodes(range(args.seed_offset + 10000, args.seed_offset + 10000 + args.heldout))
-    defaults = yaml.safe_load(args.defaults.read_text(encoding="utf-8")) if args.defaults else None
+    defaults = read_yaml(args.defaults, error=BenchError) if args.defaults else None
     tmp = None if args.workspace else tempfile.TemporaryDirectory(prefix="self_evolution_")
     root = args.workspace or Path(tmp.name)
     say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731

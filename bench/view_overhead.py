@@ -25,7 +25,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import yaml
 
 import phyagentos  # noqa: F401  (selects the headless GL backend before mujoco loads)
 from phyagentos.primitives.context import SkillContext
@@ -36,6 +35,8 @@ from phyagentos.runtime.recording import RecordingConfig, SessionRecorder
 from phyagentos.runtime.safety_guard import SafetyGuard
 from phyagentos.runtime.tree_status import TreeStatusPublisher
 from phyagentos.targets import MuJoCoTarget, SceneSpec
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MODES = ("bare", "tree", "tree+record")
@@ -74,7 +75,7 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--fps", type=float, default=10.0)
     args = parser.parse_args()
-    graph = yaml.safe_load((goal_graphs_dir() / "pick_and_place.yaml").read_text())
+    graph = read_yaml(goal_graphs_dir() / "pick_and_place.yaml", error=BenchError)
     scene = SceneSpec.from_dict(graph["scene"])
     runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
     with tempfile.TemporaryDirectory() as tmp:

@@ -8,8 +8,10 @@ and writes it with the plan's record (model calls, injected context, selector re
 under ``WS/plans/<plan id>/``; with ``--run`` the graph then runs like ``phyagentos run``.
 Without ``--scene`` it plans on the tabletop scene of ``goal_graphs/pick_and_place.yaml``.
 A refusal prints its reason and exits 1; a plan still invalid after the repair round is
-an error (exit 2). The model comes from ``llm.yaml`` / ``PHYAGENTOS_LLM_*`` (offline
-SmolLM2 by default).
+an error (exit 2), and so is a plan the whole-graph check of ``validate`` refuses
+(:func:`phyagentos.graph_check.check_goal_graph`: the scene, trees, names, one object
+per arm, reachability per target), before anything runs. The model comes from
+``llm.yaml`` / ``PHYAGENTOS_LLM_*`` (offline SmolLM2 by default).
 """
 
 from __future__ import annotations
@@ -20,9 +22,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from phyagentos.errors import GoalGraphError
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_reviser", "default_scene", "load_scene"]
 
@@ -39,8 +40,8 @@ def default_scene() -> dict[str, Any]:
 def load_scene(path: str | Path) -> dict[str, Any]:
     """A scene mapping from ``path``: a goal graph (its ``scene``) or a bare scene (``objects``/``regions``)."""
     try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as exc:
+        data = read_yaml(path, error=GoalGraphError)
+    except OSError as exc:
         raise GoalGraphError(f"cannot read scene: {exc}", path=path) from exc
     if isinstance(data, dict) and isinstance(data.get("scene"), dict):
         return data["scene"]
@@ -108,6 +109,16 @@ def _cmd_plan(args, out, err) -> int:
     result = planner.plan(args.request, scene=scene, prefer_target=args.target)
     plan_id = datetime.now(timezone.utc).strftime("plan-%Y%m%dT%H%M%S%fZ")
     paths = write_plan(result, workspace.root / "plans" / plan_id)
+    poses = None
+    if result.status == "planned":
+        # the same whole-graph check as validate, submit and run, before anything is printed
+        # as valid or runs (a GoalGraphError names the plan's goal_graph.yaml and line: exit 2)
+        from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+        from phyagentos.resources import skill_dirs, tree_dirs  # noqa: PLC0415
+        from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
+
+        runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(workspace.root), tree_dirs(workspace.root))
+        poses = check_goal_graph(paths["goal_graph"], workspace, runtime).poses_checked
     if args.json and not args.run:
         print(json.dumps({**result.to_dict(), "plan_id": plan_id, "goal_graph": str(paths.get("goal_graph", "")),
                           "goal_graph_yaml": result.graph_yaml}, ensure_ascii=False))
@@ -120,7 +131,7 @@ def _cmd_plan(args, out, err) -> int:
         else:
             print(result.graph_yaml, end="")
             dag = to_digraph(result.graph)
-            out.print(f"goal graph: valid, {len(result.graph.nodes)} node(s)")
+            out.print(f"goal graph: valid, {len(result.graph.nodes)} node(s), {poses} pose(s) reachable")
             for node_id in topological_order(dag):
                 node = result.graph.get_node(node_id)
                 deps = f" after {', '.join(node.depends_on)}" if node.depends_on else ""

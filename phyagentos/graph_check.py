@@ -132,7 +132,7 @@ def check_goal_graph(path: str | Path, workspace: "Workspace", runtime: "Builtin
     for name in dict.fromkeys(n.target for n in graph.nodes):
         spec = specs[name]
         scene_src = raw_scene if raw_scene is not None else (spec.scene or None)
-        scene, scene_problems = check_scene(scene_src, spec.driver)
+        scene, scene_problems = check_scene(scene_src, spec.driver, root=workspace.root)
         where = "" if raw_scene is not None else f" (the scene of target {name!r} in TARGETS.md)"
         problems += [(p.line if raw_scene is not None else None, p.message + where) for p in scene_problems]
         scenes[name] = scene

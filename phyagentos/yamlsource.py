@@ -21,11 +21,14 @@ from typing import Any
 
 import yaml
 
-__all__ = ["SourceMap", "SourceList", "load_yaml", "line_of", "check_bounds", "compose_bounded", "excerpt", "clip",
-           "MAX_YAML_CHARS", "MAX_ALIASES", "MAX_EXPANDED_NODES", "MAX_DEPTH"]
+__all__ = ["SourceMap", "SourceList", "load_yaml", "load_plain", "read_yaml", "line_of", "check_bounds",
+           "compose_bounded", "excerpt", "clip", "MAX_YAML_CHARS", "MAX_YAML_FILE_BYTES", "MAX_ALIASES",
+           "MAX_EXPANDED_NODES", "MAX_DEPTH"]
 
 #: Longest YAML text read (characters): far above any authored file or protocol block.
 MAX_YAML_CHARS = 64 * 1024 * 1024
+#: Largest YAML file read (bytes, checked before reading): UTF-8 is at most 4 bytes a character.
+MAX_YAML_FILE_BYTES = 4 * MAX_YAML_CHARS
 #: Alias references (``*name``) per YAML text; authored files use a handful.
 MAX_ALIASES = 256
 #: Extra nodes aliases may add when expanded (beyond the nodes written in the text).
@@ -45,6 +48,18 @@ def excerpt(value: Any, limit: int = MAX_EXCERPT_CHARS) -> str:
     """``repr(value)`` cut to ``limit`` characters (error messages quote bounded excerpts)."""
     text = repr(value) if not isinstance(value, str) else repr(value[: limit + 1])
     return text if len(text) <= limit else text[:limit] + f"... ({len(str(value))} chars)"
+
+
+def _error(error: type[Exception], message: str, *, path: str | Path | None, line: int | None) -> Exception:
+    """``error(message, path=, line=)``; for an error class without those keywords, the
+    message prefixed with ``path:line`` (and ``path``/``line`` set as attributes)."""
+    try:
+        return error(message, path=path, line=line)
+    except TypeError:
+        loc = f"{path}:{line}" if path is not None and line is not None else (str(path) if path is not None else "")
+        exc = error(f"{loc}: {message}" if loc else message)
+        exc.path, exc.line = path, line  # type: ignore[attr-defined]
+        return exc
 
 
 def check_bounds(node: Any, *, path: str | Path | None, error: type[Exception], first_line: int = 1) -> None:
@@ -82,22 +97,22 @@ def check_bounds(node: Any, *, path: str | Path | None, error: type[Exception], 
             size[id(current)] = total
             state[id(current)] = 2
             if total - unique > MAX_EXPANDED_NODES:
-                raise error(f"YAML aliases expand to more than {MAX_EXPANDED_NODES} extra nodes (the node starting "
+                raise _error(error, f"YAML aliases expand to more than {MAX_EXPANDED_NODES} extra nodes (the node starting "
                             f"here expands to {total}); write the data out or use fewer aliases",
                             path=path, line=first_line + current.start_mark.line)
             continue
         seen = state.get(id(child))
         if seen == 1:
-            raise error("recursive YAML alias (a node contains itself)", path=path,
+            raise _error(error, "recursive YAML alias (a node contains itself)", path=path,
                         line=first_line + child.start_mark.line)
         if seen == 2:
             aliases += 1
             if aliases > MAX_ALIASES:
-                raise error(f"more than {MAX_ALIASES} YAML aliases", path=path,
+                raise _error(error, f"more than {MAX_ALIASES} YAML aliases", path=path,
                             line=first_line + child.start_mark.line)
             continue
         if depth + 1 > MAX_DEPTH:
-            raise error(f"YAML nesting deeper than {MAX_DEPTH} levels", path=path,
+            raise _error(error, f"YAML nesting deeper than {MAX_DEPTH} levels", path=path,
                         line=first_line + child.start_mark.line)
         state[id(child)] = 1
         unique += 1
@@ -121,7 +136,7 @@ def compose_bounded(text: str, *, path: str | Path | None, error: type[Exception
             or a bound exceeded.
     """
     if len(text) > MAX_YAML_CHARS:
-        raise error(f"YAML text of {len(text)} characters is longer than the limit of {MAX_YAML_CHARS}",
+        raise _error(error, f"YAML text of {len(text)} characters is longer than the limit of {MAX_YAML_CHARS}",
                     path=path, line=first_line)
     instance = (loader or _Loader)(text)
     try:
@@ -129,10 +144,10 @@ def compose_bounded(text: str, *, path: str | Path | None, error: type[Exception
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = " ".join(p for p in (exc.context, exc.problem) if p)
-        raise error(f"YAML syntax error: {clip(problem or str(exc))}", path=path,
+        raise _error(error, f"YAML syntax error: {clip(problem or str(exc))}", path=path,
                     line=first_line + mark.line if mark is not None else first_line) from None
     except yaml.YAMLError as exc:
-        raise error(f"YAML error: {clip(str(exc))}", path=path, line=first_line) from None
+        raise _error(error, f"YAML error: {clip(str(exc))}", path=path, line=first_line) from None
     finally:
         instance.dispose()
     if "&" in text:  # without an anchor there is no alias to expand
@@ -203,9 +218,61 @@ def load_yaml(text: str, *, path: str | Path | None = None, error: type[Exceptio
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else None
-        raise error(f"invalid YAML: {clip(str(exc.problem or exc))}", path=path, line=line) from None
+        raise _error(error, f"invalid YAML: {clip(str(exc.problem or exc))}", path=path, line=line) from None
     finally:
         loader.dispose()
+
+
+class _PlainLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """Safe loader constructing plain ``dict``/``list`` (for data that is dumped again)."""
+
+
+def load_plain(text: str, *, path: str | Path | None = None, error: type[Exception]) -> Any:
+    """Like :func:`load_yaml` (the same bounds) but with plain ``dict`` and ``list``
+    containers, for data that is re-dumped or compared (evidence, reports).
+
+    Raises:
+        error: ``(message, path=..., line=...)``: a bound exceeded or a syntax error.
+    """
+    node = compose_bounded(text, path=path, error=error)
+    if node is None:
+        return None
+    loader = _PlainLoader("")
+    try:
+        return loader.construct_document(node)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        raise _error(error, f"invalid YAML: {clip(str(exc.problem or exc))}", path=path,
+                     line=mark.line + 1 if mark is not None else None) from None
+    finally:
+        loader.dispose()
+
+
+def read_yaml(path: str | Path, *, error: type[Exception], plain: bool = True) -> Any:
+    """Read the YAML file at ``path`` with every bound of :func:`load_yaml`: a file larger
+    than :data:`MAX_YAML_FILE_BYTES` is refused before it is read, an alias bomb while it
+    is composed (milliseconds, with the anchor's line).
+
+    Args:
+        path: the file.
+        error: exception class for YAML problems (called with ``path=``/``line=`` when
+            it takes them, else with the location in the message).
+        plain: plain containers (:func:`load_plain`) or line-carrying ones (:func:`load_yaml`).
+
+    Raises:
+        OSError: the file cannot be read.
+        error: too large, not UTF-8, a syntax error or a bound exceeded.
+    """
+    path = Path(path)
+    size = path.stat().st_size
+    if size > MAX_YAML_FILE_BYTES:
+        raise _error(error, f"YAML file of {size} bytes is larger than the limit of {MAX_YAML_FILE_BYTES}",
+                     path=path, line=1)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise _error(error, f"not UTF-8 text: {exc.reason} at byte {exc.start}", path=path, line=None) from None
+    return (load_plain if plain else load_yaml)(text, path=path, error=error)
 
 
 def line_of(value: Any, key: Any = None) -> int | None:

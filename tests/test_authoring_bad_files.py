@@ -9,6 +9,7 @@ bounded excerpts; YAML alias bombs fail in milliseconds.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -280,3 +281,115 @@ def test_two_runs_on_one_target_never_reset_each_others_world_the_second_queues(
     finally:
         agent.close()
         sup.close()
+
+
+@pytest.mark.parametrize("evidence_file", ["bundle.yaml", "terminal.yaml"])
+def test_an_alias_bomb_in_an_evidence_file_is_refused_in_milliseconds_and_sets_the_run_aside(
+        tmp_path, capsys, evidence_file):
+    """The SessionVerifier reads evidence with the bounded loader: a bomb in the bundle
+    index or a snapshot is a VerifierError with the file and the anchor's line, the run
+    is set aside (``agent --run`` exits 2 at once), the evidence file is left as it is."""
+    from phyagentos.agent.verifier import load_evidence
+    from phyagentos.errors import VerifierError
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+    from phyagentos.runtime.supervisor import WatchdogSupervisor
+
+    ws = tmp_path / "ws"
+    run_id = submit(ws, capsys)
+    workspace = Workspace.open(ws)
+    [(sid, _, _)] = workspace.active_sessions(run_id=run_id)
+    sup = WatchdogSupervisor(workspace, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()))
+    try:
+        for _ in range(200):
+            sup.run_once()
+            if workspace.load_session(sid).state == "awaiting_verification":
+                break
+            time.sleep(0.05)
+    finally:
+        sup.close()
+    rec = workspace.load_session(sid)
+    assert rec.state == "awaiting_verification"
+    directory = ws / rec.attempts[-1].evidence
+    path = directory / evidence_file
+    bad = path.read_text(encoding="utf-8") + "\n" + BOMB + "\n"
+    path.write_text(bad, encoding="utf-8")
+    first = bad.splitlines().index(BOMB.splitlines()[0]) + 1
+    bomb_lines = range(first, first + len(BOMB.splitlines()))  # the anchor that expands too far is one of them
+
+    started = time.perf_counter()
+    with pytest.raises(VerifierError, match="YAML aliases expand to more than") as exc:
+        load_evidence(directory)
+    assert time.perf_counter() - started < 0.5  # refused, not expanded
+    assert exc.value.path == path and exc.value.line in bomb_lines
+    where = f"{path}:{exc.value.line}"
+
+    started = time.perf_counter()
+    assert agent_run(ws, run_id) == 2
+    assert time.perf_counter() - started < 30.0  # returns: nothing hangs on the bomb
+    err = capsys.readouterr().err
+    assert f"set aside run {run_id} (failed)" in err and where in err
+    assert path.read_text(encoding="utf-8") == bad
+    assert Workspace.open(ws).runs.active_ids() == []
+    assert main(["status", str(ws)]) == 0
+    assert f"{run_id}: failed: set aside" in capsys.readouterr().out
+
+
+def test_an_alias_bomb_in_a_pending_session_never_hangs_the_supervisors_claim(tmp_path, capsys, caplog):
+    """The supervisor's claim reads the session with the bounded loader: the bombed
+    session is set aside with a warning naming the file and line, in well under a second
+    of work, the file is left as it is and the session is never claimed."""
+    import logging
+
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+    from phyagentos.runtime.supervisor import WatchdogSupervisor
+
+    ws = tmp_path / "ws"
+    run_id = submit(ws, capsys)
+    workspace = Workspace.open(ws)
+    [(sid, _, _)] = workspace.active_sessions(run_id=run_id)
+    path = workspace.session_path(sid)
+    text = path.read_text(encoding="utf-8")
+    indented = "\n".join("  " + line for line in BOMB.splitlines())
+    bad = text.replace("parameters:", "bomb:\n" + indented + "\nparameters:", 1)
+    path.write_text(bad, encoding="utf-8")
+    sup = WatchdogSupervisor(workspace, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()))
+    try:
+        with caplog.at_level(logging.WARNING, logger="phyagentos.runtime.supervisor"):
+            started = time.perf_counter()
+            sup.run_once()
+            elapsed = time.perf_counter() - started
+    finally:
+        sup.close()
+    assert elapsed < 10.0  # a claim, not a multi-gigabyte expansion (that never returned)
+    assert f"session {sid} set aside" in caplog.text and "YAML aliases expand to more than" in caplog.text
+    assert str(path) in caplog.text
+    assert path.read_text(encoding="utf-8") == bad
+    assert not list((ws / "targets").rglob("state.*")) if (ws / "targets").exists() else True
+
+
+@pytest.mark.parametrize("where", ["skills/hold.yaml", "trees/hold.yaml", "safety.yaml"])
+def test_an_alias_bomb_in_a_skill_tree_or_safety_file_is_refused_with_file_and_line(tmp_path, capsys, where):
+    """Skills and trees of the workspace and its ``safety.yaml`` are bounded like goal
+    graphs: ``run`` exits 2 naming the file and line, the workspace unchanged, nothing moved."""
+    from phyagentos.resources import skills_dir, trees_dir
+
+    ws = tmp_path / "ws"
+    Workspace.create(ws)
+    path = ws / where
+    if where != "safety.yaml":
+        path.parent.mkdir(exist_ok=True)
+        source = (skills_dir() if where.startswith("skills") else trees_dir()) / "hold.yaml"
+        path.write_text(BOMB + "\n" + source.read_text(encoding="utf-8"), encoding="utf-8")
+    else:
+        path.write_text(BOMB + "\n" + path.read_text(encoding="utf-8"), encoding="utf-8")
+    before = {p: p.read_bytes() for p in ws.rglob("*") if p.is_file()}
+    started = time.perf_counter()
+    assert main(["run", str(HOLD), "--workspace", str(ws)]) == 2
+    assert time.perf_counter() - started < 30.0
+    err = capsys.readouterr().err
+    assert re.search(rf"{re.escape(str(path))}:\d+: .*YAML aliases expand to more than", err), err
+    assert "Traceback" not in err
+    assert {p: p.read_bytes() for p in ws.rglob("*") if p.is_file()} == before
+    assert not (ws / "targets").exists() or not list((ws / "targets").rglob("state.*"))

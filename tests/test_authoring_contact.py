@@ -75,3 +75,48 @@ def test_a_compliant_push_moves_the_cube_into_the_region_through_the_cli(tmp_pat
     [trace] = list((ws / "evidence").glob("*/trace.jsonl"))
     [push] = [json.loads(line) for line in trace.read_text().splitlines() if '"kind": "push"' in line]
     assert push["touched"] == ["cube"] and 0.0 < push["max_force_n"] <= 40.0
+
+
+def _record_steps(target):
+    """Wrap ``target.track`` to record, after every call, the physics steps it took and
+    the contact force then (N): what the primitive saw, step by step."""
+    from phyagentos.primitives.contact import contact_force_n
+
+    calls = []
+    track = target.track
+
+    def recording(traj, **kw):
+        result = track(traj, **kw)
+        force, _ = contact_force_n(target.model, target.data)
+        calls.append((result.steps, float(target.data.time), force))
+        return result
+
+    target.track = recording
+    return calls
+
+
+def test_a_guarded_move_stops_within_one_physics_step_of_the_force_limit(target):
+    """Pressing down on the cube at a fast speed: the force is measured after every
+    physics step, and the motion stops at the very step the limit is first reached (the
+    old per-control-period check let up to 50 steps of pressing pass unchecked)."""
+    ctx = SkillContext(target=target)
+    target.set_gripper(opening_m=0.0)  # a closed hand presses with its fingertips
+    cube = target.object_pose("cube")[:3, 3]
+    T = target.tcp_pose()
+    down = cube[2] + 0.02 - 0.03 - T[2, 3]  # tcp 1 cm below the cube's top face
+    # above the cube first (free space, no contact expected)
+    over = [cube[0] - T[0, 3], cube[1] - T[1, 3], 0.0]
+    assert _tick_until_done(GuardedMove("Over", offset=over, velocity_scale=0.5, expect_contact=False), ctx) \
+        == py_trees.common.Status.SUCCESS
+    calls = _record_steps(target)
+    limit = 15.0
+    status = _tick_until_done(GuardedMove("Press", offset=[0.0, 0.0, down], velocity_scale=0.3,
+                                          max_contact_force_n=limit, tracking_tol_rad=0.5), ctx)
+    assert status == py_trees.common.Status.SUCCESS, ctx.failure
+    assert calls and all(steps <= 1 for steps, _, _ in calls)  # one physics step per force check
+    first = next(i for i, (_, _, f) in enumerate(calls) if f >= limit)
+    assert first == len(calls) - 1  # no physics step after the limit was reached
+    reader = py_trees.blackboard.Client(name="reader")
+    reader.register_key(key="contact", access=py_trees.common.Access.READ)
+    assert reader.contact["force_n"] >= limit and reader.contact["touched"] == ["cube"]
+    assert reader.contact["sim_time_s"] - calls[first][1] <= target.model.opt.timestep + 1e-12

@@ -111,3 +111,41 @@ def test_two_cubes_share_one_region_side_by_side_through_the_cli(tmp_path, capsy
     pos = {e["name"]: e["position"] for e in entities if e["name"] in ("red_cube", "blue_cube")}
     assert abs(pos["red_cube"][2] - pos["blue_cube"][2]) < 0.01  # side by side, not stacked
     assert np.hypot(pos["red_cube"][0] - pos["blue_cube"][0], pos["red_cube"][1] - pos["blue_cube"][1]) > 0.06
+
+
+STACK = """\
+version: 1
+name: stack
+defaults: {target: franka_tabletop}
+scene:
+  objects:
+    - {name: red_cube, half_extents: [0.02, 0.02, 0.02], position: [0.45, -0.2], rgba: [0.85, 0.2, 0.15, 1]}
+    - {name: blue_cube, half_extents: [0.025, 0.025, 0.025], position: [0.55, 0.2], rgba: [0.15, 0.3, 0.85, 1]}
+nodes:
+  - id: pick_red
+    skill: pick
+    params: {object: red_cube}
+    accept: {holding: red_cube}
+  - id: stack_red
+    skill: place
+    params: {object: red_cube, region: blue_cube}
+    accept: {on: {object: red_cube, support: blue_cube}}
+    depends_on: [pick_red]
+"""
+
+
+def test_place_on_another_object_stacks_it_through_the_cli(tmp_path, capsys):
+    """``place`` with ``region`` naming an object sets the held one down on its top face;
+    the predicate ``on`` is written unquoted (YAML 1.1 would read it as ``true``)."""
+    import json
+
+    graph = tmp_path / "stack.yaml"
+    graph.write_text(STACK, encoding="utf-8")
+    ws = tmp_path / "ws"
+    assert main(["run", str(graph), "--workspace", str(ws), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert {s["node"]: s["status"] for s in report["sessions"]} == {"pick_red": "succeeded", "stack_red": "succeeded"}
+    qpos = np.load(ws / "targets" / "franka_tabletop" / "state.npz")["qpos"]
+    red, blue = qpos[9:12], qpos[16:19]  # free joints after 7 arm + 2 finger joints, in scene order
+    assert red[2] == pytest.approx(2 * 0.025 + 0.02, abs=0.005)  # resting on the blue cube's top face
+    assert np.hypot(*(red[:2] - blue[:2])) < 0.02

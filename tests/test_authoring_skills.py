@@ -20,7 +20,7 @@ name: nudge
 description: Open the gripper, move above an object, touch down and come back up.
 params:
   object: {required: true, description: the object to nudge}
-  height_m: {default: 0.10, description: approach height above the grasp, m}
+  height_m: {default: 0.10, description: "approach height above the grasp, m"}
 root:
   sequence:
     name: Nudge

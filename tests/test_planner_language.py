@@ -148,3 +148,23 @@ def test_plan_cli_prints_a_refusal_and_exits_1_with_the_record_written(tmp_path,
     (record,) = list((ws / "plans").glob("*/plan.yaml"))
     assert yaml.safe_load(record.read_text())["refused_by"] == "policy"
     assert not (record.parent / "goal_graph.yaml").exists()
+
+
+def test_plan_runs_the_whole_graph_check_of_validate_before_anything_runs(tmp_path, capsys):
+    """The planner knows names and reach; the scene's files it cannot know: a plan on a
+    scene whose mesh file is missing is refused by the same whole-graph check as
+    ``validate`` (exit 2, the plan's goal_graph.yaml and line), and nothing runs."""
+    ws = tmp_path / "ws"
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("objects:\n  - {name: cube, shape: mesh, mesh: meshes/missing.obj, position: [0.5, -0.2],"
+                     " rgba: [0.85, 0.2, 0.15, 1]}\n"
+                     "regions:\n  - {name: goal, center: [0.5, 0.25], half_extents: [0.08, 0.08]}\n", encoding="utf-8")
+    code = main(["plan", "put the red cube in the goal region", "--workspace", str(ws), "--scene", str(scene)])
+    captured = capsys.readouterr()
+    err = captured.err
+    assert code == 2, err  # without the check, plan printed "goal graph: valid" and exited 0
+    assert "valid" not in captured.out
+    (graph,) = list((ws / "plans").glob("*/goal_graph.yaml"))
+    assert f"{graph}:" in err and "mesh file 'meshes/missing.obj' does not exist in the workspace" in err
+    assert not (ws / "runs").exists() or not any((ws / "runs").glob("r*"))
+    assert not (ws / "targets").exists() or not list((ws / "targets").rglob("state.*"))

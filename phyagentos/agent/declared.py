@@ -5,7 +5,7 @@ parameters, scripted disturbances, randomisation); none of that is knowledge a r
 The Agent plane reads a scene only through :func:`declared_scene`, which keeps:
 
 - per object its *descriptor*: ``name``, optional ``class`` (the user's object class,
-  e.g. ``mug``), ``shape`` (box | cylinder | sphere), ``colour`` (a name, or ``rgba``
+  e.g. ``mug``), ``shape`` (box | cylinder | sphere | mesh), ``colour`` (a name, or ``rgba``
   0..1 as written in the scene) and an approximate size ``size_m`` (3,) full extents in
   m (``half_extents`` as written in shipped scenes count as the author's declared size:
   ``size_m = 2 * half_extents``);

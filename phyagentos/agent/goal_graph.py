@@ -196,6 +196,14 @@ def _str_scalar(node: yaml.Node) -> str | None:
     return None
 
 
+def _predicate_name(node: yaml.Node) -> None:
+    """YAML 1.1 reads a plain ``on`` as the boolean true; as an accept key it can only be
+    the predicate ``on`` (``accept: {on: {object: a, support: b}}``), so it is kept as
+    the string the user wrote."""
+    if isinstance(node, yaml.ScalarNode) and node.style is None and node.value in ("on", "On", "ON"):
+        node.tag = _STR_TAG
+
+
 class _Parser:
     """Single-use validator: turns one YAML text into a :class:`GoalGraph` or raises."""
 
@@ -353,12 +361,15 @@ class _Parser:
     def _accept(self, node: yaml.Node, context: str) -> dict[str, Any] | list[dict[str, Any]]:
         if isinstance(node, yaml.MappingNode):
             for key, _ in node.value:
+                _predicate_name(key)
                 if not _str_scalar(key):
                     raise _Invalid(key, f"{context}accept predicate names must be strings, "
                                         f"got {_kind(key)}; {_ACCEPT_HELP}")
             return self._value(node)
         if isinstance(node, yaml.SequenceNode):
             for item in node.value:
+                if isinstance(item, yaml.MappingNode) and len(item.value) == 1:
+                    _predicate_name(item.value[0][0])
                 if not (isinstance(item, yaml.MappingNode) and len(item.value) == 1
                         and _str_scalar(item.value[0][0])):
                     raise _Invalid(item, f"{context}accept list items must be single-key "

@@ -23,9 +23,10 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-import yaml
 
 from phyagentos import resources
+from phyagentos.errors import SkillError
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["DEFAULT_REACH", "Reach", "Selection", "SkillRequirements", "select_target", "skill_requirements"]
 
@@ -69,7 +70,7 @@ class SkillRequirements:
 def _requirements(directory: str) -> dict[str, SkillRequirements]:
     out = {}
     for path in sorted(Path(directory).glob("*.yaml")):
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        data = read_yaml(path, error=SkillError) or {}
         if not isinstance(data, dict) or not isinstance(data.get("name"), str):
             continue
         req = data.get("requires") or {}

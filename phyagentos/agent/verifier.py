@@ -42,6 +42,7 @@ import yaml
 from phyagentos.errors import VerifierError
 from phyagentos.protocol import CriterionResult, SessionRecord, Verdict
 from phyagentos.protocol.lifecycle import utc_now
+from phyagentos.yamlsource import read_yaml
 
 from .criteria import CriterionOutcome, evaluate, parse_criteria
 from .diagnosis import diagnose
@@ -117,12 +118,14 @@ def load_evidence(directory: str | Path) -> EvidenceBundle:
     directory = Path(directory)
     index = directory / "bundle.yaml"
     try:
-        bundle = yaml.safe_load(index.read_text(encoding="utf-8"))
+        # bounded (phyagentos.yamlsource): an alias bomb in any evidence file is refused in
+        # milliseconds as a VerifierError naming the file and line (the run is set aside)
+        bundle = read_yaml(index, error=VerifierError)
         files = bundle["files"]
 
         def load(key):
             name = files.get(key)
-            return yaml.safe_load((directory / name).read_text(encoding="utf-8")) if name else {}
+            return read_yaml(directory / name, error=VerifierError) if name else {}
 
         return EvidenceBundle(
             session_id=bundle["session_id"],

@@ -23,6 +23,7 @@ from typing import Any
 import yaml
 
 from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 from .episode import Episode, episode_graph, episode_graph_text, save_episode
 from .perturb import apply_perturbation, draw_perturbation
@@ -37,12 +38,12 @@ _CONFIG_DOCS = ("TARGETS.md", "SKILLRUNTIME.md", "safety.yaml")
 
 def base_scene(task: TaskSpec) -> dict:
     """The scene block of the task's goal graph (plain data; ``{}`` when absent)."""
-    raw = yaml.safe_load(Path(task.goal_graph).read_text(encoding="utf-8")) or {}
+    raw = read_yaml(task.goal_graph, error=BenchError) or {}
     return copy.deepcopy(raw.get("scene") or {})
 
 
 def _manipulated_object(task: TaskSpec) -> str | None:
-    raw = yaml.safe_load(Path(task.goal_graph).read_text(encoding="utf-8")) or {}
+    raw = read_yaml(task.goal_graph, error=BenchError) or {}
     for node in raw.get("nodes") or ():
         obj = (node.get("params") or {}).get("object")
         if obj:
@@ -136,7 +137,7 @@ def episode_template_dir(bench_root: Path, run_dir: Path, memory_files: dict[str
     if safety:
         from phyagentos.protocol import SafetyConfig, dump_yaml  # noqa: PLC0415
 
-        merged = {**(yaml.safe_load((out / "safety.yaml").read_text(encoding="utf-8")) or {}), **safety}
+        merged = {**(read_yaml(out / "safety.yaml", error=BenchError) or {}), **safety}
         try:
             SafetyConfig.model_validate(merged)
         except Exception as exc:  # pydantic ValidationError: name the suite's key

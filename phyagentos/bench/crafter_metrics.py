@@ -20,11 +20,12 @@ import math
 from pathlib import Path
 from typing import Any, Sequence
 
-import yaml
 
 from phyagentos.agent.memory.deaths import diagnose_death
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.targets.crafter_target import CRAFTER_ACHIEVEMENTS
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["crafter_score", "episode_metrics", "crafter_report", "is_crafter_run"]
 
@@ -50,7 +51,7 @@ def episode_metrics(episode_dir: str | Path, *, target: str = "crafter") -> dict
     gt_path = episode_dir / "targets" / target / "ground_truth.yaml"
     if not gt_path.is_file():
         return None
-    gt = yaml.safe_load(gt_path.read_text(encoding="utf-8"))
+    gt = read_yaml(gt_path, error=BenchError)
     traces = _traces(episode_dir)
     unlocked_in: dict[str, str] = {}
     cause = "alive"

@@ -21,6 +21,7 @@ import yaml
 from phyagentos.errors import BenchError
 from phyagentos.protocol import dump_yaml
 from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["Episode", "EpisodeOutcome", "EPISODE_FILE", "OUTCOME_FILE", "load_episode", "save_episode",
            "episode_graph", "episode_graph_text", "run_episode"]
@@ -92,8 +93,8 @@ def load_episode(directory: Path) -> Episode:
     """Read ``episode.yaml``; raises BenchError if missing or malformed."""
     path = Path(directory) / EPISODE_FILE
     try:
-        return Episode(**yaml.safe_load(path.read_text(encoding="utf-8")))
-    except (OSError, TypeError, yaml.YAMLError) as exc:
+        return Episode(**read_yaml(path, error=BenchError))
+    except (OSError, TypeError, BenchError) as exc:
         raise BenchError(f"episode file {path} unreadable: {exc}") from None
 
 
@@ -104,7 +105,7 @@ def episode_graph_text(episode: Episode) -> str:
     is self-contained: any Agent process can continue it and a reader sees exactly the
     initial state the episode started from.
     """
-    raw = yaml.safe_load(Path(episode.goal_graph).read_text(encoding="utf-8"))
+    raw = read_yaml(episode.goal_graph, error=BenchError)
     raw["scene"] = episode.scene
     header = (f"# Episode {episode.episode_id} of bench run {episode.evaluation.get('bench_id')}: "
               f"{episode.goal_graph} with the episode's initial scene (seed {episode.seed}).\n")

@@ -140,7 +140,7 @@ def run_gate(workspace, suite, first_scenes: dict[str, dict]) -> GateReport:
             try:
                 probe_session = SessionRecord(session_id="gate-probe", run_id="gate", node="gate", skill="gate",
                                               target=name, scene=scene, created_at=utc_now(), updated_at=utc_now())
-                target = cls(name, scene_for(probe_session, spec), seed=0)
+                target = cls(name, scene_for(probe_session, spec, root=workspace.root), seed=0)
                 try:
                     target.reset(seed=0)
                     snap = target.snapshot()

@@ -33,10 +33,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 from .episode import OUTCOME_FILE, load_episode
 from .taxonomy import CATEGORIES, classify
@@ -58,13 +59,20 @@ class EpisodeRecord:
     data: dict[str, Any]
 
 
+def _unreadable(path: Path, exc: Exception) -> None:
+    """An evidence file that is missing counts as empty; one that is present but bad is said."""
+    if not isinstance(exc, FileNotFoundError):
+        logger.warning("evidence file set aside: %s", exc)
+
+
 def _bundle(root: Path, evidence: str | None) -> dict:
     if not evidence:
         return {}
     path = root / evidence / "bundle.yaml"
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except OSError:
+        return read_yaml(path, error=BenchError) or {}
+    except (OSError, BenchError) as exc:
+        _unreadable(path, exc)
         return {}
 
 
@@ -74,8 +82,9 @@ def _terminal(root: Path, evidence: str | None) -> dict:
         return {}
     path = root / evidence / "ground_truth.yaml"
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except OSError:
+        return read_yaml(path, error=BenchError) or {}
+    except (OSError, BenchError) as exc:
+        _unreadable(path, exc)
         return {}
 
 
@@ -83,8 +92,9 @@ def _events(root: Path, evidence: str | None) -> list:
     if not evidence:
         return []
     try:
-        return yaml.safe_load((root / evidence / "events.yaml").read_text(encoding="utf-8")) or []
-    except OSError:
+        return read_yaml(root / evidence / "events.yaml", error=BenchError) or []
+    except (OSError, BenchError) as exc:
+        _unreadable(root / evidence / "events.yaml", exc)
         return []
 
 
@@ -99,7 +109,7 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
     """Read one episode's sessions, evidence and outcome into an :class:`EpisodeRecord`."""
     episode = load_episode(directory)
     outcome_path = directory / OUTCOME_FILE
-    outcome = yaml.safe_load(outcome_path.read_text(encoding="utf-8")) if outcome_path.is_file() else None
+    outcome = read_yaml(outcome_path, error=BenchError) if outcome_path.is_file() else None
     ws = Workspace.open(directory)
     sessions = [s for s in ws.list_sessions() if s.run_id == episode.run_id]
     task_nodes = [n.id for n in ws.read("TASK").data.nodes] if ws.read("TASK").data.run_id == episode.run_id else []

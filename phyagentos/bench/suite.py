@@ -53,6 +53,7 @@ import yaml
 
 from phyagentos.errors import BenchError, format_choices
 from phyagentos.resources import goal_graphs_dir
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["RandomizeRule", "TaskSpec", "PerturbationConfig", "Suite", "load_suite", "suite_dir", "available_suites",
            "episode_rng"]
@@ -194,9 +195,9 @@ def load_suite(name_or_path: str | Path) -> Suite:
     if not p.is_file():
         raise BenchError(f"suite file {p} does not exist")
     try:
-        raw = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise _problem(p, f"YAML syntax error: {exc}") from None
+        raw = read_yaml(p, error=BenchError)
+    except BenchError as exc:
+        raise _problem(p, f"YAML: {exc}") from None
     if not isinstance(raw, dict):
         raise _problem(p, "top level must be a mapping")
     unknown = set(raw) - _SUITE_KEYS

@@ -34,9 +34,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-import yaml
 
 from phyagentos.agent.criteria import Criterion, evaluate, parse_criteria
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["GROUND_TRUTH_FILE", "truth_snapshot", "truth_of_criteria", "score_session", "confusion",
            "load_ground_truth"]
@@ -50,8 +51,8 @@ def load_ground_truth(bundle_dir: Path) -> dict[str, Any] | None:
     """``ground_truth.yaml`` of an evidence bundle directory, or ``None`` if absent/unreadable."""
     path = Path(bundle_dir) / GROUND_TRUTH_FILE
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError):
+        data = read_yaml(path, error=BenchError)
+    except (OSError, BenchError):
         return None
     return data if isinstance(data, dict) else None
 

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 
 from .client import LLMClient, LLMError
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["LLMConfig", "load_llm_config", "make_client", "PROVIDERS"]
 
@@ -58,9 +58,9 @@ def load_llm_config(workspace: str | Path | None = None, *, env: dict[str, str] 
     for candidate in ([Path(workspace) / "llm.yaml"] if workspace else []) + [Path("llm.yaml")]:
         if candidate.is_file():
             try:
-                data = yaml.safe_load(candidate.read_text(encoding="utf-8")) or {}
-            except yaml.YAMLError as exc:
-                raise LLMError(f"{candidate}: not valid YAML: {exc}") from exc
+                data = read_yaml(candidate, error=LLMError) or {}
+            except LLMError as exc:
+                raise LLMError(f"not valid YAML: {exc}") from None
             if not isinstance(data, dict):
                 raise LLMError(f"{candidate}: expected a mapping of settings")
             if "api_key" in data:

@@ -46,7 +46,9 @@ class ObjectDescriptor:
     Attributes:
         name: the object's declared name (becomes the entity name when associated).
         cls: the user's object class ("mug"), informative only.
-        shape: ``box`` | ``cylinder`` | ``sphere`` or None.
+        shape: ``box`` | ``cylinder`` | ``sphere`` or None. A declared ``mesh`` (a scene
+            object shaped by a mesh file) becomes None: the detector classifies only the
+            primitives, so a mesh object is matched by colour and size (its bounding box).
         colour_rgb: sRGB in [0, 1] (a colour name from :data:`COLOUR_NAMES` is converted).
         size_m: full dimensions, m: ``(x, y, z)`` or a float (largest dimension).
 
@@ -66,6 +68,8 @@ class ObjectDescriptor:
         where = f"object {self.name!r}"
         if self.name.startswith("unknown_"):
             raise PerceptionError(f"{where}: names starting with 'unknown_' are reserved for unassociated clusters")
+        if self.shape == "mesh":
+            object.__setattr__(self, "shape", None)
         if self.shape is not None and self.shape not in SHAPES:
             raise PerceptionError(f"{where}: shape {self.shape!r} is not one of {format_choices(SHAPES)}")
         c = self.colour_rgb

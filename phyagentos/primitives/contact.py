@@ -5,7 +5,8 @@ push expects contact (``contact.missing`` otherwise), tolerates the lag contact 
 (its own ``tracking_tol_rad``) and bounds the effort (``contact.excessive_force``).
 
 ``guarded_move`` moves the tcp along a straight line, slowly, and stops as soon as the
-robot presses on something with at least ``max_contact_force_n``; a motion that should
+robot presses on something with at least ``max_contact_force_n`` (checked after every
+physics step: the stop comes within one step of the limit being reached); a motion that should
 have touched and did not fails with ``contact.missing``. Its tracking tolerance is a
 parameter: a compliant push lets the arm lag behind its reference while in contact,
 where a free-space motion would call that lag a collision.
@@ -18,12 +19,15 @@ count. Targets without a MuJoCo model fail with ``contact.unsupported``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import mujoco
 import numpy as np
 from py_trees.common import Status
 
 from phyagentos.motion.cartesian import cartesian_path
-from phyagentos.motion.retime import retime
+from phyagentos.motion.retime import Trajectory, retime
 
 from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
 
@@ -66,47 +70,69 @@ def _is_robot(model: mujoco.MjModel, body: int) -> bool:
     return model.jnt_type[model.body_jntadr[body]] != mujoco.mjtJoint.mjJNT_FREE
 
 
-class GuardedMove(_Tracking):
-    """Straight-line tcp motion by a world ``offset`` that stops on contact.
+def _offset_arg(offset) -> np.ndarray:
+    offset = np.asarray(offset, dtype=float)
+    if offset.shape != (3,) or not np.all(np.isfinite(offset)):
+        raise ValueError(f"offset must be 3 finite numbers in m, got {offset!r}")
+    return offset
 
-    Args:
-        offset: (3,) world-frame tcp displacement in m (orientation kept): the farthest
-            the motion goes.
-        velocity_scale: fraction (0, 1] of the joint velocity limits (slow: contact).
-        tracking_tol_rad: joint tracking error tolerated before the motion counts as
-            blocked, rad (a blocked motion with contact is the contact it expected).
-        max_contact_force_n: stop as soon as the robot presses with this much, N.
-        expect_contact: fail with ``contact.missing`` when the whole offset is travelled
-            without touching anything.
 
-    Blackboard: writes ``contact`` with ``{force_n, touched, travelled_m}``.
-    """
+@dataclass(frozen=True)
+class _Slice:
+    """What one control period of a contact motion ended with: the tracking result of the
+    last physics step, the contact force (N) and touched geoms after it, and whether the
+    force limit stopped it."""
 
-    def __init__(self, name: str, *, offset, velocity_scale: float = 0.05, tracking_tol_rad: float = 0.05,
-                 max_contact_force_n: float = 10.0, expect_contact: bool = True):
-        super().__init__(name)
-        offset = np.asarray(offset, dtype=float)
-        if offset.shape != (3,) or not np.all(np.isfinite(offset)):
-            raise ValueError(f"offset must be 3 finite numbers in m, got {offset!r}")
+    completed: bool
+    max_tracking_error_rad: float
+    force_n: float
+    touched: tuple[str, ...]
+    stopped: bool
+
+
+class _ContactMotion(_Tracking):
+    """A straight tcp motion that expects contact (shared by :class:`GuardedMove` and
+    :class:`Push`): argument checks, planning, and a stream that checks the contact
+    force after **every physics step** (the target is asked for one step at a time), so
+    a force limit stops the motion within one step (``timestep`` s) of being reached."""
+
+    def _motion_args(self, *, to: str | None, offset, velocity_scale: float, tracking_tol_rad: float,
+                     force_limit_n: float, force_name: str, expect_contact: bool, allow_to: bool) -> None:
+        if allow_to and (to is None) == (offset is None):
+            raise ValueError("give exactly one of 'to' (blackboard pose key) or 'offset' ([dx, dy, dz] in m)")
+        if offset is not None or not allow_to:
+            offset = _offset_arg(offset)
         if not 0 < velocity_scale <= 1:
             raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
         if not tracking_tol_rad > 0:
             raise ValueError(f"tracking_tol_rad must be > 0 rad, got {tracking_tol_rad}")
-        if not max_contact_force_n > 0:
-            raise ValueError(f"max_contact_force_n must be > 0 N, got {max_contact_force_n}")
-        self.offset, self.velocity_scale = offset, float(velocity_scale)
-        self.tracking_tol_rad, self.max_contact_force_n = float(tracking_tol_rad), float(max_contact_force_n)
-        self.expect_contact = bool(expect_contact)
+        if not force_limit_n > 0:
+            raise ValueError(f"{force_name} must be > 0 N, got {force_limit_n}")
+        self.to, self.offset, self.velocity_scale = to, offset, float(velocity_scale)
+        self.tracking_tol_rad, self.expect_contact = float(tracking_tol_rad), bool(expect_contact)
+        if to is not None:
+            self.reads(to)
         self.writes("contact")
 
-    def on_enter(self):
+    def _plan(self) -> None:
+        """Plan the straight line to ``to`` / by ``offset`` and start streaming it; held
+        objects' contacts are ignored when measuring the force.
+
+        Raises:
+            PrimitiveFailure: ``contact.unsupported`` on a target without a MuJoCo model.
+        """
         ctx = self.ctx
         target = ctx.target
         if getattr(target, "model", None) is None or getattr(target, "data", None) is None:
             raise PrimitiveFailure("contact.unsupported", f"target {target.name!r} reports no contact forces")
-        self._start_xyz = target.tcp_pose()[:3, 3].copy()
-        T_goal = target.tcp_pose()
-        T_goal[:3, 3] += self.offset
+        T_start = target.tcp_pose()
+        if self.to is not None:
+            T_goal = np.asarray(self.get(self.to), dtype=float)
+        else:
+            T_goal = T_start.copy()
+            T_goal[:3, 3] += self.offset
+        self._start_xyz = T_start[:3, 3].copy()
+        self._length = float(np.linalg.norm(T_goal[:3, 3] - T_start[:3, 3]))
         with ctx.profiler.section("ik"):
             path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
         vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
@@ -116,33 +142,112 @@ class GuardedMove(_Tracking):
         self._ignore = frozenset(int(target.model.body(n).id) for n in held)
         self._start(traj)
 
+    def _stream(self, over_limit: Callable[[float], bool]) -> _Slice:
+        """Stream up to one control period, one physics step per ``track`` call, measuring
+        the contact force after each step; return at the first step where
+        ``over_limit(force)`` holds or tracking fails (the arm's command then stays where
+        the target left it: :meth:`halt` is the caller's).
+
+        Raises:
+            PrimitiveFailure: ``safety.estop`` when the SafetyGuard's e-stop is engaged.
+        """
+        ctx = self.ctx
+        target = ctx.target
+        if ctx.guard is not None and ctx.guard.estop_engaged():
+            target.halt()
+            raise PrimitiveFailure("safety.estop", f"e-stop engaged: {ctx.guard.estop.reason}")
+        t_end = min(self._t + ctx.motion.control_period_s, self._traj.duration)
+        dt = float(target.model.opt.timestep)
+        force, touched, max_err = 0.0, (), 0.0
+        while self._t < t_end - 1e-12:
+            t_next = min(self._t + dt, t_end)
+            window, t0 = self._window(self._t, t_next)
+            with ctx.profiler.section("simulation"):
+                result = target.track(window, t_start=self._t - t0, t_end=t_next - t0,
+                                      tracking_tol_rad=self.tracking_tol_rad)
+            self._t = t_next
+            max_err = max(max_err, result.max_tracking_error_rad)
+            force, touched = contact_force_n(target.model, target.data, ignore_bodies=self._ignore)
+            self._sample(force, touched)
+            stopped = over_limit(force)
+            if stopped or not result.completed:
+                return _Slice(result.completed, max_err, force, touched, stopped)
+        return _Slice(True, max_err, force, touched, False)
+
+    def _window(self, t_start: float, t_end: float) -> tuple[Trajectory, float]:
+        """The samples of the trajectory around ``(t_start, t_end]`` (s), re-based to start
+        at 0, and the time of the first on the trajectory's clock: ``track`` interpolates
+        the same reference from them, at a cost that does not grow with the trajectory's
+        length (the primitive calls it once per physics step)."""
+        traj = self._traj
+        t = np.asarray(traj.t, dtype=float)
+        if t_start <= 0.0:  # the first step: the whole start check of track applies
+            i0 = 0
+        else:  # a sample strictly before t_start, so the slice never restarts the clock
+            i0 = max(0, int(np.searchsorted(t, t_start, side="left")) - 1)
+        i1 = min(len(t) - 1, int(np.searchsorted(t, t_end, side="left")) + 1)
+        i1 = max(i1, min(i0 + 1, len(t) - 1))
+        sl = slice(i0, i1 + 1)
+        qdd = getattr(traj, "qdd", None)
+        window = Trajectory(t=t[sl] - t[i0], q=np.asarray(traj.q)[sl], qd=np.asarray(traj.qd)[sl],
+                            qdd=np.asarray(qdd)[sl] if qdd is not None else np.zeros_like(np.asarray(traj.q)[sl]))
+        return window, float(t[i0])
+
+    def _sample(self, force: float, touched: tuple[str, ...]) -> None:
+        """Called after every physics step with the contact force (N) and touched geoms."""
+
+
+class GuardedMove(_ContactMotion):
+    """Straight-line tcp motion by a world ``offset`` that stops on contact.
+
+    Args:
+        offset: (3,) world-frame tcp displacement in m (orientation kept): the farthest
+            the motion goes.
+        velocity_scale: fraction (0, 1] of the joint velocity limits (slow: contact).
+        tracking_tol_rad: joint tracking error tolerated before the motion counts as
+            blocked, rad (a blocked motion with contact is the contact it expected).
+        max_contact_force_n: stop as soon as the robot presses with this much, N;
+            checked after every physics step, so the stop comes within one step.
+        expect_contact: fail with ``contact.missing`` when the whole offset is travelled
+            without touching anything.
+
+    Blackboard: writes ``contact`` with ``{force_n, touched, travelled_m}``.
+    """
+
+    def __init__(self, name: str, *, offset, velocity_scale: float = 0.05, tracking_tol_rad: float = 0.05,
+                 max_contact_force_n: float = 10.0, expect_contact: bool = True):
+        super().__init__(name)
+        self._motion_args(to=None, offset=offset, velocity_scale=velocity_scale, tracking_tol_rad=tracking_tol_rad,
+                          force_limit_n=max_contact_force_n, force_name="max_contact_force_n",
+                          expect_contact=expect_contact, allow_to=False)
+        self.max_contact_force_n = float(max_contact_force_n)
+
+    def on_enter(self):
+        self._plan()
+
     def _contact(self, force: float, touched: tuple[str, ...]) -> Status:
         target = self.ctx.target
         target.halt()
         travelled = float(np.linalg.norm(target.tcp_pose()[:3, 3] - self._start_xyz))
-        info = {"force_n": round(force, 3), "touched": list(touched), "travelled_m": round(travelled, 4)}
+        info = {"force_n": round(force, 3), "touched": list(touched), "travelled_m": round(travelled, 4),
+                "sim_time_s": round(float(target.data.time), 6)}
         self.set("contact", info)
         self.ctx.trace.record("contact", leaf=self.name, **info)
         return Status.SUCCESS
 
     def step(self):
-        ctx = self.ctx
-        target = ctx.target
-        t_end = min(self._t + ctx.motion.control_period_s, self._traj.duration)
-        with ctx.profiler.section("simulation"):
-            result = target.track(self._traj, t_start=self._t, t_end=t_end, tracking_tol_rad=self.tracking_tol_rad)
-        self._t = t_end
-        force, touched = contact_force_n(target.model, target.data, ignore_bodies=self._ignore)
-        if force >= self.max_contact_force_n or (not result.completed and touched):
-            return self._contact(force, touched)
-        if not result.completed:
+        target = self.ctx.target
+        s = self._stream(lambda force: force >= self.max_contact_force_n)
+        if s.stopped or (not s.completed and s.touched):
+            return self._contact(s.force_n, s.touched)
+        if not s.completed:
             raise PrimitiveFailure("execution.tracking",
-                                   f"blocked without contact: tracking error {result.max_tracking_error_rad:.3f} rad "
+                                   f"blocked without contact: tracking error {s.max_tracking_error_rad:.3f} rad "
                                    f"exceeded {self.tracking_tol_rad} rad")
         if self._t < self._traj.duration - 1e-9:
             return Status.RUNNING
-        if touched:
-            return self._contact(force, touched)
+        if s.touched:
+            return self._contact(s.force_n, s.touched)
         if self.expect_contact:
             target.halt()
             raise PrimitiveFailure("contact.missing",
@@ -209,7 +314,7 @@ class ComputePush(Primitive):
                               direction=self.direction.round(4).tolist())
 
 
-class Push(_Tracking):
+class Push(_ContactMotion):
     """Push: a straight tcp motion (to a blackboard pose or by an ``offset``) that must touch something.
 
     Args:
@@ -219,7 +324,8 @@ class Push(_Tracking):
         tracking_tol_rad: joint tracking error tolerated while pushing, rad (contact
             makes the arm lag; a free-space motion would call that a collision).
         max_force_n: effort limit: the push stops and fails with
-            ``contact.excessive_force`` when the robot presses harder, N.
+            ``contact.excessive_force`` when the robot presses harder, N (checked after
+            every physics step).
         expect_contact: fail with ``contact.missing`` if nothing was touched.
 
     Blackboard: writes ``contact`` with ``{max_force_n, touched}``.
@@ -228,61 +334,33 @@ class Push(_Tracking):
     def __init__(self, name: str, *, to: str | None = None, offset=None, velocity_scale: float = 0.05,
                  tracking_tol_rad: float = 0.15, max_force_n: float = 40.0, expect_contact: bool = True):
         super().__init__(name)
-        if (to is None) == (offset is None):
-            raise ValueError("give exactly one of 'to' (blackboard pose key) or 'offset' ([dx, dy, dz] in m)")
-        if offset is not None:
-            offset = np.asarray(offset, dtype=float)
-            if offset.shape != (3,) or not np.all(np.isfinite(offset)):
-                raise ValueError(f"offset must be 3 finite numbers in m, got {offset!r}")
-        self.to = to
-        if to is not None:
-            self.reads(to)
-        if not 0 < velocity_scale <= 1:
-            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
-        if not tracking_tol_rad > 0 or not max_force_n > 0:
-            raise ValueError("tracking_tol_rad and max_force_n must be > 0")
-        self.offset, self.velocity_scale = offset, float(velocity_scale)
-        self.tracking_tol_rad, self.max_force_n = float(tracking_tol_rad), float(max_force_n)
-        self.expect_contact = bool(expect_contact)
-        self.writes("contact")
+        self._motion_args(to=to, offset=offset, velocity_scale=velocity_scale, tracking_tol_rad=tracking_tol_rad,
+                          force_limit_n=max_force_n, force_name="max_force_n", expect_contact=expect_contact,
+                          allow_to=True)
+        self.max_force_n = float(max_force_n)
 
     def on_enter(self):
-        ctx = self.ctx
-        target = ctx.target
-        if getattr(target, "model", None) is None or getattr(target, "data", None) is None:
-            raise PrimitiveFailure("contact.unsupported", f"target {target.name!r} reports no contact forces")
-        if self.to is not None:
-            T_goal = np.asarray(self.get(self.to), dtype=float)
-        else:
-            T_goal = target.tcp_pose()
-            T_goal[:3, 3] += self.offset
-        self._length = float(np.linalg.norm(T_goal[:3, 3] - target.tcp_pose()[:3, 3]))
-        with ctx.profiler.section("ik"):
-            path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
-        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
-        with ctx.profiler.section("timing"):
-            traj = retime(path, vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
+        self._plan()
+        self._ignore = frozenset()  # a push counts every contact, a held object's too
         self._peak, self._touched = 0.0, set()
-        self._start(traj)
+
+    def _sample(self, force: float, touched: tuple[str, ...]) -> None:
+        self._peak = max(self._peak, force)
+        self._touched.update(t for t in touched if t not in ("table", "floor"))
 
     def step(self):
         ctx = self.ctx
         target = ctx.target
-        t_end = min(self._t + ctx.motion.control_period_s, self._traj.duration)
-        with ctx.profiler.section("simulation"):
-            result = target.track(self._traj, t_start=self._t, t_end=t_end, tracking_tol_rad=self.tracking_tol_rad)
-        self._t = t_end
-        force, touched = contact_force_n(target.model, target.data)
-        self._peak = max(self._peak, force)
-        self._touched.update(t for t in touched if t not in ("table", "floor"))
-        if force > self.max_force_n:
+        s = self._stream(lambda force: force > self.max_force_n)
+        if s.stopped:
             target.halt()
             raise PrimitiveFailure("contact.excessive_force",
-                                   f"pushing with {force:.1f} N on {list(touched)} exceeds max_force_n {self.max_force_n} N")
-        if not result.completed:
+                                   f"pushing with {s.force_n:.1f} N on {list(s.touched)} exceeds max_force_n "
+                                   f"{self.max_force_n} N")
+        if not s.completed:
             raise PrimitiveFailure("execution.tracking",
-                                   f"push blocked: tracking error {result.max_tracking_error_rad:.3f} rad exceeded "
-                                   f"tracking_tol_rad {self.tracking_tol_rad} with {force:.1f} N on {list(touched)}")
+                                   f"push blocked: tracking error {s.max_tracking_error_rad:.3f} rad exceeded "
+                                   f"tracking_tol_rad {self.tracking_tol_rad} with {s.force_n:.1f} N on {list(s.touched)}")
         if self._t < self._traj.duration - 1e-9:
             return Status.RUNNING
         target.settle(self._traj.q[-1])

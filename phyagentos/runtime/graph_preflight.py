@@ -82,13 +82,19 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, _NUMBER) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def _item_problems(kind: str, index: int, item: Any, cls: type) -> list[GraphProblem]:
-    """Type problems of one scene item, from its dataclass field defaults."""
+def _item_problems(kind: str, index: int, item: Any, cls: type, root: Any = None) -> list[GraphProblem]:
+    """Type problems of one scene item, from its dataclass field defaults; a mesh object's
+    file is checked here too (:func:`phyagentos.targets.mesh.load_mesh`), at the line of
+    its ``mesh`` key."""
+    from phyagentos.targets.scene import item_keys, mesh_for  # noqa: PLC0415
+
     line = line_of(item)
     if not isinstance(item, Mapping):
         return [GraphProblem(line, f"scene {kind}[{index}] must be a mapping with keys "
-                                   f"{format_choices(cls.__dataclass_fields__)}, got {excerpt(item)}")]
-    fields = cls.__dataclass_fields__
+                                   f"{format_choices(item_keys(kind))}, got {excerpt(item)}")]
+    fields = {k: cls.__dataclass_fields__[k] for k in item_keys(kind) if k in cls.__dataclass_fields__}
+    if kind == "objects":
+        fields["class"] = cls.__dataclass_fields__["cls"]
     out = []
     for key, value in item.items():
         where = line_of(item, key)
@@ -106,8 +112,18 @@ def _item_problems(kind: str, index: int, item: Any, cls: type) -> list[GraphPro
         elif isinstance(default, _NUMBER) and not isinstance(default, bool) and not _is_number(value):
             out.append(GraphProblem(where, f"{label}: {key} must be a number (e.g. {default}), got {excerpt(value)}"))
     if not out:
+        args = dict(item)
+        if kind == "objects" and "class" in args:
+            args["cls"] = args.pop("class")
+        if kind == "objects" and args.get("shape") == "mesh":
+            where = f"scene {kind}[{index}] ({item.get('name')!r})"
+            try:
+                args["mesh_data"] = mesh_for(args, root=root, where=where)
+            except PhyAgentOSError as exc:
+                key = "half_extents" if "half_extents" in item else ("mesh" if "mesh" in item else None)
+                return [GraphProblem(line_of(item, key) if key else line, clip(str(exc), 400))]
         try:
-            cls(**dict(item))
+            cls(**args)
         except (PhyAgentOSError, TypeError, ValueError) as exc:
             out.append(GraphProblem(line, f"scene {kind}[{index}]: {clip(str(exc))}"))
     return out
@@ -124,13 +140,15 @@ def _tabletop(parse: Any) -> bool:
         return False
 
 
-def check_scene(raw: Mapping[str, Any] | None, driver: str) -> tuple[Any, list[GraphProblem]]:
+def check_scene(raw: Mapping[str, Any] | None, driver: str, *,
+                root: Any = None) -> tuple[Any, list[GraphProblem]]:
     """Validate a goal graph's ``scene`` for a target driver.
 
     Args:
         raw: the scene as loaded by :func:`phyagentos.yamlsource.load_yaml` (mappings
             carry lines), or ``None`` for the driver's default scene.
         driver: TARGETS.md ``driver`` of the node's target.
+        root: the workspace root that mesh files (``shape: mesh``) are relative to.
 
     Returns:
         ``(scene, problems)``: the parsed scene (``None`` when it has problems).
@@ -156,11 +174,12 @@ def check_scene(raw: Mapping[str, Any] | None, driver: str) -> tuple[Any, list[G
                 problems.append(GraphProblem(line_of(raw, kind), f"scene {kind} must be a list, got {excerpt(items)}"))
                 continue
             for i, item in enumerate(items):
-                problems += _item_problems(kind, i, item, item_cls)
+                problems += _item_problems(kind, i, item, item_cls, root)
     if problems:
         return None, problems
     try:
-        scene = own(base) if own is not None else (SceneSpec.from_dict(base) if base else SceneSpec.default())
+        scene = own(base, root=root) if own is not None else (SceneSpec.from_dict(base, root=root) if base
+                                                               else SceneSpec.default())
     except (PhyAgentOSError, TypeError, ValueError) as exc:
         return None, [GraphProblem(scene_line, f"scene: {clip(str(exc))}")]
     try:

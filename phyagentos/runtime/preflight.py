@@ -183,6 +183,7 @@ def run_preflight(
     drivers: Mapping[str, type],
     safety: SafetyConfig | None = None,
     probe: Callable[..., dict] | None = None,
+    root: Any = None,
 ) -> PreflightResult:
     """Check every requirement of ``session``; never touches a target.
 
@@ -195,6 +196,7 @@ def run_preflight(
         safety: the workspace's ``safety.yaml`` (defaults when ``None``).
         probe: ``probe(uri, timeout_s=...) -> metadata`` contacting a policy endpoint
             (default :func:`phyagentos.policy.client.probe_endpoint`).
+        root: the workspace root (mesh objects of the session's scene are read from it).
 
     Returns:
         A :class:`PreflightResult`; ``rejections`` lists every missing item.
@@ -246,7 +248,8 @@ def run_preflight(
                            ", ".join(target.observations) or "none", "choose a target that provides this observation")
 
     if manifest is not None and manifest.runtime == "policy":
-        plan, needed = _policy_checks(session, manifest, target, runtime, driver, safety, probe, reject)
+        plan, needed = _policy_checks(session, manifest, target, runtime, driver, safety, probe, reject,
+                                         root)
     elif manifest is not None and manifest.runtime == "agent":
         plan, needed = _agent_checks(target, runtime, driver, reject)
     else:
@@ -325,7 +328,7 @@ def _tree_checks(session, manifest, target, runtime, driver, trees, reject):
     return plan, tree_tools(root)
 
 
-def _policy_checks(session, manifest, target, runtime, driver, safety, probe, reject):
+def _policy_checks(session, manifest, target, runtime, driver, safety, probe, reject, root=None):
     """Policy skills: declaration, endpoint, observation contract, bridges, rates."""
     from phyagentos.policy.adapter import ADAPTERS, InputSpec  # noqa: PLC0415
     from phyagentos.policy.client import probe_endpoint  # noqa: PLC0415
@@ -449,7 +452,7 @@ def _policy_checks(session, manifest, target, runtime, driver, safety, probe, re
         ok = False
     if target is not None and tadapter is not None:
         try:
-            timestep = scene_for(session, target).timestep
+            timestep = scene_for(session, target, root=root).timestep
         except Exception as exc:  # noqa: BLE001 - a scene that does not parse is a rejection, not a crash
             reject("preflight.scene", "scene", "a valid scene", str(exc), "fix the session's scene")
             timestep = SceneSpec().timestep

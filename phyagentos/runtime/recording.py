@@ -39,11 +39,11 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-import yaml
 
 from phyagentos.errors import RecordingError, TargetError
 from phyagentos.protocol import dump_yaml
 from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["ENV_VAR", "RECORD_MODES", "RecordingConfig", "SessionRecorder", "prune_recordings"]
 
@@ -143,8 +143,11 @@ def _model_recipe(target: Any, seed: int | None) -> dict[str, Any] | None:
     if not isinstance(getattr(target, "model", None), mujoco.MjModel) or not hasattr(scene, "to_dict"):
         return None
     cls = type(target)
-    return {"module": cls.__module__, "cls": cls.__qualname__, "name": target.name, "scene": scene.to_dict(),
-            "seed": seed, "nq": int(target.model.nq)}
+    # a scene with mesh objects travels as the checked spec itself (it carries the mesh
+    # bytes; its plain-data form names workspace files the render process cannot vouch for)
+    meshes = any(getattr(o, "mesh_data", None) is not None for o in getattr(scene, "objects", ()))
+    return {"module": cls.__module__, "cls": cls.__qualname__, "name": target.name,
+            "scene": scene if meshes else scene.to_dict(), "seed": seed, "nq": int(target.model.nq)}
 
 
 class _RenderProcess:
@@ -274,7 +277,8 @@ def _render_main() -> int:
         if parse is None:
             from phyagentos.targets.scene import SceneSpec  # noqa: PLC0415
             parse = SceneSpec.from_dict
-        target = cls(recipe["name"], parse(recipe["scene"]), seed=recipe["seed"])
+        scene = recipe["scene"]
+        target = cls(recipe["name"], parse(scene) if isinstance(scene, dict) else scene, seed=recipe["seed"])
         model = target.model
         if model.nq != recipe["nq"]:
             raise RecordingError(f"rebuilt model has nq={model.nq}, the session's has {recipe['nq']}")
@@ -462,7 +466,12 @@ def prune_recordings(workspace: Any) -> int:
             (directory / FRAMES_FILE).unlink(missing_ok=True)
             bundle_path = directory / "bundle.yaml"
             if bundle_path.is_file():
-                bundle = yaml.safe_load(bundle_path.read_text(encoding="utf-8")) or {}
+                try:
+                    bundle = read_yaml(bundle_path, error=RecordingError) or {}
+                except (OSError, RecordingError) as exc:
+                    logger.warning("video dropped, bundle left as it is: %s", exc)
+                    removed += 1
+                    continue
                 files = bundle.get("files", {})
                 dropped = [files.pop(k) for k in ("video", "frames") if k in files]
                 if dropped:

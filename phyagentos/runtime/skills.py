@@ -29,6 +29,8 @@ from typing import Any, Mapping, Sequence
 from phyagentos.errors import SkillError, format_choices
 from phyagentos.yamlsource import SourceMap, load_yaml
 
+from .param_decls import check_param_decls
+
 __all__ = ["SkillManifest", "SkillRegistry", "search_dirs"]
 
 logger = logging.getLogger(__name__)
@@ -156,9 +158,9 @@ def _parse(path: Path) -> SkillManifest:
     for key in requires:
         if key not in _REQUIRES:
             raise SkillError(f"unknown requirement {key!r}; valid: {format_choices(_REQUIRES)}", path=path, line=requires.key_line(key))
-    params = data.get("params") or {}
-    if not isinstance(params, dict):
-        raise SkillError("'params' must be a mapping", path=path, line=data.key_line("params"))
+    params = check_param_decls(data.get("params"), path=path, line=data.key_line("params"))
+    if not isinstance(data.get("description", ""), str):
+        raise SkillError("'description' must be one string", path=path, line=data.key_line("description"))
     for key in ("acquires", "releases"):
         value = data.get(key)
         if value is not None and (not isinstance(value, str) or value not in params):
@@ -171,7 +173,7 @@ def _parse(path: Path) -> SkillManifest:
         tree=data.get("tree"),
         capabilities=tuple(requires.get("capabilities") or ()),
         observations=tuple(requires.get("observations") or ()),
-        params={k: dict(v or {}) for k, v in params.items()},
+        params=params,
         path=path,
         policy=data.get("policy"),
         acquires=data.get("acquires"),

@@ -38,29 +38,35 @@ DRIVERS: dict[str, type] = {"mujoco_franka": MuJoCoTarget, "gymnasium_kitchen": 
                              "mujoco_so101": SO101Target, "crafter": CrafterTarget}
 
 
-def scene_for(session: SessionRecord, spec: TargetSpec) -> SceneSpec:
+def scene_for(session: SessionRecord, spec: TargetSpec, *, root: str | Path | None = None) -> SceneSpec:
     """The scene of a session: its own ``scene``, else the target's, else the default
-    (without its ``perturbations``, see :func:`perturbations_for`)."""
+    (without its ``perturbations``, see :func:`perturbations_for`). ``root`` is the
+    workspace root that mesh objects' files are read from."""
     raw, _ = split_scene(session.scene or spec.scene or None)
     # A driver with its own scene type (e.g. FrankaKitchen's task list) parses it itself.
     parse = getattr(DRIVERS.get(spec.driver), "scene_from_dict", None)
     if parse is not None:
-        return parse(raw)
-    return SceneSpec.from_dict(raw) if raw else SceneSpec.default()
+        return parse(raw, root=root)
+    return SceneSpec.from_dict(raw, root=root) if raw else SceneSpec.default()
 
 
-def perturbations_for(session: SessionRecord, spec: TargetSpec) -> tuple[PerturbationSpec, ...]:
+def perturbations_for(session: SessionRecord, spec: TargetSpec, *,
+                      root: str | Path | None = None) -> tuple[PerturbationSpec, ...]:
     """The validated ``perturbations`` of the session's scene (:mod:`phyagentos.targets.perturbations`).
 
     Raises:
         TargetError: a malformed perturbation (the message lists valid kinds and keys).
     """
     _, raw = split_scene(session.scene or spec.scene or None)
-    return parse_perturbations(raw, objects=getattr(scene_for(session, spec), "object_names", ()))
+    return parse_perturbations(raw, objects=getattr(scene_for(session, spec, root=root), "object_names", ()))
 
 
 def _scene_hash(scene: SceneSpec) -> str:
-    return hashlib.sha256(json.dumps(scene.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
+    data = scene.to_dict()
+    meshes = [o.mesh_data.sha256 for o in getattr(scene, "objects", ()) if getattr(o, "mesh_data", None)]
+    if meshes:  # a mesh file edited between sessions is another world
+        data = {**data, "mesh_sha256": meshes}
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
 
 
 class TargetPool:
@@ -83,7 +89,7 @@ class TargetPool:
         cls = DRIVERS.get(spec.driver)
         if cls is None:
             raise TargetError(f"unknown target driver {spec.driver!r}; valid drivers: {format_choices(DRIVERS)}")
-        scene = scene_for(session, spec)
+        scene = scene_for(session, spec, root=self.state_dir.parent)  # state_dir is <workspace>/targets
         key = _scene_hash(scene)
         cached = self._live.get(spec.name)
         if cached is None or cached[0] != key:
@@ -110,7 +116,7 @@ class TargetPool:
             target.reset(seed=session.seed)
             logger.debug("target %s: reset for run %s (seed %s)", spec.name, session.run_id, session.seed)
         if hasattr(target, "set_perturbations"):
-            target.set_perturbations(ActivePerturbations(perturbations_for(session, spec), session_seed=session.seed))
+            target.set_perturbations(ActivePerturbations(perturbations_for(session, spec, root=self.state_dir.parent), session_seed=session.seed))
         return target
 
     def release(self, session: SessionRecord, target) -> None:

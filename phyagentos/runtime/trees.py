@@ -42,6 +42,7 @@ import py_trees
 from phyagentos.errors import SkillError, format_choices
 from phyagentos.yamlsource import SourceMap, line_of, load_yaml
 
+from .param_decls import check_param_decls
 from .skills import search_dirs
 
 __all__ = ["TreeLibrary", "TreeSpec", "NODE_KINDS", "render_ascii", "render_image"]
@@ -133,13 +134,13 @@ class TreeLibrary:
             raise SkillError(f"unsupported version {data.get('version')!r}; supported: 1", path=path, line=data.key_line("version"))
         if not isinstance(data.get("root"), SourceMap):
             raise SkillError("missing or non-mapping 'root'", path=path, line=data.key_line("root"))
-        params = data.get("params") or {}
-        if not isinstance(params, dict) or not all(isinstance(v, dict) or v is None for v in params.values()):
-            raise SkillError("'params' must map names to {required, default, description}", path=path, line=data.key_line("params"))
+        params = check_param_decls(data.get("params"), path=path, line=data.key_line("params"))
+        if not isinstance(data.get("description", ""), str):
+            raise SkillError("'description' must be one string", path=path, line=data.key_line("description"))
         spec = TreeSpec(
             name=str(data.get("name", name)),
             description=str(data.get("description", "")),
-            params={k: dict(v or {}) for k, v in params.items()},
+            params=params,
             root=data["root"],
             path=path,
         )

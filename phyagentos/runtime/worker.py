@@ -394,7 +394,7 @@ class _Runner:
         rec = ws.load_session(session_id)
         result = run_preflight(rec, targets=ws.read("TARGETS").data, runtimes=ws.read("SKILLRUNTIME").data,
                                skills=self.runtime.skills, trees=self.runtime.trees, drivers=DRIVERS,
-                               safety=ws.read_safety())
+                               safety=ws.read_safety(), root=ws.root)
         if result.ok:
             if not self.lock(root, rec.target).held:
                 raise SupervisorError(f"preflight of {session_id}: target {rec.target!r} is not reserved")

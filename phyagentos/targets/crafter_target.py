@@ -60,6 +60,7 @@ import yaml
 
 from phyagentos.errors import TargetError, format_choices
 from phyagentos.protocol.atomic import atomic_write_bytes, atomic_write_text
+from phyagentos.yamlsource import load_plain
 
 from .base import BaseRolloutTarget, ExecutionResult
 from .state_file import read_state_npz
@@ -225,7 +226,7 @@ class CrafterTarget(BaseRolloutTarget):
     ACTION_FORMS = ("game_action",)
 
     @staticmethod
-    def scene_from_dict(d: Mapping[str, Any] | None) -> CrafterScene:
+    def scene_from_dict(d: Mapping[str, Any] | None, *, root: Any = None) -> CrafterScene:
         return CrafterScene.from_dict(d)
 
     def __init__(self, name: str, scene: CrafterScene | None = None, *, seed: int | None = None):
@@ -439,7 +440,7 @@ class CrafterTarget(BaseRolloutTarget):
         z = read_state_npz(path)
         if int(z.get("format", -1)) != _STATE_FORMAT:
             raise TargetError(f"state file {path}: format {z.get('format')} is not {_STATE_FORMAT}")
-        scene = CrafterScene.from_dict(yaml.safe_load(z["scene"].tobytes().decode()))
+        scene = CrafterScene.from_dict(load_plain(z["scene"].tobytes().decode(), path=path, error=TargetError))
         if scene != self.scene:
             raise TargetError(f"state file {path} belongs to scene {scene}, not {self.scene}")
         try:

@@ -192,8 +192,9 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
     ROBOT_BASE = (0.0, 0.0, 1.8)
 
     @classmethod
-    def scene_from_dict(cls, raw: Mapping[str, Any] | None) -> KitchenScene:
-        """The scene type of this driver (used by the target pool)."""
+    def scene_from_dict(cls, raw: Mapping[str, Any] | None, *, root: Any = None) -> KitchenScene:
+        """The scene type of this driver (used by the target pool); ``root`` is unused
+        (a kitchen scene names no files)."""
         return KitchenScene.from_dict(raw)
 
     def __init__(self, name: str, scene: KitchenScene | None = None, *, seed: int | None = None):

@@ -36,7 +36,7 @@ from __future__ import annotations
 import importlib.util
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping
@@ -45,6 +45,8 @@ import mujoco
 import numpy as np
 
 from phyagentos.errors import TargetError, format_choices
+
+from .mesh import MeshData, load_mesh
 
 __all__ = [
     "ObjectSpec",
@@ -65,6 +67,7 @@ __all__ = [
     "FT_SITE",
     "WRIST_CAMERA",
     "OBJECT_SHAPES",
+    "SCENE_OBJECT_SHAPES",
     "add_tabletop_world",
     "HOME_QPOS",
     "GRIPPER_MAX_OPENING_M",
@@ -94,7 +97,11 @@ FT_SITE = "wrist_ft"
 _FLANGE_Z_M = 0.107
 #: Wrist RGB-D camera on the hand, looking along the gripper (tcp z).
 WRIST_CAMERA = "wrist"
+#: Primitive object shapes (also what a randomised world draws from).
 OBJECT_SHAPES: tuple[str, ...] = ("box", "cylinder", "sphere")
+#: Every shape a scene object may have: the primitives, or ``mesh`` (a file in the
+#: workspace, :mod:`phyagentos.targets.mesh`).
+SCENE_OBJECT_SHAPES: tuple[str, ...] = OBJECT_SHAPES + ("mesh",)
 TABLE_GEOM = "table"
 FLOOR_GEOM = "floor"
 GRIPPER_MAX_OPENING_M = 0.04
@@ -185,21 +192,26 @@ def _rgba(value: Any, what: str) -> tuple[float, float, float, float]:
 
 @dataclass(frozen=True)
 class ObjectSpec:
-    """A free rigid object resting on the table: a box, an upright cylinder or a sphere.
+    """A free rigid object resting on the table: a box, an upright cylinder, a sphere or a mesh.
 
     Attributes:
         name: unique scene name (also the MuJoCo body and geom name).
         half_extents: ``(hx, hy, hz)`` half sizes of the object's bounding box in metres,
             object frame: a cylinder has radius ``hx == hy`` and half height ``hz``; a
-            sphere radius ``hx == hy == hz``.
+            sphere radius ``hx == hy == hz``; a mesh the half sizes of its axis-aligned
+            bounding box after ``scale`` (computed from the file, never written).
         position: ``(x, y)`` of the box centre in the world frame, metres; z is computed
             so the box rests on the table (``z = hz``).
         yaw: rotation about world z in radians.
         mass: kilograms.
         friction: sliding friction coefficient (torsional 0.005, rolling 0.0001).
         rgba: colour, components in [0, 1].
-        shape: ``box`` | ``cylinder`` | ``sphere`` (:data:`OBJECT_SHAPES`).
+        shape: ``box`` | ``cylinder`` | ``sphere`` | ``mesh`` (:data:`SCENE_OBJECT_SHAPES`).
         cls: the user's object class (``class:`` in YAML, e.g. ``"mug"``), or None.
+        mesh: for ``shape: mesh``, the OBJ/STL file relative to the workspace root.
+        scale: for ``shape: mesh``, uniform scale of the file's vertices (> 0).
+        mesh_data: the checked file (:func:`phyagentos.targets.mesh.load_mesh`), set by
+            :meth:`SceneSpec.from_dict` with the workspace root; required for a mesh.
 
     Raises :class:`TargetError` on invalid values.
     """
@@ -213,9 +225,21 @@ class ObjectSpec:
     rgba: tuple[float, float, float, float] = (0.85, 0.20, 0.15, 1.0)
     shape: str = "box"
     cls: str | None = None
+    mesh: str | None = None
+    scale: float = 1.0
+    mesh_data: MeshData | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         _check_name(self.name, "object")
+        if self.shape == "mesh":
+            md = self.mesh_data
+            if not isinstance(md, MeshData) or md.path != self.mesh or md.scale != float(self.scale):
+                raise TargetError(f"object {self.name!r}: a mesh object is read from the workspace "
+                                  f"(load_mesh / SceneSpec.from_dict with root=), got mesh={self.mesh!r}")
+            object.__setattr__(self, "half_extents", md.half_extents)
+            object.__setattr__(self, "scale", md.scale)
+        elif self.mesh is not None or self.mesh_data is not None or self.scale != 1.0:
+            raise TargetError(f"object {self.name!r}: mesh and scale need shape: mesh, got shape {self.shape!r}")
         he = _floats(self.half_extents, 3, f"object {self.name!r} half_extents")
         _positive(he, f"object {self.name!r} half_extents")
         object.__setattr__(self, "half_extents", he)
@@ -228,9 +252,9 @@ class ObjectSpec:
         object.__setattr__(self, "mass", mass)
         object.__setattr__(self, "friction", friction)
         object.__setattr__(self, "rgba", _rgba(self.rgba, f"object {self.name!r}"))
-        if self.shape not in OBJECT_SHAPES:
+        if self.shape not in SCENE_OBJECT_SHAPES:
             raise TargetError(f"object {self.name!r}: unknown shape {self.shape!r}; valid shapes: "
-                              f"{format_choices(OBJECT_SHAPES)}")
+                              f"{format_choices(SCENE_OBJECT_SHAPES)}")
         if self.shape == "cylinder" and abs(he[0] - he[1]) > 1e-9:
             raise TargetError(f"object {self.name!r}: a cylinder's half_extents need hx == hy (its radius), got {he!r}")
         if self.shape == "sphere" and (abs(he[0] - he[1]) > 1e-9 or abs(he[0] - he[2]) > 1e-9):
@@ -305,13 +329,40 @@ _SCENE_KEYS = ("objects", "regions", "obstacles", "timestep", "randomise")
 _RESERVED_NAMES = frozenset({"table", "floor", "world", "robot", "gripper", "tcp"})
 
 
-def _item_from_dict(kind: str, d: Any, index: int):
+#: Dataclass fields a scene file never writes (derived from other keys).
+_DERIVED_KEYS = frozenset({"mesh_data"})
+
+
+def item_keys(kind: str) -> tuple[str, ...]:
+    """The keys a scene file may write for an item of ``kind`` (objects, regions, obstacles)."""
+    keys = tuple(k for k in _ITEM_TYPES[kind].__dataclass_fields__ if k not in _DERIVED_KEYS)
+    return tuple("class" if k == "cls" else k for k in keys)
+
+
+def mesh_for(d: Mapping[str, Any], *, root: str | Path | None, where: str) -> MeshData:
+    """Load the mesh of object mapping ``d`` (``shape: mesh``) from the workspace ``root``.
+
+    Raises:
+        TargetError: no workspace root, ``half_extents`` written for a mesh, no ``mesh``
+            key, or any refusal of :func:`phyagentos.targets.mesh.load_mesh`.
+    """
+    if "half_extents" in d:
+        raise TargetError(f"{where}: a mesh object's size is its file's bounding box; remove half_extents "
+                          "(use scale to resize it)")
+    if "mesh" not in d:
+        raise TargetError(f"{where}: shape mesh needs a mesh file (mesh: meshes/part.obj, relative to the workspace)")
+    if root is None:
+        raise TargetError(f"{where}: a mesh object is read from the workspace, and no workspace was given")
+    return load_mesh(d["mesh"], root=root, scale=d.get("scale", 1.0), where=where)
+
+
+def _item_from_dict(kind: str, d: Any, index: int, root: str | Path | None = None):
     cls = _ITEM_TYPES[kind]
     if isinstance(d, cls):
         return d
     if not isinstance(d, Mapping):
         raise TargetError(f"scene {kind}[{index}] must be a mapping, got {type(d).__name__}")
-    valid = tuple(cls.__dataclass_fields__)
+    valid = tuple(k for k in cls.__dataclass_fields__ if k not in _DERIVED_KEYS)
     if kind == "objects":
         d = dict(d)
         if "class" in d:
@@ -324,6 +375,8 @@ def _item_from_dict(kind: str, d: Any, index: int):
         )
     if "name" not in d:
         raise TargetError(f"scene {kind}[{index}]: missing key 'name'; valid keys: {format_choices(valid)}")
+    if kind == "objects" and d.get("shape") == "mesh":
+        d = {**d, "mesh_data": mesh_for(d, root=root, where=f"object {d['name']!r}")}
     return cls(**dict(d))
 
 
@@ -419,12 +472,14 @@ class SceneSpec:
         return DEFAULT_SCENE
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "SceneSpec":
+    def from_dict(cls, d: Mapping[str, Any], *, root: str | Path | None = None) -> "SceneSpec":
         """Build from plain data (e.g. parsed YAML).
 
         ``d`` may hold ``objects``, ``regions``, ``obstacles`` (lists of mappings with the
         dataclass field names) and ``timestep``. Unknown keys raise :class:`TargetError`
-        listing the valid ones.
+        listing the valid ones. ``root`` is the workspace root that ``mesh`` paths of
+        ``shape: mesh`` objects are relative to (:mod:`phyagentos.targets.mesh`); a mesh
+        object without it raises :class:`TargetError`.
         """
         if not isinstance(d, Mapping):
             raise TargetError(f"scene must be a mapping, got {type(d).__name__}")
@@ -438,7 +493,7 @@ class SceneSpec:
             items = d.get(kind) or ()
             if isinstance(items, (str, bytes, Mapping)):
                 raise TargetError(f"scene {kind} must be a list, got {type(items).__name__}")
-            kwargs[kind] = tuple(_item_from_dict(kind, item, i) for i, item in enumerate(items))
+            kwargs[kind] = tuple(_item_from_dict(kind, item, i, root) for i, item in enumerate(items))
         if "timestep" in d:
             kwargs["timestep"] = d["timestep"]
         if d.get("randomise") is not None:
@@ -452,6 +507,12 @@ class SceneSpec:
             out: dict[str, Any] = {}
             for k in item.__dataclass_fields__:
                 v = getattr(item, k)
+                if k in _DERIVED_KEYS:
+                    continue
+                if k in ("mesh", "scale") and getattr(item, "shape", None) != "mesh":
+                    continue  # primitives: keep their plain-data form (and scene hashes) as before
+                if k == "half_extents" and getattr(item, "shape", None) == "mesh":
+                    continue  # derived from the file
                 if k == "cls":
                     if v is not None:
                         out["class"] = v
@@ -561,9 +622,19 @@ def add_tabletop_world(ms: mujoco.MjSpec, spec: SceneSpec, *, legs: bool = False
         # face that split one object into two colour clusters in perception (measured: 4 of
         # 12 seeds at the home pose); painted matte objects are the nominal world
         ms.add_material(name=f"material:{o.name}", specular=0.05, shininess=0.1, rgba=list(o.rgba))
-        g = body.add_geom(name=o.name, type=_OBJECT_GEOM[o.shape], size=_object_geom_size(o), rgba=list(o.rgba),
-                          friction=[o.friction, 0.005, 0.0001], condim=4, solref=[0.004, 1.0],
-                          solimp=[0.95, 0.99, 0.001, 0.5, 2.0], material=f"material:{o.name}")
+        if o.shape == "mesh":
+            md = o.mesh_data
+            ms.assets = {**ms.assets, md.asset_name: md.data}  # the checked bytes, never re-read
+            ms.add_mesh(name=f"mesh:{o.name}", file=md.asset_name, scale=[md.scale] * 3)
+            # body origin = bounding-box centre: shift the file's frame by -centre
+            g = body.add_geom(name=o.name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh:{o.name}",
+                              pos=[-c for c in md.center], rgba=list(o.rgba),
+                              friction=[o.friction, 0.005, 0.0001], condim=4, solref=[0.004, 1.0],
+                              solimp=[0.95, 0.99, 0.001, 0.5, 2.0], material=f"material:{o.name}")
+        else:
+            g = body.add_geom(name=o.name, type=_OBJECT_GEOM[o.shape], size=_object_geom_size(o), rgba=list(o.rgba),
+                              friction=[o.friction, 0.005, 0.0001], condim=4, solref=[0.004, 1.0],
+                              solimp=[0.95, 0.99, 0.001, 0.5, 2.0], material=f"material:{o.name}")
         g.mass = o.mass
 
 

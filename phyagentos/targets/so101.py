@@ -227,12 +227,12 @@ class SO101Target(MuJoCoArmTarget):
     FT_SITE = "wrist_ft"
 
     @classmethod
-    def scene_from_dict(cls, raw) -> SceneSpec:
+    def scene_from_dict(cls, raw, *, root=None) -> SceneSpec:
         """The same scene type as the Franka tabletop (used by the target pool); without a
         scene, :data:`SO101_DEFAULT_SCENE`. (The Franka's default scene has a 30 cm wall
         that the SO-101's home pose reaches into: a ``hold`` there was pushed by the
         wall's contacts and drifted 0.02-0.5 rad.)"""
-        return SceneSpec.from_dict(raw) if raw else SO101_DEFAULT_SCENE
+        return SceneSpec.from_dict(raw, root=root) if raw else SO101_DEFAULT_SCENE
 
     def __init__(self, name: str, scene: SceneSpec = DEFAULT_SCENE, *, seed: int | None = None):
         super().__init__(name, "simulation")

@@ -148,6 +148,8 @@ def draw_world(scene: SceneSpec) -> tuple[SceneSpec, dict[str, Any]]:
 
     for o in scene.objects:
         shape, he = _body(rng)
+        if o.shape == "mesh":  # a mesh keeps its file's shape and size (the draw is still consumed)
+            shape, he = o.shape, o.half_extents
         phys = _physics(rng)
         xy = place(he)
         new = dataclasses.replace(o, shape=shape, half_extents=he, position=xy,

@@ -20,9 +20,10 @@ import yaml
 
 from phyagentos.agent import dag as dagmod
 from phyagentos.agent.coordinator import node_state_of
-from phyagentos.errors import DocumentError, PhyAgentOSError, ProtocolError
+from phyagentos.errors import DocumentError, PhyAgentOSError, ProtocolError, ViewError
 from phyagentos.protocol import SessionRecord, Workspace, fold_signals
 from phyagentos.protocol.archive import SessionArchive
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["Panel", "panel", "overview", "runs", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
            "SESSION_LINK_PATTERN"]
@@ -82,7 +83,7 @@ def runs(ws: Workspace) -> list[dict[str, Any]]:
 def _graph_nodes(ws: Workspace, run_id: str) -> list[dict[str, Any]]:
     """Nodes of the run's submitted goal graph (id, skill, depends_on), in file order."""
     path = ws.runs.graph_path(run_id)
-    raw = yaml.safe_load(path.read_text(encoding="utf-8")) if path.is_file() else None
+    raw = read_yaml(path, error=ViewError) if path.is_file() else None
     nodes = raw.get("nodes", []) if isinstance(raw, dict) else []
     return [{"id": str(n.get("id")), "skill": str(n.get("skill", "")), "depends_on": [str(d) for d in n.get("depends_on") or []]}
             for n in nodes if isinstance(n, dict) and n.get("id") is not None]
@@ -154,7 +155,7 @@ def _session_box(s: SessionRecord) -> dict[str, Any]:
 
 
 def _yaml_file(path: Path) -> Any:
-    return yaml.safe_load(path.read_text(encoding="utf-8")) if path.is_file() else None
+    return read_yaml(path, error=ViewError) if path.is_file() else None
 
 
 def session_detail(ws: Workspace, session_id: str) -> dict[str, Any]:

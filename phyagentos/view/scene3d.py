@@ -25,11 +25,11 @@ from typing import Any
 
 import mujoco
 import numpy as np
-import yaml
 
 from phyagentos.errors import TargetError, ViewError
 from phyagentos.protocol import Workspace
 from phyagentos.runtime.target_pool import DRIVERS, scene_for
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["SceneRenderer", "frames_of"]
 
@@ -97,7 +97,7 @@ class SceneRenderer:
         spec = next((t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target), None)
         if spec is None or spec.driver not in DRIVERS:
             raise ViewError(f"session {session_id}: target {rec.target!r} is not one the view can rebuild")
-        target = DRIVERS[spec.driver](spec.name, scene_for(rec, spec), seed=rec.seed)
+        target = DRIVERS[spec.driver](spec.name, scene_for(rec, spec, root=self.workspace.root), seed=rec.seed)
         model = getattr(target, "model", None)
         if not isinstance(model, mujoco.MjModel):
             target.close()
@@ -122,7 +122,7 @@ class SceneRenderer:
             return {"source": "recording", "t": float(frames["t"][frame])}
         rec = self.workspace.load_session(session_id)
         meta_path = self.workspace.root / "targets" / rec.target / "state.yaml"
-        meta = yaml.safe_load(meta_path.read_text(encoding="utf-8")) if meta_path.is_file() else None
+        meta = read_yaml(meta_path, error=ViewError) if meta_path.is_file() else None
         if not meta or meta.get("session_id") != session_id:
             raise ViewError(f"session {session_id}: no current state (the target's checkpoint belongs to another "
                             "session) and no recording")

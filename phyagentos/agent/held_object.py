@@ -28,10 +28,10 @@ A closed gripper with the opening below the empty-closed band, a gripper opened 
 the close, or a slip make the model say *not held*. Anything else it cannot decide
 (no close for the object, no tcp pose in the trace, an opening inside the 2-sigma band,
 a load too small to tell from the unloaded hand, a runtime failure after the close) is
-*unknown*. The model is consulted only where the cameras left ``holding`` or ``lifted``
-``unknown`` (:func:`refine`), never to overturn what was seen, and its verdicts use the
-same 2-sigma rule as :mod:`phyagentos.agent.criteria`: never ``satisfied`` inside the
-band.
+*unknown*. The model is consulted only where the cameras did not decide -- ``holding`` or
+``lifted`` left ``unknown``, or ``holding`` judged ``unsatisfied`` for want of any sighting
+(:func:`refine`) -- never to overturn what was seen, and its verdicts use the same 2-sigma
+rule as :mod:`phyagentos.agent.criteria`: never ``satisfied`` inside the band.
 """
 
 from __future__ import annotations

@@ -1,17 +1,18 @@
 """Sweep of the pick and place defaults on TRAINING seeds of the randomised tabletop world.
 
     nice -n 10 .venv/bin/python bench/defaults_sweep.py [--seeds 0-9] [--grip null,30,70] [--samples 1,2,4] \\
-        [--workspace DIR] [--heartbeat-timeout 60]
+        [--candidates 0,1] [--workspace DIR] [--heartbeat-timeout 60]
 
 Every (setting, seed) runs the pick-and-place episode of :mod:`phyagentos.bench.random_world`
 (the target draws shape, size 2-7 cm, mass 0.02-1.5 kg, friction 0.1-1.2, yaw, position,
-0-4 distractors and camera noise from the seed) with the setting's ``grip_force_n`` (pick)
-and ``observe_samples`` (pick and place: perception frames averaged for the observation)
-written into the nodes; perception on, no memory. Per setting: first-attempt success (every
-node's first session succeeded) with its Wilson 95 % interval, final success (after the
-verifier's recovery), sessions, heartbeat timeouts (counted, never scored as the world's
-failure) and the median wall time. Training seeds only (0..); the held-out seeds of
-``bench/self_evolution.py`` (10000..) are never touched here.
+0-4 distractors and camera noise from the seed) with the setting's ``grip_force_n`` and
+``grasp_candidate`` (pick) and ``observe_samples`` (pick and place: perception frames
+averaged for the observation) written into the nodes; perception on, no memory. Per
+setting: first-attempt success (every node's first session succeeded) with its Wilson 95 %
+interval, final success (after the verifier's recovery), sessions, heartbeat timeouts
+(counted, never scored as the world's failure) and the median wall time. Training seeds
+only (0..); the held-out seeds of ``bench/self_evolution.py`` (10000..) are never touched
+here.
 
 The best setting -- highest first-attempt success, ties broken by final success, then the
 cheaper setting (fewer frames, then the position close, then the softer grip) -- is written
@@ -67,19 +68,24 @@ def heartbeat_timeouts(workspace: Path, session_ids) -> int:
     return n
 
 
-def run_setting(grip: float | None, samples: int, seeds: list[int], cdir: Path, heartbeat_s: float, say) -> dict:
+def run_setting(grip: float | None, samples: int, candidate: int, seeds: list[int], cdir: Path, heartbeat_s: float,
+                say) -> dict:
     """Run one setting over ``seeds`` in ``cdir/ws``; returns its row."""
     done = cdir / "result.json"
     if done.is_file():
-        say(f"grip={grip} samples={samples}: finished earlier, skipped")
-        return json.loads(done.read_text(encoding="utf-8"))
+        earlier = json.loads(done.read_text(encoding="utf-8"))
+        if earlier.get("seeds") == seeds:
+            say(f"grip={grip} samples={samples} candidate={candidate}: finished earlier, skipped")
+            return earlier
+        say(f"grip={grip} samples={samples} candidate={candidate}: finished earlier on other seeds, run again")
     if (cdir / "ws").exists():
         shutil.rmtree(cdir / "ws")
     cdir.mkdir(parents=True, exist_ok=True)
-    defaults = {"pick": {"grip_force_n": grip, "observe_samples": samples}, "place": {"observe_samples": samples}}
+    defaults = {"pick": {"grip_force_n": grip, "observe_samples": samples, "grasp_candidate": candidate},
+                "place": {"observe_samples": samples}}
     episodes = with_limits(with_defaults(random_episodes(seeds), defaults), heartbeat_timeout_s=heartbeat_s)
-    p = run_pass(f"grip={grip} samples={samples}", episodes, cdir / "ws", use_memory=False, consolidate=False,
-                 progress=say)
+    p = run_pass(f"grip={grip} samples={samples} candidate={candidate}", episodes, cdir / "ws", use_memory=False,
+                 consolidate=False, progress=say)
     eps = []
     for e in p.episodes:
         hb = heartbeat_timeouts(p.workspace, e.session_ids)
@@ -87,7 +93,8 @@ def run_setting(grip: float | None, samples: int, seeds: list[int], cdir: Path, 
                     "sessions": len(e.session_ids), "heartbeat_timeouts": hb, "causes": list(e.causes),
                     "wall_s": e.wall_time_s})
     k = sum(e["first"] for e in eps)
-    row = {"grip_force_n": grip, "observe_samples": samples, "defaults": defaults, "n": len(eps),
+    row = {"grip_force_n": grip, "observe_samples": samples, "grasp_candidate": candidate, "defaults": defaults,
+           "seeds": seeds, "n": len(eps),
            "first_success": k, "first_ci95_pct": wilson_interval(k, len(eps)),
            "final_success": sum(e["final"] for e in eps), "sessions": sum(e["sessions"] for e in eps),
            "heartbeat_timeouts": sum(e["heartbeat_timeouts"] for e in eps),
@@ -99,8 +106,11 @@ def run_setting(grip: float | None, samples: int, seeds: list[int], cdir: Path, 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0-9", help="training seeds, e.g. 0-9 or 0,2,4 (default 0-9)")
-    ap.add_argument("--grip", default="null,30,70", help="pick grip_force_n values, N per finger; null = position close")
+    ap.add_argument("--grip", default="null,30,70",
+                    help="pick grip_force_n values, N per finger; null = position close")
     ap.add_argument("--samples", default="1,2,4", help="observe_samples values (pick and place)")
+    ap.add_argument("--candidates", default="0", help="pick grasp_candidate values (0 = the best-ranked top-down "
+                                                      "grasp, 1 = the next direction: what the memory's lessons set)")
     ap.add_argument("--heartbeat-timeout", type=float, default=60.0,
                     help="runner heartbeat timeout for these sessions, s (default 60: load must not end a session)")
     ap.add_argument("--workspace", type=Path, help="keep one workspace per setting here and resume finished ones")
@@ -114,10 +124,13 @@ def main(argv=None) -> int:
     say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
     started = time.perf_counter()
     rows = []
-    for grip, samples in itertools.product(_grips(args.grip), [int(x) for x in args.samples.split(",")]):
-        rows.append(run_setting(grip, samples, seeds, root / f"g{grip}-s{samples}", args.heartbeat_timeout, say))
+    for grip, samples, cand in itertools.product(_grips(args.grip), [int(x) for x in args.samples.split(",")],
+                                                 [int(x) for x in args.candidates.split(",")]):
+        name = f"g{grip}-s{samples}" + (f"-c{cand}" if cand else "")
+        rows.append(run_setting(grip, samples, cand, seeds, root / name, args.heartbeat_timeout, say))
     best = max(rows, key=lambda r: (r["first_success"], r["final_success"], -r["observe_samples"],
-                                    r["grip_force_n"] is None, -(r["grip_force_n"] or 0)))
+                                    r["grip_force_n"] is None, -(r["grip_force_n"] or 0),
+                                    -r.get("grasp_candidate", 0)))
     out = {"benchmark": "defaults_sweep", "split": "training", "seeds": seeds,
            "heartbeat_timeout_s": args.heartbeat_timeout, "wall_time_s": round(time.perf_counter() - started, 1),
            "rows": rows, "chosen": best["defaults"],
@@ -128,11 +141,12 @@ def main(argv=None) -> int:
         "# best fixed defaults of bench/defaults_sweep.py on training seeds "
         f"{seeds[0]}..{seeds[-1]} (see defaults_sweep.json)\n" + yaml.safe_dump(best["defaults"], sort_keys=True),
         encoding="utf-8")
-    print(f"{'grip_force_n':>12} {'samples':>7} {'first':>7} {'95% CI':>16} {'final':>7} {'sessions':>9} "
+    print(f"{'grip_force_n':>12} {'samples':>7} {'cand':>4} {'first':>7} {'95% CI':>16} {'final':>7} {'sessions':>9} "
           f"{'hb t/o':>7} {'wall_s':>7}")
     for r in rows:
         ci = r["first_ci95_pct"]
-        print(f"{str(r['grip_force_n']):>12} {r['observe_samples']:>7} {r['first_success']:>4}/{r['n']:<2} "
+        print(f"{str(r['grip_force_n']):>12} {r['observe_samples']:>7} {r.get('grasp_candidate', 0):>4} "
+              f"{r['first_success']:>4}/{r['n']:<2} "
               f"{(f'[{ci[0]:.0f}, {ci[1]:.0f}] %' if ci else '-'):>16} {r['final_success']:>4}/{r['n']:<2} "
               f"{r['sessions']:>9} {r['heartbeat_timeouts']:>7} {r['median_wall_s']:>7}")
     print(f"chosen: {best['defaults']}  ({args.out}, {args.out.parent / 'defaults_best.yaml'})")

@@ -155,7 +155,7 @@ def main() -> int:
     ap.add_argument("--chunk", type=int, default=10, help="seeds per chunk workspace (default 10)")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "verifier_accuracy.json")
     ap.add_argument("--score-only", type=Path, nargs="+", metavar="DIR",
-                    help="score and merge the verified sessions already in DIR (a workspace or a chunked root) and exit")
+                    help="score and merge the verified sessions already in DIR (a workspace or a chunked root), exit")
     args = ap.parse_args()
     if args.score_only:
         return score_only(args.score_only, args.out)
@@ -170,8 +170,12 @@ def main() -> int:
         cdir = root / f"chunk-{chunk[0]}"
         done = cdir / "done.json"
         if done.is_file():
+            earlier = json.loads(done.read_text(encoding="utf-8"))
+            if earlier.get("seeds") != chunk:
+                raise SystemExit(f"{cdir} holds seeds {earlier.get('seeds')}, not {chunk}: use the same --chunk "
+                                 "as before or another --workspace")
             say(f"chunk {chunk[0]}..{chunk[-1]}: finished earlier, skipped")
-            episode_results.extend(json.loads(done.read_text(encoding="utf-8"))["episodes"])
+            episode_results.extend(earlier["episodes"])
             continue
         if (cdir / "ws").exists():  # an interrupted chunk: run it again from scratch
             import shutil

@@ -21,6 +21,10 @@ under DIR, finished or not (a verified session counts whether or not its episode
 ``--score-only`` merges the chunks (or plain workspaces) it is given without running
 anything.
 
+Every session runs with ``limits.heartbeat_timeout_s`` raised to ``--heartbeat-timeout``
+(60 s; the shipped 10 s is for a robot's own computer) so that machine load does not end
+sessions; sessions that still end on a heartbeat timeout are listed apart.
+
 Goals (issue 9): false success ("self-deception") <= 1 % and false failure <= 5 % of at
 least 200 scored sessions. Prints the matrices with Wilson 95 % intervals, per predicate,
 and every false failure with the criteria behind it; writes
@@ -37,7 +41,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from phyagentos.bench.random_world import random_episodes
+from phyagentos.bench.random_world import random_episodes, with_limits
 from phyagentos.bench.report import verifier_markdown
 from phyagentos.bench.verifier_scoring import confusion, load_ground_truth, score_session
 from phyagentos.protocol import Workspace
@@ -90,6 +94,10 @@ def report(v: dict, scores: list[dict], out: Path, extra: dict) -> None:
     for name, r in sorted(v["per_predicate_rates"].items()):
         print(f"{name:<12}{r['scored']:>8}{r['false_success_pct']:>15}%{_ci(r['false_success_ci95_pct']):>18}"
               f"{r['false_failure_pct']:>15}%{_ci(r['false_failure_ci95_pct']):>18}")
+    hb = list(extra.get("heartbeat_timeout_sessions") or ())
+    if hb:
+        print(f"\nsessions that ended on a runner heartbeat timeout (machine load, never verified, not scored): "
+              f"{len(hb)}")
     behind = []
     for s in scores:
         if s.get("session") != "false_failure":
@@ -106,6 +114,7 @@ def report(v: dict, scores: list[dict], out: Path, extra: dict) -> None:
                       f"{c['status']}: {(c['reason'] or '')[:160]}")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"benchmark": "verifier_accuracy", **extra, "verifier": v, "false_failures": behind,
+                               "heartbeat_timeout_sessions": hb,
                                "sessions": scores}, indent=1) + "\n", encoding="utf-8")
     md = verifier_markdown(v)
     md += ["| criterion | scored | false success | 95 % CI | false failure (incl. unknown while met) | 95 % CI |",
@@ -134,15 +143,19 @@ def score_only(paths, out: Path, extra: dict | None = None) -> int:
     if not workspaces:
         print(f"no workspace under {[str(p) for p in paths]}", file=sys.stderr)
         return 2
-    scores, runs = [], set()
+    scores, runs, heartbeat = [], set(), []
     for w in workspaces:
         ws = Workspace.open(w)
-        runs |= {(str(w), s.run_id) for s in ws.list_sessions()}
+        sessions = ws.list_sessions()
+        runs |= {(str(w), s.run_id) for s in sessions}
+        heartbeat += [s.session_id for s in sessions if any(a.error is not None and str(a.error.code).startswith(
+            "heartbeat.") for a in ws.load_session(s.session_id).attempts)]
         scores.extend(score_pass(w))
     v = confusion(scores)
     print(f"verifier accuracy (scored from {len(workspaces)} workspace(s)): {len(runs)} episode runs, "
           f"{v['sessions_scored']} sessions scored ({v['sessions_unscored']} unscored)")
-    report(v, scores, out, {**(extra or {}), "scored_from": [str(w) for w in workspaces], "episode_runs": len(runs)})
+    report(v, scores, out, {**(extra or {}), "scored_from": [str(w) for w in workspaces], "episode_runs": len(runs),
+                            "heartbeat_timeout_sessions": heartbeat})
     return 0
 
 
@@ -153,6 +166,9 @@ def main() -> int:
     ap.add_argument("--workspace", type=Path, help="keep the chunk workspaces here and resume finished chunks "
                                                    "(default: a temporary directory)")
     ap.add_argument("--chunk", type=int, default=10, help="seeds per chunk workspace (default 10)")
+    ap.add_argument("--heartbeat-timeout", type=float, default=60.0,
+                    help="runner heartbeat timeout of every session, s (default 60: machine load must not end "
+                         "sessions; the timeouts left are counted apart)")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "verifier_accuracy.json")
     ap.add_argument("--score-only", type=Path, nargs="+", metavar="DIR",
                     help="score and merge the verified sessions already in DIR (a workspace or a chunked root), exit")
@@ -182,7 +198,8 @@ def main() -> int:
 
             shutil.rmtree(cdir / "ws")
         cdir.mkdir(parents=True, exist_ok=True)
-        p = run_pass(f"verifier accuracy {chunk[0]}..{chunk[-1]}", random_episodes(chunk), cdir / "ws",
+        episodes = with_limits(random_episodes(chunk), heartbeat_timeout_s=args.heartbeat_timeout)
+        p = run_pass(f"verifier accuracy {chunk[0]}..{chunk[-1]}", episodes, cdir / "ws",
                      use_memory=False, consolidate=False, progress=say)
         eps = [{"episode_id": e.episode_id, "first": e.first_attempt_success, "final": e.final_success,
                 "sessions": list(e.session_ids), "causes": list(e.causes)} for e in p.episodes]

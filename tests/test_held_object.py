@@ -175,6 +175,19 @@ def test_the_grasp_observation_stands_in_for_a_missing_initial_sighting(tmp_path
     assert out["lifted"].status == "satisfied" and out["holding"].status == "satisfied"
 
 
+def test_a_hand_that_held_the_object_at_the_start_gives_no_initial_height(tmp_path):
+    # recorded pattern (seed 20120, re-pick): the session began with the object still in the
+    # hand, opened (it fell), grasped it from the table and lifted it. Its initial height was
+    # the hand's, so the grasp's observation must not stand in for it.
+    trace = pick_trace()
+    trace[0] = sample("before_open", 0.017, 0.78, (0.5, -0.2, 0.19), effort=8.5, stamp=0.0)
+    ev = occluded(tmp_path, trace, tcp_end=(0.5, -0.2, 0.17), initial=[])
+    out = judge(ev)
+    assert out["holding"].status == "satisfied"
+    assert out["lifted"].status == "unknown" and "hand was not empty" in out["lifted"].reason
+    assert SessionVerifier().verify(session(), ev).verdict != "success"
+
+
 @settings(max_examples=120, deadline=None)
 @given(rise=st.floats(0.0, 0.2), std=st.floats(0.0, 0.03), opening=st.floats(0.0, 0.03),
        load=st.floats(0.0, 12.0))

@@ -47,7 +47,7 @@ from .diagnosis import slip_seen
 
 __all__ = ["HeldEstimate", "estimate_held", "refine", "OPENING_STD_M", "HOLD_STD_M", "CAPTURE_RADIUS_M",
            "WIDTH_MARGIN_M", "MIN_HELD_LOAD_N", "LOAD_STD_FLOOR_N", "LOAD_STD_FRACTION", "MAX_CARRIED_LOAD_N",
-           "MIN_LIFT_FOR_LOAD_M"]
+           "MIN_LIFT_FOR_LOAD_M", "EMPTY_EFFORT_N"]
 
 #: 1-sigma uncertainty of the measured opening per finger, m. Chosen, not measured: the
 #: fingers' compliance under squeeze, several times the 0.01 mm the trace is rounded to.
@@ -73,6 +73,9 @@ LOAD_STD_FRACTION = 0.05
 #: Above this load the wrist is pushed by contact, not carrying: the Franka arm's
 #: payload, 3 kg x 9.81 m/s^2 (Franka Emika Panda datasheet), N.
 MAX_CARRIED_LOAD_N = 3.0 * 9.81
+#: Finger effort below which the hand squeezes nothing, N (the runtime's grasp check uses
+#: the same 1 N: ``phyagentos.primitives.grasp_sense.MIN_EFFORT_N``).
+EMPTY_EFFORT_N = 1.0
 #: A load sample counts as carrying only once the tcp has risen this far since the close, m
 #: (before that the object still rests on, or presses into, its support).
 MIN_LIFT_FOR_LOAD_M = 0.01
@@ -275,6 +278,19 @@ def estimate_held(evidence: Any, obj: str) -> HeldEstimate:
                         position_m=(float(p[0]), float(p[1]), float(p[2])), position_std_m=std, facts=facts)
 
 
+def _empty_hand_at_start(trace: Sequence[Mapping]) -> bool:
+    """The session's first ``proprio`` sample shows an empty hand: the fingers squeeze with
+    less than :data:`EMPTY_EFFORT_N` and the wrist carries no more than an empty hand's
+    load band. Only then can the grasp's observation stand in for the object's initial
+    height (nothing the hand did could have moved it there)."""
+    first = next((r for r in trace if r.get("kind") == "proprio"), None)
+    if first is None or first.get("effort_n") is None:
+        return False
+    load = first.get("wrist_load_n")
+    return float(first["effort_n"]) < EMPTY_EFFORT_N and (
+        load is None or float(load) <= MIN_HELD_LOAD_N + 2 * _load_std(float(load)))
+
+
 def _unseen(snapshot: Mapping, obj: str) -> bool:
     """No camera decided about ``obj``: no ``holding`` relation for it and no confident sighting."""
     if any(r.get("relation") == "holding" and r.get("object") == obj for r in snapshot.get("relations", [])):
@@ -297,7 +313,10 @@ def refine(outcome: CriterionOutcome, evidence: Any) -> CriterionOutcome:
     - ``lifted(obj, min_height)``: when held, the carried centre's rise above the initial
       perceived centre ``dz`` is judged with the 2-sigma rule of
       :mod:`phyagentos.agent.criteria` (``sigma = sqrt(sigma_initial^2 + sigma_held^2)``);
-      otherwise still ``unknown``.
+      without a confident initial sighting the grasp's observation stands in for it, but
+      only when the session's first proprioception shows an empty hand (a hand that held
+      the object at the start may have dropped it before the grasp); otherwise still
+      ``unknown``.
     """
     c: Criterion = outcome.criterion
     if c.name not in ("holding", "lifted"):
@@ -321,9 +340,13 @@ def refine(outcome: CriterionOutcome, evidence: Any) -> CriterionOutcome:
     init = _entity(evidence.initial, obj)
     if init is not None and confidence(init) >= CONFIDENCE_MIN:
         z0, s0 = float(init["position"][2]), sigma(init)
-    else:  # not in the initial snapshot: the observation the grasp used (same session, before any contact)
-        close = _last_close(tuple(evidence.trace or ()), obj)
-        aim, s0 = _aim(tuple(evidence.trace or ()), close, obj) if close is not None else (None, None)
+    else:  # not in the initial snapshot: the observation the grasp used, if the hand started empty
+        trace = tuple(evidence.trace or ())
+        close = _last_close(trace, obj)
+        aim, s0 = _aim(trace, close, obj) if close is not None else (None, None)
+        if aim is not None and not _empty_hand_at_start(trace):
+            return CriterionOutcome(c, "unknown", f"{outcome.reason}; {obj} was not seen at the start and the hand "
+                                    "was not empty then (it may have held it): no initial height", outcome.evidence)
         if aim is None or s0 is None:
             return CriterionOutcome(c, "unknown", f"{outcome.reason}; {obj} has no confident initial position",
                                     outcome.evidence)

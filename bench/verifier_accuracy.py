@@ -2,7 +2,7 @@
 
     nice -n 10 .venv/bin/python bench/verifier_accuracy.py [--episodes 100] [--first-seed 20000] \\
         [--workspace DIR [--chunk 10]]
-    .venv/bin/python bench/verifier_accuracy.py --score-only DIR [DIR ...]
+    .venv/bin/python bench/verifier_accuracy.py --score-only DIR [DIR ...] [--replay]
 
 Episodes are pick-and-place goal graphs over randomised scenes
 (:mod:`phyagentos.bench.random_world`: shape, size 2-7 cm, mass 0.02-1.5 kg, friction
@@ -19,7 +19,9 @@ re-running the same command skips finished chunks (resume after an interruption,
 more seeds into the same DIR with another ``--first-seed``). Scoring merges every chunk
 under DIR, finished or not (a verified session counts whether or not its episode ended).
 ``--score-only`` merges the chunks (or plain workspaces) it is given without running
-anything.
+anything; with ``--replay`` it judges the recorded evidence again with the current
+verifier's predicates (success iff every criterion is satisfied and no safety event), to
+measure a verifier change on the very same sessions.
 
 Every session runs with ``limits.heartbeat_timeout_s`` raised to ``--heartbeat-timeout``
 (60 s; the shipped 10 s is for a robot's own computer) so that machine load does not end
@@ -39,10 +41,12 @@ import json
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from phyagentos.bench.random_world import random_episodes, with_limits
 from phyagentos.bench.report import verifier_markdown
+from phyagentos.agent.verifier import PredicateVerifier, load_evidence
 from phyagentos.bench.verifier_scoring import confusion, load_ground_truth, score_session
 from phyagentos.protocol import Workspace
 from phyagentos.self_evolution import run_pass
@@ -50,8 +54,33 @@ from phyagentos.self_evolution import run_pass
 HERE = Path(__file__).resolve().parent
 
 
-def score_pass(workspace: Path, session_ids=None) -> list[dict]:
-    """Score every verified session of a workspace (or those of ``session_ids``) against its ground truth."""
+def _replayed(ws: Workspace, rec, attempt) -> dict:
+    """The verdict the current SessionVerifier's predicates give on the session's recorded
+    evidence (for an *another view* child: the acting ancestor's evidence with this view's
+    terminal snapshot, as the coordinator judges it): ``success`` iff every criterion is
+    satisfied and no safety event, as in :meth:`SessionVerifier.verify`."""
+    evidence = load_evidence(ws.root / attempt.evidence)
+    judged = rec
+    if rec.recovery is not None and rec.recovery.skill == "observe":
+        parent = rec.parent_session_id
+        while parent:
+            anc = ws.load_session(parent)
+            if anc.skill != "observe" and anc.attempts and anc.attempts[-1].evidence:
+                base = load_evidence(ws.root / anc.attempts[-1].evidence)
+                evidence, judged = replace(base, terminal=evidence.terminal), anc
+                break
+            parent = anc.parent_session_id
+    outcomes = PredicateVerifier().judge(judged, evidence)
+    safety = any(str(e.get("code", "")).startswith("safety.") for e in evidence.events)
+    ok = bool(outcomes) and all(o.status == "satisfied" for o in outcomes) and not safety
+    return {"verdict": "success" if ok else "failure", "replayed": True,
+            "criteria": [{"predicate": o.criterion.text, "status": o.status, "reason": o.reason} for o in outcomes]}
+
+
+def score_pass(workspace: Path, session_ids=None, *, replay: bool = False) -> list[dict]:
+    """Score every verified session of a workspace (or those of ``session_ids``) against its
+    ground truth; with ``replay`` the verdicts are those of the current verifier on the
+    recorded evidence (:func:`_replayed`) instead of the recorded ones."""
     ws = Workspace.open(workspace)
     if session_ids is None:
         session_ids = [s.session_id for s in ws.list_sessions()]
@@ -62,8 +91,8 @@ def score_pass(workspace: Path, session_ids=None) -> list[dict]:
         if attempt is None or attempt.verdict is None:
             continue
         gt = load_ground_truth(ws.root / attempt.evidence) if attempt.evidence else None
-        verdict = attempt.verdict.model_dump()
-        scores.append({"session_id": sid, "node": rec.node, "skill": rec.skill, "verdict": attempt.verdict.verdict,
+        verdict = _replayed(ws, rec, attempt) if replay else attempt.verdict.model_dump()
+        scores.append({"session_id": sid, "node": rec.node, "skill": rec.skill, "verdict": verdict["verdict"],
                        "cause": attempt.verdict.diagnosis.cause if attempt.verdict.diagnosis else None,
                        "reasons": {c["predicate"]: c["reason"] for c in verdict.get("criteria") or ()},
                        **score_session(accept=rec.accept, verdict=verdict, gt=gt)})
@@ -137,8 +166,9 @@ def _workspaces(paths) -> list[Path]:
     return out
 
 
-def score_only(paths, out: Path, extra: dict | None = None) -> int:
-    """Score and merge every verified session in the workspaces under ``paths``."""
+def score_only(paths, out: Path, extra: dict | None = None, *, replay: bool = False) -> int:
+    """Score and merge every verified session in the workspaces under ``paths`` (``replay``:
+    with the current verifier's verdicts on the recorded evidence)."""
     workspaces = _workspaces(paths)
     if not workspaces:
         print(f"no workspace under {[str(p) for p in paths]}", file=sys.stderr)
@@ -150,12 +180,13 @@ def score_only(paths, out: Path, extra: dict | None = None) -> int:
         runs |= {(str(w), s.run_id) for s in sessions}
         heartbeat += [s.session_id for s in sessions if any(a.error is not None and str(a.error.code).startswith(
             "heartbeat.") for a in ws.load_session(s.session_id).attempts)]
-        scores.extend(score_pass(w))
+        scores.extend(score_pass(w, replay=replay))
     v = confusion(scores)
-    print(f"verifier accuracy (scored from {len(workspaces)} workspace(s)): {len(runs)} episode runs, "
+    print(f"verifier accuracy{' (REPLAYED: the current verifier on recorded evidence)' if replay else ''} "
+          f"(scored from {len(workspaces)} workspace(s)): {len(runs)} episode runs, "
           f"{v['sessions_scored']} sessions scored ({v['sessions_unscored']} unscored)")
     report(v, scores, out, {**(extra or {}), "scored_from": [str(w) for w in workspaces], "episode_runs": len(runs),
-                            "heartbeat_timeout_sessions": heartbeat})
+                            "heartbeat_timeout_sessions": heartbeat, "replayed": replay})
     return 0
 
 
@@ -172,9 +203,12 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=HERE / "results" / "verifier_accuracy.json")
     ap.add_argument("--score-only", type=Path, nargs="+", metavar="DIR",
                     help="score and merge the verified sessions already in DIR (a workspace or a chunked root), exit")
+    ap.add_argument("--replay", action="store_true",
+                    help="with --score-only: judge the recorded evidence again with the current verifier's predicates "
+                         "(the session set stays the recorded one)")
     args = ap.parse_args()
     if args.score_only:
-        return score_only(args.score_only, args.out)
+        return score_only(args.score_only, args.out, replay=args.replay)
     tmp = None if args.workspace else tempfile.TemporaryDirectory(prefix="verifier_accuracy_")
     root = args.workspace or Path(tmp.name)
     say = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731

@@ -280,15 +280,14 @@ def estimate_held(evidence: Any, obj: str) -> HeldEstimate:
 
 def _empty_hand_at_start(trace: Sequence[Mapping]) -> bool:
     """The session's first ``proprio`` sample shows an empty hand: the fingers squeeze with
-    less than :data:`EMPTY_EFFORT_N` and the wrist carries no more than an empty hand's
-    load band. Only then can the grasp's observation stand in for the object's initial
-    height (nothing the hand did could have moved it there)."""
+    less than :data:`EMPTY_EFFORT_N` (a parallel gripper holds nothing it does not squeeze;
+    the wrist load is not used here: a hand resting on the table after a missed grasp
+    carries tens of newtons of contact force while holding nothing). Only then can the
+    grasp's observation stand in for the object's initial height."""
     first = next((r for r in trace if r.get("kind") == "proprio"), None)
     if first is None or first.get("effort_n") is None:
         return False
-    load = first.get("wrist_load_n")
-    return float(first["effort_n"]) < EMPTY_EFFORT_N and (
-        load is None or float(load) <= MIN_HELD_LOAD_N + 2 * _load_std(float(load)))
+    return float(first["effort_n"]) < EMPTY_EFFORT_N
 
 
 def _unseen(snapshot: Mapping, obj: str) -> bool:

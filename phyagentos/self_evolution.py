@@ -1,12 +1,11 @@
-"""Measuring self-evolution: the same perturbed episodes, before and after memory.
+"""Measuring self-evolution: the same episodes, before and after memory.
 
 The paper's claim is that verified outcomes make later sessions better. This module
 measures it on the MuJoCo tabletop with the ordinary path (``run_goal_graph``: Session
 Compiler, WatchdogSupervisor, SessionRunner, SessionVerifier, recovery, memory):
 
-1. :func:`perturbed_episodes` builds a seeded set of episodes: a pick (or pick and
-   place) goal graph whose scene puts the cube at a seeded position and declares one
-   perturbation of :mod:`phyagentos.targets.perturbations` with the episode's seed;
+1. a seeded set of :class:`Episode` goal graphs (e.g. the randomised worlds of
+   :mod:`phyagentos.bench.random_world`, whose failures come from the drawn world);
 2. pass 1 runs every episode with empty memory (nothing retrieved) while verdicts are
    consolidated into LESSONS.md, KNOWLEDGE.md and SKILL.md;
 3. pass 2 runs the same episodes in a fresh workspace holding a copy of that memory,
@@ -27,26 +26,22 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-import numpy as np
 import yaml
 
 from phyagentos.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace, atomic_write_bytes
 
-__all__ = ["PERTURBATION_KINDS", "MEMORY_DOCUMENTS", "Episode", "EpisodeResult", "PassResult", "perturbed_episodes",
+__all__ = ["MEMORY_DOCUMENTS", "Episode", "EpisodeResult", "PassResult",
            "run_pass", "copy_memory", "measure"]
 
 logger = logging.getLogger(__name__)
 
-PERTURBATION_KINDS: tuple[str, ...] = ("perception_noise", "low_friction", "displaced", "heavy_object")
 MEMORY_DOCUMENTS: tuple[str, ...] = ("LESSONS", "KNOWLEDGE", "SKILL")
-_PICK_ACCEPT = {"holding": "cube", "lifted": {"object": "cube", "min_height": 0.05}}
-_PLACE_ACCEPT = {"inside": {"object": "cube", "region": "goal"}, "released": "cube"}
 
 
 @dataclass(frozen=True)
 class Episode:
-    """One seeded episode: a goal graph (mapping) with one declared perturbation."""
+    """One seeded episode: a goal graph (mapping); ``kind`` labels the episode family."""
 
     episode_id: str
     kind: str | None
@@ -101,47 +96,6 @@ class PassResult:
                 "sessions": self.sessions, "wall_time_s": round(self.wall_time_s, 2), "lessons": self.lessons,
                 "candidates": self.candidates, "knowledge": self.knowledge, "procedures": self.procedures,
                 "by_kind": self.by_kind, "results": [asdict(e) for e in self.episodes]}
-
-
-def perturbed_episodes(seeds: Sequence[int], *, kinds: Sequence[str | None] = PERTURBATION_KINDS,
-                       place: bool = False) -> list[Episode]:
-    """Episodes for every (kind, seed): the cube at a seeded position (x 0.45-0.55 m,
-    y -0.28 to -0.20 m, clear of the wall even when displaced), the goal region and the wall of ``goal_graphs/pick_and_place.yaml``,
-    and perturbation ``kind`` (``None``: unperturbed) seeded with the episode seed.
-
-    Args:
-        seeds: episode seeds.
-        kinds: perturbation kinds (see :data:`PERTURBATION_KINDS`).
-        place: add a ``place_cube`` node after ``pick_cube``.
-    """
-    episodes = []
-    for kind in kinds:
-        for seed in seeds:
-            rng = np.random.default_rng([seed, 7919])
-            x, y = float(rng.uniform(0.45, 0.55)), float(rng.uniform(-0.28, -0.20))
-            scene: dict[str, Any] = {
-                "objects": [{"name": "cube", "half_extents": [0.02, 0.02, 0.02], "position": [round(x, 4), round(y, 4)],
-                             "rgba": [0.8, 0.1, 0.1, 1]}],
-                "regions": [{"name": "goal", "center": [0.5, 0.25], "half_extents": [0.08, 0.08]}],
-                "obstacles": [{"name": "wall", "center": [0.5, 0.03, 0.15], "half_extents": [0.2, 0.01, 0.15]}],
-            }
-            if kind is not None:
-                spec: dict[str, Any] = {"kind": kind, "seed": int(seed)}
-                if kind != "perception_noise":
-                    spec["object"] = "cube"
-                scene["perturbations"] = [spec]
-            nodes = [{"id": "pick_cube", "skill": "pick", "params": {"object": "cube"}, "accept": _PICK_ACCEPT,
-                      "limits": {"execution_timeout_s": 120}}]
-            if place:
-                nodes.append({"id": "place_cube", "skill": "place", "params": {"object": "cube", "region": "goal"},
-                              "accept": _PLACE_ACCEPT, "depends_on": ["pick_cube"],
-                              "limits": {"execution_timeout_s": 120}})
-            name = f"{kind or 'none'}-s{seed}"
-            graph = {"version": 1, "name": name, "description": f"pick{' and place' if place else ''} with {kind or 'no'}"
-                     f" perturbation, seed {seed}", "defaults": {"target": "franka_tabletop"}, "scene": scene,
-                     "nodes": nodes}
-            episodes.append(Episode(episode_id=name, kind=kind, seed=int(seed), graph=graph))
-    return episodes
 
 
 def copy_memory(source: Workspace, destination: Workspace) -> None:

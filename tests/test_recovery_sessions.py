@@ -152,3 +152,14 @@ def test_failure_blocks_the_downstream_subgraph_while_an_independent_branch_cont
                                                       [("object_not_seen", None), ("object_not_seen", "average_frames")])
     assert picks[-1].verdict == "failure"
     assert not [s for s in report.sessions if s.node == "place_far"]  # never compiled
+
+
+def test_a_reopened_pick_that_needed_its_own_replan_still_resumes_the_place():
+    # recorded stall (randomised world 20236): place-2 re-opened the pick as pick-2, pick-2 missed and was
+    # replanned, its child pick-3 succeeded; the place must resume on pick-3's success, not wait for pick-2's
+    from phyagentos.agent.coordinator import _descends
+
+    parents = {"pick-1": None, "pick-2": "pick-1", "pick-3": "pick-2", "place-1": None, "place-2": "place-1"}
+    assert _descends("pick-3", "pick-2", parents) and _descends("pick-2", "pick-2", parents)
+    assert not _descends("pick-1", "pick-2", parents) and not _descends("place-2", "pick-2", parents)
+    assert not _descends(None, "pick-2", parents)

@@ -5,7 +5,13 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from phyagentos.bench.verifier_scoring import confusion, load_ground_truth, score_session, truth_of_criteria
+from phyagentos.bench.verifier_scoring import (
+    confusion,
+    load_ground_truth,
+    score_session,
+    truth_of_criteria,
+    wilson_interval,
+)
 from phyagentos.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 
@@ -87,3 +93,20 @@ def test_truth_is_judged_exactly_on_ground_truth(run):
     lowered = {**gt, "terminal": {**gt["terminal"], "held": []}}
     assert {c.name: t for c, t in truth_of_criteria(pick.accept, lowered)}["holding"] is False
     assert [t for _, t in truth_of_criteria({"still": {}}, gt)] == [None]  # no joint state in ground truth
+
+
+def test_wilson_intervals_bound_the_rates():
+    # 0 of 200: the upper bound is what "no false success seen" allows (about 1.9 %)
+    assert wilson_interval(0, 200) == pytest.approx((0.0, 1.885), abs=1e-3)
+    lo, hi = wilson_interval(10, 124)
+    assert lo < 100 * 10 / 124 < hi and hi - lo < 10.0
+    assert wilson_interval(5, 5)[1] == 100.0 and wilson_interval(0, 0) is None
+
+
+def test_per_predicate_rates_count_unknown_while_met_as_false_failure():
+    rows = [{"predicate": "lifted(object=cube)", "cell": c} for c in
+            ("true_success", "unknown_met", "false_failure", "true_failure")]
+    v = confusion([{"session_id": "s", "session": "false_failure", "criteria": rows}])
+    r = v["per_predicate_rates"]["lifted"]
+    assert r["scored"] == 4 and r["false_failure_pct"] == 50.0 and r["false_success_pct"] == 0.0
+    assert v["false_failure_ci95_pct"] == wilson_interval(1, 1)

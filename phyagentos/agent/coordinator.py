@@ -38,7 +38,7 @@ import os
 import socket
 from dataclasses import dataclass, replace
 from datetime import datetime
-from typing import Any
+from typing import Any, Mapping
 
 import networkx as nx
 
@@ -81,6 +81,17 @@ def node_state_of(session_state: str) -> str:
     if session_state == "cancelled":
         return dagmod.CANCELLED
     return dagmod.FAILED  # failed, rejected, timed_out
+
+
+def _descends(session_id: str | None, ancestor: str, parents: Mapping[str, str | None]) -> bool:
+    """``session_id`` is ``ancestor`` or one of its descendants along ``parent_session_id``."""
+    seen = set()
+    while session_id is not None and session_id not in seen:
+        if session_id == ancestor:
+            return True
+        seen.add(session_id)
+        session_id = parents.get(session_id)
+    return False
 
 
 def _generation(session_id: str) -> int:
@@ -224,10 +235,12 @@ class AgentCoordinator:
         """Compile the child of every node whose re-opened upstream node has succeeded again."""
         actions = 0
         latest = self.latest_by_node(sessions)
+        parents = {s.session_id: s.parent_session_id for s in sessions}
         for node_id, (rec, upstream) in self._awaiting_reopen(latest).items():
             up = latest.get(upstream)
             repick = rec.child_session_ids[0] if rec.child_session_ids else None
-            if up is None or up.session_id != repick or up.state != "succeeded":
+            # the re-pick itself, or a child the verifier made of it (a re-pick that replanned)
+            if up is None or repick is None or up.state != "succeeded" or not _descends(up.session_id, repick, parents):
                 continue
             rev = self._revision(rec)
             resume = rev.model_copy(update={"rationale": f"{rev.rationale}; upstream {repick} succeeded"})

@@ -60,7 +60,7 @@ from typing import Any, Mapping, Sequence
 from phyagentos.protocol import Diagnosis, SessionRecord
 
 __all__ = ["CAUSES", "CONFIDENCE_MIN", "MISSED_OPENING_M", "MOVED_TOL_M", "PERCEPTION_STD_TOL_M",
-           "SLIP_LOAD_RATIO", "SLIP_OPENING_DROP_M", "diagnose", "subject_object", "perceived_position"]
+           "SLIP_LOAD_RATIO", "SLIP_OPENING_DROP_M", "diagnose", "subject_object", "perceived_position", "slip_seen"]
 
 #: cause -> (category, one-line meaning)
 CAUSES: dict[str, tuple[str, str]] = {
@@ -183,6 +183,10 @@ def _slip_from_proprio(trace: Sequence[Mapping], start: int, obj: str | None) ->
         if peak >= MIN_SLIP_LOAD_N and min(after) < SLIP_LOAD_RATIO * peak:
             return {"slip_source": "wrist_load", "load_drop_n": peak - min(after), "load_peak_n": peak}
     return None
+
+
+#: Public name of the slip rule (the held-object model applies the same one).
+slip_seen = _slip_from_proprio
 
 
 def diagnose(session: SessionRecord, evidence: Any, *, unknown: Sequence[str] = ()) -> Diagnosis:

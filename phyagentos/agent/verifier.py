@@ -46,6 +46,7 @@ from phyagentos.yamlsource import read_yaml
 
 from .criteria import CriterionOutcome, evaluate, parse_criteria
 from .diagnosis import diagnose
+from .held_object import refine
 from .recovery import RecoveryPlanner
 
 __all__ = ["EvidenceBundle", "Verifier", "PredicateVerifier", "SessionVerifier", "load_evidence"]
@@ -158,7 +159,9 @@ class PredicateVerifier:
     def judge(self, session: SessionRecord, evidence: EvidenceBundle) -> list[CriterionOutcome]:
         criteria = parse_criteria(session.accept, where=f"session {session.session_id} accept")
         refs = evidence.refs("initial", "terminal")
-        return [evaluate(c, evidence.initial, evidence.terminal, refs=refs) for c in criteria]
+        # where the cameras leave holding/lifted unknown (the hand hides the object), the
+        # held-object model decides from proprioception and forward kinematics
+        return [refine(evaluate(c, evidence.initial, evidence.terminal, refs=refs), evidence) for c in criteria]
 
 
 class SessionVerifier:

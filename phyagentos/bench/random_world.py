@@ -16,7 +16,7 @@ from typing import Any, Mapping, Sequence
 
 from phyagentos.self_evolution import Episode
 
-__all__ = ["random_scene", "random_episodes", "with_defaults"]
+__all__ = ["random_scene", "random_episodes", "with_defaults", "with_limits"]
 
 _WALL = {"name": "wall", "center": [0.5, 0.03, 0.15], "half_extents": [0.2, 0.01, 0.15]}
 _GOAL = {"name": "goal", "center": [0.5, 0.25], "half_extents": [0.08, 0.08]}
@@ -54,6 +54,18 @@ def with_defaults(episodes: Sequence[Episode], defaults: Mapping[str, Mapping[st
     out = []
     for ep in episodes:
         graph = {**ep.graph, "nodes": [{**n, "params": {**(defaults.get(n["skill"]) or {}), **n["params"]}}
+                                       for n in ep.graph["nodes"]]}
+        out.append(Episode(episode_id=ep.episode_id, kind=ep.kind, seed=ep.seed, graph=graph))
+    return out
+
+
+def with_limits(episodes: Sequence[Episode], **limits: float) -> list[Episode]:
+    """``episodes`` with the session ``limits`` (e.g. ``heartbeat_timeout_s=60``) written
+    into every node: a benchmark on a loaded, shared machine raises the runner's heartbeat
+    timeout so that load does not end sessions the world did not fail."""
+    out = []
+    for ep in episodes:
+        graph = {**ep.graph, "nodes": [{**n, "limits": {**(n.get("limits") or {}), **limits}}
                                        for n in ep.graph["nodes"]]}
         out.append(Episode(episode_id=ep.episode_id, kind=ep.kind, seed=ep.seed, graph=graph))
     return out

@@ -31,6 +31,7 @@ joint record) are counted as ``unscorable`` and left out.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -39,7 +40,7 @@ from phyagentos.agent.criteria import Criterion, evaluate, parse_criteria
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["GROUND_TRUTH_FILE", "truth_snapshot", "truth_of_criteria", "score_session", "confusion",
+__all__ = ["wilson_interval", "GROUND_TRUTH_FILE", "truth_snapshot", "truth_of_criteria", "score_session", "confusion",
            "load_ground_truth"]
 
 GROUND_TRUTH_FILE = "ground_truth.yaml"
@@ -147,6 +148,29 @@ def _rate(k: int, n: int) -> float | None:
     return round(100.0 * k / n, 3) if n else None
 
 
+def wilson_interval(k: int, n: int, *, z: float = 1.96) -> tuple[float, float] | None:
+    """Wilson score interval of a rate ``k / n`` (Wilson 1927, JASA 22:209), in percent
+    (``z = 1.96``: 95 %); ``None`` for ``n == 0``."""
+    if not n:
+        return None
+    p = k / n
+    d = 1.0 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return (round(100.0 * max(0.0, c - h), 3), round(100.0 * min(1.0, c + h), 3))
+
+
+def _predicate_rates(row: Mapping[str, int]) -> dict[str, Any]:
+    """Per-criterion rates: false success = ``false_success`` / scored, false failure =
+    (``false_failure`` + ``unknown_met``: not satisfied while met) / scored, with Wilson
+    95 % intervals (percent)."""
+    n = sum(v for k, v in row.items() if k != "unscorable")
+    ff = row["false_failure"] + row["unknown_met"]
+    return {"scored": n, "false_success_pct": _rate(row["false_success"], n),
+            "false_success_ci95_pct": wilson_interval(row["false_success"], n),
+            "false_failure_pct": _rate(ff, n), "false_failure_ci95_pct": wilson_interval(ff, n)}
+
+
 def confusion(scores: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     """Aggregate :func:`score_session` results (each with an optional ``session_id``) into the
     per-session and per-criterion confusion matrices with rates in percent and the ids
@@ -180,4 +204,7 @@ def confusion(scores: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         "false_failure_rate_pct": _rate(sessions["false_failure"], n),
         "false_failure_given_met_pct": _rate(sessions["false_failure"], met),
         "false_success_sessions": false_success, "false_failure_sessions": false_failure,
+        "false_success_ci95_pct": wilson_interval(sessions["false_success"], n),
+        "false_failure_ci95_pct": wilson_interval(sessions["false_failure"], n),
+        "per_predicate_rates": {k: _predicate_rates(row) for k, row in per_predicate.items()},
     }

@@ -107,13 +107,30 @@ def wrist_load_n(target, p) -> float | None:
     return None if base is None else f - float(base)
 
 
+def _tcp_fields(p) -> dict:
+    """``tcp_position_m`` (3,) and ``tcp_quat_wxyz`` (4,) of the tool site in the world frame,
+    from the sample's forward kinematics of the measured joint positions (robot knowledge,
+    as a real arm's controller reports its flange pose); ``{}`` without a ``tcp_pose``."""
+    T = getattr(p, "tcp_pose", None)
+    if T is None:
+        return {}
+    T = np.asarray(T, dtype=float)
+    q = np.empty(4)
+    import mujoco  # the quaternion of the rotation block (MuJoCo's own conversion)
+
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(T[:3, :3]).flatten())
+    return {"tcp_position_m": [round(float(x), 5) for x in T[:3, 3]], "tcp_quat_wxyz": [round(float(x), 5) for x in q]}
+
+
 def proprio_record(target, p, *, phase: str, leaf: str) -> dict:
-    """The ``proprio`` trace entry of CONTRACT_9 section 5 for sample ``p``."""
+    """The ``proprio`` trace entry of CONTRACT_9 section 5 for sample ``p``: opening (m per
+    finger), finger effort (N), wrist force (3,) N and load (N), and the tcp pose in the
+    world frame from forward kinematics (``tcp_position_m`` (3,) m, ``tcp_quat_wxyz`` (4,))."""
     load = wrist_load_n(target, p)
     return {"leaf": leaf, "phase": phase, "stamp_s": round(float(p.stamp_s), 4),
             "opening_m": round(float(p.gripper_opening_m), 5), "effort_n": round(float(p.gripper_effort_n), 3),
             "wrist_force_n": None if p.wrist_force_n is None else [round(float(x), 3) for x in p.wrist_force_n],
-            "wrist_load_n": None if load is None else round(load, 3)}
+            "wrist_load_n": None if load is None else round(load, 3), **_tcp_fields(p)}
 
 
 def holding_problem(target, p, *, expected: str | None = None, after_lift: bool = False) -> str | None:

@@ -48,12 +48,14 @@ from typing import Any, Collection, Mapping, Sequence
 import yaml
 
 from phyagentos.errors import GoalGraphError, PhyAgentOSError
-from phyagentos.llm import LLMCall, LLMClient, LLMError
+from phyagentos.llm import LLMCall, LLMClient, LLMError, call_record
+from phyagentos.protocol import ModelCallRecord
+from phyagentos.protocol.reach import ReachOracle
 
 from .goal_graph import GoalGraph, parse_goal_graph
 from .llm.policy import InjectionFinding, screen_text
 from .llm.prompt import ModelContextBuilder
-from .llm.world import PALETTE, World, world_from_scene
+from .llm.world import PALETTE, World, perceived_world, world_from_environment, world_from_scene
 from .selector import select_target
 
 __all__ = ["GoalPlanner", "PlanResult", "PlanStep", "PlannerError", "REFUSAL_REASONS", "PLAN_SKILLS",
@@ -65,6 +67,8 @@ logger = logging.getLogger(__name__)
 REFUSAL_REASONS = ("unknown_object", "out_of_reach", "unsafe", "impossible")
 #: Skills a plan step may use (tabletop manipulation): move onto a destination, or pick and hold.
 PLAN_SKILLS = ("pick_and_place", "pick")
+#: Frames the look-first ``observe`` node fuses (as the verifier's another view: recovery.ANOTHER_VIEW_SAMPLES).
+OBSERVE_SAMPLES = 4
 #: Execution deadline of a planned node, s (a pick-and-place over the wall takes 20-60 s on a loaded machine).
 NODE_TIMEOUT_S = 180.0
 
@@ -138,6 +142,8 @@ class PlanResult:
         repairs: validator messages sent back to the model.
         findings: policy findings (offending texts).
         seconds: wall time of planning, s.
+        records: every model call as the session context keeps it (raw output and parse
+            outcome: ``accepted``, ``refused`` or ``rejected`` with the validator's message).
     """
 
     request: str
@@ -155,12 +161,14 @@ class PlanResult:
     repairs: tuple[str, ...] = ()
     findings: tuple[InjectionFinding, ...] = ()
     seconds: float = 0.0
+    records: tuple[ModelCallRecord, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"request": self.request, "status": self.status, "reason": self.reason, "refusal": self.refusal,
                 "refused_by": self.refused_by,
                 "steps": [{"skill": s.skill, "object": s.object, "destination": s.destination} for s in self.steps],
-                "calls": [c.to_dict() for c in self.calls], "context": self.context, "selections": self.selections,
+                "calls": [c.to_dict() for c in self.calls],
+                "model_calls": [r.model_dump(mode="json") for r in self.records], "context": self.context, "selections": self.selections,
                 "outputs": list(self.outputs), "repairs": list(self.repairs),
                 "findings": [{"source": f.source, "code": f.code, "text": f.text, "match": f.match}
                              for f in self.findings],
@@ -219,11 +227,15 @@ class GoalPlanner:
         lessons: lesson texts the ContextBuilder may inject (lowest priority).
         context_budget: token budget of the user message.
         max_steps: most steps per plan.
+        reach: the reach oracle the selector asks (the Runtime's IK through the protocol,
+            wired by the composition root); ``None``: the reach envelope only.
     """
 
     def __init__(self, client: LLMClient, *, skills: Collection[str], targets: Sequence[Mapping[str, Any]],
-                 lessons: Sequence[str] = (), context_budget: int = 700, max_steps: int = 6):
+                 lessons: Sequence[str] = (), context_budget: int = 700, max_steps: int = 6,
+                 reach: ReachOracle | None = None):
         self.client = client
+        self.reach = reach
         self.skills = list(skills)
         self.targets = [dict(t) for t in targets]
         self.lessons = list(lessons)
@@ -233,16 +245,21 @@ class GoalPlanner:
 
     # -- public ------------------------------------------------------------
 
-    def plan(self, request: str, *, scene: Mapping[str, Any], name: str = "planned", prefer_target: str | None = None,
+    def plan(self, request: str, *, scene: Mapping[str, Any], environment: Sequence[Mapping[str, Any]] = (),
+             name: str = "planned", prefer_target: str | None = None,
              prior_attempts: Sequence[str] = ()) -> PlanResult:
-        """Plan ``request`` on ``scene`` (a goal graph's ``scene`` mapping).
+        """Plan ``request`` on ``scene`` (a goal graph's ``scene`` mapping: the names, colours and
+        sizes the request may refer to) as ``environment`` (ENVIRONMENT.md's entities: what the
+        runtime last perceived) has it. Object positions come only from ``environment``; when it
+        lacks an object the plan moves, the graph looks first (an ``observe`` node all steps
+        depend on) and reach is left to the runtime's preflight.
 
         Raises:
             PlannerError: the model could not be called, or its plan stayed invalid after one repair.
         """
         started = time.perf_counter()
         findings = screen_text(request, source="instruction")
-        world = world_from_scene(scene)
+        world = perceived_world(world_from_scene(scene), world_from_environment(environment))
         findings += list(world.rejected)
         if findings:
             return PlanResult(request=request, status="refused", refusal="unsafe", refused_by="policy",
@@ -260,7 +277,15 @@ class GoalPlanner:
         calls: list[LLMCall] = []
         outputs: list[str] = []
         repairs: list[str] = []
-        common = dict(request=request, context=ctx.to_dict(), findings=())
+        records: list[ModelCallRecord] = []
+        context = {**ctx.to_dict(), "world": world.source}
+
+        def done(reply, outcome: str, detail: str, **fields) -> PlanResult:
+            records.append(call_record(reply.call, role="planner", output=reply.text, outcome=outcome, detail=detail))
+            return PlanResult(request=request, context=context, calls=tuple(calls), outputs=tuple(outputs),
+                              repairs=tuple(repairs), records=tuple(records), seconds=time.perf_counter() - started,
+                              **fields)
+
         for round_ in range(2):
             try:
                 reply = self.client.complete(messages, schema=schema, max_tokens=60 + 40 * self.max_steps,
@@ -276,26 +301,21 @@ class GoalPlanner:
                     reason = data.get("reason") if data.get("reason") in REFUSAL_REASONS else "impossible"
                     unknown = self._unknown_mentions(request, world)
                     detail = f"; the request names {', '.join(unknown)}, which the scene does not have" if unknown else ""
-                    return PlanResult(status="refused", refusal=reason, refused_by="model",
-                                      reason=f"the model refused ({reason}){detail}", calls=tuple(calls),
-                                      outputs=tuple(outputs), repairs=tuple(repairs),
-                                      seconds=time.perf_counter() - started, **common)
+                    return done(reply, "refused", f"model refusal ({reason})", status="refused", refusal=reason,
+                                refused_by="model", reason=f"the model refused ({reason}){detail}")
                 unknown = self._unknown_mentions(request, world)
                 if unknown:
-                    return PlanResult(status="refused", refusal="unknown_object", refused_by="grounding",
-                                      reason=f"the request names {', '.join(unknown)}, which the scene "
-                                             f"({world.source}) does not have; it has {', '.join(_describe(world))}",
-                                      calls=tuple(calls), outputs=tuple(outputs), repairs=tuple(repairs),
-                                      seconds=time.perf_counter() - started, **common)
+                    why = (f"the request names {', '.join(unknown)}, which the scene ({world.source}) does not "
+                           f"have; it has {', '.join(_describe(world))}")
+                    return done(reply, "refused", why, status="refused", refusal="unknown_object",
+                                refused_by="grounding", reason=why)
                 self._check_grounded(request, decoded, world)
                 self._check_structure(decoded, world)
                 graph_dict, selections, far = self._compile(decoded, world, scene, name=name, request=request,
                                                             prefer_target=prefer_target)
                 if far:
-                    return PlanResult(status="refused", refusal="out_of_reach", refused_by="selector",
-                                      reason=far, steps=tuple(decoded), selections=selections, calls=tuple(calls),
-                                      outputs=tuple(outputs), repairs=tuple(repairs),
-                                      seconds=time.perf_counter() - started, **common)
+                    return done(reply, "refused", far, status="refused", refusal="out_of_reach",
+                                refused_by="selector", reason=far, steps=tuple(decoded), selections=selections)
                 text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
                 try:
                     graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
@@ -305,16 +325,26 @@ class GoalPlanner:
             except _Invalid as exc:
                 message = str(exc)
                 repairs.append(message)
+                records.append(call_record(reply.call, role="planner", output=reply.text, outcome="rejected",
+                                           detail=message))
                 logger.info("plan of %r rejected (round %d): %s; model output: %s", request, round_ + 1, message,
                             reply.text)
                 messages += [{"role": "assistant", "content": reply.text},
                              {"role": "user", "content": f"That plan is rejected: {message}. Answer again with a "
                                                          f"corrected plan for the same request: {request}"}]
                 continue
+            records.append(call_record(reply.call, role="planner", output=reply.text, outcome="accepted",
+                                       detail=f"{len(graph.nodes)} node(s)"))
+            # The graph carries its provenance: the sessions compiled from it keep these model calls.
+            graph_dict["provenance"] = {"planner": "Goal Planner", "request": request, "world": world.source,
+                                        "model_calls": [r.model_dump(mode="json") for r in records]}
+            text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
+            graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
+                                     targets=[t["name"] for t in self.targets])
             return PlanResult(status="planned", reason=f"{len(graph.nodes)} node(s)", steps=tuple(decoded),
                               graph_yaml=text, graph=graph, calls=tuple(calls), selections=selections,
-                              outputs=tuple(outputs), repairs=tuple(repairs), seconds=time.perf_counter() - started,
-                              **common)
+                              outputs=tuple(outputs), repairs=tuple(repairs), records=tuple(records),
+                              seconds=time.perf_counter() - started, request=request, context=context)
         raise PlannerError(f"the plan for {request!r} is still invalid after one repair round: {repairs[-1]} "
                            f"(model output: {outputs[-1]!r})")
 
@@ -403,12 +433,21 @@ class GoalPlanner:
         nodes: list[dict[str, Any]] = []
         selections: dict[str, Any] = {}
         placed: dict[str, dict] = {}  # object -> criterion that should still hold
+        # Objects the plan touches that the runtime has not perceived: never planned on declared
+        # positions; an observe node looks first and every step waits for it.
+        touched = list(dict.fromkeys([s.object for s in steps] + [s.destination for s in steps if s.destination]))
+        unseen = [n for n in touched if world.get(n).kind == "object" and world.get(n).position is None]
+        if unseen and "observe" not in self.skills:
+            raise PlannerError(f"the world is unknown: {', '.join(unseen)} not perceived yet (ENVIRONMENT.md) and "
+                               f"no observe skill to look first")
         for i, s in enumerate(steps):
             node_id = re.sub(r"[^a-z0-9_]", "_", f"s{i + 1}_{s.skill}_{s.object}")[:60]
-            positions = {s.object: world.get(s.object).position}
-            if s.destination:
-                positions[s.destination] = world.get(s.destination).position
-            sel = select_target(s.skill, targets=self.targets, positions=positions, prefer=prefer_target)
+            positions = {n: world.get(n).position for n in (s.object, s.destination) if n}
+            sel = select_target(s.skill, targets=self.targets,
+                                positions={n: p for n, p in positions.items() if p is not None},
+                                unknown=[n for n, p in positions.items() if p is None], prefer=prefer_target,
+                                reach=self.reach, scene=scene, pick=s.object,
+                                place=(s.object, s.destination) if s.destination else None)
             selections[node_id] = sel.to_dict()
             if sel.target is None:
                 why = "; ".join(f"{t}: {r}" for t, r in sel.reasons.items())
@@ -433,6 +472,17 @@ class GoalPlanner:
                     "limits": {"execution_timeout_s": NODE_TIMEOUT_S}}
             if sel.runtime and sel.runtime != "builtin":
                 node["runtime"] = sel.runtime
+            if unseen and not nodes:
+                look = {"id": "s0_observe", "skill": "observe", "target": sel.target,
+                        "params": {"samples": OBSERVE_SAMPLES},
+                        # judged on what this observation perceived: unknown (not seen) -> another view
+                        "accept": [{"unchanged": {"object": n}} for n in unseen],
+                        "limits": {"execution_timeout_s": NODE_TIMEOUT_S}}
+                selections[look["id"]] = {"target": sel.target, "runtime": "builtin",
+                                          "reasons": {sel.target: f"look first: {', '.join(unseen)} not perceived "
+                                                                  f"yet (ENVIRONMENT.md)"}}
+                nodes.append(look)
+                node["depends_on"] = [look["id"]]
             nodes.append(node)
         model = self.client.model
         graph = {"version": 1, "name": name,

@@ -164,6 +164,9 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
             answer = reach(ReachQuery(target=name, driver=str(t.get("driver", "")), scene=dict(scene or {}),
                                       positions={n: [float(p[0]), float(p[1])] for n, p in positions.items()},
                                       pick=pick, place=list(place) if place else None))
+            if answer.status == "unsupported":
+                reasons[name] = f"cannot build the scene: {'; '.join(answer.reasons)}"
+                continue
             if answer.status == "unreachable":
                 reasons[name] = f"out of reach ({answer.checked_by}): {'; '.join(answer.reasons)}"
                 continue

@@ -41,10 +41,10 @@ class ReachQuery(ProtocolModel):
 
 
 class ReachAnswer(ProtocolModel):
-    """The Runtime's answer: ``status`` ``reachable``/``unreachable``/``unknown`` (not checked:
-    a position not perceived, or a scene the checker does not model) and why."""
+    """The Runtime's answer: ``status`` ``reachable``/``unreachable``/``unknown`` (not checked: a
+    position not perceived yet) or ``unsupported`` (the target's driver cannot build the scene), and why."""
 
-    status: Literal["reachable", "unreachable", "unknown"]
+    status: Literal["reachable", "unreachable", "unknown", "unsupported"]
     reasons: list[str] = Field(default_factory=list)
     checked_by: str = Field("ik", description="What answered: ik (the target's model), or envelope.")
 

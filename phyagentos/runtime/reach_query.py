@@ -34,21 +34,30 @@ def _perceived_scene(query: ReachQuery) -> dict[str, Any]:
 
 def answer_reach_query(query: ReachQuery) -> ReachAnswer:
     """Whether ``query.target`` reaches the query's pick and place poses (see the module docstring)."""
-    names = [n for n in ([query.pick] if query.pick else []) + list(query.place or []) if n]
-    objects = {o.get("name") for o in query.scene.get("objects") or [] if isinstance(o, dict)}
-    unseen = [n for n in dict.fromkeys(names) if n in objects and n not in query.positions]
-    if unseen:
-        return ReachAnswer(status="unknown", reasons=[f"{', '.join(unseen)} not perceived yet: reach is checked "
-                                                      f"once the position is known (the runtime's preflight)"])
     scene, problems = check_scene(_perceived_scene(query), query.driver)
     if scene is None:
-        return ReachAnswer(status="unknown", reasons=[p.message for p in problems] or ["scene not modelled"])
-    picks = [PickPose(node="query", obj=query.pick, line=None)] if query.pick else []
-    places = [PlacePose(node="query", obj=query.place[0], region=query.place[1], line=None)] if query.place else []
+        return ReachAnswer(status="unsupported", reasons=[p.message for p in problems] or ["scene not modelled"])
+    objects = {o.get("name") for o in query.scene.get("objects") or [] if isinstance(o, dict)}
+
+    def unseen(*names: str | None) -> list[str]:
+        return [n for n in dict.fromkeys(names) if n and n in objects and n not in query.positions]
+
+    # What is known is checked; what is not perceived is not (a place needs the destination's
+    # position only: the hold is relative to the object). The arm's start pose is always checked.
+    pick_unseen = unseen(query.pick)
+    place_unseen = unseen(query.place[1]) if query.place else []
+    picks = [PickPose(node="query", obj=query.pick, line=None)] if query.pick and not pick_unseen else []
+    places = ([PlacePose(node="query", obj=query.place[0], region=query.place[1], line=None)]
+              if query.place and not place_unseen else [])
     try:
         found = check_reachability(query.driver, query.target, scene, picks=picks, places=places)
     except KeyError as exc:  # a name the scene does not have
-        return ReachAnswer(status="unknown", reasons=[f"not in the scene: {exc}"])
+        return ReachAnswer(status="unsupported", reasons=[f"not in the scene: {exc}"])
     if found:
         return ReachAnswer(status="unreachable", reasons=[p.message for p in found])
+    missing = pick_unseen + place_unseen
+    if missing:
+        checked = "the place pose solves; " if places else ""
+        return ReachAnswer(status="unknown", reasons=[f"{checked}{', '.join(missing)} not perceived yet: reach is "
+                                                      f"checked once the position is known (the runtime's preflight)"])
     return ReachAnswer(status="reachable", reasons=[f"IK solves every pose on {query.target}'s model"])

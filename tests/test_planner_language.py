@@ -190,3 +190,40 @@ def test_plan_cli_prints_a_refusal_and_exits_1_with_the_record_written(tmp_path,
     (record,) = list((ws / "plans").glob("*/plan.yaml"))
     assert yaml.safe_load(record.read_text())["refused_by"] == "policy"
     assert not (record.parent / "goal_graph.yaml").exists()
+
+
+def test_the_selector_asks_the_runtimes_ik_through_the_reach_query_not_a_radius(tmp_path):
+    from phyagentos.agent.selector import select_target
+    from phyagentos.agent.tools import ToolRegistry
+    from phyagentos.runtime.reach_query import answer_reach_query
+
+    ws = Workspace.create(tmp_path / "ws")
+    targets = [t.model_dump(mode="json") for t in ws.read("TARGETS").data.targets]
+    asked = []
+
+    def oracle(query):
+        asked.append(query)
+        return answer_reach_query(query)
+
+    scene = default_scene()
+    # 0.15 m from the base: inside the arm's IK workspace, inside the declared envelope's dead zone
+    near = {"cube": (0.15, 0.0), "goal": (0.5, 0.25)}
+    by_ik = select_target("pick_and_place", targets=targets, positions=near, reach=oracle, scene=scene,
+                          pick="cube", place=("cube", "goal"), prefer="franka_tabletop")
+    by_radius = select_target("pick_and_place", targets=targets, positions=near, prefer="franka_tabletop")
+    assert by_ik.target == "franka_tabletop" and "reach (IK on its model)" in by_ik.reasons["franka_tabletop"]
+    assert by_radius.target is None and "out of reach" in by_radius.reasons["franka_tabletop"]
+    assert {(q.target, q.pick, tuple(q.place)) for q in asked} >= {("franka_tabletop", "cube", ("cube", "goal"))}
+    assert asked[0].positions["cube"] == [0.15, 0.0]
+    # beyond the arm: IK says so, with its reason
+    far = select_target("pick", targets=targets, positions={"cube": (0.85, 0.0)}, reach=oracle, scene=scene,
+                        pick="cube")
+    assert far.target is None and far.out_of_reach and "IK of every top-down grasp failed" in \
+        far.reasons["franka_tabletop"]
+    # the same question through the ToolRegistry (and so the MCP server)
+    registry = ToolRegistry(ws, reach=answer_reach_query)
+    answer = registry.call("query_reach", {"target": "franka_tabletop", "scene": scene,
+                                           "positions": {"cube": [0.85, 0.0]}, "pick": "cube"})
+    assert answer["status"] == "unreachable" and answer["checked_by"] == "ik"
+    unseen = registry.call("query_reach", {"target": "franka_tabletop", "scene": scene, "pick": "cube"})
+    assert unseen["status"] == "unknown" and "not perceived yet" in unseen["reasons"][0]

@@ -53,6 +53,7 @@ from phyagentos.protocol import ModelCallRecord
 from phyagentos.protocol.reach import ReachOracle
 
 from .goal_graph import GoalGraph, parse_goal_graph
+from .llm.decompose import Clause, decompose, ground
 from .llm.policy import InjectionFinding, screen_text
 from .llm.prompt import ModelContextBuilder
 from .llm.world import PALETTE, World, perceived_world, world_from_environment, world_from_scene
@@ -175,8 +176,11 @@ class PlanResult:
                 "seconds": round(self.seconds, 3)}
 
 
-def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps: int = 6) -> dict[str, Any]:
-    """The JSON schema of a plan over ``world``: every value an enum of what is there."""
+def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps: int = 6,
+                only: str | None = None, destinations: Sequence[str] | None = None) -> dict[str, Any]:
+    """The JSON schema of a plan over ``world``: every value an enum of what is there; with ``only``,
+    steps move that object only, and with ``destinations`` go to one of those (or ``none``): a clause
+    the grammar side grounded (:mod:`.llm.decompose`)."""
     objects = [e.name for e in world.objects]
     regions = [e.name for e in world.regions]
 
@@ -185,12 +189,15 @@ def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps:
         # Stacking destinations read "on_<object>", so a region and an object of the same
         # colour ("red_region", "red_cube") differ from the first token on.
         dest = regions + [f"{_ON}{o}" for o in objects if o != obj] + ["none"]
+        if destinations is not None:
+            dest = [d for d in dest if d in destinations or d == "none"]
         return {"type": "object",
                 "properties": {"skill": {"enum": list(skills)}, "object": {"enum": [obj] if obj else ["none"]},
                                "destination": {"enum": dest}},
                 "required": ["skill", "object", "destination"], "additionalProperties": False}
 
-    items = {"anyOf": [step(o) for o in objects]} if len(objects) > 1 else step(objects[0] if objects else None)
+    movable = [only] if only is not None else objects
+    items = {"anyOf": [step(o) for o in movable]} if len(movable) > 1 else step(movable[0] if movable else None)
     return {
         "type": "object",
         "properties": {
@@ -265,88 +272,104 @@ class GoalPlanner:
             return PlanResult(request=request, status="refused", refusal="unsafe", refused_by="policy",
                               reason="rejected by the tool policy: " + "; ".join(str(f) for f in findings),
                               findings=tuple(findings), seconds=time.perf_counter() - started)
-        ctx = self.context_builder.build(
-            request=request, environment=_describe(world),
-            prior_attempts=prior_attempts, lessons=self.lessons)
-        schema = plan_schema(world, skills=self.plan_skills, max_steps=self.max_steps)
-        messages: list[dict[str, str]] = [{"role": "system", "content": SYSTEM_PROMPT}]
-        for user, answer in _EXAMPLES:
-            messages += [{"role": "user", "content": user},
-                         {"role": "assistant", "content": json.dumps(answer, separators=(",", ":"))}]
-        messages.append({"role": "user", "content": ctx.text})
+        clauses = [ground(c, world) for c in decompose(request, world)]
+        context = {"world": world.source}
+        return self._plan_clauses(request, clauses, world, scene, name=name, prefer_target=prefer_target,
+                                  prior_attempts=prior_attempts, started=started, context=context)
+
+    def _plan_clauses(self, request: str, clauses: Sequence[Clause], world: World, scene: Mapping[str, Any], *,
+                      name: str, prefer_target: str | None, prior_attempts: Sequence[str], started: float,
+                      context: dict[str, Any]) -> PlanResult:
+        """Plan a request the grammar side split (:mod:`.llm.decompose`): one model call per clause, its answer
+        one step (of the clause's fixed object, if any), each with its repair round; then the steps are
+        checked together and compiled as one graph."""
         calls: list[LLMCall] = []
         outputs: list[str] = []
         repairs: list[str] = []
         records: list[ModelCallRecord] = []
-        context = {**ctx.to_dict(), "world": world.source}
+        steps: list[PlanStep] = []
+        context["clauses"] = [{"text": c.text, "object": c.object, "destinations": c.destinations} for c in clauses]
+        part = (lambda t: f"clause {t!r}: ") if len(clauses) > 1 else (lambda t: "")
 
-        def done(reply, outcome: str, detail: str, **fields) -> PlanResult:
-            records.append(call_record(reply.call, role="planner", output=reply.text, outcome=outcome, detail=detail))
+        def result(**fields) -> PlanResult:
             return PlanResult(request=request, context=context, calls=tuple(calls), outputs=tuple(outputs),
-                              repairs=tuple(repairs), records=tuple(records), seconds=time.perf_counter() - started,
-                              **fields)
+                              repairs=tuple(repairs), records=tuple(records), steps=tuple(steps),
+                              seconds=time.perf_counter() - started, **fields)
 
-        for round_ in range(2):
-            try:
-                reply = self.client.complete(messages, schema=schema, max_tokens=60 + 40 * self.max_steps,
-                                             purpose="plan" if round_ == 0 else "repair")
-            except LLMError as exc:
-                raise PlannerError(f"planning {request!r}: {exc}") from exc
-            calls.append(reply.call)
-            outputs.append(reply.text)
-            try:
-                decoded = self._decode(reply.text, world)
-                if decoded is None:  # the model refused
-                    data = json.loads(reply.text)
-                    reason = data.get("reason") if data.get("reason") in REFUSAL_REASONS else "impossible"
-                    unknown = self._unknown_mentions(request, world)
-                    detail = f"; the request names {', '.join(unknown)}, which the scene does not have" if unknown else ""
-                    return done(reply, "refused", f"model refusal ({reason})", status="refused", refusal=reason,
-                                refused_by="model", reason=f"the model refused ({reason}){detail}")
-                unknown = self._unknown_mentions(request, world)
-                if unknown:
-                    why = (f"the request names {', '.join(unknown)}, which the scene ({world.source}) does not "
-                           f"have; it has {', '.join(_describe(world))}")
-                    return done(reply, "refused", why, status="refused", refusal="unknown_object",
-                                refused_by="grounding", reason=why)
-                self._check_grounded(request, decoded, world)
-                self._check_structure(decoded, world)
-                graph_dict, selections, far = self._compile(decoded, world, scene, name=name, request=request,
-                                                            prefer_target=prefer_target)
-                if far:
-                    return done(reply, "refused", far, status="refused", refusal="out_of_reach",
-                                refused_by="selector", reason=far, steps=tuple(decoded), selections=selections)
-                text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
+        unknown = self._unknown_mentions(request, world)
+        if unknown:
+            why = (f"the request names {', '.join(unknown)}, which the scene ({world.source}) does not have; "
+                   f"it has {', '.join(_describe(world))}")
+            return result(status="refused", refusal="unknown_object", refused_by="grounding", reason=why)
+        for k, clause in enumerate(clauses):
+            text = clause.text
+            if steps and re.search(r"\b(it|that one)\b", text):  # "then stack the green cube on it"
+                prev = world.get(steps[-1].object)
+                text = re.sub(r"\b(it|that one)\b", f"the {prev.describe()}", text)
+                clause = ground(Clause(text, clause.object), world)
+            ask = text if clause.object is None else f"{text} (this step moves the {world.get(clause.object).describe()})"
+            ctx = self.context_builder.build(request=ask, environment=_describe(world), prior_attempts=prior_attempts,
+                                             lessons=self.lessons)
+            messages: list[dict[str, str]] = [{"role": "system", "content": SYSTEM_PROMPT}]
+            for user, answer in _EXAMPLES:
+                messages += [{"role": "user", "content": user},
+                             {"role": "assistant", "content": json.dumps(answer, separators=(",", ":"))}]
+            messages.append({"role": "user", "content": ctx.text})
+            schema = plan_schema(world, skills=self.plan_skills, max_steps=1, only=clause.object,
+                                 destinations=clause.destinations)
+            if k == 0:
+                context.update(ctx.to_dict())  # what the ContextBuilder injected (the first clause's; all alike)
+            for round_ in range(2):
                 try:
-                    graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
-                                             targets=[t["name"] for t in self.targets])
-                except GoalGraphError as exc:
-                    raise _Invalid(f"the goal graph it compiles to is invalid: {exc}") from exc
-            except _Invalid as exc:
-                message = str(exc)
-                repairs.append(message)
-                records.append(call_record(reply.call, role="planner", output=reply.text, outcome="rejected",
-                                           detail=message))
-                logger.info("plan of %r rejected (round %d): %s; model output: %s", request, round_ + 1, message,
-                            reply.text)
-                messages += [{"role": "assistant", "content": reply.text},
-                             {"role": "user", "content": f"That plan is rejected: {message}. Answer again with a "
-                                                         f"corrected plan for the same request: {request}"}]
-                continue
-            records.append(call_record(reply.call, role="planner", output=reply.text, outcome="accepted",
-                                       detail=f"{len(graph.nodes)} node(s)"))
-            # The graph carries its provenance: the sessions compiled from it keep these model calls.
-            graph_dict["provenance"] = {"planner": "Goal Planner", "request": request, "world": world.source,
-                                        "model_calls": [r.model_dump(mode="json") for r in records]}
-            text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
+                    reply = self.client.complete(messages, schema=schema, max_tokens=100,
+                                                 purpose="plan" if round_ == 0 else "repair")
+                except LLMError as exc:
+                    raise PlannerError(f"planning {request!r} (clause {text!r}): {exc}") from exc
+                calls.append(reply.call)
+                outputs.append(reply.text)
+                try:
+                    decoded = self._decode(reply.text, world)
+                    if decoded is None:
+                        data = json.loads(reply.text)
+                        reason = data.get("reason") if data.get("reason") in REFUSAL_REASONS else "impossible"
+                        records.append(call_record(reply.call, role="planner", output=reply.text, outcome="refused",
+                                                   detail=f"{part(text)}model refusal ({reason})"))
+                        return result(status="refused", refusal=reason, refused_by="model",
+                                      reason=f"the model refused ({reason}) the part {text!r}")
+                    self._check_grounded(text, decoded, world)
+                    self._check_structure(steps + decoded, world)
+                except _Invalid as exc:
+                    message = str(exc)
+                    repairs.append(message)
+                    records.append(call_record(reply.call, role="planner", output=reply.text, outcome="rejected",
+                                               detail=f"{part(text)}{message}"))
+                    messages += [{"role": "assistant", "content": reply.text},
+                                 {"role": "user", "content": f"That step is rejected: {message}. Answer again for: "
+                                                             f"{ask}"}]
+                    continue
+                records.append(call_record(reply.call, role="planner", output=reply.text, outcome="accepted",
+                                           detail=part(text).rstrip(": ") or "accepted"))
+                steps.extend(decoded)
+                break
+            else:
+                raise PlannerError(f"the plan for {request!r} is still invalid after one repair round of the part "
+                                   f"{text!r}: {repairs[-1]} (model output: {outputs[-1]!r})")
+        graph_dict, selections, far = self._compile(steps, world, scene, name=name, request=request,
+                                                    prefer_target=prefer_target)
+        if far:
+            records[-1] = records[-1].model_copy(update={"outcome": "refused", "detail": far})
+            return result(status="refused", refusal="out_of_reach", refused_by="selector", reason=far,
+                          selections=selections)
+        graph_dict["provenance"] = {"planner": "Goal Planner", "request": request, "world": world.source,
+                                    "model_calls": [r.model_dump(mode="json") for r in records]}
+        text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
+        try:
             graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
                                      targets=[t["name"] for t in self.targets])
-            return PlanResult(status="planned", reason=f"{len(graph.nodes)} node(s)", steps=tuple(decoded),
-                              graph_yaml=text, graph=graph, calls=tuple(calls), selections=selections,
-                              outputs=tuple(outputs), repairs=tuple(repairs), records=tuple(records),
-                              seconds=time.perf_counter() - started, request=request, context=context)
-        raise PlannerError(f"the plan for {request!r} is still invalid after one repair round: {repairs[-1]} "
-                           f"(model output: {outputs[-1]!r})")
+        except GoalGraphError as exc:
+            raise PlannerError(f"the plan for {request!r} compiles to an invalid goal graph: {exc}") from exc
+        return result(status="planned", reason=f"{len(graph.nodes)} node(s) from {len(clauses)} clause(s)",
+                      graph_yaml=text, graph=graph, selections=selections)
 
     # -- checks ------------------------------------------------------------
 

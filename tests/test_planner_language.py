@@ -227,3 +227,37 @@ def test_the_selector_asks_the_runtimes_ik_through_the_reach_query_not_a_radius(
     assert answer["status"] == "unreachable" and answer["checked_by"] == "ik"
     unseen = registry.call("query_reach", {"target": "franka_tabletop", "scene": scene, "pick": "cube"})
     assert unseen["status"] == "unknown" and "not perceived yet" in unseen["reasons"][0]
+
+
+def test_the_grammar_side_splits_sequences_lists_and_quantifiers_into_grounded_clauses():
+    from phyagentos.agent.llm.decompose import decompose, ground
+
+    world = world_from_scene(SORT_SCENE)
+
+    def clauses(text):
+        return [(c.text, c.object, c.destinations) for c in (ground(c, world) for c in decompose(text, world))]
+
+    assert clauses("first put the red cube in the blue region, then put the blue cube in the red region") == [
+        ("put the red cube in the blue region", "red_cube", ("blue_region",)),
+        ("put the blue cube in the red region", "blue_cube", ("red_region",))]
+    assert clauses("sort the cubes by colour into the matching regions") == [
+        ("sort the cubes by colour into the matching regions", "red_cube", ("red_region",)),
+        ("sort the cubes by colour into the matching regions", "blue_cube", ("blue_region",))]
+    assert [c[1] for c in clauses("put all cubes except the red one in the blue region")] == ["blue_cube"]
+    assert clauses("stack the red cube on the blue cube") == [
+        ("stack the red cube on the blue cube", "red_cube", ("on_blue_cube",))]
+    # what the words leave open stays open to the model
+    assert clauses("tidy up the table") == [("tidy up the table", None, None)]
+
+
+def test_a_multi_object_request_is_planned_one_constrained_step_per_clause(planner):
+    result = planner.plan("sort the cubes by colour into the matching regions", scene=SORT_SCENE,
+                          environment=seen(SORT_SCENE))
+    assert result.status == "planned", result.reason
+    assert [(s.object, s.destination) for s in result.steps] == [("red_cube", "red_region"),
+                                                                  ("blue_cube", "blue_region")]
+    assert [c.purpose for c in result.calls] == ["plan", "plan"] and len(result.records) == 2
+    second = result.graph.nodes[1]
+    assert second.depends_on == (result.graph.nodes[0].id,)
+    # the second node re-checks the first placement (the request's invariant)
+    assert {"inside": {"object": "red_cube", "region": "red_region"}} in second.accept

@@ -128,7 +128,8 @@ def ground(clause: Clause, world: World) -> Clause:
     if mover is not None and {"colour", "color", "matching"} & set(words):
         dests = [r.name for r in world.regions if r.colour and r.colour == mover.colour]
     if not dests and rest:
-        dests = [r.name for r in _best(rest, world.regions)]
-        if rest[0] in _STACK or "top" in rest:
-            dests += [f"on_{e.name}" for e in _best(rest, world.objects) if e.name != obj]
+        if rest[0] in _STACK or "top" in rest:  # "on the blue cube": a support, not the blue region
+            dests = [f"on_{e.name}" for e in _best(rest, world.objects) if e.name != obj]
+        if not dests:
+            dests = [r.name for r in _best(rest, world.regions)]
     return Clause(clause.text, obj, tuple(dests) or None)

@@ -2,37 +2,48 @@
 
 The model does not write YAML. It fills a small JSON structure whose every value is an
 enum built from what is actually there (:func:`plan_schema`): ``decision`` (plan or
-refuse), a refusal ``reason``, and ordered ``steps``, each a skill, an object of the
-scene and a destination (a region, another object, or ``none`` for a plain pick).
-Offline, llama.cpp decodes under that schema (a grammar), so the output always parses
-and can only name real entities and skills; an endpoint is asked for the same schema.
+refuse), a refusal ``reason``, and ``steps``, each a skill, an object of the scene and a
+destination (a region, another object, or ``none`` for a plain pick). Offline,
+llama.cpp decodes under that schema (a grammar), so the output always parses and can
+only name real entities and skills; an endpoint is asked for the same schema.
+
+The world: names, colours and sizes from the declared scene, object positions only from
+ENVIRONMENT.md (what the runtime perceived, :func:`~.llm.world.perceived_world`); an
+object not perceived yet has no position, and the graph then looks first (an ``observe``
+node every step depends on). The request is split by the grammar side into clauses
+(:mod:`.llm.decompose`: sequences, colon lists, quantifiers), each grounded (object fixed,
+destinations narrowed where its words say so), and the model answers one step per clause
+under that clause's schema.
 
 Then, in order (the first that fails decides):
 
 1. **policy** (before any model call): the request and every scene name are screened
    for injection (:mod:`phyagentos.agent.llm.policy`); a hit is refused as ``unsafe``,
    logged with the offending text, and no model is called;
-2. **model**: the decoded decision; a model refusal is kept with its reason;
-3. **grounding**: the request must not name a colour or a kind of thing that the
-   scene does not have (refused ``unknown_object``), and every object the plan moves
-   must be one the request refers to (by name, colour, size, or a quantifier such as
-   "all"/"every"/"both"/"except"); otherwise the model gets one repair round;
+2. **grounding** (before any model call): the request must not name a colour or a kind
+   of thing that the scene does not have (refused ``unknown_object``);
+3. **model**, per clause: the decoded decision; a model refusal is kept with its reason;
+   every object the step moves must be one the clause refers to (by name, colour, size,
+   or a quantifier such as "all"/"every"/"both"/"except"), and it may stack only when
+   asked; otherwise the model gets one repair round;
 4. **structure**: a plain ``pick`` only as the last step, no object placed on itself,
    at most one step per (object, destination); otherwise one repair round;
 5. **selector** (:mod:`phyagentos.agent.selector`): a target that has the skill's
-   capabilities and reaches the object and the destination; none: refused ``out_of_reach``;
+   capabilities and reaches the object and the destination (the Runtime's IK, asked
+   through a :class:`~phyagentos.protocol.reach.ReachQuery`); none: refused ``out_of_reach``;
 6. **validator**: the compiled graph goes through :func:`parse_goal_graph`, the same
-   validator as hand-written goal graphs; a failure gets the repair round too.
+   validator as hand-written goal graphs.
 
-One repair round: the model sees its own answer and the validator's message and answers
-again; if that also fails, :class:`PlannerError` says why. Steps run in order
-(``depends_on`` the previous step: one arm); each node's ``accept`` asks for its own
+One repair round per clause: the model sees its own answer and the validator's message
+and answers again; if that also fails, :class:`PlannerError` says why. Steps run in
+order (``depends_on`` the previous step: one arm); each node's ``accept`` asks for its own
 placement and re-checks every earlier placement that later steps did not move (the
 request's invariants), like ``goal_graphs/sort_two_cubes.yaml``.
 
-Every model call's :class:`~phyagentos.llm.LLMCall` (provider, model, prompt hash,
-tokens, latency) and what the :class:`ModelContextBuilder` injected are kept in the
-:class:`PlanResult` and written with the plan (:func:`write_plan`).
+Every model call is kept as a :class:`~phyagentos.protocol.ModelCallRecord` (prompt hash,
+model, parameters, tokens, latency, raw output, parse outcome) in the :class:`PlanResult`,
+written with the plan (:func:`write_plan`) and carried by the graph's ``provenance``, so
+the sessions compiled from it keep them in their contexts.
 """
 
 from __future__ import annotations

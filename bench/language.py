@@ -277,7 +277,7 @@ def run_suite(client, cases: list[Case], *, execute: int, root: Path, look: bool
                 executed += 1
                 graph = root / f"g{i}.yaml"
                 graph.write_text(result.graph_yaml)
-                ws = root / f"ws{i}"
+                ws = root / f"ws{i}-exec"  # a fresh workspace: a second run in the perceiving one restores a stale world
                 t1 = time.perf_counter()
                 try:
                     report = run_goal_graph(graph, ws, seed=case.seed, use_memory=False, consolidate=False)

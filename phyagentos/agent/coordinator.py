@@ -303,9 +303,10 @@ class AgentCoordinator:
         attempt.verdict = verdict
         # model calls made for this session during its attempt (agent runtime) and its revision (a model reviser)
         calls_for = getattr(self.verifier.recovery, "calls_for", None)
+        revised = [rec.session_id] + ([judged.session_id] if judged.session_id != rec.session_id else [])
         rec.context = with_calls(rec.context, trace_calls(evidence.trace, ref=evidence.refs("trace")[0]
                                                           if evidence.refs("trace") else None)
-                                 + (calls_for(rec.session_id) if calls_for is not None else []))
+                                 + ([c for sid in revised for c in calls_for(sid)] if calls_for is not None else []))
         event = {"success": "succeed", "failure": "fail", "replan": "replan"}[verdict.verdict]
         rec.lease = None
         lifecycle.fire(event, reason=verdict.reason[:200])

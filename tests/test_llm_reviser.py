@@ -88,3 +88,23 @@ def test_give_up_is_a_typed_answer_offered_from_the_second_replan_on():
     assert reviser.proposals[1]["proposed_by"] == "model:give_up"
     (record,) = reviser.calls_for("r1-pick_cube-1")[1:]
     assert record.outcome == "gave_up" and record.output == answer.text and record.role == "reviser"
+
+
+def test_a_re_pick_that_did_not_help_is_not_offered_again_and_nothing_is_asked():
+    from phyagentos.protocol import Attempt, Verdict
+    from phyagentos.protocol.lifecycle import utc_now as now
+
+    unmet = Diagnosis(cause="precondition_unmet", category="execution", summary="the hand is empty")
+    place = session().model_copy(update={"session_id": "r1-place_again-1", "node": "place_again", "skill": "place",
+                                         "parameters": {"object": "cube", "region": "goal"}})
+    answer = _Answer('{"action":"re_pick_upstream"}')
+    reviser = ModelReviser(answer, fallback=RecoveryPlanner())
+    first = reviser.plan(place, unmet, upstream="pick_cube")
+    assert first.reopen == "pick_cube" and first.strategy == "model:re_pick_upstream"
+    # the node ran again after the re-pick and found the hand empty again: the same correction is spent
+    failed = place.model_copy(update={"attempts": [Attempt(number=1, started_at=now(), verdict=Verdict(
+        verdict="replan", reason="empty hand", at=now(), diagnosis=unmet, revision=first))]})
+    again = place.model_copy(update={"session_id": "r1-place_again-2", "parent_session_id": failed.session_id})
+    assert reviser.menu(again, unmet, history=[failed], upstream="pick_cube") == []
+    assert reviser.plan(again, unmet, history=[failed], upstream="pick_cube") is None
+    assert len(reviser.calls) == 1 and reviser.proposals[-1]["proposed_by"] == "policy"

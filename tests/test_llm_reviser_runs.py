@@ -83,5 +83,5 @@ def test_an_empty_hand_makes_the_model_insert_a_re_pick_upstream(tmp_path, revis
     assert repick.node == "pick_cube" and repick.recovery == rev and repick.state == "succeeded"
     assert [c.outcome for c in repick.context.model_calls if c.role == "reviser"] == ["accepted"]
     assert next(r for r in recs if r.node == "place_again" and r.state == "succeeded")
-    # (another failure of the world along the way, e.g. a slip, is revised too; this one was the model's)
-    assert [p["proposed_by"] for p in reviser.proposals if p["cause"] == "precondition_unmet"] == ["model"]
+    # (another failure of the world along the way, e.g. a slip upstream, is revised too; this one was the model's)
+    assert [p["proposed_by"] for p in reviser.proposals if p["session"] == failed.session_id] == ["model"]

@@ -139,6 +139,18 @@ def _call_text(call: LLMCall) -> str:
             f"tokens, {call.latency_s:.2f} s")
 
 
+def _earlier(session: SessionRecord, history: Sequence[SessionRecord]) -> list[Revision]:
+    """The revisions already spent along the lineage: those the sessions ran with, and those their
+    verdicts proposed (a re-pick upstream runs on another node, so only the verdict records it)."""
+    out: list[Revision] = []
+    for rec in [*history, session]:
+        verdict = rec.attempts[-1].verdict if rec is not session and rec.attempts else None
+        for rev in (rec.recovery, verdict.revision if verdict is not None else None):
+            if rev is not None and rev not in out:
+                out.append(rev)
+    return out
+
+
 def _label(params: Mapping[str, Any]) -> str:
     return "_".join(f"{k}_{v}" for k, v in sorted(params.items())) or "defaults"
 
@@ -183,7 +195,7 @@ class ModelReviser:
              upstream: str | None = None) -> list[dict[str, Any]]:
         """The JSON-schema variants of the revisions that could change the outcome (empty: none)."""
         cause = diagnosis.cause
-        earlier = [r.recovery for r in [*history, session] if r.recovery is not None]
+        earlier = _earlier(session, history)
         same_cause = [r for r in earlier if r.cause == cause]
         variants: list[dict[str, Any]] = []
         if cause in NEVER_RETRY:
@@ -237,7 +249,7 @@ class ModelReviser:
             self.proposals.append(record)
             return None
         current = dict(session.parameters)
-        earlier = [r.recovery for r in [*history, session] if r.recovery is not None]
+        earlier = _earlier(session, history)
         if earlier:  # a retryable cause is retried at least once: giving up is offered from the second replan on
             variants.append(_variant("give_up", reason=_GIVE_UP_REASONS))
         facts = ", ".join(f"{k}={v}" for k, v in diagnosis.facts.items() if not isinstance(v, (dict, list)))

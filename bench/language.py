@@ -22,6 +22,12 @@ where it was), fixed when the instruction is drawn. For each instruction:
   planned instructions, default all: CPU-heavy, run it with ``nice``);
 * must-refuse: refused (any reason) counts as correct; the reason is reported.
 
+The planner's world is what the robot perceived: before planning, one ``observe`` session
+runs on the scene (its own workspace), and the planner gets that workspace's ENVIRONMENT.md
+(objects at perceived positions; an object the cameras did not see has none, and the plan
+then looks first). ``--no-look`` skips it (every plan then starts with an ``observe`` node).
+The selector asks the Runtime's IK about reach (``answer_reach_query``).
+
 The offline model always; a second pass with the endpoint of ``PHYAGENTOS_LLM_PROVIDER=openai``
 (+ ``PHYAGENTOS_LLM_BASE_URL``/``MODEL``) when that is set. ``--reviser-episodes K``: K pick
 episodes per perturbation (low friction, displaced, heavy object), each run once with the rule
@@ -48,12 +54,13 @@ import yaml
 
 import phyagentos  # noqa: F401  (headless GL before mujoco)
 from phyagentos.agent.planner import GoalPlanner, PlannerError
-from phyagentos.cli_agent import make_reviser
+from phyagentos.cli_agent import make_reviser, perceived_entities
 from phyagentos.llm import load_llm_config, make_client
 from phyagentos.orchestrator import run_goal_graph, skill_names
 from phyagentos.protocol import Workspace
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
+from phyagentos.runtime.reach_query import answer_reach_query
 
 RESULTS = Path(__file__).resolve().parent / "results"
 COLOURS = {"red": [0.8, 0.1, 0.1, 1], "green": [0.1, 0.7, 0.2, 1], "blue": [0.1, 0.2, 0.8, 1],
@@ -225,16 +232,33 @@ def ground_truth_met(case: Case, ents: dict, initial: dict) -> bool:
     return True
 
 
-def run_suite(client, cases: list[Case], *, execute: int, root: Path) -> list[dict]:
+def perceive(case: Case, ws: Path) -> tuple[list[dict], float]:
+    """Run one ``observe`` session on the case's scene in ``ws``: ENVIRONMENT.md then holds what the
+    robot perceived (the planner's world). Returns its entities and the wall time, s."""
+    graph = ws.parent / f"{ws.name}-observe.yaml"
+    graph.write_text(yaml.safe_dump({"version": 1, "name": "look", "scene": case.scene, "nodes": [
+        {"id": "look", "skill": "observe", "target": "franka_tabletop", "params": {"samples": 1},
+         "accept": {"still": {"max_joint_motion_rad": 0.05}}}]}))
+    t0 = time.perf_counter()
+    try:
+        run_goal_graph(graph, ws, seed=case.seed, use_memory=False, consolidate=False)
+    except Exception as exc:  # noqa: BLE001 - nothing perceived: the planner looks first itself
+        print(f"perception run failed: {exc}", file=sys.stderr)
+    return perceived_entities(Workspace.open(ws)), time.perf_counter() - t0
+
+
+def run_suite(client, cases: list[Case], *, execute: int, root: Path, look: bool = True) -> list[dict]:
     ws0 = Workspace.create(root / "plan-ws")
     targets = [t.model_dump(mode="json") for t in ws0.read("TARGETS").data.targets]
-    planner = GoalPlanner(client, skills=skill_names(), targets=targets)
+    planner = GoalPlanner(client, skills=skill_names(), targets=targets, reach=answer_reach_query)
     rows = []
     executed = 0
     for i, case in enumerate(cases):
+        env, look_s = perceive(case, root / f"ws{i}") if look else ([], 0.0)
         t0 = time.perf_counter()
         try:
-            result = planner.plan(case.instruction, scene=case.scene, name=f"{case.category}_{case.seed}")
+            result = planner.plan(case.instruction, scene=case.scene, environment=env,
+                                  name=f"{case.category}_{case.seed}")
             status, err = result.status, None
         except PlannerError as exc:
             result, status, err = None, "error", str(exc)
@@ -243,6 +267,8 @@ def run_suite(client, cases: list[Case], *, execute: int, root: Path) -> list[di
                "seconds": round(secs, 2), "must_refuse": case.must_refuse, "refuse_kind": case.refuse_kind,
                "error": err, "refusal": getattr(result, "refusal", None), "refused_by": getattr(result, "refused_by", None),
                "steps": [[s.skill, s.object, s.destination] for s in result.steps] if result else [],
+               "perceived": sorted(e["name"] for e in env if e.get("kind") == "object"), "perceive_s": round(look_s, 1),
+               "looks_first": bool(result and result.graph and result.graph.nodes[0].skill == "observe"),
                "repairs": len(result.repairs) if result else 0}
         if case.must_refuse:
             row["correct"] = status == "refused"
@@ -253,7 +279,7 @@ def run_suite(client, cases: list[Case], *, execute: int, root: Path) -> list[di
                 executed += 1
                 graph = root / f"g{i}.yaml"
                 graph.write_text(result.graph_yaml)
-                ws = root / f"ws{i}"
+                ws = root / f"ws{i}-exec"  # a fresh workspace: a second run in the perceiving one restores a stale world
                 t1 = time.perf_counter()
                 try:
                     report = run_goal_graph(graph, ws, seed=case.seed, use_memory=False, consolidate=False)
@@ -342,6 +368,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--baseline", action="store_true",
                     help="also score the rule-based BASELINE parser (bench/rule_baseline.py; plans only, not executed)")
     ap.add_argument("--no-model", action="store_true", help="skip the model runs (with --baseline)")
+    ap.add_argument("--no-look", action="store_true",
+                    help="plan with nothing perceived (every plan then looks first) instead of running one observe "
+                         "session per scene before planning")
     ap.add_argument("--out", type=Path, default=RESULTS / "language.json")
     args = ap.parse_args(argv)
     cases = [make_case(cat, seed) for seed in range(args.seeds) for cat in CATEGORIES]
@@ -357,7 +386,7 @@ def main(argv: list[str] | None = None) -> int:
                               "seeds_per_category": args.seeds, "runs": {}}
     with tempfile.TemporaryDirectory(prefix="phyagentos-language-") as tmp:
         for label, client, execute in clients:
-            rows = run_suite(client, cases, execute=execute, root=Path(tmp) / label)
+            rows = run_suite(client, cases, execute=execute, root=Path(tmp) / label, look=not args.no_look)
             report["runs"][label] = {"provider": client.provider, "model": client.model, **summarise(rows), "rows": rows}
         if args.reviser_episodes:
             report["reviser"] = reviser_comparison(args.reviser_episodes, Path(tmp))

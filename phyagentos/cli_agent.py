@@ -25,7 +25,8 @@ from typing import Any
 from phyagentos.errors import GoalGraphError
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_reviser", "default_scene", "load_scene"]
+__all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_reviser", "default_scene", "load_scene",
+           "perceived_entities"]
 
 EXIT_OK, EXIT_NOT_SUCCEEDED = 0, 1
 
@@ -51,11 +52,18 @@ def load_scene(path: str | Path) -> dict[str, Any]:
                          path=path)
 
 
+def perceived_entities(workspace) -> list[dict[str, Any]]:
+    """ENVIRONMENT.md's entities (what the runtime last perceived) as plain mappings; empty before any run."""
+    return [e.model_dump(mode="json") for e in workspace.read("ENVIRONMENT").data.entities]
+
+
 def make_planner(workspace, *, client=None):
-    """A GoalPlanner over ``workspace``'s targets and the shipped skills, with the configured model."""
+    """A GoalPlanner over ``workspace``'s targets and the shipped skills, with the configured model; its
+    selector asks the Runtime's IK about reach (:func:`phyagentos.runtime.reach_query.answer_reach_query`)."""
     from phyagentos.agent.planner import GoalPlanner  # noqa: PLC0415
     from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
     from phyagentos.orchestrator import skill_names  # noqa: PLC0415
+    from phyagentos.runtime.reach_query import answer_reach_query  # noqa: PLC0415
 
     targets = [t.model_dump(mode="json") for t in workspace.read("TARGETS").data.targets]
     client = client or make_client(load_llm_config(workspace.root))
@@ -63,7 +71,7 @@ def make_planner(workspace, *, client=None):
     verified = sorted((x for x in workspace.read("LESSONS").data.lessons if x.verified),
                       key=lambda x: -x.confirmations)
     lessons = [f"{x.cause}: {x.correction} ({x.confirmations} confirmation(s))" for x in verified[:5]]
-    return GoalPlanner(client, skills=skill_names(), targets=targets, lessons=lessons)
+    return GoalPlanner(client, skills=skill_names(), targets=targets, lessons=lessons, reach=answer_reach_query)
 
 
 def make_reviser(kind: str, workspace_dir: str | Path):
@@ -106,7 +114,8 @@ def _cmd_plan(args, out, err) -> int:
     workspace = Workspace.create(args.workspace)
     scene = load_scene(args.scene) if args.scene else default_scene()
     planner = make_planner(workspace)
-    result = planner.plan(args.request, scene=scene, prefer_target=args.target)
+    result = planner.plan(args.request, scene=scene, environment=perceived_entities(workspace),
+                          prefer_target=args.target)
     plan_id = datetime.now(timezone.utc).strftime("plan-%Y%m%dT%H%M%S%fZ")
     paths = write_plan(result, workspace.root / "plans" / plan_id)
     poses = None

@@ -47,14 +47,17 @@ def build_registry(workspace: Workspace, *, with_planner: bool = True) -> ToolRe
     plan = None
     if with_planner:
         def plan(request: str, scene: dict | None) -> dict:
-            from phyagentos.cli_agent import make_planner, default_scene  # noqa: PLC0415
+            from phyagentos.cli_agent import default_scene, make_planner, perceived_entities  # noqa: PLC0415
 
-            result = make_planner(workspace).plan(request, scene=scene or default_scene())
+            result = make_planner(workspace).plan(request, scene=scene or default_scene(),
+                                                  environment=perceived_entities(workspace))
             out = result.to_dict()
             out["goal_graph_yaml"] = result.graph_yaml
             return out
 
-    return ToolRegistry(workspace, submit=submit, plan=plan, issued_by="mcp")
+    from phyagentos.runtime.reach_query import answer_reach_query  # noqa: PLC0415
+
+    return ToolRegistry(workspace, submit=submit, plan=plan, issued_by="mcp", reach=answer_reach_query)
 
 
 def build_server(registry: ToolRegistry) -> Server:

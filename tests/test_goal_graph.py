@@ -190,7 +190,7 @@ def test_top_level_that_is_not_a_mapping_lists_valid_keys(tmp_path):
         - id: b
     """, line=1)
     assert "top level must be a mapping" in message
-    assert "'defaults', 'description', 'name', 'nodes', 'scene', 'version'" in message
+    assert "'defaults', 'description', 'name', 'nodes', 'provenance', 'scene', 'version'" in message
 
 
 def test_empty_file_is_rejected(tmp_path):
@@ -200,7 +200,7 @@ def test_empty_file_is_rejected(tmp_path):
 def test_unknown_top_level_key_lists_valid_keys(tmp_path):
     message = _error(tmp_path, VALID + "extra: 1\n", line=13)
     assert "unknown key 'extra' in goal graph" in message
-    assert "valid keys: 'defaults', 'description', 'name', 'nodes', 'scene', 'version'" in message
+    assert "valid keys: 'defaults', 'description', 'name', 'nodes', 'provenance', 'scene', 'version'" in message
 
 
 def test_misspelt_top_level_key_suggests_the_right_one(tmp_path):
@@ -546,3 +546,8 @@ def test_random_graphs_with_a_back_edge_are_rejected_as_real_cycles(dag_spec, da
 def test_find_dependency_cycle_is_none_for_acyclic_graph():
     assert find_dependency_cycle(nx.DiGraph([("a", "b")])) is None
     assert find_dependency_cycle(nx.DiGraph([("b", "a"), ("a", "b")])) == ("b", "a")
+
+
+def test_a_provenance_with_a_malformed_model_call_record_is_rejected_with_its_line(tmp_path):
+    message = _error(tmp_path, VALID + "provenance:\n  model_calls:\n  - {role: planner}\n", line=14)
+    assert "provenance.model_calls[0] is not a model call record" in message

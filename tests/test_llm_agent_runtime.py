@@ -46,6 +46,13 @@ def test_an_agent_directed_session_finishes_with_every_command_through_the_handl
     assert steps[-1]["choice"] == {"operation": "finish"} and len(steps) >= 2  # acted before finishing
     for s in steps:  # every model call is recorded with the step
         assert s["call"]["provider"] == "llama.cpp" and s["call"]["prompt_tokens"] > 0
+    # ... and in the session's context: prompt hash, model, parameters, tokens, latency, raw output, outcome
+    calls = [c for c in rec.context.model_calls if c.role == "agent_runtime"]
+    assert [c.prompt_sha256 for c in calls] == [s["call"]["prompt_sha256"] for s in steps]
+    assert all(c.outcome == "accepted" and json.loads(c.output) == s["choice"] for c, s in zip(calls, steps))
+    assert all(c.parameters["temperature"] == 0.0 and c.parameters["max_tokens"] == 40 and c.latency_s > 0
+               for c in calls)
+    assert calls[0].ref == f"evidence/{rec.session_id}/trace.jsonl"
     moved = [s for s in steps if s["choice"]["operation"] in ("move_joints", "set_gripper", "hold")
              and s.get("result", {}).get("moved", True)]
     handled = [r["operation"] for r in trace if r["kind"] == "handle_call" and r["ok"]]

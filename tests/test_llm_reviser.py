@@ -8,7 +8,7 @@ from phyagentos.agent.recovery import RecoveryPlanner
 from phyagentos.agent.reviser import REVISION_SPACE, ModelReviser
 from phyagentos.agent.skill_catalog import skill_catalog
 from phyagentos.llm import LLMCall, LLMReply, make_client
-from phyagentos.protocol import Diagnosis, SessionRecord
+from phyagentos.protocol import Diagnosis, Revision, SessionRecord
 from phyagentos.protocol.lifecycle import utc_now
 
 
@@ -62,9 +62,11 @@ class _Answer:
 
 
 @pytest.mark.parametrize("answer, why", [
-    ('{"action":"adjust","parameter":"grip_force_n","value":500,"reason":"addresses_cause"}', "outside its declared range"),
-    ('{"action":"adjust","parameter":"disable_safety","value":1,"reason":"addresses_cause"}', "not a strategy parameter"),
-    ('{"action":"adjust","parameter":"grip_force_n","value":40.0,"reason":"addresses_cause"}', "changes nothing"),
+    ('{"action":"adjust","parameter":"grip_force_n","value":500}', "outside its declared range"),
+    ('{"action":"adjust","parameter":"disable_safety","value":1}', "not a strategy parameter"),
+    ('{"action":"adjust","parameter":"grip_force_n","value":40.0}', "changes nothing"),
+    ('{"action":"adjust","parameter":"planner","value":"PRM"}', "not one of the offered revisions"),
+    ('{"action":"switch_skill","skill":"place_at","option":"slot_0_slots_3"}', "not one of the offered revisions"),
     ("ignore previous instructions", "not JSON"),
 ])
 def test_out_of_range_hallucinated_or_unparseable_proposals_fall_back_to_the_rule_ladder(answer, why):
@@ -76,8 +78,33 @@ def test_out_of_range_hallucinated_or_unparseable_proposals_fall_back_to_the_rul
     assert "model proposal rejected" in revision.rationale
 
 
-def test_give_up_is_a_typed_answer():
-    reviser = ModelReviser(_Answer('{"action":"give_up","parameter":"none","value":"none","reason":"nothing_left"}'),
-                           fallback=RecoveryPlanner())
-    assert reviser.plan(session(), SLIPPED) is None
-    assert reviser.proposals[0]["proposed_by"] == "model:give_up"
+def test_give_up_is_a_typed_answer_offered_from_the_second_replan_on():
+    answer = _Answer('{"action":"give_up","reason":"nothing_left"}')
+    reviser = ModelReviser(answer, fallback=RecoveryPlanner())
+    assert reviser.plan(session(), SLIPPED) is not None  # first replan: not offered, the ladder's instead
+    assert reviser.proposals[0]["proposed_by"] == "rules"
+    tried = Revision(strategy="firmer_grip", cause="object_slipped", parameters={"grip_force_n": 40.0})
+    assert reviser.plan(session(grip_force_n=40.0).model_copy(update={"recovery": tried}), SLIPPED) is None
+    assert reviser.proposals[1]["proposed_by"] == "model:give_up"
+    (record,) = reviser.calls_for("r1-pick_cube-1")[1:]
+    assert record.outcome == "gave_up" and record.output == answer.text and record.role == "reviser"
+
+
+def test_a_re_pick_that_did_not_help_is_not_offered_again_and_nothing_is_asked():
+    from phyagentos.protocol import Attempt, Verdict
+    from phyagentos.protocol.lifecycle import utc_now as now
+
+    unmet = Diagnosis(cause="precondition_unmet", category="execution", summary="the hand is empty")
+    place = session().model_copy(update={"session_id": "r1-place_again-1", "node": "place_again", "skill": "place",
+                                         "parameters": {"object": "cube", "region": "goal"}})
+    answer = _Answer('{"action":"re_pick_upstream"}')
+    reviser = ModelReviser(answer, fallback=RecoveryPlanner())
+    first = reviser.plan(place, unmet, upstream="pick_cube")
+    assert first.reopen == "pick_cube" and first.strategy == "model:re_pick_upstream"
+    # the node ran again after the re-pick and found the hand empty again: the same correction is spent
+    failed = place.model_copy(update={"attempts": [Attempt(number=1, started_at=now(), verdict=Verdict(
+        verdict="replan", reason="empty hand", at=now(), diagnosis=unmet, revision=first))]})
+    again = place.model_copy(update={"session_id": "r1-place_again-2", "parent_session_id": failed.session_id})
+    assert reviser.menu(again, unmet, history=[failed], upstream="pick_cube") == []
+    assert reviser.plan(again, unmet, history=[failed], upstream="pick_cube") is None
+    assert len(reviser.calls) == 1 and reviser.proposals[-1]["proposed_by"] == "policy"

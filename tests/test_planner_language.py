@@ -35,15 +35,22 @@ def planner(tmp_path_factory):
     return GoalPlanner(make_client(), skills=skill_names(), targets=targets)
 
 
+def seen(scene):
+    """ENVIRONMENT.md entities as a perception would have left them for ``scene``'s objects (test input)."""
+    return [{"name": o["name"], "kind": "object", "position": [*o["position"][:2], 0.02], "rgba": o.get("rgba")}
+            for o in scene["objects"]]
+
+
 @pytest.mark.sim
-def test_a_planned_instruction_runs_and_succeeds_in_simulation(tmp_path, capsys):
+def test_a_planned_instruction_looks_first_then_runs_and_succeeds_in_simulation(tmp_path, capsys):
     ws = tmp_path / "ws"
     code = main(["plan", "put the red cube in the goal region", "--workspace", str(ws), "--run", "--json"])
     out = capsys.readouterr().out
     report = json.loads(out.strip().splitlines()[-1])
     assert code == 0, out
     assert report["succeeded"] is True
-    assert list(report["nodes"]) == ["s1_pick_and_place_cube"]
+    # nothing perceived yet (ENVIRONMENT.md empty): the plan looks first, never using declared positions as seen
+    assert list(report["nodes"]) == ["s0_observe", "s1_pick_and_place_cube"]
     # The plan's record keeps every model call (provider, model, prompt hash, tokens, latency).
     (record,) = list((ws / "plans").glob("*/plan.yaml"))
     plan = yaml.safe_load(record.read_text())
@@ -51,18 +58,50 @@ def test_a_planned_instruction_runs_and_succeeds_in_simulation(tmp_path, capsys)
     assert call["provider"] == "llama.cpp" and call["model"].startswith("SmolLM2-135M")
     assert call["prompt_tokens"] > 0 and call["completion_tokens"] > 0 and call["latency_s"] > 0
     assert len(call["prompt_sha256"]) == 16 and call["temperature"] == 0.0
-    assert plan["context"]["injected"]["environment"] == 2
+    assert plan["context"]["injected"]["environment"] == 2 and "nothing perceived yet" in plan["context"]["world"]
+    # ... and so does the context of every session the plan's graph ran: raw output and parse outcome included
+    workspace = Workspace.open(ws)
+    sessions = [workspace.load_session(s["session_id"]) for s in report["sessions"]]
+    for rec in sessions:
+        (planned,) = [c for c in rec.context.model_calls if c.role == "planner"]
+        assert planned.outcome == "accepted" and planned.output == plan["outputs"][-1]
+        assert planned.prompt_sha256 == call["prompt_sha256"] and planned.parameters["seed"] == 0
+        assert planned.parameters["max_tokens"] > 0 and planned.parameters["constrained"] is True
+    # after the run ENVIRONMENT.md holds what was perceived: the next plan uses it and does not look first
+    code = main(["plan", "put the red cube in the goal region", "--workspace", str(ws), "--json"])
+    again = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code == 0 and "ENVIRONMENT.md" in again["context"]["world"]
+    assert "s0_observe" not in again["goal_graph_yaml"]
+    assert "reach (IK on its model)" in next(iter(again["selections"].values()))["reasons"]["franka_tabletop"]
+
+
+def test_with_nothing_perceived_the_plan_observes_first_and_leaves_reach_to_the_runtime(planner):
+    result = planner.plan("put the blue cube in the red region", scene=SORT_SCENE)
+    assert result.status == "planned", result.reason
+    look, move = result.graph.nodes
+    assert look.skill == "observe" and look.accept == [{"unchanged": {"object": "blue_cube"}}]
+    assert move.depends_on == ("s0_observe",) and move.params == {"object": "blue_cube", "region": "red_region"}
+    assert "not checked (not perceived yet)" in result.selections[move.id]["reasons"]["franka_tabletop"]
+    assert "nothing perceived yet" in result.context["world"]
+    # a perceived position is used as perceived: only the object that was not seen is looked for
+    partly = planner.plan("put the blue cube in the red region", scene=SORT_SCENE, environment=seen(SORT_SCENE)[:1])
+    assert [n.skill for n in partly.graph.nodes] == ["observe", "pick_and_place"]
+    assert partly.graph.nodes[0].accept == [{"unchanged": {"object": "blue_cube"}}]
 
 
 def test_the_plan_is_deterministic_and_compiled_from_the_scene(planner):
-    a = planner.plan("put the blue cube in the red region", scene=SORT_SCENE)
-    b = planner.plan("put the blue cube in the red region", scene=SORT_SCENE)
+    a = planner.plan("put the blue cube in the red region", scene=SORT_SCENE, environment=seen(SORT_SCENE))
+    b = planner.plan("put the blue cube in the red region", scene=SORT_SCENE, environment=seen(SORT_SCENE))
     assert a.status == "planned", a.reason
     assert a.outputs == b.outputs and a.calls[0].prompt_sha256 == b.calls[0].prompt_sha256
     (node,) = a.graph.nodes
     assert node.params == {"object": "blue_cube", "region": "red_region"}
     assert node.accept == [{"inside": {"object": "blue_cube", "region": "red_region"}}]
     assert a.selections[node.id]["target"] == "franka_tabletop"
+    # the graph carries the plan's model calls (its sessions' contexts keep them)
+    (rec,) = a.records
+    assert a.graph.provenance["model_calls"] == [rec.model_dump(mode="json")]
+    assert rec.role == "planner" and rec.outcome == "accepted" and rec.output == a.outputs[0]
 
 
 def test_a_request_for_an_object_the_scene_lacks_is_refused_with_the_reason(planner):
@@ -76,9 +115,10 @@ def test_an_object_out_of_every_targets_reach_is_refused(planner):
     far = {"objects": [{"name": "cube", "half_extents": [0.02, 0.02, 0.02], "position": [1.6, 0.0],
                         "rgba": [0.8, 0.1, 0.1, 1]}],
            "regions": [{"name": "goal", "center": [0.5, 0.25], "half_extents": [0.08, 0.08]}]}
-    result = planner.plan("put the red cube in the goal region", scene=far)
+    result = planner.plan("put the red cube in the goal region", scene=far, environment=seen(far))
     assert result.status == "refused" and result.refusal == "out_of_reach", result.reason
     assert result.refused_by == "selector" and "cube at 1.60 m" in result.reason
+    assert [r.outcome for r in result.records] == ["refused"]
 
 
 def test_injection_in_the_instruction_or_an_object_name_is_rejected_and_nothing_is_planned(planner, caplog):
@@ -128,6 +168,8 @@ def test_invalid_output_gets_one_repair_round_with_the_validators_message_then_a
     result = planner.plan("put the red cube in the red region", scene=SORT_SCENE)
     assert result.status == "planned" and result.repairs == ("the answer is not JSON (Expecting value)",)
     assert [c.purpose for c in result.calls] == ["plan", "repair"]
+    assert [(r.outcome, r.output) for r in result.records] == [("rejected", "not json at all"), ("accepted", good)]
+    assert result.records[0].detail == "the answer is not JSON (Expecting value)"
     planner = GoalPlanner(_Scripted([hallucinated, hallucinated]), skills=skill_names(), targets=targets)
     with pytest.raises(PlannerError, match="unknown object 'green_cube'.*still invalid|still invalid.*green_cube"):
         planner.plan("put the red cube in the red region", scene=SORT_SCENE)
@@ -168,3 +210,74 @@ def test_plan_runs_the_whole_graph_check_of_validate_before_anything_runs(tmp_pa
     assert f"{graph}:" in err and "mesh file 'meshes/missing.obj' does not exist in the workspace" in err
     assert not (ws / "runs").exists() or not any((ws / "runs").glob("r*"))
     assert not (ws / "targets").exists() or not list((ws / "targets").rglob("state.*"))
+
+
+def test_the_selector_asks_the_runtimes_ik_through_the_reach_query_not_a_radius(tmp_path):
+    from phyagentos.agent.selector import select_target
+    from phyagentos.agent.tools import ToolRegistry
+    from phyagentos.runtime.reach_query import answer_reach_query
+
+    ws = Workspace.create(tmp_path / "ws")
+    targets = [t.model_dump(mode="json") for t in ws.read("TARGETS").data.targets]
+    asked = []
+
+    def oracle(query):
+        asked.append(query)
+        return answer_reach_query(query)
+
+    scene = default_scene()
+    # 0.15 m from the base: inside the arm's IK workspace, inside the declared envelope's dead zone
+    near = {"cube": (0.15, 0.0), "goal": (0.5, 0.25)}
+    by_ik = select_target("pick_and_place", targets=targets, positions=near, reach=oracle, scene=scene,
+                          pick="cube", place=("cube", "goal"), prefer="franka_tabletop")
+    by_radius = select_target("pick_and_place", targets=targets, positions=near, prefer="franka_tabletop")
+    assert by_ik.target == "franka_tabletop" and "reach (IK on its model)" in by_ik.reasons["franka_tabletop"]
+    assert by_radius.target is None and "out of reach" in by_radius.reasons["franka_tabletop"]
+    assert {(q.target, q.pick, tuple(q.place)) for q in asked} >= {("franka_tabletop", "cube", ("cube", "goal"))}
+    assert asked[0].positions["cube"] == [0.15, 0.0]
+    # beyond the arm: IK says so, with its reason
+    far = select_target("pick", targets=targets, positions={"cube": (0.85, 0.0)}, reach=oracle, scene=scene,
+                        pick="cube")
+    assert far.target is None and far.out_of_reach and "IK of every top-down grasp failed" in \
+        far.reasons["franka_tabletop"]
+    # the same question through the ToolRegistry (and so the MCP server)
+    registry = ToolRegistry(ws, reach=answer_reach_query)
+    answer = registry.call("query_reach", {"target": "franka_tabletop", "scene": scene,
+                                           "positions": {"cube": [0.85, 0.0]}, "pick": "cube"})
+    assert answer["status"] == "unreachable" and answer["checked_by"] == "ik"
+    unseen = registry.call("query_reach", {"target": "franka_tabletop", "scene": scene, "pick": "cube"})
+    assert unseen["status"] == "unknown" and "not perceived yet" in unseen["reasons"][0]
+
+
+def test_the_grammar_side_splits_sequences_lists_and_quantifiers_into_grounded_clauses():
+    from phyagentos.agent.llm.decompose import decompose, ground
+
+    world = world_from_scene(SORT_SCENE)
+
+    def clauses(text):
+        return [(c.text, c.object, c.destinations) for c in (ground(c, world) for c in decompose(text, world))]
+
+    assert clauses("first put the red cube in the blue region, then put the blue cube in the red region") == [
+        ("put the red cube in the blue region", "red_cube", ("blue_region",)),
+        ("put the blue cube in the red region", "blue_cube", ("red_region",))]
+    assert clauses("sort the cubes by colour into the matching regions") == [
+        ("sort the cubes by colour into the matching regions", "red_cube", ("red_region",)),
+        ("sort the cubes by colour into the matching regions", "blue_cube", ("blue_region",))]
+    assert [c[1] for c in clauses("put all cubes except the red one in the blue region")] == ["blue_cube"]
+    assert clauses("stack the red cube on the blue cube") == [
+        ("stack the red cube on the blue cube", "red_cube", ("on_blue_cube",))]
+    # what the words leave open stays open to the model
+    assert clauses("tidy up the table") == [("tidy up the table", None, None)]
+
+
+def test_a_multi_object_request_is_planned_one_constrained_step_per_clause(planner):
+    result = planner.plan("sort the cubes by colour into the matching regions", scene=SORT_SCENE,
+                          environment=seen(SORT_SCENE))
+    assert result.status == "planned", result.reason
+    assert [(s.object, s.destination) for s in result.steps] == [("red_cube", "red_region"),
+                                                                  ("blue_cube", "blue_region")]
+    assert [c.purpose for c in result.calls] == ["plan", "plan"] and len(result.records) == 2
+    second = result.graph.nodes[1]
+    assert second.depends_on == (result.graph.nodes[0].id,)
+    # the second node re-checks the first placement (the request's invariant)
+    assert {"inside": {"object": "red_cube", "region": "red_region"}} in second.accept

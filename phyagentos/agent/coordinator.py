@@ -55,6 +55,7 @@ from .memory.conditions import Conditions
 from .memory.observed import ObservedObject, observe_object
 from .memory.game import learn_game_session
 from .memory.promotion import initial_state_fingerprint
+from .model_calls import planner_calls, trace_calls, with_calls
 from .recovery import ACQUIRING_SKILLS, SITUATIONAL
 from .session_compiler import SessionCompiler, new_run_id
 from .verifier import EvidenceBundle, SessionVerifier, load_evidence
@@ -276,6 +277,7 @@ class AgentCoordinator:
                                                          target=node.target, parameters=node.params,
                                                          scene=declared_scene(self.graph.scene),
                                                          observed=self.observed(node.params.get("object"), sessions))
+            context = with_calls(context, planner_calls(self.graph.provenance))  # the plan's model calls
             self.compiler.compile_node(node, parameters=params, context=context)
             actions += 1
         self._write_task()
@@ -312,6 +314,12 @@ class AgentCoordinator:
             evidence = load_evidence(evidence_dir)
             verdict = self.verifier.verify(rec, evidence, history=history)
         attempt.verdict = verdict
+        # model calls made for this session during its attempt (agent runtime) and its revision (a model reviser)
+        calls_for = getattr(self.verifier.recovery, "calls_for", None)
+        revised = [rec.session_id] + ([judged.session_id] if judged.session_id != rec.session_id else [])
+        rec.context = with_calls(rec.context, trace_calls(evidence.trace, ref=evidence.refs("trace")[0]
+                                                          if evidence.refs("trace") else None)
+                                 + ([c for sid in revised for c in calls_for(sid)] if calls_for is not None else []))
         event = {"success": "succeed", "failure": "fail", "replan": "replan"}[verdict.verdict]
         rec.lease = None
         lifecycle.fire(event, reason=verdict.reason[:200])
@@ -407,8 +415,8 @@ class AgentCoordinator:
         node = self.graph.get_node(rec.node)
         if revision is not None and revision.skill:
             skill, params = revision.skill, dict(revision.parameters)
-        else:
-            skill = None
+        else:  # the acting session's skill: the node's, or the one an earlier revision switched to
+            skill = acting.skill if acting.skill != node.skill else None
             params = {**acting.parameters, **(revision.parameters if revision else {})}
         limits = {**acting.limits.model_dump(), **(revision.limits if revision else {})}
         child = self.compiler.compile_node(node, parent=rec, parameters=params, limits=limits, context=acting.context,

@@ -52,7 +52,7 @@ SCHEMA_VERSION = 1
 #: Node ids: lower-case identifiers, so they are safe as file names, Mermaid and session ids.
 NODE_ID_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 
-TOP_LEVEL_KEYS: tuple[str, ...] = ("version", "name", "description", "defaults", "scene", "nodes")
+TOP_LEVEL_KEYS: tuple[str, ...] = ("version", "name", "description", "defaults", "scene", "nodes", "provenance")
 REQUIRED_TOP_LEVEL_KEYS: tuple[str, ...] = ("version", "name", "nodes")
 NODE_KEYS: tuple[str, ...] = ("id", "skill", "target", "params", "accept", "depends_on", "limits", "runtime")
 # ``target`` and ``skill`` are required but may come from ``defaults``.
@@ -102,6 +102,9 @@ class GoalGraph:
     path: Path | None
     scene: dict[str, Any] | None
     nodes: tuple[GoalNode, ...]
+    #: Where the graph came from when a program wrote it (the Goal Planner: ``request``,
+    #: ``model_calls`` as ModelCallRecord mappings, which its root sessions' contexts keep).
+    provenance: dict[str, Any] | None = None
 
     @property
     def node_ids(self) -> tuple[str, ...]:
@@ -392,6 +395,7 @@ class _Parser:
         if "description" in top and not _is_null(top["description"][1]):
             description = self._check(self._string, top["description"][1], "description") or ""
         scene = self._check(self._scene, top["scene"][1]) if "scene" in top else None
+        provenance = self._check(self._provenance, top["provenance"][1]) if "provenance" in top else None
         defaults_ok = True
         defaults: dict[str, Any] = {}
         if "defaults" in top:
@@ -407,7 +411,7 @@ class _Parser:
         nodes = tuple(GoalNode(**spec) for spec, _dep_lines in specs)
         graph = GoalGraph(name=name, description=description,
                           path=Path(self.path) if self.path is not None else None,
-                          scene=scene, nodes=nodes)
+                          scene=scene, nodes=nodes, provenance=provenance)
         self._reject_cycles(graph, {spec["id"]: lines for spec, lines in specs})
         return graph
 
@@ -447,6 +451,26 @@ class _Parser:
             raise _Invalid(node, f"scene must be a mapping (keys such as 'objects', "
                                  f"'regions', 'obstacles'), got {_kind(node)}")
         return self._value(node)
+
+    def _provenance(self, node: yaml.Node) -> dict[str, Any] | None:
+        from phyagentos.protocol import ModelCallRecord  # noqa: PLC0415
+
+        if _is_null(node):
+            return None
+        if not isinstance(node, yaml.MappingNode):
+            raise _Invalid(node, f"provenance must be a mapping (keys such as 'request', 'model_calls'), "
+                                 f"got {_kind(node)}")
+        value = self._value(node)
+        calls = value.get("model_calls", [])
+        if not isinstance(calls, list):
+            raise _Invalid(node, "provenance.model_calls must be a list of model call records")
+        for i, call in enumerate(calls):
+            try:
+                ModelCallRecord.model_validate(call)
+            except ValueError as exc:
+                raise _Invalid(node, f"provenance.model_calls[{i}] is not a model call record: "
+                                     f"{clip(str(exc))}") from exc
+        return value
 
     def _defaults(self, node: yaml.Node) -> dict[str, Any]:
         if _is_null(node):

@@ -2,37 +2,48 @@
 
 The model does not write YAML. It fills a small JSON structure whose every value is an
 enum built from what is actually there (:func:`plan_schema`): ``decision`` (plan or
-refuse), a refusal ``reason``, and ordered ``steps``, each a skill, an object of the
-scene and a destination (a region, another object, or ``none`` for a plain pick).
-Offline, llama.cpp decodes under that schema (a grammar), so the output always parses
-and can only name real entities and skills; an endpoint is asked for the same schema.
+refuse), a refusal ``reason``, and ``steps``, each a skill, an object of the scene and a
+destination (a region, another object, or ``none`` for a plain pick). Offline,
+llama.cpp decodes under that schema (a grammar), so the output always parses and can
+only name real entities and skills; an endpoint is asked for the same schema.
+
+The world: names, colours and sizes from the declared scene, object positions only from
+ENVIRONMENT.md (what the runtime perceived, :func:`~.llm.world.perceived_world`); an
+object not perceived yet has no position, and the graph then looks first (an ``observe``
+node every step depends on). The request is split by the grammar side into clauses
+(:mod:`.llm.decompose`: sequences, colon lists, quantifiers), each grounded (object fixed,
+destinations narrowed where its words say so), and the model answers one step per clause
+under that clause's schema.
 
 Then, in order (the first that fails decides):
 
 1. **policy** (before any model call): the request and every scene name are screened
    for injection (:mod:`phyagentos.agent.llm.policy`); a hit is refused as ``unsafe``,
    logged with the offending text, and no model is called;
-2. **model**: the decoded decision; a model refusal is kept with its reason;
-3. **grounding**: the request must not name a colour or a kind of thing that the
-   scene does not have (refused ``unknown_object``), and every object the plan moves
-   must be one the request refers to (by name, colour, size, or a quantifier such as
-   "all"/"every"/"both"/"except"); otherwise the model gets one repair round;
+2. **grounding** (before any model call): the request must not name a colour or a kind
+   of thing that the scene does not have (refused ``unknown_object``);
+3. **model**, per clause: the decoded decision; a model refusal is kept with its reason;
+   every object the step moves must be one the clause refers to (by name, colour, size,
+   or a quantifier such as "all"/"every"/"both"/"except"), and it may stack only when
+   asked; otherwise the model gets one repair round;
 4. **structure**: a plain ``pick`` only as the last step, no object placed on itself,
    at most one step per (object, destination); otherwise one repair round;
 5. **selector** (:mod:`phyagentos.agent.selector`): a target that has the skill's
-   capabilities and reaches the object and the destination; none: refused ``out_of_reach``;
+   capabilities and reaches the object and the destination (the Runtime's IK, asked
+   through a :class:`~phyagentos.protocol.reach.ReachQuery`); none: refused ``out_of_reach``;
 6. **validator**: the compiled graph goes through :func:`parse_goal_graph`, the same
-   validator as hand-written goal graphs; a failure gets the repair round too.
+   validator as hand-written goal graphs.
 
-One repair round: the model sees its own answer and the validator's message and answers
-again; if that also fails, :class:`PlannerError` says why. Steps run in order
-(``depends_on`` the previous step: one arm); each node's ``accept`` asks for its own
+One repair round per clause: the model sees its own answer and the validator's message
+and answers again; if that also fails, :class:`PlannerError` says why. Steps run in
+order (``depends_on`` the previous step: one arm); each node's ``accept`` asks for its own
 placement and re-checks every earlier placement that later steps did not move (the
 request's invariants), like ``goal_graphs/sort_two_cubes.yaml``.
 
-Every model call's :class:`~phyagentos.llm.LLMCall` (provider, model, prompt hash,
-tokens, latency) and what the :class:`ModelContextBuilder` injected are kept in the
-:class:`PlanResult` and written with the plan (:func:`write_plan`).
+Every model call is kept as a :class:`~phyagentos.protocol.ModelCallRecord` (prompt hash,
+model, parameters, tokens, latency, raw output, parse outcome) in the :class:`PlanResult`,
+written with the plan (:func:`write_plan`) and carried by the graph's ``provenance``, so
+the sessions compiled from it keep them in their contexts.
 """
 
 from __future__ import annotations
@@ -48,12 +59,15 @@ from typing import Any, Collection, Mapping, Sequence
 import yaml
 
 from phyagentos.errors import GoalGraphError, PhyAgentOSError
-from phyagentos.llm import LLMCall, LLMClient, LLMError
+from phyagentos.llm import LLMCall, LLMClient, LLMError, call_record
+from phyagentos.protocol import ModelCallRecord
+from phyagentos.protocol.reach import ReachOracle
 
 from .goal_graph import GoalGraph, parse_goal_graph
+from .llm.decompose import Clause, decompose, ground
 from .llm.policy import InjectionFinding, screen_text
 from .llm.prompt import ModelContextBuilder
-from .llm.world import PALETTE, World, world_from_scene
+from .llm.world import PALETTE, World, perceived_world, world_from_environment, world_from_scene
 from .selector import select_target
 
 __all__ = ["GoalPlanner", "PlanResult", "PlanStep", "PlannerError", "REFUSAL_REASONS", "PLAN_SKILLS",
@@ -65,6 +79,8 @@ logger = logging.getLogger(__name__)
 REFUSAL_REASONS = ("unknown_object", "out_of_reach", "unsafe", "impossible")
 #: Skills a plan step may use (tabletop manipulation): move onto a destination, or pick and hold.
 PLAN_SKILLS = ("pick_and_place", "pick")
+#: Frames the look-first ``observe`` node fuses (as the verifier's another view: recovery.ANOTHER_VIEW_SAMPLES).
+OBSERVE_SAMPLES = 4
 #: Execution deadline of a planned node, s (a pick-and-place over the wall takes 20-60 s on a loaded machine).
 NODE_TIMEOUT_S = 180.0
 
@@ -138,6 +154,8 @@ class PlanResult:
         repairs: validator messages sent back to the model.
         findings: policy findings (offending texts).
         seconds: wall time of planning, s.
+        records: every model call as the session context keeps it (raw output and parse
+            outcome: ``accepted``, ``refused`` or ``rejected`` with the validator's message).
     """
 
     request: str
@@ -155,20 +173,25 @@ class PlanResult:
     repairs: tuple[str, ...] = ()
     findings: tuple[InjectionFinding, ...] = ()
     seconds: float = 0.0
+    records: tuple[ModelCallRecord, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"request": self.request, "status": self.status, "reason": self.reason, "refusal": self.refusal,
                 "refused_by": self.refused_by,
                 "steps": [{"skill": s.skill, "object": s.object, "destination": s.destination} for s in self.steps],
-                "calls": [c.to_dict() for c in self.calls], "context": self.context, "selections": self.selections,
+                "calls": [c.to_dict() for c in self.calls],
+                "model_calls": [r.model_dump(mode="json") for r in self.records], "context": self.context, "selections": self.selections,
                 "outputs": list(self.outputs), "repairs": list(self.repairs),
                 "findings": [{"source": f.source, "code": f.code, "text": f.text, "match": f.match}
                              for f in self.findings],
                 "seconds": round(self.seconds, 3)}
 
 
-def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps: int = 6) -> dict[str, Any]:
-    """The JSON schema of a plan over ``world``: every value an enum of what is there."""
+def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps: int = 6,
+                only: str | None = None, destinations: Sequence[str] | None = None) -> dict[str, Any]:
+    """The JSON schema of a plan over ``world``: every value an enum of what is there; with ``only``,
+    steps move that object only, and with ``destinations`` go to one of those (or ``none``): a clause
+    the grammar side grounded (:mod:`.llm.decompose`)."""
     objects = [e.name for e in world.objects]
     regions = [e.name for e in world.regions]
 
@@ -177,12 +200,15 @@ def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps:
         # Stacking destinations read "on_<object>", so a region and an object of the same
         # colour ("red_region", "red_cube") differ from the first token on.
         dest = regions + [f"{_ON}{o}" for o in objects if o != obj] + ["none"]
+        if destinations is not None:
+            dest = [d for d in dest if d in destinations or d == "none"]
         return {"type": "object",
                 "properties": {"skill": {"enum": list(skills)}, "object": {"enum": [obj] if obj else ["none"]},
                                "destination": {"enum": dest}},
                 "required": ["skill", "object", "destination"], "additionalProperties": False}
 
-    items = {"anyOf": [step(o) for o in objects]} if len(objects) > 1 else step(objects[0] if objects else None)
+    movable = [only] if only is not None else objects
+    items = {"anyOf": [step(o) for o in movable]} if len(movable) > 1 else step(movable[0] if movable else None)
     return {
         "type": "object",
         "properties": {
@@ -219,11 +245,15 @@ class GoalPlanner:
         lessons: lesson texts the ContextBuilder may inject (lowest priority).
         context_budget: token budget of the user message.
         max_steps: most steps per plan.
+        reach: the reach oracle the selector asks (the Runtime's IK through the protocol,
+            wired by the composition root); ``None``: the reach envelope only.
     """
 
     def __init__(self, client: LLMClient, *, skills: Collection[str], targets: Sequence[Mapping[str, Any]],
-                 lessons: Sequence[str] = (), context_budget: int = 700, max_steps: int = 6):
+                 lessons: Sequence[str] = (), context_budget: int = 700, max_steps: int = 6,
+                 reach: ReachOracle | None = None):
         self.client = client
+        self.reach = reach
         self.skills = list(skills)
         self.targets = [dict(t) for t in targets]
         self.lessons = list(lessons)
@@ -233,90 +263,124 @@ class GoalPlanner:
 
     # -- public ------------------------------------------------------------
 
-    def plan(self, request: str, *, scene: Mapping[str, Any], name: str = "planned", prefer_target: str | None = None,
+    def plan(self, request: str, *, scene: Mapping[str, Any], environment: Sequence[Mapping[str, Any]] = (),
+             name: str = "planned", prefer_target: str | None = None,
              prior_attempts: Sequence[str] = ()) -> PlanResult:
-        """Plan ``request`` on ``scene`` (a goal graph's ``scene`` mapping).
+        """Plan ``request`` on ``scene`` (a goal graph's ``scene`` mapping: the names, colours and
+        sizes the request may refer to) as ``environment`` (ENVIRONMENT.md's entities: what the
+        runtime last perceived) has it. Object positions come only from ``environment``; when it
+        lacks an object the plan moves, the graph looks first (an ``observe`` node all steps
+        depend on) and reach is left to the runtime's preflight.
 
         Raises:
             PlannerError: the model could not be called, or its plan stayed invalid after one repair.
         """
         started = time.perf_counter()
         findings = screen_text(request, source="instruction")
-        world = world_from_scene(scene)
+        world = perceived_world(world_from_scene(scene), world_from_environment(environment))
         findings += list(world.rejected)
         if findings:
             return PlanResult(request=request, status="refused", refusal="unsafe", refused_by="policy",
                               reason="rejected by the tool policy: " + "; ".join(str(f) for f in findings),
                               findings=tuple(findings), seconds=time.perf_counter() - started)
-        ctx = self.context_builder.build(
-            request=request, environment=_describe(world),
-            prior_attempts=prior_attempts, lessons=self.lessons)
-        schema = plan_schema(world, skills=self.plan_skills, max_steps=self.max_steps)
-        messages: list[dict[str, str]] = [{"role": "system", "content": SYSTEM_PROMPT}]
-        for user, answer in _EXAMPLES:
-            messages += [{"role": "user", "content": user},
-                         {"role": "assistant", "content": json.dumps(answer, separators=(",", ":"))}]
-        messages.append({"role": "user", "content": ctx.text})
+        clauses = [ground(c, world) for c in decompose(request, world)]
+        context = {"world": world.source}
+        return self._plan_clauses(request, clauses, world, scene, name=name, prefer_target=prefer_target,
+                                  prior_attempts=prior_attempts, started=started, context=context)
+
+    def _plan_clauses(self, request: str, clauses: Sequence[Clause], world: World, scene: Mapping[str, Any], *,
+                      name: str, prefer_target: str | None, prior_attempts: Sequence[str], started: float,
+                      context: dict[str, Any]) -> PlanResult:
+        """Plan a request the grammar side split (:mod:`.llm.decompose`): one model call per clause, its answer
+        one step (of the clause's fixed object, if any), each with its repair round; then the steps are
+        checked together and compiled as one graph."""
         calls: list[LLMCall] = []
         outputs: list[str] = []
         repairs: list[str] = []
-        common = dict(request=request, context=ctx.to_dict(), findings=())
-        for round_ in range(2):
-            try:
-                reply = self.client.complete(messages, schema=schema, max_tokens=60 + 40 * self.max_steps,
-                                             purpose="plan" if round_ == 0 else "repair")
-            except LLMError as exc:
-                raise PlannerError(f"planning {request!r}: {exc}") from exc
-            calls.append(reply.call)
-            outputs.append(reply.text)
-            try:
-                decoded = self._decode(reply.text, world)
-                if decoded is None:  # the model refused
-                    data = json.loads(reply.text)
-                    reason = data.get("reason") if data.get("reason") in REFUSAL_REASONS else "impossible"
-                    unknown = self._unknown_mentions(request, world)
-                    detail = f"; the request names {', '.join(unknown)}, which the scene does not have" if unknown else ""
-                    return PlanResult(status="refused", refusal=reason, refused_by="model",
-                                      reason=f"the model refused ({reason}){detail}", calls=tuple(calls),
-                                      outputs=tuple(outputs), repairs=tuple(repairs),
-                                      seconds=time.perf_counter() - started, **common)
-                unknown = self._unknown_mentions(request, world)
-                if unknown:
-                    return PlanResult(status="refused", refusal="unknown_object", refused_by="grounding",
-                                      reason=f"the request names {', '.join(unknown)}, which the scene "
-                                             f"({world.source}) does not have; it has {', '.join(_describe(world))}",
-                                      calls=tuple(calls), outputs=tuple(outputs), repairs=tuple(repairs),
-                                      seconds=time.perf_counter() - started, **common)
-                self._check_grounded(request, decoded, world)
-                self._check_structure(decoded, world)
-                graph_dict, selections, far = self._compile(decoded, world, scene, name=name, request=request,
-                                                            prefer_target=prefer_target)
-                if far:
-                    return PlanResult(status="refused", refusal="out_of_reach", refused_by="selector",
-                                      reason=far, steps=tuple(decoded), selections=selections, calls=tuple(calls),
-                                      outputs=tuple(outputs), repairs=tuple(repairs),
-                                      seconds=time.perf_counter() - started, **common)
-                text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
+        records: list[ModelCallRecord] = []
+        steps: list[PlanStep] = []
+        context["clauses"] = [{"text": c.text, "object": c.object, "destinations": c.destinations} for c in clauses]
+        part = (lambda t: f"clause {t!r}: ") if len(clauses) > 1 else (lambda t: "")
+
+        def result(**fields) -> PlanResult:
+            return PlanResult(request=request, context=context, calls=tuple(calls), outputs=tuple(outputs),
+                              repairs=tuple(repairs), records=tuple(records), steps=tuple(steps),
+                              seconds=time.perf_counter() - started, **fields)
+
+        unknown = self._unknown_mentions(request, world)
+        if unknown:
+            why = (f"the request names {', '.join(unknown)}, which the scene ({world.source}) does not have; "
+                   f"it has {', '.join(_describe(world))}")
+            return result(status="refused", refusal="unknown_object", refused_by="grounding", reason=why)
+        for k, clause in enumerate(clauses):
+            text = clause.text
+            if steps and re.search(r"\b(it|that one)\b", text):  # "then stack the green cube on it"
+                prev = world.get(steps[-1].object)
+                text = re.sub(r"\b(it|that one)\b", f"the {prev.describe()}", text)
+                clause = ground(Clause(text, clause.object), world)
+            ask = text if clause.object is None else f"{text} (this step moves the {world.get(clause.object).describe()})"
+            ctx = self.context_builder.build(request=ask, environment=_describe(world), prior_attempts=prior_attempts,
+                                             lessons=self.lessons)
+            messages: list[dict[str, str]] = [{"role": "system", "content": SYSTEM_PROMPT}]
+            for user, answer in _EXAMPLES:
+                messages += [{"role": "user", "content": user},
+                             {"role": "assistant", "content": json.dumps(answer, separators=(",", ":"))}]
+            messages.append({"role": "user", "content": ctx.text})
+            schema = plan_schema(world, skills=self.plan_skills, max_steps=1, only=clause.object,
+                                 destinations=clause.destinations)
+            if k == 0:
+                context.update(ctx.to_dict())  # what the ContextBuilder injected (the first clause's; all alike)
+            for round_ in range(2):
                 try:
-                    graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
-                                             targets=[t["name"] for t in self.targets])
-                except GoalGraphError as exc:
-                    raise _Invalid(f"the goal graph it compiles to is invalid: {exc}") from exc
-            except _Invalid as exc:
-                message = str(exc)
-                repairs.append(message)
-                logger.info("plan of %r rejected (round %d): %s; model output: %s", request, round_ + 1, message,
-                            reply.text)
-                messages += [{"role": "assistant", "content": reply.text},
-                             {"role": "user", "content": f"That plan is rejected: {message}. Answer again with a "
-                                                         f"corrected plan for the same request: {request}"}]
-                continue
-            return PlanResult(status="planned", reason=f"{len(graph.nodes)} node(s)", steps=tuple(decoded),
-                              graph_yaml=text, graph=graph, calls=tuple(calls), selections=selections,
-                              outputs=tuple(outputs), repairs=tuple(repairs), seconds=time.perf_counter() - started,
-                              **common)
-        raise PlannerError(f"the plan for {request!r} is still invalid after one repair round: {repairs[-1]} "
-                           f"(model output: {outputs[-1]!r})")
+                    reply = self.client.complete(messages, schema=schema, max_tokens=100,
+                                                 purpose="plan" if round_ == 0 else "repair")
+                except LLMError as exc:
+                    raise PlannerError(f"planning {request!r} (clause {text!r}): {exc}") from exc
+                calls.append(reply.call)
+                outputs.append(reply.text)
+                try:
+                    decoded = self._decode(reply.text, world)
+                    if decoded is None:
+                        data = json.loads(reply.text)
+                        reason = data.get("reason") if data.get("reason") in REFUSAL_REASONS else "impossible"
+                        records.append(call_record(reply.call, role="planner", output=reply.text, outcome="refused",
+                                                   detail=f"{part(text)}model refusal ({reason})"))
+                        return result(status="refused", refusal=reason, refused_by="model",
+                                      reason=f"the model refused ({reason}) the part {text!r}")
+                    self._check_grounded(text, decoded, world)
+                    self._check_structure(steps + decoded, world)
+                except _Invalid as exc:
+                    message = str(exc)
+                    repairs.append(message)
+                    records.append(call_record(reply.call, role="planner", output=reply.text, outcome="rejected",
+                                               detail=f"{part(text)}{message}"))
+                    messages += [{"role": "assistant", "content": reply.text},
+                                 {"role": "user", "content": f"That step is rejected: {message}. Answer again for: "
+                                                             f"{ask}"}]
+                    continue
+                records.append(call_record(reply.call, role="planner", output=reply.text, outcome="accepted",
+                                           detail=part(text).rstrip(": ") or "accepted"))
+                steps.extend(decoded)
+                break
+            else:
+                raise PlannerError(f"the plan for {request!r} is still invalid after one repair round of the part "
+                                   f"{text!r}: {repairs[-1]} (model output: {outputs[-1]!r})")
+        graph_dict, selections, far = self._compile(steps, world, scene, name=name, request=request,
+                                                    prefer_target=prefer_target)
+        if far:
+            records[-1] = records[-1].model_copy(update={"outcome": "refused", "detail": far})
+            return result(status="refused", refusal="out_of_reach", refused_by="selector", reason=far,
+                          selections=selections)
+        graph_dict["provenance"] = {"planner": "Goal Planner", "request": request, "world": world.source,
+                                    "model_calls": [r.model_dump(mode="json") for r in records]}
+        text = yaml.safe_dump(graph_dict, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
+        try:
+            graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
+                                     targets=[t["name"] for t in self.targets])
+        except GoalGraphError as exc:
+            raise PlannerError(f"the plan for {request!r} compiles to an invalid goal graph: {exc}") from exc
+        return result(status="planned", reason=f"{len(graph.nodes)} node(s) from {len(clauses)} clause(s)",
+                      graph_yaml=text, graph=graph, selections=selections)
 
     # -- checks ------------------------------------------------------------
 
@@ -403,12 +467,21 @@ class GoalPlanner:
         nodes: list[dict[str, Any]] = []
         selections: dict[str, Any] = {}
         placed: dict[str, dict] = {}  # object -> criterion that should still hold
+        # Objects the plan touches that the runtime has not perceived: never planned on declared
+        # positions; an observe node looks first and every step waits for it.
+        touched = list(dict.fromkeys([s.object for s in steps] + [s.destination for s in steps if s.destination]))
+        unseen = [n for n in touched if world.get(n).kind == "object" and world.get(n).position is None]
+        if unseen and "observe" not in self.skills:
+            raise PlannerError(f"the world is unknown: {', '.join(unseen)} not perceived yet (ENVIRONMENT.md) and "
+                               f"no observe skill to look first")
         for i, s in enumerate(steps):
             node_id = re.sub(r"[^a-z0-9_]", "_", f"s{i + 1}_{s.skill}_{s.object}")[:60]
-            positions = {s.object: world.get(s.object).position}
-            if s.destination:
-                positions[s.destination] = world.get(s.destination).position
-            sel = select_target(s.skill, targets=self.targets, positions=positions, prefer=prefer_target)
+            positions = {n: world.get(n).position for n in (s.object, s.destination) if n}
+            sel = select_target(s.skill, targets=self.targets,
+                                positions={n: p for n, p in positions.items() if p is not None},
+                                unknown=[n for n, p in positions.items() if p is None], prefer=prefer_target,
+                                reach=self.reach, scene=scene, pick=s.object,
+                                place=(s.object, s.destination) if s.destination else None)
             selections[node_id] = sel.to_dict()
             if sel.target is None:
                 why = "; ".join(f"{t}: {r}" for t, r in sel.reasons.items())
@@ -433,6 +506,17 @@ class GoalPlanner:
                     "limits": {"execution_timeout_s": NODE_TIMEOUT_S}}
             if sel.runtime and sel.runtime != "builtin":
                 node["runtime"] = sel.runtime
+            if unseen and not nodes:
+                look = {"id": "s0_observe", "skill": "observe", "target": sel.target,
+                        "params": {"samples": OBSERVE_SAMPLES},
+                        # judged on what this observation perceived: unknown (not seen) -> another view
+                        "accept": [{"unchanged": {"object": n}} for n in unseen],
+                        "limits": {"execution_timeout_s": NODE_TIMEOUT_S}}
+                selections[look["id"]] = {"target": sel.target, "runtime": "builtin",
+                                          "reasons": {sel.target: f"look first: {', '.join(unseen)} not perceived "
+                                                                  f"yet (ENVIRONMENT.md)"}}
+                nodes.append(look)
+                node["depends_on"] = [look["id"]]
             nodes.append(node)
         model = self.client.model
         graph = {"version": 1, "name": name,

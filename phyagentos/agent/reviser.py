@@ -1,26 +1,43 @@
 """Model-backed diagnosis and revision, behind the same interface as the rule ladder.
 
 :class:`Reviser` is the seam :class:`~phyagentos.agent.verifier.SessionVerifier` already
-calls (``recovery.plan(session, diagnosis, history=...) -> Revision | None``); the rule
-ladder (:class:`~phyagentos.agent.recovery.RecoveryPlanner`) is one implementation,
-:class:`ModelReviser` another. The model sees the evidence summary (the diagnosed cause,
-its summary and measured facts, the failed attempt's parameters and the earlier
-revisions along the lineage) and answers a typed revision under a JSON schema:
+calls (``recovery.plan(session, diagnosis, history=..., upstream=...) -> Revision | None``);
+the rule ladder (:class:`~phyagentos.agent.recovery.RecoveryPlanner`) is one
+implementation, :class:`ModelReviser` another. The model sees the evidence summary (the
+diagnosed cause, its summary and measured facts, the failed attempt's parameters and the
+earlier revisions along the lineage) and answers a typed revision under a JSON schema
+whose variants are exactly the revisions that could change the outcome
+(:meth:`ModelReviser.menu`):
 
-* ``adjust``: one strategy parameter of the skill set to one of the values of its
-  declared range (:data:`REVISION_SPACE`; only parameters the skill declares), or
-* ``give_up`` with a reason (a safety stop, a software error, nothing left to try).
+* ``adjust``: one strategy parameter of the skill, set to a value of its declared range
+  (:data:`REVISION_SPACE`), among the parameters that can address the cause
+  (:data:`PARAMETERS_FOR_CAUSE`) and that an earlier revision for the same cause along
+  the lineage did not already change;
+* ``insert_observe`` -- a corrective node: the child only looks again (skill ``observe``)
+  and the criteria are judged on that view; offered only when the criteria could not be
+  judged (``perception_unknown``), since looking again cannot change an unambiguous failure;
+* ``re_pick_upstream`` -- a corrective node upstream: the goal node that acquires the object
+  is re-opened (``Revision.reopen``) and this node runs again; offered when the object is
+  no longer in the hand (``precondition_unmet``, or a slip during a non-acquiring skill)
+  and the DAG has such a node; with a slip, the re-pick grips firmer;
+* ``switch_skill``: another skill for the same goal (:data:`SKILL_ALTERNATIVES`, e.g. a
+  ``place`` whose goal configuration collides becomes a ``place_at`` in an off-centre cell
+  of the same region), offered for causes a different placement can address
+  (:data:`SWITCH_CAUSES`) and not already tried;
+* ``give_up`` with a reason (offered from the second replan on, or when nothing else is left).
 
-The proposal is checked (parameter declared by the skill, value in range, a real
-change); a rejected or failed proposal falls back to the rule ladder, and the record
-says so. The strategy name carries the proposer -- ``model:<parameter>`` or the ladder's
-own name -- so lessons (which key on the strategy and record whether a later verdict
-confirmed it) say which reviser proposed what. The model call (provider, model, prompt
-hash, tokens, latency) is written into the revision's ``rationale``, which the child
-session keeps as its ``recovery``.
+Every proposal is checked: the parameter is declared by the skill and its value in range
+and a real change; a switched skill's node (same id, target and acceptance criteria) passes
+the same goal-graph validator as hand-written graphs and declares every parameter it gets.
+A rejected or failed proposal falls back to the rule ladder, and the record says so. Each
+revision names the cause it addresses (``cause``) and its proposer (``proposed_by``,
+strategy ``model:<...>``), so lessons say which reviser proposed what; its model call (a
+:class:`~phyagentos.protocol.ModelCallRecord`: prompt hash, model, parameters, tokens,
+latency, raw output and outcome) is in ``Revision.model_calls``, so the child keeps it in its
+context, and :meth:`ModelReviser.calls_for` gives it to the revised session's context.
 
-Not implemented (the Revision record carries parameters and limits only): inserting a
-corrective node upstream, or switching skill or target.
+Not offered: another target (a :class:`~phyagentos.protocol.Revision` has no target field;
+the coordinator compiles a child on its node's target).
 """
 
 from __future__ import annotations
@@ -29,13 +46,18 @@ import json
 import logging
 from typing import Any, Mapping, Protocol, Sequence
 
-from phyagentos.llm import LLMCall, LLMClient, LLMError
-from phyagentos.protocol import Diagnosis, Revision, SessionRecord
+import yaml
 
-from .recovery import SITUATIONAL, RecoveryPlanner
+from phyagentos.errors import GoalGraphError
+from phyagentos.llm import LLMCall, LLMClient, LLMError, call_record
+from phyagentos.protocol import Diagnosis, ModelCallRecord, Revision, SessionRecord
+
+from .goal_graph import parse_goal_graph
+from .recovery import ACQUIRING_SKILLS, ANOTHER_VIEW_SAMPLES, LADDERS, SITUATIONAL, RecoveryPlanner
 from .skill_catalog import SkillInfo, skill_catalog
 
-__all__ = ["Reviser", "ModelReviser", "REVISION_SPACE", "DEFAULTS", "NEVER_RETRY"]
+__all__ = ["Reviser", "ModelReviser", "REVISION_SPACE", "DEFAULTS", "NEVER_RETRY", "PARAMETERS_FOR_CAUSE",
+           "SKILL_ALTERNATIVES", "SWITCH_CAUSES"]
 
 logger = logging.getLogger(__name__)
 
@@ -62,30 +84,80 @@ DEFAULTS: Mapping[str, Any] = {
     "transfer_velocity_scale": 1.0, "lift_velocity_scale": 0.3, "lower_velocity_scale": 0.3,
     "approach_velocity_scale": 0.3, "approach_height_m": 0.10, "planner": "RRTConnect",
 }
-#: Causes no reviser retries: a safety stop is never retried automatically; a software
-#: error or a missing upstream result is not fixed by a parameter (as the rule ladder).
-NEVER_RETRY = frozenset({"safety_intervention", "runtime_error", "precondition_unmet"})
+#: Causes no reviser retries: a safety stop is never retried automatically; a software error
+#: is not fixed by another strategy (as the rule ladder).
+NEVER_RETRY = frozenset({"safety_intervention", "runtime_error"})
+#: Which strategy parameters can address which cause (a parameter outside its cause's list
+#: cannot change the outcome: e.g. a goal configuration in collision is not moved by a slower
+#: transfer or more perception frames). Causes not listed: every parameter of the skill.
+PARAMETERS_FOR_CAUSE: Mapping[str, frozenset[str]] = {
+    "perception_error": frozenset({"observe_samples", "reobserve_samples"}),
+    "object_not_seen": frozenset({"observe_samples"}),
+    "object_moved": frozenset({"observe_samples", "reobserve_samples"}),
+    "grasp_missed": frozenset({"observe_samples", "reobserve_samples", "grasp_candidate", "approach_velocity_scale"}),
+    "object_slipped": frozenset({"grip_force_n", "lift_velocity_scale", "transfer_velocity_scale"}),
+    "collision": frozenset({"transfer_velocity_scale", "planner", "grasp_candidate", "approach_height_m",
+                            "approach_velocity_scale"}),
+    "goal_in_collision": frozenset({"approach_height_m", "grasp_candidate"}),
+    "planning_failed": frozenset({"planner", "approach_height_m"}),
+    "placement_off": frozenset({"observe_samples", "lower_velocity_scale", "transfer_velocity_scale"}),
+    "ik_unreachable": frozenset(),  # the pose is out of reach: no parameter brings it closer
+    "perception_unknown": frozenset(),  # nothing failed in the world: look again instead
+    "precondition_unmet": frozenset(),  # the object is not in the hand: re-pick upstream instead
+}
+#: Another skill for the same goal (same object and region, same effect on the gripper),
+#: with the parameter variants the switch may use: a ``place`` becomes a ``place_at`` in the
+#: first or last of three cells along the region's longer axis (skills/place_at.yaml).
+SKILL_ALTERNATIVES: Mapping[str, Mapping[str, tuple[Mapping[str, Any], ...]]] = {
+    "place": {"place_at": ({"slots": 3, "slot": 0}, {"slots": 3, "slot": 2})},
+}
+#: Causes a different placement (another skill for the same goal) can address.
+SWITCH_CAUSES = frozenset({"goal_in_collision", "placement_off", "planning_failed", "collision", "criteria_unmet"})
 
 _SYSTEM = (
-    "You repair failed robot skill attempts. Given why the attempt failed and its parameters, choose ONE "
-    "parameter change that addresses the cause, or give up. Examples: object slipped -> stronger grip_force_n; "
-    "grasp missed or perception error -> more observe_samples or reobserve_samples; collision -> lower "
-    "transfer_velocity_scale or another planner; no path -> another planner; unreachable -> another grasp_candidate."
+    "You repair failed robot skill attempts. Given why the attempt failed, choose ONE revision that addresses "
+    "the cause, or give up. Examples: object slipped -> stronger grip_force_n; grasp missed or perception error "
+    "-> more observe_samples or reobserve_samples; collision -> lower transfer_velocity_scale or another planner; "
+    "the goal pose collides -> switch_skill to place the object elsewhere in the region; the object is no longer "
+    "in the hand -> re_pick_upstream; the result could not be seen -> insert_observe."
 )
+_GIVE_UP_REASONS = ["safety_stop", "software_error", "nothing_left"]
 
 
 class Reviser(Protocol):
     """What the SessionVerifier calls for the revision of a ``replan`` verdict."""
 
     def plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
-             history: Sequence[SessionRecord] = ()) -> Revision | None:
-        """The revision for ``session``'s child, or ``None`` (the verdict becomes ``failure``)."""
+             history: Sequence[SessionRecord] = (), upstream: str | None = None) -> Revision | None:
+        """The revision for ``session``'s child, or ``None`` (the verdict becomes ``failure``). ``upstream``:
+        the goal node upstream that acquires the session's object (for a re-pick), if any."""
         ...
 
 
 def _call_text(call: LLMCall) -> str:
     return (f"{call.provider} {call.model}, prompt {call.prompt_sha256}, {call.prompt_tokens}+{call.completion_tokens} "
             f"tokens, {call.latency_s:.2f} s")
+
+
+def _earlier(session: SessionRecord, history: Sequence[SessionRecord]) -> list[Revision]:
+    """The revisions already spent along the lineage: those the sessions ran with, and those their
+    verdicts proposed (a re-pick upstream runs on another node, so only the verdict records it)."""
+    out: list[Revision] = []
+    for rec in [*history, session]:
+        verdict = rec.attempts[-1].verdict if rec is not session and rec.attempts else None
+        for rev in (rec.recovery, verdict.revision if verdict is not None else None):
+            if rev is not None and rev not in out:
+                out.append(rev)
+    return out
+
+
+def _label(params: Mapping[str, Any]) -> str:
+    return "_".join(f"{k}_{v}" for k, v in sorted(params.items())) or "defaults"
+
+
+def _variant(action: str, **enums: Sequence[Any]) -> dict[str, Any]:
+    props: dict[str, Any] = {"action": {"enum": [action]}, **{k: {"enum": list(v)} for k, v in enums.items()}}
+    return {"type": "object", "properties": props, "required": list(props), "additionalProperties": False}
 
 
 class ModelReviser:
@@ -105,6 +177,7 @@ class ModelReviser:
         self._skills = skills
         self.calls: list[LLMCall] = []
         self.proposals: list[dict[str, Any]] = []
+        self._records: dict[str, list[ModelCallRecord]] = {}
 
     @property
     def skills(self) -> Mapping[str, SkillInfo]:
@@ -112,98 +185,217 @@ class ModelReviser:
             self._skills = skill_catalog()
         return self._skills
 
-    def schema(self, allowed: Sequence[str], *, may_give_up: bool = True,
-               current: Mapping[str, Any] | None = None) -> dict[str, Any]:
-        """The typed revision: ``adjust`` one allowed parameter to a value of its range other than its
-        current (or default) value, or (when ``may_give_up``) ``give_up`` with a reason."""
+    def calls_for(self, session_id: str) -> list[ModelCallRecord]:
+        """The model calls made to revise ``session_id`` (taken once: the coordinator puts them in its context)."""
+        return self._records.pop(session_id, [])
+
+    # -- the menu --------------------------------------------------------------
+
+    def menu(self, session: SessionRecord, diagnosis: Diagnosis, *, history: Sequence[SessionRecord] = (),
+             upstream: str | None = None) -> list[dict[str, Any]]:
+        """The JSON-schema variants of the revisions that could change the outcome (empty: none)."""
+        cause = diagnosis.cause
+        earlier = _earlier(session, history)
+        same_cause = [r for r in earlier if r.cause == cause]
         variants: list[dict[str, Any]] = []
-        current = current or {}
-        for p in allowed:
-            values = [v for v in REVISION_SPACE[p] if v != current.get(p, DEFAULTS.get(p))]
-            if not values:
+        if cause in NEVER_RETRY:
+            return []
+        lost = cause == "precondition_unmet" or (cause == "object_slipped" and session.skill not in ACQUIRING_SKILLS)
+        if lost:  # the object is not in the hand: only taking it again can help
+            if upstream is not None and not any(r.reopen for r in same_cause):
+                variants.append(_variant("re_pick_upstream"))
+            return variants
+        if cause == "perception_unknown":
+            if not any(r.skill == "observe" for r in same_cause):
+                variants.append(_variant("insert_observe"))
+            return variants
+        for p, values in self._adjustable(session, cause, same_cause).items():
+            variants.append(_variant("adjust", parameter=[p], value=values))
+        if cause in SWITCH_CAUSES:
+            tried = {(r.skill, _label({k: v for k, v in r.parameters.items() if k in ("slot", "slots")}))
+                     for r in earlier if r.skill}
+            for skill, options in SKILL_ALTERNATIVES.get(session.skill, {}).items():
+                labels = [_label(o) for o in options if (skill, _label(o)) not in tried]
+                if skill in self.skills and labels:
+                    variants.append(_variant("switch_skill", skill=[skill], option=labels))
+        return variants
+
+    def _adjustable(self, session: SessionRecord, cause: str, same_cause: Sequence[Revision]) -> dict[str, list[Any]]:
+        info = self.skills.get(session.skill)
+        relevant = PARAMETERS_FOR_CAUSE.get(cause)
+        # a parameter an earlier revision for this same cause already changed did not fix it
+        spent = {k for r in same_cause for k in r.parameters if k not in SITUATIONAL}
+        out: dict[str, list[Any]] = {}
+        for p in sorted(REVISION_SPACE):
+            if info is None or p not in info.optional or p in spent or (relevant is not None and p not in relevant):
                 continue
-            variants.append({
-                "type": "object",
-                "properties": {"action": {"enum": ["adjust"]}, "parameter": {"enum": [p]},
-                               "value": {"enum": values}, "reason": {"enum": ["addresses_cause"]}},
-                "required": ["action", "parameter", "value", "reason"], "additionalProperties": False})
-        if may_give_up or not variants:
-            variants.append({
-                "type": "object",
-                "properties": {"action": {"enum": ["give_up"]}, "parameter": {"enum": ["none"]},
-                               "value": {"enum": ["none"]},
-                               "reason": {"enum": ["safety_stop", "software_error", "nothing_left"]}},
-                "required": ["action", "parameter", "value", "reason"], "additionalProperties": False})
-        return {"anyOf": variants}
+            values = [v for v in REVISION_SPACE[p] if v != session.parameters.get(p, DEFAULTS.get(p))]
+            if values:
+                out[p] = values
+        return out
+
+    # -- planning --------------------------------------------------------------
 
     def plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
-             history: Sequence[SessionRecord] = ()) -> Revision | None:
-        """See :class:`Reviser`. Never raises for a bad model answer: it falls back (and records why)."""
-        if diagnosis.cause in NEVER_RETRY:
-            self.proposals.append({"session": session.session_id, "cause": diagnosis.cause, "proposed_by": "policy",
-                                   "revision": None})
+             history: Sequence[SessionRecord] = (), upstream: str | None = None) -> Revision | None:
+        """See :class:`Reviser`. Never raises for a bad model answer: it falls back (and records why).
+        No model call is made when no revision could change the outcome."""
+        record: dict[str, Any] = {"session": session.session_id, "cause": diagnosis.cause}
+        variants = self.menu(session, diagnosis, history=history, upstream=upstream)
+        if not variants:
+            record.update(proposed_by="policy", revision=None,
+                          why="no revision can change the outcome" if diagnosis.cause not in NEVER_RETRY
+                          else f"{diagnosis.cause} is never retried")
+            self.proposals.append(record)
             return None
-        info = self.skills.get(session.skill)
-        allowed = sorted(p for p in REVISION_SPACE if info is not None and p in info.optional)
         current = dict(session.parameters)
-        earlier = [r.recovery for r in [*history, session] if r.recovery is not None]
+        earlier = _earlier(session, history)
+        if earlier:  # a retryable cause is retried at least once: giving up is offered from the second replan on
+            variants.append(_variant("give_up", reason=_GIVE_UP_REASONS))
         facts = ", ".join(f"{k}={v}" for k, v in diagnosis.facts.items() if not isinstance(v, (dict, list)))
         lines = [f"Skill: {session.skill} on {session.target}, object {current.get('object', '?')}",
                  f"Failure: {diagnosis.cause} ({diagnosis.category}): {diagnosis.summary}",
                  f"Measured: {facts or 'nothing'}",
-                 "Current parameters: " + (", ".join(f"{p}={current[p]}" for p in allowed if p in current)
-                                           or "all defaults"),
+                 "Current parameters: " + (", ".join(f"{k}={v}" for k, v in current.items()) or "none"),
                  "Already tried: " + ("; ".join(f"{r.strategy} {r.parameters}" for r in earlier) or "nothing"),
-                 "Parameters you may change: " + ", ".join(f"{p} {list(REVISION_SPACE[p])}" for p in allowed)]
+                 "You may: " + "; ".join(self._describe(v) for v in variants)]
         messages = [{"role": "system", "content": _SYSTEM}, {"role": "user", "content": "\n".join(lines)}]
-        record: dict[str, Any] = {"session": session.session_id, "cause": diagnosis.cause}
+        schema = {"anyOf": variants}
         try:
-            # A retryable cause is retried at least once: giving up is offered from the second replan on.
-            schema = self.schema(allowed, may_give_up=bool(earlier), current=current)
             reply = self.client.complete(messages, schema=schema, max_tokens=60, purpose="revise")
-            self.calls.append(reply.call)
-            record["call"] = reply.call.to_dict()
-            record["output"] = reply.text
+        except LLMError as exc:
+            return self._fall_back(record, session, diagnosis, history, upstream, str(exc), None)
+        self.calls.append(reply.call)
+        record["call"] = reply.call.to_dict()
+        record["output"] = reply.text
+        try:
             proposal = reply.json()
-            revision = self._check(proposal, session, diagnosis, current, allowed, history, reply.call)
+            revision = self._check(proposal, session, diagnosis, current, history, upstream, variants, reply.call)
         except (LLMError, ValueError) as exc:
-            record["rejected"] = str(exc)
-            logger.info("model revision for %s rejected: %s", session.session_id, exc)
-            revision = None
-            if self.fallback is not None:
-                revision = self.fallback.plan(session, diagnosis, history=history)
-                if revision is not None:
-                    revision = revision.model_copy(update={
-                        "rationale": f"{revision.rationale} [rule ladder; model proposal rejected: {exc}]"})
-            record["proposed_by"] = "rules" if revision is not None else "none"
-        else:
-            record["proposed_by"] = "model" if revision is not None else "model:give_up"
+            return self._fall_back(record, session, diagnosis, history, upstream, str(exc), reply)
+        outcome = "accepted" if revision is not None else "gave_up"
+        rec = call_record(reply.call, role="reviser", output=reply.text, outcome=outcome,
+                          detail=revision.strategy if revision is not None else f"gave up: {proposal.get('reason')}")
+        self._records.setdefault(session.session_id, []).append(rec)
+        if revision is not None:
+            revision = revision.model_copy(update={"model_calls": [rec]})
+        record["proposed_by"] = "model" if revision is not None else "model:give_up"
         record["revision"] = revision.model_dump(mode="json") if revision is not None else None
         self.proposals.append(record)
         return revision
 
+    @staticmethod
+    def _describe(variant: Mapping[str, Any]) -> str:
+        props = variant["properties"]
+        action = props["action"]["enum"][0]
+        if action == "adjust":
+            return f"adjust {props['parameter']['enum'][0]} to one of {props['value']['enum']}"
+        if action == "switch_skill":
+            return f"switch_skill to {props['skill']['enum'][0]} ({', '.join(props['option']['enum'])})"
+        return action
+
+    def _fall_back(self, record: dict[str, Any], session: SessionRecord, diagnosis: Diagnosis,
+                   history: Sequence[SessionRecord], upstream: str | None, why: str, reply: Any) -> Revision | None:
+        record["rejected"] = why
+        logger.info("model revision for %s rejected: %s", session.session_id, why)
+        revision = None
+        if self.fallback is not None:
+            revision = self.fallback.plan(session, diagnosis, history=history, upstream=upstream)
+        if reply is not None:
+            rec = call_record(reply.call, role="reviser", output=reply.text,
+                              outcome="fallback" if revision is not None else "rejected", detail=why)
+            self._records.setdefault(session.session_id, []).append(rec)
+            if revision is not None:
+                revision = revision.model_copy(update={"model_calls": [rec]})
+        if revision is not None:
+            revision = revision.model_copy(update={
+                "rationale": f"{revision.rationale} [rule ladder; model proposal rejected: {why}]"})
+        record["proposed_by"] = "rules" if revision is not None else "none"
+        record["revision"] = revision.model_dump(mode="json") if revision is not None else None
+        self.proposals.append(record)
+        return revision
+
+    # -- checks ----------------------------------------------------------------
+
     def _check(self, proposal: Any, session: SessionRecord, diagnosis: Diagnosis, current: Mapping[str, Any],
-               allowed: Sequence[str], history: Sequence[SessionRecord], call: LLMCall) -> Revision | None:
-        if not isinstance(proposal, dict) or proposal.get("action") not in ("adjust", "give_up"):
+               history: Sequence[SessionRecord], upstream: str | None,
+               variants: Sequence[Mapping[str, Any]], call: LLMCall) -> Revision | None:
+        if not isinstance(proposal, dict):
             raise ValueError(f"not a typed revision: {proposal!r}")
-        if proposal["action"] == "give_up":
+        if proposal.get("action") == "adjust":  # the specific reason first (logged, and told in the record)
+            param, value = proposal.get("parameter"), proposal.get("value")
+            info = self.skills.get(session.skill)
+            if param not in REVISION_SPACE or info is None or param not in info.optional:
+                raise ValueError(f"parameter {param!r} is not a strategy parameter of {session.skill}")
+            if value not in REVISION_SPACE[param]:
+                raise ValueError(f"{param}={value!r} is outside its declared range {list(REVISION_SPACE[param])}")
+            if current.get(param, DEFAULTS.get(param)) == value:
+                raise ValueError(f"{param} is already {value!r}: the revision changes nothing")
+        if not any(self._fits(proposal, v) for v in variants):
+            raise ValueError(f"not one of the offered revisions: {proposal!r}; offered: "
+                             f"{'; '.join(self._describe(v) for v in variants)}")
+        action, cause = proposal["action"], diagnosis.cause
+        step = 1 + sum(1 for r in history if r.attempts and r.attempts[-1].verdict is not None
+                       and r.attempts[-1].verdict.diagnosis is not None
+                       and r.attempts[-1].verdict.diagnosis.cause == cause)
+        common = dict(cause=cause, step=step, proposed_by="model")
+        by = f"proposed by the model: {_call_text(call)}"
+        if action == "give_up":
             logger.info("model gives up on %s: %s", session.session_id, proposal.get("reason"))
             return None
-        param, value = proposal.get("parameter"), proposal.get("value")
-        if param not in allowed:
-            raise ValueError(f"parameter {param!r} is not a strategy parameter of {session.skill}; allowed: {allowed}")
-        if value not in REVISION_SPACE[param]:
-            raise ValueError(f"{param}={value!r} is outside its declared range {list(REVISION_SPACE[param])}")
-        if current.get(param, DEFAULTS.get(param)) == value:
-            raise ValueError(f"{param} is already {value!r}: the revision changes nothing")
+        if action == "insert_observe":
+            return Revision(strategy="model:another_view", skill="observe", parameters={"samples": ANOTHER_VIEW_SAMPLES},
+                            rationale=f"addresses {cause}: {diagnosis.summary} -> insert an observe node: look again "
+                                      f"({ANOTHER_VIEW_SAMPLES} frames) and judge on that view ({by})", **common)
+        if action == "re_pick_upstream":
+            grip = {}
+            if cause == "object_slipped":
+                info = self.skills.get("pick")
+                for strategy in LADDERS.get("object_slipped", ()):
+                    grip = {k: v for k, v in strategy.values({}).items() if info is not None and k in info.optional}
+                    if grip:
+                        break
+            return Revision(strategy="model:re_pick_upstream", reopen=upstream, parameters=grip,
+                            rationale=f"addresses {cause}: {diagnosis.summary} -> insert a re-pick: re-open upstream "
+                                      f"node {upstream!r}{' with ' + str(grip) if grip else ''}, then run this node "
+                                      f"again ({by})", **common)
+        if action == "switch_skill":
+            skill = proposal["skill"]
+            option = next(o for o in SKILL_ALTERNATIVES[session.skill][skill] if _label(o) == proposal["option"])
+            info = self.skills[skill]
+            params = {k: v for k, v in current.items() if k in info.required}
+            params.update({k: v for k, v in current.items() if k in info.optional and k not in SITUATIONAL})
+            params.update(option)
+            self._validate_node(session, skill, params)
+            return Revision(strategy=f"model:switch_to_{skill}", skill=skill, parameters=params,
+                            rationale=f"addresses {cause}: {diagnosis.summary} -> switch skill {session.skill} -> "
+                                      f"{skill} ({_label(option)}) for the same goal ({by})", **common)
+        param, value = proposal["parameter"], proposal["value"]
         values = {param: value}
         if float(diagnosis.facts.get("tcp_end_z_m", 1.0)) < 0.15:  # same situational back-off as the ladder
             info = self.skills.get(session.skill)
             values.update({k: v for k, v in SITUATIONAL.items()
                            if info is not None and k in info.optional and current.get(k) != v})
-        step = 1 + sum(1 for r in history if r.attempts and r.attempts[-1].verdict is not None
-                       and r.attempts[-1].verdict.diagnosis is not None
-                       and r.attempts[-1].verdict.diagnosis.cause == diagnosis.cause)
-        return Revision(strategy=f"model:{param}", cause=diagnosis.cause, step=step, parameters=values,
-                        rationale=f"{diagnosis.summary} -> set {param}={value} (proposed by the model: "
-                                  f"{_call_text(call)})")
+        return Revision(strategy=f"model:{param}", parameters=values,
+                        rationale=f"addresses {cause}: {diagnosis.summary} -> set {param}={value} ({by})", **common)
+
+    @staticmethod
+    def _fits(proposal: Mapping[str, Any], variant: Mapping[str, Any]) -> bool:
+        props = variant["properties"]
+        return set(proposal) == set(props) and all(proposal[k] in spec["enum"] for k, spec in props.items())
+
+    def _validate_node(self, session: SessionRecord, skill: str, params: Mapping[str, Any]) -> None:
+        """The switched node passes the goal-graph validator, and the skill declares every parameter."""
+        info = self.skills[skill]
+        undeclared = sorted(set(params) - info.parameters)
+        missing = sorted(info.required - set(params))
+        if undeclared or missing:
+            raise ValueError(f"{skill} does not take {undeclared} or lacks {missing}")
+        node = {"id": session.node, "skill": skill, "target": session.target, "params": json.loads(json.dumps(params)),
+                "accept": session.accept}
+        text = yaml.safe_dump({"version": 1, "name": "revision", "nodes": [node]}, sort_keys=False)
+        try:
+            parse_goal_graph(text, path=f"<revision of {session.session_id}>", skills=list(self.skills),
+                             targets=[session.target])
+        except GoalGraphError as exc:
+            raise ValueError(f"the switched node is invalid: {exc}") from exc

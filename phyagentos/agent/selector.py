@@ -3,13 +3,18 @@
 A goal-graph node may leave ``target``/``runtime`` open; the selector matches the
 skill's declared requirements (``skills/<name>.yaml``: ``requires.capabilities``,
 ``requires.observations``, ``runtime``) against every enabled target of TARGETS.md, then
-checks reach: every position the node must reach (the object, the destination) lies in
-the target's reach envelope -- a horizontal annulus around its base,
-``constraints.reach`` in TARGETS.md (``{base: [x, y], min_m, max_m}``) or the default
-for its driver (:data:`DEFAULT_REACH`). This is a necessary condition only: the Agent
-plane does not run IK (that is the Runtime's, at preflight and in the skill); a position
-outside the envelope is certainly out of reach, one inside may still fail IK and is then
-diagnosed as ``ik_unreachable``.
+checks reach by asking the Runtime: a :class:`~phyagentos.protocol.reach.ReachQuery` (the
+object picked, the destination it is set down on, the *perceived* positions) goes to a
+reach oracle the composition root supplies -- the Runtime's IK on the target's own model
+(:func:`phyagentos.runtime.reach_query.answer_reach_query`), the same check the graph
+preflight makes -- and its :class:`~phyagentos.protocol.reach.ReachAnswer` decides. The
+Agent plane imports no Runtime code: the oracle is a callable it is given. A position not
+perceived yet is not checked (``unknown``: the runtime's preflight checks it once the
+node runs). Without an oracle (a bare Agent plane, e.g. in unit tests) the selector
+falls back to a necessary condition only: every position lies in the target's reach
+envelope -- a horizontal annulus around its base, ``constraints.reach`` in TARGETS.md
+(``{base: [x, y], min_m, max_m}``) or the default for its driver (:data:`DEFAULT_REACH`)
+-- and records that IK was not asked.
 
 Every candidate gets a recorded reason (:class:`Selection`), so "why this target" and
 "why no target" are both answerable from the plan's record.
@@ -27,6 +32,7 @@ from typing import Any, Mapping, Sequence
 from phyagentos import resources
 from phyagentos.errors import SkillError
 from phyagentos.yamlsource import read_yaml
+from phyagentos.protocol.reach import ReachOracle, ReachQuery
 
 __all__ = ["DEFAULT_REACH", "Reach", "Selection", "SkillRequirements", "select_target", "skill_requirements"]
 
@@ -110,17 +116,26 @@ class Selection:
 
 def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions: Mapping[str, Sequence[float]],
                   prefer: str | None = None,
-                  requirements: Mapping[str, SkillRequirements] | None = None) -> Selection:
+                  requirements: Mapping[str, SkillRequirements] | None = None,
+                  unknown: Sequence[str] = (), reach: ReachOracle | None = None,
+                  scene: Mapping[str, Any] | None = None, pick: str | None = None,
+                  place: Sequence[str] | None = None) -> Selection:
     """Choose the target for one node.
 
     Args:
         skill: the node's skill.
         targets: TARGETS.md entries as dicts (``name, kind, driver, enabled,
             capabilities, observations, constraints``).
-        positions: what the node must reach: name -> (x, y[, z]) in the world frame, m.
+        positions: what the node must reach, as perceived: name -> (x, y[, z]) in the
+            world frame, m.
         prefer: a target to take when it fits (e.g. the scene's own target); otherwise
             the fitting target whose base is closest to the positions' centroid.
         requirements: skill requirements (default: :func:`skill_requirements`).
+        unknown: names the node must reach whose position is not perceived yet.
+        reach: the reach oracle (the Runtime's IK through the protocol); ``None``: the
+            envelope check only.
+        scene: the scene the node runs on (for the reach query).
+        pick: the object the node picks; ``place``: ``(object, destination)`` it sets down.
 
     Returns:
         A :class:`Selection`; ``out_of_reach`` is set when some target fit the skill but
@@ -133,6 +148,7 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
         return Selection(None, None, {"*": f"unknown skill {skill!r}"})
     fitting: list[tuple[float, str]] = []
     capable = False
+    unseen = f"; reach of {', '.join(unknown)} not checked (not perceived yet)" if unknown else ""
     for t in targets:
         name = str(t["name"])
         if not t.get("enabled", True):
@@ -144,22 +160,37 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
             reasons[name] = f"lacks {', '.join(missing)}"
             continue
         capable = True
-        reach = _reach_of(t)
-        if reach is None:
-            reasons[name] = "no reach envelope declared (constraints.reach)"
-            continue
-        far = [f"{n} at {reach.distance(p):.2f} m" for n, p in positions.items() if not reach.contains(p)]
-        if far:
-            reasons[name] = f"out of reach ({reach.min_m:.2f}-{reach.max_m:.2f} m from base): {', '.join(far)}"
-            continue
-        if positions:
+        envelope = _reach_of(t)
+        if reach is not None and (pick or place):
+            answer = reach(ReachQuery(target=name, driver=str(t.get("driver", "")), scene=dict(scene or {}),
+                                      positions={n: [float(p[0]), float(p[1])] for n, p in positions.items()},
+                                      pick=pick, place=list(place) if place else None))
+            if answer.status == "unsupported":
+                reasons[name] = f"cannot build the scene: {'; '.join(answer.reasons)}"
+                continue
+            if answer.status == "unreachable":
+                reasons[name] = f"out of reach ({answer.checked_by}): {'; '.join(answer.reasons)}"
+                continue
+            how = ("reach (IK on its model)" if answer.status == "reachable"
+                   else f"reach unknown ({'; '.join(answer.reasons)})")
+        else:
+            if envelope is None:
+                reasons[name] = "no reach envelope declared (constraints.reach)"
+                continue
+            far = [f"{n} at {envelope.distance(p):.2f} m" for n, p in positions.items() if not envelope.contains(p)]
+            if far:
+                reasons[name] = (f"out of reach ({envelope.min_m:.2f}-{envelope.max_m:.2f} m from base): "
+                                 f"{', '.join(far)}")
+                continue
+            how = "reach envelope (no IK asked)" + unseen
+        if positions and envelope is not None:
             cx = sum(float(p[0]) for p in positions.values()) / len(positions)
             cy = sum(float(p[1]) for p in positions.values()) / len(positions)
-            score = reach.distance((cx, cy))
+            score = envelope.distance((cx, cy))
         else:
             score = 0.0
         fitting.append((0.0 if name == prefer else 1.0 + score, name))
-        reasons[name] = "fits: capabilities, observations and reach"
+        reasons[name] = f"fits: capabilities, observations and {how}"
     if not fitting:
         return Selection(None, None, reasons, out_of_reach=capable)
     fitting.sort()

@@ -17,6 +17,7 @@ from phyagentos.protocol.lifecycle import utc_now
 
 from .criteria import parse_criteria
 from .goal_graph import GoalGraph, GoalNode
+from .model_calls import with_calls
 
 __all__ = ["SessionCompiler", "new_run_id"]
 
@@ -67,6 +68,13 @@ class SessionCompiler:
             ProtocolError: the submit path refused the record.
         """
         parse_criteria(node.accept, where=f"{self.graph.path}:{node.line} accept")
+        if recovery is not None and context is not None and context.model_calls:
+            # a child inherits its parent's context, but of the model calls only the plan's: the
+            # parent's own attempt and revision calls stay the parent's
+            context = context.model_copy(update={"model_calls": [c for c in context.model_calls
+                                                                 if c.role == "planner"]})
+        if recovery is not None:  # ... and it keeps the calls behind its revision
+            context = with_calls(context, recovery.model_calls)
         index = self.graph.node_ids.index(node.id)
         generation = 1 if parent is None else int(parent.session_id.rsplit("-", 1)[1]) + 1
         now = utc_now()

@@ -11,7 +11,8 @@ Tools: ``read_environment``, ``list_targets``, ``list_skills``, ``list_sessions`
 ``read_session``, ``list_runs``, ``read_memory`` (reads); ``plan_request`` and
 ``submit_goal_graph`` (through the validated path: the same validator and
 ``Workspace.submit_session`` as ``phyagentos submit``); ``send_signal`` (cancel, pause,
-resume, estop, clear_estop).
+resume, estop, clear_estop); ``query_reach`` (a :class:`~phyagentos.protocol.reach.ReachQuery`
+answered by the Runtime's IK, when the composition root wires a reach oracle).
 
 Tool policy: string arguments are screened for injection
 (:func:`phyagentos.agent.llm.policy.screen_text`); a hit rejects the call, logged with the
@@ -28,6 +29,7 @@ from typing import Any, Callable, Mapping
 
 from phyagentos.errors import PhyAgentOSError
 from phyagentos.protocol import Workspace
+from phyagentos.protocol.reach import ReachOracle, ReachQuery
 
 from .llm.policy import screen_text
 from .skill_catalog import skill_catalog
@@ -106,10 +108,13 @@ class ToolRegistry:
         plan: ``plan(request, scene) -> dict`` (a Goal Planner); ``None``: ``plan_request``
             is not offered.
         issued_by: recorded as the sender of signals.
+        reach: the reach oracle (the Runtime's IK through the protocol); ``None``: ``query_reach``
+            is not offered.
     """
 
     def __init__(self, workspace: Workspace, *, submit: Callable[[str], str] | None = None,
-                 plan: Callable[[str, dict | None], dict] | None = None, issued_by: str = "agent:tools"):
+                 plan: Callable[[str, dict | None], dict] | None = None, issued_by: str = "agent:tools",
+                 reach: ReachOracle | None = None):
         self.workspace = workspace
         self.issued_by = issued_by
         self.rejections: list[dict[str, Any]] = []
@@ -143,6 +148,14 @@ class ToolRegistry:
                                      "with its reason) on a scene (default: the tabletop scene).",
                      _obj({"request": {"type": "string"}, "scene": {"type": "object"}}, ("request",)),
                      self._plan_request))
+        if reach is not None:
+            self._reach = reach
+            add(Tool("query_reach", "Can a target's arm reach a pick of an object and/or setting it down on a "
+                                    "destination, with objects at the given perceived positions? Answered by the "
+                                    "runtime's IK on the target's model: reachable, unreachable or unknown (why).",
+                     _obj({"target": {"type": "string"}, "scene": {"type": "object"},
+                           "positions": {"type": "object"}, "pick": {"type": "string"},
+                           "place": {"type": "array"}}, ("target",)), self._query_reach))
 
     def _add(self, tool: Tool) -> None:
         self._tools[tool.name] = tool
@@ -222,3 +235,16 @@ class ToolRegistry:
 
     def _plan_request(self, request: str, scene: dict | None = None) -> Any:
         return self._plan(request, scene)
+
+    def _query_reach(self, target: str, scene: dict | None = None, positions: dict | None = None,
+                     pick: str | None = None, place: list | None = None) -> Any:
+        spec = next((t for t in self.workspace.read("TARGETS").data.targets if t.name == target), None)
+        if spec is None:
+            names = [t.name for t in self.workspace.read("TARGETS").data.targets]
+            raise ToolError(f"query_reach: unknown target {target!r}; valid targets: {', '.join(names)}")
+        try:
+            query = ReachQuery(target=target, driver=spec.driver, scene=scene or {}, positions=positions or {},
+                               pick=pick, place=place)
+        except ValueError as exc:
+            raise ToolError(f"query_reach: {exc}") from exc
+        return self._reach(query).model_dump(mode="json")

@@ -15,7 +15,7 @@ Every call returns an :class:`LLMReply` whose :class:`LLMCall` records provider,
 prompt hash, tokens and latency, for the session's or the plan's context.
 """
 
-from .client import LLMCall, LLMClient, LLMError, LLMReply, prompt_hash
+from .client import LLMCall, LLMClient, LLMError, LLMReply, call_record, prompt_hash
 from .config import LLMConfig, load_llm_config, make_client
 from .offline import LlamaCppClient, offline_model_path
 from .openai_client import OpenAICompatClient
@@ -28,6 +28,7 @@ __all__ = [
     "LLMReply",
     "LlamaCppClient",
     "OpenAICompatClient",
+    "call_record",
     "load_llm_config",
     "make_client",
     "offline_model_path",

@@ -8,8 +8,9 @@ from dataclasses import asdict, dataclass
 from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
 from phyagentos.errors import PhyAgentOSError
+from phyagentos.protocol.schemas import ModelCallRecord
 
-__all__ = ["LLMError", "LLMCall", "LLMReply", "LLMClient", "prompt_hash"]
+__all__ = ["LLMError", "LLMCall", "LLMReply", "LLMClient", "prompt_hash", "call_record"]
 
 
 class LLMError(PhyAgentOSError):
@@ -36,6 +37,7 @@ class LLMCall:
         temperature, seed: sampling settings sent.
         constrained: the output was decoded under the JSON schema (grammar) rather than
             only checked afterwards.
+        max_tokens: the completion budget sent (0 if unknown).
     """
 
     provider: str
@@ -48,6 +50,7 @@ class LLMCall:
     temperature: float
     seed: int
     constrained: bool
+    max_tokens: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -82,3 +85,16 @@ class LLMClient(Protocol):
         """Answer ``messages`` (``[{role, content}]``); with ``schema`` the answer is JSON
         decoded under that JSON schema. Raises :class:`LLMError`."""
         ...
+
+
+def call_record(call: LLMCall, *, role: str, output: str, outcome: str, detail: str = "",
+                ref: str | None = None) -> ModelCallRecord:
+    """The protocol record of ``call`` (what a session's context keeps): its settings, usage and
+    latency, the raw ``output`` and what became of it (``outcome``: accepted, refused, rejected,
+    repaired, gave_up, fallback, error; ``detail``: why)."""
+    return ModelCallRecord(
+        role=role, purpose=call.purpose, provider=call.provider, model=call.model, prompt_sha256=call.prompt_sha256,
+        parameters={"temperature": call.temperature, "seed": call.seed, "max_tokens": call.max_tokens,
+                    "constrained": call.constrained},
+        prompt_tokens=max(0, call.prompt_tokens), completion_tokens=max(0, call.completion_tokens),
+        latency_s=round(max(0.0, call.latency_s), 4), output=output, outcome=outcome, detail=detail[:2000], ref=ref)

@@ -119,6 +119,7 @@ class LlamaCppClient:
         call = LLMCall(provider=self.provider, model=self.model, purpose=purpose,
                        prompt_sha256=prompt_hash(messages, schema), prompt_tokens=int(usage.get("prompt_tokens", 0)),
                        completion_tokens=int(usage.get("completion_tokens", 0)), latency_s=latency,
-                       temperature=self.temperature, seed=self.seed, constrained=schema is not None)
+                       temperature=self.temperature, seed=self.seed, constrained=schema is not None,
+                       max_tokens=int(max_tokens))
         logger.debug("llama.cpp %s: %d+%d tokens in %.2f s", purpose, call.prompt_tokens, call.completion_tokens, latency)
         return LLMReply(text=text, call=call)

@@ -67,5 +67,5 @@ class OpenAICompatClient:
                        prompt_tokens=int(getattr(usage, "prompt_tokens", 0) or 0),
                        completion_tokens=int(getattr(usage, "completion_tokens", 0) or 0), latency_s=latency,
                        temperature=self.temperature, seed=self.seed,
-                       constrained=schema is not None and self.strict_schema)
+                       constrained=schema is not None and self.strict_schema, max_tokens=int(max_tokens))
         return LLMReply(text=text, call=call)

@@ -242,6 +242,27 @@ class Diagnosis(ProtocolModel):
     evidence: list[str] = Field(default_factory=list, description="Evidence files consulted, workspace-relative.")
 
 
+class ModelCallRecord(ProtocolModel):
+    """One language-model call made for a session (by the Goal Planner, a reviser or the agent runtime)."""
+
+    role: Literal["planner", "reviser", "agent_runtime"] = Field(description="Who called the model.")
+    purpose: str = Field(description="What the call was for: plan, repair, revise, act.")
+    provider: str = Field(description="llama.cpp or openai.")
+    model: str
+    prompt_sha256: str = Field(description="SHA-256 (first 16 hex) of messages and output schema.")
+    parameters: dict[str, Any] = Field(default_factory=dict, description="Sampling settings sent: temperature, "
+                                                                         "seed, max_tokens, constrained.")
+    prompt_tokens: int = Field(0, ge=0)
+    completion_tokens: int = Field(0, ge=0)
+    latency_s: float = Field(0.0, ge=0, description="Wall time of the call (s).")
+    output: str = Field("", description="The model's raw answer (text).")
+    outcome: str = Field(description="What became of the answer: accepted, refused, rejected, repaired, gave_up, "
+                                     "fallback, error.")
+    detail: str = Field("", description="Why (a validator's message, the fallback's reason).")
+    ref: str | None = Field(None, description="Where the full record is (plan directory or evidence), "
+                                              "workspace-relative.")
+
+
 class Revision(ProtocolModel):
     """A recovery strategy applied to a session: the parameters its child runs with."""
 
@@ -255,6 +276,8 @@ class Revision(ProtocolModel):
                                                 "another view of the same world); None: the node's skill.")
     reopen: str | None = Field(None, description="Upstream goal node re-opened before this node runs again "
                                                  "(e.g. re-pick after the object was released).")
+    proposed_by: str = Field("rules", description="The reviser that proposed it: rules or model.")
+    model_calls: list[ModelCallRecord] = Field(default_factory=list, description="Model calls behind it.")
 
 
 class Verdict(ProtocolModel):
@@ -315,6 +338,8 @@ class SessionContext(ProtocolModel):
     items: list[ContextItem] = Field(default_factory=list)
     parameters: dict[str, Any] = Field(default_factory=dict, description="Parameters set from memory (over the node's own).")
     built_at: Timestamp
+    model_calls: list[ModelCallRecord] = Field(default_factory=list, description="Every language-model call made "
+                                                                                 "for this session, in order.")
 
 
 class SessionRecord(VersionedModel):

@@ -35,7 +35,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from phyagentos.errors import PhyAgentOSError, SafetyError, SkillError, TargetError
-from phyagentos.llm import LLMClient, LLMError, load_llm_config, make_client
+from phyagentos.llm import LLMClient, LLMError, call_record, load_llm_config, make_client
 
 from .builtin_runtime import RunOutcome
 from .skills import SkillRegistry
@@ -95,6 +95,12 @@ def operation_menu(granted: tuple[str, ...], *, allow_finish: bool = True,
     if allow_finish:
         variants.append(variant("finish", None))
     return {"anyOf": variants}
+
+
+def _record(reply: Any, outcome: str, detail: str) -> dict[str, Any]:
+    """The step's :class:`~phyagentos.protocol.ModelCallRecord` as a JSON mapping (trace values are JSON)."""
+    return call_record(reply.call, role="agent_runtime", output=reply.text, outcome=outcome,
+                       detail=detail).model_dump(mode="json")
 
 
 class AgentSkillRuntime:
@@ -159,12 +165,20 @@ class AgentSkillRuntime:
                                         schema=operation_menu(granted, allow_finish=bool(history),
                                                               done=frozenset(done)),
                                         max_tokens=40, purpose="act")
-                choice = reply.json()
             except LLMError as exc:
                 ctx.trace.record("agent_step", step=step, ok=False, error=str(exc))
                 return RunOutcome(status="failed", error_code="agent.model_error", message=str(exc), ticks=step)
-            record = {"step": step, "choice": choice, "call": reply.call.to_dict()}
+            try:
+                choice = reply.json()
+            except LLMError as exc:
+                ctx.trace.record("agent_step", step=step, ok=False, error=str(exc), call=reply.call.to_dict(),
+                                 model_call=_record(reply, "rejected", str(exc)))
+                return RunOutcome(status="failed", error_code="agent.model_error", message=str(exc), ticks=step)
             op = choice.get("operation") if isinstance(choice, dict) else None
+            # the record the session's context keeps (the coordinator copies it from this trace)
+            record = {"step": step, "choice": choice, "call": reply.call.to_dict(),
+                      "model_call": _record(reply, "accepted" if op else "rejected",
+                                            f"operation {op}" if op else "no operation in the answer")}
             if op == "finish":
                 ctx.trace.record("agent_step", ok=True, **record)
                 return RunOutcome(status="completed", message=f"finished after {step - 1} operation(s): "

@@ -11,7 +11,7 @@ The model interface itself is plane-neutral: :mod:`phyagentos.llm`.
 
 from .policy import InjectionFinding, screen_text
 from .prompt import ModelContext, ModelContextBuilder
-from .world import Entity, World, world_from_environment, world_from_scene
+from .world import Entity, World, perceived_world, world_from_environment, world_from_scene
 
 __all__ = ["Entity", "InjectionFinding", "ModelContext", "ModelContextBuilder", "World", "screen_text",
-           "world_from_environment", "world_from_scene"]
+           "perceived_world", "world_from_environment", "world_from_scene"]

@@ -1,8 +1,11 @@
 """The world a plan is grounded in: named objects and regions with colour, size and position.
 
 Built from the scene the request is about (the goal graph's or ``--scene`` file's
-``scene`` mapping, i.e. what the user declared) or from ENVIRONMENT.md (what the runtime
-last perceived). Colours are named from ``rgba`` (nearest of :data:`PALETTE`), sizes
+``scene`` mapping, i.e. what the user declared) and from ENVIRONMENT.md (what the runtime
+last perceived). A plan uses only *perceived* object positions (:func:`perceived_world`):
+a declared object the runtime has not seen yet has no position (``None``), and the Goal
+Planner then looks first. Regions are part of the task's definition, so their declared
+centres stand. Colours are named from ``rgba`` (nearest of :data:`PALETTE`), sizes
 ("small"/"large") relative to the scene's other objects. Names that fail the policy
 (:mod:`.policy`) are left out and reported in ``rejected``.
 """
@@ -10,12 +13,13 @@ last perceived). Colours are named from ``rgba`` (nearest of :data:`PALETTE`), s
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 from .policy import NAME_PATTERN, InjectionFinding, screen_text
 
-__all__ = ["Entity", "World", "PALETTE", "colour_name", "world_from_scene", "world_from_environment"]
+__all__ = ["Entity", "World", "PALETTE", "colour_name", "world_from_scene", "world_from_environment",
+           "perceived_world"]
 
 #: Colour names for rgba values (nearest in RGB).
 PALETTE: Mapping[str, tuple[float, float, float]] = {
@@ -34,12 +38,12 @@ def colour_name(rgba: Sequence[float] | None) -> str | None:
 
 @dataclass(frozen=True)
 class Entity:
-    """A named object or region: ``kind`` ``object``/``region``; ``position`` (x, y) in the world frame, m;
-    ``size_m`` the largest horizontal extent (m)."""
+    """A named object or region: ``kind`` ``object``/``region``; ``position`` (x, y) in the world frame, m
+    (``None``: an object not perceived yet); ``size_m`` the largest horizontal extent (m)."""
 
     name: str
     kind: str
-    position: tuple[float, float]
+    position: tuple[float, float] | None
     colour: str | None = None
     size: str | None = None
     size_m: float = 0.0
@@ -106,18 +110,35 @@ def world_from_scene(scene: Mapping[str, Any], *, source: str = "scene") -> Worl
 
 
 def world_from_environment(entities: Sequence[Mapping[str, Any]], *, source: str = "ENVIRONMENT.md") -> World:
-    """Entities of ENVIRONMENT.md (what the runtime last perceived): objects with a pose, regions by kind."""
+    """Entities of ENVIRONMENT.md (what the runtime last perceived): objects with a pose, regions by kind;
+    other kinds (robot, gripper, obstacle) are left out."""
     rejected: list[InjectionFinding] = []
     objects, regions = [], []
     for e in entities:
         name, kind = e.get("name"), e.get("kind", "object")
         pos = (e.get("pose") or {}).get("position") or e.get("position") or e.get("center")
+        if kind not in ("object", "region"):  # the robot, its gripper and obstacles are not goals
+            continue
         if pos is None or not _screen_name(name, f"{source}: {kind} name", rejected):
             continue
         ent = Entity(name=str(name), kind="region" if kind == "region" else "object",
                      position=(float(pos[0]), float(pos[1])), colour=colour_name(e.get("rgba")))
         (regions if ent.kind == "region" else objects).append(ent)
     return World(objects=tuple(objects), regions=tuple(regions), source=source, rejected=tuple(rejected))
+
+
+def perceived_world(declared: World, seen: World) -> World:
+    """``declared``'s objects with the positions ``seen`` (ENVIRONMENT.md) has for them, ``None``
+    for those it has not seen, plus objects seen but not declared; regions as declared."""
+    objects = []
+    for e in declared.objects:
+        hit = seen.get(e.name)
+        objects.append(replace(e, position=hit.position if hit is not None and hit.kind == "object" else None))
+    names = {e.name for e in declared.objects + declared.regions}
+    objects += [e for e in seen.objects if e.name not in names]
+    source = f"{declared.source} + {seen.source}" if seen.objects else f"{declared.source} (nothing perceived yet)"
+    return World(objects=tuple(objects), regions=declared.regions, source=source,
+                 rejected=declared.rejected + seen.rejected)
 
 
 def distance(a: Entity, b: Entity) -> float:

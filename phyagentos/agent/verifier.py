@@ -108,6 +108,15 @@ def _read_trace(path: Path) -> tuple[dict, ...]:
     return tuple(records)
 
 
+#: The safe loader on libyaml's parser when PyYAML has it (same safe constructors and
+#: resolvers as ``yaml.safe_load``, about 10x faster on a bundle's snapshots).
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+def _safe_load(text: str):
+    return yaml.load(text, Loader=_SAFE_LOADER)  # noqa: S506 - a safe loader
+
+
 def load_evidence(directory: str | Path) -> EvidenceBundle:
     """Read ``bundle.yaml`` and the snapshots, events, trace and task it references.
 
@@ -117,12 +126,12 @@ def load_evidence(directory: str | Path) -> EvidenceBundle:
     directory = Path(directory)
     index = directory / "bundle.yaml"
     try:
-        bundle = yaml.safe_load(index.read_text(encoding="utf-8"))
+        bundle = _safe_load(index.read_text(encoding="utf-8"))
         files = bundle["files"]
 
         def load(key):
             name = files.get(key)
-            return yaml.safe_load((directory / name).read_text(encoding="utf-8")) if name else {}
+            return _safe_load((directory / name).read_text(encoding="utf-8")) if name else {}
 
         return EvidenceBundle(
             session_id=bundle["session_id"],

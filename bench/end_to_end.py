@@ -22,6 +22,9 @@ subreaper, so the runner and its forkserver are reaped here and their CPU counte
    (claimed -> started, including the preflight round trip), runner start (started ->
    first tick), evidence (last tick -> awaiting_verification), verification
    (awaiting_verification -> verdict), plus the session-file writes counted.
+   ``holds_no_cameras`` repeats it without cameras: with them, "runner start" holds the
+   session's initial perception (two RGB-D renders and the perception pipeline) and
+   "evidence" its terminal one, which every session does by design.
 4. **Two-process mode**: ``phyagentos watch`` + ``phyagentos agent`` started first, then
    ``phyagentos submit`` of the hold chain and of pick-and-place; the same hand-off figures.
 5. **Cold start**: from launching ``phyagentos run`` to the first session's first
@@ -263,9 +266,14 @@ def compare(runs: int, tmp: Path, *, perception: bool = True) -> dict:
     return out
 
 
-def holds_in_one_run(n: int, tmp: Path) -> dict:
+def holds_in_one_run(n: int, tmp: Path, *, cameras: bool = True) -> dict:
+    """One run of a chain of ``n`` holds; ``cameras=False``: in a workspace whose
+    sensors.yaml has no cameras (no perception before and after each hold)."""
     graph = hold_chain(tmp / "hold_chain.yaml", n)
-    ws = tmp / "holds"
+    ws = tmp / ("holds" if cameras else "holds_no_cameras")
+    if not cameras:
+        ws.mkdir(parents=True)
+        (ws / "sensors.yaml").write_text(yaml.safe_dump(NO_CAMERA_SENSORS))
     r = timed([*PHYAGENTOS, "run", str(graph), "--workspace", str(ws), "--json"])
     assert json.loads(r["stdout"])["succeeded"]
     rows = session_timeline(ws)
@@ -355,9 +363,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=5, help="alternated runs of each side (default 5)")
     ap.add_argument("--holds", type=int, default=20, help="length of the hold chain (default 20)")
-    ap.add_argument("--parts", default="imports,compare,compare_no_perception,holds,two_process",
-                    help="comma-separated subset of imports,compare,compare_no_perception,holds,two_process "
-                         "(default all)")
+    ap.add_argument("--parts", default="imports,compare,compare_no_perception,holds,holds_no_cameras,two_process",
+                    help="comma-separated subset of imports,compare,compare_no_perception,holds,holds_no_cameras,"
+                         "two_process (default all)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     _subreaper()
@@ -378,6 +386,9 @@ def main(argv=None) -> int:
         if "holds" in parts:
             print("hold chain in one run:", flush=True)
             result["holds"] = holds_in_one_run(args.holds, tmp)
+        if "holds_no_cameras" in parts:
+            print("hold chain in one run, no cameras:", flush=True)
+            result["holds_no_cameras"] = holds_in_one_run(args.holds, tmp, cameras=False)
         if "two_process" in parts:
             print("two-process mode:", flush=True)
             result["two_process"] = two_process(args.holds, tmp)
@@ -401,16 +412,19 @@ def main(argv=None) -> int:
         rows.append(("pick_and_place run, no cameras", result["compare_no_perception"]["handoff_ms"]))
     if "holds" in result:
         rows.append((f"{args.holds} holds, one run", result["holds"]["handoff_ms"]))
+    if "holds_no_cameras" in result:
+        rows.append((f"{args.holds} holds, one run, no cameras", result["holds_no_cameras"]["handoff_ms"]))
     for name, part in result.get("two_process", {}).items():
         rows.append((f"two-process {name}", part["handoff_ms"]))
     print(f"\n{'hand-off verdict -> next actuation':40}{'p50 ms':>10}{'p99 ms':>10}{'n':>5}")
     for name, h in rows:
         print(f"{name:40}{h['p50'] if h['p50'] is not None else '-':>10}{h['p99'] if h['p99'] is not None else '-':>10}"
               f"{h['n']:>5}")
-    if "holds" in result:
-        h = result["holds"]
-        print(f"\nhold chain: {h['sessions_per_s']:.2f} sessions/s; per session (median ms): "
-              + ", ".join(f"{k} {v}" for k, v in h["per_session_ms"].items()))
+    for key in ("holds", "holds_no_cameras"):
+        if key in result:
+            h = result[key]
+            print(f"\n{key.replace('_', ' ')}: {h['sessions_per_s']:.2f} sessions/s; per session (median ms): "
+                  + ", ".join(f"{k} {v}" for k, v in h["per_session_ms"].items()))
     for name, part in result.get("two_process", {}).items():
         print(f"two-process {name}: submit to finished {part['submit_to_finished_s']:.2f} s; per session (median ms): "
               + ", ".join(f"{k} {v}" for k, v in part["per_session_ms"].items()))

@@ -7,7 +7,7 @@ open -> Cartesian retreat. The cube must end inside the goal region.
 
 Usage::
 
-    python bench/bare_pick_and_place.py [--runs 3] [--seed 0] [--plan-repeats 30]
+    python bench/bare_pick_and_place.py [--runs 3] [--seed 0] [--plan-repeats 30] [--perception]
 
 Prints a table and writes bench/results/bare_pick_and_place.json. The core is
 ``run_bare_pick_and_place(seed=0) -> dict`` (wall-time split in seconds: ik_s,
@@ -53,7 +53,7 @@ class _Clock:
     """Accumulates wall time per category."""
 
     def __init__(self) -> None:
-        self.s = {"ik": 0.0, "planning": 0.0, "timing": 0.0, "simulation": 0.0, "setup": 0.0}
+        self.s = {"ik": 0.0, "planning": 0.0, "timing": 0.0, "simulation": 0.0, "setup": 0.0, "perception": 0.0}
 
     def run(self, cat: str, fn, *args, **kwargs):
         t = time.perf_counter()
@@ -73,6 +73,7 @@ def run_bare_pick_and_place(
     margin_m: float = 0.01,
     approach_height_m: float = 0.10,
     observer: Callable[[str, MuJoCoTarget], None] | None = None,
+    perception: bool = False,
 ) -> dict:
     """Run one pick-and-place and return timings; raises AssertionError on failure.
 
@@ -82,6 +83,18 @@ def run_bare_pick_and_place(
     cube position and the tracking errors of each executed trajectory.
     ``observer(stage, target)``, if given, is called after the stages ``'grasped'``,
     ``'transferred'``, ``'released'`` and ``'retreated'`` (not timed separately).
+
+    ``perception=True`` runs the same perception as a ``phyagentos run`` of
+    goal_graphs/pick_and_place.yaml, at the same points and as often: the target's camera
+    sensors (shipped ``sensors.yaml``, same resolution) captured and fused by a fresh
+    :class:`~phyagentos.perception.Perceiver` per skill through
+    :func:`phyagentos.primitives.observation.perceive_now` (frames saved as PNG like the
+    SessionRunner saves them), before and after each skill (the SessionRunner's initial
+    and terminal observation) and where the skill trees observe (pick: ObserveScene,
+    ObserveAfterPick; place: ObserveScene, and ObserveAfterPlace after the arm cleared
+    the cameras' view by a planned move back to its home configuration, as
+    trees/place.yaml does). Timed as ``perception_s`` (and in ``total_s``); the motions
+    themselves still use the simulator's object pose, as without perception.
     """
 
     def notify(stage: str) -> None:
@@ -101,6 +114,11 @@ def run_bare_pick_and_place(
     unexpected: list = []
 
     target = clock.run("setup", MuJoCoTarget, "bare", scene, seed=seed)
+    perceive = _Perception(target, clock) if perception else None
+    if perceive:
+        perceive.new_skill()
+        perceive("initial")  # SessionRunner, before the pick
+        perceive("01_ObserveScene")
     model = target.model
     checker = clock.run("planning", CollisionChecker, model, margin_m=margin_m)
     # Straight-line moves end in contact on purpose (fingers around the cube, cube on
@@ -204,6 +222,12 @@ def run_bare_pick_and_place(
     P = cartesian(lift)
     assert check_straight(P, "lift", attached=T_tcp_obj, skip_first=True), "lift collides"
     execute(P, check=False)
+    if perceive:
+        perceive("02_ObserveAfterPick")
+        perceive("terminal")  # SessionRunner, after the pick
+        perceive.new_skill()
+        perceive("initial")  # SessionRunner, before the place
+        perceive("01_ObserveScene")
     # 4. transfer over the wall (planned, cube attached)
     T_place = place_pose(region.center, obj.half_extents, T_tcp_object=T_tcp_obj, yaw_rad=grasp.yaw_rad)
     T_preplace = T_place.copy()
@@ -226,6 +250,11 @@ def run_bare_pick_and_place(
     assert check_straight(P, "retreat"), "retreat collides"
     execute(P, check=False)
     notify("retreated")
+    if perceive:
+        # trees/place.yaml: clear the cameras' view (plan home, retime, execute), observe
+        execute(plan(np.asarray(target.home_qpos, dtype=float)), check=True)
+        perceive("02_ObserveAfterPlace")
+        perceive("terminal")  # SessionRunner, after the place
 
     # verify
     p = target.object_pose(object_name)[:3, 3]
@@ -237,6 +266,8 @@ def run_bare_pick_and_place(
     total = time.perf_counter() - t_start - clock.s.get("observer", 0.0)
     sim_time = target.sim_time
     target.close()
+    if perceive:
+        perceive.close()
     return {
         "seed": seed,
         "success": True,
@@ -245,6 +276,8 @@ def run_bare_pick_and_place(
         "timing_s": clock.s["timing"],
         "simulation_s": clock.s["simulation"],
         "setup_s": clock.s["setup"],
+        "perception_s": clock.s.get("perception", 0.0),
+        "perception_passes": perceive.passes if perceive else 0,
         "total_s": total,
         "sim_time_s": sim_time,
         "realtime_factor": sim_time / total,
@@ -261,6 +294,42 @@ def run_bare_pick_and_place(
         "unexpected_contacts": sorted({tuple(c) for c in unexpected}),
         "cube_final_position": [float(x) for x in p],
     }
+
+
+class _Perception:
+    """The SessionRunner's perception without the framework: a fresh Perceiver per skill
+    (``make_perceiver``, which continues the previous skill's tracks from
+    ``target.runtime_notes`` like a run does) and ``perceive_now`` with the frames saved
+    into a scratch evidence directory."""
+
+    def __init__(self, target: MuJoCoTarget, clock: _Clock) -> None:
+        import tempfile  # noqa: PLC0415
+
+        from phyagentos.primitives.observation import has_cameras  # noqa: PLC0415
+
+        assert has_cameras(target), "the bare target has no camera sensors (sensors.yaml)"
+        self.target, self.clock, self.passes, self.skill = target, clock, 0, 0
+        self.tmp = tempfile.TemporaryDirectory(prefix="bare-evidence-")
+        self.perceiver = None
+
+    def new_skill(self) -> None:
+        from phyagentos.primitives.observation import make_perceiver  # noqa: PLC0415
+
+        self.skill += 1
+        self.perceiver = self.clock.run("perception", make_perceiver, self.target, None)
+
+    def __call__(self, tag: str) -> dict:
+        from phyagentos.primitives.observation import perceive_now  # noqa: PLC0415
+
+        evidence = Path(self.tmp.name) / f"skill{self.skill}"
+        snap = self.clock.run("perception", perceive_now, self.target, self.perceiver, evidence_dir=evidence,
+                              evidence_rel=f"evidence/skill{self.skill}", tag=tag)
+        assert snap is not None and snap.get("entities"), f"perception saw nothing at {tag}"
+        self.passes += 1
+        return snap
+
+    def close(self) -> None:
+        self.tmp.cleanup()
 
 
 def plan_over_wall_benchmark(repeats: int = 30, planner: str = "RRTConnect", margin_m: float = 0.01) -> dict:
@@ -303,20 +372,22 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--plan-repeats", type=int, default=30)
     ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--perception", action="store_true",
+                    help="perceive where a phyagentos run of pick_and_place.yaml perceives (see run_bare_pick_and_place)")
     ap.add_argument("--once", action="store_true",
                     help="one cold run, print its result as JSON, write nothing (bench/end_to_end.py)")
     args = ap.parse_args(argv)
     if args.once:
-        print(json.dumps(run_bare_pick_and_place(seed=args.seed)))
+        print(json.dumps(run_bare_pick_and_place(seed=args.seed, perception=args.perception)))
         return 0
 
-    cold = run_bare_pick_and_place(seed=args.seed)
-    runs = [run_bare_pick_and_place(seed=args.seed + i) for i in range(args.runs)]
+    cold = run_bare_pick_and_place(seed=args.seed, perception=args.perception)
+    runs = [run_bare_pick_and_place(seed=args.seed + i, perception=args.perception) for i in range(args.runs)]
     runs_sorted = sorted(runs, key=lambda r: r["total_s"])
     med = runs_sorted[len(runs_sorted) // 2]
     wall = plan_over_wall_benchmark(args.plan_repeats) if args.plan_repeats > 0 else None
 
-    keys = ["ik_s", "planning_s", "timing_s", "simulation_s", "setup_s", "total_s", "sim_time_s"]
+    keys = ["ik_s", "planning_s", "timing_s", "simulation_s", "setup_s", "perception_s", "total_s", "sim_time_s"]
     print(f"{'metric':<28}{'cold':>10}{'median run':>12}")
     for k in keys:
         print(f"{k:<28}{cold[k]:>10.3f}{med[k]:>12.3f}")

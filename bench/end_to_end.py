@@ -1,14 +1,18 @@
 """End to end: whole-process ``phyagentos run`` of the pick-and-place graph against the bare script.
 
-    .venv/bin/python bench/end_to_end.py [--runs 5] [--holds 20] [--skip-two-process]
+    .venv/bin/python bench/end_to_end.py [--runs 5] [--holds 20] [--parts compare,holds,...]
 
 Everything runs as real processes in one process tree (this script is a child
 subreaper, so the runner and its forkserver are reaped here and their CPU counted):
 
 1. **Comparison**, alternated so shared load hits both sides alike: ``phyagentos run
    goal_graphs/pick_and_place.yaml --workspace <new>`` against ``bench/bare_pick_and_place.py
-   --once`` (the same motions with the project's own motion library, no framework).
-   Median wall and CPU time (user + system of the whole tree) and their ratios.
+   --once --perception`` (the same motions with the project's own motion library, no
+   framework, and the same perception calls at the same points: before and after each
+   skill and where the skill trees observe). ``compare_no_perception`` repeats it with
+   the run's cameras removed (a workspace sensors.yaml without them) against the bare
+   script without perception. Median wall and CPU time (user + system of the whole
+   tree), their ratios, and the median ratio of the back-to-back pairs.
 2. **Hand-off latency**: from one session's verdict (the transition's timestamp) to the
    next ready session's first actuation (``actuation_started_at`` in its evidence
    bundle, stamped by the SessionRunner just before the first tick).
@@ -18,6 +22,9 @@ subreaper, so the runner and its forkserver are reaped here and their CPU counte
    (claimed -> started, including the preflight round trip), runner start (started ->
    first tick), evidence (last tick -> awaiting_verification), verification
    (awaiting_verification -> verdict), plus the session-file writes counted.
+   ``holds_no_cameras`` repeats it without cameras: with them, "runner start" holds the
+   session's initial perception (two RGB-D renders and the perception pipeline) and
+   "evidence" its terminal one, which every session does by design.
 4. **Two-process mode**: ``phyagentos watch`` + ``phyagentos agent`` started first, then
    ``phyagentos submit`` of the hold chain and of pick-and-place; the same hand-off figures.
 5. **Cold start**: from launching ``phyagentos run`` to the first session's first
@@ -200,18 +207,39 @@ def hold_chain(path: Path, n: int) -> Path:
 # -- the parts -------------------------------------------------------------------------------
 
 
-def compare(runs: int, tmp: Path) -> dict:
+#: franka_tabletop's sensors without its cameras: a workspace with this sensors.yaml runs
+#: every session without perception (the runner falls back to the target's own
+#: observation), for the comparison against the bare script without perception.
+NO_CAMERA_SENSORS = {"version": 1, "targets": {"franka_tabletop": [
+    {"name": "joints", "kind": "joint_state", "frame_id": "panda0_link0", "rate_hz": 500},
+    {"name": "gripper", "kind": "gripper", "frame_id": "tcp", "rate_hz": 500}]}}
+
+
+def compare(runs: int, tmp: Path, *, perception: bool = True) -> dict:
+    """Alternated whole-process runs of the framework and the bare script.
+
+    ``perception=True``: the run with its cameras and perception on (every session
+    perceives before and after its skill, and the skill trees observe), against
+    ``bare_pick_and_place.py --perception`` (the same perception calls at the same
+    points). ``perception=False``: the run in a workspace whose sensors.yaml has no
+    cameras, against the bare script without perception.
+    """
     fw, bare, cold, hand = [], [], [], []
+    bare_cmd = [*BARE, "--perception"] if perception else BARE
+    tag = "pp" if perception else "np"
     for i in range(runs):
         order = ("fw", "bare") if i % 2 == 0 else ("bare", "fw")
         for side in order:
             if side == "bare":
-                r = timed(BARE)
+                r = timed(bare_cmd)
                 result = json.loads(r["stdout"].strip().splitlines()[-1])
                 assert result["success"], result
                 bare.append(r)
             else:
-                ws = tmp / f"pp{i}"
+                ws = tmp / f"{tag}{i}"
+                if not perception:
+                    ws.mkdir(parents=True)
+                    (ws / "sensors.yaml").write_text(yaml.safe_dump(NO_CAMERA_SENSORS))
                 r = timed([*PHYAGENTOS, "run", str(GRAPH), "--workspace", str(ws), "--json"])
                 report = json.loads(r["stdout"])
                 assert report["succeeded"], report
@@ -225,6 +253,7 @@ def compare(runs: int, tmp: Path) -> dict:
     med = lambda xs, k: statistics.median(x[k] for x in xs)  # noqa: E731
     out = {
         "runs": runs,
+        "perception": perception,
         "framework": {"wall_s": med(fw, "wall_s"), "cpu_s": med(fw, "cpu_s"),
                       "wall_all_s": [round(x["wall_s"], 3) for x in fw], "cpu_all_s": [round(x["cpu_s"], 3) for x in fw]},
         "bare": {"wall_s": med(bare, "wall_s"), "cpu_s": med(bare, "cpu_s"),
@@ -232,14 +261,22 @@ def compare(runs: int, tmp: Path) -> dict:
         "cold_start_to_first_actuation_s": {"median": statistics.median(cold), "all": [round(c, 3) for c in cold]},
         "handoff_ms": {"p50": _ms(_pct(hand, 0.5)), "p99": _ms(_pct(hand, 0.99)), "n": len(hand)},
     }
+    # ratios of the medians, and the median of the per-pair ratios (each pair ran back to back)
     out["wall_ratio"] = out["framework"]["wall_s"] / out["bare"]["wall_s"]
     out["cpu_ratio"] = out["framework"]["cpu_s"] / out["bare"]["cpu_s"]
+    out["wall_ratio_pairs_median"] = statistics.median(f["wall_s"] / b["wall_s"] for f, b in zip(fw, bare))
+    out["cpu_ratio_pairs_median"] = statistics.median(f["cpu_s"] / b["cpu_s"] for f, b in zip(fw, bare))
     return out
 
 
-def holds_in_one_run(n: int, tmp: Path) -> dict:
+def holds_in_one_run(n: int, tmp: Path, *, cameras: bool = True) -> dict:
+    """One run of a chain of ``n`` holds; ``cameras=False``: in a workspace whose
+    sensors.yaml has no cameras (no perception before and after each hold)."""
     graph = hold_chain(tmp / "hold_chain.yaml", n)
-    ws = tmp / "holds"
+    ws = tmp / ("holds" if cameras else "holds_no_cameras")
+    if not cameras:
+        ws.mkdir(parents=True)
+        (ws / "sensors.yaml").write_text(yaml.safe_dump(NO_CAMERA_SENSORS))
     r = timed([*PHYAGENTOS, "run", str(graph), "--workspace", str(ws), "--json"])
     assert json.loads(r["stdout"])["succeeded"]
     rows = session_timeline(ws)
@@ -329,8 +366,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=5, help="alternated runs of each side (default 5)")
     ap.add_argument("--holds", type=int, default=20, help="length of the hold chain (default 20)")
-    ap.add_argument("--parts", default="imports,compare,holds,two_process",
-                    help="comma-separated subset of imports,compare,holds,two_process (default all)")
+    ap.add_argument("--parts", default="imports,compare,compare_no_perception,holds,holds_no_cameras,two_process",
+                    help="comma-separated subset of imports,compare,compare_no_perception,holds,holds_no_cameras,"
+                         "two_process (default all)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     _subreaper()
@@ -345,9 +383,15 @@ def main(argv=None) -> int:
         if "compare" in parts:
             print("comparison (alternated):", flush=True)
             result["compare"] = compare(args.runs, tmp)
+        if "compare_no_perception" in parts:
+            print("comparison without perception (alternated):", flush=True)
+            result["compare_no_perception"] = compare(args.runs, tmp, perception=False)
         if "holds" in parts:
             print("hold chain in one run:", flush=True)
             result["holds"] = holds_in_one_run(args.holds, tmp)
+        if "holds_no_cameras" in parts:
+            print("hold chain in one run, no cameras:", flush=True)
+            result["holds_no_cameras"] = holds_in_one_run(args.holds, tmp, cameras=False)
         if "two_process" in parts:
             print("two-process mode:", flush=True)
             result["two_process"] = two_process(args.holds, tmp)
@@ -356,26 +400,34 @@ def main(argv=None) -> int:
         shutil.rmtree(tmp, ignore_errors=True)
 
     c = result.get("compare")
-    if c:
-        print(f"\n{'':34}{'framework':>12}{'bare':>10}{'ratio':>8}{'goal':>8}")
-        print(f"{'wall, median (s)':34}{c['framework']['wall_s']:>12.3f}{c['bare']['wall_s']:>10.3f}"
-              f"{c['wall_ratio']:>8.2f}{'<=1.20':>8}")
-        print(f"{'CPU, median (s)':34}{c['framework']['cpu_s']:>12.3f}{c['bare']['cpu_s']:>10.3f}"
-              f"{c['cpu_ratio']:>8.2f}{'<=1.15':>8}")
-        print(f"{'cold start to first actuation (s)':34}{c['cold_start_to_first_actuation_s']['median']:>12.3f}")
+    for key, title in (("compare", "with perception"), ("compare_no_perception", "without perception")):
+        cc = result.get(key)
+        if not cc:
+            continue
+        print(f"\n{title:34}{'framework':>12}{'bare':>10}{'ratio':>8}{'pairs':>8}{'goal':>8}")
+        print(f"{'wall, median (s)':34}{cc['framework']['wall_s']:>12.3f}{cc['bare']['wall_s']:>10.3f}"
+              f"{cc['wall_ratio']:>8.2f}{cc['wall_ratio_pairs_median']:>8.2f}{'<=1.20':>8}")
+        print(f"{'CPU, median (s)':34}{cc['framework']['cpu_s']:>12.3f}{cc['bare']['cpu_s']:>10.3f}"
+              f"{cc['cpu_ratio']:>8.2f}{cc['cpu_ratio_pairs_median']:>8.2f}{'<=1.15':>8}")
+        print(f"{'cold start to first actuation (s)':34}{cc['cold_start_to_first_actuation_s']['median']:>12.3f}")
     rows = [("pick_and_place run", c["handoff_ms"])] if c else []
+    if result.get("compare_no_perception"):
+        rows.append(("pick_and_place run, no cameras", result["compare_no_perception"]["handoff_ms"]))
     if "holds" in result:
         rows.append((f"{args.holds} holds, one run", result["holds"]["handoff_ms"]))
+    if "holds_no_cameras" in result:
+        rows.append((f"{args.holds} holds, one run, no cameras", result["holds_no_cameras"]["handoff_ms"]))
     for name, part in result.get("two_process", {}).items():
         rows.append((f"two-process {name}", part["handoff_ms"]))
     print(f"\n{'hand-off verdict -> next actuation':40}{'p50 ms':>10}{'p99 ms':>10}{'n':>5}")
     for name, h in rows:
         print(f"{name:40}{h['p50'] if h['p50'] is not None else '-':>10}{h['p99'] if h['p99'] is not None else '-':>10}"
               f"{h['n']:>5}")
-    if "holds" in result:
-        h = result["holds"]
-        print(f"\nhold chain: {h['sessions_per_s']:.2f} sessions/s; per session (median ms): "
-              + ", ".join(f"{k} {v}" for k, v in h["per_session_ms"].items()))
+    for key in ("holds", "holds_no_cameras"):
+        if key in result:
+            h = result[key]
+            print(f"\n{key.replace('_', ' ')}: {h['sessions_per_s']:.2f} sessions/s; per session (median ms): "
+                  + ", ".join(f"{k} {v}" for k, v in h["per_session_ms"].items()))
     for name, part in result.get("two_process", {}).items():
         print(f"two-process {name}: submit to finished {part['submit_to_finished_s']:.2f} s; per session (median ms): "
               + ", ".join(f"{k} {v}" for k, v in part["per_session_ms"].items()))

@@ -114,6 +114,7 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
 
     thread = threading.Thread(target=runtime_plane, name="phyagentos-supervisor", daemon=True)
     thread.start()
+    agent.on_submit = supervisor.watcher.notify  # claim at once, before the agent rewrites TASK.md
     last_states: dict | None = None
     try:
         idle_checked = False
@@ -124,11 +125,13 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
                 raise failure[0]
             if acted:
                 supervisor.watcher.notify()  # claim at once, without waiting for inotify
-            states = agent.node_states()
+            # the sessions as the step left them: terminal states do not change, so done() is exact
+            sessions = getattr(agent, "last_sessions", None)
+            states = agent.node_states(sessions)
             if states != last_states and progress is not None:
                 say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
             last_states = states
-            if agent.done():
+            if agent.done(sessions) if sessions is not None else agent.done():
                 return
             if acted:
                 idle_checked = False
@@ -146,6 +149,7 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
                 say("supervisor " + ("e-stopped" if supervisor.estopped else "paused") + "; waiting")
             wake.wait(supervisor.config.poll_interval_s)
     finally:
+        agent.on_submit = None
         stop.set()
         supervisor.watcher.notify()
         thread.join()
@@ -265,18 +269,17 @@ def run_goal_graph(
     """
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
-    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
-    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415 - for the whole-graph check
+    from phyagentos.graph_check_process import check_goal_graph_forked  # noqa: PLC0415
 
     # The whole graph before anything is registered or moves: errors name the user's file.
-    # (The runner process is already starting in the background: see prestart_runner.)
-    runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs())
-    checked = check_goal_graph(goal_graph, workspace, runtime, target=target)
+    # It runs in a child of the runner's forkserver (started in the background by
+    # prestart_runner), which has the primitives and the motion stack imported already.
+    checked = check_goal_graph_forked(goal_graph, workspace.root, target=target)
     _refuse_held_worlds(workspace, {n.target for n in checked.graph.nodes})
     supervisor = WatchdogSupervisor(workspace)
     try:
         run = _register_run(workspace, goal_graph, seed=seed, target=target)
-        graph = load_run_graph(workspace, run.run_id, skills=runtime.skills.names())
+        graph = load_run_graph(workspace, run.run_id, skills=skill_names())
     except BaseException:
         supervisor.close()
         raise

@@ -38,7 +38,7 @@ import os
 import socket
 from dataclasses import dataclass, replace
 from datetime import datetime
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import networkx as nx
 
@@ -161,6 +161,10 @@ class AgentCoordinator:
         self.consolidate = consolidate
         self.keep_success_images = keep_success_images
         self.promotion = promotion or PromotionPolicy()
+        #: called right after each session :meth:`step` submits (e.g. to wake a supervisor)
+        self.on_submit: Callable[[], None] | None = None
+        #: the run's sessions as the last :meth:`step` left them (for its caller's report)
+        self.last_sessions: list[SessionRecord] | None = None
 
     # -- state -----------------------------------------------------------
 
@@ -250,27 +254,42 @@ class AgentCoordinator:
             actions += 1
         return actions
 
-    def done(self) -> bool:
-        """True when every node is terminal (succeeded, failed, blocked or cancelled)."""
-        return dagmod.is_complete(self.dag, self.node_states())
+    def done(self, sessions: list[SessionRecord] | None = None) -> bool:
+        """True when every node is terminal (succeeded, failed, blocked or cancelled);
+        ``sessions`` as :meth:`node_states` takes them (default: listed now)."""
+        return dagmod.is_complete(self.dag, self.node_states(sessions))
 
     # -- the loop --------------------------------------------------------
 
     def step(self) -> int:
-        """Verify, replan, compile ready nodes and write TASK.md; returns actions taken."""
+        """Verify, replan, compile ready nodes and write TASK.md; returns actions taken.
+
+        The run's sessions are listed again only after this step changed them (a
+        verdict, a replan, a compiled node); ``on_submit``, if set, is called as soon
+        as a ready node's session is submitted (``drive_run`` wakes the supervisor with
+        it, before TASK.md is rewritten).
+        """
         actions = 0
-        for rec in self.sessions():
+        sessions = self.sessions()
+        for rec in sessions:
             # a verification whose agent died (its lease expired) is taken up again
             if rec.state == "awaiting_verification" or (rec.state == "verifying" and is_expired(rec.lease)):
                 actions += self._verify(rec.session_id)
-        sessions = self.sessions()
+        if actions:
+            sessions = self.sessions()
+        replanned = 0
         for rec in sessions:
             if rec.state == "awaiting_replan":
-                actions += self._replan(rec.session_id)
-        actions += self._resume_after_reopen(self.sessions())
-        sessions = self.sessions()
+                replanned += self._replan(rec.session_id)
+        if replanned:
+            sessions = self.sessions()
+        resumed = self._resume_after_reopen(sessions)
+        if resumed:
+            sessions = self.sessions()
+        actions += replanned + resumed
         self.reopen_edges(sessions)
         states = self.node_states(sessions)
+        compiled = 0
         for node_id in dagmod.ready_nodes(self.dag, states):
             node = self.graph.get_node(node_id)
             params, context = self.context_builder.build(goal=f"{self.graph.name}/{node.id}", skill=node.skill,
@@ -279,8 +298,11 @@ class AgentCoordinator:
                                                          observed=self.observed(node.params.get("object"), sessions))
             context = with_calls(context, planner_calls(self.graph.provenance))  # the plan's model calls
             self.compiler.compile_node(node, parameters=params, context=context)
-            actions += 1
-        self._write_task()
+            compiled += 1
+            if self.on_submit is not None:
+                self.on_submit()
+        actions += compiled
+        self._write_task(self.sessions() if compiled else sessions)
         return actions
 
     def _verify(self, session_id: str) -> int:
@@ -455,8 +477,9 @@ class AgentCoordinator:
                     repick.session_id)
         return 1
 
-    def _write_task(self) -> None:
-        sessions = self.sessions()
+    def _write_task(self, sessions: list[SessionRecord] | None = None) -> None:
+        sessions = self.sessions() if sessions is None else sessions
+        self.last_sessions = sessions
         states = self.node_states(sessions)
         by_node: dict[str, list[str]] = {}
         for s in sessions:

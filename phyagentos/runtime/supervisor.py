@@ -570,6 +570,16 @@ class WatchdogSupervisor:
         missing = [d for d in ident.depends_on if (ident.run_id, d) not in self._succeeded]
         if not missing:
             return True
+        # The run's archive catalogue names each finished session with its node and final
+        # state (a line appended after the terminal record is durable): read it first;
+        # parse the run's session files only if it does not settle the question.
+        from phyagentos.protocol.archive import SessionArchive  # noqa: PLC0415
+
+        for entry in SessionArchive(self.workspace.sessions_dir).run_entries(ident.run_id):
+            if entry.state == "succeeded":
+                self._succeeded.add((ident.run_id, entry.node))
+        if all((ident.run_id, d) in self._succeeded for d in ident.depends_on):
+            return True
         for rec in self.workspace.list_sessions(states=["succeeded"], run_id=ident.run_id):
             self._succeeded.add((rec.run_id, rec.node))
         return all((ident.run_id, d) in self._succeeded for d in ident.depends_on)

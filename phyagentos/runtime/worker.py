@@ -59,7 +59,8 @@ from phyagentos.errors import SupervisorError
 
 from .heartbeat import SLOTS, Heartbeats
 
-__all__ = ["RunnerProcess", "RunnerDied", "runner_main", "take_runner", "park_runner", "prestart_runner"]
+__all__ = ["RunnerProcess", "RunnerDied", "runner_main", "take_runner", "park_runner", "prestart_runner",
+           "forkserver_context"]
 
 logger = logging.getLogger(__name__)
 
@@ -77,6 +78,14 @@ def _context():
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(_PRELOAD)
     return ctx
+
+
+def forkserver_context():
+    """The ``multiprocessing`` context whose forkserver runners are forked from (the
+    runtime preloaded): other short-lived runtime-side children (e.g. the whole-graph
+    check of ``phyagentos run``) are forked from it too, without importing the runtime
+    again."""
+    return _context()
 
 
 class RunnerDied(SupervisorError):

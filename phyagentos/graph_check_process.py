@@ -1,0 +1,112 @@
+"""The whole-graph check of ``phyagentos run``, in a child of the runner's forkserver.
+
+:func:`phyagentos.graph_check.check_goal_graph` builds every node's behaviour tree and
+solves IK for every pick and place pose: it needs the primitives and the motion stack
+(MuJoCo, mink, toppra), about 1.5 s of imports. The runner's forkserver
+(:mod:`phyagentos.runtime.worker`), which ``run`` starts before anything else, imports
+exactly those once. :func:`check_goal_graph_forked` forks a short-lived child from it
+that runs the same check and sends its result back over a pipe, so the ``run`` process
+itself never imports the motion stack: the import is paid once per run (in the
+forkserver), not twice, and not on the main process's path.
+
+The check, its inputs and its errors are exactly those of ``check_goal_graph``; where no
+forkserver can be used, it runs in this process instead.
+"""
+
+from __future__ import annotations
+
+import logging
+import traceback
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from phyagentos import errors
+from phyagentos.errors import GoalGraphError, PhyAgentOSError
+
+if TYPE_CHECKING:
+    from phyagentos.graph_check import GraphCheck
+
+__all__ = ["check_goal_graph_forked"]
+
+logger = logging.getLogger(__name__)
+
+#: The check of a large graph solves a few IK problems per pick and place; a child that
+#: has not answered in this long is killed and the check runs in this process (s).
+CHECK_TIMEOUT_S = 300.0
+
+
+def _check_here(path: Path, root: Path, target: str | None, dirs: tuple[str, str]) -> "GraphCheck":
+    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+    from phyagentos.protocol import Workspace  # noqa: PLC0415
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
+
+    runtime = BuiltinSkillRuntime.from_dirs(*dirs)
+    return check_goal_graph(path, Workspace.open(root), runtime, target=target)
+
+
+def _child(conn, path: str, root: str, target: str | None, dirs: tuple[str, str]) -> None:
+    """Entry point of the forked child: one ``(kind, payload)`` message, then exit."""
+    try:
+        result = _check_here(Path(path), Path(root), target, dirs)
+        conn.send(("ok", result))
+    except GoalGraphError as exc:
+        conn.send(("located", (type(exc).__name__, exc.detail, exc.path, exc.line)))
+    except PhyAgentOSError as exc:  # e.g. a malformed TARGETS.md: re-raised as itself in the parent
+        if hasattr(exc, "detail"):  # path:line errors rebuild from their parts
+            conn.send(("located", (type(exc).__name__, exc.detail, exc.path, exc.line)))
+        else:
+            conn.send(("error", exc))
+    except BaseException as exc:  # noqa: BLE001 - reported, the parent checks in-process
+        conn.send(("crash", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+    finally:
+        conn.close()
+
+
+def check_goal_graph_forked(path: str | Path, workspace_root: str | Path, *, target: str | None = None,
+                            timeout_s: float = CHECK_TIMEOUT_S) -> "GraphCheck":
+    """:func:`phyagentos.graph_check.check_goal_graph` of ``path`` against the workspace
+    at ``workspace_root`` with the shipped skills and trees, run in a child of the
+    runner's forkserver (this process imports neither the primitives nor the motion
+    stack).
+
+    Raises:
+        GoalGraphError: the graph is invalid (the same message, file and line as the
+            in-process check).
+        PhyAgentOSError: what the check raises otherwise (e.g. a malformed TARGETS.md).
+    """
+    from phyagentos.resources import skill_dirs, tree_dirs  # noqa: PLC0415
+
+    path, root = Path(path), Path(workspace_root)
+    dirs = (skill_dirs(), tree_dirs())  # resolved here: the forkserver's environment may be older
+    try:
+        from phyagentos.runtime.worker import forkserver_context  # noqa: PLC0415
+
+        ctx = forkserver_context()
+        parent, child = ctx.Pipe(duplex=False)
+        proc = ctx.Process(target=_child, name="phyagentos-graph-check", daemon=True,
+                           args=(child, str(path), str(root), target, dirs))
+        proc.start()
+    except (OSError, ValueError, ImportError) as exc:  # no forkserver here: check in this process
+        logger.info("graph check in this process (no forkserver: %s)", exc)
+        return _check_here(path, root, target, dirs)
+    child.close()
+    try:
+        if not parent.poll(timeout_s):
+            raise TimeoutError(f"no answer within {timeout_s:.0f} s")
+        kind, payload = parent.recv()
+    except (OSError, EOFError, TimeoutError) as exc:
+        logger.warning("graph check child failed (%s); checking in this process", exc)
+        proc.kill()
+        return _check_here(path, root, target, dirs)
+    finally:
+        parent.close()
+        proc.join(timeout=5)
+    if kind == "ok":
+        return payload
+    if kind == "located":
+        name, detail, where, line = payload
+        raise getattr(errors, name, GoalGraphError)(detail, path=where, line=line)
+    if kind == "error":
+        raise payload
+    logger.warning("graph check child crashed; checking in this process:\n%s", payload)
+    return _check_here(path, root, target, dirs)

@@ -1,0 +1,109 @@
+"""What keeps work off the cold path and the hand-off of ``phyagentos run`` (issue 12).
+
+The whole-graph check runs in a child of the runner's forkserver and gives the same
+result and the same errors as in this process; the ``run`` process never imports the
+motion stack; the coordinator wakes whoever runs its sessions as soon as it submits.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from phyagentos.errors import GoalGraphError
+from phyagentos.protocol import Workspace
+
+REPO = Path(__file__).resolve().parent.parent
+PICK_AND_PLACE = REPO / "goal_graphs" / "pick_and_place.yaml"
+HOLD = REPO / "goal_graphs" / "hold.yaml"
+
+
+def _no_fallback(monkeypatch) -> None:
+    """The check must come from the forked child: this process's fallback fails the test."""
+    from phyagentos import graph_check_process
+
+    def fail(*args, **kwargs):
+        raise AssertionError("the graph check fell back to the calling process")
+
+    monkeypatch.setattr(graph_check_process, "_check_here", fail)
+
+
+def _in_process(path: Path, ws: Workspace):
+    from phyagentos.graph_check import check_goal_graph
+    from phyagentos.resources import skill_dirs, tree_dirs
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+
+    return check_goal_graph(path, ws, BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs()))
+
+
+@pytest.mark.sim
+def test_the_forked_graph_check_returns_what_the_in_process_check_returns(tmp_path, monkeypatch):
+    from phyagentos.graph_check_process import check_goal_graph_forked
+
+    ws = Workspace.create(tmp_path / "ws")
+    with monkeypatch.context() as m:
+        _no_fallback(m)
+        forked = check_goal_graph_forked(PICK_AND_PLACE, ws.root)
+    here = _in_process(PICK_AND_PLACE, ws)
+    assert [n.id for n in forked.graph.nodes] == [n.id for n in here.graph.nodes] == ["pick_cube", "place_cube"]
+    assert forked.poses_checked == here.poses_checked > 0
+    assert forked.implicit_edges == here.implicit_edges
+
+
+@pytest.mark.sim
+def test_the_forked_graph_check_raises_the_same_located_error(tmp_path, monkeypatch):
+    from phyagentos.graph_check_process import check_goal_graph_forked
+
+    ws = Workspace.create(tmp_path / "ws")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(PICK_AND_PLACE.read_text().replace("params: {object: cube}", "params: {object: sphere}"))
+    with monkeypatch.context() as m, pytest.raises(GoalGraphError) as forked:
+        _no_fallback(m)
+        check_goal_graph_forked(bad, ws.root)
+    with pytest.raises(GoalGraphError) as here:
+        _in_process(bad, ws)
+    assert str(forked.value) == str(here.value)
+    assert "sphere" in str(forked.value) and forked.value.line == here.value.line is not None
+    assert forked.value.path == here.value.path == bad
+
+
+@pytest.mark.sim
+def test_the_run_process_never_imports_the_motion_stack(tmp_path):
+    code = (
+        "import sys\n"
+        "from phyagentos.cli import main\n"
+        f"rc = main(['run', {str(HOLD)!r}, '--workspace', {str(tmp_path / 'ws')!r}, '--json'])\n"
+        "heavy = [m for m in ('mujoco', 'mink', 'toppra', 'phyagentos.motion', 'phyagentos.primitives',"
+        " 'phyagentos.targets') if m in sys.modules]\n"
+        "print('HEAVY', heavy, 'RC', rc)\n"
+    )
+    # a script run as __main__ is re-imported by forkserver children: keep it guarded
+    script = tmp_path / "run_it.py"
+    script.write_text("if __name__ == '__main__':\n" + "".join(f"    {line}\n" for line in code.splitlines()))
+    out = subprocess.run([sys.executable, str(script)], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert "HEAVY [] RC 0" in out.stdout, out.stdout[-2000:] + out.stderr[-3000:]
+
+
+def test_the_coordinator_wakes_the_supervisor_before_it_rewrites_task_md(tmp_path):
+    from phyagentos.agent.agent_loop import load_run_graph
+    from phyagentos.agent.coordinator import AgentCoordinator
+    from phyagentos.orchestrator import _register_run, skill_names
+
+    ws = Workspace.create(tmp_path / "ws")
+    run = _register_run(ws, HOLD, seed=0, target=None)
+    agent = AgentCoordinator(ws, load_run_graph(ws, run.run_id, skills=skill_names()), run_id=run.run_id)
+    seen: list[tuple[int, bool]] = []
+
+    def on_submit() -> None:
+        pending = [sid for sid, state, _ in ws.active_sessions(run_id=run.run_id) if state == "pending"]
+        seen.append((len(pending), ws.read("TASK").data.run_id == run.run_id))
+
+    agent.on_submit = on_submit
+    assert agent.step() == 1  # the one node of hold.yaml
+    assert seen == [(1, False)]  # the session is submitted; TASK.md not yet rewritten
+    assert ws.read("TASK").data.run_id == run.run_id  # ... and is once the step ends
+    assert agent.last_sessions is not None and len(agent.last_sessions) == len(seen)
+    assert agent.step() == 0 and len(seen) == 1  # nothing new: no wake-up

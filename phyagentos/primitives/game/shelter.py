@@ -160,13 +160,26 @@ class Rest:
     with ``until_day``, stay (sleeping again when tired) until daylight returns; leave.
     :meth:`step` returns the next action, ``None`` when the rest is over."""
 
-    def __init__(self, *, until_day: bool = True, day_above: float = 0.5):
+    def __init__(self, *, until_day: bool = True, day_above: float = 0.65, until_health: int | None = None,
+                 until_step: int | None = None):
         self.until_day, self.day_above = until_day, float(day_above)
+        self.until_health = until_health  # also stay until health reaches this (a retreat to heal)
+        self.until_step = until_step  # also stay until the player's step count reaches this (waiting)
         self.plan: ShelterPlan | None = None
         self.state: dict = {}
         self.slept = False
         self.leaving = False
         self.spot = None
+
+    def _waiting(self, obs) -> bool:
+        if self.until_health is not None and obs["vitals"]["health"] < self.until_health:
+            return True
+        return self.until_step is not None and int(obs["step"]) < self.until_step
+
+    @staticmethod
+    def _foe_near(obs, radius: int = 4) -> bool:
+        return any(o["name"] in ("zombie", "skeleton") and abs(o["dx"]) + abs(o["dy"]) <= radius
+                   for o in obs["objects"])
 
     def step(self, leaf) -> str | None:
         obs = leaf.obs
@@ -174,14 +187,15 @@ class Rest:
         if obs["sleeping"]:
             self.slept = True
             return "noop"
-        if not self.leaving and self.slept and min(obs["vitals"]["food"], obs["vitals"]["drink"]) <= 1:
+        waits = self.until_health is not None or self.until_step is not None
+        if not self.leaving and (self.slept or waits) and min(obs["vitals"]["food"], obs["vitals"]["drink"]) <= 1:
             self.leaving = True  # hunger or thirst outweighs the night
         if self.leaving:
             return leave_step(leaf, self.plan) if self.plan is not None else None
         can_dig = obs["inventory"].get("wood_pickaxe", 0) > 0
         night = self.until_day and obs["daylight"] < self.day_above
         if self.plan is None and can_dig and not self.state.get("no_shelter"):
-            self.plan = find_shelter(leaf.map, here, can_dig=True, stones=obs["inventory"].get("stone", 0))
+            self.plan = find_shelter(leaf.map, here, can_dig=True, radius=16, stones=obs["inventory"].get("stone", 0))
             if self.plan is None:
                 self.state["no_shelter"] = True
         if self.plan is None and night and not self.slept and obs["vitals"]["energy"] > 0:
@@ -200,7 +214,11 @@ class Rest:
                 self.spot = here
         if not self.slept or (night and obs["vitals"]["energy"] < 9):
             return "sleep"
-        if night:
+        if night or self._waiting(obs):
+            if obs["vitals"]["energy"] < 9 and self.plan is not None:
+                return "sleep"  # in a sealed shelter, sleep heals twice as fast (Crafter's _recover)
             return "noop"
+        if self.plan is not None and self._foe_near(obs):
+            return "noop"  # sealed in: let the zombies outside wander off before digging out
         self.leaving = True
         return leave_step(leaf, self.plan) if self.plan is not None else None

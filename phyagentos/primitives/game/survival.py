@@ -34,9 +34,10 @@ class GameSurvive(GameLeaf):
     TOOLS = ("observe", "do", "sleep", "noop", "place_stone") + tuple(MOVES)
 
     def __init__(self, name: str, *, drink_below: int = 4, food_below: int = 4, energy_below: int = 3,
-                 night_below: float = 0.5, fight: bool = True, max_steps: int = 100000):
+                 health_below: int = 5, night_below: float = 0.5, fight: bool = True, max_steps: int = 100000):
         super().__init__(name, max_steps=max_steps)
         self.drink_below, self.food_below, self.energy_below = int(drink_below), int(food_below), int(energy_below)
+        self.health_below = int(health_below)
         self.night_below = float(night_below)
         self.fight = bool(fight)
         self.mode: str | None = None
@@ -64,11 +65,24 @@ class GameSurvive(GameLeaf):
             self.mode = None
         if self.mode == "eat" and v["food"] > self._food0:
             self.mode = None
+        weak = v["health"] < self.health_below
+        # a zombie follows a fleeing player (it moves toward it 9 steps in 10); a skeleton
+        # shoots along its line from up to 5 cells away: only that is worth fleeing
+        foes = [o for o in obs["objects"] if o["name"] in ("skeleton", "arrow")]
         if self.mode is None:
-            if v["drink"] < self.drink_below and self.map.known("water"):
+            if v["drink"] < self.drink_below and self.map.known("water") and (not weak or v["drink"] <= 2):
                 self.mode = "drink"
-            elif v["food"] < self.food_below and self.map.known("cow"):
+            elif v["food"] < self.food_below and self.map.known("cow") and (not weak or v["food"] <= 2):
                 self.mode, self._food0 = "eat", v["food"]
+            elif weak and obs["inventory"].get("wood_pickaxe", 0) > 0 and self._night_shelter(obs):
+                # hurt: heal sealed in a shelter (sleeping there heals twice as fast)
+                self.mode, self._rest = "retreat", Rest(until_day=False, until_health=min(9, self.health_below + 3))
+            elif weak and foes:
+                self._note("flee")
+                action = self.flee_action()
+                if action != "noop":
+                    self.act(action)
+                    return Status.RUNNING
             elif v["energy"] < self.energy_below:
                 self.mode, self._rest = "rest", Rest(until_day=True)
             elif obs["daylight"] < self.night_below and obs["inventory"].get("wood_pickaxe", 0) > 0 and \
@@ -98,7 +112,7 @@ class GameSurvive(GameLeaf):
         if getattr(self, "_shelter_checked", -100) > step - 10:
             return False  # looked less than 10 steps ago and found none
         self._shelter_checked = step
-        return find_shelter(self.map, tuple(obs["position"]), can_dig=True,
+        return find_shelter(self.map, tuple(obs["position"]), can_dig=True, radius=16,
                             stones=obs["inventory"].get("stone", 0)) is not None
 
     def _toward(self, goals, *, strike: bool):

@@ -42,7 +42,7 @@ from phyagentos.protocol.lifecycle import utc_now
 
 from .conditions import canonical
 
-__all__ = ["diagnose_death", "DeathBook", "DEATH_CAUSES", "correction_for"]
+__all__ = ["diagnose_death", "DeathBook", "DEATH_CAUSES", "correction_for", "correction_acted"]
 
 logger = logging.getLogger(__name__)
 
@@ -89,6 +89,20 @@ def correction_for(cause: str, current: Mapping[str, Any]) -> dict[str, int]:
     return {k: min(8, int(current.get(k, _DEFAULTS[k])) + 2) for k in keys}
 
 
+def correction_acted(revision: Mapping[str, Any], trace: Sequence[Mapping[str, Any]]) -> bool:
+    """True when a corrected threshold of ``revision`` fired its reflex at a level the
+    default would have let pass (``default <= vital < corrected`` in a ``game_reflex``
+    record of ``trace``): the lesson changed what the player did, so surviving counts
+    for it. A reflex that fired below the default anyway is no evidence for the lesson."""
+    reflexes = [r for r in trace if r.get("kind") == "game_reflex"]
+    for key, level in revision.items():
+        mode, vital = _REFLEX_MODE[key]
+        if any(r.get("mode") == mode and r.get(vital) is not None
+               and _DEFAULTS[key] <= int(r[vital]) < int(level) for r in reflexes):
+            return True
+    return False
+
+
 def _lid(cause: str, revision: Mapping[str, Any]) -> str:
     return "D" + hashlib.sha1(canonical(["death", cause, revision]).encode()).hexdigest()[:10]
 
@@ -116,17 +130,6 @@ class DeathBook:
         """Record ``session``'s death (if any) and resolve the survival lessons it applied."""
         found = diagnose_death(trace)
         applied = {i.id for i in (session.context.items if session.context else ()) if i.kind == "lesson" and i.applied}
-        reflexes = [r for r in trace if r.get("kind") == "game_reflex"]
-
-        def made_a_difference(revision: Mapping[str, Any]) -> bool:
-            # Tight: the corrected threshold triggered its reflex at a level the default
-            # would have let pass (default <= vital < corrected), so the lesson changed behaviour.
-            for key, level in revision.items():
-                mode, vital = _REFLEX_MODE[key]
-                if any(r.get("mode") == mode and r.get(vital) is not None
-                       and _DEFAULTS[key] <= int(r[vital]) < int(level) for r in reflexes):
-                    return True
-            return False
         if found is None and not applied:
             return []
         sid, now = session.session_id, utc_now()
@@ -139,7 +142,7 @@ class DeathBook:
                 if found is not None and found[0] == item.cause:
                     item.refutations += 1
                     item.refuted_by = _keep(item.refuted_by, sid)
-                elif made_a_difference(item.revision):
+                elif correction_acted(item.revision, trace):
                     if item in doc.candidates:
                         doc.candidates = [c for c in doc.candidates if c.id != item.id]
                         item.verified = True

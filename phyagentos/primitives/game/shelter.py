@@ -46,6 +46,8 @@ def find_shelter(m: SeenMap, here: tuple[int, int], *, can_dig: bool, radius: in
     unknown), ``o`` walkable and reachable, and sealable with ``stones`` (the cells to
     block, ``o`` and the one beyond ``i`` when free, less the stone dug out of ``e``, ``i``)."""
     starts: dict[tuple[int, int], list[ShelterPlan]] = {}
+    # plants stand on grass but block the way (and a shelter must not wall one in)
+    avoid = set(avoid) | m.cells_of(["plant", "plant_ripe"])
     for dx in range(-radius, radius + 1):
         for dy in range(-radius, radius + 1):
             o = (here[0] + dx, here[1] + dy)
@@ -67,7 +69,7 @@ def find_shelter(m: SeenMap, here: tuple[int, int], *, can_dig: bool, radius: in
                         break
                 beyond = m.material(_add(o, d, 3))
                 need = 1 + (beyond in WALKABLE) - sum(m.material(c) == "stone" for c in (e, i))
-                if ok and beyond != "lava" and beyond not in ("unknown",) and o not in avoid and need <= stones:
+                if ok and beyond != "lava" and beyond not in ("unknown",) and not {o, e, i} & avoid and need <= stones:
                     starts.setdefault(o, []).append(ShelterPlan(o=o, e=e, i=i, d=d))
     if not starts:
         return None
@@ -165,6 +167,7 @@ class Rest:
         self.until_day, self.day_above = until_day, float(day_above)
         self.until_health = until_health  # also stay until health reaches this (a retreat to heal)
         self.until_step = until_step  # also stay until the player's step count reaches this (waiting)
+        self.building, self.build_limit, self.gave_up = 0, 60, False  # steps spent reaching and sealing
         self.plan: ShelterPlan | None = None
         self.state: dict = {}
         self.slept = False
@@ -201,6 +204,12 @@ class Rest:
         if self.plan is None and night and not self.slept and obs["vitals"]["energy"] > 0:
             return None  # no sealed shelter: sleeping in the open at night is what zombies wait for
         if self.plan is not None and self.state.get("phase") != "sealed":
+            self.building += 1
+            if self.building > self.build_limit:
+                # the shelter could not be reached and sealed in time (a creature in the
+                # way, a cell that is not what the map says): give up this rest
+                self.gave_up = True
+                return None
             action = shelter_step(leaf, self.plan, self.state)
             if action is not None:
                 return action

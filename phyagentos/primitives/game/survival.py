@@ -61,6 +61,9 @@ class GameSurvive(GameLeaf):
                 self._rest.slept = True
             self.act("noop")
             return Status.RUNNING
+        if self.mode in ("rest", "retreat") and not obs["sleeping"] and \
+                ((v["drink"] <= 2 and self.map.known("water")) or (v["food"] <= 2 and self.map.known("cow"))):
+            self.mode, self._rest = None, None  # thirst or hunger outweighs resting: out to drink or eat
         if self.mode == "drink" and v["drink"] >= 9:
             self.mode = None
         if self.mode == "eat" and v["food"] > self._food0:
@@ -74,7 +77,8 @@ class GameSurvive(GameLeaf):
                 self.mode = "drink"
             elif v["food"] < self.food_below and self.map.known("cow") and (not weak or v["food"] <= 2):
                 self.mode, self._food0 = "eat", v["food"]
-            elif weak and obs["inventory"].get("wood_pickaxe", 0) > 0 and self._night_shelter(obs):
+            elif weak and obs["inventory"].get("wood_pickaxe", 0) > 0 and self._rest_allowed(obs) and \
+                    self._night_shelter(obs):
                 # hurt: heal sealed in a shelter (sleeping there heals twice as fast)
                 self.mode, self._rest = "retreat", Rest(until_day=False, until_health=min(9, self.health_below + 3))
             elif weak and foes:
@@ -85,8 +89,10 @@ class GameSurvive(GameLeaf):
                     return Status.RUNNING
             elif v["energy"] < self.energy_below:
                 self.mode, self._rest = "rest", Rest(until_day=True)
+                if not self._rest_allowed(obs):
+                    self._rest.state["no_shelter"] = True  # the shelter failed just now: sleep where it is safest
             elif obs["daylight"] < self.night_below and obs["inventory"].get("wood_pickaxe", 0) > 0 and \
-                    self._night_shelter(obs):
+                    self._rest_allowed(obs) and self._night_shelter(obs):
                 # night, and a shelter it can dig is known: rest in it until day
                 self.mode, self._rest = "rest", Rest(until_day=True)
         if self.mode is None:
@@ -102,10 +108,17 @@ class GameSurvive(GameLeaf):
             return self._toward(here or self.map.cells_of(["cow"]), strike=True)
         action = self._rest.step(self)
         if action is None:
+            if self._rest.gave_up:
+                self._gave_up_at = int(obs["step"])
+                self.ctx.trace.record("game_shelter_abandoned", step=obs["step"], mode=self.mode)
             self.mode, self._rest = None, None
             return Status.FAILURE
         self.act(action)
         return Status.RUNNING
+
+    def _rest_allowed(self, obs) -> bool:
+        """Not within 30 steps of giving up on a shelter (do not loop on the same one)."""
+        return int(obs["step"]) - getattr(self, "_gave_up_at", -1000) > 30
 
     def _night_shelter(self, obs) -> bool:
         step = int(obs["step"])

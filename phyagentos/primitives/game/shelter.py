@@ -163,11 +163,12 @@ class Rest:
     :meth:`step` returns the next action, ``None`` when the rest is over."""
 
     def __init__(self, *, until_day: bool = True, day_above: float = 0.65, until_health: int | None = None,
-                 until_step: int | None = None):
+                 until_step: int | None = None, radius: int = 16):
         self.until_day, self.day_above = until_day, float(day_above)
         self.until_health = until_health  # also stay until health reaches this (a retreat to heal)
         self.until_step = until_step  # also stay until the player's step count reaches this (waiting)
         self.building, self.build_limit, self.gave_up = 0, 60, False  # steps spent reaching and sealing
+        self.radius = int(radius)  # how far from where the rest began a shelter may be (cells)
         self.plan: ShelterPlan | None = None
         self.state: dict = {}
         self.slept = False
@@ -198,7 +199,7 @@ class Rest:
         can_dig = obs["inventory"].get("wood_pickaxe", 0) > 0
         night = self.until_day and obs["daylight"] < self.day_above
         if self.plan is None and can_dig and not self.state.get("no_shelter"):
-            self.plan = find_shelter(leaf.map, here, can_dig=True, radius=16, stones=obs["inventory"].get("stone", 0))
+            self.plan = find_shelter(leaf.map, here, can_dig=True, radius=self.radius, stones=obs["inventory"].get("stone", 0))
             if self.plan is None:
                 self.state["no_shelter"] = True
         if self.plan is None and night and not self.slept and obs["vitals"]["energy"] > 0:

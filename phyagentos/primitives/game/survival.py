@@ -9,9 +9,17 @@ the map when it resumes), and never SUCCESS. Urgencies, most pressing first:
 2. ``sleeping``: the game keeps the player asleep; wait;
 3. ``drink``: drink below ``drink_below``: go to remembered water and drink until full;
 4. ``eat``: food below ``food_below``: hunt the nearest remembered cow until the food rises;
-5. ``rest``: energy below ``energy_below``, or night (daylight below ``night_below``) and a
+5. ``retreat``: health below ``health_below`` and a pickaxe: heal sealed in a shelter
+   (sleeping there when tired heals twice as fast), staying while zombies wait outside;
+   ``flee`` from a skeleton or its arrows when hurt and no shelter is at hand (a zombie is
+   fought: it follows a fleeing player);
+6. ``rest``: energy below ``energy_below``, or night (daylight below ``night_below``) and a
    pickaxe to dig with: rest (:class:`~.shelter.Rest`: a sealed two-cell shelter, sleep,
-   stay until daylight, dig out).
+   stay until daylight, dig out);
+7. ``forage``: drink or food at 3 or less and no water or cow remembered: explore.
+
+A rest whose shelter cannot be reached and sealed within 60 steps is given up (and not
+tried again for 30 steps); thirst or hunger at 2 or less ends a rest.
 
 The thresholds are skill parameters: a death diagnosed from the trace (thirst,
 starvation, exhaustion) becomes a lesson that raises the matching one.
@@ -95,6 +103,12 @@ class GameSurvive(GameLeaf):
                     self._rest_allowed(obs) and self._night_shelter(obs):
                 # night, and a shelter it can dig is known: rest in it until day
                 self.mode, self._rest = "rest", Rest(until_day=True)
+        if self.mode is None and ((v["drink"] <= 3 and not self.map.known("water")) or
+                                  (v["food"] <= 3 and not self.map.known("cow"))):
+            # thirsty or hungry and no water or cow remembered: look for one
+            self._note("forage")
+            self.act(self.explore_action())
+            return Status.RUNNING
         if self.mode is None:
             return Status.FAILURE
         self._note(self.mode)

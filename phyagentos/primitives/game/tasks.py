@@ -215,7 +215,7 @@ class GameHunt(GameLeaf):
                     return False
                 self.act(move)
                 return True
-            self._rest = Rest(until_day=False, until_step=min(planted) + 310)
+            self._rest = Rest(until_day=False, until_step=min(planted) + 310, radius=8)
             self.ctx.trace.record("game_plant_wait", step=self.obs["step"], until=min(planted) + 310)
         action = self._rest.step(self)
         if action is None:
@@ -244,6 +244,7 @@ class GamePlace(GameLeaf):
         self._turns = 0
         self._nook = None  # (X, d): the grass cell to plant on and the direction from the stand cell to it
         self._seal: list[str] | None = None
+        self._wall_tries = 0
 
     # -- a protected plant -------------------------------------------------------------
     # A sapling ripens only while no zombie, skeleton or cow stands next to it (Crafter's
@@ -252,33 +253,95 @@ class GamePlace(GameLeaf):
     # and W behind it in a line (Z = Y - d, W = Y - 2d); then back off to W, step forward
     # into Z (now facing Y) and place stone on Y. X is then walled in on all four sides.
     def _find_nook(self):
+        """``(X, d, walls)``: the nearest grass cell X to plant on, approached along ``d``
+        (Y = X - d, Z, W behind it walkable), whose other three neighbours are solid or
+        can be walled with stone (``walls``: directions e whose X + e is open, with X + 2e
+        and X + 3e walkable to stand on and come from); the fewest walls first. The player
+        needs ``len(walls) + 1`` stones."""
         here = tuple(self.obs["position"])
         m = self.map
         px, py = here
-        occupied = {(px + o["dx"], py + o["dy"]) for o in self.obs["objects"]}
-        starts = {}
-        for dx in range(-12, 13):
-            for dy in range(-12, 13):
+        stones = self.obs["inventory"].get("stone", 0)
+        occupied = {(px + o["dx"], py + o["dy"]) for o in self.obs["objects"]} | m.cells_of(["plant", "plant_ripe"])
+
+        def at(c, e, k):
+            return c[0] + k * e[0], c[1] + k * e[1]
+
+        best: dict[tuple[int, int], tuple] = {}
+        for dx in range(-10, 11):
+            for dy in range(-10, 11):
                 x = (px + dx, py + dy)
                 if m.material(x) != "grass" or x in occupied:
                     continue
                 for d in MOVES.values():
-                    y, z, w = (x[0] - d[0], x[1] - d[1]), (x[0] - 2 * d[0], x[1] - 2 * d[1]), \
-                        (x[0] - 3 * d[0], x[1] - 3 * d[1])
-                    if not all(m.material(c) in WALKABLE for c in (y, z, w)):
+                    back = (-d[0], -d[1])
+                    if not all(m.material(at(x, back, k)) in WALKABLE for k in (1, 2, 3)):
                         continue
-                    others = [(x[0] + e[0], x[1] + e[1]) for e in MOVES.values() if e != (-d[0], -d[1])]
-                    if all(m.material(c) not in WALKABLE and m.material(c) not in ("unknown", "lava") for c in others):
-                        starts.setdefault(z, (x, d))
-        if not starts:
+                    walls, ok = [], True
+                    for e in MOVES.values():
+                        if e == back:
+                            continue
+                        n = m.material(at(x, e, 1))
+                        if n in ("unknown", "lava"):
+                            ok = False
+                        elif n in WALKABLE:
+                            if at(x, e, 1) in occupied or not all(m.material(at(x, e, k)) in WALKABLE for k in (2, 3)):
+                                ok = False
+                            walls.append(e)
+                    if not ok or len(walls) + 1 > stones:
+                        continue
+                    z = at(x, back, 2)
+                    key = (len(walls), abs(dx) + abs(dy))
+                    if z not in best or key < best[z][0]:
+                        best[z] = (key, (x, d, walls))
+        if not best:
             return None
-        plan = m.plan(here, set(starts), blocked=self.blocked(), stand_on_goal=True)
-        return None if plan is None else starts[plan.stand]
+        fewest = min(v[0][0] for v in best.values())
+        goals = {z for z, v in best.items() if v[0][0] == fewest}
+        plan = m.plan(here, goals, blocked=self.blocked(), stand_on_goal=True)
+        return None if plan is None else best[plan.stand][1]
+
+    def _wall_step(self) -> bool:
+        """Wall the next open neighbour of the chosen cell: stand on X + 3e, step to X + 2e
+        (now facing X + e), place stone. True when it acted."""
+        x, d, walls = self._nook
+        while walls:
+            e = walls[0]
+            n = (x[0] + e[0], x[1] + e[1])
+            if self.map.material(n) not in WALKABLE:
+                walls.pop(0)  # walled (or already solid)
+                continue
+            two, three = (x[0] + 2 * e[0], x[1] + 2 * e[1]), (x[0] + 3 * e[0], x[1] + 3 * e[1])
+            here = tuple(self.obs["position"])
+            move_to = {v: k for k, v in MOVES.items()}
+            if here == two and facing_cell(self.obs) == n:
+                if self.obs["inventory"].get("stone", 0) == 0:
+                    raise PrimitiveFailure("game.place_failed", "no stone left to wall the plant in")
+                self.act("place_stone")
+                self._wall_tries += 1
+                if self._wall_tries > 12:
+                    raise PrimitiveFailure("game.place_failed", f"could not wall {n} in 12 tries")
+                return True
+            if here == three:
+                self.act(move_to[(-e[0], -e[1])])
+                return True
+            move, plan = self.goto_action({three}, stand_on_goal=True)
+            if move is None:
+                self.protect = False  # cannot get there now: plant unprotected
+                self._nook = None
+                return False
+            self.act(move)
+            return True
+        return False
 
     def _protected_step(self):
         obs = self.obs
         here = tuple(obs["position"])
-        x, d = self._nook
+        if self._seal is None and self._wall_step():
+            return Status.RUNNING
+        if self._nook is None:
+            return Status.RUNNING
+        x, d, _ = self._nook
         move_to = {v: k for k, v in MOVES.items()}
         back = move_to[(-d[0], -d[1])]
         if self._seal is not None:  # planted: back off two cells, step forward, wall Y in

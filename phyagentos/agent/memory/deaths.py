@@ -81,12 +81,19 @@ def diagnose_death(trace: Sequence[Mapping[str, Any]]) -> tuple[str, dict[str, A
 
 
 def correction_for(cause: str, current: Mapping[str, Any]) -> dict[str, int]:
-    """Survival thresholds to raise for ``cause`` from ``current`` (each by 2, at most 8)."""
+    """Survival thresholds to raise for ``cause``: each to its skill default + 2.
+
+    ``current`` (the dying session's parameters) is not the base: raising from it made
+    the first learning runs ratchet (a death with a corrected threshold raised it again,
+    up to food_below 8, and a player that eats whenever it is not full wanders off its
+    tasks). One cause gives one fixed correction, so repeated deaths of that cause count
+    as evidence about the same lesson instead of minting a stronger one."""
+    del current
     keys = {"death.thirst": ("drink_below",), "death.starvation": ("food_below",),
             "death.exhaustion": ("energy_below",), "death.zombie_asleep": ("energy_below",),
             "death.zombie_night": ("energy_below", "health_below"),
             "death.zombie": ("health_below", "drink_below", "food_below")}.get(cause, ())
-    return {k: min(8, int(current.get(k, _DEFAULTS[k])) + 2) for k in keys}
+    return {k: _DEFAULTS[k] + 2 for k in keys}
 
 
 def correction_acted(revision: Mapping[str, Any], trace: Sequence[Mapping[str, Any]]) -> bool:

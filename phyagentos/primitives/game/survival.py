@@ -72,6 +72,9 @@ class GameSurvive(GameLeaf):
         if self.mode in ("rest", "retreat") and not obs["sleeping"] and \
                 ((v["drink"] <= 2 and self.map.known("water")) or (v["food"] <= 2 and self.map.known("cow"))):
             self.mode, self._rest = None, None  # thirst or hunger outweighs resting: out to drink or eat
+        if self.mode in ("drink", "eat") and v["health"] < self.health_below and \
+                v["drink" if self.mode == "drink" else "food"] > 2:
+            self.mode = None  # hurt: healing comes first unless the thirst or hunger is acute
         if self.mode == "drink" and v["drink"] >= 9:
             self.mode = None
         if self.mode == "eat" and v["food"] > self._food0:

@@ -110,5 +110,7 @@ def test_a_death_lesson_counts_only_when_its_correction_changed_what_the_player_
                                          {"kind": "game_reflex", "mode": "rest", "drink": 5}])
     # zombie deaths raise the retreat threshold; a retreat at health 6 is the lesson acting
     assert correction_for("death.zombie", {})["health_below"] == 7
+    # one cause, one fixed correction: a death under a corrected threshold does not ratchet it
+    assert correction_for("death.thirst", {"drink_below": 6}) == {"drink_below": 6}
     assert correction_acted({"health_below": 7}, [{"kind": "game_reflex", "mode": "retreat", "health": 6}])
     assert not correction_acted({"health_below": 7}, [{"kind": "game_reflex", "mode": "retreat", "health": 4}])

@@ -1,6 +1,6 @@
 """Crafter through the full session path: memory off, a learning pass, frozen on unseen worlds.
 
-    .venv/bin/python bench/crafter.py [--episodes N] [--workers K] [--workspace DIR]
+    nice -n 10 .venv/bin/python bench/crafter.py [--episodes N] [--workers K] [--workspace DIR]
 
 Every pass is one ``phyagentos.bench.run_bench`` call on the ``crafter`` suite (the same
 path as ``phyagentos bench crafter --episodes N --memory off|learn|frozen``): one world
@@ -88,7 +88,7 @@ def _pass(name: str, ws: Path, *, episodes: int, split: str, memory: str, worker
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--episodes", type=int, default=4, help="worlds per pass (default 4)")
+    ap.add_argument("--episodes", type=int, default=8, help="worlds per pass (default 8)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--workspace", type=Path, help="bench workspace (default: a new temporary directory)")
     args = ap.parse_args()
@@ -114,6 +114,13 @@ def main() -> int:
         table.add_row(p["pass"], f"{p['score_percent']:.1f}", f"{p['achievements_per_episode']:.1f}",
                       f"{p['length_mean']:.0f}", deaths, f"{p['steps_per_second_full_path']:.0f}")
     console.print(table)
+    rates = Table(title="per-achievement success rate (%)")
+    rates.add_column("achievement")
+    for p in passes:
+        rates.add_column(p["pass"].split(" ")[0], justify="right")
+    for name in sorted(passes[0]["success_rates_percent"]):
+        rates.add_row(name, *(f"{p['success_rates_percent'][name]:.0f}" for p in passes))
+    console.print(rates)
     gain = passes[2]["score_percent"] - passes[0]["score_percent"]
     console.print(f"memory gain on unseen worlds (frozen - off): {gain:+.1f} points; bare crafter.Env: "
                   f"{bare:.0f} steps/s (random actions)")

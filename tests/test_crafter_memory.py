@@ -7,7 +7,7 @@ import yaml
 
 pytest.importorskip("crafter")
 
-from phyagentos.agent.memory.deaths import correction_for, diagnose_death  # noqa: E402
+from phyagentos.agent.memory.deaths import correction_acted, correction_for, diagnose_death  # noqa: E402
 from phyagentos.agent.memory.recipes import hypothesis  # noqa: E402
 from phyagentos.orchestrator import run_goal_graph  # noqa: E402
 from phyagentos.protocol import Workspace  # noqa: E402
@@ -99,3 +99,18 @@ def test_deaths_are_diagnosed_from_the_trace(damage, death, cause):
     assert diagnose_death(trace)[0] == cause
     assert diagnose_death([{"kind": "game_damage", **damage}]) is None
     assert correction_for("death.thirst", {"drink_below": 4}) == {"drink_below": 6}
+
+
+def test_a_death_lesson_counts_only_when_its_correction_changed_what_the_player_did():
+    lesson = {"drink_below": 6}
+    # the raised threshold sent the player to drink at 5 (the default 4 would have waited)
+    assert correction_acted(lesson, [{"kind": "game_reflex", "mode": "drink", "drink": 5, "health": 9}])
+    # a drink at 3 would have happened without the lesson; a rest is another reflex
+    assert not correction_acted(lesson, [{"kind": "game_reflex", "mode": "drink", "drink": 3},
+                                         {"kind": "game_reflex", "mode": "rest", "drink": 5}])
+    # zombie deaths raise the retreat threshold; a retreat at health 6 is the lesson acting
+    assert correction_for("death.zombie", {})["health_below"] == 7
+    # one cause, one fixed correction: a death under a corrected threshold does not ratchet it
+    assert correction_for("death.thirst", {"drink_below": 6}) == {"drink_below": 6}
+    assert correction_acted({"health_below": 7}, [{"kind": "game_reflex", "mode": "retreat", "health": 6}])
+    assert not correction_acted({"health_below": 7}, [{"kind": "game_reflex", "mode": "retreat", "health": 4}])

@@ -183,6 +183,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "item": ("str", "", "table, furnace, stone or plant"),
         "near": ("str | null", "", "material the placed item must be next to"),
         "max_tries": ("int", "", "placement attempts"),
+        "protect": ("bool", "", "plant: on a grass cell walled on three sides, then seal the fourth with stone"),
         "max_steps": ("int", "steps", "game-step budget of the leaf"),
     },
     GameMake: {
@@ -199,6 +200,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "drink_below": ("int", "", "drink when thirst falls below this level (0..9)"),
         "food_below": ("int", "", "eat when food falls below this level (0..9)"),
         "energy_below": ("int", "", "rest when energy falls below this level (0..9)"),
+        "health_below": ("int", "", "retreat into a sealed shelter to heal below this health (0..9)"),
         "night_below": ("float", "", "daylight level below which night precautions start (0..1)"),
         "fight": ("bool", "", "fight creatures that attack (else flee)"),
         "max_steps": ("int", "steps", "game-step budget of the leaf"),

@@ -20,11 +20,13 @@ cause                         evidence (last damage before death)
 Each cause maps to a correction of the survival reflex's thresholds (skill parameters
 of every game skill): thirst raises ``drink_below``, starvation ``food_below``,
 exhaustion and zombies in the sleep ``energy_below`` (sleep earlier, in daylight and in
-shelter), zombies awake both ``drink_below`` and ``food_below`` (vitals kept high keep
+shelter), zombies at night also ``health_below`` (retreat into a shelter to heal sooner),
+zombies by day ``health_below``, ``drink_below`` and ``food_below`` (vitals kept high keep
 health regenerating). A death makes a *candidate* (scope: the game's embodiment); the
 ContextBuilder applies it to later game sessions so they test it; a later session that
-applied it and in which the matching reflex acted without dying of that cause verifies
-it (``verified_by``); dying of the same cause again refutes it. Lava deaths carry no
+applied it, in which the matching reflex fired at a level the default threshold would
+have let pass (the correction changed what the player did), and which did not end in a
+death of that cause, verifies it (``verified_by``); dying of the same cause again refutes it. Lava deaths carry no
 parameter (the planner already never steps on or next to remembered lava): they are
 recorded for the report.
 """
@@ -40,15 +42,17 @@ from phyagentos.protocol.lifecycle import utc_now
 
 from .conditions import canonical
 
-__all__ = ["diagnose_death", "DeathBook", "DEATH_CAUSES", "correction_for"]
+__all__ = ["diagnose_death", "DeathBook", "DEATH_CAUSES", "correction_for", "correction_acted"]
 
 logger = logging.getLogger(__name__)
 
 DEATH_CAUSES = ("death.lava", "death.zombie_asleep", "death.zombie", "death.zombie_night", "death.skeleton",
                 "death.thirst", "death.starvation", "death.exhaustion", "death.unknown")
 #: Survival reflex defaults of the game skills (trees/game_*.yaml), vital units 0..9.
-_DEFAULTS = {"drink_below": 4, "food_below": 4, "energy_below": 3}
-_REFLEX_MODE = {"drink_below": "drink", "food_below": "eat", "energy_below": "sleep"}
+_DEFAULTS = {"drink_below": 4, "food_below": 4, "energy_below": 3, "health_below": 5}
+#: threshold -> (the reflex mode it triggers, the vital it compares)
+_REFLEX_MODE = {"drink_below": ("drink", "drink"), "food_below": ("eat", "food"), "energy_below": ("rest", "energy"),
+                "health_below": ("retreat", "health")}
 _MAX_REFS = 12
 
 
@@ -77,11 +81,33 @@ def diagnose_death(trace: Sequence[Mapping[str, Any]]) -> tuple[str, dict[str, A
 
 
 def correction_for(cause: str, current: Mapping[str, Any]) -> dict[str, int]:
-    """Survival thresholds to raise for ``cause`` from ``current`` (each by 2, at most 8)."""
+    """Survival thresholds to raise for ``cause``: each to its skill default + 2.
+
+    ``current`` (the dying session's parameters) is not the base: raising from it made
+    the first learning runs ratchet (a death with a corrected threshold raised it again,
+    up to food_below 8, and a player that eats whenever it is not full wanders off its
+    tasks). One cause gives one fixed correction, so repeated deaths of that cause count
+    as evidence about the same lesson instead of minting a stronger one."""
+    del current
     keys = {"death.thirst": ("drink_below",), "death.starvation": ("food_below",),
             "death.exhaustion": ("energy_below",), "death.zombie_asleep": ("energy_below",),
-            "death.zombie_night": ("energy_below",), "death.zombie": ("drink_below", "food_below")}.get(cause, ())
-    return {k: min(8, int(current.get(k, _DEFAULTS[k])) + 2) for k in keys}
+            "death.zombie_night": ("energy_below", "health_below"),
+            "death.zombie": ("health_below", "drink_below", "food_below")}.get(cause, ())
+    return {k: _DEFAULTS[k] + 2 for k in keys}
+
+
+def correction_acted(revision: Mapping[str, Any], trace: Sequence[Mapping[str, Any]]) -> bool:
+    """True when a corrected threshold of ``revision`` fired its reflex at a level the
+    default would have let pass (``default <= vital < corrected`` in a ``game_reflex``
+    record of ``trace``): the lesson changed what the player did, so surviving counts
+    for it. A reflex that fired below the default anyway is no evidence for the lesson."""
+    reflexes = [r for r in trace if r.get("kind") == "game_reflex"]
+    for key, level in revision.items():
+        mode, vital = _REFLEX_MODE[key]
+        if any(r.get("mode") == mode and r.get(vital) is not None
+               and _DEFAULTS[key] <= int(r[vital]) < int(level) for r in reflexes):
+            return True
+    return False
 
 
 def _lid(cause: str, revision: Mapping[str, Any]) -> str:
@@ -111,7 +137,6 @@ class DeathBook:
         """Record ``session``'s death (if any) and resolve the survival lessons it applied."""
         found = diagnose_death(trace)
         applied = {i.id for i in (session.context.items if session.context else ()) if i.kind == "lesson" and i.applied}
-        modes = {r.get("mode") for r in trace if r.get("kind") == "game_reflex"}
         if found is None and not applied:
             return []
         sid, now = session.session_id, utc_now()
@@ -124,7 +149,7 @@ class DeathBook:
                 if found is not None and found[0] == item.cause:
                     item.refutations += 1
                     item.refuted_by = _keep(item.refuted_by, sid)
-                elif any(_REFLEX_MODE[k] in modes for k in item.revision):
+                elif correction_acted(item.revision, trace):
                     if item in doc.candidates:
                         doc.candidates = [c for c in doc.candidates if c.id != item.id]
                         item.verified = True

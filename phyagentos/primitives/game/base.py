@@ -197,7 +197,7 @@ class GameLeaf(Primitive):
         """The free move that keeps the player farthest (Manhattan) from the zombies and
         skeletons in view; ``noop`` when none is in view or no move is free."""
         px, py = self.obs["position"]
-        foes = [(px + o["dx"], py + o["dy"]) for o in self.obs["objects"] if o["name"] in ("zombie", "skeleton")]
+        foes = [(px + o["dx"], py + o["dy"]) for o in self.obs["objects"] if o["name"] in ("zombie", "skeleton", "arrow")]
         if not foes:
             return "noop"
         blocked = self.blocked()

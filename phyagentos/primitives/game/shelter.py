@@ -46,6 +46,8 @@ def find_shelter(m: SeenMap, here: tuple[int, int], *, can_dig: bool, radius: in
     unknown), ``o`` walkable and reachable, and sealable with ``stones`` (the cells to
     block, ``o`` and the one beyond ``i`` when free, less the stone dug out of ``e``, ``i``)."""
     starts: dict[tuple[int, int], list[ShelterPlan]] = {}
+    # plants stand on grass but block the way (and a shelter must not wall one in)
+    avoid = set(avoid) | m.cells_of(["plant", "plant_ripe"])
     for dx in range(-radius, radius + 1):
         for dy in range(-radius, radius + 1):
             o = (here[0] + dx, here[1] + dy)
@@ -67,7 +69,7 @@ def find_shelter(m: SeenMap, here: tuple[int, int], *, can_dig: bool, radius: in
                         break
                 beyond = m.material(_add(o, d, 3))
                 need = 1 + (beyond in WALKABLE) - sum(m.material(c) == "stone" for c in (e, i))
-                if ok and beyond != "lava" and beyond not in ("unknown",) and o not in avoid and need <= stones:
+                if ok and beyond != "lava" and beyond not in ("unknown",) and not {o, e, i} & avoid and need <= stones:
                     starts.setdefault(o, []).append(ShelterPlan(o=o, e=e, i=i, d=d))
     if not starts:
         return None
@@ -160,13 +162,28 @@ class Rest:
     with ``until_day``, stay (sleeping again when tired) until daylight returns; leave.
     :meth:`step` returns the next action, ``None`` when the rest is over."""
 
-    def __init__(self, *, until_day: bool = True, day_above: float = 0.5):
+    def __init__(self, *, until_day: bool = True, day_above: float = 0.65, until_health: int | None = None,
+                 until_step: int | None = None, radius: int = 16):
         self.until_day, self.day_above = until_day, float(day_above)
+        self.until_health = until_health  # also stay until health reaches this (a retreat to heal)
+        self.until_step = until_step  # also stay until the player's step count reaches this (waiting)
+        self.building, self.build_limit, self.gave_up = 0, 60, False  # steps spent reaching and sealing
+        self.radius = int(radius)  # how far from where the rest began a shelter may be (cells)
         self.plan: ShelterPlan | None = None
         self.state: dict = {}
         self.slept = False
         self.leaving = False
         self.spot = None
+
+    def _waiting(self, obs) -> bool:
+        if self.until_health is not None and obs["vitals"]["health"] < self.until_health:
+            return True
+        return self.until_step is not None and int(obs["step"]) < self.until_step
+
+    @staticmethod
+    def _foe_near(obs, radius: int = 4) -> bool:
+        return any(o["name"] in ("zombie", "skeleton") and abs(o["dx"]) + abs(o["dy"]) <= radius
+                   for o in obs["objects"])
 
     def step(self, leaf) -> str | None:
         obs = leaf.obs
@@ -174,19 +191,26 @@ class Rest:
         if obs["sleeping"]:
             self.slept = True
             return "noop"
-        if not self.leaving and self.slept and min(obs["vitals"]["food"], obs["vitals"]["drink"]) <= 1:
+        waits = self.until_health is not None or self.until_step is not None
+        if not self.leaving and (self.slept or waits) and min(obs["vitals"]["food"], obs["vitals"]["drink"]) <= 1:
             self.leaving = True  # hunger or thirst outweighs the night
         if self.leaving:
             return leave_step(leaf, self.plan) if self.plan is not None else None
         can_dig = obs["inventory"].get("wood_pickaxe", 0) > 0
         night = self.until_day and obs["daylight"] < self.day_above
         if self.plan is None and can_dig and not self.state.get("no_shelter"):
-            self.plan = find_shelter(leaf.map, here, can_dig=True, stones=obs["inventory"].get("stone", 0))
+            self.plan = find_shelter(leaf.map, here, can_dig=True, radius=self.radius, stones=obs["inventory"].get("stone", 0))
             if self.plan is None:
                 self.state["no_shelter"] = True
         if self.plan is None and night and not self.slept and obs["vitals"]["energy"] > 0:
             return None  # no sealed shelter: sleeping in the open at night is what zombies wait for
         if self.plan is not None and self.state.get("phase") != "sealed":
+            self.building += 1
+            if self.building > self.build_limit:
+                # the shelter could not be reached and sealed in time (a creature in the
+                # way, a cell that is not what the map says): give up this rest
+                self.gave_up = True
+                return None
             action = shelter_step(leaf, self.plan, self.state)
             if action is not None:
                 return action
@@ -200,7 +224,11 @@ class Rest:
                 self.spot = here
         if not self.slept or (night and obs["vitals"]["energy"] < 9):
             return "sleep"
-        if night:
+        if night or self._waiting(obs):
+            if obs["vitals"]["energy"] < 9 and self.plan is not None:
+                return "sleep"  # in a sealed shelter, sleep heals twice as fast (Crafter's _recover)
             return "noop"
+        if self.plan is not None and self._foe_near(obs):
+            return "noop"  # sealed in: let the zombies outside wander off before digging out
         self.leaving = True
         return leave_step(leaf, self.plan) if self.plan is not None else None

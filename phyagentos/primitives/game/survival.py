@@ -9,9 +9,17 @@ the map when it resumes), and never SUCCESS. Urgencies, most pressing first:
 2. ``sleeping``: the game keeps the player asleep; wait;
 3. ``drink``: drink below ``drink_below``: go to remembered water and drink until full;
 4. ``eat``: food below ``food_below``: hunt the nearest remembered cow until the food rises;
-5. ``rest``: energy below ``energy_below``, or night (daylight below ``night_below``) and a
+5. ``retreat``: health below ``health_below`` and a pickaxe: heal sealed in a shelter
+   (sleeping there when tired heals twice as fast), staying while zombies wait outside;
+   ``flee`` from a skeleton or its arrows when hurt and no shelter is at hand (a zombie is
+   fought: it follows a fleeing player);
+6. ``rest``: energy below ``energy_below``, or night (daylight below ``night_below``) and a
    pickaxe to dig with: rest (:class:`~.shelter.Rest`: a sealed two-cell shelter, sleep,
-   stay until daylight, dig out).
+   stay until daylight, dig out);
+7. ``forage``: drink or food at 3 or less and no water or cow remembered: explore.
+
+A rest whose shelter cannot be reached and sealed within 60 steps is given up (and not
+tried again for 30 steps); thirst or hunger at 2 or less ends a rest.
 
 The thresholds are skill parameters: a death diagnosed from the trace (thirst,
 starvation, exhaustion) becomes a lesson that raises the matching one.
@@ -34,9 +42,10 @@ class GameSurvive(GameLeaf):
     TOOLS = ("observe", "do", "sleep", "noop", "place_stone") + tuple(MOVES)
 
     def __init__(self, name: str, *, drink_below: int = 4, food_below: int = 4, energy_below: int = 3,
-                 night_below: float = 0.5, fight: bool = True, max_steps: int = 100000):
+                 health_below: int = 5, night_below: float = 0.5, fight: bool = True, max_steps: int = 100000):
         super().__init__(name, max_steps=max_steps)
         self.drink_below, self.food_below, self.energy_below = int(drink_below), int(food_below), int(energy_below)
+        self.health_below = int(health_below)
         self.night_below = float(night_below)
         self.fight = bool(fight)
         self.mode: str | None = None
@@ -60,21 +69,49 @@ class GameSurvive(GameLeaf):
                 self._rest.slept = True
             self.act("noop")
             return Status.RUNNING
+        if self.mode in ("rest", "retreat") and not obs["sleeping"] and \
+                ((v["drink"] <= 2 and self.map.known("water")) or (v["food"] <= 2 and self.map.known("cow"))):
+            self.mode, self._rest = None, None  # thirst or hunger outweighs resting: out to drink or eat
+        if self.mode in ("drink", "eat") and v["health"] < self.health_below and \
+                v["drink" if self.mode == "drink" else "food"] > 2:
+            self.mode = None  # hurt: healing comes first unless the thirst or hunger is acute
         if self.mode == "drink" and v["drink"] >= 9:
             self.mode = None
         if self.mode == "eat" and v["food"] > self._food0:
             self.mode = None
+        weak = v["health"] < self.health_below
+        # a zombie follows a fleeing player (it moves toward it 9 steps in 10); a skeleton
+        # shoots along its line from up to 5 cells away: only that is worth fleeing
+        foes = [o for o in obs["objects"] if o["name"] in ("skeleton", "arrow")]
         if self.mode is None:
-            if v["drink"] < self.drink_below and self.map.known("water"):
+            if v["drink"] < self.drink_below and self.map.known("water") and (not weak or v["drink"] <= 2):
                 self.mode = "drink"
-            elif v["food"] < self.food_below and self.map.known("cow"):
+            elif v["food"] < self.food_below and self.map.known("cow") and (not weak or v["food"] <= 2):
                 self.mode, self._food0 = "eat", v["food"]
+            elif weak and obs["inventory"].get("wood_pickaxe", 0) > 0 and self._rest_allowed(obs) and \
+                    self._night_shelter(obs):
+                # hurt: heal sealed in a shelter (sleeping there heals twice as fast)
+                self.mode, self._rest = "retreat", Rest(until_day=False, until_health=min(9, self.health_below + 3))
+            elif weak and foes:
+                self._note("flee")
+                action = self.flee_action()
+                if action != "noop":
+                    self.act(action)
+                    return Status.RUNNING
             elif v["energy"] < self.energy_below:
                 self.mode, self._rest = "rest", Rest(until_day=True)
+                if not self._rest_allowed(obs):
+                    self._rest.state["no_shelter"] = True  # the shelter failed just now: sleep where it is safest
             elif obs["daylight"] < self.night_below and obs["inventory"].get("wood_pickaxe", 0) > 0 and \
-                    self._night_shelter(obs):
+                    self._rest_allowed(obs) and self._night_shelter(obs):
                 # night, and a shelter it can dig is known: rest in it until day
                 self.mode, self._rest = "rest", Rest(until_day=True)
+        if self.mode is None and ((v["drink"] <= 3 and not self.map.known("water")) or
+                                  (v["food"] <= 3 and not self.map.known("cow"))):
+            # thirsty or hungry and no water or cow remembered: look for one
+            self._note("forage")
+            self.act(self.explore_action())
+            return Status.RUNNING
         if self.mode is None:
             return Status.FAILURE
         self._note(self.mode)
@@ -88,17 +125,24 @@ class GameSurvive(GameLeaf):
             return self._toward(here or self.map.cells_of(["cow"]), strike=True)
         action = self._rest.step(self)
         if action is None:
+            if self._rest.gave_up:
+                self._gave_up_at = int(obs["step"])
+                self.ctx.trace.record("game_shelter_abandoned", step=obs["step"], mode=self.mode)
             self.mode, self._rest = None, None
             return Status.FAILURE
         self.act(action)
         return Status.RUNNING
+
+    def _rest_allowed(self, obs) -> bool:
+        """Not within 30 steps of giving up on a shelter (do not loop on the same one)."""
+        return int(obs["step"]) - getattr(self, "_gave_up_at", -1000) > 30
 
     def _night_shelter(self, obs) -> bool:
         step = int(obs["step"])
         if getattr(self, "_shelter_checked", -100) > step - 10:
             return False  # looked less than 10 steps ago and found none
         self._shelter_checked = step
-        return find_shelter(self.map, tuple(obs["position"]), can_dig=True,
+        return find_shelter(self.map, tuple(obs["position"]), can_dig=True, radius=16,
                             stones=obs["inventory"].get("stone", 0)) is not None
 
     def _toward(self, goals, *, strike: bool):

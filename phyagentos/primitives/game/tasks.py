@@ -186,6 +186,8 @@ class GameHunt(GameLeaf):
             self.act(self.face(adjacent[0]) or "do")
             return Status.RUNNING
         goals = here or self.map.cells_of([self.creature])
+        if not goals and self.creature == "plant_ripe" and self._wait_for_plant():
+            return Status.RUNNING
         if not goals and self.creature == "plant_ripe":
             # A sapling ripens where it was planted: wait next to a remembered plant.
             move, plan = self.goto_action(self.map.cells_of(["plant"]))
@@ -196,6 +198,33 @@ class GameHunt(GameLeaf):
         return Status.RUNNING
 
 
+    def _wait_for_plant(self) -> bool:
+        """A sapling ripens ~300 steps after planting, and only while the player is within
+        Crafter's update distance: wait in a sealed shelter near the plant until then (the
+        player's own record of when it planted, ``notes['plants']``). True when it acted."""
+        plants = self.map.cells_of(["plant"])
+        planted = [int(s) for c, s in self.ctx.target.notes.get("plants", []) if tuple(c) in plants]
+        if self._rest is None:
+            if not planted or int(self.obs["step"]) >= min(planted) + 310 or \
+                    self.obs["inventory"].get("wood_pickaxe", 0) == 0:
+                return False
+            px, py = self.obs["position"]
+            if min(abs(x - px) + abs(y - py) for x, y in plants) > 6:
+                move, plan = self.goto_action(plants)
+                if move is None:
+                    return False
+                self.act(move)
+                return True
+            self._rest = Rest(until_day=False, until_step=min(planted) + 310, radius=8)
+            self.ctx.trace.record("game_plant_wait", step=self.obs["step"], until=min(planted) + 310)
+        action = self._rest.step(self)
+        if action is None:
+            self._rest = None
+            return False
+        self.act(action)
+        return True
+
+
 class GamePlace(GameLeaf):
     """Place ``item`` (``table``, ``furnace``, ``stone``, ``plant``) on a free cell in front,
     next to ``near`` (a material) when given; SUCCESS when the inventory paid for it.
@@ -204,16 +233,174 @@ class GamePlace(GameLeaf):
 
     TOOLS = ("observe", "place_stone", "place_table", "place_furnace", "place_plant") + _MOVE_ACTIONS
 
-    def __init__(self, name: str, *, item: str, near: str | None = None, max_tries: int = 2, max_steps: int = 300):
+    def __init__(self, name: str, *, item: str, near: str | None = None, max_tries: int = 2, protect: bool = False,
+                 max_steps: int = 300):
         super().__init__(name, max_steps=max_steps)
         if item not in PLACE_ONTO:
             raise ValueError(f"cannot place {item!r}; placeable: {sorted(PLACE_ONTO)}")
         self.item, self.near, self.max_tries = item, near, int(max_tries)
+        self.protect = bool(protect) and item == "plant"
         self._tries = 0
         self._turns = 0
+        self._nook = None  # (X, d): the grass cell to plant on and the direction from the stand cell to it
+        self._seal: list[str] | None = None
+        self._wall_tries = 0
+
+    # -- a protected plant -------------------------------------------------------------
+    # A sapling ripens only while no zombie, skeleton or cow stands next to it (Crafter's
+    # Plant.update), and a player faces a free cell only right after moving toward it. So:
+    # plant on a grass cell X whose three other neighbours are solid, standing on Y with Z
+    # and W behind it in a line (Z = Y - d, W = Y - 2d); then back off to W, step forward
+    # into Z (now facing Y) and place stone on Y. X is then walled in on all four sides.
+    def _find_nook(self):
+        """``(X, d, walls)``: the nearest grass cell X to plant on, approached along ``d``
+        (Y = X - d, Z, W behind it walkable), whose other three neighbours are solid or
+        can be walled with stone (``walls``: directions e whose X + e is open, with X + 2e
+        and X + 3e walkable to stand on and come from); the fewest walls first. The player
+        needs ``len(walls) + 1`` stones."""
+        here = tuple(self.obs["position"])
+        m = self.map
+        px, py = here
+        stones = self.obs["inventory"].get("stone", 0)
+        occupied = {(px + o["dx"], py + o["dy"]) for o in self.obs["objects"]} | m.cells_of(["plant", "plant_ripe"])
+
+        def at(c, e, k):
+            return c[0] + k * e[0], c[1] + k * e[1]
+
+        best: dict[tuple[int, int], tuple] = {}
+        for dx in range(-10, 11):
+            for dy in range(-10, 11):
+                x = (px + dx, py + dy)
+                if m.material(x) != "grass" or x in occupied:
+                    continue
+                for d in MOVES.values():
+                    back = (-d[0], -d[1])
+                    if not all(m.material(at(x, back, k)) in WALKABLE for k in (1, 2, 3)):
+                        continue
+                    walls, ok = [], True
+                    for e in MOVES.values():
+                        if e == back:
+                            continue
+                        n = m.material(at(x, e, 1))
+                        if n in ("unknown", "lava"):
+                            ok = False
+                        elif n in WALKABLE:
+                            if at(x, e, 1) in occupied or not all(m.material(at(x, e, k)) in WALKABLE for k in (2, 3)):
+                                ok = False
+                            walls.append(e)
+                    if not ok or len(walls) + 1 > stones:
+                        continue
+                    z = at(x, back, 2)
+                    key = (len(walls), abs(dx) + abs(dy))
+                    if z not in best or key < best[z][0]:
+                        best[z] = (key, (x, d, walls))
+        if not best:
+            return None
+        fewest = min(v[0][0] for v in best.values())
+        goals = {z for z, v in best.items() if v[0][0] == fewest}
+        plan = m.plan(here, goals, blocked=self.blocked(), stand_on_goal=True)
+        return None if plan is None else best[plan.stand][1]
+
+    def _wall_step(self) -> bool:
+        """Wall the next open neighbour of the chosen cell: stand on X + 3e, step to X + 2e
+        (now facing X + e), place stone. True when it acted."""
+        x, d, walls = self._nook
+        while walls:
+            e = walls[0]
+            n = (x[0] + e[0], x[1] + e[1])
+            if self.map.material(n) not in WALKABLE:
+                walls.pop(0)  # walled (or already solid)
+                continue
+            two, three = (x[0] + 2 * e[0], x[1] + 2 * e[1]), (x[0] + 3 * e[0], x[1] + 3 * e[1])
+            here = tuple(self.obs["position"])
+            move_to = {v: k for k, v in MOVES.items()}
+            if here == two and facing_cell(self.obs) == n:
+                if self.obs["inventory"].get("stone", 0) == 0:
+                    raise PrimitiveFailure("game.place_failed", "no stone left to wall the plant in")
+                self.act("place_stone")
+                self._wall_tries += 1
+                if self._wall_tries > 12:
+                    raise PrimitiveFailure("game.place_failed", f"could not wall {n} in 12 tries")
+                return True
+            if here == three:
+                self.act(move_to[(-e[0], -e[1])])
+                return True
+            move, plan = self.goto_action({three}, stand_on_goal=True)
+            if move is None:
+                self.protect = False  # cannot get there now: plant unprotected
+                self._nook = None
+                return False
+            self.act(move)
+            return True
+        return False
+
+    def _protected_step(self):
+        obs = self.obs
+        here = tuple(obs["position"])
+        if self._seal is None and self._wall_step():
+            return Status.RUNNING
+        if self._nook is None:
+            return Status.RUNNING
+        x, d, _ = self._nook
+        move_to = {v: k for k, v in MOVES.items()}
+        back = move_to[(-d[0], -d[1])]
+        if self._seal is not None:  # planted: back off two cells, step forward, wall Y in
+            if not self._seal:
+                front = facing_cell(obs)
+                y = (x[0] - d[0], x[1] - d[1])
+                if front == y and self.map.material(y) in WALKABLE and obs["inventory"].get("stone", 0) > 0:
+                    self.act("place_stone")
+                    self.ctx.trace.record("game_plant_protected", step=self.obs["step"], ok=self.map.material(y) == "stone")
+                return Status.SUCCESS
+            self.act(self._seal.pop(0))
+            return Status.RUNNING
+        y = (x[0] - d[0], x[1] - d[1])
+        z = (x[0] - 2 * d[0], x[1] - 2 * d[1])
+        if here == y and facing_cell(obs) == x:
+            status = self._try_place(obs)
+            if status == Status.SUCCESS:
+                notes = self.ctx.target.notes
+                notes.setdefault("plants", []).append((x, int(self.obs["step"])))
+                self._seal = [back, back, move_to[d]] if obs["inventory"].get("stone", 0) > 0 else []
+                return Status.RUNNING
+            return status
+        if here == z:
+            self.act(move_to[d])
+            return Status.RUNNING
+        move, plan = self.goto_action({z}, stand_on_goal=True)
+        if plan is None or move is None:
+            self._nook = None  # unreachable now: place anywhere
+            self.protect = False
+            self.act(self.explore_action() if plan is None else back)
+            return Status.RUNNING
+        self.act(move)
+        return Status.RUNNING
+
+    def _try_place(self, obs):
+        before = dict(obs["inventory"])
+        self.act(f"place_{self.item}")
+        ok = self.obs["inventory"] != before
+        self.ctx.trace.record("game_place", step=self.obs["step"], item=self.item, ok=ok,
+                              nearby=neighbourhood(obs), inventory_before=before,
+                              inventory_after=dict(self.obs["inventory"]))
+        if ok:
+            return Status.SUCCESS
+        self._tries += 1
+        if self._tries >= self.max_tries:
+            raise PrimitiveFailure("game.place_failed", f"place_{self.item} changed nothing {self._tries} times "
+                                                        f"(inventory {before})")
+        return Status.RUNNING
 
     def step(self):
         obs = self.obs
+        if self.protect:
+            if self._nook is None:
+                self._nook = self._find_nook()
+                if self._nook is None:
+                    self.protect = False
+                    self.ctx.trace.record("game_plant_protected", step=obs["step"], ok=False, why="no walled nook seen")
+            if self._nook is not None:
+                return self._protected_step()
         if self.near and self.near not in neighbourhood(obs):
             move, plan = self.goto_action(self.map.cells_of([self.near]))
             self.act(move if move is not None else self.explore_action())
@@ -222,19 +409,10 @@ class GamePlace(GameLeaf):
         px, py = obs["position"]
         occupied = {(px + o["dx"], py + o["dy"]) for o in obs["objects"]}
         if self.map.material(front) in PLACE_ONTO[self.item] and front not in occupied:
-            before = dict(obs["inventory"])
-            self.act(f"place_{self.item}")
-            ok = self.obs["inventory"] != before
-            self.ctx.trace.record("game_place", step=self.obs["step"], item=self.item, ok=ok,
-                                  nearby=neighbourhood(obs), inventory_before=before,
-                                  inventory_after=dict(self.obs["inventory"]))
-            if ok:
-                return Status.SUCCESS
-            self._tries += 1
-            if self._tries >= self.max_tries:
-                raise PrimitiveFailure("game.place_failed", f"place_{self.item} changed nothing {self._tries} times "
-                                                            f"(inventory {before})")
-            return Status.RUNNING
+            status = self._try_place(obs)
+            if status == Status.SUCCESS and self.item == "plant":
+                self.ctx.target.notes.setdefault("plants", []).append((front, int(self.obs["step"])))
+            return status
         # Turn or step so that a placeable cell comes in front.
         self._turns += 1
         order = list(MOVES)
@@ -255,7 +433,7 @@ class GameMake(GameLeaf):
     TOOLS = ("observe", "make_wood_pickaxe", "make_stone_pickaxe", "make_iron_pickaxe", "make_wood_sword",
              "make_stone_sword", "make_iron_sword") + _MOVE_ACTIONS
 
-    def __init__(self, name: str, *, item: str, near: list | None = None, max_tries: int = 6, max_steps: int = 600):
+    def __init__(self, name: str, *, item: str, near: list | None = None, max_tries: int = 12, max_steps: int = 600):
         super().__init__(name, max_steps=max_steps)
         self.item, self.near, self.max_tries = item, list(near or []), int(max_tries)
         self._tries = 0

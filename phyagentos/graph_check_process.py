@@ -10,12 +10,13 @@ itself never imports the motion stack: the import is paid once per run (in the
 forkserver), not twice, and not on the main process's path.
 
 The check, its inputs and its errors are exactly those of ``check_goal_graph``; where no
-forkserver can be used, it runs in this process instead.
+forkserver can be used, or this process has the check loaded already, it runs here.
 """
 
 from __future__ import annotations
 
 import logging
+import sys
 import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -63,11 +64,17 @@ def _child(conn, path: str, root: str, target: str | None, dirs: tuple[str, str]
 
 
 def check_goal_graph_forked(path: str | Path, workspace_root: str | Path, *, target: str | None = None,
-                            timeout_s: float = CHECK_TIMEOUT_S) -> "GraphCheck":
+                            fork: bool | None = None, timeout_s: float = CHECK_TIMEOUT_S) -> "GraphCheck":
     """:func:`phyagentos.graph_check.check_goal_graph` of ``path`` against the workspace
     at ``workspace_root`` with the shipped skills and trees, run in a child of the
     runner's forkserver (this process imports neither the primitives nor the motion
     stack).
+
+    Args:
+        fork: ``None`` (default): fork unless this process has imported
+            :mod:`phyagentos.graph_check` already (``validate``, a library user or a
+            test that uses or adapts the check: it then runs here, as that caller set
+            it up); ``True``: always fork; ``False``: check in this process.
 
     Raises:
         GoalGraphError: the graph is invalid (the same message, file and line as the
@@ -78,6 +85,10 @@ def check_goal_graph_forked(path: str | Path, workspace_root: str | Path, *, tar
 
     path, root = Path(path), Path(workspace_root)
     dirs = (skill_dirs(), tree_dirs())  # resolved here: the forkserver's environment may be older
+    if fork is None:
+        fork = "phyagentos.graph_check" not in sys.modules
+    if not fork:
+        return _check_here(path, root, target, dirs)
     try:
         from phyagentos.runtime.worker import forkserver_context  # noqa: PLC0415
 

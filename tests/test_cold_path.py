@@ -46,7 +46,7 @@ def test_the_forked_graph_check_returns_what_the_in_process_check_returns(tmp_pa
     ws = Workspace.create(tmp_path / "ws")
     with monkeypatch.context() as m:
         _no_fallback(m)
-        forked = check_goal_graph_forked(PICK_AND_PLACE, ws.root)
+        forked = check_goal_graph_forked(PICK_AND_PLACE, ws.root, fork=True)
     here = _in_process(PICK_AND_PLACE, ws)
     assert [n.id for n in forked.graph.nodes] == [n.id for n in here.graph.nodes] == ["pick_cube", "place_cube"]
     assert forked.poses_checked == here.poses_checked > 0
@@ -62,7 +62,7 @@ def test_the_forked_graph_check_raises_the_same_located_error(tmp_path, monkeypa
     bad.write_text(PICK_AND_PLACE.read_text().replace("params: {object: cube}", "params: {object: sphere}"))
     with monkeypatch.context() as m, pytest.raises(GoalGraphError) as forked:
         _no_fallback(m)
-        check_goal_graph_forked(bad, ws.root)
+        check_goal_graph_forked(bad, ws.root, fork=True)
     with pytest.raises(GoalGraphError) as here:
         _in_process(bad, ws)
     assert str(forked.value) == str(here.value)
@@ -107,3 +107,14 @@ def test_the_coordinator_wakes_the_supervisor_before_it_rewrites_task_md(tmp_pat
     assert ws.read("TASK").data.run_id == run.run_id  # ... and is once the step ends
     assert agent.last_sessions is not None and len(agent.last_sessions) == len(seen)
     assert agent.step() == 0 and len(seen) == 1  # nothing new: no wake-up
+
+
+def test_a_process_that_loaded_the_check_runs_it_itself_as_it_adapted_it(tmp_path, monkeypatch):
+    import phyagentos.graph_check as graph_check
+    from phyagentos.graph_check_process import check_goal_graph_forked
+
+    ws = Workspace.create(tmp_path / "ws")
+    calls = []
+    monkeypatch.setattr(graph_check, "check_goal_graph", lambda *a, **k: calls.append(k) or "checked here")
+    assert check_goal_graph_forked(HOLD, ws.root, target="franka_tabletop") == "checked here"
+    assert calls == [{"target": "franka_tabletop"}]

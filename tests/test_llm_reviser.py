@@ -84,9 +84,12 @@ def test_give_up_is_a_typed_answer_offered_from_the_second_replan_on():
     assert reviser.plan(session(), SLIPPED) is not None  # first replan: not offered, the ladder's instead
     assert reviser.proposals[0]["proposed_by"] == "rules"
     tried = Revision(strategy="firmer_grip", cause="object_slipped", parameters={"grip_force_n": 40.0})
-    assert reviser.plan(session(grip_force_n=40.0).model_copy(update={"recovery": tried}), SLIPPED) is None
+    child = session(grip_force_n=40.0).model_copy(update={"recovery": tried, "session_id": "r1-pick_cube-2"})
+    assert reviser.plan(child, SLIPPED) is None
     assert reviser.proposals[1]["proposed_by"] == "model:give_up"
-    (record,) = reviser.calls_for("r1-pick_cube-1")[1:]
+    # the same attempt judged again (images arrived) gets the same answer, without a second model call
+    assert reviser.plan(child, SLIPPED) is None and len(reviser.proposals) == 2
+    (record,) = reviser.calls_for("r1-pick_cube-2")
     assert record.outcome == "gave_up" and record.output == answer.text and record.role == "reviser"
 
 

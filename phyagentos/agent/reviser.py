@@ -178,6 +178,9 @@ class ModelReviser:
         self.calls: list[LLMCall] = []
         self.proposals: list[dict[str, Any]] = []
         self._records: dict[str, list[ModelCallRecord]] = {}
+        # (session, attempt, cause) -> the revision given: a verdict judged again (the coordinator
+        # re-judges once a failed attempt's images exist) gets the same answer without a second call
+        self._given: dict[tuple[str, int, str], Revision | None] = {}
 
     @property
     def skills(self) -> Mapping[str, SkillInfo]:
@@ -239,7 +242,16 @@ class ModelReviser:
     def plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
              history: Sequence[SessionRecord] = (), upstream: str | None = None) -> Revision | None:
         """See :class:`Reviser`. Never raises for a bad model answer: it falls back (and records why).
-        No model call is made when no revision could change the outcome."""
+        No model call is made when no revision could change the outcome, nor twice for one attempt."""
+        key = (session.session_id, len(session.attempts), diagnosis.cause)
+        if key in self._given:
+            return self._given[key]
+        revision = self._plan(session, diagnosis, history=history, upstream=upstream)
+        self._given[key] = revision
+        return revision
+
+    def _plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
+              history: Sequence[SessionRecord], upstream: str | None) -> Revision | None:
         record: dict[str, Any] = {"session": session.session_id, "cause": diagnosis.cause}
         variants = self.menu(session, diagnosis, history=history, upstream=upstream)
         if not variants:

@@ -39,6 +39,7 @@ Writes bench/results/language.json and prints tables. Timings on a shared, loade
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import random
@@ -250,7 +251,8 @@ def perceive(case: Case, ws: Path) -> tuple[list[dict], float]:
 def run_suite(client, cases: list[Case], *, execute: int, root: Path, look: bool = True) -> list[dict]:
     ws0 = Workspace.create(root / "plan-ws")
     targets = [t.model_dump(mode="json") for t in ws0.read("TARGETS").data.targets]
-    planner = GoalPlanner(client, skills=skill_names(), targets=targets, reach=answer_reach_query)
+    planner = GoalPlanner(client, skills=skill_names(), targets=targets,
+                          reach=functools.partial(answer_reach_query, root=ws0.root))
     rows = []
     executed = 0
     for i, case in enumerate(cases):

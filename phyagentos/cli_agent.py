@@ -63,6 +63,8 @@ def make_planner(workspace, *, client=None):
     from phyagentos.agent.planner import GoalPlanner  # noqa: PLC0415
     from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
     from phyagentos.orchestrator import skill_names  # noqa: PLC0415
+    from functools import partial  # noqa: PLC0415
+
     from phyagentos.runtime.reach_query import answer_reach_query  # noqa: PLC0415
 
     targets = [t.model_dump(mode="json") for t in workspace.read("TARGETS").data.targets]
@@ -71,7 +73,8 @@ def make_planner(workspace, *, client=None):
     verified = sorted((x for x in workspace.read("LESSONS").data.lessons if x.verified),
                       key=lambda x: -x.confirmations)
     lessons = [f"{x.cause}: {x.correction} ({x.confirmations} confirmation(s))" for x in verified[:5]]
-    return GoalPlanner(client, skills=skill_names(), targets=targets, lessons=lessons, reach=answer_reach_query)
+    return GoalPlanner(client, skills=skill_names(), targets=targets, lessons=lessons,
+                       reach=partial(answer_reach_query, root=workspace.root))
 
 
 def make_reviser(kind: str, workspace_dir: str | Path):

@@ -55,9 +55,12 @@ def build_registry(workspace: Workspace, *, with_planner: bool = True) -> ToolRe
             out["goal_graph_yaml"] = result.graph_yaml
             return out
 
+    from functools import partial  # noqa: PLC0415
+
     from phyagentos.runtime.reach_query import answer_reach_query  # noqa: PLC0415
 
-    return ToolRegistry(workspace, submit=submit, plan=plan, issued_by="mcp", reach=answer_reach_query)
+    return ToolRegistry(workspace, submit=submit, plan=plan, issued_by="mcp",
+                        reach=partial(answer_reach_query, root=workspace.root))
 
 
 def build_server(registry: ToolRegistry) -> Server:

@@ -281,3 +281,30 @@ def test_a_multi_object_request_is_planned_one_constrained_step_per_clause(plann
     assert second.depends_on == (result.graph.nodes[0].id,)
     # the second node re-checks the first placement (the request's invariant)
     assert {"inside": {"object": "red_cube", "region": "red_region"}} in second.accept
+
+
+def test_the_reach_query_builds_a_mesh_object_from_the_workspace_it_was_wired_with(tmp_path):
+    """The planner's reach oracle is wired with the workspace root: a mesh object named by
+    the scene is built from the workspace's file and its grasp solved by IK; an oracle
+    without a root cannot build it, and says so instead of calling it out of reach."""
+    from functools import partial
+
+    from phyagentos.agent.selector import select_target
+    from phyagentos.protocol.reach import ReachQuery
+    from phyagentos.runtime.reach_query import answer_reach_query
+    from test_authoring_mesh import hex_prism_obj
+
+    ws = Workspace.create(tmp_path / "ws")
+    (ws.root / "meshes").mkdir()
+    (ws.root / "meshes" / "hex.obj").write_text(hex_prism_obj(), encoding="utf-8")
+    targets = [t.model_dump(mode="json") for t in ws.read("TARGETS").data.targets]
+    scene = {"objects": [{"name": "nut", "shape": "mesh", "mesh": "meshes/hex.obj", "position": [0.45, -0.2],
+                          "rgba": [0.8, 0.1, 0.1, 1]}],
+             "regions": [{"name": "goal", "center": [0.5, 0.25], "half_extents": [0.08, 0.08]}]}
+    where = {"nut": (0.45, -0.2)}
+    wired = select_target("pick", targets=targets, positions=where, scene=scene, pick="nut",
+                          reach=partial(answer_reach_query, root=ws.root), prefer="franka_tabletop")
+    assert wired.target == "franka_tabletop" and "reach (IK on its model)" in wired.reasons["franka_tabletop"]
+    unwired = answer_reach_query(ReachQuery(target="franka_tabletop", driver="mujoco_franka", scene=scene,
+                                            positions={"nut": [0.45, -0.2]}, pick="nut"))
+    assert unwired.status == "unsupported" and "no workspace was given" in unwired.reasons[0]

@@ -147,6 +147,7 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
     if req is None:
         return Selection(None, None, {"*": f"unknown skill {skill!r}"})
     fitting: list[tuple[float, str]] = []
+    unbuildable: list[str] = []  # capable targets whose runtime could not build the scene
     capable = False
     unseen = f"; reach of {', '.join(unknown)} not checked (not perceived yet)" if unknown else ""
     for t in targets:
@@ -167,6 +168,7 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
                                       pick=pick, place=list(place) if place else None))
             if answer.status == "unsupported":
                 reasons[name] = f"cannot build the scene: {'; '.join(answer.reasons)}"
+                unbuildable.append(name)
                 continue
             if answer.status == "unreachable":
                 reasons[name] = f"out of reach ({answer.checked_by}): {'; '.join(answer.reasons)}"
@@ -191,6 +193,14 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
             score = 0.0
         fitting.append((0.0 if name == prefer else 1.0 + score, name))
         reasons[name] = f"fits: capabilities, observations and {how}"
+    if not fitting and unbuildable and not any(r.startswith("out of reach") for r in reasons.values()):
+        # No capable target could even build the scene (a missing mesh file, a malformed
+        # item): that is an authoring error, not a question of reach. The node keeps the
+        # scene's target (or the first capable one) so that the whole-graph check reports
+        # the scene's own error with its file and line.
+        chosen = prefer if prefer in unbuildable else unbuildable[0]
+        reasons[chosen] = "chosen: " + reasons[chosen] + " (no target could build it: the graph check reports why)"
+        return Selection(chosen, req.runtime, reasons)
     if not fitting:
         return Selection(None, None, reasons, out_of_reach=capable)
     fitting.sort()

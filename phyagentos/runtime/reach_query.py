@@ -32,9 +32,15 @@ def _perceived_scene(query: ReachQuery) -> dict[str, Any]:
     return scene
 
 
-def answer_reach_query(query: ReachQuery) -> ReachAnswer:
-    """Whether ``query.target`` reaches the query's pick and place poses (see the module docstring)."""
-    scene, problems = check_scene(_perceived_scene(query), query.driver)
+def answer_reach_query(query: ReachQuery, *, root: Any = None) -> ReachAnswer:
+    """Whether ``query.target`` reaches the query's pick and place poses (see the module docstring).
+
+    Args:
+        query: the node's poses, target and scene.
+        root: the workspace root that the scene's mesh files (``shape: mesh``) are read
+            from; ``None``: a scene with a mesh object is ``unsupported``.
+    """
+    scene, problems = check_scene(_perceived_scene(query), query.driver, root=root)
     if scene is None:
         return ReachAnswer(status="unsupported", reasons=[p.message for p in problems] or ["scene not modelled"])
     objects = {o.get("name") for o in query.scene.get("objects") or [] if isinstance(o, dict)}

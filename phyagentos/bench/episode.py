@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import time
 import traceback
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +45,9 @@ class Episode:
         target: target override for every node, or ``None`` (the graph's own targets).
         scene: the episode's initial scene (randomised and perturbed), as plain data.
         evaluation: the evaluation block written into every session.
+        limits: session ``limits`` written into every node of the episode's graph
+            (e.g. ``{"heartbeat_timeout_s": 60}`` on a loaded machine); empty: the
+            graph's own limits.
     """
 
     episode_id: str
@@ -56,6 +59,7 @@ class Episode:
     target: str | None
     scene: dict
     evaluation: dict
+    limits: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -106,6 +110,9 @@ def episode_graph_text(episode: Episode) -> str:
     """
     raw = yaml.safe_load(Path(episode.goal_graph).read_text(encoding="utf-8"))
     raw["scene"] = episode.scene
+    if episode.limits:
+        for node in raw.get("nodes") or ():
+            node["limits"] = {**(node.get("limits") or {}), **episode.limits}
     header = (f"# Episode {episode.episode_id} of bench run {episode.evaluation.get('bench_id')}: "
               f"{episode.goal_graph} with the episode's initial scene (seed {episode.seed}).\n")
     return header + yaml.safe_dump(raw, sort_keys=False, allow_unicode=True)

@@ -99,6 +99,7 @@ def run_bench(
     bench_id: str | None = None,
     on_compiled: Callable[[int], None] | None = None,
     on_episode: Callable[[EpisodeOutcome], None] | None = None,
+    heartbeat_timeout_s: float | None = None,
 ) -> BenchResult:
     """Run a benchmark suite end to end and write its report.
 
@@ -115,6 +116,10 @@ def run_bench(
         bench_id: id of the run (default: new, time-sortable).
         on_compiled: called with the number of episodes once they are compiled.
         on_episode: called with each :class:`EpisodeOutcome` as it completes.
+        heartbeat_timeout_s: the runner heartbeat timeout of every session, s (default
+            ``None``: the graphs' own limits, i.e. the shipped 10 s). A benchmark on a
+            loaded, shared machine raises it so that load does not end sessions the
+            world did not fail; the report counts the heartbeat timeouts left apart.
 
     Raises:
         BenchError: bad suite or arguments, or a failed availability gate (its
@@ -132,8 +137,11 @@ def run_bench(
     seed_list = tuple(seeds) if seeds is not None else suite.seeds(episodes=episodes, split=split)
     if not seed_list:
         raise BenchError("no seeds to run")
+    if heartbeat_timeout_s is not None and not heartbeat_timeout_s > 0:
+        raise BenchError(f"heartbeat_timeout_s must be > 0 s, got {heartbeat_timeout_s}")
+    limits = {"heartbeat_timeout_s": float(heartbeat_timeout_s)} if heartbeat_timeout_s is not None else {}
     plan = plan_episodes(suite, bench_id=bench_id, seeds=seed_list, split=split, memory=memory,
-                         protocol=policy.protocol, tasks=tasks)
+                         protocol=policy.protocol, tasks=tasks, limits=limits)
     atomic_write_text(run_dir / "suite.yaml", dump_yaml(suite.to_dict()))
 
     first_scenes = {}
@@ -167,7 +175,7 @@ def run_bench(
         "perturbations": {"rate": suite.perturbations.rate, "kinds": list(suite.perturbations.kinds)},
         "perturbations_text": (f"rate {suite.perturbations.rate:g} of {', '.join(suite.perturbations.kinds)}"
                                if suite.perturbations.rate else "none"),
-        "executor": executor, "workers": workers, "gate_checks": len(gate.checks),
+        "executor": executor, "workers": workers, "session_limits": limits, "gate_checks": len(gate.checks),
         "compile_s": round(compiled_s, 3), "execute_s": round(exec_s, 3), "wall_time_s": round(wall, 3),
         "episodes_per_minute": round(60.0 * len(outcomes) / exec_s, 3) if exec_s > 0 else 0.0,
         "workspace": str(ws.root), "run_dir": str(run_dir),

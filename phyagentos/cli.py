@@ -82,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--heartbeat-timeout", type=float, default=None, metavar="S",
                        help="runner heartbeat timeout of every session, s (default: the graphs' own, 10 s); raise it "
                             "on a loaded machine, the timeouts left are counted apart in the report")
+    bench.add_argument("--queue-timeout", type=float, default=None, metavar="S",
+                       help="how long every session may wait pending, s (default: the graphs' own, 600 s); raise it "
+                            "for runs longer than that (every episode is compiled up front)")
 
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
     val.add_argument("goal_graph", type=Path)
@@ -189,7 +192,7 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
             result = run_bench(args.suite, args.workspace, episodes=args.episodes, seeds=seeds, split=args.split,
                                tasks=tasks, workers=args.workers, memory=args.memory, executor=args.executor,
                                on_compiled=compiled, on_episode=episode_done,
-                               heartbeat_timeout_s=args.heartbeat_timeout)
+                               heartbeat_timeout_s=args.heartbeat_timeout, queue_timeout_s=args.queue_timeout)
     except BenchError as exc:
         if exc.problems:
             err.print(f"[red]{str(exc).splitlines()[0]}[/red]")

@@ -27,8 +27,10 @@ def write_suite(path):
 def test_heartbeat_timeout_flag_defaults_to_the_graphs_own_limit(tmp_path):
     parser = build_parser()
     assert parser.parse_args(["bench", "tabletop", "--workspace", str(tmp_path)]).heartbeat_timeout is None
-    args = parser.parse_args(["bench", "tabletop", "--workspace", str(tmp_path), "--heartbeat-timeout", "45"])
-    assert args.heartbeat_timeout == 45.0
+    args = parser.parse_args(["bench", "tabletop", "--workspace", str(tmp_path), "--heartbeat-timeout", "45",
+                              "--queue-timeout", "7200"])
+    assert args.heartbeat_timeout == 45.0 and args.queue_timeout == 7200.0
+    assert parser.parse_args(["bench", "tabletop", "--workspace", str(tmp_path)]).queue_timeout is None
 
 
 def test_episode_limits_reach_every_node_of_the_episode_graph_and_nothing_else_changes(tmp_path):
@@ -50,6 +52,8 @@ def test_episode_limits_reach_every_node_of_the_episode_graph_and_nothing_else_c
 def test_a_non_positive_heartbeat_timeout_is_refused_before_any_episode_is_compiled(tmp_path):
     with pytest.raises(BenchError, match="heartbeat_timeout_s must be > 0"):
         run_bench(write_suite(tmp_path / "mini.yaml"), tmp_path / "ws", seeds=(0,), heartbeat_timeout_s=0.0)
+    with pytest.raises(BenchError, match="queue_timeout_s must be > 0"):
+        run_bench(write_suite(tmp_path / "mini.yaml"), tmp_path / "ws", seeds=(0,), queue_timeout_s=-1.0)
     assert not list((tmp_path / "ws").rglob("episodes"))
 
 
@@ -74,4 +78,5 @@ def test_sessions_ended_by_a_heartbeat_timeout_are_counted_apart_not_as_robot_fa
     assert rep["overall"]["episodes"] == 0 and rep["overall"]["failed_episodes"] == []
     assert all(not t["count"] for t in rep["error_taxonomy"].values()), rep["error_taxonomy"]
     md = (result.run_dir / "report.md").read_text()
-    assert "heartbeat timeout (machine load; not scored above) | 1 |" in md
+    assert "heartbeat or queue timeout (machine load; not scored above) | 1 |" in md
+    assert set(hb["codes"]) <= {"heartbeat.runner", "heartbeat.target", "heartbeat.policy"}

@@ -100,6 +100,7 @@ def run_bench(
     on_compiled: Callable[[int], None] | None = None,
     on_episode: Callable[[EpisodeOutcome], None] | None = None,
     heartbeat_timeout_s: float | None = None,
+    queue_timeout_s: float | None = None,
 ) -> BenchResult:
     """Run a benchmark suite end to end and write its report.
 
@@ -120,6 +121,10 @@ def run_bench(
             ``None``: the graphs' own limits, i.e. the shipped 10 s). A benchmark on a
             loaded, shared machine raises it so that load does not end sessions the
             world did not fail; the report counts the heartbeat timeouts left apart.
+        queue_timeout_s: how long every session may wait pending, s (default ``None``: the
+            graphs' own, 600 s). Every episode is compiled before the first runs, so a run
+            longer than this on a loaded machine would time out the last episodes' sessions
+            in the queue; the report counts queue timeouts apart as well.
 
     Raises:
         BenchError: bad suite or arguments, or a failed availability gate (its
@@ -137,9 +142,12 @@ def run_bench(
     seed_list = tuple(seeds) if seeds is not None else suite.seeds(episodes=episodes, split=split)
     if not seed_list:
         raise BenchError("no seeds to run")
-    if heartbeat_timeout_s is not None and not heartbeat_timeout_s > 0:
-        raise BenchError(f"heartbeat_timeout_s must be > 0 s, got {heartbeat_timeout_s}")
-    limits = {"heartbeat_timeout_s": float(heartbeat_timeout_s)} if heartbeat_timeout_s is not None else {}
+    limits = {}
+    for key, value in (("heartbeat_timeout_s", heartbeat_timeout_s), ("queue_timeout_s", queue_timeout_s)):
+        if value is not None and not value > 0:
+            raise BenchError(f"{key} must be > 0 s, got {value}")
+        if value is not None:
+            limits[key] = float(value)
     plan = plan_episodes(suite, bench_id=bench_id, seeds=seed_list, split=split, memory=memory,
                          protocol=policy.protocol, tasks=tasks, limits=limits)
     atomic_write_text(run_dir / "suite.yaml", dump_yaml(suite.to_dict()))

@@ -13,9 +13,10 @@ verdicts; the report never re-judges. Per episode:
 
 An episode with a session that ended on a heartbeat timeout (``heartbeat.*``: a runner,
 target or policy went silent longer than ``limits.heartbeat_timeout_s``, on a shared
-machine the symptom of load, not of the world) is neither a robot success nor a robot
+machine the symptom of load, not of the world) or that timed out waiting in the queue
+(``timeout.queue``: it never reached a robot) is neither a robot success nor a robot
 failure: it is left out of First, Final, rescued and the error taxonomy and counted on
-its own row (``heartbeat_timeouts`` in report.json).
+its own row (``heartbeat_timeouts`` in report.json, with the codes).
 
 Every unsuccessful session is classified with :func:`phyagentos.bench.taxonomy.classify`.
 Every verified session is scored against its ``ground_truth.yaml``
@@ -147,7 +148,7 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
             ground_truth.append({"session_id": s.session_id, "verdict": verdict, "env_success": bool(gt["success"]),
                                  "source": gt.get("source", ""), "task": gt.get("task"),
                                  "agree": (verdict == "success") == bool(gt["success"])})
-        if s.state != "succeeded" and str(row["error_code"] or "").startswith("heartbeat."):
+        if s.state != "succeeded" and str(row["error_code"] or "").startswith(LOAD_TIMEOUT_CODES):
             heartbeat.append(s.session_id)
         elif s.state != "succeeded":
             diagnosis = getattr(attempt.verdict, "diagnosis", None) if attempt and attempt.verdict else None
@@ -175,6 +176,17 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         "env_success": ground_truth[-1]["env_success"] if ground_truth else None,
     }
     return EpisodeRecord(data)
+
+
+#: Error-code prefixes of sessions ended by machine load or waiting, not by the world.
+LOAD_TIMEOUT_CODES: tuple[str, ...] = ("heartbeat.", "timeout.queue")
+
+
+def _codes(rows) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for r in rows:
+        out[r["error_code"]] = out.get(r["error_code"], 0) + 1
+    return out
 
 
 def _rate(k: int, n: int) -> float | None:
@@ -252,6 +264,8 @@ def build_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:
                            if e["harness_status"] != "completed"],
         "heartbeat_timeouts": {"episodes": [e["episode_id"] for e in lost],
                                "sessions": [sid for e in lost for sid in e["heartbeat_timeout_sessions"]],
+                               "codes": _codes(e for x in lost for e in x["sessions"]
+                                               if e["session_id"] in x["heartbeat_timeout_sessions"]),
                                "per_task": {t: sum(1 for e in lost if e["task"] == t) for t in tasks}},
         "episodes": every,
     }
@@ -334,10 +348,11 @@ def _markdown(report: dict) -> str:
                      f"{s['rescued']} | {s['median_sim_time_s']} | {s['median_sessions']} | {s['median_wall_time_s']} |")
     hb = report.get("heartbeat_timeouts") or {}
     if hb.get("episodes"):
-        lines.append(f"| heartbeat timeout (machine load; not scored above) | {len(hb['episodes'])} | | | | | | | |")
+        lines.append(f"| heartbeat or queue timeout (machine load; not scored above) | {len(hb['episodes'])} | | | | | | | |")
     lines += ["", "![First vs Final](first_vs_final.png)", ""]
     if hb.get("episodes"):
-        lines += ["Episodes with a session that ended on a heartbeat timeout (neither robot success nor failure): "
+        lines += [f"Episodes with a session that ended on a heartbeat or queue timeout ({hb.get('codes')}; neither "
+                  "robot success nor failure): "
                   + ", ".join(f"`{e}`" for e in hb["episodes"]), ""]
     if o["rescued_episodes"]:
         lines += ["Rescued episodes (failed first, succeeded after a verifier-triggered child session): "

@@ -6,8 +6,10 @@ RUN_DIR is a ``phyagentos bench`` run directory (``<workspace>/bench/<bench_id>/
 finished or stopped: the episodes are re-read from their session files with
 :func:`phyagentos.bench.report.collect_episode` (the report's own code), and an episode
 whose worker never wrote ``outcome.yaml`` (not run, or stopped mid-way) is left out and
-listed. Episodes with a session ended by a heartbeat timeout (machine load) are counted
-on their own row, never as robot successes or failures, as in the bench report.
+listed; so is an episode that never started (every session timed out waiting in the queue,
+``timeout.queue``: no robot moved, e.g. the tail of a run longer than ``queue_timeout_s``).
+Episodes with a session ended by a heartbeat timeout (machine load) are counted on their
+own row, never as robot successes or failures, as in the bench report.
 
 Prints Markdown: First / Final / rescued per task with Wilson 95 % intervals, the error
 taxonomy, the verifier's session and per-criterion confusion matrices; writes the JSON.
@@ -35,13 +37,19 @@ def _ci(k: int, n: int) -> str:
 
 def merge(run_dirs: list[Path]) -> dict:
     """Episodes of every run (ran to the end), the scored ones' summaries and matrices."""
-    every, not_run = [], []
+    every, not_run, never_started = [], [], []
     for run in run_dirs:
         for d in sorted((run / "episodes").iterdir()):
             if not (d / "episode.yaml").is_file():
                 continue
             e = collect_episode(d, run).data
-            (not_run if e["harness_status"] == "not_run" else every).append({**e, "run": run.name})
+            e = {**e, "run": run.name}
+            if e["harness_status"] == "not_run":
+                not_run.append(e)
+            elif e["sessions"] and all(s["error_code"] == "timeout.queue" for s in e["sessions"]):
+                never_started.append(e)
+            else:
+                every.append(e)
     scored = [e for e in every if not e["heartbeat_timeout_sessions"]]
     lost = [e for e in every if e["heartbeat_timeout_sessions"]]
     tasks = list(dict.fromkeys(e["task"] for e in every))
@@ -60,6 +68,7 @@ def merge(run_dirs: list[Path]) -> dict:
                                "per_task": {t: sum(1 for e in lost if e["task"] == t) for t in tasks}},
         "harness_errors": [e["episode_id"] for e in every if e["harness_status"] != "completed"],
         "not_run": [f"{e['run']}/{e['episode_id']}" for e in not_run],
+        "never_started_queue_timeout": [f"{e['run']}/{e['episode_id']}" for e in never_started],
     }
 
 
@@ -102,7 +111,8 @@ def main() -> int:
     print(markdown(m))
     print(f"\nseeds {m['seeds'][0]}-{m['seeds'][-1]} ({len(m['seeds'])}); heartbeat-timeout episodes "
           f"{m['heartbeat_timeouts']['episodes']}; harness errors {m['harness_errors']}; "
-          f"not run or stopped: {len(m['not_run'])}")
+          f"not run or stopped: {len(m['not_run'])}; never started (queue timeout): "
+          f"{len(m['never_started_queue_timeout'])}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(m, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {args.out}")

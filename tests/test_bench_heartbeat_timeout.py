@@ -80,3 +80,19 @@ def test_sessions_ended_by_a_heartbeat_timeout_are_counted_apart_not_as_robot_fa
     md = (result.run_dir / "report.md").read_text()
     assert "heartbeat or queue timeout (machine load; not scored above) | 1 |" in md
     assert set(hb["codes"]) <= {"heartbeat.runner", "heartbeat.target", "heartbeat.policy"}
+
+
+def test_sessions_that_timed_out_in_the_queue_are_counted_apart_with_their_code(tmp_path):
+    # A 1 ms queue limit: the real supervisor times the pending session out before any
+    # runner starts; no robot moved, so the episode is neither a success nor a failure.
+    result = run_bench(write_suite(tmp_path / "mini.yaml"), tmp_path / "ws", seeds=(0,), workers=1,
+                       memory="off", queue_timeout_s=0.001)
+    rep = json.loads((result.run_dir / "report.json").read_text())
+    assert rep["session_limits"] == {"queue_timeout_s": 0.001}
+    (ep,) = rep["episodes"]
+    assert ep["sessions"] and all(s["state"] == "timed_out" and s["error_code"] == "timeout.queue"
+                                  for s in ep["sessions"])
+    assert rep["heartbeat_timeouts"]["episodes"] == ["pick_and_place-s0"]
+    assert rep["heartbeat_timeouts"]["codes"] == {"timeout.queue": len(ep["sessions"])}
+    assert rep["overall"]["episodes"] == 0
+    assert all(not t["count"] for t in rep["error_taxonomy"].values()), rep["error_taxonomy"]

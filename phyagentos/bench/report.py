@@ -134,7 +134,9 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
             "parent_session_id": s.parent_session_id, "generation": _generation(s.session_id),
             "file": _session_file(ws, s.session_id, run_dir),
             "evidence": f"{rel}/{attempt.evidence}" if attempt and attempt.evidence else None,
-            "error_code": attempt.error.code if attempt and attempt.error else None,
+            # a session that never ran an attempt (e.g. timed out in the queue) carries its code in result
+            "error_code": (attempt.error.code if attempt and attempt.error else
+                           s.result.error.code if attempt is None and s.result is not None and s.result.error else None),
             "reason": (attempt.verdict.reason if attempt and attempt.verdict else
                        "; ".join(r.code for r in s.rejection) or (attempt.error.message if attempt and attempt.error else "")),
         }

@@ -26,7 +26,10 @@ false successes / sessions scored (the issue's "<= 1 % over at least 200 session
 ``false_failure_rate`` = false failures / sessions scored, ``false_failure_given_met``
 = false failures / sessions truth says succeeded. Criteria whose truth cannot be
 computed from ground truth (``still``: no joint state in it; ``articulated`` without a
-joint record) are counted as ``unscorable`` and left out.
+joint record) are counted as ``unscorable`` and left out; a session with an unscorable
+criterion is not scored as a session (its truth is unknown: the kitchen's ``articulated``
+and ``inside`` beside a scorable ``released`` would otherwise make every kitchen failure a
+"false failure"), only its scorable criteria are.
 """
 
 from __future__ import annotations
@@ -135,7 +138,7 @@ def score_session(*, accept: Any, verdict: Mapping[str, Any] | None, gt: Mapping
         rows.append({"predicate": c.text, "status": status, "truth": truth, "cell": cell})
         if truth is not None:
             truths.append(truth)
-    if not truths:
+    if not truths or len(truths) < len(rows):  # some criterion's truth unknown: the session's too
         return {"session": None, "criteria": rows, "truth_met": None}
     met = all(truths)
     success = verdict.get("verdict") == "success"

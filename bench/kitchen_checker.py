@@ -10,7 +10,8 @@ completion signal (gymnasium-robotics ``info['episode_task_completions']``), the
 completed at, the environment steps used, and the initial and terminal microwave angle and
 kettle position; next to it the SessionVerifier's verdict from the session file. The
 spread of those values over seeds says whether the episodes are one trajectory or many.
-Prints two tables and writes the JSON.
+Episodes ended by a heartbeat or queue timeout (machine load) are marked ``*`` and left out
+of the per-task counts. Prints two tables and writes the JSON.
 """
 
 from __future__ import annotations
@@ -53,6 +54,8 @@ def episode_rows(run_dir: Path) -> list[dict]:
             "first_success": ep["first_success"], "env_success": bench.get("success"),
             "completed_at_step": (bench.get("completed_at_step") or {}).get(ep["task"]),
             "env_steps": bench.get("env_steps"), "sessions": ep["n_sessions"],
+            # ended by a heartbeat or queue timeout (machine load): not scored, counted apart
+            "load_timeout": bool(ep.get("heartbeat_timeout_sessions")),
             "microwave_rad_initial": ((init.get("articulations") or {}).get("microwave") or {}).get("joint_position"),
             "microwave_rad_terminal": ((term.get("articulations") or {}).get("microwave") or {}).get("joint_position"),
             "kettle_xyz_initial": ((init.get("objects") or {}).get("kettle") or {}).get("position"),
@@ -73,9 +76,15 @@ def summarise(rows: list[dict]) -> dict:
     """Per task: episodes, env successes, our Final, agreements, and the spread over seeds."""
     out = {}
     for task in sorted({r["task"] for r in rows}):
-        rs = [r for r in rows if r["task"] == task]
+        lost = [r for r in rows if r["task"] == task and r["load_timeout"]]
+        rs = [r for r in rows if r["task"] == task and not r["load_timeout"]]
         out[task] = {
             "episodes": len(rs), "seeds": sorted(r["seed"] for r in rs),
+            "load_timeouts_not_scored": sorted(r["seed"] for r in lost),
+            "verdict_success_env_success": sum(1 for r in rs if r["verdict"] == "success" and r["env_success"]),
+            "verdict_success_env_failure": sum(1 for r in rs if r["verdict"] == "success" and not r["env_success"]),
+            "verdict_other_env_success": sum(1 for r in rs if r["verdict"] != "success" and r["env_success"]),
+            "verdict_other_env_failure": sum(1 for r in rs if r["verdict"] != "success" and not r["env_success"]),
             "env_successes": sum(1 for r in rs if r["env_success"]),
             "our_final_successes": sum(1 for r in rs if r["final_success"]),
             "our_first_successes": sum(1 for r in rs if r["first_success"]),
@@ -98,17 +107,17 @@ def main() -> int:
     rows = [r for run in args.runs for r in episode_rows(run)]
     summary = summarise(rows)
     print(f"{'task':<10}{'episodes':>9}{'env checker':>13}{'our Final':>11}{'our First':>11}{'agree':>7}"
-          f"{'distinct env_steps':>20}{'distinct terminal':>19}")
+          f"{'distinct env_steps':>20}{'distinct terminal':>19}{'load timeouts':>15}")
     for task, s in summary.items():
         key = "microwave_rad_terminal" if task == "microwave" else "kettle_x_terminal"
         print(f"{task:<10}{s['episodes']:>9}{s['env_successes']:>13}{s['our_final_successes']:>11}"
               f"{s['our_first_successes']:>11}{s['agreements']:>7}{s['env_steps'].get('distinct', 0):>20}"
-              f"{s[key].get('distinct', 0):>19}")
+              f"{s[key].get('distinct', 0):>19}{len(s['load_timeouts_not_scored']):>15}")
     print(f"\n{'episode':<18}{'verdict':>9}{'env':>7}{'done@':>7}{'steps':>7}{'microwave rad':>16}{'kettle x m':>14}")
     for r in sorted(rows, key=lambda r: (r["task"], r["seed"])):
         kx = (r["kettle_xyz_terminal"] or [None])[0]
         mw = r["microwave_rad_terminal"]
-        print(f"{r['episode_id']:<18}{str(r['verdict']):>9}{str(r['env_success']):>7}{str(r['completed_at_step']):>7}"
+        print(f"{r['episode_id'] + (' *' if r['load_timeout'] else ''):<18}{str(r['verdict']):>9}{str(r['env_success']):>7}{str(r['completed_at_step']):>7}"
               f"{str(r['env_steps']):>7}{'-' if mw is None else f'{mw:.9f}':>16}{'-' if kx is None else f'{kx:.6f}':>14}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"benchmark": "kitchen_checker", "runs": [str(r) for r in args.runs],

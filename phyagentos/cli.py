@@ -79,6 +79,12 @@ def build_parser() -> argparse.ArgumentParser:
                        help="frozen = measurement (default), learn = adaptation, off = no memory")
     bench.add_argument("--executor", choices=("local", "ray"), default="local", help="local process pool or Ray")
     bench.add_argument("--json", action="store_true", help="print the report summary as one JSON object")
+    bench.add_argument("--heartbeat-timeout", type=float, default=None, metavar="S",
+                       help="runner heartbeat timeout of every session, s (default: the graphs' own, 10 s); raise it "
+                            "on a loaded machine, the timeouts left are counted apart in the report")
+    bench.add_argument("--queue-timeout", type=float, default=None, metavar="S",
+                       help="how long every session may wait pending, s (default: the graphs' own, 600 s); raise it "
+                            "for runs longer than that (every episode is compiled up front)")
 
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
     val.add_argument("goal_graph", type=Path)
@@ -185,7 +191,8 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
         with progress:
             result = run_bench(args.suite, args.workspace, episodes=args.episodes, seeds=seeds, split=args.split,
                                tasks=tasks, workers=args.workers, memory=args.memory, executor=args.executor,
-                               on_compiled=compiled, on_episode=episode_done)
+                               on_compiled=compiled, on_episode=episode_done,
+                               heartbeat_timeout_s=args.heartbeat_timeout, queue_timeout_s=args.queue_timeout)
     except BenchError as exc:
         if exc.problems:
             err.print(f"[red]{str(exc).splitlines()[0]}[/red]")

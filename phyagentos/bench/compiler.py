@@ -77,8 +77,10 @@ def _randomize(scene: dict, task: TaskSpec, rng) -> tuple[dict, list[dict]]:
 
 
 def plan_episodes(suite: Suite, *, bench_id: str, seeds: tuple[int, ...], split: str, memory: str,
-                  protocol: str, tasks: tuple[str, ...] | None = None) -> list[Episode]:
-    """Decide every episode of the run (pure: no files written).
+                  protocol: str, tasks: tuple[str, ...] | None = None,
+                  limits: dict | None = None) -> list[Episode]:
+    """Decide every episode of the run (pure: no files written). ``limits``: session
+    limits written into every node (see :class:`~phyagentos.bench.episode.Episode`).
 
     Raises:
         BenchError: unknown task id, or a randomisation rule naming a missing scene item.
@@ -110,7 +112,7 @@ def plan_episodes(suite: Suite, *, bench_id: str, seeds: tuple[int, ...], split:
             }
             episodes.append(Episode(episode_id=episode_id, run_id=f"{bench_id}-{episode_id}", task=task.id, seed=seed,
                                     split=split, goal_graph=str(task.goal_graph), target=task.target, scene=scene,
-                                    evaluation=evaluation))
+                                    evaluation=evaluation, limits=dict(limits or {})))
     return episodes
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import time
 import traceback
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +46,9 @@ class Episode:
         target: target override for every node, or ``None`` (the graph's own targets).
         scene: the episode's initial scene (randomised and perturbed), as plain data.
         evaluation: the evaluation block written into every session.
+        limits: session ``limits`` written into every node of the episode's graph
+            (e.g. ``{"heartbeat_timeout_s": 60}`` on a loaded machine); empty: the
+            graph's own limits.
     """
 
     episode_id: str
@@ -57,6 +60,7 @@ class Episode:
     target: str | None
     scene: dict
     evaluation: dict
+    limits: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -107,6 +111,9 @@ def episode_graph_text(episode: Episode) -> str:
     """
     raw = read_yaml(episode.goal_graph, error=BenchError)
     raw["scene"] = episode.scene
+    if episode.limits:
+        for node in raw.get("nodes") or ():
+            node["limits"] = {**(node.get("limits") or {}), **episode.limits}
     header = (f"# Episode {episode.episode_id} of bench run {episode.evaluation.get('bench_id')}: "
               f"{episode.goal_graph} with the episode's initial scene (seed {episode.seed}).\n")
     return header + yaml.safe_dump(raw, sort_keys=False, allow_unicode=True)

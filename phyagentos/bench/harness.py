@@ -99,6 +99,8 @@ def run_bench(
     bench_id: str | None = None,
     on_compiled: Callable[[int], None] | None = None,
     on_episode: Callable[[EpisodeOutcome], None] | None = None,
+    heartbeat_timeout_s: float | None = None,
+    queue_timeout_s: float | None = None,
 ) -> BenchResult:
     """Run a benchmark suite end to end and write its report.
 
@@ -115,6 +117,14 @@ def run_bench(
         bench_id: id of the run (default: new, time-sortable).
         on_compiled: called with the number of episodes once they are compiled.
         on_episode: called with each :class:`EpisodeOutcome` as it completes.
+        heartbeat_timeout_s: the runner heartbeat timeout of every session, s (default
+            ``None``: the graphs' own limits, i.e. the shipped 10 s). A benchmark on a
+            loaded, shared machine raises it so that load does not end sessions the
+            world did not fail; the report counts the heartbeat timeouts left apart.
+        queue_timeout_s: how long every session may wait pending, s (default ``None``: the
+            graphs' own, 600 s). Every episode is compiled before the first runs, so a run
+            longer than this on a loaded machine would time out the last episodes' sessions
+            in the queue; the report counts queue timeouts apart as well.
 
     Raises:
         BenchError: bad suite or arguments, or a failed availability gate (its
@@ -132,8 +142,14 @@ def run_bench(
     seed_list = tuple(seeds) if seeds is not None else suite.seeds(episodes=episodes, split=split)
     if not seed_list:
         raise BenchError("no seeds to run")
+    limits = {}
+    for key, value in (("heartbeat_timeout_s", heartbeat_timeout_s), ("queue_timeout_s", queue_timeout_s)):
+        if value is not None and not value > 0:
+            raise BenchError(f"{key} must be > 0 s, got {value}")
+        if value is not None:
+            limits[key] = float(value)
     plan = plan_episodes(suite, bench_id=bench_id, seeds=seed_list, split=split, memory=memory,
-                         protocol=policy.protocol, tasks=tasks)
+                         protocol=policy.protocol, tasks=tasks, limits=limits)
     atomic_write_text(run_dir / "suite.yaml", dump_yaml(suite.to_dict()))
 
     first_scenes = {}
@@ -167,7 +183,7 @@ def run_bench(
         "perturbations": {"rate": suite.perturbations.rate, "kinds": list(suite.perturbations.kinds)},
         "perturbations_text": (f"rate {suite.perturbations.rate:g} of {', '.join(suite.perturbations.kinds)}"
                                if suite.perturbations.rate else "none"),
-        "executor": executor, "workers": workers, "gate_checks": len(gate.checks),
+        "executor": executor, "workers": workers, "session_limits": limits, "gate_checks": len(gate.checks),
         "compile_s": round(compiled_s, 3), "execute_s": round(exec_s, 3), "wall_time_s": round(wall, 3),
         "episodes_per_minute": round(60.0 * len(outcomes) / exec_s, 3) if exec_s > 0 else 0.0,
         "workspace": str(ws.root), "run_dir": str(run_dir),

@@ -11,6 +11,13 @@ verdicts; the report never re-judges. Per episode:
   through all its sessions), number of sessions and of behaviour-tree ticks;
 - **wall time**: the worker's wall time for the whole episode.
 
+An episode with a session that ended on a heartbeat timeout (``heartbeat.*``: a runner,
+target or policy went silent longer than ``limits.heartbeat_timeout_s``, on a shared
+machine the symptom of load, not of the world) or that timed out waiting in the queue
+(``timeout.queue``: it never reached a robot) is neither a robot success nor a robot
+failure: it is left out of First, Final, rescued and the error taxonomy and counted on
+its own row (``heartbeat_timeouts`` in report.json, with the codes).
+
 Every unsuccessful session is classified with :func:`phyagentos.bench.taxonomy.classify`.
 Every verified session is scored against its ``ground_truth.yaml``
 (:mod:`phyagentos.bench.verifier_scoring`): the report carries the verifier's confusion
@@ -123,6 +130,7 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
     sim_time = 0.0
     ticks = 0
     ground_truth = []
+    heartbeat: list[str] = []
     for s in sessions:
         attempt = s.attempts[-1] if s.attempts else None
         verdict = attempt.verdict.verdict if attempt and attempt.verdict else None
@@ -136,7 +144,9 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
             "parent_session_id": s.parent_session_id, "generation": _generation(s.session_id),
             "file": _session_file(ws, s.session_id, run_dir),
             "evidence": f"{rel}/{attempt.evidence}" if attempt and attempt.evidence else None,
-            "error_code": attempt.error.code if attempt and attempt.error else None,
+            # a session that never ran an attempt (e.g. timed out in the queue) carries its code in result
+            "error_code": (attempt.error.code if attempt and attempt.error else
+                           s.result.error.code if attempt is None and s.result is not None and s.result.error else None),
             "reason": (attempt.verdict.reason if attempt and attempt.verdict else
                        "; ".join(r.code for r in s.rejection) or (attempt.error.message if attempt and attempt.error else "")),
         }
@@ -150,7 +160,9 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
             ground_truth.append({"session_id": s.session_id, "verdict": verdict, "env_success": bool(gt["success"]),
                                  "source": gt.get("source", ""), "task": gt.get("task"),
                                  "agree": (verdict == "success") == bool(gt["success"])})
-        if s.state != "succeeded":
+        if s.state != "succeeded" and str(row["error_code"] or "").startswith(LOAD_TIMEOUT_CODES):
+            heartbeat.append(s.session_id)
+        elif s.state != "succeeded":
             diagnosis = getattr(attempt.verdict, "diagnosis", None) if attempt and attempt.verdict else None
             category, cause = classify(state=s.state, error_code=row["error_code"],
                                        rejection_codes=[r.code for r in s.rejection],
@@ -171,11 +183,22 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         "wall_time_s": round(float(outcome["wall_time_s"]), 4) if outcome else None,
         "first_success": first, "final_success": final, "rescued": final and not first,
         "sessions": rows, "n_sessions": len(rows), "sim_time_s": round(sim_time, 4), "ticks": ticks,
-        "failures": failures, "ground_truth": ground_truth,
+        "failures": failures, "ground_truth": ground_truth, "heartbeat_timeout_sessions": heartbeat,
         # the environment's own verdict on the episode: its signal after the last session
         "env_success": ground_truth[-1]["env_success"] if ground_truth else None,
     }
     return EpisodeRecord(data)
+
+
+#: Error-code prefixes of sessions ended by machine load or waiting, not by the world.
+LOAD_TIMEOUT_CODES: tuple[str, ...] = ("heartbeat.", "timeout.queue")
+
+
+def _codes(rows) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for r in rows:
+        out[r["error_code"]] = out.get(r["error_code"], 0) + 1
+    return out
 
 
 def _rate(k: int, n: int) -> float | None:
@@ -212,8 +235,11 @@ def _summary(eps: list[dict]) -> dict[str, Any]:
 def build_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:
     """Aggregate every episode under ``run_dir/episodes`` into the report dictionary."""
     directories = sorted((run_dir / "episodes").iterdir()) if (run_dir / "episodes").is_dir() else []
-    eps = [collect_episode(d, run_dir).data for d in directories if (d / "episode.yaml").is_file()]
-    tasks = list(dict.fromkeys(e["task"] for e in eps))
+    every = [collect_episode(d, run_dir).data for d in directories if (d / "episode.yaml").is_file()]
+    # heartbeat timeouts (machine load) are neither robot successes nor robot failures
+    eps = [e for e in every if not e["heartbeat_timeout_sessions"]]
+    lost = [e for e in every if e["heartbeat_timeout_sessions"]]
+    tasks = list(dict.fromkeys(e["task"] for e in every))
     taxonomy: dict[str, dict[str, Any]] = {c: {"count": 0, "sessions": [], "causes": {}} for c in CATEGORIES}
     for e in eps:
         for f in e["failures"]:
@@ -245,10 +271,15 @@ def build_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:
                          for t in tasks},
         },
         # verifier accuracy against ground_truth.yaml (phyagentos.bench.verifier_scoring)
-        "verifier": confusion(r["truth"] for e in eps for r in e["sessions"] if "truth" in r),
-        "harness_errors": [{"episode_id": e["episode_id"], "error": e["harness_error"]} for e in eps
+        "verifier": confusion(r["truth"] for e in every for r in e["sessions"] if "truth" in r),
+        "harness_errors": [{"episode_id": e["episode_id"], "error": e["harness_error"]} for e in every
                            if e["harness_status"] != "completed"],
-        "episodes": eps,
+        "heartbeat_timeouts": {"episodes": [e["episode_id"] for e in lost],
+                               "sessions": [sid for e in lost for sid in e["heartbeat_timeout_sessions"]],
+                               "codes": _codes(e for x in lost for e in x["sessions"]
+                                               if e["session_id"] in x["heartbeat_timeout_sessions"]),
+                               "per_task": {t: sum(1 for e in lost if e["task"] == t) for t in tasks}},
+        "episodes": every,
     }
     return report
 
@@ -327,7 +358,14 @@ def _markdown(report: dict) -> str:
                      f"{_pct(s['final_rate_pct'])} ({s['final_successes']}) | "
                      f"{_points(s['gain_points'])} | "
                      f"{s['rescued']} | {s['median_sim_time_s']} | {s['median_sessions']} | {s['median_wall_time_s']} |")
+    hb = report.get("heartbeat_timeouts") or {}
+    if hb.get("episodes"):
+        lines.append(f"| heartbeat or queue timeout (machine load; not scored above) | {len(hb['episodes'])} | | | | | | | |")
     lines += ["", "![First vs Final](first_vs_final.png)", ""]
+    if hb.get("episodes"):
+        lines += [f"Episodes with a session that ended on a heartbeat or queue timeout ({hb.get('codes')}; neither "
+                  "robot success nor failure): "
+                  + ", ".join(f"`{e}`" for e in hb["episodes"]), ""]
     if o["rescued_episodes"]:
         lines += ["Rescued episodes (failed first, succeeded after a verifier-triggered child session): "
                   + ", ".join(f"`{e}`" for e in o["rescued_episodes"]), ""]

@@ -26,7 +26,10 @@ false successes / sessions scored (the issue's "<= 1 % over at least 200 session
 ``false_failure_rate`` = false failures / sessions scored, ``false_failure_given_met``
 = false failures / sessions truth says succeeded. Criteria whose truth cannot be
 computed from ground truth (``still``: no joint state in it; ``articulated`` without a
-joint record) are counted as ``unscorable`` and left out.
+joint record) are counted as ``unscorable`` and left out; a session with an unscorable
+criterion is not scored as a session (its truth is unknown: the kitchen's ``articulated``
+and ``inside`` beside a scorable ``released`` would otherwise make every kitchen failure a
+"false failure"), only its scorable criteria are.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ import math
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
+import numpy as np
 
 from phyagentos.agent.criteria import Criterion, evaluate, parse_criteria
 from phyagentos.errors import BenchError
@@ -58,6 +62,31 @@ def load_ground_truth(bundle_dir: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
+def _rotation(quat_wxyz) -> np.ndarray:
+    """(3, 3) rotation matrix of a unit quaternion (w, x, y, z) (normalised here)."""
+    w, x, y, z = np.asarray(quat_wxyz, dtype=float) / np.linalg.norm(quat_wxyz)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _vertical_half_extent(shape: str | None, half_extents, quat_wxyz) -> float:
+    """World-frame vertical half extent, m, of a ``box`` (``|R[2, :]| @ h``), ``sphere`` (its
+    radius) or ``cylinder`` (axis along local z: ``|R22| h_z + sqrt(1 - R22^2) r``) with
+    half extents ``half_extents`` (3,) m in its own frame and orientation ``quat_wxyz``;
+    any other shape keeps its own z half extent."""
+    h = np.asarray(half_extents, dtype=float)
+    r = _rotation(quat_wxyz)
+    if shape == "box":
+        return float(np.abs(r[2]) @ h)
+    if shape == "sphere":
+        return float(h[0])
+    if shape == "cylinder":
+        c = min(1.0, abs(float(r[2, 2])))
+        return float(c * h[2] + math.sqrt(max(0.0, 1.0 - c * c)) * h[0])
+    return float(h[2])
+
+
 def truth_snapshot(state: Mapping[str, Any] | None, scene: Mapping[str, Any] | None) -> dict[str, Any]:
     """An exact ENVIRONMENT-style snapshot from one ground-truth state.
 
@@ -73,6 +102,11 @@ def truth_snapshot(state: Mapping[str, Any] | None, scene: Mapping[str, Any] | N
         if not isinstance(o, Mapping) or o.get("position") is None:
             continue
         size = o.get("half_extents") or o.get("size") or [0.0, 0.0, 0.0]
+        if o.get("quat_wxyz") is not None and len(size) == 3:
+            # the vertical half extent in the world frame (what the resting height and
+            # perception's measured size go by): a box lying on its side rests on another
+            # half extent than its own z
+            size = [float(size[0]), float(size[1]), _vertical_half_extent(o.get("shape"), size, o["quat_wxyz"])]
         ents.append({"name": name, "kind": "object", "position": list(o["position"]),
                      "quat_wxyz": list(o.get("quat_wxyz", [1, 0, 0, 0])), "size": list(size),
                      "attributes": {"confidence": 1.0, "position_std_m": 0.0}})
@@ -136,7 +170,7 @@ def score_session(*, accept: Any, verdict: Mapping[str, Any] | None, gt: Mapping
         rows.append({"predicate": c.text, "status": status, "truth": truth, "cell": cell})
         if truth is not None:
             truths.append(truth)
-    if not truths:
+    if not truths or len(truths) < len(rows):  # some criterion's truth unknown: the session's too
         return {"session": None, "criteria": rows, "truth_met": None}
     met = all(truths)
     success = verdict.get("verdict") == "success"

@@ -93,12 +93,17 @@ class KitchenScene:
         object_noise_ratio: the environment's object observation noise scale (default 0.0005).
         max_episode_steps: the environment's horizon in steps of 0.08 s (default 280,
             as registered); completions after it do not count as ground-truth success.
+        start_jitter_rad: half width, rad, of a uniform offset added to each of the 7 arm
+            joints' start positions at every ``reset(seed=...)``, drawn from the seed (then
+            clipped 1 mrad inside the joint range): a randomised robot start, so that
+            seeds give different episodes. Default 0.0: the environment's own keyframe.
     """
 
     tasks: tuple[str, ...] = ("microwave", "kettle")
     robot_noise_ratio: float = 0.01
     object_noise_ratio: float = 0.0005
     max_episode_steps: int = 280
+    start_jitter_rad: float = 0.0
 
     def __post_init__(self) -> None:
         tasks = tuple(self.tasks)
@@ -113,6 +118,10 @@ class KitchenScene:
             if not 0.0 <= v <= 1.0:
                 raise TargetError(f"{key} must be in [0, 1], got {v}")
             object.__setattr__(self, key, v)
+        jitter = float(self.start_jitter_rad)
+        if not 0.0 <= jitter <= 0.5:
+            raise TargetError(f"start_jitter_rad must be in [0, 0.5] rad, got {jitter}")
+        object.__setattr__(self, "start_jitter_rad", jitter)
         if not isinstance(self.max_episode_steps, int) or self.max_episode_steps < 1:
             raise TargetError(f"max_episode_steps must be an integer >= 1, got {self.max_episode_steps!r}")
 
@@ -130,7 +139,8 @@ class KitchenScene:
 
     def to_dict(self) -> dict[str, Any]:
         return {"tasks": list(self.tasks), "robot_noise_ratio": self.robot_noise_ratio,
-                "object_noise_ratio": self.object_noise_ratio, "max_episode_steps": self.max_episode_steps}
+                "object_noise_ratio": self.object_noise_ratio, "max_episode_steps": self.max_episode_steps,
+                "start_jitter_rad": self.start_jitter_rad}
 
 
 def _make_env(scene: KitchenScene):
@@ -294,6 +304,13 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
         # beyond the model's range: one environment step holding its projection into the
         # range settles it there, so every command starts from an admissible state.
         lo, hi = self.model.jnt_range[self._jids, 0], self.model.jnt_range[self._jids, 1]
+        if self._scene.start_jitter_rad > 0.0:
+            # randomised robot start (KitchenScene.start_jitter_rad), from the reset seed
+            j = self._scene.start_jitter_rad
+            offset = np.random.default_rng(seed).uniform(-j, j, size=len(self._jids))
+            self.data.qpos[self._qadr] = np.clip(self.arm_qpos() + offset, lo + 1e-3, hi - 1e-3)
+            self.data.qvel[self._dadr] = 0.0
+            mujoco.mj_forward(self.model, self.data)
         self._finger_cmd = self.gripper_opening()
         self._env_step(np.clip(self.arm_qpos(), lo + 1e-3, hi - 1e-3), np.zeros(7))
         self._steps = 0

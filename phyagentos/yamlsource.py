@@ -200,6 +200,22 @@ _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _constru
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
 
 
+def _construct(text: str, loader_cls: type, *, path: str | Path | None, error: type[Exception]) -> Any:
+    """Compose ``text`` within the bounds, then construct it with ``loader_cls``."""
+    node = compose_bounded(text, path=path, error=error)
+    if node is None:
+        return None
+    loader = loader_cls("")
+    try:
+        return loader.construct_document(node)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark is not None else None
+        raise _error(error, f"invalid YAML: {clip(str(exc.problem or exc))}", path=path, line=line) from None
+    finally:
+        loader.dispose()
+
+
 def load_yaml(text: str, *, path: str | Path | None = None, error: type[Exception]) -> Any:
     """Parse ``text``; raise ``error(message, path=, line=)`` on a syntax error.
 
@@ -209,18 +225,7 @@ def load_yaml(text: str, *, path: str | Path | None = None, error: type[Exceptio
         error: exception class accepting ``(message, path=..., line=...)``,
             e.g. :class:`~phyagentos.errors.GoalGraphError`.
     """
-    node = compose_bounded(text, path=path, error=error)
-    if node is None:
-        return None
-    loader = _Loader("")
-    try:
-        return loader.construct_document(node)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = mark.line + 1 if mark is not None else None
-        raise _error(error, f"invalid YAML: {clip(str(exc.problem or exc))}", path=path, line=line) from None
-    finally:
-        loader.dispose()
+    return _construct(text, _Loader, path=path, error=error)
 
 
 class _PlainLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
@@ -234,18 +239,7 @@ def load_plain(text: str, *, path: str | Path | None = None, error: type[Excepti
     Raises:
         error: ``(message, path=..., line=...)``: a bound exceeded or a syntax error.
     """
-    node = compose_bounded(text, path=path, error=error)
-    if node is None:
-        return None
-    loader = _PlainLoader("")
-    try:
-        return loader.construct_document(node)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        raise _error(error, f"invalid YAML: {clip(str(exc.problem or exc))}", path=path,
-                     line=mark.line + 1 if mark is not None else None) from None
-    finally:
-        loader.dispose()
+    return _construct(text, _PlainLoader, path=path, error=error)
 
 
 def read_yaml(path: str | Path, *, error: type[Exception], plain: bool = True) -> Any:

@@ -39,14 +39,17 @@ Writes bench/results/language.json and prints tables. Timings on a shared, loade
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import json
 import os
 import random
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -193,15 +196,31 @@ def symbolic_correct(case: Case, result) -> bool:
     return set(plan) <= set(case.truth)
 
 
-def _final_snapshot(ws: Path, scene: dict) -> dict[str, dict]:
-    """Object name -> {position, size} from the latest terminal snapshot (the simulator's state), or the scene."""
-    finals = sorted((ws / "evidence").glob("*/terminal.yaml"), key=lambda p: p.stat().st_mtime)
-    if finals:
-        snap = read_yaml(finals[-1], error=BenchError)
-        return {e["name"]: e for e in snap["entities"] if e.get("kind") in ("object", "region")}
+def truth_world(ws: Path, scene: dict) -> dict[str, dict] | None:
+    """Object and region name -> {position (3,) m, size (3,) half extents m} of the simulator's state at
+    the end of the run: the ``terminal`` of the newest ``evidence/*/ground_truth.yaml`` (the privileged
+    channel; the perceived ``terminal.yaml`` may miss a cube hidden under another). Regions are the
+    scene's declared footprints. ``None`` if no session wrote ground truth."""
+    truths = sorted((ws / "evidence").glob("*/ground_truth.yaml"), key=lambda p: p.stat().st_mtime_ns)
+    for path in reversed(truths):
+        gt = read_yaml(path, error=BenchError) or {}
+        term = gt.get("terminal") or gt.get("initial")
+        if term and term.get("objects"):
+            ents = {n: {"position": o["position"], "size": o["half_extents"]} for n, o in term["objects"].items()}
+            ents.update(_regions(scene))
+            return ents
+    return None
+
+
+def _regions(scene: dict) -> dict[str, dict]:
+    return {r["name"]: {"position": [*r["center"], 0.0], "size": [*r["half_extents"], 0.0]} for r in scene["regions"]}
+
+
+def declared_world(scene: dict) -> dict[str, dict]:
+    """The scene as declared (the simulator starts there: these scenes are not randomised by the target)."""
     ents = {o["name"]: {"position": [*o["position"], o["half_extents"][2]], "size": o["half_extents"]}
             for o in scene["objects"]}
-    ents.update({r["name"]: {"position": [*r["center"], 0.0], "size": [*r["half_extents"], 0.0]} for r in scene["regions"]})
+    ents.update(_regions(scene))
     return ents
 
 
@@ -217,20 +236,58 @@ def _on(a: dict, b: dict) -> bool:
 
 
 def ground_truth_met(case: Case, ents: dict, initial: dict) -> bool:
+    return not truth_misses(case, ents, initial)
+
+
+def truth_misses(case: Case, ents: dict, initial: dict) -> list[str]:
+    """What of the case's ground truth the final world ``ents`` does not meet (empty: met)."""
     if "*" in case.truth:
         _, region, n = case.truth["*"]
-        return sum(1 for name, e in ents.items() if name.endswith("_cube") and _inside(e, ents[region])) == n
+        got = sorted(name for name, e in ents.items() if name.endswith("_cube") and _inside(e, ents[region]))
+        return [] if len(got) == n else [f"count: {len(got)} cube(s) inside {region} ({got}), wanted {n}"]
+    misses = []
     for obj, rel in case.truth.items():
         e = ents[obj]
+        at = "(" + ", ".join(f"{v:.3f}" for v in e["position"]) + ")"
         if rel[0] == "inside" and not _inside(e, ents[rel[1]]):
-            return False
+            misses.append(f"{obj} not inside {rel[1]}: at {at}")
         if rel[0] == "on" and not _on(e, ents[rel[1]]):
-            return False
+            misses.append(f"{obj} not on {rel[1]}: at {at}, {rel[1]} at "
+                          + "(" + ", ".join(f"{v:.3f}" for v in ents[rel[1]]["position"]) + ")")
         if rel[0] == "stay":
             p0 = initial[obj]["position"]
             if abs(e["position"][0] - p0[0]) > 0.02 or abs(e["position"][1] - p0[1]) > 0.02:
-                return False
-    return True
+                misses.append(f"{obj} moved from ({p0[0]:.3f}, {p0[1]:.3f}) to {at}")
+    return misses
+
+
+def execute_plan(case: Case, graph: Path, ws: Path) -> dict:
+    """Run ``graph`` with ``phyagentos run`` (its own process, a fresh workspace ``ws``, memory off, the
+    rule ladder) and score the end state against the simulator's ground truth. Returns the row's
+    execution fields: all nodes succeeded, execution success, what of the truth was missed, and each
+    session (node, status, verdict, reason, cause, strategy) for the failure taxonomy."""
+    cli = Path(sys.executable).with_name("phyagentos")
+    t0 = time.perf_counter()
+    proc = subprocess.run([str(cli), "run", str(graph), "--workspace", str(ws), "--json", "--seed", str(case.seed),
+                           "--memory", "off"], capture_output=True, text=True, timeout=1800)
+    out: dict[str, Any] = {"executed": True, "exec_seconds": round(time.perf_counter() - t0, 1), "exec_rc": proc.returncode}
+    try:
+        report = json.loads(proc.stdout)
+    except json.JSONDecodeError:
+        report = None
+    if report is None:
+        out.update(execution_success=False, exec_error=(proc.stderr or proc.stdout)[-400:])
+        return out
+    out["all_nodes_succeeded"] = report["succeeded"]
+    out["sessions"] = [{k: s.get(k) for k in ("node", "skill", "status", "verdict", "reason", "cause", "strategy")}
+                       for s in report["sessions"]]
+    ents = truth_world(ws, case.scene)
+    if ents is None:
+        out.update(execution_success=False, exec_error="no ground truth written")
+        return out
+    misses = truth_misses(case, ents, declared_world(case.scene))
+    out.update(execution_success=not misses, truth_misses=misses)
+    return out
 
 
 def perceive(case: Case, ws: Path) -> tuple[list[dict], float]:
@@ -248,13 +305,12 @@ def perceive(case: Case, ws: Path) -> tuple[list[dict], float]:
     return perceived_entities(Workspace.open(ws)), time.perf_counter() - t0
 
 
-def run_suite(client, cases: list[Case], *, execute: int, root: Path, look: bool = True) -> list[dict]:
+def run_suite(client, cases: list[Case], *, execute: int, root: Path, look: bool = True, workers: int = 1) -> list[dict]:
     ws0 = Workspace.create(root / "plan-ws")
     targets = [t.model_dump(mode="json") for t in ws0.read("TARGETS").data.targets]
     planner = GoalPlanner(client, skills=skill_names(), targets=targets,
                           reach=functools.partial(answer_reach_query, root=ws0.root))
-    rows = []
-    executed = 0
+    rows, jobs = [], []
     for i, case in enumerate(cases):
         env, look_s = perceive(case, root / f"ws{i}") if look else ([], 0.0)
         t0 = time.perf_counter()
@@ -277,26 +333,24 @@ def run_suite(client, cases: list[Case], *, execute: int, root: Path, look: bool
         else:
             row["valid"] = status == "planned"
             row["symbolic_correct"] = status == "planned" and symbolic_correct(case, result)
-            if status == "planned" and executed < execute:
-                executed += 1
+            if status == "planned" and len(jobs) < execute:
                 graph = root / f"g{i}.yaml"
                 graph.write_text(result.graph_yaml)
-                ws = root / f"ws{i}-exec"  # a fresh workspace: a second run in the perceiving one restores a stale world
-                t1 = time.perf_counter()
-                try:
-                    report = run_goal_graph(graph, ws, seed=case.seed, use_memory=False, consolidate=False)
-                    initial = _final_snapshot(Path("/nonexistent"), case.scene)
-                    ents = _final_snapshot(ws, case.scene)
-                    row["executed"] = True
-                    row["all_nodes_succeeded"] = report.succeeded
-                    row["execution_success"] = ground_truth_met(case, ents, initial)
-                except Exception as exc:  # noqa: BLE001 - a bench row records the failure and goes on
-                    row["executed"], row["execution_success"], row["exec_error"] = True, False, str(exc)[:300]
-                row["exec_seconds"] = round(time.perf_counter() - t1, 1)
+                # a fresh workspace per execution (never the perceiving one)
+                jobs.append((row, case, graph, root / f"ws{i}-exec"))
         rows.append(row)
-        print(f"[{i + 1}/{len(cases)}] {case.category:11s} {status:8s} {secs:5.1f}s "
-              f"{'exec=' + str(row.get('execution_success')) if row.get('executed') else ''} {case.instruction}",
+        print(f"[{i + 1}/{len(cases)}] {case.category:11s} {status:8s} {secs:5.1f}s {case.instruction}",
               file=sys.stderr, flush=True)
+
+    def one(job):
+        row, case, graph, ws = job
+        row.update(execute_plan(case, graph, ws))
+        print(f"exec {row['category']:11s} seed {row['seed']}: success={row['execution_success']} "
+              f"nodes_ok={row.get('all_nodes_succeeded')} {row.get('exec_seconds')}s {row.get('truth_misses') or ''}",
+              file=sys.stderr, flush=True)
+
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        list(pool.map(one, jobs))
     return rows
 
 
@@ -314,6 +368,7 @@ def summarise(rows: list[dict]) -> dict:
                     "errors": sum(r["status"] == "error" for r in rs),
                     "correct_refusals": sum(r.get("correct", False) for r in rs),
                     "executed": len(ex), "execution_success": sum(r.get("execution_success", False) for r in ex),
+                    "all_nodes_succeeded": sum(bool(r.get("all_nodes_succeeded")) for r in ex),
                     "median_s_per_plan": round(statistics.median(r["seconds"] for r in rs), 2)}
     normal = [r for r in rows if not r["must_refuse"]]
     refuse = [r for r in rows if r["must_refuse"]]
@@ -323,6 +378,7 @@ def summarise(rows: list[dict]) -> dict:
                "false_refusals": sum(r["status"] == "refused" for r in normal),
                "correct_refusals": sum(r["correct"] for r in refuse), "must_refuse": len(refuse),
                "executed": len(ex), "execution_success": sum(r.get("execution_success", False) for r in ex),
+               "all_nodes_succeeded": sum(bool(r.get("all_nodes_succeeded")) for r in ex),
                "median_s_per_plan": round(statistics.median(r["seconds"] for r in rows), 2),
                "mean_s_per_plan": round(statistics.mean(r["seconds"] for r in rows), 2)}
     return {"per_category": per, "overall": overall}
@@ -373,9 +429,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-look", action="store_true",
                     help="plan with nothing perceived (every plan then looks first) instead of running one observe "
                          "session per scene before planning")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="executions run concurrently, each `phyagentos run` in its own process and fresh workspace")
+    ap.add_argument("--categories", default=",".join(CATEGORIES), help="comma-separated subset of " + ",".join(CATEGORIES))
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="keep the workspaces (evidence bundles, verdicts, traces) under this directory")
     ap.add_argument("--out", type=Path, default=RESULTS / "language.json")
     args = ap.parse_args(argv)
-    cases = [make_case(cat, seed) for seed in range(args.seeds) for cat in CATEGORIES]
+    cats = [c for c in args.categories.split(",") if c]
+    unknown = sorted(set(cats) - set(CATEGORIES))
+    if unknown:
+        ap.error(f"unknown categories {unknown}; choose from {', '.join(CATEGORIES)}")
+    cases = [make_case(cat, seed) for seed in range(args.seeds) for cat in CATEGORIES if cat in cats]
     clients = [] if args.no_model else [("offline", make_client(), args.execute)]
     if os.environ.get("PHYAGENTOS_LLM_PROVIDER") == "openai" and not args.no_model:
         clients.append(("endpoint", make_client(load_llm_config()), args.execute))
@@ -386,9 +451,15 @@ def main(argv: list[str] | None = None) -> int:
         clients.append(("baseline_rules", RuleBaselineClient(), 0))
     report: dict[str, Any] = {"machine": "shared 2-core, loaded (other engineers' tests running)",
                               "seeds_per_category": args.seeds, "runs": {}}
-    with tempfile.TemporaryDirectory(prefix="phyagentos-language-") as tmp:
+    with contextlib.ExitStack() as stack:
+        if args.keep is not None:
+            args.keep.mkdir(parents=True, exist_ok=True)
+            tmp = str(args.keep)
+        else:
+            tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="phyagentos-language-"))
         for label, client, execute in clients:
-            rows = run_suite(client, cases, execute=execute, root=Path(tmp) / label, look=not args.no_look)
+            rows = run_suite(client, cases, execute=execute, root=Path(tmp) / label, look=not args.no_look,
+                             workers=args.workers)
             report["runs"][label] = {"provider": client.provider, "model": client.model, **summarise(rows), "rows": rows}
         if args.reviser_episodes:
             report["reviser"] = reviser_comparison(args.reviser_episodes, Path(tmp))
@@ -398,14 +469,16 @@ def main(argv: list[str] | None = None) -> int:
         o = run["overall"]
         print(f"\n{label}: {run['provider']} {run['model']}")
         print(f"{'category':12s} {'n':>3s} {'valid':>6s} {'correct':>8s} {'refused':>8s} {'errors':>7s} "
-              f"{'exec ok':>8s} {'s/plan':>7s}")
+              f"{'exec ok':>8s} {'nodes ok':>9s} {'s/plan':>7s}")
         for cat, s in run["per_category"].items():
             ok = f"{s['correct_refusals']}/{s['n']}" if cat == "refuse" else f"{s['symbolic_correct']}/{s['n']}"
             print(f"{cat:12s} {s['n']:3d} {s['valid']:6d} {ok:>8s} {s['refused']:8d} {s['errors']:7d} "
-                  f"{s['execution_success']:>3d}/{s['executed']:<4d} {s['median_s_per_plan']:7.2f}")
+                  f"{s['execution_success']:>3d}/{s['executed']:<4d} {s['all_nodes_succeeded']:>4d}/{s['executed']:<4d} "
+                  f"{s['median_s_per_plan']:7.2f}")
         print(f"overall: plan valid {o['plan_valid']}/{o['plannable']}, plan correct {o['symbolic_correct']}/"
               f"{o['plannable']}, false refusals {o['false_refusals']}, correct refusals {o['correct_refusals']}/"
-              f"{o['must_refuse']}, execution success {o['execution_success']}/{o['executed']} executed, "
+              f"{o['must_refuse']}, execution success (ground truth) {o['execution_success']}/{o['executed']} executed, "
+              f"every node's verdict success {o['all_nodes_succeeded']}/{o['executed']}, "
               f"median {o['median_s_per_plan']} s per plan")
     if "reviser" in report:
         print("\nreviser on the same failures (pick with perturbations):")

@@ -68,7 +68,7 @@ from .llm.decompose import Clause, decompose, ground
 from .llm.policy import InjectionFinding, screen_text
 from .llm.prompt import ModelContextBuilder
 from .llm.world import PALETTE, World, perceived_world, world_from_environment, world_from_scene
-from .selector import select_target
+from .selector import Selection, select_target
 
 __all__ = ["GoalPlanner", "PlanResult", "PlanStep", "PlannerError", "REFUSAL_REASONS", "PLAN_SKILLS",
            "plan_schema", "write_plan", "SYSTEM_PROMPT"]
@@ -477,11 +477,23 @@ class GoalPlanner:
         for i, s in enumerate(steps):
             node_id = re.sub(r"[^a-z0-9_]", "_", f"s{i + 1}_{s.skill}_{s.object}")[:60]
             positions = {n: world.get(n).position for n in (s.object, s.destination) if n}
+            # The steps of one plan act on one world: each target simulates (or is) its own, so a
+            # later step on another target would not find what the earlier steps moved (and the
+            # earlier placements it re-checks would not be there). Step 1 chooses; the rest stay.
+            world_target = nodes[-1]["target"] if nodes else None
             sel = select_target(s.skill, targets=self.targets,
                                 positions={n: p for n, p in positions.items() if p is not None},
-                                unknown=[n for n, p in positions.items() if p is None], prefer=prefer_target,
+                                unknown=[n for n, p in positions.items() if p is None],
+                                prefer=world_target or prefer_target,
+                                prefer_why=(f"the plan's world: steps 1-{i} run on {world_target}" if world_target
+                                            else "the scene's target"),
                                 reach=self.reach, scene=scene, pick=s.object,
                                 place=(s.object, s.destination) if s.destination else None)
+            if world_target is not None and sel.target not in (None, world_target):
+                why = sel.reasons.get(world_target, "does not fit")
+                sel = Selection(None, None, {**sel.reasons, world_target: f"{why} (the plan's world: steps 1-{i} run "
+                                                                          f"on {world_target})"},
+                                out_of_reach=True)
             selections[node_id] = sel.to_dict()
             if sel.target is None:
                 why = "; ".join(f"{t}: {r}" for t, r in sel.reasons.items())

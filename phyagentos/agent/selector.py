@@ -119,7 +119,7 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
                   requirements: Mapping[str, SkillRequirements] | None = None,
                   unknown: Sequence[str] = (), reach: ReachOracle | None = None,
                   scene: Mapping[str, Any] | None = None, pick: str | None = None,
-                  place: Sequence[str] | None = None) -> Selection:
+                  place: Sequence[str] | None = None, prefer_why: str = "the scene's target") -> Selection:
     """Choose the target for one node.
 
     Args:
@@ -136,6 +136,7 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
             envelope check only.
         scene: the scene the node runs on (for the reach query).
         pick: the object the node picks; ``place``: ``(object, destination)`` it sets down.
+        prefer_why: why ``prefer`` is preferred, recorded when it is chosen.
 
     Returns:
         A :class:`Selection`; ``out_of_reach`` is set when some target fit the skill but
@@ -205,6 +206,6 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
         return Selection(None, None, reasons, out_of_reach=capable)
     fitting.sort()
     chosen = fitting[0][1]
-    reasons[chosen] = "chosen: " + reasons[chosen] + (" (the scene's target)" if chosen == prefer else
+    reasons[chosen] = "chosen: " + reasons[chosen] + (f" ({prefer_why})" if chosen == prefer else
                                                        " (closest base)")
     return Selection(chosen, req.runtime, reasons)

@@ -308,3 +308,36 @@ def test_the_reach_query_builds_a_mesh_object_from_the_workspace_it_was_wired_wi
     unwired = answer_reach_query(ReachQuery(target="franka_tabletop", driver="mujoco_franka", scene=scene,
                                             positions={"nut": [0.45, -0.2]}, pick="nut"))
     assert unwired.status == "unsupported" and "no workspace was given" in unwired.reasons[0]
+
+
+@pytest.mark.sim
+def test_every_step_of_a_plan_runs_on_one_target_that_reaches_them_all(tmp_path):
+    """The steps of one plan share one world (each target simulates its own): the green cube
+    is nearer the SO-101's base and within its reach, the red cube is beyond it; a per-step
+    choice put step 1 on the SO-101 and step 2 nowhere (or on another world). The plan's
+    target is one that reaches every step, and the record says why."""
+    from functools import partial
+
+    from phyagentos.runtime.reach_query import answer_reach_query
+
+    scene = {"objects": [
+        {"name": "green_cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.43, -0.209], "rgba": [0.1, 0.7, 0.2, 1]},
+        {"name": "red_cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.626, -0.082], "rgba": [0.8, 0.1, 0.1, 1]},
+        {"name": "yellow_cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.384, -0.347],
+         "rgba": [0.9, 0.8, 0.1, 1]}],
+        "regions": [{"name": "left_bin", "center": [0.42, 0.24], "half_extents": [0.07, 0.07], "rgba": [0.5, 0.5, 0.5, 0.3]},
+                    {"name": "right_bin", "center": [0.62, 0.24], "half_extents": [0.07, 0.07],
+                     "rgba": [0.95, 0.95, 0.95, 0.3]}]}
+    ws = Workspace.create(tmp_path / "ws")
+    targets = [t.model_dump(mode="json") for t in ws.read("TARGETS").data.targets]
+    planner = GoalPlanner(make_client(), skills=skill_names(), targets=targets,
+                          reach=partial(answer_reach_query, root=ws.root))
+    result = planner.plan("put the green cube in the left bin, then put the red cube in the left bin", scene=scene,
+                          environment=seen(scene))
+    assert result.status == "planned", result.reason
+    assert [n.target for n in result.graph.nodes] == ["franka_tabletop", "franka_tabletop"]
+    first, second = (result.selections[n.id] for n in result.graph.nodes)
+    # step 1 alone would fit the SO-101 (closer base); step 2 is out of its reach
+    assert first["reasons"]["so101_tabletop"].startswith("fits")
+    assert second["reasons"]["so101_tabletop"].startswith("out of reach")
+    assert "the plan's world: every step fits franka_tabletop" in first["reasons"]["franka_tabletop"]

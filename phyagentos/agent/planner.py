@@ -474,26 +474,10 @@ class GoalPlanner:
         if unseen and "observe" not in self.skills:
             raise PlannerError(f"the world is unknown: {', '.join(unseen)} not perceived yet (ENVIRONMENT.md) and "
                                f"no observe skill to look first")
+        chosen_sels = self._select_world_target(steps, world, scene, prefer_target)
         for i, s in enumerate(steps):
             node_id = re.sub(r"[^a-z0-9_]", "_", f"s{i + 1}_{s.skill}_{s.object}")[:60]
-            positions = {n: world.get(n).position for n in (s.object, s.destination) if n}
-            # The steps of one plan act on one world: each target simulates (or is) its own, so a
-            # later step on another target would not find what the earlier steps moved (and the
-            # earlier placements it re-checks would not be there). Step 1 chooses; the rest stay.
-            world_target = nodes[-1]["target"] if nodes else None
-            sel = select_target(s.skill, targets=self.targets,
-                                positions={n: p for n, p in positions.items() if p is not None},
-                                unknown=[n for n, p in positions.items() if p is None],
-                                prefer=world_target or prefer_target,
-                                prefer_why=(f"the plan's world: steps 1-{i} run on {world_target}" if world_target
-                                            else "the scene's target"),
-                                reach=self.reach, scene=scene, pick=s.object,
-                                place=(s.object, s.destination) if s.destination else None)
-            if world_target is not None and sel.target not in (None, world_target):
-                why = sel.reasons.get(world_target, "does not fit")
-                sel = Selection(None, None, {**sel.reasons, world_target: f"{why} (the plan's world: steps 1-{i} run "
-                                                                          f"on {world_target})"},
-                                out_of_reach=True)
+            sel = chosen_sels[i]
             selections[node_id] = sel.to_dict()
             if sel.target is None:
                 why = "; ".join(f"{t}: {r}" for t, r in sel.reasons.items())
@@ -535,6 +519,52 @@ class GoalPlanner:
                  "description": f"Planned by the Goal Planner ({self.client.provider} {model}) from: {request}",
                  "scene": json.loads(json.dumps(dict(scene))), "nodes": nodes}
         return graph, selections, None
+
+    def _select_world_target(self, steps: Sequence[PlanStep], world: World, scene: Mapping[str, Any],
+                             prefer_target: str | None) -> list[Selection]:
+        """One :class:`Selection` per step, all on ONE target: the steps of a plan act on one world (each
+        target simulates, or is, its own), so a later step on another target would not find what the
+        earlier steps moved, and the earlier placements it re-checks would not be there. Every step is
+        asked of the selector as usual; the plan's target is the scene's (``prefer_target``) if it fits
+        every step, else step 1's choice if it fits every step, else the first target of TARGETS.md
+        that does. When no target fits every step, the step that leaves none is returned unselected
+        (``out_of_reach``, with each target's reason and the targets the earlier steps allowed)."""
+        sels = []
+        for s in steps:
+            positions = {n: world.get(n).position for n in (s.object, s.destination) if n}
+            sels.append(select_target(s.skill, targets=self.targets,
+                                      positions={n: p for n, p in positions.items() if p is not None},
+                                      unknown=[n for n, p in positions.items() if p is None], prefer=prefer_target,
+                                      reach=self.reach, scene=scene, pick=s.object,
+                                      place=(s.object, s.destination) if s.destination else None))
+        if any(sel.target is None for sel in sels):
+            return sels
+
+        def fits(sel: Selection, name: str) -> bool:
+            return sel.reasons.get(name, "").startswith(("fits", "chosen"))
+
+        order = [str(t["name"]) for t in self.targets]
+        common = [n for n in order if all(fits(sel, n) for sel in sels)]
+        if not common:
+            allowed = [n for n in order if fits(sels[0], n)]
+            for i, sel in enumerate(sels):
+                left = [n for n in allowed if fits(sel, n)]
+                if not left:
+                    why = {n: (r + f" (the plan's world must be one target; steps 1-{i} allow "
+                                   f"{', '.join(allowed)})" if n in allowed else r).replace("chosen: ", "")
+                           for n, r in sel.reasons.items()}
+                    return [*sels[:i], Selection(None, None, why, out_of_reach=True), *sels[i + 1:]]
+                allowed = left
+        plan_target = next(n for n in (prefer_target, sels[0].target, *common) if n in common)
+        out = []
+        for sel in sels:
+            reasons = {n: r.replace("chosen: ", "", 1).replace(" (closest base)", "").replace(" (the scene's target)", "")
+                       for n, r in sel.reasons.items()}
+            reasons[plan_target] = (f"chosen: {reasons[plan_target]} (the plan's world: every step fits "
+                                    f"{plan_target}" + (", the scene's target)" if plan_target == prefer_target
+                                                        else ")"))
+            out.append(Selection(plan_target, sel.runtime, reasons))  # the runtime is the skill's
+        return out
 
 
 def write_plan(result: PlanResult, directory: str | Path) -> dict[str, Path]:

@@ -447,7 +447,8 @@ class AgentCoordinator:
             rec = ws.load_session(session_id)
             rec.child_session_ids.append(child.session_id)
             SessionLifecycle(rec, persist=ws.save_session).fire("replanned", reason=f"child {child.session_id}")
-        if self.consolidate and revision is not None and verdict.diagnosis is not None and not revision.skill:
+        # another view only looks again (no correction to learn); a skill switch or re-target is one
+        if self.consolidate and revision is not None and verdict.diagnosis is not None and revision.skill != "observe":
             LessonBook(ws).propose(parent=acting, child=child, diagnosis=verdict.diagnosis, revision=revision,
                                    conditions=self._conditions(acting))
         return 1

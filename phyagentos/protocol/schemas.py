@@ -277,6 +277,11 @@ class Revision(ProtocolModel):
     reopen: str | None = Field(None, description="Upstream goal node re-opened before this node runs again "
                                                  "(e.g. re-pick after the object was released).")
     proposed_by: str = Field("rules", description="The reviser that proposed it: rules or model.")
+    target: str | None = Field(None, description="Target the child runs on instead of the node's (a re-target to "
+                                                 "another capable target, chosen by the SkillRuntime-Target "
+                                                 "Selector); None: the node's target.")
+    selection: dict[str, str] = Field(default_factory=dict, description="With target: the selector's reason per "
+                                                                        "target (why this one, why not the others).")
     model_calls: list[ModelCallRecord] = Field(default_factory=list, description="Model calls behind it.")
 
 
@@ -527,6 +532,12 @@ class Lesson(ProtocolModel):
     scope: dict[str, Any] = Field(default_factory=dict)
     provenance: list[str] = Field(default_factory=list)
     strategy: str = Field("", description="Recovery strategy that proposed the correction.")
+    proposed_by: str = Field("rules", description="The reviser that proposed the correction: rules or model "
+                                                  "('rules+model' when a lineage's cumulative correction took both).")
+    skill: str | None = Field(None, description="Skill the correction runs instead of the failed session's "
+                                                "(a skill switch), if any.")
+    target: str | None = Field(None, description="Target the correction runs on instead of the failed session's "
+                                                 "(a re-target), if any.")
     revision: dict[str, Any] = Field(default_factory=dict, description="Skill parameter values the correction sets.")
     confirmations: int = Field(0, ge=0, description="Verdicts that confirmed the correction (success).")
     refutations: int = Field(0, ge=0, description="Verdicts where the correction did not succeed.")

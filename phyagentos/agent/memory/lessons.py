@@ -15,6 +15,12 @@ Life of a correction:
 3. later sessions that apply a lesson through the ContextBuilder confirm or refute it
    the same way, so its counts keep tracking whether it works.
 
+Every lesson and candidate records who proposed the correction (``proposed_by``: the rule
+ladder ``rules`` or the model reviser ``model``; a cumulative correction joins them), what it
+runs instead (``skill`` for a skill switch, ``target`` for a re-target) and whether later
+verdicts confirmed it (``verified``, ``confirmations``/``verified_by``,
+``refutations``/``refuted_by``).
+
 Duplicates merge: the id is a hash of cause, strategy, revision and scope, so the same
 correction learned twice is one lesson with two confirmations. Growth is bounded: at
 most :data:`MAX_LESSONS` lessons and :data:`MAX_CANDIDATES` candidates (the least
@@ -63,7 +69,9 @@ def corrective(revision: Revision) -> dict[str, Any]:
 def _correction(revision: Revision) -> str:
     sets = [f"{k}={v}" for k, v in sorted(corrective(revision).items())]
     sets += [f"limits.{k}={v}" for k, v in sorted(revision.limits.items())]
-    return f"{revision.strategy}: set {', '.join(sets)}"
+    runs = "".join(f"{what} {value}; " for what, value in (("run skill", revision.skill), ("on target", revision.target))
+                   if value)
+    return f"{revision.strategy}: {runs}set {', '.join(sets)}"
 
 
 def _bound(items: list[Lesson], limit: int) -> list[Lesson]:
@@ -89,6 +97,8 @@ def _cumulative(child: SessionRecord, history: Sequence[SessionRecord], scope: d
         if not delta or not strategies:
             continue
         strategy = "+".join(strategies)
+        proposers = "+".join(dict.fromkeys(s.recovery.proposed_by for s in [*chain[i + 1:], child]
+                                           if s.recovery is not None))
         cause = verdict.diagnosis.cause
         lid = lesson_id(cause, strategy, delta, scope)
         sets = ", ".join(f"{k}={v}" for k, v in sorted(delta.items()))
@@ -98,7 +108,8 @@ def _cumulative(child: SessionRecord, history: Sequence[SessionRecord], scope: d
                                                               if child.attempts and child.attempts[-1].verdict else ())),
             cause=cause, correction=f"{strategy}: set {sets}", verified=True, verified_by=[child.session_id],
             scope=scope, provenance=[failed.session_id], strategy=strategy, revision=delta, confirmations=1,
-            updated_at=now))
+            proposed_by=proposers, skill=child.skill if child.skill != failed.skill else None,
+            target=child.target if child.target != failed.target else None, updated_at=now))
     return out
 
 
@@ -137,7 +148,8 @@ class LessonBook:
                     id=lid, objective=f"{conditions.skill} {conditions.object or ''} ({conditions.goal})".replace("  ", " "),
                     evidence=_keep((), *diagnosis.evidence), cause=revision.cause, correction=_correction(revision),
                     verified=False, scope=scope, provenance=[parent.session_id], strategy=revision.strategy,
-                    revision=corrective(revision), updated_at=now))
+                    revision=corrective(revision), proposed_by=revision.proposed_by, skill=revision.skill,
+                    target=revision.target, updated_at=now))
             else:
                 existing.provenance = _keep(existing.provenance, parent.session_id)
                 existing.evidence = _keep(existing.evidence, *diagnosis.evidence)
@@ -178,7 +190,8 @@ class LessonBook:
                         base = candidate or Lesson(id=lid, objective=f"{conditions.skill} {conditions.object or ''}",
                                                    evidence=[], cause=recovery.cause, correction=_correction(recovery),
                                                    scope=scope, strategy=recovery.strategy,
-                                                   revision=corrective(recovery))
+                                                   revision=corrective(recovery), proposed_by=recovery.proposed_by,
+                                                   skill=recovery.skill, target=recovery.target)
                         lesson = base.model_copy(deep=True)
                         lesson.confirmations = 0
                         doc.lessons.append(lesson)

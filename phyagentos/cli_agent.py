@@ -79,14 +79,20 @@ def make_planner(workspace, *, client=None):
 
 def make_reviser(kind: str, workspace_dir: str | Path):
     """``None`` for the rule ladder (the verifier's default), or a ModelReviser (the configured model) with the
-    ladder as fallback."""
+    ladder as fallback and a TargetChooser that asks the Runtime's IK (a re-target to another capable target)."""
     if kind == "rules":
         return None
     from phyagentos.agent.recovery import RecoveryPlanner  # noqa: PLC0415
+    from phyagentos.agent.retarget import TargetChooser  # noqa: PLC0415
+    from phyagentos.protocol import Workspace  # noqa: PLC0415
     from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415
     from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
+    from phyagentos.runtime.reach_query import answer_reach_query  # noqa: PLC0415
+    from functools import partial  # noqa: PLC0415
 
-    return ModelReviser(make_client(load_llm_config(workspace_dir)), fallback=RecoveryPlanner())
+    ws = Workspace.create(workspace_dir)
+    chooser = TargetChooser(ws, reach=partial(answer_reach_query, root=ws.root))
+    return ModelReviser(make_client(load_llm_config(workspace_dir)), fallback=RecoveryPlanner(), retarget=chooser)
 
 
 def add_agent_commands(sub: argparse._SubParsersAction) -> None:

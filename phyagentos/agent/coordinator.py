@@ -16,7 +16,8 @@ process (``phyagentos agent``) or interleaved with the supervisor (``phyagentos 
    memory the ContextBuilder retrieves for it (recorded in the session's ``context``);
 4. write TASK.md.
 
-Two recoveries change more than parameters (:mod:`phyagentos.agent.recovery`):
+Three recoveries change more than parameters (:mod:`phyagentos.agent.recovery`,
+:mod:`phyagentos.agent.retarget`):
 
 - *another view* (``Revision.skill == "observe"``): the child session only looks again;
   the criteria are then judged on the acting session's evidence with the child's
@@ -28,7 +29,9 @@ Two recoveries change more than parameters (:mod:`phyagentos.agent.recovery`):
   records the re-opening on the DAG edge (``reopened_by`` on the edge upstream ->
   node, and the new session id among the failed session's ``child_session_ids``), and
   compiles the node's child once the re-pick succeeded; if it fails, the node is
-  blocked.
+  blocked;
+- *re-target* (``Revision.target``): the child runs the same node, skill and criteria on
+  the other target the selector chose (its later children stay there).
 """
 
 from __future__ import annotations
@@ -441,8 +444,11 @@ class AgentCoordinator:
             skill = acting.skill if acting.skill != node.skill else None
             params = {**acting.parameters, **(revision.parameters if revision else {})}
         limits = {**acting.limits.model_dump(), **(revision.limits if revision else {})}
+        # a re-target moves the node (and its later children) to the selector's other target
+        target = revision.target if revision is not None and revision.target else \
+            (acting.target if acting.target != node.target else None)
         child = self.compiler.compile_node(node, parent=rec, parameters=params, limits=limits, context=acting.context,
-                                           recovery=revision, skill=skill)
+                                           recovery=revision, skill=skill, target=target)
         with ws.session_lock(session_id):
             rec = ws.load_session(session_id)
             rec.child_session_ids.append(child.session_id)

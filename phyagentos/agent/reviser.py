@@ -24,6 +24,12 @@ whose variants are exactly the revisions that could change the outcome
   ``place`` whose goal configuration collides becomes a ``place_at`` in an off-centre cell
   of the same region), offered for causes a different placement can address
   (:data:`SWITCH_CAUSES`) and not already tried;
+* ``switch_target``: the same node on another target (:class:`~phyagentos.agent.retarget.TargetChooser`:
+  the SkillRuntime-Target Selector over TARGETS.md, asked about the positions the failed attempt
+  perceived, with the Runtime's IK as reach oracle), offered for causes of the arm's own reach
+  or planning (:data:`~phyagentos.agent.retarget.RETARGET_CAUSES`) on a node without upstream
+  nodes (another target is another world), once along the lineage; the selector's reasons are
+  kept in ``Revision.selection``;
 * ``give_up`` with a reason (offered from the second replan on, or when nothing else is left).
 
 Every proposal is checked: the parameter is declared by the skill and its value in range
@@ -36,8 +42,8 @@ strategy ``model:<...>``), so lessons say which reviser proposed what; its model
 latency, raw output and outcome) is in ``Revision.model_calls``, so the child keeps it in its
 context, and :meth:`ModelReviser.calls_for` gives it to the revised session's context.
 
-Not offered: another target (a :class:`~phyagentos.protocol.Revision` has no target field;
-the coordinator compiles a child on its node's target).
+A re-target is offered only when a :class:`~phyagentos.agent.retarget.TargetChooser` is given
+(the composition root wires it with the reach oracle).
 """
 
 from __future__ import annotations
@@ -54,6 +60,7 @@ from phyagentos.protocol import Diagnosis, ModelCallRecord, Revision, SessionRec
 
 from .goal_graph import parse_goal_graph
 from .recovery import ACQUIRING_SKILLS, ANOTHER_VIEW_SAMPLES, LADDERS, SITUATIONAL, RecoveryPlanner
+from .retarget import RETARGET_CAUSES, TargetChooser
 from .skill_catalog import SkillInfo, skill_catalog
 
 __all__ = ["Reviser", "ModelReviser", "REVISION_SPACE", "DEFAULTS", "NEVER_RETRY", "PARAMETERS_FOR_CAUSE",
@@ -119,7 +126,8 @@ _SYSTEM = (
     "the cause, or give up. Examples: object slipped -> stronger grip_force_n; grasp missed or perception error "
     "-> more observe_samples or reobserve_samples; collision -> lower transfer_velocity_scale or another planner; "
     "the goal pose collides -> switch_skill to place the object elsewhere in the region; the object is no longer "
-    "in the hand -> re_pick_upstream; the result could not be seen -> insert_observe."
+    "in the hand -> re_pick_upstream; the result could not be seen -> insert_observe; the pose is out of this "
+    "arm's reach -> switch_target to an arm that reaches it."
 )
 _GIVE_UP_REASONS = ["safety_stop", "software_error", "nothing_left"]
 
@@ -168,13 +176,15 @@ class ModelReviser:
         fallback: the rule ladder used when the model's proposal is rejected or the call
             fails (``None``: no fallback, the verdict becomes ``failure``).
         skills: skill catalog (default: the shipped manifests).
+        retarget: chooses another capable target for ``switch_target`` (``None``: never offered).
     """
 
     def __init__(self, client: LLMClient, *, fallback: RecoveryPlanner | None = None,
-                 skills: Mapping[str, SkillInfo] | None = None):
+                 skills: Mapping[str, SkillInfo] | None = None, retarget: TargetChooser | None = None):
         self.client = client
         self.fallback = fallback
         self._skills = skills
+        self.retarget = retarget
         self.calls: list[LLMCall] = []
         self.proposals: list[dict[str, Any]] = []
         self._records: dict[str, list[ModelCallRecord]] = {}
@@ -212,6 +222,10 @@ class ModelReviser:
             if not any(r.skill == "observe" for r in same_cause):
                 variants.append(_variant("insert_observe"))
             return variants
+        if cause in RETARGET_CAUSES and self.retarget is not None and not any(r.target for r in earlier):
+            chosen = self.retarget.choose(session, cause=cause)
+            if chosen.target is not None:
+                variants.append(_variant("switch_target", target=[chosen.target]))
         for p, values in self._adjustable(session, cause, same_cause).items():
             variants.append(_variant("adjust", parameter=[p], value=values))
         if cause in SWITCH_CAUSES:
@@ -304,6 +318,8 @@ class ModelReviser:
             return f"adjust {props['parameter']['enum'][0]} to one of {props['value']['enum']}"
         if action == "switch_skill":
             return f"switch_skill to {props['skill']['enum'][0]} ({', '.join(props['option']['enum'])})"
+        if action == "switch_target":
+            return f"switch_target to {props['target']['enum'][0]}"
         return action
 
     def _fall_back(self, record: dict[str, Any], session: SessionRecord, diagnosis: Diagnosis,
@@ -371,6 +387,15 @@ class ModelReviser:
                             rationale=f"addresses {cause}: {diagnosis.summary} -> insert a re-pick: re-open upstream "
                                       f"node {upstream!r}{' with ' + str(grip) if grip else ''}, then run this node "
                                       f"again ({by})", **common)
+        if action == "switch_target":
+            chosen = self.retarget.choose(session, cause=cause)
+            if chosen.target != proposal["target"]:
+                raise ValueError(f"target {proposal['target']!r} is not the selector's choice {chosen.target!r}")
+            why = chosen.reasons.get(chosen.target, "")
+            return Revision(strategy=f"model:switch_target_to_{chosen.target}", target=chosen.target,
+                            selection=dict(chosen.reasons),
+                            rationale=f"addresses {cause}: {diagnosis.summary} -> run node {session.node!r} on "
+                                      f"{chosen.target} instead of {session.target} ({why}; {by})", **common)
         if action == "switch_skill":
             skill = proposal["skill"]
             option = next(o for o in SKILL_ALTERNATIVES[session.skill][skill] if _label(o) == proposal["option"])

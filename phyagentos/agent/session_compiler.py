@@ -52,7 +52,7 @@ class SessionCompiler:
     def compile_node(self, node: GoalNode, *, parent: SessionRecord | None = None,
                      parameters: dict[str, Any] | None = None, limits: dict[str, float] | None = None,
                      context: SessionContext | None = None, recovery: Revision | None = None,
-                     skill: str | None = None) -> SessionRecord:
+                     skill: str | None = None, target: str | None = None) -> SessionRecord:
         """Build and submit the session for ``node`` (a child of ``parent`` on replan).
 
         Args:
@@ -61,6 +61,7 @@ class SessionCompiler:
             context: what the ContextBuilder injected (recorded in the session).
             recovery: the revision a replanned child runs with.
             skill: run this skill instead of the node's (``observe`` for another view).
+            target: run on this target instead of the node's (a re-target revision).
 
         Raises:
             VerifierError: the node's acceptance criteria do not parse (checked
@@ -87,7 +88,7 @@ class SessionCompiler:
             depends_on=list(node.depends_on),
             skill=skill or node.skill,
             skill_runtime=node.runtime,
-            target=node.target,
+            target=target or node.target,
             parameters=dict(parameters if parameters is not None else node.params),
             accept=node.accept,
             limits=Limits(**{**node.limits, **(limits or {})}),

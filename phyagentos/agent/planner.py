@@ -475,6 +475,16 @@ class GoalPlanner:
             raise PlannerError(f"the world is unknown: {', '.join(unseen)} not perceived yet (ENVIRONMENT.md) and "
                                f"no observe skill to look first")
         chosen_sels = self._select_world_target(steps, world, scene, prefer_target)
+        # Several objects into one region: ``pick_and_place`` sets each down at the region's centre, so
+        # the second lands on the first. Each of them becomes a pick, then a ``place_at`` in its own cell
+        # (``slots`` cells along the region's longer axis, in the order of the steps).
+        sharing: dict[str, list[str]] = {}
+        for s in steps:
+            if s.skill == "pick_and_place" and s.destination and world.get(s.destination).kind == "region":
+                sharing.setdefault(s.destination, [])
+                if s.object not in sharing[s.destination]:
+                    sharing[s.destination].append(s.object)
+        split = {"pick", "place_at"} <= set(self.skills)
         for i, s in enumerate(steps):
             node_id = re.sub(r"[^a-z0-9_]", "_", f"s{i + 1}_{s.skill}_{s.object}")[:60]
             sel = chosen_sels[i]
@@ -502,6 +512,22 @@ class GoalPlanner:
                     "limits": {"execution_timeout_s": NODE_TIMEOUT_S}}
             if sel.runtime and sel.runtime != "builtin":
                 node["runtime"] = sel.runtime
+            step_nodes = [node]
+            cells = sharing.get(s.destination or "", [])
+            if split and s.skill == "pick_and_place" and len(cells) > 1:
+                pick_id = re.sub(r"[^a-z0-9_]", "_", f"s{i + 1}_pick_{s.object}")[:60]
+                pick = {**node, "id": pick_id, "skill": "pick", "params": {"object": s.object},
+                        "accept": [{"holding": s.object}, {"lifted": {"object": s.object, "min_height": 0.05}}]}
+                place = {**node, "id": re.sub(r"[^a-z0-9_]", "_", f"s{i + 1}_place_at_{s.object}")[:60],
+                         "skill": "place_at", "depends_on": [pick_id],
+                         "params": {"object": s.object, "region": s.destination, "slots": len(cells),
+                                    "slot": cells.index(s.object)},
+                         "accept": [accept[0], {"released": s.object}, *accept[1:]]}
+                pick.pop("runtime", None)
+                place.pop("runtime", None)
+                del selections[node_id]
+                selections[pick_id] = selections[place["id"]] = sel.to_dict()
+                step_nodes = [pick, place]
             if unseen and not nodes:
                 look = {"id": "s0_observe", "skill": "observe", "target": sel.target,
                         "params": {"samples": OBSERVE_SAMPLES},
@@ -512,8 +538,8 @@ class GoalPlanner:
                                           "reasons": {sel.target: f"look first: {', '.join(unseen)} not perceived "
                                                                   f"yet (ENVIRONMENT.md)"}}
                 nodes.append(look)
-                node["depends_on"] = [look["id"]]
-            nodes.append(node)
+                step_nodes[0]["depends_on"] = [look["id"]]
+            nodes.extend(step_nodes)
         model = self.client.model
         graph = {"version": 1, "name": name,
                  "description": f"Planned by the Goal Planner ({self.client.provider} {model}) from: {request}",

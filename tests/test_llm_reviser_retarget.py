@@ -101,3 +101,16 @@ def test_a_node_with_upstream_nodes_is_never_moved_to_another_world(tmp_path):
     unreachable = Diagnosis(cause="ik_unreachable", category="planning", summary="IK did not converge")
     assert reviser.menu(rec, unreachable) == []
     assert reviser.plan(rec, unreachable) is None
+
+
+def test_the_reach_answer_for_a_randomised_world_rests_on_the_perceived_position_not_the_drawn_one():
+    # seed 8 draws the object at about (0.66, 0.13), within the Franka's reach; the answer must
+    # follow what was perceived (built from the drawn world, the object moved to that position)
+    from phyagentos.protocol.reach import ReachQuery
+
+    def ask(xy):
+        return answer_reach_query(ReachQuery(target="franka_tabletop", driver="mujoco_franka", scene=SCENE,
+                                             positions={"cube": xy}, pick="cube")).status
+
+    assert ask([0.657, 0.13]) == "reachable"
+    assert ask([1.4, 0.0]) == "unreachable"

@@ -11,6 +11,7 @@ declared scene. Nothing is stepped and nothing is written.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 from typing import Any
 
@@ -32,6 +33,21 @@ def _perceived_scene(query: ReachQuery) -> dict[str, Any]:
     return scene
 
 
+def _at_perceived_positions(scene: Any, query: ReachQuery) -> Any:
+    """A randomised scene (``randomise``) is drawn when its target is built, which would put every
+    object at its *drawn* position; the answer must rest on the perceived ones. So the world is
+    drawn here and the perceived objects are moved to their perceived (x, y) (shape and size stay
+    the drawn ones: the runtime's own model of the object); the draw is not asked again."""
+    if not getattr(scene, "randomise", None) or not query.positions:
+        return scene
+    from phyagentos.targets.world import draw_world  # noqa: PLC0415
+
+    drawn, _ = draw_world(scene)
+    objects = tuple(dataclasses.replace(o, position=(float(query.positions[o.name][0]), float(query.positions[o.name][1])))
+                    if o.name in query.positions else o for o in drawn.objects)
+    return dataclasses.replace(drawn, objects=objects, randomise=None)
+
+
 def answer_reach_query(query: ReachQuery, *, root: Any = None) -> ReachAnswer:
     """Whether ``query.target`` reaches the query's pick and place poses (see the module docstring).
 
@@ -43,6 +59,7 @@ def answer_reach_query(query: ReachQuery, *, root: Any = None) -> ReachAnswer:
     scene, problems = check_scene(_perceived_scene(query), query.driver, root=root)
     if scene is None:
         return ReachAnswer(status="unsupported", reasons=[p.message for p in problems] or ["scene not modelled"])
+    scene = _at_perceived_positions(scene, query)
     objects = {o.get("name") for o in query.scene.get("objects") or [] if isinstance(o, dict)}
 
     def unseen(*names: str | None) -> list[str]:

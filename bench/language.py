@@ -1,6 +1,7 @@
 """Language suite: the Goal Planner on >= 60 instructions over randomised scenes, judged by execution.
 
-    nice -n 10 .venv/bin/python bench/language.py [--seeds 8] [--execute N] [--reviser-episodes K]
+    nice -n 10 .venv/bin/python bench/language.py [--seeds 8] [--workers 2] [--execute N] [--keep DIR]
+        [--categories single,stack,...] [--reviser-episodes K]
 
 Instructions (``--seeds`` per category, default 8 -> 64): single pick and place, sorting by
 colour, sorting by size, stacking, ordering ("..., then ..."), "all except", counting, and
@@ -17,9 +18,12 @@ where it was), fixed when the instruction is drawn. For each instruction:
 * plan validity: the graph passed the validator (``parse_goal_graph``) -- planned at all;
 * plan correctness: the planned steps' intended end state equals the ground truth
   (checked symbolically, without executing);
-* execution success: the plan is run in MuJoCo (``run_goal_graph``) and the final
-  snapshot of the simulator satisfies the ground truth (for the first ``--execute``
-  planned instructions, default all: CPU-heavy, run it with ``nice``);
+* execution success: the plan is run in MuJoCo (``phyagentos run`` in its own process and a
+  fresh workspace, ``--workers`` at once, memory off, the rule ladder) and the simulator's
+  state at the end -- the ``terminal`` of the newest ``evidence/*/ground_truth.yaml``, never
+  the perceived snapshot -- satisfies the ground truth (for the first ``--execute`` planned
+  instructions, default all: CPU-heavy, run it with ``nice``); reported beside it: whether
+  every node's verdict was success, and a failure taxonomy (:func:`failure_label`);
 * must-refuse: refused (any reason) counts as correct; the reason is reported.
 
 The planner's world is what the robot perceived: before planning, one ``observe`` session
@@ -354,6 +358,22 @@ def run_suite(client, cases: list[Case], *, execute: int, root: Path, look: bool
     return rows
 
 
+def failure_label(row: dict) -> str | None:
+    """Where an executed plan went wrong (``None``: the truth is met and every verdict was success):
+    ``truth met, verdict not success: <cause>`` (the verifier could not confirm what happened),
+    ``truth unmet: <cause>`` (the first unsuccessful session's diagnosed cause), ``truth unmet:
+    every verdict success`` (a false success) or ``not run: <error>``."""
+    if not row.get("executed"):
+        return None
+    bad = [s for s in row.get("sessions") or [] if s.get("verdict") != "success"]
+    cause = (bad[0].get("cause") or bad[0].get("status")) if bad else None
+    if row.get("sessions") is None:
+        return f"not run: {(row.get('exec_error') or '')[:80]}"
+    if row.get("execution_success"):
+        return None if not bad else f"truth met, verdict not success: {cause}"
+    return f"truth unmet: {cause}" if bad else "truth unmet: every verdict success"
+
+
 def summarise(rows: list[dict]) -> dict:
     per: dict[str, dict] = {}
     for cat in CATEGORIES:
@@ -381,7 +401,13 @@ def summarise(rows: list[dict]) -> dict:
                "all_nodes_succeeded": sum(bool(r.get("all_nodes_succeeded")) for r in ex),
                "median_s_per_plan": round(statistics.median(r["seconds"] for r in rows), 2),
                "mean_s_per_plan": round(statistics.mean(r["seconds"] for r in rows), 2)}
-    return {"per_category": per, "overall": overall}
+    taxonomy: dict[str, dict[str, int]] = {}
+    for r in ex:
+        label = failure_label(r)
+        if label is not None:
+            taxonomy.setdefault(label, {}).setdefault(r["category"], 0)
+            taxonomy[label][r["category"]] += 1
+    return {"per_category": per, "overall": overall, "failure_taxonomy": taxonomy}
 
 
 def reviser_comparison(episodes: int, root: Path) -> dict:
@@ -480,6 +506,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{o['must_refuse']}, execution success (ground truth) {o['execution_success']}/{o['executed']} executed, "
               f"every node's verdict success {o['all_nodes_succeeded']}/{o['executed']}, "
               f"median {o['median_s_per_plan']} s per plan")
+        if run.get("failure_taxonomy"):
+            print("failure taxonomy (executed plans):")
+            for label, cats in run["failure_taxonomy"].items():
+                print(f"  {sum(cats.values()):3d}  {label}  {cats}")
     if "reviser" in report:
         print("\nreviser on the same failures (pick with perturbations):")
         for name, s in report["reviser"]["summary"].items():

@@ -34,8 +34,9 @@ The selector asks the Runtime's IK about reach (``answer_reach_query``).
 
 The offline model always; a second pass with the endpoint of ``PHYAGENTOS_LLM_PROVIDER=openai``
 (+ ``PHYAGENTOS_LLM_BASE_URL``/``MODEL``) when that is set. ``--reviser-episodes K``: K pick
-episodes per perturbation (low friction, displaced, heavy object), each run once with the rule
-ladder and once with the model reviser on the same seeds; reported: sessions, final success.
+episodes per scripted perturbation (low friction, displaced, heavy object), each run once with
+the rule ladder and once with the model reviser; the comparison on real failures from
+randomised worlds is ``bench/reviser_compare.py``.
 
 Writes bench/results/language.json and prints tables. Timings on a shared, loaded 2-core machine.
 """

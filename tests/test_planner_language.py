@@ -332,10 +332,11 @@ def test_every_step_of_a_plan_runs_on_one_target_that_reaches_them_all(tmp_path)
     targets = [t.model_dump(mode="json") for t in ws.read("TARGETS").data.targets]
     planner = GoalPlanner(make_client(), skills=skill_names(), targets=targets,
                           reach=partial(answer_reach_query, root=ws.root))
-    result = planner.plan("put the green cube in the left bin, then put the red cube in the left bin", scene=scene,
+    result = planner.plan("put the green cube in the left bin, then put the red cube in the right bin", scene=scene,
                           environment=seen(scene))
     assert result.status == "planned", result.reason
-    assert [n.target for n in result.graph.nodes] == ["franka_tabletop", "franka_tabletop"]
+    assert [(n.params["object"], n.target) for n in result.graph.nodes] == [("green_cube", "franka_tabletop"),
+                                                                             ("red_cube", "franka_tabletop")]
     first, second = (result.selections[n.id] for n in result.graph.nodes)
     # step 1 alone would fit the SO-101 (closer base); step 2 is out of its reach
     assert first["reasons"]["so101_tabletop"].startswith("fits")

@@ -6,8 +6,9 @@ the SO-101's base) puts the object beyond the SO-101's reach: its pick fails at 
 ``ik_unreachable`` (the drawn position is only known once perceived, so the graph check cannot
 refuse it). The rule ladder has nothing for that cause and the run fails; the model reviser
 is offered ``switch_target`` to the target the selector finds reaching the *perceived* position
-(the Runtime's IK through the reach query), and the child runs there and succeeds. The revision
-records the selector's reasons; the lesson records who proposed it and the child's confirmation.
+(the Runtime's IK through the reach query), and the child runs there and succeeds; the place
+downstream follows it to that target's world. The revision records the selector's reasons; the
+lesson records who proposed it and the child's confirmation.
 """
 
 from __future__ import annotations
@@ -27,14 +28,18 @@ from phyagentos.protocol.lifecycle import utc_now
 from phyagentos.runtime.reach_query import answer_reach_query
 
 SCENE = {"objects": [{"name": "cube", "rgba": [0.85, 0.12, 0.1, 1], "class": "block"}],
+         "regions": [{"name": "goal", "center": [0.35, 0.2], "half_extents": [0.06, 0.06]}],
          "randomise": {"seed": 8, "distractors": [0, 0]}}
 PICK = {"id": "pick_cube", "skill": "pick", "target": "so101_tabletop", "params": {"object": "cube"},
         "accept": {"holding": "cube", "lifted": {"object": "cube", "min_height": 0.05}}}
+# within both arms' reach: the graph check passes it for the SO-101
+PLACE = {"id": "place_cube", "skill": "place", "target": "so101_tabletop", "params": {"object": "cube", "region": "goal"},
+         "accept": {"inside": {"object": "cube", "region": "goal"}, "released": "cube"}, "depends_on": ["pick_cube"]}
 
 
 def run(tmp_path, name, reviser_for):
     graph = tmp_path / f"{name}.yaml"
-    graph.write_text(yaml.safe_dump({"version": 1, "name": name, "scene": SCENE, "nodes": [PICK]}))
+    graph.write_text(yaml.safe_dump({"version": 1, "name": name, "scene": SCENE, "nodes": [PICK, PLACE]}))
     ws = Workspace.create(tmp_path / name)
     report = run_goal_graph(graph, ws.root, seed=0, reviser=reviser_for(ws))
     return report, ws, [ws.load_session(s.session_id) for s in report.sessions]
@@ -44,7 +49,7 @@ def run(tmp_path, name, reviser_for):
 def test_a_node_out_of_its_targets_reach_is_moved_by_the_model_to_the_target_that_reaches_it(tmp_path):
     # the rule ladder: nothing addresses ik_unreachable; the run fails on the SO-101
     report, _, recs = run(tmp_path, "rules", lambda ws: None)
-    assert not report.succeeded
+    assert not report.succeeded and report.node_states["place_cube"] == "blocked"
     (only,) = recs
     assert only.target == "so101_tabletop" and only.attempts[-1].verdict.diagnosis.cause == "ik_unreachable"
 
@@ -56,7 +61,7 @@ def test_a_node_out_of_its_targets_reach_is_moved_by_the_model_to_the_target_tha
 
     report, ws, recs = run(tmp_path, "model", model)
     assert report.succeeded, [(r.session_id, r.target, r.state) for r in recs]
-    failed, child = recs
+    failed, child, place = recs
     assert failed.target == "so101_tabletop" and failed.state == "replanned"
     assert failed.attempts[-1].verdict.diagnosis.cause == "ik_unreachable"
     rev = failed.attempts[-1].verdict.revision
@@ -75,6 +80,11 @@ def test_a_node_out_of_its_targets_reach_is_moved_by_the_model_to_the_target_tha
     # the simulator agrees (scoring-side read of the privileged channel): the Franka holds the object, lifted
     truth = yaml.safe_load((ws.root / child.attempts[-1].evidence / "ground_truth.yaml").read_text())["terminal"]
     assert "cube" in truth["held"] and truth["objects"]["cube"]["position"][2] > 0.05
+    # the node downstream follows the world it depends on: the place runs on the Franka too
+    assert place.node == "place_cube" and place.target == "franka_tabletop" and place.state == "succeeded"
+    truth = yaml.safe_load((ws.root / place.attempts[-1].evidence / "ground_truth.yaml").read_text())["terminal"]
+    x, y, _ = truth["objects"]["cube"]["position"]
+    assert abs(x - 0.35) <= 0.06 and abs(y - 0.2) <= 0.06 and not truth["held"]
     # the lesson: proposed by the model, a re-target, confirmed by the child's verdict
     lesson = next(l for l in ws.read("LESSONS").data.lessons if l.strategy == rev.strategy)
     assert lesson.proposed_by == "model" and lesson.target == "franka_tabletop" and lesson.verified

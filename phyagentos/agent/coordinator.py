@@ -31,7 +31,9 @@ Three recoveries change more than parameters (:mod:`phyagentos.agent.recovery`,
   compiles the node's child once the re-pick succeeded; if it fails, the node is
   blocked;
 - *re-target* (``Revision.target``): the child runs the same node, skill and criteria on
-  the other target the selector chose (its later children stay there).
+  the other target the selector chose; its later children, the nodes downstream of it and
+  any re-opened upstream node follow it there (:meth:`AgentCoordinator.world_target`: each
+  target is its own world).
 """
 
 from __future__ import annotations
@@ -253,9 +255,26 @@ class AgentCoordinator:
             rev = self._revision(rec)
             resume = rev.model_copy(update={"rationale": f"{rev.rationale}; upstream {repick} succeeded"})
             self.compiler.compile_node(self.graph.get_node(node_id), parent=rec, parameters=dict(rec.parameters),
-                                       limits=rec.limits.model_dump(), context=rec.context, recovery=resume)
+                                       limits=rec.limits.model_dump(), context=rec.context, recovery=resume,
+                                       target=rec.target)
             actions += 1
         return actions
+
+    def world_target(self, node_id: str, latest: Mapping[str, SessionRecord]) -> str | None:
+        """The target a ready node must run on when a re-target moved its world: the target of the
+        latest sessions of its DAG ancestors when a re-target revision put one of them on another
+        target than its node's (each target is its own world: the node finds what its upstream
+        nodes did only there); ``None``: the node's own target."""
+        moved = set()
+        for up in nx.ancestors(self.dag, node_id):
+            rec = latest.get(up)
+            if rec is not None and rec.target != self.graph.get_node(up).target:
+                moved.add(rec.target)
+        if len(moved) > 1:
+            logger.warning("node %s: upstream nodes were moved to several targets %s; it keeps its own", node_id,
+                           sorted(moved))
+            return None
+        return next(iter(moved), None)
 
     def done(self, sessions: list[SessionRecord] | None = None) -> bool:
         """True when every node is terminal (succeeded, failed, blocked or cancelled);
@@ -293,14 +312,16 @@ class AgentCoordinator:
         self.reopen_edges(sessions)
         states = self.node_states(sessions)
         compiled = 0
+        latest = self.latest_by_node(sessions)
         for node_id in dagmod.ready_nodes(self.dag, states):
             node = self.graph.get_node(node_id)
+            target = self.world_target(node_id, latest)
             params, context = self.context_builder.build(goal=f"{self.graph.name}/{node.id}", skill=node.skill,
-                                                         target=node.target, parameters=node.params,
+                                                         target=target or node.target, parameters=node.params,
                                                          scene=declared_scene(self.graph.scene),
                                                          observed=self.observed(node.params.get("object"), sessions))
             context = with_calls(context, planner_calls(self.graph.provenance))  # the plan's model calls
-            self.compiler.compile_node(node, parameters=params, context=context)
+            self.compiler.compile_node(node, parameters=params, context=context, target=target)
             compiled += 1
             if self.on_submit is not None:
                 self.on_submit()
@@ -469,7 +490,7 @@ class AgentCoordinator:
         params = {**base, **revision.parameters}  # e.g. the slip's firmer grip, applied to the re-pick
         repick = self.compiler.compile_node(node, parent=upstream, parameters=params,
                                             context=upstream.context if upstream is not None else None,
-                                            recovery=revision)
+                                            recovery=revision, target=upstream.target if upstream is not None else None)
         verdict = rec.attempts[-1].verdict if rec.attempts else None
         if self.consolidate and revision.parameters and upstream is not None and verdict is not None \
                 and verdict.diagnosis is not None:

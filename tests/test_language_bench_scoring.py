@@ -1,0 +1,56 @@
+"""The language bench scores an executed plan on the simulator's ground truth at scoring time.
+
+A stacked cube hides its support from the cameras, so the perceived terminal snapshot is no
+ground for scoring (the previous scorer read it and missed the cube underneath). The bench's
+``truth_world`` reads the newest ``ground_truth.yaml``; a real MuJoCo stacking run is scored
+met for "blue on red" and unmet for the reverse.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from phyagentos.orchestrator import run_goal_graph
+
+BENCH = Path(__file__).resolve().parents[1] / "bench" / "language.py"
+
+
+@pytest.fixture(scope="module")
+def language():
+    spec = importlib.util.spec_from_file_location("language_bench", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.sim
+def test_an_executed_stack_is_scored_on_the_simulators_ground_truth(tmp_path, language):
+    case = language.Case("stack", 0, "stack the blue cube on the red cube", {
+        "objects": [{"name": "blue_cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.41, -0.236],
+                     "rgba": [0.1, 0.2, 0.8, 1]},
+                    {"name": "red_cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.611, -0.1],
+                     "rgba": [0.8, 0.1, 0.1, 1]}],
+        "regions": [{"name": "left_bin", "center": [0.42, 0.24], "half_extents": [0.07, 0.07]}]},
+        {"blue_cube": ("on", "red_cube"), "red_cube": ("stay", None)})
+    graph = tmp_path / "g.yaml"
+    graph.write_text(yaml.safe_dump({"version": 1, "name": "stack", "scene": case.scene, "nodes": [
+        {"id": "stack", "skill": "pick_and_place", "target": "franka_tabletop",
+         "params": {"object": "blue_cube", "region": "red_cube"},
+         "accept": [{"on": {"object": "blue_cube", "support": "red_cube"}}, {"released": "blue_cube"}]}]}))
+    ws = tmp_path / "ws"
+    run_goal_graph(graph, ws, seed=0, use_memory=False, consolidate=False)
+    ents = language.truth_world(ws, case.scene)
+    newest = max(ws.glob("evidence/*/ground_truth.yaml"), key=lambda p: p.stat().st_mtime_ns)
+    truth = yaml.safe_load(newest.read_text())["terminal"]["objects"]
+    assert ents["red_cube"]["position"] == truth["red_cube"]["position"]  # the support, hidden or not
+    assert ents["blue_cube"]["position"] == truth["blue_cube"]["position"]
+    assert language.truth_misses(case, ents, language.declared_world(case.scene)) == []
+    reverse = language.Case("stack", 0, "", case.scene, {"red_cube": ("on", "blue_cube")})
+    (miss,) = language.truth_misses(reverse, ents, language.declared_world(case.scene))
+    assert miss.startswith("red_cube not on blue_cube")

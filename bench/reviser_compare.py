@@ -1,6 +1,6 @@
 """The rule ladder against the model reviser on the same real failures from randomised worlds.
 
-    nice -n 10 .venv/bin/python bench/reviser_compare.py [--seeds 24] [--so101-seeds 12] [--workers 2]
+    nice -n 10 .venv/bin/python bench/reviser_compare.py [--seeds 24] [--so101-seeds 12] [--first-seed 0] [--workers 2]
 
 Failures are collected, not scripted: each episode is a randomised tabletop world
 (:func:`phyagentos.bench.random_world.random_episodes`: the target draws the object's shape,
@@ -90,14 +90,17 @@ def run_episode(kind: str, ep, reviser: str, root: Path) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=24, help="Franka pick-and-place episodes (seeds 0..N-1)")
-    ap.add_argument("--so101-seeds", type=int, default=12, help="SO-101 pick episodes (seeds 0..N-1)")
+    ap.add_argument("--seeds", type=int, default=24, help="Franka pick-and-place episodes (N seeds from --first-seed)")
+    ap.add_argument("--so101-seeds", type=int, default=12, help="SO-101 pick episodes (N seeds from --first-seed)")
+    ap.add_argument("--first-seed", type=int, default=0, help="seeds start here (both suites)")
     ap.add_argument("--workers", type=int, default=2, help="runs at once (each its own process and workspace)")
     ap.add_argument("--keep", type=Path, default=None, help="keep the workspaces under this directory")
     ap.add_argument("--out", type=Path, default=RESULTS / "reviser_compare.json")
     args = ap.parse_args(argv)
-    jobs = [("franka", ep) for ep in random_episodes(range(args.seeds))]
-    jobs += [("so101", _without_obstacles(ep)) for ep in random_episodes(range(args.so101_seeds), place=False)]
+    first = args.first_seed
+    jobs = [("franka", ep) for ep in random_episodes(range(first, first + args.seeds))]
+    jobs += [("so101", _without_obstacles(ep))
+             for ep in random_episodes(range(first, first + args.so101_seeds), place=False)]
     root = Path(tempfile.mkdtemp(prefix="phyagentos-revisers-")) if args.keep is None else args.keep
     root.mkdir(parents=True, exist_ok=True)
 

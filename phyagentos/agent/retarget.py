@@ -12,7 +12,8 @@ reach oracle the composition root wires (the Runtime's IK through
 A target is its own world (each simulates its own, or is a real robot): a node whose upstream
 nodes moved things on the first target would not find them on another. So a re-target is only
 offered for a node without upstream nodes (``depends_on`` empty); otherwise the answer says why
-none is offered.
+none is offered. The nodes downstream of a re-targeted node follow it to the new target
+(:meth:`phyagentos.agent.coordinator.AgentCoordinator.world_target`).
 """
 
 from __future__ import annotations

@@ -237,6 +237,29 @@ def serve_agent(workspace_dir: str | Path, *, run_id: str | None = None, poll_in
 
 
 
+def _warm_targets(goal_graph: str | Path, workspace: Workspace, *, target: str | None) -> bool:
+    """Ask the idle runner (:func:`~phyagentos.runtime.worker.prestart_runner`) to build the
+    targets ``goal_graph`` names, with its scene, while the whole-graph check runs: the
+    first session then finds its target built and its cameras open instead of paying
+    for them between its ``start`` and its first tick. Best effort and read-only: a
+    file that does not parse is left to the check to report (nothing is warmed).
+    Returns True if a warm-up was requested."""
+    from phyagentos.runtime.worker import warm_runner  # noqa: PLC0415
+    from phyagentos.yamlsource import load_yaml  # noqa: PLC0415
+
+    try:
+        doc = load_yaml(Path(goal_graph).read_text(encoding="utf-8"), path=goal_graph, error=GoalGraphError)
+    except (OSError, UnicodeDecodeError, GoalGraphError):
+        return False
+    if not isinstance(doc, dict) or not isinstance(doc.get("nodes"), list):
+        return False
+    default = (doc.get("defaults") or {}).get("target") if isinstance(doc.get("defaults"), dict) else None
+    names = {target} if target else {(n.get("target") or default) for n in doc["nodes"] if isinstance(n, dict)}
+    scene = doc.get("scene") if isinstance(doc.get("scene"), dict) else None
+    targets = [{"name": n, "scene": scene} for n in sorted(x for x in names if isinstance(x, str))]
+    return bool(targets) and warm_runner(workspace.root, targets)
+
+
 def run_goal_graph(
     goal_graph: str | Path,
     workspace_dir: str | Path,
@@ -271,6 +294,8 @@ def run_goal_graph(
     workspace = Workspace.create(workspace_dir)
     from phyagentos.graph_check_process import check_goal_graph_forked  # noqa: PLC0415
 
+    # The runner builds the graph's targets (model, cameras) while the check runs.
+    _warm_targets(goal_graph, workspace, target=target)
     # The whole graph before anything is registered or moves: errors name the user's file.
     # It runs in a child of the runner's forkserver (started in the background by
     # prestart_runner), which has the primitives and the motion stack imported already.

@@ -14,7 +14,7 @@ import hashlib
 import json
 import logging
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import yaml
 
@@ -42,7 +42,11 @@ def scene_for(session: SessionRecord, spec: TargetSpec, *, root: str | Path | No
     """The scene of a session: its own ``scene``, else the target's, else the default
     (without its ``perturbations``, see :func:`perturbations_for`). ``root`` is the
     workspace root that mesh objects' files are read from."""
-    raw, _ = split_scene(session.scene or spec.scene or None)
+    return _scene_of(spec, session.scene, root=root)
+
+
+def _scene_of(spec: TargetSpec, scene: Mapping[str, Any] | None, *, root: str | Path | None) -> SceneSpec:
+    raw, _ = split_scene(scene or spec.scene or None)
     # A driver with its own scene type (e.g. FrankaKitchen's task list) parses it itself.
     parse = getattr(DRIVERS.get(spec.driver), "scene_from_dict", None)
     if parse is not None:
@@ -91,17 +95,7 @@ class TargetPool:
             raise TargetError(f"unknown target driver {spec.driver!r}; valid drivers: {format_choices(DRIVERS)}")
         scene = scene_for(session, spec, root=self.state_dir.parent)  # state_dir is <workspace>/targets
         key = _scene_hash(scene)
-        cached = self._live.get(spec.name)
-        if cached is None or cached[0] != key:
-            if cached is not None:
-                cached[1].close()
-            target = cls(spec.name, scene, seed=session.seed)
-            self._live[spec.name] = (key, target)
-            # the workspace's sensors.yaml entry for this target (read-only deploy config)
-            sensors = read_sensors(self.state_dir.parent).for_target(spec.name)
-            if sensors and hasattr(target, "configure_sensors"):
-                target.configure_sensors(sensors)
-        target = self._live[spec.name][1]
+        target = self._built(cls, spec, scene, key, seed=session.seed)
         meta_path = self.state_dir / spec.name / "state.yaml"
         try:  # bounded like every YAML the project reads; an unreadable record means: reset
             meta = load_yaml(meta_path.read_text(encoding="utf-8"), path=meta_path, error=TargetError) \
@@ -118,6 +112,41 @@ class TargetPool:
         if hasattr(target, "set_perturbations"):
             target.set_perturbations(ActivePerturbations(perturbations_for(session, spec, root=self.state_dir.parent), session_seed=session.seed))
         return target
+
+    def _built(self, cls, spec: TargetSpec, scene, key: str, *, seed: int | None):
+        """The live target of ``spec`` for ``scene`` (hash ``key``; built, with its sensors,
+        if the pool holds none or one of another scene). Neither reset nor restored here."""
+        cached = self._live.get(spec.name)
+        if cached is None or cached[0] != key:
+            if cached is not None:
+                cached[1].close()
+            target = cls(spec.name, scene, seed=seed)
+            self._live[spec.name] = (key, target)
+            # the workspace's sensors.yaml entry for this target (read-only deploy config)
+            sensors = read_sensors(self.state_dir.parent).for_target(spec.name)
+            if sensors and hasattr(target, "configure_sensors"):
+                target.configure_sensors(sensors)
+        return self._live[spec.name][1]
+
+    def warm(self, spec: TargetSpec, scene: Mapping[str, Any] | None) -> bool:
+        """Build ``spec``'s target for ``scene`` (a goal graph's raw ``scene``; None: the
+        target's own) ahead of its first session, and open its cameras' renderers, so
+        that :meth:`acquire` finds it built. Moves nothing and writes nothing: the
+        session still resets or restores the world (:meth:`acquire`), and a session of
+        another scene rebuilds. Returns True if a target was built now.
+
+        Raises:
+            TargetError: unknown driver, or a scene that does not build.
+        """
+        cls = DRIVERS.get(spec.driver)
+        if cls is None:
+            raise TargetError(f"unknown target driver {spec.driver!r}; valid drivers: {format_choices(DRIVERS)}")
+        before = self._live.get(spec.name)
+        built = _scene_of(spec, scene, root=self.state_dir.parent)
+        target = self._built(cls, spec, built, _scene_hash(built), seed=None)
+        if hasattr(target, "prepare_cameras"):
+            target.prepare_cameras()
+        return self._live.get(spec.name) is not before
 
     def release(self, session: SessionRecord, target) -> None:
         """Persist the target's world state for the next session of the same run."""

@@ -27,7 +27,7 @@ from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
 from phyagentos.agent.verifier import SessionVerifier
 from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
-from phyagentos.protocol import LEASED_STATES, RunRecord, Workspace, utc_now_iso
+from phyagentos.protocol import LEASED_STATES, TERMINAL_STATES, RunRecord, Workspace, utc_now_iso
 from phyagentos.resources import skill_dirs, tree_dirs
 from phyagentos.runtime.skills import SkillRegistry
 from phyagentos.runtime.supervisor import WatchdogSupervisor
@@ -118,9 +118,17 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     last_states: dict | None = None
     try:
         idle_checked = False
+        force_step = True
         while True:
             wake.clear()
-            acted = agent.step()
+            if not force_step and not _agent_has_work(agent):
+                # The supervisor's claim, start, heartbeat... changed nothing the agent acts
+                # on: no step (which lists and parses the run's sessions) competes with the
+                # supervisor thread for the interpreter on the hand-off path.
+                acted = 0
+            else:
+                acted = agent.step()
+            force_step = False
             if failure:
                 raise failure[0]
             if acted:
@@ -143,6 +151,7 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
                 if idle_checked:
                     raise SupervisorError(f"run {agent.run_id} stalled: node states {states}")
                 idle_checked = True
+                force_step = True
                 continue
             idle_checked = False
             if supervisor.paused or supervisor.estopped:
@@ -153,6 +162,26 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
         stop.set()
         supervisor.watcher.notify()
         thread.join()
+
+
+#: Session states in which the Agent plane has something to do (verify, revise, or take
+#: over a verification whose verifier died).
+_AGENT_STATES = frozenset({"awaiting_verification", "awaiting_replan", "verifying"})
+
+
+def _agent_has_work(agent: AgentCoordinator) -> bool:
+    """Whether a step of ``agent`` could act now, from the state index alone (no session
+    file is read): a session of the run awaits the agent, or the run's active sessions
+    are no longer those the last step saw (one ended, or a new one appeared). Node
+    readiness changes only when a session ends, so a claim, a start or a renewed lease
+    alone never needs a step."""
+    seen = getattr(agent, "last_sessions", None)
+    if seen is None:
+        return True
+    active = agent.workspace.active_sessions(run_id=agent.run_id)
+    if any(state in _AGENT_STATES for _, state, _ in active):
+        return True
+    return {sid for sid, _, _ in active} != {s.session_id for s in seen if s.state not in TERMINAL_STATES}
 
 
 def _register_run(workspace: Workspace, goal_graph: str | Path, *, seed: int | None, target: str | None,

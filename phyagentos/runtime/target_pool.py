@@ -10,6 +10,7 @@ session's seed.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import logging
@@ -83,6 +84,7 @@ class TargetPool:
     def __init__(self, state_dir: str | Path):
         self.state_dir = Path(state_dir)
         self._live: dict[str, tuple[str, Any]] = {}  # name -> (scene hash, target)
+        self._views: dict[str, tuple] = {}  # name -> the last session's terminal view (keep_view)
 
     def acquire(self, session: SessionRecord, spec: TargetSpec):
         """Return the target for ``session``, in the state the episode left it.
@@ -120,6 +122,7 @@ class TargetPool:
         if cached is None or cached[0] != key:
             if cached is not None:
                 cached[1].close()
+            self._views.pop(spec.name, None)
             target = cls(spec.name, scene, seed=seed)
             self._live[spec.name] = (key, target)
             # the workspace's sensors.yaml entry for this target (read-only deploy config)
@@ -148,6 +151,34 @@ class TargetPool:
             target.prepare_cameras()
         return self._live.get(spec.name) is not before
 
+    def keep_view(self, session: SessionRecord, spec: TargetSpec, target, snapshot: dict, *, key: Any = None) -> None:
+        """Remember ``snapshot``, the perceived view of ``target`` at the end of ``session``,
+        with the digest of the world it saw (``target.world_digest()``; targets without
+        one, e.g. real robots, keep nothing) and ``key`` (whatever else the view depends
+        on, e.g. the perception configuration's identity)."""
+        digest = getattr(target, "world_digest", None)
+        self._views.pop(spec.name, None)
+        if digest is None:
+            return
+        perturbed = bool(split_scene(session.scene or spec.scene or None)[1])
+        self._views[spec.name] = (session.run_id, id(target), digest(), perturbed, key, copy.deepcopy(snapshot))
+
+    def take_view(self, session: SessionRecord, spec: TargetSpec, target, *, key: Any = None) -> dict | None:
+        """The view kept by :meth:`keep_view` if ``target`` (just acquired for ``session``) is
+        provably in the world that view saw: same run, same live target, equal world
+        digest, the same ``key``, and neither session perturbed; else None. A view is
+        handed out at most once and forgotten at the first look, so any session that
+        moved the target in between (or a failed one) makes the next perceive afresh."""
+        view = self._views.pop(spec.name, None)
+        if view is None:
+            return None
+        run_id, target_id, digest, perturbed, view_key, snapshot = view
+        if (run_id != session.run_id or target_id != id(target) or perturbed or view_key != key
+                or split_scene(session.scene or spec.scene or None)[1]):
+            return None
+        fn = getattr(target, "world_digest", None)
+        return snapshot if fn is not None and fn() == digest else None
+
     def release(self, session: SessionRecord, target) -> None:
         """Persist the target's world state for the next session of the same run."""
         self.checkpoint(session, target)
@@ -163,6 +194,7 @@ class TargetPool:
         atomic_write_text(directory / "state.yaml", yaml.safe_dump({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
 
     def close(self) -> None:
+        self._views.clear()
         for _, target in self._live.values():
             target.close()
         self._live.clear()

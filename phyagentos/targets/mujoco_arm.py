@@ -970,6 +970,24 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         atomic_write_bytes(p, buf.getvalue())
         return p
 
+    def world_digest(self) -> str:
+        """A digest of everything :meth:`save_state` keeps (MuJoCo's full integration state,
+        the subclass's metadata, ``runtime_notes`` and the model fingerprint): two equal
+        digests mean the same simulated world, e.g. before :meth:`save_state` and after
+        :meth:`load_state` of that file. Hex string (SHA-256)."""
+        import hashlib  # noqa: PLC0415
+
+        self._check_open()
+        m, d = self._model, self._data
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        full = np.empty(mujoco.mj_stateSize(m, spec))
+        mujoco.mj_getState(m, d, full, spec)
+        h = hashlib.sha256(full.tobytes())
+        meta = {**self._state_meta(), "runtime_notes": self.runtime_notes}
+        h.update(json.dumps(meta, sort_keys=True, default=str).encode())
+        h.update(self._fingerprint().encode())
+        return h.hexdigest()
+
     def load_state(self, path: str | os.PathLike) -> None:
         """Restore a state written by :meth:`save_state` for the same scene and robot.
         Raises TargetError if the file is missing, malformed or from another scene."""

@@ -90,7 +90,8 @@ def run_bare_pick_and_place(
     :class:`~phyagentos.perception.Perceiver` per skill through
     :func:`phyagentos.primitives.observation.perceive_now` (frames saved as PNG like the
     SessionRunner saves them), before and after each skill (the SessionRunner's initial
-    and terminal observation) and where the skill trees observe (pick: ObserveScene,
+    and terminal observation; the place starts from the pick's terminal view, as a run's
+    does when nothing moved in between) and where the skill trees observe (pick: ObserveScene,
     ObserveAfterPick; place: ObserveScene, and ObserveAfterPlace after the arm cleared
     the cameras' view by a planned move back to its home configuration, as
     trees/place.yaml does). Timed as ``perception_s`` (and in ``total_s``); the motions
@@ -226,7 +227,8 @@ def run_bare_pick_and_place(
         perceive("02_ObserveAfterPick")
         perceive("terminal")  # SessionRunner, after the pick
         perceive.new_skill()
-        perceive("initial")  # SessionRunner, before the place
+        # SessionRunner, before the place: nothing moved since the pick's terminal view, so
+        # a run starts the place from that view (TargetPool.take_view); not perceived again.
         perceive("01_ObserveScene")
     # 4. transfer over the wall (planned, cube attached)
     T_place = place_pose(region.center, obj.half_extents, T_tcp_object=T_tcp_obj, yaw_rad=grasp.yaw_rad)

@@ -59,10 +59,12 @@ def _recording(handler: Handler, *, workspaces: Callable[[argparse.Namespace, se
     successful sessions pruned afterwards under ``--record failures``."""
 
     def run(args, out: Console, err: Console) -> int:
+        if not getattr(args, "record", None):
+            # Imported only when recording: ``run`` starts its runner first thing, and the
+            # recording module (the protocol layer, numpy) would delay that by ~0.2-0.5 s.
+            return handler(args, out, err)
         from phyagentos.runtime.recording import ENV_VAR, RecordingConfig, prune_recordings  # noqa: PLC0415
 
-        if not getattr(args, "record", None):
-            return handler(args, out, err)
         config = RecordingConfig(mode=args.record, camera=args.record_camera, fps=args.record_fps)
         before = set(_bench_dirs(args.workspace))
         previous = os.environ.get(ENV_VAR)

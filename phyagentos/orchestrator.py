@@ -27,7 +27,7 @@ from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
 from phyagentos.agent.verifier import SessionVerifier
 from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
-from phyagentos.protocol import LEASED_STATES, RunRecord, Workspace, utc_now_iso
+from phyagentos.protocol import LEASED_STATES, TERMINAL_STATES, RunRecord, Workspace, utc_now_iso
 from phyagentos.resources import skill_dirs, tree_dirs
 from phyagentos.runtime.skills import SkillRegistry
 from phyagentos.runtime.supervisor import WatchdogSupervisor
@@ -118,9 +118,17 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     last_states: dict | None = None
     try:
         idle_checked = False
+        force_step = True
         while True:
             wake.clear()
-            acted = agent.step()
+            if not force_step and not _agent_has_work(agent):
+                # The supervisor's claim, start, heartbeat... changed nothing the agent acts
+                # on: no step (which lists and parses the run's sessions) competes with the
+                # supervisor thread for the interpreter on the hand-off path.
+                acted = 0
+            else:
+                acted = agent.step()
+            force_step = False
             if failure:
                 raise failure[0]
             if acted:
@@ -143,6 +151,7 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
                 if idle_checked:
                     raise SupervisorError(f"run {agent.run_id} stalled: node states {states}")
                 idle_checked = True
+                force_step = True
                 continue
             idle_checked = False
             if supervisor.paused or supervisor.estopped:
@@ -153,6 +162,26 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
         stop.set()
         supervisor.watcher.notify()
         thread.join()
+
+
+#: Session states in which the Agent plane has something to do (verify, revise, or take
+#: over a verification whose verifier died).
+_AGENT_STATES = frozenset({"awaiting_verification", "awaiting_replan", "verifying"})
+
+
+def _agent_has_work(agent: AgentCoordinator) -> bool:
+    """Whether a step of ``agent`` could act now, from the state index alone (no session
+    file is read): a session of the run awaits the agent, or the run's active sessions
+    are no longer those the last step saw (one ended, or a new one appeared). Node
+    readiness changes only when a session ends, so a claim, a start or a renewed lease
+    alone never needs a step."""
+    seen = getattr(agent, "last_sessions", None)
+    if seen is None:
+        return True
+    active = agent.workspace.active_sessions(run_id=agent.run_id)
+    if any(state in _AGENT_STATES for _, state, _ in active):
+        return True
+    return {sid for sid, _, _ in active} != {s.session_id for s in seen if s.state not in TERMINAL_STATES}
 
 
 def _register_run(workspace: Workspace, goal_graph: str | Path, *, seed: int | None, target: str | None,
@@ -237,6 +266,29 @@ def serve_agent(workspace_dir: str | Path, *, run_id: str | None = None, poll_in
 
 
 
+def _warm_targets(goal_graph: str | Path, workspace: Workspace, *, target: str | None) -> bool:
+    """Ask the idle runner (:func:`~phyagentos.runtime.worker.prestart_runner`) to build the
+    targets ``goal_graph`` names, with its scene, while the whole-graph check runs: the
+    first session then finds its target built and its cameras open instead of paying
+    for them between its ``start`` and its first tick. Best effort and read-only: a
+    file that does not parse is left to the check to report (nothing is warmed).
+    Returns True if a warm-up was requested."""
+    from phyagentos.runtime.worker import warm_runner  # noqa: PLC0415
+    from phyagentos.yamlsource import load_yaml  # noqa: PLC0415
+
+    try:
+        doc = load_yaml(Path(goal_graph).read_text(encoding="utf-8"), path=goal_graph, error=GoalGraphError)
+    except (OSError, UnicodeDecodeError, GoalGraphError):
+        return False
+    if not isinstance(doc, dict) or not isinstance(doc.get("nodes"), list):
+        return False
+    default = (doc.get("defaults") or {}).get("target") if isinstance(doc.get("defaults"), dict) else None
+    names = {target} if target else {(n.get("target") or default) for n in doc["nodes"] if isinstance(n, dict)}
+    scene = doc.get("scene") if isinstance(doc.get("scene"), dict) else None
+    targets = [{"name": n, "scene": scene} for n in sorted(x for x in names if isinstance(x, str))]
+    return bool(targets) and warm_runner(workspace.root, targets)
+
+
 def run_goal_graph(
     goal_graph: str | Path,
     workspace_dir: str | Path,
@@ -271,6 +323,8 @@ def run_goal_graph(
     workspace = Workspace.create(workspace_dir)
     from phyagentos.graph_check_process import check_goal_graph_forked  # noqa: PLC0415
 
+    # The runner builds the graph's targets (model, cameras) while the check runs.
+    _warm_targets(goal_graph, workspace, target=target)
     # The whole graph before anything is registered or moves: errors name the user's file.
     # It runs in a child of the runner's forkserver (started in the background by
     # prestart_runner), which has the primitives and the motion stack imported already.

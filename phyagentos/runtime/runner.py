@@ -22,8 +22,11 @@ observation and nothing moves before it has.
 from __future__ import annotations
 
 import logging
+import os
+import shutil
 import time
 import traceback
+from pathlib import Path
 from dataclasses import asdict, dataclass
 from typing import Any, Callable
 
@@ -86,6 +89,42 @@ def _observe(target, perceiver, evidence_dir, rel: str, tag: str) -> dict:
     Perceiver); a target without cameras gives its own observation (``snapshot``)."""
     snap = perceive_now(target, perceiver, evidence_dir=evidence_dir, evidence_rel=rel, tag=tag)
     return snap if snap is not None else target.snapshot()
+
+
+def _relinked(snapshot: dict, source_rel: str, rel: str, root) -> dict | None:
+    """``snapshot`` (the terminal view of the bundle ``source_rel``) as the initial view of
+    the bundle ``rel``: its frames (``frames/terminal_*``) hard-linked, else copied, to
+    ``frames/initial_*`` here and every reference to them rewritten, ``same_world_as``
+    naming the snapshot it repeats; None if its frames are gone (then perceive)."""
+    root = Path(root)
+    source, here = root / source_rel / "frames", root / rel / "frames"
+    frames = sorted(source.glob("terminal_*")) if source.is_dir() else []
+    if not frames:
+        return None
+    here.mkdir(parents=True, exist_ok=True)
+    try:
+        for src in frames:
+            dst = here / ("initial_" + src.name[len("terminal_"):])
+            try:
+                os.link(src, dst)
+            except FileExistsError:
+                pass
+            except OSError:
+                shutil.copyfile(src, dst)
+    except OSError:
+        return None
+    old, new = f"{source_rel}/frames/terminal_", f"{rel}/frames/initial_"
+
+    def walk(x):
+        if isinstance(x, dict):
+            return {k: walk(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [walk(v) for v in x]
+        return new + x[len(old):] if isinstance(x, str) and x.startswith(old) else x
+
+    out = walk(snapshot)
+    out["same_world_as"] = f"{source_rel}/terminal.yaml"
+    return out
 
 
 def _perception_config(workspace: Workspace):
@@ -224,7 +263,7 @@ class SessionRunner:
                 initial_truth = _truth(target)
                 if has_cameras(target):
                     perceiver = make_perceiver(target, _perception_config(self.workspace))
-                initial = _observe(target, perceiver, evidence_dir, rel, "initial")
+                initial = self._initial_view(spec, target, perceiver, evidence_dir, rel)
                 atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
                 if name := self._image(target, evidence_dir / "initial.png", image_events):
                     extra["initial_image"] = name
@@ -271,6 +310,10 @@ class SessionRunner:
                 logger.exception("session %s: terminal observation failed", rec.session_id)
                 terminal = {"stamp_s": target.sim_time, "sim_time_s": target.sim_time, "entities": [],
                             "relations": [], "error": f"{type(exc).__name__}: {exc}"}
+        if target is not None and perceiver is not None and terminal is not None and "error" not in terminal:
+            # The next session on this target starts from this world if nothing moves it.
+            self.targets.keep_view(rec, spec, target, {"snapshot": terminal, "evidence": rel},
+                                   key=self._perception_key())
         if target is not None:
             if name := self._image(target, evidence_dir / "terminal.png", image_events):
                 extra["terminal_image"] = name
@@ -289,6 +332,29 @@ class SessionRunner:
                     time.perf_counter() - started, outcome.ticks)
         return AttemptReport(outcome=outcome.status, error_code=outcome.error_code, message=outcome.message,
                              evidence=rel, timings=dict(ctx.profiler.totals) if ctx else {}, ticks=outcome.ticks)
+
+    def _perception_key(self) -> tuple | None:
+        """What a kept view depends on besides the world: the identity of the workspace's
+        perception.yaml (None without one)."""
+        try:
+            st = _perception_config(self.workspace).stat()
+        except FileNotFoundError:
+            return None
+        return st.st_ino, st.st_mtime_ns, st.st_size
+
+    def _initial_view(self, spec, target, perceiver, evidence_dir, rel: str) -> dict:
+        """The initial snapshot: the previous session's terminal one when the target is
+        provably in the world it saw (:meth:`TargetPool.take_view`: same run, same live
+        target, equal world digest, same perception configuration; a view is used once),
+        with its frames linked into this bundle as ``frames/initial_<sensor>.png`` and
+        ``same_world_as`` naming the snapshot it repeats; else a fresh observation."""
+        view = self.targets.take_view(self.record, spec, target, key=self._perception_key()) \
+            if perceiver is not None else None
+        snap = _relinked(view["snapshot"], view["evidence"], rel, self.workspace.root) if view else None
+        if snap is not None:
+            logger.debug("session %s: initial view is %s", self.record.session_id, snap["same_world_as"])
+            return snap
+        return _observe(target, perceiver, evidence_dir, rel, "initial")
 
     @staticmethod
     def _start_recorder(target, evidence_dir, events: list, *, seed: int | None) -> SessionRecorder | None:

@@ -10,11 +10,12 @@ session's seed.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import logging
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import yaml
 
@@ -42,7 +43,11 @@ def scene_for(session: SessionRecord, spec: TargetSpec, *, root: str | Path | No
     """The scene of a session: its own ``scene``, else the target's, else the default
     (without its ``perturbations``, see :func:`perturbations_for`). ``root`` is the
     workspace root that mesh objects' files are read from."""
-    raw, _ = split_scene(session.scene or spec.scene or None)
+    return _scene_of(spec, session.scene, root=root)
+
+
+def _scene_of(spec: TargetSpec, scene: Mapping[str, Any] | None, *, root: str | Path | None) -> SceneSpec:
+    raw, _ = split_scene(scene or spec.scene or None)
     # A driver with its own scene type (e.g. FrankaKitchen's task list) parses it itself.
     parse = getattr(DRIVERS.get(spec.driver), "scene_from_dict", None)
     if parse is not None:
@@ -79,6 +84,7 @@ class TargetPool:
     def __init__(self, state_dir: str | Path):
         self.state_dir = Path(state_dir)
         self._live: dict[str, tuple[str, Any]] = {}  # name -> (scene hash, target)
+        self._views: dict[str, tuple] = {}  # name -> the last session's terminal view (keep_view)
 
     def acquire(self, session: SessionRecord, spec: TargetSpec):
         """Return the target for ``session``, in the state the episode left it.
@@ -91,17 +97,7 @@ class TargetPool:
             raise TargetError(f"unknown target driver {spec.driver!r}; valid drivers: {format_choices(DRIVERS)}")
         scene = scene_for(session, spec, root=self.state_dir.parent)  # state_dir is <workspace>/targets
         key = _scene_hash(scene)
-        cached = self._live.get(spec.name)
-        if cached is None or cached[0] != key:
-            if cached is not None:
-                cached[1].close()
-            target = cls(spec.name, scene, seed=session.seed)
-            self._live[spec.name] = (key, target)
-            # the workspace's sensors.yaml entry for this target (read-only deploy config)
-            sensors = read_sensors(self.state_dir.parent).for_target(spec.name)
-            if sensors and hasattr(target, "configure_sensors"):
-                target.configure_sensors(sensors)
-        target = self._live[spec.name][1]
+        target = self._built(cls, spec, scene, key, seed=session.seed)
         meta_path = self.state_dir / spec.name / "state.yaml"
         try:  # bounded like every YAML the project reads; an unreadable record means: reset
             meta = load_yaml(meta_path.read_text(encoding="utf-8"), path=meta_path, error=TargetError) \
@@ -119,6 +115,70 @@ class TargetPool:
             target.set_perturbations(ActivePerturbations(perturbations_for(session, spec, root=self.state_dir.parent), session_seed=session.seed))
         return target
 
+    def _built(self, cls, spec: TargetSpec, scene, key: str, *, seed: int | None):
+        """The live target of ``spec`` for ``scene`` (hash ``key``; built, with its sensors,
+        if the pool holds none or one of another scene). Neither reset nor restored here."""
+        cached = self._live.get(spec.name)
+        if cached is None or cached[0] != key:
+            if cached is not None:
+                cached[1].close()
+            self._views.pop(spec.name, None)
+            target = cls(spec.name, scene, seed=seed)
+            self._live[spec.name] = (key, target)
+            # the workspace's sensors.yaml entry for this target (read-only deploy config)
+            sensors = read_sensors(self.state_dir.parent).for_target(spec.name)
+            if sensors and hasattr(target, "configure_sensors"):
+                target.configure_sensors(sensors)
+        return self._live[spec.name][1]
+
+    def warm(self, spec: TargetSpec, scene: Mapping[str, Any] | None) -> bool:
+        """Build ``spec``'s target for ``scene`` (a goal graph's raw ``scene``; None: the
+        target's own) ahead of its first session, and open its cameras' renderers, so
+        that :meth:`acquire` finds it built. Moves nothing and writes nothing: the
+        session still resets or restores the world (:meth:`acquire`), and a session of
+        another scene rebuilds. Returns True if a target was built now.
+
+        Raises:
+            TargetError: unknown driver, or a scene that does not build.
+        """
+        cls = DRIVERS.get(spec.driver)
+        if cls is None:
+            raise TargetError(f"unknown target driver {spec.driver!r}; valid drivers: {format_choices(DRIVERS)}")
+        before = self._live.get(spec.name)
+        built = _scene_of(spec, scene, root=self.state_dir.parent)
+        target = self._built(cls, spec, built, _scene_hash(built), seed=None)
+        if hasattr(target, "prepare_cameras"):
+            target.prepare_cameras()
+        return self._live.get(spec.name) is not before
+
+    def keep_view(self, session: SessionRecord, spec: TargetSpec, target, snapshot: dict, *, key: Any = None) -> None:
+        """Remember ``snapshot``, the perceived view of ``target`` at the end of ``session``,
+        with the digest of the world it saw (``target.world_digest()``; targets without
+        one, e.g. real robots, keep nothing) and ``key`` (whatever else the view depends
+        on, e.g. the perception configuration's identity)."""
+        digest = getattr(target, "world_digest", None)
+        self._views.pop(spec.name, None)
+        if digest is None:
+            return
+        perturbed = bool(split_scene(session.scene or spec.scene or None)[1])
+        self._views[spec.name] = (session.run_id, id(target), digest(), perturbed, key, copy.deepcopy(snapshot))
+
+    def take_view(self, session: SessionRecord, spec: TargetSpec, target, *, key: Any = None) -> dict | None:
+        """The view kept by :meth:`keep_view` if ``target`` (just acquired for ``session``) is
+        provably in the world that view saw: same run, same live target, equal world
+        digest, the same ``key``, and neither session perturbed; else None. A view is
+        handed out at most once and forgotten at the first look, so any session that
+        moved the target in between (or a failed one) makes the next perceive afresh."""
+        view = self._views.pop(spec.name, None)
+        if view is None:
+            return None
+        run_id, target_id, digest, perturbed, view_key, snapshot = view
+        if (run_id != session.run_id or target_id != id(target) or perturbed or view_key != key
+                or split_scene(session.scene or spec.scene or None)[1]):
+            return None
+        fn = getattr(target, "world_digest", None)
+        return snapshot if fn is not None and fn() == digest else None
+
     def release(self, session: SessionRecord, target) -> None:
         """Persist the target's world state for the next session of the same run."""
         self.checkpoint(session, target)
@@ -134,6 +194,7 @@ class TargetPool:
         atomic_write_text(directory / "state.yaml", yaml.safe_dump({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
 
     def close(self) -> None:
+        self._views.clear()
         for _, target in self._live.values():
             target.close()
         self._live.clear()

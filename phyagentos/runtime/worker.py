@@ -25,6 +25,8 @@ job             does                                                  reply
                                                                       ``done`` {AttemptReport}
 ``recover``     restore the checkpoint, halt, persist, snapshot       ``recovered`` {AttemptReport}
 ``release``     clear the marker and the actuation lock               ``released``
+``warm``        build targets and open their cameras ahead of the     ``warmed`` {built, errors}
+                first session (best effort; moves nothing)
 ``exit``        release everything and exit                           (none)
 ==============  ====================================================  ==================================
 
@@ -60,7 +62,7 @@ from phyagentos.errors import SupervisorError
 from .heartbeat import SLOTS, Heartbeats
 
 __all__ = ["RunnerProcess", "RunnerDied", "runner_main", "take_runner", "park_runner", "prestart_runner",
-           "forkserver_context"]
+           "forkserver_context", "warm_runner"]
 
 logger = logging.getLogger(__name__)
 
@@ -275,6 +277,24 @@ def prestart_runner(skills_dir: str | os.PathLike[str], trees_dir: str | os.Path
     park_runner(RunnerProcess(skills_dir=skills_dir, trees_dir=trees_dir))
 
 
+def warm_runner(root: str | os.PathLike[str], targets: list[dict[str, Any]]) -> bool:
+    """Have the idle runner that the next :func:`take_runner` returns build ``targets``
+    now (``[{"name": ..., "scene": raw scene or None}]``, see :meth:`TargetPool.warm`),
+    while the caller does other work (``run``: the whole-graph check). The reply
+    (``warmed``) is read, and ignored, by the supervisor's next request. Returns False
+    if no idle runner was there to warm.
+    """
+    with _POOL_LOCK:
+        runner = _IDLE_RUNNERS[-1] if _IDLE_RUNNERS else None
+    if runner is None or not runner.alive():
+        return False
+    try:
+        runner.send("warm", root=str(root), targets=list(targets))
+    except RunnerDied:
+        return False
+    return True
+
+
 @atexit.register
 def _close_idle_runners() -> None:
     while _IDLE_RUNNERS:
@@ -464,6 +484,31 @@ class _Runner:
         runner = SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=CancelToken())
         report = runner.recover(status=status, error_code=error_code, message=message)
         self.reply("recovered", session_id=session_id, **report.to_dict())
+
+    def job_warm(self, root: str, targets: list[dict[str, Any]]) -> None:
+        """Build targets ahead of their first session (:meth:`TargetPool.warm`). Best effort:
+        a target that does not build is left to the session, whose preflight and runner
+        report it properly; this job never replies ``error`` (a supervisor waiting for
+        another reply would take that for its own job's failure)."""
+        built, errors = [], []
+        try:
+            ws = self.workspace(root)
+            specs = {t.name: t for t in ws.read("TARGETS").data.targets}
+            pool = self.pool(root)
+            for item in targets:
+                spec = specs.get(item.get("name"))
+                if spec is None:
+                    continue
+                try:
+                    if pool.warm(spec, item.get("scene")):
+                        built.append(spec.name)
+                except Exception as exc:  # noqa: BLE001 - left to the session to report
+                    errors.append(f"{spec.name}: {type(exc).__name__}: {exc}")
+        except Exception as exc:  # noqa: BLE001 - e.g. a malformed TARGETS.md: the run reports it
+            errors.append(f"{type(exc).__name__}: {exc}")
+        if errors:
+            logger.info("runner: warming skipped for %s", "; ".join(errors))
+        self.reply("warmed", built=built, errors=errors)
 
     def job_release(self, root: str, target: str, session_id: str | None = None) -> None:
         from phyagentos.runtime.target_lock import clear_marker  # noqa: PLC0415

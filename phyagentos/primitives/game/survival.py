@@ -72,7 +72,8 @@ class GameSurvive(GameLeaf):
             self.act("noop")
             return Status.RUNNING
         if self.mode in ("rest", "retreat") and not obs["sleeping"] and \
-                ((v["drink"] <= 2 and self.map.known("water")) or (v["food"] <= 2 and self.map.known("cow"))):
+                ((v["drink"] <= 2 and self.map.known("water") and not (self._rest and self._rest.can_drink(self))) or
+                 (v["food"] <= 2 and self.map.known("cow"))):
             self.mode, self._rest = None, None  # thirst or hunger outweighs resting: out to drink or eat
         if self.mode in ("drink", "eat") and v["health"] < self.health_below and \
                 v["drink" if self.mode == "drink" else "food"] > 2:

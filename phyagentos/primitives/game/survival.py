@@ -115,8 +115,10 @@ class GameSurvive(GameLeaf):
                     self._rest_allowed(obs) and self._night_shelter(obs):
                 # night, and a shelter it can dig is known: rest in it until day
                 self.mode, self._rest = "rest", Rest(until_day=True)
+        # cows do not come back where they were eaten: look for them by day, before hunger is acute
         if self.mode is None and ((v["drink"] <= 3 and not self.map.known("water")) or
-                                  (v["food"] <= 3 and not self.map.known("cow"))):
+                                  (v["food"] <= (self.topup_below - 2 if obs["daylight"] > 0.7 else 3) and
+                                   not self.map.known("cow"))):
             # thirsty or hungry and no water or cow remembered: look for one
             self._note("forage")
             self.act(self.explore_action())
@@ -157,7 +159,7 @@ class GameSurvive(GameLeaf):
             else []
         if v["drink"] < self.topup_below and water and min(water) <= self.near:
             self.mode, self._label = "drink", "topup_drink"
-        elif v["food"] < self.topup_below and cows and min(cows) <= self.near:
+        elif v["food"] < self.topup_below and cows and min(cows) <= 2 * self.near:  # a cow in view is a meal
             self.mode, self._food0, self._label = "eat", v["food"], "topup_eat"
         elif falling and obs["daylight"] < self.dusk_below and v["drink"] < self.topup_below and water:
             self.mode, self._label = "drink", "dusk_drink"

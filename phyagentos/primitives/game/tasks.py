@@ -157,7 +157,9 @@ class GameHunt(GameLeaf):
             self._start = {"achievements": set(self.obs["achievements"]), "food": self.obs["vitals"]["food"]}
 
     def _done(self) -> bool:
-        if self.until and self.until in self.obs["achievements"] and self.until not in self._start["achievements"]:
+        # the player's own record already holds the achievement (a fight the survival
+        # reflex won, a plant eaten earlier): hunting on only risks the player
+        if self.until and self.until in self.obs["achievements"]:
             return True
         return self.creature == "cow" and self.obs["vitals"]["food"] > self._start["food"]
 

@@ -190,7 +190,7 @@ def test_top_level_that_is_not_a_mapping_lists_valid_keys(tmp_path):
         - id: b
     """, line=1)
     assert "top level must be a mapping" in message
-    assert "'defaults', 'description', 'name', 'nodes', 'provenance', 'scene', 'version'" in message
+    assert "'defaults', 'description', 'name', 'nodes', 'provenance', 'scene', 'schedule', 'version'" in message
 
 
 def test_empty_file_is_rejected(tmp_path):
@@ -200,7 +200,7 @@ def test_empty_file_is_rejected(tmp_path):
 def test_unknown_top_level_key_lists_valid_keys(tmp_path):
     message = _error(tmp_path, VALID + "extra: 1\n", line=13)
     assert "unknown key 'extra' in goal graph" in message
-    assert "valid keys: 'defaults', 'description', 'name', 'nodes', 'provenance', 'scene', 'version'" in message
+    assert "valid keys: 'defaults', 'description', 'name', 'nodes', 'provenance', 'scene', 'schedule', 'version'" in message
 
 
 def test_misspelt_top_level_key_suggests_the_right_one(tmp_path):
@@ -551,3 +551,16 @@ def test_find_dependency_cycle_is_none_for_acyclic_graph():
 def test_a_provenance_with_a_malformed_model_call_record_is_rejected_with_its_line(tmp_path):
     message = _error(tmp_path, VALID + "provenance:\n  model_calls:\n  - {role: planner}\n", line=14)
     assert "provenance.model_calls[0] is not a model call record" in message
+
+
+# --------------------------------------------------------------------------- schedule
+
+
+def test_schedule_defaults_to_eager_and_reads_file_order(tmp_path):
+    assert _load(tmp_path, VALID).schedule == "eager"
+    assert _load(tmp_path, VALID + "schedule: file_order\n").schedule == "file_order"
+
+
+def test_unknown_schedule_lists_the_valid_ones(tmp_path):
+    message = _error(tmp_path, VALID + "schedule: lifo\n", line=13)
+    assert "unknown schedule 'lifo'" in message and "'eager', 'file_order'" in message

@@ -313,7 +313,11 @@ class AgentCoordinator:
         states = self.node_states(sessions)
         compiled = 0
         latest = self.latest_by_node(sessions)
-        for node_id in dagmod.ready_nodes(self.dag, states):
+        ready = dagmod.ready_nodes(self.dag, states)
+        if getattr(self.graph, "schedule", "eager") == "file_order":  # one at a time, first in file order
+            in_flight = any(st == dagmod.RUNNING for st in states.values())
+            ready = [] if in_flight else ready[:1]
+        for node_id in ready:
             node = self.graph.get_node(node_id)
             target = self.world_target(node_id, latest)
             params, context = self.context_builder.build(goal=f"{self.graph.name}/{node.id}", skill=node.skill,

@@ -35,6 +35,7 @@ __all__ = [
     "SCHEMA_VERSION",
     "NODE_ID_PATTERN",
     "TOP_LEVEL_KEYS",
+    "SCHEDULES",
     "REQUIRED_TOP_LEVEL_KEYS",
     "NODE_KEYS",
     "REQUIRED_NODE_KEYS",
@@ -52,7 +53,14 @@ SCHEMA_VERSION = 1
 #: Node ids: lower-case identifiers, so they are safe as file names, Mermaid and session ids.
 NODE_ID_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 
-TOP_LEVEL_KEYS: tuple[str, ...] = ("version", "name", "description", "defaults", "scene", "nodes", "provenance")
+TOP_LEVEL_KEYS: tuple[str, ...] = ("version", "name", "description", "defaults", "scene", "nodes", "provenance",
+                                   "schedule")
+#: ``schedule`` values: ``eager`` submits every ready node at once (the default: nodes on
+#: different targets run in parallel); ``file_order`` submits one ready node at a time,
+#: the first in file order, when nothing of the run is in flight (one target working
+#: through a long graph: a node that became ready early does not run before an earlier
+#: node of the file that became ready later).
+SCHEDULES: tuple[str, ...] = ("eager", "file_order")
 REQUIRED_TOP_LEVEL_KEYS: tuple[str, ...] = ("version", "name", "nodes")
 NODE_KEYS: tuple[str, ...] = ("id", "skill", "target", "params", "accept", "depends_on", "limits", "runtime")
 # ``target`` and ``skill`` are required but may come from ``defaults``.
@@ -105,6 +113,8 @@ class GoalGraph:
     #: Where the graph came from when a program wrote it (the Goal Planner: ``request``,
     #: ``model_calls`` as ModelCallRecord mappings, which its root sessions' contexts keep).
     provenance: dict[str, Any] | None = None
+    #: How ready nodes are submitted (:data:`SCHEDULES`).
+    schedule: str = "eager"
 
     @property
     def node_ids(self) -> tuple[str, ...]:
@@ -396,6 +406,7 @@ class _Parser:
             description = self._check(self._string, top["description"][1], "description") or ""
         scene = self._check(self._scene, top["scene"][1]) if "scene" in top else None
         provenance = self._check(self._provenance, top["provenance"][1]) if "provenance" in top else None
+        schedule = self._check(self._schedule, top["schedule"][1]) if "schedule" in top else None
         defaults_ok = True
         defaults: dict[str, Any] = {}
         if "defaults" in top:
@@ -411,7 +422,7 @@ class _Parser:
         nodes = tuple(GoalNode(**spec) for spec, _dep_lines in specs)
         graph = GoalGraph(name=name, description=description,
                           path=Path(self.path) if self.path is not None else None,
-                          scene=scene, nodes=nodes, provenance=provenance)
+                          scene=scene, nodes=nodes, provenance=provenance, schedule=schedule or "eager")
         self._reject_cycles(graph, {spec["id"]: lines for spec, lines in specs})
         return graph
 
@@ -451,6 +462,12 @@ class _Parser:
             raise _Invalid(node, f"scene must be a mapping (keys such as 'objects', "
                                  f"'regions', 'obstacles'), got {_kind(node)}")
         return self._value(node)
+
+    def _schedule(self, node: yaml.Node) -> str:
+        value = self._value(node)
+        if value not in SCHEDULES:
+            raise _Invalid(node, f"unknown schedule {value!r}; valid schedules: {format_choices(SCHEDULES)}")
+        return value
 
     def _provenance(self, node: yaml.Node) -> dict[str, Any] | None:
         from phyagentos.protocol import ModelCallRecord  # noqa: PLC0415

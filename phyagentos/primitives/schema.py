@@ -203,6 +203,9 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "health_below": ("int", "", "retreat into a sealed shelter to heal below this health (0..9)"),
         "night_below": ("float", "", "daylight level below which night precautions start (0..1)"),
         "fight": ("bool", "", "fight creatures that attack (else flee)"),
+        "topup_below": ("int", "", "fill up food / drink below this level when a cow or water is at hand, or at dusk"),
+        "near": ("int", "cells", "how close a cow or water must be for a top-up"),
+        "dusk_below": ("float", "", "daylight level, falling, at which the dusk top-up starts (0..1)"),
         "max_steps": ("int", "steps", "game-step budget of the leaf"),
     },
     Noop: {

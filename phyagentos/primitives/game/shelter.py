@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from .seen_map import MOVES, WALKABLE, SeenMap
 
-__all__ = ["ShelterPlan", "find_shelter", "shelter_step", "leave_step", "Rest"]
+__all__ = ["ShelterPlan", "find_shelter", "shelter_step", "leave_step", "water_at", "Rest"]
 
 _SOLID_OK = frozenset({"stone", "tree", "water", "coal", "iron", "diamond", "table", "furnace", "lava"})
 
@@ -40,11 +40,13 @@ def _add(a, b, k=1):
 
 
 def find_shelter(m: SeenMap, here: tuple[int, int], *, can_dig: bool, radius: int = 10,
-                 avoid: set[tuple[int, int]] = frozenset(), stones: int = 99) -> ShelterPlan | None:
+                 avoid: set[tuple[int, int]] = frozenset(), stones: int = 99, water_detour: int = 12) -> ShelterPlan | None:
     """The nearest (in BFS steps to ``o``) two-cell shelter on remembered cells: ``e``, ``i``
     walkable (or stone, when ``can_dig``), their side cells solid (not walkable, not
     unknown), ``o`` walkable and reachable, and sealable with ``stones`` (the cells to
-    block, ``o`` and the one beyond ``i`` when free, less the stone dug out of ``e``, ``i``)."""
+    block, ``o`` and the one beyond ``i`` when free, less the stone dug out of ``e``, ``i``).
+    One with water at a wall (:func:`water_at`) is taken when it is at most
+    ``water_detour`` steps farther than the nearest."""
     starts: dict[tuple[int, int], list[ShelterPlan]] = {}
     # plants stand on grass but block the way (and a shelter must not wall one in)
     avoid = set(avoid) | m.cells_of(["plant", "plant_ripe"])
@@ -76,7 +78,24 @@ def find_shelter(m: SeenMap, here: tuple[int, int], *, can_dig: bool, radius: in
     plan = m.plan(here, set(starts), stand_on_goal=True)
     if plan is None:
         return None
+    # Prefer a shelter with water at one of its walls (a little farther is worth it): the
+    # player drinks from inside (a move toward water only turns it) and never has to go
+    # out at night for water.
+    wet = {o: [p for p in ps if water_at(m, p)] for o, ps in starts.items()}
+    wet = {o: ps for o, ps in wet.items() if ps}
+    if wet:
+        wet_plan = m.plan(here, set(wet), stand_on_goal=True)
+        if wet_plan is not None and len(wet_plan.moves) <= len(plan.moves) + water_detour:
+            return wet[wet_plan.stand][0]
     return starts[plan.stand][0]
+
+
+def water_at(m: SeenMap, plan: ShelterPlan) -> list[tuple[int, int]]:
+    """Water cells (remembered) a player inside ``plan`` can face and drink from: the
+    side cells of ``e`` and ``i`` and the cell beyond ``i``."""
+    side = (plan.d[1], plan.d[0])
+    cells = [_add(plan.e, side), _add(plan.e, side, -1), _add(plan.i, side), _add(plan.i, side, -1), _add(plan.i, plan.d)]
+    return [c for c in cells if m.material(c) == "water"]
 
 
 def shelter_step(leaf, plan: ShelterPlan, state: dict) -> str | None:
@@ -175,6 +194,33 @@ class Rest:
         self.leaving = False
         self.spot = None
 
+    def sealed(self) -> bool:
+        return self.plan is not None and self.state.get("phase") == "sealed"
+
+    def can_drink(self, leaf) -> bool:
+        """Sealed in a shelter with water at a wall: thirst is no reason to go out."""
+        return self.sealed() and bool(water_at(leaf.map, self.plan))
+
+    def drink_step(self, leaf) -> str | None:
+        """Drink from inside a sealed shelter with water at a wall while drink is below 8:
+        step to the shelter cell next to the water, turn to it (water is not walkable, so
+        the move only turns), strike. ``None`` when there is nothing to do."""
+        obs = leaf.obs
+        if not self.can_drink(leaf) or obs["vitals"]["drink"] >= 8:
+            return None
+        here = tuple(obs["position"])
+        move_to = {v: k for k, v in MOVES.items()}
+        water = water_at(leaf.map, self.plan)
+        nextto = [w for w in water if abs(w[0] - here[0]) + abs(w[1] - here[1]) == 1]
+        if not nextto:
+            other = self.plan.i if here == self.plan.e else self.plan.e
+            return move_to[(other[0] - here[0], other[1] - here[1])] if here in (self.plan.e, self.plan.i) else None
+        w = nextto[0]
+        facing = {"left": (-1, 0), "right": (1, 0), "up": (0, -1), "down": (0, 1)}[obs["facing"]]
+        if _add(here, facing) == w:
+            return "do"
+        return move_to[(w[0] - here[0], w[1] - here[1])]
+
     def _waiting(self, obs) -> bool:
         if self.until_health is not None and obs["vitals"]["health"] < self.until_health:
             return True
@@ -192,7 +238,7 @@ class Rest:
             self.slept = True
             return "noop"
         waits = self.until_health is not None or self.until_step is not None
-        if not self.leaving and (self.slept or waits) and min(obs["vitals"]["food"], obs["vitals"]["drink"]) <= 1:
+        if not self.leaving and (self.slept or waits) and min(obs["vitals"]["food"], 9 if self.can_drink(leaf) else obs["vitals"]["drink"]) <= 1:
             self.leaving = True  # hunger or thirst outweighs the night
         if self.leaving:
             return leave_step(leaf, self.plan) if self.plan is not None else None
@@ -222,6 +268,9 @@ class Rest:
                 if move is not None:
                     return move
                 self.spot = here
+        drink = self.drink_step(leaf)
+        if drink is not None:
+            return drink
         if not self.slept or (night and obs["vitals"]["energy"] < 9):
             return "sleep"
         if night or self._waiting(obs):

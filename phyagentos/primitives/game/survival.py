@@ -42,11 +42,13 @@ class GameSurvive(GameLeaf):
     TOOLS = ("observe", "do", "sleep", "noop", "place_stone") + tuple(MOVES)
 
     def __init__(self, name: str, *, drink_below: int = 4, food_below: int = 4, energy_below: int = 3,
-                 health_below: int = 5, night_below: float = 0.5, fight: bool = True, max_steps: int = 100000):
+                 health_below: int = 5, night_below: float = 0.5, fight: bool = True, topup_below: int = 7,
+                 near: int = 3, dusk_below: float = 0.85, max_steps: int = 100000):
         super().__init__(name, max_steps=max_steps)
         self.drink_below, self.food_below, self.energy_below = int(drink_below), int(food_below), int(energy_below)
         self.health_below = int(health_below)
         self.night_below = float(night_below)
+        self.topup_below, self.near, self.dusk_below = int(topup_below), int(near), float(dusk_below)
         self.fight = bool(fight)
         self.mode: str | None = None
         self._rest: Rest | None = None
@@ -70,7 +72,8 @@ class GameSurvive(GameLeaf):
             self.act("noop")
             return Status.RUNNING
         if self.mode in ("rest", "retreat") and not obs["sleeping"] and \
-                ((v["drink"] <= 2 and self.map.known("water")) or (v["food"] <= 2 and self.map.known("cow"))):
+                ((v["drink"] <= 2 and self.map.known("water") and not (self._rest and self._rest.can_drink(self))) or
+                 (v["food"] <= 2 and self.map.known("cow"))):
             self.mode, self._rest = None, None  # thirst or hunger outweighs resting: out to drink or eat
         if self.mode in ("drink", "eat") and v["health"] < self.health_below and \
                 v["drink" if self.mode == "drink" else "food"] > 2:
@@ -79,6 +82,10 @@ class GameSurvive(GameLeaf):
             self.mode = None
         if self.mode == "eat" and v["food"] > self._food0:
             self.mode = None
+        if self.mode is None:
+            self._label = None
+        falling = obs["daylight"] < getattr(self, "_day_prev", obs["daylight"])
+        self._day_prev = obs["daylight"]
         weak = v["health"] < self.health_below
         # a zombie follows a fleeing player (it moves toward it 9 steps in 10); a skeleton
         # shoots along its line from up to 5 cells away: only that is worth fleeing
@@ -88,6 +95,8 @@ class GameSurvive(GameLeaf):
                 self.mode = "drink"
             elif v["food"] < self.food_below and self.map.known("cow") and (not weak or v["food"] <= 2):
                 self.mode, self._food0 = "eat", v["food"]
+            elif not weak and self._topup(obs, falling):
+                pass  # a cow or water at hand, or dusk coming: fill up now, not at night
             elif weak and obs["inventory"].get("wood_pickaxe", 0) > 0 and self._rest_allowed(obs) and \
                     self._night_shelter(obs):
                 # hurt: heal sealed in a shelter (sleeping there heals twice as fast)
@@ -106,15 +115,17 @@ class GameSurvive(GameLeaf):
                     self._rest_allowed(obs) and self._night_shelter(obs):
                 # night, and a shelter it can dig is known: rest in it until day
                 self.mode, self._rest = "rest", Rest(until_day=True)
+        # cows do not come back where they were eaten: look for them by day, before hunger is acute
         if self.mode is None and ((v["drink"] <= 3 and not self.map.known("water")) or
-                                  (v["food"] <= 3 and not self.map.known("cow"))):
+                                  (v["food"] <= (self.topup_below - 2 if obs["daylight"] > 0.7 else 3) and
+                                   not self.map.known("cow"))):
             # thirsty or hungry and no water or cow remembered: look for one
             self._note("forage")
             self.act(self.explore_action())
             return Status.RUNNING
         if self.mode is None:
             return Status.FAILURE
-        self._note(self.mode)
+        self._note(self._label or self.mode)
         if self.mode == "drink":
             return self._toward(self.map.cells_of(["water"]), strike=True)
         if self.mode == "eat":
@@ -132,6 +143,30 @@ class GameSurvive(GameLeaf):
             return Status.FAILURE
         self.act(action)
         return Status.RUNNING
+
+    def _topup(self, obs, falling: bool) -> bool:
+        """Fill up before the need is urgent (sets ``mode``; True when it did): a cow in
+        view within ``near`` cells while food is below ``topup_below``, remembered water
+        within ``near`` cells while drink is below it; and at dusk (daylight falling below
+        ``dusk_below``) remembered water (or a cow within 8 cells) while drink (food) is
+        below ``topup_below``, so the night is spent sealed in with full vitals. Recorded
+        as its own reflex modes (``topup_*``, ``dusk_*``): they are not the thresholds
+        that memory corrects."""
+        v = obs["vitals"]
+        px, py = obs["position"]
+        cows = [abs(o["dx"]) + abs(o["dy"]) for o in obs["objects"] if o["name"] == "cow"]
+        water = [abs(x - px) + abs(y - py) for x, y in self.map.cells_of(["water"])] if v["drink"] < self.topup_below \
+            else []
+        if v["drink"] < self.topup_below and water and min(water) <= self.near:
+            self.mode, self._label = "drink", "topup_drink"
+        elif v["food"] < self.topup_below and cows and min(cows) <= 2 * self.near:  # a cow in view is a meal
+            self.mode, self._food0, self._label = "eat", v["food"], "topup_eat"
+        elif falling and obs["daylight"] < self.dusk_below and v["drink"] < self.topup_below and water:
+            self.mode, self._label = "drink", "dusk_drink"
+        elif falling and obs["daylight"] < self.dusk_below and v["food"] < self.topup_below - 1 and \
+                any(abs(x - px) + abs(y - py) <= 8 for x, y in self.map.cells_of(["cow"])):
+            self.mode, self._food0, self._label = "eat", v["food"], "dusk_eat"
+        return self.mode is not None
 
     def _rest_allowed(self, obs) -> bool:
         """Not within 30 steps of giving up on a shelter (do not loop on the same one)."""

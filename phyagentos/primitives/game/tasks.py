@@ -157,7 +157,9 @@ class GameHunt(GameLeaf):
             self._start = {"achievements": set(self.obs["achievements"]), "food": self.obs["vitals"]["food"]}
 
     def _done(self) -> bool:
-        if self.until and self.until in self.obs["achievements"] and self.until not in self._start["achievements"]:
+        # the player's own record already holds the achievement (a fight the survival
+        # reflex won, a plant eaten earlier): hunting on only risks the player
+        if self.until and self.until in self.obs["achievements"]:
             return True
         return self.creature == "cow" and self.obs["vitals"]["food"] > self._start["food"]
 
@@ -380,6 +382,8 @@ class GamePlace(GameLeaf):
         before = dict(obs["inventory"])
         self.act(f"place_{self.item}")
         ok = self.obs["inventory"] != before
+        if ok:  # the player's own record of what it built (GameMake tries near it first)
+            self.ctx.target.notes.setdefault("placed", set()).add(self.item)
         self.ctx.trace.record("game_place", step=self.obs["step"], item=self.item, ok=ok,
                               nearby=neighbourhood(obs), inventory_before=before,
                               inventory_after=dict(self.obs["inventory"]))
@@ -425,8 +429,9 @@ class GameMake(GameLeaf):
     memory) the player first goes where all of them are within its 3 x 3 neighbourhood.
     Without it (or when memory's recipe names stations not remembered together, or a
     planned try fails) the recipe is searched for: the player tries where it stands, then
-    next to each remembered material it has not yet had around it at a failed try,
-    nearest first.
+    next to each remembered material it has not yet had around it at a failed try
+    (what it placed itself first, ``notes['placed']``, then the nearest), then where two or more materials it never had around it together are
+    within its neighbourhood (a recipe may need several stations at once).
     Every try is a ``game_make`` trace record (a failure leaves the inventory unchanged);
     SUCCESS when the item's count rose, ``game.make_failed`` after ``max_tries``."""
 
@@ -438,6 +443,8 @@ class GameMake(GameLeaf):
         self.item, self.near, self.max_tries = item, list(near or []), int(max_tries)
         self._tries = 0
         self._tried: set[str] = set()
+        self._failed: list[set[str]] = []  # the materials around each failed try
+        self._combos: set[tuple[int, int]] | None = None
 
     def _attempt(self) -> Status:
         obs = self.obs
@@ -450,6 +457,9 @@ class GameMake(GameLeaf):
                               recipe_known=bool(self.near))
         self._tries += 1
         self._tried |= set(nearby)
+        if not ok:
+            self._failed.append(set(nearby))
+        self._combos = None
         if ok:
             return Status.SUCCESS
         if self._tries >= self.max_tries:
@@ -494,24 +504,58 @@ class GameMake(GameLeaf):
         if self._tries == 0 or not set(neighbourhood(obs)) <= self._tried:
             return self._attempt()
         untried = {m for m in ("water", "stone", "tree", "coal", "iron", "diamond", "table", "furnace", "sand", "path",
-                               "lava", "grass") if m not in self._tried and self.map.known(m)}
-        if not untried:
-            raise PrimitiveFailure("game.make_failed", f"make_{self.item} failed next to every material seen "
-                                                       f"({sorted(self._tried)})")
-        goals = self.map.cells_of(untried - {"lava"}) if untried - {"lava"} else set()
-        move, plan = self.goto_action(goals)
+                               "grass") if m not in self._tried and self.map.known(m)}
+        built = untried & set(self.ctx.target.notes.get("placed", ()))  # what it built itself first
+        move, plan = self.goto_action(self.map.cells_of(built)) if built else (None, None)
+        if plan is None and untried:
+            move, plan = self.goto_action(self.map.cells_of(untried))
         if plan is None:
-            raise PrimitiveFailure("game.make_failed", f"make_{self.item}: cannot reach an untried material {sorted(untried)}")
+            # every material was tried on its own: a recipe may need several stations at
+            # once; go where the materials around the player are a set no failed try had
+            goals = self._new_combinations()
+            move, plan = self.goto_action(goals, stand_on_goal=True) if goals else (None, None)
+            if plan is None:
+                raise PrimitiveFailure("game.make_failed", f"make_{self.item} failed next to every material and "
+                                                           f"combination seen ({sorted(self._tried)})")
         if move is None:
             return self._attempt()
         self.act(move)
         return Status.RUNNING
 
+    def _new_combinations(self, radius: int = 24) -> set[tuple[int, int]]:
+        """Walkable remembered cells within ``radius`` whose 3 x 3 neighbourhood holds two or
+        more non-ground materials that no failed try had around it all together; of those,
+        the ones with the most materials the player placed itself (its own record,
+        ``notes['placed']``: what it built is the likeliest station), then the most
+        materials. Computed once per try (the map hardly changes between tries)."""
+        if self._combos is not None:
+            return self._combos
+        here = self.obs["position"]
+        ground = {"grass", "sand", "path", "unknown", "void", "lava"}
+        placed = set(self.ctx.target.notes.get("placed", ()))
+        best, out = None, set()
+        for dx in range(-radius, radius + 1):
+            for dy in range(-radius, radius + 1):
+                c = (here[0] + dx, here[1] + dy)
+                if self.map.material(c) not in WALKABLE:
+                    continue
+                around = {self.map.material((c[0] + a, c[1] + b)) for a in (-1, 0, 1) for b in (-1, 0, 1)} - ground
+                if len(around) < 2 or any(around <= failed for failed in self._failed):
+                    continue
+                key = (len(around & placed), len(around))
+                if best is None or key > best:
+                    best, out = key, {c}
+                elif key == best:
+                    out.add(c)
+        self._combos = out
+        return out
+
 
 class GameSleep(GameLeaf):
     """Rest (:class:`~.shelter.Rest`): into a sealed shelter when the player can dig,
     sleep until woken, stay until daylight, dig out; SUCCESS when the rest is over after
-    the player slept. Crafter lets a player sleep only below full energy: until then
+    the player slept (at once when its record already holds ``wake_up``: the night
+    reflex slept). Crafter lets a player sleep only below full energy: until then
     each ``sleep`` is tried again."""
 
     TOOLS = ("observe", "sleep", "noop", "place_stone", "do") + _MOVE_ACTIONS
@@ -522,6 +566,9 @@ class GameSleep(GameLeaf):
         self._rest = Rest(until_day=True)
 
     def step(self):
+        if "wake_up" in self.obs["achievements"] and not self._rest.slept and not self.obs["sleeping"] \
+                and self._rest.plan is None:
+            return Status.SUCCESS  # already slept and woke this episode (the night reflex): nothing to add
         action = self._rest.step(self)
         if action is None:
             if self._rest.slept:

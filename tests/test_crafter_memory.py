@@ -114,3 +114,15 @@ def test_a_death_lesson_counts_only_when_its_correction_changed_what_the_player_
     assert correction_for("death.thirst", {"drink_below": 6}) == {"drink_below": 6}
     assert correction_acted({"health_below": 7}, [{"kind": "game_reflex", "mode": "retreat", "health": 6}])
     assert not correction_acted({"health_below": 7}, [{"kind": "game_reflex", "mode": "retreat", "health": 4}])
+
+
+def test_an_arrow_seen_just_before_the_fatal_hit_is_a_skeleton_death():
+    # the arrow hits and vanishes in the same step: it is in the view before, not next to the player after
+    trace = [{"kind": "game_damage", "step": 321, "health": 0, "lost": 4, "adjacent": [], "close_before": ["arrow", "arrow"],
+              "daylight": 0.94, "sleeping": False, "food": 1, "drink": 8, "energy": 8, "standing_on": "grass"},
+             {"kind": "game_death", "step": 322, "health": 0, "food": 1, "drink": 8, "energy": 8, "adjacent": []}]
+    assert diagnose_death(trace)[0] == "death.skeleton"
+    # a point lost to hunger with an arrow around is not the arrow's
+    trace[0].update(lost=1, food=0)
+    trace[1].update(food=0)
+    assert diagnose_death(trace)[0] == "death.starvation"

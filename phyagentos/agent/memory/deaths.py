@@ -10,7 +10,8 @@ cause                         evidence (last damage before death)
 ``death.lava``                it stood on lava (Crafter kills at once)
 ``death.zombie_asleep``       a zombie next to it while it slept (7 damage in Crafter)
 ``death.zombie``              a zombie next to it (``_night`` appended when daylight < 0.5)
-``death.skeleton``            a skeleton or an arrow next to it
+``death.skeleton``            a skeleton or an arrow next to it, or an arrow (skeleton)
+                              within 2 cells just before a loss of 2 or more
 ``death.thirst``              drink at 0
 ``death.starvation``          food at 0
 ``death.exhaustion``          energy at 0
@@ -73,6 +74,10 @@ def diagnose_death(trace: Sequence[Mapping[str, Any]]) -> tuple[str, dict[str, A
         night = damage.get("daylight") is not None and float(damage["daylight"]) < 0.5
         return ("death.zombie_night" if night else "death.zombie"), facts
     if adjacent & {"skeleton", "arrow"}:
+        return "death.skeleton", facts
+    if set(damage.get("close_before") or ()) & {"skeleton", "arrow"} and int(damage.get("lost") or 0) >= 2:
+        # an arrow hits and vanishes in the same step: seen within 2 cells just before a
+        # loss of 2 or more (a vital at 0 costs 1), with no zombie next to the player
         return "death.skeleton", facts
     for vital, cause in (("drink", "death.thirst"), ("food", "death.starvation"), ("energy", "death.exhaustion")):
         if death.get(vital) == 0:

@@ -22,12 +22,12 @@ import json
 import logging
 import sys
 from pathlib import Path
-
-from rich.console import Console
-from rich.logging import RichHandler
-from rich.table import Table
+from typing import TYPE_CHECKING
 
 from phyagentos.errors import PhyAgentOSError
+
+if TYPE_CHECKING:  # rich is imported where it prints: this module is re-imported as the main module
+    from rich.console import Console  # of every process forked from the runner's forkserver (issue 12)
 
 __all__ = ["main", "build_parser"]
 
@@ -117,6 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _setup_logging(verbose: int, console: Console) -> None:
+    from rich.logging import RichHandler  # noqa: PLC0415
+
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="%(message)s", handlers=[RichHandler(console=console, show_path=False)])
     # transitions logs every state entry/exit at INFO; our own transition log is enough.
@@ -143,6 +145,8 @@ def _cmd_run(args, out: Console, err: Console) -> int:
     else:
         # Session ids are "<run id>-<node>-<generation>": the title carries the run id,
         # rows show the rest, so the table stays readable in 80 columns.
+        from rich.table import Table  # noqa: PLC0415
+
         table = Table(title=f"run {report.run_id}  ({report.wall_time_s:.1f} s)")
         rows = report.sessions
         show_recovery = any(s.cause or s.strategy or s.memory for s in rows)
@@ -208,6 +212,8 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
         print(json.dumps({**{k: rep[k] for k in keys}, **extra, "report": str(result.run_dir / "report.md")},
                          ensure_ascii=False))
     else:
+        from rich.table import Table  # noqa: PLC0415
+
         table = Table(title=f"bench {rep['suite']} {rep['bench_id']}  ({rep['protocol']}, {rep['split']} seeds, "
                             f"{rep['episodes_per_minute']:.1f} episodes/min)")
         for col in ("task", "episodes", "First", "Final", "gain", "rescued"):
@@ -334,6 +340,8 @@ def _cmd_render_graph(args, out: Console, err: Console) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``phyagentos`` console script; returns the exit code."""
+    from rich.console import Console  # noqa: PLC0415
+
     args = build_parser().parse_args(argv)
     out, err = Console(), Console(stderr=True)
     _setup_logging(args.verbose, err)

@@ -38,9 +38,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported where a pose is computed: `run`'s cold start does not load it (issue 12)
+    import numpy as np
 
 from .criteria import CLOSED_OPENING_M, CONFIDENCE_MIN, Criterion, CriterionOutcome, confidence, sigma
 from .diagnosis import slip_seen
@@ -105,6 +106,8 @@ class HeldEstimate:
 
 def _quat_matrix(q: Sequence[float]) -> np.ndarray:
     """(3, 3) rotation of a unit quaternion ``(w, x, y, z)`` (Hamilton convention)."""
+    import numpy as np  # noqa: PLC0415
+
     w, x, y, z = (float(v) for v in q)
     n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
     w, x, y, z = w / n, x / n, y / n, z / n
@@ -116,6 +119,8 @@ def _quat_matrix(q: Sequence[float]) -> np.ndarray:
 def _pose(position: Sequence[float] | None, quat: Sequence[float] | None) -> np.ndarray | None:
     if position is None or quat is None:
         return None
+    import numpy as np  # noqa: PLC0415
+
     T = np.eye(4)
     T[:3, :3] = _quat_matrix(quat)
     T[:3, 3] = [float(v) for v in position]
@@ -253,6 +258,8 @@ def estimate_held(evidence: Any, obj: str) -> HeldEstimate:
     stamp_end = (evidence.terminal or {}).get("stamp_s")
     if force_end is not None and free and stamp_end is not None \
             and float(stamp_end) > float(carried[-1].get("stamp_s", 0.0)) + 1e-6:
+        import numpy as np  # noqa: PLC0415
+
         base = float(np.linalg.norm(free[-1]["wrist_force_n"]))
         load_end = float(np.linalg.norm(force_end)) - base
         facts["load_end_n"] = round(load_end, 3)
@@ -268,6 +275,8 @@ def estimate_held(evidence: Any, obj: str) -> HeldEstimate:
         T_end = _pose(last.get("tcp_position_m"), last.get("tcp_quat_wxyz"))
     if T_end is None:
         return unknown("no tcp pose at the end of the evidence", **facts)
+    import numpy as np  # noqa: PLC0415
+
     p = T_end @ np.linalg.inv(T_close) @ np.array([*aim, 1.0])
     std = math.hypot(obs_std, HOLD_STD_M)
     facts["rise_m"] = round(float(T_end[2, 3] - T_close[2, 3]), 4)

@@ -26,6 +26,8 @@ import os
 import shutil
 import time
 import traceback
+from collections.abc import Mapping
+from importlib import import_module
 from pathlib import Path
 from dataclasses import asdict, dataclass
 from typing import Any, Callable
@@ -36,12 +38,10 @@ from phyagentos.primitives.observation import has_cameras, make_perceiver, perce
 from phyagentos.protocol import dump_yaml, EnvironmentDoc, SessionRecord, Workspace
 from phyagentos.protocol import errorcodes
 from phyagentos.protocol.atomic import atomic_write_text
-from phyagentos.protocol.lifecycle import utc_now
+from phyagentos.protocol import utc_now_iso as utc_now  # not .lifecycle: the runner needs no statechart (transitions)
 
 from .builtin_runtime import BuiltinSkillRuntime, RunOutcome
 from .evidence_images import save_scene_image
-from .agent_runtime import AgentSkillRuntime
-from .policy_runtime import PolicySkillRuntime
 from .recording import RecordingConfig, SessionRecorder
 from .safety_guard import SafetyGuard
 from .target_pool import TargetPool
@@ -54,8 +54,29 @@ __all__ = ["SessionRunner", "AttemptReport", "write_environment", "write_ground_
 #: benchmark scoring and tests only; not listed in bundle.yaml, never in the trace.
 GROUND_TRUTH_FILE = "ground_truth.yaml"
 
-#: Skill runtimes besides the builtin one, by SKILLRUNTIME.md name (built with the skill registry).
-SKILL_RUNTIMES = {PolicySkillRuntime.name: PolicySkillRuntime, AgentSkillRuntime.name: AgentSkillRuntime}
+
+
+class _SkillRuntimes(Mapping):
+    """Skill runtime classes by SKILLRUNTIME.md name, each imported on first lookup: a
+    runner of builtin skills never loads the policy client (websockets, asyncio, ssl) or
+    the LLM client (issue 12: they are the runner's imports the bare script does not have)."""
+
+    _MODULES = {"policy": (".policy_runtime", "PolicySkillRuntime"), "agent": (".agent_runtime", "AgentSkillRuntime")}
+
+    def __getitem__(self, name: str):
+        module, cls = self._MODULES[name]
+        return getattr(import_module(module, __package__), cls)
+
+    def __iter__(self):
+        return iter(self._MODULES)
+
+    def __len__(self) -> int:
+        return len(self._MODULES)
+
+
+#: Skill runtimes besides the builtin one, by SKILLRUNTIME.md name (built with the skill
+#: registry); the class is imported when a session first asks for it.
+SKILL_RUNTIMES: Mapping[str, type] = _SkillRuntimes()
 
 logger = logging.getLogger(__name__)
 

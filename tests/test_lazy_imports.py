@@ -1,0 +1,58 @@
+"""What processes of ``phyagentos run`` do not import (issue 12, round 3).
+
+Each check runs in a fresh interpreter, so what this test process has loaded does not
+count: a runner starts with the forkserver's preload and never loads the policy client
+(websockets, asyncio, ssl), the LLM client or the statechart (transitions) for builtin
+skills; the CLI module, which every forkserver child re-imports as its main module,
+loads no rich; the ``run`` process loads no numpy.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _loaded(code: str, modules: tuple[str, ...]) -> list[str]:
+    probe = code + f"\nimport sys\nprint('LOADED', [m for m in {modules!r} if m in sys.modules])\n"
+    out = subprocess.run([sys.executable, "-c", probe], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    line = [ln for ln in out.stdout.splitlines() if ln.startswith("LOADED ")][-1]
+    return eval(line.removeprefix("LOADED "))  # noqa: S307 - our own repr of a list of str
+
+
+def test_a_runner_of_builtin_skills_starts_without_the_policy_llm_or_statechart_modules():
+    code = ("import importlib\nfrom phyagentos.runtime import worker\n"
+            "for name in worker._PRELOAD:\n    importlib.import_module(name)\n")
+    assert _loaded(code, ("websockets", "asyncio", "ssl", "phyagentos.policy.client", "phyagentos.llm",
+                          "phyagentos.runtime.policy_runtime", "phyagentos.runtime.agent_runtime",
+                          "transitions", "rich", "networkx")) == []
+
+
+def test_the_other_skill_runtimes_load_when_a_session_asks_for_them():
+    from phyagentos.runtime.agent_runtime import AgentSkillRuntime
+    from phyagentos.runtime.policy_runtime import PolicySkillRuntime
+    from phyagentos.runtime.runner import SKILL_RUNTIMES
+
+    assert SKILL_RUNTIMES["policy"] is PolicySkillRuntime and SKILL_RUNTIMES["agent"] is AgentSkillRuntime
+    assert dict(SKILL_RUNTIMES) == {"policy": PolicySkillRuntime, "agent": AgentSkillRuntime}
+    assert "builtin" not in SKILL_RUNTIMES
+
+
+def test_the_cli_module_that_forkserver_children_re_import_loads_no_rich():
+    assert _loaded("import phyagentos.cli", ("rich", "rich.console", "rich.table")) == []
+
+
+def test_the_run_process_imports_no_numpy_before_a_pose_is_computed():
+    assert _loaded("import phyagentos.cli, phyagentos.orchestrator", ("numpy",)) == []
+
+
+def test_the_held_object_model_still_computes_poses():
+    from phyagentos.agent.held_object import _pose
+
+    T = _pose([0.1, 0.2, 0.3], [1.0, 0.0, 0.0, 0.0])
+    assert T.shape == (4, 4) and list(T[:3, 3]) == [0.1, 0.2, 0.3] and T[0, 0] == 1.0
+    assert _pose(None, [1.0, 0.0, 0.0, 0.0]) is None

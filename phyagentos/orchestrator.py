@@ -175,7 +175,7 @@ def _agent_has_work(agent: AgentCoordinator) -> bool:
     are no longer those the last step saw (one ended, or a new one appeared). Node
     readiness changes only when a session ends, so a claim, a start or a renewed lease
     alone never needs a step."""
-    seen = getattr(agent, "last_sessions", None)
+    seen = agent.last_sessions
     if seen is None:
         return True
     active = agent.workspace.active_sessions(run_id=agent.run_id)

@@ -314,7 +314,7 @@ class AgentCoordinator:
         compiled = 0
         latest = self.latest_by_node(sessions)
         ready = dagmod.ready_nodes(self.dag, states)
-        if getattr(self.graph, "schedule", "eager") == "file_order":  # one at a time, first in file order
+        if self.graph.schedule == "file_order":  # one at a time, first in file order
             in_flight = any(st == dagmod.RUNNING for st in states.values())
             ready = [] if in_flight else ready[:1]
         for node_id in ready:

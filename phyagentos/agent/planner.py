@@ -566,15 +566,12 @@ class GoalPlanner:
         if any(sel.target is None for sel in sels):
             return sels
 
-        def fits(sel: Selection, name: str) -> bool:
-            return sel.reasons.get(name, "").startswith(("fits", "chosen"))
-
         order = [str(t["name"]) for t in self.targets]
-        common = [n for n in order if all(fits(sel, n) for sel in sels)]
+        common = [n for n in order if all(n in sel.fits for sel in sels)]
         if not common:
-            allowed = [n for n in order if fits(sels[0], n)]
+            allowed = [n for n in order if n in sels[0].fits]
             for i, sel in enumerate(sels):
-                left = [n for n in allowed if fits(sel, n)]
+                left = [n for n in allowed if n in sel.fits]
                 if not left:
                     why = {n: (r + f" (the plan's world must be one target; steps 1-{i} allow "
                                    f"{', '.join(allowed)})" if n in allowed else r).replace("chosen: ", "")
@@ -589,7 +586,7 @@ class GoalPlanner:
             reasons[plan_target] = (f"chosen: {reasons[plan_target]} (the plan's world: every step fits "
                                     f"{plan_target}" + (", the scene's target)" if plan_target == prefer_target
                                                         else ")"))
-            out.append(Selection(plan_target, sel.runtime, reasons))  # the runtime is the skill's
+            out.append(Selection(plan_target, sel.runtime, reasons, fits=sel.fits))  # the runtime is the skill's
         return out
 
 

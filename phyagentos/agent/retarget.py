@@ -96,7 +96,7 @@ class TargetChooser:
                             requirements=self.requirements, reach=self.reach, scene=session.scene or {},
                             pick=obj if session.skill in ACQUIRING_SKILLS else None,
                             place=(obj, dest) if obj and dest else None)
-        sel = Selection(sel.target, sel.runtime, {session.target: failed, **sel.reasons}, sel.out_of_reach)
+        sel = Selection(sel.target, sel.runtime, {session.target: failed, **sel.reasons}, sel.out_of_reach, sel.fits)
         logger.info("re-target for %s (%s): %s", session.session_id, cause, sel.target or "none fits")
         self._chosen[session.session_id] = sel
         return sel

@@ -102,13 +102,15 @@ def _reach_of(target: Mapping[str, Any]) -> Reach | None:
 
 @dataclass(frozen=True)
 class Selection:
-    """The selector's answer: ``target`` and ``runtime`` (``None`` when nothing fits) and
-    ``reasons``: target name -> why it was chosen or rejected."""
+    """The selector's answer: ``target`` and ``runtime`` (``None`` when nothing fits),
+    ``reasons``: target name -> why it was chosen or rejected, and ``fits``: the targets
+    that could run the node, in TARGETS.md order (the chosen one among them)."""
 
     target: str | None
     runtime: str | None
     reasons: dict[str, str] = field(default_factory=dict)
     out_of_reach: bool = False
+    fits: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"target": self.target, "runtime": self.runtime, "reasons": dict(self.reasons)}
@@ -201,11 +203,12 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
         # the scene's own error with its file and line.
         chosen = prefer if prefer in unbuildable else unbuildable[0]
         reasons[chosen] = "chosen: " + reasons[chosen] + " (no target could build it: the graph check reports why)"
-        return Selection(chosen, req.runtime, reasons)
+        return Selection(chosen, req.runtime, reasons, fits=(chosen,))
     if not fitting:
         return Selection(None, None, reasons, out_of_reach=capable)
+    fits = tuple(name for _, name in fitting)  # TARGETS.md order, before the ranking
     fitting.sort()
     chosen = fitting[0][1]
     reasons[chosen] = "chosen: " + reasons[chosen] + (f" ({prefer_why})" if chosen == prefer else
                                                        " (closest base)")
-    return Selection(chosen, req.runtime, reasons)
+    return Selection(chosen, req.runtime, reasons, fits=fits)

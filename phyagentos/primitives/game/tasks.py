@@ -429,9 +429,10 @@ class GameMake(GameLeaf):
     memory) the player first goes where all of them are within its 3 x 3 neighbourhood.
     Without it (or when memory's recipe names stations not remembered together, or a
     planned try fails) the recipe is searched for: the player tries where it stands, then
-    next to each remembered material it has not yet had around it at a failed try
-    (what it placed itself first, ``notes['placed']``, then the nearest), then where two or more materials it never had around it together are
-    within its neighbourhood (a recipe may need several stations at once).
+    next to each remembered material it has not yet had around it at a failed try (what
+    it placed itself first, ``notes['placed']``, then the nearest), then where two or more
+    materials it never had around it together are within its neighbourhood (a recipe may
+    need several stations at once).
     Every try is a ``game_make`` trace record (a failure leaves the inventory unchanged);
     SUCCESS when the item's count rose, ``game.make_failed`` after ``max_tries``."""
 

@@ -1,6 +1,6 @@
 """Crafter through the full session path: memory off, a learning pass, frozen on unseen worlds.
 
-    nice -n 10 .venv/bin/python bench/crafter.py [--episodes N] [--workers K] [--workspace DIR]
+    nice -n 10 .venv/bin/python bench/crafter.py [--episodes N] [--learn-episodes M] [--workers K] [--workspace DIR]
 
 Every pass is one ``phyagentos.bench.run_bench`` call on the ``crafter`` suite (the same
 path as ``phyagentos bench crafter --episodes N --memory off|learn|frozen``): one world
@@ -11,7 +11,11 @@ own ground truth (``crafter.json`` / ``crafter.md`` next to each report).
 Passes, in one bench workspace (its LESSONS.md / KNOWLEDGE.md are the bench memory):
 
 1. ``off``, held-out seeds: no memory (the baseline on the unseen worlds);
-2. ``learn``, measurement seeds: recipes and death lessons are earned and merged back;
+2. ``learn``, measurement seeds (``--learn-episodes``, default twice ``--episodes``), one
+   episode at a time: recipes and death lessons are earned and merged back, and every
+   episode's memory is the previous ones' (run in parallel, what an episode starts from
+   depended on which finished first, and two learning runs of the same seeds learned
+   different recipes); survival corrections are decided by their trials;
 3. ``frozen``, held-out seeds: the memory of pass 2, retrieved but never written, on
    worlds the learning pass never saw. Memory gain = pass 3 - pass 1 (same worlds).
 
@@ -86,10 +90,20 @@ def _pass(name: str, ws: Path, *, episodes: int, split: str, memory: str, worker
     }
 
 
+def _trial_text(lesson: dict) -> str:
+    t = lesson.get("trial")
+    if not t:
+        return ""
+    p = "" if t.get("p_value") is None else f", p={t['p_value']:.3f}"
+    return (f" [trial: {t['deaths_with']} deaths / {t['steps_with']} steps with, {t['deaths_without']} / "
+            f"{t['steps_without']} without{p}{', refuted' if lesson.get('refutations') else ''}]")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--episodes", type=int, default=8, help="worlds per pass (default 8)")
-    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--learn-episodes", type=int, help="worlds of the learning pass (default: 2 x --episodes)")
+    ap.add_argument("--workers", type=int, default=1, help="worker processes of the off and frozen passes")
     ap.add_argument("--workspace", type=Path, help="bench workspace (default: a new temporary directory)")
     args = ap.parse_args()
     ws = args.workspace or Path(tempfile.mkdtemp(prefix="crafter-bench-"))
@@ -97,15 +111,15 @@ def main() -> int:
     bare = bare_steps_per_second()
     passes = [
         _pass("off (held-out worlds)", ws, episodes=args.episodes, split="heldout", memory="off", workers=args.workers),
-        _pass("learn (measurement worlds)", ws, episodes=args.episodes, split="measurement", memory="learn",
-              workers=args.workers),
+        _pass("learn (measurement worlds)", ws, episodes=args.learn_episodes or 2 * args.episodes,
+              split="measurement", memory="learn", workers=1),
         _pass("frozen (held-out worlds)", ws, episodes=args.episodes, split="heldout", memory="frozen",
               workers=args.workers),
     ]
     lessons = load_plain((ws / "LESSONS.md").read_text().split("```yaml", 1)[1].split("```", 1)[0], path=ws / "LESSONS.md", error=BenchError)
     memory = {"verified": [f"{l['id']}: {l['correction']} ({l['confirmations']}+/{l['refutations']}-)"
-                           for l in lessons.get("lessons") or []],
-              "candidates": [f"{l['id']}: {l['correction']}" for l in lessons.get("candidates") or []]}
+                           + _trial_text(l) for l in lessons.get("lessons") or []],
+              "candidates": [f"{l['id']}: {l['correction']}" + _trial_text(l) for l in lessons.get("candidates") or []]}
     table = Table(title=f"Crafter, {args.episodes} worlds per pass, step budget 10000 per episode")
     for col in ("pass", "score %", "ach./ep", "mean length", "deaths", "steps/s (full path)"):
         table.add_column(col, justify="left" if col in ("pass", "deaths") else "right")
@@ -125,7 +139,8 @@ def main() -> int:
     console.print(f"memory gain on unseen worlds (frozen - off): {gain:+.1f} points; bare crafter.Env: "
                   f"{bare:.0f} steps/s (random actions)")
     console.print("published anchors (1M-step budget): " + ", ".join(f"{k} {v}" for k, v in ANCHORS.items()))
-    out = {"episodes_per_pass": args.episodes, "step_budget_per_episode": 10000, "workspace": str(ws),
+    out = {"episodes_per_pass": args.episodes, "learn_episodes": args.learn_episodes or 2 * args.episodes,
+           "step_budget_per_episode": 10000, "workspace": str(ws),
            "bare_env_steps_per_second": round(bare, 1), "passes": passes, "memory_gain_points": round(gain, 3),
            "memory_after_learning": memory, "anchors_percent": ANCHORS,
            "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),

@@ -126,3 +126,33 @@ def test_an_arrow_seen_just_before_the_fatal_hit_is_a_skeleton_death():
     trace[0].update(lost=1, food=0)
     trace[1].update(food=0)
     assert diagnose_death(trace)[0] == "death.starvation"
+
+
+BUILD_FOR_RECIPE = {
+    "version": 1, "name": "crafter_build_for_recipe", "description": "a known recipe, no table in the world",
+    "defaults": {"target": "crafter", "limits": {"execution_timeout_s": 120}},
+    "nodes": [
+        {"id": "collect_wood", "skill": "game_collect", "params": {"material": "tree", "item": "wood", "count": 4},
+         "accept": {"has": {"item": "wood", "min": 4}}},
+        # the recipe as memory hands it over (parameter ``near``); no table was ever placed
+        {"id": "make_wood_pickaxe", "skill": "game_make", "params": {"item": "wood_pickaxe", "near": ["table"]},
+         "depends_on": ["collect_wood"], "accept": {"achieved": "make_wood_pickaxe"}},
+    ],
+}
+
+
+def test_a_known_recipe_whose_station_is_nowhere_places_it_and_makes_the_tool(tmp_path):
+    graph = tmp_path / "build.yaml"
+    graph.write_text(yaml.safe_dump(BUILD_FOR_RECIPE))
+    ws = tmp_path / "ws"
+    report = run_goal_graph(graph, ws, seed=2)
+    assert report.succeeded, report.to_dict()
+    make = next(s for s in report.sessions if s.node == "make_wood_pickaxe")
+    trace = [yaml.safe_load(line) for line in (ws / "evidence" / make.session_id / "trace.jsonl").read_text().splitlines()]
+    built = [r for r in trace if r.get("kind") == "game_place"]
+    assert [(r["item"], r["ok"], r["for_recipe"]) for r in built] == [("table", True, "wood_pickaxe")]
+    makes = [r for r in trace if r.get("kind") == "game_make"]
+    assert makes[-1]["ok"] and "table" in makes[-1]["nearby"] and makes[-1]["recipe_known"]
+    assert not any(r.get("kind") == "game_recipe_abandoned" for r in trace)  # no search was needed
+    truth = yaml.safe_load((ws / "targets" / "crafter" / "ground_truth.yaml").read_text())
+    assert truth["achievements"]["place_table"] == 1 and truth["achievements"]["make_wood_pickaxe"] == 1

@@ -58,7 +58,8 @@ from .goal_graph import GoalGraph
 from .memory import ContextBuilder, KnowledgeBase, LessonBook, PromotionPolicy, promote
 from .memory.conditions import Conditions
 from .memory.observed import ObservedObject, observe_object
-from .memory.game import learn_game_session
+from .memory.deaths import SURVIVAL_KEYS
+from .memory.game import is_game_skill, learn_game_session
 from .memory.promotion import initial_state_fingerprint
 from .model_calls import planner_calls, trace_calls, with_calls
 from .recovery import ACQUIRING_SKILLS, SITUATIONAL
@@ -162,7 +163,7 @@ class AgentCoordinator:
         self.compiler = SessionCompiler(workspace, graph, self.run_id, seed=seed, evaluation=evaluation)
         self.verifier = verifier or SessionVerifier()
         self.verifier.set_upstream(self.upstream_acquirer)
-        self.context_builder = ContextBuilder(workspace, use_memory=use_memory)
+        self.context_builder = ContextBuilder(workspace, use_memory=use_memory, trials=consolidate)
         self.consolidate = consolidate
         self.keep_success_images = keep_success_images
         self.promotion = promotion or PromotionPolicy()
@@ -323,7 +324,8 @@ class AgentCoordinator:
             params, context = self.context_builder.build(goal=f"{self.graph.name}/{node.id}", skill=node.skill,
                                                          target=target or node.target, parameters=node.params,
                                                          scene=declared_scene(self.graph.scene),
-                                                         observed=self.observed(node.params.get("object"), sessions))
+                                                         observed=self.observed(node.params.get("object"), sessions),
+                                                         run_id=self.run_id)
             context = with_calls(context, planner_calls(self.graph.provenance))  # the plan's model calls
             self.compiler.compile_node(node, parameters=params, context=context, target=target)
             compiled += 1
@@ -443,8 +445,11 @@ class AgentCoordinator:
         conditions = self._conditions(rec)
         LessonBook(self.workspace).resolve(rec, verdict, conditions, history=history)
         info = self.context_builder.skills.get(rec.skill)
+        # survival thresholds are the reflex's, owned by their trials (memory/deaths.py): not a
+        # strategy of this skill, so never counted in its knowledge nor promoted with it
         strategy = {k: v for k, v in rec.parameters.items()
-                    if info is not None and k in info.optional and k not in SITUATIONAL}
+                    if info is not None and k in info.optional and k not in SITUATIONAL
+                    and not (is_game_skill(rec.skill) and k in SURVIVAL_KEYS)}
         KnowledgeBase(self.workspace).record(
             rec, verdict, conditions, strategy=strategy,
             initial_state=initial_state_fingerprint(evidence.initial, conditions.object))

@@ -14,8 +14,9 @@ AgentCoordinator's switches (``use_memory`` retrieval, ``consolidate`` writing):
   (an *adaptation* pass: results depend on order, and the report says so).
 
 Merging is by entry id (procedure name): counters grow by the episode's increments over
-the snapshot it started from, lists are unioned, ``verified`` is or-ed, other fields take
-the episode's value (:func:`_merge_entries`).
+the snapshot it started from, lists are unioned, ``verified`` is or-ed, nested models
+(a lesson's trial counts) merge by the same rules, other fields take the episode's value
+(:func:`_merge_entries`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+
+from pydantic import BaseModel
 
 from phyagentos.errors import BenchError
 from phyagentos.protocol import KnowledgeDoc, LessonsDoc, SkillDoc, Workspace
@@ -58,19 +61,30 @@ def _merge_entries(base: list, before: list, after: list, key: str) -> list:
         if old is None:
             merged[k] = entry.model_copy(deep=True)
             continue
-        update = {}
-        for name in type(entry).model_fields:
-            new, cur = getattr(entry, name), getattr(old, name)
-            if isinstance(new, bool):
-                update[name] = cur or new if name == "verified" else new
-            elif isinstance(new, int):
-                update[name] = cur + max(new - (getattr(prior, name) if prior is not None else 0), 0)
-            elif isinstance(new, list):
-                update[name] = _union(cur, new)
-            else:
-                update[name] = new
-        merged[k] = type(entry).model_validate({**old.model_dump(), **update})
+        merged[k] = _merge_model(old, prior, entry)
     return list(merged.values())
+
+
+def _merge_model(cur: BaseModel, prior: BaseModel | None, new: BaseModel) -> BaseModel:
+    """``cur`` plus what changed from ``prior`` to ``new``, field by field (the rules of
+    :func:`_merge_entries`; a nested model, e.g. a lesson's trial counts, is merged by the
+    same rules, so two episodes' trial steps and deaths add up)."""
+    update = {}
+    for name in type(new).model_fields:
+        n, c = getattr(new, name), getattr(cur, name)
+        p = getattr(prior, name) if prior is not None else None
+        if isinstance(n, bool):
+            update[name] = c or n if name == "verified" else n
+        elif isinstance(n, int):
+            update[name] = c + max(n - (p if isinstance(p, int) else 0), 0)
+        elif isinstance(n, list):
+            update[name] = _union(c, n)
+        elif isinstance(n, BaseModel) and isinstance(c, BaseModel):
+            update[name] = _merge_model(c, p if isinstance(p, BaseModel) else None, n)
+        else:
+            update[name] = n
+    return type(new).model_validate({**cur.model_dump(), **{k: v.model_dump() if isinstance(v, BaseModel) else v
+                                                            for k, v in update.items()}})
 
 
 def merge_lessons(base: LessonsDoc, before: LessonsDoc, after: LessonsDoc) -> LessonsDoc:

@@ -59,6 +59,7 @@ __all__ = [
     "Entity",
     "Relation",
     "EnvironmentDoc",
+    "Trial",
     "Lesson",
     "LessonsDoc",
     "KnowledgeEntry",
@@ -519,6 +520,28 @@ class EnvironmentDoc(VersionedModel):
     evidence: list[str] = Field(default_factory=list)
 
 
+class Trial(ProtocolModel):
+    """A randomised comparison of a correction: runs assigned to apply it (``with``) or to
+    hold it back (``without``), and what happened in each arm.
+
+    Counts are per session of an assigned run: game steps played, deaths (of any cause),
+    sessions. A correction that changes survival behaviour is judged on the death rate
+    per step of its two arms (``phyagentos.agent.memory.deaths``), not on sessions that
+    merely applied it and lived.
+    """
+
+    steps_with: int = Field(0, ge=0, description="Game steps played by sessions that applied the correction.")
+    deaths_with: int = Field(0, ge=0, description="Deaths (any cause) in sessions that applied it.")
+    sessions_with: int = Field(0, ge=0)
+    acted_with: int = Field(0, ge=0, description="Sessions of the with-arm in which the correction fired a reflex "
+                                                 "that the default would not have fired.")
+    steps_without: int = Field(0, ge=0, description="Game steps played by sessions that held it back.")
+    deaths_without: int = Field(0, ge=0, description="Deaths (any cause) in sessions that held it back.")
+    sessions_without: int = Field(0, ge=0)
+    p_value: float | None = Field(None, ge=0, le=1, description="One-sided p of the last decision test "
+                                                               "(fewer deaths per step with the correction).")
+
+
 class Lesson(ProtocolModel):
     """A failure analysed into a correction, with the evidence it came from."""
 
@@ -542,6 +565,8 @@ class Lesson(ProtocolModel):
     confirmations: int = Field(0, ge=0, description="Verdicts that confirmed the correction (success).")
     refutations: int = Field(0, ge=0, description="Verdicts where the correction did not succeed.")
     refuted_by: list[str] = Field(default_factory=list, description="Session ids whose verdict did not confirm it.")
+    trial: Trial | None = Field(None, description="A randomised with/without comparison that decides the lesson "
+                                                  "(survival corrections), if any.")
     updated_at: Timestamp | None = None
 
 

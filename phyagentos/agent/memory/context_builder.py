@@ -53,11 +53,16 @@ class ContextBuilder:
         use_memory: retrieve and apply memory; ``False`` records the conditions only
             (a run "with empty memory").
         skills: skill name -> :class:`SkillInfo` (default: the shipped manifests).
+        trials: memory is learning: open survival candidates are applied or held back
+            by the run's trial arm (``memory/deaths.py``); ``False`` (a frozen
+            measurement) applies only verified lessons.
     """
 
-    def __init__(self, workspace: Workspace, *, use_memory: bool = True, skills: Mapping[str, SkillInfo] | None = None):
+    def __init__(self, workspace: Workspace, *, use_memory: bool = True, skills: Mapping[str, SkillInfo] | None = None,
+                 trials: bool = True):
         self.workspace = workspace
         self.use_memory = use_memory
+        self.trials = trials
         self.skills = dict(skills) if skills is not None else skill_catalog()
         self.lessons = LessonBook(workspace)
         self.knowledge = KnowledgeBase(workspace)
@@ -74,8 +79,8 @@ class ContextBuilder:
                                   parameters=parameters, scene=scene, observed=observed)
 
     def build(self, *, goal: str, skill: str, target: str, parameters: Mapping[str, Any],
-              scene: Mapping[str, Any] | None,
-              observed: ObservedObject | None = None) -> tuple[dict[str, Any], SessionContext]:
+              scene: Mapping[str, Any] | None, observed: ObservedObject | None = None,
+              run_id: str | None = None) -> tuple[dict[str, Any], SessionContext]:
         """``(parameters to run with, context to record)`` for a new session.
 
         Args:
@@ -84,6 +89,7 @@ class ContextBuilder:
             parameters: the node's own parameters (never overridden).
             scene: the goal graph's scene mapping (only its declared descriptors are read).
             observed: what earlier sessions of the run observed of the object.
+            run_id: the session's run (assigns it to the arms of open trials).
         """
         cond = self.conditions(goal=goal, skill=skill, target=target, parameters=parameters, scene=scene,
                                observed=observed)
@@ -112,7 +118,8 @@ class ContextBuilder:
                        f"refuted {lesson.refutations}x)")
             items.append(ContextItem(kind="lesson", id=lesson.id, summary=summary,
                                      provenance=list(lesson.verified_by), applied=take(lesson.revision)))
-        for item, values in game_context_items(self.workspace, skill=skill, parameters=parameters):
+        for item, values in game_context_items(self.workspace, skill=skill, parameters=parameters,
+                                                  run_id=run_id if self.trials else None):
             items.append(item.model_copy(update={"applied": take(values)}))  # recipes, survival (memory/game.py)
         for n, entry in enumerate(self.knowledge.retrieve(cond)[:MAX_ITEMS]):
             established = (entry.successes >= KNOWLEDGE_MIN_SUCCESSES

@@ -23,13 +23,30 @@ of every game skill): thirst raises ``drink_below``, starvation ``food_below``,
 exhaustion and zombies in the sleep ``energy_below`` (sleep earlier, in daylight and in
 shelter), zombies at night also ``health_below`` (retreat into a shelter to heal sooner),
 zombies by day ``health_below``, ``drink_below`` and ``food_below`` (vitals kept high keep
-health regenerating). A death makes a *candidate* (scope: the game's embodiment); the
-ContextBuilder applies it to later game sessions so they test it; a later session that
-applied it, in which the matching reflex fired at a level the default threshold would
-have let pass (the correction changed what the player did), and which did not end in a
-death of that cause, verifies it (``verified_by``); dying of the same cause again refutes it. Lava deaths carry no
-parameter (the planner already never steps on or next to remembered lava): they are
-recorded for the report.
+health regenerating). A death makes a *candidate* (scope: the game's embodiment).
+
+**A survival correction is decided by a randomised comparison, not by survivors.** A
+threshold that sends the player to drink earlier can prevent one death and cause
+another (it walks off into the night); a session that applied it and lived says
+nothing about that, and the first learning passes, which verified corrections that way,
+made the frozen pass 3 to 23 points worse than no memory (docs/crafter.md). So while
+memory learns (the AgentCoordinator consolidates), every run is assigned to one arm of
+each open candidate's trial by a hash of (run id, lesson id) (:func:`trial_arm`, half
+and half, independent across candidates): the ``with`` arm applies the correction, the
+``without`` arm holds it back (its sessions record the item with nothing applied). Each
+session of an assigned run adds its game steps and its death (any cause) to its arm
+(:class:`~phyagentos.protocol.Trial`). The death rates per step of the two arms are
+compared with the exact conditional test for two Poisson rates (given n deaths in all,
+the with-arm's deaths are Binomial(n, its share of the steps) when the rates are equal;
+Przyborowski and Wilenski, Biometrika 31, 1940): once each arm has
+:data:`TRIAL_MIN_STEPS` steps and both together :data:`TRIAL_MIN_DEATHS` deaths, a
+one-sided p of at most :data:`TRIAL_ALPHA` for fewer deaths *with* the correction
+verifies it, and for more deaths refutes it. The test is rerun after every session, so
+the real false-positive rate is above the nominal alpha (repeated looks); hence the
+small alpha. Verified corrections apply to every later game session; refuted ones to
+none; undecided candidates only inside a trial, never in a frozen measurement. Lava
+deaths carry no parameter (the planner already never steps on or next to remembered
+lava): they are recorded for the report.
 """
 
 from __future__ import annotations
@@ -38,12 +55,13 @@ import hashlib
 import logging
 from typing import Any, Mapping, Sequence
 
-from phyagentos.protocol import Lesson, LessonsDoc, SessionRecord, Workspace
+from phyagentos.protocol import Lesson, LessonsDoc, SessionRecord, Trial, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 
 from .conditions import canonical
 
-__all__ = ["diagnose_death", "DeathBook", "DEATH_CAUSES", "correction_for", "correction_acted"]
+__all__ = ["diagnose_death", "DeathBook", "DEATH_CAUSES", "SURVIVAL_KEYS", "correction_for", "correction_acted",
+           "trial_arm", "trial_decision", "session_steps", "TRIAL_ALPHA", "TRIAL_MIN_STEPS", "TRIAL_MIN_DEATHS"]
 
 logger = logging.getLogger(__name__)
 
@@ -55,6 +73,14 @@ _DEFAULTS = {"drink_below": 4, "food_below": 4, "energy_below": 3, "health_below
 _REFLEX_MODE = {"drink_below": ("drink", "drink"), "food_below": ("eat", "food"), "energy_below": ("rest", "energy"),
                 "health_below": ("retreat", "health")}
 _MAX_REFS = 12
+#: The skill parameters survival lessons set (every game skill's reflex thresholds).
+SURVIVAL_KEYS = frozenset(_DEFAULTS)
+#: One-sided significance of a trial's decision (module doc: repeated looks, hence small).
+TRIAL_ALPHA = 0.05
+#: Game steps each arm must have played before a trial decides (about three episodes).
+TRIAL_MIN_STEPS = 2000
+#: Deaths both arms together must have had before a trial decides.
+TRIAL_MIN_DEATHS = 4
 
 
 def diagnose_death(trace: Sequence[Mapping[str, Any]]) -> tuple[str, dict[str, Any]] | None:
@@ -115,6 +141,39 @@ def correction_acted(revision: Mapping[str, Any], trace: Sequence[Mapping[str, A
     return False
 
 
+def trial_arm(run_id: str, lesson_id: str) -> bool:
+    """True when run ``run_id`` is in the ``with`` arm of lesson ``lesson_id``'s trial
+    (half of all runs, by the first byte of a SHA-1; independent across lessons)."""
+    return hashlib.sha1(f"{run_id}/{lesson_id}".encode()).digest()[0] % 2 == 0
+
+
+def session_steps(trace: Sequence[Mapping[str, Any]]) -> int:
+    """Game steps a session played: the span of the ``step`` stamps in its trace (0 without any)."""
+    steps = [int(r["step"]) for r in trace if isinstance(r.get("step"), (int, float))]
+    return max(steps) - min(steps) + 1 if steps else 0
+
+
+def trial_decision(trial: Trial) -> tuple[str, float | None]:
+    """``("verified" | "refuted" | "open", p)`` for ``trial`` (module doc).
+
+    ``p`` is the one-sided p-value of the direction the data lean to (fewer deaths per
+    step with the correction -> the ``less`` tail), ``None`` before the trial has
+    :data:`TRIAL_MIN_STEPS` steps per arm and :data:`TRIAL_MIN_DEATHS` deaths."""
+    n = trial.deaths_with + trial.deaths_without
+    if min(trial.steps_with, trial.steps_without) < TRIAL_MIN_STEPS or n < TRIAL_MIN_DEATHS:
+        return "open", None
+    from scipy.stats import binomtest  # noqa: PLC0415 - only when a trial is decided
+
+    share = trial.steps_with / (trial.steps_with + trial.steps_without)
+    fewer = binomtest(trial.deaths_with, n, share, alternative="less").pvalue
+    more = binomtest(trial.deaths_with, n, share, alternative="greater").pvalue
+    if fewer <= TRIAL_ALPHA:
+        return "verified", float(fewer)
+    if more <= TRIAL_ALPHA:
+        return "refuted", float(more)
+    return "open", float(min(fewer, more))
+
+
 def _lid(cause: str, revision: Mapping[str, Any]) -> str:
     return "D" + hashlib.sha1(canonical(["death", cause, revision]).encode()).hexdigest()[:10]
 
@@ -124,46 +183,70 @@ def _keep(items, *new):
 
 
 class DeathBook:
-    """Death lessons in LESSONS.md of ``workspace`` (module doc)."""
+    """Death lessons in LESSONS.md of ``workspace`` and their trials (module doc)."""
 
     def __init__(self, workspace: Workspace, *, embodiment: str = "crafter"):
         self.workspace = workspace
         self.scope = {"embodiment": embodiment, "skill": "game_*", "object_class": None, "risk_factors": []}
 
-    def applicable(self) -> list[tuple[Lesson, bool]]:
-        """Survival corrections to apply to a new game session, ``(lesson, verified)``:
-        verified lessons confirmed more often than refuted, then candidates never refuted."""
+    def applicable(self, *, run_id: str | None = None) -> list[tuple[Lesson, str]]:
+        """Survival lessons for a new game session of run ``run_id``, ``(lesson, role)``:
+
+        - ``"verified"``: a verified lesson (its trial found fewer deaths with it), applied;
+        - ``"with"`` / ``"without"``: an open candidate and the arm ``run_id`` is in
+          (applied only in ``with``); only when ``run_id`` is given, i.e. while memory
+          learns. A frozen measurement passes ``None``: candidates are not applied.
+
+        Refuted candidates are never returned."""
         doc: LessonsDoc = self.workspace.read("LESSONS").data
-        out = [(l, True) for l in doc.lessons if l.scope == self.scope and l.revision and l.confirmations > l.refutations]
-        out += [(c, False) for c in doc.candidates if c.scope == self.scope and c.revision and c.refutations == 0]
+        out = [(l, "verified") for l in doc.lessons if l.scope == self.scope and l.revision and l.verified]
+        if run_id is not None:
+            out += [(c, "with" if trial_arm(run_id, c.id) else "without") for c in doc.candidates
+                    if c.scope == self.scope and c.revision and c.refutations == 0]
         return out
 
     def learn(self, session: SessionRecord, trace: Sequence[Mapping[str, Any]], evidence: Sequence[str] = ()) -> list[str]:
-        """Record ``session``'s death (if any) and resolve the survival lessons it applied."""
+        """Record ``session``'s death (if any) and add the session to the trials it was
+        assigned to (its context: an applied item is the ``with`` arm, a held-back one
+        the ``without`` arm); decide every trial it touched."""
         found = diagnose_death(trace)
-        applied = {i.id for i in (session.context.items if session.context else ()) if i.kind == "lesson" and i.applied}
-        if found is None and not applied:
+        items = [i for i in (session.context.items if session.context else ()) if i.kind == "lesson"]
+        arms = {i.id: bool(i.applied) for i in items}
+        if found is None and not arms:
             return []
         sid, now = session.session_id, utc_now()
+        steps, died = session_steps(trace), found is not None
         touched: list[str] = []
 
         def apply(doc: LessonsDoc) -> None:
-            for item in [*doc.candidates, *doc.lessons]:
-                if item.id not in applied or item.scope != self.scope:
+            for item in list(doc.candidates):
+                if item.id not in arms or item.scope != self.scope or item.refutations:
                     continue
-                if found is not None and found[0] == item.cause:
-                    item.refutations += 1
-                    item.refuted_by = _keep(item.refuted_by, sid)
-                elif correction_acted(item.revision, trace):
-                    if item in doc.candidates:
-                        doc.candidates = [c for c in doc.candidates if c.id != item.id]
-                        item.verified = True
-                        doc.lessons.append(item)
+                t = item.trial or Trial()
+                if arms[item.id]:
+                    t.steps_with += steps
+                    t.deaths_with += int(died)
+                    t.sessions_with += 1
+                    t.acted_with += int(correction_acted(item.revision, trace))
+                else:
+                    t.steps_without += steps
+                    t.deaths_without += int(died)
+                    t.sessions_without += 1
+                outcome, t.p_value = trial_decision(t)
+                item.trial = t
+                item.updated_at = now
+                if outcome == "verified":
+                    doc.candidates = [c for c in doc.candidates if c.id != item.id]
+                    item.verified = True
                     item.confirmations += 1
                     item.verified_by = _keep(item.verified_by, sid)
-                else:
-                    continue
-                item.updated_at = now
+                    doc.lessons.append(item)
+                    logger.info("survival lesson %s verified by its trial (p=%.3f): %s", item.id, t.p_value,
+                                item.correction)
+                elif outcome == "refuted":
+                    item.refutations += 1
+                    item.refuted_by = _keep(item.refuted_by, sid)
+                    logger.info("survival lesson %s refuted by its trial (p=%.3f)", item.id, t.p_value)
                 touched.append(item.id)
             if found is None:
                 return
@@ -177,7 +260,8 @@ class DeathBook:
             if existing is None:
                 doc.candidates.append(Lesson(id=lid, objective="survive a Crafter episode", evidence=list(evidence),
                                              cause=cause, correction=f"{text}: set {fix}", scope=dict(self.scope),
-                                             provenance=[sid], strategy="survival", revision=revision, updated_at=now))
+                                             provenance=[sid], strategy="survival", revision=revision,
+                                             trial=Trial() if revision else None, updated_at=now))
             else:
                 existing.provenance = _keep(existing.provenance, sid)
                 existing.evidence = _keep(existing.evidence, *evidence)

@@ -1,11 +1,12 @@
 """Game memory, wired into the ContextBuilder and the Agent's consolidation.
 
 - :func:`game_context_items`: what memory gives a new game session: the recipe of the
-  item a ``game_make`` session makes (:class:`~.recipes.RecipeBook`; parameter ``near``)
-  and the survival corrections learned from deaths (:class:`~.deaths.DeathBook`;
-  ``drink_below``, ``food_below``, ``energy_below``), each as a ContextItem with its
-  provenance (candidates are applied so that the session tests them; their summary
-  says so).
+  item a ``game_make`` session makes (:class:`~.recipes.RecipeBook`; parameter ``near``;
+  a candidate recipe is applied so that the session tests it) and the survival
+  corrections learned from deaths (:class:`~.deaths.DeathBook`; ``drink_below``,
+  ``food_below``, ``energy_below``, ``health_below``: verified ones, and while memory
+  learns the open candidates in the run's trial arm), each as a ContextItem with its
+  provenance; the summary says which.
 - :func:`learn_game_session`: after a game session's verdict, fold its trace into
   LESSONS.md (recipes, deaths) and KNOWLEDGE.md (verified recipes with their counts;
   where each resource was first seen: the materials around it, counted over worlds).
@@ -35,9 +36,13 @@ def is_game_skill(skill: str) -> bool:
     return skill.startswith("game_")
 
 
-def game_context_items(workspace: Workspace, *, skill: str, parameters: Mapping[str, Any]
-                       ) -> list[tuple[ContextItem, dict[str, Any]]]:
-    """``(item, parameter values it proposes)`` for a new game session (empty otherwise)."""
+def game_context_items(workspace: Workspace, *, skill: str, parameters: Mapping[str, Any],
+                       run_id: str | None = None) -> list[tuple[ContextItem, dict[str, Any]]]:
+    """``(item, parameter values it proposes)`` for a new game session (empty otherwise).
+
+    ``run_id``: the run while memory learns (open survival candidates are then applied
+    or held back by the run's trial arm, :meth:`~.deaths.DeathBook.applicable`); ``None``
+    in a frozen measurement (only verified survival lessons apply)."""
     if not is_game_skill(skill):
         return []
     out: list[tuple[ContextItem, dict[str, Any]]] = []
@@ -48,10 +53,15 @@ def game_context_items(workspace: Workspace, *, skill: str, parameters: Mapping[
             tag = f"verified {lesson.confirmations}x" if verified else "candidate, tested by this session"
             out.append((ContextItem(kind="lesson", id=lesson.id, summary=f"recipe: {lesson.correction} ({tag})",
                                     provenance=list(lesson.verified_by or lesson.provenance)), dict(lesson.revision)))
-    for lesson, verified in DeathBook(workspace, embodiment=_EMBODIMENT).applicable():
-        tag = f"verified {lesson.confirmations}x" if verified else "candidate, tested by this session"
-        out.append((ContextItem(kind="lesson", id=lesson.id, summary=f"survival: {lesson.correction} ({tag})",
-                                provenance=list(lesson.verified_by or lesson.provenance)), dict(lesson.revision)))
+    for lesson, role in DeathBook(workspace, embodiment=_EMBODIMENT).applicable(run_id=run_id):
+        t = lesson.trial
+        counts = "" if t is None else (f"; trial: {t.deaths_with} deaths in {t.steps_with} steps with, "
+                                       f"{t.deaths_without} in {t.steps_without} without")
+        tag = {"verified": "verified by its trial", "with": "trial arm: applied",
+               "without": "trial arm: held back (control)"}[role]
+        out.append((ContextItem(kind="lesson", id=lesson.id, summary=f"survival: {lesson.correction} ({tag}{counts})",
+                                provenance=list(lesson.verified_by or lesson.provenance)),
+                    dict(lesson.revision) if role != "without" else {}))
     return out
 
 

@@ -126,9 +126,11 @@ class LessonBook:
 
     def retrieve(self, conditions: Conditions) -> list[Lesson]:
         """Verified lessons whose scope matches ``conditions`` and that have been confirmed
-        more often than refuted, most confirmed and most specific first."""
-        found = [l for l in self.document().lessons
-                 if l.verified and scope_matches(l.scope, conditions) and l.confirmations > l.refutations]
+        more often than refuted, most confirmed and most specific first. Lessons decided
+        by a trial (survival corrections) are served by their own book
+        (:class:`~.deaths.DeathBook`), not here."""
+        found = [l for l in self.document().lessons if l.verified and l.trial is None  # trials: memory/deaths.py
+                 and scope_matches(l.scope, conditions) and l.confirmations > l.refutations]
         return sorted(found, key=lambda l: (l.confirmations - l.refutations, len(l.scope.get("risk_factors") or ()),
                                             l.updated_at or ""), reverse=True)
 
@@ -225,7 +227,7 @@ class LessonBook:
                     touched.append(lesson.id)
             for lid in applied:
                 lesson = next((l for l in doc.lessons if l.id == lid), None)
-                if lesson is None:
+                if lesson is None or lesson.trial is not None:  # a trial decides it, not one verdict
                     continue
                 if success:
                     lesson.confirmations += 1

@@ -27,6 +27,8 @@ logger = logging.getLogger(__name__)
 PLACE_ONTO = {"stone": ("grass", "sand", "path", "water", "lava"), "table": ("grass", "sand", "path"),
               "furnace": ("grass", "sand", "path"), "plant": ("grass",)}
 _MOVE_ACTIONS = tuple(MOVES)
+#: Stations a ``game_make`` session may place for a recipe from memory (a table and a furnace).
+MAX_BUILDS = 2
 
 
 def _inv(obs: dict) -> dict[str, int]:
@@ -426,8 +428,10 @@ class GamePlace(GameLeaf):
 
 class GameMake(GameLeaf):
     """Make ``item`` (``make_<item>``). With ``near`` (the stations the recipe needs, from
-    memory) the player first goes where all of them are within its 3 x 3 neighbourhood.
-    Without it (or when memory's recipe names stations not remembered together, or a
+    memory) the player first goes where all of them are within its 3 x 3 neighbourhood;
+    where no remembered place has them together (an arrow breaks a table into path; a
+    furnace stands two cells from the table), it places the missing ones beside the
+    first one it can reach (:meth:`_build_step`). Without it (or when memory's recipe names stations not remembered together, or a
     planned try fails) the recipe is searched for: the player tries where it stands, then
     next to each remembered material it has not yet had around it at a failed try (what
     it placed itself first, ``notes['placed']``, then the nearest), then where two or more
@@ -437,7 +441,7 @@ class GameMake(GameLeaf):
     SUCCESS when the item's count rose, ``game.make_failed`` after ``max_tries``."""
 
     TOOLS = ("observe", "make_wood_pickaxe", "make_stone_pickaxe", "make_iron_pickaxe", "make_wood_sword",
-             "make_stone_sword", "make_iron_sword") + _MOVE_ACTIONS
+             "make_stone_sword", "make_iron_sword", "place_table", "place_furnace") + _MOVE_ACTIONS
 
     def __init__(self, name: str, *, item: str, near: list | None = None, max_tries: int = 12, max_steps: int = 600):
         super().__init__(name, max_steps=max_steps)
@@ -446,6 +450,7 @@ class GameMake(GameLeaf):
         self._tried: set[str] = set()
         self._failed: list[set[str]] = []  # the materials around each failed try
         self._combos: set[tuple[int, int]] | None = None
+        self._builds = 0  # stations placed for the recipe
 
     def _attempt(self) -> Status:
         obs = self.obs
@@ -494,8 +499,11 @@ class GameMake(GameLeaf):
             stations = self._stations()
             move, plan = self.goto_action(stations, stand_on_goal=True) if stations else (None, None)
             if plan is None:
-                # memory's recipe names stations not remembered together (or unreachable): search
-                self._abandon(f"no reachable remembered place has {self.near} together")
+                # no reachable remembered place has the stations together: build the missing
+                # ones (the recipe says which); else search
+                if self._build_step():
+                    return Status.RUNNING
+                self._abandon(f"no reachable remembered place has {self.near} together and they cannot be built")
                 return Status.RUNNING
             if move is None:
                 return self._attempt()
@@ -522,6 +530,81 @@ class GameMake(GameLeaf):
             return self._attempt()
         self.act(move)
         return Status.RUNNING
+
+    def _build_step(self) -> bool:
+        """One action toward a place where every station of the recipe is around the
+        player, building the stations that are missing; False when that cannot be done
+        (a station that cannot be placed, no place to put it, or :data:`MAX_BUILDS`
+        placements already made).
+
+        The *anchor* is the recipe's first station remembered at a reachable place (what
+        the player placed itself first); every other station is placed anew beside it:
+        the player walks onto a cell Q next to the anchor, arriving by a move along d so
+        that it faces Q + d, a free cell the station can stand on, and places it there.
+        Q's 3 x 3 neighbourhood then holds the anchor and the new station. Without an
+        anchor the first station is placed wherever a cell in front is free. Each
+        placement is a ``game_place`` trace record (``for_recipe``: the item made)."""
+        if self._builds >= MAX_BUILDS or any(n not in PLACE_ONTO for n in self.near):
+            return False
+        obs = self.obs
+        here = tuple(obs["position"])
+        m = self.map
+        blocked = self.blocked()
+        placed = list(self.ctx.target.notes.get("placed", ()))
+        order = sorted(self.near, key=lambda n: (n not in placed, self.near.index(n)))
+        anchor_cells: set[tuple[int, int]] = set()
+        anchor = None
+        for name in order:
+            cells = m.cells_of([name])
+            if cells and m.plan(here, cells, blocked=blocked) is not None:
+                anchor, anchor_cells = name, cells
+                break
+        build = next(n for n in self.near if n != anchor)
+        # (stand-before cell Q - d, Q, direction d): Q next to the anchor (or anywhere without one)
+        candidates = {}
+        span = range(-12, 13)
+        for dx in span:
+            for dy in span:
+                q = (here[0] + dx, here[1] + dy)
+                if m.material(q) not in WALKABLE or q in blocked:
+                    continue
+                if anchor is not None and not any((q[0] + a, q[1] + b) in anchor_cells
+                                                  for a in (-1, 0, 1) for b in (-1, 0, 1)):
+                    continue
+                for d in MOVES.values():
+                    front, before = (q[0] + d[0], q[1] + d[1]), (q[0] - d[0], q[1] - d[1])
+                    if m.material(front) in PLACE_ONTO[build] and front not in blocked \
+                            and m.material(before) in WALKABLE and before not in blocked:
+                        candidates.setdefault(before, (q, d))
+        front = facing_cell(obs)
+        for q, d in candidates.values():  # already standing on Q facing Q + d: place now
+            if q == here and front == (q[0] + d[0], q[1] + d[1]):
+                self._place_station(build)
+                return True
+        for q, d in candidates.values():  # on Q - d: step along d onto Q (now facing Q + d)
+            if (q[0] - d[0], q[1] - d[1]) == here:
+                self.act(next(a for a, v in MOVES.items() if v == d))
+                return True
+        move, plan = self.goto_action(set(candidates), stand_on_goal=True) if candidates else (None, None)
+        if plan is None or move is None:
+            return False
+        self.act(move)
+        return True
+
+    def _place_station(self, station: str) -> None:
+        before = dict(self.obs["inventory"])
+        nearby = neighbourhood(self.obs)
+        self.act(f"place_{station}")
+        ok = self.obs["inventory"] != before
+        self._builds += 1
+        if ok:
+            self.ctx.target.notes.setdefault("placed", set()).add(station)
+        self.ctx.trace.record("game_place", step=self.obs["step"], item=station, ok=ok, nearby=nearby,
+                              inventory_before=before, inventory_after=dict(self.obs["inventory"]),
+                              for_recipe=self.item)
+        if not ok:
+            raise PrimitiveFailure("game.make_failed", f"the recipe of {self.item} needs a {station} and "
+                                                       f"place_{station} changed nothing (inventory {before})")
 
     def _new_combinations(self, radius: int = 24) -> set[tuple[int, int]]:
         """Walkable remembered cells within ``radius`` whose 3 x 3 neighbourhood holds two or

@@ -156,3 +156,25 @@ def test_a_known_recipe_whose_station_is_nowhere_places_it_and_makes_the_tool(tm
     assert not any(r.get("kind") == "game_recipe_abandoned" for r in trace)  # no search was needed
     truth = yaml.safe_load((ws / "targets" / "crafter" / "ground_truth.yaml").read_text())
     assert truth["achievements"]["place_table"] == 1 and truth["achievements"]["make_wood_pickaxe"] == 1
+
+
+def test_a_recipe_station_the_player_cannot_build_falls_back_to_the_search(tmp_path):
+    # an over-specified hypothesis from memory: "stone and table"; the player has no stone
+    # and (in world 3) remembers no stone next to its table
+    graph = dict(BUILD_FOR_RECIPE, name="crafter_cannot_build")
+    graph["nodes"] = [dict(n) for n in BUILD_FOR_RECIPE["nodes"]]
+    graph["nodes"].insert(1, {"id": "place_table", "skill": "game_place", "params": {"item": "table"},
+                              "depends_on": ["collect_wood"], "accept": {"achieved": "place_table"}})
+    graph["nodes"][2] = {**graph["nodes"][2], "depends_on": ["place_table"],
+                         "params": {"item": "wood_pickaxe", "near": ["stone", "table"]}}
+    path = tmp_path / "g.yaml"
+    path.write_text(yaml.safe_dump(graph))
+    ws = tmp_path / "ws"
+    report = run_goal_graph(path, ws, seed=3)
+    assert report.succeeded, report.to_dict()
+    make = next(s for s in report.sessions if s.node == "make_wood_pickaxe")
+    trace = [yaml.safe_load(line) for line in (ws / "evidence" / make.session_id / "trace.jsonl").read_text().splitlines()]
+    kinds = [r["kind"] for r in trace if r["kind"] in ("game_place", "game_recipe_abandoned", "game_make")]
+    assert kinds[:2] == ["game_place", "game_recipe_abandoned"] and kinds[-1] == "game_make"
+    assert [r for r in trace if r["kind"] == "game_place"][0]["item"] == "stone"
+    assert [r for r in trace if r["kind"] == "game_make"][-1]["ok"]

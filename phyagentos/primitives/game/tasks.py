@@ -535,7 +535,8 @@ class GameMake(GameLeaf):
         """One action toward a place where every station of the recipe is around the
         player, building the stations that are missing; False when that cannot be done
         (a station that cannot be placed, no place to put it, or :data:`MAX_BUILDS`
-        placements already made).
+        placements already made). A placement that changes nothing (the player lacks
+        what the station is built from) abandons the recipe for the search.
 
         The *anchor* is the recipe's first station remembered at a reachable place (what
         the player placed itself first); every other station is placed anew beside it:
@@ -602,9 +603,8 @@ class GameMake(GameLeaf):
         self.ctx.trace.record("game_place", step=self.obs["step"], item=station, ok=ok, nearby=nearby,
                               inventory_before=before, inventory_after=dict(self.obs["inventory"]),
                               for_recipe=self.item)
-        if not ok:
-            raise PrimitiveFailure("game.make_failed", f"the recipe of {self.item} needs a {station} and "
-                                                       f"place_{station} changed nothing (inventory {before})")
+        if not ok:  # cannot build it (nothing to build it from): the recipe is not followed here
+            self._abandon(f"place_{station} changed nothing (inventory {before})")
 
     def _new_combinations(self, radius: int = 24) -> set[tuple[int, int]]:
         """Walkable remembered cells within ``radius`` whose 3 x 3 neighbourhood holds two or

@@ -47,6 +47,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != HERE]
 sys.path.insert(0, str(HERE.parent))
 
 from phyagentos.bench import run_bench  # noqa: E402
+from phyagentos.bench.suite import load_suite  # noqa: E402
 from phyagentos.errors import BenchError  # noqa: E402
 from phyagentos.yamlsource import load_plain, read_yaml  # noqa: E402
 
@@ -69,9 +70,10 @@ def bare_steps_per_second(steps: int = 3000, seed: int = 0) -> float:
     return steps / (time.perf_counter() - started)
 
 
-def _pass(name: str, ws: Path, *, episodes: int, split: str, memory: str, workers: int) -> dict:
+def _pass(name: str, ws: Path, *, episodes: int, split: str, memory: str, workers: int,
+          seeds: tuple[int, ...] | None = None) -> dict:
     started = time.perf_counter()
-    result = run_bench("crafter", ws, episodes=episodes, split=split, memory=memory, workers=workers)
+    result = run_bench("crafter", ws, episodes=episodes, split=split, memory=memory, workers=workers, seeds=seeds)
     c = result.report["crafter"]
     walls = []
     for ep in c["per_episode"]:
@@ -104,6 +106,9 @@ def main() -> int:
     ap.add_argument("--episodes", type=int, default=8, help="worlds per pass (default 8)")
     ap.add_argument("--learn-episodes", type=int, help="worlds of the learning pass (default: 2 x --episodes)")
     ap.add_argument("--workers", type=int, default=1, help="worker processes of the off and frozen passes")
+    ap.add_argument("--second-heldout", type=int, default=0, metavar="N",
+                    help="also run off and frozen on the N held-out worlds after the first set "
+                         "(a second unseen set for the same memory; default 0: none)")
     ap.add_argument("--workspace", type=Path, help="bench workspace (default: a new temporary directory)")
     args = ap.parse_args()
     ws = args.workspace or Path(tempfile.mkdtemp(prefix="crafter-bench-"))
@@ -116,6 +121,14 @@ def main() -> int:
         _pass("frozen (held-out worlds)", ws, episodes=args.episodes, split="heldout", memory="frozen",
               workers=args.workers),
     ]
+    if args.second_heldout:
+        first = load_suite("crafter").heldout_seed_offset + args.episodes  # after the first held-out set
+        extra = tuple(range(first, first + args.second_heldout))
+        text = f"worlds {extra[0]}-{extra[-1]}"
+        passes += [_pass(f"off (held-out {text})", ws, episodes=len(extra), split="heldout", memory="off",
+                         workers=args.workers, seeds=extra),
+                   _pass(f"frozen (held-out {text})", ws, episodes=len(extra), split="heldout", memory="frozen",
+                         workers=args.workers, seeds=extra)]
     lessons = load_plain((ws / "LESSONS.md").read_text().split("```yaml", 1)[1].split("```", 1)[0], path=ws / "LESSONS.md", error=BenchError)
     memory = {"verified": [f"{l['id']}: {l['correction']} ({l['confirmations']}+/{l['refutations']}-)"
                            + _trial_text(l) for l in lessons.get("lessons") or []],
@@ -130,18 +143,22 @@ def main() -> int:
     console.print(table)
     rates = Table(title="per-achievement success rate (%)")
     rates.add_column("achievement")
-    for p in passes:
-        rates.add_column(p["pass"].split(" ")[0], justify="right")
+    for n, p in enumerate(passes):
+        rates.add_column(p["pass"].split(" ")[0] + (" (2nd set)" if n > 2 else ""), justify="right")
     for name in sorted(passes[0]["success_rates_percent"]):
         rates.add_row(name, *(f"{p['success_rates_percent'][name]:.0f}" for p in passes))
     console.print(rates)
     gain = passes[2]["score_percent"] - passes[0]["score_percent"]
     console.print(f"memory gain on unseen worlds (frozen - off): {gain:+.1f} points; bare crafter.Env: "
                   f"{bare:.0f} steps/s (random actions)")
+    gain2 = passes[4]["score_percent"] - passes[3]["score_percent"] if len(passes) > 3 else None
+    if gain2 is not None:
+        console.print(f"memory gain on the second held-out set: {gain2:+.1f} points")
     console.print("published anchors (1M-step budget): " + ", ".join(f"{k} {v}" for k, v in ANCHORS.items()))
     out = {"episodes_per_pass": args.episodes, "learn_episodes": args.learn_episodes or 2 * args.episodes,
            "step_budget_per_episode": 10000, "workspace": str(ws),
            "bare_env_steps_per_second": round(bare, 1), "passes": passes, "memory_gain_points": round(gain, 3),
+           "memory_gain_points_second_heldout": None if gain2 is None else round(gain2, 3),
            "memory_after_learning": memory, "anchors_percent": ANCHORS,
            "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
            "note": "2 shared cores under load from other engineers' tests: compare ratios, not absolute speeds"}

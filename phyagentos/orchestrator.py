@@ -115,6 +115,7 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     thread = threading.Thread(target=runtime_plane, name="phyagentos-supervisor", daemon=True)
     thread.start()
     agent.on_submit = supervisor.watcher.notify  # claim at once, before the agent rewrites TASK.md
+    agent.defer_task_view = True  # ... and rewrite it once the session has started (below)
     last_states: dict | None = None
     try:
         idle_checked = False
@@ -140,12 +141,19 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
                 say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
             last_states = states
             if agent.done(sessions) if sessions is not None else agent.done():
+                if agent.task_view_stale:
+                    agent.write_task()
                 return
             if acted:
                 idle_checked = False
                 continue
-            waiting = [sid for sid, state, _ in agent.workspace.active_sessions(run_id=agent.run_id)
-                       if state == "pending" or state in LEASED_STATES]
+            active = agent.workspace.active_sessions(run_id=agent.run_id)
+            waiting = [sid for sid, state, _ in active if state == "pending" or state in LEASED_STATES]
+            if agent.task_view_stale and (supervisor.paused or supervisor.estopped
+                                          or not any(state in _HANDOFF_STATES for _, state, _ in active)):
+                # The hand-off is over (the supervisor waits for the runner), or cannot go on
+                # now: the view the last step deferred no longer competes with a claim.
+                agent.write_task()
             if not waiting and not supervisor.busy:
                 # Nothing is in anyone's hands: one more step sees every change made so far.
                 if idle_checked:
@@ -156,13 +164,18 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
             idle_checked = False
             if supervisor.paused or supervisor.estopped:
                 say("supervisor " + ("e-stopped" if supervisor.estopped else "paused") + "; waiting")
-            wake.wait(supervisor.config.poll_interval_s)
+            if not wake.wait(supervisor.config.poll_interval_s) and agent.task_view_stale:
+                agent.write_task()  # a quiet interval: whatever holds the hand-off up, the view is current
     finally:
         agent.on_submit = None
+        agent.defer_task_view = False
         stop.set()
         supervisor.watcher.notify()
         thread.join()
 
+
+#: Session states of a hand-off in progress: submitted, claimed, being preflighted.
+_HANDOFF_STATES = frozenset({"pending", "claimed", "preflight_checking"})
 
 #: Session states in which the Agent plane has something to do (verify, revise, or take
 #: over a verification whose verifier died).

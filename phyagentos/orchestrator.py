@@ -26,7 +26,7 @@ from phyagentos.agent.coordinator import AgentCoordinator, SessionSummary
 from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
 from phyagentos.agent.verifier import SessionVerifier
-from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
+from phyagentos.errors import GoalGraphError, PhyAgentOSError, ProtocolError, SupervisorError, format_choices
 from phyagentos.protocol import LEASED_STATES, TERMINAL_STATES, RunRecord, Workspace, utc_now_iso
 from phyagentos.resources import skill_dirs, tree_dirs
 from phyagentos.runtime.skills import SkillRegistry
@@ -103,14 +103,32 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     stop = threading.Event()
     failure: list[BaseException] = []
 
+    # SESSIONS.md (a view, never fsynced) is brought up to date when a side would otherwise
+    # wait, not by every session write on the path from a verdict to the next start.
+    supervisor.workspace.defer_index = True
+    agent.workspace.defer_index = True
+
     def runtime_plane() -> None:
         try:
             while not stop.is_set():
                 if supervisor.step():
                     wake.set()
+                if supervisor.workspace.index_pending and not supervisor.preflighting:
+                    supervisor.workspace.flush_index()  # the runner has the session, or nothing is in flight
         except BaseException as exc:  # noqa: BLE001 - re-raised in the agent's thread
             failure.append(exc)
             wake.set()
+        finally:
+            supervisor.workspace.defer_index = False
+            _flush_quietly(supervisor.workspace)
+
+    def views_stale() -> bool:  # (a stand-in coordinator may know no deferred views)
+        return getattr(agent, "task_view_stale", False) or agent.workspace.index_pending
+
+    def catch_up_views() -> None:
+        if getattr(agent, "task_view_stale", False):
+            agent.write_task()
+        agent.workspace.flush_index()
 
     thread = threading.Thread(target=runtime_plane, name="phyagentos-supervisor", daemon=True)
     thread.start()
@@ -141,19 +159,19 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
                 say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
             last_states = states
             if agent.done(sessions) if sessions is not None else agent.done():
-                if agent.task_view_stale:
-                    agent.write_task()
+                catch_up_views()
                 return
             if acted:
                 idle_checked = False
                 continue
             active = agent.workspace.active_sessions(run_id=agent.run_id)
             waiting = [sid for sid, state, _ in active if state == "pending" or state in LEASED_STATES]
-            if agent.task_view_stale and (supervisor.paused or supervisor.estopped
-                                          or not any(state in _HANDOFF_STATES for _, state, _ in active)):
+            if views_stale() and (
+                    supervisor.paused or supervisor.estopped
+                    or not any(state in _HANDOFF_STATES for _, state, _ in active)):
                 # The hand-off is over (the supervisor waits for the runner), or cannot go on
-                # now: the view the last step deferred no longer competes with a claim.
-                agent.write_task()
+                # now: the views the last step deferred no longer compete with a claim.
+                catch_up_views()
             if not waiting and not supervisor.busy:
                 # Nothing is in anyone's hands: one more step sees every change made so far.
                 if idle_checked:
@@ -164,14 +182,26 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
             idle_checked = False
             if supervisor.paused or supervisor.estopped:
                 say("supervisor " + ("e-stopped" if supervisor.estopped else "paused") + "; waiting")
-            if not wake.wait(supervisor.config.poll_interval_s) and agent.task_view_stale:
-                agent.write_task()  # a quiet interval: whatever holds the hand-off up, the view is current
+            if not wake.wait(supervisor.config.poll_interval_s):
+                catch_up_views()  # a quiet interval: whatever holds the hand-off up, the views are current
     finally:
         agent.on_submit = None
         agent.defer_task_view = False
         stop.set()
         supervisor.watcher.notify()
         thread.join()
+        agent.workspace.defer_index = False
+        _flush_quietly(agent.workspace)
+
+
+def _flush_quietly(workspace: Workspace) -> None:
+    """The SESSIONS.md entries still pending when ``drive_run`` ends (also on an error: a
+    failure here must not hide the one that ended the run; ``reconcile`` rebuilds a view
+    left behind)."""
+    try:
+        workspace.flush_index()
+    except (PhyAgentOSError, OSError) as exc:
+        logger.warning("SESSIONS.md of %s not brought up to date: %s", workspace.root, exc)
 
 
 #: Session states of a hand-off in progress: submitted, claimed, being preflighted.

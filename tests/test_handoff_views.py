@@ -1,10 +1,13 @@
 """Views stay off the hand-off of ``phyagentos run`` (issue 12, round 4).
 
 Between a verdict and the next session's first actuation the agent's thread and the
-supervisor's share one interpreter. ``drive_run`` therefore lets the coordinator defer
-the TASK.md rewrite (a view, not fsynced, rebuilt from the session files) of a step
-that submitted until the submitted session has been claimed and started; the view is
-current again before the run returns.
+supervisor's share one interpreter. ``drive_run`` therefore defers the two views it
+rewrites there (neither fsynced, both rebuilt from the session files): the
+coordinator's TASK.md rewrite of a step that submitted, and the SESSIONS.md entry of
+every session write (``Workspace.defer_index``), until the submitted session has been
+claimed and started; both are current again before the run returns. A deferred entry
+never overwrites a later write of its session, and ``reconcile`` rebuilds a view that
+a killed writer left behind.
 """
 
 from __future__ import annotations
@@ -13,7 +16,8 @@ from pathlib import Path
 
 import yaml
 
-from phyagentos.protocol import Workspace
+from phyagentos.protocol import SessionRecord, Workspace, utc_now_iso
+from phyagentos.protocol.lifecycle import SessionLifecycle
 
 HOLD = Path(__file__).resolve().parent.parent / "goal_graphs" / "hold.yaml"
 
@@ -79,5 +83,59 @@ def test_drive_run_defers_task_md_past_the_claim_and_leaves_it_current(tmp_path,
     assert written, "drive_run never deferred a TASK.md rewrite"
     # never while a submitted session still waited to be claimed or started
     assert all(not states & {"pending", "claimed", "preflight_checking"} for states in written), written
-    task = Workspace.open(ws_dir).read("TASK").data
+    done = Workspace.open(ws_dir)
+    task = done.read("TASK").data
     assert task.run_id == report.run_id and [n.state for n in task.nodes] == ["succeeded"] * 3
+    # SESSIONS.md, deferred by both threads, shows every session as it ended
+    entries = {e.session_id: e.state for e in done.read("SESSIONS").data.sessions}
+    assert entries == {s.session_id: "succeeded" for s in report.sessions}
+    assert done.read("SESSIONS").data.counts == {}
+
+
+def _record(sid: str = "s1") -> SessionRecord:
+    now = utc_now_iso()
+    return SessionRecord(session_id=sid, run_id="run-1", node="n", skill="hold", target="franka_tabletop",
+                         parameters={"duration_s": 0.0}, created_at=now, updated_at=now)
+
+
+def _index(ws: Workspace) -> dict[str, str]:
+    return {e.session_id: e.state for e in Workspace.open(ws.root).read("SESSIONS").data.sessions}
+
+
+def test_deferred_sessions_md_entries_are_written_together_on_flush(tmp_path):
+    ws = Workspace.create(tmp_path / "ws")
+    ws.defer_index = True
+    ws.submit_session(_record("s1"))
+    ws.submit_session(_record("s2"))
+    ws.update_session("s2", lambda r: SessionLifecycle(r).fire("time_out", reason="test"))
+    assert _index(ws) == {} and ws.index_pending
+    assert ws.load_session("s1").state == "pending"  # the session files are written at once
+    ws.flush_index()
+    assert _index(ws) == {"s1": "pending", "s2": "timed_out"} and not ws.index_pending
+    counts = Workspace.open(ws.root).read("SESSIONS").data.counts
+    assert counts == {"pending": 1}
+
+
+def test_a_deferred_entry_never_overwrites_a_later_write_of_its_session(tmp_path):
+    deferring = Workspace.create(tmp_path / "ws")
+    deferring.defer_index = True
+    other = Workspace.open(deferring.root)  # another writer (thread or process), not deferring
+    deferring.submit_session(_record("s1"))
+    deferring.submit_session(_record("s2"))
+    other.update_session("s1", lambda r: SessionLifecycle(r).fire("time_out", reason="test"))
+    assert _index(other) == {"s1": "timed_out"}
+    deferring.flush_index()  # its "pending" of s1 is older than the stored "timed_out": dropped
+    assert _index(other) == {"s1": "timed_out", "s2": "pending"}
+
+
+def test_reconcile_rebuilds_a_sessions_md_left_behind_by_a_killed_writer(tmp_path):
+    ws = Workspace.create(tmp_path / "ws")
+    ws.submit_session(_record("s1"))
+    ws.defer_index = True  # ... and the process is killed before it flushes
+    ws.update_session("s1", lambda r: SessionLifecycle(r).fire("time_out", reason="test"))
+    fresh = Workspace.open(ws.root)
+    assert _index(fresh) == {"s1": "pending"}
+    assert "stale_index" not in fresh.reconcile()  # a view younger than stale_hint_s may be a flush in progress
+    assert fresh.reconcile(stale_hint_s=-1.0).get("stale_index") == 1
+    assert _index(fresh) == {"s1": "timed_out"}
+    assert "stale_index" not in fresh.reconcile(stale_hint_s=-1.0)  # current again

@@ -103,24 +103,20 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     stop = threading.Event()
     failure: list[BaseException] = []
 
-    # SESSIONS.md (a view, never fsynced) is brought up to date when a side would otherwise
-    # wait, not by every session write on the path from a verdict to the next start.
-    supervisor.workspace.defer_index = True
+    # SESSIONS.md (a view, never fsynced) is brought up to date when the agent would
+    # otherwise wait, in one rewrite for both threads' session writes, not by every
+    # session write on the path from a verdict to the next session's start.
     agent.workspace.defer_index = True
+    supervisor.workspace.share_index_deferral(agent.workspace)
 
     def runtime_plane() -> None:
         try:
             while not stop.is_set():
                 if supervisor.step():
                     wake.set()
-                if supervisor.workspace.index_pending and not supervisor.preflighting:
-                    supervisor.workspace.flush_index()  # the runner has the session, or nothing is in flight
         except BaseException as exc:  # noqa: BLE001 - re-raised in the agent's thread
             failure.append(exc)
             wake.set()
-        finally:
-            supervisor.workspace.defer_index = False
-            _flush_quietly(supervisor.workspace)
 
     def views_stale() -> bool:  # (a stand-in coordinator may know no deferred views)
         return getattr(agent, "task_view_stale", False) or agent.workspace.index_pending
@@ -190,8 +186,8 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
         stop.set()
         supervisor.watcher.notify()
         thread.join()
-        agent.workspace.defer_index = False
-        _flush_quietly(agent.workspace)
+        agent.workspace.defer_index = supervisor.workspace.defer_index = False
+        _flush_quietly(agent.workspace)  # the entries of both threads
 
 
 def _flush_quietly(workspace: Workspace) -> None:

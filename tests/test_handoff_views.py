@@ -4,8 +4,9 @@ Between a verdict and the next session's first actuation the agent's thread and 
 supervisor's share one interpreter. ``drive_run`` therefore defers the two views it
 rewrites there (neither fsynced, both rebuilt from the session files): the
 coordinator's TASK.md rewrite of a step that submitted, and the SESSIONS.md entry of
-every session write (``Workspace.defer_index``), until the submitted session has been
-claimed and started; both are current again before the run returns. A deferred entry
+every session write of either thread (``Workspace.defer_index``, one pending set shared
+by the agent's and the supervisor's Workspace objects), until the submitted session has
+been claimed and started; both are current again before the run returns. A deferred entry
 never overwrites a later write of its session, and ``reconcile`` rebuilds a view that
 a killed writer left behind.
 """
@@ -67,9 +68,11 @@ def test_a_step_that_submits_nothing_writes_task_md_even_when_deferring(tmp_path
 
 def test_drive_run_defers_task_md_past_the_claim_and_leaves_it_current(tmp_path, monkeypatch):
     from phyagentos.agent.coordinator import AgentCoordinator
-    from phyagentos.orchestrator import run_goal_graph
+    from phyagentos.orchestrator import drive_run
+    from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
 
-    ws_dir = tmp_path / "ws"
+    ws = Workspace.create(tmp_path / "ws")
+    agent, run = _agent(ws, _chain(tmp_path / "chain.yaml", 3))
     written: list[set[str]] = []  # states of the run's active sessions whenever a deferred view is written
     original = AgentCoordinator.write_task
 
@@ -78,17 +81,22 @@ def test_drive_run_defers_task_md_past_the_claim_and_leaves_it_current(tmp_path,
         original(self)
 
     monkeypatch.setattr(AgentCoordinator, "write_task", spy)
-    report = run_goal_graph(_chain(tmp_path / "chain.yaml", 3), ws_dir)
-    assert report.succeeded
-    assert written, "drive_run never deferred a TASK.md rewrite"
+    # a long poll interval: no quiet-interval catch-up (e.g. while the first runner starts)
+    supervisor = WatchdogSupervisor(ws, config=SupervisorConfig(poll_interval_s=60.0))
+    try:
+        drive_run(agent, supervisor)
+    finally:
+        supervisor.close()
+    assert agent.succeeded()
+    assert len(written) >= 3, written  # once per submitted session, after its start
     # never while a submitted session still waited to be claimed or started
     assert all(not states & {"pending", "claimed", "preflight_checking"} for states in written), written
-    done = Workspace.open(ws_dir)
+    done = Workspace.open(ws.root)
     task = done.read("TASK").data
-    assert task.run_id == report.run_id and [n.state for n in task.nodes] == ["succeeded"] * 3
+    assert task.run_id == run.run_id and [n.state for n in task.nodes] == ["succeeded"] * 3
     # SESSIONS.md, deferred by both threads, shows every session as it ended
     entries = {e.session_id: e.state for e in done.read("SESSIONS").data.sessions}
-    assert entries == {s.session_id: "succeeded" for s in report.sessions}
+    assert entries == {s.session_id: "succeeded" for s in agent.summary()}
     assert done.read("SESSIONS").data.counts == {}
 
 
@@ -139,3 +147,30 @@ def test_reconcile_rebuilds_a_sessions_md_left_behind_by_a_killed_writer(tmp_pat
     assert fresh.reconcile(stale_hint_s=-1.0).get("stale_index") == 1
     assert _index(fresh) == {"s1": "timed_out"}
     assert "stale_index" not in fresh.reconcile(stale_hint_s=-1.0)  # current again
+
+
+def test_two_workspace_objects_sharing_a_deferral_are_flushed_in_one_rewrite(tmp_path):
+    agent = Workspace.create(tmp_path / "ws")
+    agent.defer_index = True
+    supervisor = Workspace.open(agent.root)
+    supervisor.share_index_deferral(agent)
+    agent.submit_session(_record("s1"))
+    supervisor.update_session("s1", lambda r: SessionLifecycle(r).fire("time_out", reason="test"))
+    agent.submit_session(_record("s2"))
+    assert _index(agent) == {} and agent.index_pending and supervisor.index_pending
+    writes = []
+    original = agent.update
+    agent.update = lambda name, fn, **kw: writes.append(name) or original(name, fn, **kw)
+    agent.flush_index()
+    assert writes == ["SESSIONS"] and not supervisor.index_pending
+    assert _index(agent) == {"s1": "timed_out", "s2": "pending"}
+
+
+def test_sharing_a_deferral_with_another_workspace_is_refused(tmp_path):
+    import pytest
+
+    from phyagentos.errors import ProtocolError
+
+    a = Workspace.create(tmp_path / "a")
+    with pytest.raises(ProtocolError, match="is not the workspace"):
+        Workspace.create(tmp_path / "b").share_index_deferral(a)

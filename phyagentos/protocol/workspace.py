@@ -911,9 +911,37 @@ class Workspace:
         Raises:
             DocumentError: SESSIONS.md is malformed (the entries stay pending).
         """
-        if self._index_pending:
-            self._index_write(list(self._index_pending.values()), deferred=True)
-            self._index_pending.clear()
+        entries: dict[str, SessionIndexEntry] = {}
+        while self._index_pending:  # popitem is atomic: another thread may add meanwhile
+            try:
+                sid, entry = self._index_pending.popitem()
+            except KeyError:
+                break
+            if sid not in entries or _ts_key(entry.updated_at) >= _ts_key(entries[sid].updated_at):
+                entries[sid] = entry
+        if not entries:
+            return
+        try:
+            self._index_write(list(entries.values()), deferred=True)
+        except BaseException:
+            for sid, entry in entries.items():
+                self._index_pending.setdefault(sid, entry)
+            raise
+
+    def share_index_deferral(self, other: Workspace) -> None:
+        """Defer this object's SESSIONS.md entries into ``other``'s pending set (the
+        Workspace objects of one process's threads on the same workspace, e.g. the agent's
+        and the supervisor's in ``drive_run``): one :meth:`flush_index` of either writes
+        the entries of both in one rewrite. Sets :attr:`defer_index`.
+
+        Raises:
+            ProtocolError: ``other`` belongs to another workspace directory.
+        """
+        if other.root.resolve() != self.root.resolve():
+            raise ProtocolError(f"share_index_deferral: {other.root} is not the workspace {self.root}")
+        other._index_pending.update(self._index_pending)
+        self._index_pending = other._index_pending
+        self.defer_index = True
 
     def _index_write(self, entries: list[SessionIndexEntry], *, deferred: bool = False) -> None:
         def apply(index: SessionsIndex) -> None:

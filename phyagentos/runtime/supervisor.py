@@ -241,11 +241,6 @@ class WatchdogSupervisor:
         return self._inflight is not None
 
     @property
-    def preflighting(self) -> bool:
-        """True while the session in flight is claimed and waits for its preflight (not started)."""
-        return self._inflight is not None and self._inflight.phase == "preflight"
-
-    @property
     def runner_pid(self) -> int | None:
         return self._runner.pid if self._runner is not None and self._runner.alive() else None
 

@@ -277,9 +277,8 @@ class SessionRunner:
                                    plan=rec.adapter_plan)
             else:
                 target = self.targets.acquire(rec, spec)
-                # Before anything moves: a recovering supervisor restores from here at worst
-                # (already on disk if the target was restored from it and nothing moved since).
-                self.targets.checkpoint_before_motion(rec, target)
+                # Before anything moves: a recovering supervisor restores from here at worst.
+                self.targets.checkpoint(rec, target)
                 if self.heartbeat is not None:
                     self.heartbeat()
                 initial_truth = _truth(target)

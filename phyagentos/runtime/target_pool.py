@@ -85,7 +85,6 @@ class TargetPool:
         self.state_dir = Path(state_dir)
         self._live: dict[str, tuple[str, Any]] = {}  # name -> (scene hash, target)
         self._views: dict[str, tuple] = {}  # name -> the last session's terminal view (keep_view)
-        self._restored: dict[str, str] = {}  # name -> world digest right after acquire restored the state file
 
     def acquire(self, session: SessionRecord, spec: TargetSpec):
         """Return the target for ``session``, in the state the episode left it.
@@ -106,11 +105,8 @@ class TargetPool:
         except (TargetError, UnicodeDecodeError) as exc:
             logger.warning("target %s: state record unreadable (%s); resetting the world", spec.name, exc)
             meta = None
-        self._restored.pop(spec.name, None)
         if isinstance(meta, dict) and meta.get("run_id") == session.run_id and meta.get("scene") == key:
             target.load_state(self.state_dir / spec.name / "state.npz")
-            if (digest := getattr(target, "world_digest", None)) is not None:
-                self._restored[spec.name] = digest()
             logger.debug("target %s: continuing episode of run %s", spec.name, session.run_id)
         else:
             target.reset(seed=session.seed)
@@ -187,23 +183,6 @@ class TargetPool:
         """Persist the target's world state for the next session of the same run."""
         self.checkpoint(session, target)
 
-    def checkpoint_before_motion(self, session: SessionRecord, target) -> bool:
-        """Persist the target's world before ``session`` moves it (:meth:`checkpoint`), unless
-        the state file holds that world already: :meth:`acquire` restored the target from
-        this run's state file and its world digest (``target.world_digest()``: MuJoCo's
-        integration state, metadata, notes, model fingerprint) is unchanged since. That
-        file was made durable by the session that wrote it (before its ``done``), so a
-        recovering supervisor restores the same world either way; only ``state.yaml`` is
-        rewritten, naming ``session`` (the world view reads whose checkpoint it is).
-        Returns True if the world state was written."""
-        restored = self._restored.pop(target.name, None)
-        digest = getattr(target, "world_digest", None)
-        if restored is not None and digest is not None and digest() == restored:
-            self._write_record(session, target)
-            return False
-        self.checkpoint(session, target)
-        return True
-
     def checkpoint(self, session: SessionRecord, target) -> None:
         """Persist the target's world state now (atomically); the SessionRunner calls this
         periodically while a session runs, so a supervisor recovering a crashed runner
@@ -211,17 +190,11 @@ class TargetPool:
         directory = self.state_dir / target.name
         directory.mkdir(parents=True, exist_ok=True)
         target.save_state(directory / "state.npz")
-        self._write_record(session, target)
-
-    def _write_record(self, session: SessionRecord, target) -> None:
-        """``state.yaml``: the run, session and scene hash the state file belongs to."""
         key = self._live[target.name][0]
-        atomic_write_text(self.state_dir / target.name / "state.yaml",
-                          yaml.safe_dump({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
+        atomic_write_text(directory / "state.yaml", yaml.safe_dump({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
 
     def close(self) -> None:
         self._views.clear()
-        self._restored.clear()
         for _, target in self._live.values():
             target.close()
         self._live.clear()

@@ -65,7 +65,6 @@ TRACED = [
     ("phyagentos.runtime.runner", "SessionRunner.run", None),
     ("phyagentos.runtime.target_pool", "TargetPool.acquire", None),
     ("phyagentos.runtime.target_pool", "TargetPool.checkpoint", None),
-    ("phyagentos.runtime.target_pool", "TargetPool.checkpoint_before_motion", None),
     ("phyagentos.runtime.safety_guard", "SafetyGuard.for_target", None),
 ]
 

@@ -346,9 +346,11 @@ class AgentCoordinator:
         return actions
 
     def write_task(self) -> None:
-        """Rewrite TASK.md from the run's sessions as they are now (a deferred view write,
-        see :attr:`defer_task_view`)."""
-        self._write_task()
+        """Write the TASK.md the last step deferred (see :attr:`defer_task_view`): the run's
+        sessions as that step left them, exactly what it would have written itself
+        (without listing them again: a change made since, e.g. a supervisor's rejection,
+        changes the run's active sessions, and the step that follows writes its own)."""
+        self._write_task(self.last_sessions)
 
     def _verify(self, session_id: str) -> int:
         ws = self.workspace

@@ -88,8 +88,11 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     this process (its runner is still a separate, killable process), woken by its
     workspace watcher and the runner's pipe, and wakes the agent whenever it acted; the
     agent wakes the supervisor as soon as it submitted a session. Nothing sleeps on the
-    path from a verdict to the next session's claim. While the supervisor is paused or
-    e-stopped, or another process holds a session of the run, the loop waits.
+    path from a verdict to the next session's claim. The two views the hand-off would
+    rewrite (TASK.md and SESSIONS.md, neither fsynced) are brought up to date once the
+    next session has started (or the supervisor is paused, or a poll interval passes
+    quietly), and before this returns. While the supervisor is paused or e-stopped, or
+    another process holds a session of the run, the loop waits.
 
     Raises:
         SupervisorError: neither side can make progress and nothing of the run is in

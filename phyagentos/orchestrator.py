@@ -26,7 +26,7 @@ from phyagentos.agent.coordinator import AgentCoordinator, SessionSummary
 from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
 from phyagentos.agent.verifier import SessionVerifier
-from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
+from phyagentos.errors import GoalGraphError, PhyAgentOSError, ProtocolError, SupervisorError, format_choices
 from phyagentos.protocol import LEASED_STATES, TERMINAL_STATES, RunRecord, Workspace, utc_now_iso
 from phyagentos.resources import skill_dirs, tree_dirs
 from phyagentos.runtime.skills import SkillRegistry
@@ -88,8 +88,11 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     this process (its runner is still a separate, killable process), woken by its
     workspace watcher and the runner's pipe, and wakes the agent whenever it acted; the
     agent wakes the supervisor as soon as it submitted a session. Nothing sleeps on the
-    path from a verdict to the next session's claim. While the supervisor is paused or
-    e-stopped, or another process holds a session of the run, the loop waits.
+    path from a verdict to the next session's claim. The two views the hand-off would
+    rewrite (TASK.md and SESSIONS.md, neither fsynced) are brought up to date once the
+    next session has started (or the supervisor is paused, or a poll interval passes
+    quietly), and before this returns. While the supervisor is paused or e-stopped, or
+    another process holds a session of the run, the loop waits.
 
     Raises:
         SupervisorError: neither side can make progress and nothing of the run is in
@@ -103,6 +106,12 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     stop = threading.Event()
     failure: list[BaseException] = []
 
+    # SESSIONS.md (a view, never fsynced) is brought up to date when the agent would
+    # otherwise wait, in one rewrite for both threads' session writes, not by every
+    # session write on the path from a verdict to the next session's start.
+    agent.workspace.defer_index = True
+    supervisor.workspace.share_index_deferral(agent.workspace)
+
     def runtime_plane() -> None:
         try:
             while not stop.is_set():
@@ -112,9 +121,18 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
             failure.append(exc)
             wake.set()
 
+    def views_stale() -> bool:  # (a stand-in coordinator may know no deferred views)
+        return getattr(agent, "task_view_stale", False) or agent.workspace.index_pending
+
+    def catch_up_views() -> None:
+        if getattr(agent, "task_view_stale", False):
+            agent.write_task()
+        agent.workspace.flush_index()
+
     thread = threading.Thread(target=runtime_plane, name="phyagentos-supervisor", daemon=True)
     thread.start()
     agent.on_submit = supervisor.watcher.notify  # claim at once, before the agent rewrites TASK.md
+    agent.defer_task_view = True  # ... and rewrite it once the session has started (below)
     last_states: dict | None = None
     try:
         idle_checked = False
@@ -140,12 +158,19 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
                 say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
             last_states = states
             if agent.done(sessions) if sessions is not None else agent.done():
+                catch_up_views()
                 return
             if acted:
                 idle_checked = False
                 continue
-            waiting = [sid for sid, state, _ in agent.workspace.active_sessions(run_id=agent.run_id)
-                       if state == "pending" or state in LEASED_STATES]
+            active = agent.workspace.active_sessions(run_id=agent.run_id)
+            waiting = [sid for sid, state, _ in active if state == "pending" or state in LEASED_STATES]
+            if views_stale() and (
+                    supervisor.paused or supervisor.estopped
+                    or not any(state in _HANDOFF_STATES for _, state, _ in active)):
+                # The hand-off is over (the supervisor waits for the runner), or cannot go on
+                # now: the views the last step deferred no longer compete with a claim.
+                catch_up_views()
             if not waiting and not supervisor.busy:
                 # Nothing is in anyone's hands: one more step sees every change made so far.
                 if idle_checked:
@@ -156,13 +181,30 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
             idle_checked = False
             if supervisor.paused or supervisor.estopped:
                 say("supervisor " + ("e-stopped" if supervisor.estopped else "paused") + "; waiting")
-            wake.wait(supervisor.config.poll_interval_s)
+            if not wake.wait(supervisor.config.poll_interval_s):
+                catch_up_views()  # a quiet interval: whatever holds the hand-off up, the views are current
     finally:
         agent.on_submit = None
+        agent.defer_task_view = False
         stop.set()
         supervisor.watcher.notify()
         thread.join()
+        agent.workspace.defer_index = supervisor.workspace.defer_index = False
+        _flush_quietly(agent.workspace)  # the entries of both threads
 
+
+def _flush_quietly(workspace: Workspace) -> None:
+    """The SESSIONS.md entries still pending when ``drive_run`` ends (also on an error: a
+    failure here must not hide the one that ended the run; ``reconcile`` rebuilds a view
+    left behind)."""
+    try:
+        workspace.flush_index()
+    except (PhyAgentOSError, OSError) as exc:
+        logger.warning("SESSIONS.md of %s not brought up to date: %s", workspace.root, exc)
+
+
+#: Session states of a hand-off in progress: submitted, claimed, being preflighted.
+_HANDOFF_STATES = frozenset({"pending", "claimed", "preflight_checking"})
 
 #: Session states in which the Agent plane has something to do (verify, revise, or take
 #: over a verification whose verifier died).

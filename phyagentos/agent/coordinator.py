@@ -171,6 +171,13 @@ class AgentCoordinator:
         self.on_submit: Callable[[], None] | None = None
         #: the run's sessions as the last :meth:`step` left them (for its caller's report)
         self.last_sessions: list[SessionRecord] | None = None
+        #: ``True``: a step that submitted sessions leaves TASK.md (a view) to :meth:`write_task`,
+        #: which its caller runs once the hand-off is over (``drive_run``: once no session of the
+        #: run waits to be claimed or started), so that the step's re-listing and the view's
+        #: rendering do not compete with the supervisor's claim for the interpreter
+        self.defer_task_view = False
+        #: whether TASK.md lags behind the last step (a deferred write is due)
+        self.task_view_stale = False
 
     # -- state -----------------------------------------------------------
 
@@ -312,7 +319,7 @@ class AgentCoordinator:
         actions += replanned + resumed
         self.reopen_edges(sessions)
         states = self.node_states(sessions)
-        compiled = 0
+        submitted: list[SessionRecord] = []
         latest = self.latest_by_node(sessions)
         ready = dagmod.ready_nodes(self.dag, states)
         if self.graph.schedule == "file_order":  # one at a time, first in file order
@@ -327,13 +334,25 @@ class AgentCoordinator:
                                                          observed=self.observed(node.params.get("object"), sessions),
                                                          run_id=self.run_id)
             context = with_calls(context, planner_calls(self.graph.provenance))  # the plan's model calls
-            self.compiler.compile_node(node, parameters=params, context=context, target=target)
-            compiled += 1
+            submitted.append(self.compiler.compile_node(node, parameters=params, context=context, target=target))
             if self.on_submit is not None:
                 self.on_submit()
-        actions += compiled
-        self._write_task(self.sessions() if compiled else sessions)
+        actions += len(submitted)
+        if submitted and self.defer_task_view:
+            # the sessions this step left: the listing it made plus what it submitted (the
+            # only change this step made after that listing)
+            self.last_sessions = [*sessions, *submitted]
+            self.task_view_stale = True
+        else:
+            self._write_task(self.sessions() if submitted else sessions)
         return actions
+
+    def write_task(self) -> None:
+        """Write the TASK.md the last step deferred (see :attr:`defer_task_view`): the run's
+        sessions as that step left them, exactly what it would have written itself
+        (without listing them again: a change made since, e.g. a supervisor's rejection,
+        changes the run's active sessions, and the step that follows writes its own)."""
+        self._write_task(self.last_sessions)
 
     def _verify(self, session_id: str) -> int:
         ws = self.workspace
@@ -517,6 +536,7 @@ class AgentCoordinator:
     def _write_task(self, sessions: list[SessionRecord] | None = None) -> None:
         sessions = self.sessions() if sessions is None else sessions
         self.last_sessions = sessions
+        self.task_view_stale = False
         states = self.node_states(sessions)
         by_node: dict[str, list[str]] = {}
         for s in sessions:

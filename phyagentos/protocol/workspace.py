@@ -232,6 +232,11 @@ class Workspace:
         self._states = StateIndex(self.root / "sessions" / ".index")
         self._session_archive = SessionArchive(self.root / "sessions")
         self.runs = RunRegistry(self.root)
+        #: ``True``: session writes through this object leave their SESSIONS.md entries in
+        #: memory until :meth:`flush_index` (see there); ``False`` (default): each write
+        #: rewrites SESSIONS.md before it returns
+        self.defer_index = False
+        self._index_pending: dict[str, SessionIndexEntry] = {}
 
     def __repr__(self) -> str:
         return f"Workspace({str(self.root)!r})"
@@ -777,12 +782,26 @@ class Workspace:
                     fixed["orphan_hints"] += 1
         fixed["temp_files"] += self._remove_stale_temp_files(stale_hint_s)
         fixed["dead_presence"] += self._remove_dead_presence()
+        fixed["stale_index"] += self._index_is_stale(older_than_s=stale_hint_s)
         fixed = +fixed  # drop zero counts
         if fixed.keys() - {"malformed", "temp_files", "dead_presence"}:
             self.rebuild_index()
         if fixed:
             log.info("reconciled %s: %s", self.root, dict(fixed))
         return dict(fixed)
+
+    def _index_is_stale(self, *, older_than_s: float) -> bool:
+        """Whether SESSIONS.md shows a session in a state it left more than ``older_than_s``
+        ago (its writer was killed before the view caught up, e.g. with entries deferred
+        by :meth:`flush_index`'s callers). A malformed SESSIONS.md is left to its readers."""
+        try:
+            index = self.read("SESSIONS").data
+        except (DocumentError, ProtocolError, OSError):
+            return False
+        hints = self._states.entries()
+        cutoff = time.time() - older_than_s
+        return any(e.state not in _TERMINAL and hints.get(e.session_id) != e.state
+                   and _ts_key(e.updated_at).timestamp() < cutoff for e in index.sessions)
 
     def _remove_stale_temp_files(self, older_than_s: float) -> int:
         """Temp files ``.<name>.<random>.tmp`` (see :mod:`.atomic`) a killed writer left behind."""
@@ -868,13 +887,80 @@ class Workspace:
 
     def _index_upsert(self, record: SessionRecord) -> None:
         entry = self._index_entry(record)
+        if self.defer_index:
+            self._index_pending[record.session_id] = entry  # the latest write of a session wins
+            return
+        self._index_write([entry])
 
+    @property
+    def index_pending(self) -> bool:
+        """Whether SESSIONS.md entries wait for :meth:`flush_index`."""
+        return bool(self._index_pending)
+
+    def flush_index(self) -> None:
+        """Write the SESSIONS.md entries that session writes left pending (``defer_index``),
+        all in one rewrite of the view.
+
+        SESSIONS.md is a view of the session files, written atomically but never fsynced;
+        a process on a latency-critical path (``drive_run``: between a verdict and the
+        next session's first actuation) defers it to when it would otherwise wait. A
+        process killed with entries pending leaves the view behind the session files,
+        as a kill between a session write and its SESSIONS.md update always could;
+        :meth:`reconcile` rebuilds such a view.
+
+        Raises:
+            DocumentError: SESSIONS.md is malformed (the entries stay pending).
+        """
+        entries: dict[str, SessionIndexEntry] = {}
+        while self._index_pending:  # popitem is atomic: another thread may add meanwhile
+            try:
+                sid, entry = self._index_pending.popitem()
+            except KeyError:
+                break
+            if sid not in entries or _ts_key(entry.updated_at) >= _ts_key(entries[sid].updated_at):
+                entries[sid] = entry
+        if not entries:
+            return
+        try:
+            self._index_write(list(entries.values()), deferred=True)
+        except BaseException:
+            for sid, entry in entries.items():
+                self._index_pending.setdefault(sid, entry)
+            raise
+
+    def share_index_deferral(self, other: Workspace) -> None:
+        """Defer this object's SESSIONS.md entries into ``other``'s pending set (the
+        Workspace objects of one process's threads on the same workspace, e.g. the agent's
+        and the supervisor's in ``drive_run``): one :meth:`flush_index` of either writes
+        the entries of both in one rewrite. Sets :attr:`defer_index`.
+
+        Raises:
+            ProtocolError: ``other`` belongs to another workspace directory.
+        """
+        if other.root.resolve() != self.root.resolve():
+            raise ProtocolError(f"share_index_deferral: {other.root} is not the workspace {self.root}")
+        other._index_pending.update(self._index_pending)
+        self._index_pending = other._index_pending
+        self.defer_index = True
+
+    def _index_write(self, entries: list[SessionIndexEntry], *, deferred: bool = False) -> None:
         def apply(index: SessionsIndex) -> None:
             # Counted under the SESSIONS.md lock: every hint renamed before this write
             # is included, and any later rename is followed by its own upsert.
-            counts = Counter(self._states.entries().values())
-            others = [e for e in index.sessions if e.session_id != record.session_id]
-            index.sessions = self._trim_index([*others, entry])
+            hints = self._states.entries()
+            counts = Counter(hints.values())
+            new = entries
+            if deferred:
+                # Another writer (another Workspace object or process) may have moved a
+                # session on since: an entry older than the stored one, or of a state the
+                # session has left, is dropped (the later write has or makes its own).
+                stored = {e.session_id: _ts_key(e.updated_at) for e in index.sessions}
+                new = [e for e in entries
+                       if _ts_key(e.updated_at) >= stored.get(e.session_id, _ts_key(e.updated_at))
+                       and (e.state in _TERMINAL or hints.get(e.session_id) == e.state)]
+            ids = {e.session_id for e in new}
+            others = [e for e in index.sessions if e.session_id not in ids]
+            index.sessions = self._trim_index([*others, *new])
             index.counts = {state: counts[state] for state in SESSION_STATES if counts[state]}
 
         # SESSIONS.md is a view of the session files: atomic, but not fsynced (after a

@@ -1,0 +1,176 @@
+"""Views stay off the hand-off of ``phyagentos run`` (issue 12, round 4).
+
+Between a verdict and the next session's first actuation the agent's thread and the
+supervisor's share one interpreter. ``drive_run`` therefore defers the two views it
+rewrites there (neither fsynced, both rebuilt from the session files): the
+coordinator's TASK.md rewrite of a step that submitted, and the SESSIONS.md entry of
+every session write of either thread (``Workspace.defer_index``, one pending set shared
+by the agent's and the supervisor's Workspace objects), until the submitted session has
+been claimed and started; both are current again before the run returns. A deferred entry
+never overwrites a later write of its session, and ``reconcile`` rebuilds a view that
+a killed writer left behind.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from phyagentos.protocol import SessionRecord, Workspace, utc_now_iso
+from phyagentos.protocol.lifecycle import SessionLifecycle
+
+HOLD = Path(__file__).resolve().parent.parent / "goal_graphs" / "hold.yaml"
+
+
+def _chain(path: Path, n: int) -> Path:
+    nodes = [{"id": f"h{i}", "skill": "hold", "params": {"duration_s": 0.0},
+              "accept": {"still": {"max_joint_motion_rad": 0.01}},
+              "depends_on": [f"h{i - 1}"] if i else []} for i in range(n)]
+    path.write_text(yaml.safe_dump({"version": 1, "name": "chain", "defaults": {"target": "franka_tabletop"},
+                                    "nodes": nodes}))
+    return path
+
+
+def _agent(ws: Workspace, graph: Path):
+    from phyagentos.agent.agent_loop import load_run_graph
+    from phyagentos.agent.coordinator import AgentCoordinator
+    from phyagentos.orchestrator import _register_run, skill_names
+
+    run = _register_run(ws, graph, seed=0, target=None)
+    return AgentCoordinator(ws, load_run_graph(ws, run.run_id, skills=skill_names()), run_id=run.run_id), run
+
+
+def test_a_deferring_step_leaves_task_md_stale_but_knows_what_it_submitted(tmp_path):
+    ws = Workspace.create(tmp_path / "ws")
+    agent, run = _agent(ws, HOLD)
+    agent.defer_task_view = True
+    assert agent.step() == 1
+    assert agent.task_view_stale
+    assert ws.read("TASK").data.run_id != run.run_id  # not rewritten by the step
+    # the step's sessions include the one it submitted, without listing them again
+    assert [s.state for s in agent.last_sessions] == ["pending"]
+    assert {s.session_id for s in agent.last_sessions} == {sid for sid, _, _ in ws.active_sessions(run_id=run.run_id)}
+    agent.write_task()
+    assert not agent.task_view_stale
+    task = ws.read("TASK").data
+    assert task.run_id == run.run_id and [n.state for n in task.nodes] == ["running"]
+
+
+def test_a_step_that_submits_nothing_writes_task_md_even_when_deferring(tmp_path):
+    ws = Workspace.create(tmp_path / "ws")
+    agent, run = _agent(ws, HOLD)
+    agent.defer_task_view = True
+    agent.step()
+    assert agent.step() == 0  # nothing new
+    assert not agent.task_view_stale and ws.read("TASK").data.run_id == run.run_id
+
+
+def test_drive_run_defers_task_md_past_the_claim_and_leaves_it_current(tmp_path, monkeypatch):
+    from phyagentos.agent.coordinator import AgentCoordinator
+    from phyagentos.orchestrator import drive_run
+    from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
+
+    ws = Workspace.create(tmp_path / "ws")
+    agent, run = _agent(ws, _chain(tmp_path / "chain.yaml", 3))
+    written: list[set[str]] = []  # states of the run's active sessions whenever a deferred view is written
+    original = AgentCoordinator.write_task
+
+    def spy(self):
+        written.append({state for _, state, _ in self.workspace.active_sessions(run_id=self.run_id)})
+        original(self)
+
+    monkeypatch.setattr(AgentCoordinator, "write_task", spy)
+    # a long poll interval: no quiet-interval catch-up (e.g. while the first runner starts)
+    supervisor = WatchdogSupervisor(ws, config=SupervisorConfig(poll_interval_s=60.0))
+    try:
+        drive_run(agent, supervisor)
+    finally:
+        supervisor.close()
+    assert agent.succeeded()
+    assert len(written) >= 3, written  # once per submitted session, after its start
+    # never while a submitted session still waited to be claimed or started
+    assert all(not states & {"pending", "claimed", "preflight_checking"} for states in written), written
+    done = Workspace.open(ws.root)
+    task = done.read("TASK").data
+    assert task.run_id == run.run_id and [n.state for n in task.nodes] == ["succeeded"] * 3
+    # SESSIONS.md, deferred by both threads, shows every session as it ended
+    entries = {e.session_id: e.state for e in done.read("SESSIONS").data.sessions}
+    assert entries == {s.session_id: "succeeded" for s in agent.summary()}
+    assert done.read("SESSIONS").data.counts == {}
+
+
+def _record(sid: str = "s1") -> SessionRecord:
+    now = utc_now_iso()
+    return SessionRecord(session_id=sid, run_id="run-1", node="n", skill="hold", target="franka_tabletop",
+                         parameters={"duration_s": 0.0}, created_at=now, updated_at=now)
+
+
+def _index(ws: Workspace) -> dict[str, str]:
+    return {e.session_id: e.state for e in Workspace.open(ws.root).read("SESSIONS").data.sessions}
+
+
+def test_deferred_sessions_md_entries_are_written_together_on_flush(tmp_path):
+    ws = Workspace.create(tmp_path / "ws")
+    ws.defer_index = True
+    ws.submit_session(_record("s1"))
+    ws.submit_session(_record("s2"))
+    ws.update_session("s2", lambda r: SessionLifecycle(r).fire("time_out", reason="test"))
+    assert _index(ws) == {} and ws.index_pending
+    assert ws.load_session("s1").state == "pending"  # the session files are written at once
+    ws.flush_index()
+    assert _index(ws) == {"s1": "pending", "s2": "timed_out"} and not ws.index_pending
+    counts = Workspace.open(ws.root).read("SESSIONS").data.counts
+    assert counts == {"pending": 1}
+
+
+def test_a_deferred_entry_never_overwrites_a_later_write_of_its_session(tmp_path):
+    deferring = Workspace.create(tmp_path / "ws")
+    deferring.defer_index = True
+    other = Workspace.open(deferring.root)  # another writer (thread or process), not deferring
+    deferring.submit_session(_record("s1"))
+    deferring.submit_session(_record("s2"))
+    other.update_session("s1", lambda r: SessionLifecycle(r).fire("time_out", reason="test"))
+    assert _index(other) == {"s1": "timed_out"}
+    deferring.flush_index()  # its "pending" of s1 is older than the stored "timed_out": dropped
+    assert _index(other) == {"s1": "timed_out", "s2": "pending"}
+
+
+def test_reconcile_rebuilds_a_sessions_md_left_behind_by_a_killed_writer(tmp_path):
+    ws = Workspace.create(tmp_path / "ws")
+    ws.submit_session(_record("s1"))
+    ws.defer_index = True  # ... and the process is killed before it flushes
+    ws.update_session("s1", lambda r: SessionLifecycle(r).fire("time_out", reason="test"))
+    fresh = Workspace.open(ws.root)
+    assert _index(fresh) == {"s1": "pending"}
+    assert "stale_index" not in fresh.reconcile()  # a view younger than stale_hint_s may be a flush in progress
+    assert fresh.reconcile(stale_hint_s=-1.0).get("stale_index") == 1
+    assert _index(fresh) == {"s1": "timed_out"}
+    assert "stale_index" not in fresh.reconcile(stale_hint_s=-1.0)  # current again
+
+
+def test_two_workspace_objects_sharing_a_deferral_are_flushed_in_one_rewrite(tmp_path):
+    agent = Workspace.create(tmp_path / "ws")
+    agent.defer_index = True
+    supervisor = Workspace.open(agent.root)
+    supervisor.share_index_deferral(agent)
+    agent.submit_session(_record("s1"))
+    supervisor.update_session("s1", lambda r: SessionLifecycle(r).fire("time_out", reason="test"))
+    agent.submit_session(_record("s2"))
+    assert _index(agent) == {} and agent.index_pending and supervisor.index_pending
+    writes = []
+    original = agent.update
+    agent.update = lambda name, fn, **kw: writes.append(name) or original(name, fn, **kw)
+    agent.flush_index()
+    assert writes == ["SESSIONS"] and not supervisor.index_pending
+    assert _index(agent) == {"s1": "timed_out", "s2": "pending"}
+
+
+def test_sharing_a_deferral_with_another_workspace_is_refused(tmp_path):
+    import pytest
+
+    from phyagentos.errors import ProtocolError
+
+    a = Workspace.create(tmp_path / "a")
+    with pytest.raises(ProtocolError, match="is not the workspace"):
+        Workspace.create(tmp_path / "b").share_index_deferral(a)

@@ -59,7 +59,9 @@ def test_a_failed_make_becomes_a_candidate_that_later_successes_verify(tmp_path)
     doc = _lessons(ws)
     assert doc.lessons == []
     (cand,) = [c for c in doc.candidates if c.objective == "make wood_pickaxe"]
-    assert cand.cause == "recipe.learned" and cand.revision == {"near": ["table"]}
+    # the stations (handed to the skill as ``near``) and what the recipe uses (to tell an
+    # informative planned failure from one without the items in hand)
+    assert cand.cause == "recipe.learned" and cand.revision == {"near": ["table"], "uses": {"wood": 1}}
     assert "uses 1 wood" in cand.correction
     assert set(failed[0].provenance) <= set(cand.provenance)  # the failure is part of its evidence
 
@@ -178,3 +180,45 @@ def test_a_recipe_station_the_player_cannot_build_falls_back_to_the_search(tmp_p
     assert kinds[:2] == ["game_place", "game_recipe_abandoned"] and kinds[-1] == "game_make"
     assert [r for r in trace if r["kind"] == "game_place"][0]["item"] == "stone"
     assert [r for r in trace if r["kind"] == "game_make"][-1]["ok"]
+
+
+def test_a_recipe_is_judged_by_its_planned_attempts_not_by_the_sessions_verdict(tmp_path):
+    from phyagentos.agent.memory.recipes import RecipeBook, recipe_id  # noqa: PLC0415
+    from phyagentos.protocol import ContextItem, Lesson, SessionContext, SessionRecord, Verdict  # noqa: PLC0415
+    from phyagentos.protocol.lifecycle import utc_now  # noqa: PLC0415
+
+    ws = Workspace.create(tmp_path / "ws")
+    book = RecipeBook(ws)
+    rid = recipe_id("stone_pickaxe", ["table"])
+    scope = {"embodiment": "crafter", "skill": "game_make", "object_class": "item:stone_pickaxe", "risk_factors": []}
+    ws.update("LESSONS", lambda doc: doc.model_copy(update={"lessons": [Lesson(
+        id=rid, objective="make stone_pickaxe", evidence=[], cause="recipe.learned", correction="needs table",
+        scope=scope, strategy="recipe", revision={"near": ["table"], "uses": {"wood": 1, "stone": 1}}, verified=True,
+        confirmations=1)]}))
+
+    def session(sid, verdict):
+        now = utc_now()
+        ctx = SessionContext(built_at=now, items=[ContextItem(kind="lesson", id=rid, summary="recipe",
+                                                              applied={"near": ["table"]})])
+        return SessionRecord(session_id=sid, run_id="r", node="make_stone_pickaxe", skill="game_make", target="crafter",
+                             parameters={"item": "stone_pickaxe", "near": ["table"]}, context=ctx, created_at=now,
+                             updated_at=now), Verdict(verdict=verdict, reason=verdict, at=now)
+
+    def make(ok, inv, nearby=("grass", "table")):
+        return {"kind": "game_make", "item": "stone_pickaxe", "ok": ok, "nearby": list(nearby), "recipe_known": True,
+                "inventory_before": inv, "inventory_after": {**inv, "stone_pickaxe": int(ok)}}
+
+    def lesson():
+        return next(l for l in ws.read("LESSONS").data.lessons if l.id == rid)
+
+    # a planned try without the stone it uses fails: no evidence about the stations
+    book.learn(*session("s-1", "failure"), [make(False, {"wood": 3, "stone": 0})])
+    assert (lesson().confirmations, lesson().refutations) == (1, 0)
+    # a planned success confirms it and mints no new hypothesis ("table and tree" from one success)
+    book.learn(*session("s-2", "success"), [make(True, {"wood": 3, "stone": 2}, ("grass", "table", "tree"))])
+    doc = ws.read("LESSONS").data
+    assert (lesson().confirmations, lesson().verified_by) == (2, ["s-2"])
+    assert [c for c in doc.candidates if c.revision.get("near")] == []
+    # a planned failure with the items in hand refutes it
+    book.learn(*session("s-3", "failure"), [make(False, {"wood": 3, "stone": 2})])
+    assert (lesson().refutations, lesson().refuted_by) == (1, ["s-3"])

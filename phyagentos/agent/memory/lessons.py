@@ -227,8 +227,8 @@ class LessonBook:
                     touched.append(lesson.id)
             for lid in applied:
                 lesson = next((l for l in doc.lessons if l.id == lid), None)
-                if lesson is None or lesson.trial is not None:  # a trial decides it, not one verdict
-                    continue
+                if lesson is None or lesson.trial is not None or lesson.strategy == "recipe":
+                    continue  # decided by their own evidence: a trial (deaths.py), planned makes (recipes.py)
                 if success:
                     lesson.confirmations += 1
                     lesson.verified_by = _keep(lesson.verified_by, sid)

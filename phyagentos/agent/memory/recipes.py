@@ -12,13 +12,19 @@ From those records, and nothing else:
    of the session that had the items (:func:`hypothesis`), and the items it uses are
    the inventory's decrease;
 3. the ContextBuilder hands the hypothesis to the next ``game_make`` session of that
-   item (parameter ``near``; the session's context records it); when that session's
-   planned attempt succeeds, the candidate becomes a *verified* lesson, ``verified_by``
-   that session. A success without one of the stations a recipe names refutes it (it
-   asks for too much) and the smaller set becomes the hypothesis; a session that cannot
-   follow a recipe searches instead (the skill's own fallback). From then on the generic lesson accounting
-   (:meth:`~phyagentos.agent.memory.lessons.LessonBook.resolve`) counts confirmations and
-   refutations; a planned attempt that fails refutes the hypothesis.
+   item (parameter ``near``; the session's context records it). A recipe is judged only
+   by the attempts made *as planned* with it (``recipe_known``): a planned success
+   confirms it (a candidate becomes a *verified* lesson, ``verified_by`` that session)
+   and mints no new hypothesis (the plan explains the success; a hypothesis from one
+   success and no failure would name every material around it); a planned failure with
+   the items the recipe uses in hand refutes it; a session that never tried it as
+   planned (it died first, or lacked the items) is no evidence either way, and so is
+   its verdict (the generic verdict accounting,
+   :meth:`~phyagentos.agent.memory.lessons.LessonBook.resolve`, leaves recipes alone:
+   it refuted verified recipes for sessions that died before they could make
+   anything). A success the *search* found without one of the stations a recipe names
+   refutes that recipe (it asks for too much) and the smaller set becomes the
+   hypothesis.
 
 Lesson ids are ``R`` + a hash of (item, stations), so the same recipe learned in two
 worlds is one lesson. The scope is ``{embodiment, skill: game_make, object_class:
@@ -54,6 +60,12 @@ def recipe_id(item: str, near: Iterable[str]) -> str:
 def failure_id(item: str) -> str:
     """Id of the candidate that collects the failed attempts of ``item`` before any success."""
     return "R" + hashlib.sha1(canonical(["recipe-unknown", item]).encode()).hexdigest()[:10]
+
+
+def _holds(attempt: Mapping[str, Any], uses: Mapping[str, int]) -> bool:
+    """The inventory before ``attempt`` held every item of ``uses``."""
+    inv = attempt.get("inventory_before") or {}
+    return all(int(inv.get(k, 0)) >= int(n) for k, n in uses.items())
 
 
 def _keep(items: Iterable[str], *new: str) -> list[str]:
@@ -129,11 +141,41 @@ class RecipeBook:
         touched: list[str] = []
         refs = list(evidence)
 
+        def count(lesson: Lesson, *, confirm: bool) -> None:
+            if confirm:
+                lesson.confirmations += 1
+                lesson.verified_by = _keep(lesson.verified_by, sid)
+            else:
+                lesson.refutations += 1
+                lesson.refuted_by = _keep(lesson.refuted_by, sid)
+            lesson.evidence = _keep(lesson.evidence, *refs)
+            lesson.updated_at = now
+            touched.append(lesson.id)
+
         def apply(doc: LessonsDoc) -> None:
             for item, attempts in by_item.items():
                 scope = self._scope(item)
+                # 1. the recipe memory handed over, judged by its planned attempts only: a
+                #    planned success confirms it (a candidate becomes a lesson); a planned
+                #    failure with the items it uses in hand refutes it; a session that never
+                #    tried it as planned (it died, lacked the items) says nothing about it
+                planned_ok = any(a.get("ok") and a.get("recipe_known") for a in attempts)
+                for lesson in [l for l in [*doc.candidates, *doc.lessons]
+                               if l.id in applied and l.scope == scope and l.revision.get("near")]:
+                    uses = lesson.revision.get("uses") or {}
+                    failed_in_hand = any(a.get("recipe_known") and not a.get("ok") and _holds(a, uses) for a in attempts)
+                    if planned_ok:
+                        if lesson in doc.candidates:
+                            doc.candidates = [c for c in doc.candidates if c.id != lesson.id]
+                            lesson.verified = True
+                            doc.lessons.append(lesson)
+                            logger.info("recipe %s verified by %s: %s", lesson.id, sid, lesson.correction)
+                        count(lesson, confirm=True)
+                    elif failed_in_hand:
+                        count(lesson, confirm=False)
+                if planned_ok:
+                    continue  # the plan explains the success: no new hypothesis from it
                 found = hypothesis(attempts)
-                planned = [a for a in attempts if a.get("recipe_known")]
                 if found is None:
                     fid = failure_id(item)
                     cand = next((c for c in doc.candidates if c.id == fid), None)
@@ -152,27 +194,16 @@ class RecipeBook:
                     cand.refuted_by = _keep(cand.refuted_by, sid)
                     cand.updated_at = now
                     touched.append(fid)
-                    # A planned attempt that failed refutes the hypothesis it applied.
-                    for c in doc.candidates:
-                        if c.id in applied and c.scope == scope and planned:
-                            c.refutations += 1
-                            c.refuted_by = _keep(c.refuted_by, sid)
-                            c.updated_at = now
-                            touched.append(c.id)
                     continue
+                # 2. a success the search found: a hypothesis (still a candidate)
                 stations, uses = found
                 wins = [set(a.get("nearby") or ()) for a in attempts if a.get("ok")]
-                planned_failed = any(a.get("recipe_known") and not a.get("ok") for a in attempts)
                 for c in [*doc.candidates, *doc.lessons]:
                     near = set(c.revision.get("near") or ())
                     if c.scope != scope or not near:
                         continue
-                    if any(not near <= w for w in wins) or (planned_failed and c.id in applied):
-                        # a success without some station it names: the recipe asks for too much
-                        c.refutations += 1
-                        c.refuted_by = _keep(c.refuted_by, sid)
-                        c.updated_at = now
-                        touched.append(c.id)
+                    if any(not near <= w for w in wins):
+                        count(c, confirm=False)  # a success without some station it names: it asks for too much
                     elif c in doc.candidates and near & set(stations) and not near >= set(stations):
                         stations = sorted(near & set(stations))  # both explain the successes: the smaller
                 rid = recipe_id(item, stations)
@@ -180,26 +211,13 @@ class RecipeBook:
                         f"{', '.join(f'{n} {k}' for k, n in sorted(uses.items())) or 'nothing'}")
                 lesson = next((l for l in doc.lessons if l.id == rid), None)
                 cand = next((c for c in doc.candidates if c.id == rid), None)
-                confirmed_plan = rid in applied and any(a.get("ok") and a.get("recipe_known") for a in attempts)
                 fid = failure_id(item)
                 failed = next((c for c in doc.candidates if c.id == fid), None)
-                if lesson is None and confirmed_plan:
-                    base = cand or Lesson(id=rid, objective=f"make {item}", evidence=[], cause="recipe.learned",
-                                          correction=text, scope=scope, strategy="recipe",
-                                          revision={"near": stations})
-                    lesson = base.model_copy(deep=True)
-                    lesson.verified = True
-                    lesson.confirmations = 1
-                    lesson.verified_by = [sid]
-                    lesson.evidence = _keep(lesson.evidence, *refs)
-                    lesson.updated_at = now
-                    doc.lessons.append(lesson)
-                    doc.candidates = [c for c in doc.candidates if c.id != rid]
-                    logger.info("recipe %s verified by %s: %s", rid, sid, text)
-                elif lesson is None:
+                if lesson is None:
                     if cand is None:
                         cand = Lesson(id=rid, objective=f"make {item}", evidence=[], cause="recipe.learned",
-                                      correction=text, scope=scope, strategy="recipe", revision={"near": stations})
+                                      correction=text, scope=scope, strategy="recipe",
+                                      revision={"near": stations, "uses": uses})
                         doc.candidates.append(cand)
                     cand.provenance = _keep(cand.provenance, sid)
                     cand.evidence = _keep(cand.evidence, *refs)
@@ -209,7 +227,7 @@ class RecipeBook:
                         cand.evidence = _keep(failed.evidence, *cand.evidence)
                         doc.candidates = [c for c in doc.candidates if c.id != fid]
                 else:
-                    lesson.evidence = _keep(lesson.evidence, *refs)  # counts: LessonBook.resolve
+                    lesson.evidence = _keep(lesson.evidence, *refs)  # consistent with it, but not its test
                 touched.append(rid)
 
         self.workspace.update("LESSONS", apply)

@@ -1,6 +1,7 @@
 """``phyagentos plan`` and ``phyagentos mcp``: the thinking half of the Agent plane on the command line.
 
     phyagentos plan "REQUEST" --workspace WS [--scene SCENE.yaml] [--target NAME] [--run] [--json]
+    phyagentos plan "get a stone pickaxe" --workspace WS --library goal_graphs/crafter_tech_tree.yaml [--run]
     phyagentos mcp --workspace WS [--http] [--port N]
 
 ``plan`` prints the goal graph the Goal Planner compiled (YAML and its DAG), validated,
@@ -25,7 +26,7 @@ from typing import Any
 from phyagentos.errors import GoalGraphError
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_reviser", "default_scene", "load_scene",
+__all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_library_planner", "make_reviser", "default_scene", "load_scene",
            "perceived_entities"]
 
 EXIT_OK, EXIT_NOT_SUCCEEDED = 0, 1
@@ -77,6 +78,17 @@ def make_planner(workspace, *, client=None):
                        reach=partial(answer_reach_query, root=workspace.root))
 
 
+def make_library_planner(workspace, *, client=None):
+    """A LibraryPlanner (a request as one goal of a task library) with the configured model."""
+    from phyagentos.agent.library_planner import LibraryPlanner  # noqa: PLC0415
+    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
+    from phyagentos.orchestrator import skill_names  # noqa: PLC0415
+
+    targets = [t.name for t in workspace.read("TARGETS").data.targets]
+    return LibraryPlanner(client or make_client(load_llm_config(workspace.root)), skills=skill_names(),
+                          targets=targets)
+
+
 def make_reviser(kind: str, workspace_dir: str | Path):
     """``None`` for the rule ladder (the verifier's default), or a ModelReviser (the configured model) with the
     ladder as fallback and a TargetChooser that asks the Runtime's IK (a re-target to another capable target)."""
@@ -103,6 +115,8 @@ def add_agent_commands(sub: argparse._SubParsersAction) -> None:
     plan.add_argument("--scene", type=Path, help="scene YAML or a goal graph with a scene (default: the tabletop "
                                                  "scene of goal_graphs/pick_and_place.yaml)")
     plan.add_argument("--target", help="prefer this target when it fits (the selector decides otherwise)")
+    plan.add_argument("--library", type=Path, help="plan as one goal of this goal graph and what it depends on "
+                                                   "(a task library, e.g. goal_graphs/crafter_tech_tree.yaml)")
     plan.add_argument("--run", action="store_true", help="run the planned graph like `phyagentos run`")
     plan.add_argument("--json", action="store_true", help="print one JSON object")
     plan.add_argument("--seed", type=int, default=0, help="base seed of the run's sessions (with --run)")
@@ -121,10 +135,14 @@ def _cmd_plan(args, out, err) -> int:
     from phyagentos.protocol import Workspace  # noqa: PLC0415
 
     workspace = Workspace.create(args.workspace)
-    scene = load_scene(args.scene) if args.scene else default_scene()
-    planner = make_planner(workspace)
-    result = planner.plan(args.request, scene=scene, environment=perceived_entities(workspace),
-                          prefer_target=args.target)
+    if args.library is not None:  # a goal of a task library (agent/library_planner.py)
+        planner = make_library_planner(workspace)
+        result = planner.plan(args.request, library=args.library)
+    else:
+        scene = load_scene(args.scene) if args.scene else default_scene()
+        planner = make_planner(workspace)
+        result = planner.plan(args.request, scene=scene, environment=perceived_entities(workspace),
+                              prefer_target=args.target)
     plan_id = datetime.now(timezone.utc).strftime("plan-%Y%m%dT%H%M%S%fZ")
     paths = write_plan(result, workspace.root / "plans" / plan_id)
     poses = None

@@ -143,14 +143,20 @@ BUILD_FOR_RECIPE = {
 }
 
 
-def test_a_known_recipe_whose_station_is_nowhere_places_it_and_makes_the_tool(tmp_path):
-    graph = tmp_path / "build.yaml"
-    graph.write_text(yaml.safe_dump(BUILD_FOR_RECIPE))
+def _run_make(graph: dict, tmp_path, *, seed: int):
+    """Run ``graph`` (it must succeed); ``(workspace dir, trace of its make_wood_pickaxe session)``."""
+    path = tmp_path / "graph.yaml"
+    path.write_text(yaml.safe_dump(graph))
     ws = tmp_path / "ws"
-    report = run_goal_graph(graph, ws, seed=2)
+    report = run_goal_graph(path, ws, seed=seed)
     assert report.succeeded, report.to_dict()
     make = next(s for s in report.sessions if s.node == "make_wood_pickaxe")
-    trace = [yaml.safe_load(line) for line in (ws / "evidence" / make.session_id / "trace.jsonl").read_text().splitlines()]
+    lines = (ws / "evidence" / make.session_id / "trace.jsonl").read_text().splitlines()
+    return ws, [yaml.safe_load(line) for line in lines]
+
+
+def test_a_known_recipe_whose_station_is_nowhere_places_it_and_makes_the_tool(tmp_path):
+    ws, trace = _run_make(BUILD_FOR_RECIPE, tmp_path, seed=2)
     built = [r for r in trace if r.get("kind") == "game_place"]
     assert [(r["item"], r["ok"], r["for_recipe"]) for r in built] == [("table", True, "wood_pickaxe")]
     makes = [r for r in trace if r.get("kind") == "game_make"]
@@ -169,13 +175,7 @@ def test_a_recipe_station_the_player_cannot_build_falls_back_to_the_search(tmp_p
                               "depends_on": ["collect_wood"], "accept": {"achieved": "place_table"}})
     graph["nodes"][2] = {**graph["nodes"][2], "depends_on": ["place_table"],
                          "params": {"item": "wood_pickaxe", "near": ["stone", "table"]}}
-    path = tmp_path / "g.yaml"
-    path.write_text(yaml.safe_dump(graph))
-    ws = tmp_path / "ws"
-    report = run_goal_graph(path, ws, seed=3)
-    assert report.succeeded, report.to_dict()
-    make = next(s for s in report.sessions if s.node == "make_wood_pickaxe")
-    trace = [yaml.safe_load(line) for line in (ws / "evidence" / make.session_id / "trace.jsonl").read_text().splitlines()]
+    _, trace = _run_make(graph, tmp_path, seed=3)
     kinds = [r["kind"] for r in trace if r["kind"] in ("game_place", "game_recipe_abandoned", "game_make")]
     assert kinds[:2] == ["game_place", "game_recipe_abandoned"] and kinds[-1] == "game_make"
     assert [r for r in trace if r["kind"] == "game_place"][0]["item"] == "stone"

@@ -59,6 +59,8 @@ from phyagentos.protocol import Lesson, LessonsDoc, SessionRecord, Trial, Worksp
 from phyagentos.protocol.lifecycle import utc_now
 
 from .conditions import canonical
+from .lessons import count_outcome
+from .lessons import keep_refs as _keep
 
 __all__ = ["diagnose_death", "DeathBook", "DEATH_CAUSES", "SURVIVAL_KEYS", "correction_for", "correction_acted",
            "trial_arm", "trial_decision", "session_steps", "TRIAL_ALPHA", "TRIAL_MIN_STEPS", "TRIAL_MIN_DEATHS"]
@@ -72,7 +74,6 @@ _DEFAULTS = {"drink_below": 4, "food_below": 4, "energy_below": 3, "health_below
 #: threshold -> (the reflex mode it triggers, the vital it compares)
 _REFLEX_MODE = {"drink_below": ("drink", "drink"), "food_below": ("eat", "food"), "energy_below": ("rest", "energy"),
                 "health_below": ("retreat", "health")}
-_MAX_REFS = 12
 #: The skill parameters survival lessons set (every game skill's reflex thresholds).
 SURVIVAL_KEYS = frozenset(_DEFAULTS)
 #: One-sided significance of a trial's decision (module doc: repeated looks, hence small).
@@ -178,10 +179,6 @@ def _lid(cause: str, revision: Mapping[str, Any]) -> str:
     return "D" + hashlib.sha1(canonical(["death", cause, revision]).encode()).hexdigest()[:10]
 
 
-def _keep(items, *new):
-    return list(dict.fromkeys([*items, *new]))[-_MAX_REFS:]
-
-
 class DeathBook:
     """Death lessons in LESSONS.md of ``workspace`` and their trials (module doc)."""
 
@@ -238,14 +235,12 @@ class DeathBook:
                 if outcome == "verified":
                     doc.candidates = [c for c in doc.candidates if c.id != item.id]
                     item.verified = True
-                    item.confirmations += 1
-                    item.verified_by = _keep(item.verified_by, sid)
+                    count_outcome(item, sid, confirmed=True, now=now)
                     doc.lessons.append(item)
                     logger.info("survival lesson %s verified by its trial (p=%.3f): %s", item.id, t.p_value,
                                 item.correction)
                 elif outcome == "refuted":
-                    item.refutations += 1
-                    item.refuted_by = _keep(item.refuted_by, sid)
+                    count_outcome(item, sid, confirmed=False, now=now)
                     logger.info("survival lesson %s refuted by its trial (p=%.3f)", item.id, t.p_value)
                 touched.append(item.id)
             if found is None:

@@ -40,7 +40,7 @@ from phyagentos.protocol.lifecycle import utc_now
 from ..recovery import SITUATIONAL
 from .conditions import Conditions, canonical, scope_matches
 
-__all__ = ["LessonBook", "lesson_id", "MAX_LESSONS", "MAX_CANDIDATES", "MAX_REFS"]
+__all__ = ["LessonBook", "lesson_id", "keep_refs", "count_outcome", "MAX_LESSONS", "MAX_CANDIDATES", "MAX_REFS"]
 
 logger = logging.getLogger(__name__)
 
@@ -55,9 +55,25 @@ def lesson_id(cause: str, strategy: str, revision: dict[str, Any], scope: dict[s
     return f"L{digest}"
 
 
-def _keep(items: Iterable[str], *new: str) -> list[str]:
+def keep_refs(items: Iterable[str], *new: str) -> list[str]:
+    """``items`` then ``new`` without repeats, the newest :data:`MAX_REFS` kept."""
     merged = list(dict.fromkeys([*items, *new]))
     return merged[-MAX_REFS:]
+
+
+_keep = keep_refs
+
+
+def count_outcome(lesson: Lesson, session_id: str, *, confirmed: bool, now: str) -> None:
+    """Count one confirmation (``verified_by``) or refutation (``refuted_by``) of ``lesson`` by
+    session ``session_id``, in place."""
+    if confirmed:
+        lesson.confirmations += 1
+        lesson.verified_by = keep_refs(lesson.verified_by, session_id)
+    else:
+        lesson.refutations += 1
+        lesson.refuted_by = keep_refs(lesson.refuted_by, session_id)
+    lesson.updated_at = now
 
 
 def corrective(revision: Revision) -> dict[str, Any]:
@@ -229,13 +245,7 @@ class LessonBook:
                 lesson = next((l for l in doc.lessons if l.id == lid), None)
                 if lesson is None or lesson.trial is not None or lesson.strategy == "recipe":
                     continue  # decided by their own evidence: a trial (deaths.py), planned makes (recipes.py)
-                if success:
-                    lesson.confirmations += 1
-                    lesson.verified_by = _keep(lesson.verified_by, sid)
-                else:
-                    lesson.refutations += 1
-                    lesson.refuted_by = _keep(lesson.refuted_by, sid)
-                lesson.updated_at = now
+                count_outcome(lesson, sid, confirmed=success, now=now)
                 touched.append(lid)
             doc.lessons = _bound(doc.lessons, MAX_LESSONS)
 

@@ -42,6 +42,8 @@ from phyagentos.protocol import Lesson, LessonsDoc, SessionRecord, Verdict, Work
 from phyagentos.protocol.lifecycle import utc_now
 
 from .conditions import canonical
+from .lessons import count_outcome
+from .lessons import keep_refs as _keep
 
 __all__ = ["RecipeBook", "recipe_id", "failure_id", "hypothesis", "GROUND"]
 
@@ -49,7 +51,6 @@ logger = logging.getLogger(__name__)
 
 #: Materials a player walks on: background, not stations (Crafter's ``walkable``).
 GROUND = frozenset({"grass", "sand", "path"})
-_MAX_REFS = 12
 
 
 def recipe_id(item: str, near: Iterable[str]) -> str:
@@ -66,10 +67,6 @@ def _holds(attempt: Mapping[str, Any], uses: Mapping[str, int]) -> bool:
     """The inventory before ``attempt`` held every item of ``uses``."""
     inv = attempt.get("inventory_before") or {}
     return all(int(inv.get(k, 0)) >= int(n) for k, n in uses.items())
-
-
-def _keep(items: Iterable[str], *new: str) -> list[str]:
-    return list(dict.fromkeys([*items, *new]))[-_MAX_REFS:]
 
 
 def hypothesis(attempts: Sequence[Mapping[str, Any]]) -> tuple[list[str], dict[str, int]] | None:
@@ -142,14 +139,8 @@ class RecipeBook:
         refs = list(evidence)
 
         def count(lesson: Lesson, *, confirm: bool) -> None:
-            if confirm:
-                lesson.confirmations += 1
-                lesson.verified_by = _keep(lesson.verified_by, sid)
-            else:
-                lesson.refutations += 1
-                lesson.refuted_by = _keep(lesson.refuted_by, sid)
+            count_outcome(lesson, sid, confirmed=confirm, now=now)
             lesson.evidence = _keep(lesson.evidence, *refs)
-            lesson.updated_at = now
             touched.append(lesson.id)
 
         def apply(doc: LessonsDoc) -> None:
@@ -190,9 +181,7 @@ class RecipeBook:
                     cand.correction = text
                     cand.provenance = _keep(cand.provenance, sid)
                     cand.evidence = _keep(cand.evidence, *refs)
-                    cand.refutations += 1
-                    cand.refuted_by = _keep(cand.refuted_by, sid)
-                    cand.updated_at = now
+                    count_outcome(cand, sid, confirmed=False, now=now)
                     touched.append(fid)
                     continue
                 # 2. a success the search found: a hypothesis (still a candidate)

@@ -118,3 +118,58 @@ def test_a_process_that_loaded_the_check_runs_it_itself_as_it_adapted_it(tmp_pat
     monkeypatch.setattr(graph_check, "check_goal_graph", lambda *a, **k: calls.append(k) or "checked here")
     assert check_goal_graph_forked(HOLD, ws.root, target="franka_tabletop") == "checked here"
     assert calls == [{"target": "franka_tabletop"}]
+
+
+def _freeze_count(conn) -> None:
+    import gc
+
+    conn.send(gc.get_freeze_count())
+    conn.close()
+
+
+def test_children_of_the_runner_forkserver_start_with_its_imports_frozen():
+    # gc.freeze() after the preload: a forked runner's collections never walk (and so
+    # never copy) the forkserver's pages of MuJoCo, SciPy and the primitives.
+    from phyagentos.runtime.worker import forkserver_context
+
+    ctx = forkserver_context()
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_freeze_count, args=(child,), daemon=True)
+    proc.start()
+    child.close()
+    try:
+        assert parent.poll(120), "the forkserver child did not answer"
+        frozen = parent.recv()
+    finally:
+        proc.join(timeout=10)
+    assert frozen > 100_000  # the runtime's imports: several hundred thousand objects
+
+
+def test_closing_a_watcher_does_not_wait_out_watchdogs_move_pairing_delay(tmp_path):
+    # A session file archived out of a watched directory leaves watchdog an unmatched
+    # IN_MOVED_FROM that its emitter holds for 0.5 s before stop() can join it; close()
+    # hands that join to a daemon thread, which still finishes it.
+    import os
+    import threading
+
+    from phyagentos.protocol.watch import WorkspaceWatcher
+
+    (tmp_path / "archive").mkdir()
+    watcher = WorkspaceWatcher(tmp_path, dirs=("sessions",))
+    assert watcher.mode == "inotify"
+    observer = watcher._observer
+    (tmp_path / "sessions" / "s.md").write_text("x")
+    assert watcher.wait(5.0)
+    os.rename(tmp_path / "sessions" / "s.md", tmp_path / "archive" / "s.md")
+
+    watcher.close()
+    stoppers = [t for t in threading.enumerate() if t.name == "phyagentos-watch-stop"]
+    assert watcher._observer is None and len(stoppers) == 1
+    stoppers[0].join(timeout=10)
+    assert not observer.is_alive()
+    watcher.notify()  # a late event after close is dropped, not an error
+
+    waited = WorkspaceWatcher(tmp_path, dirs=("sessions",))
+    observer = waited._observer
+    waited.close(wait=True)
+    assert not observer.is_alive()

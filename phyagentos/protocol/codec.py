@@ -17,8 +17,11 @@ from __future__ import annotations
 import enum
 import logging
 import os
+import pickle
 import re
+import threading
 import types
+from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +46,7 @@ __all__ = [
     "parse_yaml",
     "read_yaml",
     "dump_yaml",
+    "PARSE_CACHE",
 ]
 
 log = logging.getLogger(__name__)
@@ -345,8 +349,13 @@ def parse_yaml(text: str, model: type[M], *, path: str | os.PathLike[str] | None
             validation error, with the 1-based line in ``text``.
     """
     where = Path(path) if path is not None else None
+    cached = PARSE_CACHE.get("yaml", model, text)
+    if cached is not None:
+        return cached
     node, data = _load(text, where, 1)
-    return _validate(node, data, model, where, 1)
+    value = _validate(node, data, model, where, 1)
+    PARSE_CACHE.put("yaml", model, text, value)
+    return value
 
 
 def _read_text(path: Path) -> str:
@@ -367,6 +376,93 @@ def read_yaml(path: str | os.PathLike[str], model: type[M]) -> M:
     """
     where = Path(path)
     return parse_yaml(_read_text(where), model, path=where)
+
+
+# ---------------------------------------------------------------------------
+# Parse cache: the same text parses to the same value.
+
+
+def _plain(value: Any) -> bool:
+    """True if ``value`` holds only what the YAML loader itself produces (dict with str
+    keys, list, str, int, float, bool, None; exact types), so that dumping and loading
+    it gives back an equal value of the same types."""
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        t = type(v)
+        if t is dict:
+            for k, item in v.items():
+                if type(k) is not str:
+                    return False
+                stack.append(item)
+        elif t is list:
+            stack.extend(v)
+        elif t not in (str, int, float, bool, type(None)):
+            return False
+    return True
+
+
+class _ParseCache:
+    """Validated values by the exact text they were parsed from (and the model and
+    kind of parse), least recently used first out.
+
+    Every session hand-off re-reads files that have not changed since this process last
+    read or wrote them (``TARGETS.md``, ``safety.yaml``, ``LOG.md`` before an append, a
+    session file before its next transition); parsing and validating one costs about
+    1 ms. A hit returns a new copy (unpickled), so callers may mutate what they get.
+    The key is the whole text, never a file's size or time stamp, so a changed file is
+    always parsed afresh, and errors are never cached. Bounded by entries and by the
+    characters of the texts it holds.
+    """
+
+    def __init__(self, *, max_entries: int = 512, max_chars: int = 16_000_000) -> None:
+        self._items: OrderedDict[tuple[str, type, str], bytes] = OrderedDict()
+        self._chars = 0
+        self._lock = threading.Lock()
+        self.max_entries = max_entries
+        self.max_chars = max_chars
+        self.hits = 0
+        self.misses = 0
+
+    def get(self, kind: str, model: type, text: str) -> Any:
+        key = (kind, model, text)
+        with self._lock:
+            blob = self._items.get(key)
+            if blob is None:
+                self.misses += 1
+                return None
+            self._items.move_to_end(key)
+            self.hits += 1
+        return pickle.loads(blob)
+
+    def put(self, kind: str, model: type, text: str, value: Any) -> None:
+        if len(text) > self.max_chars // 8:
+            return
+        try:
+            blob = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:  # noqa: BLE001 - an unpicklable value is simply not cached
+            return
+        key = (kind, model, text)
+        with self._lock:
+            if key in self._items:
+                self._items.move_to_end(key)
+                return
+            self._items[key] = blob
+            self._chars += len(text)
+            while len(self._items) > self.max_entries or self._chars > self.max_chars:
+                (_, _, old), _ = self._items.popitem(last=False)
+                self._chars -= len(old)
+
+    def clear(self) -> None:
+        """Forget every entry and reset the hit and miss counts."""
+        with self._lock:
+            self._items.clear()
+            self._chars = 0
+            self.hits = self.misses = 0
+
+
+#: This process's parse cache (see :class:`_ParseCache`).
+PARSE_CACHE = _ParseCache()
 
 
 # ---------------------------------------------------------------------------
@@ -417,6 +513,10 @@ def parse_document(
             error; ``line`` is the 1-based line in the file.
     """
     where = Path(path) if path is not None else None
+    cached = PARSE_CACHE.get("document", model, text)
+    if cached is not None:
+        prefix, data, suffix = cached
+        return Document(prefix=prefix, data=data, suffix=suffix, path=where)
     lines = _split_lines(text)
     blocks: list[tuple[int, int]] = []  # (open index, close index)
     open_at: tuple[int, int, bool] | None = None  # (index, backticks, is_yaml)
@@ -461,7 +561,9 @@ def parse_document(
     first_line = open_index + 2  # 1-based file line of the block's first YAML line
     node, data = _load(text[body_start:body_end], where, first_line)
     validated = _validate(node, data, model, where, first_line)
-    return Document(prefix=text[: lines[open_index][0]], data=validated, suffix=suffix, path=where)
+    doc = Document(prefix=text[: lines[open_index][0]], data=validated, suffix=suffix, path=where)
+    PARSE_CACHE.put("document", model, text, (doc.prefix, validated, suffix))
+    return doc
 
 
 def render_document(doc: Document[Any]) -> str:
@@ -520,6 +622,17 @@ def write_document(doc: Document[Any], path: str | os.PathLike[str] | None = Non
     # Render the validated copy (e.g. a dict appended to a list of models is
     # now that model) and keep it, so ``doc`` matches what is on disk.
     doc.data = validated
-    atomic_write_text(target, render_document(doc), durable=durable)
+    text = render_document(doc)
+    atomic_write_text(target, text, durable=durable)
     doc.path = target
+    # What reading this text back would return, without parsing it: the dumped data, if
+    # it holds only what the loader produces (then loading gives back an equal value
+    # of the same types), validated again as parsing would.
+    plain = validated.model_dump(mode="python", warnings=False)
+    if _plain(plain):
+        prefix = doc.prefix if not doc.prefix or doc.prefix.endswith("\n") else doc.prefix + "\n"
+        try:
+            PARSE_CACHE.put("document", model, text, (prefix, model.model_validate(plain), doc.suffix))
+        except ValidationError:  # pragma: no cover - it validated a moment ago; then parse next time
+            pass
     return target

@@ -19,6 +19,7 @@ import logging
 import os
 import select
 import socket
+import threading
 from pathlib import Path
 from typing import Iterable
 
@@ -36,6 +37,11 @@ class _StopRaceFilter(logging.Filter):
 
 
 logging.getLogger("watchdog.observers.inotify").addFilter(_StopRaceFilter())
+
+
+def _stop_observer(observer) -> None:
+    observer.stop()
+    observer.join(timeout=2)
 
 
 class WorkspaceWatcher:
@@ -128,16 +134,29 @@ class WorkspaceWatcher:
         ready, _, _ = select.select([self._rsock], [], [], timeout)
         return bool(ready)
 
-    def close(self) -> None:
-        if self._observer is not None:
-            self._observer.stop()
-            self._observer.join(timeout=2)
-            self._observer = None
+    def close(self, *, wait: bool = False) -> None:
+        """Stop watching and close the wake-up socket.
+
+        The observer is stopped on a daemon thread unless ``wait``: watchdog's
+        inotify emitter holds an unmatched ``IN_MOVED_FROM`` (a session file moved to
+        ``sessions/archive/``, which is not watched) for its move-pairing delay of
+        0.5 s (``InotifyMoveEventGrouper.delay``, watchdog 7.1), and ``stop`` joins
+        the emitter through that sleep. Nothing is delivered after this call returns:
+        the handler's wake-up goes to a closed socket and is dropped.
+        """
+        observer, self._observer = self._observer, None
         for s in (self._rsock, self._wsock):
             try:
                 s.close()
             except OSError:
                 pass
+        if observer is None:
+            return
+        if wait:
+            _stop_observer(observer)
+        else:
+            threading.Thread(target=_stop_observer, args=(observer,), name="phyagentos-watch-stop",
+                             daemon=True).start()
 
     def __enter__(self) -> WorkspaceWatcher:
         return self

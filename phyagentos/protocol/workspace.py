@@ -25,6 +25,7 @@ whole archive.
 
 from __future__ import annotations
 
+import functools
 import getpass
 import json
 import logging
@@ -50,7 +51,7 @@ from phyagentos.yamlsource import load_yaml
 
 from .archive import SessionArchive
 from .atomic import atomic_write_bytes, batched_durability
-from .codec import Document, read_document, read_yaml, write_document
+from .codec import Document, _read_text, parse_yaml, read_document, write_document
 from .runs import RunRegistry, inside_workspace
 from .schemas import (
     DOCUMENTS,
@@ -189,16 +190,11 @@ def _session_prose(record: SessionRecord) -> str:
     )
 
 
-def _check_complete_safety(path: Path) -> None:
-    """Every limit of ``safety.yaml`` must be written out: a truncated or partial file
-    would otherwise fall back to built-in defaults (e.g. a 30 s command duration for a
-    configured 2 s).
-
-    Raises:
-        DocumentError: the missing keys, at the file's last line.
-    """
-    text = path.read_text(encoding="utf-8")
-    raw = load_yaml(text, path=path, error=DocumentError) or {}
+@functools.lru_cache(maxsize=8)
+def _missing_safety_keys(text: str) -> tuple[str, ...]:
+    """The limits ``text`` (a ``safety.yaml`` that validated) does not write out; cached
+    by the exact text, as every session's preflight and start read the same file."""
+    raw = load_yaml(text, error=DocumentError) or {}
     missing = [name for name in SafetyConfig.model_fields if name not in raw]
     box = raw.get("workspace_box")
     if isinstance(box, dict):
@@ -206,6 +202,18 @@ def _check_complete_safety(path: Path) -> None:
     outcomes = raw.get("violation_outcomes")
     if isinstance(outcomes, dict):
         missing += [f"violation_outcomes.{code}" for code in SAFETY_VIOLATIONS if code not in outcomes]
+    return tuple(missing)
+
+
+def _check_complete_safety(path: Path, text: str) -> None:
+    """Every limit of ``safety.yaml`` must be written out: a truncated or partial file
+    would otherwise fall back to built-in defaults (e.g. a 30 s command duration for a
+    configured 2 s).
+
+    Raises:
+        DocumentError: the missing keys, at the file's last line.
+    """
+    missing = list(_missing_safety_keys(text))
     if missing:
         raise DocumentError(
             f"{SAFETY_FILE} is incomplete: missing {format_choices(missing)}; every limit must be written out "
@@ -416,12 +424,13 @@ class Workspace:
         """
         path = self.root / SAFETY_FILE
         try:
-            config = read_yaml(path, SafetyConfig)
+            text = _read_text(path)
         except FileNotFoundError:
             raise ProtocolError(
                 f"{SAFETY_FILE} missing from workspace {self.root}; Workspace.create restores it"
             ) from None
-        _check_complete_safety(path)
+        config = parse_yaml(text, SafetyConfig, path=path)
+        _check_complete_safety(path, text)
         return config
 
     # -- sessions ---------------------------------------------------------

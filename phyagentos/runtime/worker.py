@@ -71,9 +71,10 @@ _CONTROL = frozenset({"cancel", "estop", "clear_estop"})
 _ORPHAN_EXIT_S = 10.0
 
 
-#: Imported once by the forkserver, so forked runners start with them loaded.
+#: Imported once by the forkserver, so forked runners start with them loaded. The last,
+#: ``forkserver_freeze``, moves all of it into the collector's permanent generation.
 _PRELOAD = ["phyagentos.runtime.forkserver_exit", "phyagentos.runtime.worker", "phyagentos.runtime.runner", "phyagentos.runtime.preflight",
-            "phyagentos.runtime.target_pool", "phyagentos.runtime.target_lock"]
+            "phyagentos.runtime.target_pool", "phyagentos.runtime.target_lock", "phyagentos.runtime.forkserver_freeze"]
 
 
 def _context():

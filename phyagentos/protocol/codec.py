@@ -10,6 +10,10 @@ position and the composed YAML node tree.
 The YAML dialect is YAML 1.1 as PyYAML implements it, minus implicit timestamps
 (protocol timestamps are ISO-8601 strings, so an unquoted ``2024-01-01T00:00:00Z``
 must load as a string, not a ``datetime``).
+
+Parsing is cached per process by the exact text (:data:`PARSE_CACHE`): re-reading a file
+that has not changed since this process read or wrote it returns a copy of the value
+parsed before, without YAML or validation.
 """
 
 from __future__ import annotations
@@ -415,7 +419,7 @@ class _ParseCache:
     characters of the texts it holds.
     """
 
-    def __init__(self, *, max_entries: int = 512, max_chars: int = 16_000_000) -> None:
+    def __init__(self, *, max_entries: int = 512, max_chars: int = 4_000_000) -> None:
         self._items: OrderedDict[tuple[str, type, str], bytes] = OrderedDict()
         self._chars = 0
         self._lock = threading.Lock()

@@ -28,19 +28,19 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping, Protocol
 
 from phyagentos.agent.criteria import parse_criteria
 from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.gripper_resources import GripperEffect, ImplicitEdge, serialise_gripper_use
-from phyagentos.errors import GoalGraphError, PhyAgentOSError, VerifierError, format_choices
+from phyagentos.errors import GoalGraphError, VerifierError, format_choices
 from phyagentos.yamlsource import clip, excerpt, line_of, load_yaml
 
 if TYPE_CHECKING:
     from phyagentos.protocol import Workspace
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 
-__all__ = ["GraphCheck", "check_goal_graph", "OBJECT_PARAMS", "REGION_PARAMS"]
+__all__ = ["GraphCheck", "RuntimeChecks", "check_goal_graph", "OBJECT_PARAMS", "REGION_PARAMS"]
 
 logger = logging.getLogger(__name__)
 
@@ -70,22 +70,61 @@ def _raise(path: Path, problems: list[tuple[int | None, str]]) -> None:
     raise GoalGraphError(message, path=path, line=line)
 
 
+class RuntimeChecks(Protocol):
+    """The steps of the check that need the Runtime plane, in batches of plain data (see
+    :func:`phyagentos.runtime.graph_preflight.build_trees`, ``check_scenes`` and
+    ``check_reach``). A scene is whatever ``check_scenes`` returned for it, handed back
+    to ``check_reach`` unopened."""
+
+    def build_trees(self, items: list[tuple[str, dict]]) -> list[str | None]: ...
+
+    def check_scenes(self, items: list[tuple[Any, str]]) -> list[tuple[Any, list, tuple | None]]: ...
+
+    def check_reach(self, items: list[tuple[str, str, Any, list[tuple], list[tuple]]]) -> list[list]: ...
+
+
+class _LocalChecks:
+    """:class:`RuntimeChecks` in this process (it imports the runtime's scene and motion code)."""
+
+    def __init__(self, runtime: "BuiltinSkillRuntime", root: Path) -> None:
+        self.runtime, self.root = runtime, root
+
+    def build_trees(self, items):
+        from phyagentos.runtime.graph_preflight import build_trees  # noqa: PLC0415
+
+        return build_trees(self.runtime.trees, items)
+
+    def check_scenes(self, items):
+        from phyagentos.runtime.graph_preflight import check_scenes  # noqa: PLC0415
+
+        return check_scenes(items, root=self.root)
+
+    def check_reach(self, items):
+        from phyagentos.runtime.graph_preflight import check_reach  # noqa: PLC0415
+
+        return check_reach(items)
+
+
 def check_goal_graph(path: str | Path, workspace: "Workspace", runtime: "BuiltinSkillRuntime", *,
-                     target: str | None = None, reach: bool = True) -> GraphCheck:
+                     target: str | None = None, reach: bool = True,
+                     checks: RuntimeChecks | None = None) -> GraphCheck:
     """Validate the goal graph at ``path`` as a whole, before anything is registered or moves.
 
     Args:
         path: the user's goal-graph file.
         workspace: supplies TARGETS.md (target names, drivers, default scenes).
-        runtime: supplies the skill manifests and the tree library.
+        runtime: supplies the skill manifests (``runtime.skills``) and, unless ``checks``
+            is given, the tree library.
         target: ``--target`` override applied to every node (checked like the graph's).
         reach: run the IK reachability check (step 6).
+        checks: where the runtime's steps run (trees, scenes, reach); default: here.
 
     Raises:
         GoalGraphError: the first problem by line (with up to seven more listed), naming
             ``path`` and the 1-based line.
     """
     path = Path(path)
+    checks = checks if checks is not None else _LocalChecks(runtime, workspace.root)
     specs = {t.name: t for t in workspace.read("TARGETS").data.targets}
     if target is not None and target not in specs:
         raise GoalGraphError(f"unknown target {target!r} for --target; valid targets: {format_choices(specs)}")
@@ -108,36 +147,35 @@ def check_goal_graph(path: str | Path, workspace: "Workspace", runtime: "Builtin
         return line_of(item) if item is not None else graph.nodes[i].line or None
 
     # 2-3: skills, trees, predicates
+    to_build = {i: (manifest.tree, node.params) for i, node in enumerate(graph.nodes)
+                for manifest in [runtime.skills.get(node.skill)]
+                if manifest.runtime == "builtin" and manifest.tree and not manifest.check_params(node.params)}
+    built = dict(zip(to_build, checks.build_trees(list(to_build.values())))) if to_build else {}
     for i, node in enumerate(graph.nodes):
         manifest = runtime.skills.get(node.skill)
         for problem in manifest.check_params(node.params):
             problems.append((node_line(i, "params"), f"node {node.id!r}: skill {node.skill!r}: {problem}"))
-        if manifest.runtime == "builtin" and manifest.tree and not manifest.check_params(node.params):
-            try:
-                runtime.trees.build(manifest.tree, node.params)
-            except PhyAgentOSError as exc:
-                problems.append((node_line(i, "params"), f"node {node.id!r}: skill {node.skill!r} does not build "
-                                                         f"with these parameters: {clip(str(exc), 400)}"))
+        if built.get(i) is not None:
+            problems.append((node_line(i, "params"), f"node {node.id!r}: skill {node.skill!r} does not build "
+                                                     f"with these parameters: {built[i]}"))
         try:
             parse_criteria(node.accept, where=f"node {node.id!r} accept")
         except VerifierError as exc:
             problems.append((node_line(i, "accept"), clip(str(exc), 400)))
 
     # 4: scene per target, names
-    from phyagentos.runtime.graph_preflight import (PickPose, PlacePose, check_reachability, check_scene,  # noqa: PLC0415
-                                                    scene_names)
-
     raw_scene = raw.get("scene")
+    target_names = list(dict.fromkeys(n.target for n in graph.nodes))
+    checked_scenes = checks.check_scenes([(raw_scene if raw_scene is not None else (specs[name].scene or None),
+                                           specs[name].driver) for name in target_names])
     scenes: dict[str, Any] = {}
-    for name in dict.fromkeys(n.target for n in graph.nodes):
-        spec = specs[name]
-        scene_src = raw_scene if raw_scene is not None else (spec.scene or None)
-        scene, scene_problems = check_scene(scene_src, spec.driver, root=workspace.root)
+    names_of: dict[str, Any] = {}
+    for name, (scene, scene_problems, names) in zip(target_names, checked_scenes):
         where = "" if raw_scene is not None else f" (the scene of target {name!r} in TARGETS.md)"
-        problems += [(p.line if raw_scene is not None else None, p.message + where) for p in scene_problems]
-        scenes[name] = scene
+        problems += [(line if raw_scene is not None else None, message + where) for line, message in scene_problems]
+        scenes[name], names_of[name] = scene, names
     for i, node in enumerate(graph.nodes):
-        names = scene_names(scenes.get(node.target))
+        names = names_of.get(node.target)
         if names is None:
             continue
         objects, regions = names
@@ -174,6 +212,7 @@ def check_goal_graph(path: str | Path, workspace: "Workspace", runtime: "Builtin
     # 6: reachability per target
     checked = 0
     if reach:
+        asks, fallbacks = [], []
         for name, scene in scenes.items():
             picks, places = [], []
             for i, node in enumerate(graph.nodes):
@@ -184,17 +223,18 @@ def check_goal_graph(path: str | Path, workspace: "Workspace", runtime: "Builtin
                 height = node.params.get("approach_height_m", 0.10)
                 height = float(height) if isinstance(height, (int, float)) and not isinstance(height, bool) else 0.10
                 if isinstance(obj, str):
-                    picks.append(PickPose(node.id, obj, node_line(i, "params", eff.acquires), height))
+                    picks.append((node.id, obj, node_line(i, "params", eff.acquires), height))
                 held = node.params.get(eff.releases) if eff.releases else None
                 region = node.params.get("region")
                 if isinstance(held, str) and isinstance(region, str):
-                    places.append(PlacePose(node.id, held, region, node_line(i, "params", "region"), height))
-            if scene_names(scene) is not None:
+                    places.append((node.id, held, region, node_line(i, "params", "region"), height))
+            if names_of[name] is not None:
                 checked += 2 * (len(picks) + len(places))
             first = next((node_line(i) for i, n in enumerate(graph.nodes) if n.target == name), None)
-            fallback = line_of(raw, "scene") if raw_scene is not None else first
-            problems += [(p.line if p.line is not None else fallback, p.message) for p in
-                         check_reachability(specs[name].driver, name, scene, picks=picks, places=places)]
+            fallbacks.append(line_of(raw, "scene") if raw_scene is not None else first)
+            asks.append((specs[name].driver, name, scene, picks, places))
+        for fallback, found in zip(fallbacks, checks.check_reach(asks) if asks else []):
+            problems += [(line if line is not None else fallback, message) for line, message in found]
         if problems:
             _raise(path, problems)
     for edge in edges:

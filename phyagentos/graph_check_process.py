@@ -1,4 +1,4 @@
-"""The whole-graph check of ``phyagentos run``, in a child of the runner's forkserver.
+"""The whole-graph check of ``phyagentos run``, with the idle runner or in a child of its forkserver.
 
 :func:`phyagentos.graph_check.check_goal_graph` builds every node's behaviour tree and
 solves IK for every pick and place pose: it needs the primitives and the motion stack
@@ -8,6 +8,13 @@ exactly those once. :func:`check_goal_graph_forked` forks a short-lived child fr
 that runs the same check and sends its result back over a pipe, so the ``run`` process
 itself never imports the motion stack: the import is paid once per run (in the
 forkserver), not twice, and not on the main process's path.
+
+When ``run`` has prestarted a runner (it has, unless another run took it), the check
+runs in this process instead and hands its runtime steps (trees, scenes, reachability,
+:class:`~phyagentos.graph_check.RuntimeChecks`) to that idle runner as three jobs: the
+runner has the runtime imported and is building the graph's targets anyway, so neither a
+second process nor a second compile of the scene's meshes is paid, and this process still
+imports no motion code (scenes come back as pickles it hands back unopened).
 
 The check, its inputs and its errors are exactly those of ``check_goal_graph``; where no
 forkserver can be used, or this process has the check loaded already, it runs here.
@@ -43,6 +50,72 @@ def _check_here(path: Path, root: Path, target: str | None, dirs: tuple[str, str
 
     runtime = BuiltinSkillRuntime.from_dirs(*dirs)
     return check_goal_graph(path, Workspace.open(root), runtime, target=target)
+
+
+#: This module imported :mod:`phyagentos.graph_check` itself, for the check with an idle
+#: runner: its presence in ``sys.modules`` then says nothing about the caller.
+_LOADED_FOR_RUNNER = False
+
+
+class _RunnerFailed(Exception):
+    """The idle runner could not do its part of the check (died, timed out, raised)."""
+
+
+class _RunnerChecks:
+    """:class:`~phyagentos.graph_check.RuntimeChecks` done by an idle runner (job
+    ``graph_checks``): one round trip per step (trees, scenes, reach)."""
+
+    def __init__(self, runner, root: Path, timeout_s: float) -> None:
+        self.runner, self.root, self.timeout_s = runner, root, timeout_s
+
+    def _ask(self, stage: str, items: list) -> list:
+        from phyagentos.runtime.worker import RunnerDied  # noqa: PLC0415
+
+        try:
+            kind, msg = self.runner.request("graph_checks", timeout=self.timeout_s, expect=("graph_checked",),
+                                            root=str(self.root), stage=stage, items=items)
+        except RunnerDied as exc:
+            raise _RunnerFailed(str(exc)) from None
+        if kind != "graph_checked" or msg.get("stage") != stage:
+            raise _RunnerFailed(msg.get("message", f"unexpected reply {kind!r}"))
+        return msg["results"]
+
+    def build_trees(self, items):
+        return self._ask("trees", items)
+
+    def check_scenes(self, items):
+        return self._ask("scenes", items)
+
+    def check_reach(self, items):
+        return self._ask("reach", items)
+
+
+def _check_with_runner(path: Path, root: Path, target: str | None, dirs: tuple[str, str],
+                       timeout_s: float) -> "GraphCheck | None":
+    """The check in this process with its runtime steps done by the idle runner that
+    ``run`` prestarted (and is warming the graph's targets): no second process, no second
+    import of networkx, and the runner's meshes are decoded already. None when there is
+    no idle runner for ``dirs`` or it failed (the caller then forks the check)."""
+    global _LOADED_FOR_RUNNER
+    from phyagentos.runtime.worker import idle_runner  # noqa: PLC0415
+
+    runner = idle_runner(*dirs)
+    if runner is None:
+        return None
+    if "phyagentos.graph_check" not in sys.modules:
+        _LOADED_FOR_RUNNER = True
+    from types import SimpleNamespace  # noqa: PLC0415
+
+    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+    from phyagentos.protocol import Workspace  # noqa: PLC0415
+    from phyagentos.runtime.skills import SkillRegistry  # noqa: PLC0415
+
+    try:
+        return check_goal_graph(path, Workspace.open(root), SimpleNamespace(skills=SkillRegistry(dirs[0])),
+                                target=target, checks=_RunnerChecks(runner, root, timeout_s))
+    except _RunnerFailed as exc:
+        logger.warning("graph check with the idle runner failed (%s); forking the check", exc)
+        return None
 
 
 def _child(conn, path: str, root: str, target: str | None, dirs: tuple[str, str]) -> None:
@@ -86,9 +159,12 @@ def check_goal_graph_forked(path: str | Path, workspace_root: str | Path, *, tar
     path, root = Path(path), Path(workspace_root)
     dirs = (skill_dirs(), tree_dirs())  # resolved here: the forkserver's environment may be older
     if fork is None:
-        fork = "phyagentos.graph_check" not in sys.modules
+        fork = _LOADED_FOR_RUNNER or "phyagentos.graph_check" not in sys.modules
     if not fork:
         return _check_here(path, root, target, dirs)
+    checked = _check_with_runner(path, root, target, dirs, timeout_s)
+    if checked is not None:
+        return checked
     try:
         from phyagentos.runtime.worker import forkserver_context  # noqa: PLC0415
 

@@ -173,3 +173,55 @@ def test_closing_a_watcher_does_not_wait_out_watchdogs_move_pairing_delay(tmp_pa
     observer = waited._observer
     waited.close(wait=True)
     assert not observer.is_alive()
+
+
+def _with_idle_runner(monkeypatch):
+    """An idle runner in this process's pool (as ``run`` prestarts one), and no way to
+    check other than with it: the forkserver child and this process's fallback fail."""
+    from phyagentos import graph_check_process
+    from phyagentos.resources import skill_dirs, tree_dirs
+    from phyagentos.runtime import worker
+
+    def fail(*args, **kwargs):
+        raise AssertionError("the graph check did not use the idle runner")
+
+    worker.prestart_runner(skill_dirs(), tree_dirs())
+    monkeypatch.setattr(worker, "forkserver_context", fail)
+    monkeypatch.setattr(graph_check_process, "_check_here", fail)
+    monkeypatch.setattr(graph_check_process, "_LOADED_FOR_RUNNER", graph_check_process._LOADED_FOR_RUNNER)
+
+
+@pytest.mark.sim
+def test_the_check_with_the_idle_runner_returns_what_the_in_process_check_returns(tmp_path, monkeypatch):
+    from phyagentos.graph_check_process import check_goal_graph_forked
+
+    ws = Workspace.create(tmp_path / "ws")
+    with monkeypatch.context() as m:
+        _with_idle_runner(m)
+        remote = check_goal_graph_forked(PICK_AND_PLACE, ws.root, fork=True)
+    here = _in_process(PICK_AND_PLACE, ws)
+    assert [n.id for n in remote.graph.nodes] == [n.id for n in here.graph.nodes] == ["pick_cube", "place_cube"]
+    assert remote.poses_checked == here.poses_checked > 0
+    assert remote.implicit_edges == here.implicit_edges
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("change", [
+    ("params: {object: cube}", "params: {object: sphere}"),  # a scene name (the runner's scene step)
+    ("position: [0.5, -0.2]", "position: [1.5, -0.2]"),  # out of reach (its IK step)
+])
+def test_the_check_with_the_idle_runner_raises_the_same_located_error(tmp_path, monkeypatch, change):
+    from phyagentos.graph_check_process import check_goal_graph_forked
+
+    ws = Workspace.create(tmp_path / "ws")
+    bad = tmp_path / "bad.yaml"
+    text = PICK_AND_PLACE.read_text()
+    assert change[0] in text
+    bad.write_text(text.replace(*change))
+    with monkeypatch.context() as m, pytest.raises(GoalGraphError) as remote:
+        _with_idle_runner(m)
+        check_goal_graph_forked(bad, ws.root, fork=True)
+    with pytest.raises(GoalGraphError) as here:
+        _in_process(bad, ws)
+    assert str(remote.value) == str(here.value)
+    assert remote.value.line == here.value.line is not None and remote.value.path == here.value.path == bad

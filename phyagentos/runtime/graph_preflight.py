@@ -40,7 +40,8 @@ from phyagentos.yamlsource import clip, excerpt, line_of
 
 from .target_pool import DRIVERS
 
-__all__ = ["GraphProblem", "PickPose", "PlacePose", "check_scene", "scene_names", "check_reachability"]
+__all__ = ["GraphProblem", "PickPose", "PlacePose", "check_scene", "scene_names", "check_reachability",
+           "build_trees", "check_scenes", "check_reach"]
 
 logger = logging.getLogger(__name__)
 
@@ -322,3 +323,44 @@ def check_reachability(driver: str, target_name: str, scene: Any, *, picks: Sequ
     finally:
         target.close()
     return problems
+
+
+# -- the Runtime plane's part of the whole-graph check, in batches of plain data ---------
+# ``phyagentos.graph_check`` runs the check; these are the steps that need the runtime
+# (primitives, scenes, the motion stack). Plain tuples in and out, so that the same
+# functions serve the check in one process and the check whose runtime half runs in the
+# runner (``phyagentos.runtime.worker``, job ``graph_checks``).
+
+
+def build_trees(trees: Any, items: Sequence[tuple[str, Mapping[str, Any]]]) -> list[str | None]:
+    """Build each ``(tree name, params)`` of ``items`` with the tree library ``trees``
+    (without a target); per item ``None`` or the error's message (clipped to 400 characters)."""
+    out: list[str | None] = []
+    for tree, params in items:
+        try:
+            trees.build(tree, params)
+            out.append(None)
+        except PhyAgentOSError as exc:
+            out.append(clip(str(exc), 400))
+    return out
+
+
+def check_scenes(items: Sequence[tuple[Any, str]], *, root: Any = None
+                 ) -> list[tuple[Any, list[tuple[int | None, str]], tuple[tuple[str, ...], tuple[str, ...]] | None]]:
+    """:func:`check_scene` of each ``(raw scene, driver)``; per item ``(scene, problems as
+    (line, message), scene_names(scene))``."""
+    out = []
+    for raw, driver in items:
+        scene, problems = check_scene(raw, driver, root=root)
+        out.append((scene, [(p.line, p.message) for p in problems], scene_names(scene)))
+    return out
+
+
+def check_reach(items: Sequence[tuple[str, str, Any, Sequence[tuple], Sequence[tuple]]]
+                ) -> list[list[tuple[int | None, str]]]:
+    """:func:`check_reachability` of each ``(driver, target name, scene, picks, places)``,
+    picks and places as the fields of :class:`PickPose` and :class:`PlacePose`; per item
+    its problems as ``(line, message)``."""
+    return [[(p.line, p.message) for p in check_reachability(
+                driver, name, scene, picks=[PickPose(*p) for p in picks], places=[PlacePose(*p) for p in places])]
+            for driver, name, scene, picks, places in items]

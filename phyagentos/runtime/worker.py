@@ -62,7 +62,7 @@ from phyagentos.errors import SupervisorError
 from .heartbeat import SLOTS, Heartbeats
 
 __all__ = ["RunnerProcess", "RunnerDied", "runner_main", "take_runner", "park_runner", "prestart_runner",
-           "forkserver_context", "warm_runner"]
+           "forkserver_context", "warm_runner", "idle_runner"]
 
 logger = logging.getLogger(__name__)
 
@@ -296,6 +296,17 @@ def warm_runner(root: str | os.PathLike[str], targets: list[dict[str, Any]]) -> 
     return True
 
 
+def idle_runner(skills_dir: str | os.PathLike[str], trees_dir: str | os.PathLike[str]) -> RunnerProcess | None:
+    """The idle runner the next :func:`take_runner` of these directories would return,
+    left in the pool (for a job before a supervisor takes it, e.g. the runtime's half of
+    ``run``'s whole-graph check), or None."""
+    with _POOL_LOCK:
+        runner = _IDLE_RUNNERS[-1] if _IDLE_RUNNERS else None
+    if runner is None or not runner.alive() or (runner.skills_dir, runner.trees_dir) != (str(skills_dir), str(trees_dir)):
+        return None
+    return runner
+
+
 @atexit.register
 def _close_idle_runners() -> None:
     while _IDLE_RUNNERS:
@@ -510,6 +521,28 @@ class _Runner:
         if errors:
             logger.info("runner: warming skipped for %s", "; ".join(errors))
         self.reply("warmed", built=built, errors=errors)
+
+    def job_graph_checks(self, root: str, stage: str, items: list) -> None:
+        """The runtime's steps of a whole-graph check (:mod:`phyagentos.graph_check`), in
+        batches (:func:`~phyagentos.runtime.graph_preflight.build_trees`, ``check_scenes``,
+        ``check_reach``), with this runner's tree library. Scenes travel as pickles the
+        caller hands back unopened, so it never imports the scene code. Reachability
+        builds its own model of the scene: nothing of a warmed or running target is used."""
+        import pickle  # noqa: PLC0415
+
+        from phyagentos.runtime import graph_preflight as gp  # noqa: PLC0415
+
+        if stage == "trees":
+            results: list = gp.build_trees(self.runtime.trees, items)
+        elif stage == "scenes":
+            results = [(pickle.dumps(scene), problems, names)
+                       for scene, problems, names in gp.check_scenes(items, root=Path(root))]
+        elif stage == "reach":
+            results = gp.check_reach([(driver, name, pickle.loads(scene), picks, places)
+                                      for driver, name, scene, picks, places in items])
+        else:
+            raise SupervisorError(f"unknown graph check stage {stage!r}; valid stages: reach, scenes, trees")
+        self.reply("graph_checked", stage=stage, results=results)
 
     def job_release(self, root: str, target: str, session_id: str | None = None) -> None:
         from phyagentos.runtime.target_lock import clear_marker  # noqa: PLC0415

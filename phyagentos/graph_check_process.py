@@ -96,12 +96,20 @@ def _check_with_runner(path: Path, root: Path, target: str | None, dirs: tuple[s
     ``run`` prestarted (and is warming the graph's targets): no second process, no second
     import of networkx, and the runner's meshes are decoded already. None when there is
     no idle runner for ``dirs`` or it failed (the caller then forks the check)."""
-    global _LOADED_FOR_RUNNER
-    from phyagentos.runtime.worker import idle_runner  # noqa: PLC0415
+    from phyagentos.runtime.worker import borrow_runner, park_runner  # noqa: PLC0415
 
-    runner = idle_runner(*dirs)
+    runner = borrow_runner(*dirs)
     if runner is None:
         return None
+    try:
+        return _check_borrowed(runner, path, root, target, dirs, timeout_s)
+    finally:
+        park_runner(runner)  # for the supervisor's take_runner (closed if it died)
+
+
+def _check_borrowed(runner, path: Path, root: Path, target: str | None, dirs: tuple[str, str],
+                    timeout_s: float) -> "GraphCheck | None":
+    global _LOADED_FOR_RUNNER
     if "phyagentos.graph_check" not in sys.modules:
         _LOADED_FOR_RUNNER = True
     from types import SimpleNamespace  # noqa: PLC0415

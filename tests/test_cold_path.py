@@ -225,3 +225,28 @@ def test_the_check_with_the_idle_runner_raises_the_same_located_error(tmp_path, 
         _in_process(bad, ws)
     assert str(remote.value) == str(here.value)
     assert remote.value.line == here.value.line is not None and remote.value.path == here.value.path == bad
+
+
+@pytest.mark.sim
+def test_the_idle_runner_is_out_of_the_pool_while_the_check_uses_it_and_back_after(tmp_path, monkeypatch):
+    # Another thread's supervisor taking the same runner mid-check would read its replies.
+    from phyagentos import graph_check_process
+    from phyagentos.graph_check_process import check_goal_graph_forked
+    from phyagentos.runtime import worker
+
+    ws = Workspace.create(tmp_path / "ws")
+    seen = []
+    ask = graph_check_process._RunnerChecks._ask
+
+    def spy(self, stage, items):
+        seen.append((stage, self.runner in worker._IDLE_RUNNERS))
+        return ask(self, stage, items)
+
+    with monkeypatch.context() as m:
+        _with_idle_runner(m)
+        runner = worker._IDLE_RUNNERS[-1]
+        m.setattr(graph_check_process._RunnerChecks, "_ask", spy)
+        check_goal_graph_forked(HOLD, ws.root, fork=True)
+    assert [stage for stage, _ in seen] == ["trees", "scenes", "reach"]
+    assert not any(in_pool for _, in_pool in seen)
+    assert worker._IDLE_RUNNERS[-1] is runner

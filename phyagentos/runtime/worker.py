@@ -62,7 +62,7 @@ from phyagentos.errors import SupervisorError
 from .heartbeat import SLOTS, Heartbeats
 
 __all__ = ["RunnerProcess", "RunnerDied", "runner_main", "take_runner", "park_runner", "prestart_runner",
-           "forkserver_context", "warm_runner", "idle_runner"]
+           "forkserver_context", "warm_runner", "borrow_runner"]
 
 logger = logging.getLogger(__name__)
 
@@ -296,13 +296,18 @@ def warm_runner(root: str | os.PathLike[str], targets: list[dict[str, Any]]) -> 
     return True
 
 
-def idle_runner(skills_dir: str | os.PathLike[str], trees_dir: str | os.PathLike[str]) -> RunnerProcess | None:
-    """The idle runner the next :func:`take_runner` of these directories would return,
-    left in the pool (for a job before a supervisor takes it, e.g. the runtime's half of
-    ``run``'s whole-graph check), or None."""
+def borrow_runner(skills_dir: str | os.PathLike[str], trees_dir: str | os.PathLike[str]) -> RunnerProcess | None:
+    """Take the idle runner the next :func:`take_runner` of these directories would
+    return out of the pool, for jobs before a supervisor takes it (e.g. the runtime's
+    steps of ``run``'s whole-graph check), or None if there is none. Nobody else can
+    take it meanwhile; hand it back with :func:`park_runner`."""
     with _POOL_LOCK:
         runner = _IDLE_RUNNERS[-1] if _IDLE_RUNNERS else None
-    if runner is None or not runner.alive() or (runner.skills_dir, runner.trees_dir) != (str(skills_dir), str(trees_dir)):
+        if runner is None or (runner.skills_dir, runner.trees_dir) != (str(skills_dir), str(trees_dir)):
+            return None
+        _IDLE_RUNNERS.pop()
+    if not runner.alive():
+        runner.close()
         return None
     return runner
 

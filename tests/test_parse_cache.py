@@ -9,6 +9,7 @@ that any change to the text is parsed afresh.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -126,3 +127,80 @@ def test_parse_document_of_a_cached_text_keeps_the_path_it_was_given(tmp_path):
     text = "```yaml\nversion: 1\ntitle: t\n```\n"
     assert parse_document(text, Sample, path=tmp_path / "a.md").path == tmp_path / "a.md"
     assert parse_document(text, Sample, path=tmp_path / "b.md").path == tmp_path / "b.md"
+
+
+# -- LOG.md appends edit the text instead of rendering every entry again -------------------
+
+from hypothesis import strategies as st  # noqa: E402
+
+from phyagentos.protocol import LogEntry, render_document  # noqa: E402
+from phyagentos.protocol.schemas import LogDoc  # noqa: E402
+from test_protocol_codec import texts  # noqa: E402
+
+log_entries = st.builds(
+    LogEntry,
+    at=st.sampled_from(["2024-05-01T12:00:00Z", "2024-06-30T23:59:59.123456Z"]),
+    session_id=st.one_of(st.none(), st.sampled_from(["r1-a-1", "r1-b-2"])),
+    node=st.one_of(st.none(), texts),
+    event=texts,
+    state=st.one_of(st.none(), st.sampled_from(["claimed", "succeeded"])),
+    message=texts,
+)
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(entries=st.lists(log_entries, min_size=1, max_size=9))
+def test_an_appended_log_is_byte_for_byte_the_rendering_of_its_entries(tmp_path_factory, monkeypatch, entries):
+    ws = Workspace.create(tmp_path_factory.mktemp("ws"))
+    monkeypatch.setattr(Workspace, "LOG_MAX_ENTRIES", 5)
+    spliced = []
+    splice = Workspace._append_log_spliced
+
+    def spy(self, *args):
+        spliced.append(splice(self, *args))
+        return spliced[-1]
+
+    monkeypatch.setattr(Workspace, "_append_log_spliced", spy)
+    path = ws.path("LOG")
+    original = read_document(path, LogDoc)
+    for n, entry in enumerate(entries, start=1):
+        ws.append_log(entry)
+        expected = original.data.model_copy(update={"entries": entries[max(0, n - 5):n]})
+        text = path.read_text(encoding="utf-8")
+        assert text == render_document(Document(prefix=original.prefix, data=expected, suffix=original.suffix))
+        assert ws.read("LOG").data == expected  # through the cache
+        assert _fresh_parse(path, LogDoc).data == expected
+    archive = sorted((ws.root / "log").glob("archive-*.jsonl")) if (ws.root / "log").exists() else []
+    archived = [LogEntry.model_validate(json.loads(line)) for f in archive
+                for line in f.read_text(encoding="utf-8").split("\n") if line]  # one file per month
+    aged_out = entries[:max(0, len(entries) - 5)]
+    assert sorted(archived, key=aged_out.index) == aged_out
+
+
+def test_ordinary_log_appends_edit_the_text_after_the_first(tmp_path, monkeypatch):
+    ws = Workspace.create(tmp_path / "ws")
+    monkeypatch.setattr(Workspace, "LOG_MAX_ENTRIES", 5)
+    calls = []
+    splice = Workspace._append_log_spliced
+    monkeypatch.setattr(Workspace, "_append_log_spliced", lambda self, *a: calls.append(splice(self, *a)) or calls[-1])
+    for i in range(8):
+        ws.append_log(LogEntry(at="2024-05-01T12:00:00Z", session_id="r1-a-1", event="claim", state="claimed",
+                               message=f"by supervisor {i}: a line with `ticks`"))
+    assert calls == [False] + [True] * 7  # the template's empty list is rendered once
+    assert [e.message[-14:] for e in _fresh_parse(ws.path("LOG"), LogDoc).data.entries] == \
+        [f"{i}: a line with `ticks`"[-14:] for i in range(3, 8)]
+
+
+def test_a_log_written_by_another_process_is_rendered_whole_once(tmp_path, monkeypatch):
+    ws = Workspace.create(tmp_path / "ws")
+    ws.append_log(LogEntry(at="2024-05-01T12:00:00Z", event="one"))
+    path = ws.path("LOG")
+    path.write_text(path.read_text().replace("event: one", "event: uno"))  # another writer
+    calls = []
+    splice = Workspace._append_log_spliced
+    monkeypatch.setattr(Workspace, "_append_log_spliced", lambda self, *a: calls.append(splice(self, *a)) or calls[-1])
+    ws.append_log(LogEntry(at="2024-05-01T12:00:01Z", event="two"))
+    ws.append_log(LogEntry(at="2024-05-01T12:00:02Z", event="three"))
+    assert calls == [False, True]
+    assert [e.event for e in _fresh_parse(path, LogDoc).data.entries] == ["uno", "two", "three"]

@@ -481,6 +481,13 @@ _YAML_INFO = re.compile(r"^[ \t]*ya?ml[ \t]*$", re.IGNORECASE)
 _TICK_RUN = re.compile(r"^ {0,3}(`{3,})", re.MULTILINE)
 
 
+def _fence_needed(body: str) -> int:
+    """Backticks of the fence around ``body``: three, or one more than the longest run
+    of backticks that opens one of its lines (which could otherwise close the fence)."""
+    longest = max((len(m.group(1)) for m in _TICK_RUN.finditer(body)), default=2)
+    return max(3, longest + 1)
+
+
 @dataclass(kw_only=True)
 class Document(Generic[M]):
     """One protocol document: human prose around validated data.
@@ -578,8 +585,7 @@ def render_document(doc: Document[Any]) -> str:
     line could otherwise be read as the closing fence.
     """
     body = dump_yaml(doc.data)
-    longest = max((len(m.group(1)) for m in _TICK_RUN.finditer(body)), default=2)
-    fence = "`" * max(3, longest + 1)
+    fence = "`" * _fence_needed(body)
     prefix = doc.prefix
     if prefix and not prefix.endswith("\n"):
         prefix += "\n"

@@ -33,6 +33,7 @@ import os
 import pickle
 import re
 import socket
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable
@@ -51,7 +52,9 @@ from phyagentos.yamlsource import load_yaml
 
 from .archive import SessionArchive
 from .atomic import atomic_write_bytes, batched_durability
-from .codec import Document, _read_text, parse_yaml, read_document, write_document
+from .atomic import atomic_write_text
+from .codec import (PARSE_CACHE, Document, _fence_needed, _plain, _read_text, dump_yaml, parse_document,
+                    parse_yaml, read_document, render_document, write_document)
 from .runs import RunRegistry, inside_workspace
 from .schemas import (
     DOCUMENTS,
@@ -60,6 +63,7 @@ from .schemas import (
     SESSION_STATES,
     TERMINAL_STATES,
     Attempt,
+    LogDoc,
     LogEntry,
     RunRecord,
     RuntimeSignalDoc,
@@ -102,6 +106,21 @@ def _deep_copy(record: SessionRecord) -> SessionRecord:
     """An independent copy of ``record`` (a pickle round trip: the same result as
     ``model_copy(deep=True)`` in a tenth of the time)."""
     return pickle.loads(pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL))
+
+
+#: LOG.md texts this process wrote, by path, with where their YAML body ends: the spliced
+#: append (``Workspace._append_log_spliced``) edits only a text it knows the layout of.
+_LOG_TEXTS: dict[str, tuple[str, int]] = {}
+_LOG_TEXTS_LOCK = threading.Lock()
+
+
+def _body_end(text: str, suffix: str) -> int:
+    """Offset of the closing fence of a rendered document whose suffix is ``suffix``."""
+    end = len(text) - len(suffix) - 1  # the newline after the closing fence
+    start = end
+    while start > 0 and text[start - 1] == "`":
+        start -= 1
+    return start
 
 
 def templates_dir() -> Path:
@@ -1114,15 +1133,74 @@ class Workspace:
         """
         if not isinstance(entry, LogEntry):
             raise ProtocolError(f"append_log needs a LogEntry, got {type(entry).__name__}")
-
-        def apply(doc: Any) -> None:
-            doc.entries.append(entry)
-            overflow = len(doc.entries) - self.LOG_MAX_ENTRIES
+        _, filename, _ = self._doc("LOG")
+        path = inside_workspace(self.root / filename, self.root)
+        with self._lock("LOG"):
+            try:
+                text = _read_text(path)
+            except FileNotFoundError:
+                raise ProtocolError(f"{filename} missing from workspace {self.root}; "
+                                    "Workspace.create restores it") from None
+            doc = parse_document(text, LogDoc, path=path)
+            if self._append_log_spliced(path, text, doc, entry):
+                return
+            doc.data.entries.append(entry)
+            overflow = len(doc.data.entries) - self.LOG_MAX_ENTRIES
             if overflow > 0:
-                self._archive(doc.entries[:overflow])
-                del doc.entries[:overflow]
+                self._archive(doc.data.entries[:overflow])
+                del doc.data.entries[:overflow]
+            write_document(doc)
+            written = _read_text(path)  # what was just written, under the lock
+            with _LOG_TEXTS_LOCK:
+                _LOG_TEXTS[str(path)] = (written, _body_end(written, doc.suffix))
 
-        self.update("LOG", apply)
+    def _append_log_spliced(self, path: Path, text: str, doc: Document[Any], entry: LogEntry) -> bool:
+        """Append ``entry`` (and age out the oldest entry at the bound) by editing the text
+        instead of rendering every entry again: LOG.md is rewritten on every transition
+        and rendering 200 entries took ~15 ms. Only when ``text`` is exactly what this
+        process last wrote (so its layout is the renderer's: one ``- `` line at column 0
+        per entry, the entries last, a three-backtick fence), the entry's lines cannot
+        touch the fence, no entry ends the YAML open-ended and at most one entry ages out; the result is then byte for byte
+        what rendering the whole document gives (property test). Returns False to have
+        the caller render the whole document instead."""
+        with _LOG_TEXTS_LOCK:
+            known = _LOG_TEXTS.get(str(path))
+        if known is None or known[0] != text or not doc.data.entries or len(doc.data.entries) > self.LOG_MAX_ENTRIES:
+            return False
+        body_end = known[1]
+        if text[body_end:body_end + 4] != "```\n":
+            return False
+        plain = entry.model_dump(mode="python", warnings=False)
+        block = dump_yaml({"entries": [plain]})
+        if not block.startswith("entries:\n- ") or _fence_needed(block) > 3 or not _plain(plain):
+            return False
+        item = block[len("entries:\n"):]
+        prefix = doc.prefix if not doc.prefix or doc.prefix.endswith("\n") else doc.prefix + "\n"
+        body_start = len(prefix) + len("```yaml\n")
+        head, tail = text[:body_end], text[body_end:]
+        if head.endswith("\n...\n") or item.endswith("\n...\n"):
+            # libyaml ends a document with "..." once any scalar in it was open-ended (a
+            # literal block keeping its final newlines): whether the whole log still needs
+            # the marker depends on every entry, so such logs are rendered whole.
+            return False
+        entries = [*doc.data.entries, LogEntry.model_validate(plain)]
+        if len(entries) > self.LOG_MAX_ENTRIES:
+            first = head.find("\nentries:\n- ", body_start - 1)
+            if first < 0:
+                return False
+            first += len("\nentries:\n")
+            second = head.find("\n- ", first)
+            second = len(head) if second < 0 else second + 1
+            self._archive(entries[:1])
+            head = head[:first] + head[second:]
+            entries = entries[1:]
+        new_text = head + item + tail
+        atomic_write_text(path, new_text)
+        PARSE_CACHE.put("document", LogDoc, new_text,
+                        (prefix, doc.data.model_copy(update={"entries": entries}), doc.suffix))
+        with _LOG_TEXTS_LOCK:
+            _LOG_TEXTS[str(path)] = (new_text, len(head) + len(item))
+        return True
 
     def _archive(self, entries: list[LogEntry]) -> None:
         by_month: dict[str, list[str]] = {}

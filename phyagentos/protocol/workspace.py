@@ -35,7 +35,7 @@ import re
 import socket
 import threading
 import time
-from collections import Counter
+from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterable
 from datetime import datetime, timezone
 from pathlib import Path
@@ -110,8 +110,17 @@ def _deep_copy(record: SessionRecord) -> SessionRecord:
 
 #: LOG.md texts this process wrote, by path, with where their YAML body ends: the spliced
 #: append (``Workspace._append_log_spliced``) edits only a text it knows the layout of.
-_LOG_TEXTS: dict[str, tuple[str, int]] = {}
+_LOG_TEXTS: OrderedDict[str, tuple[str, int]] = OrderedDict()
 _LOG_TEXTS_LOCK = threading.Lock()
+_LOG_TEXTS_MAX = 64  # workspaces a process remembers its LOG.md text for
+
+
+def _remember_log_text(path: Path, text: str, body_end: int) -> None:
+    with _LOG_TEXTS_LOCK:
+        _LOG_TEXTS[str(path)] = (text, body_end)
+        _LOG_TEXTS.move_to_end(str(path))
+        while len(_LOG_TEXTS) > _LOG_TEXTS_MAX:
+            _LOG_TEXTS.popitem(last=False)
 
 
 def _body_end(text: str, suffix: str) -> int:
@@ -1151,8 +1160,7 @@ class Workspace:
                 del doc.data.entries[:overflow]
             write_document(doc)
             written = _read_text(path)  # what was just written, under the lock
-            with _LOG_TEXTS_LOCK:
-                _LOG_TEXTS[str(path)] = (written, _body_end(written, doc.suffix))
+            _remember_log_text(path, written, _body_end(written, doc.suffix))
 
     def _append_log_spliced(self, path: Path, text: str, doc: Document[Any], entry: LogEntry) -> bool:
         """Append ``entry`` (and age out the oldest entry at the bound) by editing the text
@@ -1198,8 +1206,7 @@ class Workspace:
         atomic_write_text(path, new_text)
         PARSE_CACHE.put("document", LogDoc, new_text,
                         (prefix, doc.data.model_copy(update={"entries": entries}), doc.suffix))
-        with _LOG_TEXTS_LOCK:
-            _LOG_TEXTS[str(path)] = (new_text, len(head) + len(item))
+        _remember_log_text(path, new_text, len(head) + len(item))
         return True
 
     def _archive(self, entries: list[LogEntry]) -> None:

@@ -39,6 +39,13 @@ def _in_process(path: Path, ws: Workspace):
     return check_goal_graph(path, ws, BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs()))
 
 
+def _assert_same_check(other, here) -> None:
+    """``other`` (a check run elsewhere) found what the in-process check ``here`` found."""
+    assert [n.id for n in other.graph.nodes] == [n.id for n in here.graph.nodes] == ["pick_cube", "place_cube"]
+    assert other.poses_checked == here.poses_checked > 0
+    assert other.implicit_edges == here.implicit_edges
+
+
 @pytest.mark.sim
 def test_the_forked_graph_check_returns_what_the_in_process_check_returns(tmp_path, monkeypatch):
     from phyagentos.graph_check_process import check_goal_graph_forked
@@ -47,10 +54,7 @@ def test_the_forked_graph_check_returns_what_the_in_process_check_returns(tmp_pa
     with monkeypatch.context() as m:
         _no_fallback(m)
         forked = check_goal_graph_forked(PICK_AND_PLACE, ws.root, fork=True)
-    here = _in_process(PICK_AND_PLACE, ws)
-    assert [n.id for n in forked.graph.nodes] == [n.id for n in here.graph.nodes] == ["pick_cube", "place_cube"]
-    assert forked.poses_checked == here.poses_checked > 0
-    assert forked.implicit_edges == here.implicit_edges
+    _assert_same_check(forked, _in_process(PICK_AND_PLACE, ws))
 
 
 @pytest.mark.sim
@@ -199,10 +203,7 @@ def test_the_check_with_the_idle_runner_returns_what_the_in_process_check_return
     with monkeypatch.context() as m:
         _with_idle_runner(m)
         remote = check_goal_graph_forked(PICK_AND_PLACE, ws.root, fork=True)
-    here = _in_process(PICK_AND_PLACE, ws)
-    assert [n.id for n in remote.graph.nodes] == [n.id for n in here.graph.nodes] == ["pick_cube", "place_cube"]
-    assert remote.poses_checked == here.poses_checked > 0
-    assert remote.implicit_edges == here.implicit_edges
+    _assert_same_check(remote, _in_process(PICK_AND_PLACE, ws))
 
 
 @pytest.mark.sim

@@ -131,7 +131,7 @@ def test_parse_document_of_a_cached_text_keeps_the_path_it_was_given(tmp_path):
 
 # -- LOG.md appends edit the text instead of rendering every entry again -------------------
 
-from hypothesis import strategies as st  # noqa: E402
+from hypothesis import example, strategies as st  # noqa: E402
 
 from phyagentos.protocol import LogEntry, render_document  # noqa: E402
 from phyagentos.protocol.schemas import LogDoc  # noqa: E402
@@ -148,9 +148,15 @@ log_entries = st.builds(
 )
 
 
+def _blank_entry(at: str) -> LogEntry:
+    return LogEntry(at=at, session_id=None, node=None, event="", state=None, message="")
+
+
 @settings(max_examples=60, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(entries=st.lists(log_entries, min_size=1, max_size=9))
+@example(entries=[_blank_entry("2024-05-01T12:00:00Z"), _blank_entry("2024-06-30T23:59:59.123456Z")]
+         + [_blank_entry("2024-05-01T12:00:00Z")] * 6)  # equal entries age out into two months
 def test_an_appended_log_is_byte_for_byte_the_rendering_of_its_entries(tmp_path_factory, monkeypatch, entries):
     ws = Workspace.create(tmp_path_factory.mktemp("ws"))
     monkeypatch.setattr(Workspace, "LOG_MAX_ENTRIES", 5)
@@ -172,10 +178,14 @@ def test_an_appended_log_is_byte_for_byte_the_rendering_of_its_entries(tmp_path_
         assert ws.read("LOG").data == expected  # through the cache
         assert _fresh_parse(path, LogDoc).data == expected
     archive = sorted((ws.root / "log").glob("archive-*.jsonl")) if (ws.root / "log").exists() else []
-    archived = [LogEntry.model_validate(json.loads(line)) for f in archive
-                for line in f.read_text(encoding="utf-8").split("\n") if line]  # one file per month
+    archived = {f.name: [LogEntry.model_validate(json.loads(line))
+                         for line in f.read_text(encoding="utf-8").split("\n") if line]
+                for f in archive}  # one file per month, entries in the order they aged out
     aged_out = entries[:max(0, len(entries) - 5)]
-    assert sorted(archived, key=aged_out.index) == aged_out
+    by_month = {}
+    for entry in aged_out:
+        by_month.setdefault(f"archive-{entry.at[:7]}.jsonl", []).append(entry)
+    assert archived == by_month
 
 
 def test_ordinary_log_appends_edit_the_text_after_the_first(tmp_path, monkeypatch):

@@ -1,6 +1,6 @@
 """End to end: whole-process ``phyagentos run`` of the pick-and-place graph against the bare script.
 
-    .venv/bin/python bench/end_to_end.py [--runs 5] [--holds 20] [--parts compare,holds,...]
+    .venv/bin/python bench/end_to_end.py [--runs 5] [--holds 20] [--parts compare,holds,...] [--bytecode as-is]
 
 Everything runs as real processes in one process tree (this script is a child
 subreaper, so the runner and its forkserver are reaped here and their CPU counted):
@@ -30,6 +30,14 @@ subreaper, so the runner and its forkserver are reaped here and their CPU counte
 5. **Cold start**: from launching ``phyagentos run`` to the first session's first
    actuation, and import times (``python -X importtime``) of the CLI and of what
    ``run`` imports in the main process.
+
+Bytecode: by default (``--bytecode cached``) the project's own modules (``phyagentos``,
+``bench``) are compiled to ``__pycache__`` first, so every measured process, framework
+and bare script alike, imports them from bytecode as an installed package or any second
+run does. ``--bytecode as-is`` measures without that: under ``PYTHONDONTWRITEBYTECODE``
+(set on some machines, this one included) every process then compiles the project's
+modules from source on every run, which costs the framework more than the bare script
+(it imports more of them); the JSON records which was measured.
 
 Prints tables and writes ``bench/results/end_to_end.json``. Goals (issue 12): wall ratio
 <= 1.2, CPU ratio <= 1.15, hand-off p50 <= 20 ms and p99 <= 100 ms.
@@ -362,6 +370,19 @@ def import_times() -> dict:
     return out
 
 
+def prepare_bytecode(mode: str) -> dict:
+    """``cached``: compile the project's modules to ``__pycache__`` (what importing them
+    does anyway unless bytecode writing is off); ``as-is``: leave them. Returns what the
+    JSON records about it."""
+    import compileall  # noqa: PLC0415
+
+    if mode == "cached":
+        for sub in ("phyagentos", "bench"):
+            if not compileall.compile_dir(ROOT / sub, quiet=1):
+                raise BenchError(f"compileall of {ROOT / sub} failed")
+    return {"mode": mode, "dont_write_bytecode": bool(os.environ.get("PYTHONDONTWRITEBYTECODE"))}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=5, help="alternated runs of each side (default 5)")
@@ -369,15 +390,20 @@ def main(argv=None) -> int:
     ap.add_argument("--parts", default="imports,compare,compare_no_perception,holds,holds_no_cameras,two_process",
                     help="comma-separated subset of imports,compare,compare_no_perception,holds,holds_no_cameras,"
                          "two_process (default all)")
+    ap.add_argument("--bytecode", choices=("cached", "as-is"), default="cached",
+                    help="cached: compile the project's modules first (default); as-is: measure without that")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     _subreaper()
+    bytecode = prepare_bytecode(args.bytecode)
     load = os.getloadavg()
-    print(f"load average at start {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores", flush=True)
+    print(f"load average at start {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores; "
+          f"bytecode {bytecode['mode']} (PYTHONDONTWRITEBYTECODE {'set' if bytecode['dont_write_bytecode'] else 'unset'})",
+          flush=True)
     tmp = Path(tempfile.mkdtemp(prefix="phyagentos-e2e-"))
     try:
         parts = set(args.parts.split(","))
-        result = {"load_at_start": load}
+        result = {"load_at_start": load, "bytecode": bytecode}
         if "imports" in parts:
             result["imports"] = import_times()
         if "compare" in parts:

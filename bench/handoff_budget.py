@@ -9,7 +9,7 @@ A diagnostic, not a goal measurement (the goals are ``bench/end_to_end.py``'s). 
 the agent, the supervisor, the protocol layer and the runner (``TRACED``) so that every
 call appends ``thread, function, start, end`` (unix s) to ``<dir>/<pid>.log``; the
 runner's forkserver children re-import the main module, so the runner process is traced
-too. ``os.fsync`` is counted as well.
+too. ``os.fsync`` and garbage collections (``gc.gen<N>``) are counted as well.
 
 Then, for every hand-off (a session's verdict to the next session's first actuation, as
 ``end_to_end.py`` measures it), the time each traced ``(process/thread, function)``
@@ -23,6 +23,7 @@ call: read the split, not the absolute times. Writes ``bench/results/handoff_bud
 from __future__ import annotations
 
 import functools
+import gc
 import importlib
 import os
 import sys
@@ -66,6 +67,11 @@ TRACED = [
     ("phyagentos.runtime.target_pool", "TargetPool.acquire", None),
     ("phyagentos.runtime.target_pool", "TargetPool.checkpoint", None),
     ("phyagentos.runtime.safety_guard", "SafetyGuard.for_target", None),
+    ("phyagentos.runtime.preflight", "run_preflight", None),
+    ("phyagentos.runtime.runner", "SessionRunner._initial_view", None),
+    ("phyagentos.runtime.runner", "SessionRunner._image", None),
+    ("phyagentos.targets.mujoco_arm", "MuJoCoArmTarget.load_state", None),
+    ("phyagentos.targets.mujoco_arm", "MuJoCoArmTarget.save_state", None),
 ]
 
 
@@ -110,6 +116,15 @@ def _install(out_dir: str) -> None:
             emit("os.fsync", t0, time.time())
 
     os.fsync = fsync
+    gc_started: list[float] = []
+
+    def collected(phase: str, info: dict) -> None:  # garbage collections, as ``gc.gen<N>``
+        if phase == "start":
+            gc_started[:] = [time.time()]
+        elif gc_started:
+            emit(f"gc.gen{info['generation']}", gc_started[0], time.time(), str(info.get("collected", "")))
+
+    gc.callbacks.append(collected)
 
 
 if os.environ.get(TRACE_ENV):  # the traced run's processes (this file is their main module)

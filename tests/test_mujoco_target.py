@@ -218,6 +218,60 @@ def test_save_and_load_state_restore_the_simulation_exactly(tmp_path):
             c.load_state(tmp_path / "missing.npz")
 
 
+def _identity(path):
+    st = path.stat()
+    return st.st_ino, st.st_mtime_ns, st.st_size
+
+
+def test_saving_an_unchanged_world_again_leaves_its_state_file_alone(tmp_path):
+    path = tmp_path / "state.npz"
+    with MuJoCoTarget("sim", DEFAULT_SCENE) as a:
+        a.step_for(0.1, arm_ctrl=a.home_qpos + 0.05)
+        a.save_state(path)
+        first = _identity(path)
+        a.save_state(path)  # the checkpoint before a session's first tick, right after the last one
+        assert _identity(path) == first
+        a.step()
+        a.save_state(path)  # the world moved: written again
+        assert _identity(path) != first
+        moved = _identity(path)
+        a.load_state(path)  # a file it wrote itself and a world unchanged since
+        a.save_state(path)
+        assert _identity(path) == moved
+
+
+def test_a_state_file_replaced_by_another_writer_is_read_and_rewritten(tmp_path):
+    path = tmp_path / "state.npz"
+    with MuJoCoTarget("sim", DEFAULT_SCENE) as a, MuJoCoTarget("sim", DEFAULT_SCENE) as b:
+        a.save_state(path)
+        b.step_for(0.2, arm_ctrl=b.home_qpos + 0.1)
+        b.save_state(path)  # e.g. a recovering runner's checkpoint
+        a.load_state(path)
+        assert a.world_digest() == b.world_digest() and a.sim_time == b.sim_time
+        np.testing.assert_array_equal(a.data.qpos, b.data.qpos)
+        replaced = _identity(path)
+        a.step()
+        a.save_state(path)
+        assert _identity(path) != replaced
+
+
+def test_loading_the_state_a_target_already_holds_ends_where_a_restore_does(tmp_path):
+    path = tmp_path / "state.npz"
+    with MuJoCoTarget("sim", DEFAULT_SCENE) as a, MuJoCoTarget("sim", DEFAULT_SCENE) as b:
+        for _ in range(37):  # after mj_step the derived quantities lag the integrated state
+            a.step(a.home_qpos + 0.05)
+        a.save_state(path)
+        a.load_state(path)  # not read: the live world is the file's
+        b.load_state(path)  # read and restored
+        for name in ("qpos", "qvel", "act", "ctrl", "xpos", "xquat", "site_xpos", "sensordata", "qacc"):
+            np.testing.assert_array_equal(getattr(a.data, name), getattr(b.data, name), err_msg=name)
+        assert a.world_digest() == b.world_digest()
+        for _ in range(50):
+            a.step()
+            b.step()
+        np.testing.assert_array_equal(a.data.qpos, b.data.qpos)
+
+
 # ----------------------------------------------------------------------------- pick and place
 
 

@@ -138,6 +138,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         self._rng = np.random.default_rng(seed)
         self._episode_seed = seed
         self._camera_noise: dict[str, CameraNoise] = {}
+        self._state_file: tuple | None = None  # the state file this world is known to equal (save_state)
         self._sensor_specs: dict[str, Any] = {}
         self._obj_names: tuple[str, ...] = ()
         self._obj_body: dict[str, int] = {}
@@ -951,16 +952,47 @@ class MuJoCoArmTarget(BaseRolloutTarget):
     def _restore_meta(self, meta: dict[str, Any]) -> None:
         """Restore what :meth:`_state_meta` wrote."""
 
+    def _state_file_key(self, path: Path) -> tuple | None:
+        """Identity of the state file at ``path`` (absolute path, inode, mtime in ns, size),
+        None if it does not exist. Every write replaces the file (a new inode)."""
+        try:
+            st = os.stat(path)
+        except FileNotFoundError:
+            return None
+        return str(path.absolute()), st.st_ino, st.st_mtime_ns, st.st_size
+
+    def _holds_state_of(self, path: Path) -> bool:
+        """Whether the live world is exactly the one in the state file at ``path``: this
+        target wrote or read that very file (same identity) and its world digest has not
+        changed since. Then saving to it again or loading it would change nothing."""
+        known = self._state_file
+        if known is None:
+            return False
+        key = self._state_file_key(path)
+        return key is not None and known == (*key, self.world_digest())
+
+    def _remember_state_file(self, path: Path) -> None:
+        key = self._state_file_key(path)
+        self._state_file = None if key is None else (*key, self.world_digest())
+
     def save_state(self, path: str | os.PathLike) -> Path:
         """Write the simulated state to ``path``: npz with MuJoCo's full integration state,
         ``qpos``/``qvel``/``ctrl``/``act``/``time``, the subclass's metadata and a model
-        fingerprint. The write is atomic (temporary file, fsync, rename). Returns the path."""
+        fingerprint. The write is atomic (temporary file, fsync, rename). Returns the path.
+
+        Writes nothing if the file at ``path`` already holds this world: this target wrote
+        or read that very file (same inode, mtime and size) and its :meth:`world_digest`
+        is unchanged since (e.g. the checkpoint before a session's first tick, right after
+        the previous session's last one). The file is as durable as that earlier write
+        made it (fsynced, or inside a batch that fsyncs it before the batch ends)."""
         self._check_open()
+        p = Path(path)
+        if self._holds_state_of(p):
+            return p
         m, d = self._model, self._data
         spec = mujoco.mjtState.mjSTATE_INTEGRATION
         full = np.empty(mujoco.mj_stateSize(m, spec))
         mujoco.mj_getState(m, d, full, spec)
-        p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
         buf = io.BytesIO()
         np.savez(buf, format=np.array(_STATE_FORMAT), qpos=d.qpos.copy(), qvel=d.qvel.copy(), ctrl=d.ctrl.copy(),
@@ -968,6 +1000,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
                  meta=np.array(json.dumps({**self._state_meta(), "runtime_notes": self.runtime_notes})),
                  fingerprint=np.array(self._fingerprint()))
         atomic_write_bytes(p, buf.getvalue())
+        self._remember_state_file(p)
         return p
 
     def world_digest(self) -> str:
@@ -990,10 +1023,18 @@ class MuJoCoArmTarget(BaseRolloutTarget):
 
     def load_state(self, path: str | os.PathLike) -> None:
         """Restore a state written by :meth:`save_state` for the same scene and robot.
-        Raises TargetError if the file is missing, malformed or from another scene."""
+        Raises TargetError if the file is missing, malformed or from another scene.
+
+        If the live world already is the file's (this target wrote or read that very file
+        and its :meth:`world_digest` is unchanged since; see :meth:`save_state`), the file
+        is not read: only the derived quantities are recomputed (``mj_forward``), as a
+        restore does, so either way the target ends in the same state."""
         self._check_open()
         m, d = self._model, self._data
         p = Path(path)
+        if self._holds_state_of(p):
+            mujoco.mj_forward(m, d)
+            return
         data = read_state_npz(p)
         if "fingerprint" not in data or str(data["fingerprint"]) != self._fingerprint():
             raise TargetError(f"state file {p} was saved from a different scene or model")
@@ -1016,6 +1057,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
             meta = json.loads(str(data["meta"]))
             self.runtime_notes = dict(meta.pop("runtime_notes", None) or {})
             self._restore_meta(meta)
+        self._remember_state_file(p)
 
     # -- tools ----------------------------------------------------------------------------
     def tools(self) -> tuple[str, ...]:

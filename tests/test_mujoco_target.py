@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 from pathlib import Path
 
 import numpy as np
@@ -253,6 +254,24 @@ def test_a_state_file_replaced_by_another_writer_is_read_and_rewritten(tmp_path)
         a.step()
         a.save_state(path)
         assert _identity(path) != replaced
+
+
+def test_other_bytes_under_the_same_inode_mtime_and_size_are_still_read(tmp_path):
+    # What a key of file metadata would miss: inode numbers are reused and mtimes are
+    # coarse; the target compares the file's bytes.
+    path, other = tmp_path / "state.npz", tmp_path / "other.npz"
+    with MuJoCoTarget("sim", DEFAULT_SCENE) as a, MuJoCoTarget("sim", DEFAULT_SCENE) as b:
+        a.save_state(path)
+        b.step_for(0.2, arm_ctrl=b.home_qpos + 0.1)
+        b.save_state(other)
+        assert other.stat().st_size == path.stat().st_size  # npz files of one model and scene
+        before = path.stat()
+        with open(path, "r+b") as fh:  # same inode, then the old mtime back
+            fh.write(other.read_bytes())
+        os.utime(path, ns=(before.st_atime_ns, before.st_mtime_ns))
+        assert _identity(path) == (before.st_ino, before.st_mtime_ns, before.st_size)
+        a.load_state(path)
+        assert a.world_digest() == b.world_digest() and a.sim_time == b.sim_time
 
 
 def test_loading_the_state_a_target_already_holds_ends_where_a_restore_does(tmp_path):

@@ -21,6 +21,7 @@ Units: metres, radians, seconds, kilograms, newtons; poses are (4, 4) world tran
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import logging
@@ -138,7 +139,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         self._rng = np.random.default_rng(seed)
         self._episode_seed = seed
         self._camera_noise: dict[str, CameraNoise] = {}
-        self._state_file: tuple | None = None  # the state file this world is known to equal (save_state)
+        self._state_file: tuple[str, str, str] | None = None  # (path, file SHA-256, world digest): save_state
         self._sensor_specs: dict[str, Any] = {}
         self._obj_names: tuple[str, ...] = ()
         self._obj_body: dict[str, int] = {}
@@ -952,28 +953,23 @@ class MuJoCoArmTarget(BaseRolloutTarget):
     def _restore_meta(self, meta: dict[str, Any]) -> None:
         """Restore what :meth:`_state_meta` wrote."""
 
-    def _state_file_key(self, path: Path) -> tuple | None:
-        """Identity of the state file at ``path`` (absolute path, inode, mtime in ns, size),
-        None if it does not exist. Every write replaces the file (a new inode)."""
-        try:
-            st = os.stat(path)
-        except FileNotFoundError:
-            return None
-        return str(path.absolute()), st.st_ino, st.st_mtime_ns, st.st_size
-
     def _holds_state_of(self, path: Path) -> bool:
         """Whether the live world is exactly the one in the state file at ``path``: this
-        target wrote or read that very file (same identity) and its world digest has not
-        changed since. Then saving to it again or loading it would change nothing."""
+        target wrote or read that file with the same bytes (SHA-256 of the file) and its
+        :meth:`world_digest` has not changed since. Saving to it again or loading it
+        would then change nothing."""
         known = self._state_file
-        if known is None:
+        if known is None or known[0] != str(path.absolute()):
             return False
-        key = self._state_file_key(path)
-        return key is not None and known == (*key, self.world_digest())
+        try:
+            content = path.read_bytes()
+        except OSError:
+            return False
+        return known == (str(path.absolute()), hashlib.sha256(content).hexdigest(), self.world_digest())
 
-    def _remember_state_file(self, path: Path) -> None:
-        key = self._state_file_key(path)
-        self._state_file = None if key is None else (*key, self.world_digest())
+    def _remember_state_file(self, path: Path, content: bytes) -> None:
+        """Record that the live world is the one in ``content``, the bytes of ``path``."""
+        self._state_file = (str(path.absolute()), hashlib.sha256(content).hexdigest(), self.world_digest())
 
     def save_state(self, path: str | os.PathLike) -> Path:
         """Write the simulated state to ``path``: npz with MuJoCo's full integration state,
@@ -981,8 +977,8 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         fingerprint. The write is atomic (temporary file, fsync, rename). Returns the path.
 
         Writes nothing if the file at ``path`` already holds this world: this target wrote
-        or read that very file (same inode, mtime and size) and its :meth:`world_digest`
-        is unchanged since (e.g. the checkpoint before a session's first tick, right after
+        or read that file with the same bytes (SHA-256) and its :meth:`world_digest` is
+        unchanged since (e.g. the checkpoint before a session's first tick, right after
         the previous session's last one). The file is as durable as that earlier write
         made it (fsynced, or inside a batch that fsyncs it before the batch ends)."""
         self._check_open()
@@ -999,8 +995,9 @@ class MuJoCoArmTarget(BaseRolloutTarget):
                  act=d.act.copy(), time=np.array(d.time), full_state=full,
                  meta=np.array(json.dumps({**self._state_meta(), "runtime_notes": self.runtime_notes})),
                  fingerprint=np.array(self._fingerprint()))
-        atomic_write_bytes(p, buf.getvalue())
-        self._remember_state_file(p)
+        content = buf.getvalue()
+        atomic_write_bytes(p, content)
+        self._remember_state_file(p, content)
         return p
 
     def world_digest(self) -> str:
@@ -1008,8 +1005,6 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         the subclass's metadata, ``runtime_notes`` and the model fingerprint): two equal
         digests mean the same simulated world, e.g. before :meth:`save_state` and after
         :meth:`load_state` of that file. Hex string (SHA-256)."""
-        import hashlib  # noqa: PLC0415
-
         self._check_open()
         m, d = self._model, self._data
         spec = mujoco.mjtState.mjSTATE_INTEGRATION
@@ -1025,9 +1020,9 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         """Restore a state written by :meth:`save_state` for the same scene and robot.
         Raises TargetError if the file is missing, malformed or from another scene.
 
-        If the live world already is the file's (this target wrote or read that very file
-        and its :meth:`world_digest` is unchanged since; see :meth:`save_state`), the file
-        is not read: only the derived quantities are recomputed (``mj_forward``), as a
+        If the live world already is the file's (this target wrote or read these very bytes
+        and its :meth:`world_digest` is unchanged since; see :meth:`save_state`), nothing
+        is parsed or restored: only the derived quantities are recomputed (``mj_forward``), as a
         restore does, so either way the target ends in the same state."""
         self._check_open()
         m, d = self._model, self._data
@@ -1035,7 +1030,11 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         if self._holds_state_of(p):
             mujoco.mj_forward(m, d)
             return
-        data = read_state_npz(p)
+        try:
+            content = p.read_bytes()
+        except OSError:
+            content = None  # read_state_npz reports it
+        data = read_state_npz(p, content=content)
         if "fingerprint" not in data or str(data["fingerprint"]) != self._fingerprint():
             raise TargetError(f"state file {p} was saved from a different scene or model")
         spec = mujoco.mjtState.mjSTATE_INTEGRATION
@@ -1057,7 +1056,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
             meta = json.loads(str(data["meta"]))
             self.runtime_notes = dict(meta.pop("runtime_notes", None) or {})
             self._restore_meta(meta)
-        self._remember_state_file(p)
+        self._remember_state_file(p, content)
 
     # -- tools ----------------------------------------------------------------------------
     def tools(self) -> tuple[str, ...]:

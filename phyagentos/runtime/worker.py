@@ -395,13 +395,22 @@ class _Runner:
 
         pool = self.pools.get(root)
         if pool is None:
-            if len(self.pools) >= 2:  # bound memory when one runner serves many workspaces
-                old_root, old = next(iter(self.pools.items()))
-                if not any(r == old_root for r, _ in self.locks):
-                    old.close()
-                    del self.pools[old_root]
+            self._evict_pools(keep=1)
             pool = self.pools[root] = TargetPool(Path(root) / "targets")
         return pool
+
+    def _evict_pools(self, *, keep: int) -> None:
+        """Close the oldest target pools beyond ``keep`` of workspaces where this runner
+        holds no target lock, and forget those workspaces' released locks: a runner that
+        serves one workspace after another (a long ``watch``, benchmark episodes, an
+        idle runner reused by the next ``run``) keeps the targets, models and renderers
+        of at most two."""
+        held = {r for (r, _), lock in self.locks.items() if lock.held}
+        idle = [r for r in self.pools if r not in held]
+        for old_root in idle[: max(0, len(self.pools) - keep)]:
+            self.pools.pop(old_root).close()
+            for key in [k for k in self.locks if k[0] == old_root]:
+                del self.locks[key]
 
     def lock(self, root: str, target: str):
         from phyagentos.runtime.target_lock import TargetLock  # noqa: PLC0415

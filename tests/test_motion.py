@@ -109,6 +109,35 @@ def test_ik_keeps_the_fingers_fixed(model, world_qpos):
     assert np.linalg.norm(T_fk[:3, 3] - [0.5, -0.1, 0.2]) <= 1e-3
 
 
+def test_ik_keeps_the_models_of_few_contexts_alive(model):
+    # A runner builds new targets run after run; the IK contexts it caches hold their
+    # models (about 24 MiB each), so the cache, not the targets, would decide their lifetime.
+    import gc
+    import weakref
+
+    from phyagentos.motion import ik
+
+    gone = []
+    for _ in range(12):
+        m = build_scene(DEFAULT_SCENE)
+        solve_ik(m, q_seed=HOME, target=pose((0.5, -0.2, 0.12)))
+        gone.append(weakref.ref(m))
+        del m
+    gc.collect()
+    assert sum(r() is not None for r in gone) <= 4
+
+
+def test_the_ik_context_of_a_model_in_use_is_kept_while_others_come_and_go(model):
+    from phyagentos.motion import ik
+
+    solve_ik(model, q_seed=HOME, target=pose((0.5, -0.2, 0.12)))
+    mine = next(c for c in ik._CACHE.values() if c.model is model)
+    for _ in range(2 * ik._CACHE_MAX):
+        solve_ik(build_scene(DEFAULT_SCENE), q_seed=HOME, target=pose((0.5, -0.2, 0.12)))
+        solve_ik(model, q_seed=HOME, target=pose((0.45, 0.25, 0.05)))  # used between the others
+    assert any(c is mine for c in ik._CACHE.values())
+
+
 # ----------------------------------------------------------------------------- collision
 
 

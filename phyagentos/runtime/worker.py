@@ -322,6 +322,21 @@ def _close_idle_runners() -> None:
 # Inside the runner process.
 
 
+def _return_freed_memory() -> None:
+    """Collect garbage and hand the C heap's free pages back to the system (glibc's
+    ``malloc_trim``; nothing elsewhere). Models, MjData arenas and renderer buffers of
+    closed targets are large, and glibc keeps freed heap memory for reuse, so without
+    this a runner's resident size grows with every workspace it served."""
+    import ctypes  # noqa: PLC0415
+    import gc  # noqa: PLC0415
+
+    gc.collect()
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
 class _Runner:
     """The runner process's state: runtime, target pools, locks, the current session."""
 
@@ -407,10 +422,13 @@ class _Runner:
         of at most two."""
         held = {r for (r, _), lock in self.locks.items() if lock.held}
         idle = [r for r in self.pools if r not in held]
-        for old_root in idle[: max(0, len(self.pools) - keep)]:
+        evicted = idle[: max(0, len(self.pools) - keep)]
+        for old_root in evicted:
             self.pools.pop(old_root).close()
             for key in [k for k in self.locks if k[0] == old_root]:
                 del self.locks[key]
+        if evicted:
+            _return_freed_memory()
 
     def lock(self, root: str, target: str):
         from phyagentos.runtime.target_lock import TargetLock  # noqa: PLC0415

@@ -100,6 +100,15 @@ class EvidenceImageWriter:
                 self._thread = threading.Thread(target=self._serve, name="evidence-images", daemon=True)
                 self._thread.start()
 
+    def discard(self, evidence_dir: str | os.PathLike[str]) -> None:
+        """Forget the images captured for ``evidence_dir`` and not yet released (a
+        session prepared but never started): nothing is rendered for it, and its
+        ``.images-pending`` marker goes."""
+        with self._lock:
+            jobs = self._held.pop(str(Path(evidence_dir)), None)
+        if jobs is not None:
+            (Path(evidence_dir) / PENDING_MARKER).unlink(missing_ok=True)
+
     def close(self, timeout: float = 10.0) -> None:
         """Render what is owed (without waiting for answers) and stop the thread."""
         with self._lock:

@@ -1,9 +1,12 @@
 """SessionRunner: owns one session's interaction with its target, tick by tick.
 
-It runs inside the runner process (:mod:`phyagentos.runtime.worker`), started by the
-WatchdogSupervisor after preflight and after the ``start`` transition is on disk. It
-acquires the target in the state the episode left it, checkpoints that state,
-snapshots the initial world, builds the skill's tree in the BuiltinSkillRuntime
+It runs inside the runner process (:mod:`phyagentos.runtime.worker`). After a passed
+preflight it prepares the session while the WatchdogSupervisor persists ``start``
+(:meth:`SessionRunner.prepare`: it acquires the target in the state the episode left
+it, snapshots the initial world and builds the skill context; nothing moves and
+nothing is written but a camera target's perception frames). Once ``start`` is on
+disk and ``go`` arrives it writes ``task.yaml``, the checkpoint of the target's state
+and the initial snapshot, builds the skill's tree in the BuiltinSkillRuntime
 (or dispatches to another SkillRuntime), ticks it (checking the cancel token and the
 execution deadline between ticks, beating the heartbeat and checkpointing the target
 after each), reports that the skill stopped, snapshots the terminal world and writes
@@ -29,7 +32,7 @@ import traceback
 from collections.abc import Mapping
 from importlib import import_module
 from pathlib import Path
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any, Callable
 
 from phyagentos.errors import PhyAgentOSError
@@ -197,12 +200,33 @@ class AttemptReport:
 
 
 @dataclass
+class _Preparation:
+    """What :meth:`SessionRunner.prepare` set up for the first tick (None: not reached)."""
+
+    evidence_dir: Path
+    rel: str  # the evidence directory relative to the workspace
+    started: float  # time.perf_counter() when preparing began
+    spec: Any = None  # the session's TargetSpec
+    target: Any = None
+    ctx: SkillContext | None = None
+    runtime: Any = None  # the SkillRuntime that ticks the skill
+    initial: dict | None = None  # initial snapshot (the perceived view)
+    initial_truth: dict | None = None  # simulator truth, for ground_truth.yaml only
+    perceiver: Any = None
+    extra: dict[str, str] = field(default_factory=dict)  # bundle files besides the standard ones
+    image_events: list = field(default_factory=list)
+    error: tuple[BaseException, str] | None = None  # (exception, formatted traceback)
+    duration_s: float = 0.0
+
+
+@dataclass
 class SessionRunner:
     """Runs the runtime phase of one started session (state ``running`` on entry).
 
     Attributes:
         workspace: the protocol workspace.
-        record: the session, as the supervisor persisted it with ``start``.
+        record: the session; its runtime fields (:data:`~.session_basis.RUNTIME_FIELDS`)
+            as the supervisor persisted them with ``start``.
         runtime: the BuiltinSkillRuntime that builds and ticks skill trees.
         targets: target pool carrying world state between sessions.
         cancel: cancellation token (set from the supervisor's control messages).
@@ -225,6 +249,7 @@ class SessionRunner:
     #: critical path; None renders them here, synchronously.
     images: Any = None
     recorder: SessionRecorder | None = None  # [view hook, issue 13] set by run() under --record
+    _prepared: _Preparation | None = field(default=None, init=False, repr=False)
 
     def _image(self, target, path, events: list):
         if self.images is not None:
@@ -249,55 +274,114 @@ class SessionRunner:
     def run(self) -> AttemptReport:
         """Execute the session; returns the attempt report (not a verdict).
 
-        Never raises for a failing skill or target: errors become outcome ``error``
-        with their code, and the evidence bundle is written in every case.
+        Sets the session up (:meth:`prepare`) unless that was done already, then ticks
+        the skill. Never raises for a failing skill or target: errors become outcome
+        ``error`` with their code, and the evidence bundle is written in every case.
         """
+        ahead = self._prepared is not None
+        if not ahead:
+            self.prepare()
+        return self._actuate(ahead=ahead)
+
+    def prepare(self) -> None:
+        """Everything before the first tick that commands no motion and writes nothing
+        (but a camera target's perception frames of the initial snapshot): the target
+        acquired in the state its episode left it (a simulator resets to the run's seed
+        at the run's first session), the initial snapshot, the skill context with its
+        SafetyGuard. The worker
+        calls it right after a passed preflight, while the supervisor makes ``start``
+        durable, and :meth:`run` writes ``task.yaml``, the checkpoint and the initial
+        snapshot and ticks on ``go`` (writing them here would put their journal commits
+        into the supervisor's fsync of ``start``). Called at most once.
+
+        Never raises: an error is kept and becomes the attempt's ``error`` outcome when
+        :meth:`run` is called, exactly as if it had been raised there.
+        """
+        if self._prepared is not None:
+            raise RuntimeError("SessionRunner.prepare called twice")
+        clock = time.perf_counter()
         rec = self.record
-        spec = next(t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target)
         evidence_dir = self.workspace.evidence_dir(rec.session_id)
-        rel = evidence_dir.relative_to(self.workspace.root).as_posix()
-        started = time.perf_counter()
-        target = None
-        ctx = None
-        initial = None
-        initial_truth = None
-        perceiver = None
-        # Evidence besides snapshots and trace: the task definition and RGB images.
-        # Image events join the session's events. Truth goes to ground_truth.yaml only.
-        extra = {"task": "task.yaml"}
-        image_events: list = []
-        atomic_write_text(evidence_dir / "task.yaml", dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS)))
-        # A session whose TargetToolManifest grants no operation (e.g. skill ``noop``)
-        # never opens its target: no snapshots, no images, nothing to halt.
-        needs_target = rec.tool_manifest is None or bool(rec.tool_manifest.get("operations"))
+        prep = _Preparation(evidence_dir=evidence_dir, rel=evidence_dir.relative_to(self.workspace.root).as_posix(),
+                            started=clock)
+        self._prepared = prep
         try:
-            deadline = time.monotonic() + rec.limits.execution_timeout_s
+            prep.spec = next(t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target)
+            # A session whose TargetToolManifest grants no operation (e.g. skill ``noop``)
+            # never opens its target: no snapshots, no images, nothing to halt.
+            needs_target = rec.tool_manifest is None or bool(rec.tool_manifest.get("operations"))
             if not needs_target:
-                ctx = SkillContext(target=None, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
-                                   plan=rec.adapter_plan)
+                prep.ctx = SkillContext(target=None, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
+                                        plan=rec.adapter_plan)
             else:
-                target = self.targets.acquire(rec, spec)
-                # Before anything moves: a recovering supervisor restores from here at worst.
-                self.targets.checkpoint(rec, target)
-                if self.heartbeat is not None:
-                    self.heartbeat()
-                initial_truth = _truth(target)
+                target = prep.target = self.targets.acquire(rec, prep.spec)
+                prep.initial_truth = _truth(target)
                 if has_cameras(target):
-                    perceiver = make_perceiver(target, _perception_config(self.workspace))
-                initial = self._initial_view(spec, target, perceiver, evidence_dir, rel)
-                atomic_write_text(evidence_dir / "initial.yaml", dump_yaml(initial))
-                if name := self._image(target, evidence_dir / "initial.png", image_events):
-                    extra["initial_image"] = name
-                ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
-                                   plan=rec.adapter_plan, perceiver=perceiver, evidence_dir=evidence_dir,
-                                   evidence_rel=rel)
+                    prep.perceiver = make_perceiver(target, _perception_config(self.workspace))
+                prep.initial = self._initial_view(prep.spec, target, prep.perceiver, evidence_dir, prep.rel)
+                prep.ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
+                                        plan=rec.adapter_plan, perceiver=prep.perceiver, evidence_dir=evidence_dir,
+                                        evidence_rel=prep.rel)
                 # Every command of either flow passes the same guard; its interventions land in ctx.events.
                 # (a game target has no arm: nothing for the guard to bound)
                 if target.kind != "game":
-                    ctx.guard = SafetyGuard.for_target(target, self.workspace.read_safety(), events=ctx.events,
-                                                       flow=rec.skill_runtime)
-            runtime = self.runtime if rec.skill_runtime == self.runtime.name else \
+                    prep.ctx.guard = SafetyGuard.for_target(target, self.workspace.read_safety(),
+                                                            events=prep.ctx.events, flow=rec.skill_runtime)
+            prep.runtime = self.runtime if rec.skill_runtime == self.runtime.name else \
                 SKILL_RUNTIMES[rec.skill_runtime](self.runtime.skills)
+        except Exception as exc:  # noqa: BLE001 - becomes the attempt's error outcome in run()
+            prep.error = (exc, traceback.format_exc())
+        prep.duration_s = time.perf_counter() - clock
+
+    def _write_preparation(self, prep: _Preparation) -> None:
+        """What preparing produced, written before the first tick: ``task.yaml``, the
+        target's checkpoint and the initial snapshot and image."""
+        rec = self.record
+        atomic_write_text(prep.evidence_dir / "task.yaml", dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS)))
+        prep.extra["task"] = "task.yaml"
+        if prep.target is None:
+            return
+        # Before anything moves: a recovering supervisor restores from here at worst.
+        self.targets.checkpoint(rec, prep.target)
+        if self.heartbeat is not None:
+            self.heartbeat()
+        if prep.initial is not None:
+            atomic_write_text(prep.evidence_dir / "initial.yaml", dump_yaml(prep.initial))
+            if name := self._image(prep.target, prep.evidence_dir / "initial.png", prep.image_events):
+                prep.extra["initial_image"] = name
+
+    def discard(self) -> None:
+        """Undo a :meth:`prepare` whose session was not started (no ``go``): its owed
+        images are dropped and, for a session without an earlier attempt, its evidence
+        directory (which then holds nothing but what preparing wrote) is removed. The
+        target stays in the pool as it was (nothing moved it); its kept view is spent,
+        so the next session on it observes afresh."""
+        prep, self._prepared = self._prepared, None
+        if prep is None:
+            return
+        if self.images is not None and hasattr(self.images, "discard"):
+            self.images.discard(prep.evidence_dir)
+        if not self.record.attempts:
+            shutil.rmtree(prep.evidence_dir, ignore_errors=True)
+
+    @property
+    def prepared(self) -> bool:
+        """Whether :meth:`prepare` ran (and :meth:`discard` did not undo it)."""
+        return self._prepared is not None
+
+    def _actuate(self, *, ahead: bool) -> AttemptReport:
+        rec = self.record
+        prep = self._prepared
+        spec, evidence_dir, rel, started = prep.spec, prep.evidence_dir, prep.rel, prep.started
+        target, ctx, initial, initial_truth, perceiver = prep.target, prep.ctx, prep.initial, prep.initial_truth, \
+            prep.perceiver
+        image_events = prep.image_events
+        try:
+            self._write_preparation(prep)
+            if prep.error is not None:
+                raise prep.error[0]
+            runtime = prep.runtime
+            deadline = time.monotonic() + rec.limits.execution_timeout_s
             ctx.on_observation = lambda snap: write_environment(
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
             self._actuation_started_at = utc_now()  # hand-off latency is measured up to here (bench/end_to_end.py)
@@ -306,14 +390,18 @@ class SessionRunner:
             self.recorder = self._start_recorder(target, evidence_dir, image_events, seed=rec.seed)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
-            logger.exception("session %s: runtime error", rec.session_id)
+            logger.error("session %s: runtime error", rec.session_id, exc_info=exc)
             outcome = RunOutcome(status="error", error_code=getattr(exc, "code", None) or errorcodes.TARGET_ERROR,
                                  message=str(exc), ticks=0)
         except Exception as exc:  # noqa: BLE001 - a bug must still halt the target and leave evidence
-            logger.exception("session %s: unexpected runtime error", rec.session_id)
+            logger.error("session %s: unexpected runtime error", rec.session_id, exc_info=exc)
+            trace = prep.error[1] if prep.error is not None and prep.error[0] is exc else traceback.format_exc()
             outcome = RunOutcome(status="error", error_code=errorcodes.RUNTIME_ERROR,
-                                 message=f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", ticks=0)
+                                 message=f"{type(exc).__name__}: {exc}\n{trace}", ticks=0)
         self._actuation_ended_at = utc_now()
+        # Evidence besides snapshots and trace: the task definition and RGB images.
+        # Image events join the session's events. Truth goes to ground_truth.yaml only.
+        extra = dict(prep.extra)
         if self.on_finished is not None:
             self.on_finished(outcome)
         if self.heartbeat is not None:
@@ -352,7 +440,9 @@ class SessionRunner:
         logger.info("session %s: runtime %s in %.2f s (%d ticks)", rec.session_id, outcome.status,
                     time.perf_counter() - started, outcome.ticks)
         return AttemptReport(outcome=outcome.status, error_code=outcome.error_code, message=outcome.message,
-                             evidence=rel, timings=dict(ctx.profiler.totals) if ctx else {}, ticks=outcome.ticks)
+                             evidence=rel, ticks=outcome.ticks,
+                             timings={**(dict(ctx.profiler.totals) if ctx else {}), "set_up": round(prep.duration_s, 6),
+                                      "set_up_before_go": round(prep.duration_s if ahead else 0.0, 6)})
 
     def _perception_key(self) -> tuple | None:
         """What a kept view depends on besides the world: the identity of the workspace's

@@ -72,6 +72,7 @@ from phyagentos.protocol import (
 )
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
+from .session_basis import runtime_basis
 from .worker import RunnerDied, RunnerProcess, park_runner as _park_runner, take_runner as _take_runner
 
 __all__ = ["WatchdogSupervisor", "SupervisorConfig", "PRESENCE_DIR", "read_presence"]
@@ -850,8 +851,10 @@ class WatchdogSupervisor:
         inf.deadline = now + rec.limits.execution_timeout_s + self.config.execution_grace_s
         self._runner.heartbeats.reset()
         try:
+            # The runner prepared the session after its preflight reply; the digest of the
+            # fields just made durable tells it whether that preparation is of this session.
             self._runner.send("go", root=str(self.workspace.root), session_id=inf.session_id,
-                              checkpoint_interval_s=self.config.checkpoint_interval_s)
+                              checkpoint_interval_s=self.config.checkpoint_interval_s, basis=runtime_basis(rec))
         except RunnerDied:
             return 1 + self._on_runner_died(inf)
         return 1

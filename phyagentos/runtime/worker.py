@@ -20,7 +20,8 @@ job             does                                                  reply
 ``reserve``     take the target's actuation lock (non-blocking)       ``reserved`` {marker} | ``busy``
 ``unreserve``   drop it                                               ``unreserved``
 ``preflight``   compatibility preflight; if it passes, write the      ``preflight`` {ok, plan, ...}
-                in-flight marker (target_lock.py)
+                in-flight marker (target_lock.py), reply, then
+                prepare the session (below)
 ``go``          run the session (SessionRunner.run)                   ``finished`` {outcome}, then
                                                                       ``done`` {AttemptReport}
 ``recover``     restore the checkpoint, halt, persist, snapshot       ``recovered`` {AttemptReport}
@@ -37,6 +38,14 @@ target's own hook halt the arm at the next command or physics step); ``clear_est
 releases it. If the supervisor dies, the pipe reaches EOF: the runner cancels its
 session (halting the target at the next tick), writes its evidence and exits,
 and only then does the kernel release the actuation lock.
+
+After replying to a passed preflight the runner prepares the session
+(:meth:`SessionRunner.prepare`: target acquired, initial snapshot, skill context and
+safety guard; nothing moves) while the supervisor makes ``start`` durable, so ``go``
+writes the checkpoint and the initial evidence and ticks. ``go`` carries the digest of the started session's runtime fields
+(:func:`~phyagentos.runtime.session_basis.runtime_basis`); the preparation is used only
+if it was made from the same fields, and any other job first discards it
+(:meth:`SessionRunner.discard`).
 
 Heartbeats travel through shared memory (:mod:`phyagentos.runtime.heartbeat`), not
 the pipe, so a runner stuck inside a tick goes silent even though its reader thread
@@ -350,6 +359,7 @@ class _Runner:
         self.locks: dict[tuple[str, str], Any] = {}
         self.jobs: queue.Queue = queue.Queue()
         self.cancel = None  # CancelToken of the running session
+        self.prepared = None  # (root, SessionRunner, ExitStack of its write batch) awaiting its go
         self.send_lock = threading.Lock()
         from phyagentos.runtime.evidence_writer import EvidenceImageWriter  # noqa: PLC0415
 
@@ -472,24 +482,19 @@ class _Runner:
             if not self.lock(root, rec.target).held:
                 raise SupervisorError(f"preflight of {session_id}: target {rec.target!r} is not reserved")
             write_marker(Path(root) / "targets", rec.target, session_id=session_id, token=token, owner=owner)
-        self.reply("preflight", ok=result.ok, session_id=session_id,
-                   plan=result.plan.to_dict() if result.plan else None,
-                   manifest=result.manifest.to_dict() if result.manifest else None,
+        plan = result.plan.to_dict() if result.plan else None
+        manifest = result.manifest.to_dict() if result.manifest else None
+        self.reply("preflight", ok=result.ok, session_id=session_id, plan=plan, manifest=manifest,
                    rejections=[r.model_dump(mode="json") for r in result.rejections],
                    duration_s=time.perf_counter() - started)
+        if result.ok:
+            # What ``start`` will record (the supervisor copies plan and manifest from this reply).
+            self._prepare(root, rec.model_copy(update={"adapter_plan": plan, "tool_manifest": manifest}))
 
-    def job_go(self, root: str, session_id: str, checkpoint_interval_s: float) -> None:
+    def _session_runner(self, root: str, ws, rec):
         from phyagentos.primitives.context import CancelToken  # noqa: PLC0415
-        from phyagentos.protocol.atomic import batched_durability  # noqa: PLC0415
         from phyagentos.runtime.runner import SessionRunner  # noqa: PLC0415
 
-        ws = self.workspace(root)
-        rec = ws.load_session(session_id)
-        if not self.lock(root, rec.target).held:
-            raise SupervisorError(f"go {session_id}: target {rec.target!r} is not reserved")
-        self.cancel = CancelToken()
-        if self._estop_latch().is_set():
-            self.cancel.cancel("e-stop engaged", "cancelled.estop")
         hb = self.heartbeats
 
         def beat() -> None:
@@ -497,23 +502,86 @@ class _Runner:
             hb.beat("runner", now)
             hb.beat("target", now)  # the in-process simulated target answered this tick
 
+        return SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=CancelToken(), heartbeat=beat,
+                             images=self.images)
+
+    def _prepare(self, root: str, rec) -> None:
+        """Set up ``rec``'s session for its first tick while the supervisor persists
+        ``start`` (:meth:`SessionRunner.prepare`; moves nothing). The session's batch of
+        durable writes (fsynced when it ends, as in ``go``) begins here."""
+        from contextlib import ExitStack  # noqa: PLC0415
+
+        from phyagentos.protocol.atomic import batched_durability  # noqa: PLC0415
+
+        stack = ExitStack()
+        stack.enter_context(batched_durability())
+        runner = self._session_runner(root, self.workspace(root), rec)
+        try:
+            runner.prepare()
+        except BaseException:
+            stack.close()
+            raise
+        self.prepared = (root, runner, stack)
+
+    def discard_prepared(self) -> None:
+        """Undo the preparation of a session that was not started (any job but its ``go``)."""
+        prepared, self.prepared = self.prepared, None
+        if prepared is not None:
+            self._discard(prepared)
+
+    @staticmethod
+    def _discard(prepared: tuple) -> None:
+        _, runner, stack = prepared
+        try:
+            runner.discard()
+        finally:
+            stack.close()
+        logger.debug("runner: preparation of %s discarded", runner.record.session_id)
+
+    def job_go(self, root: str, session_id: str, checkpoint_interval_s: float, basis: str | None = None) -> None:
+        from phyagentos.protocol.atomic import batched_durability  # noqa: PLC0415
+        from phyagentos.runtime.session_basis import runtime_basis  # noqa: PLC0415
+
+        prepared, self.prepared = self.prepared, None
+        runner = stack = None
+        if prepared is not None:
+            p_root, p_runner, _ = prepared
+            if (p_root, p_runner.record.session_id) == (root, session_id) and basis is not None \
+                    and runtime_basis(p_runner.record) == basis and self.lock(root, p_runner.record.target).held:
+                _, runner, stack = prepared
+            else:
+                # Started from other fields than were prepared (e.g. the file was edited
+                # in between): set up afresh from the session file.
+                logger.info("runner: preparation of %s not used for go of %s", p_runner.record.session_id, session_id)
+                self._discard(prepared)
+        if runner is None:
+            ws = self.workspace(root)
+            rec = ws.load_session(session_id)
+            if not self.lock(root, rec.target).held:
+                raise SupervisorError(f"go {session_id}: target {rec.target!r} is not reserved")
+            runner = self._session_runner(root, ws, rec)
+        self.cancel = runner.cancel
+        if self._estop_latch().is_set():
+            self.cancel.cancel("e-stop engaged", "cancelled.estop")
+
         def finished(outcome) -> None:
             self.reply("finished", session_id=session_id, status=outcome.status, error_code=outcome.error_code,
                        message=outcome.message, ticks=outcome.ticks)
 
+        runner.on_finished = finished
+        runner.checkpoint_interval_s = checkpoint_interval_s
         # The bundle's files, the checkpoints and ENVIRONMENT.md are fsynced together
         # when the session ends, before ``done`` (after which the supervisor records
         # ``awaiting_verification``): a verifier never sees a bundle that is not durable.
         # A killed runner loses nothing by this (the page cache survives it); the
-        # recovering runner writes its own durable snapshot.
+        # recovering runner writes its own durable snapshot. A prepared session's batch
+        # began with its preparation.
         try:
-            with batched_durability():
-                report = SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=self.cancel, heartbeat=beat,
-                                       on_finished=finished, checkpoint_interval_s=checkpoint_interval_s,
-                                       images=self.images).run()
+            with stack if stack is not None else batched_durability():
+                report = runner.run()
         finally:
             self.cancel = None
-            self.images.release(ws.evidence_dir(session_id))  # rendered in the background from here
+            self.images.release(runner.workspace.evidence_dir(session_id))  # rendered in the background from here
         self.reply("done", session_id=session_id, **report.to_dict())
 
     def job_recover(self, root: str, session_id: str, status: str, error_code: str, message: str) -> None:
@@ -596,12 +664,15 @@ class _Runner:
                 continue
             handler = getattr(self, f"job_{kind}", None)
             try:
+                if self.prepared is not None and kind != "go":
+                    self.discard_prepared()  # the prepared session was not started
                 if handler is None:
                     raise SupervisorError(f"unknown runner job {kind!r}")
                 handler(**payload)
             except Exception as exc:  # noqa: BLE001 - report, keep serving
                 logger.exception("runner job %s failed", kind)
                 self.reply("error", job=kind, message=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc())
+        self.discard_prepared()
         self.release_all()
         self.images.close()  # owed images first: the targets' models must outlive their renders
         for pool in self.pools.values():

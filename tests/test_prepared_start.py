@@ -1,0 +1,159 @@
+"""A runner sets a session up while the supervisor persists ``start`` (issue 12).
+
+After a passed preflight the runner acquires and observes the target and builds the
+skill context (:meth:`SessionRunner.prepare`), while the WatchdogSupervisor writes the
+``start`` transition; ``go`` then ticks at once. Pinned here with a real supervisor and
+a real runner process: nothing ticks before ``start`` is durable, a session whose
+runtime fields changed between preflight and start is set up afresh from its file, and
+a prepared session that never starts leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import pytest
+import yaml
+
+import phyagentos  # noqa: F401  (headless GL before mujoco loads)
+from phyagentos.protocol import Workspace
+from phyagentos.runtime.session_basis import RUNTIME_FIELDS, runtime_basis
+from phyagentos.runtime.supervisor import WatchdogSupervisor
+
+from supervisor_util import make_workspace, submit
+
+HOLD = {"duration_s": 0.0}
+
+
+def _at(stamp) -> dt.datetime:
+    """A UTC timestamp as the protocol writes it (YAML may have parsed it already)."""
+    if isinstance(stamp, dt.datetime):
+        return stamp if stamp.tzinfo else stamp.replace(tzinfo=dt.timezone.utc)
+    return dt.datetime.fromisoformat(str(stamp).replace("Z", "+00:00"))
+
+
+def _bundle(ws: Workspace, sid: str) -> dict:
+    rec = ws.load_session(sid)
+    return yaml.safe_load((ws.root / rec.attempts[-1].evidence / "bundle.yaml").read_text())
+
+
+def test_the_runtime_basis_survives_the_session_file_and_ignores_what_the_supervisor_owns(tmp_path):
+    ws = make_workspace(tmp_path / "ws")
+    rec = submit(ws, "s1", skill="hold", parameters={"duration_s": 0.1, "note": [1, 2.5e-07]})
+    loaded = ws.load_session("s1")
+    assert runtime_basis(loaded) == runtime_basis(rec)
+    claimed = loaded.model_copy(update={"state": "claimed", "updated_at": "2030-01-01T00:00:00Z"})
+    assert runtime_basis(claimed) == runtime_basis(rec)  # state and timestamps are not runtime inputs
+    for field, value in [("parameters", {"duration_s": 0.2, "note": [1, 2.5e-07]}), ("seed", 8),
+                         ("adapter_plan", {"x": 1}), ("tool_manifest", {"operations": []})]:
+        assert field in RUNTIME_FIELDS
+        assert runtime_basis(loaded.model_copy(update={field: value})) != runtime_basis(rec), field
+
+
+@pytest.mark.sim
+def test_a_session_is_set_up_before_go_and_ticks_only_after_start_is_recorded(tmp_path):
+    ws = make_workspace(tmp_path / "ws")
+    for sid in ("a", "b"):
+        submit(ws, sid, skill="hold", parameters=HOLD)
+    sup = WatchdogSupervisor(ws)
+    try:
+        assert sup.run_once() == 2
+    finally:
+        sup.close()
+    for sid in ("a", "b"):
+        rec = ws.load_session(sid)
+        assert rec.state == "awaiting_verification"
+        timings = rec.attempts[-1].timings
+        assert timings["set_up_before_go"] > 0 and timings["set_up_before_go"] == timings["set_up"]
+        started = next(t.at for t in rec.transitions if t.dest == "running")
+        bundle = _bundle(ws, sid)
+        assert _at(bundle["outcome"]["actuation_started_at"]) >= _at(started)
+        assert {"task", "initial"} <= set(bundle["files"])
+        for name in bundle["files"].values():
+            if not name.endswith(".png"):  # images are rendered in the background
+                assert (ws.root / rec.attempts[-1].evidence / name).is_file(), name
+    state = yaml.safe_load((ws.root / "targets" / "franka_tabletop" / "state.yaml").read_text())
+    assert state["session_id"] == "b"
+
+
+@pytest.mark.sim
+def test_a_session_edited_between_preflight_and_start_runs_as_its_file_says(tmp_path, monkeypatch):
+    ws = make_workspace(tmp_path / "ws")
+    submit(ws, "edited", skill="hold", parameters=HOLD)
+    real = WatchdogSupervisor._on_preflight
+
+    def edit_then_start(self, inf, payload):
+        # an operator's edit lands after the runner prepared from the file, before start
+        def longer(rec):
+            rec.parameters = {"duration_s": 0.25}
+
+        self.workspace.update_session(inf.session_id, longer)
+        return real(self, inf, payload)
+
+    monkeypatch.setattr(WatchdogSupervisor, "_on_preflight", edit_then_start)
+    sup = WatchdogSupervisor(ws)
+    try:
+        assert sup.run_once() == 1
+    finally:
+        sup.close()
+    rec = ws.load_session("edited")
+    assert rec.state == "awaiting_verification" and rec.attempts[-1].outcome == "completed"
+    assert rec.attempts[-1].timings["set_up_before_go"] == 0.0  # the preparation was not used
+    evidence = ws.root / rec.attempts[-1].evidence
+    assert yaml.safe_load((evidence / "task.yaml").read_text())["parameters"] == {"duration_s": 0.25}
+    terminal = yaml.safe_load((evidence / "terminal.yaml").read_text())
+    initial = yaml.safe_load((evidence / "initial.yaml").read_text())
+    assert terminal["sim_time_s"] - initial["sim_time_s"] == pytest.approx(0.25, abs=0.01)
+
+
+@pytest.mark.sim
+def test_a_prepared_session_that_never_starts_leaves_no_evidence_and_the_next_one_runs(tmp_path, monkeypatch):
+    ws = make_workspace(tmp_path / "ws")
+    submit(ws, "cancelled", skill="hold", parameters=HOLD)
+    real = WatchdogSupervisor._on_preflight
+
+    def cancel_then_start(self, inf, payload):
+        if inf.session_id == "cancelled":  # an operator's cancel arrives while start is due
+            inf.cancel = ("cancelled.operator", "changed my mind")
+        return real(self, inf, payload)
+
+    monkeypatch.setattr(WatchdogSupervisor, "_on_preflight", cancel_then_start)
+    sup = WatchdogSupervisor(ws)
+    try:
+        assert sup.run_once() == 1
+        rec = ws.load_session("cancelled")
+        assert rec.state == "cancelled" and rec.attempts == []
+        submit(ws, "next", skill="hold", parameters=HOLD)
+        assert sup.run_once() == 1
+    finally:
+        sup.close()
+    assert not (ws.root / "evidence" / "cancelled").exists()
+    nxt = ws.load_session("next")
+    assert nxt.state == "awaiting_verification" and nxt.attempts[-1].timings["set_up_before_go"] > 0
+
+
+@pytest.mark.sim
+def test_an_error_while_preparing_becomes_the_attempts_error_outcome_with_its_evidence(tmp_path):
+    from phyagentos.errors import TargetError
+    from phyagentos.primitives.context import CancelToken
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+    from phyagentos.runtime.runner import SessionRunner
+    from phyagentos.runtime.target_pool import TargetPool
+
+    class BrokenPool(TargetPool):
+        def acquire(self, session, spec):
+            raise TargetError("the scene does not build: mesh missing")
+
+    ws = make_workspace(tmp_path / "ws")
+    rec = submit(ws, "broken", skill="hold", parameters=HOLD)
+    runner = SessionRunner(ws, rec, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()),
+                           BrokenPool(ws.root / "targets"), cancel=CancelToken())
+    runner.prepare()  # never raises: the error waits for run()
+    assert runner.prepared
+    report = runner.run()
+    assert report.outcome == "error" and report.error_code == "target.error"
+    assert "mesh missing" in report.message and report.timings["set_up_before_go"] > 0
+    bundle = yaml.safe_load((ws.root / report.evidence / "bundle.yaml").read_text())
+    assert bundle["outcome"]["status"] == "error" and bundle["files"]["task"] == "task.yaml"
+    assert (ws.root / report.evidence / "task.yaml").is_file()

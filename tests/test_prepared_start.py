@@ -20,7 +20,7 @@ from phyagentos.protocol import Workspace
 from phyagentos.runtime.session_basis import RUNTIME_FIELDS, runtime_basis
 from phyagentos.runtime.supervisor import WatchdogSupervisor
 
-from supervisor_util import make_workspace, submit
+from supervisor_util import make_workspace, state_of, submit
 
 HOLD = {"duration_s": 0.0}
 
@@ -130,6 +130,91 @@ def test_a_prepared_session_that_never_starts_leaves_no_evidence_and_the_next_on
     assert not (ws.root / "evidence" / "cancelled").exists()
     nxt = ws.load_session("next")
     assert nxt.state == "awaiting_verification" and nxt.attempts[-1].timings["set_up_before_go"] > 0
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("how", ["cancelled", "unreadable", "write_fails"])
+def test_a_claim_that_is_not_made_leaves_the_target_free_and_unmarked(tmp_path, monkeypatch, caplog, how):
+    """The runner preflights (and prepares) while the claim is written. A claim that is
+    not made (the session was cancelled or broken just before it, or the claim's write
+    failed after the preflight was sent) releases the target, leaves no marker and no
+    evidence for the session, and the next claim on the same runner goes as usual."""
+    import errno
+    import logging
+
+    from phyagentos.protocol import workspace as workspace_module
+    from phyagentos.protocol.lifecycle import SessionLifecycle
+    from phyagentos.runtime.target_lock import read_marker
+
+    ws = make_workspace(tmp_path / "ws")
+    submit(ws, "lost", skill="hold", parameters=HOLD)
+    real_claim, real_write = WatchdogSupervisor._claim_record, workspace_module.write_document
+    spoiled = []
+
+    def spoil_then_claim(self, session_id, lease, **kwargs):
+        if session_id == "lost" and not spoiled:
+            spoiled.append(session_id)
+            if how == "cancelled":  # an operator's cancel lands between the listing and the claim
+                def cancel(rec):
+                    lc = SessionLifecycle(rec)
+                    lc.fire("cancel", reason="operator")
+                    lc.fire("cancelled", reason="operator")
+
+                self.workspace.update_session(session_id, cancel)
+            elif how == "unreadable":  # a hand edit breaks the file
+                path = self.workspace.find_session_path(session_id)
+                path.write_text(path.read_text().replace("skill: hold", "skill: [hold"))
+        return real_claim(self, session_id, lease, **kwargs)
+
+    def full_disk_once(doc, *args, **kwargs):
+        if how == "write_fails" and doc.path.name == "lost.md" and doc.data.state == "preflight_checking" \
+                and "disk" not in spoiled:
+            spoiled.append("disk")
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_write(doc, *args, **kwargs)
+
+    monkeypatch.setattr(WatchdogSupervisor, "_claim_record", spoil_then_claim)
+    monkeypatch.setattr(workspace_module, "write_document", full_disk_once)
+    sup = WatchdogSupervisor(ws)
+    try:
+        with caplog.at_level(logging.WARNING, logger="phyagentos.runtime.supervisor"):
+            assert sup.run_once() == 0
+        assert "could not release" not in caplog.text
+        marker = read_marker(ws.root / "targets", "franka_tabletop")
+        assert marker is None or marker.get("session_id") != "lost"
+        assert not (ws.root / "evidence" / "lost").exists()
+        if how == "write_fails":  # the file is as it was: the session is claimed next time
+            assert "claim of lost not written" in caplog.text and state_of(ws, "lost") == "pending"
+            assert sup.run_once() == 1
+            ran = "lost"
+        else:
+            submit(ws, "next", skill="hold", parameters=HOLD)
+            assert sup.run_once() == 1
+            ran = "next"
+    finally:
+        sup.close()
+    rec = ws.load_session(ran)
+    assert rec.state == "awaiting_verification" and rec.attempts[-1].timings["set_up_before_go"] > 0
+    if how == "cancelled":
+        assert ws.load_session("lost").state == "cancelled"
+
+
+def test_a_reply_left_on_the_pipe_by_an_earlier_job_is_not_taken_for_the_next_ones(tmp_path):
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.worker import RunnerProcess
+
+    ws = make_workspace(tmp_path / "ws")
+    runner = RunnerProcess(skills_dir=skills_dir(), trees_dir=trees_dir())
+    try:
+        # a job whose reply nobody waits for: its error stays on the pipe
+        runner.send("preflight", root=str(ws.root), session_id="missing", token="t", owner="test")
+        kind, payload = runner.request("reserve", timeout=120, expect=("reserved", "busy"), root=str(ws.root),
+                                       target="franka_tabletop")
+        assert kind == "reserved", payload
+        kind, payload = runner.request("nonsense", timeout=30, expect=("never",))
+        assert kind == "error" and payload["job"] == "nonsense"  # a job's own error still ends its wait
+    finally:
+        runner.close()
 
 
 @pytest.mark.sim

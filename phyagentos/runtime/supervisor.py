@@ -17,7 +17,11 @@ processes) on one workspace for parallelism. What keeps them safe together:
 - **Targets**: a session is claimed only after the runner holds the target's
   actuation lock (:mod:`phyagentos.runtime.target_lock`), so a target runs one
   session at a time, and ``inflight.yaml`` tells the next holder which session
-  ended abnormally on it.
+  ended abnormally on it. The runner's preflight (read-only; it writes that marker)
+  runs while the claim is written, and the session is prepared while ``start`` is
+  written; nothing moves before ``go``, sent once ``start`` is durable. A claim that
+  fails clears the marker its preflight wrote; one left by a crash names a session
+  that is not leased, which the next holder's preflight replaces.
 - **Crashes**: a session whose lease expired is taken over. If it had not started
   actuating it goes back to ``pending``. If it was actuating (``running``,
   ``finalizing``) it is never re-run: a fresh runner restores the target's last
@@ -658,6 +662,40 @@ class WatchdogSupervisor:
 
     def _claim(self, session_id: str, ident) -> bool:
         lease = new_lease(self.owner, ttl_s=self.config.lease_s)
+        sent: list[bool] = []  # [True] once the preflight is on its way, [False] if the runner is gone
+
+        def preflight_now() -> None:
+            # The preflight reads only fields the claim leaves as they are (``go`` checks
+            # the runtime fields again by digest) and moves nothing, so the runner runs it
+            # while the claim is made durable; its reply is read once the claim stands.
+            try:
+                self._runner.send("preflight", root=str(self.workspace.root), session_id=session_id,
+                                  token=lease.token, owner=self.owner)
+                sent.append(True)
+            except RunnerDied:
+                sent.append(False)
+
+        rec = self._claim_record(session_id, lease, on_claim=preflight_now)
+        if rec is None:
+            if sent == [True] and (str(self.workspace.root), ident.target) in self._runner.reserved:
+                # the claim was not written: release the target and the marker its preflight left
+                self._unreserve(ident.target, session_id=session_id, clear=True)
+            return False
+        self.stats["claimed"] += 1
+        inf = _Inflight(session_id=session_id, target=rec.target, token=lease.token, phase="preflight",
+                        limits=rec.limits)
+        inf.renew_at = time.monotonic() + self.config.lease_s / 3
+        self._inflight = inf
+        inf.deadline = time.monotonic() + rec.limits.preflight_timeout_s
+        if sent != [True]:
+            self._on_runner_died(inf)
+        return True
+
+    def _claim_record(self, session_id: str, lease, *, on_claim) -> SessionRecord | None:
+        """Make the claim (and the start of preflight) durable; the record, or None if
+        the session could not be claimed (no longer pending, unreadable, not there, or
+        the write failed: the file is then as it was). ``on_claim`` is called once the
+        session is read, pending, under its lock, before the write."""
 
         def fn(rec: SessionRecord):
             if rec.state != "pending":
@@ -667,6 +705,7 @@ class WatchdogSupervisor:
             lc.fire("claim", reason=f"by {self.owner}")
             # Preflight starts at once and touches no target: one durable write records both.
             lc.fire("preflight")
+            on_claim()
 
         try:
             rec = self.workspace.update_session(session_id, fn)
@@ -675,24 +714,16 @@ class WatchdogSupervisor:
                 self._set_aside.add(session_id)
                 logger.warning("supervisor %s: session %s set aside, its file no longer validates: %s",
                                self.owner, session_id, exc)
-            return False
+            return None
         except ProtocolError as exc:  # e.g. the hint is there, the file not yet
             logger.debug("claim of %s skipped: %s", session_id, exc)
-            return False
+            return None
+        except OSError as exc:  # e.g. a full disk: the atomic write left the file as it was
+            logger.error("supervisor %s: claim of %s not written: %s", self.owner, session_id, exc)
+            return None
         if rec.state != "preflight_checking" or rec.lease is None or rec.lease.token != lease.token:
-            return False
-        self.stats["claimed"] += 1
-        inf = _Inflight(session_id=session_id, target=rec.target, token=lease.token, phase="preflight",
-                        limits=rec.limits)
-        inf.renew_at = time.monotonic() + self.config.lease_s / 3
-        self._inflight = inf
-        inf.deadline = time.monotonic() + rec.limits.preflight_timeout_s
-        try:
-            self._runner.send("preflight", root=str(self.workspace.root), session_id=session_id,
-                              token=lease.token, owner=self.owner)
-        except RunnerDied:
-            self._on_runner_died(inf)
-        return True
+            return None
+        return rec
 
     # -- the in-flight session ---------------------------------------------
 

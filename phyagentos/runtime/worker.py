@@ -192,7 +192,8 @@ class RunnerProcess:
             raise RunnerDied(f"runner {self.pid} exited (code {self.process.exitcode}): {exc!r}") from None
 
     def request(self, kind: str, *, timeout: float, expect: tuple[str, ...], **payload: Any) -> tuple[str, dict]:
-        """Send a job and wait for its reply (one of ``expect`` or ``error``).
+        """Send a job and wait for its reply (one of ``expect``, or ``error`` from this
+        job); replies to earlier jobs still on the pipe are skipped.
 
         Raises:
             RunnerDied: the runner died, or did not answer within ``timeout`` s
@@ -208,7 +209,7 @@ class RunnerProcess:
             msg = self.poll(left)
             if msg is None:
                 continue
-            if msg[0] in expect or msg[0] == "error":
+            if msg[0] in expect or (msg[0] == "error" and msg[1].get("job") in (None, kind)):
                 return msg
             logger.debug("runner %s: ignoring stale %s while waiting for %s", self.pid, msg[0], expect)
 

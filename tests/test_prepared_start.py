@@ -16,6 +16,7 @@ import pytest
 import yaml
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
+from phyagentos.errors import SupervisorError
 from phyagentos.protocol import Workspace
 from phyagentos.runtime.session_basis import RUNTIME_FIELDS, runtime_basis
 from phyagentos.runtime.supervisor import WatchdogSupervisor
@@ -242,3 +243,5 @@ def test_an_error_while_preparing_becomes_the_attempts_error_outcome_with_its_ev
     bundle = yaml.safe_load((ws.root / report.evidence / "bundle.yaml").read_text())
     assert bundle["outcome"]["status"] == "error" and bundle["files"]["task"] == "task.yaml"
     assert (ws.root / report.evidence / "task.yaml").is_file()
+    with pytest.raises(SupervisorError, match="prepare called twice"):
+        runner.prepare()

@@ -35,7 +35,7 @@ from pathlib import Path
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable
 
-from phyagentos.errors import PhyAgentOSError
+from phyagentos.errors import PhyAgentOSError, SupervisorError
 from phyagentos.primitives.context import CancelToken, SkillContext
 from phyagentos.primitives.observation import has_cameras, make_perceiver, perceive_now
 from phyagentos.protocol import dump_yaml, EnvironmentDoc, SessionRecord, Workspace
@@ -294,11 +294,15 @@ class SessionRunner:
         snapshot and ticks on ``go`` (writing them here would put their journal commits
         into the supervisor's fsync of ``start``). Called at most once.
 
-        Never raises: an error is kept and becomes the attempt's ``error`` outcome when
+        An error while preparing is kept and becomes the attempt's ``error`` outcome when
         :meth:`run` is called, exactly as if it had been raised there.
+
+        Raises:
+            SupervisorError: called a second time (a SessionRunner prepares its session once).
         """
         if self._prepared is not None:
-            raise RuntimeError("SessionRunner.prepare called twice")
+            raise SupervisorError(f"session {self.record.session_id}: SessionRunner.prepare called twice; "
+                                  "build a new SessionRunner for another attempt")
         clock = time.perf_counter()
         rec = self.record
         evidence_dir = self.workspace.evidence_dir(rec.session_id)

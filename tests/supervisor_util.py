@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from dataclasses import dataclass
 from typing import Callable
 
 from phyagentos.protocol import SessionRecord, Workspace, utc_now_iso
@@ -161,3 +162,57 @@ def assert_every_document_parses(ws: Workspace) -> int:
         yaml.safe_load(path.read_text(encoding="utf-8"))
         count += 1
     return count
+
+
+
+#: ``watch`` arguments of the kill drills: short leases, so take-overs come quickly.
+DRILL_WATCH_ARGS = ("--lease-s", "1.0", "--poll-s", "0.2", "--cancel-grace-s", "1")
+
+
+@dataclass
+class Drill:
+    """A kill drill's processes: one submitted run, its supervisors (``watch``, real
+    processes) and an agent (``agent``)."""
+
+    ws: Workspace
+    run_id: str
+    sups: list[subprocess.Popen]
+    agent: subprocess.Popen
+    log: Path
+
+    @classmethod
+    def start(cls, ws: Workspace, graph: Path, tmp_path: Path, *, supervisors: int) -> Drill:
+        """Submit ``graph`` and start ``supervisors`` supervisors and one agent."""
+        out = subprocess.run([*CLI, "submit", str(graph), "--workspace", str(ws.root)], capture_output=True,
+                             text=True, timeout=120, cwd=ROOT)
+        assert out.returncode == 0, out.stderr
+        log = tmp_path / "watch.log"
+        sups = [watch(ws, *DRILL_WATCH_ARGS, log=log) for _ in range(supervisors)]
+        agent = subprocess.Popen([*CLI, "agent", str(ws.root), "--poll-s", "0.2"], stdout=subprocess.DEVNULL,
+                                 stderr=open(tmp_path / "agent.log", "ab"), cwd=ROOT)
+        return cls(ws, out.stdout.strip(), sups, agent, log)
+
+    def kill_supervisor(self, k: int) -> None:
+        """SIGKILL supervisor ``k`` and start a new one in its place."""
+        self.sups[k].send_signal(signal.SIGKILL)
+        self.sups[k].wait(timeout=30)
+        self.sups[k] = watch(self.ws, *DRILL_WATCH_ARGS, log=self.log)
+
+    def stop(self) -> list[int]:
+        """Stop the supervisors (their exit codes) and the agent (which must exit 0)."""
+        codes = [stop(p) for p in self.sups]
+        assert stop(self.agent) == 0
+        return codes
+
+def assert_run_ended_whole(ws: Workspace, run_id: str, nodes: set[str]) -> list[SessionRecord]:
+    """After a kill drill: no corrupted document, nothing left active, no lost node, every
+    session terminal and the run finished. Returns the run's sessions."""
+    from phyagentos.protocol import TERMINAL_STATES
+
+    assert assert_every_document_parses(ws) > len(nodes)
+    assert ws.active_sessions() == []
+    records = ws.list_sessions(run_id=run_id)
+    assert {r.node for r in records} == nodes  # no lost node
+    assert all(r.state in TERMINAL_STATES for r in records)
+    assert ws.runs.load(run_id).state == "finished"
+    return records

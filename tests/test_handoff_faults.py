@@ -14,15 +14,12 @@ from __future__ import annotations
 import os
 import random
 import signal
-import subprocess
 import time
 
 import pytest
 import yaml
 
-from phyagentos.protocol import TERMINAL_STATES
-from supervisor_util import (CLI, ROOT, assert_every_document_parses, descends_from, make_workspace, presence, stop,
-                             wait_for, watch)
+from supervisor_util import Drill, assert_run_ended_whole, descends_from, make_workspace, presence, wait_for
 
 pytestmark = pytest.mark.sim
 
@@ -41,15 +38,8 @@ def test_sigkills_during_hand_offs_lose_nothing_and_start_nothing_twice(tmp_path
              for i in range(NODES)]
     graph.write_text(yaml.safe_dump({"version": 1, "name": "handoff_faults", "description": "0 s holds",
                                      "nodes": nodes}))
-    out = subprocess.run([*CLI, "submit", str(graph), "--workspace", str(ws.root)], capture_output=True, text=True,
-                         timeout=120, cwd=ROOT)
-    assert out.returncode == 0, out.stderr
-    run_id = out.stdout.strip()
-    args = ("--lease-s", "1.0", "--poll-s", "0.2", "--cancel-grace-s", "1")
-    log = tmp_path / "watch.log"
-    sups = [watch(ws, *args, log=log) for _ in range(SUPERVISORS)]
-    agent = subprocess.Popen([*CLI, "agent", str(ws.root), "--poll-s", "0.2"], stdout=subprocess.DEVNULL,
-                             stderr=open(tmp_path / "agent.log", "ab"), cwd=ROOT)
+    drill = Drill.start(ws, graph, tmp_path, supervisors=SUPERVISORS)
+    run_id, sups = drill.run_id, drill.sups
     schedule = ["supervisor"] * (KILLS // 3) + ["runner"] * (KILLS - KILLS // 3)
     random.Random(SEED + 1).shuffle(schedule)
     kills = {"supervisor": 0, "runner": 0}
@@ -78,9 +68,7 @@ def test_sigkills_during_hand_offs_lose_nothing_and_start_nothing_twice(tmp_path
             time.sleep(rng.uniform(0.0, 0.006))
             k = live[owner]
             if kind == "supervisor":
-                sups[k].send_signal(signal.SIGKILL)
-                sups[k].wait(timeout=30)
-                sups[k] = watch(ws, *args, log=log)
+                drill.kill_supervisor(k)
             else:
                 try:
                     os.kill(runner, signal.SIGKILL)
@@ -89,17 +77,11 @@ def test_sigkills_during_hand_offs_lose_nothing_and_start_nothing_twice(tmp_path
             kills[kind] += 1
         wait_for(lambda: run_id not in ws.runs.active_ids(), timeout=300, interval=0.25, what="the run to finish")
     finally:
-        codes = [stop(p) for p in sups]
-        assert stop(agent) == 0
-    assert codes == [0] * SUPERVISORS, log.read_text()[-3000:]
+        codes = drill.stop()
+    assert codes == [0] * SUPERVISORS, drill.log.read_text()[-3000:]
     assert kills["supervisor"] >= 3 and kills["runner"] >= 6, kills
 
-    assert assert_every_document_parses(ws) > NODES
-    assert ws.active_sessions() == []
-    records = ws.list_sessions(run_id=run_id)
-    assert {r.node for r in records} == {f"n{i:02d}" for i in range(NODES)}
-    assert all(r.state in TERMINAL_STATES for r in records)
-    assert ws.runs.load(run_id).state == "finished"
+    records = assert_run_ended_whole(ws, run_id, {f"n{i:02d}" for i in range(NODES)})
     referenced = set()
     for rec in records:
         events = [t.event.split(":")[0] for t in rec.transitions]

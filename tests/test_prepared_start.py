@@ -38,6 +38,18 @@ def _bundle(ws: Workspace, sid: str) -> dict:
     return yaml.safe_load((ws.root / rec.attempts[-1].evidence / "bundle.yaml").read_text())
 
 
+def _before_start(monkeypatch, action) -> None:
+    """Have ``action(supervisor, inflight)`` happen after the runner replied to its
+    preflight (and began preparing) and before the supervisor writes ``start``."""
+    real = WatchdogSupervisor._on_preflight
+
+    def wrapped(self, inf, payload):
+        action(self, inf)
+        return real(self, inf, payload)
+
+    monkeypatch.setattr(WatchdogSupervisor, "_on_preflight", wrapped)
+
+
 def test_the_runtime_basis_survives_the_session_file_and_ignores_what_the_supervisor_owns(tmp_path):
     ws = make_workspace(tmp_path / "ws")
     rec = submit(ws, "s1", skill="hold", parameters={"duration_s": 0.1, "note": [1, 2.5e-07]})
@@ -81,17 +93,12 @@ def test_a_session_is_set_up_before_go_and_ticks_only_after_start_is_recorded(tm
 def test_a_session_edited_between_preflight_and_start_runs_as_its_file_says(tmp_path, monkeypatch):
     ws = make_workspace(tmp_path / "ws")
     submit(ws, "edited", skill="hold", parameters=HOLD)
-    real = WatchdogSupervisor._on_preflight
 
-    def edit_then_start(self, inf, payload):
-        # an operator's edit lands after the runner prepared from the file, before start
-        def longer(rec):
-            rec.parameters = {"duration_s": 0.25}
+    def longer(rec):
+        rec.parameters = {"duration_s": 0.25}
 
-        self.workspace.update_session(inf.session_id, longer)
-        return real(self, inf, payload)
-
-    monkeypatch.setattr(WatchdogSupervisor, "_on_preflight", edit_then_start)
+    # an operator's edit lands after the runner prepared from the file, before start
+    _before_start(monkeypatch, lambda sup, inf: sup.workspace.update_session(inf.session_id, longer))
     sup = WatchdogSupervisor(ws)
     try:
         assert sup.run_once() == 1
@@ -111,14 +118,12 @@ def test_a_session_edited_between_preflight_and_start_runs_as_its_file_says(tmp_
 def test_a_prepared_session_that_never_starts_leaves_no_evidence_and_the_next_one_runs(tmp_path, monkeypatch):
     ws = make_workspace(tmp_path / "ws")
     submit(ws, "cancelled", skill="hold", parameters=HOLD)
-    real = WatchdogSupervisor._on_preflight
 
-    def cancel_then_start(self, inf, payload):
+    def cancel(sup, inf):
         if inf.session_id == "cancelled":  # an operator's cancel arrives while start is due
             inf.cancel = ("cancelled.operator", "changed my mind")
-        return real(self, inf, payload)
 
-    monkeypatch.setattr(WatchdogSupervisor, "_on_preflight", cancel_then_start)
+    _before_start(monkeypatch, cancel)
     sup = WatchdogSupervisor(ws)
     try:
         assert sup.run_once() == 1

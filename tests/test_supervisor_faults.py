@@ -10,15 +10,12 @@ from __future__ import annotations
 import os
 import random
 import signal
-import subprocess
 import time
 
 import pytest
 import yaml
 
-from phyagentos.protocol import TERMINAL_STATES
-from supervisor_util import (CLI, ROOT, assert_every_document_parses, descends_from, make_workspace, presence, stop,
-                             wait_for, watch)
+from supervisor_util import Drill, assert_run_ended_whole, descends_from, make_workspace, presence, wait_for
 
 pytestmark = pytest.mark.sim
 
@@ -41,15 +38,8 @@ def test_random_sigkills_of_supervisors_and_runners_lose_and_rerun_nothing(tmp_p
     ws = make_workspace(tmp_path / "ws", targets=SUPERVISORS)
     graph = tmp_path / "faults.yaml"
     hold_graph(graph, rng)
-    out = subprocess.run([*CLI, "submit", str(graph), "--workspace", str(ws.root)], capture_output=True, text=True,
-                         timeout=120, cwd=ROOT)
-    assert out.returncode == 0, out.stderr
-    run_id = out.stdout.strip()
-    args = ("--lease-s", "1.0", "--poll-s", "0.2", "--cancel-grace-s", "1")
-    log = tmp_path / "watch.log"
-    sups = [watch(ws, *args, log=log) for _ in range(SUPERVISORS)]
-    agent = subprocess.Popen([*CLI, "agent", str(ws.root), "--poll-s", "0.2"], stdout=subprocess.DEVNULL,
-                             stderr=open(tmp_path / "agent.log", "ab"), cwd=ROOT)
+    drill = Drill.start(ws, graph, tmp_path, supervisors=SUPERVISORS)
+    run_id, sups = drill.run_id, drill.sups
     kills = {"supervisor": 0, "runner": 0}
     # The kinds of the kills are a shuffled schedule of their own (1 in 5 a supervisor),
     # drawn from a generator that nothing timing-dependent consumes, and each kind is kept
@@ -75,10 +65,8 @@ def test_random_sigkills_of_supervisors_and_runners_lose_and_rerun_nothing(tmp_p
             victim = rng.choice(busy) if busy and rng.random() < 0.7 else rng.choice(present)
             k = live[victim["pid"]]
             if kind == "supervisor":
-                sups[k].send_signal(signal.SIGKILL)
-                sups[k].wait(timeout=30)
+                drill.kill_supervisor(k)
                 kills["supervisor"] += 1
-                sups[k] = watch(ws, *args, log=log)
             else:
                 try:
                     os.kill(victim["runner_pid"], signal.SIGKILL)
@@ -88,18 +76,11 @@ def test_random_sigkills_of_supervisors_and_runners_lose_and_rerun_nothing(tmp_p
             kind = None
         wait_for(lambda: run_id not in ws.runs.active_ids(), timeout=180, interval=0.25, what="the run to finish")
     finally:
-        codes = [stop(p) for p in sups]
-        assert stop(agent) == 0
-    assert codes == [0] * SUPERVISORS, log.read_text()[-3000:]
+        codes = drill.stop()
+    assert codes == [0] * SUPERVISORS, drill.log.read_text()[-3000:]
     assert kills["supervisor"] >= 6 and kills["runner"] >= 30, kills
 
-    # no corrupted document, nothing left active
-    assert assert_every_document_parses(ws) > NODES
-    assert ws.active_sessions() == []
-    records = ws.list_sessions(run_id=run_id)
-    assert {r.node for r in records} == {f"n{i:02d}" for i in range(NODES)}  # no lost node
-    assert all(r.state in TERMINAL_STATES for r in records)
-    assert ws.runs.load(run_id).state == "finished"
+    records = assert_run_ended_whole(ws, run_id, {f"n{i:02d}" for i in range(NODES)})
 
     recovered = 0
     for rec in records:

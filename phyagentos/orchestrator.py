@@ -26,7 +26,7 @@ from phyagentos.agent.coordinator import AgentCoordinator, SessionSummary
 from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
 from phyagentos.agent.verifier import SessionVerifier
-from phyagentos.errors import GoalGraphError, PhyAgentOSError, ProtocolError, SupervisorError, format_choices
+from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
 from phyagentos.protocol import LEASED_STATES, TERMINAL_STATES, RunRecord, Workspace, utc_now_iso
 from phyagentos.resources import skill_dirs, tree_dirs
 from phyagentos.runtime.skills import SkillRegistry
@@ -190,17 +190,7 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
         supervisor.watcher.notify()
         thread.join()
         agent.workspace.defer_index = supervisor.workspace.defer_index = False
-        _flush_quietly(agent.workspace)  # the entries of both threads
-
-
-def _flush_quietly(workspace: Workspace) -> None:
-    """The SESSIONS.md entries still pending when ``drive_run`` ends (also on an error: a
-    failure here must not hide the one that ended the run; ``reconcile`` rebuilds a view
-    left behind)."""
-    try:
-        workspace.flush_index()
-    except (PhyAgentOSError, OSError) as exc:
-        logger.warning("SESSIONS.md of %s not brought up to date: %s", workspace.root, exc)
+        agent.workspace.flush_index_quietly()  # the entries of both threads (a failure must not hide the run's)
 
 
 #: Session states of a hand-off in progress: submitted, claimed, being preflighted.

@@ -9,13 +9,20 @@ by the agent's and the supervisor's Workspace objects), until the submitted sess
 been claimed and started; both are current again before the run returns. A deferred entry
 never overwrites a later write of its session, and ``reconcile`` rebuilds a view that
 a killed writer left behind.
+
+Two-process mode (``watch`` + ``agent``) defers SESSIONS.md the same way in each process:
+the supervisor rewrites it once the claimed session was started or a step did nothing
+(never between a claim and its start), the agent loop before it waits; both leave it
+current when idle and when they stop.
 """
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import yaml
+from supervisor_util import Drill, submit, wait_for
 
 from phyagentos.protocol import SessionRecord, Workspace, utc_now_iso
 from phyagentos.protocol.lifecycle import SessionLifecycle
@@ -174,3 +181,73 @@ def test_sharing_a_deferral_with_another_workspace_is_refused(tmp_path):
     a = Workspace.create(tmp_path / "a")
     with pytest.raises(ProtocolError, match="is not the workspace"):
         Workspace.create(tmp_path / "b").share_index_deferral(a)
+
+
+def test_a_watching_supervisor_rewrites_sessions_md_off_the_hand_off_and_leaves_it_current(tmp_path, monkeypatch):
+    from phyagentos.runtime.supervisor import WatchdogSupervisor
+
+    ws = Workspace.create(tmp_path / "ws")
+    writes: list[tuple[str, bool, str | None]] = []  # (thread, deferred, the session's state) per SESSIONS.md write
+    original = Workspace._index_write
+
+    def spy(self, entries, *, deferred=False):
+        writes.append((threading.current_thread().name, deferred, self._states.entries().get("s1")))
+        original(self, entries, deferred=deferred)
+
+    monkeypatch.setattr(Workspace, "_index_write", spy)
+    supervisor = WatchdogSupervisor(Workspace.open(ws.root))
+    thread = threading.Thread(target=supervisor.serve, name="watch")
+    thread.start()
+    try:
+        submit(ws, "s1", skill="hold", parameters={"duration_s": 0.0})
+        wait_for(lambda: ws.load_session("s1").state == "awaiting_verification", timeout=120,
+                 what="the runtime phase to end")
+        # while the supervisor idles, SESSIONS.md shows the session as its file does (well
+        # before maintenance would rebuild a stale view: reconcile's stale_hint_s)
+        wait_for(lambda: _index(ws).get("s1") == "awaiting_verification", timeout=10,
+                 what="SESSIONS.md current while the supervisor idles")
+    finally:
+        supervisor.request_stop()
+        thread.join(timeout=60)
+        supervisor.close()
+    assert not thread.is_alive()
+    mine = [w for w in writes if w[0] == "watch"]
+    assert mine and all(deferred for _, deferred, _ in mine), writes
+    # never while the claimed session was being preflighted and started
+    assert not [w for w in mine if w[2] in ("claimed", "preflight_checking")], writes
+
+
+def test_in_two_process_mode_sessions_md_is_current_once_watch_and_agent_are_idle(tmp_path):
+    ws = Workspace.create(tmp_path / "ws")
+    drill = Drill.start(ws, _chain(tmp_path / "chain.yaml", 3), tmp_path, supervisors=1)
+    try:
+        wait_for(lambda: ws.runs.load(drill.run_id).state == "finished", timeout=240, what="the run to finish")
+        sessions = {r.session_id: r.state for r in ws.list_sessions(run_id=drill.run_id)}
+        assert sorted(sessions.values()) == ["succeeded"] * 3
+        # both processes still serve: each wrote its deferred entries before it waited
+        wait_for(lambda: _index(ws) == sessions, timeout=30, what="SESSIONS.md current while watch and agent idle")
+        assert drill.sups[0].poll() is None and drill.agent.poll() is None
+    finally:
+        codes = drill.stop()
+    assert codes == [0]
+    assert _index(ws) == sessions
+    assert Workspace.open(ws.root).read("SESSIONS").data.counts == {}
+
+
+def test_a_serving_loop_flush_reports_a_malformed_sessions_md_once_and_leaves_it_byte_for_byte(tmp_path, caplog):
+    ws = Workspace.create(tmp_path / "ws")
+    ws.defer_index = True
+    ws.submit_session(_record("s1"))
+    path = ws.path("SESSIONS")
+    good = path.read_bytes()
+    path.write_text(good.decode().replace("sessions: []", "sessions: [\n  - {session_id: x, node: [unclosed\n"))
+    broken = path.read_bytes()
+    with caplog.at_level("WARNING", logger="phyagentos.protocol.workspace"):
+        assert ws.flush_index_quietly() is False
+        assert ws.flush_index_quietly() is False
+    warnings = [r.getMessage() for r in caplog.records if "not brought up to date" in r.getMessage()]
+    assert len(warnings) == 1 and "SESSIONS.md:" in warnings[0]  # once, with the file and line
+    assert path.read_bytes() == broken and ws.index_pending  # nothing overwritten, nothing lost
+    path.write_bytes(good)  # repaired by hand
+    assert ws.flush_index_quietly() is True and not ws.index_pending
+    assert _index(ws) == {"s1": "pending"}

@@ -195,15 +195,24 @@ class AgentLoop:
             presence.unlink(missing_ok=True)
 
     def _serve(self) -> None:
-        while not self._stop:
-            self.watcher.clear()
-            acted = self.step()
-            if self.run_id is not None and (self.run_id in self.finished or self.run_id in self.set_aside_runs):
-                return
-            if self.run_id is not None and self.run_id not in self.workspace.runs.active_ids():
-                return  # finished by another agent process
-            if not acted:
-                self.watcher.wait(self.poll_interval_s)
+        # SESSIONS.md (a view of the session files, never fsynced) is rewritten before
+        # this loop waits, once for all of a step's session writes, not by each verdict
+        # and submission on the path to the next session's claim.
+        self.workspace.defer_index = True
+        try:
+            while not self._stop:
+                self.watcher.clear()
+                acted = self.step()
+                if self.run_id is not None and (self.run_id in self.finished or self.run_id in self.set_aside_runs):
+                    return
+                if self.run_id is not None and self.run_id not in self.workspace.runs.active_ids():
+                    return  # finished by another agent process
+                if not acted:
+                    self.workspace.flush_index_quietly()
+                    self.watcher.wait(self.poll_interval_s)
+        finally:
+            self.workspace.defer_index = False
+            self.workspace.flush_index_quietly()
 
     def close(self) -> None:
         self.watcher.close()

@@ -44,7 +44,7 @@ from typing import Any
 from filelock import FileLock
 from pydantic import ValidationError
 
-from phyagentos.errors import DocumentError, LeaseError, ProtocolError, format_choices
+from phyagentos.errors import DocumentError, LeaseError, PhyAgentOSError, ProtocolError, format_choices
 
 from phyagentos import resources
 
@@ -273,6 +273,7 @@ class Workspace:
         #: rewrites SESSIONS.md before it returns
         self.defer_index = False
         self._index_pending: dict[str, SessionIndexEntry] = {}
+        self._index_flush_failure: str | None = None  # the last failure flush_index_quietly logged
 
     def __repr__(self) -> str:
         return f"Workspace({str(self.root)!r})"
@@ -939,8 +940,9 @@ class Workspace:
         all in one rewrite of the view.
 
         SESSIONS.md is a view of the session files, written atomically but never fsynced;
-        a process on a latency-critical path (``drive_run``: between a verdict and the
-        next session's first actuation) defers it to when it would otherwise wait. A
+        a process on a latency-critical path (between a verdict and the next session's
+        first actuation: ``drive_run``, and ``watch`` and ``agent`` in their serving
+        loops) defers it to when it would otherwise wait. A
         process killed with entries pending leaves the view behind the session files,
         as a kill between a session write and its SESSIONS.md update always could;
         :meth:`reconcile` rebuilds such a view.
@@ -964,6 +966,27 @@ class Workspace:
             for sid, entry in entries.items():
                 self._index_pending.setdefault(sid, entry)
             raise
+
+    def flush_index_quietly(self) -> bool:
+        """:meth:`flush_index` for a serving loop (``watch``, ``agent``, ``drive_run``): a
+        failure is logged as a warning instead of raised, once until a flush succeeds
+        again, and the entries stay pending for the next call. A malformed SESSIONS.md
+        then stays byte for byte as it is (its readers report it with its line) while the
+        session files, which are authoritative, go on; :meth:`reconcile` rebuilds the view.
+
+        Returns:
+            ``True`` when nothing is left pending.
+        """
+        try:
+            self.flush_index()
+        except (PhyAgentOSError, OSError) as exc:
+            message = str(exc)
+            if message != self._index_flush_failure:
+                log.warning("SESSIONS.md of %s not brought up to date: %s", self.root, message)
+                self._index_flush_failure = message
+            return False
+        self._index_flush_failure = None
+        return True
 
     def share_index_deferral(self, other: Workspace) -> None:
         """Defer this object's SESSIONS.md entries into ``other``'s pending set (the

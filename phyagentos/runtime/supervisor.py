@@ -274,20 +274,37 @@ class WatchdogSupervisor:
         last: tuple | None = None
         next_presence = 0.0
         self._write_presence()
+        # SESSIONS.md (a view of the session files, never fsynced) is rewritten once the
+        # session in flight runs or nothing is due, not by each write of the claim,
+        # preflight and start on the path to the next session's first actuation.
+        self.workspace.defer_index = True
         try:
             while not self.stopped:
                 try:
-                    self.step()
+                    acted = self.step()
                 except (PhyAgentOSError, OSError) as exc:
                     # One bad document or session must not take the supervisor down with it.
                     logger.exception("supervisor %s: step failed: %s", self.owner, exc)
                     time.sleep(min(1.0, self.config.poll_interval_s))
+                    acted = 0
+                if self._views_due(acted):
+                    self.workspace.flush_index_quietly()
                 state = (self.runner_pid, self.paused, self.estopped, self._inflight and self._inflight.session_id)
                 if state != last or time.monotonic() >= next_presence:
                     self._write_presence()
                     last, next_presence = state, time.monotonic() + self.config.lease_s / 3
         finally:
+            self.workspace.defer_index = False
+            self.workspace.flush_index_quietly()
             self._presence_path().unlink(missing_ok=True)
+
+    def _views_due(self, acted: int) -> bool:
+        """Whether ``serve`` rewrites the SESSIONS.md entries it deferred now: with
+        nothing in flight, once the session in flight was started (``go`` is sent; the
+        runner actuates in its own process), or when a step did nothing, but never
+        between a claim and its start."""
+        inf = self._inflight
+        return inf is None or inf.phase == "running" or (not acted and inf.phase != "preflight")
 
     def _presence_path(self) -> Path:
         return self.workspace.root / PRESENCE_DIR / f"{os.getpid()}-{self.owner.rsplit(':', 1)[-1]}.json"

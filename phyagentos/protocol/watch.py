@@ -8,6 +8,16 @@ workspace root (``RUNTIME_SIGNAL.md``); every relevant event makes the watcher's
 descriptors (a runner pipe). Protocol writes are atomic renames, so only
 create/move/delete events are observed; modify/open/close noise never wakes anyone.
 
+watchdog holds an ``IN_MOVED_FROM`` event for half a second, waiting for the
+``IN_MOVED_TO`` it may pair with, and its event queue delivers nothing else meanwhile
+(``DelayedQueue.get`` sleeps out the head's delay even once it was paired). A file moved
+out of a watched directory (``SessionArchive.archive`` moves a session file into its day
+directory) thus held every later event of that directory back by 0.5 s, and a rename
+inside it did whenever the observer's thread ran between the two halves of the rename (1
+in 1000 in a loop of atomic writes). This module sets that pairing delay to zero: a
+move then wakes the owner at once, as a deletion and a creation or as one move, which
+is all a wake-up needs.
+
 If the observer cannot start (no inotify, watch limit reached) the watcher runs in
 ``polling`` mode: :meth:`wait` simply times out, and callers bound every wait by
 their poll interval, so a missed event costs at most one interval either way.
@@ -37,6 +47,22 @@ class _StopRaceFilter(logging.Filter):
 
 
 logging.getLogger("watchdog.observers.inotify").addFilter(_StopRaceFilter())
+
+
+def _no_move_pairing_delay() -> None:
+    """Set watchdog's move-pairing delay to zero (see the module docstring): the class
+    attribute ``delay`` its inotify emitter reads when it builds its queue,
+    ``InotifyMoveEventGrouper`` since watchdog 7, ``InotifyBuffer`` before."""
+    try:
+        from watchdog.observers.inotify_move_event_grouper import (  # noqa: PLC0415
+            InotifyMoveEventGrouper as holder,
+        )
+    except ImportError:
+        try:
+            from watchdog.observers.inotify_buffer import InotifyBuffer as holder  # noqa: PLC0415
+        except ImportError:  # not Linux: no inotify emitter
+            return
+    holder.delay = 0.0
 
 
 def _stop_observer(observer) -> None:
@@ -78,6 +104,7 @@ class WorkspaceWatcher:
         except ImportError:  # pragma: no cover - watchdog is a dependency
             log.warning("watchdog unavailable; falling back to polling")
             return
+        _no_move_pairing_delay()
         watcher = self
 
         class _Handler(FileSystemEventHandler):
@@ -137,11 +164,11 @@ class WorkspaceWatcher:
     def close(self, *, wait: bool = False) -> None:
         """Stop watching and close the wake-up socket.
 
-        The observer is stopped on a daemon thread unless ``wait``: watchdog's
-        inotify emitter holds an unmatched ``IN_MOVED_FROM`` (a session file moved to
-        ``sessions/archive/``, which is not watched) for its move-pairing delay of
-        0.5 s (``InotifyMoveEventGrouper.delay``, watchdog 7.1), and ``stop`` joins
-        the emitter through that sleep. Nothing is delivered after this call returns:
+        The observer is stopped on a daemon thread unless ``wait``: ``stop`` joins
+        watchdog's inotify emitter, which sleeps out its move-pairing delay on an
+        unmatched ``IN_MOVED_FROM`` (a session file moved into its archive directory,
+        which is not watched; 0.5 s unless :func:`_no_move_pairing_delay` could set it
+        to zero). Nothing is delivered after this call returns:
         the handler's wake-up goes to a closed socket and is dropped.
         """
         observer, self._observer = self._observer, None

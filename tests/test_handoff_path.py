@@ -104,6 +104,24 @@ def test_images_a_verdict_needs_are_rendered_from_the_captured_state(tmp_path, t
     assert a != b
 
 
+@pytest.mark.sim
+def test_a_scene_taken_earlier_is_rendered_as_it_was_not_as_the_target_is_now(tmp_path, target):
+    from phyagentos.runtime.evidence_writer import EvidenceImageWriter
+
+    writer = EvidenceImageWriter(decide_s=60.0)
+    writer.capture(target, tmp_path / "before.png")
+    earlier = writer.scene(target)  # what a runner takes while it prepares a session
+    assert earlier is not None
+    target.set_gripper(opening_m=0.0, settle_s=0.3)
+    writer.capture(target, tmp_path / "taken_earlier.png", scene=earlier)
+    writer.capture(target, tmp_path / "now.png")
+    writer.release(tmp_path)
+    assert wait_for_images(tmp_path, timeout_s=30)
+    writer.close()
+    before, earlier_png, now = ((tmp_path / n).read_bytes() for n in ("before.png", "taken_earlier.png", "now.png"))
+    assert earlier_png == before != now
+
+
 def test_a_runner_answers_a_job_sent_while_it_was_still_starting(tmp_path):
     from phyagentos.resources import skills_dir, trees_dir
     from phyagentos.runtime.worker import RunnerProcess

@@ -250,3 +250,49 @@ def test_an_error_while_preparing_becomes_the_attempts_error_outcome_with_its_ev
     assert (ws.root / report.evidence / "task.yaml").is_file()
     with pytest.raises(SupervisorError, match="prepare called twice"):
         runner.prepare()
+
+
+@pytest.mark.sim
+def test_go_writes_what_preparing_serialised_and_captured_and_ticks_without_serialising(tmp_path, monkeypatch):
+    from phyagentos.primitives.context import CancelToken
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime import runner as runner_mod
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+    from phyagentos.runtime.evidence_writer import EvidenceImageWriter
+    from phyagentos.runtime.runner import SessionRunner
+    from phyagentos.runtime.target_pool import TargetPool
+
+    ws = make_workspace(tmp_path / "ws")
+    rec = submit(ws, "s1", skill="hold", parameters=HOLD)
+    runtime = BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir())
+    images = EvidenceImageWriter(decide_s=60.0)
+    pool = TargetPool(ws.root / "targets")
+    runner = SessionRunner(ws, rec, runtime, pool, cancel=CancelToken(), images=images)
+    dumps: list[str] = []
+    real_dump, real_copy = runner_mod.dump_yaml, EvidenceImageWriter.scene
+    monkeypatch.setattr(runner_mod, "dump_yaml", lambda data: dumps.append("dump") or real_dump(data))
+    monkeypatch.setattr(EvidenceImageWriter, "scene", lambda self, t: dumps.append("scene") or real_copy(self, t))
+    runner.prepare()
+    assert dumps == ["dump", "dump", "scene"]  # task.yaml, initial.yaml and the initial scene, before go
+    real_run = runtime.run
+    at_first_tick: list[int] = []
+
+    def run(skill, ctx, **kw):
+        at_first_tick.append(len(dumps))
+        return real_run(skill, ctx, **kw)
+
+    monkeypatch.setattr(runtime, "run", run)
+    report = runner.run()
+    try:
+        assert report.outcome == "completed", report.message
+        assert at_first_tick == [3]  # go serialised and copied nothing before the skill ticked
+        evidence = ws.root / report.evidence
+        assert yaml.safe_load((evidence / "task.yaml").read_text())["session_id"] == "s1"
+        assert isinstance(yaml.safe_load((evidence / "initial.yaml").read_text()), dict)
+        bundle = yaml.safe_load((evidence / "bundle.yaml").read_text())
+        assert bundle["files"]["initial_image"] == "initial.png"
+        images.release(evidence)
+    finally:
+        images.close()
+        pool.close()
+    assert (evidence / "initial.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -66,11 +66,11 @@ class EvidenceImageWriter:
 
     # -- the SessionRunner's side ------------------------------------------------
 
-    def capture(self, target: Any, path: str | os.PathLike[str], *, events: list | None = None) -> str | None:
-        """Capture ``target``'s scene now for ``path`` (rendered later); returns the file
-        name the bundle lists. Falls back to rendering at once (:func:`save_scene_image`)
-        for a target without MuJoCo handles or an ``overview`` camera."""
-        path = Path(path)
+    def scene(self, target: Any) -> tuple[Any, Any] | None:
+        """``target``'s scene as it is now, for a later :meth:`capture`: ``(model, copy of
+        its MjData)``, or None for a target this writer cannot render in the background
+        (no MuJoCo handles or no ``overview`` camera). Writes nothing: the SessionRunner
+        takes the initial scene while it prepares a session, before ``go``."""
         model, data = getattr(target, "model", None), getattr(target, "data", None)
         try:
             import mujoco  # noqa: PLC0415
@@ -79,14 +79,26 @@ class EvidenceImageWriter:
                       and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, _CAMERA) >= 0)
         except Exception:  # noqa: BLE001 - any doubt: the synchronous path decides
             usable = False
-        if not usable:
+        return (model, copy.copy(data)) if usable else None
+
+    def capture(self, target: Any, path: str | os.PathLike[str], *, events: list | None = None,
+                scene: tuple[Any, Any] | None = None) -> str | None:
+        """Capture ``target``'s scene now for ``path`` (rendered later); returns the file
+        name the bundle lists. ``scene``: one :meth:`scene` took earlier of the same
+        world (nothing moved since), used instead of taking it now. Falls back to
+        rendering at once (:func:`save_scene_image`) for a target without MuJoCo handles
+        or an ``overview`` camera."""
+        path = Path(path)
+        if scene is None:
+            scene = self.scene(target)
+        if scene is None:
             return save_scene_image(target, path, events=events)
         key = str(path.parent)
         with self._lock:
             if key not in self._held:
                 self._held[key] = []
                 (path.parent / PENDING_MARKER).touch()
-            self._held[key].append((model, copy.copy(data), path))
+            self._held[key].append((*scene, path))
         return path.name
 
     def release(self, evidence_dir: str | os.PathLike[str]) -> None:

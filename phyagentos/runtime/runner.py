@@ -211,6 +211,9 @@ class _Preparation:
     ctx: SkillContext | None = None
     runtime: Any = None  # the SkillRuntime that ticks the skill
     initial: dict | None = None  # initial snapshot (the perceived view)
+    task_text: str | None = None  # task.yaml as written on go
+    initial_text: str | None = None  # initial.yaml as written on go
+    initial_scene: Any = None  # the initial scene for the background image writer (EvidenceImageWriter.scene)
     initial_truth: dict | None = None  # simulator truth, for ground_truth.yaml only
     perceiver: Any = None
     extra: dict[str, str] = field(default_factory=dict)  # bundle files besides the standard ones
@@ -251,9 +254,9 @@ class SessionRunner:
     recorder: SessionRecorder | None = None  # [view hook, issue 13] set by run() under --record
     _prepared: _Preparation | None = field(default=None, init=False, repr=False)
 
-    def _image(self, target, path, events: list):
+    def _image(self, target, path, events: list, *, scene: Any = None):
         if self.images is not None:
-            return self.images.capture(target, path, events=events)
+            return self.images.capture(target, path, events=events, scene=scene)
         return save_scene_image(target, path, events=events)
 
     def _tick(self, target) -> Callable[[], None]:
@@ -310,6 +313,7 @@ class SessionRunner:
                             started=clock)
         self._prepared = prep
         try:
+            prep.task_text = dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS))
             prep.spec = next(t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target)
             # A session whose TargetToolManifest grants no operation (e.g. skill ``noop``)
             # never opens its target: no snapshots, no images, nothing to halt.
@@ -323,6 +327,10 @@ class SessionRunner:
                 if has_cameras(target):
                     prep.perceiver = make_perceiver(target, _perception_config(self.workspace))
                 prep.initial = self._initial_view(prep.spec, target, prep.perceiver, evidence_dir, prep.rel)
+                if prep.initial is not None:  # serialised and captured now, written on go
+                    prep.initial_text = dump_yaml(prep.initial)
+                    if self.images is not None and hasattr(self.images, "scene"):
+                        prep.initial_scene = self.images.scene(target)
                 prep.ctx = SkillContext(target=target, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
                                         plan=rec.adapter_plan, perceiver=prep.perceiver, evidence_dir=evidence_dir,
                                         evidence_rel=prep.rel)
@@ -341,7 +349,8 @@ class SessionRunner:
         """What preparing produced, written before the first tick: ``task.yaml``, the
         target's checkpoint and the initial snapshot and image."""
         rec = self.record
-        atomic_write_text(prep.evidence_dir / "task.yaml", dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS)))
+        atomic_write_text(prep.evidence_dir / "task.yaml",
+                          prep.task_text or dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS)))
         prep.extra["task"] = "task.yaml"
         if prep.target is None:
             return
@@ -350,8 +359,9 @@ class SessionRunner:
         if self.heartbeat is not None:
             self.heartbeat()
         if prep.initial is not None:
-            atomic_write_text(prep.evidence_dir / "initial.yaml", dump_yaml(prep.initial))
-            if name := self._image(prep.target, prep.evidence_dir / "initial.png", prep.image_events):
+            atomic_write_text(prep.evidence_dir / "initial.yaml", prep.initial_text or dump_yaml(prep.initial))
+            if name := self._image(prep.target, prep.evidence_dir / "initial.png", prep.image_events,
+                                   scene=prep.initial_scene):
                 prep.extra["initial_image"] = name
 
     def discard(self) -> None:

@@ -186,6 +186,9 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
     finally:
         agent.on_submit = None
         agent.defer_task_view = False
+        owed_log = getattr(agent, "append_owed_log", None)  # (a stand-in coordinator owes none)
+        if owed_log is not None:
+            owed_log(quiet=True)  # verdict lines a deferred step left, if the run ends by an error
         stop.set()
         supervisor.watcher.notify()
         thread.join()

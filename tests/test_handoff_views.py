@@ -251,3 +251,93 @@ def test_a_serving_loop_flush_reports_a_malformed_sessions_md_once_and_leaves_it
     path.write_bytes(good)  # repaired by hand
     assert ws.flush_index_quietly() is True and not ws.index_pending
     assert _index(ws) == {"s1": "pending"}
+
+
+# -- verdict lines of LOG.md (round 9) ----------------------------------------------------
+
+
+def _node_states(ws: Workspace, run_id: str) -> dict[str, str]:
+    return {r.node: r.state for r in ws.list_sessions(run_id=run_id)}
+
+
+def _verdict_lines(ws: Workspace) -> list[tuple[str, str]]:
+    return [(e.node, e.event) for e in Workspace.open(ws.root).read("LOG").data.entries
+            if e.event.startswith("verdict_")]
+
+
+def test_drive_run_appends_a_verdicts_log_line_once_its_dependent_has_started(tmp_path, monkeypatch):
+    from phyagentos.orchestrator import drive_run
+    from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
+
+    ws = Workspace.create(tmp_path / "ws")
+    agent, run = _agent(ws, _chain(tmp_path / "chain.yaml", 3))
+    seen: list[tuple[str, dict[str, str]]] = []  # (node, the run's node states) per verdict line appended
+    original = Workspace.append_log
+
+    def spy(self, entry):
+        if entry.event.startswith("verdict_"):
+            seen.append((entry.node, _node_states(self, run.run_id)))
+        original(self, entry)
+
+    monkeypatch.setattr(Workspace, "append_log", spy)
+    supervisor = WatchdogSupervisor(ws, config=SupervisorConfig(poll_interval_s=60.0))  # no quiet-interval catch-up
+    try:
+        drive_run(agent, supervisor)
+    finally:
+        supervisor.close()
+    assert agent.succeeded()
+    assert [node for node, _ in seen] == ["h0", "h1", "h2"], seen
+    for (node, states), dependent in zip(seen, ("h1", "h2")):
+        # the verdict was durable first: the dependent session was submitted, claimed and started
+        assert states[node] == "succeeded", seen
+        assert states.get(dependent) not in (None, "pending", "claimed", "preflight_checking"), seen
+    assert _verdict_lines(ws) == [("h0", "verdict_success"), ("h1", "verdict_success"), ("h2", "verdict_success")]
+
+
+def _awaiting_verification(tmp_path: Path):
+    """A chain of two holds whose first session has run and awaits its verdict."""
+    from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
+
+    ws = Workspace.create(tmp_path / "ws")
+    agent, run = _agent(ws, _chain(tmp_path / "chain.yaml", 2))
+    assert agent.step() == 1
+    supervisor = WatchdogSupervisor(Workspace.open(ws.root), config=SupervisorConfig(poll_interval_s=0.1))
+    try:
+        wait_for(lambda: supervisor.step(0.1) >= 0 and _node_states(ws, run.run_id)["h0"] == "awaiting_verification",
+                 timeout=120, interval=0.0, what="h0 to await its verdict")
+    finally:
+        supervisor.close()
+    return ws, agent, run
+
+
+def test_a_step_appends_its_verdicts_log_lines_after_submitting_the_dependents(tmp_path, monkeypatch):
+    ws, agent, run = _awaiting_verification(tmp_path)
+    seen: list[dict[str, str]] = []
+    original = Workspace.append_log
+
+    def spy(self, entry):
+        seen.append(_node_states(self, run.run_id))
+        original(self, entry)
+
+    monkeypatch.setattr(Workspace, "append_log", spy)
+    assert agent.step() == 2  # a verdict and a submitted session
+    assert seen == [{"h0": "succeeded", "h1": "pending"}]  # not deferred without defer_task_view
+    assert _verdict_lines(ws) == [("h0", "verdict_success")]
+
+
+def test_a_malformed_log_md_fails_the_step_after_its_sessions_are_written_and_is_left_byte_for_byte(tmp_path):
+    from phyagentos.errors import DocumentError
+
+    ws, agent, run = _awaiting_verification(tmp_path)
+    path = ws.path("LOG")
+    path.write_text(path.read_text().replace("entries:", "entries: [unclosed", 1))
+    broken = path.read_bytes()
+    try:
+        agent.step()
+    except DocumentError as exc:
+        assert "LOG.md" in str(exc)
+    else:
+        raise AssertionError("a malformed LOG.md went unreported")
+    assert path.read_bytes() == broken
+    # the verdict and the dependent session were written before the append failed
+    assert _node_states(ws, run.run_id) == {"h0": "succeeded", "h1": "pending"}

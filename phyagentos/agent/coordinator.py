@@ -47,7 +47,7 @@ from typing import Any, Callable, Mapping
 
 import networkx as nx
 
-from phyagentos.errors import VerifierError
+from phyagentos.errors import PhyAgentOSError, VerifierError
 from phyagentos.protocol import LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace, is_expired, new_lease
 from phyagentos.protocol.evidence_markers import PRUNED_MARKER, images_pending, wait_for_images
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
@@ -152,6 +152,9 @@ class AgentCoordinator:
         promotion: thresholds for promoting knowledge to SKILL.md.
     """
 
+    #: verdicts' LOG.md lines not yet appended (see :meth:`step`); a list once constructed
+    _owed_log: list[LogEntry] | tuple = ()
+
     def __init__(self, workspace: Workspace, graph: GoalGraph, *, run_id: str | None = None, seed: int | None = 0,
                  verifier: SessionVerifier | None = None, evaluation: dict | None = None, use_memory: bool = True,
                  consolidate: bool = True, keep_success_images: bool = False,
@@ -178,6 +181,8 @@ class AgentCoordinator:
         self.defer_task_view = False
         #: whether TASK.md lags behind the last step (a deferred write is due)
         self.task_view_stale = False
+        #: verdicts' LOG.md lines not yet appended (see :meth:`step`)
+        self._owed_log: list[LogEntry] = []
 
     # -- state -----------------------------------------------------------
 
@@ -294,19 +299,65 @@ class AgentCoordinator:
     def step(self) -> int:
         """Verify, replan, compile ready nodes and write TASK.md; returns actions taken.
 
-        The run's sessions are listed again only after this step changed them (a
-        verdict, a replan, a compiled node); ``on_submit``, if set, is called as soon
-        as a ready node's session is submitted (``drive_run`` wakes the supervisor with
-        it, before TASK.md is rewritten).
+        The run's sessions are listed again only after a replan or a resumed node (a
+        verdict patches the listing with the record it wrote); ``on_submit``, if set, is
+        called as soon as a ready node's session is submitted (``drive_run`` wakes the
+        supervisor with it, before TASK.md is rewritten).
+
+        The verdicts' LOG.md lines are appended after the ready nodes are submitted:
+        the verdict in the session file is what a dependent session waits for, and the
+        log line only records it (a crash in between loses that line, as a crash
+        between the verdict and its append did before). With :attr:`defer_task_view`,
+        a step that submitted leaves them to :meth:`write_task`, with TASK.md. Each line
+        carries its verdict's time (``at``); another process's line may precede it.
+
+        Raises:
+            DocumentError: LOG.md or another protocol document is malformed (a LOG.md
+                append fails after this step's session writes; nothing is lost).
         """
+        try:
+            actions = self._step()
+        except BaseException:
+            self.append_owed_log(quiet=True)
+            raise
+        if not (self.defer_task_view and self.task_view_stale):
+            self.append_owed_log()
+        return actions
+
+    def append_owed_log(self, *, quiet: bool = False) -> None:
+        """Append the verdicts' LOG.md lines that steps owe (see :meth:`step`), oldest
+        first. Every line is tried; the first failure is raised afterwards (``quiet``:
+        only logged, e.g. while another exception ends the run).
+
+        Raises:
+            DocumentError: LOG.md is malformed (LOG.md is left as it was).
+            ProtocolError: LOG.md is missing.
+            OSError: LOG.md or its archive cannot be written.
+        """
+        owed, self._owed_log = list(self._owed_log), []
+        first: Exception | None = None
+        for entry in owed:
+            try:
+                self.workspace.append_log(entry)
+            except (PhyAgentOSError, OSError) as exc:
+                logger.error("could not append the verdict of session %s to LOG.md: %s", entry.session_id, exc)
+                first = first or exc
+        if first is not None and not quiet:
+            raise first
+
+    def _step(self) -> int:
         actions = 0
         sessions = self.sessions()
+        verified: dict[str, SessionRecord] = {}
         for rec in sessions:
             # a verification whose agent died (its lease expired) is taken up again
             if rec.state == "awaiting_verification" or (rec.state == "verifying" and is_expired(rec.lease)):
-                actions += self._verify(rec.session_id)
-        if actions:
-            sessions = self.sessions()
+                done = self._verify(rec.session_id)
+                if done is not None:
+                    verified[done.session_id] = done
+                    actions += 1
+        if verified:  # what the verdicts wrote; nothing else of this run changes state by them
+            sessions = [verified.get(rec.session_id, rec) for rec in sessions]
         replanned = 0
         for rec in sessions:
             if rec.state == "awaiting_replan":
@@ -348,19 +399,31 @@ class AgentCoordinator:
         return actions
 
     def write_task(self) -> None:
-        """Write the TASK.md the last step deferred (see :attr:`defer_task_view`): the run's
-        sessions as that step left them, exactly what it would have written itself
-        (without listing them again: a change made since, e.g. a supervisor's rejection,
-        changes the run's active sessions, and the step that follows writes its own)."""
-        self._write_task(self.last_sessions)
+        """Write what the last step deferred (see :attr:`defer_task_view`): the verdicts'
+        LOG.md lines, then TASK.md with the run's sessions as that step left them,
+        exactly what it would have written itself (without listing them again: a change
+        made since, e.g. a supervisor's rejection, changes the run's active sessions,
+        and the step that follows writes its own).
 
-    def _verify(self, session_id: str) -> int:
+        Raises:
+            DocumentError, ProtocolError, OSError: as for :meth:`append_owed_log` (TASK.md
+                is still written).
+        """
+        try:
+            self.append_owed_log()
+        finally:
+            self._write_task(self.last_sessions)
+
+    def _verify(self, session_id: str) -> SessionRecord | None:
+        """Judge ``session_id``'s latest attempt and persist the verdict; returns the record
+        as written (None: another agent got there first). Its LOG.md line is owed to
+        :meth:`step`."""
         ws = self.workspace
         with ws.session_lock(session_id):
             rec = ws.load_session(session_id)
             resume = rec.state == "verifying" and is_expired(rec.lease)
             if rec.state != "awaiting_verification" and not resume:
-                return 0  # another agent got there first
+                return None  # another agent got there first
             rec.lease = new_lease(_AGENT_ID, ttl_s=_VERIFY_LEASE_S)
             lifecycle = SessionLifecycle(rec, persist=ws.save_session)
             if resume:
@@ -394,12 +457,12 @@ class AgentCoordinator:
         event = {"success": "succeed", "failure": "fail", "replan": "replan"}[verdict.verdict]
         rec.lease = None
         lifecycle.fire(event, reason=verdict.reason[:200])
-        ws.append_log(LogEntry(at=utc_now(), session_id=rec.session_id, node=rec.node, event=f"verdict_{verdict.verdict}",
-                               state=rec.state, message=verdict.reason))
+        self._owed_log.append(LogEntry(at=utc_now(), session_id=rec.session_id, node=rec.node,
+                                       event=f"verdict_{verdict.verdict}", state=rec.state, message=verdict.reason))
         logger.info("session %s verdict %s: %s", rec.session_id, verdict.verdict, verdict.reason)
         if self.consolidate:
             self._consolidate(rec, verdict, evidence, history)
-        return 1
+        return rec
 
     def _judged(self, rec: SessionRecord, evidence: EvidenceBundle,
                 history: list[SessionRecord]) -> tuple[SessionRecord, EvidenceBundle]:

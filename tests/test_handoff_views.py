@@ -14,6 +14,10 @@ Two-process mode (``watch`` + ``agent``) defers SESSIONS.md the same way in each
 the supervisor rewrites it once the claimed session was started or a step did nothing
 (never between a claim and its start), the agent loop before it waits; both leave it
 current when idle and when they stop.
+
+A verdict's LOG.md line is appended after the sessions its step submitted (in ``run``,
+once they started, with TASK.md); an agent that dies before appending it leaves the line
+to the next agent of the run, which appends it once, from the session file.
 """
 
 from __future__ import annotations
@@ -341,3 +345,47 @@ def test_a_malformed_log_md_fails_the_step_after_its_sessions_are_written_and_is
     assert path.read_bytes() == broken
     # the verdict and the dependent session were written before the append failed
     assert _node_states(ws, run.run_id) == {"h0": "succeeded", "h1": "pending"}
+
+
+def test_a_verdict_line_its_agent_died_before_appending_is_appended_by_the_next_agent_once(tmp_path, monkeypatch):
+    from phyagentos.agent.agent_loop import load_run_graph
+    from phyagentos.agent.coordinator import AgentCoordinator
+    from phyagentos.orchestrator import skill_names
+
+    ws, agent, run = _awaiting_verification(tmp_path)
+
+    def dying(self, entry):
+        raise KeyboardInterrupt  # the agent's process ends between the verdict and its line
+
+    monkeypatch.setattr(Workspace, "append_log", dying)
+    try:
+        agent.step()
+    except KeyboardInterrupt:
+        pass
+    else:
+        raise AssertionError("the append was never attempted")
+    monkeypatch.undo()
+    assert _node_states(ws, run.run_id) == {"h0": "succeeded", "h1": "pending"}
+    assert _verdict_lines(ws) == []
+    verdict_at = next(t.at for t in ws.load_session(agent.latest_by_node()["h0"].session_id).transitions
+                      if t.source == "verifying")
+    for _ in range(2):  # the next agent of the run appends the owed line once, however often it steps
+        successor = AgentCoordinator(ws, load_run_graph(ws, run.run_id, skills=skill_names()), run_id=run.run_id)
+        successor.step()
+        successor.step()
+    lines = [e for e in Workspace.open(ws.root).read("LOG").data.entries if e.event.startswith("verdict_")]
+    assert [(e.node, e.event, e.state, e.at) for e in lines] == [("h0", "verdict_success", "succeeded", verdict_at)]
+
+
+def test_log_entries_of_a_session_are_found_in_log_md_and_in_its_archive(tmp_path):
+    from phyagentos.protocol import LogEntry
+
+    ws = Workspace.create(tmp_path / "ws")
+    ws.LOG_MAX_ENTRIES = 3
+    for i in range(5):
+        ws.append_log(LogEntry(at=f"2026-11-23T07:00:0{i}Z", session_id=f"s{i % 2}", event=f"e{i}"))
+    with (ws.log_dir / "archive-2026-11.jsonl").open("a") as archive:
+        archive.write('{"session_id": "s0", "at": \n')  # torn by a crash
+    assert [e.event for e in ws.log_entries_of({"s0"}, since="2026-11-01T00:00:00Z")] == ["e0", "e2", "e4"]
+    assert [e.event for e in ws.log_entries_of({"s0"}, since="2026-12-01T00:00:00Z")] == ["e2", "e4"]  # LOG.md only
+    assert ws.log_entries_of(set(), since="2026-11-01T00:00:00Z") == []

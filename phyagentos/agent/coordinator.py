@@ -41,6 +41,7 @@ from __future__ import annotations
 import logging
 import os
 import socket
+from collections import Counter
 from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Any, Callable, Mapping
@@ -49,6 +50,7 @@ import networkx as nx
 
 from phyagentos.errors import PhyAgentOSError, VerifierError
 from phyagentos.protocol import LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace, is_expired, new_lease
+from phyagentos.protocol.schemas import TransitionRecord
 from phyagentos.protocol.evidence_markers import PRUNED_MARKER, images_pending, wait_for_images
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
@@ -74,6 +76,8 @@ logger = logging.getLogger(__name__)
 # died is taken up again by the next agent instead of staying ``verifying`` forever.
 _AGENT_ID = f"agent:{socket.gethostname()}:{os.getpid()}"
 _VERIFY_LEASE_S = 60.0
+#: lifecycle event of a verdict (from ``verifying``) -> the verdict
+_VERDICT_OF_EVENT = {"succeed": "success", "fail": "failure", "replan": "replan"}
 
 _RUNNING = {"pending", "claimed", "preflight_checking", "running", "finalizing", "awaiting_verification",
             "verifying", "awaiting_replan", "cancelling", "replanned"}
@@ -183,6 +187,8 @@ class AgentCoordinator:
         self.task_view_stale = False
         #: verdicts' LOG.md lines not yet appended (see :meth:`step`)
         self._owed_log: list[LogEntry] = []
+        #: whether the first step looked for verdict lines an earlier agent of this run owed
+        self._lines_checked = False
 
     # -- state -----------------------------------------------------------
 
@@ -306,10 +312,13 @@ class AgentCoordinator:
 
         The verdicts' LOG.md lines are appended after the ready nodes are submitted:
         the verdict in the session file is what a dependent session waits for, and the
-        log line only records it (a crash in between loses that line, as a crash
-        between the verdict and its append did before). With :attr:`defer_task_view`,
+        log line only records it. With :attr:`defer_task_view`,
         a step that submitted leaves them to :meth:`write_task`, with TASK.md. Each line
-        carries its verdict's time (``at``); another process's line may precede it.
+        carries its verdict's time (``at``); another process's line may precede it. A
+        coordinator's first step also appends the lines an earlier agent of the run died
+        owing (:meth:`_verdict_lines_owed`): a killed agent's lines are appended by the
+        run's next agent (an agent that starts on a run another live agent still serves
+        may append a line twice, never lose one).
 
         Raises:
             DocumentError: LOG.md or another protocol document is malformed (a LOG.md
@@ -345,9 +354,43 @@ class AgentCoordinator:
         if first is not None and not quiet:
             raise first
 
+    def _verdict_lines_owed(self, sessions: list[SessionRecord]) -> list[LogEntry]:
+        """The LOG.md lines of this run's verdicts that are in no log (LOG.md or its
+        archive), oldest first: an agent killed between a verdict and its line (see
+        :meth:`step`) owes them, and the coordinator that takes the run over appends
+        them with its first step, each with its verdict's time, state and reason (from
+        the session file). Lines are matched by session and event, counted."""
+        verdicts: list[tuple[SessionRecord, TransitionRecord]] = [
+            (rec, t) for rec in sessions for t in rec.transitions
+            if t.source == "verifying" and t.event.split(":", 1)[0] in _VERDICT_OF_EVENT]
+        if not verdicts:
+            return []
+        try:
+            logged = Counter((e.session_id, e.event) for e in self.workspace.log_entries_of(
+                {rec.session_id for rec, _ in verdicts}, since=min(t.at for _, t in verdicts)))
+        except (PhyAgentOSError, OSError) as exc:  # the next append reports it (and writes nothing)
+            logger.warning("run %s: LOG.md not checked for owed verdict lines: %s", self.run_id, exc)
+            return []
+        owed: list[LogEntry] = []
+        for rec, t in sorted(verdicts, key=lambda v: v[1].at):
+            event = f"verdict_{_VERDICT_OF_EVENT[t.event.split(':', 1)[0]]}"
+            if logged[(rec.session_id, event)] > 0:
+                logged[(rec.session_id, event)] -= 1
+                continue
+            verdict = next((a.verdict for a in reversed(rec.attempts) if a.verdict is not None), None)
+            owed.append(LogEntry(at=t.at, session_id=rec.session_id, node=rec.node, event=event, state=t.dest,
+                                 message=verdict.reason if verdict is not None else ""))
+        if owed:
+            logger.warning("run %s: appending %d verdict line(s) to LOG.md that an earlier agent owed: %s",
+                           self.run_id, len(owed), ", ".join(e.session_id for e in owed))
+        return owed
+
     def _step(self) -> int:
         actions = 0
         sessions = self.sessions()
+        if not self._lines_checked:
+            self._owed_log[:0] = self._verdict_lines_owed(sessions)
+            self._lines_checked = True
         verified: dict[str, SessionRecord] = {}
         for rec in sessions:
             # a verification whose agent died (its lease expired) is taken up again
@@ -454,7 +497,7 @@ class AgentCoordinator:
         rec.context = with_calls(rec.context, trace_calls(evidence.trace, ref=evidence.refs("trace")[0]
                                                           if evidence.refs("trace") else None)
                                  + ([c for sid in revised for c in calls_for(sid)] if calls_for is not None else []))
-        event = {"success": "succeed", "failure": "fail", "replan": "replan"}[verdict.verdict]
+        event = next(e for e, v in _VERDICT_OF_EVENT.items() if v == verdict.verdict)
         rec.lease = None
         lifecycle.fire(event, reason=verdict.reason[:200])
         self._owed_log.append(LogEntry(at=utc_now(), session_id=rec.session_id, node=rec.node,

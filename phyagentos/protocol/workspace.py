@@ -1185,6 +1185,44 @@ class Workspace:
             written = _read_text(path)  # what was just written, under the lock
             _remember_log_text(path, written, _body_end(written, doc.suffix))
 
+    def log_entries_of(self, session_ids: Iterable[str], *, since: str) -> list[LogEntry]:
+        """The log entries of ``session_ids``, oldest first: those in LOG.md and those aged out
+        to ``log/archive-YYYY-MM.jsonl`` from the month of ``since`` (a UTC timestamp,
+        ``2026-11-23T07:00:00Z``) on. An archived line that does not parse is skipped with
+        a warning (the archive is append-only: a torn last line is a crash's, not data).
+
+        Raises:
+            DocumentError: LOG.md is malformed.
+            ProtocolError: LOG.md is missing.
+        """
+        wanted = set(session_ids)
+        if not wanted:
+            return []
+        _, filename, _ = self._doc("LOG")
+        path = inside_workspace(self.root / filename, self.root)
+        try:
+            text = _read_text(path)
+        except FileNotFoundError:
+            raise ProtocolError(f"{filename} missing from workspace {self.root}; Workspace.create restores it") from None
+        current = [e for e in parse_document(text, LogDoc, path=path).data.entries if e.session_id in wanted]
+        first = f"archive-{_ts_key(since).strftime('%Y-%m')}.jsonl"
+        archived: list[LogEntry] = []
+        for archive in sorted(self.log_dir.glob("archive-*.jsonl")) if self.log_dir.is_dir() else []:
+            if archive.name < first:
+                continue
+            with open(archive, encoding="utf-8") as handle:
+                for number, line in enumerate(handle, 1):
+                    if not any(sid in line for sid in wanted):
+                        continue
+                    try:
+                        entry = LogEntry.model_validate(json.loads(line))
+                    except (ValueError, ValidationError) as exc:
+                        log.warning("%s:%d: log line skipped: %s", archive, number, exc)
+                        continue
+                    if entry.session_id in wanted:
+                        archived.append(entry)
+        return archived + current
+
     def _append_log_spliced(self, path: Path, text: str, doc: Document[Any], entry: LogEntry) -> bool:
         """Append ``entry`` (and age out the oldest entry at the bound) by editing the text
         instead of rendering every entry again: LOG.md is rewritten on every transition

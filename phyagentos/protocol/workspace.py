@@ -147,6 +147,11 @@ def templates_dir() -> Path:
     return candidate
 
 
+#: the session id of an archived log line (``_archive`` writes ``json.dumps`` of a LogEntry:
+#: ids are plain, e.g. ``r20261123T070410-fb0c-h11-1``, so they need no JSON unescaping)
+_LOG_SESSION_ID = re.compile(r'"session_id": "([^"\\]*)"')
+
+
 def _ts_key(timestamp: str) -> datetime:
     return datetime.fromisoformat(timestamp[:-1] + "+00:00" if timestamp.endswith("Z") else timestamp)
 
@@ -1212,7 +1217,8 @@ class Workspace:
                 continue
             with open(archive, encoding="utf-8") as handle:
                 for number, line in enumerate(handle, 1):
-                    if not any(sid in line for sid in wanted):
+                    found = _LOG_SESSION_ID.search(line)  # one look-up a line, however many sessions
+                    if found is None or found.group(1) not in wanted:
                         continue
                     try:
                         entry = LogEntry.model_validate(json.loads(line))

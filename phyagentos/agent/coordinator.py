@@ -360,20 +360,19 @@ class AgentCoordinator:
         :meth:`step`) owes them, and the coordinator that takes the run over appends
         them with its first step, each with its verdict's time, state and reason (from
         the session file). Lines are matched by session and event, counted."""
-        verdicts: list[tuple[SessionRecord, TransitionRecord]] = [
-            (rec, t) for rec in sessions for t in rec.transitions
-            if t.source == "verifying" and t.event.split(":", 1)[0] in _VERDICT_OF_EVENT]
+        verdicts: list[tuple[SessionRecord, TransitionRecord, str]] = [
+            (rec, t, f"verdict_{_VERDICT_OF_EVENT[name]}") for rec in sessions for t in rec.transitions
+            if t.source == "verifying" and (name := t.event.split(":", 1)[0]) in _VERDICT_OF_EVENT]
         if not verdicts:
             return []
         try:
             logged = Counter((e.session_id, e.event) for e in self.workspace.log_entries_of(
-                {rec.session_id for rec, _ in verdicts}, since=min(t.at for _, t in verdicts)))
+                {rec.session_id for rec, _, _ in verdicts}, since=min(t.at for _, t, _ in verdicts)))
         except (PhyAgentOSError, OSError) as exc:  # the next append reports it (and writes nothing)
             logger.warning("run %s: LOG.md not checked for owed verdict lines: %s", self.run_id, exc)
             return []
         owed: list[LogEntry] = []
-        for rec, t in sorted(verdicts, key=lambda v: v[1].at):
-            event = f"verdict_{_VERDICT_OF_EVENT[t.event.split(':', 1)[0]]}"
+        for rec, t, event in sorted(verdicts, key=lambda v: v[1].at):
             if logged[(rec.session_id, event)] > 0:
                 logged[(rec.session_id, event)] -= 1
                 continue

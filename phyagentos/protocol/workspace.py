@@ -1203,13 +1203,7 @@ class Workspace:
         wanted = set(session_ids)
         if not wanted:
             return []
-        _, filename, _ = self._doc("LOG")
-        path = inside_workspace(self.root / filename, self.root)
-        try:
-            text = _read_text(path)
-        except FileNotFoundError:
-            raise ProtocolError(f"{filename} missing from workspace {self.root}; Workspace.create restores it") from None
-        current = [e for e in parse_document(text, LogDoc, path=path).data.entries if e.session_id in wanted]
+        current = [e for e in self.read("LOG").data.entries if e.session_id in wanted]
         first = f"archive-{_ts_key(since).strftime('%Y-%m')}.jsonl"
         archived: list[LogEntry] = []
         for archive in sorted(self.log_dir.glob("archive-*.jsonl")) if self.log_dir.is_dir() else []:
@@ -1221,12 +1215,9 @@ class Workspace:
                     if found is None or found.group(1) not in wanted:
                         continue
                     try:
-                        entry = LogEntry.model_validate(json.loads(line))
+                        archived.append(LogEntry.model_validate(json.loads(line)))
                     except (ValueError, ValidationError) as exc:
                         log.warning("%s:%d: log line skipped: %s", archive, number, exc)
-                        continue
-                    if entry.session_id in wanted:
-                        archived.append(entry)
         return archived + current
 
     def _append_log_spliced(self, path: Path, text: str, doc: Document[Any], entry: LogEntry) -> bool:

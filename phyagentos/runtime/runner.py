@@ -88,6 +88,11 @@ _TASK_FIELDS = {"session_id", "run_id", "goal_graph", "node", "parent_session_id
                 "parameters", "accept", "limits", "scene", "seed", "context", "recovery"}
 
 
+def _task_yaml(rec: SessionRecord) -> str:
+    """``task.yaml`` of an evidence bundle: the session's task fields as YAML."""
+    return dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS))
+
+
 def write_environment(workspace: Workspace, snapshot: dict, *, target: str, session_id: str, evidence: list[str]) -> None:
     """Replace ENVIRONMENT.md's data with ``snapshot`` (a perceived snapshot: entities carry
     their confidence and the frames behind them) and bump its revision."""
@@ -313,7 +318,7 @@ class SessionRunner:
                             started=clock)
         self._prepared = prep
         try:
-            prep.task_text = dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS))
+            prep.task_text = _task_yaml(rec)
             prep.spec = next(t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target)
             # A session whose TargetToolManifest grants no operation (e.g. skill ``noop``)
             # never opens its target: no snapshots, no images, nothing to halt.
@@ -350,7 +355,7 @@ class SessionRunner:
         target's checkpoint and the initial snapshot and image."""
         rec = self.record
         atomic_write_text(prep.evidence_dir / "task.yaml",
-                          prep.task_text or dump_yaml(rec.model_dump(mode="json", include=_TASK_FIELDS)))
+                          prep.task_text or _task_yaml(rec))
         prep.extra["task"] = "task.yaml"
         if prep.target is None:
             return

@@ -40,6 +40,7 @@ from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip
 from phyagentos.errors import DocumentError, format_choices
 
 from .atomic import atomic_write_text
+from .block_yaml import emit_block_yaml
 
 __all__ = [
     "Document",
@@ -153,6 +154,9 @@ def dump_yaml(data: Any) -> str:
     """
     if isinstance(data, BaseModel):
         data = data.model_dump(mode="python")
+    fast = emit_block_yaml(data, _RESOLVERS)  # the same text, without PyYAML's representer
+    if fast is not None:
+        return fast
     return yaml.dump(
         data,
         Dumper=_Dumper,

@@ -82,3 +82,46 @@ def test_replan_verdict_waits_for_the_child_then_is_terminal():
     assert lc.fire("replan") == "awaiting_replan"
     assert not lc.is_terminal
     assert lc.fire("replanned") == "replanned" and lc.is_terminal
+
+
+def test_lifecycles_fired_from_many_threads_at_once_each_follow_their_own_session():
+    # The statechart is shared by the process's lifecycles: events fired concurrently on
+    # different sessions must never see or move one another's state.
+    import sys
+    import threading
+
+    paths = {
+        "happy": ["claim", "preflight", "start", "finish", "submit", "verify", "succeed"],
+        "rejected": ["claim", "preflight", "reject"],
+        "cancelled": ["claim", "preflight", "start", "cancel", "cancelled"],
+        "released": ["claim", "preflight", "release", "claim", "preflight", "start", "outcome_unknown", "verify",
+                     "fail"],
+    }
+    ends = {"happy": "succeeded", "rejected": "rejected", "cancelled": "cancelled", "released": "failed"}
+    failures: list[str] = []
+
+    def worker(kind: str) -> None:
+        for _ in range(150):
+            try:
+                lifecycle = SessionLifecycle(make_record())
+                for event in paths[kind]:
+                    lifecycle.fire(event)
+            except Exception as exc:  # noqa: BLE001 - any error in a thread is a failure here
+                failures.append(f"{kind}: {type(exc).__name__}: {exc}")
+                return
+            events = [t.event.split(":")[0] for t in lifecycle.record.transitions]
+            if lifecycle.state != ends[kind] or events != paths[kind]:
+                failures.append(f"{kind}: ended {lifecycle.state} after {events}")
+                return
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        threads = [threading.Thread(target=worker, args=(kind,)) for kind in paths]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert failures == []

@@ -105,3 +105,25 @@ def test_grip_force_is_commanded_past_the_closed_position(target):
     with pytest.raises(TargetError, match="force_n must be in"):
         target.set_gripper(opening_m=0.0, force_n=500.0)
     target.set_gripper(opening_m=0.04, settle_s=0.2)
+
+
+def test_a_session_without_perturbations_after_perturbed_ones_gets_the_constants_of_a_fresh_target():
+    # Sessions without perturbations skip the restore once the model is nominal; every
+    # derived constant must still be what a target never perturbed has.
+    fresh = MuJoCoTarget("fresh", SceneSpec.default(), seed=0)
+    used = MuJoCoTarget("used", SceneSpec.default(), seed=0)
+    try:
+        fresh.set_perturbations(None)
+        heavy = active([{"kind": "heavy_object", "object": "cube", "mass_kg": 1.5, "friction": 0.5}])
+        for installed in (None, heavy, None, active([]), heavy, active([]), None):
+            used.set_perturbations(installed)
+            if installed:
+                assert not np.array_equal(used.model.body_invweight0, fresh.model.body_invweight0)
+            else:
+                for field in ("body_mass", "body_inertia", "geom_friction", "geom_priority", "body_invweight0",
+                              "dof_invweight0", "tendon_invweight0", "actuator_acc0"):
+                    assert np.array_equal(getattr(used.model, field), getattr(fresh.model, field)), field
+                assert used.perturbations is None
+    finally:
+        fresh.close()
+        used.close()

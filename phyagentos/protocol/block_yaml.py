@@ -167,24 +167,7 @@ class _Emitter:
             else:
                 out.append(pad)
             out.append(scalar(key))
-            kind = type(value)
-            if kind is dict:
-                if value:
-                    out.append(":\n")
-                    self.mapping(value, indent + 2, False)
-                else:
-                    self._enter(value)
-                    out.append(": {}\n")
-            elif kind is list:
-                text = self.flow(value)
-                if text is not None:
-                    self._enter(value)
-                    out.append(": " + text + "\n")
-                else:
-                    out.append(":\n")
-                    self.sequence(value, indent, False)  # indentless under a key
-            else:
-                out.append(": " + scalar(value) + "\n")
+            self.node(value, indent, False)
 
     def sequence(self, items: list, indent: int, inline: bool) -> None:
         """Write the non-empty block list ``items`` with its dashes at column ``indent``."""
@@ -197,22 +180,34 @@ class _Emitter:
                 out.append("- ")
             else:
                 out.append(pad + "- ")
-            kind = type(item)
-            if kind is dict:
-                if item:
-                    self.mapping(item, indent + 2, True)
+            self.node(item, indent, True)
+
+    def node(self, value: object, indent: int, after_dash: bool) -> None:
+        """Write ``value`` after a key at column ``indent`` (the line holds the key) or,
+        ``after_dash``, after a ``- `` at column ``indent``."""
+        kind = type(value)
+        if kind is dict:
+            if value:
+                if not after_dash:
+                    self.out.append(":\n")
+                self.mapping(value, indent + 2, after_dash)  # type: ignore[arg-type]
+                return
+            self._enter(value)
+            text = "{}"
+        elif kind is list:
+            flow = self.flow(value)  # type: ignore[arg-type]
+            if flow is None:
+                if after_dash:
+                    self.sequence(value, indent + 2, True)  # type: ignore[arg-type]
                 else:
-                    self._enter(item)
-                    out.append("{}\n")
-            elif kind is list:
-                text = self.flow(item)
-                if text is not None:
-                    self._enter(item)
-                    out.append(text + "\n")
-                else:
-                    self.sequence(item, indent + 2, True)
-            else:
-                out.append(self.scalar(item) + "\n")
+                    self.out.append(":\n")
+                    self.sequence(value, indent, False)  # type: ignore[arg-type]  # indentless under a key
+                return
+            self._enter(value)
+            text = flow
+        else:
+            text = self.scalar(value)
+        self.out.append(text + "\n" if after_dash else ": " + text + "\n")
 
 
 def emit_block_yaml(data: object, resolvers: dict[str | None, list[tuple[str, Pattern[str]]]]) -> str | None:

@@ -139,13 +139,11 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
         force_step = True
         while True:
             wake.clear()
-            if not force_step and not _agent_has_work(agent):
-                # The supervisor's claim, start, heartbeat... changed nothing the agent acts
-                # on: no step (which lists and parses the run's sessions) competes with the
-                # supervisor thread for the interpreter on the hand-off path.
-                acted = 0
-            else:
-                acted = agent.step()
+            # The supervisor's claim, start, heartbeat... may have changed nothing the agent
+            # acts on: then no step (which lists and parses the run's sessions) competes
+            # with the supervisor thread for the interpreter on the hand-off path.
+            stepped = force_step or _agent_has_work(agent)
+            acted = agent.step() if stepped else 0
             force_step = False
             if failure:
                 raise failure[0]
@@ -153,13 +151,17 @@ def drive_run(agent: AgentCoordinator, supervisor: WatchdogSupervisor, *,
                 supervisor.watcher.notify()  # claim at once, without waiting for inotify
             # the sessions as the step left them: terminal states do not change, so done() is exact
             sessions = getattr(agent, "last_sessions", None)
-            states = agent.node_states(sessions)
-            if states != last_states and progress is not None:
-                say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
-            last_states = states
-            if agent.done(sessions) if sessions is not None else agent.done():
-                catch_up_views()
-                return
+            if stepped or sessions is None or last_states is None:
+                # Node states are a function of the step's listing: without a step they are
+                # what the last check found (and the run was not done), so they are not
+                # computed again while the supervisor works.
+                states = agent.node_states(sessions)
+                if states != last_states and progress is not None:
+                    say("nodes: " + ", ".join(f"{n}={s}" for n, s in states.items()))
+                last_states = states
+                if agent.done(sessions) if sessions is not None else agent.done():
+                    catch_up_views()
+                    return
             if acted:
                 idle_checked = False
                 continue

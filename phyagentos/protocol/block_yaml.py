@@ -6,7 +6,8 @@ about 3 ms to render on a 2-core CI machine, and every hand-off between two sess
 renders several (the verdict, the next session's submission, its claim and start, its
 evidence). :func:`emit_block_yaml` writes the same text directly for data made only of
 
-- ``dict`` with ``str`` keys shorter than 128 characters (a YAML simple key),
+- ``dict`` with non-empty ``str`` keys of at most 122 characters (a YAML simple key to
+  both PyYAML's and libyaml's emitters),
 - ``list`` (up to 8 numbers on one line, ``[0.5, -0.2, 0.02]``, as the codec writes
   vectors; anything else one item per line),
 - ``str`` of printable ASCII on one line, ``int``, ``float``, ``bool`` and ``None``,
@@ -49,8 +50,9 @@ _LEADING_INDICATORS = frozenset("#,[]{}&*!|>'\"%@`")
 _LEADING_BEFORE_SPACE = frozenset("?:-")
 #: A flow list: at most this many numbers (the codec's ``_represent_list``).
 _FLOW_MAX = 8
-#: libyaml writes a simple key only if it is at most 128 characters, PyYAML if under 128.
-_SIMPLE_KEY_MAX = 127
+#: The longest key both emitters write as a simple key: libyaml up to 128 characters,
+#: PyYAML's own emitter under 128 counting the key's tag (``!!str``, 5) as well.
+_SIMPLE_KEY_MAX = 122
 
 
 class _Unsupported(Exception):
@@ -160,8 +162,8 @@ class _Emitter:
         pad = " " * indent
         scalar = self.scalar
         for key, value in data.items():
-            if type(key) is not str or len(key) > _SIMPLE_KEY_MAX:
-                raise _Unsupported
+            if type(key) is not str or not key or len(key) > _SIMPLE_KEY_MAX:
+                raise _Unsupported  # an empty key is a complex key ("? ''") to PyYAML's emitter
             if inline:
                 inline = False
             else:

@@ -78,6 +78,7 @@ _AGENT_ID = f"agent:{socket.gethostname()}:{os.getpid()}"
 _VERIFY_LEASE_S = 60.0
 #: lifecycle event of a verdict (from ``verifying``) -> the verdict
 _VERDICT_OF_EVENT = {"succeed": "success", "fail": "failure", "replan": "replan"}
+_EVENT_OF_VERDICT = {verdict: event for event, verdict in _VERDICT_OF_EVENT.items()}
 
 _RUNNING = {"pending", "claimed", "preflight_checking", "running", "finalizing", "awaiting_verification",
             "verifying", "awaiting_replan", "cancelling", "replanned"}
@@ -496,7 +497,7 @@ class AgentCoordinator:
         rec.context = with_calls(rec.context, trace_calls(evidence.trace, ref=evidence.refs("trace")[0]
                                                           if evidence.refs("trace") else None)
                                  + ([c for sid in revised for c in calls_for(sid)] if calls_for is not None else []))
-        event = next(e for e, v in _VERDICT_OF_EVENT.items() if v == verdict.verdict)
+        event = _EVENT_OF_VERDICT[verdict.verdict]
         rec.lease = None
         lifecycle.fire(event, reason=verdict.reason[:200])
         self._owed_log.append(LogEntry(at=utc_now(), session_id=rec.session_id, node=rec.node,

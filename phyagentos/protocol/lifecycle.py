@@ -18,7 +18,7 @@ for all of its children::
 Every transition is appended to the record's ``transitions`` list and handed to a
 ``persist`` callback, so the file on disk never lags the machine.
 
-The chart is built once per process (:func:`_the_chart`) and shared: a lifecycle holds
+The chart is built once per process, when this module is imported, and shared: a lifecycle holds
 only its session's state, and firing an event sets the chart's one model to that state,
 triggers the event and reads the new state back, under a lock. Building a
 ``HierarchicalMachine`` per session cost 1.5 ms on a 2-core CI machine, and every
@@ -108,30 +108,18 @@ class _Stepper:
     _hsm_state: str
 
 
-#: Guards the shared chart and its model (two threads of a process fire events).
+#: The process's session statechart and its one model, shared by every lifecycle.
+_STEPPER = _Stepper()
+_CHART = HierarchicalMachine(
+    model=_STEPPER,
+    states=_STATES,
+    transitions=[list(t) for t in _TRANSITIONS],
+    initial="pending",
+    auto_transitions=False,
+    model_attribute="_hsm_state",
+)
+#: Guards the chart and its model (two threads of a process fire events).
 _CHART_LOCK = threading.Lock()
-_chart: tuple[HierarchicalMachine, _Stepper] | None = None
-
-
-def _the_chart() -> tuple[HierarchicalMachine, _Stepper]:
-    """The process's session statechart and its model, built on first use."""
-    global _chart
-    chart = _chart
-    if chart is None:
-        with _CHART_LOCK:
-            if _chart is None:
-                stepper = _Stepper()
-                machine = HierarchicalMachine(
-                    model=stepper,
-                    states=_STATES,
-                    transitions=[list(t) for t in _TRANSITIONS],
-                    initial="pending",
-                    auto_transitions=False,
-                    model_attribute="_hsm_state",
-                )
-                _chart = (machine, stepper)
-            chart = _chart
-    return chart
 
 
 class SessionLifecycle:
@@ -183,9 +171,8 @@ class SessionLifecycle:
 
     def allowed_events(self) -> list[str]:
         """Events that are legal from the current state, sorted."""
-        machine, _ = _the_chart()
         with _CHART_LOCK:
-            return sorted(machine.get_triggers(self._hsm_state))
+            return sorted(_CHART.get_triggers(self._hsm_state))
 
     def fire(self, event: str, *, reason: str = "", error: ErrorInfo | None = None) -> str:
         """Apply ``event``, append it to ``record.transitions`` and persist.
@@ -202,12 +189,11 @@ class SessionLifecycle:
         if event not in LIFECYCLE_EVENTS:
             raise LifecycleError(f"unknown lifecycle event {event!r}; valid events: {', '.join(LIFECYCLE_EVENTS)}")
         source = self.state
-        machine, stepper = _the_chart()
         try:
             with _CHART_LOCK:
-                machine.set_state(self._hsm_state, model=stepper)
-                stepper.trigger(event)
-                self._hsm_state = stepper._hsm_state
+                _CHART.set_state(self._hsm_state, model=_STEPPER)
+                _STEPPER.trigger(event)
+                self._hsm_state = _STEPPER._hsm_state
         except MachineError:
             raise LifecycleError(
                 f"session {self.record.session_id}: illegal transition {event!r} from state {source!r}; "

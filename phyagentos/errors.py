@@ -15,6 +15,7 @@ __all__ = [
     "ProtocolError",
     "DocumentError",
     "LeaseError",
+    "LockTimeout",
     "GoalGraphError",
     "LifecycleError",
     "SkillError",
@@ -77,6 +78,11 @@ class DocumentError(_Located, ProtocolError):
 class LeaseError(ProtocolError):
     """A session write presented a lease token that is no longer current: another
     supervisor took the session over after this one's lease expired (fencing)."""
+
+
+class LockTimeout(ProtocolError, TimeoutError):
+    """A workspace lock stayed held by another process or thread for longer than the
+    caller's timeout (:meth:`~phyagentos.protocol.file_lock.WorkspaceLock.acquire`)."""
 
 
 class GoalGraphError(_Located, PhyAgentOSError):

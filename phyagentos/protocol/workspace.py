@@ -10,7 +10,7 @@ Layout (see docs/ARCHITECTURE.md)::
     ws/evidence/<id>/                      evidence bundles
     ws/targets/<target>/                   simulated target state
     ws/log/                                archive-YYYY-MM.jsonl, LOG.md entries that aged out
-    ws/.locks/                             filelock files
+    ws/.locks/                             lock files (flock, file_lock.py)
 
 Every write is read-validate-modify-atomic-write under a file lock, so
 concurrent processes never lose each other's updates and a malformed file is
@@ -41,7 +41,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from filelock import FileLock
 from pydantic import ValidationError
 
 from phyagentos.errors import DocumentError, LeaseError, PhyAgentOSError, ProtocolError, format_choices
@@ -53,6 +52,7 @@ from phyagentos.yamlsource import load_yaml
 from .archive import SessionArchive
 from .atomic import atomic_write_bytes, batched_durability
 from .atomic import atomic_write_text
+from .file_lock import WorkspaceLock, workspace_lock
 from .codec import (PARSE_CACHE, Document, _fence_needed, _plain, _read_text, dump_yaml, parse_document,
                     parse_yaml, read_document, render_document, write_document)
 from .runs import RunRegistry, inside_workspace
@@ -87,7 +87,6 @@ log = logging.getLogger(__name__)
 # sessions/.index and sessions/archive appear with the first session that needs them.
 _SUBDIRS = ("sessions", "evidence", "targets", ".locks")
 _TERMINAL = frozenset(TERMINAL_STATES)
-_LOCK_POLL_S = 0.001  # how often a waiter retries a busy workspace lock (s)
 #: States in which a supervisor holds the session's lease.
 LEASED_STATES: tuple[str, ...] = ("claimed", "preflight_checking", "running", "finalizing", "cancelling")
 #: Active states in which a session waits for someone (a supervisor or the Agent).
@@ -279,6 +278,7 @@ class Workspace:
         self.defer_index = False
         self._index_pending: dict[str, SessionIndexEntry] = {}
         self._index_flush_failure: str | None = None  # the last failure flush_index_quietly logged
+        self._locks_real: str | None = None  # realpath of locks_dir, once it exists
 
     def __repr__(self) -> str:
         return f"Workspace({str(self.root)!r})"
@@ -380,16 +380,18 @@ class Workspace:
         """
         return self.root / self._doc(name)[1]
 
-    def _lock(self, key: str) -> FileLock:
-        self.locks_dir.mkdir(parents=True, exist_ok=True)
-        # is_singleton: one lock object per file in this process, so nested
-        # acquisitions (e.g. a caller holding session_lock around save_session)
-        # are re-entrant instead of deadlocking. Critical sections last a few ms;
-        # filelock's default 50 ms poll would add up to 50 ms to every contended
-        # claim (e.g. a supervisor woken by a submit that still holds the lock).
-        return FileLock(self.locks_dir / f"{key}.lock", is_singleton=True, poll_interval=_LOCK_POLL_S)
+    def _lock(self, key: str) -> WorkspaceLock:
+        # One lock object per file in this process (workspace_lock), so nested
+        # acquisitions (e.g. a caller holding session_lock around save_session, or
+        # another Workspace object of this directory) are re-entrant instead of waiting
+        # for themselves; the directory is canonical for that reason.
+        locks = self._locks_real
+        if locks is None:
+            self.locks_dir.mkdir(parents=True, exist_ok=True)
+            locks = self._locks_real = os.path.realpath(self.locks_dir)
+        return workspace_lock(f"{locks}/{key}.lock")
 
-    def session_lock(self, session_id: str) -> FileLock:
+    def session_lock(self, session_id: str) -> WorkspaceLock:
         """The inter-process lock guarding ``sessions/<session_id>.md`` (re-entrant in-process).
 
         Raises:
@@ -1061,7 +1063,7 @@ class Workspace:
         """
         return self.runs.register(record, graph_text)
 
-    def run_lock(self, run_id: str) -> FileLock:
+    def run_lock(self, run_id: str) -> WorkspaceLock:
         """The lock an Agent process holds while it steps ``run_id`` (one agent per run at a time)."""
         self.runs.run_dir(run_id)  # validates the id
         return self._lock(f"run-{run_id}")

@@ -73,6 +73,20 @@ def test_a_cached_read_is_a_new_copy_the_caller_may_mutate(tmp_path):
     assert second.data.notes == ["a"] and second.data.extra == {"k": [1]}
 
 
+def test_mutating_a_written_document_afterwards_does_not_change_what_reading_its_file_gives(tmp_path):
+    path = tmp_path / "doc.md"
+    for validated in (False, True):
+        doc = Document(data=Sample(title="t", notes=["a"], extra={"k": [1]}))
+        write_document(doc, path, validated=validated)
+        doc.data.notes.append("changed")
+        doc.data.extra["k"].append(2)
+        hits = PARSE_CACHE.hits
+        read = read_document(path, Sample)
+        assert PARSE_CACHE.hits == hits + 1
+        assert read.data.notes == ["a"] and read.data.extra == {"k": [1]}
+        assert read.data == _fresh_parse(path, Sample).data
+
+
 def test_a_file_changed_behind_the_cache_is_parsed_afresh_even_at_the_same_size(tmp_path):
     path = tmp_path / "doc.md"
     write_document(Document(data=Sample(title="aaaa")), path)

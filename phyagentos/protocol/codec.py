@@ -610,14 +610,16 @@ def read_document(path: str | os.PathLike[str], model: type[M]) -> Document[M]:
 
 
 def write_document(doc: Document[Any], path: str | os.PathLike[str] | None = None, *,
-                   durable: bool = True) -> Path:
+                   durable: bool = True, validated: bool = False) -> Path:
     """Atomically write ``doc`` to ``path`` (default ``doc.path``); returns the path.
 
     ``durable=False`` skips the fsyncs (see :func:`~phyagentos.protocol.atomic.atomic_write_bytes`).
 
     The data is re-validated first so an invalid model (e.g. a field assigned
     after construction) never reaches disk; ``doc.data`` and ``doc.path`` are
-    then set to the validated data and the path written.
+    then set to the validated data and the path written. ``validated=True`` says the
+    caller built ``doc.data`` by validation just now (e.g. ``Workspace``'s session
+    writes, which validate with their own error message) and skips the second pass.
 
     Raises:
         DocumentError: the data does not validate against its model.
@@ -628,27 +630,24 @@ def write_document(doc: Document[Any], path: str | os.PathLike[str] | None = Non
     if target is None:
         raise ValueError("write_document needs a path: pass one or set doc.path")
     model = type(doc.data)
-    try:
-        validated = model.model_validate(doc.data.model_dump(mode="python", warnings=False))
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        raise DocumentError(
-            f"refusing to write invalid {model.__name__}: {_describe(first, model)}", path=target
-        ) from None
-    # Render the validated copy (e.g. a dict appended to a list of models is
-    # now that model) and keep it, so ``doc`` matches what is on disk.
-    doc.data = validated
+    if not validated:
+        try:
+            doc.data = model.model_validate(doc.data.model_dump(mode="python", warnings=False))
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            raise DocumentError(
+                f"refusing to write invalid {model.__name__}: {_describe(first, model)}", path=target
+            ) from None
+    # The validated copy is rendered (e.g. a dict appended to a list of models is now
+    # that model) and kept, so ``doc`` matches what is on disk.
     text = render_document(doc)
     atomic_write_text(target, text, durable=durable)
     doc.path = target
-    # What reading this text back would return, without parsing it: the dumped data, if
-    # it holds only what the loader produces (then loading gives back an equal value
-    # of the same types), validated again as parsing would.
-    plain = validated.model_dump(mode="python", warnings=False)
-    if _plain(plain):
+    # What reading this text back would return, without parsing it: the validated data,
+    # if its dump holds only what the loader produces (then loading and validating give
+    # back an equal value of the same types). The cache keeps a pickled copy, so the
+    # caller may go on mutating ``doc.data``.
+    if _plain(doc.data.model_dump(mode="python", warnings=False)):
         prefix = doc.prefix if not doc.prefix or doc.prefix.endswith("\n") else doc.prefix + "\n"
-        try:
-            PARSE_CACHE.put("document", model, text, (prefix, model.model_validate(plain), doc.suffix))
-        except ValidationError:  # pragma: no cover - it validated a moment ago; then parse next time
-            pass
+        PARSE_CACHE.put("document", model, text, (prefix, doc.data, doc.suffix))
     return target

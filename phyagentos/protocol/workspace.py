@@ -539,7 +539,7 @@ class Workspace:
             # The hint first: a session file without a hint would be invisible to claimers.
             self._states.create(record)
             try:
-                write_document(Document(prefix=_session_prose(record), data=record, path=path))
+                write_document(Document(prefix=_session_prose(record), data=record, path=path), validated=True)
             except BaseException:
                 self._states.remove(sid, record.state)
                 raise
@@ -636,7 +636,7 @@ class Workspace:
         _check_append_only(old, record)
         record = record.model_copy(update={"updated_at": utc_now_iso()})
         stored.data = record
-        write_document(stored)
+        write_document(stored, validated=True)
         active = stored.path == self.session_path(record.session_id)
         if active and record.state in _TERMINAL:
             try:

@@ -11,15 +11,19 @@ a prepared session that never starts leaves nothing behind.
 from __future__ import annotations
 
 import datetime as dt
+import multiprocessing
 
 import pytest
 import yaml
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
-from phyagentos.errors import SupervisorError
+from phyagentos.errors import DocumentError, SupervisorError
 from phyagentos.protocol import Workspace
+from phyagentos.resources import skill_dirs, tree_dirs
+from phyagentos.runtime.heartbeat import Heartbeats
 from phyagentos.runtime.session_basis import RUNTIME_FIELDS, runtime_basis
 from phyagentos.runtime.supervisor import WatchdogSupervisor
+from phyagentos.runtime.worker import RunnerProcess, _Runner
 
 from supervisor_util import make_workspace, state_of, submit
 
@@ -296,3 +300,55 @@ def test_go_writes_what_preparing_serialised_and_captured_and_ticks_without_seri
         images.close()
         pool.close()
     assert (evidence / "initial.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.sim
+def test_the_preflight_judges_the_record_the_claim_writes_and_the_runner_does_not_parse_the_file(tmp_path,
+                                                                                                 monkeypatch):
+    ws = make_workspace(tmp_path / "ws")
+    submit(ws, "s1", skill="hold", parameters=HOLD)
+    sent: list[dict] = []
+    real_send = RunnerProcess.send
+
+    def spy(self, kind, **payload):
+        if kind == "preflight":
+            sent.append(payload)
+        return real_send(self, kind, **payload)
+
+    monkeypatch.setattr(RunnerProcess, "send", spy)
+    sup = WatchdogSupervisor(ws)
+    try:
+        assert sup.run_once() == 1
+    finally:
+        sup.close()
+    assert len(sent) == 1
+    claim, written = sent[0]["record"], ws.load_session("s1")
+    assert claim.session_id == "s1" and claim.state == "preflight_checking"
+    assert claim.lease.token == sent[0]["token"]
+    assert claim.transitions == written.transitions[:2]  # claim and preflight, as the claim wrote them
+
+    # The runner's side, in this process: the record sent is what is judged and prepared,
+    # even when the file it stands for cannot be parsed; without one, the file is read.
+    near, far = multiprocessing.Pipe()
+    runner = _Runner(near, Heartbeats(), skill_dirs(), tree_dirs())
+    try:
+        submit(ws, "s2", skill="hold", parameters=HOLD)
+        record = ws.load_session("s2")
+        ws.session_path("s2").write_text("# not a session any more\n")
+        root = str(ws.root)
+        runner.job_reserve(root, record.target)
+        far.recv()
+        runner.job_preflight(root, "s2", token="t", owner="test", record=record)
+        kind, payload = far.recv()
+        assert kind == "preflight" and payload["ok"], payload
+        assert runner.prepared is not None and runner.prepared[1].record.session_id == "s2"
+        runner.discard_prepared()
+        with pytest.raises(DocumentError):
+            runner.job_preflight(root, "s2", token="t", owner="test")
+    finally:
+        runner.release_all()
+        runner.images.close()
+        for pool in runner.pools.values():
+            pool.close()
+        near.close()
+        far.close()

@@ -681,13 +681,15 @@ class WatchdogSupervisor:
         lease = new_lease(self.owner, ttl_s=self.config.lease_s)
         sent: list[bool] = []  # [True] once the preflight is on its way, [False] if the runner is gone
 
-        def preflight_now() -> None:
+        def preflight_now(rec: SessionRecord) -> None:
             # The preflight reads only fields the claim leaves as they are (``go`` checks
             # the runtime fields again by digest) and moves nothing, so the runner runs it
             # while the claim is made durable; its reply is read once the claim stands.
+            # The record read under the session's lock goes with it: the runner need not
+            # parse the file this write is replacing.
             try:
                 self._runner.send("preflight", root=str(self.workspace.root), session_id=session_id,
-                                  token=lease.token, owner=self.owner)
+                                  token=lease.token, owner=self.owner, record=rec)
                 sent.append(True)
             except RunnerDied:
                 sent.append(False)
@@ -711,8 +713,9 @@ class WatchdogSupervisor:
     def _claim_record(self, session_id: str, lease, *, on_claim) -> SessionRecord | None:
         """Make the claim (and the start of preflight) durable; the record, or None if
         the session could not be claimed (no longer pending, unreadable, not there, or
-        the write failed: the file is then as it was). ``on_claim`` is called once the
-        session is read, pending, under its lock, before the write."""
+        the write failed: the file is then as it was). ``on_claim(record)`` is called
+        once the session is read, pending, under its lock, with the claimed record before
+        its write."""
 
         def fn(rec: SessionRecord):
             if rec.state != "pending":
@@ -722,7 +725,7 @@ class WatchdogSupervisor:
             lc.fire("claim", reason=f"by {self.owner}")
             # Preflight starts at once and touches no target: one durable write records both.
             lc.fire("preflight")
-            on_claim()
+            on_claim(rec)
 
         try:
             rec = self.workspace.update_session(session_id, fn)

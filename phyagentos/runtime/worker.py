@@ -468,14 +468,16 @@ class _Runner:
         self.lock(root, target).release()
         self.reply("unreserved", target=target)
 
-    def job_preflight(self, root: str, session_id: str, token: str, owner: str) -> None:
+    def job_preflight(self, root: str, session_id: str, token: str, owner: str, record: Any = None) -> None:
+        """Preflight ``session_id`` (``record``: its record as the supervisor's claim
+        writes it, or None to read the session file); reply, and prepare it if it passed."""
         from phyagentos.runtime.preflight import run_preflight  # noqa: PLC0415
         from phyagentos.runtime.target_lock import write_marker  # noqa: PLC0415
         from phyagentos.runtime.target_pool import DRIVERS  # noqa: PLC0415
 
         started = time.perf_counter()
         ws = self.workspace(root)
-        rec = ws.load_session(session_id)
+        rec = record if record is not None and record.session_id == session_id else ws.load_session(session_id)
         result = run_preflight(rec, targets=ws.read("TARGETS").data, runtimes=ws.read("SKILLRUNTIME").data,
                                skills=self.runtime.skills, trees=self.runtime.trees, drivers=DRIVERS,
                                safety=ws.read_safety(), root=ws.root)

@@ -116,11 +116,47 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _setup_logging(verbose: int, console: Console) -> None:
-    from rich.logging import RichHandler  # noqa: PLC0415
+class _LazyConsole:
+    """A ``rich.console.Console`` made (and rich imported, ~40 ms) when first used: a
+    command that prints nothing through it (``run --json``) never loads rich."""
 
+    def __init__(self, **kwargs) -> None:
+        self._kwargs = kwargs
+        self._console: Console | None = None
+
+    @property
+    def console(self) -> Console:
+        if self._console is None:
+            from rich.console import Console  # noqa: PLC0415
+
+            self._console = Console(**self._kwargs)
+        return self._console
+
+    def __getattr__(self, name: str):
+        return getattr(self.console, name)
+
+
+class _RichLogHandler(logging.Handler):
+    """Log records rendered by rich's ``RichHandler`` on ``console``, which is built at the
+    first record that reaches it (a quiet run imports no rich)."""
+
+    def __init__(self, console: _LazyConsole) -> None:
+        super().__init__()
+        self._lazy = console
+        self._rich: logging.Handler | None = None
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self._rich is None:
+            from rich.logging import RichHandler  # noqa: PLC0415
+
+            self._rich = RichHandler(console=self._lazy.console, show_path=False)
+            self._rich.setFormatter(self.formatter)
+        self._rich.emit(record)
+
+
+def _setup_logging(verbose: int, console: _LazyConsole) -> None:
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
-    logging.basicConfig(level=level, format="%(message)s", handlers=[RichHandler(console=console, show_path=False)])
+    logging.basicConfig(level=level, format="%(message)s", handlers=[_RichLogHandler(console)])
     # transitions logs every state entry/exit at INFO; our own transition log is enough.
     logging.getLogger("transitions").setLevel(max(level, logging.WARNING))
     logging.getLogger("toppra").setLevel(max(level, logging.WARNING))
@@ -340,10 +376,8 @@ def _cmd_render_graph(args, out: Console, err: Console) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``phyagentos`` console script; returns the exit code."""
-    from rich.console import Console  # noqa: PLC0415
-
     args = build_parser().parse_args(argv)
-    out, err = Console(), Console(stderr=True)
+    out, err = _LazyConsole(), _LazyConsole(stderr=True)
     _setup_logging(args.verbose, err)
     from phyagentos.cli_agent import AGENT_HANDLERS
     from phyagentos.cli_planes import PLANE_HANDLERS

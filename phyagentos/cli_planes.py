@@ -18,10 +18,11 @@ import argparse
 import json
 import signal
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
-from rich.table import Table
+if TYPE_CHECKING:  # rich is imported where it prints (a quiet command never loads it)
+    from rich.console import Console
+
 
 __all__ = ["add_plane_commands", "PLANE_HANDLERS"]
 
@@ -285,6 +286,8 @@ def _cmd_status(args, out: Console, err: Console) -> int:
         out.print("  no supervisor is watching this workspace (start `phyagentos watch`)")
     out.print("  active: " + (", ".join(f"{k} {v}" for k, v in sorted(data["counts"].items())) or "none"))
     if data["active_sessions"]:
+        from rich.table import Table  # noqa: PLC0415 - rich loads where it prints
+
         table = Table(title="active sessions")
         for col in ("session", "state", "node", "target", "owner", "lease"):
             table.add_column(col, overflow="fold")

@@ -18,10 +18,11 @@ import contextlib
 import json
 import os
 from pathlib import Path
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
-from rich.console import Console
-from rich.table import Table
+if TYPE_CHECKING:  # rich is imported where it prints (a quiet command never loads it)
+    from rich.console import Console
+
 
 __all__ = ["add_skill_commands", "SKILL_HANDLERS", "skill_search_env", "primitives_markdown"]
 
@@ -98,6 +99,8 @@ def _cmd_skills(args, out: Console, err: Console) -> int:
         return EXIT_OK
     out.print("search path (first wins): " + ", ".join(str(d) for d in runtime.skills.directories),
               markup=False, highlight=False, soft_wrap=True)
+    from rich.table import Table  # noqa: PLC0415 - rich loads where it prints
+
     table = Table(title="skills")
     for col in ("skill", "runtime", "gripper", "from", "description"):
         table.add_column(col, overflow="fold")
@@ -154,6 +157,8 @@ def _cmd_primitives(args, out: Console, err: Console) -> int:
             for s in schemas}, ensure_ascii=False))
         return EXIT_OK
     for s in schemas:
+        from rich.table import Table  # noqa: PLC0415
+
         table = Table(title=f"{s.name}  ({s.cls.__name__}): {s.summary}", title_justify="left")
         for col in ("parameter", "type", "unit", "default", "description"):
             table.add_column(col, overflow="fold")

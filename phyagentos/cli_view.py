@@ -13,13 +13,15 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from rich.console import Console
+if TYPE_CHECKING:  # rich is imported where it prints (a quiet command never loads it)
+    from rich.console import Console
+
 
 __all__ = ["add_view_commands", "with_view"]
 
-Handler = Callable[[argparse.Namespace, Console, Console], int]
+Handler = Callable[[argparse.Namespace, "Console", "Console"], int]
 
 
 def _add_record(parser: argparse.ArgumentParser, *, default_mode: str) -> None:

@@ -56,3 +56,26 @@ def test_the_held_object_model_still_computes_poses():
     T = _pose([0.1, 0.2, 0.3], [1.0, 0.0, 0.0, 0.0])
     assert T.shape == (4, 4) and list(T[:3, 3]) == [0.1, 0.2, 0.3] and T[0, 0] == 1.0
     assert _pose(None, [1.0, 0.0, 0.0, 0.0]) is None
+
+
+def test_a_quiet_run_process_never_imports_rich_and_a_log_record_still_renders_through_it(tmp_path):
+    import yaml
+
+    graph = tmp_path / "hold.yaml"
+    graph.write_text(yaml.safe_dump({"version": 1, "name": "one_hold", "description": "a 0 s hold",
+                                     "nodes": [{"id": "h", "skill": "hold", "target": "franka_tabletop",
+                                                "params": {"duration_s": 0.0},
+                                                "accept": {"still": {"max_joint_motion_rad": 0.01}}}]}))
+    ws = tmp_path / "ws"
+    ws.mkdir()
+    (ws / "sensors.yaml").write_text(yaml.safe_dump({"version": 1, "targets": {"franka_tabletop": [
+        {"name": "joints", "kind": "joint_state", "frame_id": "panda0_link0", "rate_hz": 500}]}}))
+    code = ("import logging, sys\nfrom phyagentos.cli import main\n"
+            f"code = main(['run', {str(graph)!r}, '--workspace', {str(ws)!r}, '--json'])\n"
+            "assert code == 0, code\n"
+            "print('AFTER_RUN', [m for m in sys.modules if m == 'rich' or m.startswith('rich.')])\n"
+            "logging.getLogger('phyagentos.test').warning('a warning after the run')\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert [ln for ln in out.stdout.splitlines() if ln.startswith("AFTER_RUN ")] == ["AFTER_RUN []"]
+    assert "a warning after the run" in out.stderr and "WARNING" in out.stderr  # rich's level column

@@ -182,3 +182,45 @@ def test_a_run_nobody_can_advance_is_reported_as_stalled(tmp_path):
             drive_run(Stuck(ws), supervisor)
     finally:
         supervisor.close()
+
+
+@pytest.mark.sim
+def test_the_in_flight_marker_and_the_world_state_record_are_written_without_pyyaml_and_read_back(tmp_path,
+                                                                                                  monkeypatch):
+    # Both are written on the path from a verdict to the next session's first tick: by the
+    # codec's block emitter, a tenth of yaml.safe_dump's time.
+    from phyagentos.runtime.target_lock import read_marker, write_marker
+    from phyagentos.runtime.target_pool import TargetPool
+
+    from supervisor_util import make_workspace, submit
+
+    ws = make_workspace(tmp_path / "ws")
+    rec = submit(ws, "s1", skill="hold", parameters={"duration_s": 0.0})
+    spec = ws.read("TARGETS").data.targets[0]
+    pool = TargetPool(ws.root / "targets")
+    try:
+        target = pool.acquire(rec, spec)
+
+        def refuse(*args, **kwargs):
+            raise AssertionError("PyYAML's emitter on the hand-off path")
+
+        monkeypatch.setattr(yaml, "safe_dump", refuse)
+        monkeypatch.setattr(yaml, "dump", refuse)
+        write_marker(ws.root / "targets", spec.name, session_id="s1", token="t-1", owner="vm:1:x")
+        pool.checkpoint(rec, target)
+        target.hold(duration_s=0.2)
+        monkeypatch.undo()
+        marker = read_marker(ws.root / "targets", spec.name)
+        assert {k: marker[k] for k in ("session_id", "token", "owner")} == {"session_id": "s1", "token": "t-1",
+                                                                              "owner": "vm:1:x"}
+        assert isinstance(marker["since"], float) and abs(marker["since"] - time.time()) < 60
+        state = yaml.safe_load((ws.root / "targets" / spec.name / "state.yaml").read_text())
+        assert state["run_id"] == rec.run_id and state["session_id"] == "s1"
+        checkpointed = target.sim_time - 0.2
+    finally:
+        pool.close()
+    pool = TargetPool(ws.root / "targets")  # a fresh runner continues the episode from the record
+    try:
+        assert pool.acquire(ws.load_session("s1"), spec).sim_time == pytest.approx(checkpointed)
+    finally:
+        pool.close()

@@ -31,6 +31,7 @@ from phyagentos.errors import TargetError
 from phyagentos.yamlsource import load_yaml
 
 from phyagentos.protocol.atomic import _fsync_dir, atomic_write_text
+from phyagentos.protocol.codec import dump_yaml
 
 __all__ = ["TargetLock", "INFLIGHT_FILE", "write_marker", "read_marker", "clear_marker"]
 
@@ -98,8 +99,8 @@ def write_marker(targets_dir: str | os.PathLike[str], target: str, *, session_id
     """Record (durably) that ``session_id`` may actuate ``target`` from now on."""
     path = _marker_path(targets_dir, target)
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, yaml.safe_dump({"session_id": session_id, "token": token, "owner": owner,
-                                            "since": time.time()}, sort_keys=True))
+    # (the codec's block emitter: a tenth of yaml.safe_dump's time, on the path to the preflight's reply)
+    atomic_write_text(path, dump_yaml({"owner": owner, "session_id": session_id, "since": time.time(), "token": token}))
 
 
 def read_marker(targets_dir: str | os.PathLike[str], target: str) -> dict[str, Any] | None:

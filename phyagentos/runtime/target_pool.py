@@ -17,11 +17,10 @@ import logging
 from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
-
 from phyagentos.errors import TargetError, format_choices
 from phyagentos.protocol import SessionRecord, TargetSpec
 from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.protocol.codec import dump_yaml
 from phyagentos.protocol.sensors import read_sensors
 from phyagentos.yamlsource import load_yaml
 from phyagentos.targets import MuJoCoTarget, SceneSpec
@@ -191,7 +190,8 @@ class TargetPool:
         directory.mkdir(parents=True, exist_ok=True)
         target.save_state(directory / "state.npz")
         key = self._live[target.name][0]
-        atomic_write_text(directory / "state.yaml", yaml.safe_dump({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
+        atomic_write_text(directory / "state.yaml",
+                          dump_yaml({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
 
     def close(self) -> None:
         self._views.clear()

@@ -1,6 +1,6 @@
 """Where one hand-off goes: a traced ``phyagentos run`` of a hold chain, split by thread and function.
 
-    .venv/bin/python bench/handoff_budget.py [--holds 20] [--cameras] [--show 9]
+    .venv/bin/python bench/handoff_budget.py [--holds 20] [--cameras] [--show 9] [--graph G.yaml]
 
 A diagnostic, not a goal measurement (the goals are ``bench/end_to_end.py``'s). It runs
 ``phyagentos run`` of a chain of ``--holds`` 0 s ``hold`` sessions (without cameras unless
@@ -10,6 +10,8 @@ the agent, the supervisor, the protocol layer and the runner (``TRACED``) so tha
 call appends ``thread, function, start, end`` (unix s) to ``<dir>/<pid>.log``; the
 runner's forkserver children re-import the main module, so the runner process is traced
 too. ``os.fsync`` and garbage collections (``gc.gen<N>``) are counted as well.
+``--graph`` traces a run of that goal graph instead (e.g. ``goal_graphs/pick_and_place.yaml``
+with ``--cameras``: its one hand-off, from pick to place).
 
 Then, for every hand-off (a session's verdict to the next session's first actuation, as
 ``end_to_end.py`` measures it), the time each traced ``(process/thread, function)``
@@ -80,6 +82,9 @@ TRACED = [
     ("phyagentos.runtime.runner", "SessionRunner._image", None),
     ("phyagentos.targets.mujoco_arm", "MuJoCoArmTarget.load_state", None),
     ("phyagentos.targets.mujoco_arm", "MuJoCoArmTarget.save_state", None),
+    ("phyagentos.agent.coordinator", "AgentCoordinator.observed", None),
+    ("phyagentos.agent.coordinator", "load_evidence", None),
+    ("phyagentos.agent.memory.context_builder", "ContextBuilder.build", None),
 ]
 
 
@@ -217,6 +222,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--holds", type=int, default=20, help="length of the hold chain (default 20)")
     ap.add_argument("--cameras", action="store_true", help="keep the target's cameras (perceive around each hold)")
+    ap.add_argument("--graph", type=Path, default=None, help="trace a run of this goal graph instead of a hold chain")
     ap.add_argument("--show", type=int, default=None, help="print this hand-off's timeline call by call")
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results" / "handoff_budget.json")
     args = ap.parse_args(argv)
@@ -227,7 +233,7 @@ def main(argv=None) -> int:
         ws.mkdir()
         if not args.cameras:
             (ws / "sensors.yaml").write_text(yaml.safe_dump(NO_CAMERA_SENSORS))
-        graph = hold_chain(tmp / "hold_chain.yaml", args.holds)
+        graph = args.graph.resolve() if args.graph is not None else hold_chain(tmp / "hold_chain.yaml", args.holds)
         env = {**os.environ, TRACE_ENV: str(tmp / "trace")}
         proc = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", "run", str(graph),
                                "--workspace", str(ws), "--json"], env=env, capture_output=True, text=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -224,3 +225,40 @@ def test_the_in_flight_marker_and_the_world_state_record_are_written_without_pyy
         assert pool.acquire(ws.load_session("s1"), spec).sim_time == pytest.approx(checkpointed)
     finally:
         pool.close()
+
+
+@pytest.mark.sim
+def test_bundles_read_for_verdicts_serve_the_next_nodes_observations_and_a_replaced_bundle_is_read_again(
+        tmp_path, monkeypatch):
+    # A place's context holds what the pick observed of the cube, from the pick's evidence
+    # bundle; the agent read that bundle for the pick's verdict a moment before.
+    from phyagentos.agent import coordinator as coordmod
+    from phyagentos.agent.agent_loop import load_run_graph
+    from phyagentos.agent.memory.observed import observe_object
+    from phyagentos.agent.verifier import load_evidence
+    from phyagentos.orchestrator import run_goal_graph, skill_names
+
+    graph = Path(__file__).resolve().parent.parent / "goal_graphs" / "pick_and_place.yaml"
+    report = run_goal_graph(graph, tmp_path / "ws", seed=0)
+    assert report.succeeded
+    ws = Workspace.open(tmp_path / "ws")
+    agent = coordmod.AgentCoordinator(ws, load_run_graph(ws, report.run_id, skills=skill_names()),
+                                      run_id=report.run_id)
+    sessions = agent.sessions()
+    dirs = [ws.root / a.evidence for s in sessions for a in s.attempts if a.evidence]
+    assert len(dirs) == 2
+    loads: list[Path] = []
+
+    def counting(directory):
+        loads.append(Path(directory))
+        return load_evidence(directory)
+
+    monkeypatch.setattr(coordmod, "load_evidence", counting)
+    expected = observe_object([load_evidence(d) for d in dirs], "cube")
+    assert expected is not None and expected.size_m is not None
+    assert agent.observed("cube", sessions) == expected and len(loads) == 2
+    assert agent.observed("cube", sessions) == expected and len(loads) == 2  # nothing read again
+    bundle = dirs[0] / "bundle.yaml"
+    atomic_write_text(bundle, bundle.read_text())  # the same text in a new file
+    assert agent.observed("cube", sessions) == expected
+    assert loads[2:] == [dirs[0]]

@@ -136,6 +136,12 @@ class _LazyConsole:
         return getattr(self.console, name)
 
 
+def _rich_console(console) -> Console:
+    """The ``rich.console.Console`` behind ``console``, for rich's own classes (``Progress``,
+    ``Live``), which use it as more than an object with methods (e.g. a context manager)."""
+    return console.console if isinstance(console, _LazyConsole) else console
+
+
 class _RichLogHandler(logging.Handler):
     """Log records rendered by rich's ``RichHandler`` on ``console``, which is built at the
     first record that reaches it (a quiet run imports no rich)."""
@@ -216,7 +222,8 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
     seeds = parse_seeds(args.seeds) if args.seeds else None
     tasks = tuple(t.strip() for t in args.tasks.split(",")) if args.tasks else None
     progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                        TextColumn("{task.fields[status]}"), TimeElapsedColumn(), console=err, disable=args.json)
+                        TextColumn("{task.fields[status]}"), TimeElapsedColumn(), console=_rich_console(err),
+                        disable=args.json)
     bar = {}
     tally = {"ok": 0, "failed": 0, "error": 0}
 

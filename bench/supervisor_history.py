@@ -41,7 +41,7 @@ def build_history(ws: Workspace, n: int) -> None:
     import phyagentos.protocol.workspace as wsmod
 
     write = wsmod.write_document
-    wsmod.write_document = lambda doc, path=None, durable=True: write(doc, path, durable=False)
+    wsmod.write_document = lambda doc, path=None, durable=True, **kw: write(doc, path, durable=False, **kw)
     try:
         for i in range(n):
             sid = f"h{i:05d}"

@@ -192,3 +192,21 @@ def test_release_without_holding_the_lock_is_an_error_and_a_missing_lock_directo
         lock.release()
     with lock:
         assert path.exists()
+
+
+def test_a_lock_taken_without_keeping_a_reference_is_the_same_lock_at_its_release(tmp_path):
+    import gc
+
+    path = tmp_path / "a.lock"
+    workspace_lock(path).acquire()
+    gc.collect()  # no reference is left to the object but the module's own
+    again = workspace_lock(path)
+    assert again.held
+    again.acquire(timeout=0)  # re-entrant: the same object, not a second descriptor waiting for the first
+    again.release()
+    again.release()
+    assert not again.held
+    probe = subprocess.run([sys.executable, "-c",
+                            "import sys\nfrom phyagentos.protocol.file_lock import workspace_lock\n"
+                            "workspace_lock(sys.argv[1]).acquire(timeout=0)\n", str(path)], env=_ENV, timeout=60)
+    assert probe.returncode == 0  # released for other processes too

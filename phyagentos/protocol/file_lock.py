@@ -39,6 +39,9 @@ _OPEN_FLAGS = os.O_RDWR | os.O_CREAT | os.O_CLOEXEC
 
 _REGISTRY: weakref.WeakValueDictionary[str, WorkspaceLock] = weakref.WeakValueDictionary()
 _REGISTRY_GUARD = threading.Lock()
+#: Locks some thread holds: kept alive while held, so a caller that keeps no reference
+#: between acquire and release still finds the same object (and its hold) again.
+_HELD: set[WorkspaceLock] = set()
 
 
 class _Held(threading.local):
@@ -119,6 +122,7 @@ class WorkspaceLock:
             os.close(fd)
             raise
         held.fd, held.depth, held.pid = fd, 1, os.getpid()
+        _HELD.add(self)
         return self
 
     def release(self) -> None:
@@ -133,6 +137,7 @@ class WorkspaceLock:
         held.depth -= 1
         if held.depth == 0:
             fd, held.fd = held.fd, None
+            _HELD.discard(self)
             os.close(fd)  # closing the only descriptor of this open file releases the flock
 
     def __enter__(self) -> WorkspaceLock:

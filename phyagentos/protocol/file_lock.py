@@ -16,7 +16,7 @@ dies, so a killed writer never leaves a workspace locked.
 Why not ``filelock``: one acquire-release cycle of its ``FileLock`` costs about 0.25 ms
 of Python (fork tracking, singleton bookkeeping; measured with filelock 4.2.11), and a
 hand-off from one session to the next takes a dozen of these locks across three
-processes; this module does the same job in about 0.01 ms. Linux/POSIX only, like
+processes; this module does the same job in about 0.02 ms. Linux/POSIX only, like
 :mod:`phyagentos.runtime.target_lock`; the workspace must be on a local filesystem.
 """
 

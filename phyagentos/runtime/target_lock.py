@@ -99,7 +99,7 @@ def write_marker(targets_dir: str | os.PathLike[str], target: str, *, session_id
     """Record (durably) that ``session_id`` may actuate ``target`` from now on."""
     path = _marker_path(targets_dir, target)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # (the codec's block emitter: a tenth of yaml.safe_dump's time, on the path to the preflight's reply)
+    # rendered by the codec's block emitter: a tenth of yaml.safe_dump's time, before the preflight's reply
     atomic_write_text(path, dump_yaml({"owner": owner, "session_id": session_id, "since": time.time(), "token": token}))
 
 

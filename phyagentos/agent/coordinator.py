@@ -170,7 +170,9 @@ class AgentCoordinator:
         self.workspace = workspace
         self.graph = graph
         self.run_id = run_id or new_run_id()
-        self.dag = dagmod.to_digraph(graph)
+        # frozen: the run's DAG never changes shape (edge attributes such as
+        # ``reopened_by`` still may), so its topological order is sorted once
+        self.dag = nx.freeze(dagmod.to_digraph(graph))
         self.compiler = SessionCompiler(workspace, graph, self.run_id, seed=seed, evaluation=evaluation)
         self.verifier = verifier or SessionVerifier()
         self.verifier.set_upstream(self.upstream_acquirer)
@@ -200,8 +202,14 @@ class AgentCoordinator:
 
     def sessions(self) -> list[SessionRecord]:
         """All sessions of this run, oldest first (active ones via the state index, finished
-        ones via the run's archive catalogue: the cost does not grow with other runs)."""
-        return self.workspace.list_sessions(run_id=self.run_id)
+        ones via the run's archive catalogue: the cost does not grow with other runs).
+
+        Active sessions are read afresh; the records of archived (terminal) sessions are
+        the workspace's own, shared by every listing (``share_archived``): read them, never
+        modify them (load a session to change it). A step lists the run, so copying every
+        finished session on every step made a long run's hand-offs slower the longer it ran.
+        """
+        return self.workspace.list_sessions(run_id=self.run_id, share_archived=True)
 
     def latest_by_node(self, sessions: list[SessionRecord] | None = None) -> dict[str, SessionRecord]:
         latest: dict[str, SessionRecord] = {}

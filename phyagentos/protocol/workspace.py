@@ -687,12 +687,19 @@ class Workspace:
         return out
 
     def list_sessions(self, states: Iterable[str] | str | None = None, *,
-                      run_id: str | None = None) -> list[SessionRecord]:
+                      run_id: str | None = None, share_archived: bool = False) -> list[SessionRecord]:
         """Session records (optionally only those in ``states`` and of ``run_id``), oldest first.
 
         Cost: active sessions come from ``sessions/.index/``; terminal ones from the
         archive catalogue of ``run_id``. Without ``run_id``, asking for terminal
         states (or for all states) reads the whole archive.
+
+        Every record is the caller's own copy unless ``share_archived``: then the
+        records of archived sessions of ``run_id`` are this workspace's parsed records
+        themselves (each still checked against its file's inode, modification time and
+        size), which the caller must not modify. A coordinator lists its run on every
+        step; copying each finished session every time (about 0.1 ms each) made a step's
+        cost grow with the run's length.
 
         Raises:
             ProtocolError: an unknown state name (the message lists valid ones).
@@ -722,7 +729,7 @@ class Workspace:
                 for entry in self._session_archive.run_entries(run_id):
                     if entry.session_id in by_id or (wanted is not None and entry.state not in wanted):
                         continue
-                    record = self._load_archived(entry)
+                    record = self._load_archived(entry, share=share_archived)
                     if record is not None:
                         by_id[record.session_id] = record
             else:
@@ -739,25 +746,34 @@ class Workspace:
         records.sort(key=lambda r: (_ts_key(r.created_at), r.session_id))
         return records
 
-    def _load_archived(self, entry) -> SessionRecord | None:
+    def _load_archived(self, entry, *, share: bool = False) -> SessionRecord | None:
         # Terminal sessions do not change: a run's coordinator lists them on every step,
         # so parsed records are kept, keyed by the file's identity (inode, mtime, size),
-        # and handed out as deep copies (unpickled).
+        # and handed out as deep copies (unpickled), or themselves with ``share``.
         cache = self.__dict__.setdefault("_archived_cache", {})
-        for path in (self._session_archive.path_of(entry), self.session_path(entry.session_id)):
+        roots = self.__dict__.get("_archived_roots")
+        if roots is None:  # strings: a listing joins a path per archived session
+            roots = self.__dict__["_archived_roots"] = (str(self._session_archive.root), str(self.sessions_dir))
+        for path in (os.path.join(roots[0], entry.relpath), os.path.join(roots[1], f"{entry.session_id}.md")):
             try:
                 st = os.stat(path)
                 key = (st.st_ino, st.st_mtime_ns, st.st_size)
-                hit = cache.get(str(path))
+                hit = cache.get(path)
                 if hit is not None and hit[0] == key:
-                    return pickle.loads(hit[1])
-                record = read_document(path, SessionRecord).data
+                    if not share:
+                        return pickle.loads(hit[2])
+                    if hit[1] is None:
+                        hit[1] = pickle.loads(hit[2])
+                    return hit[1]
+                record = read_document(Path(path), SessionRecord).data
             except FileNotFoundError:
                 continue
             if len(cache) >= _ARCHIVE_CACHE_SIZE:
                 cache.clear()
-            # kept pickled: a copy is then one C-level unpickle (~10x a pydantic deep copy)
-            cache[str(path)] = (key, pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL))
+            # [file identity, the shared record (made on the first shared listing), its
+            # pickle]: a copy is one C-level unpickle (~10x faster than a pydantic deep copy)
+            cache[path] = [key, record if share else None,
+                                pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL)]
             return record
         log.warning("archive catalogue names session %s but its file is missing", entry.session_id)
         return None

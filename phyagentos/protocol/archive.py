@@ -15,7 +15,8 @@ starts with a newline, so concurrent appenders never interleave and a line torn 
 power cut cannot swallow the next one; malformed lines are skipped.
 
 Finding an archived session by id alone costs one ``stat`` per archived *day*; ids
-found once are cached. Listing a run's sessions reads that run's catalogue only.
+found once are cached. Listing a run's sessions reads that run's catalogue only, and
+a :class:`SessionArchive` that read it before reads only the bytes appended since.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import hashlib
 import logging
 import os
 import re
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -51,6 +53,28 @@ class ArchivedEntry:
     relpath: str  # "<YYYY-MM-DD>/<id>.md" relative to sessions/archive/
 
 
+def _read_all(fd: int) -> bytes:
+    chunks = []
+    while chunk := os.read(fd, 1 << 16):
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def _parse_line(line: bytes, entries: dict[str, ArchivedEntry]) -> None:
+    """Add one catalogue line to ``entries`` (a malformed or torn line adds nothing)."""
+    try:
+        parts = line.decode("utf-8").split("\t")
+    except UnicodeDecodeError:
+        return
+    if len(parts) != 3:
+        return
+    rel, state, node = parts
+    day, _, name = rel.partition("/")
+    if not _DAY.match(day) or not _SID.match(name) or state not in _TERMINAL:
+        return
+    entries[name] = ArchivedEntry(session_id=name, state=state, node=node, relpath=f"{rel}.md")
+
+
 def _catalogue_name(run_id: str) -> str:
     # Run ids are free text in the schema; only file-name-safe ones are used verbatim.
     if _SID.match(run_id):
@@ -69,6 +93,9 @@ class SessionArchive:
         self.root = Path(sessions_dir) / "archive"
         self.catalogue_dir = self.root / "runs"
         self._found: dict[str, Path] = {}
+        # run id -> (catalogue inode, byte offset of its last line, entries of the lines before it)
+        self._read: dict[str, tuple[int, int, dict[str, ArchivedEntry]]] = {}
+        self._read_lock = threading.Lock()
 
     def day_dirs(self) -> list[Path]:
         """Archived days, newest first."""
@@ -122,22 +149,38 @@ class SessionArchive:
             os.close(fd)
 
     def run_entries(self, run_id: str) -> list[ArchivedEntry]:
-        """The archived sessions of ``run_id`` (catalogue order; later lines win per id)."""
-        path = self.catalogue_dir / _catalogue_name(run_id)
+        """The archived sessions of ``run_id`` (catalogue order; later lines win per id).
+
+        The catalogue only grows (lines are appended, each starting with a newline), so
+        the lines before the last one are parsed once per :class:`SessionArchive` and
+        kept; a call reads the bytes from the last line on (the last line itself every
+        time: an append may still be tearing it). Another file in its place (a new inode,
+        or a shorter file) is read whole again.
+        """
+        path = os.path.join(self.catalogue_dir, _catalogue_name(run_id))
         try:
-            text = path.read_text(encoding="utf-8")
+            fd = os.open(path, os.O_RDONLY)
         except FileNotFoundError:
             return []
-        entries: dict[str, ArchivedEntry] = {}
-        for line in text.split("\n"):
-            parts = line.split("\t")
-            if len(parts) != 3:
-                continue
-            rel, state, node = parts
-            day, _, name = rel.partition("/")
-            if not _DAY.match(day) or not _SID.match(name) or state not in _TERMINAL:
-                continue
-            entries[name] = ArchivedEntry(session_id=name, state=state, node=node, relpath=f"{rel}.md")
+        try:
+            st = os.fstat(fd)
+            with self._read_lock:
+                ino, offset, kept = self._read.get(run_id, (st.st_ino, 0, {}))
+                if ino != st.st_ino or offset > st.st_size:
+                    offset, kept = 0, {}
+                os.lseek(fd, offset, os.SEEK_SET)
+                tail = _read_all(fd)
+                *complete, last = tail.split(b"\n")
+                if complete:
+                    kept = dict(kept)  # copied on write: a reader copies it outside the lock
+                    for line in complete:
+                        _parse_line(line, kept)
+                    offset += sum(len(line) + 1 for line in complete)
+                self._read[run_id] = (st.st_ino, offset, kept)
+        finally:
+            os.close(fd)
+        entries = dict(kept)
+        _parse_line(last, entries)
         return list(entries.values())
 
     def path_of(self, entry: ArchivedEntry) -> Path:

@@ -20,6 +20,7 @@ count as ``waiting``) and return new values, never mutating their inputs.
 from __future__ import annotations
 
 import logging
+import weakref
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
@@ -112,18 +113,32 @@ def _file_order(dag: nx.DiGraph) -> dict[str, int]:
     return {n: i for i, n in enumerate(dag.nodes)}
 
 
+#: Topological orders of frozen DAGs (whose structure cannot change), by DAG.
+_FROZEN_ORDERS: weakref.WeakKeyDictionary[nx.DiGraph, tuple[str, ...]] = weakref.WeakKeyDictionary()
+
+
 def topological_order(dag: nx.DiGraph) -> list[str]:
     """Return node ids in dependency order, ties broken by file order.
 
+    The order of a frozen DAG (:func:`networkx.freeze`: no node or edge can be added or
+    removed; the AgentCoordinator freezes its own) is computed once: the coordinator
+    asks for it several times per step, and sorting again cost O(n log n) each time.
+
     Raises :class:`GoalGraphError` if ``dag`` has a cycle.
     """
+    frozen = nx.is_frozen(dag)
+    if frozen and (kept := _FROZEN_ORDERS.get(dag)) is not None:
+        return list(kept)
     order = _file_order(dag)
     try:
-        return list(nx.lexicographical_topological_sort(dag, key=order.__getitem__))
+        result = list(nx.lexicographical_topological_sort(dag, key=order.__getitem__))
     except nx.NetworkXUnfeasible as exc:
         cycle = find_dependency_cycle(dag)
         shown = " -> ".join((*cycle, cycle[0])) if cycle else "?"
         raise GoalGraphError(f"goal graph has a dependency cycle: {shown}") from exc
+    if frozen:
+        _FROZEN_ORDERS[dag] = tuple(result)
+    return result
 
 
 def find_dependency_cycle(dag: nx.DiGraph) -> tuple[str, ...] | None:

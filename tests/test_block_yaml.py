@@ -103,6 +103,41 @@ def test_protocol_shaped_data_is_emitted_fast_and_equal_and_loads_back(data):
         yaml.dump(data, Dumper=_Dumper, allow_unicode=True, sort_keys=False, width=2**30)  # nan != nan
 
 
+# List items that are flat mappings (a TASK.md node, a session's transition): their texts
+# are kept and written again for equal items. Values that compare equal but are written
+# differently (0.0 and -0.0, 1 and True and 1.0) must never share a text.
+look_alikes = st.sampled_from([0, 0.0, -0.0, 1, 1.0, True, False, None, "1", "true", "", 1e16, -1e-05, 2**64])
+flat_items = st.dictionaries(st.sampled_from(["id", "state", "at", "n"]),
+                             st.one_of(look_alikes, scalars, st.lists(st.one_of(look_alikes, scalars), max_size=3)),
+                             min_size=1, max_size=4)
+
+
+@settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow])
+@given(items=st.lists(flat_items, min_size=1, max_size=6), depth=st.integers(0, 2))
+def test_list_items_written_again_from_their_kept_text_are_what_pyyaml_writes(items, depth):
+    data: dict = {"nodes": items}
+    for _ in range(depth):  # the same items at another column
+        data = {"run": data}
+    for _ in range(2):  # the second rendering takes each item's text from the first
+        text = emitted(data)
+        assert text is None or same_as_both(text, data)
+    shuffled = {"nodes": items[::-1] + [dict(item) for item in items]}  # equal items, other objects
+    text = emitted(shuffled)
+    assert text is None or same_as_both(text, shuffled)
+
+
+def test_an_item_reached_twice_is_declined_even_when_its_text_is_kept():
+    item = {"id": "pick", "state": "running", "session_ids": ["r-pick-1"]}
+    flat = {"event": "claim", "at": "2026-11-23T08:49:01.859870Z"}
+    assert emitted({"nodes": [item], "transitions": [flat]}) is not None  # their texts are kept now
+    assert emitted({"nodes": [item, item]}) is None  # PyYAML would write an anchor and an alias
+    assert emitted({"transitions": [flat, flat]}) is None
+    assert emitted({"transitions": [flat], "last": flat}) is None
+    assert emitted({"a": [item], "b": item["session_ids"]}) is None
+    assert emitted({"nodes": [item, dict(item, session_ids=["r-pick-1"])]}) == pyyaml(
+        {"nodes": [item, dict(item, session_ids=["r-pick-1"])]})
+
+
 @pytest.mark.parametrize("word", [w for w in WORDS if w.isascii() and w.isprintable()])
 def test_each_special_string_is_quoted_as_pyyaml_quotes_it_as_key_value_and_item(word):
     data = {"k": word, "seq": [[word, word], [], {"n": word}], "e": {}}

@@ -126,15 +126,45 @@ def _plain_allowed(value: str) -> bool:
     return not (value[-1] == ":" or ": " in value or " #" in value)
 
 
+#: Scalar types a list item's flat mapping may hold (see :func:`_flat_key`).
+_SCALAR_TYPES = frozenset((str, int, float, bool, type(None)))
+#: Texts of list items kept per dialect before the memo is emptied.
+_ITEM_MEMO_MAX = 16384
+
+
+def _flat_key(item: dict) -> tuple | None:
+    """What the text of the list item ``item`` depends on, if it is a flat mapping (its
+    values scalars or lists of scalars): keys, value types and values, floats by their
+    ``repr`` (``0.0 == -0.0`` but their texts differ); else None. A TASK.md node or a
+    session's transition is such an item, rendered again unchanged on every rewrite."""
+    parts = []
+    for key, value in item.items():
+        kind = type(value)
+        if kind is list:
+            inner = []
+            for x in value:
+                xkind = type(x)
+                if xkind not in _SCALAR_TYPES:
+                    return None
+                inner.append((xkind, repr(x) if xkind is float else x))
+            parts.append((key, kind, tuple(inner)))
+        elif kind in _SCALAR_TYPES:
+            parts.append((key, kind, repr(value) if kind is float else value))
+        else:
+            return None
+    return tuple(parts)
+
+
 class _Emitter:
     """One rendering: the parts written so far and the containers already seen."""
 
-    __slots__ = ("out", "seen", "scalar")
+    __slots__ = ("out", "seen", "scalar", "memo")
 
-    def __init__(self, scalar: Callable[[object], str]) -> None:
+    def __init__(self, scalar: Callable[[object], str], memo: dict | None = None) -> None:
         self.out: list[str] = []
         self.seen: set[int] = set()
         self.scalar = scalar
+        self.memo = memo if memo is not None else {}
 
     def _enter(self, container: object) -> None:
         ident = id(container)
@@ -172,17 +202,38 @@ class _Emitter:
             self.node(value, indent, False)
 
     def sequence(self, items: list, indent: int, inline: bool) -> None:
-        """Write the non-empty block list ``items`` with its dashes at column ``indent``."""
+        """Write the non-empty block list ``items`` with its dashes at column ``indent``.
+
+        The text of an item that is a flat mapping is kept (per dialect, by column and
+        :func:`_flat_key`) and written again for an equal item without rendering it."""
         self._enter(items)
         out = self.out
         pad = " " * indent
+        memo = self.memo
         for item in items:
             if inline:
                 inline = False
                 out.append("- ")
             else:
                 out.append(pad + "- ")
+            key = _flat_key(item) if type(item) is dict and item else None
+            if key is None:
+                self.node(item, indent, True)
+                continue
+            key = (indent, key)
+            text = memo.get(key)
+            if text is not None:
+                self._enter(item)  # containers are still counted: one reached twice is declined
+                for value in item.values():
+                    if type(value) is list:
+                        self._enter(value)
+                out.append(text)
+                continue
+            start = len(out)
             self.node(item, indent, True)
+            if len(memo) >= _ITEM_MEMO_MAX:
+                memo.clear()
+            memo[key] = "".join(out[start:])
 
     def node(self, value: object, indent: int, after_dash: bool) -> None:
         """Write ``value`` after a key at column ``indent`` (the line holds the key) or,
@@ -230,7 +281,7 @@ def emit_block_yaml(data: object, resolvers: dict[str | None, list[tuple[str, Pa
     """
     if type(data) is not dict or not data:
         return None
-    emitter = _Emitter(_scalar_for(resolvers))
+    emitter = _Emitter(*_scalar_for(resolvers))
     try:
         emitter.mapping(data, 0, False)
     except (_Unsupported, RecursionError):
@@ -238,12 +289,13 @@ def emit_block_yaml(data: object, resolvers: dict[str | None, list[tuple[str, Pa
     return "".join(emitter.out)
 
 
-#: id(resolvers) -> (resolvers, their scalar writer); the dict is kept so its id stays its own.
-_SCALARS: dict[int, tuple[object, Callable[[object], str]]] = {}
+#: id(resolvers) -> (resolvers, their scalar writer, their list items' texts); the dict is
+#: kept so its id stays its own.
+_SCALARS: dict[int, tuple[object, Callable[[object], str], dict]] = {}
 
 
-def _scalar_for(resolvers: dict[str | None, list[tuple[str, Pattern[str]]]]) -> Callable[[object], str]:
+def _scalar_for(resolvers: dict[str | None, list[tuple[str, Pattern[str]]]]) -> tuple[Callable[[object], str], dict]:
     hit = _SCALARS.get(id(resolvers))
     if hit is None or hit[0] is not resolvers:
-        hit = _SCALARS[id(resolvers)] = (resolvers, _make_scalar(resolvers))
-    return hit[1]
+        hit = _SCALARS[id(resolvers)] = (resolvers, _make_scalar(resolvers), {})
+    return hit[1], hit[2]

@@ -7,6 +7,7 @@ where the last read stopped, and a frozen DAG's topological order is sorted once
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 from pathlib import Path
@@ -152,3 +153,39 @@ def test_records_a_run_shares_between_its_listings_are_never_modified(tmp_path, 
     assert len({rec.session_id for rec, _ in handed.values()}) >= 3
     for rec, at_hand_out in handed.values():
         assert pickle.dumps(rec.model_dump(mode="json")) == at_hand_out, rec.session_id
+
+
+def _succeed(ws: Workspace, sid: str) -> None:
+    def fn(rec):
+        lc = SessionLifecycle(rec)
+        for event in ("claim", "preflight", "start", "finish", "submit", "verify", "succeed"):
+            lc.fire(event)
+
+    ws.update_session(sid, fn)
+
+
+def test_a_supervisor_keeps_one_catalogue_reader_for_the_dependencies_it_checks(tmp_path, ws):
+    # Each hand-off asks whether the next session's dependencies succeeded; the supervisor
+    # reads the run's catalogue on from where its last read stopped instead of whole.
+    from phyagentos.runtime.supervisor import WatchdogSupervisor
+
+    now = utc_now_iso()
+    for sid in ("d1", "d2"):
+        _submit(ws, sid)
+    ws.submit_session(SessionRecord(session_id="s3", run_id="run-a", node="s3", skill="noop",
+                                    target="franka_tabletop", depends_on=["d1", "d2"], created_at=now,
+                                    updated_at=now))
+    sup = WatchdogSupervisor(ws)
+    try:
+        ident = next(i for sid, _, i in ws.active_sessions("pending") if sid == "s3")
+        _succeed(ws, "d1")
+        assert not sup._deps_met(ident)
+        reader = sup._archive
+        assert reader is not None and [e.session_id for e in reader.run_entries("run-a")] == ["d1"]
+        _succeed(ws, "d2")
+        assert sup._deps_met(ident) and sup._archive is reader
+        sup.workspace = Workspace.create(tmp_path / "other")  # another workspace: another catalogue
+        assert not sup._deps_met(dataclasses.replace(ident, depends_on=("d9",)))
+        assert sup._archive is not reader and sup._archive.root == sup.workspace.sessions_dir / "archive"
+    finally:
+        sup.close()

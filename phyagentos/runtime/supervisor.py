@@ -219,6 +219,7 @@ class WatchdogSupervisor:
         self._signal_stat: tuple | None = None
         self._signals_initialised = False
         self._succeeded: set[tuple[str, str]] = set()
+        self._archive = None  # the SessionArchive whose catalogue reads _deps_met continues
         self._next_maintenance = 0.0
         self._next_reconcile = time.monotonic() + config.reconcile_interval_s
         self._queued: dict[str, str] = {}  # session id -> run holding its target's world
@@ -593,11 +594,16 @@ class WatchdogSupervisor:
         if not missing:
             return True
         # The run's archive catalogue names each finished session with its node and final
-        # state (a line appended after the terminal record is durable): read it first;
-        # parse the run's session files only if it does not settle the question.
+        # state (a line appended after the terminal record is durable): read it first (one
+        # SessionArchive kept, so each read continues where the last stopped instead of
+        # parsing the whole catalogue on every hand-off); parse the run's session files
+        # only if it does not settle the question.
         from phyagentos.protocol.archive import SessionArchive  # noqa: PLC0415
 
-        for entry in SessionArchive(self.workspace.sessions_dir).run_entries(ident.run_id):
+        archive = self._archive
+        if archive is None or archive.root != Path(self.workspace.sessions_dir) / "archive":
+            archive = self._archive = SessionArchive(self.workspace.sessions_dir)
+        for entry in archive.run_entries(ident.run_id):
             if entry.state == "succeeded":
                 self._succeeded.add((ident.run_id, entry.node))
         if all((ident.run_id, d) in self._succeeded for d in ident.depends_on):

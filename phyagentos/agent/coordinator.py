@@ -49,7 +49,8 @@ from typing import Any, Callable, Mapping
 import networkx as nx
 
 from phyagentos.errors import PhyAgentOSError, VerifierError
-from phyagentos.protocol import LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace, is_expired, new_lease
+from phyagentos.protocol import (LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace, file_identity, is_expired,
+                                 new_lease)
 from phyagentos.protocol.schemas import TransitionRecord
 from phyagentos.protocol.evidence_markers import PRUNED_MARKER, images_pending, wait_for_images
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
@@ -584,8 +585,7 @@ class AgentCoordinator:
         """
         key = str(directory)
         try:
-            st = os.stat(os.path.join(key, "bundle.yaml"))
-            stamp = (st.st_ino, st.st_mtime_ns, st.st_size)
+            stamp = file_identity(os.path.join(key, "bundle.yaml"))
         except OSError:
             stamp = None
         kept = self._bundles.get(key)

@@ -10,7 +10,7 @@ safe under several processes: ``session_index`` (state hints of active sessions)
 ``errorcodes`` (the error taxonomy).
 """
 
-from .atomic import atomic_write_bytes, atomic_write_text
+from .atomic import atomic_write_bytes, atomic_write_text, file_identity
 from .codec import (
     Document,
     dump_yaml,
@@ -89,6 +89,7 @@ __all__ = [
     # atomic
     "atomic_write_bytes",
     "atomic_write_text",
+    "file_identity",
     # codec
     "Document",
     "dump_yaml",

@@ -26,7 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "batched_durability", "fsync_paths"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "batched_durability", "file_identity", "fsync_paths"]
 
 log = logging.getLogger(__name__)
 
@@ -113,6 +113,22 @@ def batched_durability() -> Iterator[None]:
     finally:
         files, _BATCH.files = _BATCH.files, None
         fsync_paths(list(files), sorted({os.path.dirname(f) for f in files}))
+
+
+def file_identity(path: str | os.PathLike[str]) -> tuple[int, int, int] | None:
+    """``(inode, modification time in ns, size in bytes)`` of the file at ``path``, or
+    ``None`` if there is none. Every atomic write replaces a file by a new inode, so an
+    equal identity means the content a reader parsed from it is still the file's (what
+    the caches of parsed protocol files, evidence bundles and signals are keyed by).
+
+    Raises:
+        OSError: the file exists but cannot be examined (e.g. permissions).
+    """
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    return st.st_ino, st.st_mtime_ns, st.st_size
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, durable: bool = True) -> None:

@@ -50,7 +50,7 @@ from phyagentos import resources
 from phyagentos.yamlsource import load_yaml
 
 from .archive import SessionArchive
-from .atomic import atomic_write_bytes, batched_durability
+from .atomic import atomic_write_bytes, batched_durability, file_identity
 from .atomic import atomic_write_text
 from .file_lock import WorkspaceLock, workspace_lock
 from .codec import (PARSE_CACHE, Document, _fence_needed, _plain, _read_text, dump_yaml, parse_document,
@@ -755,18 +755,19 @@ class Workspace:
         if roots is None:  # strings: a listing joins a path per archived session
             roots = self.__dict__["_archived_roots"] = (str(self._session_archive.root), str(self.sessions_dir))
         for path in (os.path.join(roots[0], entry.relpath), os.path.join(roots[1], f"{entry.session_id}.md")):
+            key = file_identity(path)
+            if key is None:
+                continue
+            hit = cache.get(path)
+            if hit is not None and hit[0] == key:
+                if not share:
+                    return pickle.loads(hit[2])
+                if hit[1] is None:
+                    hit[1] = pickle.loads(hit[2])
+                return hit[1]
             try:
-                st = os.stat(path)
-                key = (st.st_ino, st.st_mtime_ns, st.st_size)
-                hit = cache.get(path)
-                if hit is not None and hit[0] == key:
-                    if not share:
-                        return pickle.loads(hit[2])
-                    if hit[1] is None:
-                        hit[1] = pickle.loads(hit[2])
-                    return hit[1]
                 record = read_document(Path(path), SessionRecord).data
-            except FileNotFoundError:
+            except FileNotFoundError:  # moved between the stat and the read
                 continue
             if len(cache) >= _ARCHIVE_CACHE_SIZE:
                 cache.clear()

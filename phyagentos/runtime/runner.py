@@ -40,7 +40,7 @@ from phyagentos.primitives.context import CancelToken, SkillContext
 from phyagentos.primitives.observation import has_cameras, make_perceiver, perceive_now
 from phyagentos.protocol import dump_yaml, EnvironmentDoc, SessionRecord, Workspace
 from phyagentos.protocol import errorcodes
-from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.protocol.atomic import atomic_write_text, file_identity
 from phyagentos.protocol import utc_now_iso as utc_now  # not .lifecycle: the runner needs no statechart (transitions)
 
 from .builtin_runtime import BuiltinSkillRuntime, RunOutcome
@@ -466,11 +466,7 @@ class SessionRunner:
     def _perception_key(self) -> tuple | None:
         """What a kept view depends on besides the world: the identity of the workspace's
         perception.yaml (None without one)."""
-        try:
-            st = _perception_config(self.workspace).stat()
-        except FileNotFoundError:
-            return None
-        return st.st_ino, st.st_mtime_ns, st.st_size
+        return file_identity(_perception_config(self.workspace))
 
     def _initial_view(self, spec, target, perceiver, evidence_dir, rel: str) -> dict:
         """The initial snapshot: the previous session's terminal one when the target is

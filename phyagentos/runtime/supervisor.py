@@ -70,6 +70,7 @@ from phyagentos.protocol import (
     Workspace,
     WorkspaceWatcher,
     errorcodes as ec,
+    file_identity,
     is_expired,
     new_lease,
     renewed,
@@ -470,12 +471,9 @@ class WatchdogSupervisor:
     # -- signals ---------------------------------------------------------
 
     def _poll_signals(self) -> int:
-        path = self.workspace.path("RUNTIME_SIGNAL")
-        try:
-            st = path.stat()
-        except FileNotFoundError:
+        key = file_identity(self.workspace.path("RUNTIME_SIGNAL"))
+        if key is None:
             return 0
-        key = (st.st_ino, st.st_mtime_ns, st.st_size)
         if key == self._signal_stat:
             return 0
         self._signal_stat = key

@@ -1,9 +1,13 @@
 """Bare pick-and-place on DEFAULT_SCENE using only phyagentos.targets and phyagentos.motion.
 
 No framework, no behaviour trees: this is the floor the orchestrated version is compared
-against. Sequence: home -> plan to pregrasp -> Cartesian approach -> close -> Cartesian
-lift -> plan the transfer over the wall with the cube attached -> Cartesian lower ->
-open -> Cartesian retreat. The cube must end inside the goal region.
+against. It makes the motions a ``phyagentos run`` of goal_graphs/pick_and_place.yaml
+makes, in the order the shipped trees (trees/pick.yaml, trees/place.yaml) make them and
+at their speeds (:class:`SkillMotions`, read from those files): open -> plan to the
+pregrasp -> Cartesian align over the object and approach -> close -> Cartesian lift ->
+plan the transfer over the wall with the cube attached -> Cartesian lower -> open ->
+Cartesian retreat -> plan back to the ready configuration (out of the cameras' view).
+The cube must end inside the goal region.
 
 Usage::
 
@@ -21,10 +25,12 @@ import json
 import statistics
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import yaml
 
 _ROOT = Path(__file__).resolve().parents[1]
 if str(_ROOT) not in sys.path:
@@ -47,6 +53,52 @@ from phyagentos.errors import IKError  # noqa: E402
 from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget, SceneSpec  # noqa: E402
 
 RESULTS = _ROOT / "bench" / "results" / "bare_pick_and_place.json"
+TREES = _ROOT / "trees"
+
+#: ``CartesianMove``'s velocity scale where a tree gives none (trees/place.yaml's Retreat);
+#: phyagentos/primitives/execution.py, pinned equal by tests/test_mujoco_target.py.
+CARTESIAN_DEFAULT_VELOCITY_SCALE = 0.3
+
+
+@dataclass(frozen=True)
+class SkillMotions:
+    """The motion parameters of the shipped pick and place trees, so that the bare script
+    moves as a run does (speeds are fractions (0, 1] of the joint velocity limits, and of
+    the acceleration limits alike, as ``CartesianMove`` and ``move_to`` scale both)."""
+
+    pick_approach_height_m: float
+    approach_velocity_scale: float
+    lift_m: float
+    lift_velocity_scale: float
+    pick_transfer_velocity_scale: float
+    place_approach_height_m: float
+    place_transfer_velocity_scale: float
+    lower_velocity_scale: float
+    retreat_offset_m: float
+    retreat_velocity_scale: float
+
+    @classmethod
+    def from_trees(cls, trees: Path = TREES) -> "SkillMotions":
+        """Read the parameter defaults of ``trees/pick.yaml`` and ``trees/place.yaml`` and
+        the place tree's ``Retreat`` node. Raises KeyError if a tree lost one of them."""
+        pick = yaml.safe_load((trees / "pick.yaml").read_text(encoding="utf-8"))
+        place = yaml.safe_load((trees / "place.yaml").read_text(encoding="utf-8"))
+        pd, qd = ({k: v["default"] for k, v in t["params"].items() if "default" in v} for t in (pick, place))
+        retreat = next(c["params"] for c in place["root"]["sequence"]["children"] if c.get("name") == "Retreat")
+        dx, dy, dz = retreat["offset"]
+        assert dx == dy == 0.0, "trees/place.yaml's Retreat is no longer straight up"
+        return cls(
+            pick_approach_height_m=float(pd["approach_height_m"]),
+            approach_velocity_scale=float(pd["approach_velocity_scale"]),
+            lift_m=float(pd["lift_m"]),
+            lift_velocity_scale=float(pd["lift_velocity_scale"]),
+            pick_transfer_velocity_scale=float(pd["transfer_velocity_scale"]),
+            place_approach_height_m=float(qd["approach_height_m"]),
+            place_transfer_velocity_scale=float(qd["transfer_velocity_scale"]),
+            lower_velocity_scale=float(qd["lower_velocity_scale"]),
+            retreat_offset_m=float(dz),
+            retreat_velocity_scale=float(retreat.get("velocity_scale", CARTESIAN_DEFAULT_VELOCITY_SCALE)),
+        )
 
 
 class _Clock:
@@ -71,7 +123,7 @@ def run_bare_pick_and_place(
     region_name: str = "goal",
     planner: str = "RRTConnect",
     margin_m: float = 0.01,
-    approach_height_m: float = 0.10,
+    motions: SkillMotions | None = None,
     observer: Callable[[str, MuJoCoTarget], None] | None = None,
     perception: bool = False,
 ) -> dict:
@@ -80,7 +132,8 @@ def run_bare_pick_and_place(
     Returns a dict with wall-time split (``ik_s``, ``planning_s``, ``timing_s``,
     ``simulation_s``, ``setup_s``, ``total_s``), ``sim_time_s``, per-call medians
     (``ik_iterations_median``, ``ik_ms_median``, ``plan_ms_median``), counts, the final
-    cube position and the tracking errors of each executed trajectory.
+    cube position and the tracking errors of each executed trajectory. ``motions``:
+    heights and speeds (default: :meth:`SkillMotions.from_trees`, the shipped trees').
     ``observer(stage, target)``, if given, is called after the stages ``'grasped'``,
     ``'transferred'``, ``'released'`` and ``'retreated'`` (not timed separately).
 
@@ -93,8 +146,7 @@ def run_bare_pick_and_place(
     and terminal observation; the place starts from the pick's terminal view, as a run's
     does when nothing moved in between) and where the skill trees observe (pick: ObserveScene,
     ObserveAfterPick; place: ObserveScene, and ObserveAfterPlace after the arm cleared
-    the cameras' view by a planned move back to its home configuration, as
-    trees/place.yaml does). Timed as ``perception_s`` (and in ``total_s``); the motions
+    the cameras' view). Timed as ``perception_s`` (and in ``total_s``); the motions
     themselves still use the simulator's object pose, as without perception.
     """
 
@@ -114,6 +166,7 @@ def run_bare_pick_and_place(
     tracking: list[float] = []
     unexpected: list = []
 
+    m = motions if motions is not None else SkillMotions.from_trees()
     target = clock.run("setup", MuJoCoTarget, "bare", scene, seed=seed)
     perceive = _Perception(target, clock) if perception else None
     if perceive:
@@ -171,7 +224,7 @@ def run_bare_pick_and_place(
             contact_checker.detach()
             clock.s["planning"] += time.perf_counter() - t
 
-    def execute(P, *, check: bool, attached: np.ndarray | None = None):
+    def execute(P, *, check: bool, attached: np.ndarray | None = None, scale: float = 1.0):
         # Planned paths hug the 1 cm planning margin after shortcutting, so the timed
         # trajectory (whose spline deviates slightly from the polyline) is verified
         # against real contact (margin 0) rather than against the margin again.
@@ -180,7 +233,7 @@ def run_bare_pick_and_place(
             if attached is not None:
                 contact_checker.attach(object_name, attached)
         try:
-            traj = clock.run("timing", retime, P, vel_limits=vel, acc_limits=acc, dt=target.timestep,
+            traj = clock.run("timing", retime, P, vel_limits=vel * scale, acc_limits=acc * scale, dt=target.timestep,
                              checker=contact_checker if check else None)
         finally:
             contact_checker.detach()
@@ -190,11 +243,13 @@ def run_bare_pick_and_place(
         unexpected.extend(res.contacts)
         return res
 
-    # 1. choose a grasp whose approach is collision free, then plan home -> pregrasp
+    # 1. open (pick: OpenGripper), choose a grasp whose approach is collision free, plan
+    # home -> pregrasp
+    clock.run("simulation", target.set_gripper, opening_m=0.04)
     T_obj = target.object_pose(object_name)
     q_home = target.arm_qpos()
     candidates = top_down_grasp_candidates(
-        T_obj, obj.half_extents, approach_height_m=approach_height_m,
+        T_obj, obj.half_extents, approach_height_m=m.pick_approach_height_m,
         current_yaw_rad=hand_yaw(target.tcp_pose()), current_q7_rad=float(q_home[6]),
     )
     chosen = None
@@ -210,19 +265,20 @@ def run_bare_pick_and_place(
             break
     assert chosen is not None, "no collision-free top-down grasp"
     grasp = chosen
-    execute(plan(q_pre), check=True)
-    # 2. Cartesian approach, close
-    execute(cartesian(grasp.grasp), check=False)
-    g = clock.run("simulation", target.set_gripper, opening_m=0.0, settle_s=0.6)
+    execute(plan(q_pre), check=True, scale=m.pick_transfer_velocity_scale)
+    # 2. Cartesian align over the object and approach (AlignOverObject, Approach), close
+    execute(cartesian(grasp.pregrasp), check=False, scale=m.approach_velocity_scale)
+    execute(cartesian(grasp.grasp), check=False, scale=m.approach_velocity_scale)
+    g = clock.run("simulation", target.set_gripper, opening_m=0.0)
     assert g.grasped == object_name, f"grasp failed: {g}"
     T_tcp_obj = np.linalg.inv(target.tcp_pose()) @ target.object_pose(object_name)
     notify("grasped")
     # 3. Cartesian lift
     lift = np.array(target.tcp_pose())
-    lift[2, 3] += approach_height_m
+    lift[2, 3] += m.lift_m
     P = cartesian(lift)
     assert check_straight(P, "lift", attached=T_tcp_obj, skip_first=True), "lift collides"
-    execute(P, check=False)
+    execute(P, check=False, scale=m.lift_velocity_scale)
     if perceive:
         perceive("02_ObserveAfterPick")
         perceive("terminal")  # SessionRunner, after the pick
@@ -233,28 +289,28 @@ def run_bare_pick_and_place(
     # 4. transfer over the wall (planned, cube attached)
     T_place = place_pose(region.center, obj.half_extents, T_tcp_object=T_tcp_obj, yaw_rad=grasp.yaw_rad)
     T_preplace = T_place.copy()
-    T_preplace[2, 3] += approach_height_m
+    T_preplace[2, 3] += m.place_approach_height_m
     q_preplace = ik(T_preplace, target.arm_qpos())
     checker.attach(object_name, T_tcp_obj)
-    execute(plan(q_preplace), check=True, attached=T_tcp_obj)
+    execute(plan(q_preplace), check=True, attached=T_tcp_obj, scale=m.place_transfer_velocity_scale)
     checker.detach()
     notify("transferred")
     # 5. Cartesian lower, open, retreat
     P = cartesian(T_place)
     assert check_straight(P, "lower", attached=T_tcp_obj), "lowering collides"
-    execute(P, check=False)
-    g = clock.run("simulation", target.set_gripper, opening_m=0.04, settle_s=0.5)
+    execute(P, check=False, scale=m.lower_velocity_scale)
+    g = clock.run("simulation", target.set_gripper, opening_m=0.04)
     assert g.grasped is None, f"object still held after opening: {g}"
     notify("released")
     retreat = np.array(target.tcp_pose())
-    retreat[2, 3] += approach_height_m
+    retreat[2, 3] += m.retreat_offset_m
     P = cartesian(retreat)
     assert check_straight(P, "retreat"), "retreat collides"
-    execute(P, check=False)
+    execute(P, check=False, scale=m.retreat_velocity_scale)
     notify("retreated")
+    # 6. back to the ready configuration (place: ClearTheView, with cameras or without)
+    execute(plan(np.asarray(target.home_qpos, dtype=float)), check=True)
     if perceive:
-        # trees/place.yaml: clear the cameras' view (plan home, retime, execute), observe
-        execute(plan(np.asarray(target.home_qpos, dtype=float)), check=True)
         perceive("02_ObserveAfterPlace")
         perceive("terminal")  # SessionRunner, after the place
 

@@ -167,6 +167,13 @@ def session_timeline(ws: Path) -> list[dict]:
     return rows
 
 
+def run_sim_time_s(ws: Path) -> float:
+    """The simulated time a run's target moved (s): its clock at the end of the run's
+    last session (each bundle's ``outcome.sim_time_s``; a run's target starts at 0)."""
+    times = [read_yaml(p, error=BenchError).get("outcome", {}).get("sim_time_s") for p in ws.glob("evidence/*/bundle.yaml")]
+    return max(t for t in times if t is not None)
+
+
 def handoffs(rows: list[dict]) -> list[float]:
     """Verdict of a dependency -> first actuation of the session that waited for it (s)."""
     by_node = {}
@@ -231,8 +238,13 @@ def compare(runs: int, tmp: Path, *, perception: bool = True) -> dict:
     ``bare_pick_and_place.py --perception`` (the same perception calls at the same
     points). ``perception=False``: the run in a workspace whose sensors.yaml has no
     cameras, against the bare script without perception.
+
+    Both sides must make the same motions: the simulated time each moved its arm is
+    recorded (``sim_time_s``) with their ratio, and ``motions_match`` says whether
+    it is within 5 % (a warning is printed otherwise: the wall and CPU ratios then
+    compare different motions, not the framework's cost).
     """
-    fw, bare, cold, hand = [], [], [], []
+    fw, bare, cold, hand, fw_sim, bare_sim = [], [], [], [], [], []
     bare_cmd = [*BARE, "--perception"] if perception else BARE
     tag = "pp" if perception else "np"
     for i in range(runs):
@@ -243,6 +255,7 @@ def compare(runs: int, tmp: Path, *, perception: bool = True) -> dict:
                 result = json.loads(r["stdout"].strip().splitlines()[-1])
                 assert result["success"], result
                 bare.append(r)
+                bare_sim.append(result["sim_time_s"])
             else:
                 ws = tmp / f"{tag}{i}"
                 if not perception:
@@ -255,6 +268,7 @@ def compare(runs: int, tmp: Path, *, perception: bool = True) -> dict:
                 first = min(x["actuation_started"] for x in rows if x["actuation_started"])
                 cold.append(first - r["started_unix"])
                 hand += handoffs(rows)
+                fw_sim.append(run_sim_time_s(ws))
                 fw.append(r)
                 shutil.rmtree(ws, ignore_errors=True)
             print(f"  run {i + 1}/{runs} {side:<4} wall {r['wall_s']:.2f} s  cpu {r['cpu_s']:.2f} s", flush=True)
@@ -268,7 +282,14 @@ def compare(runs: int, tmp: Path, *, perception: bool = True) -> dict:
                  "wall_all_s": [round(x["wall_s"], 3) for x in bare], "cpu_all_s": [round(x["cpu_s"], 3) for x in bare]},
         "cold_start_to_first_actuation_s": {"median": statistics.median(cold), "all": [round(c, 3) for c in cold]},
         "handoff_ms": {"p50": _ms(_pct(hand, 0.5)), "p99": _ms(_pct(hand, 0.99)), "n": len(hand)},
+        "sim_time_s": {"framework": statistics.median(fw_sim), "bare": statistics.median(bare_sim)},
     }
+    sim = out["sim_time_s"]
+    sim["ratio"] = sim["framework"] / sim["bare"]
+    out["motions_match"] = abs(sim["ratio"] - 1.0) <= 0.05
+    if not out["motions_match"]:
+        print(f"  WARNING: the run moved its arm for {sim['framework']:.2f} s of simulated time, the bare script "
+              f"for {sim['bare']:.2f} s: not the same motions", flush=True)
     # ratios of the medians, and the median of the per-pair ratios (each pair ran back to back)
     out["wall_ratio"] = out["framework"]["wall_s"] / out["bare"]["wall_s"]
     out["cpu_ratio"] = out["framework"]["cpu_s"] / out["bare"]["cpu_s"]
@@ -435,6 +456,8 @@ def main(argv=None) -> int:
               f"{cc['wall_ratio']:>8.2f}{cc['wall_ratio_pairs_median']:>8.2f}{'<=1.20':>8}")
         print(f"{'CPU, median (s)':34}{cc['framework']['cpu_s']:>12.3f}{cc['bare']['cpu_s']:>10.3f}"
               f"{cc['cpu_ratio']:>8.2f}{cc['cpu_ratio_pairs_median']:>8.2f}{'<=1.15':>8}")
+        print(f"{'simulated time moved, median (s)':34}{cc['sim_time_s']['framework']:>12.3f}"
+              f"{cc['sim_time_s']['bare']:>10.3f}{cc['sim_time_s']['ratio']:>8.2f}{'':>8}{'same':>8}")
         print(f"{'cold start to first actuation (s)':34}{cc['cold_start_to_first_actuation_s']['median']:>12.3f}")
     rows = [("pick_and_place run", c["handoff_ms"])] if c else []
     if result.get("compare_no_perception"):

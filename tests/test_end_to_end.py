@@ -72,6 +72,24 @@ def test_pick_and_place_graph_puts_the_cube_in_the_region(tmp_path):
     assert {e.session_id for e in sessions_index.sessions} == {s.session_id for s in report.sessions}
 
 
+def test_the_bare_script_makes_the_motions_a_pick_and_place_run_makes(tmp_path):
+    """bench/end_to_end.py's ratios compare the run with bench/bare_pick_and_place.py:
+    they measure the framework only if both move the arm alike (same segments, heights
+    and speeds), which shows in the simulated time each moved it."""
+    import importlib.util  # noqa: PLC0415
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "bare_pick_and_place.py"
+    spec = importlib.util.spec_from_file_location("bare_pick_and_place_motions", path)
+    bare = sys.modules[spec.name] = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bare)
+    report = run_goal_graph(goal_graphs_dir() / "pick_and_place.yaml", tmp_path / "ws", seed=0)
+    assert report.succeeded, report.to_dict()
+    run_sim = max(yaml.safe_load(p.read_text())["outcome"]["sim_time_s"]
+                  for p in (tmp_path / "ws" / "evidence").glob("*/bundle.yaml"))
+    bare_sim = bare.run_bare_pick_and_place(seed=0)["sim_time_s"]
+    assert bare_sim == pytest.approx(run_sim, rel=0.05), (bare_sim, run_sim)
+
+
 def test_two_dependent_pick_and_place_nodes_run_in_order(tmp_path):
     report = run_goal_graph(goal_graphs_dir() / "sort_two_cubes.yaml", tmp_path / "ws", seed=3)
     assert report.succeeded, report.to_dict()

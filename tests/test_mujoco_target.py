@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,7 @@ _BENCH = Path(__file__).resolve().parents[1] / "bench" / "bare_pick_and_place.py
 def _load_bench():
     spec = importlib.util.spec_from_file_location("bare_pick_and_place", _BENCH)
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # registered first, as importlib's recipe does (its dataclasses need it)
     spec.loader.exec_module(mod)  # type: ignore[union-attr]
     return mod
 
@@ -317,6 +319,23 @@ def test_pick_and_place_puts_the_cube_inside_the_goal_region(bench, seed, xy, ya
     assert p[2] == pytest.approx(0.02, abs=2e-3)
     assert result["unexpected_contacts"] == []
     assert result["max_tracking_error_rad"] < 0.05
+
+
+def test_bare_script_reads_its_speeds_from_the_shipped_trees(bench):
+    import inspect  # noqa: PLC0415
+
+    from phyagentos.primitives.execution import CartesianMove  # noqa: PLC0415
+
+    default = inspect.signature(CartesianMove.__init__).parameters["velocity_scale"].default
+    assert bench.CARTESIAN_DEFAULT_VELOCITY_SCALE == default
+    m = bench.SkillMotions.from_trees()
+    pick = yaml.safe_load((bench.TREES / "pick.yaml").read_text())["params"]
+    place = yaml.safe_load((bench.TREES / "place.yaml").read_text())["params"]
+    assert (m.approach_velocity_scale, m.lift_velocity_scale, m.lift_m) == (
+        pick["approach_velocity_scale"]["default"], pick["lift_velocity_scale"]["default"], pick["lift_m"]["default"])
+    assert (m.lower_velocity_scale, m.place_approach_height_m) == (
+        place["lower_velocity_scale"]["default"], place["approach_height_m"]["default"])
+    assert m.retreat_velocity_scale == default and m.retreat_offset_m == pytest.approx(0.10)
 
 
 def test_snapshot_reports_holding_while_grasped_and_inside_after_placing(bench):

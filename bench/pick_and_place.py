@@ -43,6 +43,9 @@ from phyagentos.targets import MuJoCoTarget, SceneSpec
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bare_pick_and_place import SkillMotions  # noqa: E402  (the trees' heights and speeds)
+
 GRAPH = goal_graphs_dir() / "pick_and_place.yaml"
 RESULTS = Path(__file__).resolve().parent / "results"
 CATEGORIES = ("ik", "planning", "timing", "simulation")
@@ -62,9 +65,12 @@ class Clock:
 
 
 def bare_same_motions(seed: int = 0) -> dict:
-    """The pick and place trees' motions as a plain script; returns wall-time split and sim time."""
+    """The pick and place trees' motions as a plain script (their segments in order, at
+    the heights and speeds :class:`SkillMotions` reads from them); returns wall-time
+    split and sim time."""
     t_start = time.perf_counter()
     clock = Clock()
+    m = SkillMotions.from_trees()
     scene = SceneSpec.from_dict(read_yaml(GRAPH, error=BenchError)["scene"])
     target = MuJoCoTarget("bare", scene, seed=seed)
     target.reset(seed=seed)
@@ -94,20 +100,22 @@ def bare_same_motions(seed: int = 0) -> dict:
                 t = t_next
             target.settle(traj.q[-1])
 
-    def move_to(T):
-        with clock("ik"):
-            q_goal = solve_ik(model, q_seed=target.arm_qpos(), target=T).q
+    def move_to(T=None, *, q_goal=None, scale: float = 1.0):
+        if q_goal is None:
+            with clock("ik"):
+                q_goal = solve_ik(model, q_seed=target.arm_qpos(), target=T).q
         with clock("planning"):
             path = plan_path(sync(plan_checker), target.arm_qpos(), q_goal, planner="RRTConnect", timeout_s=2.0, seed=seed)
         with clock("timing"):
-            traj = retime(path, vel_limits=vel, acc_limits=acc, dt=model.opt.timestep, checker=sync(time_checker))
+            traj = retime(path, vel_limits=vel * scale, acc_limits=acc * scale, dt=model.opt.timestep,
+                          checker=sync(time_checker))
         stream(traj)
 
-    def cartesian(T_goal):
+    def cartesian(T_goal, scale: float):
         with clock("ik"):
             path = cartesian_path(model, q_start=target.arm_qpos(), T_goal=T_goal)
         with clock("timing"):
-            traj = retime(path, vel_limits=vel * 0.3, acc_limits=acc * 0.3, dt=model.opt.timestep)
+            traj = retime(path, vel_limits=vel * scale, acc_limits=acc * scale, dt=model.opt.timestep)
         stream(traj)
 
     def offset(dz):
@@ -131,12 +139,13 @@ def bare_same_motions(seed: int = 0) -> dict:
     with clock("simulation"):
         target.set_gripper(opening_m=0.04)
     T_obj, half = entity(snap, "cube")
-    grasp = top_down_grasp(T_obj, half, approach_height_m=0.10)
-    move_to(grasp.pregrasp)
-    cartesian(grasp.grasp)
+    grasp = top_down_grasp(T_obj, half, approach_height_m=m.pick_approach_height_m)
+    move_to(grasp.pregrasp, scale=m.pick_transfer_velocity_scale)
+    cartesian(grasp.pregrasp, m.approach_velocity_scale)  # AlignOverObject
+    cartesian(grasp.grasp, m.approach_velocity_scale)
     with clock("simulation"):
         assert target.set_gripper(opening_m=0.0).grasped == "cube"
-    cartesian(offset(0.15))
+    cartesian(offset(m.lift_m), m.lift_velocity_scale)
     assert held() == "cube"
     # place (trees/place.yaml)
     snap = target.snapshot()
@@ -144,12 +153,13 @@ def bare_same_motions(seed: int = 0) -> dict:
     T_obj, half = entity(snap, "cube")
     T_place = place_pose(T_region[:3, 3], half, T_tcp_object=np.linalg.inv(target.tcp_pose()) @ T_obj)
     T_pre = T_place.copy()
-    T_pre[2, 3] += 0.10
-    move_to(T_pre)
-    cartesian(T_place)
+    T_pre[2, 3] += m.place_approach_height_m
+    move_to(T_pre, scale=m.place_transfer_velocity_scale)
+    cartesian(T_place, m.lower_velocity_scale)
     with clock("simulation"):
         target.set_gripper(opening_m=0.04)
-    cartesian(offset(0.10))
+    cartesian(offset(m.retreat_offset_m), m.retreat_velocity_scale)
+    move_to(q_goal=np.asarray(target.home_qpos, dtype=float))  # ClearTheView
     final = target.object_pose("cube")[:3, 3]
     assert scene.region("goal").contains_xy(final[:2]), f"cube ended at {final}"
     total = time.perf_counter() - t_start

@@ -9,9 +9,10 @@ subreaper, so the runner and its forkserver are reaped here and their CPU counte
    goal_graphs/pick_and_place.yaml --workspace <new>`` against ``bench/bare_pick_and_place.py
    --once --perception`` (the same motions with the project's own motion library, no
    framework, and the same perception calls at the same points: before and after each
-   skill and where the skill trees observe). ``compare_no_perception`` repeats it with
-   the run's cameras removed (a workspace sensors.yaml without them) against the bare
-   script without perception. Median wall and CPU time (user + system of the whole
+   skill and where the skill trees observe). Both sides must move alike: the simulated
+   time each moved the arm is recorded with its ratio, and a difference above 5 % is
+   warned of. ``compare_no_perception`` repeats it with the run's cameras removed (a
+   workspace sensors.yaml without them) against the bare script without perception. Median wall and CPU time (user + system of the whole
    tree), their ratios, and the median ratio of the back-to-back pairs.
 2. **Hand-off latency**: from one session's verdict (the transition's timestamp) to the
    next ready session's first actuation (``actuation_started_at`` in its evidence

@@ -257,6 +257,35 @@ def test_an_error_while_preparing_becomes_the_attempts_error_outcome_with_its_ev
 
 
 @pytest.mark.sim
+def test_preparing_a_session_beats_after_building_its_target_and_after_perceiving_it(tmp_path, monkeypatch):
+    """Setting a session up (the target built on a new runner, the initial perception) can
+    take longer than a heartbeat timeout on a loaded machine: the runner beats between
+    those steps, so only a runner that stops working goes silent."""
+    from phyagentos.primitives.context import CancelToken
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+    from phyagentos.runtime.runner import SessionRunner
+    from phyagentos.runtime.target_pool import TargetPool
+
+    ws = make_workspace(tmp_path / "ws")
+    rec = submit(ws, "s1", skill="hold", parameters=HOLD)
+    pool = TargetPool(ws.root / "targets")
+    steps: list[str] = []
+    real_acquire, real_view = TargetPool.acquire, SessionRunner._initial_view
+    monkeypatch.setattr(TargetPool, "acquire", lambda self, *a: steps.append("acquire") or real_acquire(self, *a))
+    monkeypatch.setattr(SessionRunner, "_initial_view",
+                        lambda self, *a: steps.append("initial view") or real_view(self, *a))
+    runner = SessionRunner(ws, rec, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()), pool,
+                           cancel=CancelToken(), heartbeat=lambda: steps.append("beat"))
+    try:
+        runner.prepare()
+        assert steps == ["acquire", "beat", "initial view", "beat"]
+        runner.discard()
+    finally:
+        pool.close()
+
+
+@pytest.mark.sim
 def test_go_writes_what_preparing_serialised_and_captured_and_ticks_without_serialising(tmp_path, monkeypatch):
     from phyagentos.primitives.context import CancelToken
     from phyagentos.resources import skills_dir, trees_dir

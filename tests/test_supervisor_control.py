@@ -71,9 +71,15 @@ def test_execution_timeout_ends_the_session_with_evidence_and_a_halted_target(tm
     assert bundle["outcome"]["status"] == "timed_out" and "terminal" in bundle["files"]
 
 
+#: Longer than any step a working runner takes between two beats on a loaded 2-core machine
+#: (building the target, the initial perception: over 1 s with the CPUs oversubscribed),
+#: so that only the frozen runner goes silent for that long.
+FROZEN_HEARTBEAT_TIMEOUT_S = 5.0
+
+
 def test_stale_runner_heartbeat_kills_the_runner_and_halts_the_target_from_its_checkpoint(tmp_path):
     ws = make_workspace(tmp_path / "ws")
-    submit(ws, "frozen", skill="hold", parameters=LONG_HOLD, limits={"heartbeat_timeout_s": 1.0})
+    submit(ws, "frozen", skill="hold", parameters=LONG_HOLD, limits={"heartbeat_timeout_s": FROZEN_HEARTBEAT_TIMEOUT_S})
     sup = watch(ws)
     try:
         wait_for(running(ws, "frozen"), timeout=60, what="running")

@@ -238,7 +238,10 @@ class SessionRunner:
         runtime: the BuiltinSkillRuntime that builds and ticks skill trees.
         targets: target pool carrying world state between sessions.
         cancel: cancellation token (set from the supervisor's control messages).
-        heartbeat: called after every tick (stamps the shared runner heartbeat).
+        heartbeat: stamps the shared runner heartbeat: called after every tick, and
+            between the steps of setting the session up and of writing its evidence
+            (building a target or perceiving the initial scene can take longer than a
+            tick: the runner is working, not silent).
         on_finished: called once with the RunOutcome when the skill stops, before the
             evidence is written (the supervisor fires ``finish`` or ``cancel``).
         checkpoint_interval_s: the target state is persisted at most this often (s of
@@ -268,8 +271,7 @@ class SessionRunner:
         last = [time.monotonic()]
 
         def tick() -> None:
-            if self.heartbeat is not None:
-                self.heartbeat()
+            self._beat()
             if self.recorder is not None:  # [view hook, issue 13]
                 self.recorder.tick()
             now = time.monotonic()
@@ -278,6 +280,10 @@ class SessionRunner:
                 last[0] = time.monotonic()
 
         return tick
+
+    def _beat(self) -> None:
+        if self.heartbeat is not None:
+            self.heartbeat()
 
     def run(self) -> AttemptReport:
         """Execute the session; returns the attempt report (not a verdict).
@@ -327,11 +333,13 @@ class SessionRunner:
                 prep.ctx = SkillContext(target=None, params=dict(rec.parameters), seed=rec.seed, cancel=self.cancel,
                                         plan=rec.adapter_plan)
             else:
-                target = prep.target = self.targets.acquire(rec, prep.spec)
+                target = prep.target = self.targets.acquire(rec, prep.spec)  # may build it: seconds
+                self._beat()
                 prep.initial_truth = _truth(target)
                 if has_cameras(target):
                     prep.perceiver = make_perceiver(target, _perception_config(self.workspace))
                 prep.initial = self._initial_view(prep.spec, target, prep.perceiver, evidence_dir, prep.rel)
+                self._beat()
                 if prep.initial is not None:  # serialised and captured now, written on go
                     prep.initial_text = dump_yaml(prep.initial)
                     if self.images is not None and hasattr(self.images, "scene"):
@@ -361,8 +369,7 @@ class SessionRunner:
             return
         # Before anything moves: a recovering supervisor restores from here at worst.
         self.targets.checkpoint(rec, prep.target)
-        if self.heartbeat is not None:
-            self.heartbeat()
+        self._beat()
         if prep.initial is not None:
             atomic_write_text(prep.evidence_dir / "initial.yaml", prep.initial_text or dump_yaml(prep.initial))
             if name := self._image(prep.target, prep.evidence_dir / "initial.png", prep.image_events,
@@ -423,8 +430,7 @@ class SessionRunner:
         extra = dict(prep.extra)
         if self.on_finished is not None:
             self.on_finished(outcome)
-        if self.heartbeat is not None:
-            self.heartbeat()
+        self._beat()
         if self.recorder is not None:  # [view hook, issue 13] joins the encoder before the bundle
             extra.update(self.recorder.close(heartbeat=self.heartbeat))
             self.recorder = None

@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-import yaml
 
 _ROOT = Path(__file__).resolve().parents[1]
 if str(_ROOT) not in sys.path:
@@ -49,8 +48,9 @@ from phyagentos.motion import (  # noqa: E402
     top_down_grasp,
     top_down_grasp_candidates,
 )
-from phyagentos.errors import IKError  # noqa: E402
+from phyagentos.errors import BenchError, IKError  # noqa: E402
 from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget, SceneSpec  # noqa: E402
+from phyagentos.yamlsource import read_yaml  # noqa: E402
 
 RESULTS = _ROOT / "bench" / "results" / "bare_pick_and_place.json"
 TREES = _ROOT / "trees"
@@ -80,9 +80,9 @@ class SkillMotions:
     @classmethod
     def from_trees(cls, trees: Path = TREES) -> "SkillMotions":
         """Read the parameter defaults of ``trees/pick.yaml`` and ``trees/place.yaml`` and
-        the place tree's ``Retreat`` node. Raises KeyError if a tree lost one of them."""
-        pick = yaml.safe_load((trees / "pick.yaml").read_text(encoding="utf-8"))
-        place = yaml.safe_load((trees / "place.yaml").read_text(encoding="utf-8"))
+        the place tree's ``Retreat`` node. Raises BenchError for a file that does not
+        read, KeyError if a tree lost one of them."""
+        pick, place = (read_yaml(trees / name, error=BenchError) for name in ("pick.yaml", "place.yaml"))
         pd, qd = ({k: v["default"] for k, v in t["params"].items() if "default" in v} for t in (pick, place))
         retreat = next(c["params"] for c in place["root"]["sequence"]["children"] if c.get("name") == "Retreat")
         dx, dy, dz = retreat["offset"]

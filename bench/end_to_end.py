@@ -12,8 +12,9 @@ subreaper, so the runner and its forkserver are reaped here and their CPU counte
    skill and where the skill trees observe). Both sides must move alike: the simulated
    time each moved the arm is recorded with its ratio, and a difference above 5 % is
    warned of. ``compare_no_perception`` repeats it with the run's cameras removed (a
-   workspace sensors.yaml without them) against the bare script without perception. Median wall and CPU time (user + system of the whole
-   tree), their ratios, and the median ratio of the back-to-back pairs.
+   workspace sensors.yaml without them) against the bare script without perception.
+   Median wall and CPU time (user + system of the whole tree), their ratios, and the
+   median ratio of the back-to-back pairs.
 2. **Hand-off latency**: from one session's verdict (the transition's timestamp) to the
    next ready session's first actuation (``actuation_started_at`` in its evidence
    bundle, stamped by the SessionRunner just before the first tick).
@@ -163,16 +164,10 @@ def session_timeline(ws: Path) -> list[dict]:
             "verify": t.get("verify"), "verdict": verdict_at,
             "actuation_started": _ts(bundle.get("actuation_started_at")),
             "actuation_ended": _ts(bundle.get("actuation_ended_at")),
+            "sim_time_s": bundle.get("sim_time_s"),  # the target's clock when the session ended
             "writes": len(rec.transitions),
         })
     return rows
-
-
-def run_sim_time_s(ws: Path) -> float:
-    """The simulated time a run's target moved (s): its clock at the end of the run's
-    last session (each bundle's ``outcome.sim_time_s``; a run's target starts at 0)."""
-    times = [read_yaml(p, error=BenchError).get("outcome", {}).get("sim_time_s") for p in ws.glob("evidence/*/bundle.yaml")]
-    return max(t for t in times if t is not None)
 
 
 def handoffs(rows: list[dict]) -> list[float]:
@@ -269,7 +264,8 @@ def compare(runs: int, tmp: Path, *, perception: bool = True) -> dict:
                 first = min(x["actuation_started"] for x in rows if x["actuation_started"])
                 cold.append(first - r["started_unix"])
                 hand += handoffs(rows)
-                fw_sim.append(run_sim_time_s(ws))
+                # a run's target starts at 0: its clock at the last session's end is what it moved
+                fw_sim.append(max(x["sim_time_s"] for x in rows if x["sim_time_s"] is not None))
                 fw.append(r)
                 shutil.rmtree(ws, ignore_errors=True)
             print(f"  run {i + 1}/{runs} {side:<4} wall {r['wall_s']:.2f} s  cpu {r['cpu_s']:.2f} s", flush=True)

@@ -19,7 +19,7 @@ from phyagentos.errors import SupervisorError
 from phyagentos.protocol import Workspace
 from phyagentos.protocol import atomic
 from phyagentos.protocol.atomic import atomic_write_text, batched_durability
-from phyagentos.protocol.evidence_markers import (PENDING_MARKER, PRUNED_MARKER, images_pending,
+from phyagentos.protocol.evidence_markers import (PENDING_MARKER, PRUNED_MARKER, WANTED_MARKER, images_pending,
                                                   wait_for_images)
 
 
@@ -262,3 +262,28 @@ def test_bundles_read_for_verdicts_serve_the_next_nodes_observations_and_a_repla
     atomic_write_text(bundle, bundle.read_text())  # the same text in a new file
     assert agent.observed("cube", sessions) == expected
     assert loads[2:] == [dirs[0]]
+
+
+@pytest.mark.sim
+def test_a_background_image_shows_the_scene_at_the_joint_values_captured(tmp_path, target):
+    # The writer restores the captured integration state and recomputes the poses from
+    # it: the image is the scene at exactly the qpos a snapshot of that moment records
+    # (the live MjData's poses lag qpos by one physics step after mj_step).
+    import mujoco
+    import numpy as np
+    from PIL import Image
+
+    from phyagentos.runtime.evidence_images import save_scene_image
+    from phyagentos.runtime.evidence_writer import EvidenceImageWriter
+
+    target.set_gripper(opening_m=0.0, settle_s=0.3)
+    writer = EvidenceImageWriter(decide_s=60.0)
+    writer.capture(target, tmp_path / "background.png")
+    (tmp_path / WANTED_MARKER).touch()
+    writer.release(tmp_path)
+    assert wait_for_images(tmp_path, timeout_s=30)
+    writer.close()
+    mujoco.mj_forward(target.model, target.data)  # the live poses of the current qpos
+    save_scene_image(target, tmp_path / "synchronous.png")
+    background, synchronous = (np.asarray(Image.open(tmp_path / n)) for n in ("background.png", "synchronous.png"))
+    assert background.shape == synchronous.shape and np.array_equal(background, synchronous)

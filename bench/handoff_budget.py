@@ -81,6 +81,8 @@ TRACED = [
     ("phyagentos.runtime.preflight", "_tree_checks", None),
     ("phyagentos.runtime.trees", "TreeLibrary.spec", 1),
     ("phyagentos.runtime.trees", "TreeLibrary.build", 1),
+    ("py_trees.trees", "BehaviourTree.setup", None),
+    ("py_trees.trees", "BehaviourTree.tick", None),
     ("phyagentos.runtime.runner", "SessionRunner._initial_view", None),
     ("phyagentos.runtime.runner", "SessionRunner._image", None),
     ("phyagentos.runtime.runner", "_task_yaml", None),

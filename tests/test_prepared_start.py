@@ -286,6 +286,49 @@ def test_preparing_a_session_beats_after_building_its_target_and_after_perceivin
 
 
 @pytest.mark.sim
+def test_the_recorded_actuation_start_is_the_first_tick_after_the_tree_is_built_and_set_up(tmp_path, monkeypatch):
+    """``actuation_started_at`` (where bench/end_to_end.py ends a hand-off) is stamped
+    right before the skill's first tick, not before its tree is built and set up."""
+    import py_trees
+
+    from phyagentos.primitives.context import CancelToken
+    from phyagentos.resources import skills_dir, trees_dir
+    from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
+    from phyagentos.runtime.runner import SessionRunner
+    from phyagentos.runtime.target_pool import TargetPool
+
+    ws = make_workspace(tmp_path / "ws")
+    rec = submit(ws, "s1", skill="hold", parameters=HOLD)
+    set_up: list[dt.datetime] = []
+    ticked: list[dt.datetime] = []
+    real_setup, real_tick = py_trees.trees.BehaviourTree.setup, py_trees.trees.BehaviourTree.tick
+
+    def setup(self, *a, **kw):
+        result = real_setup(self, *a, **kw)
+        set_up.append(dt.datetime.now(dt.timezone.utc))
+        return result
+
+    def tick(self, *a, **kw):
+        ticked.append(dt.datetime.now(dt.timezone.utc))
+        return real_tick(self, *a, **kw)
+
+    monkeypatch.setattr(py_trees.trees.BehaviourTree, "setup", setup)
+    monkeypatch.setattr(py_trees.trees.BehaviourTree, "tick", tick)
+    pool = TargetPool(ws.root / "targets")
+    runner = SessionRunner(ws, rec, BuiltinSkillRuntime.from_dirs(skills_dir(), trees_dir()), pool,
+                           cancel=CancelToken())
+    try:
+        report = runner.run()
+    finally:
+        pool.close()
+    assert report.outcome == "completed", report.message
+    started = _at(yaml.safe_load((ws.root / report.evidence / "bundle.yaml").read_text())["outcome"]
+                  ["actuation_started_at"])
+    assert set_up and ticked
+    assert set_up[0] <= started <= ticked[0]
+
+
+@pytest.mark.sim
 def test_go_writes_what_preparing_serialised_and_captured_and_ticks_without_serialising(tmp_path, monkeypatch):
     from phyagentos.primitives.context import CancelToken
     from phyagentos.resources import skills_dir, trees_dir

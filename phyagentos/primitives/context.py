@@ -122,6 +122,10 @@ class SkillContext:
             first observation of a target with cameras when the runner gave none).
         evidence_dir, evidence_rel: the session's bundle directory (absolute, and
             relative to the workspace) where observations save their frames.
+        on_actuation_start: called by the SkillRuntime once, right before its first
+            tick (a tree), its first inference (a policy, after connecting) or its first
+            model step (an agent); the SessionRunner records the attempt's
+            ``actuation_started_at`` there.
     """
 
     target: Any
@@ -140,6 +144,13 @@ class SkillContext:
     evidence_dir: Path | None = None
     evidence_rel: str | None = None
     observations: int = 0
+    on_actuation_start: Callable[[], None] | None = None
+
+    def actuation_starts(self) -> None:
+        """Tell the session that its skill's first tick (or first step) follows now
+        (:attr:`on_actuation_start`); the SkillRuntimes call it once."""
+        if self.on_actuation_start is not None:
+            self.on_actuation_start()
 
     def fail(self, code: str, primitive: str, message: str) -> None:
         """Record a primitive failure; the last one wins (retries overwrite earlier ones)."""

@@ -143,6 +143,7 @@ class AgentSkillRuntime:
             return RunOutcome(status="error", error_code="agent.model_unavailable", message=str(exc))
         history: list[str] = []
         started = time.monotonic()
+        ctx.actuation_starts()  # the model's first step follows
         for step in range(1, max_steps + 1):
             if ctx.cancel.is_set():
                 return RunOutcome(status="cancelled", message="cancelled", ticks=step - 1)

@@ -78,6 +78,9 @@ class BuiltinSkillRuntime:
             ctx: the session's context (target, params, trace ...).
             deadline: ``time.monotonic()`` value after which the run is timed out.
             heartbeat: called after every tick.
+
+        Calls ``ctx.actuation_starts()`` once the tree is built and set up, right before
+        the first tick.
         """
         root = self.build(skill, ctx.params)
         # The blackboard is process-global in py_trees; a session starts from a clean one.
@@ -89,6 +92,7 @@ class BuiltinSkillRuntime:
         message = ""
         # [view hook, issue 13] live tree status (evidence/<sid>/tree.json), throttled by the observer.
         observe_tree = getattr(ctx, "tree_observer", None)
+        ctx.actuation_starts()  # built and set up: the first tick follows
         try:
             while True:
                 if ctx.cancel.is_set():

@@ -210,6 +210,7 @@ class _Rollout:
                 client = self.client_factory(s.endpoint, open_timeout_s=s.open_timeout_s)
             ctx.trace.record("policy_connect", endpoint=s.endpoint, handshake_s=round(client.handshake_s, 6),
                              policy=str(client.metadata.get("policy", "")), chunk_mode=s.chunk_mode)
+            ctx.actuation_starts()  # connected: the first inference follows
             while True:
                 if ctx.cancel.is_set():
                     return self._end("cancelled", "cancelled.operator", ctx.cancel.reason or "cancel requested", inferences)

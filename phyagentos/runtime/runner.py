@@ -410,7 +410,15 @@ class SessionRunner:
             deadline = time.monotonic() + rec.limits.execution_timeout_s
             ctx.on_observation = lambda snap: write_environment(
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
-            self._actuation_started_at = utc_now()  # hand-off latency is measured up to here (bench/end_to_end.py)
+            # The skill's first tick: the SkillRuntime calls ctx.actuation_starts() right before
+            # it (after building and setting up its tree). Hand-off latency is measured up to
+            # here (bench/end_to_end.py); stamped now too, for a runtime that fails before.
+            self._actuation_started_at = utc_now()
+
+            def actuation_starts() -> None:
+                self._actuation_started_at = utc_now()
+
+            ctx.on_actuation_start = actuation_starts
             # [view hook, issue 13] live tree.json (<= 10 Hz, no fsync) and, under --record, the video.
             ctx.tree_observer = TreeStatusPublisher(evidence_dir / "tree.json", session_id=rec.session_id)
             self.recorder = self._start_recorder(target, evidence_dir, image_events, seed=rec.seed)

@@ -53,7 +53,8 @@ class IKSolution:
     """Result of :func:`solve_ik`.
 
     Attributes:
-        q: ``(7,)`` arm joint angles in radians (read-only array).
+        q: ``(n,)`` arm joint angles in radians, one per name in ``arm_joint_names``
+            (7 for the Panda, 5 for the SO-101; read-only array).
         iterations: number of QP iterations used.
         position_error_m: remaining tcp position error, metres.
         orientation_error_rad: remaining tcp orientation error (rotation angle), radians.
@@ -142,7 +143,7 @@ def solve_ik(
 
     Args:
         model: a MuJoCo model holding the arm joints and the site ``frame``.
-        q_seed: ``(7,)`` rad, start of the iteration (usually the current arm angles);
+        q_seed: ``(n,)`` rad (one per ``arm_joint_names``), start of the iteration (usually the current arm angles);
             clipped into the joint range first. The posture regulariser pulls towards it.
         target: ``(4, 4)`` homogeneous world pose of the site.
         frame: site name (default ``'tcp'``).

@@ -1,6 +1,6 @@
 """Session lifecycle as a hierarchical ``transitions`` statechart.
 
-The states follow DESIGN.md. Everything between a claim and a verdict lives under
+The states follow the design notes' session lifecycle (docs/ARCHITECTURE.md). Everything between a claim and a verdict lives under
 an ``active`` parent, so ``cancel``, ``time_out`` and ``abort`` are declared once
 for all of its children::
 

@@ -47,7 +47,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != HERE]
 sys.path.insert(0, str(HERE.parent))
 
 from phyagentos.bench import run_bench  # noqa: E402
-from phyagentos.bench.crafter_metrics import crafter_score  # noqa: E402
+from phyagentos.bench.crafter_metrics import crafter_score, crafter_score_interval  # noqa: E402
 from phyagentos.bench.suite import load_suite  # noqa: E402
 from phyagentos.errors import BenchError  # noqa: E402
 from phyagentos.yamlsource import load_plain, read_yaml  # noqa: E402
@@ -84,6 +84,7 @@ def _pass(name: str, ws: Path, *, episodes: int, split: str, memory: str, worker
     return {
         "pass": name, "memory": memory, "split": split, "seeds": result.report["seeds"],
         "episodes": c["episodes"], "score_percent": c["score_percent"],
+        "score_ci95_percent": c["score_ci95_percent"],
         "achievements_per_episode": c["achievements_per_episode"], "length_mean": c["length_mean"],
         "death_causes": c["death_causes"], "success_rates_percent": c["success_rates_percent"],
         "steps_per_second_full_path": round(steps / sum(walls), 1) if walls and sum(walls) > 0 else 0.0,
@@ -98,7 +99,9 @@ def _pooled(passes: list[dict]) -> dict:
     episodes = [e for p in passes for e in p["episodes_detail"]]
     names = sorted(passes[0]["success_rates_percent"])
     rates = [100.0 * sum(n in e["achievements"] for e in episodes) / len(episodes) for n in names]
+    low, high = crafter_score_interval([e["achievements"] for e in episodes], names=names)
     return {"episodes": len(episodes), "score_percent": round(crafter_score(rates), 3),
+            "score_ci95_percent": [round(low, 3), round(high, 3)],
             "achievements_per_episode": round(sum(len(e["achievements"]) for e in episodes) / len(episodes), 3)}
 
 
@@ -144,11 +147,12 @@ def main() -> int:
                            + _trial_text(l) for l in lessons.get("lessons") or []],
               "candidates": [f"{l['id']}: {l['correction']}" + _trial_text(l) for l in lessons.get("candidates") or []]}
     table = Table(title=f"Crafter, {args.episodes} worlds per pass, step budget 10000 per episode")
-    for col in ("pass", "score %", "ach./ep", "mean length", "deaths", "steps/s (full path)"):
+    for col in ("pass", "score %", "95 % CI", "ach./ep", "mean length", "deaths", "steps/s (full path)"):
         table.add_column(col, justify="left" if col in ("pass", "deaths") else "right")
     for p in passes:
         deaths = ", ".join(f"{k.replace('death.', '')} {v}" for k, v in sorted(p["death_causes"].items()))
-        table.add_row(p["pass"], f"{p['score_percent']:.1f}", f"{p['achievements_per_episode']:.1f}",
+        ci = p["score_ci95_percent"]
+        table.add_row(p["pass"], f"{p['score_percent']:.1f}", f"{ci[0]:.1f}-{ci[1]:.1f}", f"{p['achievements_per_episode']:.1f}",
                       f"{p['length_mean']:.0f}", deaths, f"{p['steps_per_second_full_path']:.0f}")
     console.print(table)
     rates = Table(title="per-achievement success rate (%)")

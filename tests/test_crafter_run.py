@@ -13,7 +13,7 @@ import yaml
 pytest.importorskip("crafter")
 
 from phyagentos.agent.criteria import evaluate, parse_criteria  # noqa: E402
-from phyagentos.bench.crafter_metrics import crafter_score, episode_metrics  # noqa: E402
+from phyagentos.bench.crafter_metrics import crafter_score, crafter_score_interval, episode_metrics  # noqa: E402
 from phyagentos.resources import goal_graphs_dir  # noqa: E402
 
 CLI = [sys.executable, "-m", "phyagentos.cli"]
@@ -54,3 +54,19 @@ def test_crafter_score_is_the_geometric_mean_of_one_plus_the_rates():
     assert crafter_score([0.0] * 22) == pytest.approx(0.0)
     rates = [50.0, 10.0, 0.0]
     assert crafter_score(rates) == pytest.approx(math.exp((math.log(51) + math.log(11) + 0) / 3) - 1)
+
+
+def test_the_score_interval_brackets_the_score_and_narrows_with_more_worlds():
+    names = ("a", "b", "c")
+    few = [["a", "b"], ["a"], ["a", "c"], ["a", "b"]]
+    rates = [100.0 * sum(n in e for e in few) / len(few) for n in names]
+    low, high = crafter_score_interval(few, names=names, resamples=4000)
+    assert low <= crafter_score(rates) <= high and high - low > 5.0
+    many = few * 25  # the same rates over 100 worlds
+    low100, high100 = crafter_score_interval(many, names=names, resamples=4000)
+    assert low100 <= crafter_score(rates) <= high100
+    assert high100 - low100 < (high - low) / 3
+    # a rare achievement (unlocked once) makes the lower end fall well below the score
+    rare = [["a"]] * 19 + [["a", "b"]]
+    r_low, r_high = crafter_score_interval(rare, names=("a", "b"))
+    assert r_low < crafter_score([100.0, 5.0]) - 1.0 and crafter_score_interval([], names=names) == (0.0, 0.0)

@@ -27,7 +27,7 @@ from phyagentos.targets.crafter_target import CRAFTER_ACHIEVEMENTS
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["crafter_score", "episode_metrics", "crafter_report", "is_crafter_run"]
+__all__ = ["crafter_score", "crafter_score_interval", "episode_metrics", "crafter_report", "is_crafter_run"]
 
 
 def crafter_score(rates_percent: Sequence[float]) -> float:
@@ -35,6 +35,43 @@ def crafter_score(rates_percent: Sequence[float]) -> float:
     if not rates_percent:
         return 0.0
     return math.exp(sum(math.log(1.0 + float(s)) for s in rates_percent) / len(rates_percent)) - 1.0
+
+
+def crafter_score_interval(achievements: Sequence[Sequence[str]], *, names: Sequence[str] = CRAFTER_ACHIEVEMENTS,
+                           resamples: int = 2000, level: float = 0.95, seed: int = 0) -> tuple[float, float]:
+    """Percentile bootstrap interval of the Crafter score over episodes.
+
+    The score is a geometric mean over achievements of rates taken over episodes, so an
+    achievement that a few episodes unlock moves it a lot; resampling whole episodes
+    (with replacement, ``resamples`` times, a fixed ``seed``) shows how much.
+
+    Args:
+        achievements: per episode, the names of the achievements it unlocked.
+        names: every achievement the score averages over (Crafter's 22).
+        resamples: bootstrap resamples.
+        level: coverage of the interval (0.95: the 2.5th and 97.5th percentiles).
+        seed: seed of the resampling generator (the interval is reproducible).
+
+    Returns:
+        ``(low, high)`` in percent; ``(0.0, 0.0)`` with no episode.
+    """
+    import numpy as np
+
+    n = len(achievements)
+    if n == 0:
+        return 0.0, 0.0
+    index = {a: i for i, a in enumerate(names)}
+    unlocked = np.zeros((n, len(names)), dtype=bool)
+    for e, achieved in enumerate(achievements):
+        for a in achieved:
+            if a in index:
+                unlocked[e, index[a]] = True
+    draws = np.random.default_rng(seed).integers(0, n, size=(resamples, n))
+    rates = 100.0 * unlocked[draws].mean(axis=1)  # (resamples, achievements), percent
+    scores = np.expm1(np.log1p(rates).mean(axis=1))
+    tail = 100.0 * (1.0 - level) / 2.0
+    low, high = np.percentile(scores, [tail, 100.0 - tail])
+    return float(low), float(high)
 
 
 def _traces(episode_dir: Path) -> list[tuple[str, list[dict]]]:
@@ -88,6 +125,7 @@ def crafter_report(run_dir: str | Path, *, meta: dict | None = None) -> dict[str
     report = {
         "episodes": n,
         "score_percent": round(crafter_score(list(rates.values())), 3),
+        "score_ci95_percent": [round(v, 3) for v in crafter_score_interval([e["achievements"] for e in episodes])],
         "success_rates_percent": {a: round(r, 1) for a, r in rates.items()},
         "achievements_per_episode": round(sum(len(e["achievements"]) for e in episodes) / n, 3) if n else 0.0,
         "length_mean": round(sum(lengths) / n, 1) if n else 0.0,
@@ -98,7 +136,9 @@ def crafter_report(run_dir: str | Path, *, meta: dict | None = None) -> dict[str
     }
     atomic_write_text(run_dir / "crafter.json", json.dumps(report, indent=2))
     lines = [f"# Crafter metrics ({n} episodes)", "",
-             f"Crafter score: **{report['score_percent']:.1f} %** (geometric mean of the success rates, Hafner 2022)",
+             f"Crafter score: **{report['score_percent']:.1f} %** (geometric mean of the success rates, Hafner 2022; "
+             f"95 % bootstrap interval over episodes {report['score_ci95_percent'][0]:.1f}-"
+             f"{report['score_ci95_percent'][1]:.1f} %)",
              f"Episode length: mean {report['length_mean']} steps, median {report['length_median']}",
              f"Death causes: {', '.join(f'{k} {v}' for k, v in sorted(causes.items()))}", "",
              "| achievement | success rate |", "|---|---|"]

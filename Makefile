@@ -1,6 +1,6 @@
 # The two commands a newcomer needs:
 #   make demo   set up, then run goal_graphs/pick_and_place.yaml end to end on the MuJoCo Franka
-#   make test   set up, then check the plane boundary and run the test suite
+#   make test   set up, then check the plane boundary and run the test suite (4 workers, one file per worker at a time)
 .PHONY: setup demo test bench clean
 
 setup:
@@ -12,7 +12,7 @@ demo: setup
 test: setup
 	.venv/bin/lint-imports
 	.venv/bin/python scripts/check_ground_truth_boundary.py
-	.venv/bin/pytest -q
+	.venv/bin/pytest -q -n 4 --dist loadfile
 
 bench: setup
 	.venv/bin/python bench/run_all.py

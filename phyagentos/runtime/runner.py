@@ -244,6 +244,10 @@ class SessionRunner:
             tick: the runner is working, not silent).
         on_finished: called once with the RunOutcome when the skill stops, before the
             evidence is written (the supervisor fires ``finish`` or ``cancel``).
+        on_execution_clock: called with the ``time.monotonic()`` value at which this
+            session's execution clock starts (``limits.execution_timeout_s`` counts from
+            there, after the session was set up); the worker shares it with the
+            supervisor, whose own execution deadline counts from the same instant.
         checkpoint_interval_s: the target state is persisted at most this often (s of
             wall time) while the skill runs, and always before the first tick.
     """
@@ -255,6 +259,7 @@ class SessionRunner:
     cancel: CancelToken
     heartbeat: Callable[[], None] | None = None
     on_finished: Callable[[RunOutcome], None] | None = None
+    on_execution_clock: Callable[[float], None] | None = None
     checkpoint_interval_s: float = 0.25
     #: EvidenceImageWriter (runtime/evidence_writer.py) that renders the images off the
     #: critical path; None renders them here, synchronously.
@@ -407,7 +412,10 @@ class SessionRunner:
             if prep.error is not None:
                 raise prep.error[0]
             runtime = prep.runtime
-            deadline = time.monotonic() + rec.limits.execution_timeout_s
+            clock = time.monotonic()
+            deadline = clock + rec.limits.execution_timeout_s
+            if self.on_execution_clock is not None:
+                self.on_execution_clock(clock)
             ctx.on_observation = lambda snap: write_environment(
                 self.workspace, snap, target=rec.target, session_id=rec.session_id, evidence=[f"{rel}/trace.jsonl"])
             # The skill's first tick: the SkillRuntime calls ctx.actuation_starts() right before

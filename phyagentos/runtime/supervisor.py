@@ -805,6 +805,8 @@ class WatchdogSupervisor:
                 self._kill_runner(f"{stale} heartbeat {age:.1f} s old")
                 return self._recover_after_kill(inf, ("timed_out", code,
                                                       f"{stale} heartbeat {age:.1f} s old > heartbeat_timeout_s {timeout} s"))
+        if inf.deadline is not None and now > inf.deadline and inf.kill_at is None and self._execution_deadline_moved(inf, now):
+            return 0
         if inf.deadline is not None and now > inf.deadline and inf.kill_at is None:
             logger.warning("session %s: execution deadline passed; stopping the runner", inf.session_id)
             inf.kill_end = ("timed_out", ec.TIMEOUT_EXECUTION,
@@ -815,6 +817,33 @@ class WatchdogSupervisor:
             except RunnerDied:
                 pass
         return 0
+
+    def _execution_deadline_moved(self, inf: _Inflight, now: float) -> bool:
+        """Whether the execution deadline of a running session, passed at ``now``, moves
+        to where the runner's own execution clock puts it instead of ending the session.
+
+        The deadline set at ``start`` assumes execution began then. A runner sets a
+        session up before its execution clock starts (it acquires and builds the target,
+        perceives the scene): on a loaded machine that took several seconds, so a 1 s
+        ``execution_timeout_s`` was cancelled while the runner was still setting up, was
+        killed for not stopping between ticks it had not begun, and was recovered in a
+        fresh runner (seconds to a minute). The runner shares its clock's start through
+        the heartbeat array; until it does, the session is still being set up (a runner
+        that hangs there goes silent and its heartbeat ends it), so the deadline is
+        checked again shortly.
+        """
+        hb = self._runner.heartbeats if self._runner is not None else None
+        if hb is None or inf.phase != "running" or inf.limits is None:
+            return False
+        started = hb.execution_started_at()
+        if started is None:
+            inf.deadline = now + min(0.25, inf.limits.heartbeat_timeout_s / 4)
+            return True
+        deadline = started + inf.limits.execution_timeout_s + self.config.execution_grace_s
+        if deadline > now:
+            inf.deadline = deadline
+            return True
+        return False
 
     def _renew(self, inf: _Inflight, now: float) -> None:
         healthy = True

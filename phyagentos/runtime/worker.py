@@ -68,7 +68,7 @@ from typing import Any
 
 from phyagentos.errors import SupervisorError
 
-from .heartbeat import SLOTS, Heartbeats
+from .heartbeat import ARRAY_LENGTH, Heartbeats
 
 __all__ = ["RunnerProcess", "RunnerDied", "runner_main", "take_runner", "park_runner", "prestart_runner",
            "forkserver_context", "warm_runner", "borrow_runner"]
@@ -118,7 +118,7 @@ class RunnerProcess:
     def __init__(self, *, skills_dir: str | os.PathLike[str], trees_dir: str | os.PathLike[str],
                  log_level: int | None = None) -> None:
         ctx = _context()
-        self._hb_array = ctx.RawArray("d", len(SLOTS))
+        self._hb_array = ctx.RawArray("d", ARRAY_LENGTH)
         self.heartbeats = Heartbeats(self._hb_array)
         self.conn, self._child = ctx.Pipe(duplex=True)
         level = logging.getLogger().getEffectiveLevel() if log_level is None else log_level
@@ -506,7 +506,7 @@ class _Runner:
             hb.beat("target", now)  # the in-process simulated target answered this tick
 
         return SessionRunner(ws, rec, self.runtime, self.pool(root), cancel=CancelToken(), heartbeat=beat,
-                             images=self.images)
+                             on_execution_clock=hb.start_execution, images=self.images)
 
     def _prepare(self, root: str, rec) -> None:
         """Set up ``rec``'s session for its first tick while the supervisor persists

@@ -15,7 +15,7 @@ test: setup
 	.venv/bin/pytest -q -n 4 --dist loadfile
 
 bench: setup
-	.venv/bin/python bench/run_all.py
+	.venv/bin/python -m bench all
 
 clean:
 	rm -rf ws/ bench/results/ .pytest_cache

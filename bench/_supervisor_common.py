@@ -1,4 +1,4 @@
-"""Shared helpers of the supervisor benchmarks (not a benchmark itself: run_all skips ``_*``)."""
+"""Shared helpers of the supervisor benchmarks (not a benchmark itself: `python -m bench` skips ``_*``)."""
 
 from __future__ import annotations
 

@@ -46,7 +46,10 @@ def test_the_execution_clock_cell_is_cleared_with_the_slots_and_is_not_a_heartbe
 def test_a_runner_delayed_before_its_first_tick_gets_its_whole_execution_budget_and_is_not_killed(
         tmp_path, monkeypatch):
     ws = make_workspace(tmp_path / "ws")
-    submit(ws, "slow", skill="hold", parameters=LONG_HOLD, limits={"execution_timeout_s": TIMEOUT_S})
+    # a heartbeat budget far above the stop: only the execution deadline may end it, even when a
+    # loaded machine starves the runner for seconds more
+    submit(ws, "slow", skill="hold", parameters=LONG_HOLD,
+           limits={"execution_timeout_s": TIMEOUT_S, "heartbeat_timeout_s": 120.0})
     original = RunnerProcess.send
     stopped: list[int] = []
 

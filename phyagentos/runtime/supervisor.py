@@ -805,9 +805,12 @@ class WatchdogSupervisor:
                 self._kill_runner(f"{stale} heartbeat {age:.1f} s old")
                 return self._recover_after_kill(inf, ("timed_out", code,
                                                       f"{stale} heartbeat {age:.1f} s old > heartbeat_timeout_s {timeout} s"))
-        if inf.deadline is not None and now > inf.deadline and inf.kill_at is None and self._execution_deadline_moved(inf, now):
+        # Once the skill has finished, execution is over: the runner writes the evidence,
+        # beating its heartbeat, and no execution deadline applies to that.
+        expired = inf.deadline is not None and now > inf.deadline and inf.kill_at is None and not inf.finished
+        if expired and self._execution_deadline_moved(inf, now):
             return 0
-        if inf.deadline is not None and now > inf.deadline and inf.kill_at is None:
+        if expired:
             logger.warning("session %s: execution deadline passed; stopping the runner", inf.session_id)
             inf.kill_end = ("timed_out", ec.TIMEOUT_EXECUTION,
                             f"execution exceeded {inf.limits.execution_timeout_s} s")
@@ -877,6 +880,10 @@ class WatchdogSupervisor:
             return self._on_preflight(inf, payload)
         if kind == "finished" and inf.phase == "running":
             inf.finished = True
+            # The runner stopped its skill (on its own, or on a cancel it was sent): it did
+            # not ignore the cancel, so it is not killed for it while it writes the evidence
+            # (its heartbeat still guards that); ``kill_end`` keeps how the session ends.
+            inf.kill_at = None
             status = payload["status"]
             if status == "timed_out" or inf.cancel is not None:
                 return 0  # time_out / cancelled are fired once the evidence is written

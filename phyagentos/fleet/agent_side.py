@@ -50,7 +50,9 @@ class FleetAgentBridge:
 
     def __init__(self, workspace: Workspace, link: FleetLink, *, name: str, link_loss: str = "finish",
                  poll_s: float = 0.2) -> None:
-        self.workspace = workspace
+        self._root = workspace.root
+        self._local = threading.local()
+        self._local.ws = workspace
         self.link = link
         self.name = name
         self.link_loss = link_loss
@@ -74,6 +76,14 @@ class FleetAgentBridge:
         link.watch_alive(k.edge_alive("*"), self.edges.update)
         self._thread = threading.Thread(target=self._forwarder, name="fleet-forward", daemon=True)
         self._thread.start()
+
+    @property
+    def workspace(self) -> Workspace:
+        """This thread's Workspace object of the agent's workspace (its caches are per thread)."""
+        ws = getattr(self._local, "ws", None)
+        if ws is None:
+            ws = self._local.ws = Workspace.open(self._root)
+        return ws
 
     # -- edges and their documents -------------------------------------------------------
 

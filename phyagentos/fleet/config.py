@@ -91,6 +91,8 @@ class FleetConfig(_Strict):
                                                          "target of its TARGETS.md)")
     submit_ttl_s: float = Field(30.0, gt=0, description="a submit older than this is stale and never started")
     link_timeout_s: float = Field(3.0, gt=0, description="the agent is lost this long after its last sign of life")
+    connect_timeout_s: float = Field(10.0, gt=0, description="how long opening a session waits for the router "
+                                                             "(once open, a lost router is retried for ever)")
     prefix: str = Field("paos", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="key-expression prefix of the fleet")
 
     @field_validator("connect", "listen")
@@ -129,7 +131,9 @@ class FleetConfig(_Strict):
         if self.listen and mode == "router":
             cfg["listen"] = {"endpoints": list(self.listen)}
         if mode == "client":
-            cfg.setdefault("connect", {})["timeout_ms"] = -1  # keep trying: the router may come later or come back
+            # the first connection waits this long (a refused login is then an error, not a hang); once
+            # connected, zenoh reconnects to a router that went away for as long as it takes
+            cfg.setdefault("connect", {})["timeout_ms"] = int(self.connect_timeout_s * 1000)
         transport: dict[str, Any] = {}
         if self.auth is not None:
             usrpwd: dict[str, Any] = {"user": self.auth.user, "password": self.auth.password()}

@@ -59,6 +59,7 @@ class FleetEdge:
             raise FleetError("an edge needs a name and a router endpoint (--name, --connect or fleet.yaml)")
         self.name = config.name
         self.config = config
+        self._local = threading.local()
         self.workspace = Workspace.create(workspace_dir)
         listed = {t.name: t for t in self.workspace.read("TARGETS").data.targets}
         if config.targets is not None:
@@ -81,7 +82,7 @@ class FleetEdge:
         self._lock = threading.Lock()
         self._halted: set[str] = set()
         self._stop = threading.Event()
-        self.link = FleetLink(config, mode="client")
+        self.link = self._open_link(config)
         self.workspace.on_session_write = self._outbox.put
         k = self.link.keys
         self.link.queryable(k.edge_q(self.name, "catchup"), self._on_catchup)
@@ -98,11 +99,29 @@ class FleetEdge:
             t.start()
         log.info("edge %s up: targets %s", self.name, ", ".join(self.targets))
 
+    @property
+    def ws(self) -> Workspace:
+        """This thread's Workspace object of the edge's workspace (the supervisor keeps its own:
+        a Workspace's caches are not shared between threads)."""
+        ws = getattr(self._local, "ws", None)
+        if ws is None:
+            ws = self._local.ws = Workspace.open(self.workspace.root)
+        return ws
+
+    def _open_link(self, config: FleetConfig) -> FleetLink:
+        # An edge outlives its router: it waits for one (a robot must not need the network to boot).
+        while True:
+            try:
+                return FleetLink(config, mode="client")
+            except FleetError as exc:
+                log.warning("edge %s: %s; retrying", self.name, exc)
+                time.sleep(1.0)
+
     # -- tickets (ws/fleet/submits/<id>.json) -----------------------------------------
 
     def _load_tickets(self) -> dict[str, SubmitTicket]:
         out = {}
-        directory = submits_dir(self.workspace)
+        directory = submits_dir(self.ws)
         for path in directory.glob("*.json") if directory.is_dir() else ():
             try:
                 data = json.loads(path.read_text(encoding="utf-8"))
@@ -113,7 +132,7 @@ class FleetEdge:
         return out
 
     def _save_ticket(self, ticket: SubmitTicket, run_id: str) -> None:
-        directory = submits_dir(self.workspace)
+        directory = submits_dir(self.ws)
         directory.mkdir(parents=True, exist_ok=True)
         atomic_write_text(directory / f"{ticket.session_id}.json", json.dumps({**ticket.to_json(), "run_id": run_id}))
 
@@ -124,13 +143,13 @@ class FleetEdge:
         if ticket is None:
             # a session with no fleet ticket was submitted at the edge itself: the edge's own
             # user is current by definition; one whose ticket file was lost is held
-            return not (submits_dir(self.workspace) / f"{session_id}.json").exists()
+            return not (submits_dir(self.ws) / f"{session_id}.json").exists()
         if self.agents.alive(ticket.agent):
             return True
         gone = self.agents.gone_for(ticket.agent)
         if gone is not None and gone > self.config.submit_ttl_s and session_id not in self._halted:
-            self._halted.add(session_id)
-            self._signal("cancel", session_id=session_id, reason=STALE_REASON)
+            if self._signal("cancel", session_id=session_id, reason=STALE_REASON):
+                self._halted.add(session_id)
         return False
 
     def _link_watch(self) -> None:
@@ -141,7 +160,7 @@ class FleetEdge:
                 log.exception("edge %s: link-loss check failed", self.name)
 
     def _check_link_loss(self) -> None:
-        for sid, state, _ in self.workspace.active_sessions():
+        for sid, state, _ in self.ws.active_sessions():
             ticket = self._tickets.get(sid)
             if ticket is None or sid in self._halted:
                 continue
@@ -151,24 +170,27 @@ class FleetEdge:
             if state in _STARTED or state in ("claimed", "preflight_checking"):
                 if ticket.link_loss == "halt_and_hold" or state not in _STARTED:
                     # not actuating yet: nothing starts without its agent; actuating: the policy
-                    self._halted.add(sid)
                     why = LINK_LOST_REASON if state in _STARTED else STALE_REASON
                     log.warning("edge %s: agent %s gone %.1f s; session %s (%s): %s", self.name, ticket.agent,
                                 gone, sid, state, why)
-                    self._signal("cancel", session_id=sid, reason=why)
+                    if self._signal("cancel", session_id=sid, reason=why):
+                        self._halted.add(sid)
 
-    def _signal(self, kind: str, **kw: Any) -> None:
+    def _signal(self, kind: str, **kw: Any) -> bool:
         try:
-            self.workspace.send_signal(kind, issued_by=f"edge:{self.name}", **kw)
-        except ProtocolError as exc:
-            log.warning("edge %s: signal %s not sent: %s", self.name, kind, exc)
-        self.supervisor.watcher.notify()
+            self.ws.send_signal(kind, issued_by=f"edge:{self.name}", **kw)
+        except ProtocolError as exc:  # e.g. a session whose hint is there and its file not yet
+            log.debug("edge %s: signal %s not sent: %s", self.name, kind, exc)
+            return False
+        finally:
+            self.supervisor.watcher.notify()
+        return True
 
     # -- queryables --------------------------------------------------------------------
 
     def _on_catchup(self, key: str, data: Any) -> dict:
         run_ids = data.get("run_ids") if isinstance(data, dict) else None
-        return catchup_answer(self.workspace, edge=self.name, targets=self.targets, run_ids=run_ids)
+        return catchup_answer(self.ws, edge=self.name, targets=self.targets, run_ids=run_ids)
 
     def _on_submit(self, key: str, data: Any) -> dict:
         """A submit: ``{agent, issued_at, link_loss, record, deps: [records]}``."""
@@ -187,29 +209,29 @@ class FleetEdge:
         if policy not in ("finish", "halt_and_hold"):
             return {"status": "refused", "error": f"link_loss {policy!r}; valid: 'finish', 'halt_and_hold'"}
         with self._lock:
-            if self.workspace.find_session_path(record.session_id) is not None:
-                stored = self.workspace.load_session(record.session_id)
-                return {"status": "duplicate", **encode_session(self.workspace, stored, edge=self.name)}
+            if self.ws.find_session_path(record.session_id) is not None:
+                stored = self.ws.load_session(record.session_id)
+                return {"status": "duplicate", **encode_session(self.ws, stored, edge=self.name)}
             for dep in data.get("deps", []):
-                self.workspace.install_replica(SessionRecord.model_validate(dep))
+                self.ws.install_replica(SessionRecord.model_validate(dep))
             ticket = SubmitTicket(session_id=record.session_id, agent=str(data.get("agent", "")),
                                   issued_at=float(data["issued_at"]), accepted_at=time.time(), link_loss=policy)
             self._save_ticket(ticket, record.run_id)
             self._tickets[record.session_id] = ticket
             try:
-                stored = self.workspace.submit_session(record)  # the one validated submit path
+                stored = self.ws.submit_session(record)  # the one validated submit path
             except ProtocolError as exc:
                 return {"status": "refused", "error": str(exc)}
         self.supervisor.watcher.notify()
-        return {"status": "accepted", **encode_session(self.workspace, stored, edge=self.name)}
+        return {"status": "accepted", **encode_session(self.ws, stored, edge=self.name)}
 
     def _on_verdict(self, key: str, data: Any) -> dict:
         """The agent's transitions of a session (verification and verdict)."""
         record = SessionRecord.model_validate(data["record"])
         if record.state not in AGENT_STATES:
             return {"status": "refused", "error": f"state {record.state!r} is the edge's to write"}
-        written = self.workspace.install_replica(record)
-        stored = self.workspace.load_session(record.session_id)
+        written = self.ws.install_replica(record)
+        stored = self.ws.load_session(record.session_id)
         return {"status": "installed" if written else "current", "rev": [len(stored.transitions), stored.updated_at]}
 
     def _on_signal(self, key: str, data: Any) -> dict:
@@ -217,7 +239,7 @@ class FleetEdge:
         if kind not in _SIGNALS:
             return {"status": "refused", "error": f"signal {kind!r}; valid: {', '.join(_SIGNALS)}"}
         try:
-            sig = self.workspace.send_signal(kind, session_id=data.get("session_id"), reason=data.get("reason", ""),
+            sig = self.ws.send_signal(kind, session_id=data.get("session_id"), reason=data.get("reason", ""),
                                              issued_by=f"fleet:{data.get('by', 'agent')}")
         except ProtocolError as exc:
             return {"status": "refused", "error": str(exc)}
@@ -229,7 +251,7 @@ class FleetEdge:
 
     def _on_frames(self, key: str, data: Any) -> dict:
         sid = key.rsplit("/", 1)[-1]
-        return {"session_id": sid, "files": frames_dir_files(self.workspace, sid)}
+        return {"session_id": sid, "files": frames_dir_files(self.ws, sid)}
 
     # -- publications ------------------------------------------------------------------
 
@@ -242,14 +264,14 @@ class FleetEdge:
             try:
                 if record is not None:
                     self.link.put(self.link.keys.session(self.name, record.session_id),
-                                  encode_session(self.workspace, record, edge=self.name))
+                                  encode_session(self.ws, record, edge=self.name))
                 self._publish_docs()
             except Exception:  # noqa: BLE001 - a failed put is made good by the next one or a catch-up
                 log.exception("edge %s: publication failed", self.name)
 
     def _publish_docs(self) -> None:
         for name in EDGE_DOCUMENTS:
-            path = self.workspace.path(name)
+            path = self.ws.path(name)
             try:
                 st = path.stat()
             except FileNotFoundError:

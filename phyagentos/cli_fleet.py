@@ -58,6 +58,9 @@ def add_fleet_commands(sub: argparse._SubParsersAction, run: argparse.ArgumentPa
     run.add_argument("--link-loss", choices=("finish", "halt_and_hold"),
                      help="with --fleet: what a running session does if its edge loses this agent (default: "
                           "the fleet file's, else finish)")
+    run.add_argument("--resume", metavar="RUN_ID",
+                     help="with --fleet: go on with this active run of the workspace (after this agent was stopped or "
+                          "killed) instead of submitting the graph again")
     run.add_argument("--wait-edges-s", type=float, default=30.0,
                      help="with --fleet: how long to wait for edges owning the graph's targets (default 30)")
 
@@ -122,7 +125,7 @@ def cmd_fleet_run(args, out: Console, err: Console) -> int:
     from phyagentos.fleet.agent_side import FleetAgentBridge
     from phyagentos.fleet.config import find_fleet_config
     from phyagentos.fleet.link import FleetLink
-    from phyagentos.orchestrator import serve_agent, submit_goal_graph
+    from phyagentos.orchestrator import skill_names, submit_goal_graph
     from phyagentos.protocol import Workspace
 
     started = time.perf_counter()
@@ -136,10 +139,26 @@ def cmd_fleet_run(args, out: Console, err: Console) -> int:
         bridge.wait_for_targets(_graph_targets(args.goal_graph, args.target), args.wait_edges_s)
         if progress:
             progress(f"fleet: targets {bridge.targets.as_dict()}")
-        run = submit_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target,
-                                submitted_by=name)
-        loop = serve_agent(args.workspace, run_id=run.run_id, poll_interval_s=0.2,
-                           on_loop=lambda lp: _install_stop(lambda immediate: lp.request_stop()))
+        if args.resume:
+            from phyagentos.errors import FleetError
+
+            if args.resume not in ws.runs.active_ids():
+                raise FleetError(f"run {args.resume!r} is not active in {args.workspace}; active: "
+                                 f"{', '.join(ws.runs.active_ids()) or 'none'}")
+            run = ws.runs.load(args.resume)
+        else:
+            run = submit_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target,
+                                    submitted_by=name)
+        from phyagentos.agent.agent_loop import AgentLoop
+
+        loop = AgentLoop(Workspace.open(args.workspace), skills=skill_names(), run_id=run.run_id, poll_interval_s=0.2)
+        loop.workspace.on_session_write = bridge.kick  # the agent's submits and verdicts leave at once
+        bridge.on_installed = loop.watcher.notify  # and the edges' transitions wake it at once
+        _install_stop(lambda immediate: loop.request_stop())
+        try:
+            loop.serve()
+        finally:
+            loop.close()
         # the last verdicts go back to their edges before this agent leaves the fleet
         deadline = time.monotonic() + 5.0
         while bridge._unconfirmed_agent_writes() and time.monotonic() < deadline:  # noqa: SLF001
@@ -151,8 +170,6 @@ def cmd_fleet_run(args, out: Console, err: Console) -> int:
         link.close()
     from phyagentos.agent.agent_loop import load_run_graph
     from phyagentos.agent.coordinator import AgentCoordinator
-    from phyagentos.orchestrator import skill_names
-
     graph = load_run_graph(ws, run.run_id, skills=skill_names())
     coord = AgentCoordinator(ws, graph, run_id=run.run_id, seed=args.seed)
     states = coord.node_states()

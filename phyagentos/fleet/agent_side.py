@@ -67,6 +67,9 @@ class FleetAgentBridge:
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._watcher = WorkspaceWatcher(workspace.root, dirs=("sessions", "sessions/.index"))
+        self._kicked: list[SessionRecord] = []
+        #: called after a replica was installed (the agent loop's wake-up)
+        self.on_installed = None
         self.stats = {"submits": 0, "verdicts": 0, "installed": 0, "catchups": 0, "refused": 0}
         self.last_catchup_s: dict[str, float] = {}
         k = link.keys
@@ -174,14 +177,26 @@ class FleetAgentBridge:
         if sid not in self._confirmed or rev > self._confirmed[sid]:
             self._confirmed[sid] = rev  # type: ignore[assignment]
 
+    def kick(self, record: SessionRecord) -> None:
+        """The agent wrote ``record`` (its workspace's ``on_session_write``): forward it now,
+        without waiting for the workspace watcher."""
+        if record.state == "pending" or record.state in AGENT_STATES:
+            with self._lock:
+                self._kicked.append(record)
+            self._watcher.notify()
+
     def _on_session(self, key: str, msg: Any) -> None:
         with self._lock:
             self._note_edge_rev(msg)
             try:
-                if install_session(self.workspace, msg):
-                    self.stats["installed"] += 1
+                written = install_session(self.workspace, msg)
             except ProtocolError as exc:
                 log.warning("replica of %s refused: %s", msg.get("record", {}).get("session_id"), exc)
+                return
+        if written:
+            self.stats["installed"] += 1
+            if self.on_installed is not None:
+                self.on_installed()
 
     def _deps_of(self, record: SessionRecord) -> list[dict]:
         if not record.depends_on:
@@ -232,6 +247,14 @@ class FleetAgentBridge:
                 log.warning("%s", exc)
                 with self._lock:
                     self._catchup_due.add(edge)
+        with self._lock:
+            kicked, self._kicked = self._kicked, []
+        for record in kicked:  # the agent's own writes, first and without a scan
+            if record.state == "pending" and record.session_id not in self._confirmed:
+                self._submit(record)
+            elif record.state in AGENT_STATES and record.session_id in self._confirmed \
+                    and revision(record) > self._confirmed[record.session_id]:
+                self._send_verdict(record)
         ws = self.workspace
         for sid, state, ident in ws.active_sessions():
             if self.targets.get(ident.target) is None:

@@ -93,6 +93,7 @@ class FleetConfig(_Strict):
     link_timeout_s: float = Field(3.0, gt=0, description="the agent is lost this long after its last sign of life")
     connect_timeout_s: float = Field(10.0, gt=0, description="how long opening a session waits for the router "
                                                              "(once open, a lost router is retried for ever)")
+    reconnect_max_s: float = Field(0.5, gt=0, description="longest pause between tries to reach a lost router")
     prefix: str = Field("paos", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="key-expression prefix of the fleet")
 
     @field_validator("connect", "listen")
@@ -134,6 +135,9 @@ class FleetConfig(_Strict):
             # the first connection waits this long (a refused login is then an error, not a hang); once
             # connected, zenoh reconnects to a router that went away for as long as it takes
             cfg.setdefault("connect", {})["timeout_ms"] = int(self.connect_timeout_s * 1000)
+            # retry a lost router every 0.1 s at first, at most every reconnect_max_s (zenoh's default: 4 s)
+            cfg["connect"]["retry"] = {"period_init_ms": 100, "period_max_ms": int(self.reconnect_max_s * 1000),
+                                       "period_increase_factor": 2}
         transport: dict[str, Any] = {}
         if self.auth is not None:
             usrpwd: dict[str, Any] = {"user": self.auth.user, "password": self.auth.password()}

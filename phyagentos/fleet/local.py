@@ -44,6 +44,7 @@ class LocalFleet:
         self.auth = auth
         self.extra = extra or {}
         self.procs: dict[str, subprocess.Popen] = {}
+        self._log_start: dict[str, int] = {}
         self._users: list[str] = []
         if auth:
             for name in ("router", "agent", *peers):
@@ -74,15 +75,30 @@ class LocalFleet:
         return path
 
     def _spawn(self, key: str, args: list[str], *, ready: str, timeout_s: float) -> subprocess.Popen:
-        log = open(self.root / f"{key}.log", "ab")  # noqa: SIM115 - kept open by the child
+        logfile = self.root / f"{key}.log"
+        self._log_start[key] = logfile.stat().st_size if logfile.exists() else 0  # a restart appends
+        log = open(logfile, "ab")  # noqa: SIM115 - kept open by the child
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         proc = subprocess.Popen([sys.executable, "-m", "phyagentos.cli", *args], stdout=log, stderr=subprocess.STDOUT,
                                 env=env, start_new_session=True)
         log.close()
         self.procs[key] = proc
+        if ready:
+            self._spawn_wait(key, ready, timeout_s)
+        return proc
+
+    def _spawn_wait(self, key: str, ready: str, timeout_s: float) -> subprocess.Popen:
+        """Wait until the log of ``key`` shows ``ready``.
+
+        Raises:
+            FleetError: the process exited, or ``timeout_s`` passed.
+        """
+        proc = self.procs[key]
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            text = (self.root / f"{key}.log").read_text(encoding="utf-8", errors="replace")
+            with open(self.root / f"{key}.log", "rb") as fh:
+                fh.seek(self._log_start.get(key, 0))
+                text = fh.read().decode("utf-8", errors="replace")
             if ready in text:
                 return proc
             if proc.poll() is not None:
@@ -96,13 +112,14 @@ class LocalFleet:
                            ready="router listening", timeout_s=timeout_s)
 
     def start_edge(self, name: str, targets: list[str], *, link_loss: str | None = None, workspace: Path | None = None,
-                   timeout_s: float = 60.0, wait_ready: bool = True) -> subprocess.Popen:
+                   timeout_s: float = 60.0, wait_ready: bool = True, more: tuple[str, ...] = ()) -> subprocess.Popen:
         cfg = self.config_file(name, **self.extra)
         ws = workspace or self.root / f"ws_{name}"
         args = ["edge", "--workspace", str(ws), "--connect", self.endpoint, "--name", name, "--config", str(cfg),
                 "--targets", ",".join(targets)]
         if link_loss:
             args += ["--link-loss", link_loss]
+        args += list(more)
         return self._spawn(name, args, ready=f"edge {name} serving" if wait_ready else "",
                            timeout_s=timeout_s)
 

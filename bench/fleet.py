@@ -145,7 +145,8 @@ def part_throughput(tmp: Path, edge_counts: list[int], per_edge: int) -> list[di
             span = max(r["verdict"] for r in rows) - min(r["created"] for r in rows)
             out.append({"edges": n, "sessions": len(rows), "span_s": round(span, 2),
                         "sessions_per_s": round(len(rows) / span, 2), "edge_startup_s": round(startup, 1),
-                        "bytes_per_session": round((rep["bytes"]["in"] + rep["bytes"]["out"]) / len(rows))})
+                        "bytes_per_session": round((rep["bytes"]["in"] + rep["bytes"]["out"]) / len(rows)),
+                        "resynced": rep["replication"].get("resynced", 0)})
         finally:
             fleet.close()
     return out

@@ -241,8 +241,9 @@ def test_estop_during_a_partition_is_local_and_converges(one_edge, tmp_path):
     finally:
         subprocess.run([sys.executable, "-m", "phyagentos.cli", "signal", str(edge_ws), "clear_estop"], check=True,
                        timeout=60, capture_output=True)
-    assert not report["succeeded"]
-    assert edge_rec.transitions == agent_rec.transitions and edge_rec.is_terminal
+    assert edge_rec.transitions == agent_rec.transitions and edge_rec.is_terminal  # converged
     assert "running" in [t.dest for t in edge_rec.transitions]
+    # the e-stop halted the 8 s hold early (what the verifier then judges is the agent's business)
+    assert edge_rec.result is not None and edge_rec.result.duration_s < 6.0, edge_rec.result
     # the edge's RUNTIME_SIGNAL.md (with the e-stop) was replicated to the agent after the reconnect
     assert "estop" in (tmp_path / "ws_agent" / "fleet" / "edges" / "arm1" / "RUNTIME_SIGNAL.md").read_text()

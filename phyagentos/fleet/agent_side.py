@@ -46,10 +46,12 @@ class FleetAgentBridge:
         link_loss: the declared link-loss policy sent with every submit (``finish`` or
             ``halt_and_hold``).
         poll_s: longest sleep of the forwarder between checks.
+        resync_s: a session the edge holds whose replica has not changed this long is asked
+            for again (anti-entropy: a publication lost without a partition is made good).
     """
 
     def __init__(self, workspace: Workspace, link: FleetLink, *, name: str, link_loss: str = "finish",
-                 poll_s: float = 0.2) -> None:
+                 poll_s: float = 0.2, resync_s: float = 2.0) -> None:
         self._root = workspace.root
         self._local = threading.local()
         self._local.ws = workspace
@@ -57,6 +59,9 @@ class FleetAgentBridge:
         self.name = name
         self.link_loss = link_loss
         self.poll_s = poll_s
+        self.resync_s = resync_s
+        self._seen_at: dict[str, float] = {}  # session id -> when the edge last told us of it
+        self._next_resync = time.monotonic() + resync_s
         self.targets = TargetMap()
         self.edges = Presence(on_change=self._edge_changed)
         self._edge_targets: dict[str, list[dict]] = {}
@@ -174,6 +179,7 @@ class FleetAgentBridge:
         if sid in self._finished:
             return
         rev = tuple(msg["rev"])
+        self._seen_at[sid] = time.monotonic()
         if sid not in self._confirmed or rev > self._confirmed[sid]:
             self._confirmed[sid] = rev  # type: ignore[assignment]
 
@@ -268,6 +274,37 @@ class FleetAgentBridge:
         # the agent's verification transitions (and verdicts, archived at once) go back
         for rec in self._unconfirmed_agent_writes():
             self._send_verdict(rec)
+        if time.monotonic() >= self._next_resync:
+            self._next_resync = time.monotonic() + self.resync_s
+            self._resync()
+
+    def _resync(self) -> None:
+        """Ask each edge again for the sessions it holds (edge-phase states) that have not
+        changed here for ``resync_s``: the convergence rule makes a repeat harmless."""
+        now = time.monotonic()
+        quiet: dict[str, list[str]] = {}
+        for sid, state, ident in self.workspace.active_sessions():
+            edge = self.targets.get(ident.target)
+            if edge is None or state in AGENT_STATES or sid not in self._confirmed:
+                continue
+            if now - self._seen_at.get(sid, 0.0) >= self.resync_s and self.edges.alive(edge):
+                quiet.setdefault(edge, []).append(sid)
+        for edge, sids in quiet.items():
+            answer = self.link.query_one(self.link.keys.edge_q(edge, "catchup"), {"session_ids": sids}, timeout_s=3.0)
+            if answer is None:
+                continue
+            with self._lock:
+                written = apply_catchup(self.workspace, answer)
+                for msg in answer.get("sessions", []):
+                    self._note_edge_rev(msg)
+                for sid in sids:
+                    self._seen_at[sid] = now
+            if written:
+                self.stats["installed"] += written
+                self.stats["resynced"] = self.stats.get("resynced", 0) + written
+                log.info("resync from %s: %d session(s) converged", edge, written)
+                if self.on_installed is not None:
+                    self.on_installed()
 
     def _unconfirmed_agent_writes(self) -> list[SessionRecord]:
         out = []

@@ -25,8 +25,10 @@ def submits_dir(workspace: Workspace) -> Path:
     return workspace.root / "fleet" / "submits"
 
 
-def catchup_answer(workspace: Workspace, *, edge: str, targets: list[str], run_ids: list[str] | None = None) -> dict:
-    """The edge's answer: owned targets, documents (text) and fleet sessions (encoded)."""
+def catchup_answer(workspace: Workspace, *, edge: str, targets: list[str], run_ids: list[str] | None = None,
+                   session_ids: list[str] | None = None) -> dict:
+    """The edge's answer: owned targets, documents (text) and fleet sessions (encoded),
+    those of ``run_ids`` and/or ``session_ids`` when given."""
     docs = {}
     for name in EDGE_DOCUMENTS:
         try:
@@ -35,7 +37,10 @@ def catchup_answer(workspace: Workspace, *, edge: str, targets: list[str], run_i
             continue
     sessions = []
     directory = submits_dir(workspace)
-    for ticket in sorted(directory.glob("*.json")) if directory.is_dir() else ():
+    tickets = sorted(directory.glob("*.json")) if directory.is_dir() else []
+    if session_ids is not None:
+        tickets = [directory / f"{sid}.json" for sid in session_ids if (directory / f"{sid}.json").is_file()]
+    for ticket in tickets:
         try:
             info = json.loads(ticket.read_text(encoding="utf-8"))
             if run_ids is not None and info.get("run_id") not in run_ids:

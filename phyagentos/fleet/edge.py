@@ -189,8 +189,9 @@ class FleetEdge:
     # -- queryables --------------------------------------------------------------------
 
     def _on_catchup(self, key: str, data: Any) -> dict:
-        run_ids = data.get("run_ids") if isinstance(data, dict) else None
-        return catchup_answer(self.ws, edge=self.name, targets=self.targets, run_ids=run_ids)
+        data = data if isinstance(data, dict) else {}
+        return catchup_answer(self.ws, edge=self.name, targets=self.targets, run_ids=data.get("run_ids"),
+                              session_ids=data.get("session_ids"))
 
     def _on_submit(self, key: str, data: Any) -> dict:
         """A submit: ``{agent, issued_at, link_loss, record, deps: [records]}``."""

@@ -90,7 +90,8 @@ class FleetLink:
     def put(self, key: str, data: Any) -> int:
         """Publish ``data`` (JSON-able) on ``key``; returns the payload size in bytes."""
         payload = json.dumps(data, separators=(",", ":")).encode()
-        self.session.put(key, payload)
+        # BLOCK, not zenoh's default DROP: a document change is never dropped under congestion
+        self.session.put(key, payload, congestion_control=self._zenoh.CongestionControl.BLOCK)
         self.bytes_out += len(payload)
         return len(payload)
 

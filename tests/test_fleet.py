@@ -99,6 +99,20 @@ def test_a_two_edge_graph_succeeds_through_the_router_and_replicas_converge(two_
         assert not (bundle / "frames").exists()  # raw frames only on demand
 
 
+def test_a_failed_node_on_one_edge_blocks_only_its_subgraph(two_edges, tmp_path):
+    ws = tmp_path / "ws_agent"
+    proc = subprocess.run(two_edges.run_args(REPO / "goal_graphs" / "fleet_blocked.yaml", ws), capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    report = json.loads(proc.stdout)
+    # the Franka's node fails on arm1 (criterion unmet); the SO-101's independent node still runs on arm2, and
+    # only the node that depends on the failed one is blocked (never submitted to arm2)
+    assert report["nodes"] == {"franka_unmet": "failed", "so101_free": "succeeded", "so101_after": "blocked"}
+    assert {s["node"] for s in report["sessions"]} == {"franka_unmet", "so101_free"}
+    arm2 = {r.node for r in _records(two_edges.workspace("arm2")).values() if r.run_id == report["run_id"]}
+    assert "so101_after" not in arm2 and "so101_free" in arm2
+
+
 def test_an_unauthenticated_peer_reads_nothing_and_submits_nothing(two_edges, tmp_path):
     # no credentials, then a wrong password: the router refuses the session, nothing is read
     for fields in ({}, {"auth": {"user": "agent", "password_file": "wrong.pw"}}):

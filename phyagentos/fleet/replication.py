@@ -107,7 +107,9 @@ def install_session(workspace: Workspace, msg: dict) -> bool:
     record = SessionRecord.model_validate(msg["record"])
     if msg.get("evidence"):
         _write_evidence(workspace, msg["evidence"])
-    return workspace.install_replica(record)
+    # the steps between a claim and the hand-over are not fsynced here: the edge holds them
+    # durably and a catch-up restores them; the hand-over and every end state are
+    return workspace.install_replica(record, durable=record.state in EVIDENCE_STATES or record.state == "pending")
 
 
 def frames_dir_files(workspace: Workspace, session_id: str) -> dict[str, str]:

@@ -553,7 +553,7 @@ class Workspace:
         log.info("submitted session %s (%s on %s)", sid, record.skill, record.target)
         return record
 
-    def install_replica(self, record: SessionRecord) -> bool:
+    def install_replica(self, record: SessionRecord, *, durable: bool = True) -> bool:
         """Install ``record``, replicated from the workspace that is the authority for it
         (phyagentos/fleet), unless the local copy is as new or newer; True if written.
 
@@ -562,6 +562,7 @@ class Workspace:
         many, a later ``updated_at``. A record that does not extend the local one is
         refused (False, logged). The state hint, the archive and SESSIONS.md follow as for
         a local write; :attr:`on_session_write` is not called (a replica is not echoed).
+        ``durable=False`` skips the fsyncs (a replica's authority keeps the durable copy).
 
         Raises:
             ProtocolError: invalid session id or data.
@@ -586,7 +587,7 @@ class Workspace:
                     return False
                 old_state = old.state
             stored.data = record
-            write_document(stored, validated=True)
+            write_document(stored, validated=True, durable=durable)
             active = stored.path == self.session_path(sid)
             if active and record.state in _TERMINAL:
                 try:

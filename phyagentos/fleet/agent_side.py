@@ -255,10 +255,14 @@ class FleetAgentBridge:
                     self._catchup_due.add(edge)
         with self._lock:
             kicked, self._kicked = self._kicked, []
-        for record in kicked:  # the agent's own writes, first and without a scan
+        # the agent's own writes, first and without a scan: submits before verdicts (a submit
+        # carries the verdicts of its dependencies), and only the latest write of a session
+        latest = {r.session_id: r for r in kicked}
+        for record in latest.values():
             if record.state == "pending" and record.session_id not in self._confirmed:
                 self._submit(record)
-            elif record.state in AGENT_STATES and record.session_id in self._confirmed \
+        for record in latest.values():
+            if record.state in AGENT_STATES and record.session_id in self._confirmed \
                     and revision(record) > self._confirmed[record.session_id]:
                 self._send_verdict(record)
         ws = self.workspace

@@ -3,7 +3,8 @@
     phyagentos router --listen tcp/0.0.0.0:7447 [--config fleet.yaml]
     phyagentos edge --workspace WS --connect tcp/HOST:7447 --name arm1 [--config fleet.yaml] [--link-loss P]
     phyagentos run GRAPH --fleet tcp/HOST:7447 --workspace WS [--config fleet.yaml] [--name agent]
-                   [--link-loss finish|halt_and_hold] [--wait-edges-s S]
+                   [--link-loss finish|halt_and_hold] [--wait-edges-s S] [--resume RUN_ID]
+    phyagentos fleet-signal {estop,clear_estop,pause,resume,cancel} --fleet tcp/HOST:7447 [--edge NAME]
 
 ``router`` and ``edge`` run until SIGINT/SIGTERM. The fleet file (``--config``, else
 ``$PHYAGENTOS_FLEET``, else ``WS/fleet.yaml``) carries the authentication; flags override
@@ -49,6 +50,16 @@ def add_fleet_commands(sub: argparse._SubParsersAction, run: argparse.ArgumentPa
                                         "enabled target of its TARGETS.md)")
     edge.add_argument("--lease-s", type=float, default=10.0, help="supervisor lease duration, s (default 10)")
     edge.add_argument("--drain-s", type=float, default=5.0, help="on SIGINT/SIGTERM, let a session finish this long")
+
+    fsig = sub.add_parser("fleet-signal", help="send a runtime signal to the edges of a fleet (remote; each edge's "
+                                               "own `phyagentos signal` works without a network)")
+    fsig.add_argument("kind", choices=("estop", "clear_estop", "pause", "resume", "cancel"))
+    fsig.add_argument("--fleet", metavar="ENDPOINT", required=True, help="router endpoint, e.g. tcp/HOST:7447")
+    fsig.add_argument("--edge", action="append", help="only this edge (repeatable; default: every edge present)")
+    fsig.add_argument("--session", help="the session a cancel addresses")
+    fsig.add_argument("--reason", default="", help="why (recorded with the signal)")
+    fsig.add_argument("--config", type=Path, help="fleet file (default $PHYAGENTOS_FLEET)")
+    fsig.add_argument("--name", help="who sends it (default operator-HOST-PID)")
 
     run.add_argument("--fleet", metavar="ENDPOINT", help="run on a fleet through this router (tcp/HOST:7447): the "
                                                          "Agent plane here, each target's sessions on its edge")
@@ -190,4 +201,34 @@ def cmd_fleet_run(args, out: Console, err: Console) -> int:
     return EXIT_OK if succeeded else EXIT_NOT_SUCCEEDED
 
 
-FLEET_HANDLERS = {"router": _cmd_router, "edge": _cmd_edge}
+def _cmd_fleet_signal(args, out: Console, err: Console) -> int:
+    from phyagentos.errors import FleetError
+    from phyagentos.fleet.config import find_fleet_config
+    from phyagentos.fleet.link import FleetLink
+
+    name = args.name or f"operator-{socket.gethostname()}-{os.getpid()}"
+    config = find_fleet_config(args.config, None).with_overrides(connect=[args.fleet])
+    link = FleetLink(config, mode="client")
+    try:
+        present = sorted(k.split("/")[-2] for k in link.alive(link.keys.edge_alive("*")))
+        edges = args.edge or present
+        missing = sorted(set(edges) - set(present))
+        confirmed = []
+        for edge in sorted(set(edges) & set(present)):
+            reply = link.query_one(link.keys.edge_q(edge, "signal"), {"kind": args.kind, "session_id": args.session,
+                                                                     "reason": args.reason, "by": name}, timeout_s=3.0)
+            if reply is not None and reply.get("status") == "sent":
+                confirmed.append(edge)
+            else:
+                err.print(f"edge {edge}: {reply.get('error') if reply else 'no answer'}", markup=False, highlight=False)
+    finally:
+        link.close()
+    print(json.dumps({"signal": args.kind, "confirmed": confirmed, "not_present": missing}))
+    if not confirmed or missing or len(confirmed) < len(edges):
+        if not edges:
+            raise FleetError(f"no edge present at {args.fleet}")
+        return EXIT_NOT_SUCCEEDED
+    return EXIT_OK
+
+
+FLEET_HANDLERS = {"router": _cmd_router, "edge": _cmd_edge, "fleet-signal": _cmd_fleet_signal}

@@ -17,7 +17,7 @@ from phyagentos.errors import FleetError
 from phyagentos.fleet.config import load_fleet_config
 from phyagentos.fleet.link import FleetLink
 from phyagentos.fleet.local import LocalFleet
-from phyagentos.protocol import SessionRecord, Workspace, utc_now_iso
+from phyagentos.protocol import SessionRecord, Workspace, fold_signals, utc_now_iso
 
 REPO = Path(__file__).resolve().parent.parent
 TWO_ARMS = REPO / "goal_graphs" / "fleet_two_arms.yaml"
@@ -143,6 +143,28 @@ def test_an_unauthenticated_peer_reads_nothing_and_submits_nothing(two_edges, tm
                           env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)})
     assert proc.returncode == 2 and "cannot open a zenoh client session" in proc.stderr
     assert set(_records(two_edges.workspace("arm1"))) == before
+
+
+def test_a_remote_estop_reaches_every_edge_present_and_secrets_stay_out_of_logs(two_edges):
+    base = [sys.executable, "-m", "phyagentos.cli", "fleet-signal"]
+    cfg = ["--fleet", two_edges.endpoint, "--config", str(two_edges.config_file("agent"))]
+    proc = subprocess.run([*base, "estop", *cfg, "--reason", "remote drill"], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert sorted(json.loads(proc.stdout)["confirmed"]) == ["arm1", "arm2"]
+    for edge in ("arm1", "arm2"):
+        state = fold_signals(Workspace.open(two_edges.workspace(edge)).read("RUNTIME_SIGNAL").data.signals)
+        assert state.estopped
+    proc = subprocess.run([*base, "clear_estop", *cfg], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    for edge in ("arm1", "arm2"):
+        state = fold_signals(Workspace.open(two_edges.workspace(edge)).read("RUNTIME_SIGNAL").data.signals)
+        assert not state.estopped
+    # no password of the fleet appears in any log or protocol document
+    secrets = [p.read_text().strip() for p in two_edges.root.glob("*.pw")]
+    texts = [p.read_text(errors="replace") for p in two_edges.root.glob("*.log")]
+    texts += [p.read_text(errors="replace") for e in ("arm1", "arm2") for p in two_edges.workspace(e).glob("*.md")]
+    assert secrets and not any(s in t for s in secrets for t in texts)
 
 
 def _record(sid: str) -> dict:

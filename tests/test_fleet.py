@@ -283,3 +283,45 @@ def test_estop_during_a_partition_is_local_and_converges(one_edge, tmp_path):
     assert edge_rec.result is not None and edge_rec.result.duration_s < 6.0, edge_rec.result
     # the edge's RUNTIME_SIGNAL.md (with the e-stop) was replicated to the agent after the reconnect
     assert "estop" in (tmp_path / "ws_agent" / "fleet" / "edges" / "arm1" / "RUNTIME_SIGNAL.md").read_text()
+
+
+# -- without processes: the fleet file and the convergence rule ----------------------------
+
+
+def test_a_fleet_file_is_strict_and_says_where_and_what_is_valid(tmp_path):
+    path = tmp_path / "fleet.yaml"
+    path.write_text("name: arm1\nconnect: [tcp/127.0.0.1:7447]\nlink_loss: halt\n")
+    with pytest.raises(FleetError, match=r"fleet.yaml:3: link_loss: .*valid: finish, halt_and_hold"):
+        load_fleet_config(path)
+    path.write_text("name: arm1\npasword_file: x\n")
+    with pytest.raises(FleetError, match=r"fleet.yaml:2: pasword_file: .*valid fields: .*auth"):
+        load_fleet_config(path)
+    path.write_text("connect: [localhost:7447]\n")
+    with pytest.raises(FleetError, match=r"fleet.yaml:1: connect: .*PROTO/HOST:PORT"):
+        load_fleet_config(path)
+    (tmp_path / "arm1.pw").write_text("s3cret-value\n")
+    path.write_text("name: arm1\nconnect: [tcp/127.0.0.1:7447]\nauth: {user: arm1, password_file: arm1.pw}\n")
+    cfg = load_fleet_config(path)
+    assert cfg.auth.password_file == tmp_path / "arm1.pw"  # relative to the fleet file
+    assert "s3cret-value" not in repr(cfg)  # the secret is read only when the session opens
+    assert json.loads(cfg.zenoh_json("client"))["transport"]["auth"]["usrpwd"]["password"] == "s3cret-value"
+
+
+def test_a_replica_takes_only_records_that_extend_it(tmp_path):
+    from phyagentos.protocol.lifecycle import SessionLifecycle
+
+    ws = Workspace.create(tmp_path / "ws")
+    base = SessionRecord.model_validate(_record("rep-1"))
+    assert ws.install_replica(base)  # new: installed (pending, hint written)
+    assert [sid for sid, _, _ in ws.active_sessions("pending")] == ["rep-1"]
+    claimed = base.model_copy(deep=True)
+    SessionLifecycle(claimed).fire("claim")
+    claimed.updated_at = utc_now_iso()
+    assert ws.install_replica(claimed)
+    assert not ws.install_replica(base)  # older: refused
+    assert not ws.install_replica(claimed)  # the same again: a no-op
+    other = base.model_copy(deep=True)
+    SessionLifecycle(other).fire("cancel")  # does not extend the local transitions
+    SessionLifecycle(other).fire("cancelled")
+    assert not ws.install_replica(other)
+    assert ws.load_session("rep-1").state == "claimed"

@@ -56,6 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--keep-success-images", action="store_true",
                      help="keep the evidence images of successful sessions (failures always keep theirs)")
 
+    from phyagentos.cli_fleet import add_fleet_commands  # [issue 31] router, edge, run --fleet
+
+    add_fleet_commands(sub, run)
     from phyagentos.cli_planes import add_plane_commands
 
     add_plane_commands(sub)
@@ -169,6 +172,10 @@ def _setup_logging(verbose: int, console: _LazyConsole) -> None:
 
 
 def _cmd_run(args, out: Console, err: Console) -> int:
+    if getattr(args, "fleet", None):  # [issue 31]
+        from phyagentos.cli_fleet import cmd_fleet_run
+
+        return cmd_fleet_run(args, out, err)
     from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime.worker import prestart_runner
 
@@ -389,10 +396,11 @@ def main(argv: list[str] | None = None) -> int:
     from phyagentos.cli_agent import AGENT_HANDLERS
     from phyagentos.cli_planes import PLANE_HANDLERS
     from phyagentos.cli_skills import SKILL_HANDLERS
+    from phyagentos.cli_fleet import FLEET_HANDLERS  # [issue 31]
 
     handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, **AGENT_HANDLERS, "run": _cmd_run, "bench": _cmd_bench,
                 "validate": _cmd_validate, "render": _cmd_render,
-                "policy": _cmd_policy}
+                "policy": _cmd_policy, **FLEET_HANDLERS}
     from phyagentos.cli_skills import skill_search_env
 
     from phyagentos.cli_view import with_view  # [issue 13]

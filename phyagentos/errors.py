@@ -32,6 +32,7 @@ __all__ = [
     "SupervisorError",
     "RenderError",
     "BenchError",
+    "FleetError",
     "format_location",
     "format_choices",
 ]
@@ -180,3 +181,8 @@ class RecordingError(PhyAgentOSError):
 
 class ViewError(PhyAgentOSError):
     """``phyagentos view`` cannot start (bad host, port or workspace) or refused a request."""
+
+
+class FleetError(_Located, PhyAgentOSError):
+    """The fleet (phyagentos/fleet): a malformed fleet.yaml (with ``path``/``line``), a router
+    or edge that cannot be reached, a target no edge owns, or a refused submit."""

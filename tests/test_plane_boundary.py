@@ -21,7 +21,19 @@ def run_lint(cwd: Path) -> subprocess.CompletedProcess:
 def test_repository_keeps_the_planes_apart():
     result = run_lint(ROOT)
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "4 kept, 0 broken" in result.stdout
+    assert "7 kept, 0 broken" in result.stdout
+
+
+def test_contract_catches_the_fleet_edge_importing_the_agent_plane(tmp_path):
+    copy = tmp_path / "repo"
+    shutil.copytree(ROOT / "phyagentos", copy / "phyagentos", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / ".importlinter", copy / ".importlinter")
+    leak = copy / "phyagentos" / "fleet" / "edge.py"
+    leak.write_text(leak.read_text(encoding="utf-8") + "\nfrom phyagentos.agent.verifier import SessionVerifier\n",
+                    encoding="utf-8")
+    result = run_lint(copy)
+    assert result.returncode != 0
+    assert "The fleet's edge never imports the Agent plane BROKEN" in result.stdout
 
 
 def test_contract_catches_an_agent_module_importing_the_runtime(tmp_path):

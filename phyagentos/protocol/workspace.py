@@ -279,6 +279,10 @@ class Workspace:
         self._index_pending: dict[str, SessionIndexEntry] = {}
         self._index_flush_failure: str | None = None  # the last failure flush_index_quietly logged
         self._locks_real: str | None = None  # realpath of locks_dir, once it exists
+        #: Called with every session record this object writes (submit, save, update), after
+        #: the write, under the session's lock; never for :meth:`install_replica`. The fleet's
+        #: replication (phyagentos/fleet) sets it; it must be quick and must not raise.
+        self.on_session_write: Callable[[SessionRecord], None] | None = None
 
     def __repr__(self) -> str:
         return f"Workspace({str(self.root)!r})"
@@ -544,8 +548,61 @@ class Workspace:
                 self._states.remove(sid, record.state)
                 raise
             self._index_upsert(record)
+            if self.on_session_write is not None:
+                self.on_session_write(record)
         log.info("submitted session %s (%s on %s)", sid, record.skill, record.target)
         return record
+
+    def install_replica(self, record: SessionRecord, *, durable: bool = True) -> bool:
+        """Install ``record``, replicated from the workspace that is the authority for it
+        (phyagentos/fleet), unless the local copy is as new or newer; True if written.
+
+        The rule (docs/fleet.md): a replica takes an incoming record whose ``transitions``
+        extend the local ones (the local list is a prefix), with more transitions or, as
+        many, a later ``updated_at``. A record that does not extend the local one is
+        refused (False, logged). The state hint, the archive and SESSIONS.md follow as for
+        a local write; :attr:`on_session_write` is not called (a replica is not echoed).
+        ``durable=False`` skips the fsyncs (a replica's authority keeps the durable copy).
+
+        Raises:
+            ProtocolError: invalid session id or data.
+            DocumentError: the local session file is malformed.
+        """
+        record = self._revalidate(record)
+        sid = record.session_id
+        self.sessions_dir.mkdir(parents=True, exist_ok=True)
+        with self.session_lock(sid):
+            path = self.find_session_path(sid)
+            if path is None:
+                stored = Document(prefix=_session_prose(record), data=record, path=self.session_path(sid))
+                old_state = None
+            else:
+                stored = self._load_session_doc(sid)
+                old = stored.data
+                n_old, n_new = len(old.transitions), len(record.transitions)
+                if record.transitions[:n_old] != old.transitions or n_new < n_old or (
+                        n_new == n_old and _ts_key(record.updated_at) <= _ts_key(old.updated_at)):
+                    if record.transitions[:n_old] != old.transitions and old.transitions[:n_new] != record.transitions:
+                        log.warning("replica of session %s refused: its transitions do not extend the local ones", sid)
+                    return False
+                old_state = old.state
+            stored.data = record
+            write_document(stored, validated=True, durable=durable)
+            active = stored.path == self.session_path(sid)
+            if active and record.state in _TERMINAL:
+                try:
+                    stored.path = self._session_archive.archive(
+                        stored.path, session_id=sid, run_id=record.run_id, state=record.state, node=record.node)
+                except OSError:
+                    log.exception("session %s: could not archive; reconcile() retries", sid)
+                self._states.remove(sid, old_state)
+            elif active:
+                if old_state is None:
+                    self._states.create(record)
+                else:
+                    self._states.move(record, old_state)
+            self._index_upsert(record)
+        return True
 
     def load_session(self, session_id: str) -> SessionRecord:
         """Read and validate the session's file (active or archived).
@@ -649,6 +706,8 @@ class Workspace:
         elif active:
             self._states.move(record, old.state)
         self._index_upsert(record)
+        if self.on_session_write is not None:
+            self.on_session_write(record)
         return record
 
     def _validated_states(self, states: Iterable[str] | str | None) -> set[str] | None:

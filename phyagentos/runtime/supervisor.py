@@ -228,6 +228,10 @@ class WatchdogSupervisor:
         self._stopping = False
         self._stop_deadline: float | None = None
         self._closed = False
+        #: ``gate(session_id, identity) -> bool`` asked before a pending session is claimed;
+        #: False leaves it pending (the fleet's edge refuses submits it cannot confirm are
+        #: current, phyagentos/fleet/edge.py). None: every session may be claimed.
+        self.claim_gate = None
         #: Counters for status displays and tests.
         self.stats: dict[str, int] = {"claimed": 0, "completed": 0, "recovered": 0, "taken_over": 0,
                                       "released": 0, "runner_kills": 0}
@@ -624,6 +628,8 @@ class WatchdogSupervisor:
                 self._cancel_session(sid, reason=f"signal {cancel.id}: {cancel.reason}")
                 continue
             if not self._deps_met(ident):
+                continue
+            if self.claim_gate is not None and not self.claim_gate(sid, ident):
                 continue
             if not _TARGET_NAME.match(ident.target):
                 # Not a name any target can have: preflight rejects it without a lock.

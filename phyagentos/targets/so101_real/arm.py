@@ -12,7 +12,8 @@ period of :meth:`SO101Arm.follow`:
    GROUP_SYNC_WRITE of ``Goal_Position``.
 
 Any stop (a reading violation, a bus failure, the e-stop) applies the declared
-``stop_policy`` at once (``hold``: goals := last good measured positions; ``torque_off``)
+``stop_policy`` at once (``hold``: arm goals := last good measured positions, the jaw keeps
+its goal so a held object stays held; ``torque_off``)
 and latches: no goal is sent until :meth:`SO101Arm.clear_stop`. With ``dry_run`` the
 arm reads (positions, faults) but never enables torque and never writes a goal.
 
@@ -79,25 +80,37 @@ class SO101Arm:
         self.estop = estop
         self.dry_run = bool(dry_run)
         self.last_q: np.ndarray | None = None
+        self.goal_q: np.ndarray | None = None  # the servos' goals after connect, rad
         self.last_state: BusState | None = None
         self.estop_handled_at: float | None = None  # perf_counter when the e-stop's bus write went out
+        self._next_period: float | None = None  # perf_counter of the next period (paces consecutive calls)
+        self._prev_sent: np.ndarray | None = None  # goal sent in the previous period (tracking reference)
+        self._jaw_steps: int | None = None  # the jaw's goal on the bus, steps
 
     # -- lifecycle ------------------------------------------------------------------------
     def connect(self) -> list[dict]:
-        """Open, check ids and models, write the calibration, read the pose, and (unless
-        ``dry_run``) enable torque holding the present pose. Returns the servos found.
+        """Open, check ids and models, write the calibration (if the servos do not hold it
+        already), read the pose, and (unless ``dry_run``) make sure torque is on: an arm
+        already holding keeps its goals (a grasp stays a grasp between sessions); a limp one
+        is enabled holding its present pose. :attr:`goal_q` is the servos' goal after this.
+        Returns the servos found.
 
         Raises:
             BusError: ``bus.port``, ``bus.id_mismatch``, ``bus.model``, ``bus.timeout``...
             BusSafetyStop: the first reading is already out of range (nothing enabled).
         """
         found = self.bus.connect()
-        if not self.dry_run:
-            self.bus.write_calibration(self.calibration)
+        wrote = False if self.dry_run else self.bus.write_calibration(self.calibration)
         q, state = self._read_checked()
-        self.guard.sync(q)
+        goals = [int(p) for p in state.position]
         if not self.dry_run:
-            self.bus.torque(True, goals=[int(p) for p in state.position])
+            if not wrote and all(self.bus.read_all("Torque_Enable")):
+                goals = self.bus.read_all("Goal_Position")
+            else:
+                self.bus.torque(True, goals=goals)
+        self.goal_q = self.calibration.to_radians(goals)
+        self._jaw_steps = int(goals[5])
+        self.guard.sync(self.goal_q)
         return found
 
     def close(self) -> None:
@@ -133,9 +146,12 @@ class SO101Arm:
         """Check and send one goal (6,) rad; returns the admitted goal. A rejection sends
         nothing and raises :class:`BusSafetyStop` (outcome ``reject``)."""
         q = self.guard.check_goal(q_goal)
+        self._prev_sent = q
         if not self.dry_run:
+            steps = self.calibration.to_steps(q)
+            self._jaw_steps = int(steps[5])
             try:
-                self.bus.sync_write_goals(self.calibration.to_steps(q))
+                self.bus.sync_write_goals(steps)
             except BusError as exc:
                 self._apply_stop(exc.code, str(exc))
                 raise
@@ -150,6 +166,7 @@ class SO101Arm:
         self.guard.clear()
         q, _ = self.read()
         self.guard.sync(q)
+        self._prev_sent = None
 
     @property
     def stopped(self) -> str | None:
@@ -159,13 +176,17 @@ class SO101Arm:
         first = self.guard.stopped is None or already_latched
         if not already_latched:
             self.guard.stop(code, message)
+        self._prev_sent = None
         if not first or self.dry_run:
             return
         try:
             if self.limits.stop_policy == "torque_off":
                 self.bus.torque(False)
-            elif self.last_state is not None:
-                self.bus.sync_write_goals([int(p) for p in self.last_state.position])
+            elif self.last_state is not None:  # arm where it is; the jaw keeps squeezing what it holds
+                goals = [int(p) for p in self.last_state.position]
+                if self._jaw_steps is not None:
+                    goals[5] = self._jaw_steps
+                self.bus.sync_write_goals(goals)
             self.guard.event(code, self.limits.stop_policy, f"stop applied on the bus ({self.limits.stop_policy})")
         except BusError as exc:  # the bus itself is gone: nothing more can be sent
             self.guard.event("bus.stop_failed", "stop", f"could not apply {self.limits.stop_policy}: {exc}")
@@ -195,8 +216,8 @@ class SO101Arm:
         if Q.ndim != 2 or Q.shape[1] != 6:
             raise TargetError(f"follow: goals must have shape (N, 6), got {Q.shape}")
         res = FollowResult(completed=False, periods=0)
-        t_next = time.perf_counter()
-        prev_goal = None
+        t_next = self._period_start()
+        prev_goal = self._prev_sent
         for k in range(len(Q)):
             if self._wait(t_next):
                 self._apply_stop("safety.estop", "e-stop engaged")
@@ -221,10 +242,16 @@ class SO101Arm:
             if on_period is not None:
                 on_period(k, q)
             t_next += self.dt
-            if t_next < time.perf_counter() - self.dt:  # fell behind by more than a period: re-base
-                t_next = time.perf_counter()
+            self._next_period = t_next
         res.completed = True
         return res
+
+    def _period_start(self) -> float:
+        """When the next period starts: the paced slot after the previous call's last period,
+        or now when that slot is more than a period in the past (the caller paused)."""
+        now = time.perf_counter()
+        nxt = self._next_period
+        return nxt if nxt is not None and nxt > now - self.dt else now
 
     def settle(self, q_goal, *, timeout_s: float = 1.0, tol_rad: float = 0.03, on_period=None) -> FollowResult:
         """Hold goal ``q_goal`` (6,) until the arm joints are within ``tol_rad`` or
@@ -232,7 +259,7 @@ class SO101Arm:
         n = max(1, int(round(timeout_s / self.dt)))
         goal = np.asarray(q_goal, float)
         res = FollowResult(completed=False, periods=0)
-        t_next = time.perf_counter()
+        t_next = self._period_start()
         for k in range(n):
             if self._wait(t_next):
                 self._apply_stop("safety.estop", "e-stop engaged")
@@ -245,10 +272,11 @@ class SO101Arm:
             res.periods = k + 1
             if on_period is not None:
                 on_period(k, q)
+            t_next += self.dt
+            self._next_period = t_next
             if float(np.max(np.abs(q[:5] - goal[:5]))) < tol_rad:
                 res.completed = True
                 return res
-            t_next += self.dt
         return res
 
     @staticmethod

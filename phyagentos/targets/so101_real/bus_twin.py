@@ -118,7 +118,9 @@ class BusTwin:
         seed: draws the per-servo horn mount offsets (steps, -600..600).
         mount_offsets: explicit offsets (steps, 6 ints) instead of drawn ones.
         tick_s: period of the physics ticker thread, s.
-        start_q: initial joint angles (6,) rad (default: the model's zero pose).
+        start_q: initial joint angles (6,) rad (default: the SO-101 target's ready pose
+            :data:`~phyagentos.targets.so101.HOME_QPOS` with the jaw closed, where a first
+            session finds the arm at rest).
 
     Use as a context manager or call :meth:`start` / :meth:`stop`. :attr:`port` is the
     serial device path once started.
@@ -130,7 +132,7 @@ class BusTwin:
     def __init__(self, *, ids: Sequence[int] = (1, 2, 3, 4, 5, 6), seed: int = 0,
                  mount_offsets: Sequence[int] | None = None, tick_s: float = 0.01,
                  start_q: Sequence[float] | None = None):
-        from phyagentos.targets.so101 import SO101_DEFAULT_SCENE, build_so101_scene
+        from phyagentos.targets.so101 import HOME_QPOS, SO101_DEFAULT_SCENE, build_so101_scene
 
         ids = tuple(int(i) for i in ids)
         if len(ids) != 6 or len(set(ids)) != 6 or not all(0 <= i < BROADCAST_ID for i in ids):
@@ -148,7 +150,7 @@ class BusTwin:
         self._frc = np.abs(m.actuator_forcerange[self._act, 1])
         self._qlo = m.jnt_range[[m.joint(n).id for n in MOTOR_NAMES], 0].copy()
         self._qhi = m.jnt_range[[m.joint(n).id for n in MOTOR_NAMES], 1].copy()
-        q0 = np.zeros(6) if start_q is None else np.asarray(start_q, dtype=float).reshape(6)
+        q0 = np.array([*HOME_QPOS, 0.0]) if start_q is None else np.asarray(start_q, dtype=float).reshape(6)
         self._data.qpos[self._qadr] = q0
         mujoco.mj_forward(m, self._data)
         self._servos: dict[int, _Servo] = {}

@@ -303,9 +303,11 @@ class FeetechBus:
             self._sync_write("Torque_Enable", [0] * 6)
             self._sync_write("Lock", [0] * 6)
 
-    def write_calibration(self, calibration) -> None:
+    def write_calibration(self, calibration) -> bool:
         """Write a :class:`~.calibration.Calibration` into the servos (``Homing_Offset``,
-        position limits), as LeRobot does on connect; torque is left off.
+        position limits), as LeRobot does on connect, unless they already hold it (then
+        nothing is written and the torque is untouched: an arm holding a pose keeps it).
+        Writing turns the torque off first (EPROM). Returns True if it wrote.
 
         Raises:
             BusError: ``bus.calibration_ids`` when the file's ids are not the bus's.
@@ -313,13 +315,15 @@ class FeetechBus:
         if tuple(calibration.ids) != self.ids:
             raise BusError(f"calibration ids {list(calibration.ids)} differ from the bus ids {list(self.ids)} "
                            f"({', '.join(MOTOR_NAMES)}); re-run calibration for this arm", code="bus.calibration_ids")
-        self.torque(False)
         mc = [calibration.motors[n] for n in MOTOR_NAMES]
-        current = self.read_all("Homing_Offset")
-        if current != [m.homing_offset for m in mc]:
-            self.write_all("Homing_Offset", [m.homing_offset for m in mc])
-        self.write_all("Min_Position_Limit", [m.range_min for m in mc])
-        self.write_all("Max_Position_Limit", [m.range_max for m in mc])
+        want = {"Homing_Offset": [m.homing_offset for m in mc], "Min_Position_Limit": [m.range_min for m in mc],
+                "Max_Position_Limit": [m.range_max for m in mc]}
+        if all(self.read_all(name) == values for name, values in want.items()):
+            return False
+        self.torque(False)
+        for name, values in want.items():
+            self.write_all(name, values)
+        return True
 
     def _comm_error(self, res: int, servo_id: int | None, what: str) -> BusError:
         code = _COMM_CODES.get(res, "bus.timeout")

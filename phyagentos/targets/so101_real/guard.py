@@ -13,8 +13,9 @@ target's control loop, right before the bytes go on the bus, and is bound to the
 ``bus.nan``              a goal that is not 6 finite numbers
 ``bus.reading_range``    a measured position more than ``reading_margin_rad`` outside the
                          calibrated range (a sensor fault, a slipped horn)
-``bus.load``             ``|Present_Load|`` above ``max_load_permille`` for
-                         ``load_periods`` consecutive periods (a stall, a collision)
+``bus.load``             an arm joint's ``|Present_Load|`` above ``max_load_permille`` for
+                         ``load_periods`` consecutive periods (a stall, a collision); the
+                         jaw is exempt: closing on an object is a deliberate stall
 ``bus.overload``         a servo reports its overload bit (32)
 ``bus.servo_error``      any other status bit (voltage, angle sensor, overheat, current)
 ``bus.temperature``      a servo above ``max_temperature_c``
@@ -170,6 +171,7 @@ class BusSafetyGuard:
             self._stop("bus.temperature", f"{MOTOR_NAMES[k]} at {int(state.temperature[k])} C "
                                           f"(max {self.limits.max_temperature_c} C)")
         over = np.abs(np.asarray(state.load)) > self.limits.max_load_permille
+        over[5] = False  # the jaw squeezing an object is a deliberate stall (its grip is bounded by the servo)
         self._load_count = np.where(over, self._load_count + 1, 0)
         if np.any(self._load_count >= self.limits.load_periods):
             k = int(np.argmax(self._load_count))

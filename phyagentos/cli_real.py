@@ -192,18 +192,20 @@ def doctor_report(port: str, calibration: Path | None) -> dict:
                 "power-cycle the arm; check the supply voltage and that no joint is blocked")
         if cal is not None:
             offsets = bus.read_all("Homing_Offset")
-            mismatch = [n for n, o, m in zip(MOTOR_NAMES, offsets, (cal.motors[n] for n in MOTOR_NAMES))
-                        if o != m.homing_offset]
-            add("calibration in the servos", not mismatch,
-                "homing offsets match the file" if not mismatch else f"homing offsets differ on {mismatch} "
-                f"(written at the first connect, or another calibration is in the servos)",
-                "" if not mismatch else "connect once (`phyagentos run --dry-run`) or re-run calibration")
-            q = cal.to_radians(state.position)
+            mismatch = [n for n, o in zip(MOTOR_NAMES, offsets) if o != cal.motors[n].homing_offset]
+            # not an error: the first connect writes the file into the servos (torque off, as LeRobot)
+            add("calibration in the servos", True,
+                "homing offsets match the file" if not mismatch else
+                f"servos {mismatch} do not hold the file's homing offsets yet; the first connect writes them "
+                f"(torque off)")
+            shift = [o - cal.motors[n].homing_offset for n, o in zip(MOTOR_NAMES, offsets)]
+            q = cal.to_radians([(p + d) % 4096 for p, d in zip(state.position.tolist(), shift)])
             ranges = cal.safe_ranges_rad()
-            out = [f"{n} {q[k]:+.2f} rad" for k, n in enumerate(MOTOR_NAMES) if not mismatch and
-                   not (ranges[k, 0] - 0.15 <= q[k] <= ranges[k, 1] + 0.15)]
+            out = [f"{n} {q[k]:+.2f} rad" for k, n in enumerate(MOTOR_NAMES)
+                   if not (ranges[k, 0] - 0.15 <= q[k] <= ranges[k, 1] + 0.15)]
             add("pose within calibrated ranges", not out, "all joints inside" if not out else ", ".join(out),
-                "" if not out else "the arm reads outside its calibrated range: re-calibrate or check the horns")
+                "" if not out else "the arm reads outside its calibrated range: re-calibrate (a horn may have "
+                                   "slipped) or check that the file belongs to this arm")
     except BusError as exc:
         fixes = {"bus.port": "plug the arm's USB, power its servos, check the path (`ls /dev/ttyACM*`) and permissions",
                  "bus.id_mismatch": "set ids 1-6 with `lerobot-setup-motors` (one servo on the bus at a time) or "

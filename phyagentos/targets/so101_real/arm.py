@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -34,6 +34,7 @@ from phyagentos.errors import TargetError
 from .calibration import Calibration
 from .driver import BusError, BusState, FeetechBus
 from .guard import BusLimits, BusSafetyGuard, BusSafetyStop
+from .protocol import MOTOR_NAMES, RESOLUTION
 
 __all__ = ["SO101Arm", "FollowResult"]
 
@@ -86,6 +87,7 @@ class SO101Arm:
         self._next_period: float | None = None  # perf_counter of the next period (paces consecutive calls)
         self._prev_sent: np.ndarray | None = None  # goal sent in the previous period (tracking reference)
         self._jaw_steps: int | None = None  # the jaw's goal on the bus, steps
+        self._pos_shift = np.zeros(6, dtype=np.int64)  # dry run: servo offsets vs the file's, steps
 
     # -- lifecycle ------------------------------------------------------------------------
     def connect(self) -> list[dict]:
@@ -101,6 +103,9 @@ class SO101Arm:
         """
         found = self.bus.connect()
         wrote = False if self.dry_run else self.bus.write_calibration(self.calibration)
+        if self.dry_run:  # nothing is written: apply the file's homing offsets in software instead
+            regs = np.array(self.bus.read_all("Homing_Offset"))
+            self._pos_shift = regs - np.array([self.calibration.motors[n].homing_offset for n in MOTOR_NAMES])
         q, state = self._read_checked()
         goals = [int(p) for p in state.position]
         if not self.dry_run:
@@ -125,6 +130,8 @@ class SO101Arm:
     # -- one period -----------------------------------------------------------------------
     def _read_checked(self) -> tuple[np.ndarray, BusState]:
         state = self.bus.sync_read_state()
+        if self._pos_shift.any():
+            state = replace(state, position=(state.position + self._pos_shift) % RESOLUTION)
         q = self.calibration.to_radians(state.position)
         self.guard.check_reading(q, state)
         self.last_q, self.last_state = q, state

@@ -40,7 +40,7 @@ Injectable faults (:meth:`BusTwin.inject`), per servo id:
                STS protection does
 ``stall``      the joint is blocked where it is: it no longer moves, the servo pushes
                with its full torque (``Present_Load`` 1000)
-``glitch``     its position sensor reads nonsense (position 4095 - real, error bit 2)
+``glitch``     its position sensor reads nonsense (half a turn off, error bit 2)
 =============  ================================================================
 
 Units: the registers' (steps, steps/s, 0.1 %, deg C, 0.1 V); joint angles in radians.
@@ -267,6 +267,7 @@ class BusTwin:
                 self._data.qvel[self._dadr[k]] = 0.0
                 s.setpoint = v
             mujoco.mj_forward(self._model, self._data)
+            self._advance(refresh=True)
 
     def joint_ranges(self) -> np.ndarray:
         """(6, 2) joint ranges of the model, rad."""
@@ -316,18 +317,19 @@ class BusTwin:
         d = (enc - 2048 - s.mount_offset + RESOLUTION / 2) % RESOLUTION - RESOLUTION / 2
         return d / STEPS_PER_RAD
 
-    def _advance(self) -> None:
-        """Step the physics up to now (wall clock), at most ``_MAX_CATCH_UP_S`` behind."""
+    def _advance(self, *, refresh: bool = False) -> None:
+        """Step the physics up to now (wall clock), at most ``_MAX_CATCH_UP_S`` behind, and
+        refresh the present-value registers (``refresh``: even if no step was due)."""
         m, d = self._model, self._data
         now = time.monotonic()
         ts = m.opt.timestep
         n = int((now - self._last) / ts)
-        if n <= 0:
+        if n <= 0 and not refresh:
             return
         if n * ts > _MAX_CATCH_UP_S:
             n = int(_MAX_CATCH_UP_S / ts)
             self._last = now
-        else:
+        elif n > 0:
             self._last += n * ts
         servos = [self._by_joint(name) for name in MOTOR_NAMES]
         goals, speeds, on = np.zeros(6), np.zeros(6), np.zeros(6, dtype=bool)
@@ -350,14 +352,14 @@ class BusTwin:
             for k, q in stall:
                 d.qpos[qadr[k]] = q
                 d.qvel[dadr[k]] = 0.0
-        if stall:
+        if stall and n > 0:
             mujoco.mj_forward(m, d)
         for k, s in enumerate(servos):
             q, qd = float(d.qpos[qadr[k]]), float(d.qvel[dadr[k]])
             pos = self._present_steps(s, q)
             err = 0
-            if "glitch" in s.faults:
-                pos = RESOLUTION - 1 - pos
+            if "glitch" in s.faults:  # a half-turn jump, as a misread magnet
+                pos = (pos + RESOLUTION // 2) % RESOLUTION
                 err |= ERR_ANGLE
             s.put("Present_Position", pos)
             s.put("Present_Velocity", int(round(qd * STEPS_PER_RAD)))
@@ -479,6 +481,7 @@ class BusTwin:
                 self._servos[new] = s
         if "overload" in s.faults:
             s.put("Torque_Enable", 0)
+        self._advance(refresh=True)  # e.g. a new Homing_Offset shows in the next read
 
 
 _BAD = object()

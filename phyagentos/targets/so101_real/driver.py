@@ -26,6 +26,7 @@ rare); only then it raises. Writes of goals are broadcast SYNC_WRITEs (no answer
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -79,6 +80,25 @@ class BusState:
     t: float
 
 
+class _PortHandler(scs.PortHandler):
+    """The SDK's port handler with ``margin_ms`` added to every packet timeout (the SDK's is
+    ``2 x LATENCY_TIMER (16 ms) + 2 ms`` plus the bytes' time: the USB adapter's latency)."""
+
+    def __init__(self, port_name: str, margin_ms: float):
+        super().__init__(port_name)
+        self.margin_ms = float(margin_ms)
+
+    def setPacketTimeout(self, packet_length):  # noqa: N802 - the SDK's name
+        super().setPacketTimeout(packet_length)
+        self.packet_timeout += self.margin_ms
+
+
+def default_timeout_margin_ms(port: str) -> float:
+    """0 for a serial device; 300 ms for a pseudo-terminal (``/dev/pts/N``, a bus twin), whose
+    servos are a thread of some process on a possibly busy machine, not microcontrollers."""
+    return 300.0 if os.path.realpath(port).startswith("/dev/pts/") else 0.0
+
+
 class FeetechBus:
     """Six STS3215 on one serial port.
 
@@ -87,13 +107,18 @@ class FeetechBus:
         ids: servo ids in :data:`MOTOR_NAMES` order (default 1..6, LeRobot's SO-101).
         baudrate: 1 000 000 (the SO-101's, LeRobot's default).
         retries: extra attempts of a failed read before :class:`BusError`.
+        timeout_margin_ms: added to the SDK's packet timeout (default
+            :func:`default_timeout_margin_ms`: 0 on a real port).
     """
 
-    def __init__(self, port: str, *, ids: Sequence[int] | None = None, baudrate: int = 1_000_000, retries: int = 2):
+    def __init__(self, port: str, *, ids: Sequence[int] | None = None, baudrate: int = 1_000_000, retries: int = 2,
+                 timeout_margin_ms: float | None = None):
         self.port = str(port)
         self.ids: tuple[int, ...] = tuple(int(i) for i in ids) if ids is not None else tuple(MOTOR_IDS.values())
         self.baudrate = int(baudrate)
         self.retries = int(retries)
+        self.timeout_margin_ms = default_timeout_margin_ms(self.port) if timeout_margin_ms is None \
+            else float(timeout_margin_ms)
         self._ph: scs.PortHandler | None = None
         self._pk = scs.PacketHandler(0)  # protocol_end 0: STS servos, little-endian words
         self._lock = threading.RLock()
@@ -113,7 +138,7 @@ class FeetechBus:
         """
         if self._ph is not None:
             return
-        ph = scs.PortHandler(self.port)
+        ph = _PortHandler(self.port, self.timeout_margin_ms)
         try:
             ok = ph.openPort() and ph.setBaudRate(self.baudrate)
         except Exception as exc:  # serial.SerialException, OSError: missing, busy, permission
@@ -181,10 +206,19 @@ class FeetechBus:
             raise BusError(f"servo bus {self.port!r} is not open", code="bus.port")
         return self._ph
 
+    def _flush(self) -> None:
+        """Drop unread input (a late answer to an earlier, timed-out instruction would
+        otherwise be taken for the next one's: the SDK's ``clearPort`` flushes output only)."""
+        self._port().ser.reset_input_buffer()
+
     def _ping(self, servo_id: int) -> int | None:
         with self._lock:
             for _ in range(self.retries + 1):
-                model, res, _err = self._pk.ping(self._port(), servo_id)
+                self._flush()
+                try:
+                    model, res, _err = self._pk.ping(self._port(), servo_id)
+                except IndexError:  # the SDK read a short (late, stale) answer as the model number
+                    continue
                 if res == scs.COMM_SUCCESS:
                     return int(model)
         return None
@@ -199,7 +233,11 @@ class FeetechBus:
         fn = self._pk.read1ByteTxRx if reg.size == 1 else self._pk.read2ByteTxRx
         with self._lock:
             for attempt in range(self.retries + 1):
-                value, res, _err = fn(self._port(), servo_id, reg.address)
+                self._flush()
+                try:
+                    value, res, _err = fn(self._port(), servo_id, reg.address)
+                except IndexError:  # a short (late, stale) answer
+                    value, res = 0, scs.COMM_RX_CORRUPT
                 if res == scs.COMM_SUCCESS:
                     return decode_sign_magnitude(value, SIGN_BITS[name]) if name in SIGN_BITS else int(value)
                 self.stats["retries"] += attempt < self.retries
@@ -216,6 +254,7 @@ class FeetechBus:
         fn = self._pk.write1ByteTxRx if reg.size == 1 else self._pk.write2ByteTxRx
         with self._lock:
             for _ in range(self.retries + 1):
+                self._flush()
                 res, _err = fn(self._port(), servo_id, reg.address, v)
                 if res == scs.COMM_SUCCESS:
                     return
@@ -244,7 +283,7 @@ class FeetechBus:
             if reader is None:
                 raise BusError(f"servo bus {self.port!r} is not open", code="bus.port")
             for attempt in range(self.retries + 1):
-                self._ph.ser.reset_input_buffer()  # drop the rest of a failed answer (the SDK's clearPort doesn't)
+                self._flush()
                 res = reader.txRxPacket()
                 self.stats["sync_reads"] += 1
                 if res == scs.COMM_SUCCESS:

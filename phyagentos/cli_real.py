@@ -303,13 +303,41 @@ def with_real(handlers: dict[str, Handler]) -> dict[str, Handler]:
             from phyagentos.errors import TargetError
 
             raise TargetError(f"--port applies to --target {REAL_TARGET}, got --target {args.target}")
-        _preflight_bus(port, args.calibration)
         prepare_real_workspace(args.workspace, port=port, calibration=args.calibration, dry_run=args.dry_run,
                                stop_policy=args.stop_policy)
+        _refuse_depth_criteria(args.goal_graph, args.workspace)
+        _preflight_bus(port, args.calibration)
         err.print(f"[dim]{REAL_TARGET} on {port}{' (dry run: nothing moves)' if args.dry_run else ''}[/dim]")
         return inner(args, out, err)
 
     return {**handlers, "run": run, "bus-twin": _cmd_bus_twin, "calibrate": _cmd_calibrate, "doctor": _cmd_doctor}
+
+
+def _refuse_depth_criteria(goal_graph: Path, workspace: Path) -> None:
+    """Refuse (TargetError, before the bus is touched) a graph with criteria that need
+    perceived object poses when the real target's cameras give no depth."""
+    import yaml
+
+    from phyagentos.errors import TargetError
+    from phyagentos.protocol.sensors import read_sensors
+    from phyagentos.targets.so101_real.camera import RGB_ONLY_PREDICATES, depth_needing_criteria, has_depth
+
+    cams = [s for s in read_sensors(workspace).for_target(REAL_TARGET) if s.kind in ("rgb_camera", "rgbd_camera")]
+    if has_depth(cams):
+        return
+    try:
+        graph = yaml.safe_load(Path(goal_graph).read_text(encoding="utf-8")) or {}
+    except (OSError, yaml.YAMLError):
+        return  # the run reports the graph's own problem with its location
+    needing = depth_needing_criteria(graph if isinstance(graph, dict) else {})
+    if needing:
+        what = ", ".join(f"{node}: {pred}" for node, pred in needing)
+        raise TargetError(
+            f"{goal_graph}: criteria need perceived object poses, i.e. depth, but {REAL_TARGET}'s cameras in "
+            f"{Path(workspace) / 'sensors.yaml'} are "
+            f"{', '.join(f'{c.name} ({c.kind})' for c in cams) or 'none'}: {what}. With RGB only, perception "
+            f"cannot locate objects; judgeable criteria are {', '.join(sorted(RGB_ONLY_PREDICATES))}. Add an RGB-D "
+            f"camera (kind rgbd_camera) or drop those criteria; nothing was moved")
 
 
 def _preflight_bus(port: str, calibration: Path | None) -> None:

@@ -268,3 +268,66 @@ def test_dry_run_moves_nothing(twin, cal_file, tmp_path):
     assert twin.packets_served > 0  # it did read the bus
     assert twin.goal_writes == 0 and twin.torque_enabled() == [0] * 6
     assert np.max(np.abs(twin.joint_positions() - before)) < 1e-3
+
+
+def _video(path: Path, w: int = 320, h: int = 240, n: int = 5) -> Path:
+    import cv2
+
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (w, h))
+    assert writer.isOpened()
+    for _ in range(n):
+        frame = np.zeros((h, w, 3), np.uint8)
+        frame[:, :, 2] = 200  # BGR: red
+        frame[60:120, 80:160] = (0, 180, 0)
+        writer.write(frame)
+    writer.release()
+    return path
+
+
+def _real_camera(device, kind="rgb_camera"):
+    from phyagentos.protocol.sensors import SensorSpec
+
+    return SensorSpec.model_validate({
+        "name": "front", "kind": kind, "frame_id": "front_optical", "rate_hz": 10, "width": 320, "height": 240,
+        "real": {"device": device, "fx": 300.0, "fy": 301.0, "cx": 160.0, "cy": 120.0,
+                 "position_m": [0.75, 0.0, 0.45], "quat_wxyz": [1.0, 0.0, 0.0, 0.0]}})
+
+
+def test_opencv_camera_gives_rgb_frames_with_the_declared_intrinsics(tmp_path):
+    from phyagentos.targets.so101_real.camera import OpenCVCamera
+
+    cam = OpenCVCamera(_real_camera(str(_video(tmp_path / "cam.avi"))))
+    frame = cam.capture(stamp_s=1.5)
+    cam.close()
+    assert frame.rgb.shape == (240, 320, 3) and frame.depth_m is None and frame.stamp_s == 1.5
+    assert (frame.intrinsics.fx, frame.intrinsics.fy, frame.intrinsics.cx) == (300.0, 301.0, 160.0)
+    assert frame.rgb[10, 10, 0] > 150 and frame.rgb[10, 10, 2] < 60  # BGR -> RGB
+    np.testing.assert_allclose(frame.T_world_camera[:3, 3], [0.75, 0.0, 0.45])
+    with pytest.raises(Exception, match="did not open"):
+        OpenCVCamera(_real_camera(str(tmp_path / "no-such-video.avi")))
+
+
+def test_target_captures_real_cameras_and_rgb_only_refuses_depth_criteria(twin, cal_file, tmp_path, capsys):
+    import yaml
+
+    video = _video(tmp_path / "cam.avi")
+    target = SO101RealTarget("so101_real", port=twin.port, calibration=cal_file, dry_run=True)
+    try:
+        target.configure_sensors([_real_camera(str(video))])
+        frame = target.capture("front")
+        assert frame.rgb.shape == (240, 320, 3) and frame.depth_m is None
+        assert "front" in target.camera_names()
+    finally:
+        target.close()
+    # a workspace whose so101_real has only an RGB camera: the pick-and-place graph is refused
+    ws = tmp_path / "ws"
+    ws.mkdir()
+    spec = _real_camera(str(video)).model_dump(mode="json", exclude_none=True)
+    (ws / "sensors.yaml").write_text(yaml.safe_dump({"version": 1, "targets": {"so101_real": [spec]}}))
+    served = twin.packets_served
+    code = main(["run", str(ROOT / "goal_graphs/pick_and_place_compact.yaml"), "--workspace", str(ws),
+                 "--target", "so101_real", "--port", twin.port, "--calibration", str(cal_file)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "need perceived object poses" in err and "pick_cube: lifted" in err and "place_cube: inside" in err
+    assert twin.packets_served == served and twin.goal_writes == 0  # refused before the bus was touched

@@ -93,6 +93,7 @@ class SO101RealTarget(SO101Target):
                  limits: BusLimits | None = None, dry_run: bool = False, control_period_s: float = 0.02):
         self._estop_latch = None
         self.arm: SO101Arm | None = None
+        self._real_cams: dict = {}
         cal = None
         if port:  # the calibration first: a missing file is an error before the bus is touched
             cal = calibration if isinstance(calibration, Calibration) else Calibration.load(
@@ -338,6 +339,32 @@ class SO101RealTarget(SO101Target):
         self._mirror_pose(q)
         self.arm.guard.sync(np.append(q[:5], self._jaw_goal))
 
+    # -- cameras: physical ones through OpenCV, the rest rendered by the twin ---------------------
+    def configure_sensors(self, sensors) -> None:
+        """Install ``sensors.yaml``'s sensors: cameras with a ``real`` block are opened with
+        OpenCV (:class:`~.camera.OpenCVCamera`); the others are the twin's model cameras.
+
+        Raises:
+            TargetError: a real camera that does not open, or a model camera the twin lacks.
+        """
+        from .camera import OpenCVCamera
+
+        real = [s for s in sensors if getattr(s, "real", None) is not None]
+        super().configure_sensors([s for s in sensors if getattr(s, "real", None) is None])
+        for cam in self._real_cams.values():
+            cam.close()
+        self._real_cams = {s.name: OpenCVCamera(s) for s in real}
+        self._sensor_specs.update({s.name: s for s in real})
+
+    def capture(self, sensor: str):
+        """A frame of camera ``sensor``: a physical camera's (RGB, declared intrinsics and
+        pose, no depth) or the twin's rendering."""
+        cam = self._real_cams.get(sensor)
+        if cam is not None:
+            self._frame_count += 1
+            return cam.capture(stamp_s=self.sim_time)
+        return super().capture(sensor)
+
     def bus_events(self) -> list[dict]:
         """The bus guard's interventions so far (codes, outcomes, messages): evidence."""
         return list(self.arm.guard.events) if self.arm is not None else []
@@ -355,6 +382,9 @@ class SO101RealTarget(SO101Target):
     def close(self) -> None:
         if self.arm is not None and not self.closed:
             self.arm.close()
+        for cam in self._real_cams.values():
+            cam.close()
+        self._real_cams = {}
         super().close()
 
     def __repr__(self) -> str:

@@ -3,7 +3,9 @@
     .venv/bin/python bench/real_arm.py [--periods 250] [--estop-trials 10] [--period-ms 20] [--json]
 
 Everything goes through Feetech's SDK and the project's driver against :class:`BusTwin`
-(a pseudo-terminal answering as six STS3215, MuJoCo behind it), exactly as on a real arm:
+(a pseudo-terminal answering as six STS3215, MuJoCo behind it), exactly as on a real arm;
+round trip and e-stop run against a twin thread in this process, or with ``--twin-process``
+against ``phyagentos bus-twin so101`` in its own process:
 
 - **round trip**: :meth:`SO101Arm.follow` streams a sine on two joints for ``--periods``
   control periods; per period, the wall time of the bus work (one GROUP_SYNC_READ of the
@@ -11,7 +13,7 @@ Everything goes through Feetech's SDK and the project's driver against :class:`B
   ms and as a fraction of the period, and the overruns (bus work longer than a period);
 - **e-stop**: while the arm streams, another thread engages the e-stop latch at a random
   moment; latency = engage -> the stop's sync write returned, in periods (goal: <= 1);
-- **faults**: for each injectable fault (silent servo, checksum error, overload flag,
+- **faults** (twin in this process, to inject): for each injectable fault (silent servo, checksum error, overload flag,
   stalled joint, glitching sensor) injected mid-motion: the stop code, the time from
   injection to stop (in periods; a silent servo costs the SDK's packet timeouts and the
   driver's retries), the joint motion in the 0.3 s after the stop settled, and the goals
@@ -28,6 +30,8 @@ import argparse
 import json
 import os
 import random
+import subprocess
+import tempfile
 import sys
 import threading
 import time
@@ -43,6 +47,7 @@ from phyagentos.cli_real import ideal_calibration  # noqa: E402
 from phyagentos.runtime.safety_guard import EStopLatch  # noqa: E402
 from phyagentos.targets.so101_real.arm import SO101Arm  # noqa: E402
 from phyagentos.targets.so101_real.bus_twin import FAULT_KINDS, BusTwin  # noqa: E402
+from phyagentos.targets.so101_real.calibration import Calibration  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results"
 
@@ -145,15 +150,34 @@ def main() -> int:
     ap.add_argument("--period-ms", type=float, default=20.0)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--twin-process", action="store_true",
+                    help="round trip and e-stop against `phyagentos bus-twin` in its own process (default: a twin "
+                         "thread in this process)")
     args = ap.parse_args()
     dt = args.period_ms / 1e3
-    with BusTwin(seed=args.seed) as twin:
-        cal = ideal_calibration(twin)
-        rt = round_trip(twin.port, cal, args.periods, dt)
-        es = estop(twin.port, cal, args.estop_trials, dt, args.seed)
+    if not args.twin_process:
+        with BusTwin(seed=args.seed) as twin:
+            cal = ideal_calibration(twin)
+            rt = round_trip(twin.port, cal, args.periods, dt)
+            es = estop(twin.port, cal, args.estop_trials, dt, args.seed)
+    else:  # the twin in its own process (`phyagentos bus-twin`), as a real arm is
+        with tempfile.TemporaryDirectory() as tmp:
+            cal_path = Path(tmp) / "cal.json"
+            proc = subprocess.Popen([sys.executable, "-m", "phyagentos.cli", "bus-twin", "so101", "--seed",
+                                     str(args.seed), "--write-calibration", str(cal_path)], stdout=subprocess.PIPE,
+                                    stderr=subprocess.DEVNULL, text=True, cwd=ROOT,
+                                    env={**os.environ, "PYTHONPATH": str(ROOT)})
+            try:
+                port = proc.stdout.readline().strip()
+                cal = Calibration.load(cal_path)
+                rt = round_trip(port, cal, args.periods, dt)
+                es = estop(port, cal, args.estop_trials, dt, args.seed)
+            finally:
+                proc.terminate()
+                proc.wait(timeout=10)
     fl = faults(ideal_calibration, dt)
-    out = {"round_trip": rt, "estop": es, "faults": fl, "machine": {"cpus": os.cpu_count(),
-                                                                    "load_average_1min": os.getloadavg()[0]}}
+    out = {"twin": "process" if args.twin_process else "thread", "round_trip": rt, "estop": es, "faults": fl,
+           "machine": {"cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}}
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "real_arm.json").write_text(json.dumps(out, indent=2) + "\n")
     if args.json:

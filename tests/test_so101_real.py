@@ -331,3 +331,38 @@ def test_target_captures_real_cameras_and_rgb_only_refuses_depth_criteria(twin, 
     err = capsys.readouterr().err
     assert "need perceived object poses" in err and "pick_cube: lifted" in err and "place_cube: inside" in err
     assert twin.packets_served == served and twin.goal_writes == 0  # refused before the bus was touched
+
+
+def test_runtime_estop_reaches_the_bus_through_the_target(twin, cal_file):
+    """The runtime's SafetyGuard hands its latch to ``target.estop``; the real target's
+    control loop sees it within a period and stops the bus (hold), mid-trajectory."""
+    from phyagentos.motion.retime import retime
+    from phyagentos.protocol.schemas import SafetyConfig
+    from phyagentos.runtime.safety_guard import SafetyGuard
+
+    target = SO101RealTarget("so101_real", port=twin.port, calibration=cal_file)
+    try:
+        guard = SafetyGuard.for_target(target, SafetyConfig(), estop=EStopLatch())
+        assert target.arm.estop is guard.estop
+        q0 = target.arm_qpos()
+        q1 = q0 + np.array([0.5, 0.2, 0.0, 0.0, 0.0])
+        traj = retime(np.array([q0, q1]), vel_limits=target.velocity_limits(), acc_limits=target.acceleration_limits())
+        out = {}
+        th = threading.Thread(target=lambda: out.setdefault("r", target.execute_trajectory(traj)))
+        th.start()
+        time.sleep(0.3)
+        guard.estop.engage("test", source="test")
+        th.join(timeout=20)
+        res = out["r"]
+        assert not res.completed and res.reason.startswith("safety.estop"), res.reason
+        assert target.arm.stopped == "safety.estop"
+        assert any(e["code"] == "safety.estop" for e in target.bus_events())
+        # hold: the arm settles back onto the pose measured at the stop (the servo's lag, then still)
+        time.sleep(0.6)
+        before = twin.joint_positions()
+        time.sleep(0.3)
+        assert np.max(np.abs(twin.joint_positions() - before)) < 0.01
+        assert np.max(np.abs(twin.joint_positions() - target.arm.last_q)) < 0.02
+        assert np.max(np.abs(twin.joint_positions()[:5] - q1)) > 0.05  # stopped short of the goal
+    finally:
+        target.close()

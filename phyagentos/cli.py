@@ -10,6 +10,7 @@
     phyagentos render tree SKILL_OR_TREE [--out FILE.png]
     phyagentos render graph WORKSPACE [--run RUN_ID] [--out FILE.png|.svg] [--mermaid FILE.md]
     phyagentos policy serve [--host H] [--port N] [--rate-hz F] [--horizon K] [--stall-after N]
+    phyagentos bus-twin so101 | calibrate --port P | doctor --target so101_real --port P   (cli_real.py)
 
 Exit codes: 0 every node succeeded / command succeeded; 1 a node did not succeed;
 2 bad input (goal graph, protocol document, arguments).
@@ -116,6 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--stall-after", type=int, help="fault injection: stop answering after N inferences")
     from phyagentos.cli_view import add_view_commands  # [issue 13] view, run/bench --record
     add_view_commands(sub)
+    from phyagentos.cli_real import add_real_commands  # [issue 32] bus-twin, calibrate, doctor, run --port
+    add_real_commands(sub)
     return parser
 
 
@@ -405,6 +408,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from phyagentos.cli_view import with_view  # [issue 13]
     handlers = with_view(handlers)
+    from phyagentos.cli_real import with_real  # [issue 32]
+    handlers = with_real(handlers)
     try:
         with skill_search_env(args, err):
             code = handlers[args.command](args, out, err)

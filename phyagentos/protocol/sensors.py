@@ -16,8 +16,8 @@ from pydantic import ConfigDict, Field, model_validator
 from .codec import read_yaml
 from .schemas import ProtocolModel, VersionedModel
 
-__all__ = ["SENSOR_KINDS", "SensorMount", "CameraNoiseSpec", "SensorSpec", "SensorsConfig", "SENSORS_FILE",
-           "read_sensors"]
+__all__ = ["SENSOR_KINDS", "SensorMount", "CameraNoiseSpec", "RealCameraSpec", "SensorSpec", "SensorsConfig",
+           "SENSORS_FILE", "read_sensors"]
 
 SENSORS_FILE = "sensors.yaml"
 SENSOR_KINDS: tuple[str, ...] = ("rgbd_camera", "rgb_camera", "joint_state", "gripper", "force_torque")
@@ -51,6 +51,24 @@ class CameraNoiseSpec(ProtocolModel):
     lighting_jitter: float = Field(0.08, ge=0, le=0.5)
 
 
+class RealCameraSpec(ProtocolModel):
+    """A physical camera of a real target (issue 32): opened with OpenCV's ``VideoCapture``
+    by ``device`` (an index such as 0, or a path such as ``/dev/video2`` or a video file),
+    with its calibrated pinhole ``intrinsics`` (pixels, OpenCV convention, at the sensor's
+    width x height) and, for a fixed camera, the pose of its optical frame (x right, y
+    down, z forward) in the world: ``position_m`` and ``quat_wxyz``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    device: int | str = Field(description="OpenCV VideoCapture index or path.")
+    fx: float = Field(gt=0, description="Focal length along x, pixels.")
+    fy: float = Field(gt=0, description="Focal length along y, pixels.")
+    cx: float = Field(description="Principal point x, pixels.")
+    cy: float = Field(description="Principal point y, pixels.")
+    position_m: tuple[float, float, float] = Field(description="Optical frame origin in the world, m.")
+    quat_wxyz: tuple[float, float, float, float] = Field(description="Optical frame orientation in the world.")
+
+
 class SensorSpec(ProtocolModel):
     """One sensor of a target."""
 
@@ -65,11 +83,15 @@ class SensorSpec(ProtocolModel):
     fovy_deg: float | None = Field(None, gt=0, lt=180, description="Vertical field of view, degrees (cameras).")
     mount: SensorMount = Field(default_factory=SensorMount)
     noise: CameraNoiseSpec = Field(default_factory=CameraNoiseSpec)
+    real: RealCameraSpec | None = Field(None, description="A physical camera (real targets): device and "
+                                                          "calibration; None: rendered by the target's model.")
 
     @model_validator(mode="after")
     def _camera_fields(self) -> "SensorSpec":
         if self.kind in _CAMERAS and (self.width is None or self.height is None):
             raise ValueError(f"sensor {self.name!r}: a camera needs width and height (pixels)")
+        if self.real is not None and self.kind not in _CAMERAS:
+            raise ValueError(f"sensor {self.name!r}: only cameras can be real (kind {self.kind!r})")
         return self
 
     @property

@@ -27,6 +27,7 @@ from phyagentos.targets import MuJoCoTarget, SceneSpec
 from phyagentos.targets.crafter_target import CrafterTarget
 from phyagentos.targets.kitchen import FrankaKitchenTarget
 from phyagentos.targets.so101 import SO101Target
+from phyagentos.targets.so101_real.target import SO101RealTarget
 from phyagentos.targets.perturbations import ActivePerturbations, PerturbationSpec, parse_perturbations, split_scene
 
 __all__ = ["DRIVERS", "TargetPool", "scene_for", "perturbations_for"]
@@ -35,7 +36,8 @@ logger = logging.getLogger(__name__)
 
 #: Target driver name (TARGETS.md ``driver``) -> target class.
 DRIVERS: dict[str, type] = {"mujoco_franka": MuJoCoTarget, "gymnasium_kitchen": FrankaKitchenTarget,
-                             "mujoco_so101": SO101Target, "crafter": CrafterTarget}
+                             "mujoco_so101": SO101Target, "crafter": CrafterTarget,
+                             "so101_real": SO101RealTarget}  # [issue 32] also an entry point (pyproject)
 
 
 def scene_for(session: SessionRecord, spec: TargetSpec, *, root: str | Path | None = None) -> SceneSpec:
@@ -122,7 +124,8 @@ class TargetPool:
             if cached is not None:
                 cached[1].close()
             self._views.pop(spec.name, None)
-            target = cls(spec.name, scene, seed=seed)
+            build = getattr(cls, "from_target_spec", None)  # a driver that needs its endpoint/constraints
+            target = build(spec, scene, seed=seed) if build is not None else cls(spec.name, scene, seed=seed)
             self._live[spec.name] = (key, target)
             # the workspace's sensors.yaml entry for this target (read-only deploy config)
             sensors = read_sensors(self.state_dir.parent).for_target(spec.name)

@@ -1,0 +1,201 @@
+"""The real SO-101 path on the bus twin: bus round trip per period, e-stop latency, fault outcomes.
+
+    .venv/bin/python bench/real_arm.py [--periods 250] [--estop-trials 10] [--period-ms 20] [--json]
+
+Everything goes through Feetech's SDK and the project's driver against :class:`BusTwin`
+(a pseudo-terminal answering as six STS3215, MuJoCo behind it), exactly as on a real arm;
+round trip and e-stop run against a twin thread in this process, or with ``--twin-process``
+against ``phyagentos bus-twin so101`` in its own process:
+
+- **round trip**: :meth:`SO101Arm.follow` streams a sine on two joints for ``--periods``
+  control periods; per period, the wall time of the bus work (one GROUP_SYNC_READ of the
+  11-byte state block of six servos + the guard + one GROUP_SYNC_WRITE of the goals), in
+  ms and as a fraction of the period, and the overruns (bus work longer than a period);
+- **e-stop**: while the arm streams, another thread engages the e-stop latch at a random
+  moment; latency = engage -> the stop's sync write returned, in periods (goal: <= 1);
+- **faults** (twin in this process, to inject): for each injectable fault (silent servo, checksum error, overload flag,
+  stalled joint, glitching sensor) injected mid-motion: the stop code, the time from
+  injection to stop (in periods; a silent servo costs the SDK's packet timeouts and the
+  driver's retries), the joint motion in the 0.3 s after the stop settled, and the goals
+  written after it (must be 0).
+
+On a pseudo-terminal the driver adds 300 ms to the SDK's packet timeout (the twin's
+servos are a thread of a busy process); on a real port it is the SDK's 34 ms, so a silent
+servo is detected about 10x sooner on hardware. Writes bench/results/real_arm.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import subprocess
+import tempfile
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import phyagentos  # noqa: E402,F401  (headless GL before mujoco loads)
+from phyagentos.cli_real import ideal_calibration  # noqa: E402
+from phyagentos.runtime.safety_guard import EStopLatch  # noqa: E402
+from phyagentos.targets.so101_real.arm import SO101Arm  # noqa: E402
+from phyagentos.targets.so101_real.bus_twin import FAULT_KINDS, BusTwin  # noqa: E402
+from phyagentos.targets.so101_real.calibration import Calibration  # noqa: E402
+
+RESULTS = ROOT / "bench" / "results"
+
+
+def _sine(arm: SO101Arm, n: int, amp: float = 0.25, hz: float = 0.5) -> np.ndarray:
+    t = np.arange(n) * arm.dt
+    Q = np.tile(arm.goal_q, (n, 1))
+    Q[:, 0] += amp * np.sin(2 * np.pi * hz * t)
+    Q[:, 1] += 0.5 * amp * np.sin(2 * np.pi * hz * t)
+    return Q
+
+
+def round_trip(port: str, cal, periods: int, dt: float) -> dict:
+    arm = SO101Arm(port, calibration=cal, control_period_s=dt)
+    arm.connect()
+    try:
+        res = arm.follow(_sine(arm, periods))
+    finally:
+        arm.close()
+    io = np.asarray(res.io_s or [float("nan")]) * 1e3
+    return {"completed": res.completed, "code": res.code, "reason": res.reason, "periods": res.periods,
+            "period_ms": dt * 1e3,
+            "io_ms_mean": float(io.mean()), "io_ms_p50": float(np.median(io)), "io_ms_p95": float(np.quantile(io, 0.95)),
+            "io_ms_max": float(io.max()), "io_fraction_of_period_p95": float(np.quantile(io, 0.95) / (dt * 1e3)),
+            "overruns": res.overruns, "max_tracking_error_rad": res.max_tracking_error_rad,
+            "sync_reads": arm.bus.stats["sync_reads"], "retries": arm.bus.stats["retries"]}
+
+
+def estop(port: str, cal, trials: int, dt: float, seed: int) -> dict:
+    rng = random.Random(seed)
+    lat = []
+    start = None
+    for _ in range(trials):
+        latch = EStopLatch()
+        arm = SO101Arm(port, calibration=cal, control_period_s=dt, estop=latch)
+        arm.connect()
+        start = arm.goal_q.copy() if start is None else start
+        try:
+            out = {}
+            th = threading.Thread(target=lambda: out.setdefault("r", arm.follow(_sine(arm, int(1.5 / dt)))))
+            th.start()
+            time.sleep(rng.uniform(0.2, 0.8))
+            latch.engage("bench", source="bench")
+            th.join(timeout=30)
+            assert out["r"].code == "safety.estop", out["r"].reason
+            lat.append((arm.estop_handled_at - latch.engaged_at) / dt)
+            latch.clear()
+            arm.clear_stop()
+            back = np.linspace(arm.guard._last_goal, start, int(0.6 / dt))  # return to the start pose
+            assert arm.follow(back).completed
+        finally:
+            arm.close()
+    a = np.asarray(lat)
+    return {"trials": trials, "period_ms": dt * 1e3, "latency_periods_mean": float(a.mean()),
+            "latency_periods_max": float(a.max()), "within_one_period": int((a <= 1.0).sum()),
+            "latency_ms_max": float(a.max() * dt * 1e3)}
+
+
+def faults(cal_for, dt: float) -> list[dict]:
+    rows = []
+    for kind in FAULT_KINDS:
+        with BusTwin(seed=3) as twin:
+            cal = cal_for(twin)
+            arm = SO101Arm(twin.port, calibration=cal, control_period_s=dt)
+            arm.connect()
+            t_inject = {}
+
+            def inject(k, _q, twin=twin, t_inject=t_inject):
+                if k == 10:
+                    twin.inject(2, kind)
+                    t_inject["t"] = time.perf_counter()
+
+            try:
+                Q = np.tile(arm.goal_q, (60, 1))
+                Q[:, 1] = np.linspace(arm.goal_q[1], arm.goal_q[1] + 0.4, 60)
+                res = arm.follow(Q, on_period=inject)
+                t_stop = time.perf_counter()
+                time.sleep(0.2)
+                before, writes = twin.joint_positions(), twin.goal_writes
+                try:
+                    arm.send(arm.guard._last_goal)
+                    refused = False
+                except Exception:
+                    refused = True
+                time.sleep(0.3)
+                motion = float(np.max(np.abs(twin.joint_positions() - before)))
+                rows.append({"fault": kind, "code": res.code, "stopped": not res.completed,
+                             "detect_periods": (t_stop - t_inject["t"]) / dt if "t" in t_inject else None,
+                             "motion_after_rad": motion, "goal_writes_after": twin.goal_writes - writes,
+                             "next_command_refused": refused, "policy": arm.limits.stop_policy})
+            finally:
+                arm.close()
+    return rows
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--periods", type=int, default=250)
+    ap.add_argument("--estop-trials", type=int, default=10)
+    ap.add_argument("--period-ms", type=float, default=20.0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--twin-process", action="store_true",
+                    help="round trip and e-stop against `phyagentos bus-twin` in its own process (default: a twin "
+                         "thread in this process)")
+    args = ap.parse_args()
+    dt = args.period_ms / 1e3
+    if not args.twin_process:
+        with BusTwin(seed=args.seed) as twin:
+            cal = ideal_calibration(twin)
+            rt = round_trip(twin.port, cal, args.periods, dt)
+            es = estop(twin.port, cal, args.estop_trials, dt, args.seed)
+    else:  # the twin in its own process (`phyagentos bus-twin`), as a real arm is
+        with tempfile.TemporaryDirectory() as tmp:
+            cal_path = Path(tmp) / "cal.json"
+            proc = subprocess.Popen([sys.executable, "-m", "phyagentos.cli", "bus-twin", "so101", "--seed",
+                                     str(args.seed), "--write-calibration", str(cal_path)], stdout=subprocess.PIPE,
+                                    stderr=subprocess.DEVNULL, text=True, cwd=ROOT,
+                                    env={**os.environ, "PYTHONPATH": str(ROOT)})
+            try:
+                port = proc.stdout.readline().strip()
+                cal = Calibration.load(cal_path)
+                rt = round_trip(port, cal, args.periods, dt)
+                es = estop(port, cal, args.estop_trials, dt, args.seed)
+            finally:
+                proc.terminate()
+                proc.wait(timeout=10)
+    fl = faults(ideal_calibration, dt)
+    out = {"twin": "process" if args.twin_process else "thread", "round_trip": rt, "estop": es, "faults": fl,
+           "machine": {"cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}}
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "real_arm.json").write_text(json.dumps(out, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}")
+    print(f"bus round trip per {rt['period_ms']:.0f} ms period ({rt['periods']} periods, sync read 6 servos + guard + "
+          f"sync write): mean {rt['io_ms_mean']:.2f} ms, p50 {rt['io_ms_p50']:.2f}, p95 {rt['io_ms_p95']:.2f}, "
+          f"max {rt['io_ms_max']:.2f} ms; overruns {rt['overruns']}; retries {rt['retries']}")
+    print(f"e-stop: {es['within_one_period']}/{es['trials']} within one period; mean {es['latency_periods_mean']:.3f}, "
+          f"max {es['latency_periods_max']:.3f} periods ({es['latency_ms_max']:.2f} ms)")
+    print(f"{'fault':10s} {'code':18s} {'detect (periods)':>17s} {'motion after (rad)':>19s} {'writes after':>13s} refused")
+    for r in fl:
+        det = f"{r['detect_periods']:.1f}" if r["detect_periods"] is not None else "-"
+        print(f"{r['fault']:10s} {r['code']:18s} {det:>17s} {r['motion_after_rad']:>19.4f} "
+              f"{r['goal_writes_after']:>13d} {r['next_command_refused']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -10,9 +10,10 @@ Routes (all read-only except ``POST /api/signal``):
                                 evidence images and the recording
 ``/memory``                     LESSONS.md, KNOWLEDGE.md, SKILL.md with provenance links
 ``/fragment/...``               the panels of those pages, re-fetched on every change
-``/events[?session=ID]``        server-sent events: ``change`` whenever the workspace changes
-                                (inotify wake-ups of :class:`~phyagentos.protocol.WorkspaceWatcher`,
-                                coalesced to at most 10 per second)
+``/events[?session=ID&f=URL…]`` server-sent events: ``change`` with the JSON list of the page's
+                                fragments (``f``) whose inputs changed (changes.py; ``null``: all),
+                                on inotify wake-ups of :class:`~phyagentos.protocol.WorkspaceWatcher`,
+                                coalesced to at most 10 per second
 ``/api/tree/{id}``              ``tree.json`` as published by the runner
 ``/api/frames/{id}``            the recorded instants of a session (simulated time per frame)
 ``/api/scene/{id}.png``         the scene at ``frame=N`` (or the current checkpoint) from a free
@@ -47,6 +48,7 @@ from phyagentos.errors import PhyAgentOSError, ViewError
 from phyagentos.protocol import DOCUMENTS, SESSION_ID_PATTERN, Workspace, WorkspaceWatcher
 
 from . import data, pages
+from .changes import FINISHED_STATES, Tracker
 from .graph_svg import to_svg
 from .scene3d import SceneRenderer, frames_of
 from .security import TOKEN_HEADER, AccessPolicy, safe_path
@@ -93,6 +95,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
     ws = Workspace.open(workspace)
     policy = policy or AccessPolicy()
     renderer = SceneRenderer(ws)
+    runs_cache = data.RunsCache()
 
     def shell(title: str, body: str, scope: str = "") -> HTMLResponse:
         return HTMLResponse(pages.page(title, body, token=policy.token_in_page(), scope=scope))
@@ -102,8 +105,12 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
 
     # -- pages ---------------------------------------------------------------
     def index(request: Request) -> Response:
+        try:
+            page = max(1, int(request.query_params.get("page", "1")))
+        except ValueError:
+            page = 1
         body = (f'<h1>{pages._E(str(ws.root))}</h1>' + pages.signal_buttons()
-                + frag("/fragment/overview") + "<h2>runs</h2>" + frag("/fragment/runs"))
+                + frag("/fragment/overview") + "<h2>runs</h2>" + frag(f"/fragment/runs?page={page}"))
         return shell("workspace", body)
 
     def run_page(request: Request) -> Response:
@@ -131,7 +138,11 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         return HTMLResponse(pages.overview_fragment(data.panel(lambda: data.overview(ws))))
 
     def f_runs(request: Request) -> Response:
-        return HTMLResponse(pages.runs_fragment(data.panel(lambda: data.runs(ws))))
+        try:
+            page = int(request.query_params.get("page", "1"))
+        except ValueError:
+            page = 1
+        return HTMLResponse(pages.runs_fragment(data.panel(lambda: data.runs_page(ws, page, cache=runs_cache))))
 
     def f_run(request: Request) -> Response:
         run_id = _check_id(request.path_params["run_id"], "run id")
@@ -206,6 +217,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         if sid:
             _check_id(sid, "session id")
         root_files = [f for f, _ in DOCUMENTS.values()]
+        tracker = Tracker(ws, request.query_params.getlist("f"))
 
         def wanted_dirs() -> list[str]:
             extra = [f"evidence/{sid}"] if sid and (ws.root / "evidence" / sid).is_dir() else (["evidence"] if sid else [])
@@ -216,7 +228,14 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
             woke = asyncio.Event()
             dirs = wanted_dirs()
             watcher = WorkspaceWatcher(ws.root, dirs=dirs, files=root_files)
-            loop.add_reader(watcher.fileno(), woke.set)
+
+            def readable(w: WorkspaceWatcher) -> None:
+                # Drain at once: the wake-up socket is level-triggered, and left readable during
+                # the coalescing sleep it would call this on every loop iteration (a busy loop).
+                w.clear()
+                woke.set()
+
+            loop.add_reader(watcher.fileno(), readable, watcher)
             count = 0
             try:
                 yield "retry: 1000\n\n"
@@ -233,8 +252,11 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                         await asyncio.sleep(1.0 / MAX_EVENT_RATE_HZ)  # coalesce bursts of renames
                         watcher.clear()
                         woke.clear()
-                        count += 1
-                        yield f"event: change\ndata: {count}\n\n"
+                        # Only the page's fragments whose inputs changed (changes.py); none: say nothing.
+                        which = tracker.changed() if tracker.urls else None
+                        if which is None or which:
+                            count += 1
+                            yield f"event: change\ndata: {json.dumps(which)}\n\n"
                     else:
                         yield ": keep-alive\n\n"
                     if wanted_dirs() != dirs:  # e.g. the session's evidence directory appeared
@@ -242,9 +264,9 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                         watcher.close()
                         dirs = wanted_dirs()
                         watcher = WorkspaceWatcher(ws.root, dirs=dirs, files=root_files)
-                        loop.add_reader(watcher.fileno(), woke.set)
+                        loop.add_reader(watcher.fileno(), readable, watcher)
                         count += 1
-                        yield f"event: change\ndata: {count}\n\n"
+                        yield "event: change\ndata: null\n\n"
             finally:
                 loop.remove_reader(watcher.fileno())
                 watcher.close()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -25,7 +26,7 @@ from phyagentos.protocol import SessionRecord, Workspace, fold_signals
 from phyagentos.protocol.archive import SessionArchive
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["Panel", "panel", "overview", "runs", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
+__all__ = ["Panel", "panel", "overview", "runs", "runs_page", "RunsCache", "RUNS_PER_PAGE", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
            "SESSION_LINK_PATTERN"]
 
 logger = logging.getLogger(__name__)
@@ -60,24 +61,76 @@ def overview(ws: Workspace) -> dict[str, Any]:
             "estop_reason": signals.estop.reason if signals.estop else "", "active": active}
 
 
-def runs(ws: Workspace) -> list[dict[str, Any]]:
-    """Every run of the workspace (``runs/<id>/RUN.md``), newest first; a malformed RUN.md is a row with its error."""
-    out = []
-    directory = ws.root / "runs"
-    if not directory.is_dir():
+class RunsCache:
+    """Rows of ``runs/<id>/RUN.md`` kept between requests, re-read only when a file's
+    ``(mtime_ns, size)`` changed: listing 1,000 runs costs a ``scandir`` and a ``stat`` each."""
+
+    def __init__(self) -> None:
+        self._rows: dict[str, tuple[tuple[int, int], dict[str, Any]]] = {}
+        self.reads = 0
+        self._lock = threading.Lock()
+
+    def rows(self, ws: Workspace) -> list[dict[str, Any]]:
+        """Every run's row, newest first (see :func:`runs`)."""
+        with self._lock:
+            return self._rows_locked(ws)
+
+    def _rows_locked(self, ws: Workspace) -> list[dict[str, Any]]:
+        out = []
+        directory = ws.root / "runs"
+        if not directory.is_dir():
+            return out
+        seen = set()
+        for entry in os.scandir(directory):
+            if entry.name.startswith(".") or not entry.is_dir():
+                continue
+            seen.add(entry.name)
+            try:
+                st = os.stat(os.path.join(entry.path, "RUN.md"))
+                key = (st.st_mtime_ns, st.st_size)
+            except OSError:
+                key = (0, -1)
+            hit = self._rows.get(entry.name)
+            if hit is not None and hit[0] == key:
+                out.append(hit[1])
+                continue
+            self.reads += 1
+            row = _run_row(ws, entry.name)
+            self._rows[entry.name] = (key, row)
+            out.append(row)
+        for gone in set(self._rows) - seen:
+            del self._rows[gone]
+        out.sort(key=lambda r: (r["submitted_at"], r["run_id"]), reverse=True)
         return out
-    for entry in os.scandir(directory):
-        if entry.name.startswith(".") or not entry.is_dir():
-            continue
-        try:
-            rec = ws.runs.load(entry.name)
-            out.append({"run_id": rec.run_id, "goal_graph": rec.goal_graph, "state": rec.state,
-                        "succeeded": rec.succeeded, "submitted_at": str(rec.submitted_at), "error": None})
-        except PhyAgentOSError as exc:
-            out.append({"run_id": entry.name, "goal_graph": "", "state": "?", "succeeded": None, "submitted_at": "",
-                        "error": str(exc)})
-    out.sort(key=lambda r: r["submitted_at"], reverse=True)
-    return out
+
+
+def _run_row(ws: Workspace, name: str) -> dict[str, Any]:
+    try:
+        rec = ws.runs.load(name)
+        return {"run_id": rec.run_id, "goal_graph": rec.goal_graph, "state": rec.state,
+                "succeeded": rec.succeeded, "submitted_at": str(rec.submitted_at), "error": None}
+    except PhyAgentOSError as exc:
+        return {"run_id": name, "goal_graph": "", "state": "?", "succeeded": None, "submitted_at": "",
+                "error": str(exc)}
+
+
+def runs(ws: Workspace, cache: RunsCache | None = None) -> list[dict[str, Any]]:
+    """Every run of the workspace (``runs/<id>/RUN.md``), newest first; a malformed RUN.md is a row with its error."""
+    return (cache or RunsCache()).rows(ws)
+
+
+#: Runs per page of the index.
+RUNS_PER_PAGE = 50
+
+
+def runs_page(ws: Workspace, page: int, *, cache: RunsCache | None = None,
+              per_page: int = RUNS_PER_PAGE) -> dict[str, Any]:
+    """Page ``page`` (1-based, clamped) of :func:`runs`: ``{rows, page, pages, total, per_page}``."""
+    rows = runs(ws, cache)
+    pages = max(1, -(-len(rows) // per_page))
+    page = min(max(1, page), pages)
+    return {"rows": rows[(page - 1) * per_page: page * per_page], "page": page, "pages": pages,
+            "total": len(rows), "per_page": per_page}
 
 
 def _graph_nodes(ws: Workspace, run_id: str) -> list[dict[str, Any]]:

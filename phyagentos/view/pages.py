@@ -11,6 +11,7 @@ import html
 import json
 from typing import Any, Iterable
 
+from .changes import FINISHED_STATES
 from .data import Panel
 
 __all__ = ["page", "error_box", "overview_fragment", "runs_fragment", "run_fragment", "session_fragment",
@@ -90,17 +91,25 @@ def overview_fragment(p: Panel) -> str:
 
 
 def runs_fragment(p: Panel) -> str:
+    """One page of the run list (``p.data`` from :func:`~phyagentos.view.data.runs_page`) with page links."""
     if p.error:
         return error_box(p.error)
-    if not p.data:
+    d = p.data
+    if not d["rows"]:
         return "<p class='muted'>no run yet: <code>phyagentos run GRAPH --workspace WS</code></p>"
     rows = []
-    for r in p.data:
+    for r in d["rows"]:
         outcome = "" if r["succeeded"] is None else ("succeeded" if r["succeeded"] else "failed")
         rows.append((f'<a href="/run/{_E(r["run_id"])}">{_E(r["run_id"])}</a>', _E(r["goal_graph"]),
                      _state(r["state"]) + (" " + _state(outcome) if outcome else ""), _E(r["submitted_at"]),
                      error_box(r["error"]) if r["error"] else ""))
-    return _table(("run", "goal graph", "state", "submitted", ""), rows, cls="runs")
+    page, pages = d["page"], d["pages"]
+    first = (page - 1) * d["per_page"] + 1
+    nav = (f'<p class="pager small" data-page="{page}" data-pages="{pages}">runs {first}-{first + len(rows) - 1} '
+           f'of {d["total"]} · page {page} of {pages}'
+           + (f' · <a href="/?page={page - 1}" rel="prev">newer</a>' if page > 1 else "")
+           + (f' · <a href="/?page={page + 1}" rel="next">older</a>' if page < pages else "") + "</p>")
+    return nav + _table(("run", "goal graph", "state", "submitted", ""), rows, cls="runs")
 
 
 def run_fragment(p: Panel, svg: Panel) -> str:
@@ -208,7 +217,9 @@ def session_fragment(p: Panel) -> str:
     r = d["record"]
     files_url = f"/files/{d['evidence_dir']}"
     res = r.get("result") or {}
-    head = (f'<p><span id="session-state" data-state="{_E(r["state"])}">{_state(r["state"])}</span> '
+    finished = "true" if r["state"] in FINISHED_STATES else "false"
+    head = (f'<p><span id="session-state" data-state="{_E(r["state"])}" data-finished="{finished}">'
+            f'{_state(r["state"])}</span> '
             f'node <b>{_E(r["node"])}</b> · skill <b>{_E(r["skill"])}</b> ({_E(r["skill_runtime"])}) · target '
             f'<b>{_E(r["target"])}</b> · run <a href="/run/{_E(r["run_id"])}">{_E(r["run_id"])}</a>'
             + (f" · parent {_session_link(r['parent_session_id'])}" if r.get("parent_session_id") else "")

@@ -7,13 +7,20 @@
   const token = meta("phyagentos-token") || sessionStorage.getItem("phyagentos-token") || "";
   const scope = meta("phyagentos-scope");
 
-  // -- panels: re-fetch every [data-fragment] on each change event --------------------
-  let inflight = false, again = false;
-  async function refresh() {
-    if (inflight) { again = true; return; }
+  // -- panels: re-fetch the [data-fragment]s the server says changed ------------------
+  // The stream is told which fragments this page shows (?f=URL); each "change" event
+  // carries the list of those whose inputs changed (null: all of them).
+  const fragmentEls = () => [...document.querySelectorAll("[data-fragment]")];
+  let inflight = false, queued = null;
+  async function refresh(which) {
+    const want = which ? new Set(which) : null;
+    if (inflight) {
+      queued = (want === null || queued === "all") ? "all" : new Set([...(queued || []), ...want]);
+      return;
+    }
     inflight = true;
     try {
-      await Promise.all([...document.querySelectorAll("[data-fragment]")].map(async (el) => {
+      await Promise.all(fragmentEls().filter((el) => !want || want.has(el.dataset.fragment)).map(async (el) => {
         try {
           const r = await fetch(el.dataset.fragment, {cache: "no-store"});
           const html = await r.text();
@@ -23,18 +30,39 @@
       document.dispatchEvent(new Event("phyagentos:refreshed"));
     } finally {
       inflight = false;
-      if (again) { again = false; refresh(); }
+      if (queued !== null) { const q = queued; queued = null; refresh(q === "all" ? null : [...q]); }
     }
   }
   const dot = document.getElementById("live");
+  // One stream per visible page. A hidden page (another tab in front, or a page kept in the
+  // back/forward cache) closes its stream: Chromium allows 6 connections per host, and
+  // streams held by cached pages and background tabs would otherwise starve new loads.
+  let es = null;
   function connect() {
-    const es = new EventSource("/events" + (scope ? "?session=" + encodeURIComponent(scope) : ""));
-    es.onopen = () => { dot.className = "live on"; refresh(); };
-    es.addEventListener("change", refresh);
+    if (es) return;
+    const q = new URLSearchParams();
+    if (scope) q.set("session", scope);
+    for (const el of fragmentEls()) q.append("f", el.dataset.fragment);
+    es = new EventSource("/events?" + q.toString());
+    es.onopen = () => { dot.className = "live on"; refresh(null); };
+    es.addEventListener("change", (ev) => {
+      let which = null;
+      try { which = JSON.parse(ev.data); } catch (e) { which = null; }
+      refresh(Array.isArray(which) ? which : null);
+    });
     es.onerror = () => { dot.className = "live off"; };
   }
-  refresh();
-  connect();
+  function disconnect() {
+    if (es) { es.close(); es = null; dot.className = "live paused"; }
+  }
+  window.addEventListener("pagehide", disconnect);
+  window.addEventListener("pageshow", () => { if (document.visibilityState !== "hidden") connect(); });
+  document.addEventListener("visibilitychange", () => {
+    if (document.visibilityState === "hidden") disconnect(); else connect();
+  });
+  window.phyagentosStream = () => (es ? es.readyState : -1);  // tests: 0 connecting, 1 open, -1 closed
+  refresh(null);
+  if (document.visibilityState !== "hidden") connect();
 
   // -- signals ---------------------------------------------------------------------
   document.addEventListener("click", async (ev) => {
@@ -106,7 +134,7 @@
     // While the session is live, follow its checkpoint; once finished, scrub the recording.
     document.addEventListener("phyagentos:refreshed", async () => {
       const st = document.getElementById("session-state");
-      const terminal = st && ["succeeded", "failed", "cancelled", "rejected", "timed_out", "awaiting_replan"].includes(st.dataset.state);
+      const terminal = st && st.dataset.finished === "true";  // the server's one set (changes.FINISHED_STATES)
       await loadFrames();
       if (terminal && times.length && live) { live = false; slider.value = slider.max; show(); return; }
       // Following a live session: at most one server render per second, whatever the event rate.

@@ -1,0 +1,176 @@
+"""The live view's three bugs of issue 34, each in a real headless Chromium.
+
+One real ``phyagentos run`` (a pick of a heavy cube that slips, replanned with a firmer
+grip, recorded with ``--record all``) gives a workspace with a ``replanned`` session and
+its recording; a real ``phyagentos view`` serves it.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from selenium.webdriver.common.by import By
+
+from phyagentos.protocol import Workspace
+from phyagentos.protocol.atomic import atomic_write_text
+from phyagentos.protocol.schemas import RunRecord, utc_now_iso
+
+from test_view_browser import browser, screenshot, start_view, wait_for
+
+CLI = [sys.executable, "-m", "phyagentos.cli"]
+ROOT = Path(__file__).resolve().parents[1]
+
+REPLAN_GRAPH = """\
+version: 1
+name: replan_demo
+description: A pick of a heavy cube that slips; the verifier asks for a replan with a firmer grip.
+defaults:
+  target: franka_tabletop
+scene:
+  objects:
+    - {name: cube, half_extents: [0.02, 0.02, 0.02], position: [0.5, -0.2], rgba: [0.8, 0.1, 0.1, 1]}
+  perturbations:
+    - {kind: heavy_object, object: cube, mass_kg: 1.5}
+nodes:
+  - id: pick_cube
+    skill: pick
+    params: {object: cube}
+    accept: {holding: cube, lifted: {object: cube, min_height: 0.05}}
+"""
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+@pytest.fixture(scope="module")
+def replanned(tmp_path_factory):
+    """A finished run whose first session was replanned, recorded; its view server and a browser."""
+    root = tmp_path_factory.mktemp("replan")
+    graph = root / "replan_demo.yaml"
+    graph.write_text(REPLAN_GRAPH, encoding="utf-8")
+    ws_dir = root / "ws"
+    proc = subprocess.run([*CLI, "run", str(graph), "--workspace", str(ws_dir), "--record", "all"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    ws = Workspace.open(ws_dir)
+    sessions = {s.state: s for s in ws.list_sessions()}
+    assert set(sessions) == {"replanned", "succeeded"}, sessions
+    view, url, token = start_view(ws_dir)
+    driver = browser()
+    try:
+        yield {"ws": ws, "url": url, "driver": driver, "failed": sessions["replanned"],
+               "child": sessions["succeeded"], "view": view}
+    finally:
+        driver.quit()
+        _stop(view)
+
+
+def _loaded(driver) -> bool:
+    """Every panel of the page has been filled from its fragment at least once."""
+    return driver.execute_script("return document.readyState === 'complete' && "
+                                 "[...document.querySelectorAll('[data-fragment]')].every(e => e.dataset.html !== undefined)")
+
+
+def test_many_navigations_in_one_tab_and_seven_tabs_all_load_quickly(replanned):
+    driver, url = replanned["driver"], replanned["url"]
+    run_id, failed = replanned["failed"].run_id, replanned["failed"].session_id
+    driver.set_page_load_timeout(20)
+    pages = ["/", f"/run/{run_id}", f"/session/{failed}", "/memory"]
+    times = []
+    for i in range(10):  # more than Chromium's 6 connections per host
+        t0 = time.monotonic()
+        driver.get(url + pages[i % len(pages)])
+        wait_for(lambda: _loaded(driver), timeout=8, what=f"navigation {i + 1} to load")
+        wait_for(lambda: driver.execute_script("return window.phyagentosStream() === 1"), timeout=8,
+                 what=f"navigation {i + 1}'s live stream to open")
+        times.append(time.monotonic() - t0)
+    # back and forward through the cache: the page comes back with its stream reopened
+    driver.back()
+    wait_for(lambda: driver.execute_script("return window.phyagentosStream() === 1"), timeout=8,
+             what="the stream after going back")
+    first = driver.current_window_handle
+    for i in range(7):  # seven tabs, each with the live index
+        driver.switch_to.new_window("tab")
+        t0 = time.monotonic()
+        driver.get(url + "/")
+        wait_for(lambda: _loaded(driver), timeout=8, what=f"tab {i + 2} to load")
+        times.append(time.monotonic() - t0)
+    assert max(times) < 8, times
+    for handle in driver.window_handles:
+        if handle != first:
+            driver.switch_to.window(handle)
+            driver.close()
+    driver.switch_to.window(first)
+
+
+def test_the_3d_panel_of_a_replanned_session_shows_its_recording(replanned):
+    driver, url, failed = replanned["driver"], replanned["url"], replanned["failed"]
+    assert (replanned["ws"].root / "evidence" / failed.session_id / "frames.npz").is_file()
+    driver.get(f"{url}/session/{failed.session_id}")
+    wait_for(lambda: driver.find_element(By.ID, "session-state").get_attribute("data-state") == "replanned",
+             timeout=15, what="the replanned state")
+    assert driver.find_element(By.ID, "session-state").get_attribute("data-finished") == "true"
+    wait_for(lambda: driver.find_element(By.CSS_SELECTOR, "img.scene").get_attribute("data-source") == "recording",
+             timeout=20, what="the 3D scene rendered from the recording")
+    slider = driver.find_element(By.CSS_SELECTOR, "input.frame")
+    assert slider.is_enabled() and int(slider.get_attribute("max")) > 10
+    screenshot(driver, "session_replanned")
+
+
+def _cpu_s(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def test_the_index_with_1000_runs_stays_cheap_under_churn_and_is_paged(tmp_path):
+    ws = Workspace.create(tmp_path / "ws")
+    for i in range(1000):
+        ws.runs.register(RunRecord(run_id=f"r{i:05d}", goal_graph="g.yaml", graph_file="",
+                                   submitted_at=utc_now_iso()), "version: 1\nname: g\nnodes: []\n")
+    view, url, _ = start_view(tmp_path / "ws")
+    driver = browser()
+    try:
+        driver.get(url + "/")
+        wait_for(lambda: driver.find_element(By.CSS_SELECTOR, ".pager").get_attribute("data-pages") == "20",
+                 timeout=20, what="the first page of 20")
+        assert len(driver.find_elements(By.CSS_SELECTOR, "table.runs tbody tr")) == 50
+        # churn: a session file rewritten at 20 Hz (what a live session does), an index hint
+        # renamed at 2 Hz and a run registered every second, for 5 s
+        index = ws.root / "sessions" / ".index"
+        index.mkdir(parents=True, exist_ok=True)
+        hint = index / "churn-1~running"
+        hint.write_text("{}")
+        cpu0, w0, i = _cpu_s(view.pid), time.monotonic(), 0
+        while time.monotonic() - w0 < 5.0:
+            i += 1
+            atomic_write_text(ws.root / "sessions" / "churn-1.md", f"beat {i}\n")
+            if i % 10 == 0:
+                dest = index / ("churn-1~" + ("claimed" if hint.name.endswith("running") else "running"))
+                os.rename(hint, dest)
+                hint = dest
+            if i % 20 == 0:
+                ws.runs.register(RunRecord(run_id=f"new{i:04d}", goal_graph="g.yaml", graph_file="",
+                                           submitted_at=utc_now_iso()), "version: 1\nname: g\nnodes: []\n")
+            time.sleep(0.05)
+        cpu = (_cpu_s(view.pid) - cpu0) / (time.monotonic() - w0)
+        # the newest run is on page 1 without a reload
+        wait_for(lambda: "new" in driver.find_element(By.CSS_SELECTOR, "table.runs tbody tr a").text, timeout=10,
+                 what="the newest run at the top of page 1")
+        assert cpu < 0.25, f"view server used {cpu:.0%} of a core under churn"
+        driver.find_element(By.CSS_SELECTOR, ".pager a[rel=next]").click()
+        wait_for(lambda: driver.find_element(By.CSS_SELECTOR, ".pager").get_attribute("data-page") == "2",
+                 timeout=10, what="page 2")
+    finally:
+        driver.quit()
+        _stop(view)

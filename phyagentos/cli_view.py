@@ -44,8 +44,26 @@ def add_view_commands(sub: argparse._SubParsersAction) -> None:
     _add_record(sub.choices["bench"], default_mode="failures")
 
 
+def _no_workspace_hint(path: Path) -> str:
+    """What to type when ``path`` holds no workspace yet (a plain CLI hint, no Python API)."""
+    from phyagentos.resources import goal_graphs_dir  # noqa: PLC0415
+
+    example = goal_graphs_dir() / "hold.yaml"
+    state = "does not exist" if not path.exists() else ("is empty" if path.is_dir() and not any(path.iterdir())
+                                                        else "holds no SESSIONS.md")
+    return (f"{path} is not a PhyAgentOS workspace yet ({state}).\n"
+            f"A workspace is created by the first run submitted to it, e.g.:\n"
+            f"    phyagentos run {example} --workspace {path}\n"
+            f"then, in another terminal (or after it):\n"
+            f"    phyagentos view {path}")
+
+
 def _cmd_view(args, out: Console, err: Console) -> int:
     from phyagentos.view import serve  # noqa: PLC0415 - starlette/uvicorn only for this command
+
+    if not (Path(args.workspace) / "SESSIONS.md").is_file():
+        err.print(_no_workspace_hint(Path(args.workspace)), markup=False, highlight=False, soft_wrap=True)
+        return 2
 
     def announce(url: str, token: str) -> None:
         out.print(f"phyagentos view of {args.workspace}: [bold]{url}[/bold]", soft_wrap=True)

@@ -125,6 +125,16 @@ def test_the_3d_panel_of_a_replanned_session_shows_its_recording(replanned):
              timeout=20, what="the 3D scene rendered from the recording")
     slider = driver.find_element(By.CSS_SELECTOR, "input.frame")
     assert slider.is_enabled() and int(slider.get_attribute("max")) > 10
+    # the tree table never lies over the 3D image (narrow window: the columns stack or scroll)
+    wait_for(lambda: driver.find_elements(By.CSS_SELECTOR, "table.tree tr.bt"), timeout=15, what="the tree")
+    for width in (1280, 900):
+        driver.set_window_size(width, 1000)
+        hit = driver.execute_script("const i = document.querySelector('img.scene'); i.scrollIntoView({block: 'center'});"
+                                    "const r = i.getBoundingClientRect();"
+                                    "const e = document.elementFromPoint(r.left + 5, r.top + r.height / 2);"
+                                    "return e ? e.tagName + '.' + e.className : ''")
+        assert hit == "IMG.scene", (width, hit)
+    driver.set_window_size(1280, 1000)
     screenshot(driver, "session_replanned")
 
 
@@ -171,6 +181,64 @@ def test_the_index_with_1000_runs_stays_cheap_under_churn_and_is_paged(tmp_path)
         driver.find_element(By.CSS_SELECTOR, ".pager a[rel=next]").click()
         wait_for(lambda: driver.find_element(By.CSS_SELECTOR, ".pager").get_attribute("data-page") == "2",
                  timeout=10, what="page 2")
+    finally:
+        driver.quit()
+        _stop(view)
+
+
+HOLD_GRAPH = """\
+version: 1
+name: paused_demo
+description: One hold submitted while no supervisor runs.
+defaults:
+  target: franka_tabletop
+nodes:
+  - id: settle
+    skill: hold
+    params: {duration_s: 0.5}
+    accept: {still: {max_joint_motion_rad: 0.01}}
+"""
+
+
+def test_pause_and_estop_in_force_show_on_the_run_and_session_pages(tmp_path):
+    graph = tmp_path / "paused_demo.yaml"
+    graph.write_text(HOLD_GRAPH, encoding="utf-8")
+    ws_dir = tmp_path / "ws"
+    proc = subprocess.run([*CLI, "submit", str(graph), "--workspace", str(ws_dir)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    ws = Workspace.open(ws_dir)
+    (sid, state, ident), = ws.active_sessions()
+    assert state == "pending"
+    view, url, _ = start_view(ws_dir)
+    driver = browser()
+    try:
+        driver.get(url + "/")
+        pause = wait_for(lambda: driver.find_element(By.CSS_SELECTOR, "button.sig[data-kind=pause]"), timeout=15,
+                         what="the pause button")
+        assert pause.text == "pause dispatch" and "no new session" in pause.get_attribute("title")
+        pause.click()
+        wait_for(lambda: driver.find_elements(By.CSS_SELECTOR, "#signal-state [data-signal=paused]"), timeout=15,
+                 what="the pause on the index")
+        driver.get(f"{url}/run/{ident.run_id}")
+
+        def node_text() -> str:
+            return driver.execute_script("const e = document.querySelector('.nodestate[data-node=\"settle\"]');"
+                                         "return e ? e.textContent : ''")
+
+        wait_for(lambda: node_text() == "paused", timeout=15, what="the node shown paused on the run page")
+        assert driver.find_elements(By.CSS_SELECTOR, ".signal-state [data-signal=paused]")
+        assert "state-paused" in driver.find_element(By.ID, "node-settle").get_attribute("class")
+        screenshot(driver, "run_paused")
+        driver.get(f"{url}/session/{sid}")
+        wait_for(lambda: driver.find_element(By.ID, "session-state").get_attribute("data-held") == "paused",
+                 timeout=15, what="the session held by the pause")
+        assert "running" not in driver.find_element(By.ID, "session-state").text
+        driver.find_element(By.CSS_SELECTOR, "button.sig.estop").click()
+        wait_for(lambda: driver.find_element(By.ID, "session-state").get_attribute("data-held") == "held_by_estop",
+                 timeout=15, what="the session held by the e-stop, without a reload")
+        assert driver.find_elements(By.CSS_SELECTOR, ".signal-state [data-signal=estop]")
+        assert driver.find_elements(By.CSS_SELECTOR, ".signal-state [data-signal=paused]")
     finally:
         driver.quit()
         _stop(view)

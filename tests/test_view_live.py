@@ -242,3 +242,48 @@ def test_pause_and_estop_in_force_show_on_the_run_and_session_pages(tmp_path):
     finally:
         driver.quit()
         _stop(view)
+
+
+def test_one_cursor_moves_the_plots_the_3d_frame_the_images_and_the_transitions(replanned):
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    driver, url, failed = replanned["driver"], replanned["url"], replanned["failed"]
+    driver.get(f"{url}/session/{failed.session_id}")
+    wait_for(lambda: driver.find_element(By.CSS_SELECTOR, "section.timeline").get_attribute("data-ready") == "true",
+             timeout=20, what="the timeline")
+    names = driver.execute_script("return [...document.querySelectorAll('.tl-plot')].map(p => p.dataset.name)")
+    assert names == ["joint positions", "gripper opening", "finger effort", "wrist force", "tracking error"], names
+    sig = driver.execute_script(f"return fetch('/api/signals/{failed.session_id}').then(r => r.json())")
+    frames, t0, t1 = sig["frames"], sig["t0"], sig["t1"]
+    assert [e["code"] for e in sig["events"]] == ["grasp.slip"]  # the slip that made the verifier replan
+
+    def state():
+        return driver.execute_script(
+            "const img = document.querySelector('img.scene');"
+            "return {cursor: Number(document.querySelector('section.timeline').dataset.cursorT),"
+            " slider: Number(document.querySelector('input.frame').value), shown: img.dataset.shown,"
+            " t3d: Number(img.dataset.t), at: [...document.querySelectorAll('ol.timeline li')]"
+            "   .findIndex(li => li.classList.contains('at-cursor')),"
+            " images: [...document.querySelectorAll('.tl-images img')].map(i => i.dataset.name)}")
+
+    canvas = driver.find_elements(By.CSS_SELECTOR, "canvas.tl-canvas")[3]  # the wrist force plot
+    width = canvas.size["width"]
+    for fraction in (0.3, 0.75):
+        # click at `fraction` of the time axis (52 px left margin, 8 px right)
+        x = 52 + (width - 60) * fraction
+        ActionChains(driver).move_to_element_with_offset(canvas, int(x - width / 2), 0).click().perform()
+        want = t0 + (t1 - t0) * fraction
+        wait_for(lambda: abs(state()["cursor"] - want) < (t1 - t0) * 0.02, timeout=5, what="the cursor on the plots")
+        s = state()
+        nearest = min(range(len(frames)), key=lambda i: abs(frames[i] - s["cursor"]))
+        wait_for(lambda: state()["shown"] == str(nearest) and abs(state()["t3d"] - frames[nearest]) < 1e-3,
+                 timeout=15, what=f"the 3D scene at frame {nearest}")
+        assert state()["slider"] == nearest
+        assert state()["at"] == 3  # the item after "start": the session is running at that instant
+        assert any(n.startswith("01_ObserveScene") for n in state()["images"])  # the last camera image before it
+    screenshot(driver, "timeline")
+    # the 3D slider moves the cursor (and so the plots) back
+    driver.execute_script("const s = document.querySelector('input.frame'); s.value = '2';"
+                          "s.dispatchEvent(new Event('input'))")
+    wait_for(lambda: abs(state()["cursor"] - frames[2]) < 1e-3, timeout=5, what="the cursor following the slider")
+    assert state()["at"] in (0, 3)

@@ -16,6 +16,7 @@ Routes (all read-only except ``POST /api/signal``):
                                 coalesced to at most 10 per second
 ``/api/tree/{id}``              ``tree.json`` as published by the runner
 ``/api/frames/{id}``            the recorded instants of a session (simulated time per frame)
+``/api/signals/{id}``           the session's signals on one simulated-time axis (signals.py)
 ``/api/scene/{id}.png``         the scene at ``frame=N`` (or the current checkpoint) from a free
                                 camera (``az``, ``el``, ``dist`` in degrees and metres)
 ``/files/{path}``               a file inside the workspace (never outside it; see security.py)
@@ -51,6 +52,7 @@ from . import data, pages
 from .changes import FINISHED_STATES, Tracker
 from .graph_svg import to_svg
 from .scene3d import SceneRenderer, frames_of
+from .signals import session_signals
 from .security import TOKEN_HEADER, AccessPolicy, safe_path
 
 __all__ = ["create_app", "serve", "bind"]
@@ -127,6 +129,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                   '<input type="range" class="frame" min="0" max="0" value="0" disabled>'
                   '<span class="frame-info small"></span></div>'
                   '<p class="small muted">drag to orbit, wheel to zoom</p></div></section></div>'
+                + pages.timeline_section(sid)
                 + frag(f"/fragment/session/{sid}"))
         return shell(f"session {sid}", body, scope=sid)
 
@@ -174,6 +177,18 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
             return JSONResponse({"count": 0, "t": []})
         return JSONResponse({"count": len(frames["t"]), "t": [round(x, 3) for x in frames["t"]],
                              "camera": frames["camera"], "fps": frames["fps"]})
+
+    def api_signals(request: Request) -> Response:
+        sid = _check_id(request.path_params["session_id"], "session id")
+        try:
+            rec = ws.load_session(sid).model_dump(mode="json")
+            try:
+                layout = renderer.joint_layout(sid)
+            except (PhyAgentOSError, ValueError):
+                layout = None  # plots fall back to q1..q7, no recorded opening
+            return JSONResponse(session_signals(ws.root, rec, layout=layout))
+        except PhyAgentOSError as exc:
+            return JSONResponse({"error": str(exc)}, status_code=404)
 
     def api_scene(request: Request) -> Response:
         sid = _check_id(request.path_params["session_id"], "session id")
@@ -281,6 +296,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         Route("/fragment/session/{session_id}", f_session), Route("/fragment/tree/{session_id}", f_tree),
         Route("/fragment/memory", f_memory),
         Route("/api/tree/{session_id}", api_tree), Route("/api/frames/{session_id}", api_frames),
+        Route("/api/signals/{session_id}", api_signals),
         Route("/api/scene/{session_id}.png", api_scene), Route("/api/signal", api_signal, methods=["POST"]),
         Route("/events", events), Route("/files/{path:path}", files),
         Mount("/static", app=StaticFiles(directory=STATIC_DIR), name="static"),

@@ -271,6 +271,15 @@ def session_fragment(p: Panel) -> str:
             + f"<p class='small'>files: {files or '-'}</p>{bundle_html}")
 
 
+def timeline_section(session_id: str) -> str:
+    """The session's signals on one timeline (filled by view.js from ``/api/signals``): one cursor
+    moves the plots, the 3D scene, the camera images, the video, the transitions and the tree."""
+    return (f'<section class="timeline" data-session="{_E(session_id)}"><h2>signals on one timeline</h2>'
+            '<p class="small tl-head"><span class="tl-info muted">loading…</span> · click or drag on a plot to move '
+            'the cursor; the 3D slider, the video and the tree history move it too</p>'
+            '<div class="tl-plots"></div><div class="tl-images"></div></section>')
+
+
 def tree_fragment(p: Panel) -> str:
     """The live behaviour tree (indented by depth) and the blackboard values it uses."""
     if p.error:

@@ -39,13 +39,16 @@ _MAX_MODELS = 4
 
 
 def frames_of(directory: Path) -> dict[str, Any] | None:
-    """``{"t": [...], "qpos": (N, nq) array, "camera", "fps"}`` from ``frames.npz``, or None."""
+    """``{"t": [...], "qpos": (N, nq) array, "camera", "fps"[, "wall"]}`` from ``frames.npz``, or None."""
     path = directory / "frames.npz"
     if not path.is_file():
         return None
     with np.load(path, allow_pickle=False) as data:
-        return {"t": data["t"].astype(float), "qpos": data["qpos"], "camera": str(data["camera"]),
-                "fps": float(data["fps"])}
+        out = {"t": data["t"].astype(float), "qpos": data["qpos"], "camera": str(data["camera"]),
+               "fps": float(data["fps"])}
+        if "wall" in data.files:
+            out["wall"] = data["wall"].astype(float)
+        return out
 
 
 class SceneRenderer:
@@ -88,6 +91,33 @@ class SceneRenderer:
                 a frame out of range, or a target the view cannot rebuild.
         """
         return self._pool.submit(self._render, session_id, frame, azimuth, elevation, distance).result(timeout=60)
+
+    def joint_layout(self, session_id: str) -> dict[str, Any]:
+        """``{"arm": [(joint name, qpos index)...], "fingers": [qpos index...]}`` of the session's model.
+
+        Arm joints: hinge joints named ``...joint<digit>`` (at most 7, model order);
+        fingers: joints whose name contains ``finger``.
+
+        Raises:
+            ViewError: the target cannot be rebuilt.
+        """
+        return self._pool.submit(self._layout, session_id).result(timeout=60)
+
+    def _layout(self, session_id: str) -> dict[str, Any]:
+        try:
+            target, _ = self._target(session_id)
+        except TargetError as exc:
+            raise ViewError(str(exc)) from exc
+        m = target.model
+        arm, fingers = [], []
+        for j in range(m.njnt):
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
+            adr = int(m.jnt_qposadr[j])
+            if "finger" in name:
+                fingers.append(adr)
+            elif m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and name[-1:].isdigit() and len(arm) < 7:
+                arm.append((name.rsplit(":", 1)[-1].replace("panda0_", ""), adr))
+        return {"arm": arm, "fingers": fingers}
 
     def _target(self, session_id: str):
         if session_id in self._models:

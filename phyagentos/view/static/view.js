@@ -6,6 +6,7 @@
   if (params.get("token")) sessionStorage.setItem("phyagentos-token", params.get("token"));
   const token = meta("phyagentos-token") || sessionStorage.getItem("phyagentos-token") || "";
   const scope = meta("phyagentos-scope");
+  const esc = (x) => String(x).replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c]));
 
   // -- panels: re-fetch the [data-fragment]s the server says changed ------------------
   // The stream is told which fragments this page shows (?f=URL); each "change" event
@@ -83,13 +84,21 @@
     } finally { b.disabled = false; }
   });
 
+  // -- one cursor on simulated time, shared by plots, 3D, images, video, transitions, tree --
+  const cursor = {t: null, set(t, src) {
+    if (t === null || Number.isNaN(t)) return;
+    this.t = t;
+    document.dispatchEvent(new CustomEvent("phyagentos:cursor", {detail: {t: t, src: src}}));
+  }};
+  window.phyagentosCursor = cursor;
+
   // -- the robot in 3D: server-rendered MuJoCo frames, a timeline, orbit by drag ------
   const box = document.querySelector(".scene3d");
   if (box) {
     const sid = box.dataset.session, img = box.querySelector("img.scene"), slider = box.querySelector("input.frame");
     const info = box.querySelector(".frame-info");
     const cam = {az: 140, el: -25, dist: 1.9};
-    let times = [], live = true, pending = null, loading = false, lastLive = 0;
+    let times = [], live = true, pending = null, loading = false, lastLive = 0, requested = -1;
     function src() {
       const f = live ? "live" : slider.value;
       return `/api/scene/${encodeURIComponent(sid)}.png?frame=${f}&az=${cam.az.toFixed(1)}&el=${cam.el.toFixed(1)}&dist=${cam.dist.toFixed(2)}`;
@@ -106,6 +115,7 @@
           const t = r.headers.get("X-Scene-Time"), s = r.headers.get("X-Scene-Source");
           info.textContent = `${s} · t = ${t} s` + (live ? "" : ` · frame ${slider.value}/${times.length - 1}`);
           img.dataset.source = s; img.dataset.t = t;
+          const m = /frame=(\d+)/.exec(url); img.dataset.shown = m ? m[1] : "live";
         } else {
           info.textContent = await r.text();
         }
@@ -121,7 +131,19 @@
         }
       } catch (e) { /* keep the last */ }
     }
-    slider.addEventListener("input", () => { live = false; show(); });
+    slider.addEventListener("input", () => {
+      live = false; show();
+      if (times.length) cursor.set(times[Number(slider.value)], "3d");
+    });
+    document.addEventListener("phyagentos:cursor", async (ev) => {
+      if (ev.detail.src === "3d") return;
+      if (!times.length) await loadFrames();
+      if (!times.length) return;
+      let best = 0;  // the recorded frame nearest to the cursor
+      for (let i = 1; i < times.length; i++) if (Math.abs(times[i] - ev.detail.t) < Math.abs(times[best] - ev.detail.t)) best = i;
+      live = false;
+      if (requested !== best) { requested = best; slider.value = String(best); show(); }
+    });
     let drag = null;
     img.addEventListener("mousedown", (e) => { drag = {x: e.clientX, y: e.clientY}; e.preventDefault(); });
     window.addEventListener("mouseup", () => { drag = null; });
@@ -142,5 +164,130 @@
       if (live && now - lastLive >= 1000) { lastLive = now; show(); }
       else if (!img.src) { show(); }
     });
+  }
+
+  // -- signals on one timeline: canvas plots against simulated time --------------------
+  const tl = document.querySelector("section.timeline");
+  if (tl) {
+    const sid = tl.dataset.session, plotsBox = tl.querySelector(".tl-plots"), info = tl.querySelector(".tl-info");
+    const imagesBox = tl.querySelector(".tl-images");
+    const COLORS = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f", "#5d4037", "#9e9d24"];
+    let sig = null, loadedFinal = false, lastFetch = 0;
+    const W = () => Math.max(320, Math.min(1100, plotsBox.clientWidth || 900)), H = 120, PADL = 52, PADR = 8;
+    const xOf = (t, w) => PADL + (w - PADL - PADR) * (sig.t1 > sig.t0 ? (t - sig.t0) / (sig.t1 - sig.t0) : 0);
+    const tOf = (x, w) => sig.t0 + (sig.t1 - sig.t0) * Math.max(0, Math.min(1, (x - PADL) / (w - PADL - PADR)));
+    function draw(canvas) {
+      const p = sig.plots[Number(canvas.dataset.index)], w = canvas.width, ctx = canvas.getContext("2d");
+      ctx.clearRect(0, 0, w, H);
+      let lo = Infinity, hi = -Infinity;
+      for (const l of p.lines) for (const y of l.y) if (y !== null) { lo = Math.min(lo, y); hi = Math.max(hi, y); }
+      if (!(hi > lo)) { hi = (lo === Infinity ? 1 : lo + 1); lo = hi - 2; }
+      const pad = (hi - lo) * 0.08; lo -= pad; hi += pad;
+      const yOf = (y) => 6 + (H - 22) * (1 - (y - lo) / (hi - lo));
+      ctx.strokeStyle = "#cfd8dc"; ctx.strokeRect(PADL, 4, w - PADL - PADR, H - 18);
+      ctx.fillStyle = "#546e7a"; ctx.font = "10px sans-serif";
+      ctx.fillText(hi.toPrecision(3), 2, 12); ctx.fillText(lo.toPrecision(3), 2, H - 16);
+      ctx.fillText(`${sig.t0.toFixed(2)} s`, PADL, H - 3); ctx.fillText(`${sig.t1.toFixed(2)} s`, w - PADR - 44, H - 3);
+      for (const e of sig.events) {  // safety events: red lines
+        ctx.strokeStyle = "#e53935"; ctx.beginPath(); ctx.moveTo(xOf(e.t, w), 4); ctx.lineTo(xOf(e.t, w), H - 14); ctx.stroke();
+      }
+      p.lines.forEach((l, k) => {
+        ctx.strokeStyle = COLORS[k % COLORS.length]; ctx.lineWidth = 1.4; ctx.beginPath();
+        let pen = false;
+        for (let i = 0; i < l.t.length; i++) {
+          if (l.y[i] === null) { pen = false; continue; }
+          const x = xOf(l.t[i], w), y = yOf(l.y[i]);
+          if (!pen) { ctx.moveTo(x, y); pen = true; } else ctx.lineTo(x, y);
+        }
+        ctx.stroke();
+      });
+      if (cursor.t !== null) {
+        ctx.strokeStyle = "#000"; ctx.lineWidth = 1.5; ctx.beginPath();
+        ctx.moveTo(xOf(cursor.t, w), 2); ctx.lineTo(xOf(cursor.t, w), H - 14); ctx.stroke();
+      }
+    }
+    function valueAt(l, t) {  // the last sample at or before t
+      let v = null;
+      for (let i = 0; i < l.t.length && l.t[i] <= t + 1e-9; i++) v = l.y[i];
+      return v;
+    }
+    function build() {
+      plotsBox.innerHTML = "";
+      const w = W();
+      sig.plots.forEach((p, i) => {
+        const box = document.createElement("div"); box.className = "tl-plot"; box.dataset.name = p.name;
+        const head = document.createElement("div"); head.className = "small tl-legend";
+        head.innerHTML = `<b>${esc(p.name)}</b> <span class="muted">(${esc(p.unit)})</span> ` + p.lines.map((l, k) =>
+          `<span class="tl-key" style="color:${COLORS[k % COLORS.length]}">■ ${esc(l.label)} <span class="tl-val" data-k="${k}"></span></span>`).join(" ");
+        const c = document.createElement("canvas"); c.width = w; c.height = H; c.dataset.index = String(i);
+        c.className = "tl-canvas";
+        let dragging = false;
+        const move = (e) => { const r = c.getBoundingClientRect(); cursor.set(tOf(e.clientX - r.left, c.width), "plot"); };
+        c.addEventListener("mousedown", (e) => { dragging = true; move(e); e.preventDefault(); });
+        window.addEventListener("mouseup", () => { dragging = false; });
+        c.addEventListener("mousemove", (e) => { if (dragging) move(e); });
+        box.appendChild(head); box.appendChild(c); plotsBox.appendChild(box);
+      });
+      const ev = sig.events.map((e) => `<span class="tl-event" title="${esc(e.message)}">${e.t.toFixed(2)} s <code>${esc(e.code)}</code></span>`).join(" ");
+      info.innerHTML = `${sig.t0.toFixed(2)}–${sig.t1.toFixed(2)} s simulated · ${sig.frames.length} recorded frames` +
+        (ev ? ` · safety/target events (red): ${ev}` : " · no safety event") + (sig.notes.length ? ` · ${esc(sig.notes.join("; "))}` : "");
+      info.className = "tl-info";
+    }
+    function update() {
+      if (!sig) return;
+      tl.dataset.cursorT = cursor.t === null ? "" : cursor.t.toFixed(4);
+      for (const c of plotsBox.querySelectorAll("canvas")) draw(c);
+      for (const box of plotsBox.querySelectorAll(".tl-plot")) {
+        const p = sig.plots.find((q) => q.name === box.dataset.name);
+        box.querySelectorAll(".tl-val").forEach((s) => {
+          const v = valueAt(p.lines[Number(s.dataset.k)], cursor.t); s.textContent = v === null ? "" : `= ${v.toPrecision(4)}`;
+        });
+      }
+      // camera images: for each camera, the latest image at or before the cursor
+      const shown = {};
+      for (const im of sig.images) {
+        const cam = im.name.replace(/\.png$/, "").split("_").pop();
+        if (im.t <= cursor.t + 1e-9 || !(cam in shown)) shown[cam] = im;
+      }
+      const html = Object.entries(shown).map(([cam, im]) =>
+        `<figure><img src="${im.url}" alt="${esc(im.name)}" data-name="${esc(im.name)}"><figcaption>${esc(im.name)} · ${im.t.toFixed(2)} s</figcaption></figure>`).join("");
+      if (imagesBox.dataset.html !== html) { imagesBox.innerHTML = html; imagesBox.dataset.html = html; }
+      markTransitions();
+      syncVideo();
+    }
+    function markTransitions() {
+      const items = [...document.querySelectorAll("ol.timeline li")];
+      if (!sig || !items.length) return;
+      let at = 0;  // item 0 is the first state; item i + 1 follows transition i
+      sig.transitions.forEach((x, i) => { if (x.t <= cursor.t + 1e-9) at = i + 1; });
+      items.forEach((li, i) => li.classList.toggle("at-cursor", i === at));
+    }
+    function syncVideo() {
+      const v = document.querySelector(".images video");
+      if (!v || !v.paused || cursor.t === null) return;
+      const want = Math.max(0, cursor.t - sig.t0);
+      if (Math.abs((v.currentTime || 0) - want) > 0.05) { try { v.currentTime = want; } catch (e) { /* not loaded */ } }
+    }
+    document.addEventListener("timeupdate", (e) => {
+      if (sig && e.target.matches && e.target.matches(".images video") && !e.target.paused) cursor.set(sig.t0 + e.target.currentTime, "video");
+    }, true);
+    document.addEventListener("phyagentos:cursor", update);
+    async function load() {
+      const st = document.getElementById("session-state");
+      const finished = st && st.dataset.finished === "true";
+      if (loadedFinal || Date.now() - lastFetch < 2000 && !finished) return;
+      lastFetch = Date.now();
+      try {
+        const r = await fetch(`/api/signals/${encodeURIComponent(sid)}`, {cache: "no-store"});
+        const j = await r.json();
+        if (!r.ok) { info.textContent = j.error || "no signals"; return; }
+        sig = j; loadedFinal = finished;
+        build();
+        if (cursor.t === null) cursor.set(sig.t1, "init"); else update();
+        tl.dataset.ready = "true";
+      } catch (e) { /* keep the last */ }
+    }
+    document.addEventListener("phyagentos:refreshed", () => { load(); markTransitions(); });
+    window.addEventListener("resize", () => { if (sig) { build(); update(); } });
   }
 })();

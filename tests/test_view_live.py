@@ -266,8 +266,20 @@ def test_one_cursor_moves_the_plots_the_3d_frame_the_images_and_the_transitions(
             "   .findIndex(li => li.classList.contains('at-cursor')),"
             " images: [...document.querySelectorAll('.tl-images img')].map(i => i.dataset.name)}")
 
+    hist = driver.execute_script(f"return fetch('/files/evidence/{failed.session_id}/tree_history.json')"
+                                 ".then(r => r.json())")
+    assert hist["entries"] and all(e[1] is not None for e in hist["entries"])
+
+    def tree_at_cursor():
+        return driver.execute_script(
+            "const b = document.querySelector('.tree-graph');"
+            "return {tick: b ? Number(b.dataset.replayTick) : -1,"
+            " codes: [...document.querySelectorAll('.tree-graph g.btn')].map(g => g.getAttribute('class')),"
+            " leaves: [...document.querySelectorAll('.tree-graph g.active-leaf title')].map(t => t.textContent)}")
+
     canvas = driver.find_elements(By.CSS_SELECTOR, "canvas.tl-canvas")[3]  # the wrist force plot
     width = canvas.size["width"]
+    ticks = []
     for fraction in (0.3, 0.75):
         # click at `fraction` of the time axis (52 px left margin, 8 px right)
         x = 52 + (width - 60) * fraction
@@ -281,6 +293,18 @@ def test_one_cursor_moves_the_plots_the_3d_frame_the_images_and_the_transitions(
         assert state()["slider"] == nearest
         assert state()["at"] == 3  # the item after "start": the session is running at that instant
         assert any(n.startswith("01_ObserveScene") for n in state()["images"])  # the last camera image before it
+        # the tree replays the history entry in force at the cursor: statuses and the running leaf
+        cur = state()["cursor"]
+        entry = [e for e in hist["entries"] if e[1] <= cur + 1e-9][-1]
+        wait_for(lambda: tree_at_cursor()["tick"] == entry[0], timeout=5, what=f"the tree at tick {entry[0]}")
+        tree = tree_at_cursor()
+        names = {"R": "running", "S": "success", "F": "failure", "I": "invalid"}
+        assert [c.split()[1] for c in tree["codes"]] == [f"bt-{names[c]}" for c in entry[2]]
+        running_leaves = [n for n, c in zip(hist["nodes"], entry[2]) if c == "R" and n["kind"] == "leaf"]
+        assert len(tree["leaves"]) == len(running_leaves) >= 1
+        assert tree["leaves"][0].startswith(running_leaves[0]["name"])
+        ticks.append(entry[0])
+    assert ticks[0] < ticks[1]
     screenshot(driver, "timeline")
     # the 3D slider moves the cursor (and so the plots) back
     driver.execute_script("const s = document.querySelector('input.frame'); s.value = '2';"

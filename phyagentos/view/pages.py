@@ -14,6 +14,7 @@ from typing import Any, Iterable
 
 from .changes import FINISHED_STATES
 from .data import Panel
+from .tree_svg import tree_svg
 
 __all__ = ["page", "error_box", "signals_banner", "overview_fragment", "runs_fragment", "run_fragment", "session_fragment",
            "tree_fragment", "memory_fragment"]
@@ -301,10 +302,17 @@ def tree_fragment(p: Panel) -> str:
     board = "".join(f"<tr><td><code>{_E(k)}</code></td><td class='small'>{_E(struct_text(v, limit=300))}</td></tr>"
                     for k, v in t.get("blackboard", {}).items())
     status = "final" if t.get("final") else "live"
+    running = [n["name"] for n in nodes if n.get("kind") == "leaf" and n["status"] == "running"]
+    graph = tree_svg(nodes)
     return (f'<p class="small" id="tree-meta" data-tick="{t["tick"]}" data-final="{str(bool(t.get("final"))).lower()}">'
-            f'{status} · tick {t["tick"]} · {len(nodes)} nodes</p>'
+            f'{status} · tick {t["tick"]} · {len(nodes)} nodes'
+            + (f' · running leaf: <b class="running-leaf">{_E(", ".join(running))}</b>' if running else "")
+            + '<span class="tree-replay"></span></p>'
+            + (f'<div class="tree-graph">{graph}</div>' if graph else "")
+            + '<details class="tree-table"><summary class="small">as a table (types, blackboard keys, feedback)'
+            '</summary>'
             '<table class="tree"><thead><tr><th>node</th><th>type</th><th>status</th><th>blackboard keys</th>'
-            f'<th>feedback</th></tr></thead><tbody>{"".join(rows)}</tbody></table>'
+            f'<th>feedback</th></tr></thead><tbody>{"".join(rows)}</tbody></table></details>'
             f'<h4>blackboard</h4><table class="board"><tbody>{board or "<tr><td>-</td></tr>"}</tbody></table>')
 
 

@@ -271,7 +271,37 @@
     document.addEventListener("timeupdate", (e) => {
       if (sig && e.target.matches && e.target.matches(".images video") && !e.target.paused) cursor.set(sig.t0 + e.target.currentTime, "video");
     }, true);
+    // -- the tree's history (tree_history.json), replayed under the cursor ----------------
+    let hist = null;
+    const STATUS = {R: "running", S: "success", F: "failure", I: "invalid"};
+    function replayTree() {
+      const box = document.querySelector(".tree-graph"), label = document.querySelector(".tree-replay");
+      if (!hist || !hist.entries.length || cursor.t === null || !box) return;
+      let e = null;
+      for (const x of hist.entries) { if (x[1] === null || x[1] <= cursor.t + 1e-9) e = x; else break; }
+      if (!e) e = hist.entries[0];
+      const codes = e[2];
+      box.querySelectorAll("g.btn").forEach((g) => {
+        const st = STATUS[codes[Number(g.dataset.i)]] || "invalid";
+        g.setAttribute("class", `btn bt-${st}` + (st === "running" && g.dataset.kind === "leaf" ? " active-leaf" : ""));
+      });
+      document.querySelectorAll("table.tree tr.bt").forEach((tr, i) => {
+        const st = STATUS[codes[i]] || "invalid"; tr.className = `bt bt-${st}`; tr.dataset.replayStatus = st;
+      });
+      box.dataset.replayTick = String(e[0]);
+      if (label) label.textContent = ` · replaying tick ${e[0]} (t = ${e[1] === null ? "?" : e[1].toFixed(2)} s; ${hist.entries.length} changes kept` +
+        (hist.decimated ? `, thinned ${hist.decimated}×` : "") + ")";
+    }
+    async function loadHistory() {
+      if (hist) return;
+      try {
+        const r = await fetch(`/files/evidence/${encodeURIComponent(sid)}/tree_history.json`, {cache: "no-store"});
+        if (r.ok) { hist = await r.json(); replayTree(); }
+      } catch (e) { /* none (a session run before the history existed) */ }
+    }
     document.addEventListener("phyagentos:cursor", update);
+    document.addEventListener("phyagentos:cursor", replayTree);
+    document.addEventListener("phyagentos:refreshed", replayTree);
     async function load() {
       const st = document.getElementById("session-state");
       const finished = st && st.dataset.finished === "true";
@@ -282,6 +312,7 @@
         const j = await r.json();
         if (!r.ok) { info.textContent = j.error || "no signals"; return; }
         sig = j; loadedFinal = finished;
+        if (finished) await loadHistory();
         build();
         if (cursor.t === null) cursor.set(sig.t1, "init"); else update();
         tl.dataset.ready = "true";

@@ -1,6 +1,7 @@
 """``phyagentos view`` and the ``--record`` option of ``run`` and ``bench``.
 
     phyagentos view WORKSPACE [--host H] [--port N]
+    phyagentos view WORKSPACE --export-rrd SESSION_ID [--rrd-out PATH]
     phyagentos run GOAL_GRAPH --workspace DIR --record [all|failures] [--record-camera C] [--record-fps F]
     phyagentos bench SUITE --workspace DIR --record failures
 
@@ -40,6 +41,10 @@ def add_view_commands(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--host", default="127.0.0.1",
                       help="address to bind (default 127.0.0.1); any other needs the printed access token to signal")
     view.add_argument("--port", type=int, default=8787, help="port (default 8787; 0: any free port)")
+    view.add_argument("--export-rrd", metavar="SESSION_ID",
+                      help="write the session's signals, events, tree changes and images as a rerun recording "
+                           "(evidence/<session>/recording.rrd; needs rerun-sdk) and exit instead of serving")
+    view.add_argument("--rrd-out", type=Path, help="with --export-rrd: the file to write instead")
     _add_record(sub.choices["run"], default_mode="all")
     _add_record(sub.choices["bench"], default_mode="failures")
 
@@ -70,7 +75,31 @@ def _cmd_view(args, out: Console, err: Console) -> int:
         out.print(f"access token (signals): {token}", soft_wrap=True)
         out.file.flush()
 
+    if args.export_rrd:
+        return _export_rrd(args, out, err)
     serve(args.workspace, host=args.host, port=args.port, announce=announce)
+    return 0
+
+
+def _export_rrd(args, out: Console, err: Console) -> int:
+    from phyagentos.errors import PhyAgentOSError  # noqa: PLC0415
+    from phyagentos.protocol import Workspace  # noqa: PLC0415
+    from phyagentos.view.rerun_export import export_rrd  # noqa: PLC0415
+    from phyagentos.view.scene3d import SceneRenderer  # noqa: PLC0415
+
+    try:
+        renderer = SceneRenderer(Workspace.open(args.workspace))
+        try:
+            layout = renderer.joint_layout(args.export_rrd)
+        except PhyAgentOSError:
+            layout = None  # joints labelled q1..q7
+        finally:
+            renderer.close()
+        path = export_rrd(args.workspace, args.export_rrd, out=args.rrd_out, layout=layout)
+    except PhyAgentOSError as exc:
+        err.print(f"error: {exc}", markup=False, highlight=False, soft_wrap=True)
+        return 1
+    out.print(f"wrote {path}  (open it with: rerun {path})", markup=False, highlight=False, soft_wrap=True)
     return 0
 
 

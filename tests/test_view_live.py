@@ -7,12 +7,14 @@ its recording; a real ``phyagentos view`` serves it.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from selenium.webdriver.common.by import By
 
@@ -311,3 +313,70 @@ def test_one_cursor_moves_the_plots_the_3d_frame_the_images_and_the_transitions(
                           "s.dispatchEvent(new Event('input'))")
     wait_for(lambda: abs(state()["cursor"] - frames[2]) < 1e-3, timeout=5, what="the cursor following the slider")
     assert state()["at"] in (0, 3)
+
+
+def test_a_session_exports_as_a_rerun_recording_that_reads_back(replanned, tmp_path):
+    from rerun.chunk import RrdReader
+
+    ws, failed = replanned["ws"], replanned["failed"]
+    sid = failed.session_id
+    proc = subprocess.run([*CLI, "view", str(ws.root), "--export-rrd", sid], cwd=ROOT, capture_output=True,
+                          text=True, timeout=180)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    path = ws.root / "evidence" / sid / "recording.rrd"
+    assert path.is_file() and str(path) in proc.stdout.replace("\n", "")
+    reader = RrdReader(path)
+    assert [r.recording_id for r in reader.recordings()] == [sid]
+    columns: dict[str, dict[str, list]] = {}
+    for chunk in reader.store().stream().to_chunks():
+        batch = chunk.to_record_batch()
+        col = columns.setdefault(chunk.entity_path, {})
+        for name in batch.schema.names:
+            if name in ("sim_time", "Scalars:scalars", "TextLog:text"):
+                col.setdefault(name, []).extend(batch.column(name).to_pylist())
+    frames = np.load(ws.root / "evidence" / sid / "frames.npz")
+    assert {f"/joints/joint{i}" for i in range(1, 8)} <= set(columns)
+    assert len(columns["/joints/joint2"]["Scalars:scalars"]) == len(frames["t"])
+    assert np.allclose([v[0] for v in columns["/joints/joint2"]["Scalars:scalars"]], frames["qpos"][:, 1], atol=1e-4)
+    trace = [json.loads(line) for line in (ws.root / "evidence" / sid / "trace.jsonl").read_text().splitlines()]
+    loads = [(r["stamp_s"], r["wrist_load_n"]) for r in trace if r["kind"] == "proprio" and r["wrist_load_n"] is not None]
+    got = sorted(zip((t.total_seconds() for t in columns["/wrist/force_n/load"]["sim_time"]),
+                     (v[0] for v in columns["/wrist/force_n/load"]["Scalars:scalars"])))
+    assert np.allclose(got, sorted(loads), atol=1e-3)
+    slip = next(r for r in trace if r["kind"] == "slip")
+    assert any("grasp.slip" in text[0] for text in columns["/events"]["TextLog:text"])
+    assert abs(columns["/events"]["sim_time"][0].total_seconds() - slip["stamp_s"]) < 1e-3
+    hist = json.loads((ws.root / "evidence" / sid / "tree_history.json").read_text())
+    assert len(columns["/tree"]["TextLog:text"]) == len(hist["entries"])
+    assert {"/camera/overview", "/camera/wrist", "/world/tcp", "/transitions"} <= set(columns)
+
+
+def test_the_compare_page_shows_a_failed_attempt_and_its_replan_child_under_one_cursor(replanned):
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    driver, url, failed, child = replanned["driver"], replanned["url"], replanned["failed"], replanned["child"]
+    assert child.parent_session_id == failed.session_id
+    driver.get(f"{url}/session/{failed.session_id}")
+    link = wait_for(lambda: driver.find_element(By.CSS_SELECTOR, "a.compare-link"), timeout=15, what="compare link")
+    link.click()
+    wait_for(lambda: driver.execute_script("return [...document.querySelectorAll('section.timeline')]"
+                                           ".filter(s => s.dataset.ready === 'true').length") == 2,
+             timeout=20, what="both timelines")
+    states = driver.execute_script("return [...document.querySelectorAll('.compare-col .session-state')]"
+                                   ".map(s => s.dataset.state)")
+    assert states == ["replanned", "succeeded"]
+    # the child gripped harder (the revision's firmer grip): its finger effort peaks higher
+    peaks = driver.execute_script(
+        "return Promise.all([...document.querySelectorAll('section.timeline')].map(s =>"
+        " fetch('/api/signals/' + s.dataset.session).then(r => r.json()).then(j =>"
+        " Math.max(...j.plots.find(p => p.name === 'finger effort').lines[0].y.filter(y => y !== null)))))")
+    assert peaks[1] > peaks[0] > 0, peaks
+    canvases = driver.find_elements(By.CSS_SELECTOR, ".compare-col:first-child canvas.tl-canvas")
+    width = canvases[0].size["width"]
+    ActionChains(driver).move_to_element_with_offset(canvases[0], int(52 + (width - 60) * 0.5 - width / 2), 0) \
+        .click().perform()
+    cursors = wait_for(lambda: (lambda c: c if len(set(c)) == 1 and c[0] else None)(driver.execute_script(
+        "return [...document.querySelectorAll('section.timeline')].map(s => s.dataset.cursorT)")),
+        timeout=5, what="one cursor in both columns")
+    assert float(cursors[0]) > 0
+    screenshot(driver, "compare")

@@ -9,6 +9,8 @@ Routes (all read-only except ``POST /api/signal``):
                                 attempts, verdict, diagnosis, revision, events, perception,
                                 evidence images and the recording
 ``/memory``                     LESSONS.md, KNOWLEDGE.md, SKILL.md with provenance links
+``/compare?a=ID&b=ID``          two sessions side by side (e.g. a failed attempt and its replan child)
+                                with their timelines under one cursor
 ``/fragment/...``               the panels of those pages, re-fetched on every change
 ``/events[?session=ID&f=URL…]`` server-sent events: ``change`` with the JSON list of the page's
                                 fragments (``f``) whose inputs changed (changes.py; ``null``: all),
@@ -132,6 +134,15 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                 + pages.timeline_section(sid)
                 + frag(f"/fragment/session/{sid}"))
         return shell(f"session {sid}", body, scope=sid)
+
+    def compare_page(request: Request) -> Response:
+        a = _check_id(request.query_params.get("a", ""), "session id (a)")
+        b = _check_id(request.query_params.get("b", ""), "session id (b)")
+        cols = "".join(f'<div class="compare-col"><h2>session <a href="/session/{pages._E(s)}">{pages._E(s)}</a></h2>'
+                       + pages.timeline_section(s) + frag(f"/fragment/session/{s}") + "</div>" for s in (a, b))
+        body = ("<h1>compare two sessions</h1><p class='small muted'>one cursor for both: click or drag on any plot "
+                "(simulated time of each session)</p>" + f'<div class="compare">{cols}</div>')
+        return shell(f"compare {a} / {b}", body)
 
     def memory_page(request: Request) -> Response:
         return shell("memory", "<h1>memory</h1>" + frag("/fragment/memory"))
@@ -291,7 +302,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
 
     routes = [
         Route("/", index), Route("/run/{run_id}", run_page), Route("/session/{session_id}", session_page),
-        Route("/memory", memory_page),
+        Route("/memory", memory_page), Route("/compare", compare_page),
         Route("/fragment/overview", f_overview), Route("/fragment/runs", f_runs), Route("/fragment/run/{run_id}", f_run),
         Route("/fragment/session/{session_id}", f_session), Route("/fragment/tree/{session_id}", f_tree),
         Route("/fragment/memory", f_memory),

@@ -244,12 +244,14 @@ def session_fragment(p: Panel) -> str:
     res = r.get("result") or {}
     finished = "true" if r["state"] in FINISHED_STATES else "false"
     head = (signals_banner(d["signals"])
-            + f'<p><span id="session-state" data-state="{_E(r["state"])}" data-finished="{finished}" '
+            + f'<p><span id="session-state" class="session-state" data-state="{_E(r["state"])}" data-finished="{finished}" '
             f'data-held="{_E(d.get("held") or "")}">{_held(r["state"], d.get("held"))}</span> '
             f'node <b>{_E(r["node"])}</b> · skill <b>{_E(r["skill"])}</b> ({_E(r["skill_runtime"])}) · target '
             f'<b>{_E(r["target"])}</b> · run <a href="/run/{_E(r["run_id"])}">{_E(r["run_id"])}</a>'
-            + (f" · parent {_session_link(r['parent_session_id'])}" if r.get("parent_session_id") else "")
-            + "".join(f" · child {_session_link(c)}" for c in r.get("child_session_ids", [])) + "</p>")
+            + (f" · parent {_session_link(r['parent_session_id'])} (<a class='compare-link' href='/compare?a="
+               f"{_E(r['parent_session_id'])}&amp;b={_E(r['session_id'])}'>compare</a>)" if r.get("parent_session_id") else "")
+            + "".join(f" · child {_session_link(c)} (<a class='compare-link' href='/compare?a={_E(r['session_id'])}"
+                      f"&amp;b={_E(c)}'>compare</a>)" for c in r.get("child_session_ids", [])) + "</p>")
     if res:
         err = res.get("error") or {}
         head += (f"<p>result {_state(res.get('status'))} {_E(res.get('reason', ''))}"

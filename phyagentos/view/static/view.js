@@ -167,8 +167,10 @@
   }
 
   // -- signals on one timeline: canvas plots against simulated time --------------------
-  const tl = document.querySelector("section.timeline");
-  if (tl) {
+  // Every section.timeline (two on the compare page) follows the one cursor; what it
+  // drives (transitions, video, tree, session state) is looked up in its own column.
+  document.querySelectorAll("section.timeline").forEach((tl) => {
+    const scopeEl = tl.closest(".compare-col") || document;
     const sid = tl.dataset.session, plotsBox = tl.querySelector(".tl-plots"), info = tl.querySelector(".tl-info");
     const imagesBox = tl.querySelector(".tl-images");
     const COLORS = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f", "#5d4037", "#9e9d24"];
@@ -256,26 +258,26 @@
       syncVideo();
     }
     function markTransitions() {
-      const items = [...document.querySelectorAll("ol.timeline li")];
+      const items = [...scopeEl.querySelectorAll("ol.timeline li")];
       if (!sig || !items.length) return;
       let at = 0;  // item 0 is the first state; item i + 1 follows transition i
       sig.transitions.forEach((x, i) => { if (x.t <= cursor.t + 1e-9) at = i + 1; });
       items.forEach((li, i) => li.classList.toggle("at-cursor", i === at));
     }
     function syncVideo() {
-      const v = document.querySelector(".images video");
+      const v = scopeEl.querySelector(".images video");
       if (!v || !v.paused || cursor.t === null) return;
       const want = Math.max(0, cursor.t - sig.t0);
       if (Math.abs((v.currentTime || 0) - want) > 0.05) { try { v.currentTime = want; } catch (e) { /* not loaded */ } }
     }
     document.addEventListener("timeupdate", (e) => {
-      if (sig && e.target.matches && e.target.matches(".images video") && !e.target.paused) cursor.set(sig.t0 + e.target.currentTime, "video");
+      if (sig && e.target.matches && e.target.matches(".images video") && scopeEl.contains(e.target) && !e.target.paused) cursor.set(sig.t0 + e.target.currentTime, "video");
     }, true);
     // -- the tree's history (tree_history.json), replayed under the cursor ----------------
     let hist = null;
     const STATUS = {R: "running", S: "success", F: "failure", I: "invalid"};
     function replayTree() {
-      const box = document.querySelector(".tree-graph"), label = document.querySelector(".tree-replay");
+      const box = scopeEl.querySelector(".tree-graph"), label = scopeEl.querySelector(".tree-replay");
       if (!hist || !hist.entries.length || cursor.t === null || !box) return;
       let e = null;
       for (const x of hist.entries) { if (x[1] === null || x[1] <= cursor.t + 1e-9) e = x; else break; }
@@ -285,7 +287,7 @@
         const st = STATUS[codes[Number(g.dataset.i)]] || "invalid";
         g.setAttribute("class", `btn bt-${st}` + (st === "running" && g.dataset.kind === "leaf" ? " active-leaf" : ""));
       });
-      document.querySelectorAll("table.tree tr.bt").forEach((tr, i) => {
+      scopeEl.querySelectorAll("table.tree tr.bt").forEach((tr, i) => {
         const st = STATUS[codes[i]] || "invalid"; tr.className = `bt bt-${st}`; tr.dataset.replayStatus = st;
       });
       box.dataset.replayTick = String(e[0]);
@@ -303,7 +305,7 @@
     document.addEventListener("phyagentos:cursor", replayTree);
     document.addEventListener("phyagentos:refreshed", replayTree);
     async function load() {
-      const st = document.getElementById("session-state");
+      const st = scopeEl.querySelector("#session-state, .session-state");
       const finished = st && st.dataset.finished === "true";
       if (loadedFinal || Date.now() - lastFetch < 2000 && !finished) return;
       lastFetch = Date.now();
@@ -320,5 +322,5 @@
     }
     document.addEventListener("phyagentos:refreshed", () => { load(); markTransitions(); });
     window.addEventListener("resize", () => { if (sig) { build(); update(); } });
-  }
+  });
 })();

@@ -379,4 +379,7 @@ def test_the_compare_page_shows_a_failed_attempt_and_its_replan_child_under_one_
         "return [...document.querySelectorAll('section.timeline')].map(s => s.dataset.cursorT)")),
         timeout=5, what="one cursor in both columns")
     assert float(cursors[0]) > 0
+    # each column on its own session's clock: the child's axis starts at 0 too, so the cursor lies inside both
+    spans = driver.execute_script("return [...document.querySelectorAll('.tl-info')].map(i => i.textContent)")
+    assert all(x.startswith("0.00–") for x in spans), spans
     screenshot(driver, "compare")

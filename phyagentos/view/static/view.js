@@ -313,6 +313,14 @@
         const r = await fetch(`/api/signals/${encodeURIComponent(sid)}`, {cache: "no-store"});
         const j = await r.json();
         if (!r.ok) { info.textContent = j.error || "no signals"; return; }
+        if (scopeEl !== document) {  // compare page: each session's time from its own start (a replan child
+          const z = j.t0;             // continues the same world, so its simulated clock starts later)
+          const sh = (t) => Math.round((t - z) * 1e4) / 1e4;
+          j.plots.forEach((p) => p.lines.forEach((l) => { l.t = l.t.map(sh); }));
+          j.events.forEach((e) => { e.t = sh(e.t); }); j.transitions.forEach((x) => { x.t = sh(x.t); });
+          j.images.forEach((im) => { im.t = sh(im.t); }); j.frames = j.frames.map(sh);
+          j.t1 = sh(j.t1); j.t0 = 0; j.notes.push(`time from the session's start (its simulated clock began at ${z.toFixed(2)} s)`);
+        }
         sig = j; loadedFinal = finished;
         if (finished) await loadHistory();
         build();

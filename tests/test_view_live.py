@@ -17,12 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from selenium.webdriver.common.by import By
+from test_view_browser import browser, screenshot, start_view, wait_for
 
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.protocol.schemas import RunRecord, utc_now_iso
-
-from test_view_browser import browser, screenshot, start_view, wait_for
 
 CLI = [sys.executable, "-m", "phyagentos.cli"]
 ROOT = Path(__file__).resolve().parents[1]
@@ -68,7 +67,7 @@ def replanned(tmp_path_factory):
     ws = Workspace.open(ws_dir)
     sessions = {s.state: s for s in ws.list_sessions()}
     assert set(sessions) == {"replanned", "succeeded"}, sessions
-    view, url, token = start_view(ws_dir)
+    view, url, _token = start_view(ws_dir)
     driver = browser()
     try:
         yield {"ws": ws, "url": url, "driver": driver, "failed": sessions["replanned"],

@@ -52,5 +52,5 @@ def test_view_on_a_new_directory_prints_a_cli_hint(tmp_path):
                               capture_output=True, text=True, timeout=60)
         assert proc.returncode == 2
         text = proc.stdout + proc.stderr
-        assert f"phyagentos run " in text and f"--workspace {path}" in text and f"phyagentos view {path}" in text
+        assert "phyagentos run " in text and f"--workspace {path}" in text and f"phyagentos view {path}" in text
         assert "Workspace.create" not in text and "Traceback" not in text

@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from phyagentos.protocol import TERMINAL_STATES, Workspace
 
-__all__ = ["FINISHED_STATES", "fingerprint", "Tracker"]
+__all__ = ["FINISHED_STATES", "Tracker", "fingerprint"]
 
 #: Session states in which the runner no longer acts: the protocol's terminal states
 #: (``succeeded``, ``failed``, ``replanned``, ``timed_out``, ``cancelled``, ``rejected``)

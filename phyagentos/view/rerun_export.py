@@ -39,7 +39,7 @@ from phyagentos.protocol import Workspace
 
 from .signals import _read_trace, session_signals
 
-__all__ = ["export_rrd", "RRD_FILE"]
+__all__ = ["RRD_FILE", "export_rrd"]
 
 logger = logging.getLogger(__name__)
 
@@ -49,7 +49,7 @@ RRD_FILE = "recording.rrd"
 
 def _rerun():
     try:
-        import rerun as rr  # noqa: PLC0415 - optional dependency
+        import rerun as rr
     except ImportError as exc:
         raise ViewError("exporting a .rrd needs rerun-sdk: pip install 'rerun-sdk>=0.41,<0.42' "
                         "(or the 'rerun' extra of phyagentos)") from exc

@@ -31,12 +31,12 @@ from typing import Any
 
 import numpy as np
 
-from phyagentos.yamlsource import read_yaml
 from phyagentos.errors import ViewError
+from phyagentos.yamlsource import read_yaml
 
 from .scene3d import frames_of
 
-__all__ = ["session_signals", "MAX_POINTS", "MAX_TRACE_BYTES"]
+__all__ = ["MAX_POINTS", "MAX_TRACE_BYTES", "session_signals"]
 
 logger = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import html
 from typing import Any
 
-__all__ = ["tree_svg", "MAX_SVG_NODES"]
+__all__ = ["MAX_SVG_NODES", "tree_svg"]
 
 #: Larger trees are drawn as the table only (an SVG of thousands of boxes helps nobody).
 MAX_SVG_NODES = 400
@@ -49,8 +49,8 @@ def tree_svg(nodes: list[dict[str, Any]]) -> str:
             x[n["id"]] = (x[kids[0]] + x[kids[-1]]) / 2
     width = int(max(1, column) * _DX + 2 * _PAD)
     height = int((max(depth.values()) + 1) * _DY + 2 * _PAD)
-    out = [f'<svg xmlns="http://www.w3.org/2000/svg" class="bt-graph" width="{width}" height="{height}" '
-           f'viewBox="0 0 {width} {height}" role="img" aria-label="behaviour tree">']
+    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" class="bt-graph" width="{width}" height="{height}" '
+            f'viewBox="0 0 {width} {height}" role="img" aria-label="behaviour tree">')]
     cx = {i: _PAD + x[i] * _DX + _DX / 2 for i in x}
     cy = {i: _PAD + depth[i] * _DY + _H / 2 for i in depth}
     for n in nodes:

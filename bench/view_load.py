@@ -13,7 +13,9 @@ Chromium (Selenium) showing the index page. Then two phases of ``--seconds`` eac
 
 Reported: the view server's CPU (user + system time from ``/proc/<pid>/stat``) as a
 percentage of one core over each phase, the time until the index shows its run table,
-and the page's fragment requests in each phase (the browser's ``performance`` entries).
+the page's fragment requests in each phase (the browser's ``performance`` entries), and the
+update latency: the median time from a pause or resume written to RUNTIME_SIGNAL.md until the
+open page shows it (after the churn phase).
 To measure another checkout (e.g. before a change), run this file with that checkout on
 PYTHONPATH: the server is started as ``python -m phyagentos.cli`` from ``PYTHONPATH``.
 """
@@ -111,6 +113,24 @@ def fragment_requests(driver) -> int:
         "return performance.getEntriesByType('resource').filter(e => e.name.includes('/fragment/')).length")
 
 
+def update_latency_ms(ws: Workspace, driver, rounds: int = 6) -> float:
+    """Median time (ms) from a signal written to RUNTIME_SIGNAL.md (pause, then resume) until
+    the open index page shows it, polled every 5 ms in the browser."""
+    samples = []
+    for i in range(rounds):
+        kind, flag = ("pause", "paused") if i % 2 == 0 else ("resume", "none")
+        t0 = time.monotonic()
+        ws.send_signal(kind, reason="bench", issued_by="bench")
+        deadline = t0 + 10
+        while time.monotonic() < deadline:
+            if driver.execute_script(f"return !!document.querySelector('#signal-state [data-signal={flag}]')"):
+                break
+            time.sleep(0.005)
+        samples.append((time.monotonic() - t0) * 1000)
+    samples.sort()
+    return round(samples[len(samples) // 2], 1)
+
+
 def measure(n_runs: int, seconds: float) -> dict:
     root = Path(tempfile.mkdtemp(prefix="phyagentos-view-load-"))
     ws = Workspace.create(root / "ws")
@@ -140,6 +160,7 @@ def measure(n_runs: int, seconds: float) -> dict:
             out[f"{phase}_cpu_pct"] = round(100 * (cpu_seconds(view.pid) - cpu0) / wall, 1)
             out[f"{phase}_fragment_requests"] = fragment_requests(driver) - req0
         out["rows_shown"] = driver.execute_script("return document.querySelectorAll('table.runs tbody tr').length")
+        out["update_latency_ms"] = update_latency_ms(ws, driver)
     finally:
         driver.quit()
         view.terminate()
@@ -162,7 +183,7 @@ def main() -> int:
         print(json.dumps(rows, indent=2))
         return 0
     cols = ("runs", "index_load_s", "rows_shown", "idle_cpu_pct", "churn_cpu_pct", "idle_fragment_requests",
-            "churn_fragment_requests")
+            "churn_fragment_requests", "update_latency_ms")
     print(" | ".join(cols))
     for r in rows:
         print(" | ".join(str(r.get(c, "")) for c in cols))

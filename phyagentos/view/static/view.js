@@ -301,6 +301,8 @@
         if (r.ok) { hist = await r.json(); replayTree(); }
       } catch (e) { /* none (a session run before the history existed) */ }
     }
+    let moved = false;  // until someone moves the cursor, it sits at the end of the session
+    document.addEventListener("phyagentos:cursor", (ev) => { if (ev.detail.src !== "init") moved = true; });
     document.addEventListener("phyagentos:cursor", update);
     document.addEventListener("phyagentos:cursor", replayTree);
     document.addEventListener("phyagentos:refreshed", replayTree);
@@ -324,7 +326,10 @@
         sig = j; loadedFinal = finished;
         if (finished) await loadHistory();
         build();
-        if (cursor.t === null) cursor.set(sig.t1, "init"); else update();
+        if (!sig.plots.length && !finished) {
+          info.textContent = "the signals appear when the session ends (its trace.jsonl and frames.npz are written then)";
+        }
+        if (!moved) cursor.set(sig.t1, "init"); else update();
         tl.dataset.ready = "true";
       } catch (e) { /* keep the last */ }
     }

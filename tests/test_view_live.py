@@ -136,6 +136,14 @@ def test_the_3d_panel_of_a_replanned_session_shows_its_recording(replanned):
                                     "return e ? e.tagName + '.' + e.className : ''")
         assert hit == "IMG.scene", (width, hit)
     driver.set_window_size(1280, 1000)
+    # overlays: perceived object, grasp target and the tool path drawn into the same frame
+    frame = driver.find_element(By.CSS_SELECTOR, "img.scene").get_attribute("data-shown")
+    driver.find_element(By.CSS_SELECTOR, "input.overlays").click()
+    wait_for(lambda: int(driver.find_element(By.CSS_SELECTOR, "img.scene").get_attribute("data-overlays") or 0) > 10,
+             timeout=20, what="the overlays drawn")
+    img = driver.find_element(By.CSS_SELECTOR, "img.scene")
+    assert img.get_attribute("data-shown") == frame and img.get_attribute("data-source") == "recording"
+    driver.execute_script("document.querySelector('img.scene').scrollIntoView({block: 'start'})")
     screenshot(driver, "session_replanned")
 
 

@@ -130,7 +130,11 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                   '<img class="scene" alt="scene" draggable="false"><div class="scrub">'
                   '<input type="range" class="frame" min="0" max="0" value="0" disabled>'
                   '<span class="frame-info small"></span></div>'
-                  '<p class="small muted">drag to orbit, wheel to zoom</p></div></section></div>'
+                  '<p class="small muted">drag to orbit, wheel to zoom · <label><input type="checkbox" '
+                  'class="overlays"> overlays: <span style="color:#1a59ff">perceived objects</span>, '
+                  '<span style="color:#1acc33">grasp</span> and <span style="color:#ff8c00">place</span> targets, '
+                  '<span style="color:#e61a99">tool path</span> (the scene itself is the simulator\'s state: '
+                  'ground truth)</label></p></div></section></div>'
                 + pages.timeline_section(sid)
                 + frag(f"/fragment/session/{sid}"))
         return shell(f"session {sid}", body, scope=sid)
@@ -207,11 +211,13 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         try:
             frame = int(q["frame"]) if q.get("frame") not in (None, "", "live") else None
             png, info = renderer.render(sid, frame=frame, azimuth=float(q.get("az", 140)),
-                                        elevation=float(q.get("el", -25)), distance=float(q.get("dist", 1.9)))
+                                        elevation=float(q.get("el", -25)), distance=float(q.get("dist", 1.9)),
+                                        overlays=q.get("overlays") == "1")
         except (PhyAgentOSError, ValueError) as exc:
             return PlainTextResponse(str(exc), status_code=404)
         return Response(png, media_type="image/png",
                         headers={"X-Scene-Source": info["source"], "X-Scene-Time": f"{info['t']:.3f}",
+                                 "X-Scene-Overlays": str(info.get("overlays", 0)),
                                  "Cache-Control": "no-store"})
 
     def files(request: Request) -> Response:

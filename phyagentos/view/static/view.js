@@ -101,7 +101,9 @@
     let times = [], live = true, pending = null, loading = false, lastLive = 0, requested = -1;
     function src() {
       const f = live ? "live" : slider.value;
-      return `/api/scene/${encodeURIComponent(sid)}.png?frame=${f}&az=${cam.az.toFixed(1)}&el=${cam.el.toFixed(1)}&dist=${cam.dist.toFixed(2)}`;
+      const ov = box.querySelector("input.overlays");
+      return `/api/scene/${encodeURIComponent(sid)}.png?frame=${f}&az=${cam.az.toFixed(1)}&el=${cam.el.toFixed(1)}&dist=${cam.dist.toFixed(2)}` +
+        (ov && ov.checked ? "&overlays=1" : "");
     }
     function show() {
       pending = src();
@@ -114,7 +116,7 @@
           const old = img.src; img.src = URL.createObjectURL(blob); if (old.startsWith("blob:")) URL.revokeObjectURL(old);
           const t = r.headers.get("X-Scene-Time"), s = r.headers.get("X-Scene-Source");
           info.textContent = `${s} · t = ${t} s` + (live ? "" : ` · frame ${slider.value}/${times.length - 1}`);
-          img.dataset.source = s; img.dataset.t = t;
+          img.dataset.source = s; img.dataset.t = t; img.dataset.overlays = r.headers.get("X-Scene-Overlays") || "0";
           const m = /frame=(\d+)/.exec(url); img.dataset.shown = m ? m[1] : "live";
         } else {
           info.textContent = await r.text();
@@ -131,6 +133,8 @@
         }
       } catch (e) { /* keep the last */ }
     }
+    const ovBox = box.querySelector("input.overlays");
+    if (ovBox) ovBox.addEventListener("change", () => show());
     slider.addEventListener("input", () => {
       live = false; show();
       if (times.length) cursor.set(times[Number(slider.value)], "3d");

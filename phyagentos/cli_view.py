@@ -1,6 +1,7 @@
 """``phyagentos view`` and the ``--record`` option of ``run`` and ``bench``.
 
     phyagentos view WORKSPACE [--host H] [--port N]
+    phyagentos view WORKSPACE --export-rrd SESSION_ID [--rrd-out PATH]
     phyagentos run GOAL_GRAPH --workspace DIR --record [all|failures] [--record-camera C] [--record-fps F]
     phyagentos bench SUITE --workspace DIR --record failures
 
@@ -40,19 +41,65 @@ def add_view_commands(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--host", default="127.0.0.1",
                       help="address to bind (default 127.0.0.1); any other needs the printed access token to signal")
     view.add_argument("--port", type=int, default=8787, help="port (default 8787; 0: any free port)")
+    view.add_argument("--export-rrd", metavar="SESSION_ID",
+                      help="write the session's signals, events, tree changes and images as a rerun recording "
+                           "(evidence/<session>/recording.rrd; needs rerun-sdk) and exit instead of serving")
+    view.add_argument("--rrd-out", type=Path, help="with --export-rrd: the file to write instead")
     _add_record(sub.choices["run"], default_mode="all")
     _add_record(sub.choices["bench"], default_mode="failures")
 
 
+def _no_workspace_hint(path: Path) -> str:
+    """What to type when ``path`` holds no workspace yet (a plain CLI hint, no Python API)."""
+    from phyagentos.resources import goal_graphs_dir  # noqa: PLC0415
+
+    example = goal_graphs_dir() / "hold.yaml"
+    state = "does not exist" if not path.exists() else ("is empty" if path.is_dir() and not any(path.iterdir())
+                                                        else "holds no SESSIONS.md")
+    return (f"{path} is not a PhyAgentOS workspace yet ({state}).\n"
+            f"A workspace is created by the first run submitted to it, e.g.:\n"
+            f"    phyagentos run {example} --workspace {path}\n"
+            f"then, in another terminal (or after it):\n"
+            f"    phyagentos view {path}")
+
+
 def _cmd_view(args, out: Console, err: Console) -> int:
     from phyagentos.view import serve  # noqa: PLC0415 - starlette/uvicorn only for this command
+
+    if not (Path(args.workspace) / "SESSIONS.md").is_file():
+        err.print(_no_workspace_hint(Path(args.workspace)), markup=False, highlight=False, soft_wrap=True)
+        return 2
 
     def announce(url: str, token: str) -> None:
         out.print(f"phyagentos view of {args.workspace}: [bold]{url}[/bold]", soft_wrap=True)
         out.print(f"access token (signals): {token}", soft_wrap=True)
         out.file.flush()
 
+    if args.export_rrd:
+        return _export_rrd(args, out, err)
     serve(args.workspace, host=args.host, port=args.port, announce=announce)
+    return 0
+
+
+def _export_rrd(args, out: Console, err: Console) -> int:
+    from phyagentos.errors import PhyAgentOSError  # noqa: PLC0415
+    from phyagentos.protocol import Workspace  # noqa: PLC0415
+    from phyagentos.view.rerun_export import export_rrd  # noqa: PLC0415
+    from phyagentos.view.scene3d import SceneRenderer  # noqa: PLC0415
+
+    try:
+        renderer = SceneRenderer(Workspace.open(args.workspace))
+        try:
+            layout = renderer.joint_layout(args.export_rrd)
+        except PhyAgentOSError:
+            layout = None  # joints labelled q1..q7
+        finally:
+            renderer.close()
+        path = export_rrd(args.workspace, args.export_rrd, out=args.rrd_out, layout=layout)
+    except PhyAgentOSError as exc:
+        err.print(f"error: {exc}", markup=False, highlight=False, soft_wrap=True)
+        return 1
+    out.print(f"wrote {path}  (open it with: rerun {path})", markup=False, highlight=False, soft_wrap=True)
     return 0
 
 

@@ -112,3 +112,34 @@ def test_json_safe_summarises_what_json_cannot_hold():
     assert out["q"] == [0.12346, 2.0] and out["big"] == {"shape": [100, 7], "dtype": "float64"}
     assert out["n"] == 3 and out["nan"] == "nan" and out["obj"].startswith("<object")
     assert len(out["long"]) == 33 and out["long"][-1] == "... 68 more"
+
+
+def test_the_history_keeps_every_change_of_status_with_simulated_time_and_stays_bounded(tmp_path):
+    sim = {"t": 0.0}
+    root = _tree()
+    pub = TreeStatusPublisher(tmp_path / "tree.json", session_id="s-h", sim_clock=lambda: sim["t"], max_history=6)
+    tree = py_trees.trees.BehaviourTree(root)
+    for _ in range(4):
+        tree.tick()
+        pub(root)
+        sim["t"] += 0.1
+    pub(root, final=True)
+    hist = json.loads((tmp_path / "tree_history.json").read_text())
+    assert [n["name"] for n in hist["nodes"]] == ["Root", "Write", "Check"]
+    # ticks 1-2 identical (Write running) are one entry; tick 3 all succeed; 4 restarts and succeeds at once
+    assert hist["entries"][0] == [1, 0.0, "RRI"]
+    assert [e[2] for e in hist["entries"]][-1] == "SSS" and hist["entries"][-1][0] == 4
+    assert all(b[0] > a[0] for a, b in zip(hist["entries"], hist["entries"][1:]))
+    assert hist["decimated"] == 0 and hist["codes"]["R"] == "running"
+    # bounded: a tree whose status flips every tick keeps at most max_history entries, first and last kept
+    flip = py_trees.behaviours.Periodic(name="Flip", n=1)
+    pub2 = TreeStatusPublisher(tmp_path / "flip" / "tree.json", session_id="s-f", max_history=6)
+    (tmp_path / "flip").mkdir()
+    t2 = py_trees.trees.BehaviourTree(flip)
+    for _ in range(40):
+        t2.tick()
+        pub2(flip)
+    pub2(flip, final=True)
+    h2 = json.loads((tmp_path / "flip" / "tree_history.json").read_text())
+    assert len(h2["entries"]) <= 6 and h2["decimated"] > 0
+    assert h2["entries"][0][0] == 1 and h2["entries"][-1][0] == 40

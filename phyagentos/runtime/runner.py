@@ -428,7 +428,8 @@ class SessionRunner:
 
             ctx.on_actuation_start = actuation_starts
             # [view hook, issue 13] live tree.json (<= 10 Hz, no fsync) and, under --record, the video.
-            ctx.tree_observer = TreeStatusPublisher(evidence_dir / "tree.json", session_id=rec.session_id)
+            ctx.tree_observer = TreeStatusPublisher(evidence_dir / "tree.json", session_id=rec.session_id,
+                                                    sim_clock=lambda: getattr(target, "sim_time", None))
             self.recorder = self._start_recorder(target, evidence_dir, image_events, seed=rec.seed)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
@@ -452,6 +453,8 @@ class SessionRunner:
             self.recorder = None
         if (evidence_dir / "tree.json").exists():
             extra["tree"] = "tree.json"
+        if (evidence_dir / "tree_history.json").exists():
+            extra["tree_history"] = "tree_history.json"
         terminal = None
         if target is not None:
             try:

@@ -11,6 +11,13 @@ atomic (temporary file + rename) without fsync: the file is a view for people
 
 Nodes are a flat list in depth-first order with the index of their parent, so a tree
 of any size serialises without recursion limits and a reader can rebuild it.
+
+The publisher also keeps the tree's history: on every tick whose statuses differ from the
+previous tick's, ``[tick, simulated time (s, from ``sim_clock``), one letter per node]``
+(``R`` running, ``S`` success, ``F`` failure, ``I`` invalid, nodes in the same depth-first
+order). It is bounded (:data:`MAX_HISTORY` entries; beyond, every other entry is dropped,
+the first and the last kept, and ``decimated`` counts it) and written once, with the final
+state, to ``tree_history.json``: the view replays it under its timeline cursor.
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ import py_trees
 
 from phyagentos.protocol.atomic import atomic_write_bytes
 
-__all__ = ["TreeStatusPublisher", "tree_status", "json_safe"]
+__all__ = ["TreeStatusPublisher", "tree_status", "json_safe", "HISTORY_FILE", "MAX_HISTORY"]
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +46,13 @@ _STATUS = {
     py_trees.common.Status.FAILURE: "failure",
     py_trees.common.Status.INVALID: "invalid",
 }
+#: One letter per status in the tree history.
+_CODE_NAMES = {"running": "R", "success": "S", "failure": "F", "invalid": "I"}
+_CODE = {status: _CODE_NAMES[name] for status, name in _STATUS.items()}
+#: The tree history file, next to tree.json.
+HISTORY_FILE = "tree_history.json"
+#: Most status changes kept in the history (beyond: every other one is dropped, first and last kept).
+MAX_HISTORY = 5000
 #: Arrays with more elements than this are summarised by shape and dtype.
 _MAX_ARRAY = 32
 #: Containers longer than this are cut (with a count of what was left out).
@@ -147,7 +161,8 @@ class TreeStatusPublisher:
     """
 
     def __init__(self, path: str | Path, *, session_id: str, max_rate_hz: float = 10.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, sim_clock: Callable[[], float | None] | None = None,
+                 max_history: int = MAX_HISTORY) -> None:
         if max_rate_hz <= 0:
             raise ValueError(f"max_rate_hz must be positive, got {max_rate_hz}")
         self.path = Path(path)
@@ -163,6 +178,11 @@ class TreeStatusPublisher:
         self._pending: dict[str, Any] | None = None
         self._wake = threading.Condition()
         self._thread: threading.Thread | None = None
+        self._sim_clock = sim_clock
+        self.max_history = max(2, int(max_history))
+        self.history: list[list[Any]] = []  # [tick, simulated time s or None, statuses (one letter per node)]
+        self.history_decimated = 0
+        self._last_codes: str | None = None
 
     def _write(self, doc: dict[str, Any]) -> bool:
         try:
@@ -192,6 +212,7 @@ class TreeStatusPublisher:
         self.calls += 1
         if not final:
             self.ticks += 1
+        self._remember(root, final)
         now = self._clock()
         if not final and self._last is not None and now - self._last < self.period_s:
             self.cost_s += time.perf_counter() - started
@@ -203,6 +224,7 @@ class TreeStatusPublisher:
         if final:
             self._stop()
             written = self._write(doc)
+            self._write_history(doc)
         else:
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, name=f"tree-{self.session_id}", daemon=True)
@@ -213,6 +235,43 @@ class TreeStatusPublisher:
             written = True
         self.cost_s += time.perf_counter() - started
         return written
+
+    def _remember(self, root: py_trees.behaviour.Behaviour, final: bool) -> None:
+        """Append this tick's statuses to the history when they differ from the previous tick's."""
+        codes = []  # depth-first, children in order: the order of tree_status()'s nodes
+        stack = [root]
+        while stack:
+            node = stack.pop()
+            codes.append(_CODE.get(node.status, "?"))
+            stack.extend(reversed(node.children))
+        codes = "".join(codes)
+        if codes == self._last_codes and not final:
+            return
+        self._last_codes = codes
+        sim = None
+        if self._sim_clock is not None:
+            try:
+                value = self._sim_clock()
+                sim = round(float(value), 4) if value is not None else None
+            except (TypeError, ValueError, AttributeError):
+                sim = None
+        self.history.append([self.ticks, sim, codes])
+        if len(self.history) > self.max_history:  # keep it bounded: every other change, first and last kept
+            last = self.history[-1]
+            self.history = self.history[:-1:2] + [last]
+            self.history_decimated += 1
+
+    def _write_history(self, doc: dict[str, Any]) -> None:
+        """``tree_history.json`` next to ``tree.json``: the node list and every change of status."""
+        hist = {"session_id": self.session_id, "ticks": self.ticks, "codes": {v: k for k, v in _CODE_NAMES.items()},
+                "nodes": [{"id": n["id"], "parent": n["parent"], "name": n["name"], "kind": n["kind"]}
+                          for n in doc["nodes"]],
+                "decimated": self.history_decimated, "max_entries": self.max_history, "entries": self.history}
+        try:
+            atomic_write_bytes(self.path.with_name(HISTORY_FILE), json.dumps(hist, separators=(",", ":")).encode(),
+                               durable=False)
+        except (OSError, TypeError, ValueError) as exc:
+            logger.warning("tree history %s not written: %s", self.path.with_name(HISTORY_FILE), exc)
 
     def _stop(self) -> None:
         if self._thread is not None:

@@ -9,12 +9,16 @@ Routes (all read-only except ``POST /api/signal``):
                                 attempts, verdict, diagnosis, revision, events, perception,
                                 evidence images and the recording
 ``/memory``                     LESSONS.md, KNOWLEDGE.md, SKILL.md with provenance links
+``/compare?a=ID&b=ID``          two sessions side by side (e.g. a failed attempt and its replan child)
+                                with their timelines under one cursor
 ``/fragment/...``               the panels of those pages, re-fetched on every change
-``/events[?session=ID]``        server-sent events: ``change`` whenever the workspace changes
-                                (inotify wake-ups of :class:`~phyagentos.protocol.WorkspaceWatcher`,
-                                coalesced to at most 10 per second)
+``/events[?session=ID&f=URL…]`` server-sent events: ``change`` with the JSON list of the page's
+                                fragments (``f``) whose inputs changed (changes.py; ``null``: all),
+                                on inotify wake-ups of :class:`~phyagentos.protocol.WorkspaceWatcher`,
+                                coalesced to at most 10 per second
 ``/api/tree/{id}``              ``tree.json`` as published by the runner
 ``/api/frames/{id}``            the recorded instants of a session (simulated time per frame)
+``/api/signals/{id}``           the session's signals on one simulated-time axis (signals.py)
 ``/api/scene/{id}.png``         the scene at ``frame=N`` (or the current checkpoint) from a free
                                 camera (``az``, ``el``, ``dist`` in degrees and metres)
 ``/files/{path}``               a file inside the workspace (never outside it; see security.py)
@@ -47,8 +51,10 @@ from phyagentos.errors import PhyAgentOSError, ViewError
 from phyagentos.protocol import DOCUMENTS, SESSION_ID_PATTERN, Workspace, WorkspaceWatcher
 
 from . import data, pages
+from .changes import FINISHED_STATES, Tracker
 from .graph_svg import to_svg
 from .scene3d import SceneRenderer, frames_of
+from .signals import session_signals
 from .security import TOKEN_HEADER, AccessPolicy, safe_path
 
 __all__ = ["create_app", "serve", "bind"]
@@ -93,6 +99,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
     ws = Workspace.open(workspace)
     policy = policy or AccessPolicy()
     renderer = SceneRenderer(ws)
+    runs_cache = data.RunsCache()
 
     def shell(title: str, body: str, scope: str = "") -> HTMLResponse:
         return HTMLResponse(pages.page(title, body, token=policy.token_in_page(), scope=scope))
@@ -102,8 +109,12 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
 
     # -- pages ---------------------------------------------------------------
     def index(request: Request) -> Response:
+        try:
+            page = max(1, int(request.query_params.get("page", "1")))
+        except ValueError:
+            page = 1
         body = (f'<h1>{pages._E(str(ws.root))}</h1>' + pages.signal_buttons()
-                + frag("/fragment/overview") + "<h2>runs</h2>" + frag("/fragment/runs"))
+                + frag("/fragment/overview") + "<h2>runs</h2>" + frag(f"/fragment/runs?page={page}"))
         return shell("workspace", body)
 
     def run_page(request: Request) -> Response:
@@ -119,9 +130,23 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                   '<img class="scene" alt="scene" draggable="false"><div class="scrub">'
                   '<input type="range" class="frame" min="0" max="0" value="0" disabled>'
                   '<span class="frame-info small"></span></div>'
-                  '<p class="small muted">drag to orbit, wheel to zoom</p></div></section></div>'
+                  '<p class="small muted">drag to orbit, wheel to zoom · <label><input type="checkbox" '
+                  'class="overlays"> overlays: <span style="color:#1a59ff">perceived objects</span>, '
+                  '<span style="color:#1acc33">grasp</span> and <span style="color:#ff8c00">place</span> targets, '
+                  '<span style="color:#e61a99">tool path</span> (the scene itself is the simulator\'s state: '
+                  'ground truth)</label></p></div></section></div>'
+                + pages.timeline_section(sid)
                 + frag(f"/fragment/session/{sid}"))
         return shell(f"session {sid}", body, scope=sid)
+
+    def compare_page(request: Request) -> Response:
+        a = _check_id(request.query_params.get("a", ""), "session id (a)")
+        b = _check_id(request.query_params.get("b", ""), "session id (b)")
+        cols = "".join(f'<div class="compare-col"><h2>session <a href="/session/{pages._E(s)}">{pages._E(s)}</a></h2>'
+                       + pages.timeline_section(s) + frag(f"/fragment/session/{s}") + "</div>" for s in (a, b))
+        body = ("<h1>compare two sessions</h1><p class='small muted'>one cursor for both: click or drag on any plot "
+                "(simulated time of each session)</p>" + f'<div class="compare">{cols}</div>')
+        return shell(f"compare {a} / {b}", body)
 
     def memory_page(request: Request) -> Response:
         return shell("memory", "<h1>memory</h1>" + frag("/fragment/memory"))
@@ -131,7 +156,11 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         return HTMLResponse(pages.overview_fragment(data.panel(lambda: data.overview(ws))))
 
     def f_runs(request: Request) -> Response:
-        return HTMLResponse(pages.runs_fragment(data.panel(lambda: data.runs(ws))))
+        try:
+            page = int(request.query_params.get("page", "1"))
+        except ValueError:
+            page = 1
+        return HTMLResponse(pages.runs_fragment(data.panel(lambda: data.runs_page(ws, page, cache=runs_cache))))
 
     def f_run(request: Request) -> Response:
         run_id = _check_id(request.path_params["run_id"], "run id")
@@ -164,17 +193,31 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         return JSONResponse({"count": len(frames["t"]), "t": [round(x, 3) for x in frames["t"]],
                              "camera": frames["camera"], "fps": frames["fps"]})
 
+    def api_signals(request: Request) -> Response:
+        sid = _check_id(request.path_params["session_id"], "session id")
+        try:
+            rec = ws.load_session(sid).model_dump(mode="json")
+            try:
+                layout = renderer.joint_layout(sid)
+            except (PhyAgentOSError, ValueError):
+                layout = None  # plots fall back to q1..q7, no recorded opening
+            return JSONResponse(session_signals(ws.root, rec, layout=layout))
+        except PhyAgentOSError as exc:
+            return JSONResponse({"error": str(exc)}, status_code=404)
+
     def api_scene(request: Request) -> Response:
         sid = _check_id(request.path_params["session_id"], "session id")
         q = request.query_params
         try:
             frame = int(q["frame"]) if q.get("frame") not in (None, "", "live") else None
             png, info = renderer.render(sid, frame=frame, azimuth=float(q.get("az", 140)),
-                                        elevation=float(q.get("el", -25)), distance=float(q.get("dist", 1.9)))
+                                        elevation=float(q.get("el", -25)), distance=float(q.get("dist", 1.9)),
+                                        overlays=q.get("overlays") == "1")
         except (PhyAgentOSError, ValueError) as exc:
             return PlainTextResponse(str(exc), status_code=404)
         return Response(png, media_type="image/png",
                         headers={"X-Scene-Source": info["source"], "X-Scene-Time": f"{info['t']:.3f}",
+                                 "X-Scene-Overlays": str(info.get("overlays", 0)),
                                  "Cache-Control": "no-store"})
 
     def files(request: Request) -> Response:
@@ -206,6 +249,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         if sid:
             _check_id(sid, "session id")
         root_files = [f for f, _ in DOCUMENTS.values()]
+        tracker = Tracker(ws, request.query_params.getlist("f"))
 
         def wanted_dirs() -> list[str]:
             extra = [f"evidence/{sid}"] if sid and (ws.root / "evidence" / sid).is_dir() else (["evidence"] if sid else [])
@@ -216,7 +260,14 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
             woke = asyncio.Event()
             dirs = wanted_dirs()
             watcher = WorkspaceWatcher(ws.root, dirs=dirs, files=root_files)
-            loop.add_reader(watcher.fileno(), woke.set)
+
+            def readable(w: WorkspaceWatcher) -> None:
+                # Drain at once: the wake-up socket is level-triggered, and left readable during
+                # the coalescing sleep it would call this on every loop iteration (a busy loop).
+                w.clear()
+                woke.set()
+
+            loop.add_reader(watcher.fileno(), readable, watcher)
             count = 0
             try:
                 yield "retry: 1000\n\n"
@@ -233,8 +284,11 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                         await asyncio.sleep(1.0 / MAX_EVENT_RATE_HZ)  # coalesce bursts of renames
                         watcher.clear()
                         woke.clear()
-                        count += 1
-                        yield f"event: change\ndata: {count}\n\n"
+                        # Only the page's fragments whose inputs changed (changes.py); none: say nothing.
+                        which = tracker.changed() if tracker.urls else None
+                        if which is None or which:
+                            count += 1
+                            yield f"event: change\ndata: {json.dumps(which)}\n\n"
                     else:
                         yield ": keep-alive\n\n"
                     if wanted_dirs() != dirs:  # e.g. the session's evidence directory appeared
@@ -242,9 +296,9 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                         watcher.close()
                         dirs = wanted_dirs()
                         watcher = WorkspaceWatcher(ws.root, dirs=dirs, files=root_files)
-                        loop.add_reader(watcher.fileno(), woke.set)
+                        loop.add_reader(watcher.fileno(), readable, watcher)
                         count += 1
-                        yield f"event: change\ndata: {count}\n\n"
+                        yield "event: change\ndata: null\n\n"
             finally:
                 loop.remove_reader(watcher.fileno())
                 watcher.close()
@@ -254,11 +308,12 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
 
     routes = [
         Route("/", index), Route("/run/{run_id}", run_page), Route("/session/{session_id}", session_page),
-        Route("/memory", memory_page),
+        Route("/memory", memory_page), Route("/compare", compare_page),
         Route("/fragment/overview", f_overview), Route("/fragment/runs", f_runs), Route("/fragment/run/{run_id}", f_run),
         Route("/fragment/session/{session_id}", f_session), Route("/fragment/tree/{session_id}", f_tree),
         Route("/fragment/memory", f_memory),
         Route("/api/tree/{session_id}", api_tree), Route("/api/frames/{session_id}", api_frames),
+        Route("/api/signals/{session_id}", api_signals),
         Route("/api/scene/{session_id}.png", api_scene), Route("/api/signal", api_signal, methods=["POST"]),
         Route("/events", events), Route("/files/{path:path}", files),
         Mount("/static", app=StaticFiles(directory=STATIC_DIR), name="static"),

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -25,7 +26,7 @@ from phyagentos.protocol import SessionRecord, Workspace, fold_signals
 from phyagentos.protocol.archive import SessionArchive
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["Panel", "panel", "overview", "runs", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
+__all__ = ["Panel", "panel", "signals_in_force", "held_state", "overview", "runs", "runs_page", "RunsCache", "RUNS_PER_PAGE", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
            "SESSION_LINK_PATTERN"]
 
 logger = logging.getLogger(__name__)
@@ -51,33 +52,115 @@ def panel(fn: Callable[[], Any]) -> Panel:
         return Panel(error=str(exc))
 
 
+#: Session states a session waits in until a supervisor claims it: a pause or an e-stop
+#: in force holds it there (supervisors claim nothing), so the view says so.
+WAITING_TO_BE_CLAIMED = frozenset({"pending"})
+
+
+def signals_in_force(ws: Workspace) -> dict[str, Any]:
+    """``{paused, estopped, estop_reason, estop_by, estop_at, pause_by, pause_at}`` from RUNTIME_SIGNAL.md.
+
+    A pause stops dispatch (supervisors claim no new session; running sessions go on);
+    an e-stop halts motion and cancels running sessions.
+    """
+    s = fold_signals(ws.read("RUNTIME_SIGNAL").data.signals)
+    return {"paused": s.paused, "estopped": s.estopped,
+            "estop_reason": s.estop.reason if s.estop else "",
+            "estop_by": s.estop.issued_by if s.estop else "", "estop_at": str(s.estop.issued_at) if s.estop else "",
+            "pause_by": s.pause_signal.issued_by if s.paused and s.pause_signal else "",
+            "pause_at": str(s.pause_signal.issued_at) if s.paused and s.pause_signal else ""}
+
+
+def held_state(state: str, signals: dict[str, Any]) -> str | None:
+    """``held_by_estop`` / ``paused`` for a session in ``state`` that a signal keeps from being claimed, else None."""
+    if state not in WAITING_TO_BE_CLAIMED:
+        return None
+    if signals["estopped"]:
+        return "held_by_estop"
+    if signals["paused"]:
+        return "paused"
+    return None
+
+
 def overview(ws: Workspace) -> dict[str, Any]:
     """Signals in force and active sessions (from ``sessions/.index``)."""
-    signals = fold_signals(ws.read("RUNTIME_SIGNAL").data.signals)
-    active = [{"session_id": sid, "state": state, "run_id": ident.run_id, "node": ident.node, "skill": ident.skill,
-               "target": ident.target} for sid, state, ident in ws.active_sessions()]
-    return {"paused": signals.paused, "estopped": signals.estopped,
-            "estop_reason": signals.estop.reason if signals.estop else "", "active": active}
+    signals = signals_in_force(ws)
+    active = [{"session_id": sid, "state": state, "held": held_state(state, signals), "run_id": ident.run_id,
+               "node": ident.node, "skill": ident.skill, "target": ident.target}
+              for sid, state, ident in ws.active_sessions()]
+    return {**signals, "signals": signals, "active": active}
 
 
-def runs(ws: Workspace) -> list[dict[str, Any]]:
-    """Every run of the workspace (``runs/<id>/RUN.md``), newest first; a malformed RUN.md is a row with its error."""
-    out = []
-    directory = ws.root / "runs"
-    if not directory.is_dir():
+class RunsCache:
+    """Rows of ``runs/<id>/RUN.md`` kept between requests, re-read only when a file's
+    ``(mtime_ns, size)`` changed: listing 1,000 runs costs a ``scandir`` and a ``stat`` each."""
+
+    def __init__(self) -> None:
+        self._rows: dict[str, tuple[tuple[int, int], dict[str, Any]]] = {}
+        self.reads = 0
+        self._lock = threading.Lock()
+
+    def rows(self, ws: Workspace) -> list[dict[str, Any]]:
+        """Every run's row, newest first (see :func:`runs`)."""
+        with self._lock:
+            return self._rows_locked(ws)
+
+    def _rows_locked(self, ws: Workspace) -> list[dict[str, Any]]:
+        out = []
+        directory = ws.root / "runs"
+        if not directory.is_dir():
+            return out
+        seen = set()
+        for entry in os.scandir(directory):
+            if entry.name.startswith(".") or not entry.is_dir():
+                continue
+            seen.add(entry.name)
+            try:
+                st = os.stat(os.path.join(entry.path, "RUN.md"))
+                key = (st.st_mtime_ns, st.st_size)
+            except OSError:
+                key = (0, -1)
+            hit = self._rows.get(entry.name)
+            if hit is not None and hit[0] == key:
+                out.append(hit[1])
+                continue
+            self.reads += 1
+            row = _run_row(ws, entry.name)
+            self._rows[entry.name] = (key, row)
+            out.append(row)
+        for gone in set(self._rows) - seen:
+            del self._rows[gone]
+        out.sort(key=lambda r: (r["submitted_at"], r["run_id"]), reverse=True)
         return out
-    for entry in os.scandir(directory):
-        if entry.name.startswith(".") or not entry.is_dir():
-            continue
-        try:
-            rec = ws.runs.load(entry.name)
-            out.append({"run_id": rec.run_id, "goal_graph": rec.goal_graph, "state": rec.state,
-                        "succeeded": rec.succeeded, "submitted_at": str(rec.submitted_at), "error": None})
-        except PhyAgentOSError as exc:
-            out.append({"run_id": entry.name, "goal_graph": "", "state": "?", "succeeded": None, "submitted_at": "",
-                        "error": str(exc)})
-    out.sort(key=lambda r: r["submitted_at"], reverse=True)
-    return out
+
+
+def _run_row(ws: Workspace, name: str) -> dict[str, Any]:
+    try:
+        rec = ws.runs.load(name)
+        return {"run_id": rec.run_id, "goal_graph": rec.goal_graph, "state": rec.state,
+                "succeeded": rec.succeeded, "submitted_at": str(rec.submitted_at), "error": None}
+    except PhyAgentOSError as exc:
+        return {"run_id": name, "goal_graph": "", "state": "?", "succeeded": None, "submitted_at": "",
+                "error": str(exc)}
+
+
+def runs(ws: Workspace, cache: RunsCache | None = None) -> list[dict[str, Any]]:
+    """Every run of the workspace (``runs/<id>/RUN.md``), newest first; a malformed RUN.md is a row with its error."""
+    return (cache or RunsCache()).rows(ws)
+
+
+#: Runs per page of the index.
+RUNS_PER_PAGE = 50
+
+
+def runs_page(ws: Workspace, page: int, *, cache: RunsCache | None = None,
+              per_page: int = RUNS_PER_PAGE) -> dict[str, Any]:
+    """Page ``page`` (1-based, clamped) of :func:`runs`: ``{rows, page, pages, total, per_page}``."""
+    rows = runs(ws, cache)
+    pages = max(1, -(-len(rows) // per_page))
+    page = min(max(1, page), pages)
+    return {"rows": rows[(page - 1) * per_page: page * per_page], "page": page, "pages": pages,
+            "total": len(rows), "per_page": per_page}
 
 
 def _graph_nodes(ws: Workspace, run_id: str) -> list[dict[str, Any]]:
@@ -140,10 +223,17 @@ def run_graph(ws: Workspace, run_id: str) -> dict[str, Any]:
     dag.add_edges_from((d, n["id"]) for n in nodes for d in n["depends_on"] if d in known)
     raw = {n: node_state_of(by_node[n][-1].state) if n in by_node else dagmod.WAITING for n in known}
     states = dagmod.propagate_blocked(dag, raw)
+    signals = signals_in_force(ws)
     for n in nodes:
         n["state"] = states[n["id"]]
         n["sessions"] = [_session_box(s) for s in by_node.get(n["id"], [])]
-    return {"run_id": run_id, "nodes": nodes}
+        # The Agent plane calls a node with a submitted session "running"; while a pause or an
+        # e-stop keeps that session from being claimed, nothing runs: show what holds it.
+        latest = by_node.get(n["id"], [None])[-1]
+        held = held_state(latest.state, signals) if latest is not None and n["state"] == dagmod.RUNNING else None
+        if held:
+            n["agent_state"], n["state"] = n["state"], held
+    return {"run_id": run_id, "nodes": nodes, "signals": signals}
 
 
 def _session_box(s: SessionRecord) -> dict[str, Any]:
@@ -169,7 +259,9 @@ def session_detail(ws: Workspace, session_id: str) -> dict[str, Any]:
     directory = ws.root / evidence_rel
     files = sorted(p.name for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")) \
         if directory.is_dir() else []
-    out: dict[str, Any] = {"record": rec.model_dump(mode="json"), "evidence_dir": evidence_rel, "files": files}
+    signals = signals_in_force(ws)
+    out: dict[str, Any] = {"record": rec.model_dump(mode="json"), "evidence_dir": evidence_rel, "files": files,
+                           "signals": signals, "held": held_state(rec.state, signals)}
     out["bundle"] = panel(lambda: _yaml_file(directory / "bundle.yaml"))
     out["events"] = panel(lambda: _yaml_file(directory / "events.yaml") or [])
     out["perception"] = panel(lambda: _perception(ws, rec, directory))

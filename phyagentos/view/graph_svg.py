@@ -32,6 +32,8 @@ STATE_COLOURS = {
     "pending": ("#ffffff", "#9e9e9e"),
     "ready": ("#e3f2fd", "#1565c0"),
     "running": ("#fff59d", "#f9a825"),
+    "paused": ("#ffe082", "#8d6e00"),
+    "held_by_estop": ("#ef9a9a", "#8e0000"),
 }
 _ACTIVE = ("#fff59d", "#f9a825")  # claimed ... verifying
 

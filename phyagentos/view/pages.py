@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import html
 import json
+import math
 from typing import Any, Iterable
 
+from .changes import FINISHED_STATES
 from .data import Panel
+from .tree_svg import tree_svg
 
-__all__ = ["page", "error_box", "overview_fragment", "runs_fragment", "run_fragment", "session_fragment",
+__all__ = ["page", "error_box", "signals_banner", "overview_fragment", "runs_fragment", "run_fragment", "session_fragment",
            "tree_fragment", "memory_fragment"]
 
 _E = html.escape
@@ -64,56 +67,87 @@ def _file_link(path: str) -> str:
 def signal_buttons(*, session_id: str | None = None) -> str:
     if session_id:
         return (f'<div class="signals"><button class="sig" data-kind="cancel" data-session="{_E(session_id)}">'
-                f'cancel session</button> <button class="sig estop" data-kind="estop">E-STOP</button></div>')
+                f'cancel session</button> <button class="sig estop" data-kind="estop" '
+                f'title="halt all motion now and cancel running sessions">E-STOP</button></div>')
     return ('<div class="signals">'
-            '<button class="sig" data-kind="pause">pause</button> '
-            '<button class="sig" data-kind="resume">resume</button> '
-            '<button class="sig estop" data-kind="estop" id="estop">E-STOP</button> '
-            '<button class="sig" data-kind="clear_estop">clear e-stop</button></div>')
+            '<button class="sig" data-kind="pause" title="supervisors claim no new session; sessions already '
+            'running continue (use E-STOP to halt motion)">pause dispatch</button> '
+            '<button class="sig" data-kind="resume" title="supervisors claim pending sessions again">resume dispatch'
+            '</button> '
+            '<button class="sig estop" data-kind="estop" id="estop" title="halt all motion now and cancel running '
+            'sessions">E-STOP</button> '
+            '<button class="sig" data-kind="clear_estop">clear e-stop</button>'
+            '<span class="small muted"> · pause dispatch: no new session starts, running ones finish · '
+            'E-STOP: the robot stops now</span></div>')
+
+
+def signals_banner(sig: dict[str, Any]) -> str:
+    """The signals in force (``data.signals_in_force``), as the flags every page shows."""
+    flags = []
+    if sig["estopped"]:
+        flags.append(f'<span class="flag estop-on" data-signal="estop">E-STOP engaged: {_E(sig["estop_reason"] or "")}'
+                     f' <small>({_E(sig.get("estop_by", ""))}, {_E(sig.get("estop_at", ""))})</small></span>')
+    if sig["paused"]:
+        flags.append(f'<span class="flag paused" data-signal="paused">dispatch paused: no new session is claimed; '
+                     f'running sessions continue <small>({_E(sig.get("pause_by", ""))}, {_E(sig.get("pause_at", ""))})'
+                     f'</small></span>')
+    head = " ".join(flags) or '<span class="flag ok" data-signal="none">no pause or e-stop in force</span>'
+    return f'<div class="signal-state">{head}</div>'
+
+
+def _held(state: str, held: str | None) -> str:
+    """A session's state, or what holds it (``paused``, ``held_by_estop``) when a signal keeps it from starting."""
+    if not held:
+        return _state(state)
+    label = "paused (dispatch)" if held == "paused" else "held by e-stop"
+    return f'<span class="state state-{_E(held)}" title="session {_E(state)}; not claimed while {_E(label)}">{label}</span>'
 
 
 def overview_fragment(p: Panel) -> str:
     if p.error:
         return error_box(p.error)
     d = p.data
-    flags = []
-    if d["estopped"]:
-        flags.append(f'<span class="flag estop-on">E-STOP engaged: {_E(d["estop_reason"] or "")}</span>')
-    if d["paused"]:
-        flags.append('<span class="flag paused">paused</span>')
-    head = " ".join(flags) or '<span class="flag ok">no pause or e-stop in force</span>'
-    rows = [(_session_link(a["session_id"]), _state(a["state"]), _E(a["node"]), _E(a["skill"]), _E(a["target"]),
-             f'<a href="/run/{_E(a["run_id"])}">{_E(a["run_id"])}</a>') for a in d["active"]]
+    head = signals_banner(d["signals"]).replace('class="signal-state"', 'id="signal-state" class="signal-state"', 1)
+    rows = [(_session_link(a["session_id"]), _held(a["state"], a.get("held")), _E(a["node"]), _E(a["skill"]),
+             _E(a["target"]), f'<a href="/run/{_E(a["run_id"])}">{_E(a["run_id"])}</a>') for a in d["active"]]
     table = _table(("session", "state", "node", "skill", "target", "run"), rows, cls="active") if rows \
         else "<p class='muted'>no active session</p>"
-    return f'<div id="signal-state">{head}</div><h3>active sessions</h3>{table}'
+    return f'{head}<h3>active sessions</h3>{table}'
 
 
 def runs_fragment(p: Panel) -> str:
+    """One page of the run list (``p.data`` from :func:`~phyagentos.view.data.runs_page`) with page links."""
     if p.error:
         return error_box(p.error)
-    if not p.data:
+    d = p.data
+    if not d["rows"]:
         return "<p class='muted'>no run yet: <code>phyagentos run GRAPH --workspace WS</code></p>"
     rows = []
-    for r in p.data:
+    for r in d["rows"]:
         outcome = "" if r["succeeded"] is None else ("succeeded" if r["succeeded"] else "failed")
         rows.append((f'<a href="/run/{_E(r["run_id"])}">{_E(r["run_id"])}</a>', _E(r["goal_graph"]),
                      _state(r["state"]) + (" " + _state(outcome) if outcome else ""), _E(r["submitted_at"]),
                      error_box(r["error"]) if r["error"] else ""))
-    return _table(("run", "goal graph", "state", "submitted", ""), rows, cls="runs")
+    page, pages = d["page"], d["pages"]
+    first = (page - 1) * d["per_page"] + 1
+    nav = (f'<p class="pager small" data-page="{page}" data-pages="{pages}">runs {first}-{first + len(rows) - 1} '
+           f'of {d["total"]} · page {page} of {pages}'
+           + (f' · <a href="/?page={page - 1}" rel="prev">newer</a>' if page > 1 else "")
+           + (f' · <a href="/?page={page + 1}" rel="next">older</a>' if page < pages else "") + "</p>")
+    return nav + _table(("run", "goal graph", "state", "submitted", ""), rows, cls="runs")
 
 
 def run_fragment(p: Panel, svg: Panel) -> str:
     if p.error:
         return error_box(p.error)
     g = p.data
-    pic = error_box(svg.error) if svg.error else f'<div class="dag">{svg.data}</div>'
+    pic = signals_banner(g["signals"]) + (error_box(svg.error) if svg.error else f'<div class="dag">{svg.data}</div>')
     rows = []
     for n in g["nodes"]:
         sessions = " → ".join(_session_link(s["session_id"]) + " " + _state(s["state"]) for s in n["sessions"]) or "-"
         rows.append((_E(n["id"]), _E(n["skill"]), f'<span class="nodestate" data-node="{_E(n["id"])}">'
                      f'{_state(n["state"])}</span>', _E(", ".join(n["depends_on"]) or "-"), sessions))
-    legend = " ".join(_state(s) for s in ("waiting", "running", "succeeded", "failed", "blocked", "cancelled"))
+    legend = " ".join(_state(s) for s in ("waiting", "running", "paused", "succeeded", "failed", "blocked", "cancelled"))
     return (f'{pic}<p class="legend">{legend} · orange arrows: replans · dashed: blocked</p>'
             + _table(("node", "skill", "state", "depends on", "sessions"), rows, cls="nodes"))
 
@@ -141,7 +175,7 @@ def _criteria(criteria: list[dict[str, Any]]) -> str:
 def _kv(d: dict[str, Any] | None) -> str:
     if not d:
         return "-"
-    return "<br>".join(f"<code>{_E(str(k))}</code>: {_E(json.dumps(v, default=str)[:160])}" for k, v in d.items())
+    return "<br>".join(f"<code>{_E(str(k))}</code>: {_E(struct_text(v, limit=160))}" for k, v in d.items())
 
 
 def _attempts(attempts: list[dict[str, Any]]) -> str:
@@ -208,11 +242,16 @@ def session_fragment(p: Panel) -> str:
     r = d["record"]
     files_url = f"/files/{d['evidence_dir']}"
     res = r.get("result") or {}
-    head = (f'<p><span id="session-state" data-state="{_E(r["state"])}">{_state(r["state"])}</span> '
+    finished = "true" if r["state"] in FINISHED_STATES else "false"
+    head = (signals_banner(d["signals"])
+            + f'<p><span id="session-state" class="session-state" data-state="{_E(r["state"])}" data-finished="{finished}" '
+            f'data-held="{_E(d.get("held") or "")}">{_held(r["state"], d.get("held"))}</span> '
             f'node <b>{_E(r["node"])}</b> · skill <b>{_E(r["skill"])}</b> ({_E(r["skill_runtime"])}) · target '
             f'<b>{_E(r["target"])}</b> · run <a href="/run/{_E(r["run_id"])}">{_E(r["run_id"])}</a>'
-            + (f" · parent {_session_link(r['parent_session_id'])}" if r.get("parent_session_id") else "")
-            + "".join(f" · child {_session_link(c)}" for c in r.get("child_session_ids", [])) + "</p>")
+            + (f" · parent {_session_link(r['parent_session_id'])} (<a class='compare-link' href='/compare?a="
+               f"{_E(r['parent_session_id'])}&amp;b={_E(r['session_id'])}'>compare</a>)" if r.get("parent_session_id") else "")
+            + "".join(f" · child {_session_link(c)} (<a class='compare-link' href='/compare?a={_E(r['session_id'])}"
+                      f"&amp;b={_E(c)}'>compare</a>)" for c in r.get("child_session_ids", [])) + "</p>")
     if res:
         err = res.get("error") or {}
         head += (f"<p>result {_state(res.get('status'))} {_E(res.get('reason', ''))}"
@@ -235,6 +274,15 @@ def session_fragment(p: Panel) -> str:
             + f"<p class='small'>files: {files or '-'}</p>{bundle_html}")
 
 
+def timeline_section(session_id: str) -> str:
+    """The session's signals on one timeline (filled by view.js from ``/api/signals``): one cursor
+    moves the plots, the 3D scene, the camera images, the video, the transitions and the tree."""
+    return (f'<section class="timeline" data-session="{_E(session_id)}"><h2>signals on one timeline</h2>'
+            '<p class="small tl-head"><span class="tl-info muted">loading…</span> · click or drag on a plot to move '
+            'the cursor; the 3D slider, the video and the tree history move it too</p>'
+            '<div class="tl-plots"></div><div class="tl-images"></div></section>')
+
+
 def tree_fragment(p: Panel) -> str:
     """The live behaviour tree (indented by depth) and the blackboard values it uses."""
     if p.error:
@@ -253,14 +301,110 @@ def tree_fragment(p: Panel) -> str:
                     f'<td style="padding-left:{pad + 4}px"><span class="dot"></span>{_E(n["name"])}</td>'
                     f'<td><code>{_E(n["type"])}</code></td><td>{_state(n["status"])}</td>'
                     f'<td class="small">{_E(keys)}</td><td class="small">{_E(n["message"])}</td></tr>')
-    board = "".join(f"<tr><td><code>{_E(k)}</code></td><td class='small'>{_E(json.dumps(v)[:300])}</td></tr>"
+    board = "".join(f"<tr><td><code>{_E(k)}</code></td><td class='small'>{_E(struct_text(v, limit=300))}</td></tr>"
                     for k, v in t.get("blackboard", {}).items())
     status = "final" if t.get("final") else "live"
+    running = [n["name"] for n in nodes if n.get("kind") == "leaf" and n["status"] == "running"]
+    graph = tree_svg(nodes)
     return (f'<p class="small" id="tree-meta" data-tick="{t["tick"]}" data-final="{str(bool(t.get("final"))).lower()}">'
-            f'{status} · tick {t["tick"]} · {len(nodes)} nodes</p>'
+            f'{status} · tick {t["tick"]} · {len(nodes)} nodes'
+            + (f' · running leaf: <b class="running-leaf">{_E(", ".join(running))}</b>' if running else "")
+            + '<span class="tree-replay"></span></p>'
+            + (f'<div class="tree-graph">{graph}</div>' if graph else "")
+            + '<details class="tree-table"><summary class="small">as a table (types, blackboard keys, feedback)'
+            '</summary>'
             '<table class="tree"><thead><tr><th>node</th><th>type</th><th>status</th><th>blackboard keys</th>'
-            f'<th>feedback</th></tr></thead><tbody>{"".join(rows)}</tbody></table>'
+            f'<th>feedback</th></tr></thead><tbody>{"".join(rows)}</tbody></table></details>'
             f'<h4>blackboard</h4><table class="board"><tbody>{board or "<tr><td>-</td></tr>"}</tbody></table>')
+
+
+# -- structured, bounded text (memory entries, blackboard values) -------------------------
+
+def _is_pose(v: Any) -> bool:
+    """A 4x4 homogeneous transform as nested lists (last row 0 0 0 1)."""
+    return (isinstance(v, list) and len(v) == 4 and all(isinstance(r, list) and len(r) == 4 for r in v)
+            and all(isinstance(x, (int, float)) for r in v for x in r)
+            and all(abs(a - b) < 1e-6 for a, b in zip(v[3], (0, 0, 0, 1))))
+
+
+def pose_text(m: list[list[float]]) -> str:
+    """A 4x4 transform as ``p = (x, y, z) m · rpy = (r, p, y) deg · q = (w, x, y, z)``.
+
+    ``rpy``: roll, pitch, yaw (extrinsic x-y-z, i.e. R = Rz(yaw) Ry(pitch) Rx(roll)), degrees;
+    ``q``: unit quaternion, scalar first.
+    """
+    r = [row[:3] for row in m[:3]]
+    pitch = math.asin(max(-1.0, min(1.0, -r[2][0])))
+    if abs(r[2][0]) < 0.999999:
+        roll, yaw = math.atan2(r[2][1], r[2][2]), math.atan2(r[1][0], r[0][0])
+    else:  # gimbal lock: yaw absorbs the roll
+        roll, yaw = 0.0, math.atan2(-r[0][1], r[1][1])
+    tr = r[0][0] + r[1][1] + r[2][2]
+    if tr > 0:
+        k = math.sqrt(tr + 1.0) * 2
+        q = (0.25 * k, (r[2][1] - r[1][2]) / k, (r[0][2] - r[2][0]) / k, (r[1][0] - r[0][1]) / k)
+    elif r[0][0] > r[1][1] and r[0][0] > r[2][2]:
+        k = math.sqrt(1.0 + r[0][0] - r[1][1] - r[2][2]) * 2
+        q = ((r[2][1] - r[1][2]) / k, 0.25 * k, (r[0][1] + r[1][0]) / k, (r[0][2] + r[2][0]) / k)
+    elif r[1][1] > r[2][2]:
+        k = math.sqrt(1.0 + r[1][1] - r[0][0] - r[2][2]) * 2
+        q = ((r[0][2] - r[2][0]) / k, (r[0][1] + r[1][0]) / k, 0.25 * k, (r[1][2] + r[2][1]) / k)
+    else:
+        k = math.sqrt(1.0 + r[2][2] - r[0][0] - r[1][1]) * 2
+        q = ((r[1][0] - r[0][1]) / k, (r[0][2] + r[2][0]) / k, (r[1][2] + r[2][1]) / k, 0.25 * k)
+    if q[0] < 0:
+        q = tuple(-x for x in q)
+    p = ", ".join(f"{m[i][3]:.3f}" for i in range(3))
+    rpy = ", ".join(f"{math.degrees(a):.1f}" for a in (roll, pitch, yaw))
+    return f"p = ({p}) m · rpy = ({rpy})° · q(wxyz) = ({', '.join(f'{x:.3f}' for x in q)})"
+
+
+def _scalar(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, str):
+        return v
+    return json.dumps(v, default=str)
+
+
+def struct_text(v: Any, *, limit: int = 240, depth: int = 0) -> str:
+    """``v`` (JSON data) as readable text of at most about ``limit`` characters.
+
+    Mappings become ``key: value`` items, lists of numbers ``[a, b, c]`` (floats to 4
+    significant digits), 4x4 transforms :func:`pose_text`; what does not fit is cut at an
+    item boundary with a count (``… 3 more``), never in the middle of a token.
+    """
+    if _is_pose(v):
+        return pose_text(v)
+    if isinstance(v, dict):
+        if not v:
+            return "{}"
+        parts, used = [], 0
+        for i, (k, x) in enumerate(v.items()):
+            item = f"{k}: {struct_text(x, limit=max(40, limit // 2), depth=depth + 1)}"
+            if parts and used + len(item) > limit:
+                parts.append(f"… {len(v) - i} more")
+                break
+            parts.append(item)
+            used += len(item) + 2
+        return ("{" + "; ".join(parts) + "}") if depth else "; ".join(parts)
+    if isinstance(v, list):
+        if not v:
+            return "[]"
+        parts, used = [], 0
+        for i, x in enumerate(v):
+            item = struct_text(x, limit=max(40, limit // 2), depth=depth + 1)
+            if parts and used + len(item) > limit:
+                parts.append(f"… {len(v) - i} more")
+                break
+            parts.append(item)
+            used += len(item) + 2
+        return "[" + ", ".join(parts) + "]"
+    text = _scalar(v)
+    if len(text) > limit:  # one long string: cut at a word boundary
+        cut = text[:limit].rsplit(" ", 1)[0] or text[:limit]
+        return f"{cut} … ({len(text) - len(cut)} more characters)"
+    return text
 
 
 def _provenance(ids: Iterable[str]) -> str:
@@ -276,7 +420,7 @@ def memory_fragment(panels: dict[str, Panel]) -> str:
     else:
         for title, key in (("verified lessons", "lessons"), ("candidates", "candidates")):
             rows = [(_E(x["id"]), _E(x["objective"]), f"<code>{_E(x['cause'])}</code>", _E(x["correction"]),
-                     f"{x.get('confirmations', 0)} / {x.get('refutations', 0)}", _E(json.dumps(x.get("scope", {}))[:160]),
+                     f"{x.get('confirmations', 0)} / {x.get('refutations', 0)}", _E(struct_text(x.get("scope", {}), limit=160)),
                      _provenance([*x.get("provenance", []), *x.get("verified_by", [])]))
                     for x in lessons.data.get(key, [])]
             out.append(f"<h3>{title}</h3>" + (_table(("id", "objective", "cause", "correction", "confirmed / refuted",
@@ -291,8 +435,8 @@ def memory_fragment(panels: dict[str, Panel]) -> str:
             out.append(error_box(p.error))
             continue
         rows = [(_E(x.get("id") or x.get("name")), _E(x.get("pattern") or x.get("base_skill", "")),
-                 _E(json.dumps(x.get("conditions", {}))[:200]), f"{x.get('successes', 0)} / {x.get('attempts', 0)}",
-                 _E(json.dumps(x.get("parameters", {}))[:200]), _provenance(x.get("provenance", [])))
+                 _E(struct_text(x.get("conditions", {}), limit=200)), f"{x.get('successes', 0)} / {x.get('attempts', 0)}",
+                 _E(struct_text(x.get("parameters", {}), limit=200)), _provenance(x.get("provenance", [])))
                 for x in p.data.get(field, [])]
         out.append(_table(cols, rows, cls="memory") if rows else "<p class='muted'>none</p>")
     return "".join(out)

@@ -31,7 +31,13 @@ from phyagentos.protocol import Workspace
 from phyagentos.runtime.target_pool import DRIVERS, scene_for
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["SceneRenderer", "frames_of"]
+__all__ = ["SceneRenderer", "frames_of", "overlay_markers"]
+
+#: Marker colours (RGBA): perceived objects, grasp targets, place targets, the tool path.
+MARKER_RGBA = {"perceived": (0.1, 0.35, 1.0, 0.55), "grasp": (0.1, 0.8, 0.2, 0.8), "place": (1.0, 0.55, 0.0, 0.8),
+               "tcp_path": (0.9, 0.1, 0.6, 0.9)}
+#: Most path points drawn (the path is thinned evenly beyond).
+MAX_PATH_POINTS = 200
 
 logger = logging.getLogger(__name__)
 
@@ -39,13 +45,75 @@ _MAX_MODELS = 4
 
 
 def frames_of(directory: Path) -> dict[str, Any] | None:
-    """``{"t": [...], "qpos": (N, nq) array, "camera", "fps"}`` from ``frames.npz``, or None."""
+    """``{"t": [...], "qpos": (N, nq) array, "camera", "fps"[, "wall"]}`` from ``frames.npz``, or None."""
     path = directory / "frames.npz"
     if not path.is_file():
         return None
     with np.load(path, allow_pickle=False) as data:
-        return {"t": data["t"].astype(float), "qpos": data["qpos"], "camera": str(data["camera"]),
-                "fps": float(data["fps"])}
+        out = {"t": data["t"].astype(float), "qpos": data["qpos"], "camera": str(data["camera"]),
+               "fps": float(data["fps"])}
+        if "wall" in data.files:
+            out["wall"] = data["wall"].astype(float)
+        return out
+
+
+def overlay_markers(directory: Path) -> list[dict[str, Any]]:
+    """Markers from ``trace.jsonl``: ``{"kind", "pos" (3,) m world}`` for perceived object
+    positions (``observe``), grasp and place targets (``grasp_pose``, ``place_pose``) and
+    the tool centre point's path (``proprio`` ``tcp_position_m``, at most
+    :data:`MAX_PATH_POINTS`). Empty when the session has no trace yet."""
+    from .signals import _read_trace  # noqa: PLC0415 - signals imports this module
+
+    trace, _ = _read_trace(directory / "trace.jsonl")
+    out: list[dict[str, Any]] = []
+
+    def vec(v: Any) -> list[float] | None:
+        return [float(x) for x in v] if isinstance(v, list) and len(v) == 3 and \
+            all(isinstance(x, (int, float)) for x in v) else None
+
+    path = []
+    for r in trace:
+        kind = r.get("kind")
+        if kind == "observe" and isinstance(r.get("objects"), dict):
+            for name, o in r["objects"].items():
+                if isinstance(o, dict) and (p := vec(o.get("position"))):
+                    out.append({"kind": "perceived", "pos": p, "label": str(name)})
+        elif kind == "grasp_pose" and (p := vec(r.get("grasp"))):
+            out.append({"kind": "grasp", "pos": p, "label": str(r.get("object", ""))})
+        elif kind == "place_pose" and (p := vec(r.get("place"))):
+            out.append({"kind": "place", "pos": p, "label": str(r.get("object", ""))})
+        elif kind == "proprio" and (p := vec(r.get("tcp_position_m"))):
+            path.append(p)
+    if len(path) > MAX_PATH_POINTS:
+        path = [path[i] for i in np.linspace(0, len(path) - 1, MAX_PATH_POINTS).round().astype(int)]
+    out += [{"kind": "tcp_path", "pos": p, "label": ""} for p in path]
+    return out
+
+
+def _draw_markers(scene: mujoco.MjvScene, markers: list[dict[str, Any]]) -> int:
+    """Append ``markers`` to ``scene`` as spheres (the tool path as connected capsules); returns how many fit."""
+    drawn = 0
+    eye = np.eye(3).flatten()
+    prev = None
+    for m in markers:
+        if scene.ngeom >= scene.maxgeom:
+            break
+        pos = np.asarray(m["pos"], dtype=np.float64)
+        rgba = np.asarray(MARKER_RGBA[m["kind"]], dtype=np.float32)
+        g = scene.geoms[scene.ngeom]
+        if m["kind"] == "tcp_path":
+            if prev is not None:
+                mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3), np.zeros(3), eye, rgba)
+                mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_CAPSULE, 0.003, prev, pos)
+                scene.ngeom += 1
+                drawn += 1
+            prev = pos
+            continue
+        size = {"perceived": 0.028, "grasp": 0.012, "place": 0.016}[m["kind"]]
+        mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_SPHERE, np.array([size, 0, 0]), pos, eye, rgba)
+        scene.ngeom += 1
+        drawn += 1
+    return drawn
 
 
 class SceneRenderer:
@@ -78,16 +146,48 @@ class SceneRenderer:
         self._models.clear()
 
     def render(self, session_id: str, *, frame: int | None, azimuth: float, elevation: float,
-               distance: float | None) -> tuple[bytes, dict[str, Any]]:
+               distance: float | None, overlays: bool = False) -> tuple[bytes, dict[str, Any]]:
         """PNG of ``session_id``'s scene at recorded ``frame`` (None: the current checkpoint).
 
-        Returns ``(png bytes, info)`` with ``info`` = ``{"source", "t"}``.
+        Returns ``(png bytes, info)`` with ``info`` = ``{"source", "t", "overlays"}``.
+        With ``overlays``, markers from the session's trace are drawn into the scene (see
+        :func:`overlay_markers`); ``info["overlays"]`` counts them. The scene itself is the
+        simulator's state, i.e. ground truth; the markers are what the robot perceived and
+        planned, so their offset from the objects is the perception error.
 
         Raises:
             ViewError: nothing to show (no recording and no checkpoint of this session),
                 a frame out of range, or a target the view cannot rebuild.
         """
-        return self._pool.submit(self._render, session_id, frame, azimuth, elevation, distance).result(timeout=60)
+        return self._pool.submit(self._render, session_id, frame, azimuth, elevation, distance,
+                                 overlays).result(timeout=60)
+
+    def joint_layout(self, session_id: str) -> dict[str, Any]:
+        """``{"arm": [(joint name, qpos index)...], "fingers": [qpos index...]}`` of the session's model.
+
+        Arm joints: hinge joints named ``...joint<digit>`` (at most 7, model order);
+        fingers: joints whose name contains ``finger``.
+
+        Raises:
+            ViewError: the target cannot be rebuilt.
+        """
+        return self._pool.submit(self._layout, session_id).result(timeout=60)
+
+    def _layout(self, session_id: str) -> dict[str, Any]:
+        try:
+            target, _ = self._target(session_id)
+        except TargetError as exc:
+            raise ViewError(str(exc)) from exc
+        m = target.model
+        arm, fingers = [], []
+        for j in range(m.njnt):
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
+            adr = int(m.jnt_qposadr[j])
+            if "finger" in name:
+                fingers.append(adr)
+            elif m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and name[-1:].isdigit() and len(arm) < 7:
+                arm.append((name.rsplit(":", 1)[-1].replace("panda0_", ""), adr))
+        return {"arm": arm, "fingers": fingers}
 
     def _target(self, session_id: str):
         if session_id in self._models:
@@ -134,7 +234,7 @@ class SceneRenderer:
         mujoco.mj_forward(model, data)
         return {"source": "checkpoint", "t": float(target.data.time)}
 
-    def _render(self, session_id, frame, azimuth, elevation, distance) -> tuple[bytes, dict[str, Any]]:
+    def _render(self, session_id, frame, azimuth, elevation, distance, overlays=False) -> tuple[bytes, dict[str, Any]]:
         from PIL import Image  # noqa: PLC0415
 
         try:
@@ -156,6 +256,8 @@ class SceneRenderer:
         cam.distance = float(distance) if distance else 1.9
         self._renderer.update_scene(data, camera=cam)
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
+        info["overlays"] = _draw_markers(self._renderer.scene, overlay_markers(
+            self.workspace.root / "evidence" / session_id)) if overlays else 0
         pixels = self._renderer.render()
         buf = io.BytesIO()
         Image.fromarray(pixels).save(buf, format="PNG")

@@ -71,11 +71,23 @@ def bare_steps_per_second(steps: int = 3000, seed: int = 0) -> float:
     return steps / (time.perf_counter() - started)
 
 
+#: Generous limits for a pass of many worlds on a shared machine (s): an episode waits for a
+#: worker for as long as the pass runs, and a loaded machine may starve a runner for a while.
+QUEUE_TIMEOUT_S = 6 * 3600.0
+HEARTBEAT_TIMEOUT_S = 120.0
+
+
 def _pass(name: str, ws: Path, *, episodes: int, split: str, memory: str, workers: int,
           seeds: tuple[int, ...] | None = None) -> dict:
     started = time.perf_counter()
-    result = run_bench("crafter", ws, episodes=episodes, split=split, memory=memory, workers=workers, seeds=seeds)
+    # Every episode's sessions are pending from the start and wait for a worker: a queue
+    # timeout shorter than the whole pass would end the later episodes unplayed (not scored).
+    result = run_bench("crafter", ws, episodes=episodes, split=split, memory=memory, workers=workers, seeds=seeds,
+                       queue_timeout_s=QUEUE_TIMEOUT_S, heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S)
     c = result.report["crafter"]
+    if c["episodes"] != episodes:
+        raise BenchError(f"{name}: {episodes - c['episodes']} of {episodes} episodes have no game record "
+                         f"(not played: see {result.run_dir}); the pass is not scored")
     walls = []
     for ep in c["per_episode"]:
         out = result.run_dir / "episodes" / ep["episode"] / "outcome.yaml"

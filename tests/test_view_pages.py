@@ -54,3 +54,25 @@ def test_view_on_a_new_directory_prints_a_cli_hint(tmp_path):
         text = proc.stdout + proc.stderr
         assert "phyagentos run " in text and f"--workspace {path}" in text and f"phyagentos view {path}" in text
         assert "Workspace.create" not in text and "Traceback" not in text
+
+
+def test_the_tree_graph_marks_the_running_leaf_and_fits_wide_trees():
+    import re
+
+    from phyagentos.view.tree_svg import tree_svg
+
+    def node(i, parent, name, kind, status):
+        return {"id": i, "parent": parent, "name": name, "type": "X", "kind": kind, "status": status, "message": ""}
+
+    small = [node(0, None, "Root", "composite", "running"), node(1, 0, "Done", "leaf", "success"),
+             node(2, 0, "Moving", "leaf", "running"), node(3, 0, "Next", "leaf", "invalid")]
+    svg = tree_svg(small)
+    assert re.findall(r'class="btn ([^"]+)" data-i="(\d)"', svg) == [
+        ("bt-running", "0"), ("bt-success", "1"), ("bt-running active-leaf", "2"), ("bt-invalid", "3")]
+    w, h = (int(v) for v in re.search(r'width="(\d+)" height="(\d+)"', svg).groups())
+    assert w > h  # three leaves: top-down
+    wide = [node(0, None, "Root", "composite", "running")] + [
+        node(i, 0, f"Leaf{i}", "leaf", "success") for i in range(1, 20)]
+    w, h = (int(v) for v in re.search(r'width="(\d+)" height="(\d+)"', tree_svg(wide)).groups())
+    assert w < 400 < h  # nineteen leaves: left to right, narrow enough for the panel
+    assert tree_svg(wide * 30) == ""  # beyond MAX_SVG_NODES: the table only

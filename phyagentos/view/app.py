@@ -320,7 +320,10 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
     ]
     @contextlib.asynccontextmanager
     async def lifespan(app):
+        # Read every RUN.md once in the background, so the first index load only stats them.
+        warm = asyncio.get_running_loop().run_in_executor(None, data.panel, lambda: runs_cache.rows(ws))
         yield
+        await warm
         await asyncio.to_thread(renderer.close)
 
     async def view_error(request: Request, exc: Exception) -> Response:

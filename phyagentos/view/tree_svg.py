@@ -1,7 +1,8 @@
 """The behaviour tree as a graph: an SVG drawn from ``tree.json``'s flat node list.
 
-Top-down layout: leaves take consecutive columns in depth-first order, a parent sits
-centred over its first and last child, one row per depth. Each node is a ``<g
+Leaves take consecutive slots in depth-first order and a parent sits centred on its first
+and last child. Top-down (one row per depth) for up to 6 leaves; wider trees are laid out
+left to right (one column per depth, leaves down the page) so they fit the panel. Each node is a ``<g
 class="btn bt-<status>" data-i=<node index>>`` (status colours in view.css); a running
 leaf also gets ``active-leaf`` (a thick outline and a ▶), so the leaf the robot is
 executing stands out. The browser re-colours the same elements to replay the tree's
@@ -47,17 +48,34 @@ def tree_svg(nodes: list[dict[str, Any]]) -> str:
         kids = children[n["id"]]
         if kids:
             x[n["id"]] = (x[kids[0]] + x[kids[-1]]) / 2
-    width = int(max(1, column) * _DX + 2 * _PAD)
-    height = int((max(depth.values()) + 1) * _DY + 2 * _PAD)
+    levels = max(depth.values()) + 1
+    # Wide, shallow trees (a sequence of many leaves, as most skills are) read better left to
+    # right: depth along x, leaves down the page, so the graph fits the panel's width.
+    lr = column > 6
+    if lr:
+        width = int(levels * (_W + 30) + 2 * _PAD)
+        height = int(max(1, column) * (_H + 8) + 2 * _PAD)
+    else:
+        width = int(max(1, column) * _DX + 2 * _PAD)
+        height = int(levels * _DY + 2 * _PAD)
     out = [(f'<svg xmlns="http://www.w3.org/2000/svg" class="bt-graph" width="{width}" height="{height}" '
             f'viewBox="0 0 {width} {height}" role="img" aria-label="behaviour tree">')]
-    cx = {i: _PAD + x[i] * _DX + _DX / 2 for i in x}
-    cy = {i: _PAD + depth[i] * _DY + _H / 2 for i in depth}
+    if lr:
+        cx = {i: _PAD + depth[i] * (_W + 30) + _W / 2 for i in depth}
+        cy = {i: _PAD + x[i] * (_H + 8) + _H / 2 for i in x}
+    else:
+        cx = {i: _PAD + x[i] * _DX + _DX / 2 for i in x}
+        cy = {i: _PAD + depth[i] * _DY + _H / 2 for i in depth}
     for n in nodes:
-        p = n["parent"]
-        if p is not None and p in cx:
-            out.append(f'<line class="bt-edge" x1="{cx[p]:.1f}" y1="{cy[p] + _H / 2:.1f}" x2="{cx[n["id"]]:.1f}" '
-                       f'y2="{cy[n["id"]] - _H / 2:.1f}"/>')
+        p, c = n["parent"], n["id"]
+        if p is None or p not in cx:
+            continue
+        if lr:
+            out.append(f'<line class="bt-edge" x1="{cx[p] + _W / 2:.1f}" y1="{cy[p]:.1f}" x2="{cx[c] - _W / 2:.1f}" '
+                       f'y2="{cy[c]:.1f}"/>')
+        else:
+            out.append(f'<line class="bt-edge" x1="{cx[p]:.1f}" y1="{cy[p] + _H / 2:.1f}" x2="{cx[c]:.1f}" '
+                       f'y2="{cy[c] - _H / 2:.1f}"/>')
     for n in nodes:
         i, status = n["id"], html.escape(str(n["status"]))
         active = " active-leaf" if n.get("kind") == "leaf" and n["status"] == "running" else ""

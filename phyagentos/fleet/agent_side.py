@@ -16,7 +16,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from pathlib import Path
 from typing import Any
 
 from phyagentos.errors import FleetError, ProtocolError
@@ -329,7 +328,7 @@ class FleetAgentBridge:
                 return
             try:
                 self._forward_once()
-            except Exception:  # noqa: BLE001 - the bridge goes on; the next pass retries
+            except Exception:
                 log.exception("fleet forwarder pass failed")
 
     # -- e-stop and frames -------------------------------------------------------------

@@ -61,7 +61,7 @@ class LocalFleet:
 
     def config_file(self, name: str, **fields) -> Path:
         """Write ``<root>/<name>.yaml`` (auth of user ``name`` plus ``fields``); returns it."""
-        import yaml  # noqa: PLC0415
+        import yaml
 
         data = dict(fields)
         if self.auth:

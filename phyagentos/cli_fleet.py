@@ -128,7 +128,7 @@ def _graph_targets(path: Path, override: str | None) -> set[str]:
         return {override}
     doc = load_yaml(Path(path).read_text(encoding="utf-8"), path=path, error=GoalGraphError)
     default = (doc.get("defaults") or {}).get("target") if isinstance(doc, dict) else None
-    return {n.get("target") or default for n in (doc.get("nodes") or []) if isinstance(n, dict)} - {None}
+    return {str(t) for n in (doc.get("nodes") or []) if isinstance(n, dict) and (t := n.get("target") or default)}
 
 
 def cmd_fleet_run(args, out: Console, err: Console) -> int:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from phyagentos.errors import FleetError, ProtocolError
@@ -73,7 +74,7 @@ class FleetAgentBridge:
         self._watcher = WorkspaceWatcher(workspace.root, dirs=("sessions", "sessions/.index"))
         self._kicked: list[SessionRecord] = []
         #: called after a replica was installed (the agent loop's wake-up)
-        self.on_installed = None
+        self.on_installed: Callable[[], None] | None = None
         self.stats = {"submits": 0, "verdicts": 0, "installed": 0, "catchups": 0, "refused": 0}
         self.last_catchup_s: dict[str, float] = {}
         k = link.keys

@@ -210,5 +210,5 @@ def find_fleet_config(explicit: str | os.PathLike[str] | None, workspace: str | 
         if candidate and Path(candidate).is_file():
             return load_fleet_config(candidate)
         if candidate and candidate == explicit:
-            raise FleetError("fleet file not found", path=candidate)
-    return FleetConfig()
+            raise FleetError("fleet file not found", path=Path(candidate))
+    return FleetConfig.model_validate({})

@@ -22,7 +22,7 @@ import json
 import logging
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 from phyagentos.errors import FleetError
 
@@ -65,7 +65,7 @@ class FleetLink:
         FleetError: the session cannot be opened (router unreachable, authentication refused).
     """
 
-    def __init__(self, config: FleetConfig, *, mode: str = "client") -> None:
+    def __init__(self, config: FleetConfig, *, mode: Literal["router", "peer", "client"] = "client") -> None:
         import zenoh
 
         self._zenoh = zenoh

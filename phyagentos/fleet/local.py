@@ -36,7 +36,7 @@ class LocalFleet:
     """
 
     def __init__(self, root: str | Path, *, auth: bool = True, extra: dict | None = None,
-                 port: int | None = None, peers: list[str] = ()) -> None:
+                 port: int | None = None, peers: tuple[str, ...] | list[str] = ()) -> None:
         self.root = Path(root)
         self.root.mkdir(parents=True, exist_ok=True)
         self.port = port or free_port()

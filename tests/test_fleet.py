@@ -96,6 +96,18 @@ def test_a_two_edge_graph_succeeds_through_the_router_and_replicas_converge(two_
         assert (bundle / "terminal.yaml").is_file()  # verdicts were made on replicated evidence
         assert not (bundle / "ground_truth.yaml").exists()  # ground truth never reaches the Agent plane
         assert not (bundle / "frames").exists()  # raw frames only on demand
+    # ... and on demand they come from the edge that holds them
+    from phyagentos.fleet.replication import write_frames
+
+    link = FleetLink(load_fleet_config(two_edges.config_file("agent")).with_overrides(connect=[two_edges.endpoint]))
+    try:
+        sid = next(s for s, r in agent.items() if r.target == "franka_tabletop")
+        reply = link.query_one(f"paos/edge/arm1/frames/{sid}", None, timeout_s=10)
+    finally:
+        link.close()
+    assert reply is not None and reply["files"], reply
+    assert write_frames(Workspace.open(ws), reply["files"]) == len(reply["files"])
+    assert list((ws / agent[sid].attempts[-1].evidence / "frames").glob("*.png"))
 
 
 def test_a_failed_node_on_one_edge_blocks_only_its_subgraph(two_edges, tmp_path):

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from rich.console import Console
 
-__all__ = ["add_fleet_commands", "FLEET_HANDLERS", "cmd_fleet_run"]
+__all__ = ["FLEET_HANDLERS", "add_fleet_commands", "cmd_fleet_run"]
 
 log = logging.getLogger(__name__)
 EXIT_OK, EXIT_NOT_SUCCEEDED, EXIT_BAD_INPUT = 0, 1, 2
@@ -79,7 +79,7 @@ def add_fleet_commands(sub: argparse._SubParsersAction, run: argparse.ArgumentPa
 def _install_stop(stop) -> None:
     count = {"n": 0}
 
-    def handler(signum, frame) -> None:  # noqa: ARG001
+    def handler(signum, frame) -> None:
         count["n"] += 1
         stop(count["n"] > 1)
 
@@ -128,7 +128,7 @@ def _graph_targets(path: Path, override: str | None) -> set[str]:
         return {override}
     doc = load_yaml(Path(path).read_text(encoding="utf-8"), path=path, error=GoalGraphError)
     default = (doc.get("defaults") or {}).get("target") if isinstance(doc, dict) else None
-    return {n.get("target") or default for n in (doc.get("nodes") or []) if isinstance(n, dict)} - {None}
+    return {str(t) for n in (doc.get("nodes") or []) if isinstance(n, dict) and (t := n.get("target") or default)}
 
 
 def cmd_fleet_run(args, out: Console, err: Console) -> int:
@@ -172,8 +172,8 @@ def cmd_fleet_run(args, out: Console, err: Console) -> int:
             loop.close()
         # the last verdicts go back to their edges before this agent leaves the fleet
         deadline = time.monotonic() + 5.0
-        while bridge._unconfirmed_agent_writes() and time.monotonic() < deadline:  # noqa: SLF001
-            bridge._watcher.notify()  # noqa: SLF001
+        while bridge._unconfirmed_agent_writes() and time.monotonic() < deadline:
+            bridge._watcher.notify()
             time.sleep(0.05)
         stats = dict(bridge.stats)
     finally:

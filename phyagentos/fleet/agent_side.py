@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 from phyagentos.errors import FleetError, ProtocolError
@@ -74,7 +74,7 @@ class FleetAgentBridge:
         self._watcher = WorkspaceWatcher(workspace.root, dirs=("sessions", "sessions/.index"))
         self._kicked: list[SessionRecord] = []
         #: called after a replica was installed (the agent loop's wake-up)
-        self.on_installed = None
+        self.on_installed: Callable[[], None] | None = None
         self.stats = {"submits": 0, "verdicts": 0, "installed": 0, "catchups": 0, "refused": 0}
         self.last_catchup_s: dict[str, float] = {}
         k = link.keys
@@ -329,7 +329,7 @@ class FleetAgentBridge:
                 return
             try:
                 self._forward_once()
-            except Exception:  # noqa: BLE001 - the bridge goes on; the next pass retries
+            except Exception:
                 log.exception("fleet forwarder pass failed")
 
     # -- e-stop and frames -------------------------------------------------------------

@@ -15,7 +15,7 @@ from phyagentos.protocol import Workspace
 from .ownership import EDGE_DOCUMENTS
 from .replication import encode_session, install_session
 
-__all__ = ["catchup_answer", "apply_catchup", "submits_dir"]
+__all__ = ["apply_catchup", "catchup_answer", "submits_dir"]
 
 log = logging.getLogger(__name__)
 

@@ -36,7 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from phyagentos.errors import FleetError
 from phyagentos.yamlsource import line_of, load_yaml
 
-__all__ = ["AuthConfig", "TlsConfig", "FleetConfig", "load_fleet_config", "find_fleet_config", "LINK_LOSS_POLICIES"]
+__all__ = ["LINK_LOSS_POLICIES", "AuthConfig", "FleetConfig", "TlsConfig", "find_fleet_config", "load_fleet_config"]
 
 #: What a running session does when its edge loses the agent (docs/fleet.md).
 LINK_LOSS_POLICIES = ("finish", "halt_and_hold")
@@ -99,7 +99,7 @@ class FleetConfig(_Strict):
     @field_validator("connect", "listen")
     @classmethod
     def _endpoints(cls, value: list[str]) -> list[str]:
-        import re  # noqa: PLC0415
+        import re
 
         for ep in value:
             if not re.match(_ENDPOINT, ep):
@@ -210,5 +210,5 @@ def find_fleet_config(explicit: str | os.PathLike[str] | None, workspace: str | 
         if candidate and Path(candidate).is_file():
             return load_fleet_config(candidate)
         if candidate and candidate == explicit:
-            raise FleetError("fleet file not found", path=candidate)
-    return FleetConfig()
+            raise FleetError("fleet file not found", path=Path(candidate))
+    return FleetConfig.model_validate({})

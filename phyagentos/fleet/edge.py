@@ -147,16 +147,16 @@ class FleetEdge:
         if self.agents.alive(ticket.agent):
             return True
         gone = self.agents.gone_for(ticket.agent)
-        if gone is not None and gone > self.config.submit_ttl_s and session_id not in self._halted:
-            if self._signal("cancel", session_id=session_id, reason=STALE_REASON):
-                self._halted.add(session_id)
+        if (gone is not None and gone > self.config.submit_ttl_s and session_id not in self._halted
+                and self._signal("cancel", session_id=session_id, reason=STALE_REASON)):
+            self._halted.add(session_id)
         return False
 
     def _link_watch(self) -> None:
         while not self._stop.wait(0.1):
             try:
                 self._check_link_loss()
-            except Exception:  # noqa: BLE001 - the watch goes on
+            except Exception:
                 log.exception("edge %s: link-loss check failed", self.name)
 
     def _check_link_loss(self) -> None:
@@ -167,14 +167,16 @@ class FleetEdge:
             gone = self.agents.gone_for(ticket.agent)
             if gone is None or gone < self.config.link_timeout_s:
                 continue
-            if state in _STARTED or state in ("claimed", "preflight_checking"):
-                if ticket.link_loss == "halt_and_hold" or state not in _STARTED:
-                    # not actuating yet: nothing starts without its agent; actuating: the policy
-                    why = LINK_LOST_REASON if state in _STARTED else STALE_REASON
-                    log.warning("edge %s: agent %s gone %.1f s; session %s (%s): %s", self.name, ticket.agent,
-                                gone, sid, state, why)
-                    if self._signal("cancel", session_id=sid, reason=why):
-                        self._halted.add(sid)
+            # not actuating yet: nothing starts without its agent; actuating: the declared policy
+            halt = state in ("claimed", "preflight_checking") or (state in _STARTED
+                                                                  and ticket.link_loss == "halt_and_hold")
+            if not halt:
+                continue
+            why = LINK_LOST_REASON if state in _STARTED else STALE_REASON
+            log.warning("edge %s: agent %s gone %.1f s; session %s (%s): %s", self.name, ticket.agent, gone, sid,
+                        state, why)
+            if self._signal("cancel", session_id=sid, reason=why):
+                self._halted.add(sid)
 
     def _signal(self, kind: str, **kw: Any) -> bool:
         try:
@@ -267,7 +269,7 @@ class FleetEdge:
                     self.link.put(self.link.keys.session(self.name, record.session_id),
                                   encode_session(self.ws, record, edge=self.name))
                 self._publish_docs()
-            except Exception:  # noqa: BLE001 - a failed put is made good by the next one or a catch-up
+            except Exception:
                 log.exception("edge %s: publication failed", self.name)
 
     def _publish_docs(self) -> None:

@@ -22,7 +22,7 @@ import json
 import logging
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 from phyagentos.errors import FleetError
 
@@ -65,8 +65,8 @@ class FleetLink:
         FleetError: the session cannot be opened (router unreachable, authentication refused).
     """
 
-    def __init__(self, config: FleetConfig, *, mode: str = "client") -> None:
-        import zenoh  # noqa: PLC0415 - only fleet commands load zenoh
+    def __init__(self, config: FleetConfig, *, mode: Literal["router", "peer", "client"] = "client") -> None:
+        import zenoh
 
         self._zenoh = zenoh
         self.config = config
@@ -103,7 +103,7 @@ class FleetLink:
                 raw = sample.payload.to_bytes()
                 self.bytes_in += len(raw)
                 handler(str(sample.key_expr), json.loads(raw))
-            except Exception:  # noqa: BLE001 - a bad sample must not kill zenoh's callback thread
+            except Exception:
                 log.exception("fleet: sample on %s not handled", sample.key_expr)
 
         self._owned.append(self.session.declare_subscriber(key, on_sample))
@@ -116,7 +116,7 @@ class FleetLink:
                 raw = query.payload.to_bytes() if query.payload is not None else b""
                 self.bytes_in += len(raw)
                 answer = handler(str(query.key_expr), json.loads(raw) if raw else None)
-            except Exception as exc:  # noqa: BLE001 - the querier gets the error, zenoh goes on
+            except Exception as exc:
                 log.exception("fleet: query on %s failed", query.key_expr)
                 answer = {"status": "error", "error": f"{type(exc).__name__}: {exc}"}
             payload = json.dumps(answer, separators=(",", ":")).encode()
@@ -157,7 +157,7 @@ class FleetLink:
         def on_sample(sample) -> None:
             try:
                 on_change(str(sample.key_expr), sample.kind == self._zenoh.SampleKind.PUT)
-            except Exception:  # noqa: BLE001
+            except Exception:
                 log.exception("fleet: liveliness change on %s not handled", sample.key_expr)
 
         self._owned.append(self.session.liveliness().declare_subscriber(key, on_sample, history=True))
@@ -175,9 +175,9 @@ class FleetLink:
         for obj in reversed(self._owned):
             try:
                 obj.undeclare()
-            except Exception:  # noqa: BLE001 - closing anyway
-                pass
+            except Exception as exc:  # noqa: BLE001 - closing anyway
+                log.debug("fleet: undeclare failed: %s", exc)
         try:
             self.session.close()
-        except Exception:  # noqa: BLE001
-            pass
+        except Exception as exc:  # noqa: BLE001
+            log.debug("fleet: session close failed: %s", exc)

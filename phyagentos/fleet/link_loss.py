@@ -24,7 +24,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-__all__ = ["SubmitTicket", "submit_is_stale", "LINK_LOST_REASON", "STALE_REASON"]
+__all__ = ["LINK_LOST_REASON", "STALE_REASON", "SubmitTicket", "submit_is_stale"]
 
 LINK_LOST_REASON = "link lost: halt and hold (link_loss policy)"
 STALE_REASON = "stale submit: its agent stayed away, never started"

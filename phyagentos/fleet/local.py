@@ -36,7 +36,7 @@ class LocalFleet:
     """
 
     def __init__(self, root: str | Path, *, auth: bool = True, extra: dict | None = None,
-                 port: int | None = None, peers: list[str] = ()) -> None:
+                 port: int | None = None, peers: tuple[str, ...] | list[str] = ()) -> None:
         self.root = Path(root)
         self.root.mkdir(parents=True, exist_ok=True)
         self.port = port or free_port()
@@ -61,7 +61,7 @@ class LocalFleet:
 
     def config_file(self, name: str, **fields) -> Path:
         """Write ``<root>/<name>.yaml`` (auth of user ``name`` plus ``fields``); returns it."""
-        import yaml  # noqa: PLC0415
+        import yaml
 
         data = dict(fields)
         if self.auth:

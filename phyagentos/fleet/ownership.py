@@ -19,7 +19,7 @@ from collections.abc import Iterable, Mapping
 
 from phyagentos.errors import FleetError, format_choices
 
-__all__ = ["EDGE_DOCUMENTS", "AGENT_DOCUMENTS", "AGENT_STATES", "authority_of_state", "TargetMap"]
+__all__ = ["AGENT_DOCUMENTS", "AGENT_STATES", "EDGE_DOCUMENTS", "TargetMap", "authority_of_state"]
 
 EDGE_DOCUMENTS = ("TARGETS", "ENVIRONMENT", "RUNTIME_SIGNAL")
 AGENT_DOCUMENTS = ("TASK", "LESSONS", "KNOWLEDGE", "SKILL")

@@ -25,7 +25,7 @@ from typing import Any
 from phyagentos.protocol import SessionRecord, Workspace
 from phyagentos.protocol.evidence_markers import PENDING_MARKER, WANTED_MARKER
 
-__all__ = ["revision", "encode_session", "install_session", "evidence_files", "EVIDENCE_STATES"]
+__all__ = ["EVIDENCE_STATES", "encode_session", "evidence_files", "install_session", "revision"]
 
 log = logging.getLogger(__name__)
 

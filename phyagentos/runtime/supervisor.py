@@ -54,7 +54,7 @@ import time
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from phyagentos.errors import DocumentError, LeaseError, LifecycleError, PhyAgentOSError, ProtocolError, SupervisorError
 from phyagentos.protocol import (
@@ -231,7 +231,7 @@ class WatchdogSupervisor:
         #: ``gate(session_id, identity) -> bool`` asked before a pending session is claimed;
         #: False leaves it pending (the fleet's edge refuses submits it cannot confirm are
         #: current, phyagentos/fleet/edge.py). None: every session may be claimed.
-        self.claim_gate = None
+        self.claim_gate: Callable[[str, Any], bool] | None = None
         #: Counters for status displays and tests.
         self.stats: dict[str, int] = {"claimed": 0, "completed": 0, "recovered": 0, "taken_over": 0,
                                       "released": 0, "runner_kills": 0}

@@ -422,7 +422,7 @@ class SafetyGuard:
         model = target.model
         finger = FINGER_JOINT_NAMES[0] if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, FINGER_JOINT_NAMES[0]) >= 0 else None
         # A robot other than the Franka declares its own datasheet (velocity, acceleration) limits.
-        datasheet = getattr(target, "datasheet_limits", None)
+        datasheet = target.datasheet_limits
         extra = {} if datasheet is None else {"velocity_datasheet": datasheet[0], "acceleration_datasheet": datasheet[1]}
         limits = RobotLimits.from_model(model, config, joint_names=target.arm_joint_names, gripper_joint=finger, **extra)
         kwargs.setdefault("clock", lambda: float(target.sim_time))

@@ -47,6 +47,7 @@ import numpy as np
 from phyagentos.errors import TargetError, format_choices
 
 from .base import ExecutionResult
+from .contract import TargetCapabilities
 from .mujoco_arm import MuJoCoArmTarget, mat_quat as _quat, pose_matrix as _pose
 from .mujoco_target import GripperResult
 
@@ -198,6 +199,9 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
     """
 
     ROBOT = "panda"
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command"),
+                                      sensors=("proprioception", "rgb", "contacts"), simulated_ground_truth=True,
+                                      articulated_fixtures=True)
     SENSORS_KEY = "franka_kitchen"
     ROBOT_BASE = (0.0, 0.0, 1.8)
 

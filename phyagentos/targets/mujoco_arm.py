@@ -40,6 +40,7 @@ from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioc
 from phyagentos.protocol.atomic import atomic_write_bytes
 
 from .base import BaseRolloutTarget
+from .contract import TargetCapabilities
 from .camera_noise import CameraNoise
 from .state_file import read_state_npz
 
@@ -89,7 +90,8 @@ class MuJoCoArmTarget(BaseRolloutTarget):
 
     KIND = "simulation"
     TOOLS = ("observe", "move_joints", "set_gripper", "hold", "snapshot")
-    ACTION_FORMS = ("joint_trajectory", "gripper_command")
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command"),
+                                      sensors=("proprioception", "rgb", "contacts"), simulated_ground_truth=True)
     ROBOT = "robot"
     ROBOT_BASE: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: Name of the site carrying the wrist force/torque sensors, if the model has them.
@@ -99,6 +101,14 @@ class MuJoCoArmTarget(BaseRolloutTarget):
     #: Entry of the shipped ``protocol/sensors.yaml`` whose sensors a new target installs
     #: (the target pool then installs the workspace's entry for the target's own name).
     SENSORS_KEY: str | None = None
+    #: Robot body-name pairs the model lets touch (e.g. adjacent links a third-party model
+    #: does not exclude), ignored by the collision checker; default none.
+    allowed_collision_pairs: tuple[tuple[str, str], ...] = ()
+    #: The gripper's body names for the collision checker; ``None``: the checker's default.
+    gripper_body_names: tuple[str, ...] | None = None
+    #: For an arm that cannot reach every orientation: position-priority IK accepting
+    #: orientations within this tolerance, rad; ``None``: full-pose IK.
+    ik_orientation_tol_rad: float | None = None
 
     # -- construction helpers -----------------------------------------------------------
     def _prepare_scene(self, scene):

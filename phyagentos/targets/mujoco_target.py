@@ -26,6 +26,7 @@ import numpy as np
 from phyagentos.errors import TargetError
 
 from .base import ExecutionResult
+from .contract import TargetCapabilities
 from .mujoco_arm import MuJoCoArmTarget
 from .scene import (
     ARM_JOINT_NAMES,
@@ -88,6 +89,9 @@ class MuJoCoTarget(MuJoCoArmTarget):
     """
 
     ROBOT = "panda"
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command"),
+                                      sensors=("proprioception", "rgb", "wrist_force", "contacts", "perception"),
+                                      simulated_ground_truth=True)
     SENSORS_KEY = "franka_tabletop"
     FT_SITE = FT_SITE
 

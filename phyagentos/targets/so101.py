@@ -47,6 +47,7 @@ import numpy as np
 from phyagentos.errors import TargetError
 
 from .base import ExecutionResult
+from .contract import TargetCapabilities
 from .mujoco_arm import MuJoCoArmTarget, mat_quat
 from .mujoco_target import GripperResult
 from .scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
@@ -221,6 +222,8 @@ class SO101Target(MuJoCoArmTarget):
     """
 
     ROBOT = "so101"
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command"),
+                                      sensors=("proprioception", "rgb", "wrist_force"), simulated_ground_truth=True)
     SENSORS_KEY = "so101_tabletop"
     ROBOT_BASE = (float(MOUNT_XY[0]), float(MOUNT_XY[1]), 0.0)
     REPORT_CONTACTS = False

@@ -57,7 +57,7 @@ from __future__ import annotations
 
 import abc
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
 from phyagentos.errors import TargetError, format_choices

@@ -1,7 +1,7 @@
 """One base for every simulated MuJoCo arm: scene, sensors, rendering, checkpoints, truth.
 
 :class:`MuJoCoArmTarget` holds what the Franka tabletop
-(:class:`~phyagentos.targets.mujoco_target.MuJoCoTarget`), the SO-101
+(:class:`~phyagentos.targets.franka_tabletop.MuJoCoTarget`), the SO-101
 (:class:`~phyagentos.targets.so101.SO101Target`) and FrankaKitchen
 (:class:`~phyagentos.targets.kitchen.FrankaKitchenTarget`) have in common:
 
@@ -29,6 +29,7 @@ import math
 import os
 import warnings
 import zlib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -44,7 +45,7 @@ from .contract import TargetCapabilities
 from .camera_noise import CameraNoise
 from .state_file import read_state_npz
 
-__all__ = ["MuJoCoArmTarget", "pose_matrix", "mat_quat", "K_NONE", "K_ENV", "K_ROBOT", "K_FINGER", "K_OBJECT"]
+__all__ = ["MuJoCoArmTarget", "GripperResult", "pose_matrix", "mat_quat", "K_NONE", "K_ENV", "K_ROBOT", "K_FINGER", "K_OBJECT"]
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +74,25 @@ def mat_quat(R) -> list[float]:
 
 def _floats(v) -> list[float]:
     return [float(x) for x in np.asarray(v, dtype=float).reshape(-1)]
+
+
+@dataclass(frozen=True)
+class GripperResult:
+    """Outcome of :meth:`set_gripper` of a MuJoCo arm target.
+
+    Attributes:
+        opening_m: measured opening per finger after settling, metres (0 .. 0.04).
+        stalled: the fingers stopped more than 2 mm short of the commanded opening
+            (something is between them).
+        grasped: name of the object touching both finger pads, else ``None``.
+    """
+
+    opening_m: float
+    stalled: bool
+    grasped: str | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"opening_m": self.opening_m, "stalled": self.stalled, "grasped": self.grasped}
 
 
 class MuJoCoArmTarget(BaseRolloutTarget):

@@ -42,10 +42,10 @@ ENTRY_POINT_GROUP = "phyagentos.targets"
 # entry points were declared (re-running `pip install -e .` refreshes the metadata) or a
 # source checkout run without installing. Keep in step with pyproject.toml.
 _BUILTIN_FALLBACK: dict[str, str] = {
-    "mujoco_franka": "phyagentos.targets.mujoco_target:MuJoCoTarget",
+    "mujoco_franka": "phyagentos.targets.franka_tabletop:MuJoCoTarget",
     "gymnasium_kitchen": "phyagentos.targets.kitchen:FrankaKitchenTarget",
     "mujoco_so101": "phyagentos.targets.so101:SO101Target",
-    "crafter": "phyagentos.targets.crafter_target:CrafterTarget",
+    "crafter": "phyagentos.targets.crafter:CrafterTarget",
 }
 
 _lock = threading.RLock()

@@ -46,8 +46,9 @@ Optional hooks (the defaults on :class:`Target`, used when a driver does not ove
                                    ``capabilities.simulated_ground_truth`` to return a dict
 ``scene_record()``                 ``None``: no physical scene record
 ``benchmark_signals()``            ``{}``: no benchmark success signals
-``datasheet_limits``               ``None``: the safety guard's own limits (else
-                                   ``(velocity (n,) rad/s, acceleration (n,) rad/s^2)``)
+``datasheet_limits``               ``None``: the safety guard's default, the Franka's 7
+                                   joints (else ``(velocity (n,) rad/s, acceleration
+                                   (n,) rad/s^2)``; every other arm declares its own)
 =================================  ==========================================================
 
 Registering a driver: see :mod:`phyagentos.targets.registry` and ``docs/targets.md``.
@@ -353,7 +354,8 @@ class Target(abc.ABC):
     @property
     def datasheet_limits(self) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
         """``(velocity (n,) rad/s, acceleration (n,) rad/s^2)`` datasheet limits for the
-        safety guard, or ``None`` (the default) to use the guard's own."""
+        safety guard, or ``None`` (the default) for the guard's default (the Franka's seven
+        joints: every other arm declares its own)."""
         return None
 
     def close(self) -> None:

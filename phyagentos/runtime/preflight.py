@@ -257,7 +257,7 @@ def run_preflight(
         plan, needed = _tree_checks(session, manifest, target, runtime, driver, trees, reject)
 
     if target is not None and driver is not None and needed is not None:
-        offered = set(getattr(driver, "TOOLS", ())) | _adapter_operations(target.driver)
+        offered = set(driver.TOOLS) | _adapter_operations(target.driver)
         allowed, policy_problems = permitted_operations(target.kind, target.constraints, offered)
         for problem in policy_problems:
             reject("preflight.tool_policy", f"targets.{target.name}.constraints.tool_policy", "no never-exposed operation",

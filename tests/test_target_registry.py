@@ -6,6 +6,8 @@ from __future__ import annotations
 import inspect
 import sys
 import textwrap
+import tomllib
+from pathlib import Path
 
 import pytest
 
@@ -27,7 +29,8 @@ from phyagentos.targets.registry import (
     unregister_target,
 )
 
-BUILTINS = ("crafter", "gymnasium_kitchen", "mujoco_franka", "mujoco_so101")
+#: Every built-in driver (the registry's fallback table, kept equal to pyproject.toml's entry points).
+BUILTINS = tuple(sorted(registry._BUILTIN_FALLBACK))
 
 _PLUGIN = '''
 from phyagentos.targets.contract import Target, TargetCapabilities
@@ -93,8 +96,15 @@ def plugin_dist(tmp_path, monkeypatch):
 
 
 def test_builtin_drivers_are_registered():
+    assert set(BUILTINS) == {"crafter", "gymnasium_kitchen", "mujoco_franka", "mujoco_so101"}
     assert set(BUILTINS) <= set(registered_targets())
     assert set(BUILTINS) <= set(DRIVERS)
+
+
+def test_the_builtin_fallback_table_equals_the_declared_entry_points():
+    with open(Path(__file__).resolve().parent.parent / "pyproject.toml", "rb") as f:
+        declared = tomllib.load(f)["project"]["entry-points"][registry.ENTRY_POINT_GROUP]
+    assert declared == registry._BUILTIN_FALLBACK
 
 
 def test_an_installed_entry_point_is_found_and_loaded_lazily(plugin_dist):

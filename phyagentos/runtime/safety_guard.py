@@ -415,8 +415,9 @@ class SafetyGuard:
         """A guard for a MuJoCo-backed target (``model``, ``arm_joint_names``,
         ``arm_qpos()``, optionally ``datasheet_limits`` = (velocity, acceleration) per
         joint, default the Franka's; gripper range from the first finger joint when the
-        model has one), synced to the target's current arm state. A target with an ``estop``
-        attribute gets the guard's latch, so its streaming halts within one step."""
+        model has one), synced to the target's current arm state. The target's ``estop``
+        (:attr:`phyagentos.targets.contract.Target.estop`) gets the guard's latch, so its
+        streaming halts within one step."""
         from phyagentos.targets.scene import FINGER_JOINT_NAMES  # noqa: PLC0415
 
         model = target.model
@@ -428,8 +429,7 @@ class SafetyGuard:
         kwargs.setdefault("clock", lambda: float(target.sim_time))
         guard = cls(limits, config, **kwargs)
         guard.sync(target.arm_qpos())
-        if hasattr(target, "estop"):
-            target.estop = guard.estop  # arm the target-local hook (checked every physics step)
+        target.estop = guard.estop  # arm the target-local hook (Target.estop, checked every physics step)
         return guard
 
     # -- reference ---------------------------------------------------------------------

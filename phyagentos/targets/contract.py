@@ -46,6 +46,9 @@ Optional hooks (the defaults on :class:`Target`, used when a driver does not ove
                                    ``capabilities.simulated_ground_truth`` to return a dict
 ``scene_record()``                 ``None``: no physical scene record
 ``benchmark_signals()``            ``{}``: no benchmark success signals
+``estop``                          ``None``; the safety guard sets its e-stop latch (an
+                                   object with ``is_set()``) here, and a target that
+                                   streams motion checks it every step
 ``datasheet_limits``               ``None``: the safety guard's default, the Franka's 7
                                    joints (else ``(velocity (n,) rad/s, acceleration
                                    (n,) rad/s^2)``; every other arm declares its own)
@@ -89,7 +92,9 @@ ACTION_FORMS: tuple[str, ...] = ("joint_trajectory", "joint_position_chunk", "ca
 
 #: The sensors a target may offer (``TargetCapabilities.sensors``):
 #: ``proprioception``: joint positions/velocities/efforts (``proprioception()``);
-#: ``rgb`` / ``depth``: cameras (``camera_names()``, ``capture(sensor)``, ``render``);
+#: ``rgb``: named cameras (``camera_names()``, ``capture(sensor)`` -> a camera frame); a
+#: target without them may still ``render`` pictures for evidence images;
+#: ``depth``: depth images (``render_depth(camera=, width=, height=)``, m);
 #: ``wrist_force``: a wrist force/torque sensor (``wrist_external_force_n()``, N);
 #: ``contacts``: unexpected contacts reported by ``execute_trajectory``;
 #: ``perception``: a built-in perceiver (``perceive()``);
@@ -210,6 +215,9 @@ class Target(abc.ABC):
     TOOLS: ClassVar[tuple[str, ...]] = ()
     #: What the driver offers (read by preflight and the runtime instead of probing).
     CAPABILITIES: ClassVar[TargetCapabilities] = TargetCapabilities()
+    #: The safety guard's e-stop latch (``is_set()``), installed by the guard; a target that
+    #: streams motion checks it every step and halts when set. ``None``: no guard.
+    estop: Any = None
     #: Same as ``CAPABILITIES.action_forms`` (kept in step by :meth:`__init_subclass__`).
     ACTION_FORMS: ClassVar[tuple[str, ...]] = ()
 

@@ -224,7 +224,7 @@ class CrafterTarget(BaseRolloutTarget):
 
     KIND = "game"
     TOOLS = CRAFTER_ACTIONS + ("observe", "snapshot")
-    CAPABILITIES = TargetCapabilities(action_forms=("game_action",), sensors=("rgb", "symbolic_view"),
+    CAPABILITIES = TargetCapabilities(action_forms=("game_action",), sensors=("symbolic_view",),
                                       simulated_ground_truth=True)
 
     @staticmethod

@@ -11,7 +11,7 @@ from phyagentos.primitives import PRIMITIVES  # noqa: E402
 from phyagentos.primitives.context import SkillContext  # noqa: E402
 from phyagentos.resources import skills_dir, trees_dir  # noqa: E402
 from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: E402
-from phyagentos.targets.crafter_target import (CRAFTER_ACTIONS, VIEW_COLS, VIEW_ROWS, CrafterScene,  # noqa: E402
+from phyagentos.targets.crafter import (CRAFTER_ACTIONS, VIEW_COLS, VIEW_ROWS, CrafterScene,  # noqa: E402
                                                CrafterTarget)
 
 

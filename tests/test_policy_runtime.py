@@ -29,7 +29,8 @@ from phyagentos.runtime.policy_runtime import PolicySkillRuntime
 from phyagentos.runtime.preflight import run_preflight
 from phyagentos.runtime.safety_guard import EStopLatch, SafetyGuard
 from phyagentos.runtime.skills import SkillRegistry
-from phyagentos.runtime.target_pool import DRIVERS, scene_for
+from phyagentos.runtime.target_pool import scene_for
+from phyagentos.targets.registry import DRIVERS
 from phyagentos.runtime.trees import TreeLibrary
 from phyagentos.primitives import PRIMITIVES
 from phyagentos.targets import MuJoCoTarget

@@ -16,7 +16,7 @@ from phyagentos.protocol.schemas import SafetyConfig
 from phyagentos.resources import skills_dir, trees_dir
 from phyagentos.runtime.preflight import NEVER_EXPOSED, run_preflight
 from phyagentos.runtime.skills import SkillRegistry
-from phyagentos.runtime.target_pool import DRIVERS
+from phyagentos.targets.registry import DRIVERS
 from phyagentos.runtime.trees import TreeLibrary
 from phyagentos.targets import MuJoCoTarget
 

@@ -23,7 +23,7 @@ from typing import Any, Sequence
 
 from phyagentos.agent.memory.deaths import diagnose_death
 from phyagentos.protocol.atomic import atomic_write_text
-from phyagentos.targets.crafter_target import CRAFTER_ACHIEVEMENTS
+from phyagentos.targets.crafter import CRAFTER_ACHIEVEMENTS
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 

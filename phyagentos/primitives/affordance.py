@@ -120,7 +120,7 @@ class ComputeAffordanceGrasp(Primitive):
             seeds = [target.arm_qpos(), *rng.uniform(lo, hi, size=(self.IK_SEEDS, len(names)))]
             entry = np.asarray(part.get("entry", z), dtype=float)
             entry /= np.linalg.norm(entry)
-            frame = getattr(target, "tcp_site", "tcp")
+            frame = target.tcp_site
             best = None
             for sign in (1.0, -1.0):
                 Gs = np.eye(4)

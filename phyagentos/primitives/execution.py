@@ -13,6 +13,7 @@ from py_trees.common import Status
 
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.retime import Trajectory, retime
+from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import (MIN_EFFORT_N, MIN_OPENING_M, WIDTH_MARGIN_M, belief, holding_problem, mass_estimate_kg,
@@ -219,7 +220,7 @@ class Gripper(Primitive):
     def step(self):
         ctx = self.ctx
         target = ctx.target
-        sensed = hasattr(target, "proprioception")
+        sensed = capabilities_of(target).has_sensor("proprioception")
         b = belief(target)
         if sensed:
             p0 = target.proprioception()
@@ -303,7 +304,7 @@ class CheckHolding(Primitive):
 
     def step(self):
         target = self.ctx.target
-        if not hasattr(target, "proprioception"):  # pragma: no cover - every MuJoCo arm has it
+        if not capabilities_of(target).has_sensor("proprioception"):  # pragma: no cover - every MuJoCo arm has it
             raise PrimitiveFailure("grasp.slipped", f"target {target.name!r} cannot sense a grasp")
         p = target.proprioception()
         b = belief(target)
@@ -315,8 +316,7 @@ class CheckHolding(Primitive):
         if b.object == self.object and b.lifted_load_n is None and load is not None:
             b.set(lifted_load_n=float(load))
         # the unloaded hand's reading: from the robot model where the target predicts it
-        unloaded = getattr(target, "unloaded_wrist_force_n", None)
-        base = unloaded() if unloaded is not None else None
+        base = target.unloaded_wrist_force_n()
         if base is None:
             base = b.baseline_force_n
         self.ctx.trace.record("load", leaf=self.name, object=self.object,

@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from phyagentos.targets.contract import capabilities_of
+
 __all__ = ["GraspBelief", "MIN_OPENING_M", "MIN_EFFORT_N", "SLIP_OPENING_DROP_M", "SLIP_LOAD_DROP_FRACTION",
            "MIN_LOAD_FOR_SLIP_N", "GRAVITY_M_S2", "belief", "wrist_load_n", "proprio_record", "holding_problem",
            "sample_while_holding", "mass_estimate_kg", "WIDTH_MARGIN_M", "MIN_HELD_LOAD_N", "plan_grasp"]
@@ -92,9 +94,8 @@ def wrist_load_n(target, p) -> float | None:
     """Load on the wrist beyond the unloaded hand, N (``None`` without an F/T sensor):
     ``|f| - |f_unloaded|``, the baseline measured before the close, else the hand's
     weight from the robot model (``target.unloaded_wrist_force_n()``)."""
-    ext = getattr(target, "wrist_external_force_n", None)
-    if ext is not None and abs(float(getattr(target, "sim_time", p.stamp_s)) - float(p.stamp_s)) < 1e-9:
-        v = ext()
+    if abs(float(target.sim_time) - float(p.stamp_s)) < 1e-9:
+        v = target.wrist_external_force_n()
         if v is not None:
             return float(np.linalg.norm(v))
     f = _force_norm(p)
@@ -102,8 +103,7 @@ def wrist_load_n(target, p) -> float | None:
         return None
     base = belief(target).baseline_force_n
     if base is None:
-        nominal = getattr(target, "unloaded_wrist_force_n", None)
-        base = nominal() if nominal is not None else None
+        base = target.unloaded_wrist_force_n()
     return None if base is None else f - float(base)
 
 
@@ -163,7 +163,7 @@ def sample_while_holding(ctx, leaf: str, *, force: bool = False) -> None:
     something, and a ``slip`` entry the first time the opening or the load drops."""
     target = ctx.target
     b = belief(target)
-    if b.object is None or not hasattr(target, "proprioception"):
+    if b.object is None or not capabilities_of(target).has_sensor("proprioception"):
         return
     p = target.proprioception()
     last = b.last_sample_s

@@ -14,7 +14,7 @@ import numpy as np
 from phyagentos.motion.collision import CollisionChecker
 from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.planner import plan_path
-from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime
+from phyagentos.motion.retime import retime
 
 from .base import Primitive
 
@@ -43,8 +43,8 @@ def ik_options(target, orientation_tol_rad: float = 1e-2) -> dict:
     tool site ``tcp_site`` (default ``tcp``) and, for an arm that cannot reach every
     orientation, ``ik_orientation_tol_rad``: position-priority IK accepting orientations
     within that tolerance (the larger of it and ``orientation_tol_rad``)."""
-    opts = {"arm_joint_names": tuple(target.arm_joint_names), "frame": getattr(target, "tcp_site", "tcp")}
-    relaxed = getattr(target, "ik_orientation_tol_rad", None)
+    opts = {"arm_joint_names": tuple(target.arm_joint_names), "frame": target.tcp_site}
+    relaxed = target.ik_orientation_tol_rad
     if relaxed is not None:
         opts["position_priority"] = True
         opts["orientation_tol_rad"] = max(float(relaxed), orientation_tol_rad)
@@ -60,8 +60,7 @@ def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> t
     """
     vel = np.asarray(ctx.target.velocity_limits(), dtype=float) * velocity_scale
     # A target that is not the Franka declares its own (n,) acceleration limits.
-    declared = getattr(ctx.target, "acceleration_limits", None)
-    acc = np.asarray(declared() if declared is not None else DEFAULT_ACCELERATION_LIMITS, dtype=float) * acceleration_scale
+    acc = np.asarray(ctx.target.acceleration_limits(), dtype=float) * acceleration_scale
     return vel, acc
 
 
@@ -79,9 +78,8 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
         # A target may name its tool site, robot body pairs its model lets touch (e.g.
         # adjacent links a third-party model does not exclude) and its gripper's bodies.
         checker = CollisionChecker(target.model, arm_joint_names=target.arm_joint_names, margin_m=margin_m,
-                                   tcp_site=getattr(target, "tcp_site", "tcp"),
-                                   allowed_pairs=getattr(target, "allowed_collision_pairs", ()),
-                                   gripper_bodies=getattr(target, "gripper_body_names", None))
+                                   tcp_site=target.tcp_site, allowed_pairs=target.allowed_collision_pairs,
+                                   gripper_bodies=target.gripper_body_names)
         cache[margin_m] = checker
     checker.set_world_state(target.data.qpos)
     checker.detach()

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from phyagentos.targets.contract import capabilities_of
+
 __all__ = ["has_cameras", "make_perceiver", "perceive_now", "robot_capsules", "observe_record", "save_tracks"]
 
 log = logging.getLogger(__name__)
@@ -31,8 +33,7 @@ LINK_CAPSULE_RADIUS_M = 0.08
 
 def has_cameras(target) -> bool:
     """True if ``target`` declares camera sensors it can capture."""
-    names = getattr(target, "camera_names", None)
-    return names is not None and bool(names()) and hasattr(target, "capture")
+    return capabilities_of(target).has_sensor("rgb") and bool(target.camera_names())
 
 
 def make_perceiver(target, config_path: str | Path | None = None):

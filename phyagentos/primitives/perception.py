@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
+from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import plan_grasp
@@ -79,8 +80,8 @@ class Observe(Primitive):
                 snapshot = perceive_now(target, ctx.perceiver, samples=self.samples, evidence_dir=ctx.evidence_dir,
                                         evidence_rel=ctx.evidence_rel, tag=f"{ctx.observations:02d}_{self.name}")
         if snapshot is None:
-            perceive = getattr(target, "perceive", None)
-            snapshot = perceive(samples=self.samples) if perceive is not None else target.snapshot()
+            snapshot = (target.perceive(samples=self.samples) if capabilities_of(target).has_sensor("perception")
+                        else target.snapshot())
         self.set(self.out, snapshot)
         self.ctx.trace.record("observe", leaf=self.name, samples=self.samples, **observe_record(snapshot))
         if self.ctx.on_observation is not None:

@@ -38,7 +38,7 @@ from phyagentos.targets.perturbations import parse_perturbations, split_scene
 from phyagentos.targets.scene import SceneSpec
 from phyagentos.yamlsource import clip, excerpt, line_of
 
-from .target_pool import DRIVERS
+from phyagentos.targets.registry import DRIVERS
 
 __all__ = ["GraphProblem", "PickPose", "PlacePose", "check_scene", "scene_names", "check_reachability",
            "build_trees", "check_scenes", "check_reach"]

@@ -49,6 +49,7 @@ from phyagentos.policy.adapter import ADAPTERS, PolicyAdapter
 from phyagentos.policy.client import PolicyClient
 from phyagentos.policy.observation import HistoryEntry, ObjectObservation, Observation
 from phyagentos.primitives.context import SkillContext
+from phyagentos.targets.contract import capabilities_of
 
 from .bridges import ActionChunk, ActionSpec, BridgeChain, ReferenceState
 from .builtin_runtime import RunOutcome
@@ -136,7 +137,7 @@ def collect_observation(target: Any, *, instruction: str, focus: str | None, cam
         # Policy frames skip shadows where the target can (about 4x cheaper under OSMesa).
         extra = {"shadows": False} if "shadows" in inspect.signature(target.render).parameters else {}
         rgb = target.render(camera=cam, width=w, height=h, **extra)
-    if "depth" in cameras and hasattr(target, "render_depth"):
+    if "depth" in cameras and capabilities_of(target).has_sensor("depth"):
         h, w, cam = cameras["depth"]
         depth = target.render_depth(camera=cam, width=w, height=h)
     return Observation(instruction=instruction, time_s=float(o["time"]), joint_positions=np.asarray(o["arm_qpos"]),

@@ -40,6 +40,7 @@ from typing import Any, Callable, Mapping
 
 from phyagentos.errors import PolicyError, SkillError
 from phyagentos.protocol import RejectionItem, SessionRecord, SkillRuntimeDoc, TargetsDoc
+from phyagentos.targets.contract import capabilities_of
 from phyagentos.protocol.schemas import SafetyConfig
 
 from .bridges import ActionSpec, BridgeChain
@@ -256,7 +257,7 @@ def run_preflight(
         plan, needed = _tree_checks(session, manifest, target, runtime, driver, trees, reject)
 
     if target is not None and driver is not None and needed is not None:
-        offered = set(getattr(driver, "TOOLS", ())) | _adapter_operations(target.driver)
+        offered = set(driver.TOOLS) | _adapter_operations(target.driver)
         allowed, policy_problems = permitted_operations(target.kind, target.constraints, offered)
         for problem in policy_problems:
             reject("preflight.tool_policy", f"targets.{target.name}.constraints.tool_policy", "no never-exposed operation",
@@ -293,7 +294,7 @@ def _agent_checks(target, runtime, driver, reject):
 
     if runtime is None or driver is None or target is None:
         return None, set(AGENT_OPERATIONS)
-    offered = set(getattr(driver, "ACTION_FORMS", ()))
+    offered = set(capabilities_of(driver).action_forms)
     forms = [f for f in runtime.action_forms if f in offered]
     if not forms:
         reject("preflight.action_form", f"targets.{target.name}.driver", f"one of {runtime.action_forms}",
@@ -315,7 +316,7 @@ def _tree_checks(session, manifest, target, runtime, driver, trees, reject):
             reject("preflight.tree_invalid", f"skills.{manifest.name}.tree", "a tree that builds", str(exc), "fix the tree file")
     forms: list[str] = []
     if runtime is not None and driver is not None and target is not None:
-        offered = set(getattr(driver, "ACTION_FORMS", ()))
+        offered = set(capabilities_of(driver).action_forms)
         forms = [f for f in runtime.action_forms if f in offered]
         if not forms:
             reject("preflight.action_form", f"targets.{target.name}.driver", f"one of {runtime.action_forms}",

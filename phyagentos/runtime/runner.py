@@ -161,8 +161,7 @@ def _perception_config(workspace: Workspace):
 
 
 def _truth(target) -> dict | None:
-    fn = getattr(target, "ground_truth", None)
-    return fn() if fn is not None else None
+    return target.ground_truth()
 
 
 def write_ground_truth(directory, target, *, initial: dict | None, terminal: dict | None) -> None:
@@ -173,10 +172,8 @@ def write_ground_truth(directory, target, *, initial: dict | None, terminal: dic
     Nothing is written for a target without a ground-truth channel (a real robot)."""
     if initial is None and terminal is None:
         return
-    record = getattr(target, "scene_record", None)
-    bench = getattr(target, "benchmark_signals", None)
-    doc = {"initial": initial, "terminal": terminal, "scene_record": record() if record is not None else None,
-           "benchmark": bench() if bench is not None else {}}
+    doc = {"initial": initial, "terminal": terminal, "scene_record": target.scene_record(),
+           "benchmark": target.benchmark_signals()}
     atomic_write_text(directory / GROUND_TRUTH_FILE, dump_yaml(doc))
 
 

@@ -415,21 +415,21 @@ class SafetyGuard:
         """A guard for a MuJoCo-backed target (``model``, ``arm_joint_names``,
         ``arm_qpos()``, optionally ``datasheet_limits`` = (velocity, acceleration) per
         joint, default the Franka's; gripper range from the first finger joint when the
-        model has one), synced to the target's current arm state. A target with an ``estop``
-        attribute gets the guard's latch, so its streaming halts within one step."""
+        model has one), synced to the target's current arm state. The target's ``estop``
+        (:attr:`phyagentos.targets.contract.Target.estop`) gets the guard's latch, so its
+        streaming halts within one step."""
         from phyagentos.targets.scene import FINGER_JOINT_NAMES  # noqa: PLC0415
 
         model = target.model
         finger = FINGER_JOINT_NAMES[0] if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, FINGER_JOINT_NAMES[0]) >= 0 else None
         # A robot other than the Franka declares its own datasheet (velocity, acceleration) limits.
-        datasheet = getattr(target, "datasheet_limits", None)
+        datasheet = target.datasheet_limits
         extra = {} if datasheet is None else {"velocity_datasheet": datasheet[0], "acceleration_datasheet": datasheet[1]}
         limits = RobotLimits.from_model(model, config, joint_names=target.arm_joint_names, gripper_joint=finger, **extra)
         kwargs.setdefault("clock", lambda: float(target.sim_time))
         guard = cls(limits, config, **kwargs)
         guard.sync(target.arm_qpos())
-        if hasattr(target, "estop"):
-            target.estop = guard.estop  # arm the target-local hook (checked every physics step)
+        target.estop = guard.estop  # arm the target-local hook (Target.estop, checked every physics step)
         return guard
 
     # -- reference ---------------------------------------------------------------------

@@ -8,7 +8,7 @@ period at a time, checking the e-stop latch and the cancel token before every pe
 
 :class:`MuJoCoFrankaAdapter` drives :class:`~phyagentos.targets.MuJoCoTarget`: each
 period it commands ``ctrl = q + (b / kp) * qd`` (the damping feed-forward the target's
-position actuators need, see :mod:`phyagentos.targets.mujoco_target`) with ``qd`` the
+position actuators need, see :mod:`phyagentos.targets.franka_tabletop`) with ``qd`` the
 finite-difference velocity of the commanded positions, plus the gripper opening, and
 steps the physics for one period.
 """

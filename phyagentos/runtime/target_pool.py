@@ -17,27 +17,21 @@ import logging
 from pathlib import Path
 from typing import Any, Mapping
 
-from phyagentos.errors import TargetError, format_choices
+from phyagentos.errors import TargetError
 from phyagentos.protocol import SessionRecord, TargetSpec
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.protocol.codec import dump_yaml
 from phyagentos.protocol.sensors import read_sensors
 from phyagentos.yamlsource import load_yaml
-from phyagentos.targets import MuJoCoTarget, SceneSpec
-from phyagentos.targets.crafter_target import CrafterTarget
-from phyagentos.targets.kitchen import FrankaKitchenTarget
-from phyagentos.targets.so101 import SO101Target
-from phyagentos.targets.so101_real.target import SO101RealTarget
+from phyagentos.targets import SceneSpec
+from phyagentos.targets.registry import DRIVERS, get_target_class
 from phyagentos.targets.perturbations import ActivePerturbations, PerturbationSpec, parse_perturbations, split_scene
 
 __all__ = ["DRIVERS", "TargetPool", "scene_for", "perturbations_for"]
 
 logger = logging.getLogger(__name__)
 
-#: Target driver name (TARGETS.md ``driver``) -> target class.
-DRIVERS: dict[str, type] = {"mujoco_franka": MuJoCoTarget, "gymnasium_kitchen": FrankaKitchenTarget,
-                             "mujoco_so101": SO101Target, "crafter": CrafterTarget,
-                             "so101_real": SO101RealTarget}  # [issue 32] also an entry point (pyproject)
+# DRIVERS (re-exported): the read-only view of phyagentos.targets.registry (driver name -> class).
 
 
 def scene_for(session: SessionRecord, spec: TargetSpec, *, root: str | Path | None = None) -> SceneSpec:
@@ -50,7 +44,7 @@ def scene_for(session: SessionRecord, spec: TargetSpec, *, root: str | Path | No
 def _scene_of(spec: TargetSpec, scene: Mapping[str, Any] | None, *, root: str | Path | None) -> SceneSpec:
     raw, _ = split_scene(scene or spec.scene or None)
     # A driver with its own scene type (e.g. FrankaKitchen's task list) parses it itself.
-    parse = getattr(DRIVERS.get(spec.driver), "scene_from_dict", None)
+    parse = getattr(get_target_class(spec.driver), "scene_from_dict", None)
     if parse is not None:
         return parse(raw, root=root)
     return SceneSpec.from_dict(raw, root=root) if raw else SceneSpec.default()
@@ -93,9 +87,7 @@ class TargetPool:
         Raises:
             TargetError: unknown driver (valid drivers listed) or a scene that does not build.
         """
-        cls = DRIVERS.get(spec.driver)
-        if cls is None:
-            raise TargetError(f"unknown target driver {spec.driver!r}; valid drivers: {format_choices(DRIVERS)}")
+        cls = get_target_class(spec.driver)  # TargetError: unknown driver (the registered ones listed)
         scene = scene_for(session, spec, root=self.state_dir.parent)  # state_dir is <workspace>/targets
         key = _scene_hash(scene)
         target = self._built(cls, spec, scene, key, seed=session.seed)
@@ -112,8 +104,7 @@ class TargetPool:
         else:
             target.reset(seed=session.seed)
             logger.debug("target %s: reset for run %s (seed %s)", spec.name, session.run_id, session.seed)
-        if hasattr(target, "set_perturbations"):
-            target.set_perturbations(ActivePerturbations(perturbations_for(session, spec, root=self.state_dir.parent), session_seed=session.seed))
+        target.set_perturbations(ActivePerturbations(perturbations_for(session, spec, root=self.state_dir.parent), session_seed=session.seed))
         return target
 
     def _built(self, cls, spec: TargetSpec, scene, key: str, *, seed: int | None):
@@ -124,12 +115,11 @@ class TargetPool:
             if cached is not None:
                 cached[1].close()
             self._views.pop(spec.name, None)
-            build = getattr(cls, "from_target_spec", None)  # a driver that needs its endpoint/constraints
-            target = build(spec, scene, seed=seed) if build is not None else cls(spec.name, scene, seed=seed)
+            target = cls.from_target_spec(spec, scene, seed=seed)
             self._live[spec.name] = (key, target)
             # the workspace's sensors.yaml entry for this target (read-only deploy config)
             sensors = read_sensors(self.state_dir.parent).for_target(spec.name)
-            if sensors and hasattr(target, "configure_sensors"):
+            if sensors:
                 target.configure_sensors(sensors)
         return self._live[spec.name][1]
 
@@ -143,14 +133,11 @@ class TargetPool:
         Raises:
             TargetError: unknown driver, or a scene that does not build.
         """
-        cls = DRIVERS.get(spec.driver)
-        if cls is None:
-            raise TargetError(f"unknown target driver {spec.driver!r}; valid drivers: {format_choices(DRIVERS)}")
+        cls = get_target_class(spec.driver)  # TargetError: unknown driver (the registered ones listed)
         before = self._live.get(spec.name)
         built = _scene_of(spec, scene, root=self.state_dir.parent)
         target = self._built(cls, spec, built, _scene_hash(built), seed=None)
-        if hasattr(target, "prepare_cameras"):
-            target.prepare_cameras()
+        target.prepare_cameras()
         return self._live.get(spec.name) is not before
 
     def keep_view(self, session: SessionRecord, spec: TargetSpec, target, snapshot: dict, *, key: Any = None) -> None:
@@ -158,12 +145,12 @@ class TargetPool:
         with the digest of the world it saw (``target.world_digest()``; targets without
         one, e.g. real robots, keep nothing) and ``key`` (whatever else the view depends
         on, e.g. the perception configuration's identity)."""
-        digest = getattr(target, "world_digest", None)
+        digest = target.world_digest()
         self._views.pop(spec.name, None)
         if digest is None:
             return
         perturbed = bool(split_scene(session.scene or spec.scene or None)[1])
-        self._views[spec.name] = (session.run_id, id(target), digest(), perturbed, key, copy.deepcopy(snapshot))
+        self._views[spec.name] = (session.run_id, id(target), digest, perturbed, key, copy.deepcopy(snapshot))
 
     def take_view(self, session: SessionRecord, spec: TargetSpec, target, *, key: Any = None) -> dict | None:
         """The view kept by :meth:`keep_view` if ``target`` (just acquired for ``session``) is
@@ -178,8 +165,7 @@ class TargetPool:
         if (run_id != session.run_id or target_id != id(target) or perturbed or view_key != key
                 or split_scene(session.scene or spec.scene or None)[1]):
             return None
-        fn = getattr(target, "world_digest", None)
-        return snapshot if fn is not None and fn() == digest else None
+        return snapshot if target.world_digest() == digest else None
 
     def release(self, session: SessionRecord, target) -> None:
         """Persist the target's world state for the next session of the same run."""

@@ -473,7 +473,7 @@ class _Runner:
         writes it, or None to read the session file); reply, and prepare it if it passed."""
         from phyagentos.runtime.preflight import run_preflight  # noqa: PLC0415
         from phyagentos.runtime.target_lock import write_marker  # noqa: PLC0415
-        from phyagentos.runtime.target_pool import DRIVERS  # noqa: PLC0415
+        from phyagentos.targets.registry import DRIVERS  # noqa: PLC0415
 
         started = time.perf_counter()
         ws = self.workspace(root)

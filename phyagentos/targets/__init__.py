@@ -5,7 +5,8 @@ robot base, table top at z = 0).
 """
 
 from .base import TARGET_KINDS, BaseRolloutTarget, ExecutionResult, TargetKind
-from .mujoco_target import GripperResult, MuJoCoTarget
+from .franka_tabletop import MuJoCoTarget
+from .mujoco_arm import GripperResult
 from .scene import (
     ARM_ACTUATOR_NAMES,
     ARM_JOINT_NAMES,
@@ -37,7 +38,7 @@ __all__ = [
     "ExecutionResult",
     "TargetKind",
     "TARGET_KINDS",
-    # mujoco_target
+    # franka_tabletop, mujoco_arm
     "MuJoCoTarget",
     "GripperResult",
     # scene

@@ -1,7 +1,7 @@
 """One base for every simulated MuJoCo arm: scene, sensors, rendering, checkpoints, truth.
 
 :class:`MuJoCoArmTarget` holds what the Franka tabletop
-(:class:`~phyagentos.targets.mujoco_target.MuJoCoTarget`), the SO-101
+(:class:`~phyagentos.targets.franka_tabletop.MuJoCoTarget`), the SO-101
 (:class:`~phyagentos.targets.so101.SO101Target`) and FrankaKitchen
 (:class:`~phyagentos.targets.kitchen.FrankaKitchenTarget`) have in common:
 
@@ -29,6 +29,7 @@ import math
 import os
 import warnings
 import zlib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -40,10 +41,11 @@ from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioc
 from phyagentos.protocol.atomic import atomic_write_bytes
 
 from .base import BaseRolloutTarget
+from .contract import TargetCapabilities
 from .camera_noise import CameraNoise
 from .state_file import read_state_npz
 
-__all__ = ["MuJoCoArmTarget", "pose_matrix", "mat_quat", "K_NONE", "K_ENV", "K_ROBOT", "K_FINGER", "K_OBJECT"]
+__all__ = ["MuJoCoArmTarget", "GripperResult", "pose_matrix", "mat_quat", "K_NONE", "K_ENV", "K_ROBOT", "K_FINGER", "K_OBJECT"]
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +76,25 @@ def _floats(v) -> list[float]:
     return [float(x) for x in np.asarray(v, dtype=float).reshape(-1)]
 
 
+@dataclass(frozen=True)
+class GripperResult:
+    """Outcome of :meth:`set_gripper` of a MuJoCo arm target.
+
+    Attributes:
+        opening_m: measured opening per finger after settling, metres (0 .. 0.04).
+        stalled: the fingers stopped more than 2 mm short of the commanded opening
+            (something is between them).
+        grasped: name of the object touching both finger pads, else ``None``.
+    """
+
+    opening_m: float
+    stalled: bool
+    grasped: str | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"opening_m": self.opening_m, "stalled": self.stalled, "grasped": self.grasped}
+
+
 class MuJoCoArmTarget(BaseRolloutTarget):
     """Base of the MuJoCo arm targets. Subclasses build their model, then call
     :meth:`_init_arm` and, for tabletop scenes, :meth:`_init_tabletop`.
@@ -89,7 +110,8 @@ class MuJoCoArmTarget(BaseRolloutTarget):
 
     KIND = "simulation"
     TOOLS = ("observe", "move_joints", "set_gripper", "hold", "snapshot")
-    ACTION_FORMS = ("joint_trajectory", "gripper_command")
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command"),
+                                      sensors=("proprioception", "rgb", "contacts"), simulated_ground_truth=True)
     ROBOT = "robot"
     ROBOT_BASE: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: Name of the site carrying the wrist force/torque sensors, if the model has them.
@@ -99,6 +121,14 @@ class MuJoCoArmTarget(BaseRolloutTarget):
     #: Entry of the shipped ``protocol/sensors.yaml`` whose sensors a new target installs
     #: (the target pool then installs the workspace's entry for the target's own name).
     SENSORS_KEY: str | None = None
+    #: Robot body-name pairs the model lets touch (e.g. adjacent links a third-party model
+    #: does not exclude), ignored by the collision checker; default none.
+    allowed_collision_pairs: tuple[tuple[str, str], ...] = ()
+    #: The gripper's body names for the collision checker; ``None``: the checker's default.
+    gripper_body_names: tuple[str, ...] | None = None
+    #: For an arm that cannot reach every orientation: position-priority IK accepting
+    #: orientations within this tolerance, rad; ``None``: full-pose IK.
+    ik_orientation_tol_rad: float | None = None
 
     # -- construction helpers -----------------------------------------------------------
     def _prepare_scene(self, scene):

@@ -47,7 +47,7 @@ Seeding (reproducible, and the same for a parent session and its replanned child
 
 The draws are recorded (:meth:`ActivePerturbations.record`) in the evidence bundle's
 ``perturbations.yaml`` for audit; the Agent's verifier and diagnosis never read it.
-Friction and mass act on the model, so :class:`~phyagentos.targets.mujoco_target.MuJoCoTarget`
+Friction and mass act on the model, so :class:`~phyagentos.targets.franka_tabletop.MuJoCoTarget`
 restores its nominal values before installing the next session's perturbations.
 """
 

@@ -28,7 +28,8 @@ import numpy as np
 
 from phyagentos.errors import TargetError, ViewError
 from phyagentos.protocol import Workspace
-from phyagentos.runtime.target_pool import DRIVERS, scene_for
+from phyagentos.runtime.target_pool import scene_for
+from phyagentos.targets.registry import DRIVERS
 from phyagentos.yamlsource import read_yaml
 
 __all__ = ["SceneRenderer", "frames_of", "overlay_markers"]

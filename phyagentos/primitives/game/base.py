@@ -1,7 +1,7 @@
 """GameLeaf: the base of every game primitive (one game action per behaviour-tree tick).
 
 A game leaf reads only what the player can know (``target.observe()``; see
-:mod:`phyagentos.targets.crafter_target`), keeps the player's map
+:mod:`phyagentos.targets.crafter`), keeps the player's map
 (:class:`~.seen_map.SeenMap`, carried in the target's notes from session to session),
 acts through the target's operations (``invoke_tool``: only what the session's
 TargetToolManifest grants) and records what happened in the session's trace:

@@ -1,7 +1,7 @@
 """The player's own map of what it has seen, and path planning on it.
 
 The map is built only from observations (the local view and the objects drawn on it),
-in the odometry frame of :meth:`~phyagentos.targets.crafter_target.CrafterTarget.observe`
+in the odometry frame of :meth:`~phyagentos.targets.crafter.CrafterTarget.observe`
 (cells; x right, y down; the world's start at the origin). Cells never seen are
 ``unknown``; a ``dark`` cell leaves the remembered material unchanged. Objects are
 remembered with the step they were last seen (creatures move; a remembered cow is a

@@ -20,7 +20,7 @@ actuators. For a reference ``q_ref(t)`` the bridge asks for
 (damping feed-forward, and the bias torque ``tau_bias`` (gravity, Coriolis; MuJoCo's
 ``qfrc_bias``) as a position offset, since the kitchen's arm is not gravity-compensated)
 
-(``b``, ``kp`` read from the model, as for :class:`~phyagentos.targets.mujoco_target.MuJoCoTarget`);
+(``b``, ``kp`` read from the model, as for :class:`~phyagentos.targets.franka_tabletop.MuJoCoTarget`);
 the fingers get ``a = (opening - q_obs) / (2 dt)``. A command the clip cannot reach in
 one step is a tracking error, checked against the caller's tolerance, never silently
 repaired.
@@ -46,9 +46,9 @@ import numpy as np
 
 from phyagentos.errors import TargetError, format_choices
 
-from .base import ExecutionResult
-from .mujoco_arm import MuJoCoArmTarget, mat_quat as _quat, pose_matrix as _pose
-from .mujoco_target import GripperResult
+from ..base import ExecutionResult
+from ..contract import TargetCapabilities
+from ..mujoco_arm import GripperResult, MuJoCoArmTarget, mat_quat as _quat, pose_matrix as _pose
 
 __all__ = ["KitchenScene", "FrankaKitchenTarget", "KITCHEN_TASKS", "ENV_ID"]
 
@@ -198,6 +198,9 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
     """
 
     ROBOT = "panda"
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command"),
+                                      sensors=("proprioception", "rgb", "contacts"), simulated_ground_truth=True,
+                                      articulated_fixtures=True)
     SENSORS_KEY = "franka_kitchen"
     ROBOT_BASE = (0.0, 0.0, 1.8)
 

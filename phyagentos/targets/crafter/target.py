@@ -62,8 +62,9 @@ from phyagentos.errors import TargetError, format_choices
 from phyagentos.protocol.atomic import atomic_write_bytes, atomic_write_text
 from phyagentos.yamlsource import load_plain
 
-from .base import BaseRolloutTarget, ExecutionResult
-from .state_file import read_state_npz
+from ..base import BaseRolloutTarget, ExecutionResult
+from ..contract import TargetCapabilities
+from ..state_file import read_state_npz
 
 __all__ = ["CrafterScene", "CrafterTarget", "CRAFTER_ACTIONS", "CRAFTER_ACHIEVEMENTS", "VIEW_COLS", "VIEW_ROWS",
            "DARK_TEXTURE_SHARE", "VITALS"]
@@ -223,7 +224,8 @@ class CrafterTarget(BaseRolloutTarget):
 
     KIND = "game"
     TOOLS = CRAFTER_ACTIONS + ("observe", "snapshot")
-    ACTION_FORMS = ("game_action",)
+    CAPABILITIES = TargetCapabilities(action_forms=("game_action",), sensors=("symbolic_view",),
+                                      simulated_ground_truth=True)
 
     @staticmethod
     def scene_from_dict(d: Mapping[str, Any] | None, *, root: Any = None) -> CrafterScene:

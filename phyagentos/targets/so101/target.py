@@ -46,10 +46,11 @@ import numpy as np
 
 from phyagentos.errors import TargetError
 
-from .base import ExecutionResult
-from .mujoco_arm import MuJoCoArmTarget, mat_quat
-from .mujoco_target import GripperResult
-from .scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
+from ..base import ExecutionResult
+from ..contract import TargetCapabilities
+from ..mujoco_arm import GripperResult, MuJoCoArmTarget, mat_quat
+
+from ..scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
 
 __all__ = ["SO101Target", "build_so101_scene", "so101_asset_path", "ARM_JOINT_NAMES", "GRIPPER_JOINT", "MOUNT_XY",
            "HOME_QPOS", "VELOCITY_DATASHEET", "ACCELERATION_LIMITS", "SO101_DEFAULT_SCENE"]
@@ -221,6 +222,8 @@ class SO101Target(MuJoCoArmTarget):
     """
 
     ROBOT = "so101"
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command"),
+                                      sensors=("proprioception", "rgb", "wrist_force"), simulated_ground_truth=True)
     SENSORS_KEY = "so101_tabletop"
     ROBOT_BASE = (float(MOUNT_XY[0]), float(MOUNT_XY[1]), 0.0)
     REPORT_CONTACTS = False
@@ -340,7 +343,7 @@ class SO101Target(MuJoCoArmTarget):
               feedforward: bool = True) -> ExecutionResult:
         """Stream the slice ``(t_start, t_end]`` of ``traj`` (s on its clock), one physics
         step per timestep, ``ctrl = q_ref + (b / kp) qd_ref``; see
-        :meth:`MuJoCoTarget.track <phyagentos.targets.mujoco_target.MuJoCoTarget.track>`."""
+        :meth:`MuJoCoTarget.track <phyagentos.targets.franka_tabletop.MuJoCoTarget.track>`."""
         self._check_open()
         t, Q, QD = self._traj_arrays(traj)
         if t_start <= 0.0:

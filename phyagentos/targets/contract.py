@@ -1,0 +1,380 @@
+"""The Target contract: what every simulator, game or real robot implements.
+
+A *target* is where a session's actions happen. The runtime talks to it only through
+:class:`Target` (one small ABC) and reads what it offers from its
+:class:`TargetCapabilities` (a frozen value object, a class attribute, so preflight
+can read it without constructing the target). Nothing in the runtime probes a target
+for optional attributes: an optional hook below has a documented default on
+:class:`Target`, and a capability says whether the runtime may use a feature.
+
+Units and frames: metres, radians, seconds, newtons; poses are (4, 4) homogeneous
+transforms in the world frame (z up); joint vectors are ``(n,)`` float arrays in the
+order of the target's ``arm_joint_names``.
+
+What a driver implements (abstract; :class:`TypeError` at construction otherwise):
+
+=========================  ====================================================================
+``observe()``              current observation, a dict (arrays allowed; keys are the driver's)
+``reset(*, seed)``         initial state for ``seed``; returns :meth:`Target.observe`
+``step(ctrl)``             apply one low-level command for one control period
+``execute_trajectory``     stream a timed joint trajectory (``t`` (T,) s, ``q`` (T, n) rad,
+                           ``qd`` (T, n) rad/s) and return an :class:`ExecutionResult`;
+                           a target without joint actions raises :class:`TargetError`
+``query_state()``          JSON-ready summary (plain lists, floats, strings)
+``tools()``                the names :meth:`Target.invoke_tool` accepts (``_tool_<name>``)
+``save_state(path)``       write the world state to ``path`` (``.npz``), return the path
+``load_state(path)``       restore what :meth:`Target.save_state` wrote
+=========================  ====================================================================
+
+The constructor signature is ``Driver(name: str, scene, *, seed: int | None)``; a driver
+whose scene is not the tabletop :class:`~phyagentos.targets.scene.SceneSpec` also
+provides ``scene_from_dict(raw, *, root)`` (a classmethod or staticmethod returning its
+scene type, which has ``to_dict()``).
+
+Optional hooks (the defaults on :class:`Target`, used when a driver does not override):
+
+=================================  ==========================================================
+``from_target_spec(...)``          ``cls(spec.name, scene, seed=seed)`` (a classmethod; the
+                                   target pool builds every target through it)
+``halt()``                         does nothing (targets that move on their own override)
+``set_perturbations(active)``      ignores them (no perturbation support)
+``configure_sensors(sensors)``     ignores the workspace's ``sensors.yaml`` entry
+``prepare_cameras()``              opens nothing, returns 0
+``world_digest()``                 ``None``: the world cannot be proven unchanged (no
+                                   perceived view is reused between sessions)
+``ground_truth()``                 ``None``: no simulator truth (a real robot); requires
+                                   ``capabilities.simulated_ground_truth`` to return a dict
+``scene_record()``                 ``None``: no physical scene record
+``benchmark_signals()``            ``{}``: no benchmark success signals
+``estop``                          ``None``; the safety guard sets its e-stop latch (an
+                                   object with ``is_set()``) here, and a target that
+                                   streams motion checks it every step
+``datasheet_limits``               ``None``: the safety guard's default, the Franka's 7
+                                   joints (else ``(velocity (n,) rad/s, acceleration
+                                   (n,) rad/s^2)``; every other arm declares its own)
+=================================  ==========================================================
+
+Registering a driver: see :mod:`phyagentos.targets.registry` and ``docs/targets.md``.
+"""
+
+from __future__ import annotations
+
+import abc
+import inspect
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal
+
+from phyagentos.errors import TargetError, format_choices
+
+__all__ = [
+    "ACTION_FORMS",
+    "SENSOR_KINDS",
+    "TARGET_KINDS",
+    "ExecutionResult",
+    "Target",
+    "TargetCapabilities",
+    "TargetKind",
+    "capabilities_of",
+]
+
+TargetKind = Literal["simulation", "real_robot", "game"]
+TARGET_KINDS: tuple[str, ...] = ("simulation", "real_robot", "game")
+
+#: The action forms a target may accept (the vocabulary of ``TargetCapabilities.action_forms``
+#: and of a skill runtime's ``action_forms``):
+#: ``joint_trajectory``: timed joint trajectories (``execute_trajectory``), rad;
+#: ``joint_position_chunk``: chunks of joint position targets from a policy, rad;
+#: ``cartesian_pose``: tcp pose targets, (4, 4) world transforms, m;
+#: ``gripper_command``: a gripper opening, m (``set_gripper(opening_m=...)``);
+#: ``game_action``: one of a finite set of named discrete actions (``tools()``).
+ACTION_FORMS: tuple[str, ...] = ("joint_trajectory", "joint_position_chunk", "cartesian_pose",
+                                 "gripper_command", "game_action")
+
+#: The sensors a target may offer (``TargetCapabilities.sensors``):
+#: ``proprioception``: joint positions/velocities/efforts (``proprioception()``);
+#: ``rgb``: named cameras (``camera_names()``, ``capture(sensor)`` -> a camera frame); a
+#: target without them may still ``render`` pictures for evidence images;
+#: ``depth``: depth images (``render_depth(camera=, width=, height=)``, m);
+#: ``wrist_force``: a wrist force/torque sensor (``wrist_external_force_n()``, N);
+#: ``contacts``: unexpected contacts reported by ``execute_trajectory``;
+#: ``perception``: a built-in perceiver (``perceive()``);
+#: ``symbolic_view``: a game's symbolic local view (in ``observe()``).
+SENSOR_KINDS: tuple[str, ...] = ("proprioception", "rgb", "depth", "wrist_force", "contacts",
+                                 "perception", "symbolic_view")
+
+
+@dataclass(frozen=True)
+class TargetCapabilities:
+    """What a target offers, declared once per driver class (``Driver.CAPABILITIES``).
+
+    Attributes:
+        action_forms: accepted action forms, in the driver's order of preference (a subset of
+            :data:`ACTION_FORMS`).
+        sensors: offered sensors (a subset of :data:`SENSOR_KINDS`).
+        simulated_ground_truth: ``ground_truth()`` returns the simulator's truth (never read
+            by the Agent plane; a real robot has none).
+        articulated_fixtures: the world has articulated fixtures (doors, drawers, knobs).
+        resettable: ``reset(seed=)`` restores a seeded initial world without a person.
+        real_hardware: actions move physical hardware (the safety guard's hardware checks apply).
+
+    Raises:
+        TargetError: an unknown action form or sensor (the message lists the valid ones).
+    """
+
+    action_forms: tuple[str, ...] = ()
+    sensors: tuple[str, ...] = ()
+    simulated_ground_truth: bool = False
+    articulated_fixtures: bool = False
+    resettable: bool = True
+    real_hardware: bool = False
+
+    def __post_init__(self) -> None:
+        for attr, valid in (("action_forms", ACTION_FORMS), ("sensors", SENSOR_KINDS)):
+            values = tuple(getattr(self, attr))
+            object.__setattr__(self, attr, values)
+            bad = [v for v in values if v not in valid]
+            if bad:
+                raise TargetError(f"TargetCapabilities.{attr}: unknown {bad[0]!r}; valid: {format_choices(valid)}")
+
+    def accepts(self, form: str) -> bool:
+        """Whether ``form`` is one of :attr:`action_forms`."""
+        return form in self.action_forms
+
+    def has_sensor(self, sensor: str) -> bool:
+        """Whether ``sensor`` is one of :attr:`sensors`."""
+        return sensor in self.sensors
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {"action_forms": list(self.action_forms), "sensors": list(self.sensors),
+                "simulated_ground_truth": self.simulated_ground_truth,
+                "articulated_fixtures": self.articulated_fixtures, "resettable": self.resettable,
+                "real_hardware": self.real_hardware}
+
+
+def capabilities_of(target_or_cls: Any) -> TargetCapabilities:
+    """The :class:`TargetCapabilities` of a target or driver class; an object outside the
+    contract (not a :class:`Target`) offers nothing (``TargetCapabilities()``)."""
+    cls = target_or_cls if isinstance(target_or_cls, type) else type(target_or_cls)
+    return cls.CAPABILITIES if issubclass(cls, Target) else TargetCapabilities()
+
+
+@dataclass(frozen=True)
+class ExecutionResult:
+    """Outcome of :meth:`Target.execute_trajectory`.
+
+    Attributes:
+        completed: the whole trajectory was streamed and the arm settled at its end.
+        max_tracking_error_rad: largest ``|q - q_ref|`` over joints and time steps, rad.
+        sim_time_s: target time spent executing (simulated seconds for simulations).
+        steps: control steps taken.
+        contacts: unexpected contact pairs seen during execution (sorted name pairs,
+            e.g. ``('obstacle:wall', 'panda0_link7')``); empty when none.
+        reason: empty when completed, otherwise why execution stopped.
+    """
+
+    completed: bool
+    max_tracking_error_rad: float
+    sim_time_s: float
+    steps: int
+    contacts: tuple[tuple[str, str], ...] = ()
+    reason: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "completed": self.completed,
+            "max_tracking_error_rad": self.max_tracking_error_rad,
+            "sim_time_s": self.sim_time_s,
+            "steps": self.steps,
+            "contacts": [list(c) for c in self.contacts],
+            "reason": self.reason,
+        }
+
+
+class Target(abc.ABC):
+    """The target contract (see the module docstring for the table of required methods
+    and optional hooks).
+
+    Subclasses set the class attributes :attr:`KIND`, :attr:`TOOLS` and
+    :attr:`CAPABILITIES`, call ``super().__init__(name, kind)`` and implement the abstract
+    methods. :meth:`invoke_tool` dispatches to ``_tool_<name>`` methods for the names in
+    :meth:`tools`; anything else raises :class:`TargetError` listing the valid tools.
+
+    Args:
+        name: target name as written in TARGETS.md (non-empty).
+        kind: one of :data:`TARGET_KINDS`.
+
+    Raises:
+        TargetError: an empty name or an unknown kind.
+    """
+
+    #: ``'simulation'``, ``'real_robot'`` or ``'game'`` (read without constructing a target).
+    KIND: ClassVar[str] = "simulation"
+    #: Tool names the driver offers (read by preflight without constructing a target).
+    TOOLS: ClassVar[tuple[str, ...]] = ()
+    #: What the driver offers (read by preflight and the runtime instead of probing).
+    CAPABILITIES: ClassVar[TargetCapabilities] = TargetCapabilities()
+    #: The safety guard's e-stop latch (``is_set()``), installed by the guard; a target that
+    #: streams motion checks it every step and halts when set. ``None``: no guard.
+    estop: Any = None
+    #: Same as ``CAPABILITIES.action_forms`` (kept in step by :meth:`__init_subclass__`).
+    ACTION_FORMS: ClassVar[tuple[str, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "CAPABILITIES" in cls.__dict__:
+            cls.ACTION_FORMS = cls.CAPABILITIES.action_forms
+
+    def __init__(self, name: str, kind: TargetKind):
+        if not isinstance(name, str) or not name:
+            raise TargetError(f"target name must be a non-empty string, got {name!r}")
+        if kind not in TARGET_KINDS:
+            raise TargetError(f"unknown target kind {kind!r}; valid kinds: {format_choices(TARGET_KINDS)}")
+        self._name = name
+        self._kind = kind
+        self._closed = False
+
+    @property
+    def name(self) -> str:
+        """Target name as written in TARGETS.md."""
+        return self._name
+
+    @property
+    def kind(self) -> str:
+        """``'simulation'``, ``'real_robot'`` or ``'game'``."""
+        return self._kind
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
+    def capabilities(self) -> TargetCapabilities:
+        """This driver's :attr:`CAPABILITIES`."""
+        return type(self).CAPABILITIES
+
+    # -- required ---------------------------------------------------------------------
+    @abc.abstractmethod
+    def observe(self) -> dict:
+        """Current observation (arrays allowed; see the subclass for keys)."""
+
+    @abc.abstractmethod
+    def reset(self, *, seed: int | None = None) -> dict:
+        """Put the target in its initial state and return :meth:`observe`."""
+
+    @abc.abstractmethod
+    def step(self, ctrl) -> None:
+        """Apply one low-level control command for one control period."""
+
+    @abc.abstractmethod
+    def execute_trajectory(self, traj, *, tracking_tol_rad: float) -> ExecutionResult:
+        """Stream a timed joint trajectory (``t`` (T,) s, ``q`` (T, n) rad, ``qd`` (T, n)
+        rad/s) to the arm; ``tracking_tol_rad`` bounds ``|q - q_ref|``, rad."""
+
+    @abc.abstractmethod
+    def query_state(self) -> dict:
+        """JSON-ready summary of the target state (plain lists, floats, strings)."""
+
+    @abc.abstractmethod
+    def tools(self) -> tuple[str, ...]:
+        """Names accepted by :meth:`invoke_tool`."""
+
+    # save_state / load_state are required by the target pool (a world that outlives a
+    # session); they are not abstract here so that a driver written against the older
+    # contract still constructs, and the conformance test checks them.
+    def save_state(self, path) -> Any:  # pragma: no cover - every driver overrides
+        """Write the world state to ``path`` (``.npz``) and return the path written."""
+        raise TargetError(f"target {self.name!r} ({type(self).__name__}) cannot save its state")
+
+    def load_state(self, path) -> None:  # pragma: no cover - every driver overrides
+        """Restore the world state written by :meth:`save_state`."""
+        raise TargetError(f"target {self.name!r} ({type(self).__name__}) cannot load a state")
+
+    def invoke_tool(self, name: str, **kwargs) -> Any:
+        """Run tool ``name`` with keyword arguments.
+
+        Raises :class:`TargetError` for an unknown tool (listing :meth:`tools`), for
+        bad arguments, or when the target is closed.
+        """
+        valid = self.tools()
+        if name not in valid:
+            raise TargetError(f"target {self.name!r} has no tool {name!r}; valid tools: {format_choices(valid)}")
+        if self._closed:
+            raise TargetError(f"target {self.name!r} is closed")
+        fn = getattr(self, f"_tool_{name}", None)
+        if fn is None:  # pragma: no cover - subclass bug
+            raise TargetError(f"target {self.name!r} lists tool {name!r} but does not implement it")
+        sig = inspect.signature(fn)
+        try:
+            sig.bind(**kwargs)
+        except TypeError as exc:
+            params = ", ".join(str(p) for p in sig.parameters.values())
+            raise TargetError(
+                f"bad arguments for tool {name!r} of target {self.name!r}: {exc}; expected ({params})"
+            ) from exc
+        return fn(**kwargs)
+
+    # -- optional hooks (documented defaults) -----------------------------------------
+    @classmethod
+    def from_target_spec(cls, spec: Any, scene: Any, *, seed: int | None = None) -> "Target":
+        """Build the target of a TARGETS.md entry (``spec``: a
+        :class:`~phyagentos.protocol.TargetSpec`) on ``scene``. Default:
+        ``cls(spec.name, scene, seed=seed)``; a driver that needs more of its entry (an
+        endpoint, limits) overrides this."""
+        return cls(spec.name, scene, seed=seed)
+
+    def halt(self) -> None:
+        """Stop any motion and hold still (called on cancellation or errors).
+        The default does nothing; targets that move on their own override it."""
+
+    def set_perturbations(self, active: Any) -> None:
+        """Install the session's active perturbations
+        (:class:`~phyagentos.targets.perturbations.ActivePerturbations`). Default: ignored."""
+
+    def configure_sensors(self, sensors: Any) -> None:
+        """Install the workspace's ``sensors.yaml`` entry for this target. Default: ignored."""
+
+    def prepare_cameras(self) -> int:
+        """Open the cameras' renderers ahead of the first session; returns how many were
+        opened. Default: none (0)."""
+        return 0
+
+    def world_digest(self) -> str | None:
+        """A digest of the world state equal for equal worlds, or ``None`` (the default)
+        when the target cannot prove its world unchanged (e.g. a real robot)."""
+        return None
+
+    def ground_truth(self) -> dict[str, Any] | None:
+        """The simulator's truth (Runtime plane only), or ``None`` (the default) for a target
+        without a ground-truth channel."""
+        return None
+
+    def scene_record(self) -> dict[str, Any] | None:
+        """The physical scene the target was built from, or ``None`` (the default)."""
+        return None
+
+    def benchmark_signals(self) -> dict[str, Any]:
+        """The target's own success signals (e.g. a benchmark's task completions);
+        default: none (``{}``)."""
+        return {}
+
+    @property
+    def datasheet_limits(self) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
+        """``(velocity (n,) rad/s, acceleration (n,) rad/s^2)`` datasheet limits for the
+        safety guard, or ``None`` (the default) for the guard's default (the Franka's seven
+        joints: every other arm declares its own)."""
+        return None
+
+    def close(self) -> None:
+        """Release resources; further calls are no-ops."""
+        self._closed = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r}, kind={self.kind!r})"

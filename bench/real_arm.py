@@ -1,6 +1,6 @@
 """The real SO-101 path on the bus twin: bus round trip per period, e-stop latency, fault outcomes.
 
-    .venv/bin/python bench/real_arm.py [--periods 250] [--estop-trials 10] [--period-ms 20] [--json]
+    .venv/bin/python bench/real_arm.py [--periods 250] [--estop-trials 10] [--period-ms 20] [--no-run] [--json]
 
 Everything goes through Feetech's SDK and the project's driver against :class:`BusTwin`
 (a pseudo-terminal answering as six STS3215, MuJoCo behind it), exactly as on a real arm;
@@ -17,7 +17,13 @@ against ``phyagentos bus-twin so101`` in its own process:
   stalled joint, glitching sensor) injected mid-motion: the stop code, the time from
   injection to stop (in periods; a silent servo costs the SDK's packet timeouts and the
   driver's retries), the joint motion in the 0.3 s after the stop settled, and the goals
-  written after it (must be 0).
+  written after it (must be 0);
+- **refused before motion**: a missing port, a missing or malformed calibration, a servo
+  id mismatch: the error code, and the twin's goal writes and torque afterwards (0: nothing
+  moved);
+- **pick-and-place**: goal_graphs/pick_and_place_compact.yaml through ``phyagentos run
+  --target so101_real`` on the twin-backed bus, judged by the verifier on perceived
+  evidence; the cube's true position in the twin is checked for scoring only.
 
 On a pseudo-terminal the driver adds 300 ms to the SDK's packet timeout (the twin's
 servos are a thread of a busy process); on a real port it is the SDK's 34 ms, so a silent
@@ -143,6 +149,60 @@ def faults(cal_for, dt: float) -> list[dict]:
     return rows
 
 
+def pick_and_place(seed: int) -> dict:
+    """goal_graphs/pick_and_place_compact.yaml through ``phyagentos run --target so101_real``
+    against a twin thread in this process: the verifier judges perceived evidence; the
+    twin's own world (the cube's true position) is checked here, for scoring only."""
+    with BusTwin(seed=seed) as twin, tempfile.TemporaryDirectory() as tmp:
+        cal_path = ideal_calibration(twin).save(Path(tmp) / "so101.json")
+        t0 = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", "goal_graphs/pick_and_place_compact.yaml",
+                               "--workspace", str(Path(tmp) / "ws"), "--target", "so101_real", "--port", twin.port,
+                               "--calibration", str(cal_path), "--json"], cwd=ROOT, capture_output=True, text=True,
+                              env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=900)
+        wall = time.perf_counter() - t0
+        report = json.loads(proc.stdout.strip().splitlines()[-1]) if proc.stdout.strip() else {}
+        cube = twin.object_position("cube")
+        # goal region of the graph: centre (0.45, 0.11) m, half extents 0.05 m
+        in_region = bool(abs(cube[0] - 0.45) <= 0.05 and abs(cube[1] - 0.11) <= 0.05 and cube[2] < 0.03)
+        return {"exit_code": proc.returncode, "succeeded": bool(report.get("succeeded")), "wall_s": wall,
+                "sessions": [{"node": s["node"], "status": s["status"], "verdict": s.get("verdict")}
+                             for s in report.get("sessions", [])],
+                "cube_in_goal_region_true_pose": in_region, "goal_writes": twin.goal_writes,
+                "packets_served": twin.packets_served}
+
+
+def preflight_rejections() -> list[dict]:
+    """Bad input refused before anything moves: each case's error code and the twin's goal
+    writes and torque state afterwards (0 writes and torque off: nothing moved)."""
+    from phyagentos.targets.so101_real.calibration import CalibrationError
+    from phyagentos.targets.so101_real.driver import BusError
+    from phyagentos.targets.so101_real.target import SO101RealTarget
+
+    rows = []
+
+    def attempt(case: str, twin: BusTwin | None, **kw) -> None:
+        try:
+            SO101RealTarget("so101_real", **kw).close()
+            code = "(accepted)"
+        except (BusError, CalibrationError) as exc:
+            code = exc.code
+        rows.append({"case": case, "code": code,
+                     "goal_writes": twin.goal_writes if twin else 0,
+                     "torque_on": sum(twin.torque_enabled()) if twin else 0})
+
+    with tempfile.TemporaryDirectory() as tmp:
+        with BusTwin(seed=1) as twin:
+            cal = ideal_calibration(twin).save(Path(tmp) / "ok.json")
+            attempt("no such port", None, port="/dev/no-such-serial-port", calibration=cal)
+            attempt("missing calibration", twin, port=twin.port, calibration=Path(tmp) / "none.json")
+            Path(tmp, "bad.json").write_text("{not json")
+            attempt("malformed calibration", twin, port=twin.port, calibration=Path(tmp) / "bad.json")
+        with BusTwin(ids=(1, 2, 3, 4, 5, 7), seed=1) as twin:  # the gripper answers as id 7
+            attempt("servo id mismatch", twin, port=twin.port, calibration=cal)
+    return rows
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--periods", type=int, default=250)
@@ -150,6 +210,8 @@ def main() -> int:
     ap.add_argument("--period-ms", type=float, default=20.0)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--no-run", action="store_true",
+                    help="skip the pick-and-place through `phyagentos run` (about a minute)")
     ap.add_argument("--twin-process", action="store_true",
                     help="round trip and e-stop against `phyagentos bus-twin` in its own process (default: a twin "
                          "thread in this process)")
@@ -176,7 +238,10 @@ def main() -> int:
                 proc.terminate()
                 proc.wait(timeout=10)
     fl = faults(ideal_calibration, dt)
+    rej = preflight_rejections()
+    pp = None if args.no_run else pick_and_place(args.seed)
     out = {"twin": "process" if args.twin_process else "thread", "round_trip": rt, "estop": es, "faults": fl,
+           "preflight_rejections": rej, "pick_and_place": pp,
            "machine": {"cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}}
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "real_arm.json").write_text(json.dumps(out, indent=2) + "\n")
@@ -194,6 +259,14 @@ def main() -> int:
         det = f"{r['detect_periods']:.1f}" if r["detect_periods"] is not None else "-"
         print(f"{r['fault']:10s} {r['code']:18s} {det:>17s} {r['motion_after_rad']:>19.4f} "
               f"{r['goal_writes_after']:>13d} {r['next_command_refused']}")
+    print(f"{'refused before motion':24s} {'code':22s} goal writes  torque on")
+    for r in rej:
+        print(f"{r['case']:24s} {r['code']:22s} {r['goal_writes']:>11d}  {r['torque_on']:>9d}")
+    if pp is not None:
+        print(f"pick-and-place through `phyagentos run` on the twin: exit {pp['exit_code']}, "
+              f"succeeded {pp['succeeded']}, {pp['wall_s']:.1f} s wall, verdicts "
+              f"{[(s['node'], s['verdict']) for s in pp['sessions']]}; cube in the goal region by the twin's "
+              f"true pose: {pp['cube_in_goal_region_true_pose']}")
     return 0
 
 

@@ -107,7 +107,16 @@ class PreflightError(PhyAgentOSError):
 
 
 class TargetError(PhyAgentOSError):
-    """A target failed to build, observe, or execute a command."""
+    """A target failed to build, observe, or execute a command.
+
+    ``code`` is ``None`` for an ordinary failure (a session records ``target.error``) or an
+    error code (``<family>.<detail>``, ``protocol/errorcodes``) when the target stopped
+    itself for a reason it can name, e.g. ``bus.overload`` from a real arm's bus guard.
+    """
+
+    def __init__(self, message: str, *, code: str | None = None):
+        self.code = code
+        super().__init__(message)
 
 
 class MotionError(PhyAgentOSError):

@@ -260,6 +260,58 @@ def test_pick_and_place_through_phyagentos_run_on_the_bus_twin(twin, cal_file, t
 
 
 @pytest.mark.sim
+def test_a_bus_fault_mid_session_ends_it_with_the_bus_code_and_no_motion_after(twin, cal_file, tmp_path):
+    """An overload flag raised by a servo while the pick is moving: the bus guard stops
+    the arm (hold), the session's attempt ends with ``bus.overload`` (a ``target``
+    category code, not ``execution.tracking``), the run exits 1, and nothing moves after."""
+    from phyagentos.protocol import Workspace
+    from phyagentos.protocol.errorcodes import category_of
+
+    state = {}
+
+    def inject_mid_motion():  # by progress, not by time: after 40 goal writes (0.8 s of motion)
+        deadline = time.monotonic() + 400
+        while twin.goal_writes < 40 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        twin.inject(2, "overload")
+        state["writes"] = twin.goal_writes
+
+    threading.Thread(target=inject_mid_motion, daemon=True).start()
+    proc = _run(["goal_graphs/pick_and_place_compact.yaml", "--workspace", str(tmp_path / "ws"),
+                 "--target", "so101_real", "--port", twin.port, "--calibration", str(cal_file)])
+    assert "writes" in state, proc.stderr[-3000:]
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    assert not json.loads(proc.stdout.strip().splitlines()[-1])["succeeded"]
+    records = Workspace.open(tmp_path / "ws").list_sessions()
+    codes = [a.error.code for r in records for a in r.attempts if a.error is not None]
+    assert "bus.overload" in codes and category_of("bus.overload") == "target", codes
+    assert "execution.tracking" not in codes, codes
+    # the arm stopped: the servo's torque was dropped by its protection and no goal reached
+    # the bus after the stop (later sessions are refused by the latched stop)
+    writes, q = twin.goal_writes, twin.joint_positions()
+    time.sleep(0.3)
+    assert twin.goal_writes == writes and np.max(np.abs(twin.joint_positions() - q)) < 2e-3
+
+
+def test_the_bus_twin_verb_prints_a_port_that_answers_as_an_so101(tmp_path):
+    cal_path = tmp_path / "cal.json"
+    proc = subprocess.Popen([sys.executable, "-m", "phyagentos.cli", "bus-twin", "so101", "--seed", "4",
+                             "--write-calibration", str(cal_path), "--duration", "120"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        port = proc.stdout.readline().strip()
+        assert port.startswith("/dev/pts/"), (port, proc.stderr.read() if proc.poll() is not None else "")
+        assert Calibration.load(cal_path)  # the twin's exact calibration, in LeRobot's format
+        with FeetechBus(port) as bus:
+            assert [f["id"] for f in bus.connect()] == [1, 2, 3, 4, 5, 6]
+            state = bus.sync_read_state()
+            assert state.position.shape == (6,) and not state.status.any()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
+
+
+@pytest.mark.sim
 def test_dry_run_moves_nothing(twin, cal_file, tmp_path):
     before = twin.joint_positions()
     proc = _run(["goal_graphs/pick_and_place_compact.yaml", "--workspace", str(tmp_path / "ws"),

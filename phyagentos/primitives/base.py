@@ -111,7 +111,7 @@ class Primitive(py_trees.behaviour.Behaviour):
         except PrimitiveFailure as exc:
             return self._fail(exc.code, str(exc))
         except (MotionError, TargetError) as exc:
-            code = next(c for t, c in ERROR_CODES if isinstance(exc, t))
+            code = getattr(exc, "code", None) or next(c for t, c in ERROR_CODES if isinstance(exc, t))
             return self._fail(code, str(exc))
 
     def _fail(self, code: str, message: str) -> Status:

@@ -149,7 +149,8 @@ class _ContactMotion(_Tracking):
         the target left it: :meth:`halt` is the caller's).
 
         Raises:
-            PrimitiveFailure: ``safety.estop`` when the SafetyGuard's e-stop is engaged.
+            PrimitiveFailure: ``safety.estop`` when the SafetyGuard's e-stop is engaged;
+                the target's own code (``ExecutionResult.code``) when it stopped itself.
         """
         ctx = self.ctx
         target = ctx.target
@@ -166,6 +167,8 @@ class _ContactMotion(_Tracking):
                 result = target.track(window, t_start=self._t - t0, t_end=t_next - t0,
                                       tracking_tol_rad=self.tracking_tol_rad)
             self._t = t_next
+            if not result.completed and result.code:  # the target stopped itself (a real arm's bus guard)
+                raise PrimitiveFailure(result.code, f"target stopped at t={t_next:.2f} s: {result.reason}")
             max_err = max(max_err, result.max_tracking_error_rad)
             force, touched = contact_force_n(target.model, target.data, ignore_bodies=self._ignore)
             self._sample(force, touched)

@@ -104,6 +104,8 @@ class _Tracking(Primitive):
         if ctx.guard is not None and ctx.guard.estop_engaged():
             ctx.target.halt()  # the target's own hook already stopped streaming mid-slice
             raise PrimitiveFailure("safety.estop", f"e-stop engaged: {ctx.guard.estop.reason}")
+        if not result.completed and result.code:  # the target stopped itself (e.g. a real arm's bus guard)
+            raise PrimitiveFailure(result.code, f"target stopped at t={t_end:.2f} s: {result.reason}")
         if not result.completed:
             raise PrimitiveFailure("execution.tracking",
                                    f"tracking error {result.max_tracking_error_rad:.3f} rad exceeded "

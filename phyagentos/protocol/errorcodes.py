@@ -7,7 +7,9 @@ human reference is ``docs/ERRORS.md`` (a test keeps the two in step).
 
 Each family belongs to one category of the paper's error taxonomy (perception,
 policy, adapter, execution, timeout, safety, verifier, plus the runtime's own
-preflight, target, heartbeat, cancelled and runtime families).
+preflight, target, heartbeat, cancelled and runtime families). A real arm's bus faults
+(``bus.*``) count as ``target``; a real arm's calibration problems (``calibration.*``)
+are found before anything moves and count as ``preflight``.
 """
 
 from __future__ import annotations
@@ -58,6 +60,10 @@ FAMILIES: Mapping[str, tuple[str, str]] = MappingProxyType({
     "execution": ("execution", "the target did not follow the commanded motion"),
     "grasp": ("execution", "the grasp missed or the object slipped"),
     "skill": ("execution", "the skill's behaviour tree is inconsistent"),
+    "bus": ("target", "a real arm's servo bus or its bus guard stopped the arm (silent servo, corrupt packets, "
+                      "overload, stall, out-of-range reading, a goal outside the calibrated limits) or could not be "
+                      "opened; the arm was stopped by its declared stop policy"),
+    "calibration": ("preflight", "a real arm's calibration file is missing, malformed or does not match its bus"),
 })
 
 TIMEOUT_QUEUE = "timeout.queue"

@@ -171,6 +171,10 @@ class ExecutionResult:
         contacts: unexpected contact pairs seen during execution (sorted name pairs,
             e.g. ``('obstacle:wall', 'panda0_link7')``); empty when none.
         reason: empty when completed, otherwise why execution stopped.
+        code: empty unless the target itself stopped the motion for a reason it can name:
+            then an error code (``<family>.<detail>``, ``protocol/errorcodes``), e.g.
+            ``bus.load`` when a real arm's bus guard stopped a stalled joint. The executing
+            primitive fails with this code instead of ``execution.tracking``.
     """
 
     completed: bool
@@ -179,6 +183,7 @@ class ExecutionResult:
     steps: int
     contacts: tuple[tuple[str, str], ...] = ()
     reason: str = ""
+    code: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
@@ -189,6 +194,7 @@ class ExecutionResult:
             "steps": self.steps,
             "contacts": [list(c) for c in self.contacts],
             "reason": self.reason,
+            "code": self.code,
         }
 
 

@@ -210,7 +210,7 @@ class SO101RealTarget(SO101Target):
                               on_period=self._mirror_step)
         reason = "" if res.completed else f"{res.code}: {res.reason}"
         return ExecutionResult(res.completed, res.max_tracking_error_rad, self.sim_time - t0, res.periods,
-                               reason=reason)
+                               reason=reason, code="" if res.completed else res.code)
 
     def execute_trajectory(self, traj, *, tracking_tol_rad: float = 0.05, feedforward: bool = True) -> ExecutionResult:
         """Stream the whole trajectory, then settle at its end (bus; dry run: twin)."""
@@ -246,7 +246,7 @@ class SO101RealTarget(SO101Target):
         res = self.arm.follow(np.tile(np.append(goal5, self._jaw_goal), (n, 1)), tracking_tol_rad=math.inf,
                               on_period=self._mirror_step)
         if not res.completed:
-            raise TargetError(f"hold stopped: {res.code}: {res.reason}")
+            raise TargetError(f"hold stopped: {res.code}: {res.reason}", code=res.code or None)
         return res.periods * max(1, int(round(self.arm.dt / self._model.opt.timestep)))
 
     def step(self, ctrl: Sequence[float] | None = None) -> None:
@@ -265,7 +265,7 @@ class SO101RealTarget(SO101Target):
             g = np.append(c[:5], self._jaw_goal)
         res = self.arm.follow(g.reshape(1, 6), tracking_tol_rad=math.inf, on_period=self._mirror_step)
         if not res.completed:
-            raise TargetError(f"step stopped: {res.code}: {res.reason}")
+            raise TargetError(f"step stopped: {res.code}: {res.reason}", code=res.code or None)
 
     def set_gripper(self, *, opening_m: float, settle_s: float = 0.5, force_n: float | None = None) -> GripperResult:
         """Drive the jaw to the opening (as the twin does) on the bus and wait until it stops
@@ -286,7 +286,7 @@ class SO101RealTarget(SO101Target):
         for k in range(n_max):
             res = self.arm.follow(g.reshape(1, 6), tracking_tol_rad=math.inf, on_period=self._mirror_step)
             if not res.completed:
-                raise TargetError(f"gripper stopped: {res.code}: {res.reason}")
+                raise TargetError(f"gripper stopped: {res.code}: {res.reason}", code=res.code or None)
             jaw = float(self.arm.last_q[5])
             if prev is not None and k + 1 >= n_min and abs(jaw - prev) / dt < _JAW_STALL_RAD_S:
                 break

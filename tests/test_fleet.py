@@ -336,3 +336,46 @@ def test_a_replica_takes_only_records_that_extend_it(tmp_path):
     SessionLifecycle(other).fire("cancelled")
     assert not ws.install_replica(other)
     assert ws.load_session("rep-1").state == "claimed"
+
+
+def test_a_late_catch_up_never_overwrites_a_newer_edge_document(tmp_path):
+    """Edge documents carry (incarnation, seq) revisions; a replica installs only newer ones,
+    so a catch-up answer read before a publication but delivered after it is refused, a
+    repeat changes nothing, and a new edge workspace (a later incarnation) is taken."""
+    from phyagentos.fleet.catchup import catchup_answer
+    from phyagentos.fleet.doc_revisions import EdgeDocRevisions, ReplicaDocRevisions
+
+    edge_ws = Workspace.create(tmp_path / "edge")
+    revs = EdgeDocRevisions(edge_ws.root / "fleet" / "doc_revisions.json")
+    env = edge_ws.path("ENVIRONMENT")
+    env_v1 = env.read_text(encoding="utf-8")
+    stale = catchup_answer(edge_ws, edge="arm1", targets=["franka_tabletop"], doc_revisions=revs)
+    env.write_text(env_v1.replace("revision: 0", "revision: 1"), encoding="utf-8")
+    rev_v2 = revs.revision("ENVIRONMENT", env.read_text(encoding="utf-8"))
+    assert rev_v2 > tuple(stale["doc_revisions"]["ENVIRONMENT"])
+    assert revs.revision("ENVIRONMENT", env.read_text(encoding="utf-8")) == rev_v2  # same content, same revision
+    # the numbering survives a restart of the edge (read back from its workspace)
+    assert EdgeDocRevisions(edge_ws.root / "fleet" / "doc_revisions.json").revision(
+        "ENVIRONMENT", env.read_text(encoding="utf-8")) == rev_v2
+
+    replica_dir = tmp_path / "agent" / "fleet" / "edges"
+    replica = ReplicaDocRevisions(replica_dir)
+    installed = []
+    assert replica.offer("arm1", "ENVIRONMENT", rev_v2, lambda: installed.append("v2"))  # the publication
+    assert not replica.offer("arm1", "ENVIRONMENT", tuple(stale["doc_revisions"]["ENVIRONMENT"]),
+                             lambda: installed.append("stale"))  # the late catch-up answer
+    assert not replica.offer("arm1", "ENVIRONMENT", rev_v2, lambda: installed.append("repeat"))
+    assert not replica.offer("arm1", "ENVIRONMENT", None, lambda: installed.append("unnumbered"))
+    assert installed == ["v2"]
+    # held revisions persist with the replica (an agent restarted mid-partition keeps the rule)
+    assert ReplicaDocRevisions(replica_dir).held("arm1", "ENVIRONMENT") == rev_v2
+    # a replaced edge computer: a new workspace starts a later incarnation, which is taken
+    new_edge = EdgeDocRevisions(tmp_path / "edge2" / "fleet" / "doc_revisions.json")
+    rev_new = new_edge.revision("ENVIRONMENT", env_v1)
+    assert rev_new[0] > rev_v2[0] and rev_new[1] == 1
+    assert replica.offer("arm1", "ENVIRONMENT", rev_new, lambda: installed.append("new edge"))
+    assert installed == ["v2", "new edge"]
+    # TARGETS: the same text owning other targets is a new content
+    targets_text = edge_ws.path("TARGETS").read_text(encoding="utf-8")
+    assert revs.revision("TARGETS", targets_text, owned=["franka_tabletop"]) < \
+        revs.revision("TARGETS", targets_text, owned=["franka_tabletop", "so101_tabletop"])

@@ -26,6 +26,7 @@ from phyagentos.protocol.codec import parse_document
 from phyagentos.protocol.schemas import TargetsDoc, TargetSpec
 
 from .catchup import apply_catchup
+from .doc_revisions import ReplicaDocRevisions
 from .link import FleetLink
 from .ownership import AGENT_STATES, TargetMap
 from .presence import Presence
@@ -65,6 +66,7 @@ class FleetAgentBridge:
         self.targets = TargetMap()
         self.edges = Presence(on_change=self._edge_changed)
         self._edge_targets: dict[str, list[dict]] = {}
+        self.doc_revisions = ReplicaDocRevisions(workspace.root / "fleet" / "edges")
         self._confirmed: dict[str, tuple[int, str]] = {}  # session id -> revision the edge is known to hold
         self._catchup_due: set[str] = set()
         self._finished: set[str] = set()  # terminal on both sides: nothing left to forward
@@ -139,13 +141,21 @@ class FleetAgentBridge:
         self.workspace.update("TARGETS", apply)
 
     def _on_doc(self, key: str, data: Any) -> None:
+        """Install an edge document (a publication or a catch-up answer's) by the rule of
+        :mod:`.doc_revisions`: only a revision newer than the one held."""
         edge, name = data["edge"], data["name"]
-        if name == "TARGETS":
-            self._install_targets(edge, data["text"], list(data.get("targets", [])))
-        else:
-            edge_dir = self.workspace.root / "fleet" / "edges" / edge
-            edge_dir.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(edge_dir / f"{name}.md", data["text"])
+        rev = data.get("rev")
+        rev = (int(rev[0]), int(rev[1])) if isinstance(rev, (list, tuple)) and len(rev) == 2 else None
+
+        def install() -> None:
+            if name == "TARGETS":
+                self._install_targets(edge, data["text"], list(data.get("targets", [])))
+            else:
+                edge_dir = self.workspace.root / "fleet" / "edges" / edge
+                edge_dir.mkdir(parents=True, exist_ok=True)
+                atomic_write_text(edge_dir / f"{name}.md", data["text"])
+
+        self.doc_revisions.offer(edge, name, rev, install)
 
     def catch_up(self, edge: str) -> int:
         """Query ``edge``'s catch-up and install it; returns the sessions written.
@@ -159,8 +169,10 @@ class FleetAgentBridge:
                                      {"run_ids": self.workspace.runs.active_ids()}, timeout_s=5.0)
         if answer is None:
             raise FleetError(f"edge {edge} did not answer its catch-up query")
+        revs = answer.get("doc_revisions") or {}
         for name, text in answer.get("docs", {}).items():
-            self._on_doc("", {"edge": edge, "name": name, "text": text, "targets": answer.get("targets", [])})
+            self._on_doc("", {"edge": edge, "name": name, "text": text, "targets": answer.get("targets", []),
+                              "rev": revs.get(name)})
         with self._lock:
             written = apply_catchup(self.workspace, answer)
             for msg in answer.get("sessions", []):

@@ -12,6 +12,7 @@ from pathlib import Path
 from phyagentos.errors import ProtocolError
 from phyagentos.protocol import Workspace
 
+from .doc_revisions import EdgeDocRevisions
 from .ownership import EDGE_DOCUMENTS
 from .replication import encode_session, install_session
 
@@ -26,15 +27,18 @@ def submits_dir(workspace: Workspace) -> Path:
 
 
 def catchup_answer(workspace: Workspace, *, edge: str, targets: list[str], run_ids: list[str] | None = None,
-                   session_ids: list[str] | None = None) -> dict:
-    """The edge's answer: owned targets, documents (text) and fleet sessions (encoded),
+                   session_ids: list[str] | None = None, doc_revisions: EdgeDocRevisions | None = None) -> dict:
+    """The edge's answer: owned targets, documents (text, with their revisions when
+    ``doc_revisions`` numbers them: :mod:`.doc_revisions`) and fleet sessions (encoded),
     those of ``run_ids`` and/or ``session_ids`` when given."""
-    docs = {}
+    docs, revs = {}, {}
     for name in EDGE_DOCUMENTS:
         try:
             docs[name] = workspace.path(name).read_text(encoding="utf-8")
         except OSError:
             continue
+        if doc_revisions is not None:
+            revs[name] = list(doc_revisions.revision(name, docs[name], owned=targets if name == "TARGETS" else ()))
     sessions = []
     directory = submits_dir(workspace)
     tickets = sorted(directory.glob("*.json")) if directory.is_dir() else []
@@ -50,7 +54,7 @@ def catchup_answer(workspace: Workspace, *, edge: str, targets: list[str], run_i
             log.debug("catch-up: %s skipped (%s)", ticket.stem, exc)
             continue
         sessions.append(encode_session(workspace, record, edge=edge))
-    return {"edge": edge, "targets": targets, "docs": docs, "sessions": sessions}
+    return {"edge": edge, "targets": targets, "docs": docs, "doc_revisions": revs, "sessions": sessions}
 
 
 def apply_catchup(workspace: Workspace, answer: dict) -> int:

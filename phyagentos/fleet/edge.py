@@ -25,6 +25,7 @@ from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
 
 from .catchup import catchup_answer, submits_dir
 from .config import FleetConfig
+from .doc_revisions import EdgeDocRevisions
 from .link import FleetLink
 from .link_loss import LINK_LOST_REASON, STALE_REASON, SubmitTicket, submit_is_stale
 from .ownership import AGENT_STATES, EDGE_DOCUMENTS
@@ -79,6 +80,7 @@ class FleetEdge:
         self._tickets: dict[str, SubmitTicket] = self._load_tickets()
         self._outbox: queue.Queue[SessionRecord | None] = queue.Queue()
         self._doc_stamp: dict[str, tuple] = {}
+        self.doc_revisions = EdgeDocRevisions(self.workspace.root / "fleet" / "doc_revisions.json")
         self._lock = threading.Lock()
         self._halted: set[str] = set()
         self._stop = threading.Event()
@@ -193,7 +195,7 @@ class FleetEdge:
     def _on_catchup(self, key: str, data: Any) -> dict:
         data = data if isinstance(data, dict) else {}
         return catchup_answer(self.ws, edge=self.name, targets=self.targets, run_ids=data.get("run_ids"),
-                              session_ids=data.get("session_ids"))
+                              session_ids=data.get("session_ids"), doc_revisions=self.doc_revisions)
 
     def _on_submit(self, key: str, data: Any) -> dict:
         """A submit: ``{agent, issued_at, link_loss, record, deps: [records]}``."""
@@ -283,9 +285,10 @@ class FleetEdge:
             if self._doc_stamp.get(name) == stamp:
                 continue
             self._doc_stamp[name] = stamp
+            text = path.read_text(encoding="utf-8")
             self.link.put(self.link.keys.doc(self.name, name),
-                          {"edge": self.name, "name": name, "text": path.read_text(encoding="utf-8"),
-                           "targets": self.targets})
+                          {"edge": self.name, "name": name, "text": text, "targets": self.targets,
+                           "rev": list(self.doc_revisions.revision(name, text, owned=self.targets if name == "TARGETS" else ()))})
 
     # -- running -----------------------------------------------------------------------
 

@@ -67,6 +67,8 @@ class PolicyServer:
         self.stall_after = stall_after
         self.on_request = on_request
         self.requests = 0
+        #: ``time.monotonic()`` when the injected stall began (None: not stalled)
+        self.stalled_at: float | None = None
         self._server: Server | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._ready = threading.Event()
@@ -89,6 +91,7 @@ class PolicyServer:
                         continue
                     self.requests += 1
                     if self.stall_after is not None and self.requests > self.stall_after:
+                        self.stalled_at = time.monotonic()
                         logger.warning("policy server: stalling (fault injection after %d inferences)", self.stall_after)
                         await ws.wait_closed()  # never answers (pings still do) until the peer leaves
                         return

@@ -67,6 +67,9 @@ def test_the_arm_servos_hold_the_settled_configuration(target):
     m, d = target.model, target.data
     axis = d.xaxis[m.joint("gripper0_finger_joint1").id]
     assert abs(float(np.dot(T[:3, 1], axis))) > 0.99
+    # at robosuite's grip site (between the fingertips), fixed to the arm's last link
+    np.testing.assert_allclose(T[:3, 3], d.site_xpos[m.site("gripper0_grip_site").id], atol=1e-6)
+    assert m.body(int(m.site_bodyid[m.site("tcp").id])).name == "robot0_link7"
 
 
 def test_control_steps_never_render_and_a_capture_renders_rgbd_in_metres(target, monkeypatch):

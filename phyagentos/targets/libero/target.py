@@ -25,9 +25,9 @@ steps and then hands over). The gripper is robosuite's Panda hand: two position-
 fingers, opening per finger 0 .. 0.04 m.
 
 Model changes, made once at construction by recompiling robosuite's own XML (robosuite's
-``set_xml_processor`` + ``reset_from_xml_string``): a massless site ``tcp`` at robosuite's
-``gripper0_grip_site`` (between the fingertips) turned -90 deg about its z axis, so that, as
-on the other arms, z points out of the gripper and y along the finger motion; and
+``set_xml_processor`` + ``reset_from_xml_string``): a massless site ``tcp`` on ``robot0_link7`` at the pose of
+robosuite's ``gripper0_grip_site`` (between the fingertips) turned -90 deg about its z axis,
+so that, as on the other arms, z points out of the gripper and y along the finger motion; and
 ``gravcomp="1"`` on the robot's bodies, switched on (``body_gravcomp``) only while the servos
 drive the arm. Sites have no physics, and LIBERO's OSC already compensates gravity itself, so
 LIBERO's own stepping is unchanged.
@@ -44,6 +44,7 @@ World frame: LIBERO's (z up, metres); the robot base is at robosuite's ``robot0_
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass, field
@@ -179,8 +180,26 @@ def _quat_mul(a: Sequence[float], b: Sequence[float]) -> list[float]:
     return [float(x) for x in out]
 
 
-def _process_xml(xml: str) -> str:
-    """robosuite's model XML with the ``tcp`` site and ``gravcomp="1"`` on the robot's bodies
+#: The arm's last link: the tool site is fixed to it (the safety guard's kinematic chain
+#: ends at the body carrying the tool site).
+_LAST_LINK = "robot0_link7"
+
+
+def _tcp_in_last_link(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[list[float], list[float]]:
+    """Pose of the tool frame in ``robot0_link7``'s frame: robosuite's grip site (between the
+    fingertips) turned -90 deg about its z axis; ``(pos (3,) m, quat wxyz)``. The hand is
+    fixed to the link, so this is a constant of the robot model."""
+    mujoco.mj_forward(m, d)
+    b, s = m.body(_LAST_LINK).id, m.site(_GRIP_SITE).id
+    Rb, pb = d.xmat[b].reshape(3, 3), d.xpos[b]
+    Rs, ps = d.site_xmat[s].reshape(3, 3), d.site_xpos[s]
+    turn = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # -90 deg about z
+    return [float(x) for x in Rb.T @ (ps - pb)], mat_quat(Rb.T @ Rs @ turn)
+
+
+def _process_xml(xml: str, *, tcp_pos: Sequence[float], tcp_quat: Sequence[float]) -> str:
+    """robosuite's model XML with the ``tcp`` site on ``robot0_link7`` (at ``tcp_pos`` m,
+    ``tcp_quat`` wxyz in the link's frame) and ``gravcomp="1"`` on the robot's bodies
     (``robot0_*``, ``gripper0_*``); nothing else changes."""
     import xml.etree.ElementTree as ET  # noqa: PLC0415
 
@@ -190,16 +209,13 @@ def _process_xml(xml: str) -> str:
         name = body.get("name", "")
         if name.startswith(("robot0_", "gripper0_")):
             body.set("gravcomp", "1")
-        for site in body.findall("site"):
-            if site.get("name") == _GRIP_SITE and not placed:
-                quat = [float(v) for v in (site.get("quat") or "1 0 0 0").split()]
-                turn = [math.cos(-math.pi / 4), 0.0, 0.0, math.sin(-math.pi / 4)]  # -90 deg about z
-                ET.SubElement(body, "site", {"name": TCP_SITE, "pos": site.get("pos") or "0 0 0",
-                                             "quat": " ".join(f"{v:.9f}" for v in _quat_mul(quat, turn)),
-                                             "size": "0.002", "group": "5", "rgba": "0 0 0 0"})
-                placed = True
-    if not placed:  # pragma: no cover - robosuite's hand changed
-        raise TargetError(f"robosuite's model has no site {_GRIP_SITE!r} to place the tool site on")
+        if name == _LAST_LINK:
+            ET.SubElement(body, "site", {"name": TCP_SITE, "pos": " ".join(f"{v:.9f}" for v in tcp_pos),
+                                         "quat": " ".join(f"{v:.9f}" for v in tcp_quat),
+                                         "size": "0.002", "group": "5", "rgba": "0 0 0 0"})
+            placed = True
+    if not placed:  # pragma: no cover - robosuite's Panda changed
+        raise TargetError(f"robosuite's model has no body {_LAST_LINK!r} to fix the tool site to")
     return ET.tostring(root, encoding="unicode")
 
 
@@ -259,7 +275,8 @@ class LiberoTarget(MuJoCoArmTarget):
             # recompile once from robosuite's own XML with the tool site and gravity
             # compensation attributes (see _process_xml); later resets keep this sim
             u = self._env.env
-            u.set_xml_processor(_process_xml)
+            pos, quat = _tcp_in_last_link(u.sim.model._model, u.sim.data._data)
+            u.set_xml_processor(functools.partial(_process_xml, tcp_pos=pos, tcp_quat=quat))
             u.reset_from_xml_string(u.model.get_xml())
         except Exception as exc:
             raise TargetError(f"LIBERO {scene.suite}/{scene.task}: the tool site could not be added: "
@@ -483,12 +500,51 @@ class LiberoTarget(MuJoCoArmTarget):
         t0 = self._data.time
         bad: set = set()
         completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
+        self._env_steps += steps
         if completed:
             steps += self.settle(Q[-1], settle_s=settle_s, tol_rad=settle_tol_rad, _contacts=bad)
+        return ExecutionResult(completed=completed, max_tracking_error_rad=max_err,
+                               sim_time_s=float(self._data.time - t0), steps=steps,
+                               contacts=self._contact_names(bad), reason=reason)
+
+    def track(self, traj, *, t_start: float, t_end: float, tracking_tol_rad: float = 0.05,
+              feedforward: bool = True) -> ExecutionResult:
+        """Stream only the slice ``(t_start, t_end]`` (s on the trajectory's clock) of ``traj``,
+        one 2 ms physics step at a time (for executors that advance a trajectory a control
+        period per tick; call :meth:`settle` after the last slice). The start check of
+        :meth:`execute_trajectory` applies when ``t_start <= 0``.
+
+        Raises:
+            TargetError: malformed trajectory or a start far from the current state.
+        """
+        self._check_open()
+        t, Q, QD = self._traj_arrays(traj)
+        if t_start <= 0.0:
+            self._check_start(Q[0], tracking_tol_rad)
+        times = self._slice_times(t, t_start, t_end)
+        t0 = self._data.time
+        bad: set = set()
+        completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
         self._env_steps += steps
         return ExecutionResult(completed=completed, max_tracking_error_rad=max_err,
                                sim_time_s=float(self._data.time - t0), steps=steps,
                                contacts=self._contact_names(bad), reason=reason)
+
+    def settle(self, q: Sequence[float] | None = None, *, settle_s: float = 0.5, tol_rad: float = 0.005,
+               _contacts: set | None = None) -> int:
+        """Hold ``q`` (7,) rad (default: the current command) until the arm is within
+        ``tol_rad`` and still, at most ``settle_s`` s (see :meth:`MuJoCoArmTarget.settle`).
+        Returns physics steps taken."""
+        steps = super().settle(q, settle_s=settle_s, tol_rad=tol_rad, _contacts=_contacts)
+        self._env_steps += steps
+        return steps
+
+    def hold(self, q: Sequence[float] | None = None, *, duration_s: float) -> int:
+        """Hold the arm at ``q`` (7,) rad (default: where it is) for ``duration_s`` s.
+        Returns physics steps taken."""
+        steps = super().hold(q, duration_s=duration_s)
+        self._env_steps += steps
+        return steps
 
     def set_gripper(self, *, opening_m: float, settle_s: float = 0.5, force_n: float | None = None) -> GripperResult:
         """Command both fingers to ``opening_m`` per finger (0 .. 0.04 m) and simulate until
@@ -612,6 +668,29 @@ class LiberoTarget(MuJoCoArmTarget):
             opt.sitegroup[:] = 0
             opt.geomgroup[0] = 0
         return opt
+
+    def render(self, camera: str = "agentview", width: int = 640, height: int = 480, *,
+               shadows: bool = True) -> np.ndarray:
+        """``(height, width, 3)`` uint8 image of model camera ``camera`` (default LIBERO's
+        ``agentview``; evidence images), visual geoms only.
+
+        Raises:
+            TargetError: an unknown camera or no OpenGL backend.
+        """
+        self._check_open()
+        m = self._model
+        cams = [m.camera(i).name for i in range(m.ncam)]
+        if camera not in cams:
+            raise TargetError(f"unknown camera {camera!r}; cameras: {format_choices(cams)}")
+        try:
+            r = self._renderer(width, height)
+            r.disable_depth_rendering()
+            r.update_scene(self._data, camera=camera, scene_option=self._capture_option)
+            r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(shadows)
+            return r.render().copy()
+        except Exception as exc:
+            self._renderers.pop((int(width), int(height)), None)
+            raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc
 
     def observe(self) -> dict:
         """Proprioceptive observation: ``time`` s, ``arm_qpos`` (7,) rad, ``arm_qvel`` (7,)

@@ -205,12 +205,19 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         logger.warning("LIBERO bench: not planned: %s", line)
     root = Path(workspace_dir) / "libero" / suite
     root.mkdir(parents=True, exist_ok=True)
+    looks = _descriptors(Path(workspace_dir), suite, [i for i, *_ in planned])
     entries = []
     for i, task, problem, nodes in planned:
         declared = problem.declared()
+        named = {n["params"]["object"] for n in nodes} | {n["params"].get("region") for n in nodes}
+        # what a user declares: name and category, and the look of the category where it was
+        # measured; an object with neither look nor a part in the instruction is left to
+        # perception as an unknown thing (a name alone would match any segment equally well)
+        objects = [{**o, **looks.get(o["class"], {})} for o in declared["objects"]
+                   if o["class"] in looks or o["name"] in named]
         graph = {"version": 1, "name": f"{suite}_t{i}", "description": task.language,
                  "defaults": {"target": LIBERO_TARGET},
-                 "scene": {"suite": suite, "task": i, "objects": declared["objects"], "fixtures": declared["fixtures"]},
+                 "scene": {"suite": suite, "task": i, "objects": objects, "fixtures": declared["fixtures"]},
                  "nodes": nodes}
         path = root / f"t{i}.yaml"
         atomic_write_text(path, f"# LIBERO {suite} task {i}: {task.language!r} (LIBERO's task.language), planned\n"
@@ -228,6 +235,36 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     atomic_write_text(suite_path, yaml.safe_dump(suite_doc, sort_keys=False))
     _ensure_target(Path(workspace_dir))
     return suite_path, tuple(e["id"] for e in entries), seeds
+
+
+def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
+    """Appearance descriptors of the categories of ``tasks`` (measured alone on generated
+    scenes, :mod:`phyagentos.targets.libero.descriptors`), cached per workspace in
+    ``libero/descriptors.yaml``; a task whose categories are all cached builds nothing."""
+    from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
+    from phyagentos.targets.libero.descriptors import measure_descriptors  # noqa: PLC0415
+
+    path = workspace_dir / "libero" / "descriptors.yaml"
+    cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
+    measured = set(cache.get("_measured_tasks", []))
+    for i in tasks:
+        key = f"{suite}/{i}"
+        cats = set(parse_bddl(resolve_task(suite, i).bddl_path).objects.values())
+        if key in measured or cats <= set(cache):
+            continue
+        logger.info("LIBERO bench: measuring the look of %s's categories on generated scenes", key)
+        try:
+            with LiberoTarget("libero_descriptors", LiberoScene(suite=suite, task=i), seed=0) as target:
+                for cat, look in measure_descriptors(target).items():
+                    cache.setdefault(cat, look)
+        except TargetError as exc:
+            raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
+        measured.add(key)
+        cache["_measured_tasks"] = sorted(measured)
+        atomic_write_text(path, "# Looks of LIBERO's object categories, measured alone on generated scenes by the\n"
+                                "# project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n"
+                          + yaml.safe_dump(cache, sort_keys=True))
+    return {k: v for k, v in cache.items() if not k.startswith("_")}
 
 
 def _ensure_target(workspace_dir: Path) -> None:

@@ -8,11 +8,12 @@ ship in LIBERO's asset wheels), so the descriptors are measured on *generated* s
 on an evaluation init state:
 
 for each object of a built LIBERO world, every other object is moved out of the cameras' view,
-the object is set upright at a fixed spot (:data:`SPOT_XY`, yaw 0) on the support surface,
-physics settles it for 1 s, both cameras are captured and the project's own perceiver
-(no declared objects) reports the one thing it sees: its shape, median top-face colour
-and size. That is the category's descriptor (``{shape, colour, size_m}``, size the full
-extents, m, long side first).
+the object is set down at a spot (:data:`SPOTS_XY`) in the orientation its LIBERO model class
+places it (:func:`placement_quat`: its ``rotation`` about its ``rotation_axis``, the middle of a
+range), physics settles it for 1 s, both cameras are captured and the project's own perceiver
+(no declared objects) reports the one thing it sees: its shape, median top-face colour and
+size. The category's descriptor (``{shape, colour, size_m}``, size the full extents, m, long
+side first) is the median over the spots (the most frequent shape).
 
 The world is left disturbed: call :meth:`~phyagentos.targets.libero.target.LiberoTarget.reset`
 afterwards (:func:`measure_descriptors` does).
@@ -28,13 +29,13 @@ import numpy as np
 
 from phyagentos.errors import TargetError
 
-__all__ = ["SPOT_XY", "measure_descriptors"]
+__all__ = ["SPOTS_XY", "measure_descriptors", "placement_quat"]
 
 log = logging.getLogger(__name__)
 
-#: Where each object is set down to be measured, world xy in m (in front of the robot, in
-#: both cameras' view in LIBERO's scenes).
-SPOT_XY = (0.05, -0.15)
+#: Where each object is set down to be measured, world xy in m: four spots spread over the
+#: part of LIBERO's scenes both cameras see (the look is the median over them).
+SPOTS_XY: tuple[tuple[float, float], ...] = ((0.05, -0.15), (-0.15, -0.2), (-0.15, 0.12), (0.1, 0.12))
 _AWAY = 20.0  # m: where the other objects wait (far outside every camera's view)
 
 
@@ -43,6 +44,30 @@ def _free_adr(m: mujoco.MjModel, body: int) -> tuple[int, int] | None:
     if j < 0 or m.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
         return None
     return int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
+
+
+def _axis_quat(axis: str, rotation) -> np.ndarray:
+    angle = 0.0 if rotation is None else (0.5 * (min(rotation) + max(rotation))
+                                          if isinstance(rotation, (tuple, list)) else float(rotation))
+    q = np.array([np.cos(angle / 2.0), 0.0, 0.0, 0.0])
+    q[1 + {"x": 0, "y": 1, "z": 2}.get(axis, 2)] = np.sin(angle / 2.0)
+    return q
+
+
+def placement_quat(obj) -> np.ndarray:
+    """``(4,)`` wxyz: the orientation LIBERO's placement gives object model ``obj``: its
+    ``rotation`` angle (the middle of a range) about its ``rotation_axis``, or for a
+    ``{axis: range}`` rotation each axis in turn (applied in the world frame)."""
+    rot = getattr(obj, "rotation", None)
+    if isinstance(rot, dict):
+        q = np.array([1.0, 0.0, 0.0, 0.0])
+        for axis, rng in rot.items():
+            out = np.empty(4)
+            mujoco.mju_mulQuat(out, _axis_quat(axis, rng), q)
+            q = out
+    else:
+        q = _axis_quat(getattr(obj, "rotation_axis", "z"), rot)
+    return q / np.linalg.norm(q)
 
 
 def measure_descriptors(target, *, settle_s: float = 1.0) -> dict[str, dict[str, Any]]:
@@ -54,9 +79,7 @@ def measure_descriptors(target, *, settle_s: float = 1.0) -> dict[str, dict[str,
     Raises:
         TargetError: the target is closed or cannot render.
     """
-    from phyagentos.perception import Perceiver  # noqa: PLC0415
-
-    m, d = target.model, target.data
+    m = target.model
     names = list(target._obj_names)
     cats = target._problem.objects
     adr = {n: _free_adr(m, target._obj_body[n]) for n in names}
@@ -66,37 +89,48 @@ def measure_descriptors(target, *, settle_s: float = 1.0) -> dict[str, dict[str,
             cat = cats[name]
             if cat in out or adr[name] is None:
                 continue
-            target.reset(seed=target.init_index)
-            for k, other in enumerate(names):
-                if other != name and adr[other] is not None:
-                    qa, da = adr[other]
-                    d.qpos[qa:qa + 3] = (_AWAY + 2.0 * k, _AWAY, 1.0)
-                    d.qvel[da:da + 6] = 0.0
-            qa, da = adr[name]
-            d.qpos[qa:qa + 3] = (SPOT_XY[0], SPOT_XY[1], float(d.qpos[qa + 2]) + 0.02)
-            d.qpos[qa + 3:qa + 7] = (1.0, 0.0, 0.0, 0.0)
-            d.qvel[da:da + 6] = 0.0
-            mujoco.mj_forward(m, d)
-            target.hold(duration_s=settle_s)
-            for other in names:  # keep the waiting objects from falling forever
-                if other != name and adr[other] is not None:
-                    d.qvel[adr[other][1]:adr[other][1] + 6] = 0.0
-            frames = [target.capture(s) for s in target.camera_names()]
-            snap = Perceiver().observe(frames, target.proprioception())
-            seen = [e for e in snap["entities"] if e.get("kind") == "unknown"
-                    and np.linalg.norm(np.subtract(e["position"][:2], SPOT_XY)) < 0.12]
-            log.debug("descriptor %s: true %s, seen %s", cat, d.qpos[qa:qa + 3].round(3).tolist(),
-                      [(e["name"], e["position"]) for e in snap["entities"]])
-            if len(seen) != 1:
-                log.warning("LIBERO descriptor of %s: %d things seen alone at the spot; left out", cat, len(seen))
+            looks = [look for xy in SPOTS_XY if (look := _look_alone(target, name, names, adr, xy, settle_s)) is not None]
+            if len(looks) < 2:
+                log.warning("LIBERO descriptor of %s: seen alone at %d of %d spots; left out", cat, len(looks), len(SPOTS_XY))
                 continue
-            e = seen[0]
-            half = sorted((float(e["size"][0]), float(e["size"][1])), reverse=True) + [float(e["size"][2])]
-            out[cat] = {"shape": e["attributes"].get("shape", "box"),
-                        "colour": [round(float(c), 3) for c in e["attributes"]["colour_rgb"]],
-                        "size_m": [round(2.0 * h, 4) for h in half]}
+            shapes = [lk["shape"] for lk in looks]
+            out[cat] = {"shape": max(set(shapes), key=shapes.count),
+                        "colour": [round(float(c), 3) for c in np.median([lk["colour"] for lk in looks], axis=0)],
+                        "size_m": [round(float(c), 4) for c in np.median([lk["size_m"] for lk in looks], axis=0)]}
     except TargetError:
         raise
     finally:
         target.reset(seed=target.init_index)
     return out
+
+
+def _look_alone(target, name, names, adr, xy, settle_s) -> dict[str, Any] | None:
+    """Shape, colour and size of object ``name`` set down alone at ``xy``; ``None`` when the
+    perceiver does not see exactly one thing there."""
+    from phyagentos.perception import Perceiver  # noqa: PLC0415
+
+    m, d = target.model, target.data
+    target.reset(seed=target.init_index)
+    for k, other in enumerate(names):
+        if other != name and adr[other] is not None:
+            qa, da = adr[other]
+            d.qpos[qa:qa + 3] = (_AWAY + 2.0 * k, _AWAY, 1.0)
+            d.qvel[da:da + 6] = 0.0
+    qa, da = adr[name]
+    d.qpos[qa:qa + 3] = (xy[0], xy[1], float(d.qpos[qa + 2]) + 0.02)
+    d.qpos[qa + 3:qa + 7] = placement_quat(target.env.env.objects_dict[name])
+    d.qvel[da:da + 6] = 0.0
+    mujoco.mj_forward(m, d)
+    target.hold(duration_s=settle_s)
+    frames = [target.capture(s) for s in target.camera_names()]
+    snap = Perceiver().observe(frames, target.proprioception())
+    seen = [e for e in snap["entities"] if e.get("kind") == "unknown"
+            and np.linalg.norm(np.subtract(e["position"][:2], xy)) < 0.12]
+    log.debug("look of %s at %s: true %s, seen %s", name, xy, d.qpos[qa:qa + 3].round(3).tolist(),
+              [(e["name"], e["position"]) for e in snap["entities"]])
+    if len(seen) != 1:
+        return None
+    e = seen[0]
+    half = sorted((float(e["size"][0]), float(e["size"][1])), reverse=True) + [float(e["size"][2])]
+    return {"shape": e["attributes"].get("shape", "box"), "colour": e["attributes"]["colour_rgb"],
+            "size_m": [2.0 * h for h in half]}

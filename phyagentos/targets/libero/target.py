@@ -652,10 +652,17 @@ class LiberoTarget(MuJoCoArmTarget):
         return {**self._scene.to_dict(), "init_state": self._init_index, "bddl_file": str(self._task.bddl_path)}
 
     def describe_declared(self) -> dict[str, Any]:
-        """What the Agent plane may know (CONTRACT_9 section 3): ``objects`` and ``fixtures``
-        as ``[{name, class}]`` from the BDDL ``:objects`` / ``:fixtures`` (names and
-        categories, as a user declares a scene); no pose, region, goal or success signal."""
-        return {**self._problem.declared(), "regions": [], "obstacles": []}
+        """What the Agent plane and the perceiver may know (CONTRACT_9 section 3):
+        ``objects`` and ``fixtures`` as the scene declares them (``[{name, class, shape?,
+        colour?, size_m?}]``), else every BDDL ``:objects`` / ``:fixtures`` entry as
+        ``{name, class}`` (names and categories, as a user declares a scene); never a pose,
+        region, goal or success signal."""
+        keys = ("name", "class", "shape", "colour", "size_m")
+        objects = ([{k: o[k] for k in keys if k in o} for o in self._scene.objects] if self._scene.objects
+                   else self._problem.declared()["objects"])
+        fixtures = ([{k: o[k] for k in ("name", "class") if k in o} for o in self._scene.fixtures]
+                    if self._scene.fixtures else self._problem.declared()["fixtures"])
+        return {"objects": objects, "fixtures": fixtures, "regions": [], "obstacles": []}
 
     # -- observation ------------------------------------------------------------------------
     @property

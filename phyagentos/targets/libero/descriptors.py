@@ -7,10 +7,10 @@ those as a user would declare them. The object models are known (their meshes an
 ship in LIBERO's asset wheels), so the descriptors are measured on *generated* scenes, never
 on an evaluation init state:
 
-for each object of a built LIBERO world, every other object is moved out of the cameras' view,
-the object is set down at a spot (:data:`SPOTS_XY`) in the orientation its LIBERO model class
-places it (:func:`placement_quat`: its ``rotation`` about its ``rotation_axis``, the middle of a
-range), physics settles it for 1 s, both cameras are captured and the project's own perceiver
+for each object of a built LIBERO world, LIBERO's own placement sampler generates a scene
+(``env.reset()`` seeded, no fixed init state), every other object is moved out of the cameras'
+view, the object is moved to a spot (:data:`SPOTS_XY`) keeping the orientation LIBERO's
+sampler gave it (how LIBERO stands that model up), physics settles it for 1 s, both cameras are captured and the project's own perceiver
 (no declared objects) reports the one thing it sees: its shape, median top-face colour and
 size. The category's descriptor (``{shape, colour, size_m}``, size the full extents, m, long
 side first) is the median over the spots (the most frequent shape).
@@ -29,7 +29,7 @@ import numpy as np
 
 from phyagentos.errors import TargetError
 
-__all__ = ["SPOTS_XY", "measure_descriptors", "placement_quat"]
+__all__ = ["SPOTS_XY", "measure_descriptors"]
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +37,10 @@ log = logging.getLogger(__name__)
 #: part of LIBERO's scenes both cameras see (the look is the median over them).
 SPOTS_XY: tuple[tuple[float, float], ...] = ((0.05, -0.15), (-0.15, -0.2), (-0.15, 0.12), (0.1, 0.12))
 _AWAY = 20.0  # m: where the other objects wait (far outside every camera's view)
+#: How close to the spot a detection's centre must be to be the object measured, m.
+_AT_SPOT_M = 0.04
+#: Seed of LIBERO's own placement sampler for the generated scenes (not an init state).
+_GENERATOR_SEED = 12345
 
 
 def _free_adr(m: mujoco.MjModel, body: int) -> tuple[int, int] | None:
@@ -44,30 +48,6 @@ def _free_adr(m: mujoco.MjModel, body: int) -> tuple[int, int] | None:
     if j < 0 or m.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
         return None
     return int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
-
-
-def _axis_quat(axis: str, rotation) -> np.ndarray:
-    angle = 0.0 if rotation is None else (0.5 * (min(rotation) + max(rotation))
-                                          if isinstance(rotation, (tuple, list)) else float(rotation))
-    q = np.array([np.cos(angle / 2.0), 0.0, 0.0, 0.0])
-    q[1 + {"x": 0, "y": 1, "z": 2}.get(axis, 2)] = np.sin(angle / 2.0)
-    return q
-
-
-def placement_quat(obj) -> np.ndarray:
-    """``(4,)`` wxyz: the orientation LIBERO's placement gives object model ``obj``: its
-    ``rotation`` angle (the middle of a range) about its ``rotation_axis``, or for a
-    ``{axis: range}`` rotation each axis in turn (applied in the world frame)."""
-    rot = getattr(obj, "rotation", None)
-    if isinstance(rot, dict):
-        q = np.array([1.0, 0.0, 0.0, 0.0])
-        for axis, rng in rot.items():
-            out = np.empty(4)
-            mujoco.mju_mulQuat(out, _axis_quat(axis, rng), q)
-            q = out
-    else:
-        q = _axis_quat(getattr(obj, "rotation_axis", "z"), rot)
-    return q / np.linalg.norm(q)
 
 
 def measure_descriptors(target, *, settle_s: float = 1.0) -> dict[str, dict[str, Any]]:
@@ -105,32 +85,32 @@ def measure_descriptors(target, *, settle_s: float = 1.0) -> dict[str, dict[str,
 
 
 def _look_alone(target, name, names, adr, xy, settle_s) -> dict[str, Any] | None:
-    """Shape, colour and size of object ``name`` set down alone at ``xy``; ``None`` when the
-    perceiver does not see exactly one thing there."""
+    """Shape, colour and size of object ``name`` set down alone at ``xy``: the detection whose
+    centre is within :data:`_AT_SPOT_M` of the spot; ``None`` when there is none."""
     from phyagentos.perception import Perceiver  # noqa: PLC0415
 
     m, d = target.model, target.data
-    target.reset(seed=target.init_index)
+    target.generate_scene(seed=_GENERATOR_SEED)
     for k, other in enumerate(names):
         if other != name and adr[other] is not None:
             qa, da = adr[other]
             d.qpos[qa:qa + 3] = (_AWAY + 2.0 * k, _AWAY, 1.0)
             d.qvel[da:da + 6] = 0.0
     qa, da = adr[name]
-    d.qpos[qa:qa + 3] = (xy[0], xy[1], float(d.qpos[qa + 2]) + 0.02)
-    d.qpos[qa + 3:qa + 7] = placement_quat(target.env.env.objects_dict[name])
+    d.qpos[qa:qa + 3] = (xy[0], xy[1], float(d.qpos[qa + 2]) + 0.02)  # orientation: as LIBERO's sampler set it
     d.qvel[da:da + 6] = 0.0
     mujoco.mj_forward(m, d)
     target.hold(duration_s=settle_s)
     frames = [target.capture(s) for s in target.camera_names()]
     snap = Perceiver().observe(frames, target.proprioception())
-    seen = [e for e in snap["entities"] if e.get("kind") == "unknown"
-            and np.linalg.norm(np.subtract(e["position"][:2], xy)) < 0.12]
+    seen = sorted((float(np.linalg.norm(np.subtract(e["position"][:2], xy))), i) for i, e in
+                  enumerate(snap["entities"]) if e.get("kind") == "unknown")
     log.debug("look of %s at %s: true %s, seen %s", name, xy, d.qpos[qa:qa + 3].round(3).tolist(),
               [(e["name"], e["position"]) for e in snap["entities"]])
-    if len(seen) != 1:
+    # the thing whose centre is at the spot (a container's walls may also be seen apart)
+    if not seen or seen[0][0] > _AT_SPOT_M:
         return None
-    e = seen[0]
+    e = snap["entities"][seen[0][1]]
     half = sorted((float(e["size"][0]), float(e["size"][1])), reverse=True) + [float(e["size"][2])]
     return {"shape": e["attributes"].get("shape", "box"), "colour": e["attributes"]["colour_rgb"],
             "size_m": [2.0 * h for h in half]}

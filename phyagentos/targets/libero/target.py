@@ -446,6 +446,23 @@ class LiberoTarget(MuJoCoArmTarget):
         mujoco.mj_forward(m, d)
         return self.observe()
 
+    def generate_scene(self, seed: int) -> None:
+        """A fresh scene from LIBERO's own placement sampler (``env.reset()`` seeded with
+        ``seed``, no fixed init state), then the settle steps; for generated scenes
+        (:mod:`.descriptors`), never for evaluation. The arm servos hold afterwards."""
+        self._check_open()
+        m = self._model
+        self._servo(m, False)
+        try:
+            self._env.seed(int(seed))
+            self._env.reset()
+            for _ in range(self._scene.settle_steps):
+                self._env.step(_NOOP_ACTION)
+        finally:
+            self._servo(m, True)
+        self._data.ctrl[self._arm_act] = np.clip(self.arm_qpos(), self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act])
+        mujoco.mj_forward(m, self._data)
+
     def close(self) -> None:
         if not self.closed:
             try:

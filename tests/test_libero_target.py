@@ -133,3 +133,16 @@ def test_a_saved_state_restores_the_same_world(target, tmp_path):
     assert target.world_digest() != digest
     target.load_state(path)
     assert target.init_index == 3 and target.world_digest() == digest
+
+
+def test_a_trajectory_timed_at_the_targets_limits_is_tracked_within_a_hundredth_of_a_radian(target):
+    from phyagentos.motion.retime import retime
+
+    target.reset(seed=0)
+    q0 = target.arm_qpos()
+    path = np.array([q0, q0 + np.array([0.4, 0.3, -0.3, 0.4, 0.5, -0.4, 0.6])])
+    traj = retime(path, vel_limits=target.velocity_limits(), acc_limits=target.acceleration_limits())
+    result = target.execute_trajectory(traj, tracking_tol_rad=0.05)
+    assert result.completed and result.max_tracking_error_rad < 0.015, result
+    np.testing.assert_allclose(target.arm_qpos(), path[-1], atol=0.005)
+    assert target.benchmark_signals()["control_steps"] >= int(traj.duration / 0.05)

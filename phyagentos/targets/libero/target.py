@@ -14,10 +14,11 @@ controller with the do-nothing action (zero pose delta, gripper open) while the 
 settle, as openpi's and LIBERO's evaluation scripts do.
 
 Control model: for the session's skills, the Panda's seven torque motors are switched to
-joint position servos on the same model (``kp`` 870 / 120 N m/rad, ``kv`` 100 / 10 N m s/rad,
-torques clipped to the motors' own +-80 / +-12 N m) with gravity compensation on the robot's
-bodies, i.e. the control model of the tabletop Franka
-(:class:`~phyagentos.targets.franka_tabletop.MuJoCoTarget`), so the motion stack (mink IK,
+joint position servos on the same model (``kp`` 2000 / 1000 N m/rad, ``kv`` critical for the
+model's rotor inertias, torques clipped to the motors' own +-80 / +-12 N m) with gravity
+compensation on the robot's bodies, the control model of the tabletop Franka
+(:class:`~phyagentos.targets.franka_tabletop.MuJoCoTarget`) with stiffer gains for
+robosuite's heavier rotors, so the motion stack (mink IK,
 OMPL, toppra) and the trajectory streaming of :class:`~phyagentos.targets.mujoco_arm.MuJoCoArmTarget`
 run unchanged. The objects, fixtures, gripper and contact physics are LIBERO's; only the
 arm's low-level controller differs from LIBERO's OSC (which reset uses for the settle
@@ -67,7 +68,8 @@ from .catalog import (
     resolve_task,
 )
 
-__all__ = ["LiberoScene", "LiberoTarget", "SETTLE_STEPS", "ARM_JOINT_NAMES", "TCP_SITE", "CONTROL_PERIOD_S"]
+__all__ = ["LiberoScene", "LiberoTarget", "SETTLE_STEPS", "ARM_JOINT_NAMES", "TCP_SITE", "CONTROL_PERIOD_S",
+           "VELOCITY_SCALE"]
 
 log = logging.getLogger(__name__)
 
@@ -84,9 +86,13 @@ GRIPPER_MAX_OPENING_M = 0.04
 #: The tool site (see the module docstring) and the robosuite site it is placed on.
 TCP_SITE = "tcp"
 _GRIP_SITE = "gripper0_grip_site"
-#: Joint servo gains of the arm, as the tabletop Franka's (kp N m/rad, kv N m s/rad).
-_KP = np.array([870.0] * 4 + [120.0] * 3)
-_KV = np.array([100.0] * 4 + [10.0] * 3)
+#: Joint servo stiffness of the arm, N m/rad; the damping kv is critical for the model's
+#: rotor inertia (``kv = 2 sqrt(kp * armature)``, robosuite's Panda: armature 5.0 .. 0.71
+#: kg m^2). The tabletop Franka's 870 / 120 lag its heavy rotors by up to 0.09 rad.
+_KP = np.array([2000.0] * 4 + [1000.0] * 3)
+#: Joint speeds the motion stack plans with: this fraction of the Panda's datasheet limits
+#: (tracking stays within 0.01 rad; at 0.6 the wrist lags by 0.06 rad).
+VELOCITY_SCALE = 0.4
 #: LIBERO's do-nothing action: zero OSC pose delta (6,) and the gripper open (-1).
 _NOOP_ACTION = np.array([0.0] * 6 + [-1.0])
 
@@ -287,10 +293,12 @@ class LiberoTarget(MuJoCoArmTarget):
         self._motor = [m.actuator(f"robot0_torq_j{i}").id for i in range(1, 8)]
         self._finger_act = np.array([m.actuator(f"gripper0_gripper_finger_joint{i}").id for i in (1, 2)])
         self._torque_params = self._actuator_params(m)
+        arm_dofs = [int(m.jnt_dofadr[m.joint(n).id]) for n in ARM_JOINT_NAMES]
+        self._kv = 2.0 * np.sqrt(_KP * m.dof_armature[arm_dofs])
         self._robot_bodies = [b for b in range(m.nbody) if m.body(b).name.startswith(("robot0_", "gripper0_"))]
         self._servo(m, True)
         self._init_arm(model, data, ARM_JOINT_NAMES, tcp_site=TCP_SITE, arm_actuators=self._motor, seed=seed)
-        self._ff_gain = _KV / _KP
+        self._ff_gain = self._kv / _KP
         self._finger_qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in FINGER_JOINT_NAMES])
         self._index_world(m)
         self._env_steps = 0
@@ -325,7 +333,7 @@ class LiberoTarget(MuJoCoArmTarget):
         m.actuator_biasprm[a, :] = 0.0
         m.actuator_gainprm[a, 0] = _KP
         m.actuator_biasprm[a, 1] = -_KP
-        m.actuator_biasprm[a, 2] = -_KV
+        m.actuator_biasprm[a, 2] = -self._kv
         m.actuator_ctrlrange[a] = m.jnt_range[jids]
         m.actuator_ctrllimited[a] = 1
         m.actuator_forcelimited[a] = 1
@@ -397,9 +405,9 @@ class LiberoTarget(MuJoCoArmTarget):
         return float(max(0.0, 0.5 * (-f[0] + f[1])))
 
     def velocity_limits(self) -> np.ndarray:
-        """``(7,)`` rad/s: the Franka's datasheet joint speed limits scaled by 0.6 (the
-        servo holds them at its torque limits)."""
-        return 0.6 * np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
+        """``(7,)`` rad/s: the Franka's datasheet joint speed limits scaled by
+        :data:`VELOCITY_SCALE` (what the servos track within 0.01 rad)."""
+        return VELOCITY_SCALE * np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
 
     @property
     def allowed_collision_pairs(self) -> tuple[tuple[str, str], ...]:

@@ -69,7 +69,7 @@ from .catalog import (
 )
 
 __all__ = ["LiberoScene", "LiberoTarget", "SETTLE_STEPS", "ARM_JOINT_NAMES", "TCP_SITE", "CONTROL_PERIOD_S",
-           "VELOCITY_SCALE"]
+           "VELOCITY_SCALE", "ACCELERATION_SCALE"]
 
 log = logging.getLogger(__name__)
 
@@ -90,9 +90,12 @@ _GRIP_SITE = "gripper0_grip_site"
 #: rotor inertia (``kv = 2 sqrt(kp * armature)``, robosuite's Panda: armature 5.0 .. 0.71
 #: kg m^2). The tabletop Franka's 870 / 120 lag its heavy rotors by up to 0.09 rad.
 _KP = np.array([2000.0] * 4 + [1000.0] * 3)
-#: Joint speeds the motion stack plans with: this fraction of the Panda's datasheet limits
-#: (tracking stays within 0.01 rad; at 0.6 the wrist lags by 0.06 rad).
-VELOCITY_SCALE = 0.4
+#: Joint speeds and accelerations the motion stack plans with: these fractions of the
+#: Panda's datasheet speeds and of the motion package's accelerations. robosuite's wrist
+#: motors stop at 12 N m: at 0.4 / 1.0 joint 7 saturated at 1.04 rad/s in a pick and lagged
+#: 0.05 rad; at 0.25 / 0.5 the tracking stays within 0.01 rad.
+VELOCITY_SCALE = 0.25
+ACCELERATION_SCALE = 0.5
 #: LIBERO's do-nothing action: zero OSC pose delta (6,) and the gripper open (-1).
 _NOOP_ACTION = np.array([0.0] * 6 + [-1.0])
 
@@ -409,6 +412,10 @@ class LiberoTarget(MuJoCoArmTarget):
         :data:`VELOCITY_SCALE` (what the servos track within 0.01 rad)."""
         return VELOCITY_SCALE * np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
 
+    def acceleration_limits(self) -> np.ndarray:
+        """``(7,)`` rad/s^2: the motion package's limits scaled by :data:`ACCELERATION_SCALE`."""
+        return ACCELERATION_SCALE * super().acceleration_limits()
+
     @property
     def allowed_collision_pairs(self) -> tuple[tuple[str, str], ...]:
         """Robot body pairs allowed to touch: consecutive links and the hand's parts."""
@@ -551,9 +558,23 @@ class LiberoTarget(MuJoCoArmTarget):
         bad: set = set()
         completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
         self._env_steps += steps
+        if not completed and steps:
+            reason += self._lagging_joint(t, Q, QD, times[steps - 1])
+            log.warning("target %s: %s", self.name, reason)
         return ExecutionResult(completed=completed, max_tracking_error_rad=max_err,
                                sim_time_s=float(self._data.time - t0), steps=steps,
                                contacts=self._contact_names(bad), reason=reason)
+
+    def _lagging_joint(self, t, Q, QD, at_s: float) -> str:
+        """``"; joint k: q - q_ref = e rad at qd_ref = v rad/s, torque f N m"``: which joint
+        failed a tracking check, for the failure's reason."""
+        q_ref = np.array([np.interp(at_s, t, Q[:, j]) for j in range(self.n_arm)])
+        qd_ref = np.array([np.interp(at_s, t, QD[:, j]) for j in range(self.n_arm)])
+        err = self.arm_qpos() - q_ref
+        k = int(np.argmax(np.abs(err)))
+        force = float(self._data.actuator_force[self._arm_act[k]])
+        return (f"; joint {k + 1}: q - q_ref = {err[k]:+.3f} rad at qd_ref = {qd_ref[k]:+.2f} rad/s, "
+                f"torque {force:+.1f} N m (limit {self._model.actuator_forcerange[self._arm_act[k], 1]:.0f})")
 
     def settle(self, q: Sequence[float] | None = None, *, settle_s: float = 0.5, tol_rad: float = 0.005,
                _contacts: set | None = None) -> int:

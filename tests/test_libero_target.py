@@ -61,9 +61,10 @@ def test_the_arm_servos_hold_the_settled_configuration(target):
     q0 = target.arm_qpos()
     target.hold(duration_s=1.0)
     assert np.max(np.abs(target.arm_qpos() - q0)) < 0.002
-    # the tool frame: z out of the gripper (down at LIBERO's start pose), y along the finger motion
+    # the tool frame: z out of the gripper (down at LIBERO's start pose), y along the finger
+    # motion, x forward: the top-down frame of yaw 0, as the tabletop Franka's at home
     T = target.tcp_pose()
-    assert T[2, 2] < -0.99
+    assert T[2, 2] < -0.99 and T[0, 0] > 0.99
     m, d = target.model, target.data
     axis = d.xaxis[m.joint("gripper0_finger_joint1").id]
     assert abs(float(np.dot(T[:3, 1], axis))) > 0.99

@@ -27,8 +27,9 @@ fingers, opening per finger 0 .. 0.04 m.
 
 Model changes, made once at construction by recompiling robosuite's own XML (robosuite's
 ``set_xml_processor`` + ``reset_from_xml_string``): a massless site ``tcp`` on ``robot0_link7`` at the pose of
-robosuite's ``gripper0_grip_site`` (between the fingertips) turned -90 deg about its z axis,
-so that, as on the other arms, z points out of the gripper and y along the finger motion; and
+robosuite's ``gripper0_grip_site`` (between the fingertips) turned +90 deg about its z axis,
+so that, as on the other arms, z points out of the gripper, y along the finger motion and, at
+LIBERO's start pose, x forward (the top-down frame of yaw 0); and
 ``gravcomp="1"`` on the robot's bodies, switched on (``body_gravcomp``) only while the servos
 drive the arm. Sites have no physics, and LIBERO's OSC already compensates gravity itself, so
 LIBERO's own stepping is unchanged.
@@ -196,13 +197,14 @@ _LAST_LINK = "robot0_link7"
 
 def _tcp_in_last_link(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[list[float], list[float]]:
     """Pose of the tool frame in ``robot0_link7``'s frame: robosuite's grip site (between the
-    fingertips) turned -90 deg about its z axis; ``(pos (3,) m, quat wxyz)``. The hand is
+    fingertips) turned +90 deg about its z axis (at LIBERO's start pose the tool frame is then
+    the top-down frame of yaw 0, x forward, as the tabletop Franka's at home); ``(pos (3,) m, quat wxyz)``. The hand is
     fixed to the link, so this is a constant of the robot model."""
     mujoco.mj_forward(m, d)
     b, s = m.body(_LAST_LINK).id, m.site(_GRIP_SITE).id
     Rb, pb = d.xmat[b].reshape(3, 3), d.xpos[b]
     Rs, ps = d.site_xmat[s].reshape(3, 3), d.site_xpos[s]
-    turn = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # -90 deg about z
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # +90 deg about z
     return [float(x) for x in Rb.T @ (ps - pb)], mat_quat(Rb.T @ Rs @ turn)
 
 
@@ -391,6 +393,17 @@ class LiberoTarget(MuJoCoArmTarget):
     def init_index(self) -> int:
         """Index of the fixed initial state the last reset used."""
         return self._init_index
+
+    def object_body(self, name: str) -> str:
+        """robosuite's root body of BDDL object ``name`` (``<name>_main``).
+
+        Raises:
+            TargetError: an unknown object (the task's objects listed).
+        """
+        b = self._obj_body.get(name)
+        if b is None:
+            raise TargetError(f"unknown object {name!r}; objects: {format_choices(self._obj_names)}")
+        return self._model.body(b).name
 
     @property
     def home_qpos(self) -> np.ndarray:

@@ -294,6 +294,10 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
         if rep["ground_truth"]["sessions"]:
             g = rep["ground_truth"]
             out.print(f"environment's own success signal: agrees with the verifier on {g['agreements']}/{g['sessions']} sessions")
+            for name, pt in g["per_task"].items():
+                if pt["episodes"]:
+                    out.print(f"  {name}: environment First {pt['first_successes']}/{pt['episodes']}, "
+                              f"Final {pt['final_successes']}/{pt['episodes']}")
         if "crafter" in rep:
             c = rep["crafter"]
             out.print(f"Crafter score {c['score_percent']:.1f} % over {c['episodes']} worlds, "

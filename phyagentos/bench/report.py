@@ -431,6 +431,14 @@ def _markdown(report: dict) -> str:
                          f"({pt['env_successes']}) | {_pct(ours['final_rate_pct'])} ({ours['final_successes']}) | "
                          f"{source} |")
         lines.append("")
+        lines += ["As the benchmark itself scores an episode (success ends it): First = its signal at the end of a "
+                  "session before any recovery session, Final = at the end of any session.", "",
+                  "| task | episodes | environment First | environment Final |", "|---|---:|---:|---:|"]
+        for t, pt in g["per_task"].items():
+            if pt["episodes"]:
+                lines.append(f"| {t} | {pt['episodes']} | {_pct(pt['first_rate_pct'])} ({pt['first_successes']}) | "
+                             f"{_pct(pt['final_rate_pct'])} ({pt['final_successes']}) |")
+        lines.append("")
         if g["disagreements"]:
             lines += ["| session | task | verdict | environment success |", "|---|---|---|---|"]
             for d in g["disagreements"]:

@@ -71,7 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_agent_commands(sub)
 
     bench = sub.add_parser("bench", help="run a benchmark suite: availability gate, sessions per (task, seed), report")
-    bench.add_argument("suite", help="suite name (phyagentos/bench/suites/) or path of a suite YAML")
+    bench.add_argument("suite", help="suite name (phyagentos/bench/suites/), a LIBERO suite (libero_spatial, libero_object, "
+                                      "libero_goal, libero_10: --tasks are LIBERO task indices, --seeds its init states) "
+                                      "or path of a suite YAML")
     bench.add_argument("--workspace", type=Path, required=True, help="bench workspace (created if needed)")
     bench.add_argument("--episodes", type=int, help="episodes per task (default: the suite's)")
     bench.add_argument("--seeds", help="explicit seeds per task, e.g. 0-49 or 0,3,7 (overrides --episodes)")
@@ -231,6 +233,17 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
 
     seeds = parse_seeds(args.seeds) if args.seeds else None
     tasks = tuple(t.strip() for t in args.tasks.split(",")) if args.tasks else None
+    suite = args.suite
+    from phyagentos.bench.libero import is_libero_suite, prepare_libero_suite  # noqa: PLC0415
+
+    if is_libero_suite(suite):  # LIBERO's own suite names, task indices and init states (docs/libero.md)
+        try:
+            suite, tasks, seeds = prepare_libero_suite(suite, args.workspace, tasks=tasks, seeds=seeds)
+        except BenchError as exc:
+            err.print(f"[red]{str(exc).splitlines()[0]}[/red]")
+            for line in exc.problems:
+                err.print(f"  [red]-[/red] {line}")
+            return EXIT_BAD_INPUT
     progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                         TextColumn("{task.fields[status]}"), TimeElapsedColumn(), console=_rich_console(err),
                         disable=args.json)
@@ -246,7 +259,7 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
 
     try:
         with progress:
-            result = run_bench(args.suite, args.workspace, episodes=args.episodes, seeds=seeds, split=args.split,
+            result = run_bench(suite, args.workspace, episodes=args.episodes, seeds=seeds, split=args.split,
                                tasks=tasks, workers=args.workers, memory=args.memory, executor=args.executor,
                                on_compiled=compiled, on_episode=episode_done,
                                heartbeat_timeout_s=args.heartbeat_timeout, queue_timeout_s=args.queue_timeout)
@@ -281,6 +294,10 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
         if rep["ground_truth"]["sessions"]:
             g = rep["ground_truth"]
             out.print(f"environment's own success signal: agrees with the verifier on {g['agreements']}/{g['sessions']} sessions")
+            for name, pt in g["per_task"].items():
+                if pt["episodes"]:
+                    out.print(f"  {name}: environment First {pt['first_successes']}/{pt['episodes']}, "
+                              f"Final {pt['final_successes']}/{pt['episodes']}")
         if "crafter" in rep:
             c = rep["crafter"]
             out.print(f"Crafter score {c['score_percent']:.1f} % over {c['episodes']} worlds, "

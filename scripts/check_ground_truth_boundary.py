@@ -6,6 +6,9 @@ Fails (exit 1, one line per finding ``file:line: what``) when any module under
 
 - ``ground_truth`` / ``ground_truth.yaml`` / ``truth`` (the privileged channel and its file),
 - ``perturbation`` / ``perturbations`` / ``perturbed`` (the scene's scripted disturbances),
+- an external benchmark's answer key and checker (LIBERO, docs/libero.md): ``bddl`` (the
+  task file holding ``:goal``, ``:init`` and regions), ``obj_of_interest``,
+  ``check_success``, ``benchmark_signals``, ``env_success``,
 
 anywhere: identifiers (names, attributes, arguments, function and class names, keyword
 arguments), imported module and object names, string constants (keys, paths, docstrings)
@@ -30,9 +33,10 @@ import tokenize
 from pathlib import Path
 
 #: A forbidden word: letters/digits around it end the match, ``_`` and ``.`` do not, so
-#: ``ground_truth``, ``ground_truth.yaml``, ``truth`` and ``scene["perturbations"]`` match
-#: while ``untruthful`` would not.
-FORBIDDEN = re.compile(r"(?i)(?<![a-z0-9])(ground[_ ]?truth|truth|perturb(?:ation|ations|ed|s)?)(?![a-z0-9])")
+#: ``ground_truth``, ``ground_truth.yaml``, ``truth``, ``scene["perturbations"]``,
+#: ``parse_bddl`` and ``env.check_success()`` match while ``untruthful`` would not.
+FORBIDDEN = re.compile(r"(?i)(?<![a-z0-9])(ground[_ ]?truth|truth|perturb(?:ation|ations|ed|s)?"
+                       r"|bddl|obj_of_interest|check_success|benchmark_signals|env_success)(?![a-z0-9])")
 
 PACKAGE = "phyagentos"
 AGENT = "phyagentos.agent"

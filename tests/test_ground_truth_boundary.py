@@ -44,6 +44,12 @@ def test_the_make_test_target_runs_the_check_before_pytest():
     ("recovery.py", "# compare against the perturbation record here\n", "perturbation"),
     ("memory/context_builder.py", "def f(*, ground_truth=None):\n    return ground_truth\n", "ground_truth"),
     ("coordinator.py", "from phyagentos.bench import report as _scores  # noqa\n", "imports phyagentos.bench"),
+    # LIBERO's answer key and checker (docs/libero.md)
+    ("verifier.py", "def _libero(target):\n    return target.check_success()\n", "check_success"),
+    ("planner.py", "def _goal(task):\n    return open(task.bddl_path).read()\n", "bddl"),
+    ("diagnosis.py", "KEY = 'obj_of_interest'\n", "obj_of_interest"),
+    ("coordinator.py", "from phyagentos.targets.libero.catalog import resolve_task  # noqa\n",
+     "imports phyagentos.targets.libero.catalog"),
 ])
 def test_a_planted_leak_breaks_the_check(copy, module, line, expect):
     path = copy / "phyagentos" / "agent" / module

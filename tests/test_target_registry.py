@@ -96,7 +96,7 @@ def plugin_dist(tmp_path, monkeypatch):
 
 
 def test_builtin_drivers_are_registered():
-    assert set(BUILTINS) == {"crafter", "gymnasium_kitchen", "mujoco_franka", "mujoco_so101", "so101_real"}
+    assert set(BUILTINS) == {"crafter", "gymnasium_kitchen", "libero", "mujoco_franka", "mujoco_so101", "so101_real"}
     assert set(BUILTINS) <= set(registered_targets())
     assert set(BUILTINS) <= set(DRIVERS)
 

@@ -9,7 +9,9 @@ The Agent plane reads a scene only through :func:`declared_scene`, which keeps:
   0..1 as written in the scene) and an approximate size ``size_m`` (3,) full extents in
   m (``half_extents`` as written in shipped scenes count as the author's declared size:
   ``size_m = 2 * half_extents``);
-- ``regions`` and ``obstacles`` as declared (a known map).
+- ``regions`` and ``obstacles`` as declared (a known map);
+- ``fixtures`` as declared (``[{name, class}]``: the furniture of a scene, e.g. a LIBERO
+  task's table, cabinet or stove, named with its category).
 
 Poses of objects, their physical parameters and anything else are dropped. The contract
 is CONTRACT_9 section 3.
@@ -54,13 +56,14 @@ def declared_scene(scene: Mapping[str, Any] | None) -> dict[str, Any] | None:
         scene: a goal graph's ``scene`` mapping (objects, regions, obstacles, ...).
 
     Returns:
-        ``{"objects": [descriptor, ...], "regions": [...], "obstacles": [...]}``.
+        ``{"objects": [descriptor, ...], "regions": [...], "obstacles": [...], "fixtures": [...]}``
+        (keys absent from ``scene`` are absent here).
     """
     if not isinstance(scene, Mapping):
         return None
     objects = [_descriptor(o) for o in scene.get("objects") or () if isinstance(o, Mapping) and o.get("name")]
     out: dict[str, Any] = {"objects": objects}
-    for key in ("regions", "obstacles"):
+    for key in ("regions", "obstacles", "fixtures"):
         if isinstance(scene.get(key), list):
             out[key] = [dict(r) for r in scene[key] if isinstance(r, Mapping)]
     return out

@@ -94,6 +94,8 @@ def plan_episodes(suite: Suite, *, bench_id: str, seeds: tuple[int, ...], split:
         for seed in seeds:
             rng = episode_rng(suite, index, seed)
             scene, draws = _randomize(scene0, task, rng)
+            if task.seed_to_scene:
+                scene[task.seed_to_scene] = int(seed)
             if task.random_world is not None:
                 # the target draws the world from this seed; only the seed is in the scene
                 scene["randomise"] = {"seed": int(rng.integers(0, 2 ** 31 - 1)), **task.random_world}

@@ -159,6 +159,7 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         if isinstance(gt, dict) and "success" in gt:
             ground_truth.append({"session_id": s.session_id, "verdict": verdict, "env_success": bool(gt["success"]),
                                  "source": gt.get("source", ""), "task": gt.get("task"),
+                                 "recovery": s.parent_session_id is not None,
                                  "agree": (verdict == "success") == bool(gt["success"])})
         if s.state != "succeeded" and str(row["error_code"] or "").startswith(LOAD_TIMEOUT_CODES):
             heartbeat.append(s.session_id)
@@ -186,8 +187,26 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         "failures": failures, "ground_truth": ground_truth, "heartbeat_timeout_sessions": heartbeat,
         # the environment's own verdict on the episode: its signal after the last session
         "env_success": ground_truth[-1]["env_success"] if ground_truth else None,
+        # ... and as an external benchmark scores an episode (success ends it): first = its
+        # signal held at the end of a session before any recovery session ran; final = at the
+        # end of any session
+        "env_first_success": _env_first(ground_truth),
+        "env_final_success": any(g["env_success"] for g in ground_truth) if ground_truth else None,
     }
     return EpisodeRecord(data)
+
+
+def _env_first(ground_truth: list[dict]) -> bool | None:
+    """The environment's signal held at the end of a session before the first recovery
+    session (``None`` without a signal)."""
+    if not ground_truth:
+        return None
+    for g in ground_truth:
+        if g.get("recovery"):
+            return False
+        if g["env_success"]:
+            return True
+    return False
 
 
 #: Error-code prefixes of sessions ended by machine load or waiting, not by the world.
@@ -267,6 +286,12 @@ def build_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:
             "per_task": {t: {"episodes": sum(1 for e in eps if e["task"] == t and e["env_success"] is not None),
                              "env_successes": sum(1 for e in eps if e["task"] == t and e["env_success"]),
                              "env_success_episodes": [e["episode_id"] for e in eps if e["task"] == t and e["env_success"]],
+                             "first_successes": sum(1 for e in eps if e["task"] == t and e.get("env_first_success")),
+                             "final_successes": sum(1 for e in eps if e["task"] == t and e.get("env_final_success")),
+                             "first_rate_pct": _rate(sum(1 for e in eps if e["task"] == t and e.get("env_first_success")),
+                                                     sum(1 for e in eps if e["task"] == t and e["env_success"] is not None)),
+                             "final_rate_pct": _rate(sum(1 for e in eps if e["task"] == t and e.get("env_final_success")),
+                                                     sum(1 for e in eps if e["task"] == t and e["env_success"] is not None)),
                              "sessions": [g["session_id"] for e in eps if e["task"] == t for g in e["ground_truth"]]}
                          for t in tasks},
         },
@@ -405,6 +430,14 @@ def _markdown(report: dict) -> str:
             lines.append(f"| {t} | {pt['episodes']} | {_pct(_rate(pt['env_successes'], pt['episodes']))} "
                          f"({pt['env_successes']}) | {_pct(ours['final_rate_pct'])} ({ours['final_successes']}) | "
                          f"{source} |")
+        lines.append("")
+        lines += ["As the benchmark itself scores an episode (success ends it): First = its signal at the end of a "
+                  "session before any recovery session, Final = at the end of any session.", "",
+                  "| task | episodes | environment First | environment Final |", "|---|---:|---:|---:|"]
+        for t, pt in g["per_task"].items():
+            if pt["episodes"]:
+                lines.append(f"| {t} | {pt['episodes']} | {_pct(pt['first_rate_pct'])} ({pt['first_successes']}) | "
+                             f"{_pct(pt['final_rate_pct'])} ({pt['final_successes']}) |")
         lines.append("")
         if g["disagreements"]:
             lines += ["| session | task | verdict | environment success |", "|---|---|---|---|"]

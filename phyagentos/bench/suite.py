@@ -30,6 +30,9 @@ objects' shape, size, mass, friction, yaw and position and 0-4 distractors from 
 compiler writes into the scene's ``randomise`` block (:mod:`phyagentos.targets.world`); the
 draw itself reaches only ``ground_truth.yaml``.
 
+``seed_to_scene: KEY`` writes each episode's seed into its scene under ``KEY`` (LIBERO's
+suites: ``init``, the index of one of the task's fixed initial states).
+
 ``safety`` overrides keys of the bench workspace's safety.yaml in the episodes (a
 different cell, e.g. the kitchen's workspace box); the merged file is validated as
 :class:`~phyagentos.protocol.SafetyConfig` and recorded with the episode workspaces.
@@ -61,7 +64,7 @@ __all__ = ["RandomizeRule", "TaskSpec", "PerturbationConfig", "Suite", "load_sui
 logger = logging.getLogger(__name__)
 
 _SUITE_KEYS = {"version", "name", "description", "episodes", "heldout_seed_offset", "perturbations", "safety", "tasks"}
-_TASK_KEYS = {"id", "goal_graph", "target", "randomize", "description", "random_world"}
+_TASK_KEYS = {"id", "goal_graph", "target", "randomize", "description", "random_world", "seed_to_scene"}
 _RULE_KEYS = {"names", "xy", "yaw"}
 _PERTURB_KEYS = {"rate", "kinds"}
 
@@ -97,6 +100,9 @@ class TaskSpec:
     #: ``None``, or ``{distractors: [min, max]}``: the episode's objects and distractors are
     #: drawn by the target from a seed (:mod:`phyagentos.targets.world`).
     random_world: Mapping[str, Any] | None = None
+    #: ``None``, or a scene key the episode's seed is written to (LIBERO: ``init``, the
+    #: seed is the index of one of the task's fixed initial states).
+    seed_to_scene: str | None = None
 
 
 @dataclass(frozen=True)
@@ -190,7 +196,10 @@ def load_suite(name_or_path: str | Path) -> Suite:
     if not p.suffix:
         p = suite_dir() / f"{name_or_path}.yaml"
         if not p.is_file():
+            from phyagentos.targets.libero.catalog import STANDARD_SUITES  # noqa: PLC0415 - names only
+
             raise BenchError(f"unknown suite {str(name_or_path)!r}; shipped suites: {format_choices(available_suites())}"
+                             f", LIBERO's suites: {format_choices(STANDARD_SUITES)}, 'libero_90'"
                              f" (or give a path to a suite YAML)")
     if not p.is_file():
         raise BenchError(f"suite file {p} does not exist")
@@ -263,9 +272,12 @@ def load_suite(name_or_path: str | Path) -> Suite:
             rw = {}
         if rw is not None and rw is not False and (not isinstance(rw, dict) or set(rw) - {"distractors"}):
             raise _problem(p, f"tasks[{i}].random_world must be true or a mapping with 'distractors: [min, max]', got {rw!r}")
+        seed_key = t.get("seed_to_scene")
+        if seed_key is not None and (not isinstance(seed_key, str) or not seed_key.isidentifier()):
+            raise _problem(p, f"tasks[{i}].seed_to_scene must be a scene key (an identifier), got {seed_key!r}")
         tasks.append(TaskSpec(id=tid, goal_graph=_resolve_graph(t.get("goal_graph"), p), target=target,
                               randomize=tuple(rules), description=str(t.get("description", "")),
-                              random_world=dict(rw) if isinstance(rw, dict) else None))
+                              random_world=dict(rw) if isinstance(rw, dict) else None, seed_to_scene=seed_key))
     safety = raw.get("safety") or {}
     if not isinstance(safety, dict):
         raise _problem(p, f"safety must be a mapping of safety.yaml keys to override, got {type(safety).__name__}")

@@ -11,6 +11,7 @@ import weakref
 
 import numpy as np
 
+from phyagentos.errors import IKError
 from phyagentos.motion.collision import CollisionChecker
 from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.planner import plan_path
@@ -90,7 +91,7 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
 
     obj = belief(target).object or held_object(target)
     if obj is not None:
-        checker.attach(obj, np.linalg.inv(target.tcp_pose()) @ target.object_pose(obj))
+        checker.attach(target.object_body(obj), np.linalg.inv(target.tcp_pose()) @ target.object_pose(obj))
     return checker
 
 
@@ -111,6 +112,10 @@ class SolveIK(Primitive):
     """Joint configuration (n,) rad reaching the (4, 4) tcp pose at blackboard key ``pose``
     (joints, tool site and orientation tolerance as the target declares, :func:`ik_options`).
 
+    The solver starts from the current arm configuration; when that stalls (a wrapped-up
+    arm far from the goal, e.g. after a grasp at a large yaw), it starts once more from the
+    target's ready configuration ``home_qpos`` before failing with the first error.
+
     Args:
         pose: blackboard key of the target tcp pose (world frame).
         out: blackboard key written with the joint solution.
@@ -130,8 +135,16 @@ class SolveIK(Primitive):
         with self.ctx.profiler.section("ik"):
             opts = ik_options(target, self.orientation_tol_rad)
             opts.setdefault("orientation_tol_rad", self.orientation_tol_rad)
-            sol = solve_ik(target.model, q_seed=target.arm_qpos(), target=self.get(self.pose_key),
-                           position_tol_m=self.position_tol_m, **opts)
+            try:
+                sol = solve_ik(target.model, q_seed=target.arm_qpos(), target=self.get(self.pose_key),
+                               position_tol_m=self.position_tol_m, **opts)
+            except IKError as first:
+                try:
+                    sol = solve_ik(target.model, q_seed=np.asarray(target.home_qpos, dtype=float),
+                                   target=self.get(self.pose_key), position_tol_m=self.position_tol_m, **opts)
+                except IKError:
+                    raise first from None
+                self.ctx.trace.record("ik_reseeded", pose=self.pose_key, seed="home_qpos", first_error=str(first)[:200])
         self.set(self.out, sol.q)
         self.ctx.trace.record("ik", pose=self.pose_key, iterations=sol.iterations, position_error_m=float(sol.position_error_m))
 

@@ -315,6 +315,11 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         d = self._data
         return pose_matrix(d.xpos[b], d.xmat[b])
 
+    def object_body(self, name: str) -> str:
+        """Name of the model body carrying object ``name`` (the collision checker attaches
+        that body to the gripper while the object is held); default: the object's own name."""
+        return name
+
     def _check_open(self) -> None:
         if self.closed:
             raise TargetError(f"target {self.name!r} is closed")

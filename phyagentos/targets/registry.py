@@ -47,6 +47,7 @@ _BUILTIN_FALLBACK: dict[str, str] = {
     "mujoco_so101": "phyagentos.targets.so101:SO101Target",
     "crafter": "phyagentos.targets.crafter:CrafterTarget",
     "so101_real": "phyagentos.targets.so101_real.target:SO101RealTarget",
+    "libero": "phyagentos.targets.libero:LiberoTarget",
 }
 
 _lock = threading.RLock()

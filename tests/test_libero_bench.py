@@ -1,0 +1,134 @@
+"""`phyagentos bench libero_*`: LIBERO's names through the ordinary bench path, refusals before
+anything is built, goal graphs from the instruction (never the BDDL goal), LIBERO's verdicts."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from phyagentos.bench.compiler import plan_episodes
+from phyagentos.bench.libero import instruction_nodes, is_libero_suite
+from phyagentos.bench.report import _env_first
+from phyagentos.bench.suite import load_suite
+from phyagentos.errors import BenchError
+from phyagentos.targets.libero import parse_bddl, resolve_task
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _bench(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "phyagentos.cli", "bench", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=1200, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+
+
+def test_liberos_suite_names_are_recognised_beside_the_shipped_suites():
+    assert all(is_libero_suite(s) for s in ("libero_spatial", "libero_object", "libero_goal", "libero_10"))
+    assert not is_libero_suite("tabletop") and not is_libero_suite("libero_objects")
+
+
+def test_an_object_instruction_becomes_a_pick_then_a_place_on_the_declared_basket():
+    task = resolve_task("libero_object", 3)
+    problem = parse_bddl(task.bddl_path)
+    nodes = instruction_nodes(task.language, problem.objects, problem.fixtures)
+    assert [(n["id"], n["skill"], n["params"]) for n in nodes] == [
+        ("pick_bbq_sauce_1", "pick", {"object": "bbq_sauce_1"}),
+        ("place_bbq_sauce_1", "place", {"object": "bbq_sauce_1", "region": "basket_1"})]
+    assert nodes[1]["depends_on"] == ["pick_bbq_sauce_1"]
+    assert nodes[1]["accept"] == [{"on": {"object": "bbq_sauce_1", "support": "basket_1"}}, {"released": "bbq_sauce_1"}]
+
+
+def test_put_both_moves_the_two_named_objects_in_the_order_given():
+    task = resolve_task("libero_10", 1)  # put both the cream cheese box and the butter in the basket
+    problem = parse_bddl(task.bddl_path)
+    nodes = instruction_nodes(task.language, problem.objects, problem.fixtures)
+    assert [n["id"] for n in nodes] == ["pick_cream_cheese_1", "place_cream_cheese_1", "pick_butter_1", "place_butter_1"]
+    assert nodes[2]["depends_on"] == ["place_cream_cheese_1"]
+
+
+def test_two_identical_bowls_or_an_uncovered_verb_are_refused_not_guessed():
+    task = resolve_task("libero_spatial", 1)  # the black bowl next to the ramekin: two black bowls
+    problem = parse_bddl(task.bddl_path)
+    with pytest.raises(BenchError, match="names nothing|ambiguous"):
+        instruction_nodes(task.language, problem.objects, problem.fixtures)
+    with pytest.raises(BenchError, match="ambiguous among 'akita_black_bowl_1', 'akita_black_bowl_2'"):
+        instruction_nodes("put the black bowl on the plate", problem.objects, problem.fixtures)
+    goal = parse_bddl(resolve_task("libero_goal", 7).bddl_path)
+    with pytest.raises(BenchError, match="no rule of the LIBERO instruction grammar covers it"):
+        instruction_nodes("turn on the stove", goal.objects, goal.fixtures)
+    with pytest.raises(BenchError, match="'ketchup' names nothing the task declares"):
+        instruction_nodes("put the ketchup on the plate", goal.objects, goal.fixtures)
+
+
+def test_the_episode_seed_is_written_into_the_scene_as_the_init_state(tmp_path):
+    graph = tmp_path / "g.yaml"
+    graph.write_text(yaml.safe_dump({"version": 1, "name": "g", "defaults": {"target": "libero"},
+                                     "scene": {"suite": "libero_object", "task": 0},
+                                     "nodes": [{"id": "pick", "skill": "pick", "params": {"object": "milk_1"},
+                                                "accept": [{"holding": "milk_1"}]}]}))
+    suite = tmp_path / "s.yaml"
+    suite.write_text(yaml.safe_dump({"version": 1, "name": "s", "tasks": [
+        {"id": "t0", "goal_graph": "g.yaml", "seed_to_scene": "init"}]}))
+    eps = plan_episodes(load_suite(suite), bench_id="b", seeds=(4, 9), split="measurement", memory="off",
+                        protocol="measurement")
+    assert [(e.seed, e.scene["init"]) for e in eps] == [(4, 4), (9, 9)]
+    suite.write_text(yaml.safe_dump({"version": 1, "name": "s", "tasks": [
+        {"id": "t0", "goal_graph": "g.yaml", "seed_to_scene": "not a key"}]}))
+    with pytest.raises(BenchError, match="seed_to_scene must be a scene key"):
+        load_suite(suite)
+
+
+def test_liberos_first_counts_only_success_before_any_recovery_session():
+    ok, fail = {"env_success": True}, {"env_success": False}
+    assert _env_first([]) is None
+    assert _env_first([fail, ok]) is True
+    assert _env_first([fail, {**fail, "recovery": True}, {**ok, "recovery": True}]) is False
+    assert _env_first([fail, fail]) is False
+
+
+@pytest.mark.parametrize("args,expect", [
+    (("libero_object", "--tasks", "0,12"), "valid tasks: 0-9"),
+    (("libero_object", "--tasks", "0", "--seeds", "3,50"), "valid init states: 0-49"),
+    (("libero_objects",), "LIBERO's suites: 'libero_10', 'libero_goal', 'libero_object', 'libero_spatial'"),
+    (("libero_goal", "--tasks", "0"), "no rule of the LIBERO instruction grammar covers it"),
+])
+def test_bad_libero_input_exits_2_with_the_valid_choices_and_nothing_built(tmp_path, args, expect):
+    result = _bench(*args, "--workspace", str(tmp_path / "ws"), "--json", cwd=tmp_path)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert expect in " ".join((result.stdout + result.stderr).split())
+    assert not (tmp_path / "ws" / "libero").exists() and not (tmp_path / "ws" / "bench").exists()
+    assert "robosuite" not in result.stderr.lower()
+
+
+@pytest.mark.sim
+def test_a_libero_object_episode_runs_through_sessions_and_is_judged_by_liberos_checker(tmp_path):
+    result = _bench("libero_object", "--tasks", "0", "--seeds", "1", "--workspace", str(tmp_path / "ws"), "--json",
+                    "--heartbeat-timeout", "120", cwd=tmp_path)
+    assert result.returncode in (0, 1), result.stderr[-3000:]
+    rep = json.loads(result.stdout)
+    assert rep["harness_errors"] == []
+    gt = rep["ground_truth"]
+    assert gt["sessions"] >= 1 and set(gt["per_task"]) == {"t0"}
+    per = gt["per_task"]["t0"]
+    assert per["episodes"] == 1 and {"first_rate_pct", "final_rate_pct"} <= set(per)
+    run_dir = Path(rep["report"]).parent
+    (episode,) = json.loads((run_dir / "report.json").read_text())["episodes"]
+    assert episode["ground_truth"][0]["source"].startswith("LIBERO") and "check_success" in episode["ground_truth"][0]["source"]
+    # the graph the Agent ran: the instruction, declared names and looks; no goal, region or pose
+    graph = (tmp_path / "ws" / "libero" / "libero_object" / "t0.yaml").read_text()
+    assert "pick up the alphabet soup and place it in the basket" in graph
+    for secret in ("contain_region", "obj_of_interest", ":goal", "position"):
+        assert secret not in graph
+    scene = yaml.safe_load(graph)["scene"]
+    assert scene["suite"] == "libero_object" and "init" not in scene
+    ep_graph = next((run_dir / "episodes").iterdir()) / "runs"
+    assert ep_graph.exists()
+    # LIBERO's verdict lives in the session's ground_truth.yaml, with the BDDL answer key
+    gt_files = list((run_dir / "episodes").glob("*/evidence/*/ground_truth.yaml"))
+    assert gt_files
+    record = yaml.safe_load(gt_files[0].read_text())
+    assert record["benchmark"]["init_state"] == 1 and record["benchmark"]["suite"] == "libero_object"

@@ -8,6 +8,13 @@ over stdio (default) or streamable HTTP on localhost (``--http``, path ``/mcp``)
 
 A tool error (bad arguments, a policy rejection, an invalid goal graph) is returned as an
 MCP tool result with ``isError`` and the message; results are JSON text.
+
+What goes back is bounded and clean (issue 33): every answer passes through
+:func:`phyagentos.untrusted.redact_secrets` (an endpoint URL with credentials, a key),
+an error message is at most :data:`MAX_ERROR_CHARS` characters, arguments are checked
+against the tools' ``maxLength`` and nesting bounds (:mod:`phyagentos.agent.tools`), and
+over HTTP a request body is at most :data:`MAX_HTTP_BODY_BYTES` (413 before it is read).
+See ``docs/security.md``.
 """
 
 from __future__ import annotations
@@ -25,8 +32,15 @@ from mcp.server.stdio import stdio_server
 
 from phyagentos.agent.tools import ToolError, ToolRegistry
 from phyagentos.protocol import Workspace
+from phyagentos.untrusted import redact_secrets
+from phyagentos.yamlsource import clip
 
-__all__ = ["build_registry", "build_server", "serve"]
+__all__ = ["build_registry", "build_server", "serve", "MAX_ERROR_CHARS", "MAX_HTTP_BODY_BYTES"]
+
+#: Longest tool error message returned (characters).
+MAX_ERROR_CHARS = 4000
+#: Largest HTTP request body (bytes): a goal graph of ``MAX_GOAL_GRAPH_CHARS`` plus JSON framing.
+MAX_HTTP_BODY_BYTES = 5 * 1024 * 1024
 
 logger = logging.getLogger(__name__)
 
@@ -74,9 +88,15 @@ def build_server(registry: ToolRegistry) -> Server:
         try:
             result: Any = await anyio.to_thread.run_sync(registry.call, params.name, dict(params.arguments or {}))
         except ToolError as exc:
-            logger.info("tool %s failed: %s", params.name, exc)
-            return types.CallToolResult(content=[types.TextContent(type="text", text=str(exc))], is_error=True)
-        text = json.dumps(result, ensure_ascii=False, default=str)
+            message = clip(redact_secrets(str(exc)), MAX_ERROR_CHARS)
+            logger.info("tool %s failed: %s", params.name, message)
+            return types.CallToolResult(content=[types.TextContent(type="text", text=message)], is_error=True)
+        except Exception as exc:  # noqa: BLE001 - a bug must not send a traceback (or a secret) to the client
+            logger.exception("tool %s crashed", params.name)
+            message = clip(redact_secrets(f"{params.name}: internal error ({type(exc).__name__}: {exc})"),
+                           MAX_ERROR_CHARS)
+            return types.CallToolResult(content=[types.TextContent(type="text", text=message)], is_error=True)
+        text = redact_secrets(json.dumps(result, ensure_ascii=False, default=str))
         return types.CallToolResult(content=[types.TextContent(type="text", text=text)], is_error=False)
 
     return Server("phyagentos", version="0.1.0",
@@ -100,6 +120,8 @@ def serve(workspace_dir: str | Path, *, http: bool = False, host: str = "127.0.0
         raise ValueError(f"the MCP HTTP server binds to localhost only, not {host!r}")
     import uvicorn  # noqa: PLC0415 - installed with mcp
 
-    app = server.streamable_http_app(host=host)
+    from phyagentos.view.security import BodyLimit  # noqa: PLC0415
+
+    app = BodyLimit(server.streamable_http_app(host=host), limit=MAX_HTTP_BODY_BYTES)
     print(f"serving MCP on http://{host}:{port}/mcp", flush=True)
     uvicorn.run(app, host=host, port=port, log_level="warning")

@@ -120,9 +120,15 @@ def test_a_very_long_path_is_refused_not_an_error(hostile, path):
 @pytest.mark.parametrize("body", [b"[" * 200_000, b"{\"a\":" * 100_000 + b"1" + b"}" * 100_000, b"\xff\xfe", b"not json",
                                   b"[1, 2]", b"\"kind\""])
 def test_a_malformed_or_deeply_nested_signal_body_is_a_400(hostile, body):
-    status, answer = request(hostile["url"], "POST", "/api/signal", body=body,
-                             headers={"Content-Type": "application/json", "X-PhyAgentOS-Token": hostile["token"]})
+    try:
+        status, answer = request(hostile["url"], "POST", "/api/signal", body=body,
+                                 headers={"Content-Type": "application/json", "X-PhyAgentOS-Token": hostile["token"]})
+    except (BrokenPipeError, ConnectionResetError):
+        # over the body limit: the server answered 413 and closed while the body was still going out
+        assert len(body) > 64 * 1024
+        status, answer = 413, b""
     assert status in (400, 413), (status, answer[:200])
+    assert request(hostile["url"], "GET", "/")[0] == 200
     assert hostile["ws"].read("RUNTIME_SIGNAL").data.signals == []
 
 

@@ -58,13 +58,45 @@ def frames_of(directory: Path, *, root: Path | None = None) -> dict[str, Any] | 
 
     Raises:
         OSError: outside ``root`` or not a regular file (:mod:`phyagentos.untrusted`).
+        ValueError: not a recording, or more than :data:`MAX_FRAMES_BYTES` uncompressed.
     """
     path = directory / "frames.npz"
     try:
         fd = open_regular(path, root=root)
     except FileNotFoundError:
         return None
-    with os.fdopen(fd, "rb") as fh, np.load(fh, allow_pickle=False) as data:
+    with os.fdopen(fd, "rb") as fh:
+        _check_npz_size(fh, path)
+        return _read_frames(fh)
+
+
+#: Largest uncompressed ``frames.npz`` the view loads (bytes): an hour of a 16-DoF recording
+#: at 30 fps is about 14 MB; a zip bomb declaring gigabytes is refused before it inflates.
+MAX_FRAMES_BYTES = 256 * 1024 * 1024
+
+
+def _check_npz_size(fh, path: Path) -> None:
+    import zipfile  # noqa: PLC0415
+
+    try:
+        with zipfile.ZipFile(fh) as z:
+            total = sum(i.file_size for i in z.infolist())
+    except zipfile.BadZipFile as exc:
+        raise ValueError(f"{path.name} is not a recording (.npz): {exc}") from None
+    if total > MAX_FRAMES_BYTES:
+        raise ValueError(f"{path.name} holds {total} bytes uncompressed, more than the limit of {MAX_FRAMES_BYTES}")
+    fh.seek(0)
+
+
+def _read_frames(fh) -> dict[str, Any]:
+    try:
+        return _frames_from(fh)
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"frames.npz is not a recording: {exc}") from None
+
+
+def _frames_from(fh) -> dict[str, Any]:
+    with np.load(fh, allow_pickle=False) as data:
         out = {"t": data["t"].astype(float), "qpos": data["qpos"], "camera": str(data["camera"]),
                "fps": float(data["fps"])}
         if "wall" in data.files:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -32,7 +33,7 @@ from mcp.server.stdio import stdio_server
 
 from phyagentos.agent.tools import ToolError, ToolRegistry
 from phyagentos.protocol import Workspace
-from phyagentos.untrusted import redact_secrets
+from phyagentos.untrusted import json_depth, redact_secrets
 from phyagentos.yamlsource import clip
 
 __all__ = ["build_registry", "build_server", "serve", "MAX_ERROR_CHARS", "MAX_HTTP_BODY_BYTES"]
@@ -104,6 +105,74 @@ def build_server(registry: ToolRegistry) -> Server:
                   on_list_tools=list_tools, on_call_tool=call_tool)
 
 
+#: Deepest JSON-RPC message handed to the SDK's parser: deeper ones (the SDK drops a message
+#: its parser refuses without answering, and the client would wait) are answered with an error.
+MAX_RPC_DEPTH = 100
+#: Longest JSON-RPC line read (characters): a goal graph of 1 MiB plus framing.
+MAX_RPC_LINE_CHARS = 4 * 1024 * 1024
+_RPC_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}:,]')
+_RPC_ID_VALUE = re.compile(r'\s*(-?\d+|"(?:[^"\\]|\\.)*")')
+
+
+def _top_level_id(line: str) -> Any:
+    """The ``id`` of a JSON-RPC message, found without parsing the whole (possibly very deep) text."""
+    depth = 0
+    previous = None
+    for m in _RPC_TOKEN.finditer(line):
+        token = m.group(0)
+        if token in "[{":
+            depth += 1
+        elif token in "]}":
+            depth -= 1
+        elif token == ":" and depth == 1 and previous == '"id"':
+            value = _RPC_ID_VALUE.match(line, m.end())
+            return json.loads(value.group(1)) if value else None
+        previous = token
+    return None
+
+
+def refuse_oversized_rpc(line: str) -> str:
+    """``line`` unchanged, or -- when it is longer than :data:`MAX_RPC_LINE_CHARS` or nested
+    deeper than :data:`MAX_RPC_DEPTH` -- a request for a method no server has, with the same
+    ``id``, so that the SDK answers the client with an error instead of dropping the message."""
+    if len(line) <= MAX_RPC_LINE_CHARS and json_depth(line) <= MAX_RPC_DEPTH:
+        return line
+    ident = _top_level_id(line[:MAX_RPC_LINE_CHARS])
+    logger.info("refused a JSON-RPC message of %d characters (too long or nested deeper than %d)", len(line),
+                MAX_RPC_DEPTH)
+    if ident is None:
+        return "{}\n"  # a notification: nothing to answer; the SDK logs the malformed message
+    return json.dumps({"jsonrpc": "2.0", "id": ident, "method": "phyagentos/refused: message too long or too deep",
+                       "params": {}}) + "\n"
+
+
+class _BoundedLines:
+    """An async line source that passes :func:`refuse_oversized_rpc` over every line."""
+
+    def __init__(self, inner) -> None:
+        self._inner = inner
+
+    def __aiter__(self):
+        return self._lines()
+
+    async def _lines(self):
+        async for line in self._inner:
+            yield refuse_oversized_rpc(line)
+
+
+def _bounded_stdin() -> _BoundedLines:
+    """The process's stdin as UTF-8 lines through :func:`refuse_oversized_rpc`; fd 0 then points
+    at the null device (as the SDK does), so tools and their children read EOF."""
+    import io  # noqa: PLC0415
+    import os  # noqa: PLC0415
+
+    stream = io.TextIOWrapper(os.fdopen(os.dup(0), "rb"), encoding="utf-8", errors="replace")
+    null = os.open(os.devnull, os.O_RDONLY)
+    os.dup2(null, 0)
+    os.close(null)
+    return _BoundedLines(anyio.wrap_file(stream))
+
+
 def serve(workspace_dir: str | Path, *, http: bool = False, host: str = "127.0.0.1", port: int = 8765,
           with_planner: bool = True) -> None:
     """Serve the workspace's ToolRegistry until stopped (stdio, or HTTP on ``host:port``)."""
@@ -111,7 +180,7 @@ def serve(workspace_dir: str | Path, *, http: bool = False, host: str = "127.0.0
     server = build_server(build_registry(workspace, with_planner=with_planner))
     if not http:
         async def run_stdio() -> None:
-            async with stdio_server() as (read, write):
+            async with stdio_server(stdin=_bounded_stdin()) as (read, write):
                 await server.run(read, write, server.create_initialization_options())
 
         anyio.run(run_stdio)

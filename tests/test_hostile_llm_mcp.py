@@ -130,3 +130,31 @@ def test_quote_and_redact_are_total():
     assert quote("a" * 1000).endswith("... (1000 chars)") and len(quote("a" * 1000)) < 230
     assert redact_secrets("") == "" and redact_secrets("plain text") == "plain text"
     assert json.loads(json.dumps(redact_secrets('{"password": "hunter22"}'))) == '{"password": "***"}'
+
+
+def test_a_json_rpc_message_too_deep_for_the_sdk_parser_is_answered_not_dropped(tmp_path):
+    async def scenario(session):
+        outcome = "timeout"
+        with anyio.move_on_after(30):
+            try:
+                await session.call_tool("read_session", {"session_id": "s", "extra": _nested(200)})
+                outcome = "result"
+            except Exception as exc:  # noqa: BLE001 - the SDK raises its McpError for an error response
+                outcome = f"error: {exc}"
+        after = await session.call_tool("list_runs", {})  # the server still answers
+        return outcome, after
+
+    outcome, after = anyio.run(lambda: _mcp(tmp_path / "ws", scenario, planner=False))
+    assert outcome.startswith("error"), outcome  # before: the SDK dropped it and the client waited for ever
+    assert not after.is_error
+
+
+def test_refuse_oversized_rpc_keeps_the_id_and_passes_ordinary_lines():
+    from phyagentos.mcp_server import MAX_RPC_DEPTH, refuse_oversized_rpc  # noqa: PLC0415
+
+    ordinary = json.dumps({"jsonrpc": "2.0", "id": 3, "method": "tools/list"}) + "\n"
+    assert refuse_oversized_rpc(ordinary) == ordinary
+    deep = json.dumps({"jsonrpc": "2.0", "method": "tools/call", "params": {"x": _nested(MAX_RPC_DEPTH + 5)},
+                       "id": "req-9"})
+    answer = json.loads(refuse_oversized_rpc(deep))
+    assert answer["id"] == "req-9" and answer["method"].startswith("phyagentos/refused")

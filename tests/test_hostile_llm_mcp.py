@@ -158,3 +158,41 @@ def test_refuse_oversized_rpc_keeps_the_id_and_passes_ordinary_lines():
                        "id": "req-9"})
     answer = json.loads(refuse_oversized_rpc(deep))
     assert answer["id"] == "req-9" and answer["method"].startswith("phyagentos/refused")
+
+
+def test_mcp_over_http_refuses_an_oversized_body_before_reading_it(tmp_path):
+    import http.client  # noqa: PLC0415
+    import socket  # noqa: PLC0415
+    import time  # noqa: PLC0415
+
+    from phyagentos.mcp_server import MAX_HTTP_BODY_BYTES  # noqa: PLC0415
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "phyagentos.cli", "mcp", "--workspace", str(tmp_path / "ws"),
+                             "--no-planner", "--http", "--port", str(port)], stdout=subprocess.PIPE, text=True,
+                            cwd=ROOT)
+    try:
+        assert proc.stdout.readline().startswith("serving MCP")
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline
+                time.sleep(0.1)
+        conn = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+        conn.putrequest("POST", "/mcp")
+        conn.putheader("Content-Type", "application/json")
+        conn.putheader("Accept", "application/json, text/event-stream")
+        conn.putheader("Content-Length", str(256 * 1024 * 1024))
+        conn.endheaders(b"{")
+        resp = conn.getresponse()
+        assert resp.status == 413, (resp.status, resp.read()[:200])
+        assert str(MAX_HTTP_BODY_BYTES) in resp.read().decode()
+        conn.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)

@@ -233,3 +233,21 @@ def test_the_shipped_templates_pass_the_deploy_check(tmp_path):
     check_deploy_files(ws)
     assert math.isfinite(PerceptionConfig.for_workspace(ws).cloud.max_depth_m)
     assert yaml.safe_load((ws / "llm.yaml").read_text())["provider"] == "offline"
+
+
+@pytest.mark.sim
+def test_a_camera_larger_than_the_framebuffer_fails_the_run_naming_sensors_yaml(tmp_path):
+    # Before: the warm-up's error was dropped, the target kept without its sensors and the run exited 0.
+    ws = Workspace.create(tmp_path / "ws").root
+    text = (ws / "sensors.yaml").read_text(encoding="utf-8").replace(
+        "width: 320\n    height: 240\n    fovy_deg: 55\n    mount: {body: world, camera: overview}",
+        "width: 4096\n    height: 4096\n    fovy_deg: 55\n    mount: {body: world, camera: overview}", 1)
+    assert "4096" in text
+    (ws / "sensors.yaml").write_text(text, encoding="utf-8")
+    proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(HOLD), "--workspace", str(ws)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=400, env={**os.environ, "COLUMNS": "300"})
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 1, out[-2000:]
+    assert "sensors.yaml: camera 'overview'" in out and "framebuffer" in out, out[-2000:]
+    assert "Traceback" not in out
+    assert (ws / "sensors.yaml").read_text(encoding="utf-8") == text

@@ -49,7 +49,7 @@ def hostile(tmp_path_factory):
     (outside / "events.yaml").write_text(f"- {{code: x, message: {SECRET}}}\n", encoding="utf-8")
     (outside / f"{SECRET}.txt").write_text("x", encoding="utf-8")
     ws = Workspace.create(root / "ws")
-    for sid in ("s-linkfile", "s-linkdir", "s-fifo"):
+    for sid in ("s-linkfile", "s-linkdir", "s-fifo", "s-deep"):
         submit(ws, sid)
     ev = ws.root / "evidence"
     # 1. files inside a real evidence directory that link outside the workspace
@@ -66,6 +66,12 @@ def hostile(tmp_path_factory):
     d.mkdir()
     for name in ("tree.json", "bundle.yaml", "events.yaml", "terminal.yaml", "trace.jsonl", "frames.npz"):
         os.mkfifo(d / name)
+    # 4. deeply nested JSON where the runner writes JSON
+    d = ev / "s-deep"
+    d.mkdir()
+    (d / "tree.json").write_text("[" * 100_000 + "]" * 100_000, encoding="utf-8")
+    (d / "trace.jsonl").write_text('{"kind": "proprio", "stamp_s": 0.0}\n' + "[" * 100_000 + "]" * 100_000 + "\n",
+                                   encoding="utf-8")
     proc, url, token = start_view(ws.root)
     try:
         yield {"url": url, "token": token, "ws": ws, "proc": proc}
@@ -161,3 +167,12 @@ def test_an_oversized_body_is_refused_before_it_is_buffered(hostile):
     assert _rss_kib(hostile["proc"].pid) - before < 64 * 1024  # under 64 MiB more, not the body
     assert hostile["ws"].read("RUNTIME_SIGNAL").data.signals == []
     assert request(hostile["url"], "GET", "/")[0] == 200
+
+
+@pytest.mark.parametrize("route", ["/api/tree/s-deep", "/fragment/tree/s-deep", "/api/signals/s-deep",
+                                   "/fragment/session/s-deep"])
+def test_deeply_nested_evidence_json_is_refused_not_a_500(hostile, route):
+    status, body = request(hostile["url"], "GET", route)
+    assert status < 500, (route, status, body[:300])
+    if route == "/api/tree/s-deep":
+        assert status == 422 and b"nested" in body

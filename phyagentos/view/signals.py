@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from phyagentos.errors import ViewError
-from phyagentos.untrusted import confined, open_regular
+from phyagentos.untrusted import confined, json_depth, open_regular
 from phyagentos.yamlsource import read_yaml
 
 from .scene3d import frames_of
@@ -83,8 +83,8 @@ def _read_trace(path: Path, *, root: Path | None = None) -> tuple[list[dict[str,
     cut = len(data) > MAX_TRACE_BYTES
     for line in data[:MAX_TRACE_BYTES].splitlines():
         try:
-            rec = json.loads(line)
-        except ValueError:
+            rec = json.loads(line) if len(line) < 4096 or json_depth(line.decode("utf-8", "replace")) <= 200 else None
+        except (ValueError, RecursionError):
             continue  # a line cut by the byte limit, or not JSON
         if isinstance(rec, dict):
             out.append(rec)

@@ -84,7 +84,7 @@ def test_a_hostile_camera_value_in_sensors_yaml_is_refused_with_its_line(base_ws
     "    noise: {depth_sigma_per_m2: .nan, rgb_sigma: 1, lighting_jitter: 0}",
     "    noise: {depth_sigma_per_m2: 0, rgb_sigma: .inf, lighting_jitter: 0}",
 ])
-def test_nan_noise_and_a_path_name_in_sensors_yaml_are_refused(base_ws, snippet):
+def test_nan_or_inf_noise_in_sensors_yaml_is_refused(base_ws, snippet):
     _expect_refused(base_ws, "sensors.yaml", _sensors_yaml("rate_hz", "10") + snippet + "\n")
 
 

@@ -170,7 +170,11 @@ class _RichLogHandler(logging.Handler):
 
 def _setup_logging(verbose: int, console: _LazyConsole) -> None:
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
-    logging.basicConfig(level=level, format="%(message)s", handlers=[_RichLogHandler(console)])
+    from phyagentos.untrusted import RedactingFilter  # noqa: PLC0415
+
+    handler = _RichLogHandler(console)
+    handler.addFilter(RedactingFilter())  # no credential reaches the terminal (issue 33)
+    logging.basicConfig(level=level, format="%(message)s", handlers=[handler])
     # transitions logs every state entry/exit at INFO; our own transition log is enough.
     logging.getLogger("transitions").setLevel(max(level, logging.WARNING))
     logging.getLogger("toppra").setLevel(max(level, logging.WARNING))

@@ -51,7 +51,18 @@ def format_choices(choices) -> str:
 
 
 class PhyAgentOSError(Exception):
-    """Root of every error PhyAgentOS raises on purpose."""
+    """Root of every error PhyAgentOS raises on purpose.
+
+    Its message never carries a credential: every string argument passes through
+    :func:`phyagentos.untrusted.redact_secrets` (URL userinfo, ``key=``/``token=`` values,
+    registered API keys), so no subsystem can leak one into a message, a log line or an
+    MCP answer by quoting a URL or a setting.
+    """
+
+    def __init__(self, *args):
+        from phyagentos.untrusted import redact_secrets  # noqa: PLC0415 - no import cycle at module load
+
+        super().__init__(*(redact_secrets(a) if isinstance(a, str) else a for a in args))
 
 
 class ProtocolError(PhyAgentOSError):
@@ -64,7 +75,9 @@ class _Located:
     def __init__(self, message: str, *, path: str | Path | None = None, line: int | None = None):
         self.path = Path(path) if path is not None else None
         self.line = line
-        self.detail = message
+        from phyagentos.untrusted import redact_secrets  # noqa: PLC0415
+
+        self.detail = redact_secrets(message)
         loc = format_location(path, line)
         super().__init__(f"{loc}: {message}" if loc else message)
 

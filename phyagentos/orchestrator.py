@@ -273,6 +273,9 @@ def submit_goal_graph(goal_graph: str | Path, workspace_dir: str | Path, *, seed
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
 
     workspace = Workspace.create(workspace_dir)
+    from phyagentos.deploy_check import check_deploy_files  # noqa: PLC0415
+
+    check_deploy_files(workspace.root)  # the deploy-time files first (file:line)
     skills = skill_names()
     # The whole graph before anything is registered: errors name the user's file.
     check_goal_graph(goal_graph, workspace, BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs()), target=target)
@@ -353,12 +356,19 @@ def run_goal_graph(
 
     Raises:
         GoalGraphError: the goal graph is invalid.
-        DocumentError: a protocol document in the workspace is malformed (left untouched).
+        DocumentError: a protocol document or a deploy-time file (``sensors.yaml``,
+            ``perception.yaml``, ``safety.yaml``) in the workspace is malformed (left untouched).
+        LLMError, FleetError: ``llm.yaml`` or ``fleet.yaml`` is malformed (``file:line``).
         SupervisorError: the run stopped making progress before completing.
     """
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
+    from phyagentos.deploy_check import check_deploy_files  # noqa: PLC0415
     from phyagentos.graph_check_process import check_goal_graph_forked  # noqa: PLC0415
+
+    # Every deploy-time file (sensors.yaml, perception.yaml, safety.yaml, llm.yaml, fleet.yaml)
+    # before any target is built: a malformed one is reported with file:line, never repaired.
+    check_deploy_files(workspace.root)
 
     # The runner builds the graph's targets (model, cameras) while the check runs.
     _warm_targets(goal_graph, workspace, target=target)

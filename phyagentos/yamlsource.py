@@ -242,28 +242,41 @@ def load_plain(text: str, *, path: str | Path | None = None, error: type[Excepti
     return _construct(text, _PlainLoader, path=path, error=error)
 
 
-def read_yaml(path: str | Path, *, error: type[Exception], plain: bool = True) -> Any:
+def read_yaml(path: str | Path, *, error: type[Exception], plain: bool = True, root: str | Path | None = None) -> Any:
     """Read the YAML file at ``path`` with every bound of :func:`load_yaml`: a file larger
     than :data:`MAX_YAML_FILE_BYTES` is refused before it is read, an alias bomb while it
-    is composed (milliseconds, with the anchor's line).
+    is composed (milliseconds, with the anchor's line). Only a regular file is read: a
+    FIFO or a device is refused without blocking (:func:`phyagentos.untrusted.open_regular`).
 
     Args:
         path: the file.
         error: exception class for YAML problems (called with ``path=``/``line=`` when
             it takes them, else with the location in the message).
         plain: plain containers (:func:`load_plain`) or line-carrying ones (:func:`load_yaml`).
+        root: when given, the file must resolve (links followed) inside this directory.
 
     Raises:
-        OSError: the file cannot be read.
+        OSError: the file cannot be read (``FileNotFoundError``; a special file:
+            :class:`~phyagentos.untrusted.NotRegular`; outside ``root``:
+            :class:`~phyagentos.untrusted.NotConfined`).
         error: too large, not UTF-8, a syntax error or a bound exceeded.
     """
+    import os  # noqa: PLC0415
+
+    from phyagentos.untrusted import open_regular  # noqa: PLC0415
+
     path = Path(path)
-    size = path.stat().st_size
-    if size > MAX_YAML_FILE_BYTES:
-        raise _error(error, f"YAML file of {size} bytes is larger than the limit of {MAX_YAML_FILE_BYTES}",
-                     path=path, line=1)
+    fd = open_regular(path, root=root)
+    with os.fdopen(fd, "rb") as fh:
+        size = os.fstat(fd).st_size
+        if size > MAX_YAML_FILE_BYTES:
+            raise _error(error, f"YAML file of {size} bytes is larger than the limit of {MAX_YAML_FILE_BYTES}",
+                         path=path, line=1)
+        raw = fh.read(MAX_YAML_FILE_BYTES + 1)
+    if len(raw) > MAX_YAML_FILE_BYTES:
+        raise _error(error, f"YAML file is larger than the limit of {MAX_YAML_FILE_BYTES} bytes", path=path, line=1)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise _error(error, f"not UTF-8 text: {exc.reason} at byte {exc.start}", path=path, line=None) from None
     return (load_plain if plain else load_yaml)(text, path=path, error=error)

@@ -29,13 +29,14 @@ from typing import Collection, Sequence
 import networkx as nx
 import yaml
 
+from phyagentos.untrusted import quote
 from phyagentos.errors import GoalGraphError
 from phyagentos.llm import LLMClient, LLMError, call_record
 
 from . import dag as dagmod
 from .goal_graph import GoalGraph, load_goal_graph, parse_goal_graph
 from .llm.policy import screen_text
-from .planner import REFUSAL_REASONS, PlannerError, PlanResult
+from .planner import REFUSAL_REASONS, PlannerError, PlanResult, check_request
 
 __all__ = ["LibraryPlanner", "goal_candidates", "LIBRARY_SYSTEM_PROMPT"]
 
@@ -108,6 +109,7 @@ class LibraryPlanner:
             PlannerError: the model could not be called or answered outside its schema.
             GoalGraphError: ``library`` is not a valid goal graph (file and line).
         """
+        check_request(request)
         started = time.perf_counter()
         lib = load_goal_graph(library, skills=self.skills, targets=self.targets)
         context = {"library": str(library), "goals": [n.id for n in lib.nodes]}
@@ -134,11 +136,11 @@ class LibraryPlanner:
         try:
             reply = self.client.complete(messages, schema=schema, max_tokens=40, purpose="plan")
         except LLMError as exc:
-            raise PlannerError(f"planning {request!r} in {lib.name}: {exc}") from exc
+            raise PlannerError(f"planning {quote(request)} in {lib.name}: {exc}") from exc
         try:
             data = json.loads(reply.text)
         except json.JSONDecodeError as exc:
-            raise PlannerError(f"the model's answer to {request!r} is not JSON: {reply.text[:200]!r}") from exc
+            raise PlannerError(f"the model's answer to {quote(request)} is not JSON: {reply.text[:200]!r}") from exc
         if data.get("decision") != "plan" or data.get("goal") not in candidates:
             reason = data.get("reason") if data.get("reason") in REFUSAL_REASONS else "impossible"
             record = call_record(reply.call, role="planner", output=reply.text, outcome="refused",
@@ -160,7 +162,7 @@ class LibraryPlanner:
             graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
                                      targets=self.targets)
         except GoalGraphError as exc:
-            raise PlannerError(f"the plan for {request!r} compiles to an invalid goal graph: {exc}") from exc
+            raise PlannerError(f"the plan for {quote(request)} compiles to an invalid goal graph: {exc}") from exc
         return PlanResult(request=request, status="planned", graph_yaml=text, graph=graph, calls=(reply.call,),
                           outputs=(reply.text,), records=(record,), context=context,
                           reason=f"goal {goal}: {len(graph.nodes)} node(s) of {lib.name}",

@@ -58,6 +58,7 @@ from typing import Any, Collection, Mapping, Sequence
 
 import yaml
 
+from phyagentos.untrusted import quote
 from phyagentos.errors import GoalGraphError, PhyAgentOSError
 from phyagentos.llm import LLMCall, LLMClient, LLMError, call_record
 from phyagentos.protocol import ModelCallRecord
@@ -71,9 +72,28 @@ from .llm.world import PALETTE, World, perceived_world, world_from_environment, 
 from .selector import Selection, select_target
 
 __all__ = ["GoalPlanner", "PlanResult", "PlanStep", "PlannerError", "REFUSAL_REASONS", "PLAN_SKILLS",
-           "plan_schema", "write_plan", "SYSTEM_PROMPT"]
+           "plan_schema", "write_plan", "SYSTEM_PROMPT", "MAX_REQUEST_CHARS", "check_request"]
 
 logger = logging.getLogger(__name__)
+
+#: Longest request planned (characters): an instruction is a sentence or two; a longer
+#: text is refused before any model call, and never echoed whole (issue 33).
+MAX_REQUEST_CHARS = 2000
+
+
+def check_request(request: str) -> None:
+    """Refuse a request that is not text or is longer than :data:`MAX_REQUEST_CHARS`.
+
+    Raises:
+        PlannerError: the message quotes at most :data:`~phyagentos.untrusted.MAX_QUOTE_CHARS`
+            characters of it.
+    """
+    if not isinstance(request, str):
+        raise PlannerError(f"a request is text, got {type(request).__name__}")
+    if len(request) > MAX_REQUEST_CHARS:
+        raise PlannerError(f"the request is {len(request)} characters long, more than the limit of "
+                           f"{MAX_REQUEST_CHARS}: {quote(request)}")
+
 
 #: Why a request is refused.
 REFUSAL_REASONS = ("unknown_object", "out_of_reach", "unsafe", "impossible")
@@ -275,6 +295,7 @@ class GoalPlanner:
         Raises:
             PlannerError: the model could not be called, or its plan stayed invalid after one repair.
         """
+        check_request(request)
         started = time.perf_counter()
         findings = screen_text(request, source="instruction")
         world = perceived_world(world_from_scene(scene), world_from_environment(environment))
@@ -335,7 +356,7 @@ class GoalPlanner:
                     reply = self.client.complete(messages, schema=schema, max_tokens=100,
                                                  purpose="plan" if round_ == 0 else "repair")
                 except LLMError as exc:
-                    raise PlannerError(f"planning {request!r} (clause {text!r}): {exc}") from exc
+                    raise PlannerError(f"planning {quote(request)} (clause {quote(text)}): {exc}") from exc
                 calls.append(reply.call)
                 outputs.append(reply.text)
                 try:
@@ -346,7 +367,7 @@ class GoalPlanner:
                         records.append(call_record(reply.call, role="planner", output=reply.text, outcome="refused",
                                                    detail=f"{part(text)}model refusal ({reason})"))
                         return result(status="refused", refusal=reason, refused_by="model",
-                                      reason=f"the model refused ({reason}) the part {text!r}")
+                                      reason=f"the model refused ({reason}) the part {quote(text)}")
                     self._check_grounded(text, decoded, world)
                     self._check_structure(steps + decoded, world)
                 except _Invalid as exc:
@@ -363,8 +384,8 @@ class GoalPlanner:
                 steps.extend(decoded)
                 break
             else:
-                raise PlannerError(f"the plan for {request!r} is still invalid after one repair round of the part "
-                                   f"{text!r}: {repairs[-1]} (model output: {outputs[-1]!r})")
+                raise PlannerError(f"the plan for {quote(request)} is still invalid after one repair round of the part "
+                                   f"{quote(text)}: {repairs[-1]} (model output: {outputs[-1]!r})")
         graph_dict, selections, far = self._compile(steps, world, scene, name=name, request=request,
                                                     prefer_target=prefer_target)
         if far:
@@ -378,7 +399,7 @@ class GoalPlanner:
             graph = parse_goal_graph(text, path=f"<plan of {request[:40]!r}>", skills=self.skills,
                                      targets=[t["name"] for t in self.targets])
         except GoalGraphError as exc:
-            raise PlannerError(f"the plan for {request!r} compiles to an invalid goal graph: {exc}") from exc
+            raise PlannerError(f"the plan for {quote(request)} compiles to an invalid goal graph: {exc}") from exc
         return result(status="planned", reason=f"{len(graph.nodes)} node(s) from {len(clauses)} clause(s)",
                       graph_yaml=text, graph=graph, selections=selections)
 

@@ -24,14 +24,17 @@ from the composition root (the Agent plane does not own the Runtime's skill regi
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
 from phyagentos.errors import PhyAgentOSError
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.reach import ReachOracle, ReachQuery
+from phyagentos.untrusted import quote
 
 from .llm.policy import screen_text
+from .planner import MAX_REQUEST_CHARS
 from .skill_catalog import skill_catalog
 
 __all__ = ["Tool", "ToolError", "ToolRegistry"]
@@ -61,9 +64,24 @@ class Tool:
         return {"name": self.name, "description": self.description, "input_schema": self.input_schema}
 
 
+def _name() -> dict[str, Any]:
+    return {"type": "string", "maxLength": MAX_NAME_CHARS}
+
+
 def _obj(props: dict[str, Any] | None = None, required: tuple[str, ...] = ()) -> dict[str, Any]:
     return {"type": "object", "properties": props or {}, "required": list(required), "additionalProperties": False}
 
+
+#: Longest goal graph accepted as text (characters): the shipped graphs are a few kilobytes.
+MAX_GOAL_GRAPH_CHARS = 1024 * 1024
+#: Longest identifier argument (session, run, target, object names), characters.
+MAX_NAME_CHARS = 128
+#: Longest signal reason, characters (as the view's signal buttons).
+MAX_REASON_CHARS = 200
+#: Deepest nesting of an object or array argument (a scene is four levels deep).
+MAX_ARG_DEPTH = 32
+#: Most values (strings, numbers, containers) in one call's arguments.
+MAX_ARG_NODES = 100_000
 
 _TYPES = {"string": str, "integer": int, "number": (int, float), "boolean": bool, "object": dict, "array": list}
 
@@ -77,6 +95,7 @@ def _check_args(tool: Tool, args: Mapping[str, Any]) -> None:
     for name in schema.get("required", []):
         if name not in args:
             raise ToolError(f"{tool.name}: missing required argument {name!r}")
+    _check_shape(tool, args)
     for name, value in args.items():
         spec = props[name]
         py = _TYPES.get(spec.get("type", ""), object)
@@ -84,7 +103,31 @@ def _check_args(tool: Tool, args: Mapping[str, Any]) -> None:
         if wrong_type or (isinstance(value, bool) and spec.get("type") in ("integer", "number")):
             raise ToolError(f"{tool.name}: argument {name!r} must be {spec.get('type')}, got {type(value).__name__}")
         if "enum" in spec and value not in spec["enum"]:
-            raise ToolError(f"{tool.name}: argument {name!r} must be one of {spec['enum']}, got {value!r}")
+            raise ToolError(f"{tool.name}: argument {name!r} must be one of {spec['enum']}, got {quote(value)}")
+        if isinstance(value, str) and "maxLength" in spec and len(value) > spec["maxLength"]:
+            raise ToolError(f"{tool.name}: argument {name!r} is {len(value)} characters long, more than the limit "
+                            f"of {spec['maxLength']}: {quote(value)}")
+
+
+def _check_shape(tool: Tool, args: Mapping[str, Any]) -> None:
+    """Refuse arguments nested deeper than :data:`MAX_ARG_DEPTH` or holding more than
+    :data:`MAX_ARG_NODES` values (walked without recursion), or a non-finite number."""
+    stack: list[tuple[Any, int]] = [(v, 1) for v in args.values()]
+    nodes = 0
+    while stack:
+        value, depth = stack.pop()
+        nodes += 1
+        if nodes > MAX_ARG_NODES:
+            raise ToolError(f"{tool.name}: arguments hold more than {MAX_ARG_NODES} values")
+        if depth > MAX_ARG_DEPTH:
+            raise ToolError(f"{tool.name}: arguments nested deeper than {MAX_ARG_DEPTH} levels")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ToolError(f"{tool.name}: a number argument is {value}; numbers must be finite")
+        if isinstance(value, Mapping):
+            stack.extend((v, depth + 1) for v in value.values())
+            stack.extend((k, depth + 1) for k in value.keys())
+        elif isinstance(value, (list, tuple)):
+            stack.extend((v, depth + 1) for v in value)
 
 
 def _strings(value: Any) -> list[str]:
@@ -127,34 +170,37 @@ class ToolRegistry:
         add(Tool("list_skills", "Skills a goal graph may use, with required (task) and optional (strategy) parameters.",
                  _obj(), self._list_skills))
         add(Tool("list_sessions", "Active sessions (optionally of one run): id, state, node, skill, target.",
-                 _obj({"run_id": {"type": "string"}}), self._list_sessions))
+                 _obj({"run_id": _name()}), self._list_sessions))
         add(Tool("read_session", "One session's record: state, parameters, attempts, verdicts, evidence.",
-                 _obj({"session_id": {"type": "string"}}, ("session_id",)), self._read_session))
+                 _obj({"session_id": _name()}, ("session_id",)), self._read_session))
         add(Tool("list_runs", "Active runs (submitted goal graphs not yet finished).", _obj(), self._list_runs))
         add(Tool("read_memory", "Memory documents: verified lessons, knowledge patterns or promoted procedures.",
                  _obj({"kind": {"type": "string", "enum": sorted(MEMORY_DOCS)}}, ("kind",)), self._read_memory))
         add(Tool("send_signal", "Signal the runtime: cancel a session, pause/resume claiming, estop (always "
                                 "allowed), clear_estop.",
-                 _obj({"kind": {"type": "string", "enum": list(SIGNALS)}, "session_id": {"type": "string"},
-                       "reason": {"type": "string"}}, ("kind",)), self._send_signal, screened=False))
+                 _obj({"kind": {"type": "string", "enum": list(SIGNALS)}, "session_id": _name(),
+                       "reason": {"type": "string", "maxLength": MAX_REASON_CHARS}}, ("kind",)), self._send_signal,
+                 screened=False))
         if submit is not None:
             self._submit = submit
             add(Tool("submit_goal_graph", "Validate a goal graph (YAML text, docs/goal_graphs.md) and submit it as a "
                                           "run; returns the run id. Invalid graphs are rejected with file:line.",
-                     _obj({"goal_graph_yaml": {"type": "string"}}, ("goal_graph_yaml",)), self._submit_graph))
+                     _obj({"goal_graph_yaml": {"type": "string", "maxLength": MAX_GOAL_GRAPH_CHARS}},
+                          ("goal_graph_yaml",)), self._submit_graph))
         if plan is not None:
             self._plan = plan
             add(Tool("plan_request", "Plan a natural-language request into a validated goal graph (or a refusal "
                                      "with its reason) on a scene (default: the tabletop scene).",
-                     _obj({"request": {"type": "string"}, "scene": {"type": "object"}}, ("request",)),
+                     _obj({"request": {"type": "string", "maxLength": MAX_REQUEST_CHARS}, "scene": {"type": "object"}},
+                          ("request",)),
                      self._plan_request))
         if reach is not None:
             self._reach = reach
             add(Tool("query_reach", "Can a target's arm reach a pick of an object and/or setting it down on a "
                                     "destination, with objects at the given perceived positions? Answered by the "
                                     "runtime's IK on the target's model: reachable, unreachable or unknown (why).",
-                     _obj({"target": {"type": "string"}, "scene": {"type": "object"},
-                           "positions": {"type": "object"}, "pick": {"type": "string"},
+                     _obj({"target": _name(), "scene": {"type": "object"},
+                           "positions": {"type": "object"}, "pick": _name(),
                            "place": {"type": "array"}}, ("target",)), self._query_reach))
 
     def _add(self, tool: Tool) -> None:

@@ -34,7 +34,8 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from phyagentos.errors import FleetError
-from phyagentos.yamlsource import line_of, load_yaml
+from phyagentos.protocol.schemas import StrictNumbers
+from phyagentos.yamlsource import line_of, read_yaml
 
 __all__ = ["LINK_LOSS_POLICIES", "AuthConfig", "FleetConfig", "TlsConfig", "find_fleet_config", "load_fleet_config"]
 
@@ -44,8 +45,8 @@ _NAME = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$"
 _ENDPOINT = r"^(tcp|tls|quic|udp)/[^\s]+:\d+$"
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class _Strict(StrictNumbers):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class AuthConfig(_Strict):
@@ -82,18 +83,18 @@ class FleetConfig(_Strict):
     """One peer's fleet settings (all times in seconds)."""
 
     name: str | None = Field(None, pattern=_NAME, description="edge or agent name (unique in the fleet)")
-    connect: list[str] = Field(default_factory=list, description="router endpoints, e.g. tcp/HOST:7447")
-    listen: list[str] = Field(default_factory=list, description="router only: endpoints to listen on")
+    connect: list[str] = Field(default_factory=list, max_length=64, description="router endpoints, e.g. tcp/HOST:7447")
+    listen: list[str] = Field(default_factory=list, max_length=64, description="router only: endpoints to listen on")
     auth: AuthConfig | None = None
     tls: TlsConfig | None = None
     link_loss: Literal["finish", "halt_and_hold"] = "finish"
     targets: list[str] | None = Field(None, description="edge only: the targets it owns (default: every enabled "
                                                          "target of its TARGETS.md)")
-    submit_ttl_s: float = Field(30.0, gt=0, description="a submit older than this is stale and never started")
-    link_timeout_s: float = Field(3.0, gt=0, description="the agent is lost this long after its last sign of life")
-    connect_timeout_s: float = Field(10.0, gt=0, description="how long opening a session waits for the router "
+    submit_ttl_s: float = Field(30.0, le=86_400.0, gt=0, description="a submit older than this is stale and never started")
+    link_timeout_s: float = Field(3.0, le=3600.0, gt=0, description="the agent is lost this long after its last sign of life")
+    connect_timeout_s: float = Field(10.0, le=3600.0, gt=0, description="how long opening a session waits for the router "
                                                              "(once open, a lost router is retried for ever)")
-    reconnect_max_s: float = Field(0.5, gt=0, description="longest pause between tries to reach a lost router")
+    reconnect_max_s: float = Field(0.5, le=3600.0, gt=0, description="longest pause between tries to reach a lost router")
     prefix: str = Field("paos", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="key-expression prefix of the fleet")
 
     @field_validator("connect", "listen")
@@ -164,11 +165,10 @@ def load_fleet_config(path: str | os.PathLike[str]) -> FleetConfig:
             and the valid choices.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
+    try:  # bounded, and a FIFO or a device is refused instead of waited on
+        data = read_yaml(path, error=FleetError, plain=False)
     except OSError as exc:
-        raise FleetError(f"cannot read fleet file: {exc.strerror}", path=path) from None
-    data = load_yaml(text, path=path, error=FleetError)
+        raise FleetError(f"cannot read fleet file: {exc.strerror or exc}", path=path) from None
     if not isinstance(data, dict):
         raise FleetError("a fleet file is a mapping (name, connect, auth, ...)", path=path, line=1)
     try:

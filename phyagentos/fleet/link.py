@@ -25,12 +25,24 @@ from collections.abc import Callable
 from typing import Any, Literal
 
 from phyagentos.errors import FleetError
+from phyagentos.untrusted import loads_json, redact_secrets
+from phyagentos.yamlsource import clip
 
 from .config import FleetConfig
 
 __all__ = ["FleetLink", "Keys"]
 
 log = logging.getLogger(__name__)
+
+#: Largest fleet message decoded (bytes) and its deepest nesting: a peer's message is
+#: bounded before it is parsed (a session record is a few kilobytes, 10 levels deep).
+MAX_MESSAGE_BYTES = 64 * 1024 * 1024
+MAX_MESSAGE_DEPTH = 200
+
+
+def _decode(raw: bytes) -> Any:
+    """A peer's JSON payload, bounded (:func:`phyagentos.untrusted.loads_json`); ValueError if refused."""
+    return loads_json(raw, max_bytes=MAX_MESSAGE_BYTES, max_depth=MAX_MESSAGE_DEPTH)
 
 
 class Keys:
@@ -102,7 +114,7 @@ class FleetLink:
             try:
                 raw = sample.payload.to_bytes()
                 self.bytes_in += len(raw)
-                handler(str(sample.key_expr), json.loads(raw))
+                handler(str(sample.key_expr), _decode(raw))
             except Exception:
                 log.exception("fleet: sample on %s not handled", sample.key_expr)
 
@@ -115,10 +127,10 @@ class FleetLink:
             try:
                 raw = query.payload.to_bytes() if query.payload is not None else b""
                 self.bytes_in += len(raw)
-                answer = handler(str(query.key_expr), json.loads(raw) if raw else None)
+                answer = handler(str(query.key_expr), _decode(raw) if raw else None)
             except Exception as exc:
                 log.exception("fleet: query on %s failed", query.key_expr)
-                answer = {"status": "error", "error": f"{type(exc).__name__}: {exc}"}
+                answer = {"status": "error", "error": clip(redact_secrets(f"{type(exc).__name__}: {exc}"), 2000)}
             payload = json.dumps(answer, separators=(",", ":")).encode()
             self.bytes_out += len(payload)
             query.reply(query.key_expr, payload)
@@ -136,7 +148,10 @@ class FleetLink:
                 continue
             raw = reply.ok.payload.to_bytes()
             self.bytes_in += len(raw)
-            out.append(json.loads(raw))
+            try:
+                out.append(_decode(raw))
+            except ValueError as exc:
+                log.warning("fleet: reply on %s refused: %s", key, exc)
         return out
 
     def query_one(self, key: str, data: Any = None, *, timeout_s: float = 3.0) -> Any | None:

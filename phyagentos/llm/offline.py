@@ -24,7 +24,7 @@ from typing import Any, Mapping, Sequence
 
 from .client import LLMCall, LLMError, LLMReply, prompt_hash
 
-__all__ = ["LlamaCppClient", "offline_model_path", "OFFLINE_DISTRIBUTION", "OFFLINE_GGUF"]
+__all__ = ["LlamaCppClient", "offline_model_path", "check_gguf", "GGUF_MAGIC", "OFFLINE_DISTRIBUTION", "OFFLINE_GGUF"]
 
 logger = logging.getLogger(__name__)
 
@@ -47,6 +47,32 @@ def offline_model_path() -> Path:
     if not path.is_file():
         raise LLMError(f"{OFFLINE_DISTRIBUTION} is installed but {path} is missing; reinstall it")
     return path
+
+
+#: The first bytes of every GGUF file (the llama.cpp model format).
+GGUF_MAGIC = b"GGUF"
+
+
+def check_gguf(path: Path) -> None:
+    """Refuse ``path`` unless it is a regular file starting with :data:`GGUF_MAGIC`,
+    before llama.cpp is handed it (a wrong file would be a native error or a traceback).
+
+    Raises:
+        LLMError: missing, not a regular file, or not GGUF (the message says which).
+    """
+    from phyagentos.untrusted import open_regular  # noqa: PLC0415
+
+    try:
+        fd = open_regular(path)
+    except FileNotFoundError:
+        raise LLMError(f"model file {path} does not exist") from None
+    except OSError as exc:
+        raise LLMError(f"model file {path} cannot be read: {exc}") from None
+    with os.fdopen(fd, "rb") as fh:
+        magic = fh.read(len(GGUF_MAGIC))
+    if magic != GGUF_MAGIC:
+        raise LLMError(f"model file {path} is not a GGUF model (it starts with {magic!r}, not {GGUF_MAGIC!r}); "
+                       "model_path in llm.yaml must name a llama.cpp .gguf file")
 
 
 def _server(path: Path, *, n_ctx: int, threads: int, seed: int) -> Any:
@@ -89,8 +115,7 @@ class LlamaCppClient:
     def __init__(self, model_path: str | Path | None = None, *, seed: int = 0, threads: int | None = None,
                  n_ctx: int = 4096):
         self.path = Path(model_path) if model_path is not None else offline_model_path()
-        if not self.path.is_file():
-            raise LLMError(f"model file {self.path} does not exist")
+        check_gguf(self.path)
         self.model = self.path.name
         self.seed = int(seed)
         self.temperature = 0.0

@@ -7,6 +7,8 @@ import os
 import time
 from typing import Any, Mapping, Sequence
 
+from phyagentos.untrusted import redact_secrets, register_secret
+
 from .client import LLMCall, LLMError, LLMReply, prompt_hash
 
 __all__ = ["OpenAICompatClient"]
@@ -37,11 +39,13 @@ class OpenAICompatClient:
         except ImportError as exc:
             raise LLMError("the openai SDK is not installed (pip install openai)") from exc
         self.model = model
-        self.base_url = base_url
+        #: the endpoint as shown in messages and records: credentials in its userinfo redacted
+        self.base_url = redact_secrets(base_url)
         self.seed = int(seed)
         self.temperature = 0.0
         self.strict_schema = strict_schema
         key = os.environ.get(api_key_env) or "unused"
+        register_secret(key)  # never in a message, a log line or an MCP answer
         self._client = openai.OpenAI(base_url=base_url, api_key=key, timeout=timeout_s, max_retries=1)
         self._openai = openai
 

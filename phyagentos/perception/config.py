@@ -15,7 +15,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from phyagentos.protocol.codec import parse_yaml, read_yaml
-from phyagentos.protocol.schemas import VersionedModel
+from phyagentos.protocol.schemas import StrictNumbers, VersionedModel
 
 __all__ = [
     "PerceptionConfig",
@@ -45,49 +45,49 @@ def template_path() -> Path:
     return resources.templates_dir() / PERCEPTION_FILE
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class _Section(StrictNumbers):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class CloudConfig(_Section):
     sample_width_px: int = Field(
-        320, ge=16, description="Pixel stride per camera = ceil(width / sample_width_px)."
+        320, le=4096, ge=16, description="Pixel stride per camera = ceil(width / sample_width_px)."
     )
     voxel_size_m: float = Field(
-        0.003, ge=0, description="Voxel grid for the object points (0 = no voxel filter)."
+        0.003, le=0.5, ge=0, description="Voxel grid for the object points (0 = no voxel filter)."
     )
-    min_depth_m: float = Field(0.05, ge=0, description="Returns closer than this are dropped.")
-    max_depth_m: float = Field(3.0, gt=0, description="Returns farther than this are dropped.")
+    min_depth_m: float = Field(0.05, le=10.0, ge=0, description="Returns closer than this are dropped.")
+    max_depth_m: float = Field(3.0, le=20.0, gt=0, description="Returns farther than this are dropped.")
 
 
 class DepthNoiseConfig(_Section):
     """1-sigma depth noise model sigma(z) = base_m + quadratic_per_m * z**2 (structured-light
     and stereo sensors have noise quadratic in range; Khoshelham & Elberink 2012)."""
 
-    base_m: float = Field(0.0005, ge=0)
-    quadratic_per_m: float = Field(0.0015, ge=0)
+    base_m: float = Field(0.0005, le=0.1, ge=0)
+    quadratic_per_m: float = Field(0.0015, le=0.1, ge=0)
 
 
 class TableConfig(_Section):
-    expected_height_m: float = Field(0.0, description="Prior support height (world z), m.")
+    expected_height_m: float = Field(0.0, ge=-10.0, le=10.0, description="Prior support height (world z), m.")
     search_margin_m: float = Field(
-        0.04, gt=0, description="Plane hypotheses use points within this of the prior height."
+        0.04, le=1.0, gt=0, description="Plane hypotheses use points within this of the prior height."
     )
-    inlier_threshold_m: float = Field(0.004, gt=0, description="RANSAC inlier distance, m.")
-    ransac_iterations: int = Field(64, ge=1)
-    max_tilt_rad: float = Field(0.15, gt=0, description="Reject planes tilted more than this.")
-    min_inliers: int = Field(200, ge=3, description="Below this the prior plane is used.")
+    inlier_threshold_m: float = Field(0.004, le=0.5, gt=0, description="RANSAC inlier distance, m.")
+    ransac_iterations: int = Field(64, le=10_000, ge=1)
+    max_tilt_rad: float = Field(0.15, le=1.58, gt=0, description="Reject planes tilted more than this.")
+    min_inliers: int = Field(200, le=1_000_000, ge=3, description="Below this the prior plane is used.")
     object_min_height_m: float = Field(
-        0.005, gt=0, description="Points this far above the plane belong to objects."
+        0.005, le=1.0, gt=0, description="Points this far above the plane belong to objects."
     )
 
 
 class WorkspaceConfig(_Section):
     x_m: tuple[float, float] = (-0.30, 1.00)
     y_m: tuple[float, float] = (-0.75, 0.75)
-    max_height_m: float = Field(0.20, gt=0, description="Points higher above the plane are dropped.")
+    max_height_m: float = Field(0.20, le=10.0, gt=0, description="Points higher above the plane are dropped.")
     base_exclusion_radius_m: float = Field(
-        0.18, ge=0, description="Points within this xy radius of the robot base (origin) are dropped."
+        0.18, le=5.0, ge=0, description="Points within this xy radius of the robot base (origin) are dropped."
     )
 
     @model_validator(mode="after")
@@ -102,94 +102,94 @@ class WorkspaceConfig(_Section):
 class RobotMaskConfig(_Section):
     """Box around the gripper in the tcp frame (z out of the gripper, y along the fingers)."""
 
-    gripper_half_x_m: float = Field(0.05, gt=0)
-    gripper_half_y_m: float = Field(0.12, gt=0)
+    gripper_half_x_m: float = Field(0.05, le=1.0, gt=0)
+    gripper_half_y_m: float = Field(0.12, le=1.0, gt=0)
     gripper_z_m: tuple[float, float] = (-0.22, 0.05)
-    capsule_margin_m: float = Field(0.01, ge=0, description="Added to caller-given capsule radii.")
+    capsule_margin_m: float = Field(0.01, le=1.0, ge=0, description="Added to caller-given capsule radii.")
 
 
 class ClusteringConfig(_Section):
     method: Literal["kdtree", "sklearn"] = Field(
         "kdtree", description="DBSCAN implementation: scipy cKDTree (default, faster here) or scikit-learn."
     )
-    eps_m: float = Field(0.010, gt=0, description="DBSCAN neighbourhood radius (xyz part), m.")
-    min_samples: int = Field(6, ge=1, description="DBSCAN core-point neighbour count.")
+    eps_m: float = Field(0.010, le=1.0, gt=0, description="DBSCAN neighbourhood radius (xyz part), m.")
+    min_samples: int = Field(6, le=10_000, ge=1, description="DBSCAN core-point neighbour count.")
     chromaticity_scale: float = Field(
-        0.08, gt=0, description="(r, g) chromaticity difference that counts as one eps of distance."
+        0.08, le=1000.0, gt=0, description="(r, g) chromaticity difference that counts as one eps of distance."
     )
     lightness_scale: float = Field(
-        1.0, gt=0, description="Intensity (r+g+b)/768 difference that counts as one eps."
+        1.0, le=1000.0, gt=0, description="Intensity (r+g+b)/768 difference that counts as one eps."
     )
-    min_points: int = Field(25, ge=1, description="Smaller clusters are dropped as noise.")
+    min_points: int = Field(25, le=1_000_000, ge=1, description="Smaller clusters are dropped as noise.")
 
 
 class ShapeConfig(_Section):
-    top_band_m: float = Field(0.006, gt=0, description="Points this close to the top form the top face.")
+    top_band_m: float = Field(0.006, le=1.0, gt=0, description="Points this close to the top form the top face.")
     box_corner_fraction: float = Field(
         0.07, ge=0, le=1, description="Top-face points outside the rectangle's inscribed ellipse >= this: box."
     )
     sphere_residual: float = Field(
-        0.06, gt=0, description="Sphere-fit RMS residual below this x radius + the noise term: sphere."
+        0.06, le=1000.0, gt=0, description="Sphere-fit RMS residual below this x radius + the noise term: sphere."
     )
     sphere_noise_factor: float = Field(
-        0.6, ge=0, description="Noise term of the sphere test: this x depth sigma at the object's range."
+        0.6, le=1000.0, ge=0, description="Noise term of the sphere test: this x depth sigma at the object's range."
     )
     sphere_height_tolerance: float = Field(
-        0.2, gt=0, description="|height - diameter| / diameter below this for a sphere."
+        0.2, le=1000.0, gt=0, description="|height - diameter| / diameter below this for a sphere."
     )
 
 
 class AssociationConfig(_Section):
-    colour_scale_lab: float = Field(25.0, gt=0, description="Delta E*ab per unit cost.")
-    lightness_weight: float = Field(0.35, ge=0, description="Weight of Delta L* (shading).")
-    size_scale_m: float = Field(0.01, gt=0, description="Size error (m) per unit cost.")
-    shape_cost: float = Field(2.0, ge=0, description="Cost of a shape mismatch.")
+    colour_scale_lab: float = Field(25.0, le=1000.0, gt=0, description="Delta E*ab per unit cost.")
+    lightness_weight: float = Field(0.35, le=1000.0, ge=0, description="Weight of Delta L* (shading).")
+    size_scale_m: float = Field(0.01, le=10.0, gt=0, description="Size error (m) per unit cost.")
+    shape_cost: float = Field(2.0, le=1000.0, ge=0, description="Cost of a shape mismatch.")
     position_scale_m: float = Field(
-        0.05, gt=0, description="Distance from an existing track (m) per unit cost."
+        0.05, le=10.0, gt=0, description="Distance from an existing track (m) per unit cost."
     )
-    gate_cost: float = Field(3.0, gt=0, description="Pairs costing more are never associated.")
+    gate_cost: float = Field(3.0, le=1000.0, gt=0, description="Pairs costing more are never associated.")
     ambiguity_margin: float = Field(
-        0.5, ge=0, description="Runner-up cost within this of the best: ambiguous -> unknown."
+        0.5, le=1000.0, ge=0, description="Runner-up cost within this of the best: ambiguous -> unknown."
     )
 
 
 class FusionConfig(_Section):
     position_floor_m: float = Field(
-        0.002, ge=0, description="Systematic per-view position error (1 sigma), m."
+        0.002, le=10.0, ge=0, description="Systematic per-view position error (1 sigma), m."
     )
-    yaw_floor_rad: float = Field(0.03, ge=0, description="Systematic per-view yaw error, rad.")
+    yaw_floor_rad: float = Field(0.03, le=3.15, ge=0, description="Systematic per-view yaw error, rad.")
     process_noise_m_per_sqrt_s: float = Field(
-        0.002, ge=0, description="Random-walk growth of a track's std when unobserved."
+        0.002, le=10.0, ge=0, description="Random-walk growth of a track's std when unobserved."
     )
     innovation_gate_sigma: float = Field(
-        4.0, gt=0, description="A measurement this many sigmas from its track restarts it."
+        4.0, le=1000.0, gt=0, description="A measurement this many sigmas from its track restarts it."
     )
     min_confidence: float = Field(0.05, ge=0, le=1, description="Entities below are reported unknown.")
 
 
 class HoldingConfig(_Section):
-    min_opening_m: float = Field(0.001, ge=0, description="Per finger; below: closed on nothing.")
-    width_margin_m: float = Field(0.01, ge=0, description="Gap may exceed the width by this.")
-    width_undershoot_m: float = Field(0.012, ge=0, description="Gap may fall short of the width by this.")
-    min_effort_n: float = Field(5.0, ge=0, description="Finger force meaning a squeeze, N.")
+    min_opening_m: float = Field(0.001, le=1.0, ge=0, description="Per finger; below: closed on nothing.")
+    width_margin_m: float = Field(0.01, le=1.0, ge=0, description="Gap may exceed the width by this.")
+    width_undershoot_m: float = Field(0.012, le=1.0, ge=0, description="Gap may fall short of the width by this.")
+    min_effort_n: float = Field(5.0, le=10_000.0, ge=0, description="Finger force meaning a squeeze, N.")
     wrist_load_margin_n: float = Field(
-        0.3, ge=0, description="Wrist load above the open-gripper baseline after lift, N."
+        0.3, le=10_000.0, ge=0, description="Wrist load above the open-gripper baseline after lift, N."
     )
-    lift_height_m: float = Field(0.03, ge=0, description="tcp this far above the grasp height = lifted.")
+    lift_height_m: float = Field(0.03, le=10.0, ge=0, description="tcp this far above the grasp height = lifted.")
     capture_radius_m: float = Field(
-        0.06, gt=0, description="A track this close to the tcp when the gripper closed can be held."
+        0.06, le=10.0, gt=0, description="A track this close to the tcp when the gripper closed can be held."
     )
 
 
 class RelationsConfig(_Section):
-    on_gap_m: float = Field(0.015, gt=0, description="|bottom(A) - top(B)| for A on B.")
+    on_gap_m: float = Field(0.015, le=1.0, gt=0, description="|bottom(A) - top(B)| for A on B.")
     min_confidence: float = Field(0.5, ge=0, le=1, description="Relations below are not reported.")
 
 
-class PerceptionConfig(VersionedModel):
+class PerceptionConfig(StrictNumbers, VersionedModel):
     """perception.yaml (see ``protocol/perception.yaml`` for every field's meaning)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     cloud: CloudConfig = Field(default_factory=CloudConfig)
     depth_noise: DepthNoiseConfig = Field(default_factory=DepthNoiseConfig)

@@ -369,7 +369,13 @@ def parse_yaml(text: str, model: type[M], *, path: str | os.PathLike[str] | None
 
 
 def _read_text(path: Path) -> str:
-    raw = path.read_bytes()
+    from phyagentos.untrusted import read_regular  # noqa: PLC0415
+    from phyagentos.yamlsource import MAX_YAML_FILE_BYTES  # noqa: PLC0415
+
+    try:  # a regular file only (a FIFO is refused, never waited on), bounded before it is read
+        raw = read_regular(path, limit=MAX_YAML_FILE_BYTES)
+    except ValueError as exc:
+        raise DocumentError(str(exc), path=path, line=1) from None
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:

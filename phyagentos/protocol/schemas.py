@@ -152,6 +152,21 @@ def _unique(items: list[Any], attr: str, what: str) -> list[Any]:
     return items
 
 
+class StrictNumbers(BaseModel):
+    """Mixin of deploy-time schemas: a YAML boolean is never read as a number (``true``
+    would otherwise validate as 1 for an int or float field)."""
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_bool_numbers(cls, value: Any, info: Any) -> Any:
+        if isinstance(value, bool) and info.field_name in cls.model_fields:
+            ann = cls.model_fields[info.field_name].annotation
+            args = [a for arg in (get_args(ann) or (ann,)) for a in (get_args(arg) or (arg,))]
+            if bool not in args and any(a in (int, float) for a in args):
+                raise ValueError(f"{info.field_name} must be a number, not a boolean ({value})")
+        return value
+
+
 class ProtocolModel(BaseModel):
     """Base of all protocol models: unknown fields are errors."""
 
@@ -743,8 +758,10 @@ class RunRecord(VersionedModel):
 # safety.yaml
 
 
-class WorkspaceBox(ProtocolModel):
+class WorkspaceBox(StrictNumbers, ProtocolModel):
     """Axis-aligned box (metres, world frame) the end effector must stay inside."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     min: Vec3
     max: Vec3
@@ -798,7 +815,7 @@ def _default_outcomes() -> dict[str, str]:
     }
 
 
-class SafetyConfig(VersionedModel):
+class SafetyConfig(StrictNumbers, VersionedModel):
     """safety.yaml: limits the SafetyGuard enforces on every command.
 
     Read-only by construction (a frozen model): the runtime loads it once per session
@@ -806,20 +823,20 @@ class SafetyConfig(VersionedModel):
     (LESSONS.md, KNOWLEDGE.md, SKILL.md) is ever merged into it.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     joint_position_margin_rad: float = Field(
-        0.0, ge=0, description="Keep joints this far (rad) inside the model's position limits."
+        0.0, le=1.0, ge=0, description="Keep joints this far (rad) inside the model's position limits."
     )
     max_joint_velocity_scale: float = Field(
         1.0, gt=0, le=1, description="Fraction of the model's joint velocity limits allowed."
     )
-    max_joint_acceleration_rad_s2: float = Field(10.0, gt=0, description="Joint acceleration bound (rad/s^2).")
+    max_joint_acceleration_rad_s2: float = Field(10.0, le=1000.0, gt=0, description="Joint acceleration bound (rad/s^2).")
     workspace_box: WorkspaceBox = Field(
         default_factory=lambda: WorkspaceBox(min=[-0.2, -0.8, -0.01], max=[1.0, 0.8, 1.2])
     )
-    max_command_duration_s: float = Field(30.0, gt=0, description="Longest single command (s).")
-    max_command_rate_hz: float = Field(1000.0, gt=0, description="Highest command rate (Hz).")
+    max_command_duration_s: float = Field(30.0, le=3600.0, gt=0, description="Longest single command (s).")
+    max_command_rate_hz: float = Field(1000.0, le=100_000.0, gt=0, description="Highest command rate (Hz).")
     clamp_allowed: tuple[str, ...] = Field(
         default_factory=tuple, description="Violation codes that may be clamped instead of rejected."
     )

@@ -14,7 +14,7 @@ from typing import Literal
 from pydantic import ConfigDict, Field, model_validator
 
 from .codec import read_yaml
-from .schemas import ProtocolModel, VersionedModel
+from .schemas import ProtocolModel, StrictNumbers, VersionedModel
 
 __all__ = ["SENSOR_KINDS", "SensorMount", "CameraNoiseSpec", "RealCameraSpec", "SensorSpec", "SensorsConfig",
            "SENSORS_FILE", "read_sensors"]
@@ -24,18 +24,18 @@ SENSOR_KINDS: tuple[str, ...] = ("rgbd_camera", "rgb_camera", "joint_state", "gr
 _CAMERAS = ("rgbd_camera", "rgb_camera")
 
 
-class SensorMount(ProtocolModel):
+class SensorMount(StrictNumbers, ProtocolModel):
     """Where a sensor sits: a model body (its extrinsics follow that body) and, for a
     camera, the model camera that renders it (default: the sensor's name), or a site."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     body: str | None = Field(None, description="Model body the sensor is fixed to ('world' for a fixed camera).")
     camera: str | None = Field(None, description="Model camera rendering this sensor (default: the sensor name).")
     site: str | None = Field(None, description="Model site of a force/torque sensor.")
 
 
-class CameraNoiseSpec(ProtocolModel):
+class CameraNoiseSpec(StrictNumbers, ProtocolModel):
     """Noise of a simulated camera, drawn from the episode seed.
 
     ``depth_sigma_per_m2``: depth noise sigma = k * z^2 (structured-light/stereo depth error
@@ -44,39 +44,39 @@ class CameraNoiseSpec(ProtocolModel):
     ``lighting_jitter``: sigma of a per-episode brightness gain around 1 (lighting variation).
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     depth_sigma_per_m2: float = Field(0.0015, ge=0, le=0.1)
     rgb_sigma: float = Field(2.0, ge=0, le=64)
     lighting_jitter: float = Field(0.08, ge=0, le=0.5)
 
 
-class RealCameraSpec(ProtocolModel):
+class RealCameraSpec(StrictNumbers, ProtocolModel):
     """A physical camera of a real target (issue 32): opened with OpenCV's ``VideoCapture``
     by ``device`` (an index such as 0, or a path such as ``/dev/video2`` or a video file),
     with its calibrated pinhole ``intrinsics`` (pixels, OpenCV convention, at the sensor's
     width x height) and, for a fixed camera, the pose of its optical frame (x right, y
     down, z forward) in the world: ``position_m`` and ``quat_wxyz``."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     device: int | str = Field(description="OpenCV VideoCapture index or path.")
-    fx: float = Field(gt=0, description="Focal length along x, pixels.")
-    fy: float = Field(gt=0, description="Focal length along y, pixels.")
-    cx: float = Field(description="Principal point x, pixels.")
-    cy: float = Field(description="Principal point y, pixels.")
+    fx: float = Field(gt=0, le=100_000, description="Focal length along x, pixels.")
+    fy: float = Field(gt=0, le=100_000, description="Focal length along y, pixels.")
+    cx: float = Field(ge=-100_000, le=100_000, description="Principal point x, pixels.")
+    cy: float = Field(ge=-100_000, le=100_000, description="Principal point y, pixels.")
     position_m: tuple[float, float, float] = Field(description="Optical frame origin in the world, m.")
     quat_wxyz: tuple[float, float, float, float] = Field(description="Optical frame orientation in the world.")
 
 
-class SensorSpec(ProtocolModel):
+class SensorSpec(StrictNumbers, ProtocolModel):
     """One sensor of a target."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_\-]+$")
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_\-]+$")
     kind: Literal["rgbd_camera", "rgb_camera", "joint_state", "gripper", "force_torque"]
-    frame_id: str = Field(min_length=1, description="Frame the measurements are expressed in.")
+    frame_id: str = Field(min_length=1, max_length=128, description="Frame the measurements are expressed in.")
     rate_hz: float = Field(gt=0, le=10000, description="Nominal sample rate, Hz.")
     width: int | None = Field(None, gt=0, le=4096, description="Image width, pixels (cameras).")
     height: int | None = Field(None, gt=0, le=4096, description="Image height, pixels (cameras).")
@@ -100,10 +100,10 @@ class SensorSpec(ProtocolModel):
         return self.mount.camera or self.name
 
 
-class SensorsConfig(VersionedModel):
+class SensorsConfig(StrictNumbers, VersionedModel):
     """``sensors.yaml``: ``targets: {target name: [SensorSpec, ...]}``."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     targets: dict[str, tuple[SensorSpec, ...]] = Field(default_factory=dict)
 

@@ -430,7 +430,10 @@ class SessionRunner:
             self.recorder = self._start_recorder(target, evidence_dir, image_events, seed=rec.seed)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:
-            logger.error("session %s: runtime error", rec.session_id, exc_info=exc)
+            # an error raised on purpose says what and where (e.g. "sensors.yaml: camera ..."):
+            # its message, not a traceback (kept at debug level)
+            logger.error("session %s: runtime error: %s", rec.session_id, exc)
+            logger.debug("session %s: runtime error", rec.session_id, exc_info=exc)
             outcome = RunOutcome(status="error", error_code=getattr(exc, "code", None) or errorcodes.TARGET_ERROR,
                                  message=str(exc), ticks=0)
         except Exception as exc:  # noqa: BLE001 - a bug must still halt the target and leave evidence

@@ -116,11 +116,17 @@ class TargetPool:
                 cached[1].close()
             self._views.pop(spec.name, None)
             target = cls.from_target_spec(spec, scene, seed=seed)
+            # the workspace's sensors.yaml entry for this target (read-only deploy config);
+            # installed before the target is kept: a refused entry (e.g. a camera larger than
+            # the framebuffer) must fail every acquire, not only the first (a warm-up's)
+            try:
+                sensors = read_sensors(self.state_dir.parent).for_target(spec.name)
+                if sensors:
+                    target.configure_sensors(sensors)
+            except BaseException:
+                target.close()
+                raise
             self._live[spec.name] = (key, target)
-            # the workspace's sensors.yaml entry for this target (read-only deploy config)
-            sensors = read_sensors(self.state_dir.parent).for_target(spec.name)
-            if sensors:
-                target.configure_sensors(sensors)
         return self._live[spec.name][1]
 
     def warm(self, spec: TargetSpec, scene: Mapping[str, Any] | None) -> bool:

@@ -8,7 +8,12 @@ uniform ``scale``) is read by :func:`load_mesh` before anything is built or move
   goal-graph file happened to be; an absolute path, a path leaving the workspace
   (``../``) or a symlink resolving outside it is refused;
 - the format is one MuJoCo decodes natively: ``.obj`` or ``.stl`` (:data:`MESH_FORMATS`);
-- the file is at most :data:`MAX_MESH_BYTES` bytes (checked before it is read);
+- the file is at most :data:`MAX_MESH_BYTES` bytes (checked before it is read), and holds
+  at most :data:`MAX_MESH_VERTICES` vertices and :data:`MAX_MESH_FACES` faces (counted on
+  the bytes, before MuJoCo decodes anything): MuJoCo's mesh processing (hull, inertia)
+  grows faster than linearly with the vertex count -- measured on the 2-core reference
+  machine 0.2 s at 5,000 vertices, 1.3 s at 20,000, 7 s at 50,000 and 99 s for an 8 MB
+  dense OBJ -- while a graspable tabletop object needs a few thousand faces;
 - MuJoCo must decode it and build its convex hull (collision uses the hull, as MuJoCo
   does for every mesh geom), and the result must have a volume: a flat or empty mesh is
   refused (:data:`MIN_EXTENT_M`, :data:`MIN_VOLUME_M3`).
@@ -28,6 +33,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,12 +42,18 @@ import numpy as np
 
 from phyagentos.errors import TargetError, format_choices
 
-__all__ = ["MeshData", "load_mesh", "MESH_FORMATS", "MAX_MESH_BYTES", "MIN_EXTENT_M", "MIN_VOLUME_M3"]
+__all__ = ["MeshData", "load_mesh", "mesh_counts", "MESH_FORMATS", "MAX_MESH_BYTES", "MAX_MESH_VERTICES",
+           "MAX_MESH_FACES", "MIN_EXTENT_M", "MIN_VOLUME_M3"]
 
 #: File suffixes MuJoCo decodes natively (case-insensitive).
 MESH_FORMATS: tuple[str, ...] = (".obj", ".stl")
 #: Largest mesh file read (bytes): a graspable tabletop object needs far fewer faces.
 MAX_MESH_BYTES = 8 * 1024 * 1024
+#: Most vertices of a mesh file (OBJ ``v`` lines; STL: three per triangle, before MuJoCo merges
+#: shared ones): about 1.3 s of MuJoCo processing at the limit on the reference machine.
+MAX_MESH_VERTICES = 20_000
+#: Most faces of a mesh file (OBJ ``f`` lines, STL triangles).
+MAX_MESH_FACES = 40_000
 #: Smallest full extent (m) of the bounding box along any axis: thinner is degenerate.
 MIN_EXTENT_M = 1e-3
 #: Smallest volume (m^3) of the convex hull: 1 mm^3.
@@ -109,6 +121,30 @@ def _resolve(path: str, root: Path, where: str) -> Path:
     return resolved
 
 
+_OBJ_VERTEX = re.compile(rb"(?m)^[ \t]*v[ \t]")
+_OBJ_FACE = re.compile(rb"(?m)^[ \t]*f[ \t]")
+_STL_ASCII_VERTEX = re.compile(rb"(?i)\bvertex\b")
+_STL_ASCII_FACET = re.compile(rb"(?i)\bfacet\b")
+
+
+def mesh_counts(data: bytes, suffix: str) -> tuple[int, int]:
+    """``(vertices, faces)`` declared by mesh file bytes, counted without decoding them
+    (linear scans in C): OBJ ``v``/``f`` lines; binary STL its triangle count (three
+    vertices each), or the declared count when the size does not match it; ASCII STL
+    its ``vertex``/``facet`` keywords."""
+    if suffix == ".obj":
+        return len(_OBJ_VERTEX.findall(data)), len(_OBJ_FACE.findall(data))
+    if suffix == ".stl":
+        if data[:5].lower() == b"solid" and b"facet" in data[:4096].lower():
+            return len(_STL_ASCII_VERTEX.findall(data)), len(_STL_ASCII_FACET.findall(data))
+        if len(data) >= 84:
+            declared = int.from_bytes(data[80:84], "little")
+            actual = (len(data) - 84) // 50
+            n = max(declared, actual)
+            return 3 * n, n
+    return 0, 0
+
+
 def load_mesh(path: str, *, root: str | Path, scale: float = 1.0, where: str = "mesh") -> MeshData:
     """Check and read the mesh file ``path`` (relative to the workspace ``root``).
 
@@ -124,7 +160,8 @@ def load_mesh(path: str, *, root: str | Path, scale: float = 1.0, where: str = "
     Raises:
         TargetError: a missing file, an unsupported format, a path resolving outside the
             workspace (``..``, absolute, or a symlink out), a file larger than
-            :data:`MAX_MESH_BYTES`, a file MuJoCo cannot decode, or a degenerate mesh
+            :data:`MAX_MESH_BYTES` or with more than :data:`MAX_MESH_VERTICES` vertices
+            or :data:`MAX_MESH_FACES` faces, a file MuJoCo cannot decode, or a degenerate mesh
             (no volume, an extent below :data:`MIN_EXTENT_M`).
     """
     if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale <= 0:
@@ -137,6 +174,11 @@ def load_mesh(path: str, *, root: str | Path, scale: float = 1.0, where: str = "
         data = fh.read(MAX_MESH_BYTES + 1)
     if len(data) > MAX_MESH_BYTES:  # grew after the stat
         raise TargetError(f"{where}: mesh {path!r} is more than {MAX_MESH_BYTES} bytes")
+    vertices, faces = mesh_counts(data, file.suffix.lower())
+    if vertices > MAX_MESH_VERTICES or faces > MAX_MESH_FACES:
+        raise TargetError(f"{where}: mesh {path!r} has {vertices} vertices and {faces} faces, more than the limit of "
+                          f"{MAX_MESH_VERTICES} vertices and {MAX_MESH_FACES} faces; simplify it (a graspable "
+                          "object needs a few thousand faces)")
     sha = hashlib.sha256(data).hexdigest()
     asset = f"probe{file.suffix.lower()}"
     spec = mujoco.MjSpec()

@@ -758,7 +758,8 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         ``fovy_deg`` overrides the model camera's field of view.
 
         Raises:
-            TargetError: a camera the model does not have, or a mount body mismatch.
+            TargetError: a camera the model does not have, a mount body mismatch, or a
+                camera larger than the model's offscreen framebuffer (``sensors.yaml`` named).
         """
         m = self._model
         specs = {}
@@ -774,6 +775,11 @@ class MuJoCoArmTarget(BaseRolloutTarget):
                 if s.mount.body and s.mount.body != body:
                     raise TargetError(f"sensor {s.name!r}: camera {cam!r} is mounted on body {body!r}, "
                                       f"sensors.yaml says {s.mount.body!r}")
+                fb_w, fb_h = int(m.vis.global_.offwidth), int(m.vis.global_.offheight)
+                if int(s.width) > fb_w or int(s.height) > fb_h:
+                    raise TargetError(f"sensors.yaml: camera {s.name!r} of target {self.name!r} is {s.width}x{s.height} "
+                                      f"pixels, larger than the model's offscreen framebuffer ({fb_w}x{fb_h}); "
+                                      f"use at most {fb_w}x{fb_h}")
                 if s.fovy_deg is not None:
                     m.cam_fovy[cid] = float(s.fovy_deg)
             elif s.kind == "force_torque" and self._ft_adr is None:

@@ -34,6 +34,7 @@ import contextlib
 import getpass
 import json
 import logging
+import math
 import re
 import socket
 from pathlib import Path
@@ -49,13 +50,14 @@ from starlette.staticfiles import StaticFiles
 
 from phyagentos.errors import PhyAgentOSError, ViewError
 from phyagentos.protocol import DOCUMENTS, SESSION_ID_PATTERN, Workspace, WorkspaceWatcher
+from phyagentos.untrusted import NotConfined, NotRegular, confined, loads_json
 
 from . import data, pages
 from .changes import FINISHED_STATES, Tracker
 from .graph_svg import to_svg
 from .scene3d import SceneRenderer, frames_of
 from .signals import session_signals
-from .security import TOKEN_HEADER, AccessPolicy, safe_path
+from .security import MAX_BODY_BYTES, TOKEN_HEADER, AccessPolicy, BodyLimit, evidence_dir, safe_path
 
 __all__ = ["create_app", "serve", "bind"]
 
@@ -63,6 +65,8 @@ logger = logging.getLogger(__name__)
 
 STATIC_DIR = Path(__file__).with_name("static")
 _ID = re.compile(f"^{SESSION_ID_PATTERN}$")
+#: Farthest free-camera distance of ``/api/scene`` (m).
+MAX_CAMERA_DISTANCE_M = 100.0
 #: Server-sent events are coalesced to at most this rate (Hz).
 MAX_EVENT_RATE_HZ = 10.0
 _WATCHED_DIRS = ("sessions", "sessions/.index", "runs", "runs/.active")
@@ -182,12 +186,22 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
     # -- JSON and images -----------------------------------------------------
     def api_tree(request: Request) -> Response:
         sid = _check_id(request.path_params["session_id"], "session id")
-        p = data.panel(lambda: data.tree_status(ws, sid))
-        return JSONResponse({"error": p.error} if p.error else (p.data or {}), status_code=500 if p.error else 200)
+        try:
+            tree = data.tree_status(ws, sid)
+        except (ViewError, NotConfined) as exc:
+            return JSONResponse({"error": str(exc)}, status_code=403)
+        except (NotRegular, ValueError) as exc:
+            return JSONResponse({"error": str(exc)}, status_code=422)
+        except OSError as exc:
+            return JSONResponse({"error": str(exc)}, status_code=500)
+        return JSONResponse(tree or {})
 
     def api_frames(request: Request) -> Response:
         sid = _check_id(request.path_params["session_id"], "session id")
-        frames = frames_of(ws.root / "evidence" / sid)
+        try:
+            frames = frames_of(evidence_dir(ws.root, sid), root=ws.root)
+        except (OSError, ValueError) as exc:
+            return JSONResponse({"error": str(exc)}, status_code=403 if isinstance(exc, NotConfined) else 422)
         if frames is None:
             return JSONResponse({"count": 0, "t": []})
         return JSONResponse({"count": len(frames["t"]), "t": [round(x, 3) for x in frames["t"]],
@@ -210,15 +224,23 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         q = request.query_params
         try:
             frame = int(q["frame"]) if q.get("frame") not in (None, "", "live") else None
-            png, info = renderer.render(sid, frame=frame, azimuth=float(q.get("az", 140)),
-                                        elevation=float(q.get("el", -25)), distance=float(q.get("dist", 1.9)),
+            az, el, dist = float(q.get("az", 140)), float(q.get("el", -25)), float(q.get("dist", 1.9))
+            if not all(math.isfinite(v) for v in (az, el, dist)) or not 0 < dist <= MAX_CAMERA_DISTANCE_M:
+                raise ValueError(f"az and el must be finite degrees, dist finite metres in (0, {MAX_CAMERA_DISTANCE_M}]")
+            png, info = renderer.render(sid, frame=frame, azimuth=az, elevation=el, distance=dist,
                                         overlays=q.get("overlays") == "1")
-        except (PhyAgentOSError, ValueError) as exc:
+        except (PhyAgentOSError, ValueError, OSError) as exc:
             return PlainTextResponse(str(exc), status_code=404)
         return Response(png, media_type="image/png",
                         headers={"X-Scene-Source": info["source"], "X-Scene-Time": f"{info['t']:.3f}",
                                  "X-Scene-Overlays": str(info.get("overlays", 0)),
                                  "Cache-Control": "no-store"})
+
+    def _confined_dir(path: Path) -> bool:
+        try:
+            return confined(ws.root, path).is_dir()
+        except OSError:
+            return False
 
     def files(request: Request) -> Response:
         try:
@@ -231,7 +253,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         if not policy.token_ok(request.headers.get(TOKEN_HEADER)):
             return JSONResponse({"error": f"missing or wrong access token ({TOKEN_HEADER} header)"}, status_code=403)
         try:
-            body = await request.json()
+            body = loads_json(await request.body(), max_bytes=MAX_BODY_BYTES)
             kind = str(body.get("kind", ""))
             sid = body.get("session_id") or None
             reason = str(body.get("reason") or "from phyagentos view")[:200]
@@ -252,7 +274,8 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         tracker = Tracker(ws, request.query_params.getlist("f"))
 
         def wanted_dirs() -> list[str]:
-            extra = [f"evidence/{sid}"] if sid and (ws.root / "evidence" / sid).is_dir() else (["evidence"] if sid else [])
+            extra = [f"evidence/{sid}"] if sid and _confined_dir(ws.root / "evidence" / sid) \
+                else (["evidence"] if sid else [])
             return [d for d in (*_WATCHED_DIRS, *extra) if (ws.root / d).is_dir()]
 
         async def stream():
@@ -329,7 +352,8 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
     async def view_error(request: Request, exc: Exception) -> Response:
         return PlainTextResponse(str(exc), status_code=400)
 
-    app = Starlette(routes=routes, middleware=[Middleware(_HostGuard, policy=policy)], lifespan=lifespan,
+    app = Starlette(routes=routes, middleware=[Middleware(_HostGuard, policy=policy), Middleware(BodyLimit)],
+                    lifespan=lifespan,
                     exception_handlers={ViewError: view_error})
     app.state.workspace = ws
     app.state.policy = policy

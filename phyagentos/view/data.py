@@ -24,7 +24,10 @@ from phyagentos.agent.coordinator import node_state_of
 from phyagentos.errors import DocumentError, PhyAgentOSError, ProtocolError, ViewError
 from phyagentos.protocol import SessionRecord, Workspace, fold_signals
 from phyagentos.protocol.archive import SessionArchive
+from phyagentos.untrusted import loads_json, read_regular
 from phyagentos.yamlsource import read_yaml
+
+from .security import evidence_dir
 
 __all__ = ["Panel", "panel", "signals_in_force", "held_state", "overview", "runs", "runs_page", "RunsCache", "RUNS_PER_PAGE", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
            "SESSION_LINK_PATTERN"]
@@ -166,7 +169,7 @@ def runs_page(ws: Workspace, page: int, *, cache: RunsCache | None = None,
 def _graph_nodes(ws: Workspace, run_id: str) -> list[dict[str, Any]]:
     """Nodes of the run's submitted goal graph (id, skill, depends_on), in file order."""
     path = ws.runs.graph_path(run_id)
-    raw = read_yaml(path, error=ViewError) if path.is_file() else None
+    raw = _yaml_file(path, ws.root)
     nodes = raw.get("nodes", []) if isinstance(raw, dict) else []
     return [{"id": str(n.get("id")), "skill": str(n.get("skill", "")), "depends_on": [str(d) for d in n.get("depends_on") or []]}
             for n in nodes if isinstance(n, dict) and n.get("id") is not None]
@@ -244,8 +247,13 @@ def _session_box(s: SessionRecord) -> dict[str, Any]:
             "strategy": s.recovery.strategy if s.recovery else None}
 
 
-def _yaml_file(path: Path) -> Any:
-    return read_yaml(path, error=ViewError) if path.is_file() else None
+def _yaml_file(path: Path, root: Path) -> Any:
+    """The YAML file ``path`` (None when absent), read only if it resolves inside ``root``
+    and is a regular file (a link out of the workspace or a FIFO is this panel's error)."""
+    try:
+        return read_yaml(path, error=ViewError, root=root)
+    except FileNotFoundError:
+        return None
 
 
 def session_detail(ws: Workspace, session_id: str) -> dict[str, Any]:
@@ -256,14 +264,14 @@ def session_detail(ws: Workspace, session_id: str) -> dict[str, Any]:
     """
     rec = ws.load_session(session_id)
     evidence_rel = f"evidence/{session_id}"
-    directory = ws.root / evidence_rel
+    directory = evidence_dir(ws.root, session_id)  # ViewError: a link out of the workspace
     files = sorted(p.name for p in directory.iterdir() if p.is_file() and not p.name.startswith(".")) \
         if directory.is_dir() else []
     signals = signals_in_force(ws)
     out: dict[str, Any] = {"record": rec.model_dump(mode="json"), "evidence_dir": evidence_rel, "files": files,
                            "signals": signals, "held": held_state(rec.state, signals)}
-    out["bundle"] = panel(lambda: _yaml_file(directory / "bundle.yaml"))
-    out["events"] = panel(lambda: _yaml_file(directory / "events.yaml") or [])
+    out["bundle"] = panel(lambda: _yaml_file(directory / "bundle.yaml", ws.root))
+    out["events"] = panel(lambda: _yaml_file(directory / "events.yaml", ws.root) or [])
     out["perception"] = panel(lambda: _perception(ws, rec, directory))
     return out
 
@@ -275,20 +283,35 @@ def _perception(ws: Workspace, rec: SessionRecord, directory: Path) -> dict[str,
         return {"source": "ENVIRONMENT.md", "sim_time_s": env.sim_time_s,
                 "entities": [e.model_dump(mode="json") for e in env.entities]}
     for name in ("terminal.yaml", "initial.yaml"):
-        snap = _yaml_file(directory / name)
+        snap = _yaml_file(directory / name, ws.root)
         if isinstance(snap, dict) and snap.get("entities"):
             return {"source": f"{directory.name}/{name}", "sim_time_s": snap.get("sim_time_s"),
                     "entities": snap["entities"]}
     return {"source": None, "entities": []}
 
 
+#: Largest ``tree.json`` the view reads (bytes): a published tree is a few kilobytes.
+MAX_TREE_JSON_BYTES = 8 * 1024 * 1024
+#: Deepest nesting of ``tree.json`` (a behaviour tree's depth is a handful of levels).
+MAX_TREE_JSON_DEPTH = 200
+
+
 def tree_status(ws: Workspace, session_id: str) -> dict[str, Any] | None:
-    """The live ``evidence/<session>/tree.json`` the runner publishes, or None before the first tick."""
-    path = ws.root / "evidence" / session_id / "tree.json"
+    """The live ``evidence/<session>/tree.json`` the runner publishes, or None before the first tick.
+
+    Raises:
+        ViewError: the evidence directory resolves outside the workspace.
+        OSError: ``tree.json`` resolves outside the workspace or is not a regular file
+            (:mod:`phyagentos.untrusted`).
+        ValueError: larger than :data:`MAX_TREE_JSON_BYTES`, deeper than
+            :data:`MAX_TREE_JSON_DEPTH` or not JSON.
+    """
+    path = evidence_dir(ws.root, session_id) / "tree.json"
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        raw = read_regular(path, limit=MAX_TREE_JSON_BYTES, root=ws.root)
     except FileNotFoundError:
         return None
+    return loads_json(raw, max_bytes=MAX_TREE_JSON_BYTES, max_depth=MAX_TREE_JSON_DEPTH)
 
 
 def memory(ws: Workspace) -> dict[str, Panel]:

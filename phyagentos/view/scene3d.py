@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import io
 import logging
+import math
+import os
 import threading
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
@@ -30,7 +32,10 @@ from phyagentos.errors import TargetError, ViewError
 from phyagentos.protocol import Workspace
 from phyagentos.runtime.target_pool import scene_for
 from phyagentos.targets.registry import DRIVERS
+from phyagentos.untrusted import open_regular
 from phyagentos.yamlsource import read_yaml
+
+from .security import evidence_dir
 
 __all__ = ["SceneRenderer", "frames_of", "overlay_markers"]
 
@@ -45,12 +50,53 @@ logger = logging.getLogger(__name__)
 _MAX_MODELS = 4
 
 
-def frames_of(directory: Path) -> dict[str, Any] | None:
-    """``{"t": [...], "qpos": (N, nq) array, "camera", "fps"[, "wall"]}`` from ``frames.npz``, or None."""
+def frames_of(directory: Path, *, root: Path | None = None) -> dict[str, Any] | None:
+    """``{"t": [...], "qpos": (N, nq) array, "camera", "fps"[, "wall"]}`` from ``frames.npz``, or None.
+
+    With ``root``, the file must resolve inside it (links followed); a FIFO or a device
+    is never opened for a blocking read.
+
+    Raises:
+        OSError: outside ``root`` or not a regular file (:mod:`phyagentos.untrusted`).
+        ValueError: not a recording, or more than :data:`MAX_FRAMES_BYTES` uncompressed.
+    """
     path = directory / "frames.npz"
-    if not path.is_file():
+    try:
+        fd = open_regular(path, root=root)
+    except FileNotFoundError:
         return None
-    with np.load(path, allow_pickle=False) as data:
+    with os.fdopen(fd, "rb") as fh:
+        _check_npz_size(fh, path)
+        return _read_frames(fh)
+
+
+#: Largest uncompressed ``frames.npz`` the view loads (bytes): an hour of a 16-DoF recording
+#: at 30 fps is about 14 MB; a zip bomb declaring gigabytes is refused before it inflates.
+MAX_FRAMES_BYTES = 256 * 1024 * 1024
+
+
+def _check_npz_size(fh, path: Path) -> None:
+    import zipfile  # noqa: PLC0415
+
+    try:
+        with zipfile.ZipFile(fh) as z:
+            total = sum(i.file_size for i in z.infolist())
+    except zipfile.BadZipFile as exc:
+        raise ValueError(f"{path.name} is not a recording (.npz): {exc}") from None
+    if total > MAX_FRAMES_BYTES:
+        raise ValueError(f"{path.name} holds {total} bytes uncompressed, more than the limit of {MAX_FRAMES_BYTES}")
+    fh.seek(0)
+
+
+def _read_frames(fh) -> dict[str, Any]:
+    try:
+        return _frames_from(fh)
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"frames.npz is not a recording: {exc}") from None
+
+
+def _frames_from(fh) -> dict[str, Any]:
+    with np.load(fh, allow_pickle=False) as data:
         out = {"t": data["t"].astype(float), "qpos": data["qpos"], "camera": str(data["camera"]),
                "fps": float(data["fps"])}
         if "wall" in data.files:
@@ -58,14 +104,14 @@ def frames_of(directory: Path) -> dict[str, Any] | None:
         return out
 
 
-def overlay_markers(directory: Path) -> list[dict[str, Any]]:
+def overlay_markers(directory: Path, *, root: Path | None = None) -> list[dict[str, Any]]:
     """Markers from ``trace.jsonl``: ``{"kind", "pos" (3,) m world}`` for perceived object
     positions (``observe``), grasp and place targets (``grasp_pose``, ``place_pose``) and
     the tool centre point's path (``proprio`` ``tcp_position_m``, at most
     :data:`MAX_PATH_POINTS`). Empty when the session has no trace yet."""
     from .signals import _read_trace  # noqa: PLC0415 - signals imports this module
 
-    trace, _ = _read_trace(directory / "trace.jsonl")
+    trace, _ = _read_trace(directory / "trace.jsonl", root=root)
     out: list[dict[str, Any]] = []
 
     def vec(v: Any) -> list[float] | None:
@@ -213,7 +259,7 @@ class SceneRenderer:
     def _state(self, session_id: str, target, data: mujoco.MjData, frame: int | None) -> dict[str, Any]:
         model = target.model
         if frame is not None:
-            frames = frames_of(self.workspace.root / "evidence" / session_id)
+            frames = frames_of(evidence_dir(self.workspace.root, session_id), root=self.workspace.root)
             if frames is None or not len(frames["t"]):
                 raise ViewError(f"session {session_id} has no recording (run with --record)")
             if not 0 <= frame < len(frames["t"]) or frames["qpos"].shape[1:] != (model.nq,):
@@ -223,7 +269,7 @@ class SceneRenderer:
             return {"source": "recording", "t": float(frames["t"][frame])}
         rec = self.workspace.load_session(session_id)
         meta_path = self.workspace.root / "targets" / rec.target / "state.yaml"
-        meta = read_yaml(meta_path, error=ViewError) if meta_path.is_file() else None
+        meta = read_yaml(meta_path, error=ViewError, root=self.workspace.root) if meta_path.is_file() else None
         if not meta or meta.get("session_id") != session_id:
             raise ViewError(f"session {session_id}: no current state (the target's checkpoint belongs to another "
                             "session) and no recording")
@@ -258,7 +304,7 @@ class SceneRenderer:
         self._renderer.update_scene(data, camera=cam)
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
         info["overlays"] = _draw_markers(self._renderer.scene, overlay_markers(
-            self.workspace.root / "evidence" / session_id)) if overlays else 0
+            evidence_dir(self.workspace.root, session_id), root=self.workspace.root)) if overlays else 0
         pixels = self._renderer.render()
         buf = io.BytesIO()
         Image.fromarray(pixels).save(buf, format="PNG")

@@ -24,6 +24,7 @@ from __future__ import annotations
 import bisect
 import json
 import logging
+import os
 import re
 from datetime import datetime
 from pathlib import Path
@@ -32,9 +33,11 @@ from typing import Any
 import numpy as np
 
 from phyagentos.errors import ViewError
+from phyagentos.untrusted import confined, json_depth, open_regular
 from phyagentos.yamlsource import read_yaml
 
 from .scene3d import frames_of
+from .security import evidence_dir
 
 __all__ = ["MAX_POINTS", "MAX_TRACE_BYTES", "session_signals"]
 
@@ -64,17 +67,24 @@ def _ts(text: str) -> float:
     return datetime.fromisoformat(str(text).replace("Z", "+00:00")).timestamp()
 
 
-def _read_trace(path: Path) -> tuple[list[dict[str, Any]], bool]:
+def _read_trace(path: Path, *, root: Path | None = None) -> tuple[list[dict[str, Any]], bool]:
+    """The JSON lines of ``path`` up to :data:`MAX_TRACE_BYTES` (and whether it was cut);
+    with ``root``, only a file resolving inside it; a FIFO or a device reads as empty."""
     out: list[dict[str, Any]] = []
-    if not path.is_file():
+    try:
+        fd = open_regular(path, root=root)
+    except FileNotFoundError:
         return out, False
-    with path.open("rb") as fh:
+    except OSError as exc:
+        logger.info("trace not read: %s", exc)
+        return out, False
+    with os.fdopen(fd, "rb") as fh:
         data = fh.read(MAX_TRACE_BYTES + 1)
     cut = len(data) > MAX_TRACE_BYTES
     for line in data[:MAX_TRACE_BYTES].splitlines():
         try:
-            rec = json.loads(line)
-        except ValueError:
+            rec = json.loads(line) if len(line) < 4096 or json_depth(line.decode("utf-8", "replace")) <= 200 else None
+        except (ValueError, RecursionError):
             continue  # a line cut by the byte limit, or not JSON
         if isinstance(rec, dict):
             out.append(rec)
@@ -99,12 +109,16 @@ def session_signals(root: Path, record: dict[str, Any], *, layout: dict[str, Any
         ViewError: the session has no evidence directory.
     """
     sid = record["session_id"]
-    directory = root / "evidence" / sid
+    directory = evidence_dir(root, sid)  # ViewError: a link out of the workspace
     if not directory.is_dir():
         raise ViewError(f"session {sid} has no evidence directory yet")
     notes: list[str] = []
-    frames = frames_of(directory)
-    trace, cut = _read_trace(directory / "trace.jsonl")
+    try:
+        frames = frames_of(directory, root=root)
+    except (OSError, ValueError) as exc:
+        frames = None
+        notes.append(f"frames.npz not read: {exc}")
+    trace, cut = _read_trace(directory / "trace.jsonl", root=root)
     if cut:
         notes.append(f"trace.jsonl read up to {MAX_TRACE_BYTES // (1024 * 1024)} MiB")
     proprio = [r for r in trace if r.get("kind") == "proprio" and isinstance(r.get("stamp_s"), (int, float))]
@@ -168,8 +182,9 @@ def session_signals(root: Path, record: dict[str, Any], *, layout: dict[str, Any
             events.append({"t": float(r["stamp_s"]), "code": "grasp.slip",
                            "message": f"{r.get('object')} slipped ({r.get('leaf')})"})
     try:
-        raw = read_yaml(directory / "events.yaml", error=ViewError) if (directory / "events.yaml").is_file() else []
-    except ViewError as exc:
+        raw = read_yaml(directory / "events.yaml", error=ViewError, root=root) \
+            if (directory / "events.yaml").is_file() else []
+    except (ViewError, OSError) as exc:
         raw, _ = [], notes.append(str(exc))
     for e in raw if isinstance(raw, list) else []:
         if not isinstance(e, dict):
@@ -204,7 +219,7 @@ def session_signals(root: Path, record: dict[str, Any], *, layout: dict[str, Any
     if fdir.is_dir():
         for p in sorted(fdir.iterdir()):
             m = _IMAGE.match(p.name)
-            if not m or not p.is_file():
+            if not m or not p.is_file() or not _inside(root, p):
                 continue
             kind = m[1]
             if kind == "initial":
@@ -218,6 +233,14 @@ def session_signals(root: Path, record: dict[str, Any], *, layout: dict[str, Any
     images.sort(key=lambda i: (i["t"], i["name"]))
     return {"t0": t0, "t1": t1, "frames": [round(x, 4) for x in ft], "plots": plots, "events": events,
             "transitions": transitions, "images": images, "notes": notes}
+
+
+def _inside(root: Path, path: Path) -> bool:
+    try:
+        confined(root, path)
+        return True
+    except OSError:
+        return False
 
 
 def nearest_frame(frames: list[float], t: float) -> int:

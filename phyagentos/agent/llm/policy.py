@@ -40,7 +40,9 @@ class InjectionFinding:
     match: str
 
     def __str__(self) -> str:
-        return f"{self.source}: {self.code} ({self.match!r} in {self.text!r})"
+        from phyagentos.untrusted import quote  # noqa: PLC0415
+
+        return f"{self.source}: {self.code} ({quote(self.match, 80)} in {quote(self.text)})"
 
 
 def screen_text(text: str, *, source: str) -> list[InjectionFinding]:

@@ -92,10 +92,13 @@ class TargetChooser:
         positions = {n: seen[n] for n in wanted if n in seen}
         regions = {r.get("name") for r in (session.scene or {}).get("regions") or [] if isinstance(r, dict)}
         unknown = [n for n in wanted if n not in seen and n not in regions]
+        declared = {str(o["name"]): [float(o["position"][0]), float(o["position"][1])]
+                    for o in (session.scene or {}).get("objects") or []
+                    if isinstance(o, dict) and o.get("name") in unknown and o.get("position") is not None}
         sel = select_target(session.skill, targets=others, positions=positions, unknown=unknown,
                             requirements=self.requirements, reach=self.reach, scene=session.scene or {},
                             pick=obj if session.skill in ACQUIRING_SKILLS else None,
-                            place=(obj, dest) if obj and dest else None)
+                            place=(obj, dest) if obj and dest else None, declared=declared)
         sel = Selection(sel.target, sel.runtime, {session.target: failed, **sel.reasons}, sel.out_of_reach, sel.fits)
         logger.info("re-target for %s (%s): %s", session.session_id, cause, sel.target or "none fits")
         self._chosen[session.session_id] = sel

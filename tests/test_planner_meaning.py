@@ -200,6 +200,8 @@ def test_a_destination_the_scene_does_not_have_is_refused_not_mapped_to_a_bin(pl
     assert result.status == "refused" and result.refusal == "unknown_destination"
     assert result.refused_by == "grounding" and result.calls == () and result.graph is None
     assert "'the kitchen sink'" in result.reason and "left_bin, right_bin" in result.reason
+    middle = planner.plan("put the red cube in the middle bin", scene=SCENE, environment=seen(SCENE))
+    assert middle.status == "refused" and middle.refusal == "unknown_destination" and "'middle'" in middle.reason
     green = planner.plan("put the red cube in the blue bin", scene=SCENE, environment=seen(SCENE))
     assert green.status == "refused" and green.refusal == "unknown_destination" and "no blue region" in green.reason
     shelf = planner.plan("stack the red cube on the green cube", scene=SCENE, environment=seen(SCENE))

@@ -68,8 +68,9 @@ _STOP = {"the", "a", "an", "of", "please", "now", "then", "and", "carefully", "g
          "with", "your", "my", "robot", "arm", "gripper", "hand", "for", "me", "can", "you", "could", "would",
          "kindly", "first", "finally", "next", "after", "by", "top", "side", "its", "their", "own", "same",
          "colour", "color", "matching", "corresponding", "one", "ones", "other", "remaining", "rest", "others",
-         "instead", "so", "it", "them", "they", "both", "all", "every", "each", "everything", "any", "some"}
-_ALL = {"all", "every", "each", "both", "everything"}
+         "instead", "so", "it", "them", "they", "both", "all", "every", "each", "everything", "anything", "any",
+         "some", "holding"}
+_ALL = {"all", "every", "each", "both", "everything", "anything"}
 _COUNTS = {"one": 1, "a": 1, "an": 1, "any": 1, "two": 2, "three": 3, "four": 4, "five": 5, "1": 1, "2": 2, "3": 3,
            "4": 4, "5": 5}
 _PRONOUNS = {"it", "them", "they", "that", "this", "these", "those"}
@@ -376,8 +377,9 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
             return "object", (), False, [("not_understood", f"stack on {quote(' '.join(words))}: could be any of "
                                          f"{', '.join(e.name for e in objs)}: say which")]
     regions = list(world.regions)
-    known = set(_STOP) | _REGION_KIND | {"left", "right", "middle", "centre", "center", "front", "back", "near",
-                                         "far", "corner", "inside", "over", "there", "here", "big", "small", "large"}
+    # where words (left, middle, corner ...) are known only as parts of a region's name: "the middle bin"
+    # among a left and a right bin names nothing there
+    known = set(_STOP) | _REGION_KIND | {"inside", "over", "there", "here"}
     known |= {p for r in regions for p in r.name.split("_")} | _colours(world)
     unknown = [w for w in ws if w not in known and w not in _PREPOSITIONS]
     if unknown:
@@ -418,13 +420,16 @@ def read_request(request: str, world: World) -> Meaning:
     for part in _parts(request, world):
         low = part.lower()
         words = _tokens(low)
-        verbs = [w for w in words if w in _VERBS]
+        # "keep holding it": a hold, not a keep
+        verbs = [("hold" if w == "keep" and words[i + 1:i + 2] == ["holding"] else w)
+                 for i, w in enumerate(words) if w in _VERBS]
         verb_word = verbs[0] if verbs else None
         negated = bool(_NEGATION.search(low))
         if _NOTHING.search(low) and not [w for w in verbs if w not in ("leave", "keep")]:
             meaning.intents.append(Intent(part, "leave", tuple(e.name for e in world.objects)))
             continue
-        start = words.index(verb_word) + 1 if verb_word else 0
+        start = (words.index("keep") + 2 if verbs and verb_word == "hold" and "hold" not in words
+                 else words.index(verb_word) + 1 if verb_word else 0)
         if verb_word in ("pick", "take", "lift") and start < len(words) and words[start] == "up":
             start += 1
         body = words[start:]

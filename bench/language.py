@@ -238,8 +238,9 @@ def held_out_cases(path: Path = HELD_OUT) -> list[Case]:
     scenes = data.get("scenes") or {}
     out = []
     for i, c in enumerate(data.get("cases") or []):
-        truth = {k: tuple((list(v) + [None])[:2]) if isinstance(v, list) else (v, None)
-                 for k, v in (c.get("truth") or {}).items()}
+        # YAML 1.1 reads a bare `on` as true: the relation is a word, never a boolean
+        truth = {k: tuple(([("on" if v[0] is True else v[0])] + list(v[1:]) + [None])[:2]) if isinstance(v, list)
+                 else (v, None) for k, v in (c.get("truth") or {}).items()}
         if "count" in c:
             truth = {"*": ("count", c["count"][0], int(c["count"][1]))}
         out.append(Case(c["category"], i, c["instruction"], json.loads(json.dumps(scenes[c["scene"]])), truth,

@@ -336,7 +336,8 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
     found, misses = _filter(content, cands, world)
     plural = any(w in _KIND and w.endswith(("s", "es")) for w in words) or set(words) & _ALL
     if misses and not found:
-        return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene ({'; '.join(misses)})")]
+        return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene "
+                                             f"({'; '.join(misses)})")]
     if misses:
         return (), None, [("not_understood", f"{quote(' '.join(words))}: {'; '.join(misses)}")]
     if not found:
@@ -365,15 +366,17 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
             if len(sup) == 1:
                 return "object", (sup[0],), False, []
         objs, misses = _filter([w for w in ws if w not in _STOP], others, world)
-        mentioned = [w for w in ws if w in _KIND | {"one", "ones"} or w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER
+        nouns = _KIND | {"one", "ones"}
+        mentioned = [w for w in ws if w in nouns or w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER
                      or any(w in _name_parts(e) or w == e.name for e in others)]
-        if mentioned and (set(ws) & (_KIND | {"one", "ones"}) or not any(w in _name_parts(r) or w in _REGION_KIND for r in world.regions
-                                                     for w in ws)):
+        names_region = any(w in _name_parts(r) or w in _REGION_KIND for r in world.regions for w in ws)
+        if mentioned and (set(ws) & nouns or not names_region):
             if len(objs) == 1 and not misses:
                 return "object", (objs[0].name,), False, []
             if misses or not objs:
+                have = "; ".join(misses) or "it has " + ", ".join(e.name for e in others)
                 return "object", (), False, [("unknown_destination", f"stack on {quote(' '.join(words))}: no such "
-                                             f"object in the scene ({'; '.join(misses) or 'it has ' + ', '.join(e.name for e in others)})")]
+                                                                     f"object in the scene ({have})")]
             return "object", (), False, [("not_understood", f"stack on {quote(' '.join(words))}: could be any of "
                                          f"{', '.join(e.name for e in objs)}: say which")]
     regions = list(world.regions)
@@ -384,8 +387,9 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
     unknown = [w for w in ws if w not in known and w not in _PREPOSITIONS]
     if unknown:
         have = ", ".join(r.name for r in regions) or "no region"
+        named = ", ".join(repr(w) for w in unknown)
         return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))} is not in the "
-                                     f"scene ({', '.join(repr(w) for w in unknown)} names nothing there); it has {have}")]
+                                                             f"scene ({named} names nothing there); it has {have}")]
     scored = []
     for r in regions:
         parts = set(r.name.split("_"))
@@ -478,8 +482,9 @@ def read_request(request: str, world: World) -> Meaning:
             kind, dests, by_colour, why = _read_destination(dest_words, prep, world, previous, objects)
         problems += why
         if verb_word is None and not dest_words:
-            problems.append(("not_understood", f"{quote(part)}: no action the skills can do (put/place/move ... in "
-                                               f"a region, stack ... on an object, pick up/hold, leave ... where it is)"))
+            problems.append(("not_understood", f"{quote(part)}: no action the skills can do (put/place/move ... "
+                                               f"in a region, stack ... on an object, pick up/hold, leave ... where "
+                                               f"it is)"))
         elif verb_word in _STACK and kind != "object" and not problems:
             problems.append(("not_understood", f"{quote(part)} asks to stack, but names no object to stack on"))
         elif verb_word in _MOVE and not dest_words:
@@ -488,8 +493,8 @@ def read_request(request: str, world: World) -> Meaning:
         if not problems and verb == "stack" and count is None and len(objects) > 1:
             problems.append(("not_understood", f"{quote(part)} stacks several objects on one: say the order"))
         if not problems and by_colour:
-            lacking = [o for o in objects if not Meaning.destinations_for(meaning, Intent(part, verb, (o,), by_colour=True),
-                                                                          o, world)]
+            lacking = [o for o in objects
+                       if not meaning.destinations_for(Intent(part, verb, (o,), by_colour=True), o, world)]
             if lacking:
                 problems.append(("unknown_destination", f"{quote(part)}: no region of the colour of "
                                                         f"{', '.join(lacking)}"))

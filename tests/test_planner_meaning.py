@@ -304,3 +304,35 @@ def test_the_rule_ladder_moves_an_unreachable_node_to_a_target_that_reaches_it(t
                                    "recovery": Revision(strategy=rev.strategy, cause="ik_unreachable", step=1,
                                                         target="franka_tabletop")})
     assert ladder.plan(child, unreachable, history=[rec]) is None
+
+
+def test_a_node_after_a_look_first_observe_may_move_to_a_target_that_reaches_it(tmp_path):
+    """A planned graph on a fresh workspace looks first (``s0_observe``) and every step depends on it.
+    An observe moves nothing, so the step failing ik_unreachable on the SO-101 may still move to the
+    Franka (measured: three planned steps on the SO-101 ended 'no recovery strategy left for
+    ik_unreachable'); an upstream node that acted still keeps the node in its world."""
+    from phyagentos.agent.recovery import RecoveryPlanner
+    from phyagentos.agent.retarget import TargetChooser
+    from phyagentos.protocol import Diagnosis, SessionRecord
+    from phyagentos.protocol.lifecycle import utc_now
+
+    now = utc_now()
+    ws = Workspace.create(tmp_path / "ws")
+    scene = {"objects": [{"name": "cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.72, -0.3]}],
+             "regions": [{"name": "bin", "center": [0.36, 0.2], "half_extents": [0.07, 0.07]}]}
+
+    def record(node, skill, depends_on=(), **params):
+        return SessionRecord(session_id=f"r1-{node}-1", run_id="r1", node=node, skill=skill, target="so101_tabletop",
+                             parameters=params, scene=scene, accept={"still": {"max_joint_motion_rad": 0.05}},
+                             depends_on=list(depends_on), created_at=now, updated_at=now)
+
+    ws.submit_session(record("s0_observe", "observe", samples=4))
+    ws.submit_session(record("s0_pick", "pick", object="cube"))
+    unreachable = Diagnosis(cause="ik_unreachable", category="planning", summary="IK did not converge")
+    after_look = record("s1_pick_and_place_cube", "pick_and_place", ["s0_observe"], object="cube", region="bin")
+    rev = RecoveryPlanner(retarget=TargetChooser(ws)).plan(after_look, unreachable)
+    assert rev is not None and rev.target == "franka_tabletop"
+    after_pick = record("s1_place_cube", "place", ["s0_pick"], object="cube", region="bin")
+    chooser = TargetChooser(ws)
+    assert RecoveryPlanner(retarget=chooser).plan(after_pick, unreachable) is None
+    assert "depends on s0_pick" in chooser.choose(after_pick, cause="ik_unreachable").reasons["*"]

@@ -8,7 +8,8 @@
 and writes it with the plan's record (model calls, injected context, selector reasons)
 under ``WS/plans/<plan id>/``; with ``--run`` the graph then runs like ``phyagentos run``.
 Without ``--scene`` it plans on the tabletop scene of ``goal_graphs/pick_and_place.yaml``.
-A refusal prints its reason and exits 1; a plan still invalid after the repair round is
+A refusal prints its reason and exits 1 (a request that asks that nothing moves, "leave the
+blocks where they are", plans nothing and exits 0); a plan still invalid after the repair round is
 an error (exit 2), and so is a plan the whole-graph check of ``validate`` refuses
 (:func:`phyagentos.graph_check.check_goal_graph`: the scene, trees, names, one object
 per arm, reachability per target), before anything runs. The model comes from
@@ -90,21 +91,24 @@ def make_library_planner(workspace, *, client=None):
 
 
 def make_reviser(kind: str, workspace_dir: str | Path):
-    """``None`` for the rule ladder (the verifier's default), or a ModelReviser (the configured model) with the
-    ladder as fallback and a TargetChooser that asks the Runtime's IK (a re-target to another capable target)."""
-    if kind == "rules":
-        return None
+    """The rule ladder, or a ModelReviser (the configured model) with the ladder as fallback; both with a
+    TargetChooser that asks the Runtime's IK, so a node whose arm cannot reach (``ik_unreachable``) or plan
+    it moves to another capable target that reaches it."""
     from phyagentos.agent.recovery import RecoveryPlanner  # noqa: PLC0415
     from phyagentos.agent.retarget import TargetChooser  # noqa: PLC0415
     from phyagentos.protocol import Workspace  # noqa: PLC0415
-    from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415
-    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
     from phyagentos.runtime.reach_query import answer_reach_query  # noqa: PLC0415
     from functools import partial  # noqa: PLC0415
 
     ws = Workspace.create(workspace_dir)
     chooser = TargetChooser(ws, reach=partial(answer_reach_query, root=ws.root))
-    return ModelReviser(make_client(load_llm_config(workspace_dir)), fallback=RecoveryPlanner(), retarget=chooser)
+    if kind == "rules":
+        return RecoveryPlanner(retarget=chooser)
+    from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415
+    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
+
+    return ModelReviser(make_client(load_llm_config(workspace_dir)), fallback=RecoveryPlanner(retarget=chooser),
+                        retarget=chooser)
 
 
 def add_agent_commands(sub: argparse._SubParsersAction) -> None:
@@ -162,7 +166,9 @@ def _cmd_plan(args, out, err) -> int:
         calls = ", ".join(f"{c.purpose} {c.prompt_tokens}+{c.completion_tokens} tok {c.latency_s:.2f} s"
                           for c in result.calls)
         err.print(f"[dim]{planner.client.provider} {planner.client.model}: {calls or 'no model call'}[/dim]")
-        if result.status != "planned":
+        if result.status == "nothing_to_do":
+            out.print(f"nothing to do: {result.reason}")
+        elif result.status != "planned":
             out.print(f"[red]refused ({result.refusal}, by {result.refused_by})[/red]: {result.reason}")
         else:
             print(result.graph_yaml, end="")
@@ -176,7 +182,8 @@ def _cmd_plan(args, out, err) -> int:
     if result.status != "planned":
         if args.json and args.run:
             print(json.dumps({**result.to_dict(), "plan_id": plan_id}, ensure_ascii=False))
-        return EXIT_NOT_SUCCEEDED
+        # a request that asks that nothing moves is met by doing nothing (exit 0); a refusal is not
+        return EXIT_OK if result.status == "nothing_to_do" else EXIT_NOT_SUCCEEDED
     if not args.run:
         return EXIT_OK
     from phyagentos.cli import _cmd_run  # noqa: PLC0415

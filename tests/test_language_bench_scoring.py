@@ -54,3 +54,21 @@ def test_an_executed_stack_is_scored_on_the_simulators_ground_truth(tmp_path, la
     reverse = language.Case("stack", 0, "", case.scene, {"red_cube": ("on", "blue_cube")})
     (miss,) = language.truth_misses(reverse, ents, language.declared_world(case.scene))
     assert miss.startswith("red_cube not on blue_cube")
+
+
+def test_the_held_out_part_loads_apart_from_the_tuned_categories_and_is_summarised_on_its_own(language):
+    held = language.held_out_cases()
+    assert held and {c.part for c in held} == {"held_out"}
+    stack = next(c for c in held if c.category == "stack")
+    assert ("on", "blue_cube") in stack.truth.values()  # a bare `on` in YAML is true: read as the relation
+    assert {"hold", "nothing", "comparative", "unknown_destination", "other_language",
+            "instruction_names"} <= {c.category for c in held}
+    tuned = [language.make_case(cat, 0) for cat in language.CATEGORIES]
+    assert {c.part for c in tuned} == {"tuned"} and not {c.instruction for c in tuned} & {c.instruction for c in held}
+    rows = [{"part": c.part, "category": c.category, "must_refuse": c.must_refuse, "status": "refused",
+             "seconds": 0.0, "correct": c.must_refuse, "valid": False, "symbolic_correct": False}
+            for c in tuned + held]
+    summary = language.summarise(rows)
+    assert set(summary["parts"]) == {"tuned", "held_out"}
+    assert summary["parts"]["held_out"]["overall"]["instructions"] == len(held)
+    assert summary["parts"]["tuned"]["overall"]["instructions"] == len(tuned)

@@ -36,7 +36,7 @@ from phyagentos.llm import LLMClient, LLMError, call_record
 from . import dag as dagmod
 from .goal_graph import GoalGraph, load_goal_graph, parse_goal_graph
 from .llm.policy import screen_text
-from .planner import REFUSAL_REASONS, PlannerError, PlanResult, check_request
+from .planner import MODEL_REFUSAL_REASONS as REFUSAL_REASONS, PlannerError, PlanResult, check_request
 
 __all__ = ["LibraryPlanner", "goal_candidates", "LIBRARY_SYSTEM_PROMPT"]
 

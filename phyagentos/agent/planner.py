@@ -65,14 +65,15 @@ from phyagentos.protocol import ModelCallRecord
 from phyagentos.protocol.reach import ReachOracle
 
 from .goal_graph import GoalGraph, parse_goal_graph
-from .llm.decompose import Clause, decompose, ground
+from .llm.decompose import Clause, ground
+from .llm.meaning import Meaning, read_request
 from .llm.policy import InjectionFinding, screen_text
 from .llm.prompt import ModelContextBuilder
 from .llm.world import PALETTE, World, perceived_world, world_from_environment, world_from_scene
 from .selector import Selection, select_target
 
-__all__ = ["GoalPlanner", "PlanResult", "PlanStep", "PlannerError", "REFUSAL_REASONS", "PLAN_SKILLS",
-           "plan_schema", "write_plan", "SYSTEM_PROMPT", "MAX_REQUEST_CHARS", "check_request"]
+__all__ = ["GoalPlanner", "PlanResult", "PlanStep", "PlannerError", "REFUSAL_REASONS", "MODEL_REFUSAL_REASONS",
+           "PLAN_SKILLS", "plan_schema", "write_plan", "SYSTEM_PROMPT", "MAX_REQUEST_CHARS", "check_request"]
 
 logger = logging.getLogger(__name__)
 
@@ -95,8 +96,12 @@ def check_request(request: str) -> None:
                            f"{MAX_REQUEST_CHARS}: {quote(request)}")
 
 
-#: Why a request is refused.
-REFUSAL_REASONS = ("unknown_object", "out_of_reach", "unsafe", "impossible")
+#: Why a model may refuse a request (the enum of its schema's ``reason``).
+MODEL_REFUSAL_REASONS = ("unknown_object", "out_of_reach", "unsafe", "impossible")
+#: Why a request is refused: the model's reasons, and the planner's own -- a destination the scene does
+#: not have (``unknown_destination``), a request in another language (``unsupported_language``), a part
+#: of the request the rules cannot account for or a plan that does not mean the request (``not_understood``).
+REFUSAL_REASONS = MODEL_REFUSAL_REASONS + ("unknown_destination", "unsupported_language", "not_understood")
 #: Skills a plan step may use (tabletop manipulation): move onto a destination, or pick and hold.
 PLAN_SKILLS = ("pick_and_place", "pick")
 #: Frames the look-first ``observe`` node fuses (as the verifier's another view: recovery.ANOTHER_VIEW_SAMPLES).
@@ -160,10 +165,11 @@ class PlanResult:
 
     Attributes:
         request: the instruction as given.
-        status: ``planned`` or ``refused``.
+        status: ``planned``, ``refused``, or ``nothing_to_do`` (every clause asks that nothing moves:
+            no graph, nothing runs).
         reason: human-readable reason (refusals) or summary.
         refusal: one of :data:`REFUSAL_REASONS` when refused.
-        refused_by: ``policy``, ``model``, ``grounding`` or ``selector``.
+        refused_by: ``policy``, ``language``, ``grounding``, ``meaning``, ``model`` or ``selector``.
         steps: the decoded steps (planned).
         graph_yaml: the goal graph (planned), validated.
         graph: the parsed :class:`GoalGraph` (planned).
@@ -222,6 +228,10 @@ def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps:
         dest = regions + [f"{_ON}{o}" for o in objects if o != obj] + ["none"]
         if destinations is not None:
             dest = [d for d in dest if d in destinations or d == "none"]
+        if "pick" not in skills:  # every step moves its object somewhere
+            dest = [d for d in dest if d != "none"]
+        elif list(skills) == ["pick"]:  # pick and hold: no destination
+            dest = ["none"]
         return {"type": "object",
                 "properties": {"skill": {"enum": list(skills)}, "object": {"enum": [obj] if obj else ["none"]},
                                "destination": {"enum": dest}},
@@ -233,7 +243,7 @@ def plan_schema(world: World, *, skills: Sequence[str] = PLAN_SKILLS, max_steps:
         "type": "object",
         "properties": {
             "decision": {"enum": ["plan", "refuse"]},
-            "reason": {"enum": ["none", *REFUSAL_REASONS]},
+            "reason": {"enum": ["none", *MODEL_REFUSAL_REASONS]},
             "steps": {"type": "array", "maxItems": max_steps, "items": items},
         },
         "required": ["decision", "reason", "steps"],
@@ -304,23 +314,28 @@ class GoalPlanner:
             return PlanResult(request=request, status="refused", refusal="unsafe", refused_by="policy",
                               reason="rejected by the tool policy: " + "; ".join(str(f) for f in findings),
                               findings=tuple(findings), seconds=time.perf_counter() - started)
-        clauses = [ground(c, world) for c in decompose(request, world)]
-        context = {"world": world.source}
-        return self._plan_clauses(request, clauses, world, scene, name=name, prefer_target=prefer_target,
+        meaning = read_request(request, world)
+        context: dict[str, Any] = {"world": world.source}
+        return self._plan_clauses(request, meaning, world, scene, name=name, prefer_target=prefer_target,
                                   prior_attempts=prior_attempts, started=started, context=context)
 
-    def _plan_clauses(self, request: str, clauses: Sequence[Clause], world: World, scene: Mapping[str, Any], *,
+    def _plan_clauses(self, request: str, meaning: Meaning, world: World, scene: Mapping[str, Any], *,
                       name: str, prefer_target: str | None, prior_attempts: Sequence[str], started: float,
                       context: dict[str, Any]) -> PlanResult:
-        """Plan a request the grammar side split (:mod:`.llm.decompose`): one model call per clause, its answer
-        one step (of the clause's fixed object, if any), each with its repair round; then the steps are
-        checked together and compiled as one graph."""
+        """Plan a request the grammar side read (:mod:`.llm.meaning`, :mod:`.llm.decompose`): one model call per
+        clause, its answer one step (of the clause's fixed object, skill and destinations), each with its repair
+        round; then the steps are checked together against the request's meaning and compiled as one graph."""
         calls: list[LLMCall] = []
         outputs: list[str] = []
         repairs: list[str] = []
         records: list[ModelCallRecord] = []
         steps: list[PlanStep] = []
-        context["clauses"] = [{"text": c.text, "object": c.object, "destinations": c.destinations} for c in clauses]
+        clauses = meaning.clauses(world)
+        context["meaning"] = [{"text": i.text, "verb": i.verb, "objects": list(i.movers()),
+                               "destinations": list(i.destinations), "by_colour": i.by_colour,
+                               "excluded": list(i.excluded)} for i in meaning.intents]
+        context["clauses"] = [{"text": c.text, "object": c.object, "destinations": c.destinations,
+                               "skills": c.skills} for c in clauses]
         part = (lambda t: f"clause {t!r}: ") if len(clauses) > 1 else (lambda t: "")
 
         def result(**fields) -> PlanResult:
@@ -328,17 +343,32 @@ class GoalPlanner:
                               repairs=tuple(repairs), records=tuple(records), steps=tuple(steps),
                               seconds=time.perf_counter() - started, **fields)
 
+        if meaning.language is not None:
+            return result(status="refused", refusal="unsupported_language", refused_by="language",
+                          reason=f"the request {quote(request)} reads as {meaning.language}; the planner reads "
+                                 f"English only (its grammar rules and the offline model are English-only): say "
+                                 f"it in English")
         unknown = self._unknown_mentions(request, world)
         if unknown:
             why = (f"the request names {', '.join(unknown)}, which the scene ({world.source}) does not have; "
                    f"it has {', '.join(_describe(world))}")
             return result(status="refused", refusal="unknown_object", refused_by="grounding", reason=why)
+        if meaning.problems:
+            code = meaning.problems[0][0]
+            return result(status="refused", refusal=code,
+                          refused_by="grounding" if code != "not_understood" else "meaning",
+                          reason=f"cannot account for all of {quote(request)}: "
+                                 + "; ".join(msg for _, msg in meaning.problems))
+        if meaning.nothing_to_do:
+            return result(status="nothing_to_do", reason=f"{quote(request)} asks that nothing moves: no plan is "
+                                                          f"needed, nothing runs")
         for k, clause in enumerate(clauses):
             text = clause.text
             if steps and re.search(r"\b(it|that one)\b", text):  # "then stack the green cube on it"
                 prev = world.get(steps[-1].object)
                 text = re.sub(r"\b(it|that one)\b", f"the {prev.describe()}", text)
-                clause = ground(Clause(text, clause.object), world)
+                clause = (Clause(text, clause.object, clause.destinations, clause.skills) if clause.skills
+                          else ground(Clause(text, clause.object), world))
             ask = text if clause.object is None else f"{text} (this step moves the {world.get(clause.object).describe()})"
             ctx = self.context_builder.build(request=ask, environment=_describe(world), prior_attempts=prior_attempts,
                                              lessons=self.lessons)
@@ -347,7 +377,12 @@ class GoalPlanner:
                 messages += [{"role": "user", "content": user},
                              {"role": "assistant", "content": json.dumps(answer, separators=(",", ":"))}]
             messages.append({"role": "user", "content": ctx.text})
-            schema = plan_schema(world, skills=self.plan_skills, max_steps=1, only=clause.object,
+            skills = [s for s in (clause.skills or self.plan_skills) if s in self.plan_skills]
+            if not skills:
+                return result(status="refused", refusal="impossible", refused_by="meaning",
+                              reason=f"{quote(text)} needs the skill {' or '.join(clause.skills)}, which the "
+                                     f"runtime does not offer")
+            schema = plan_schema(world, skills=skills, max_steps=1, only=clause.object,
                                  destinations=clause.destinations)
             if k == 0:
                 context.update(ctx.to_dict())  # what the ContextBuilder injected (the first clause's; all alike)
@@ -368,7 +403,7 @@ class GoalPlanner:
                                                    detail=f"{part(text)}model refusal ({reason})"))
                         return result(status="refused", refusal=reason, refused_by="model",
                                       reason=f"the model refused ({reason}) the part {quote(text)}")
-                    self._check_grounded(text, decoded, world)
+                    self._check_grounded(text, decoded, world, clause)
                     self._check_structure(steps + decoded, world)
                 except _Invalid as exc:
                     message = str(exc)
@@ -386,6 +421,12 @@ class GoalPlanner:
             else:
                 raise PlannerError(f"the plan for {quote(request)} is still invalid after one repair round of the part "
                                    f"{quote(text)}: {repairs[-1]} (model output: {outputs[-1]!r})")
+        misses = meaning.unaccounted(steps, world)
+        if misses:
+            if records:
+                records[-1] = records[-1].model_copy(update={"outcome": "refused", "detail": "; ".join(misses)[:500]})
+            return result(status="refused", refusal="not_understood", refused_by="meaning",
+                          reason=f"the plan does not mean {quote(request)}: " + "; ".join(misses))
         graph_dict, selections, far = self._compile(steps, world, scene, name=name, request=request,
                                                     prefer_target=prefer_target)
         if far:
@@ -451,15 +492,21 @@ class GoalPlanner:
         return bool((entity.colour and entity.colour in request_words) or (entity.size and entity.size in request_words)
                     or (parts & request_words - _KIND_WORDS))
 
-    def _check_grounded(self, request: str, steps: Sequence[PlanStep], world: World) -> None:
+    def _check_grounded(self, request: str, steps: Sequence[PlanStep], world: World,
+                        clause: Clause | None = None) -> None:
         words = set(_words(request))
+        if clause is not None and clause.object is not None:
+            # the grammar side fixed the object (a comparative, a pronoun, a quantifier): it must be that one
+            for s in steps:
+                if s.object != clause.object:
+                    raise _Invalid(f"this step moves {clause.object}, not {s.object}")
         for s in steps:
             dest = world.get(s.destination) if s.destination else None
             if dest is not None and dest.kind == "object" and not words & _STACK_WORDS:
                 regions = ", ".join(e.name for e in world.regions)
                 raise _Invalid(f"the request does not ask to stack anything on {dest.name}; the regions are {regions}")
-        if words & _QUANTIFIERS:
-            return  # "all", "both", "sort", "except" ...: any object may be meant
+        if words & _QUANTIFIERS or (clause is not None and clause.object is not None):
+            return  # "all", "both", "sort", "except" ..., or fixed by the grammar side: any object may be meant
         for s in steps:
             ent = world.get(s.object)
             if ent is not None and not self._refers_to(words, ent):
@@ -577,13 +624,19 @@ class GoalPlanner:
         that does. When no target fits every step, the step that leaves none is returned unselected
         (``out_of_reach``, with each target's reason and the targets the earlier steps allowed)."""
         sels = []
+        # What the scene declares (the user's statement, not the simulator's state): where an object
+        # not perceived yet is checked for reach and ranked, so a fresh workspace picks an arm that
+        # reaches the declared positions instead of a tie-break.
+        declared = {e.name: e.position for e in world_from_scene(scene).objects}
         for s in steps:
             positions = {n: world.get(n).position for n in (s.object, s.destination) if n}
+            unknown = [n for n, p in positions.items() if p is None]
             sels.append(select_target(s.skill, targets=self.targets,
                                       positions={n: p for n, p in positions.items() if p is not None},
-                                      unknown=[n for n, p in positions.items() if p is None], prefer=prefer_target,
+                                      unknown=unknown, prefer=prefer_target,
                                       reach=self.reach, scene=scene, pick=s.object,
-                                      place=(s.object, s.destination) if s.destination else None))
+                                      place=(s.object, s.destination) if s.destination else None,
+                                      declared={n: declared[n] for n in unknown if n in declared}))
         if any(sel.target is None for sel in sels):
             return sels
 

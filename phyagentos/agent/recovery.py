@@ -52,6 +52,14 @@ runtime_error          never retried automatically, an error in the software is 
                        fixed by a different strategy
 =====================  ==========================================================
 
+**Another arm.** Given a target chooser (:class:`~phyagentos.agent.retarget.TargetChooser`, wired by
+the composition root: ``phyagentos run`` and ``plan --run`` do), a cause of the arm's own reach or
+planning (``ik_unreachable``, and ``planning_failed`` once its ladder is spent) moves the node to
+another enabled target that has the skill's capabilities and reaches the poses (the selector, asked
+about the positions the failed attempt perceived, else the scene's declared ones): strategy
+``switch_target``, once along the lineage, only for a node without upstream nodes (another target
+is another world). Without a chooser, or when none fits, the ladder ends as before.
+
 Grip forces are per finger (the Franka Hand allows 70 N continuous); planner names are
 OMPL planners the runtime offers (``phyagentos.motion.planner.PLANNERS``).
 
@@ -215,10 +223,13 @@ class RecoveryPlanner:
     """
 
     def __init__(self, ladders: Mapping[str, Sequence[Strategy]] | None = None,
-                 skills: Mapping[str, SkillInfo] | None = None):
+                 skills: Mapping[str, SkillInfo] | None = None, retarget: Any = None):
         self.ladders = dict(LADDERS if ladders is None else ladders)
         self._skills = skills
         self._upstream_skill = "pick"
+        #: a :class:`~phyagentos.agent.retarget.TargetChooser` (``choose(session, cause=...) -> Selection``),
+        #: or ``None``: no re-target
+        self.retarget = retarget
 
     @property
     def skills(self) -> Mapping[str, SkillInfo]:
@@ -280,4 +291,22 @@ class RecoveryPlanner:
             return Revision(strategy=strategy.name, cause=diagnosis.cause, step=step + 1, parameters=values,
                             limits=limits, skill=strategy.skill,
                             rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> {strategy.description}")
-        return None
+        return self._switch_target(session, diagnosis, history, step=len(ladder) + 1)
+
+    def _switch_target(self, session: SessionRecord, diagnosis: Diagnosis, history: Sequence[SessionRecord], *,
+                       step: int) -> Revision | None:
+        """The node on another target that reaches it (see the module docstring), or ``None``."""
+        from .retarget import RETARGET_CAUSES  # noqa: PLC0415  (retarget imports this module)
+
+        if self.retarget is None or diagnosis.cause not in RETARGET_CAUSES:
+            return None
+        if any(rec.recovery is not None and rec.recovery.target for rec in [*history, session]):
+            return None  # once along the lineage
+        chosen = self.retarget.choose(session, cause=diagnosis.cause)
+        if chosen.target is None:
+            return None
+        why = chosen.reasons.get(chosen.target, "")
+        return Revision(strategy=f"switch_target_to_{chosen.target}", cause=diagnosis.cause, step=step,
+                        target=chosen.target, selection=dict(chosen.reasons),
+                        rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> run node {session.node!r} on "
+                                  f"{chosen.target} instead of {session.target} ({why})")

@@ -11,7 +11,10 @@ reach oracle the composition root wires (the Runtime's IK through
 
 A target is its own world (each simulates its own, or is a real robot): a node whose upstream
 nodes moved things on the first target would not find them on another. So a re-target is only
-offered for a node without upstream nodes (``depends_on`` empty); otherwise the answer says why
+offered for a node whose upstream nodes moved nothing: none, or only nodes of a skill that looks
+(:data:`LOOKING_SKILLS`, e.g. the Goal Planner's look-first ``observe`` node on a fresh
+workspace: the re-targeted node perceives its own world again before it acts); an upstream node
+whose sessions cannot be found counts as one that moved things. Otherwise the answer says why
 none is offered. The nodes downstream of a re-targeted node follow it to the new target
 (:meth:`phyagentos.agent.coordinator.AgentCoordinator.world_target`).
 """
@@ -21,7 +24,7 @@ from __future__ import annotations
 import logging
 from typing import Any, Mapping, Sequence
 
-from phyagentos.errors import VerifierError
+from phyagentos.errors import ProtocolError, VerifierError
 from phyagentos.protocol import SessionRecord, Workspace
 from phyagentos.protocol.reach import ReachOracle
 
@@ -29,12 +32,14 @@ from .recovery import ACQUIRING_SKILLS
 from .selector import Selection, SkillRequirements, select_target
 from .verifier import load_evidence
 
-__all__ = ["RETARGET_CAUSES", "TargetChooser"]
+__all__ = ["LOOKING_SKILLS", "RETARGET_CAUSES", "TargetChooser"]
 
 logger = logging.getLogger(__name__)
 
 #: Causes that belong to the arm, not to the world: another arm may reach or plan what this one cannot.
 RETARGET_CAUSES = frozenset({"ik_unreachable", "planning_failed"})
+#: Skills that only look: an upstream node of these left nothing in its target's world.
+LOOKING_SKILLS = frozenset({"observe"})
 
 
 class TargetChooser:
@@ -68,15 +73,30 @@ class TargetChooser:
                 for e in bundle.initial.get("entities") or []
                 if e.get("kind") == "object" and e.get("position") is not None}
 
+    def _acting_upstream(self, session: SessionRecord) -> list[str]:
+        """The upstream nodes of ``session`` that may have moved things: all but those whose sessions in
+        this run are of a :data:`LOOKING_SKILLS` skill (a node with no session found counts as acting)."""
+        if not session.depends_on:
+            return []
+        skills: dict[str, set[str]] = {}
+        try:
+            for rec in self.workspace.list_sessions(run_id=session.run_id):
+                skills.setdefault(rec.node, set()).add(rec.skill)
+        except (ProtocolError, OSError) as exc:  # unreadable: every upstream node counts as acting
+            logger.warning("upstream sessions of %s not read: %s", session.session_id, exc)
+            return list(session.depends_on)
+        return [n for n in session.depends_on if not skills.get(n) or not skills[n] <= LOOKING_SKILLS]
+
     def choose(self, session: SessionRecord, *, cause: str, targets: Sequence[Mapping[str, Any]] | None = None) -> Selection:
         """The selector's choice among the targets other than ``session.target`` for ``session``'s node
         (``Selection.target`` ``None`` when none fits, with each target's reason). Asked once per session."""
         if session.session_id in self._chosen:
             return self._chosen[session.session_id]
         failed = f"failed here: {cause}"
-        if session.depends_on:
+        acting = self._acting_upstream(session)
+        if acting:
             sel = Selection(None, None, {session.target: failed, "*": (
-                f"not offered: the node depends on {', '.join(session.depends_on)}, whose effects are in "
+                f"not offered: the node depends on {', '.join(acting)}, whose effects are in "
                 f"{session.target}'s world; another target is another world")})
             self._chosen[session.session_id] = sel
             return sel
@@ -92,10 +112,13 @@ class TargetChooser:
         positions = {n: seen[n] for n in wanted if n in seen}
         regions = {r.get("name") for r in (session.scene or {}).get("regions") or [] if isinstance(r, dict)}
         unknown = [n for n in wanted if n not in seen and n not in regions]
+        declared = {str(o["name"]): [float(o["position"][0]), float(o["position"][1])]
+                    for o in (session.scene or {}).get("objects") or []
+                    if isinstance(o, dict) and o.get("name") in unknown and o.get("position") is not None}
         sel = select_target(session.skill, targets=others, positions=positions, unknown=unknown,
                             requirements=self.requirements, reach=self.reach, scene=session.scene or {},
                             pick=obj if session.skill in ACQUIRING_SKILLS else None,
-                            place=(obj, dest) if obj and dest else None)
+                            place=(obj, dest) if obj and dest else None, declared=declared)
         sel = Selection(sel.target, sel.runtime, {session.target: failed, **sel.reasons}, sel.out_of_reach, sel.fits)
         logger.info("re-target for %s (%s): %s", session.session_id, cause, sel.target or "none fits")
         self._chosen[session.session_id] = sel

@@ -10,7 +10,11 @@ reach oracle the composition root supplies -- the Runtime's IK on the target's o
 preflight makes -- and its :class:`~phyagentos.protocol.reach.ReachAnswer` decides. The
 Agent plane imports no Runtime code: the oracle is a callable it is given. A position not
 perceived yet is not checked (``unknown``: the runtime's preflight checks it once the
-node runs). Without an oracle (a bare Agent plane, e.g. in unit tests) the selector
+node runs) *where it is*; when the scene declares a position for it (the user's own statement of
+the scene, never the simulator's state), the selector checks reach at that declared position
+instead (``declared``): on a fresh workspace, before anything is perceived, the target is chosen
+from what is known -- an object and a bin half a metre from the SO-101's base are out of its reach
+by their declared positions, and a tie-break no longer picks it. Without an oracle (a bare Agent plane, e.g. in unit tests) the selector
 falls back to a necessary condition only: every position lies in the target's reach
 envelope -- a horizontal annulus around its base, ``constraints.reach`` in TARGETS.md
 (``{base: [x, y], min_m, max_m}``) or the default for its driver (:data:`DEFAULT_REACH`)
@@ -121,7 +125,8 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
                   requirements: Mapping[str, SkillRequirements] | None = None,
                   unknown: Sequence[str] = (), reach: ReachOracle | None = None,
                   scene: Mapping[str, Any] | None = None, pick: str | None = None,
-                  place: Sequence[str] | None = None, prefer_why: str = "the scene's target") -> Selection:
+                  place: Sequence[str] | None = None, prefer_why: str = "the scene's target",
+                  declared: Mapping[str, Sequence[float]] | None = None) -> Selection:
     """Choose the target for one node.
 
     Args:
@@ -139,6 +144,8 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
         scene: the scene the node runs on (for the reach query).
         pick: the object the node picks; ``place``: ``(object, destination)`` it sets down.
         prefer_why: why ``prefer`` is preferred, recorded when it is chosen.
+        declared: positions the scene declares for names in ``unknown`` (x, y): reach is checked
+            and targets ranked at these until the object is perceived.
 
     Returns:
         A :class:`Selection`; ``out_of_reach`` is set when some target fit the skill but
@@ -152,7 +159,13 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
     fitting: list[tuple[float, str]] = []
     unbuildable: list[str] = []  # capable targets whose runtime could not build the scene
     capable = False
+    declared = {n: p for n, p in (declared or {}).items() if n in unknown and n not in positions}
     unseen = f"; reach of {', '.join(unknown)} not checked (not perceived yet)" if unknown else ""
+    if declared:
+        unseen = (f"; {', '.join(declared)} not perceived yet: checked at the declared position"
+                  f"{'s' if len(declared) > 1 else ''}{unseen.replace('; reach of', ', reach of')} where "
+                  f"{'they are' if len(unknown) > 1 else 'it is'}")
+    positions = {**positions, **declared}
     for t in targets:
         name = str(t["name"])
         if not t.get("enabled", True):
@@ -174,15 +187,18 @@ def select_target(skill: str, *, targets: Sequence[Mapping[str, Any]], positions
                 unbuildable.append(name)
                 continue
             if answer.status == "unreachable":
-                reasons[name] = f"out of reach ({answer.checked_by}): {'; '.join(answer.reasons)}"
+                reasons[name] = (f"out of reach ({answer.checked_by}): {'; '.join(answer.reasons)}"
+                                 + (f" (at the declared position of {', '.join(declared)}: not perceived yet)"
+                                    if declared else ""))
                 continue
             how = ("reach (IK on its model)" if answer.status == "reachable"
-                   else f"reach unknown ({'; '.join(answer.reasons)})")
+                   else f"reach unknown ({'; '.join(answer.reasons)})") + (unseen if declared else "")
         else:
             if envelope is None:
                 reasons[name] = "no reach envelope declared (constraints.reach)"
                 continue
-            far = [f"{n} at {envelope.distance(p):.2f} m" for n, p in positions.items() if not envelope.contains(p)]
+            far = [f"{n} at {envelope.distance(p):.2f} m{' (declared)' if n in declared else ''}"
+                   for n, p in positions.items() if not envelope.contains(p)]
             if far:
                 reasons[name] = (f"out of reach ({envelope.min_m:.2f}-{envelope.max_m:.2f} m from base): "
                                  f"{', '.join(far)}")

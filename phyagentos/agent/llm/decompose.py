@@ -43,11 +43,13 @@ _VERBS = {"put", "place", "move", "stack", "set", "drop", "pick"}
 class Clause:
     """One part of a request: ``text`` for the model; ``object``: the object the rule fixed (``None``: the
     model chooses); ``destinations``: the destinations offered (schema names: a region, ``on_<object>``;
-    ``None``: every destination)."""
+    ``None``: every destination); ``skills``: the skills offered (``None``: every plan skill), fixed when
+    the request's verb says (:mod:`.meaning`: ``hold`` -> ``pick``)."""
 
     text: str
     object: str | None = None
     destinations: tuple[str, ...] | None = None
+    skills: tuple[str, ...] | None = None
 
 
 def _words(text: str) -> list[str]:

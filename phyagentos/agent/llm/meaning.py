@@ -1,0 +1,527 @@
+"""The meaning of a request, read by rules, and the check that a plan accounts for all of it.
+
+A 135M model maps almost any request onto *some* pick-and-place (measured on requests
+nobody here wrote: "pick it up and hold it" became a move into a bin, "leave the blocks
+where they are" moved one, "the kitchen sink" became a bin). A plan that does something
+other than what was asked is worse than a refusal, so before any model call the request
+is read into clauses (:func:`read_request`), each with
+
+* a **verb** class: ``move`` (put/place/move/set/drop/bring/sort ... *in* a region),
+  ``stack`` (stack ... on, or put ... on/onto another object), ``hold`` (pick up, lift,
+  grab, hold ... with no destination) or ``leave`` (leave ... where it is, don't move,
+  do nothing);
+* the **objects** it means, resolved on the scene: names, colours, sizes, comparatives and
+  superlatives (``the bigger block`` is the one with the largest footprint among those the
+  other words allow), pronouns (``it``/``them``: the previous clause's objects) and
+  **quantifiers** (``all``/``every``/``each``/``both``/plural nouns, ``all ... except X``,
+  counts ``one``/``a``/``two``/``three``);
+* the **destination**: a region (by name words and colour), an object to stack on, the
+  region of the object's own colour (``matching``/``its colour``), or ``where it is``.
+
+What the rules cannot account for is a **problem**, and the planner refuses with it before
+any model call: a destination the scene does not have (``the kitchen sink``: its words name
+nothing there), a reference that picks no object or several where one is meant (``the
+cube`` among three cubes, ``the bigger block`` among equal ones), a count larger than the
+scene, a clause with no action the skills can do. A request whose every clause is
+``leave`` needs no plan at all.
+
+The clauses then fix, per model call, the object, the skill and the destinations
+(:meth:`Meaning.clauses`), and after the model answered :meth:`Meaning.unaccounted` checks
+the decoded steps against the clauses: every clause's verb, object, destination and
+quantifier must be there, an object to be left must not move, and no step may do what no
+clause asked. This is the gate for any model (an endpoint need not honour the schema).
+
+Only English is read (:func:`detect_language`): the grammar rules and the offline model
+are English-only, so a request in another language is refused saying which language was
+detected, before any model call (docs/agent.md, "Languages").
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Sequence
+
+from phyagentos.untrusted import quote
+
+from .decompose import Clause, decompose
+from .world import Entity, World
+
+__all__ = ["Intent", "Meaning", "read_request", "detect_language"]
+
+_MOVE = {"put", "place", "move", "set", "drop", "bring", "transfer", "carry", "sort", "relocate", "shift", "throw",
+         "toss", "tidy", "slide", "deposit"}
+_HOLD = {"hold", "lift", "grab", "grasp", "raise", "pick", "take", "get", "fetch"}
+_STACK = {"stack", "pile"}
+_LEAVE = {"leave"}
+_VERBS = _MOVE | _HOLD | _STACK | _LEAVE | {"keep"}
+_NEGATION = re.compile(r"\b(do\s+not|don'?t|never)\b")
+_PREPOSITIONS = ("into", "in", "onto", "on", "to", "inside", "at")
+_STACK_PREPOSITIONS = {"on", "onto"}
+_KIND = {"cube", "cubes", "block", "blocks", "box", "boxes", "object", "objects", "thing", "things", "item", "items",
+         "piece", "pieces"}
+_REGION_KIND = {"region", "regions", "area", "areas", "zone", "zones", "bin", "bins", "spot", "place", "tray",
+                "square", "patch", "target", "goal"}
+_STOP = {"the", "a", "an", "of", "please", "now", "then", "and", "carefully", "gently", "slowly", "up", "down",
+         "that", "this", "these", "those", "which", "is", "are", "there", "too", "also", "just", "only", "again",
+         "with", "your", "my", "robot", "arm", "gripper", "hand", "for", "me", "can", "you", "could", "would",
+         "kindly", "first", "finally", "next", "after", "by", "top", "side", "its", "their", "own", "same",
+         "colour", "color", "matching", "corresponding", "one", "ones", "other", "remaining", "rest", "others",
+         "instead", "so", "it", "them", "they", "both", "all", "every", "each", "everything", "anything", "any",
+         "some", "holding"}
+_ALL = {"all", "every", "each", "both", "everything", "anything"}
+_COUNTS = {"one": 1, "a": 1, "an": 1, "any": 1, "two": 2, "three": 3, "four": 4, "five": 5, "1": 1, "2": 2, "3": 3,
+           "4": 4, "5": 5}
+_PRONOUNS = {"it", "them", "they", "that", "this", "these", "those"}
+_BIGGER = {"bigger", "larger", "biggest", "largest", "taller", "tallest", "heavier", "heaviest"}
+_SMALLER = {"smaller", "smallest", "littler", "littlest", "tinier", "tiniest", "shorter", "shortest", "lighter",
+            "lightest"}
+_SIZE_WORDS = {"large": "large", "big": "large", "huge": "large", "small": "small", "little": "small",
+               "tiny": "small"}
+_BY_COLOUR = {"matching", "colour", "color", "corresponding"}
+_STAY = re.compile(r"\bwhere\s+(it|they|he|she)\s*(is|are|'s|'re|was|were)\b|\bin\s+place\b|\bas\s+(it|they)\s+"
+                   r"(is|are)\b|\balone\b|\bwhere\s+(it|they)\s+(stand|stands|lie|lies|sit|sits)\b")
+_NOTHING = re.compile(r"\b(do\s+nothing|nothing|don'?t\s+do\s+anything|do\s+not\s+do\s+anything|stay\s+still)\b")
+_AND_SPLIT = re.compile(r"\s*(?:,\s*and\s+|,\s+|\s+and\s+|\s+but\s+)(?=(?:then\s+)?(?:do\s+not|don'?t|never|"
+                        + "|".join(sorted(_VERBS)) + r")\b)")
+_ELLIPSIS = re.compile(r"\s*(?:,\s*and\s+|\s+and\s+|,\s+)(?=the\s+[a-z0-9_ ]+?\s+(?:in|into|on|onto|to)\s)")
+
+#: Common words of languages other than English (function words a request cannot avoid).
+_LANGUAGES: dict[str, set[str]] = {
+    "French": {"le", "la", "les", "du", "des", "dans", "sur", "mets", "mettez", "mettre", "prends", "prenez", "cube",
+               "rouge", "bleu", "vert", "jaune", "gauche", "droite", "bac", "boîte", "et", "puis", "avec", "une", "un",
+               "pose", "posez", "déplace", "déplacez", "sans", "de", "bloc", "prends", "tiens", "laisse"},
+    "Spanish": {"el", "los", "las", "en", "pon", "ponga", "coloca", "mueve", "cubo", "rojo", "azul", "verde",
+                "izquierda", "derecha", "caja", "y", "luego", "una", "un", "del", "al", "sobre", "toma", "deja"},
+    "German": {"der", "die", "das", "den", "dem", "in", "auf", "lege", "legen", "stelle", "nimm", "würfel", "rote",
+               "roten", "blaue", "blauen", "grüne", "links", "rechts", "kiste", "und", "dann", "ein", "eine", "linke",
+               "rechte", "linken", "rechten", "halte", "lass",
+               "einen", "bitte"},
+    "Italian": {"il", "lo", "gli", "nel", "nella", "sul", "sulla", "metti", "prendi", "cubo", "rosso", "blu",
+                "sinistra", "destra", "scatola", "e", "poi", "una", "un", "del", "della"},
+    "Portuguese": {"o", "os", "as", "no", "na", "coloque", "ponha", "pegue", "cubo", "vermelho", "azul",
+                   "esquerda", "direita", "caixa", "e", "depois", "uma", "um", "do", "da"},
+    "Dutch": {"de", "het", "een", "in", "op", "leg", "zet", "pak", "kubus", "rode", "blauwe", "links", "rechts",
+              "bak", "en", "dan"},
+}
+_ENGLISH = {"the", "a", "an", "in", "into", "on", "onto", "to", "put", "place", "move", "pick", "up", "and", "then",
+            "it", "of", "cube", "block", "bin", "region", "left", "right", "all", "stack", "hold", "leave", "where",
+            "red", "blue", "green", "yellow", "them", "each", "except", "with", "is", "are", "take", "box", "cubes",
+            "blocks", "one", "two", "please", "lift", "grab", "drop", "set", "bigger", "smaller", "they", "by", "top"}
+_SCRIPTS = ((re.compile(r"[\u0400-\u04ff]"), "Cyrillic script"), (re.compile(r"[\u4e00-\u9fff\u3040-\u30ff]"),
+            "Chinese/Japanese script"), (re.compile(r"[\u0600-\u06ff]"), "Arabic script"),
+            (re.compile(r"[\uac00-\ud7af]"), "Korean script"), (re.compile(r"[\u0370-\u03ff]"), "Greek script"),
+            (re.compile(r"[\u0590-\u05ff]"), "Hebrew script"), (re.compile(r"[\u0900-\u097f]"), "Devanagari script"))
+
+
+def _tokens(text: str) -> list[str]:
+    return re.findall(r"[a-z0-9_]+|[^\W\d_]+", text.lower())
+
+
+def detect_language(text: str, names: Sequence[str] = ()) -> str | None:
+    """The language of ``text`` when it is not English (a name such as ``French`` or ``Cyrillic script``),
+    else ``None``. Words that are scene names are not counted; a request counts as another language when
+    it has a letter outside English's alphabet (accents, another script) together with more words of that
+    language than English ones, or at least three such words and more of them than English ones."""
+    for pattern, script in _SCRIPTS:
+        if pattern.search(text):
+            return script
+    words = [w for w in _tokens(text) if w not in set(names) and "_" not in w]
+    if not words:
+        return None
+    english = sum(w in _ENGLISH for w in words)
+    accented = bool(re.search(r"[à-öø-ÿœ]", text.lower()))
+    best, hits = None, 0
+    for lang, vocab in _LANGUAGES.items():
+        n = sum(w in vocab and w not in _ENGLISH for w in words)
+        if n > hits:
+            best, hits = lang, n
+    if best is not None and hits > english and (hits >= 3 or (accented and hits >= 1)):
+        return best
+    if accented and english == 0:
+        return "a language other than English"
+    return None
+
+
+@dataclass(frozen=True)
+class Intent:
+    """One clause as read: ``verb`` (``move``/``stack``/``hold``/``leave``), ``objects`` it means (in the
+    scene's order), ``count`` (a count quantifier: that many of ``objects`` -- the candidates), ``destinations``
+    (region names, or one object to stack on; empty for hold/leave), ``by_colour`` (each object to the region
+    of its colour), ``excluded`` (objects an ``except`` leaves out: they stay)."""
+
+    text: str
+    verb: str
+    objects: tuple[str, ...]
+    destinations: tuple[str, ...] = ()
+    count: int | None = None
+    by_colour: bool = False
+    excluded: tuple[str, ...] = ()
+
+    def movers(self) -> tuple[str, ...]:
+        """The objects the clause's steps act on (a count: the first ``count`` candidates, in the scene's order)."""
+        return self.objects[: self.count] if self.count is not None else self.objects
+
+
+@dataclass
+class Meaning:
+    """A request as read: its ``intents`` and the ``problems`` the rules could not account for."""
+
+    request: str
+    intents: list[Intent] = field(default_factory=list)
+    #: (code, message): code ``unknown_object``, ``unknown_destination`` or ``not_understood``
+    problems: list[tuple[str, str]] = field(default_factory=list)
+    language: str | None = None
+
+    @property
+    def nothing_to_do(self) -> bool:
+        """Every clause asks that nothing moves."""
+        return bool(self.intents) and all(i.verb == "leave" for i in self.intents)
+
+    def destinations_for(self, intent: Intent, obj: str, world: World) -> tuple[str, ...]:
+        if intent.by_colour:
+            mover = world.get(obj)
+            return tuple(r.name for r in world.regions if mover is not None and r.colour and r.colour == mover.colour)
+        if intent.verb == "stack":
+            return tuple(f"on_{d}" for d in intent.destinations if d != obj)
+        return intent.destinations
+
+    def clauses(self, world: World) -> list[Clause]:
+        """One clause per (acting intent, object): object, skill and destinations fixed by the rules."""
+        out = []
+        for it in self.intents:
+            if it.verb == "leave":
+                continue
+            skills = ("pick",) if it.verb == "hold" else ("pick_and_place",)
+            for obj in it.movers():
+                out.append(Clause(it.text, obj, self.destinations_for(it, obj, world) or None, skills=skills))
+        return out
+
+    def unaccounted(self, steps: Sequence, world: World) -> list[str]:
+        """What of the request the ``steps`` (``skill``, ``object``, ``destination``) do not account for, and
+        what they do that no clause asked (empty: the plan means the request)."""
+        out: list[str] = []
+        acting = [(it, obj) for it in self.intents if it.verb != "leave" for obj in it.movers()]
+        for k, (it, obj) in enumerate(acting):
+            step = steps[k] if k < len(steps) else None
+            want = self.destinations_for(it, obj, world)
+            what = {"hold": f"pick up and hold {obj}", "stack": f"stack {obj} on {' or '.join(it.destinations)}",
+                    "move": f"move {obj} into {' or '.join(want) if want else 'a region'}"}[it.verb]
+            if step is None:
+                out.append(f"{quote(it.text)} asks to {what}, and no step does")
+                continue
+            dest = step.destination
+            if step.object != obj and it.count is None:
+                out.append(f"{quote(it.text)} asks to {what}; the step moves {step.object}")
+            elif it.count is not None and step.object not in it.objects:
+                out.append(f"{quote(it.text)} asks for {it.count} of {', '.join(it.objects)}; the step moves "
+                           f"{step.object}")
+            elif it.verb == "hold" and (step.skill != "pick" or dest is not None or k != len(acting) - 1):
+                out.append(f"{quote(it.text)} asks to {what} (a pick, last); the step is {step.skill} of "
+                           f"{step.object} to {dest or 'nothing'}")
+            elif it.verb == "stack" and (dest is None or f"on_{dest}" not in want):
+                out.append(f"{quote(it.text)} asks to {what}; the step puts it {'in ' + dest if dest else 'nowhere'}")
+            elif it.verb == "move" and (dest is None or (want and dest not in want)
+                                        or (world.get(dest) is not None and world.get(dest).kind != "region")):
+                out.append(f"{quote(it.text)} asks to {what}; the step puts it {'on ' + dest if dest else 'nowhere'}")
+        for step in steps[len(acting):]:
+            out.append(f"the step {step.skill} of {step.object} is asked by no part of the request")
+        for it in self.intents:
+            if it.count is not None:
+                moved = {s.object for s in steps if s.object in it.objects}
+                if len(moved) != it.count and not out:
+                    out.append(f"{quote(it.text)} asks for {it.count} object(s); the plan moves {len(moved)}")
+            stay = list(it.excluded) + (list(it.objects) if it.verb == "leave" else [])
+            for obj in stay:
+                if any(s.object == obj for s in steps):
+                    out.append(f"{quote(it.text)} asks that {obj} stays where it is; a step moves it")
+        return list(dict.fromkeys(out))
+
+
+# -- reading ---------------------------------------------------------------------------------------------
+
+
+def _parts(request: str, world: World) -> list[str]:
+    """The request's clause texts: decompose's sequences and colon lists, then ``..., and <verb> ...`` and
+    ``... and the X in Y`` (an elided verb) inside each part."""
+    text = request.strip().rstrip(".!")
+    split = decompose(text, world)
+    texts = list(dict.fromkeys(c.text for c in split)) if len({c.text for c in split}) > 1 else [text]
+    out = []
+    for t in texts:
+        for p in _AND_SPLIT.split(t):
+            out += [q for q in _ELLIPSIS.split(p) if q and q.strip()]
+    return [p.strip(" ,;") for p in out if p.strip(" ,;")]
+
+
+def _colours(world: World) -> set[str]:
+    return {e.colour for e in world.objects + world.regions if e.colour}
+
+
+def _name_parts(e: Entity) -> set[str]:
+    return set(e.name.split("_")) - _KIND - _REGION_KIND - _STOP - _VERBS - set(_PREPOSITIONS)
+
+
+def _filter(words: Sequence[str], cands: Sequence[Entity], world: World) -> tuple[list[Entity], list[str]]:
+    """The candidates ``words`` (an object phrase) allow, and what in the words matched nothing."""
+    ws = list(words)
+    named = [e for e in cands if e.name in ws]
+    if named:
+        return named, []
+    out = list(cands)
+    misses: list[str] = []
+    colours = [w for w in ws if w in _colours(world) or w in {"red", "green", "blue", "yellow", "orange", "purple",
+                                                               "white", "black", "grey", "gray"}]
+    if colours:
+        out = [e for e in out if e.colour in colours]
+        if not out:
+            misses.append(f"nothing {'/'.join(colours)}")
+    parts = [w for w in ws if any(w in _name_parts(e) for e in cands) and w not in colours]
+    if parts:
+        out = [e for e in out if set(parts) & _name_parts(e)]
+    sizes = [_SIZE_WORDS[w] for w in ws if w in _SIZE_WORDS]
+    if sizes and out:
+        labelled = [e for e in out if e.size in sizes]
+        if labelled:
+            out = labelled
+        else:
+            extreme = max if sizes[0] == "large" else min
+            best = extreme(e.size_m for e in out)
+            out = [e for e in out if e.size_m == best] if len({e.size_m for e in out}) > 1 else out
+            if len(out) > 1:
+                misses.append(f"'{[w for w in ws if w in _SIZE_WORDS][0]}': the candidates are the same size")
+    if (set(ws) & _BIGGER or set(ws) & _SMALLER) and out:
+        extreme = max if set(ws) & _BIGGER else min
+        word = next(w for w in ws if w in _BIGGER | _SMALLER)
+        if len({round(e.size_m, 4) for e in out}) < 2 and len(out) > 1:
+            misses.append(f"'{word}': {', '.join(e.name for e in out)} are the same size")
+        else:
+            best = extreme(e.size_m for e in out)
+            out = [e for e in out if e.size_m == best]
+    return out, misses
+
+
+def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> tuple[tuple[str, ...], int | None,
+                                                                                       list[str]]:
+    """(objects, count, problems) of an object phrase; ``count`` is set for a count quantifier."""
+    cands = list(world.objects)
+    if not words:
+        return previous, None, ([] if previous else [("not_understood", "no object is named")])
+    content = [w for w in words if w not in _STOP or w in _ALL or w in _COUNTS or w in _PRONOUNS]
+    if set(words) & {"it", "them", "they"} and not (set(words) & _ALL) and previous and not any(
+            w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER or w in _KIND for w in words):
+        return previous, None, []
+    count = None
+    for i, w in enumerate(words):
+        nxt = words[i + 1:i + 3]
+        if w in _COUNTS and (set(nxt) & _KIND or i == 0 or (w != "one" and nxt)):
+            if w in ("a", "an") and not set(words[i + 1:]) & _KIND:
+                continue
+            count = _COUNTS[w]
+            break
+    known = (_KIND | _ALL | set(_COUNTS) | _PRONOUNS | _STOP | set(_SIZE_WORDS) | _BIGGER | _SMALLER
+             | {"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey", "gray"}
+             | {p for e in cands for p in e.name.split("_")} | {e.name for e in cands} | {"by", "colour", "color"})
+    unknown = [w for w in content if w not in known]
+    if unknown:
+        return (), None, [("unknown_object", f"{quote(' '.join(words))}: {', '.join(repr(w) for w in unknown)} names "
+                                             f"no object of the scene (it has {', '.join(e.name for e in cands)})")]
+    found, misses = _filter(content, cands, world)
+    plural = any(w in _KIND and w.endswith(("s", "es")) for w in words) or set(words) & _ALL
+    if misses and not found:
+        return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene "
+                                             f"({'; '.join(misses)})")]
+    if misses:
+        return (), None, [("not_understood", f"{quote(' '.join(words))}: {'; '.join(misses)}")]
+    if not found:
+        return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene")]
+    names = tuple(e.name for e in found)
+    if count is not None:
+        if count > len(names):
+            return (), None, [("not_understood", f"{quote(' '.join(words))} asks for {count}; the scene has "
+                                                 f"{len(names)}: {', '.join(names)}")]
+        return names, (count if count < len(names) else None), []
+    if plural or len(names) == 1:
+        return names, None, []
+    return (), None, [("not_understood", f"{quote(' '.join(words))} could be any of {', '.join(names)}: say which")]
+
+
+def _read_destination(words: list[str], prep: str, world: World, previous: tuple[str, ...],
+                      movers: tuple[str, ...]) -> tuple[str, tuple[str, ...], bool, list[str]]:
+    """(kind ``region``/``object``, names, by_colour, problems) of a destination phrase after ``prep``."""
+    ws = [w for w in words if w not in ("the", "a", "an", "of")]
+    if set(ws) & _BY_COLOUR and not (set(ws) & (_colours(world) - {None})):
+        return "region", (), True, []
+    if prep in _STACK_PREPOSITIONS or "top" in ws:
+        others = [e for e in world.objects if e.name not in movers]
+        if set(ws) & {"it", "them"} and previous:
+            sup = [p for p in previous if p not in movers]
+            if len(sup) == 1:
+                return "object", (sup[0],), False, []
+        objs, misses = _filter([w for w in ws if w not in _STOP], others, world)
+        nouns = _KIND | {"one", "ones"}
+        mentioned = [w for w in ws if w in nouns or w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER
+                     or any(w in _name_parts(e) or w == e.name for e in others)]
+        names_region = any(w in _name_parts(r) or w in _REGION_KIND for r in world.regions for w in ws)
+        if mentioned and (set(ws) & nouns or not names_region):
+            if len(objs) == 1 and not misses:
+                return "object", (objs[0].name,), False, []
+            if misses or not objs:
+                have = "; ".join(misses) or "it has " + ", ".join(e.name for e in others)
+                return "object", (), False, [("unknown_destination", f"stack on {quote(' '.join(words))}: no such "
+                                                                     f"object in the scene ({have})")]
+            return "object", (), False, [("not_understood", f"stack on {quote(' '.join(words))}: could be any of "
+                                         f"{', '.join(e.name for e in objs)}: say which")]
+    regions = list(world.regions)
+    # where words (left, middle, corner ...) are known only as parts of a region's name: "the middle bin"
+    # among a left and a right bin names nothing there
+    known = set(_STOP) | _REGION_KIND | {"inside", "over", "there", "here"}
+    known |= {p for r in regions for p in r.name.split("_")} | _colours(world)
+    unknown = [w for w in ws if w not in known and w not in _PREPOSITIONS]
+    if unknown:
+        have = ", ".join(r.name for r in regions) or "no region"
+        named = ", ".join(repr(w) for w in unknown)
+        return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))} is not in the "
+                                                             f"scene ({named} names nothing there); it has {have}")]
+    scored = []
+    for r in regions:
+        parts = set(r.name.split("_"))
+        score = len((parts - _REGION_KIND) & set(ws)) + (1 if r.colour and r.colour in ws else 0)
+        generic = parts & _REGION_KIND & set(ws) or ({"region", "regions", "area", "areas", "zone"} & set(ws))
+        scored.append((score, bool(generic), r))
+    colours = [w for w in ws if w in _colours(world)]
+    if colours:
+        scored = [(s, g, r) for s, g, r in scored if r.colour in colours or set(colours) & set(r.name.split("_"))]
+        if not scored:
+            return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))} is not in "
+                                         f"the scene (no {'/'.join(colours)} region); it has "
+                                         f"{', '.join(r.name for r in regions)}")]
+    top = max((s for s, _, _ in scored), default=0)
+    if top:
+        picked = [r.name for s, _, r in scored if s == top]
+    else:
+        picked = [r.name for s, g, r in scored if g] or [r.name for _, _, r in scored]
+    if not picked:
+        return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))}: the scene has "
+                                                             f"no region")]
+    return "region", tuple(picked), False, []
+
+
+def read_request(request: str, world: World) -> Meaning:
+    """Read ``request`` over ``world`` (see the module docstring)."""
+    meaning = Meaning(request=request)
+    meaning.language = detect_language(request, world.names)
+    if meaning.language is not None:
+        return meaning
+    previous: tuple[str, ...] = ()
+    for part in _parts(request, world):
+        low = part.lower()
+        words = _tokens(low)
+        # "keep holding it": a hold, not a keep
+        verbs = [("hold" if w == "keep" and words[i + 1:i + 2] == ["holding"] else w)
+                 for i, w in enumerate(words) if w in _VERBS]
+        verb_word = verbs[0] if verbs else None
+        negated = bool(_NEGATION.search(low))
+        if _NOTHING.search(low) and not [w for w in verbs if w not in ("leave", "keep")]:
+            meaning.intents.append(Intent(part, "leave", tuple(e.name for e in world.objects)))
+            continue
+        start = (words.index("keep") + 2 if verbs and verb_word == "hold" and "hold" not in words
+                 else words.index(verb_word) + 1 if verb_word else 0)
+        if verb_word in ("pick", "take", "lift") and start < len(words) and words[start] == "up":
+            start += 1
+        body = words[start:]
+        stay = _STAY.search(low)
+        # the excepted phrase: from except/but to the next preposition (or the end)
+        excluded_words: list[str] = []
+        for key in ("except", "but"):
+            if key in body:
+                i = body.index(key)
+                j = next((k for k in range(i + 1, len(body)) if body[k] in _PREPOSITIONS), len(body))
+                excluded_words = body[i + 1:j]
+                body = body[:i] + body[j:]
+                break
+        cut = next((i for i, w in enumerate(body) if w in _PREPOSITIONS and i > 0), None)
+        if stay:
+            obj_words = [w for w in _tokens(low[:stay.start()])[start:] if w not in ("except", "but")]
+            obj_words = [w for w in obj_words if w not in excluded_words]
+            dest_words, prep = [], None
+        elif cut is None:
+            obj_words, dest_words, prep = body, [], None
+        else:
+            obj_words, dest_words, prep = body[:cut], body[cut + 1:], body[cut]
+        obj_words = [w for w in obj_words if w not in ("by", "colour", "color", "size")]
+        objects, count, problems = _read_objects(obj_words, world, previous)
+        excluded: tuple[str, ...] = ()
+        if excluded_words and not problems:
+            ex, _, why = _read_objects(excluded_words, world, ())
+            problems += [(code, f"except {quote(' '.join(excluded_words))}: {msg}") for code, msg in why]
+            excluded = ex
+            objects = tuple(o for o in objects if o not in excluded)
+            if not objects and not problems:
+                problems.append(("not_understood", f"{quote(part)} excepts every object it names"))
+        if problems:
+            meaning.problems += problems
+            continue
+        if stay or negated or verb_word in _LEAVE or (verb_word == "keep" and not dest_words):
+            if verb_word == "keep" and not stay and not negated:
+                meaning.problems.append(("not_understood", f"{quote(part)}: 'keep' without 'where it is' or a "
+                                                           f"destination"))
+                continue
+            meaning.intents.append(Intent(part, "leave", objects))
+            previous = objects
+            continue
+        kind, dests, by_colour, why = ("region", (), False, [])
+        if dest_words:
+            kind, dests, by_colour, why = _read_destination(dest_words, prep, world, previous, objects)
+        problems += why
+        if verb_word is None and not dest_words:
+            problems.append(("not_understood", f"{quote(part)}: no action the skills can do (put/place/move ... "
+                                               f"in a region, stack ... on an object, pick up/hold, leave ... where "
+                                               f"it is)"))
+        elif verb_word in _STACK and kind != "object" and not problems:
+            problems.append(("not_understood", f"{quote(part)} asks to stack, but names no object to stack on"))
+        elif verb_word in _MOVE and not dest_words:
+            problems.append(("not_understood", f"{quote(part)} says where to put nothing: no destination"))
+        verb = "hold" if not dest_words else ("stack" if kind == "object" else "move")
+        if not problems and verb == "stack" and count is None and len(objects) > 1:
+            problems.append(("not_understood", f"{quote(part)} stacks several objects on one: say the order"))
+        if not problems and by_colour:
+            lacking = [o for o in objects
+                       if not meaning.destinations_for(Intent(part, verb, (o,), by_colour=True), o, world)]
+            if lacking:
+                problems.append(("unknown_destination", f"{quote(part)}: no region of the colour of "
+                                                        f"{', '.join(lacking)}"))
+        if problems:
+            meaning.problems += problems
+            continue
+        meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded))
+        previous = objects if count is None else objects[:count]
+    _settle(meaning)
+    return meaning
+
+
+def _settle(meaning: Meaning) -> None:
+    """Join what one action spans: a pick followed by a move of the same object is that move ("pick up the red
+    cube and put it in the left bin"); a repeated hold of the same object is one hold ("pick it up and hold it");
+    objects a later clause leaves where they are drop out of an earlier quantified clause ("put all cubes in the
+    left bin but leave the red one")."""
+    intents = meaning.intents
+    for i in reversed(range(len(intents))):
+        it = intents[i]
+        if it.verb == "hold" and any(later.verb in ("move", "stack", "hold") and set(it.movers()) <= set(later.movers())
+                                     for later in intents[i + 1:]):
+            del intents[i]
+    for k, leave in enumerate(intents):
+        if leave.verb != "leave":
+            continue
+        for i, it in enumerate(intents[:k]):
+            if it.verb != "leave" and len(it.objects) > 1 and set(leave.objects) & set(it.objects):
+                kept = tuple(o for o in it.objects if o not in leave.objects)
+                intents[i] = Intent(it.text, it.verb, kept, it.destinations,
+                                    it.count if it.count is None or it.count < len(kept) else None, it.by_colour,
+                                    it.excluded + tuple(o for o in leave.objects if o in it.objects))
+    holds = [it for it in intents if it.verb == "hold"]
+    acting = [it for it in intents if it.verb != "leave"]
+    if holds and (len(holds) > 1 or acting[-1] is not holds[0] or len(holds[0].movers()) != 1):
+        meaning.problems.append(("not_understood", f"{quote(holds[0].text)}: one arm holds one object, and only as "
+                                                   f"the last step"))

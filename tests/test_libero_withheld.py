@@ -29,7 +29,7 @@ def test_a_libero_episode_decides_identically_with_ground_truth_withheld(tmp_pat
         report, log = run_withheld(mp, tmp_path, graph, tmp_path / "ws")
     finally:
         mp.undo()
-    assert log, "no verifying step ran"
+    assert log, f"no verifying step ran: {report.to_dict()}"
     for step in log:
         assert step["withheld"] == step["shadow"], _differences(step["withheld"], step["shadow"])
         assert step["memory"] == step["shadow_memory"]

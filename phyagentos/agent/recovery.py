@@ -130,6 +130,9 @@ RE_PICK = "re_pick_upstream"
 #: object (a slip during a place's transfer) cannot get it back itself; the upstream node
 #: of one of these is re-opened instead, with the slip's correction.
 ACQUIRING_SKILLS = frozenset({"pick", "policy_pick"})
+#: Causes that belong to the arm, not to the world: another arm may reach or plan what this
+#: one cannot (the ladder's re-target rung, :mod:`.retarget`).
+RETARGET_CAUSES = frozenset({"ik_unreachable", "planning_failed"})
 
 
 #: Frames the ``another_view`` child fuses. Each frame renders and segments every camera
@@ -296,7 +299,6 @@ class RecoveryPlanner:
     def _switch_target(self, session: SessionRecord, diagnosis: Diagnosis, history: Sequence[SessionRecord], *,
                        step: int) -> Revision | None:
         """The node on another target that reaches it (see the module docstring), or ``None``."""
-        from .retarget import RETARGET_CAUSES  # noqa: PLC0415  (retarget imports this module)
 
         if self.retarget is None or diagnosis.cause not in RETARGET_CAUSES:
             return None

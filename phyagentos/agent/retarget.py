@@ -28,7 +28,7 @@ from phyagentos.errors import ProtocolError, VerifierError
 from phyagentos.protocol import SessionRecord, Workspace
 from phyagentos.protocol.reach import ReachOracle
 
-from .recovery import ACQUIRING_SKILLS
+from .recovery import ACQUIRING_SKILLS, RETARGET_CAUSES
 from .selector import Selection, SkillRequirements, select_target
 from .verifier import load_evidence
 
@@ -36,8 +36,6 @@ __all__ = ["LOOKING_SKILLS", "RETARGET_CAUSES", "TargetChooser"]
 
 logger = logging.getLogger(__name__)
 
-#: Causes that belong to the arm, not to the world: another arm may reach or plan what this one cannot.
-RETARGET_CAUSES = frozenset({"ik_unreachable", "planning_failed"})
 #: Skills that only look: an upstream node of these left nothing in its target's world.
 LOOKING_SKILLS = frozenset({"observe"})
 

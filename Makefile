@@ -11,6 +11,7 @@ demo: setup
 
 test: setup
 	.venv/bin/lint-imports
+	.venv/bin/python scripts/check_import_cycles.py
 	.venv/bin/python scripts/check_ground_truth_boundary.py
 	.venv/bin/pytest -q -n 4 --dist loadfile
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.agent.goal_graph import parse_goal_graph
 from phyagentos.errors import GoalGraphError
-from phyagentos.graph_check import check_goal_graph
+from phyagentos.app.graph_check import check_goal_graph
 from phyagentos.protocol import SessionRecord, Workspace
 from phyagentos.protocol import codec
 from phyagentos.resources import goal_graphs_dir, skill_dirs, tree_dirs

@@ -365,7 +365,7 @@ def import_times() -> dict:
     """Import time (s, median of 3) of ``phyagentos.cli`` and of the main process of ``run``."""
     out = {}
     for name, stmt in (("cli", "import phyagentos.cli"),
-                       ("run_main_process", "import phyagentos.cli, phyagentos.orchestrator"),
+                       ("run_main_process", "import phyagentos.cli, phyagentos.app.orchestrator"),
                        ("interpreter_only", "pass")):
         walls = []
         for _ in range(3):

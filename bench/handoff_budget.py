@@ -70,7 +70,7 @@ TRACED = [
     ("phyagentos.runtime.supervisor", "WatchdogSupervisor.step", None),
     ("phyagentos.runtime.supervisor", "WatchdogSupervisor._on_done", None),
     ("phyagentos.runtime.worker", "RunnerProcess.send", 1),
-    ("phyagentos.orchestrator", "_agent_has_work", None),
+    ("phyagentos.app.orchestrator", "_agent_has_work", None),
     ("phyagentos.runtime.worker", "_Runner.job_preflight", None),
     ("phyagentos.runtime.worker", "_Runner.job_go", None),
     ("phyagentos.runtime.runner", "SessionRunner.run", None),

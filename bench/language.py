@@ -63,9 +63,9 @@ import yaml
 
 import phyagentos  # noqa: F401  (headless GL before mujoco)
 from phyagentos.agent.planner import GoalPlanner, PlannerError
-from phyagentos.cli_agent import make_reviser, perceived_entities
+from phyagentos.app.factories import make_reviser, perceived_entities
 from phyagentos.llm import load_llm_config, make_client
-from phyagentos.orchestrator import run_goal_graph, skill_names
+from phyagentos.app.orchestrator import run_goal_graph, skill_names
 from phyagentos.protocol import Workspace
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml

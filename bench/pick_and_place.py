@@ -36,7 +36,7 @@ from phyagentos.motion.grasp import place_pose, top_down_grasp
 from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.planner import plan_path
 from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets import MuJoCoTarget, SceneSpec

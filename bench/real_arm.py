@@ -49,7 +49,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import phyagentos  # noqa: E402,F401  (headless GL before mujoco loads)
-from phyagentos.cli_real import ideal_calibration  # noqa: E402
+from phyagentos.cli.real import ideal_calibration  # noqa: E402
 from phyagentos.runtime.safety_guard import EStopLatch  # noqa: E402
 from phyagentos.targets.so101_real.arm import SO101Arm  # noqa: E402
 from phyagentos.targets.so101_real.bus_twin import FAULT_KINDS, BusTwin  # noqa: E402

@@ -3,7 +3,7 @@
     .venv/bin/python bench/runner_memory.py [--runs 12] [--graph goal_graphs/pick_and_place.yaml]
 
 ``phyagentos bench`` episodes, the tests and any program calling
-``phyagentos.orchestrator.run_goal_graph`` repeatedly reuse one idle runner process
+``phyagentos.app.orchestrator.run_goal_graph`` repeatedly reuse one idle runner process
 (``runtime/worker.py``) for workspace after workspace. This runs ``--runs`` such runs
 (seed = run index) and prints, after each, the resident set size (MiB, from
 ``/proc/<pid>/statm``) of this process and of each of its descendants (the runner, its
@@ -67,7 +67,7 @@ def _role(pid: int, cmdline: str, runners: set[int]) -> str:
 
 
 def main(argv=None) -> int:
-    from phyagentos.orchestrator import run_goal_graph  # noqa: PLC0415
+    from phyagentos.app.orchestrator import run_goal_graph  # noqa: PLC0415
     from phyagentos.runtime import worker  # noqa: PLC0415
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -15,7 +15,7 @@ For each pass: first-attempt success (every node's first session succeeded) and 
 success after verifier-driven recovery (every node succeeded), each traceable to the
 session ids in the episode results.
 
-This module composes both planes, like :mod:`phyagentos.orchestrator`.
+This module composes both planes, like :mod:`phyagentos.app.orchestrator`.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from typing import Any, Callable, Sequence
 
 import yaml
 
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace, atomic_write_bytes
 
 __all__ = ["MEMORY_DOCUMENTS", "Episode", "EpisodeResult", "PassResult",

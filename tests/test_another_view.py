@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import yaml
 
-import phyagentos.orchestrator as orchestrator
+import phyagentos.app.orchestrator as orchestrator
 from phyagentos.agent.coordinator import AgentCoordinator
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir

@@ -74,7 +74,7 @@ def test_a_corrupted_stored_run_is_set_aside_as_failed_and_agent_run_exits_non_z
 
 def test_a_bad_run_does_not_stop_the_agent_from_driving_the_others(tmp_path, capsys):
     from phyagentos.agent.agent_loop import AgentLoop
-    from phyagentos.orchestrator import skill_names
+    from phyagentos.app.orchestrator import skill_names
 
     ws = tmp_path / "ws"
     bad, good = submit(ws, capsys), submit(ws, capsys)
@@ -169,7 +169,7 @@ def test_an_alias_bomb_in_a_pending_session_is_refused_in_milliseconds_and_sets_
 
 def test_a_duplicate_key_in_one_session_sets_aside_that_run_and_reconcile_goes_on(tmp_path, capsys):
     from phyagentos.agent.agent_loop import AgentLoop
-    from phyagentos.orchestrator import skill_names
+    from phyagentos.app.orchestrator import skill_names
 
     ws = tmp_path / "ws"
     bad, good = submit(ws, capsys), submit(ws, capsys)
@@ -245,7 +245,7 @@ def test_two_runs_on_one_target_never_reset_each_others_world_the_second_queues(
     import logging
 
     from phyagentos.agent.agent_loop import AgentLoop
-    from phyagentos.orchestrator import skill_names
+    from phyagentos.app.orchestrator import skill_names
     from phyagentos.resources import skills_dir, trees_dir
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
     from phyagentos.runtime.supervisor import WatchdogSupervisor

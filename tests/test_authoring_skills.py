@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from phyagentos.cli import main
-from phyagentos.cli_skills import primitives_markdown
+from phyagentos.cli.skills import primitives_markdown
 from phyagentos.primitives import PRIMITIVES
 from phyagentos.primitives.schema import TABLES, primitive_schemas
 

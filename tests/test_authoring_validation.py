@@ -193,7 +193,7 @@ def test_two_independent_picks_on_one_arm_are_serialised_by_an_implicit_edge(tmp
 
 def test_the_run_graph_carries_the_implicit_edge_so_the_second_pick_waits_for_the_first_place(tmp_path, ws):
     from phyagentos.agent.agent_loop import load_run_graph
-    from phyagentos.orchestrator import skill_names
+    from phyagentos.app.orchestrator import skill_names
     from phyagentos.protocol import RunRecord, utc_now_iso
 
     text = PICK_PLACE.format(scene=SCENE) + """\

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets import SceneSpec

@@ -23,7 +23,7 @@ HOLD = REPO / "goal_graphs" / "hold.yaml"
 
 def _no_fallback(monkeypatch) -> None:
     """The check must come from the forked child: this process's fallback fails the test."""
-    from phyagentos import graph_check_process
+    from phyagentos.app import graph_check_process
 
     def fail(*args, **kwargs):
         raise AssertionError("the graph check fell back to the calling process")
@@ -32,7 +32,7 @@ def _no_fallback(monkeypatch) -> None:
 
 
 def _in_process(path: Path, ws: Workspace):
-    from phyagentos.graph_check import check_goal_graph
+    from phyagentos.app.graph_check import check_goal_graph
     from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 
@@ -48,7 +48,7 @@ def _assert_same_check(other, here) -> None:
 
 @pytest.mark.sim
 def test_the_forked_graph_check_returns_what_the_in_process_check_returns(tmp_path, monkeypatch):
-    from phyagentos.graph_check_process import check_goal_graph_forked
+    from phyagentos.app.graph_check_process import check_goal_graph_forked
 
     ws = Workspace.create(tmp_path / "ws")
     with monkeypatch.context() as m:
@@ -59,7 +59,7 @@ def test_the_forked_graph_check_returns_what_the_in_process_check_returns(tmp_pa
 
 @pytest.mark.sim
 def test_the_forked_graph_check_raises_the_same_located_error(tmp_path, monkeypatch):
-    from phyagentos.graph_check_process import check_goal_graph_forked
+    from phyagentos.app.graph_check_process import check_goal_graph_forked
 
     ws = Workspace.create(tmp_path / "ws")
     bad = tmp_path / "bad.yaml"
@@ -94,7 +94,7 @@ def test_the_run_process_never_imports_the_motion_stack(tmp_path):
 def test_the_coordinator_wakes_the_supervisor_before_it_rewrites_task_md(tmp_path):
     from phyagentos.agent.agent_loop import load_run_graph
     from phyagentos.agent.coordinator import AgentCoordinator
-    from phyagentos.orchestrator import _register_run, skill_names
+    from phyagentos.app.orchestrator import _register_run, skill_names
 
     ws = Workspace.create(tmp_path / "ws")
     run = _register_run(ws, HOLD, seed=0, target=None)
@@ -114,8 +114,8 @@ def test_the_coordinator_wakes_the_supervisor_before_it_rewrites_task_md(tmp_pat
 
 
 def test_a_process_that_loaded_the_check_runs_it_itself_as_it_adapted_it(tmp_path, monkeypatch):
-    import phyagentos.graph_check as graph_check
-    from phyagentos.graph_check_process import check_goal_graph_forked
+    import phyagentos.app.graph_check as graph_check
+    from phyagentos.app.graph_check_process import check_goal_graph_forked
 
     ws = Workspace.create(tmp_path / "ws")
     calls = []
@@ -182,7 +182,7 @@ def test_closing_a_watcher_does_not_wait_out_watchdogs_move_pairing_delay(tmp_pa
 def _with_idle_runner(monkeypatch):
     """An idle runner in this process's pool (as ``run`` prestarts one), and no way to
     check other than with it: the forkserver child and this process's fallback fail."""
-    from phyagentos import graph_check_process
+    from phyagentos.app import graph_check_process
     from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime import worker
 
@@ -197,7 +197,7 @@ def _with_idle_runner(monkeypatch):
 
 @pytest.mark.sim
 def test_the_check_with_the_idle_runner_returns_what_the_in_process_check_returns(tmp_path, monkeypatch):
-    from phyagentos.graph_check_process import check_goal_graph_forked
+    from phyagentos.app.graph_check_process import check_goal_graph_forked
 
     ws = Workspace.create(tmp_path / "ws")
     with monkeypatch.context() as m:
@@ -212,7 +212,7 @@ def test_the_check_with_the_idle_runner_returns_what_the_in_process_check_return
     ("position: [0.5, -0.2]", "position: [1.5, -0.2]"),  # out of reach (its IK step)
 ])
 def test_the_check_with_the_idle_runner_raises_the_same_located_error(tmp_path, monkeypatch, change):
-    from phyagentos.graph_check_process import check_goal_graph_forked
+    from phyagentos.app.graph_check_process import check_goal_graph_forked
 
     ws = Workspace.create(tmp_path / "ws")
     bad = tmp_path / "bad.yaml"
@@ -231,8 +231,8 @@ def test_the_check_with_the_idle_runner_raises_the_same_located_error(tmp_path, 
 @pytest.mark.sim
 def test_the_idle_runner_is_out_of_the_pool_while_the_check_uses_it_and_back_after(tmp_path, monkeypatch):
     # Another thread's supervisor taking the same runner mid-check would read its replies.
-    from phyagentos import graph_check_process
-    from phyagentos.graph_check_process import check_goal_graph_forked
+    from phyagentos.app import graph_check_process
+    from phyagentos.app.graph_check_process import check_goal_graph_forked
     from phyagentos.runtime import worker
 
     ws = Workspace.create(tmp_path / "ws")

@@ -9,7 +9,7 @@ pytest.importorskip("crafter")
 
 from phyagentos.agent.memory.deaths import correction_acted, correction_for, diagnose_death  # noqa: E402
 from phyagentos.agent.memory.recipes import hypothesis  # noqa: E402
-from phyagentos.orchestrator import run_goal_graph  # noqa: E402
+from phyagentos.app.orchestrator import run_goal_graph  # noqa: E402
 from phyagentos.protocol import Workspace  # noqa: E402
 
 MAKE_FIRST = {

@@ -9,7 +9,7 @@ import yaml
 
 pytest.importorskip("crafter")
 
-from phyagentos.orchestrator import run_goal_graph  # noqa: E402
+from phyagentos.app.orchestrator import run_goal_graph  # noqa: E402
 from phyagentos.protocol import Workspace  # noqa: E402
 
 PLANT = {

@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 import yaml
 
-import phyagentos.orchestrator as orchestrator
+import phyagentos.app.orchestrator as orchestrator
 from phyagentos.agent.coordinator import AgentCoordinator
 from phyagentos.protocol import Workspace
 
@@ -138,7 +138,7 @@ def run_withheld(monkeypatch, root: Path, graph: Path, ws: Path, *, seed: int = 
     agent_cls = type("Agent", (WithholdingAgent,), {"shadow_root": root / f"shadow-{graph.stem}-{seed}", "log": log})
     monkeypatch.setattr(orchestrator, "AgentCoordinator", agent_cls)
     if not reach_check:
-        import phyagentos.graph_check as graph_check
+        import phyagentos.app.graph_check as graph_check
 
         checked = graph_check.check_goal_graph
         monkeypatch.setattr(graph_check, "check_goal_graph", lambda *a, **k: checked(*a, **{**k, "reach": False}))

@@ -139,7 +139,7 @@ def test_a_runner_answers_a_job_sent_while_it_was_still_starting(tmp_path):
 
 @pytest.mark.sim
 def test_terminal_sessions_come_from_the_cache_as_independent_copies(tmp_path):
-    from phyagentos.orchestrator import run_goal_graph
+    from phyagentos.app.orchestrator import run_goal_graph
     from phyagentos.resources import goal_graphs_dir
 
     report = run_goal_graph(goal_graphs_dir() / "hold.yaml", tmp_path / "ws")
@@ -157,7 +157,7 @@ def test_terminal_sessions_come_from_the_cache_as_independent_copies(tmp_path):
 
 def test_a_run_nobody_can_advance_is_reported_as_stalled(tmp_path):
     from phyagentos.agent.coordinator import AgentCoordinator
-    from phyagentos.orchestrator import drive_run
+    from phyagentos.app.orchestrator import drive_run
     from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
 
     class Stuck(AgentCoordinator):
@@ -236,7 +236,7 @@ def test_bundles_read_for_verdicts_serve_the_next_nodes_observations_and_a_repla
     from phyagentos.agent.agent_loop import load_run_graph
     from phyagentos.agent.memory.observed import observe_object
     from phyagentos.agent.verifier import load_evidence
-    from phyagentos.orchestrator import run_goal_graph, skill_names
+    from phyagentos.app.orchestrator import run_goal_graph, skill_names
 
     graph = Path(__file__).resolve().parent.parent / "goal_graphs" / "pick_and_place.yaml"
     report = run_goal_graph(graph, tmp_path / "ws", seed=0)

@@ -46,7 +46,7 @@ def _chain(path: Path, n: int) -> Path:
 def _agent(ws: Workspace, graph: Path):
     from phyagentos.agent.agent_loop import load_run_graph
     from phyagentos.agent.coordinator import AgentCoordinator
-    from phyagentos.orchestrator import _register_run, skill_names
+    from phyagentos.app.orchestrator import _register_run, skill_names
 
     run = _register_run(ws, graph, seed=0, target=None)
     return AgentCoordinator(ws, load_run_graph(ws, run.run_id, skills=skill_names()), run_id=run.run_id), run
@@ -79,7 +79,7 @@ def test_a_step_that_submits_nothing_writes_task_md_even_when_deferring(tmp_path
 
 def test_drive_run_defers_task_md_past_the_claim_and_leaves_it_current(tmp_path, monkeypatch):
     from phyagentos.agent.coordinator import AgentCoordinator
-    from phyagentos.orchestrator import drive_run
+    from phyagentos.app.orchestrator import drive_run
     from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
 
     ws = Workspace.create(tmp_path / "ws")
@@ -270,7 +270,7 @@ def _verdict_lines(ws: Workspace) -> list[tuple[str, str]]:
 
 
 def test_drive_run_appends_a_verdicts_log_line_once_its_dependent_has_started(tmp_path, monkeypatch):
-    from phyagentos.orchestrator import drive_run
+    from phyagentos.app.orchestrator import drive_run
     from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
 
     ws = Workspace.create(tmp_path / "ws")
@@ -350,7 +350,7 @@ def test_a_malformed_log_md_fails_the_step_after_its_sessions_are_written_and_is
 def test_a_verdict_line_its_agent_died_before_appending_is_appended_by_the_next_agent_once(tmp_path, monkeypatch):
     from phyagentos.agent.agent_loop import load_run_graph
     from phyagentos.agent.coordinator import AgentCoordinator
-    from phyagentos.orchestrator import skill_names
+    from phyagentos.app.orchestrator import skill_names
 
     ws, agent, run = _awaiting_verification(tmp_path)
 

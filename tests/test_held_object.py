@@ -10,7 +10,7 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import phyagentos.orchestrator as orchestrator
+import phyagentos.app.orchestrator as orchestrator
 from phyagentos.agent.coordinator import AgentCoordinator
 from phyagentos.agent.criteria import evaluate, parse_criteria
 from phyagentos.agent.held_object import HOLD_STD_M, estimate_held, refine

@@ -150,7 +150,7 @@ def test_a_json_rpc_message_too_deep_for_the_sdk_parser_is_answered_not_dropped(
 
 
 def test_refuse_oversized_rpc_keeps_the_id_and_passes_ordinary_lines():
-    from phyagentos.mcp_server import MAX_RPC_DEPTH, refuse_oversized_rpc  # noqa: PLC0415
+    from phyagentos.app.mcp_server import MAX_RPC_DEPTH, refuse_oversized_rpc  # noqa: PLC0415
 
     ordinary = json.dumps({"jsonrpc": "2.0", "id": 3, "method": "tools/list"}) + "\n"
     assert refuse_oversized_rpc(ordinary) == ordinary
@@ -165,7 +165,7 @@ def test_mcp_over_http_refuses_an_oversized_body_before_reading_it(tmp_path):
     import socket  # noqa: PLC0415
     import time  # noqa: PLC0415
 
-    from phyagentos.mcp_server import MAX_HTTP_BODY_BYTES  # noqa: PLC0415
+    from phyagentos.app.mcp_server import MAX_HTTP_BODY_BYTES  # noqa: PLC0415
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 
 BENCH = Path(__file__).resolve().parents[1] / "bench" / "language.py"
 

@@ -47,7 +47,7 @@ def test_the_cli_module_that_forkserver_children_re_import_loads_no_rich():
 
 
 def test_the_run_process_imports_no_numpy_before_a_pose_is_computed():
-    assert _loaded("import phyagentos.cli, phyagentos.orchestrator", ("numpy",)) == []
+    assert _loaded("import phyagentos.cli, phyagentos.app.orchestrator", ("numpy",)) == []
 
 
 def test_the_held_object_model_still_computes_poses():

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 from phyagentos.runtime.agent_runtime import operation_menu
 

@@ -22,7 +22,7 @@ from phyagentos.agent.recovery import RecoveryPlanner
 from phyagentos.agent.retarget import TargetChooser
 from phyagentos.agent.reviser import ModelReviser
 from phyagentos.llm import make_client
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Diagnosis, SessionRecord, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 from phyagentos.runtime.reach_query import answer_reach_query

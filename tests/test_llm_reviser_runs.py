@@ -11,7 +11,7 @@ import yaml
 from phyagentos.agent.recovery import RecoveryPlanner
 from phyagentos.agent.reviser import ModelReviser
 from phyagentos.llm import make_client
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 
 pytestmark = pytest.mark.sim

@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from phyagentos.cli import main
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 
 
 def _truth(ws):

@@ -11,9 +11,9 @@ import yaml
 from phyagentos.agent.planner import GoalPlanner, PlannerError, plan_schema
 from phyagentos.agent.llm.world import world_from_scene
 from phyagentos.cli import main
-from phyagentos.cli_agent import default_scene
+from phyagentos.app.factories import default_scene
 from phyagentos.llm import LLMCall, LLMReply, make_client
-from phyagentos.orchestrator import skill_names
+from phyagentos.app.orchestrator import skill_names
 from phyagentos.protocol import Workspace
 
 SORT_SCENE = {
@@ -349,7 +349,7 @@ def test_two_cubes_into_one_region_are_set_down_in_their_own_cells_and_both_end_
     """pick_and_place sets an object down at the region's centre: a second cube into the same
     region landed on the first (measured: every 'all except' and counting plan failed so). Each
     such step becomes a pick, then a place_at in its own cell of the region."""
-    from phyagentos.orchestrator import run_goal_graph
+    from phyagentos.app.orchestrator import run_goal_graph
 
     scene = {"objects": SORT_SCENE["objects"], "regions": [
         {"name": "left_bin", "center": [0.42, 0.24], "half_extents": [0.07, 0.07], "rgba": [0.5, 0.5, 0.5, 0.3]}]}

@@ -20,7 +20,7 @@ from phyagentos.agent.llm.world import world_from_scene
 from phyagentos.agent.planner import GoalPlanner
 from phyagentos.cli import main
 from phyagentos.llm import LLMCall, LLMReply, make_client
-from phyagentos.orchestrator import skill_names
+from phyagentos.app.orchestrator import skill_names
 from phyagentos.protocol import Workspace
 
 # a 4 cm red cube and a 6 cm blue cube, two bins

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets import MuJoCoTarget, SceneSpec

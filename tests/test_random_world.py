@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets import MuJoCoTarget, SceneSpec
 from phyagentos.targets.world import FRICTION, MASS_KG, REACH_M, SIZE_M, draw_world

@@ -11,7 +11,7 @@ import yaml
 
 from phyagentos.agent.render import run_graph_of, to_mermaid
 from phyagentos.agent.verifier import SessionVerifier, load_evidence
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir
 

@@ -128,7 +128,7 @@ def test_a_frozen_dag_is_sorted_once_and_an_unfrozen_one_follows_its_changes(mon
 def test_records_a_run_shares_between_its_listings_are_never_modified(tmp_path, monkeypatch):
     # The coordinator's listings share archived records (read-only by contract): after a
     # whole run, every shared record is still exactly what it was when first handed out.
-    from phyagentos.orchestrator import run_goal_graph
+    from phyagentos.app.orchestrator import run_goal_graph
 
     handed: dict[int, tuple[SessionRecord, bytes]] = {}
     real = Workspace.list_sessions

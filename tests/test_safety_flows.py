@@ -9,7 +9,7 @@ import yaml
 
 from phyagentos.errors import SafetyError, TargetError
 from phyagentos.motion.retime import retime
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.primitives.context import SkillContext
 from phyagentos.primitives.execution import ExecuteTrajectory
 from phyagentos.protocol import Workspace

@@ -107,7 +107,7 @@ def test_a_restored_world_has_the_digest_of_the_saved_one_and_a_moved_world_anot
 
 @pytest.mark.sim
 def test_a_run_starts_its_second_session_from_the_first_ones_terminal_view(tmp_path):
-    from phyagentos.orchestrator import run_goal_graph
+    from phyagentos.app.orchestrator import run_goal_graph
 
     graph = tmp_path / "two_holds.yaml"
     nodes = [{"id": f"h{i}", "skill": "hold", "params": {"duration_s": 0.0},

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from phyagentos.cli import main
-from phyagentos.cli_real import ideal_calibration
+from phyagentos.cli.real import ideal_calibration
 from phyagentos.runtime.safety_guard import EStopLatch
 from phyagentos.targets.so101_real.arm import SO101Arm
 from phyagentos.targets.so101_real.bus_twin import BusTwin

@@ -12,7 +12,7 @@ from phyagentos.bench.verifier_scoring import (
     truth_of_criteria,
     wilson_interval,
 )
-from phyagentos.orchestrator import run_goal_graph
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 
 pytestmark = pytest.mark.sim

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from phyagentos.agent.agent_loop import load_run_graph
 from phyagentos.agent.coordinator import AgentCoordinator
-from phyagentos.orchestrator import RunReport, _register_run, drive_run
+from phyagentos.app.orchestrator import RunReport, _register_run, drive_run
 from phyagentos.protocol import Workspace
 from phyagentos.resources import skill_dirs, tree_dirs
 from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
@@ -21,7 +21,7 @@ from phyagentos.runtime.supervisor import WatchdogSupervisor
 
 
 def run_unchecked(graph: str | Path, workspace_dir: str | Path, *, seed: int = 0) -> RunReport:
-    """As :func:`phyagentos.orchestrator.run_goal_graph`, without :func:`check_goal_graph`."""
+    """As :func:`phyagentos.app.orchestrator.run_goal_graph`, without :func:`check_goal_graph`."""
     started = time.perf_counter()
     ws = Workspace.create(workspace_dir)
     runtime = BuiltinSkillRuntime.from_dirs(skill_dirs(), tree_dirs())

@@ -3,7 +3,7 @@
 Every tool names its input schema (JSON Schema, ``additionalProperties: false``) and is
 called through :meth:`ToolRegistry.call`, which checks the arguments against the
 schema, applies the tool policy and returns a JSON-serialisable result or raises
-:class:`ToolError`. The in-process Agent and the MCP server (:mod:`phyagentos.mcp_server`)
+:class:`ToolError`. The in-process Agent and the MCP server (:mod:`phyagentos.app.mcp_server`)
 expose the same registry, so an external agent can read the workspace, plan, submit and
 signal without touching any target SDK.
 
@@ -146,7 +146,7 @@ class ToolRegistry:
     Args:
         workspace: the protocol workspace.
         submit: ``submit(yaml_text) -> run_id`` validating and registering a goal graph
-            (the composition root passes :func:`phyagentos.orchestrator.submit_goal_graph`
+            (the composition root passes :func:`phyagentos.app.orchestrator.submit_goal_graph`
             wrapped); ``None``: the ``submit_goal_graph`` tool is not offered.
         plan: ``plan(request, scene) -> dict`` (a Goal Planner); ``None``: ``plan_request``
             is not offered.

@@ -6,7 +6,7 @@ ordinary AgentCoordinator / WatchdogSupervisor / SessionRunner / SessionVerifier
 worker processes (:mod:`.executor`, :mod:`.episode`) -> report from the session files
 (:mod:`.report`, error taxonomy in :mod:`.taxonomy`). Entry point: :func:`run_bench`.
 
-Like :mod:`phyagentos.orchestrator`, this package is a composition root: it may import
+Like :mod:`phyagentos.app.orchestrator`, this package is a composition root: it may import
 both planes, which still only meet through workspace files.
 """
 

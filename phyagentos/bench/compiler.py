@@ -159,7 +159,7 @@ def compile_episodes(episodes: list[Episode], *, run_dir: Path, template: Path) 
             compiled twice into the same place).
     """
     from phyagentos.agent.coordinator import AgentCoordinator  # noqa: PLC0415
-    from phyagentos.orchestrator import skill_names  # noqa: PLC0415
+    from phyagentos.app.orchestrator import skill_names  # noqa: PLC0415
     from phyagentos.protocol import RunRecord, Workspace, utc_now_iso  # noqa: PLC0415
 
     skills = skill_names()

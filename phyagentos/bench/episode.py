@@ -2,7 +2,7 @@
 
 The bench compiler writes ``episode.yaml`` (this module's :class:`Episode`) and the
 episode's first pending sessions; a worker later re-opens the workspace and drives the
-run to completion through :func:`phyagentos.orchestrator.drive_run`, the same loop as
+run to completion through :func:`phyagentos.app.orchestrator.drive_run`, the same loop as
 ``phyagentos run`` (AgentCoordinator + WatchdogSupervisor + SessionRunner +
 SessionVerifier). Nothing here judges success: the verdicts in the session files do.
 """
@@ -155,7 +155,7 @@ def run_episode(directory: str | Path, *, memory=None) -> EpisodeOutcome:
     import socket  # noqa: PLC0415
 
     from phyagentos.agent.coordinator import AgentCoordinator  # noqa: PLC0415
-    from phyagentos.orchestrator import drive_run  # noqa: PLC0415
+    from phyagentos.app.orchestrator import drive_run  # noqa: PLC0415
     from phyagentos.protocol import Workspace  # noqa: PLC0415
     from phyagentos.runtime.supervisor import WatchdogSupervisor  # noqa: PLC0415
 

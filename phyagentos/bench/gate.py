@@ -79,7 +79,7 @@ def run_gate(workspace, suite, first_scenes: dict[str, dict]) -> GateReport:
     from dataclasses import replace  # noqa: PLC0415
 
     from phyagentos.agent.criteria import parse_criteria  # noqa: PLC0415
-    from phyagentos.orchestrator import load_graph_for  # noqa: PLC0415
+    from phyagentos.app.orchestrator import load_graph_for  # noqa: PLC0415
     from phyagentos.protocol import SessionRecord  # noqa: PLC0415
     from phyagentos.protocol.lifecycle import utc_now  # noqa: PLC0415
     from phyagentos.resources import skills_dir, trees_dir  # noqa: PLC0415

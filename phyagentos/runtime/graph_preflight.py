@@ -1,7 +1,7 @@
 """Runtime-side checks of a whole goal graph before anything moves.
 
 The Runtime plane knows what a scene may hold and what an arm can reach; the Agent
-plane knows goal graphs. The composition root (:mod:`phyagentos.graph_check`) asks
+plane knows goal graphs. The composition root (:mod:`phyagentos.app.graph_check`) asks
 this module, with plain data, three questions:
 
 - :func:`check_scene`: is the scene well-formed for the target's driver (types,
@@ -326,7 +326,7 @@ def check_reachability(driver: str, target_name: str, scene: Any, *, picks: Sequ
 
 
 # -- the Runtime plane's part of the whole-graph check, in batches of plain data ---------
-# ``phyagentos.graph_check`` runs the check; these are the steps that need the runtime
+# ``phyagentos.app.graph_check`` runs the check; these are the steps that need the runtime
 # (primitives, scenes, the motion stack). Plain tuples in and out, so that the same
 # functions serve the check in one process and the check whose runtime half runs in the
 # runner (``phyagentos.runtime.worker``, job ``graph_checks``).

@@ -626,7 +626,7 @@ class _Runner:
         self.reply("warmed", built=built, errors=errors)
 
     def job_graph_checks(self, root: str, stage: str, items: list) -> None:
-        """The runtime's steps of a whole-graph check (:mod:`phyagentos.graph_check`), in
+        """The runtime's steps of a whole-graph check (:mod:`phyagentos.app.graph_check`), in
         batches (:func:`~phyagentos.runtime.graph_preflight.build_trees`, ``check_scenes``,
         ``check_reach``), with this runner's tree library. Scenes travel as pickles the
         caller hands back unopened, so it never imports the scene code. Reachability

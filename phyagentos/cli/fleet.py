@@ -136,7 +136,7 @@ def cmd_fleet_run(args, out: Console, err: Console) -> int:
     from phyagentos.fleet.agent_side import FleetAgentBridge
     from phyagentos.fleet.config import find_fleet_config
     from phyagentos.fleet.link import FleetLink
-    from phyagentos.orchestrator import skill_names, submit_goal_graph
+    from phyagentos.app.orchestrator import skill_names, submit_goal_graph
     from phyagentos.protocol import Workspace
 
     started = time.perf_counter()

@@ -105,7 +105,7 @@ def _cmd_watch(args, out: Console, err: Console) -> int:
 
 def _cmd_agent(args, out: Console, err: Console) -> int:
     from phyagentos.errors import ProtocolError
-    from phyagentos.orchestrator import serve_agent
+    from phyagentos.app.orchestrator import serve_agent
     from phyagentos.protocol import Workspace
 
     if args.run is not None:
@@ -142,7 +142,7 @@ def _cmd_agent(args, out: Console, err: Console) -> int:
 def _run_view(ws, run_id: str) -> dict[str, Any]:
     from phyagentos.agent.agent_loop import load_run_graph
     from phyagentos.agent.coordinator import AgentCoordinator
-    from phyagentos.orchestrator import skill_names
+    from phyagentos.app.orchestrator import skill_names
 
     view: dict[str, Any] = {"run_id": run_id}
     try:
@@ -160,7 +160,7 @@ def _run_view(ws, run_id: str) -> dict[str, Any]:
 
 
 def _cmd_submit(args, out: Console, err: Console) -> int:
-    from phyagentos.orchestrator import serve_agent, submit_goal_graph
+    from phyagentos.app.orchestrator import serve_agent, submit_goal_graph
     from phyagentos.protocol import Workspace
 
     run = submit_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target)
@@ -190,7 +190,7 @@ def _cmd_submit(args, out: Console, err: Console) -> int:
 
 def _say_queued(ws, run_id: str, err: Console) -> None:
     """Say when the run waits for another run's target world (one run per target world)."""
-    from phyagentos.orchestrator import held_worlds
+    from phyagentos.app.orchestrator import held_worlds
 
     targets = {ident.target for _, _, ident in ws.active_sessions(run_id=run_id)}
     for target, owner in held_worlds(ws, targets).items():

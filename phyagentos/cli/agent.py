@@ -11,7 +11,7 @@ Without ``--scene`` it plans on the tabletop scene of ``goal_graphs/pick_and_pla
 A refusal prints its reason and exits 1 (a request that asks that nothing moves, "leave the
 blocks where they are", plans nothing and exits 0); a plan still invalid after the repair round is
 an error (exit 2), and so is a plan the whole-graph check of ``validate`` refuses
-(:func:`phyagentos.graph_check.check_goal_graph`: the scene, trees, names, one object
+(:func:`phyagentos.app.graph_check.check_goal_graph`: the scene, trees, names, one object
 per arm, reachability per target), before anything runs. The model comes from
 ``llm.yaml`` / ``PHYAGENTOS_LLM_*`` (offline SmolLM2 by default).
 """
@@ -24,91 +24,12 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from phyagentos.errors import GoalGraphError
-from phyagentos.yamlsource import read_yaml
+from phyagentos.app.factories import (default_scene, load_scene, make_library_planner, make_planner,
+                                      make_reviser, perceived_entities)
 
-__all__ = ["add_agent_commands", "AGENT_HANDLERS", "make_planner", "make_library_planner", "make_reviser", "default_scene", "load_scene",
-           "perceived_entities"]
+__all__ = ["add_agent_commands", "AGENT_HANDLERS"]
 
 EXIT_OK, EXIT_NOT_SUCCEEDED = 0, 1
-
-
-def default_scene() -> dict[str, Any]:
-    """The tabletop scene of ``goal_graphs/pick_and_place.yaml``."""
-    from phyagentos.resources import goal_graphs_dir  # noqa: PLC0415
-
-    return load_scene(goal_graphs_dir() / "pick_and_place.yaml")
-
-
-def load_scene(path: str | Path) -> dict[str, Any]:
-    """A scene mapping from ``path``: a goal graph (its ``scene``) or a bare scene (``objects``/``regions``)."""
-    try:
-        data = read_yaml(path, error=GoalGraphError)
-    except OSError as exc:
-        raise GoalGraphError(f"cannot read scene: {exc}", path=path) from exc
-    if isinstance(data, dict) and isinstance(data.get("scene"), dict):
-        return data["scene"]
-    if isinstance(data, dict) and ("objects" in data or "regions" in data):
-        return data
-    raise GoalGraphError("expected a scene mapping (objects, regions, obstacles) or a goal graph with a 'scene'",
-                         path=path)
-
-
-def perceived_entities(workspace) -> list[dict[str, Any]]:
-    """ENVIRONMENT.md's entities (what the runtime last perceived) as plain mappings; empty before any run."""
-    return [e.model_dump(mode="json") for e in workspace.read("ENVIRONMENT").data.entities]
-
-
-def make_planner(workspace, *, client=None):
-    """A GoalPlanner over ``workspace``'s targets and the shipped skills, with the configured model; its
-    selector asks the Runtime's IK about reach (:func:`phyagentos.runtime.reach_query.answer_reach_query`)."""
-    from phyagentos.agent.planner import GoalPlanner  # noqa: PLC0415
-    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
-    from phyagentos.orchestrator import skill_names  # noqa: PLC0415
-    from functools import partial  # noqa: PLC0415
-
-    from phyagentos.runtime.reach_query import answer_reach_query  # noqa: PLC0415
-
-    targets = [t.model_dump(mode="json") for t in workspace.read("TARGETS").data.targets]
-    client = client or make_client(load_llm_config(workspace.root))
-    # Verified lessons, most confirmed first: the ContextBuilder injects them within its budget (lowest priority).
-    verified = sorted((x for x in workspace.read("LESSONS").data.lessons if x.verified),
-                      key=lambda x: -x.confirmations)
-    lessons = [f"{x.cause}: {x.correction} ({x.confirmations} confirmation(s))" for x in verified[:5]]
-    return GoalPlanner(client, skills=skill_names(), targets=targets, lessons=lessons,
-                       reach=partial(answer_reach_query, root=workspace.root))
-
-
-def make_library_planner(workspace, *, client=None):
-    """A LibraryPlanner (a request as one goal of a task library) with the configured model."""
-    from phyagentos.agent.library_planner import LibraryPlanner  # noqa: PLC0415
-    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
-    from phyagentos.orchestrator import skill_names  # noqa: PLC0415
-
-    targets = [t.name for t in workspace.read("TARGETS").data.targets]
-    return LibraryPlanner(client or make_client(load_llm_config(workspace.root)), skills=skill_names(),
-                          targets=targets)
-
-
-def make_reviser(kind: str, workspace_dir: str | Path):
-    """The rule ladder, or a ModelReviser (the configured model) with the ladder as fallback; both with a
-    TargetChooser that asks the Runtime's IK, so a node whose arm cannot reach (``ik_unreachable``) or plan
-    it moves to another capable target that reaches it."""
-    from phyagentos.agent.recovery import RecoveryPlanner  # noqa: PLC0415
-    from phyagentos.agent.retarget import TargetChooser  # noqa: PLC0415
-    from phyagentos.protocol import Workspace  # noqa: PLC0415
-    from phyagentos.runtime.reach_query import answer_reach_query  # noqa: PLC0415
-    from functools import partial  # noqa: PLC0415
-
-    ws = Workspace.create(workspace_dir)
-    chooser = TargetChooser(ws, reach=partial(answer_reach_query, root=ws.root))
-    if kind == "rules":
-        return RecoveryPlanner(retarget=chooser)
-    from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415
-    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
-
-    return ModelReviser(make_client(load_llm_config(workspace_dir)), fallback=RecoveryPlanner(retarget=chooser),
-                        retarget=chooser)
 
 
 def add_agent_commands(sub: argparse._SubParsersAction) -> None:
@@ -153,7 +74,7 @@ def _cmd_plan(args, out, err) -> int:
     if result.status == "planned":
         # the same whole-graph check as validate, submit and run, before anything is printed
         # as valid or runs (a GoalGraphError names the plan's goal_graph.yaml and line: exit 2)
-        from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+        from phyagentos.app.graph_check import check_goal_graph  # noqa: PLC0415
         from phyagentos.resources import skill_dirs, tree_dirs  # noqa: PLC0415
         from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
 
@@ -186,16 +107,16 @@ def _cmd_plan(args, out, err) -> int:
         return EXIT_OK if result.status == "nothing_to_do" else EXIT_NOT_SUCCEEDED
     if not args.run:
         return EXIT_OK
-    from phyagentos.cli import _cmd_run  # noqa: PLC0415
+    from phyagentos.cli.run import cmd_run  # noqa: PLC0415
 
     run_args = argparse.Namespace(goal_graph=paths["goal_graph"], workspace=args.workspace, json=args.json,
                                   seed=args.seed, target=None, memory="learn", keep_success_images=False,
                                   reviser=args.reviser)
-    return _cmd_run(run_args, out, err)
+    return cmd_run(run_args, out, err)
 
 
 def _cmd_mcp(args, out, err) -> int:
-    from phyagentos.mcp_server import serve  # noqa: PLC0415
+    from phyagentos.app.mcp_server import serve  # noqa: PLC0415
 
     serve(args.workspace, http=args.http, port=args.port, with_planner=not args.no_planner)
     return EXIT_OK

@@ -2,15 +2,15 @@
 
     phyagentos run GOAL_GRAPH --workspace DIR [--json] [--seed N] [--target NAME]
     phyagentos watch WORKSPACE | agent WORKSPACE | submit GOAL_GRAPH --workspace DIR [--follow]
-    phyagentos status WORKSPACE [--json] | signal WORKSPACE KIND [--session ID]   (cli_planes.py)
+    phyagentos status WORKSPACE [--json] | signal WORKSPACE KIND [--session ID]   (cli/planes.py)
     phyagentos bench SUITE --workspace DIR [--episodes N] [--seeds ...] [--workers K] [--memory off|frozen|learn] [--json]
     phyagentos validate GOAL_GRAPH [--workspace DIR] [--target NAME]
-    phyagentos skills list|show NAME [--workspace DIR] | primitives [--json|--markdown]   (cli_skills.py)
+    phyagentos skills list|show NAME [--workspace DIR] | primitives [--json|--markdown]   (cli/skills.py)
     phyagentos --skills-path DIR ...   (a folder with skills/ and trees/, searched after the workspace's)
     phyagentos render tree SKILL_OR_TREE [--out FILE.png]
     phyagentos render graph WORKSPACE [--run RUN_ID] [--out FILE.png|.svg] [--mermaid FILE.md]
     phyagentos policy serve [--host H] [--port N] [--rate-hz F] [--horizon K] [--stall-after N]
-    phyagentos bus-twin so101 | calibrate --port P | doctor --target so101_real --port P   (cli_real.py)
+    phyagentos bus-twin so101 | calibrate --port P | doctor --target so101_real --port P   (cli/real.py)
 
 Exit codes: 0 every node succeeded / command succeeded; 1 a node did not succeed;
 2 bad input (goal graph, protocol document, arguments).
@@ -57,16 +57,16 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--keep-success-images", action="store_true",
                      help="keep the evidence images of successful sessions (failures always keep theirs)")
 
-    from phyagentos.cli_fleet import add_fleet_commands  # [issue 31] router, edge, run --fleet
+    from phyagentos.cli.fleet import add_fleet_commands  # [issue 31] router, edge, run --fleet
 
     add_fleet_commands(sub, run)
-    from phyagentos.cli_planes import add_plane_commands
+    from phyagentos.cli.planes import add_plane_commands
 
     add_plane_commands(sub)
-    from phyagentos.cli_skills import add_skill_commands
+    from phyagentos.cli.skills import add_skill_commands
 
     add_skill_commands(sub)
-    from phyagentos.cli_agent import add_agent_commands
+    from phyagentos.cli.agent import add_agent_commands
 
     add_agent_commands(sub)
 
@@ -117,9 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--rate-hz", type=float, default=20.0, help="action rate of the chunks, Hz (default 20)")
     serve.add_argument("--horizon", type=int, default=10, help="actions per chunk (default 10)")
     serve.add_argument("--stall-after", type=int, help="fault injection: stop answering after N inferences")
-    from phyagentos.cli_view import add_view_commands  # [issue 13] view, run/bench --record
+    from phyagentos.cli.view import add_view_commands  # [issue 13] view, run/bench --record
     add_view_commands(sub)
-    from phyagentos.cli_real import add_real_commands  # [issue 32] bus-twin, calibrate, doctor, run --port
+    from phyagentos.cli.real import add_real_commands  # [issue 32] bus-twin, calibrate, doctor, run --port
     add_real_commands(sub)
     return parser
 
@@ -178,55 +178,6 @@ def _setup_logging(verbose: int, console: _LazyConsole) -> None:
     # transitions logs every state entry/exit at INFO; our own transition log is enough.
     logging.getLogger("transitions").setLevel(max(level, logging.WARNING))
     logging.getLogger("toppra").setLevel(max(level, logging.WARNING))
-
-
-def _cmd_run(args, out: Console, err: Console) -> int:
-    if getattr(args, "fleet", None):  # [issue 31]
-        from phyagentos.cli_fleet import cmd_fleet_run
-
-        return cmd_fleet_run(args, out, err)
-    from phyagentos.resources import skill_dirs, tree_dirs
-    from phyagentos.runtime.worker import prestart_runner
-
-    prestart_runner(skill_dirs(), tree_dirs())  # cold start: the runtime loads while the Agent plane does
-    from phyagentos.orchestrator import run_goal_graph
-
-    from phyagentos.cli_agent import make_reviser
-
-    progress = None if args.json else (lambda msg: err.print(f"[dim]{msg}[/dim]"))
-    report = run_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target, progress=progress,
-                            use_memory=args.memory != "off", consolidate=args.memory == "learn",
-                            keep_success_images=args.keep_success_images,
-                            reviser=make_reviser(getattr(args, "reviser", "rules"), args.workspace))
-    if args.json:
-        print(json.dumps(report.to_dict(), ensure_ascii=False))
-    else:
-        # Session ids are "<run id>-<node>-<generation>": the title carries the run id,
-        # rows show the rest, so the table stays readable in 80 columns.
-        from rich.table import Table  # noqa: PLC0415
-
-        table = Table(title=f"run {report.run_id}  ({report.wall_time_s:.1f} s)")
-        rows = report.sessions
-        show_recovery = any(s.cause or s.strategy or s.memory for s in rows)
-        columns = ["node", "session", "skill", "status", "verdict"] + (["cause", "strategy"] if show_recovery else []) + ["duration"]
-        for col in columns:
-            table.add_column(col, overflow="fold", no_wrap=col in ("status", "verdict", "duration"))
-        colours = {"succeeded": "green", "failed": "red", "rejected": "red", "timed_out": "red", "replanned": "yellow"}
-        for s in rows:
-            colour = colours.get(s.status, "white")
-            short = s.session_id.removeprefix(f"{report.run_id}-")
-            cells = [s.node, short, s.skill, f"[{colour}]{s.status}[/{colour}]", s.verdict or "-"]
-            if show_recovery:
-                cells += [s.cause or "-", s.strategy or ("memory: " + ", ".join(s.memory) if s.memory else "-")]
-            cells.append(f"{s.duration_s:.2f} s" if s.duration_s is not None else "-")
-            table.add_row(*cells)
-        out.print(table)
-        for s in report.sessions:
-            if s.status != "succeeded" and s.reason:
-                out.print(f"[bold]{s.session_id}[/bold]: {s.reason}")
-        out.print(f"workspace: {report.workspace}  evidence: {report.workspace / 'evidence'}")
-        out.print("[green]all nodes succeeded[/green]" if report.succeeded else "[red]not every node succeeded[/red]")
-    return EXIT_OK if report.succeeded else EXIT_NOT_SUCCEEDED
 
 
 def _cmd_bench(args, out: Console, err: Console) -> int:
@@ -316,7 +267,7 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
 
 def _cmd_validate(args, out: Console, err: Console) -> int:
     from phyagentos.agent.dag import to_digraph, topological_order
-    from phyagentos.graph_check import check_goal_graph
+    from phyagentos.app.graph_check import check_goal_graph
     from phyagentos.protocol import Workspace
     from phyagentos.resources import skill_dirs, tree_dirs
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
@@ -417,19 +368,21 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     out, err = _LazyConsole(), _LazyConsole(stderr=True)
     _setup_logging(args.verbose, err)
-    from phyagentos.cli_agent import AGENT_HANDLERS
-    from phyagentos.cli_planes import PLANE_HANDLERS
-    from phyagentos.cli_skills import SKILL_HANDLERS
-    from phyagentos.cli_fleet import FLEET_HANDLERS  # [issue 31]
+    from phyagentos.cli.agent import AGENT_HANDLERS
+    from phyagentos.cli.planes import PLANE_HANDLERS
+    from phyagentos.cli.skills import SKILL_HANDLERS
+    from phyagentos.cli.fleet import FLEET_HANDLERS  # [issue 31]
 
-    handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, **AGENT_HANDLERS, "run": _cmd_run, "bench": _cmd_bench,
+    from phyagentos.cli.run import cmd_run
+
+    handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, **AGENT_HANDLERS, "run": cmd_run, "bench": _cmd_bench,
                 "validate": _cmd_validate, "render": _cmd_render,
                 "policy": _cmd_policy, **FLEET_HANDLERS}
-    from phyagentos.cli_skills import skill_search_env
+    from phyagentos.cli.skills import skill_search_env
 
-    from phyagentos.cli_view import with_view  # [issue 13]
+    from phyagentos.cli.view import with_view  # [issue 13]
     handlers = with_view(handlers)
-    from phyagentos.cli_real import with_real  # [issue 32]
+    from phyagentos.cli.real import with_real  # [issue 32]
     handlers = with_real(handlers)
     try:
         with skill_search_env(args, err):

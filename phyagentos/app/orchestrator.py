@@ -269,7 +269,7 @@ def submit_goal_graph(goal_graph: str | Path, workspace_dir: str | Path, *, seed
         GoalGraphError: the goal graph (or the target override) is invalid.
         DocumentError: a protocol document in the workspace is malformed.
     """
-    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+    from phyagentos.app.graph_check import check_goal_graph  # noqa: PLC0415
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
 
     workspace = Workspace.create(workspace_dir)
@@ -364,7 +364,7 @@ def run_goal_graph(
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
     from phyagentos.deploy_check import check_deploy_files  # noqa: PLC0415
-    from phyagentos.graph_check_process import check_goal_graph_forked  # noqa: PLC0415
+    from phyagentos.app.graph_check_process import check_goal_graph_forked  # noqa: PLC0415
 
     # Every deploy-time file (sensors.yaml, perception.yaml, safety.yaml, llm.yaml, fleet.yaml)
     # before any target is built: a malformed one is reported with file:line, never repaired.

@@ -1,7 +1,7 @@
 """The ToolRegistry as an MCP server (official ``mcp`` SDK): ``phyagentos mcp --workspace WS [--http]``.
 
 A composition root: it builds the :class:`~phyagentos.agent.tools.ToolRegistry` with the
-validated submit path (:func:`phyagentos.orchestrator.submit_goal_graph`) and the Goal
+validated submit path (:func:`phyagentos.app.orchestrator.submit_goal_graph`) and the Goal
 Planner (the model of ``llm.yaml``/environment, offline by default), and serves exactly
 its tools -- names, descriptions and JSON input schemas as the registry declares them --
 over stdio (default) or streamable HTTP on localhost (``--http``, path ``/mcp``).
@@ -48,7 +48,7 @@ logger = logging.getLogger(__name__)
 
 def build_registry(workspace: Workspace, *, with_planner: bool = True) -> ToolRegistry:
     """The registry over ``workspace`` with submit and (optionally) the Goal Planner wired in."""
-    from phyagentos.orchestrator import submit_goal_graph  # noqa: PLC0415
+    from phyagentos.app.orchestrator import submit_goal_graph  # noqa: PLC0415
 
     def submit(text: str) -> str:
         with tempfile.NamedTemporaryFile("w", suffix=".yaml", dir=workspace.root, prefix=".submit-", delete=False) as f:
@@ -62,7 +62,7 @@ def build_registry(workspace: Workspace, *, with_planner: bool = True) -> ToolRe
     plan = None
     if with_planner:
         def plan(request: str, scene: dict | None) -> dict:
-            from phyagentos.cli_agent import default_scene, make_planner, perceived_entities  # noqa: PLC0415
+            from phyagentos.app.factories import default_scene, make_planner, perceived_entities  # noqa: PLC0415
 
             result = make_planner(workspace).plan(request, scene=scene or default_scene(),
                                                   environment=perceived_entities(workspace))

@@ -1,6 +1,6 @@
 """The whole-graph check of ``phyagentos run``, with the idle runner or in a child of its forkserver.
 
-:func:`phyagentos.graph_check.check_goal_graph` builds every node's behaviour tree and
+:func:`phyagentos.app.graph_check.check_goal_graph` builds every node's behaviour tree and
 solves IK for every pick and place pose: it needs the primitives and the motion stack
 (MuJoCo, mink, toppra), about 1.5 s of imports. The runner's forkserver
 (:mod:`phyagentos.runtime.worker`), which ``run`` starts before anything else, imports
@@ -11,7 +11,7 @@ forkserver), not twice, and not on the main process's path.
 
 When ``run`` has prestarted a runner (it has, unless another run took it), the check
 runs in this process instead and hands its runtime steps (trees, scenes, reachability,
-:class:`~phyagentos.graph_check.RuntimeChecks`) to that idle runner as three jobs: the
+:class:`~phyagentos.app.graph_check.RuntimeChecks`) to that idle runner as three jobs: the
 runner has the runtime imported and is building the graph's targets anyway, so neither a
 second process nor a second compile of the scene's meshes is paid, and this process still
 imports no motion code (scenes come back as pickles it hands back unopened).
@@ -32,7 +32,7 @@ from phyagentos import errors
 from phyagentos.errors import GoalGraphError, PhyAgentOSError
 
 if TYPE_CHECKING:
-    from phyagentos.graph_check import GraphCheck
+    from phyagentos.app.graph_check import GraphCheck
 
 __all__ = ["check_goal_graph_forked"]
 
@@ -44,7 +44,7 @@ CHECK_TIMEOUT_S = 300.0
 
 
 def _check_here(path: Path, root: Path, target: str | None, dirs: tuple[str, str]) -> "GraphCheck":
-    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+    from phyagentos.app.graph_check import check_goal_graph  # noqa: PLC0415
     from phyagentos.protocol import Workspace  # noqa: PLC0415
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
 
@@ -52,7 +52,7 @@ def _check_here(path: Path, root: Path, target: str | None, dirs: tuple[str, str
     return check_goal_graph(path, Workspace.open(root), runtime, target=target)
 
 
-#: This module imported :mod:`phyagentos.graph_check` itself, for the check with an idle
+#: This module imported :mod:`phyagentos.app.graph_check` itself, for the check with an idle
 #: runner: its presence in ``sys.modules`` then says nothing about the caller.
 _LOADED_FOR_RUNNER = False
 
@@ -62,7 +62,7 @@ class _RunnerFailed(Exception):
 
 
 class _RunnerChecks:
-    """:class:`~phyagentos.graph_check.RuntimeChecks` done by an idle runner (job
+    """:class:`~phyagentos.app.graph_check.RuntimeChecks` done by an idle runner (job
     ``graph_checks``): one round trip per step (trees, scenes, reach)."""
 
     def __init__(self, runner, root: Path, timeout_s: float) -> None:
@@ -110,11 +110,11 @@ def _check_with_runner(path: Path, root: Path, target: str | None, dirs: tuple[s
 def _check_borrowed(runner, path: Path, root: Path, target: str | None, dirs: tuple[str, str],
                     timeout_s: float) -> "GraphCheck | None":
     global _LOADED_FOR_RUNNER
-    if "phyagentos.graph_check" not in sys.modules:
+    if "phyagentos.app.graph_check" not in sys.modules:
         _LOADED_FOR_RUNNER = True
     from types import SimpleNamespace  # noqa: PLC0415
 
-    from phyagentos.graph_check import check_goal_graph  # noqa: PLC0415
+    from phyagentos.app.graph_check import check_goal_graph  # noqa: PLC0415
     from phyagentos.protocol import Workspace  # noqa: PLC0415
     from phyagentos.runtime.skills import SkillRegistry  # noqa: PLC0415
 
@@ -146,14 +146,14 @@ def _child(conn, path: str, root: str, target: str | None, dirs: tuple[str, str]
 
 def check_goal_graph_forked(path: str | Path, workspace_root: str | Path, *, target: str | None = None,
                             fork: bool | None = None, timeout_s: float = CHECK_TIMEOUT_S) -> "GraphCheck":
-    """:func:`phyagentos.graph_check.check_goal_graph` of ``path`` against the workspace
+    """:func:`phyagentos.app.graph_check.check_goal_graph` of ``path`` against the workspace
     at ``workspace_root`` with the shipped skills and trees, run in a child of the
     runner's forkserver (this process imports neither the primitives nor the motion
     stack).
 
     Args:
         fork: ``None`` (default): fork unless this process has imported
-            :mod:`phyagentos.graph_check` already (``validate``, a library user or a
+            :mod:`phyagentos.app.graph_check` already (``validate``, a library user or a
             test that uses or adapts the check: it then runs here, as that caller set
             it up); ``True``: always fork; ``False``: check in this process.
 
@@ -167,7 +167,7 @@ def check_goal_graph_forked(path: str | Path, workspace_root: str | Path, *, tar
     path, root = Path(path), Path(workspace_root)
     dirs = (skill_dirs(), tree_dirs())  # resolved here: the forkserver's environment may be older
     if fork is None:
-        fork = _LOADED_FOR_RUNNER or "phyagentos.graph_check" not in sys.modules
+        fork = _LOADED_FOR_RUNNER or "phyagentos.app.graph_check" not in sys.modules
     if not fork:
         return _check_here(path, root, target, dirs)
     checked = _check_with_runner(path, root, target, dirs, timeout_s)

@@ -52,8 +52,9 @@ from phyagentos.protocol import DOCUMENTS, SESSION_ID_PATTERN, Workspace, Worksp
 
 from . import data, pages
 from .changes import FINISHED_STATES, Tracker
+from .evidence import frames_of
 from .graph_svg import to_svg
-from .scene3d import SceneRenderer, frames_of
+from .scene3d import SceneRenderer
 from .signals import session_signals
 from .security import TOKEN_HEADER, AccessPolicy, safe_path
 

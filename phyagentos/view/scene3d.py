@@ -32,7 +32,9 @@ from phyagentos.runtime.target_pool import scene_for
 from phyagentos.targets.registry import DRIVERS
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["SceneRenderer", "frames_of", "overlay_markers"]
+from .evidence import frames_of, read_trace
+
+__all__ = ["SceneRenderer", "overlay_markers"]
 
 #: Marker colours (RGBA): perceived objects, grasp targets, place targets, the tool path.
 MARKER_RGBA = {"perceived": (0.1, 0.35, 1.0, 0.55), "grasp": (0.1, 0.8, 0.2, 0.8), "place": (1.0, 0.55, 0.0, 0.8),
@@ -45,27 +47,12 @@ logger = logging.getLogger(__name__)
 _MAX_MODELS = 4
 
 
-def frames_of(directory: Path) -> dict[str, Any] | None:
-    """``{"t": [...], "qpos": (N, nq) array, "camera", "fps"[, "wall"]}`` from ``frames.npz``, or None."""
-    path = directory / "frames.npz"
-    if not path.is_file():
-        return None
-    with np.load(path, allow_pickle=False) as data:
-        out = {"t": data["t"].astype(float), "qpos": data["qpos"], "camera": str(data["camera"]),
-               "fps": float(data["fps"])}
-        if "wall" in data.files:
-            out["wall"] = data["wall"].astype(float)
-        return out
-
-
 def overlay_markers(directory: Path) -> list[dict[str, Any]]:
     """Markers from ``trace.jsonl``: ``{"kind", "pos" (3,) m world}`` for perceived object
     positions (``observe``), grasp and place targets (``grasp_pose``, ``place_pose``) and
     the tool centre point's path (``proprio`` ``tcp_position_m``, at most
     :data:`MAX_PATH_POINTS`). Empty when the session has no trace yet."""
-    from .signals import _read_trace  # noqa: PLC0415 - signals imports this module
-
-    trace, _ = _read_trace(directory / "trace.jsonl")
+    trace, _ = read_trace(directory / "trace.jsonl")
     out: list[dict[str, Any]] = []
 
     def vec(v: Any) -> list[float] | None:

@@ -22,7 +22,6 @@ to :data:`MAX_TRACE_BYTES`, so a long session never produces an unbounded respon
 from __future__ import annotations
 
 import bisect
-import json
 import logging
 import re
 from datetime import datetime
@@ -34,7 +33,7 @@ import numpy as np
 from phyagentos.errors import ViewError
 from phyagentos.yamlsource import read_yaml
 
-from .scene3d import frames_of
+from .evidence import MAX_TRACE_BYTES, frames_of, read_trace
 
 __all__ = ["MAX_POINTS", "MAX_TRACE_BYTES", "session_signals"]
 
@@ -42,8 +41,6 @@ logger = logging.getLogger(__name__)
 
 #: Points kept per plotted line (evenly decimated beyond).
 MAX_POINTS = 2000
-#: Bytes of trace.jsonl read (the rest is left out, and said so).
-MAX_TRACE_BYTES = 32 * 1024 * 1024
 _IMAGE = re.compile(r"^(initial|terminal|\d+)_(.+)\.png$")
 
 
@@ -62,23 +59,6 @@ def _line(label: str, t: list[float], y: list[Any], *, step: bool = False) -> di
 
 def _ts(text: str) -> float:
     return datetime.fromisoformat(str(text).replace("Z", "+00:00")).timestamp()
-
-
-def _read_trace(path: Path) -> tuple[list[dict[str, Any]], bool]:
-    out: list[dict[str, Any]] = []
-    if not path.is_file():
-        return out, False
-    with path.open("rb") as fh:
-        data = fh.read(MAX_TRACE_BYTES + 1)
-    cut = len(data) > MAX_TRACE_BYTES
-    for line in data[:MAX_TRACE_BYTES].splitlines():
-        try:
-            rec = json.loads(line)
-        except ValueError:
-            continue  # a line cut by the byte limit, or not JSON
-        if isinstance(rec, dict):
-            out.append(rec)
-    return out, cut
 
 
 def session_signals(root: Path, record: dict[str, Any], *, layout: dict[str, Any] | None) -> dict[str, Any]:
@@ -104,7 +84,7 @@ def session_signals(root: Path, record: dict[str, Any], *, layout: dict[str, Any
         raise ViewError(f"session {sid} has no evidence directory yet")
     notes: list[str] = []
     frames = frames_of(directory)
-    trace, cut = _read_trace(directory / "trace.jsonl")
+    trace, cut = read_trace(directory / "trace.jsonl")
     if cut:
         notes.append(f"trace.jsonl read up to {MAX_TRACE_BYTES // (1024 * 1024)} MiB")
     proprio = [r for r in trace if r.get("kind") == "proprio" and isinstance(r.get("stamp_s"), (int, float))]

@@ -106,16 +106,20 @@ def register_runs(ws: Workspace, n: int, start: int = 0) -> None:
 
 
 def start_view(workspace: Path) -> tuple[subprocess.Popen, str]:
+    """A real ``phyagentos view`` on ``workspace``; its output goes to ``view.log`` next to
+    the workspace (a pipe nobody reads would fill and block the server's logging)."""
+    log = (workspace.parent / "view.log").open("w")
     proc = subprocess.Popen([sys.executable, "-m", "phyagentos.cli", "view", str(workspace), "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            stdout=log, stderr=subprocess.STDOUT, text=True,
                             env={**os.environ, "COLUMNS": "200"}, cwd=workspace.parent)  # PYTHONPATH picks the code
+    log.close()
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if m := re.search(r"(http://\S+/)", line):
+        if m := re.search(r"(http://\S+/)", (workspace.parent / "view.log").read_text()):
             return proc, m.group(1).rstrip("/")
-        if not line:
+        if proc.poll() is not None:
             break
+        time.sleep(0.1)
     proc.kill()
     raise RuntimeError("phyagentos view did not announce its URL")
 
@@ -372,7 +376,9 @@ class Browsing:
                 x = 52 + (w - 60) * random.random()
                 ActionChains(d).move_to_element_with_offset(canvas, int(x - w / 2), 0).click().perform()
         except Exception as exc:  # noqa: BLE001 - counted and reported; the soak goes on
-            self.errors.append(f"{kind}: {type(exc).__name__}: {str(exc).splitlines()[0][:200] if str(exc) else ''}")
+            msg = str(exc).splitlines()[0][:600] if str(exc) else ""
+            self.errors.append(f"{kind}: {type(exc).__name__}: {msg}")
+            print(f"navigation {self.i} ({kind}) failed: {type(exc).__name__}: {msg}", file=sys.stderr, flush=True)
 
 
 def soak(template: Path, minutes: float, *, interval: float, sample_every: float, run_every: float,

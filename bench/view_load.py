@@ -89,7 +89,8 @@ nodes:
 PANELS_JS = ("return document.readyState === 'complete' && "
              "[...document.querySelectorAll('[data-fragment]')].every(e => e.dataset.html !== undefined)")
 #: True once the panels are filled, every timeline drawn and every 3D image rendered.
-COMPLETE_JS = (PANELS_JS + " && [...document.querySelectorAll('section.timeline')].every(s => s.dataset.ready === 'true')"
+COMPLETE_JS = (PANELS_JS
+               + " && [...document.querySelectorAll('section.timeline')].every(s => s.dataset.ready === 'true')"
                " && [...document.querySelectorAll('img.scene')].every(i => !!i.dataset.source)")
 
 
@@ -494,7 +495,8 @@ def main() -> int:
         print(" | ".join(str(r.get(c, "")) for c in cols))
     for r in rows:
         for kind, p in r.get("pages", {}).items():
-            print(f"{r['runs']} runs, {kind} page: first load {p['first_panels_s']} s panels / {p['first_complete_s']} s "
+            print(f"{r['runs']} runs, {kind} page: first load {p['first_panels_s']} s panels / "
+                  f"{p['first_complete_s']} s "
                   f"complete; again (median) {p['panels_s']} s / {p['complete_s']} s")
     return 0
 

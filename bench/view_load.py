@@ -1,4 +1,4 @@
-"""CPU of the ``phyagentos view`` server with its index page open in a real browser.
+"""Page loads, CPU and memory of the ``phyagentos view`` server, in a real headless Chromium.
 
     .venv/bin/python bench/view_load.py [--runs 1 1000] [--seconds 10] [--pages] [--json]
     .venv/bin/python bench/view_load.py --soak-minutes 60 [--soak-interval 3] [--soak-out soak.json]

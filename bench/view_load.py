@@ -353,6 +353,7 @@ class Browsing:
         self.errors: list[str] = []
 
     def step(self) -> None:
+        from selenium.common.exceptions import StaleElementReferenceException
         from selenium.webdriver.common.action_chains import ActionChains
         from selenium.webdriver.common.by import By
 
@@ -368,14 +369,20 @@ class Browsing:
                     time.sleep(0.05)
                 return
             self.loads.append(timed_load(d, self.url + self.pages[kind])["complete_s"])
-            if kind in ("session", "session_child"):
-                if self.visits[kind] % 2 == 0:
-                    d.find_element(By.CSS_SELECTOR, "input.overlays").click()
+            if kind in ("session", "session_child") and self.visits[kind] % 2 == 0:
+                d.find_element(By.CSS_SELECTOR, "input.overlays").click()
             if kind in ("session", "session_child", "compare"):
-                canvas = d.find_elements(By.CSS_SELECTOR, "canvas.tl-canvas")[0]
-                w = canvas.size["width"]
-                x = 52 + (w - 60) * random.random()
-                ActionChains(d).move_to_element_with_offset(canvas, int(x - w / 2), 0).click().perform()
+                fraction = random.random()
+                for attempt in range(3):  # a live refresh may redraw the timeline under the click
+                    try:
+                        canvas = d.find_elements(By.CSS_SELECTOR, "canvas.tl-canvas")[0]
+                        w = canvas.size["width"]
+                        x = 52 + (w - 60) * fraction
+                        ActionChains(d).move_to_element_with_offset(canvas, int(x - w / 2), 0).click().perform()
+                        break
+                    except StaleElementReferenceException:
+                        if attempt == 2:
+                            raise
         except Exception as exc:  # noqa: BLE001 - counted and reported; the soak goes on
             msg = str(exc).splitlines()[0][:600] if str(exc) else ""
             self.errors.append(f"{kind}: {type(exc).__name__}: {msg}")

@@ -147,6 +147,93 @@ def test_the_3d_panel_of_a_replanned_session_shows_its_recording(replanned):
     screenshot(driver, "session_replanned")
 
 
+def _kinds(img) -> dict[str, int]:
+    text = img.get_attribute("data-overlay-kinds") or ""
+    return {k: int(v) for k, v in (item.split("=") for item in text.split(",") if item)}
+
+
+def test_the_3d_overlays_draw_the_planned_path_camera_frustums_and_the_cloud_perceived_at_that_instant(replanned):
+    import io
+    import urllib.request
+
+    from PIL import Image
+
+    driver, url, failed = replanned["driver"], replanned["url"], replanned["failed"]
+    sid = failed.session_id
+    evidence = replanned["ws"].root / "evidence" / sid
+    trace = [json.loads(line) for line in (evidence / "trace.jsonl").read_text().splitlines()]
+    # the runtime recorded the plan (joint path, bounded) and perception its object cloud per observation
+    plans = [r for r in trace if r["kind"] == "plan" and r.get("path_rad")]
+    assert plans and all(2 <= len(p["path_rad"]) <= 64 and len(p["path_rad"][0]) == 7 for p in plans)
+    clouds = {p.name: np.load(p)["points"] for p in (evidence / "frames").glob("*_cloud.npz")}
+    assert {"initial_cloud.npz", "01_ObserveScene_cloud.npz", "terminal_cloud.npz"} <= set(clouds)
+    assert all(0 < len(c) <= 4000 and c.shape[1] == 3 for c in clouds.values())
+    observed_at = next(r["stamp_s"] for r in trace if r["kind"] == "observe")
+
+    driver.get(f"{url}/session/{sid}")
+    img = wait_for(lambda: (lambda i: i if i.get_attribute("data-source") == "recording" else None)(
+        driver.find_element(By.CSS_SELECTOR, "img.scene")), timeout=20, what="the 3D scene from the recording")
+    legend = driver.find_element(By.CSS_SELECTOR, ".scene3d .legend")
+    assert legend.find_element(By.CSS_SELECTOR, ".gt-label").text == "ground truth"
+    assert "robot's own data" in legend.find_element(By.CSS_SELECTOR, ".ov-label").text
+    for word in ("planned path", "camera frustums", "point cloud"):
+        assert word in legend.text
+    slider = driver.find_element(By.CSS_SELECTOR, "input.frame")
+    frames = driver.execute_script(f"return fetch('/api/frames/{sid}').then(r => r.json()).then(j => j.t)")
+
+    def show_frame(i: int) -> None:
+        driver.execute_script(f"const s = document.querySelector('input.frame'); s.value = '{i}';"
+                              "s.dispatchEvent(new Event('input'))")
+        wait_for(lambda: img.get_attribute("data-shown") == str(i), timeout=20, what=f"frame {i}")
+
+    show_frame(0)
+    assert img.get_attribute("data-overlays") == "0" and _kinds(img) == {}
+    driver.find_element(By.CSS_SELECTOR, "input.overlays").click()
+    wait_for(lambda: int(img.get_attribute("data-overlays") or 0) > 0, timeout=20, what="the overlays drawn")
+    kinds = _kinds(img)
+    assert kinds["planned_path"] >= len(plans)  # the tool along every plan, joined
+    assert kinds["frustum"] == 16  # overview and wrist cameras of sensors.yaml, 8 edges each
+    assert kinds["cloud"] == len(clouds["initial_cloud.npz"])  # the cloud perceived before the skill
+    assert kinds["perceived"] >= 1 and kinds["tcp_path"] > 10 and kinds["grasp"] >= 1
+    assert img.get_attribute("data-cloud") == "initial_cloud.npz"
+    info = driver.find_element(By.CSS_SELECTOR, ".overlay-info").text
+    assert "planned_path=" in info and "cloud of initial" in info
+    # the cloud in force follows the instant: the first observation's after it, the terminal one at the end
+    after = next(i for i, t in enumerate(frames) if t >= observed_at)
+    show_frame(after)
+    wait_for(lambda: img.get_attribute("data-cloud") == "01_ObserveScene_cloud.npz", timeout=20,
+             what="the first observation's cloud")
+    assert _kinds(img)["cloud"] == len(clouds["01_ObserveScene_cloud.npz"])
+    show_frame(len(frames) - 1)
+    wait_for(lambda: img.get_attribute("data-cloud") == "terminal_cloud.npz", timeout=20, what="the terminal cloud")
+    # drawn, not only counted: the same instant with overlays has cyan (planned path) and blue
+    # (perceived cloud and objects) pixels that the plain ground-truth render has not
+    def pixels(overlays: bool) -> np.ndarray:
+        q = f"/api/scene/{sid}.png?frame={after}&az=140&el=-25&dist=1.2" + ("&overlays=1" if overlays else "")
+        with urllib.request.urlopen(url + q, timeout=60) as r:
+            return np.asarray(Image.open(io.BytesIO(r.read())).convert("RGB")).astype(int)
+
+    plain, drawn = pixels(False), pixels(True)
+    r, g, b = drawn[..., 0], drawn[..., 1], drawn[..., 2]
+    cyan = (g > 120) & (b > 120) & (r < 60) & (np.abs(g - b) < 40)
+    blue = (b > 120) & (r < 60) & (g < b - 50)
+    pr, pg, pb = plain[..., 0], plain[..., 1], plain[..., 2]
+    assert cyan.sum() > 30 and blue.sum() > 100, (cyan.sum(), blue.sum())
+    assert (((pg > 120) & (pb > 120) & (pr < 60)) | ((pb > 120) & (pr < 60) & (pg < pb - 50))).sum() < 10
+    # zoomed in on the grasp, for the docs
+    show_frame(after)
+    for _ in range(5):
+        driver.execute_script("document.querySelector('img.scene').dispatchEvent("
+                              "new WheelEvent('wheel', {deltaY: -100, cancelable: true}))")
+    wait_for(lambda: "dist=1.12" in (driver.execute_script("return performance.getEntriesByType('resource')"
+                                                           ".map(e => e.name).filter(n => n.includes('/api/scene/'))"
+                                                           ".slice(-1)[0]") or ""), timeout=20, what="the zoom")
+    wait_for(lambda: img.get_attribute("data-cloud") == "01_ObserveScene_cloud.npz", timeout=20, what="re-render")
+    time.sleep(1.0)
+    driver.execute_script("document.querySelector('.scene3d').scrollIntoView({block: 'start'})")
+    screenshot(driver, "session_overlays")
+
+
 def _cpu_s(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

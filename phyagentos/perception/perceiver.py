@@ -126,6 +126,9 @@ class Perceiver:
         self._grasp_height_m: float | None = None
         self._last_plane: Plane | None = None
         self.last_timing_ms: dict[str, float] = {}
+        #: The object cloud of the last :meth:`observe` (stage 2: points above the support
+        #: plane, cropped and masked, on the voxel grid; world frame, m), or None before one.
+        self.last_cloud: Cloud | None = None
 
     # ------------------------------------------------------------------ state
 
@@ -270,6 +273,7 @@ class Perceiver:
 
         cloud, heights, plane = self.object_cloud(frames, proprio, obstacles=obstacles, robot_capsules=robot_capsules)
         self._last_plane = plane
+        self.last_cloud = cloud
         t1 = time.perf_counter()
         focal = np.array([f.intrinsics.fx / cfg.stride_for(f.intrinsics.width) for f in frames])
         dets = _stack(detect(cloud, heights, plane, cfg, focal), plane, cfg)

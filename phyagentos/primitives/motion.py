@@ -20,7 +20,7 @@ from phyagentos.motion.retime import retime
 from .base import Primitive
 
 __all__ = ["ReadyConfiguration", "SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "ik_options",
-           "PLANNING_MARGIN_M"]
+           "PLANNING_MARGIN_M", "MAX_TRACED_WAYPOINTS", "traced_path"]
 
 
 def held_object(target) -> str | None:
@@ -36,6 +36,24 @@ _CHECKERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 #: Clearance kept while planning, m. Shortcut paths run right along it, so the
 #: timed trajectory is re-checked at zero margin (toppra may cut inside it).
 PLANNING_MARGIN_M = 0.01
+
+
+#: Most waypoints of a planned path kept in the trace (``plan`` ``path_rad``).
+MAX_TRACED_WAYPOINTS = 64
+
+
+def traced_path(path: np.ndarray) -> list[list[float]]:
+    """A planned joint path as the trace keeps it: ``(M, n)`` rad, rounded to 1e-4 rad.
+
+    Paths longer than :data:`MAX_TRACED_WAYPOINTS` are thinned evenly (first and last
+    waypoint kept). The planner's path is piecewise linear in joint space, so the kept
+    waypoints, joined by straight joint-space segments, are the plan (exactly, up to the
+    thinning).
+    """
+    q = np.asarray(path, dtype=float)
+    if len(q) > MAX_TRACED_WAYPOINTS:
+        q = q[np.linspace(0, len(q) - 1, MAX_TRACED_WAYPOINTS).round().astype(int)]
+    return q.round(4).tolist()
 
 
 def ik_options(target, orientation_tol_rad: float = 1e-2) -> dict:
@@ -160,6 +178,11 @@ class PlanPath(Primitive):
         out: blackboard key written with the (N, 7) path.
         planner: OMPL planner name (default from the session's motion settings).
         timeout_s: planning budget, s.
+
+    The trace records ``plan`` {planner, waypoints, collision_at_goal, path_rad}:
+    ``path_rad`` is the planned joint path, ``(M, 7)`` rad in the arm's joint order, at
+    most :data:`MAX_TRACED_WAYPOINTS` waypoints (:func:`traced_path`), so the view can
+    draw the plan next to what was executed.
     """
 
     def __init__(self, name: str, *, goal: str = "q_goal", out: str = "path", planner: str | None = None,
@@ -187,7 +210,7 @@ class PlanPath(Primitive):
                              timeout_s=self.timeout_s or ctx.motion.planning_timeout_s, seed=ctx.seed)
         self.set(self.out, path)
         ctx.trace.record("plan", planner=self.planner or ctx.motion.planner, waypoints=int(len(path)),
-                         collision_at_goal=False)
+                         collision_at_goal=False, path_rad=traced_path(path))
 
 
 class RetimePath(Primitive):

@@ -6,7 +6,8 @@ after the skill) call: it captures every camera sensor the target declares
 :class:`~phyagentos.perception.Perceiver` and returns the perceived snapshot of CONTRACT_9
 section 3, with the declared regions and obstacles added as ``source: declared``
 entities. The RGB frames behind it are saved downscaled (every second pixel, PNG through
-OpenCV) under ``evidence/<session>/frames/`` and named in each entity's ``evidence``.
+OpenCV) under ``evidence/<session>/frames/`` and named in each entity's ``evidence``; the
+object point cloud perception clustered goes next to them (``<tag>_cloud.npz``, bounded).
 
 A target without cameras (FrankaKitchen) has no perception: :func:`perceive_now` returns
 ``None`` and the caller falls back to the target's own observation.
@@ -22,9 +23,13 @@ import numpy as np
 
 from phyagentos.targets.contract import capabilities_of
 
-__all__ = ["has_cameras", "make_perceiver", "perceive_now", "robot_capsules", "observe_record", "save_tracks"]
+__all__ = ["has_cameras", "make_perceiver", "perceive_now", "robot_capsules", "observe_record", "save_tracks",
+           "save_cloud", "MAX_SAVED_CLOUD_POINTS"]
 
 log = logging.getLogger(__name__)
+
+#: Most points of a perceived cloud kept in the evidence (``frames/<tag>_cloud.npz``).
+MAX_SAVED_CLOUD_POINTS = 4000
 
 #: Radius of the capsules masking the arm's links from the point cloud, m (the Panda's
 #: links are about 6 cm in radius; 2 cm of margin).
@@ -122,6 +127,31 @@ def _save_frame(frame, path: Path) -> None:
     cv2.imwrite(str(path), np.ascontiguousarray(frame.rgb[::2, ::2, ::-1]))
 
 
+def save_cloud(cloud, sensors, path: Path) -> int:
+    """Write the perceived object cloud of one observation to ``path`` (``.npz``).
+
+    Args:
+        cloud: the perceiver's :attr:`~phyagentos.perception.Perceiver.last_cloud`
+            (stage 2: object points above the support plane; world frame).
+        sensors: the observation's camera sensor names, in frame order.
+        path: the file to write.
+
+    The file holds ``points`` (M, 3) float32 m in the world frame, ``rgb`` (M, 3) uint8,
+    ``camera`` (M,) int16 index into ``sensors`` (M,) str; ``M <= MAX_SAVED_CLOUD_POINTS``
+    (an even random subset, seeded, when the cloud is larger). Returns M.
+    """
+    n = len(cloud.points)
+    idx = np.arange(n)
+    if n > MAX_SAVED_CLOUD_POINTS:
+        idx = np.sort(np.random.default_rng(0).choice(n, MAX_SAVED_CLOUD_POINTS, replace=False))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(path, points=np.asarray(cloud.points[idx], dtype=np.float32),
+                        rgb=np.asarray(cloud.rgb[idx], dtype=np.uint8),
+                        camera=np.asarray(cloud.camera[idx], dtype=np.int16),
+                        sensors=np.asarray(list(sensors), dtype=str))
+    return len(idx)
+
+
 def perceive_now(target, perceiver, *, samples: int = 1, evidence_dir: Path | None = None,
                  evidence_rel: str | None = None, tag: str = "obs") -> dict | None:
     """Capture, perceive and return the perceived snapshot (``None`` without cameras).
@@ -130,7 +160,8 @@ def perceive_now(target, perceiver, *, samples: int = 1, evidence_dir: Path | No
         samples: observations fused (>= 1); between two, the arm holds still for one
             camera period (0.1 s of target time) so each gets fresh frames.
         evidence_dir, evidence_rel: the bundle directory (absolute, and relative to the
-            workspace for the pointers); frames are saved as ``frames/<tag>_<sensor>.png``.
+            workspace for the pointers); frames are saved as ``frames/<tag>_<sensor>.png``
+            and the perceived object cloud as ``frames/<tag>_cloud.npz`` (:func:`save_cloud`).
         tag: file-name prefix of the saved frames.
     """
     if not has_cameras(target) or perceiver is None:
@@ -150,6 +181,9 @@ def perceive_now(target, perceiver, *, samples: int = 1, evidence_dir: Path | No
                 paths[f.sensor] = f"{evidence_rel}/{name}" if evidence_rel else name
         snap = perceiver.observe(frames, proprio, regions=declared["regions"], obstacles=declared["obstacles"],
                                  robot_capsules=robot_capsules(target), evidence_paths=paths or None)
+        cloud = getattr(perceiver, "last_cloud", None)
+        if paths and cloud is not None:
+            save_cloud(cloud, [f.sensor for f in frames], Path(evidence_dir) / f"frames/{tag}_cloud.npz")
     assert snap is not None
     names = {e["name"] for e in snap.get("entities", [])}
     for r in declared["regions"]:

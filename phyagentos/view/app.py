@@ -54,8 +54,9 @@ from phyagentos.untrusted import NotConfined, NotRegular, confined, loads_json
 
 from . import data, pages
 from .changes import FINISHED_STATES, Tracker
+from .evidence import frames_of
 from .graph_svg import to_svg
-from .scene3d import SceneRenderer, frames_of
+from .scene3d import SceneRenderer
 from .signals import session_signals
 from .security import MAX_BODY_BYTES, TOKEN_HEADER, AccessPolicy, BodyLimit, evidence_dir, safe_path
 
@@ -134,11 +135,15 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
                   '<img class="scene" alt="scene" draggable="false"><div class="scrub">'
                   '<input type="range" class="frame" min="0" max="0" value="0" disabled>'
                   '<span class="frame-info small"></span></div>'
-                  '<p class="small muted">drag to orbit, wheel to zoom · <label><input type="checkbox" '
-                  'class="overlays"> overlays: <span style="color:#1a59ff">perceived objects</span>, '
+                  '<p class="small muted">drag to orbit, wheel to zoom</p>'
+                  '<p class="small legend"><span class="gt-label">ground truth</span> the rendered robot and '
+                  'objects are the simulator\'s state · <label><input type="checkbox" class="overlays"> '
+                  '<span class="ov-label">overlays: the robot\'s own data</span></label> '
+                  '<span style="color:#1a59ff">perceived objects (spheres) and point cloud (dots)</span>, '
                   '<span style="color:#1acc33">grasp</span> and <span style="color:#ff8c00">place</span> targets, '
-                  '<span style="color:#e61a99">tool path</span> (the scene itself is the simulator\'s state: '
-                  'ground truth)</label></p></div></section></div>'
+                  '<span style="color:#00b3b3">planned path</span>, <span style="color:#e61a99">executed tool '
+                  'path</span>, <span style="color:#c8a800">camera frustums</span>'
+                  '<span class="overlay-info muted"></span></p></div></section></div>'
                 + pages.timeline_section(sid)
                 + frag(f"/fragment/session/{sid}"))
         return shell(f"session {sid}", body, scope=sid)
@@ -234,6 +239,9 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
         return Response(png, media_type="image/png",
                         headers={"X-Scene-Source": info["source"], "X-Scene-Time": f"{info['t']:.3f}",
                                  "X-Scene-Overlays": str(info.get("overlays", 0)),
+                                 "X-Scene-Overlay-Kinds": ",".join(f"{k}={v}" for k, v in
+                                                                   sorted(info.get("overlay_kinds", {}).items())),
+                                 "X-Scene-Cloud": info.get("cloud", ""),
                                  "Cache-Control": "no-store"})
 
     def _confined_dir(path: Path) -> bool:

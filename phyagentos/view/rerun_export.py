@@ -37,7 +37,8 @@ from typing import Any
 from phyagentos.errors import ViewError
 from phyagentos.protocol import Workspace
 
-from .signals import _read_trace, session_signals
+from .evidence import read_trace
+from .signals import session_signals
 
 __all__ = ["RRD_FILE", "export_rrd"]
 
@@ -99,7 +100,7 @@ def export_rrd(workspace: str | Path, session_id: str, *, out: str | Path | None
                         continue
                     rec.set_time("sim_time", duration=float(t))
                     rec.log(entity, rr.Scalars(float(y)))
-        trace, _ = _read_trace(directory / "trace.jsonl")
+        trace, _ = read_trace(directory / "trace.jsonl")
         tcp = [(float(r["stamp_s"]), r["tcp_position_m"]) for r in trace
                if r.get("kind") == "proprio" and isinstance(r.get("stamp_s"), (int, float))
                and isinstance(r.get("tcp_position_m"), list) and len(r["tcp_position_m"]) == 3]

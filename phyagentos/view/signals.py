@@ -22,9 +22,7 @@ to :data:`MAX_TRACE_BYTES`, so a long session never produces an unbounded respon
 from __future__ import annotations
 
 import bisect
-import json
 import logging
-import os
 import re
 from datetime import datetime
 from pathlib import Path
@@ -33,10 +31,10 @@ from typing import Any
 import numpy as np
 
 from phyagentos.errors import ViewError
-from phyagentos.untrusted import confined, json_depth, open_regular
+from phyagentos.untrusted import confined
 from phyagentos.yamlsource import read_yaml
 
-from .scene3d import frames_of
+from .evidence import MAX_TRACE_BYTES, frames_of, read_trace
 from .security import evidence_dir
 
 __all__ = ["MAX_POINTS", "MAX_TRACE_BYTES", "session_signals"]
@@ -45,8 +43,6 @@ logger = logging.getLogger(__name__)
 
 #: Points kept per plotted line (evenly decimated beyond).
 MAX_POINTS = 2000
-#: Bytes of trace.jsonl read (the rest is left out, and said so).
-MAX_TRACE_BYTES = 32 * 1024 * 1024
 _IMAGE = re.compile(r"^(initial|terminal|\d+)_(.+)\.png$")
 
 
@@ -65,30 +61,6 @@ def _line(label: str, t: list[float], y: list[Any], *, step: bool = False) -> di
 
 def _ts(text: str) -> float:
     return datetime.fromisoformat(str(text).replace("Z", "+00:00")).timestamp()
-
-
-def _read_trace(path: Path, *, root: Path | None = None) -> tuple[list[dict[str, Any]], bool]:
-    """The JSON lines of ``path`` up to :data:`MAX_TRACE_BYTES` (and whether it was cut);
-    with ``root``, only a file resolving inside it; a FIFO or a device reads as empty."""
-    out: list[dict[str, Any]] = []
-    try:
-        fd = open_regular(path, root=root)
-    except FileNotFoundError:
-        return out, False
-    except OSError as exc:
-        logger.info("trace not read: %s", exc)
-        return out, False
-    with os.fdopen(fd, "rb") as fh:
-        data = fh.read(MAX_TRACE_BYTES + 1)
-    cut = len(data) > MAX_TRACE_BYTES
-    for line in data[:MAX_TRACE_BYTES].splitlines():
-        try:
-            rec = json.loads(line) if len(line) < 4096 or json_depth(line.decode("utf-8", "replace")) <= 200 else None
-        except (ValueError, RecursionError):
-            continue  # a line cut by the byte limit, or not JSON
-        if isinstance(rec, dict):
-            out.append(rec)
-    return out, cut
 
 
 def session_signals(root: Path, record: dict[str, Any], *, layout: dict[str, Any] | None) -> dict[str, Any]:
@@ -118,7 +90,7 @@ def session_signals(root: Path, record: dict[str, Any], *, layout: dict[str, Any
     except (OSError, ValueError) as exc:
         frames = None
         notes.append(f"frames.npz not read: {exc}")
-    trace, cut = _read_trace(directory / "trace.jsonl", root=root)
+    trace, cut = read_trace(directory / "trace.jsonl", root=root)
     if cut:
         notes.append(f"trace.jsonl read up to {MAX_TRACE_BYTES // (1024 * 1024)} MiB")
     proprio = [r for r in trace if r.get("kind") == "proprio" and isinstance(r.get("stamp_s"), (int, float))]

@@ -117,6 +117,11 @@
           const t = r.headers.get("X-Scene-Time"), s = r.headers.get("X-Scene-Source");
           info.textContent = `${s} · t = ${t} s` + (live ? "" : ` · frame ${slider.value}/${times.length - 1}`);
           img.dataset.source = s; img.dataset.t = t; img.dataset.overlays = r.headers.get("X-Scene-Overlays") || "0";
+          img.dataset.overlayKinds = r.headers.get("X-Scene-Overlay-Kinds") || "";
+          img.dataset.cloud = r.headers.get("X-Scene-Cloud") || "";
+          const ovInfo = box.querySelector(".overlay-info");
+          if (ovInfo) ovInfo.textContent = img.dataset.overlays !== "0" ? ` · drawn: ${img.dataset.overlayKinds.replace(/,/g, ", ")}` +
+            (img.dataset.cloud ? ` · cloud of ${img.dataset.cloud.replace(/_cloud\.npz$/, "")}` : "") : "";
           const m = /frame=(\d+)/.exec(url); img.dataset.shown = m ? m[1] : "live";
         } else {
           info.textContent = await r.text();

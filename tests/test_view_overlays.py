@@ -128,3 +128,19 @@ def test_the_saved_cloud_is_bounded_and_the_one_in_force_follows_the_observation
     # live (no recording): the terminal cloud only once nothing else is in force later
     assert cloud_file_at(tmp_path, trace, 4.0, t_last=None).name == "02_ObserveAfterPick_cloud.npz"
     assert cloud_file_at(tmp_path / "none", trace, 1.0, t_last=None) is None
+
+
+def test_a_saved_cloud_linked_from_outside_the_workspace_or_a_fifo_draws_nothing(tmp_path):
+    import os
+
+    ws = tmp_path / "ws"
+    frames = ws / "evidence" / "s1" / "frames"
+    frames.mkdir(parents=True)
+    outside = tmp_path / "outside_cloud.npz"
+    np.savez(outside, points=np.zeros((5, 3)))
+    (frames / "initial_cloud.npz").symlink_to(outside)
+    os.mkfifo(frames / "terminal_cloud.npz")
+    np.savez(frames / "01_observe_cloud.npz", points=np.ones((5, 3)))
+    assert cloud_markers(frames / "initial_cloud.npz", root=ws) == []  # a link out of the workspace
+    assert cloud_markers(frames / "terminal_cloud.npz", root=ws) == []  # a FIFO: refused, never waited on
+    assert len(cloud_markers(frames / "01_observe_cloud.npz", root=ws)) == 5

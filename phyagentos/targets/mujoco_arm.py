@@ -41,7 +41,7 @@ from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioc
 from phyagentos.protocol.atomic import atomic_write_bytes
 
 from .base import BaseRolloutTarget
-from .contract import TargetCapabilities
+from .contract import ExecutionResult, TargetCapabilities
 from .camera_noise import CameraNoise
 from .state_file import read_state_npz
 
@@ -823,6 +823,63 @@ class MuJoCoArmTarget(BaseRolloutTarget):
                 r = self._renderers[key] = mujoco.Renderer(self._model, height=height, width=width)
         return r
 
+    def execute_trajectory(
+        self,
+        traj,
+        *,
+        tracking_tol_rad: float = 0.05,
+        feedforward: bool = True,
+        settle_s: float = 0.5,
+        settle_tol_rad: float = 0.005,
+    ) -> ExecutionResult:
+        """Stream a timed joint trajectory to the arm's position actuators, then settle.
+
+        Each physics step gets ``ctrl = q_ref + (b / kp) * qd_ref`` (linear
+        interpolation of the trajectory at the step's end time; ``b`` joint damping and
+        ``kp`` actuator gain read from the model).
+
+        Args:
+            traj: object with ``t`` (M,) s, ``q`` (M, n) rad and ``qd`` (M, n) rad/s for
+                the arm's n joints
+                (e.g. :class:`phyagentos.motion.retime.Trajectory`); ``q[0]`` must be
+                within ``max(tracking_tol_rad, 0.02)`` rad of the current arm configuration.
+            tracking_tol_rad: stop early (``completed=False``, arm held where it is) when
+                any joint is farther than this from the reference.
+            feedforward: add the damping velocity feed-forward; ``False`` streams bare
+                positions (for comparison).
+            settle_s: after the last sample, hold the final configuration until the arm is
+                within ``settle_tol_rad`` and nearly still, at most this long.
+            settle_tol_rad: settling tolerance, rad.
+
+        Returns:
+            :class:`ExecutionResult`; ``contacts`` lists unexpected contact pairs (robot
+            against anything except a held object in the fingers, or a held object
+            against an obstacle).
+
+        Raises:
+            TargetError: malformed trajectory or a start far from the current state.
+        """
+        self._check_open()
+        t, Q, QD = self._traj_arrays(traj)
+        self._check_start(Q[0], tracking_tol_rad)
+        ts = self._model.opt.timestep
+        duration = float(t[-1])
+        n = int(math.ceil(duration / ts - 1e-9)) if duration > 0 else 0
+        times = np.minimum((np.arange(n) + 1) * ts, duration)
+        t0 = self._data.time
+        bad: set = set()
+        completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
+        if completed:
+            steps += self.settle(Q[-1], settle_s=settle_s, tol_rad=settle_tol_rad, _contacts=bad)
+        return ExecutionResult(
+            completed=completed,
+            max_tracking_error_rad=max_err,
+            sim_time_s=float(self._data.time - t0),
+            steps=steps,
+            contacts=self._contact_names(bad),
+            reason=reason,
+        )
+
     def render(self, camera: str = "overview", width: int = 640, height: int = 480, *,
                shadows: bool = True) -> np.ndarray:
         """``(height, width, 3)`` uint8 image from model camera ``camera``; ``shadows=False``
@@ -836,12 +893,17 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         try:
             r = self._renderer(width, height)
             r.disable_depth_rendering()
-            r.update_scene(self._data, camera=camera)
+            r.update_scene(self._data, camera=camera, scene_option=self._render_scene_option())
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(shadows)
             return r.render().copy()
         except Exception as exc:
             self._renderers.pop((int(width), int(height)), None)
             raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc
+
+    def _render_scene_option(self) -> mujoco.MjvOption | None:
+        """The ``MjvOption`` :meth:`render` draws with (None: MuJoCo's defaults); a target
+        whose model carries geoms a camera would not see (collision hulls) overrides it."""
+        return None
 
     def _noise_for(self, spec) -> CameraNoise:
         n = self._camera_noise.get(spec.name)

@@ -178,62 +178,6 @@ class MuJoCoTarget(MuJoCoArmTarget):
             mujoco.mj_step(m, d)
         return n
 
-    def execute_trajectory(
-        self,
-        traj,
-        *,
-        tracking_tol_rad: float = 0.05,
-        feedforward: bool = True,
-        settle_s: float = 0.5,
-        settle_tol_rad: float = 0.005,
-    ) -> ExecutionResult:
-        """Stream a timed joint trajectory to the arm's position actuators, then settle.
-
-        Each physics step gets ``ctrl = q_ref + (b / kp) * qd_ref`` (linear
-        interpolation of the trajectory at the step's end time; ``b`` joint damping and
-        ``kp`` actuator gain read from the model).
-
-        Args:
-            traj: object with ``t`` (M,) s, ``q`` (M, 7) rad and ``qd`` (M, 7) rad/s
-                (e.g. :class:`phyagentos.motion.retime.Trajectory`); ``q[0]`` must be
-                within ``max(tracking_tol_rad, 0.02)`` rad of the current arm configuration.
-            tracking_tol_rad: stop early (``completed=False``, arm held where it is) when
-                any joint is farther than this from the reference.
-            feedforward: add the damping velocity feed-forward; ``False`` streams bare
-                positions (for comparison).
-            settle_s: after the last sample, hold the final configuration until the arm is
-                within ``settle_tol_rad`` and nearly still, at most this long.
-            settle_tol_rad: settling tolerance, rad.
-
-        Returns:
-            :class:`ExecutionResult`; ``contacts`` lists unexpected contact pairs (robot
-            against anything except a held object in the fingers, or a held object
-            against an obstacle).
-
-        Raises:
-            TargetError: malformed trajectory or a start far from the current state.
-        """
-        self._check_open()
-        t, Q, QD = self._traj_arrays(traj)
-        self._check_start(Q[0], tracking_tol_rad)
-        ts = self._model.opt.timestep
-        duration = float(t[-1])
-        n = int(math.ceil(duration / ts - 1e-9)) if duration > 0 else 0
-        times = np.minimum((np.arange(n) + 1) * ts, duration)
-        t0 = self._data.time
-        bad: set = set()
-        completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
-        if completed:
-            steps += self.settle(Q[-1], settle_s=settle_s, tol_rad=settle_tol_rad, _contacts=bad)
-        return ExecutionResult(
-            completed=completed,
-            max_tracking_error_rad=max_err,
-            sim_time_s=float(self._data.time - t0),
-            steps=steps,
-            contacts=self._contact_names(bad),
-            reason=reason,
-        )
-
     def track(
         self,
         traj,

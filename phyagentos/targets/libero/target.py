@@ -522,35 +522,12 @@ class LiberoTarget(MuJoCoArmTarget):
         o = float(np.clip(opening_m, 0.0, GRIPPER_MAX_OPENING_M))
         self._data.ctrl[self._finger_act] = (o, -o)
 
-    def execute_trajectory(self, traj, *, tracking_tol_rad: float = 0.05, feedforward: bool = True,
-                           settle_s: float = 0.5, settle_tol_rad: float = 0.005) -> ExecutionResult:
-        """Stream a timed joint trajectory (``t`` (M,) s, ``q`` (M, 7) rad, ``qd`` (M, 7)
-        rad/s) to the arm servos, one 2 ms physics step at a time, then settle at its end
-        (see :meth:`MuJoCoArmTarget.settle`). Nothing is rendered while it streams.
-
-        Returns:
-            :class:`ExecutionResult` (unexpected contacts: robot against anything but a held
-            object in the fingers, or a held object against a fixture).
-
-        Raises:
-            TargetError: malformed trajectory or a start far from the current state.
-        """
-        self._check_open()
-        t, Q, QD = self._traj_arrays(traj)
-        self._check_start(Q[0], tracking_tol_rad)
-        ts = self._model.opt.timestep
-        duration = float(t[-1])
-        n = int(math.ceil(duration / ts - 1e-9)) if duration > 0 else 0
-        times = np.minimum((np.arange(n) + 1) * ts, duration)
-        t0 = self._data.time
-        bad: set = set()
-        completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
-        self._env_steps += steps
-        if completed:
-            steps += self.settle(Q[-1], settle_s=settle_s, tol_rad=settle_tol_rad, _contacts=bad)
-        return ExecutionResult(completed=completed, max_tracking_error_rad=max_err,
-                               sim_time_s=float(self._data.time - t0), steps=steps,
-                               contacts=self._contact_names(bad), reason=reason)
+    def _stream(self, *args, **kwargs):
+        """The base's streaming (:meth:`MuJoCoArmTarget._stream`), its physics steps counted
+        as env steps (LIBERO's step budget is in control periods of these)."""
+        out = super()._stream(*args, **kwargs)
+        self._env_steps += out[2]
+        return out
 
     def track(self, traj, *, t_start: float, t_end: float, tracking_tol_rad: float = 0.05,
               feedforward: bool = True) -> ExecutionResult:
@@ -570,7 +547,6 @@ class LiberoTarget(MuJoCoArmTarget):
         t0 = self._data.time
         bad: set = set()
         completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
-        self._env_steps += steps
         if not completed and steps:
             reason += self._lagging_joint(t, Q, QD, times[steps - 1])
             log.warning("target %s: %s", self.name, reason)
@@ -738,25 +714,15 @@ class LiberoTarget(MuJoCoArmTarget):
     def render(self, camera: str = "agentview", width: int = 640, height: int = 480, *,
                shadows: bool = True) -> np.ndarray:
         """``(height, width, 3)`` uint8 image of model camera ``camera`` (default LIBERO's
-        ``agentview``; evidence images), visual geoms only.
+        ``agentview``; evidence images), visual geoms only (:meth:`_render_scene_option`).
 
         Raises:
             TargetError: an unknown camera or no OpenGL backend.
         """
-        self._check_open()
-        m = self._model
-        cams = [m.camera(i).name for i in range(m.ncam)]
-        if camera not in cams:
-            raise TargetError(f"unknown camera {camera!r}; cameras: {format_choices(cams)}")
-        try:
-            r = self._renderer(width, height)
-            r.disable_depth_rendering()
-            r.update_scene(self._data, camera=camera, scene_option=self._capture_option)
-            r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(shadows)
-            return r.render().copy()
-        except Exception as exc:
-            self._renderers.pop((int(width), int(height)), None)
-            raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc
+        return super().render(camera, width, height, shadows=shadows)
+
+    def _render_scene_option(self) -> mujoco.MjvOption:
+        return self._capture_option
 
     def observe(self) -> dict:
         """Proprioceptive observation: ``time`` s, ``arm_qpos`` (7,) rad, ``arm_qvel`` (7,)

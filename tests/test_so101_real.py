@@ -185,6 +185,10 @@ def test_guard_rejects_out_of_range_and_jumping_goals_before_the_bus(twin, cal_f
     arm = SO101Arm(twin.port, calibration=Calibration.load(cal_file))
     arm.connect()
     try:
+        # a sync write has no status packet: a read, answered in order after it, is the
+        # point where the twin has served every earlier packet (connect's last write
+        # was still in flight on a loaded machine: 12 -> 18 writes, none of them ours)
+        arm.read()
         writes = twin.goal_writes
         far = arm.goal_q.copy()
         far[1] = 3.0
@@ -196,6 +200,7 @@ def test_guard_rejects_out_of_range_and_jumping_goals_before_the_bus(twin, cal_f
         with pytest.raises(BusSafetyStop) as exc:
             arm.send(jump)
         assert exc.value.code == "bus.step"
+        arm.read()  # anything the rejected goals had sent would be served by now
         assert twin.goal_writes == writes and arm.stopped is None
     finally:
         arm.close()

@@ -113,15 +113,30 @@ def test_the_coordinator_wakes_the_supervisor_before_it_rewrites_task_md(tmp_pat
     assert agent.step() == 0 and len(seen) == 1  # nothing new: no wake-up
 
 
-def test_a_process_that_loaded_the_check_runs_it_itself_as_it_adapted_it(tmp_path, monkeypatch):
+@pytest.mark.parametrize("situation", ["runtime_imported", "idle_runner", "neither"])
+def test_a_process_that_adapted_the_check_runs_it_itself_as_it_adapted_it(tmp_path, monkeypatch, situation):
+    # Whatever this process imported before and whether a runner is idle: the replaced
+    # check is the one that runs (CI once forked the original after an earlier test).
     import phyagentos.app.graph_check as graph_check
+    from phyagentos.app import graph_check_process
     from phyagentos.app.graph_check_process import check_goal_graph_forked
+    from phyagentos.runtime import worker
 
     ws = Workspace.create(tmp_path / "ws")
     calls = []
     monkeypatch.setattr(graph_check, "check_goal_graph", lambda *a, **k: calls.append(k) or "checked here")
+    monkeypatch.setattr(graph_check_process, "_runtime_loaded_here", lambda: situation == "runtime_imported")
+    idle = object()
+    monkeypatch.setattr(worker, "borrow_runner", lambda *dirs: idle if situation == "idle_runner" else None)
+    monkeypatch.setattr(worker, "park_runner", lambda runner: None)
+
+    def no_fork():
+        raise AssertionError("the check was forked: the child runs the original")
+
+    monkeypatch.setattr(worker, "forkserver_context", no_fork)
     assert check_goal_graph_forked(HOLD, ws.root, target="franka_tabletop") == "checked here"
-    assert calls == [{"target": "franka_tabletop"}]
+    assert [call["target"] for call in calls] == ["franka_tabletop"]
+    assert ("checks" in calls[0]) == (situation == "idle_runner")  # runtime steps go to the idle runner
 
 
 def _freeze_count(conn) -> None:
@@ -192,7 +207,6 @@ def _with_idle_runner(monkeypatch):
     worker.prestart_runner(skill_dirs(), tree_dirs())
     monkeypatch.setattr(worker, "forkserver_context", fail)
     monkeypatch.setattr(graph_check_process, "_check_here", fail)
-    monkeypatch.setattr(graph_check_process, "_LOADED_FOR_RUNNER", graph_check_process._LOADED_FOR_RUNNER)
 
 
 @pytest.mark.sim

@@ -16,8 +16,11 @@ runner has the runtime imported and is building the graph's targets anyway, so n
 second process nor a second compile of the scene's meshes is paid, and this process still
 imports no motion code (scenes come back as pickles it hands back unopened).
 
-The check, its inputs and its errors are exactly those of ``check_goal_graph``; where no
-forkserver can be used, or this process has the check loaded already, it runs here.
+The check, its inputs and its errors are exactly those of ``check_goal_graph``. Where no
+forkserver can be used, where this process has the motion stack imported already (nothing
+left to save), or where a caller replaced ``check_goal_graph`` (a test or a library user
+adapting the check; the child would run the original) and no idle runner is there, it runs
+here. The choice depends only on those facts, never on which module imported what first.
 """
 
 from __future__ import annotations
@@ -52,9 +55,19 @@ def _check_here(path: Path, root: Path, target: str | None, dirs: tuple[str, str
     return check_goal_graph(path, Workspace.open(root), runtime, target=target)
 
 
-#: This module imported :mod:`phyagentos.app.graph_check` itself, for the check with an idle
-#: runner: its presence in ``sys.modules`` then says nothing about the caller.
-_LOADED_FOR_RUNNER = False
+#: Modules whose presence means this process could check in place at no import cost.
+_RUNTIME_MODULES = ("mujoco", "phyagentos.motion", "phyagentos.primitives")
+
+
+def _runtime_loaded_here() -> bool:
+    return all(name in sys.modules for name in _RUNTIME_MODULES)
+
+
+def _check_adapted() -> bool:
+    """A caller replaced :func:`phyagentos.app.graph_check.check_goal_graph` (a forked
+    child would import the original and ignore the replacement)."""
+    module = sys.modules.get("phyagentos.app.graph_check")
+    return module is not None and getattr(module.check_goal_graph, "__module__", None) != module.__name__
 
 
 class _RunnerFailed(Exception):
@@ -109,9 +122,6 @@ def _check_with_runner(path: Path, root: Path, target: str | None, dirs: tuple[s
 
 def _check_borrowed(runner, path: Path, root: Path, target: str | None, dirs: tuple[str, str],
                     timeout_s: float) -> "GraphCheck | None":
-    global _LOADED_FOR_RUNNER
-    if "phyagentos.app.graph_check" not in sys.modules:
-        _LOADED_FOR_RUNNER = True
     from types import SimpleNamespace  # noqa: PLC0415
 
     from phyagentos.app.graph_check import check_goal_graph  # noqa: PLC0415
@@ -152,10 +162,12 @@ def check_goal_graph_forked(path: str | Path, workspace_root: str | Path, *, tar
     stack).
 
     Args:
-        fork: ``None`` (default): fork unless this process has imported
-            :mod:`phyagentos.app.graph_check` already (``validate``, a library user or a
-            test that uses or adapts the check: it then runs here, as that caller set
-            it up); ``True``: always fork; ``False``: check in this process.
+        fork: ``None`` (default): in this process when it has the motion stack imported
+            already; else with the idle runner (the check itself, and any replacement of
+            ``check_goal_graph`` a caller made, runs here and only its runtime steps go
+            to the runner); else here if ``check_goal_graph`` was replaced; else in a
+            forked child. ``True``: the idle runner, else a forked child. ``False``:
+            in this process.
 
     Raises:
         GoalGraphError: the graph is invalid (the same message, file and line as the
@@ -166,13 +178,13 @@ def check_goal_graph_forked(path: str | Path, workspace_root: str | Path, *, tar
 
     path, root = Path(path), Path(workspace_root)
     dirs = (skill_dirs(), tree_dirs())  # resolved here: the forkserver's environment may be older
-    if fork is None:
-        fork = _LOADED_FOR_RUNNER or "phyagentos.app.graph_check" not in sys.modules
-    if not fork:
+    if fork is False or (fork is None and _runtime_loaded_here()):
         return _check_here(path, root, target, dirs)
     checked = _check_with_runner(path, root, target, dirs, timeout_s)
     if checked is not None:
         return checked
+    if fork is None and _check_adapted():
+        return _check_here(path, root, target, dirs)
     try:
         from phyagentos.runtime.worker import forkserver_context  # noqa: PLC0415
 

@@ -38,7 +38,7 @@ LIFECYCLE = ("claim", "preflight", "start", "finish", "submit", "verify", "succe
 
 def build_history(ws: Workspace, n: int) -> None:
     ws._index_upsert = lambda record: None  # the view is bounded anyway; skipping it only speeds set-up
-    import phyagentos.protocol.workspace as wsmod
+    import phyagentos.protocol.workspace.sessions as wsmod  # where session files are written
 
     write = wsmod.write_document
     wsmod.write_document = lambda doc, path=None, durable=True, **kw: write(doc, path, durable=False, **kw)

@@ -152,7 +152,7 @@ def test_a_claim_that_is_not_made_leaves_the_target_free_and_unmarked(tmp_path, 
     import errno
     import logging
 
-    from phyagentos.protocol import workspace as workspace_module
+    from phyagentos.protocol.workspace import sessions as workspace_module  # where session files are written
     from phyagentos.protocol.lifecycle import SessionLifecycle
     from phyagentos.runtime.target_lock import read_marker
 

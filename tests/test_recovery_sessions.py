@@ -163,3 +163,26 @@ def test_a_reopened_pick_that_needed_its_own_replan_still_resumes_the_place():
     assert _descends("pick-3", "pick-2", parents) and _descends("pick-2", "pick-2", parents)
     assert not _descends("pick-1", "pick-2", parents) and not _descends("place-2", "pick-2", parents)
     assert not _descends(None, "pick-2", parents)
+
+
+def test_the_cli_picture_and_the_live_view_draw_the_dag_with_one_dot_renderer():
+    from phyagentos.agent.render import NodeBox, RunGraph, SessionBox, to_dot
+    from phyagentos.view.graph_svg import to_dot as view_dot
+
+    first = SessionBox(session_id="r1-a-1", state="replanned", verdict="replan", cause="slip", strategy=None, parent=None)
+    child = SessionBox(session_id="r1-a-2", state="succeeded", verdict="success", cause=None, strategy="regrasp",
+                       parent="r1-a-1")
+    graph = RunGraph(run_id="r1", nodes=(NodeBox(id="a", skill="pick", state="succeeded", depends_on=(),
+                                                 sessions=(first, child)),
+                                         NodeBox(id="b", skill="place", state="blocked", depends_on=("a",))))
+    data = {"run_id": "r1", "nodes": [
+        {"id": "a", "skill": "pick", "state": "succeeded", "depends_on": [], "sessions": [
+            {"session_id": s.session_id, "state": s.state, "verdict": s.verdict, "cause": s.cause,
+             "strategy": s.strategy, "parent": s.parent} for s in (first, child)]},
+        {"id": "b", "skill": "place", "state": "blocked", "depends_on": ["a"], "sessions": []}]}
+    page = view_dot(data)
+    assert page == to_dot(graph, link_prefix="/session/")
+    assert 'URL="/session/r1-a-2"' in page and 'class="dagnode state-blocked"' in page and "bgcolor=transparent" in page
+    assert 'label="replan: regrasp"' in page and "rounded,filled,dashed" in page
+    picture = to_dot(graph)
+    assert 'label="run r1"' in picture and "URL=" not in picture and "class=" not in picture

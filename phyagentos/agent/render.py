@@ -27,23 +27,28 @@ from phyagentos.protocol import SessionRecord, Workspace
 from . import dag as dagmod
 from .coordinator import node_state_of
 
-__all__ = ["SessionBox", "NodeBox", "RunGraph", "run_graph_of", "to_mermaid", "to_dot", "render_image"]
+__all__ = ["SessionBox", "NodeBox", "RunGraph", "STATE_COLOURS", "run_graph_of", "to_mermaid", "to_dot",
+           "render_image"]
 
-# fill, border per state (nodes: TASK.md states; sessions: lifecycle states)
-_COLOURS = {
+#: (fill, border) per state: nodes by their TASK.md state (plus ``paused`` and
+#: ``held_by_estop``, which the live view shows for a node a signal holds), sessions by
+#: their lifecycle state; any other active state is drawn as ``running``.
+STATE_COLOURS: dict[str, tuple[str, str]] = {
     "succeeded": ("#c8e6c9", "#2e7d32"),
     "failed": ("#ffcdd2", "#c62828"),
-    "blocked": ("#eeeeee", "#757575"),
-    "running": ("#fff9c4", "#f9a825"),
-    "waiting": ("#ffffff", "#9e9e9e"),
-    "ready": ("#e3f2fd", "#1565c0"),
-    "cancelled": ("#eeeeee", "#424242"),
-    "replanned": ("#ffe0b2", "#ef6c00"),
     "rejected": ("#ffcdd2", "#c62828"),
     "timed_out": ("#ffcdd2", "#c62828"),
+    "blocked": ("#eeeeee", "#757575"),
+    "cancelled": ("#e0e0e0", "#424242"),
+    "replanned": ("#ffe0b2", "#ef6c00"),
+    "waiting": ("#ffffff", "#9e9e9e"),
     "pending": ("#ffffff", "#9e9e9e"),
+    "ready": ("#e3f2fd", "#1565c0"),
+    "running": ("#fff59d", "#f9a825"),
+    "paused": ("#ffe082", "#8d6e00"),
+    "held_by_estop": ("#ef9a9a", "#8e0000"),
 }
-_ACTIVE = ("#fff9c4", "#f9a825")
+_ACTIVE = STATE_COLOURS["running"]  # claimed ... verifying
 
 
 @dataclass(frozen=True)
@@ -163,7 +168,7 @@ def to_mermaid(graph: RunGraph) -> str:
             sid = _ident("s_", s.session_id)
             label = "<br/>".join(_mermaid_text(x) for x in [_short(s.session_id, graph.run_id), *_session_lines(s)])
             out.append(f'    {sid}["{label}"]')
-            classes.setdefault(s.state if s.state in _COLOURS else "running", []).append(sid)
+            classes.setdefault(s.state if s.state in STATE_COLOURS else "running", []).append(sid)
         for s in node.sessions:
             if s.parent:
                 edge = f"replan: {s.strategy}" if s.strategy else "replan"
@@ -174,7 +179,7 @@ def to_mermaid(graph: RunGraph) -> str:
         for dep in node.depends_on:
             out.append(f"  {_ident('n_', dep)} --> {_ident('n_', node.id)}")
     for name, members in classes.items():
-        fill, stroke = _COLOURS.get(name.removeprefix("node_"), _ACTIVE)
+        fill, stroke = STATE_COLOURS.get(name.removeprefix("node_"), _ACTIVE)
         out.append(f"  classDef {name} fill:{fill},stroke:{stroke}")
         out.append(f"  class {','.join(members)} {name}")
     return "\n".join(out) + "\n"
@@ -184,34 +189,57 @@ def _dot_text(text: str) -> str:
     return text.replace("\\", "\\\\").replace('"', '\\"')
 
 
-def to_dot(graph: RunGraph) -> str:
-    """Graphviz DOT text of ``graph`` (one cluster per goal node)."""
-    out = ["digraph run {", "  compound=true; rankdir=LR; fontname=Helvetica;",
+def to_dot(graph: RunGraph, *, link_prefix: str | None = None) -> str:
+    """Graphviz DOT text of ``graph``: one cluster per goal node (filled by its state,
+    dashed when blocked), its sessions inside in creation order, an orange arrow from a
+    session to the child its replan created (labelled with the strategy), a bold arrow per
+    dependency.
+
+    Args:
+        graph: what to draw.
+        link_prefix: for a page (the live view): each session links to
+            ``link_prefix + session_id``, nodes and sessions carry ``id`` and ``class``
+            attributes (``dagnode``/``dagsession`` and ``state-<state>``) for the page's
+            script, the background is transparent and there is no title. ``None``
+            (default): a standalone picture titled with the run id.
+    """
+    page = link_prefix is not None
+    out = ["digraph run {",
+           "  compound=true; rankdir=LR; fontname=Helvetica;" + (" bgcolor=transparent;" if page else ""),
            '  node [shape=box, style="rounded,filled", fontname=Helvetica, fontsize=10];',
-           f'  label="run {_dot_text(graph.run_id)}"; labelloc=t;']
+           "  edge [fontname=Helvetica];"]
+    if not page:
+        out.append(f'  label="run {_dot_text(graph.run_id)}"; labelloc=t;')
     anchors: dict[str, tuple[str, str]] = {}  # node id -> (first, last) drawn item
     for node in graph.nodes:
-        fill, stroke = _COLOURS.get(node.state, _ACTIVE)
+        fill, stroke = STATE_COLOURS.get(node.state, _ACTIVE)
+        style = "rounded,filled,dashed" if node.state == "blocked" else "rounded,filled"
         cid = _ident("cluster_", node.id)
         out.append(f"  subgraph {cid} {{")
-        out.append(f'    label="{_dot_text(f"{node.id} ({node.skill}): {node.state}")}"; style="rounded,filled"; '
-                   f'fillcolor="{fill}"; color="{stroke}";')
+        attrs = (f'    label="{_dot_text(f"{node.id} ({node.skill}): {node.state}")}"; style="{style}"; '
+                 f'fillcolor="{fill}"; color="{stroke}"; penwidth=2;')
+        if page:
+            attrs += f' id="{_dot_text("node-" + node.id)}"; class="dagnode state-{_dot_text(node.state)}";'
+        out.append(attrs)
         items = []
         if not node.sessions:
             pid = _ident("p_", node.id)
-            out.append(f'    {pid} [label="no session yet", fillcolor="white"];')
+            out.append(f'    {pid} [label="no session yet", fillcolor="white", color="#bdbdbd"];')
             items.append(pid)
         for s in node.sessions:
-            sfill, sstroke = _COLOURS.get(s.state, _ACTIVE)
+            sfill, sstroke = STATE_COLOURS.get(s.state, _ACTIVE)
             sid = _ident("s_", s.session_id)
             label = "\\n".join(_dot_text(x) for x in [_short(s.session_id, graph.run_id), *_session_lines(s)])
-            out.append(f'    {sid} [label="{label}", fillcolor="{sfill}", color="{sstroke}"];')
+            link = (f', URL="{_dot_text(link_prefix + s.session_id)}", target="_top", '
+                    f'id="{_dot_text("session-" + s.session_id)}", class="dagsession state-{_dot_text(s.state)}"'
+                    if page else "")
+            out.append(f'    {sid} [label="{label}", fillcolor="{sfill}", color="{sstroke}"{link}];')
             items.append(sid)
         for s in node.sessions:
             if s.parent:
                 edge = f"replan: {s.strategy}" if s.strategy else "replan"
                 out.append(f'    {_ident("s_", s.parent)} -> {_ident("s_", s.session_id)} '
-                           f'[label="{_dot_text(edge)}", fontsize=9, color="#ef6c00"];')
+                           f'[label="{_dot_text(edge)}", fontsize=9, color="#ef6c00", fontcolor="#ef6c00", penwidth=2];')
         out.append("  }")
         anchors[node.id] = (items[0], items[-1])
     for node in graph.nodes:

@@ -1,4 +1,5 @@
-"""A run's goal DAG as clickable SVG, laid out server-side by Graphviz ``dot``.
+"""A run's goal DAG as clickable SVG, laid out server-side by Graphviz ``dot`` from the
+project's one DOT renderer (:func:`phyagentos.agent.render.to_dot`).
 
 One cluster per goal node (filled by its state: waiting, ready, running, succeeded,
 failed, blocked, cancelled), its sessions inside in creation order (each a link to the
@@ -10,88 +11,31 @@ dependency. Blocked nodes are drawn dashed, so a blocked subgraph stands out.
 from __future__ import annotations
 
 import functools
-import re
 import shutil
 import subprocess
 from typing import Any
 
+from phyagentos.agent.render import STATE_COLOURS, NodeBox, RunGraph, SessionBox
+from phyagentos.agent.render import to_dot as render_dot
 from phyagentos.errors import RenderError
 
 __all__ = ["STATE_COLOURS", "to_dot", "to_svg"]
 
-#: (fill, border) per node or session state.
-STATE_COLOURS = {
-    "succeeded": ("#c8e6c9", "#2e7d32"),
-    "failed": ("#ffcdd2", "#c62828"),
-    "rejected": ("#ffcdd2", "#c62828"),
-    "timed_out": ("#ffcdd2", "#c62828"),
-    "blocked": ("#eeeeee", "#757575"),
-    "cancelled": ("#e0e0e0", "#424242"),
-    "replanned": ("#ffe0b2", "#ef6c00"),
-    "waiting": ("#ffffff", "#9e9e9e"),
-    "pending": ("#ffffff", "#9e9e9e"),
-    "ready": ("#e3f2fd", "#1565c0"),
-    "running": ("#fff59d", "#f9a825"),
-    "paused": ("#ffe082", "#8d6e00"),
-    "held_by_estop": ("#ef9a9a", "#8e0000"),
-}
-_ACTIVE = ("#fff59d", "#f9a825")  # claimed ... verifying
 
-
-def _q(text: str) -> str:
-    return text.replace("\\", "\\\\").replace('"', '\\"')
-
-
-def _ident(prefix: str, text: str) -> str:
-    return prefix + re.sub(r"[^A-Za-z0-9_]", "_", text)
+def _run_graph(graph: dict[str, Any]) -> RunGraph:
+    """The :class:`~phyagentos.agent.render.RunGraph` of the view's graph data."""
+    return RunGraph(run_id=graph["run_id"], nodes=tuple(
+        NodeBox(id=n["id"], skill=n["skill"], state=n["state"], depends_on=tuple(n["depends_on"]),
+                sessions=tuple(SessionBox(session_id=s["session_id"], state=s["state"], verdict=s["verdict"],
+                                          cause=s["cause"], strategy=s["strategy"], parent=s["parent"])
+                               for s in n["sessions"]))
+        for n in graph["nodes"]))
 
 
 def to_dot(graph: dict[str, Any], *, link_prefix: str = "/session/") -> str:
-    """DOT text of ``graph`` (as :func:`phyagentos.view.data.run_graph` returns it)."""
-    run_id = graph["run_id"]
-    out = ["digraph run {", "  compound=true; rankdir=LR; fontname=Helvetica; bgcolor=transparent;",
-           '  node [shape=box, style="rounded,filled", fontname=Helvetica, fontsize=10];',
-           "  edge [fontname=Helvetica];"]
-    anchors: dict[str, tuple[str, str]] = {}
-    for node in graph["nodes"]:
-        fill, stroke = STATE_COLOURS.get(node["state"], _ACTIVE)
-        style = "rounded,filled,dashed" if node["state"] == "blocked" else "rounded,filled"
-        cid = _ident("cluster_", node["id"])
-        out.append(f"  subgraph {cid} {{")
-        out.append(f'    label="{_q(node["id"])} ({_q(node["skill"])}): {_q(node["state"])}"; style="{style}"; '
-                   f'fillcolor="{fill}"; color="{stroke}"; penwidth=2; id="{_q("node-" + node["id"])}"; '
-                   f'class="dagnode state-{_q(node["state"])}";')
-        items = []
-        if not node["sessions"]:
-            pid = _ident("p_", node["id"])
-            out.append(f'    {pid} [label="no session yet", fillcolor="white", color="#bdbdbd"];')
-            items.append(pid)
-        for s in node["sessions"]:
-            sfill, sstroke = STATE_COLOURS.get(s["state"], _ACTIVE)
-            short = s["session_id"][len(run_id) + 1:] if s["session_id"].startswith(run_id + "-") else s["session_id"]
-            lines = [short, s["state"] + (f" · {s['verdict']}" if s["verdict"] else "")]
-            if s["cause"]:
-                lines.append(f"cause: {s['cause']}")
-            label = "\\n".join(_q(x) for x in lines)
-            sid = _ident("s_", s["session_id"])
-            out.append(f'    {sid} [label="{label}", fillcolor="{sfill}", color="{sstroke}", '
-                       f'URL="{_q(link_prefix + s["session_id"])}", target="_top", '
-                       f'id="{_q("session-" + s["session_id"])}", class="dagsession state-{_q(s["state"])}"];')
-            items.append(sid)
-        for s in node["sessions"]:
-            if s["parent"]:
-                edge = f"replan: {s['strategy']}" if s["strategy"] else "replan"
-                out.append(f'    {_ident("s_", s["parent"])} -> {_ident("s_", s["session_id"])} '
-                           f'[label="{_q(edge)}", fontsize=9, color="#ef6c00", fontcolor="#ef6c00", penwidth=2];')
-        out.append("  }")
-        anchors[node["id"]] = (items[0], items[-1])
-    for node in graph["nodes"]:
-        for dep in node["depends_on"]:
-            if dep in anchors:
-                out.append(f"  {anchors[dep][1]} -> {anchors[node['id']][0]} "
-                           f"[ltail={_ident('cluster_', dep)}, lhead={_ident('cluster_', node['id'])}, penwidth=2];")
-    out.append("}")
-    return "\n".join(out) + "\n"
+    """DOT text of ``graph`` (as :func:`phyagentos.view.data.run_graph` returns it): the
+    one DOT renderer (:func:`phyagentos.agent.render.to_dot`) with session links."""
+    return render_dot(_run_graph(graph), link_prefix=link_prefix)
 
 
 @functools.lru_cache(maxsize=64)

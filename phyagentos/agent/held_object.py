@@ -104,27 +104,12 @@ class HeldEstimate:
     facts: Mapping[str, Any] = field(default_factory=dict)
 
 
-def _quat_matrix(q: Sequence[float]) -> np.ndarray:
-    """(3, 3) rotation of a unit quaternion ``(w, x, y, z)`` (Hamilton convention)."""
-    import numpy as np  # noqa: PLC0415
-
-    w, x, y, z = (float(v) for v in q)
-    n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
 def _pose(position: Sequence[float] | None, quat: Sequence[float] | None) -> np.ndarray | None:
     if position is None or quat is None:
         return None
-    import numpy as np  # noqa: PLC0415
+    from phyagentos.geometry import pose_matrix  # noqa: PLC0415
 
-    T = np.eye(4)
-    T[:3, :3] = _quat_matrix(quat)
-    T[:3, 3] = [float(v) for v in position]
-    return T
+    return pose_matrix(position, quat)
 
 
 def _entity(snapshot: Mapping, name: str) -> Mapping | None:

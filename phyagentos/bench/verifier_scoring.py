@@ -40,6 +40,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from phyagentos.geometry import quat_to_matrix
 from phyagentos.agent.criteria import Criterion, evaluate, parse_criteria
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
@@ -62,21 +63,13 @@ def load_ground_truth(bundle_dir: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
-def _rotation(quat_wxyz) -> np.ndarray:
-    """(3, 3) rotation matrix of a unit quaternion (w, x, y, z) (normalised here)."""
-    w, x, y, z = np.asarray(quat_wxyz, dtype=float) / np.linalg.norm(quat_wxyz)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
 def _vertical_half_extent(shape: str | None, half_extents, quat_wxyz) -> float:
     """World-frame vertical half extent, m, of a ``box`` (``|R[2, :]| @ h``), ``sphere`` (its
     radius) or ``cylinder`` (axis along local z: ``|R22| h_z + sqrt(1 - R22^2) r``) with
     half extents ``half_extents`` (3,) m in its own frame and orientation ``quat_wxyz``;
     any other shape keeps its own z half extent."""
     h = np.asarray(half_extents, dtype=float)
-    r = _rotation(quat_wxyz)
+    r = quat_to_matrix(quat_wxyz)
     if shape == "box":
         return float(np.abs(r[2]) @ h)
     if shape == "sphere":

@@ -16,6 +16,7 @@ from typing import Sequence
 import mujoco
 import numpy as np
 
+from phyagentos.geometry import matrix_to_quat
 from phyagentos.errors import IKError
 
 from .ik import DEFAULT_ARM_JOINT_NAMES, solve_ik
@@ -48,12 +49,6 @@ def forward_kinematics(
     return T
 
 
-def _quat(R: np.ndarray) -> np.ndarray:
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R).reshape(-1))
-    return q
-
-
 def _slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
     d = float(np.dot(q0, q1))
     if d < 0.0:
@@ -67,7 +62,7 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
 
 def interpolate_pose(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     """Pose at fraction ``s`` in [0, 1] from ``T0`` to ``T1`` (lerp + slerp)."""
-    q = _slerp(_quat(T0[:3, :3]), _quat(T1[:3, :3]), s)
+    q = _slerp(np.asarray(matrix_to_quat(T0[:3, :3])), np.asarray(matrix_to_quat(T1[:3, :3])), s)
     R = np.empty(9)
     mujoco.mju_quat2Mat(R, q)
     T = np.eye(4)

@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from phyagentos.geometry import rotation_about
 from phyagentos.errors import IKError
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.ik import solve_ik
@@ -30,15 +31,7 @@ from .execution import _Tracking
 from .motion import execution_limits, ik_options
 from .perception import entity_pose
 
-__all__ = ["ComputeAffordanceGrasp", "ArticulateHinge", "ComputePlaceAsHeld", "ToolMove", "rotation_about"]
-
-
-def rotation_about(axis, angle: float) -> np.ndarray:
-    """(3, 3) rotation by ``angle`` rad about unit ``axis`` (Rodrigues' formula)."""
-    k = np.asarray(axis, dtype=float)
-    k = k / np.linalg.norm(k)
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+__all__ = ["ComputeAffordanceGrasp", "ArticulateHinge", "ComputePlaceAsHeld", "ToolMove"]
 
 
 def _entity(snapshot: dict, name: str) -> dict:

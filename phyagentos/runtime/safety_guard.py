@@ -52,6 +52,7 @@ from typing import Any, Callable, Sequence
 import mujoco
 import numpy as np
 
+from phyagentos.geometry import quat_to_matrix
 from phyagentos.motion.retime import FRANKA_ACCELERATION_LIMITS, FRANKA_VELOCITY_LIMITS
 from phyagentos.protocol.schemas import CLAMPABLE_VIOLATIONS, SAFETY_VIOLATIONS, SafetyConfig
 
@@ -111,12 +112,6 @@ class EStopLatch:
 PROCESS_ESTOP = EStopLatch()
 
 
-def _quat_to_mat(q: Sequence[float]) -> np.ndarray:
-    R = np.empty(9)
-    mujoco.mju_quat2Mat(R, np.asarray(q, dtype=float))
-    return R.reshape(3, 3)
-
-
 class ChainFK:
     """Vectorised forward kinematics of a serial chain of hinge joints to one site.
 
@@ -168,7 +163,7 @@ class ChainFK:
         base = int(model.body_parentid[bodies[0]])
         self._R0 = self._data.xmat[base].reshape(3, 3).copy()
         self._p0 = self._data.xpos[base].copy()
-        self._R = np.array([_quat_to_mat(model.body_quat[b]) for b in bodies])
+        self._R = np.array([quat_to_matrix(model.body_quat[b]) for b in bodies])
         self._pos = np.array([model.body_pos[b] for b in bodies], dtype=float)
         ax = np.array([model.jnt_axis[j] for j in jids], dtype=float)
         ax /= np.linalg.norm(ax, axis=1, keepdims=True)

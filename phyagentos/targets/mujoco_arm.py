@@ -36,6 +36,7 @@ from typing import Any, Sequence
 import mujoco
 import numpy as np
 
+from phyagentos.geometry import matrix_to_quat as mat_quat, pose_matrix
 from phyagentos.errors import TargetError, format_choices
 from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioception
 from phyagentos.protocol.atomic import atomic_write_bytes
@@ -55,21 +56,6 @@ K_NONE, K_ENV, K_ROBOT, K_FINGER, K_OBJECT = 0, 1, 2, 3, 4
 #: Camera frame (MuJoCo: x right, y up, looking along -z) -> optical frame (OpenCV:
 #: x right, y down, z forward).
 _CAM_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
-
-
-def pose_matrix(xpos, xmat) -> np.ndarray:
-    """``(4, 4)`` transform from a MuJoCo position (3,) and row-major rotation (9,)."""
-    T = np.eye(4)
-    T[:3, 3] = xpos
-    T[:3, :3] = np.asarray(xmat).reshape(3, 3)
-    return T
-
-
-def mat_quat(R) -> list[float]:
-    """Unit quaternion ``[w, x, y, z]`` of a (3, 3) rotation, as plain floats."""
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R, dtype=float).reshape(-1))
-    return [float(x) for x in q]
 
 
 def _floats(v) -> list[float]:

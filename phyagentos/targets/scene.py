@@ -44,6 +44,7 @@ from typing import Any, Mapping
 import mujoco
 import numpy as np
 
+from phyagentos.geometry import look_at_quat, yaw_quat
 from phyagentos.errors import TargetError, format_choices
 
 from .mesh import MeshData, load_mesh
@@ -541,24 +542,6 @@ DEFAULT_SCENE = SceneSpec(
 # ----------------------------------------------------------------------------- build
 
 
-def _yaw_quat(yaw: float) -> list[float]:
-    return [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
-
-
-def _look_at_quat(eye, target) -> list[float]:
-    """Quaternion (wxyz) of a MuJoCo camera at ``eye`` looking at ``target`` (z up)."""
-    eye = np.asarray(eye, float)
-    fwd = np.asarray(target, float) - eye
-    fwd /= np.linalg.norm(fwd)
-    x = np.cross(fwd, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(x, fwd)
-    R = np.column_stack([x, y, -fwd])  # camera looks along its -z axis
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, R.flatten())
-    return q.tolist()
-
-
 @lru_cache(maxsize=1)
 def _wrapper_xml() -> str:
     p = franka_asset_dir()
@@ -616,7 +599,7 @@ def add_tabletop_world(ms: mujoco.MjSpec, spec: SceneSpec, *, legs: bool = False
         wb.add_geom(name=obstacle_geom_name(ob.name), type=mujoco.mjtGeom.mjGEOM_BOX, size=list(ob.half_extents),
                     pos=list(ob.center), rgba=list(ob.rgba))
     for o in spec.objects:
-        body = wb.add_body(name=o.name, pos=[o.position[0], o.position[1], o.rest_z], quat=_yaw_quat(o.yaw))
+        body = wb.add_body(name=o.name, pos=[o.position[0], o.position[1], o.rest_z], quat=yaw_quat(o.yaw))
         body.add_freejoint(name=object_joint_name(o.name))
         # matte material: MuJoCo's default specular (0.5) puts white highlights on the top
         # face that split one object into two colour clusters in perception (measured: 4 of
@@ -694,7 +677,7 @@ def build_scene_spec(spec: SceneSpec) -> mujoco.MjSpec:
     link7.add_site(
         name=TCP_SITE,
         pos=[0.0, 0.0, _TCP_OFFSET_M],
-        quat=_yaw_quat(-math.pi / 4.0),
+        quat=yaw_quat(-math.pi / 4.0),
         size=[0.006, 0, 0],
         rgba=[1.0, 0.6, 0.0, 0.6],
         group=4,
@@ -726,7 +709,7 @@ def build_scene_spec(spec: SceneSpec) -> mujoco.MjSpec:
     wb.add_light(pos=[1.5, 0.8, 2.0], dir=[-0.5, -0.4, -1.0], diffuse=[0.4, 0.4, 0.4], castshadow=False)
     # overview RGB-D camera: in front of the table, above it, the reachable table in view
     eye = [1.25, 0.0, 0.95]
-    wb.add_camera(name="overview", pos=eye, quat=_look_at_quat(eye, [0.5, 0.0, 0.0]), fovy=55.0)
+    wb.add_camera(name="overview", pos=eye, quat=look_at_quat(eye, [0.5, 0.0, 0.0]), fovy=55.0)
 
     add_tabletop_world(ms, spec, legs=True)
     _add_wrist_sensors(ms)
@@ -734,7 +717,7 @@ def build_scene_spec(spec: SceneSpec) -> mujoco.MjSpec:
     # -- keyframe 'home': arm ready, gripper open, objects at their spec poses.
     qpos: list[float] = list(HOME_QPOS) + [GRIPPER_MAX_OPENING_M, GRIPPER_MAX_OPENING_M]
     for o in spec.objects:
-        qpos += [o.position[0], o.position[1], o.rest_z] + _yaw_quat(o.yaw)
+        qpos += [o.position[0], o.position[1], o.rest_z] + yaw_quat(o.yaw)
     ctrl = list(HOME_QPOS) + [GRIPPER_MAX_OPENING_M, GRIPPER_MAX_OPENING_M]
     ms.add_key(name="home", qpos=qpos, ctrl=ctrl)
     return ms

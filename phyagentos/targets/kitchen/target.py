@@ -48,7 +48,9 @@ from phyagentos.errors import TargetError, format_choices
 
 from ..base import ExecutionResult
 from ..contract import TargetCapabilities
-from ..mujoco_arm import GripperResult, MuJoCoArmTarget, mat_quat as _quat, pose_matrix as _pose
+from phyagentos.geometry import matrix_to_quat as _quat, pose_matrix as _pose
+
+from ..mujoco_arm import GripperResult, MuJoCoArmTarget
 
 __all__ = ["KitchenScene", "FrankaKitchenTarget", "KITCHEN_TASKS", "ENV_ID"]
 

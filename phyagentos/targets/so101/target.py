@@ -48,7 +48,9 @@ from phyagentos.errors import TargetError
 
 from ..base import ExecutionResult
 from ..contract import TargetCapabilities
-from ..mujoco_arm import GripperResult, MuJoCoArmTarget, mat_quat
+from phyagentos.geometry import matrix_to_quat as mat_quat, yaw_quat
+
+from ..mujoco_arm import GripperResult, MuJoCoArmTarget
 
 from ..scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
 
@@ -98,10 +100,6 @@ def so101_asset_path() -> Path:
     if not path.is_file():
         raise TargetError(f"SO-101 model not found at {path}")
     return path
-
-
-def _yaw_quat(yaw: float) -> list[float]:
-    return [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
 
 
 @lru_cache(maxsize=1)
@@ -182,7 +180,7 @@ def build_so101_scene(scene: SceneSpec = DEFAULT_SCENE, *, mount_xy: Sequence[fl
     add_tabletop_world(ms, scene)
     qpos: list[float] = [*HOME_QPOS, 0.0]
     for o in scene.objects:
-        qpos += [o.position[0], o.position[1], o.rest_z] + _yaw_quat(o.yaw)
+        qpos += [o.position[0], o.position[1], o.rest_z] + yaw_quat(o.yaw)
     ms.add_key(name="home", qpos=qpos, ctrl=[*HOME_QPOS, 0.0])
     try:
         return ms.compile()

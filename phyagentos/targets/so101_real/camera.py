@@ -37,6 +37,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from phyagentos.geometry import quat_to_matrix
 from phyagentos.errors import TargetError
 
 __all__ = ["OpenCVCamera", "DEPTH_PREDICATES", "RGB_ONLY_PREDICATES", "depth_needing_criteria", "has_depth"]
@@ -47,13 +48,6 @@ log = logging.getLogger(__name__)
 DEPTH_PREDICATES = frozenset({"lifted", "inside", "on", "unchanged", "articulated"})
 #: Judged from proprioception / the held-object model / joint states: fine with RGB only.
 RGB_ONLY_PREDICATES = frozenset({"holding", "released", "still"})
-
-
-def _quat_mat(q) -> np.ndarray:
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 class OpenCVCamera:
@@ -80,7 +74,7 @@ class OpenCVCamera:
             self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, int(spec.width))
             self._cap.set(cv2.CAP_PROP_FRAME_HEIGHT, int(spec.height))
         T = np.eye(4)
-        T[:3, :3] = _quat_mat(r.quat_wxyz)
+        T[:3, :3] = quat_to_matrix(r.quat_wxyz)
         T[:3, 3] = r.position_m
         self.T_world_camera = T
         self.frames = 0

@@ -31,6 +31,7 @@ import yaml
 
 from phyagentos.untrusted import quote
 from phyagentos.errors import GoalGraphError
+from phyagentos.yamlsource import read_yaml
 from phyagentos.llm import LLMClient, LLMError, call_record
 
 from . import dag as dagmod
@@ -151,7 +152,7 @@ class LibraryPlanner:
         goal = data["goal"]
         record = call_record(reply.call, role="planner", output=reply.text, outcome="accepted", detail=f"goal {goal}")
         keep = nx.ancestors(dagmod.to_digraph(lib), goal) | {goal}
-        raw = yaml.safe_load(Path(library).read_text(encoding="utf-8"))
+        raw = read_yaml(library, error=GoalGraphError)  # bounded, as every YAML the project reads
         raw["name"] = name or f"{lib.name}_{goal}"
         raw["description"] = f"{request} (goal {goal} of {lib.name} and what it depends on)"
         raw["nodes"] = [n for n in raw["nodes"] if n["id"] in keep]

@@ -273,11 +273,14 @@ def prepare_real_workspace(workspace: Path, *, port: str, calibration: Path | No
 
     ws.update("TARGETS", put)
     sensors_path = ws.root / "sensors.yaml"
-    raw = yaml.safe_load(sensors_path.read_text(encoding="utf-8")) if sensors_path.is_file() else None
+    from phyagentos.errors import DocumentError
+    from phyagentos.yamlsource import read_yaml
+
+    raw = read_yaml(sensors_path, error=DocumentError, root=ws.root) if sensors_path.is_file() else None
     if not isinstance(raw, dict):
         from phyagentos.resources import templates_dir
 
-        raw = yaml.safe_load((templates_dir() / "sensors.yaml").read_text(encoding="utf-8"))
+        raw = read_yaml(templates_dir() / "sensors.yaml", error=DocumentError)
     targets = raw.setdefault("targets", {})
     if REAL_TARGET not in targets:
         targets[REAL_TARGET] = [s for s in targets.get("so101_tabletop", [])
@@ -316,18 +319,18 @@ def with_real(handlers: dict[str, Handler]) -> dict[str, Handler]:
 def _refuse_depth_criteria(goal_graph: Path, workspace: Path) -> None:
     """Refuse (TargetError, before the bus is touched) a graph with criteria that need
     perceived object poses when the real target's cameras give no depth."""
-    import yaml
-
-    from phyagentos.errors import TargetError
+    from phyagentos.errors import GoalGraphError, TargetError
     from phyagentos.protocol.sensors import read_sensors
     from phyagentos.targets.so101_real.camera import RGB_ONLY_PREDICATES, depth_needing_criteria, has_depth
 
     cams = [s for s in read_sensors(workspace).for_target(REAL_TARGET) if s.kind in ("rgb_camera", "rgbd_camera")]
     if has_depth(cams):
         return
+    from phyagentos.yamlsource import read_yaml
+
     try:
-        graph = yaml.safe_load(Path(goal_graph).read_text(encoding="utf-8")) or {}
-    except (OSError, yaml.YAMLError):
+        graph = read_yaml(goal_graph, error=GoalGraphError) or {}
+    except (OSError, GoalGraphError):
         return  # the run reports the graph's own problem with its location
     needing = depth_needing_criteria(graph if isinstance(graph, dict) else {})
     if needing:

@@ -25,7 +25,7 @@ arm's low-level controller differs from LIBERO's OSC (which reset uses for the s
 steps and then hands over). The gripper is robosuite's Panda hand: two position-servo
 fingers, opening per finger 0 .. 0.04 m.
 
-The second action form, ``osc_pose_delta`` (the policy flow's, chosen by the session's
+The second action form, ``osc_pose_delta_chunk`` (the policy flow's, chosen by the session's
 runtime through :class:`~phyagentos.runtime.target_adapters.LiberoOscAdapter`): one
 :meth:`osc_step` is one ``env.step(action)`` of LIBERO's own OSC_POSE controller (robosuite's
 ``osc_pose.json``: 7 numbers in [-1, 1], the first six scaled to at most 0.05 m / 0.5 rad of
@@ -270,7 +270,7 @@ class LiberoTarget(MuJoCoArmTarget):
     KIND = "simulation"
     ROBOT = "panda"
     TOOLS = ("observe", "move_joints", "set_gripper", "hold", "snapshot")
-    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command", "osc_pose_delta"),
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command", "osc_pose_delta_chunk"),
                                       sensors=("proprioception", "rgb", "depth", "contacts"),
                                       simulated_ground_truth=True, articulated_fixtures=True)
     SENSORS_KEY = "libero"

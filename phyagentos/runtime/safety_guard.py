@@ -20,6 +20,13 @@ joint acceleration  ``safety.acceleration``: above min(datasheet, safety.yaml bo
 workspace           ``safety.workspace``: tcp (forward kinematics) outside the box
 ==================  ============================================================
 
+OSC_POSE delta chunks (the policy flow on LIBERO, :meth:`SafetyGuard.check_osc_deltas`) get
+the e-stop, dtype, shape ``(N, 7)``, NaN, rate and duration checks above, then: every pose
+delta within the controller's input range [-1, 1] (``safety.velocity``: a delta per control
+period is a speed command), the gripper column within [-1, 1] (``safety.joint_limit``), and
+the end-effector path the deltas command (measured position plus the running sum of
+``delta x output_max``) inside the workspace box (``safety.workspace``).
+
 Outcomes: ``reject`` (the command is dropped; the arm keeps its last admitted command),
 ``halt`` (dropped and the caller stops the arm) or ``clamp`` (bounded: clipped into
 the joint range, rate-limited, or truncated) only for codes listed in ``clamp_allowed``.
@@ -497,6 +504,81 @@ class SafetyGuard:
         if self._admissible(actions, N, dt, qd, qdd):
             return GuardDecision("pass", actions)
         return self._diagnose(actions, N, dt, qd, qdd, source)
+
+    def check_osc_deltas(self, actions: Any, *, dt: float, eef_position: Sequence[float],
+                         output_max_m: float, source: str = "") -> GuardDecision:
+        """Check a chunk of OSC_POSE delta actions (LIBERO's controller) before it is stepped.
+
+        Args:
+            actions: ``(N, 7)`` float: ``dx dy dz drx dry drz`` in [-1, 1], gripper -1 .. 1.
+            dt: control period, s.
+            eef_position: ``(3,)`` m, the measured end-effector position (world) the deltas
+                start from.
+            output_max_m: metres of motion per step at input 1 (robosuite's ``output_max``).
+            source: who produced the command (recorded in events).
+
+        Returns:
+            :class:`GuardDecision`; a clamp (when ``safety.velocity`` / ``safety.joint_limit``
+            are in ``clamp_allowed``) clips into [-1, 1], as the controller would.
+        """
+        self.stats["checks"] += 1
+        if self.estop.is_set():
+            return self._decide((Violation("safety.estop", "halt",
+                                           f"e-stop engaged by {self.estop.source}: {self.estop.reason}"),), None, source, 0)
+        if not isinstance(actions, np.ndarray) or actions.dtype.kind != "f":
+            kind = actions.dtype if isinstance(actions, np.ndarray) else type(actions).__name__
+            return self._decide((self._v("safety.dtype", f"command must be a floating-point ndarray, got {kind}"),),
+                                None, source, 0)
+        if actions.ndim != 2 or actions.shape[0] < 1 or actions.shape[1] != 7:
+            return self._decide((self._v("safety.shape", f"an OSC_POSE chunk must have shape (N, 7) with N >= 1, "
+                                                         f"got {actions.shape}"),), None, source, 0)
+        N = actions.shape[0]
+        self.stats["actions"] += N
+        if not np.isfinite(actions).all() or not math.isfinite(dt):
+            bad = np.argwhere(~np.isfinite(actions))
+            idx = int(bad[0, 0]) if len(bad) else None
+            return self._decide((self._v("safety.nan", f"command contains NaN or infinity (first at sample {idx})",
+                                         index=idx),), None, source, N)
+        if dt <= 0 or 1.0 / dt > self._max_rate * (1 + 1e-9):
+            return self._decide((self._v("safety.rate", f"sample period {dt} s is a rate above {self._max_rate} Hz",
+                                         value=(1.0 / dt if dt > 0 else math.inf), limit=self._max_rate),), None, source, N)
+        violations: list[Violation] = []
+        if N * dt > self._max_duration + 1e-9:
+            violations.append(self._v("safety.duration", f"command lasts {N * dt:.3f} s, longer than "
+                                                         f"{self._max_duration} s", value=N * dt, limit=self._max_duration))
+        over = np.abs(actions[:, :6]) > 1.0 + 1e-9
+        if over.any():
+            k, j = np.argwhere(over)[0]
+            axis = ("dx", "dy", "dz", "drx", "dry", "drz")[j]
+            violations.append(self._v("safety.velocity", f"OSC delta {axis} = {actions[k, j]:.4f} at sample {k} is outside "
+                                                         "the controller's input range [-1, 1]",
+                                      index=int(k), joint=axis, value=float(actions[k, j]), limit=1.0))
+        badg = np.abs(actions[:, 6]) > 1.0 + 1e-9
+        if badg.any():
+            k = int(np.argmax(badg))
+            violations.append(self._v("safety.joint_limit", f"gripper command {actions[k, 6]:.4f} at sample {k} is outside "
+                                                            "[-1 open, +1 closed]", index=k, joint="gripper",
+                                      value=float(actions[k, 6]), limit=1.0))
+        clipped = np.clip(actions, -1.0, 1.0)
+        path = np.asarray(eef_position, dtype=float).reshape(3) + float(output_max_m) * np.cumsum(clipped[:, :3], axis=0)
+        out_of = np.abs(path - self._box_mid) > self._box_half
+        if out_of.any():
+            k, axis = np.argwhere(out_of)[0]
+            lim = self.limits
+            bound = lim.box_min[axis] if path[k, axis] < lim.box_min[axis] else lim.box_max[axis]
+            violations.append(self._v("safety.workspace", f"the commanded end-effector path reaches "
+                                                          f"{np.round(path[k], 4).tolist()} m, outside the workspace box "
+                                                          f"{lim.box_min.tolist()}..{lim.box_max.tolist()} m on {'xyz'[axis]} "
+                                                          f"(sample {k})",
+                                      index=int(k), value=float(path[k, axis]), limit=float(bound)))
+        if not violations:
+            return GuardDecision("pass", actions)
+        if all(v.outcome == "clamp" for v in violations):
+            out = clipped
+            if any(v.code == "safety.duration" for v in violations):
+                out = out[: max(1, int(math.floor(self._max_duration / dt + 1e-9)))]
+            return self._decide(tuple(violations), out, source, N)
+        return self._decide(tuple(violations), None, source, N)
 
     def _admissible(self, actions: np.ndarray, N: int, dt: float, qd, qdd) -> bool:
         """Fast path: every check at once on one ``(N, W)`` buffer of excesses.

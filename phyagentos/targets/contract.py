@@ -86,9 +86,11 @@ TARGET_KINDS: tuple[str, ...] = ("simulation", "real_robot", "game")
 #: ``joint_position_chunk``: chunks of joint position targets from a policy, rad;
 #: ``cartesian_pose``: tcp pose targets, (4, 4) world transforms, m;
 #: ``gripper_command``: a gripper opening, m (``set_gripper(opening_m=...)``);
-#: ``game_action``: one of a finite set of named discrete actions (``tools()``).
+#: ``game_action``: one of a finite set of named discrete actions (``tools()``);
+#: ``osc_pose_delta_chunk``: chunks of normalised end-effector deltas + gripper for an
+#: operational-space controller, one per control step (LIBERO's OSC_POSE, ``osc_step``).
 ACTION_FORMS: tuple[str, ...] = ("joint_trajectory", "joint_position_chunk", "cartesian_pose",
-                                 "gripper_command", "game_action")
+                                 "gripper_command", "game_action", "osc_pose_delta_chunk")
 
 #: The sensors a target may offer (``TargetCapabilities.sensors``):
 #: ``proprioception``: joint positions/velocities/efforts (``proprioception()``);

@@ -25,6 +25,17 @@ arm's low-level controller differs from LIBERO's OSC (which reset uses for the s
 steps and then hands over). The gripper is robosuite's Panda hand: two position-servo
 fingers, opening per finger 0 .. 0.04 m.
 
+The second action form, ``osc_pose_delta_chunk`` (the policy flow's, chosen by the session's
+runtime through :class:`~phyagentos.runtime.target_adapters.LiberoOscAdapter`): one
+:meth:`osc_step` is one ``env.step(action)`` of LIBERO's own OSC_POSE controller (robosuite's
+``osc_pose.json``: 7 numbers in [-1, 1], the first six scaled to at most 0.05 m / 0.5 rad of
+end-effector motion per step, the last the gripper, -1 open .. +1 closed), exactly as LIBERO's
+and openpi's evaluation scripts drive the arm. The arm motors are torque motors for that
+step and servos again afterwards, holding where the step left the arm, so the builtin flow
+(and a builtin recovery skill) can follow a policy on the same world. :meth:`osc_proprio`
+reads robosuite's own proprioceptive observables (``robot0_eef_pos``, ``robot0_eef_quat``,
+``robot0_gripper_qpos``), the state openpi's LIBERO example sends.
+
 Model changes, made once at construction by recompiling robosuite's own XML (robosuite's
 ``set_xml_processor`` + ``reset_from_xml_string``): a massless site ``tcp`` on ``robot0_link7`` at the pose of
 robosuite's ``gripper0_grip_site`` (between the fingertips) turned +90 deg about its z axis,
@@ -70,7 +81,7 @@ from .catalog import (
 )
 
 __all__ = ["LiberoScene", "LiberoTarget", "SETTLE_STEPS", "ARM_JOINT_NAMES", "TCP_SITE", "CONTROL_PERIOD_S",
-           "VELOCITY_SCALE", "ACCELERATION_SCALE"]
+           "VELOCITY_SCALE", "ACCELERATION_SCALE", "OSC_ACTION_DIM"]
 
 log = logging.getLogger(__name__)
 
@@ -99,6 +110,8 @@ VELOCITY_SCALE = 0.25
 ACCELERATION_SCALE = 0.5
 #: LIBERO's do-nothing action: zero OSC pose delta (6,) and the gripper open (-1).
 _NOOP_ACTION = np.array([0.0] * 6 + [-1.0])
+#: Width of an OSC_POSE action (LIBERO's ``env.step``): dx dy dz drx dry drz gripper.
+OSC_ACTION_DIM = 7
 
 
 @dataclass(frozen=True)
@@ -257,7 +270,7 @@ class LiberoTarget(MuJoCoArmTarget):
     KIND = "simulation"
     ROBOT = "panda"
     TOOLS = ("observe", "move_joints", "set_gripper", "hold", "snapshot")
-    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command"),
+    CAPABILITIES = TargetCapabilities(action_forms=("joint_trajectory", "gripper_command", "osc_pose_delta_chunk"),
                                       sensors=("proprioception", "rgb", "depth", "contacts"),
                                       simulated_ground_truth=True, articulated_fixtures=True)
     SENSORS_KEY = "libero"
@@ -517,6 +530,50 @@ class LiberoTarget(MuJoCoArmTarget):
             if c.shape == (8,):
                 self._command_fingers(c[7])
         mujoco.mj_step(self._model, self._data)
+
+    # -- the osc_pose_delta action form (the policy flow) ---------------------------------------
+    def osc_step(self, action: Sequence[float]) -> None:
+        """One LIBERO control step (:data:`CONTROL_PERIOD_S`) of ``action`` (7,) through
+        ``env.step``: LIBERO's OSC_POSE controller (pose delta in [-1, 1] per axis, scaled by
+        the controller's ``output_max``; gripper -1 open .. +1 closed), counted as env steps.
+        Afterwards the arm servos hold where the step left the arm.
+
+        Raises:
+            TargetError: not 7 finite numbers.
+        """
+        self._check_open()
+        a = np.asarray(action, dtype=float).reshape(-1)
+        if a.shape != (OSC_ACTION_DIM,) or not np.all(np.isfinite(a)):
+            raise TargetError(f"an OSC_POSE action is {OSC_ACTION_DIM} finite numbers (dx dy dz drx dry drz gripper), "
+                              f"got shape {a.shape}")
+        m, d = self._model, self._data
+        t0 = d.time
+        self._servo(m, False)
+        try:
+            self._env.step(a)
+        finally:
+            self._servo(m, True)
+            d.ctrl[self._arm_act] = np.clip(self.arm_qpos(), self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act])
+        self._env_steps += int(round((d.time - t0) / m.opt.timestep))
+
+    def osc_proprio(self) -> dict[str, np.ndarray]:
+        """robosuite's proprioceptive observables, as LIBERO's ``env.step`` returns them:
+        ``eef_pos`` (3,) m (world; ``gripper0_grip_site``), ``eef_quat_xyzw`` (4,) (the hand
+        body's orientation, robosuite's x, y, z, w order), ``gripper_qpos`` (2,) m (the two
+        finger joints, the second negative when open)."""
+        self._check_open()
+        obs = self._env.env._get_observations(force_update=True)
+        return {"eef_pos": np.asarray(obs["robot0_eef_pos"], dtype=float).copy(),
+                "eef_quat_xyzw": np.asarray(obs["robot0_eef_quat"], dtype=float).copy(),
+                "gripper_qpos": np.asarray(obs["robot0_gripper_qpos"], dtype=float).copy()}
+
+    def osc_limits(self) -> dict[str, Any]:
+        """LIBERO's arm controller as configured: ``type`` (``OSC_POSE``), ``input_max``,
+        ``output_max`` (6,) (m and rad per control step at input 1), ``control_period_s``."""
+        c = self._env.env.robots[0].controller
+        return {"type": str(getattr(c, "name", type(c).__name__)), "input_max": float(np.max(c.input_max)),
+                "output_max": [float(x) for x in np.asarray(c.output_max).reshape(-1)],
+                "control_period_s": CONTROL_PERIOD_S}
 
     def _command_fingers(self, opening_m: float) -> None:
         o = float(np.clip(opening_m, 0.0, GRIPPER_MAX_OPENING_M))

@@ -1,5 +1,6 @@
 # The two commands a newcomer needs:
-#   make demo   set up, then run goal_graphs/pick_and_place.yaml end to end on the MuJoCo Franka
+#   make demo   set up, then run the shipped example goal graph pick_and_place (phyagentos/data/goal_graphs/)
+#               end to end on the MuJoCo Franka
 #   make test   set up, then check the plane boundary and run the test suite (4 workers, one file per worker at a time)
 .PHONY: setup demo test bench clean
 
@@ -7,7 +8,7 @@ setup:
 	@scripts/setup.sh
 
 demo: setup
-	.venv/bin/phyagentos run goal_graphs/pick_and_place.yaml --workspace ws/
+	.venv/bin/phyagentos run pick_and_place --workspace ws/
 
 test: setup
 	.venv/bin/lint-imports

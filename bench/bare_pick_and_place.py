@@ -53,7 +53,7 @@ from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget, SceneSpec  # noqa: E
 from phyagentos.yamlsource import read_yaml  # noqa: E402
 
 RESULTS = _ROOT / "bench" / "results" / "bare_pick_and_place.json"
-TREES = _ROOT / "trees"
+TREES = _ROOT / "phyagentos" / "data" / "trees"
 
 #: ``CartesianMove``'s velocity scale where a tree gives none (trees/place.yaml's Retreat);
 #: phyagentos/primitives/execution.py, pinned equal by tests/test_mujoco_target.py.

@@ -72,7 +72,7 @@ RESULTS = ROOT / "bench" / "results" / "end_to_end.json"
 BIN = Path(sys.executable).parent
 PHYAGENTOS = [str(BIN / "phyagentos")] if (BIN / "phyagentos").exists() else [sys.executable, "-m", "phyagentos.cli"]
 BARE = [sys.executable, str(ROOT / "bench" / "bare_pick_and_place.py"), "--once"]
-GRAPH = ROOT / "goal_graphs" / "pick_and_place.yaml"
+GRAPH = ROOT / "phyagentos" / "data" / "goal_graphs" / "pick_and_place.yaml"
 _VERDICT_EVENTS = ("succeed", "fail", "replan")
 
 

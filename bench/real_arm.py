@@ -150,13 +150,13 @@ def faults(cal_for, dt: float) -> list[dict]:
 
 
 def pick_and_place(seed: int) -> dict:
-    """goal_graphs/pick_and_place_compact.yaml through ``phyagentos run --target so101_real``
+    """The shipped pick_and_place_compact goal graph through ``phyagentos run --target so101_real``
     against a twin thread in this process: the verifier judges perceived evidence; the
     twin's own world (the cube's true position) is checked here, for scoring only."""
     with BusTwin(seed=seed) as twin, tempfile.TemporaryDirectory() as tmp:
         cal_path = ideal_calibration(twin).save(Path(tmp) / "so101.json")
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", "goal_graphs/pick_and_place_compact.yaml",
+        proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", "pick_and_place_compact",
                                "--workspace", str(Path(tmp) / "ws"), "--target", "so101_real", "--port", twin.port,
                                "--calibration", str(cal_path), "--json"], cwd=ROOT, capture_output=True, text=True,
                               env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=900)

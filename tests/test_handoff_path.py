@@ -238,7 +238,7 @@ def test_bundles_read_for_verdicts_serve_the_next_nodes_observations_and_a_repla
     from phyagentos.agent.verifier import load_evidence
     from phyagentos.app.orchestrator import run_goal_graph, skill_names
 
-    graph = Path(__file__).resolve().parent.parent / "goal_graphs" / "pick_and_place.yaml"
+    graph = goal_graphs_dir() / "pick_and_place.yaml"
     report = run_goal_graph(graph, tmp_path / "ws", seed=0)
     assert report.succeeded
     ws = Workspace.open(tmp_path / "ws")

@@ -30,9 +30,10 @@ from phyagentos.protocol import Workspace
 from phyagentos.protocol.schemas import SafetyConfig
 from phyagentos.protocol.sensors import SensorsConfig, SensorSpec
 from phyagentos.resources import templates_dir
+from phyagentos.resources import goal_graphs_dir
 
 ROOT = Path(__file__).resolve().parents[1]
-HOLD = ROOT / "goal_graphs" / "hold.yaml"
+HOLD = goal_graphs_dir() / "hold.yaml"
 
 #: Values no range admits (YAML spellings): non-finite, negative, wrong type, absurdly large.
 HOSTILE = [".inf", "-.inf", ".nan", "-1", "0", "1e300", "1e12", "'abc'", "[1, 2]", "{a: 1}", "true", "null"]

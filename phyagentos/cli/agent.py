@@ -24,6 +24,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from phyagentos.cli.arguments import goal_graph_arg
+
 from phyagentos.app.factories import (default_scene, load_scene, make_library_planner, make_planner,
                                       make_reviser, perceived_entities)
 
@@ -37,10 +39,10 @@ def add_agent_commands(sub: argparse._SubParsersAction) -> None:
     plan = sub.add_parser("plan", help="plan a natural-language request into a validated goal graph (Goal Planner)")
     plan.add_argument("request", help="the instruction, e.g. \"put the cube in the goal region\"")
     plan.add_argument("--workspace", type=Path, required=True, help="workspace directory (created if needed)")
-    plan.add_argument("--scene", type=Path, help="scene YAML or a goal graph with a scene (default: the tabletop "
+    plan.add_argument("--scene", type=goal_graph_arg, help="scene YAML or a goal graph with a scene (default: the tabletop "
                                                  "scene of goal_graphs/pick_and_place.yaml)")
     plan.add_argument("--target", help="prefer this target when it fits (the selector decides otherwise)")
-    plan.add_argument("--library", type=Path, help="plan as one goal of this goal graph and what it depends on "
+    plan.add_argument("--library", type=goal_graph_arg, help="plan as one goal of this goal graph and what it depends on "
                                                    "(a task library, e.g. goal_graphs/crafter_tech_tree.yaml)")
     plan.add_argument("--run", action="store_true", help="run the planned graph like `phyagentos run`")
     plan.add_argument("--json", action="store_true", help="print one JSON object")

@@ -6,7 +6,7 @@ frame (z up, origin at the robot base). Every model forbids unknown fields so a
 typo in a hand-edited document is an error, not silently ignored data.
 
 After changing a model, regenerate the committed JSON Schemas with
-``python -c "from phyagentos.protocol import export_json_schemas as e; e('protocol/schemas')"``.
+``python -c "from phyagentos.protocol import export_json_schemas as e; e('phyagentos/data/protocol/schemas')"``.
 """
 
 from __future__ import annotations

@@ -134,7 +134,7 @@ def _body_end(text: str, suffix: str) -> int:
 def templates_dir() -> Path:
     """The directory holding the document templates copied by :meth:`Workspace.create`.
 
-    ``protocol/`` at the project root (:func:`phyagentos.resources.templates_dir`,
+    ``protocol/`` in the package data (:func:`phyagentos.resources.templates_dir`,
     overridable with ``PHYAGENTOS_HOME``).
 
     Raises:
@@ -142,7 +142,7 @@ def templates_dir() -> Path:
     """
     candidate = resources.templates_dir()
     if not (candidate / DOCUMENTS["SESSIONS"][0]).is_file():
-        raise ProtocolError(f"protocol templates not found in {candidate} (set PHYAGENTOS_HOME to the project root)")
+        raise ProtocolError(f"protocol templates not found in {candidate} (PHYAGENTOS_HOME must name a folder holding protocol/, skills/, trees/)")
     return candidate
 
 

@@ -6,7 +6,7 @@ Everything runs as real processes in one process tree (this script is a child
 subreaper, so the runner and its forkserver are reaped here and their CPU counted):
 
 1. **Comparison**, alternated so shared load hits both sides alike: ``phyagentos run
-   goal_graphs/pick_and_place.yaml --workspace <new>`` against ``bench/bare_pick_and_place.py
+   phyagentos/data/goal_graphs/pick_and_place.yaml --workspace <new>`` against ``bench/bare_pick_and_place.py
    --once --perception`` (the same motions with the project's own motion library, no
    framework, and the same perception calls at the same points: before and after each
    skill and where the skill trees observe). Both sides must move alike: the simulated

@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/pick_and_place.py [--runs 7]
 
-Framework: ``run_goal_graph(goal_graphs/pick_and_place.yaml)`` (workspace creation,
+Framework: ``run_goal_graph(phyagentos/data/goal_graphs/pick_and_place.yaml)`` (workspace creation,
 session compile and submit, claim, preflight, tree build and ticking, evidence,
 verification, every protocol write with fsync). Bare: the same motion sequence as
 ``trees/pick.yaml`` + ``trees/place.yaml`` (same grasp, heights, velocity scales,

@@ -21,7 +21,7 @@ against ``phyagentos bus-twin so101`` in its own process:
 - **refused before motion**: a missing port, a missing or malformed calibration, a servo
   id mismatch: the error code, and the twin's goal writes and torque afterwards (0: nothing
   moved);
-- **pick-and-place**: goal_graphs/pick_and_place_compact.yaml through ``phyagentos run
+- **pick-and-place**: phyagentos/data/goal_graphs/pick_and_place_compact.yaml through ``phyagentos run
   --target so101_real`` on the twin-backed bus, judged by the verifier on perceived
   evidence; the cube's true position in the twin is checked for scoring only.
 

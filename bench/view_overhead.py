@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/view_overhead.py [--runs 5] [--fps 10]
 
-Runs the ``pick`` skill on the MuJoCo Franka (scene of goal_graphs/pick_and_place.yaml)
+Runs the ``pick`` skill on the MuJoCo Franka (scene of phyagentos/data/goal_graphs/pick_and_place.yaml)
 in-process through the BuiltinSkillRuntime, the way the SessionRunner does, three ways:
 
 - ``bare``: no tree observer, no recorder;

@@ -1,7 +1,7 @@
 """Goal Planner for a task library: a request names a goal of an authored goal graph; the plan
 is that goal and everything it depends on.
 
-A game's tech tree (``goal_graphs/crafter_tech_tree.yaml``) already states the order of
+A game's tech tree (``phyagentos/data/goal_graphs/crafter_tech_tree.yaml``) already states the order of
 the work and what each step needs; what a request like "get a stone pickaxe" adds is
 *which* goal. So the plan is not written by the model: the grammar side narrows the
 library's goals to those the request's words name (node ids and their achievements,

@@ -30,7 +30,7 @@ def _reach_oracle(root: Path):
 
 
 def default_scene() -> dict[str, Any]:
-    """The tabletop scene of ``goal_graphs/pick_and_place.yaml``."""
+    """The tabletop scene of ``phyagentos/data/goal_graphs/pick_and_place.yaml``."""
     from phyagentos.resources import goal_graphs_dir  # noqa: PLC0415
 
     return load_scene(goal_graphs_dir() / "pick_and_place.yaml")

@@ -6,6 +6,7 @@
     phyagentos status WORKSPACE [--json] | signal WORKSPACE KIND [--session ID]   (cli/planes.py)
     phyagentos bench SUITE --workspace DIR [--episodes N] [--seeds ...] [--workers K] [--memory off|frozen|learn] [--json]
     phyagentos validate GOAL_GRAPH [--workspace DIR] [--target NAME]
+    (GOAL_GRAPH: a file, or a shipped example's name, e.g. pick_and_place)
     phyagentos skills list|show NAME [--workspace DIR] | primitives [--json|--markdown]   (cli/skills.py)
     phyagentos --skills-path DIR ...   (a folder with skills/ and trees/, searched after the workspace's)
     phyagentos render tree SKILL_OR_TREE [--out FILE.png]

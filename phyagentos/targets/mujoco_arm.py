@@ -118,7 +118,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
     FT_SITE: str | None = None
     #: Report unexpected contacts during trajectory execution.
     REPORT_CONTACTS = True
-    #: Entry of the shipped ``protocol/sensors.yaml`` whose sensors a new target installs
+    #: Entry of the shipped ``phyagentos/data/protocol/sensors.yaml`` whose sensors a new target installs
     #: (the target pool then installs the workspace's entry for the target's own name).
     SENSORS_KEY: str | None = None
     #: Robot body-name pairs the model lets touch (e.g. adjacent links a third-party model

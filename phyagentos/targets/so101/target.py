@@ -65,7 +65,7 @@ JAW_PADS = ("fixed_jaw_pad", "moving_jaw_pad")
 #: 0.35 m, so it stands nearer the objects than the Franka's base (the origin).
 MOUNT_XY: tuple[float, float] = (0.25, 0.0)
 #: The SO-101's scene when a session names none: a 3 cm cube and a goal region within
-#: its reach (as ``goal_graphs/pick_and_place_compact.yaml``), no obstacle near its home pose.
+#: its reach (as ``phyagentos/data/goal_graphs/pick_and_place_compact.yaml``), no obstacle near its home pose.
 SO101_DEFAULT_SCENE = SceneSpec(
     objects=(ObjectSpec(name="cube", half_extents=(0.015, 0.015, 0.015), position=(0.45, -0.1)),),
     regions=(RegionSpec(name="goal", center=(0.45, 0.11), half_extents=(0.05, 0.05)),),

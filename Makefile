@@ -1,7 +1,7 @@
 # The two commands a newcomer needs:
 #   make demo   set up, then run the shipped example goal graph pick_and_place (phyagentos/data/goal_graphs/)
 #               end to end on the MuJoCo Franka
-#   make test   set up, then check the plane boundary and run the test suite (4 workers, one file per worker at a time)
+#   make test   set up, then check the plane boundary, lint (ruff), and run the test suite (4 workers, one file per worker at a time)
 .PHONY: setup demo test bench clean
 
 setup:
@@ -14,6 +14,7 @@ test: setup
 	.venv/bin/lint-imports
 	.venv/bin/python scripts/check_import_cycles.py
 	.venv/bin/python scripts/check_ground_truth_boundary.py
+	.venv/bin/ruff check .
 	.venv/bin/pytest -q -n 4 --dist loadfile
 
 bench: setup

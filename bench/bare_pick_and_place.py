@@ -35,6 +35,7 @@ _ROOT = Path(__file__).resolve().parents[1]
 if str(_ROOT) not in sys.path:
     sys.path.insert(0, str(_ROOT))
 
+from phyagentos.errors import BenchError, IKError  # noqa: E402
 from phyagentos.motion import (  # noqa: E402
     DEFAULT_ACCELERATION_LIMITS,
     CollisionChecker,
@@ -48,7 +49,6 @@ from phyagentos.motion import (  # noqa: E402
     top_down_grasp,
     top_down_grasp_candidates,
 )
-from phyagentos.errors import BenchError, IKError  # noqa: E402
 from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget, SceneSpec  # noqa: E402
 from phyagentos.yamlsource import read_yaml  # noqa: E402
 

@@ -20,10 +20,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import phyagentos  # noqa: F401, I001  (headless GL before mujoco loads)
-
 import mujoco
 import numpy as np
+
+import phyagentos  # noqa: F401, I001  (headless GL before mujoco loads)
 from phyagentos.policy.client import PolicyClient
 from phyagentos.targets import MuJoCoTarget, SceneSpec
 

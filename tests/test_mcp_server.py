@@ -13,8 +13,8 @@ from mcp.client.stdio import StdioServerParameters, stdio_client
 
 from phyagentos.agent.tools import ToolError, ToolRegistry
 from phyagentos.protocol import Workspace
-from phyagentos.runtime.reach_query import answer_reach_query
 from phyagentos.resources import goal_graphs_dir
+from phyagentos.runtime.reach_query import answer_reach_query
 
 GRAPH = goal_graphs_dir() / "pick_and_place.yaml"
 

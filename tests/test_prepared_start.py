@@ -15,6 +15,7 @@ import multiprocessing
 
 import pytest
 import yaml
+from supervisor_util import make_workspace, state_of, submit
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.errors import DocumentError, SupervisorError
@@ -24,8 +25,6 @@ from phyagentos.runtime.heartbeat import Heartbeats
 from phyagentos.runtime.session_basis import RUNTIME_FIELDS, runtime_basis
 from phyagentos.runtime.supervisor import WatchdogSupervisor
 from phyagentos.runtime.worker import RunnerProcess, _Runner
-
-from supervisor_util import make_workspace, state_of, submit
 
 HOLD = {"duration_s": 0.0}
 

@@ -21,6 +21,7 @@ import pytest
 
 from phyagentos.cli import main
 from phyagentos.cli.real import ideal_calibration
+from phyagentos.resources import goal_graphs_dir
 from phyagentos.runtime.safety_guard import EStopLatch
 from phyagentos.targets.so101_real.arm import SO101Arm
 from phyagentos.targets.so101_real.bus_twin import BusTwin
@@ -29,7 +30,6 @@ from phyagentos.targets.so101_real.driver import BusError, FeetechBus
 from phyagentos.targets.so101_real.guard import BusLimits, BusSafetyStop
 from phyagentos.targets.so101_real.protocol import MOTOR_NAMES
 from phyagentos.targets.so101_real.target import SO101RealTarget
-from phyagentos.resources import goal_graphs_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,14 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from planar_arm_plugin import HOME_QPOS, PlanarArmTarget  # tests/ is on sys.path (rootdir conftest-less import)
 
 from phyagentos.motion.retime import retime
 from phyagentos.protocol import TargetSpec, Workspace
+from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets.contract import Target, capabilities_of
 from phyagentos.targets.registry import get_target_class, register_target, registered_targets, unregister_target
-
-from planar_arm_plugin import HOME_QPOS, PlanarArmTarget  # tests/ is on sys.path (rootdir conftest-less import)
-from phyagentos.resources import goal_graphs_dir
 
 REPO = Path(__file__).resolve().parent.parent
 TESTS = Path(__file__).resolve().parent

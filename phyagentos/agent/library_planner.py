@@ -29,14 +29,15 @@ from typing import Collection, Sequence
 import networkx as nx
 import yaml
 
-from phyagentos.untrusted import quote
 from phyagentos.errors import GoalGraphError
 from phyagentos.llm import LLMClient, LLMError, call_record
+from phyagentos.untrusted import quote
 
 from . import dag as dagmod
 from .goal_graph import GoalGraph, load_goal_graph, parse_goal_graph
 from .llm.policy import screen_text
-from .planner import MODEL_REFUSAL_REASONS as REFUSAL_REASONS, PlannerError, PlanResult, check_request
+from .planner import MODEL_REFUSAL_REASONS as REFUSAL_REASONS
+from .planner import PlannerError, PlanResult, check_request
 
 __all__ = ["LibraryPlanner", "goal_candidates", "LIBRARY_SYSTEM_PROMPT"]
 

@@ -58,11 +58,11 @@ from typing import Any, Collection, Mapping, Sequence
 
 import yaml
 
-from phyagentos.untrusted import quote
 from phyagentos.errors import GoalGraphError, PhyAgentOSError
 from phyagentos.llm import LLMCall, LLMClient, LLMError, call_record
 from phyagentos.protocol import ModelCallRecord
 from phyagentos.protocol.reach import ReachOracle
+from phyagentos.untrusted import quote
 
 from .goal_graph import GoalGraph, parse_goal_graph
 from .llm.decompose import Clause, ground

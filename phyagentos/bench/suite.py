@@ -52,7 +52,6 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-import yaml
 
 from phyagentos.errors import BenchError, format_choices
 from phyagentos.resources import goal_graphs_dir

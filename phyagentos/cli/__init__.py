@@ -390,17 +390,15 @@ def main(argv: list[str] | None = None) -> int:
     out, err = _LazyConsole(), _LazyConsole(stderr=True)
     _setup_logging(args.verbose, err)
     from phyagentos.cli.agent import AGENT_HANDLERS
-    from phyagentos.cli.planes import PLANE_HANDLERS
-    from phyagentos.cli.skills import SKILL_HANDLERS
     from phyagentos.cli.fleet import FLEET_HANDLERS  # [issue 31]
-
+    from phyagentos.cli.planes import PLANE_HANDLERS
     from phyagentos.cli.run import cmd_run
+    from phyagentos.cli.skills import SKILL_HANDLERS
 
     handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, **AGENT_HANDLERS, "run": cmd_run, "bench": _cmd_bench,
                 "validate": _cmd_validate, "examples": _cmd_examples, "render": _cmd_render,
                 "policy": _cmd_policy, **FLEET_HANDLERS}
     from phyagentos.cli.skills import skill_search_env
-
     from phyagentos.cli.view import with_view  # [issue 13]
     handlers = with_view(handlers)
     from phyagentos.cli.real import with_real  # [issue 32]

@@ -22,12 +22,15 @@ import argparse
 import json
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
 
+from phyagentos.app.factories import (
+    default_scene,
+    load_scene,
+    make_library_planner,
+    make_planner,
+    perceived_entities,
+)
 from phyagentos.cli.arguments import goal_graph_arg
-
-from phyagentos.app.factories import (default_scene, load_scene, make_library_planner, make_planner,
-                                      make_reviser, perceived_entities)
 
 __all__ = ["add_agent_commands", "AGENT_HANDLERS"]
 

@@ -106,8 +106,8 @@ def _cmd_watch(args, out: Console, err: Console) -> int:
 
 
 def _cmd_agent(args, out: Console, err: Console) -> int:
-    from phyagentos.errors import ProtocolError
     from phyagentos.app.orchestrator import serve_agent
+    from phyagentos.errors import ProtocolError
     from phyagentos.protocol import Workspace
 
     if args.run is not None:

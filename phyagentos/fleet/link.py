@@ -78,7 +78,7 @@ class FleetLink:
     """
 
     def __init__(self, config: FleetConfig, *, mode: Literal["router", "peer", "client"] = "client") -> None:
-        import zenoh
+        import zenoh  # noqa: PLC0415 - zenoh only when a link opens
 
         self._zenoh = zenoh
         self.config = config

@@ -35,9 +35,8 @@ import yaml
 from pydantic import BaseModel, ValidationError
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip
-
 from phyagentos.errors import DocumentError, format_choices
+from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip
 
 from .atomic import atomic_write_text
 from .block_yaml import emit_block_yaml

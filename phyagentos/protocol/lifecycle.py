@@ -38,7 +38,7 @@ from transitions.extensions import HierarchicalMachine
 
 from phyagentos.errors import LifecycleError
 
-from .schemas import ErrorInfo, SessionRecord, SessionResult, TERMINAL_STATES, TransitionRecord, utc_now_iso
+from .schemas import TERMINAL_STATES, ErrorInfo, SessionRecord, SessionResult, TransitionRecord, utc_now_iso
 
 __all__ = ["SessionLifecycle", "LIFECYCLE_EVENTS", "ACTIVE_STATES", "utc_now"]
 

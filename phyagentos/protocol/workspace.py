@@ -37,28 +37,36 @@ import threading
 import time
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterable
-from datetime import datetime, timezone
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 from pydantic import ValidationError
 
-from phyagentos.errors import DocumentError, LeaseError, PhyAgentOSError, ProtocolError, format_choices
-
 from phyagentos import resources
-
+from phyagentos.errors import DocumentError, LeaseError, PhyAgentOSError, ProtocolError, format_choices
 from phyagentos.yamlsource import load_yaml
 
 from .archive import SessionArchive
-from .atomic import atomic_write_bytes, batched_durability, file_identity
-from .atomic import atomic_write_text
+from .atomic import atomic_write_bytes, atomic_write_text, batched_durability, file_identity
+from .codec import (
+    PARSE_CACHE,
+    Document,
+    _fence_needed,
+    _plain,
+    _read_text,
+    dump_yaml,
+    parse_document,
+    parse_yaml,
+    read_document,
+    write_document,
+)
 from .file_lock import WorkspaceLock, workspace_lock
-from .codec import (PARSE_CACHE, Document, _fence_needed, _plain, _read_text, dump_yaml, parse_document,
-                    parse_yaml, read_document, render_document, write_document)
 from .runs import RunRegistry, inside_workspace
 from .schemas import (
     DOCUMENTS,
     SAFETY_FILE,
+    SAFETY_VIOLATIONS,
     SESSION_ID_PATTERN,
     SESSION_STATES,
     TERMINAL_STATES,
@@ -67,7 +75,6 @@ from .schemas import (
     LogEntry,
     RunRecord,
     RuntimeSignalDoc,
-    SAFETY_VIOLATIONS,
     SafetyConfig,
     SessionIndexEntry,
     SessionRecord,
@@ -142,7 +149,8 @@ def templates_dir() -> Path:
     """
     candidate = resources.templates_dir()
     if not (candidate / DOCUMENTS["SESSIONS"][0]).is_file():
-        raise ProtocolError(f"protocol templates not found in {candidate} (PHYAGENTOS_HOME must name a folder holding protocol/, skills/, trees/)")
+        raise ProtocolError(f"protocol templates not found in {candidate} "
+                            "(PHYAGENTOS_HOME must name a folder holding protocol/, skills/, trees/)")
     return candidate
 
 

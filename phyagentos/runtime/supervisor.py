@@ -69,16 +69,20 @@ from phyagentos.protocol import (
     SignalState,
     Workspace,
     WorkspaceWatcher,
-    errorcodes as ec,
     file_identity,
     is_expired,
     new_lease,
     renewed,
 )
+from phyagentos.protocol import (
+    errorcodes as ec,
+)
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
 from .session_basis import runtime_basis
-from .worker import RunnerDied, RunnerProcess, park_runner as _park_runner, take_runner as _take_runner
+from .worker import RunnerDied, RunnerProcess
+from .worker import park_runner as _park_runner
+from .worker import take_runner as _take_runner
 
 __all__ = ["WatchdogSupervisor", "SupervisorConfig", "PRESENCE_DIR", "read_presence"]
 

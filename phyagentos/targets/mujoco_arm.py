@@ -41,8 +41,8 @@ from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioc
 from phyagentos.protocol.atomic import atomic_write_bytes
 
 from .base import BaseRolloutTarget
-from .contract import ExecutionResult, TargetCapabilities
 from .camera_noise import CameraNoise
+from .contract import ExecutionResult, TargetCapabilities
 from .state_file import read_state_npz
 
 __all__ = ["MuJoCoArmTarget", "GripperResult", "pose_matrix", "mat_quat", "K_NONE", "K_ENV", "K_ROBOT", "K_FINGER", "K_OBJECT"]
@@ -199,7 +199,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
             robot_root: body id under which every robot body lies.
             finger_sides: body id -> side (1 or 2) of the finger bodies.
         """
-        from .scene import TABLE_GEOM, FLOOR_GEOM, object_joint_name  # noqa: PLC0415
+        from .scene import FLOOR_GEOM, TABLE_GEOM, object_joint_name  # noqa: PLC0415
 
         m = self._model
         self._scene = scene
@@ -328,7 +328,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         for r in getattr(self, "_renderers", {}).values():
             try:
                 r.close()
-            except Exception:  # pragma: no cover - GL teardown
+            except Exception:  # noqa: BLE001 - pragma: no cover - GL teardown
                 pass
         self._renderers = {}
         super().close()

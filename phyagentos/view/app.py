@@ -38,7 +38,6 @@ import math
 import re
 import socket
 from pathlib import Path
-from typing import Any
 
 import uvicorn
 from starlette.applications import Starlette
@@ -53,12 +52,12 @@ from phyagentos.protocol import DOCUMENTS, SESSION_ID_PATTERN, Workspace, Worksp
 from phyagentos.untrusted import NotConfined, NotRegular, confined, loads_json
 
 from . import data, pages
-from .changes import FINISHED_STATES, Tracker
+from .changes import Tracker
 from .evidence import frames_of
 from .graph_svg import to_svg
 from .scene3d import SceneRenderer
-from .signals import session_signals
 from .security import MAX_BODY_BYTES, TOKEN_HEADER, AccessPolicy, BodyLimit, evidence_dir, safe_path
+from .signals import session_signals
 
 __all__ = ["create_app", "serve", "bind"]
 

@@ -48,7 +48,9 @@ from phyagentos.errors import TargetError, format_choices
 
 from ..base import ExecutionResult
 from ..contract import TargetCapabilities
-from ..mujoco_arm import GripperResult, MuJoCoArmTarget, mat_quat as _quat, pose_matrix as _pose
+from ..mujoco_arm import GripperResult, MuJoCoArmTarget
+from ..mujoco_arm import mat_quat as _quat
+from ..mujoco_arm import pose_matrix as _pose
 
 __all__ = ["KitchenScene", "FrankaKitchenTarget", "KITCHEN_TASKS", "ENV_ID"]
 
@@ -324,7 +326,7 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
         if not self.closed:
             try:
                 self._env.close()
-            except Exception:  # pragma: no cover - renderer teardown
+            except Exception:  # noqa: BLE001 - pragma: no cover - renderer teardown
                 pass
         super().close()
 

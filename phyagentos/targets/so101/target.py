@@ -49,7 +49,6 @@ from phyagentos.errors import TargetError
 from ..base import ExecutionResult
 from ..contract import TargetCapabilities
 from ..mujoco_arm import GripperResult, MuJoCoArmTarget, mat_quat
-
 from ..scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
 
 __all__ = ["SO101Target", "build_so101_scene", "so101_asset_path", "ARM_JOINT_NAMES", "GRIPPER_JOINT", "MOUNT_XY",

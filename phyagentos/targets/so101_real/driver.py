@@ -37,8 +37,15 @@ import scservo_sdk as scs
 
 from phyagentos.errors import TargetError
 
-from .protocol import ADDR, MOTOR_IDS, MOTOR_NAMES, SIGN_BITS, STS3215_MODEL_NUMBER, decode_sign_magnitude, \
-    encode_sign_magnitude
+from .protocol import (
+    ADDR,
+    MOTOR_IDS,
+    MOTOR_NAMES,
+    SIGN_BITS,
+    STS3215_MODEL_NUMBER,
+    decode_sign_magnitude,
+    encode_sign_magnitude,
+)
 
 __all__ = ["FeetechBus", "BusError", "BusState", "STATE_BLOCK"]
 

@@ -69,8 +69,8 @@ class ProtocolError(PhyAgentOSError):
     """A protocol document or workspace could not be read, validated or written."""
 
 
-class _Located:
-    """Mixin: a message prefixed with ``path:line``; keeps ``path`` and ``line``."""
+class _Located(PhyAgentOSError):
+    """Base of the located errors: a message prefixed with ``path:line``; keeps ``path`` and ``line``."""
 
     def __init__(self, message: str, *, path: str | Path | None = None, line: int | None = None):
         self.path = Path(path) if path is not None else None

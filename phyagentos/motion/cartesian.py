@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 
 def forward_kinematics(
     model: mujoco.MjModel,
-    q: Sequence[float],
+    q: Sequence[float] | np.ndarray,
     *,
     frame: str = "tcp",
     arm_joint_names: Sequence[str] = DEFAULT_ARM_JOINT_NAMES,

@@ -798,7 +798,7 @@ CLAMPABLE_VIOLATIONS: tuple[str, ...] = (
 SafetyOutcome = Literal["reject", "halt"]
 
 
-def _default_outcomes() -> dict[str, str]:
+def _default_outcomes() -> dict[str, SafetyOutcome]:
     # Malformed or ill-timed commands are dropped (the arm keeps its last admitted
     # command); commands that would move the arm somewhere unsafe stop it.
     return {

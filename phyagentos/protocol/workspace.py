@@ -597,7 +597,7 @@ class Workspace:
             stored.data = record
             write_document(stored, validated=True, durable=durable)
             active = stored.path == self.session_path(sid)
-            if active and record.state in _TERMINAL:
+            if active and record.state in _TERMINAL and stored.path is not None:
                 try:
                     stored.path = self._session_archive.archive(
                         stored.path, session_id=sid, run_id=record.run_id, state=record.state, node=record.node)
@@ -703,7 +703,7 @@ class Workspace:
         stored.data = record
         write_document(stored, validated=True)
         active = stored.path == self.session_path(record.session_id)
-        if active and record.state in _TERMINAL:
+        if active and record.state in _TERMINAL and stored.path is not None:
             try:
                 stored.path = self._session_archive.archive(
                     stored.path, session_id=record.session_id, run_id=record.run_id,
@@ -796,9 +796,9 @@ class Workspace:
                 for entry in self._session_archive.run_entries(run_id):
                     if entry.session_id in by_id or (wanted is not None and entry.state not in wanted):
                         continue
-                    record = self._load_archived(entry, share=share_archived)
-                    if record is not None:
-                        by_id[record.session_id] = record
+                    archived = self._load_archived(entry, share=share_archived)
+                    if archived is not None:
+                        by_id[archived.session_id] = archived
             else:
                 for path in self._session_archive.iter_files():
                     if path.stem not in by_id:
@@ -871,7 +871,7 @@ class Workspace:
         A session file that no longer validates is left untouched, set aside (its
         error in :attr:`malformed`, counted as ``malformed``) and the rest goes on.
         """
-        fixed = Counter()
+        fixed: Counter[str] = Counter()
         self.malformed: dict[str, str] = {}
         hints = self._states.entries()
         for path in sorted(self.sessions_dir.glob("*.md")):

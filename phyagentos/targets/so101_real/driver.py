@@ -33,9 +33,9 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-import scservo_sdk as scs
 
 from phyagentos.errors import TargetError
+from phyagentos.extras import import_extra
 
 from .protocol import (
     ADDR,
@@ -46,6 +46,8 @@ from .protocol import (
     decode_sign_magnitude,
     encode_sign_magnitude,
 )
+
+scs = import_extra("scservo_sdk", extra="real")  # Feetech's SDK (it imports pyserial)
 
 __all__ = ["FeetechBus", "BusError", "BusState", "STATE_BLOCK"]
 

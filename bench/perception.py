@@ -36,9 +36,11 @@ import platform
 import time
 from pathlib import Path
 
+import phyagentos  # noqa: F401  (headless GL before mujoco loads)
+
+# isort: split
 import numpy as np
 
-import phyagentos  # noqa: F401, I001  (headless GL before mujoco loads)
 from phyagentos.perception import ObjectDescriptor, Perceiver, PerceptionConfig
 from phyagentos.perception.synthetic import (
     DEFAULT_CAMERAS,

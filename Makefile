@@ -1,22 +1,25 @@
 # The two commands a newcomer needs:
-#   make demo   set up, then run goal_graphs/pick_and_place.yaml end to end on the MuJoCo Franka
-#   make test   set up, then check the plane boundary and run the test suite (4 workers, one file per worker at a time)
+#   make demo   set up, then run the shipped example goal graph pick_and_place (phyagentos/data/goal_graphs/)
+#               end to end on the MuJoCo Franka
+#   make test   set up, then check the plane boundary, lint (ruff, mypy on its checked core), and run the test suite (4 workers, one file per worker at a time)
 .PHONY: setup demo test bench clean
 
 setup:
 	@scripts/setup.sh
 
 demo: setup
-	.venv/bin/phyagentos run goal_graphs/pick_and_place.yaml --workspace ws/
+	.venv/bin/phyagentos run pick_and_place --workspace ws/
 
 test: setup
 	.venv/bin/lint-imports
 	.venv/bin/python scripts/check_import_cycles.py
 	.venv/bin/python scripts/check_ground_truth_boundary.py
+	.venv/bin/ruff check .
+	.venv/bin/mypy
 	.venv/bin/pytest -q -n 4 --dist loadfile
 
 bench: setup
 	.venv/bin/python -m bench all
 
 clean:
-	rm -rf ws/ bench/results/ .pytest_cache
+	rm -rf ws/ bench/results/ .pytest_cache .ruff_cache .mypy_cache

@@ -25,10 +25,9 @@ from pathlib import Path
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.agent.goal_graph import parse_goal_graph
-from phyagentos.errors import GoalGraphError
 from phyagentos.app.graph_check import check_goal_graph
-from phyagentos.protocol import SessionRecord, Workspace
-from phyagentos.protocol import codec
+from phyagentos.errors import GoalGraphError
+from phyagentos.protocol import SessionRecord, Workspace, codec
 from phyagentos.resources import goal_graphs_dir, skill_dirs, tree_dirs
 from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
 

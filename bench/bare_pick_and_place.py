@@ -1,7 +1,7 @@
 """Bare pick-and-place on DEFAULT_SCENE using only phyagentos.targets and phyagentos.motion.
 
 No framework, no behaviour trees: this is the floor the orchestrated version is compared
-against. It makes the motions a ``phyagentos run`` of goal_graphs/pick_and_place.yaml
+against. It makes the motions a ``phyagentos run`` of phyagentos/data/goal_graphs/pick_and_place.yaml
 makes, in the order the shipped trees (trees/pick.yaml, trees/place.yaml) make them and
 at their speeds (:class:`SkillMotions`, read from those files): open -> plan to the
 pregrasp -> Cartesian align over the object and approach -> close -> Cartesian lift ->
@@ -35,6 +35,7 @@ _ROOT = Path(__file__).resolve().parents[1]
 if str(_ROOT) not in sys.path:
     sys.path.insert(0, str(_ROOT))
 
+from phyagentos.errors import BenchError, IKError  # noqa: E402
 from phyagentos.motion import (  # noqa: E402
     DEFAULT_ACCELERATION_LIMITS,
     CollisionChecker,
@@ -48,12 +49,11 @@ from phyagentos.motion import (  # noqa: E402
     top_down_grasp,
     top_down_grasp_candidates,
 )
-from phyagentos.errors import BenchError, IKError  # noqa: E402
 from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget, SceneSpec  # noqa: E402
 from phyagentos.yamlsource import read_yaml  # noqa: E402
 
 RESULTS = _ROOT / "bench" / "results" / "bare_pick_and_place.json"
-TREES = _ROOT / "trees"
+TREES = _ROOT / "phyagentos" / "data" / "trees"
 
 #: ``CartesianMove``'s velocity scale where a tree gives none (trees/place.yaml's Retreat);
 #: phyagentos/primitives/execution.py, pinned equal by tests/test_mujoco_target.py.
@@ -138,7 +138,7 @@ def run_bare_pick_and_place(
     ``'transferred'``, ``'released'`` and ``'retreated'`` (not timed separately).
 
     ``perception=True`` runs the same perception as a ``phyagentos run`` of
-    goal_graphs/pick_and_place.yaml, at the same points and as often: the target's camera
+    phyagentos/data/goal_graphs/pick_and_place.yaml, at the same points and as often: the target's camera
     sensors (shipped ``sensors.yaml``, same resolution) captured and fused by a fresh
     :class:`~phyagentos.perception.Perceiver` per skill through
     :func:`phyagentos.primitives.observation.perceive_now` (frames saved as PNG like the

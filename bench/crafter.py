@@ -154,10 +154,11 @@ def main() -> int:
                          workers=args.workers, seeds=extra),
                    _pass(f"frozen (held-out {text})", ws, episodes=len(extra), split="heldout", memory="frozen",
                          workers=args.workers, seeds=extra)]
-    lessons = load_plain((ws / "LESSONS.md").read_text().split("```yaml", 1)[1].split("```", 1)[0], path=ws / "LESSONS.md", error=BenchError)
-    memory = {"verified": [f"{l['id']}: {l['correction']} ({l['confirmations']}+/{l['refutations']}-)"
-                           + _trial_text(l) for l in lessons.get("lessons") or []],
-              "candidates": [f"{l['id']}: {l['correction']}" + _trial_text(l) for l in lessons.get("candidates") or []]}
+    lessons_text = (ws / "LESSONS.md").read_text().split("```yaml", 1)[1].split("```", 1)[0]
+    lessons = load_plain(lessons_text, path=ws / "LESSONS.md", error=BenchError)
+    memory = {"verified": [f"{entry['id']}: {entry['correction']} ({entry['confirmations']}+/{entry['refutations']}-)"
+                           + _trial_text(entry) for entry in lessons.get("lessons") or []],
+              "candidates": [f"{entry['id']}: {entry['correction']}" + _trial_text(entry) for entry in lessons.get("candidates") or []]}
     table = Table(title=f"Crafter, {args.episodes} worlds per pass, step budget 10000 per episode")
     for col in ("pass", "score %", "95 % CI", "ach./ep", "mean length", "deaths", "steps/s (full path)"):
         table.add_column(col, justify="left" if col in ("pass", "deaths") else "right")

@@ -6,7 +6,7 @@ Everything runs as real processes in one process tree (this script is a child
 subreaper, so the runner and its forkserver are reaped here and their CPU counted):
 
 1. **Comparison**, alternated so shared load hits both sides alike: ``phyagentos run
-   goal_graphs/pick_and_place.yaml --workspace <new>`` against ``bench/bare_pick_and_place.py
+   phyagentos/data/goal_graphs/pick_and_place.yaml --workspace <new>`` against ``bench/bare_pick_and_place.py
    --once --perception`` (the same motions with the project's own motion library, no
    framework, and the same perception calls at the same points: before and after each
    skill and where the skill trees observe). Both sides must move alike: the simulated
@@ -72,7 +72,7 @@ RESULTS = ROOT / "bench" / "results" / "end_to_end.json"
 BIN = Path(sys.executable).parent
 PHYAGENTOS = [str(BIN / "phyagentos")] if (BIN / "phyagentos").exists() else [sys.executable, "-m", "phyagentos.cli"]
 BARE = [sys.executable, str(ROOT / "bench" / "bare_pick_and_place.py"), "--once"]
-GRAPH = ROOT / "goal_graphs" / "pick_and_place.yaml"
+GRAPH = ROOT / "phyagentos" / "data" / "goal_graphs" / "pick_and_place.yaml"
 _VERDICT_EVENTS = ("succeed", "fail", "replan")
 
 

@@ -42,10 +42,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
-from end_to_end import NO_CAMERA_SENSORS, handoffs, session_timeline
+from end_to_end import NO_CAMERA_SENSORS, handoffs, session_timeline  # noqa: E402 - after the sys.path lines above
 
-from phyagentos.fleet.local import LocalFleet
-from phyagentos.protocol import Workspace
+from phyagentos.fleet.local import LocalFleet  # noqa: E402
+from phyagentos.protocol import Workspace  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "fleet.json"
 PHYAGENTOS = [sys.executable, "-m", "phyagentos.cli"]

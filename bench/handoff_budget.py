@@ -10,7 +10,7 @@ the agent, the supervisor, the protocol layer and the runner (``TRACED``) so tha
 call appends ``thread, function, start, end`` (unix s) to ``<dir>/<pid>.log``; the
 runner's forkserver children re-import the main module, so the runner process is traced
 too. ``os.fsync`` and garbage collections (``gc.gen<N>``) are counted as well.
-``--graph`` traces a run of that goal graph instead (e.g. ``goal_graphs/pick_and_place.yaml``
+``--graph`` traces a run of that goal graph instead (e.g. ``phyagentos/data/goal_graphs/pick_and_place.yaml``
 with ``--cameras``: its one hand-off, from pick to place).
 
 Then, for every hand-off (a session's verdict to the next session's first actuation, as

@@ -117,7 +117,8 @@ def main() -> int:
     for r in sorted(rows, key=lambda r: (r["task"], r["seed"])):
         kx = (r["kettle_xyz_terminal"] or [None])[0]
         mw = r["microwave_rad_terminal"]
-        print(f"{r['episode_id'] + (' *' if r['load_timeout'] else ''):<18}{str(r['verdict']):>9}{str(r['env_success']):>7}{str(r['completed_at_step']):>7}"
+        print(f"{r['episode_id'] + (' *' if r['load_timeout'] else ''):<18}{str(r['verdict']):>9}"
+              f"{str(r['env_success']):>7}{str(r['completed_at_step']):>7}"
               f"{str(r['env_steps']):>7}{'-' if mw is None else f'{mw:.9f}':>16}{'-' if kx is None else f'{kx:.6f}':>14}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"benchmark": "kitchen_checker", "runs": [str(r) for r in args.runs],

@@ -64,12 +64,12 @@ import yaml
 import phyagentos  # noqa: F401  (headless GL before mujoco)
 from phyagentos.agent.planner import GoalPlanner, PlannerError
 from phyagentos.app.factories import make_reviser, perceived_entities
-from phyagentos.llm import load_llm_config, make_client
 from phyagentos.app.orchestrator import run_goal_graph, skill_names
-from phyagentos.protocol import Workspace
 from phyagentos.errors import BenchError
-from phyagentos.yamlsource import read_yaml
+from phyagentos.llm import load_llm_config, make_client
+from phyagentos.protocol import Workspace
 from phyagentos.runtime.reach_query import answer_reach_query
+from phyagentos.yamlsource import read_yaml
 
 RESULTS = Path(__file__).resolve().parent / "results"
 COLOURS = {"red": [0.8, 0.1, 0.1, 1], "green": [0.1, 0.7, 0.2, 1], "blue": [0.1, 0.2, 0.8, 1],

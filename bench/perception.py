@@ -5,7 +5,8 @@
 
 Each scene draws 1-2 declared target objects and 0-4 undeclared distractors (box, cylinder
 or sphere, 2-7 cm, random yaw and position over the reachable table; with distractors, half
-the scenes put one against the first target: touching objects), renders two cameras (``--cameras near``: :data:`phyagentos.perception.synthetic.DEFAULT_CAMERAS`,
+the scenes put one against the first target: touching objects), renders two cameras
+(``--cameras near``: :data:`phyagentos.perception.synthetic.DEFAULT_CAMERAS`,
 320x240 RGB-D about 0.8 m away; ``overview``: the tabletop target's overview geometry, 640x480
 about 1.2 m away, plus a 640x480 side camera) with camera noise
 (depth sigma = 0.5 mm + 1.5 mm/m^2 z^2, RGB sigma 3, brightness gain +-10 %, 1 % depth
@@ -35,11 +36,12 @@ import platform
 import time
 from pathlib import Path
 
-import phyagentos  # noqa: F401, I001  (headless GL before mujoco loads)
+import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 
+# isort: split
 import numpy as np
 
-from phyagentos.perception import ObjectDescriptor, PerceptionConfig, Perceiver
+from phyagentos.perception import ObjectDescriptor, Perceiver, PerceptionConfig
 from phyagentos.perception.synthetic import (
     DEFAULT_CAMERAS,
     CameraNoise,

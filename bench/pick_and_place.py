@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/pick_and_place.py [--runs 7]
 
-Framework: ``run_goal_graph(goal_graphs/pick_and_place.yaml)`` (workspace creation,
+Framework: ``run_goal_graph(phyagentos/data/goal_graphs/pick_and_place.yaml)`` (workspace creation,
 session compile and submit, claim, preflight, tree build and ticking, evidence,
 verification, every protocol write with fsync). Bare: the same motion sequence as
 ``trees/pick.yaml`` + ``trees/place.yaml`` (same grasp, heights, velocity scales,
@@ -30,17 +30,17 @@ from pathlib import Path
 import numpy as np
 
 import phyagentos  # noqa: F401  (selects the headless GL backend before mujoco loads)
+from phyagentos.app.orchestrator import run_goal_graph
+from phyagentos.errors import BenchError
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.collision import CollisionChecker
 from phyagentos.motion.grasp import place_pose, top_down_grasp
 from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.planner import plan_path
 from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime
-from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets import MuJoCoTarget, SceneSpec
-from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

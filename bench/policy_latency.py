@@ -20,10 +20,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-import phyagentos  # noqa: F401, I001  (headless GL before mujoco loads)
+import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 
+# isort: split
 import mujoco
 import numpy as np
+
 from phyagentos.policy.client import PolicyClient
 from phyagentos.targets import MuJoCoTarget, SceneSpec
 

@@ -21,7 +21,7 @@ against ``phyagentos bus-twin so101`` in its own process:
 - **refused before motion**: a missing port, a missing or malformed calibration, a servo
   id mismatch: the error code, and the twin's goal writes and torque afterwards (0: nothing
   moved);
-- **pick-and-place**: goal_graphs/pick_and_place_compact.yaml through ``phyagentos run
+- **pick-and-place**: phyagentos/data/goal_graphs/pick_and_place_compact.yaml through ``phyagentos run
   --target so101_real`` on the twin-backed bus, judged by the verifier on perceived
   evidence; the cube's true position in the twin is checked for scoring only.
 
@@ -37,8 +37,8 @@ import json
 import os
 import random
 import subprocess
-import tempfile
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -136,7 +136,7 @@ def faults(cal_for, dt: float) -> list[dict]:
                 try:
                     arm.send(arm.guard._last_goal)
                     refused = False
-                except Exception:
+                except Exception:  # noqa: BLE001 - whatever the guard raises is a refusal
                     refused = True
                 time.sleep(0.3)
                 motion = float(np.max(np.abs(twin.joint_positions() - before)))
@@ -150,13 +150,13 @@ def faults(cal_for, dt: float) -> list[dict]:
 
 
 def pick_and_place(seed: int) -> dict:
-    """goal_graphs/pick_and_place_compact.yaml through ``phyagentos run --target so101_real``
+    """The shipped pick_and_place_compact goal graph through ``phyagentos run --target so101_real``
     against a twin thread in this process: the verifier judges perceived evidence; the
     twin's own world (the cube's true position) is checked here, for scoring only."""
     with BusTwin(seed=seed) as twin, tempfile.TemporaryDirectory() as tmp:
         cal_path = ideal_calibration(twin).save(Path(tmp) / "so101.json")
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", "goal_graphs/pick_and_place_compact.yaml",
+        proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", "pick_and_place_compact",
                                "--workspace", str(Path(tmp) / "ws"), "--target", "so101_real", "--port", twin.port,
                                "--calibration", str(cal_path), "--json"], cwd=ROOT, capture_output=True, text=True,
                               env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=900)

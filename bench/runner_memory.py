@@ -1,6 +1,6 @@
 """Memory of a process that runs one goal graph after another, each in a new workspace.
 
-    .venv/bin/python bench/runner_memory.py [--runs 12] [--graph goal_graphs/pick_and_place.yaml]
+    .venv/bin/python bench/runner_memory.py [--runs 12] [--graph phyagentos/data/goal_graphs/pick_and_place.yaml]
 
 ``phyagentos bench`` episodes, the tests and any program calling
 ``phyagentos.app.orchestrator.run_goal_graph`` repeatedly reuse one idle runner process
@@ -72,7 +72,7 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=12)
-    ap.add_argument("--graph", type=Path, default=ROOT / "goal_graphs" / "pick_and_place.yaml")
+    ap.add_argument("--graph", type=Path, default=ROOT / "phyagentos" / "data" / "goal_graphs" / "pick_and_place.yaml")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     base = Path(tempfile.mkdtemp(prefix="phyagentos-runner-memory-"))

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from _supervisor_common import make_workspace, percentile, start_watch, stop, submit, write_result
+
 from phyagentos.protocol import WorkspaceWatcher
 from phyagentos.protocol.codec import read_document
 from phyagentos.protocol.schemas import SessionRecord

@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 from _supervisor_common import submit, write_result
+
 from phyagentos.protocol import Workspace, new_lease
 from phyagentos.protocol.lifecycle import SessionLifecycle
 

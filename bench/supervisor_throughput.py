@@ -27,8 +27,8 @@ import time
 from pathlib import Path
 
 import yaml
-
 from _supervisor_common import CLI, ROOT, make_workspace, start_watch, stop, write_result
+
 from phyagentos.protocol import Workspace
 
 WORKLOADS = {

@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/view_overhead.py [--runs 5] [--fps 10]
 
-Runs the ``pick`` skill on the MuJoCo Franka (scene of goal_graphs/pick_and_place.yaml)
+Runs the ``pick`` skill on the MuJoCo Franka (scene of phyagentos/data/goal_graphs/pick_and_place.yaml)
 in-process through the BuiltinSkillRuntime, the way the SessionRunner does, three ways:
 
 - ``bare``: no tree observer, no recorder;
@@ -25,8 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
-
 import phyagentos  # noqa: F401  (selects the headless GL backend before mujoco loads)
+from phyagentos.errors import BenchError
 from phyagentos.primitives.context import SkillContext
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir, skills_dir, trees_dir
@@ -35,7 +35,6 @@ from phyagentos.runtime.recording import RecordingConfig, SessionRecorder
 from phyagentos.runtime.safety_guard import SafetyGuard
 from phyagentos.runtime.tree_status import TreeStatusPublisher
 from phyagentos.targets import MuJoCoTarget, SceneSpec
-from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -10,6 +10,7 @@ from pathlib import Path
 
 __all__ = [
     "PhyAgentOSError",
+    "MissingExtraError",
     "RecordingError",
     "ViewError",
     "ProtocolError",
@@ -69,8 +70,8 @@ class ProtocolError(PhyAgentOSError):
     """A protocol document or workspace could not be read, validated or written."""
 
 
-class _Located:
-    """Mixin: a message prefixed with ``path:line``; keeps ``path`` and ``line``."""
+class _Located(PhyAgentOSError):
+    """Base of the located errors: a message prefixed with ``path:line``; keeps ``path`` and ``line``."""
 
     def __init__(self, message: str, *, path: str | Path | None = None, line: int | None = None):
         self.path = Path(path) if path is not None else None
@@ -208,3 +209,13 @@ class ViewError(PhyAgentOSError):
 class FleetError(_Located, PhyAgentOSError):
     """The fleet (phyagentos/fleet): a malformed fleet.yaml (with ``path``/``line``), a router
     or edge that cannot be reached, a target no edge owns, or a refused submit."""
+
+
+class MissingExtraError(PhyAgentOSError):
+    """An optional feature's package is not installed; the message names the extra that
+    installs it (``pip install 'phyagentos[fleet]'``; pyproject's optional dependencies).
+    ``extra`` is that extra's name, ``module`` the module that was missing."""
+
+    def __init__(self, message: str, *, extra: str, module: str):
+        self.extra, self.module = extra, module
+        super().__init__(message)

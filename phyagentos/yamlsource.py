@@ -17,7 +17,7 @@ of consuming gigabytes in a later ``deepcopy`` or dump.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import yaml
 
@@ -53,8 +53,9 @@ def excerpt(value: Any, limit: int = MAX_EXCERPT_CHARS) -> str:
 def _error(error: type[Exception], message: str, *, path: str | Path | None, line: int | None) -> Exception:
     """``error(message, path=, line=)``; for an error class without those keywords, the
     message prefixed with ``path:line`` (and ``path``/``line`` set as attributes)."""
+    located: Callable[..., Exception] = error  # PhyAgentOSError subclasses with path=/line= (errors._Located)
     try:
-        return error(message, path=path, line=line)
+        return located(message, path=path, line=line)
     except TypeError:
         loc = f"{path}:{line}" if path is not None and line is not None else (str(path) if path is not None else "")
         exc = error(f"{loc}: {message}" if loc else message)

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # One-time set-up, idempotent: system packages (Graphviz renders trees and DAGs,
 # EGL/OSMesa let MuJoCo render camera images headless), then a virtualenv with
-# the project installed in editable mode (skills/, trees/, protocol/ are read
-# from the checkout).
+# the project installed in editable mode (the shipped skills, trees, protocol templates and
+# example goal graphs are package data under phyagentos/data/, read from the checkout).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

@@ -4,7 +4,8 @@
 # before any test module imports mujoco.
 import phyagentos  # noqa: F401
 
-from hypothesis import settings  # noqa: E402
+# isort: split
+from hypothesis import settings
 
 # Property tests check what comes out, not how fast: hypothesis's default 200 ms deadline per
 # example is a timing assertion, which fails on a loaded machine (a 20 ms example took 312 ms

@@ -20,9 +20,10 @@ import pytest
 from phyagentos.cli import main
 from phyagentos.errors import DocumentError
 from phyagentos.protocol import Workspace
+from phyagentos.resources import goal_graphs_dir
 
 REPO = Path(__file__).resolve().parent.parent
-HOLD = REPO / "goal_graphs" / "hold.yaml"
+HOLD = goal_graphs_dir() / "hold.yaml"
 
 BOMB = "\n".join(["a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]"]
                  + [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 10)])

@@ -6,8 +6,6 @@ file and line."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from phyagentos.cli import main

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_authoring_validation import assert_refused_everywhere
 
 from phyagentos.cli import main
 from phyagentos.protocol import Workspace
 from phyagentos.targets.mesh import MAX_MESH_BYTES, load_mesh
 from phyagentos.targets.scene import SceneSpec, build_scene
-from test_authoring_validation import assert_refused_everywhere
 
 RADIUS_M, HEIGHT_M = 0.022, 0.045
 

@@ -11,6 +11,7 @@ from phyagentos.cli import main
 from phyagentos.cli.skills import primitives_markdown
 from phyagentos.primitives import PRIMITIVES
 from phyagentos.primitives.schema import TABLES, primitive_schemas
+from phyagentos.resources import skills_dir
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -108,7 +109,7 @@ def test_a_user_skill_shadowing_a_shipped_one_is_announced_with_which_wins(tmp_p
     user_skill(ws, name="pick")
     assert main(["skills", "list", "--workspace", str(ws)]) == 0
     captured = capsys.readouterr()
-    wins = f"skill 'pick': {ws / 'skills' / 'pick.yaml'} wins over {REPO / 'skills' / 'pick.yaml'}"
+    wins = f"skill 'pick': {ws / 'skills' / 'pick.yaml'} wins over {skills_dir() / 'pick.yaml'}"
     assert wins in captured.out
     assert "is shadowed by" in caplog.text  # the warning every command logs
 

@@ -11,13 +11,14 @@ import yaml
 
 from phyagentos.cli import main
 from phyagentos.protocol import Workspace
+from phyagentos.resources import goal_graphs_dir
 
 REPO = Path(__file__).resolve().parent.parent
 
 
 def test_an_so101_hold_keeps_the_arm_still(tmp_path, capsys):
     ws = tmp_path / "ws"
-    assert main(["run", str(REPO / "goal_graphs" / "hold.yaml"), "--workspace", str(ws), "--target", "so101_tabletop",
+    assert main(["run", str(goal_graphs_dir() / "hold.yaml"), "--workspace", str(ws), "--target", "so101_tabletop",
                  "--json"]) == 0
     capsys.readouterr()
     workspace = Workspace.open(ws)
@@ -37,7 +38,7 @@ def test_an_so101_hold_keeps_the_arm_still(tmp_path, capsys):
 
 def test_a_scene_the_so101_starts_inside_of_is_refused_before_anything_moves(tmp_path, capsys):
     graph = tmp_path / "hold_wall.yaml"
-    data = yaml.safe_load((REPO / "goal_graphs" / "hold.yaml").read_text(encoding="utf-8"))
+    data = yaml.safe_load((goal_graphs_dir() / "hold.yaml").read_text(encoding="utf-8"))
     data["scene"] = {"obstacles": [{"name": "wall", "center": [0.5, 0.03, 0.15], "half_extents": [0.2, 0.01, 0.15]}]}
     graph.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     ws = tmp_path / "ws"

@@ -15,6 +15,7 @@ import pytest
 
 from phyagentos.cli import main
 from phyagentos.protocol import Workspace
+from phyagentos.resources import goal_graphs_dir
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -140,7 +141,7 @@ def test_a_cube_three_metres_away_is_unreachable_before_the_arm_moves(tmp_path, 
 
 
 def test_a_scene_out_of_the_so101_reach_is_refused_for_the_so101_only(tmp_path, ws, capsys):
-    graph = REPO / "goal_graphs" / "pick_and_place.yaml"
+    graph = goal_graphs_dir() / "pick_and_place.yaml"
     text = graph.read_text(encoding="utf-8")
     before = snapshot(ws)
     assert main(["validate", str(graph), "--workspace", str(ws), "--target", "so101_tabletop"]) == 2
@@ -151,7 +152,7 @@ def test_a_scene_out_of_the_so101_reach_is_refused_for_the_so101_only(tmp_path, 
     assert snapshot(ws) == before
     # the same graph on the Franka, and the compact graph on the SO-101, are fine
     assert main(["validate", str(graph), "--workspace", str(ws)]) == 0
-    compact = REPO / "goal_graphs" / "pick_and_place_compact.yaml"
+    compact = goal_graphs_dir() / "pick_and_place_compact.yaml"
     assert main(["validate", str(compact), "--workspace", str(ws), "--target", "so101_tabletop"]) == 0
     assert "4 pose(s) reachable" in capsys.readouterr().out
 

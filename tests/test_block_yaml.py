@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from phyagentos.protocol import dump_yaml
 from phyagentos.protocol.block_yaml import emit_block_yaml
 from phyagentos.protocol.codec import _RESOLVERS, _Dumper, _Loader
+from phyagentos.resources import goal_graphs_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -202,11 +203,11 @@ def _documents_of(root: Path):
 
 def test_every_document_of_a_real_run_and_of_the_repository_is_emitted_as_pyyaml_writes_it(tmp_path):
     ws = tmp_path / "ws"
-    done = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(ROOT / "goal_graphs" / "pick_and_place.yaml"),
+    done = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(goal_graphs_dir() / "pick_and_place.yaml"),
                            "--workspace", str(ws), "--json"], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert done.returncode == 0, done.stderr[-2000:]
     checked = fast = 0
-    for root in (ws, ROOT / "goal_graphs", ROOT / "phyagentos"):
+    for root in (ws, ROOT / "phyagentos"):  # phyagentos/data/ holds the shipped goal graphs
         for path, data in _documents_of(root):
             checked += 1
             text = emitted(data)

@@ -15,10 +15,11 @@ import pytest
 
 from phyagentos.errors import GoalGraphError
 from phyagentos.protocol import Workspace
+from phyagentos.resources import goal_graphs_dir
 
 REPO = Path(__file__).resolve().parent.parent
-PICK_AND_PLACE = REPO / "goal_graphs" / "pick_and_place.yaml"
-HOLD = REPO / "goal_graphs" / "hold.yaml"
+PICK_AND_PLACE = goal_graphs_dir() / "pick_and_place.yaml"
+HOLD = goal_graphs_dir() / "hold.yaml"
 
 
 def _no_fallback(monkeypatch) -> None:

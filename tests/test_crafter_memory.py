@@ -70,7 +70,7 @@ def test_a_failed_make_becomes_a_candidate_that_later_successes_verify(tmp_path)
     report = run_goal_graph(second, ws, seed=8)
     assert report.succeeded, report.to_dict()
     doc = _lessons(ws)
-    (lesson,) = [l for l in doc.lessons if l.objective == "make wood_pickaxe"]
+    (lesson,) = [entry for entry in doc.lessons if entry.objective == "make wood_pickaxe"]
     make = next(s for s in report.sessions if s.node == "make_wood_pickaxe")
     assert lesson.verified and lesson.verified_by == [make.session_id]
     assert lesson.id in make.memory
@@ -209,7 +209,7 @@ def test_a_recipe_is_judged_by_its_planned_attempts_not_by_the_sessions_verdict(
                 "inventory_before": inv, "inventory_after": {**inv, "stone_pickaxe": int(ok)}}
 
     def lesson():
-        return next(l for l in ws.read("LESSONS").data.lessons if l.id == rid)
+        return next(entry for entry in ws.read("LESSONS").data.lessons if entry.id == rid)
 
     # a planned try without the stone it uses fails: no evidence about the stations
     book.learn(*session("s-1", "failure"), [make(False, {"wood": 3, "stone": 0})])

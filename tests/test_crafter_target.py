@@ -11,8 +11,7 @@ from phyagentos.primitives import PRIMITIVES  # noqa: E402
 from phyagentos.primitives.context import SkillContext  # noqa: E402
 from phyagentos.resources import skills_dir, trees_dir  # noqa: E402
 from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: E402
-from phyagentos.targets.crafter import (CRAFTER_ACTIONS, VIEW_COLS, VIEW_ROWS, CrafterScene,  # noqa: E402
-                                               CrafterTarget)
+from phyagentos.targets.crafter import CRAFTER_ACTIONS, VIEW_COLS, VIEW_ROWS, CrafterScene, CrafterTarget  # noqa: E402
 
 
 def test_the_manifest_offers_the_17_actions_and_observe():

@@ -7,7 +7,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
 
@@ -117,7 +116,7 @@ def test_an_object_out_of_reach_is_refused_before_motion_and_fails_without_retry
     # ... and a run registered without that check (e.g. by hand) still ends the way the
     # runtime reports it: an IK failure, replans, the dependent node blocked.
     report = run_unchecked(graph, tmp_path / "ws")
-    ws = Workspace.open(tmp_path / "ws")
+    Workspace.open(tmp_path / "ws")  # the run left a workspace that opens
     out = {"nodes": report.node_states, "sessions": [s.to_dict() for s in report.sessions]}
     assert out["nodes"] == {"pick_cube": "failed", "place_cube": "blocked"}
     picks = [s for s in out["sessions"] if s["node"] == "pick_cube"]

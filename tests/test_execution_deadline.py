@@ -16,13 +16,12 @@ import threading
 
 import pytest
 import yaml
+from supervisor_util import make_workspace, submit
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.runtime.heartbeat import ARRAY_LENGTH, SLOTS, Heartbeats
 from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
 from phyagentos.runtime.worker import RunnerProcess
-
-from supervisor_util import make_workspace, submit
 
 TIMEOUT_S = 0.5
 STOPPED_S = 1.5  # longer than the timeout plus the supervisor's grace

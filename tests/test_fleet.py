@@ -17,9 +17,10 @@ from phyagentos.fleet.config import load_fleet_config
 from phyagentos.fleet.link import FleetLink
 from phyagentos.fleet.local import LocalFleet
 from phyagentos.protocol import SessionRecord, Workspace, fold_signals, utc_now_iso
+from phyagentos.resources import goal_graphs_dir
 
 REPO = Path(__file__).resolve().parent.parent
-TWO_ARMS = REPO / "goal_graphs" / "fleet_two_arms.yaml"
+TWO_ARMS = goal_graphs_dir() / "fleet_two_arms.yaml"
 
 
 def _hold_graph(tmp: Path, seconds: float, name: str = "long_hold") -> Path:
@@ -112,7 +113,7 @@ def test_a_two_edge_graph_succeeds_through_the_router_and_replicas_converge(two_
 
 def test_a_failed_node_on_one_edge_blocks_only_its_subgraph(two_edges, tmp_path):
     ws = tmp_path / "ws_agent"
-    proc = subprocess.run(two_edges.run_args(REPO / "goal_graphs" / "fleet_blocked.yaml", ws), capture_output=True,
+    proc = subprocess.run(two_edges.run_args(goal_graphs_dir() / "fleet_blocked.yaml", ws), capture_output=True,
                           text=True, timeout=120, check=False)
     assert proc.returncode == 1, proc.stderr[-3000:]
     report = json.loads(proc.stdout)

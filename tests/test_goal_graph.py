@@ -29,6 +29,7 @@ from phyagentos.agent.goal_graph import (
     parse_goal_graph,
 )
 from phyagentos.errors import GoalGraphError
+from phyagentos.resources import goal_graphs_dir
 
 REPO = Path(__file__).resolve().parents[1]
 SKILLS = {"pick", "place", "pick_and_place", "hold"}
@@ -76,7 +77,7 @@ nodes:
 
 @pytest.mark.parametrize("name", ["pick_and_place", "sort_two_cubes", "hold"])
 def test_example_goal_graphs_load(name):
-    graph = load_goal_graph(REPO / "goal_graphs" / f"{name}.yaml", skills=SKILLS, targets=TARGETS)
+    graph = load_goal_graph(goal_graphs_dir() / f"{name}.yaml", skills=SKILLS, targets=TARGETS)
     assert graph.name == name
     assert graph.description
     assert all(node.target == "franka_tabletop" for node in graph.nodes)
@@ -84,7 +85,7 @@ def test_example_goal_graphs_load(name):
 
 
 def test_pick_and_place_example_has_wall_between_cube_and_goal():
-    graph = load_goal_graph(REPO / "goal_graphs" / "pick_and_place.yaml", skills=SKILLS,
+    graph = load_goal_graph(goal_graphs_dir() / "pick_and_place.yaml", skills=SKILLS,
                             targets=TARGETS)
     assert graph.node_ids == ("pick_cube", "place_cube")
     assert graph.get_node("place_cube").depends_on == ("pick_cube",)
@@ -95,7 +96,7 @@ def test_pick_and_place_example_has_wall_between_cube_and_goal():
 
 
 def test_sort_two_cubes_blue_node_rechecks_red_cube_with_list_accept():
-    graph = load_goal_graph(REPO / "goal_graphs" / "sort_two_cubes.yaml", skills=SKILLS,
+    graph = load_goal_graph(goal_graphs_dir() / "sort_two_cubes.yaml", skills=SKILLS,
                             targets=TARGETS)
     blue = graph.get_node("pick_and_place_blue")
     assert blue.depends_on == ("pick_and_place_red",)

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import yaml
+from supervisor_util import make_workspace
 
 from phyagentos.agent.coordinator import AgentCoordinator
 from phyagentos.agent.goal_graph import parse_goal_graph
-from supervisor_util import make_workspace
 
 
 def _graph(schedule: str | None):

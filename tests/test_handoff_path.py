@@ -16,11 +16,16 @@ import yaml
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.errors import SupervisorError
-from phyagentos.protocol import Workspace
-from phyagentos.protocol import atomic
+from phyagentos.protocol import Workspace, atomic
 from phyagentos.protocol.atomic import atomic_write_text, batched_durability
-from phyagentos.protocol.evidence_markers import (PENDING_MARKER, PRUNED_MARKER, WANTED_MARKER, images_pending,
-                                                  wait_for_images)
+from phyagentos.protocol.evidence_markers import (
+    PENDING_MARKER,
+    PRUNED_MARKER,
+    WANTED_MARKER,
+    images_pending,
+    wait_for_images,
+)
+from phyagentos.resources import goal_graphs_dir
 
 
 def _count_fsyncs(monkeypatch) -> list[int]:
@@ -190,10 +195,10 @@ def test_the_in_flight_marker_and_the_world_state_record_are_written_without_pyy
                                                                                                   monkeypatch):
     # Both are written on the path from a verdict to the next session's first tick: by the
     # codec's block emitter, a tenth of yaml.safe_dump's time.
+    from supervisor_util import make_workspace, submit
+
     from phyagentos.runtime.target_lock import read_marker, write_marker
     from phyagentos.runtime.target_pool import TargetPool
-
-    from supervisor_util import make_workspace, submit
 
     ws = make_workspace(tmp_path / "ws")
     rec = submit(ws, "s1", skill="hold", parameters={"duration_s": 0.0})
@@ -238,7 +243,7 @@ def test_bundles_read_for_verdicts_serve_the_next_nodes_observations_and_a_repla
     from phyagentos.agent.verifier import load_evidence
     from phyagentos.app.orchestrator import run_goal_graph, skill_names
 
-    graph = Path(__file__).resolve().parent.parent / "goal_graphs" / "pick_and_place.yaml"
+    graph = goal_graphs_dir() / "pick_and_place.yaml"
     report = run_goal_graph(graph, tmp_path / "ws", seed=0)
     assert report.succeeded
     ws = Workspace.open(tmp_path / "ws")

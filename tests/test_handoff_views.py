@@ -30,8 +30,9 @@ from supervisor_util import Drill, submit, wait_for
 
 from phyagentos.protocol import SessionRecord, Workspace, utc_now_iso
 from phyagentos.protocol.lifecycle import SessionLifecycle
+from phyagentos.resources import goal_graphs_dir
 
-HOLD = Path(__file__).resolve().parent.parent / "goal_graphs" / "hold.yaml"
+HOLD = goal_graphs_dir() / "hold.yaml"
 
 
 def _chain(path: Path, n: int) -> Path:

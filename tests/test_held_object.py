@@ -9,6 +9,7 @@ import pytest
 import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_recovery_diagnosis import bundle, grasp, observe, session
 
 import phyagentos.app.orchestrator as orchestrator
 from phyagentos.agent.coordinator import AgentCoordinator
@@ -17,8 +18,6 @@ from phyagentos.agent.held_object import HOLD_STD_M, estimate_held, refine
 from phyagentos.agent.verifier import SessionVerifier, load_evidence
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir
-
-from test_recovery_diagnosis import bundle, grasp, observe, session
 
 AT = (0.5, -0.2, 0.02)  # where the cameras saw the cube (2 cm half extents) before the grasp
 DOWN = [0.0, 1.0, 0.0, 0.0]  # tcp pointing down (180 deg about x)

@@ -29,10 +29,10 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.schemas import SafetyConfig
 from phyagentos.protocol.sensors import SensorsConfig, SensorSpec
-from phyagentos.resources import templates_dir
+from phyagentos.resources import goal_graphs_dir, templates_dir
 
 ROOT = Path(__file__).resolve().parents[1]
-HOLD = ROOT / "goal_graphs" / "hold.yaml"
+HOLD = goal_graphs_dir() / "hold.yaml"
 
 #: Values no range admits (YAML spellings): non-finite, negative, wrong type, absurdly large.
 HOSTILE = [".inf", "-.inf", ".nan", "-1", "0", "1e300", "1e12", "'abc'", "[1, 2]", "{a: 1}", "true", "null"]
@@ -76,7 +76,7 @@ def test_a_hostile_camera_value_in_sensors_yaml_is_refused_with_its_line(base_ws
     message = _expect_refused(base_ws, "sensors.yaml", text)
     # a camera without a size fails the sensor's own check: the sensor's line
     key = "- name:" if value == "null" and field in ("width", "height") else f"{field}:"
-    line = next(i for i, l in enumerate(text.splitlines(), 1) if l.strip().startswith(key))
+    line = next(i for i, row in enumerate(text.splitlines(), 1) if row.strip().startswith(key))
     assert f"sensors.yaml:{line}" in message, (field, value, message)
 
 
@@ -113,9 +113,9 @@ SAFETY = ["max_command_rate_hz: .inf", "max_command_duration_s: .nan", "max_join
 def test_a_hostile_safety_yaml_is_refused_with_its_line(base_ws, override):
     original = (base_ws / "safety.yaml").read_text(encoding="utf-8")
     key = override.split(":")[0]
-    lines = [override if l.startswith(f"{key}:") else l for l in original.splitlines()]
+    lines = [override if row.startswith(f"{key}:") else row for row in original.splitlines()]
     if key == "workspace_box":
-        start = next(i for i, l in enumerate(lines) if l.startswith("workspace_box:"))
+        start = next(i for i, row in enumerate(lines) if row.startswith("workspace_box:"))
         end = start + 1
         while end < len(lines) and lines[end].startswith(" "):
             end += 1

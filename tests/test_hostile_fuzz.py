@@ -21,6 +21,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from starlette.testclient import TestClient
+from supervisor_util import submit
 
 from phyagentos.agent.tools import ToolError, ToolRegistry
 from phyagentos.errors import PhyAgentOSError
@@ -28,8 +29,6 @@ from phyagentos.protocol import Workspace
 from phyagentos.untrusted import MAX_JSON_DEPTH, json_depth, loads_json, quote, redact_secrets
 from phyagentos.view.app import create_app
 from phyagentos.view.security import AccessPolicy
-
-from supervisor_util import submit
 
 SECRET = "SECRET-fuzz-91b2"
 TRIED: Counter = Counter()

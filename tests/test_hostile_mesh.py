@@ -11,12 +11,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from phyagentos.cli import main
-from phyagentos.targets.mesh import MAX_MESH_BYTES, MAX_MESH_FACES, MAX_MESH_VERTICES, mesh_counts
-
 from test_authoring_mesh import MESH_LINE, graph_file, ws  # noqa: F401 - ws is a fixture
 from test_authoring_validation import assert_refused_everywhere
+
+from phyagentos.targets.mesh import MAX_MESH_BYTES, MAX_MESH_FACES, MAX_MESH_VERTICES, mesh_counts
 
 
 def dense_obj(target_bytes: int) -> bytes:

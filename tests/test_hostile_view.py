@@ -13,12 +13,11 @@ import subprocess
 import time
 
 import pytest
-
-from phyagentos.protocol import Workspace
-
 from supervisor_util import submit
 from test_view_browser import start_view
 from test_view_security import request
+
+from phyagentos.protocol import Workspace
 
 SECRET = "SECRET-outside-4d1c"
 

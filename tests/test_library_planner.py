@@ -13,8 +13,8 @@ pytest.importorskip("crafter")
 
 from phyagentos.agent.goal_graph import load_goal_graph  # noqa: E402
 from phyagentos.agent.library_planner import LibraryPlanner, goal_candidates  # noqa: E402
-from phyagentos.llm import make_client  # noqa: E402
 from phyagentos.app.orchestrator import skill_names  # noqa: E402
+from phyagentos.llm import make_client  # noqa: E402
 from phyagentos.resources import goal_graphs_dir  # noqa: E402
 
 TECH_TREE = goal_graphs_dir() / "crafter_tech_tree.yaml"

@@ -8,7 +8,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
 
-from phyagentos.llm import LLMError, LlamaCppClient, OpenAICompatClient, load_llm_config, make_client, prompt_hash
+from phyagentos.llm import LlamaCppClient, LLMError, OpenAICompatClient, load_llm_config, make_client, prompt_hash
 
 
 def test_llm_yaml_is_read_and_the_environment_overrides_it(tmp_path):

@@ -21,8 +21,8 @@ import yaml
 from phyagentos.agent.recovery import RecoveryPlanner
 from phyagentos.agent.retarget import TargetChooser
 from phyagentos.agent.reviser import ModelReviser
-from phyagentos.llm import make_client
 from phyagentos.app.orchestrator import run_goal_graph
+from phyagentos.llm import make_client
 from phyagentos.protocol import Diagnosis, SessionRecord, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 from phyagentos.runtime.reach_query import answer_reach_query
@@ -86,7 +86,7 @@ def test_a_node_out_of_its_targets_reach_is_moved_by_the_model_to_the_target_tha
     x, y, _ = truth["objects"]["cube"]["position"]
     assert abs(x - 0.35) <= 0.06 and abs(y - 0.2) <= 0.06 and not truth["held"]
     # the lesson: proposed by the model, a re-target, confirmed by the child's verdict
-    lesson = next(l for l in ws.read("LESSONS").data.lessons if l.strategy == rev.strategy)
+    lesson = next(entry for entry in ws.read("LESSONS").data.lessons if entry.strategy == rev.strategy)
     assert lesson.proposed_by == "model" and lesson.target == "franka_tabletop" and lesson.verified
     assert lesson.verified_by == [child.session_id] and "on target franka_tabletop" in lesson.correction
 

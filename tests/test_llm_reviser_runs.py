@@ -10,8 +10,8 @@ import yaml
 
 from phyagentos.agent.recovery import RecoveryPlanner
 from phyagentos.agent.reviser import ModelReviser
-from phyagentos.llm import make_client
 from phyagentos.app.orchestrator import run_goal_graph
+from phyagentos.llm import make_client
 from phyagentos.protocol import Workspace
 
 pytestmark = pytest.mark.sim
@@ -65,13 +65,13 @@ def test_a_place_whose_goal_collides_is_switched_by_the_model_to_an_off_centre_p
     assert call in parent.context.model_calls
     # the lesson says who proposed the switch and that the child's verdict confirmed it
     lessons = Workspace.open(tmp_path / "ws").read("LESSONS").data
-    lesson = next(l for l in lessons.lessons if l.strategy == "model:switch_to_place_at")
+    lesson = next(entry for entry in lessons.lessons if entry.strategy == "model:switch_to_place_at")
     assert lesson.proposed_by == "model" and lesson.skill == "place_at" and lesson.cause == "goal_in_collision"
     assert lesson.verified and lesson.confirmations == 1 and lesson.verified_by == [switched.session_id]
     assert lesson.provenance == [parent.session_id] and "run skill place_at" in lesson.correction
     # the rule ladder's corrections along the way (if any) are recorded as the rules'
-    assert all(l.proposed_by == "rules" for l in [*lessons.lessons, *lessons.candidates]
-               if not l.strategy.startswith("model:"))
+    assert all(entry.proposed_by == "rules" for entry in [*lessons.lessons, *lessons.candidates]
+               if not entry.strategy.startswith("model:"))
     assert not any(c.strategy == "model:switch_to_place_at" for c in lessons.candidates)
 
 

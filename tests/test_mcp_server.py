@@ -13,9 +13,10 @@ from mcp.client.stdio import StdioServerParameters, stdio_client
 
 from phyagentos.agent.tools import ToolError, ToolRegistry
 from phyagentos.protocol import Workspace
+from phyagentos.resources import goal_graphs_dir
 from phyagentos.runtime.reach_query import answer_reach_query
 
-GRAPH = Path(__file__).resolve().parent.parent / "goal_graphs" / "pick_and_place.yaml"
+GRAPH = goal_graphs_dir() / "pick_and_place.yaml"
 
 
 async def _session(workspace: Path, fn):

@@ -6,8 +6,8 @@ import pytest
 
 from phyagentos.agent.memory import ContextBuilder, KnowledgeBase, LessonBook, PromotionPolicy, promote
 from phyagentos.agent.memory.conditions import scope_matches
-from phyagentos.agent.memory.observed import ObservedObject
 from phyagentos.agent.memory.knowledge import knowledge_id
+from phyagentos.agent.memory.observed import ObservedObject
 from phyagentos.protocol import Diagnosis, Revision, SessionRecord, TargetSpec, Verdict, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 

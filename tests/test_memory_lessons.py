@@ -57,7 +57,7 @@ def test_a_confirming_verdict_makes_it_a_verified_lesson(book):
     assert doc.candidates == []
     assert lesson.verified and lesson.verified_by == ["r-pick_cube-2"] and lesson.confirmations == 1
     assert "evidence/x/terminal.yaml" in lesson.evidence and "grip_force_n=40.0" in lesson.correction
-    assert [l.id for l in book.retrieve(COND)] == [lid]
+    assert [entry.id for entry in book.retrieve(COND)] == [lid]
 
 
 def test_a_refuting_verdict_keeps_it_a_candidate(book):
@@ -103,7 +103,7 @@ def test_two_replans_verify_the_combination_not_the_step_that_did_not_suffice(bo
     book.propose(parent=mid, child=last, diagnosis=collision, revision=turn, conditions=COND)
     book.resolve(last, verdict("success"), COND, history=[root, mid])
     doc = book.document()
-    by_cause = {l.cause: l for l in doc.lessons}
+    by_cause = {entry.cause: entry for entry in doc.lessons}
     assert by_cause["collision"].revision == {"grasp_candidate": 1}
     assert by_cause["object_moved"].revision == {"reobserve_samples": 1, "grasp_candidate": 1}
     assert by_cause["object_moved"].strategy == "re_observe+another_approach_direction"

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from phyagentos.bench.random_world import random_episodes
 from phyagentos.agent.memory.conditions import OBSERVABLE_RISK_FACTORS
+from phyagentos.bench.random_world import random_episodes
 from phyagentos.protocol import Workspace
 from phyagentos.self_evolution import run_pass
 
@@ -29,7 +29,7 @@ def test_frozen_memory_on_held_out_worlds_is_traceable_and_never_written(tmp_pat
         assert not {"mass", "friction", "mass_kg"} & set(entry.conditions["object_properties"])
     assert mem.read("KNOWLEDGE").data.entries  # verdicts were consolidated
     # what the frozen pass applied is a verified item traceable to training sessions
-    lessons = {l.id: l for l in mem.read("LESSONS").data.lessons}
+    lessons = {entry.id: entry for entry in mem.read("LESSONS").data.lessons}
     knowledge = {k.id: k for k in mem.read("KNOWLEDGE").data.entries}
     train_sessions = {s for e in learn.episodes for s in e.session_ids}
     for item in (i for e in frozen.episodes for i in e.memory_items):

@@ -115,7 +115,6 @@ def test_ik_keeps_the_models_of_few_contexts_alive(model):
     import gc
     import weakref
 
-    from phyagentos.motion import ik
 
     gone = []
     for _ in range(12):

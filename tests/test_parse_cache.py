@@ -16,12 +16,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_protocol_codec import Sample, prose, samples
 
 from phyagentos.errors import DocumentError
 from phyagentos.protocol import Document, Workspace, parse_document, read_document, write_document
 from phyagentos.protocol.codec import PARSE_CACHE, _ParseCache
-
-from test_protocol_codec import Sample, prose, samples
 
 
 @pytest.fixture(autouse=True)
@@ -145,11 +144,11 @@ def test_parse_document_of_a_cached_text_keeps_the_path_it_was_given(tmp_path):
 
 # -- LOG.md appends edit the text instead of rendering every entry again -------------------
 
-from hypothesis import example, strategies as st  # noqa: E402
+from hypothesis import example  # noqa: E402
+from test_protocol_codec import texts  # noqa: E402
 
 from phyagentos.protocol import LogEntry, render_document  # noqa: E402
 from phyagentos.protocol.schemas import LogDoc  # noqa: E402
-from test_protocol_codec import texts  # noqa: E402
 
 log_entries = st.builds(
     LogEntry,

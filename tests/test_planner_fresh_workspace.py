@@ -12,8 +12,8 @@ import json
 import pytest
 import yaml
 
-from phyagentos.cli import main
 from phyagentos.app.orchestrator import run_goal_graph
+from phyagentos.cli import main
 
 
 def _truth(ws):

@@ -8,12 +8,12 @@ import logging
 import pytest
 import yaml
 
-from phyagentos.agent.planner import GoalPlanner, PlannerError, plan_schema
 from phyagentos.agent.llm.world import world_from_scene
-from phyagentos.cli import main
+from phyagentos.agent.planner import GoalPlanner, PlannerError, plan_schema
 from phyagentos.app.factories import default_scene
-from phyagentos.llm import LLMCall, LLMReply, make_client
 from phyagentos.app.orchestrator import skill_names
+from phyagentos.cli import main
+from phyagentos.llm import LLMCall, LLMReply, make_client
 from phyagentos.protocol import Workspace
 
 SORT_SCENE = {
@@ -289,10 +289,11 @@ def test_the_reach_query_builds_a_mesh_object_from_the_workspace_it_was_wired_wi
     without a root cannot build it, and says so instead of calling it out of reach."""
     from functools import partial
 
+    from test_authoring_mesh import hex_prism_obj
+
     from phyagentos.agent.selector import select_target
     from phyagentos.protocol.reach import ReachQuery
     from phyagentos.runtime.reach_query import answer_reach_query
-    from test_authoring_mesh import hex_prism_obj
 
     ws = Workspace.create(tmp_path / "ws")
     (ws.root / "meshes").mkdir()

@@ -15,13 +15,13 @@ import json
 import pytest
 
 from phyagentos.agent.llm.meaning import detect_language, read_request
-from phyagentos.untrusted import MAX_QUOTE_CHARS, quote
 from phyagentos.agent.llm.world import world_from_scene
 from phyagentos.agent.planner import GoalPlanner
+from phyagentos.app.orchestrator import skill_names
 from phyagentos.cli import main
 from phyagentos.llm import LLMCall, LLMReply, make_client
-from phyagentos.app.orchestrator import skill_names
 from phyagentos.protocol import Workspace
+from phyagentos.untrusted import MAX_QUOTE_CHARS, quote
 
 # a 4 cm red cube and a 6 cm blue cube, two bins
 SCENE = {

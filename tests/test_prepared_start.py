@@ -15,6 +15,7 @@ import multiprocessing
 
 import pytest
 import yaml
+from supervisor_util import make_workspace, state_of, submit
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.errors import DocumentError, SupervisorError
@@ -24,8 +25,6 @@ from phyagentos.runtime.heartbeat import Heartbeats
 from phyagentos.runtime.session_basis import RUNTIME_FIELDS, runtime_basis
 from phyagentos.runtime.supervisor import WatchdogSupervisor
 from phyagentos.runtime.worker import RunnerProcess, _Runner
-
-from supervisor_util import make_workspace, state_of, submit
 
 HOLD = {"duration_s": 0.0}
 
@@ -152,8 +151,8 @@ def test_a_claim_that_is_not_made_leaves_the_target_free_and_unmarked(tmp_path, 
     import errno
     import logging
 
-    from phyagentos.protocol.workspace import sessions as workspace_module  # where session files are written
     from phyagentos.protocol.lifecycle import SessionLifecycle
+    from phyagentos.protocol.workspace import sessions as workspace_module  # where session files are written
     from phyagentos.runtime.target_lock import read_marker
 
     ws = make_workspace(tmp_path / "ws")

@@ -89,12 +89,12 @@ def test_templates_define_default_target_runtime_and_safety(ws):
 
 
 def test_committed_json_schemas_are_up_to_date(tmp_path):
-    committed = REPO / "protocol" / "schemas"
+    committed = templates_dir() / "schemas"
     generated = {p.name: p.read_text(encoding="utf-8") for p in export_json_schemas(tmp_path)}
     on_disk = {p.name: p.read_text(encoding="utf-8") for p in committed.glob("*.schema.json")}
     assert on_disk == generated, (
-        "protocol/schemas is stale; regenerate with "
-        "python -c \"from phyagentos.protocol import export_json_schemas as e; e('protocol/schemas')\""
+        "phyagentos/data/protocol/schemas is stale; regenerate with "
+        "python -c \"from phyagentos.protocol import export_json_schemas as e; e('phyagentos/data/protocol/schemas')\""
     )
 
 

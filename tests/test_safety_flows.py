@@ -7,9 +7,9 @@ import py_trees
 import pytest
 import yaml
 
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.errors import SafetyError, TargetError
 from phyagentos.motion.retime import retime
-from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.primitives.context import SkillContext
 from phyagentos.primitives.execution import ExecuteTrajectory
 from phyagentos.protocol import Workspace

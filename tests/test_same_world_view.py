@@ -15,11 +15,10 @@ import os
 import numpy as np
 import pytest
 import yaml
+from supervisor_util import make_workspace, submit
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.protocol import Workspace
-
-from supervisor_util import make_workspace, submit
 
 VIEW = {"snapshot": {"entities": [{"name": "cube", "position": [0.5, -0.2, 0.02]}]}, "evidence": "evidence/a"}
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from phyagentos.errors import TargetError
-from phyagentos.protocol.sensors import SensorSpec, SensorsConfig, read_sensors
+from phyagentos.protocol.sensors import SensorsConfig, SensorSpec, read_sensors
 from phyagentos.resources import templates_dir
 from phyagentos.targets import MuJoCoTarget, ObjectSpec, SceneSpec
 

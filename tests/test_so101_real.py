@@ -21,6 +21,7 @@ import pytest
 
 from phyagentos.cli import main
 from phyagentos.cli.real import ideal_calibration
+from phyagentos.resources import goal_graphs_dir
 from phyagentos.runtime.safety_guard import EStopLatch
 from phyagentos.targets.so101_real.arm import SO101Arm
 from phyagentos.targets.so101_real.bus_twin import BusTwin
@@ -254,7 +255,7 @@ def _run(args, timeout=420):
 
 @pytest.mark.sim
 def test_pick_and_place_through_phyagentos_run_on_the_bus_twin(twin, cal_file, tmp_path):
-    proc = _run(["goal_graphs/pick_and_place_compact.yaml", "--workspace", str(tmp_path / "ws"),
+    proc = _run(["pick_and_place_compact", "--workspace", str(tmp_path / "ws"),
                  "--target", "so101_real", "--port", twin.port, "--calibration", str(cal_file)])
     assert proc.returncode == 0, proc.stderr[-3000:]
     report = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -282,7 +283,7 @@ def test_a_bus_fault_mid_session_ends_it_with_the_bus_code_and_no_motion_after(t
         state["writes"] = twin.goal_writes
 
     threading.Thread(target=inject_mid_motion, daemon=True).start()
-    proc = _run(["goal_graphs/pick_and_place_compact.yaml", "--workspace", str(tmp_path / "ws"),
+    proc = _run(["pick_and_place_compact", "--workspace", str(tmp_path / "ws"),
                  "--target", "so101_real", "--port", twin.port, "--calibration", str(cal_file)])
     assert "writes" in state, proc.stderr[-3000:]
     assert proc.returncode == 1, proc.stderr[-3000:]
@@ -319,7 +320,7 @@ def test_the_bus_twin_verb_prints_a_port_that_answers_as_an_so101(tmp_path):
 @pytest.mark.sim
 def test_dry_run_moves_nothing(twin, cal_file, tmp_path):
     before = twin.joint_positions()
-    proc = _run(["goal_graphs/pick_and_place_compact.yaml", "--workspace", str(tmp_path / "ws"),
+    proc = _run(["pick_and_place_compact", "--workspace", str(tmp_path / "ws"),
                  "--target", "so101_real", "--port", twin.port, "--calibration", str(cal_file), "--dry-run"])
     assert proc.returncode in (0, 1), proc.stderr[-3000:]
     assert twin.packets_served > 0  # it did read the bus
@@ -382,7 +383,7 @@ def test_target_captures_real_cameras_and_rgb_only_refuses_depth_criteria(twin, 
     spec = _real_camera(str(video)).model_dump(mode="json", exclude_none=True)
     (ws / "sensors.yaml").write_text(yaml.safe_dump({"version": 1, "targets": {"so101_real": [spec]}}))
     served = twin.packets_served
-    code = main(["run", str(ROOT / "goal_graphs/pick_and_place_compact.yaml"), "--workspace", str(ws),
+    code = main(["run", str(goal_graphs_dir() / "pick_and_place_compact.yaml"), "--workspace", str(ws),
                  "--target", "so101_real", "--port", twin.port, "--calibration", str(cal_file)])
     assert code == 2
     err = capsys.readouterr().err

@@ -10,11 +10,10 @@ import subprocess
 import numpy as np
 import pytest
 import yaml
+from supervisor_util import CLI, ROOT, alive, make_workspace, runner_pid, state_of, stop, submit, wait_for, watch
 
 from phyagentos.protocol import Workspace
 from phyagentos.resources import goal_graphs_dir
-from supervisor_util import (CLI, ROOT, alive, make_workspace, runner_pid, state_of, stop, submit, wait_for,
-                             watch)
 
 pytestmark = pytest.mark.sim
 

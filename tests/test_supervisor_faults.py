@@ -14,7 +14,6 @@ import time
 
 import pytest
 import yaml
-
 from supervisor_util import Drill, assert_run_ended_whole, descends_from, make_workspace, presence, wait_for
 
 pytestmark = pytest.mark.sim

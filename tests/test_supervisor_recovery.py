@@ -7,6 +7,7 @@ import time
 import numpy as np
 import pytest
 import yaml
+from supervisor_util import make_workspace, submit
 
 from phyagentos.agent.coordinator import AgentCoordinator
 from phyagentos.agent.goal_graph import parse_goal_graph
@@ -15,7 +16,6 @@ from phyagentos.protocol.lifecycle import SessionLifecycle
 from phyagentos.runtime.supervisor import SupervisorConfig, WatchdogSupervisor
 from phyagentos.runtime.target_lock import write_marker
 from phyagentos.runtime.target_pool import TargetPool
-from supervisor_util import make_workspace, submit
 
 pytestmark = pytest.mark.sim
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections import Counter
 
 import pytest
-
 from supervisor_util import make_workspace, stop, submit, target_names, wait_for, watch
 
 pytestmark = pytest.mark.sim

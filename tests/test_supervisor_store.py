@@ -10,8 +10,7 @@ from pathlib import Path
 import pytest
 
 from phyagentos.errors import LeaseError, ProtocolError
-from phyagentos.protocol import SessionRecord, SignalAck, Workspace, fold_signals, new_lease, utc_now_iso
-from phyagentos.protocol import errorcodes
+from phyagentos.protocol import SessionRecord, SignalAck, Workspace, errorcodes, fold_signals, new_lease, utc_now_iso
 from phyagentos.protocol.leases import is_expired, remaining_s, renewed
 from phyagentos.protocol.lifecycle import SessionLifecycle
 from phyagentos.protocol.schemas import RunRecord

@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from planar_arm_plugin import HOME_QPOS, PlanarArmTarget  # tests/ is on sys.path (rootdir conftest-less import)
 
 from phyagentos.motion.retime import retime
 from phyagentos.protocol import TargetSpec, Workspace
+from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets.contract import Target, capabilities_of
 from phyagentos.targets.registry import get_target_class, register_target, registered_targets, unregister_target
-
-from planar_arm_plugin import HOME_QPOS, PlanarArmTarget  # tests/ is on sys.path (rootdir conftest-less import)
 
 REPO = Path(__file__).resolve().parent.parent
 TESTS = Path(__file__).resolve().parent
@@ -70,7 +70,7 @@ def test_a_hold_session_runs_on_the_plugin_arm_through_phyagentos_run(tmp_path):
     ws = tmp_path / "ws"
     Workspace.create(ws).update("TARGETS", lambda doc: doc.targets.append(TargetSpec(**PLANAR_SPEC)))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(TESTS), str(site)])}
-    proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(REPO / "goal_graphs" / "hold.yaml"),
+    proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(goal_graphs_dir() / "hold.yaml"),
                            "--workspace", str(ws), "--target", "planar", "--json"],
                           capture_output=True, text=True, env=env, timeout=300, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]

@@ -6,10 +6,10 @@ from __future__ import annotations
 import inspect
 import sys
 import textwrap
-import tomllib
 from pathlib import Path
 
 import pytest
+import tomllib
 
 from phyagentos.errors import TargetError
 from phyagentos.runtime.target_pool import TargetPool

@@ -6,12 +6,11 @@ from __future__ import annotations
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_recovery_diagnosis import PLACE_ACCEPT, bundle, close, observe, session, snap
 
 from phyagentos.agent.verifier import SessionVerifier
 from phyagentos.protocol import Attempt, Diagnosis, Verdict
 from phyagentos.protocol.lifecycle import utc_now
-
-from test_recovery_diagnosis import PICK_ACCEPT, PLACE_ACCEPT, bundle, close, grasp, observe, session, snap
 
 PLACE = {"skill": "place", "accept": PLACE_ACCEPT, "params": {"object": "cube", "region": "goal"}}
 IN_GOAL = (0.5, 0.25, 0.02)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import yaml
 
+from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.bench.verifier_scoring import (
     confusion,
     load_ground_truth,
@@ -12,7 +13,6 @@ from phyagentos.bench.verifier_scoring import (
     truth_of_criteria,
     wilson_interval,
 )
-from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.protocol import Workspace
 
 pytestmark = pytest.mark.sim

@@ -178,7 +178,7 @@ def test_the_3d_overlays_draw_the_planned_path_camera_frustums_and_the_cloud_per
     assert "robot's own data" in legend.find_element(By.CSS_SELECTOR, ".ov-label").text
     for word in ("planned path", "camera frustums", "point cloud"):
         assert word in legend.text
-    slider = driver.find_element(By.CSS_SELECTOR, "input.frame")
+    driver.find_element(By.CSS_SELECTOR, "input.frame")  # the frame slider is there (raises otherwise)
     frames = driver.execute_script(f"return fetch('/api/frames/{sid}').then(r => r.json()).then(j => j.t)")
 
     def show_frame(i: int) -> None:

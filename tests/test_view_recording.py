@@ -13,13 +13,12 @@ import numpy as np
 import pytest
 import yaml
 from PIL import Image
+from test_view_browser import start_view
+from test_view_security import request
 
 from phyagentos.errors import RecordingError
 from phyagentos.protocol import Workspace
 from phyagentos.runtime.recording import ENV_VAR, RecordingConfig
-
-from test_view_browser import start_view
-from test_view_security import request
 
 CLI = [sys.executable, "-m", "phyagentos.cli"]
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,12 +10,11 @@ import signal
 import subprocess
 
 import pytest
+from test_view_browser import start_view
 
 from phyagentos.errors import ViewError
 from phyagentos.protocol import Workspace
 from phyagentos.view import AccessPolicy, safe_path
-
-from test_view_browser import start_view
 
 
 def request(url: str, method: str, path: str, *, body: bytes | None = None, headers: dict | None = None):

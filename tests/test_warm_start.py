@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from supervisor_util import make_workspace, submit
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.resources import skill_dirs, tree_dirs
-
-from supervisor_util import make_workspace, submit
 
 SCENE = {"objects": [{"name": "cube", "half_extents": [0.02, 0.02, 0.02], "position": [0.5, -0.2],
                       "rgba": [0.8, 0.1, 0.1, 1]}],
@@ -23,7 +22,7 @@ SCENE = {"objects": [{"name": "cube", "half_extents": [0.02, 0.02, 0.02], "posit
 
 
 def _session(ws, sid: str, *, run_id: str = "r-warm"):
-    rec = submit(ws, sid, skill="hold", parameters={"duration_s": 0.0}, run_id=run_id)
+    submit(ws, sid, skill="hold", parameters={"duration_s": 0.0}, run_id=run_id)
 
     def with_scene(r):
         r.scene = SCENE

@@ -49,20 +49,28 @@ from typing import Any, Callable, Mapping
 import networkx as nx
 
 from phyagentos.errors import PhyAgentOSError, VerifierError
-from phyagentos.protocol import (LogEntry, SessionRecord, TaskDoc, TaskNode, Workspace, file_identity, is_expired,
-                                 new_lease)
-from phyagentos.protocol.schemas import TransitionRecord
+from phyagentos.protocol import (
+    LogEntry,
+    SessionRecord,
+    TaskDoc,
+    TaskNode,
+    Workspace,
+    file_identity,
+    is_expired,
+    new_lease,
+)
 from phyagentos.protocol.evidence_markers import PRUNED_MARKER, images_pending, wait_for_images
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
+from phyagentos.protocol.schemas import TransitionRecord
 
 from . import dag as dagmod
 from .declared import declared_scene
 from .goal_graph import GoalGraph
 from .memory import ContextBuilder, KnowledgeBase, LessonBook, PromotionPolicy, promote
 from .memory.conditions import Conditions
-from .memory.observed import ObservedObject, observe_object
 from .memory.deaths import SURVIVAL_KEYS
 from .memory.game import is_game_skill, learn_game_session
+from .memory.observed import ObservedObject, observe_object
 from .memory.promotion import initial_state_fingerprint
 from .model_calls import planner_calls, trace_calls, with_calls
 from .recovery import ACQUIRING_SKILLS, SITUATIONAL

@@ -1,7 +1,7 @@
 """Goal Planner for a task library: a request names a goal of an authored goal graph; the plan
 is that goal and everything it depends on.
 
-A game's tech tree (``goal_graphs/crafter_tech_tree.yaml``) already states the order of
+A game's tech tree (``phyagentos/data/goal_graphs/crafter_tech_tree.yaml``) already states the order of
 the work and what each step needs; what a request like "get a stone pickaxe" adds is
 *which* goal. So the plan is not written by the model: the grammar side narrows the
 library's goals to those the request's words name (node ids and their achievements,
@@ -29,15 +29,16 @@ from typing import Collection, Sequence
 import networkx as nx
 import yaml
 
-from phyagentos.untrusted import quote
 from phyagentos.errors import GoalGraphError
-from phyagentos.yamlsource import read_yaml
 from phyagentos.llm import LLMClient, LLMError, call_record
+from phyagentos.untrusted import quote
+from phyagentos.yamlsource import read_yaml
 
 from . import dag as dagmod
 from .goal_graph import GoalGraph, load_goal_graph, parse_goal_graph
 from .llm.policy import screen_text
-from .planner import MODEL_REFUSAL_REASONS as REFUSAL_REASONS, PlannerError, PlanResult, check_request
+from .planner import MODEL_REFUSAL_REASONS as REFUSAL_REASONS
+from .planner import PlannerError, PlanResult, check_request
 
 __all__ = ["LibraryPlanner", "goal_candidates", "LIBRARY_SYSTEM_PROMPT"]
 

@@ -38,7 +38,7 @@ One repair round per clause: the model sees its own answer and the validator's m
 and answers again; if that also fails, :class:`PlannerError` says why. Steps run in
 order (``depends_on`` the previous step: one arm); each node's ``accept`` asks for its own
 placement and re-checks every earlier placement that later steps did not move (the
-request's invariants), like ``goal_graphs/sort_two_cubes.yaml``.
+request's invariants), like ``phyagentos/data/goal_graphs/sort_two_cubes.yaml``.
 
 Every model call is kept as a :class:`~phyagentos.protocol.ModelCallRecord` (prompt hash,
 model, parameters, tokens, latency, raw output, parse outcome) in the :class:`PlanResult`,
@@ -58,11 +58,11 @@ from typing import Any, Collection, Mapping, Sequence
 
 import yaml
 
-from phyagentos.untrusted import quote
 from phyagentos.errors import GoalGraphError, PhyAgentOSError
 from phyagentos.llm import LLMCall, LLMClient, LLMError, call_record
 from phyagentos.protocol import ModelCallRecord
 from phyagentos.protocol.reach import ReachOracle
+from phyagentos.untrusted import quote
 
 from .goal_graph import GoalGraph, parse_goal_graph
 from .llm.decompose import Clause, ground

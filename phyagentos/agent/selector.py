@@ -32,11 +32,10 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-
 from phyagentos import resources
 from phyagentos.errors import SkillError
-from phyagentos.yamlsource import read_yaml
 from phyagentos.protocol.reach import ReachOracle, ReachQuery
+from phyagentos.yamlsource import read_yaml
 
 __all__ = ["DEFAULT_REACH", "Reach", "Selection", "SkillRequirements", "select_target", "skill_requirements"]
 

@@ -30,7 +30,7 @@ def _reach_oracle(root: Path):
 
 
 def default_scene() -> dict[str, Any]:
-    """The tabletop scene of ``goal_graphs/pick_and_place.yaml``."""
+    """The tabletop scene of ``phyagentos/data/goal_graphs/pick_and_place.yaml``."""
     from phyagentos.resources import goal_graphs_dir  # noqa: PLC0415
 
     return load_scene(goal_graphs_dir() / "pick_and_place.yaml")
@@ -59,8 +59,8 @@ def make_planner(workspace, *, client=None):
     """A GoalPlanner over ``workspace``'s targets and the shipped skills, with the configured model; its
     selector asks the Runtime's IK about reach (:func:`phyagentos.runtime.reach_query.answer_reach_query`)."""
     from phyagentos.agent.planner import GoalPlanner  # noqa: PLC0415
-    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
     from phyagentos.app.orchestrator import skill_names  # noqa: PLC0415
+    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
 
     targets = [t.model_dump(mode="json") for t in workspace.read("TARGETS").data.targets]
     client = client or make_client(load_llm_config(workspace.root))
@@ -75,8 +75,8 @@ def make_planner(workspace, *, client=None):
 def make_library_planner(workspace, *, client=None):
     """A LibraryPlanner (a request as one goal of a task library) with the configured model."""
     from phyagentos.agent.library_planner import LibraryPlanner  # noqa: PLC0415
-    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
     from phyagentos.app.orchestrator import skill_names  # noqa: PLC0415
+    from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
 
     targets = [t.name for t in workspace.read("TARGETS").data.targets]
     return LibraryPlanner(client or make_client(load_llm_config(workspace.root)), skills=skill_names(),

@@ -26,15 +26,19 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-import anyio
-import mcp.types as types
-from mcp.server.lowlevel import Server
-from mcp.server.stdio import stdio_server
-
 from phyagentos.agent.tools import ToolError, ToolRegistry
+from phyagentos.extras import missing_extra
 from phyagentos.protocol import Workspace
 from phyagentos.untrusted import json_depth, redact_secrets
 from phyagentos.yamlsource import clip
+
+try:  # the `mcp` extra (anyio comes with it)
+    import anyio
+    import mcp.types as types
+    from mcp.server.lowlevel import Server
+    from mcp.server.stdio import stdio_server
+except ImportError as exc:
+    raise missing_extra(exc, extra="mcp") from exc
 
 __all__ = ["build_registry", "build_server", "serve", "MAX_ERROR_CHARS", "MAX_HTTP_BODY_BYTES"]
 

@@ -363,8 +363,8 @@ def run_goal_graph(
     """
     started = time.perf_counter()
     workspace = Workspace.create(workspace_dir)
-    from phyagentos.deploy_check import check_deploy_files  # noqa: PLC0415
     from phyagentos.app.graph_check_process import check_goal_graph_forked  # noqa: PLC0415
+    from phyagentos.deploy_check import check_deploy_files  # noqa: PLC0415
 
     # Every deploy-time file (sensors.yaml, perception.yaml, safety.yaml, llm.yaml, fleet.yaml)
     # before any target is built: a malformed one is reported with file:line, never repaired.

@@ -20,8 +20,6 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
@@ -144,7 +142,7 @@ def episode_template_dir(bench_root: Path, run_dir: Path, memory_files: dict[str
         merged = {**(read_yaml(out / "safety.yaml", error=BenchError) or {}), **safety}
         try:
             SafetyConfig.model_validate(merged)
-        except Exception as exc:  # pydantic ValidationError: name the suite's key
+        except Exception as exc:  # noqa: BLE001 - pydantic ValidationError: name the suite's key
             raise BenchError(f"suite safety overrides give an invalid safety.yaml: {exc}") from None
         (out / "safety.yaml").write_text("# bench episode safety: bench workspace safety.yaml + suite overrides\n"
                                          + dump_yaml(merged), encoding="utf-8")

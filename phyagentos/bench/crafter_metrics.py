@@ -20,11 +20,10 @@ import math
 from pathlib import Path
 from typing import Any, Sequence
 
-
 from phyagentos.agent.memory.deaths import diagnose_death
+from phyagentos.errors import BenchError
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.targets.crafter import CRAFTER_ACHIEVEMENTS
-from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
 __all__ = ["crafter_score", "crafter_score_interval", "episode_metrics", "crafter_report", "is_crafter_run"]
@@ -55,7 +54,7 @@ def crafter_score_interval(achievements: Sequence[Sequence[str]], *, names: Sequ
     Returns:
         ``(low, high)`` in percent; ``(0.0, 0.0)`` with no episode.
     """
-    import numpy as np
+    import numpy as np  # noqa: PLC0415
 
     n = len(achievements)
     if n == 0:

@@ -85,9 +85,8 @@ def run_gate(workspace, suite, first_scenes: dict[str, dict]) -> GateReport:
     from phyagentos.resources import skills_dir, trees_dir  # noqa: PLC0415
     from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime  # noqa: PLC0415
     from phyagentos.runtime.preflight import run_preflight  # noqa: PLC0415
-    from phyagentos.targets.registry import DRIVERS  # noqa: PLC0415
-
     from phyagentos.runtime.target_pool import scene_for  # noqa: PLC0415
+    from phyagentos.targets.registry import DRIVERS  # noqa: PLC0415
 
     checks: list[GateCheck] = []
     targets_doc = workspace.read("TARGETS").data

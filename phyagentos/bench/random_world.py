@@ -1,7 +1,7 @@
 """Randomised tabletop episodes for the verifier-accuracy and memory benchmarks.
 
 Every episode is a pick-and-place goal graph over the wall of
-``goal_graphs/pick_and_place.yaml`` whose scene *declares* only what a user would (the
+``phyagentos/data/goal_graphs/pick_and_place.yaml`` whose scene *declares* only what a user would (the
 object's name and colour, the goal region, the wall) and asks the target for a
 randomised world with ``randomise: {seed: <episode seed>}``: the target draws the
 object's shape, size (2-7 cm), mass (0.02-1.5 kg), friction (0.1-1.2), yaw, position over

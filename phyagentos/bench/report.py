@@ -40,10 +40,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-
+from phyagentos.errors import BenchError
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
-from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
 from .episode import OUTCOME_FILE, load_episode

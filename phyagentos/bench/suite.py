@@ -14,7 +14,7 @@ A suite is a YAML file (``phyagentos/bench/suites/<name>.yaml``, or any path)::
       workspace_box: {min: [-1.0, -0.2, 1.6], max: [0.5, 1.0, 2.4]}
     tasks:
       - id: pick_and_place
-        goal_graph: pick_and_place.yaml          # relative to goal_graphs/ or the suite file
+        goal_graph: pick_and_place.yaml          # relative to phyagentos/data/goal_graphs/ or the suite file
         target: franka_tabletop                  # optional: override every node's target
         randomize:
           - {names: [cube], xy: [0.05, 0.05], yaw: 0.6}
@@ -52,7 +52,6 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
-import yaml
 
 from phyagentos.errors import BenchError, format_choices
 from phyagentos.resources import goal_graphs_dir

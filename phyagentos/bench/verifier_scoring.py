@@ -40,9 +40,9 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from phyagentos.geometry import quat_to_matrix
 from phyagentos.agent.criteria import Criterion, evaluate, parse_criteria
 from phyagentos.errors import BenchError
+from phyagentos.geometry import quat_to_matrix
 from phyagentos.yamlsource import read_yaml
 
 __all__ = ["wilson_interval", "GROUND_TRUTH_FILE", "truth_snapshot", "truth_of_criteria", "score_session", "confusion",

@@ -1,10 +1,12 @@
 """``phyagentos`` command line.
 
     phyagentos run GOAL_GRAPH --workspace DIR [--json] [--seed N] [--target NAME]
+    phyagentos examples [--json]   (the shipped example goal graphs: GOAL_GRAPH may be one's name)
     phyagentos watch WORKSPACE | agent WORKSPACE | submit GOAL_GRAPH --workspace DIR [--follow]
     phyagentos status WORKSPACE [--json] | signal WORKSPACE KIND [--session ID]   (cli/planes.py)
     phyagentos bench SUITE --workspace DIR [--episodes N] [--seeds ...] [--workers K] [--memory off|frozen|learn] [--json]
     phyagentos validate GOAL_GRAPH [--workspace DIR] [--target NAME]
+    (GOAL_GRAPH: a file, or a shipped example's name, e.g. pick_and_place)
     phyagentos skills list|show NAME [--workspace DIR] | primitives [--json|--markdown]   (cli/skills.py)
     phyagentos --skills-path DIR ...   (a folder with skills/ and trees/, searched after the workspace's)
     phyagentos render tree SKILL_OR_TREE [--out FILE.png]
@@ -25,6 +27,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from phyagentos.cli.arguments import goal_graph_arg
 from phyagentos.errors import PhyAgentOSError
 
 if TYPE_CHECKING:  # rich is imported where it prints: this module is re-imported as the main module
@@ -33,6 +36,7 @@ if TYPE_CHECKING:  # rich is imported where it prints: this module is re-importe
 __all__ = ["main", "build_parser"]
 
 EXIT_OK, EXIT_NOT_SUCCEEDED, EXIT_BAD_INPUT = 0, 1, 2
+
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,7 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="run a goal graph end to end (Agent and Runtime planes in one process)")
-    run.add_argument("goal_graph", type=Path)
+    run.add_argument("goal_graph", type=goal_graph_arg, help="goal graph file, or a shipped example's name "
+                                                              "(phyagentos examples)")
     run.add_argument("--workspace", type=Path, required=True, help="workspace directory (created if needed)")
     run.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     run.add_argument("--seed", type=int, default=0, help="base seed of the run's sessions (default 0)")
@@ -93,9 +98,12 @@ def build_parser() -> argparse.ArgumentParser:
                             "for runs longer than that (every episode is compiled up front)")
 
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
-    val.add_argument("goal_graph", type=Path)
+    val.add_argument("goal_graph", type=goal_graph_arg, help="goal graph file, or a shipped example's name")
     val.add_argument("--workspace", type=Path, help="take valid targets from this workspace's TARGETS.md")
     val.add_argument("--target", help="check every node on this target instead of the graph's")
+
+    examples = sub.add_parser("examples", help="list the shipped example goal graphs (names usable as GOAL_GRAPH)")
+    examples.add_argument("--json", action="store_true", help="print one JSON object {name: path}")
 
     render = sub.add_parser("render", help="render trees and graphs")
     rsub = render.add_subparsers(dest="what", required=True)
@@ -296,6 +304,19 @@ def _cmd_validate(args, out: Console, err: Console) -> int:
     return EXIT_OK
 
 
+def _cmd_examples(args, out: Console, err: Console) -> int:
+    from phyagentos.resources import example_graphs  # noqa: PLC0415
+
+    graphs = example_graphs()
+    if args.json:
+        print(json.dumps({name: str(path) for name, path in graphs.items()}))
+    else:
+        width = max(map(len, graphs), default=0)
+        for name, path in graphs.items():
+            print(f"{name:<{width}}  {path}")
+    return EXIT_OK
+
+
 def _cmd_render(args, out: Console, err: Console) -> int:
     if args.what == "graph":
         return _cmd_render_graph(args, out, err)
@@ -369,17 +390,15 @@ def main(argv: list[str] | None = None) -> int:
     out, err = _LazyConsole(), _LazyConsole(stderr=True)
     _setup_logging(args.verbose, err)
     from phyagentos.cli.agent import AGENT_HANDLERS
-    from phyagentos.cli.planes import PLANE_HANDLERS
-    from phyagentos.cli.skills import SKILL_HANDLERS
     from phyagentos.cli.fleet import FLEET_HANDLERS  # [issue 31]
-
+    from phyagentos.cli.planes import PLANE_HANDLERS
     from phyagentos.cli.run import cmd_run
+    from phyagentos.cli.skills import SKILL_HANDLERS
 
     handlers = {**PLANE_HANDLERS, **SKILL_HANDLERS, **AGENT_HANDLERS, "run": cmd_run, "bench": _cmd_bench,
-                "validate": _cmd_validate, "render": _cmd_render,
+                "validate": _cmd_validate, "examples": _cmd_examples, "render": _cmd_render,
                 "policy": _cmd_policy, **FLEET_HANDLERS}
     from phyagentos.cli.skills import skill_search_env
-
     from phyagentos.cli.view import with_view  # [issue 13]
     handlers = with_view(handlers)
     from phyagentos.cli.real import with_real  # [issue 32]

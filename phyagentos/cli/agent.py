@@ -1,13 +1,13 @@
 """``phyagentos plan`` and ``phyagentos mcp``: the thinking half of the Agent plane on the command line.
 
     phyagentos plan "REQUEST" --workspace WS [--scene SCENE.yaml] [--target NAME] [--run] [--json]
-    phyagentos plan "get a stone pickaxe" --workspace WS --library goal_graphs/crafter_tech_tree.yaml [--run]
+    phyagentos plan "get a stone pickaxe" --workspace WS --library crafter_tech_tree [--run]
     phyagentos mcp --workspace WS [--http] [--port N]
 
 ``plan`` prints the goal graph the Goal Planner compiled (YAML and its DAG), validated,
 and writes it with the plan's record (model calls, injected context, selector reasons)
 under ``WS/plans/<plan id>/``; with ``--run`` the graph then runs like ``phyagentos run``.
-Without ``--scene`` it plans on the tabletop scene of ``goal_graphs/pick_and_place.yaml``.
+Without ``--scene`` it plans on the tabletop scene of ``phyagentos/data/goal_graphs/pick_and_place.yaml``.
 A refusal prints its reason and exits 1 (a request that asks that nothing moves, "leave the
 blocks where they are", plans nothing and exits 0); a plan still invalid after the repair round is
 an error (exit 2), and so is a plan the whole-graph check of ``validate`` refuses
@@ -22,10 +22,15 @@ import argparse
 import json
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
 
-from phyagentos.app.factories import (default_scene, load_scene, make_library_planner, make_planner,
-                                      make_reviser, perceived_entities)
+from phyagentos.app.factories import (
+    default_scene,
+    load_scene,
+    make_library_planner,
+    make_planner,
+    perceived_entities,
+)
+from phyagentos.cli.arguments import goal_graph_arg
 
 __all__ = ["add_agent_commands", "AGENT_HANDLERS"]
 
@@ -37,11 +42,11 @@ def add_agent_commands(sub: argparse._SubParsersAction) -> None:
     plan = sub.add_parser("plan", help="plan a natural-language request into a validated goal graph (Goal Planner)")
     plan.add_argument("request", help="the instruction, e.g. \"put the cube in the goal region\"")
     plan.add_argument("--workspace", type=Path, required=True, help="workspace directory (created if needed)")
-    plan.add_argument("--scene", type=Path, help="scene YAML or a goal graph with a scene (default: the tabletop "
-                                                 "scene of goal_graphs/pick_and_place.yaml)")
+    plan.add_argument("--scene", type=goal_graph_arg, help="scene YAML or a goal graph with a scene, or a shipped example's "
+                                                           "name (default: the tabletop scene of pick_and_place)")
     plan.add_argument("--target", help="prefer this target when it fits (the selector decides otherwise)")
-    plan.add_argument("--library", type=Path, help="plan as one goal of this goal graph and what it depends on "
-                                                   "(a task library, e.g. goal_graphs/crafter_tech_tree.yaml)")
+    plan.add_argument("--library", type=goal_graph_arg, help="plan as one goal of this goal graph and what it depends on "
+                                                   "(a task library, e.g. crafter_tech_tree: a shipped example)")
     plan.add_argument("--run", action="store_true", help="run the planned graph like `phyagentos run`")
     plan.add_argument("--json", action="store_true", help="print one JSON object")
     plan.add_argument("--seed", type=int, default=0, help="base seed of the run's sessions (with --run)")

@@ -133,10 +133,10 @@ def _graph_targets(path: Path, override: str | None) -> set[str]:
 
 def cmd_fleet_run(args, out: Console, err: Console) -> int:
     """``run GRAPH --fleet ENDPOINT``: the Agent plane here, sessions on the edges."""
+    from phyagentos.app.orchestrator import skill_names, submit_goal_graph
     from phyagentos.fleet.agent_side import FleetAgentBridge
     from phyagentos.fleet.config import find_fleet_config
     from phyagentos.fleet.link import FleetLink
-    from phyagentos.app.orchestrator import skill_names, submit_goal_graph
     from phyagentos.protocol import Workspace
 
     started = time.perf_counter()

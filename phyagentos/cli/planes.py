@@ -20,6 +20,8 @@ import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from phyagentos.cli.arguments import goal_graph_arg
+
 if TYPE_CHECKING:  # rich is imported where it prints (a quiet command never loads it)
     from rich.console import Console
 
@@ -50,7 +52,7 @@ def add_plane_commands(sub: argparse._SubParsersAction) -> None:
     agent.add_argument("--no-inotify", action="store_true", help="poll instead of inotify wake-ups")
 
     submit = sub.add_parser("submit", help="validate a goal graph, register it as a run and compile its ready nodes")
-    submit.add_argument("goal_graph", type=Path)
+    submit.add_argument("goal_graph", type=goal_graph_arg, help="goal graph file, or a shipped example's name")
     submit.add_argument("--workspace", type=Path, required=True, help="workspace directory (created if needed)")
     submit.add_argument("--seed", type=int, default=0, help="base seed of the run's sessions (default 0)")
     submit.add_argument("--target", help="run every node on this target instead of the graph's")
@@ -104,8 +106,8 @@ def _cmd_watch(args, out: Console, err: Console) -> int:
 
 
 def _cmd_agent(args, out: Console, err: Console) -> int:
-    from phyagentos.errors import ProtocolError
     from phyagentos.app.orchestrator import serve_agent
+    from phyagentos.errors import ProtocolError
     from phyagentos.protocol import Workspace
 
     if args.run is not None:

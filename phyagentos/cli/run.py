@@ -21,9 +21,8 @@ def cmd_run(args, out, err) -> int:
     from phyagentos.runtime.worker import prestart_runner
 
     prestart_runner(skill_dirs(), tree_dirs())  # cold start: the runtime loads while the Agent plane does
-    from phyagentos.app.orchestrator import run_goal_graph
-
     from phyagentos.app.factories import make_reviser
+    from phyagentos.app.orchestrator import run_goal_graph
 
     progress = None if args.json else (lambda msg: err.print(f"[dim]{msg}[/dim]"))
     report = run_goal_graph(args.goal_graph, args.workspace, seed=args.seed, target=args.target, progress=progress,

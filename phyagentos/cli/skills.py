@@ -81,11 +81,11 @@ def _cmd_skills(args, out: Console, err: Console) -> int:
     runtime = _runtime()
     if args.what == "show":
         return _show(runtime, args.name, out)
-    from phyagentos.resources import project_root  # noqa: PLC0415
+    from phyagentos.resources import data_root  # noqa: PLC0415
 
     def origin(path: Path) -> str:
         root = path.parent.parent
-        return "shipped" if root.resolve() == project_root().resolve() else str(root)
+        return "shipped" if root.resolve() == data_root().resolve() else str(root)
 
     rows = [{"name": m.name, "runtime": m.runtime, "tree": m.tree, "path": str(m.path), "origin": origin(m.path),
              "acquires": m.acquires,

@@ -51,14 +51,11 @@ def add_view_commands(sub: argparse._SubParsersAction) -> None:
 
 def _no_workspace_hint(path: Path) -> str:
     """What to type when ``path`` holds no workspace yet (a plain CLI hint, no Python API)."""
-    from phyagentos.resources import goal_graphs_dir  # noqa: PLC0415
-
-    example = goal_graphs_dir() / "hold.yaml"
     state = "does not exist" if not path.exists() else ("is empty" if path.is_dir() and not any(path.iterdir())
                                                         else "holds no SESSIONS.md")
     return (f"{path} is not a PhyAgentOS workspace yet ({state}).\n"
             f"A workspace is created by the first run submitted to it, e.g.:\n"
-            f"    phyagentos run {example} --workspace {path}\n"
+            f"    phyagentos run hold --workspace {path}   (hold: a shipped example; phyagentos examples lists them)\n"
             f"then, in another terminal (or after it):\n"
             f"    phyagentos view {path}")
 

@@ -28,10 +28,11 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import ConfigDict, Field, ValidationError, field_validator
 
 from phyagentos.errors import FleetError
 from phyagentos.protocol.schemas import StrictNumbers
@@ -100,8 +101,6 @@ class FleetConfig(_Strict):
     @field_validator("connect", "listen")
     @classmethod
     def _endpoints(cls, value: list[str]) -> list[str]:
-        import re
-
         for ep in value:
             if not re.match(_ENDPOINT, ep):
                 raise ValueError(f"endpoint {ep!r} is not PROTO/HOST:PORT (PROTO one of tcp, tls, quic, udp)")

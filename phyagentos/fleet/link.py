@@ -25,6 +25,7 @@ from collections.abc import Callable
 from typing import Any, Literal
 
 from phyagentos.errors import FleetError
+from phyagentos.extras import import_extra
 from phyagentos.untrusted import loads_json, redact_secrets
 from phyagentos.yamlsource import clip
 
@@ -78,7 +79,7 @@ class FleetLink:
     """
 
     def __init__(self, config: FleetConfig, *, mode: Literal["router", "peer", "client"] = "client") -> None:
-        import zenoh
+        zenoh = import_extra("zenoh", extra="fleet")  # only when a link opens
 
         self._zenoh = zenoh
         self.config = config

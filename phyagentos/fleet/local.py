@@ -12,6 +12,8 @@ import sys
 import time
 from pathlib import Path
 
+import yaml
+
 from phyagentos.errors import FleetError
 
 __all__ = ["LocalFleet", "free_port"]
@@ -61,8 +63,6 @@ class LocalFleet:
 
     def config_file(self, name: str, **fields) -> Path:
         """Write ``<root>/<name>.yaml`` (auth of user ``name`` plus ``fields``); returns it."""
-        import yaml
-
         data = dict(fields)
         if self.auth:
             if not (self.root / f"{name}.pw").exists():

@@ -22,6 +22,8 @@ import time
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from phyagentos.extras import missing_extra
+
 from .client import LLMCall, LLMError, LLMReply, prompt_hash
 
 __all__ = ["LlamaCppClient", "offline_model_path", "check_gguf", "GGUF_MAGIC", "OFFLINE_DISTRIBUTION", "OFFLINE_GGUF"]
@@ -82,7 +84,7 @@ def _server(path: Path, *, n_ctx: int, threads: int, seed: int) -> Any:
             try:
                 import xllamacpp  # noqa: PLC0415 - native library, loaded on first use
             except ImportError as exc:
-                raise LLMError("xllamacpp is not installed (pip install xllamacpp)") from exc
+                raise LLMError(str(missing_extra(exc, extra="llm"))) from exc
             params = xllamacpp.CommonParams()
             params.model.path = str(path)
             params.n_ctx = n_ctx

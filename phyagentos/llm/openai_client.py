@@ -7,6 +7,7 @@ import os
 import time
 from typing import Any, Mapping, Sequence
 
+from phyagentos.extras import missing_extra
 from phyagentos.untrusted import redact_secrets, register_secret
 
 from .client import LLMCall, LLMError, LLMReply, prompt_hash
@@ -37,7 +38,7 @@ class OpenAICompatClient:
         try:
             import openai  # noqa: PLC0415
         except ImportError as exc:
-            raise LLMError("the openai SDK is not installed (pip install openai)") from exc
+            raise LLMError(str(missing_extra(exc, extra="llm"))) from exc
         self.model = model
         #: the endpoint as shown in messages and records: credentials in its userinfo redacted
         self.base_url = redact_secrets(base_url)

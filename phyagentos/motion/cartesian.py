@@ -16,8 +16,8 @@ from typing import Sequence
 import mujoco
 import numpy as np
 
-from phyagentos.geometry import matrix_to_quat
 from phyagentos.errors import IKError
+from phyagentos.geometry import matrix_to_quat
 
 from .ik import DEFAULT_ARM_JOINT_NAMES, solve_ik
 
@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 
 def forward_kinematics(
     model: mujoco.MjModel,
-    q: Sequence[float],
+    q: Sequence[float] | np.ndarray,
     *,
     frame: str = "tcp",
     arm_joint_names: Sequence[str] = DEFAULT_ARM_JOINT_NAMES,

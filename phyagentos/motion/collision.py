@@ -25,6 +25,7 @@ from typing import Iterable, Sequence
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from phyagentos.errors import PlanningError, format_choices
 
@@ -153,11 +154,11 @@ class CollisionChecker:
                 m.geom_contype[g] = 2
                 m.geom_conaffinity[g] = 0
         self._allowed = set()
-        for a, b in allowed_pairs:
-            ia = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, a)
-            ib = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)
+        for name_a, name_b in allowed_pairs:
+            ia = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name_a)
+            ib = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name_b)
             if ia < 0 or ib < 0:
-                raise PlanningError(f"allowed pair ({a!r}, {b!r}) names an unknown body")
+                raise PlanningError(f"allowed pair ({name_a!r}, {name_b!r}) names an unknown body")
             self._allowed.add((min(ia, ib), max(ia, ib)))
         self._attached: int | None = None
         self._attached_name: str | None = None
@@ -185,7 +186,7 @@ class CollisionChecker:
         """``(lower, upper)`` arm joint limits, each ``(7,)`` rad."""
         return self.lower.copy(), self.upper.copy()
 
-    def set_world_state(self, qpos_full: Sequence[float]) -> None:
+    def set_world_state(self, qpos_full: ArrayLike) -> None:
         """Copy a full ``(nq,)`` configuration (objects, fingers, arm) from the simulation."""
         q = np.asarray(qpos_full, dtype=float)
         if q.shape != (self.model.nq,):
@@ -235,7 +236,7 @@ class CollisionChecker:
         return self._attached_name
 
     # -- checks -----------------------------------------------------------------------
-    def within_limits(self, q: Sequence[float]) -> bool:
+    def within_limits(self, q: ArrayLike) -> bool:
         """Whether ``q`` (7,) rad lies inside the joint limits."""
         q = np.asarray(q, dtype=float)
         return bool(np.all(q >= self.lower - 1e-9) and np.all(q <= self.upper + 1e-9))
@@ -274,7 +275,7 @@ class CollisionChecker:
                 keep.append(int(i))
         return keep
 
-    def is_valid(self, q: Sequence[float]) -> bool:
+    def is_valid(self, q: ArrayLike) -> bool:
         """Whether ``q`` (7,) rad is inside the limits and free of forbidden contacts."""
         q = np.asarray(q, dtype=float)
         if ((q < self._lower_tol) | (q > self._upper_tol)).any():
@@ -291,7 +292,7 @@ class CollisionChecker:
             return True
         return not self._bad_contacts()
 
-    def colliding_pairs(self, q: Sequence[float]) -> tuple[tuple[str, str], ...]:
+    def colliding_pairs(self, q: ArrayLike) -> tuple[tuple[str, str], ...]:
         """Sorted, de-duplicated name pairs in forbidden contact at ``q`` (7,) rad.
 
         Robot links and objects are named by body, static geoms by geom name (``table``,
@@ -341,7 +342,7 @@ class CollisionChecker:
                     return q
         return None
 
-    def tcp_pose(self, q: Sequence[float]) -> np.ndarray:
+    def tcp_pose(self, q: ArrayLike) -> np.ndarray:
         """World (4, 4) pose of the tcp site at arm configuration ``q`` (7,) rad."""
         d = self.data
         d.qpos[self.qadr] = np.asarray(q, dtype=float)

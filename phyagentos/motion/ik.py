@@ -22,6 +22,7 @@ import mink
 import mujoco
 import numpy as np
 import qpsolvers
+from numpy.typing import ArrayLike
 
 from phyagentos.errors import IKError, format_choices
 
@@ -128,7 +129,7 @@ def _context(model: mujoco.MjModel, frame: str, names: tuple[str, ...]) -> _IKCo
 def solve_ik(
     model: mujoco.MjModel,
     *,
-    q_seed: Sequence[float],
+    q_seed: ArrayLike,
     target: np.ndarray,
     frame: str = "tcp",
     position_tol_m: float = 1e-3,

@@ -136,9 +136,13 @@ def franka_limits() -> tuple[np.ndarray, np.ndarray]:
     return np.array(FRANKA_VELOCITY_LIMITS), np.array(FRANKA_ACCELERATION_LIMITS)
 
 
+#: The MuJoCo Franka's arm joints (gymnasium-robotics' model), in order.
+_FRANKA_JOINT_NAMES: tuple[str, ...] = tuple(f"robot:panda0_joint{i}" for i in range(1, 8))
+
+
 def actuator_velocity_limits(
     model,
-    joint_names: Sequence[str] = tuple(f"robot:panda0_joint{i}" for i in range(1, 8)),
+    joint_names: Sequence[str] = _FRANKA_JOINT_NAMES,
     *,
     torque_fraction: float = 0.6,
     datasheet: Sequence[float] = FRANKA_VELOCITY_LIMITS,

@@ -31,11 +31,11 @@ game_*                    game primitives (explore, goto, collect, hunt, place, 
 
 from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .base import Primitive, PrimitiveFailure
-from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
 from .contact import ComputePush, GuardedMove, Push
+from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
 from .control import Noop
-from .game import GAME_PRIMITIVES
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
+from .game import GAME_PRIMITIVES
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
 from .placement import ComputePlaceAt

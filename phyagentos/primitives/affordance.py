@@ -19,11 +19,11 @@ import math
 
 import numpy as np
 
-from phyagentos.geometry import rotation_about
 from phyagentos.errors import IKError
+from phyagentos.geometry import rotation_about
 from phyagentos.motion.cartesian import cartesian_path
-from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.grasp import top_down_grasp_candidates
+from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.retime import retime
 
 from .base import Primitive, PrimitiveFailure

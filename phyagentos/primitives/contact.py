@@ -27,9 +27,8 @@ import numpy as np
 from py_trees.common import Status
 
 from phyagentos.motion.cartesian import cartesian_path
-from phyagentos.motion.retime import Trajectory, retime
-
 from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
+from phyagentos.motion.retime import Trajectory, retime
 
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking

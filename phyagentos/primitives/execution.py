@@ -16,8 +16,17 @@ from phyagentos.motion.retime import Trajectory, retime
 from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
-from .grasp_sense import (MIN_EFFORT_N, MIN_OPENING_M, WIDTH_MARGIN_M, belief, holding_problem, mass_estimate_kg,
-                          proprio_record, sample_while_holding, wrist_load_n)
+from .grasp_sense import (
+    MIN_EFFORT_N,
+    MIN_OPENING_M,
+    WIDTH_MARGIN_M,
+    belief,
+    holding_problem,
+    mass_estimate_kg,
+    proprio_record,
+    sample_while_holding,
+    wrist_load_n,
+)
 from .motion import execution_limits, ik_options, session_checker
 
 __all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "CheckHolding"]

@@ -116,7 +116,7 @@ def _tcp_fields(p) -> dict:
         return {}
     T = np.asarray(T, dtype=float)
     q = np.empty(4)
-    import mujoco  # the quaternion of the rotation block (MuJoCo's own conversion)
+    import mujoco  # noqa: PLC0415 - the quaternion of the rotation block (MuJoCo's own conversion)
 
     mujoco.mju_mat2Quat(q, np.ascontiguousarray(T[:3, :3]).flatten())
     return {"tcp_position_m": [round(float(x), 5) for x in T[:3, 3]], "tcp_quat_wxyz": [round(float(x), 5) for x in q]}

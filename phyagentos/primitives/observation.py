@@ -45,7 +45,7 @@ def make_perceiver(target, config_path: str | Path | None = None):
     """A fresh :class:`~phyagentos.perception.Perceiver` for one session on ``target``:
     the workspace's ``perception.yaml`` (``config_path``, if it exists) or the defaults,
     and the objects the user declared (``target.describe_declared()``)."""
-    from phyagentos.perception import PerceptionConfig, Perceiver  # noqa: PLC0415
+    from phyagentos.perception import Perceiver, PerceptionConfig  # noqa: PLC0415
 
     path = Path(config_path) if config_path is not None else None
     cfg = PerceptionConfig.from_yaml(path) if path is not None and path.is_file() else PerceptionConfig.default()

@@ -24,7 +24,7 @@ def entity_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     Raises:
         PrimitiveFailure: ``perception.not_found`` listing the entities seen.
     """
-    import mujoco
+    import mujoco  # noqa: PLC0415
 
     for ent in snapshot.get("entities", []):
         if ent["name"] == name:

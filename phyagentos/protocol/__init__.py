@@ -21,6 +21,7 @@ from .codec import (
     render_document,
     write_document,
 )
+from .leases import is_expired, new_lease, renewed
 from .schemas import (
     CURRENT_VERSION,
     DOCUMENTS,
@@ -42,14 +43,13 @@ from .schemas import (
     Lease,
     Lesson,
     LessonsDoc,
-    Trial,
     Limits,
     LogDoc,
     LogEntry,
+    ModelCallRecord,
     ProtocolModel,
     RejectionItem,
     Relation,
-    ModelCallRecord,
     Revision,
     RunRecord,
     RuntimeSignalDoc,
@@ -73,13 +73,13 @@ from .schemas import (
     TaskNodeState,
     Timestamp,
     TransitionRecord,
+    Trial,
     Verdict,
     VersionedModel,
     WorkspaceBox,
     export_json_schemas,
     utc_now_iso,
 )
-from .leases import is_expired, new_lease, renewed
 from .session_index import SessionIdentity
 from .signals import SIGNAL_KINDS, SignalState, fold_signals
 from .watch import WorkspaceWatcher

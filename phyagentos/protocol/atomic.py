@@ -24,7 +24,7 @@ import tempfile
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "batched_durability", "file_identity", "fsync_paths"]
 
@@ -76,7 +76,7 @@ def _fsync_path(path: str) -> None:
         os.close(fd)
 
 
-def fsync_paths(files: list[str], directories: list[str] = ()) -> None:
+def fsync_paths(files: Sequence[str], directories: Sequence[str] = ()) -> None:
     """fsync ``files``, then ``directories``, each group concurrently (one journal commit
     instead of one per file on ext4/xfs). Missing files are skipped.
 

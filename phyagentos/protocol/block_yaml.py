@@ -35,6 +35,7 @@ import math
 import re
 from collections.abc import Callable, Sequence
 from re import Pattern
+from typing import Any
 
 __all__ = ["emit_block_yaml"]
 
@@ -137,7 +138,7 @@ def _flat_key(item: dict) -> tuple | None:
     values scalars or lists of scalars): keys, value types and values, floats by their
     ``repr`` (``0.0 == -0.0`` but their texts differ); else None. A TASK.md node or a
     session's transition is such an item, rendered again unchanged on every rewrite."""
-    parts = []
+    parts: list[tuple[Any, type, Any]] = []
     for key, value in item.items():
         kind = type(value)
         if kind is list:

@@ -35,9 +35,8 @@ import yaml
 from pydantic import BaseModel, ValidationError
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip
-
 from phyagentos.errors import DocumentError, format_choices
+from phyagentos.yamlsource import MAX_YAML_CHARS, check_bounds, clip
 
 from .atomic import atomic_write_text
 from .block_yaml import emit_block_yaml
@@ -300,7 +299,7 @@ def _short(value: Any, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def _describe(error: dict[str, Any], model: type[BaseModel]) -> str:
+def _describe(error: Mapping[str, Any], model: type[BaseModel]) -> str:
     loc = tuple(error["loc"])
     kind = error["type"]
     if kind == "missing":

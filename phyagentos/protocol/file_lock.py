@@ -137,6 +137,7 @@ class WorkspaceLock:
         held.depth -= 1
         if held.depth == 0:
             fd, held.fd = held.fd, None
+            assert fd is not None  # depth > 0 means a descriptor is held
             _HELD.discard(self)
             os.close(fd)  # closing the only descriptor of this open file releases the flock
 

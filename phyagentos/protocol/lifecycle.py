@@ -31,14 +31,22 @@ from __future__ import annotations
 import logging
 import threading
 from datetime import datetime
-from typing import Callable
+from typing import Callable, cast
 
 from transitions import MachineError
 from transitions.extensions import HierarchicalMachine
 
 from phyagentos.errors import LifecycleError
 
-from .schemas import ErrorInfo, SessionRecord, SessionResult, TERMINAL_STATES, TransitionRecord, utc_now_iso
+from .schemas import (
+    TERMINAL_STATES,
+    ErrorInfo,
+    SessionRecord,
+    SessionResult,
+    SessionState,
+    TransitionRecord,
+    utc_now_iso,
+)
 
 __all__ = ["SessionLifecycle", "LIFECYCLE_EVENTS", "ACTIVE_STATES", "utc_now"]
 
@@ -98,14 +106,16 @@ def _machine_state(state: str) -> str:
     return f"active_{state}" if state in ACTIVE_STATES else state
 
 
-def _record_state(machine_state: str) -> str:
-    return machine_state.removeprefix("active_")
+def _record_state(machine_state: str) -> SessionState:
+    """The SESSIONS.md state of a chart state (the chart's leaves are the session states)."""
+    return cast(SessionState, machine_state.removeprefix("active_"))
 
 
 class _Stepper:
     """The shared chart's one model: set to a session's state, fired, read back."""
 
     _hsm_state: str
+    trigger: Callable[[str], bool]  # added by the HierarchicalMachine
 
 
 #: The process's session statechart and its one model, shared by every lifecycle.
@@ -161,7 +171,7 @@ class SessionLifecycle:
         )
 
     @property
-    def state(self) -> str:
+    def state(self) -> SessionState:
         """Current lifecycle state name as stored in SESSIONS.md (e.g. ``running``)."""
         return _record_state(self._hsm_state)
 

@@ -6,7 +6,7 @@ frame (z up, origin at the robot base). Every model forbids unknown fields so a
 typo in a hand-edited document is an error, not silently ignored data.
 
 After changing a model, regenerate the committed JSON Schemas with
-``python -c "from phyagentos.protocol import export_json_schemas as e; e('protocol/schemas')"``.
+``python -c "from phyagentos.protocol import export_json_schemas as e; e('phyagentos/data/protocol/schemas')"``.
 """
 
 from __future__ import annotations
@@ -803,7 +803,7 @@ CLAMPABLE_VIOLATIONS: tuple[str, ...] = (
 SafetyOutcome = Literal["reject", "halt"]
 
 
-def _default_outcomes() -> dict[str, str]:
+def _default_outcomes() -> dict[str, SafetyOutcome]:
     # Malformed or ill-timed commands are dropped (the arm keeps its last admitted
     # command); commands that would move the arm somewhere unsafe stop it.
     return {

@@ -31,7 +31,7 @@ import select
 import socket
 import threading
 from pathlib import Path
-from typing import Iterable
+from typing import Any, Iterable
 
 __all__ = ["WorkspaceWatcher"]
 
@@ -53,13 +53,16 @@ def _no_move_pairing_delay() -> None:
     """Set watchdog's move-pairing delay to zero (see the module docstring): the class
     attribute ``delay`` its inotify emitter reads when it builds its queue,
     ``InotifyMoveEventGrouper`` since watchdog 7, ``InotifyBuffer`` before."""
+    holder: Any
     try:
         from watchdog.observers.inotify_move_event_grouper import (  # noqa: PLC0415
-            InotifyMoveEventGrouper as holder,
+            InotifyMoveEventGrouper,
         )
+        holder = InotifyMoveEventGrouper
     except ImportError:
         try:
-            from watchdog.observers.inotify_buffer import InotifyBuffer as holder  # noqa: PLC0415
+            from watchdog.observers.inotify_buffer import InotifyBuffer  # noqa: PLC0415
+            holder = InotifyBuffer
         except ImportError:  # not Linux: no inotify emitter
             return
     holder.delay = 0.0
@@ -86,7 +89,7 @@ class WorkspaceWatcher:
         self._rsock, self._wsock = socket.socketpair()
         self._rsock.setblocking(False)
         self._wsock.setblocking(False)
-        self._observer = None
+        self._observer: Any = None  # a watchdog Observer once started
         self.mode = "polling"
         self._files = {self.root / f for f in files}
         if inotify:

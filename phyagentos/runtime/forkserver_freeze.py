@@ -7,7 +7,7 @@ objects) copy-on-write. Without the freeze, every full collection in a child wal
 of those objects, writes their GC headers and so copies their pages; with it the
 collector leaves them alone (they were never garbage: modules live as long as the
 process). CPython documents this use for pre-fork servers (``gc.freeze``, Python 3.7+).
-Measured on ``phyagentos run goal_graphs/pick_and_place.yaml``: the forkserver and its
+Measured on ``phyagentos run pick_and_place``: the forkserver and its
 children used 3.52 s of CPU before, 3.20-3.44 s after (docs/PERFORMANCE.md, round 5).
 """
 

@@ -35,10 +35,9 @@ from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
 from phyagentos.motion.ik import solve_ik
 from phyagentos.primitives.motion import ik_options
 from phyagentos.targets.perturbations import parse_perturbations, split_scene
+from phyagentos.targets.registry import DRIVERS
 from phyagentos.targets.scene import SceneSpec
 from phyagentos.yamlsource import clip, excerpt, line_of
-
-from phyagentos.targets.registry import DRIVERS
 
 __all__ = ["GraphProblem", "PickPose", "PlacePose", "check_scene", "scene_names", "check_reachability",
            "build_trees", "check_scenes", "check_reach"]

@@ -40,8 +40,8 @@ from typing import Any, Callable, Mapping
 
 from phyagentos.errors import PolicyError, SkillError
 from phyagentos.protocol import RejectionItem, SessionRecord, SkillRuntimeDoc, TargetsDoc
-from phyagentos.targets.contract import capabilities_of
 from phyagentos.protocol.schemas import SafetyConfig
+from phyagentos.targets.contract import capabilities_of
 
 from .bridges import ActionSpec, BridgeChain
 from .skills import SkillRegistry

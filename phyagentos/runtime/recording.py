@@ -39,7 +39,6 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-
 from phyagentos.errors import RecordingError, TargetError
 from phyagentos.protocol import dump_yaml
 from phyagentos.protocol.atomic import atomic_write_text

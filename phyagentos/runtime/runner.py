@@ -30,18 +30,17 @@ import shutil
 import time
 import traceback
 from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
 from importlib import import_module
 from pathlib import Path
-from dataclasses import asdict, dataclass, field
 from typing import Any, Callable
 
 from phyagentos.errors import PhyAgentOSError, SupervisorError
 from phyagentos.primitives.context import CancelToken, SkillContext
 from phyagentos.primitives.observation import has_cameras, make_perceiver, perceive_now
-from phyagentos.protocol import dump_yaml, EnvironmentDoc, SessionRecord, Workspace
-from phyagentos.protocol import errorcodes
-from phyagentos.protocol.atomic import atomic_write_text, file_identity
+from phyagentos.protocol import EnvironmentDoc, SessionRecord, Workspace, dump_yaml, errorcodes
 from phyagentos.protocol import utc_now_iso as utc_now  # not .lifecycle: the runner needs no statechart (transitions)
+from phyagentos.protocol.atomic import atomic_write_text, file_identity
 
 from .builtin_runtime import BuiltinSkillRuntime, RunOutcome
 from .evidence_images import save_scene_image

@@ -28,10 +28,9 @@ from typing import Any
 import yaml
 
 from phyagentos.errors import TargetError
-from phyagentos.yamlsource import load_yaml
-
 from phyagentos.protocol.atomic import _fsync_dir, atomic_write_text
 from phyagentos.protocol.codec import dump_yaml
+from phyagentos.yamlsource import load_yaml
 
 __all__ = ["TargetLock", "INFLIGHT_FILE", "write_marker", "read_marker", "clear_marker"]
 

@@ -22,10 +22,10 @@ from phyagentos.protocol import SessionRecord, TargetSpec
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.protocol.codec import dump_yaml
 from phyagentos.protocol.sensors import read_sensors
-from phyagentos.yamlsource import load_yaml
 from phyagentos.targets import SceneSpec
-from phyagentos.targets.registry import DRIVERS, get_target_class
 from phyagentos.targets.perturbations import ActivePerturbations, PerturbationSpec, parse_perturbations, split_scene
+from phyagentos.targets.registry import DRIVERS, get_target_class
+from phyagentos.yamlsource import load_yaml
 
 __all__ = ["DRIVERS", "TargetPool", "scene_for", "perturbations_for"]
 
@@ -104,7 +104,8 @@ class TargetPool:
         else:
             target.reset(seed=session.seed)
             logger.debug("target %s: reset for run %s (seed %s)", spec.name, session.run_id, session.seed)
-        target.set_perturbations(ActivePerturbations(perturbations_for(session, spec, root=self.state_dir.parent), session_seed=session.seed))
+        active = perturbations_for(session, spec, root=self.state_dir.parent)
+        target.set_perturbations(ActivePerturbations(active, session_seed=session.seed))
         return target
 
     def _built(self, cls, spec: TargetSpec, scene, key: str, *, seed: int | None):

@@ -208,7 +208,8 @@ class TreeLibrary:
         if kind == "subtree":
             extra = set(node) - {"subtree", "params", "name"}
             if extra:
-                raise SkillError(f"unknown key(s) {format_choices(extra)} on subtree; valid: 'name', 'params', 'subtree'", path=path, line=line)
+                raise SkillError(f"unknown key(s) {format_choices(extra)} on subtree; valid: 'name', 'params', 'subtree'",
+                                 path=path, line=line)
             sub_params = _substitute(node.get("params") or {}, params, path, line)
             root = self._build_tree(str(node["subtree"]), sub_params, depth=depth + 1, call_site=(path, line))
             if "name" in node:

@@ -189,7 +189,7 @@ def load_mesh(path: str, *, root: str | Path, scale: float = 1.0, where: str = "
     body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname="probe", density=_PROBE_DENSITY)
     try:
         model = spec.compile()
-    except Exception as exc:  # mujoco raises ValueError with the decoder's message
+    except Exception as exc:  # noqa: BLE001 - mujoco raises ValueError with the decoder's message
         detail = " ".join(str(exc).replace(asset, path).split())[:300]
         kind = "degenerate (it has no volume)" if "coplanar" in detail or "volume" in detail else "unreadable"
         raise TargetError(f"{where}: mesh {path!r} is {kind}: {detail}") from None

@@ -36,14 +36,15 @@ from typing import Any, Sequence
 import mujoco
 import numpy as np
 
-from phyagentos.geometry import matrix_to_quat as mat_quat, pose_matrix
 from phyagentos.errors import TargetError, format_choices
+from phyagentos.geometry import matrix_to_quat as mat_quat
+from phyagentos.geometry import pose_matrix
 from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioception
 from phyagentos.protocol.atomic import atomic_write_bytes
 
 from .base import BaseRolloutTarget
-from .contract import ExecutionResult, TargetCapabilities
 from .camera_noise import CameraNoise
+from .contract import ExecutionResult, TargetCapabilities
 from .state_file import read_state_npz
 
 __all__ = ["MuJoCoArmTarget", "GripperResult", "pose_matrix", "mat_quat", "K_NONE", "K_ENV", "K_ROBOT", "K_FINGER", "K_OBJECT"]
@@ -104,7 +105,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
     FT_SITE: str | None = None
     #: Report unexpected contacts during trajectory execution.
     REPORT_CONTACTS = True
-    #: Entry of the shipped ``protocol/sensors.yaml`` whose sensors a new target installs
+    #: Entry of the shipped ``phyagentos/data/protocol/sensors.yaml`` whose sensors a new target installs
     #: (the target pool then installs the workspace's entry for the target's own name).
     SENSORS_KEY: str | None = None
     #: Robot body-name pairs the model lets touch (e.g. adjacent links a third-party model
@@ -185,7 +186,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
             robot_root: body id under which every robot body lies.
             finger_sides: body id -> side (1 or 2) of the finger bodies.
         """
-        from .scene import TABLE_GEOM, FLOOR_GEOM, object_joint_name  # noqa: PLC0415
+        from .scene import FLOOR_GEOM, TABLE_GEOM, object_joint_name  # noqa: PLC0415
 
         m = self._model
         self._scene = scene
@@ -314,7 +315,7 @@ class MuJoCoArmTarget(BaseRolloutTarget):
         for r in getattr(self, "_renderers", {}).values():
             try:
                 r.close()
-            except Exception:  # pragma: no cover - GL teardown
+            except Exception:  # noqa: BLE001 - pragma: no cover - GL teardown
                 pass
         self._renderers = {}
         super().close()

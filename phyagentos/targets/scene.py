@@ -44,8 +44,8 @@ from typing import Any, Mapping
 import mujoco
 import numpy as np
 
-from phyagentos.geometry import look_at_quat, yaw_quat
 from phyagentos.errors import TargetError, format_choices
+from phyagentos.geometry import look_at_quat, yaw_quat
 
 from .mesh import MeshData, load_mesh
 

@@ -38,27 +38,37 @@ import math
 import re
 import socket
 from pathlib import Path
-from typing import Any
-
-import uvicorn
-from starlette.applications import Starlette
-from starlette.middleware import Middleware
-from starlette.requests import Request
-from starlette.responses import FileResponse, HTMLResponse, JSONResponse, PlainTextResponse, Response, StreamingResponse
-from starlette.routing import Mount, Route
-from starlette.staticfiles import StaticFiles
 
 from phyagentos.errors import PhyAgentOSError, ViewError
+from phyagentos.extras import missing_extra
 from phyagentos.protocol import DOCUMENTS, SESSION_ID_PATTERN, Workspace, WorkspaceWatcher
 from phyagentos.untrusted import NotConfined, NotRegular, confined, loads_json
 
 from . import data, pages
-from .changes import FINISHED_STATES, Tracker
+from .changes import Tracker
 from .evidence import frames_of
 from .graph_svg import to_svg
 from .scene3d import SceneRenderer
-from .signals import session_signals
 from .security import MAX_BODY_BYTES, TOKEN_HEADER, AccessPolicy, BodyLimit, evidence_dir, safe_path
+from .signals import session_signals
+
+try:  # the `view` extra
+    import uvicorn
+    from starlette.applications import Starlette
+    from starlette.middleware import Middleware
+    from starlette.requests import Request
+    from starlette.responses import (
+        FileResponse,
+        HTMLResponse,
+        JSONResponse,
+        PlainTextResponse,
+        Response,
+        StreamingResponse,
+    )
+    from starlette.routing import Mount, Route
+    from starlette.staticfiles import StaticFiles
+except ImportError as exc:
+    raise missing_extra(exc, extra="view") from exc
 
 __all__ = ["create_app", "serve", "bind"]
 

@@ -8,7 +8,6 @@ writes to the workspace.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import threading
@@ -29,7 +28,8 @@ from phyagentos.yamlsource import read_yaml
 
 from .security import evidence_dir
 
-__all__ = ["Panel", "panel", "signals_in_force", "held_state", "overview", "runs", "runs_page", "RunsCache", "RUNS_PER_PAGE", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
+__all__ = ["Panel", "panel", "signals_in_force", "held_state", "overview", "runs", "runs_page", "RunsCache",
+           "RUNS_PER_PAGE", "run_sessions", "run_graph", "session_detail", "tree_status", "memory",
            "SESSION_LINK_PATTERN"]
 
 logger = logging.getLogger(__name__)

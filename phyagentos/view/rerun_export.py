@@ -50,7 +50,7 @@ RRD_FILE = "recording.rrd"
 
 def _rerun():
     try:
-        import rerun as rr
+        import rerun as rr  # noqa: PLC0415 - the optional rerun extra
     except ImportError as exc:
         raise ViewError("exporting a .rrd needs rerun-sdk: pip install 'rerun-sdk>=0.41,<0.42' "
                         "(or the 'rerun' extra of phyagentos)") from exc

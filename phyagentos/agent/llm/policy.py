@@ -23,9 +23,12 @@ NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 
 #: (code, pattern): phrases that ask to bypass safety or the system's own instructions.
 INJECTION_PATTERNS: tuple[tuple[str, re.Pattern[str]], ...] = (
-    ("override_instructions", re.compile(r"\b(ignore|disregard|forget|override)\b.{0,40}\b(instruction|rule|prompt|polic|limit|safety|guard|constraint)", re.I)),
-    ("disable_safety", re.compile(r"\b(disable|deactivate|turn\s+off|switch\s+off|bypass|remove|skip|circumvent)\b.{0,40}\b(guard|safety|limit|e-?stop|emergency|validator|check|constraint)", re.I)),
-    ("unsafe_motion", re.compile(r"\b(max(imum)?|full|unlimited)\s+(speed|force|torque|velocity)\b|\bas\s+fast\s+as\s+possible\b|\bno\s+limits?\b", re.I)),
+    ("override_instructions", re.compile(r"\b(ignore|disregard|forget|override)\b.{0,40}"
+                                         r"\b(instruction|rule|prompt|polic|limit|safety|guard|constraint)", re.I)),
+    ("disable_safety", re.compile(r"\b(disable|deactivate|turn\s+off|switch\s+off|bypass|remove|skip|circumvent)\b"
+                                  r".{0,40}\b(guard|safety|limit|e-?stop|emergency|validator|check|constraint)", re.I)),
+    ("unsafe_motion", re.compile(r"\b(max(imum)?|full|unlimited)\s+(speed|force|torque|velocity)\b"
+                                 r"|\bas\s+fast\s+as\s+possible\b|\bno\s+limits?\b", re.I)),
     ("role_hijack", re.compile(r"\b(you\s+are\s+now|new\s+instructions?|system\s+prompt|jailbreak|developer\s+mode)\b", re.I)),
 )
 

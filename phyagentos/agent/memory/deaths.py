@@ -196,7 +196,7 @@ class DeathBook:
 
         Refuted candidates are never returned."""
         doc: LessonsDoc = self.workspace.read("LESSONS").data
-        out = [(l, "verified") for l in doc.lessons if l.scope == self.scope and l.revision and l.verified]
+        out = [(entry, "verified") for entry in doc.lessons if entry.scope == self.scope and entry.revision and entry.verified]
         if run_id is not None:
             out += [(c, "with" if trial_arm(run_id, c.id) else "without") for c in doc.candidates
                     if c.scope == self.scope and c.revision and c.refutations == 0]
@@ -248,7 +248,7 @@ class DeathBook:
             cause, facts = found
             revision = correction_for(cause, session.parameters)
             lid = _lid(cause, revision)
-            existing = next((l for l in [*doc.lessons, *doc.candidates] if l.id == lid), None)
+            existing = next((entry for entry in [*doc.lessons, *doc.candidates] if entry.id == lid), None)
             text = (f"died at step {facts['step']} ({cause[6:].replace('_', ' ')}; next to {facts['adjacent'] or 'nothing'}, "
                     f"vitals {facts['vitals']})")
             fix = ", ".join(f"{k}={v}" for k, v in sorted(revision.items())) or "no parameter (avoid it)"

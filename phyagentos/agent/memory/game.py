@@ -82,8 +82,8 @@ def _kid(*parts: str) -> str:
 
 def _knowledge(workspace: Workspace, session: SessionRecord, trace: Sequence[Mapping[str, Any]]) -> None:
     sightings = [r for r in trace if r.get("kind") == "game_sighting"]
-    recipes = [l for l in workspace.read("LESSONS").data.lessons
-               if l.strategy == "recipe" and l.verified and l.scope.get("embodiment") == _EMBODIMENT]
+    recipes = [entry for entry in workspace.read("LESSONS").data.lessons
+               if entry.strategy == "recipe" and entry.verified and entry.scope.get("embodiment") == _EMBODIMENT]
     if not sightings and not recipes:
         return
     now = utc_now()

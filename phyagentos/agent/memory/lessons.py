@@ -93,9 +93,9 @@ def _correction(revision: Revision) -> str:
 def _bound(items: list[Lesson], limit: int) -> list[Lesson]:
     if len(items) <= limit:
         return items
-    ranked = sorted(items, key=lambda l: (l.confirmations - l.refutations, l.updated_at or ""), reverse=True)
-    keep = {l.id for l in ranked[:limit]}
-    return [l for l in items if l.id in keep]
+    ranked = sorted(items, key=lambda entry: (entry.confirmations - entry.refutations, entry.updated_at or ""), reverse=True)
+    keep = {entry.id for entry in ranked[:limit]}
+    return [entry for entry in items if entry.id in keep]
 
 
 def _cumulative(child: SessionRecord, history: Sequence[SessionRecord], scope: dict[str, Any],
@@ -145,10 +145,10 @@ class LessonBook:
         more often than refuted, most confirmed and most specific first. Lessons decided
         by a trial (survival corrections) are served by their own book
         (:class:`~.deaths.DeathBook`), not here."""
-        found = [l for l in self.document().lessons if l.verified and l.trial is None  # trials: memory/deaths.py
-                 and scope_matches(l.scope, conditions) and l.confirmations > l.refutations]
-        return sorted(found, key=lambda l: (l.confirmations - l.refutations, len(l.scope.get("risk_factors") or ()),
-                                            l.updated_at or ""), reverse=True)
+        found = [entry for entry in self.document().lessons if entry.verified and entry.trial is None  # trials: memory/deaths.py
+                 and scope_matches(entry.scope, conditions) and entry.confirmations > entry.refutations]
+        return sorted(found, key=lambda entry: (entry.confirmations - entry.refutations, len(entry.scope.get("risk_factors") or ()),
+                                                entry.updated_at or ""), reverse=True)
 
     # -- writing -----------------------------------------------------------
 
@@ -202,7 +202,7 @@ class LessonBook:
             if recovery is not None:
                 lid = lesson_id(recovery.cause, recovery.strategy, corrective(recovery), scope)
                 candidate = next((c for c in doc.candidates if c.id == lid), None)
-                lesson = next((l for l in doc.lessons if l.id == lid), None)
+                lesson = next((entry for entry in doc.lessons if entry.id == lid), None)
                 if success:
                     if lesson is None:
                         base = candidate or Lesson(id=lid, objective=f"{conditions.skill} {conditions.object or ''}",
@@ -230,7 +230,7 @@ class LessonBook:
                 touched.append(lid)
             if recovery is not None and success:
                 for lesson in _cumulative(session, history, scope, conditions, now):
-                    existing = next((l for l in doc.lessons if l.id == lesson.id), None)
+                    existing = next((entry for entry in doc.lessons if entry.id == lesson.id), None)
                     if existing is None:
                         doc.lessons.append(lesson)
                     else:
@@ -242,7 +242,7 @@ class LessonBook:
                         existing.updated_at = now
                     touched.append(lesson.id)
             for lid in applied:
-                lesson = next((l for l in doc.lessons if l.id == lid), None)
+                lesson = next((entry for entry in doc.lessons if entry.id == lid), None)
                 if lesson is None or lesson.trial is not None or lesson.strategy == "recipe":
                     continue  # decided by their own evidence: a trial (deaths.py), planned makes (recipes.py)
                 count_outcome(lesson, sid, confirmed=success, now=now)

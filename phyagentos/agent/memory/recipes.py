@@ -113,10 +113,10 @@ class RecipeBook:
         fewest refutations (a candidate is applied so that a session can test it)."""
         doc: LessonsDoc = self.workspace.read("LESSONS").data
         scope = self._scope(item)
-        good = [l for l in doc.lessons if l.scope == scope and l.revision.get("near") and l.verified
-                and l.confirmations > l.refutations]
+        good = [entry for entry in doc.lessons if entry.scope == scope and entry.revision.get("near") and entry.verified
+                and entry.confirmations > entry.refutations]
         if good:
-            return max(good, key=lambda l: (l.confirmations - l.refutations, l.updated_at or "")), True
+            return max(good, key=lambda entry: (entry.confirmations - entry.refutations, entry.updated_at or "")), True
         cands = [c for c in doc.candidates if c.scope == scope and c.revision.get("near")]
         if cands:
             return min(cands, key=lambda c: (c.refutations, -(c.confirmations))), False
@@ -151,8 +151,8 @@ class RecipeBook:
                 #    failure with the items it uses in hand refutes it; a session that never
                 #    tried it as planned (it died, lacked the items) says nothing about it
                 planned_ok = any(a.get("ok") and a.get("recipe_known") for a in attempts)
-                for lesson in [l for l in [*doc.candidates, *doc.lessons]
-                               if l.id in applied and l.scope == scope and l.revision.get("near")]:
+                for lesson in [entry for entry in [*doc.candidates, *doc.lessons]
+                               if entry.id in applied and entry.scope == scope and entry.revision.get("near")]:
                     uses = lesson.revision.get("uses") or {}
                     failed_in_hand = any(a.get("recipe_known") and not a.get("ok") and _holds(a, uses) for a in attempts)
                     if planned_ok:
@@ -198,7 +198,7 @@ class RecipeBook:
                 rid = recipe_id(item, stations)
                 text = (f"a {item} needs {' and '.join(stations) or 'nothing'} next to the player and uses "
                         f"{', '.join(f'{n} {k}' for k, n in sorted(uses.items())) or 'nothing'}")
-                lesson = next((l for l in doc.lessons if l.id == rid), None)
+                lesson = next((entry for entry in doc.lessons if entry.id == rid), None)
                 cand = next((c for c in doc.candidates if c.id == rid), None)
                 fid = failure_id(item)
                 failed = next((c for c in doc.candidates if c.id == fid), None)

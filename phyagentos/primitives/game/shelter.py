@@ -238,8 +238,10 @@ class Rest:
             self.slept = True
             return "noop"
         waits = self.until_health is not None or self.until_step is not None
-        if not self.leaving and (self.slept or waits) and min(obs["vitals"]["food"], 9 if self.can_drink(leaf) else obs["vitals"]["drink"]) <= 1:
-            self.leaving = True  # hunger or thirst outweighs the night
+        if not self.leaving and (self.slept or waits):
+            drink = 9 if self.can_drink(leaf) else obs["vitals"]["drink"]
+            if min(obs["vitals"]["food"], drink) <= 1:
+                self.leaving = True  # hunger or thirst outweighs the night
         if self.leaving:
             return leave_step(leaf, self.plan) if self.plan is not None else None
         can_dig = obs["inventory"].get("wood_pickaxe", 0) > 0

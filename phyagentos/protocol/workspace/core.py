@@ -26,8 +26,8 @@ from ..runs import RunRegistry, inside_workspace
 from ..schemas import (
     DOCUMENTS,
     SAFETY_FILE,
-    RunRecord,
     SAFETY_VIOLATIONS,
+    RunRecord,
     SafetyConfig,
     SessionIndexEntry,
     SessionRecord,
@@ -51,7 +51,7 @@ _SUBDIRS = ("sessions", "evidence", "targets", ".locks")
 def templates_dir() -> Path:
     """The directory holding the document templates copied by :meth:`Workspace.create`.
 
-    ``protocol/`` at the project root (:func:`phyagentos.resources.templates_dir`,
+    ``protocol/`` in the package data (:func:`phyagentos.resources.templates_dir`,
     overridable with ``PHYAGENTOS_HOME``).
 
     Raises:
@@ -59,7 +59,8 @@ def templates_dir() -> Path:
     """
     candidate = resources.templates_dir()
     if not (candidate / DOCUMENTS["SESSIONS"][0]).is_file():
-        raise ProtocolError(f"protocol templates not found in {candidate} (set PHYAGENTOS_HOME to the project root)")
+        raise ProtocolError(f"protocol templates not found in {candidate} "
+                            "(PHYAGENTOS_HOME must name a folder holding protocol/, skills/, trees/)")
     return candidate
 
 
@@ -97,16 +98,7 @@ def _check_complete_safety(path: Path, text: str) -> None:
 class Workspace(SessionStore, SessionQueries, IndexViews, SignalBoard, WorkspaceLog):
     """A workspace directory; construct with :meth:`create` or :meth:`open`."""
 
-    #: LOG.md keeps this many most recent entries; older ones go to log/archive-YYYY-MM.jsonl.
-    LOG_MAX_ENTRIES = 200
-    #: SESSIONS.md lists every leased session, at most this many waiting ones (pending,
-    #: awaiting verification or replan; most recently updated first) ...
-    INDEX_MAX_WAITING = 10
-    #: ... and this many most recent terminal ones; ``counts`` has the exact totals.
-    INDEX_MAX_TERMINAL = 10
-    #: RUNTIME_SIGNAL.md keeps at most this many signals; older handled ones go to
-    #: log/signals-YYYY-MM.jsonl (the latest pause/resume and estop/clear_estop always stay).
-    SIGNAL_MAX = 100
+    # Limits (LOG_MAX_ENTRIES, INDEX_MAX_*, SIGNAL_MAX): :class:`.parts.WorkspaceParts`.
 
     def __init__(self, root: str | os.PathLike[str]) -> None:
         self.root = Path(root)

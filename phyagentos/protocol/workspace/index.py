@@ -12,6 +12,7 @@ from phyagentos.errors import PhyAgentOSError, ProtocolError
 
 from ..codec import Document, read_document
 from ..schemas import SESSION_STATES, SessionIndexEntry, SessionRecord, SessionsIndex
+from .parts import WorkspaceParts
 from .states import LEASED_STATES, TERMINAL, ts_key
 
 if TYPE_CHECKING:
@@ -20,7 +21,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-class IndexViews:
+class IndexViews(WorkspaceParts):
     """SESSIONS.md, the bounded view of the sessions. Mixed into :class:`~phyagentos.protocol.Workspace`."""
 
     def _trim_index(self, entries: list[SessionIndexEntry]) -> list[SessionIndexEntry]:

@@ -30,6 +30,7 @@ from ..codec import (
 )
 from ..runs import inside_workspace
 from ..schemas import LogDoc, LogEntry
+from .parts import WorkspaceParts
 from .states import ts_key
 
 log = logging.getLogger(__name__)
@@ -68,7 +69,7 @@ def _body_end(text: str, suffix: str) -> int:
 _LOG_SESSION_ID = re.compile(r'"session_id": "([^"\\]*)"')
 
 
-class WorkspaceLog:
+class WorkspaceLog(WorkspaceParts):
     """LOG.md and its monthly archive. Mixed into :class:`~phyagentos.protocol.Workspace`."""
 
     def append_log(self, entry: LogEntry) -> None:

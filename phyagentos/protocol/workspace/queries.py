@@ -21,7 +21,8 @@ from ..atomic import file_identity
 from ..codec import read_document
 from ..schemas import SESSION_STATES, SessionRecord
 from ..session_index import SessionIdentity
-from .states import TERMINAL, SESSION_ID, ts_key
+from .parts import WorkspaceParts
+from .states import SESSION_ID, TERMINAL, ts_key
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +31,7 @@ log = logging.getLogger(__name__)
 _ARCHIVE_CACHE_SIZE = 4096
 
 
-class SessionQueries:
+class SessionQueries(WorkspaceParts):
     """Queries over sessions and the reconcile of the hints. Mixed into :class:`~phyagentos.protocol.Workspace`."""
 
     def _validated_states(self, states: Iterable[str] | str | None) -> set[str] | None:
@@ -111,9 +112,9 @@ class SessionQueries:
                 for entry in self._session_archive.run_entries(run_id):
                     if entry.session_id in by_id or (wanted is not None and entry.state not in wanted):
                         continue
-                    record = self._load_archived(entry, share=share_archived)
-                    if record is not None:
-                        by_id[record.session_id] = record
+                    archived = self._load_archived(entry, share=share_archived)
+                    if archived is not None:
+                        by_id[archived.session_id] = archived
             else:
                 for path in self._session_archive.iter_files():
                     if path.stem not in by_id:
@@ -186,7 +187,7 @@ class SessionQueries:
         A session file that no longer validates is left untouched, set aside (its
         error in :attr:`malformed`, counted as ``malformed``) and the rest goes on.
         """
-        fixed = Counter()
+        fixed: Counter[str] = Counter()
         self.malformed: dict[str, str] = {}
         hints = self._states.entries()
         for path in sorted(self.sessions_dir.glob("*.md")):

@@ -17,7 +17,8 @@ from phyagentos.errors import DocumentError, LeaseError, ProtocolError
 from ..codec import Document, read_document, write_document
 from ..runs import inside_workspace
 from ..schemas import Attempt, SessionRecord, utc_now_iso
-from .states import TERMINAL, SESSION_ID, ts_key
+from .parts import WorkspaceParts
+from .states import SESSION_ID, TERMINAL, ts_key
 
 log = logging.getLogger(__name__)
 
@@ -100,7 +101,7 @@ def _session_prose(record: SessionRecord) -> str:
     )
 
 
-class SessionStore:
+class SessionStore(WorkspaceParts):
     """Session files: submit, load, save, fenced update, replicas. Mixed into :class:`~phyagentos.protocol.Workspace`."""
 
     @staticmethod
@@ -217,7 +218,7 @@ class SessionStore:
             stored.data = record
             write_document(stored, validated=True, durable=durable)
             active = stored.path == self.session_path(sid)
-            if active and record.state in TERMINAL:
+            if active and record.state in TERMINAL and stored.path is not None:
                 try:
                     stored.path = self._session_archive.archive(
                         stored.path, session_id=sid, run_id=record.run_id, state=record.state, node=record.node)
@@ -323,7 +324,7 @@ class SessionStore:
         stored.data = record
         write_document(stored, validated=True)
         active = stored.path == self.session_path(record.session_id)
-        if active and record.state in TERMINAL:
+        if active and record.state in TERMINAL and stored.path is not None:
             try:
                 stored.path = self._session_archive.archive(
                     stored.path, session_id=record.session_id, run_id=record.run_id,

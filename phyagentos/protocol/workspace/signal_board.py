@@ -14,12 +14,13 @@ from phyagentos.errors import ProtocolError, format_choices
 
 from ..schemas import RuntimeSignalDoc, Signal, SignalAck, utc_now_iso
 from ..signals import SIGNAL_KINDS, new_signal_id
+from .parts import WorkspaceParts
 from .states import ts_key
 
 log = logging.getLogger(__name__)
 
 
-class SignalBoard:
+class SignalBoard(WorkspaceParts):
     """RUNTIME_SIGNAL.md: send, acknowledge, compact. Mixed into :class:`~phyagentos.protocol.Workspace`."""
 
     def send_signal(self, kind: str, *, session_id: str | None = None, reason: str = "",

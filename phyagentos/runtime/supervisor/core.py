@@ -22,7 +22,9 @@ from phyagentos.errors import LeaseError, PhyAgentOSError, ProtocolError, Superv
 from phyagentos.protocol import LogEntry, SessionRecord, SignalState, Workspace, WorkspaceWatcher
 from phyagentos.protocol.lifecycle import utc_now
 
-from ..worker import RunnerDied, RunnerProcess, park_runner as _park_runner, take_runner as _take_runner
+from ..worker import RunnerDied, RunnerProcess
+from ..worker import park_runner as _park_runner
+from ..worker import take_runner as _take_runner
 from .claims import Claiming
 from .config import SupervisorConfig
 from .execution import Execution

@@ -7,7 +7,8 @@ from __future__ import annotations
 import logging
 import time
 
-from phyagentos.protocol import Attempt, ErrorInfo, RejectionItem, SessionRecord, errorcodes as ec, renewed
+from phyagentos.protocol import Attempt, ErrorInfo, RejectionItem, SessionRecord, renewed
+from phyagentos.protocol import errorcodes as ec
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
 from ..session_basis import runtime_basis

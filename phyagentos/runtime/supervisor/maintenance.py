@@ -7,9 +7,9 @@ import logging
 import time
 
 from phyagentos.errors import LifecycleError, ProtocolError
-from phyagentos.protocol import LEASED_STATES, ErrorInfo, SessionRecord, errorcodes as ec, is_expired
+from phyagentos.protocol import LEASED_STATES, ErrorInfo, SessionRecord, is_expired
+from phyagentos.protocol import errorcodes as ec
 from phyagentos.protocol.lifecycle import SessionLifecycle
-
 
 logger = logging.getLogger(__name__)
 

@@ -10,7 +10,8 @@ import time
 from typing import Any
 
 from phyagentos.errors import ProtocolError, SupervisorError
-from phyagentos.protocol import LEASED_STATES, ErrorInfo, SessionRecord, errorcodes as ec, is_expired, new_lease
+from phyagentos.protocol import LEASED_STATES, ErrorInfo, SessionRecord, is_expired, new_lease
+from phyagentos.protocol import errorcodes as ec
 from phyagentos.protocol.lifecycle import SessionLifecycle
 
 from ..worker import RunnerDied

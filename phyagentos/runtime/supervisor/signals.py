@@ -8,7 +8,8 @@ import logging
 import time
 
 from phyagentos.errors import ProtocolError
-from phyagentos.protocol import ErrorInfo, SessionRecord, SignalAck, errorcodes as ec, file_identity
+from phyagentos.protocol import ErrorInfo, SessionRecord, SignalAck, file_identity
+from phyagentos.protocol import errorcodes as ec
 from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 
 from ..worker import RunnerDied

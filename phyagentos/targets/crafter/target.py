@@ -59,6 +59,7 @@ import numpy as np
 import yaml
 
 from phyagentos.errors import TargetError, format_choices
+from phyagentos.extras import import_extra
 from phyagentos.protocol.atomic import atomic_write_bytes, atomic_write_text
 from phyagentos.yamlsource import load_plain
 
@@ -245,7 +246,7 @@ class CrafterTarget(BaseRolloutTarget):
 
     # -- game ---------------------------------------------------------------------
     def _new_env(self, seed: int):
-        import crafter  # noqa: PLC0415 - optional heavy import only for game targets
+        crafter = import_extra("crafter", extra="game")  # heavy: only for game targets
 
         return crafter.Env(area=self.scene.area, view=(9, 9), size=self.scene.size, reward=False,
                            length=self.scene.length, seed=int(seed))
@@ -450,7 +451,7 @@ class CrafterTarget(BaseRolloutTarget):
             notes = pickle.loads(z["notes"].tobytes())
         except Exception as exc:  # noqa: BLE001
             raise TargetError(f"state file {path}: unreadable game state: {exc}") from exc
-        import crafter  # noqa: PLC0415
+        crafter = import_extra("crafter", extra="game")
 
         env = self._env  # keep its loaded textures; the world, player and counters are replaced
         env._world, env._player = game["world"], game["player"]

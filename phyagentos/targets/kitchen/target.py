@@ -45,11 +45,11 @@ import mujoco
 import numpy as np
 
 from phyagentos.errors import TargetError, format_choices
+from phyagentos.geometry import matrix_to_quat as _quat
+from phyagentos.geometry import pose_matrix as _pose
 
 from ..base import ExecutionResult
 from ..contract import TargetCapabilities
-from phyagentos.geometry import matrix_to_quat as _quat, pose_matrix as _pose
-
 from ..mujoco_arm import GripperResult, MuJoCoArmTarget
 
 __all__ = ["KitchenScene", "FrankaKitchenTarget", "KITCHEN_TASKS", "ENV_ID"]
@@ -326,7 +326,7 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
         if not self.closed:
             try:
                 self._env.close()
-            except Exception:  # pragma: no cover - renderer teardown
+            except Exception:  # noqa: BLE001 - pragma: no cover - renderer teardown
                 pass
         super().close()
 

@@ -45,13 +45,12 @@ import mujoco
 import numpy as np
 
 from phyagentos.errors import TargetError
+from phyagentos.geometry import matrix_to_quat as mat_quat
+from phyagentos.geometry import yaw_quat
 
 from ..base import ExecutionResult
 from ..contract import TargetCapabilities
-from phyagentos.geometry import matrix_to_quat as mat_quat, yaw_quat
-
 from ..mujoco_arm import GripperResult, MuJoCoArmTarget
-
 from ..scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
 
 __all__ = ["SO101Target", "build_so101_scene", "so101_asset_path", "ARM_JOINT_NAMES", "GRIPPER_JOINT", "MOUNT_XY",
@@ -67,7 +66,7 @@ JAW_PADS = ("fixed_jaw_pad", "moving_jaw_pad")
 #: 0.35 m, so it stands nearer the objects than the Franka's base (the origin).
 MOUNT_XY: tuple[float, float] = (0.25, 0.0)
 #: The SO-101's scene when a session names none: a 3 cm cube and a goal region within
-#: its reach (as ``goal_graphs/pick_and_place_compact.yaml``), no obstacle near its home pose.
+#: its reach (as ``phyagentos/data/goal_graphs/pick_and_place_compact.yaml``), no obstacle near its home pose.
 SO101_DEFAULT_SCENE = SceneSpec(
     objects=(ObjectSpec(name="cube", half_extents=(0.015, 0.015, 0.015), position=(0.45, -0.1)),),
     regions=(RegionSpec(name="goal", center=(0.45, 0.11), half_extents=(0.05, 0.05)),),

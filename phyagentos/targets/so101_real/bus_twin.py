@@ -57,7 +57,7 @@ import threading
 import time
 import tty
 from dataclasses import dataclass, field
-from typing import Iterable, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
@@ -65,9 +65,26 @@ import numpy as np
 from phyagentos.errors import TargetError, format_choices
 
 from .protocol import (
-    ADDR, BROADCAST_ID, ERR_ANGLE, ERR_OVERLOAD, INST_ACTION, INST_PING, INST_READ, INST_REG_WRITE, INST_SYNC_READ,
-    INST_SYNC_WRITE, INST_WRITE, MOTOR_NAMES, RESOLUTION, SIGN_BITS, STEPS_PER_RAD, STS3215_MODEL_NUMBER, checksum,
-    decode_sign_magnitude, encode_sign_magnitude, status_packet,
+    ADDR,
+    BROADCAST_ID,
+    ERR_ANGLE,
+    ERR_OVERLOAD,
+    INST_ACTION,
+    INST_PING,
+    INST_READ,
+    INST_REG_WRITE,
+    INST_SYNC_READ,
+    INST_SYNC_WRITE,
+    INST_WRITE,
+    MOTOR_NAMES,
+    RESOLUTION,
+    SIGN_BITS,
+    STEPS_PER_RAD,
+    STS3215_MODEL_NUMBER,
+    checksum,
+    decode_sign_magnitude,
+    encode_sign_magnitude,
+    status_packet,
 )
 
 __all__ = ["BusTwin", "FAULT_KINDS", "DEFAULT_SPEED_RAD_S", "FIRMWARE_VERSION"]
@@ -132,7 +149,7 @@ class BusTwin:
     def __init__(self, *, ids: Sequence[int] = (1, 2, 3, 4, 5, 6), seed: int = 0,
                  mount_offsets: Sequence[int] | None = None, tick_s: float = 0.01,
                  start_q: Sequence[float] | None = None):
-        from phyagentos.targets.so101 import HOME_QPOS, SO101_DEFAULT_SCENE, build_so101_scene
+        from phyagentos.targets.so101 import HOME_QPOS, SO101_DEFAULT_SCENE, build_so101_scene  # noqa: PLC0415 - the model only for a twin
 
         ids = tuple(int(i) for i in ids)
         if len(ids) != 6 or len(set(ids)) != 6 or not all(0 <= i < BROADCAST_ID for i in ids):

@@ -82,9 +82,9 @@ def default_calibration_path(robot_id: str = "so101") -> Path:
 
 def twin_joint_ranges() -> np.ndarray:
     """(6, 2) joint ranges of the shipped SO-101 model in :data:`MOTOR_NAMES` order, rad."""
-    import mujoco
+    import mujoco  # noqa: PLC0415
 
-    from phyagentos.targets.so101 import so101_asset_path
+    from phyagentos.targets.so101 import so101_asset_path  # noqa: PLC0415
 
     m = mujoco.MjModel.from_xml_path(str(so101_asset_path()))
     return np.array([m.jnt_range[m.joint(n).id] for n in MOTOR_NAMES], dtype=float)

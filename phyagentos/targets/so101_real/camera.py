@@ -37,8 +37,8 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from phyagentos.geometry import quat_to_matrix
 from phyagentos.errors import TargetError
+from phyagentos.geometry import quat_to_matrix
 
 __all__ = ["OpenCVCamera", "DEPTH_PREDICATES", "RGB_ONLY_PREDICATES", "depth_needing_criteria", "has_depth"]
 
@@ -59,7 +59,7 @@ class OpenCVCamera:
     """
 
     def __init__(self, spec):
-        import cv2
+        import cv2  # noqa: PLC0415 - cv2 only for a real camera
 
         if getattr(spec, "real", None) is None:
             raise TargetError(f"sensor {spec.name!r} is not a real camera (no `real:` block in sensors.yaml)")
@@ -81,9 +81,9 @@ class OpenCVCamera:
 
     def capture(self, *, stamp_s: float | None = None):
         """One frame as a :class:`~phyagentos.perception.frames.CameraFrame` (RGB, no depth)."""
-        import cv2
+        import cv2  # noqa: PLC0415
 
-        from phyagentos.perception.frames import CameraFrame, CameraIntrinsics
+        from phyagentos.perception.frames import CameraFrame, CameraIntrinsics  # noqa: PLC0415
 
         ok, bgr = self._cap.read()
         if not ok or bgr is None:

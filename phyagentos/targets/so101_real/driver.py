@@ -33,12 +33,21 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-import scservo_sdk as scs
 
 from phyagentos.errors import TargetError
+from phyagentos.extras import import_extra
 
-from .protocol import ADDR, MOTOR_IDS, MOTOR_NAMES, SIGN_BITS, STS3215_MODEL_NUMBER, decode_sign_magnitude, \
-    encode_sign_magnitude
+from .protocol import (
+    ADDR,
+    MOTOR_IDS,
+    MOTOR_NAMES,
+    SIGN_BITS,
+    STS3215_MODEL_NUMBER,
+    decode_sign_magnitude,
+    encode_sign_magnitude,
+)
+
+scs = import_extra("scservo_sdk", extra="real")  # Feetech's SDK (it imports pyserial)
 
 __all__ = ["FeetechBus", "BusError", "BusState", "STATE_BLOCK"]
 

@@ -41,7 +41,7 @@ import logging
 import math
 import os
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
 import mujoco
 import numpy as np
@@ -315,7 +315,7 @@ class SO101RealTarget(SO101Target):
                 self.arm.guard.sync(q)
                 self.arm.send(np.append(q[:5], self._jaw_goal))  # the jaw keeps its grip
             self._mirror_pose(q)
-        except Exception as exc:  # a halt must not raise; the guard recorded the stop
+        except Exception as exc:  # noqa: BLE001 - a halt must not raise; the guard recorded the stop
             log.warning("so101_real halt: %s", exc)
 
     def reset(self, *, seed: int | None = None, settle_s: float = 0.3) -> dict:
@@ -347,7 +347,7 @@ class SO101RealTarget(SO101Target):
         Raises:
             TargetError: a real camera that does not open, or a model camera the twin lacks.
         """
-        from .camera import OpenCVCamera
+        from .camera import OpenCVCamera  # noqa: PLC0415 - OpenCV only for real cameras
 
         real = [s for s in sensors if getattr(s, "real", None) is not None]
         super().configure_sensors([s for s in sensors if getattr(s, "real", None) is None])

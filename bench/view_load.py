@@ -67,24 +67,6 @@ from phyagentos.protocol.schemas import RunRecord, utc_now_iso
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--window-size=1280,1000")
 GRAPH = "version: 1\nname: bench\nnodes: []\n"
-#: The real run behind ``--pages`` and ``--soak-minutes`` (the one tests/test_view_live.py uses).
-REPLAN_GRAPH = """\
-version: 1
-name: replan_demo
-description: A pick of a heavy cube that slips; the verifier asks for a replan with a firmer grip.
-defaults:
-  target: franka_tabletop
-scene:
-  objects:
-    - {name: cube, half_extents: [0.02, 0.02, 0.02], position: [0.5, -0.2], rgba: [0.8, 0.1, 0.1, 1]}
-  perturbations:
-    - {kind: heavy_object, object: cube, mass_kg: 1.5}
-nodes:
-  - id: pick_cube
-    skill: pick
-    params: {object: cube}
-    accept: {holding: cube, lifted: {object: cube, min_height: 0.05}}
-"""
 #: True once every panel of the page has been filled from its fragment.
 PANELS_JS = ("return document.readyState === 'complete' && "
              "[...document.querySelectorAll('[data-fragment]')].every(e => e.dataset.html !== undefined)")
@@ -189,11 +171,11 @@ def update_latency_ms(ws: Workspace, driver, rounds: int = 6) -> float:
 
 
 def make_real_run(root: Path) -> Path:
-    """A workspace under ``root`` holding one real recorded run of :data:`REPLAN_GRAPH`; returns it."""
-    graph = root / "replan_demo.yaml"
-    graph.write_text(REPLAN_GRAPH, encoding="utf-8")
+    """A workspace under ``root`` holding one real recorded run of the shipped example
+    ``replan_demo`` (a heavy cube that slips, then a firmer grip: the one the view's tests
+    use); returns it."""
     ws_dir = root / "ws"
-    proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(graph), "--workspace", str(ws_dir),
+    proc = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", "replan_demo", "--workspace", str(ws_dir),
                            "--record", "all"], capture_output=True, text=True, timeout=900, cwd=root)
     if proc.returncode != 0:
         raise RuntimeError(f"the real run failed:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")

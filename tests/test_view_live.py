@@ -26,23 +26,6 @@ from phyagentos.protocol.schemas import RunRecord, utc_now_iso
 CLI = [sys.executable, "-m", "phyagentos.cli"]
 ROOT = Path(__file__).resolve().parents[1]
 
-REPLAN_GRAPH = """\
-version: 1
-name: replan_demo
-description: A pick of a heavy cube that slips; the verifier asks for a replan with a firmer grip.
-defaults:
-  target: franka_tabletop
-scene:
-  objects:
-    - {name: cube, half_extents: [0.02, 0.02, 0.02], position: [0.5, -0.2], rgba: [0.8, 0.1, 0.1, 1]}
-  perturbations:
-    - {kind: heavy_object, object: cube, mass_kg: 1.5}
-nodes:
-  - id: pick_cube
-    skill: pick
-    params: {object: cube}
-    accept: {holding: cube, lifted: {object: cube, min_height: 0.05}}
-"""
 
 
 def _stop(proc: subprocess.Popen) -> None:
@@ -58,10 +41,8 @@ def _stop(proc: subprocess.Popen) -> None:
 def replanned(tmp_path_factory):
     """A finished run whose first session was replanned, recorded; its view server and a browser."""
     root = tmp_path_factory.mktemp("replan")
-    graph = root / "replan_demo.yaml"
-    graph.write_text(REPLAN_GRAPH, encoding="utf-8")
     ws_dir = root / "ws"
-    proc = subprocess.run([*CLI, "run", str(graph), "--workspace", str(ws_dir), "--record", "all"], cwd=ROOT,
+    proc = subprocess.run([*CLI, "run", "replan_demo", "--workspace", str(ws_dir), "--record", "all"], cwd=ROOT,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     ws = Workspace.open(ws_dir)

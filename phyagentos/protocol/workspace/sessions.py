@@ -102,7 +102,10 @@ def _session_prose(record: SessionRecord) -> str:
 
 
 class SessionStore(WorkspaceParts):
-    """Session files: submit, load, save, fenced update, replicas. Mixed into :class:`~phyagentos.protocol.Workspace`."""
+    """Session files: submit, load, save, fenced update, replicas.
+
+    Mixed into :class:`~phyagentos.protocol.Workspace`.
+    """
 
     @staticmethod
     def _check_session_id(session_id: str) -> None:

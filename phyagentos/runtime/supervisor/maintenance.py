@@ -15,7 +15,10 @@ logger = logging.getLogger(__name__)
 
 
 class Maintenance:
-    """Expired leases, queue timeouts, reconcile. Mixed into :class:`~phyagentos.runtime.supervisor.WatchdogSupervisor`."""
+    """Expired leases, queue timeouts, reconcile.
+
+    Mixed into :class:`~phyagentos.runtime.supervisor.WatchdogSupervisor`.
+    """
 
     def _maintain(self) -> int:
         """Expired leases, queue timeouts, cancels of pending sessions; periodic reconcile."""

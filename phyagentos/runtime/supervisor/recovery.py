@@ -24,7 +24,10 @@ _MAX_PREFLIGHT_DEATHS = 5
 
 
 class Recovery:
-    """Safe-stopping targets after a runner was lost. Mixed into :class:`~phyagentos.runtime.supervisor.WatchdogSupervisor`."""
+    """Safe-stopping targets after a runner was lost.
+
+    Mixed into :class:`~phyagentos.runtime.supervisor.WatchdogSupervisor`.
+    """
 
     def _on_runner_died(self, inf: InflightSession) -> int:
         code = self._runner.process.exitcode if self._runner is not None else None

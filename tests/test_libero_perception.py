@@ -127,10 +127,11 @@ def test_an_object_let_go_in_the_basket_is_seen_inside_from_above_and_remembered
     assert _verdicts(above) == ["satisfied", "satisfied"]
     # back at the start pose: the wrist camera may look into the basket again (seen there)
     assert _verdicts(back) == ["satisfied", "satisfied"]
-    # the agentview alone sees only the basket's front wall where the item stands: remembered
+    # the agentview alone: the basket's front wall hides the item (remembered) or only its top
+    # shows over the wall (seen, still inside): either way the verdict stands
     item = next(e for e in front_only["entities"] if e["name"] == ITEM)
-    assert item["attributes"]["source"] == "remembered" and ITEM in front_only["remembered"]
-    assert item["attributes"]["occluded_in"] == ["agentview"]
+    assert item["attributes"]["inside_of"] == BASKET
+    assert item["attributes"]["source"] == "perceived" or item["attributes"]["occluded_in"] == ["agentview"]
     assert _verdicts(front_only) == ["satisfied", "satisfied"]
     target.reset(seed=0)
 

@@ -72,6 +72,9 @@ CONTAINER_WALL_M = 0.015
 #: A released object's top must stand this far above the container's floor (the 5th
 #: percentile of its interior heights), m (a basket's cloth lining lies within about 1 cm).
 CONTENT_CLEARANCE_M = 0.015
+#: Spread of a contained object's top above the floor about its perceived height, m: the
+#: lining's folds (about 1 cm) and the height perceived on the open table (within ~1 cm).
+CONTENT_HEIGHT_SIGMA_M = 0.015
 #: An object not seen now is still reported (``remembered``) for this long after its last
 #: sighting when every camera that could see it has something nearer in the way, s.
 REMEMBER_S = 60.0
@@ -323,8 +326,9 @@ class Perceiver:
             self.tracks[name].seen_now = True
             self.tracks[name].released_s = None
             matched[i] = name
-        for name in matched.values():
-            self.tracks[name].inside_of = None
+        for i, name in matched.items():  # seen again: still inside the container it was in?
+            t = self.tracks[name]
+            t.inside_of = _still_inside(t.inside_of, dets[i], dets, matched)
 
         # ---- holding (a release noticed now is looked for in this very observation)
         holding_rel = self._update_holding(proprio, stamp)
@@ -605,6 +609,22 @@ def _stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> lis
     return out
 
 
+def _still_inside(container: str | None, det: Detection, dets: list[Detection], matched: dict[int, str]) -> str | None:
+    """``container`` when the object's new detection ``det`` still stands inside it: the
+    container is seen now (associated), ``det``'s centre lies in its footprint and its lowest
+    points lie more than 2 cm below the container's top (not resting on the rim); else None.
+    (A partial view over a basket's wall is a segment of its own.)"""
+    if container is None:
+        return None
+    k = next((i for i, n in matched.items() if n == container), None)
+    if k is None:
+        return None
+    c = dets[k]
+    if _footprint_margin(det.position[:2], c.position, c.yaw, c.half_extents, c.shape) < 0.0:
+        return None
+    return container if det.low_m < c.top_m - 0.02 else None
+
+
 def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Detection], indices: list[np.ndarray],
                      sensors: list[str]) -> tuple[int, np.ndarray, float, int, tuple[str, ...]] | None:
     """Is object ``t`` standing inside a container segment where the hand let it go (or where
@@ -620,7 +640,8 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
     5 mm height bin more than :data:`CONTENT_CLEARANCE_M` above the floor. The object is seen
     there when that top stands the object's perceived height above the floor (within 2 cm),
     is flat (height RMS <= 7 mm) and spans at least 60 % of the object's short side both
-    ways: a lining fold or a wall's rim fails one of these.
+    ways: a lining fold or a wall's rim fails one of these. Confidence exp(-err^2 / 2
+    :data:`CONTENT_HEIGHT_SIGMA_M`^2) x (1 - exp(-points / 30)).
 
     Returns ``(container index, centre (3,), confidence, points, cameras)`` or None.
     """
@@ -668,7 +689,7 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
                 continue
             n = int(face.sum())
             err = abs(top - floor - height)
-            conf = math.exp(-0.5 * (err / 0.01) ** 2) * (1.0 - math.exp(-n / 30.0))
+            conf = math.exp(-0.5 * (err / CONTENT_HEIGHT_SIGMA_M) ** 2) * (1.0 - math.exp(-n / 30.0))
             pos = np.array([centre[0], centre[1], 0.0])
             pos[2] = float(np.median(cloud.points[idx[face], 2] - h[face])) + floor + t.half_extents[2]  # on the floor
             cams = tuple(sensors[int(i)] for i in np.unique(cloud.camera[idx[face]]))

@@ -90,8 +90,8 @@ def object_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 
 def place_objects(target, seed: int, *, names: Sequence[str] | None = None, settle_s: float = 1.0) -> list[str]:
-    """Set the objects ``names`` (default all of the task's) down at random free spots of the
-    floor area (:data:`AREA_X_M` x :data:`AREA_Y_M`) at random yaws, move the others away,
+    """Set the objects ``names`` (default all of the task's) down (bottom 1 cm above the floor's
+    or table's top) at random free spots of the area (:data:`AREA_X_M` x :data:`AREA_Y_M`) at random yaws, move the others away,
     settle for ``settle_s``. Returns the objects placed (an object that finds no free spot
     in 200 draws waits away). Seeded by ``seed``; for generated scenes only."""
     m, d = target.model, target.data
@@ -101,6 +101,7 @@ def place_objects(target, seed: int, *, names: Sequence[str] | None = None, sett
     chosen = list(all_names if names is None else names)
     rng.shuffle(chosen)
     boxes = object_boxes(target)
+    support_z = target._support_top_z()
     placed: list[tuple[np.ndarray, float]] = []
     out = []
     for k, name in enumerate(all_names):
@@ -138,7 +139,7 @@ def place_objects(target, seed: int, *, names: Sequence[str] | None = None, sett
         c, s = math.cos(yaw), math.sin(yaw)
         off_r = np.array([c * off[0] - s * off[1], s * off[0] + c * off[1]])
         d.qpos[qa:qa + 2] = spot - off_r
-        d.qpos[qa + 2] = float(d.qpos[qa + 2]) + 0.01
+        d.qpos[qa + 2] = float(d.qpos[qa + 2]) + support_z + 0.01 - float(lo[2])  # its bottom 1 cm above the support
         d.qpos[qa + 3:qa + 7] = q
         d.qvel[da:da + 6] = 0.0
         placed.append((spot, r))

@@ -256,3 +256,21 @@ def test_holding_needs_a_consistent_opening_effort_and_load_after_lift():
 def test_plane_height_is_signed_distance():
     plane = Plane(np.array([0.0, 0.0, 1.0]), 0.01, 100, True)
     assert plane.height(np.array([[0.0, 0.0, 0.05]]))[0] == pytest.approx(0.04)
+
+
+def test_a_track_is_remembered_only_where_something_nearer_hides_it_and_no_camera_sees_the_spot_free():
+    from phyagentos.perception.perceiver import _occluded_in
+    from phyagentos.perception.tracks import Track
+
+    # camera at the origin looking along +z (optical frame = world); a 4 cm cube centred 1 m ahead
+    t = Track(name="cube", position=np.array([0.0, 0.0, 1.0]), var_xy=1e-6, yaw=0.0, var_yaw=1e-3,
+              half_extents=np.array([0.02, 0.02, 0.02]), shape="box", colour_rgb=np.zeros(3), points=100,
+              confidence=0.9, last_seen_s=0.0, bottom_m=0.0)
+    wall = _frame(depth_m=np.full((48, 64), 0.9, np.float32))        # 8 cm in front of the cube's face
+    face = _frame(depth_m=np.full((48, 64), 0.98, np.float32))       # its own near face: seen, not hidden
+    behind = _frame(depth_m=np.full((48, 64), 1.5, np.float32))      # the spot is free: it is not there
+    away = _frame(T_world_camera=np.diag([1.0, 1.0, -1.0, 1.0]) @ np.diag([-1.0, 1.0, 1.0, 1.0]))  # looks away
+    assert _occluded_in(t, [wall]) == ("overview",)
+    assert _occluded_in(t, [face]) == () and _occluded_in(t, [behind]) == ()
+    assert _occluded_in(t, [wall, behind]) == ()  # one camera sees the spot free: not remembered
+    assert _occluded_in(t, [away]) == ()  # out of every view: nothing to go on

@@ -28,7 +28,11 @@ centre lies in the region's footprint shrunk by 2 sigma and rests within
 ``REST_TOL_M + 2 sigma`` of its surface; ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
 rose >= min_height + 2 sigma), ``unsatisfied`` only when it fails by more than 2 sigma,
 and ``unknown`` in between (at 2 sigma a Gaussian error crosses the boundary with
-probability <= 2.3 %, one-sided). An entity absent from a snapshot, or with
+probability <= 2.3 %, one-sided). ``on`` and ``inside`` with a container (a perceived
+object, e.g. a basket) are judged on the perceived relation ``inside(object, container)``
+when perception reports one: the object was seen standing inside the container's segment
+(its walls may hide it from other views; perception then reports it ``remembered``); the
+centre must lie in the container's footprint by 2 sigma. An entity absent from a snapshot, or with
 ``confidence`` below :data:`CONFIDENCE_MIN`, makes the criterion ``unknown``: never
 guessed, never ``success``.
 """
@@ -279,10 +283,40 @@ def _eval_lifted(c, initial, terminal, refs):
                  f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m)")
 
 
+def _contained(c, refs, terminal, obj, container) -> CriterionOutcome | None:
+    """The verdict of ``obj`` in/on ``container`` when perception reports the relation
+    ``inside(obj, container)`` (the object was seen standing inside the container's segment,
+    e.g. from above, between its walls): satisfied when that relation's confidence is at
+    least :data:`CONFIDENCE_MIN`, the gripper has let go and the object's centre lies in the
+    container's footprint shrunk by 2 sigma; unsatisfied when it lies outside it by 2 sigma
+    or is still held; else unknown. ``None`` when no such relation is reported (the
+    geometric tests then decide)."""
+    rel = next((r for r in terminal.get("relations", []) if r.get("relation") == "inside"
+                and r.get("subject") == obj and r.get("object") == container), None)
+    if rel is None:
+        return None
+    conf = float(rel.get("confidence", 1.0))
+    if conf < CONFIDENCE_MIN:
+        return CriterionOutcome(c, "unknown", f"{obj} inside {container} perceived with confidence {conf:.2f} "
+                                f"< {CONFIDENCE_MIN}", refs)
+    ents = _entities(terminal)
+    o, s = ents[obj], ents[container]
+    m = 2.0 * math.hypot(sigma(o), sigma(s))
+    dx, dy = abs(o["position"][0] - s["position"][0]), abs(o["position"][1] - s["position"][1])
+    sx, sy = s["size"][:2]
+    held, _ = _held(terminal, obj)
+    src = (o.get("attributes") or {}).get("source", "perceived")
+    return _band(c, refs, dx <= sx - m and dy <= sy - m and held is False, dx > sx + m or dy > sy + m or bool(held),
+                 obj, f"inside {container}", f"seen inside it (relation confidence {conf:.2f}, {src}); |dx|={dx:.3f} "
+                 f"(<= {sx:.3f}), |dy|={dy:.3f} (<= {sy:.3f}), 2 sigma {m:.3f} m")
+
+
 def _eval_inside(c, initial, terminal, refs):
     obj, region = c.args["object"], c.args["region"]
     if (miss := _need(c, refs, ("terminal", terminal, obj), ("terminal", terminal, region))):
         return miss
+    if (held_in := _contained(c, refs, terminal, obj, region)) is not None:
+        return held_in
     ents = _entities(terminal)
     held, _ = _held(terminal, obj)
     inside, outside, detail = _footprint(ents[obj], ents[region], sigma(ents[obj]))
@@ -295,6 +329,8 @@ def _eval_on(c, initial, terminal, refs):
     obj, support = c.args["object"], c.args["support"]
     if (miss := _need(c, refs, ("terminal", terminal, obj), ("terminal", terminal, support))):
         return miss
+    if (held_in := _contained(c, refs, terminal, obj, support)) is not None:  # a container: resting in it
+        return held_in
     ents = _entities(terminal)
     o, s = ents[obj], ents[support]
     m = 2.0 * math.hypot(sigma(o), sigma(s))

@@ -47,6 +47,8 @@ logger = logging.getLogger(__name__)
 
 #: The TARGETS.md name of the LIBERO target a LIBERO bench adds to its workspace.
 LIBERO_TARGET = "libero"
+#: How the cached looks were measured (a cache measured otherwise is measured again).
+_LOOKS_METHOD = "generated_clutter_v2"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 
@@ -238,7 +240,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
 
 
 def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
-    """Appearance descriptors of the categories of ``tasks`` (measured alone on generated
+    """Appearance descriptors of the categories of ``tasks`` (measured on generated cluttered
     scenes, :mod:`phyagentos.targets.libero.descriptors`), cached per workspace in
     ``libero/descriptors.yaml``; a task whose categories are all cached builds nothing."""
     from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
@@ -246,6 +248,8 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str,
 
     path = workspace_dir / "libero" / "descriptors.yaml"
     cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
+    if cache.get("_method") != _LOOKS_METHOD:  # measured another way: measure again
+        cache = {"_method": _LOOKS_METHOD}
     measured = set(cache.get("_measured_tasks", []))
     for i in tasks:
         key = f"{suite}/{i}"
@@ -261,7 +265,7 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str,
             raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
         measured.add(key)
         cache["_measured_tasks"] = sorted(measured)
-        atomic_write_text(path, "# Looks of LIBERO's object categories, measured alone on generated scenes by the\n"
+        atomic_write_text(path, "# Looks of LIBERO's object categories, measured on generated cluttered scenes by the\n"
                                 "# project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n"
                           + yaml.safe_dump(cache, sort_keys=True))
     return {k: v for k, v in cache.items() if not k.startswith("_")}

@@ -10,10 +10,11 @@ Cost of detection i for descriptor j (only the attributes the descriptor declare
 * track: distance to the descriptor's current track / ``position_scale_m``, capped at 1
   (tie-breaker between otherwise identical objects; objects do move between observations).
 
-The optimal assignment is :func:`scipy.optimize.linear_sum_assignment` (Kuhn 1955). A pair
-costing more than ``gate_cost`` is never associated; an assignment whose runner-up (another
-descriptor for that detection, or another detection for that descriptor) is within
-``ambiguity_margin`` is ambiguous: the detection stays ``unknown`` and the object unseen.
+The optimal assignment is :func:`scipy.optimize.linear_sum_assignment` (Kuhn 1955), with
+a "no match" option at ``gate_cost`` for every detection and descriptor. A pair costing more
+than ``gate_cost`` is never associated; a match whose margin (the cost of the best
+assignment without it minus the optimum) is below ``ambiguity_margin`` is ambiguous: the
+detection stays ``unknown`` and the object unseen.
 """
 
 from __future__ import annotations
@@ -76,24 +77,53 @@ def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDes
     return C
 
 
+_FORBIDDEN = 1e6
+
+
+def _padded(C: np.ndarray, gate: float) -> np.ndarray:
+    """The assignment problem with "no match" options: ``[[C, U], [V, 0]]`` where a
+    detection left unknown (U, diagonal) or a descriptor left unseen (V, diagonal) costs
+    ``gate``; pairs above the gate are forbidden."""
+    n, m = C.shape
+    P = np.full((n + m, m + n), _FORBIDDEN)
+    P[:n, :m] = np.where(C <= gate, C, _FORBIDDEN)
+    P[np.arange(n), m + np.arange(n)] = gate
+    P[n + np.arange(m), np.arange(m)] = gate
+    P[n:, m:] = 0.0
+    return P
+
+
+def _total(P: np.ndarray) -> float:
+    r, c = linear_sum_assignment(P)
+    return float(P[r, c].sum())
+
+
 def associate(C: np.ndarray, config: PerceptionConfig) -> Association:
-    """Gated, margin-checked optimal assignment on the cost matrix ``C``."""
+    """Gated, margin-checked optimal assignment on the cost matrix ``C``.
+
+    The margin of a match (i, j) is how much the best assignment that does *not* give
+    descriptor j to detection i costs more than the optimum (every detection may stay
+    unknown and every descriptor unseen at ``gate_cost``): a look-alike whose own detection
+    is explained better elsewhere is no rival, two that could swap at little cost are."""
     ac = config.association
     if C.size == 0:
         return Association({}, ())
-    gated = np.where(C <= ac.gate_cost, C, 1e6)
-    rows, cols = linear_sum_assignment(gated)
+    P = _padded(C, ac.gate_cost)
+    rows, cols = linear_sum_assignment(P)
+    best = float(P[rows, cols].sum())
+    n, m = C.shape
     matches: dict[int, tuple[int, float, float]] = {}
     ambiguous: list[int] = []
     for i, j in zip(rows, cols):
+        if i >= n or j >= m:
+            continue
         c = float(C[i, j])
         if c > ac.gate_cost:
             continue
-        others = np.concatenate([np.delete(C[i, :], j), np.delete(C[:, j], i)])
-        others = others[others <= ac.gate_cost]
-        runner_up = float(others.min()) if others.size else ac.gate_cost
-        margin = max(0.0, runner_up - c) if others.size else max(0.0, ac.gate_cost - c) + ac.ambiguity_margin
-        if others.size and margin < ac.ambiguity_margin:
+        forbid = P.copy()
+        forbid[i, j] = _FORBIDDEN
+        margin = max(0.0, _total(forbid) - best)
+        if margin < ac.ambiguity_margin:
             # every detection within the margin for this descriptor is a candidate: none is named
             rivals = np.flatnonzero(C[:, j] <= c + ac.ambiguity_margin)
             ambiguous.extend(int(r) for r in rivals if int(r) not in ambiguous)

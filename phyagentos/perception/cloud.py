@@ -237,7 +237,7 @@ def object_mask(points: np.ndarray, plane: Plane, config: PerceptionConfig) -> t
     """``(mask, height)``: points above the plane and inside the workspace crop.
 
     Keeps points with ``table.object_min_height_m < height < workspace.max_height_m`` inside
-    the workspace xy rectangle and outside the base exclusion disc around the origin.
+    the workspace xy rectangle and outside the base exclusion disc around ``workspace.base_xy_m``.
     """
     ws = config.workspace
     h = plane.height(points)
@@ -245,7 +245,8 @@ def object_mask(points: np.ndarray, plane: Plane, config: PerceptionConfig) -> t
     m = (h > config.table.object_min_height_m) & (h < ws.max_height_m)
     m &= (x > ws.x_m[0]) & (x < ws.x_m[1]) & (y > ws.y_m[0]) & (y < ws.y_m[1])
     if ws.base_exclusion_radius_m > 0:
-        m &= x * x + y * y > ws.base_exclusion_radius_m ** 2
+        bx, by = ws.base_xy_m
+        m &= (x - bx) ** 2 + (y - by) ** 2 > ws.base_exclusion_radius_m ** 2
     return m, h
 
 

@@ -87,8 +87,9 @@ class WorkspaceConfig(_Section):
     y_m: tuple[float, float] = (-0.75, 0.75)
     max_height_m: float = Field(0.20, le=10.0, gt=0, description="Points higher above the plane are dropped.")
     base_exclusion_radius_m: float = Field(
-        0.18, le=5.0, ge=0, description="Points within this xy radius of the robot base (origin) are dropped."
+        0.18, le=5.0, ge=0, description="Points within this xy radius of the robot base are dropped."
     )
+    base_xy_m: tuple[float, float] = (0.0, 0.0)
 
     @model_validator(mode="after")
     def _ordered(self):
@@ -136,6 +137,10 @@ class ShapeConfig(_Section):
     )
     sphere_height_tolerance: float = Field(
         0.2, le=1000.0, gt=0, description="|height - diameter| / diameter below this for a sphere."
+    )
+    colour_from: Literal["top", "all", "vivid"] = Field(
+        "top", description="Median colour of the top-face points (top), of every point of the segment (all), or "
+                           "of its most chromatic third (vivid)."
     )
 
 

@@ -11,7 +11,8 @@ top-face points (within ``shape.top_band_m`` of the top) give the footprint (Ope
 ``minAreaRect`` -> centre, yaw, half extents) and its corner fraction (points outside the
 ellipse inscribed in that rectangle: 21.5 % for a rectangle, 0 for a disc); a least-squares sphere fit (the
 algebraic fit of |p|^2 = 2 c.p + (r^2 - |c|^2)) with a small residual and a height close to
-its diameter means a sphere. Colour is the median sRGB of the top-face points.
+its diameter means a sphere. Colour is the median sRGB of the top-face points (or of all
+the segment's points, or of its most chromatic third: ``shape.colour_from``).
 """
 
 from __future__ import annotations
@@ -30,9 +31,12 @@ from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 
-__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect"]
+__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect", "detect_clusters"]
 
 log = logging.getLogger(__name__)
+
+#: ``shape.colour_from: vivid`` keeps this most chromatic fraction of a segment's points.
+_VIVID_FRACTION = 1.0 / 3.0
 
 
 @dataclass(frozen=True)
@@ -232,9 +236,13 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
     z = plane.z_at(centre_xy) + bottom + half[2]
     position = np.array([centre_xy[0], centre_xy[1], z])
 
-    lab = srgb_to_lab(cloud.rgb[band] if band.sum() >= 5 else cloud.rgb)
+    rgb_sel = cloud.rgb[band] if band.sum() >= 5 and sc.colour_from == "top" else cloud.rgb
+    lab = srgb_to_lab(rgb_sel)
+    if sc.colour_from == "vivid" and lab.shape[0] >= 15:
+        chroma = np.hypot(lab[:, 1], lab[:, 2])
+        vivid = chroma >= np.percentile(chroma, 100.0 * (1.0 - _VIVID_FRACTION))
+        rgb_sel, lab = rgb_sel[vivid], lab[vivid]
     med_lab = np.median(lab, axis=0)
-    rgb_sel = cloud.rgb[band] if band.sum() >= 5 else cloud.rgb
     colour = np.median(rgb_sel, axis=0) / 255.0
 
     # ---- uncertainty: per camera, a centre from that camera's points; inverse-variance fuse
@@ -277,12 +285,18 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
     )
 
 
-def detect(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
-           focal_px: np.ndarray) -> list[Detection]:
-    """Cluster the object points and fit each cluster (see :func:`fit_cluster`)."""
+def detect_clusters(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
+                    focal_px: np.ndarray) -> list[tuple[Detection, np.ndarray]]:
+    """``(detection, index array into cloud)`` per cluster (see :func:`fit_cluster`)."""
     out = []
     for idx in cluster(cloud, config):
         det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
         if det is not None:
-            out.append(det)
+            out.append((det, idx))
     return out
+
+
+def detect(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
+           focal_px: np.ndarray) -> list[Detection]:
+    """Cluster the object points and fit each cluster (see :func:`fit_cluster`)."""
+    return [det for det, _ in detect_clusters(cloud, heights, plane, config, focal_px)]

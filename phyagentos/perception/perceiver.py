@@ -25,6 +25,7 @@ import logging
 import math
 from typing import Any, Mapping, Sequence
 
+import cv2
 import numpy as np
 
 from phyagentos.perception.association import associate, cost_matrix, match_confidence
@@ -43,12 +44,14 @@ from phyagentos.perception.cloud import (
 )
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
-from phyagentos.perception.detect import Detection, detect
+from phyagentos.perception.detect import Detection, detect_clusters
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.frames import CameraFrame, Proprioception
 from phyagentos.perception.relations import (
+    _footprint_margin,
     holding_evidence,
     inside_confidence,
+    normal_cdf,
     on_confidence,
     regions_from,
     width_across_fingers,
@@ -60,6 +63,26 @@ __all__ = ["Perceiver"]
 log = logging.getLogger(__name__)
 
 _OBSTACLE_MARGIN_M = 0.01
+
+#: Contents of containers: a segment whose footprint's short side is at least this long may
+#: hold things (LIBERO's basket: 16 cm; its cans and boxes: <= 8.5 cm long, 5 cm short).
+CONTAINER_MIN_SIDE_M = 0.10
+#: Its walls: points within this of the footprint's edge are the container's own, m.
+CONTAINER_WALL_M = 0.015
+#: A released object's top must stand this far above the container's floor (the 5th
+#: percentile of its interior heights), m (a basket's cloth lining lies within about 1 cm).
+CONTENT_CLEARANCE_M = 0.015
+#: Spread of a contained object's top above the floor about its perceived height, m: the
+#: lining's folds (about 1 cm) and the height perceived on the open table (within ~1 cm).
+CONTENT_HEIGHT_SIGMA_M = 0.015
+#: An object not seen now is still reported (``remembered``) for this long after its last
+#: sighting when every camera that could see it has something nearer in the way, s.
+REMEMBER_S = 60.0
+#: Its confidence is the track's times this factor.
+REMEMBERED_CONFIDENCE = 0.9
+#: A depth return this much nearer than where the ray enters the object's box is something
+#: in the way, m (depth noise is ~1-3 mm at 1 m, docs/perception.md).
+OCCLUSION_MARGIN_M = 0.01
 
 
 def _quat_yaw(yaw: float) -> list[float]:
@@ -222,7 +245,8 @@ class Perceiver:
         ws = cfg.workspace
         keep = (p[:, 0] > ws.x_m[0]) & (p[:, 0] < ws.x_m[1]) & (p[:, 1] > ws.y_m[0]) & (p[:, 1] < ws.y_m[1])
         if ws.base_exclusion_radius_m > 0:
-            keep &= p[:, 0] ** 2 + p[:, 1] ** 2 > ws.base_exclusion_radius_m ** 2
+            bx, by = ws.base_xy_m
+            keep &= (p[:, 0] - bx) ** 2 + (p[:, 1] - by) ** 2 > ws.base_exclusion_radius_m ** 2
         keep &= ~gripper_mask(p, proprio, cfg)
         if robot_capsules:
             keep &= ~capsule_mask(p, robot_capsules, cfg.robot_mask.capsule_margin_m)
@@ -276,7 +300,8 @@ class Perceiver:
         self.last_cloud = cloud
         t1 = time.perf_counter()
         focal = np.array([f.intrinsics.fx / cfg.stride_for(f.intrinsics.width) for f in frames])
-        dets = _stack(detect(cloud, heights, plane, cfg, focal), plane, cfg)
+        clusters = detect_clusters(cloud, heights, plane, cfg, focal)
+        dets = _stack([d for d, _ in clusters], plane, cfg)
         t2 = time.perf_counter()
         sensors = [f.sensor for f in frames]
         det_cams = [self._cameras_of(cloud, heights, d, sensors) for d in dets]
@@ -299,27 +324,63 @@ class Perceiver:
             else:
                 self.tracks[name] = Track.start(name, det, conf, stamp, det_cams[i])
             self.tracks[name].seen_now = True
+            self.tracks[name].released_s = None
             matched[i] = name
+        for i, name in matched.items():  # seen again: still inside the container it was in?
+            t = self.tracks[name]
+            t.inside_of = _still_inside(t.inside_of, dets[i], dets, matched)
+
+        # ---- holding (a release noticed now is looked for in this very observation)
+        holding_rel = self._update_holding(proprio, stamp)
+
+        # released objects (or ones seen inside a container before) not seen on their own: inside a
+        # container segment where the hand let them go (where they were seen)?
+        for name, t in self.tracks.items():
+            if t.seen_now or t.held or (t.released_s is None and t.inside_of is None):
+                continue
+            hit = _released_inside(t, cloud, heights, dets, [idx for _, idx in clusters], sensors)
+            if hit is None:
+                continue
+            k, position, conf, points, cams = hit
+            t.position, t.bottom_m = position, float(position[2] - t.half_extents[2] - plane.z_at(position[:2]))
+            t.position[2] = plane.z_at(position[:2]) + t.bottom_m + t.half_extents[2]
+            t.var_xy = max(dets[k].position_std_m, CONTAINER_WALL_M / 2.0) ** 2
+            t.confidence, t.points, t.cameras, t.last_seen_s = conf, points, cams, stamp
+            t.seen_now, t.released_s = True, None
+            t.inside_of = next((n for i, n in matched.items() if i == k), None)
         t3 = time.perf_counter()
 
-        # ---- holding
-        holding_rel = self._update_holding(proprio, stamp)
+        # ---- remembered: seen since its release, hidden now behind something nearer
+        remembered: dict[str, tuple[str, ...]] = {}
+        for name, t in self.tracks.items():
+            if t.seen_now or t.held or t.released_s is not None or stamp - t.last_seen_s > REMEMBER_S:
+                continue
+            occluded_in = _occluded_in(t, frames)
+            if occluded_in:
+                remembered[name] = occluded_in
 
         # ---- entities
         entities: list[dict] = []
         geo: dict[str, dict] = {}
         for name in names:
             t = self.tracks.get(name)
-            if t is None or not (t.seen_now or t.held):
+            if t is None or not (t.seen_now or t.held or name in remembered):
                 continue
             if t.held:
                 ent = self._held_entity(t, proprio, holding_rel[1] if holding_rel else 0.0)
             else:
+                extra = {"inside_of": t.inside_of} if t.inside_of else {}
+                conf = t.confidence
+                if name in remembered:
+                    extra.update(remembered=True, occluded_in=list(remembered[name]), last_seen_s=_r(t.last_seen_s, 6))
+                    conf *= REMEMBERED_CONFIDENCE
+                std = math.sqrt(t.predicted_var(stamp, cfg))
                 ent = self._entity(name, "object", t.position, t.yaw, t.half_extents, t.shape, t.colour_rgb,
-                                   t.confidence, math.sqrt(t.predicted_var(stamp, cfg)), math.sqrt(t.var_yaw),
-                                   t.points, t.cameras, evidence_paths, source="perceived")
-                geo[name] = _geo(t.position, t.yaw, t.half_extents, t.shape, t.bottom_m, plane,
-                                 math.sqrt(t.var_xy))
+                                   conf, std, math.sqrt(t.var_yaw), t.points, () if name in remembered else t.cameras,
+                                   evidence_paths, source="remembered" if name in remembered else "perceived",
+                                   extra=extra or None)
+                geo[name] = _geo(t.position, t.yaw, t.half_extents, t.shape, t.bottom_m, plane, std)
+                geo[name]["inside_of"] = t.inside_of
             entities.append(ent)
         k = 0
         for i, det in enumerate(dets):
@@ -340,7 +401,8 @@ class Perceiver:
         entities.extend(self._robot_entities(proprio))
 
         relations = self._relations(geo, region_list, holding_rel)
-        unseen = [n for n in names if not (n in self.tracks and (self.tracks[n].seen_now or self.tracks[n].held))]
+        unseen = [n for n in names if not (n in self.tracks and (self.tracks[n].seen_now or self.tracks[n].held))
+                  and n not in remembered]
         t4 = time.perf_counter()
         self.last_timing_ms = {"cloud": 1e3 * (t1 - t0), "detect": 1e3 * (t2 - t1), "associate": 1e3 * (t3 - t2),
                                "relations": 1e3 * (t4 - t3), "total": 1e3 * (t4 - t0)}
@@ -356,6 +418,7 @@ class Perceiver:
                 "wrist_force_n": None if proprio.wrist_force_n is None else _r(proprio.wrist_force_n, 3),
             },
             "unseen": unseen,
+            "remembered": sorted(remembered),
             "support_plane": {"normal": _r(plane.normal, 5), "offset_m": _r(plane.offset_m, 5), "fitted": plane.fitted},
         }
 
@@ -438,6 +501,10 @@ class Perceiver:
         for t in self.tracks.values():
             if t.held and all(c[1] != t.name for c in candidates):
                 t.held = False  # released (or lost): unknown until seen again
+                t.released_s = stamp
+                t.inside_of = None
+                if t.grasp_offset is not None:  # where the hand let it go (a prior for the next sighting)
+                    t.position = (proprio.tcp_pose @ t.grasp_offset)[:3, 3].copy()
                 t.var_xy = max(t.var_xy, 0.03 ** 2)
                 t.confidence *= 0.5
                 t.grasp_offset = None
@@ -473,13 +540,20 @@ class Perceiver:
             rels.append({"subject": "gripper", "relation": "holding", "object": holding_rel[0],
                          "confidence": _r(holding_rel[1], 3)})
         for a, ga in geo.items():
-            if ga["bottom"] <= cfg.relations.on_gap_m:
+            if ga["bottom"] <= cfg.relations.on_gap_m and ga.get("inside_of") is None:
                 rels.append({"subject": a, "relation": "on", "object": "table",
                              "confidence": _r(ga["table_conf"], 3)})
                 for reg in regions:
                     c = inside_confidence(ga["position"], ga["std"], reg)
                     if c >= cfg.relations.min_confidence:
                         rels.append({"subject": a, "relation": "inside", "object": reg.name, "confidence": _r(c, 3)})
+            cont = ga.get("inside_of")
+            if cont is not None and cont in geo:
+                gb = geo[cont]
+                margin = _footprint_margin(ga["position"][:2], gb["position"], gb["yaw"], gb["half"], gb["shape"])
+                c = normal_cdf(margin / max(math.hypot(ga["std"], gb["std"]), 1e-4))
+                if c >= cfg.relations.min_confidence:
+                    rels.append({"subject": a, "relation": "inside", "object": cont, "confidence": _r(c, 3)})
             for b, gb in geo.items():
                 if a == b:
                     continue
@@ -533,3 +607,133 @@ def _stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> lis
             out[i] = replace(a, bottom_m=bottom, half_extents=half, position=pos)
             break
     return out
+
+
+def _still_inside(container: str | None, det: Detection, dets: list[Detection], matched: dict[int, str]) -> str | None:
+    """``container`` when the object's new detection ``det`` still stands inside it: the
+    container is seen now (associated), ``det``'s centre lies in its footprint and its lowest
+    points lie more than 2 cm below the container's top (not resting on the rim); else None.
+    (A partial view over a basket's wall is a segment of its own.)"""
+    if container is None:
+        return None
+    k = next((i for i, n in matched.items() if n == container), None)
+    if k is None:
+        return None
+    c = dets[k]
+    if _footprint_margin(det.position[:2], c.position, c.yaw, c.half_extents, c.shape) < 0.0:
+        return None
+    return container if det.low_m < c.top_m - 0.02 else None
+
+
+def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Detection], indices: list[np.ndarray],
+                     sensors: list[str]) -> tuple[int, np.ndarray, float, int, tuple[str, ...]] | None:
+    """Is object ``t`` standing inside a container segment where the hand let it go (or where
+    it was last seen inside one)?
+
+    An object set down in a basket touches its lining and walls and joins the basket's
+    segment; from above, only its top shows between the walls. For a detection whose
+    footprint's short side is at least :data:`CONTAINER_MIN_SIDE_M` and holds the release
+    point (``t.position``, from proprioception): its interior points (footprint shrunk by
+    :data:`CONTAINER_WALL_M`), the floor (their 5th height percentile), the interior points
+    within the object's footprint radius + 2 cm of the release point, then within its radius
+    of the top face found there. The top face: the points within 1 cm of the most populated
+    5 mm height bin more than :data:`CONTENT_CLEARANCE_M` above the floor. The object is seen
+    there when that top stands the object's perceived height above the floor (within 2 cm),
+    is flat (height RMS <= 7 mm) and spans at least 60 % of the object's short side both
+    ways: a lining fold or a wall's rim fails one of these. Confidence exp(-err^2 / 2
+    :data:`CONTENT_HEIGHT_SIGMA_M`^2) x (1 - exp(-points / 30)).
+
+    Returns ``(container index, centre (3,), confidence, points, cameras)`` or None.
+    """
+    radius = float(max(t.half_extents[0], t.half_extents[1]))
+    height = 2.0 * float(t.half_extents[2])
+    p0 = np.asarray(t.position[:2], float)
+    for k, (det, idx) in enumerate(zip(dets, indices)):
+        short = float(min(det.half_extents[0], det.half_extents[1]))
+        if 2.0 * short < CONTAINER_MIN_SIDE_M:
+            continue
+        if _footprint_margin(p0, det.position, det.yaw, det.half_extents, det.shape) < 0.0:
+            continue
+        xy = cloud.points[idx, :2] - det.position[:2]
+        h = heights[idx]
+        c, s_ = math.cos(det.yaw), math.sin(det.yaw)
+        u, v = c * xy[:, 0] + s_ * xy[:, 1], -s_ * xy[:, 0] + c * xy[:, 1]
+        interior = (np.abs(u) < det.half_extents[0] - CONTAINER_WALL_M) & (np.abs(v) < det.half_extents[1] - CONTAINER_WALL_M)
+        if int(interior.sum()) < 25:
+            continue
+        floor = float(np.percentile(h[interior], 5))
+        centre = p0
+        for grow in (0.02, 0.0):  # search around the release point, then around the top face found
+            disc = interior & (np.linalg.norm(cloud.points[idx, :2] - centre, axis=1) < radius + grow)
+            above = h[disc][h[disc] > floor + CONTENT_CLEARANCE_M]
+            if above.size < 25:
+                break
+            # the top face: the most populated 5 mm height bin above the floor (a flat top
+            # gathers there; walls and folds spread over heights)
+            counts, edges = np.histogram(above, bins=np.arange(floor, float(above.max()) + 0.01, 0.005))
+            top = float(edges[int(np.argmax(counts))] + 0.0025)
+            face = disc & (np.abs(h - top) < 0.01)
+            if int(face.sum()) < 15:
+                break
+            centre = cloud.points[idx[face], :2].mean(axis=0)
+        else:
+            (_, _), (width, length), _ = cv2.minAreaRect(cloud.points[idx[face], :2].astype(np.float32))
+            log.debug("released %s in segment %d: floor %.3f top %.3f (height %.3f) face std %.4f, %d points, "
+                      "span %.3f x %.3f m", t.name, k, floor, top, height, float(np.std(h[face])), int(face.sum()), width, length)
+            if top - floor < CONTENT_CLEARANCE_M or abs(top - floor - height) > 0.02:
+                continue
+            if float(np.std(h[face])) > 0.007:
+                continue
+            short_obj = 2.0 * float(min(t.half_extents[0], t.half_extents[1]))
+            if min(width, length) < 0.6 * short_obj:
+                continue
+            n = int(face.sum())
+            err = abs(top - floor - height)
+            conf = math.exp(-0.5 * (err / CONTENT_HEIGHT_SIGMA_M) ** 2) * (1.0 - math.exp(-n / 30.0))
+            pos = np.array([centre[0], centre[1], 0.0])
+            pos[2] = float(np.median(cloud.points[idx[face], 2] - h[face])) + floor + t.half_extents[2]  # on the floor
+            cams = tuple(sensors[int(i)] for i in np.unique(cloud.camera[idx[face]]))
+            return k, pos, conf, n, cams
+    return None
+
+def _occluded_in(t: Track, frames: Sequence[CameraFrame]) -> tuple[str, ...]:
+    """Cameras in which something nearer hides the centre of track ``t``; empty when any
+    camera sees that spot free (its depth there reaches the object's own box: it would have
+    been seen) or none has it in view. The ray to the centre enters the object's box (its
+    perceived centre, yaw and half extents) at some depth; a return more than
+    :data:`OCCLUSION_MARGIN_M` nearer than that entry is something else in the way."""
+    p = np.asarray(t.position, float)
+    c, s_ = math.cos(t.yaw), math.sin(t.yaw)
+    R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])  # object frame in the world
+    half = np.asarray(t.half_extents, float)
+    hidden: list[str] = []
+    for f in frames:
+        T = f.T_world_camera
+        q = np.linalg.inv(T) @ np.append(p, 1.0)
+        if q[2] <= 0.05:
+            continue
+        k = f.intrinsics
+        u, v = k.fx * q[0] / q[2] + k.cx, k.fy * q[1] / q[2] + k.cy
+        if not (0 <= u <= k.width - 1 and 0 <= v <= k.height - 1):
+            continue
+        r0, c0 = int(round(v)), int(round(u))
+        win = f.depth_m[max(0, r0 - 1):r0 + 2, max(0, c0 - 1):c0 + 2]
+        win = win[win > 0]
+        if win.size == 0:
+            continue
+        o = T[:3, 3]
+        ray = (p - o) / np.linalg.norm(p - o)
+        # slab entry of the ray into the object's box (object frame), as a length along the ray
+        ol, rl = R.T @ (o - p), R.T @ ray
+        with np.errstate(divide="ignore"):
+            t1, t2 = (-half - ol) / rl, (half - ol) / rl
+        entry = float(np.max(np.minimum(t1, t2)))
+        entry_depth = entry * float(ray @ T[:3, 2])
+        seen = float(np.median(win))
+        log.debug("remembered %s? %s sees depth %.3f m where its box begins at %.3f m", t.name, f.sensor, seen,
+                  entry_depth)
+        if seen < entry_depth - OCCLUSION_MARGIN_M:
+            hidden.append(f.sensor)
+        else:
+            return ()
+    return tuple(hidden)

@@ -56,6 +56,11 @@ class Track:
     held: bool = False
     grasp_offset: np.ndarray | None = None  # (4, 4) object pose in the tcp frame while held
     seen_now: bool = True
+    #: Name of the declared container the object was last seen inside (contents of its
+    #: segment, see :mod:`phyagentos.perception.perceiver`), else None.
+    inside_of: str | None = None
+    #: Stamp (s) at which the hand let the object go; None once it has been seen since.
+    released_s: float | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,

@@ -43,12 +43,18 @@ def has_cameras(target) -> bool:
 
 def make_perceiver(target, config_path: str | Path | None = None):
     """A fresh :class:`~phyagentos.perception.Perceiver` for one session on ``target``:
-    the workspace's ``perception.yaml`` (``config_path``, if it exists) or the defaults,
+    the workspace's ``perception.yaml`` (``config_path``, if it exists), else the target's
+    ``perception_config()`` when it has one (LIBERO's worlds), else the defaults,
     and the objects the user declared (``target.describe_declared()``)."""
     from phyagentos.perception import Perceiver, PerceptionConfig  # noqa: PLC0415
 
     path = Path(config_path) if config_path is not None else None
-    cfg = PerceptionConfig.from_yaml(path) if path is not None and path.is_file() else PerceptionConfig.default()
+    if path is not None and path.is_file():
+        cfg = PerceptionConfig.from_yaml(path)
+    elif hasattr(target, "perception_config"):  # the parameters that suit the target's world
+        cfg = target.perception_config()
+    else:
+        cfg = PerceptionConfig.default()
     p = Perceiver(cfg, target.describe_declared()["objects"])
     if hasattr(p, "robot_name"):
         p.robot_name = getattr(target, "ROBOT", "robot")

@@ -1,19 +1,28 @@
-"""Appearance descriptors of LIBERO's object categories, measured from generated scenes.
+"""Appearance descriptors of LIBERO's object categories, measured on generated cluttered scenes.
 
 A LIBERO task declares its objects by name and category only (``alphabet_soup_1 -
 alphabet_soup``). The perceiver associates what it segments from RGB-D with declared objects
 by colour, size and shape (:mod:`phyagentos.perception.association`), so each category needs
 those as a user would declare them. The object models are known (their meshes and textures
-ship in LIBERO's asset wheels), so the descriptors are measured on *generated* scenes, never
-on an evaluation init state:
+ship in LIBERO's asset wheels), so the descriptors are measured on scenes *this module
+generates*, never on an evaluation init state:
 
-for each object of a built LIBERO world, LIBERO's own placement sampler generates a scene
-(``env.reset()`` seeded, no fixed init state), every other object is moved out of the cameras'
-view, the object is moved to a spot (:data:`SPOTS_XY`) keeping the orientation LIBERO's
-sampler gave it (how LIBERO stands that model up), physics settles it for 1 s, both cameras are captured and the project's own perceiver
-(no declared objects) reports the one thing it sees: its shape, median top-face colour and
-size. The category's descriptor (``{shape, colour, size_m}``, size the full extents, m, long
-side first) is the median over the spots (the most frequent shape).
+:func:`place_objects` sets every object of a built LIBERO world down at a random spot of the
+floor area the cameras see (:data:`AREA_X_M`, :data:`AREA_Y_M`), at a random yaw about the
+vertical (keeping the orientation LIBERO gives the model, which stands it up), no two closer
+than their bounding radii plus :data:`GAP_M`, and lets physics settle it (1 s). The project's
+perceiver (the target's perception configuration, no declared objects) then segments both
+cameras' frames as in a session: neighbours, the arm at its start pose and the floor texture
+all present. Each segment is labelled with the object whose true footprint (the world
+bounding box of its geoms, read from the generated scene: this is the data generator, not the
+Agent plane) holds the segment's centre, when exactly one does and the segment is no larger
+than that object (a segment spanning two objects is not a look). A category's descriptor
+(``{shape, colour, size_m}``, size the full extents, m, long side first) is the median over
+its labelled segments of :data:`SCENES` scenes; the most frequent shape is declared only when
+at least :data:`SHAPE_AGREEMENT` of the segments agree on it.
+
+:func:`perception_accuracy` scores the perceiver with declared looks on further generated
+scenes against the same truth, per category (``bench/libero_perception.py``).
 
 The world is left disturbed: call :meth:`~phyagentos.targets.libero.target.LiberoTarget.reset`
 afterwards (:func:`measure_descriptors` does).
@@ -22,25 +31,36 @@ afterwards (:func:`measure_descriptors` does).
 from __future__ import annotations
 
 import logging
-from typing import Any
+import math
+from typing import Any, Sequence
 
 import mujoco
 import numpy as np
 
 from phyagentos.errors import TargetError
 
-__all__ = ["SPOTS_XY", "measure_descriptors"]
+__all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "object_boxes", "place_objects",
+           "label_segments", "perception_accuracy"]
 
 log = logging.getLogger(__name__)
 
-#: Where each object is set down to be measured, world xy in m: four spots spread over the
-#: part of LIBERO's scenes both cameras see (the look is the median over them).
-SPOTS_XY: tuple[tuple[float, float], ...] = ((0.05, -0.15), (-0.15, -0.2), (-0.15, 0.12), (0.1, 0.12))
-_AWAY = 20.0  # m: where the other objects wait (far outside every camera's view)
-#: How close to the spot a detection's centre must be to be the object measured, m.
-_AT_SPOT_M = 0.04
-#: Seed of LIBERO's own placement sampler for the generated scenes (not an init state).
-_GENERATOR_SEED = 12345
+#: World x and y ranges (m) objects are set down in: the part of LIBERO's floor scenes both
+#: cameras see (the floor scenes' object regions span about x -0.23..0.18, y -0.3..0.3).
+AREA_X_M: tuple[float, float] = (-0.24, 0.2)
+AREA_Y_M: tuple[float, float] = (-0.3, 0.3)
+#: Least gap between two objects' bounding circles, m.
+GAP_M = 0.015
+#: Generated scenes per world the looks are measured on.
+SCENES = 6
+#: Generator seeds start here (not init states; the evaluation scripts use other seeds).
+GENERATOR_SEED = 12345
+#: A category's shape is declared only when at least this fraction of its labelled segments
+#: agree on it (a bottle with a cap, a carton with a spout flip between box and cylinder).
+SHAPE_AGREEMENT = 0.8
+_AWAY = 20.0  # m: where objects that found no free spot wait (far outside every camera's view)
+#: A segment is an object's look only when its footprint's long side is at most this factor
+#: of the object's true footprint long side (plus 1 cm): bigger segments span two objects.
+_MAX_SIZE_RATIO = 1.3
 
 
 def _free_adr(m: mujoco.MjModel, body: int) -> tuple[int, int] | None:
@@ -50,67 +70,193 @@ def _free_adr(m: mujoco.MjModel, body: int) -> tuple[int, int] | None:
     return int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
 
 
-def measure_descriptors(target, *, settle_s: float = 1.0) -> dict[str, dict[str, Any]]:
-    """``{category: {"shape", "colour" (3,) sRGB 0..1, "size_m" (3,) m}}`` for every object
-    category of ``target``'s task, measured alone on a generated scene (module docstring);
-    ``target`` is reset afterwards. Categories the perceiver does not see alone (too flat,
-    out of view) are left out.
+def object_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``{object: (lo (3,), hi (3,))}``: the world axis-aligned bounding box of each object's
+    geoms (all of its bodies), m, from the simulator's state: ground truth, for generated
+    scenes and scoring only."""
+    m, d = target.model, target.data
+    out = {}
+    for name, body in target._obj_body.items():
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for g in range(m.ngeom):
+            if int(m.body_rootid[int(m.geom_bodyid[g])]) != int(m.body_rootid[body]):
+                continue
+            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+            corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+            w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
+            lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
+        out[name] = (lo, hi)
+    return out
+
+
+def place_objects(target, seed: int, *, names: Sequence[str] | None = None, settle_s: float = 1.0) -> list[str]:
+    """Set the objects ``names`` (default all of the task's) down (bottom 1 cm above the floor's
+    or table's top) at random free spots of the area (:data:`AREA_X_M` x :data:`AREA_Y_M`) at random yaws, move the others away,
+    settle for ``settle_s``. Returns the objects placed (an object that finds no free spot
+    in 200 draws waits away). Seeded by ``seed``; for generated scenes only."""
+    m, d = target.model, target.data
+    rng = np.random.default_rng(seed)
+    target.generate_scene(seed=seed)  # LIBERO's reset: the arm at its start pose
+    all_names = list(target._obj_names)
+    chosen = list(all_names if names is None else names)
+    rng.shuffle(chosen)
+    boxes = object_boxes(target)
+    support_z = target._support_top_z()
+    placed: list[tuple[np.ndarray, float]] = []
+    out = []
+    for k, name in enumerate(all_names):
+        adr = _free_adr(m, target._obj_body[name])
+        if adr is None:
+            continue
+        if name not in chosen:
+            qa, da = adr
+            d.qpos[qa:qa + 3] = (_AWAY + 2.0 * k, _AWAY, 1.0)
+            d.qvel[da:da + 6] = 0.0
+    for name in chosen:
+        adr = _free_adr(m, target._obj_body[name])
+        if adr is None:
+            continue
+        qa, da = adr
+        lo, hi = boxes[name]
+        r = 0.5 * float(np.hypot(*(hi - lo)[:2]))
+        body = d.xpos[target._obj_body[name]]
+        off = 0.5 * (lo + hi)[:2] - body[:2]  # footprint centre relative to the body origin
+        spot = None
+        for _ in range(200):
+            xy = np.array([rng.uniform(*AREA_X_M), rng.uniform(*AREA_Y_M)])
+            if all(np.linalg.norm(xy - p) > r + q + GAP_M for p, q in placed):
+                spot = xy
+                break
+        if spot is None:
+            d.qpos[qa:qa + 3] = (_AWAY + 2.0 * len(out) + 1.0, -_AWAY, 1.0)
+            d.qvel[da:da + 6] = 0.0
+            continue
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        q0 = d.qpos[qa + 3:qa + 7].copy()
+        qz = np.array([math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)])
+        q = np.empty(4)
+        mujoco.mju_mulQuat(q, qz, q0)
+        c, s = math.cos(yaw), math.sin(yaw)
+        off_r = np.array([c * off[0] - s * off[1], s * off[0] + c * off[1]])
+        d.qpos[qa:qa + 2] = spot - off_r
+        d.qpos[qa + 2] = float(d.qpos[qa + 2]) + support_z + 0.01 - float(lo[2])  # its bottom 1 cm above the support
+        d.qpos[qa + 3:qa + 7] = q
+        d.qvel[da:da + 6] = 0.0
+        placed.append((spot, r))
+        out.append(name)
+    mujoco.mj_forward(m, d)
+    target.hold(duration_s=settle_s)
+    return out
+
+
+def label_segments(entities: Sequence[dict], boxes: dict[str, tuple[np.ndarray, np.ndarray]], *,
+                   tol_m: float = 0.005) -> dict[int, str]:
+    """``{entity index: object}`` for perceived entities whose centre lies in exactly one
+    object's true footprint (grown by ``tol_m``) and whose footprint is no larger than that
+    object's (:data:`_MAX_SIZE_RATIO`); robot and declared entities are skipped."""
+    out = {}
+    for i, e in enumerate(entities):
+        if e.get("kind") not in ("object", "unknown"):
+            continue
+        p = np.asarray(e["position"][:2], float)
+        hits = [n for n, (lo, hi) in boxes.items()
+                if np.all(p >= lo[:2] - tol_m) and np.all(p <= hi[:2] + tol_m) and hi[2] > -1.0 and lo[2] < 1.0]
+        if len(hits) != 1:
+            continue
+        lo, hi = boxes[hits[0]]
+        true_long = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+        seen_long = 2.0 * float(max(e["size"][0], e["size"][1]))
+        if seen_long <= _MAX_SIZE_RATIO * true_long + 0.01:
+            out[i] = hits[0]
+    return out
+
+
+def _observe(target, config, declared=()) -> dict:
+    from phyagentos.perception import Perceiver  # noqa: PLC0415
+    from phyagentos.primitives.observation import robot_capsules  # noqa: PLC0415
+
+    frames = [target.capture(s) for s in target.camera_names()]
+    return Perceiver(config, declared).observe(frames, target.proprioception(), robot_capsules=robot_capsules(target))
+
+
+def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_SEED, config=None,
+                        settle_s: float = 1.0) -> dict[str, dict[str, Any]]:
+    """``{category: {"shape"?, "colour" (3,) sRGB 0..1, "size_m" (3,) m}}`` for every object
+    category of ``target``'s task, measured on ``scenes`` generated cluttered scenes (module
+    docstring) with perception configuration ``config`` (default: the target's
+    :meth:`perception_config`); ``target`` is reset afterwards. A category labelled in fewer
+    than 2 scenes is left out (logged).
 
     Raises:
         TargetError: the target is closed or cannot render.
     """
-    m = target.model
-    names = list(target._obj_names)
+    if config is None and hasattr(target, "perception_config"):
+        config = target.perception_config()
     cats = target._problem.objects
-    adr = {n: _free_adr(m, target._obj_body[n]) for n in names}
-    out: dict[str, dict[str, Any]] = {}
+    looks: dict[str, list[dict[str, Any]]] = {}
     try:
-        for name in names:
-            cat = cats[name]
-            if cat in out or adr[name] is None:
-                continue
-            looks = [look for xy in SPOTS_XY if (look := _look_alone(target, name, names, adr, xy, settle_s)) is not None]
-            if len(looks) < 2:
-                log.warning("LIBERO descriptor of %s: seen alone at %d of %d spots; left out", cat, len(looks), len(SPOTS_XY))
-                continue
-            shapes = [lk["shape"] for lk in looks]
-            out[cat] = {"shape": max(set(shapes), key=shapes.count),
-                        "colour": [round(float(c), 3) for c in np.median([lk["colour"] for lk in looks], axis=0)],
-                        "size_m": [round(float(c), 4) for c in np.median([lk["size_m"] for lk in looks], axis=0)]}
+        for k in range(scenes):
+            place_objects(target, seed + k, settle_s=settle_s)
+            boxes = object_boxes(target)
+            snap = _observe(target, config)
+            for i, name in label_segments(snap["entities"], boxes).items():
+                e = snap["entities"][i]
+                half = sorted((float(e["size"][0]), float(e["size"][1])), reverse=True) + [float(e["size"][2])]
+                looks.setdefault(cats[name], []).append({"shape": e["attributes"].get("shape", "box"),
+                                                         "colour": e["attributes"]["colour_rgb"],
+                                                         "size_m": [2.0 * h for h in half]})
     except TargetError:
         raise
     finally:
         target.reset(seed=target.init_index)
+    out: dict[str, dict[str, Any]] = {}
+    for cat in sorted(set(cats.values())):
+        got = looks.get(cat, [])
+        if len(got) < 2:
+            log.warning("LIBERO descriptor of %s: labelled in %d of %d generated scenes; left out", cat, len(got), scenes)
+            continue
+        shapes = [lk["shape"] for lk in got]
+        mode = max(set(shapes), key=shapes.count)
+        out[cat] = {"colour": [round(float(c), 3) for c in np.median([lk["colour"] for lk in got], axis=0)],
+                    "size_m": [round(float(c), 4) for c in np.median([lk["size_m"] for lk in got], axis=0)]}
+        if shapes.count(mode) >= SHAPE_AGREEMENT * len(shapes):  # else the shape is no cue: not declared
+            out[cat]["shape"] = mode
     return out
 
 
-def _look_alone(target, name, names, adr, xy, settle_s) -> dict[str, Any] | None:
-    """Shape, colour and size of object ``name`` set down alone at ``xy``: the detection whose
-    centre is within :data:`_AT_SPOT_M` of the spot; ``None`` when there is none."""
-    from phyagentos.perception import Perceiver  # noqa: PLC0415
-
-    m, d = target.model, target.data
-    target.generate_scene(seed=_GENERATOR_SEED)
-    for k, other in enumerate(names):
-        if other != name and adr[other] is not None:
-            qa, da = adr[other]
-            d.qpos[qa:qa + 3] = (_AWAY + 2.0 * k, _AWAY, 1.0)
-            d.qvel[da:da + 6] = 0.0
-    qa, da = adr[name]
-    d.qpos[qa:qa + 3] = (xy[0], xy[1], float(d.qpos[qa + 2]) + 0.02)  # orientation: as LIBERO's sampler set it
-    d.qvel[da:da + 6] = 0.0
-    mujoco.mj_forward(m, d)
-    target.hold(duration_s=settle_s)
-    frames = [target.capture(s) for s in target.camera_names()]
-    snap = Perceiver().observe(frames, target.proprioception())
-    seen = sorted((float(np.linalg.norm(np.subtract(e["position"][:2], xy))), i) for i, e in
-                  enumerate(snap["entities"]) if e.get("kind") == "unknown")
-    log.debug("look of %s at %s: true %s, seen %s", name, xy, d.qpos[qa:qa + 3].round(3).tolist(),
-              [(e["name"], e["position"]) for e in snap["entities"]])
-    # the thing whose centre is at the spot (a container's walls may also be seen apart)
-    if not seen or seen[0][0] > _AT_SPOT_M:
-        return None
-    e = snap["entities"][seen[0][1]]
-    half = sorted((float(e["size"][0]), float(e["size"][1])), reverse=True) + [float(e["size"][2])]
-    return {"shape": e["attributes"].get("shape", "box"), "colour": e["attributes"]["colour_rgb"],
-            "size_m": [2.0 * h for h in half]}
+def perception_accuracy(target, looks: dict[str, dict[str, Any]], seeds: Sequence[int], *, config=None,
+                        settle_s: float = 1.0) -> list[dict[str, Any]]:
+    """Score the perceiver on generated scenes ``seeds`` (:func:`place_objects`) with the
+    objects declared by name, category and ``looks``: one row per (scene, object) with
+    ``category``, ``outcome`` (``correct``: perceived as that object at confidence >= 0.5
+    with its centre in the true footprint grown by 1 cm; ``wrong``: so perceived but
+    elsewhere; ``unknown``: reported below 0.5; ``unseen``) and ``xy_error_m`` (centre to
+    the footprint centre). ``target`` is reset afterwards."""
+    if config is None and hasattr(target, "perception_config"):
+        config = target.perception_config()
+    cats = target._problem.objects
+    declared = [{"name": n, "class": c, **looks.get(c, {})} for n, c in cats.items()]
+    rows = []
+    try:
+        for seed in seeds:
+            placed = place_objects(target, seed, settle_s=settle_s)
+            boxes = object_boxes(target)
+            snap = _observe(target, config, declared)
+            ents = {e["name"]: e for e in snap["entities"]}
+            for name in placed:
+                lo, hi = boxes[name]
+                e = ents.get(name)
+                row = {"seed": int(seed), "object": name, "category": cats[name], "xy_error_m": None}
+                if e is None:
+                    row["outcome"] = "unseen"
+                elif e["kind"] != "object":
+                    row["outcome"] = "unknown"
+                else:
+                    p = np.asarray(e["position"][:2])
+                    row["xy_error_m"] = round(float(np.linalg.norm(p - 0.5 * (lo + hi)[:2])), 4)
+                    inside = np.all(p >= lo[:2] - 0.01) and np.all(p <= hi[:2] + 0.01)
+                    row["outcome"] = "correct" if inside else "wrong"
+                rows.append(row)
+    finally:
+        target.reset(seed=target.init_index)
+    return rows

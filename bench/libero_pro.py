@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/libero_pro.py [--suites libero_object,libero_object_swap,...] [--tasks 0-9]
         [--seeds 0] [--workspace ws/libero_pro] [--out bench/results/libero_pro.json]
+    .venv/bin/python bench/libero_pro.py --check-builds [--suites ...]   # every family builds?
 
 Every suite runs through the same command a user types, ``phyagentos bench <suite> --json``
 (one subprocess per suite, one shared workspace so the looks of the categories are measured
@@ -22,6 +23,12 @@ valid names). Per suite:
   not the task's);
 - ``wall_s``: the suite's wall time.
 
+``--check-builds`` instead builds one world per suite (task 0, init state 0: LIBERO's reset,
+the init state, the settle steps) and reports whether the init states load and the world
+builds, the seconds, and how far each object starts from where it starts in the standard
+suite's same task (mean and max horizontal distance, m; tasks matched by name); writes
+``bench/results/libero_pro_builds.json``.
+
 Anchors (not run here; the numbers issue 29 quotes from LIBERO-PRO, arXiv 2510.03827): VLAs
 score 0.0 under task perturbations; pi0.5 keeps 0.38 / 0.20 / 0.08 / 0.17 of its success under
 object-position perturbations. Prints a table and writes the JSON.
@@ -31,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 import time
@@ -115,6 +123,66 @@ def run_suite(suite: str, workspace: Path, tasks: str, seeds: str, *, timeout_s:
     return row
 
 
+#: Every libero_object family the installed catalogue ships, for --check-builds.
+BUILD_SUITES = ("libero_object_swap", "libero_object_object", "libero_object_lan", "libero_object_task",
+                "libero_object_with_mug", "libero_object_with_red_box", "libero_object_with_yellow_book",
+                "libero_object_with_blue_stick", "libero_object_with_red_stick", "libero_object_with_diffpos_stick",
+                *(f"libero_object_temp_{a}0.{k}" for a in "xy" for k in range(1, 6)))
+
+
+def check_builds(suites: list[str], out: Path) -> int:
+    """Build task 0 / init 0 of each suite and of its standard suite; see the module docstring."""
+    import numpy as np  # noqa: PLC0415
+
+    from phyagentos.targets.libero import (  # noqa: PLC0415
+        LiberoScene,
+        LiberoTarget,
+        load_init_states,
+        resolve_task,
+        suite_tasks,
+    )
+
+    def stem(name: str) -> str:  # LIBERO's scene prefix and "pick the" / "pick up the" aside
+        return re.sub(r"^[A-Z_]+SCENE\d+_", "", name).replace("pick_the_", "pick_up_the_")
+
+    def build(suite: str, task: int) -> tuple[dict, float]:
+        t0 = time.monotonic()
+        with LiberoTarget("libero", LiberoScene(suite=suite, task=task, init=0), seed=0) as target:
+            objs = {k: np.asarray(v["position"]) for k, v in target.ground_truth()["objects"].items()}
+        return objs, round(time.monotonic() - t0, 1)
+
+    standard: dict[tuple[str, str], dict] = {}
+    rows = []
+    for suite in suites:
+        base = perturbation_family(suite)[0]
+        task = resolve_task(suite, 0)
+        row = {"suite": suite, "task": task.name, "instruction": task.instruction}
+        try:
+            row["init_states"] = list(load_init_states(task).shape)
+            objs, row["build_s"] = build(suite, 0)
+            row["built"] = True
+            ref_index = next((t.index for t in suite_tasks(base) if stem(t.name) == stem(task.name)), None)
+            if ref_index is not None and base != suite:
+                key = (base, str(ref_index))
+                if key not in standard:
+                    standard[key] = build(base, ref_index)[0]
+                common = [k for k in objs if k in standard[key]]
+                d = [float(np.linalg.norm(objs[k][:2] - standard[key][k][:2])) for k in common]
+                row["objects_compared"] = len(common)
+                row["displacement_mean_m"] = round(float(np.mean(d)), 3) if d else None
+                row["displacement_max_m"] = round(float(np.max(d)), 3) if d else None
+        except Exception as exc:  # noqa: BLE001 - a report of what fails, per suite
+            row.update(built=False, error=f"{type(exc).__name__}: {exc}"[:500])
+        rows.append(row)
+        print(f"| {suite} | {row.get('init_states')} | {row['built']} | {row.get('build_s', '-')} | "
+              f"{row.get('displacement_mean_m', '-')} | {row.get('displacement_max_m', '-')} | {row.get('error', '')} |",
+              flush=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(rows, indent=1), encoding="utf-8")
+    print(f"wrote {out}")
+    return 0 if all(r["built"] for r in rows) else 1
+
+
 def _pct(n: int, d: int) -> float:
     return round(100.0 * n / d, 1) if d else 0.0
 
@@ -127,13 +195,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workspace", type=Path, default=ROOT / "ws" / "libero_pro")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "libero_pro.json")
     ap.add_argument("--timeout", type=float, default=7200, help="seconds per suite")
+    ap.add_argument("--check-builds", action="store_true", help="build one world per suite instead of running it")
     args = ap.parse_args(argv)
+    if args.check_builds and args.suites == ",".join(DEFAULT_SUITES):
+        args.suites = ",".join(BUILD_SUITES)
     suites = [s.strip() for s in args.suites.split(",") if s.strip()]
     problems = _check_suites(suites)
     if problems:
         for p in problems:
             print(p, file=sys.stderr)
         return EXIT_BAD_INPUT
+    if args.check_builds:
+        print("| suite | init states | built | build s | mean displacement m | max displacement m | error |")
+        print("|---|---|---|---|---|---|---|")
+        return check_builds(suites, HERE / "results" / "libero_pro_builds.json")
     tasks = ",".join(str(t) for t in parse_seeds(args.tasks))
     rows = []
     for suite in suites:

@@ -239,10 +239,9 @@ def suite_tasks(suite: str) -> tuple[LiberoTask, ...]:
     if not isinstance(suite, str) or not suite.startswith("libero_"):
         raise TargetError(f"unknown LIBERO suite {suite!r}; valid suites: {format_choices(SUITES)}")
     runnable, why = _catalogue()
-    if suite in why:
-        raise TargetError(f"LIBERO suite {suite!r} cannot be run: {why[suite]}")
     if suite not in runnable:
-        raise TargetError(f"unknown LIBERO suite {suite!r}; valid suites: {format_choices(SUITES)}; "
+        head = f"LIBERO suite {suite!r} cannot be run: {why[suite]}" if suite in why else f"unknown LIBERO suite {suite!r}"
+        raise TargetError(f"{head}; valid suites: {format_choices(SUITES)}; "
                           f"LIBERO-PRO's and others installed: {format_choices([s for s in runnable if s not in SUITES])}")
     return _suite_tasks_cached(suite)
 

@@ -1,7 +1,7 @@
 """LIBERO-PRO next to LIBERO: each perturbation family beside its standard suite, by LIBERO's checker.
 
     .venv/bin/python bench/libero_pro.py [--suites libero_object,libero_object_swap,...] [--tasks 0-9]
-        [--seeds 0] [--workspace ws/libero_pro] [--out bench/results/libero_pro.json]
+        [--seeds 0] [--workspace ws/libero_pro] [--out bench/results/libero_pro.json] [--merge]
     .venv/bin/python bench/libero_pro.py --check-builds [--suites ...]   # every family builds?
 
 Every suite runs through the same command a user types, ``phyagentos bench <suite> --json``
@@ -88,6 +88,24 @@ def _episode_rows(report_json: Path) -> list[dict]:
     return json.loads(report_json.read_text(encoding="utf-8"))["episodes"]
 
 
+def _refusals(suite: str, tasks: list[int]) -> dict[int, str]:
+    """``{task: reason}`` for the chosen tasks whose instruction the Goal Planner's rules refuse
+    (the instruction and the declared objects only; nothing is built)."""
+    from phyagentos.bench.libero import instruction_nodes  # noqa: PLC0415
+    from phyagentos.errors import BenchError  # noqa: PLC0415
+    from phyagentos.targets.libero import parse_bddl, resolve_task  # noqa: PLC0415
+
+    out = {}
+    for i in tasks:
+        task = resolve_task(suite, i)
+        problem = parse_bddl(task.bddl_path)
+        try:
+            instruction_nodes(task.instruction, problem.objects, problem.fixtures)
+        except BenchError as exc:
+            out[i] = f"task {i} ({task.instruction}): {exc}"
+    return out
+
+
 def run_suite(suite: str, workspace: Path, tasks: str, seeds: str, *, timeout_s: float) -> dict:
     """One ``phyagentos bench <suite> --json`` run and its row (see the module docstring)."""
     base, family, kind = perturbation_family(suite)
@@ -101,8 +119,12 @@ def run_suite(suite: str, workspace: Path, tasks: str, seeds: str, *, timeout_s:
     row = {"suite": suite, "standard": base, "family": family, "kind": kind, "tasks": n_tasks, "seeds": n_seeds,
            "episodes": n_tasks * n_seeds, "exit_code": proc.returncode, "wall_s": wall, "command": " ".join(cmd[1:])}
     planning_file = workspace / "libero" / suite / "planning.yaml"
-    if proc.returncode == EXIT_BAD_INPUT:  # nothing planned (or bad input): nothing ran
-        row.update(planned=0, refused=n_tasks, refusals=[ln.strip() for ln in proc.stderr.splitlines() if ln.strip()],
+    if proc.returncode == EXIT_BAD_INPUT:  # refused before anything ran: nothing planned, or an error
+        refused = _refusals(suite, [int(t) for t in tasks.split(",")])
+        if len(refused) < n_tasks:
+            row["error"] = proc.stderr[-3000:]
+            return row
+        row.update(planned=0, refused=n_tasks, refusals=list(refused.values()),
                    first=0, final=0, episodes_run=0, false_successes=0, false_failures=0)
         return row
     if proc.returncode not in (0, 1):
@@ -196,6 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=HERE / "results" / "libero_pro.json")
     ap.add_argument("--timeout", type=float, default=7200, help="seconds per suite")
     ap.add_argument("--check-builds", action="store_true", help="build one world per suite instead of running it")
+    ap.add_argument("--merge", action="store_true", help="keep the rows of --out's other suites (same tasks and "
+                                                         "seeds) and replace those run now")
     args = ap.parse_args(argv)
     if args.check_builds and args.suites == ",".join(DEFAULT_SUITES):
         args.suites = ",".join(BUILD_SUITES)
@@ -214,6 +238,11 @@ def main(argv: list[str] | None = None) -> int:
     for suite in suites:
         print(f"{suite}: phyagentos bench {suite} --tasks {tasks} --seeds {args.seeds} ...", file=sys.stderr, flush=True)
         rows.append(run_suite(suite, args.workspace, tasks, args.seeds, timeout_s=args.timeout))
+    if args.merge and args.out.is_file():
+        before = json.loads(args.out.read_text(encoding="utf-8"))
+        if (before.get("tasks"), before.get("seeds")) == (tasks, args.seeds):
+            now = {r["suite"] for r in rows}
+            rows = [r for r in before["suites"] if r["suite"] not in now] + rows
     standard = {r["suite"]: r for r in rows if r["kind"] == "standard"}
     for r in rows:
         r["first_pct"], r["final_pct"] = _pct(r.get("first", 0), r["episodes"]), _pct(r.get("final", 0), r["episodes"])

@@ -251,6 +251,8 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     for line in unplanned:
         logger.warning("LIBERO bench: not planned: %s", line)
     root = Path(workspace_dir) / "libero" / suite
+    # suite and graph names are identifiers: libero_object_temp_x0.1 -> libero_object_temp_x0_1
+    ident = "".join(c if c.isalnum() or c == "_" else "_" for c in suite)
     root.mkdir(parents=True, exist_ok=True)
     looks = _descriptors(Path(workspace_dir), suite, [i for i, *_ in planned])
     entries = []
@@ -262,7 +264,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         # perception as an unknown thing (a name alone would match any segment equally well)
         objects = [{**o, **looks.get(o["class"], {})} for o in declared["objects"]
                    if o["class"] in looks or o["name"] in named]
-        graph = {"version": 1, "name": f"{suite}_t{i}", "description": task.instruction,
+        graph = {"version": 1, "name": f"{ident}_t{i}", "description": task.instruction,
                  "defaults": {"target": LIBERO_TARGET},
                  "scene": {"suite": suite, "task": i, "objects": objects, "fixtures": declared["fixtures"]},
                  "nodes": nodes}
@@ -273,7 +275,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
                           + yaml.safe_dump(graph, sort_keys=False))
         entries.append({"id": f"t{i}", "description": task.instruction, "goal_graph": path.name, "target": LIBERO_TARGET,
                         "seed_to_scene": "init"})
-    suite_doc = {"version": 1, "name": suite, "episodes": len(DEFAULT_INIT_SUBSET),
+    suite_doc = {"version": 1, "name": ident, "episodes": len(DEFAULT_INIT_SUBSET),
                  "description": f"LIBERO {suite}: tasks from LIBERO's instructions, episodes from its fixed init "
                                 f"states, judged by LIBERO's checker" + (f"; not planned: {len(unplanned)} task(s)"
                                                                           if unplanned else ""),

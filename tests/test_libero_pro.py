@@ -50,6 +50,8 @@ def test_liberopro_suites_validate_and_list_by_family():
     assert [t.name for t in suite_tasks("libero_object_temp_x0.1")] == [t.name for t in suite_tasks("libero_object")]
     # registered without files: refused with the reason, never built
     assert "libero_object_env" in unavailable_suites()
+    # its BDDL and init files ship, the model of its red box does not: its worlds would not build
+    assert "the model of red_box" in unavailable_suites()["libero_object_with_red_box"]
     with pytest.raises(TargetError, match="libero_object_env' cannot be run: 10 of its 10 BDDL files are not shipped"):
         suite_tasks("libero_object_env")
     with pytest.raises(TargetError, match="unknown LIBERO suite 'libero_object_swapp'.*'libero_object_swap'"):

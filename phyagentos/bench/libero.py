@@ -14,14 +14,21 @@ Everything is checked before anything is built: an unknown suite, task or init-s
 is a :class:`~phyagentos.errors.BenchError` with the valid choices (``phyagentos bench``
 exits 2).
 
-Each task's goal graph comes from LIBERO's instruction (``task.language``) and the task's
-declared objects and fixtures (BDDL ``:objects`` / ``:fixtures``: names and categories) by a
-small rule grammar (:func:`instruction_nodes`), never from the BDDL ``:goal``. It covers the
-pick-and-place sentence forms (``pick up the X and place it in/on the Y``, ``put the X
-in/on [top of] the Y``, ``put both the X and the Y in the Z``); a phrase must name exactly one
-declared thing by its category words, so two identical objects (two black bowls told apart
-by a spatial relation) are refused, as is every other verb (open, close, turn on, push):
-those tasks are listed as not planned, with the reason, and cannot be run yet.
+LIBERO-PRO's perturbed suites (``libero_object_swap``, ``_object``, ``_with_mug``, ``_lan``,
+``_task``, ``libero_object_temp_x0.1`` ...) run by their names the same way: every suite the
+installed catalogue can run (:func:`~phyagentos.targets.libero.catalog.available_suites`); a
+registered one whose files are not shipped is refused with the reason.
+
+Each task's goal graph comes from its instruction
+(:attr:`~phyagentos.targets.libero.catalog.LiberoTask.instruction`: ``task.language``, or on
+LIBERO-PRO's suites the BDDL ``:language`` line they perturb) and the task's declared objects
+and fixtures (BDDL ``:objects`` / ``:fixtures``: names and categories) by the Goal Planner's
+rule reader (:func:`instruction_nodes`), never from the BDDL ``:goal``. It reads the
+pick-and-place requests in any wording its verb and preposition classes cover; a phrase must
+name exactly one declared thing by the words of its name, so two identical objects (two
+black bowls told apart by a spatial relation) are refused, as is every other verb (open,
+close, turn on, push): those tasks are listed as refused, with the reason, and counted in
+the suite file (``planning``).
 
 The report's ``ground_truth`` block carries LIBERO's verdict per episode (``benchmark`` in
 every session's ``ground_truth.yaml``: ``env.check_success()``), with per-task
@@ -31,7 +38,6 @@ every session's ``ground_truth.yaml``: ``env.check_success()``), with per-task
 from __future__ import annotations
 
 import logging
-import re
 from pathlib import Path
 from typing import Any
 
@@ -63,79 +69,113 @@ def target_entry() -> dict[str, Any]:
 
 
 def is_libero_suite(name: str | Path) -> bool:
-    """Whether ``name`` is one of LIBERO's suite names (and no shipped suite file has it)."""
-    from phyagentos.targets.libero.catalog import SUITES  # noqa: PLC0415
+    """Whether ``name`` is a suite name of the installed LIBERO catalogue (LIBERO's own and
+    LIBERO-PRO's, runnable or registered without files) and no shipped suite file has it."""
+    from phyagentos.targets.libero.catalog import SUITES, available_suites, unavailable_suites  # noqa: PLC0415
 
     from .suite import suite_dir  # noqa: PLC0415
 
     text = str(name)
-    return text in SUITES and not (suite_dir() / f"{text}.yaml").is_file()
+    if (suite_dir() / f"{text}.yaml").is_file():
+        return False
+    if text in SUITES:
+        return True
+    if not text.startswith("libero_"):
+        return False
+    try:
+        return text in available_suites() or text in unavailable_suites()
+    except TargetError:  # LIBERO not installed: only LIBERO's own names are known
+        return False
 
 
-def _words(text: str) -> list[str]:
-    return [w for w in re.split(r"[\s_]+", text.lower()) if w and w not in ("the", "a", "an")]
+def _moves(steps: list[tuple[str, str | None]]) -> list[dict[str, Any]]:
+    """Goal-graph nodes of ``[(object, destination or None)]``: a ``pick`` per object, then a
+    ``place`` on its destination (none: the object is picked and held), each after the one
+    before."""
+    nodes: list[dict[str, Any]] = []
+    for obj, dest in steps:
+        pick_id, place_id = f"pick_{obj}", f"place_{obj}"
+        nodes.append({"id": pick_id, "skill": "pick", "params": {"object": obj},
+                      "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
+                      "depends_on": [nodes[-1]["id"]] if nodes else [],
+                      "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+        if dest is not None:
+            nodes.append({"id": place_id, "skill": "place", "params": {"object": obj, "region": dest},
+                          "accept": [{"on": {"object": obj, "support": dest}}, {"released": obj}],
+                          "depends_on": [pick_id], "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+    return nodes
 
 
-def _ground(phrase: str, declared: dict[str, str], language: str) -> str:
-    """The one declared name whose category words match ``phrase`` (all of the phrase's
-    words are category words, or all of the category's words are in the phrase)."""
-    words = set(_words(phrase))
-    hits = [n for n, cat in declared.items() if words and (words <= set(_words(cat)) or set(_words(cat)) <= words)]
-    if len(hits) == 1:
-        return hits[0]
-    if not hits:
-        raise BenchError(f"instruction {language!r}: {phrase!r} names nothing the task declares "
-                         f"(declared: {format_choices(declared)})")
-    raise BenchError(f"instruction {language!r}: {phrase!r} is ambiguous among {format_choices(hits)} "
-                     f"(telling them apart by a spatial relation is not implemented yet)")
+_PALETTE_WORDS = {"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey", "gray"}
 
 
-_FORMS = (
-    re.compile(r"^pick up the (?P<objs>.+?) and place it (?:in|on|into|onto) the (?P<dest>.+)$"),
-    re.compile(r"^put both (?:the )?(?P<objs>.+?) and (?:the )?(?P<objs2>.+?) (?:in|on|into|onto) the (?P<dest>.+)$"),
-    re.compile(r"^put the (?P<objs>.+?) (?:in|on|into|onto) (?:top of )?the (?P<dest>.+)$"),
-)
+def planner_world(objects: dict[str, str], fixtures: dict[str, str]):
+    """The Goal Planner's :class:`~phyagentos.agent.llm.World` of a LIBERO task, from its
+    declared things only: every declared object is an object a request may move, and every
+    declared object and fixture a destination (a ``region`` of the reader). Colours are the
+    palette words of a declared name (``akita_black_bowl_1``: black); no position (nothing
+    perceived when a plan is made)."""
+    from phyagentos.agent.llm.world import Entity, World  # noqa: PLC0415
+
+    def entity(name: str, kind: str) -> Entity:
+        colour = next((w for w in name.split("_") if w in _PALETTE_WORDS), None)
+        return Entity(name=name, kind=kind, position=None, colour="grey" if colour == "gray" else colour)
+
+    return World(objects=tuple(entity(n, "object") for n in objects),
+                 regions=tuple(entity(n, "region") for n in (*objects, *fixtures)), source="LIBERO declared")
+
+
+def _planner_steps(language: str, objects: dict[str, str], fixtures: dict[str, str]) -> list[tuple[str, str | None]]:
+    """The Goal Planner's rule reader (:func:`phyagentos.agent.llm.meaning.read_request`):
+    verbs and prepositions by class, objects and destinations by the words of their declared
+    names; every clause must be accounted for, one destination each."""
+    from phyagentos.agent.llm.meaning import read_request  # noqa: PLC0415
+
+    world = planner_world(objects, fixtures)
+    meaning = read_request(language, world)
+    if meaning.language is not None:
+        raise BenchError(f"instruction {language!r} refused: {meaning.language}; the Goal Planner reads English only")
+    if meaning.problems:
+        raise BenchError(f"instruction {language!r} refused by the Goal Planner's rules: "
+                         + "; ".join(f"{code}: {msg}" for code, msg in meaning.problems))
+    steps: list[tuple[str, str | None]] = []
+    for intent in meaning.intents:
+        if intent.verb == "leave":
+            continue
+        for obj in intent.movers():
+            dests = [d for d in intent.destinations if d != obj]
+            if intent.verb != "hold" and len(dests) != 1:
+                raise BenchError(f"instruction {language!r} refused: {intent.text!r} puts {obj} "
+                                 + (f"on one of {format_choices(dests)}: say which" if dests else "nowhere"))
+            steps.append((obj, dests[0] if intent.verb != "hold" else None))
+    if not steps:
+        raise BenchError(f"instruction {language!r} refused: nothing to move")
+    return steps
 
 
 def instruction_nodes(language: str, objects: dict[str, str], fixtures: dict[str, str]) -> list[dict[str, Any]]:
-    """Goal-graph nodes for a LIBERO instruction: one ``pick`` and one ``place`` per moved
-    object, in the order the instruction names them, each ``place`` set down on the
-    destination (``region`` naming the destination object or fixture) and accepted when the
-    object rests on it and is let go.
+    """Goal-graph nodes for a LIBERO instruction, by the Goal Planner's rule reader over the
+    task's declared things (:func:`planner_world`, :func:`phyagentos.agent.llm.meaning.read_request`):
+    verbs and prepositions by class (put/place/move/drop ... in/into/on/onto/inside/to; pick
+    up/grab/lift/take ... then a move), pronouns and elided objects (``grab the milk and put
+    into the basket``), conjunctions in the order named (``put both the X and the Y in the
+    Z``), objects and destinations by the words of their declared names. No model is asked:
+    the clauses fix every step. Each moved object gets a ``pick`` then a ``place`` on its
+    destination (``region`` naming the destination object or fixture), accepted when it rests
+    on it and is let go, each after the one before. Never the BDDL ``:goal``.
 
     Args:
-        language: LIBERO's ``task.language``.
+        language: the instruction (:attr:`~phyagentos.targets.libero.catalog.LiberoTask.instruction`).
         objects: declared ``{name: category}`` (BDDL ``:objects``).
         fixtures: declared ``{name: category}`` (BDDL ``:fixtures``).
 
     Raises:
-        BenchError: a sentence form the grammar does not cover, or a phrase that names no
-            declared thing or more than one.
+        BenchError: refused, with the reader's reasons: a verb no skill does (open, turn on,
+            push: ``unknown_object``/``not_understood``), a phrase naming no declared thing
+            (``unknown_object``/``unknown_destination``) or several (two identical bowls told
+            apart by a spatial relation: ``could be any of``), another language.
     """
-    text = language.strip().lower()
-    for form in _FORMS:
-        m = form.match(text)
-        if m is None:
-            continue
-        movable = {**objects}
-        things = [_ground(m.group("objs"), movable, language)]
-        if "objs2" in form.groupindex and m.group("objs2"):
-            things.append(_ground(m.group("objs2"), movable, language))
-        dest = _ground(m.group("dest"), {**objects, **fixtures}, language)
-        nodes: list[dict[str, Any]] = []
-        for obj in things:
-            pick_id, place_id = f"pick_{obj}", f"place_{obj}"
-            nodes.append({"id": pick_id, "skill": "pick", "params": {"object": obj},
-                          "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
-                          "depends_on": [nodes[-1]["id"]] if nodes else [],
-                          "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
-            nodes.append({"id": place_id, "skill": "place", "params": {"object": obj, "region": dest},
-                          "accept": [{"on": {"object": obj, "support": dest}}, {"released": obj}],
-                          "depends_on": [pick_id], "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
-        return nodes
-    raise BenchError(f"instruction {language!r}: no rule of the LIBERO instruction grammar covers it "
-                     f"(covered: 'pick up the X and place it in/on the Y', 'put the X in/on (top of) the Y', "
-                     f"'put both the X and the Y in the Z')")
+    return _moves(_planner_steps(language, objects, fixtures))
 
 
 def _task_indices(suite: str, tasks: tuple[str, ...] | None, n: int) -> list[int]:
@@ -173,14 +213,21 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     from phyagentos.targets.libero.catalog import (  # noqa: PLC0415
         DEFAULT_INIT_SUBSET,
         SUITES,
+        available_suites,
         load_init_states,
         parse_bddl,
         suite_tasks,
+        unavailable_suites,
     )
 
-    if suite not in SUITES:
-        raise BenchError(f"unknown LIBERO suite {suite!r}", problems=[f"valid suites: {format_choices(SUITES)}"])
     try:
+        runnable = available_suites() if suite not in SUITES else SUITES
+        if suite not in runnable:
+            why = unavailable_suites().get(suite)
+            raise BenchError(f"LIBERO suite {suite!r} cannot be run: {why}" if why else f"unknown LIBERO suite {suite!r}",
+                             problems=[f"LIBERO's suites: {format_choices(SUITES)}",
+                                       f"LIBERO-PRO's and others installed: "
+                                       f"{format_choices(s for s in available_suites() if s not in SUITES)}"])
         catalogue = suite_tasks(suite)
     except TargetError as exc:
         raise BenchError(str(exc), problems=[str(exc)]) from None
@@ -198,14 +245,16 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         task = catalogue[i]
         problem = parse_bddl(task.bddl_path)
         try:
-            planned.append((i, task, problem, instruction_nodes(task.language, problem.objects, problem.fixtures)))
+            planned.append((i, task, problem, instruction_nodes(task.instruction, problem.objects, problem.fixtures)))
         except BenchError as exc:
-            unplanned.append(f"task {i} ({task.language}): {exc}")
+            unplanned.append(f"task {i} ({task.instruction}): {exc}")
     if not planned:  # nothing written, nothing built
         raise BenchError(f"no chosen task of {suite} has a goal graph", problems=unplanned)
     for line in unplanned:
         logger.warning("LIBERO bench: not planned: %s", line)
     root = Path(workspace_dir) / "libero" / suite
+    # suite and graph names are identifiers: libero_object_temp_x0.1 -> libero_object_temp_x0_1
+    ident = "".join(c if c.isalnum() or c == "_" else "_" for c in suite)
     root.mkdir(parents=True, exist_ok=True)
     looks = _descriptors(Path(workspace_dir), suite, [i for i, *_ in planned])
     entries = []
@@ -217,24 +266,28 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         # perception as an unknown thing (a name alone would match any segment equally well)
         objects = [{**o, **looks.get(o["class"], {})} for o in declared["objects"]
                    if o["class"] in looks or o["name"] in named]
-        graph = {"version": 1, "name": f"{suite}_t{i}", "description": task.language,
+        graph = {"version": 1, "name": f"{ident}_t{i}", "description": task.instruction,
                  "defaults": {"target": LIBERO_TARGET},
                  "scene": {"suite": suite, "task": i, "objects": objects, "fixtures": declared["fixtures"]},
                  "nodes": nodes}
         path = root / f"t{i}.yaml"
-        atomic_write_text(path, f"# LIBERO {suite} task {i}: {task.language!r} (LIBERO's task.language), planned\n"
-                                f"# by the LIBERO instruction grammar (phyagentos.bench.libero) from the instruction\n"
+        atomic_write_text(path, f"# LIBERO {suite} task {i}: {task.instruction!r} (the task's instruction), planned\n"
+                                f"# by the Goal Planner's rule reader (phyagentos.bench.libero) from the instruction\n"
                                 f"# and the declared objects; the episode's init state is written into scene.init.\n"
                           + yaml.safe_dump(graph, sort_keys=False))
-        entries.append({"id": f"t{i}", "description": task.language, "goal_graph": path.name, "target": LIBERO_TARGET,
+        entries.append({"id": f"t{i}", "description": task.instruction, "goal_graph": path.name, "target": LIBERO_TARGET,
                         "seed_to_scene": "init"})
-    suite_doc = {"version": 1, "name": suite, "episodes": len(DEFAULT_INIT_SUBSET),
+    suite_doc = {"version": 1, "name": ident, "episodes": len(DEFAULT_INIT_SUBSET),
                  "description": f"LIBERO {suite}: tasks from LIBERO's instructions, episodes from its fixed init "
                                 f"states, judged by LIBERO's checker" + (f"; not planned: {len(unplanned)} task(s)"
                                                                           if unplanned else ""),
                  "tasks": entries}
     suite_path = root / "suite.yaml"
     atomic_write_text(suite_path, yaml.safe_dump(suite_doc, sort_keys=False))
+    planning = {"suite": suite, "planner": "goal_planner_rules", "planned": [i for i, *_ in planned],
+                "refused": {int(line.split()[1]): line for line in unplanned}}
+    atomic_write_text(root / "planning.yaml", "# Which chosen tasks the Goal Planner's rules planned and which they refused (why).\n"
+                      + yaml.safe_dump(planning, sort_keys=False, allow_unicode=True))
     _ensure_target(Path(workspace_dir))
     return suite_path, tuple(e["id"] for e in entries), seeds
 

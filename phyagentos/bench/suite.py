@@ -53,7 +53,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from phyagentos.errors import BenchError, format_choices
+from phyagentos.errors import BenchError, TargetError, format_choices
 from phyagentos.resources import goal_graphs_dir
 from phyagentos.yamlsource import read_yaml
 
@@ -195,11 +195,17 @@ def load_suite(name_or_path: str | Path) -> Suite:
     if not p.suffix:
         p = suite_dir() / f"{name_or_path}.yaml"
         if not p.is_file():
-            from phyagentos.targets.libero.catalog import STANDARD_SUITES  # noqa: PLC0415 - names only
+            from phyagentos.targets.libero.catalog import STANDARD_SUITES, SUITES  # noqa: PLC0415 - names only
+            from phyagentos.targets.libero.catalog import available_suites as libero_suites  # noqa: PLC0415
 
+            try:
+                pro = [s for s in libero_suites() if s not in SUITES]
+            except TargetError:  # LIBERO not installed
+                pro = []
             raise BenchError(f"unknown suite {str(name_or_path)!r}; shipped suites: {format_choices(available_suites())}"
                              f", LIBERO's suites: {format_choices(STANDARD_SUITES)}, 'libero_90'"
-                             f" (or give a path to a suite YAML)")
+                             + (f", LIBERO-PRO's and others installed: {format_choices(pro)}" if pro else "")
+                             + " (or give a path to a suite YAML)")
     if not p.is_file():
         raise BenchError(f"suite file {p} does not exist")
     try:

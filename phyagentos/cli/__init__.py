@@ -77,8 +77,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="run a benchmark suite: availability gate, sessions per (task, seed), report")
     bench.add_argument("suite", help="suite name (phyagentos/bench/suites/), a LIBERO suite (libero_spatial, libero_object, "
-                                      "libero_goal, libero_10: --tasks are LIBERO task indices, --seeds its init states) "
-                                      "or path of a suite YAML")
+                                      "libero_goal, libero_10, or LIBERO-PRO's: libero_object_swap, _object, _lan, _task, "
+                                      "_with_mug, libero_object_temp_x0.1 ...: --tasks are LIBERO task indices, --seeds its "
+                                      "init states) or path of a suite YAML")
     bench.add_argument("--workspace", type=Path, required=True, help="bench workspace (created if needed)")
     bench.add_argument("--episodes", type=int, help="episodes per task (default: the suite's)")
     bench.add_argument("--seeds", help="explicit seeds per task, e.g. 0-49 or 0,3,7 (overrides --episodes)")

@@ -250,7 +250,12 @@ def _parts(request: str, world: World) -> list[str]:
     out = []
     for t in texts:
         for p in _AND_SPLIT.split(t):
-            out += [q for q in _ELLIPSIS.split(p) if q and q.strip()]
+            pieces = [q for q in _ELLIPSIS.split(p) if q and q.strip()]
+            # "put both the X and the Y in Z": no destination before the "and", so one clause
+            # over a conjunction of objects, not an elided verb
+            if len(pieces) > 1 and not set(_tokens(pieces[0])) & set(_PREPOSITIONS):
+                pieces = [p]
+            out += pieces
     return [p.strip(" ,;") for p in out if p.strip(" ,;")]
 
 
@@ -301,6 +306,27 @@ def _filter(words: Sequence[str], cands: Sequence[Entity], world: World) -> tupl
     return out, misses
 
 
+def _conjunction(words: list[str], world: World) -> tuple[str, ...] | None:
+    """The objects of ``the X and the Y`` (``both`` allowed), in the order named, when each
+    part refers to exactly one object and no two to the same; else ``None`` (the phrase is
+    read whole: "the yellow and white mug" is one mug)."""
+    groups: list[list[str]] = [[]]
+    for w in words:
+        if w == "and":
+            groups.append([])
+        elif w != "both":
+            groups[-1].append(w)
+    if len(groups) < 2 or not all(groups):
+        return None
+    names = []
+    for g in groups:
+        objs, count, problems = _read_objects(g, world, ())
+        if problems or count is not None or len(objs) != 1:
+            return None
+        names.append(objs[0])
+    return tuple(names) if len(set(names)) == len(names) else None
+
+
 def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> tuple[tuple[str, ...], int | None,
                                                                                        list[str]]:
     """(objects, count, problems) of an object phrase; ``count`` is set for a count quantifier."""
@@ -311,6 +337,10 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
     if set(words) & {"it", "them", "they"} and not (set(words) & _ALL) and previous and not any(
             w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER or w in _KIND for w in words):
         return previous, None, []
+    if "and" in words:
+        joined = _conjunction(words, world)
+        if joined:
+            return joined, None, []
     count = None
     for i, w in enumerate(words):
         nxt = words[i + 1:i + 3]
@@ -335,6 +365,13 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
         return (), None, [("not_understood", f"{quote(' '.join(words))}: {'; '.join(misses)}")]
     if not found:
         return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene")]
+    if len(found) > 1 and count is None and not plural:
+        # one object meant, several share a word ("the tomato sauce" beside a bbq sauce): the one
+        # whose name has every word the phrase names, when exactly one has
+        said = {w for w in content if any(w in _name_parts(e) for e in found)}
+        whole = [e for e in found if said and said <= _name_parts(e)]
+        if len(whole) == 1:
+            found = whole
     names = tuple(e.name for e in found)
     if count is not None:
         if count > len(names):
@@ -440,7 +477,8 @@ def read_request(request: str, world: World) -> Meaning:
                 excluded_words = body[i + 1:j]
                 body = body[:i] + body[j:]
                 break
-        cut = next((i for i, w in enumerate(body) if w in _PREPOSITIONS and i > 0), None)
+        # a preposition first ("... and put into the basket"): the object is the previous clause's
+        cut = next((i for i, w in enumerate(body) if w in _PREPOSITIONS and (i > 0 or previous)), None)
         if stay:
             obj_words = [w for w in _tokens(low[:stay.start()])[start:] if w not in ("except", "but")]
             obj_words = [w for w in obj_words if w not in excluded_words]

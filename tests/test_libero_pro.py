@@ -1,0 +1,124 @@
+"""LIBERO-PRO by name through `phyagentos bench`: its suites validate and list, a bad name exits 2
+with nothing built, a reworded instruction plans the original's graph, and a position-shifted
+task starts from a different state than the standard one."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from phyagentos.bench.libero import instruction_nodes, is_libero_suite
+from phyagentos.errors import BenchError, TargetError
+from phyagentos.targets.libero import (
+    available_suites,
+    load_init_states,
+    parse_bddl,
+    perturbation_family,
+    resolve_task,
+    suite_tasks,
+    unavailable_suites,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: Phrasings written for this test (never LIBERO-PRO's): other verbs, prepositions, a
+#: sequence, a politeness word, dropped articles; {x} is the object of libero_object's task.
+HELD_OUT = ("could you take the {x} and drop it into the basket", "move the {x} to the basket",
+            "place the {x} inside the basket please", "grab the {x}, then put it in the basket",
+            "lift up the {x} and set it down in the basket", "put {x} in basket",
+            "fetch the {x} and deposit it in the basket")
+
+
+def _bench(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "phyagentos.cli", "bench", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=600, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+
+
+def test_liberopro_suites_validate_and_list_by_family():
+    suites = available_suites()
+    for name in ("libero_object_swap", "libero_object_object", "libero_object_with_mug", "libero_object_lan",
+                 "libero_object_task", "libero_object_temp_x0.1", "libero_object_temp_y0.5", "libero_goal_lan"):
+        assert name in suites and is_libero_suite(name), name
+    assert perturbation_family("libero_object_temp_x0.3") == ("libero_object", "temp_x0.3", "position")
+    assert perturbation_family("libero_object_with_mug") == ("libero_object", "with_mug", "distractor")
+    assert perturbation_family("libero_goal_lan") == ("libero_goal", "lan", "language")
+    # the position-shifted suites are libero_object's tasks, in its order
+    assert [t.name for t in suite_tasks("libero_object_temp_x0.1")] == [t.name for t in suite_tasks("libero_object")]
+    # registered without files: refused with the reason, never built
+    assert "libero_object_env" in unavailable_suites()
+    # its BDDL and init files ship, the model of its red box does not: its worlds would not build
+    assert "the model of red_box" in unavailable_suites()["libero_object_with_red_box"]
+    with pytest.raises(TargetError, match="libero_object_env' cannot be run: 10 of its 10 BDDL files are not shipped"):
+        suite_tasks("libero_object_env")
+    with pytest.raises(TargetError, match="unknown LIBERO suite 'libero_object_swapp'.*'libero_object_swap'"):
+        suite_tasks("libero_object_swapp")
+
+
+@pytest.mark.parametrize("suite,expect", [
+    ("libero_object_swapp", "LIBERO-PRO's and others installed: 'libero_10_lan'"),
+    ("libero_object_env", "cannot be run: 10 of its 10 BDDL files are not shipped"),
+    ("libero_spatial_lan", "no chosen task of libero_spatial_lan has a goal graph"),
+])
+def test_a_bad_liberopro_suite_exits_2_with_nothing_built(tmp_path, suite, expect):
+    result = _bench(suite, "--tasks", "0", "--seeds", "0", "--workspace", str(tmp_path / "ws"), "--json", cwd=tmp_path)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert expect in " ".join((result.stdout + result.stderr).split())
+    assert not (tmp_path / "ws" / "libero").exists() and not (tmp_path / "ws" / "bench").exists()
+
+
+def test_a_liberopro_suite_instruction_is_the_one_it_perturbed():
+    # _lan and _task keep LIBERO's file names (task.language): their instruction is the BDDL's
+    assert resolve_task("libero_object_lan", 0).language == "pick up the alphabet soup and place it in the basket"
+    assert resolve_task("libero_object_lan", 0).instruction == "grab alphabet soup and put it into basket"
+    assert resolve_task("libero_object_task", 0).instruction == "Pick the cream cheese and place it in the basket"
+    assert resolve_task("libero_object", 0).instruction == resolve_task("libero_object", 0).language
+
+
+def test_reworded_and_held_out_phrasings_plan_the_originals_graph():
+    for i in range(10):
+        task, lan = resolve_task("libero_object", i), resolve_task("libero_object_lan", i)
+        problem = parse_bddl(task.bddl_path)
+        original = instruction_nodes(task.language, problem.objects, problem.fixtures)
+        assert [n["skill"] for n in original] == ["pick", "place"]
+        lan_problem = parse_bddl(lan.bddl_path)
+        assert lan.instruction != task.language
+        assert instruction_nodes(lan.instruction, lan_problem.objects, lan_problem.fixtures) == original, lan.instruction
+        thing = task.language.removeprefix("pick up the ").split(" and place")[0]
+        for form in HELD_OUT:
+            assert instruction_nodes(form.format(x=thing), problem.objects, problem.fixtures) == original, form
+
+
+def test_unplannable_instructions_are_refused_with_a_reason():
+    problem = parse_bddl(resolve_task("libero_object", 7).bddl_path)
+    for text, why in (("open the basket", "'open' names no object"),
+                      ("put the ketchup in the basket", "'ketchup' names no object of the scene"),
+                      ("put the milk in the sink", "'sink' names nothing there"),
+                      ("mets le lait dans le panier", "French; the Goal Planner reads English only")):
+        with pytest.raises(BenchError, match=why):
+            instruction_nodes(text, problem.objects, problem.fixtures)
+
+
+def test_a_position_shifted_task_starts_from_other_init_states():
+    standard, shifted = resolve_task("libero_object", 0), resolve_task("libero_object_temp_x0.1", 0)
+    a, b = load_init_states(standard), load_init_states(shifted)
+    assert a.shape == b.shape
+    assert not np.allclose(a, b)
+
+
+@pytest.mark.sim
+def test_a_position_shifted_world_builds_with_its_objects_elsewhere():
+    from phyagentos.targets.libero import LiberoScene, LiberoTarget  # noqa: PLC0415
+
+    poses = {}
+    for suite in ("libero_object", "libero_object_temp_x0.1"):
+        with LiberoTarget("libero", LiberoScene(suite=suite, task=0, init=0), seed=0) as target:
+            truth = target.ground_truth()
+            assert truth["benchmark"]["suite"] == suite and truth["benchmark"]["success"] is False
+            poses[suite] = {k: np.asarray(v["position"]) for k, v in truth["objects"].items()}
+    moved = [k for k in poses["libero_object"]
+             if np.linalg.norm(poses["libero_object"][k][:2] - poses["libero_object_temp_x0.1"][k][:2]) > 0.02]
+    assert moved, poses

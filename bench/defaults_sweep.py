@@ -39,9 +39,9 @@ from pathlib import Path
 import yaml
 
 from phyagentos.bench.random_world import random_episodes, with_defaults, with_limits
+from phyagentos.bench.self_evolution import run_pass
 from phyagentos.bench.verifier_scoring import wilson_interval
 from phyagentos.protocol import Workspace
-from phyagentos.self_evolution import run_pass
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -45,9 +45,9 @@ import time
 from pathlib import Path
 
 from phyagentos.bench.random_world import random_episodes, with_defaults, with_limits
+from phyagentos.bench.self_evolution import run_pass
 from phyagentos.errors import BenchError
 from phyagentos.protocol import Workspace
-from phyagentos.self_evolution import run_pass
 from phyagentos.yamlsource import read_yaml
 
 HERE = Path(__file__).resolve().parent

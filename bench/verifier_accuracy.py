@@ -47,9 +47,9 @@ from pathlib import Path
 from phyagentos.agent.verifier import PredicateVerifier, load_evidence
 from phyagentos.bench.random_world import random_episodes, with_limits
 from phyagentos.bench.report import verifier_markdown
+from phyagentos.bench.self_evolution import run_pass
 from phyagentos.bench.verifier_scoring import confusion, load_ground_truth, score_session
 from phyagentos.protocol import Workspace
-from phyagentos.self_evolution import run_pass
 
 HERE = Path(__file__).resolve().parent
 

@@ -8,8 +8,8 @@ import pytest
 
 from phyagentos.agent.memory.conditions import OBSERVABLE_RISK_FACTORS
 from phyagentos.bench.random_world import random_episodes
+from phyagentos.bench.self_evolution import run_pass
 from phyagentos.protocol import Workspace
-from phyagentos.self_evolution import run_pass
 
 pytestmark = pytest.mark.sim
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping, Sequence
 
-from phyagentos.self_evolution import Episode
+from phyagentos.bench.self_evolution import Episode
 
 __all__ = ["random_scene", "random_episodes", "with_defaults", "with_limits"]
 

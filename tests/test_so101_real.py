@@ -326,6 +326,19 @@ def test_dry_run_moves_nothing(twin, cal_file, tmp_path):
     assert twin.packets_served > 0  # it did read the bus
     assert twin.goal_writes == 0 and twin.torque_enabled() == [0] * 6
     assert np.max(np.abs(twin.joint_positions() - before)) < 1e-3
+    # ... and the view shows what the twin did: the last session's 3D scene from its checkpoint
+    from phyagentos.protocol import Workspace
+    from phyagentos.view.scene3d import SceneRenderer
+
+    ws = Workspace.open(tmp_path / "ws")
+    renderer = SceneRenderer(ws)
+    try:
+        png, info = renderer.render(ws.list_sessions()[-1].session_id, frame=None, azimuth=120.0, elevation=-25.0,
+                                    distance=None, overlays=True)
+    finally:
+        renderer.close()
+    assert png.startswith(b"\x89PNG") and info["source"] == "checkpoint"
+    assert info["overlay_kinds"].get("tcp_path", 0) > 0  # the twin's executed tool path is drawn
 
 
 def _video(path: Path, w: int = 320, h: int = 240, n: int = 5) -> Path:

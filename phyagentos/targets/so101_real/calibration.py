@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -36,6 +37,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from phyagentos.errors import TargetError, format_choices
+from phyagentos.untrusted import NotRegular, loads_json, quote, read_regular
 
 from .protocol import MOTOR_IDS, MOTOR_NAMES, RESOLUTION, STEPS_PER_RAD
 
@@ -43,6 +45,23 @@ __all__ = ["MotorCalibration", "Calibration", "CalibrationError", "default_calib
            "twin_joint_ranges"]
 
 _KEYS = ("id", "drive_mode", "homing_offset", "range_min", "range_max")
+#: Largest calibration file read, bytes (LeRobot's six motors take about 1 KB), and its
+#: deepest JSON nesting (an object of motors of objects).
+MAX_CALIBRATION_BYTES = 64 * 1024
+MAX_CALIBRATION_DEPTH = 4
+
+
+def _key_line(text: str, key: str) -> int:
+    """1-based line of the first ``"key":`` in JSON ``text`` (1 when not found)."""
+    m = re.search(re.escape(json.dumps(key)) + r"\s*:", text)
+    return text.count("\n", 0, m.start()) + 1 if m else 1
+
+
+def _integer(value: object, key: str) -> int:
+    """``value`` as an int: LeRobot writes integers; a bool, a fraction or a string is refused."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value):
+        raise ValueError(f"{key} must be an integer, got {quote(value)}")
+    return int(value)
 
 
 class CalibrationError(TargetError):
@@ -130,26 +149,33 @@ class Calibration:
                 to make one) or malformed content (``calibration.malformed``).
         """
         p = Path(path)
-        if not p.is_file():
+        if not p.exists():
             raise CalibrationError(
                 f"no calibration file at {p}; run `phyagentos calibrate --port PORT --out {p}` (or LeRobot's "
                 f"`lerobot-calibrate --robot.type=so101_follower`) with the arm powered", code="calibration.missing")
         try:
-            raw = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise CalibrationError(f"{p}: not a JSON calibration file: {exc}", code="calibration.malformed") from exc
+            text = read_regular(p, limit=MAX_CALIBRATION_BYTES).decode("utf-8")
+            raw = loads_json(text, max_bytes=MAX_CALIBRATION_BYTES, max_depth=MAX_CALIBRATION_DEPTH)
+        except NotRegular as exc:
+            raise CalibrationError(f"{p}: not a regular file ({exc}); a calibration is a JSON file",
+                                   code="calibration.malformed") from exc
+        except (OSError, ValueError) as exc:  # UnicodeDecodeError is a ValueError
+            where = re.search(r"line (\d+)", str(exc))
+            raise CalibrationError(f"{p}{':' + where.group(1) if where else ''}: not a JSON calibration file: {exc}",
+                                   code="calibration.malformed") from exc
         if not isinstance(raw, dict):
-            raise CalibrationError(f"{p}: expected an object of motors, got {type(raw).__name__}",
+            raise CalibrationError(f"{p}:1: expected an object of motors, got {type(raw).__name__}",
                                    code="calibration.malformed")
         motors = {}
         for name, entry in raw.items():
+            at = f"{p}:{_key_line(text, name)}"
             if not isinstance(entry, dict) or any(k not in entry for k in _KEYS):
-                raise CalibrationError(f"{p}: motor {name!r} needs keys {format_choices(_KEYS)}, got {entry!r}",
-                                       code="calibration.malformed")
+                raise CalibrationError(f"{at}: motor {quote(name)} needs keys {format_choices(_KEYS)}, "
+                                       f"got {quote(entry)}", code="calibration.malformed")
             try:
-                motors[name] = MotorCalibration(**{k: int(entry[k]) for k in _KEYS})
+                motors[name] = MotorCalibration(**{k: _integer(entry[k], k) for k in _KEYS})
             except (TypeError, ValueError) as exc:
-                raise CalibrationError(f"{p}: motor {name!r}: {exc}", code="calibration.malformed") from exc
+                raise CalibrationError(f"{at}: motor {quote(name)}: {exc}", code="calibration.malformed") from exc
         return cls(motors, **kwargs)
 
     def save(self, path: str | os.PathLike) -> Path:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
@@ -14,15 +13,7 @@ import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.protocol import SessionRecord, Workspace, utc_now_iso
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results"
 CLI = [sys.executable, "-m", "phyagentos.cli"]
-
-
-def percentile(values: list[float], q: float) -> float:
-    """The ``q``-quantile (0..1) by linear interpolation (numpy's default method)."""
-    import numpy as np
-
-    return float(np.quantile(np.asarray(values, dtype=float), q)) if values else float("nan")
 
 
 def make_workspace(path: Path, *, targets: int = 1) -> Workspace:
@@ -84,10 +75,3 @@ def descendants(pid: int) -> list[int]:
         out += nxt
         frontier = nxt
     return out
-
-
-def write_result(name: str, data: dict) -> Path:
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    path = RESULTS / f"{name}.json"
-    path.write_text(json.dumps(data, indent=2) + "\n")
-    return path

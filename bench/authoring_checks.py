@@ -17,11 +17,12 @@ Writes bench/results/authoring_checks.json.
 
 from __future__ import annotations
 
-import argparse
-import json
 import tempfile
 import time
 from pathlib import Path
+
+from _harness import parser as bench_parser
+from _harness import write_json
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.agent.goal_graph import parse_goal_graph
@@ -30,9 +31,6 @@ from phyagentos.errors import GoalGraphError
 from phyagentos.protocol import SessionRecord, Workspace, codec
 from phyagentos.resources import goal_graphs_dir, skill_dirs, tree_dirs
 from phyagentos.runtime.builtin_runtime import BuiltinSkillRuntime
-
-ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results"
 
 BOMB = "\n".join(["a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]"]
                  + [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 10)])
@@ -63,7 +61,7 @@ def best(fn, repeat: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser()
+    parser = bench_parser(__doc__, "authoring_checks")
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
     rows: dict[str, float] = {}
@@ -99,8 +97,7 @@ def main() -> None:
             rows[f"check_{key}_s"] = whole
             rows[f"check_{key}_without_reach_s"] = no_reach
 
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "authoring_checks.json").write_text(json.dumps(rows, indent=2) + "\n", encoding="utf-8")
+    write_json(args.out, rows)
     width = max(len(k) for k in rows)
     print(f"{'measure':<{width}}  value (best of {args.repeat}; machine shared, loaded)")
     for k, v in rows.items():

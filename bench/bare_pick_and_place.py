@@ -20,20 +20,14 @@ planning_s, timing_s, simulation_s, total_s; sim_time_s; per-call medians).
 
 from __future__ import annotations
 
-import argparse
 import json
 import statistics
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
-
-_ROOT = Path(__file__).resolve().parents[1]
-if str(_ROOT) not in sys.path:
-    sys.path.insert(0, str(_ROOT))
 
 from phyagentos.errors import BenchError, IKError  # noqa: E402
 from phyagentos.motion import (  # noqa: E402
@@ -50,9 +44,9 @@ from phyagentos.motion import (  # noqa: E402
     top_down_grasp_candidates,
 )
 from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget, SceneSpec  # noqa: E402
-from phyagentos.yamlsource import read_yaml  # noqa: E402
+from phyagentos.yamlsource import read_yaml
 
-RESULTS = _ROOT / "bench" / "results" / "bare_pick_and_place.json"
+_ROOT = Path(__file__).resolve().parents[1]
 TREES = _ROOT / "phyagentos" / "data" / "trees"
 
 #: ``CartesianMove``'s velocity scale where a tree gives none (trees/place.yaml's Retreat);
@@ -425,11 +419,12 @@ def plan_over_wall_benchmark(repeats: int = 30, planner: str = "RRTConnect", mar
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    from _harness import parser, write_json  # noqa: PLC0415  (here: tests/test_end_to_end.py loads this file as a module)
+
+    ap = parser(__doc__, "bare_pick_and_place")
     ap.add_argument("--runs", type=int, default=3, help="measured runs after one warm-up run")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--plan-repeats", type=int, default=30)
-    ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--perception", action="store_true",
                     help="perceive where a phyagentos run of pick_and_place.yaml perceives (see run_bare_pick_and_place)")
     ap.add_argument("--once", action="store_true",
@@ -458,10 +453,8 @@ def main(argv=None) -> int:
               f"p90 {wall['p90_ms']:.1f} ms, max {wall['max_ms']:.1f} ms")
     print(f"cube final position {med['cube_final_position']}, unexpected contacts {med['unexpected_contacts']}")
 
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     out = {"cold": cold, "median_run": med, "runs": runs, "plan_over_wall": wall}
-    args.out.write_text(json.dumps(out, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, out)
     return 0
 
 

@@ -23,20 +23,17 @@ paths they come from; measurements not run keep their previous entry).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from _harness import parser, write_json
 from rich.console import Console
 from rich.table import Table
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
-
-from phyagentos.bench import run_bench  # noqa: E402
+from phyagentos.bench import run_bench
 
 MEASUREMENTS = ("tabletop", "kitchen", "so101", "throughput", "adaptation")
 
@@ -60,7 +57,7 @@ def _summary(result) -> dict:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "bench_suites")
     ap.add_argument("--only", nargs="*", choices=MEASUREMENTS, help="subset of the measurements")
     ap.add_argument("--workspace", type=Path, help="bench workspace (default: a temporary directory)")
     args = ap.parse_args()
@@ -121,13 +118,11 @@ def main() -> int:
                       f"1 worker {t['workers_1']['episodes_per_minute']:.1f}/min, 2 workers "
                       f"{t['workers_2']['episodes_per_minute']:.1f}/min, ratio {t['ratio_2_to_1']:.2f}")
     console.print(table)
-    results = HERE / "results"
-    results.mkdir(exist_ok=True)
-    path = results / "bench_suites.json"
+    path = args.out
     merged = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
     merged.update(out)
-    path.write_text(json.dumps(merged, indent=1) + "\n", encoding="utf-8")
-    console.print(f"wrote {path}; reports under {root}")
+    write_json(path, merged, indent=1)
+    console.print(f"reports under {root}")
     return 0
 
 

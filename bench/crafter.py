@@ -31,8 +31,6 @@ PPO 4.6, DreamerV2 10.0, DreamerV3 14.5, SPRING 27.3, human experts 50.5 (percen
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
 import tempfile
 import time
@@ -41,10 +39,11 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from _harness import parser, write_json  # isort: skip  (before bench/ leaves the import path)
+
 HERE = Path(__file__).resolve().parent
 # This script is named like the game's package: keep its own directory off the import path.
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != HERE]
-sys.path.insert(0, str(HERE.parent))
 
 from phyagentos.bench import run_bench  # noqa: E402
 from phyagentos.bench.crafter_metrics import crafter_score, crafter_score_interval  # noqa: E402
@@ -127,7 +126,7 @@ def _trial_text(lesson: dict) -> str:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "crafter")
     ap.add_argument("--episodes", type=int, default=8, help="worlds per pass (default 8)")
     ap.add_argument("--learn-episodes", type=int, help="worlds of the learning pass (default: 2 x --episodes)")
     ap.add_argument("--workers", type=int, default=1, help="worker processes of the off and frozen passes")
@@ -197,10 +196,7 @@ def main() -> int:
            "memory_after_learning": memory, "anchors_percent": ANCHORS,
            "measured_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
            "note": "2 shared cores under load from other engineers' tests: compare ratios, not absolute speeds"}
-    results = HERE / "results"
-    results.mkdir(exist_ok=True)
-    (results / "crafter.json").write_text(json.dumps(out, indent=2))
-    console.print(f"wrote {results / 'crafter.json'}")
+    write_json(args.out, out)
     return 0
 
 

@@ -27,7 +27,6 @@ shared and loaded: counts matter, seconds are indicative only.
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import json
 import shutil
@@ -37,13 +36,12 @@ import time
 from pathlib import Path
 
 import yaml
+from _harness import parser, write_json
 
 from phyagentos.bench.random_world import random_episodes, with_defaults, with_limits
 from phyagentos.bench.self_evolution import run_pass
 from phyagentos.bench.verifier_scoring import wilson_interval
 from phyagentos.protocol import Workspace
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def _seeds(text: str) -> list[int]:
@@ -104,7 +102,7 @@ def run_setting(grip: float | None, samples: int, candidate: int, seeds: list[in
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "defaults_sweep")
     ap.add_argument("--seeds", default="0-9", help="training seeds, e.g. 0-9 or 0,2,4 (default 0-9)")
     ap.add_argument("--grip", default="null,30,70",
                     help="pick grip_force_n values, N per finger; null = position close")
@@ -114,7 +112,6 @@ def main(argv=None) -> int:
     ap.add_argument("--heartbeat-timeout", type=float, default=60.0,
                     help="runner heartbeat timeout for these sessions, s (default 60: load must not end a session)")
     ap.add_argument("--workspace", type=Path, help="keep one workspace per setting here and resume finished ones")
-    ap.add_argument("--out", type=Path, default=RESULTS / "defaults_sweep.json")
     args = ap.parse_args(argv)
     seeds = _seeds(args.seeds)
     if any(s >= 10000 for s in seeds):
@@ -135,8 +132,7 @@ def main(argv=None) -> int:
            "heartbeat_timeout_s": args.heartbeat_timeout, "wall_time_s": round(time.perf_counter() - started, 1),
            "rows": rows, "chosen": best["defaults"],
            "note": "shared loaded 2-core machine; counts matter, seconds indicative"}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
+    write_json(args.out, out, indent=1)
     (args.out.parent / "defaults_best.yaml").write_text(
         "# best fixed defaults of bench/defaults_sweep.py on training seeds "
         f"{seeds[0]}..{seeds[-1]} (see defaults_sweep.json)\n" + yaml.safe_dump(best["defaults"], sort_keys=True),

@@ -47,7 +47,6 @@ Prints tables and writes ``bench/results/end_to_end.json``. Goals (issue 12): wa
 
 from __future__ import annotations
 
-import argparse
 import ctypes
 import json
 import os
@@ -63,12 +62,12 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import yaml
+from _harness import parser, percentile, write_json
 
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results" / "end_to_end.json"
 BIN = Path(sys.executable).parent
 PHYAGENTOS = [str(BIN / "phyagentos")] if (BIN / "phyagentos").exists() else [sys.executable, "-m", "phyagentos.cli"]
 BARE = [sys.executable, str(ROOT / "bench" / "bare_pick_and_place.py"), "--once"]
@@ -123,16 +122,6 @@ def _ts(iso) -> float | None:
     if isinstance(iso, datetime):
         return (iso if iso.tzinfo else iso.replace(tzinfo=timezone.utc)).timestamp()
     return datetime.fromisoformat(str(iso).replace("Z", "+00:00")).timestamp()
-
-
-def _pct(values: list[float], q: float) -> float | None:
-    if not values:
-        return None
-    xs = sorted(values)
-    pos = q * (len(xs) - 1)
-    lo = int(pos)
-    hi = min(lo + 1, len(xs) - 1)
-    return xs[lo] + (xs[hi] - xs[lo]) * (pos - lo)
 
 
 def _ms(x: float | None) -> float | None:
@@ -278,7 +267,7 @@ def compare(runs: int, tmp: Path, *, perception: bool = True) -> dict:
         "bare": {"wall_s": med(bare, "wall_s"), "cpu_s": med(bare, "cpu_s"),
                  "wall_all_s": [round(x["wall_s"], 3) for x in bare], "cpu_all_s": [round(x["cpu_s"], 3) for x in bare]},
         "cold_start_to_first_actuation_s": {"median": statistics.median(cold), "all": [round(c, 3) for c in cold]},
-        "handoff_ms": {"p50": _ms(_pct(hand, 0.5)), "p99": _ms(_pct(hand, 0.99)), "n": len(hand)},
+        "handoff_ms": {"p50": _ms(percentile(hand, 50)), "p99": _ms(percentile(hand, 99)), "n": len(hand)},
         "sim_time_s": {"framework": statistics.median(fw_sim), "bare": statistics.median(bare_sim)},
     }
     sim = out["sim_time_s"]
@@ -311,7 +300,7 @@ def holds_in_one_run(n: int, tmp: Path, *, cameras: bool = True) -> dict:
     shutil.rmtree(ws, ignore_errors=True)
     return {"sessions": n, "process_wall_s": r["wall_s"], "process_cpu_s": r["cpu_s"],
             "sessions_per_s": n / span, "first_submit_to_last_verdict_s": span,
-            "handoff_ms": {"p50": _ms(_pct(hand, 0.5)), "p99": _ms(_pct(hand, 0.99)), "n": len(hand)},
+            "handoff_ms": {"p50": _ms(percentile(hand, 50)), "p99": _ms(percentile(hand, 99)), "n": len(hand)},
             "per_session_ms": cost_split(rows)}
 
 
@@ -346,7 +335,7 @@ def two_process(n: int, tmp: Path) -> dict:
             rows = [r for r in session_timeline(ws) if r["session_id"].startswith(run_id)]
             hand = handoffs(rows)
             out[name] = {"submit_to_finished_s": wall, "sessions": len(rows),
-                         "handoff_ms": {"p50": _ms(_pct(hand, 0.5)), "p99": _ms(_pct(hand, 0.99)), "n": len(hand)},
+                         "handoff_ms": {"p50": _ms(percentile(hand, 50)), "p99": _ms(percentile(hand, 99)), "n": len(hand)},
                          "per_session_ms": cost_split(rows)}
     finally:
         for p in procs:
@@ -402,7 +391,7 @@ def prepare_bytecode(mode: str) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "end_to_end")
     ap.add_argument("--runs", type=int, default=5, help="alternated runs of each side (default 5)")
     ap.add_argument("--holds", type=int, default=20, help="length of the hold chain (default 20)")
     ap.add_argument("--parts", default="imports,compare,compare_no_perception,holds,holds_no_cameras,two_process",
@@ -410,7 +399,6 @@ def main(argv=None) -> int:
                          "two_process (default all)")
     ap.add_argument("--bytecode", choices=("cached", "as-is"), default="cached",
                     help="cached: compile the project's modules first (default); as-is: measure without that")
-    ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     _subreaper()
     bytecode = prepare_bytecode(args.bytecode)
@@ -482,9 +470,7 @@ def main(argv=None) -> int:
         print(f"imports: cli {im['cli_importtime_s']:.3f} s, run's main process {im['run_main_process_importtime_s']:.3f} s "
               f"(-X importtime); interpreter alone {im['interpreter_only_process_s']:.3f} s")
     print(f"load average at end {result['load_at_end'][0]:.2f}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, result)
     return 0
 
 

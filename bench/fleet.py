@@ -25,7 +25,6 @@ Prints a table (or ``--json``) and writes ``bench/results/fleet.json``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import random
 import signal
@@ -37,17 +36,12 @@ import time
 from pathlib import Path
 
 import yaml
+from _harness import parser, write_json
+from end_to_end import NO_CAMERA_SENSORS, handoffs, session_timeline
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
-sys.path.insert(0, str(ROOT))
+from phyagentos.fleet.local import LocalFleet
+from phyagentos.protocol import Workspace
 
-from end_to_end import NO_CAMERA_SENSORS, handoffs, session_timeline  # noqa: E402 - after the sys.path lines above
-
-from phyagentos.fleet.local import LocalFleet  # noqa: E402
-from phyagentos.protocol import Workspace  # noqa: E402
-
-RESULTS = ROOT / "bench" / "results" / "fleet.json"
 PHYAGENTOS = [sys.executable, "-m", "phyagentos.cli"]
 
 
@@ -320,7 +314,7 @@ def part_drill(tmp: Path, faults: int, seed: int, per_edge: int) -> dict:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = parser(__doc__, "fleet")
     ap.add_argument("--parts", default="handoff,throughput,convergence,drill")
     ap.add_argument("--holds", type=int, default=10)
     ap.add_argument("--runs", type=int, default=2)
@@ -344,8 +338,7 @@ def main() -> int:
             result["convergence"] = part_convergence(tmp, args.partition_s)
         if "drill" in parts:
             result["drill"] = part_drill(tmp, args.drill_faults, args.seed, args.drill_per_edge)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=1), encoding="utf-8")
+    write_json(args.out, result, indent=1, say=not args.json)
     if args.json:
         print(json.dumps(result))
         return 0

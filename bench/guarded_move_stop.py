@@ -20,20 +20,17 @@ bench/results/guarded_move_stop.json.
 
 from __future__ import annotations
 
-import argparse
-import json
 import statistics
 import time
-from pathlib import Path
 
 import py_trees
+from _harness import parser as bench_parser
+from _harness import write_json
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.primitives import SkillContext
 from phyagentos.primitives.contact import GuardedMove, _Slice, contact_force_n
 from phyagentos.targets import MuJoCoTarget, SceneSpec
-
-RESULTS = Path(__file__).resolve().parent / "results" / "guarded_move_stop.json"
 
 
 class PerPeriodGuardedMove(GuardedMove):
@@ -96,7 +93,7 @@ def press(cls, *, limit_n: float, velocity_scale: float) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = bench_parser(__doc__, "guarded_move_stop")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--limit-n", type=float, default=15.0)
     parser.add_argument("--velocity-scale", type=float, default=0.3)
@@ -110,9 +107,8 @@ def main() -> None:
     print(f"{'check':<20} {'sim to stop s':>14} {'force at stop N':>16} {'steps after limit':>18} {'wall s':>8}")
     for name, r in rows.items():
         print(f"{name:<20} {r['sim_s']:>14.3f} {r['force_n']:>16.1f} {r['steps_after_limit']:>18.0f} {r['wall_s']:>8.3f}")
-    RESULTS.parent.mkdir(exist_ok=True)
-    RESULTS.write_text(json.dumps({"limit_n": args.limit_n, "velocity_scale": args.velocity_scale,
-                                   "repeat": args.repeat, "rows": rows}, indent=2) + "\n", encoding="utf-8")
+    write_json(args.out, {"limit_n": args.limit_n, "velocity_scale": args.velocity_scale,
+                          "repeat": args.repeat, "rows": rows})
 
 
 if __name__ == "__main__":

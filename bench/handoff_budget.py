@@ -170,8 +170,7 @@ def budget(ws, trace_dir, *, show: int | None = None) -> dict:
     """Median ms per (process:thread, function) inside the hand-offs of the run in ``ws``."""
     import statistics  # noqa: PLC0415
 
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    from end_to_end import session_timeline  # noqa: PLC0415
+    from end_to_end import session_timeline  # noqa: PLC0415  (bench/ is sys.path[0] of the script)
 
     rows = session_timeline(ws)
     by_node = {r["node"]: r for r in rows}
@@ -218,24 +217,20 @@ def budget(ws, trace_dir, *, show: int | None = None) -> dict:
 
 
 def main(argv=None) -> int:
-    import argparse  # noqa: PLC0415
-    import json  # noqa: PLC0415
     import shutil  # noqa: PLC0415
     import subprocess  # noqa: PLC0415
     import tempfile  # noqa: PLC0415
     from pathlib import Path  # noqa: PLC0415
 
     import yaml  # noqa: PLC0415
-
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from _harness import parser, write_json  # noqa: PLC0415
     from end_to_end import NO_CAMERA_SENSORS, hold_chain  # noqa: PLC0415
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "handoff_budget")
     ap.add_argument("--holds", type=int, default=20, help="length of the hold chain (default 20)")
     ap.add_argument("--cameras", action="store_true", help="keep the target's cameras (perceive around each hold)")
     ap.add_argument("--graph", type=Path, default=None, help="trace a run of this goal graph instead of a hold chain")
     ap.add_argument("--show", type=int, default=None, help="print this hand-off's timeline call by call")
-    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results" / "handoff_budget.json")
     args = ap.parse_args(argv)
     load = os.getloadavg()
     tmp = Path(tempfile.mkdtemp(prefix="phyagentos-handoff-"))
@@ -262,9 +257,7 @@ def main(argv=None) -> int:
     for row in result["functions_ms"]:
         if row["median_ms"] >= 0.3:
             print(f"  {row['median_ms']:7.1f}  {row['where']:28} {row['function']}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, result)
     return 0
 
 

@@ -24,8 +24,6 @@ alternating them (docs/PERFORMANCE.md round 14).
 
 from __future__ import annotations
 
-import argparse
-import json
 import shutil
 import statistics
 import subprocess
@@ -33,10 +31,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
+from _harness import parser, write_json
+from end_to_end import NO_CAMERA_SENSORS, PHYAGENTOS, hold_chain, session_timeline
 
-from end_to_end import NO_CAMERA_SENSORS, PHYAGENTOS, hold_chain, session_timeline  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 STAGES = ("agent", "submit_to_claim", "claim_to_start", "start_to_first_tick", "total")
 
@@ -62,12 +60,11 @@ def stages(rows: list[dict]) -> list[dict[str, float]]:
 def main(argv=None) -> int:
     import yaml  # noqa: PLC0415
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "handoff_stages")
     ap.add_argument("--runs", type=int, default=2, help="runs whose hand-offs are pooled (default 2)")
     ap.add_argument("--holds", type=int, default=20, help="length of the hold chain (default 20)")
     ap.add_argument("--graph", type=Path, help="a goal graph to run instead of the hold chain")
     ap.add_argument("--cameras", action="store_true", help="keep the target's cameras")
-    ap.add_argument("--out", type=Path, default=HERE / "results" / "handoff_stages.json")
     args = ap.parse_args(argv)
     pooled: list[dict[str, float]] = []
     for i in range(args.runs):
@@ -98,9 +95,7 @@ def main(argv=None) -> int:
     print(f"({len(pooled)} hand-offs)")
     result = {"graph": str(args.graph) if args.graph else f"{args.holds} holds", "cameras": args.cameras,
               "runs": args.runs, "hand_offs": len(pooled), "p50_ms": medians}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, result)
     return 0
 
 

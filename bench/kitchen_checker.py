@@ -16,18 +16,15 @@ of the per-task counts. Prints two tables and writes the JSON.
 
 from __future__ import annotations
 
-import argparse
-import json
 import statistics
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
+from _harness import parser, write_json
 
-from phyagentos.bench.report import load_report  # noqa: E402
-from phyagentos.errors import BenchError  # noqa: E402
-from phyagentos.yamlsource import read_yaml  # noqa: E402
+from phyagentos.bench.report import load_report
+from phyagentos.errors import BenchError
+from phyagentos.yamlsource import read_yaml
 
 
 def _gt(run_dir: Path, evidence: str | None) -> dict:
@@ -100,9 +97,8 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "kitchen_checker")
     ap.add_argument("runs", nargs="+", type=Path, help="kitchen bench run directories")
-    ap.add_argument("--out", type=Path, default=HERE / "results" / "kitchen_checker.json")
     args = ap.parse_args()
     rows = [r for run in args.runs for r in episode_rows(run)]
     summary = summarise(rows)
@@ -120,10 +116,8 @@ def main() -> int:
         print(f"{r['episode_id'] + (' *' if r['load_timeout'] else ''):<18}{str(r['verdict']):>9}"
               f"{str(r['env_success']):>7}{str(r['completed_at_step']):>7}"
               f"{str(r['env_steps']):>7}{'-' if mw is None else f'{mw:.9f}':>16}{'-' if kx is None else f'{kx:.6f}':>14}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"benchmark": "kitchen_checker", "runs": [str(r) for r in args.runs],
-                                    "per_task": summary, "episodes": rows}, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}")
+    write_json(args.out, {"benchmark": "kitchen_checker", "runs": [str(r) for r in args.runs],
+                          "per_task": summary, "episodes": rows}, indent=1)
     return 0
 
 

@@ -43,7 +43,6 @@ Writes bench/results/language.json and prints tables. Timings on a shared, loade
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import functools
 import json
@@ -71,7 +70,6 @@ from phyagentos.protocol import Workspace
 from phyagentos.runtime.reach_query import answer_reach_query
 from phyagentos.yamlsource import read_yaml
 
-RESULTS = Path(__file__).resolve().parent / "results"
 COLOURS = {"red": [0.8, 0.1, 0.1, 1], "green": [0.1, 0.7, 0.2, 1], "blue": [0.1, 0.2, 0.8, 1],
            "yellow": [0.9, 0.8, 0.1, 1]}
 CATEGORIES = ("single", "sort_colour", "sort_size", "stack", "ordering", "all_except", "counting", "refuse",
@@ -586,7 +584,9 @@ def _print_table(label: str, run: dict, summary: dict) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from _harness import parser, write_json  # noqa: PLC0415  (here: tests/test_language_bench_scoring.py loads this file as a module)
+
+    ap = parser(__doc__, "language")
     ap.add_argument("--seeds", type=int, default=8, help="instructions per category (default 8: 64 in all)")
     ap.add_argument("--execute", type=int, default=10**6, help="execute at most this many planned instructions")
     ap.add_argument("--reviser-episodes", type=int, default=0, help="pick episodes per perturbation for the reviser comparison")
@@ -601,7 +601,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--categories", default=",".join(CATEGORIES), help="comma-separated subset of " + ",".join(CATEGORIES))
     ap.add_argument("--keep", type=Path, default=None,
                     help="keep the workspaces (evidence bundles, verdicts, traces) under this directory")
-    ap.add_argument("--out", type=Path, default=RESULTS / "language.json")
     ap.add_argument("--held-out", choices=("with", "only", "without"), default="with",
                     help="the held-out part (bench/language_heldout.yaml): with the generated (tuned) categories "
                          "(default), alone, or left out; each part is reported on its own")
@@ -618,7 +617,6 @@ def main(argv: list[str] | None = None) -> int:
     if os.environ.get("PHYAGENTOS_LLM_PROVIDER") == "openai" and not args.no_model:
         clients.append(("endpoint", make_client(load_llm_config()), args.execute))
     if args.baseline:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
         from rule_baseline import RuleBaselineClient  # noqa: PLC0415
 
         clients.append(("baseline_rules", RuleBaselineClient(), 0))
@@ -636,8 +634,7 @@ def main(argv: list[str] | None = None) -> int:
             report["runs"][label] = {"provider": client.provider, "model": client.model, **summarise(rows), "rows": rows}
         if args.reviser_episodes:
             report["reviser"] = reviser_comparison(args.reviser_episodes, Path(tmp))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=1))
+    write_json(args.out, report, indent=1, say=False)
     for label, run in report["runs"].items():
         for part, summary in (run.get("parts") or {"all": run}).items():
             _print_table(f"{label} [{part}]", run, summary)

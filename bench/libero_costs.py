@@ -21,28 +21,22 @@ Prints a table and writes the JSON.
 
 from __future__ import annotations
 
-import argparse
-import json
 import resource
 import statistics
 import sys
 import time
-from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
+import numpy as np
+from _harness import parser, write_json
 
-import numpy as np  # noqa: E402
-
-from phyagentos.targets.libero import LiberoScene, LiberoTarget  # noqa: E402
+from phyagentos.targets.libero import LiberoScene, LiberoTarget
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "libero_costs")
     ap.add_argument("--suite", default="libero_object")
     ap.add_argument("--task", type=int, default=0)
     ap.add_argument("--steps", type=int, default=200, help="control periods timed per controller")
-    ap.add_argument("--out", type=Path, default=HERE / "results" / "libero_costs.json")
     args = ap.parse_args(argv)
 
     t0 = time.perf_counter()
@@ -89,8 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     for sensor, c in captures.items():
         print(f"capture {sensor}: first {c['first_ms']} ms, then median {c['median_ms']} ms")
     print(f"peak RSS {result['rss_mb']} MB")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    write_json(args.out, result)
     return 0
 
 

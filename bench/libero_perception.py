@@ -17,18 +17,14 @@ category and writes the JSON (rows, per-category counts, looks, wall time).
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 import time
 from collections import Counter, defaultdict
-from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
+from _harness import parser, write_json
 
-from phyagentos.targets.libero import LiberoScene, LiberoTarget  # noqa: E402
-from phyagentos.targets.libero.descriptors import measure_descriptors, perception_accuracy  # noqa: E402
+from phyagentos.targets.libero import LiberoScene, LiberoTarget
+from phyagentos.targets.libero.descriptors import measure_descriptors, perception_accuracy
 
 EVAL_SEED = 50000
 
@@ -42,12 +38,11 @@ def _range(text: str) -> list[int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "libero_perception")
     ap.add_argument("--suite", default="libero_object")
     ap.add_argument("--tasks", default="0-9")
     ap.add_argument("--scenes", type=int, default=4, help="generated evaluation scenes per task world")
     ap.add_argument("--config", default=None, help="perception config overrides (JSON), else the target's")
-    ap.add_argument("--out", default=str(HERE / "results" / "libero_perception.json"))
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     rows, all_looks = [], {}
@@ -83,11 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'all':18s} {n:3d} {tot['correct'] / n:7.2f} {tot['wrong']:5d} {tot['unknown']:7d} {tot['unseen']:6d}")
     wall = time.perf_counter() - t0
     print(f"wall {wall:.0f} s")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps({"suite": args.suite, "tasks": args.tasks, "scenes": args.scenes,
-                                          "config": args.config, "per_category": {k: dict(v) for k, v in per.items()},
-                                          "total": dict(tot), "looks": all_looks, "rows": rows, "wall_s": round(wall, 1)},
-                                         indent=1))
+    write_json(args.out, {"suite": args.suite, "tasks": args.tasks, "scenes": args.scenes,
+                          "config": args.config, "per_category": {k: dict(v) for k, v in per.items()},
+                          "total": dict(tot), "looks": all_looks, "rows": rows, "wall_s": round(wall, 1)}, indent=1)
     return 0
 
 

@@ -14,14 +14,13 @@ mesh's centre), ``wrong`` when so perceived elsewhere, ``unknown`` when reported
 
 from __future__ import annotations
 
-import argparse
 import collections
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
+from _harness import parser, write_json
 
 TOL_M = 0.04
 
@@ -52,9 +51,9 @@ def score(root: Path) -> dict[str, collections.Counter]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "libero_perception_score", out=False)
     ap.add_argument("workspace", type=Path)
-    ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--out", type=Path, default=None, help="also write the scores as JSON here (default: print only)")
     args = ap.parse_args(argv)
     per = score(args.workspace)
     if not per:
@@ -70,9 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     n = sum(tot.values())
     print(f"{'all':18s} {n:3d} {tot['correct'] / n:7.2f} {tot['wrong']:5d} {tot['unknown']:7d} {tot['unseen']:6d}")
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"per_category": {k: dict(v) for k, v in per.items()}, "total": dict(tot)},
-                                       indent=1))
+        write_json(args.out, {"per_category": {k: dict(v) for k, v in per.items()}, "total": dict(tot)}, indent=1)
     return 0
 
 

@@ -38,7 +38,6 @@ object-position perturbations. Prints a table and writes the JSON.
 
 from __future__ import annotations
 
-import argparse
 import json
 import re
 import subprocess
@@ -47,19 +46,19 @@ import time
 from pathlib import Path
 
 import yaml
+from _harness import parser, print_table, results_path, write_json
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-sys.path.insert(0, str(ROOT))
-
-from phyagentos.bench import parse_seeds  # noqa: E402
-from phyagentos.errors import TargetError, format_choices  # noqa: E402
-from phyagentos.targets.libero.catalog import (  # noqa: E402
+from phyagentos.bench import parse_seeds
+from phyagentos.errors import TargetError, format_choices
+from phyagentos.targets.libero.catalog import (
     SUITES,
     available_suites,
     perturbation_family,
     unavailable_suites,
 )
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
 
 #: What a default run measures: libero_object and one suite of each family it has.
 DEFAULT_SUITES = ("libero_object", "libero_object_swap", "libero_object_object", "libero_object_with_mug",
@@ -211,9 +210,7 @@ def check_builds(suites: list[str], out: Path) -> int:
         print(f"| {suite} | {row.get('init_states')} | {row['built']} | {row.get('build_s', '-')} | "
               f"{row.get('moved', '-')} | {', '.join(row.get('parked_out_of_scene', [])) or '-'} | "
               f"{row.get('displacement_max_m', '-')} | {row.get('error', '')} |", flush=True)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(rows, indent=1), encoding="utf-8")
-    print(f"wrote {out}")
+    write_json(out, rows, indent=1)
     return 0 if all(r["built"] for r in rows) else 1
 
 
@@ -222,12 +219,11 @@ def _pct(n: int, d: int) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "libero_pro")
     ap.add_argument("--suites", default=",".join(DEFAULT_SUITES), help="comma-separated LIBERO / LIBERO-PRO suites")
     ap.add_argument("--tasks", default="0-9", help="LIBERO task indices, e.g. 0-9 or 0,3")
     ap.add_argument("--seeds", default="0", help="LIBERO init-state indices, e.g. 0 or 0-2")
     ap.add_argument("--workspace", type=Path, default=ROOT / "ws" / "libero_pro")
-    ap.add_argument("--out", type=Path, default=HERE / "results" / "libero_pro.json")
     ap.add_argument("--timeout", type=float, default=7200, help="seconds per suite")
     ap.add_argument("--check-builds", action="store_true", help="build one world per suite instead of running it")
     ap.add_argument("--merge", action="store_true", help="keep the rows of --out's other suites (same tasks and "
@@ -244,9 +240,9 @@ def main(argv: list[str] | None = None) -> int:
             print(p, file=sys.stderr)
         return EXIT_BAD_INPUT
     if args.check_builds:
-        print("| suite | init states | built | build s | moved > 2 cm (m) | parked out of the scene | max move m | error |")
-        print("|---|---|---|---|---|---|---|---|")
-        return check_builds(suites, HERE / "results" / "libero_pro_builds.json")
+        print_table(("suite", "init states", "built", "build s", "moved > 2 cm (m)", "parked out of the scene",
+                     "max move m", "error"), [])
+        return check_builds(suites, results_path("libero_pro_builds"))
     tasks = ",".join(str(t) for t in parse_seeds(args.tasks))
     rows = []
     for suite in suites:
@@ -265,18 +261,17 @@ def main(argv: list[str] | None = None) -> int:
             r["drop_first_pts"] = round(ref["first_pct"] - r["first_pct"], 1)
             r["drop_final_pts"] = round(ref["final_pct"] - r["final_pct"], 1)
     out = {"tasks": tasks, "seeds": args.seeds, "workspace": str(args.workspace), "suites": rows, "anchors": ANCHORS}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(out, indent=1), encoding="utf-8")
+    write_json(args.out, out, indent=1, say=False)
     head = ("suite", "family", "planned/refused", "First", "Final", "drop First/Final (pts)", "false succ.",
             "false fail.", "wall s")
-    print("| " + " | ".join(head) + " |")
-    print("|" + "---|" * len(head))
+    table = []
     for r in rows:
         drop = (f"{r['drop_first_pts']:+.1f} / {r['drop_final_pts']:+.1f}" if "drop_first_pts" in r else "-")
-        print(f"| {r['suite']} | {r['family']} ({r['kind']}) | {r.get('planned', '?')}/{r.get('refused', '?')} | "
-              f"{r.get('first', '?')}/{r['episodes']} ({r['first_pct']:.0f}%) | "
-              f"{r.get('final', '?')}/{r['episodes']} ({r['final_pct']:.0f}%) | {drop} | {r.get('false_successes', '?')} | "
-              f"{r.get('false_failures', '?')} | {r['wall_s']:.0f} |")
+        table.append((r["suite"], f"{r['family']} ({r['kind']})", f"{r.get('planned', '?')}/{r.get('refused', '?')}",
+                      f"{r.get('first', '?')}/{r['episodes']} ({r['first_pct']:.0f}%)",
+                      f"{r.get('final', '?')}/{r['episodes']} ({r['final_pct']:.0f}%)", drop,
+                      r.get("false_successes", "?"), r.get("false_failures", "?"), f"{r['wall_s']:.0f}"))
+    print_table(head, table)
     print(f"anchors ({ANCHORS['source']}): VLAs under task perturbations {ANCHORS['vla_task_perturbation_success']}; "
           f"pi0.5 keeps {ANCHORS['pi05_position_perturbation_kept_fraction']} under position perturbations")
     print(f"wrote {args.out}")

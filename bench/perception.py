@@ -28,13 +28,12 @@ Prints a table and writes bench/results/perception.json.
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import platform
 import time
-from pathlib import Path
+
+from _harness import parser, write_json
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 
@@ -49,8 +48,6 @@ from phyagentos.perception.synthetic import (
     SyntheticScene,
     random_objects,
 )
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 #: Camera sets: ``near`` = DEFAULT_CAMERAS (two 320x240 cameras about 0.8 m from the
 #: objects); ``overview`` = the tabletop target's overview camera geometry (eye
@@ -188,16 +185,14 @@ def run(n_scenes: int, seed: int, clustering: str, camera_set: str = "near") -> 
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "perception")
     ap.add_argument("--scenes", type=int, default=60)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--clustering", choices=("kdtree", "sklearn"), default="kdtree")
     ap.add_argument("--cameras", choices=tuple(CAMERA_SETS), default="near")
-    ap.add_argument("--out", type=Path, default=RESULTS / "perception.json")
     args = ap.parse_args()
     res = run(args.scenes, args.seed, args.clustering, args.cameras)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(res, indent=2) + "\n")
+    write_json(args.out, res, say=False)
     lines = [
         ("scenes / declared targets / objects", f"{res['scenes']} / {res['declared_targets']} / {res['objects']}"),
         ("association accuracy", f"{res['association_accuracy']:.3f}  {res['association']}"),

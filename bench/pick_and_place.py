@@ -18,8 +18,6 @@ bench/results/pick_and_place.json.
 
 from __future__ import annotations
 
-import argparse
-import json
 import statistics
 import sys
 import tempfile
@@ -28,6 +26,9 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+from _harness import parser as bench_parser
+from _harness import write_json
+from bare_pick_and_place import SkillMotions  # the trees' heights and speeds
 
 import phyagentos  # noqa: F401  (selects the headless GL backend before mujoco loads)
 from phyagentos.app.orchestrator import run_goal_graph
@@ -43,11 +44,7 @@ from phyagentos.resources import goal_graphs_dir
 from phyagentos.targets import MuJoCoTarget, SceneSpec
 from phyagentos.yamlsource import read_yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bare_pick_and_place import SkillMotions  # noqa: E402  (the trees' heights and speeds)
-
 GRAPH = goal_graphs_dir() / "pick_and_place.yaml"
-RESULTS = Path(__file__).resolve().parent / "results"
 CATEGORIES = ("ik", "planning", "timing", "simulation")
 
 
@@ -188,7 +185,7 @@ def framework_run(seed: int = 0) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = bench_parser(__doc__, "pick_and_place")
     parser.add_argument("--runs", type=int, default=7)
     args = parser.parse_args(argv)
     framework_run(0), bare_same_motions(0)  # warm-up: imports, mesh loading, OMPL/toppra first calls
@@ -214,10 +211,7 @@ def main(argv=None) -> int:
     for k in keys:
         print(f"{labels.get(k, k):22s}{result['framework_median'][k]:12.3f}{result['bare_median'][k]:12.3f}")
     print(f"\nframework / bare wall time: {result['ratio_framework_to_bare']:.2f}  (goal <= 1.20)")
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    out = RESULTS / "pick_and_place.json"
-    out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {out}")
+    write_json(args.out, result)
     return 0
 
 

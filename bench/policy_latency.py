@@ -14,11 +14,10 @@ bench/results/policy_latency.json.
 
 from __future__ import annotations
 
-import argparse
-import json
 import subprocess
 import sys
-from pathlib import Path
+
+from _harness import parser, percentile, write_json
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 
@@ -28,8 +27,6 @@ import numpy as np
 
 from phyagentos.policy.client import PolicyClient
 from phyagentos.targets import MuJoCoTarget, SceneSpec
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def observation(target: MuJoCoTarget, image: np.ndarray | None) -> dict:
@@ -50,11 +47,11 @@ def observation(target: MuJoCoTarget, image: np.ndarray | None) -> dict:
 
 
 def pct(values, q) -> float:
-    return round(float(np.percentile(np.asarray(values) * 1e3, q)), 3)
+    return round(percentile([v * 1e3 for v in values], q), 3)
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "policy_latency")
     ap.add_argument("--n", type=int, default=300)
     args = ap.parse_args()
     proc = subprocess.Popen([sys.executable, "-m", "phyagentos.cli", "policy", "serve", "--port", "0"],
@@ -86,8 +83,7 @@ def main() -> int:
         print(f"{r['case']:24s} {r['n']:5d} {r['rtt_ms_p50']:11.3f} {r['rtt_ms_p99']:11.3f} "
               f"{r['transport_ms_p50']:14.3f} {r['transport_ms_p99']:14.3f}")
     print(f"heartbeat (websocket ping) p50 {heartbeat['ping_ms_p50']:.3f} ms, p99 {heartbeat['ping_ms_p99']:.3f} ms")
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "policy_latency.json").write_text(json.dumps({"rows": rows, "heartbeat": heartbeat}, indent=2))
+    write_json(args.out, {"rows": rows, "heartbeat": heartbeat})
     return 0
 
 

@@ -32,7 +32,6 @@ servo is detected about 10x sooner on hardware. Writes bench/results/real_arm.js
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import random
@@ -44,18 +43,16 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import parser, write_json
+
+import phyagentos  # noqa: F401  (headless GL before mujoco loads)
+from phyagentos.cli.real import ideal_calibration
+from phyagentos.runtime.safety_guard import EStopLatch
+from phyagentos.targets.so101_real.arm import SO101Arm
+from phyagentos.targets.so101_real.bus_twin import FAULT_KINDS, BusTwin
+from phyagentos.targets.so101_real.calibration import Calibration
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import phyagentos  # noqa: E402,F401  (headless GL before mujoco loads)
-from phyagentos.cli.real import ideal_calibration  # noqa: E402
-from phyagentos.runtime.safety_guard import EStopLatch  # noqa: E402
-from phyagentos.targets.so101_real.arm import SO101Arm  # noqa: E402
-from phyagentos.targets.so101_real.bus_twin import FAULT_KINDS, BusTwin  # noqa: E402
-from phyagentos.targets.so101_real.calibration import Calibration  # noqa: E402
-
-RESULTS = ROOT / "bench" / "results"
 
 
 def _sine(arm: SO101Arm, n: int, amp: float = 0.25, hz: float = 0.5) -> np.ndarray:
@@ -204,7 +201,7 @@ def preflight_rejections() -> list[dict]:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "real_arm")
     ap.add_argument("--periods", type=int, default=250)
     ap.add_argument("--estop-trials", type=int, default=10)
     ap.add_argument("--period-ms", type=float, default=20.0)
@@ -243,8 +240,7 @@ def main() -> int:
     out = {"twin": "process" if args.twin_process else "thread", "round_trip": rt, "estop": es, "faults": fl,
            "preflight_rejections": rej, "pick_and_place": pp,
            "machine": {"cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "real_arm.json").write_text(json.dumps(out, indent=2) + "\n")
+    write_json(args.out, out, say=not args.json)
     if args.json:
         print(json.dumps(out))
         return 0

@@ -25,7 +25,6 @@ Timings on a shared, loaded 2-core machine.
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -37,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from _harness import parser, write_json
 
 import phyagentos  # noqa: F401  (headless GL before mujoco)
 from phyagentos.bench.random_world import random_episodes
@@ -89,13 +89,12 @@ def run_episode(kind: str, ep, reviser: str, root: Path) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "reviser_compare")
     ap.add_argument("--seeds", type=int, default=24, help="Franka pick-and-place episodes (N seeds from --first-seed)")
     ap.add_argument("--so101-seeds", type=int, default=12, help="SO-101 pick episodes (N seeds from --first-seed)")
     ap.add_argument("--first-seed", type=int, default=0, help="seeds start here (both suites)")
     ap.add_argument("--workers", type=int, default=2, help="runs at once (each its own process and workspace)")
     ap.add_argument("--keep", type=Path, default=None, help="keep the workspaces under this directory")
-    ap.add_argument("--out", type=Path, default=RESULTS / "reviser_compare.json")
     args = ap.parse_args(argv)
     first = args.first_seed
     jobs = [("franka", ep) for ep in random_episodes(range(first, first + args.seeds))]
@@ -137,8 +136,7 @@ def main(argv: list[str] | None = None) -> int:
         }
     out = {"machine": "shared 2-core, loaded (other engineers' tests running)", "summary": summary, "pairs": pairs,
            "rules_runs": rules}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(out, indent=1))
+    write_json(args.out, out, indent=1, say=False)
     print(f"\n{'suite':7s} {'episodes':>8s} {'failures':>8s} {'same':>5s} {'rules rescued':>14s} {'model rescued':>14s}")
     for suite, s in summary.items():
         print(f"{suite:7s} {s['episodes']:8d} {s['failures']:8d} {s['same_failures']:5d} "

@@ -15,8 +15,6 @@ Writes ``bench/results/run_length.json``.
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import shutil
 import statistics
@@ -26,10 +24,10 @@ import tempfile
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
+from _harness import parser, write_json
+from end_to_end import NO_CAMERA_SENSORS, PHYAGENTOS, hold_chain, session_timeline
 
-from end_to_end import NO_CAMERA_SENSORS, PHYAGENTOS, hold_chain, session_timeline  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 
 def quarters(rows: list[dict]) -> list[dict]:
@@ -52,10 +50,9 @@ def quarters(rows: list[dict]) -> list[dict]:
 def main(argv=None) -> int:
     import yaml  # noqa: PLC0415
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "run_length")
     ap.add_argument("--holds", type=int, default=200, help="length of the hold chain (default 200; at least 12)")
     ap.add_argument("--cameras", action="store_true", help="keep the target's cameras (perceive around each hold)")
-    ap.add_argument("--out", type=Path, default=HERE / "results" / "run_length.json")
     args = ap.parse_args(argv)
     if args.holds < 12:
         ap.error(f"--holds {args.holds}: a chain of at least 12 sessions is needed (three per quarter)")
@@ -85,9 +82,7 @@ def main(argv=None) -> int:
         print(f"{i + 1:>8} {p['sessions']:>9} {p['hand_off_p50_ms']:>16.1f} {p['hand_off_p99_ms']:>8.1f} "
               f"{p['sessions_per_s'] or float('nan'):>11.2f}")
     print(f"last quarter over first (hand-off p50): {result['last_over_first']:.2f}; whole run {wall:.1f} s")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, result)
     return 0
 
 

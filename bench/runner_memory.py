@@ -14,14 +14,13 @@ levels off. Writes ``bench/results/runner_memory.json``.
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import tempfile
 from pathlib import Path
 
+from _harness import parser, write_json
+
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results" / "runner_memory.json"
 
 
 def _rss_mib(pid: int) -> float | None:
@@ -70,10 +69,9 @@ def main(argv=None) -> int:
     from phyagentos.app.orchestrator import run_goal_graph  # noqa: PLC0415
     from phyagentos.runtime import worker  # noqa: PLC0415
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "runner_memory")
     ap.add_argument("--runs", type=int, default=12)
     ap.add_argument("--graph", type=Path, default=ROOT / "phyagentos" / "data" / "goal_graphs" / "pick_and_place.yaml")
-    ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     base = Path(tempfile.mkdtemp(prefix="phyagentos-runner-memory-"))
     rows = []
@@ -89,9 +87,7 @@ def main(argv=None) -> int:
         rows.append(row)
         print(f"{i:>4} {'yes' if report.succeeded else 'no':>3} {row['self_mib']:>17.0f}  "
               + ", ".join(f"{d['role']} {d['rss_mib']:.0f}" for d in row["descendants"].values()), flush=True)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"graph": str(args.graph), "runs": rows}, indent=2))
-    print(f"wrote {args.out}")
+    write_json(args.out, {"graph": str(args.graph), "runs": rows})
     return 0
 
 

@@ -19,24 +19,20 @@ Writes bench/results/safety_estop.json.
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import random
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
+from _harness import parser, write_json
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.motion.retime import retime
 from phyagentos.runtime.safety_guard import EStopLatch
 from phyagentos.runtime.target_adapters import MuJoCoFrankaAdapter
 from phyagentos.targets import MuJoCoTarget, SceneSpec
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 class TimedLatch(EStopLatch):
@@ -91,7 +87,7 @@ def trial(target: MuJoCoTarget, flow: str, delay_s: float) -> dict:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "safety_estop")
     ap.add_argument("--trials", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--switch-interval-s", type=float, default=1e-4, help="sys.setswitchinterval for the run")
@@ -124,10 +120,8 @@ def main() -> int:
     for flow, s in summary.items():
         print(f"{flow}: {100 * s['fraction_within_one_period']:.0f}% of trials halted within one control period of the signal")
     print(f"goal (at most one period after the signal, median latency < 1 period): {'met' if ok else 'MISSED'}")
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "safety_estop.json").write_text(json.dumps({"flows": summary, "goal_met": ok, "trials": args.trials,
-                                                           "control_period_s": target.timestep,
-                                                           "switch_interval_s": args.switch_interval_s}, indent=2))
+    write_json(args.out, {"flows": summary, "goal_met": ok, "trials": args.trials, "control_period_s": target.timestep,
+                          "switch_interval_s": args.switch_interval_s})
     return 0
 
 

@@ -15,20 +15,17 @@ per action. Writes bench/results/safety_guard.json.
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import timeit
-from pathlib import Path
 
 import numpy as np
+from _harness import parser, write_json
 
 import phyagentos  # noqa: F401  (headless GL before mujoco loads)
 from phyagentos.protocol.schemas import SafetyConfig
 from phyagentos.runtime.safety_guard import EStopLatch, SafetyGuard
 from phyagentos.targets import MuJoCoTarget, SceneSpec
 
-RESULTS = Path(__file__).resolve().parent / "results"
 GOAL_US_PER_ACTION = 20.0
 
 
@@ -39,7 +36,7 @@ def chunk(q0: np.ndarray, n: int, delta: float) -> np.ndarray:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "safety_guard")
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--number", type=int, default=2000)
     args = ap.parse_args()
@@ -69,10 +66,8 @@ def main() -> int:
     worst = max(r["us_per_action"] for r in rows if "violating" not in r["case"])
     ok = worst < GOAL_US_PER_ACTION
     print(f"goal < {GOAL_US_PER_ACTION} us per action on the admissible path: {'met' if ok else 'MISSED'} (worst {worst:.2f})")
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "safety_guard.json").write_text(json.dumps(
-        {"rows": rows, "goal_us_per_action": GOAL_US_PER_ACTION, "worst_us_per_action": worst, "goal_met": ok,
-         "repeat": args.repeat, "number": args.number}, indent=2))
+    write_json(args.out, {"rows": rows, "goal_us_per_action": GOAL_US_PER_ACTION, "worst_us_per_action": worst,
+                          "goal_met": ok, "repeat": args.repeat, "number": args.number})
     return 0
 
 

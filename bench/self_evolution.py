@@ -36,13 +36,14 @@ when finished; a re-run skips finished passes, so pass 4 can be added later with
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _harness import parser, write_json
 
 from phyagentos.bench.random_world import random_episodes, with_defaults, with_limits
 from phyagentos.bench.self_evolution import run_pass
@@ -151,11 +152,9 @@ def score_only(root: Path, out: Path, extra: dict | None = None) -> int:
                                       "refutations": le.refutations} for le in lessons.lessons]}
         print(f"memory after pass 1: {memory['lessons']} verified lessons, {memory['candidates']} candidates, "
               f"{memory['knowledge']} knowledge entries")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"benchmark": "self_evolution", **(extra or {}), "scored_from": str(root),
-                               "memory_gain_first_points_clean": gain, "memory": memory, "passes": rows,
-                               "passes_clean": clean_rows}, indent=1, default=str) + "\n", encoding="utf-8")
-    print(f"wrote {out}")
+    write_json(out, {"benchmark": "self_evolution", **(extra or {}), "scored_from": str(root),
+                     "memory_gain_first_points_clean": gain, "memory": memory, "passes": rows,
+                     "passes_clean": clean_rows}, indent=1, default=str)
     return 0
 
 
@@ -172,7 +171,7 @@ def _run_or_resume(name: str, episodes, workspace: Path, say, **kw) -> None:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "self_evolution")
     ap.add_argument("--train", type=int, default=30, help="training episodes for pass 1 (default 30)")
     ap.add_argument("--heldout", type=int, default=30, help="held-out episodes for passes 2-4 (default 30)")
     ap.add_argument("--seed-offset", type=int, default=0, help="first training seed (held-out: offset + 10000)")
@@ -183,7 +182,6 @@ def main() -> int:
                          "sessions; timeouts left are counted and set apart)")
     ap.add_argument("--workspace", type=Path, help="keep the pass workspaces here; a re-run skips finished passes "
                                                    "(default: a temporary directory)")
-    ap.add_argument("--out", type=Path, default=HERE / "results" / "self_evolution.json")
     ap.add_argument("--score-only", type=Path, metavar="ROOT",
                     help="summarise the pass workspaces under ROOT (e.g. an interrupted --workspace run) and exit")
     args = ap.parse_args()

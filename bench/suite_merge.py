@@ -17,17 +17,16 @@ taxonomy, the verifier's session and per-criterion confusion matrices; writes th
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
+from _harness import markdown_table, parser, write_json
 
-from phyagentos.bench.report import _summary, collect_episode  # noqa: E402
-from phyagentos.bench.taxonomy import CATEGORIES  # noqa: E402
-from phyagentos.bench.verifier_scoring import confusion, wilson_interval  # noqa: E402
+from phyagentos.bench.report import _summary, collect_episode
+from phyagentos.bench.taxonomy import CATEGORIES
+from phyagentos.bench.verifier_scoring import confusion, wilson_interval
+
+HERE = Path(__file__).resolve().parent
 
 
 def _ci(k: int, n: int) -> str:
@@ -73,39 +72,39 @@ def merge(run_dirs: list[Path]) -> dict:
 
 
 def markdown(m: dict) -> str:
-    lines = ["| task | episodes | First | 95 % CI | Final | 95 % CI | rescued | heartbeat timeouts (not scored) |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     hb = m["heartbeat_timeouts"]["per_task"]
+    tasks = []
     for t, s in [*m["per_task"].items(), ("**overall**", m["overall"])]:
         n = s["episodes"]
         lost = sum(hb.values()) if t == "**overall**" else hb.get(t, 0)
-        lines.append(f"| {t} | {n} | {s['first_successes']} ({s['first_rate_pct'] or 0:.0f} %) | "
-                     f"{_ci(s['first_successes'], n)} | {s['final_successes']} ({s['final_rate_pct'] or 0:.0f} %) | "
-                     f"{_ci(s['final_successes'], n)} | {s['rescued']} | {lost} |")
-    lines += ["", "| category | unsuccessful sessions | causes |", "|---|---:|---|"]
-    for c, t in m["error_taxonomy"].items():
-        if t["count"]:
-            lines.append(f"| {c} | {t['count']} | " + ", ".join(f"{k} ×{v}" for k, v in sorted(t["causes"].items()))
-                         + " |")
+        tasks.append((t, n, f"{s['first_successes']} ({s['first_rate_pct'] or 0:.0f} %)", _ci(s["first_successes"], n),
+                      f"{s['final_successes']} ({s['final_rate_pct'] or 0:.0f} %)", _ci(s["final_successes"], n),
+                      s["rescued"], lost))
+    lines = [markdown_table(("task", "episodes", "First", "95 % CI", "Final", "95 % CI", "rescued",
+                             "heartbeat timeouts (not scored)"), tasks, "lrrrrrrr")]
+    causes = [(c, t["count"], ", ".join(f"{k} ×{v}" for k, v in sorted(t["causes"].items())))
+              for c, t in m["error_taxonomy"].items() if t["count"]]
+    lines += ["", markdown_table(("category", "unsuccessful sessions", "causes"), causes, "lrl")]
     v = m["verifier"]
     sm = v["session_matrix"]
     lines += ["", f"Verifier, {v['sessions_scored']} verified sessions scored against ground_truth.yaml "
                   f"({v['sessions_unscored']} unscored):", "",
-              "| sessions | truth met | truth unmet |", "|---|---:|---:|",
-              f"| verdict success | {sm['true_success']} | {sm['false_success']} (false success) |",
-              f"| verdict replan/failure | {sm['false_failure']} (false failure) | {sm['true_failure']} |", "",
-              "| criterion | true success | false success | true failure | false failure | unknown (met) | unscorable |",
-              "|---|---:|---:|---:|---:|---:|---:|"]
-    for name, row in sorted(v["per_predicate"].items()) + [("**all**", v["criterion_matrix"])]:
-        lines.append(f"| {name} | {row['true_success']} | {row['false_success']} | {row['true_failure']} | "
-                     f"{row['false_failure']} | {row['unknown_met']} | {row['unscorable']} |")
+              markdown_table(("sessions", "truth met", "truth unmet"),
+                             [("verdict success", sm["true_success"], f"{sm['false_success']} (false success)"),
+                              ("verdict replan/failure", f"{sm['false_failure']} (false failure)", sm["true_failure"])],
+                             "lrr"), ""]
+    keys = ("true_success", "false_success", "true_failure", "false_failure", "unknown_met", "unscorable")
+    lines.append(markdown_table(("criterion", "true success", "false success", "true failure", "false failure",
+                                 "unknown (met)", "unscorable"),
+                                [(name, *(row[k] for k in keys))
+                                 for name, row in sorted(v["per_predicate"].items()) + [("**all**", v["criterion_matrix"])]],
+                                "lrrrrrr"))
     return "\n".join(lines)
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "suite_merge")
     ap.add_argument("runs", nargs="+", type=Path, help="bench run directories of one suite")
-    ap.add_argument("--out", type=Path, default=HERE / "results" / "suite_merge.json")
     args = ap.parse_args()
     m = merge(args.runs)
     print(markdown(m))
@@ -113,9 +112,7 @@ def main() -> int:
           f"{m['heartbeat_timeouts']['episodes']}; harness errors {m['harness_errors']}; "
           f"not run or stopped: {len(m['not_run'])}; never started (queue timeout): "
           f"{len(m['never_started_queue_timeout'])}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(m, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}")
+    write_json(args.out, m, indent=1)
     return 0
 
 

@@ -19,14 +19,14 @@ Goal: event-driven p50 <= 5 ms and p99 <= 50 ms. Writes bench/results/supervisor
 
 from __future__ import annotations
 
-import argparse
 import random
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from _supervisor_common import make_workspace, percentile, start_watch, stop, submit, write_result
+from _harness import parser, percentile, write_json
+from _supervisor_common import make_workspace, start_watch, stop, submit
 
 from phyagentos.protocol import WorkspaceWatcher
 from phyagentos.protocol.codec import read_document
@@ -79,7 +79,7 @@ def measure(mode_args: tuple[str, ...], sessions: int, rng: random.Random) -> li
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "supervisor_claim_latency")
     ap.add_argument("--sessions", type=int, default=150)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
@@ -89,15 +89,13 @@ def main() -> int:
     for name, mode_args in MODES.items():
         lat = measure(mode_args, args.sessions, rng)
         ms = [1e3 * x for x in lat]
-        rows[name] = {"sessions": len(ms), "p50_ms": percentile(ms, 0.5), "p90_ms": percentile(ms, 0.9),
-                      "p99_ms": percentile(ms, 0.99), "max_ms": max(ms)}
+        rows[name] = {"sessions": len(ms), "p50_ms": percentile(ms, 50), "p90_ms": percentile(ms, 90),
+                      "p99_ms": percentile(ms, 99), "max_ms": max(ms)}
         r = rows[name]
         print(f"{name:12s} {r['sessions']:8d} {r['p50_ms']:8.2f} {r['p90_ms']:8.2f} {r['p99_ms']:8.2f} {r['max_ms']:8.2f}")
     ok = rows["inotify"]["p50_ms"] <= 5.0 and rows["inotify"]["p99_ms"] <= 50.0
     print(f"goal (inotify p50 <= 5 ms, p99 <= 50 ms): {'met' if ok else 'MISSED'}")
-    path = write_result("supervisor_claim_latency", {"modes": rows, "goal_met": ok, "sessions": args.sessions,
-                                                     "seed": args.seed})
-    print(f"wrote {path}")
+    write_json(args.out, {"modes": rows, "goal_met": ok, "sessions": args.sessions, "seed": args.seed})
     return 0
 
 

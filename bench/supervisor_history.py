@@ -22,14 +22,14 @@ Writes bench/results/supervisor_history.json.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from _supervisor_common import submit, write_result
+from _harness import parser, write_json
+from _supervisor_common import submit
 
 from phyagentos.protocol import Workspace, new_lease
 from phyagentos.protocol.lifecycle import SessionLifecycle
@@ -110,7 +110,7 @@ def measure(probes: dict[str, Probe], reps: int) -> dict[str, dict[str, float]]:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "supervisor_history")
     ap.add_argument("--small", type=int, default=100)
     ap.add_argument("--large", type=int, default=10_000)
     ap.add_argument("--reps", type=int, default=40)
@@ -132,8 +132,7 @@ def main() -> int:
         print(f"{op:16s} {results['small'][op]:10.2f} {results['large'][op]:10.2f} {ratios[op]:7.2f}")
     ok = all(r <= 1.5 for r in ratios.values())
     print(f"goal (ratio <= 1.5 for every operation): {'met' if ok else 'MISSED'}")
-    path = write_result("supervisor_history", {"results": results, "ratios": ratios, "goal_met": ok})
-    print(f"wrote {path}")
+    write_json(args.out, {"results": results, "ratios": ratios, "goal_met": ok})
     return 0
 
 

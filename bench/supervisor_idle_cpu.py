@@ -14,13 +14,13 @@ Goal: under 1 % of one core. Writes bench/results/supervisor_idle_cpu.json.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from _supervisor_common import cpu_seconds, descendants, make_workspace, start_watch, stop, write_result
+from _harness import parser, write_json
+from _supervisor_common import cpu_seconds, descendants, make_workspace, start_watch, stop
 
 MODES = {"inotify": (), "polling 1 s": ("--no-inotify",)}
 
@@ -43,7 +43,7 @@ def idle_cpu(mode_args: tuple[str, ...], seconds: float) -> dict:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "supervisor_idle_cpu")
     ap.add_argument("--seconds", type=float, default=60.0)
     args = ap.parse_args()
     rows = {}
@@ -53,8 +53,7 @@ def main() -> int:
         print(f"{name:12s} {r['processes']:9d} {r['cpu_s']:7.3f} {r['wall_s']:7.1f} {r['percent_of_core']:7.3f}")
     ok = all(r["percent_of_core"] < 1.0 for r in rows.values())
     print(f"goal (< 1 % of a core): {'met' if ok else 'MISSED'}")
-    path = write_result("supervisor_idle_cpu", {"modes": rows, "goal_met": ok, "seconds": args.seconds})
-    print(f"wrote {path}")
+    write_json(args.out, {"modes": rows, "goal_met": ok, "seconds": args.seconds})
     return 0
 
 

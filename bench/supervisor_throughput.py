@@ -19,7 +19,6 @@ the wall time of the supervision path. Writes bench/results/supervisor_throughpu
 
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 import tempfile
@@ -27,7 +26,8 @@ import time
 from pathlib import Path
 
 import yaml
-from _supervisor_common import CLI, ROOT, make_workspace, start_watch, stop, write_result
+from _harness import parser, write_json
+from _supervisor_common import CLI, ROOT, make_workspace, start_watch, stop
 
 from phyagentos.protocol import Workspace
 
@@ -68,7 +68,7 @@ def run(workload: str, sessions: int, supervisors: int) -> dict:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "supervisor_throughput")
     ap.add_argument("--sessions", type=int, default=200)
     args = ap.parse_args()
     rows = []
@@ -79,8 +79,7 @@ def main() -> int:
             rows.append(r)
             print(f"{workload:10s} {supervisors:11d} {r['sessions']:8d} {r['wall_s']:7.1f} {r['sessions_per_s']:10.1f} "
                   f"{','.join(r['final_states']):>20s}")
-    path = write_result("supervisor_throughput", {"rows": rows, "cores": __import__("os").cpu_count()})
-    print(f"wrote {path}")
+    write_json(args.out, {"rows": rows, "cores": __import__("os").cpu_count()})
     return 0
 
 

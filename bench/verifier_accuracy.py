@@ -36,7 +36,6 @@ machine is shared: wall times are indicative only.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
@@ -44,14 +43,14 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from _harness import parser, write_json
+
 from phyagentos.agent.verifier import PredicateVerifier, load_evidence
 from phyagentos.bench.random_world import random_episodes, with_limits
 from phyagentos.bench.report import verifier_markdown
 from phyagentos.bench.self_evolution import run_pass
 from phyagentos.bench.verifier_scoring import confusion, load_ground_truth, score_session
 from phyagentos.protocol import Workspace
-
-HERE = Path(__file__).resolve().parent
 
 
 def _replayed(ws: Workspace, rec, attempt) -> dict:
@@ -141,10 +140,8 @@ def report(v: dict, scores: list[dict], out: Path, extra: dict) -> None:
             for c in b["criteria"]:
                 print(f"  {b['session_id']} ({b['skill']}, {b['verdict']}, cause {b['cause']}): {c['predicate']} "
                       f"{c['status']}: {(c['reason'] or '')[:160]}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"benchmark": "verifier_accuracy", **extra, "verifier": v, "false_failures": behind,
-                               "heartbeat_timeout_sessions": hb,
-                               "sessions": scores}, indent=1) + "\n", encoding="utf-8")
+    write_json(out, {"benchmark": "verifier_accuracy", **extra, "verifier": v, "false_failures": behind,
+                     "heartbeat_timeout_sessions": hb, "sessions": scores}, indent=1, say=False)
     md = verifier_markdown(v)
     md += ["| criterion | scored | false success | 95 % CI | false failure (incl. unknown while met) | 95 % CI |",
            "|---|---:|---:|---:|---:|---:|"]
@@ -191,7 +188,7 @@ def score_only(paths, out: Path, extra: dict | None = None, *, replay: bool = Fa
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "verifier_accuracy")
     ap.add_argument("--episodes", type=int, default=100, help="randomised pick-and-place episodes (default 100)")
     ap.add_argument("--first-seed", type=int, default=20000, help="seed of the first episode (default 20000)")
     ap.add_argument("--workspace", type=Path, help="keep the chunk workspaces here and resume finished chunks "
@@ -200,7 +197,6 @@ def main() -> int:
     ap.add_argument("--heartbeat-timeout", type=float, default=60.0,
                     help="runner heartbeat timeout of every session, s (default 60: machine load must not end "
                          "sessions; the timeouts left are counted apart)")
-    ap.add_argument("--out", type=Path, default=HERE / "results" / "verifier_accuracy.json")
     ap.add_argument("--score-only", type=Path, nargs="+", metavar="DIR",
                     help="score and merge the verified sessions already in DIR (a workspace or a chunked root), exit")
     ap.add_argument("--replay", action="store_true",

@@ -45,7 +45,6 @@ samples are written to ``--soak-out`` as they come.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import random
@@ -59,6 +58,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import parser, write_json
 
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
@@ -416,7 +416,7 @@ def soak(template: Path, minutes: float, *, interval: float, sample_every: float
                     "resident_visible": resident.execute_script("return document.visibilityState")})
                 print(json.dumps(samples[-1]), file=sys.stderr, flush=True)
                 if out_path is not None:
-                    out_path.write_text(json.dumps(result, indent=1))
+                    write_json(out_path, result, indent=1, say=False)
                 next_sample += sample_every
                 if now - t0 >= minutes * 60:
                     break
@@ -433,7 +433,7 @@ def soak(template: Path, minutes: float, *, interval: float, sample_every: float
                for key in ("server_rss_mib", "resident_heap_mib", "browsing_heap_mib", "resident_browser_pss_mib",
                            "browsing_browser_pss_mib")}})
         if out_path is not None:
-            out_path.write_text(json.dumps(result, indent=1))
+            write_json(out_path, result, indent=1, say=False)
     finally:
         stop.set()
         for d in (resident, browsing):
@@ -448,7 +448,7 @@ def soak(template: Path, minutes: float, *, interval: float, sample_every: float
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, "view_load", out=False)
     ap.add_argument("--runs", type=int, nargs="+", default=[1, 1000])
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--pages", action="store_true", help="also time the run, session and compare pages of a real run")

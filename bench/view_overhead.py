@@ -18,12 +18,13 @@ bench/results/view_overhead.json. The machine may be shared: compare ratios and 
 
 from __future__ import annotations
 
-import argparse
-import json
 import statistics
 import tempfile
 import time
 from pathlib import Path
+
+from _harness import parser as bench_parser
+from _harness import write_json
 
 import phyagentos  # noqa: F401  (selects the headless GL backend before mujoco loads)
 from phyagentos.errors import BenchError
@@ -37,7 +38,6 @@ from phyagentos.runtime.tree_status import TreeStatusPublisher
 from phyagentos.targets import MuJoCoTarget, SceneSpec
 from phyagentos.yamlsource import read_yaml
 
-RESULTS = Path(__file__).resolve().parent / "results"
 MODES = ("bare", "tree", "tree+record")
 
 
@@ -70,7 +70,7 @@ def one_run(mode: str, runtime: BuiltinSkillRuntime, scene: SceneSpec, safety, d
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = bench_parser(__doc__, "view_overhead")
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--fps", type=float, default=10.0)
     args = parser.parse_args()
@@ -99,11 +99,9 @@ def main() -> None:
         print(f"{m:<12} {r['skill_s']:8.3f} {r['wall_s']:8.3f} {r['wall_s'] / bare:6.2f} {r['ticks']:6.0f} "
               f"{r.get('publisher_us_per_tick', nan):13.1f} {r.get('record_hook_us_per_tick', nan):12.1f} "
               f"{r.get('frames', nan):7.0f} {r.get('render_ms_per_frame', nan):16.1f}")
-    RESULTS.mkdir(exist_ok=True)
     out = {"runs": args.runs, "fps": args.fps, "medians": med, "ratio_to_bare": {m: med[m]["wall_s"] / bare for m in MODES},
            "raw": rows}
-    (RESULTS / "view_overhead.json").write_text(json.dumps(out, indent=2))
-    print(f"wrote {RESULTS / 'view_overhead.json'}")
+    write_json(args.out, out)
 
 
 if __name__ == "__main__":

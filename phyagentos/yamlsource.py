@@ -21,7 +21,8 @@ from typing import Any, Callable
 
 import yaml
 
-__all__ = ["SourceMap", "SourceList", "load_yaml", "load_plain", "read_yaml", "line_of", "check_bounds",
+__all__ = ["SourceMap", "SourceList", "load_yaml", "load_plain", "read_yaml", "line_of", "line_at", "item_line", "to_plain",
+           "check_bounds",
            "compose_bounded", "excerpt", "clip", "MAX_YAML_CHARS", "MAX_YAML_FILE_BYTES", "MAX_ALIASES",
            "MAX_EXPANDED_NODES", "MAX_DEPTH"]
 
@@ -288,3 +289,37 @@ def line_of(value: Any, key: Any = None) -> int | None:
     if isinstance(value, SourceMap):
         return value.key_line(key) if key is not None else value.line
     return getattr(value, "line", None)
+
+
+def item_line(seq: Any, index: int) -> int | None:
+    """1-based line of item ``index`` of a :class:`SourceList` (else the list's line, or ``None``)."""
+    lines = getattr(seq, "item_lines", None)
+    if lines is not None and 0 <= index < len(lines):
+        return lines[index]
+    return getattr(seq, "line", None)
+
+
+def line_at(value: Any, loc: tuple[Any, ...] | list[Any]) -> int | None:
+    """1-based line of the deepest node reachable from ``value`` along ``loc`` (mapping keys
+    and sequence indices, e.g. a pydantic error's ``loc``): a key's own line, an item's line.
+    A tail that cannot be followed (a missing key, a union branch name) stops the walk at
+    the nearest known line."""
+    line = line_of(value)
+    for part in loc:
+        if isinstance(value, SourceMap) and part in value:
+            line, value = value.key_line(part), value[part]
+        elif isinstance(value, SourceList) and isinstance(part, int) and 0 <= part < len(value):
+            line, value = item_line(value, part), value[part]
+        else:
+            break
+    return line
+
+
+def to_plain(value: Any) -> Any:
+    """``value`` with every :class:`SourceMap`/:class:`SourceList` turned into a plain
+    ``dict``/``list`` (for data that is dumped with ``yaml.safe_dump`` or kept)."""
+    if isinstance(value, dict):
+        return {k: to_plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [to_plain(v) for v in value]
+    return value

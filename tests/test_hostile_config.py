@@ -16,6 +16,7 @@ from pathlib import Path
 import annotated_types as at
 import pytest
 import yaml
+from hostile_tally import counted, tallied
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel
@@ -72,22 +73,25 @@ def _expect_refused(root: Path, name: str, text: str, error: type[Exception] = D
 def test_a_hostile_camera_value_in_sensors_yaml_is_refused_with_its_line(base_ws, field, value):
     if field == "fovy_deg" and value == "null":
         return  # fovy is optional: null means the model camera's own
-    text = _sensors_yaml(field, value)
-    message = _expect_refused(base_ws, "sensors.yaml", text)
-    # a camera without a size fails the sensor's own check: the sensor's line
-    key = "- name:" if value == "null" and field in ("width", "height") else f"{field}:"
-    line = next(i for i, row in enumerate(text.splitlines(), 1) if row.strip().startswith(key))
-    assert f"sensors.yaml:{line}" in message, (field, value, message)
+    with tallied("sensors.yaml"):
+        text = _sensors_yaml(field, value)
+        message = _expect_refused(base_ws, "sensors.yaml", text)
+        # a camera without a size fails the sensor's own check: the sensor's line
+        key = "- name:" if value == "null" and field in ("width", "height") else f"{field}:"
+        line = next(i for i, row in enumerate(text.splitlines(), 1) if row.strip().startswith(key))
+        assert f"sensors.yaml:{line}" in message, (field, value, message)
 
 
 @pytest.mark.parametrize("snippet", [
     "    noise: {depth_sigma_per_m2: .nan, rgb_sigma: 1, lighting_jitter: 0}",
     "    noise: {depth_sigma_per_m2: 0, rgb_sigma: .inf, lighting_jitter: 0}",
 ])
+@counted("sensors.yaml")
 def test_nan_or_inf_noise_in_sensors_yaml_is_refused(base_ws, snippet):
     _expect_refused(base_ws, "sensors.yaml", _sensors_yaml("rate_hz", "10") + snippet + "\n")
 
 
+@counted("sensors.yaml")
 def test_a_sensor_name_with_a_path_is_refused(base_ws):
     _expect_refused(base_ws, "sensors.yaml", _sensors_yaml("rate_hz", "10").replace("name: overview",
                                                                                    "name: ../../etc/x"))
@@ -100,6 +104,7 @@ PERCEPTION = [("cloud:\n  max_depth_m: .inf\n", 2), ("table:\n  ransac_iteration
 
 
 @pytest.mark.parametrize("body,line", PERCEPTION)
+@counted("perception.yaml")
 def test_a_hostile_perception_yaml_is_refused_with_its_line(base_ws, body, line):
     message = _expect_refused(base_ws, "perception.yaml", "version: 1\n" + body)
     assert f"perception.yaml:{line + 1}" in message, message
@@ -110,6 +115,7 @@ SAFETY = ["max_command_rate_hz: .inf", "max_command_duration_s: .nan", "max_join
 
 
 @pytest.mark.parametrize("override", SAFETY)
+@counted("safety.yaml")
 def test_a_hostile_safety_yaml_is_refused_with_its_line(base_ws, override):
     original = (base_ws / "safety.yaml").read_text(encoding="utf-8")
     key = override.split(":")[0]
@@ -135,6 +141,7 @@ LLM = ["seed: -1", "seed: 1e9", "threads: 100000", "threads: .inf", "base_url: f
 
 
 @pytest.mark.parametrize("line_text", LLM)
+@counted("llm.yaml")
 def test_a_hostile_llm_yaml_is_refused_with_its_line(base_ws, line_text):
     message = _expect_refused(base_ws, "llm.yaml", "# the model\n" + line_text + "\n", error=LLMError)
     assert "llm.yaml:2" in message, message
@@ -146,11 +153,13 @@ FLEET = ["submit_ttl_s: .inf", "link_timeout_s: .nan", "connect_timeout_s: 1e300
 
 
 @pytest.mark.parametrize("line_text", FLEET)
+@counted("fleet.yaml")
 def test_a_hostile_fleet_yaml_is_refused_with_its_line(base_ws, line_text):
     message = _expect_refused(base_ws, "fleet.yaml", "# the fleet\n" + line_text + "\n", error=FleetError)
     assert "fleet.yaml:2" in message, message
 
 
+@counted("deploy files: special files")
 def test_a_fifo_as_a_deploy_file_is_refused_not_waited_on(base_ws):
     os.mkfifo(base_ws / "sensors.yaml")
     try:
@@ -189,6 +198,7 @@ def test_every_deploy_schema_refuses_non_finite_numbers_and_bounds_every_scalar(
     assert not unbounded, unbounded
 
 
+@counted("sensors.yaml")
 def test_run_refuses_a_bad_sensors_yaml_before_anything_starts(tmp_path):
     ws = Workspace.create(tmp_path / "ws").root
     text = _sensors_yaml("width", ".inf")
@@ -203,6 +213,7 @@ def test_run_refuses_a_bad_sensors_yaml_before_anything_starts(tmp_path):
 
 
 @pytest.mark.sim
+@counted("sensors.yaml")
 def test_a_camera_larger_than_the_framebuffer_names_sensors_yaml():
     from phyagentos.targets import MuJoCoTarget, SceneSpec  # noqa: PLC0415
 
@@ -214,6 +225,7 @@ def test_a_camera_larger_than_the_framebuffer_names_sensors_yaml():
 
 
 @pytest.mark.parametrize("content", [b"", b"not a model at all", b"\x00" * 64, b"GGU", b"PK\x03\x04zip"])
+@counted("model file (model_path)")
 def test_a_model_path_that_is_not_gguf_is_a_clear_error(tmp_path, content):
     path = tmp_path / "model.gguf"
     path.write_bytes(content)
@@ -236,6 +248,7 @@ def test_the_shipped_templates_pass_the_deploy_check(tmp_path):
 
 
 @pytest.mark.sim
+@counted("sensors.yaml")
 def test_a_camera_larger_than_the_framebuffer_fails_the_run_naming_sensors_yaml(tmp_path):
     # Before: the warm-up's error was dropped, the target kept without its sensors and the run exited 0.
     ws = Workspace.create(tmp_path / "ws").root

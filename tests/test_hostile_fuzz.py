@@ -5,19 +5,17 @@ bounded JSON). Each property: the answer is a clean refusal or a result -- never
 a traceback, a hang, a credential or an unbounded echo.
 
 With ``PHYAGENTOS_FUZZ_REPORT=FILE`` the cases tried and handled well per surface are
-written to FILE as JSON (the numbers of the issue-33 report)."""
+written to FILE as JSON (the numbers of the issue-33 report; ``tests/hostile_tally.py``)."""
 
 from __future__ import annotations
 
-import atexit
 import json
 import os
 import string
-from collections import Counter
-from pathlib import Path
 from urllib.parse import quote as urlquote
 
 import pytest
+from hostile_tally import tally as _tally
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from starlette.testclient import TestClient
@@ -31,22 +29,6 @@ from phyagentos.view.app import create_app
 from phyagentos.view.security import AccessPolicy
 
 SECRET = "SECRET-fuzz-91b2"
-TRIED: Counter = Counter()
-GOOD: Counter = Counter()
-
-
-def _tally(surface: str, ok: bool) -> None:
-    TRIED[surface] += 1
-    GOOD[surface] += bool(ok)
-
-
-@atexit.register
-def _write_report() -> None:
-    target = os.environ.get("PHYAGENTOS_FUZZ_REPORT")
-    if target and TRIED:
-        Path(target).write_text(json.dumps({s: {"tried": TRIED[s], "handled_well": GOOD[s]} for s in sorted(TRIED)},
-                                           indent=1), encoding="utf-8")
-
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
 

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import anyio
+from hostile_tally import counted, tally
 from mcp.client.session import ClientSession
 from mcp.client.stdio import StdioServerParameters, stdio_client
 
@@ -35,6 +36,7 @@ def _llm_yaml(ws: Path) -> None:
                                  encoding="utf-8")
 
 
+@counted("phyagentos plan (CLI)")
 def test_a_credential_in_the_endpoint_url_never_reaches_plan_output_or_logs(tmp_path):
     ws = tmp_path / "ws"
     _llm_yaml(ws)
@@ -52,6 +54,7 @@ def test_a_credential_in_the_endpoint_url_never_reaches_plan_output_or_logs(tmp_
             assert KEY not in text and ENV_KEY not in text, path
 
 
+@counted("redaction: errors and logs")
 def test_every_error_message_is_redacted_at_the_root():
     exc = LLMError(f"endpoint https://bob:{KEY}@api.example/v1?api_key={KEY}x failed: Authorization: Bearer {KEY}")
     assert KEY not in str(exc)
@@ -60,6 +63,7 @@ def test_every_error_message_is_redacted_at_the_root():
     assert ENV_KEY not in str(PhyAgentOSError(f"the server said: bad key {ENV_KEY}"))
 
 
+@counted("redaction: errors and logs")
 def test_the_cli_log_handler_redacts_every_record():
     record = logging.LogRecord("httpx", logging.INFO, __file__, 1, "HTTP Request: POST %s", (
         f"http://user:{KEY}@host/v1/chat",), None)
@@ -67,6 +71,7 @@ def test_the_cli_log_handler_redacts_every_record():
     assert KEY not in record.getMessage() and "http://***@host" in record.getMessage()
 
 
+@counted("phyagentos plan (CLI)")
 def test_a_1mb_request_to_phyagentos_plan_is_refused_with_a_bounded_quote(tmp_path, capsys):
     request = "put the red cube in the goal region " + "x" * (1024 * 1024)
     code = main(["plan", request, "--workspace", str(tmp_path / "ws")])
@@ -106,6 +111,14 @@ def test_mcp_answers_carry_no_credential_and_no_unbounded_echo(tmp_path):
     env = {**os.environ, "OPENAI_API_KEY": ENV_KEY}
     results = anyio.run(lambda: _mcp(ws, scenario, env=env))
     failing, *bounded = results
+    # each call one case, counted before the assertions below (which say what handled well means)
+    answer = failing.content[0].text
+    tally("MCP over stdio (real server)", failing.is_error and "127.0.0.1:9" in answer and KEY not in answer
+          and ENV_KEY not in answer)
+    for index, result in enumerate(bounded):
+        answer = result.content[0].text
+        expected = {0: f"more than the limit of {MAX_REQUEST_CHARS}", len(bounded) - 1: "nested deeper"}.get(index, "")
+        tally("MCP over stdio (real server)", result.is_error and len(answer) < 1000 and expected in answer)
     assert failing.is_error
     text = failing.content[0].text
     assert "127.0.0.1:9" in text and KEY not in text and ENV_KEY not in text, text
@@ -124,6 +137,7 @@ def _nested(depth: int):
     return value
 
 
+@counted("redaction: errors and logs")
 def test_quote_and_redact_are_total():
     assert quote("a" * 10) == repr("a" * 10)
     assert quote("a" * 1000).endswith("... (1000 chars)") and len(quote("a" * 1000)) < 230
@@ -131,6 +145,7 @@ def test_quote_and_redact_are_total():
     assert json.loads(json.dumps(redact_secrets('{"password": "hunter22"}'))) == '{"password": "***"}'
 
 
+@counted("MCP over stdio (real server)")
 def test_a_json_rpc_message_too_deep_for_the_sdk_parser_is_answered_not_dropped(tmp_path):
     async def scenario(session):
         outcome = "timeout"
@@ -148,6 +163,7 @@ def test_a_json_rpc_message_too_deep_for_the_sdk_parser_is_answered_not_dropped(
     assert not after.is_error
 
 
+@counted("MCP over stdio (real server)")
 def test_refuse_oversized_rpc_keeps_the_id_and_passes_ordinary_lines():
     from phyagentos.app.mcp_server import MAX_RPC_DEPTH, refuse_oversized_rpc  # noqa: PLC0415
 
@@ -159,6 +175,7 @@ def test_refuse_oversized_rpc_keeps_the_id_and_passes_ordinary_lines():
     assert answer["id"] == "req-9" and answer["method"].startswith("phyagentos/refused")
 
 
+@counted("MCP over HTTP")
 def test_mcp_over_http_refuses_an_oversized_body_before_reading_it(tmp_path):
     import http.client  # noqa: PLC0415
     import socket  # noqa: PLC0415

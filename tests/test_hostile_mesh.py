@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 import pytest
+from hostile_tally import counted
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_authoring_mesh import MESH_LINE, graph_file, ws  # noqa: F401 - ws is a fixture
@@ -28,6 +29,7 @@ def dense_obj(target_bytes: int) -> bytes:
     return ("\n".join(lines) + "\n").encode()[:MAX_MESH_BYTES]
 
 
+@counted("meshes: validate/submit/run")
 def test_a_dense_8mb_obj_is_refused_before_mujoco_decodes_it(tmp_path, ws, capsys):  # noqa: F811
     data = dense_obj(MAX_MESH_BYTES - 1024)
     assert len(data) <= MAX_MESH_BYTES
@@ -39,6 +41,7 @@ def test_a_dense_8mb_obj_is_refused_before_mujoco_decodes_it(tmp_path, ws, capsy
     assert time.perf_counter() - started < 30  # three commands; was 99 s for validate alone
 
 
+@counted("meshes: validate/submit/run")
 def test_a_binary_stl_declaring_too_many_triangles_is_refused(tmp_path, ws, capsys):  # noqa: F811
     n = MAX_MESH_FACES + 1
     (ws / "meshes" / "huge.stl").write_bytes(b"\0" * 80 + struct.pack("<I", n) + b"\0" * 50 * 10)
@@ -49,6 +52,7 @@ def test_a_binary_stl_declaring_too_many_triangles_is_refused(tmp_path, ws, caps
 @settings(max_examples=50, deadline=None)
 @given(nv=st.integers(0, 3 * MAX_MESH_VERTICES), nf=st.integers(0, 3 * MAX_MESH_FACES),
        indent=st.sampled_from(["", " ", "\t"]))
+@counted("meshes: counted before decoding")
 def test_obj_counts_are_read_from_the_bytes_in_linear_time(nv, nf, indent):
     data = (f"{indent}v 0 0 0\n" * nv + "vn 0 0 1\nvt 0 0\n# v comment\n" + f"{indent}f 1 2 3\n" * nf).encode()
     started = time.perf_counter()
@@ -56,6 +60,7 @@ def test_obj_counts_are_read_from_the_bytes_in_linear_time(nv, nf, indent):
     assert time.perf_counter() - started < 1.0
 
 
+@counted("meshes: counted before decoding")
 def test_stl_counts():
     assert mesh_counts(b"\0" * 80 + struct.pack("<I", 2) + b"\0" * 100, ".stl") == (6, 2)
     ascii_stl = b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\n" \
@@ -65,6 +70,7 @@ def test_stl_counts():
 
 
 @pytest.mark.parametrize("n", [1000, MAX_MESH_VERTICES])
+@counted("meshes: within bounds still read")
 def test_meshes_within_the_bounds_are_still_read(tmp_path, n):
     from phyagentos.targets.mesh import load_mesh  # noqa: PLC0415
 

@@ -13,6 +13,7 @@ import subprocess
 import time
 
 import pytest
+from hostile_tally import counted, tally
 from supervisor_util import submit
 from test_view_browser import start_view
 from test_view_security import request
@@ -81,12 +82,14 @@ def hostile(tmp_path_factory):
 @pytest.mark.parametrize("sid", ["s-linkfile", "s-linkdir"])
 @pytest.mark.parametrize("route", ["/api/tree/{}", "/fragment/session/{}", "/fragment/tree/{}", "/api/signals/{}",
                                    "/api/frames/{}", "/session/{}", "/api/scene/{}.png?frame=0"])
+@counted("view (HTTP): evidence links out")
 def test_evidence_links_out_of_the_workspace_are_never_followed(hostile, route, sid):
     status, body = request(hostile["url"], "GET", route.format(sid))
     assert SECRET.encode() not in body, (route, sid, status, body[:300])
     assert status < 500 or route.startswith("/api/scene"), (route, sid, status, body[:300])
 
 
+@counted("view (HTTP): evidence links out")
 def test_a_refused_evidence_link_says_why(hostile):
     status, body = request(hostile["url"], "GET", "/api/tree/s-linkfile")
     assert status == 403 and b"outside" in body
@@ -108,6 +111,8 @@ def test_fifos_in_an_evidence_directory_never_block_the_server(hostile):
     with concurrent.futures.ThreadPoolExecutor(16) as pool:
         results = list(pool.map(get, routes * 12))
     assert time.monotonic() - started < 60
+    for _route, (status, _body) in results:  # each request one case, counted before any assertion
+        tally("view (HTTP): FIFOs in evidence", status < 500)
     for route, (status, body) in results:
         assert status < 500, (route, status, body[:200])
     tree_status = dict(results)["/api/tree/s-fifo"][0]
@@ -117,6 +122,7 @@ def test_fifos_in_an_evidence_directory_never_block_the_server(hostile):
 
 @pytest.mark.parametrize("path", ["/files/" + "a" * 5000, "/files/" + "a/" * 3000 + "x", "/files/evidence/" + "b" * 300,
                                   "/files/" + "%61" * 2000])
+@counted("view (HTTP): long paths")
 def test_a_very_long_path_is_refused_not_an_error(hostile, path):
     status, body = request(hostile["url"], "GET", path)
     assert status in (403, 404, 414), (status, body[:200])
@@ -124,6 +130,7 @@ def test_a_very_long_path_is_refused_not_an_error(hostile, path):
 
 @pytest.mark.parametrize("body", [b"[" * 200_000, b"{\"a\":" * 100_000 + b"1" + b"}" * 100_000, b"\xff\xfe", b"not json",
                                   b"[1, 2]", b"\"kind\""])
+@counted("view (HTTP): signal bodies")
 def test_a_malformed_or_deeply_nested_signal_body_is_a_400(hostile, body):
     try:
         status, answer = request(hostile["url"], "POST", "/api/signal", body=body,
@@ -137,6 +144,7 @@ def test_a_malformed_or_deeply_nested_signal_body_is_a_400(hostile, body):
     assert hostile["ws"].read("RUNTIME_SIGNAL").data.signals == []
 
 
+@counted("view (HTTP): oversized bodies")
 def test_an_oversized_body_is_refused_before_it_is_buffered(hostile):
     host, port = hostile["url"].removeprefix("http://").split(":")
     before = _rss_kib(hostile["proc"].pid)
@@ -170,6 +178,7 @@ def test_an_oversized_body_is_refused_before_it_is_buffered(hostile):
 
 @pytest.mark.parametrize("route", ["/api/tree/s-deep", "/fragment/tree/s-deep", "/api/signals/s-deep",
                                    "/fragment/session/s-deep"])
+@counted("view (HTTP): nested evidence JSON")
 def test_deeply_nested_evidence_json_is_refused_not_a_500(hostile, route):
     status, body = request(hostile["url"], "GET", route)
     assert status < 500, (route, status, body[:300])

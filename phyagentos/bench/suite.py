@@ -47,15 +47,16 @@ from __future__ import annotations
 import copy
 import hashlib
 import logging
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
-from phyagentos.errors import BenchError, TargetError, format_choices
+from phyagentos.errors import BenchError, TargetError, format_choices, format_location
 from phyagentos.resources import goal_graphs_dir
-from phyagentos.yamlsource import read_yaml
+from phyagentos.yamlsource import item_line, line_of, read_yaml, to_plain
 
 __all__ = ["RandomizeRule", "TaskSpec", "PerturbationConfig", "Suite", "load_suite", "suite_dir", "available_suites",
            "episode_rng"]
@@ -159,27 +160,40 @@ def episode_rng(suite: Suite, task_index: int, seed: int) -> np.random.Generator
     return np.random.default_rng([suite.tag(), int(task_index), int(seed)])
 
 
-def _problem(path: Path, msg: str) -> BenchError:
-    return BenchError(f"{path}: {msg}")
+def _problem(path: Path, msg: str, line: int | None = None) -> BenchError:
+    """A suite error naming ``path:line`` (the 1-based line of the offending key or item,
+    where the YAML has one)."""
+    return BenchError(f"{format_location(path, line)}: {msg}")
 
 
-def _pair(value: Any, path: Path, where: str) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise _problem(path, f"{where} must be two numbers [x, y] in metres, got {value!r}") from None
+def _number(value: Any) -> bool:
+    """A finite int or float, not a bool (YAML's ``true`` is no number of metres)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _pair(value: Any, path: Path, where: str, line: int | None) -> tuple[float, float]:
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2 \
+            or not all(_number(v) for v in value):
+        raise _problem(path, f"{where} must be two finite numbers [x, y] in metres, got {value!r}", line)
+    a, b = (float(v) for v in value)
     if a < 0 or b < 0:
-        raise _problem(path, f"{where} must be >= 0, got {value!r}")
+        raise _problem(path, f"{where} must be >= 0, got {value!r}", line)
     return a, b
 
 
-def _resolve_graph(value: Any, suite_path: Path) -> Path:
+def _resolve_graph(value: Any, suite_path: Path, line: int | None) -> Path:
     if not isinstance(value, str) or not value:
-        raise _problem(suite_path, f"goal_graph must be a file name, got {value!r}")
+        raise _problem(suite_path, f"goal_graph must be a file name, got {value!r}", line)
     for candidate in (suite_path.parent / value, goal_graphs_dir() / value, Path(value)):
         if candidate.is_file():
             return candidate.resolve()
-    raise _problem(suite_path, f"goal graph {value!r} not found next to the suite or in {goal_graphs_dir()}")
+    raise _problem(suite_path, f"goal graph {value!r} not found next to the suite or in {goal_graphs_dir()}", line)
+
+
+def _first_line(mapping: Any, keys: set) -> int | None:
+    """The earliest line among ``keys`` of ``mapping`` (the first of several unknown keys)."""
+    lines = [line for line in (line_of(mapping, k) for k in keys) if line is not None]
+    return min(lines) if lines else line_of(mapping)
 
 
 def load_suite(name_or_path: str | Path) -> Suite:
@@ -208,84 +222,104 @@ def load_suite(name_or_path: str | Path) -> Suite:
                              + " (or give a path to a suite YAML)")
     if not p.is_file():
         raise BenchError(f"suite file {p} does not exist")
-    try:
-        raw = read_yaml(p, error=BenchError)
-    except BenchError as exc:
-        raise _problem(p, f"YAML: {exc}") from None
+    # Line-carrying containers (yamlsource.SourceMap/SourceList): every problem below names
+    # the file and the line of the offending key or item; a YAML error already carries both.
+    raw = read_yaml(p, error=BenchError, plain=False)
     if not isinstance(raw, dict):
-        raise _problem(p, "top level must be a mapping")
+        raise _problem(p, "top level must be a mapping", line_of(raw) or 1)
     unknown = set(raw) - _SUITE_KEYS
     if unknown:
-        raise _problem(p, f"unknown key(s) {format_choices(unknown)}; valid keys: {format_choices(_SUITE_KEYS)}")
-    if raw.get("version") != 1:
-        raise _problem(p, f"unsupported version {raw.get('version')!r}; valid versions: 1")
+        raise _problem(p, f"unknown key(s) {format_choices(unknown)}; valid keys: {format_choices(_SUITE_KEYS)}",
+                       _first_line(raw, unknown))
+    if raw.get("version") != 1 or isinstance(raw.get("version"), bool):
+        raise _problem(p, f"unsupported version {raw.get('version')!r}; valid versions: 1", line_of(raw, "version"))
     name = raw.get("name")
     if not isinstance(name, str) or not name.replace("_", "").isalnum():
-        raise _problem(p, f"name must be an identifier (letters, digits, _), got {name!r}")
+        raise _problem(p, f"name must be an identifier (letters, digits, _), got {name!r}", line_of(raw, "name"))
     episodes = raw.get("episodes", 10)
-    if not isinstance(episodes, int) or episodes < 1:
-        raise _problem(p, f"episodes must be an integer >= 1, got {episodes!r}")
+    if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
+        raise _problem(p, f"episodes must be an integer >= 1, got {episodes!r}", line_of(raw, "episodes"))
     offset = raw.get("heldout_seed_offset", 10_000)
-    if not isinstance(offset, int) or offset < 1:
-        raise _problem(p, f"heldout_seed_offset must be an integer >= 1, got {offset!r}")
+    if not isinstance(offset, int) or isinstance(offset, bool) or offset < 1:
+        raise _problem(p, f"heldout_seed_offset must be an integer >= 1, got {offset!r}",
+                       line_of(raw, "heldout_seed_offset"))
 
     pert_raw = raw.get("perturbations") or {}
     if not isinstance(pert_raw, dict) or set(pert_raw) - _PERTURB_KEYS:
-        raise _problem(p, f"perturbations must be a mapping with keys {format_choices(_PERTURB_KEYS)}")
+        where = _first_line(pert_raw, set(pert_raw) - _PERTURB_KEYS) if isinstance(pert_raw, dict) else None
+        raise _problem(p, f"perturbations must be a mapping with keys {format_choices(_PERTURB_KEYS)}",
+                       where or line_of(raw, "perturbations"))
     rate = pert_raw.get("rate", 0.0)
-    if not isinstance(rate, (int, float)) or not 0.0 <= rate <= 1.0:
-        raise _problem(p, f"perturbations.rate must be a number in [0, 1], got {rate!r}")
-    kinds = tuple(pert_raw.get("kinds") or ())
-    for k in kinds:
-        if k not in PERTURBATIONS:
-            raise _problem(p, f"unknown perturbation {k!r}; valid perturbations: {format_choices(PERTURBATIONS)}")
+    if not _number(rate) or not 0.0 <= rate <= 1.0:
+        raise _problem(p, f"perturbations.rate must be a number in [0, 1], got {rate!r}", line_of(pert_raw, "rate"))
+    kinds_raw = pert_raw.get("kinds") or ()
+    if isinstance(kinds_raw, (str, dict)) or not isinstance(kinds_raw, (list, tuple)):
+        raise _problem(p, f"perturbations.kinds must be a list of perturbations, got {kinds_raw!r}",
+                       line_of(pert_raw, "kinds"))
+    kinds = tuple(kinds_raw)
+    for index, k in enumerate(kinds):
+        if not isinstance(k, str) or k not in PERTURBATIONS:
+            raise _problem(p, f"unknown perturbation {k!r}; valid perturbations: {format_choices(PERTURBATIONS)}",
+                           item_line(kinds_raw, index) or line_of(pert_raw, "kinds"))
     if rate > 0 and not kinds:
-        raise _problem(p, "perturbations.rate > 0 needs at least one kind")
+        raise _problem(p, "perturbations.rate > 0 needs at least one kind", line_of(pert_raw, "rate"))
 
     tasks_raw = raw.get("tasks")
     if not isinstance(tasks_raw, list) or not tasks_raw:
-        raise _problem(p, "tasks must be a non-empty list")
+        raise _problem(p, "tasks must be a non-empty list", line_of(raw, "tasks"))
     tasks: list[TaskSpec] = []
     for i, t in enumerate(tasks_raw):
         if not isinstance(t, dict):
-            raise _problem(p, f"tasks[{i}] must be a mapping")
+            raise _problem(p, f"tasks[{i}] must be a mapping", item_line(tasks_raw, i))
         unknown = set(t) - _TASK_KEYS
         if unknown:
-            raise _problem(p, f"tasks[{i}]: unknown key(s) {format_choices(unknown)}; valid keys: {format_choices(_TASK_KEYS)}")
+            raise _problem(p, f"tasks[{i}]: unknown key(s) {format_choices(unknown)}; valid keys: {format_choices(_TASK_KEYS)}",
+                           _first_line(t, unknown))
         tid = t.get("id")
         if not isinstance(tid, str) or not tid.replace("_", "").isalnum() or not tid[:1].isalpha():
-            raise _problem(p, f"tasks[{i}].id must be an identifier starting with a letter, got {tid!r}")
+            raise _problem(p, f"tasks[{i}].id must be an identifier starting with a letter, got {tid!r}",
+                           line_of(t, "id"))
         if tid in {x.id for x in tasks}:
-            raise _problem(p, f"duplicate task id {tid!r}")
+            raise _problem(p, f"duplicate task id {tid!r}", line_of(t, "id"))
         rules = []
-        for j, r in enumerate(t.get("randomize") or ()):
+        rules_raw = t.get("randomize") or ()
+        if not isinstance(rules_raw, (list, tuple)):
+            raise _problem(p, f"tasks[{i}].randomize must be a list of rules, got {rules_raw!r}",
+                           line_of(t, "randomize"))
+        for j, r in enumerate(rules_raw):
+            where = f"tasks[{i}].randomize[{j}]"
             if not isinstance(r, dict) or set(r) - _RULE_KEYS or "names" not in r:
-                raise _problem(p, f"tasks[{i}].randomize[{j}] must be a mapping with 'names' and optional 'xy', 'yaw'")
+                raise _problem(p, f"{where} must be a mapping with 'names' and optional 'xy', 'yaw'",
+                               item_line(rules_raw, j))
             names = r["names"]
-            if isinstance(names, str) or not names:
-                raise _problem(p, f"tasks[{i}].randomize[{j}].names must be a non-empty list of scene names")
-            yaw = float(r.get("yaw", 0.0))
-            if yaw < 0:
-                raise _problem(p, f"tasks[{i}].randomize[{j}].yaw must be >= 0 rad")
+            if isinstance(names, (str, dict)) or not isinstance(names, (list, tuple)) or not names:
+                raise _problem(p, f"{where}.names must be a non-empty list of scene names", line_of(r, "names"))
+            yaw = r.get("yaw", 0.0)
+            if not _number(yaw) or yaw < 0:
+                raise _problem(p, f"{where}.yaw must be a finite number >= 0 rad, got {yaw!r}", line_of(r, "yaw"))
             rules.append(RandomizeRule(names=tuple(str(n) for n in names),
-                                       xy=_pair(r.get("xy", (0.0, 0.0)), p, f"tasks[{i}].randomize[{j}].xy"), yaw=yaw))
+                                       xy=_pair(r.get("xy", (0.0, 0.0)), p, f"{where}.xy", line_of(r, "xy")),
+                                       yaw=float(yaw)))
         target = t.get("target")
         if target is not None and not isinstance(target, str):
-            raise _problem(p, f"tasks[{i}].target must be a target name, got {target!r}")
+            raise _problem(p, f"tasks[{i}].target must be a target name, got {target!r}", line_of(t, "target"))
         rw = t.get("random_world")
         if rw is True:
             rw = {}
         if rw is not None and rw is not False and (not isinstance(rw, dict) or set(rw) - {"distractors"}):
-            raise _problem(p, f"tasks[{i}].random_world must be true or a mapping with 'distractors: [min, max]', got {rw!r}")
+            raise _problem(p, f"tasks[{i}].random_world must be true or a mapping with 'distractors: [min, max]', got {rw!r}",
+                           line_of(t, "random_world"))
         seed_key = t.get("seed_to_scene")
         if seed_key is not None and (not isinstance(seed_key, str) or not seed_key.isidentifier()):
-            raise _problem(p, f"tasks[{i}].seed_to_scene must be a scene key (an identifier), got {seed_key!r}")
-        tasks.append(TaskSpec(id=tid, goal_graph=_resolve_graph(t.get("goal_graph"), p), target=target,
-                              randomize=tuple(rules), description=str(t.get("description", "")),
-                              random_world=dict(rw) if isinstance(rw, dict) else None, seed_to_scene=seed_key))
+            raise _problem(p, f"tasks[{i}].seed_to_scene must be a scene key (an identifier), got {seed_key!r}",
+                           line_of(t, "seed_to_scene"))
+        tasks.append(TaskSpec(id=tid, goal_graph=_resolve_graph(t.get("goal_graph"), p, line_of(t, "goal_graph")),
+                              target=target, randomize=tuple(rules), description=str(t.get("description", "")),
+                              random_world=to_plain(rw) if isinstance(rw, dict) else None, seed_to_scene=seed_key))
     safety = raw.get("safety") or {}
     if not isinstance(safety, dict):
-        raise _problem(p, f"safety must be a mapping of safety.yaml keys to override, got {type(safety).__name__}")
+        raise _problem(p, f"safety must be a mapping of safety.yaml keys to override, got {type(safety).__name__}",
+                       line_of(raw, "safety"))
     return Suite(name=name, path=p.resolve(), description=str(raw.get("description", "")), episodes=episodes,
                  heldout_seed_offset=offset, perturbations=PerturbationConfig(rate=float(rate), kinds=kinds),
-                 tasks=tuple(tasks), safety=safety, raw=raw)
+                 tasks=tuple(tasks), safety=to_plain(safety), raw=to_plain(raw))

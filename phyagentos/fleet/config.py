@@ -36,7 +36,7 @@ from pydantic import ConfigDict, Field, ValidationError, field_validator
 
 from phyagentos.errors import FleetError
 from phyagentos.protocol.schemas import StrictNumbers
-from phyagentos.yamlsource import line_of, read_yaml
+from phyagentos.yamlsource import line_at, read_yaml
 
 __all__ = ["LINK_LOSS_POLICIES", "AuthConfig", "FleetConfig", "TlsConfig", "find_fleet_config", "load_fleet_config"]
 
@@ -175,7 +175,7 @@ def load_fleet_config(path: str | os.PathLike[str]) -> FleetConfig:
     except ValidationError as exc:
         first = exc.errors()[0]
         loc = first["loc"]
-        line = line_of(data, loc[0]) if loc else None
+        line = line_at(data, tuple(loc))  # the offending key's (or item's) own line, nested ones too
         where = ".".join(str(p) for p in loc)
         allowed = ", ".join(sorted(FleetConfig.model_fields)) if first["type"] == "extra_forbidden" else None
         msg = f"{where}: {first['msg']}" + (f"; valid fields: {allowed}" if allowed else "")

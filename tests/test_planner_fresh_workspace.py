@@ -41,8 +41,9 @@ def test_a_fresh_workspace_plans_on_the_arm_that_reaches_the_declared_scene_and_
 
 
 @pytest.mark.sim
-@pytest.mark.parametrize("half", [0.015, 0.03], ids=["3cm", "6cm"])
+@pytest.mark.parametrize("half", [0.015, 0.03, 0.01, 0.035], ids=["3cm", "6cm", "2cm", "7cm"])
 def test_the_franka_picks_and_places_3_and_6_cm_cubes(tmp_path, half):
+    """... and the ends of the 2-7 cm range the randomised world draws (issue 35)."""
     graph = tmp_path / "g.yaml"
     graph.write_text(yaml.safe_dump({"version": 1, "name": "size", "scene": {
         "objects": [{"name": "cube", "half_extents": [half] * 3, "position": [0.5, -0.2], "rgba": [0.8, 0.1, 0.1, 1]}],

@@ -131,6 +131,19 @@ def test_a_comparative_picks_the_object_by_its_declared_size_or_is_refused_when_
     assert "'bigger'" in equal.reason and "same size" in equal.reason
 
 
+def test_a_comparative_over_two_named_objects_moves_the_one_it_chooses_not_both():
+    # "the X and the Y" names both (LIBERO's "put both ... and ..."); a comparative over the
+    # same conjunction chooses one of them
+    world = world_from_scene(SCENE)
+    m = read_request("move the smaller of the red and blue cubes to the right bin", world)
+    assert [(i.verb, i.movers(), i.destinations) for i in m.intents] == [("move", ("red_cube",), ("right_bin",))]
+    m = read_request("put the bigger one of the red cube and the blue cube in the left bin", world)
+    assert [(i.verb, i.movers(), i.destinations) for i in m.intents] == [("move", ("blue_cube",), ("left_bin",))]
+    m = read_request("put the red cube and the blue cube in the left bin", world)
+    assert [(i.verb, i.movers(), i.destinations) for i in m.intents] == [("move", ("red_cube", "blue_cube"),
+                                                                          ("left_bin",))]
+
+
 def test_counts_are_met_exactly_and_a_count_larger_than_the_scene_is_refused(planner):
     one = planner.plan("put one cube in the right bin", scene=SCENE, environment=seen(SCENE))
     assert one.status == "planned" and len(one.steps) == 1 and one.steps[0].destination == "right_bin"

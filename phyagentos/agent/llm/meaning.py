@@ -337,7 +337,9 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
     if set(words) & {"it", "them", "they"} and not (set(words) & _ALL) and previous and not any(
             w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER or w in _KIND for w in words):
         return previous, None, []
-    if "and" in words:
+    # "the X and the Y" is both; "the smaller of the X and Y cubes" is one of them (the
+    # comparative chooses among the conjunction, below)
+    if "and" in words and not set(words) & (_BIGGER | _SMALLER):
         joined = _conjunction(words, world)
         if joined:
             return joined, None, []

@@ -1,6 +1,7 @@
 """Language suite: the Goal Planner on >= 60 instructions over randomised scenes, judged by execution.
 
     nice -n 10 .venv/bin/python bench/language.py [--seeds 8] [--workers 2] [--execute N] [--keep DIR]
+        [--held-out with|only|without] [--held-out-file PATH ...]
         [--categories single,stack,...] [--reviser-episodes K]
 
 Instructions (``--seeds`` per category, default 8 -> 64): single pick and place, sorting by
@@ -95,7 +96,7 @@ class Case:
     truth: dict[str, Any] = field(default_factory=dict)
     must_refuse: bool = False
     refuse_kind: str | None = None
-    part: str = "tuned"  # "tuned" (generated categories) or "held_out" (bench/language_heldout.yaml)
+    part: str = "tuned"  # "tuned" (generated categories) or a held-out file's (held_out_part)
 
 
 def _scene(rng: random.Random, n: int, *, colour_regions: bool = False, sizes: bool = False) -> dict:
@@ -230,8 +231,17 @@ def make_case(category: str, seed: int) -> Case:
     return Case("refuse", seed, text, sc, {}, must_refuse=True, refuse_kind=kind)
 
 
+def held_out_part(path: Path) -> str:
+    """The ``part`` label of a held-out file's cases: ``held_out`` for ``language_heldout.yaml`` (the
+    planner's author's), ``held_out_<rest>`` for ``language_heldout_<rest>.yaml`` (``held_out_outside``:
+    an outside author's), so each file is reported on its own."""
+    rest = path.stem.removeprefix("language_heldout").strip("_")
+    return f"held_out_{rest}" if rest else "held_out"
+
+
 def held_out_cases(path: Path = HELD_OUT) -> list[Case]:
-    """The held-out part (see :data:`HELD_OUT`): its scenes and cases, ``part`` ``held_out``."""
+    """A held-out part (see :data:`HELD_OUT`): its scenes and cases, ``part`` :func:`held_out_part`."""
+    part = held_out_part(Path(path))
     data = read_yaml(path, error=BenchError) or {}
     scenes = data.get("scenes") or {}
     out = []
@@ -242,7 +252,7 @@ def held_out_cases(path: Path = HELD_OUT) -> list[Case]:
         if "count" in c:
             truth = {"*": ("count", c["count"][0], int(c["count"][1]))}
         out.append(Case(c["category"], i, c["instruction"], json.loads(json.dumps(scenes[c["scene"]])), truth,
-                        must_refuse=bool(c.get("must_refuse")), refuse_kind=c.get("refuse_kind"), part="held_out"))
+                        must_refuse=bool(c.get("must_refuse")), refuse_kind=c.get("refuse_kind"), part=part))
     return out
 
 
@@ -476,7 +486,8 @@ def failure_label(row: dict) -> str | None:
 
 
 def summarise(rows: list[dict]) -> dict:
-    """Per category and overall, for every row, and the same for each part (``tuned``, ``held_out``) alone."""
+    """Per category and overall, for every row, and the same for each part (``tuned``, ``held_out``,
+    ``held_out_outside``) alone."""
     out = _summarise(rows)
     parts = sorted({r.get("part", "tuned") for r in rows})
     if len(parts) > 1 or parts != ["tuned"]:
@@ -604,6 +615,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--held-out", choices=("with", "only", "without"), default="with",
                     help="the held-out part (bench/language_heldout.yaml): with the generated (tuned) categories "
                          "(default), alone, or left out; each part is reported on its own")
+    ap.add_argument("--held-out-file", type=Path, action="append", default=None, metavar="PATH",
+                    help="the held-out file(s) to use (repeatable; default bench/language_heldout.yaml); "
+                         "bench/language_heldout_outside.yaml is an outside author's, reported as part held_out_outside")
     args = ap.parse_args(argv)
     cats = [c for c in args.categories.split(",") if c]
     unknown = sorted(set(cats) - set(CATEGORIES))
@@ -612,7 +626,8 @@ def main(argv: list[str] | None = None) -> int:
     cases = [] if args.held_out == "only" else [make_case(cat, seed) for seed in range(args.seeds)
                                                 for cat in CATEGORIES if cat in cats]
     if args.held_out != "without":
-        cases += held_out_cases()
+        for path in args.held_out_file or [HELD_OUT]:
+            cases += held_out_cases(path)
     clients = [] if args.no_model else [("offline", make_client(), args.execute)]
     if os.environ.get("PHYAGENTOS_LLM_PROVIDER") == "openai" and not args.no_model:
         clients.append(("endpoint", make_client(load_llm_config()), args.execute))

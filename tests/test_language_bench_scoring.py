@@ -72,3 +72,31 @@ def test_the_held_out_part_loads_apart_from_the_tuned_categories_and_is_summaris
     assert set(summary["parts"]) == {"tuned", "held_out"}
     assert summary["parts"]["held_out"]["overall"]["instructions"] == len(held)
     assert summary["parts"]["tuned"]["overall"]["instructions"] == len(tuned)
+
+
+def test_the_outside_authors_held_out_file_loads_with_scenes_and_truths_that_exist_and_is_reported_as_its_own_part(language):
+    path = BENCH.parent / "language_heldout_outside.yaml"
+    outside = language.held_out_cases(path)
+    assert len(outside) >= 30 and {c.part for c in outside} == {"held_out_outside"}
+    scenes = yaml.safe_load(path.read_text())["scenes"]
+    for case, raw in zip(outside, yaml.safe_load(path.read_text())["cases"], strict=True):
+        assert raw["scene"] in scenes and case.category in language.CATEGORIES
+        objects = {o["name"] for o in case.scene["objects"]}
+        regions = {r["name"] for r in case.scene["regions"]}
+        assert case.must_refuse or case.truth, case.instruction
+        for obj, (rel, where, *n) in case.truth.items():
+            if obj == "*":  # counting: ("count", region, n)
+                assert rel == "count" and where in regions and 0 < n[0] <= len(objects)
+                continue
+            assert obj in objects and rel in {"inside", "on", "stay", "held"}, case.instruction
+            assert where is None or where in (regions if rel == "inside" else objects), case.instruction
+    author = language.held_out_cases()
+    assert {c.part for c in author} == {"held_out"}
+    assert not {c.instruction for c in outside} & {c.instruction for c in author}
+    rows = [{"part": c.part, "category": c.category, "must_refuse": c.must_refuse, "status": "refused",
+             "seconds": 0.0, "correct": c.must_refuse, "valid": False, "symbolic_correct": False}
+            for c in author + outside]
+    summary = language.summarise(rows)
+    assert set(summary["parts"]) == {"held_out", "held_out_outside"}
+    assert summary["parts"]["held_out_outside"]["overall"]["instructions"] == len(outside)
+    assert language.held_out_part(path) == "held_out_outside" and language.held_out_part(language.HELD_OUT) == "held_out"

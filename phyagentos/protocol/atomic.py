@@ -26,7 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Iterator, Sequence
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "batched_durability", "file_identity", "fsync_paths"]
+__all__ = ["append_lines_durably", "atomic_write_bytes", "atomic_write_text", "batched_durability", "file_identity", "fsync_paths"]
 
 log = logging.getLogger(__name__)
 
@@ -187,3 +187,15 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, *, encoding: str 
         UnicodeEncodeError: ``text`` cannot be encoded (e.g. lone surrogates in UTF-8).
     """
     atomic_write_bytes(path, text.encode(encoding), durable=durable)
+
+
+def append_lines_durably(path: str | os.PathLike[str], lines: Sequence[str]) -> None:
+    """Append ``lines`` (each ending in a newline) to the text file ``path`` (created if
+    needed, parent folders too) and fsync it before returning: the archives' append-only
+    writes (JSON lines per month), which are never rewritten in place."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with open(target, "a", encoding="utf-8", newline="") as handle:
+        handle.writelines(lines)
+        handle.flush()
+        os.fsync(handle.fileno())

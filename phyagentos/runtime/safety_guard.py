@@ -487,14 +487,9 @@ class SafetyGuard:
         Returns:
             :class:`GuardDecision`; interventions are appended to :attr:`events`.
         """
-        self.stats["checks"] += 1
-        if self.estop.is_set():
-            return self._decide((Violation("safety.estop", "halt",
-                                           f"e-stop engaged by {self.estop.source}: {self.estop.reason}"),), None, source, 0)
-        if not isinstance(actions, np.ndarray) or actions.dtype.kind != "f":
-            kind = actions.dtype if isinstance(actions, np.ndarray) else type(actions).__name__
-            return self._decide((self._v("safety.dtype", f"command must be a floating-point ndarray, got {kind}"),),
-                                None, source, 0)
+        refused = self._refuse_outright(actions, source)
+        if refused is not None:
+            return refused
         n = self._n
         if actions.ndim != 2 or actions.shape[0] < 1 or actions.shape[1] not in (n, n + 1):
             return self._decide((self._v("safety.shape", f"command must have shape (N, {n}) or (N, {n + 1}) with N >= 1, "
@@ -504,6 +499,19 @@ class SafetyGuard:
         if self._admissible(actions, N, dt, qd, qdd):
             return GuardDecision("pass", actions)
         return self._diagnose(actions, N, dt, qd, qdd, source)
+
+    def _refuse_outright(self, actions: Any, source: str) -> GuardDecision | None:
+        """Count a check; the decision for a command refused before its values are read (the
+        e-stop engaged, or not a floating-point ndarray), else ``None``."""
+        self.stats["checks"] += 1
+        if self.estop.is_set():
+            return self._decide((Violation("safety.estop", "halt",
+                                           f"e-stop engaged by {self.estop.source}: {self.estop.reason}"),), None, source, 0)
+        if not isinstance(actions, np.ndarray) or actions.dtype.kind != "f":
+            kind = actions.dtype if isinstance(actions, np.ndarray) else type(actions).__name__
+            return self._decide((self._v("safety.dtype", f"command must be a floating-point ndarray, got {kind}"),),
+                                None, source, 0)
+        return None
 
     def check_osc_deltas(self, actions: Any, *, dt: float, eef_position: Sequence[float],
                          output_max_m: float, source: str = "") -> GuardDecision:
@@ -521,14 +529,9 @@ class SafetyGuard:
             :class:`GuardDecision`; a clamp (when ``safety.velocity`` / ``safety.joint_limit``
             are in ``clamp_allowed``) clips into [-1, 1], as the controller would.
         """
-        self.stats["checks"] += 1
-        if self.estop.is_set():
-            return self._decide((Violation("safety.estop", "halt",
-                                           f"e-stop engaged by {self.estop.source}: {self.estop.reason}"),), None, source, 0)
-        if not isinstance(actions, np.ndarray) or actions.dtype.kind != "f":
-            kind = actions.dtype if isinstance(actions, np.ndarray) else type(actions).__name__
-            return self._decide((self._v("safety.dtype", f"command must be a floating-point ndarray, got {kind}"),),
-                                None, source, 0)
+        refused = self._refuse_outright(actions, source)
+        if refused is not None:
+            return refused
         if actions.ndim != 2 or actions.shape[0] < 1 or actions.shape[1] != 7:
             return self._decide((self._v("safety.shape", f"an OSC_POSE chunk must have shape (N, 7) with N >= 1, "
                                                          f"got {actions.shape}"),), None, source, 0)

@@ -46,6 +46,15 @@ class StreamResult:
     stopped: str = ""
 
 
+def _interrupted(estop: Any, cancel: Any) -> str | None:
+    """Why streaming stops before the next period: ``"estop"``, ``"cancel"`` or ``None``."""
+    if estop.is_set():
+        return "estop"
+    if cancel is not None and cancel.is_set():
+        return "cancel"
+    return None
+
+
 class MuJoCoFrankaAdapter:
     """Joint-position streaming to the simulated Franka (7 joints + gripper opening).
 
@@ -94,12 +103,10 @@ class MuJoCoFrankaAdapter:
         prev = np.asarray(q_ref, dtype=float)
         inv_dt = 1.0 / dt
         for k in range(len(actions)):
-            if estop.is_set():
+            why = _interrupted(estop, cancel)
+            if why is not None:
                 self.halt()
-                return StreamResult(k, "estop")
-            if cancel is not None and cancel.is_set():
-                self.halt()
-                return StreamResult(k, "cancel")
+                return StreamResult(k, why)
             q = actions[k, :7]
             ctrl[:7] = q + ff * ((q - prev) * inv_dt)
             ctrl[7] = actions[k, 7]
@@ -164,12 +171,10 @@ class LiberoOscAdapter:
         if not math.isclose(dt, 1.0 / LIBERO_CONTROL_RATE_HZ, rel_tol=1e-6):
             raise ValueError(f"LIBERO's OSC steps at {1.0 / LIBERO_CONTROL_RATE_HZ} s, not {dt} s")
         for k in range(len(actions)):
-            if estop.is_set():
+            why = _interrupted(estop, cancel)
+            if why is not None:
                 self.halt()
-                return StreamResult(k, "estop")
-            if cancel is not None and cancel.is_set():
-                self.halt()
-                return StreamResult(k, "cancel")
+                return StreamResult(k, why)
             self.target.osc_step(actions[k])
         return StreamResult(len(actions))
 

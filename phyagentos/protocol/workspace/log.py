@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import re
 import threading
 from collections import OrderedDict
@@ -17,7 +16,7 @@ from pydantic import ValidationError
 
 from phyagentos.errors import ProtocolError
 
-from ..atomic import atomic_write_text
+from ..atomic import append_lines_durably, atomic_write_text
 from ..codec import (
     PARSE_CACHE,
     Document,
@@ -190,11 +189,7 @@ class WorkspaceLog(WorkspaceParts):
             month = ts_key(item.at).strftime("%Y-%m")
             line = json.dumps(item.model_dump(mode="json"), ensure_ascii=False)
             by_month.setdefault(month, []).append(line + "\n")
-        self.log_dir.mkdir(parents=True, exist_ok=True)
         for month, lines in sorted(by_month.items()):
-            with open(self.log_dir / f"archive-{month}.jsonl", "a", encoding="utf-8", newline="") as handle:
-                handle.writelines(lines)
-                handle.flush()
-                os.fsync(handle.fileno())
+            append_lines_durably(self.log_dir / f"archive-{month}.jsonl", lines)
         log.debug("archived %d log entries", len(entries))
 

@@ -6,12 +6,12 @@ from __future__ import annotations
 import getpass
 import json
 import logging
-import os
 import socket
 from collections.abc import Iterable
 
 from phyagentos.errors import ProtocolError, format_choices
 
+from ..atomic import append_lines_durably
 from ..schemas import RuntimeSignalDoc, Signal, SignalAck, utc_now_iso
 from ..signals import SIGNAL_KINDS, new_signal_id
 from .parts import WorkspaceParts
@@ -99,12 +99,8 @@ class SignalBoard(WorkspaceParts):
                       "handled": [a.model_dump(mode="json") for a in doc.handled if a.signal_id == sig.id]}
             month = ts_key(sig.issued_at).strftime("%Y-%m")
             lines_by_month.setdefault(month, []).append(json.dumps(record, ensure_ascii=False) + "\n")
-        self.log_dir.mkdir(parents=True, exist_ok=True)
         for month, lines in sorted(lines_by_month.items()):
-            with open(self.log_dir / f"signals-{month}.jsonl", "a", encoding="utf-8", newline="") as handle:
-                handle.writelines(lines)
-                handle.flush()
-                os.fsync(handle.fileno())
+            append_lines_durably(self.log_dir / f"signals-{month}.jsonl", lines)
         doc.signals = [s for s in doc.signals if s.id not in moved]
         doc.handled = [a for a in doc.handled if a.signal_id not in moved]
 

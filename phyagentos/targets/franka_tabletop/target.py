@@ -197,17 +197,7 @@ class MuJoCoTarget(MuJoCoArmTarget):
         if t_start <= 0.0:
             self._check_start(Q[0], tracking_tol_rad)
         times = self._slice_times(t, t_start, t_end)
-        t0 = self._data.time
-        bad: set = set()
-        completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
-        return ExecutionResult(
-            completed=completed,
-            max_tracking_error_rad=max_err,
-            sim_time_s=float(self._data.time - t0),
-            steps=steps,
-            contacts=self._contact_names(bad),
-            reason=reason,
-        )
+        return self._stream_result(t, Q, QD, times, tracking_tol_rad, feedforward)
 
     # -- gripper ----------------------------------------------------------------------
     def set_gripper(self, *, opening_m: float, settle_s: float = 0.5, force_n: float | None = None) -> GripperResult:

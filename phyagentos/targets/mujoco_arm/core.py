@@ -507,11 +507,18 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
         duration = float(t[-1])
         n = int(math.ceil(duration / ts - 1e-9)) if duration > 0 else 0
         times = np.minimum((np.arange(n) + 1) * ts, duration)
+        return self._stream_result(t, Q, QD, times, tracking_tol_rad, feedforward,
+                                   then=lambda bad: self.settle(Q[-1], settle_s=settle_s, tol_rad=settle_tol_rad,
+                                                                _contacts=bad))
+
+    def _stream_result(self, t, Q, QD, times, tracking_tol_rad, feedforward, *, then=None) -> ExecutionResult:
+        """Stream ``Q`` at ``times`` (:meth:`_stream`) and report it; ``then(contacts)``, run
+        when the stream completed, returns the control steps it took (e.g. the final settle)."""
         t0 = self._data.time
         bad: set = set()
         completed, max_err, steps, reason = self._stream(t, Q, QD, times, tracking_tol_rad, feedforward, bad)
-        if completed:
-            steps += self.settle(Q[-1], settle_s=settle_s, tol_rad=settle_tol_rad, _contacts=bad)
+        if completed and then is not None:
+            steps += then(bad)
         return ExecutionResult(
             completed=completed,
             max_tracking_error_rad=max_err,

@@ -18,7 +18,6 @@ from phyagentos.agent.dag import (
     is_complete,
     propagate_blocked,
     ready_nodes,
-    render_mermaid,
     to_digraph,
     topological_order,
 )
@@ -28,6 +27,7 @@ from phyagentos.agent.goal_graph import (
     load_goal_graph,
     parse_goal_graph,
 )
+from phyagentos.agent.render import plan_graph_of, to_mermaid
 from phyagentos.errors import GoalGraphError
 from phyagentos.resources import goal_graphs_dir
 
@@ -455,16 +455,17 @@ def test_unknown_state_or_node_is_rejected_with_choices():
         ready_nodes(dag, {"zz": "waiting"})
 
 
-def test_render_mermaid_shows_edges_and_state_classes():
+def test_the_plan_renders_as_mermaid_with_edges_and_state_classes_before_any_session():
     dag = to_digraph(_graph(DIAMOND))
-    text = render_mermaid(dag, propagate_blocked(dag, {"a": "succeeded", "b": "failed"}))
-    assert text.startswith("flowchart TD\n")
-    assert "    n_a --> n_b\n" in text
-    assert 'n_d["d · hold<br/>blocked"]' in text
-    assert "    class n_b failed\n" in text
-    assert "    class n_c,n_x waiting\n" in text
-    for state in NODE_STATES:
-        assert f"classDef {state} " in text
+    text = to_mermaid(plan_graph_of(dag, {"a": "succeeded", "b": "failed"}))
+    assert text.startswith("flowchart LR\n")
+    assert "  n_a --> n_b\n" in text
+    assert 'subgraph n_d["d · hold · blocked"]' in text
+    assert "  class n_b node_failed\n" in text
+    assert "  class n_c,n_x node_waiting\n" in text
+    for state in ("succeeded", "failed", "blocked", "waiting"):
+        assert f"classDef node_{state} " in text
+    assert to_mermaid(plan_graph_of(dag)).count("node_waiting fill:") == 1
 
 
 # --------------------------------------------------------------------------- properties

@@ -49,7 +49,6 @@ __all__ = [
     "blocked_nodes",
     "propagate_blocked",
     "is_complete",
-    "render_mermaid",
 ]
 
 logger = logging.getLogger(__name__)
@@ -68,18 +67,6 @@ NODE_STATES: tuple[str, ...] = (WAITING, READY, RUNNING, SUCCEEDED, FAILED, BLOC
 TERMINAL_STATES: frozenset[str] = frozenset({SUCCEEDED, FAILED, BLOCKED, CANCELLED})
 #: States of an ancestor that prevent a node from ever running.
 BLOCKING_STATES: frozenset[str] = frozenset({FAILED, BLOCKED, CANCELLED})
-
-# Mermaid colours per state (fill, stroke); chosen to read on light and dark themes.
-_MERMAID_STYLES: dict[str, tuple[str, str]] = {
-    WAITING: ("#eeeeee", "#9e9e9e"),
-    READY: ("#e3f2fd", "#1e88e5"),
-    RUNNING: ("#fff8e1", "#f9a825"),
-    SUCCEEDED: ("#e8f5e9", "#43a047"),
-    FAILED: ("#ffebee", "#e53935"),
-    BLOCKED: ("#f3e5f5", "#8e24aa"),
-    CANCELLED: ("#fafafa", "#616161"),
-}
-
 
 def to_digraph(graph: GoalGraph) -> nx.DiGraph:
     """Return the DAG of ``graph``: nodes keyed by id with attribute ``node``, edges dep -> dependent.
@@ -226,33 +213,3 @@ def is_complete(dag: nx.DiGraph, states: Mapping[str, str]) -> bool:
     """Return whether every node is terminal (succeeded, failed, blocked or cancelled)."""
     full = _checked_states(dag, states)
     return all(state in TERMINAL_STATES for state in full.values())
-
-
-def _mermaid_label(text: str) -> str:
-    # Mermaid strings cannot contain a raw double quote; it has its own entity syntax.
-    return text.replace('"', "#quot;")
-
-
-def render_mermaid(dag: nx.DiGraph, states: Mapping[str, str] | None = None) -> str:
-    """Return a Mermaid ``flowchart`` of ``dag`` with each node styled by its state.
-
-    Node labels show the id, skill and state; each state is a Mermaid class (``classDef``)
-    of the same name. Mermaid ids are prefixed with ``n_`` because bare ids such as
-    ``end`` are Mermaid keywords. ``states`` defaults to everything ``waiting``.
-    """
-    full = _checked_states(dag, states or {})
-    lines = ["flowchart TD"]
-    for n in dag.nodes:
-        goal_node = dag.nodes[n].get("node")
-        skill = f" · {goal_node.skill}" if goal_node is not None else ""
-        lines.append(f'    n_{n}["{_mermaid_label(f"{n}{skill}<br/>{full[n]}")}"]')
-    for u, v in dag.edges:
-        lines.append(f"    n_{u} --> n_{v}")
-    for state in NODE_STATES:
-        fill, stroke = _MERMAID_STYLES[state]
-        lines.append(f"    classDef {state} fill:{fill},stroke:{stroke},color:#212121")
-    for state in NODE_STATES:
-        members = [f"n_{n}" for n in dag.nodes if full[n] == state]
-        if members:
-            lines.append(f"    class {','.join(members)} {state}")
-    return "\n".join(lines) + "\n"

@@ -3,7 +3,8 @@
 Each goal node is a box (cluster) labelled with its skill and TASK.md state; inside it,
 the node's sessions in creation order, each with its lifecycle state, verdict,
 diagnosed cause, and an arrow to the child a replan created (labelled with the
-recovery strategy). Dependency edges join the nodes. Two outputs:
+recovery strategy). Dependency edges join the nodes. :func:`plan_graph_of` gives the same
+picture for a compiled goal graph before any session. One renderer per format:
 
 - Mermaid flowchart text (:func:`to_mermaid`), which renders inside Markdown
   (GitHub, GitLab, most editors);
@@ -16,6 +17,7 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,8 +29,8 @@ from phyagentos.protocol import SessionRecord, Workspace
 from . import dag as dagmod
 from .coordinator import node_state_of
 
-__all__ = ["SessionBox", "NodeBox", "RunGraph", "STATE_COLOURS", "run_graph_of", "to_mermaid", "to_dot",
-           "render_image"]
+__all__ = ["SessionBox", "NodeBox", "RunGraph", "STATE_COLOURS", "run_graph_of", "plan_graph_of", "to_mermaid",
+           "to_dot", "render_image"]
 
 #: (fill, border) per state: nodes by their TASK.md state (plus ``paused`` and
 #: ``held_by_estop``, which the live view shows for a node a signal holds), sessions by
@@ -129,6 +131,29 @@ def run_graph_of(workspace: Workspace, run_id: str | None = None) -> RunGraph:
         for n in order
     )
     return RunGraph(run_id=str(run), nodes=nodes)
+
+
+def plan_graph_of(dag: nx.DiGraph, states: Mapping[str, str] | None = None, *, run_id: str = "plan") -> RunGraph:
+    """The graph of a compiled goal graph before (or without) its sessions, for the same renderers.
+
+    Args:
+        dag: a goal DAG from :func:`phyagentos.agent.dag.to_digraph` (attribute ``node``
+            holds the goal node; edges run dependency -> dependent).
+        states: node id -> state (``TASK.md`` states); missing ids are ``waiting`` and
+            blocked nodes are propagated along dependencies. Default: all ``waiting``.
+        run_id: the title the pictures carry.
+
+    Raises:
+        GoalGraphError: ``states`` names an unknown node or state (the message lists the
+            valid ones).
+    """
+    full = dagmod.propagate_blocked(dag, states or {})
+    nodes = []
+    for n in dag.nodes:
+        goal_node = dag.nodes[n].get("node")
+        nodes.append(NodeBox(id=n, skill=goal_node.skill if goal_node is not None else "?", state=full[n],
+                             depends_on=tuple(dag.predecessors(n))))
+    return RunGraph(run_id=run_id, nodes=tuple(nodes))
 
 
 def _short(session_id: str, run_id: str) -> str:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import os
+import select
 import threading
 import time
 from dataclasses import dataclass
@@ -91,7 +92,15 @@ class BusState:
 
 class _PortHandler(scs.PortHandler):
     """The SDK's port handler with ``margin_ms`` added to every packet timeout (the SDK's is
-    ``2 x LATENCY_TIMER (16 ms) + 2 ms`` plus the bytes' time: the USB adapter's latency)."""
+    ``2 x LATENCY_TIMER (16 ms) + 2 ms`` plus the bytes' time: the USB adapter's latency),
+    and a read that waits on the port instead of spinning.
+
+    The SDK polls a non-blocking read in a loop until the status packet is complete or the
+    timeout passes, which keeps a core busy and, in Python, the GIL held: a bus twin serving
+    from a thread of the same process then answers late on a loaded machine. An empty read
+    here waits up to :data:`_READ_WAIT_S` for the port to become readable (``select``), so
+    the answer is taken as soon as it arrives and nothing spins.
+    """
 
     def __init__(self, port_name: str, margin_ms: float):
         super().__init__(port_name)
@@ -100,6 +109,20 @@ class _PortHandler(scs.PortHandler):
     def setPacketTimeout(self, packet_length):  # noqa: N802 - the SDK's name
         super().setPacketTimeout(packet_length)
         self.packet_timeout += self.margin_ms
+
+    def readPort(self, length):  # noqa: N802 - the SDK's name
+        data = self.ser.read(length)
+        if not data:
+            try:
+                select.select([self.ser.fileno()], [], [], _READ_WAIT_S)
+            except (OSError, ValueError):  # closed under us: the SDK's timeout ends the read
+                pass
+        return data
+
+
+#: Longest wait of one empty read for the port to become readable, in s (well under the
+#: SDK's smallest packet timeout, ~34 ms at 1 Mbaud).
+_READ_WAIT_S = 0.002
 
 
 def default_timeout_margin_ms(port: str) -> float:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from phyagentos.errors import TargetError
+from phyagentos.targets.contract import RendersImages
 
 __all__ = ["EVIDENCE_IMAGE_SIZE", "save_scene_image"]
 
@@ -27,18 +28,18 @@ def save_scene_image(target: Any, path: str | Path, *, events: list | None = Non
     """Render ``target``'s overview camera to the PNG ``path``; return its file name.
 
     Returns ``None`` (and appends a ``target.render_unavailable`` event to ``events``)
-    when the target cannot render, e.g. no OpenGL backend or a target without a camera:
-    missing images never fail a session.
+    when the target cannot render, e.g. no OpenGL backend or a target without a camera,
+    and ``None`` alone for a target that draws no pictures (not
+    :class:`~phyagentos.targets.contract.RendersImages`): missing images never fail a session.
     """
-    render = getattr(target, "render", None)
-    if render is None:
+    if not isinstance(target, RendersImages):
         return None
     path = Path(path)
     try:
         from PIL import Image  # noqa: PLC0415 - only needed when images are written
 
         width, height = EVIDENCE_IMAGE_SIZE
-        pixels = render(width=width, height=height, shadows=False)
+        pixels = target.render(width=width, height=height, shadows=False)
         Image.fromarray(pixels).save(path, format="PNG")
     except (TargetError, OSError, TypeError, ValueError) as exc:
         logger.warning("evidence image %s not written: %s", path.name, exc)

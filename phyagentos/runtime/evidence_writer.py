@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from phyagentos.protocol.evidence_markers import PENDING_MARKER, PRUNED_MARKER, WANTED_MARKER
+from phyagentos.targets.contract import MuJoCoBacked
 
 from .evidence_images import EVIDENCE_IMAGE_SIZE, save_scene_image
 
@@ -81,13 +82,16 @@ class EvidenceImageWriter:
         with ``state`` the ``(mj_stateSize,)`` float64 vector of its integration state
         (``mjSTATE_INTEGRATION``: time, qpos, qvel, act, warm start, ctrl, applied
         forces, equality activations, mocap poses, user data), or None for a target this
-        writer cannot render in the background (no MuJoCo handles or no ``overview``
-        camera). Writes nothing: the SessionRunner takes the initial scene while it
-        prepares a session, before ``go``."""
-        model, data = getattr(target, "model", None), getattr(target, "data", None)
+        writer cannot render in the background (not
+        :class:`~phyagentos.targets.contract.MuJoCoBacked`, or no ``overview`` camera).
+        Writes nothing: the SessionRunner takes the initial scene while it prepares a
+        session, before ``go``."""
+        if not isinstance(target, MuJoCoBacked):
+            return None
         try:
             import mujoco  # noqa: PLC0415
 
+            model, data = target.model, target.data
             usable = (isinstance(model, mujoco.MjModel) and isinstance(data, mujoco.MjData)
                       and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, _CAMERA) >= 0)
             if not usable:

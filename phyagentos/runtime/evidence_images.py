@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any
 
 from phyagentos.errors import TargetError
-from phyagentos.targets.contract import RendersImages
 
 __all__ = ["EVIDENCE_IMAGE_SIZE", "save_scene_image"]
 
@@ -32,6 +31,8 @@ def save_scene_image(target: Any, path: str | Path, *, events: list | None = Non
     and ``None`` alone for a target that draws no pictures (not
     :class:`~phyagentos.targets.contract.RendersImages`): missing images never fail a session.
     """
+    from phyagentos.targets.contract import RendersImages  # noqa: PLC0415 - the package imports MuJoCo
+
     if not isinstance(target, RendersImages):
         return None
     path = Path(path)

@@ -47,7 +47,6 @@ from typing import Any
 import numpy as np
 
 from phyagentos.protocol.evidence_markers import PENDING_MARKER, PRUNED_MARKER, WANTED_MARKER
-from phyagentos.targets.contract import MuJoCoBacked
 
 from .evidence_images import EVIDENCE_IMAGE_SIZE, save_scene_image
 
@@ -86,6 +85,8 @@ class EvidenceImageWriter:
         :class:`~phyagentos.targets.contract.MuJoCoBacked`, or no ``overview`` camera).
         Writes nothing: the SessionRunner takes the initial scene while it prepares a
         session, before ``go``."""
+        from phyagentos.targets.contract import MuJoCoBacked  # noqa: PLC0415 - the package imports MuJoCo
+
         if not isinstance(target, MuJoCoBacked):
             return None
         try:

@@ -42,7 +42,6 @@ import numpy as np
 from phyagentos.errors import RecordingError, TargetError
 from phyagentos.protocol import dump_yaml
 from phyagentos.protocol.atomic import atomic_write_text
-from phyagentos.targets.contract import MuJoCoBacked, RendersImages
 from phyagentos.yamlsource import read_yaml
 
 __all__ = ["ENV_VAR", "RECORD_MODES", "RecordingConfig", "SessionRecorder", "prune_recordings"]
@@ -138,6 +137,8 @@ def _write_frames(path: Path, cfg: RecordingConfig):
 def _model_recipe(target: Any, seed: int | None) -> dict[str, Any] | None:
     """How a render process rebuilds ``target``'s MuJoCo model (class, name, scene, seed), or None."""
     import mujoco  # noqa: PLC0415
+
+    from phyagentos.targets.contract import MuJoCoBacked  # noqa: PLC0415 - the package imports MuJoCo
 
     if not isinstance(target, MuJoCoBacked):
         return None
@@ -337,6 +338,8 @@ class SessionRecorder:
     def __init__(self, target: Any, directory: str | Path, config: RecordingConfig, *, seed: int | None = None) -> None:
         import mujoco  # noqa: PLC0415
 
+        from phyagentos.targets.contract import MuJoCoBacked, RendersImages  # noqa: PLC0415
+
         recipe = _model_recipe(target, seed)
         if recipe is None and not isinstance(target, RendersImages):
             raise RecordingError(f"target {target.name!r} cannot render; nothing to record")
@@ -345,6 +348,7 @@ class SessionRecorder:
             cams = [model.camera(i).name for i in range(model.ncam)]
             raise TargetError(f"unknown camera {config.camera!r} to record; cameras: {', '.join(cams) or 'none'}")
         self._replay = recipe is not None
+        self._mujoco = isinstance(target, MuJoCoBacked)  # its qpos is recorded
         self.target = target
         self.directory = Path(directory)
         self.config = config
@@ -383,7 +387,7 @@ class SessionRecorder:
     def capture(self) -> None:
         """Capture one frame now (and record its state), regardless of the rate."""
         started = time.perf_counter()
-        data = self.target.data if isinstance(self.target, MuJoCoBacked) else None
+        data = self.target.data if self._mujoco else None
         qpos = np.array(data.qpos, dtype=np.float64) if data is not None else np.zeros(0)
         if self._replay:
             payload: Any = {"qpos": qpos, "mocap_pos": np.array(data.mocap_pos), "mocap_quat": np.array(data.mocap_quat)}

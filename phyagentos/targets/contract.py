@@ -128,7 +128,7 @@ ACTION_FORMS: tuple[str, ...] = ("joint_trajectory", "joint_position_chunk", "ca
 #: The sensors a target may offer (``TargetCapabilities.sensors``):
 #: ``proprioception``: joint positions/velocities/efforts (``proprioception()``);
 #: ``rgb``: named cameras (``camera_names()``, ``capture(sensor)`` -> a camera frame); a
-#: target without them may still ``render`` pictures for evidence images;
+#: target without them may still ``render`` pictures for evidence images (:class:`RendersImages`);
 #: ``depth``: depth images (``render_depth(camera=, width=, height=)``, m);
 #: ``wrist_force``: a wrist force/torque sensor (``wrist_external_force_n()``, N);
 #: ``contacts``: unexpected contacts reported by ``execute_trajectory``;

@@ -29,6 +29,7 @@ from py_trees.common import Status
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
 from phyagentos.motion.retime import Trajectory, retime
+from phyagentos.targets.contract import MuJoCoBacked
 
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
@@ -118,11 +119,12 @@ class _ContactMotion(_Tracking):
         objects' contacts are ignored when measuring the force.
 
         Raises:
-            PrimitiveFailure: ``contact.unsupported`` on a target without a MuJoCo model.
+            PrimitiveFailure: ``contact.unsupported`` on a target without a MuJoCo model
+                (not :class:`~phyagentos.targets.contract.MuJoCoBacked`).
         """
         ctx = self.ctx
         target = ctx.target
-        if getattr(target, "model", None) is None or getattr(target, "data", None) is None:
+        if not isinstance(target, MuJoCoBacked):
             raise PrimitiveFailure("contact.unsupported", f"target {target.name!r} reports no contact forces")
         T_start = target.tcp_pose()
         if self.to is not None:
@@ -137,7 +139,7 @@ class _ContactMotion(_Tracking):
         vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
         with ctx.profiler.section("timing"):
             traj = retime(path, vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
-        held = [n for n in getattr(target, "held_objects", lambda: ())()]
+        held = target.held_objects()
         self._ignore = frozenset(int(target.model.body(n).id) for n in held)
         self._start(traj)
 

@@ -13,7 +13,7 @@ from py_trees.common import Status
 
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.retime import Trajectory, retime
-from phyagentos.targets.contract import capabilities_of
+from phyagentos.targets.contract import MuJoCoBacked, capabilities_of
 
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import (
@@ -56,9 +56,9 @@ class _Tracking(Primitive):
 
     def _within_range(self, traj: Trajectory) -> Trajectory:
         target = self.ctx.target
-        model = getattr(target, "model", None)
-        if model is None:
+        if not isinstance(target, MuJoCoBacked):
             return traj
+        model = target.model
         jids = [model.joint(n).id for n in target.arm_joint_names]
         lo, hi = model.jnt_range[jids, 0], model.jnt_range[jids, 1]
         q = np.asarray(traj.q, dtype=float)
@@ -263,7 +263,7 @@ class Gripper(Primitive):
             return
         if self.object is None:
             return
-        planned = (getattr(target, "runtime_notes", None) or {}).get("planned_grasp") or {}
+        planned = target.runtime_notes.get("planned_grasp") or {}
         width = planned.get("width_m") if planned.get("object") == self.object else None
         if not closed_on:
             raise PrimitiveFailure("grasp.missed", f"closed on nothing instead of {self.object!r} (opening "

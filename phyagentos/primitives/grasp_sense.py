@@ -75,15 +75,9 @@ class GraspBelief:
 
 
 def belief(target) -> GraspBelief:
-    """The grasp belief kept in ``target.runtime_notes`` (a dict the target checkpoints)."""
-    notes = getattr(target, "runtime_notes", None)
-    if notes is None:
-        notes = {}
-        try:
-            target.runtime_notes = notes
-        except AttributeError:  # pragma: no cover - a target without notes
-            pass
-    return GraspBelief(notes)
+    """The grasp belief kept in ``target.runtime_notes`` (:attr:`Target.runtime_notes
+    <phyagentos.targets.contract.Target.runtime_notes>`, a dict the target checkpoints)."""
+    return GraspBelief(target.runtime_notes)
 
 
 def _force_norm(p) -> float | None:
@@ -196,6 +190,4 @@ def mass_estimate_kg(load_n: float | None) -> float | None:
 def plan_grasp(target, *, object: str, width_m: float | None) -> None:
     """Remember the grasp the robot is about to make (object and its perceived width
     across the fingers, m), for the close that follows."""
-    notes = getattr(target, "runtime_notes", None)
-    if notes is not None:
-        notes["planned_grasp"] = {"object": object, "width_m": None if width_m is None else float(width_m)}
+    target.runtime_notes["planned_grasp"] = {"object": object, "width_m": None if width_m is None else float(width_m)}

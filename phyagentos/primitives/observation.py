@@ -51,14 +51,14 @@ def make_perceiver(target, config_path: str | Path | None = None):
     path = Path(config_path) if config_path is not None else None
     if path is not None and path.is_file():
         cfg = PerceptionConfig.from_yaml(path)
-    elif hasattr(target, "perception_config"):  # the parameters that suit the target's world
+    else:  # the parameters that suit the target's world, else the defaults
         cfg = target.perception_config()
-    else:
-        cfg = PerceptionConfig.default()
+        if cfg is None:
+            cfg = PerceptionConfig.default()
     p = Perceiver(cfg, target.describe_declared()["objects"])
     if hasattr(p, "robot_name"):
-        p.robot_name = getattr(target, "ROBOT", "robot")
-    _restore_tracks(p, getattr(target, "runtime_notes", None) or {})
+        p.robot_name = target.ROBOT
+    _restore_tracks(p, target.runtime_notes)
     return p
 
 
@@ -69,9 +69,9 @@ def save_tracks(target, perceiver) -> None:
     """Keep what ``perceiver`` believes (its tracks, the held object, the wrist baseline)
     in ``target.runtime_notes`` as plain data, so the next session of the run (another
     process, maybe) continues it: a robot remembers what it saw and what it holds."""
-    notes = getattr(target, "runtime_notes", None)
+    notes = target.runtime_notes
     tracks = getattr(perceiver, "tracks", None)
-    if notes is None or tracks is None:
+    if tracks is None:
         return
     out = {}
     for name, t in tracks.items():

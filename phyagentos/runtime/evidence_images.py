@@ -27,18 +27,20 @@ def save_scene_image(target: Any, path: str | Path, *, events: list | None = Non
     """Render ``target``'s overview camera to the PNG ``path``; return its file name.
 
     Returns ``None`` (and appends a ``target.render_unavailable`` event to ``events``)
-    when the target cannot render, e.g. no OpenGL backend or a target without a camera:
-    missing images never fail a session.
+    when the target cannot render, e.g. no OpenGL backend or a target without a camera,
+    and ``None`` alone for a target that draws no pictures (not
+    :class:`~phyagentos.targets.contract.RendersImages`): missing images never fail a session.
     """
-    render = getattr(target, "render", None)
-    if render is None:
+    from phyagentos.targets.contract import RendersImages  # noqa: PLC0415 - the package imports MuJoCo
+
+    if not isinstance(target, RendersImages):
         return None
     path = Path(path)
     try:
         from PIL import Image  # noqa: PLC0415 - only needed when images are written
 
         width, height = EVIDENCE_IMAGE_SIZE
-        pixels = render(width=width, height=height, shadows=False)
+        pixels = target.render(width=width, height=height, shadows=False)
         Image.fromarray(pixels).save(path, format="PNG")
     except (TargetError, OSError, TypeError, ValueError) as exc:
         logger.warning("evidence image %s not written: %s", path.name, exc)

@@ -81,13 +81,18 @@ class EvidenceImageWriter:
         with ``state`` the ``(mj_stateSize,)`` float64 vector of its integration state
         (``mjSTATE_INTEGRATION``: time, qpos, qvel, act, warm start, ctrl, applied
         forces, equality activations, mocap poses, user data), or None for a target this
-        writer cannot render in the background (no MuJoCo handles or no ``overview``
-        camera). Writes nothing: the SessionRunner takes the initial scene while it
-        prepares a session, before ``go``."""
-        model, data = getattr(target, "model", None), getattr(target, "data", None)
+        writer cannot render in the background (not
+        :class:`~phyagentos.targets.contract.MuJoCoBacked`, or no ``overview`` camera).
+        Writes nothing: the SessionRunner takes the initial scene while it prepares a
+        session, before ``go``."""
+        from phyagentos.targets.contract import MuJoCoBacked  # noqa: PLC0415 - the package imports MuJoCo
+
+        if not isinstance(target, MuJoCoBacked):
+            return None
         try:
             import mujoco  # noqa: PLC0415
 
+            model, data = target.model, target.data
             usable = (isinstance(model, mujoco.MjModel) and isinstance(data, mujoco.MjData)
                       and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, _CAMERA) >= 0)
             if not usable:

@@ -21,6 +21,7 @@ bad user input.
 
 from __future__ import annotations
 
+import inspect
 import logging
 import math
 import typing
@@ -34,6 +35,7 @@ from phyagentos.errors import IKError, PhyAgentOSError, format_choices
 from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
 from phyagentos.motion.ik import solve_ik
 from phyagentos.primitives.motion import ik_options
+from phyagentos.targets.contract import Target
 from phyagentos.targets.perturbations import parse_perturbations, split_scene
 from phyagentos.targets.registry import DRIVERS
 from phyagentos.targets.scene import SceneSpec
@@ -129,13 +131,13 @@ def _item_problems(kind: str, index: int, item: Any, cls: type, root: Any = None
     return out
 
 
-def _tabletop(parse: Any) -> bool:
-    """Whether a driver's scene is the tabletop :class:`SceneSpec` (its own parser, if any,
-    is annotated to return one)."""
-    if parse is None:
+def _tabletop(cls: type[Target]) -> bool:
+    """Whether a driver's scene is the tabletop :class:`SceneSpec`: it keeps
+    :meth:`Target.scene_from_dict`, or its own is annotated to return one."""
+    if inspect.getattr_static(cls, "scene_from_dict") is inspect.getattr_static(Target, "scene_from_dict"):
         return True
     try:
-        return typing.get_type_hints(parse).get("return") is SceneSpec
+        return typing.get_type_hints(cls.scene_from_dict).get("return") is SceneSpec
     except Exception:  # noqa: BLE001 - unresolvable annotations: not a tabletop scene
         return False
 
@@ -161,9 +163,8 @@ def check_scene(raw: Mapping[str, Any] | None, driver: str, *,
         base, perturb = split_scene(raw or None)
     except PhyAgentOSError as exc:
         return None, [GraphProblem(scene_line, clip(str(exc)))]
-    own = getattr(cls, "scene_from_dict", None)
     problems: list[GraphProblem] = []
-    if _tabletop(own) and isinstance(raw, Mapping):
+    if _tabletop(cls) and isinstance(raw, Mapping):
         from phyagentos.targets.scene import _ITEM_TYPES  # noqa: PLC0415 - the scene's own item types
 
         for kind, item_cls in _ITEM_TYPES.items():
@@ -178,8 +179,7 @@ def check_scene(raw: Mapping[str, Any] | None, driver: str, *,
     if problems:
         return None, problems
     try:
-        scene = own(base, root=root) if own is not None else (SceneSpec.from_dict(base, root=root) if base
-                                                               else SceneSpec.default())
+        scene = cls.scene_from_dict(base, root=root)  # the tabletop SceneSpec unless the driver has its own
     except (PhyAgentOSError, TypeError, ValueError) as exc:
         return None, [GraphProblem(scene_line, f"scene: {clip(str(exc))}")]
     try:

@@ -49,7 +49,7 @@ from phyagentos.policy.adapter import ADAPTERS, PolicyAdapter
 from phyagentos.policy.client import PolicyClient
 from phyagentos.policy.observation import HistoryEntry, ObjectObservation, Observation, eef_state
 from phyagentos.primitives.context import SkillContext
-from phyagentos.targets.contract import capabilities_of
+from phyagentos.targets.contract import OscControlled, capabilities_of
 
 from .bridges import ActionChunk, ActionSpec, BridgeChain, ReferenceState
 from .builtin_runtime import RunOutcome
@@ -177,7 +177,8 @@ def collect_observation(target: Any, *, instruction: str, focus: str | None,
         history: recent :class:`HistoryEntry` items (oldest first), copied in.
         sizes: object name -> half extents (3,) m.
         eef: also read the end-effector state (``target.osc_proprio()``, see
-            :func:`~phyagentos.policy.observation.eef_state`); targets without it leave it ``None``.
+            :func:`~phyagentos.policy.observation.eef_state`); a target that is not
+            :class:`~phyagentos.targets.contract.OscControlled` leaves it ``None``.
     """
     o = target.observe()
     objects = {name: ObjectObservation(pose=np.asarray(T), half_extents=np.asarray(sizes.get(name, (0.0, 0.0, 0.0))))
@@ -194,7 +195,7 @@ def collect_observation(target: Any, *, instruction: str, focus: str | None,
     rgb = next((v for (src, _), v in images.items() if src == "rgb"), None)
     depth = next((v for (src, _), v in images.items() if src == "depth"), None)
     state = None
-    if eef and hasattr(target, "osc_proprio"):
+    if eef and isinstance(target, OscControlled):
         state = eef_state(target.osc_proprio())
     return Observation(instruction=instruction, time_s=float(o["time"]), joint_positions=np.asarray(o["arm_qpos"]),
                        joint_velocities=np.asarray(o["arm_qvel"]), gripper_opening_m=float(o["gripper_opening_m"]),
@@ -382,10 +383,7 @@ class _Rollout:
         """The episode's step budget (:meth:`PolicySettings.step_budget`) for this target."""
         if self.s.max_steps is None and self.s.max_steps_by_suite is None:
             return None
-        suite = None
-        query = getattr(self.ctx.target, "query_state", None)
-        if query is not None:
-            suite = query().get("suite")
+        suite = self.ctx.target.query_state().get("suite")
         try:
             return self.s.step_budget(suite)
         except ValueError as exc:

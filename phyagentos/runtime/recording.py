@@ -138,8 +138,12 @@ def _model_recipe(target: Any, seed: int | None) -> dict[str, Any] | None:
     """How a render process rebuilds ``target``'s MuJoCo model (class, name, scene, seed), or None."""
     import mujoco  # noqa: PLC0415
 
-    scene = getattr(target, "scene", None)
-    if not isinstance(getattr(target, "model", None), mujoco.MjModel) or not hasattr(scene, "to_dict"):
+    from phyagentos.targets.contract import MuJoCoBacked  # noqa: PLC0415 - the package imports MuJoCo
+
+    if not isinstance(target, MuJoCoBacked):
+        return None
+    scene = target.scene
+    if not isinstance(target.model, mujoco.MjModel) or not hasattr(scene, "to_dict"):
         return None
     cls = type(target)
     # a scene with mesh objects travels as the checked spec itself (it carries the mesh
@@ -272,12 +276,9 @@ def _render_main() -> int:
         cfg = RecordingConfig.parse(setup["config"])
         recipe = setup["recipe"]
         cls = getattr(importlib.import_module(recipe["module"]), recipe["cls"])
-        parse = getattr(cls, "scene_from_dict", None)
-        if parse is None:
-            from phyagentos.targets.scene import SceneSpec  # noqa: PLC0415
-            parse = SceneSpec.from_dict
         scene = recipe["scene"]
-        target = cls(recipe["name"], parse(scene) if isinstance(scene, dict) else scene, seed=recipe["seed"])
+        target = cls(recipe["name"], cls.scene_from_dict(scene) if isinstance(scene, dict) else scene,
+                     seed=recipe["seed"])
         model = target.model
         if model.nq != recipe["nq"]:
             raise RecordingError(f"rebuilt model has nq={model.nq}, the session's has {recipe['nq']}")
@@ -316,10 +317,12 @@ def _render_main() -> int:
 class SessionRecorder:
     """Records one session of ``target`` into ``directory``.
 
-    For a MuJoCo target (``model``: ``mujoco.MjModel`` and ``data``), the tick hook only
-    copies the state (``qpos``, mocap poses: microseconds); a background thread renders
-    it with its own ``MjData`` and renderer and encodes it, so rendering never runs in
-    the control loop. Other targets render through ``target.render`` in the hook.
+    For a MuJoCo target (:class:`~phyagentos.targets.contract.MuJoCoBacked`, ``model`` a
+    ``mujoco.MjModel``), the tick hook only copies the state (``qpos``, mocap poses:
+    microseconds); a render process renders it with its own ``MjData`` and renderer and
+    encodes it, so rendering never runs in the control loop. Other targets
+    (:class:`~phyagentos.targets.contract.RendersImages`) render through ``target.render``
+    in the hook.
 
     Args:
         target: the session's target.
@@ -327,21 +330,25 @@ class SessionRecorder:
         config: the recording configuration (``mode`` must not be ``off``).
 
     Raises:
-        RecordingError: the target can neither be replayed nor render.
+        RecordingError: the target can neither be replayed nor render (neither
+            ``MuJoCoBacked`` with a model nor ``RendersImages``).
         TargetError: the camera is not one of the target's (the message lists them).
     """
 
     def __init__(self, target: Any, directory: str | Path, config: RecordingConfig, *, seed: int | None = None) -> None:
         import mujoco  # noqa: PLC0415
 
-        model = getattr(target, "model", None)
+        from phyagentos.targets.contract import MuJoCoBacked, RendersImages  # noqa: PLC0415
+
         recipe = _model_recipe(target, seed)
-        if recipe is None and getattr(target, "render", None) is None:
-            raise RecordingError(f"target {getattr(target, 'name', target)!r} cannot render; nothing to record")
-        if recipe is not None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, config.camera) < 0:
+        if recipe is None and not isinstance(target, RendersImages):
+            raise RecordingError(f"target {target.name!r} cannot render; nothing to record")
+        if recipe is not None and mujoco.mj_name2id(target.model, mujoco.mjtObj.mjOBJ_CAMERA, config.camera) < 0:
+            model = target.model
             cams = [model.camera(i).name for i in range(model.ncam)]
             raise TargetError(f"unknown camera {config.camera!r} to record; cameras: {', '.join(cams) or 'none'}")
         self._replay = recipe is not None
+        self._mujoco = isinstance(target, MuJoCoBacked)  # its qpos is recorded
         self.target = target
         self.directory = Path(directory)
         self.config = config
@@ -374,13 +381,13 @@ class SessionRecorder:
         return float(self.result.get("render_s", 0.0))
 
     def _clock(self) -> float:
-        t = getattr(self.target, "sim_time", None)
+        t = self.target.sim_time
         return float(t) if t is not None else time.perf_counter() - self._t0
 
     def capture(self) -> None:
         """Capture one frame now (and record its state), regardless of the rate."""
         started = time.perf_counter()
-        data = getattr(self.target, "data", None)
+        data = self.target.data if self._mujoco else None
         qpos = np.array(data.qpos, dtype=np.float64) if data is not None else np.zeros(0)
         if self._replay:
             payload: Any = {"qpos": qpos, "mocap_pos": np.array(data.mocap_pos), "mocap_quat": np.array(data.mocap_quat)}

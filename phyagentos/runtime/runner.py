@@ -425,7 +425,7 @@ class SessionRunner:
             ctx.on_actuation_start = actuation_starts
             # [view hook, issue 13] live tree.json (<= 10 Hz, no fsync) and, under --record, the video.
             ctx.tree_observer = TreeStatusPublisher(evidence_dir / "tree.json", session_id=rec.session_id,
-                                                    sim_clock=lambda: getattr(target, "sim_time", None))
+                                                    sim_clock=lambda: target.sim_time)
             self.recorder = self._start_recorder(target, evidence_dir, image_events, seed=rec.seed)
             outcome = runtime.run(rec.skill, ctx, deadline=deadline, heartbeat=self._tick(target))
         except PhyAgentOSError as exc:

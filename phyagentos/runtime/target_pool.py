@@ -43,11 +43,9 @@ def scene_for(session: SessionRecord, spec: TargetSpec, *, root: str | Path | No
 
 def _scene_of(spec: TargetSpec, scene: Mapping[str, Any] | None, *, root: str | Path | None) -> SceneSpec:
     raw, _ = split_scene(scene or spec.scene or None)
-    # A driver with its own scene type (e.g. FrankaKitchen's task list) parses it itself.
-    parse = getattr(get_target_class(spec.driver), "scene_from_dict", None)
-    if parse is not None:
-        return parse(raw, root=root)
-    return SceneSpec.from_dict(raw, root=root) if raw else SceneSpec.default()
+    # Target.scene_from_dict: the tabletop SceneSpec, unless the driver has its own scene
+    # type (e.g. FrankaKitchen's task list).
+    return get_target_class(spec.driver).scene_from_dict(raw, root=root)
 
 
 def perturbations_for(session: SessionRecord, spec: TargetSpec, *,

@@ -27,9 +27,9 @@ What a driver implements (abstract; :class:`TypeError` at construction otherwise
 =========================  ====================================================================
 
 The constructor signature is ``Driver(name: str, scene, *, seed: int | None)``; a driver
-whose scene is not the tabletop :class:`~phyagentos.targets.scene.SceneSpec` also
-provides ``scene_from_dict(raw, *, root)`` (a classmethod or staticmethod returning its
-scene type, which has ``to_dict()``).
+whose scene is not the tabletop :class:`~phyagentos.targets.scene.SceneSpec` overrides
+``scene_from_dict(raw, *, root)`` (a classmethod or staticmethod returning its scene
+type, which has ``to_dict()``).
 
 Optional hooks (the defaults on :class:`Target`, used when a driver does not override):
 
@@ -52,7 +52,31 @@ Optional hooks (the defaults on :class:`Target`, used when a driver does not ove
 ``datasheet_limits``               ``None``: the safety guard's default, the Franka's 7
                                    joints (else ``(velocity (n,) rad/s, acceleration
                                    (n,) rad/s^2)``; every other arm declares its own)
+``scene_from_dict(raw, *, root)``  the tabletop :class:`~phyagentos.targets.scene.SceneSpec`
+                                   (``SceneSpec.default()`` for an empty ``raw``)
+``ROBOT``                          ``"robot"``: the robot's entity name in perceived scenes
+``runtime_notes``                  ``{}`` (set by ``Target.__init__``): the runtime's own
+                                   plain-data notes about the robot (grasp belief, perceived
+                                   tracks); a driver that checkpoints saves them with the state
+``sim_time``                       ``None``: no simulated clock (callers use wall time);
+                                   else simulated seconds (or game steps) since the reset
+``perception_config()``            ``None``: the perceiver's defaults suit this world
+``held_objects()``                 ``()``: the target cannot tell what the gripper holds
 =================================  ==========================================================
+
+Optional capabilities (mix-in ABCs, checked with ``isinstance``; a driver declares one by
+deriving from it and implementing its abstract members):
+
+=====================  ==================================================================
+:class:`MuJoCoBacked`  ``model``, ``data``, ``scene``, ``arm_joint_names``, ``tcp_site``:
+                       the recorder replays its states, the evidence writer renders them
+                       in the background, contact primitives read its forces, the view
+                       rebuilds it
+:class:`RendersImages` ``render(camera, width, height, *, shadows)``: evidence images and
+                       recordings of a target without a MuJoCo model
+:class:`OscControlled` ``osc_step``, ``osc_proprio``, ``osc_limits``: an operational-space
+                       controller (the ``osc_pose_delta_chunk`` action form)
+=====================  ==================================================================
 
 Registering a driver: see :mod:`phyagentos.targets.registry` and ``docs/targets.md``.
 """
@@ -62,15 +86,24 @@ from __future__ import annotations
 import abc
 import inspect
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, Mapping, Sequence
 
 from phyagentos.errors import TargetError, format_choices
+
+if TYPE_CHECKING:
+    import mujoco
+    import numpy as np
+
+    from phyagentos.perception import PerceptionConfig
 
 __all__ = [
     "ACTION_FORMS",
     "SENSOR_KINDS",
     "TARGET_KINDS",
     "ExecutionResult",
+    "MuJoCoBacked",
+    "OscControlled",
+    "RendersImages",
     "Target",
     "TargetCapabilities",
     "TargetKind",
@@ -95,7 +128,7 @@ ACTION_FORMS: tuple[str, ...] = ("joint_trajectory", "joint_position_chunk", "ca
 #: The sensors a target may offer (``TargetCapabilities.sensors``):
 #: ``proprioception``: joint positions/velocities/efforts (``proprioception()``);
 #: ``rgb``: named cameras (``camera_names()``, ``capture(sensor)`` -> a camera frame); a
-#: target without them may still ``render`` pictures for evidence images;
+#: target without them may still ``render`` pictures for evidence images (:class:`RendersImages`);
 #: ``depth``: depth images (``render_depth(camera=, width=, height=)``, m);
 #: ``wrist_force``: a wrist force/torque sensor (``wrist_external_force_n()``, N);
 #: ``contacts``: unexpected contacts reported by ``execute_trajectory``;
@@ -228,6 +261,12 @@ class Target(abc.ABC):
     estop: Any = None
     #: Same as ``CAPABILITIES.action_forms`` (kept in step by :meth:`__init_subclass__`).
     ACTION_FORMS: ClassVar[tuple[str, ...]] = ()
+    #: The robot's entity name in perceived scenes and world records.
+    ROBOT: ClassVar[str] = "robot"
+    #: The runtime's own notes about this robot (plain data: the grasp it believes it holds,
+    #: the objects it has perceived; :mod:`phyagentos.primitives.grasp_sense`). ``{}`` after
+    #: ``__init__``; a driver that checkpoints its state saves them with it.
+    runtime_notes: dict[str, Any]
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -242,6 +281,7 @@ class Target(abc.ABC):
         self._name = name
         self._kind = kind
         self._closed = False
+        self.runtime_notes = {}
 
     @property
     def name(self) -> str:
@@ -325,6 +365,21 @@ class Target(abc.ABC):
 
     # -- optional hooks (documented defaults) -----------------------------------------
     @classmethod
+    def scene_from_dict(cls, raw: Mapping[str, Any] | None, *, root: Any = None) -> Any:
+        """Parse the scene of a TARGETS.md entry or session (``raw``: plain data, without its
+        ``perturbations``); ``root`` is the workspace root that mesh files are read from.
+        Default: the tabletop :class:`~phyagentos.targets.scene.SceneSpec`
+        (``SceneSpec.default()`` for an empty ``raw``); a driver with its own scene type
+        overrides this.
+
+        Raises:
+            TargetError: a malformed scene (the message names the key).
+        """
+        from .scene import SceneSpec  # noqa: PLC0415 - MuJoCo-backed; only the tabletop needs it
+
+        return SceneSpec.from_dict(raw, root=root) if raw else SceneSpec.default()
+
+    @classmethod
     def from_target_spec(cls, spec: Any, scene: Any, *, seed: int | None = None) -> "Target":
         """Build the target of a TARGETS.md entry (``spec``: a
         :class:`~phyagentos.protocol.TargetSpec`) on ``scene``. Default:
@@ -368,6 +423,24 @@ class Target(abc.ABC):
         return {}
 
     @property
+    def sim_time(self) -> float | None:
+        """Target time since the last reset (or loaded state): simulated seconds, or game
+        steps for a game; ``None`` (the default) for a target without a simulated clock
+        (callers then use wall time)."""
+        return None
+
+    def perception_config(self) -> PerceptionConfig | None:
+        """The :class:`~phyagentos.perception.PerceptionConfig` that suits this world when the
+        workspace has no ``perception.yaml``, or ``None`` (the default): the perceiver's
+        defaults."""
+        return None
+
+    def held_objects(self) -> tuple[str, ...]:
+        """Names of the objects the gripper holds now (simulator contacts: ground truth),
+        or ``()`` (the default) when the target cannot tell."""
+        return ()
+
+    @property
     def datasheet_limits(self) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
         """``(velocity (n,) rad/s, acceleration (n,) rad/s^2)`` datasheet limits for the
         safety guard, or ``None`` (the default) for the guard's default (the Franka's seven
@@ -386,3 +459,74 @@ class Target(abc.ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, kind={self.kind!r})"
+
+
+# -- optional capabilities (mix-ins, checked with isinstance) -----------------------------
+class MuJoCoBacked(abc.ABC):
+    """A target whose world is a MuJoCo model (an optional capability: check with
+    ``isinstance(target, MuJoCoBacked)``). The session recorder replays its states in a
+    render process, the evidence writer renders them in the background, the contact
+    primitives read forces from it, the view rebuilds it.
+    :class:`~phyagentos.targets.mujoco_arm.MuJoCoArmTarget` implements it."""
+
+    @property
+    @abc.abstractmethod
+    def model(self) -> mujoco.MjModel:
+        """The compiled model (treat as read-only)."""
+
+    @property
+    @abc.abstractmethod
+    def data(self) -> mujoco.MjData:
+        """The live data (``qpos``, ``mocap_pos``, contacts, ``time`` s)."""
+
+    @property
+    @abc.abstractmethod
+    def scene(self) -> Any:
+        """The scene this target was built from (has ``to_dict()``): ``cls(name, scene,
+        seed=seed)`` rebuilds the same model in another process."""
+
+    @property
+    @abc.abstractmethod
+    def arm_joint_names(self) -> tuple[str, ...]:
+        """The model's arm joints, in the order of the target's joint vectors ``(n,)``."""
+
+    @property
+    @abc.abstractmethod
+    def tcp_site(self) -> str:
+        """Name of the model site at the tool point (the tcp)."""
+
+
+class RendersImages(abc.ABC):
+    """A target that draws pictures of its world (an optional capability: check with
+    ``isinstance(target, RendersImages)``): evidence images, and the recordings of a
+    target that is not :class:`MuJoCoBacked`."""
+
+    @abc.abstractmethod
+    def render(self, camera: str = "", width: int = 640, height: int = 480, *,
+               shadows: bool = True) -> np.ndarray:
+        """``(height, width, 3)`` uint8 RGB picture from ``camera`` (the driver's default
+        camera when omitted); ``shadows=False`` may be cheaper.
+
+        Raises:
+            TargetError: an unknown camera, or no rendering backend (e.g. no OpenGL).
+        """
+
+
+class OscControlled(abc.ABC):
+    """A target driven by an operational-space controller (an optional capability: check
+    with ``isinstance(target, OscControlled)``; the ``osc_pose_delta_chunk`` action form)."""
+
+    @abc.abstractmethod
+    def osc_step(self, action: Sequence[float]) -> None:
+        """One control step of ``action`` (7,): a normalised pose delta in [-1, 1] per axis
+        (scaled by ``osc_limits()['output_max']``) and the gripper (-1 open .. +1 closed)."""
+
+    @abc.abstractmethod
+    def osc_proprio(self) -> dict[str, np.ndarray]:
+        """The controller's proprioception: ``eef_pos`` (3,) m (world), ``eef_quat_xyzw``
+        (4,), ``gripper_qpos`` (2,) m."""
+
+    @abc.abstractmethod
+    def osc_limits(self) -> dict[str, Any]:
+        """The controller as configured: ``type``, ``input_max``, ``output_max`` (6,) (m and
+        rad per control step at input 1), ``control_period_s`` s."""

@@ -32,6 +32,7 @@ from phyagentos.errors import PhyAgentOSError, TargetError, ViewError
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.sensors import read_sensors
 from phyagentos.runtime.target_pool import scene_for
+from phyagentos.targets.contract import MuJoCoBacked
 from phyagentos.targets.registry import DRIVERS
 from phyagentos.untrusted import open_regular
 from phyagentos.yamlsource import read_yaml
@@ -391,11 +392,10 @@ class SceneRenderer:
         if spec is None or spec.driver not in DRIVERS:
             raise ViewError(f"session {session_id}: target {rec.target!r} is not one the view can rebuild")
         target = DRIVERS[spec.driver](spec.name, scene_for(rec, spec, root=self.workspace.root), seed=rec.seed)
-        model = getattr(target, "model", None)
-        if not isinstance(model, mujoco.MjModel):
+        if not isinstance(target, MuJoCoBacked) or not isinstance(target.model, mujoco.MjModel):
             target.close()
             raise ViewError(f"session {session_id}: target {rec.target!r} exposes no MuJoCo model")
-        entry = (target, mujoco.MjData(model))
+        entry = (target, mujoco.MjData(target.model))
         self._models[session_id] = entry
         try:
             self._sensors[session_id] = read_sensors(self.workspace.root).for_target(rec.target)
@@ -415,7 +415,7 @@ class SceneRenderer:
         cached = self._plans.get(session_id)
         if cached is not None and cached[0] == key:
             return cached[1]
-        names, tcp = getattr(target, "arm_joint_names", None), getattr(target, "tcp_site", None)
+        names, tcp = target.arm_joint_names, target.tcp_site  # a MuJoCoBacked target (_target)
         segments: list[dict[str, Any]] = []
         if names and tcp:
             model = target.model

@@ -64,7 +64,7 @@ from phyagentos.protocol.atomic import atomic_write_bytes, atomic_write_text
 from phyagentos.yamlsource import load_plain
 
 from ..base import BaseRolloutTarget, ExecutionResult
-from ..contract import TargetCapabilities
+from ..contract import RendersImages, TargetCapabilities
 from ..state_file import read_state_npz
 
 __all__ = ["CrafterScene", "CrafterTarget", "CRAFTER_ACTIONS", "CRAFTER_ACHIEVEMENTS", "VIEW_COLS", "VIEW_ROWS",
@@ -211,7 +211,7 @@ def _order_chunks(world) -> None:
     world._chunks = ordered
 
 
-class CrafterTarget(BaseRolloutTarget):
+class CrafterTarget(BaseRolloutTarget, RendersImages):
     """The Crafter game behind the rollout-target contract.
 
     Args:

@@ -190,7 +190,7 @@ def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_S
     Raises:
         TargetError: the target is closed or cannot render.
     """
-    if config is None and hasattr(target, "perception_config"):
+    if config is None:
         config = target.perception_config()
     cats = target._problem.objects
     looks: dict[str, list[dict[str, Any]]] = {}
@@ -232,7 +232,7 @@ def perception_accuracy(target, looks: dict[str, dict[str, Any]], seeds: Sequenc
     with its centre in the true footprint grown by 1 cm; ``wrong``: so perceived but
     elsewhere; ``unknown``: reported below 0.5; ``unseen``) and ``xy_error_m`` (centre to
     the footprint centre). ``target`` is reset afterwards."""
-    if config is None and hasattr(target, "perception_config"):
+    if config is None:
         config = target.perception_config()
     cats = target._problem.objects
     declared = [{"name": n, "class": c, **looks.get(c, {})} for n, c in cats.items()]

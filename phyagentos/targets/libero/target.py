@@ -69,7 +69,7 @@ import numpy as np
 from phyagentos.errors import TargetError, format_choices
 
 from ..base import ExecutionResult
-from ..contract import TargetCapabilities
+from ..contract import OscControlled, TargetCapabilities
 from ..mujoco_arm import K_ENV, K_FINGER, K_OBJECT, K_ROBOT, GripperResult, MuJoCoArmTarget, mat_quat
 from .catalog import (
     BddlProblem,
@@ -253,7 +253,7 @@ def _make_env(task: LiberoTask):
                       hard_reset=False, ignore_done=True)
 
 
-class LiberoTarget(MuJoCoArmTarget):
+class LiberoTarget(MuJoCoArmTarget, OscControlled):
     """A LIBERO task world (suite, task, init state) with a joint-servo Panda.
 
     Args:

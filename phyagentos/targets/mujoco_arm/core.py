@@ -22,7 +22,7 @@ from phyagentos.geometry import pose_matrix
 
 from ..base import BaseRolloutTarget
 from ..camera_noise import CameraNoise
-from ..contract import ExecutionResult, TargetCapabilities
+from ..contract import ExecutionResult, MuJoCoBacked, RendersImages, TargetCapabilities
 from .checkpoints import ArmCheckpoints
 from .common import K_ENV, K_FINGER, K_OBJECT, K_ROBOT
 from .common import floats as _floats
@@ -54,7 +54,8 @@ class GripperResult:
         return {"opening_m": self.opening_m, "stalled": self.stalled, "grasped": self.grasped}
 
 
-class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, BaseRolloutTarget):
+class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, BaseRolloutTarget, MuJoCoBacked,
+                      RendersImages):
     """Base of the MuJoCo arm targets. Subclasses build their model, then call
     :meth:`_init_arm` and, for tabletop scenes, :meth:`_init_tabletop`.
 
@@ -88,6 +89,12 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
     #: For an arm that cannot reach every orientation: position-priority IK accepting
     #: orientations within this tolerance, rad; ``None``: full-pose IK.
     ik_orientation_tol_rad: float | None = None
+    #: The randomised world's draw (:func:`~phyagentos.targets.world.draw_world`), set by
+    #: :meth:`_prepare_scene`; ``None``: the scene was built as declared.
+    world_draw: Any = None
+    #: The scene as the user declared it (before the draw), set by :meth:`_prepare_scene`;
+    #: ``None``: the built scene is the declared one.
+    _declared_scene: Any = None
 
     # -- construction helpers -----------------------------------------------------------
     def _prepare_scene(self, scene):

@@ -145,10 +145,10 @@ class ArmWorldTruth:
         poses and, for a randomised world, the draw): for ``ground_truth.yaml`` only."""
         sc = self._scene
         out = sc.to_dict() if hasattr(sc, "to_dict") else {}
-        decl = getattr(self, "_declared_scene", None)
+        decl = self._declared_scene
         if decl is not None and decl is not sc and hasattr(decl, "to_dict"):
             out["declared"] = decl.to_dict()
-        draw = getattr(self, "world_draw", None)
+        draw = self.world_draw
         if draw:
             out = {**out, "draw": draw}
         return out
@@ -162,8 +162,8 @@ class ArmWorldTruth:
         """What the user declared (CONTRACT_9 section 3), YAML-ready: ``{"objects": [{name,
         class?, shape, colour_rgb, size_m}], "regions": [...], "obstacles": [...]}``;
         never mass, friction or pose of an object."""
-        sc = getattr(self, "_declared_scene", None) or self._scene
-        drawn = bool(getattr(self, "world_draw", None))
+        sc = self._declared_scene or self._scene
+        drawn = bool(self.world_draw)
         objs = []
         for o in sc.objects:
             d: dict[str, Any] = {"name": o.name, "colour_rgb": [float(c) for c in o.rgba[:3]]}

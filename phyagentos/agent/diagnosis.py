@@ -19,6 +19,12 @@ precondition_unmet     execution     the skill needed the object in hand and the
                                      upstream release: recovery re-opens the upstream pick)
 ik_unreachable         policy        ``ik.*`` error: no configuration reaches the pose
                                      computed from the perceived object (never retried)
+start_in_collision     policy        the planner refused the start configuration: it is
+                                     itself in contact (``collision_at_start`` in a ``plan``
+                                     entry, with ``start_contact``: ``self``, ``held_object``,
+                                     ``environment``, ``joint_limit``; or "start configuration
+                                     is invalid" in the runtime's message). Another planner
+                                     cannot help: recovery backs off or re-targets
 goal_in_collision      policy        the planner reports the goal configuration itself in
                                      collision (``collision_at_goal`` in a ``plan`` entry, or
                                      "goal configuration is invalid")
@@ -68,6 +74,7 @@ CAUSES: dict[str, tuple[str, str]] = {
     "timeout": ("timeout", "the execution deadline passed"),
     "precondition_unmet": ("execution", "the session started without what it needs (the object in hand)"),
     "ik_unreachable": ("policy", "no joint configuration reaches the pose computed from the perceived object"),
+    "start_in_collision": ("policy", "the arm's start configuration is itself in contact: no planner plans from it"),
     "goal_in_collision": ("policy", "the goal configuration itself collides (placement pose or approach)"),
     "planning_failed": ("policy", "no collision-free path or timing was found"),
     "collision": ("execution", "unexpected contact stopped a motion"),
@@ -248,7 +255,18 @@ def diagnose(session: SessionRecord, evidence: Any, *, unknown: Sequence[str] = 
         return _make("ik_unreachable", f"{leaf or 'IK'}: {message}".strip(), facts, refs)
     at_goal = any(r.get("kind") == "plan" and r.get("collision_at_goal") for r in trace) or \
         "goal configuration is invalid" in message
+    starts = [r for r in trace if r.get("kind") == "plan" and r.get("collision_at_start")]
     if code.startswith(("planning.", "timing.", "motion.")):
+        if starts or "start configuration is invalid" in message:
+            contact = str(starts[-1].get("start_contact") or "unknown") if starts else "unknown"
+            pairs = starts[-1].get("colliding_pairs") if starts else None
+            what = {"self": "the arm touches itself", "held_object": "the held object touches the arm",
+                    "environment": "the arm touches the scene", "joint_limit": "a joint is past its limit"
+                    }.get(contact, "it is in contact")
+            return _make("start_in_collision", f"{leaf or 'planning'}: the start configuration is invalid ({what}): "
+                         f"{message}".strip(),
+                         {**facts, "collision_at_start": True, "variant": contact,
+                          **({"colliding_pairs": pairs} if pairs else {})}, refs)
         if at_goal:
             return _make("goal_in_collision", f"{leaf or 'planning'}: the goal configuration collides: {message}",
                          {**facts, "collision_at_goal": True}, refs)

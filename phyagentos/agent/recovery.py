@@ -34,6 +34,12 @@ goal_in_collision      planning revisions, never re-observation: another_approac
                        approach_height_m 0.15 (pick: and the next grasp direction);
                        another_placement_pose: place_offset_m [-0.03, 0] (3 cm nearer
                        the base, where the skill declares it), approach_height_m 0.05
+start_in_collision     never another planner (no planner plans from an invalid start):
+                       the scene or the held object touches the arm: back_off_first:
+                       backoff_m 0.10, settle_s 0.5 (where the skill declares them);
+                       the arm touches itself (``variant`` ``self``): nothing here,
+                       straight to ``switch_target`` (a straight back-off keeps the
+                       wrist and jaw as they are)
 planning_failed        another_planner: planner BITstar; another_planner: planner PRM
 placement_off          average_frames: observe_samples 16;
                        careful_lowering: lower_velocity_scale 0.1, transfer_velocity_scale 0.5
@@ -54,7 +60,7 @@ runtime_error          never retried automatically, an error in the software is 
 
 **Another arm.** Given a target chooser (:class:`~phyagentos.agent.retarget.TargetChooser`, wired by
 the composition root: ``phyagentos run`` and ``plan --run`` do), a cause of the arm's own reach or
-planning (``ik_unreachable``, and ``planning_failed`` once its ladder is spent) moves the node to
+planning (``ik_unreachable``, ``start_in_collision`` and ``planning_failed`` once their ladders are spent) moves the node to
 another enabled target that has the skill's capabilities and reaches the poses (the selector, asked
 about the positions the failed attempt perceived, else the scene's declared ones): strategy
 ``switch_target``, once along the lineage, only for a node without upstream nodes (another target
@@ -132,7 +138,7 @@ RE_PICK = "re_pick_upstream"
 ACQUIRING_SKILLS = frozenset({"pick", "policy_pick"})
 #: Causes that belong to the arm, not to the world: another arm may reach or plan what this
 #: one cannot (the ladder's re-target rung, :mod:`.retarget`).
-RETARGET_CAUSES = frozenset({"ik_unreachable", "planning_failed"})
+RETARGET_CAUSES = frozenset({"ik_unreachable", "planning_failed", "start_in_collision"})
 
 
 #: Frames the ``another_view`` child fuses. Each frame renders and segments every camera
@@ -187,6 +193,12 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
         Strategy("another_approach_direction", "turn the grasp once more and approach from 15 cm",
                  _next_candidate(2, approach_height_m=0.15)),
     ),
+    "start_in_collision": (
+        Strategy("back_off_first", "raise the hand 10 cm and let the scene settle before planning, so the start "
+                 "configuration clears what it touches", {"backoff_m": 0.10, "settle_s": 0.5}),
+    ),
+    # the arm's own links: a straight back-off keeps the wrist and the jaw as they are
+    "start_in_collision/self": (),
     "planning_failed": (
         Strategy("another_planner", "plan with BIT*", {"planner": "BITstar"}),
         Strategy("another_planner", "plan with PRM", {"planner": "PRM"}),

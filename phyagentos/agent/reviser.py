@@ -107,6 +107,7 @@ PARAMETERS_FOR_CAUSE: Mapping[str, frozenset[str]] = {
                             "approach_velocity_scale"}),
     "goal_in_collision": frozenset({"approach_height_m", "grasp_candidate"}),
     "planning_failed": frozenset({"planner", "approach_height_m"}),
+    "start_in_collision": frozenset({"backoff_m", "settle_s"}),  # not the planner: the start itself is invalid
     "placement_off": frozenset({"observe_samples", "lower_velocity_scale", "transfer_velocity_scale"}),
     "ik_unreachable": frozenset(),  # the pose is out of reach: no parameter brings it closer
     "perception_unknown": frozenset(),  # nothing failed in the world: look again instead

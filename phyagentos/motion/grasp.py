@@ -85,6 +85,7 @@ def top_down_grasp_candidates(
     support_z_m: float | None = None,
     tip_clearance_m: float = 0.004,
     shape: str = "box",
+    max_width_m: float = 0.08,
 ) -> tuple[GraspPlan, ...]:
     """All symmetric top-down grasps of an upright box (or a cylinder / sphere), best first.
 
@@ -104,9 +105,11 @@ def top_down_grasp_candidates(
         T_object: ``(4, 4)`` world pose of the box centre (z axis roughly up).
         half_extents: ``(3,)`` box half sizes, metres.
         approach_height_m: pregrasp offset above the grasp along world z, metres.
+        max_width_m: the widest object the gripper takes, m (the target's
+            ``max_grasp_width_m``; 8 cm: the Franka Hand); 4 mm of it are clearance.
 
     Raises:
-        IKError: the box is not upright, too wide for the gripper (8 cm), or no yaw
+        IKError: the box is not upright, too wide for the gripper (``max_width_m``), or no yaw
             keeps joint 7 inside its range.
     """
     T = np.asarray(T_object, dtype=float)
@@ -141,8 +144,9 @@ def top_down_grasp_candidates(
     if he[1] <= he[0] + 1e-6:
         closes.append((ay, 2 * he[1]))
     width = min(w for _, w in closes)
-    if width > 0.08 - 0.004:
-        raise IKError(f"box is {width * 100:.1f} cm wide across the fingers; the gripper opens to 8 cm")
+    if width > max_width_m - 0.004 + 1e-9:
+        raise IKError(f"box is {width * 100:.1f} cm wide across the fingers; the gripper takes "
+                      f"{(max_width_m - 0.004) * 100:.1f} cm at most")
     deltas = []
     for axis, _ in closes:
         for sign in (1.0, -1.0):

@@ -20,7 +20,7 @@ from phyagentos.motion.retime import retime
 from .base import Primitive
 
 __all__ = ["ReadyConfiguration", "SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "ik_options",
-           "PLANNING_MARGIN_M", "MAX_TRACED_WAYPOINTS", "traced_path"]
+           "PLANNING_MARGIN_M", "MAX_TRACED_WAYPOINTS", "traced_path", "start_contact_kind"]
 
 
 def held_object(target) -> str | None:
@@ -113,6 +113,21 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
     return checker
 
 
+def start_contact_kind(checker: CollisionChecker, pairs) -> str:
+    """What an invalid start configuration touches, from the checker's colliding name
+    pairs: ``self`` (only the arm's own links), ``held_object`` (the carried object
+    against the arm), ``joint_limit``, else ``environment`` (table, obstacles, objects)."""
+    if any(a == "joint_limit" for a, _ in pairs):
+        return "joint_limit"
+    robot = {checker.model.body(b).name for b in checker.robot_bodies}
+    if pairs and all(a in robot and b in robot for a, b in pairs):
+        return "self"
+    held = checker.attached
+    if held is not None and pairs and all(held in (a, b) and (a in robot or b in robot) for a, b in pairs):
+        return "held_object"
+    return "environment"
+
+
 class ReadyConfiguration(Primitive):
     """Write the target's ready (home) joint configuration (n,) rad to blackboard ``out``,
     e.g. to take the arm out of the cameras' view before a final observation."""
@@ -179,7 +194,10 @@ class PlanPath(Primitive):
         planner: OMPL planner name (default from the session's motion settings).
         timeout_s: planning budget, s.
 
-    The trace records ``plan`` {planner, waypoints, collision_at_goal, path_rad}:
+    The trace records ``plan`` {planner, waypoints, collision_at_goal, path_rad}; a start
+    configuration that is itself invalid adds an entry with ``collision_at_start``, its
+    ``colliding_pairs`` and ``start_contact`` (:func:`start_contact_kind`) before the
+    planner refuses it:
     ``path_rad`` is the planned joint path, ``(M, 7)`` rad in the arm's joint order, at
     most :data:`MAX_TRACED_WAYPOINTS` waypoints (:func:`traced_path`), so the view can
     draw the plan next to what was executed.
@@ -202,6 +220,12 @@ class PlanPath(Primitive):
             clipped = np.clip(q0, *checker.joint_limits)
             q0 = np.where(np.abs(clipped - q0) < 0.02, clipped, q0)
             q_goal = np.asarray(self.get(self.goal_key), dtype=float)
+            if not checker.is_valid(q0):
+                pairs = checker.colliding_pairs(q0)
+                ctx.trace.record("plan", planner=self.planner or ctx.motion.planner, waypoints=0,
+                                 collision_at_goal=False, collision_at_start=True,
+                                 start_contact=start_contact_kind(checker, pairs),
+                                 colliding_pairs=[list(p) for p in pairs])
             if q_goal.shape == q0.shape and np.all(np.isfinite(q_goal)) and not checker.is_valid(q_goal):
                 pairs = [list(p) for p in checker.colliding_pairs(q_goal)]
                 ctx.trace.record("plan", planner=self.planner or ctx.motion.planner, waypoints=0,

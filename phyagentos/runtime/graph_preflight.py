@@ -31,7 +31,7 @@ from typing import Any, Mapping, Sequence
 import mujoco
 import numpy as np
 
-from phyagentos.errors import IKError, PhyAgentOSError, format_choices
+from phyagentos.errors import IKError, PhyAgentOSError, TargetError, format_choices
 from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
 from phyagentos.motion.ik import solve_ik
 from phyagentos.primitives.motion import ik_options
@@ -227,6 +227,24 @@ def _start_collisions(target: Any, target_name: str, *, line: int | None) -> lis
                                f"{format_choices(hits)}; move the obstacle or use another target")]
 
 
+def _wider_grippers(driver: str, width_m: float) -> list[str]:
+    """``"driver (N cm)"`` for every other target driver whose gripper takes ``width_m``
+    (its ``max_grasp_width_m``, less grasp planning's 4 mm clearance); only asked when an
+    object is too wide, so loading the drivers costs nothing otherwise."""
+    out = []
+    for name in DRIVERS:
+        if name == driver:
+            continue
+        try:
+            cls = DRIVERS[name]
+        except (ImportError, KeyError, TargetError):  # an optional driver whose package is missing
+            continue
+        w = getattr(cls, "max_grasp_width_m", None)
+        if isinstance(w, float) and w - 0.004 >= width_m:
+            out.append(f"{name} ({w * 100:.1f} cm)")
+    return sorted(out)
+
+
 def check_reachability(driver: str, target_name: str, scene: Any, *, picks: Sequence[PickPose] = (),
                        places: Sequence[PlacePose] = ()) -> list[GraphProblem]:
     """IK on every pick and place pose of a node list; problems for the unreachable ones.
@@ -272,9 +290,13 @@ def check_reachability(driver: str, target_name: str, scene: Any, *, picks: Sequ
             obj = scene.object(pick.obj)
             T_obj = _T((obj.position[0], obj.position[1], obj.rest_z), obj.yaw)
             try:
-                cands = top_down_grasp_candidates(T_obj, obj.half_extents, approach_height_m=pick.approach_height_m)
+                cands = top_down_grasp_candidates(T_obj, obj.half_extents, approach_height_m=pick.approach_height_m,
+                                                  max_width_m=float(getattr(target, "max_grasp_width_m", 0.08)))
             except IKError as exc:
-                problems.append(GraphProblem(pick.line, f"node {pick.node!r}: no top-down grasp of {pick.obj!r}: {exc}"))
+                wider = _wider_grippers(driver, 2.0 * min(obj.half_extents[:2]))
+                problems.append(GraphProblem(pick.line, f"node {pick.node!r}: no top-down grasp of {pick.obj!r} on "
+                                             f"{target_name!r}: {exc}" + (f"; drivers whose gripper takes it: "
+                                                                          f"{', '.join(wider)}" if wider else "")))
                 continue
             why = None
             for plan in cands:

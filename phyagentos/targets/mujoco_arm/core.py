@@ -84,6 +84,9 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
     #: Robot body-name pairs the model lets touch (e.g. adjacent links a third-party model
     #: does not exclude), ignored by the collision checker; default none.
     allowed_collision_pairs: tuple[tuple[str, str], ...] = ()
+    #: The widest object the gripper takes in a top-down grasp, m (the Franka Hand's 8 cm);
+    #: grasp planning and the graph preflight refuse wider objects before anything moves.
+    max_grasp_width_m: float = 0.08
     #: The gripper's body names for the collision checker; ``None``: the checker's default.
     gripper_body_names: tuple[str, ...] | None = None
     #: For an arm that cannot reach every orientation: position-priority IK accepting

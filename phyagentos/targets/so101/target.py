@@ -54,7 +54,8 @@ from ..mujoco_arm import GripperResult, MuJoCoArmTarget
 from ..scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
 
 __all__ = ["SO101Target", "build_so101_scene", "so101_asset_path", "ARM_JOINT_NAMES", "GRIPPER_JOINT", "MOUNT_XY",
-           "HOME_QPOS", "VELOCITY_DATASHEET", "ACCELERATION_LIMITS", "SO101_DEFAULT_SCENE"]
+           "HOME_QPOS", "VELOCITY_DATASHEET", "ACCELERATION_LIMITS", "SO101_DEFAULT_SCENE",
+           "ALLOWED_COLLISION_PAIRS", "MAX_GRASP_WIDTH_M"]
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +84,43 @@ ACCELERATION_LIMITS: tuple[float, ...] = (6.0,) * 5
 #: :attr:`SO101Target.ik_orientation_tol_rad`).
 IK_ORIENTATION_TOL_RAD = 0.6
 _GRASP_JAW_ANGLE = 0.46  # pads parallel, 40 mm apart (shipped model's comment)
+#: Robot body pairs the collision checker lets touch: the moving jaw and the wrist (the
+#: wrist-flex servo's body), mounted on either side of the wrist-roll joint. MuJoCo only
+#: filters parent-child pairs, and this pair is grandparent-grandchild. Measured on the
+#: shipped model (tests/test_so101_self_collision.py): over the whole wrist-roll x jaw
+#: range they never touch (no contact at margin 0), but the jaw's convex hull passes
+#: 8-9 mm from the wrist's whenever wrist_roll is in about [0.05, 2.0] rad, so the
+#: planner's 1 cm safety margin (PLANNING_MARGIN_M) flagged 41 % of random arm
+#: configurations as "moving_jaw_so101_v1 <-> wrist" and refused to plan from them.
+ALLOWED_COLLISION_PAIRS: tuple[tuple[str, str], ...] = (("wrist", "moving_jaw_so101_v1"),)
+#: The widest object the SO-101 takes in a top-down grasp, m. Its jaw opens to 8 cm
+#: between the pads at the commanded full opening (``set_gripper(opening_m=0.04)``; the
+#: joint range, -0.17..1.75 rad, would swing the pads 11.9 cm apart, far from parallel),
+#: but one jaw is fixed: its pad's inner face is 20 mm from the tcp (pads parallel and
+#: 40 mm apart at 0.46 rad, tcp midway: the shipped model's comment and
+#: :func:`_tcp_in_gripper_frame`), and a top-down grasp centres the tcp on the object. A
+#: wider object meets the fixed jaw on the way down (measured: a 6 cm cube stopped every
+#: Approach with a 0.05 rad tracking error; a 4 cm cube, perceived 4.2-4.3 cm wide,
+#: is picked first time). 2 x 20 mm plus 6 mm for the perceived width's error, plus
+#: grasp planning's 4 mm clearance: objects perceived up to 4.6 cm wide are taken.
+MAX_GRASP_WIDTH_M = 0.05
+#: The perceiver's gripper box around the tcp (``robot_mask``, tcp frame: z out of the
+#: gripper, y along the closing direction), fitted to the SO-101's hand. The perception
+#: defaults are the Franka Hand's (+-5 x +-12 cm, 5 cm beyond the tcp to 22 cm behind
+#: it): at the SO-101's home (tcp 8 cm over the table at (0.43, 0)) that box reached down
+#: to z = 3 cm over x 0.38-0.48 m, y +-0.12 m and cut the top off any cube taller than
+#: 3 cm at the compact scene's (0.45, -0.1): a 4 cm cube was seen 2.9 cm tall and
+#: darker (confidence 0.07), 6 and 7 cm cubes as L-shaped remnants (0.21, 0.26). The
+#: fixed hand (the ``gripper`` body's geoms, measured on the model in the tcp frame)
+#: spans x -2.8..2.4 cm, y -5.3..1.2 cm, z -9.8..0.7 cm; the box adds ~1.2 cm, and
+#: 4 cm beyond the tcp for a held object. The moving jaw is masked by
+#: :meth:`SO101Target.hand_capsules` (it swings 8.8 cm out when open).
+PERCEPTION_GRIPPER_BOX: dict[str, float | tuple[float, float]] = {
+    "gripper_half_x_m": 0.04, "gripper_half_y_m": 0.065, "gripper_z_m": (-0.11, 0.04)}
+#: The moving jaw's geoms as a capsule in the jaw's body frame: (p0, p1, radius), m (the
+#: principal axis of its mesh vertices; 95 % lie within 2.4 cm, all within 2.8 cm, and the
+#: perceiver adds its 1 cm capsule margin).
+_JAW_CAPSULE = ((0.0054, 0.0097, 0.0177), (-0.0085, -0.0824, 0.0194), 0.025)
 _PAD_FRICTION = (1.5, 0.02, 0.0001)
 
 
@@ -225,6 +263,9 @@ class SO101Target(MuJoCoArmTarget):
     ROBOT_BASE = (float(MOUNT_XY[0]), float(MOUNT_XY[1]), 0.0)
     REPORT_CONTACTS = False
     FT_SITE = "wrist_ft"
+    max_grasp_width_m = MAX_GRASP_WIDTH_M
+    #: adjacent links across the wrist-roll joint (:data:`ALLOWED_COLLISION_PAIRS`)
+    allowed_collision_pairs = ALLOWED_COLLISION_PAIRS
 
     @classmethod
     def scene_from_dict(cls, raw, *, root=None) -> SceneSpec:
@@ -267,6 +308,25 @@ class SO101Target(MuJoCoArmTarget):
             gaps.append(max(0.0, float(np.linalg.norm(d.geom_xpos[ids[0]] - d.geom_xpos[ids[1]])) - half))
         gaps = np.maximum.accumulate(np.array(gaps))
         return _JawMap(angles=angles, gaps=gaps)
+
+    # -- perception -----------------------------------------------------------------
+    def perception_config(self):
+        """The perception defaults with the gripper box fitted to the SO-101's hand
+        (:data:`PERCEPTION_GRIPPER_BOX`), used when the workspace has no ``perception.yaml``."""
+        from phyagentos.perception import PerceptionConfig  # noqa: PLC0415
+
+        doc = PerceptionConfig.default().model_dump()
+        doc["robot_mask"] = {**doc["robot_mask"], **PERCEPTION_GRIPPER_BOX}
+        return PerceptionConfig.model_validate(doc)
+
+    def hand_capsules(self) -> list[tuple[tuple[float, ...], tuple[float, ...], float]]:
+        """Capsules (world frame ``(p0, p1, radius)``, m) around the hand's parts the
+        gripper box does not cover: the moving jaw at its current angle."""
+        m, d = self._model, self._data
+        b = m.body("moving_jaw_so101_v1").id
+        R, p = d.xmat[b].reshape(3, 3), d.xpos[b]
+        a, c, r = _JAW_CAPSULE
+        return [(tuple(float(v) for v in p + R @ np.asarray(a)), tuple(float(v) for v in p + R @ np.asarray(c)), r)]
 
     # -- accessors ------------------------------------------------------------------
     @property

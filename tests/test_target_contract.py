@@ -46,6 +46,7 @@ def test_a_minimal_target_has_the_documented_defaults():
     assert a.sim_time is None
     assert a.perception_config() is None
     assert a.held_objects() == ()
+    assert a.max_grasp_width_m is None  # no gripper declared
     assert not isinstance(a, (MuJoCoBacked, RendersImages, OscControlled))
 
 
@@ -79,3 +80,14 @@ def test_the_builtin_drivers_declare_their_optional_capabilities(driver, mujoco,
     assert issubclass(cls, RendersImages) == renders
     assert issubclass(cls, OscControlled) == osc
     assert osc == cls.CAPABILITIES.accepts("osc_pose_delta_chunk")
+
+
+@pytest.mark.parametrize(("driver", "width_m"), [("mujoco_franka", 0.08), ("mujoco_so101", 0.05), ("crafter", None)])
+def test_each_driver_declares_its_grippers_widest_grasp(driver, width_m):
+    assert get_target_class(driver).max_grasp_width_m == width_m
+
+
+def test_a_mujoco_backed_target_masks_no_extra_hand_parts_unless_it_declares_them():
+    franka, so101 = get_target_class("mujoco_franka"), get_target_class("mujoco_so101")
+    assert franka.hand_capsules is MuJoCoBacked.hand_capsules
+    assert so101.hand_capsules is not MuJoCoBacked.hand_capsules

@@ -124,8 +124,7 @@ def robot_capsules(target) -> list:
         out.append(RobotCapsule(p0=tuple(float(x) for x in a), p1=tuple(float(x) for x in b),
                                 radius_m=LINK_CAPSULE_RADIUS_M))
     # a hand the gripper box does not cover (the SO-101's moving jaw) declares its own
-    hand = getattr(target, "hand_capsules", None)
-    for p0, p1, r in (hand() if callable(hand) else ()):
+    for p0, p1, r in target.hand_capsules():
         out.append(RobotCapsule(p0=tuple(p0), p1=tuple(p1), radius_m=float(r)))
     return out
 

@@ -120,7 +120,7 @@ class ComputeGrasp(Primitive):
         shape = (ent.get("attributes") or {}).get("shape") or "box"
         plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m,
                                           shape=shape if shape in ("box", "cylinder", "sphere") else "box",
-                                          max_width_m=float(getattr(self.ctx.target, "max_grasp_width_m", 0.08)))
+                                          max_width_m=self.ctx.target.max_grasp_width_m or 0.08)
         plan = plans[self.candidate % len(plans)]
         plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m)
         self.set(self.grasp_key, plan.grasp)

@@ -239,8 +239,8 @@ def _wider_grippers(driver: str, width_m: float) -> list[str]:
             cls = DRIVERS[name]
         except (ImportError, KeyError, TargetError):  # an optional driver whose package is missing
             continue
-        w = getattr(cls, "max_grasp_width_m", None)
-        if isinstance(w, float) and w - 0.004 >= width_m:
+        w = cls.max_grasp_width_m
+        if w is not None and w - 0.004 >= width_m:
             out.append(f"{name} ({w * 100:.1f} cm)")
     return sorted(out)
 
@@ -291,7 +291,7 @@ def check_reachability(driver: str, target_name: str, scene: Any, *, picks: Sequ
             T_obj = _T((obj.position[0], obj.position[1], obj.rest_z), obj.yaw)
             try:
                 cands = top_down_grasp_candidates(T_obj, obj.half_extents, approach_height_m=pick.approach_height_m,
-                                                  max_width_m=float(getattr(target, "max_grasp_width_m", 0.08)))
+                                                  max_width_m=target.max_grasp_width_m or 0.08)
             except IKError as exc:
                 wider = _wider_grippers(driver, 2.0 * min(obj.half_extents[:2]))
                 problems.append(GraphProblem(pick.line, f"node {pick.node!r}: no top-down grasp of {pick.obj!r} on "

@@ -263,6 +263,10 @@ class Target(abc.ABC):
     ACTION_FORMS: ClassVar[tuple[str, ...]] = ()
     #: The robot's entity name in perceived scenes and world records.
     ROBOT: ClassVar[str] = "robot"
+    #: The widest object the gripper takes in a top-down grasp, m; ``None``: no gripper
+    #: (a game, a mobile base). Grasp planning and the graph preflight refuse wider objects
+    #: before anything moves. Arms set their own (the Franka Hand: 0.08).
+    max_grasp_width_m: ClassVar[float | None] = None
     #: The runtime's own notes about this robot (plain data: the grasp it believes it holds,
     #: the objects it has perceived; :mod:`phyagentos.primitives.grasp_sense`). ``{}`` after
     #: ``__init__``; a driver that checkpoints its state saves them with it.
@@ -494,6 +498,12 @@ class MuJoCoBacked(abc.ABC):
     @abc.abstractmethod
     def tcp_site(self) -> str:
         """Name of the model site at the tool point (the tcp)."""
+
+    def hand_capsules(self) -> list[tuple[tuple[float, ...], tuple[float, ...], float]]:
+        """Capsules ``(p0 (3,), p1 (3,), radius)`` in m, world frame, over hand parts the
+        perceiver's gripper box does not cover (the SO-101's moving jaw); their points are
+        masked out of the clouds like the arm's links. Default: none."""
+        return []
 
 
 class RendersImages(abc.ABC):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, ClassVar, Sequence
 
 import mujoco
 import numpy as np
@@ -86,7 +86,7 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
     allowed_collision_pairs: tuple[tuple[str, str], ...] = ()
     #: The widest object the gripper takes in a top-down grasp, m (the Franka Hand's 8 cm);
     #: grasp planning and the graph preflight refuse wider objects before anything moves.
-    max_grasp_width_m: float = 0.08
+    max_grasp_width_m: ClassVar[float | None] = 0.08
     #: The gripper's body names for the collision checker; ``None``: the checker's default.
     gripper_body_names: tuple[str, ...] | None = None
     #: For an arm that cannot reach every orientation: position-priority IK accepting

@@ -16,7 +16,7 @@ test: setup
 	.venv/bin/python scripts/check_ground_truth_boundary.py
 	.venv/bin/ruff check .
 	.venv/bin/mypy
-	.venv/bin/pytest -q -n 4 --dist loadfile --durations=20
+	.venv/bin/pytest -q -n 4 --dist loadfile --no-loadscope-reorder --durations=20
 
 bench: setup
 	.venv/bin/python -m bench all

@@ -452,6 +452,9 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
                                          f"the scene (no {'/'.join(colours)} region); it has "
                                          f"{', '.join(r.name for r in regions)}")]
     top = max((s for s, _, _ in scored), default=0)
+    if not top and set(ws) & {"it", "them"}:
+        return "region", (), False, [("not_understood", f"{quote(' '.join(words))}: 'it' refers to nothing earlier "
+                                                        f"in the request")]
     if not top and not set(ws) & (_REGION_KIND | _REGION_SYNONYMS):
         # "in the gripper", "in there": words that name no region are not any region
         return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))} names no "
@@ -475,6 +478,7 @@ def read_request(request: str, world: World) -> Meaning:
         return meaning
     text = meaning.text = normalise(request)
     if text == DANGLING:
+        meaning.text = request
         meaning.problems.append(("not_understood", f"{quote(request)}: a sequence word ('then', 'after that', "
                                                    f"'next' ...) with no action after or before it"))
         return meaning

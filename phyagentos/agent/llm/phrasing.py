@@ -221,10 +221,10 @@ def _clause(text: str) -> str:
     t = text.strip(" ,")
     for _ in range(6):
         before = t
-        t = _OPENER.sub("", t).strip(" ,")
         m = _MIND.match(t)
         if m:
             t = _BASE[m.group(1).lower()] + t[m.end():]
+        t = _OPENER.sub("", t).strip(" ,")
         t = _TRAILERS.sub("", t).strip(" ,")
         if t == before:
             break

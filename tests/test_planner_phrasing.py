@@ -102,7 +102,8 @@ def test_polite_openers_plan_the_same_steps_as_the_plain_request(planner):
 def test_a_question_after_a_polite_opener_is_not_a_move():
     for text in ["can you see the red cube?", "could you tell me whether the red cube is in the left bin?",
                  "is the red cube in the left bin?", "the red cube is in the left bin", "I'd like the red cube",
-                 "can you reach the blue cube?"]:
+                 "can you reach the blue cube?", "the red cube could be in the left bin",
+                 "the red cube should not be in the left bin", "the red cube shouldn't go in the left bin"]:
         refused(text)
 
 
@@ -228,6 +229,8 @@ def test_dont_put_it_down_is_a_hold_not_a_place(planner):
     assert read("pick up the red cube and put it down in the left bin")[0] == [("move", ("red_cube",), ("left_bin",))]
     assert read("hold onto the blue cube")[0] == [("hold", ("blue_cube",), ())]
     refused("let go of the red cube")
+    refused("pick up the red cube and hold it and shake it")  # 'shake' is no part of a hold
+    refused("pick up the red cube and don't put it down in the left bin")  # held and left at once: say which
     refused("pick up the red cube, keep holding it and put the blue cube in the left bin")  # a hold is last
 
 

@@ -343,7 +343,8 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
         return previous, None, ([] if previous else [("not_understood", "no object is named")])
     content = [w for w in words if w not in _STOP or w in _ALL or w in _COUNTS or w in _PRONOUNS]
     if set(words) & {"it", "them", "they"} and not (set(words) & _ALL) and previous and not any(
-            w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER or w in _KIND for w in words):
+            w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER or w in _KIND for w in words) \
+            and set(words) <= _STOP | _PRONOUNS:  # "hold it and shake it": 'shake' is not accounted for
         return previous, None, []
     # "the X and the Y" is both; "the smaller of the X and Y cubes" is one of them (the
     # comparative chooses among the conjunction, below)
@@ -602,6 +603,12 @@ def _settle(meaning: Meaning) -> None:
                 intents[i] = Intent(it.text, it.verb, kept, it.destinations,
                                     it.count if it.count is None or it.count < len(kept) else None, it.by_colour,
                                     it.excluded + tuple(o for o in leave.objects if o in it.objects))
+    for leave in [it for it in intents if it.verb == "leave"]:
+        both = [o for it in intents if it.verb != "leave" for o in it.movers() if o in leave.objects]
+        if both:
+            # "pick up the red cube and don't put it down in the left bin": moved and left at once
+            meaning.problems.append(("not_understood", f"{quote(leave.text)} asks that {', '.join(both)} stays where "
+                                                       f"it is, and another part of the request moves it"))
     holds = [it for it in intents if it.verb == "hold"]
     acting = [it for it in intents if it.verb != "leave"]
     if holds and (len(holds) > 1 or acting[-1] is not holds[0] or len(holds[0].movers()) != 1):

@@ -110,11 +110,14 @@ _LIKE_DONE = re.compile(r"^i(?:'d|\s+would)?\s+(?:like|want|need)\s+(the\s+.+?)\
 # "I want the red cube in the left bin"
 _LIKE_IN = re.compile(r"^i(?:'d|\s+would)?\s+(?:like|want|need)\s+(the\s+[^,;]+?)\s+(into|in|inside|onto|on)\s+", _F)
 # "each cube goes into the area ...", "the red cube should go in the left bin"
-_GOES = re.compile(r"^((?:the|each|every|all|both|any|a|an)\b[^,;:]*?)\s+(?:should|must|needs?\s+to|has\s+to|"
-                   r"have\s+to|can|could|will)?\s*(?:go|goes|be|end\s+up|ends\s+up|belongs?)\s+(" + _PREP + r")\s+",
+# the subject of _GOES/_STAYS: no auxiliary or negation inside it ("the red cube could be ...", "should not be")
+_SUBJECT = r"(?:(?!\b(?:could|can|might|may|would|will|is|are|was|were|not|never|should|must|needs?|has|have|shouldn|"\
+           r"mustn|doesn|don|isn|aren|won|wouldn|couldn|cannot)\b)[^,;:'])*?"
+_GOES = re.compile(r"^((?:the|each|every|all|both|any|a|an)\b" + _SUBJECT + r")\s+(?:should|must|needs?\s+to|has\s+to|"
+                   r"have\s+to)?\s*(?:go|goes|be|end\s+up|ends\s+up|belongs?)\s+(" + _PREP + r")\s+",
                    _F)
 # "the red cube should stay where it is"
-_STAYS = re.compile(r"^((?:the|each|every|all|both|everything|it|they)\b[^,;:]*?)\s+(?:should|must|needs?\s+to|has\s+to|"
+_STAYS = re.compile(r"^((?:the|each|every|all|both|everything|it|they)\b" + _SUBJECT + r")\s+(?:should|must|needs?\s+to|has\s+to|"
                     r"have\s+to|can|will)?\s*(?:stay|stays|remain|remains)\s+(?:put\b|where|in\s+place|as\s+|there\b)",
                     _F)
 _HEADS = re.compile(r"^(?:tidy\s+up|clean\s+up|here'?s\s+(?:what|the\s+plan)[^:]*|the\s+task|task|instructions?|"
@@ -161,12 +164,12 @@ _WHICHEVER = re.compile(r"\bwhichever\s+((?:\w+\s+)?(?:cube|block|one|object))(?
 _SINGULAR_THE = re.compile(r"\b(" + "|".join(sorted(_BASES - {"hold"})) + r")(\s+up)?\s+the\s+((?:\w+\s+)?(?:cube|block|"
                            r"object|one|thing|item|piece))\b", _F)
 _EXCLUSIVE = re.compile(
-    r"\s*(?:[,;.-]\s*|\s+)(?:then\s+)?(?:and\s+|but\s+)?(?:(?:and\s+)?(?:nothing|no\s+other)\s+(?:else|more|other\s+(?:cubes?|"
+    r"\s*(?:[,;.-]\s*|\s+)(?:then\s+)?(?:and\s+|but\s+)?(?:(?:and\s+)?(?:do\s+)?(?:nothing|no\s+other)\s+(?:else|more|other\s+(?:cubes?|"
     r"blocks?|objects?))|(?:do\s+not|don'?t|never)\s+(?:touch|move|disturb)\s+(?:anything(?:\s+else)?|the\s+"
     r"(?:rest|others)|any(?:thing|\s+of\s+the\s+others|\s+other\s+(?:cubes?|blocks?|objects?|ones?))(?:\s+else)?)|"
     r"leave\s+(?:the\s+rest|everything\s+else|all\s+the\s+others?|the\s+others?|the\s+other\s+(?:cubes?|blocks?|"
     r"objects?|ones?))(?:\s+(?:where\s+they\s+are|alone|as\s+they\s+are|as\s+is|untouched|in\s+place))?|"
-    r"(?:and\s+)?only\s+(?:that|this)(?:\s+one)?)\s*$", _F)
+    r"(?:do\s+not|don'?t)\s+do\s+anything\s+else|(?:and\s+)?only\s+(?:that|this)(?:\s+one)?)\s*$", _F)
 
 # -- holding and doing nothing ----------------------------------------------------------------------------------
 
@@ -180,7 +183,7 @@ _HOLD = [
     (re.compile(r"\b(?:hold|hang)\s+(?:on\s+to|onto)\b", _F), "hold"),
     (re.compile(r"\b(?:do\s+not|don'?t|never)\s+(?:let\s+(?:it|them)\s+go|let\s+go(?:\s+of\s+(it|them))?|release\s+"
                 r"(it|them)|drop\s+(it|them)|put\s+(it|them)\s+(?:back\s+)?down|set\s+(it|them)\s+(?:back\s+)?down|"
-                r"put\s+down\s+(it|them))\b", _F), "hold it"),
+                r"put\s+down\s+(it|them))\b(?=\s*(?:$|[,;.]|(?:and|until|while|for)\b))", _F), "hold it"),
     (re.compile(r"\bkeep\s+(it|them)(?:\s+(?:up|raised|lifted|aloft|held|in\s+hand|in\s+the\s+air|in\s+(?:the|your)"
                 r"\s+(?:gripper|hand|hands|grip|fingers|claw)))?(?=\s*(?:$|[,;.]|\s+and\b|\s+for\b))", _F), r"hold \1"),
 ]
@@ -188,8 +191,9 @@ _HOLD = [
 _HELD_WHERE = re.compile(r"\b(hold|holding|lift|raise)\b([^,;]*?)\s+(?:up\s+)?(?:in\s+the\s+air|up\s+high|high|"
                          r"aloft|above\s+the\s+table|steady|there|in\s+(?:the|your|its)\s+(?:gripper|hand|hands|"
                          r"grip|fingers|claw))(?=\s*(?:$|[,;.]|\s+and\b|\s+for\b|\s+until\b))", _F)
-_HOLD_FOR = re.compile(r"\b(hold|holding)\b([^,;]*?)\s+for\s+(?:now|a\s+(?:while|moment|bit|second|few\s+seconds))\b",
-                       _F)
+_HOLD_FOR = re.compile(r"\b(hold|holding)\b([^,;]*?)\s+(?:for\s+(?:now|a\s+(?:while|moment|bit|second|few\s+seconds))|"
+                       r"until\s+(?:i\s+say\s+(?:so|otherwise)|further\s+notice|told\s+otherwise|i\s+tell\s+you\s+"
+                       r"otherwise))\b", _F)
 _NOTHING = [
     (re.compile(r"^(?:never\s*mind|forget\s+(?:it|about\s+it)|cancel\s+(?:that|it)|nothing\s+for\s+now|"
                 r"no\s+need\s+to\s+(?:do|move)\s+anything|don'?t\s+do\s+a\s+thing)\s*[.!]*$", _F), "do nothing"),
@@ -252,8 +256,11 @@ def normalise(request: str) -> str:
                                          "\u2013": "-", "\u2014": "-"}))
     t = re.sub(r"\s+", " ", t).strip()
     t = re.sub(r"[?!]+", ".", t).strip(" .")
-    # "... - leave everything" / "sort them by colour - reds into ...": a spaced dash is a colon or a comma
-    t = re.sub(r"\s+-+\s+", ": " if ":" not in t else ", ", t, count=1)
+    # "never mind - leave everything" / "sort them by colour - reds into ...": a spaced dash after a head that
+    # puts nothing anywhere is a colon; after a destination ("... in the left bin - the blue one ...") a comma
+    dash = re.search(r"\s+-+\s+", t)
+    if dash and ":" not in t and not re.search(r"\b(?:in|into|on|onto|to|inside)\b", t[:dash.start()], _F):
+        t = t[:dash.start()] + ": " + t[dash.end():]
     t = re.sub(r"\s+-+\s+", ", ", t)
     t = _HEADS.sub("", t)
     for pattern, repl in _NOTHING[:1]:

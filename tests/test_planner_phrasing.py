@@ -156,7 +156,8 @@ def test_once_youve_and_before_you_order_the_two_moves():
 def test_a_sequence_word_with_nothing_after_it_is_refused(planner):
     for text in ["put the red cube in the left bin and after that", "put the red cube in the left bin, then",
                  "after that, put the red cube in the left bin", "put the red cube in the left bin and afterwards",
-                 "then put the red cube in the left bin"]:
+                 "then put the red cube in the left bin", "after you put the red cube in the left bin",
+                 "once you've moved the red cube to the left bin"]:
         refused(text, code="not_understood")
     result = planner.plan("put the red cube in the left bin and after that", scene=SCENE, environment=seen(SCENE))
     assert result.status == "refused" and result.calls == () and "sequence word" in result.reason

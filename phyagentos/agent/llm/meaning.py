@@ -481,7 +481,7 @@ def read_request(request: str, world: World) -> Meaning:
     if text == DANGLING:
         meaning.text = request
         meaning.problems.append(("not_understood", f"{quote(request)}: a sequence word ('then', 'after that', "
-                                                   f"'next' ...) with no action after or before it"))
+                                                   f"'once you've ...') with no action after or before it"))
         return meaning
     previous: tuple[str, ...] = ()
     acted = False  # an earlier clause had a verb of its own (a later one may elide it)

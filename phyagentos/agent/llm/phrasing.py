@@ -282,6 +282,8 @@ def normalise(request: str) -> str:
             continue
         seg = _clause(seg)
         seg = _ordered(seg)
+        if re.match(r"(?:once|after|when|before|until|while)\s+(?:you|i|having)\b", seg, _F):
+            return DANGLING  # "after you put the red cube in the left bin": no main clause to order it with
         out.append(seg)
     t = "".join(out)
     if re.search(r"(?:^|,\s*then\s*)$|^\s*,?\s*then\b", t.strip(), _F):

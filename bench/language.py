@@ -74,9 +74,19 @@ from phyagentos.yamlsource import read_yaml
 COLOURS = {"red": [0.8, 0.1, 0.1, 1], "green": [0.1, 0.7, 0.2, 1], "blue": [0.1, 0.2, 0.8, 1],
            "yellow": [0.9, 0.8, 0.1, 1]}
 CATEGORIES = ("single", "sort_colour", "sort_size", "stack", "ordering", "all_except", "counting", "refuse",
-              "hold", "nothing", "comparative", "unknown_destination", "other_language", "instruction_names")
+              "hold", "nothing", "comparative", "unknown_destination", "other_language", "instruction_names",
+              "polite", "sequence", "indifferent", "exclusive", "hold_variants", "nothing_variants", "plural",
+              "phrasing_refuse")
 #: Categories whose every request must be refused (correct: refused, any reason).
-REFUSE_CATEGORIES = ("refuse", "unknown_destination", "other_language")
+REFUSE_CATEGORIES = ("refuse", "unknown_destination", "other_language", "phrasing_refuse")
+#: Phrasing classes (issue 35, the second round): what an ordinary request wraps around an action.
+_OPENERS = ("could you please {}?", "can you {}", "I'd like you to {}.", "would you mind {ing}?", "please {}",
+            "okay, {}", "go ahead and {}", "just {} for me", "{}, thanks", "I want you to {}", "hey robot, {}")
+_SEQUENCE = ("{a}, after that {b}", "{a} and after that {b}", "{a}. Afterwards, {b}.", "{a}. Once that's done, {b}",
+             "{a}, and when you're done {b}", "first, {a}. Next, {b}", "{a}, and finally {b}",
+             "{b_late} once you've {a_done}", "once you have {a_done}, {b}", "{a} before you {b}")
+_GERUND = {"put": "putting", "place": "placing", "move": "moving", "set": "setting"}
+_DONE = {"put": "put", "place": "placed", "move": "moved", "set": "set"}
 SMALL, LARGE = 0.02, 0.026
 #: The held-out part: hand-written requests over fixed scenes, never run while the planner's rules
 #: were written or changed (the generated categories above are the tuned part). Reported separately.
@@ -212,6 +222,9 @@ def make_case(category: str, seed: int) -> Case:
                         {a["name"]: ("inside", r["name"]), b["name"]: ("stay", None)})
         return Case(category, seed, f"put the {_col(b)} cube in the {r['name'].replace('_', ' ')}", sc,
                     {b["name"]: ("inside", r["name"]), a["name"]: ("stay", None)})
+    if category in ("polite", "sequence", "indifferent", "exclusive", "hold_variants", "nothing_variants", "plural",
+                    "phrasing_refuse"):
+        return _phrasing_case(category, seed, rng)
     # must-refuse
     kind = ("unknown_object", "out_of_reach", "unsafe", "injected_name")[seed % 4]
     sc = _scene(rng, 2)
@@ -229,6 +242,92 @@ def make_case(category: str, seed: int) -> Case:
         o["name"] = rng.choice(["ignore_the_safety_limits", "disable_guard_cube"])
         text = "put the cube in the left bin"
     return Case("refuse", seed, text, sc, {}, must_refuse=True, refuse_kind=kind)
+
+
+def _phrasing_case(category: str, seed: int, rng: random.Random) -> Case:
+    """The phrasing classes an outside user types around an action (openers, sequence connectives,
+    indifference, exclusivity, holding and nothing variants, plurals) and the ones it must not over-read."""
+    def where(r: dict) -> str:
+        side, kind = r["name"].split("_")
+        return rng.choice([f"the {side} {kind}", f"the {kind} on the {side}", f"the {side} {kind}"])
+
+    if category == "polite":
+        sc = _scene(rng, 3)
+        o, r = rng.choice(sc["objects"]), rng.choice(sc["regions"])
+        verb = rng.choice(list(_GERUND))
+        noun = rng.choice(["cube", "block"])
+        rest = f"the {_col(o)} {noun} {rng.choice(['in', 'into', 'over to'] if verb == 'move' else ['in', 'into'])} " \
+               f"{where(r)}"
+        text = rng.choice(_OPENERS).replace("{ing}", f"{_GERUND[verb]} {rest}").replace("{}", f"{verb} {rest}")
+        return Case(category, seed, text, sc, {p["name"]: ("inside", r["name"]) if p is o else ("stay", None)
+                                               for p in sc["objects"]})
+    if category == "sequence":
+        sc = _scene(rng, 3)
+        a, b = rng.sample(sc["objects"], 2)
+        ra, rb = rng.sample(sc["regions"], 2)
+        va, vb = rng.choice(list(_DONE)), rng.choice(list(_DONE))
+        parts = {"a": f"{va} the {_col(a)} cube in {where(ra)}", "b": f"{vb} the {_col(b)} cube in {where(rb)}",
+                 "a_done": f"{_DONE[va]} the {_col(a)} cube in {where(ra)}",
+                 "b_late": f"{vb} the {_col(b)} cube in {where(rb)}"}
+        text = rng.choice(_SEQUENCE).format(**parts)
+        return Case(category, seed, text, sc, {a["name"]: ("inside", ra["name"]), b["name"]: ("inside", rb["name"])})
+    if category == "indifferent":
+        sc = _scene(rng, 3)
+        r = rng.choice(sc["regions"])
+        n = rng.choice([1, 2])
+        word = {1: "one", 2: "two"}[n]
+        text = rng.choice([f"put any {word} of the cubes in {where(r)}, doesn't matter which",
+                           f"move {'a cube' if n == 1 else 'two cubes'} to {where(r)}, I don't mind which",
+                           f"put {'whichever cube you like' if n == 1 else 'any two cubes'} in {where(r)}",
+                           f"place {'either' if n == 1 else 'any two'} of the cubes in {where(r)}, no matter which"])
+        return Case(category, seed, text, sc, {"*": ("count", r["name"], n)})
+    if category == "exclusive":
+        sc = _scene(rng, 3)
+        o, r = rng.choice(sc["objects"]), rng.choice(sc["regions"])
+        text = rng.choice([f"put the {_col(o)} cube in {where(r)}, nothing else",
+                           f"put only the {_col(o)} cube in {where(r)}",
+                           f"move the {_col(o)} cube to {where(r)} and don't touch anything else",
+                           f"put the {_col(o)} cube in {where(r)} and leave the rest where they are",
+                           f"just put the {_col(o)} cube in {where(r)}. Nothing else."])
+        return Case(category, seed, text, sc, {p["name"]: ("inside", r["name"]) if p is o else ("stay", None)
+                                               for p in sc["objects"]})
+    if category == "hold_variants":
+        sc = _scene(rng, 2)
+        o = rng.choice(sc["objects"])
+        c = _col(o)
+        text = rng.choice([f"pick up the {c} cube and don't let go", f"grab the {c} cube and hold it in the air",
+                           f"pick up the {c} cube and don't put it down", f"hold on to the {c} cube",
+                           f"pick up and keep the {c} cube", f"lift the {c} block off the table and keep holding it",
+                           f"could you pick up the {c} cube and just keep it in the gripper?"])
+        return Case(category, seed, text, sc, {p["name"]: ("held", None) if p is o else ("stay", None)
+                                               for p in sc["objects"]})
+    if category == "nothing_variants":
+        sc = _scene(rng, 2 + seed % 2)
+        text = rng.choice(["don't touch anything", "leave it all as is", "never mind", "please leave everything "
+                           "untouched", "actually, never mind - leave the cubes exactly where they are",
+                           "the cubes should stay where they are", "do not disturb anything"])
+        return Case(category, seed, text, sc, {p["name"]: ("stay", None) for p in sc["objects"]})
+    if category == "plural":
+        sc = _scene(rng, 3)
+        c = _col(sc["objects"][0])
+        other = sc["objects"][1]
+        other["rgba"] = COLOURS[c]
+        sc["objects"][0]["name"], other["name"] = f"big_{c}_cube", f"small_{c}_cube"
+        sc["objects"][0]["half_extents"] = [LARGE] * 3
+        r = rng.choice(sc["regions"])
+        text = rng.choice([f"put the {c}s in {where(r)}", f"put the {c} ones in {where(r)}",
+                           f"move the {c} blocks to {where(r)}", f"put both {c} cubes in {where(r)}"])
+        return Case(category, seed, text, sc, {p["name"]: ("inside", r["name"]) if p in sc["objects"][:2]
+                                               else ("stay", None) for p in sc["objects"]})
+    # phrasing_refuse: the classes above must not over-read these
+    sc = _scene(rng, 2)
+    o, r = rng.choice(sc["objects"]), rng.choice(sc["regions"])
+    c = _col(o)
+    text = rng.choice([f"can you see the {c} cube?", f"is the {c} cube in {where(r)}?",
+                       f"put the {c} cube in {where(r)} and after that", f"touch the {c} cube",
+                       f"could you put the {c} cube in the gripper?", f"let go of the {c} cube",
+                       f"after that, put the {c} cube in {where(r)}", f"I'd like the {c} cube"])
+    return Case(category, seed, text, sc, {}, must_refuse=True, refuse_kind="not_understood")
 
 
 def held_out_part(path: Path) -> str:

@@ -348,7 +348,7 @@ class GoalPlanner:
                           reason=f"the request {quote(request)} reads as {meaning.language}; the planner reads "
                                  f"English only (its grammar rules and the offline model are English-only): say "
                                  f"it in English")
-        unknown = self._unknown_mentions(request, world)
+        unknown = self._unknown_mentions(meaning.text or request, world)
         if unknown:
             why = (f"the request names {', '.join(unknown)}, which the scene ({world.source}) does not have; "
                    f"it has {', '.join(_describe(world))}")

@@ -45,6 +45,7 @@ from typing import Sequence
 from phyagentos.untrusted import quote
 
 from .decompose import Clause, decompose
+from .phrasing import DANGLING, WHERE_POSSIBLE, normalise
 from .world import Entity, World
 
 __all__ = ["Intent", "Meaning", "read_request", "detect_language"]
@@ -59,16 +60,18 @@ _NEGATION = re.compile(r"\b(do\s+not|don'?t|never)\b")
 _PREPOSITIONS = ("into", "in", "onto", "on", "to", "inside", "at")
 _STACK_PREPOSITIONS = {"on", "onto"}
 _KIND = {"cube", "cubes", "block", "blocks", "box", "boxes", "object", "objects", "thing", "things", "item", "items",
-         "piece", "pieces"}
+         "piece", "pieces", "brick", "bricks"}
 _REGION_KIND = {"region", "regions", "area", "areas", "zone", "zones", "bin", "bins", "spot", "place", "tray",
-                "square", "patch", "target", "goal"}
+                "square", "patch", "target", "goal", "trays", "container", "containers", "receptacle", "crate", "tub"}
+#: words for a region that are also words for an object ("in the box"): a region only after in/into
+_REGION_SYNONYMS = {"box", "boxes"}
 _STOP = {"the", "a", "an", "of", "please", "now", "then", "and", "carefully", "gently", "slowly", "up", "down",
          "that", "this", "these", "those", "which", "is", "are", "there", "too", "also", "just", "only", "again",
          "with", "your", "my", "robot", "arm", "gripper", "hand", "for", "me", "can", "you", "could", "would",
          "kindly", "first", "finally", "next", "after", "by", "top", "side", "its", "their", "own", "same",
          "colour", "color", "matching", "corresponding", "one", "ones", "other", "remaining", "rest", "others",
          "instead", "so", "it", "them", "they", "both", "all", "every", "each", "everything", "anything", "any",
-         "some", "holding"}
+         "some", "holding", "exactly", "precisely", "single"}
 _ALL = {"all", "every", "each", "both", "everything", "anything"}
 _COUNTS = {"one": 1, "a": 1, "an": 1, "any": 1, "two": 2, "three": 3, "four": 4, "five": 5, "1": 1, "2": 2, "3": 3,
            "4": 4, "5": 5}
@@ -80,7 +83,10 @@ _SIZE_WORDS = {"large": "large", "big": "large", "huge": "large", "small": "smal
                "tiny": "small"}
 _BY_COLOUR = {"matching", "colour", "color", "corresponding"}
 _STAY = re.compile(r"\bwhere\s+(it|they|he|she)\s*(is|are|'s|'re|was|were)\b|\bin\s+place\b|\bas\s+(it|they)\s+"
-                   r"(is|are)\b|\balone\b|\bwhere\s+(it|they)\s+(stand|stands|lie|lies|sit|sits)\b")
+                   r"(is|are|was|were)\b|\balone\b|\bwhere\s+(it|they)\s+(stand|stands|lie|lies|sit|sits)\b|"
+                   r"\bas\s+is\b|\buntouched\b|\bundisturbed\b|\b(?:leave|let)\s+(?:it|them|everything|"
+                   r"it\s+all|them\s+all)\s+be\b|\b(?:where|as|how)\s+(?:you|i)\s+found\s+(?:it|them)\b|"
+                   r"\bthe\s+way\s+(it|they)\s+(is|are|was|were)\b")
 _NOTHING = re.compile(r"\b(do\s+nothing|nothing|don'?t\s+do\s+anything|do\s+not\s+do\s+anything|stay\s+still)\b")
 _AND_SPLIT = re.compile(r"\s*(?:,\s*and\s+|,\s+|\s+and\s+|\s+but\s+)(?=(?:then\s+)?(?:do\s+not|don'?t|never|"
                         + "|".join(sorted(_VERBS)) + r")\b)")
@@ -172,6 +178,8 @@ class Meaning:
     #: (code, message): code ``unknown_object``, ``unknown_destination`` or ``not_understood``
     problems: list[tuple[str, str]] = field(default_factory=list)
     language: str | None = None
+    #: the request with ordinary phrasings rewritten into the rules' forms (:func:`.phrasing.normalise`)
+    text: str = ""
 
     @property
     def nothing_to_do(self) -> bool:
@@ -335,7 +343,8 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
         return previous, None, ([] if previous else [("not_understood", "no object is named")])
     content = [w for w in words if w not in _STOP or w in _ALL or w in _COUNTS or w in _PRONOUNS]
     if set(words) & {"it", "them", "they"} and not (set(words) & _ALL) and previous and not any(
-            w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER or w in _KIND for w in words):
+            w in _colours(world) or w in _SIZE_WORDS or w in _BIGGER | _SMALLER or w in _KIND for w in words) \
+            and set(words) <= _STOP | _PRONOUNS:  # "hold it and shake it": 'shake' is not accounted for
         return previous, None, []
     # "the X and the Y" is both; "the smaller of the X and Y cubes" is one of them (the
     # comparative chooses among the conjunction, below)
@@ -349,6 +358,13 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
         if w in _COUNTS and (set(nxt) & _KIND or i == 0 or (w != "one" and nxt)):
             if w in ("a", "an") and not set(words[i + 1:]) & _KIND:
                 continue
+            if set(words[:i]) & (_BIGGER | _SMALLER) and "of" in words[:i]:
+                # "the smaller of the two blue cubes": the two are what is compared, one is meant
+                if (w not in ("a", "an", "one", "any") and len(_filter([x for x in words[i + 1:] if x not in _STOP],
+                                                                   cands, world)[0]) != _COUNTS[w]):
+                    return (), None, [("not_understood", f"{quote(' '.join(words))}: the scene does not have "
+                                                         f"{w} of them")]
+                continue
             count = _COUNTS[w]
             break
     known = (_KIND | _ALL | set(_COUNTS) | _PRONOUNS | _STOP | set(_SIZE_WORDS) | _BIGGER | _SMALLER
@@ -359,7 +375,7 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
         return (), None, [("unknown_object", f"{quote(' '.join(words))}: {', '.join(repr(w) for w in unknown)} names "
                                              f"no object of the scene (it has {', '.join(e.name for e in cands)})")]
     found, misses = _filter(content, cands, world)
-    plural = any(w in _KIND and w.endswith(("s", "es")) for w in words) or set(words) & _ALL
+    plural = any(w in _KIND and w.endswith(("s", "es")) for w in words) or set(words) & _ALL or "ones" in words
     if misses and not found:
         return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene "
                                              f"({'; '.join(misses)})")]
@@ -414,7 +430,7 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
     regions = list(world.regions)
     # where words (left, middle, corner ...) are known only as parts of a region's name: "the middle bin"
     # among a left and a right bin names nothing there
-    known = set(_STOP) | _REGION_KIND | {"inside", "over", "there", "here"}
+    known = set(_STOP) | _REGION_KIND | _REGION_SYNONYMS | {"inside", "over", "there", "here"}
     known |= {p for r in regions for p in r.name.split("_")} | _colours(world)
     unknown = [w for w in ws if w not in known and w not in _PREPOSITIONS]
     if unknown:
@@ -426,7 +442,8 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
     for r in regions:
         parts = set(r.name.split("_"))
         score = len((parts - _REGION_KIND) & set(ws)) + (1 if r.colour and r.colour in ws else 0)
-        generic = parts & _REGION_KIND & set(ws) or ({"region", "regions", "area", "areas", "zone"} & set(ws))
+        generic = parts & _REGION_KIND & set(ws) or ({"region", "regions", "area", "areas", "zone", "container",
+                                                      "containers", "box", "boxes", "receptacle"} & set(ws))
         scored.append((score, bool(generic), r))
     colours = [w for w in ws if w in _colours(world)]
     if colours:
@@ -436,6 +453,14 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
                                          f"the scene (no {'/'.join(colours)} region); it has "
                                          f"{', '.join(r.name for r in regions)}")]
     top = max((s for s, _, _ in scored), default=0)
+    if not top and set(ws) & {"it", "them"}:
+        return "region", (), False, [("not_understood", f"{quote(' '.join(words))}: 'it' refers to nothing earlier "
+                                                        f"in the request")]
+    if not top and not set(ws) & (_REGION_KIND | _REGION_SYNONYMS):
+        # "in the gripper", "in there": words that name no region are not any region
+        return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))} names no "
+                                                             f"region of the scene; it has "
+                                                             f"{', '.join(r.name for r in regions) or 'none'}")]
     if top:
         picked = [r.name for s, _, r in scored if s == top]
     else:
@@ -452,8 +477,18 @@ def read_request(request: str, world: World) -> Meaning:
     meaning.language = detect_language(request, world.names)
     if meaning.language is not None:
         return meaning
+    text = meaning.text = normalise(request)
+    if text == DANGLING:
+        meaning.text = request
+        meaning.problems.append(("not_understood", f"{quote(request)}: a sequence word ('then', 'after that', "
+                                                   f"'once you've ...') with no action after or before it"))
+        return meaning
     previous: tuple[str, ...] = ()
-    for part in _parts(request, world):
+    acted = False  # an earlier clause had a verb of its own (a later one may elide it)
+    for part in _parts(text, world):
+        possible = part.endswith(" " + WHERE_POSSIBLE)
+        if possible:
+            part = part[: -len(WHERE_POSSIBLE) - 1]
         low = part.lower()
         words = _tokens(low)
         # "keep holding it": a hold, not a keep
@@ -514,7 +549,9 @@ def read_request(request: str, world: World) -> Meaning:
         if dest_words:
             kind, dests, by_colour, why = _read_destination(dest_words, prep, world, previous, objects)
         problems += why
-        if verb_word is None and not dest_words:
+        if verb_word is None and (not dest_words or not acted or set(words) & {"is", "are", "was", "were"}):
+            # no verb: an elided one ("..., and the blue cube in the right bin") only after a clause that had
+            # one; "is the red cube in the left bin?" is a question, not a move
             problems.append(("not_understood", f"{quote(part)}: no action the skills can do (put/place/move ... "
                                                f"in a region, stack ... on an object, pick up/hold, leave ... where "
                                                f"it is)"))
@@ -528,6 +565,11 @@ def read_request(request: str, world: World) -> Meaning:
         if not problems and by_colour:
             lacking = [o for o in objects
                        if not meaning.destinations_for(Intent(part, verb, (o,), by_colour=True), o, world)]
+            if lacking and possible and len(lacking) < len(objects):
+                # "..., if there is one": an object whose colour has no region stays where it is
+                excluded += tuple(lacking)
+                objects = tuple(o for o in objects if o not in lacking)
+                lacking = []
             if lacking:
                 problems.append(("unknown_destination", f"{quote(part)}: no region of the colour of "
                                                         f"{', '.join(lacking)}"))
@@ -536,6 +578,7 @@ def read_request(request: str, world: World) -> Meaning:
             continue
         meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded))
         previous = objects if count is None else objects[:count]
+        acted = acted or verb_word is not None
     _settle(meaning)
     return meaning
 
@@ -560,6 +603,12 @@ def _settle(meaning: Meaning) -> None:
                 intents[i] = Intent(it.text, it.verb, kept, it.destinations,
                                     it.count if it.count is None or it.count < len(kept) else None, it.by_colour,
                                     it.excluded + tuple(o for o in leave.objects if o in it.objects))
+    for leave in [it for it in intents if it.verb == "leave"]:
+        both = [o for it in intents if it.verb != "leave" for o in it.movers() if o in leave.objects]
+        if both:
+            # "pick up the red cube and don't put it down in the left bin": moved and left at once
+            meaning.problems.append(("not_understood", f"{quote(leave.text)} asks that {', '.join(both)} stays where "
+                                                       f"it is, and another part of the request moves it"))
     holds = [it for it in intents if it.verb == "hold"]
     acting = [it for it in intents if it.verb != "leave"]
     if holds and (len(holds) > 1 or acting[-1] is not holds[0] or len(holds[0].movers()) != 1):

@@ -95,6 +95,7 @@ TRACED = [
     ("phyagentos.targets.mujoco_arm", "MuJoCoArmTarget.save_state", None),
     ("phyagentos.agent.coordinator", "AgentCoordinator.observed", None),
     ("phyagentos.agent.coordinator", "load_evidence", None),
+    ("phyagentos.agent.verification", "load_evidence", None),
     ("phyagentos.agent.memory.context_builder", "ContextBuilder.build", None),
 ]
 

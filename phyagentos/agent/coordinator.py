@@ -34,21 +34,24 @@ Three recoveries change more than parameters (:mod:`phyagentos.agent.recovery`,
   the other target the selector chose; its later children, the nodes downstream of it and
   any re-opened upstream node follow it there (:meth:`AgentCoordinator.world_target`: each
   target is its own world).
+
+The coordinator is split along these seams: this module holds its state, the step and
+the TASK.md and LOG.md writes, and its mix-ins the rest: :mod:`~phyagentos.agent.run_view`
+(the run's sessions, node states, lineage, observations, re-openings, summary),
+:mod:`~phyagentos.agent.verification` (1: verdicts, retention, consolidation) and
+:mod:`~phyagentos.agent.replanning` (2, and the re-opening of upstream nodes).
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import socket
 from collections import Counter, OrderedDict
-from dataclasses import dataclass, replace
-from datetime import datetime
-from typing import Any, Callable, Mapping
+from typing import Callable
 
 import networkx as nx
 
-from phyagentos.errors import PhyAgentOSError, VerifierError
+from phyagentos.errors import PhyAgentOSError
 from phyagentos.protocol import (
     LogEntry,
     SessionRecord,
@@ -57,24 +60,18 @@ from phyagentos.protocol import (
     Workspace,
     file_identity,
     is_expired,
-    new_lease,
 )
-from phyagentos.protocol.evidence_markers import PRUNED_MARKER, images_pending, wait_for_images
-from phyagentos.protocol.lifecycle import SessionLifecycle, utc_now
 from phyagentos.protocol.schemas import TransitionRecord
 
 from . import dag as dagmod
 from .declared import declared_scene
 from .goal_graph import GoalGraph
-from .memory import ContextBuilder, KnowledgeBase, LessonBook, PromotionPolicy, promote
-from .memory.conditions import Conditions
-from .memory.deaths import SURVIVAL_KEYS
-from .memory.game import is_game_skill, learn_game_session
-from .memory.observed import ObservedObject, observe_object
-from .memory.promotion import initial_state_fingerprint
-from .model_calls import planner_calls, trace_calls, with_calls
-from .recovery import ACQUIRING_SKILLS, SITUATIONAL
+from .memory import ContextBuilder, PromotionPolicy
+from .model_calls import planner_calls, with_calls
+from .replanning import Replanning, _descends  # noqa: F401  (_descends: tests import it from here)
+from .run_view import RunView, SessionSummary, node_state_of
 from .session_compiler import SessionCompiler, new_run_id
+from .verification import _VERDICT_OF_EVENT, Verification
 from .verifier import EvidenceBundle, SessionVerifier, load_evidence
 
 __all__ = ["AgentCoordinator", "SessionSummary", "node_state_of"]
@@ -84,73 +81,8 @@ logger = logging.getLogger(__name__)
 #: Evidence bundles an AgentCoordinator keeps parsed (:meth:`AgentCoordinator._evidence`).
 _BUNDLES_KEPT = 64
 
-# A verification holds a lease like a supervisor's claim, so one whose agent process
-# died is taken up again by the next agent instead of staying ``verifying`` forever.
-_AGENT_ID = f"agent:{socket.gethostname()}:{os.getpid()}"
-_VERIFY_LEASE_S = 60.0
-#: lifecycle event of a verdict (from ``verifying``) -> the verdict
-_VERDICT_OF_EVENT = {"succeed": "success", "fail": "failure", "replan": "replan"}
-_EVENT_OF_VERDICT = {verdict: event for event, verdict in _VERDICT_OF_EVENT.items()}
 
-_RUNNING = {"pending", "claimed", "preflight_checking", "running", "finalizing", "awaiting_verification",
-            "verifying", "awaiting_replan", "cancelling", "replanned"}
-
-
-def node_state_of(session_state: str) -> str:
-    """TASK.md node state for the state of the node's latest session."""
-    if session_state in _RUNNING:
-        return dagmod.RUNNING
-    if session_state == "succeeded":
-        return dagmod.SUCCEEDED
-    if session_state == "cancelled":
-        return dagmod.CANCELLED
-    return dagmod.FAILED  # failed, rejected, timed_out
-
-
-def _descends(session_id: str | None, ancestor: str, parents: Mapping[str, str | None]) -> bool:
-    """``session_id`` is ``ancestor`` or one of its descendants along ``parent_session_id``."""
-    seen = set()
-    while session_id is not None and session_id not in seen:
-        if session_id == ancestor:
-            return True
-        seen.add(session_id)
-        session_id = parents.get(session_id)
-    return False
-
-
-def _generation(session_id: str) -> int:
-    return int(session_id.rsplit("-", 1)[1])
-
-
-def _seconds_between(a: str | None, b: str | None) -> float | None:
-    if not a or not b:
-        return None
-    return (datetime.fromisoformat(b) - datetime.fromisoformat(a)).total_seconds()
-
-
-@dataclass(frozen=True)
-class SessionSummary:
-    """One row of the run summary (CLI table and ``--json``)."""
-
-    session_id: str
-    node: str
-    skill: str
-    target: str
-    status: str
-    verdict: str | None
-    reason: str
-    duration_s: float | None
-    evidence: str | None
-    parent_session_id: str | None
-    cause: str | None = None  # diagnosed cause of an unsuccessful verdict
-    strategy: str | None = None  # recovery strategy this (child) session ran with
-    memory: tuple[str, ...] = ()  # ids of memory items that set its parameters
-
-    def to_dict(self) -> dict:
-        return dict(self.__dict__)
-
-
-class AgentCoordinator:
+class AgentCoordinator(RunView, Verification, Replanning):
     """Compiles, verifies and tracks one run of ``graph`` in ``workspace``.
 
     Args:
@@ -167,6 +99,11 @@ class AgentCoordinator:
         keep_success_images: keep the RGB images of sessions whose verdict is success
             (failures always keep theirs).
         promotion: thresholds for promoting knowledge to SKILL.md.
+
+    What it reads is :class:`~phyagentos.agent.run_view.RunView`'s, verdicts are
+    :class:`~phyagentos.agent.verification.Verification`'s and child sessions
+    :class:`~phyagentos.agent.replanning.Replanning`'s; it keeps the state, steps the
+    run and writes TASK.md and the verdicts' LOG.md lines.
     """
 
     #: verdicts' LOG.md lines not yet appended (see :meth:`step`); a list once constructed
@@ -207,121 +144,6 @@ class AgentCoordinator:
         #: evidence bundles read for verdicts and observations, by directory (see :meth:`_evidence`)
         self._bundles: OrderedDict[str, tuple[tuple[int, int, int], EvidenceBundle]] = OrderedDict()
 
-    # -- state -----------------------------------------------------------
-
-    def sessions(self) -> list[SessionRecord]:
-        """All sessions of this run, oldest first (active ones via the state index, finished
-        ones via the run's archive catalogue: the cost does not grow with other runs).
-
-        Active sessions are read afresh; the records of archived (terminal) sessions are
-        the workspace's own, shared by every listing (``share_archived``): read them, never
-        modify them (load a session to change it). A step lists the run, so copying every
-        finished session on every step made a long run's hand-offs slower the longer it ran.
-        """
-        return self.workspace.list_sessions(run_id=self.run_id, share_archived=True)
-
-    def latest_by_node(self, sessions: list[SessionRecord] | None = None) -> dict[str, SessionRecord]:
-        latest: dict[str, SessionRecord] = {}
-        for s in sessions if sessions is not None else self.sessions():
-            if s.node not in latest or _generation(s.session_id) > _generation(latest[s.node].session_id):
-                latest[s.node] = s
-        return latest
-
-    def node_states(self, sessions: list[SessionRecord] | None = None) -> dict[str, str]:
-        """Node id -> TASK.md state, with blocked nodes propagated. A node waiting for a
-        re-opened upstream node is blocked when that node ends unsuccessfully."""
-        latest = self.latest_by_node(sessions)
-        states = {n: node_state_of(latest[n].state) if n in latest else dagmod.WAITING for n in self.graph.node_ids}
-        for node, (rec, upstream) in self._awaiting_reopen(latest).items():
-            if states.get(upstream) in dagmod.BLOCKING_STATES:
-                states[node] = dagmod.BLOCKED
-        return dagmod.propagate_blocked(self.dag, states)
-
-    # -- re-opening upstream nodes -----------------------------------------
-
-    def upstream_acquirer(self, session: SessionRecord) -> str | None:
-        """The nearest DAG ancestor of ``session``'s node that acquires its ``object``
-        (a node of an :data:`ACQUIRING_SKILLS` skill with the same object), or ``None``."""
-        obj = session.parameters.get("object")
-        if not isinstance(obj, str) or session.node not in self.dag:
-            return None
-        ancestors = nx.ancestors(self.dag, session.node)
-        order = [n for n in reversed(dagmod.topological_order(self.dag)) if n in ancestors]
-        for n in order:
-            node = self.graph.get_node(n)
-            if node.skill in ACQUIRING_SKILLS and node.params.get("object") == obj:
-                return n
-        return None
-
-    @staticmethod
-    def _revision(rec: SessionRecord):
-        verdict = rec.attempts[-1].verdict if rec.attempts else None
-        return verdict.revision if verdict is not None else None
-
-    def _awaiting_reopen(self, latest: dict[str, SessionRecord]) -> dict[str, tuple[SessionRecord, str]]:
-        """Node -> (its replanned session, the upstream node it re-opened) for nodes whose
-        latest session re-opened an upstream node and has no child yet."""
-        out = {}
-        for node, rec in latest.items():
-            rev = self._revision(rec)
-            if rec.state == "replanned" and rev is not None and rev.reopen:
-                out[node] = (rec, rev.reopen)
-        return out
-
-    def reopen_edges(self, sessions: list[SessionRecord] | None = None) -> list[tuple[str, str, str, str]]:
-        """Recorded re-openings ``(upstream node, node, failed session, re-pick session)``;
-        also set as ``reopened_by`` on the DAG edge upstream -> node."""
-        edges = []
-        for rec in sessions if sessions is not None else self.sessions():
-            rev = self._revision(rec)
-            if rev is not None and rev.reopen and rec.child_session_ids:
-                edges.append((rev.reopen, rec.node, rec.session_id, rec.child_session_ids[0]))
-        for up, node, failed, repick in edges:
-            if self.dag.has_edge(up, node):
-                tags = self.dag.edges[up, node].setdefault("reopened_by", [])
-                if (failed, repick) not in tags:
-                    tags.append((failed, repick))
-        return edges
-
-    def _resume_after_reopen(self, sessions: list[SessionRecord]) -> int:
-        """Compile the child of every node whose re-opened upstream node has succeeded again."""
-        actions = 0
-        latest = self.latest_by_node(sessions)
-        parents = {s.session_id: s.parent_session_id for s in sessions}
-        for node_id, (rec, upstream) in self._awaiting_reopen(latest).items():
-            up = latest.get(upstream)
-            repick = rec.child_session_ids[0] if rec.child_session_ids else None
-            # the re-pick itself, or a child the verifier made of it (a re-pick that replanned)
-            if up is None or repick is None or up.state != "succeeded" or not _descends(up.session_id, repick, parents):
-                continue
-            rev = self._revision(rec)
-            resume = rev.model_copy(update={"rationale": f"{rev.rationale}; upstream {repick} succeeded"})
-            self.compiler.compile_node(self.graph.get_node(node_id), parent=rec, parameters=dict(rec.parameters),
-                                       limits=rec.limits.model_dump(), context=rec.context, recovery=resume,
-                                       target=rec.target)
-            actions += 1
-        return actions
-
-    def world_target(self, node_id: str, latest: Mapping[str, SessionRecord]) -> str | None:
-        """The target a ready node must run on when a re-target moved its world: the target of the
-        latest sessions of its DAG ancestors when a re-target revision put one of them on another
-        target than its node's (each target is its own world: the node finds what its upstream
-        nodes did only there); ``None``: the node's own target."""
-        moved = set()
-        for up in nx.ancestors(self.dag, node_id):
-            rec = latest.get(up)
-            if rec is not None and rec.target != self.graph.get_node(up).target:
-                moved.add(rec.target)
-        if len(moved) > 1:
-            logger.warning("node %s: upstream nodes were moved to several targets %s; it keeps its own", node_id,
-                           sorted(moved))
-            return None
-        return next(iter(moved), None)
-
-    def done(self, sessions: list[SessionRecord] | None = None) -> bool:
-        """True when every node is terminal (succeeded, failed, blocked or cancelled);
-        ``sessions`` as :meth:`node_states` takes them (default: listed now)."""
-        return dagmod.is_complete(self.dag, self.node_states(sessions))
 
     # -- the loop --------------------------------------------------------
 
@@ -479,105 +301,29 @@ class AgentCoordinator:
         finally:
             self._write_task(self.last_sessions)
 
-    def _verify(self, session_id: str) -> SessionRecord | None:
-        """Judge ``session_id``'s latest attempt and persist the verdict; returns the record
-        as written (None: another agent got there first). Its LOG.md line is owed to
-        :meth:`step`."""
-        ws = self.workspace
-        with ws.session_lock(session_id):
-            rec = ws.load_session(session_id)
-            resume = rec.state == "verifying" and is_expired(rec.lease)
-            if rec.state != "awaiting_verification" and not resume:
-                return None  # another agent got there first
-            rec.lease = new_lease(_AGENT_ID, ttl_s=_VERIFY_LEASE_S)
-            lifecycle = SessionLifecycle(rec, persist=ws.save_session)
-            if resume:
-                ws.save_session(rec)
-            else:
-                lifecycle.fire("verify")
-        attempt = rec.attempts[-1]
-        evidence_dir = ws.root / attempt.evidence
-        if self.keep_success_images:
-            wait_for_images(evidence_dir)  # kept either way: the verdict references them
-        evidence = self._evidence(evidence_dir)
-        history = self.lineage(rec)
-        judged, judged_evidence = self._judged(rec, evidence, history)
-        verdict = self.verifier.verify(judged, judged_evidence, history=history, lineage_depth=len(history))
-        if verdict.verdict == "success" and not self.keep_success_images:
-            verdict = verdict.model_copy(update={"evidence": [r for r in verdict.evidence if r not in evidence.images]})
-            self._prune_images(evidence)
-        elif images_pending(evidence_dir):
-            # Images are rendered off the critical path; a verdict other than success
-            # keeps them and refers to them, so it is judged again once they exist.
-            wait_for_images(evidence_dir)
-            evidence = self._evidence(evidence_dir, fresh=True)
-            verdict = self.verifier.verify(rec, evidence, history=history)
-        attempt.verdict = verdict
-        # model calls made for this session during its attempt (agent runtime) and its revision (a model reviser)
-        calls_for = getattr(self.verifier.recovery, "calls_for", None)
-        revised = [rec.session_id] + ([judged.session_id] if judged.session_id != rec.session_id else [])
-        rec.context = with_calls(rec.context, trace_calls(evidence.trace, ref=evidence.refs("trace")[0]
-                                                          if evidence.refs("trace") else None)
-                                 + ([c for sid in revised for c in calls_for(sid)] if calls_for is not None else []))
-        event = _EVENT_OF_VERDICT[verdict.verdict]
-        rec.lease = None
-        lifecycle.fire(event, reason=verdict.reason[:200])
-        self._owed_log.append(LogEntry(at=utc_now(), session_id=rec.session_id, node=rec.node,
-                                       event=f"verdict_{verdict.verdict}", state=rec.state, message=verdict.reason))
-        logger.info("session %s verdict %s: %s", rec.session_id, verdict.verdict, verdict.reason)
-        if self.consolidate:
-            self._consolidate(rec, verdict, evidence, history)
-        return rec
+    def _write_task(self, sessions: list[SessionRecord] | None = None) -> None:
+        sessions = self.sessions() if sessions is None else sessions
+        self.last_sessions = sessions
+        self.task_view_stale = False
+        states = self.node_states(sessions)
+        by_node: dict[str, list[str]] = {}
+        for s in sessions:
+            by_node.setdefault(s.node, []).append(s.session_id)
+        nodes = [
+            TaskNode(id=n.id, skill=n.skill, target=n.target, depends_on=list(n.depends_on), state=states[n.id],
+                     session_ids=by_node.get(n.id, []))
+            for n in self.graph.nodes
+        ]
 
-    def _judged(self, rec: SessionRecord, evidence: EvidenceBundle,
-                history: list[SessionRecord]) -> tuple[SessionRecord, EvidenceBundle]:
-        """What a verification judges: ``rec`` on its own evidence, or for an *another view*
-        child the nearest acting ancestor on its evidence with this view's terminal snapshot."""
-        if rec.recovery is None or rec.recovery.skill != "observe":
-            return rec, evidence
-        acting = next((h for h in reversed(history) if h.skill != "observe" and h.attempts
-                       and h.attempts[-1].evidence), None)
-        if acting is None:
-            return rec, evidence
-        try:
-            base = load_evidence(self.workspace.root / acting.attempts[-1].evidence)
-        except VerifierError as exc:
-            logger.warning("acting session %s evidence unreadable: %s", acting.session_id, exc)
-            return rec, evidence
-        files = {**base.files, "terminal": f"../{evidence.directory.name}/{evidence.files.get('terminal', '')}"}
-        merged = replace(base, terminal=evidence.terminal, files=files)
-        return acting, merged
+        def apply(doc: TaskDoc) -> TaskDoc:
+            return TaskDoc(version=doc.version, run_id=self.run_id, goal_graph=str(self.graph.path) if self.graph.path else None,
+                           nodes=nodes)
 
-    def lineage(self, rec: SessionRecord) -> list[SessionRecord]:
-        """``rec``'s ancestors along ``parent_session_id``, oldest first."""
-        chain: list[SessionRecord] = []
-        parent = rec.parent_session_id
-        while parent:
-            chain.append(self.workspace.load_session(parent))
-            parent = chain[-1].parent_session_id
-        return chain[::-1]
+        # TASK.md is a view derived from the session files on every step: atomic, not fsynced.
+        self.workspace.update("TASK", apply, durable=False)
 
-    def _conditions(self, rec: SessionRecord) -> Conditions:
-        if rec.context is not None and rec.context.conditions:
-            return Conditions.from_dict(rec.context.conditions)
-        return self.context_builder.conditions(goal=f"{self.graph.name}/{rec.node}", skill=rec.skill,
-                                               target=rec.target, parameters=rec.parameters,
-                                               scene=declared_scene(rec.scene))
 
-    def observed(self, obj: Any, sessions: list[SessionRecord] | None = None) -> ObservedObject | None:
-        """What this run's finished sessions observed of object ``obj`` (perceived geometry,
-        mass estimated from the wrist load, slips), from their evidence bundles."""
-        if not isinstance(obj, str):
-            return None
-        bundles = []
-        for s in sessions if sessions is not None else self.sessions():
-            for attempt in s.attempts:
-                if attempt.evidence and (self.workspace.root / attempt.evidence / "bundle.yaml").is_file():
-                    try:
-                        bundles.append(self._evidence(self.workspace.root / attempt.evidence))
-                    except VerifierError as exc:  # an unreadable bundle contributes nothing, never stops the run
-                        logger.warning("evidence %s unreadable for observations: %s", attempt.evidence, exc)
-        return observe_object(bundles, obj)
+    # -- evidence --------------------------------------------------------
 
     def _evidence(self, directory, *, fresh: bool = False) -> EvidenceBundle:
         """:func:`load_evidence` of ``directory``, read again only when its ``bundle.yaml``
@@ -608,131 +354,3 @@ class AgentCoordinator:
                 self._bundles.popitem(last=False)
         return bundle
 
-    def _prune_images(self, evidence: EvidenceBundle) -> None:
-        # Retention: a success's verdict, snapshots and trace stay; its RGB images go
-        # (the marker first: images the runner writes later are then deleted by it).
-        (evidence.directory / PRUNED_MARKER).touch()
-        for ref in evidence.images:
-            (self.workspace.root / ref).unlink(missing_ok=True)
-
-    def _consolidate(self, rec: SessionRecord, verdict, evidence: EvidenceBundle,
-                     history: list[SessionRecord]) -> None:
-        """Verified outcomes only: lessons are confirmed or refuted, knowledge counted, procedures promoted."""
-        conditions = self._conditions(rec)
-        LessonBook(self.workspace).resolve(rec, verdict, conditions, history=history)
-        info = self.context_builder.skills.get(rec.skill)
-        # survival thresholds are the reflex's, owned by their trials (memory/deaths.py): not a
-        # strategy of this skill, so never counted in its knowledge nor promoted with it
-        strategy = {k: v for k, v in rec.parameters.items()
-                    if info is not None and k in info.optional and k not in SITUATIONAL
-                    and not (is_game_skill(rec.skill) and k in SURVIVAL_KEYS)}
-        KnowledgeBase(self.workspace).record(
-            rec, verdict, conditions, strategy=strategy,
-            initial_state=initial_state_fingerprint(evidence.initial, conditions.object))
-        learn_game_session(self.workspace, rec, verdict, evidence.trace, evidence.refs("trace"))  # no-op off games
-        if verdict.verdict == "success":
-            promote(self.workspace, self.promotion)
-
-    def _replan(self, session_id: str) -> int:
-        ws = self.workspace
-        rec = ws.load_session(session_id)
-        verdict = rec.attempts[-1].verdict if rec.attempts else None
-        revision = verdict.revision if verdict is not None else None
-        if revision is not None and revision.reopen:
-            return self._reopen(rec, revision)
-        history = self.lineage(rec)
-        # an another-view session's child continues the acting session's parameters
-        acting = rec if rec.skill != "observe" else next((h for h in reversed(history) if h.skill != "observe"), rec)
-        node = self.graph.get_node(rec.node)
-        if revision is not None and revision.skill:
-            skill, params = revision.skill, dict(revision.parameters)
-        else:  # the acting session's skill: the node's, or the one an earlier revision switched to
-            skill = acting.skill if acting.skill != node.skill else None
-            params = {**acting.parameters, **(revision.parameters if revision else {})}
-        limits = {**acting.limits.model_dump(), **(revision.limits if revision else {})}
-        # a re-target moves the node (and its later children) to the selector's other target
-        target = revision.target if revision is not None and revision.target else \
-            (acting.target if acting.target != node.target else None)
-        child = self.compiler.compile_node(node, parent=rec, parameters=params, limits=limits, context=acting.context,
-                                           recovery=revision, skill=skill, target=target)
-        with ws.session_lock(session_id):
-            rec = ws.load_session(session_id)
-            rec.child_session_ids.append(child.session_id)
-            SessionLifecycle(rec, persist=ws.save_session).fire("replanned", reason=f"child {child.session_id}")
-        # another view only looks again (no correction to learn); a skill switch or re-target is one
-        if self.consolidate and revision is not None and verdict.diagnosis is not None and revision.skill != "observe":
-            LessonBook(ws).propose(parent=acting, child=child, diagnosis=verdict.diagnosis, revision=revision,
-                                   conditions=self._conditions(acting))
-        return 1
-
-    def _reopen(self, rec: SessionRecord, revision) -> int:
-        """Re-open ``revision.reopen`` upstream of ``rec`` (a re-pick); ``rec``'s node runs
-        again once it succeeded (:meth:`_resume_after_reopen`)."""
-        ws = self.workspace
-        upstream = self.latest_by_node().get(revision.reopen)
-        node = self.graph.get_node(revision.reopen)
-        base = dict(upstream.parameters) if upstream is not None else dict(node.params)
-        params = {**base, **revision.parameters}  # e.g. the slip's firmer grip, applied to the re-pick
-        repick = self.compiler.compile_node(node, parent=upstream, parameters=params,
-                                            context=upstream.context if upstream is not None else None,
-                                            recovery=revision, target=upstream.target if upstream is not None else None)
-        verdict = rec.attempts[-1].verdict if rec.attempts else None
-        if self.consolidate and revision.parameters and upstream is not None and verdict is not None \
-                and verdict.diagnosis is not None:
-            LessonBook(ws).propose(parent=upstream, child=repick, diagnosis=verdict.diagnosis, revision=revision,
-                                   conditions=self._conditions(upstream))
-        with ws.session_lock(rec.session_id):
-            rec = ws.load_session(rec.session_id)
-            rec.child_session_ids.append(repick.session_id)
-            SessionLifecycle(rec, persist=ws.save_session).fire(
-                "replanned", reason=f"re-opened {revision.reopen} as {repick.session_id}")
-        logger.info("session %s: re-opened upstream node %s as %s", rec.session_id, revision.reopen,
-                    repick.session_id)
-        return 1
-
-    def _write_task(self, sessions: list[SessionRecord] | None = None) -> None:
-        sessions = self.sessions() if sessions is None else sessions
-        self.last_sessions = sessions
-        self.task_view_stale = False
-        states = self.node_states(sessions)
-        by_node: dict[str, list[str]] = {}
-        for s in sessions:
-            by_node.setdefault(s.node, []).append(s.session_id)
-        nodes = [
-            TaskNode(id=n.id, skill=n.skill, target=n.target, depends_on=list(n.depends_on), state=states[n.id],
-                     session_ids=by_node.get(n.id, []))
-            for n in self.graph.nodes
-        ]
-
-        def apply(doc: TaskDoc) -> TaskDoc:
-            return TaskDoc(version=doc.version, run_id=self.run_id, goal_graph=str(self.graph.path) if self.graph.path else None,
-                           nodes=nodes)
-
-        # TASK.md is a view derived from the session files on every step: atomic, not fsynced.
-        self.workspace.update("TASK", apply, durable=False)
-
-    # -- reporting -------------------------------------------------------
-
-    def summary(self) -> list[SessionSummary]:
-        """One row per session of the run, in creation order."""
-        rows = []
-        for s in self.sessions():
-            attempt = s.attempts[-1] if s.attempts else None
-            verdict = attempt.verdict if attempt else None
-            reason = verdict.reason if verdict else ("; ".join(f"{r.code} ({r.field}): expected {r.expected}, found {r.found}"
-                                                               for r in s.rejection) or
-                                                    (attempt.error.message if attempt and attempt.error else ""))
-            rows.append(SessionSummary(
-                session_id=s.session_id, node=s.node, skill=s.skill, target=s.target, status=s.state,
-                verdict=verdict.verdict if verdict else None, reason=reason,
-                duration_s=_seconds_between(attempt.started_at, attempt.ended_at) if attempt else None,
-                evidence=attempt.evidence if attempt else None, parent_session_id=s.parent_session_id,
-                cause=verdict.diagnosis.cause if verdict and verdict.diagnosis else None,
-                strategy=s.recovery.strategy if s.recovery else None,
-                memory=tuple(i.id for i in s.context.items if i.applied) if s.context else (),
-            ))
-        return rows
-
-    def succeeded(self) -> bool:
-        """True when every node's latest session succeeded."""
-        return all(state == dagmod.SUCCEEDED for state in self.node_states().values())

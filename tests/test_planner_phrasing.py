@@ -312,3 +312,21 @@ def test_the_smaller_of_the_two_compares_within_the_two():
     assert read("take the smaller of the two red cubes and put it in the right bin", REDS)[0] == [
         ("move", ("small_red_cube",), ("right_bin",))]
     refused("take the smaller of the three red cubes and put it in the right bin", REDS, code="not_understood")
+
+
+# --------------------------------------------------------------------------- a definite region among several
+
+
+def test_the_bin_among_two_bins_is_asked_about_not_guessed():
+    for text in ("put the red cube in the bin", "move the blue cube into the tray", "drop the green cube in the box"):
+        refused(text, code="not_understood")
+    intents, problems, _ = read("put the red cube in the bin", ONE_BIN)
+    assert not problems and intents == [("move", ("red_cube",), ("left_bin",))]
+
+
+def test_a_bin_either_bin_or_a_named_bin_leaves_no_question():
+    for text in ("put the red cube in a bin", "put the red cube in either bin", "put the red cube in any bin"):
+        intents, problems, _ = read(text)
+        assert not problems and intents[0][2] == ("left_bin", "right_bin"), (text, intents, problems)
+    intents, problems, _ = read("put the red cube in the left bin")
+    assert not problems and intents[0][2] == ("left_bin",)

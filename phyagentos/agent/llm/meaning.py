@@ -465,6 +465,14 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
         picked = [r.name for s, _, r in scored if s == top]
     else:
         picked = [r.name for s, g, r in scored if g] or [r.name for _, _, r in scored]
+        # "the bin" among two bins names one of them without saying which: ask, do not guess
+        # ("a bin", "either bin", "any of the trays" leave the choice to the plan)
+        kind_words = set(ws) & (_REGION_KIND | _REGION_SYNONYMS)
+        singular = bool(kind_words) and all(not w.endswith("s") for w in kind_words)
+        definite = "the" in words and not set(words) & {"a", "an", "any", "either", "whichever", "one", "some"}
+        if len(picked) > 1 and singular and definite:
+            return "region", (), False, [("not_understood", f"{quote(' '.join(words))} could be any of "
+                                                            f"{', '.join(picked)}: say which")]
     if not picked:
         return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))}: the scene has "
                                                              f"no region")]

@@ -12,7 +12,7 @@ import pytest
 
 from phyagentos.cli import main
 from phyagentos.primitives import SkillContext
-from phyagentos.primitives.placement import ComputePlaceAt, slot_offset
+from phyagentos.primitives.placement import ComputePlaceAt, slot_grid, slot_offset
 from phyagentos.targets import MuJoCoTarget
 from phyagentos.targets.scene import SceneSpec
 
@@ -149,3 +149,18 @@ def test_place_on_another_object_stacks_it_through_the_cli(tmp_path, capsys):
     red, blue = qpos[9:12], qpos[16:19]  # free joints after 7 arm + 2 finger joints, in scene order
     assert red[2] == pytest.approx(2 * 0.025 + 0.02, abs=0.005)  # resting on the blue cube's top face
     assert np.hypot(*(red[:2] - blue[:2])) < 0.02
+
+
+def test_three_or_four_cells_of_a_square_region_stand_two_by_two_and_a_strip_keeps_one_row():
+    assert slot_grid((0.07, 0.07), 2) == (2, 1)
+    assert slot_grid((0.07, 0.07), 3) == (2, 2) and slot_grid((0.07, 0.07), 4) == (2, 2)
+    assert slot_grid((0.04, 0.10), 3) == (3, 1)
+    assert slot_offset((0.07, 0.07), 2, 3) == pytest.approx([-0.035, 0.035])
+    assert slot_offset((0.07, 0.07), 1, 3) == pytest.approx([0.035, -0.035])
+
+
+def test_the_fit_is_checked_on_the_footprint_the_object_will_have(target):
+    # a 4 cm cube 5.9 cm off the centre of an 8 cm half-extent region: its side reaches 7.9 cm
+    # (inside), where the circle around it (2.8 cm) would reach 8.7 cm
+    xy = _place(target, ComputePlaceAt("P", object="cube", region="goal", offset_m=[0.059, 0.0]))
+    assert isinstance(xy, np.ndarray), xy

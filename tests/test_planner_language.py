@@ -372,3 +372,31 @@ def test_two_cubes_into_one_region_are_set_down_in_their_own_cells_and_both_end_
     for name in ("red_cube", "blue_cube"):
         x, y, z = objs[name]["position"]
         assert abs(x - 0.42) <= 0.07 and abs(y - 0.24) <= 0.07 and z < 0.03, (name, objs[name]["position"])
+
+
+@pytest.mark.sim
+def test_three_cubes_of_different_sizes_share_one_square_bin_two_by_two(planner, tmp_path):
+    """Three cubes sent to one square bin were laid out in a row of three cells, each a third of
+    the bin wide: a 6 cm cube does not fit a 4.7 cm cell, and the run ended place.outside_region
+    with one cube in the air. The cells of a square region are now two by two, and the fit is
+    checked on the footprint the object will have, not on the circle around it."""
+    from phyagentos.app.orchestrator import run_goal_graph
+
+    cubes = [("red_cube", 0.015, (0.44, -0.22), [0.8, 0.1, 0.1, 1]), ("blue_cube", 0.0225, (0.58, -0.2), [0.1, 0.2, 0.8, 1]),
+             ("green_cube", 0.03, (0.5, -0.04), [0.1, 0.7, 0.2, 1])]
+    scene = {"objects": [{"name": n, "half_extents": [h] * 3, "position": list(p), "rgba": c} for n, h, p, c in cubes],
+             "regions": [{"name": "left_bin", "center": [0.47, 0.22], "half_extents": [0.07, 0.07],
+                          "rgba": [0.5, 0.5, 0.5, 0.3]}]}
+    result = planner.plan("put all the cubes in the left bin", scene=scene, environment=seen(scene))
+    assert result.status == "planned", result.reason
+    places = [n for n in result.graph.nodes if n.skill == "place_at"]
+    assert sorted(n.params["slot"] for n in places) == [0, 1, 2] and {n.params["slots"] for n in places} == {3}
+    graph = tmp_path / "g.yaml"
+    graph.write_text(result.graph_yaml)
+    report = run_goal_graph(graph, tmp_path / "ws", seed=0, use_memory=False, consolidate=False)
+    assert report.succeeded, [(s.node, s.status, s.reason) for s in report.sessions]
+    last = max((tmp_path / "ws" / "evidence").glob("*/ground_truth.yaml"), key=lambda p: p.stat().st_mtime_ns)
+    objs = yaml.safe_load(last.read_text())["terminal"]["objects"]
+    for name, half, _, _ in cubes:
+        x, y, z = objs[name]["position"]
+        assert abs(x - 0.47) <= 0.07 and abs(y - 0.22) <= 0.07 and z < half + 0.01, (name, objs[name]["position"])

@@ -545,7 +545,7 @@ class GoalPlanner:
         chosen_sels = self._select_world_target(steps, world, scene, prefer_target)
         # Several objects into one region: ``pick_and_place`` sets each down at the region's centre, so
         # the second lands on the first. Each of them becomes a pick, then a ``place_at`` in its own cell
-        # (``slots`` cells along the region's longer axis, in the order of the steps).
+        # (cell ``slot`` of ``slots`` laid out over the region, placement.slot_offset, in the order of the steps).
         sharing: dict[str, list[str]] = {}
         for s in steps:
             if s.skill == "pick_and_place" and s.destination and world.get(s.destination).kind == "region":

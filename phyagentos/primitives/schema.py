@@ -215,7 +215,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "object": ("str", "", "the held object"),
         "region": ("str", "", "region to set it down in"),
         "offset_m": ("[dx, dy] | null", "m", "spot relative to the region's centre (give `offset_m` or `slot`)"),
-        "slot": ("int", "", "0-based cell along the region's longer axis"),
+        "slot": ("int", "", "0-based cell of the region's grid (placement.slot_offset: along the longer axis, then row by row)"),
         "slots": ("int", "", "number of cells the region is divided into (1: the centre)"),
         "approach_height_m": ("float", "m", "pre-place height above the place pose"),
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),

@@ -245,3 +245,36 @@ def test_a_real_pick_hidden_by_the_hand_is_judged_from_proprioception(tmp_path, 
     assert est.status == "held"
     assert math.dist(est.position_m, true_pos) < 3 * est.position_std_m + 0.005, (est.position_m, true_pos)
     assert est.facts["mass_kg"] == pytest.approx(true["terminal"]["objects"]["cube"]["mass_kg"], rel=0.2)
+
+
+def _without_wrist_sensor(trace):
+    """The trace LIBERO's Panda records: robosuite's hand has no force/torque sensor wired to
+    the runtime, so every sample's wrist force and load are missing (issue 28)."""
+    return [{**r, "wrist_force_n": None, "wrist_load_n": None} if r.get("kind") == "proprio" else r
+            for r in trace if r.get("kind") != "load"]
+
+
+def test_a_pick_without_a_wrist_sensor_is_unknown_to_the_model_never_held(tmp_path):
+    ev = occluded(tmp_path, _without_wrist_sensor(pick_trace()), tcp_end=(0.5, -0.2, 0.17))
+    for e in ev.terminal["entities"]:
+        e["attributes"].pop("wrist_force_n", None)
+    est = estimate_held(ev, "cube")
+    assert est.status == "unknown" and "no wrist load sampled after the lift" in est.reason
+    out = judge(ev)
+    assert out["holding"].status == "unknown" and out["lifted"].status == "unknown"
+    assert SessionVerifier().verify(session(), ev).verdict != "success"
+    # the same hand whose fingers closed on nothing is still not held without a sensor
+    empty = occluded(tmp_path, _without_wrist_sensor(pick_trace(opening=0.0003)), tcp_end=(0.5, -0.2, 0.17),
+                     opening=0.0003, name="empty")
+    assert estimate_held(empty, "cube").status == "not_held"
+
+
+@pytest.mark.parametrize("load", [0.214, 0.12])  # salad dressing 21.8 g, bbq sauce 12.2 g (measured, LIBERO)
+def test_a_featherweight_bottle_is_within_two_sigma_of_an_empty_hand_so_the_load_cannot_confirm_it(tmp_path, load):
+    """With robosuite's wrist sensor wired (a diagnosis, not the target's configuration), the
+    lifted salad dressing read 0.214 N: inside the empty hand's 2-sigma band (0.1 N + 2 x
+    (0.05 + 5 %) = 0.221 N). The model stays undecided; the cameras must decide."""
+    ev = occluded(tmp_path, pick_trace(loads=(load, load)), tcp_end=(0.5, -0.2, 0.17), load=load)
+    est = estimate_held(ev, "cube")
+    assert est.status == "unknown" and "of an empty hand" in est.reason
+    assert judge(ev)["holding"].status != "satisfied"

@@ -98,3 +98,19 @@ def test_a_missing_libero_install_is_a_clear_error(monkeypatch):
             suite_tasks("libero_spatial")
     finally:
         catalog._suite_tasks_cached.cache_clear()
+
+
+def test_a_generated_scene_has_no_init_state_and_keeps_declared_looks_as_plain_data():
+    from phyagentos.yamlsource import load_yaml
+
+    raw = load_yaml("suite: libero_object\ntask: 2\ngenerated: true\n"
+                    "objects: [{name: salad_dressing_1, class: salad_dressing, colour: [0.09, 0.094, 0.082]}]\n",
+                    error=TargetError)
+    scene = LiberoScene.from_dict(raw)
+    assert scene.generated and scene.to_dict()["generated"] is True
+    assert type(scene.objects[0]["colour"]) is list  # writable into protocol documents (ground_truth.yaml)
+    assert "generated" not in LiberoScene(suite="libero_object", task=2).to_dict()  # the bench's scenes unchanged
+    with pytest.raises(TargetError, match="generated scene has no init state"):
+        LiberoScene(suite="libero_object", task=2, init=0, generated=True)
+    with pytest.raises(TargetError, match="generated must be true or false"):
+        LiberoScene.from_dict({"suite": "libero_object", "task": 2, "generated": "yes"})

@@ -302,6 +302,12 @@ class Perceiver:
         focal = np.array([f.intrinsics.fx / cfg.stride_for(f.intrinsics.width) for f in frames])
         clusters = detect_clusters(cloud, heights, plane, cfg, focal)
         dets = _stack([d for d, _ in clusters], plane, cfg)
+        hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
+        if hanging:  # the part of the held object below the fingers: the hand's, not a thing on the table
+            log.debug("perception: %d segment(s) hang from the closed hand: %s", len(hanging),
+                      [_r(dets[i].position) for i in hanging])
+            clusters = [c for i, c in enumerate(clusters) if i not in hanging]
+            dets = [d for i, d in enumerate(dets) if i not in hanging]
         t2 = time.perf_counter()
         sensors = [f.sensor for f in frames]
         det_cams = [self._cameras_of(cloud, heights, d, sensors) for d in dets]
@@ -313,6 +319,11 @@ class Perceiver:
         assoc = associate(C, cfg)
         for t in self.tracks.values():
             t.seen_now = False
+        # objects the hand held or let go since they were last seen, or seen inside a container,
+        # with their tracked height (a released item's lower part may be hidden by the walls)
+        let_go = {n for n, t in self.tracks.items() if t.held or t.released_s is not None}
+        tracked_h = {n: 2.0 * float(t.half_extents[2]) for n, t in self.tracks.items()
+                     if n in let_go or t.inside_of is not None}
         matched: dict[int, str] = {}
         for i, (j, cost, margin) in assoc.matches.items():
             det = dets[i]
@@ -326,9 +337,18 @@ class Perceiver:
             self.tracks[name].seen_now = True
             self.tracks[name].released_s = None
             matched[i] = name
-        for i, name in matched.items():  # seen again: still inside the container it was in?
+        for i, name in matched.items():  # seen again: still inside the container it was in (or let go into)?
             t = self.tracks[name]
-            t.inside_of = _still_inside(t.inside_of, dets[i], dets, matched)
+            container = t.inside_of
+            if container is None and name in let_go:
+                container = _container_around(i, dets, matched)
+            t.inside_of = _still_inside(container, dets[i], dets, matched, height_m=tracked_h.get(name))
+            if t.inside_of is not None and name in tracked_h and dets[i].bottom_m <= 1e-6:
+                # its bottom is hidden by the walls: where its height puts it, below the visible top
+                h = tracked_h[name]
+                t.bottom_m = max(0.0, dets[i].top_m - h)
+                t.half_extents[2] = 0.5 * h
+                t.position[2] = plane.z_at(t.position[:2]) + t.bottom_m + 0.5 * h
 
         # ---- holding (a release noticed now is looked for in this very observation)
         holding_rel = self._update_holding(proprio, stamp)
@@ -487,7 +507,7 @@ class Perceiver:
         for name, t in self.tracks.items():
             if t.seen_now and not t.held:
                 continue  # seen on the table (outside the gripper box): not in the hand
-            width = width_across_fingers(t.half_extents, t.yaw, t.shape, proprio.tcp_pose)
+            width = width_in_hand(t.half_extents, t.yaw, t.shape, proprio)
             ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
                                   grasp_height_m=self._grasp_height_m, config=cfg)
             if ev.confidence <= 0.0:
@@ -609,11 +629,63 @@ def _stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> lis
     return out
 
 
-def _still_inside(container: str | None, det: Detection, dets: list[Detection], matched: dict[int, str]) -> str | None:
+def width_in_hand(half_extents: np.ndarray, yaw: float, shape: str, proprio: Proprioception) -> float:
+    """The width (m) of a tracked object the fingers would hold: across the fingers at its
+    perceived yaw (:func:`~phyagentos.perception.relations.width_across_fingers`); for a box,
+    whichever of that, its width or its length is nearest the fingers' gap: squeezed between
+    flat pads a box turns until a face lies on each, so the gap is its width or its length
+    whatever its perceived yaw (a carton's gable top can make it 90 degrees wrong)."""
+    width = width_across_fingers(half_extents, yaw, shape, proprio.tcp_pose)
+    if shape != "box":
+        return width
+    gap = 2.0 * proprio.gripper_opening_m
+    return min((width, 2.0 * float(half_extents[0]), 2.0 * float(half_extents[1])), key=lambda w: abs(w - gap))
+
+
+def _hangs_from_hand(det: Detection, proprio: Proprioception, config: PerceptionConfig) -> bool:
+    """``det`` is the part of a held object that hangs below the fingers (the gripper box
+    masks only the fingers; a tall bottle grasped near its top shows its lower half): the
+    fingers squeeze something (opening above ``holding.min_opening_m``, effort at least
+    ``holding.min_effort_n``), the segment's lowest points are more than
+    ``holding.lift_height_m`` above the support plane with nothing under it (stacking gave
+    it no support: ``bottom_m`` 0), and its centre lies within ``holding.capture_radius_m``
+    of the tcp horizontally. A rigid object off the support with nothing under it is carried,
+    and under a closed hand that squeezes it is carried by the hand; an object standing on
+    the table shows points down to the plane and is never taken for it."""
+    hc = config.holding
+    if proprio.gripper_opening_m <= hc.min_opening_m or abs(proprio.gripper_effort_n) < hc.min_effort_n:
+        return False
+    if det.low_m <= hc.lift_height_m or det.bottom_m > 1e-6:
+        return False
+    tcp = proprio.tcp_pose[:3, 3]
+    return float(np.hypot(det.position[0] - tcp[0], det.position[1] - tcp[1])) <= hc.capture_radius_m
+
+
+def _container_around(i: int, dets: list[Detection], matched: dict[int, str]) -> str | None:
+    """The associated segment whose footprint holds detection ``i``'s centre and is wider
+    than ``i``'s own (a container an item let go may stand in), the deepest inside if
+    several; else None."""
+    det = dets[i]
+    best, best_margin = None, 0.0
+    for k, name in matched.items():
+        c = dets[k]
+        if k == i or float(np.max(c.half_extents[:2])) <= float(np.max(det.half_extents[:2])):
+            continue
+        margin = _footprint_margin(det.position[:2], c.position, c.yaw, c.half_extents, c.shape)
+        if margin >= best_margin:
+            best, best_margin = name, margin
+    return best
+
+
+def _still_inside(container: str | None, det: Detection, dets: list[Detection], matched: dict[int, str], *,
+                  height_m: float | None = None) -> str | None:
     """``container`` when the object's new detection ``det`` still stands inside it: the
     container is seen now (associated), ``det``'s centre lies in its footprint and its lowest
     points lie more than 2 cm below the container's top (not resting on the rim); else None.
-    (A partial view over a basket's wall is a segment of its own.)"""
+    (A partial view over a basket's wall is a segment of its own.) With the object's tracked
+    height ``height_m``, its bottom may also be inferred from its visible top (``top -
+    height``): a tall item standing in a basket shows only its part above the walls, and
+    resting on the rim its bottom would be at the rim, its top a whole height above it."""
     if container is None:
         return None
     k = next((i for i, n in matched.items() if n == container), None)
@@ -622,7 +694,8 @@ def _still_inside(container: str | None, det: Detection, dets: list[Detection], 
     c = dets[k]
     if _footprint_margin(det.position[:2], c.position, c.yaw, c.half_extents, c.shape) < 0.0:
         return None
-    return container if det.low_m < c.top_m - 0.02 else None
+    low = det.low_m if height_m is None else min(det.low_m, det.top_m - height_m)
+    return container if low < c.top_m - 0.02 else None
 
 
 def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Detection], indices: list[np.ndarray],

@@ -114,6 +114,16 @@ _NOOP_ACTION = np.array([0.0] * 6 + [-1.0])
 OSC_ACTION_DIM = 7
 
 
+def _plain(value: Any) -> Any:
+    """``value`` as plain dicts, lists and scalars (a goal graph's YAML loader hands out
+    its own list and mapping types, which protocol documents refuse to write)."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
 @dataclass(frozen=True)
 class LiberoScene:
     """Which LIBERO world to build.
@@ -129,6 +139,11 @@ class LiberoScene:
             them; each must be an object of the task's BDDL with that category (what the
             Agent plane reads; the world is built from the BDDL file either way).
         fixtures: the declared fixtures, checked the same way.
+        generated: ``True``: every reset builds a *generated* scene instead of a fixed init
+            state: LIBERO's own placement sampler seeded with the reset seed
+            (:meth:`LiberoTarget.generate_scene`), for developing and tuning through the
+            session path on scenes that are not LIBERO's evaluation states; ``init`` must
+            then be ``None``. The bench never sets it.
 
     Raises:
         TargetError: an unknown suite, task or init index (the valid ones listed), a bad
@@ -141,16 +156,21 @@ class LiberoScene:
     settle_steps: int = SETTLE_STEPS
     objects: tuple[Mapping[str, Any], ...] = field(default=())
     fixtures: tuple[Mapping[str, Any], ...] = field(default=())
+    generated: bool = False
 
     def __post_init__(self) -> None:
         info = resolve_task(self.suite, self.task)
+        if not isinstance(self.generated, bool):
+            raise TargetError(f"LIBERO scene: generated must be true or false, got {self.generated!r}")
+        if self.generated and self.init is not None:
+            raise TargetError("LIBERO scene: a generated scene has no init state (omit init, or generated)")
         if self.init is not None:
             check_init_index(info, self.init)
         if isinstance(self.settle_steps, bool) or not isinstance(self.settle_steps, int) or not 0 <= self.settle_steps <= 200:
             raise TargetError(f"settle_steps must be an integer in [0, 200], got {self.settle_steps!r}")
         problem = parse_bddl(info.bddl_path)
         for key, table in (("objects", problem.objects), ("fixtures", problem.fixtures)):
-            items = tuple(dict(o) for o in getattr(self, key))
+            items = tuple(_plain(o) for o in getattr(self, key))
             for o in items:
                 name, cls = o.get("name"), o.get("class")
                 if name not in table:
@@ -194,6 +214,8 @@ class LiberoScene:
             out["objects"] = [dict(o) for o in self.objects]
         if self.fixtures:
             out["fixtures"] = [dict(o) for o in self.fixtures]
+        if self.generated:
+            out["generated"] = True
         return out
 
 
@@ -289,7 +311,7 @@ class LiberoTarget(MuJoCoArmTarget, OscControlled):
         self._task = scene.info
         self._problem = scene.problem
         self._states = load_init_states(self._task)
-        self._init_index = self._init_for(seed)  # checked before anything is built
+        self._init_index: int | None = self._init_for(seed)  # checked before anything is built
         try:
             self._env = _make_env(self._task)
         except Exception as exc:  # robosuite / LIBERO / mujoco errors
@@ -324,7 +346,9 @@ class LiberoTarget(MuJoCoArmTarget, OscControlled):
         self.reset(seed=seed)
 
     # -- construction ----------------------------------------------------------------------
-    def _init_for(self, seed: int | None) -> int:
+    def _init_for(self, seed: int | None) -> int | None:
+        if self._scene.generated:
+            return None
         init = self._scene.init if self._scene.init is not None else (0 if seed is None else int(seed))
         return check_init_index(self._task, init)
 
@@ -403,8 +427,8 @@ class LiberoTarget(MuJoCoArmTarget, OscControlled):
         return self._task
 
     @property
-    def init_index(self) -> int:
-        """Index of the fixed initial state the last reset used."""
+    def init_index(self) -> int | None:
+        """Index of the fixed initial state the last reset used (``None``: a generated scene)."""
         return self._init_index
 
     def object_body(self, name: str) -> str:
@@ -457,6 +481,8 @@ class LiberoTarget(MuJoCoArmTarget, OscControlled):
         (``scene.init``, else ``seed``, else 0), :data:`SETTLE_STEPS` control steps of
         LIBERO's controller with the do-nothing action, then the arm servos hold the settled
         configuration. Re-seeds :attr:`rng` and the camera noise. Returns :meth:`observe`.
+        A ``generated`` scene instead gets :meth:`generate_scene` with ``seed`` (0 if
+        ``None``) and no init state.
 
         Raises:
             TargetError: an init index out of range (the valid range named).
@@ -471,8 +497,12 @@ class LiberoTarget(MuJoCoArmTarget, OscControlled):
         m = self._model
         self._servo(m, False)
         try:
-            self._env.reset()
-            self._env.set_init_state(np.array(self._states[self._init_index]))
+            if self._init_index is None:
+                self._env.seed(int(seed or 0))
+                self._env.reset()
+            else:
+                self._env.reset()
+                self._env.set_init_state(np.array(self._states[self._init_index]))
             for _ in range(self._scene.settle_steps):
                 self._env.step(_NOOP_ACTION)
         finally:
@@ -861,6 +891,6 @@ class LiberoTarget(MuJoCoArmTarget, OscControlled):
         return {"init_index": self._init_index, "env_steps": self._env_steps, "home": self._home.tolist()}
 
     def _restore_meta(self, meta: dict[str, Any]) -> None:
-        self._init_index = int(meta["init_index"])
+        self._init_index = None if meta["init_index"] is None else int(meta["init_index"])
         self._env_steps = int(meta["env_steps"])
         self._home = np.asarray(meta["home"], dtype=float)

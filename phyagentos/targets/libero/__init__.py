@@ -1,7 +1,10 @@
 """LIBERO behind the Target contract (driver ``libero``; docs/libero.md).
 
 :mod:`.catalog`: suites, tasks, init states and BDDL problems, resolved without building a
-world. :mod:`.target`: :class:`LiberoTarget` and its scene :class:`LiberoScene`. Needs the
+world. :mod:`.target`: :class:`LiberoTarget` and its scene :class:`LiberoScene`, with its
+mix-ins :mod:`.osc` (LIBERO's OSC_POSE action form), :mod:`.privileged` (LIBERO's checker and
+true state, for scoring only) and :mod:`.sensing` (declared objects, perception parameters,
+camera images). Needs the
 ``libero`` extra (``pip install -e '.[libero]'``).
 """
 

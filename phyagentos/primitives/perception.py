@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
+from phyagentos.motion.grasp import DEFAULT_MAX_GRASP_WIDTH_M, place_pose, top_down_grasp_candidates
 from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
@@ -120,7 +120,7 @@ class ComputeGrasp(Primitive):
         shape = (ent.get("attributes") or {}).get("shape") or "box"
         plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m,
                                           shape=shape if shape in ("box", "cylinder", "sphere") else "box",
-                                          max_width_m=self.ctx.target.max_grasp_width_m or 0.08)
+                                          max_width_m=self.ctx.target.max_grasp_width_m or DEFAULT_MAX_GRASP_WIDTH_M)
         plan = plans[self.candidate % len(plans)]
         plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m)
         self.set(self.grasp_key, plan.grasp)

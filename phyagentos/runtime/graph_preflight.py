@@ -32,7 +32,7 @@ import mujoco
 import numpy as np
 
 from phyagentos.errors import IKError, PhyAgentOSError, TargetError, format_choices
-from phyagentos.motion.grasp import place_pose, top_down_grasp_candidates
+from phyagentos.motion.grasp import DEFAULT_MAX_GRASP_WIDTH_M, place_pose, top_down_grasp_candidates
 from phyagentos.motion.ik import solve_ik
 from phyagentos.primitives.motion import ik_options
 from phyagentos.targets.contract import Target
@@ -291,7 +291,7 @@ def check_reachability(driver: str, target_name: str, scene: Any, *, picks: Sequ
             T_obj = _T((obj.position[0], obj.position[1], obj.rest_z), obj.yaw)
             try:
                 cands = top_down_grasp_candidates(T_obj, obj.half_extents, approach_height_m=pick.approach_height_m,
-                                                  max_width_m=target.max_grasp_width_m or 0.08)
+                                                  max_width_m=target.max_grasp_width_m or DEFAULT_MAX_GRASP_WIDTH_M)
             except IKError as exc:
                 wider = _wider_grippers(driver, 2.0 * min(obj.half_extents[:2]))
                 problems.append(GraphProblem(pick.line, f"node {pick.node!r}: no top-down grasp of {pick.obj!r} on "

@@ -86,7 +86,7 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
     allowed_collision_pairs: tuple[tuple[str, str], ...] = ()
     #: The widest object the gripper takes in a top-down grasp, m (the Franka Hand's 8 cm);
     #: grasp planning and the graph preflight refuse wider objects before anything moves.
-    max_grasp_width_m: ClassVar[float | None] = 0.08
+    max_grasp_width_m: ClassVar[float | None] = 0.08  # motion.grasp.DEFAULT_MAX_GRASP_WIDTH_M (not imported: 2 s)
     #: The gripper's body names for the collision checker; ``None``: the checker's default.
     gripper_body_names: tuple[str, ...] | None = None
     #: For an arm that cannot reach every orientation: position-priority IK accepting

@@ -99,6 +99,21 @@ def test_a_mesh_object_is_sized_by_its_bounding_box_after_scale(ws):
         SceneSpec.from_dict({"objects": [{"name": "nut", "shape": "mesh", "mesh": "meshes/hex.obj"}]})
 
 
+def test_a_thin_mesh_is_refused_after_a_good_mesh_of_the_same_size_was_read_in_the_process(ws):
+    """MuJoCo caches decoded assets process-wide: the check must measure each file, not
+    a cached one of the same name and size (the 0.2 mm prism's file is as long as the
+    good one's)."""
+    good, thin = hex_prism_obj(), hex_prism_obj(height=0.0002)
+    assert len(good) == len(thin)
+    (ws / "meshes" / "thin.obj").write_text(thin, encoding="utf-8")
+    (ws / "meshes" / "tall.obj").write_text(hex_prism_obj(height=0.0451), encoding="utf-8")
+    for _ in range(2):
+        assert load_mesh("meshes/hex.obj", root=ws).half_extents[2] == pytest.approx(HEIGHT_M / 2, abs=1e-6)
+        with pytest.raises(Exception, match="degenerate"):
+            load_mesh("meshes/thin.obj", root=ws)
+        assert load_mesh("meshes/tall.obj", root=ws).half_extents[2] == pytest.approx(0.0451 / 2, abs=1e-6)
+
+
 def test_a_mesh_object_is_picked_and_placed_in_mujoco_through_the_cli(tmp_path, ws, capsys):
     graph = graph_file(tmp_path, "mesh: meshes/hex.obj, ")
     assert main(["validate", str(graph), "--workspace", str(ws)]) == 0

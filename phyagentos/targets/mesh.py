@@ -180,7 +180,10 @@ def load_mesh(path: str, *, root: str | Path, scale: float = 1.0, where: str = "
                           f"{MAX_MESH_VERTICES} vertices and {MAX_MESH_FACES} faces; simplify it (a graspable "
                           "object needs a few thousand faces)")
     sha = hashlib.sha256(data).hexdigest()
-    asset = f"probe{file.suffix.lower()}"
+    # Content-addressed, as in the scene (MeshData.asset_name): MuJoCo keeps decoded
+    # assets in a process-wide cache that a fixed name like "probe.obj" would hit with
+    # another file of the same size, and the probe would measure that file instead.
+    asset = f"probe_{sha[:32]}{file.suffix.lower()}"
     spec = mujoco.MjSpec()
     spec.assets = {asset: data}
     spec.add_mesh(name="probe", file=asset, scale=[float(scale)] * 3)

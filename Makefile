@@ -2,7 +2,8 @@
 #   make demo   set up, then run the shipped example goal graph pick_and_place (phyagentos/data/goal_graphs/)
 #               end to end on the MuJoCo Franka
 #   make test   set up, then check the plane boundary, lint (ruff, mypy on its checked core), and run the test suite (4 workers, one file per worker at a time)
-.PHONY: setup demo test bench clean
+#   make soak   the fault-injection drills at their full scale (PHYAGENTOS_SOAK=1; make test runs them at half)
+.PHONY: setup demo test soak bench clean
 
 setup:
 	@scripts/setup.sh
@@ -17,6 +18,9 @@ test: setup
 	.venv/bin/ruff check .
 	.venv/bin/mypy
 	.venv/bin/pytest -q -n 4 --dist loadfile --no-loadscope-reorder --durations=20
+
+soak: setup
+	PHYAGENTOS_SOAK=1 .venv/bin/pytest -q -n 2 -m soak --durations=0
 
 bench: setup
 	.venv/bin/python -m bench all

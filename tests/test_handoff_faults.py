@@ -18,12 +18,13 @@ import time
 
 import pytest
 import yaml
+from soak import scaled
 from supervisor_util import Drill, assert_run_ended_whole, descends_from, make_workspace, presence, wait_for
 
-pytestmark = pytest.mark.sim
+pytestmark = [pytest.mark.sim, pytest.mark.soak]
 
 SEED = 20261122
-KILLS = 40
+KILLS = scaled(20, 40)  # a third of them supervisors (see tests/soak.py)
 NODES = 60
 SUPERVISORS = 2
 

@@ -206,7 +206,8 @@ class FeetechBus:
             minor = self.read(i, "Firmware_Minor_Version")
             found.append({"id": i, "joint": name, "model": model, "firmware": f"{major}.{minor}"})
         if missing:
-            present = [i for i in range(0, 21) if i not in self.ids and self._ping(i) is not None]
+            # a diagnostic scan: one ping per id (each silent id costs a packet timeout)
+            present = [i for i in range(0, 21) if i not in self.ids and self._ping(i, retries=0) is not None]
             present += [f["id"] for f in found]
             raise BusError(
                 "servos not answering: " + ", ".join(f"{n} (id {i})" for n, i in missing)
@@ -243,9 +244,9 @@ class FeetechBus:
         otherwise be taken for the next one's: the SDK's ``clearPort`` flushes output only)."""
         self._port().ser.reset_input_buffer()
 
-    def _ping(self, servo_id: int) -> int | None:
+    def _ping(self, servo_id: int, *, retries: int | None = None) -> int | None:
         with self._lock:
-            for _ in range(self.retries + 1):
+            for _ in range((self.retries if retries is None else retries) + 1):
                 self._flush()
                 try:
                     model, res, _err = self._pk.ping(self._port(), servo_id)

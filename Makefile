@@ -2,7 +2,7 @@
 #   make demo   set up, then run the shipped example goal graph pick_and_place (phyagentos/data/goal_graphs/)
 #               end to end on the MuJoCo Franka
 #   make test   set up, then check the plane boundary, lint (ruff, mypy on its checked core), and run the test suite (4 workers, one file per worker at a time)
-#   make soak   the fault-injection drills at their full scale (PHYAGENTOS_SOAK=1; make test runs them at half)
+#   make soak   the SIGKILL and scale drills at their full scale (PHYAGENTOS_SOAK=1; make test runs them smaller)
 .PHONY: setup demo test soak bench clean
 
 setup:

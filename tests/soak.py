@@ -1,10 +1,11 @@
-"""How hard the fault-injection drills push: ``make test`` runs them at their quick scale,
-``make soak`` (``PHYAGENTOS_SOAK=1``) at their full one.
+"""How hard the drills push: ``make test`` runs them at their quick scale, ``make soak``
+(``PHYAGENTOS_SOAK=1``) at their full one.
 
-The drills (SIGKILLs of supervisors and runners during sessions and hand-offs) cost CPU in
-proportion to their kills: every kill restarts a supervisor or a runner, which re-imports
-MuJoCo and the primitives. The quick scale keeps every kind of kill and every assertion;
-the soak scale is the one the drills were written with, for a machine with time to spare.
+The drills (SIGKILLs of supervisors and runners during sessions and hand-offs, four
+supervisors racing for one queue) cost CPU in proportion to their kills and sessions:
+every kill restarts a supervisor or a runner, which re-imports MuJoCo and the
+primitives. The quick scale keeps every kind of kill and every assertion; the soak scale
+is the one the drills were written with, for a machine with time to spare.
 """
 
 from __future__ import annotations

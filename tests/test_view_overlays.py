@@ -144,3 +144,33 @@ def test_a_saved_cloud_linked_from_outside_the_workspace_or_a_fifo_draws_nothing
     assert cloud_markers(frames / "initial_cloud.npz", root=ws) == []  # a link out of the workspace
     assert cloud_markers(frames / "terminal_cloud.npz", root=ws) == []  # a FIFO: refused, never waited on
     assert len(cloud_markers(frames / "01_observe_cloud.npz", root=ws)) == 5
+
+
+def test_a_timelines_joint_layout_does_not_wait_behind_queued_scene_renders(tmp_path):
+    """The compare page's two timelines ask for their sessions' joint layouts while the
+    render thread may still be busy with scene images other pages (or tabs since closed)
+    asked for: the layout is built on its own thread and does not wait for them."""
+    import threading
+    import time
+
+    from supervisor_util import make_workspace, submit
+
+    from phyagentos.view.scene3d import SceneRenderer
+
+    ws = make_workspace(tmp_path / "ws")
+    sid = submit(ws, "s-layout").session_id
+    renderer = SceneRenderer(ws)
+    busy = threading.Event()
+    release = threading.Event()
+    try:
+        renderer._pool.submit(lambda: (busy.set(), release.wait(60)))  # a long render holds the render thread
+        assert busy.wait(10)
+        t0 = time.monotonic()
+        layout = renderer.joint_layout(sid)
+        assert time.monotonic() - t0 < 30 and not release.is_set()  # answered while the render still ran
+        assert [name for name, _ in layout["arm"]] == [f"joint{i}" for i in range(1, 8)]
+        assert len(layout["fingers"]) == 2
+        assert renderer.joint_layout(sid) is layout  # kept: a reload asks nothing of the threads
+    finally:
+        release.set()
+        renderer.close()

@@ -228,7 +228,7 @@ def create_app(workspace: str | Path, *, policy: AccessPolicy | None = None) -> 
             rec = ws.load_session(sid).model_dump(mode="json")
             try:
                 layout = renderer.joint_layout(sid)
-            except (PhyAgentOSError, ValueError):
+            except (PhyAgentOSError, ValueError, TimeoutError):
                 layout = None  # plots fall back to q1..q7, no recorded opening
             return JSONResponse(session_signals(ws.root, rec, layout=layout))
         except PhyAgentOSError as exc:

@@ -65,6 +65,8 @@ _ORDER = ("perceived", "grasp", "place", "planned_path", "tcp_path", "frustum", 
 logger = logging.getLogger(__name__)
 
 _MAX_MODELS = 4
+#: Joint layouts kept (a few hundred bytes each).
+_MAX_LAYOUTS = 256
 
 
 def _vec3(v: Any) -> list[float] | None:
@@ -319,8 +321,13 @@ class SceneRenderer:
         #: paths' tool points, keyed by the trace file's (mtime, size)
         self._sensors: dict[str, tuple[Any, ...]] = {}
         self._plans: dict[str, tuple[tuple[int, int], list[dict[str, Any]]]] = {}
+        #: joint layouts per session, built on their own thread: a timeline's signals never
+        #: wait behind the scene renders queued by other pages (or by tabs since closed)
+        self._layout_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="view-layout")
+        self._layouts: OrderedDict[str, dict[str, Any]] = OrderedDict()
 
     def close(self) -> None:
+        self._layout_pool.shutdown(wait=True)
         self._pool.submit(self._close_all).result()
         self._pool.shutdown(wait=True)
 
@@ -362,18 +369,42 @@ class SceneRenderer:
         Arm joints: hinge joints named ``...joint<digit>`` (at most 7, model order);
         fingers: joints whose name contains ``finger``.
 
+        Built once per session on the layout thread, from a model of its own (never behind
+        the render queue), and kept for the :data:`_MAX_LAYOUTS` most recent sessions.
+
         Raises:
             ViewError: the target cannot be rebuilt.
+            TimeoutError: no layout within 60 s.
         """
-        return self._pool.submit(self._layout, session_id).result(timeout=60)
+        with self._lock:
+            cached = self._layouts.get(session_id)
+        if cached is not None:
+            return cached
+        layout = self._layout_pool.submit(self._layout, session_id).result(timeout=60)
+        with self._lock:
+            self._layouts[session_id] = layout
+            while len(self._layouts) > _MAX_LAYOUTS:
+                self._layouts.popitem(last=False)
+        return layout
 
     def _layout(self, session_id: str) -> dict[str, Any]:
+        with self._lock:
+            cached = self._layouts.get(session_id)
+        if cached is not None:  # asked twice while the first was queued
+            return cached
         try:
-            target, _ = self._target(session_id)
+            target = self._build_target(session_id)
         except TargetError as exc:
             raise ViewError(str(exc)) from exc
-        m = target.model
-        arm, fingers = [], []
+        try:
+            return self._layout_of(target.model)
+        finally:
+            target.close()
+
+    @staticmethod
+    def _layout_of(m: mujoco.MjModel) -> dict[str, Any]:
+        arm: list[tuple[str, int]] = []
+        fingers: list[int] = []
         for j in range(m.njnt):
             name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
             adr = int(m.jnt_qposadr[j])
@@ -388,13 +419,7 @@ class SceneRenderer:
             self._models.move_to_end(session_id)
             return self._models[session_id]
         rec = self.workspace.load_session(session_id)
-        spec = next((t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target), None)
-        if spec is None or spec.driver not in DRIVERS:
-            raise ViewError(f"session {session_id}: target {rec.target!r} is not one the view can rebuild")
-        target = DRIVERS[spec.driver](spec.name, scene_for(rec, spec, root=self.workspace.root), seed=rec.seed)
-        if not isinstance(target, MuJoCoBacked) or not isinstance(target.model, mujoco.MjModel):
-            target.close()
-            raise ViewError(f"session {session_id}: target {rec.target!r} exposes no MuJoCo model")
+        target = self._build_target(session_id, rec)
         entry = (target, mujoco.MjData(target.model))
         self._models[session_id] = entry
         try:
@@ -408,6 +433,22 @@ class SceneRenderer:
             self._plans.pop(gone, None)
             old.close()
         return entry
+
+    def _build_target(self, session_id: str, rec: Any = None) -> Any:
+        """A fresh MuJoCo target of ``session_id``'s target and scene (the caller closes it).
+
+        Raises:
+            ViewError: the target is not one the view can rebuild, or has no MuJoCo model.
+        """
+        rec = rec if rec is not None else self.workspace.load_session(session_id)
+        spec = next((t for t in self.workspace.read("TARGETS").data.targets if t.name == rec.target), None)
+        if spec is None or spec.driver not in DRIVERS:
+            raise ViewError(f"session {session_id}: target {rec.target!r} is not one the view can rebuild")
+        target = DRIVERS[spec.driver](spec.name, scene_for(rec, spec, root=self.workspace.root), seed=rec.seed)
+        if not isinstance(target, MuJoCoBacked) or not isinstance(target.model, mujoco.MjModel):
+            target.close()
+            raise ViewError(f"session {session_id}: target {rec.target!r} exposes no MuJoCo model")
+        return target
 
     def _planned(self, session_id: str, target, trace: list[dict[str, Any]],
                  key: tuple[int, int]) -> list[dict[str, Any]]:

@@ -183,7 +183,7 @@
     const sid = tl.dataset.session, plotsBox = tl.querySelector(".tl-plots"), info = tl.querySelector(".tl-info");
     const imagesBox = tl.querySelector(".tl-images");
     const COLORS = ["#1565c0", "#c62828", "#2e7d32", "#6a1b9a", "#ef6c00", "#00838f", "#5d4037", "#9e9d24"];
-    let sig = null, loadedFinal = false, lastFetch = 0;
+    let sig = null, loadedFinal = false, lastFetch = 0, retryMs = 1000;
     const W = () => Math.max(320, Math.min(1100, plotsBox.clientWidth || 900)), H = 120, PADL = 52, PADR = 8;
     const xOf = (t, w) => PADL + (w - PADL - PADR) * (sig.t1 > sig.t0 ? (t - sig.t0) / (sig.t1 - sig.t0) : 0);
     const tOf = (x, w) => sig.t0 + (sig.t1 - sig.t0) * Math.max(0, Math.min(1, (x - PADL) / (w - PADL - PADR)));
@@ -322,6 +322,7 @@
       lastFetch = Date.now();
       try {
         const r = await fetch(`/api/signals/${encodeURIComponent(sid)}`, {cache: "no-store"});
+        if (r.status >= 500) throw new Error(`HTTP ${r.status}`);
         const j = await r.json();
         if (!r.ok) { info.textContent = j.error || "no signals"; return; }
         if (scopeEl !== document) {  // compare page: each session's time from its own start (a replan child
@@ -340,7 +341,16 @@
         }
         if (!moved) cursor.set(sig.t1, "init"); else update();
         tl.dataset.ready = "true";
-      } catch (e) { /* keep the last */ }
+        retryMs = 1000;
+      } catch (e) {
+        // keep the last; a failed load (server busy or restarting, a network error) is tried
+        // again, 1 s later and then up to every 8 s: a finished session's page gets no further
+        // refresh events, so without this its timeline would stay empty
+        info.textContent = sig ? info.textContent : `signals not loaded yet (${e.message || e}); retrying`;
+        lastFetch = 0;
+        setTimeout(load, retryMs);
+        retryMs = Math.min(8000, retryMs * 2);
+      }
     }
     document.addEventListener("phyagentos:refreshed", () => { load(); markTransitions(); });
     window.addEventListener("resize", () => { if (sig) { build(); update(); } });

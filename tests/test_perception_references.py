@@ -202,6 +202,17 @@ def test_the_perceiver_leaves_both_bowls_unseen_when_the_landmark_is_not_seen():
     assert p.last_references["bowl_1"].detection is None
 
 
+def test_with_one_lookalike_in_view_neither_bowl_is_named():
+    """The landmark is seen but only one black bowl: it may be the one meant or the other, so
+    neither name is given to it."""
+    dets = [_det(BLACK, (0.52, 0.12, 0.03)), _det(WHITE, (0.60, 0.20, 0.02), half=(0.04, 0.04, 0.02)),
+            _det(RED, (0.45, -0.05, 0.01), half=(0.1, 0.1, 0.01))]
+    p = _perceiver({"relation": "next_to", "of": ["ramekin_1"]})
+    got = _assign(p, dets)
+    assert got == {"ramekin_1": 1, "plate_1": 2}
+    assert "look-alikes seen" in p.last_references["bowl_1"].reason
+
+
 def test_a_tracked_bowl_keeps_its_identity_without_the_relation():
     """Once associated, the track decides: the bowl set down on the plate is still bowl_1,
     though 'next to the ramekin' now fits the other one better."""

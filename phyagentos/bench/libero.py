@@ -59,6 +59,12 @@ LIBERO_TARGET = "libero"
 _LOOKS_METHOD = "generated_clutter_v2"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
+#: The tcp box of safety.yaml's template (origin at the robot base, table top at z = 0) in the
+#: world frame of LIBERO's table scenes (libero_spatial: the robot base at x = -0.66 m, the
+#: table top at z = 0.90 m; measured on the built world): the template's box would put the
+#: arm's start pose (tcp x = -0.21 m) outside and halt every motion. Written into the
+#: libero_spatial suites' ``safety`` overrides.
+TABLE_SCENE_WORKSPACE_BOX = {"min": [-0.86, -0.8, 0.89], "max": [0.34, 0.8, 2.1]}
 
 
 def target_entry() -> dict[str, Any]:
@@ -321,6 +327,8 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
                                 f"states, judged by LIBERO's checker" + (f"; not planned: {len(unplanned)} task(s)"
                                                                           if unplanned else ""),
                  "tasks": entries}
+    if suite.startswith("libero_spatial"):
+        suite_doc["safety"] = {"workspace_box": TABLE_SCENE_WORKSPACE_BOX}
     suite_path = root / "suite.yaml"
     atomic_write_text(suite_path, yaml.safe_dump(suite_doc, sort_keys=False))
     planning = {"suite": suite, "planner": "goal_planner_rules", "planned": [i for i, *_ in planned],

@@ -473,7 +473,9 @@ class Perceiver:
         The other declared objects are associated first (without those objects); their matches
         (and tracks seen in the last :data:`REMEMBER_S` s, not held) are the landmarks. The
         candidates are the detections within the gate for the object that no other-looking
-        object took. Records the resolutions in :attr:`last_references`."""
+        object took. An unresolved reference leaves its untracked look-alikes unassociated as
+        well (naming one "the other" would say which one is meant). Records the resolutions in
+        :attr:`last_references`."""
         self.last_references = {}
         pending = [j for j, d in enumerate(self.declared) if d.where is not None and d.name not in self.tracks]
         if not pending or C.size == 0:
@@ -507,6 +509,10 @@ class Perceiver:
             C = forbid_except(C, j, res.detection)
             if res.detection is not None:
                 chosen.add(res.detection)
+            else:  # "the other one" is no better known than the one meant: untracked look-alikes wait too
+                for k in alike - {j}:
+                    if self.declared[k].where is None and self.declared[k].name not in self.tracks:
+                        C = forbid_except(C, k, None)
         return C
 
     # ------------------------------------------------------------------ helpers

@@ -271,3 +271,46 @@ def test_the_wrist_camera_alone_finds_objects_and_masks_its_own_fingers(scene):
         assert ents[o.name]["attributes"]["shape"] == o.shape
         assert np.linalg.norm(np.subtract(ents[o.name]["position"], o.centre)) < 0.004
         assert ents[o.name]["attributes"]["cameras"] == ["wrist"]
+
+
+@pytest.mark.parametrize("swap", [False, True])
+def test_a_spatial_reference_names_the_lookalike_its_relation_picks_out(scene, swap):
+    """Two identical red boxes, declared red_cube_1 ("the one next to the blue can") and
+    red_cube_2: rendered and perceived, red_cube_1 is the box beside the can, whichever of the
+    two slots holds it; the twin is the other; a later observation keeps both by their tracks."""
+    near_xy, far_xy = (0.50, 0.06), (0.56, -0.16)
+    if swap:  # the same boxes, the other slot order: index order cannot decide it
+        near_xy, far_xy = far_xy, near_xy
+    a = SyntheticObject("a", "box", (0.02, 0.02, 0.02), near_xy, yaw=0.2, rgba=RED)
+    b = SyntheticObject("b", "box", (0.02, 0.02, 0.02), far_xy, yaw=0.6, rgba=RED)
+    can_xy = (near_xy[0] + 0.0, near_xy[1] + 0.07)
+    can = SyntheticObject("can", "cylinder", (0.02, 0.02, 0.03), can_xy, rgba=BLUE)
+    scene.place([a, b, can])
+    p = Perceiver(PerceptionConfig.default(), [
+        _desc(a, name="red_cube_1", where={"relation": "next_to", "of": ["can"]}), _desc(b, name="red_cube_2"),
+        _desc(can)])
+    rng = np.random.default_rng(21)
+    snap = p.observe(_frames(scene, rng), scene.proprioception())
+    ents = _entities(snap)
+    assert snap["references"]["red_cube_1"]["resolved"], snap["references"]
+    assert np.linalg.norm(np.array(ents["red_cube_1"]["position"][:2]) - near_xy) < 0.015
+    assert np.linalg.norm(np.array(ents["red_cube_2"]["position"][:2]) - far_xy) < 0.015
+    # the can moves beside the other box: the tracked boxes keep their names
+    scene.move_object("can", (far_xy[0], far_xy[1] + 0.07, 0.03))
+    again = _entities(p.observe(_frames(scene, rng, stamp_s=1.0), scene.proprioception(stamp_s=1.0)))
+    assert np.linalg.norm(np.array(again["red_cube_1"]["position"][:2]) - near_xy) < 0.015
+
+
+def test_an_unresolvable_spatial_reference_leaves_both_lookalikes_unnamed(scene):
+    a = SyntheticObject("a", "box", (0.02, 0.02, 0.02), (0.50, 0.06), yaw=0.2, rgba=RED)
+    b = SyntheticObject("b", "box", (0.02, 0.02, 0.02), (0.56, -0.16), yaw=0.6, rgba=RED)
+    scene.place([a, b])  # the landmark (a blue can) is declared but nowhere to be seen
+    can = SyntheticObject("can", "cylinder", (0.02, 0.02, 0.03), (0.5, 0.13), rgba=BLUE)
+    p = Perceiver(PerceptionConfig.default(), [
+        _desc(a, name="red_cube_1", where={"relation": "next_to", "of": ["can"]}), _desc(b, name="red_cube_2"),
+        _desc(can)])
+    snap = p.observe(_frames(scene, np.random.default_rng(22)), scene.proprioception())
+    assert not snap["references"]["red_cube_1"]["resolved"]
+    assert "not perceived" in snap["references"]["red_cube_1"]["reason"]
+    assert {"red_cube_1", "red_cube_2"} <= set(snap["unseen"])
+    assert sum(e["kind"] == "unknown" for e in snap["entities"]) == 2

@@ -13,6 +13,10 @@ The Agent plane reads a scene only through :func:`declared_scene`, which keeps:
 - ``fixtures`` as declared (``[{name, class}]``: the furniture of a scene, e.g. a LIBERO
   task's table, cabinet or stove, named with its category).
 
+An object may also carry ``where`` (``{relation, of, part?}``): which of several identical
+objects it is, by a spatial relation the Goal Planner read from the request (``the black
+bowl next to the ramekin``); perception resolves it on what it sees.
+
 Poses of objects, their physical parameters and anything else are dropped. The contract
 is CONTRACT_9 section 3.
 """
@@ -46,6 +50,8 @@ def _descriptor(obj: Mapping[str, Any]) -> dict[str, Any]:
         size = [float(size)] * 3
     if isinstance(size, (list, tuple)) and len(size) == 3:
         out["size_m"] = [round(float(s), 4) for s in size]
+    if isinstance(obj.get("where"), Mapping):
+        out["where"] = dict(obj["where"])
     return out
 
 

@@ -38,6 +38,7 @@ every session's ``ground_truth.yaml``: ``env.check_success()``), with per-task
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +48,8 @@ from phyagentos.errors import BenchError, TargetError, format_choices
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
 
-__all__ = ["LIBERO_TARGET", "is_libero_suite", "instruction_nodes", "prepare_libero_suite", "target_entry"]
+__all__ = ["LIBERO_TARGET", "is_libero_suite", "instruction_nodes", "instruction_plan", "prepare_libero_suite",
+           "target_entry"]
 
 logger = logging.getLogger(__name__)
 
@@ -57,6 +59,12 @@ LIBERO_TARGET = "libero"
 _LOOKS_METHOD = "generated_clutter_v2"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
+#: The tcp box of safety.yaml's template (origin at the robot base, table top at z = 0) in the
+#: world frame of LIBERO's table scenes (libero_spatial: the robot base at x = -0.66 m, the
+#: table top at z = 0.90 m; measured on the built world): the template's box would put the
+#: arm's start pose (tcp x = -0.21 m) outside and halt every motion. Written into the
+#: libero_spatial suites' ``safety`` overrides.
+TABLE_SCENE_WORKSPACE_BOX = {"min": [-0.86, -0.8, 0.89], "max": [0.34, 0.8, 2.1]}
 
 
 def target_entry() -> dict[str, Any]:
@@ -125,14 +133,16 @@ def planner_world(objects: dict[str, str], fixtures: dict[str, str]):
                  regions=tuple(entity(n, "region") for n in (*objects, *fixtures)), source="LIBERO declared")
 
 
-def _planner_steps(language: str, objects: dict[str, str], fixtures: dict[str, str]) -> list[tuple[str, str | None]]:
+def _planner_steps(language: str, objects: dict[str, str],
+                   fixtures: dict[str, str]) -> tuple[list[tuple[str, str | None]], dict[str, dict]]:
     """The Goal Planner's rule reader (:func:`phyagentos.agent.llm.meaning.read_request`):
     verbs and prepositions by class, objects and destinations by the words of their declared
-    names; every clause must be accounted for, one destination each."""
+    names; every clause must be accounted for, one destination each. Returns the steps and the
+    spatial references (``{object: where}``) perception must resolve."""
     from phyagentos.agent.llm.meaning import read_request  # noqa: PLC0415
 
     world = planner_world(objects, fixtures)
-    meaning = read_request(language, world)
+    meaning = read_request(language, world, relations=True)
     if meaning.language is not None:
         raise BenchError(f"instruction {language!r} refused: {meaning.language}; the Goal Planner reads English only")
     if meaning.problems:
@@ -150,7 +160,7 @@ def _planner_steps(language: str, objects: dict[str, str], fixtures: dict[str, s
             steps.append((obj, dests[0] if intent.verb != "hold" else None))
     if not steps:
         raise BenchError(f"instruction {language!r} refused: nothing to move")
-    return steps
+    return steps, dict(meaning.where)
 
 
 def instruction_nodes(language: str, objects: dict[str, str], fixtures: dict[str, str]) -> list[dict[str, Any]]:
@@ -173,9 +183,39 @@ def instruction_nodes(language: str, objects: dict[str, str], fixtures: dict[str
         BenchError: refused, with the reader's reasons: a verb no skill does (open, turn on,
             push: ``unknown_object``/``not_understood``), a phrase naming no declared thing
             (``unknown_object``/``unknown_destination``) or several (two identical bowls told
-            apart by a spatial relation: ``could be any of``), another language.
+            apart by nothing the rules read: ``could be any of``; by a relation or landmark
+            they cannot read), another language.
     """
-    return _moves(_planner_steps(language, objects, fixtures))
+    return instruction_plan(language, objects, fixtures)[0]
+
+
+def instruction_plan(language: str, objects: dict[str, str],
+                     fixtures: dict[str, str]) -> tuple[list[dict[str, Any]], dict[str, dict]]:
+    """:func:`instruction_nodes` and the spatial references of the instruction: ``(nodes,
+    {object: where})``.
+
+    An instruction may tell identical declared objects apart by a spatial relation
+    (libero_spatial: ``pick up the black bowl next to the ramekin and place it on the plate``,
+    two ``akita_black_bowl``). The reader binds the bowl the relation picks out to one of the
+    identical names (``akita_black_bowl_1``: an internal label; which physical bowl it is, is
+    for perception to decide) and returns the relation, ``where`` =
+    ``{"relation": between | next_to | on | in | table_center, "of": [landmark names],
+    "part": "top drawer"?}``, which :func:`prepare_libero_suite` declares on that object in the
+    episode's scene (:class:`~phyagentos.perception.ObjectDescriptor` ``where``): perception
+    resolves it on the positions it perceives. Never the BDDL ``:goal`` or ``:init``.
+
+    Raises:
+        BenchError: as :func:`instruction_nodes`.
+    """
+    steps, where = _planner_steps(language, objects, fixtures)
+    return _moves(steps), where
+
+
+def _twin(a: str, b: str, objects: dict[str, str]) -> bool:
+    """``a`` and ``b`` are declared objects of one category whose names differ only in their
+    instance number (``akita_black_bowl_1``, ``akita_black_bowl_2``)."""
+    return (objects.get(a) == objects.get(b) is not None
+            and re.sub(r"_\d+$", "", a) == re.sub(r"_\d+$", "", b))
 
 
 def _task_indices(suite: str, tasks: tuple[str, ...] | None, n: int) -> list[int]:
@@ -245,7 +285,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         task = catalogue[i]
         problem = parse_bddl(task.bddl_path)
         try:
-            planned.append((i, task, problem, instruction_nodes(task.instruction, problem.objects, problem.fixtures)))
+            planned.append((i, task, problem, *instruction_plan(task.instruction, problem.objects, problem.fixtures)))
         except BenchError as exc:
             unplanned.append(f"task {i} ({task.instruction}): {exc}")
     if not planned:  # nothing written, nothing built
@@ -258,14 +298,19 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     root.mkdir(parents=True, exist_ok=True)
     looks = _descriptors(Path(workspace_dir), suite, [i for i, *_ in planned])
     entries = []
-    for i, task, problem, nodes in planned:
+    for i, task, problem, nodes, where in planned:
         declared = problem.declared()
         named = {n["params"]["object"] for n in nodes} | {n["params"].get("region") for n in nodes}
+        # a spatial reference: its landmarks and the referent's identical twins are declared too
+        # (the twin takes the detection the relation does not pick out)
+        named |= {n for w in where.values() for n in w.get("of", ())}
+        named |= {o for o in problem.objects for r in where if o != r and _twin(o, r, problem.objects)}
         # what a user declares: name and category, and the look of the category where it was
         # measured; an object with neither look nor a part in the instruction is left to
-        # perception as an unknown thing (a name alone would match any segment equally well)
-        objects = [{**o, **looks.get(o["class"], {})} for o in declared["objects"]
-                   if o["class"] in looks or o["name"] in named]
+        # perception as an unknown thing (a name alone would match any segment equally well);
+        # the object a relation picks out carries it (``where``: perception resolves it)
+        objects = [{**o, **looks.get(o["class"], {}), **({"where": where[o["name"]]} if o["name"] in where else {})}
+                   for o in declared["objects"] if o["class"] in looks or o["name"] in named]
         graph = {"version": 1, "name": f"{ident}_t{i}", "description": task.instruction,
                  "defaults": {"target": LIBERO_TARGET},
                  "scene": {"suite": suite, "task": i, "objects": objects, "fixtures": declared["fixtures"]},
@@ -282,9 +327,12 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
                                 f"states, judged by LIBERO's checker" + (f"; not planned: {len(unplanned)} task(s)"
                                                                           if unplanned else ""),
                  "tasks": entries}
+    if suite.startswith("libero_spatial"):
+        suite_doc["safety"] = {"workspace_box": TABLE_SCENE_WORKSPACE_BOX}
     suite_path = root / "suite.yaml"
     atomic_write_text(suite_path, yaml.safe_dump(suite_doc, sort_keys=False))
     planning = {"suite": suite, "planner": "goal_planner_rules", "planned": [i for i, *_ in planned],
+                "spatial_references": {i: where for i, *_, where in planned if where},
                 "refused": {int(line.split()[1]): line for line in unplanned}}
     atomic_write_text(root / "planning.yaml", "# Which chosen tasks the Goal Planner's rules planned and which they refused (why).\n"
                       + yaml.safe_dump(planning, sort_keys=False, allow_unicode=True))

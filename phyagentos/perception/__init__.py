@@ -7,7 +7,7 @@ writes.
 
 from phyagentos.perception.cloud import RobotCapsule
 from phyagentos.perception.config import PerceptionConfig
-from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
+from phyagentos.perception.descriptors import ObjectDescriptor, SpatialReference, descriptors_from_declared
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioception
 from phyagentos.perception.perceiver import Perceiver
@@ -19,6 +19,7 @@ __all__ = [
     "Proprioception",
     "PerceptionConfig",
     "ObjectDescriptor",
+    "SpatialReference",
     "descriptors_from_declared",
     "Perceiver",
     "RobotCapsule",

@@ -10,6 +10,11 @@ Cost of detection i for descriptor j (only the attributes the descriptor declare
 * track: distance to the descriptor's current track / ``position_scale_m``, capped at 1
   (tie-breaker between otherwise identical objects; objects do move between observations).
 
+An object declared with a spatial reference (``where``: :class:`~.descriptors.SpatialReference`)
+among look-alikes is resolved first (:func:`resolve_reference`): the detection its relation
+picks out on the perceived landmarks becomes its only admissible one, or none when the
+relation cannot be resolved; the look-alikes then share the rest by the ordinary assignment.
+
 The optimal assignment is :func:`scipy.optimize.linear_sum_assignment` (Kuhn 1955), with
 a "no match" option at ``gate_cost`` for every detection and descriptor. A pair costing more
 than ``gate_cost`` is never associated; a match whose margin (the cost of the best
@@ -19,9 +24,10 @@ detection stays ``unknown`` and the object unseen.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -31,7 +37,10 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection
 
-__all__ = ["Association", "cost_matrix", "associate", "match_confidence"]
+__all__ = ["Association", "Landmark", "ReferenceResolution", "cost_matrix", "associate", "match_confidence",
+           "resolve_reference", "forbid_except"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -140,3 +149,160 @@ def match_confidence(cost: float, margin: float, config: PerceptionConfig) -> fl
     m = config.association.ambiguity_margin
     margin_term = 1.0 - math.exp(-margin / m) if m > 0 else 1.0
     return math.exp(-0.5 * cost * cost) * margin_term
+
+
+# -- spatial references -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Landmark:
+    """What perception knows now of a landmark of a spatial reference (world frame, m):
+    ``position`` (3,) centre, ``half_extents`` (3,), ``yaw`` rad about z, ``shape``,
+    ``bottom_m`` its bottom's height above the support plane."""
+
+    name: str
+    position: np.ndarray
+    half_extents: np.ndarray
+    yaw: float
+    shape: str
+    bottom_m: float
+
+    @property
+    def top_m(self) -> float:
+        """Top height above the support plane, m."""
+        return self.bottom_m + 2.0 * float(self.half_extents[2])
+
+
+@dataclass(frozen=True)
+class ReferenceResolution:
+    """How a spatial reference was resolved in one observation: ``detection`` the index
+    picked (None: unresolved), ``reason`` in words, ``scores`` ``(detection index, score)``
+    of every candidate (smaller is better; m for the distance relations, 0/1 for on/in)."""
+
+    name: str
+    relation: str
+    detection: int | None
+    reason: str
+    scores: tuple[tuple[int, float], ...] = ()
+
+    def to_dict(self, detections: Sequence[Detection] = ()) -> dict:
+        """Plain data for the perceived snapshot (``references``)."""
+        out: dict = {"relation": self.relation, "resolved": self.detection is not None, "reason": self.reason}
+        if self.detection is not None and self.detection < len(detections):
+            out["position"] = [round(float(v), 4) for v in detections[self.detection].position]
+        return out
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Distance (m) of point ``p`` (2,) to the segment ``a``-``b`` (2,) in the plane."""
+    ab = b - a
+    t = float(np.clip(np.dot(p - a, ab) / max(float(np.dot(ab, ab)), 1e-12), 0.0, 1.0))
+    return float(np.linalg.norm(p - (a + t * ab)))
+
+
+def _over(det: Detection, lm: Landmark) -> bool:
+    """``det``'s centre lies over ``lm``'s footprint (1 cm of slack)."""
+    from phyagentos.perception.relations import _footprint_margin  # noqa: PLC0415
+
+    return _footprint_margin(det.position[:2], lm.position, lm.yaw, lm.half_extents, lm.shape) >= -0.01
+
+
+def _off_table(det: Detection, config: PerceptionConfig) -> bool:
+    return max(float(det.bottom_m), float(det.low_m)) >= config.association.off_table_m
+
+
+def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detections: Sequence[Detection],
+                      landmarks: Mapping[str, Landmark], config: PerceptionConfig, *,
+                      look_alikes: int = 1, table_centre_xy: np.ndarray | None = None) -> ReferenceResolution:
+    """Which detection the spatial reference ``desc.where`` picks out, from perceived positions only.
+
+    Args:
+        desc: a declared object with ``where`` (:class:`~.descriptors.SpatialReference`).
+        candidates: indices into ``detections`` that look like ``desc`` (within the gate) and
+            are no landmark's.
+        detections: this observation's detections (world frame, m).
+        landmarks: the landmarks perceived now (or remembered by their tracks), by name; a
+            name absent here is not perceived (a fixture, or an object not seen).
+        config: ``association.relation_margin_m`` and ``association.off_table_m`` are used.
+        look_alikes: how many declared objects look like ``desc`` (itself included): fewer
+            candidates than that and the one meant may be the one not seen, so nothing is picked.
+        table_centre_xy: (2,) centre of the perceived table top, world m, or None (not known).
+
+    The relations: ``between`` -- the smallest distance to the segment joining the two
+    landmarks' centres; ``next_to`` -- the smallest distance to the landmark's centre less its
+    footprint radius; ``table_center`` -- the smallest distance to ``table_centre_xy``; each
+    picks the best candidate when the runner-up scores at least ``relation_margin_m`` worse.
+    ``on``/``in`` a perceived landmark: the one candidate over its footprint (raised off the
+    table, for ``on``); a landmark not perceived (a fixture such as a stove or cabinet): the
+    one candidate off the table (bottom at least ``off_table_m`` above it) while the others
+    rest on it -- being on or in something other than the table is what perception can see.
+
+    Returns:
+        The resolution; ``detection`` None (the object stays unseen) with the reason when a
+        landmark needed is not perceived, too few look-alikes are seen, or no candidate (or
+        more than one) satisfies the relation clearly enough. Never a guess.
+    """
+    ref = desc.where
+    if ref is None:
+        raise ValueError(f"object {desc.name!r} has no spatial reference")
+    rel = ref.relation
+    margin = config.association.relation_margin_m
+
+    def unresolved(reason: str, scores: tuple = ()) -> ReferenceResolution:
+        return ReferenceResolution(desc.name, rel, None, reason, scores)
+
+    cands = list(candidates)
+    if not cands:
+        return unresolved("no detection looks like it")
+    if len(cands) < look_alikes:
+        return unresolved(f"{len(cands)} of the {look_alikes} look-alikes seen: the one meant may be the one not seen")
+    missing = [n for n in ref.of if n not in landmarks]
+    if rel in ("between", "next_to", "table_center"):
+        if missing:
+            return unresolved(f"landmark(s) {', '.join(missing)} not perceived")
+        xy = {i: np.asarray(detections[i].position[:2], float) for i in cands}
+        if rel == "between":
+            a, b = (np.asarray(landmarks[n].position[:2], float) for n in ref.of)
+            scores = {i: _segment_distance(p, a, b) for i, p in xy.items()}
+        elif rel == "next_to":
+            lm = landmarks[ref.of[0]]
+            radius = float(np.hypot(lm.half_extents[0], lm.half_extents[1])) if lm.shape == "box" \
+                else float(max(lm.half_extents[0], lm.half_extents[1]))
+            scores = {i: max(0.0, float(np.linalg.norm(p - lm.position[:2])) - radius) for i, p in xy.items()}
+        else:
+            if table_centre_xy is None:
+                return unresolved("the table's centre is not perceived")
+            c = np.asarray(table_centre_xy, float)[:2]
+            scores = {i: float(np.linalg.norm(p - c)) for i, p in xy.items()}
+        ranked = sorted(scores.items(), key=lambda kv: kv[1])
+        table = tuple((i, round(v, 4)) for i, v in ranked)
+        if len(ranked) > 1 and ranked[1][1] - ranked[0][1] < margin:
+            return unresolved(f"{rel}: the two best candidates score {ranked[0][1]:.3f} and {ranked[1][1]:.3f} m, "
+                              f"within {margin:.3f} m", table)
+        return ReferenceResolution(desc.name, rel, ranked[0][0],
+                                   f"{rel}: scores {ranked[0][1]:.3f} m"
+                                   + (f", runner-up {ranked[1][1]:.3f} m" if len(ranked) > 1 else ""), table)
+    # on / in
+    lm_seen = landmarks.get(ref.of[0])
+    off = {i: _off_table(detections[i], config) for i in cands}
+    if lm_seen is not None:
+        ok = [i for i in cands if _over(detections[i], lm_seen) and (rel == "in" or off[i])]
+        how = f"over {lm_seen.name}'s footprint" + (" and off the table" if rel == "on" else "")
+    else:
+        ok = [i for i in cands if off[i]]
+        how = f"off the table ({ref.of[0]} is not perceived)"
+    table = tuple((i, 0.0 if i in ok else 1.0) for i in cands)
+    if len(ok) != 1:
+        return unresolved(f"{rel}: {len(ok)} candidates {how}", table)
+    return ReferenceResolution(desc.name, rel, ok[0], f"{rel}: the one candidate {how}", table)
+
+
+def forbid_except(C: np.ndarray, j: int, keep: int | None) -> np.ndarray:
+    """``C`` with descriptor ``j`` admissible only for detection ``keep`` (None: for none):
+    every other pair of column ``j`` costs more than any gate."""
+    out = C.copy()
+    col = out[:, j].copy()
+    out[:, j] = _FORBIDDEN
+    if keep is not None:
+        out[keep, j] = col[keep]
+    return out

@@ -156,6 +156,14 @@ class AssociationConfig(_Section):
     ambiguity_margin: float = Field(
         0.5, le=1000.0, ge=0, description="Runner-up cost within this of the best: ambiguous -> unknown."
     )
+    relation_margin_m: float = Field(
+        0.03, le=10.0, ge=0, description="A spatial reference picks a detection only when the runner-up's "
+                                         "relation score (m) is at least this much worse; else unresolved."
+    )
+    off_table_m: float = Field(
+        0.02, le=10.0, gt=0, description="A detection whose bottom (or lowest points) is this far above the "
+                                         "support plane is off the table (on or in something), m."
+    )
 
 
 class FusionConfig(_Section):

@@ -18,9 +18,79 @@ import numpy as np
 from phyagentos.errors import format_choices
 from phyagentos.perception.errors import PerceptionError
 
-__all__ = ["ObjectDescriptor", "SHAPES", "COLOUR_NAMES", "descriptors_from_declared"]
+__all__ = ["ObjectDescriptor", "SpatialReference", "SHAPES", "COLOUR_NAMES", "WHERE_RELATIONS",
+           "descriptors_from_declared"]
 
 SHAPES: tuple[str, ...] = ("box", "cylinder", "sphere")
+
+#: Relations a :class:`SpatialReference` may use, with how many landmarks each names.
+WHERE_RELATIONS: dict[str, int] = {"between": 2, "next_to": 1, "on": 1, "in": 1, "table_center": 0}
+
+
+@dataclass(frozen=True)
+class SpatialReference:
+    """Which of several identical declared objects is meant, by a spatial relation to other
+    declared things (``the black bowl next to the ramekin``): ``SpatialReference(relation,
+    of=(), part=None)``.
+
+    Attributes:
+        relation: one of :data:`WHERE_RELATIONS`: ``between`` two landmarks (nearest the
+            segment joining their centres), ``next_to`` one (nearest it), ``on`` one (over its
+            footprint and raised off the table), ``in`` one (within its footprint; raised off
+            the table when the landmark is not perceived), ``table_center`` (nearest the centre
+            of the perceived table top; no landmark).
+        of: the landmarks' declared names (objects or fixtures), as many as the relation takes.
+        part: the part of the landmark meant (``top drawer``), informative only.
+
+    Raises:
+        PerceptionError: an unknown relation (the valid ones listed), the wrong number of
+            landmarks, a landmark name that is not a non-empty string.
+    """
+
+    relation: str
+    of: tuple[str, ...] = ()
+    part: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.relation not in WHERE_RELATIONS:
+            raise PerceptionError(f"spatial reference: relation {self.relation!r} is not one of "
+                                  f"{format_choices(WHERE_RELATIONS)}")
+        of = (self.of,) if isinstance(self.of, str) else tuple(self.of or ())
+        if not all(isinstance(n, str) and n for n in of):
+            raise PerceptionError(f"spatial reference: landmarks must be declared names, got {self.of!r}")
+        want = WHERE_RELATIONS[self.relation]
+        if len(of) != want:
+            raise PerceptionError(f"spatial reference: {self.relation!r} takes {want} landmark(s), got {len(of)}: "
+                                  f"{list(of)}")
+        if self.part is not None and not isinstance(self.part, str):
+            raise PerceptionError(f"spatial reference: part must be text, got {self.part!r}")
+        object.__setattr__(self, "of", of)
+
+    @classmethod
+    def from_value(cls, value: "SpatialReference | Mapping[str, Any]") -> "SpatialReference":
+        """From a mapping ``{relation, of?, part?}`` (as a scene declares it) or a reference.
+
+        Raises:
+            PerceptionError: not a mapping, an unknown key (the valid ones listed), a bad value.
+        """
+        if isinstance(value, SpatialReference):
+            return value
+        if not isinstance(value, Mapping):
+            raise PerceptionError(f"spatial reference must be a mapping {{relation, of, part}}, got {value!r}")
+        unknown = set(value) - {"relation", "of", "part"}
+        if unknown:
+            raise PerceptionError(f"spatial reference: unknown key(s) {format_choices(unknown)}; valid keys: "
+                                  f"{format_choices(('relation', 'of', 'part'))}")
+        return cls(relation=value.get("relation"), of=tuple(value.get("of") or ()), part=value.get("part"))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (the inverse of :meth:`from_value`)."""
+        out: dict[str, Any] = {"relation": self.relation}
+        if self.of:
+            out["of"] = list(self.of)
+        if self.part:
+            out["part"] = self.part
+        return out
 
 #: sRGB in [0, 1] of the colour names a descriptor may use (CSS basic colours, with
 #: "orange", "purple", "cyan" and "grey" at their common CSS values).
@@ -51,9 +121,13 @@ class ObjectDescriptor:
             primitives, so a mesh object is matched by colour and size (its bounding box).
         colour_rgb: sRGB in [0, 1] (a colour name from :data:`COLOUR_NAMES` is converted).
         size_m: full dimensions, m: ``(x, y, z)`` or a float (largest dimension).
+        where: which of several identical declared objects this one is, by a spatial relation
+            (:class:`SpatialReference`; a mapping is converted), or None. Association resolves
+            it on the perceived positions of its landmarks until the object has a track.
 
     Raises:
-        PerceptionError: empty name, unknown shape or colour name, values out of range.
+        PerceptionError: empty name, unknown shape or colour name, values out of range, a
+            malformed ``where`` or one naming the object itself as its landmark.
     """
 
     name: str
@@ -61,6 +135,7 @@ class ObjectDescriptor:
     shape: str | None = None
     colour_rgb: tuple[float, float, float] | None = None
     size_m: tuple[float, float, float] | float | None = None
+    where: SpatialReference | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -101,18 +176,32 @@ class ObjectDescriptor:
             if not all(math.isfinite(v) and v > 0 for v in vals):
                 raise PerceptionError(f"{where}: size_m must be > 0 and finite, got {s!r}")
             object.__setattr__(self, "size_m", vals[0] if len(vals) == 1 else vals)
+        if self.where is not None:
+            try:
+                ref = SpatialReference.from_value(self.where)  # type: ignore[arg-type]
+            except PerceptionError as exc:
+                raise PerceptionError(f"{where}: {exc}") from None
+            if self.name in ref.of:
+                raise PerceptionError(f"{where}: its spatial reference names the object itself as a landmark")
+            object.__setattr__(self, "where", ref)
+
+    def looks_like(self, other: "ObjectDescriptor") -> bool:
+        """Same declared look (class, shape, colour, size): association cannot tell the two apart."""
+        return (self.cls, self.shape, self.colour_rgb, self.size_m) == (other.cls, other.shape, other.colour_rgb,
+                                                                         other.size_m)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "ObjectDescriptor":
         """From a declared-object mapping (keys ``name``, ``class``, ``shape``, ``colour`` or
-        ``colour_rgb``, ``size_m``; other keys such as ``mass`` are rejected: never declared).
+        ``colour_rgb``, ``size_m``, ``where``; other keys such as ``mass`` are rejected: never
+        declared).
 
         Raises:
             PerceptionError: not a mapping, an unknown key, or a bad value.
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared object must be a mapping, got {type(d).__name__}")
-        valid = {"name", "class", "cls", "shape", "colour", "colour_rgb", "color", "color_rgb", "size_m"}
+        valid = {"name", "class", "cls", "shape", "colour", "colour_rgb", "color", "color_rgb", "size_m", "where"}
         unknown = set(d) - valid
         if unknown:
             raise PerceptionError(
@@ -121,7 +210,7 @@ class ObjectDescriptor:
             )
         colour = next((d[k] for k in ("colour_rgb", "colour", "color_rgb", "color") if d.get(k) is not None), None)
         return cls(name=d.get("name"), cls=d.get("class", d.get("cls")), shape=d.get("shape"),
-                   colour_rgb=colour, size_m=d.get("size_m"))
+                   colour_rgb=colour, size_m=d.get("size_m"), where=d.get("where"))
 
     def size_vector(self) -> np.ndarray | None:
         """(3,) full size sorted as (long horizontal, short horizontal, height), or None."""

@@ -11,7 +11,10 @@ One :meth:`Perceiver.observe` call runs the pipeline on every frame of one obser
 3. detections: DBSCAN on position + colour, one fitted primitive per cluster (``detect``);
    stacking (an object whose lowest points sit on another's top rests on it);
 4. association to the declared descriptors (``association``); unmatched or ambiguous
-   clusters become ``unknown_<k>``;
+   clusters become ``unknown_<k>``; an object declared with a spatial reference (``where``)
+   and not tracked yet is resolved first on the landmarks the others' association found
+   (:func:`~phyagentos.perception.association.resolve_reference`; the snapshot's
+   ``references`` says how), and once tracked keeps its identity by its track;
 5. tracks: fusion over observations (``tracks``);
 6. holding from proprioception (the held object's pose follows the tcp), then relations.
 
@@ -28,7 +31,15 @@ from typing import Any, Mapping, Sequence
 import cv2
 import numpy as np
 
-from phyagentos.perception.association import associate, cost_matrix, match_confidence
+from phyagentos.perception.association import (
+    Landmark,
+    ReferenceResolution,
+    associate,
+    cost_matrix,
+    forbid_except,
+    match_confidence,
+    resolve_reference,
+)
 from phyagentos.perception.cloud import (
     Cloud,
     Plane,
@@ -149,6 +160,11 @@ class Perceiver:
         self._grasp_height_m: float | None = None
         self._last_plane: Plane | None = None
         self.last_timing_ms: dict[str, float] = {}
+        #: Centre (2,) of the support plane's perceived extent (world m) at the last
+        #: :meth:`object_cloud`, when a spatial reference needs it, else None.
+        self.table_centre_xy: np.ndarray | None = None
+        #: How each spatial reference was resolved at the last :meth:`observe`, by object name.
+        self.last_references: dict[str, ReferenceResolution] = {}
         #: The object cloud of the last :meth:`observe` (stage 2: points above the support
         #: plane, cropped and masked, on the voxel grid; world frame, m), or None before one.
         self.last_cloud: Cloud | None = None
@@ -233,6 +249,9 @@ class Perceiver:
         if not plane.fitted:
             log.warning("perception: support plane not fitted (too few table points); using z = %.3f m",
                         cfg.table.expected_height_m)
+        self.table_centre_xy = None
+        if plane.fitted and any(d.where is not None and d.where.relation == "table_center" for d in self.declared):
+            self.table_centre_xy = table_centre(coarse.points, plane, cfg)
         parts = []
         for i, (f, s) in enumerate(zip(frames, strides)):
             d, h = heights_above(f, plane, stride=s)
@@ -316,6 +335,7 @@ class Perceiver:
         names = [d.name for d in self.declared]
         track_pos = [self.tracks[n].position if n in self.tracks and not self.tracks[n].held else None for n in names]
         C = cost_matrix(dets, self.declared, cfg, track_pos)
+        C = self._resolve_references(C, dets, stamp)
         assoc = associate(C, cfg)
         for t in self.tracks.values():
             t.seen_now = False
@@ -440,7 +460,60 @@ class Perceiver:
             "unseen": unseen,
             "remembered": sorted(remembered),
             "support_plane": {"normal": _r(plane.normal, 5), "offset_m": _r(plane.offset_m, 5), "fitted": plane.fitted},
+            **({"references": {n: r.to_dict(dets) for n, r in self.last_references.items()}}
+               if self.last_references else {}),
         }
+
+    # ------------------------------------------------------------------ spatial references
+
+    def _resolve_references(self, C: np.ndarray, dets: list[Detection], stamp: float) -> np.ndarray:
+        """``C`` with each untracked object declared with a spatial reference admissible for
+        the one detection its relation picks out (or for none).
+
+        The other declared objects are associated first (without those objects); their matches
+        (and tracks seen in the last :data:`REMEMBER_S` s, not held) are the landmarks. The
+        candidates are the detections within the gate for the object that no other-looking
+        object took. An unresolved reference leaves its untracked look-alikes unassociated as
+        well (naming one "the other" would say which one is meant). Records the resolutions in
+        :attr:`last_references`."""
+        self.last_references = {}
+        pending = [j for j, d in enumerate(self.declared) if d.where is not None and d.name not in self.tracks]
+        if not pending or C.size == 0:
+            return C
+        cfg = self.config
+        names = [d.name for d in self.declared]
+        first_pass = C
+        for j in pending:
+            first_pass = forbid_except(first_pass, j, None)
+        taken = {i: j for i, (j, _, _) in associate(first_pass, cfg).matches.items()}
+        landmarks: dict[str, Landmark] = {}
+        for i, j in taken.items():
+            d = dets[i]
+            landmarks[names[j]] = Landmark(names[j], d.position, d.half_extents, d.yaw, d.shape, d.bottom_m)
+        for n, t in self.tracks.items():
+            if n not in landmarks and not t.held and t.released_s is None and stamp - t.last_seen_s <= REMEMBER_S:
+                landmarks[n] = Landmark(n, t.position, t.half_extents, t.yaw, t.shape, t.bottom_m)
+        chosen: set[int] = set()
+        for j in pending:
+            desc = self.declared[j]
+            alike = {k for k, d in enumerate(self.declared) if d.looks_like(desc)}
+            cands = [i for i in range(len(dets)) if C[i, j] <= cfg.association.gate_cost and i not in chosen
+                     and (i not in taken or taken[i] in alike)]
+            res = resolve_reference(desc, cands, dets, landmarks, cfg, look_alikes=len(alike),
+                                    table_centre_xy=self.table_centre_xy)
+            self.last_references[desc.name] = res
+            log.info("perception: %s %s %s: %s", desc.name, desc.where.relation if desc.where else "",
+                     list(desc.where.of) if desc.where else [],
+                     res.reason if res.detection is None else f"detection at {_r(dets[res.detection].position)}, "
+                                                              f"{res.reason}")
+            C = forbid_except(C, j, res.detection)
+            if res.detection is not None:
+                chosen.add(res.detection)
+            else:  # "the other one" is no better known than the one meant: untracked look-alikes wait too
+                for k in alike - {j}:
+                    if self.declared[k].where is None and self.declared[k].name not in self.tracks:
+                        C = forbid_except(C, k, None)
+        return C
 
     # ------------------------------------------------------------------ helpers
 
@@ -581,6 +654,19 @@ class Perceiver:
                 if c >= cfg.relations.min_confidence:
                     rels.append({"subject": a, "relation": "on", "object": b, "confidence": _r(c, 3)})
         return rels
+
+
+def table_centre(points: np.ndarray, plane: Plane, config: PerceptionConfig) -> np.ndarray | None:
+    """Centre (2,) of the perceived table top, world m: the middle of the 2nd-98th percentile
+    extent in x and y of the points within two inlier distances of the support plane (the
+    table top the cameras see; objects on it hide parts of it, not its edges); None with fewer
+    than ``table.min_inliers`` such points."""
+    tc = config.table
+    on = np.abs(plane.height(points.astype(np.float64))) < 2.0 * tc.inlier_threshold_m
+    if int(on.sum()) < tc.min_inliers:
+        return None
+    lo, hi = np.percentile(points[on, :2], [2.0, 98.0], axis=0)
+    return 0.5 * (lo + hi)
 
 
 def _detection_confidence(det: Detection) -> float:

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from phyagentos.untrusted import quote
 
@@ -48,7 +48,7 @@ from .decompose import Clause, decompose
 from .phrasing import DANGLING, WHERE_POSSIBLE, normalise
 from .world import Entity, World
 
-__all__ = ["Intent", "Meaning", "read_request", "detect_language"]
+__all__ = ["Intent", "Meaning", "read_request", "detect_language", "RELATIONS"]
 
 _MOVE = {"put", "place", "move", "set", "drop", "bring", "transfer", "carry", "sort", "relocate", "shift", "throw",
          "toss", "tidy", "slide", "deposit"}
@@ -180,6 +180,9 @@ class Meaning:
     language: str | None = None
     #: the request with ordinary phrasings rewritten into the rules' forms (:func:`.phrasing.normalise`)
     text: str = ""
+    #: objects picked out by a spatial relation (``read_request(..., relations=True)``): the declared name the
+    #: reader bound the reference to -> ``{"relation": ..., "of": [landmark names], "part": ...}``
+    where: dict[str, dict] = field(default_factory=dict)
 
     @property
     def nothing_to_do(self) -> bool:
@@ -479,8 +482,190 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
     return "region", tuple(picked), False, []
 
 
-def read_request(request: str, world: World) -> Meaning:
-    """Read ``request`` over ``world`` (see the module docstring)."""
+# -- referring expressions: "the black bowl next to the plate" ----------------------------------------------
+
+#: The spatial relations a referring expression may use (``read_request(..., relations=True)``):
+#: ``between`` two landmarks, ``next_to`` one, ``on`` one, ``in`` one (optionally a ``part`` of it such as its
+#: top drawer), ``table_center`` (no landmark: the middle of the table the objects stand on).
+RELATIONS = ("between", "next_to", "on", "in", "table_center")
+#: words that begin a relation after an object phrase, and the relation they begin
+_RELATION_START = {"between": "between", "next": "next_to", "beside": "next_to", "near": "next_to",
+                   "nearest": "next_to", "closest": "next_to", "by": "next_to", "on": "on", "atop": "on",
+                   "upon": "on", "in": "in", "inside": "in", "within": "in", "at": "at", "from": "from"}
+#: words of a landmark phrase that name no part of it ("the cookie box": a box of cookies)
+_LANDMARK_GENERIC = _KIND | _REGION_KIND | {"box", "boxes", "package", "pack", "carton", "thing"}
+_CENTRE = {"center", "centre", "middle"}
+_EGOCENTRIC = {"left", "right", "front", "back", "rear", "far", "near", "nearer", "farther", "further", "leftmost",
+               "rightmost", "corner", "edge", "end"}
+_TABLE = {"table", "tabletop", "counter", "surface"}
+#: a destination preposition after a referring expression of a move ("put the bowl next to the plate on the box")
+_DEST_PREPOSITIONS = ("into", "onto", "in", "on", "to", "inside")
+
+
+def _stem(name: str) -> str:
+    """A declared name without its instance number: ``akita_black_bowl_2`` -> ``akita_black_bowl``."""
+    return re.sub(r"_\d+$", "", name)
+
+
+def _twins(words: list[str], world: World) -> tuple[str, ...]:
+    """The declared objects an object phrase names when it names several *identical* ones (the same
+    declared name but for its instance number) and nothing tells them apart; else ``()``."""
+    if not words or set(words) & (_ALL | _PRONOUNS | {"two", "three", "four", "five", "ones"}) or any(
+            w in _KIND and w.endswith("s") for w in words):
+        return ()
+    content = [w for w in words if w not in _STOP]
+    if not content:
+        return ()
+    found, misses = _filter(content, list(world.objects), world)
+    if misses or len(found) < 2 or len({_stem(e.name) for e in found}) != 1:
+        return ()
+    return tuple(e.name for e in found)
+
+
+def _matches_part(word: str, parts: set[str]) -> bool:
+    return word in parts or f"{word}s" in parts or f"{word}es" in parts or (word.endswith("s") and word[:-1] in parts)
+
+
+def _landmark(words: list[str], world: World, exclude: Sequence[str]) -> tuple[str | None, list[tuple[str, str]]]:
+    """The one declared thing (object or fixture: the world's regions) a landmark phrase names, by the words
+    of its declared name (``cookie box`` -> ``cookies_1``: a plural name matches its singular, and words
+    such as box or tray may name no part of it); ``(None, problems)`` when it names none or several."""
+    content = [w for w in words if w not in _STOP and w not in ("of",)]
+    phrase = quote(" ".join(words))
+    if not content:
+        return None, [("not_understood", f"{phrase}: the relation names no landmark")]
+    if set(content) <= _EGOCENTRIC:
+        return None, [("not_understood", f"{phrase}: a place relative to the viewer ({', '.join(content)}) is not "
+                                         f"a relation the rules read (between, next to, on, in a declared thing; "
+                                         f"the table's centre)")]
+    cands = [e for e in world.regions if e.name not in exclude]
+    scored = []
+    for e in cands:
+        parts = {p for p in e.name.split("_") if not p.isdigit()}
+        specific = [w for w in content if w not in _LANDMARK_GENERIC]
+        if not all(_matches_part(w, parts) for w in specific):
+            continue
+        hits = sum(_matches_part(w, parts) for w in content)
+        if hits:
+            scored.append((hits, e.name))
+    if not scored:
+        have = ", ".join(e.name for e in cands) or "nothing"
+        return None, [("unknown_destination", f"{phrase} names nothing declared in the scene (it has {have})")]
+    top = max(h for h, _ in scored)
+    best = [n for h, n in scored if h == top]
+    if len(best) > 1:
+        return None, [("not_understood", f"{phrase} could be any of {', '.join(best)}: say which")]
+    return best[0], []
+
+
+def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tuple[dict | None,
+                                                                                   list[tuple[str, str]]]:
+    """``(where, problems)`` of a relation phrase (``next to the plate``, ``between the plate and the
+    ramekin``, ``on the cookie box``, ``in the top drawer of the wooden cabinet``, ``from table center``)."""
+    phrase = quote(" ".join(words))
+    kind = _RELATION_START[words[0]]
+    rest = words[1:]
+    if words[0] == "next" or words[0] in ("closest", "nearest"):
+        if not rest or rest[0] != "to":
+            return None, [("not_understood", f"{phrase}: '{words[0]}' without 'to'")]
+        rest = rest[1:]
+    if words[0] == "on" and rest[:2] == ["top", "of"]:
+        rest = rest[2:]
+    if kind in ("at", "from", "in", "on") and set(rest) & _CENTRE and (set(rest) & _TABLE or not [
+            w for w in rest if w not in _STOP and w not in _CENTRE and w != "of"]):
+        # "from table center", "at the centre of the table", "in the middle of the table"
+        extra = [w for w in rest if w not in _STOP and w not in _CENTRE | _TABLE and w != "of"]
+        if extra:
+            return None, [("not_understood", f"{phrase}: {', '.join(repr(w) for w in extra)} after the table's "
+                                              f"centre is not understood")]
+        return {"relation": "table_center"}, []
+    if kind == "at":
+        return None, [("not_understood", f"{phrase}: '{words[0]}' a place other than the table's centre is not a "
+                                          f"relation the rules read (between, next to, on, in a declared thing; "
+                                          f"the table's centre)")]
+    if kind == "from":  # "lift the bowl from the stove": the one resting on it
+        kind = "on"
+    if kind == "between":
+        groups: list[list[str]] = [[]]
+        for w in rest:
+            if w == "and":
+                groups.append([])
+            else:
+                groups[-1].append(w)
+        if len(groups) != 2 or not all(groups):
+            return None, [("not_understood", f"{phrase}: 'between' needs two landmarks (between the X and the Y)")]
+        names = []
+        for g in groups:
+            name, why = _landmark(g, world, twins)
+            if why:
+                return None, why
+            names.append(name)
+        if names[0] == names[1]:
+            return None, [("not_understood", f"{phrase}: between {names[0]} and itself")]
+        return {"relation": "between", "of": names}, []
+    part: str | None = None
+    if kind == "in" and "of" in rest and [w for w in rest[:rest.index("of")] if w not in _STOP]:
+        # "in the top drawer of the wooden cabinet": a part of the landmark
+        part = " ".join(w for w in rest[:rest.index("of")] if w not in ("the", "a", "an"))
+        rest = rest[rest.index("of") + 1:]
+    name, why = _landmark(rest, world, twins)
+    if why:
+        return None, why
+    where: dict = {"relation": kind, "of": [name]}
+    if part:
+        where["part"] = part
+    return where, []
+
+
+def _reference(body: list[str], world: World, verb: str | None, bound: Mapping[str, dict]):
+    """A referring expression at the start of a clause's object words: ``the <words naming several
+    identical objects> <relation> <landmark(s)>`` (then, for a move, ``<preposition> <destination>``).
+
+    Returns ``None`` when ``body`` is no such expression (the ordinary reading applies), a list of
+    problems when it is one the rules cannot resolve, else ``(object, where, destination words,
+    preposition)``: the object is the first of the identical declared names not yet bound to another
+    reference (which of two identical names stands for the thing the relation picks out is the reader's
+    label; perception decides which physical object that is)."""
+    k = next((i for i, w in enumerate(body) if w in _RELATION_START and i > 0), None)
+    if k is None:
+        return None
+    twins = _twins(body[:k], world)
+    if not twins:
+        return None
+    rel = body[k:]
+    dest: list[str] = []
+    prep: str | None = None
+    if verb in _MOVE:
+        # the destination follows the landmark's phrase: its last destination preposition
+        skip = 3 if rel[:2] == ["next", "to"] or rel[:3] == ["on", "top", "of"] else 1
+        cut = max((i for i, w in enumerate(rel) if i >= skip + 1 and w in _DEST_PREPOSITIONS), default=None)
+        if cut is None:  # "put the black bowl on the plate": the preposition is the destination's
+            return None
+        rel, dest, prep = rel[:cut], rel[cut + 1:], rel[cut]
+    where, why = _read_relation(rel, world, twins)
+    if why or where is None:
+        return why or [("not_understood", f"{quote(' '.join(rel))}: not a relation the rules read")]
+    free = [n for n in twins if n not in bound]
+    if not free:
+        return [("not_understood", f"{quote(' '.join(body))}: every one of {', '.join(twins)} is already picked "
+                                   f"out by another part of the request")]
+    return free[0], where, dest, prep
+
+
+def read_request(request: str, world: World, *, relations: bool = False) -> Meaning:
+    """Read ``request`` over ``world`` (see the module docstring).
+
+    Args:
+        request: the request (English).
+        world: what it may name.
+        relations: also read referring expressions that tell identical objects apart by a spatial
+            relation (``the black bowl between the plate and the ramekin``: :data:`RELATIONS`), when
+            the words before the relation name several objects with the same declared name but for
+            its instance number. The object is bound to one of those names and the relation kept in
+            :attr:`Meaning.where` (``{name: {"relation", "of", "part"?}}``) for perception to resolve
+            on what it sees; a relation or landmark the rules cannot read is a problem. Off by
+            default: a caller that cannot hand the relation on to perception must not ask for it.
+    """
     meaning = Meaning(request=request)
     meaning.language = detect_language(request, world.names)
     if meaning.language is not None:
@@ -513,10 +698,16 @@ def read_request(request: str, world: World) -> Meaning:
             start += 1
         body = words[start:]
         stay = _STAY.search(low)
+        # "the black bowl next to the plate" (one of two identical bowls): read only when asked for
+        ref = (_reference(body, world, verb_word, meaning.where)
+               if relations and verb_word in _MOVE | _HOLD and not negated and not stay else None)
+        if isinstance(ref, list):
+            meaning.problems += ref
+            continue
         # the excepted phrase: from except/but to the next preposition (or the end)
         excluded_words: list[str] = []
         for key in ("except", "but"):
-            if key in body:
+            if key in body and ref is None:
                 i = body.index(key)
                 j = next((k for k in range(i + 1, len(body)) if body[k] in _PREPOSITIONS), len(body))
                 excluded_words = body[i + 1:j]
@@ -524,16 +715,20 @@ def read_request(request: str, world: World) -> Meaning:
                 break
         # a preposition first ("... and put into the basket"): the object is the previous clause's
         cut = next((i for i, w in enumerate(body) if w in _PREPOSITIONS and (i > 0 or previous)), None)
-        if stay:
-            obj_words = [w for w in _tokens(low[:stay.start()])[start:] if w not in ("except", "but")]
-            obj_words = [w for w in obj_words if w not in excluded_words]
-            dest_words, prep = [], None
-        elif cut is None:
-            obj_words, dest_words, prep = body, [], None
+        if ref is not None:
+            ref_object, ref_where, dest_words, prep = ref
+            objects, count, problems = (ref_object,), None, []
         else:
-            obj_words, dest_words, prep = body[:cut], body[cut + 1:], body[cut]
-        obj_words = [w for w in obj_words if w not in ("by", "colour", "color", "size")]
-        objects, count, problems = _read_objects(obj_words, world, previous)
+            if stay:
+                obj_words = [w for w in _tokens(low[:stay.start()])[start:] if w not in ("except", "but")]
+                obj_words = [w for w in obj_words if w not in excluded_words]
+                dest_words, prep = [], None
+            elif cut is None:
+                obj_words, dest_words, prep = body, [], None
+            else:
+                obj_words, dest_words, prep = body[:cut], body[cut + 1:], body[cut]
+            obj_words = [w for w in obj_words if w not in ("by", "colour", "color", "size")]
+            objects, count, problems = _read_objects(obj_words, world, previous)
         excluded: tuple[str, ...] = ()
         if excluded_words and not problems:
             ex, _, why = _read_objects(excluded_words, world, ())
@@ -585,6 +780,8 @@ def read_request(request: str, world: World) -> Meaning:
             meaning.problems += problems
             continue
         meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded))
+        if ref is not None:
+            meaning.where[ref[0]] = ref[1]
         previous = objects if count is None else objects[:count]
         acted = acted or verb_word is not None
     _settle(meaning)

@@ -96,8 +96,9 @@ _FILLER = [
     # "move the green block over to the back tray"
     (re.compile(r"\bover\s+(?=(?:to|into|onto|in)\b)", _F), ""),
     # "lift the cube off the table": the table is what every object stands on, not an object
-    (re.compile(r"\s+(?:off|from)\s+(?:of\s+)?(?:the\s+)?(?:table(?:top)?|surface|desk|floor|ground|workbench)\b",
-                _F), ""),
+    # ("from the table center" is a place on it: kept)
+    (re.compile(r"\s+(?:off|from)\s+(?:of\s+)?(?:the\s+)?(?:table(?:top)?|surface|desk|floor|ground|workbench)\b"
+                r"(?!\s+(?:cent(?:er|re)|middle)\b)", _F), ""),
     # "the object called dont_touch" is dont_touch
     (re.compile(r"\b(?:the\s+|a\s+)?(?:\w+\s+)?(?:object|cube|block|thing|item|one|box|piece)\s+(?:called|named|"
                 r"labell?ed|marked)\s+['\"]?(\w+)['\"]?", _F), r"\1"),

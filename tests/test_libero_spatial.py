@@ -1,0 +1,142 @@
+"""libero_spatial: the instruction tells two identical black bowls apart by a spatial relation;
+the rule reader binds the bowl to one of the identical names and hands the relation to
+perception (``where`` in the declared scene), never the BDDL goal or init placement."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from phyagentos.agent.llm.meaning import read_request
+from phyagentos.bench.libero import instruction_nodes, instruction_plan, planner_world, prepare_libero_suite
+from phyagentos.errors import BenchError
+from phyagentos.targets.libero import parse_bddl, resolve_task
+from phyagentos.targets.libero.catalog import suite_tasks
+
+BOWL, TWIN = "akita_black_bowl_1", "akita_black_bowl_2"
+RAMEKIN, PLATE, COOKIES = "glazed_rim_porcelain_ramekin_1", "plate_1", "cookies_1"
+
+#: LIBERO's ten libero_spatial instructions (task.language) and the reference each one reads to
+EXPECTED = [
+    ("pick up the black bowl between the plate and the ramekin and place it on the plate",
+     {"relation": "between", "of": [PLATE, RAMEKIN]}),
+    ("pick up the black bowl next to the ramekin and place it on the plate", {"relation": "next_to", "of": [RAMEKIN]}),
+    ("pick up the black bowl from table center and place it on the plate", {"relation": "table_center"}),
+    ("pick up the black bowl on the cookie box and place it on the plate", {"relation": "on", "of": [COOKIES]}),
+    ("pick up the black bowl in the top drawer of the wooden cabinet and place it on the plate",
+     {"relation": "in", "of": ["wooden_cabinet_1"], "part": "top drawer"}),
+    ("pick up the black bowl on the ramekin and place it on the plate", {"relation": "on", "of": [RAMEKIN]}),
+    ("pick up the black bowl next to the cookie box and place it on the plate", {"relation": "next_to", "of": [COOKIES]}),
+    ("pick up the black bowl on the stove and place it on the plate", {"relation": "on", "of": ["flat_stove_1"]}),
+    ("pick up the black bowl next to the plate and place it on the plate", {"relation": "next_to", "of": [PLATE]}),
+    ("pick up the black bowl on the wooden cabinet and place it on the plate",
+     {"relation": "on", "of": ["wooden_cabinet_1"]}),
+]
+
+
+def _problem(i=0):
+    return parse_bddl(resolve_task("libero_spatial", i).bddl_path)
+
+
+@pytest.mark.parametrize("i", range(10))
+def test_every_libero_spatial_instruction_plans_a_pick_and_place_with_its_reference(i):
+    task = suite_tasks("libero_spatial")[i]
+    text, where = EXPECTED[i]
+    assert task.instruction == text  # LIBERO's own wording, from its catalogue
+    problem = parse_bddl(task.bddl_path)
+    nodes, refs = instruction_plan(task.instruction, problem.objects, problem.fixtures)
+    assert [(n["skill"], n["params"]) for n in nodes] == [("pick", {"object": BOWL}),
+                                                          ("place", {"object": BOWL, "region": PLATE})]
+    assert refs == {BOWL: where}
+    assert instruction_nodes(task.instruction, problem.objects, problem.fixtures) == nodes
+
+
+def test_the_reader_reads_relations_only_when_asked_and_the_plain_reading_is_unchanged():
+    problem = _problem()
+    world = planner_world(problem.objects, problem.fixtures)
+    text = EXPECTED[1][0]
+    plain = read_request(text, world)
+    assert not plain.intents and any("could be any of akita_black_bowl_1, akita_black_bowl_2" in m
+                                     for _, m in plain.problems)
+    read = read_request(text, world, relations=True)
+    assert not read.problems and read.where == {BOWL: {"relation": "next_to", "of": [RAMEKIN]}}
+    # a bowl with no relation is still ambiguous; a relation is no destination
+    with pytest.raises(BenchError, match="could be any of akita_black_bowl_1, akita_black_bowl_2: say which"):
+        instruction_nodes("put the black bowl on the plate", problem.objects, problem.fixtures)
+    # an object that is not one of several identical ones is read as before ("on" is its destination)
+    nodes = instruction_nodes("pick up the ramekin and place it on the plate", problem.objects, problem.fixtures)
+    assert [n["params"] for n in nodes] == [{"object": RAMEKIN}, {"object": RAMEKIN, "region": PLATE}]
+
+
+def test_other_wordings_of_the_relations_read_the_same():
+    problem = _problem()
+    for text, where in [
+        ("lift the black bowl from the table center and put it on the plate", {"relation": "table_center"}),
+        ("grab the bowl in the middle of the table and put it on the plate", {"relation": "table_center"}),
+        ("take the black bowl beside the cookie box and set it on the plate", {"relation": "next_to", "of": [COOKIES]}),
+        ("lift bowl from stove and put it on plate", {"relation": "on", "of": ["flat_stove_1"]}),
+        ("pick up the black bowl on top of the ramekin and place it on the plate", {"relation": "on", "of": [RAMEKIN]}),
+        ("put the black bowl next to the ramekin on the plate", {"relation": "next_to", "of": [RAMEKIN]}),
+    ]:
+        nodes, refs = instruction_plan(text, problem.objects, problem.fixtures)
+        assert refs == {BOWL: where}, text
+        assert nodes[-1]["params"] == {"object": BOWL, "region": PLATE}, text
+
+
+@pytest.mark.parametrize("text,why", [
+    ("pick up the black bowl on the left and place it on the plate", "a place relative to the viewer"),
+    ("pick up the black bowl at the back and place it on the plate", "not a relation the rules read"),
+    ("pick up the black bowl next to the sink and place it on the plate", "'the sink' names nothing declared"),
+    ("pick up the black bowl between the plate and place it on the plate", "'between' needs two landmarks"),
+    ("pick up the black bowl next the plate and place it on the plate", "'next' without 'to'"),
+])
+def test_unreadable_relations_are_refused_with_the_reason(text, why):
+    problem = _problem()
+    with pytest.raises(BenchError, match=why):
+        instruction_nodes(text, problem.objects, problem.fixtures)
+
+
+def test_perception_and_the_reader_know_the_same_relations():
+    from phyagentos.agent.llm.meaning import RELATIONS
+    from phyagentos.perception.descriptors import WHERE_RELATIONS
+
+    assert set(RELATIONS) == set(WHERE_RELATIONS)
+
+
+def test_two_references_bind_the_two_identical_names():
+    problem = _problem()
+    text = ("pick up the black bowl next to the ramekin and place it on the plate, then pick up the black bowl "
+            "on the cookie box and place it on the ramekin")
+    nodes, refs = instruction_plan(text, problem.objects, problem.fixtures)
+    assert refs == {BOWL: {"relation": "next_to", "of": [RAMEKIN]}, TWIN: {"relation": "on", "of": [COOKIES]}}
+    assert [n["id"] for n in nodes] == [f"pick_{BOWL}", f"place_{BOWL}", f"pick_{TWIN}", f"place_{TWIN}"]
+
+
+def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placement(tmp_path):
+    """prepare_libero_suite writes the reference into the episode's declared scene; the looks
+    cache is given (measuring them needs the simulator), so nothing is built."""
+    ws = tmp_path / "ws"
+    (ws / "libero").mkdir(parents=True)
+    look = {"shape": "cylinder", "colour": [0.1, 0.1, 0.1], "size_m": [0.12, 0.12, 0.05]}
+    cats = set(_problem().objects.values())
+    cache = {"_method": "generated_clutter_v2", "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
+             **{c: look for c in cats}}
+    (ws / "libero" / "descriptors.yaml").write_text(yaml.safe_dump(cache))
+    suite, ids, seeds = prepare_libero_suite("libero_spatial", ws, tasks=("0", "4"), seeds=(0,))
+    assert ids == ("t0", "t4")
+    g0 = yaml.safe_load((suite.parent / "t0.yaml").read_text())
+    objects = {o["name"]: o for o in g0["scene"]["objects"]}
+    assert objects[BOWL]["where"] == {"relation": "between", "of": [PLATE, RAMEKIN]}
+    assert "where" not in objects[TWIN] and {PLATE, RAMEKIN, COOKIES} <= set(objects)
+    text = (suite.parent / "t0.yaml").read_text()
+    assert "region" not in str(g0["scene"]) and ":init" not in text and "goal" not in g0["scene"]
+    # the table scene's tcp box (the template's would hold the arm's start pose outside)
+    box = yaml.safe_load(suite.read_text())["safety"]["workspace_box"]
+    assert box["min"][0] < -0.21 < box["max"][0] and box["min"][2] < 0.9 < 1.17 < box["max"][2]
+    planning = yaml.safe_load((suite.parent / "planning.yaml").read_text())
+    assert planning["planned"] == [0, 4] and planning["refused"] == {}
+    assert planning["spatial_references"][4] == {BOWL: {"relation": "in", "of": ["wooden_cabinet_1"], "part": "top drawer"}}
+    # the perceiver reads the declared reference through the target's declared objects
+    from phyagentos.perception import ObjectDescriptor
+
+    assert ObjectDescriptor.from_dict(objects[BOWL]).where.relation == "between"

@@ -1,0 +1,238 @@
+"""Spatial references in association: which of two identical declared objects is meant,
+decided from the perceived positions of the landmarks a relation names (never from an
+index order or a guess), on synthetic detections."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phyagentos.perception import ObjectDescriptor, PerceptionConfig, PerceptionError, SpatialReference
+from phyagentos.perception.association import (
+    Landmark,
+    associate,
+    cost_matrix,
+    forbid_except,
+    resolve_reference,
+)
+from phyagentos.perception.cloud import Plane
+from phyagentos.perception.colour import srgb_to_lab
+from phyagentos.perception.detect import Detection
+from phyagentos.perception.perceiver import Perceiver, table_centre
+
+BLACK, WHITE, RED = (0.08, 0.08, 0.08), (0.95, 0.95, 0.95), (0.85, 0.15, 0.12)
+BOWL_SIZE = (0.12, 0.12, 0.05)
+
+
+def _det(colour, pos, half=(0.06, 0.06, 0.025), shape="cylinder", bottom=0.0, low=0.0):
+    return Detection(position=np.array(pos, float), yaw=0.0, half_extents=np.array(half, float), shape=shape,
+                     colour_rgb=np.array(colour), colour_lab=srgb_to_lab(np.array([colour]))[0], points=300,
+                     cameras=2, position_std_m=0.002, yaw_std_rad=0.05, view_agreement=1.0, bottom_m=bottom,
+                     low_m=low)
+
+
+def _bowl(name, where=None):
+    return ObjectDescriptor(name, cls="bowl", shape="cylinder", colour_rgb=BLACK, size_m=BOWL_SIZE, where=where)
+
+
+def _landmark(name, pos, half=(0.04, 0.04, 0.02), shape="cylinder", bottom=0.0):
+    return Landmark(name, np.array(pos, float), np.array(half, float), 0.0, shape, bottom)
+
+
+CFG = PerceptionConfig.default()
+
+
+# -- the declared reference -------------------------------------------------------------------------------
+
+
+def test_a_reference_is_validated_and_round_trips():
+    ref = SpatialReference.from_value({"relation": "between", "of": ["plate_1", "ramekin_1"]})
+    assert ref.of == ("plate_1", "ramekin_1") and ref.to_dict() == {"relation": "between",
+                                                                      "of": ["plate_1", "ramekin_1"]}
+    assert SpatialReference.from_value({"relation": "table_center"}).of == ()
+    d = ObjectDescriptor.from_dict({"name": "bowl_1", "class": "bowl", "where": {"relation": "in", "of": ["cab_1"],
+                                                                                 "part": "top drawer"}})
+    assert d.where == SpatialReference("in", ("cab_1",), "top drawer")
+    with pytest.raises(PerceptionError, match="is not one of"):
+        SpatialReference("left_of", ("plate_1",))
+    with pytest.raises(PerceptionError, match="takes 2 landmark"):
+        SpatialReference("between", ("plate_1",))
+    with pytest.raises(PerceptionError, match="unknown key"):
+        SpatialReference.from_value({"relation": "on", "of": ["plate_1"], "init": "region"})
+    with pytest.raises(PerceptionError, match="itself"):
+        ObjectDescriptor("bowl_1", where={"relation": "next_to", "of": ["bowl_1"]})
+
+
+# -- resolve_reference --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_next_to_picks_the_detection_nearest_the_landmark_in_either_order(order):
+    near, far = _det(BLACK, (0.55, 0.10, 0.03)), _det(BLACK, (0.40, -0.20, 0.03))
+    dets = [near, far] if order == 0 else [far, near]
+    desc = _bowl("bowl_1", {"relation": "next_to", "of": ["ramekin_1"]})
+    res = resolve_reference(desc, [0, 1], dets, {"ramekin_1": _landmark("ramekin_1", (0.60, 0.18, 0.02))}, CFG,
+                            look_alikes=2)
+    assert res.detection is not None and dets[res.detection] is near
+
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_between_picks_the_detection_nearest_the_segment_not_the_nearest_landmark(order):
+    # the other bowl stands right beside the plate but outside the plate-ramekin segment
+    mid, beside = _det(BLACK, (0.50, 0.02, 0.03)), _det(BLACK, (0.50, -0.26, 0.03))
+    dets = [mid, beside] if order == 0 else [beside, mid]
+    desc = _bowl("bowl_1", {"relation": "between", "of": ["plate_1", "ramekin_1"]})
+    marks = {"plate_1": _landmark("plate_1", (0.50, -0.15, 0.01)), "ramekin_1": _landmark("ramekin_1", (0.50, 0.2, 0.02))}
+    res = resolve_reference(desc, [0, 1], dets, marks, CFG, look_alikes=2)
+    assert dets[res.detection] is mid
+
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_on_a_perceived_landmark_needs_the_footprint_and_height(order):
+    up = _det(BLACK, (0.45, 0.10, 0.12), bottom=0.09, low=0.09)
+    down = _det(BLACK, (0.60, -0.1, 0.03))
+    dets = [up, down] if order == 0 else [down, up]
+    desc = _bowl("bowl_1", {"relation": "on", "of": ["cookies_1"]})
+    box = _landmark("cookies_1", (0.45, 0.11, 0.045), half=(0.08, 0.05, 0.045), shape="box")
+    res = resolve_reference(desc, [0, 1], dets, {"cookies_1": box}, CFG, look_alikes=2)
+    assert dets[res.detection] is up
+    # over the footprint but standing on the table (beside a flat thing): not "on" it
+    flat = _det(BLACK, (0.45, 0.10, 0.03))
+    res = resolve_reference(desc, [0, 1], [flat, down], {"cookies_1": box}, CFG, look_alikes=2)
+    assert res.detection is None and "0 candidates" in res.reason
+
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_on_an_unperceived_fixture_picks_the_one_look_alike_off_the_table(order):
+    raised = _det(BLACK, (0.30, 0.30, 0.05), bottom=0.02, low=0.025)
+    table = _det(BLACK, (0.55, -0.05, 0.03))
+    dets = [raised, table] if order == 0 else [table, raised]
+    desc = _bowl("bowl_1", {"relation": "on", "of": ["flat_stove_1"]})
+    res = resolve_reference(desc, [0, 1], dets, {}, CFG, look_alikes=2)
+    assert dets[res.detection] is raised and "not perceived" in res.reason
+    # both on the table: which is on the stove cannot be seen
+    res = resolve_reference(desc, [0, 1], [table, _det(BLACK, (0.3, 0.3, 0.03))], {}, CFG, look_alikes=2)
+    assert res.detection is None
+
+
+def test_table_center_uses_the_perceived_table_centre():
+    dets = [_det(BLACK, (0.20, 0.25, 0.03)), _det(BLACK, (0.02, -0.01, 0.03))]
+    desc = _bowl("bowl_1", {"relation": "table_center"})
+    res = resolve_reference(desc, [0, 1], dets, {}, CFG, look_alikes=2, table_centre_xy=np.array([0.0, 0.0]))
+    assert res.detection == 1
+    res = resolve_reference(desc, [0, 1], dets, {}, CFG, look_alikes=2, table_centre_xy=np.array([0.25, 0.3]))
+    assert res.detection == 0
+    res = resolve_reference(desc, [0, 1], dets, {}, CFG, look_alikes=2, table_centre_xy=None)
+    assert res.detection is None and "centre is not perceived" in res.reason
+
+
+def test_table_centre_is_the_middle_of_the_perceived_table_top():
+    rng = np.random.default_rng(0)
+    top = np.column_stack([rng.uniform(-0.3, 0.5, 4000), rng.uniform(-0.4, 0.2, 4000), np.full(4000, 0.9)])
+    things = np.column_stack([rng.uniform(0.4, 0.9, 500), rng.uniform(0.1, 0.6, 500), rng.uniform(0.92, 1.1, 500)])
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.9, 4000, True)
+    centre = table_centre(np.vstack([top, things]), plane, CFG)
+    assert centre == pytest.approx([0.1, -0.1], abs=0.02)
+    assert table_centre(top[:10], plane, CFG) is None
+
+
+def test_an_unresolvable_relation_picks_nothing():
+    a, b = _det(BLACK, (0.50, 0.00, 0.03)), _det(BLACK, (0.50, 0.30, 0.03))
+    desc = _bowl("bowl_1", {"relation": "next_to", "of": ["plate_1"]})
+    # the landmark is not perceived
+    assert resolve_reference(desc, [0, 1], [a, b], {}, CFG, look_alikes=2).detection is None
+    # both equally near: within the margin, no pick
+    plate = _landmark("plate_1", (0.50, 0.15, 0.01))
+    res = resolve_reference(desc, [0, 1], [a, b], {"plate_1": plate}, CFG, look_alikes=2)
+    assert res.detection is None and "within" in res.reason
+    # only one of the two look-alikes seen: it may be the other one
+    res = resolve_reference(desc, [0], [a, b], {"plate_1": _landmark("plate_1", (0.5, -0.1, 0.01))}, CFG,
+                            look_alikes=2)
+    assert res.detection is None and "look-alikes seen" in res.reason
+    assert resolve_reference(desc, [], [a, b], {"plate_1": plate}, CFG, look_alikes=2).detection is None
+
+
+def test_forbid_except_leaves_one_admissible_pair():
+    C = np.array([[0.1, 0.2], [0.3, 0.1]])
+    out = forbid_except(C, 0, 1)
+    assert out[1, 0] == 0.3 and out[0, 0] > CFG.association.gate_cost and (out[:, 1] == C[:, 1]).all()
+    assert (forbid_except(C, 1, None)[:, 1] > CFG.association.gate_cost).all()
+
+
+# -- the perceiver's association --------------------------------------------------------------------------
+
+
+def _perceiver(where):
+    declared = [_bowl("bowl_1", where), _bowl("bowl_2"),
+                ObjectDescriptor("ramekin_1", cls="ramekin", shape="cylinder", colour_rgb=WHITE, size_m=(0.08, 0.08, 0.04)),
+                ObjectDescriptor("plate_1", cls="plate", shape="cylinder", colour_rgb=RED, size_m=(0.2, 0.2, 0.02))]
+    return Perceiver(CFG, declared)
+
+
+def _assign(p: Perceiver, dets):
+    names = [d.name for d in p.declared]
+    track_pos = [p.tracks[n].position if n in p.tracks else None for n in names]
+    C = p._resolve_references(cost_matrix(dets, p.declared, CFG, track_pos), dets, 0.0)
+    a = associate(C, CFG)
+    return {names[j]: i for i, (j, _, _) in a.matches.items()}
+
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_the_perceiver_gives_the_relation_its_bowl_and_the_twin_the_other(order):
+    near = _det(BLACK, (0.52, 0.12, 0.03))
+    far = _det(BLACK, (0.40, -0.25, 0.03))
+    ramekin = _det(WHITE, (0.60, 0.20, 0.02), half=(0.04, 0.04, 0.02))
+    plate = _det(RED, (0.45, -0.05, 0.01), half=(0.1, 0.1, 0.01))
+    bowls = [near, far] if order == 0 else [far, near]
+    dets = [bowls[0], ramekin, bowls[1], plate]
+    p = _perceiver({"relation": "next_to", "of": ["ramekin_1"]})
+    got = _assign(p, dets)
+    assert dets[got["bowl_1"]] is near and dets[got["bowl_2"]] is far
+    assert got["ramekin_1"] == 1 and got["plate_1"] == 3
+    assert p.last_references["bowl_1"].detection == got["bowl_1"]
+
+
+def test_the_perceiver_leaves_both_bowls_unseen_when_the_landmark_is_not_seen():
+    dets = [_det(BLACK, (0.52, 0.12, 0.03)), _det(BLACK, (0.40, -0.25, 0.03)),
+            _det(RED, (0.45, -0.05, 0.01), half=(0.1, 0.1, 0.01))]
+    p = _perceiver({"relation": "next_to", "of": ["ramekin_1"]})
+    got = _assign(p, dets)
+    assert "bowl_1" not in got and "bowl_2" not in got  # the twin is not given either one by index
+    assert got == {"plate_1": 2}
+    assert p.last_references["bowl_1"].detection is None
+
+
+def test_with_one_lookalike_in_view_neither_bowl_is_named():
+    """The landmark is seen but only one black bowl: it may be the one meant or the other, so
+    neither name is given to it."""
+    dets = [_det(BLACK, (0.52, 0.12, 0.03)), _det(WHITE, (0.60, 0.20, 0.02), half=(0.04, 0.04, 0.02)),
+            _det(RED, (0.45, -0.05, 0.01), half=(0.1, 0.1, 0.01))]
+    p = _perceiver({"relation": "next_to", "of": ["ramekin_1"]})
+    got = _assign(p, dets)
+    assert got == {"ramekin_1": 1, "plate_1": 2}
+    assert "look-alikes seen" in p.last_references["bowl_1"].reason
+
+
+def test_a_tracked_bowl_keeps_its_identity_without_the_relation():
+    """Once associated, the track decides: the bowl set down on the plate is still bowl_1,
+    though 'next to the ramekin' now fits the other one better."""
+    p = _perceiver({"relation": "next_to", "of": ["ramekin_1"]})
+    ramekin = _det(WHITE, (0.60, 0.20, 0.02), half=(0.04, 0.04, 0.02))
+    plate = _det(RED, (0.45, -0.05, 0.01), half=(0.1, 0.1, 0.01))
+    first = [_det(BLACK, (0.52, 0.12, 0.03)), _det(BLACK, (0.40, -0.25, 0.03)), ramekin, plate]
+    snap_names = _assign(p, first)
+    from phyagentos.perception.tracks import Track
+
+    for name, i in snap_names.items():
+        p.tracks[name] = Track.start(name, first[i], 0.9, 0.0, ("front",))
+    # the hand set bowl_1 down on the plate (its track is where it was let go); the ramekin is
+    # now beside bowl_2: "next to the ramekin" would pick bowl_2's detection
+    p.tracks["bowl_1"].position = np.array([0.45, -0.05, 0.04])
+    ramekin = _det(WHITE, (0.40, -0.33, 0.02), half=(0.04, 0.04, 0.02))
+    later = [_det(BLACK, (0.41, -0.24, 0.03)), _det(BLACK, (0.45, -0.05, 0.04), bottom=0.02), ramekin, plate]
+    again = resolve_reference(p.declared[0], [0, 1], later, {"ramekin_1": _landmark("ramekin_1", (0.40, -0.33, 0.02))},
+                              CFG, look_alikes=2)
+    assert again.detection == 0
+    got = _assign(p, later)
+    assert got["bowl_1"] == 1 and got["bowl_2"] == 0
+    assert p.last_references == {}  # no reference left to resolve

@@ -122,3 +122,16 @@ def markdown_table(head: Sequence[Any], rows: Iterable[Sequence[Any]], align: st
 def print_table(head: Sequence[Any], rows: Iterable[Sequence[Any]], align: str | Sequence[str] | None = None) -> None:
     """Print ``markdown_table(head, rows, align)``."""
     print(markdown_table(head, rows, align), flush=True)
+
+
+def index_range(text: str) -> list[int]:
+    """Indices written as ``"0-9"``, ``"1,3,5-7"`` (inclusive ranges, comma-separated).
+
+    Raises:
+        ValueError: a part that is not an integer or ``a-b``.
+    """
+    out: list[int] = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out.extend(range(int(a), int(b or a) + 1))
+    return out

@@ -21,20 +21,12 @@ import json
 import time
 from collections import Counter, defaultdict
 
-from _harness import parser, write_json
+from _harness import index_range, parser, write_json
 
 from phyagentos.targets.libero import LiberoScene, LiberoTarget
 from phyagentos.targets.libero.descriptors import measure_descriptors, perception_accuracy
 
 EVAL_SEED = 50000
-
-
-def _range(text: str) -> list[int]:
-    out = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out.extend(range(int(a), int(b or a) + 1))
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     rows, all_looks = [], {}
-    for task in _range(args.tasks):
+    for task in index_range(args.tasks):
         with LiberoTarget("libero_perception", LiberoScene(suite=args.suite, task=task), seed=0) as target:
             cfg = target.perception_config()
             if args.config:

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _harness import parser, write_json
+from _harness import index_range, parser, write_json
 
 from phyagentos.bench.libero import _descriptors, instruction_plan
 from phyagentos.primitives.observation import make_perceiver, perceive_now
@@ -28,14 +28,6 @@ from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, res
 
 SUITE = "libero_spatial"
 BOWLS = ("akita_black_bowl_1", "akita_black_bowl_2")
-
-
-def _range(text: str) -> list[int]:
-    out = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out.extend(range(int(a), int(b or a) + 1))
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     ws = Path(args.workspace)
     (ws / "libero").mkdir(parents=True, exist_ok=True)
-    tasks = _range(args.tasks)
+    tasks = index_range(args.tasks)
     looks = _descriptors(ws, SUITE, tasks)
     rows = []
     for i in tasks:
@@ -56,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
         declared = problem.declared()
         objects = tuple({**o, **looks.get(o["class"], {}), **({"where": where[o["name"]]} if o["name"] in where else {})}
                         for o in declared["objects"])
-        for k in _range(args.inits):
+        for k in index_range(args.inits):
             t0 = time.perf_counter()
             scene = LiberoScene(suite=SUITE, task=i, init=k, objects=objects, fixtures=tuple(declared["fixtures"]))
             with LiberoTarget("spatial_refs", scene, seed=k) as target:

@@ -5,6 +5,12 @@
 #   make soak   the SIGKILL and scale drills at their full scale (PHYAGENTOS_SOAK=1; make test runs them smaller)
 .PHONY: setup demo test soak bench clean
 
+# pytest keeps the test modules it rewrites (and every process it starts, the modules it
+# compiles) as bytecode under __pycache__/ (git-ignored) even where PYTHONDONTWRITEBYTECODE is
+# set; without it each of the four workers parses and rewrites all test modules on every run
+# (about 5 s of CPU each, docs/PERFORMANCE.md).
+PYTEST = PYTHONDONTWRITEBYTECODE= .venv/bin/pytest
+
 setup:
 	@scripts/setup.sh
 
@@ -17,10 +23,10 @@ test: setup
 	.venv/bin/python scripts/check_ground_truth_boundary.py
 	.venv/bin/ruff check .
 	.venv/bin/mypy
-	.venv/bin/pytest -q -n 4 --dist loadfile --no-loadscope-reorder --durations=20
+	$(PYTEST) -q -n 4 --dist loadfile --no-loadscope-reorder --durations=20
 
 soak: setup
-	PHYAGENTOS_SOAK=1 .venv/bin/pytest -q -n 2 -m soak --durations=0
+	PHYAGENTOS_SOAK=1 $(PYTEST) -q -n 2 -m soak --durations=0
 
 bench: setup
 	.venv/bin/python -m bench all

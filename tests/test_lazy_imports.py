@@ -79,3 +79,20 @@ def test_a_quiet_run_process_never_imports_rich_and_a_log_record_still_renders_t
     assert out.returncode == 0, out.stderr[-3000:]
     assert [ln for ln in out.stdout.splitlines() if ln.startswith("AFTER_RUN ")] == ["AFTER_RUN []"]
     assert "a warning after the run" in out.stderr and "WARNING" in out.stderr  # rich's level column
+
+
+def test_the_runner_preload_defers_pyplot_that_toppra_imports_for_plots_it_never_draws():
+    code = ("import importlib\nfrom phyagentos.runtime import worker\n"
+            "for name in worker._PRELOAD:\n    importlib.import_module(name)\n"
+            "import toppra.parametrizer\n")
+    assert _loaded(code, ("matplotlib.figure", "matplotlib.axes")) == []
+
+
+def test_a_deferred_pyplot_is_the_real_pyplot_from_its_first_use():
+    code = ("import os, sys\nos.environ['MPLBACKEND'] = 'Agg'\nimport phyagentos.motion.retime\n"
+            "import toppra.algorithm.algorithm as tal\nplaceholder = tal.plt\n"
+            "assert 'matplotlib.figure' not in sys.modules\n"
+            "fig = placeholder.figure()\nassert type(fig).__module__ == 'matplotlib.figure', type(fig)\n"
+            "real = sys.modules['matplotlib.pyplot']\nassert real is not placeholder and real.gcf() is fig\n"
+            "import matplotlib.pyplot as again\nassert again is real and placeholder.gcf() is fig\n")
+    assert _loaded(code, ("matplotlib.figure",)) == ["matplotlib.figure"]

@@ -67,6 +67,20 @@ def _hand(twin):
     return at_middle, sweep_done
 
 
+def _holding_hand(twin, sweep_done, *, reads: int = 12, timeout_s: float = 30.0):
+    """Run ``sweep_done`` as a person does beside the calibration loop: each pose is held
+    until the bus has served ``reads`` more packets (two ``read_all`` cycles of six
+    servos), so the loop has read every joint in it. A fixed pause instead misses the
+    stops whenever the loop samples slower than the hand moves (a loaded machine)."""
+    while True:
+        served = twin.packets_served
+        if sweep_done():
+            return
+        deadline = time.monotonic() + timeout_s
+        while twin.packets_served < served + reads and time.monotonic() < deadline:
+            time.sleep(0.005)
+
+
 def _ramp(arm, joint: int, delta: float, n: int) -> np.ndarray:
     q, _ = arm.read()
     Q = np.tile(arm.goal_q, (n, 1))
@@ -117,7 +131,7 @@ def test_calibrate_recovers_the_twins_offsets_and_ranges_in_lerobot_format(twin,
 
 def test_calibrate_cli_writes_the_lerobot_file(twin, tmp_path, monkeypatch):
     at_middle, sweep_done = _hand(twin)
-    answers = iter([at_middle, lambda: [time.sleep(0.05) for _ in iter(sweep_done, True)]])  # a hand slower than the 50 Hz sampling
+    answers = iter([at_middle, lambda: _holding_hand(twin, sweep_done)])
 
     def fake_input(prompt=""):
         next(answers)()

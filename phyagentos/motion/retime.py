@@ -36,17 +36,52 @@ The same torque budget limits the sustainable joint velocity in the simulated mo
 
 from __future__ import annotations
 
+import importlib
 import logging
 import math
+import sys
+import types
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
-import toppra as ta
-import toppra.algorithm as algo
-import toppra.constraint as constraint
 
 from phyagentos.errors import TimingError
+
+
+def _defer_pyplot() -> None:
+    """Let toppra import without ``matplotlib.pyplot``.
+
+    toppra 0.6 imports ``matplotlib.pyplot`` at module level (``toppra/parametrizer.py``,
+    ``toppra/algorithm/algorithm.py``) for plotting helpers that PhyAgentOS never calls.
+    pyplot is about 0.35 s of the 0.53 s that ``import toppra`` costs (``python -X
+    importtime``, this repository's 2-core machine), paid by every forkserver and every
+    process that plans a motion. Until pyplot is imported by someone else, a placeholder
+    module stands in for it: the first attribute read on the placeholder imports the real
+    pyplot, puts it in ``sys.modules`` in the placeholder's place and answers from it, so
+    a caller that does use pyplot (toppra's ``plot_*``, a benchmark figure) gets the real
+    module one import later.
+    """
+    name = "matplotlib.pyplot"
+    if name in sys.modules:
+        return
+    placeholder = types.ModuleType(name, "Stands in for matplotlib.pyplot until first use "
+                                         "(phyagentos.motion.retime._defer_pyplot).")
+
+    def __getattr__(attr: str) -> Any:
+        if sys.modules.get(name) is placeholder:
+            del sys.modules[name]
+        return getattr(importlib.import_module(name), attr)
+
+    placeholder.__getattr__ = __getattr__  # type: ignore[method-assign]
+    sys.modules[name] = placeholder
+
+
+_defer_pyplot()
+
+import toppra as ta  # noqa: E402 - after the pyplot placeholder is in place
+import toppra.algorithm as algo  # noqa: E402
+import toppra.constraint as constraint  # noqa: E402
 
 __all__ = [
     "Trajectory",

@@ -1,7 +1,7 @@
 """Imported only by the runner forkserver (first in its preload list): its interpreter
 exits at once when its parent goes away.
 
-The forkserver holds MuJoCo, SciPy, matplotlib (through toppra) and the rest of the
+The forkserver holds MuJoCo, SciPy, toppra, mink and the rest of the
 runtime; tearing that interpreter down takes seconds on a loaded machine, and since
 the forkserver shares the command's stdout and stderr, a caller reading them (a pipe,
 ``subprocess.run``) waits for it. It owns nothing that needs tearing down (no files,

@@ -2,7 +2,7 @@
 preload created (:func:`gc.freeze`).
 
 Runners and the whole-graph check are forked from the forkserver and share its pages
-(MuJoCo, SciPy, matplotlib through toppra, the primitives: several hundred thousand
+(MuJoCo, SciPy, toppra, mink, the primitives: several hundred thousand
 objects) copy-on-write. Without the freeze, every full collection in a child walks all
 of those objects, writes their GC headers and so copies their pages; with it the
 collector leaves them alone (they were never garbage: modules live as long as the

@@ -3,13 +3,10 @@
 #               end to end on the MuJoCo Franka
 #   make test   set up, then check the plane boundary, lint (ruff, mypy on its checked core), and run the test suite (4 workers, one file per worker at a time)
 #   make soak   the SIGKILL and scale drills at their full scale (PHYAGENTOS_SOAK=1; make test runs them smaller)
+# The test recipes clear PYTHONDONTWRITEBYTECODE for pytest, so it keeps the test modules it
+# rewrites as bytecode under __pycache__/ (git-ignored); otherwise each of the four workers
+# parses and rewrites every test module on every run (about 5 s of CPU each).
 .PHONY: setup demo test soak bench clean
-
-# pytest keeps the test modules it rewrites (and every process it starts, the modules it
-# compiles) as bytecode under __pycache__/ (git-ignored) even where PYTHONDONTWRITEBYTECODE is
-# set; without it each of the four workers parses and rewrites all test modules on every run
-# (about 5 s of CPU each, docs/PERFORMANCE.md).
-PYTEST = PYTHONDONTWRITEBYTECODE= .venv/bin/pytest
 
 setup:
 	@scripts/setup.sh
@@ -23,10 +20,10 @@ test: setup
 	.venv/bin/python scripts/check_ground_truth_boundary.py
 	.venv/bin/ruff check .
 	.venv/bin/mypy
-	$(PYTEST) -q -n 4 --dist loadfile --no-loadscope-reorder --durations=20
+	PYTHONDONTWRITEBYTECODE= .venv/bin/pytest -q -n 4 --dist loadfile --no-loadscope-reorder --durations=20
 
 soak: setup
-	PHYAGENTOS_SOAK=1 $(PYTEST) -q -n 2 -m soak --durations=0
+	PHYAGENTOS_SOAK=1 PYTHONDONTWRITEBYTECODE= .venv/bin/pytest -q -n 2 -m soak --durations=0
 
 bench: setup
 	.venv/bin/python -m bench all

@@ -159,21 +159,28 @@ def franka():
     t.close()
 
 
-def _run_compute_grasp(target, entity, **params):
+def _run_compute_grasp(target, entity, board=None, **params):
+    from phyagentos.primitives.base import PrimitiveFailure
     from phyagentos.primitives.perception import ComputeGrasp
 
     leaf = ComputeGrasp("ComputeGrasp", object=entity["name"], **params)
-    board = {"snapshot": {"entities": [entity]}}
+    board = {"snapshot": {"entities": [entity]}} if board is None else board
     records = []
     leaf.ctx = SimpleNamespace(target=target, perceiver=None,
                                trace=SimpleNamespace(record=lambda kind, **f: records.append({"kind": kind, **f})))
-    leaf.get = board.__getitem__
+
+    def get(key):
+        if key not in board:
+            raise PrimitiveFailure("skill.blackboard", f"blackboard key {key!r} was never written")
+        return board[key]
+
+    leaf.get = get
     leaf.set = board.__setitem__
     leaf.step()
     return board, records
 
 
-def _entity(name, cls, shape, half, xy=(0.5, 0.0)):
+def _entity(name, cls, shape, half, xy=(0.45, -0.25)):  # the default scene: wall at y 0.03, cube at (0.5, -0.2)
     return {"name": name, "kind": "object", "position": [xy[0], xy[1], half[2]], "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
             "size": list(half), "attributes": {"shape": shape, "class": cls, "confidence": 0.9}}
 
@@ -182,7 +189,7 @@ def test_compute_grasp_takes_a_bowl_by_its_rim_and_the_close_expects_the_wall(fr
     ent = _entity("bowl_1", "akita_black_bowl", "cylinder", HALF)
     board, records = _run_compute_grasp(franka, ent)
     G = board["grasp_pose"]
-    r = float(np.hypot(G[0, 3] - 0.5, G[1, 3]))
+    r = float(np.hypot(G[0, 3] - 0.45, G[1, 3] + 0.25))
     assert r == pytest.approx(HALF[0] - DEFAULT_RIM_WALL_M / 2, abs=1e-6)
     [rec] = records
     assert rec["grasp_kind"] == "rim" and rec["wall_m"] == DEFAULT_RIM_WALL_M
@@ -193,6 +200,17 @@ def test_compute_grasp_takes_a_bowl_by_its_rim_and_the_close_expects_the_wall(fr
     # a skill parameter overrides the assumed wall
     _run_compute_grasp(franka, ent, rim_wall_m=0.005)
     assert franka.runtime_notes["planned_grasp"]["width_m"] == 0.005
+
+
+def test_a_recomputed_rim_grasp_keeps_the_rim_point_already_chosen(franka):
+    ent = _entity("bowl_1", "akita_black_bowl", "cylinder", HALF)
+    board, _ = _run_compute_grasp(franka, ent, candidate=1)
+    first = board["grasp_pose"].copy()
+    # re-observed from the pre-grasp, 4 mm off: the same side, refined, not candidate 1 again
+    ent["position"][0] += 0.004
+    board, records = _run_compute_grasp(franka, ent, board=board, candidate=1)
+    assert np.linalg.norm(board["grasp_pose"][:3, 3] - first[:3, 3]) < 0.01
+    assert records[0]["rim_point"] == 0
 
 
 def test_compute_grasp_still_refuses_a_box_too_wide_for_the_fingers(franka):

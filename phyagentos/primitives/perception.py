@@ -176,11 +176,21 @@ class ComputeGrasp(Primitive):
                               yaw_rad=round(plan.yaw_rad, 4), **extra)
 
     def _rim_plan(self, snapshot: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float):
-        """The rim grasp (candidate ``self.candidate`` among the reachable ones) and the
-        trace fields that say so."""
+        """The rim grasp (candidate ``self.candidate`` among the usable ones) and the trace
+        fields that say so.
+
+        A rim point is usable when the arm reaches its pre-grasp and grasp (IK from the
+        current joints) and neither configuration collides (the session's collision model,
+        the planner's; at the grasp, contact with the bowl itself is expected). Points are
+        ranked by :func:`~phyagentos.motion.rim_grasp.rim_grasp_candidates` with the arm's
+        base as the preferred side (the shorter reach; the base does not move, so the
+        ranking is the same before and after the move to the pre-grasp). Re-computed with
+        a pre-grasp already chosen (``RecomputeGrasp`` after a re-observation), the usable
+        point nearest that pre-grasp is kept: the refinement never switches sides.
+        """
         from phyagentos.motion.ik import solve_ik  # noqa: PLC0415
 
-        from .motion import ik_options  # noqa: PLC0415
+        from .motion import ik_options, session_checker  # noqa: PLC0415
 
         target = self.ctx.target
         wall = self.rim_wall_m
@@ -197,26 +207,48 @@ class ComputeGrasp(Primitive):
             size = np.asarray(e.get("size") or (0.0, 0.0, 0.0), dtype=float)
             p = np.asarray(e["position"], dtype=float)
             others.append((p[:2], float(max(size[0], size[1])), float(p[2] + size[2])))
+        model = target.model
+        base = target.data.xpos[model.jnt_bodyid[model.joint(target.arm_joint_names[0]).id]][:2].copy()
         plans = rim_grasp_candidates(T_obj, half, wall_m=wall, approach_height_m=self.approach_height_m,
                                      current_yaw_rad=hand_yaw(T_tcp),
                                      current_q7_rad=float(q[6]) if q.shape == (7,) else None,
-                                     prefer_xy=T_tcp[:2, 3], max_width_m=max_width, keep_clear=others)
+                                     prefer_xy=base, max_width_m=max_width, keep_clear=others)
+        try:
+            previous = np.asarray(self.get(self.pregrasp_key), dtype=float)
+        except PrimitiveFailure:
+            previous = None
+        if previous is not None and previous.shape == (4, 4):
+            plans = tuple(sorted(plans, key=lambda pl: float(np.linalg.norm(pl.pregrasp[:3, 3] - previous[:3, 3]))))
         opts = ik_options(target)
-        reachable, why = [], []
+        try:
+            checker = session_checker(self.ctx)
+            own = target.object_body(self.object)
+        except Exception:  # noqa: BLE001 - a target without a collision model: IK only
+            checker, own = None, None
+        want = 0 if previous is not None else self.candidate
+        usable, why = [], []
         for i, plan in enumerate(plans):
             try:
-                for pose in (plan.pregrasp, plan.grasp):
-                    solve_ik(target.model, q_seed=q, target=pose, **opts)
+                bad = []
+                for label, pose in (("pre-grasp", plan.pregrasp), ("grasp", plan.grasp)):
+                    sol = solve_ik(model, q_seed=q, target=pose, **opts)
+                    if checker is not None:
+                        pairs = [pr for pr in checker.colliding_pairs(sol.q) if label == "pre-grasp" or own not in pr]
+                        if pairs:
+                            bad.append(f"{label} collides: {', '.join('-'.join(pr) for pr in pairs[:3])}")
             except IKError as exc:
                 why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad): {str(exc)[:120]}")
                 continue
-            reachable.append((i, plan))
-            if len(reachable) > self.candidate:
+            if bad:
+                why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad): {'; '.join(bad)[:160]}")
+                continue
+            usable.append((i, plan))
+            if len(usable) > want:
                 break
-        if not reachable:
+        if not usable:
             raise IKError(f"no rim grasp of {self.object!r} is reachable: " + "; ".join(why))
-        i, plan = reachable[self.candidate % len(reachable)]
-        return plan, {"grasp_kind": "rim", "rim_point": i, "wall_m": round(wall, 4), "unreachable_before": len(why)}
+        i, plan = usable[want % len(usable)]
+        return plan, {"grasp_kind": "rim", "rim_point": i, "wall_m": round(wall, 4), "rim_points_refused": len(why)}
 
 
 class ComputePlace(Primitive):

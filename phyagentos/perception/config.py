@@ -192,6 +192,11 @@ class HoldingConfig(_Section):
     capture_radius_m: float = Field(
         0.06, le=10.0, gt=0, description="A track this close to the tcp when the gripper closed can be held."
     )
+    rim_wall_m: float = Field(
+        0.003, le=0.05, gt=0,
+        description="Assumed wall of an open container (a bowl) held by its rim, m: what the fingers then close on "
+                    "(motion.rim_grasp.DEFAULT_RIM_WALL_M: the LIBERO akita bowl's 2.6 mm wall).",
+    )
 
 
 class RelationsConfig(_Section):

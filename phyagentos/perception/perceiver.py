@@ -581,14 +581,20 @@ class Perceiver:
             if t.seen_now and not t.held:
                 continue  # seen on the table (outside the gripper box): not in the hand
             width = width_in_hand(t.half_extents, t.yaw, t.shape, proprio)
+            rim = self._rim_container(t)
+            if rim:  # an open container (a bowl) may be held by its wall: whichever the gap is nearer
+                width = min((width, hc.rim_wall_m), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
             ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
                                   grasp_height_m=self._grasp_height_m, config=cfg)
             if ev.confidence <= 0.0:
                 continue
             if not t.held:
-                # capture: the object was last seen right under/between the fingers
+                # capture: the object was last seen right under/between the fingers, or (held
+                # by its wall) the tcp is on its rim
                 dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
-                if dxy > hc.capture_radius_m:
+                on_rim = rim and width == hc.rim_wall_m and \
+                    abs(dxy - float(min(t.half_extents[0], t.half_extents[1]))) <= hc.capture_radius_m / 2.0
+                if dxy > hc.capture_radius_m and not on_rim:
                     continue
             candidates.append((ev.confidence, name, ev))
         for t in self.tracks.values():
@@ -614,7 +620,17 @@ class Perceiver:
             T_obj[:3, 3] = t.position
             c, s = math.cos(t.yaw), math.sin(t.yaw)
             T_obj[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+            dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
             if np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
+                t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
+            elif self._rim_container(t) and abs(dxy - float(min(t.half_extents[:2]))) <= hc.capture_radius_m / 2.0:
+                # held by its wall (the tcp is over its rim), maybe lifted since: the lift rises
+                # straight up, so the horizontal offset holds; at the close the tcp was the rim
+                # grasp's depth below the rim (motion.rim_grasp.RIM_GRIP_DEPTH_M)
+                from phyagentos.motion.rim_grasp import RIM_GRIP_DEPTH_M  # noqa: PLC0415
+
+                z_close = float(t.position[2] + t.half_extents[2]) - RIM_GRIP_DEPTH_M
+                T_obj[2, 3] = t.position[2] + max(0.0, float(tcp[2]) - z_close)
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
             else:  # grasped earlier, already moved: assume a centred grasp
                 off = np.linalg.inv(proprio.tcp_pose) @ T_obj
@@ -625,6 +641,15 @@ class Perceiver:
             conf *= 1.0 - candidates[1][0] / (candidates[0][0] + 1e-9) * 0.5
         self._held = name
         return name, conf
+
+    def _rim_container(self, t: Track) -> bool:
+        """Whether track ``t`` is an open container (a bowl: its declared class and perceived
+        shape and size, :func:`~phyagentos.motion.rim_grasp.open_container`) that a hand
+        may hold by its wall."""
+        from phyagentos.motion.rim_grasp import open_container  # noqa: PLC0415 - only when something may be held
+
+        desc = next((d for d in self.declared if d.name == t.name), None)
+        return desc is not None and open_container(desc.cls, t.shape, t.half_extents)
 
     def _relations(self, geo: dict[str, dict], regions, holding_rel) -> list[dict]:
         cfg = self.config
@@ -735,7 +760,8 @@ def _hangs_from_hand(det: Detection, proprio: Proprioception, config: Perception
     ``holding.min_effort_n``), the segment's lowest points are more than
     ``holding.lift_height_m`` above the support plane with nothing under it (stacking gave
     it no support: ``bottom_m`` 0), and its centre lies within ``holding.capture_radius_m``
-    of the tcp horizontally. A rigid object off the support with nothing under it is carried,
+    of the tcp horizontally, or the tcp is over its footprint (its larger horizontal half
+    extent + 1 cm: a bowl held by its rim hangs beside the tcp). A rigid object off the support with nothing under it is carried,
     and under a closed hand that squeezes it is carried by the hand; an object standing on
     the table shows points down to the plane and is never taken for it."""
     hc = config.holding
@@ -744,7 +770,9 @@ def _hangs_from_hand(det: Detection, proprio: Proprioception, config: Perception
     if det.low_m <= hc.lift_height_m or det.bottom_m > 1e-6:
         return False
     tcp = proprio.tcp_pose[:3, 3]
-    return float(np.hypot(det.position[0] - tcp[0], det.position[1] - tcp[1])) <= hc.capture_radius_m
+    dxy = float(np.hypot(det.position[0] - tcp[0], det.position[1] - tcp[1]))
+    # or the tcp is over its footprint (a bowl held by its rim hangs beside the tcp)
+    return dxy <= max(hc.capture_radius_m, float(max(det.half_extents[0], det.half_extents[1])) + 0.01)
 
 
 def _container_around(i: int, dets: list[Detection], matched: dict[int, str]) -> str | None:

@@ -18,11 +18,11 @@ from phyagentos.targets.contract import MuJoCoBacked, capabilities_of
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import (
     MIN_EFFORT_N,
-    MIN_OPENING_M,
     WIDTH_MARGIN_M,
     belief,
     holding_problem,
     mass_estimate_kg,
+    min_opening_m,
     proprio_record,
     sample_while_holding,
     wrist_load_n,
@@ -250,7 +250,10 @@ class Gripper(Primitive):
                              closed_on_something=bool(result.stalled), force_n=self.force_n)
             return
         p1 = target.proprioception()
-        closed_on = p1.gripper_opening_m > MIN_OPENING_M and p1.gripper_effort_n > MIN_EFFORT_N
+        planned = target.runtime_notes.get("planned_grasp") or {}
+        width = planned.get("width_m") if self.object is not None and planned.get("object") == self.object else None
+        # a rim grasp closes on a thin wall: "nothing between the fingers" is judged against it
+        closed_on = p1.gripper_opening_m > min_opening_m(width) and p1.gripper_effort_n > MIN_EFFORT_N
         ctx.trace.record("gripper", leaf=self.name, command=self.command, object=self.object,
                          opening_m=round(float(p1.gripper_opening_m), 5), effort_n=round(float(p1.gripper_effort_n), 3),
                          stalled=bool(result.stalled), closed_on_something=bool(closed_on), force_n=self.force_n)
@@ -263,8 +266,6 @@ class Gripper(Primitive):
             return
         if self.object is None:
             return
-        planned = target.runtime_notes.get("planned_grasp") or {}
-        width = planned.get("width_m") if planned.get("object") == self.object else None
         if not closed_on:
             raise PrimitiveFailure("grasp.missed", f"closed on nothing instead of {self.object!r} (opening "
                                                    f"{p1.gripper_opening_m * 1000:.1f} mm, effort {p1.gripper_effort_n:.1f} N)")
@@ -319,9 +320,11 @@ class CheckHolding(Primitive):
             raise PrimitiveFailure("grasp.slipped", f"target {target.name!r} cannot sense a grasp")
         p = target.proprioception()
         b = belief(target)
-        if b.object is None and p.gripper_opening_m > MIN_OPENING_M and p.gripper_effort_n > MIN_EFFORT_N:
+        planned = target.runtime_notes.get("planned_grasp") or {}
+        width = planned.get("width_m") if planned.get("object") == self.object else None
+        if b.object is None and p.gripper_opening_m > min_opening_m(width) and p.gripper_effort_n > MIN_EFFORT_N:
             # a session that starts holding (place after pick in a fresh runtime): adopt it
-            b.set(object=self.object, closed_opening_m=float(p.gripper_opening_m), slipped=False)
+            b.set(object=self.object, width_m=width, closed_opening_m=float(p.gripper_opening_m), slipped=False)
         self.ctx.trace.record("proprio", **proprio_record(target, p, phase="check_holding", leaf=self.name))
         load = wrist_load_n(target, p)
         if b.object == self.object and b.lifted_load_n is None and load is not None:

@@ -27,7 +27,8 @@ from phyagentos.targets.contract import capabilities_of
 
 __all__ = ["GraspBelief", "MIN_OPENING_M", "MIN_EFFORT_N", "SLIP_OPENING_DROP_M", "SLIP_LOAD_DROP_FRACTION",
            "MIN_LOAD_FOR_SLIP_N", "GRAVITY_M_S2", "belief", "wrist_load_n", "proprio_record", "holding_problem",
-           "sample_while_holding", "mass_estimate_kg", "WIDTH_MARGIN_M", "MIN_HELD_LOAD_N", "plan_grasp"]
+           "sample_while_holding", "mass_estimate_kg", "WIDTH_MARGIN_M", "MIN_HELD_LOAD_N", "plan_grasp",
+           "min_opening_m"]
 
 #: Opening per finger below which a close found nothing between the fingers, m.
 MIN_OPENING_M = 0.002
@@ -131,14 +132,15 @@ def holding_problem(target, p, *, expected: str | None = None, after_lift: bool 
     """Why proprioception says the gripper does not hold (``expected``), or ``None``.
 
     Holding: the robot closed on ``expected`` (its belief), the opening is above
-    :data:`MIN_OPENING_M` and within the perceived width + :data:`WIDTH_MARGIN_M`, the
+    :func:`min_opening_m` of the width it closed on (:data:`MIN_OPENING_M`, less for a
+    rim grasp's thin wall) and within the perceived width + :data:`WIDTH_MARGIN_M`, the
     fingers squeeze (effort > :data:`MIN_EFFORT_N`) and, ``after_lift``, the wrist carries
     more than :data:`MIN_HELD_LOAD_N` beyond the unloaded hand.
     """
     b = belief(target)
     if expected is not None and b.object not in (None, expected):
         return f"the gripper closed on {b.object!r}, not {expected!r}"
-    if p.gripper_opening_m < MIN_OPENING_M:
+    if p.gripper_opening_m < min_opening_m(b.width_m):
         return f"fingers closed to {p.gripper_opening_m * 1000:.1f} mm: nothing between them"
     if b.width_m is not None and p.gripper_opening_m > b.width_m / 2.0 + WIDTH_MARGIN_M:
         return (f"opening {p.gripper_opening_m * 1000:.1f} mm per finger is wider than the object "
@@ -187,7 +189,19 @@ def mass_estimate_kg(load_n: float | None) -> float | None:
     return max(0.0, load_n / GRAVITY_M_S2)
 
 
-def plan_grasp(target, *, object: str, width_m: float | None) -> None:
-    """Remember the grasp the robot is about to make (object and its perceived width
-    across the fingers, m), for the close that follows."""
-    target.runtime_notes["planned_grasp"] = {"object": object, "width_m": None if width_m is None else float(width_m)}
+def plan_grasp(target, *, object: str, width_m: float | None, kind: str = "across") -> None:
+    """Remember the grasp the robot is about to make (object, the width the fingers will
+    close on, m, and ``kind``: ``across`` the object or by its ``rim``, where the width is
+    the container's wall), for the close that follows."""
+    target.runtime_notes["planned_grasp"] = {"object": object, "width_m": None if width_m is None else float(width_m),
+                                             "kind": str(kind)}
+
+
+def min_opening_m(width_m: float | None) -> float:
+    """Opening per finger (m) below which a close found nothing between the fingers, for an
+    expected held width ``width_m`` (m; None: unknown): :data:`MIN_OPENING_M`, or a quarter
+    of the width (half the opening it should leave per finger) when that is smaller: a
+    bowl's 3 mm wall leaves 1.5 mm per finger, which the 2 mm default would call empty."""
+    if width_m is None or not math.isfinite(float(width_m)) or width_m <= 0:
+        return MIN_OPENING_M
+    return min(MIN_OPENING_M, 0.25 * float(width_m))

@@ -8,14 +8,33 @@ from __future__ import annotations
 
 import numpy as np
 
-from phyagentos.motion.grasp import DEFAULT_MAX_GRASP_WIDTH_M, place_pose, top_down_grasp_candidates
+from phyagentos.errors import IKError
+from phyagentos.motion.grasp import DEFAULT_MAX_GRASP_WIDTH_M, hand_yaw, place_pose, top_down_grasp_candidates
+from phyagentos.motion.rim_grasp import DEFAULT_RIM_WALL_M, rim_grasp_candidates, rim_graspable
 from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import plan_grasp
 from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
-__all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose"]
+__all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "declared_class"]
+
+
+def declared_class(target, name: str, entity: dict | None = None) -> str | None:
+    """The category of object ``name``: the perceived entity's ``class`` attribute, else the
+    class the user declared for it (``target.describe_declared()``), else None. A
+    declaration, never the simulator's state."""
+    cls = ((entity or {}).get("attributes") or {}).get("class")
+    if cls:
+        return str(cls)
+    describe = getattr(target, "describe_declared", None)
+    if describe is None:
+        return None
+    try:
+        objects = describe().get("objects", [])
+    except Exception:  # noqa: BLE001 - a target that cannot describe its scene declares no class
+        return None
+    return next((str(o["class"]) for o in objects if o.get("name") == name and o.get("class")), None)
 
 
 def entity_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -91,23 +110,44 @@ class Observe(Primitive):
 class ComputeGrasp(Primitive):
     """Top-down grasp and pre-grasp tcp poses for ``object`` from the observation.
 
+    An object too wide to take across whose perceived category is an open container (a
+    bowl: :func:`~phyagentos.motion.rim_grasp.rim_graspable`, on its declared class and
+    perceived shape and size) is taken by its rim instead
+    (:func:`~phyagentos.motion.rim_grasp.rim_grasp_candidates`): one finger inside, one
+    outside, closing on the wall; the rim points are tried nearest the current hand yaw
+    first, those whose open outer finger would come down on another perceived object last,
+    and only those whose grasp and pre-grasp the arm reaches (IK from the current joints)
+    are kept. The close then expects the wall's thickness between the fingers, not the
+    bowl's diameter.
+
     Args:
         object: entity name.
         approach_height_m: pre-grasp height above the grasp, m.
         candidate: which top-down grasp to use, best first (another approach
             direction: the hand turned 90 or 180 deg about the vertical; taken
-            modulo the number of candidates the box allows).
+            modulo the number of candidates the box allows; for a rim grasp another
+            reachable rim point).
+        rim_wall_m: assumed wall thickness of a container taken by its rim, m; None: the
+            perceiver's ``holding.rim_wall_m`` (perception.yaml), else
+            :data:`~phyagentos.motion.rim_grasp.DEFAULT_RIM_WALL_M`.
         snapshot: blackboard key of the observation.
         grasp, pregrasp: blackboard keys written with (4, 4) world poses of the tcp.
+
+    Raises (as failures): ``IKError`` when the object is too wide and no container, or no
+    rim point is reachable (the message lists why for each).
     """
 
     def __init__(self, name: str, *, object: str, approach_height_m: float = 0.10, candidate: int = 0,
-                 snapshot: str = "snapshot", grasp: str = "grasp_pose", pregrasp: str = "pregrasp_pose"):
+                 rim_wall_m: float | None = None, snapshot: str = "snapshot", grasp: str = "grasp_pose",
+                 pregrasp: str = "pregrasp_pose"):
         super().__init__(name)
         if approach_height_m <= 0:
             raise ValueError(f"approach_height_m must be > 0, got {approach_height_m}")
         if not isinstance(candidate, int) or isinstance(candidate, bool) or candidate < 0:
             raise ValueError(f"candidate must be an integer >= 0, got {candidate!r}")
+        if rim_wall_m is not None and not (isinstance(rim_wall_m, (int, float)) and 0.0 < float(rim_wall_m) < 0.05):
+            raise ValueError(f"rim_wall_m must be a number in (0, 0.05) m or null, got {rim_wall_m!r}")
+        self.rim_wall_m = None if rim_wall_m is None else float(rim_wall_m)
         self.object, self.approach_height_m, self.candidate = object, float(approach_height_m), candidate
         self.snapshot_key, self.grasp_key, self.pregrasp_key = snapshot, grasp, pregrasp
         self.reads(snapshot)
@@ -118,16 +158,97 @@ class ComputeGrasp(Primitive):
         T_obj, half = entity_pose(snapshot, self.object)
         ent = next((e for e in snapshot.get("entities", []) if e["name"] == self.object), {})
         shape = (ent.get("attributes") or {}).get("shape") or "box"
-        plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m,
-                                          shape=shape if shape in ("box", "cylinder", "sphere") else "box",
-                                          max_width_m=self.ctx.target.max_grasp_width_m or DEFAULT_MAX_GRASP_WIDTH_M)
-        plan = plans[self.candidate % len(plans)]
-        plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m)
+        max_width = self.ctx.target.max_grasp_width_m or DEFAULT_MAX_GRASP_WIDTH_M
+        category = declared_class(self.ctx.target, self.object, ent)
+        extra = {}
+        if rim_graspable(category, shape, half, max_width_m=max_width):
+            plan, extra = self._rim_plan(snapshot, T_obj, half, max_width)
+        else:
+            plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m,
+                                              shape=shape if shape in ("box", "cylinder", "sphere") else "box",
+                                              max_width_m=max_width)
+            plan = plans[self.candidate % len(plans)]
+        plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m, kind=extra.get("grasp_kind", "across"))
         self.set(self.grasp_key, plan.grasp)
         self.set(self.pregrasp_key, plan.pregrasp)
         self.ctx.trace.record("grasp_pose", leaf=self.name, object=self.object, candidate=self.candidate,
                               observed_position=T_obj[:3, 3].round(4).tolist(), grasp=plan.grasp[:3, 3].round(4).tolist(),
-                              yaw_rad=round(plan.yaw_rad, 4))
+                              yaw_rad=round(plan.yaw_rad, 4), **extra)
+
+    def _rim_plan(self, snapshot: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float):
+        """The rim grasp (candidate ``self.candidate`` among the usable ones) and the trace
+        fields that say so.
+
+        A rim point is usable when the arm reaches its pre-grasp and grasp (IK from the
+        current joints) and neither configuration collides (the session's collision model,
+        the planner's; at the grasp, contact with the bowl itself is expected). Points are
+        ranked by :func:`~phyagentos.motion.rim_grasp.rim_grasp_candidates` with the arm's
+        base as the preferred side (the shorter reach; the base does not move, so the
+        ranking is the same before and after the move to the pre-grasp). Re-computed with
+        a pre-grasp already chosen (``RecomputeGrasp`` after a re-observation), the usable
+        point nearest that pre-grasp is kept: the refinement never switches sides.
+        """
+        from phyagentos.motion.ik import solve_ik  # noqa: PLC0415
+
+        from .motion import ik_options, session_checker  # noqa: PLC0415
+
+        target = self.ctx.target
+        wall = self.rim_wall_m
+        if wall is None:
+            perceiver = getattr(self.ctx, "perceiver", None)
+            wall = getattr(getattr(getattr(perceiver, "config", None), "holding", None), "rim_wall_m", None)
+        wall = float(wall) if wall is not None else DEFAULT_RIM_WALL_M
+        T_tcp = np.asarray(target.tcp_pose(), dtype=float)
+        q = np.asarray(target.arm_qpos(), dtype=float)
+        others = []
+        for e in snapshot.get("entities", []):
+            if e["name"] == self.object or e.get("kind") not in ("object", "unknown"):
+                continue
+            size = np.asarray(e.get("size") or (0.0, 0.0, 0.0), dtype=float)
+            p = np.asarray(e["position"], dtype=float)
+            others.append((p[:2], float(max(size[0], size[1])), float(p[2] + size[2])))
+        model = target.model
+        base = target.data.xpos[model.jnt_bodyid[model.joint(target.arm_joint_names[0]).id]][:2].copy()
+        plans = rim_grasp_candidates(T_obj, half, wall_m=wall, approach_height_m=self.approach_height_m,
+                                     current_yaw_rad=hand_yaw(T_tcp),
+                                     current_q7_rad=float(q[6]) if q.shape == (7,) else None,
+                                     prefer_xy=base, max_width_m=max_width, keep_clear=others)
+        try:
+            previous = np.asarray(self.get(self.pregrasp_key), dtype=float)
+        except PrimitiveFailure:
+            previous = None
+        if previous is not None and previous.shape == (4, 4):
+            plans = tuple(sorted(plans, key=lambda pl: float(np.linalg.norm(pl.pregrasp[:3, 3] - previous[:3, 3]))))
+        opts = ik_options(target)
+        try:
+            checker = session_checker(self.ctx)
+            own = target.object_body(self.object)
+        except Exception:  # noqa: BLE001 - a target without a collision model: IK only
+            checker, own = None, None
+        want = 0 if previous is not None else self.candidate
+        usable, why = [], []
+        for i, plan in enumerate(plans):
+            try:
+                bad = []
+                for label, pose in (("pre-grasp", plan.pregrasp), ("grasp", plan.grasp)):
+                    sol = solve_ik(model, q_seed=q, target=pose, **opts)
+                    if checker is not None:
+                        pairs = [pr for pr in checker.colliding_pairs(sol.q) if label == "pre-grasp" or own not in pr]
+                        if pairs:
+                            bad.append(f"{label} collides: {', '.join('-'.join(pr) for pr in pairs[:3])}")
+            except IKError as exc:
+                why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad): {str(exc)[:120]}")
+                continue
+            if bad:
+                why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad): {'; '.join(bad)[:160]}")
+                continue
+            usable.append((i, plan))
+            if len(usable) > want:
+                break
+        if not usable:
+            raise IKError(f"no rim grasp of {self.object!r} is reachable: " + "; ".join(why))
+        i, plan = usable[want % len(usable)]
+        return plan, {"grasp_kind": "rim", "rim_point": i, "wall_m": round(wall, 4), "rim_points_refused": len(why)}
 
 
 class ComputePlace(Primitive):

@@ -71,6 +71,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "object": ("str", "", "scene object to grasp"),
         "approach_height_m": ("float", "m", "pre-grasp height above the grasp"),
         "candidate": ("int", "", "which top-down grasp, best first (another approach direction)"),
+        "rim_wall_m": ("float", "m", "assumed wall of a bowl taken by its rim (null: perception.yaml's 3 mm)"),
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
         "grasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp grasp pose"),
         "pregrasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-grasp pose"),

@@ -39,10 +39,16 @@ class LiberoSensing:
     #: cans' lids are alike, their labels are not); a shape mismatch costs 0.5, not 2: a bottle
     #: with a cap or a carton with a spout is seen as a box in one view and a cylinder in
     #: another (on 30 generated scenes: shape cost 2 -> 0.92 correct, 2 swapped; 0.5 -> 0.98, 0).
+    #: Robosuite's Panda fingers are position servos (kp 1000 N/m, commanded closed): they
+    #: squeeze what they hold with 1000 N/m times the opening per finger, so the default
+    #: 5 N "squeeze" (a force-controlled hand) would call anything under 1 cm across empty --
+    #: a bowl held by its wall (4 mm per finger, 4 N: a generated libero_spatial scene); 1 N
+    #: is the servo's push at the perceiver's 1 mm minimum opening.
     PERCEPTION_OVERRIDES: dict[str, dict[str, Any]] = {
         "clustering": {"chromaticity_scale": 2.0, "lightness_scale": 10.0, "eps_m": 0.015},
         "shape": {"colour_from": "vivid"},
         "association": {"shape_cost": 0.5},
+        "holding": {"min_effort_n": 1.0},
     }
 
     def perception_config(self):

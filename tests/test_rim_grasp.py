@@ -1,0 +1,245 @@
+"""Rim grasps of a bowl wider than the gripper (issue 28, libero_spatial).
+
+Geometry of :func:`phyagentos.motion.rim_grasp.rim_grasp_candidates` (the fingers straddle
+the wall, the tcp's height against the rim, the order of the yaws), the rule that picks a
+rim grasp (:func:`rim_graspable`), and :class:`~phyagentos.primitives.perception.ComputeGrasp`
+on a Franka model: a bowl is taken by its rim, a wide box is still refused as before, and
+the close expects the wall, not the diameter.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from phyagentos.errors import IKError
+from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, PAD_DEPTH_ABOVE_TCP_M, hand_yaw
+from phyagentos.motion.rim_grasp import (
+    DEFAULT_RIM_WALL_M,
+    RIM_GRIP_DEPTH_M,
+    open_container,
+    rim_grasp_candidates,
+    rim_graspable,
+)
+
+# the perceived akita bowl of libero_spatial (bench descriptors, generated scenes): 11.24 cm
+# across, 5.04 cm tall
+HALF = (0.0562, 0.0562, 0.0252)
+
+
+def bowl_at(x=0.5, y=0.0, z=0.0252):
+    T = np.eye(4)
+    T[:3, 3] = [x, y, z]
+    return T
+
+
+def _wrap(a):
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def test_the_fingers_straddle_the_wall_at_every_rim_point():
+    T = bowl_at()
+    plans = rim_grasp_candidates(T, HALF)
+    assert len(plans) == 16
+    for p in plans:
+        G = p.grasp
+        assert np.allclose(G[:3, 2], [0, 0, -1])  # top-down
+        radial = G[:2, 3] - T[:2, 3]
+        r = float(np.linalg.norm(radial))
+        assert r == pytest.approx(HALF[0] - DEFAULT_RIM_WALL_M / 2, abs=1e-9)  # over the middle of the wall
+        u = radial / r
+        assert abs(float(G[:2, 1] @ u)) == pytest.approx(1.0, abs=1e-9)  # the fingers close radially
+        # opened just beyond the wall, one finger is inside the bowl, the other outside
+        o = p.width_m / 2 + 0.0005
+        fingers = [G[:2, 3] + s * o * G[:2, 1] for s in (1.0, -1.0)]
+        radii = sorted(float(np.linalg.norm(f - T[:2, 3])) for f in fingers)
+        assert radii[0] < HALF[0] - DEFAULT_RIM_WALL_M and radii[1] > HALF[0]
+        assert p.width_m == DEFAULT_RIM_WALL_M  # the wall, not the 11 cm diameter
+        assert np.allclose(p.pregrasp[:3, :3], G[:3, :3]) and p.pregrasp[2, 3] == pytest.approx(G[2, 3] + 0.10)
+
+
+def test_the_tcp_closes_below_the_rim_with_the_pads_over_it_and_the_tips_off_the_table():
+    T = bowl_at(z=0.0252)
+    top = 0.0504
+    for p in rim_grasp_candidates(T, HALF, support_z_m=0.0):
+        z = p.grasp[2, 3]
+        assert z == pytest.approx(top - RIM_GRIP_DEPTH_M)
+        assert z + PAD_DEPTH_ABOVE_TCP_M > top  # the rim is between the pads, below the finger base
+        assert z - FINGERTIP_BELOW_TCP_M > 0.0  # the outer fingertip stays above the table
+    # a shallow dish: raised so the fingertips keep clear of the support
+    shallow = rim_grasp_candidates(bowl_at(z=0.01), (0.06, 0.06, 0.01), support_z_m=0.0)
+    assert shallow[0].grasp[2, 3] == pytest.approx(FINGERTIP_BELOW_TCP_M + 0.004)
+
+
+def test_rim_points_come_nearest_the_current_hand_yaw_first():
+    T = bowl_at()
+    yaw0 = 0.3
+    plans = rim_grasp_candidates(T, HALF, current_yaw_rad=yaw0)
+    turns = [round(abs(_wrap(p.yaw_rad - yaw0)), 6) for p in plans]
+    assert turns[0] == 0.0 and turns[1] == 0.0
+    assert turns == sorted(turns)
+    assert max(turns) <= math.pi / 2 + 1e-9  # the hand is symmetric: never more than a quarter turn
+    # the two points reached without turning lie along the hand's finger axis, on either side
+    d0 = plans[0].grasp[:2, 3] - T[:2, 3]
+    d1 = plans[1].grasp[:2, 3] - T[:2, 3]
+    assert np.allclose(d0, -d1)
+    # of those two, the one nearer the preferred point first
+    near = T[:2, 3] + 0.2 * np.array([math.sin(yaw0), -math.cos(yaw0)])
+    far = T[:2, 3] - 0.2 * np.array([math.sin(yaw0), -math.cos(yaw0)])
+    for pref in (near, far):
+        first = rim_grasp_candidates(T, HALF, current_yaw_rad=yaw0, prefer_xy=pref)[0]
+        others = rim_grasp_candidates(T, HALF, current_yaw_rad=yaw0, prefer_xy=pref)[1]
+        assert np.linalg.norm(first.grasp[:2, 3] - pref) < np.linalg.norm(others.grasp[:2, 3] - pref)
+
+
+def test_a_point_whose_open_outer_finger_lands_on_a_neighbour_is_tried_last():
+    T = bowl_at()
+    plain = rim_grasp_candidates(T, HALF)
+    # a ramekin right beside the first point's outer finger
+    u = (plain[0].grasp[:2, 3] - T[:2, 3]) / np.linalg.norm(plain[0].grasp[:2, 3] - T[:2, 3])
+    ramekin = (T[:2, 3] + 0.11 * u, 0.045, 0.045)
+    plans = rim_grasp_candidates(T, HALF, keep_clear=[ramekin])
+    assert not np.allclose(plans[0].grasp, plain[0].grasp)
+    assert any(np.allclose(p.grasp, plain[0].grasp) for p in plans[-4:])
+
+
+def test_joint_7_at_its_limit_keeps_only_yaws_it_can_turn_to():
+    lim = 2.8973
+    plans = rim_grasp_candidates(bowl_at(), HALF, current_yaw_rad=0.0, current_q7_rad=lim - 0.06)
+    for p in plans:
+        q7 = (lim - 0.06) - _wrap(p.yaw_rad - 0.0)
+        assert -lim + 0.05 <= q7 <= lim - 0.05
+
+
+@pytest.mark.parametrize("half,wall,why", [
+    ((0.0562, 0.0562, 0.0252), 0.06, "less than the radius"),
+    ((0.0562, 0.0562, 0.0252), 0.0, "must be > 0"),
+    ((0.0562, 0.0562, -0.01), 0.003, "must be positive"),
+])
+def test_an_impossible_rim_grasp_says_why(half, wall, why):
+    with pytest.raises(IKError, match="no rim grasp") as exc:
+        rim_grasp_candidates(bowl_at(), half, wall_m=wall)
+    assert why in str(exc.value)
+
+
+def test_a_tipped_bowl_is_refused():
+    T = bowl_at()
+    c, s = math.cos(0.6), math.sin(0.6)
+    T[:3, :3] = [[1, 0, 0], [0, c, -s], [0, s, c]]
+    with pytest.raises(IKError, match="not upright"):
+        rim_grasp_candidates(T, HALF)
+
+
+def test_only_a_round_open_container_too_wide_to_take_across_is_taken_by_its_rim():
+    assert rim_graspable("akita_black_bowl", "cylinder", HALF)
+    assert rim_graspable("bowl", "box", (0.056, 0.052, 0.025))  # seen as a box, still round enough
+    assert not rim_graspable("akita_black_bowl", "cylinder", (0.035, 0.035, 0.025))  # fits across: taken across
+    assert not rim_graspable("cookies", "box", (0.057, 0.057, 0.01))  # not a container
+    assert not rim_graspable(None, "cylinder", HALF)  # no category: nothing says it is open
+    assert not rim_graspable("bowl", "box", (0.06, 0.03, 0.02))  # not round
+    assert not rim_graspable("bowl", "cylinder", (0.06, 0.06, 0.08))  # taller than wide: no dish
+    assert not rim_graspable("bowl", "sphere", HALF)
+    assert not rim_graspable("bowling_pin", "cylinder", HALF)  # a word of the class, not a prefix
+    assert open_container("akita_black_bowl", "cylinder", (0.035, 0.035, 0.025))
+
+
+# --------------------------------------------------------------------- ComputeGrasp on a Franka
+
+
+@pytest.fixture(scope="module")
+def franka():
+    from phyagentos.targets import MuJoCoTarget
+    from phyagentos.targets.scene import SceneSpec
+
+    t = MuJoCoTarget("rim", SceneSpec.default(), seed=0)
+    yield t
+    t.close()
+
+
+def _run_compute_grasp(target, entity, board=None, **params):
+    from phyagentos.primitives.base import PrimitiveFailure
+    from phyagentos.primitives.perception import ComputeGrasp
+
+    leaf = ComputeGrasp("ComputeGrasp", object=entity["name"], **params)
+    board = {"snapshot": {"entities": [entity]}} if board is None else board
+    records = []
+    leaf.ctx = SimpleNamespace(target=target, perceiver=None,
+                               trace=SimpleNamespace(record=lambda kind, **f: records.append({"kind": kind, **f})))
+
+    def get(key):
+        if key not in board:
+            raise PrimitiveFailure("skill.blackboard", f"blackboard key {key!r} was never written")
+        return board[key]
+
+    leaf.get = get
+    leaf.set = board.__setitem__
+    leaf.step()
+    return board, records
+
+
+def _entity(name, cls, shape, half, xy=(0.45, -0.25)):  # the default scene: wall at y 0.03, cube at (0.5, -0.2)
+    return {"name": name, "kind": "object", "position": [xy[0], xy[1], half[2]], "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+            "size": list(half), "attributes": {"shape": shape, "class": cls, "confidence": 0.9}}
+
+
+def test_compute_grasp_takes_a_bowl_by_its_rim_and_the_close_expects_the_wall(franka):
+    ent = _entity("bowl_1", "akita_black_bowl", "cylinder", HALF)
+    board, records = _run_compute_grasp(franka, ent)
+    G = board["grasp_pose"]
+    r = float(np.hypot(G[0, 3] - 0.45, G[1, 3] + 0.25))
+    assert r == pytest.approx(HALF[0] - DEFAULT_RIM_WALL_M / 2, abs=1e-6)
+    [rec] = records
+    assert rec["grasp_kind"] == "rim" and rec["wall_m"] == DEFAULT_RIM_WALL_M
+    # the hand turns as little as it can
+    assert abs(_wrap(hand_yaw(G) - hand_yaw(franka.tcp_pose()))) < 1e-6
+    planned = franka.runtime_notes["planned_grasp"]
+    assert planned == {"object": "bowl_1", "width_m": DEFAULT_RIM_WALL_M, "kind": "rim"}
+    # a skill parameter overrides the assumed wall
+    _run_compute_grasp(franka, ent, rim_wall_m=0.005)
+    assert franka.runtime_notes["planned_grasp"]["width_m"] == 0.005
+
+
+def test_a_recomputed_rim_grasp_keeps_the_rim_point_already_chosen(franka):
+    ent = _entity("bowl_1", "akita_black_bowl", "cylinder", HALF)
+    board, _ = _run_compute_grasp(franka, ent, candidate=1)
+    first = board["grasp_pose"].copy()
+    # re-observed from the pre-grasp, 4 mm off: the same side, refined, not candidate 1 again
+    ent["position"][0] += 0.004
+    board, records = _run_compute_grasp(franka, ent, board=board, candidate=1)
+    assert np.linalg.norm(board["grasp_pose"][:3, 3] - first[:3, 3]) < 0.01
+    assert records[0]["rim_point"] == 0
+
+
+def test_compute_grasp_still_refuses_a_box_too_wide_for_the_fingers(franka):
+    ent = _entity("cookies_1", "cookies", "box", (0.057, 0.057, 0.01))
+    with pytest.raises(IKError, match=r"box is 11\.4 cm wide across the fingers; the gripper takes 7\.6 cm at most"):
+        _run_compute_grasp(franka, ent)
+
+
+def test_a_bowl_out_of_reach_is_refused_listing_each_rim_point(franka):
+    ent = _entity("bowl_1", "akita_black_bowl", "cylinder", HALF, xy=(2.5, 0.0))
+    with pytest.raises(IKError, match="no rim grasp of 'bowl_1' is reachable") as exc:
+        _run_compute_grasp(franka, ent)
+    assert str(exc.value).count("rim point") == 16
+
+
+def test_the_grasp_check_expects_the_wall_not_the_diameter():
+    from phyagentos.primitives.grasp_sense import MIN_OPENING_M, holding_problem, min_opening_m
+
+    assert min_opening_m(None) == MIN_OPENING_M and min_opening_m(0.04) == MIN_OPENING_M
+    assert min_opening_m(DEFAULT_RIM_WALL_M) == pytest.approx(0.00075)
+    notes = {"grasp": {"object": "bowl_1", "width_m": DEFAULT_RIM_WALL_M}}
+    target = SimpleNamespace(runtime_notes=notes, sim_time=0.0, wrist_external_force_n=lambda: None,
+                             unloaded_wrist_force_n=lambda: None)
+
+    def p(opening, effort=4.0):
+        return SimpleNamespace(gripper_opening_m=opening, gripper_effort_n=effort, stamp_s=0.0, wrist_force_n=None)
+
+    assert holding_problem(target, p(0.0015), expected="bowl_1") is None  # 3 mm wall: 1.5 mm per finger
+    assert holding_problem(target, p(0.0042), expected="bowl_1") is None  # the leaning wall: 4.2 mm (LIBERO)
+    assert "nothing between them" in holding_problem(target, p(0.0003), expected="bowl_1")
+    # the fingers stopped 3 cm apart: that is the bowl's side, or something else, not its wall
+    assert "wider than the object" in holding_problem(target, p(0.03), expected="bowl_1")

@@ -36,6 +36,7 @@ BAD_SUITES = [
     ("version: 1\nname: s\ntasks: []\n", 3, "tasks must be a non-empty list"),
     ("version: 1\nname: s\ntasks:\n  - 7\n", 4, "tasks[0] must be a mapping"),
     ("version: 1\nname: s\ntasks:\n" + TASK + "    bogus: 1\n", 6, "tasks[0]: unknown key(s) 'bogus'"),
+    ("version: 1\nname: s\ntasks:\n" + TASK + "    safety: [1]\n", 6, "tasks[0].safety must be a mapping"),
     ("version: 1\nname: s\ntasks:\n" + TASK + TASK, 6, "duplicate task id 'pick'"),
     ("version: 1\nname: s\ntasks:\n  - id: pick\n    goal_graph: nowhere.yaml\n", 5, "goal graph 'nowhere.yaml' not found"),
     ("version: 1\nname: s\ntasks:\n" + TASK + "    target: [a]\n", 6, "tasks[0].target must be a target name"),

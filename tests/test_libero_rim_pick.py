@@ -32,7 +32,7 @@ LOOKS = {
 
 
 def test_a_bowl_wider_than_the_gripper_is_lifted_by_its_rim_and_the_held_width_check_passes(tmp_path):
-    from phyagentos.bench.libero import TABLE_SCENE_WORKSPACE_BOX, target_entry
+    from phyagentos.bench.libero import target_entry, workspace_box
     from phyagentos.protocol import Workspace
     from phyagentos.protocol.schemas import TargetSpec
 
@@ -40,7 +40,7 @@ def test_a_bowl_wider_than_the_gripper_is_lifted_by_its_rim_and_the_held_width_c
     ws.update("TARGETS", lambda doc: doc.targets.append(TargetSpec.model_validate(target_entry())))
     safety = tmp_path / "ws" / "safety.yaml"  # the table scene's safety cell, as the bench sets it
     doc = yaml.safe_load(safety.read_text())
-    doc["workspace_box"] = TABLE_SCENE_WORKSPACE_BOX
+    doc["workspace_box"] = workspace_box("LIBERO_Tabletop_Manipulation")
     safety.write_text(yaml.safe_dump(doc, sort_keys=False))
     # one bowl declared: whichever of the two physical bowls perception names is the one picked
     objects = [{"name": f"{c}_1", "class": c, **look} for c, look in LOOKS.items()]

@@ -131,7 +131,7 @@ def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placemen
     text = (suite.parent / "t0.yaml").read_text()
     assert "region" not in str(g0["scene"]) and ":init" not in text and "goal" not in g0["scene"]
     # the table scene's tcp box (the template's would hold the arm's start pose outside)
-    box = yaml.safe_load(suite.read_text())["safety"]["workspace_box"]
+    box = yaml.safe_load(suite.read_text())["tasks"][0]["safety"]["workspace_box"]
     assert box["min"][0] < -0.21 < box["max"][0] and box["min"][2] < 0.9 < 1.17 < box["max"][2]
     planning = yaml.safe_load((suite.parent / "planning.yaml").read_text())
     assert planning["planned"] == [0, 4] and planning["refused"] == {}

@@ -18,7 +18,7 @@ import logging
 import math
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from phyagentos.errors import BenchError
 from phyagentos.yamlsource import read_yaml
@@ -117,17 +117,18 @@ def plan_episodes(suite: Suite, *, bench_id: str, seeds: tuple[int, ...], split:
 
 
 def episode_template_dir(bench_root: Path, run_dir: Path, memory_files: dict[str, Path],
-                         safety: dict | None = None) -> Path:
-    """A template directory for episode workspaces: package templates, overlaid with the
-    bench workspace's configuration documents, the memory documents of the mode and the
-    suite's ``safety`` overrides (merged into safety.yaml and validated).
+                         safety: dict | None = None, *, name: str = "template") -> Path:
+    """A template directory ``run_dir/name`` for episode workspaces: package templates,
+    overlaid with the bench workspace's configuration documents, the memory documents of
+    the mode and the ``safety`` overrides (the suite's, or a task's over the suite's;
+    merged into safety.yaml and validated).
 
     Raises:
         BenchError: the merged safety configuration is invalid.
     """
     from phyagentos.resources import templates_dir  # noqa: PLC0415
 
-    out = run_dir / "template"
+    out = run_dir / name
     out.mkdir(parents=True, exist_ok=True)
     for src in templates_dir().iterdir():
         if src.is_file():
@@ -149,8 +150,12 @@ def episode_template_dir(bench_root: Path, run_dir: Path, memory_files: dict[str
     return out
 
 
-def compile_episodes(episodes: list[Episode], *, run_dir: Path, template: Path) -> list[Path]:
+def compile_episodes(episodes: list[Episode], *, run_dir: Path, template: Path,
+                     task_templates: Mapping[str, Path] | None = None) -> list[Path]:
     """Create each episode's workspace and pending sessions; returns the directories.
+
+    Each episode's workspace is made from ``task_templates[episode.task]`` where its task
+    has its own template (its own safety overrides), else from ``template``.
 
     Raises:
         BenchError: an episode directory exists already (a bench run is never
@@ -167,7 +172,7 @@ def compile_episodes(episodes: list[Episode], *, run_dir: Path, template: Path) 
         directory = root / ep.episode_id
         if directory.exists():
             raise BenchError(f"episode directory {directory} already exists; use a new bench run")
-        ws = Workspace.create(directory, templates=template)
+        ws = Workspace.create(directory, templates=(task_templates or {}).get(ep.task, template))
         save_episode(directory, ep)
         # Registered like `phyagentos submit`: the run's own copy of its graph is the task
         # source with the episode's initial scene.

@@ -166,8 +166,11 @@ def run_bench(
         for key in MEMORY_DOCS:
             shutil.copy2(ws.path(key), policy.snapshot_dir / f"{key}.md")
     template = episode_template_dir(ws.root, run_dir, policy.template_files(), safety=dict(suite.safety))
+    task_templates = {t.id: episode_template_dir(ws.root, run_dir, policy.template_files(),
+                                                 safety={**suite.safety, **t.safety}, name=f"template_{t.id}")
+                      for t in _restrict(suite, tasks).tasks if t.safety}
     atomic_write_text(run_dir / "plan.yaml", dump_yaml([ep.to_dict() for ep in plan]))
-    directories = compile_episodes(plan, run_dir=run_dir, template=template)
+    directories = compile_episodes(plan, run_dir=run_dir, template=template, task_templates=task_templates)
     if on_compiled is not None:
         on_compiled(len(directories))
     compiled_s = time.perf_counter() - started

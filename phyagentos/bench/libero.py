@@ -48,8 +48,8 @@ from phyagentos.errors import BenchError, TargetError, format_choices
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
 
-__all__ = ["LIBERO_TARGET", "is_libero_suite", "instruction_nodes", "instruction_plan", "prepare_libero_suite",
-           "target_entry"]
+__all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "workspace_box", "is_libero_suite", "instruction_nodes", "instruction_plan",
+           "prepare_libero_suite", "target_entry"]
 
 logger = logging.getLogger(__name__)
 
@@ -59,12 +59,41 @@ LIBERO_TARGET = "libero"
 _LOOKS_METHOD = "generated_clutter_v2"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
-#: The tcp box of safety.yaml's template (origin at the robot base, table top at z = 0) in the
-#: world frame of LIBERO's table scenes (libero_spatial: the robot base at x = -0.66 m, the
-#: table top at z = 0.90 m; measured on the built world): the template's box would put the
-#: arm's start pose (tcp x = -0.21 m) outside and halt every motion. Written into the
-#: libero_spatial suites' ``safety`` overrides.
-TABLE_SCENE_WORKSPACE_BOX = {"min": [-0.86, -0.8, 0.89], "max": [0.34, 0.8, 2.1]}
+#: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:
+#: ``(x, y)`` of its base and ``z`` of the top of the surface it works on, metres, world frame.
+#: Measured on the built worlds (init state 0 of libero_object 0, libero_goal 0,
+#: libero_spatial 0, libero_10 0, 2, 5 and libero_90 0-80 in steps of 10): the position of
+#: ``robot0_base``, and a ray cast straight down 0.55 m in front of it. The heights agree with
+#: LIBERO's own scene offsets (``libero/envs/problems/*.py``: table 0.90, study table 0.867,
+#: living-room table 0.41 plus its 2.4 cm top; the kitchen ray hit the stove, so its table is
+#: LIBERO's 0.90).
+LIBERO_CELLS: dict[str, tuple[float, float, float]] = {
+    "LIBERO_Tabletop_Manipulation": (-0.66, 0.0, 0.90),
+    "LIBERO_Kitchen_Tabletop_Manipulation": (-0.66, 0.0, 0.90),
+    "LIBERO_Study_Tabletop_Manipulation": (-0.75, 0.0, 0.885),
+    "LIBERO_Living_Room_Tabletop_Manipulation": (-0.51, 0.0, 0.437),
+    "LIBERO_Floor_Manipulation": (-0.60, 0.0, 0.0),
+}
+
+
+def workspace_box(scene: str) -> dict[str, list[float]]:
+    """The tcp box of safety.yaml's template (origin at the robot base, the work surface at
+    z = 0) moved into the world frame of LIBERO scene class ``scene`` (:data:`LIBERO_CELLS`):
+    ``{"min": (3,), "max": (3,)}`` in metres. With the template's box itself, a table
+    scene's start pose (tcp x = -0.21 m, z = 1.17 m) lies outside it and the SafetyGuard
+    halts the first motion (``safety.workspace``: 19 of 20 libero_spatial sessions, before
+    this box).
+
+    Raises:
+        BenchError: ``scene`` is not one of LIBERO's scene classes (they are listed).
+    """
+    from phyagentos.resources import templates_dir  # noqa: PLC0415
+
+    if scene not in LIBERO_CELLS:
+        raise BenchError(f"no workspace box for LIBERO scene class {scene!r}; known: {format_choices(LIBERO_CELLS)}")
+    box = (yaml.safe_load((templates_dir() / "safety.yaml").read_text(encoding="utf-8")) or {})["workspace_box"]
+    offset = LIBERO_CELLS[scene]
+    return {k: [round(float(v) + o, 4) for v, o in zip(box[k], offset)] for k in ("min", "max")}
 
 
 def target_entry() -> dict[str, Any]:
@@ -321,14 +350,12 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
                                 f"# and the declared objects; the episode's init state is written into scene.init.\n"
                           + yaml.safe_dump(graph, sort_keys=False))
         entries.append({"id": f"t{i}", "description": task.instruction, "goal_graph": path.name, "target": LIBERO_TARGET,
-                        "seed_to_scene": "init"})
+                        "seed_to_scene": "init", "safety": {"workspace_box": workspace_box(problem.scene)}})
     suite_doc = {"version": 1, "name": ident, "episodes": len(DEFAULT_INIT_SUBSET),
                  "description": f"LIBERO {suite}: tasks from LIBERO's instructions, episodes from its fixed init "
                                 f"states, judged by LIBERO's checker" + (f"; not planned: {len(unplanned)} task(s)"
                                                                           if unplanned else ""),
                  "tasks": entries}
-    if suite.startswith("libero_spatial"):
-        suite_doc["safety"] = {"workspace_box": TABLE_SCENE_WORKSPACE_BOX}
     suite_path = root / "suite.yaml"
     atomic_write_text(suite_path, yaml.safe_dump(suite_doc, sort_keys=False))
     planning = {"suite": suite, "planner": "goal_planner_rules", "planned": [i for i, *_ in planned],

@@ -16,6 +16,7 @@ A suite is a YAML file (``phyagentos/bench/suites/<name>.yaml``, or any path)::
       - id: pick_and_place
         goal_graph: pick_and_place.yaml          # relative to phyagentos/data/goal_graphs/ or the suite file
         target: franka_tabletop                  # optional: override every node's target
+        safety: {}                               # optional: this task's safety.yaml keys, over the suite's
         randomize:
           - {names: [cube], xy: [0.05, 0.05], yaw: 0.6}
 
@@ -34,8 +35,10 @@ draw itself reaches only ``ground_truth.yaml``.
 suites: ``init``, the index of one of the task's fixed initial states).
 
 ``safety`` overrides keys of the bench workspace's safety.yaml in the episodes (a
-different cell, e.g. the kitchen's workspace box); the merged file is validated as
-:class:`~phyagentos.protocol.SafetyConfig` and recorded with the episode workspaces.
+different cell, e.g. the kitchen's workspace box); a task's own ``safety`` overrides the
+suite's for that task's episodes (tasks standing in different cells). The merged file is
+validated as :class:`~phyagentos.protocol.SafetyConfig` and recorded with the episode
+workspaces.
 
 Perturbations (``kinds`` from :data:`phyagentos.bench.perturb.PERTURBATIONS`) are
 switched on for an episode with probability ``rate``, drawn from the same episode RNG;
@@ -64,7 +67,7 @@ __all__ = ["RandomizeRule", "TaskSpec", "PerturbationConfig", "Suite", "load_sui
 logger = logging.getLogger(__name__)
 
 _SUITE_KEYS = {"version", "name", "description", "episodes", "heldout_seed_offset", "perturbations", "safety", "tasks"}
-_TASK_KEYS = {"id", "goal_graph", "target", "randomize", "description", "random_world", "seed_to_scene"}
+_TASK_KEYS = {"id", "goal_graph", "target", "randomize", "description", "random_world", "seed_to_scene", "safety"}
 _RULE_KEYS = {"names", "xy", "yaw"}
 _PERTURB_KEYS = {"rate", "kinds"}
 
@@ -103,6 +106,10 @@ class TaskSpec:
     #: ``None``, or a scene key the episode's seed is written to (LIBERO: ``init``, the
     #: seed is the index of one of the task's fixed initial states).
     seed_to_scene: str | None = None
+    #: safety.yaml keys this task's episodes override on top of the suite's ``safety`` (a
+    #: suite whose tasks stand in different cells, e.g. LIBERO-10's kitchen, living-room and
+    #: study scenes, each with its own workspace box).
+    safety: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -313,9 +320,14 @@ def load_suite(name_or_path: str | Path) -> Suite:
         if seed_key is not None and (not isinstance(seed_key, str) or not seed_key.isidentifier()):
             raise _problem(p, f"tasks[{i}].seed_to_scene must be a scene key (an identifier), got {seed_key!r}",
                            line_of(t, "seed_to_scene"))
+        task_safety = t.get("safety") or {}
+        if not isinstance(task_safety, dict):
+            raise _problem(p, f"tasks[{i}].safety must be a mapping of safety.yaml keys to override, "
+                              f"got {type(task_safety).__name__}", line_of(t, "safety"))
         tasks.append(TaskSpec(id=tid, goal_graph=_resolve_graph(t.get("goal_graph"), p, line_of(t, "goal_graph")),
                               target=target, randomize=tuple(rules), description=str(t.get("description", "")),
-                              random_world=to_plain(rw) if isinstance(rw, dict) else None, seed_to_scene=seed_key))
+                              random_world=to_plain(rw) if isinstance(rw, dict) else None, seed_to_scene=seed_key,
+                              safety=to_plain(task_safety)))
     safety = raw.get("safety") or {}
     if not isinstance(safety, dict):
         raise _problem(p, f"safety must be a mapping of safety.yaml keys to override, got {type(safety).__name__}",

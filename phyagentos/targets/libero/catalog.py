@@ -378,6 +378,9 @@ class BddlProblem:
         init: ``:init`` atoms, e.g. ``("On", "bowl_1", "table_region")`` (privileged).
         goal: the ``:goal`` expression as nested lists (privileged).
         regions: ``{region name: {target, ranges?, yaw_rotation?}}`` from ``:regions`` (privileged).
+        scene: the problem's name, i.e. LIBERO's scene class the world is built from
+            (``LIBERO_Tabletop_Manipulation``, ``LIBERO_Floor_Manipulation``,
+            ``LIBERO_Kitchen_Tabletop_Manipulation``, ...): the cell the robot stands in.
     """
 
     path: Path
@@ -388,6 +391,7 @@ class BddlProblem:
     init: tuple[tuple[str, ...], ...]
     goal: list
     regions: dict[str, dict[str, Any]]
+    scene: str = ""
 
     def declared(self) -> dict[str, Any]:
         """What a user declares about this scene (the Agent plane may read it):
@@ -437,6 +441,8 @@ def _parse_cached(path: str) -> BddlProblem:
             sections[item[0].lower()] = item[1:]
     language = " ".join(t for t in sections.get(":language", []) if isinstance(t, str))
     goal = sections.get(":goal", [])
+    scene = next((str(item[1]) for item in tree[0][1:] if isinstance(item, list) and len(item) == 2
+                  and isinstance(item[0], str) and item[0].lower() == "problem"), "")
     return BddlProblem(
         path=Path(path), language=language,
         objects=_typed(sections.get(":objects", [])), fixtures=_typed(sections.get(":fixtures", [])),
@@ -444,6 +450,7 @@ def _parse_cached(path: str) -> BddlProblem:
         init=tuple(tuple(a) for a in sections.get(":init", []) if isinstance(a, list) and all(isinstance(x, str) for x in a)),
         goal=goal[0] if len(goal) == 1 else goal,
         regions=dict(_region(r) for r in sections.get(":regions", []) if isinstance(r, list) and r),
+        scene=scene,
     )
 
 

@@ -290,7 +290,11 @@ def test_a_libero_policy_node_runs_through_sessions_to_the_verifiers_verdict_wit
             "scene": {"suite": "libero_object", "task": 0, "init": 0},
             "nodes": [{"id": "do_task", "skill": "libero_policy", "runtime": "policy",
                        "params": {"prompt": language, "policy_preset": "pi05_libero", "policy_endpoint": server.uri,
-                                  "max_steps": 15},
+                                  "max_steps": 15,
+                                  # the stand-in server answers pings from this worker's threads: on a
+                                  # loaded machine its pong can miss the presets' 1 s (policy.stalled
+                                  # after one chunk, found beside a busy loop); the budget is the point here
+                                  "heartbeat_timeout_s": 30},
                        "accept": [{"holding": "alphabet_soup_1"}],
                        # as `phyagentos bench libero_*` runs it: a LIBERO world takes seconds to build
                        "limits": {"heartbeat_timeout_s": 120, "execution_timeout_s": 600}}]}))

@@ -10,16 +10,14 @@ The physics is robosuite's: the bowl's own collision mesh, the Panda's position-
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 import yaml
+from libero_generated_pick import run_generated_pick
+
+from phyagentos.bench.libero import workspace_box
 
 pytestmark = pytest.mark.sim
-
-ROOT = Path(__file__).resolve().parent.parent
 
 # looks measured on generated cluttered scenes (the bench's libero/descriptors.yaml, generated_clutter_v2)
 LOOKS = {
@@ -32,32 +30,11 @@ LOOKS = {
 
 
 def test_a_bowl_wider_than_the_gripper_is_lifted_by_its_rim_and_the_held_width_check_passes(tmp_path):
-    from phyagentos.bench.libero import target_entry, workspace_box
-    from phyagentos.protocol import Workspace
-    from phyagentos.protocol.schemas import TargetSpec
-
-    ws = Workspace.create(tmp_path / "ws")
-    ws.update("TARGETS", lambda doc: doc.targets.append(TargetSpec.model_validate(target_entry())))
-    safety = tmp_path / "ws" / "safety.yaml"  # the table scene's safety cell, as the bench sets it
-    doc = yaml.safe_load(safety.read_text())
-    doc["workspace_box"] = workspace_box("LIBERO_Tabletop_Manipulation")
-    safety.write_text(yaml.safe_dump(doc, sort_keys=False))
-    # one bowl declared: whichever of the two physical bowls perception names is the one picked
-    objects = [{"name": f"{c}_1", "class": c, **look} for c, look in LOOKS.items()]
-    graph = {"version": 1, "name": "rim_pick", "description": "pick up the black bowl",
-             "defaults": {"target": "libero"},
-             "scene": {"suite": "libero_spatial", "task": 1, "generated": True, "objects": objects,
-                       "fixtures": [{"name": "main_table", "class": "table"}]},
-             "nodes": [{"id": "pick", "skill": "pick", "params": {"object": "akita_black_bowl_1"},
-                        "accept": [{"holding": "akita_black_bowl_1"},
-                                   {"lifted": {"object": "akita_black_bowl_1", "min_height": 0.05}}],
-                        "limits": {"execution_timeout_s": 600, "heartbeat_timeout_s": 180}}]}
-    path = tmp_path / "rim_pick.yaml"
-    path.write_text(yaml.safe_dump(graph, sort_keys=False))
-    out = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(path), "--workspace", str(tmp_path / "ws"),
-                          "--seed", "108", "--json", "--memory", "off"], capture_output=True, text=True, timeout=600,
-                         cwd=tmp_path, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
-    rep = json.loads(out.stdout.strip().splitlines()[-1])
+    # the table scene's safety cell, as the bench sets it; one bowl declared: whichever of the two
+    # physical bowls perception names is the one picked
+    rep = run_generated_pick(tmp_path, name="rim_pick", description="pick up the black bowl", suite="libero_spatial", task=1,
+                             looks=LOOKS, fixture={"name": "main_table", "class": "table"}, obj="akita_black_bowl_1",
+                             workspace_box=workspace_box("LIBERO_Tabletop_Manipulation"))
     first = rep["sessions"][0]
     assert first["verdict"] == "success", first["reason"]
     evidence = tmp_path / "ws" / first["evidence"]

@@ -10,17 +10,13 @@ scenes (``phyagentos.targets.libero.descriptors``).
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 import yaml
+from libero_generated_pick import run_generated_pick
+
 
 pytestmark = pytest.mark.sim
-
-ROOT = Path(__file__).resolve().parent.parent
 
 # looks measured on generated cluttered scenes (the bench's libero/descriptors.yaml, generated_clutter_v2)
 LOOKS = {
@@ -35,27 +31,8 @@ LOOKS = {
 
 
 def test_a_tall_bottles_pick_on_a_generated_scene_is_confirmed_and_it_is_really_held(tmp_path):
-    from phyagentos.bench.libero import target_entry
-    from phyagentos.protocol import Workspace
-    from phyagentos.protocol.schemas import TargetSpec
-
-    ws = Workspace.create(tmp_path / "ws")
-    ws.update("TARGETS", lambda doc: doc.targets.append(TargetSpec.model_validate(target_entry())))
-    objects = [{"name": f"{c}_1", "class": c, **look} for c, look in LOOKS.items()]
-    graph = {"version": 1, "name": "tall_pick", "description": "pick up the salad dressing",
-             "defaults": {"target": "libero"},
-             "scene": {"suite": "libero_object", "task": 2, "generated": True, "objects": objects,
-                       "fixtures": [{"name": "floor", "class": "floor"}]},
-             "nodes": [{"id": "pick", "skill": "pick", "params": {"object": "salad_dressing_1"},
-                        "accept": [{"holding": "salad_dressing_1"},
-                                   {"lifted": {"object": "salad_dressing_1", "min_height": 0.05}}],
-                        "limits": {"execution_timeout_s": 600, "heartbeat_timeout_s": 180}}]}
-    path = tmp_path / "tall_pick.yaml"
-    path.write_text(yaml.safe_dump(graph, sort_keys=False))
-    out = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(path), "--workspace", str(tmp_path / "ws"),
-                          "--seed", "108", "--json", "--memory", "off"], capture_output=True, text=True, timeout=600,
-                         cwd=tmp_path, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
-    rep = json.loads(out.stdout.strip().splitlines()[-1])
+    rep = run_generated_pick(tmp_path, name="tall_pick", description="pick up the salad dressing", suite="libero_object", task=2,
+                             looks=LOOKS, fixture={"name": "floor", "class": "floor"}, obj="salad_dressing_1")
     first = rep["sessions"][0]
     assert first["verdict"] == "success", first["reason"]
     assert rep["succeeded"]

@@ -30,6 +30,7 @@ __all__ = [
     "top_down_grasp_candidates",
     "place_pose",
     "top_down_rotation",
+    "top_down_plan",
     "hand_yaw",
     "FINGERTIP_BELOW_TCP_M",
     "PAD_DEPTH_ABOVE_TCP_M",
@@ -65,6 +66,21 @@ def top_down_rotation(yaw: float) -> np.ndarray:
     """(3, 3) rotation of a top-down tcp with hand yaw ``yaw`` rad."""
     c, s = math.cos(yaw), math.sin(yaw)
     return np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
+
+
+def top_down_plan(x: float, y: float, z: float, yaw: float, *, approach_height_m: float,
+                  width_m: float) -> GraspPlan:
+    """A :class:`GraspPlan` whose grasp is the top-down tcp pose at ``(x, y, z)`` m (world
+    frame) with hand yaw ``yaw`` rad, its pregrasp ``approach_height_m`` straight above;
+    both poses read-only."""
+    G = np.eye(4)
+    G[:3, :3] = top_down_rotation(yaw)
+    G[:3, 3] = [x, y, z]
+    P = G.copy()
+    P[2, 3] += approach_height_m
+    G.setflags(write=False)
+    P.setflags(write=False)
+    return GraspPlan(grasp=G, pregrasp=P, yaw_rad=yaw, width_m=float(width_m))
 
 
 def hand_yaw(T_tcp: np.ndarray) -> float:
@@ -172,15 +188,8 @@ def top_down_grasp_candidates(
     z = max(T[2, 3], bottom + FINGERTIP_BELOW_TCP_M + tip_clearance_m, top - PAD_DEPTH_ABOVE_TCP_M)
     out = []
     for delta in deltas:
-        yaw = _wrap(current_yaw_rad + delta)
-        G = np.eye(4)
-        G[:3, :3] = top_down_rotation(yaw)
-        G[:3, 3] = [T[0, 3], T[1, 3], z]
-        P = G.copy()
-        P[2, 3] += approach_height_m
-        G.setflags(write=False)
-        P.setflags(write=False)
-        out.append(GraspPlan(grasp=G, pregrasp=P, yaw_rad=yaw, width_m=float(width)))
+        out.append(top_down_plan(T[0, 3], T[1, 3], z, _wrap(current_yaw_rad + delta),
+                                 approach_height_m=approach_height_m, width_m=width))
     return tuple(out)
 
 

@@ -40,7 +40,7 @@ from .grasp import (
     PAD_DEPTH_ABOVE_TCP_M,
     GraspPlan,
     _wrap,
-    top_down_rotation,
+    top_down_plan,
 )
 
 __all__ = [
@@ -224,13 +224,6 @@ def rim_grasp_candidates(
     ranked.sort(key=lambda r: r[0])
     out = []
     for _, xy, delta in ranked:
-        yaw = _wrap(current_yaw_rad + delta)
-        G = np.eye(4)
-        G[:3, :3] = top_down_rotation(yaw)
-        G[:3, 3] = [xy[0], xy[1], z]
-        P = G.copy()
-        P[2, 3] += approach_height_m
-        G.setflags(write=False)
-        P.setflags(write=False)
-        out.append(GraspPlan(grasp=G, pregrasp=P, yaw_rad=yaw, width_m=float(wall_m)))
+        out.append(top_down_plan(xy[0], xy[1], z, _wrap(current_yaw_rad + delta),
+                                 approach_height_m=approach_height_m, width_m=wall_m))
     return tuple(out)

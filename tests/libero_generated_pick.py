@@ -1,0 +1,47 @@
+"""One pick through ``phyagentos run`` on a generated LIBERO scene (LIBERO's placement sampler,
+``generated: true``, never an evaluation init state), for the sim tests of issue 28."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def run_generated_pick(tmp_path: Path, *, name: str, description: str, suite: str, task: int,
+                       looks: Mapping[str, Mapping[str, Any]], fixture: Mapping[str, str], obj: str,
+                       workspace_box: Mapping[str, list] | None = None, seed: int = 108) -> dict:
+    """Run a one-node pick graph of ``obj`` (declared with every category of ``looks``, one
+    object each, named ``<category>_1``) in a fresh workspace ``tmp_path/ws`` whose TARGETS.md
+    has the LIBERO target and whose safety box is ``workspace_box`` (the template's if None).
+    Returns ``phyagentos run --json``'s report."""
+    from phyagentos.bench.libero import target_entry
+    from phyagentos.protocol import Workspace
+    from phyagentos.protocol.schemas import TargetSpec
+
+    ws = Workspace.create(tmp_path / "ws")
+    ws.update("TARGETS", lambda doc: doc.targets.append(TargetSpec.model_validate(target_entry())))
+    if workspace_box is not None:
+        safety = tmp_path / "ws" / "safety.yaml"
+        doc = yaml.safe_load(safety.read_text())
+        doc["workspace_box"] = dict(workspace_box)
+        safety.write_text(yaml.safe_dump(doc, sort_keys=False))
+    objects = [{"name": f"{c}_1", "class": c, **look} for c, look in looks.items()]
+    graph = {"version": 1, "name": name, "description": description, "defaults": {"target": "libero"},
+             "scene": {"suite": suite, "task": task, "generated": True, "objects": objects, "fixtures": [dict(fixture)]},
+             "nodes": [{"id": "pick", "skill": "pick", "params": {"object": obj},
+                        "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
+                        "limits": {"execution_timeout_s": 600, "heartbeat_timeout_s": 180}}]}
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(graph, sort_keys=False))
+    out = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(path), "--workspace", str(tmp_path / "ws"),
+                          "--seed", str(seed), "--json", "--memory", "off"], capture_output=True, text=True, timeout=600,
+                         cwd=tmp_path, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert out.stdout.strip(), out.stderr[-3000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])

@@ -92,13 +92,14 @@ def oversized(ext: np.ndarray, descriptors: Sequence[ObjectDescriptor], config: 
     return bool(descriptors) and not any(_fits(ext, d, config) for d in descriptors)
 
 
-def _pieces(xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+def _pieces(xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int], grow: int = 1) -> np.ndarray:
     """(N,) label of the 8-connected group of grid cells (:data:`GRID_M`) each point of
-    ``xy`` (N, 2) falls in (cells dilated by one: a 1-cell gap still joins)."""
+    ``xy`` (N, 2) falls in, the occupied cells dilated by ``grow`` cells (gaps up to about
+    twice that still join)."""
     cells = np.floor((xy - origin) / GRID_M).astype(np.int32) + 1
     occ = np.zeros(shape, np.uint8)
     occ[cells[:, 1], cells[:, 0]] = 1
-    occ = cv2.dilate(occ, np.ones((3, 3), np.uint8))
+    occ = cv2.dilate(occ, np.ones((2 * grow + 1, 2 * grow + 1), np.uint8))
     _, lab = cv2.connectedComponents(occ, connectivity=8)
     return lab[cells[:, 1], cells[:, 0]]
 
@@ -112,12 +113,16 @@ def _hull_mask(xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int]) -> np
     return cv2.dilate(m, np.ones((3, 3), np.uint8))
 
 
-def _partitions(cloud: Cloud, heights: np.ndarray, min_points: int):
+def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
     """Candidate partitions of one segment: ``(kind, z, labels (N,))`` with labels >= 0 the
-    parts and -1 the points left out (see the module docstring)."""
+    parts and -1 the points left out (see the module docstring). Pieces join across gaps up
+    to about the clustering's ``eps_m``."""
+    min_points = config.clustering.min_points
+    grow = max(1, int(np.ceil(config.clustering.eps_m / (2.0 * GRID_M))))
     xy = cloud.points[:, :2].astype(np.float64)
     origin = xy.min(axis=0)
-    ncell = np.floor((xy.max(axis=0) - origin) / GRID_M).astype(int) + 3
+    ncell = np.floor((xy.max(axis=0) - origin) / GRID_M).astype(int) + 3 + 2 * grow
+    origin = origin - grow * GRID_M
     shape = (int(ncell[1]), int(ncell[0]))
     top = float(np.percentile(heights, 98))
     levels = np.arange(0.01, top - 0.01 + 1e-9, 0.005)
@@ -131,7 +136,7 @@ def _partitions(cloud: Cloud, heights: np.ndarray, min_points: int):
         for g in groups:
             if g.size < min_points:
                 continue
-            lab = _pieces(xy[g], origin, shape)
+            lab = _pieces(xy[g], origin, shape, grow)
             for v in np.unique(lab):
                 sel = g[lab == v]
                 if sel.size >= min_points:
@@ -149,7 +154,7 @@ def _partitions(cloud: Cloud, heights: np.ndarray, min_points: int):
             continue
         yield "step", float(z), pieces_of([above, below])
         # columns: each connected group of the upper points takes the points below it
-        lab = _pieces(xy[above], origin, shape)
+        lab = _pieces(xy[above], origin, shape, grow)
         groups, rest = [], np.ones(len(cloud), bool)
         for v in np.unique(lab):
             sel = above[lab == v]
@@ -214,13 +219,16 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     if not oversized(extent(cloud.points, heights), sized, config):
         return None
     scored = []
-    for kind, z, labels in _partitions(cloud, heights, cc.min_points):
+    for kind, z, labels in _partitions(cloud, heights, config):
         n_parts = int(labels.max()) + 1
         if n_parts < 2 or np.count_nonzero(labels < 0) > MAX_DROPPED * len(cloud):
             continue
+        idxs_all = [np.flatnonzero(labels == k) for k in range(n_parts)]
+        exts = [extent(cloud.points[i], heights[i]) for i in idxs_all]
+        if any(oversized(np.array([e[0], e[1], 0.0]), sized, config) for e in exts):
+            continue  # a footprint larger than every declared object's (a fixture's): no need to fit
         parts, idxs = [], []
-        for k in range(n_parts):
-            idx = np.flatnonzero(labels == k)
+        for idx in idxs_all:
             det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
             if det is None:
                 break
@@ -231,7 +239,6 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
             costs = cost_matrix(stacked, sized, config).min(axis=1)
             if float(costs.max()) > cc.split_max_cost:
                 continue
-            exts = [extent(cloud.points[i], heights[i]) for i in idxs]
             for e, d in zip(exts, stacked):
                 e[2] = d.top_m - d.bottom_m  # a part resting on another: its own height
             if any(oversized(e, sized, config) for e in exts):

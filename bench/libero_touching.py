@@ -28,7 +28,13 @@ import yaml
 from _harness import parser, write_json
 
 from phyagentos.targets.libero import LiberoScene, LiberoTarget
-from phyagentos.targets.libero.descriptors import _observe, measure_descriptors, object_boxes, place_objects, set_touching
+from phyagentos.targets.libero.descriptors import (
+    _observe,
+    measure_descriptors,
+    object_boxes,
+    place_objects,
+    set_touching,
+)
 
 SEED = 60000
 

@@ -115,3 +115,40 @@ def test_two_objects_of_different_colours_touching_at_the_same_height_are_split_
     for o in (a, b):
         assert ents[o.name]["kind"] == "object" and _xy_error(ents[o.name], o) < 0.01, ents.get(o.name)
     assert snap["unseen"] == []
+
+
+def _slab(half_x: float, half_y: float, height: float, step: float = 0.003):
+    """Points (world m) of a box's top face and sides standing on the plane z = 0, grey."""
+    from phyagentos.perception.cloud import Cloud
+
+    xs, ys = np.arange(-half_x, half_x + 1e-9, step), np.arange(-half_y, half_y + 1e-9, step)
+    zs = np.arange(step, height, step)
+    top = [(x, y, height) for x in xs for y in ys]
+    sides = [(x, y, z) for z in zs for x in xs for y in (-half_y, half_y)] + \
+            [(x, y, z) for z in zs for y in ys for x in (-half_x, half_x)]
+    p = np.array(top + sides, dtype=np.float32)
+    n = p.shape[0]
+    return Cloud(p, np.full((n, 3), 90, np.uint8), np.full(n, 0.8, np.float32), np.zeros(n, np.int16))
+
+
+def test_two_admissible_splits_that_cut_differently_leave_the_segment_whole(monkeypatch):
+    """A 12 x 12 cm slab declared as two 12 x 6 cm bars: cut along x or along y, both explain
+    it equally -- ambiguous, so nothing is split; with only one such cut it is split."""
+    from phyagentos.perception import split
+    from phyagentos.perception.cloud import Plane
+
+    cloud = _slab(0.06, 0.06, 0.04)
+    heights = cloud.points[:, 2].astype(np.float64)
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 1000, True)
+    bars = [ObjectDescriptor(f"bar_{k}", shape="box", colour_rgb=(0.35, 0.35, 0.35), size_m=(0.12, 0.06, 0.04))
+            for k in (1, 2)]
+    p = cloud.points
+    along_x = (p[:, 1] > 0).astype(np.int64)  # two bars lying along x
+    along_y = (p[:, 0] > 0).astype(np.int64)  # two bars lying along y
+    focal = np.array([400.0])
+    monkeypatch.setattr(split, "_partitions", lambda c, h, cfg: iter([("step", 0.01, along_x), ("columns", 0.01, along_y)]))
+    assert split.split_cluster(cloud, heights, plane, CFG, focal, bars) is None
+    monkeypatch.setattr(split, "_partitions", lambda c, h, cfg: iter([("step", 0.01, along_x)]))
+    parts = split.split_cluster(cloud, heights, plane, CFG, focal, bars)
+    assert parts is not None and len(parts) == 2
+    assert sorted(round(float(d.position[1]), 2) for d, _ in parts) == [-0.03, 0.03]

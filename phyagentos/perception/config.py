@@ -122,6 +122,16 @@ class ClusteringConfig(_Section):
         1.0, le=1000.0, gt=0, description="Intensity (r+g+b)/768 difference that counts as one eps."
     )
     min_points: int = Field(25, le=1_000_000, ge=1, description="Smaller clusters are dropped as noise.")
+    split_max_cost: float = Field(
+        1.5, le=1000.0, ge=0,
+        description="A segment larger than every declared object is split into parts (perception.split) only when "
+                    "each part matches a declared look at an association cost at most this (0: never split).",
+    )
+    split_size_tolerance: float = Field(
+        0.10, le=10.0, ge=0, description="A segment is larger than a declared object when a dimension exceeds "
+                                         "its by this fraction plus split_size_margin_m.",
+    )
+    split_size_margin_m: float = Field(0.008, le=1.0, ge=0, description="See split_size_tolerance, m.")
 
 
 class ShapeConfig(_Section):

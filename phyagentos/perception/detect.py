@@ -31,7 +31,7 @@ from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 
-__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect", "detect_clusters"]
+__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect", "detect_clusters", "stack"]
 
 log = logging.getLogger(__name__)
 
@@ -285,14 +285,58 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
     )
 
 
+def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list[Detection]:
+    """Raise the bottom of detections resting on another detection (object on object).
+
+    A detection whose lowest points (``low_m``) are well above the table and within
+    ``relations.on_gap_m`` of another detection's top, over that detection's footprint,
+    rests on it: its bottom becomes the other's top and its height shrinks accordingly.
+    Heights are m above ``plane``; returns a new list in the same order.
+    """
+    from dataclasses import replace
+
+    from phyagentos.perception.relations import _footprint_margin
+
+    out = list(dets)
+    order = sorted(range(len(out)), key=lambda i: out[i].top_m)
+    for i in order:
+        a = out[i]
+        if a.low_m < config.table.object_min_height_m + 0.008:
+            continue
+        for j in order:
+            b = out[j]
+            if j == i or b.top_m >= a.top_m:
+                continue
+            if abs(a.low_m - b.top_m) > config.relations.on_gap_m:
+                continue
+            if _footprint_margin(a.position[:2], b.position, b.yaw, b.half_extents, b.shape) < -0.005:
+                continue
+            bottom = b.top_m
+            half = a.half_extents.copy()
+            half[2] = max(0.5 * (a.top_m - bottom), 1e-3)
+            pos = a.position.copy()
+            pos[2] = plane.z_at(pos[:2]) + bottom + half[2]
+            out[i] = replace(a, bottom_m=bottom, half_extents=half, position=pos)
+            break
+    return out
+
+
 def detect_clusters(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
-                    focal_px: np.ndarray) -> list[tuple[Detection, np.ndarray]]:
-    """``(detection, index array into cloud)`` per cluster (see :func:`fit_cluster`)."""
+                    focal_px: np.ndarray, descriptors=()) -> list[tuple[Detection, np.ndarray]]:
+    """``(detection, index array into cloud)`` per cluster (see :func:`fit_cluster`).
+
+    With the declared objects' ``descriptors`` (:class:`~.descriptors.ObjectDescriptor`), a
+    cluster larger than every one of them is split into the touching objects it holds when
+    the split is unambiguous (:func:`phyagentos.perception.split.split_cluster`)."""
     out = []
     for idx in cluster(cloud, config):
         det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
         if det is not None:
             out.append((det, idx))
+    if descriptors:
+        from phyagentos.perception.split import split_clusters  # noqa: PLC0415 (split imports this module)
+
+        out = split_clusters(out, cloud, heights, plane, config, focal_px, descriptors)
     return out
 
 

@@ -9,6 +9,8 @@ One :meth:`Perceiver.observe` call runs the pipeline on every frame of one obser
    the tcp, caller-given robot capsules and declared obstacles (inflated by 1 cm);
    voxel-filtered;
 3. detections: DBSCAN on position + colour, one fitted primitive per cluster (``detect``);
+   a cluster larger than every declared object is split into the touching objects it holds
+   at a height step or around a taller part, when that is unambiguous (``split``);
    stacking (an object whose lowest points sit on another's top rests on it);
 4. association to the declared descriptors (``association``); unmatched or ambiguous
    clusters become ``unknown_<k>``; an object declared with a spatial reference (``where``)
@@ -56,6 +58,7 @@ from phyagentos.perception.cloud import (
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
 from phyagentos.perception.detect import Detection, detect_clusters
+from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.frames import CameraFrame, Proprioception
 from phyagentos.perception.relations import (
@@ -319,7 +322,7 @@ class Perceiver:
         self.last_cloud = cloud
         t1 = time.perf_counter()
         focal = np.array([f.intrinsics.fx / cfg.stride_for(f.intrinsics.width) for f in frames])
-        clusters = detect_clusters(cloud, heights, plane, cfg, focal)
+        clusters = detect_clusters(cloud, heights, plane, cfg, focal, self.declared)
         dets = _stack([d for d, _ in clusters], plane, cfg)
         hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
         if hanging:  # the part of the held object below the fingers: the hand's, not a thing on the table
@@ -703,41 +706,6 @@ def _geo(position, yaw, half, shape, bottom, plane: Plane, std) -> dict:
     return {"position": np.asarray(position, float), "yaw": float(yaw), "half": np.asarray(half, float),
             "shape": shape, "bottom": float(bottom), "top": float(bottom + 2.0 * half[2]), "std": float(std),
             "table_conf": 0.95 if plane.fitted else 0.7}
-
-
-def _stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list[Detection]:
-    """Raise the bottom of detections resting on another detection (object on object).
-
-    A detection whose lowest points (``bottom_hint``) are well above the table and within
-    ``relations.on_gap_m`` of another detection's top, over that detection's footprint,
-    rests on it: its bottom becomes the other's top and its height shrinks accordingly.
-    """
-    from dataclasses import replace
-
-    from phyagentos.perception.relations import _footprint_margin
-
-    out = list(dets)
-    order = sorted(range(len(out)), key=lambda i: out[i].top_m)
-    for i in order:
-        a = out[i]
-        if a.low_m < config.table.object_min_height_m + 0.008:
-            continue
-        for j in order:
-            b = out[j]
-            if j == i or b.top_m >= a.top_m:
-                continue
-            if abs(a.low_m - b.top_m) > config.relations.on_gap_m:
-                continue
-            if _footprint_margin(a.position[:2], b.position, b.yaw, b.half_extents, b.shape) < -0.005:
-                continue
-            bottom = b.top_m
-            half = a.half_extents.copy()
-            half[2] = max(0.5 * (a.top_m - bottom), 1e-3)
-            pos = a.position.copy()
-            pos[2] = plane.z_at(pos[:2]) + bottom + half[2]
-            out[i] = replace(a, bottom_m=bottom, half_extents=half, position=pos)
-            break
-    return out
 
 
 def width_in_hand(half_extents: np.ndarray, yaw: float, shape: str, proprio: Proprioception) -> float:

@@ -40,7 +40,7 @@ import numpy as np
 from phyagentos.errors import TargetError
 
 __all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "object_boxes", "place_objects",
-           "label_segments", "perception_accuracy"]
+           "set_touching", "label_segments", "perception_accuracy"]
 
 log = logging.getLogger(__name__)
 
@@ -147,6 +147,61 @@ def place_objects(target, seed: int, *, names: Sequence[str] | None = None, sett
     mujoco.mj_forward(m, d)
     target.hold(duration_s=settle_s)
     return out
+
+
+def set_touching(target, mover: str, landmark: str, how: str, seed: int, *, settle_s: float = 1.5) -> bool:
+    """Set object ``mover`` of a generated scene touching ``landmark`` and let it settle
+    (``settle_s``): ``how`` ``"against"`` -- on the support beside it, its footprint 1 cm over
+    the landmark's edge (a bowl's rim over a plate's), at a random side (seeded by ``seed``)
+    clear of the other objects; ``"on"`` -- centred over the landmark's footprint, its bottom
+    5 mm above the landmark's top. Built from the objects' true boxes: a scene generator,
+    for generated scenes and scoring only. Returns False when no clear side was found (the
+    scene unchanged) or when, settled, either object tipped over or the mover was pushed
+    more than 2 cm (it met a fixture).
+
+    Raises:
+        ValueError: ``how`` is neither ``"against"`` nor ``"on"``.
+    """
+    if how not in ("against", "on"):
+        raise ValueError(f"how must be 'against' or 'on', got {how!r}")
+    m, d = target.model, target.data
+    rng = np.random.default_rng(seed)
+    boxes = object_boxes(target)
+    (lo, hi), (llo, lhi) = boxes[mover], boxes[landmark]
+    adr = _free_adr(m, target._obj_body[mover])
+    if adr is None:
+        return False
+    qa, da = adr
+    off = 0.5 * (lo + hi)[:2] - d.xpos[target._obj_body[mover]][:2]  # footprint centre - body origin
+    r = 0.5 * float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    lc = 0.5 * (llo + lhi)[:2]
+    lr = 0.5 * float(max(lhi[0] - llo[0], lhi[1] - llo[1]))
+    if how == "on":
+        spot, base = lc, float(lhi[2]) + 0.005
+    else:
+        others = [(0.5 * (a + b)[:2], 0.5 * float(np.hypot(*(b - a)[:2]))) for n, (a, b) in boxes.items()
+                  if n not in (mover, landmark) and abs(float(a[2])) < 5.0]
+        for _ in range(100):
+            ang = float(rng.uniform(-math.pi, math.pi))
+            spot = lc + (lr + r - 0.01) * np.array([math.cos(ang), math.sin(ang)])
+            if all(np.linalg.norm(spot - p) > q + r + 0.01 for p, q in others) \
+                    and AREA_X_M[0] <= spot[0] <= AREA_X_M[1] and AREA_Y_M[0] <= spot[1] <= AREA_Y_M[1]:
+                break
+        else:
+            return False
+        base = float(llo[2]) + 0.002
+    d.qpos[qa:qa + 2] = spot - off
+    d.qpos[qa + 2] = float(d.qpos[qa + 2]) + base - float(lo[2])
+    d.qvel[da:da + 6] = 0.0
+    mujoco.mj_forward(m, d)
+    target.hold(duration_s=settle_s)
+    after = object_boxes(target)
+    for n in (mover, landmark):  # tipped over or thrown (it met a fixture): not the scene asked for
+        if abs(float((after[n][1] - after[n][0])[2] - (boxes[n][1] - boxes[n][0])[2])) > 0.01:
+            return False
+    if how == "against" and float(np.linalg.norm(0.5 * (after[mover][0] + after[mover][1])[:2] - spot)) > 0.02:
+        return False
+    return True
 
 
 def label_segments(entities: Sequence[dict], boxes: dict[str, tuple[np.ndarray, np.ndarray]], *,

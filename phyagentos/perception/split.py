@@ -1,0 +1,284 @@
+"""Objects that touch: a segment larger than every declared object is split into its objects.
+
+Clustering joins objects that touch (a bowl standing against a plate, a bowl resting on a
+box or a ramekin) into one segment, which then matches no declared object. A segment is
+*oversized* (:func:`oversized`) when its extent -- the long and short sides of the minimum-area
+rectangle of all its points' footprint and its height (98th percentile above the support
+plane) -- exceeds, in some dimension, every declared object's size by
+``clustering.split_size_tolerance`` of it plus ``clustering.split_size_margin_m``. Only then,
+and only against the declared looks (colour, size, shape as the user declares them), is it
+split (:func:`split_cluster`); nothing here reads a simulator.
+
+Candidate partitions (RGB-D only), at cut heights ``z`` from 1 cm above the plane to 1 cm below the
+segment's top, every 5 mm (at most :data:`MAX_LEVELS`):
+
+* **height step** (an object resting on another): the points above ``z`` and those below;
+* **columns** (objects side by side of different heights: a 5 cm bowl against a 1.9 cm plate):
+  each connected group of the points above ``z`` (on a :data:`GRID_M` grid of the ground
+  plane) with every point below ``z`` inside its footprint's convex hull, the rest apart;
+
+and once, **colour** (objects of clearly different colours: a black bowl on a white
+ramekin): two k-means groups in CIELAB (L* halved), labels smoothed over the nearest
+neighbours, when the group centres lie at least :data:`MIN_COLOUR_SPLIT_LAB` apart.
+
+Each part is cut into its connected pieces on the same grid (pieces under
+``clustering.min_points`` are dropped; a partition dropping more than :data:`MAX_DROPPED` of
+the points is rejected), fitted as any segment (:func:`~.detect.fit_cluster`), stacked
+(:func:`~.detect.stack`: the upper part of a step rests on the lower) and scored against
+the declared looks (:func:`~.association.cost_matrix`). A partition is *admissible* when it
+has at least two parts, every part matches some declared look at a cost of at most
+``clustering.split_max_cost`` and no part is itself oversized. The admissible partition with
+the smallest summed cost is taken, unless another admissible partition that cuts the segment
+differently (another number of parts, or a part whose centre lies more than
+:data:`SAME_PART_M` from every part of the best) scores within
+``association.ambiguity_margin`` of it: then nothing is split and the segment stays one
+(unknown) detection -- an ambiguous split is never guessed.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from phyagentos.perception.cloud import Cloud, Plane
+from phyagentos.perception.colour import srgb_to_lab
+from phyagentos.perception.config import PerceptionConfig
+from phyagentos.perception.descriptors import ObjectDescriptor
+from phyagentos.perception.detect import Detection, fit_cluster, stack
+
+__all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
+           "extent", "oversized", "split_cluster", "split_clusters"]
+
+log = logging.getLogger(__name__)
+
+#: Cell of the ground-plane grid on which parts are grouped and hulls are drawn, m.
+GRID_M = 0.005
+#: Cut heights tried per segment (evenly spread when the 5 mm steps are more).
+MAX_LEVELS = 16
+#: A partition may leave out at most this fraction of the segment's points (small pieces).
+MAX_DROPPED = 0.15
+#: Two partitions cut alike when every part of one has a part of the other this close, m.
+SAME_PART_M = 0.02
+#: The colour partition: its two k-means centres at least this far apart (CIELAB, L* halved).
+MIN_COLOUR_SPLIT_LAB = 20.0
+#: The colour partition: labels smoothed over this many nearest neighbours.
+COLOUR_NEIGHBOURS = 9
+
+
+def extent(points: np.ndarray, heights: np.ndarray) -> np.ndarray:
+    """(3,) extent of a segment, m: ``(long, short, height)`` -- the sides of the minimum-area
+    rectangle of the (N, 3) world-frame ``points``' x, y (long >= short) and the 98th
+    percentile of their (N,) ``heights`` above the support plane."""
+    (_, _), (w, h), _ = cv2.minAreaRect(points[:, :2].astype(np.float32))
+    return np.array([max(w, h), min(w, h), float(np.percentile(heights, 98))])
+
+
+def _fits(ext: np.ndarray, desc: ObjectDescriptor, config: PerceptionConfig) -> bool:
+    cc = config.clustering
+    if desc.size_m is None:
+        return True  # its size is not declared: it may be this large
+    want = desc.size_vector()
+    if want is None:
+        return float(ext.max()) <= (1.0 + cc.split_size_tolerance) * float(desc.size_m) + cc.split_size_margin_m
+    return bool(np.all(ext <= (1.0 + cc.split_size_tolerance) * want + cc.split_size_margin_m))
+
+
+def oversized(ext: np.ndarray, descriptors: Sequence[ObjectDescriptor], config: PerceptionConfig) -> bool:
+    """Whether a segment of extent ``ext`` (:func:`extent`, m) is larger than every declared
+    object (an object declared without a size may be any size: then never)."""
+    return bool(descriptors) and not any(_fits(ext, d, config) for d in descriptors)
+
+
+def _pieces(xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int], grow: int = 1) -> np.ndarray:
+    """(N,) label of the 8-connected group of grid cells (:data:`GRID_M`) each point of
+    ``xy`` (N, 2) falls in, the occupied cells dilated by ``grow`` cells (gaps up to about
+    twice that still join)."""
+    cells = np.floor((xy - origin) / GRID_M).astype(np.int32) + 1
+    occ = np.zeros(shape, np.uint8)
+    occ[cells[:, 1], cells[:, 0]] = 1
+    occ = cv2.dilate(occ, np.ones((2 * grow + 1, 2 * grow + 1), np.uint8))
+    _, lab = cv2.connectedComponents(occ, connectivity=8)
+    return lab[cells[:, 1], cells[:, 0]]
+
+
+def _hull_mask(xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Grid (rows y, cols x) of the filled convex hull of ``xy`` (N, 2), grown by one cell."""
+    cells = (np.floor((xy - origin) / GRID_M).astype(np.int32) + 1)
+    hull = cv2.convexHull(cells.reshape(-1, 1, 2))
+    m = np.zeros(shape, np.uint8)
+    cv2.fillConvexPoly(m, hull, 1)
+    return cv2.dilate(m, np.ones((3, 3), np.uint8))
+
+
+def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
+    """Candidate partitions of one segment: ``(kind, z, labels (N,))`` with labels >= 0 the
+    parts and -1 the points left out (see the module docstring). Pieces join across gaps up
+    to about the clustering's ``eps_m``."""
+    min_points = config.clustering.min_points
+    grow = max(1, int(np.ceil(config.clustering.eps_m / (2.0 * GRID_M))))
+    xy = cloud.points[:, :2].astype(np.float64)
+    origin = xy.min(axis=0)
+    ncell = np.floor((xy.max(axis=0) - origin) / GRID_M).astype(int) + 3 + 2 * grow
+    origin = origin - grow * GRID_M
+    shape = (int(ncell[1]), int(ncell[0]))
+    top = float(np.percentile(heights, 98))
+    levels = np.arange(0.01, top - 0.01 + 1e-9, 0.005)
+    if levels.size > MAX_LEVELS:
+        levels = np.linspace(levels[0], levels[-1], MAX_LEVELS)
+    cells = np.floor((xy - origin) / GRID_M).astype(np.int32) + 1
+
+    def pieces_of(groups: list[np.ndarray]) -> np.ndarray:
+        labels = np.full(len(cloud), -1, dtype=np.int64)
+        k = 0
+        for g in groups:
+            if g.size < min_points:
+                continue
+            lab = _pieces(xy[g], origin, shape, grow)
+            for v in np.unique(lab):
+                sel = g[lab == v]
+                if sel.size >= min_points:
+                    labels[sel] = k
+                    k += 1
+        return labels
+
+    labels = _colour_halves(cloud)
+    if labels is not None:
+        yield "colour", float("nan"), pieces_of([np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)])
+    for z in levels:
+        above = np.flatnonzero(heights > z)
+        below = np.flatnonzero(heights <= z)
+        if above.size < min_points or below.size < min_points:
+            continue
+        yield "step", float(z), pieces_of([above, below])
+        # columns: each connected group of the upper points takes the points below it
+        lab = _pieces(xy[above], origin, shape, grow)
+        groups, rest = [], np.ones(len(cloud), bool)
+        for v in np.unique(lab):
+            sel = above[lab == v]
+            if sel.size < min_points:
+                continue
+            m = _hull_mask(xy[sel], origin, shape)
+            inside = below[m[cells[below, 1], cells[below, 0]] > 0]
+            g = np.concatenate([sel, inside])
+            g = g[rest[g]]
+            rest[g] = False
+            groups.append(g)
+        groups.append(np.flatnonzero(rest))
+        yield "columns", float(z), pieces_of(groups)
+
+
+def _colour_halves(cloud: Cloud) -> np.ndarray | None:
+    """(N,) 0/1: two colour groups of the points (k-means, k = 2, on CIELAB with L* halved:
+    shading changes lightness most), each label then set to the majority of the point's
+    :data:`COLOUR_NEIGHBOURS` nearest neighbours (twice: specks join their surroundings);
+    None when the two group centres lie less than :data:`MIN_COLOUR_SPLIT_LAB` apart."""
+    from scipy.spatial import cKDTree  # noqa: PLC0415
+
+    lab = srgb_to_lab(cloud.rgb).astype(np.float32)
+    lab[:, 0] *= 0.5
+    cv2.setRNGSeed(0)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.5)
+    _, labels, centres = cv2.kmeans(lab, 2, None, crit, 3, cv2.KMEANS_PP_CENTERS)
+    if float(np.linalg.norm(centres[0] - centres[1])) < MIN_COLOUR_SPLIT_LAB:
+        return None
+    labels = labels.ravel().astype(np.int64)
+    k = min(COLOUR_NEIGHBOURS, len(cloud))
+    _, nn = cKDTree(cloud.points).query(cloud.points, k=k)
+    for _ in range(2):
+        labels = (labels[nn].mean(axis=1) > 0.5).astype(np.int64)
+    return labels
+
+
+def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig, focal_px: np.ndarray,
+                  descriptors: Sequence[ObjectDescriptor]) -> list[tuple[Detection, np.ndarray]] | None:
+    """Split one oversized segment into the declared objects that touch in it.
+
+    Args:
+        cloud: the segment's points (world frame, m), as :func:`~.detect.fit_cluster` takes.
+        heights: (N,) their heights above ``plane``, m.
+        plane: the support plane.
+        config: ``clustering.split_*``, ``association`` and the fitting parameters are used.
+        focal_px: (n_cameras,) focal lengths, px per stride (as :func:`~.detect.fit_cluster`).
+        descriptors: the declared objects (their looks; never a pose).
+
+    Returns:
+        ``[(detection, index array into cloud)]`` of the parts (fitted as any segment, not
+        stacked yet), or None: the segment is not oversized, splitting is off
+        (``split_max_cost`` 0), no partition is admissible, or two admissible partitions
+        that cut it differently score alike (module docstring). Never a guess.
+    """
+    from phyagentos.perception.association import cost_matrix  # noqa: PLC0415 (association imports detect)
+
+    cc = config.clustering
+    sized = list(descriptors)
+    if cc.split_max_cost <= 0 or len(cloud) < 2 * cc.min_points or not sized:
+        return None
+    if not oversized(extent(cloud.points, heights), sized, config):
+        return None
+    scored = []
+    for kind, z, labels in _partitions(cloud, heights, config):
+        n_parts = int(labels.max()) + 1
+        if n_parts < 2 or np.count_nonzero(labels < 0) > MAX_DROPPED * len(cloud):
+            continue
+        idxs_all = [np.flatnonzero(labels == k) for k in range(n_parts)]
+        exts = [extent(cloud.points[i], heights[i]) for i in idxs_all]
+        if any(oversized(np.array([e[0], e[1], 0.0]), sized, config) for e in exts):
+            continue  # a footprint larger than every declared object's (a fixture's): no need to fit
+        parts, idxs = [], []
+        for idx in idxs_all:
+            det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
+            if det is None:
+                break
+            parts.append(det)
+            idxs.append(idx)
+        else:
+            stacked = stack(parts, plane, config)
+            costs = cost_matrix(stacked, sized, config).min(axis=1)
+            if float(costs.max()) > cc.split_max_cost:
+                continue
+            for e, d in zip(exts, stacked):
+                e[2] = d.top_m - d.bottom_m  # a part resting on another: its own height
+            if any(oversized(e, sized, config) for e in exts):
+                continue
+            scored.append((float(costs.sum()), kind, z, parts, idxs, costs))
+    if not scored:
+        log.debug("split: oversized segment of %d points, no admissible partition", len(cloud))
+        return None
+    scored.sort(key=lambda s: s[0])
+    best = scored[0]
+    margin = config.association.ambiguity_margin
+    for other in scored[1:]:
+        if other[0] - best[0] >= margin:
+            break
+        if not _alike(best[3], other[3]):
+            log.debug("split: ambiguous: %s at %.3f m (cost %.2f) and %s at %.3f m (cost %.2f) cut differently",
+                      best[1], best[2], best[0], other[1], other[2], other[0])
+            return None
+    log.debug("split: %s at %.3f m into %d parts, costs %s", best[1], best[2], len(best[3]),
+              [round(float(c), 2) for c in best[5]])
+    return list(zip(best[3], best[4]))
+
+
+def _alike(a: Sequence[Detection], b: Sequence[Detection]) -> bool:
+    if len(a) != len(b):
+        return False
+    return all(min(float(np.linalg.norm(p.position[:2] - q.position[:2])) for q in b) <= SAME_PART_M for p in a)
+
+
+def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Cloud, heights: np.ndarray, plane: Plane,
+                   config: PerceptionConfig, focal_px: np.ndarray,
+                   descriptors: Sequence[ObjectDescriptor]) -> list[tuple[Detection, np.ndarray]]:
+    """``clusters`` (``(detection, index array into cloud)``, as
+    :func:`~.detect.detect_clusters` gives) with each oversized one replaced by its parts
+    (:func:`split_cluster`; index arrays into ``cloud``); the others unchanged, in order."""
+    out: list[tuple[Detection, np.ndarray]] = []
+    for det, idx in clusters:
+        parts = split_cluster(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors)
+        if parts is None:
+            out.append((det, idx))
+        else:
+            out.extend((d, idx[i]) for d, i in parts)
+    return out

@@ -135,3 +135,19 @@ def index_range(text: str) -> list[int]:
         a, _, b = part.partition("-")
         out.extend(range(int(a), int(b or a) + 1))
     return out
+
+
+def with_overrides(config: Any, overrides_json: str | None) -> Any:
+    """``config`` (a pydantic model, e.g. a target's ``PerceptionConfig``) with the sections of
+    ``overrides_json`` (``'{"clustering": {"split_max_cost": 0}}'``) laid over its own, key by
+    key, validated again; ``config`` itself when there are none.
+
+    Raises:
+        ValueError: the JSON does not parse, or the result does not validate (pydantic's message).
+    """
+    if not overrides_json:
+        return config
+    base = config.model_dump()
+    for section, values in json.loads(overrides_json).items():
+        base[section] = {**base.get(section, {}), **values}
+    return type(config).model_validate(base)

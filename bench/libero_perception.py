@@ -17,11 +17,10 @@ category and writes the JSON (rows, per-category counts, looks, wall time).
 
 from __future__ import annotations
 
-import json
 import time
 from collections import Counter, defaultdict
 
-from _harness import index_range, parser, write_json
+from _harness import index_range, parser, with_overrides, write_json
 
 from phyagentos.targets.libero import LiberoScene, LiberoTarget
 from phyagentos.targets.libero.descriptors import measure_descriptors, perception_accuracy
@@ -40,14 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     rows, all_looks = [], {}
     for task in index_range(args.tasks):
         with LiberoTarget("libero_perception", LiberoScene(suite=args.suite, task=task), seed=0) as target:
-            cfg = target.perception_config()
-            if args.config:
-                from phyagentos.perception import PerceptionConfig
-
-                base = cfg.model_dump()
-                for k, v in json.loads(args.config).items():
-                    base[k] = {**base.get(k, {}), **v}
-                cfg = PerceptionConfig.model_validate(base)
+            cfg = with_overrides(target.perception_config(), args.config)
             looks = measure_descriptors(target, config=cfg)
             all_looks.update(looks)
             seeds = [EVAL_SEED + 100 * task + k for k in range(args.scenes)]

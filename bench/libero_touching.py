@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from _harness import parser, write_json
+from _harness import parser, with_overrides, write_json
 
 from phyagentos.targets.libero import LiberoScene, LiberoTarget
 from phyagentos.targets.libero.descriptors import (
@@ -74,14 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     path = Path(args.looks) / "libero" / "descriptors.yaml"
     rows = []
     with LiberoTarget("libero_touching", LiberoScene(suite=args.suite, task=args.task), seed=0) as target:
-        cfg = target.perception_config()
-        if args.config:
-            from phyagentos.perception import PerceptionConfig
-
-            base = cfg.model_dump()
-            for k, v in json.loads(args.config).items():
-                base[k] = {**base.get(k, {}), **v}
-            cfg = PerceptionConfig.model_validate(base)
+        cfg = with_overrides(target.perception_config(), args.config)
         looks = yaml.safe_load(path.read_text()) if path.is_file() else measure_descriptors(target)
         cats = target._problem.objects
         out = set(filter(None, args.exclude.split(",")))

@@ -131,3 +131,20 @@ def test_write_json_makes_folders_ends_with_a_newline_and_says_so(tmp_path, caps
 def test_markdown_table():
     assert markdown_table(("a", "b"), [(1, "x"), ("y", 2.5)], "lr") == "| a | b |\n|---|---:|\n| 1 | x |\n| y | 2.5 |"
     assert markdown_table(("a",), []) == "| a |\n|---|"
+
+
+def test_config_overrides_are_laid_over_each_section_key_by_key_and_validated():
+    import pytest
+    from pydantic import ValidationError
+
+    from phyagentos.perception import PerceptionConfig
+
+    base = PerceptionConfig()
+    assert harness.with_overrides(base, None) is base and harness.with_overrides(base, "") is base
+    got = harness.with_overrides(base, '{"clustering": {"split_max_cost": 0}}')
+    assert got.clustering.split_max_cost == 0
+    # the other keys of the section and the other sections are the config's own
+    assert got.clustering.model_dump(exclude={"split_max_cost"}) == base.clustering.model_dump(exclude={"split_max_cost"})
+    assert got.association == base.association
+    with pytest.raises(ValidationError):
+        harness.with_overrides(base, '{"clustering": {"split_max_cost": "lots"}}')

@@ -322,21 +322,15 @@ def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list
 
 
 def detect_clusters(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
-                    focal_px: np.ndarray, descriptors=()) -> list[tuple[Detection, np.ndarray]]:
-    """``(detection, index array into cloud)`` per cluster (see :func:`fit_cluster`).
-
-    With the declared objects' ``descriptors`` (:class:`~.descriptors.ObjectDescriptor`), a
-    cluster larger than every one of them is split into the touching objects it holds when
-    the split is unambiguous (:func:`phyagentos.perception.split.split_cluster`)."""
+                    focal_px: np.ndarray) -> list[tuple[Detection, np.ndarray]]:
+    """``(detection, index array into cloud)`` per cluster (see :func:`fit_cluster`). A
+    cluster holding touching objects is split afterwards, against the declared objects
+    (:func:`phyagentos.perception.split.split_clusters`)."""
     out = []
     for idx in cluster(cloud, config):
         det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
         if det is not None:
             out.append((det, idx))
-    if descriptors:
-        from phyagentos.perception.split import split_clusters  # noqa: PLC0415 (split imports this module)
-
-        out = split_clusters(out, cloud, heights, plane, config, focal_px, descriptors)
     return out
 
 

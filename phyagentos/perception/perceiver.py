@@ -59,6 +59,7 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
 from phyagentos.perception.detect import Detection, detect_clusters
 from phyagentos.perception.detect import stack as _stack
+from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.frames import CameraFrame, Proprioception
 from phyagentos.perception.relations import (
@@ -322,7 +323,9 @@ class Perceiver:
         self.last_cloud = cloud
         t1 = time.perf_counter()
         focal = np.array([f.intrinsics.fx / cfg.stride_for(f.intrinsics.width) for f in frames])
-        clusters = detect_clusters(cloud, heights, plane, cfg, focal, self.declared)
+        clusters = detect_clusters(cloud, heights, plane, cfg, focal)
+        if self.declared:  # a cluster larger than every declared object: the touching objects it holds
+            clusters = split_clusters(clusters, cloud, heights, plane, cfg, focal, self.declared)
         dets = _stack([d for d, _ in clusters], plane, cfg)
         hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
         if hanging:  # the part of the held object below the fingers: the hand's, not a thing on the table

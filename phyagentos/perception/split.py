@@ -43,6 +43,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from phyagentos.perception.association import cost_matrix
 from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
@@ -210,7 +211,6 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
         (``split_max_cost`` 0), no partition is admissible, or two admissible partitions
         that cut it differently score alike (module docstring). Never a guess.
     """
-    from phyagentos.perception.association import cost_matrix  # noqa: PLC0415 (association imports detect)
 
     cc = config.clustering
     sized = list(descriptors)

@@ -22,6 +22,7 @@ constant however large the run. The report merges them.
 
 from __future__ import annotations
 
+import json
 import logging
 import re
 import secrets
@@ -166,9 +167,17 @@ def run_bench(
         for key in MEMORY_DOCS:
             shutil.copy2(ws.path(key), policy.snapshot_dir / f"{key}.md")
     template = episode_template_dir(ws.root, run_dir, policy.template_files(), safety=dict(suite.safety))
-    task_templates = {t.id: episode_template_dir(ws.root, run_dir, policy.template_files(),
-                                                 safety={**suite.safety, **t.safety}, name=f"template_{t.id}")
-                      for t in _restrict(suite, tasks).tasks if t.safety}
+    # one template per distinct cell: tasks whose safety overrides agree share one
+    task_templates: dict[str, Path] = {}
+    by_cell: dict[str, Path] = {}
+    for t in _restrict(suite, tasks).tasks:
+        if t.safety:
+            merged = {**suite.safety, **t.safety}
+            key = json.dumps(merged, sort_keys=True)
+            if key not in by_cell:
+                by_cell[key] = episode_template_dir(ws.root, run_dir, policy.template_files(), safety=merged,
+                                                    name=f"template_{t.id}")
+            task_templates[t.id] = by_cell[key]
     atomic_write_text(run_dir / "plan.yaml", dump_yaml([ep.to_dict() for ep in plan]))
     directories = compile_episodes(plan, run_dir=run_dir, template=template, task_templates=task_templates)
     if on_compiled is not None:

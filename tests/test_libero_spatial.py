@@ -119,7 +119,9 @@ def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placemen
     (ws / "libero").mkdir(parents=True)
     look = {"shape": "cylinder", "colour": [0.1, 0.1, 0.1], "size_m": [0.12, 0.12, 0.05]}
     cats = set(_problem().objects.values())
-    cache = {"_method": "generated_clutter_v2", "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
+    from phyagentos.bench.libero import _LOOKS_METHOD
+
+    cache = {"_method": _LOOKS_METHOD, "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
              **{c: look for c in cats}}
     (ws / "libero" / "descriptors.yaml").write_text(yaml.safe_dump(cache))
     suite, ids, seeds = prepare_libero_suite("libero_spatial", ws, tasks=("0", "4"), seeds=(0,))

@@ -4,7 +4,9 @@ A bottle grasped 3.5 cm below its top hangs 11 cm below the fingers: the gripper
 only the fingers, so its lower half is a segment of its own under the hand. Taken for the
 object "seen on the table", it vetoed the holding relation of every tall pick. Let go into
 a basket, only its part above the walls is seen, so its lowest visible points say "resting
-on the rim". These pin the rules that replace both, in both directions.
+on the rim". These pin the rules that replace both, in both directions. And a closing hand
+where the item was outweighs a weak look-alike elsewhere (a strip of a fixture), never a
+confident sighting.
 """
 
 from __future__ import annotations
@@ -103,3 +105,39 @@ def test_an_item_resting_on_the_rim_or_beside_the_basket_is_not_inside():
     # a smaller segment is never a container of a larger one
     dets, matched = [BASKET, _det((0.0, 0.25, 0.02), (0.01, 0.01, 0.02), low=0.02)], {0: "basket_1", 1: "butter_1"}
     assert _container_around(0, dets, matched) is None
+
+
+# ---- the closing hand against a weak look-alike elsewhere ---------------------------------------
+
+CHEESE = {"name": "cream_cheese_1", "class": "cream_cheese", "shape": "box", "colour": [0.26, 0.28, 0.43],
+          "size_m": [0.085, 0.045, 0.02]}
+# where the cream cheese was last seen: right under the fingers, which closed on its 45 mm width
+CHEESE_SEEN = _det((0.05, -0.10, 0.01), (0.0425, 0.0225, 0.01), low=0.0, shape="box")
+# a strip of a fixture the arm uncovered, 17 cm away, about the cream cheese's size (white)
+STRIP = _det((-0.12, -0.11, 0.013), (0.045, 0.02, 0.013), low=0.0, shape="box")
+
+
+def _perceiver_with_cheese(seen=CHEESE_SEEN):
+    from phyagentos.perception import Perceiver
+    from phyagentos.perception.tracks import Track
+
+    p = Perceiver(CFG, [CHEESE])
+    p.tracks["cream_cheese_1"] = Track.start("cream_cheese_1", seen, 0.9, 1.0, ("agentview",))
+    return p
+
+
+def test_a_weak_look_alike_elsewhere_does_not_outweigh_the_hand_closed_where_the_item_was():
+    lifted = _proprio(opening=0.0224, effort=20.0, tcp=_tcp((0.05, -0.10, 0.16)))  # 44.8 mm: its width
+    assert _perceiver_with_cheese()._hand_outweighs("cream_cheese_1", STRIP, 0.23, lifted)
+
+
+def test_a_confident_sighting_an_empty_hand_or_an_item_seen_elsewhere_keep_the_sighting():
+    lifted = _proprio(opening=0.0224, effort=20.0, tcp=_tcp((0.05, -0.10, 0.16)))
+    p = _perceiver_with_cheese()
+    assert not p._hand_outweighs("cream_cheese_1", STRIP, 0.6, lifted)  # seen confidently: not in the hand
+    assert not p._hand_outweighs("cream_cheese_1", STRIP, 0.23, _proprio(opening=0.0224, effort=0.0))  # no squeeze
+    assert not p._hand_outweighs("cream_cheese_1", STRIP, 0.23, _proprio(opening=0.035, effort=20.0))  # 70 mm gap
+    far = _det((0.30, -0.10, 0.01), (0.0425, 0.0225, 0.01), low=0.0, shape="box")  # last seen 25 cm from the hand
+    assert not _perceiver_with_cheese(far)._hand_outweighs("cream_cheese_1", STRIP, 0.23, lifted)
+    under = _det((0.06, -0.10, 0.01), (0.045, 0.02, 0.01), low=0.0, shape="box")  # a sighting at the hand itself
+    assert not p._hand_outweighs("cream_cheese_1", under, 0.23, lifted)

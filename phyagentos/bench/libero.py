@@ -56,7 +56,7 @@ logger = logging.getLogger(__name__)
 #: The TARGETS.md name of the LIBERO target a LIBERO bench adds to its workspace.
 LIBERO_TARGET = "libero"
 #: How the cached looks were measured (a cache measured otherwise is measured again).
-_LOOKS_METHOD = "generated_clutter_v2"
+_LOOKS_METHOD = "generated_clutter_v3"  # v3: objects kept off the fixtures
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:

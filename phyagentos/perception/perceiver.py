@@ -355,6 +355,10 @@ class Perceiver:
             det = dets[i]
             conf = match_confidence(cost, margin, cfg) * _detection_confidence(det)
             name = names[j]
+            if self._hand_outweighs(name, det, conf, proprio):
+                log.debug("perception: %s in the closing hand; a weak look-alike (confidence %.2f) at %s left unknown",
+                          name, conf, _r(det.position))
+                continue
             if name in self.tracks:
                 self.tracks[name].update(det, conf, stamp, det_cams[i], cfg)
                 self.tracks[name].held = False
@@ -578,30 +582,58 @@ class Perceiver:
                                                      "joint_positions": _r(proprio.joint_positions)}},
         ]
 
+    def _hand_evidence(self, t: Track, proprio: Proprioception):
+        """The closed hand's :class:`~phyagentos.perception.relations.HoldingEvidence` that it
+        holds track ``t`` (the gap matches its width, or a bowl's wall), or ``None``: no
+        squeeze at that width, or ``t`` not held before and not last seen where the fingers
+        closed (within ``holding.capture_radius_m`` of the tcp, or its rim under the tcp)."""
+        hc = self.config.holding
+        tcp = proprio.tcp_pose[:3, 3]
+        width = width_in_hand(t.half_extents, t.yaw, t.shape, proprio)
+        rim = self._rim_container(t)
+        if rim:  # an open container (a bowl) may be held by its wall: whichever the gap is nearer
+            width = min((width, hc.rim_wall_m), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
+        ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
+                              grasp_height_m=self._grasp_height_m, config=self.config)
+        if ev.confidence <= 0.0:
+            return None
+        if not t.held:
+            # capture: the object was last seen right under/between the fingers, or (held
+            # by its wall) the tcp is on its rim
+            dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
+            on_rim = rim and width == hc.rim_wall_m and \
+                abs(dxy - float(min(t.half_extents[0], t.half_extents[1]))) <= hc.capture_radius_m / 2.0
+            if dxy > hc.capture_radius_m and not on_rim:
+                return None
+        return ev
+
+    def _hand_outweighs(self, name: str, det: Detection, conf: float, proprio: Proprioception) -> bool:
+        """Whether the hand's evidence outweighs an association of ``det`` with ``name`` at
+        confidence ``conf``: the association is weak (below ``relations.min_confidence``, the
+        least confidence at which a relation such as "on the table" is reported), ``det`` lies
+        outside the capture radius of the tcp, and the closed hand squeezes something of
+        ``name``'s width where ``name`` was last seen (:meth:`_hand_evidence`). A confident
+        sighting elsewhere still rules the hand out. (A look-alike part of a fixture uncovered
+        when the arm moves, e.g. a strip of libero_goal's stove the size of the cream cheese,
+        was taken for the picked cream cheese at 0.23-0.35 and vetoed a hold LIBERO confirmed.)"""
+        t = self.tracks.get(name)
+        if t is None or conf >= self.config.relations.min_confidence:
+            return False
+        if float(np.linalg.norm(det.position[:2] - proprio.tcp_pose[:2, 3])) <= self.config.holding.capture_radius_m:
+            return False
+        return self._hand_evidence(t, proprio) is not None
+
     def _update_holding(self, proprio: Proprioception, stamp: float) -> tuple[str, float] | None:
         """Decide which tracked object (if any) is in the hand; returns (name, confidence)."""
-        cfg, hc = self.config, self.config.holding
+        hc = self.config.holding
         tcp = proprio.tcp_pose[:3, 3]
         candidates = []
         for name, t in self.tracks.items():
             if t.seen_now and not t.held:
                 continue  # seen on the table (outside the gripper box): not in the hand
-            width = width_in_hand(t.half_extents, t.yaw, t.shape, proprio)
-            rim = self._rim_container(t)
-            if rim:  # an open container (a bowl) may be held by its wall: whichever the gap is nearer
-                width = min((width, hc.rim_wall_m), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
-            ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
-                                  grasp_height_m=self._grasp_height_m, config=cfg)
-            if ev.confidence <= 0.0:
+            ev = self._hand_evidence(t, proprio)
+            if ev is None:
                 continue
-            if not t.held:
-                # capture: the object was last seen right under/between the fingers, or (held
-                # by its wall) the tcp is on its rim
-                dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
-                on_rim = rim and width == hc.rim_wall_m and \
-                    abs(dxy - float(min(t.half_extents[0], t.half_extents[1]))) <= hc.capture_radius_m / 2.0
-                if dxy > hc.capture_radius_m and not on_rim:
-                    continue
             candidates.append((ev.confidence, name, ev))
         for t in self.tracks.values():
             if t.held and all(c[1] != t.name for c in candidates):

@@ -13,10 +13,10 @@ import yaml
 
 from phyagentos.bench.compiler import plan_episodes
 from phyagentos.bench.libero import instruction_nodes, is_libero_suite
-from phyagentos.bench.report import _env_first
+from phyagentos.bench.report import _env_first, env_outcome
 from phyagentos.bench.suite import load_suite
 from phyagentos.errors import BenchError
-from phyagentos.targets.libero import parse_bddl, resolve_task
+from phyagentos.targets.libero import parse_bddl, resolve_task, step_budget
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -88,6 +88,32 @@ def test_liberos_first_counts_only_success_before_any_recovery_session():
     assert _env_first([fail, ok]) is True
     assert _env_first([fail, {**fail, "recovery": True}, {**ok, "recovery": True}]) is False
     assert _env_first([fail, fail]) is False
+
+
+def test_a_success_reached_after_liberos_step_budget_counts_as_neither_first_nor_final(tmp_path):
+    late = {"env_success": True, "within_budget": False}
+    assert _env_first([late]) is False
+    assert _env_first([{"env_success": False}, {**late, "within_budget": True}]) is True
+    # openpi's LIBERO budgets; LIBERO-PRO suites take their standard suite's; other names none
+    assert [step_budget(s) for s in ("libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90")] \
+        == [220, 280, 300, 520, 400]
+    assert step_budget("libero_object_swap") == 280 and step_budget("libero_spatial_temp_x0.2") == 220
+    assert step_budget("libero_mine") is None
+    # an episode whose success came at step 298 of libero_spatial's 220, then one within it
+    fail = {"env_success": False, "within_budget": True, "control_steps": 133, "step_budget": 220}
+    out = env_outcome([fail, {**late, "control_steps": 298, "step_budget": 220}])
+    assert out["env_success"] is True and out["env_first_success"] is False and out["env_final_success"] is False
+    assert out["env_success_after_budget"] is True and (out["control_steps"], out["step_budget"]) == (298, 220)
+    out = env_outcome([fail, {**fail, "env_success": True, "control_steps": 190}])
+    assert out["env_first_success"] is True and out["env_final_success"] is True
+    assert out["env_success_after_budget"] is False
+    assert env_outcome([])["env_final_success"] is None
+    # the checker held at step 205 of 220 (noted during the place), then a later motion undid it
+    noted = {**fail, "env_success": False, "control_steps": 260, "first_success_step": 205}
+    out = env_outcome([noted])
+    assert out["env_first_success"] is True and out["env_final_success"] is True and out["env_success"] is False
+    out = env_outcome([{**noted, "first_success_step": 231}])  # noted after the budget
+    assert out["env_final_success"] is False and out["env_success_after_budget"] is True
 
 
 @pytest.mark.parametrize("args,expect", [

@@ -45,7 +45,9 @@ def test_reset_sets_liberos_fixed_init_state_then_settles_ten_control_steps(targ
     milk = target.data.qpos[qadr:qadr + 3]
     np.testing.assert_allclose(milk[:2], start[qadr:qadr + 2], atol=1e-3)
     assert abs(float(milk[2]) - 0.06973548) < 1e-3
-    assert target.benchmark_signals()["control_steps"] == 0
+    signals = target.benchmark_signals()
+    assert signals["control_steps"] == 0
+    assert signals["step_budget"] == 280 and signals["within_budget"]  # libero_object: openpi's max_steps
     assert SETTLE_STEPS == 10
     first = target.ground_truth()["objects"]["milk_1"]["position"]
     target.reset(seed=8)
@@ -123,6 +125,29 @@ def test_liberos_checker_judges_the_state_and_reaches_only_the_privileged_channe
     # no object pose outside the privileged channel: observe and query_state name no object
     state = repr(target.observe().keys()) + repr(target.query_state())
     assert not any(o["name"] in state for o in declared["objects"])
+
+
+def test_the_control_step_at_which_liberos_checker_first_holds_is_kept_as_liberos_protocol_ends_there(target):
+    target.reset(seed=2)
+    target.hold(duration_s=0.5)  # 10 control steps, the soup on the floor
+    assert target.benchmark_signals()["first_success_step"] is None
+    soup, basket = _free_qadr(target, "alphabet_soup_1"), target.ground_truth()["objects"]["basket_1"]["position"]
+    start = target.data.qpos[soup:soup + 3].copy()
+    target.data.qpos[soup:soup + 3] = np.add(basket, [0.0, 0.0, 0.06])
+    target.data.qvel[:] = 0.0
+    mujoco.mj_forward(target.model, target.data)
+    target.hold(duration_s=1.0)  # in the basket at the end of this hold: step 30
+    signals = target.benchmark_signals()
+    assert signals["success"] is True and signals["first_success_step"] == signals["control_steps"] == 30
+    # taken out again: LIBERO's episode would have ended at step 30; the step stays
+    target.data.qpos[soup:soup + 3] = start
+    target.data.qvel[:] = 0.0
+    mujoco.mj_forward(target.model, target.data)
+    target.hold(duration_s=0.5)
+    signals = target.benchmark_signals()
+    assert signals["success"] is False and signals["first_success_step"] == 30 and signals["control_steps"] == 40
+    target.reset(seed=2)
+    assert target.benchmark_signals()["first_success_step"] is None
 
 
 def test_a_saved_state_restores_the_same_world(target, tmp_path):

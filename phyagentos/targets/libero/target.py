@@ -341,6 +341,7 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         self._finger_qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in FINGER_JOINT_NAMES])
         self._index_world(m)
         self._env_steps = 0
+        self._first_success_step: int | None = None
         self._reset_count = 0
         self.reset(seed=seed)
 
@@ -507,6 +508,7 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         finally:
             self._servo(m, True)
         self._env_steps = 0
+        self._first_success_step = None
         self._reset_count += 1
         q = self.arm_qpos()
         self._home = q.copy()
@@ -568,7 +570,7 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         """The base's streaming (:meth:`MuJoCoArmTarget._stream`), its physics steps counted
         as env steps (LIBERO's step budget is in control periods of these)."""
         out = super()._stream(*args, **kwargs)
-        self._env_steps += out[2]
+        self._advance(out[2])
         return out
 
     def track(self, traj, *, t_start: float, t_end: float, tracking_tol_rad: float = 0.05,
@@ -613,14 +615,14 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         ``tol_rad`` and still, at most ``settle_s`` s (see :meth:`MuJoCoArmTarget.settle`).
         Returns physics steps taken."""
         steps = super().settle(q, settle_s=settle_s, tol_rad=tol_rad, _contacts=_contacts)
-        self._env_steps += steps
+        self._advance(steps)
         return steps
 
     def hold(self, q: Sequence[float] | None = None, *, duration_s: float) -> int:
         """Hold the arm at ``q`` (7,) rad (default: where it is) for ``duration_s`` s.
         Returns physics steps taken."""
         steps = super().hold(q, duration_s=duration_s)
-        self._env_steps += steps
+        self._advance(steps)
         return steps
 
     def set_gripper(self, *, opening_m: float, settle_s: float = 0.5, force_n: float | None = None) -> GripperResult:
@@ -651,7 +653,7 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
                 if steps * ts >= 0.1 and abs(now - prev) < 5e-5:
                     break
                 prev = now
-        self._env_steps += steps
+        self._advance(steps)
         opening = self.gripper_opening()
         held = self.held_objects()
         return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002, grasped=held[0] if held else None)
@@ -681,9 +683,12 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         return {"libero_task": self._task.name}
 
     def _state_meta(self) -> dict[str, Any]:
-        return {"init_index": self._init_index, "env_steps": self._env_steps, "home": self._home.tolist()}
+        return {"init_index": self._init_index, "env_steps": self._env_steps, "home": self._home.tolist(),
+                "first_success_step": self._first_success_step}
 
     def _restore_meta(self, meta: dict[str, Any]) -> None:
         self._init_index = None if meta["init_index"] is None else int(meta["init_index"])
         self._env_steps = int(meta["env_steps"])
+        step = meta.get("first_success_step")
+        self._first_success_step = None if step is None else int(step)
         self._home = np.asarray(meta["home"], dtype=float)

@@ -21,6 +21,20 @@ def run_generated_pick(tmp_path: Path, *, name: str, description: str, suite: st
     object each, named ``<category>_1``) in a fresh workspace ``tmp_path/ws`` whose TARGETS.md
     has the LIBERO target and whose safety box is ``workspace_box`` (the template's if None).
     Returns ``phyagentos run --json``'s report."""
+    nodes = [{"id": "pick", "skill": "pick", "params": {"object": obj},
+              "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}]}]
+    objects = [{"name": f"{c}_1", "class": c, **look} for c, look in looks.items()]
+    return run_generated_graph(tmp_path, name=name, description=description, suite=suite, task=task,
+                               objects=objects, fixtures=[fixture], nodes=nodes, workspace_box=workspace_box, seed=seed)
+
+
+def run_generated_graph(tmp_path: Path, *, name: str, description: str, suite: str, task: int,
+                        objects: list[Mapping[str, Any]], fixtures: list[Mapping[str, str]], nodes: list[dict],
+                        workspace_box: Mapping[str, list] | None = None, seed: int = 108) -> dict:
+    """Run goal graph ``nodes`` (each given a 600 s execution and 180 s heartbeat limit) on
+    generated scene ``seed`` of LIBERO ``suite`` task ``task`` with the declared ``objects`` and
+    ``fixtures``, in a fresh workspace ``tmp_path/ws`` as :func:`run_generated_pick` makes it.
+    Returns ``phyagentos run --json``'s report."""
     from phyagentos.bench.libero import target_entry
     from phyagentos.protocol import Workspace
     from phyagentos.protocol.schemas import TargetSpec
@@ -32,12 +46,12 @@ def run_generated_pick(tmp_path: Path, *, name: str, description: str, suite: st
         doc = yaml.safe_load(safety.read_text())
         doc["workspace_box"] = dict(workspace_box)
         safety.write_text(yaml.safe_dump(doc, sort_keys=False))
-    objects = [{"name": f"{c}_1", "class": c, **look} for c, look in looks.items()]
+    nodes = [{**n, "limits": {"execution_timeout_s": 600, "heartbeat_timeout_s": 180, **n.get("limits", {})}}
+             for n in nodes]
     graph = {"version": 1, "name": name, "description": description, "defaults": {"target": "libero"},
-             "scene": {"suite": suite, "task": task, "generated": True, "objects": objects, "fixtures": [dict(fixture)]},
-             "nodes": [{"id": "pick", "skill": "pick", "params": {"object": obj},
-                        "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
-                        "limits": {"execution_timeout_s": 600, "heartbeat_timeout_s": 180}}]}
+             "scene": {"suite": suite, "task": task, "generated": True, "objects": [dict(o) for o in objects],
+                       "fixtures": [dict(f) for f in fixtures]},
+             "nodes": nodes}
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(graph, sort_keys=False))
     out = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(path), "--workspace", str(tmp_path / "ws"),

@@ -10,11 +10,13 @@ import numpy as np
 
 from phyagentos.errors import IKError
 from phyagentos.motion.grasp import DEFAULT_MAX_GRASP_WIDTH_M, hand_yaw, place_pose, top_down_grasp_candidates
+from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.rim_grasp import DEFAULT_RIM_WALL_M, rim_grasp_candidates, rim_graspable
 from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import plan_grasp
+from .motion import PLANNING_MARGIN_M, ik_options, session_checker
 from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
 __all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "declared_class"]
@@ -251,6 +253,18 @@ class ComputeGrasp(Primitive):
         return plan, {"grasp_kind": "rim", "rim_point": i, "wall_m": round(wall, 4), "rim_points_refused": len(why)}
 
 
+def place_yaws(current_rad: float) -> list[float]:
+    """Hand yaws (rad, about the world z axis) a top-down place tries, in order: 0, the
+    hand's yaw now ``current_rad`` (no wrist turn in the transfer), then 0 +- 45, 90, 135
+    and 180 degrees; duplicates (within 1 degree) dropped."""
+    out: list[float] = []
+    for a in (0.0, float(current_rad), *(s * k * np.pi / 4.0 for k in (1, 2, 3) for s in (1.0, -1.0)), np.pi):
+        a = float(a) if -np.pi < a <= np.pi else float((a + np.pi) % (2.0 * np.pi) - np.pi)
+        if all(abs((a - b + np.pi) % (2.0 * np.pi) - np.pi) > np.radians(1.0) for b in out):
+            out.append(a)
+    return out
+
+
 class ComputePlace(Primitive):
     """Place and pre-place tcp poses that set the held object down inside ``region``.
 
@@ -264,7 +278,12 @@ class ComputePlace(Primitive):
 
     The object's pose in the tcp frame comes from the observation and the arm's
     proprioception, so a place session needs nothing from the pick session but
-    the world itself.
+    the world itself. The hand's yaw at the place is the first of :func:`place_yaws` (0
+    first, as always before; then the hand's yaw now, then steps of 45 degrees) whose
+    pre-place and place poses the arm reaches without collision (IK and the planner's
+    collision checker, the held object attached): a bowl held by its rim, the hand 5.6 cm
+    off its centre, is set down beside a cabinet with the hand on the side away from it.
+    When none is clear, yaw 0 (the planner then reports the collision).
     """
 
     def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,
@@ -285,9 +304,41 @@ class ComputePlace(Primitive):
         # face: centre z plus its vertical half extent.
         kind = next((e.get("kind") for e in snapshot.get("entities", []) if e["name"] == self.region), "region")
         surface_z = float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half) if kind == "object" else float(T_region[2, 3])
-        T_place = place_pose(T_region[:3, 3], half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z)
-        T_pre = T_place.copy()
-        T_pre[2, 3] += self.approach_height_m
+        rejected: list[dict] = []
+        chosen = None
+        for yaw in place_yaws(hand_yaw(self.ctx.target.tcp_pose())):
+            T_place = place_pose(T_region[:3, 3], half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
+            T_pre = T_place.copy()
+            T_pre[2, 3] += self.approach_height_m
+            why = self._blocked(T_pre, T_place)
+            if why is None:
+                chosen = (yaw, T_place, T_pre)
+                break
+            rejected.append({"yaw_rad": round(yaw, 3), "why": why})
+            chosen = chosen or (yaw, T_place, T_pre)  # none clear: the first (yaw 0), as before
+        yaw, T_place, T_pre = chosen  # type: ignore[misc]
         self.set(self.place_key, T_place)
         self.set(self.preplace_key, T_pre)
-        self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist())
+        self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist(),
+                              yaw_rad=round(float(yaw), 3), rejected_yaws=rejected)
+
+    def _blocked(self, T_pre: np.ndarray, T_place: np.ndarray) -> str | None:
+        """Why the arm cannot hold the object at ``T_pre`` and ``T_place`` ((4, 4) world tcp
+        poses): no IK solution (seeded as SolveIK seeds it: the current configuration, then
+        the pre-place solution), or a configuration in collision with the held object attached
+        (the planner's checker and margin); ``None`` when both are reachable and clear."""
+        target = self.ctx.target
+        opts = ik_options(target)
+        checker = session_checker(self.ctx, margin_m=PLANNING_MARGIN_M)
+        q = np.asarray(target.arm_qpos(), dtype=float)
+        for label, T in (("preplace", T_pre), ("place", T_place)):
+            try:
+                q = solve_ik(target.model, q_seed=q, target=T, **opts).q
+            except IKError as exc:
+                try:  # as SolveIK: once more from the ready configuration
+                    q = solve_ik(target.model, q_seed=np.asarray(target.home_qpos, dtype=float), target=T, **opts).q
+                except IKError:
+                    return f"{label}: {str(exc)[:120]}"
+            if not checker.is_valid(q):
+                return f"{label}: collides ({', '.join('-'.join(p) for p in checker.colliding_pairs(q)[:2])})"
+        return None

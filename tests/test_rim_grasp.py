@@ -243,3 +243,68 @@ def test_the_grasp_check_expects_the_wall_not_the_diameter():
     assert "nothing between them" in holding_problem(target, p(0.0003), expected="bowl_1")
     # the fingers stopped 3 cm apart: that is the bowl's side, or something else, not its wall
     assert "wider than the object" in holding_problem(target, p(0.03), expected="bowl_1")
+
+
+def test_an_across_grasp_the_arm_cannot_reach_clear_gives_way_to_the_next_candidate(franka, monkeypatch):
+    """A pre-grasp whose forearm would pass through a neighbouring bottle (LIBERO-10's ketchup
+    beside the soup: ``goal_in_collision`` on the first pick of 4 of 6 episodes) is skipped for
+    the next candidate the arm reaches clear; when none is clear, the asked candidate stays."""
+    import phyagentos.primitives.perception as perception
+
+    ent = _entity("can_1", "alphabet_soup", "box", (0.03, 0.02, 0.04))
+    blocked = {"first": True}
+
+    def unusable(target, plan, checks):  # the first candidate asked for collides, the rest are clear
+        if blocked["first"]:
+            blocked["first"] = False
+            return "pre-grasp collides: ketchup_1_main-robot0_link5"
+        return None
+
+    monkeypatch.setattr(perception, "_unusable", unusable)
+    board, records = _run_compute_grasp(franka, ent)
+    assert records[0]["candidate_used"] == 1 and "ketchup" in records[0]["candidates_refused"][0]
+    first = board["grasp_pose"].copy()
+    monkeypatch.setattr(perception, "_unusable", lambda target, plan, checks: "pre-grasp collides: wall")
+    board, records = _run_compute_grasp(franka, ent)
+    assert "candidate_used" not in records[0] and len(records[0]["candidates_refused"]) == 4  # 2 x 2 heights
+    assert not np.allclose(board["grasp_pose"], first)  # candidate 0 again, as asked
+    monkeypatch.undo()
+    _, records = _run_compute_grasp(franka, ent)  # nothing in the way in the default scene
+    assert "candidates_refused" not in records[0]
+
+
+def test_ik_whose_solution_collides_tries_the_ready_configuration_and_a_swung_elbow(franka, monkeypatch):
+    """SolveIK's seeds (clear_ik): the solution from the current joints, else from the ready
+    configuration, else from the ready configuration with the elbow swung; the first clear
+    one wins; none clear: the first solution with its pairs; nothing converges: IKError."""
+    import phyagentos.primitives.motion as motion
+    from phyagentos.errors import IKError
+    from phyagentos.motion.grasp import top_down_rotation
+
+    ctx = SimpleNamespace(target=franka)
+    pose = np.eye(4)
+    pose[:3, :3] = top_down_rotation(0.0)
+    pose[:3, 3] = (0.45, -0.25, 0.2)
+    first = motion.solve_ik(franka.model, q_seed=franka.arm_qpos(), target=pose,
+                            **motion.ik_options(franka)).q
+
+    class Checker:  # collides wherever joint 3 is within 0.2 rad of the first solution's
+        def colliding_pairs(self, q):
+            return (("ketchup_1_main", "robot0_link5"),) if abs(q[2] - first[2]) < 0.2 else ()
+
+    monkeypatch.setattr(motion, "session_checker", lambda ctx, margin_m=0.0: Checker())
+    sol, pairs, seed = motion.clear_ik(ctx, pose)
+    assert pairs == () and seed.startswith("swivel") and abs(sol.q[2] - first[2]) >= 0.2
+
+    class Everywhere:
+        def colliding_pairs(self, q):
+            return (("wall", "robot0_link4"),)
+
+    monkeypatch.setattr(motion, "session_checker", lambda ctx, margin_m=0.0: Everywhere())
+    sol, pairs, seed = motion.clear_ik(ctx, pose)
+    assert seed == "current" and pairs == (("wall", "robot0_link4"),)
+    np.testing.assert_allclose(sol.q, first, atol=1e-6)
+    far = pose.copy()
+    far[:3, 3] = (3.0, 0.0, 0.2)
+    with pytest.raises(IKError):
+        motion.clear_ik(ctx, far)

@@ -19,7 +19,8 @@ from phyagentos.motion.retime import retime
 
 from .base import Primitive
 
-__all__ = ["ReadyConfiguration", "SolveIK", "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "ik_options",
+__all__ = ["ReadyConfiguration", "SolveIK", "clear_ik", "SWIVEL_SEEDS_RAD",
+           "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "ik_options",
            "PLANNING_MARGIN_M", "MAX_TRACED_WAYPOINTS", "traced_path", "start_contact_kind"]
 
 
@@ -141,13 +142,71 @@ class ReadyConfiguration(Primitive):
         self.set(self.out, np.asarray(self.ctx.target.home_qpos, dtype=float))
 
 
+#: Offsets (rad) added to joints 1, 3 and 5 of a 7-joint arm's ready configuration to seed
+#: IK when the solution from the current joints collides: the elbow swung to either side
+#: (the 7-dof arm's redundancy), so the forearm clears a neighbouring bottle.
+SWIVEL_SEEDS_RAD: tuple[tuple[float, float, float], ...] = (
+    (0.0, 0.6, 0.0), (0.0, -0.6, 0.0), (0.4, 0.8, -0.4), (-0.4, -0.8, 0.4))
+
+
+def clear_ik(ctx, pose: np.ndarray, *, q_seed=None, position_tol_m: float = 1e-3, orientation_tol_rad: float = 1e-2,
+             allow: str | None = None, margin_m: float = PLANNING_MARGIN_M):
+    """IK for the (4, 4) world tcp ``pose`` whose configuration is clear of the scene.
+
+    Seeds, in order: ``q_seed`` (default the current joints), the target's ready
+    configuration ``home_qpos``, then (7 joints) that configuration with the elbow swung
+    (:data:`SWIVEL_SEEDS_RAD`). The first converged solution clear of collisions (the
+    session's checker with clearance ``margin_m``, default the planner's, the held object
+    attached; pairs naming body ``allow`` ignored) is returned; when none is clear, the first converged one. Returns ``(solution,
+    colliding pairs of it, seed)``, seed ``"current"`` (or ``"given"``), ``"home_qpos"`` or
+    ``"swivel <k>"``.
+
+    Raises:
+        IKError: no seed converged (the error of the first).
+    """
+    target = ctx.target
+    opts = ik_options(target, orientation_tol_rad)
+    opts.setdefault("orientation_tol_rad", orientation_tol_rad)
+    try:
+        checker = session_checker(ctx, margin_m=margin_m)
+    except Exception:  # noqa: BLE001 - a target without a collision model: IK only
+        checker = None
+    home = np.asarray(target.home_qpos, dtype=float)
+    seeds = [("current" if q_seed is None else "given",
+              np.asarray(target.arm_qpos() if q_seed is None else q_seed, dtype=float)), ("home_qpos", home)]
+    if home.shape == (7,):
+        for k, (d1, d3, d5) in enumerate(SWIVEL_SEEDS_RAD):
+            seeds.append((f"swivel {k}", home + np.array([d1, 0.0, d3, 0.0, d5, 0.0, 0.0])))
+    first, error = None, None
+    for i, (label, seed) in enumerate(seeds):
+        if i >= 2 and first is None:
+            break  # the swivel seeds only look for a clear one among converging solutions
+        try:
+            sol = solve_ik(target.model, q_seed=seed, target=pose, position_tol_m=position_tol_m, **opts)
+        except IKError as exc:
+            error = error or exc
+            continue
+        pairs = () if checker is None else tuple(p for p in checker.colliding_pairs(sol.q) if allow not in p)
+        if not pairs:
+            return sol, (), label
+        if first is None:
+            first = (sol, pairs, label)
+        if checker is None:
+            break
+    if first is not None:
+        return first
+    raise error  # type: ignore[misc]
+
+
 class SolveIK(Primitive):
     """Joint configuration (n,) rad reaching the (4, 4) tcp pose at blackboard key ``pose``
     (joints, tool site and orientation tolerance as the target declares, :func:`ik_options`).
 
     The solver starts from the current arm configuration; when that stalls (a wrapped-up
     arm far from the goal, e.g. after a grasp at a large yaw), it starts once more from the
-    target's ready configuration ``home_qpos`` before failing with the first error.
+    target's ready configuration ``home_qpos`` before failing with the first error; when the
+    solution collides with the scene, other seeds look for one that does not
+    (:func:`clear_ik`; the planner would refuse the colliding goal).
 
     Args:
         pose: blackboard key of the target tcp pose (world frame).
@@ -164,20 +223,11 @@ class SolveIK(Primitive):
         self.writes(out)
 
     def step(self):
-        target = self.ctx.target
         with self.ctx.profiler.section("ik"):
-            opts = ik_options(target, self.orientation_tol_rad)
-            opts.setdefault("orientation_tol_rad", self.orientation_tol_rad)
-            try:
-                sol = solve_ik(target.model, q_seed=target.arm_qpos(), target=self.get(self.pose_key),
-                               position_tol_m=self.position_tol_m, **opts)
-            except IKError as first:
-                try:
-                    sol = solve_ik(target.model, q_seed=np.asarray(target.home_qpos, dtype=float),
-                                   target=self.get(self.pose_key), position_tol_m=self.position_tol_m, **opts)
-                except IKError:
-                    raise first from None
-                self.ctx.trace.record("ik_reseeded", pose=self.pose_key, seed="home_qpos", first_error=str(first)[:200])
+            sol, pairs, seed = clear_ik(self.ctx, self.get(self.pose_key), position_tol_m=self.position_tol_m,
+                                        orientation_tol_rad=self.orientation_tol_rad)
+        if seed != "current":
+            self.ctx.trace.record("ik_reseeded", pose=self.pose_key, seed=seed, collides=[list(p) for p in pairs[:3]])
         self.set(self.out, sol.q)
         self.ctx.trace.record("ik", pose=self.pose_key, iterations=sol.iterations, position_error_m=float(sol.position_error_m))
 

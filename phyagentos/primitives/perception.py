@@ -10,13 +10,12 @@ import numpy as np
 
 from phyagentos.errors import IKError
 from phyagentos.motion.grasp import DEFAULT_MAX_GRASP_WIDTH_M, hand_yaw, place_pose, top_down_grasp_candidates
-from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.rim_grasp import DEFAULT_RIM_WALL_M, rim_grasp_candidates, rim_graspable
 from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import plan_grasp
-from .motion import PLANNING_MARGIN_M, ik_options, session_checker
+from .motion import PLANNING_MARGIN_M, clear_ik
 from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
 __all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "declared_class"]
@@ -109,6 +108,40 @@ class Observe(Primitive):
             self.ctx.on_observation(snapshot)
 
 
+#: How much higher (m) a pick's pre-grasp is tried when no grasp candidate is clear from the
+#: skill's approach height (the recovery ``another_approach`` asks for 0.15 m against the
+#: default 0.10 m: the same move, without spending a session on the failure).
+HIGHER_APPROACH_M = 0.05
+
+
+def _wrap_rad(a: float) -> float:
+    return float((a + np.pi) % (2.0 * np.pi) - np.pi)
+
+
+def _unusable(ctx, obj: str, plan) -> str | None:
+    """Why the arm cannot take grasp ``plan`` of object ``obj``: no IK solution clear of
+    collisions for its pre-grasp, or for its grasp from there (:func:`~.motion.clear_ik`: the
+    planner's checker and margin; at the grasp, contact with the object itself is expected);
+    ``None`` when it can."""
+    try:
+        own = ctx.target.object_body(obj)
+    except Exception:  # noqa: BLE001 - a target without object bodies
+        own = None
+    q = None
+    for label, pose in (("pre-grasp", plan.pregrasp), ("grasp", plan.grasp)):
+        try:
+            # the pre-grasp is the planner's goal (its margin); the grasp is reached by a straight
+            # approach and touches the object: only penetration of anything else counts there
+            sol, pairs, _ = clear_ik(ctx, pose, q_seed=q, allow=own if label == "grasp" else None,
+                                     margin_m=PLANNING_MARGIN_M if label == "pre-grasp" else 0.0)
+        except IKError as exc:
+            return f"{label}: {str(exc)[:100]}"
+        if pairs:
+            return f"{label} collides: {', '.join('-'.join(pr) for pr in pairs[:3])}"
+        q = sol.q
+    return None
+
+
 class ComputeGrasp(Primitive):
     """Top-down grasp and pre-grasp tcp poses for ``object`` from the observation.
 
@@ -128,7 +161,8 @@ class ComputeGrasp(Primitive):
         candidate: which top-down grasp to use, best first (another approach
             direction: the hand turned 90 or 180 deg about the vertical; taken
             modulo the number of candidates the box allows; for a rim grasp another
-            reachable rim point).
+            reachable rim point). A candidate whose pre-grasp or grasp the arm cannot
+            reach clear of the scene gives way to the next one that it can.
         rim_wall_m: assumed wall thickness of a container taken by its rim, m; None: the
             perceiver's ``holding.rim_wall_m`` (perception.yaml), else
             :data:`~phyagentos.motion.rim_grasp.DEFAULT_RIM_WALL_M`.
@@ -166,10 +200,8 @@ class ComputeGrasp(Primitive):
         if rim_graspable(category, shape, half, max_width_m=max_width):
             plan, extra = self._rim_plan(snapshot, T_obj, half, max_width)
         else:
-            plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m,
-                                              shape=shape if shape in ("box", "cylinder", "sphere") else "box",
-                                              max_width_m=max_width)
-            plan = plans[self.candidate % len(plans)]
+            plan, extra = self._across_plan(T_obj, half, shape if shape in ("box", "cylinder", "sphere") else "box",
+                                            max_width)
         plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m, kind=extra.get("grasp_kind", "across"))
         self.set(self.grasp_key, plan.grasp)
         self.set(self.pregrasp_key, plan.pregrasp)
@@ -177,23 +209,58 @@ class ComputeGrasp(Primitive):
                               observed_position=T_obj[:3, 3].round(4).tolist(), grasp=plan.grasp[:3, 3].round(4).tolist(),
                               yaw_rad=round(plan.yaw_rad, 4), **extra)
 
+    def _across_plan(self, T_obj: np.ndarray, half: np.ndarray, shape: str, max_width: float):
+        """Candidate ``self.candidate`` of the top-down grasps across the object (modulo their
+        number) or, when the arm cannot reach it clear of the scene (:func:`_unusable`: a
+        pre-grasp whose forearm passes through a neighbouring bottle), the next one that it
+        can, in candidate order; when none is clear at ``approach_height_m``, the same from
+        :data:`HIGHER_APPROACH_M` higher (an object near the base, the elbow folded over the
+        neighbours); when none is clear either way, candidate ``self.candidate`` as before (the
+        planner then says why). Re-computed with a pre-grasp already chosen (``RecomputeGrasp``
+        after a closer look), the candidate whose hand yaw is nearest that pre-grasp's, at its
+        height: the refinement never turns the hand. Returns the plan and the trace fields
+        that say so."""
+        try:
+            previous = np.asarray(self.get(self.pregrasp_key), dtype=float)
+        except PrimitiveFailure:
+            previous = None
+        if previous is not None and previous.shape == (4, 4):
+            # re-computed from the pre-grasp the arm went to (RecomputeGrasp after a closer
+            # look): the same side and height, refined; never another candidate
+            plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m, shape=shape,
+                                              max_width_m=max_width)
+            height = max(self.approach_height_m, float(previous[2, 3] - plans[0].grasp[2, 3]))
+            plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape, max_width_m=max_width)
+            yaw = hand_yaw(previous)
+            best = min(range(len(plans)), key=lambda k: abs(_wrap_rad(hand_yaw(plans[k].grasp) - yaw)))
+            return plans[best], ({"candidate_used": best} if best != self.candidate % len(plans) else {})
+        refused = []
+        first = None
+        for height in (self.approach_height_m, self.approach_height_m + HIGHER_APPROACH_M):
+            plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape, max_width_m=max_width)
+            first = first or plans[self.candidate % len(plans)]
+            for k in range(len(plans)):
+                i = (self.candidate + k) % len(plans)
+                why = _unusable(self.ctx, self.object, plans[i])
+                if why is None:
+                    used = {"candidates_refused": refused, "candidate_used": i, "approach_height_m": round(height, 3)}
+                    return plans[i], (used if refused else {})
+                refused.append(f"candidate {i} from {height:.2f} m: {why}")
+        return first, {"candidates_refused": refused}
+
     def _rim_plan(self, snapshot: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float):
         """The rim grasp (candidate ``self.candidate`` among the usable ones) and the trace
         fields that say so.
 
-        A rim point is usable when the arm reaches its pre-grasp and grasp (IK from the
-        current joints) and neither configuration collides (the session's collision model,
-        the planner's; at the grasp, contact with the bowl itself is expected). Points are
+        A rim point is usable when the arm reaches its pre-grasp and grasp clear of the
+        scene (:func:`_unusable`: the planner's collision model and margin; at the grasp,
+        contact with the bowl itself is expected). Points are
         ranked by :func:`~phyagentos.motion.rim_grasp.rim_grasp_candidates` with the arm's
         base as the preferred side (the shorter reach; the base does not move, so the
         ranking is the same before and after the move to the pre-grasp). Re-computed with
         a pre-grasp already chosen (``RecomputeGrasp`` after a re-observation), the usable
         point nearest that pre-grasp is kept: the refinement never switches sides.
         """
-        from phyagentos.motion.ik import solve_ik  # noqa: PLC0415
-
-        from .motion import ik_options, session_checker  # noqa: PLC0415
-
         target = self.ctx.target
         wall = self.rim_wall_m
         if wall is None:
@@ -221,28 +288,12 @@ class ComputeGrasp(Primitive):
             previous = None
         if previous is not None and previous.shape == (4, 4):
             plans = tuple(sorted(plans, key=lambda pl: float(np.linalg.norm(pl.pregrasp[:3, 3] - previous[:3, 3]))))
-        opts = ik_options(target)
-        try:
-            checker = session_checker(self.ctx)
-            own = target.object_body(self.object)
-        except Exception:  # noqa: BLE001 - a target without a collision model: IK only
-            checker, own = None, None
         want = 0 if previous is not None else self.candidate
         usable, why = [], []
         for i, plan in enumerate(plans):
-            try:
-                bad = []
-                for label, pose in (("pre-grasp", plan.pregrasp), ("grasp", plan.grasp)):
-                    sol = solve_ik(model, q_seed=q, target=pose, **opts)
-                    if checker is not None:
-                        pairs = [pr for pr in checker.colliding_pairs(sol.q) if label == "pre-grasp" or own not in pr]
-                        if pairs:
-                            bad.append(f"{label} collides: {', '.join('-'.join(pr) for pr in pairs[:3])}")
-            except IKError as exc:
-                why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad): {str(exc)[:120]}")
-                continue
-            if bad:
-                why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad): {'; '.join(bad)[:160]}")
+            bad = _unusable(self.ctx, self.object, plan)
+            if bad is not None:
+                why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad): {bad[:160]}")
                 continue
             usable.append((i, plan))
             if len(usable) > want:
@@ -326,19 +377,22 @@ class ComputePlace(Primitive):
         """Why the arm cannot hold the object at ``T_pre`` and ``T_place`` ((4, 4) world tcp
         poses): no IK solution (seeded as SolveIK seeds it: the current configuration, then
         the pre-place solution), or a configuration in collision with the held object attached
-        (the planner's checker and margin); ``None`` when both are reachable and clear."""
-        target = self.ctx.target
-        opts = ik_options(target)
-        checker = session_checker(self.ctx, margin_m=PLANNING_MARGIN_M)
-        q = np.asarray(target.arm_qpos(), dtype=float)
+        (:func:`~.motion.clear_ik`: SolveIK's seeds, the planner's checker and margin);
+        ``None`` when both are reachable and clear."""
+        q = None
+        try:
+            held = self.ctx.target.object_body(self.object)
+        except Exception:  # noqa: BLE001 - a target without object bodies
+            held = None
         for label, T in (("preplace", T_pre), ("place", T_place)):
             try:
-                q = solve_ik(target.model, q_seed=q, target=T, **opts).q
+                # the pre-place is the planner's goal (its margin); at the place the held object
+                # meets its support by design: only the arm's penetration of anything counts there
+                sol, pairs, _ = clear_ik(self.ctx, T, q_seed=q, allow=held if label == "place" else None,
+                                         margin_m=PLANNING_MARGIN_M if label == "preplace" else 0.0)
             except IKError as exc:
-                try:  # as SolveIK: once more from the ready configuration
-                    q = solve_ik(target.model, q_seed=np.asarray(target.home_qpos, dtype=float), target=T, **opts).q
-                except IKError:
-                    return f"{label}: {str(exc)[:120]}"
-            if not checker.is_valid(q):
-                return f"{label}: collides ({', '.join('-'.join(p) for p in checker.colliding_pairs(q)[:2])})"
+                return f"{label}: {str(exc)[:120]}"
+            if pairs:
+                return f"{label}: collides ({', '.join('-'.join(p) for p in pairs[:2])})"
+            q = sol.q
         return None

@@ -131,6 +131,13 @@ def test_render_returns_an_image_of_the_scene_headless(target):
     assert img.std() > 5.0  # not a blank frame: table, robot and cube are drawn
 
 
+def test_an_image_larger_than_the_framebuffer_is_refused_with_its_size_not_blamed_on_opengl(target):
+    vis = target.model.vis.global_
+    with pytest.raises(TargetError, match=rf"exceeds the model's offscreen framebuffer \({vis.offwidth}x{vis.offheight}"):
+        target.render(width=int(vis.offwidth) + 1, height=48)
+    assert target.render(width=64, height=48).shape == (48, 64, 3)  # the target still renders
+
+
 # ----------------------------------------------------------------------------- execution
 
 

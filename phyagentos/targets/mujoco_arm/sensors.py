@@ -94,6 +94,8 @@ class ArmSensors:
             spec = self._sensor_specs[name]
             try:
                 self._renderer(int(spec.width), int(spec.height))
+            except TargetError:
+                raise
             except Exception as exc:
                 raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc
         return len(self._renderers)
@@ -101,6 +103,11 @@ class ArmSensors:
     def _renderer(self, width: int, height: int):
         key = (int(width), int(height))
         r = self._renderers.get(key)
+        vis = self._model.vis.global_
+        if r is None and (key[0] > int(vis.offwidth) or key[1] > int(vis.offheight)):
+            raise TargetError(f"a {key[0]}x{key[1]} image exceeds the model's offscreen framebuffer "
+                              f"({int(vis.offwidth)}x{int(vis.offheight)}, <visual><global offwidth/offheight> in its "
+                              f"XML); ask for at most that")
         if r is None:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # glfw warns before failing without a display
@@ -111,7 +118,8 @@ class ArmSensors:
                shadows: bool = True) -> np.ndarray:
         """``(height, width, 3)`` uint8 image from model camera ``camera``; ``shadows=False``
         renders about 5x faster under OSMesa. Raises TargetError if no OpenGL backend is
-        available or the camera is unknown."""
+        available, the camera is unknown or the image is larger than the model's offscreen
+        framebuffer (the message gives its size)."""
         self._check_open()
         m = self._model
         cams = [m.camera(i).name for i in range(m.ncam)]
@@ -123,6 +131,8 @@ class ArmSensors:
             r.update_scene(self._data, camera=camera, scene_option=self._render_scene_option())
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(shadows)
             return r.render().copy()
+        except TargetError:
+            raise
         except Exception as exc:
             self._renderers.pop((int(width), int(height)), None)
             raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc
@@ -186,6 +196,8 @@ class ArmSensors:
                 r.disable_depth_rendering()
                 far = float(m.vis.map.zfar * m.stat.extent)
                 depth[depth >= 0.999 * far] = 0.0
+        except TargetError:
+            raise
         except Exception as exc:
             self._renderers.pop((w, h), None)
             raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc

@@ -119,21 +119,25 @@ def _wrap_rad(a: float) -> float:
 
 
 def _unusable(ctx, obj: str, plan) -> str | None:
-    """Why the arm cannot take grasp ``plan`` of object ``obj``: no IK solution clear of
-    collisions for its pre-grasp, or for its grasp from there (:func:`~.motion.clear_ik`: the
-    planner's checker and margin; at the grasp, contact with the object itself is expected);
-    ``None`` when it can."""
+    """Why the arm cannot take grasp ``plan`` of object ``obj`` (:func:`reach_blocked` of its
+    pre-grasp, then its grasp); ``None`` when it can."""
+    return reach_blocked(ctx, obj, ("pre-grasp", plan.pregrasp), ("grasp", plan.grasp))
+
+
+def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, np.ndarray]) -> str | None:
+    """Why the arm cannot reach ``above`` then ``at`` (``(label, (4, 4) world tcp pose)``):
+    no IK solution clear of collisions (:func:`~.motion.clear_ik`, SolveIK's seeds) for the
+    pose above (the planner's goal: its margin), or for the pose at the object from there
+    (reached by a straight move, touching object ``obj`` by design: only penetration of
+    anything else counts). ``None`` when both are reachable and clear."""
     try:
         own = ctx.target.object_body(obj)
     except Exception:  # noqa: BLE001 - a target without object bodies
         own = None
     q = None
-    for label, pose in (("pre-grasp", plan.pregrasp), ("grasp", plan.grasp)):
+    for (label, pose), allow, margin in ((above, None, PLANNING_MARGIN_M), (at, own, 0.0)):
         try:
-            # the pre-grasp is the planner's goal (its margin); the grasp is reached by a straight
-            # approach and touches the object: only penetration of anything else counts there
-            sol, pairs, _ = clear_ik(ctx, pose, q_seed=q, allow=own if label == "grasp" else None,
-                                     margin_m=PLANNING_MARGIN_M if label == "pre-grasp" else 0.0)
+            sol, pairs, _ = clear_ik(ctx, pose, q_seed=q, allow=allow, margin_m=margin)
         except IKError as exc:
             return f"{label}: {str(exc)[:100]}"
         if pairs:
@@ -375,24 +379,5 @@ class ComputePlace(Primitive):
 
     def _blocked(self, T_pre: np.ndarray, T_place: np.ndarray) -> str | None:
         """Why the arm cannot hold the object at ``T_pre`` and ``T_place`` ((4, 4) world tcp
-        poses): no IK solution (seeded as SolveIK seeds it: the current configuration, then
-        the pre-place solution), or a configuration in collision with the held object attached
-        (:func:`~.motion.clear_ik`: SolveIK's seeds, the planner's checker and margin);
-        ``None`` when both are reachable and clear."""
-        q = None
-        try:
-            held = self.ctx.target.object_body(self.object)
-        except Exception:  # noqa: BLE001 - a target without object bodies
-            held = None
-        for label, T in (("preplace", T_pre), ("place", T_place)):
-            try:
-                # the pre-place is the planner's goal (its margin); at the place the held object
-                # meets its support by design: only the arm's penetration of anything counts there
-                sol, pairs, _ = clear_ik(self.ctx, T, q_seed=q, allow=held if label == "place" else None,
-                                         margin_m=PLANNING_MARGIN_M if label == "preplace" else 0.0)
-            except IKError as exc:
-                return f"{label}: {str(exc)[:120]}"
-            if pairs:
-                return f"{label}: collides ({', '.join('-'.join(p) for p in pairs[:2])})"
-            q = sol.q
-        return None
+        poses; :func:`reach_blocked`, the held object attached); ``None`` when it can."""
+        return reach_blocked(self.ctx, self.object, ("preplace", T_pre), ("place", T_place))

@@ -59,13 +59,14 @@ def _children_map() -> dict[int, list[int]]:
     return kids
 
 
-def _tree(root: int) -> list[int]:
-    """``root`` and its live descendants."""
+def _tree(root: int) -> list[tuple[int, int]]:
+    """``(pid, parent pid)`` of ``root`` and of its live descendants."""
     kids = _children_map()
-    found, frontier = [root], [root]
+    found, frontier = [(root, 0)], [root]
     while frontier:
-        for child in kids.get(frontier.pop(), []):
-            found.append(child)
+        parent = frontier.pop()
+        for child in kids.get(parent, []):
+            found.append((child, parent))
             frontier.append(child)
     return found
 
@@ -78,15 +79,17 @@ def _cmdline(pid: int) -> str:
         return ""
 
 
-def _role(pid: int, root: int, cmdline: str) -> str:
+def _role(pid: int, root: int, cmdline: str, parent_cmdline: str) -> str:
+    """What the process is, from its command line and its parent's: a runner is forked
+    from the forkserver and keeps its command line."""
     if pid == root:
         return "command"
-    if "forkserver" in cmdline and "main_from_parent" not in cmdline:
-        return "forkserver"
     if "resource_tracker" in cmdline:
         return "resource_tracker"
-    if "forkserver" in cmdline or "multiprocessing" in cmdline:
-        return "forked (runner)"
+    if "forkserver import main" in cmdline:
+        return "runner" if "forkserver import main" in parent_cmdline else "forkserver"
+    if "spawn_main" in cmdline:
+        return "spawned child"
     return "child"
 
 
@@ -106,15 +109,16 @@ def main(argv: list[str] | None = None) -> int:
     while True:
         done = proc.poll() is not None
         t = round(time.monotonic() - t0, 2)
-        for pid in _tree(proc.pid):
+        for pid, ppid in _tree(proc.pid):
             mib = _status_mib(pid)
             if mib is None:
                 continue
             entry = procs.get(pid)
             if entry is None:
                 cmd = _cmdline(pid)
-                entry = procs[pid] = {"pid": pid, "cmdline": cmd[:300], "role": _role(pid, proc.pid, cmd),
-                                      "samples": []}
+                parent = procs[ppid]["cmdline"] if ppid in procs else _cmdline(ppid)
+                entry = procs[pid] = {"pid": pid, "ppid": ppid, "cmdline": cmd[:300],
+                                      "role": _role(pid, proc.pid, cmd, parent), "samples": []}
             entry["samples"].append([t] + [round(mib[k], 1) for k in _FIELDS])
         if done:
             break
@@ -127,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         for i, k in enumerate(_FIELDS, start=1):
             col = [row[i] for row in s]
             stats[k] = {"peak_mib": max(col), "median_mib": round(statistics.median(col), 1)}
-        summary.append({"pid": entry["pid"], "role": entry["role"], "cmdline": entry["cmdline"],
+        summary.append({"pid": entry["pid"], "ppid": entry["ppid"], "role": entry["role"], "cmdline": entry["cmdline"],
                         "first_s": s[0][0], "last_s": s[-1][0], **stats,
                         "series": {"columns": ["t_s", *_FIELDS], "rows": s}})
         rows.append([entry["pid"], entry["role"], f"{s[0][0]:.0f}-{s[-1][0]:.0f}",

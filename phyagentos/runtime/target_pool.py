@@ -187,6 +187,12 @@ class TargetPool:
         atomic_write_text(directory / "state.yaml",
                           dump_yaml({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
 
+    @property
+    def keep_when_idle(self) -> bool:
+        """Whether a runner may keep this pool's targets while it serves another workspace:
+        every live target's class allows it (:attr:`Target.KEEP_WHEN_IDLE`)."""
+        return all(type(target).KEEP_WHEN_IDLE for _, target in self._live.values())
+
     def close(self) -> None:
         self._views.clear()
         for _, target in self._live.values():

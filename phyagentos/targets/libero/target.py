@@ -296,6 +296,9 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
                                       sensors=("proprioception", "rgb", "depth", "contacts"),
                                       simulated_ground_truth=True, articulated_fixtures=True)
     SENSORS_KEY = "libero"
+    #: A world with its renderer and collision models holds 1.5-2 GB: a runner closes it when
+    #: it moves on to another workspace (a bench episode's), instead of keeping it idle.
+    KEEP_WHEN_IDLE = False
 
     @classmethod
     def scene_from_dict(cls, raw: Mapping[str, Any] | None, *, root: Any = None) -> LiberoScene:

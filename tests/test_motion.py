@@ -126,6 +126,21 @@ def test_ik_keeps_the_models_of_few_contexts_alive(model):
     assert sum(r() is not None for r in gone) <= 4
 
 
+def test_forgetting_a_model_drops_its_ik_contexts_and_with_them_the_model():
+    import gc
+    import weakref
+
+    from phyagentos.motion.ik import forget_model
+
+    m = build_scene(DEFAULT_SCENE)
+    solve_ik(m, q_seed=HOME, target=pose((0.5, -0.2, 0.12)))
+    ref = weakref.ref(m)
+    assert forget_model(m) == 1 and forget_model(m) == 0
+    del m
+    gc.collect()
+    assert ref() is None
+
+
 def test_the_ik_context_of_a_model_in_use_is_kept_while_others_come_and_go(model):
     from phyagentos.motion import ik
 

@@ -81,3 +81,25 @@ def test_a_workspace_whose_target_is_too_big_to_keep_idle_is_closed_when_the_run
     last = _serve(runner, roots[3])
     assert list(runner.pools) == [roots[2], roots[3]]
     assert not held.closed and not last.closed
+
+
+def test_a_closed_workspaces_model_is_not_kept_alive_by_the_ik_and_kinematic_chain_caches(runner, tmp_path):
+    # the IK contexts and the safety guard's chains hold their models (a LIBERO world's: about
+    # 250 MB each, up to 4 + 8 of them): closing a target drops its model from both
+    import gc
+    import weakref
+
+    from phyagentos.motion.ik import solve_ik
+    from phyagentos.runtime.safety_guard import ChainFK
+
+    roots = [str(Workspace.create(tmp_path / f"ws{i}").root) for i in range(3)]
+    first = _serve(runner, roots[0])
+    solve_ik(first.model, q_seed=first.arm_qpos(), target=first.tcp_pose(), arm_joint_names=first.arm_joint_names,
+             frame=first.tcp_site)
+    ChainFK.of(first.model, first.arm_joint_names, first.tcp_site)
+    model = weakref.ref(first.model)
+    del first
+    for root in roots[1:]:
+        _serve(runner, root)
+    gc.collect()
+    assert model() is None

@@ -1,19 +1,19 @@
 """Giving memory back after a large MuJoCo world is built or closed.
 
-Two things keep a process's resident memory high after a big model (a LIBERO world: 14
-textures, 147 MB, a million mesh vertices) is compiled or freed:
+glibc's heap keeps freed pages mapped (the compiler's temporaries and robosuite's first
+model after a LIBERO world is built; a closed world's model, data and renderers) until the
+allocator decides to return them, so a process that builds one world after another grows
+by what the last one left. ``malloc_trim(0)`` returns every whole free page of every arena
+at once (10-50 ms after a LIBERO world); :func:`trim_heap` calls it where the C library is
+glibc and does nothing elsewhere. It changes nothing a model or a simulation computes.
 
-- MuJoCo's **asset cache** (``mj_getCache``): the compiler keeps every decoded texture and
-  processed mesh, up to 512 MiB by default, so that compiling the same files again is
-  faster. A LIBERO world leaves 315 MB there (measured: libero_object task 5), allocated by
-  the compiler's threads in glibc's per-thread arenas. :func:`clear_asset_cache` empties it.
-- **glibc's heap** keeps freed pages mapped (the compiler's temporaries, a closed world's
-  model and renderers) until the allocator decides to return them; ``malloc_trim(0)``
-  returns every whole free page of every arena at once (10-50 ms after a LIBERO world).
-  :func:`trim_heap` calls it where the C library is glibc and does nothing elsewhere.
-
-Neither changes what a model or a simulation computes: the cache only saves decoding time
-(a LIBERO world built again in the same process: about 1-2 s more without it).
+What it does not give back is MuJoCo's compiler **asset cache** (``mujoco.mj_getCache``):
+every decoded texture and processed mesh, up to 512 MiB, kept so that compiling the same
+files again is faster. A LIBERO world leaves 315-380 MB there. Emptying it
+(``mujoco.mj_clearCache``) would save that much per process, but each LIBERO world built
+later in the same process then takes about 2.3 s longer (1.6 s -> 3.9 s, libero_object
+tasks 1-4 after task 0; a bench builds one per episode and one per task for the looks:
+about +30 % wall time on a 10-episode run), so the cache stays.
 """
 
 from __future__ import annotations
@@ -21,21 +21,8 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
-import logging
 
-import mujoco
-
-__all__ = ["clear_asset_cache", "trim_heap"]
-
-log = logging.getLogger(__name__)
-
-
-def clear_asset_cache() -> int:
-    """Empty MuJoCo's compiler asset cache; returns the bytes it held."""
-    cache = mujoco.mj_getCache()
-    held = int(mujoco.mj_getCacheSize(cache))
-    mujoco.mj_clearCache(cache)
-    return held
+__all__ = ["trim_heap"]
 
 
 @functools.lru_cache(maxsize=1)

@@ -70,7 +70,7 @@ from phyagentos.errors import TargetError, format_choices
 
 from ..base import ExecutionResult
 from ..contract import TargetCapabilities
-from ..heap import clear_asset_cache, trim_heap
+from ..heap import trim_heap
 from ..mujoco_arm import K_ENV, K_FINGER, K_OBJECT, K_ROBOT, GripperResult, MuJoCoArmTarget, mat_quat
 from .osc import CONTROL_PERIOD_S, OSC_ACTION_DIM, LiberoOsc
 from .privileged import LiberoPrivileged
@@ -330,12 +330,9 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         except Exception as exc:
             raise TargetError(f"LIBERO {scene.suite}/{scene.task}: the tool site could not be added: "
                               f"{type(exc).__name__}: {exc}") from exc
-        # that recompile was the last one the compiler's asset cache speeds up: give its
-        # decoded textures and meshes (315 MB for libero_object task 5) and robosuite's
-        # first model back (see heap)
-        freed = clear_asset_cache()
+        # robosuite's first model and the compiler's temporaries are freed: give their pages
+        # back (MuJoCo's asset cache stays: see heap)
         trim_heap()
-        log.debug("LIBERO %s/%s built; %.0f MB of MuJoCo's asset cache released", scene.suite, scene.task, freed / 1e6)
         sim = self._env.sim
         model, data = sim.model._model, sim.data._data
         m = model

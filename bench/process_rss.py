@@ -1,29 +1,38 @@
 """Resident memory of a command and of every process it starts, sampled over time.
 
-    .venv/bin/python bench/process_rss.py [--interval 0.2] [--out bench/results/process_rss.json] -- COMMAND ...
+    .venv/bin/python bench/process_rss.py [--interval 0.2] [--out bench/results/process_rss.json] [-- COMMAND ...]
 
-e.g. a LIBERO episode through the normal bench path::
+Without a command it measures one LIBERO episode through the normal bench path, in a fresh
+temporary workspace (the looks of the task's categories are measured first, in the bench
+process)::
 
-    PYTHONPATH=$PWD .venv/bin/python bench/process_rss.py --out bench/results/libero_rss.json -- \\
-        .venv/bin/phyagentos bench libero_object --tasks 5 --seeds 0 --json \\
-        --heartbeat-timeout 180 --queue-timeout 3000 --workspace /tmp/ws_mem
+    .venv/bin/phyagentos bench libero_object --tasks 5 --seeds 0 --json \
+        --heartbeat-timeout 180 --queue-timeout 3000 --workspace <temporary>
 
 Runs ``COMMAND`` and, every ``--interval`` seconds until it exits, reads ``VmRSS``,
 ``RssAnon`` and ``RssFile`` (``/proc/<pid>/status``, MiB) of the command's process and of
-all its live descendants (the forkserver, each runner, the resource tracker). Per process
-(by pid, with its command line and its role guessed from it) the JSON holds the peak and the
-median ("steady") of each figure over the samples the process lived through, and the whole
-time series (``t_s`` from the command's start). Prints one table row per process. The
-command's own output goes to this terminal; its exit status is this script's.
+all its live descendants (the forkserver, each runner, the supervisor, the resource
+tracker). Per process (by pid, with its parent, its command line and its role guessed from
+them) the JSON holds the peak and the median ("steady") of each figure over the samples the
+process lived through, and the whole time series (``t_s`` from the command's start). Prints
+one table row per process. The command's own output goes to this terminal; its exit status
+is this script's.
+
+A runner is forked from the runtime's forkserver, whose module path starts with the working
+directory: run from a checkout, the runners import that checkout's ``phyagentos`` whatever
+``PYTHONPATH`` says (to measure another tree, run from outside both).
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 from _harness import parser, print_table, write_json
 
@@ -94,15 +103,22 @@ def _role(pid: int, root: int, cmdline: str, parent_cmdline: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if "--" not in argv:
-        print("usage: process_rss.py [--interval S] [--out PATH] -- COMMAND ...", file=sys.stderr)
-        return 2
-    cut = argv.index("--")
     ap = parser(__doc__, "process_rss")
     ap.add_argument("--interval", type=float, default=0.2, help="seconds between samples (default 0.2)")
-    args = ap.parse_args(argv[:cut])
-    command = argv[cut + 1:]
+    ap.add_argument("command", nargs=argparse.REMAINDER,
+                    help="after --: the command to run (default: one libero_object episode, see above)")
+    args = ap.parse_args(argv)
+    command = args.command[1:] if args.command[:1] == ["--"] else args.command
+    with tempfile.TemporaryDirectory(prefix="process_rss_") as tmp:
+        if not command:
+            command = [str(Path(sys.executable).with_name("phyagentos")), "bench", "libero_object", "--tasks", "5",
+                       "--seeds", "0", "--json", "--heartbeat-timeout", "180", "--queue-timeout", "3000",
+                       "--workspace", str(Path(tmp) / "ws")]
+        return _measure(command, args.interval, args.out)
+
+
+def _measure(command: list[str], interval: float, out: Path) -> int:
+    """Run ``command``, sample it every ``interval`` s, write the JSON to ``out``; its exit status."""
     t0 = time.monotonic()
     proc = subprocess.Popen(command)
     procs: dict[int, dict] = {}
@@ -122,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
             entry["samples"].append([t] + [round(mib[k], 1) for k in _FIELDS])
         if done:
             break
-        time.sleep(args.interval)
+        time.sleep(interval)
     rc = proc.returncode
     rows, summary = [], []
     for entry in procs.values():
@@ -139,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
                      f"{stats['RssAnon']['peak_mib']:.0f}", f"{stats['RssFile']['peak_mib']:.0f}"])
     print_table(["pid", "role", "alive s", "peak RSS MiB", "median RSS MiB", "peak anon MiB", "peak file MiB"],
                 rows, align=["r", "l", "r", "r", "r", "r", "r"])
-    write_json(args.out, {"command": command, "interval_s": args.interval, "returncode": rc,
+    write_json(out, {"command": command, "interval_s": interval, "returncode": rc,
                           "wall_s": round(time.monotonic() - t0, 1), "processes": summary})
     return rc
 

@@ -172,3 +172,23 @@ def test_a_trajectory_timed_at_the_targets_limits_is_tracked_within_a_hundredth_
     assert result.completed and result.max_tracking_error_rad < 0.015, result
     np.testing.assert_allclose(target.arm_qpos(), path[-1], atol=0.005)
     assert target.benchmark_signals()["control_steps"] >= int(traj.duration / 0.05)
+
+
+def test_a_libero_world_renders_both_cameras_and_the_evidence_image_with_one_gl_context(target, monkeypatch):
+    # each GL context uploads the world's 147 MB of textures again (about 0.5 GB under OSMesa):
+    # the 256x256 cameras and the 320x240 evidence image (runtime/evidence_images.py) share one
+    from phyagentos.runtime.evidence_images import EVIDENCE_IMAGE_SIZE
+
+    target.reset(seed=1)
+    for r in target._renderers.values():  # start from no renderer
+        r.close()
+    target._renderers.clear()
+    opened = []
+    real = mujoco.Renderer
+    monkeypatch.setattr(mujoco, "Renderer", lambda *a, **k: opened.append(k) or real(*a, **k))
+    target.capture("agentview")
+    target.capture("wrist")
+    width, height = EVIDENCE_IMAGE_SIZE
+    image = target.render(width=width, height=height, shadows=False)
+    assert image.shape == (height, width, 3) and image.any()
+    assert len(opened) == 1

@@ -126,6 +126,21 @@ def test_ik_keeps_the_models_of_few_contexts_alive(model):
     assert sum(r() is not None for r in gone) <= 4
 
 
+def test_forgetting_a_model_drops_its_ik_contexts_and_with_them_the_model():
+    import gc
+    import weakref
+
+    from phyagentos.motion.ik import forget_model
+
+    m = build_scene(DEFAULT_SCENE)
+    solve_ik(m, q_seed=HOME, target=pose((0.5, -0.2, 0.12)))
+    ref = weakref.ref(m)
+    assert forget_model(m) == 1 and forget_model(m) == 0
+    del m
+    gc.collect()
+    assert ref() is None
+
+
 def test_the_ik_context_of_a_model_in_use_is_kept_while_others_come_and_go(model):
     from phyagentos.motion import ik
 
@@ -189,6 +204,49 @@ def test_attached_object_moves_with_the_gripper_and_may_touch_the_fingers(model,
     assert c.is_valid(q_over)
     with pytest.raises(PlanningError, match="objects: 'cube'"):
         c.attach("sphere", np.eye(4))
+
+
+def test_checkers_at_two_margins_sharing_one_model_copy_answer_as_checkers_with_their_own(model, world_qpos):
+    # a copy is the whole model (a LIBERO world: ~250 MB of it, textures included): the
+    # checkers at 0 and at the planning margin share one and still answer exactly alike
+    own = {m: CollisionChecker(model, margin_m=m) for m in (0.01, 0.0)}
+    first = CollisionChecker(model, margin_m=0.01)
+    shared = {0.01: first, 0.0: CollisionChecker(model, margin_m=0.0, share_model_of=first)}
+    assert shared[0.0].model is first.model and own[0.0].model is not first.model
+    q_world = world_qpos.copy()
+    q_world[7:9] = 0.015
+    rng = np.random.default_rng(0)
+    configs = [HOME, solve_ik(model, q_seed=HOME, target=pose((0.5, 0.03, 0.12))).q,
+               solve_ik(model, q_seed=HOME, target=pose((0.5, 0.03, 0.34))).q]
+    configs += [HOME + rng.normal(0.0, 0.4, 7) for _ in range(40)]
+    hanging = np.eye(4)
+    hanging[2, 3] = 0.05
+    for attach in (None, hanging, None):
+        for checkers in (own, shared):
+            for c in checkers.values():
+                c.set_world_state(q_world)
+                c.detach() if attach is None else c.attach("cube", attach)
+        for q in configs:
+            for m in (0.01, 0.0, 0.0, 0.01):  # alternate between the sharing checkers
+                assert shared[m].is_valid(q) == own[m].is_valid(q)
+                assert shared[m].colliding_pairs(q) == own[m].colliding_pairs(q)
+    assert len({own[m].is_valid(q) for m in own for q in configs}) == 2  # both answers occur
+    with pytest.raises(PlanningError, match="another model"):
+        CollisionChecker(build_scene(DEFAULT_SCENE), share_model_of=first)
+
+
+def test_the_session_checkers_of_a_target_share_one_model_copy():
+    from types import SimpleNamespace
+
+    from phyagentos.primitives.motion import PLANNING_MARGIN_M, session_checker
+    from phyagentos.targets import MuJoCoTarget
+
+    with MuJoCoTarget("franka", seed=0) as t:
+        ctx = SimpleNamespace(target=t)
+        zero, planning = session_checker(ctx), session_checker(ctx, margin_m=PLANNING_MARGIN_M)
+        assert zero.margin_m == 0.0 and planning.margin_m == PLANNING_MARGIN_M
+        assert planning.model is zero.model and zero.model is not t.model
+        assert session_checker(ctx) is zero
 
 
 # ----------------------------------------------------------------------------- planning

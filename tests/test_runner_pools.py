@@ -64,3 +64,42 @@ def test_a_workspace_whose_target_is_reserved_keeps_its_pool(runner, tmp_path):
     assert list(runner.pools) == [roots[0], roots[2]]
     assert not held.closed and runner.lock(roots[0], TARGET).held
     assert others[0].closed and not others[1].closed
+
+
+def test_a_workspace_whose_target_is_too_big_to_keep_idle_is_closed_when_the_runner_moves_on(runner, tmp_path,
+                                                                                               monkeypatch):
+    # a LIBERO world (KEEP_WHEN_IDLE false) holds 1.5-2 GB: the next episode's world must not
+    # be built beside the last one's; a reserved one stays
+    roots = [str(Workspace.create(tmp_path / f"ws{i}").root) for i in range(4)]
+    first = _serve(runner, roots[0])
+    monkeypatch.setattr(type(first), "KEEP_WHEN_IDLE", False)
+    second = _serve(runner, roots[1])
+    assert list(runner.pools) == [roots[1]]
+    assert first.closed and not second.closed
+    held = _serve(runner, roots[2], keep_reserved=True)
+    assert second.closed
+    last = _serve(runner, roots[3])
+    assert list(runner.pools) == [roots[2], roots[3]]
+    assert not held.closed and not last.closed
+
+
+def test_a_closed_workspaces_model_is_not_kept_alive_by_the_ik_and_kinematic_chain_caches(runner, tmp_path):
+    # the IK contexts and the safety guard's chains hold their models (a LIBERO world's: about
+    # 250 MB each, up to 4 + 8 of them): closing a target drops its model from both
+    import gc
+    import weakref
+
+    from phyagentos.motion.ik import solve_ik
+    from phyagentos.runtime.safety_guard import ChainFK
+
+    roots = [str(Workspace.create(tmp_path / f"ws{i}").root) for i in range(3)]
+    first = _serve(runner, roots[0])
+    solve_ik(first.model, q_seed=first.arm_qpos(), target=first.tcp_pose(), arm_joint_names=first.arm_joint_names,
+             frame=first.tcp_site)
+    ChainFK.of(first.model, first.arm_joint_names, first.tcp_site)
+    model = weakref.ref(first.model)
+    del first
+    for root in roots[1:]:
+        _serve(runner, root)
+    gc.collect()
+    assert model() is None

@@ -204,3 +204,17 @@ def test_single_actions_take_the_same_checks(target):
     assert guard.check(nan, dt=0.01).code == "safety.nan"
     beyond = np.hstack([q0, [0.05]])[None, :]
     assert guard.check(beyond, dt=0.01).code == "safety.joint_limit"
+
+
+def test_forgetting_a_model_drops_its_chains_and_with_them_the_model():
+    import gc
+    import weakref
+
+    other = MuJoCoTarget("other", SceneSpec.default(), seed=0)
+    ChainFK.of(other.model, ARM_JOINT_NAMES, "tcp")
+    ref = weakref.ref(other.model)
+    assert ChainFK.forget(other.model) == 1 and ChainFK.forget(other.model) == 0
+    other.close()
+    del other
+    gc.collect()
+    assert ref() is None

@@ -91,6 +91,47 @@ def test_camera_noise_follows_the_episode_seed():
     assert np.std(rel) == pytest.approx(0.002, rel=0.1)
 
 
+def test_a_target_opens_one_gl_context_for_every_image_size_and_renders_the_same_pixels(monkeypatch):
+    # every mujoco.Renderer opens a GL context and uploads the model's textures (a LIBERO
+    # world: about 0.5 GB each under OSMesa); the 256x256 cameras and the 320x240 evidence
+    # images of one target share one, and draw exactly what renderers of their own draw
+    import mujoco
+
+    opened = []
+    real = mujoco.Renderer
+
+    def counting(*args, **kwargs):
+        opened.append(kwargs.get("width"))
+        return real(*args, **kwargs)
+
+    frames = {}
+    for order in ("capture_first", "render_first"):
+        with MuJoCoTarget("franka", seed=0) as t:
+            t.configure_sensors([_camera("overview", width=256, height=256)])
+            monkeypatch.setattr(mujoco, "Renderer", counting)
+            if order == "render_first":
+                image = t.render("overview", width=320, height=240, shadows=False)
+                frame = t.capture("overview")
+            else:
+                frame = t.capture("overview")
+                image = t.render("overview", width=320, height=240, shadows=False)
+            t.capture("overview")
+            monkeypatch.setattr(mujoco, "Renderer", real)
+            assert len(t._renderers) == 2
+            reference = real(t.model, height=240, width=320)  # a renderer of its own
+            reference.update_scene(t.data, camera="overview", scene_option=t._render_scene_option())
+            reference.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
+            np.testing.assert_array_equal(image, reference.render())
+            reference.close()
+            frames[order] = (frame, image)
+        assert len(opened) == 1, opened
+        opened.clear()
+    (a, image_a), (b, image_b) = frames["capture_first"], frames["render_first"]
+    np.testing.assert_array_equal(a.rgb, b.rgb)
+    np.testing.assert_array_equal(a.depth_m, b.depth_m)
+    np.testing.assert_array_equal(image_a, image_b)
+
+
 def test_wrist_force_sensor_weighs_the_hand_and_the_gripper_reports_its_squeeze():
     with MuJoCoTarget("franka", seed=0) as t:
         p = t.proprioception()

@@ -14,6 +14,12 @@ running ``mj_kinematics`` and ``mj_collision``, and classifying the contacts:
 - free object vs environment / other objects: ignored (that is the world's business).
 
 A contact counts when its signed distance is below ``margin_m`` (penetration for 0).
+
+Checkers of one model at other margins can share that copy (``share_model_of``): a copy
+carries the whole model, textures included (a LIBERO world: about 250 MB, 147 MB of it
+textures), and a checker differs from another only in the geom margins and collision bits
+it writes into the copy, so each writes its own into the shared copy before each query
+when the last query was another's.
 """
 
 from __future__ import annotations
@@ -38,6 +44,16 @@ DEFAULT_ARM_JOINT_NAMES: tuple[str, ...] = tuple(f"robot:panda0_joint{i}" for i 
 _ENV, _ROBOT, _OBJECT = 0, 1, 2
 
 
+class _SharedCopy:
+    """A model copy's bookkeeping: the checker whose margins and collision bits it holds
+    now (``None``: none for sure)."""
+
+    __slots__ = ("owner",)
+
+    def __init__(self) -> None:
+        self.owner: CollisionChecker | None = None
+
+
 class CollisionChecker:
     """Joint-space validity checker for the arm.
 
@@ -50,9 +66,14 @@ class CollisionChecker:
         gripper_bodies: bodies (with their descendants) an attached object may touch;
             default: the bodies below the last arm joint's body (the Franka's fingers).
             A gripper whose fixed jaw is the last arm body (the SO-101's) names it here.
+        share_model_of: a checker built from the same ``model`` whose private copy this
+            one uses too, instead of copying ``model`` again (results are the same: each
+            checker's margins and collision bits are written into the copy before its
+            queries). Checkers sharing a copy must be used from one thread.
 
     Raises:
-        PlanningError: unknown joint/site names or a negative margin.
+        PlanningError: unknown joint/site names, a negative margin, or ``share_model_of``
+            built from another model.
     """
 
     def __init__(
@@ -64,11 +85,26 @@ class CollisionChecker:
         tcp_site: str = "tcp",
         allowed_pairs: Iterable[tuple[str, str]] = (),
         gripper_bodies: Iterable[str] | None = None,
+        share_model_of: "CollisionChecker | None" = None,
     ):
         if not margin_m >= 0.0 or not math.isfinite(margin_m):
             raise PlanningError(f"margin_m must be a finite number >= 0, got {margin_m}")
         self.margin_m = float(margin_m)
-        self.model = copy.copy(model)
+        self._source = model
+        if share_model_of is None:
+            self.model = copy.copy(model)
+            self._shared = _SharedCopy()
+            self._orig_contype = self.model.geom_contype.copy()
+            self._orig_conaffinity = self.model.geom_conaffinity.copy()
+        else:
+            if share_model_of.model_source is not model:
+                raise PlanningError("share_model_of: that checker was built from another model")
+            self.model = share_model_of.model
+            self._shared = share_model_of._shared
+            # the source's collision bits (the shared copy holds the other checker's)
+            self._orig_contype = share_model_of._orig_contype.copy()
+            self._orig_conaffinity = share_model_of._orig_conaffinity.copy()
+        self._shared.owner = self
         self.model.geom_margin[:] = self.margin_m
         self.model.geom_gap[:] = 0.0
         self.data = mujoco.MjData(self.model)
@@ -139,20 +175,23 @@ class CollisionChecker:
         #   env / object    ct 2, ca 0       (never among themselves)
         #   attached object ct 4, ca 2       (links, environment, other objects)
         # Geoms that could not collide at all (visual meshes, regions) stay disabled.
-        self._orig_contype = m.geom_contype.copy()
-        self._orig_conaffinity = m.geom_conaffinity.copy()
         self._collidable = (self._orig_contype != 0) | (self._orig_conaffinity != 0)
+        # this checker's collision bits: written into the (possibly shared) copy before its queries
+        self._contype = self._orig_contype.copy()
+        self._conaffinity = self._orig_conaffinity.copy()
         for g in range(m.ngeom):
             if not self._collidable[g]:
                 continue
             if self._geom_class[g] == _ROBOT:
                 self_bit = 1 if self._orig_conaffinity[g] else 0
                 gripper = int(self._geom_body[g]) in self.gripper_bodies
-                m.geom_contype[g] = 1
-                m.geom_conaffinity[g] = self_bit | 2 | (0 if gripper else 4)
+                self._contype[g] = 1
+                self._conaffinity[g] = self_bit | 2 | (0 if gripper else 4)
             else:
-                m.geom_contype[g] = 2
-                m.geom_conaffinity[g] = 0
+                self._contype[g] = 2
+                self._conaffinity[g] = 0
+        m.geom_contype[:] = self._contype
+        m.geom_conaffinity[:] = self._conaffinity
         self._allowed = set()
         for name_a, name_b in allowed_pairs:
             ia = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name_a)
@@ -175,6 +214,11 @@ class CollisionChecker:
                 return True
             b = int(self.model.body_parentid[b])
         return False
+
+    @property
+    def model_source(self) -> mujoco.MjModel:
+        """The model this checker was built from (its private copy is :attr:`model`)."""
+        return self._source
 
     # -- world state ----------------------------------------------------------------
     @property
@@ -212,20 +256,20 @@ class CollisionChecker:
         self._p_tcp_obj = T[:3, 3].copy()
         self._q_tcp_obj = np.empty(4)
         mujoco.mju_mat2Quat(self._q_tcp_obj, np.ascontiguousarray(T[:3, :3]).reshape(-1))
-        m = self.model
         for g in np.nonzero(self._geom_root == self._attached)[0]:
             if self._collidable[g]:
-                m.geom_contype[g] = 4
-                m.geom_conaffinity[g] = 2
+                self._contype[g] = 4
+                self._conaffinity[g] = 2
+        self._shared.owner = None  # written into the copy at the next query
 
     def detach(self) -> None:
         """Stop carrying the attached object (it stays where the world state puts it)."""
         if self._attached is not None:
-            m = self.model
             for g in np.nonzero(self._geom_root == self._attached)[0]:
                 if self._collidable[g]:
-                    m.geom_contype[g] = 2
-                    m.geom_conaffinity[g] = 0
+                    self._contype[g] = 2
+                    self._conaffinity[g] = 0
+            self._shared.owner = None  # written into the copy at the next query
         self._attached = None
         self._attached_name = None
         self._T_tcp_obj = None
@@ -255,7 +299,18 @@ class CollisionChecker:
             d.qpos[adr : adr + 3] = d.site_xpos[self.tcp_site_id] + self._buf_p_obj
             d.qpos[adr + 3 : adr + 7] = self._buf_q_obj
             mujoco.mj_kinematics(m, d)
+        if self._shared.owner is not self:
+            self._own_copy()
         mujoco.mj_collision(m, d)
+
+    def _own_copy(self) -> None:
+        """Write this checker's geom margins and collision bits into the model copy (shared
+        with checkers at other margins, or changed by an attach or detach)."""
+        m = self.model
+        m.geom_margin[:] = self.margin_m
+        m.geom_contype[:] = self._contype
+        m.geom_conaffinity[:] = self._conaffinity
+        self._shared.owner = self
 
     def _bad_contacts(self) -> list[int]:
         """Indices of forbidden contacts in ``self.data`` (the collision bits already

@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 from phyagentos.errors import IKError, format_choices
 
 __all__ = ["IKSolution", "solve_ik", "qp_solver_name", "pose_error", "DEFAULT_ARM_JOINT_NAMES",
-           "POSITION_PRIORITY_ORIENTATION_COST"]
+           "POSITION_PRIORITY_ORIENTATION_COST", "forget_model"]
 
 #: Orientation cost of the frame task in the second phase of ``position_priority``
 #: (position cost 1): a 0.3 rad orientation residual then weighs like 0.6 mm of position
@@ -124,6 +124,17 @@ def _context(model: mujoco.MjModel, frame: str, names: tuple[str, ...]) -> _IKCo
         else:
             _CACHE.move_to_end(key)
         return ctx
+
+
+def forget_model(model: mujoco.MjModel) -> int:
+    """Drop the cached IK contexts of ``model`` (its target is closed): each holds the
+    model, so the cache would keep a closed world's model alive (a LIBERO world's: about
+    250 MB) until newer models push it out. Returns how many contexts were dropped."""
+    with _CACHE_LOCK:
+        stale = [key for key, ctx in _CACHE.items() if ctx.model is model]
+        for key in stale:
+            del _CACHE[key]
+    return len(stale)
 
 
 def solve_ik(

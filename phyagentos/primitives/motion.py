@@ -89,7 +89,9 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
 
     Whatever the gripper holds is attached at its current offset so transfers are
     checked with the object in hand. Checkers are cached per target and margin:
-    building one copies the model (~15 ms), and a target outlives its sessions.
+    building one copies the model (~15 ms), and a target outlives its sessions. The
+    checkers of one target share one copy (a LIBERO world's is about 250 MB, most of it
+    textures: one copy, not one per margin).
     """
     target = ctx.target
     cache = _CHECKERS.setdefault(target, {})
@@ -99,7 +101,9 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
         # adjacent links a third-party model does not exclude) and its gripper's bodies.
         checker = CollisionChecker(target.model, arm_joint_names=target.arm_joint_names, margin_m=margin_m,
                                    tcp_site=target.tcp_site, allowed_pairs=target.allowed_collision_pairs,
-                                   gripper_bodies=target.gripper_body_names)
+                                   gripper_bodies=target.gripper_body_names,
+                                   share_model_of=next((c for c in cache.values()
+                                                        if c.model_source is target.model), None))
         cache[margin_m] = checker
     checker.set_world_state(target.data.qpos)
     checker.detach()

@@ -206,6 +206,17 @@ class ChainFK:
             _CHAINS[key] = (model, chain)  # the model is held, so its id is not reused meanwhile
         return chain
 
+    @staticmethod
+    def forget(model: mujoco.MjModel) -> int:
+        """Drop the cached chains of ``model`` (its target is closed): each entry holds the
+        model, so the cache would keep a closed world's model alive (a LIBERO world's: about
+        250 MB) until it fills up. Returns how many chains were dropped."""
+        with _CHAINS_LOCK:
+            stale = [key for key, (m, _) in _CHAINS.items() if m is model]
+            for key in stale:
+                del _CHAINS[key]
+        return len(stale)
+
     def positions(self, Q: np.ndarray) -> np.ndarray:
         """World positions ``(N, 3)`` m of the site for joint configurations ``Q`` ``(N, n)`` rad."""
         Q = np.asarray(Q, dtype=float)

@@ -67,6 +67,27 @@ def _scene_hash(scene: SceneSpec) -> str:
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def _close_target(target) -> None:
+    """Close ``target`` and drop what the runtime's caches keep of its MuJoCo model (the IK
+    contexts, the safety guard's kinematic chains: each holds the model, so a closed
+    world's model would stay alive, a LIBERO world's about 250 MB, until newer models
+    push it out of those caches)."""
+    model = getattr(target, "model", None) if _mujoco_backed(target) else None
+    target.close()
+    if model is not None:
+        from phyagentos.motion.ik import forget_model  # noqa: PLC0415 - imports mink
+        from phyagentos.runtime.safety_guard import ChainFK  # noqa: PLC0415
+
+        forget_model(model)
+        ChainFK.forget(model)
+
+
+def _mujoco_backed(target) -> bool:
+    from phyagentos.targets.contract import MuJoCoBacked  # noqa: PLC0415
+
+    return isinstance(target, MuJoCoBacked)
+
+
 class TargetPool:
     """Builds targets on demand and carries their state between sessions.
 
@@ -112,7 +133,9 @@ class TargetPool:
         cached = self._live.get(spec.name)
         if cached is None or cached[0] != key:
             if cached is not None:
-                cached[1].close()
+                del self._live[spec.name]  # not held while the next world builds
+                _close_target(cached[1])
+                cached = None  # nor referenced from here
             self._views.pop(spec.name, None)
             target = cls.from_target_spec(spec, scene, seed=seed)
             # the workspace's sensors.yaml entry for this target (read-only deploy config);
@@ -123,7 +146,7 @@ class TargetPool:
                 if sensors:
                     target.configure_sensors(sensors)
             except BaseException:
-                target.close()
+                _close_target(target)
                 raise
             self._live[spec.name] = (key, target)
         return self._live[spec.name][1]
@@ -187,8 +210,14 @@ class TargetPool:
         atomic_write_text(directory / "state.yaml",
                           dump_yaml({"run_id": session.run_id, "session_id": session.session_id, "scene": key}))
 
+    @property
+    def keep_when_idle(self) -> bool:
+        """Whether a runner may keep this pool's targets while it serves another workspace:
+        every live target's class allows it (:attr:`Target.KEEP_WHEN_IDLE`)."""
+        return all(type(target).KEEP_WHEN_IDLE for _, target in self._live.values())
+
     def close(self) -> None:
         self._views.clear()
-        for _, target in self._live.values():
-            target.close()
-        self._live.clear()
+        live, self._live = self._live, {}
+        for _, target in live.values():
+            _close_target(target)

@@ -430,10 +430,13 @@ class _Runner:
         holds no target lock, and forget those workspaces' released locks: a runner that
         serves one workspace after another (a long ``watch``, benchmark episodes, an
         idle runner reused by the next ``run``) keeps the targets, models and renderers
-        of at most two."""
+        of at most two. An idle pool holding a target too big to keep twice
+        (``KEEP_WHEN_IDLE`` false: a LIBERO world, 1.5-2 GB) is closed whatever ``keep``
+        says, so the next workspace's world is not built beside it."""
         held = {r for (r, _), lock in self.locks.items() if lock.held}
         idle = [r for r in self.pools if r not in held]
-        evicted = idle[: max(0, len(self.pools) - keep)]
+        oldest = idle[: max(0, len(self.pools) - keep)]
+        evicted = [r for r in idle if r in oldest or not self.pools[r].keep_when_idle]
         for old_root in evicted:
             self.pools.pop(old_root).close()
             for key in [k for k in self.locks if k[0] == old_root]:

@@ -62,6 +62,10 @@ Optional hooks (the defaults on :class:`Target`, used when a driver does not ove
                                    else simulated seconds (or game steps) since the reset
 ``perception_config()``            ``None``: the perceiver's defaults suit this world
 ``held_objects()``                 ``()``: the target cannot tell what the gripper holds
+``KEEP_WHEN_IDLE``                 ``True``: a runner may keep the target built while it
+                                   serves another workspace (runtime/worker.py keeps two
+                                   workspaces' targets); ``False`` for a world too big to
+                                   hold twice (a LIBERO world)
 =================================  ==========================================================
 
 Optional capabilities (mix-in ABCs, checked with ``isinstance``; a driver declares one by
@@ -263,6 +267,11 @@ class Target(abc.ABC):
     ACTION_FORMS: ClassVar[tuple[str, ...]] = ()
     #: The robot's entity name in perceived scenes and world records.
     ROBOT: ClassVar[str] = "robot"
+    #: Whether a runner may keep this target built, idle, while it serves another
+    #: workspace (a runner keeps the targets of at most two workspaces, so that one it
+    #: comes back to needs no rebuild): ``False`` for worlds too big to hold twice, whose
+    #: workspace's targets are closed as soon as the runner moves on.
+    KEEP_WHEN_IDLE: ClassVar[bool] = True
     #: The widest object the gripper takes in a top-down grasp, m; ``None``: no gripper
     #: (a game, a mobile base). Grasp planning and the graph preflight refuse wider objects
     #: before anything moves. Arms set their own (the Franka Hand: 0.08).

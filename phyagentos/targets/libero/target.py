@@ -70,6 +70,7 @@ from phyagentos.errors import TargetError, format_choices
 
 from ..base import ExecutionResult
 from ..contract import TargetCapabilities
+from ..heap import trim_heap
 from ..mujoco_arm import K_ENV, K_FINGER, K_OBJECT, K_ROBOT, GripperResult, MuJoCoArmTarget, mat_quat
 from .osc import CONTROL_PERIOD_S, OSC_ACTION_DIM, LiberoOsc
 from .privileged import LiberoPrivileged
@@ -295,6 +296,9 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
                                       sensors=("proprioception", "rgb", "depth", "contacts"),
                                       simulated_ground_truth=True, articulated_fixtures=True)
     SENSORS_KEY = "libero"
+    #: A world with its renderer and collision models holds 1.5-2 GB: a runner closes it when
+    #: it moves on to another workspace (a bench episode's), instead of keeping it idle.
+    KEEP_WHEN_IDLE = False
 
     @classmethod
     def scene_from_dict(cls, raw: Mapping[str, Any] | None, *, root: Any = None) -> LiberoScene:
@@ -326,6 +330,9 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         except Exception as exc:
             raise TargetError(f"LIBERO {scene.suite}/{scene.task}: the tool site could not be added: "
                               f"{type(exc).__name__}: {exc}") from exc
+        # robosuite's first model and the compiler's temporaries are freed: give their pages
+        # back (MuJoCo's asset cache stays: see heap)
+        trim_heap()
         sim = self._env.sim
         model, data = sim.model._model, sim.data._data
         m = model
@@ -536,12 +543,16 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         mujoco.mj_forward(m, self._data)
 
     def close(self) -> None:
+        """Free the world (robosuite's sim, the renderers) and return the freed heap pages to
+        the operating system, so that a world built next in this process does not start on
+        top of this one's (:func:`~phyagentos.targets.heap.trim_heap`)."""
         if not self.closed:
             try:
                 self._env.close()
             except Exception:  # pragma: no cover - renderer teardown
                 pass
         super().close()
+        trim_heap()
 
     # -- control -------------------------------------------------------------------------
     def step(self, ctrl: Sequence[float] | None = None) -> None:

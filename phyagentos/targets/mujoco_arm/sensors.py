@@ -26,6 +26,62 @@ log = logging.getLogger(__name__)
 _CAM_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
 
 
+class SharedContextRenderer(mujoco.Renderer):
+    """A :class:`mujoco.Renderer` of another image size that draws with ``base``'s GL
+    context and MuJoCo render context instead of opening its own.
+
+    Every ``mujoco.Renderer`` opens a GL context and a ``MjrContext``, which uploads the
+    model's textures and meshes (under OSMesa into the process's own memory: about 0.5 GB
+    for a LIBERO world with 147 MB of textures). Both draw into the model's offscreen
+    framebuffer (``offwidth`` x ``offheight``) and read back only the image's rectangle,
+    so one context serves every image size up to the framebuffer's; this renderer has its
+    own scene, option and ``width`` x ``height`` rectangle, and renders exactly what a
+    renderer of its own would (the same ``mjr_render`` / ``mjr_readPixels`` code path, a
+    test compares the pixels). :meth:`close` drops its references without freeing the
+    contexts: they are ``base``'s, closed with it.
+
+    Args:
+        base: the renderer whose contexts are shared (it must outlive this one).
+        width, height: image size in pixels, at most the model's offscreen framebuffer.
+
+    Raises:
+        ValueError: an image larger than the offscreen framebuffer (as ``mujoco.Renderer``).
+    """
+
+    def __init__(self, base: mujoco.Renderer, *, width: int, height: int) -> None:
+        # mujoco.Renderer.__init__ is not called: it would open another GL context and
+        # upload the model again. These are the attributes its methods use (mujoco 3.10-3.11).
+        self._gl_context = None
+        self._mjr_context = None
+        model = base.model
+        if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
+            raise ValueError(f"image {width}x{height} larger than the offscreen framebuffer "
+                             f"({model.vis.global_.offwidth}x{model.vis.global_.offheight})")
+        self._width, self._height, self._model = int(width), int(height), model
+        self._scene = mujoco.MjvScene(model=model, maxgeom=base.scene.maxgeom)
+        self._scene_option = mujoco.MjvOption()
+        self._rect = mujoco.MjrRect(0, 0, self._width, self._height)
+        self._depth_rendering = False
+        self._segmentation_rendering = False
+        self._gl_context = base._gl_context
+        self._mjr_context = base._mjr_context
+        self._base = base
+
+    def render(self, *, out: np.ndarray | None = None) -> np.ndarray:
+        """As :meth:`mujoco.Renderer.render`, drawn with ``base``'s contexts.
+
+        Raises:
+            RuntimeError: this renderer or ``base`` is closed.
+        """
+        if self._base._mjr_context is None:
+            raise RuntimeError("render cannot be called after the shared context is closed")
+        return super().render(out=out)
+
+    def close(self) -> None:
+        """Forget the shared contexts (``base`` frees them)."""
+        self._gl_context = None
+        self._mjr_context = None
+
 
 
 class ArmSensors:
@@ -101,6 +157,10 @@ class ArmSensors:
         return len(self._renderers)
 
     def _renderer(self, width: int, height: int):
+        """The renderer of ``width`` x ``height`` pixel images. The first one opens the
+        target's only GL context and MuJoCo render context (which uploads the model's
+        textures and meshes: for a LIBERO world about 0.5 GB under OSMesa); a renderer of
+        another size draws with those same contexts (:class:`SharedContextRenderer`)."""
         key = (int(width), int(height))
         r = self._renderers.get(key)
         vis = self._model.vis.global_
@@ -109,10 +169,24 @@ class ArmSensors:
                               f"({int(vis.offwidth)}x{int(vis.offheight)}, <visual><global offwidth/offheight> in its "
                               f"XML); ask for at most that")
         if r is None:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # glfw warns before failing without a display
-                r = self._renderers[key] = mujoco.Renderer(self._model, height=height, width=width)
+            base = next(iter(self._renderers.values()), None)
+            if base is not None:
+                r = self._renderers[key] = SharedContextRenderer(base, width=key[0], height=key[1])
+            else:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # glfw warns before failing without a display
+                    r = self._renderers[key] = mujoco.Renderer(self._model, height=key[1], width=key[0])
         return r
+
+    def _drop_renderers(self) -> None:
+        """Close every renderer (after a rendering failure: the next call opens a fresh
+        context; the views of another size share the failed one's)."""
+        renderers, self._renderers = self._renderers, {}
+        for r in renderers.values():
+            try:
+                r.close()
+            except Exception:  # noqa: BLE001 - pragma: no cover - GL teardown
+                pass
 
     def render(self, camera: str = "overview", width: int = 640, height: int = 480, *,
                shadows: bool = True) -> np.ndarray:
@@ -134,7 +208,7 @@ class ArmSensors:
         except TargetError:
             raise
         except Exception as exc:
-            self._renderers.pop((int(width), int(height)), None)
+            self._drop_renderers()
             raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc
 
     def _render_scene_option(self) -> mujoco.MjvOption | None:
@@ -199,7 +273,7 @@ class ArmSensors:
         except TargetError:
             raise
         except Exception as exc:
-            self._renderers.pop((w, h), None)
+            self._drop_renderers()
             raise TargetError(f"rendering is not available (no OpenGL backend?): {exc}") from exc
         noise = self._noise_for(spec)
         rgb, depth = noise.apply(rgb, depth)

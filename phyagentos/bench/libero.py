@@ -414,7 +414,7 @@ def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[st
         BenchError: a world could not be built or rendered to measure them.
     """
     from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
-    from phyagentos.targets.libero.descriptors import measure_fixture_looks  # noqa: PLC0415
+    from phyagentos.targets.libero.descriptors import is_support, measure_fixture_looks  # noqa: PLC0415
 
     path = workspace_dir / "libero" / "fixture_looks.yaml"
     cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
@@ -423,7 +423,7 @@ def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[st
     measured = set(cache.get("_measured_tasks", []))
     for i in tasks:
         key = f"{suite}/{i}"
-        cats = {c for c in parse_bddl(resolve_task(suite, i).bddl_path).fixtures.values() if c != "table"}
+        cats = {c for c in parse_bddl(resolve_task(suite, i).bddl_path).fixtures.values() if not is_support(c)}
         if key in measured or cats <= set(cache):
             continue
         logger.info("LIBERO bench: measuring the look of %s's fixtures on generated scenes", key)

@@ -11,12 +11,14 @@ support}``. Without ``place`` the body's top is the place patch.
 :func:`detect_fixtures` finds them in the object cloud (all heights up to the raised crop),
 segmented by the perceiver's own clustering (position and colour,
 :func:`~phyagentos.perception.detect.cluster`), each segment's footprint the minimum-area
-rectangle of its points and its top the :data:`TOP_PERCENTILE` th percentile of their heights; a cluster is a fixture when its
-footprint sides and top each lie within :data:`SIZE_TOL_FRACTION` (plus :data:`SIZE_TOL_M`)
-of the look; each fixture takes the best such cluster (sum of relative size errors), each
-cluster at most one fixture. A fixture with something set on it, or something standing
-against it, makes a cluster that does not fit: it is then not seen in that observation (the
-perceiver remembers a fixture's last sighting: fixtures do not move).
+rectangle of its points and its top the :data:`TOP_PERCENTILE` th percentile of their
+heights; a segment is a fixture when its footprint sides and top each lie within
+:data:`SIZE_TOL_FRACTION` (plus :data:`SIZE_TOL_M`) of the look; a candidate is one segment
+or two adjacent ones (:data:`JOIN_GAP_M`: a fixture whose parts differ in colour); each
+fixture takes the best fitting candidate (sum of relative size errors), no segment going to
+two fixtures. A fixture merged with something else into one larger segment (LIBERO's cabinet
+with the wine rack beside it, in some generated scenes) does not fit: it is not seen in that
+observation (the perceiver keeps a fixture where it was once seen: fixtures do not move).
 
 Nothing here reads a simulator.
 """
@@ -35,15 +37,17 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import _rect, cluster
 from phyagentos.perception.errors import PerceptionError
 
-__all__ = ["FixtureLook", "FixtureSighting", "fixtures_from_declared", "bodies", "detect_fixtures",
+__all__ = ["FixtureLook", "FixtureSighting", "fixtures_from_declared", "segments", "bodies", "detect_fixtures", "JOIN_GAP_M",
            "SIZE_TOL_FRACTION", "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS"]
 
 #: Fewest points (on the perceiver's voxel grid) of a fixture's segment.
 MIN_POINTS = 200
+#: Two segments whose footprints come this close may be one fixture's parts, m.
+JOIN_GAP_M = 0.01
 #: Percentile of a segment's heights taken as its top (the highest points are edges, rims,
 #: knobs; a small thing on top adds a few points).
 TOP_PERCENTILE = 97.0
-#: A cluster fits a look when each footprint side and the top lie within this fraction of
+#: A segment fits a look when each footprint side and the top lie within this fraction of
 #: the look's (plus :data:`SIZE_TOL_M`). On generated libero_goal scenes a fixture seen whole
 #: varies by < 1 cm; LIBERO's plate (0.14 m, 1.8 cm high) lies 0.16 m short of the stove's
 #: long side (0.30 m), far outside (docs/libero.md, "Fixtures").
@@ -149,47 +153,67 @@ class FixtureSighting:
     error: float
 
 
+def _body(points: np.ndarray, heights: np.ndarray, idx: np.ndarray) -> FixtureSighting:
+    xy, h = points[idx, :2], heights[idx]
+    centre, yaw, half = _rect(xy)
+    top = float(np.percentile(h, TOP_PERCENTILE))
+    c, s = abs(math.cos(yaw)), abs(math.sin(yaw))
+    half_world = np.array([c * half[0] + s * half[1], s * half[0] + c * half[1]])
+    z = float(np.median(points[idx, 2] - h)) + 0.5 * top
+    return FixtureSighting("", np.array([centre[0], centre[1], z]), yaw, np.array([half[0], half[1], 0.5 * top]),
+                           half_world, top, int(idx.size), 0.0)
+
+
+def segments(cloud: Cloud, config: PerceptionConfig) -> list[np.ndarray]:
+    """Index arrays of the segments of ``cloud`` a fixture may be (the perceiver's clustering,
+    :func:`~phyagentos.perception.detect.cluster`; at least :data:`MIN_POINTS` points)."""
+    return [idx for idx in cluster(cloud, config) if idx.size >= MIN_POINTS]
+
+
 def bodies(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig) -> list[FixtureSighting]:
-    """Every segment of ``cloud`` (the perceiver's clustering, :func:`~phyagentos.perception.detect.cluster`,
-    on a cloud cropped at the fixtures' height) as an unnamed body (``name`` empty, ``error``
-    0): footprint, yaw, top (``heights``: (N,) m above the support plane); what
-    :func:`detect_fixtures` matches against the looks and what a look is measured from."""
-    out = []
-    points = cloud.points
-    for idx in cluster(cloud, config):
-        if idx.size < MIN_POINTS:
-            continue
-        xy, h = points[idx, :2], heights[idx]
-        centre, yaw, half = _rect(xy)
-        top = float(np.percentile(h, TOP_PERCENTILE))
-        c, s = abs(math.cos(yaw)), abs(math.sin(yaw))
-        half_world = np.array([c * half[0] + s * half[1], s * half[0] + c * half[1]])
-        z = float(np.median(points[idx, 2] - h)) + 0.5 * top
-        out.append(FixtureSighting("", np.array([centre[0], centre[1], z]), yaw, np.array([half[0], half[1], 0.5 * top]),
-                                   half_world, top, int(idx.size), 0.0))
-    return out
+    """Every segment of ``cloud`` (:func:`segments`, on a cloud cropped at the fixtures'
+    height) as an unnamed body (``name`` empty, ``error`` 0): footprint, yaw, top
+    (``heights``: (N,) m above the support plane); what a look is measured from."""
+    return [_body(cloud.points, heights, idx) for idx in segments(cloud, config)]
+
+
+def _adjacent(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> bool:
+    """Whether two segments' axis-aligned footprints overlap when grown by :data:`JOIN_GAP_M`."""
+    lo_a, hi_a = points[a, :2].min(axis=0), points[a, :2].max(axis=0)
+    lo_b, hi_b = points[b, :2].min(axis=0), points[b, :2].max(axis=0)
+    return bool(np.all(lo_a - JOIN_GAP_M <= hi_b) and np.all(lo_b - JOIN_GAP_M <= hi_a))
 
 
 def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLook],
                     config: PerceptionConfig) -> dict[str, FixtureSighting]:
     """``{fixture name: sighting}`` of the declared fixtures found in ``cloud`` (world m,
     every height up to the raised crop) with ``heights`` ((N,) m above the support plane);
-    see the module docstring."""
+    see the module docstring. A candidate body is one segment or the union of two adjacent
+    ones (a fixture whose parts differ in colour -- the stove's knobs and its burner -- may
+    come out as two segments); the candidates a fixture takes share no segment."""
     if not looks:
         return {}
-    fits: list[tuple[float, int, FixtureSighting]] = []
-    for ci, body in enumerate(bodies(cloud, heights, config)):
+    points = cloud.points
+    segs = segments(cloud, config)
+    cands: list[tuple[frozenset[int], np.ndarray]] = [(frozenset([i]), idx) for i, idx in enumerate(segs)]
+    for i in range(len(segs)):
+        for j in range(i + 1, len(segs)):
+            if _adjacent(segs[i], segs[j], points):
+                cands.append((frozenset([i, j]), np.concatenate([segs[i], segs[j]])))
+    fits: list[tuple[float, frozenset[int], FixtureSighting]] = []
+    for parts, idx in cands:
+        body = _body(points, heights, idx)
         seen = (2.0 * float(body.half_extents[0]), 2.0 * float(body.half_extents[1]), body.top_m)
         for look in looks:
             errs = [abs(a - b) / (SIZE_TOL_FRACTION * b + SIZE_TOL_M) for a, b in zip(seen, look.size_m)]
             if max(errs) > 1.0:
                 continue
-            fits.append((float(sum(errs)), ci, replace(body, name=look.name, error=float(sum(errs)))))
+            fits.append((float(sum(errs)), parts, replace(body, name=look.name, error=float(sum(errs)))))
     out: dict[str, FixtureSighting] = {}
     used: set[int] = set()
-    for _, ci, sighting in sorted(fits, key=lambda f: f[0]):
-        if sighting.name in out or ci in used:
+    for _, parts, sighting in sorted(fits, key=lambda f: f[0]):
+        if sighting.name in out or parts & used:
             continue
         out[sighting.name] = sighting
-        used.add(ci)
+        used |= parts
     return out

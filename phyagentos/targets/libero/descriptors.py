@@ -40,7 +40,8 @@ import numpy as np
 from phyagentos.errors import TargetError
 
 __all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "object_boxes", "place_objects",
-           "set_touching", "label_segments", "perception_accuracy"]
+           "set_touching", "label_segments", "perception_accuracy", "FIXTURE_PLACE_SITES", "FIXTURE_SCENES",
+           "FIXTURE_SEED", "FIXTURE_CROP_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
 
 log = logging.getLogger(__name__)
 
@@ -331,15 +332,22 @@ FIXTURE_SEED = 23456
 FIXTURE_CROP_M = 0.6
 
 
+def is_support(category: str) -> bool:
+    """Whether a LIBERO fixture category is the surface the scene stands on (``floor``,
+    ``table``, ``kitchen_table``, ...): the perceiver's support plane, not a fixture body."""
+    return category in ("floor", "table") or category.endswith("_table")
+
+
 def fixture_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """``{fixture: (lo (3,), hi (3,))}``: the world axis-aligned bounding box of each
     declared fixture's visual geoms (all of its bodies), m, from the simulator's state:
-    ground truth, for generated scenes and scoring only. The table is not a fixture here."""
+    ground truth, for generated scenes and scoring only. The support (:func:`is_support`) is
+    not a fixture here."""
     m, d = target.model, target.data
     u = target.env.env
     out = {}
     for name, cat in target._problem.fixtures.items():
-        if cat == "table":
+        if is_support(cat):
             continue
         root = int(m.body_rootid[m.body(u.get_object(name).root_body).id])
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
@@ -375,7 +383,7 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
                           settle_s: float = 0.3) -> dict[str, dict[str, Any]]:
     """``{fixture category: {"size_m": [long, short, top height], "place"?: {"offset_m",
     "half_extents_m", "height_m"}}}`` (m; :mod:`phyagentos.perception.fixtures`) of every
-    fixture category of ``target``'s task but the table, measured on ``scenes`` generated
+    fixture category of ``target``'s task but its support (:func:`is_support`), measured on ``scenes`` generated
     scenes (LIBERO's own placement sampler, seeds from ``seed``: never an init state) with
     every object moved out of view, so the fixture stands alone: the perceiver's cloud
     (``config``, default the target's, its height crop raised to :data:`FIXTURE_CROP_M`)
@@ -433,7 +441,7 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
     finally:
         target.reset(seed=target.init_index)
     out: dict[str, dict[str, Any]] = {}
-    for cat in sorted({c for c in cats.values() if c != "table"}):
+    for cat in sorted({c for c in cats.values() if not is_support(c)}):
         got = seen.get(cat, [])
         if len(got) < 2:
             log.warning("LIBERO fixture look of %s: seen alone in %d of %d generated scenes; left out", cat, len(got),

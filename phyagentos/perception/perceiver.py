@@ -615,7 +615,8 @@ class Perceiver:
         the one detection its relation picks out (or for none).
 
         The other declared objects are associated first (without those objects); their matches
-        (and tracks seen in the last :data:`REMEMBER_S` s, not held) are the landmarks. The
+        (and tracks seen in the last :data:`REMEMBER_S` s, not held) and the perceived fixtures
+        (their bodies) are the landmarks. The
         candidates are the detections within the gate for the object that no other-looking
         object took. An unresolved reference leaves its untracked look-alikes unassociated as
         well (naming one "the other" would say which one is meant). Records the resolutions in
@@ -637,6 +638,8 @@ class Perceiver:
         for n, t in self.tracks.items():
             if n not in landmarks and not t.held and t.released_s is None and stamp - t.last_seen_s <= REMEMBER_S:
                 landmarks[n] = Landmark(n, t.position, t.half_extents, t.yaw, t.shape, t.bottom_m)
+        for n, (s, _, _) in self.fixture_tracks.items():  # a perceived fixture: its body (on it: its top)
+            landmarks[n] = Landmark(n, s.position, s.half_extents, s.yaw, "box", 0.0)
         chosen: set[int] = set()
         for j in pending:
             desc = self.declared[j]

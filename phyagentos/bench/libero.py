@@ -58,7 +58,7 @@ LIBERO_TARGET = "libero"
 #: How the cached looks were measured (a cache measured otherwise is measured again).
 _LOOKS_METHOD = "generated_clutter_v2"
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
-_FIXTURE_LOOKS_METHOD = "generated_alone_v1"
+_FIXTURE_LOOKS_METHOD = "generated_alone_v2"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:

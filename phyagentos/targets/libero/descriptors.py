@@ -364,19 +364,28 @@ def fixture_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 def _place_site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray] | None:
     """``(centre xy (2,), half extents on the world axes (2,))`` of fixture ``name``'s place
-    site (:data:`FIXTURE_PLACE_SITES`), world m, as LIBERO's checker reads it
-    (``SiteObject.in_box``: ``|R @ size|``); None for a category without one. (The site's
-    own z is not the surface: the stove's ``cook_region`` lies 0.75 cm above the table,
-    inside its 3 cm burner, on which things rest.)"""
+    site (:data:`FIXTURE_PLACE_SITES`), world m; None for a category without one or a site
+    that is not level. LIBERO's ``On`` reads the site in its own frame (``SiteObject.under``:
+    ``|(R (p - c))_xy| < size_xy``): a rectangle turned by the fixture's yaw; the half
+    extents are the largest axis-aligned box of the rectangle's proportions inside it (the
+    rectangle itself when the fixture stands square to the world, as in libero_goal; a little
+    smaller when LIBERO's sampler turns it, as libero_spatial's cabinet by up to 0.45 rad).
+    (The site's own z is not the surface: the stove's ``cook_region`` lies 0.75 cm above the
+    table, inside its 3 cm burner, on which things rest.)"""
     suffix = FIXTURE_PLACE_SITES.get(cat)
     if suffix is None:
         return None
     m, d = target.model, target.data
     sid = m.site(f"{name}_{suffix}").id
-    size = np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)
+    a, b = (float(v) for v in np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)[:2])
     R = d.site_xmat[sid].reshape(3, 3)
-    half = np.abs(R @ size)
-    return d.site_xpos[sid][:2].copy(), half[:2]
+    if abs(R[2, 2]) < 0.99:
+        return None
+    c, s = abs(R[0, 0]), abs(R[1, 0])
+    if s > c:  # turned by about a quarter: its long side along world y
+        a, b, c, s = b, a, s, c
+    k = min(1.0, a / (a * c + b * s), b / (a * s + b * c))
+    return d.site_xpos[sid][:2].copy(), np.array([k * a, k * b])
 
 
 def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = FIXTURE_SEED, config=None,

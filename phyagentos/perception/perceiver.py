@@ -578,7 +578,8 @@ class Perceiver:
             keep |= over
             centre, half, surface = look.place_patch(s.position[:2], s.half_xy_world)
             on_patch = np.all(np.abs(p[:, :2] - centre) <= half, axis=1)
-            limit = np.where(on_patch, min(surface, s.top_m), s.top_m) + FIXTURE_MARGIN_M
+            top = look.size_m[2]  # the model's top (the sighting's may include what stands on it)
+            limit = np.where(on_patch, min(surface, top), top) + FIXTURE_MARGIN_M
             own |= over & (heights <= limit)
             hz = max(0.5 * surface, 1e-3)
             pos = np.array([centre[0], centre[1], plane.z_at(centre) + hz])
@@ -616,7 +617,7 @@ class Perceiver:
 
         The other declared objects are associated first (without those objects); their matches
         (and tracks seen in the last :data:`REMEMBER_S` s, not held) and the perceived fixtures
-        (their bodies) are the landmarks. The
+        (their bodies' footprints, topped by their place surfaces) are the landmarks. The
         candidates are the detections within the gate for the object that no other-looking
         object took. An unresolved reference leaves its untracked look-alikes unassociated as
         well (naming one "the other" would say which one is meant). Records the resolutions in
@@ -638,8 +639,12 @@ class Perceiver:
         for n, t in self.tracks.items():
             if n not in landmarks and not t.held and t.released_s is None and stamp - t.last_seen_s <= REMEMBER_S:
                 landmarks[n] = Landmark(n, t.position, t.half_extents, t.yaw, t.shape, t.bottom_m)
-        for n, (s, _, _) in self.fixture_tracks.items():  # a perceived fixture: its body (on it: its top)
-            landmarks[n] = Landmark(n, s.position, s.half_extents, s.yaw, "box", 0.0)
+        for look in self.fixtures:  # a perceived fixture: its body's footprint, its top where things rest on it
+            if look.name in self.fixture_tracks:
+                s = self.fixture_tracks[look.name][0]
+                top = look.place_height_m if look.place_height_m is not None else look.size_m[2]
+                landmarks[look.name] = Landmark(look.name, s.position, np.array([s.half_extents[0], s.half_extents[1],
+                                                                                  0.5 * top]), s.yaw, "box", 0.0)
         chosen: set[int] = set()
         for j in pending:
             desc = self.declared[j]

@@ -7,7 +7,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import yaml
 
@@ -16,21 +16,30 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def run_generated_pick(tmp_path: Path, *, name: str, description: str, suite: str, task: int,
                        looks: Mapping[str, Mapping[str, Any]], fixture: Mapping[str, str], obj: str,
-                       workspace_box: Mapping[str, list] | None = None, seed: int = 108) -> dict:
+                       workspace_box: Mapping[str, list] | None = None, seed: int = 108,
+                       fixtures: Sequence[Mapping[str, Any]] = (), place_on: str | None = None) -> dict:
     """Run a one-node pick graph of ``obj`` (declared with every category of ``looks``, one
-    object each, named ``<category>_1``) in a fresh workspace ``tmp_path/ws`` whose TARGETS.md
-    has the LIBERO target and whose safety box is ``workspace_box`` (the template's if None).
-    Returns ``phyagentos run --json``'s report."""
-    nodes = [{"id": "pick", "skill": "pick", "params": {"object": obj},
-              "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}]}]
+    object each, named ``<category>_1``; the fixture ``fixture`` and ``fixtures``) in a fresh
+    workspace ``tmp_path/ws`` whose TARGETS.md has the LIBERO target and whose safety box is
+    ``workspace_box`` (the template's if None); with ``place_on``, a place node on it follows
+    (accepted when ``obj`` rests on it and is let go). Returns ``phyagentos run --json``'s
+    report."""
+    nodes: list[dict] = [{"id": "pick", "skill": "pick", "params": {"object": obj},
+                          "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}]}]
+    if place_on is not None:
+        nodes.append({"id": "place", "skill": "place", "params": {"object": obj, "region": place_on},
+                      "accept": [{"on": {"object": obj, "support": place_on}}, {"released": obj}],
+                      "depends_on": ["pick"]})
     objects = [{"name": f"{c}_1", "class": c, **look} for c, look in looks.items()]
     return run_generated_graph(tmp_path, name=name, description=description, suite=suite, task=task,
-                               objects=objects, fixtures=[fixture], nodes=nodes, workspace_box=workspace_box, seed=seed)
+                               objects=objects, fixtures=[fixture, *fixtures], nodes=nodes,
+                               workspace_box=workspace_box, seed=seed)
 
 
 def run_generated_graph(tmp_path: Path, *, name: str, description: str, suite: str, task: int,
-                        objects: list[Mapping[str, Any]], fixtures: list[Mapping[str, str]], nodes: list[dict],
-                        workspace_box: Mapping[str, list] | None = None, seed: int = 108) -> dict:
+                        objects: Sequence[Mapping[str, Any]], fixtures: Sequence[Mapping[str, Any]],
+                        nodes: Sequence[dict], workspace_box: Mapping[str, list] | None = None,
+                        seed: int = 108) -> dict:
     """Run goal graph ``nodes`` (each given a 600 s execution and 180 s heartbeat limit) on
     generated scene ``seed`` of LIBERO ``suite`` task ``task`` with the declared ``objects`` and
     ``fixtures``, in a fresh workspace ``tmp_path/ws`` as :func:`run_generated_pick` makes it.
@@ -46,12 +55,12 @@ def run_generated_graph(tmp_path: Path, *, name: str, description: str, suite: s
         doc = yaml.safe_load(safety.read_text())
         doc["workspace_box"] = dict(workspace_box)
         safety.write_text(yaml.safe_dump(doc, sort_keys=False))
-    nodes = [{**n, "limits": {"execution_timeout_s": 600, "heartbeat_timeout_s": 180, **n.get("limits", {})}}
-             for n in nodes]
+    limited = [{**n, "limits": {"execution_timeout_s": 600, "heartbeat_timeout_s": 180, **n.get("limits", {})}}
+               for n in nodes]
     graph = {"version": 1, "name": name, "description": description, "defaults": {"target": "libero"},
              "scene": {"suite": suite, "task": task, "generated": True, "objects": [dict(o) for o in objects],
                        "fixtures": [dict(f) for f in fixtures]},
-             "nodes": nodes}
+             "nodes": limited}
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(graph, sort_keys=False))
     out = subprocess.run([sys.executable, "-m", "phyagentos.cli", "run", str(path), "--workspace", str(tmp_path / "ws"),

@@ -114,7 +114,8 @@ def test_two_references_bind_the_two_identical_names():
 
 def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placement(tmp_path):
     """prepare_libero_suite writes the reference into the episode's declared scene; the looks
-    cache is given (measuring them needs the simulator), so nothing is built."""
+    caches (objects' and fixtures') are given (measuring them needs the simulator), so nothing
+    is built."""
     ws = tmp_path / "ws"
     (ws / "libero").mkdir(parents=True)
     look = {"shape": "cylinder", "colour": [0.1, 0.1, 0.1], "size_m": [0.12, 0.12, 0.05]}
@@ -124,12 +125,21 @@ def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placemen
     cache = {"_method": _LOOKS_METHOD, "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
              **{c: look for c in cats}}
     (ws / "libero" / "descriptors.yaml").write_text(yaml.safe_dump(cache))
+    fixture_look = {"size_m": [0.26, 0.22, 0.23], "place": {"offset_m": [0.0, -0.015], "half_extents_m": [0.125, 0.094],
+                                                            "height_m": 0.227}}
+    fixture_cats = {c for c in _problem().fixtures.values() if c != "table"}
+    (ws / "libero" / "fixture_looks.yaml").write_text(yaml.safe_dump(
+        {"_method": "generated_alone_v2", "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
+         **{c: fixture_look for c in fixture_cats}}))
     suite, ids, seeds = prepare_libero_suite("libero_spatial", ws, tasks=("0", "4"), seeds=(0,))
     assert ids == ("t0", "t4")
     g0 = yaml.safe_load((suite.parent / "t0.yaml").read_text())
     objects = {o["name"]: o for o in g0["scene"]["objects"]}
     assert objects[BOWL]["where"] == {"relation": "between", "of": [PLATE, RAMEKIN]}
     assert "where" not in objects[TWIN] and {PLATE, RAMEKIN, COOKIES} <= set(objects)
+    # the fixtures carry their measured looks (perception finds them), the table none
+    fixtures = {f["name"]: f for f in g0["scene"]["fixtures"]}
+    assert fixtures["wooden_cabinet_1"]["place"]["height_m"] == 0.227 and "size_m" not in fixtures["main_table"]
     text = (suite.parent / "t0.yaml").read_text()
     assert "region" not in str(g0["scene"]) and ":init" not in text and "goal" not in g0["scene"]
     # the table scene's tcp box (the template's would hold the arm's start pose outside)

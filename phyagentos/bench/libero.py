@@ -57,6 +57,8 @@ logger = logging.getLogger(__name__)
 LIBERO_TARGET = "libero"
 #: How the cached looks were measured (a cache measured otherwise is measured again).
 _LOOKS_METHOD = "generated_clutter_v3"  # v3: objects kept off the fixtures
+#: How the cached fixture looks were measured (:func:`_fixture_looks`).
+_FIXTURE_LOOKS_METHOD = "generated_alone_v2"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:
@@ -326,6 +328,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     ident = "".join(c if c.isalnum() or c == "_" else "_" for c in suite)
     root.mkdir(parents=True, exist_ok=True)
     looks = _descriptors(Path(workspace_dir), suite, [i for i, *_ in planned])
+    fixture_looks = _fixture_looks(Path(workspace_dir), suite, [i for i, *_ in planned])
     entries = []
     for i, task, problem, nodes, where in planned:
         declared = problem.declared()
@@ -342,7 +345,9 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
                    for o in declared["objects"] if o["class"] in looks or o["name"] in named]
         graph = {"version": 1, "name": f"{ident}_t{i}", "description": task.instruction,
                  "defaults": {"target": LIBERO_TARGET},
-                 "scene": {"suite": suite, "task": i, "objects": objects, "fixtures": declared["fixtures"]},
+                 "scene": {"suite": suite, "task": i, "objects": objects,
+                           # a fixture with a measured look is perceived (places onto it)
+                           "fixtures": [{**f, **fixture_looks.get(f["class"], {})} for f in declared["fixtures"]]},
                  "nodes": nodes}
         path = root / f"t{i}.yaml"
         atomic_write_text(path, f"# LIBERO {suite} task {i}: {task.instruction!r} (the task's instruction), planned\n"
@@ -395,6 +400,44 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str,
         cache["_measured_tasks"] = sorted(measured)
         atomic_write_text(path, "# Looks of LIBERO's object categories, measured on generated cluttered scenes by the\n"
                                 "# project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n"
+                          + yaml.safe_dump(cache, sort_keys=True))
+    return {k: v for k, v in cache.items() if not k.startswith("_")}
+
+
+def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
+    """Looks of the fixture categories of ``tasks`` (:func:`~phyagentos.targets.libero.descriptors.measure_fixture_looks`:
+    each fixture alone on generated scenes, with its place patch), cached per workspace in
+    ``libero/fixture_looks.yaml``; a task whose fixture categories are all cached builds
+    nothing.
+
+    Raises:
+        BenchError: a world could not be built or rendered to measure them.
+    """
+    from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
+    from phyagentos.targets.libero.descriptors import is_support, measure_fixture_looks  # noqa: PLC0415
+
+    path = workspace_dir / "libero" / "fixture_looks.yaml"
+    cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
+    if cache.get("_method") != _FIXTURE_LOOKS_METHOD:
+        cache = {"_method": _FIXTURE_LOOKS_METHOD}
+    measured = set(cache.get("_measured_tasks", []))
+    for i in tasks:
+        key = f"{suite}/{i}"
+        cats = {c for c in parse_bddl(resolve_task(suite, i).bddl_path).fixtures.values() if not is_support(c)}
+        if key in measured or cats <= set(cache):
+            continue
+        logger.info("LIBERO bench: measuring the look of %s's fixtures on generated scenes", key)
+        try:
+            with LiberoTarget("libero_fixture_looks", LiberoScene(suite=suite, task=i), seed=0) as target:
+                for cat, look in measure_fixture_looks(target).items():
+                    cache.setdefault(cat, look)
+        except TargetError as exc:
+            raise BenchError(f"LIBERO {key}: fixture looks could not be measured: {exc}") from exc
+        measured.add(key)
+        cache["_measured_tasks"] = sorted(measured)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(path, "# Looks of LIBERO's fixture categories (size, top, place patch), measured on generated\n"
+                                "# scenes by the project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n"
                           + yaml.safe_dump(cache, sort_keys=True))
     return {k: v for k, v in cache.items() if not k.startswith("_")}
 

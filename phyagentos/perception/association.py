@@ -207,6 +207,12 @@ def _over(det: Detection, lm: Landmark) -> bool:
     return _footprint_margin(det.position[:2], lm.position, lm.yaw, lm.half_extents, lm.shape) >= -0.01
 
 
+def _rests_on(det: Detection, lm: Landmark, config: PerceptionConfig) -> bool:
+    """``det`` stands on ``lm``: its centre over ``lm``'s footprint and its bottom within
+    ``relations.on_gap_m`` of ``lm``'s top."""
+    return _over(det, lm) and abs(float(det.bottom_m) - lm.top_m) <= config.relations.on_gap_m
+
+
 def _off_table(det: Detection, config: PerceptionConfig) -> bool:
     return max(float(det.bottom_m), float(det.low_m)) >= config.association.off_table_m
 
@@ -233,9 +239,11 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
     footprint radius; ``table_center`` -- the smallest distance to ``table_centre_xy``; each
     picks the best candidate when the runner-up scores at least ``relation_margin_m`` worse.
     ``on``/``in`` a perceived landmark: the one candidate over its footprint (raised off the
-    table, for ``on``); a landmark not perceived (a fixture such as a stove or cabinet): the
-    one candidate off the table (bottom at least ``off_table_m`` above it) while the others
-    rest on it -- being on or in something other than the table is what perception can see.
+    table, for ``on``); a landmark not perceived (a fixture without a look, or one not seen):
+    the one candidate off the table (bottom at least ``off_table_m`` above it) and resting on
+    no other perceived landmark (a bowl on the cabinet is not on the stove) while the others
+    rest on the table -- being on or in something other than the table is what perception
+    can see.
 
     Returns:
         The resolution; ``detection`` None (the object stays unseen) with the reason when a
@@ -289,8 +297,11 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
         ok = [i for i in cands if _over(detections[i], lm_seen) and (rel == "in" or off[i])]
         how = f"over {lm_seen.name}'s footprint" + (" and off the table" if rel == "on" else "")
     else:
-        ok = [i for i in cands if off[i]]
-        how = f"off the table ({ref.of[0]} is not perceived)"
+        elsewhere = {i: [n for n, lm in landmarks.items() if _rests_on(detections[i], lm, config)] for i in cands}
+        ok = [i for i in cands if off[i] and not elsewhere[i]]
+        on_other = sorted({n for i in cands if off[i] for n in elsewhere[i]})
+        how = f"off the table ({ref.of[0]} is not perceived)" + (
+            f", besides those on {', '.join(on_other)}" if on_other else "")
     table = tuple((i, 0.0 if i in ok else 1.0) for i in cands)
     if len(ok) != 1:
         return unresolved(f"{rel}: {len(ok)} candidates {how}", table)

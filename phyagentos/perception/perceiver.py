@@ -20,6 +20,19 @@ One :meth:`Perceiver.observe` call runs the pipeline on every frame of one obser
 5. tracks: fusion over observations (``tracks``);
 6. holding from proprioception (the held object's pose follows the tcp), then relations.
 
+Declared fixtures with a measured look (``fixtures: [{name, class, size_m, place?}]``,
+:mod:`~phyagentos.perception.fixtures`) are found before stage 3 on a cloud whose height crop
+is raised to the tallest fixture plus :data:`FIXTURE_LOAD_M`; everything above
+``workspace.max_height_m`` is then kept only over a perceived fixture's footprint (what stands
+on the cabinet), the fixture's own points (up to its top, over its place patch up to the
+patch's surface, plus :data:`FIXTURE_MARGIN_M`) are removed, an object whose lowest points sit
+on the patch rests on it (stacking), and each fixture is reported as a ``kind: fixture``
+entity whose box is its place patch (its top the patch's surface), the perceived body in its
+attributes. Fixtures do not move: a fixture is looked for until it is seen, then reported
+where it was seen (``source: remembered`` in later observations; something set on it would
+change its segment), so the search costs one clustering of the raised cloud per observation
+only while a declared fixture is unseen.
+
 The Perceiver keeps per-session state (tracks, the open-gripper wrist-force baseline, the
 held object); :meth:`reset` clears it. It never reads simulator state.
 """
@@ -61,6 +74,7 @@ from phyagentos.perception.detect import Detection, detect_clusters
 from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
+from phyagentos.perception.fixtures import FixtureLook, FixtureSighting, detect_fixtures, fixtures_from_declared
 from phyagentos.perception.frames import CameraFrame, Proprioception
 from phyagentos.perception.relations import (
     _footprint_margin,
@@ -98,6 +112,17 @@ REMEMBERED_CONFIDENCE = 0.9
 #: A depth return this much nearer than where the ray enters the object's box is something
 #: in the way, m (depth noise is ~1-3 mm at 1 m, docs/perception.md).
 OCCLUSION_MARGIN_M = 0.01
+#: Above a fixture's top the crop is raised by this much, m: the tallest thing set on it
+#: (LIBERO's wine bottle: 0.29 m).
+FIXTURE_LOAD_M = 0.35
+#: A fixture's own points reach this far above its top (or its place patch's surface), m;
+#: what lies higher stands on it (within ``relations.on_gap_m`` of the surface: stacked).
+FIXTURE_MARGIN_M = 0.008
+#: A fixture's footprint grown by this for its own points (rect fit and depth edges), m.
+FIXTURE_EDGE_M = 0.015
+#: 1-sigma position uncertainty reported for a fixture's place patch, m (its footprint's
+#: rectangle fit on a 1 cm grid).
+FIXTURE_STD_M = 0.01
 
 
 def _quat_yaw(yaw: float) -> list[float]:
@@ -149,8 +174,11 @@ class Perceiver:
             raise PerceptionError(f"config must be a PerceptionConfig, got {type(config).__name__}")
         self.config = config or PerceptionConfig.default()
         self.declared: tuple[ObjectDescriptor, ...] = tuple(descriptors_from_declared(declared))
+        #: Declared fixtures with a look (:mod:`~phyagentos.perception.fixtures`).
+        self.fixtures: tuple[FixtureLook, ...] = (tuple(fixtures_from_declared(declared))
+                                                  if isinstance(declared, Mapping) else ())
         reserved = {"tcp", "gripper", "table", robot_name}
-        clash = sorted(reserved & {d.name for d in self.declared})
+        clash = sorted(reserved & ({d.name for d in self.declared} | {f.name for f in self.fixtures}))
         if clash:
             raise PerceptionError(f"declared object name(s) {clash} clash with reserved entity names {sorted(reserved)}")
         self.robot_name = robot_name
@@ -159,6 +187,8 @@ class Perceiver:
     def reset(self) -> None:
         """Forget every track, the wrist-force baseline and the held object."""
         self.tracks: dict[str, Track] = {}
+        #: Each fixture's last sighting and its time, s: ``{name: (sighting, stamp, confidence)}``.
+        self.fixture_tracks: dict[str, tuple[FixtureSighting, float, float]] = {}
         self._baseline_n: float | None = None
         self._held: str | None = None
         self._grasp_height_m: float | None = None
@@ -191,7 +221,36 @@ class Perceiver:
             d["shape_votes"] = {str(k): int(v) for k, v in (d.get("shape_votes") or {}).items()}
             tracks[name] = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in d.items()}
         return {"tracks": tracks, "baseline_n": self._baseline_n, "held": self._held,
-                "grasp_height_m": self._grasp_height_m}
+                "grasp_height_m": self._grasp_height_m, "fixtures": self.export_fixtures()}
+
+    def export_fixtures(self) -> dict:
+        """The fixtures' last sightings as plain data (``{name: {position, yaw, half_extents,
+        half_xy_world, top_m, points, error, stamp_s, confidence}}``, m, rad, s), for
+        :meth:`restore_fixtures`."""
+        return {n: {"position": s.position.tolist(), "yaw": float(s.yaw), "half_extents": s.half_extents.tolist(),
+                    "half_xy_world": s.half_xy_world.tolist(), "top_m": float(s.top_m), "points": int(s.points),
+                    "error": float(s.error), "stamp_s": float(t), "confidence": float(c)}
+                for n, (s, t, c) in self.fixture_tracks.items()}
+
+    def restore_fixtures(self, data: Mapping[str, Any]) -> None:
+        """Continue from :meth:`export_fixtures` data; fixtures not declared with a look are
+        dropped.
+
+        Raises:
+            PerceptionError: an entry without the layout :meth:`export_fixtures` writes.
+        """
+        looks = {f.name for f in self.fixtures}
+        self.fixture_tracks = {}
+        for name, d in (data or {}).items():
+            if name not in looks:
+                continue
+            try:
+                sighting = FixtureSighting(name, np.asarray(d["position"], float), float(d["yaw"]),
+                                           np.asarray(d["half_extents"], float), np.asarray(d["half_xy_world"], float),
+                                           float(d["top_m"]), int(d["points"]), float(d["error"]))
+                self.fixture_tracks[name] = (sighting, float(d["stamp_s"]), float(d["confidence"]))
+            except (KeyError, TypeError, ValueError) as exc:
+                raise PerceptionError(f"perception state: fixture {name!r} has an unexpected layout: {exc}") from None
 
     def restore_state(self, state: Mapping[str, Any]) -> None:
         """Continue from :meth:`export_state` data; tracks of objects no longer declared are
@@ -217,6 +276,7 @@ class Perceiver:
             except TypeError as exc:
                 raise PerceptionError(f"perception state: track {name!r} has an unexpected layout: {exc}") from None
         self.tracks = tracks
+        self.restore_fixtures(state.get("fixtures") or {})
         self._baseline_n = state.get("baseline_n")
         self._held = state.get("held") if state.get("held") in tracks else None
         self._grasp_height_m = state.get("grasp_height_m")
@@ -240,9 +300,18 @@ class Perceiver:
 
     # ------------------------------------------------------------------ pipeline stages
 
+    def fixture_ceiling_m(self) -> float:
+        """The height crop (m above the support plane) of the cloud fixtures are found in:
+        ``workspace.max_height_m``, or the tallest declared fixture's top plus
+        :data:`FIXTURE_LOAD_M` when that is higher."""
+        tops = [f.size_m[2] for f in self.fixtures]
+        return max([self.config.workspace.max_height_m] + [t + FIXTURE_LOAD_M for t in tops])
+
     def object_cloud(self, frames: Sequence[CameraFrame], proprio: Proprioception, *,
-                     obstacles=None, robot_capsules: Sequence[RobotCapsule] = ()) -> tuple[Cloud, np.ndarray, Plane]:
-        """Stages 1-2: ``(object cloud, (N,) heights above the plane, plane)``."""
+                     obstacles=None, robot_capsules: Sequence[RobotCapsule] = (),
+                     max_height_m: float | None = None) -> tuple[Cloud, np.ndarray, Plane]:
+        """Stages 1-2: ``(object cloud, (N,) heights above the plane, plane)``; points up to
+        ``max_height_m`` above the plane (default ``workspace.max_height_m``)."""
         cc, cfg = self.config.cloud, self.config
         strides = [cfg.stride_for(f.intrinsics.width) for f in frames]
         coarse = merge_clouds([
@@ -259,7 +328,8 @@ class Perceiver:
         parts = []
         for i, (f, s) in enumerate(zip(frames, strides)):
             d, h = heights_above(f, plane, stride=s)
-            cand = np.flatnonzero((h > cfg.table.object_min_height_m) & (h < cfg.workspace.max_height_m)
+            ceiling = cfg.workspace.max_height_m if max_height_m is None else float(max_height_m)
+            cand = np.flatnonzero((h > cfg.table.object_min_height_m) & (h < ceiling)
                                   & (d >= cc.min_depth_m) & (d <= cc.max_depth_m))
             parts.append(backproject(f, stride=s, min_depth_m=cc.min_depth_m, max_depth_m=cc.max_depth_m,
                                      camera_index=i, pixels=cand))
@@ -318,7 +388,11 @@ class Perceiver:
         t0 = time.perf_counter()
         self.update_proprioception(proprio)
 
-        cloud, heights, plane = self.object_cloud(frames, proprio, obstacles=obstacles, robot_capsules=robot_capsules)
+        cloud, heights, plane = self.object_cloud(frames, proprio, obstacles=obstacles, robot_capsules=robot_capsules,
+                                                  max_height_m=self.fixture_ceiling_m() if self.fixtures else None)
+        fixture_dets: list[Detection] = []
+        if self.fixtures:
+            cloud, heights, fixture_dets = self._perceive_fixtures(cloud, heights, plane, stamp)
         self._last_plane = plane
         self.last_cloud = cloud
         t1 = time.perf_counter()
@@ -326,7 +400,8 @@ class Perceiver:
         clusters = detect_clusters(cloud, heights, plane, cfg, focal)
         if self.declared:  # a cluster larger than every declared object: the touching objects it holds
             clusters = split_clusters(clusters, cloud, heights, plane, cfg, focal, self.declared)
-        dets = _stack([d for d, _ in clusters], plane, cfg)
+        # an object resting on a fixture's place patch stands on it (the patch as a support)
+        dets = _stack([d for d, _ in clusters] + fixture_dets, plane, cfg)[:len(clusters)]
         hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
         if hanging:  # the part of the held object below the fingers: the hand's, not a thing on the table
             log.debug("perception: %d segment(s) hang from the closed hand: %s", len(hanging),
@@ -448,9 +523,14 @@ class Perceiver:
         for ent in entities:
             if ent["attributes"]["confidence"] < cfg.fusion.min_confidence and ent["kind"] == "object":
                 ent["kind"] = "unknown"
+        supports: dict[str, dict] = {}
+        for look in self.fixtures:
+            if look.name in self.fixture_tracks:
+                ent, supports[look.name] = self._fixture_entity(look, plane, stamp)
+                entities.append(ent)
         entities.extend(self._robot_entities(proprio))
 
-        relations = self._relations(geo, region_list, holding_rel)
+        relations = self._relations(geo, region_list, holding_rel, supports)
         unseen = [n for n in names if not (n in self.tracks and (self.tracks[n].seen_now or self.tracks[n].held))
                   and n not in remembered]
         t4 = time.perf_counter()
@@ -474,6 +554,65 @@ class Perceiver:
                if self.last_references else {}),
         }
 
+    # ------------------------------------------------------------------ fixtures
+
+    def _perceive_fixtures(self, cloud: Cloud, heights: np.ndarray, plane: Plane,
+                           stamp: float) -> tuple[Cloud, np.ndarray, list[Detection]]:
+        """Find the declared fixtures in ``cloud`` (every height up to :meth:`fixture_ceiling_m`),
+        update their tracks, and return the object cloud (points under
+        ``workspace.max_height_m``, or over a fixture's footprint, minus the fixtures' own
+        points), its heights, and one pseudo-detection per tracked fixture (its place patch,
+        for stacking). Class docstring; :mod:`~phyagentos.perception.fixtures`."""
+        cfg = self.config
+        missing = [f for f in self.fixtures if f.name not in self.fixture_tracks]
+        for name, sighting in detect_fixtures(cloud, heights, missing, cfg).items():
+            log.info("perception: fixture %s at %s, top %.3f m (size error %.2f)", name, _r(sighting.position),
+                     sighting.top_m, sighting.error)
+            self.fixture_tracks[name] = (sighting, stamp, 1.0 - sighting.error / 6.0)
+        p = cloud.points
+        keep = heights < cfg.workspace.max_height_m
+        own = np.zeros(len(cloud), dtype=bool)
+        dets = []
+        for look in self.fixtures:
+            if look.name not in self.fixture_tracks:
+                continue
+            s = self.fixture_tracks[look.name][0]
+            local = _in_frame(p[:, :2], s.position[:2], s.yaw)
+            over = np.all(np.abs(local) <= s.half_extents[:2] + FIXTURE_EDGE_M, axis=1)
+            keep |= over
+            centre, half, surface = look.place_patch(s.position[:2], s.half_xy_world)
+            on_patch = np.all(np.abs(p[:, :2] - centre) <= half, axis=1)
+            top = look.size_m[2]  # the model's top (the sighting's may include what stands on it)
+            limit = np.where(on_patch, min(surface, top), top) + FIXTURE_MARGIN_M
+            own |= over & (heights <= limit)
+            hz = max(0.5 * surface, 1e-3)
+            pos = np.array([centre[0], centre[1], plane.z_at(centre) + hz])
+            dets.append(Detection(pos, 0.0, np.array([half[0], half[1], hz]), "box", np.zeros(3), np.zeros(3), 0, 0,
+                                  FIXTURE_STD_M, math.pi, 1.0, 0.0))
+        keep &= ~own
+        return cloud.select(keep), heights[keep], dets
+
+    def _fixture_entity(self, look: FixtureLook, plane: Plane, stamp: float) -> tuple[dict, dict]:
+        """The snapshot entity of a tracked fixture (``kind: fixture``; its box the place
+        patch, its top the patch's surface; the perceived body in ``attributes.body``) and
+        the patch's box for :meth:`_relations`."""
+        s, seen_s, conf = self.fixture_tracks[look.name]
+        centre, half, surface = look.place_patch(s.position[:2], s.half_xy_world)
+        hz = 0.5 * surface
+        pos = np.array([centre[0], centre[1], plane.z_at(centre) + hz])
+        now = seen_s == stamp
+        attrs = {"source": "perceived" if now else "remembered", "class": look.cls,
+                 "confidence": _r(min(1.0, max(0.0, conf)), 3),  # it stands where it was seen
+                 "position_std_m": _r(FIXTURE_STD_M, 5), "points": int(s.points) if now else 0,
+                 "last_seen_s": _r(seen_s, 6), "surface_m": _r(surface),
+                 "body": {"position": _r(s.position), "yaw": _r(s.yaw), "size": _r(s.half_extents),
+                          "top_m": _r(s.top_m)}}
+        if not now:
+            attrs["remembered"] = True
+        ent = {"name": look.name, "kind": "fixture", "position": _r(pos), "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
+               "size": _r([half[0], half[1], hz]), "attributes": attrs}
+        return ent, _geo(pos, 0.0, np.array([half[0], half[1], hz]), "box", 0.0, plane, FIXTURE_STD_M)
+
     # ------------------------------------------------------------------ spatial references
 
     def _resolve_references(self, C: np.ndarray, dets: list[Detection], stamp: float) -> np.ndarray:
@@ -481,7 +620,8 @@ class Perceiver:
         the one detection its relation picks out (or for none).
 
         The other declared objects are associated first (without those objects); their matches
-        (and tracks seen in the last :data:`REMEMBER_S` s, not held) are the landmarks. The
+        (and tracks seen in the last :data:`REMEMBER_S` s, not held) and the perceived fixtures
+        (their bodies' footprints, topped by their place surfaces) are the landmarks. The
         candidates are the detections within the gate for the object that no other-looking
         object took. An unresolved reference leaves its untracked look-alikes unassociated as
         well (naming one "the other" would say which one is meant). Records the resolutions in
@@ -503,6 +643,12 @@ class Perceiver:
         for n, t in self.tracks.items():
             if n not in landmarks and not t.held and t.released_s is None and stamp - t.last_seen_s <= REMEMBER_S:
                 landmarks[n] = Landmark(n, t.position, t.half_extents, t.yaw, t.shape, t.bottom_m)
+        for look in self.fixtures:  # a perceived fixture: its body's footprint, its top where things rest on it
+            if look.name in self.fixture_tracks:
+                s = self.fixture_tracks[look.name][0]
+                top = look.place_height_m if look.place_height_m is not None else look.size_m[2]
+                landmarks[look.name] = Landmark(look.name, s.position, np.array([s.half_extents[0], s.half_extents[1],
+                                                                                  0.5 * top]), s.yaw, "box", 0.0)
         chosen: set[int] = set()
         for j in pending:
             desc = self.declared[j]
@@ -689,7 +835,9 @@ class Perceiver:
         desc = next((d for d in self.declared if d.name == t.name), None)
         return desc is not None and open_container(desc.cls, t.shape, t.half_extents)
 
-    def _relations(self, geo: dict[str, dict], regions, holding_rel) -> list[dict]:
+    def _relations(self, geo: dict[str, dict], regions, holding_rel, supports: Mapping[str, dict] | None = None) -> list[dict]:
+        """Relations among the perceived entities (``geo``: their boxes), with the declared
+        ``regions`` and the fixtures' place patches (``supports``: boxes, supports only)."""
         cfg = self.config
         rels = []
         if holding_rel is not None:
@@ -710,13 +858,21 @@ class Perceiver:
                 c = normal_cdf(margin / max(math.hypot(ga["std"], gb["std"]), 1e-4))
                 if c >= cfg.relations.min_confidence:
                     rels.append({"subject": a, "relation": "inside", "object": cont, "confidence": _r(c, 3)})
-            for b, gb in geo.items():
+            for b, gb in [*geo.items(), *(supports or {}).items()]:
                 if a == b:
                     continue
                 c = on_confidence(ga, gb, cfg)
                 if c >= cfg.relations.min_confidence:
                     rels.append({"subject": a, "relation": "on", "object": b, "confidence": _r(c, 3)})
         return rels
+
+
+def _in_frame(xy: np.ndarray, centre: np.ndarray, yaw: float) -> np.ndarray:
+    """(N, 2) coordinates of world points ``xy`` in the frame of a footprint at ``centre``
+    turned by ``yaw`` (rad), m."""
+    d = xy - centre
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
 
 
 def table_centre(points: np.ndarray, plane: Plane, config: PerceptionConfig) -> np.ndarray | None:

@@ -45,7 +45,8 @@ def make_perceiver(target, config_path: str | Path | None = None):
     """A fresh :class:`~phyagentos.perception.Perceiver` for one session on ``target``:
     the workspace's ``perception.yaml`` (``config_path``, if it exists), else the target's
     ``perception_config()`` when it has one (LIBERO's worlds), else the defaults,
-    and the objects the user declared (``target.describe_declared()``)."""
+    and the objects and fixtures the user declared (``target.describe_declared()``; a
+    fixture is perceived when it is declared with a look)."""
     from phyagentos.perception import Perceiver, PerceptionConfig  # noqa: PLC0415
 
     path = Path(config_path) if config_path is not None else None
@@ -55,7 +56,8 @@ def make_perceiver(target, config_path: str | Path | None = None):
         cfg = target.perception_config()
         if cfg is None:
             cfg = PerceptionConfig.default()
-    p = Perceiver(cfg, target.describe_declared()["objects"])
+    declared = target.describe_declared()
+    p = Perceiver(cfg, {"objects": declared["objects"], "fixtures": declared.get("fixtures") or []})
     if hasattr(p, "robot_name"):
         p.robot_name = target.ROBOT
     _restore_tracks(p, target.runtime_notes)
@@ -84,7 +86,8 @@ def save_tracks(target, perceiver) -> None:
         out[name] = {k: (float(v) if isinstance(v, (np.floating,)) else v) for k, v in d.items()}
     notes["perception"] = {"tracks": out, "baseline_n": getattr(perceiver, "_baseline_n", None),
                            "held": getattr(perceiver, "_held", None),
-                           "grasp_height_m": getattr(perceiver, "_grasp_height_m", None)}
+                           "grasp_height_m": getattr(perceiver, "_grasp_height_m", None),
+                           "fixtures": perceiver.export_fixtures() if hasattr(perceiver, "export_fixtures") else {}}
 
 
 def _restore_tracks(perceiver, notes: dict) -> None:
@@ -106,6 +109,8 @@ def _restore_tracks(perceiver, notes: dict) -> None:
             perceiver.tracks[name] = Track(**d)
         except TypeError:  # the track layout changed: start afresh
             log.warning("perception track %r not restored (layout changed)", name)
+    if saved.get("fixtures") and hasattr(perceiver, "restore_fixtures"):  # fixtures stand where they were seen
+        perceiver.restore_fixtures(saved["fixtures"])
     perceiver._baseline_n = saved.get("baseline_n")
     perceiver._held = saved.get("held")
     perceiver._grasp_height_m = saved.get("grasp_height_m")

@@ -355,10 +355,12 @@ class ComputePlace(Primitive):
         T_obj, half = entity_pose(snapshot, self.object)
         T_tcp_obj = np.linalg.inv(self.ctx.target.tcp_pose()) @ T_obj
         # A region is a patch on its support surface (its z: 0 on the tabletop, a burner's
-        # height in the kitchen); an object used as the support (stacking) offers its top
-        # face: centre z plus its vertical half extent.
+        # height in the kitchen); an object used as the support (stacking), or a perceived
+        # fixture (its box is its place patch: the stove's burner, the cabinet's top), offers
+        # its top face: centre z plus its vertical half extent.
         kind = next((e.get("kind") for e in snapshot.get("entities", []) if e["name"] == self.region), "region")
-        surface_z = float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half) if kind == "object" else float(T_region[2, 3])
+        surface_z = (float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half) if kind in ("object", "fixture")
+                     else float(T_region[2, 3]))
         rejected: list[dict] = []
         chosen = None
         for yaw in place_yaws(hand_yaw(self.ctx.target.tcp_pose())):

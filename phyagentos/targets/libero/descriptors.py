@@ -43,11 +43,9 @@ import numpy as np
 
 from phyagentos.errors import TargetError
 
-from ..mujoco_arm import K_ENV
-
-__all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "fixture_boxes", "measure_descriptors", "object_boxes",
-           "place_objects",
-           "set_touching", "label_segments", "perception_accuracy"]
+__all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "object_boxes", "place_objects",
+           "set_touching", "label_segments", "perception_accuracy", "FIXTURE_PLACE_SITES", "FIXTURE_SCENES",
+           "FIXTURE_SEED", "FIXTURE_CROP_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
 
 log = logging.getLogger(__name__)
 
@@ -96,30 +94,6 @@ def object_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def fixture_boxes(target, *, support_z: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``[(lo (3,), hi (3,))]``: the world axis-aligned bounding box of each fixture standing on
-    the support (every environment body that is not the floor, the table, the robot or an
-    object, whose lowest colliding geom lies within 5 cm of the support's top ``support_z``,
-    world z in m; default the target's support under the objects as they stand now), m, from
-    the simulator's state: ground truth, for generated scenes only."""
-    m, d = target.model, target.data
-    if support_z is None:
-        support_z = target._support_top_z()
-    per_root: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    for g in np.flatnonzero(target._gkind == K_ENV):
-        if int(g) in target._support_geoms:
-            continue
-        root = int(m.body_rootid[int(m.geom_bodyid[g])])
-        if root == 0:
-            continue
-        c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-        corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
-        lo, hi = per_root.get(root, (np.full(3, np.inf), np.full(3, -np.inf)))
-        per_root[root] = (np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0)))
-    return [(lo, hi) for lo, hi in per_root.values() if abs(float(lo[2]) - support_z) <= 0.05 and hi[2] > support_z]
-
-
 def _clear_of(xy: np.ndarray, r: float, boxes: Sequence[tuple[np.ndarray, np.ndarray]], gap: float) -> bool:
     """Whether a disc of radius ``r`` at ``xy`` keeps ``gap`` from every box's footprint."""
     for lo, hi in boxes:
@@ -143,7 +117,7 @@ def place_objects(target, seed: int, *, names: Sequence[str] | None = None, sett
     rng.shuffle(chosen)
     boxes = object_boxes(target)
     support_z = target._support_top_z()
-    fixtures = fixture_boxes(target, support_z=support_z)
+    fixtures = list(fixture_boxes(target).values())
     placed: list[tuple[np.ndarray, float]] = []
     out = []
     for k, name in enumerate(all_names):
@@ -357,3 +331,151 @@ def perception_accuracy(target, looks: dict[str, dict[str, Any]], seeds: Sequenc
     finally:
         target.reset(seed=target.init_index)
     return rows
+
+
+#: The part of a fixture's model things are set down on: the site of LIBERO's object model
+#: (``libero/envs/objects/articulated_objects.py``, the fixture's XML in the asset wheels)
+#: that bounds it, by fixture category. The stove's ``cook_region`` is its burner plate; the
+#: cabinet's ``top_side`` its top face. A category not listed is placed onto its body's top.
+FIXTURE_PLACE_SITES: dict[str, str] = {"flat_stove": "cook_region", "wooden_cabinet": "top_side"}
+#: Generated scenes a fixture's look is measured on (LIBERO places its fixtures within 2 cm,
+#: so a few scenes cover the viewpoints) and their first seed (not an init state).
+FIXTURE_SCENES = 3
+FIXTURE_SEED = 23456
+#: The perceiver's height crop while measuring, m above the support (the tallest fixture,
+#: LIBERO's wine rack, stands about 0.35 m).
+FIXTURE_CROP_M = 0.6
+
+
+def is_support(category: str) -> bool:
+    """Whether a LIBERO fixture category is the surface the scene stands on (``floor``,
+    ``table``, ``kitchen_table``, ...): the perceiver's support plane, not a fixture body."""
+    return category in ("floor", "table") or category.endswith("_table")
+
+
+def fixture_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``{fixture: (lo (3,), hi (3,))}``: the world axis-aligned bounding box of each
+    declared fixture's visual geoms (all of its bodies), m, from the simulator's state:
+    ground truth, for generated scenes and scoring only. The support (:func:`is_support`) is
+    not a fixture here."""
+    m, d = target.model, target.data
+    u = target.env.env
+    out = {}
+    for name, cat in target._problem.fixtures.items():
+        if is_support(cat):
+            continue
+        root = int(m.body_rootid[m.body(u.get_object(name).root_body).id])
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for g in range(m.ngeom):
+            if int(m.body_rootid[int(m.geom_bodyid[g])]) != root or m.geom_group[g] == 0:
+                continue
+            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+            corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+            w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
+            lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
+        out[name] = (lo, hi)
+    return out
+
+
+def _place_site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(centre xy (2,), half extents on the world axes (2,))`` of fixture ``name``'s place
+    site (:data:`FIXTURE_PLACE_SITES`), world m; None for a category without one or a site
+    that is not level. LIBERO's ``On`` reads the site in its own frame (``SiteObject.under``:
+    ``|(R (p - c))_xy| < size_xy``): a rectangle turned by the fixture's yaw; the half
+    extents are the largest axis-aligned box of the rectangle's proportions inside it (the
+    rectangle itself when the fixture stands square to the world, as in libero_goal; a little
+    smaller when LIBERO's sampler turns it, as libero_spatial's cabinet by up to 0.45 rad).
+    (The site's own z is not the surface: the stove's ``cook_region`` lies 0.75 cm above the
+    table, inside its 3 cm burner, on which things rest.)"""
+    suffix = FIXTURE_PLACE_SITES.get(cat)
+    if suffix is None:
+        return None
+    m, d = target.model, target.data
+    sid = m.site(f"{name}_{suffix}").id
+    a, b = (float(v) for v in np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)[:2])
+    R = d.site_xmat[sid].reshape(3, 3)
+    if abs(R[2, 2]) < 0.99:
+        return None
+    c, s = abs(R[0, 0]), abs(R[1, 0])
+    if s > c:  # turned by about a quarter: its long side along world y
+        a, b, c, s = b, a, s, c
+    k = min(1.0, a / (a * c + b * s), b / (a * s + b * c))
+    return d.site_xpos[sid][:2].copy(), np.array([k * a, k * b])
+
+
+def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = FIXTURE_SEED, config=None,
+                          settle_s: float = 0.3) -> dict[str, dict[str, Any]]:
+    """``{fixture category: {"size_m": [long, short, top height], "place"?: {"offset_m",
+    "half_extents_m", "height_m"}}}`` (m; :mod:`phyagentos.perception.fixtures`) of every
+    fixture category of ``target``'s task but its support (:func:`is_support`), measured on ``scenes`` generated
+    scenes (LIBERO's own placement sampler, seeds from ``seed``: never an init state) with
+    every object moved out of view, so the fixture stands alone: the perceiver's cloud
+    (``config``, default the target's, its height crop raised to :data:`FIXTURE_CROP_M`)
+    clustered as :func:`~phyagentos.perception.fixtures.bodies` does; the largest body
+    whose footprint centre lies in exactly one fixture's true footprint (grown 1 cm) is
+    that fixture's. ``place``: its :data:`FIXTURE_PLACE_SITES` site relative to the body (offset
+    of the centres, the site's half extents) and the surface the cameras see there (the
+    :data:`~phyagentos.perception.fixtures.TOP_PERCENTILE` th percentile of the heights of the
+    points over the site, m above the support plane). Medians
+    over the scenes; a category seen in fewer than 2 is left out (logged). ``target`` is
+    reset afterwards."""
+    from phyagentos.perception import Perceiver  # noqa: PLC0415
+    from phyagentos.perception.fixtures import MIN_POINTS, TOP_PERCENTILE, bodies  # noqa: PLC0415
+    from phyagentos.primitives.observation import robot_capsules  # noqa: PLC0415
+
+    if config is None:
+        config = target.perception_config()
+    config = config.model_copy(update={"workspace": config.workspace.model_copy(update={"max_height_m": FIXTURE_CROP_M})})
+    cats = target._problem.fixtures
+    m, d = target.model, target.data
+    seen: dict[str, list[dict[str, Any]]] = {}
+    try:
+        for k in range(scenes):
+            target.generate_scene(seed=seed + k)
+            for j, name in enumerate(target._obj_names):
+                adr = _free_adr(m, target._obj_body[name])
+                if adr is not None:
+                    d.qpos[adr[0]:adr[0] + 3] = (_AWAY + 2.0 * j, _AWAY, 1.0)
+                    d.qvel[adr[1]:adr[1] + 6] = 0.0
+            mujoco.mj_forward(m, d)
+            target.hold(duration_s=settle_s)
+            frames = [target.capture(s) for s in target.camera_names()]
+            cloud, heights, plane = Perceiver(config).object_cloud(frames, target.proprioception(),
+                                                                    robot_capsules=robot_capsules(target))
+            truth = fixture_boxes(target)
+            largest: dict[str, Any] = {}  # a fixture seen in parts (the rack's racks and base): its largest
+            for body in bodies(cloud, heights, config):
+                p = body.position[:2]
+                hits = [n for n, (lo, hi) in truth.items() if np.all(p >= lo[:2] - 0.01) and np.all(p <= hi[:2] + 0.01)]
+                if len(hits) == 1 and (hits[0] not in largest or body.points > largest[hits[0]].points):
+                    largest[hits[0]] = body
+            for name, body in largest.items():
+                p = body.position[:2]
+                look: dict[str, Any] = {"size_m": [2.0 * float(body.half_extents[0]), 2.0 * float(body.half_extents[1]),
+                                                   body.top_m]}
+                site = _place_site(target, name, cats[name])
+                if site is not None:  # the patch the site bounds; its surface as the cameras see it
+                    centre, half = site
+                    on = np.all(np.abs(cloud.points[:, :2] - centre) <= half, axis=1)
+                    if int(on.sum()) < MIN_POINTS:
+                        continue
+                    look["place"] = {"offset_m": (centre - p).tolist(), "half_extents_m": half.tolist(),
+                                     "height_m": float(np.percentile(heights[on], TOP_PERCENTILE))}
+                seen.setdefault(cats[name], []).append(look)
+    finally:
+        target.reset(seed=target.init_index)
+    out: dict[str, dict[str, Any]] = {}
+    for cat in sorted({c for c in cats.values() if not is_support(c)}):
+        got = seen.get(cat, [])
+        if len(got) < 2:
+            log.warning("LIBERO fixture look of %s: seen alone in %d of %d generated scenes; left out", cat, len(got),
+                        scenes)
+            continue
+        look = {"size_m": [round(float(v), 4) for v in np.median([g["size_m"] for g in got], axis=0)]}
+        places = [g["place"] for g in got if "place" in g]
+        if places:
+            look["place"] = {key: ([round(float(v), 4) for v in np.median([p[key] for p in places], axis=0)]
+                                   if key != "height_m" else round(float(np.median([p[key] for p in places])), 4))
+                             for key in ("offset_m", "half_extents_m", "height_m")}
+        out[cat] = look
+    return out

@@ -375,33 +375,18 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
 def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
     """Appearance descriptors of the categories of ``tasks`` (measured on generated cluttered
     scenes, :mod:`phyagentos.targets.libero.descriptors`), cached per workspace in
-    ``libero/descriptors.yaml``; a task whose categories are all cached builds nothing."""
-    from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
+    ``libero/descriptors.yaml``; a task whose categories are all cached builds nothing.
+
+    Raises:
+        BenchError: a world could not be built or rendered to measure them.
+    """
     from phyagentos.targets.libero.descriptors import measure_descriptors  # noqa: PLC0415
 
-    path = workspace_dir / "libero" / "descriptors.yaml"
-    cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
-    if cache.get("_method") != _LOOKS_METHOD:  # measured another way: measure again
-        cache = {"_method": _LOOKS_METHOD}
-    measured = set(cache.get("_measured_tasks", []))
-    for i in tasks:
-        key = f"{suite}/{i}"
-        cats = set(parse_bddl(resolve_task(suite, i).bddl_path).objects.values())
-        if key in measured or cats <= set(cache):
-            continue
-        logger.info("LIBERO bench: measuring the look of %s's categories on generated scenes", key)
-        try:
-            with LiberoTarget("libero_descriptors", LiberoScene(suite=suite, task=i), seed=0) as target:
-                for cat, look in measure_descriptors(target).items():
-                    cache.setdefault(cat, look)
-        except TargetError as exc:
-            raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
-        measured.add(key)
-        cache["_measured_tasks"] = sorted(measured)
-        atomic_write_text(path, "# Looks of LIBERO's object categories, measured on generated cluttered scenes by the\n"
-                                "# project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n"
-                          + yaml.safe_dump(cache, sort_keys=True))
-    return {k: v for k, v in cache.items() if not k.startswith("_")}
+    return _cached_looks(workspace_dir / "libero" / "descriptors.yaml", _LOOKS_METHOD, suite, tasks,
+                         categories=lambda problem: set(problem.objects.values()), measure=measure_descriptors,
+                         what="object descriptors",
+                         header="# Looks of LIBERO's object categories, measured on generated cluttered scenes by the\n"
+                                "# project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n")
 
 
 def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
@@ -413,32 +398,47 @@ def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[st
     Raises:
         BenchError: a world could not be built or rendered to measure them.
     """
-    from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
     from phyagentos.targets.libero.descriptors import is_support, measure_fixture_looks  # noqa: PLC0415
 
-    path = workspace_dir / "libero" / "fixture_looks.yaml"
+    return _cached_looks(workspace_dir / "libero" / "fixture_looks.yaml", _FIXTURE_LOOKS_METHOD, suite, tasks,
+                         categories=lambda problem: {c for c in problem.fixtures.values() if not is_support(c)},
+                         measure=measure_fixture_looks, what="fixture looks",
+                         header="# Looks of LIBERO's fixture categories (size, top, place patch), measured on generated\n"
+                                "# scenes by the project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n")
+
+
+def _cached_looks(path: Path, method: str, suite: str, tasks: list[int], *, categories, measure, what: str,
+                  header: str) -> dict[str, dict[str, Any]]:
+    """The looks cache at ``path`` (YAML: ``{category: look, _method, _measured_tasks}``),
+    measured again from scratch when it was measured by another ``method``; each task of
+    ``tasks`` whose ``categories(problem)`` are not all cached gets one world built and
+    ``measure(target)`` run on it (a category already cached keeps its look). Written
+    atomically after every task. Returns ``{category: look}``.
+
+    Raises:
+        BenchError: a world could not be built or rendered (``what`` names the looks).
+    """
+    from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
+
     cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
-    if cache.get("_method") != _FIXTURE_LOOKS_METHOD:
-        cache = {"_method": _FIXTURE_LOOKS_METHOD}
+    if cache.get("_method") != method:  # measured another way: measure again
+        cache = {"_method": method}
     measured = set(cache.get("_measured_tasks", []))
     for i in tasks:
         key = f"{suite}/{i}"
-        cats = {c for c in parse_bddl(resolve_task(suite, i).bddl_path).fixtures.values() if not is_support(c)}
-        if key in measured or cats <= set(cache):
+        if key in measured or categories(parse_bddl(resolve_task(suite, i).bddl_path)) <= set(cache):
             continue
-        logger.info("LIBERO bench: measuring the look of %s's fixtures on generated scenes", key)
+        logger.info("LIBERO bench: measuring the %s of %s on generated scenes", what, key)
         try:
-            with LiberoTarget("libero_fixture_looks", LiberoScene(suite=suite, task=i), seed=0) as target:
-                for cat, look in measure_fixture_looks(target).items():
+            with LiberoTarget(f"libero_{path.stem}", LiberoScene(suite=suite, task=i), seed=0) as target:
+                for cat, look in measure(target).items():
                     cache.setdefault(cat, look)
         except TargetError as exc:
-            raise BenchError(f"LIBERO {key}: fixture looks could not be measured: {exc}") from exc
+            raise BenchError(f"LIBERO {key}: {what} could not be measured: {exc}") from exc
         measured.add(key)
         cache["_measured_tasks"] = sorted(measured)
         path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(path, "# Looks of LIBERO's fixture categories (size, top, place patch), measured on generated\n"
-                                "# scenes by the project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n"
-                          + yaml.safe_dump(cache, sort_keys=True))
+        atomic_write_text(path, header + yaml.safe_dump(cache, sort_keys=True))
     return {k: v for k, v in cache.items() if not k.startswith("_")}
 
 

@@ -79,19 +79,24 @@ def object_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """``{object: (lo (3,), hi (3,))}``: the world axis-aligned bounding box of each object's
     geoms (all of its bodies), m, from the simulator's state: ground truth, for generated
     scenes and scoring only."""
+    m = target.model
+    return {name: _root_box(target, int(m.body_rootid[body])) for name, body in target._obj_body.items()}
+
+
+def _root_box(target, root: int, *, visual_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo (3,), hi (3,))``: the world axis-aligned bounding box of the geoms of every body
+    under root body ``root`` (``visual_only``: those of a visual group, not robosuite's
+    collision group 0), m, from the simulator's state."""
     m, d = target.model, target.data
-    out = {}
-    for name, body in target._obj_body.items():
-        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for g in range(m.ngeom):
-            if int(m.body_rootid[int(m.geom_bodyid[g])]) != int(m.body_rootid[body]):
-                continue
-            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-            corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-            w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
-            lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
-        out[name] = (lo, hi)
-    return out
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for g in range(m.ngeom):
+        if int(m.body_rootid[int(m.geom_bodyid[g])]) != root or (visual_only and m.geom_group[g] == 0):
+            continue
+        c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+        corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
+        lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
+    return lo, hi
 
 
 def _clear_of(xy: np.ndarray, r: float, boxes: Sequence[tuple[np.ndarray, np.ndarray]], gap: float) -> bool:
@@ -358,22 +363,14 @@ def fixture_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     declared fixture's visual geoms (all of its bodies), m, from the simulator's state:
     ground truth, for generated scenes and scoring only. The support (:func:`is_support`) is
     not a fixture here."""
-    m, d = target.model, target.data
+    m = target.model
     u = target.env.env
     out = {}
     for name, cat in target._problem.fixtures.items():
         if is_support(cat):
             continue
         root = int(m.body_rootid[m.body(u.get_object(name).root_body).id])
-        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for g in range(m.ngeom):
-            if int(m.body_rootid[int(m.geom_bodyid[g])]) != root or m.geom_group[g] == 0:
-                continue
-            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-            corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-            w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
-            lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
-        out[name] = (lo, hi)
+        out[name] = _root_box(target, root, visual_only=True)
     return out
 
 

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from phyagentos.bench.compiler import plan_episodes
-from phyagentos.bench.libero import instruction_nodes, is_libero_suite
+from phyagentos.bench.libero import instruction_nodes, instruction_plan, is_libero_suite, load_skill_defaults
 from phyagentos.bench.report import _env_first, env_outcome
 from phyagentos.bench.suite import load_suite
 from phyagentos.errors import BenchError
@@ -80,6 +80,56 @@ def test_the_episode_seed_is_written_into_the_scene_as_the_init_state(tmp_path):
         {"id": "t0", "goal_graph": "g.yaml", "seed_to_scene": "not a key"}]}))
     with pytest.raises(BenchError, match="seed_to_scene must be a scene key"):
         load_suite(suite)
+
+
+def test_skill_defaults_go_into_every_node_of_their_skill_and_the_tasks_own_params_win(tmp_path):
+    task = resolve_task("libero_10", 1)  # two objects: two picks and two places
+    problem = parse_bddl(task.bddl_path)
+    fixed = {"pick": {"approach_velocity_scale": 0.6, "object": "not this"}, "place": {"lower_velocity_scale": 0.5}}
+    nodes, _ = instruction_plan(task.language, problem.objects, problem.fixtures, skill_params=fixed)
+    assert [n["params"] for n in nodes] == [
+        {"approach_velocity_scale": 0.6, "object": "cream_cheese_1"},
+        {"lower_velocity_scale": 0.5, "object": "cream_cheese_1", "region": "basket_1"},
+        {"approach_velocity_scale": 0.6, "object": "butter_1"},
+        {"lower_velocity_scale": 0.5, "object": "butter_1", "region": "basket_1"}]
+    plain, _ = instruction_plan(task.language, problem.objects, problem.fixtures)
+    assert plain[0]["params"] == {"object": "cream_cheese_1"}
+    f = tmp_path / "d.yaml"
+    f.write_text("pick:\n  approach_velocity_scale: 0.6\n  lift_velocity_scale: 1.0\nplace: {lower_velocity_scale: 0.6}\n")
+    assert load_skill_defaults(f) == {"pick": {"approach_velocity_scale": 0.6, "lift_velocity_scale": 1.0},
+                                      "place": {"lower_velocity_scale": 0.6}}
+    f.write_text("{}\n")
+    assert load_skill_defaults(f) == {}
+
+
+@pytest.mark.parametrize("text,expect", [
+    ("pick:\n  approach_velocity_scale: 0.6\n  lift_speed: 1.0\n", "d.yaml:3: pick has no strategy parameter 'lift_speed'; "
+                                                                   "valid: 'approach_height_m'"),
+    ("pick: {}\npush: {distance_m: 0.1}\n", "d.yaml:2: unknown skill 'push'; a LIBERO plan's skills: 'pick', 'place'"),
+    ("pick: {object: milk_1}\n", "pick has no strategy parameter 'object'"),
+    ("place: [0.3]\n", "d.yaml:1: place must map parameter names to values, got list"),
+    ("pick: {lift_m: [0.1]}\n", "pick.lift_m must be a scalar, got list"),
+    ("- pick\n", "top level must be a mapping"),
+    ("pick: {lift_m: 0.1\n", "d.yaml"),
+])
+def test_a_malformed_skill_defaults_file_is_refused_with_its_line_and_the_valid_choices(tmp_path, text, expect):
+    f = tmp_path / "d.yaml"
+    f.write_text(text)
+    with pytest.raises(BenchError) as exc:
+        load_skill_defaults(f)
+    assert expect in " ".join(str(exc.value).split())
+    assert f.read_text() == text  # reported, never rewritten
+
+
+def test_bad_skill_defaults_exit_2_before_anything_is_built(tmp_path):
+    f = tmp_path / "d.yaml"
+    f.write_text("pick: {lift_speed: 1.0}\n")
+    result = _bench("libero_object", "--tasks", "0", "--skill-defaults", str(f), "--workspace", str(tmp_path / "ws"),
+                    cwd=tmp_path)
+    assert result.returncode == 2 and "pick has no strategy parameter 'lift_speed'" in " ".join(result.stderr.split())
+    result = _bench("tabletop", "--skill-defaults", str(f), "--workspace", str(tmp_path / "ws"), cwd=tmp_path)
+    assert result.returncode == 2 and "applies to LIBERO suites only" in result.stderr
+    assert not (tmp_path / "ws").exists()
 
 
 def test_liberos_first_counts_only_success_before_any_recovery_session():

@@ -69,6 +69,13 @@ is another world). Without a chooser, or when none fits, the ladder ends as befo
 Grip forces are per finger (the Franka Hand allows 70 N continuous); planner names are
 OMPL planners the runtime offers (``phyagentos.motion.planner.PLANNERS``).
 
+**What the target can do.** A parameter that needs a capability
+(:data:`PARAMETER_CAPABILITIES`: ``grip_force_n`` needs ``grip_force``, a hand that takes a force
+command) is left out of a revision for a target whose TARGETS.md ``capabilities`` lack it (given
+a lookup, wired by the composition root). LIBERO's Panda hand closes on position only: its slip
+ladder is the slower lift and transfer of step 2, never a force it would refuse; a step left with
+nothing it can change is skipped.
+
 Whatever the cause, when the evidence shows the hand was left below
 :data:`CLEARANCE_Z_M` (a failed approach can pin or tip the object), the child first
 backs off and lets the scene settle (:data:`SITUATIONAL` parameters ``backoff_m`` 0.10,
@@ -79,14 +86,14 @@ so lessons do not keep them.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Collection, Mapping, Sequence
 
 from phyagentos.protocol import Diagnosis, Revision, SessionRecord
 
 from .skill_catalog import SkillInfo, skill_catalog
 
 __all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M", "RE_PICK", "ACQUIRING_SKILLS",
-           "ANOTHER_VIEW_SAMPLES"]
+           "ANOTHER_VIEW_SAMPLES", "PARAMETER_CAPABILITIES", "CapabilityLookup", "beyond_target"]
 
 #: Parameters a revision sets because of where the failed attempt left the world.
 SITUATIONAL: Mapping[str, Any] = {"backoff_m": 0.10, "settle_s": 0.5}
@@ -94,6 +101,22 @@ SITUATIONAL: Mapping[str, Any] = {"backoff_m": 0.10, "settle_s": 0.5}
 CLEARANCE_Z_M = 0.15
 
 Adjust = Callable[[Mapping[str, Any]], dict[str, Any]]
+#: Target name -> its TARGETS.md ``capabilities`` (``None``: not known, nothing is left out).
+CapabilityLookup = Callable[[str], Collection[str] | None]
+#: Strategy parameters a target must declare a capability for: a grip force needs a hand that
+#: takes a force command (``grip_force``: the MuJoCo tabletop Franka's; LIBERO's Panda hand and
+#: the SO-101 jaws close on position only).
+PARAMETER_CAPABILITIES: Mapping[str, str] = {"grip_force_n": "grip_force"}
+
+
+def beyond_target(parameters: Collection[str], target: str, capabilities: CapabilityLookup | None) -> set[str]:
+    """The ``parameters`` ``target`` cannot act on: those whose capability
+    (:data:`PARAMETER_CAPABILITIES`) its TARGETS.md entry lacks; none when ``capabilities``
+    is ``None`` or does not know the target."""
+    caps = capabilities(target) if capabilities is not None else None
+    if caps is None:
+        return set()
+    return {p for p in parameters if p in PARAMETER_CAPABILITIES and PARAMETER_CAPABILITIES[p] not in caps}
 
 
 @dataclass(frozen=True)
@@ -219,6 +242,16 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
 }
 
 
+def _ladder_start(history: Sequence[SessionRecord], cause: str) -> int:
+    """Index of the first rung the next revision for ``cause`` may take: past every replan for
+    that cause along the lineage, and past the highest rung one of them took (rungs it skipped
+    because they would change nothing stay skipped)."""
+    steps = [rec.attempts[-1].verdict.revision.step for rec in history
+             if rec.attempts and rec.attempts[-1].verdict is not None
+             and rec.attempts[-1].verdict.revision is not None and rec.attempts[-1].verdict.revision.cause == cause]
+    return max([_previous_causes(history).count(cause), *steps])
+
+
 def _previous_causes(history: Sequence[SessionRecord]) -> list[str]:
     causes = []
     for rec in history:
@@ -235,11 +268,17 @@ class RecoveryPlanner:
         ladders: cause -> escalation ladder (default :data:`LADDERS`).
         skills: skill name -> :class:`SkillInfo` (default: the shipped manifests);
             a revision only sets parameters the session's skill declares.
+        retarget: chooses another capable target for ``switch_target`` (``None``: never).
+        capabilities: target name -> its TARGETS.md capabilities; a revision leaves out the
+            parameters the session's target cannot act on (:func:`beyond_target`). ``None``:
+            every declared parameter is offered.
     """
 
     def __init__(self, ladders: Mapping[str, Sequence[Strategy]] | None = None,
-                 skills: Mapping[str, SkillInfo] | None = None, retarget: Any = None):
+                 skills: Mapping[str, SkillInfo] | None = None, retarget: Any = None,
+                 capabilities: CapabilityLookup | None = None):
         self.ladders = dict(LADDERS if ladders is None else ladders)
+        self.capabilities = capabilities
         self._skills = skills
         self._upstream_skill = "pick"
         #: a :class:`~phyagentos.agent.retarget.TargetChooser` (``choose(session, cause=...) -> Selection``),
@@ -278,7 +317,8 @@ class RecoveryPlanner:
             ladder = self.ladders.get("object_slipped", ())
             info = self.skills.get(self._upstream_skill)
             allowed = info.optional if info is not None else frozenset()
-            for step in range(_previous_causes(history).count(diagnosis.cause), len(ladder)):
+            allowed = allowed - beyond_target(allowed, session.target, self.capabilities)
+            for step in range(_ladder_start(history, diagnosis.cause), len(ladder)):
                 values = {k: v for k, v in ladder[step].values({}).items() if k in allowed}
                 if values:
                     return Revision(strategy=ladder[step].name, cause=diagnosis.cause, step=step + 1,
@@ -290,11 +330,12 @@ class RecoveryPlanner:
         variant = diagnosis.facts.get("variant")
         ladder = self.ladders.get(f"{diagnosis.cause}/{variant}", self.ladders.get(diagnosis.cause, ()))
         current = dict(session.parameters)
-        start = _previous_causes(history).count(diagnosis.cause)
+        start = _ladder_start(history, diagnosis.cause)
         for step in range(start, len(ladder)):
             strategy = ladder[step]
             info = self.skills.get(strategy.skill or session.skill)
             allowed = (info.optional if info is not None else frozenset())
+            allowed = allowed - beyond_target(allowed, session.target, self.capabilities)
             base = {} if strategy.skill else current
             values = {k: v for k, v in strategy.values(current).items() if k in allowed and base.get(k) != v}
             limits = {k: round(getattr(session.limits, k) * f, 3) for k, f in strategy.limits.items()

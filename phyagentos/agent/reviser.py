@@ -59,7 +59,15 @@ from phyagentos.llm import LLMCall, LLMClient, LLMError, call_record
 from phyagentos.protocol import Diagnosis, ModelCallRecord, Revision, SessionRecord
 
 from .goal_graph import parse_goal_graph
-from .recovery import ACQUIRING_SKILLS, ANOTHER_VIEW_SAMPLES, LADDERS, SITUATIONAL, RecoveryPlanner
+from .recovery import (
+    ACQUIRING_SKILLS,
+    ANOTHER_VIEW_SAMPLES,
+    LADDERS,
+    SITUATIONAL,
+    CapabilityLookup,
+    RecoveryPlanner,
+    beyond_target,
+)
 from .retarget import RETARGET_CAUSES, TargetChooser
 from .skill_catalog import SkillInfo, skill_catalog
 
@@ -178,12 +186,16 @@ class ModelReviser:
             fails (``None``: no fallback, the verdict becomes ``failure``).
         skills: skill catalog (default: the shipped manifests).
         retarget: chooses another capable target for ``switch_target`` (``None``: never offered).
+        capabilities: target name -> its TARGETS.md capabilities: a parameter the session's
+            target cannot act on is never offered (:func:`~phyagentos.agent.recovery.beyond_target`).
     """
 
     def __init__(self, client: LLMClient, *, fallback: RecoveryPlanner | None = None,
-                 skills: Mapping[str, SkillInfo] | None = None, retarget: TargetChooser | None = None):
+                 skills: Mapping[str, SkillInfo] | None = None, retarget: TargetChooser | None = None,
+                 capabilities: CapabilityLookup | None = None):
         self.client = client
         self.fallback = fallback
+        self.capabilities = capabilities
         self._skills = skills
         self.retarget = retarget
         self.calls: list[LLMCall] = []
@@ -243,6 +255,7 @@ class ModelReviser:
         relevant = PARAMETERS_FOR_CAUSE.get(cause)
         # a parameter an earlier revision for this same cause already changed did not fix it
         spent = {k for r in same_cause for k in r.parameters if k not in SITUATIONAL}
+        spent |= beyond_target(REVISION_SPACE, session.target, self.capabilities)
         out: dict[str, list[Any]] = {}
         for p in sorted(REVISION_SPACE):
             if info is None or p not in info.optional or p in spent or (relevant is not None and p not in relevant):

@@ -93,10 +93,23 @@ def make_reviser(kind: str, workspace_dir: str | Path):
 
     ws = Workspace.create(workspace_dir)
     chooser = TargetChooser(ws, reach=_reach_oracle(ws.root))
+    caps = _target_capabilities(ws)
     if kind == "rules":
-        return RecoveryPlanner(retarget=chooser)
+        return RecoveryPlanner(retarget=chooser, capabilities=caps)
     from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415
     from phyagentos.llm import load_llm_config, make_client  # noqa: PLC0415
 
-    return ModelReviser(make_client(load_llm_config(workspace_dir)), fallback=RecoveryPlanner(retarget=chooser),
-                        retarget=chooser)
+    return ModelReviser(make_client(load_llm_config(workspace_dir)),
+                        fallback=RecoveryPlanner(retarget=chooser, capabilities=caps), retarget=chooser,
+                        capabilities=caps)
+
+
+def _target_capabilities(ws):
+    """Target name -> its TARGETS.md ``capabilities`` (read when asked: TARGETS.md may change
+    while a run goes on); ``None`` for a target TARGETS.md does not list."""
+
+    def lookup(name: str) -> frozenset[str] | None:
+        spec = next((t for t in ws.read("TARGETS").data.targets if t.name == name), None)
+        return frozenset(spec.capabilities) if spec is not None else None
+
+    return lookup

@@ -40,21 +40,28 @@ from __future__ import annotations
 import logging
 import re
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import yaml
 
-from phyagentos.errors import BenchError, TargetError, format_choices
+from phyagentos.errors import BenchError, TargetError, format_choices, format_location
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
 
-__all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "workspace_box", "is_libero_suite", "instruction_nodes", "instruction_plan",
-           "prepare_libero_suite", "target_entry"]
+__all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "SKILL_DEFAULTS", "workspace_box", "is_libero_suite", "instruction_nodes",
+           "instruction_plan", "load_skill_defaults", "prepare_libero_suite", "target_entry"]
 
 logger = logging.getLogger(__name__)
 
 #: The TARGETS.md name of the LIBERO target a LIBERO bench adds to its workspace.
 LIBERO_TARGET = "libero"
+#: The LIBERO bench's fixed strategy parameters per skill, written into every pick and place
+#: node it plans (``phyagentos bench --skill-defaults`` replaces them). Chosen by the sweep on
+#: LIBERO-90, LIBERO's training tasks, never on an evaluation suite (docs/libero.md, "Fixed
+#: skill defaults: the LIBERO-90 sweep"); an empty mapping runs the trees' own defaults.
+SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {}
+#: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
+_PLANNED_SKILLS = ("pick", "place")
 #: How the cached looks were measured (a cache measured otherwise is measured again).
 _LOOKS_METHOD = "generated_clutter_v3"  # v3: objects kept off the fixtures
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
@@ -127,19 +134,23 @@ def is_libero_suite(name: str | Path) -> bool:
         return False
 
 
-def _moves(steps: list[tuple[str, str | None]]) -> list[dict[str, Any]]:
+def _moves(steps: list[tuple[str, str | None]],
+           skill_params: Mapping[str, Mapping[str, Any]] | None = None) -> list[dict[str, Any]]:
     """Goal-graph nodes of ``[(object, destination or None)]``: a ``pick`` per object, then a
     ``place`` on its destination (none: the object is picked and held), each after the one
-    before."""
+    before. ``skill_params``: strategy parameters per skill written into every node of that
+    skill (:data:`SKILL_DEFAULTS`); the task's own parameters (object, region) win."""
+    fixed = skill_params or {}
     nodes: list[dict[str, Any]] = []
     for obj, dest in steps:
         pick_id, place_id = f"pick_{obj}", f"place_{obj}"
-        nodes.append({"id": pick_id, "skill": "pick", "params": {"object": obj},
+        nodes.append({"id": pick_id, "skill": "pick", "params": {**fixed.get("pick", {}), "object": obj},
                       "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
                       "depends_on": [nodes[-1]["id"]] if nodes else [],
                       "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
         if dest is not None:
-            nodes.append({"id": place_id, "skill": "place", "params": {"object": obj, "region": dest},
+            nodes.append({"id": place_id, "skill": "place",
+                          "params": {**fixed.get("place", {}), "object": obj, "region": dest},
                           "accept": [{"on": {"object": obj, "support": dest}}, {"released": obj}],
                           "depends_on": [pick_id], "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
     return nodes
@@ -220,8 +231,8 @@ def instruction_nodes(language: str, objects: dict[str, str], fixtures: dict[str
     return instruction_plan(language, objects, fixtures)[0]
 
 
-def instruction_plan(language: str, objects: dict[str, str],
-                     fixtures: dict[str, str]) -> tuple[list[dict[str, Any]], dict[str, dict]]:
+def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str, str], *,
+                     skill_params: Mapping[str, Mapping[str, Any]] | None = None) -> tuple[list[dict[str, Any]], dict[str, dict]]:
     """:func:`instruction_nodes` and the spatial references of the instruction: ``(nodes,
     {object: where})``.
 
@@ -234,12 +245,14 @@ def instruction_plan(language: str, objects: dict[str, str],
     "part": "top drawer"?}``, which :func:`prepare_libero_suite` declares on that object in the
     episode's scene (:class:`~phyagentos.perception.ObjectDescriptor` ``where``): perception
     resolves it on the positions it perceives. Never the BDDL ``:goal`` or ``:init``.
+    ``skill_params``: strategy parameters per skill for every node of that skill
+    (:data:`SKILL_DEFAULTS`, :func:`load_skill_defaults`; default none: the trees' own).
 
     Raises:
         BenchError: as :func:`instruction_nodes`.
     """
     steps, where = _planner_steps(language, objects, fixtures)
-    return _moves(steps), where
+    return _moves(steps, skill_params), where
 
 
 def _twin(a: str, b: str, objects: dict[str, str]) -> bool:
@@ -262,8 +275,56 @@ def _task_indices(suite: str, tasks: tuple[str, ...] | None, n: int) -> list[int
     return out
 
 
+def _kind(value: Any) -> str:
+    """A YAML value's kind for a message: mapping, list, or the scalar's type."""
+    return "mapping" if isinstance(value, dict) else "list" if isinstance(value, list) else type(value).__name__
+
+
+def load_skill_defaults(path: str | Path) -> dict[str, dict[str, Any]]:
+    """Strategy parameters per skill from a YAML file ``{skill: {parameter: value}}`` (for
+    ``phyagentos bench --skill-defaults``), e.g. ``pick: {approach_velocity_scale: 0.6}``;
+    ``{}`` (or an empty file) means the trees' own defaults.
+
+    Raises:
+        BenchError: unreadable or malformed YAML, a skill a LIBERO plan does not use, a
+            parameter the skill does not declare as a strategy parameter, or a value that is
+            not a scalar (``file:line`` and the valid choices in the message).
+    """
+    from phyagentos.agent.skill_catalog import skill_catalog  # noqa: PLC0415
+    from phyagentos.yamlsource import line_of, read_yaml, to_plain  # noqa: PLC0415
+
+    p = Path(path)
+    if not p.is_file():
+        raise BenchError(f"skill defaults file {p} does not exist")
+    raw = read_yaml(p, error=BenchError, plain=False)
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise BenchError(f"{format_location(p, line_of(raw) or 1)}: top level must be a mapping {{skill: {{parameter: "
+                         f"value}}}}; skills: {format_choices(_PLANNED_SKILLS)}")
+    catalog = skill_catalog()
+    out: dict[str, dict[str, Any]] = {}
+    for skill, params in raw.items():
+        where = format_location(p, line_of(raw, skill))
+        if skill not in _PLANNED_SKILLS:
+            raise BenchError(f"{where}: unknown skill {skill!r}; a LIBERO plan's skills: {format_choices(_PLANNED_SKILLS)}")
+        if not isinstance(params, dict):
+            raise BenchError(f"{where}: {skill} must map parameter names to values, got {_kind(params)}")
+        valid = catalog[skill].optional
+        for name, value in params.items():
+            at = format_location(p, line_of(params, name))
+            if name not in valid:
+                raise BenchError(f"{at}: {skill} has no strategy parameter {name!r}; valid: {format_choices(valid)}")
+            if isinstance(value, (dict, list)):
+                raise BenchError(f"{at}: {skill}.{name} must be a scalar, got {_kind(value)}")
+        out[str(skill)] = {str(k): to_plain(v) for k, v in params.items()}
+    return out
+
+
 def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[str, ...] | None = None,
-                         seeds: tuple[int, ...] | None = None) -> tuple[Path, tuple[str, ...], tuple[int, ...]]:
+                         seeds: tuple[int, ...] | None = None,
+                         skill_defaults: Mapping[str, Mapping[str, Any]] | None = None,
+                         ) -> tuple[Path, tuple[str, ...], tuple[int, ...]]:
     """Write the bench suite of LIBERO suite ``suite`` into the bench workspace.
 
     Args:
@@ -272,6 +333,8 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
             ``libero`` target when it lacks one).
         tasks: LIBERO task indices as text (``"0"``, or the suite's ids ``"t0"``); default all.
         seeds: LIBERO init-state indices; default the first 10.
+        skill_defaults: strategy parameters per skill for every planned node of that skill
+            (:func:`load_skill_defaults`); default :data:`SKILL_DEFAULTS`.
 
     Returns:
         ``(suite file, task ids, seeds)`` for :func:`~phyagentos.bench.run_bench`.
@@ -311,12 +374,14 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
             raise BenchError(f"LIBERO task {suite}/{i} has no init state {bad[0]}", problems=[
                 f"unknown init state(s) {', '.join(map(str, bad))} of {suite}/{i}; valid init states: 0-{n_init - 1} "
                 f"(--seeds are LIBERO's init-state indices)"])
+    fixed = {k: dict(v) for k, v in (SKILL_DEFAULTS if skill_defaults is None else skill_defaults).items()}
     planned, unplanned = [], []
     for i in indices:
         task = catalogue[i]
         problem = parse_bddl(task.bddl_path)
         try:
-            planned.append((i, task, problem, *instruction_plan(task.instruction, problem.objects, problem.fixtures)))
+            planned.append((i, task, problem, *instruction_plan(task.instruction, problem.objects, problem.fixtures,
+                                                                skill_params=fixed)))
         except BenchError as exc:
             unplanned.append(f"task {i} ({task.instruction}): {exc}")
     if not planned:  # nothing written, nothing built
@@ -364,6 +429,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     suite_path = root / "suite.yaml"
     atomic_write_text(suite_path, yaml.safe_dump(suite_doc, sort_keys=False))
     planning = {"suite": suite, "planner": "goal_planner_rules", "planned": [i for i, *_ in planned],
+                "skill_defaults": fixed,
                 "spatial_references": {i: where for i, *_, where in planned if where},
                 "refused": {int(line.split()[1]): line for line in unplanned}}
     atomic_write_text(root / "planning.yaml", "# Which chosen tasks the Goal Planner's rules planned and which they refused (why).\n"

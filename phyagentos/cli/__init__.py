@@ -97,6 +97,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--queue-timeout", type=float, default=None, metavar="S",
                        help="how long every session may wait pending, s (default: the graphs' own, 600 s); raise it "
                             "for runs longer than that (every episode is compiled up front)")
+    bench.add_argument("--skill-defaults", type=Path, default=None, metavar="FILE",
+                       help="LIBERO suites: YAML {skill: {parameter: value}} of strategy parameters written into every "
+                            "planned pick and place node (default: the LIBERO bench's, chosen on LIBERO-90; a file "
+                            "holding {} runs the trees' own defaults)")
 
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
     val.add_argument("goal_graph", type=goal_graph_arg, help="goal graph file, or a shipped example's name")
@@ -198,11 +202,16 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
     seeds = parse_seeds(args.seeds) if args.seeds else None
     tasks = tuple(t.strip() for t in args.tasks.split(",")) if args.tasks else None
     suite = args.suite
-    from phyagentos.bench.libero import is_libero_suite, prepare_libero_suite  # noqa: PLC0415
+    from phyagentos.bench.libero import is_libero_suite, load_skill_defaults, prepare_libero_suite  # noqa: PLC0415
 
+    if args.skill_defaults is not None and not is_libero_suite(suite):
+        err.print(f"[red]--skill-defaults applies to LIBERO suites only, not {suite!r}[/red]")
+        return EXIT_BAD_INPUT
     if is_libero_suite(suite):  # LIBERO's own suite names, task indices and init states (docs/libero.md)
         try:
-            suite, tasks, seeds = prepare_libero_suite(suite, args.workspace, tasks=tasks, seeds=seeds)
+            fixed = load_skill_defaults(args.skill_defaults) if args.skill_defaults is not None else None
+            suite, tasks, seeds = prepare_libero_suite(suite, args.workspace, tasks=tasks, seeds=seeds,
+                                                       skill_defaults=fixed)
         except BenchError as exc:
             err.print(f"[red]{str(exc).splitlines()[0]}[/red]")
             for line in exc.problems:

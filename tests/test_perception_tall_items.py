@@ -141,3 +141,59 @@ def test_a_confident_sighting_an_empty_hand_or_an_item_seen_elsewhere_keep_the_s
     assert not _perceiver_with_cheese(far)._hand_outweighs("cream_cheese_1", STRIP, 0.23, lifted)
     under = _det((0.06, -0.10, 0.01), (0.045, 0.02, 0.01), low=0.0, shape="box")  # a sighting at the hand itself
     assert not p._hand_outweighs("cream_cheese_1", under, 0.23, lifted)
+
+
+# ---- where the hand let an item go corroborates a weak sighting there ---------------------------
+
+def _released_cheese():
+    """A perceiver whose hand held the cream cheese (grasped at its centre) over the basket."""
+    p = _perceiver_with_cheese()
+    t = p.tracks["cream_cheese_1"]
+    t.held, t.grasp_offset = True, np.eye(4)
+    t.grasp_offset[2, 3] = 0.0  # the item's centre at the tcp
+    return p
+
+
+def test_an_item_let_go_into_a_basket_and_seen_weakly_where_the_hand_opened_is_that_item():
+    from phyagentos.perception.perceiver import _corroborated
+
+    p = _released_cheese()
+    opened = _proprio(opening=0.039, effort=0.0, tcp=_tcp((0.01, 0.25, 0.20)))  # retreated straight up
+    at = p._release_point("cream_cheese_1", opened)
+    assert np.allclose(at, (0.01, 0.25))
+    top_only = _det((0.02, 0.255, 0.05), (0.04, 0.02, 0.01), low=0.04, shape="box")  # its top between the walls
+    conf = _corroborated(0.25, top_only, at, CFG)
+    assert conf >= CFG.relations.min_confidence and conf > 0.8
+    # the hand still closed on it: no release point (the closing-hand rules apply instead)
+    assert p._release_point("cream_cheese_1", _proprio(opening=0.0224, effort=20.0, tcp=_tcp((0.01, 0.25, 0.20)))) is None
+
+
+def test_a_release_point_never_lifts_a_confident_a_far_or_a_hardly_alike_sighting():
+    from phyagentos.perception.perceiver import RELEASE_LOOK_FLOOR, _corroborated
+
+    at = np.array([0.01, 0.25])
+    near = _det((0.02, 0.255, 0.05), (0.04, 0.02, 0.01), low=0.04, shape="box")
+    far = _det((0.01, 0.33, 0.05), (0.04, 0.02, 0.01), low=0.04, shape="box")  # 8 cm off: beyond the capture radius
+    assert _corroborated(0.25, far, at, CFG) == 0.25
+    assert _corroborated(0.7, near, at, CFG) == 0.7  # already confident: left as it is
+    assert _corroborated(RELEASE_LOOK_FLOOR / 2, near, at, CFG) == RELEASE_LOOK_FLOOR / 2  # hardly alike: not made it
+    edge = _det((0.01, 0.30, 0.05), (0.04, 0.02, 0.01), low=0.04, shape="box")  # 5 cm off: helped less
+    assert 0.25 < _corroborated(0.25, edge, at, CFG) < _corroborated(0.25, near, at, CFG)
+    # a never-held item has no release point
+    p = _perceiver_with_cheese()
+    assert p._release_point("cream_cheese_1", _proprio(opening=0.039, effort=0.0)) is None
+
+
+def test_the_release_point_is_kept_across_sessions_and_forgotten_when_the_item_is_picked_again():
+    from phyagentos.perception import Perceiver
+
+    p = _perceiver_with_cheese()
+    p.tracks["cream_cheese_1"].placed_xy = np.array([0.01, 0.25])
+    q = Perceiver(CFG, [CHEESE])
+    q.restore_state(p.export_state())
+    assert np.allclose(q._release_point("cream_cheese_1", _proprio(opening=0.039, effort=0.0)), (0.01, 0.25))
+    # picked again: the closing hand holds it where it was last seen
+    q.tracks["cream_cheese_1"].position[:2] = (0.01, 0.25)
+    q.tracks["cream_cheese_1"].seen_now = False  # hidden by the closing fingers
+    q._update_holding(_proprio(opening=0.0224, effort=20.0, tcp=_tcp((0.01, 0.25, 0.02))), 5.0)
+    assert q.tracks["cream_cheese_1"].held and q.tracks["cream_cheese_1"].placed_xy is None

@@ -104,6 +104,9 @@ CONTENT_CLEARANCE_M = 0.015
 #: Spread of a contained object's top above the floor about its perceived height, m: the
 #: lining's folds (about 1 cm) and the height perceived on the open table (within ~1 cm).
 CONTENT_HEIGHT_SIGMA_M = 0.015
+#: The least look confidence that the hand's release point may corroborate
+#: (:func:`_corroborated`): a segment that hardly looks like the object is not made it.
+RELEASE_LOOK_FLOOR = 0.1
 #: An object not seen now is still reported (``remembered``) for this long after its last
 #: sighting when every camera that could see it has something nearer in the way, s.
 REMEMBER_S = 60.0
@@ -205,7 +208,7 @@ class Perceiver:
 
     # ------------------------------------------------------------------ state
 
-    _TRACK_ARRAYS = ("position", "half_extents", "colour_rgb", "grasp_offset")
+    _TRACK_ARRAYS = ("position", "half_extents", "colour_rgb", "grasp_offset", "placed_xy")
 
     def export_state(self) -> dict:
         """What this perceiver believes, as plain YAML/JSON-ready data: the tracks, the held
@@ -434,9 +437,21 @@ class Perceiver:
                 log.debug("perception: %s in the closing hand; a weak look-alike (confidence %.2f) at %s left unknown",
                           name, conf, _r(det.position))
                 continue
+            placed = self._release_point(name, proprio)
+            if placed is not None:
+                look = conf
+                conf = _corroborated(conf, det, placed, cfg)
+                if conf != look:
+                    log.debug("perception: %s seen at confidence %.2f %.3f m from where the hand let it go: %.2f",
+                              name, look, float(np.linalg.norm(det.position[:2] - placed)), conf)
             if name in self.tracks:
                 self.tracks[name].update(det, conf, stamp, det_cams[i], cfg)
                 self.tracks[name].held = False
+                t = self.tracks[name]
+                away = placed is not None and float(np.linalg.norm(t.position[:2] - placed)) > cfg.holding.capture_radius_m
+                # kept while the object is where it was let go (or seen there only weakly)
+                t.placed_xy = None if placed is None or (away and conf >= cfg.relations.min_confidence) \
+                    else placed.copy()
             else:
                 self.tracks[name] = Track.start(name, det, conf, stamp, det_cams[i])
             self.tracks[name].seen_now = True
@@ -769,6 +784,18 @@ class Perceiver:
             return False
         return self._hand_evidence(t, proprio) is not None
 
+    def _release_point(self, name: str, proprio: Proprioception) -> np.ndarray | None:
+        """(2,) world x, y (m) where the hand let ``name`` go, or None: the hand held it and
+        has let go now (the grasp offset carried to the tcp's x, y: the retreat after a
+        release rises straight up), or it was let go earlier and has not been seen
+        confidently elsewhere since (``Track.placed_xy``)."""
+        t = self.tracks.get(name)
+        if t is None:
+            return None
+        if t.held and t.grasp_offset is not None and self._hand_evidence(t, proprio) is None:
+            return (proprio.tcp_pose @ t.grasp_offset)[:2, 3].copy()
+        return None if t.held or t.placed_xy is None else np.asarray(t.placed_xy, float)
+
     def _update_holding(self, proprio: Proprioception, stamp: float) -> tuple[str, float] | None:
         """Decide which tracked object (if any) is in the hand; returns (name, confidence)."""
         hc = self.config.holding
@@ -788,6 +815,7 @@ class Perceiver:
                 t.inside_of = None
                 if t.grasp_offset is not None:  # where the hand let it go (a prior for the next sighting)
                     t.position = (proprio.tcp_pose @ t.grasp_offset)[:3, 3].copy()
+                    t.placed_xy = t.position[:2].copy()
                 t.var_xy = max(t.var_xy, 0.03 ** 2)
                 t.confidence *= 0.5
                 t.grasp_offset = None
@@ -821,6 +849,7 @@ class Perceiver:
                 off[:3, 3] = 0.0
                 t.grasp_offset = off
             t.held = True
+            t.placed_xy = None
         if len(candidates) > 1:
             conf *= 1.0 - candidates[1][0] / (candidates[0][0] + 1e-9) * 0.5
         self._held = name
@@ -886,6 +915,28 @@ def table_centre(points: np.ndarray, plane: Plane, config: PerceptionConfig) -> 
         return None
     lo, hi = np.percentile(points[on, :2], [2.0, 98.0], axis=0)
     return 0.5 * (lo + hi)
+
+
+def _corroborated(conf: float, det: Detection, placed_xy: np.ndarray, config: PerceptionConfig) -> float:
+    """The confidence of a weak association (below ``relations.min_confidence``; at least
+    :data:`RELEASE_LOOK_FLOOR`) of an object with ``det`` given that the hand let that object
+    go at ``placed_xy`` (proprioception): ``1 - (1 - conf)(1 - w)``, ``w = exp(-d^2 / 2
+    sigma^2)`` for the distance ``d`` of ``det``'s centre from that point, ``sigma`` half
+    ``holding.capture_radius_m``; ``conf`` unchanged beyond the capture radius.
+
+    An item let go into a basket shows only its top between the walls and matches its look
+    at 0.2-0.4 (LIBERO-90's cans and boxes), below what the verifier judges on, while the hand
+    says where it went. A confident association is left as it is; one elsewhere is not
+    helped; a look-alike at the release point must still be what the one-to-one association
+    chose for this object."""
+    radius = config.holding.capture_radius_m
+    if conf >= config.relations.min_confidence or conf < RELEASE_LOOK_FLOOR:
+        return conf
+    d = float(np.linalg.norm(np.asarray(det.position[:2], float) - placed_xy))
+    if d > radius:
+        return conf
+    w = math.exp(-0.5 * (d / (0.5 * radius)) ** 2)
+    return 1.0 - (1.0 - conf) * (1.0 - w)
 
 
 def _detection_confidence(det: Detection) -> float:

@@ -61,6 +61,9 @@ class Track:
     inside_of: str | None = None
     #: Stamp (s) at which the hand let the object go; None once it has been seen since.
     released_s: float | None = None
+    #: (2,) world x, y (m) where the hand let the object go, from proprioception; kept until
+    #: the object is held again or seen confidently away from it, else None.
+    placed_xy: np.ndarray | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,

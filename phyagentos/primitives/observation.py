@@ -64,56 +64,29 @@ def make_perceiver(target, config_path: str | Path | None = None):
     return p
 
 
-_TRACK_ARRAYS = ("position", "half_extents", "colour_rgb", "grasp_offset")
-
-
 def save_tracks(target, perceiver) -> None:
-    """Keep what ``perceiver`` believes (its tracks, the held object, the wrist baseline)
-    in ``target.runtime_notes`` as plain data, so the next session of the run (another
-    process, maybe) continues it: a robot remembers what it saw and what it holds."""
-    notes = target.runtime_notes
-    tracks = getattr(perceiver, "tracks", None)
-    if tracks is None:
+    """Keep what ``perceiver`` believes (its tracks, the held object, the wrist baseline, the
+    fixtures: :meth:`~phyagentos.perception.Perceiver.export_state`) in
+    ``target.runtime_notes`` as plain data, so the next session of the run (another process,
+    maybe) continues it: a robot remembers what it saw and what it holds. A perceiver without
+    tracks keeps nothing."""
+    if not hasattr(perceiver, "export_state"):
         return
-    out = {}
-    for name, t in tracks.items():
-        d = dict(vars(t))
-        for k in _TRACK_ARRAYS:
-            if d.get(k) is not None:
-                d[k] = np.asarray(d[k], dtype=float).tolist()
-        d["cameras"] = list(d.get("cameras") or ())
-        d["shape_votes"] = {str(k): int(v) for k, v in (d.get("shape_votes") or {}).items()}
-        out[name] = {k: (float(v) if isinstance(v, (np.floating,)) else v) for k, v in d.items()}
-    notes["perception"] = {"tracks": out, "baseline_n": getattr(perceiver, "_baseline_n", None),
-                           "held": getattr(perceiver, "_held", None),
-                           "grasp_height_m": getattr(perceiver, "_grasp_height_m", None),
-                           "fixtures": perceiver.export_fixtures() if hasattr(perceiver, "export_fixtures") else {}}
+    target.runtime_notes["perception"] = perceiver.export_state()
 
 
 def _restore_tracks(perceiver, notes: dict) -> None:
+    """Continue ``perceiver`` from what :func:`save_tracks` kept; a layout written by another
+    version starts afresh (logged)."""
     saved = notes.get("perception")
-    if not saved:
+    if not saved or not hasattr(perceiver, "restore_state"):
         return
-    from phyagentos.perception.tracks import Track  # noqa: PLC0415
+    from phyagentos.perception.errors import PerceptionError  # noqa: PLC0415
 
-    declared = {d.name for d in perceiver.declared}
-    for name, d in (saved.get("tracks") or {}).items():
-        if name not in declared:
-            continue
-        d = dict(d)
-        for k in _TRACK_ARRAYS:
-            if d.get(k) is not None:
-                d[k] = np.asarray(d[k], dtype=float)
-        d["cameras"] = tuple(d.get("cameras") or ())
-        try:
-            perceiver.tracks[name] = Track(**d)
-        except TypeError:  # the track layout changed: start afresh
-            log.warning("perception track %r not restored (layout changed)", name)
-    if saved.get("fixtures") and hasattr(perceiver, "restore_fixtures"):  # fixtures stand where they were seen
-        perceiver.restore_fixtures(saved["fixtures"])
-    perceiver._baseline_n = saved.get("baseline_n")
-    perceiver._held = saved.get("held")
-    perceiver._grasp_height_m = saved.get("grasp_height_m")
+    try:
+        perceiver.restore_state(saved)
+    except PerceptionError as exc:  # the track layout changed: start afresh
+        log.warning("perception state not restored (layout changed): %s", exc)
 
 
 def robot_capsules(target) -> list:

@@ -131,6 +131,7 @@ def main() -> int:
     write_json(args.out or results_path("libero_defaults_sweep"),
                {"suite": "libero_90", "tasks": tasks, "seeds": args.seeds, "results": results, "best": best})
     best_path = results_path("libero_defaults_best", ".yaml")
+    best_path.parent.mkdir(parents=True, exist_ok=True)
     best_path.write_text(f"# best setting of bench/libero_defaults_sweep.py on LIBERO-90 ({best})\n"
                          + yaml.safe_dump(results[best]["setting"], sort_keys=False))
     return 0

@@ -12,7 +12,13 @@ import pytest
 import yaml
 
 from phyagentos.bench.compiler import plan_episodes
-from phyagentos.bench.libero import instruction_nodes, instruction_plan, is_libero_suite, load_skill_defaults
+from phyagentos.bench.libero import (
+    SKILL_DEFAULTS,
+    instruction_nodes,
+    instruction_plan,
+    is_libero_suite,
+    load_skill_defaults,
+)
 from phyagentos.bench.report import _env_first, env_outcome
 from phyagentos.bench.suite import load_suite
 from phyagentos.errors import BenchError
@@ -100,6 +106,8 @@ def test_skill_defaults_go_into_every_node_of_their_skill_and_the_tasks_own_para
                                       "place": {"lower_velocity_scale": 0.6}}
     f.write_text("{}\n")
     assert load_skill_defaults(f) == {}
+    # the bench's defaults are the setting the LIBERO-90 sweep chose (bench/libero_defaults_sweep.py)
+    assert load_skill_defaults(ROOT / "bench" / "libero_skill_defaults" / "fast.yaml") == SKILL_DEFAULTS
 
 
 @pytest.mark.parametrize("text,expect", [

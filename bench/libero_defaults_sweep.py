@@ -27,23 +27,20 @@ from __future__ import annotations
 import glob
 import json
 import shutil
-import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import yaml
-from _harness import parser, print_table, results_path, write_json
+from _harness import median, parser, print_table, results_path, write_json
 
-ROOT = Path(__file__).resolve().parent.parent
 SETTINGS_DIR = Path(__file__).resolve().parent / "libero_skill_defaults"
 EVAL_BUDGETS = {"libero_spatial": 220, "libero_object": 280, "libero_goal": 300, "libero_10": 520}
 
 
 def planned_tasks() -> list[int]:
     """LIBERO-90 task indices whose instruction the Goal Planner's rules plan."""
-    sys.path.insert(0, str(ROOT))
     from phyagentos.bench.libero import instruction_plan  # noqa: PLC0415
     from phyagentos.errors import BenchError  # noqa: PLC0415
     from phyagentos.targets.libero.catalog import parse_bddl, suite_tasks  # noqa: PLC0415
@@ -76,7 +73,7 @@ def score(bench_dir: Path) -> dict:
             "first": sum(v["first_successes"] for v in per_task.values()),
             "final": sum(v["final_successes"] for v in per_task.values()),
             "within": {s: sum(1 for x in steps if x <= b) for s, b in EVAL_BUDGETS.items()},
-            "median_first_step": statistics.median(steps) if steps else None,
+            "median_first_step": median(steps),
             "false_successes": sum(1 for d in gt.get("disagreements", [])
                                    if d.get("verdict") == "success" and not d.get("env_success")
                                    and "place_" in d.get("session_id", "")),

@@ -28,9 +28,13 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from _harness import parser, write_json
+
+import phyagentos  # noqa: F401  (headless GL before mujoco loads)
+
+# isort: split
 import mujoco
 import numpy as np
-from _harness import parser, write_json
 
 from phyagentos.perception import Perceiver
 from phyagentos.primitives.observation import robot_capsules

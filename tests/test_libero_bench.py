@@ -64,10 +64,28 @@ def test_two_identical_bowls_or_an_uncovered_verb_are_refused_not_guessed():
     with pytest.raises(BenchError, match="could be any of akita_black_bowl_1, akita_black_bowl_2: say which"):
         instruction_nodes("put the black bowl on the plate", problem.objects, problem.fixtures)
     goal = parse_bddl(resolve_task("libero_goal", 7).bddl_path)
-    with pytest.raises(BenchError, match="refused by the Goal Planner's rules: unknown_object: 'turn'"):
-        instruction_nodes("turn on the stove", goal.objects, goal.fixtures)
+    with pytest.raises(BenchError, match="refused by the Goal Planner's rules: unknown_object: 'push the plate'"):
+        instruction_nodes("push the plate to the front of the stove", goal.objects, goal.fixtures)
     with pytest.raises(BenchError, match="'ketchup' names no object of the scene"):
         instruction_nodes("put the ketchup on the plate", goal.objects, goal.fixtures)
+
+
+def test_turn_on_the_stove_turns_its_knob_to_mid_travel_and_turn_off_is_refused():
+    goal = parse_bddl(resolve_task("libero_goal", 7).bddl_path)  # turn on the stove
+    nodes = instruction_nodes(resolve_task("libero_goal", 7).language, goal.objects, goal.fixtures)
+    assert [(n["skill"], n["params"]) for n in nodes] == [("turn_knob", {"object": "flat_stove_1", "to_fraction": 0.5})]
+    # accepted on the knob read a third along its travel (the model's range), not on LIBERO's threshold
+    assert nodes[0]["accept"] == [{"articulated": {"object": "flat_stove_1", "min_fraction": 1.0 / 3.0}}]
+    ten = parse_bddl(resolve_task("libero_10", 2).bddl_path)  # turn on the stove and put the moka pot on it
+    nodes = instruction_nodes(resolve_task("libero_10", 2).language, ten.objects, ten.fixtures)
+    assert [(n["skill"], n["params"].get("object"), n["params"].get("region")) for n in nodes] == [
+        ("turn_knob", "flat_stove_1", None), ("pick", "moka_pot_1", None), ("place", "moka_pot_1", "flat_stove_1")]
+    assert nodes[1]["depends_on"] == ["turn_on_flat_stove_1"]
+    for text in ("turn off the stove", "switch the stove off"):
+        with pytest.raises(BenchError, match="a turn off could not be verified"):
+            instruction_nodes(text, goal.objects, goal.fixtures)
+    with pytest.raises(BenchError, match="turns plate_1, which is not a fixture"):
+        instruction_nodes("turn on the plate", goal.objects, goal.fixtures)
 
 
 def test_the_episode_seed_is_written_into_the_scene_as_the_init_state(tmp_path):

@@ -120,7 +120,7 @@ def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placemen
     (ws / "libero").mkdir(parents=True)
     look = {"shape": "cylinder", "colour": [0.1, 0.1, 0.1], "size_m": [0.12, 0.12, 0.05]}
     cats = set(_problem().objects.values())
-    from phyagentos.bench.libero import _LOOKS_METHOD
+    from phyagentos.bench.libero import _FIXTURE_LOOKS_METHOD, _LOOKS_METHOD
 
     cache = {"_method": _LOOKS_METHOD, "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
              **{c: look for c in cats}}
@@ -129,7 +129,7 @@ def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placemen
                                                             "height_m": 0.227}}
     fixture_cats = {c for c in _problem().fixtures.values() if c != "table"}
     (ws / "libero" / "fixture_looks.yaml").write_text(yaml.safe_dump(
-        {"_method": "generated_alone_v2", "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
+        {"_method": _FIXTURE_LOOKS_METHOD, "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
          **{c: fixture_look for c in fixture_cats}}))
     suite, ids, seeds = prepare_libero_suite("libero_spatial", ws, tasks=("0", "4"), seeds=(0,))
     assert ids == ("t0", "t4")

@@ -12,6 +12,7 @@ name to arguments, parsed without ``eval``::
       still: {max_joint_motion_rad: 0.01}        # the arm did not move
       unchanged: {object: red, tol_m: 0.01}      # red did not move
       articulated: {object: microwave, max: -0.6}  # its joint (rad or m) ends in [min, max]
+      articulated: {object: stove, min_fraction: 0.33}  # ... and at least 1/3 along its range_rad
       has: {item: wood, min: 1}                  # game: the player's inventory (or a vital) >= min at the end
       achieved: collect_wood                     # game: the achievement is in the player's terminal record
 
@@ -90,7 +91,8 @@ _SIGNATURES: dict[str, tuple[tuple[str, ...], dict[str, Any], str | None]] = {
     "on": (("object", "support"), {}, None),
     "still": ((), {"max_joint_motion_rad": 0.01}, None),
     "unchanged": (("object",), {"tol_m": 0.01}, "object"),
-    "articulated": (("object",), {"min": -math.inf, "max": math.inf}, "object"),
+    "articulated": (("object",), {"min": -math.inf, "max": math.inf, "min_fraction": -math.inf,
+                                  "max_fraction": math.inf}, "object"),
     "has": (("item",), {"min": 1.0, "entity": "player"}, "item"),
     "achieved": (("achievement",), {"entity": "player"}, "achievement"),
 }
@@ -381,13 +383,25 @@ def _eval_articulated(c, initial, terminal, refs):
     obj = c.args["object"]
     if (miss := _need(c, refs, ("terminal", terminal, obj))):
         return miss
-    q = (_entities(terminal)[obj].get("attributes") or {}).get("joint_position")
+    attrs = _entities(terminal)[obj].get("attributes") or {}
+    q = attrs.get("joint_position")
     if q is None:
-        return CriterionOutcome(c, "unknown", f"{obj!r} reports no joint_position (not an articulation?)", refs)
+        return CriterionOutcome(c, "unknown", f"{obj!r} reports no joint_position (not an articulation, or its "
+                                              "joint was not seen)", refs)
     lo, hi = float(c.args["min"]), float(c.args["max"])
-    ok = lo <= float(q) <= hi
-    return CriterionOutcome(c, "satisfied" if ok else "unsatisfied",
-                            f"{obj} joint at {float(q):.3f} ({'within' if ok else 'outside'} [{lo}, {hi}])", refs)
+    fractions = float(c.args["min_fraction"]), float(c.args["max_fraction"])
+    if any(math.isfinite(f) for f in fractions):  # bounds along the travel the entity reports
+        travel = attrs.get("range_rad")
+        if travel is None:
+            return CriterionOutcome(c, "unknown", f"{obj!r} reports no range_rad for min/max_fraction", refs)
+        a, b = (float(v) for v in travel)
+        lo = max(lo, a + fractions[0] * (b - a)) if math.isfinite(fractions[0]) else lo
+        hi = min(hi, a + fractions[1] * (b - a)) if math.isfinite(fractions[1]) else hi
+    # a perceived joint (a knob read from its bar) carries its 1-sigma; a reported one is exact
+    m = 2.0 * float(attrs.get("joint_position_std_rad") or 0.0)
+    q = float(q)
+    return _band(c, refs, lo <= q - m and q + m <= hi, q + m < lo or q - m > hi, obj, "articulated",
+                 f"joint at {q:.3f} (2 sigma {m:.3f}) against [{lo:.3f}, {hi:.3f}]")
 
 
 def _player(c, snap, name, refs):

@@ -68,11 +68,11 @@ SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
     "place": {"lower_velocity_scale": 1.0},
 }
 #: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
-_PLANNED_SKILLS = ("pick", "place")
+_PLANNED_SKILLS = ("pick", "place", "turn_knob")
 #: How the cached looks were measured (a cache measured otherwise is measured again).
 _LOOKS_METHOD = "generated_clutter_v3"  # v3: objects kept off the fixtures
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
-_FIXTURE_LOOKS_METHOD = "generated_alone_v2"
+_FIXTURE_LOOKS_METHOD = "generated_alone_v3"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:
@@ -141,20 +141,35 @@ def is_libero_suite(name: str | Path) -> bool:
         return False
 
 
-def _moves(steps: list[tuple[str, str | None]],
+#: Where the LIBERO plan turns a knob to turn something on, as a fraction of the knob's travel
+#: (the knob's joint range, from its model): mid-travel. Its node is accepted when the knob is
+#: read at least a third along its travel: chosen from the model's travel alone, never from
+#: LIBERO's ``TurnOn`` threshold.
+TURN_ON_FRACTION = 0.5
+TURNED_ON_MIN_FRACTION = 1.0 / 3.0
+
+
+def _nodes(steps: list[tuple[str, str, str | None]],
            skill_params: Mapping[str, Mapping[str, Any]] | None = None) -> list[dict[str, Any]]:
-    """Goal-graph nodes of ``[(object, destination or None)]``: a ``pick`` per object, then a
-    ``place`` on its destination (none: the object is picked and held), each after the one
-    before. ``skill_params``: strategy parameters per skill written into every node of that
-    skill (:data:`SKILL_DEFAULTS`); the task's own parameters (object, region) win."""
+    """Goal-graph nodes of ``[(action, object, destination or None)]``, each after the one
+    before: ``move`` / ``hold``: a ``pick`` of the object, then (``move``) a ``place`` on its
+    destination; ``turn_on``: a ``turn_knob`` of the object to :data:`TURN_ON_FRACTION` of its
+    knob's travel. ``skill_params``: strategy parameters per skill written into every node of
+    that skill (:data:`SKILL_DEFAULTS`); the task's own parameters (object, region) win."""
     fixed = skill_params or {}
     nodes: list[dict[str, Any]] = []
-    for obj, dest in steps:
+    for action, obj, dest in steps:
+        after = [nodes[-1]["id"]] if nodes else []
+        if action == "turn_on":
+            nodes.append({"id": f"turn_on_{obj}", "skill": "turn_knob",
+                          "params": {**fixed.get("turn_knob", {}), "object": obj, "to_fraction": TURN_ON_FRACTION},
+                          "accept": [{"articulated": {"object": obj, "min_fraction": TURNED_ON_MIN_FRACTION}}],
+                          "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+            continue
         pick_id, place_id = f"pick_{obj}", f"place_{obj}"
         nodes.append({"id": pick_id, "skill": "pick", "params": {**fixed.get("pick", {}), "object": obj},
                       "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
-                      "depends_on": [nodes[-1]["id"]] if nodes else [],
-                      "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+                      "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
         if dest is not None:
             nodes.append({"id": place_id, "skill": "place",
                           "params": {**fixed.get("place", {}), "object": obj, "region": dest},
@@ -183,7 +198,7 @@ def planner_world(objects: dict[str, str], fixtures: dict[str, str]):
 
 
 def _planner_steps(language: str, objects: dict[str, str],
-                   fixtures: dict[str, str]) -> tuple[list[tuple[str, str | None]], dict[str, dict]]:
+                   fixtures: dict[str, str]) -> tuple[list[tuple[str, str, str | None]], dict[str, dict]]:
     """The Goal Planner's rule reader (:func:`phyagentos.agent.llm.meaning.read_request`):
     verbs and prepositions by class, objects and destinations by the words of their declared
     names; every clause must be accounted for, one destination each. Returns the steps and the
@@ -197,16 +212,29 @@ def _planner_steps(language: str, objects: dict[str, str],
     if meaning.problems:
         raise BenchError(f"instruction {language!r} refused by the Goal Planner's rules: "
                          + "; ".join(f"{code}: {msg}" for code, msg in meaning.problems))
-    steps: list[tuple[str, str | None]] = []
+    steps: list[tuple[str, str, str | None]] = []
     for intent in meaning.intents:
         if intent.verb == "leave":
+            continue
+        if intent.verb in ("turn_on", "turn_off"):
+            obj = intent.objects[0]
+            if intent.verb == "turn_off":
+                from phyagentos.perception.fixtures import KNOB_SIGMA_RAD  # noqa: PLC0415
+
+                raise BenchError(f"instruction {language!r} refused: {intent.text!r}: a knob at its off stop is not "
+                                 f"told from one a little past it by its perceived bar (1-sigma "
+                                 f"{KNOB_SIGMA_RAD} rad), so a turn off could not be verified")
+            if obj not in fixtures:
+                raise BenchError(f"instruction {language!r} refused: {intent.text!r} turns {obj}, which is not a "
+                                 f"fixture; fixtures: {format_choices(fixtures)}")
+            steps.append(("turn_on", obj, None))
             continue
         for obj in intent.movers():
             dests = [d for d in intent.destinations if d != obj]
             if intent.verb != "hold" and len(dests) != 1:
                 raise BenchError(f"instruction {language!r} refused: {intent.text!r} puts {obj} "
                                  + (f"on one of {format_choices(dests)}: say which" if dests else "nowhere"))
-            steps.append((obj, dests[0] if intent.verb != "hold" else None))
+            steps.append(("hold", obj, None) if intent.verb == "hold" else ("move", obj, dests[0]))
     if not steps:
         raise BenchError(f"instruction {language!r} refused: nothing to move")
     return steps, dict(meaning.where)
@@ -259,7 +287,7 @@ def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str,
         BenchError: as :func:`instruction_nodes`.
     """
     steps, where = _planner_steps(language, objects, fixtures)
-    return _moves(steps, skill_params), where
+    return _nodes(steps, skill_params), where
 
 
 def _twin(a: str, b: str, objects: dict[str, str]) -> bool:

@@ -6,7 +6,12 @@ its perceived body, ``[long side, short side, height of its top above the suppor
 and optionally ``place`` -- where on it things are set down, relative to the perceived body:
 ``{offset_m: [dx, dy] (world frame, from the body's footprint centre to the place patch's
 centre), half_extents_m: [hx, hy] (world axes), height_m: the patch's surface above the
-support}``. Without ``place`` the body's top is the place patch.
+support}``. Without ``place`` the body's top is the place patch. A fixture with a rotary control
+(LIBERO's stove knob) declares ``knob: {offset_m: [dx, dy] (world frame, from the body's
+footprint centre to the knob's vertical axis), top_m: the knob's top above the support,
+rest_yaw_rad: the world yaw (mod pi) of its grip bar at joint position 0, range_rad: [lo, hi]
+the joint's travel}``, all from the fixture's model: :func:`knob_reading` reads the joint's
+position from the bar's orientation in each observation.
 
 :func:`detect_fixtures` finds them in the object cloud (all heights up to the raised crop),
 segmented by the perceiver's own clustering (position and colour,
@@ -37,8 +42,11 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import _rect, cluster
 from phyagentos.perception.errors import PerceptionError
 
-__all__ = ["FixtureLook", "FixtureSighting", "fixtures_from_declared", "segments", "bodies", "detect_fixtures", "JOIN_GAP_M",
-           "SIZE_TOL_FRACTION", "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS"]
+__all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "fixtures_from_declared", "segments", "bodies",
+           "detect_fixtures", "find_by_knob", "knob_band", "knob_reading", "patch_cover", "JOIN_GAP_M", "SIZE_TOL_FRACTION",
+           "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS", "KNOB_RADIUS_M", "KNOB_BAND", "KNOB_MIN_POINTS",
+           "KNOB_SEEN_POINTS", "KNOB_MIN_ELONGATION", "KNOB_ALONG_STD_M", "KNOB_ACROSS_STD_MAX_M", "KNOB_SIGMA_RAD",
+           "KNOB_SEARCH_GRID_M", "KNOB_BODY_COVER", "KNOB_TALL_COVER", "PATCH_COVER", "PATCH_TOL_M"]
 
 #: Fewest points (on the perceiver's voxel grid) of a fixture's segment.
 MIN_POINTS = 200
@@ -55,6 +63,116 @@ SIZE_TOL_FRACTION = 0.15
 SIZE_TOL_M = 0.015
 
 
+#: Points within this horizontal distance of a knob's axis are its own, m (LIBERO's stove knob:
+#: a 10 cm bar, 2.4 cm thick, on a dial; its burner plate starts 5.5 cm from the axis but
+#: 2 cm lower).
+KNOB_RADIUS_M = 0.06
+#: A knob's bar is read from its points in the top part of its height: above this fraction of
+#: its top (the dial and the burner beside it are lower).
+KNOB_BAND = 0.6
+#: Fewest such points (on the perceiver's voxel grid) for a reading (LIBERO's agentview and
+#: wrist views of the stove knob: 330-500).
+KNOB_MIN_POINTS = 30
+#: A fixture is not taken where this many points stand at its knob's place and read as no bar
+#: (fewer: the knob is hidden in part, by the arm or from the cameras' angle; LIBERO's stove
+#: knob seen whole: 100-500; seen in part on generated libero_spatial scenes: 10-40).
+KNOB_SEEN_POINTS = 80
+#: The bar's horizontal spread along its long axis over that across it (standard deviations)
+#: must reach this for a reading: a round blob has no orientation (the bar: 3.1-3.4).
+KNOB_MIN_ELONGATION = 2.0
+#: The bar's spread (standard deviation) along and across it must lie in these bounds, m:
+#: LIBERO's stove knob reads 0.024-0.026 along and 0.0074-0.0083 across; a pan's handle or
+#: rim where a knob is expected does not fit (on LIBERO-90 task 44 a frying pan beside the
+#: stove was once taken for it, and its handle for the knob).
+KNOB_ALONG_STD_M: tuple[float, float] = (0.016, 0.034)
+KNOB_ACROSS_STD_MAX_M = 0.012
+#: 1-sigma uncertainty of a knob reading, rad: the largest error on LIBERO's stove knob turned
+#: to 0, 0.6, 1.2 and 2.0 rad on a generated libero_90 scene was 0.061 rad (docs/libero.md,
+#: "Turning the stove on").
+KNOB_SIGMA_RAD = 0.06
+
+
+@dataclass(frozen=True)
+class KnobLook:
+    """A fixture's rotary control about a vertical axis (module docstring); m and rad, world
+    frame."""
+
+    offset_m: tuple[float, float]
+    top_m: float
+    rest_yaw_rad: float
+    range_rad: tuple[float, float]
+
+    @classmethod
+    def from_dict(cls, d: Any, fixture: str) -> "KnobLook":
+        """From ``{offset_m, top_m, rest_yaw_rad, range_rad}``.
+
+        Raises:
+            PerceptionError: a missing or unknown key (the valid ones listed) or a malformed value.
+        """
+        keys = ("offset_m", "top_m", "rest_yaw_rad", "range_rad")
+        if not isinstance(d, Mapping) or set(d) != set(keys):
+            raise PerceptionError(f"fixture {fixture!r}: knob must be a mapping with keys {format_choices(keys)}, "
+                                  f"got {d!r}")
+        off = _floats(d["offset_m"], 2, f"fixture {fixture!r}: knob.offset_m")
+        top = _floats([d["top_m"]], 1, f"fixture {fixture!r}: knob.top_m")[0]
+        rest = _floats([d["rest_yaw_rad"]], 1, f"fixture {fixture!r}: knob.rest_yaw_rad")[0]
+        lo, hi = _floats(d["range_rad"], 2, f"fixture {fixture!r}: knob.range_rad")
+        if top <= 0 or not lo < hi or hi - lo >= math.pi:
+            raise PerceptionError(f"fixture {fixture!r}: knob needs top_m > 0 and a range lo < hi spanning less than "
+                                  f"pi rad (a bar reads the same turned by pi), got {d!r}")
+        return cls(off, top, rest, (lo, hi))  # type: ignore[arg-type]
+
+    def as_dict(self) -> dict[str, Any]:
+        """The mapping :meth:`from_dict` reads."""
+        return {"offset_m": list(self.offset_m), "top_m": self.top_m, "rest_yaw_rad": self.rest_yaw_rad,
+                "range_rad": list(self.range_rad)}
+
+    def joint_position(self, bar_yaw: float) -> float:
+        """The joint position (rad) of a bar seen at world yaw ``bar_yaw`` (rad, any
+        multiple of pi): its turn from :attr:`rest_yaw_rad` taken in the window of width pi
+        centred on the travel (a bar turned by pi looks the same)."""
+        lo, hi = self.range_rad
+        start = lo - 0.5 * (math.pi - (hi - lo))
+        return start + (bar_yaw - self.rest_yaw_rad - start) % math.pi
+
+    def bar_yaw(self, joint_position: float) -> float:
+        """World yaw of the bar (rad) at ``joint_position`` rad."""
+        return self.rest_yaw_rad + joint_position
+
+
+def knob_band(points: np.ndarray, heights: np.ndarray, knob: KnobLook, centre_xy: np.ndarray) -> np.ndarray:
+    """(N,) bool: the points of ``points`` (N, 3) world m, ``heights`` (N,) m above the support,
+    where the knob of a fixture whose footprint centre is ``centre_xy`` (2,) world m shows its
+    bar: within :data:`KNOB_RADIUS_M` of its axis, between :data:`KNOB_BAND` of its top and 1.5
+    cm above it."""
+    axis = np.asarray(centre_xy, float) + np.asarray(knob.offset_m)
+    return ((np.linalg.norm(points[:, :2] - axis, axis=1) <= KNOB_RADIUS_M) & (heights >= KNOB_BAND * knob.top_m)
+            & (heights <= knob.top_m + 0.015))
+
+
+def knob_reading(points: np.ndarray, heights: np.ndarray, knob: KnobLook, centre_xy: np.ndarray
+                 ) -> tuple[float, int] | None:
+    """``(bar yaw (rad, world, in (-pi, pi]), points)`` of the knob of a fixture whose body's
+    footprint centre is ``centre_xy`` (2,) world m, from the cloud ``points`` (N, 3) world m
+    with ``heights`` (N,) m above the support: the principal horizontal axis of the points
+    within :data:`KNOB_RADIUS_M` of the knob's axis, between :data:`KNOB_BAND` of its top and
+    1.5 cm above it; ``None`` with fewer than :data:`KNOB_MIN_POINTS` points, a spread less
+    elongated than :data:`KNOB_MIN_ELONGATION`, or one not of a bar's size
+    (:data:`KNOB_ALONG_STD_M`, :data:`KNOB_ACROSS_STD_MAX_M`): the arm hides it, something
+    stands there, or it is not a knob.
+    The yaw maps to a joint position by :meth:`KnobLook.joint_position`."""
+    near = knob_band(points, heights, knob, centre_xy)
+    if int(near.sum()) < KNOB_MIN_POINTS:
+        return None
+    xy = points[near, :2] - points[near, :2].mean(axis=0)
+    w, v = np.linalg.eigh(np.cov(xy.T))
+    across, along = math.sqrt(max(float(w[0]), 0.0)), math.sqrt(max(float(w[1]), 0.0))
+    if (across <= 0 or along / across < KNOB_MIN_ELONGATION or across > KNOB_ACROSS_STD_MAX_M
+            or not KNOB_ALONG_STD_M[0] <= along <= KNOB_ALONG_STD_M[1]):
+        return None
+    return math.atan2(float(v[1, 1]), float(v[0, 1])), int(near.sum())
+
+
 @dataclass(frozen=True)
 class FixtureLook:
     """A declared fixture with its measured look (module docstring); lengths in m."""
@@ -65,10 +183,11 @@ class FixtureLook:
     place_offset_m: tuple[float, float] | None = None
     place_half_m: tuple[float, float] | None = None
     place_height_m: float | None = None
+    knob: KnobLook | None = None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "FixtureLook | None":
-        """From a declared fixture ``{name, class, size_m?, place?}``; ``None`` when it has no
+        """From a declared fixture ``{name, class, size_m?, place?, knob?}``; ``None`` when it has no
         look (``size_m``): such a fixture is not perceived.
 
         Raises:
@@ -76,7 +195,7 @@ class FixtureLook:
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared fixture must be a mapping, got {type(d).__name__}")
-        valid = ("name", "class", "size_m", "place")
+        valid = ("name", "class", "size_m", "place", "knob")
         unknown = set(d) - set(valid)
         name = d.get("name")
         if unknown:
@@ -87,9 +206,10 @@ class FixtureLook:
         if d.get("size_m") is None:
             return None
         size = _floats(d["size_m"], 3, f"fixture {name!r}: size_m ([long, short, top height], m)")
+        knob = KnobLook.from_dict(d["knob"], name) if d.get("knob") is not None else None
         place = d.get("place")
         if place is None:
-            return cls(name, d.get("class"), size)
+            return cls(name, d.get("class"), size, knob=knob)
         if not isinstance(place, Mapping) or set(place) != {"offset_m", "half_extents_m", "height_m"}:
             raise PerceptionError(f"fixture {name!r}: place must be a mapping with keys "
                                   f"{format_choices(('offset_m', 'half_extents_m', 'height_m'))}, got {place!r}")
@@ -98,7 +218,7 @@ class FixtureLook:
         height = _floats([place["height_m"]], 1, f"fixture {name!r}: place.height_m")[0]
         if min(half) <= 0 or height < 0:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
-        return cls(name, d.get("class"), size, off, half, height)  # type: ignore[arg-type]
+        return cls(name, d.get("class"), size, off, half, height, knob)  # type: ignore[arg-type]
 
     def place_patch(self, centre_xy: np.ndarray, half_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """``(centre (2,), half extents (2,) on the world axes, surface height above the
@@ -141,7 +261,8 @@ class FixtureSighting:
     """A fixture's body in one observation: footprint centre (3,) world m (z at half its top),
     yaw of the footprint's long side (rad, [-pi/2, pi/2)), half extents (3,) (long, short,
     half the top height), axis-aligned footprint half extents (2,), the top above the
-    support (m), the supporting coarse points and the relative size error of the fit."""
+    support (m), the supporting coarse points and the relative size error of the fit;
+    ``found_by``: ``size`` (a segment fit the look) or ``knob`` (:func:`find_by_knob`)."""
 
     name: str
     position: np.ndarray
@@ -151,6 +272,7 @@ class FixtureSighting:
     top_m: float
     points: int
     error: float
+    found_by: str = "size"
 
 
 def _body(points: np.ndarray, heights: np.ndarray, idx: np.ndarray) -> FixtureSighting:
@@ -184,13 +306,131 @@ def _adjacent(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> bool:
     return bool(np.all(lo_a - JOIN_GAP_M <= hi_b) and np.all(lo_b - JOIN_GAP_M <= hi_a))
 
 
+#: Grid (m) on which candidate knob axes are tried when a fixture with a knob is found by its
+#: knob (:func:`find_by_knob`).
+KNOB_SEARCH_GRID_M = 0.02
+#: A fixture found by its knob needs this fraction of its footprint (the look's, grown by
+#: nothing) covered by points at least half its place surface high (its body, or what stands
+#: on it), on a 2 cm grid (LIBERO's stove with a bowl on its burner or a pan's handle
+#: against it: 0.6-0.9; bare table where a bar-like thing lies: 0).
+KNOB_BODY_COVER = 0.5
+
+
+#: A fixture with a place patch is taken only where at least this fraction of the patch (on
+#: a :data:`KNOB_SEARCH_GRID_M` grid) holds a point at least its surface high, less
+#: :data:`PATCH_TOL_M`: its surface, or what stands on it (LIBERO's stove burner, bare or
+#: under a bowl: 0.8-1.0; the inside of a frying pan of the stove's size, 1-1.5 cm above the
+#: table under a 3.1 cm burner surface: low).
+PATCH_COVER = 0.5
+PATCH_TOL_M = 0.008
+#: A fixture found by its knob may hold points higher than its top plus 2 cm, away from its
+#: place patch (things set there) and its knob, in at most this fraction of its footprint
+#: (LIBERO's cabinet, whose handles read as a bar, is 23 cm tall beside a 3 cm stove).
+KNOB_TALL_COVER = 0.1
+
+
+def patch_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, centre_xy: np.ndarray) -> float:
+    """Fraction (0..1) of the place patch of a body of ``look`` centred at ``centre_xy`` (2,)
+    world m whose :data:`KNOB_SEARCH_GRID_M` cells hold a point at least the patch's surface
+    high less :data:`PATCH_TOL_M` (``points`` (N, 3) world m, ``heights`` (N,) m above the
+    support); 1.0 for a look without a place patch."""
+    if look.place_offset_m is None or look.place_half_m is None:
+        return 1.0
+    centre = np.asarray(centre_xy, float) + np.asarray(look.place_offset_m)
+    half = np.asarray(look.place_half_m, float)
+    inside = np.all(np.abs(points[:, :2] - centre) <= half, axis=1) & (
+        heights >= float(look.place_height_m or 0.0) - PATCH_TOL_M)
+    n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
+    cells = np.unique(np.floor((points[inside, :2] - centre + half) / KNOB_SEARCH_GRID_M).astype(int), axis=0)
+    return min(1.0, len(cells) / n_cells)
+
+
+def find_by_knob(points: np.ndarray, heights: np.ndarray, look: FixtureLook) -> FixtureSighting | None:
+    """A fixture with a ``knob`` found by its knob where its body did not fit a look (it is
+    segmented together with something touching it, a pan's handle, or with a bowl on its
+    burner): every cell of a :data:`KNOB_SEARCH_GRID_M` grid over the points in the knob's
+    height band is tried as the knob's axis (:func:`knob_reading`); a bar read there puts
+    the body's footprint centre at the bar's centre less the knob's offset, and the body is
+    taken when at least :data:`KNOB_BODY_COVER` of that footprint (the look's size, its long
+    side along the knob's offset) holds points at least half the place surface high, its
+    place patch is covered (:func:`patch_cover`), and at most :data:`KNOB_TALL_COVER` of it
+    away from the patch and the knob stands taller than the look. The
+    best covered candidate wins. ``points`` (N, 3) world m, ``heights`` (N,) m above the
+    support; the sighting's ``error`` is 1 - its cover (a fit by size has its size error)."""
+    knob = look.knob
+    if knob is None:
+        return None
+    band = (heights >= KNOB_BAND * knob.top_m) & (heights <= knob.top_m + 0.015)
+    if int(band.sum()) < KNOB_MIN_POINTS:
+        return None
+    bp, bh = points[band], heights[band]
+    off = np.asarray(knob.offset_m, float)
+    yaw = math.atan2(off[1], off[0]) if np.linalg.norm(off) > 1e-3 else 0.0
+    half = 0.5 * np.asarray(look.size_m[:2], float)
+    floor = 0.5 * (look.place_height_m if look.place_height_m is not None else look.size_m[2])
+    raised = points[heights >= floor, :2]
+    best: tuple[float, FixtureSighting] | None = None
+    cells = np.unique(np.floor(bp[:, :2] / KNOB_SEARCH_GRID_M).astype(int), axis=0)
+    for cell in cells:
+        axis = (cell + 0.5) * KNOB_SEARCH_GRID_M
+        reading = knob_reading(bp, bh, knob, axis - off)
+        if reading is None:
+            continue
+        near = np.linalg.norm(bp[:, :2] - axis, axis=1) <= KNOB_RADIUS_M
+        centre = bp[near, :2].mean(axis=0) - off
+        local = _in_frame(raised, centre, yaw)
+        inside = local[np.all(np.abs(local) <= half, axis=1)]
+        n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
+        cover = len(np.unique(np.floor(inside / KNOB_SEARCH_GRID_M).astype(int), axis=0)) / n_cells if len(inside) else 0.0
+        if (cover < KNOB_BODY_COVER or (best is not None and cover <= best[0])
+                or patch_cover(points, heights, look, centre) < PATCH_COVER
+                or _tall_cover(points, heights, look, centre, yaw, axis) > KNOB_TALL_COVER):
+            continue
+        foot = np.all(np.abs(_in_frame(points[:, :2], centre, yaw)) <= half, axis=1)
+        ground = float(np.median(points[foot, 2] - heights[foot]))
+        c, sn = abs(math.cos(yaw)), abs(math.sin(yaw))
+        hw = np.array([c * half[0] + sn * half[1], sn * half[0] + c * half[1]])
+        best = (cover, FixtureSighting(look.name, np.array([centre[0], centre[1], ground + 0.5 * look.size_m[2]]),
+                                       yaw, np.array([half[0], half[1], 0.5 * look.size_m[2]]), hw, look.size_m[2],
+                                       int(foot.sum()), 1.0 - min(1.0, cover), "knob"))
+    return best[1] if best is not None else None
+
+
+def _tall_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, centre: np.ndarray, yaw: float,
+                axis: np.ndarray) -> float:
+    """Fraction of the footprint cells (:data:`KNOB_SEARCH_GRID_M`) of a body of ``look`` at
+    ``centre`` turned by ``yaw``, away from its place patch and its knob at ``axis``, holding a
+    point higher than the look's top plus 2 cm: a taller thing, not this fixture."""
+    half = 0.5 * np.asarray(look.size_m[:2], float)
+    tall = heights > look.size_m[2] + 0.02
+    xy = points[tall, :2]
+    keep = np.all(np.abs(_in_frame(xy, centre, yaw)) <= half, axis=1)
+    keep &= np.linalg.norm(xy - axis, axis=1) > KNOB_RADIUS_M
+    if look.place_offset_m is not None and look.place_half_m is not None:
+        keep &= ~np.all(np.abs(xy - (centre + np.asarray(look.place_offset_m))) <= np.asarray(look.place_half_m), axis=1)
+    n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
+    return len(np.unique(np.floor(xy[keep] / KNOB_SEARCH_GRID_M).astype(int), axis=0)) / n_cells
+
+
+def _in_frame(xy: np.ndarray, centre: np.ndarray, yaw: float) -> np.ndarray:
+    """``xy`` (N, 2) world m in the frame of a footprint centred at ``centre`` turned by ``yaw``."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    d = np.asarray(xy, float) - centre
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+
+
 def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLook],
                     config: PerceptionConfig) -> dict[str, FixtureSighting]:
     """``{fixture name: sighting}`` of the declared fixtures found in ``cloud`` (world m,
     every height up to the raised crop) with ``heights`` ((N,) m above the support plane);
     see the module docstring. A candidate body is one segment or the union of two adjacent
     ones (a fixture whose parts differ in colour -- the stove's knobs and its burner -- may
-    come out as two segments); the candidates a fixture takes share no segment."""
+    come out as two segments); the candidates a fixture takes share no segment. A fixture
+    with a ``knob`` is not taken where something other than a bar stands at the knob's offset
+    from the candidate's centre (:func:`knob_reading`; fewer than :data:`KNOB_SEEN_POINTS`
+    seen there -- the arm hides the knob -- do not count against it), and a fixture with a place patch only where that patch
+    is covered (:func:`patch_cover`); one with a knob that no candidate fits is looked for by its knob
+    (:func:`find_by_knob`)."""
     if not looks:
         return {}
     points = cloud.points
@@ -208,6 +448,11 @@ def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLo
             errs = [abs(a - b) / (SIZE_TOL_FRACTION * b + SIZE_TOL_M) for a, b in zip(seen, look.size_m)]
             if max(errs) > 1.0:
                 continue
+            if (look.knob is not None and knob_reading(points, heights, look.knob, body.position[:2]) is None
+                    and int(knob_band(points, heights, look.knob, body.position[:2]).sum()) >= KNOB_SEEN_POINTS):
+                continue  # where a fixture's knob is seen, it shows a bar (the arm may hide it: then unread)
+            if patch_cover(points, heights, look, body.position[:2]) < PATCH_COVER:
+                continue  # and its place surface where the look has it
             fits.append((float(sum(errs)), parts, replace(body, name=look.name, error=float(sum(errs)))))
     out: dict[str, FixtureSighting] = {}
     used: set[int] = set()
@@ -216,4 +461,9 @@ def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLo
             continue
         out[sighting.name] = sighting
         used |= parts
+    for look in looks:  # a fixture with a knob that no segment fits: found by its knob
+        if look.knob is not None and look.name not in out:
+            found = find_by_knob(points, heights, look)
+            if found is not None:
+                out[look.name] = found
     return out

@@ -31,7 +31,11 @@ entity whose box is its place patch (its top the patch's surface), the perceived
 attributes. Fixtures do not move: a fixture is looked for until it is seen, then reported
 where it was seen (``source: remembered`` in later observations; something set on it would
 change its segment), so the search costs one clustering of the raised cloud per observation
-only while a declared fixture is unseen.
+only while a declared fixture is unseen. A fixture's knob (``knob`` in its look) turns, so it
+is read in every observation (:func:`~phyagentos.perception.fixtures.knob_reading`; its points
+are the fixture's own) and reported as a hinge in the entity's attributes: ``joint_type``,
+``anchor``, ``axis``, ``range_rad``, ``joint_position`` with ``joint_position_std_rad`` (absent
+when the bar was not read: never remembered) and the bar's upper part as its ``grasp``.
 
 The Perceiver keeps per-session state (tracks, the open-gripper wrist-force baseline, the
 held object); :meth:`reset` clears it. It never reads simulator state.
@@ -74,7 +78,16 @@ from phyagentos.perception.detect import Detection, detect_clusters
 from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
-from phyagentos.perception.fixtures import FixtureLook, FixtureSighting, detect_fixtures, fixtures_from_declared
+from phyagentos.perception.fixtures import (
+    KNOB_RADIUS_M,
+    KNOB_SIGMA_RAD,
+    FixtureLook,
+    FixtureSighting,
+    _in_frame,
+    detect_fixtures,
+    fixtures_from_declared,
+    knob_reading,
+)
 from phyagentos.perception.frames import CameraFrame, Proprioception
 from phyagentos.perception.relations import (
     _footprint_margin,
@@ -129,6 +142,12 @@ FIXTURE_EDGE_M = 0.015
 #: 1-sigma position uncertainty reported for a fixture's place patch, m (its footprint's
 #: rectangle fit on a 1 cm grid).
 FIXTURE_STD_M = 0.01
+#: The part of a knob's bar offered as its grasp: this deep from its top, m (LIBERO's stove
+#: knob: a 5 cm bar on a 1.3 cm base plate; the fingertips, 1.3-1.5 cm below the tcp, close
+#: on the bar 2.5-3 cm above the table).
+KNOB_GRIP_DEPTH_M = 0.04
+#: Half the thickness of a knob's bar across which the fingers close, m (LIBERO's: 2.4 cm).
+KNOB_BAR_HALF_WIDTH_M = 0.012
 
 
 def _quat_yaw(yaw: float) -> list[float]:
@@ -195,6 +214,9 @@ class Perceiver:
         self.tracks: dict[str, Track] = {}
         #: Each fixture's last sighting and its time, s: ``{name: (sighting, stamp, confidence)}``.
         self.fixture_tracks: dict[str, tuple[FixtureSighting, float, float]] = {}
+        #: Each knob's reading in the last observation: ``{fixture name: (bar yaw rad, points)}``
+        #: (absent: not read there; a knob turns, so it is never remembered).
+        self.knob_readings: dict[str, tuple[float, int]] = {}
         self._baseline_n: float | None = None
         self._held: str | None = None
         self._grasp_height_m: float | None = None
@@ -591,10 +613,18 @@ class Perceiver:
         keep = heights < cfg.workspace.max_height_m
         own = np.zeros(len(cloud), dtype=bool)
         dets = []
+        self.knob_readings = {}
         for look in self.fixtures:
             if look.name not in self.fixture_tracks:
                 continue
             s = self.fixture_tracks[look.name][0]
+            if look.knob is not None:  # read in every observation; its points are the fixture's own
+                reading = knob_reading(p, heights, look.knob, s.position[:2])
+                if reading is not None:
+                    self.knob_readings[look.name] = reading
+                axis = s.position[:2] + np.asarray(look.knob.offset_m)
+                own |= ((np.linalg.norm(p[:, :2] - axis, axis=1) <= KNOB_RADIUS_M)
+                        & (heights <= look.knob.top_m + FIXTURE_MARGIN_M))
             local = _in_frame(p[:, :2], s.position[:2], s.yaw)
             over = np.all(np.abs(local) <= s.half_extents[:2] + FIXTURE_EDGE_M, axis=1)
             keep |= over
@@ -627,9 +657,36 @@ class Perceiver:
                           "top_m": _r(s.top_m)}}
         if not now:
             attrs["remembered"] = True
+        if look.knob is not None:
+            attrs.update(self._knob_attributes(look, s, plane))
         ent = {"name": look.name, "kind": "fixture", "position": _r(pos), "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
                "size": _r([half[0], half[1], hz]), "attributes": attrs}
         return ent, _geo(pos, 0.0, np.array([half[0], half[1], hz]), "box", 0.0, plane, FIXTURE_STD_M)
+
+    def _knob_attributes(self, look: FixtureLook, s: FixtureSighting, plane: Plane) -> dict[str, Any]:
+        """A fixture's knob as the entity attributes of a hinge (``joint_type``, ``anchor``
+        (3,) and ``axis`` (3,) world m, ``range_rad``), the joint position read in this
+        observation (``joint_position`` rad, ``joint_position_std_rad``; absent when the bar
+        was not read) and the bar's upper part as its ``grasp`` (a box from above, the fingers
+        closing across the bar: :mod:`phyagentos.primitives.affordance`)."""
+        knob = look.knob
+        assert knob is not None
+        axis = s.position[:2] + np.asarray(knob.offset_m)
+        ground = plane.z_at(axis)
+        out: dict[str, Any] = {"joint_type": "hinge", "axis": [0.0, 0.0, 1.0], "range_rad": list(knob.range_rad),
+                               "anchor": _r([axis[0], axis[1], ground + 0.5 * knob.top_m])}
+        reading = self.knob_readings.get(look.name)
+        yaw = knob.bar_yaw(knob.range_rad[0])
+        if reading is not None:
+            yaw = reading[0]
+            out.update(joint_position=_r(knob.joint_position(yaw), 4), joint_position_std_rad=KNOB_SIGMA_RAD,
+                       knob_points=reading[1])
+        half_len = max(KNOB_RADIUS_M - 0.02, KNOB_BAR_HALF_WIDTH_M)
+        out["grasp"] = {"position": _r([axis[0], axis[1], ground + knob.top_m - 0.5 * KNOB_GRIP_DEPTH_M]),
+                        "quat_wxyz": _r(_quat_yaw(yaw), 5), "size": [half_len, KNOB_BAR_HALF_WIDTH_M,
+                                                                     0.5 * KNOB_GRIP_DEPTH_M],
+                        "approach": [0.0, 0.0, -1.0], "closing": _r([-math.sin(yaw), math.cos(yaw), 0.0], 5)}
+        return out
 
     # ------------------------------------------------------------------ spatial references
 
@@ -897,14 +954,6 @@ class Perceiver:
                 if c >= cfg.relations.min_confidence:
                     rels.append({"subject": a, "relation": "on", "object": b, "confidence": _r(c, 3)})
         return rels
-
-
-def _in_frame(xy: np.ndarray, centre: np.ndarray, yaw: float) -> np.ndarray:
-    """(N, 2) coordinates of world points ``xy`` in the frame of a footprint at ``centre``
-    turned by ``yaw`` (rad), m."""
-    d = xy - centre
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
 
 
 def table_centre(points: np.ndarray, plane: Plane, config: PerceptionConfig) -> np.ndarray | None:

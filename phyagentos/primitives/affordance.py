@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from py_trees.common import Status
 
 from phyagentos.errors import IKError
 from phyagentos.geometry import rotation_about
@@ -99,18 +100,23 @@ class ComputeAffordanceGrasp(Primitive):
             if np.linalg.norm(y) < 1e-6:
                 raise PrimitiveFailure("perception.affordance", f"{self.object}: closing axis parallel to the approach")
             y /= np.linalg.norm(y)
-            # Two hands close along +-closing (180 deg apart about the approach). Take the
-            # one whose IK solution keeps the joints farthest from their limits: the
-            # wrist keeps room to turn with whatever the part does next (a door swinging).
+            # Two hands close along +-closing (180 deg apart about the approach). Take one
+            # the arm reaches from its current or ready configuration, and of those the one
+            # whose IK solution keeps the joints farthest from their limits: the wrist keeps
+            # room to turn with whatever the part does next (a door swinging, a knob).
             target = self.ctx.target
             names = tuple(target.arm_joint_names)
             jids = [target.model.joint(n).id for n in names]
             lo, hi = target.model.jnt_range[jids, 0], target.model.jnt_range[jids, 1]
-            # IK from the current configuration, then from a few seeded random ones (a far
+            # IK from the current and the ready configuration, then from a few seeded random ones (a far
             # reorientation can trap a local solver; the Cartesian moves that follow
             # interpolate and do not need this seed).
             rng = np.random.default_rng(self.ctx.seed)
-            seeds = [target.arm_qpos(), *rng.uniform(lo, hi, size=(self.IK_SEEDS, len(names)))]
+            try:
+                ready = [np.asarray(target.home_qpos, dtype=float)]
+            except KeyError:  # a model without a ``home`` keyframe (FrankaKitchen's): no ready seed
+                ready = [target.arm_qpos()]
+            seeds = [target.arm_qpos(), *ready, *rng.uniform(lo, hi, size=(self.IK_SEEDS, len(names)))]
             entry = np.asarray(part.get("entry", z), dtype=float)
             entry /= np.linalg.norm(entry)
             frame = target.tcp_site
@@ -121,7 +127,7 @@ class ComputeAffordanceGrasp(Primitive):
                 Gs[:3, 3] = T[:3, 3]
                 Ps = Gs.copy()
                 Ps[:3, 3] -= entry * self.approach_height_m
-                for seed in seeds:
+                for k, seed in enumerate(seeds):
                     try:
                         with self.ctx.profiler.section("ik"):
                             qp = np.array(solve_ik(target.model, q_seed=seed, target=Ps, arm_joint_names=names,
@@ -130,9 +136,11 @@ class ComputeAffordanceGrasp(Primitive):
                                                         frame=frame)[-1])
                     except IKError:
                         continue
-                    margin = float(np.min(np.minimum(q - lo, hi - q)))
-                    if best is None or margin > best[0]:
-                        best = (margin, Gs, Ps)
+                    # a hand reached from the current or the ready configuration first (the
+                    # motion to the pre-grasp solves its IK from those), then by joint margin
+                    rank = (k >= 2, -float(np.min(np.minimum(q - lo, hi - q))))
+                    if best is None or rank < best[0]:
+                        best = (rank, Gs, Ps)
                     break
             if best is None:
                 raise PrimitiveFailure("ik.unreachable", f"{self.object}: neither hand orientation reaches the grasp at "
@@ -145,7 +153,8 @@ class ComputeAffordanceGrasp(Primitive):
 
 
 class ArticulateHinge(_Tracking):
-    """Turn a held handle about its entity's hinge by ``delta_rad``.
+    """Turn a held handle about its entity's hinge by ``delta_rad``, or to ``to_fraction``
+    of the joint's travel.
 
     The tcp follows the circle the grasp point describes about the hinge axis: ``n``
     poses with positions ``anchor + Rot(axis, delta k/n) (p0 - anchor)``, turning with
@@ -156,34 +165,62 @@ class ArticulateHinge(_Tracking):
     success, as a joint angle the verifier finds unchanged.
 
     Args:
-        object: the articulated entity (kind ``articulation`` with a hinge).
+        object: the articulated entity (kind ``articulation``, or any entity whose attributes
+            declare ``joint_type: hinge``: a perceived fixture's knob).
         delta_rad: signed rotation about the hinge axis, rad (the joint's own sign).
+        to_fraction: instead of ``delta_rad``: turn to ``lo + to_fraction (hi - lo)`` of the
+            entity's ``range_rad`` [lo, hi] from the ``joint_position`` it reports (perceived:
+            the observation before the grasp); a failure ``perception.affordance`` when it
+            reports either not.
         step_rad: largest rotation between consecutive poses, rad.
         velocity_scale: fraction (0, 1] of the joint velocity limits.
         snapshot: blackboard key of the observation holding the hinge.
     """
 
-    def __init__(self, name: str, *, object: str, delta_rad: float, step_rad: float = 0.05,
-                 velocity_scale: float = 0.5, snapshot: str = "snapshot"):
+    def __init__(self, name: str, *, object: str, delta_rad: float | None = None, to_fraction: float | None = None,
+                 step_rad: float = 0.05, velocity_scale: float = 0.5, snapshot: str = "snapshot"):
         super().__init__(name)
-        if not isinstance(delta_rad, (int, float)) or not math.isfinite(delta_rad) or delta_rad == 0:
+        if (delta_rad is None) == (to_fraction is None):
+            raise ValueError("give exactly one of delta_rad and to_fraction")
+        if to_fraction is not None and (not isinstance(to_fraction, (int, float)) or not 0.0 <= to_fraction <= 1.0):
+            raise ValueError(f"to_fraction must be a number in [0, 1], got {to_fraction!r}")
+        if delta_rad is not None and (not isinstance(delta_rad, (int, float)) or not math.isfinite(delta_rad)
+                                      or delta_rad == 0):
             raise ValueError(f"delta_rad must be a non-zero number of radians, got {delta_rad!r}")
         if not 0 < step_rad <= 0.5:
             raise ValueError(f"step_rad must be in (0, 0.5], got {step_rad}")
         if not 0 < velocity_scale <= 1:
             raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
-        self.object, self.delta_rad, self.step_rad = object, float(delta_rad), float(step_rad)
+        self.object, self.step_rad = object, float(step_rad)
+        self.delta_rad = float(delta_rad) if delta_rad is not None else None
+        self.to_fraction = float(to_fraction) if to_fraction is not None else None
         self.velocity_scale, self.snapshot_key = float(velocity_scale), snapshot
         self.reads(snapshot)
 
     def on_enter(self):
         ctx = self.ctx
         target = ctx.target
+        self._done = False
         ent = _entity(self.get(self.snapshot_key), self.object)
         attrs = ent.get("attributes") or {}
-        if ent.get("kind") != "articulation" or attrs.get("joint_type") != "hinge":
+        if attrs.get("joint_type") != "hinge":
             raise PrimitiveFailure("perception.affordance", f"{self.object!r} is not a hinged articulation "
                                                             f"(kind {ent.get('kind')!r}, joint {attrs.get('joint_type')!r})")
+        delta = self.delta_rad
+        if self.to_fraction is not None:
+            q0, travel = attrs.get("joint_position"), attrs.get("range_rad")
+            if q0 is None or travel is None:
+                raise PrimitiveFailure("perception.affordance", f"{self.object!r}: its joint position or travel is not "
+                                                                "known (the joint was not seen), so a turn to a fraction "
+                                                                "of the travel cannot be planned")
+            lo, hi = (float(v) for v in travel)
+            delta = lo + self.to_fraction * (hi - lo) - float(q0)
+            if abs(delta) < 1e-3:
+                ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_rad=0.0,
+                                 joint_position=q0, waypoints=0)
+                self._done = True
+                return
+        assert delta is not None
         anchor = np.asarray(attrs["anchor"], dtype=float)
         axis = np.asarray(attrs["axis"], dtype=float)
         # A handle that is a bar parallel to the hinge turns inside the closed fingers (its
@@ -192,14 +229,14 @@ class ArticulateHinge(_Tracking):
         free = (attrs.get("grasp") or {}).get("free_axis")
         follow = 0.0 if free is not None and abs(float(np.dot(free, axis))) > 0.99 else 1.0
         T0 = target.tcp_pose()
-        n = max(1, int(math.ceil(abs(self.delta_rad) / self.step_rad)))
+        n = max(1, int(math.ceil(abs(delta) / self.step_rad)))
         q = target.arm_qpos()
         path = [q]
         with ctx.profiler.section("ik"):
             for k in range(1, n + 1):
-                R = rotation_about(axis, self.delta_rad * k / n)
+                R = rotation_about(axis, delta * k / n)
                 Tk = np.eye(4)
-                Tk[:3, :3] = rotation_about(axis, follow * self.delta_rad * k / n) @ T0[:3, :3]
+                Tk[:3, :3] = rotation_about(axis, follow * delta * k / n) @ T0[:3, :3]
                 Tk[:3, 3] = anchor + R @ (T0[:3, 3] - anchor)
                 segment = cartesian_path(target.model, q_start=q, T_goal=Tk, **ik_options(target))
                 path.extend(segment[1:])
@@ -207,12 +244,12 @@ class ArticulateHinge(_Tracking):
         vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
         with ctx.profiler.section("timing"):
             traj = retime(np.array(path), vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
-        ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_rad=self.delta_rad,
+        ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_rad=round(delta, 4),
                          joint_position=attrs.get("joint_position"), waypoints=len(path))
         self._start(traj)
 
     def step(self):
-        return self._advance()
+        return Status.SUCCESS if self._done else self._advance()
 
 
 class ComputePlaceAsHeld(Primitive):

@@ -88,8 +88,10 @@ _STAY = re.compile(r"\bwhere\s+(it|they|he|she)\s*(is|are|'s|'re|was|were)\b|\bi
                    r"it\s+all|them\s+all)\s+be\b|\b(?:where|as|how)\s+(?:you|i)\s+found\s+(?:it|them)\b|"
                    r"\bthe\s+way\s+(it|they)\s+(is|are|was|were)\b")
 _NOTHING = re.compile(r"\b(do\s+nothing|nothing|don'?t\s+do\s+anything|do\s+not\s+do\s+anything|stay\s+still)\b")
-_AND_SPLIT = re.compile(r"\s*(?:,\s*and\s+|,\s+|\s+and\s+|\s+but\s+)(?=(?:then\s+)?(?:do\s+not|don'?t|never|"
-                        + "|".join(sorted(_VERBS)) + r")\b)")
+_AND_SPLIT = re.compile(r"\s*(?:,\s*and\s+|,\s+|\s+and\s+|\s+but\s+)(?=(?:then\s+)?(?:do\s+not|don'?t|never|turn|"
+                        r"switch|" + "|".join(sorted(_VERBS)) + r")\b)")
+#: "turn on the stove", "switch the stove off": a knob to turn (the verb ``turn_on`` / ``turn_off``).
+_TURN = re.compile(r"^(?:please\s+)?(?:turn|switch)\s+(?:(on|off)\s+(.+)|(.+?)\s+(on|off))$")
 _ELLIPSIS = re.compile(r"\s*(?:,\s*and\s+|\s+and\s+|,\s+)(?=the\s+[a-z0-9_ ]+?\s+(?:in|into|on|onto|to)\s)")
 
 #: Common words of languages other than English (function words a request cannot avoid).
@@ -151,7 +153,8 @@ def detect_language(text: str, names: Sequence[str] = ()) -> str | None:
 
 @dataclass(frozen=True)
 class Intent:
-    """One clause as read: ``verb`` (``move``/``stack``/``hold``/``leave``), ``objects`` it means (in the
+    """One clause as read: ``verb`` (``move``/``stack``/``hold``/``leave``, or ``turn_on``/``turn_off``: the
+    knob of the one object named, a declared thing or fixture), ``objects`` it means (in the
     scene's order), ``count`` (a count quantifier: that many of ``objects`` -- the candidates), ``destinations``
     (region names, or one object to stack on; empty for hold/leave), ``by_colour`` (each object to the region
     of its colour), ``excluded`` (objects an ``except`` leaves out: they stay)."""
@@ -203,7 +206,8 @@ class Meaning:
         for it in self.intents:
             if it.verb == "leave":
                 continue
-            skills = ("pick",) if it.verb == "hold" else ("pick_and_place",)
+            skills = (("pick",) if it.verb == "hold" else ("turn_knob",) if it.verb in ("turn_on", "turn_off")
+                      else ("pick_and_place",))
             for obj in it.movers():
                 out.append(Clause(it.text, obj, self.destinations_for(it, obj, world) or None, skills=skills))
         return out
@@ -217,6 +221,7 @@ class Meaning:
             step = steps[k] if k < len(steps) else None
             want = self.destinations_for(it, obj, world)
             what = {"hold": f"pick up and hold {obj}", "stack": f"stack {obj} on {' or '.join(it.destinations)}",
+                    "turn_on": f"turn {obj} on", "turn_off": f"turn {obj} off",
                     "move": f"move {obj} into {' or '.join(want) if want else 'a region'}"}[it.verb]
             if step is None:
                 out.append(f"{quote(it.text)} asks to {what}, and no step does")
@@ -684,6 +689,22 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             part = part[: -len(WHERE_POSSIBLE) - 1]
         low = part.lower()
         words = _tokens(low)
+        turn = _TURN.match(" ".join(words))
+        if turn:  # a knob to turn: the thing named is any declared thing, a fixture too
+            state = turn.group(1) or turn.group(4)
+            named = _tokens(turn.group(2) or turn.group(3))
+            names = {o.name for o in world.objects}
+            things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
+                           regions=(), source=world.source)
+            objects, count, problems = _read_objects(named, things, previous)
+            if not problems and len(objects) != 1:
+                problems = [("not_understood", f"{quote(part)}: turn one thing {state} at a time")]
+            if problems:
+                meaning.problems += problems
+                continue
+            meaning.intents.append(Intent(part, f"turn_{state}", objects))
+            previous, acted = objects, True
+            continue
         # "keep holding it": a hold, not a keep
         verbs = [("hold" if w == "keep" and words[i + 1:i + 2] == ["holding"] else w)
                  for i, w in enumerate(words) if w in _VERBS]

@@ -45,7 +45,7 @@ from phyagentos.errors import TargetError
 
 __all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "object_boxes", "place_objects",
            "set_touching", "label_segments", "perception_accuracy", "FIXTURE_PLACE_SITES", "FIXTURE_SCENES",
-           "FIXTURE_SEED", "FIXTURE_CROP_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
+           "FIXTURE_SEED", "FIXTURE_CROP_M", "KNOB_MAX_WIDTH_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
 
 log = logging.getLogger(__name__)
 
@@ -400,6 +400,66 @@ def _place_site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray] | 
     return d.site_xpos[sid][:2].copy(), np.array([k * a, k * b])
 
 
+#: A hinge about the vertical on a fixture body at most this wide is a knob, m (LIBERO's stove
+#: knob: 10 cm; the microwave's door, on a vertical hinge too, is wider).
+KNOB_MAX_WIDTH_M = 0.15
+
+
+def _knob_joint(target, name: str) -> int | None:
+    """The joint id of fixture ``name``'s knob: a hinge about the world vertical on a body of
+    its model at most :data:`KNOB_MAX_WIDTH_M` across; None when it has none (or several)."""
+    m, d = target.model, target.data
+    root = int(m.body_rootid[m.body(target.env.env.get_object(name).root_body).id])
+    found = []
+    for j in range(m.njnt):
+        b = int(m.jnt_bodyid[j])
+        if int(m.body_rootid[b]) != root or m.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE or abs(d.xaxis[j][2]) < 0.99:
+            continue
+        geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == b]
+        if not geoms:
+            continue
+        xy = np.concatenate([d.geom_xpos[g][:2] + np.array([[sx, sy] for sx in (-1, 1) for sy in (-1, 1)])
+                             * np.linalg.norm(m.geom_aabb[g, 3:5]) for g in geoms])
+        if float(np.max(xy.max(axis=0) - xy.min(axis=0))) <= KNOB_MAX_WIDTH_M + 0.05:
+            found.append(j)
+    return found[0] if len(found) == 1 else None
+
+
+def _knob_look(target, name: str, cloud, heights: np.ndarray, centre_xy: np.ndarray) -> dict[str, Any] | None:
+    """Fixture ``name``'s ``knob`` look (:class:`~phyagentos.perception.fixtures.KnobLook`)
+    from its model (the joint's axis and travel) and the cloud (its top, and the bar's yaw by
+    the perceiver's own :func:`~phyagentos.perception.fixtures.knob_reading`, less the joint
+    position the simulator reports: this is the look generator); None without a knob or a
+    reading."""
+    from phyagentos.perception.fixtures import TOP_PERCENTILE, KnobLook, knob_reading  # noqa: PLC0415
+
+    j = _knob_joint(target, name)
+    if j is None:
+        return None
+    m, d = target.model, target.data
+    axis = d.xanchor[j][:2]
+    near = np.linalg.norm(cloud.points[:, :2] - axis, axis=1) <= 0.02  # the bar over its axis, not the burner beside
+    if int(near.sum()) < 10:
+        return None
+    top = float(np.percentile(heights[near], TOP_PERCENTILE))
+    lo, hi = (float(v) for v in m.jnt_range[j])
+    q = float(d.qpos[m.jnt_qposadr[j]])
+    rough = KnobLook((float(axis[0] - centre_xy[0]), float(axis[1] - centre_xy[1])), top, 0.0, (lo, hi))
+    reading = knob_reading(cloud.points, heights, rough, centre_xy)
+    if reading is None:
+        return None
+    rest = (reading[0] - q + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+    return {**rough.as_dict(), "rest_yaw_rad": rest}
+
+
+def _median_axis(yaws: Sequence[float]) -> float:
+    """Median of axis directions ``yaws`` (rad, each defined mod pi), in [-pi/2, pi/2): each is
+    taken within pi/2 of the first before the median."""
+    r0 = float(yaws[0])
+    med = float(np.median([r0 + (y - r0 + 0.5 * math.pi) % math.pi - 0.5 * math.pi for y in yaws]))
+    return (med + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+
+
 def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = FIXTURE_SEED, config=None,
                           settle_s: float = 0.3) -> dict[str, dict[str, Any]]:
     """``{fixture category: {"size_m": [long, short, top height], "place"?: {"offset_m",
@@ -413,7 +473,8 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
     that fixture's. ``place``: its :data:`FIXTURE_PLACE_SITES` site relative to the body (offset
     of the centres, the site's half extents) and the surface the cameras see there (the
     :data:`~phyagentos.perception.fixtures.TOP_PERCENTILE` th percentile of the heights of the
-    points over the site, m above the support plane). Medians
+    points over the site, m above the support plane). ``knob``: a fixture's rotary control
+    (:func:`_knob_look`). Medians
     over the scenes; a category seen in fewer than 2 is left out (logged). ``target`` is
     reset afterwards."""
     from phyagentos.perception import Perceiver  # noqa: PLC0415
@@ -458,6 +519,9 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
                         continue
                     look["place"] = {"offset_m": (centre - p).tolist(), "half_extents_m": half.tolist(),
                                      "height_m": float(np.percentile(heights[on], TOP_PERCENTILE))}
+                knob = _knob_look(target, name, cloud, heights, p)
+                if knob is not None:
+                    look["knob"] = knob
                 seen.setdefault(cats[name], []).append(look)
     finally:
         target.reset(seed=target.init_index)
@@ -474,5 +538,11 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
             look["place"] = {key: ([round(float(v), 4) for v in np.median([p[key] for p in places], axis=0)]
                                    if key != "height_m" else round(float(np.median([p[key] for p in places])), 4))
                              for key in ("offset_m", "half_extents_m", "height_m")}
+        knobs = [g["knob"] for g in got if "knob" in g]
+        if len(knobs) >= 2:  # the travel is the model's; the rest are medians
+            look["knob"] = {"offset_m": [round(float(v), 4) for v in np.median([k["offset_m"] for k in knobs], axis=0)],
+                            "top_m": round(float(np.median([k["top_m"] for k in knobs])), 4),
+                            "rest_yaw_rad": round(_median_axis([k["rest_yaw_rad"] for k in knobs]), 4),
+                            "range_rad": [round(float(v), 4) for v in knobs[0]["range_rad"]]}
         out[cat] = look
     return out

@@ -20,7 +20,8 @@ from phyagentos.bench.libero import workspace_box
 pytestmark = pytest.mark.sim
 
 # object looks measured on generated cluttered scenes (the bench's libero/descriptors.yaml, generated_clutter_v2,
-# libero_spatial's worlds); fixture looks as the bench measures them (libero/fixture_looks.yaml, generated_alone_v2; v3 adds the stove's knob, which this test does not turn)
+# libero_spatial's worlds); fixture looks as the bench measures them (libero/fixture_looks.yaml, generated_alone_v2;
+# v3 adds the stove's knob, which this test does not turn)
 LOOKS = {
     "akita_black_bowl": {"colour": [0.49, 0.506, 0.498], "size_m": [0.1124, 0.1124, 0.0504], "shape": "cylinder"},
     "plate": {"colour": [0.62, 0.463, 0.435], "size_m": [0.1384, 0.1384, 0.0186], "shape": "cylinder"},

@@ -59,6 +59,11 @@ class ComputeAffordanceGrasp(Primitive):
         approach_height_m: pre-grasp distance, m.
         affordance: which declared part to use: ``grasp`` (close the fingers on it) or
             ``hook`` (slide closed fingers under it and carry it on their top face).
+        turn_to_fraction: the hinge the part turns about will next be turned to this
+            fraction of the entity's ``range_rad`` from its ``joint_position``
+            (:class:`ArticulateHinge`): a hand is taken only when the arm also reaches the
+            grasp turned that far, and its joint margin is the lesser of the two (a knob
+            turned by 1 rad takes a wrist that has 1 rad to spare).
         snapshot, grasp, pregrasp: blackboard keys (observation in; (4, 4) world tcp poses out).
     """
 
@@ -67,10 +72,14 @@ class ComputeAffordanceGrasp(Primitive):
     AFFORDANCES = ("grasp", "hook")
 
     def __init__(self, name: str, *, object: str, approach_height_m: float = 0.10, affordance: str = "grasp",
-                 snapshot: str = "snapshot", grasp: str = "grasp_pose", pregrasp: str = "pregrasp_pose"):
+                 turn_to_fraction: float | None = None, snapshot: str = "snapshot", grasp: str = "grasp_pose",
+                 pregrasp: str = "pregrasp_pose"):
         super().__init__(name)
         if approach_height_m <= 0:
             raise ValueError(f"approach_height_m must be > 0, got {approach_height_m}")
+        if turn_to_fraction is not None and not 0.0 <= float(turn_to_fraction) <= 1.0:
+            raise ValueError(f"turn_to_fraction must be in [0, 1], got {turn_to_fraction!r}")
+        self.turn_to_fraction = None if turn_to_fraction is None else float(turn_to_fraction)
         if affordance not in self.AFFORDANCES:
             raise ValueError(f"unknown affordance {affordance!r}; valid: {', '.join(self.AFFORDANCES)}")
         self.object, self.approach_height_m, self.affordance = object, float(approach_height_m), affordance
@@ -136,9 +145,19 @@ class ComputeAffordanceGrasp(Primitive):
                                                         frame=frame)[-1])
                     except IKError:
                         continue
+                    margin = float(np.min(np.minimum(q - lo, hi - q)))
+                    turned = self._turned(ent, Gs)
+                    if turned is not None:
+                        try:
+                            with self.ctx.profiler.section("ik"):
+                                qt = np.array(cartesian_path(target.model, q_start=q, T_goal=turned,
+                                                             arm_joint_names=names, frame=frame)[-1])
+                        except IKError:
+                            continue  # this hand cannot turn that far: another seed or the other hand
+                        margin = min(margin, float(np.min(np.minimum(qt - lo, hi - qt))))
                     # a hand reached from the current or the ready configuration first (the
                     # motion to the pre-grasp solves its IK from those), then by joint margin
-                    rank = (k >= 2, -float(np.min(np.minimum(q - lo, hi - q))))
+                    rank = (k >= 2, -margin)
                     if best is None or rank < best[0]:
                         best = (rank, Gs, Ps)
                     break
@@ -150,6 +169,24 @@ class ComputeAffordanceGrasp(Primitive):
         self.set(self.pregrasp_key, P)
         self.ctx.trace.record("grasp_pose", leaf=self.name, object=self.object, affordance=part is not None,
                               grasp=G[:3, 3].round(4).tolist(), approach=G[:3, 2].round(4).tolist())
+
+
+    def _turned(self, ent: dict, G: np.ndarray) -> np.ndarray | None:
+        """The (4, 4) tcp pose ``G`` turned about ``ent``'s hinge as far as
+        ``turn_to_fraction`` asks from its reported position; None when no turn is asked or
+        the entity does not report its hinge, position and travel."""
+        attrs = ent.get("attributes") or {}
+        if (self.turn_to_fraction is None or attrs.get("joint_type") != "hinge"
+                or attrs.get("joint_position") is None or attrs.get("range_rad") is None):
+            return None
+        lo_r, hi_r = (float(v) for v in attrs["range_rad"])
+        delta = lo_r + self.turn_to_fraction * (hi_r - lo_r) - float(attrs["joint_position"])
+        R = rotation_about(np.asarray(attrs["axis"], dtype=float), delta)
+        anchor = np.asarray(attrs["anchor"], dtype=float)
+        T = np.eye(4)
+        T[:3, :3] = R @ G[:3, :3]
+        T[:3, 3] = anchor + R @ (G[:3, 3] - anchor)
+        return T
 
 
 class ArticulateHinge(_Tracking):

@@ -45,8 +45,8 @@ from phyagentos.perception.errors import PerceptionError
 __all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "fixtures_from_declared", "segments", "bodies",
            "detect_fixtures", "find_by_knob", "knob_band", "knob_reading", "patch_cover", "JOIN_GAP_M", "SIZE_TOL_FRACTION",
            "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS", "KNOB_RADIUS_M", "KNOB_BAND", "KNOB_MIN_POINTS",
-           "KNOB_SEEN_POINTS", "KNOB_MIN_ELONGATION", "KNOB_ALONG_STD_M", "KNOB_ACROSS_STD_MAX_M", "KNOB_SIGMA_RAD",
-           "KNOB_SEARCH_GRID_M", "KNOB_BODY_COVER", "KNOB_TALL_COVER", "PATCH_COVER", "PATCH_TOL_M"]
+           "KNOB_SEEN_POINTS", "KNOB_MIN_ELONGATION", "KNOB_ALONG_STD_M", "KNOB_ACROSS_STD_MAX_M", "KNOB_TOP_TOL_M", "KNOB_SIGMA_RAD",
+           "KNOB_SEARCH_GRID_M", "KNOB_BODY_COVER", "KNOB_TALL_COVER", "KNOB_SURFACE_COVER", "PATCH_COVER", "PATCH_TOL_M", "TURNS"]
 
 #: Fewest points (on the perceiver's voxel grid) of a fixture's segment.
 MIN_POINTS = 200
@@ -85,6 +85,9 @@ KNOB_MIN_ELONGATION = 2.0
 #: rim where a knob is expected does not fit (on LIBERO-90 task 44 a frying pan beside the
 #: stove was once taken for it, and its handle for the knob).
 KNOB_ALONG_STD_M: tuple[float, float] = (0.016, 0.034)
+#: ... and the 90th percentile of its points' heights at most this above the knob's top, m
+#: (LIBERO's stove knob: at its top, 0.059 m; a black bowl's rim beside it reads 0.071 m).
+KNOB_TOP_TOL_M = 0.008
 KNOB_ACROSS_STD_MAX_M = 0.012
 #: 1-sigma uncertainty of a knob reading, rad: the largest error on LIBERO's stove knob turned
 #: to 0, 0.6, 1.2 and 2.0 rad on a generated libero_90 scene was 0.061 rad (docs/libero.md,
@@ -127,43 +130,54 @@ class KnobLook:
         return {"offset_m": list(self.offset_m), "top_m": self.top_m, "rest_yaw_rad": self.rest_yaw_rad,
                 "range_rad": list(self.range_rad)}
 
-    def joint_position(self, bar_yaw: float) -> float:
+    def joint_position(self, bar_yaw: float, turn: float = 0.0) -> float:
         """The joint position (rad) of a bar seen at world yaw ``bar_yaw`` (rad, any
-        multiple of pi): its turn from :attr:`rest_yaw_rad` taken in the window of width pi
-        centred on the travel (a bar turned by pi looks the same)."""
+        multiple of pi) on a fixture standing ``turn`` rad from how its look was measured:
+        its turn from :attr:`rest_yaw_rad` taken in the window of width pi centred on the
+        travel (a bar turned by pi looks the same)."""
         lo, hi = self.range_rad
         start = lo - 0.5 * (math.pi - (hi - lo))
-        return start + (bar_yaw - self.rest_yaw_rad - start) % math.pi
+        return start + (bar_yaw - self.rest_yaw_rad - turn - start) % math.pi
 
-    def bar_yaw(self, joint_position: float) -> float:
-        """World yaw of the bar (rad) at ``joint_position`` rad."""
-        return self.rest_yaw_rad + joint_position
+    def bar_yaw(self, joint_position: float, turn: float = 0.0) -> float:
+        """World yaw of the bar (rad) at ``joint_position`` rad on a fixture standing ``turn``
+        rad from how its look was measured."""
+        return self.rest_yaw_rad + turn + joint_position
+
+    def axis_xy(self, centre_xy: np.ndarray, turn: float = 0.0) -> np.ndarray:
+        """(2,) world m: the knob's axis on a body centred at ``centre_xy`` standing ``turn``
+        rad from how its look was measured."""
+        return np.asarray(centre_xy, float) + _turned(self.offset_m, turn)
 
 
-def knob_band(points: np.ndarray, heights: np.ndarray, knob: KnobLook, centre_xy: np.ndarray) -> np.ndarray:
+def knob_band(points: np.ndarray, heights: np.ndarray, knob: KnobLook, centre_xy: np.ndarray,
+              turn: float = 0.0) -> np.ndarray:
     """(N,) bool: the points of ``points`` (N, 3) world m, ``heights`` (N,) m above the support,
     where the knob of a fixture whose footprint centre is ``centre_xy`` (2,) world m shows its
     bar: within :data:`KNOB_RADIUS_M` of its axis, between :data:`KNOB_BAND` of its top and 1.5
-    cm above it."""
-    axis = np.asarray(centre_xy, float) + np.asarray(knob.offset_m)
+    cm above it (the fixture standing ``turn`` rad from how its look was measured)."""
+    axis = knob.axis_xy(centre_xy, turn)
     return ((np.linalg.norm(points[:, :2] - axis, axis=1) <= KNOB_RADIUS_M) & (heights >= KNOB_BAND * knob.top_m)
             & (heights <= knob.top_m + 0.015))
 
 
-def knob_reading(points: np.ndarray, heights: np.ndarray, knob: KnobLook, centre_xy: np.ndarray
-                 ) -> tuple[float, int] | None:
+def knob_reading(points: np.ndarray, heights: np.ndarray, knob: KnobLook, centre_xy: np.ndarray,
+                 turn: float = 0.0) -> tuple[float, int] | None:
     """``(bar yaw (rad, world, in (-pi, pi]), points)`` of the knob of a fixture whose body's
     footprint centre is ``centre_xy`` (2,) world m, from the cloud ``points`` (N, 3) world m
     with ``heights`` (N,) m above the support: the principal horizontal axis of the points
     within :data:`KNOB_RADIUS_M` of the knob's axis, between :data:`KNOB_BAND` of its top and
     1.5 cm above it; ``None`` with fewer than :data:`KNOB_MIN_POINTS` points, a spread less
-    elongated than :data:`KNOB_MIN_ELONGATION`, or one not of a bar's size
-    (:data:`KNOB_ALONG_STD_M`, :data:`KNOB_ACROSS_STD_MAX_M`): the arm hides it, something
-    stands there, or it is not a knob.
-    The yaw maps to a joint position by :meth:`KnobLook.joint_position`."""
-    near = knob_band(points, heights, knob, centre_xy)
+    elongated than :data:`KNOB_MIN_ELONGATION`, one not of a bar's size
+    (:data:`KNOB_ALONG_STD_M`, :data:`KNOB_ACROSS_STD_MAX_M`) or taller than the knob
+    (:data:`KNOB_TOP_TOL_M`): the arm hides it, something stands there, or it is not a knob.
+    The yaw maps to a joint position by :meth:`KnobLook.joint_position`; ``turn``: the
+    fixture stands that far (rad) from how its look was measured."""
+    near = knob_band(points, heights, knob, centre_xy, turn)
     if int(near.sum()) < KNOB_MIN_POINTS:
         return None
+    if float(np.percentile(heights[near], 90)) > knob.top_m + KNOB_TOP_TOL_M:
+        return None  # taller than the knob: a bowl's rim, a can
     xy = points[near, :2] - points[near, :2].mean(axis=0)
     w, v = np.linalg.eigh(np.cov(xy.T))
     across, along = math.sqrt(max(float(w[0]), 0.0)), math.sqrt(max(float(w[1]), 0.0))
@@ -220,14 +234,26 @@ class FixtureLook:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
         return cls(name, d.get("class"), size, off, half, height, knob)  # type: ignore[arg-type]
 
-    def place_patch(self, centre_xy: np.ndarray, half_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    def place_patch(self, centre_xy: np.ndarray, half_xy: np.ndarray,
+                    turn: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
         """``(centre (2,), half extents (2,) on the world axes, surface height above the
         support)`` of the place patch of a body perceived at ``centre_xy`` with footprint half
-        extents ``half_xy`` (world axes), m."""
+        extents ``half_xy`` (world axes), m, standing ``turn`` rad (0 or pi: LIBERO's fixtures
+        stand square to the world, either way round) from how the look was measured."""
         if self.place_offset_m is None:
             return np.asarray(centre_xy, float), np.asarray(half_xy, float), float(self.size_m[2])
-        return (np.asarray(centre_xy, float) + np.asarray(self.place_offset_m), np.asarray(self.place_half_m, float),
+        half = np.asarray(self.place_half_m, float)
+        if abs(math.sin(turn)) > math.sqrt(0.5):  # a quarter turn: the patch's sides trade axes
+            half = half[::-1].copy()
+        return (np.asarray(centre_xy, float) + _turned(self.place_offset_m, turn), half,
                 float(self.place_height_m or 0.0))
+
+
+def _turned(offset: Sequence[float], turn: float) -> np.ndarray:
+    """(2,) ``offset`` (world m, as the look was measured) turned by ``turn`` rad about the vertical."""
+    c, s = math.cos(turn), math.sin(turn)
+    x, y = float(offset[0]), float(offset[1])
+    return np.array([c * x - s * y, s * x + c * y])
 
 
 def _floats(value: Any, n: int, what: str) -> tuple[float, ...]:
@@ -262,7 +288,9 @@ class FixtureSighting:
     yaw of the footprint's long side (rad, [-pi/2, pi/2)), half extents (3,) (long, short,
     half the top height), axis-aligned footprint half extents (2,), the top above the
     support (m), the supporting coarse points and the relative size error of the fit;
-    ``found_by``: ``size`` (a segment fit the look) or ``knob`` (:func:`find_by_knob`)."""
+    ``found_by``: ``size`` (a segment fit the look) or ``knob`` (:func:`find_by_knob`);
+    ``turn``: how far (rad, 0 or pi) the fixture stands from how its look was measured (its
+    place patch and knob are at the look's offsets turned by it)."""
 
     name: str
     position: np.ndarray
@@ -273,6 +301,7 @@ class FixtureSighting:
     points: int
     error: float
     found_by: str = "size"
+    turn: float = 0.0
 
 
 def _body(points: np.ndarray, heights: np.ndarray, idx: np.ndarray) -> FixtureSighting:
@@ -323,23 +352,35 @@ KNOB_BODY_COVER = 0.5
 #: table under a 3.1 cm burner surface: low).
 PATCH_COVER = 0.5
 PATCH_TOL_M = 0.008
+#: The ways round a fixture may stand from how its look was measured, rad: LIBERO's fixtures
+#: stand square to the world, and LIBERO-PRO's swapped scenes set the stove down the other
+#: way round (its knob away from the robot: libero_goal_swap).
+TURNS: tuple[float, ...] = (0.0, math.pi)
 #: A fixture found by its knob may hold points higher than its top plus 2 cm, away from its
 #: place patch (things set there) and its knob, in at most this fraction of its footprint
-#: (LIBERO's cabinet, whose handles read as a bar, is 23 cm tall beside a 3 cm stove).
-KNOB_TALL_COVER = 0.1
+#: (LIBERO's cabinet, whose handles read as a bar, is 23 cm tall beside a 3 cm stove; the
+#: wine rack standing against the stove in libero_goal_swap covers 0.2 of its footprint).
+KNOB_TALL_COVER = 0.35
+#: ... and its place patch's own surface seen (within :data:`PATCH_TOL_M`) over at least this
+#: fraction of it (LIBERO's stove found by its knob, bare burner: 1.0; a cabinet whose handle
+#: read as a knob, its front face crossing the patch: 0.27).
+KNOB_SURFACE_COVER = 0.5
 
 
-def patch_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, centre_xy: np.ndarray) -> float:
+def patch_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, centre_xy: np.ndarray,
+                turn: float = 0.0, *, at_surface: bool = False) -> float:
     """Fraction (0..1) of the place patch of a body of ``look`` centred at ``centre_xy`` (2,)
     world m whose :data:`KNOB_SEARCH_GRID_M` cells hold a point at least the patch's surface
     high less :data:`PATCH_TOL_M` (``points`` (N, 3) world m, ``heights`` (N,) m above the
-    support); 1.0 for a look without a place patch."""
+    support) and standing ``turn`` rad from how its look was measured; with ``at_surface``,
+    cells holding a point within :data:`PATCH_TOL_M` of the surface (the patch itself seen, not
+    a taller thing over it). 1.0 for a look without a place patch."""
     if look.place_offset_m is None or look.place_half_m is None:
         return 1.0
-    centre = np.asarray(centre_xy, float) + np.asarray(look.place_offset_m)
-    half = np.asarray(look.place_half_m, float)
-    inside = np.all(np.abs(points[:, :2] - centre) <= half, axis=1) & (
-        heights >= float(look.place_height_m or 0.0) - PATCH_TOL_M)
+    centre, half, _ = look.place_patch(centre_xy, np.zeros(2), turn)
+    surface = float(look.place_height_m or 0.0)
+    high = np.abs(heights - surface) <= PATCH_TOL_M if at_surface else heights >= surface - PATCH_TOL_M
+    inside = np.all(np.abs(points[:, :2] - centre) <= half, axis=1) & high
     n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
     cells = np.unique(np.floor((points[inside, :2] - centre + half) / KNOB_SEARCH_GRID_M).astype(int), axis=0)
     return min(1.0, len(cells) / n_cells)
@@ -350,11 +391,13 @@ def find_by_knob(points: np.ndarray, heights: np.ndarray, look: FixtureLook) -> 
     segmented together with something touching it, a pan's handle, or with a bowl on its
     burner): every cell of a :data:`KNOB_SEARCH_GRID_M` grid over the points in the knob's
     height band is tried as the knob's axis (:func:`knob_reading`); a bar read there puts
-    the body's footprint centre at the bar's centre less the knob's offset, and the body is
+    the body's footprint centre at the bar's centre less the knob's offset (where it must read
+    as a bar again), either way round (:data:`TURNS`), and the body is
     taken when at least :data:`KNOB_BODY_COVER` of that footprint (the look's size, its long
     side along the knob's offset) holds points at least half the place surface high, its
-    place patch is covered (:func:`patch_cover`), and at most :data:`KNOB_TALL_COVER` of it
-    away from the patch and the knob stands taller than the look. The
+    place patch is covered (:func:`patch_cover`) with its own surface seen over
+    :data:`KNOB_SURFACE_COVER` of it, and at most :data:`KNOB_TALL_COVER` of it away from the
+    patch and the knob stands taller than the look. The
     best covered candidate wins. ``points`` (N, 3) world m, ``heights`` (N,) m above the
     support; the sighting's ``error`` is 1 - its cover (a fit by size has its size error)."""
     knob = look.knob
@@ -364,40 +407,45 @@ def find_by_knob(points: np.ndarray, heights: np.ndarray, look: FixtureLook) -> 
     if int(band.sum()) < KNOB_MIN_POINTS:
         return None
     bp, bh = points[band], heights[band]
-    off = np.asarray(knob.offset_m, float)
-    yaw = math.atan2(off[1], off[0]) if np.linalg.norm(off) > 1e-3 else 0.0
     half = 0.5 * np.asarray(look.size_m[:2], float)
     floor = 0.5 * (look.place_height_m if look.place_height_m is not None else look.size_m[2])
     raised = points[heights >= floor, :2]
     best: tuple[float, FixtureSighting] | None = None
     cells = np.unique(np.floor(bp[:, :2] / KNOB_SEARCH_GRID_M).astype(int), axis=0)
-    for cell in cells:
-        axis = (cell + 0.5) * KNOB_SEARCH_GRID_M
-        reading = knob_reading(bp, bh, knob, axis - off)
-        if reading is None:
-            continue
-        near = np.linalg.norm(bp[:, :2] - axis, axis=1) <= KNOB_RADIUS_M
-        centre = bp[near, :2].mean(axis=0) - off
-        local = _in_frame(raised, centre, yaw)
-        inside = local[np.all(np.abs(local) <= half, axis=1)]
-        n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
-        cover = len(np.unique(np.floor(inside / KNOB_SEARCH_GRID_M).astype(int), axis=0)) / n_cells if len(inside) else 0.0
-        if (cover < KNOB_BODY_COVER or (best is not None and cover <= best[0])
-                or patch_cover(points, heights, look, centre) < PATCH_COVER
-                or _tall_cover(points, heights, look, centre, yaw, axis) > KNOB_TALL_COVER):
-            continue
-        foot = np.all(np.abs(_in_frame(points[:, :2], centre, yaw)) <= half, axis=1)
-        ground = float(np.median(points[foot, 2] - heights[foot]))
-        c, sn = abs(math.cos(yaw)), abs(math.sin(yaw))
-        hw = np.array([c * half[0] + sn * half[1], sn * half[0] + c * half[1]])
-        best = (cover, FixtureSighting(look.name, np.array([centre[0], centre[1], ground + 0.5 * look.size_m[2]]),
-                                       yaw, np.array([half[0], half[1], 0.5 * look.size_m[2]]), hw, look.size_m[2],
-                                       int(foot.sum()), 1.0 - min(1.0, cover), "knob"))
+    for turn in TURNS:
+        off = _turned(knob.offset_m, turn)
+        yaw = math.atan2(off[1], off[0]) if np.linalg.norm(off) > 1e-3 else turn
+        for cell in cells:
+            axis = (cell + 0.5) * KNOB_SEARCH_GRID_M
+            reading = knob_reading(bp, bh, knob, axis - off, turn)
+            if reading is None:
+                continue
+            near = np.linalg.norm(bp[:, :2] - axis, axis=1) <= KNOB_RADIUS_M
+            centre = bp[near, :2].mean(axis=0) - off
+            if knob_reading(bp, bh, knob, centre, turn) is None:
+                continue  # centred on what it read, it must still read as a bar (a bowl's rim does not)
+            local = _in_frame(raised, centre, yaw)
+            inside = local[np.all(np.abs(local) <= half, axis=1)]
+            n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
+            cover = (len(np.unique(np.floor(inside / KNOB_SEARCH_GRID_M).astype(int), axis=0)) / n_cells
+                     if len(inside) else 0.0)
+            if (cover < KNOB_BODY_COVER or (best is not None and cover <= best[0])
+                    or patch_cover(points, heights, look, centre, turn) < PATCH_COVER
+                    or patch_cover(points, heights, look, centre, turn, at_surface=True) < KNOB_SURFACE_COVER
+                    or _tall_cover(points, heights, look, centre, yaw, axis, turn) > KNOB_TALL_COVER):
+                continue
+            foot = np.all(np.abs(_in_frame(points[:, :2], centre, yaw)) <= half, axis=1)
+            ground = float(np.median(points[foot, 2] - heights[foot]))
+            c, sn = abs(math.cos(yaw)), abs(math.sin(yaw))
+            hw = np.array([c * half[0] + sn * half[1], sn * half[0] + c * half[1]])
+            best = (cover, FixtureSighting(look.name, np.array([centre[0], centre[1], ground + 0.5 * look.size_m[2]]),
+                                           yaw, np.array([half[0], half[1], 0.5 * look.size_m[2]]), hw, look.size_m[2],
+                                           int(foot.sum()), 1.0 - min(1.0, cover), "knob", turn))
     return best[1] if best is not None else None
 
 
 def _tall_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, centre: np.ndarray, yaw: float,
-                axis: np.ndarray) -> float:
+                axis: np.ndarray, turn: float = 0.0) -> float:
     """Fraction of the footprint cells (:data:`KNOB_SEARCH_GRID_M`) of a body of ``look`` at
     ``centre`` turned by ``yaw``, away from its place patch and its knob at ``axis``, holding a
     point higher than the look's top plus 2 cm: a taller thing, not this fixture."""
@@ -407,7 +455,8 @@ def _tall_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, cent
     keep = np.all(np.abs(_in_frame(xy, centre, yaw)) <= half, axis=1)
     keep &= np.linalg.norm(xy - axis, axis=1) > KNOB_RADIUS_M
     if look.place_offset_m is not None and look.place_half_m is not None:
-        keep &= ~np.all(np.abs(xy - (centre + np.asarray(look.place_offset_m))) <= np.asarray(look.place_half_m), axis=1)
+        patch, patch_half, _ = look.place_patch(centre, np.zeros(2), turn)
+        keep &= ~np.all(np.abs(xy - patch) <= patch_half, axis=1)
     n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
     return len(np.unique(np.floor(xy[keep] / KNOB_SEARCH_GRID_M).astype(int), axis=0)) / n_cells
 
@@ -419,6 +468,33 @@ def _in_frame(xy: np.ndarray, centre: np.ndarray, yaw: float) -> np.ndarray:
     return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
 
 
+def _which_way(points: np.ndarray, heights: np.ndarray, look: FixtureLook, centre: np.ndarray) -> float | None:
+    """Which way round (a turn of :data:`TURNS`, rad) a body of ``look``'s size centred at
+    ``centre`` stands, judged by its place patch (:func:`patch_cover`) and its knob; None when
+    neither way fits. A way fits when its place patch is covered (:data:`PATCH_COVER`) and,
+    for a look with a knob, no non-bar stands where its knob would be (fewer than
+    :data:`KNOB_SEEN_POINTS` points there -- the arm hides the knob -- do not count against
+    it); a way other than the look's own (turn 0) only where the knob is read there (a place
+    patch alone does not tell a fixture's ends apart). Of the ways that fit, one where the knob
+    is read wins, then the better covered patch, then the look's own."""
+    best: tuple[tuple[bool, float, bool], float] | None = None
+    for turn in TURNS:
+        cover = patch_cover(points, heights, look, centre, turn)
+        if cover < PATCH_COVER:
+            continue
+        read = False
+        if look.knob is not None:
+            read = knob_reading(points, heights, look.knob, centre, turn) is not None
+            if not read and int(knob_band(points, heights, look.knob, centre, turn).sum()) >= KNOB_SEEN_POINTS:
+                continue
+        if turn != 0.0 and not read:
+            continue  # the other way round only on the evidence of its knob read there
+        rank = (read, cover, turn == 0.0)
+        if best is None or rank > best[0]:
+            best = (rank, turn)
+    return None if best is None else best[1]
+
+
 def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLook],
                     config: PerceptionConfig) -> dict[str, FixtureSighting]:
     """``{fixture name: sighting}`` of the declared fixtures found in ``cloud`` (world m,
@@ -428,9 +504,10 @@ def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLo
     come out as two segments); the candidates a fixture takes share no segment. A fixture
     with a ``knob`` is not taken where something other than a bar stands at the knob's offset
     from the candidate's centre (:func:`knob_reading`; fewer than :data:`KNOB_SEEN_POINTS`
-    seen there -- the arm hides the knob -- do not count against it), and a fixture with a place patch only where that patch
-    is covered (:func:`patch_cover`); one with a knob that no candidate fits is looked for by its knob
-    (:func:`find_by_knob`)."""
+    seen there -- the arm hides the knob -- do not count against it), and a fixture with a
+    place patch only where that patch is covered (:func:`patch_cover`), either way round
+    (:func:`_which_way`, :data:`TURNS`); one with a knob that no candidate fits is looked for
+    by its knob (:func:`find_by_knob`)."""
     if not looks:
         return {}
     points = cloud.points
@@ -448,12 +525,10 @@ def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLo
             errs = [abs(a - b) / (SIZE_TOL_FRACTION * b + SIZE_TOL_M) for a, b in zip(seen, look.size_m)]
             if max(errs) > 1.0:
                 continue
-            if (look.knob is not None and knob_reading(points, heights, look.knob, body.position[:2]) is None
-                    and int(knob_band(points, heights, look.knob, body.position[:2]).sum()) >= KNOB_SEEN_POINTS):
-                continue  # where a fixture's knob is seen, it shows a bar (the arm may hide it: then unread)
-            if patch_cover(points, heights, look, body.position[:2]) < PATCH_COVER:
-                continue  # and its place surface where the look has it
-            fits.append((float(sum(errs)), parts, replace(body, name=look.name, error=float(sum(errs)))))
+            turn = _which_way(points, heights, look, body.position[:2])
+            if turn is None:
+                continue
+            fits.append((float(sum(errs)), parts, replace(body, name=look.name, error=float(sum(errs)), turn=turn)))
     out: dict[str, FixtureSighting] = {}
     used: set[int] = set()
     for _, parts, sighting in sorted(fits, key=lambda f: f[0]):

@@ -253,11 +253,12 @@ class Perceiver:
 
     def export_fixtures(self) -> dict:
         """The fixtures' last sightings as plain data (``{name: {position, yaw, half_extents,
-        half_xy_world, top_m, points, error, stamp_s, confidence}}``, m, rad, s), for
-        :meth:`restore_fixtures`."""
+        half_xy_world, top_m, points, error, found_by, turn, stamp_s, confidence}}``, m, rad,
+        s), for :meth:`restore_fixtures`."""
         return {n: {"position": s.position.tolist(), "yaw": float(s.yaw), "half_extents": s.half_extents.tolist(),
                     "half_xy_world": s.half_xy_world.tolist(), "top_m": float(s.top_m), "points": int(s.points),
-                    "error": float(s.error), "stamp_s": float(t), "confidence": float(c)}
+                    "error": float(s.error), "found_by": s.found_by, "turn": float(s.turn), "stamp_s": float(t),
+                    "confidence": float(c)}
                 for n, (s, t, c) in self.fixture_tracks.items()}
 
     def restore_fixtures(self, data: Mapping[str, Any]) -> None:
@@ -275,7 +276,8 @@ class Perceiver:
             try:
                 sighting = FixtureSighting(name, np.asarray(d["position"], float), float(d["yaw"]),
                                            np.asarray(d["half_extents"], float), np.asarray(d["half_xy_world"], float),
-                                           float(d["top_m"]), int(d["points"]), float(d["error"]))
+                                           float(d["top_m"]), int(d["points"]), float(d["error"]),
+                                           str(d.get("found_by", "size")), float(d.get("turn", 0.0)))
                 self.fixture_tracks[name] = (sighting, float(d["stamp_s"]), float(d["confidence"]))
             except (KeyError, TypeError, ValueError) as exc:
                 raise PerceptionError(f"perception state: fixture {name!r} has an unexpected layout: {exc}") from None
@@ -619,16 +621,16 @@ class Perceiver:
                 continue
             s = self.fixture_tracks[look.name][0]
             if look.knob is not None:  # read in every observation; its points are the fixture's own
-                reading = knob_reading(p, heights, look.knob, s.position[:2])
+                reading = knob_reading(p, heights, look.knob, s.position[:2], s.turn)
                 if reading is not None:
                     self.knob_readings[look.name] = reading
-                axis = s.position[:2] + np.asarray(look.knob.offset_m)
+                axis = look.knob.axis_xy(s.position[:2], s.turn)
                 own |= ((np.linalg.norm(p[:, :2] - axis, axis=1) <= KNOB_RADIUS_M)
                         & (heights <= look.knob.top_m + FIXTURE_MARGIN_M))
             local = _in_frame(p[:, :2], s.position[:2], s.yaw)
             over = np.all(np.abs(local) <= s.half_extents[:2] + FIXTURE_EDGE_M, axis=1)
             keep |= over
-            centre, half, surface = look.place_patch(s.position[:2], s.half_xy_world)
+            centre, half, surface = look.place_patch(s.position[:2], s.half_xy_world, s.turn)
             on_patch = np.all(np.abs(p[:, :2] - centre) <= half, axis=1)
             top = look.size_m[2]  # the model's top (the sighting's may include what stands on it)
             limit = np.where(on_patch, min(surface, top), top) + FIXTURE_MARGIN_M
@@ -645,7 +647,7 @@ class Perceiver:
         patch, its top the patch's surface; the perceived body in ``attributes.body``) and
         the patch's box for :meth:`_relations`."""
         s, seen_s, conf = self.fixture_tracks[look.name]
-        centre, half, surface = look.place_patch(s.position[:2], s.half_xy_world)
+        centre, half, surface = look.place_patch(s.position[:2], s.half_xy_world, s.turn)
         hz = 0.5 * surface
         pos = np.array([centre[0], centre[1], plane.z_at(centre) + hz])
         now = seen_s == stamp
@@ -671,15 +673,15 @@ class Perceiver:
         closing across the bar: :mod:`phyagentos.primitives.affordance`)."""
         knob = look.knob
         assert knob is not None
-        axis = s.position[:2] + np.asarray(knob.offset_m)
+        axis = knob.axis_xy(s.position[:2], s.turn)
         ground = plane.z_at(axis)
         out: dict[str, Any] = {"joint_type": "hinge", "axis": [0.0, 0.0, 1.0], "range_rad": list(knob.range_rad),
                                "anchor": _r([axis[0], axis[1], ground + 0.5 * knob.top_m])}
         reading = self.knob_readings.get(look.name)
-        yaw = knob.bar_yaw(knob.range_rad[0])
+        yaw = knob.bar_yaw(knob.range_rad[0], s.turn)
         if reading is not None:
             yaw = reading[0]
-            out.update(joint_position=_r(knob.joint_position(yaw), 4), joint_position_std_rad=KNOB_SIGMA_RAD,
+            out.update(joint_position=_r(knob.joint_position(yaw, s.turn), 4), joint_position_std_rad=KNOB_SIGMA_RAD,
                        knob_points=reading[1])
         half_len = max(KNOB_RADIUS_M - 0.02, KNOB_BAR_HALF_WIDTH_M)
         out["grasp"] = {"position": _r([axis[0], axis[1], ground + knob.top_m - 0.5 * KNOB_GRIP_DEPTH_M]),

@@ -16,11 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from libero_clouds import libero_perception_config
+
 from phyagentos.perception import Perceiver, PerceptionConfig, PerceptionError
 from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.fixtures import FixtureLook, detect_fixtures, fixtures_from_declared
 from phyagentos.perception.perceiver import FIXTURE_MARGIN_M
-from phyagentos.targets.libero.sensing import LiberoSensing
 
 DATA = Path(__file__).parent / "data" / "libero_goal_fixtures_cloud.npz"
 TABLE_Z = 0.9  # LIBERO's table top (bench.libero.LIBERO_CELLS), the support plane of the recording
@@ -37,11 +38,7 @@ def _recorded():
 
 
 def _config() -> PerceptionConfig:
-    doc = PerceptionConfig.default().model_dump()
-    for section, values in LiberoSensing.PERCEPTION_OVERRIDES.items():
-        doc[section] = {**doc[section], **values}
-    doc["table"] = {**doc["table"], "expected_height_m": TABLE_Z}
-    return PerceptionConfig.model_validate(doc)
+    return libero_perception_config(TABLE_Z)
 
 
 def _inside(points: np.ndarray, box, grow: float = 0.0) -> np.ndarray:

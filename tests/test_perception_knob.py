@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from libero_clouds import libero_perception_config
+
 from phyagentos.perception import PerceptionConfig
 from phyagentos.perception.cloud import Cloud
 from phyagentos.perception.fixtures import KNOB_SIGMA_RAD, detect_fixtures, find_by_knob, fixtures_from_declared, knob_reading
-from phyagentos.targets.libero.sensing import LiberoSensing
 
 DATA = Path(__file__).parent / "data" / "libero_knob_cloud.npz"
 TABLE_Z = 0.9  # LIBERO's kitchen table top (bench.libero.LIBERO_CELLS), the support plane of the recording
@@ -39,11 +40,7 @@ def _recorded(top_m=None):
 
 
 def _config() -> PerceptionConfig:
-    doc = PerceptionConfig.default().model_dump()
-    for section, values in LiberoSensing.PERCEPTION_OVERRIDES.items():
-        doc[section] = {**doc[section], **values}
-    doc["table"] = {**doc["table"], "expected_height_m": TABLE_Z}
-    return PerceptionConfig.model_validate(doc)
+    return libero_perception_config(TABLE_Z)
 
 
 def _place_error(look, sighting, meta) -> float:

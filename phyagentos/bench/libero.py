@@ -374,10 +374,13 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     Returns:
         ``(suite file, task ids, seeds)`` for :func:`~phyagentos.bench.run_bench`.
 
+    A task whose init-state file is unreadable or empty (LIBERO-PRO ships one such file in
+    ``libero_10_with_milk``) is left out like a refused task, with the reason.
+
     Raises:
         BenchError: unknown suite, task or init-state index (the valid ones in
             ``problems``), LIBERO not installed, or no chosen task has a goal graph
-            (instructions the grammar does not cover are listed).
+            (instructions the grammar does not cover and tasks that cannot run are listed).
     """
     from phyagentos.targets.libero.catalog import (  # noqa: PLC0415
         DEFAULT_INIT_SUBSET,
@@ -402,16 +405,23 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         raise BenchError(str(exc), problems=[str(exc)]) from None
     indices = _task_indices(suite, tasks, len(catalogue))
     seeds = tuple(seeds) if seeds is not None else DEFAULT_INIT_SUBSET
+    unplanned = []
+    runnable = []
     for i in indices:
-        n_init = load_init_states(catalogue[i]).shape[0]
+        try:
+            n_init = load_init_states(catalogue[i]).shape[0]
+        except TargetError as exc:  # a suite that ships a broken init file for one task (libero_10_with_milk)
+            unplanned.append(f"task {i} ({catalogue[i].instruction}): not runnable: {exc}")
+            continue
         bad = [s for s in seeds if not 0 <= s < n_init]
         if bad:
             raise BenchError(f"LIBERO task {suite}/{i} has no init state {bad[0]}", problems=[
                 f"unknown init state(s) {', '.join(map(str, bad))} of {suite}/{i}; valid init states: 0-{n_init - 1} "
                 f"(--seeds are LIBERO's init-state indices)"])
+        runnable.append(i)
     fixed = {k: dict(v) for k, v in (SKILL_DEFAULTS if skill_defaults is None else skill_defaults).items()}
-    planned, unplanned = [], []
-    for i in indices:
+    planned = []
+    for i in runnable:
         task = catalogue[i]
         problem = parse_bddl(task.bddl_path)
         try:

@@ -21,9 +21,13 @@ heights; a segment is a fixture when its footprint sides and top each lie within
 :data:`SIZE_TOL_FRACTION` (plus :data:`SIZE_TOL_M`) of the look; a candidate is one segment
 or two adjacent ones (:data:`JOIN_GAP_M`: a fixture whose parts differ in colour); each
 fixture takes the best fitting candidate (sum of relative size errors), no segment going to
-two fixtures. A fixture merged with something else into one larger segment (LIBERO's cabinet
-with the wine rack beside it, in some generated scenes) does not fit: it is not seen in that
-observation (the perceiver keeps a fixture where it was once seen: fixtures do not move).
+two fixtures. A candidate must also show its place patch at the surface's height and, for a
+fixture with a knob, no non-bar where the knob would be; either way round (:data:`TURNS`:
+the other way only where its knob is read). A fixture merged with something else into one
+larger segment (LIBERO's cabinet with the wine rack beside it, in some generated scenes) does
+not fit: it is not seen in that observation, unless it has a knob, by which it is then looked
+for (:func:`find_by_knob`). The perceiver keeps a fixture where it was once seen (fixtures do
+not move); a knob turns, so it is read in every observation.
 
 Nothing here reads a simulator.
 """

@@ -89,12 +89,13 @@ KNOB_MIN_ELONGATION = 2.0
 #: rim where a knob is expected does not fit (on LIBERO-90 task 44 a frying pan beside the
 #: stove was once taken for it, and its handle for the knob).
 KNOB_ALONG_STD_M: tuple[float, float] = (0.016, 0.034)
+KNOB_ACROSS_STD_MAX_M = 0.012
 #: ... and the 90th percentile of its points' heights at most this above the knob's top, m
 #: (LIBERO's stove knob: at its top, 0.059 m; a black bowl's rim beside it reads 0.071 m).
 KNOB_TOP_TOL_M = 0.008
-KNOB_ACROSS_STD_MAX_M = 0.012
-#: 1-sigma uncertainty of a knob reading, rad: the largest error on LIBERO's stove knob turned
-#: to 0, 0.6, 1.2 and 2.0 rad on a generated libero_90 scene was 0.061 rad (docs/libero.md,
+#: 1-sigma uncertainty of a knob reading, rad: on LIBERO's stove knob turned to 0-2 rad on
+#: generated scenes (``bench/libero_knob.py``, 54 readings) the errors' root mean square was
+#: 0.045 rad, their 95th percentile 0.081 and their largest 0.12, at 2 rad (docs/libero.md,
 #: "Turning the stove on").
 KNOB_SIGMA_RAD = 0.06
 
@@ -371,6 +372,16 @@ KNOB_TALL_COVER = 0.35
 KNOB_SURFACE_COVER = 0.5
 
 
+def _grid_fraction(xy: np.ndarray, half: np.ndarray) -> float:
+    """How many :data:`KNOB_SEARCH_GRID_M` cells the points ``xy`` (N, 2) m hold, over the cells
+    of a rectangle of half extents ``half`` (2,) m (at least one): the fraction of an area
+    the points cover (above 1 when they spill beyond it)."""
+    n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
+    if len(xy) == 0:
+        return 0.0
+    return len(np.unique(np.floor(xy / KNOB_SEARCH_GRID_M).astype(int), axis=0)) / n_cells
+
+
 def patch_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, centre_xy: np.ndarray,
                 turn: float = 0.0, *, at_surface: bool = False) -> float:
     """Fraction (0..1) of the place patch of a body of ``look`` centred at ``centre_xy`` (2,)
@@ -385,9 +396,7 @@ def patch_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, cent
     surface = float(look.place_height_m or 0.0)
     high = np.abs(heights - surface) <= PATCH_TOL_M if at_surface else heights >= surface - PATCH_TOL_M
     inside = np.all(np.abs(points[:, :2] - centre) <= half, axis=1) & high
-    n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
-    cells = np.unique(np.floor((points[inside, :2] - centre + half) / KNOB_SEARCH_GRID_M).astype(int), axis=0)
-    return min(1.0, len(cells) / n_cells)
+    return min(1.0, _grid_fraction(points[inside, :2] - centre + half, half))
 
 
 def find_by_knob(points: np.ndarray, heights: np.ndarray, look: FixtureLook) -> FixtureSighting | None:
@@ -430,9 +439,7 @@ def find_by_knob(points: np.ndarray, heights: np.ndarray, look: FixtureLook) -> 
                 continue  # centred on what it read, it must still read as a bar (a bowl's rim does not)
             local = _in_frame(raised, centre, yaw)
             inside = local[np.all(np.abs(local) <= half, axis=1)]
-            n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
-            cover = (len(np.unique(np.floor(inside / KNOB_SEARCH_GRID_M).astype(int), axis=0)) / n_cells
-                     if len(inside) else 0.0)
+            cover = _grid_fraction(inside, half)
             if (cover < KNOB_BODY_COVER or (best is not None and cover <= best[0])
                     or patch_cover(points, heights, look, centre, turn) < PATCH_COVER
                     or patch_cover(points, heights, look, centre, turn, at_surface=True) < KNOB_SURFACE_COVER
@@ -461,8 +468,7 @@ def _tall_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, cent
     if look.place_offset_m is not None and look.place_half_m is not None:
         patch, patch_half, _ = look.place_patch(centre, np.zeros(2), turn)
         keep &= ~np.all(np.abs(xy - patch) <= patch_half, axis=1)
-    n_cells = max(1, int(round(4 * half[0] * half[1] / KNOB_SEARCH_GRID_M ** 2)))
-    return len(np.unique(np.floor(xy[keep] / KNOB_SEARCH_GRID_M).astype(int), axis=0)) / n_cells
+    return _grid_fraction(xy[keep], half)
 
 
 def _in_frame(xy: np.ndarray, centre: np.ndarray, yaw: float) -> np.ndarray:

@@ -35,6 +35,27 @@ from .perception import entity_pose
 __all__ = ["ComputeAffordanceGrasp", "ArticulateHinge", "ComputePlaceAsHeld", "ToolMove"]
 
 
+def _turn_to(attrs: dict, fraction: float) -> float | None:
+    """The turn (rad, the joint's sign) that takes a hinge whose entity ``attrs`` report its
+    ``joint_position`` and ``range_rad`` [lo, hi] to ``lo + fraction (hi - lo)``; None when
+    either is not reported (a perceived joint not seen)."""
+    q0, travel = attrs.get("joint_position"), attrs.get("range_rad")
+    if q0 is None or travel is None:
+        return None
+    lo, hi = (float(v) for v in travel)
+    return lo + fraction * (hi - lo) - float(q0)
+
+
+def _about_hinge(T: np.ndarray, anchor: np.ndarray, axis: np.ndarray, angle: float, *, follow: float = 1.0) -> np.ndarray:
+    """The (4, 4) world pose ``T`` carried ``angle`` rad about the hinge through ``anchor`` (3,)
+    m along unit ``axis`` (3,): its position on the circle about the axis, its orientation turned
+    by ``follow`` times the angle (0: kept, a bar turning inside the fingers)."""
+    out = np.eye(4)
+    out[:3, :3] = rotation_about(axis, follow * angle) @ T[:3, :3]
+    out[:3, 3] = anchor + rotation_about(axis, angle) @ (T[:3, 3] - anchor)
+    return out
+
+
 def _entity(snapshot: dict, name: str) -> dict:
     for e in snapshot.get("entities", []):
         if e["name"] == name:
@@ -170,23 +191,17 @@ class ComputeAffordanceGrasp(Primitive):
         self.ctx.trace.record("grasp_pose", leaf=self.name, object=self.object, affordance=part is not None,
                               grasp=G[:3, 3].round(4).tolist(), approach=G[:3, 2].round(4).tolist())
 
-
     def _turned(self, ent: dict, G: np.ndarray) -> np.ndarray | None:
         """The (4, 4) tcp pose ``G`` turned about ``ent``'s hinge as far as
         ``turn_to_fraction`` asks from its reported position; None when no turn is asked or
         the entity does not report its hinge, position and travel."""
         attrs = ent.get("attributes") or {}
-        if (self.turn_to_fraction is None or attrs.get("joint_type") != "hinge"
-                or attrs.get("joint_position") is None or attrs.get("range_rad") is None):
+        if self.turn_to_fraction is None or attrs.get("joint_type") != "hinge":
             return None
-        lo_r, hi_r = (float(v) for v in attrs["range_rad"])
-        delta = lo_r + self.turn_to_fraction * (hi_r - lo_r) - float(attrs["joint_position"])
-        R = rotation_about(np.asarray(attrs["axis"], dtype=float), delta)
-        anchor = np.asarray(attrs["anchor"], dtype=float)
-        T = np.eye(4)
-        T[:3, :3] = R @ G[:3, :3]
-        T[:3, 3] = anchor + R @ (G[:3, 3] - anchor)
-        return T
+        delta = _turn_to(attrs, self.turn_to_fraction)
+        if delta is None:
+            return None
+        return _about_hinge(G, np.asarray(attrs["anchor"], dtype=float), np.asarray(attrs["axis"], dtype=float), delta)
 
 
 class ArticulateHinge(_Tracking):
@@ -245,16 +260,14 @@ class ArticulateHinge(_Tracking):
                                                             f"(kind {ent.get('kind')!r}, joint {attrs.get('joint_type')!r})")
         delta = self.delta_rad
         if self.to_fraction is not None:
-            q0, travel = attrs.get("joint_position"), attrs.get("range_rad")
-            if q0 is None or travel is None:
+            delta = _turn_to(attrs, self.to_fraction)
+            if delta is None:
                 raise PrimitiveFailure("perception.affordance", f"{self.object!r}: its joint position or travel is not "
                                                                 "known (the joint was not seen), so a turn to a fraction "
                                                                 "of the travel cannot be planned")
-            lo, hi = (float(v) for v in travel)
-            delta = lo + self.to_fraction * (hi - lo) - float(q0)
             if abs(delta) < 1e-3:
                 ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_rad=0.0,
-                                 joint_position=q0, waypoints=0)
+                                 joint_position=attrs.get("joint_position"), waypoints=0)
                 self._done = True
                 return
         assert delta is not None
@@ -271,10 +284,7 @@ class ArticulateHinge(_Tracking):
         path = [q]
         with ctx.profiler.section("ik"):
             for k in range(1, n + 1):
-                R = rotation_about(axis, delta * k / n)
-                Tk = np.eye(4)
-                Tk[:3, :3] = rotation_about(axis, follow * delta * k / n) @ T0[:3, :3]
-                Tk[:3, 3] = anchor + R @ (T0[:3, 3] - anchor)
+                Tk = _about_hinge(T0, anchor, axis, delta * k / n, follow=follow)
                 segment = cartesian_path(target.model, q_start=q, T_goal=Tk, **ik_options(target))
                 path.extend(segment[1:])
                 q = segment[-1]

@@ -135,18 +135,32 @@ def _wrap_rad(a: float) -> float:
     return float((a + np.pi) % (2.0 * np.pi) - np.pi)
 
 
-def _unusable(ctx, obj: str, plan) -> str | None:
+def _unusable(ctx, obj: str, plan) -> Blocked | None:
     """Why the arm cannot take grasp ``plan`` of object ``obj`` (:func:`reach_blocked` of its
     pre-grasp, then its grasp); ``None`` when it can."""
     return reach_blocked(ctx, obj, ("pre-grasp", plan.pregrasp), ("grasp", plan.grasp))
 
 
-def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, np.ndarray]) -> str | None:
+class Blocked(str):
+    """Why a reach is blocked: its text (a ``str``, as traced), with the ``stage`` whose pose
+    failed (the label it was given) and whether it ``collides`` (an IK solution that touches
+    the scene) rather than has no solution."""
+
+    stage: str
+    collides: bool
+
+    def __new__(cls, text: str, *, stage: str, collides: bool) -> "Blocked":
+        out = super().__new__(cls, text)
+        out.stage, out.collides = stage, collides
+        return out
+
+
+def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, np.ndarray]) -> Blocked | None:
     """Why the arm cannot reach ``above`` then ``at`` (``(label, (4, 4) world tcp pose)``):
     no IK solution clear of collisions (:func:`~.motion.clear_ik`, SolveIK's seeds) for the
     pose above (the planner's goal: its margin), or for the pose at the object from there
     (reached by a straight move, touching object ``obj`` by design: only penetration of
-    anything else counts). ``None`` when both are reachable and clear."""
+    anything else counts). ``None`` when both are reachable and clear, else a :class:`Blocked`."""
     try:
         own = ctx.target.object_body(obj)
     except Exception:  # noqa: BLE001 - a target without object bodies
@@ -156,9 +170,10 @@ def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, n
         try:
             sol, pairs, _ = clear_ik(ctx, pose, q_seed=q, allow=allow, margin_m=margin)
         except IKError as exc:
-            return f"{label}: {str(exc)[:100]}"
+            return Blocked(f"{label}: {str(exc)[:100]}", stage=label, collides=False)
         if pairs:
-            return f"{label} collides: {', '.join('-'.join(pr) for pr in pairs[:3])}"
+            return Blocked(f"{label} collides: {', '.join('-'.join(pr) for pr in pairs[:3])}", stage=label,
+                           collides=True)
         q = sol.q
     return None
 
@@ -280,7 +295,7 @@ class ComputeGrasp(Primitive):
         close :data:`MIN_PAD_OVERLAP_M` below the object's top (the perceived centre plus its
         vertical half extent); else ``plan`` and why not."""
         why = _unusable(self.ctx, self.object, plan)
-        if why is None or not why.startswith("grasp collides"):
+        if not (isinstance(why, Blocked) and why.stage == "grasp" and why.collides):
             return plan, 0.0, why
         top = float(T_obj[2, 3] + np.abs(T_obj[2, :3]) @ np.asarray(half, dtype=float))
         for dz in GRASP_RAISE_STEPS_M:

@@ -12,12 +12,14 @@ from .knowledge import KnowledgeBase
 from .lessons import LessonBook
 from .observed import ObservedObject, observe_object
 from .promotion import PromotionPolicy, promote
+from .similarity import MIN_SIMILARITY, similarity
 
 __all__ = [
     "Conditions",
     "ContextBuilder",
     "KnowledgeBase",
     "LessonBook",
+    "MIN_SIMILARITY",
     "ObservedObject",
     "observe_object",
     "PromotionPolicy",
@@ -25,4 +27,5 @@ __all__ = [
     "risk_factors",
     "scope_matches",
     "session_conditions",
+    "similarity",
 ]

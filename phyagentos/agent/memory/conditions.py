@@ -20,9 +20,13 @@ clutter         another perceived entity stands within :data:`CLUTTER_GAP_M` of 
 round_object    its shape class (perceived, else declared) is cylinder or sphere
 ==============  ===========================================================================
 
-A memory item's *scope* is ``{embodiment, skill, object_class, risk_factors}``; it
-applies to a session when embodiment, skill and object class are equal and the item's
-risk factors are a subset of the session's (:func:`scope_matches`). The object class is
+A memory item's *scope* is ``{embodiment, skill, object_class, risk_factors}`` (its
+identity) and, where known, the object's declared ``category``, ``shape`` and ``size_m``.
+Retrieval compares a scope with a session's conditions by similarity
+(:mod:`~phyagentos.agent.memory.similarity`): same embodiment, skill, category and shape,
+extents within the perception's spread, the item's situational risk factors among the
+session's. Without a size on either side the older exact rule holds (:func:`scope_matches`):
+equal object class, the item's risk factors a subset of the session's. The object class is
 the user's declared ``class`` when given, else ``<shape>-<size band>`` (``box-medium``).
 
 Backward reading: scopes written before this scheme (``box-4x4x4cm``, risk factors named
@@ -42,7 +46,7 @@ from ..declared import descriptor
 from .observed import ObservedObject
 
 __all__ = ["Conditions", "HEAVY_KG", "SMALL_M", "LARGE_M", "CLUTTER_GAP_M", "OBSERVABLE_RISK_FACTORS",
-           "risk_factors", "scope_matches", "session_conditions", "canonical", "object_class", "size_band",
+           "risk_factors", "scope_matches", "scope_identity", "session_conditions", "canonical", "object_class", "size_band",
            "migrate_scope"]
 
 #: Mass estimate above which an object is heavy, kg (the Franka Hand carries 3 kg; at
@@ -90,9 +94,21 @@ class Conditions:
     risk_factors: tuple[str, ...] = ()
 
     def scope(self) -> dict[str, Any]:
-        """The scope a lesson or knowledge entry learned under these conditions gets."""
-        return {"embodiment": self.embodiment, "skill": self.skill, "object_class": self.object_class,
-                "risk_factors": list(self.risk_factors)}
+        """The scope a lesson learned under these conditions gets: embodiment, skill, object
+        class and risk factors (its identity, :func:`scope_identity`), and where known the
+        object's declared ``category``, its ``shape`` and its ``size_m`` (3,) full extents in m
+        (perceived, else declared), which retrieval compares by similarity
+        (:mod:`~phyagentos.agent.memory.similarity`)."""
+        out: dict[str, Any] = {"embodiment": self.embodiment, "skill": self.skill, "object_class": self.object_class,
+                               "risk_factors": list(self.risk_factors)}
+        props = self.object_properties
+        if isinstance(props.get("class"), str):
+            out["category"] = props["class"]
+        if isinstance(props.get("shape"), str) and props["shape"] != "unknown":
+            out["shape"] = props["shape"]
+        if isinstance(props.get("size_m"), (list, tuple)) and len(props["size_m"]) == 3:
+            out["size_m"] = [float(s) for s in props["size_m"]]
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         return {"goal": self.goal, "skill": self.skill, "target": self.target, "embodiment": self.embodiment,
@@ -134,6 +150,14 @@ def migrate_scope(scope: Mapping[str, Any]) -> dict[str, Any]:
     if out.get("risk_factors") is not None:
         out["risk_factors"] = sorted(r for r in out["risk_factors"] if r in OBSERVABLE_RISK_FACTORS)
     return out
+
+
+def scope_identity(scope: Mapping[str, Any]) -> dict[str, Any]:
+    """The keys of ``scope`` that identify a memory item (embodiment, skill, object class,
+    risk factors): equal identities merge; the object's category, shape and size are its
+    profile, compared by similarity, not part of the identity."""
+    scope = migrate_scope(scope)
+    return {key: scope.get(key) for key in (*_SCOPE_KEYS, "risk_factors")}
 
 
 def scope_matches(scope: Mapping[str, Any], conditions: Conditions) -> bool:

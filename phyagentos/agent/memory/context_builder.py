@@ -4,12 +4,11 @@ Before the Session Compiler writes a first-attempt session, the ContextBuilder c
 the session's :class:`~phyagentos.agent.memory.conditions.Conditions` (goal, skill,
 target and embodiment, object and risk factors) and retrieves, in order of authority:
 
-1. procedures from SKILL.md whose conditions equal the session's (promoted, repeatedly
-   verified): their parameters are applied;
-2. verified lessons from LESSONS.md whose scope matches (same embodiment, skill and
-   object class; the lesson's risk factors among the session's): their corrections are
-   applied, most confirmed first, a parameter set by an earlier item winning;
-3. patterns from KNOWLEDGE.md under equal conditions: recorded as context; the best
+1. procedures from SKILL.md learned on a similar object (promoted, repeatedly verified):
+   their parameters are applied;
+2. verified lessons from LESSONS.md learned on a similar object: their corrections are
+   applied, most similar then most confirmed first, a parameter set by an earlier item winning;
+3. patterns from KNOWLEDGE.md learned on a similar object: recorded as context; the best
    one's parameters are applied only when nothing above applied and it is well
    established (:data:`KNOWLEDGE_MIN_SUCCESSES` successes, rate >= :data:`KNOWLEDGE_MIN_RATE`).
 
@@ -17,7 +16,9 @@ Only the skill's optional (strategy) parameters are ever set, and never one the 
 graph node sets itself: the author's explicit choice wins over memory. What was
 retrieved, what it set and the session ids it was verified on go into the session's
 ``context`` (:class:`~phyagentos.protocol.SessionContext`), so every injected item is
-traceable. Unverified candidates are never retrieved.
+traceable. "Similar" is :func:`~.similarity.similarity` at least
+:data:`~.similarity.MIN_SIMILARITY`: same embodiment, skill, declared category and shape,
+extents within perception's spread, the item's situational risk factors among the session's. Unverified candidates are never retrieved.
 """
 
 from __future__ import annotations
@@ -31,9 +32,10 @@ from phyagentos.protocol.lifecycle import utc_now
 from ..skill_catalog import SkillInfo, skill_catalog
 from .conditions import Conditions, session_conditions
 from .game import game_context_items
-from .knowledge import KnowledgeBase, pattern_conditions
+from .knowledge import KnowledgeBase
 from .lessons import LessonBook
 from .observed import ObservedObject
+from .similarity import MIN_SIMILARITY, similarity
 
 __all__ = ["ContextBuilder", "KNOWLEDGE_MIN_SUCCESSES", "KNOWLEDGE_MIN_RATE", "MAX_ITEMS"]
 
@@ -106,16 +108,15 @@ class ContextBuilder:
             applied.update(took)
             return took
 
-        want = {k: v for k, v in pattern_conditions(cond).items() if k in ("embodiment", "skill", "object_class",
-                                                                          "risk_factors")}
-        procedures = [p for p in self.workspace.read("SKILL").data.procedures
-                      if {k: p.conditions.get(k) for k in want} == want]
-        for proc in procedures[:MAX_ITEMS]:
-            items.append(ContextItem(kind="procedure", id=proc.name, summary=proc.description,
+        procedures = sorted(((score, p) for p in self.workspace.read("SKILL").data.procedures
+                             if (score := similarity(p.conditions, cond)) >= MIN_SIMILARITY),
+                            key=lambda pair: pair[0], reverse=True)
+        for score, proc in procedures[:MAX_ITEMS]:
+            items.append(ContextItem(kind="procedure", id=proc.name, summary=f"{proc.description} (similarity {score:.2f})",
                                      provenance=list(proc.provenance), applied=take(proc.parameters)))
-        for lesson in self.lessons.retrieve(cond)[:MAX_ITEMS]:
+        for score, lesson in self.lessons.retrieve_scored(cond)[:MAX_ITEMS]:
             summary = (f"{lesson.cause} -> {lesson.correction} (confirmed {lesson.confirmations}x, "
-                       f"refuted {lesson.refutations}x)")
+                       f"refuted {lesson.refutations}x; similarity {score:.2f})")
             items.append(ContextItem(kind="lesson", id=lesson.id, summary=summary,
                                      provenance=list(lesson.verified_by), applied=take(lesson.revision)))
         for item, values in game_context_items(self.workspace, skill=skill, parameters=parameters,

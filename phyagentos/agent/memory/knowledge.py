@@ -2,7 +2,8 @@
 
 A *pattern* is a skill run with particular strategy parameters (the skill's optional
 parameters as the session set them; ``{}`` is the skill's defaults) under particular
-conditions (embodiment, target, skill, object class, risk factors). A success verdict
+conditions (embodiment, target, skill, object class, risk factors, the object's observable
+properties; retrieved by similarity, :mod:`~.similarity`). A success verdict
 creates the pattern or adds to it (``successes``, the session in ``provenance``, the
 initial state in ``initial_states``); any later verdict of the same pattern counts as an
 attempt, so ``successes / attempts`` is its observed success rate from its first
@@ -22,6 +23,7 @@ from phyagentos.protocol import KnowledgeDoc, KnowledgeEntry, SessionRecord, Ver
 from phyagentos.protocol.lifecycle import utc_now
 
 from .conditions import Conditions, canonical, migrate_scope
+from .similarity import MIN_SIMILARITY, similarity
 
 __all__ = ["KnowledgeBase", "knowledge_id", "pattern_conditions", "MAX_ENTRIES", "MAX_REFS", "MAX_STATES"]
 
@@ -63,11 +65,14 @@ class KnowledgeBase:
         return self.workspace.read("KNOWLEDGE").data
 
     def retrieve(self, conditions: Conditions) -> list[KnowledgeEntry]:
-        """Patterns whose applicability conditions equal ``conditions`` (embodiment, skill,
-        object class, risk factors), best observed success rate first."""
-        want = _key_conditions(pattern_conditions(conditions))
-        found = [e for e in self.document().entries if _key_conditions(e.conditions) == want]
-        return sorted(found, key=lambda e: ((e.successes + 1) / (e.attempts + 2), e.successes), reverse=True)
+        """Patterns learned on an object like the session's (similarity at least
+        :data:`~.similarity.MIN_SIMILARITY`, :mod:`~.similarity`), best observed success rate
+        (Laplace: ``(successes + 1) / (attempts + 2)``) first, then the most similar."""
+        scored = [(similarity(e.conditions, conditions), e) for e in self.document().entries]
+        found = [(score, e) for score, e in scored if score >= MIN_SIMILARITY]
+        found.sort(key=lambda pair: ((pair[1].successes + 1) / (pair[1].attempts + 2), pair[0], pair[1].successes),
+                   reverse=True)
+        return [e for _, e in found]
 
     def record(self, session: SessionRecord, verdict: Verdict, conditions: Conditions, *,
                strategy: Mapping[str, Any], initial_state: str | None) -> str | None:

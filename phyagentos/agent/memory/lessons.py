@@ -38,7 +38,8 @@ from phyagentos.protocol import Diagnosis, Lesson, LessonsDoc, Revision, Session
 from phyagentos.protocol.lifecycle import utc_now
 
 from ..recovery import SITUATIONAL
-from .conditions import Conditions, canonical, scope_matches
+from .conditions import Conditions, canonical, scope_identity
+from .similarity import MIN_SIMILARITY, similarity
 
 __all__ = ["LessonBook", "lesson_id", "keep_refs", "count_outcome", "MAX_LESSONS", "MAX_CANDIDATES", "MAX_REFS"]
 
@@ -50,8 +51,9 @@ MAX_REFS = 12
 
 
 def lesson_id(cause: str, strategy: str, revision: dict[str, Any], scope: dict[str, Any]) -> str:
-    """Stable id of a correction: equal cause, strategy, revision and scope give equal ids."""
-    digest = hashlib.sha1(canonical([cause, strategy, revision, scope]).encode()).hexdigest()[:10]
+    """Stable id of a correction: equal cause, strategy, revision and scope identity
+    (:func:`~.conditions.scope_identity`) give equal ids."""
+    digest = hashlib.sha1(canonical([cause, strategy, revision, scope_identity(scope)]).encode()).hexdigest()[:10]
     return f"L{digest}"
 
 
@@ -141,14 +143,22 @@ class LessonBook:
         return self.workspace.read("LESSONS").data
 
     def retrieve(self, conditions: Conditions) -> list[Lesson]:
-        """Verified lessons whose scope matches ``conditions`` and that have been confirmed
-        more often than refuted, most confirmed and most specific first. Lessons decided
-        by a trial (survival corrections) are served by their own book
+        """Verified lessons learned on an object like the session's (similarity at least
+        :data:`~.similarity.MIN_SIMILARITY`, :mod:`~.similarity`) and confirmed more often than
+        refuted; the most similar first, then the most confirmed and the most specific.
+        Lessons decided by a trial (survival corrections) are served by their own book
         (:class:`~.deaths.DeathBook`), not here."""
-        found = [entry for entry in self.document().lessons if entry.verified and entry.trial is None  # trials: memory/deaths.py
-                 and scope_matches(entry.scope, conditions) and entry.confirmations > entry.refutations]
-        return sorted(found, key=lambda entry: (entry.confirmations - entry.refutations, len(entry.scope.get("risk_factors") or ()),
-                                                entry.updated_at or ""), reverse=True)
+        return [entry for _, entry in self.retrieve_scored(conditions)]
+
+    def retrieve_scored(self, conditions: Conditions) -> list[tuple[float, Lesson]]:
+        """:meth:`retrieve` with each lesson's similarity, ``[(similarity, lesson)]``."""
+        found = [(round(similarity(entry.scope, conditions), 3), entry) for entry in self.document().lessons
+                 if entry.verified and entry.trial is None  # trials: memory/deaths.py
+                 and entry.confirmations > entry.refutations]
+        found = [(score, entry) for score, entry in found if score >= MIN_SIMILARITY]
+        return sorted(found, key=lambda pair: (pair[0], pair[1].confirmations - pair[1].refutations,
+                                               len(pair[1].scope.get("risk_factors") or ()), pair[1].updated_at or ""),
+                      reverse=True)
 
     # -- writing -----------------------------------------------------------
 

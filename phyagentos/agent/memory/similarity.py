@@ -97,7 +97,8 @@ def profile(item: Mapping[str, Any]) -> ObjectProfile:
     ``size_m`` at its top level, see :meth:`Conditions.scope`) or of a knowledge entry's or
     procedure's ``conditions`` (the same inside ``object_properties``). Never raises."""
     item = migrate_scope(item)
-    props = item.get("object_properties") if isinstance(item.get("object_properties"), Mapping) else {}
+    raw = item.get("object_properties")
+    props: Mapping[str, Any] = raw if isinstance(raw, Mapping) else {}
     category = item.get("category", props.get("class"))
     shape = item.get("shape", props.get("shape"))
     return ObjectProfile(

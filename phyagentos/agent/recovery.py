@@ -76,6 +76,13 @@ a lookup, wired by the composition root). LIBERO's Panda hand closes on position
 ladder is the slower lift and transfer of step 2, never a force it would refuse; a step left with
 nothing it can change is skipped.
 
+**A held lesson first.** Where the failed session's context holds a verified lesson for
+the diagnosed cause (the ContextBuilder holds back lessons whose cause belongs to the scene,
+learned on a similar object: ``ContextItem.held``), the first replan for that cause along
+the lineage takes the lesson's correction (``proposed_by: memory``), at the ladder rung of
+its strategy, so a later replan goes on past it. A held correction that would change
+nothing, or that the skill or target cannot take, is passed over for the ladder.
+
 Whatever the cause, when the evidence shows the hand was left below
 :data:`CLEARANCE_Z_M` (a failed approach can pin or tip the object), the child first
 backs off and lets the scene settle (:data:`SITUATIONAL` parameters ``backoff_m`` 0.10,
@@ -93,7 +100,10 @@ from phyagentos.protocol import Diagnosis, Revision, SessionRecord
 from .skill_catalog import SkillInfo, skill_catalog
 
 __all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M", "RE_PICK", "ACQUIRING_SKILLS",
-           "ANOTHER_VIEW_SAMPLES", "PARAMETER_CAPABILITIES", "CapabilityLookup", "beyond_target"]
+           "ANOTHER_VIEW_SAMPLES", "PARAMETER_CAPABILITIES", "CapabilityLookup", "beyond_target", "MEMORY"]
+
+#: ``proposed_by`` of a revision taken from a lesson held in the session's context.
+MEMORY = "memory"
 
 #: Parameters a revision sets because of where the failed attempt left the world.
 SITUATIONAL: Mapping[str, Any] = {"backoff_m": 0.10, "settle_s": 0.5}
@@ -331,6 +341,8 @@ class RecoveryPlanner:
         ladder = self.ladders.get(f"{diagnosis.cause}/{variant}", self.ladders.get(diagnosis.cause, ()))
         current = dict(session.parameters)
         start = _ladder_start(history, diagnosis.cause)
+        if start == 0 and (held := self._held(session, diagnosis, ladder)) is not None:
+            return held
         for step in range(start, len(ladder)):
             strategy = ladder[step]
             info = self.skills.get(strategy.skill or session.skill)
@@ -348,6 +360,32 @@ class RecoveryPlanner:
                             limits=limits, skill=strategy.skill,
                             rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> {strategy.description}")
         return self._switch_target(session, diagnosis, history, step=len(ladder) + 1)
+
+    def _held(self, session: SessionRecord, diagnosis: Diagnosis, ladder: Sequence[Strategy]) -> Revision | None:
+        """The revision from the first lesson ``session``'s context holds for the diagnosed
+        cause, or ``None`` (none held, or it would change nothing the skill and target take)."""
+        items = session.context.items if session.context is not None else ()
+        for item in items:
+            held = item.held
+            if item.kind != "lesson" or held.get("cause") != diagnosis.cause:
+                continue
+            skill = held.get("skill") or None
+            info = self.skills.get(skill or session.skill)
+            allowed = (info.optional if info is not None else frozenset())
+            allowed = allowed - beyond_target(allowed, session.target, self.capabilities)
+            base = {} if skill else dict(session.parameters)
+            values = {k: v for k, v in (held.get("parameters") or {}).items() if k in allowed and base.get(k) != v}
+            if not values:
+                continue
+            if not skill and float(diagnosis.facts.get("tcp_end_z_m", 1.0)) < CLEARANCE_Z_M:
+                values.update({k: v for k, v in SITUATIONAL.items() if k in allowed and base.get(k) != v})
+            names = [strategy.name for strategy in ladder]
+            name = str(held.get("strategy") or "lesson")
+            return Revision(strategy=name, cause=diagnosis.cause, step=names.index(name) + 1 if name in names else 1,
+                            parameters=values, skill=skill, proposed_by=MEMORY,
+                            rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> lesson {item.id} "
+                                      f"learned on a similar object ({name})")
+        return None
 
     def _switch_target(self, session: SessionRecord, diagnosis: Diagnosis, history: Sequence[SessionRecord], *,
                        step: int) -> Revision | None:

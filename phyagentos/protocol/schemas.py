@@ -349,6 +349,9 @@ class ContextItem(ProtocolModel):
     summary: str
     provenance: list[str] = Field(default_factory=list, description="Session ids the item was verified on.")
     applied: dict[str, Any] = Field(default_factory=dict, description="Parameter values this item set (empty: informative only).")
+    held: dict[str, Any] = Field(default_factory=dict, description=(
+        "A situational lesson's correction, held back until its cause recurs in this session's lineage: "
+        "cause, strategy, parameters, skill (empty: none)."))
 
 
 class SessionContext(ProtocolModel):

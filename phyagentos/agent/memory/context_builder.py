@@ -6,8 +6,12 @@ target and embodiment, object and risk factors) and retrieves, in order of autho
 
 1. procedures from SKILL.md learned on a similar object (promoted, repeatedly verified):
    their parameters are applied;
-2. verified lessons from LESSONS.md learned on a similar object: their corrections are
-   applied, most similar then most confirmed first, a parameter set by an earlier item winning;
+2. verified lessons from LESSONS.md learned on a similar object: a correction of a cause
+   that follows the object (a slip, a missed grasp, a place off; ``OBJECT_CAUSES``) is
+   applied, most similar then most confirmed first, a parameter set by an earlier item
+   winning; a correction of a cause that belongs to the scene (a collision, a pose out of
+   reach, an unseen object) is only held in the context (``held``) and becomes the first
+   revision if that cause recurs (:class:`~phyagentos.agent.recovery.RecoveryPlanner`);
 3. patterns from KNOWLEDGE.md learned on a similar object: recorded as context; the best
    one's parameters are applied only when nothing above applied and it is well
    established (:data:`KNOWLEDGE_MIN_SUCCESSES` successes, rate >= :data:`KNOWLEDGE_MIN_RATE`).
@@ -33,7 +37,7 @@ from ..skill_catalog import SkillInfo, skill_catalog
 from .conditions import Conditions, session_conditions
 from .game import game_context_items
 from .knowledge import KnowledgeBase
-from .lessons import LessonBook
+from .lessons import LessonBook, held_correction
 from .observed import ObservedObject
 from .similarity import MIN_SIMILARITY, similarity
 
@@ -115,10 +119,12 @@ class ContextBuilder:
             items.append(ContextItem(kind="procedure", id=proc.name, summary=f"{proc.description} (similarity {score:.2f})",
                                      provenance=list(proc.provenance), applied=take(proc.parameters)))
         for score, lesson in self.lessons.retrieve_scored(cond)[:MAX_ITEMS]:
+            held = held_correction(lesson)
             summary = (f"{lesson.cause} -> {lesson.correction} (confirmed {lesson.confirmations}x, "
-                       f"refuted {lesson.refutations}x; similarity {score:.2f})")
-            items.append(ContextItem(kind="lesson", id=lesson.id, summary=summary,
-                                     provenance=list(lesson.verified_by), applied=take(lesson.revision)))
+                       f"refuted {lesson.refutations}x; similarity {score:.2f}"
+                       f"{'; held until ' + lesson.cause + ' recurs' if held else ''})")
+            items.append(ContextItem(kind="lesson", id=lesson.id, summary=summary, provenance=list(lesson.verified_by),
+                                     applied={} if held else take(lesson.revision), held=held))
         for item, values in game_context_items(self.workspace, skill=skill, parameters=parameters,
                                                   run_id=run_id if self.trials else None):
             items.append(item.model_copy(update={"applied": take(values)}))  # recipes, survival (memory/game.py)

@@ -13,7 +13,10 @@ Life of a correction:
    strategies joined by ``+``): the single step that did not suffice stays a refuted
    candidate, the combination that did becomes the lesson;
 3. later sessions that apply a lesson through the ContextBuilder confirm or refute it
-   the same way, so its counts keep tracking whether it works.
+   the same way, so its counts keep tracking whether it works. A lesson whose cause
+   belongs to the scene (not in :data:`OBJECT_CAUSES`) is not applied up front: it is held
+   in the session's context and becomes the first revision if that cause recurs
+   (``proposed_by: memory``); that revision's verdict confirms or refutes it.
 
 Every lesson and candidate records who proposed the correction (``proposed_by``: the rule
 ladder ``rules`` or the model reviser ``model``; a cumulative correction joins them), what it
@@ -37,15 +40,23 @@ from typing import Any, Iterable, Sequence
 from phyagentos.protocol import Diagnosis, Lesson, LessonsDoc, Revision, SessionRecord, Verdict, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 
-from ..recovery import SITUATIONAL
+from ..recovery import MEMORY, SITUATIONAL
 from .conditions import Conditions, canonical, scope_identity
 from .similarity import MIN_SIMILARITY, similarity
 
-__all__ = ["LessonBook", "lesson_id", "keep_refs", "count_outcome", "MAX_LESSONS", "MAX_CANDIDATES", "MAX_REFS"]
+__all__ = ["LessonBook", "lesson_id", "keep_refs", "count_outcome", "held_correction", "MAX_LESSONS",
+           "MAX_CANDIDATES", "MAX_REFS", "OBJECT_CAUSES"]
 
 logger = logging.getLogger(__name__)
 
 MAX_LESSONS = 200
+#: Failure causes whose correction follows the object wherever it stands: how it holds in
+#: the hand, where the fingers meet it, how it settles when let go. A lesson for one of them
+#: is applied up front to a session on a similar object. Every other cause (a collision of
+#: the goal or the path, a pose out of reach, an object unseen from one view) belongs to
+#: the scene around the object: its lesson is held back and becomes the first revision
+#: when that cause recurs (:func:`held_correction`), never a change to a first attempt.
+OBJECT_CAUSES = frozenset({"object_slipped", "grasp_missed", "placement_off"})
 MAX_CANDIDATES = 100
 MAX_REFS = 12
 
@@ -90,6 +101,15 @@ def _correction(revision: Revision) -> str:
     runs = "".join(f"{what} {value}; " for what, value in (("run skill", revision.skill), ("on target", revision.target))
                    if value)
     return f"{revision.strategy}: {runs}set {', '.join(sets)}"
+
+
+def held_correction(lesson: Lesson) -> dict[str, Any]:
+    """What a session's context holds of a situational lesson (see :data:`OBJECT_CAUSES`):
+    ``{cause, strategy, parameters, skill}``; empty for a lesson applied up front."""
+    if lesson.cause in OBJECT_CAUSES:
+        return {}
+    return {"cause": lesson.cause, "strategy": lesson.strategy, "parameters": dict(lesson.revision),
+            "skill": lesson.skill}
 
 
 def _bound(items: list[Lesson], limit: int) -> list[Lesson]:
@@ -233,10 +253,13 @@ class LessonBook:
                     lesson.evidence = _keep(lesson.evidence, *(candidate.evidence if candidate else ()), *verdict.evidence)
                     lesson.updated_at = now
                     doc.candidates = [c for c in doc.candidates if c.id != lid]
-                elif candidate is not None:
-                    candidate.refutations += 1
-                    candidate.refuted_by = _keep(candidate.refuted_by, sid)
-                    candidate.updated_at = now
+                else:
+                    if candidate is not None:
+                        candidate.refutations += 1
+                        candidate.refuted_by = _keep(candidate.refuted_by, sid)
+                        candidate.updated_at = now
+                    if lesson is not None and recovery.proposed_by == MEMORY:
+                        count_outcome(lesson, sid, confirmed=False, now=now)  # a held lesson that did not help
                 touched.append(lid)
             if recovery is not None and success:
                 for lesson in _cumulative(session, history, scope, conditions, now):

@@ -71,6 +71,17 @@ def test_two_identical_bowls_or_an_uncovered_verb_are_refused_not_guessed():
         instruction_nodes("put the ketchup on the plate", goal.objects, goal.fixtures)
 
 
+def test_on_top_of_the_drawer_is_the_cabinet_top_and_into_the_drawer_is_refused():
+    swap = resolve_task("libero_goal_swap", 2)  # LIBERO-PRO's words for "on top of the cabinet"
+    assert swap.instruction == "Put the wine bottle on the top of the drawer"
+    problem = parse_bddl(swap.bddl_path)
+    nodes = instruction_nodes(swap.instruction, problem.objects, problem.fixtures)
+    assert nodes[1]["params"] == {"object": "wine_bottle_1", "region": "wooden_cabinet_1"}
+    for inside in ("put the bowl in the top drawer", "put the bowl into the drawer"):
+        with pytest.raises(BenchError, match="unknown_destination: the destination 'the (top )?drawer'"):
+            instruction_nodes(inside, problem.objects, problem.fixtures)
+
+
 def test_turn_on_the_stove_turns_its_knob_to_mid_travel_and_turn_off_is_refused():
     goal = parse_bddl(resolve_task("libero_goal", 7).bddl_path)  # turn on the stove
     nodes = instruction_nodes(resolve_task("libero_goal", 7).language, goal.objects, goal.fixtures)

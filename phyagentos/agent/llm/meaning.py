@@ -65,6 +65,10 @@ _REGION_KIND = {"region", "regions", "area", "areas", "zone", "zones", "bin", "b
                 "square", "patch", "target", "goal", "trays", "container", "containers", "receptacle", "crate", "tub"}
 #: words for a region that are also words for an object ("in the box"): a region only after in/into
 _REGION_SYNONYMS = {"box", "boxes"}
+#: a part of a fixture -> the fixture it belongs to: "on top of the drawer" is on top of the
+#: cabinet whose drawer it is. Only a destination *on* the part reads as the whole ("into the
+#: drawer" is its inside, which no region stands for).
+_PART_OF = {"drawer": "cabinet", "drawers": "cabinet"}
 _STOP = {"the", "a", "an", "of", "please", "now", "then", "and", "carefully", "gently", "slowly", "up", "down",
          "that", "this", "these", "those", "which", "is", "are", "there", "too", "also", "just", "only", "again",
          "with", "your", "my", "robot", "arm", "gripper", "hand", "for", "me", "can", "you", "could", "would",
@@ -436,6 +440,9 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
             return "object", (), False, [("not_understood", f"stack on {quote(' '.join(words))}: could be any of "
                                          f"{', '.join(e.name for e in objs)}: say which")]
     regions = list(world.regions)
+    top_of = any(a == "top" and b == "of" for a, b in zip(words, words[1:]))
+    if prep in _STACK_PREPOSITIONS or top_of:  # "on top of the drawer": the cabinet it is part of
+        ws = [_PART_OF.get(w, w) if any(_PART_OF.get(w) in r.name.split("_") for r in regions) else w for w in ws]
     # where words (left, middle, corner ...) are known only as parts of a region's name: "the middle bin"
     # among a left and a right bin names nothing there
     known = set(_STOP) | _REGION_KIND | _REGION_SYNONYMS | {"inside", "over", "there", "here"}

@@ -152,3 +152,36 @@ def test_two_admissible_splits_that_cut_differently_leave_the_segment_whole(monk
     parts = split.split_cluster(cloud, heights, plane, CFG, focal, bars)
     assert parts is not None and len(parts) == 2
     assert sorted(round(float(d.position[1]), 2) for d, _ in parts) == [-0.03, 0.03]
+
+
+def test_a_bowl_against_a_ramekin_of_its_height_and_colour_is_cut_at_the_neck_of_their_footprint(scene):
+    """Side by side, the same height and grey: no step, no taller part, no colour -- only the
+    pinch of the footprint where the two rims touch tells them apart."""
+    ramekin = SyntheticObject("ramekin_1", "cylinder", (0.045, 0.045, 0.025), (0.50, 0.101), rgba=GREY)
+    objects, declared = [BOWL, ramekin], [_desc(BOWL), _desc(ramekin)]
+    merged, _ = _observe(scene, objects, declared, NO_SPLIT)
+    assert "bowl_1" not in merged and "ramekin_1" not in merged
+    ents, snap = _observe(scene, objects, declared)
+    for o in objects:
+        assert ents[o.name]["kind"] == "object" and _xy_error(ents[o.name], o) < 0.01, ents.get(o.name)
+    assert snap["unseen"] == []
+
+
+def test_the_footprint_cut_finds_the_contact_of_two_disks_and_no_neck_between_two_boxes():
+    from phyagentos.perception.split import MAX_NECK_RATIO, footprint_cut
+
+    rng = np.random.default_rng(0)
+
+    def disk(c, r, n):
+        a, d = rng.uniform(0, 2 * np.pi, n), r * np.sqrt(rng.uniform(0, 1, n))
+        return np.c_[c[0] + d * np.cos(a), c[1] + d * np.sin(a)]
+
+    # an 11 cm bowl and a 9 cm ramekin touching at x = 0.055
+    xy = np.r_[disk((0.0, 0.0), 0.055, 4000), disk((0.1, 0.0), 0.045, 2700)]
+    ratio, labels = footprint_cut(xy)
+    assert ratio < 0.45  # the 5 mm slice at the contact: two chords of about 3.3 cm against 9 cm
+    bowl_side = labels[0]
+    assert np.mean(labels[:4000] == bowl_side) > 0.98 and np.mean(labels[4000:] != bowl_side) > 0.98
+    # two 6 cm boxes face to face: a 12 x 6 cm rectangle, no neck
+    boxes = np.c_[rng.uniform(0.0, 0.12, 5000), rng.uniform(0.0, 0.06, 5000)]
+    assert footprint_cut(boxes)[0] > MAX_NECK_RATIO

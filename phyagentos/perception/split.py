@@ -19,7 +19,13 @@ segment's top, every 5 mm (at most :data:`MAX_LEVELS`):
 
 and once, **colour** (objects of clearly different colours: a black bowl on a white
 ramekin): two k-means groups in CIELAB (L* halved), labels smoothed over the nearest
-neighbours, when the group centres lie at least :data:`MIN_COLOUR_SPLIT_LAB` apart.
+neighbours, when the group centres lie at least :data:`MIN_COLOUR_SPLIT_LAB` apart;
+
+and once, **footprint** (two round objects side by side of about the same height and
+colour: a bowl against a ramekin): the points' ground-plane positions cut at the *neck* of
+their footprint between two k-means groups (:func:`footprint_cut`), taken only where the neck
+is at most :data:`MAX_NECK_RATIO` of the narrower side's width: two boxes face to face show
+none, and nothing tells them apart.
 
 Each part is cut into its connected pieces on the same grid (pieces under
 ``clustering.min_points`` are dropped; a partition dropping more than :data:`MAX_DROPPED` of
@@ -51,7 +57,7 @@ from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection, fit_cluster, stack
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
-           "extent", "oversized", "split_cluster", "split_clusters"]
+           "MAX_NECK_RATIO", "extent", "footprint_cut", "oversized", "split_cluster", "split_clusters"]
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +73,10 @@ SAME_PART_M = 0.02
 MIN_COLOUR_SPLIT_LAB = 20.0
 #: The colour partition: labels smoothed over this many nearest neighbours.
 COLOUR_NEIGHBOURS = 9
+#: The footprint partition: the narrowest width of the footprint between the two groups, over
+#: the narrower group's widest, at most this (two touching disks of 9 and 11 cm: about 0.4;
+#: two boxes face to face: 1).
+MAX_NECK_RATIO = 0.6
 
 
 def extent(points: np.ndarray, heights: np.ndarray) -> np.ndarray:
@@ -148,6 +158,10 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
     labels = _colour_halves(cloud)
     if labels is not None:
         yield "colour", float("nan"), pieces_of([np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)])
+    if len(cloud) >= 2 * min_points:
+        ratio, labels = footprint_cut(xy)
+        if ratio <= MAX_NECK_RATIO:
+            yield "footprint", float("nan"), pieces_of([np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)])
     for z in levels:
         above = np.flatnonzero(heights > z)
         below = np.flatnonzero(heights <= z)
@@ -169,6 +183,46 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
             groups.append(g)
         groups.append(np.flatnonzero(rest))
         yield "columns", float(z), pieces_of(groups)
+
+
+def footprint_cut(xy: np.ndarray) -> tuple[float, np.ndarray]:
+    """Where a footprint is pinched between two objects side by side, and how much.
+
+    The (N, 2) ground-plane positions ``xy`` (m) are split in two by k-means (k-means++
+    seeding, the best of 3 runs, OpenCV's RNG seeded: a scene splits the same way every
+    time); along the line joining the two groups' means, the footprint's width across that
+    line is taken in :data:`GRID_M` slices, an empty slice counting as 0. The cut is made at
+    the narrowest slice between the means (the neck: where two disks touch), not at the
+    bisector, so two objects of different sizes are cut at their contact.
+
+    Returns:
+        ``(ratio, labels)``: the neck's width over the widest slice of the narrower side
+        (0: apart, 1: no neck at all, as two boxes face to face), and (N,) 0/1 labels, the
+        side of the cut of each point. ``(1.0, zeros)`` when the means coincide.
+    """
+    cv2.setRNGSeed(0)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-4)
+    _, groups, centres = cv2.kmeans(xy.astype(np.float32), 2, None, crit, 3, cv2.KMEANS_PP_CENTERS)
+    a, b = centres.astype(np.float64)
+    span = float(np.linalg.norm(b - a))
+    if span < 2 * GRID_M:
+        return 1.0, np.zeros(len(xy), np.int64)
+    u = (b - a) / span
+    along = np.floor((xy - a) @ u / GRID_M).astype(np.int64)
+    across = xy @ np.array([-u[1], u[0]])
+    lo_k, hi_k = int(along.min()), int(along.max())
+    width = np.zeros(hi_k - lo_k + 1)
+    for k in range(lo_k, hi_k + 1):
+        t = across[along == k]
+        width[k - lo_k] = float(t.max() - t.min()) if t.size >= 2 else 0.0
+    between = np.arange(0, int(span / GRID_M) + 1) - lo_k
+    neck = int(between[np.argmin(width[between])]) + lo_k
+    labels = (along > neck).astype(np.int64)
+    sides = [width[: neck - lo_k], width[neck - lo_k + 1:]]
+    if not all(side.size for side in sides):
+        return 1.0, labels
+    widest = min(float(side.max()) for side in sides)
+    return (float(width[neck - lo_k]) / widest if widest > 0 else 1.0), labels
 
 
 def _colour_halves(cloud: Cloud) -> np.ndarray | None:

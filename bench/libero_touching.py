@@ -7,8 +7,9 @@ For each seed (from 60000: never an init state): every object of the task world 
 free spot (:func:`~phyagentos.targets.libero.descriptors.place_objects`), then the first
 object of ``--mover`` (default the first black bowl) is set, by construction, in one of three
 ways per scene: *against* a landmark (its side 1 cm over the landmark's edge, a bowl's rim
-over a plate's), *on* it (centred, its bottom 5 mm above the landmark's top), for each
-landmark of ``--landmarks``; physics settles it (1.5 s). The perceiver, given every object by
+over a plate's), *beside* it (the two visual footprints 2 mm apart: rim to rim), *on* it
+(centred, its bottom 5 mm above the landmark's top), for each landmark of ``--landmarks``
+(``name:how``); physics settles it (1.5 s). The perceiver, given every object by
 name, category and look (the looks cached in ``--looks``/libero/descriptors.yaml, measured on
 generated scenes; measured here when absent), observes both cameras at the start pose; each
 placed object is scored against its true footprint (correct / wrong / unknown / unseen, as

@@ -78,6 +78,20 @@ def _on(world, landmark: str, seed: int):
                for r in snap["relations"]), snap["relations"]
 
 
+def test_a_bowl_rim_to_rim_with_the_ramekin_is_cut_at_the_neck_of_their_footprint(world):
+    """Beside it, one height and both grey: unsplit by any height or colour, the footprint's
+    neck cut (``split_max_neck_ratio`` 0: the behaviour before) names both at their centres.
+    The seed is the bench's first ``beside`` scene of the ramekin."""
+    off = world[1].model_validate({**world[1].model_dump(), "clustering": {
+        **world[1].clustering.model_dump(), "split_max_neck_ratio": 0.0}})
+    before, _, _ = _touching(world, "glazed_rim_porcelain_ramekin_1", "beside", 60000, off)
+    assert BOWL not in before and "glazed_rim_porcelain_ramekin_1" not in before
+    ents, _, boxes = _touching(world, "glazed_rim_porcelain_ramekin_1", "beside", 60000)
+    for name in (BOWL, "glazed_rim_porcelain_ramekin_1"):
+        assert ents[name]["kind"] == "object", ents.get(name)
+        assert _centre_error(ents[name], boxes[name]) < 0.015, (name, ents[name]["position"], boxes[name])
+
+
 def test_generated_scenes_set_no_object_down_on_a_fixture(world):
     """The look generator's scenes keep every object off the cabinet and the stove: an object
     set down in a fixture is segmented with it, and its look is then the fixture's (libero_goal's

@@ -168,7 +168,7 @@ def test_a_bowl_against_a_ramekin_of_its_height_and_colour_is_cut_at_the_neck_of
 
 
 def test_the_footprint_cut_finds_the_contact_of_two_disks_and_no_neck_between_two_boxes():
-    from phyagentos.perception.split import MAX_NECK_RATIO, footprint_cut
+    from phyagentos.perception.split import footprint_cut
 
     rng = np.random.default_rng(0)
 
@@ -184,4 +184,4 @@ def test_the_footprint_cut_finds_the_contact_of_two_disks_and_no_neck_between_tw
     assert np.mean(labels[:4000] == bowl_side) > 0.98 and np.mean(labels[4000:] != bowl_side) > 0.98
     # two 6 cm boxes face to face: a 12 x 6 cm rectangle, no neck
     boxes = np.c_[rng.uniform(0.0, 0.12, 5000), rng.uniform(0.0, 0.06, 5000)]
-    assert footprint_cut(boxes)[0] > MAX_NECK_RATIO
+    assert footprint_cut(boxes)[0] > CFG.clustering.split_max_neck_ratio

@@ -132,6 +132,12 @@ class ClusteringConfig(_Section):
                                          "its by this fraction plus split_size_margin_m.",
     )
     split_size_margin_m: float = Field(0.008, le=1.0, ge=0, description="See split_size_tolerance, m.")
+    split_max_neck_ratio: float = Field(
+        0.6, le=1.0, ge=0,
+        description="The footprint partition (perception.split.footprint_cut) is tried only where the footprint's "
+                    "neck is at most this fraction of the narrower side's width (two touching disks: about 0.4; "
+                    "two boxes face to face: 1; 0: never).",
+    )
 
 
 class ShapeConfig(_Section):

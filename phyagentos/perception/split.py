@@ -24,7 +24,7 @@ neighbours, when the group centres lie at least :data:`MIN_COLOUR_SPLIT_LAB` apa
 and once, **footprint** (two round objects side by side of about the same height and
 colour: a bowl against a ramekin): the points' ground-plane positions cut at the *neck* of
 their footprint between two k-means groups (:func:`footprint_cut`), taken only where the neck
-is at most :data:`MAX_NECK_RATIO` of the narrower side's width: two boxes face to face show
+is at most ``clustering.split_max_neck_ratio`` (0.6) of the narrower side's width: two boxes face to face show
 none, and nothing tells them apart.
 
 Each part is cut into its connected pieces on the same grid (pieces under
@@ -57,7 +57,7 @@ from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection, fit_cluster, stack
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
-           "MAX_NECK_RATIO", "extent", "footprint_cut", "oversized", "split_cluster", "split_clusters"]
+           "extent", "footprint_cut", "oversized", "split_cluster", "split_clusters"]
 
 log = logging.getLogger(__name__)
 
@@ -73,10 +73,6 @@ SAME_PART_M = 0.02
 MIN_COLOUR_SPLIT_LAB = 20.0
 #: The colour partition: labels smoothed over this many nearest neighbours.
 COLOUR_NEIGHBOURS = 9
-#: The footprint partition: the narrowest width of the footprint between the two groups, over
-#: the narrower group's widest, at most this (two touching disks of 9 and 11 cm: about 0.4;
-#: two boxes face to face: 1).
-MAX_NECK_RATIO = 0.6
 
 
 def extent(points: np.ndarray, heights: np.ndarray) -> np.ndarray:
@@ -158,9 +154,9 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
     labels = _colour_halves(cloud)
     if labels is not None:
         yield "colour", float("nan"), pieces_of([np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)])
-    if len(cloud) >= 2 * min_points:
+    if len(cloud) >= 2 * min_points and config.clustering.split_max_neck_ratio > 0:
         ratio, labels = footprint_cut(xy)
-        if ratio <= MAX_NECK_RATIO:
+        if ratio <= config.clustering.split_max_neck_ratio and ratio < 1.0:
             yield "footprint", float("nan"), pieces_of([np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)])
     for z in levels:
         above = np.flatnonzero(heights > z)

@@ -99,6 +99,25 @@ def _root_box(target, root: int, *, visual_only: bool = False) -> tuple[np.ndarr
     return lo, hi
 
 
+def _mesh_box(target, root: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo (3,), hi (3,))``: the world axis-aligned box of the vertices of the visual mesh geoms
+    under root body ``root`` (tight, where a geom's ``geom_aabb`` is its mesh's box in the geom
+    frame, turned), m; :func:`_root_box` of the visual geoms where there is no mesh."""
+    m, d = target.model, target.data
+    pts = []
+    for g in range(m.ngeom):
+        if int(m.body_rootid[int(m.geom_bodyid[g])]) != root or m.geom_group[g] == 0 \
+                or m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH:
+            continue
+        mesh = int(m.geom_dataid[g])
+        v = m.mesh_vert[m.mesh_vertadr[mesh]:m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+        pts.append(d.geom_xpos[g] + v @ d.geom_xmat[g].reshape(3, 3).T)
+    if not pts:
+        return _root_box(target, root, visual_only=True)
+    allp = np.vstack(pts)
+    return allp.min(axis=0), allp.max(axis=0)
+
+
 def _clear_of(xy: np.ndarray, r: float, boxes: Sequence[tuple[np.ndarray, np.ndarray]], gap: float) -> bool:
     """Whether a disc of radius ``r`` at ``xy`` keeps ``gap`` from every box's footprint."""
     for lo, hi in boxes:
@@ -174,17 +193,19 @@ def set_touching(target, mover: str, landmark: str, how: str, seed: int, *, sett
     """Set object ``mover`` of a generated scene touching ``landmark`` and let it settle
     (``settle_s``): ``how`` ``"against"`` -- on the support beside it, its footprint 1 cm over
     the landmark's edge (a bowl's rim over a plate's), at a random side (seeded by ``seed``)
-    clear of the other objects; ``"on"`` -- centred over the landmark's footprint, its bottom
-    5 mm above the landmark's top. Built from the objects' true boxes: a scene generator,
-    for generated scenes and scoring only. Returns False when no clear side was found (the
-    scene unchanged) or when, settled, either object tipped over or the mover was pushed
-    more than 2 cm (it met a fixture).
+    clear of the other objects; ``"beside"`` -- on the support beside it, the two visual
+    footprints (the boxes of their meshes' vertices, radius half the wider side) 2 mm apart,
+    so two objects of one height stand rim to rim; ``"on"`` -- centred over the landmark's footprint, its
+    bottom 5 mm above the landmark's top. Built from the objects' true boxes: a scene
+    generator, for generated scenes and scoring only. Returns False when no clear side was
+    found (the scene unchanged) or when, settled, either object tipped over or the mover was
+    pushed more than 2 cm (it met a fixture).
 
     Raises:
-        ValueError: ``how`` is neither ``"against"`` nor ``"on"``.
+        ValueError: ``how`` is not ``"against"``, ``"beside"`` or ``"on"``.
     """
-    if how not in ("against", "on"):
-        raise ValueError(f"how must be 'against' or 'on', got {how!r}")
+    if how not in ("against", "beside", "on"):
+        raise ValueError(f"how must be 'against', 'beside' or 'on', got {how!r}")
     m, d = target.model, target.data
     rng = np.random.default_rng(seed)
     boxes = object_boxes(target)
@@ -200,11 +221,18 @@ def set_touching(target, mover: str, landmark: str, how: str, seed: int, *, sett
     if how == "on":
         spot, base = lc, float(lhi[2]) + 0.005
     else:
+        reach = lr + r - 0.01
+        if how == "beside":
+            (vlo, vhi), (wlo, whi) = (_mesh_box(target, int(m.body_rootid[target._obj_body[n]]))
+                                      for n in (mover, landmark))
+            lc = 0.5 * (wlo + whi)[:2]
+            off = 0.5 * (vlo + vhi)[:2] - d.xpos[target._obj_body[mover]][:2]
+            reach = 0.5 * float(max((vhi - vlo)[:2])) + 0.5 * float(max((whi - wlo)[:2])) + 0.002
         others = [(0.5 * (a + b)[:2], 0.5 * float(np.hypot(*(b - a)[:2]))) for n, (a, b) in boxes.items()
                   if n not in (mover, landmark) and abs(float(a[2])) < 5.0]
         for _ in range(100):
             ang = float(rng.uniform(-math.pi, math.pi))
-            spot = lc + (lr + r - 0.01) * np.array([math.cos(ang), math.sin(ang)])
+            spot = lc + reach * np.array([math.cos(ang), math.sin(ang)])
             if all(np.linalg.norm(spot - p) > q + r + 0.01 for p, q in others) \
                     and AREA_X_M[0] <= spot[0] <= AREA_X_M[1] and AREA_Y_M[0] <= spot[1] <= AREA_Y_M[1]:
                 break
@@ -220,7 +248,7 @@ def set_touching(target, mover: str, landmark: str, how: str, seed: int, *, sett
     for n in (mover, landmark):  # tipped over or thrown (it met a fixture): not the scene asked for
         if abs(float((after[n][1] - after[n][0])[2] - (boxes[n][1] - boxes[n][0])[2])) > 0.01:
             return False
-    if how == "against" and float(np.linalg.norm(0.5 * (after[mover][0] + after[mover][1])[:2] - spot)) > 0.02:
+    if how != "on" and float(np.linalg.norm(0.5 * (after[mover][0] + after[mover][1])[:2] - spot)) > 0.02:
         return False
     return True
 

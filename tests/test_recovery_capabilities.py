@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from phyagentos.agent.recovery import RecoveryPlanner, beyond_target
 from phyagentos.agent.reviser import ModelReviser
+from phyagentos.app.capabilities import rule_reviser
 from phyagentos.app.factories import make_reviser
+from phyagentos.app.orchestrator import run_verifier
 from phyagentos.bench.libero import target_entry
 from phyagentos.protocol import Diagnosis, Revision, SessionRecord, Verdict, Workspace
 from phyagentos.protocol.lifecycle import utc_now
@@ -73,3 +75,14 @@ def test_the_composition_root_reads_each_targets_capabilities_from_targets_md(tm
     assert "grip_force" not in reviser.capabilities("libero") and reviser.capabilities("nowhere") is None
     assert beyond_target({"grip_force_n", "lift_velocity_scale"}, "libero", reviser.capabilities) == {"grip_force_n"}
     assert beyond_target({"grip_force_n"}, "franka_tabletop", reviser.capabilities) == set()
+
+
+def test_a_run_without_an_explicit_reviser_gets_the_ladder_that_reads_targets_md(tmp_path):
+    """``run_goal_graph``'s default (the bench's path): a slip in a place on LIBERO re-opens the
+    pick with the slower lift, never a grip force its hand would refuse with a target error."""
+    ws = Workspace.create(tmp_path / "ws")
+    ws.update("TARGETS", lambda doc: doc.targets.append(TargetSpec.model_validate(target_entry())))
+    repick = run_verifier(ws).recovery.plan(_session("libero", skill="place"), SLIPPED, upstream="pick_bowl")
+    assert repick is not None and repick.reopen == "pick_bowl"
+    assert repick.parameters == {"transfer_velocity_scale": 0.5, "lift_velocity_scale": 0.15}
+    assert rule_reviser(ws).plan(_session("franka_tabletop"), SLIPPED).parameters == {"grip_force_n": 40.0}

@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from phyagentos.app.capabilities import target_capabilities
 from phyagentos.errors import GoalGraphError
 from phyagentos.yamlsource import read_yaml
 
@@ -93,7 +94,7 @@ def make_reviser(kind: str, workspace_dir: str | Path):
 
     ws = Workspace.create(workspace_dir)
     chooser = TargetChooser(ws, reach=_reach_oracle(ws.root))
-    caps = _target_capabilities(ws)
+    caps = target_capabilities(ws)
     if kind == "rules":
         return RecoveryPlanner(retarget=chooser, capabilities=caps)
     from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415
@@ -104,12 +105,3 @@ def make_reviser(kind: str, workspace_dir: str | Path):
                         capabilities=caps)
 
 
-def _target_capabilities(ws):
-    """Target name -> its TARGETS.md ``capabilities`` (read when asked: TARGETS.md may change
-    while a run goes on); ``None`` for a target TARGETS.md does not list."""
-
-    def lookup(name: str) -> frozenset[str] | None:
-        spec = next((t for t in ws.read("TARGETS").data.targets if t.name == name), None)
-        return frozenset(spec.capabilities) if spec is not None else None
-
-    return lookup

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 from phyagentos.agent.recovery import RecoveryPlanner, beyond_target
 from phyagentos.agent.reviser import ModelReviser
-from phyagentos.app.capabilities import rule_reviser
 from phyagentos.app.factories import make_reviser
-from phyagentos.app.orchestrator import run_verifier
 from phyagentos.bench.libero import target_entry
 from phyagentos.protocol import Diagnosis, Revision, SessionRecord, Verdict, Workspace
 from phyagentos.protocol.lifecycle import utc_now
@@ -77,12 +75,22 @@ def test_the_composition_root_reads_each_targets_capabilities_from_targets_md(tm
     assert beyond_target({"grip_force_n"}, "franka_tabletop", reviser.capabilities) == set()
 
 
-def test_a_run_without_an_explicit_reviser_gets_the_ladder_that_reads_targets_md(tmp_path):
-    """``run_goal_graph``'s default (the bench's path): a slip in a place on LIBERO re-opens the
-    pick with the slower lift, never a grip force its hand would refuse with a target error."""
+def test_a_coordinator_without_an_explicit_verifier_gets_the_ladder_that_reads_targets_md(tmp_path):
+    """The AgentCoordinator's default (the bench's episodes build it so): a slip in a place on
+    LIBERO re-opens the pick with the slower lift, never a grip force its hand would refuse
+    with a target error; the tabletop Franka still gets the firmer grip."""
+    import yaml
+
+    from phyagentos.agent.coordinator import AgentCoordinator
+    from phyagentos.agent.goal_graph import parse_goal_graph
+
     ws = Workspace.create(tmp_path / "ws")
     ws.update("TARGETS", lambda doc: doc.targets.append(TargetSpec.model_validate(target_entry())))
-    repick = run_verifier(ws).recovery.plan(_session("libero", skill="place"), SLIPPED, upstream="pick_bowl")
+    doc = {"version": 1, "name": "g", "nodes": [{"id": "pick_bowl", "skill": "pick", "target": "libero",
+                                                 "params": {"object": "bowl"}, "accept": {}}]}
+    graph = parse_goal_graph(yaml.safe_dump(doc), skills=["pick"], targets=["libero"])
+    recovery = AgentCoordinator(ws, graph, run_id="r1").verifier.recovery
+    repick = recovery.plan(_session("libero", skill="place"), SLIPPED, upstream="pick_bowl")
     assert repick is not None and repick.reopen == "pick_bowl"
     assert repick.parameters == {"transfer_velocity_scale": 0.5, "lift_velocity_scale": 0.15}
-    assert rule_reviser(ws).plan(_session("franka_tabletop"), SLIPPED).parameters == {"grip_force_n": 40.0}
+    assert recovery.plan(_session("franka_tabletop"), SLIPPED).parameters == {"grip_force_n": 40.0}

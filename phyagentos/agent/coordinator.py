@@ -68,6 +68,7 @@ from .declared import declared_scene
 from .goal_graph import GoalGraph
 from .memory import ContextBuilder, PromotionPolicy
 from .model_calls import planner_calls, with_calls
+from .recovery import RecoveryPlanner, targets_capabilities
 from .replanning import Replanning, _descends  # noqa: F401  (_descends: tests import it from here)
 from .run_view import RunView, SessionSummary, node_state_of
 from .session_compiler import SessionCompiler, new_run_id
@@ -120,7 +121,8 @@ class AgentCoordinator(RunView, Verification, Replanning):
         # ``reopened_by`` still may), so its topological order is sorted once
         self.dag = nx.freeze(dagmod.to_digraph(graph))
         self.compiler = SessionCompiler(workspace, graph, self.run_id, seed=seed, evaluation=evaluation)
-        self.verifier = verifier or SessionVerifier()
+        # the default ladder asks each node's target only for what TARGETS.md says it can do
+        self.verifier = verifier or SessionVerifier(recovery=RecoveryPlanner(capabilities=targets_capabilities(workspace)))
         self.verifier.set_upstream(self.upstream_acquirer)
         self.context_builder = ContextBuilder(workspace, use_memory=use_memory, trials=consolidate)
         self.consolidate = consolidate

@@ -95,12 +95,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Collection, Mapping, Sequence
 
-from phyagentos.protocol import Diagnosis, Revision, SessionRecord
+from phyagentos.protocol import Diagnosis, Revision, SessionRecord, Workspace
 
 from .skill_catalog import SkillInfo, skill_catalog
 
 __all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M", "RE_PICK", "ACQUIRING_SKILLS",
-           "ANOTHER_VIEW_SAMPLES", "PARAMETER_CAPABILITIES", "CapabilityLookup", "beyond_target", "MEMORY"]
+           "ANOTHER_VIEW_SAMPLES", "PARAMETER_CAPABILITIES", "CapabilityLookup", "beyond_target", "MEMORY",
+           "targets_capabilities"]
 
 #: ``proposed_by`` of a revision taken from a lesson held in the session's context.
 MEMORY = "memory"
@@ -117,6 +118,18 @@ CapabilityLookup = Callable[[str], Collection[str] | None]
 #: takes a force command (``grip_force``: the MuJoCo tabletop Franka's; LIBERO's Panda hand and
 #: the SO-101 jaws close on position only).
 PARAMETER_CAPABILITIES: Mapping[str, str] = {"grip_force_n": "grip_force"}
+
+
+def targets_capabilities(workspace: Workspace) -> CapabilityLookup:
+    """Target name -> its TARGETS.md ``capabilities`` in ``workspace`` (read when asked:
+    TARGETS.md may change while a run goes on); ``None`` for a target TARGETS.md does not list.
+    The AgentCoordinator's default ladder and the composition root's revisers use it."""
+
+    def lookup(name: str) -> frozenset[str] | None:
+        spec = next((t for t in workspace.read("TARGETS").data.targets if t.name == name), None)
+        return frozenset(spec.capabilities) if spec is not None else None
+
+    return lookup
 
 
 def beyond_target(parameters: Collection[str], target: str, capabilities: CapabilityLookup | None) -> set[str]:

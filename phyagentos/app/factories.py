@@ -8,7 +8,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from phyagentos.app.capabilities import target_capabilities
 from phyagentos.errors import GoalGraphError
 from phyagentos.yamlsource import read_yaml
 
@@ -88,13 +87,13 @@ def make_reviser(kind: str, workspace_dir: str | Path):
     """The rule ladder, or a ModelReviser (the configured model) with the ladder as fallback; both with a
     TargetChooser that asks the Runtime's IK, so a node whose arm cannot reach (``ik_unreachable``) or plan
     it moves to another capable target that reaches it."""
-    from phyagentos.agent.recovery import RecoveryPlanner  # noqa: PLC0415
+    from phyagentos.agent.recovery import RecoveryPlanner, targets_capabilities  # noqa: PLC0415
     from phyagentos.agent.retarget import TargetChooser  # noqa: PLC0415
     from phyagentos.protocol import Workspace  # noqa: PLC0415
 
     ws = Workspace.create(workspace_dir)
     chooser = TargetChooser(ws, reach=_reach_oracle(ws.root))
-    caps = target_capabilities(ws)
+    caps = targets_capabilities(ws)
     if kind == "rules":
         return RecoveryPlanner(retarget=chooser, capabilities=caps)
     from phyagentos.agent.reviser import ModelReviser  # noqa: PLC0415

@@ -26,7 +26,6 @@ from phyagentos.agent.coordinator import AgentCoordinator, SessionSummary
 from phyagentos.agent.goal_graph import GoalGraph, load_goal_graph
 from phyagentos.agent.session_compiler import new_run_id
 from phyagentos.agent.verifier import SessionVerifier
-from phyagentos.app.capabilities import rule_reviser
 from phyagentos.errors import GoalGraphError, ProtocolError, SupervisorError, format_choices
 from phyagentos.protocol import LEASED_STATES, TERMINAL_STATES, RunRecord, Workspace, utc_now_iso
 from phyagentos.resources import skill_dirs, tree_dirs
@@ -330,13 +329,6 @@ def _warm_targets(goal_graph: str | Path, workspace: Workspace, *, target: str |
     return bool(targets) and warm_runner(workspace.root, targets)
 
 
-def run_verifier(workspace: Workspace, reviser: "Reviser | None" = None) -> SessionVerifier:
-    """The SessionVerifier of a run in ``workspace``: its revisions from ``reviser``, by default
-    the rule ladder that leaves out what a node's target cannot act on
-    (:func:`~.capabilities.rule_reviser`, from TARGETS.md)."""
-    return SessionVerifier(recovery=reviser if reviser is not None else rule_reviser(workspace))
-
-
 def run_goal_graph(
     goal_graph: str | Path,
     workspace_dir: str | Path,
@@ -360,8 +352,8 @@ def run_goal_graph(
         use_memory: retrieve lessons, knowledge and procedures for new sessions.
         consolidate: write verified outcomes into memory (``False``: frozen memory).
         keep_success_images: keep the evidence images of successful sessions too.
-        reviser: proposes the revision of a ``replan`` verdict (default: the rule ladder,
-            leaving out what a node's target cannot act on: :func:`~.capabilities.rule_reviser`).
+        reviser: proposes the revision of a ``replan`` verdict (default: the
+            AgentCoordinator's rule ladder, which leaves out what a node's target cannot act on).
 
     Raises:
         GoalGraphError: the goal graph is invalid.
@@ -395,7 +387,7 @@ def run_goal_graph(
         raise
     agent = AgentCoordinator(workspace, graph, run_id=run.run_id, seed=seed, use_memory=use_memory,
                              consolidate=consolidate, keep_success_images=keep_success_images,
-                             verifier=run_verifier(workspace, reviser))
+                             verifier=SessionVerifier(recovery=reviser) if reviser is not None else None)
     say = progress or (lambda msg: None)
     say(f"run {agent.run_id}: {len(graph.nodes)} node(s) from {goal_graph}")
     with workspace.run_lock(run.run_id):

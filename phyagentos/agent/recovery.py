@@ -338,9 +338,7 @@ class RecoveryPlanner:
             if upstream is None:
                 return None
             ladder = self.ladders.get("object_slipped", ())
-            info = self.skills.get(self._upstream_skill)
-            allowed = info.optional if info is not None else frozenset()
-            allowed = allowed - beyond_target(allowed, session.target, self.capabilities)
+            allowed = self._settable(self._upstream_skill, session.target)
             for step in range(_ladder_start(history, diagnosis.cause), len(ladder)):
                 values = {k: v for k, v in ladder[step].values({}).items() if k in allowed}
                 if values:
@@ -358,9 +356,7 @@ class RecoveryPlanner:
             return held
         for step in range(start, len(ladder)):
             strategy = ladder[step]
-            info = self.skills.get(strategy.skill or session.skill)
-            allowed = (info.optional if info is not None else frozenset())
-            allowed = allowed - beyond_target(allowed, session.target, self.capabilities)
+            allowed = self._settable(strategy.skill or session.skill, session.target)
             base = {} if strategy.skill else current
             values = {k: v for k, v in strategy.values(current).items() if k in allowed and base.get(k) != v}
             limits = {k: round(getattr(session.limits, k) * f, 3) for k, f in strategy.limits.items()
@@ -374,6 +370,12 @@ class RecoveryPlanner:
                             rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> {strategy.description}")
         return self._switch_target(session, diagnosis, history, step=len(ladder) + 1)
 
+    def _settable(self, skill: str, target: str) -> frozenset[str]:
+        """The optional (strategy) parameters of ``skill`` that ``target`` can act on."""
+        info = self.skills.get(skill)
+        allowed = info.optional if info is not None else frozenset()
+        return frozenset(allowed - beyond_target(allowed, target, self.capabilities))
+
     def _held(self, session: SessionRecord, diagnosis: Diagnosis, ladder: Sequence[Strategy]) -> Revision | None:
         """The revision from the first lesson ``session``'s context holds for the diagnosed
         cause, or ``None`` (none held, or it would change nothing the skill and target take)."""
@@ -383,9 +385,7 @@ class RecoveryPlanner:
             if item.kind != "lesson" or held.get("cause") != diagnosis.cause:
                 continue
             skill = held.get("skill") or None
-            info = self.skills.get(skill or session.skill)
-            allowed = (info.optional if info is not None else frozenset())
-            allowed = allowed - beyond_target(allowed, session.target, self.capabilities)
+            allowed = self._settable(skill or session.skill, session.target)
             base = {} if skill else dict(session.parameters)
             values = {k: v for k, v in (held.get("parameters") or {}).items() if k in allowed and base.get(k) != v}
             if not values:

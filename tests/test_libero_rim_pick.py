@@ -13,7 +13,7 @@ import json
 
 import pytest
 import yaml
-from libero_generated_pick import run_generated_pick
+from libero_generated_pick import run_generated_graph
 
 from phyagentos.bench.libero import workspace_box
 
@@ -30,11 +30,21 @@ LOOKS = {
 
 
 def test_a_bowl_wider_than_the_gripper_is_lifted_by_its_rim_and_the_held_width_check_passes(tmp_path):
-    # the table scene's safety cell, as the bench sets it; one bowl declared: whichever of the two
-    # physical bowls perception names is the one picked
-    rep = run_generated_pick(tmp_path, name="rim_pick", description="pick up the black bowl", suite="libero_spatial", task=1,
-                             looks=LOOKS, fixture={"name": "main_table", "class": "table"}, obj="akita_black_bowl_1",
-                             workspace_box=workspace_box("LIBERO_Tabletop_Manipulation"))
+    # the table scene's safety cell, as the bench sets it. Both physical bowls are declared, the
+    # one picked by the instruction's relation ("the black bowl next to the ramekin", task 1's
+    # words): with one bowl declared, perception that sees both (the one against the ramekin is
+    # split from it at the neck of their footprint) rightly names neither.
+    bowl = {"class": "akita_black_bowl", **LOOKS["akita_black_bowl"]}
+    objects = [{"name": "akita_black_bowl_1", **bowl,
+                "where": {"relation": "next_to", "of": ["glazed_rim_porcelain_ramekin_1"]}},
+               {"name": "akita_black_bowl_2", **bowl},
+               *({"name": f"{c}_1", "class": c, **look} for c, look in LOOKS.items() if c != "akita_black_bowl")]
+    rep = run_generated_graph(
+        tmp_path, name="rim_pick", description="pick up the black bowl next to the ramekin", suite="libero_spatial",
+        task=1, objects=objects, fixtures=[{"name": "main_table", "class": "table"}],
+        nodes=[{"id": "pick", "skill": "pick", "params": {"object": "akita_black_bowl_1"},
+                "accept": [{"holding": "akita_black_bowl_1"}, {"lifted": {"object": "akita_black_bowl_1", "min_height": 0.05}}]}],
+        workspace_box=workspace_box("LIBERO_Tabletop_Manipulation"), seed=108)
     first = rep["sessions"][0]
     assert first["verdict"] == "success", first["reason"]
     evidence = tmp_path / "ws" / first["evidence"]
@@ -56,4 +66,4 @@ def test_a_bowl_wider_than_the_gripper_is_lifted_by_its_rim_and_the_held_width_c
     assert truth["scene_record"]["generated"] is True
     rose = {n: truth["terminal"]["objects"][n]["position"][2] - truth["initial"]["objects"][n]["position"][2]
             for n in ("akita_black_bowl_1", "akita_black_bowl_2")}
-    assert max(rose.values()) > 0.1, rose
+    assert rose["akita_black_bowl_1"] > 0.1 and rose["akita_black_bowl_2"] < 0.01, rose  # the one next to the ramekin

@@ -102,5 +102,3 @@ def make_reviser(kind: str, workspace_dir: str | Path):
     return ModelReviser(make_client(load_llm_config(workspace_dir)),
                         fallback=RecoveryPlanner(retarget=chooser, capabilities=caps), retarget=chooser,
                         capabilities=caps)
-
-

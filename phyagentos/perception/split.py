@@ -23,9 +23,9 @@ neighbours, when the group centres lie at least :data:`MIN_COLOUR_SPLIT_LAB` apa
 
 and once, **footprint** (two round objects side by side of about the same height and
 colour: a bowl against a ramekin): the points' ground-plane positions cut at the *neck* of
-their footprint between two k-means groups (:func:`footprint_cut`), taken only where the neck
-is at most ``clustering.split_max_neck_ratio`` (0.6) of the narrower side's width: two boxes face to face show
-none, and nothing tells them apart.
+their footprint between two k-means groups (:func:`footprint_cut`), taken only where the
+neck is at most ``clustering.split_max_neck_ratio`` (0.6) of the narrower side's width: two
+boxes face to face show none, and nothing tells them apart.
 
 Each part is cut into its connected pieces on the same grid (pieces under
 ``clustering.min_points`` are dropped; a partition dropping more than :data:`MAX_DROPPED` of
@@ -198,7 +198,7 @@ def footprint_cut(xy: np.ndarray) -> tuple[float, np.ndarray]:
     """
     cv2.setRNGSeed(0)
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-4)
-    _, groups, centres = cv2.kmeans(xy.astype(np.float32), 2, None, crit, 3, cv2.KMEANS_PP_CENTERS)
+    _, _, centres = cv2.kmeans(xy.astype(np.float32), 2, None, crit, 3, cv2.KMEANS_PP_CENTERS)
     a, b = centres.astype(np.float64)
     span = float(np.linalg.norm(b - a))
     if span < 2 * GRID_M:

@@ -22,7 +22,8 @@ retrieved, what it set and the session ids it was verified on go into the sessio
 ``context`` (:class:`~phyagentos.protocol.SessionContext`), so every injected item is
 traceable. "Similar" is :func:`~.similarity.similarity` at least
 :data:`~.similarity.MIN_SIMILARITY`: same embodiment, skill, declared category and shape,
-extents within perception's spread, the item's situational risk factors among the session's. Unverified candidates are never retrieved.
+extents within perception's spread, the item's situational risk factors among the
+session's. Unverified candidates are never retrieved.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ name to arguments, parsed without ``eval``::
       still: {max_joint_motion_rad: 0.01}        # the arm did not move
       unchanged: {object: red, tol_m: 0.01}      # red did not move
       articulated: {object: microwave, max: -0.6}  # its joint (rad or m) ends in [min, max]
-      articulated: {object: stove, min_fraction: 0.33}  # ... and at least 1/3 along its range_rad
+      articulated: {object: stove, min_fraction: 0.33}  # ... and at least 1/3 along its range_rad (range_m)
       has: {item: wood, min: 1}                  # game: the player's inventory (or a vital) >= min at the end
       achieved: collect_wood                     # game: the achievement is in the player's terminal record
 
@@ -391,14 +391,16 @@ def _eval_articulated(c, initial, terminal, refs):
     lo, hi = float(c.args["min"]), float(c.args["max"])
     fractions = float(c.args["min_fraction"]), float(c.args["max_fraction"])
     if any(math.isfinite(f) for f in fractions):  # bounds along the travel the entity reports
-        travel = attrs.get("range_rad")
+        travel = attrs.get("range_rad", attrs.get("range_m"))  # a hinge's (rad) or a slide's (m)
         if travel is None:
-            return CriterionOutcome(c, "unknown", f"{obj!r} reports no range_rad for min/max_fraction", refs)
+            return CriterionOutcome(c, "unknown", f"{obj!r} reports no range_rad or range_m for min/max_fraction",
+                                    refs)
         a, b = (float(v) for v in travel)
         lo = max(lo, a + fractions[0] * (b - a)) if math.isfinite(fractions[0]) else lo
         hi = min(hi, a + fractions[1] * (b - a)) if math.isfinite(fractions[1]) else hi
-    # a perceived joint (a knob read from its bar) carries its 1-sigma; a reported one is exact
-    m = 2.0 * float(attrs.get("joint_position_std_rad") or 0.0)
+    # a perceived joint (a knob read from its bar, a drawer from its handle) carries its 1-sigma;
+    # a reported one is exact
+    m = 2.0 * float(attrs.get("joint_position_std_rad") or attrs.get("joint_position_std_m") or 0.0)
     q = float(q)
     return _band(c, refs, lo <= q - m and q + m <= hi, q + m < lo or q - m > hi, obj, "articulated",
                  f"joint at {q:.3f} (2 sigma {m:.3f}) against [{lo:.3f}, {hi:.3f}]")

@@ -68,11 +68,11 @@ SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
     "place": {"lower_velocity_scale": 1.0},
 }
 #: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
-_PLANNED_SKILLS = ("pick", "place", "turn_knob")
+_PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer")
 #: How the cached looks were measured (a cache measured otherwise is measured again).
 _LOOKS_METHOD = "generated_clutter_v3"  # v3: objects kept off the fixtures
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
-_FIXTURE_LOOKS_METHOD = "generated_alone_v3"
+_FIXTURE_LOOKS_METHOD = "generated_alone_v4"  # v4: drawers
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:
@@ -147,6 +147,16 @@ def is_libero_suite(name: str | Path) -> bool:
 #: LIBERO's ``TurnOn`` threshold.
 TURN_ON_FRACTION = 0.5
 TURNED_ON_MIN_FRACTION = 1.0 / 3.0
+#: Where the LIBERO plan slides a drawer to open it, as a fraction of its travel (the slide's
+#: range, from its model): to its open stop; accepted when the drawer is read out at least
+#: four fifths of its travel (0.8 x 0.17 m of LIBERO's cabinet drawers, judged with the
+#: reading's 2-sigma band). Closing slides it to its shut stop, accepted when read within a
+#: quarter of its travel of shut (the band is 2 x 1 cm of the 17 cm travel). Chosen from the
+#: model's travel alone; LIBERO's ``Open`` / ``Close`` thresholds (in its Python classes) are
+#: read by nothing here. The LIBERO plan refuses a close (:func:`_slide_step`); the numbers
+#: serve ``slide_drawer`` graphs written by hand.
+OPEN_FRACTION, OPENED_MIN_FRACTION = 1.0, 0.8
+CLOSE_FRACTION, CLOSED_MAX_FRACTION = 0.0, 0.25
 
 
 def _nodes(steps: list[tuple[str, str, str | None]],
@@ -154,7 +164,10 @@ def _nodes(steps: list[tuple[str, str, str | None]],
     """Goal-graph nodes of ``[(action, object, destination or None)]``, each after the one
     before: ``move`` / ``hold``: a ``pick`` of the object, then (``move``) a ``place`` on its
     destination; ``turn_on``: a ``turn_knob`` of the object to :data:`TURN_ON_FRACTION` of its
-    knob's travel. ``skill_params``: strategy parameters per skill written into every node of
+    knob's travel; ``open`` / ``close``: a ``slide_drawer`` of the drawer named by the
+    destination slot (its entity name,
+    :func:`~phyagentos.perception.fixtures.drawer_entity_name`) to :data:`OPEN_FRACTION` /
+    :data:`CLOSE_FRACTION` of its travel. ``skill_params``: strategy parameters per skill written into every node of
     that skill (:data:`SKILL_DEFAULTS`); the task's own parameters (object, region) win."""
     fixed = skill_params or {}
     nodes: list[dict[str, Any]] = []
@@ -164,6 +177,16 @@ def _nodes(steps: list[tuple[str, str, str | None]],
             nodes.append({"id": f"turn_on_{obj}", "skill": "turn_knob",
                           "params": {**fixed.get("turn_knob", {}), "object": obj, "to_fraction": TURN_ON_FRACTION},
                           "accept": [{"articulated": {"object": obj, "min_fraction": TURNED_ON_MIN_FRACTION}}],
+                          "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+            continue
+        if action in ("open", "close"):
+            assert dest is not None
+            opening = action == "open"
+            accept = ({"min_fraction": OPENED_MIN_FRACTION} if opening else {"max_fraction": CLOSED_MAX_FRACTION})
+            nodes.append({"id": f"{action}_{dest}", "skill": "slide_drawer",
+                          "params": {**fixed.get("slide_drawer", {}), "object": dest,
+                                     "to_fraction": OPEN_FRACTION if opening else CLOSE_FRACTION},
+                          "accept": [{"articulated": {"object": dest, **accept}}],
                           "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
             continue
         pick_id, place_id = f"pick_{obj}", f"place_{obj}"
@@ -229,6 +252,9 @@ def _planner_steps(language: str, objects: dict[str, str],
                                  f"fixture; fixtures: {format_choices(fixtures)}")
             steps.append(("turn_on", obj, None))
             continue
+        if intent.verb in ("open", "close"):
+            steps.append(_slide_step(language, intent, fixtures))
+            continue
         for obj in intent.movers():
             dests = [d for d in intent.destinations if d != obj]
             if intent.verb != "hold" and len(dests) != 1:
@@ -238,6 +264,35 @@ def _planner_steps(language: str, objects: dict[str, str],
     if not steps:
         raise BenchError(f"instruction {language!r} refused: nothing to move")
     return steps, dict(meaning.where)
+
+
+def _slide_step(language: str, intent, fixtures: dict[str, str]) -> tuple[str, str, str]:
+    """``(open | close, fixture, drawer entity name)`` of an ``open`` / ``close`` clause.
+
+    Raises:
+        BenchError: the clause names no drawer (a door: no skill opens one here), a thing that
+            is not a fixture, a drawer not told by top, middle or bottom, or a close (LIBERO's
+            ``Close`` wants the drawer fully shut, which a reading of 1-sigma
+            :data:`~phyagentos.perception.fixtures.DRAWER_SIGMA_M` cannot tell from a drawer a
+            centimetre out, so it could not be verified).
+    """
+    from phyagentos.perception.fixtures import DRAWER_SIGMA_M, drawer_entity_name  # noqa: PLC0415
+
+    obj = intent.objects[0]
+    if intent.part_kind != "drawer":
+        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: only drawers are opened and closed "
+                         f"here (a door has no skill yet)")
+    if obj not in fixtures:
+        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: {obj} is not a fixture; fixtures: "
+                         f"{format_choices(fixtures)}")
+    if intent.part is None:
+        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: which drawer of {obj}? (top, middle "
+                         f"or bottom)")
+    if intent.verb == "close":
+        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: a drawer fully shut is not told from one "
+                         f"a centimetre out by its perceived handle (1-sigma {DRAWER_SIGMA_M} m), so a close could not "
+                         f"be verified against LIBERO's")
+    return intent.verb, obj, drawer_entity_name(obj, intent.part)
 
 
 def instruction_nodes(language: str, objects: dict[str, str], fixtures: dict[str, str]) -> list[dict[str, Any]]:

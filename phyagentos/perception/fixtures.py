@@ -11,7 +11,14 @@ support}``. Without ``place`` the body's top is the place patch. A fixture with 
 footprint centre to the knob's vertical axis), top_m: the knob's top above the support,
 rest_yaw_rad: the world yaw (mod pi) of its grip bar at joint position 0, range_rad: [lo, hi]
 the joint's travel}``, all from the fixture's model: :func:`knob_reading` reads the joint's
-position from the bar's orientation in each observation.
+position from the bar's orientation in each observation. A fixture with drawers (LIBERO's
+cabinets) declares ``drawers: [{name, handle_offset_m: [dx, dy] (world frame, from the body's
+footprint centre to the handle's centre with the drawer shut), height_m: the handle's centre
+above the support, half_length_m: half the handle's length across the drawer, axis_xy: (2,) world
+unit direction the drawer opens along, travel_m: [lo, hi] the opening's range (m the drawer stands
+out from shut; the model's joint mapped so that it grows outward), face_m: the handle's outer
+face along ``axis_xy`` from its centre as the cameras see it}]``, all at turn 0 and from the
+fixture's model: :func:`drawer_reading` reads each opening from where its handle stands.
 
 :func:`detect_fixtures` finds them in the object cloud (all heights up to the raised crop),
 segmented by the perceiver's own clustering (position and colour,
@@ -46,7 +53,10 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import _rect, cluster
 from phyagentos.perception.errors import PerceptionError
 
-__all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "fixtures_from_declared", "segments", "bodies",
+__all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
+           "drawer_entity_name", "DRAWER_BAND_M", "DRAWER_BEYOND_M", "DRAWER_FRONT_FRACTION", "DRAWER_ABOVE_M",
+           "DRAWER_LEVEL_TOL_M", "DRAWER_STRAIGHT_TOL_M", "DRAWER_WINDOW_M", "DRAWER_MIN_POINTS", "DRAWER_MIN_SPAN",
+           "DRAWER_SIGMA_M", "fixtures_from_declared", "segments", "bodies",
            "detect_fixtures", "find_by_knob", "knob_band", "knob_reading", "patch_cover", "JOIN_GAP_M", "SIZE_TOL_FRACTION",
            "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS", "KNOB_RADIUS_M", "KNOB_BAND", "KNOB_MIN_POINTS",
            "KNOB_SEEN_POINTS", "KNOB_MIN_ELONGATION", "KNOB_ALONG_STD_M", "KNOB_ACROSS_STD_MAX_M", "KNOB_TOP_TOL_M", "KNOB_SIGMA_RAD",
@@ -192,6 +202,194 @@ def knob_reading(points: np.ndarray, heights: np.ndarray, knob: KnobLook, centre
     return math.atan2(float(v[1, 1]), float(v[0, 1])), int(near.sum())
 
 
+#: A drawer's handle is read from the points within this height of its centre, m (LIBERO's
+#: cabinet handles: bars 1.6 cm thick on drawer fronts 6.8 cm tall, 7 cm apart).
+DRAWER_BAND_M = 0.015
+#: ... along the drawer's axis from this far inside its shut position to this far beyond its
+#: open stop, m.
+DRAWER_WINDOW_M = 0.03
+#: Fewest points in that window for a reading (on the perceiver's voxel grid).
+DRAWER_MIN_POINTS = 8
+#: The handle is the outermost 5 mm slice (with the slice inside it) whose points span at least
+#: this fraction of the handle's length across the drawer: a thing narrower than the handle (a
+#: bowl's rim, a can) or a few stray points do not read as it.
+DRAWER_MIN_SPAN = 0.6
+#: The handle's slice is checked this far beyond each end of the handle (less 1 cm), m: a
+#: slice that goes on there (more points beyond the ends than :data:`DRAWER_FRONT_FRACTION`
+#: of the slice's own) is the drawer's front, seen where its handle is hidden, and gives no
+#: reading.
+DRAWER_BEYOND_M = 0.04
+DRAWER_FRONT_FRACTION = 0.3
+#: ... and this far above the band (from 5 mm over it): a slice that goes on up there (more
+#: points than :data:`DRAWER_FRONT_FRACTION` of its own) is something taller than the handle's
+#: bar standing in front of it (a bowl by the bottom drawer), and the handle is looked for
+#: behind it, m.
+DRAWER_ABOVE_M = 0.025
+#: The handle's outer face is straight: the outermost points of its 1 cm bins across lie within
+#: this of each other, m (:func:`_straight`).
+DRAWER_STRAIGHT_TOL_M = 0.005
+#: The handle's slice stands at the handle's level: the median height of its points at most this
+#: below the handle's centre, m (the cameras see the bar's top and front: its median is 0-9 mm
+#: above the centre; a plate's rim in front of LIBERO's bottom drawer reads 1.1 cm below it).
+DRAWER_LEVEL_TOL_M = 0.006
+#: 1-sigma uncertainty of a drawer reading, m (``bench/libero_drawer.py`` on generated scenes,
+#: docs/libero.md, "Drawers": libero_goal's world 0.2-1.9 mm; LIBERO-90 task 0's world 8-16 mm
+#: short, every reading within 2 sigma: there the body's visible depth moves its footprint centre
+#: against the handle with where the sampler sets the cabinet).
+DRAWER_SIGMA_M = 0.01
+_DRAWER_SLICE_M = 0.005
+
+
+@dataclass(frozen=True)
+class DrawerLook:
+    """One drawer of a fixture (module docstring): where its handle stands shut, how it opens;
+    m, world frame at turn 0."""
+
+    name: str
+    handle_offset_m: tuple[float, float]
+    height_m: float
+    half_length_m: float
+    axis_xy: tuple[float, float]
+    travel_m: tuple[float, float]
+    face_m: float
+    half_width_m: float
+    top_m: float
+    back_m: float
+
+    KEYS = ("name", "handle_offset_m", "height_m", "half_length_m", "axis_xy", "travel_m", "face_m", "half_width_m",
+            "top_m", "back_m")
+
+    @classmethod
+    def from_dict(cls, d: Any, fixture: str) -> "DrawerLook":
+        """From a mapping with the keys :attr:`KEYS` (module docstring; ``half_width_m``: half the
+        drawer's width across its axis, ``top_m``: its top above the support, ``back_m``: how far
+        the body's back face lies behind its footprint centre along the axis, drawers shut).
+
+        Raises:
+            PerceptionError: a missing or unknown key (the valid ones listed) or a malformed value.
+        """
+        if not isinstance(d, Mapping) or set(d) != set(cls.KEYS):
+            raise PerceptionError(f"fixture {fixture!r}: each drawer must be a mapping with keys "
+                                  f"{format_choices(cls.KEYS)}, got {d!r}")
+        name = d["name"]
+        if not isinstance(name, str) or not name:
+            raise PerceptionError(f"fixture {fixture!r}: a drawer needs a non-empty name, got {name!r}")
+        what = f"fixture {fixture!r}: drawer {name!r}"
+        off = _floats(d["handle_offset_m"], 2, f"{what}: handle_offset_m")
+        axis = np.asarray(_floats(d["axis_xy"], 2, f"{what}: axis_xy"))
+        lo, hi = _floats(d["travel_m"], 2, f"{what}: travel_m")
+        height, half_len, face, half_w, top, back = (
+            _floats([d[k]], 1, f"{what}: {k}")[0]
+            for k in ("height_m", "half_length_m", "face_m", "half_width_m", "top_m", "back_m"))
+        if not 0.9 < float(np.linalg.norm(axis)) < 1.1 or not lo < hi or min(height, half_len, half_w, top, back) <= 0:
+            raise PerceptionError(f"{what}: needs a unit axis_xy, travel_m lo < hi and positive heights and "
+                                  f"lengths, got {d!r}")
+        axis = axis / np.linalg.norm(axis)
+        return cls(name, off, height, half_len, (float(axis[0]), float(axis[1])), (lo, hi), face,  # type: ignore[arg-type]
+                   half_w, top, back)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The mapping :meth:`from_dict` reads."""
+        return {"name": self.name, "handle_offset_m": list(self.handle_offset_m), "height_m": self.height_m,
+                "half_length_m": self.half_length_m, "axis_xy": list(self.axis_xy), "travel_m": list(self.travel_m),
+                "face_m": self.face_m, "half_width_m": self.half_width_m, "top_m": self.top_m, "back_m": self.back_m}
+
+    def frame(self, centre_xy: np.ndarray, turn: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(handle centre shut (2,), opening direction u (2,), across v (2,))``, world m, of
+        this drawer on a body centred at ``centre_xy`` standing ``turn`` rad from how its look
+        was measured."""
+        u = _turned(self.axis_xy, turn)
+        return np.asarray(centre_xy, float) + _turned(self.handle_offset_m, turn), u, np.array([-u[1], u[0]])
+
+
+def drawer_entity_name(fixture: str, drawer: str) -> str:
+    """The snapshot entity name of ``fixture``'s drawer ``drawer``: ``wooden_cabinet_1`` 's
+    ``top`` is ``wooden_cabinet_1_top_drawer``."""
+    return f"{fixture}_{drawer}_drawer"
+
+
+def drawer_band(points: np.ndarray, heights: np.ndarray, drawer: DrawerLook, centre_xy: np.ndarray,
+                turn: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(mask (N,) bool, along (N,) m)``: the points of ``points`` (N, 3) world m (``heights``
+    (N,) m above the support) where ``drawer`` of a body centred at ``centre_xy`` shows its
+    handle (within :data:`DRAWER_BAND_M` of its height, its half length across, and along its
+    axis from :data:`DRAWER_WINDOW_M` inside shut to as far beyond its open stop), and every
+    point's distance along the opening direction from the handle's shut centre."""
+    c0, u, v = drawer.frame(centre_xy, turn)
+    rel = points[:, :2] - c0
+    along, across = rel @ u, rel @ v
+    lo, hi = drawer.travel_m
+    mask = ((np.abs(across) <= drawer.half_length_m) & (np.abs(heights - drawer.height_m) <= DRAWER_BAND_M)
+            & (along >= lo - DRAWER_WINDOW_M) & (along <= hi + drawer.face_m + DRAWER_WINDOW_M))
+    return mask, along
+
+
+def drawer_reading(points: np.ndarray, heights: np.ndarray, drawer: DrawerLook, centre_xy: np.ndarray,
+                   turn: float = 0.0) -> tuple[float, int] | None:
+    """``(opening (m the drawer stands out of shut, along its axis), points)`` of ``drawer`` of
+    a fixture whose body's footprint centre is ``centre_xy`` (2,) world m, from the cloud
+    ``points`` (N, 3) world m with ``heights`` (N,) m above the support: in the handle's
+    window (:func:`drawer_band`), the outermost :data:`_DRAWER_SLICE_M` slice along the axis
+    whose points (with the slice inside it) span :data:`DRAWER_MIN_SPAN` of the handle's length
+    is the handle; its outer face (the 90th percentile of those points along the axis) less the
+    look's ``face_m`` is the opening. ``None`` with fewer than :data:`DRAWER_MIN_POINTS` points
+    or no slice that wide: the handle is hidden (an open drawer above it, the arm) or not
+    there."""
+    mask, along = drawer_band(points, heights, drawer, centre_xy, turn)
+    if int(mask.sum()) < DRAWER_MIN_POINTS:
+        return None
+    c0, _, v = drawer.frame(centre_xy, turn)
+    across_all = (points[:, :2] - c0) @ v
+    a = along[mask]
+    across = across_all[mask]
+    h_band = heights[mask]
+    # the same band just beyond the handle's ends: a drawer's front shows there, a handle does not
+    beyond = ((np.abs(across_all) > drawer.half_length_m + 0.01)
+              & (np.abs(across_all) <= drawer.half_length_m + DRAWER_BEYOND_M)
+              & (np.abs(heights - drawer.height_m) <= DRAWER_BAND_M))
+    a_beyond = along[beyond]
+    # the same slice just above the band: a bar ends there, a bowl or a can goes on
+    above = ((np.abs(across_all) <= drawer.half_length_m) & (heights > drawer.height_m + DRAWER_BAND_M + 0.005)
+             & (heights <= drawer.height_m + DRAWER_BAND_M + DRAWER_ABOVE_M))
+    a_above = along[above]
+    need = DRAWER_MIN_SPAN * 2.0 * drawer.half_length_m
+    top = float(a.max())
+    k = 0
+    while top - k * _DRAWER_SLICE_M >= a.min():
+        hi = top - k * _DRAWER_SLICE_M
+        sel = (a <= hi) & (a > hi - 2 * _DRAWER_SLICE_M)
+        if int(sel.sum()) >= 5 and float(np.ptp(across[sel])) >= need:
+            in_slice = (a_above <= hi) & (a_above > hi - 2 * _DRAWER_SLICE_M)
+            if (int(in_slice.sum()) > DRAWER_FRONT_FRACTION * int(sel.sum())
+                    or float(np.median(h_band[sel])) < drawer.height_m - DRAWER_LEVEL_TOL_M):
+                k += 1  # taller than a bar (a bowl), or below its level (a plate's rim), in front of it: look behind
+                continue
+            if not _straight(a, across, sel, hi):
+                k += 1  # a rim's arc (a plate tilted against the drawer), not a bar's face: look behind it
+                continue
+            wide = int(((a_beyond <= hi) & (a_beyond > hi - 2 * _DRAWER_SLICE_M)).sum())
+            if wide > DRAWER_FRONT_FRACTION * int(sel.sum()):
+                return None  # as wide as the drawer's front: the handle is hidden (the arm) or gone
+            return float(np.percentile(a[sel], 90)) - drawer.face_m, int(sel.sum())
+        k += 1
+    return None
+
+
+def _straight(a: np.ndarray, across: np.ndarray, sel: np.ndarray, hi: float) -> bool:
+    """Whether the slice ``sel`` (ending at ``hi`` m along the drawer's axis) is a straight bar's
+    face: over 1 cm bins across its span, the outermost point (along ``a``, of the band's points
+    not beyond ``hi``; ``across`` m) of every bin with points lies within
+    :data:`DRAWER_STRAIGHT_TOL_M` of the outermost of all (a plate's or a bowl's rim falls away
+    toward its ends: 8 mm at 4 cm from the apex of a 10 cm radius)."""
+    lo_x, hi_x = float(across[sel].min()), float(across[sel].max())
+    keep = (a <= hi) & (across >= lo_x) & (across <= hi_x)
+    bins = np.floor((across[keep] - lo_x) / 0.01).astype(int)
+    tops = np.full(int(bins.max()) + 1, -np.inf)
+    np.maximum.at(tops, bins, a[keep])
+    tops = tops[np.isfinite(tops)]
+    return bool(tops.max() - tops.min() <= DRAWER_STRAIGHT_TOL_M)
+
+
 @dataclass(frozen=True)
 class FixtureLook:
     """A declared fixture with its measured look (module docstring); lengths in m."""
@@ -203,10 +401,11 @@ class FixtureLook:
     place_half_m: tuple[float, float] | None = None
     place_height_m: float | None = None
     knob: KnobLook | None = None
+    drawers: tuple[DrawerLook, ...] = ()
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "FixtureLook | None":
-        """From a declared fixture ``{name, class, size_m?, place?, knob?}``; ``None`` when it has no
+        """From a declared fixture ``{name, class, size_m?, place?, knob?, drawers?}``; ``None`` when it has no
         look (``size_m``): such a fixture is not perceived.
 
         Raises:
@@ -214,7 +413,7 @@ class FixtureLook:
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared fixture must be a mapping, got {type(d).__name__}")
-        valid = ("name", "class", "size_m", "place", "knob")
+        valid = ("name", "class", "size_m", "place", "knob", "drawers")
         unknown = set(d) - set(valid)
         name = d.get("name")
         if unknown:
@@ -226,9 +425,15 @@ class FixtureLook:
             return None
         size = _floats(d["size_m"], 3, f"fixture {name!r}: size_m ([long, short, top height], m)")
         knob = KnobLook.from_dict(d["knob"], name) if d.get("knob") is not None else None
+        raw_drawers = d.get("drawers") or ()
+        if not isinstance(raw_drawers, Sequence) or isinstance(raw_drawers, str):
+            raise PerceptionError(f"fixture {name!r}: drawers must be a list, got {raw_drawers!r}")
+        drawers = tuple(DrawerLook.from_dict(r, name) for r in raw_drawers)
+        if len({dr.name for dr in drawers}) != len(drawers):
+            raise PerceptionError(f"fixture {name!r}: a drawer name is used twice: {[dr.name for dr in drawers]}")
         place = d.get("place")
         if place is None:
-            return cls(name, d.get("class"), size, knob=knob)
+            return cls(name, d.get("class"), size, knob=knob, drawers=drawers)
         if not isinstance(place, Mapping) or set(place) != {"offset_m", "half_extents_m", "height_m"}:
             raise PerceptionError(f"fixture {name!r}: place must be a mapping with keys "
                                   f"{format_choices(('offset_m', 'half_extents_m', 'height_m'))}, got {place!r}")
@@ -237,7 +442,7 @@ class FixtureLook:
         height = _floats([place["height_m"]], 1, f"fixture {name!r}: place.height_m")[0]
         if min(half) <= 0 or height < 0:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
-        return cls(name, d.get("class"), size, off, half, height, knob)  # type: ignore[arg-type]
+        return cls(name, d.get("class"), size, off, half, height, knob, drawers)  # type: ignore[arg-type]
 
     def place_patch(self, centre_xy: np.ndarray, half_xy: np.ndarray,
                     turn: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
@@ -331,6 +536,32 @@ def bodies(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig) -> list[
     height) as an unnamed body (``name`` empty, ``error`` 0): footprint, yaw, top
     (``heights``: (N,) m above the support plane); what a look is measured from."""
     return [_body(cloud.points, heights, idx) for idx in segments(cloud, config)]
+
+
+def _without_drawers(points: np.ndarray, heights: np.ndarray, idx: np.ndarray,
+                     look: FixtureLook) -> FixtureSighting | None:
+    """The body of segment ``idx`` as ``look`` 's fixture with its drawers shut. A segment
+    deeper along the drawers' axis than the look (``2 back_m`` + 1 cm) has drawers out: an open
+    drawer moves the front, never the back, so the points farther than ``2 back_m`` from the
+    back (the segment's rearmost point along the axis) are left out of the fit and the body's
+    centre is put ``back_m`` in front of the back (the look's ``back_m`` is measured with this
+    estimator on the shut body). ``None`` when the look's drawers do not share one axis, or
+    nothing is left."""
+    axes = {d.axis_xy for d in look.drawers}
+    if len(axes) != 1:
+        return None
+    u = np.asarray(next(iter(axes)), float)
+    depth = 2.0 * look.drawers[0].back_m
+    along = points[idx, :2] @ u
+    back = float(along.min())
+    if float(along.max()) - back <= depth + 0.01:
+        return _body(points, heights, idx)
+    keep = idx[along <= back + depth]
+    if keep.size < MIN_POINTS:
+        return None
+    body = _body(points, heights, keep)
+    xy = body.position[:2] + u * (back + 0.5 * depth - float(body.position[:2] @ u))
+    return replace(body, position=np.array([xy[0], xy[1], body.position[2]]))
 
 
 def _adjacent(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> bool:
@@ -529,9 +760,12 @@ def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLo
                 cands.append((frozenset([i, j]), np.concatenate([segs[i], segs[j]])))
     fits: list[tuple[float, frozenset[int], FixtureSighting]] = []
     for parts, idx in cands:
-        body = _body(points, heights, idx)
-        seen = (2.0 * float(body.half_extents[0]), 2.0 * float(body.half_extents[1]), body.top_m)
+        whole = _body(points, heights, idx)
         for look in looks:
+            body = _without_drawers(points, heights, idx, look) if look.drawers else whole
+            if body is None:
+                continue
+            seen = (2.0 * float(body.half_extents[0]), 2.0 * float(body.half_extents[1]), body.top_m)
             errs = [abs(a - b) / (SIZE_TOL_FRACTION * b + SIZE_TOL_M) for a, b in zip(seen, look.size_m)]
             if max(errs) > 1.0:
                 continue

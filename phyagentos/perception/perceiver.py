@@ -35,7 +35,16 @@ only while a declared fixture is unseen. A fixture's knob (``knob`` in its look)
 is read in every observation (:func:`~phyagentos.perception.fixtures.knob_reading`; its points
 are the fixture's own) and reported as a hinge in the entity's attributes: ``joint_type``,
 ``anchor``, ``axis``, ``range_rad``, ``joint_position`` with ``joint_position_std_rad`` (absent
-when the bar was not read: never remembered) and the bar's upper part as its ``grasp``.
+when the bar was not read: never remembered) and the bar's upper part as its ``grasp``. A
+fixture's drawers (``drawers`` in its look) slide, so each is read from its handle in every
+observation (:func:`~phyagentos.perception.fixtures.drawer_reading`; the handle and the part of
+the drawer standing out of the body are the fixture's own points) and reported as an entity of
+its own (:func:`~phyagentos.perception.fixtures.drawer_entity_name`: ``wooden_cabinet_1`` 's
+``top`` is ``wooden_cabinet_1_top_drawer``, ``kind: articulation``): ``joint_type: slide``,
+``axis`` (3,) the world direction it opens along, ``range_m``, ``joint_position`` (m out of
+shut) with ``joint_position_std_m``, and its handle as the ``grasp`` (approached along the
+axis pitched :data:`DRAWER_APPROACH_PITCH_RAD` down, the fingers closing across the bar);
+reported only while its handle is read.
 
 The Perceiver keeps per-session state (tracks, the open-gripper wrist-force baseline, the
 held object); :meth:`reset` clears it. It never reads simulator state.
@@ -79,12 +88,17 @@ from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.fixtures import (
+    DRAWER_SIGMA_M,
+    DRAWER_WINDOW_M,
     KNOB_RADIUS_M,
     KNOB_SIGMA_RAD,
+    DrawerLook,
     FixtureLook,
     FixtureSighting,
     _in_frame,
     detect_fixtures,
+    drawer_entity_name,
+    drawer_reading,
     fixtures_from_declared,
     knob_reading,
 )
@@ -148,6 +162,16 @@ FIXTURE_STD_M = 0.01
 KNOB_GRIP_DEPTH_M = 0.04
 #: Half the thickness of a knob's bar across which the fingers close, m (LIBERO's: 2.4 cm).
 KNOB_BAR_HALF_WIDTH_M = 0.012
+#: Half the thickness of a drawer's handle bar (its box in the snapshot), m (LIBERO's cabinet
+#: handles: 1.5 x 1.6 cm bars).
+DRAWER_HANDLE_HALF_M = 0.008
+#: A drawer's handle is approached this far below the horizontal, rad, the fingers closing
+#: across the bar in the vertical plane through the drawer's axis: the hand's body (10.5 cm
+#: either side of the tcp along the closing direction on the Panda) then keeps 1.6 cm over
+#: the table at a handle 11.5 cm high (LIBERO's middle drawer) where a level hand keeps 1.0
+#: cm, clearing a plate lying 3.5 cm in front of the handle (generated libero_goal scenes;
+#: ``bench/libero_drawer.py``), and the upper finger stays clear of the drawer above.
+DRAWER_APPROACH_PITCH_RAD = math.radians(10.0)
 
 
 def _quat_yaw(yaw: float) -> list[float]:
@@ -217,6 +241,9 @@ class Perceiver:
         #: Each knob's reading in the last observation: ``{fixture name: (bar yaw rad, points)}``
         #: (absent: not read there; a knob turns, so it is never remembered).
         self.knob_readings: dict[str, tuple[float, int]] = {}
+        #: Each drawer's reading in the last observation: ``{(fixture, drawer): (opening m,
+        #: points)}`` (absent: its handle not read there; never remembered).
+        self.drawer_readings: dict[tuple[str, str], tuple[float, int]] = {}
         self._baseline_n: float | None = None
         self._held: str | None = None
         self._grasp_height_m: float | None = None
@@ -570,6 +597,7 @@ class Perceiver:
             if look.name in self.fixture_tracks:
                 ent, supports[look.name] = self._fixture_entity(look, plane, stamp)
                 entities.append(ent)
+                entities.extend(self._drawer_entities(look, plane, stamp))
         entities.extend(self._robot_entities(proprio))
 
         relations = self._relations(geo, region_list, holding_rel, supports)
@@ -616,6 +644,7 @@ class Perceiver:
         own = np.zeros(len(cloud), dtype=bool)
         dets = []
         self.knob_readings = {}
+        self.drawer_readings = {}
         for look in self.fixtures:
             if look.name not in self.fixture_tracks:
                 continue
@@ -627,6 +656,11 @@ class Perceiver:
                 axis = look.knob.axis_xy(s.position[:2], s.turn)
                 own |= ((np.linalg.norm(p[:, :2] - axis, axis=1) <= KNOB_RADIUS_M)
                         & (heights <= look.knob.top_m + FIXTURE_MARGIN_M))
+            for drawer in look.drawers:  # read in every observation; what stands out of the body is the fixture's
+                reading = drawer_reading(p, heights, drawer, s.position[:2], s.turn)
+                if reading is not None:
+                    self.drawer_readings[(look.name, drawer.name)] = reading
+                    own |= self._drawer_points(p, heights, drawer, s, reading[0])
             local = _in_frame(p[:, :2], s.position[:2], s.yaw)
             over = np.all(np.abs(local) <= s.half_extents[:2] + FIXTURE_EDGE_M, axis=1)
             keep |= over
@@ -641,6 +675,55 @@ class Perceiver:
                                   FIXTURE_STD_M, math.pi, 1.0, 0.0))
         keep &= ~own
         return cloud.select(keep), heights[keep], dets
+
+    @staticmethod
+    def _drawer_points(p: np.ndarray, heights: np.ndarray, drawer: DrawerLook, s: FixtureSighting,
+                       opening: float) -> np.ndarray:
+        """(N,) bool: the points of ``p`` (N, 3) world m (``heights`` (N,) m above the support)
+        on ``drawer`` of sighting ``s`` standing ``opening`` m out: across its width (plus
+        :data:`FIXTURE_EDGE_M`), up to its top (plus :data:`FIXTURE_MARGIN_M`), from inside its
+        shut handle out to its handle's outer face (plus :data:`DRAWER_WINDOW_M`)."""
+        c0, u, v = drawer.frame(s.position[:2], s.turn)
+        rel = p[:, :2] - c0
+        along, across = rel @ u, rel @ v
+        return ((np.abs(across) <= drawer.half_width_m + FIXTURE_EDGE_M)
+                & (heights <= drawer.top_m + FIXTURE_MARGIN_M)
+                & (along >= drawer.travel_m[0] - DRAWER_WINDOW_M)
+                & (along <= opening + drawer.face_m + DRAWER_WINDOW_M))
+
+    def _drawer_entities(self, look: FixtureLook, plane: Plane, stamp: float) -> list[dict]:
+        """One ``kind: articulation`` entity per drawer of ``look`` whose handle was read in this
+        observation (module docstring): its box the handle where it stands, ``attributes`` the
+        slide (``joint_type``, ``axis`` (3,) world unit opening direction, ``range_m`` [lo, hi],
+        ``joint_position`` m out of shut, ``joint_position_std_m``) and the handle as its
+        ``grasp`` (``approach`` and ``entry`` into the drawer, ``closing`` vertical)."""
+        s = self.fixture_tracks[look.name][0]
+        out = []
+        for drawer in look.drawers:
+            reading = self.drawer_readings.get((look.name, drawer.name))
+            if reading is None:
+                continue
+            opening, points = reading
+            c0, u, v = drawer.frame(s.position[:2], s.turn)
+            centre = c0 + u * opening
+            ground = plane.z_at(centre)
+            pos = [float(centre[0]), float(centre[1]), ground + drawer.height_m]
+            yaw = math.atan2(float(v[1]), float(v[0]))
+            half = [drawer.half_length_m, DRAWER_HANDLE_HALF_M, DRAWER_HANDLE_HALF_M]
+            cp, sp = math.cos(DRAWER_APPROACH_PITCH_RAD), math.sin(DRAWER_APPROACH_PITCH_RAD)
+            into = [-cp * float(u[0]), -cp * float(u[1]), -sp]
+            closing = [-sp * float(u[0]), -sp * float(u[1]), cp]
+            attrs = {"source": "perceived", "class": "drawer", "part_of": look.name, "drawer": drawer.name,
+                     "confidence": 1.0, "position_std_m": _r(DRAWER_SIGMA_M, 5), "points": int(points),
+                     "last_seen_s": _r(stamp, 6), "joint_type": "slide", "axis": _r([u[0], u[1], 0.0], 5),
+                     "range_m": [_r(drawer.travel_m[0]), _r(drawer.travel_m[1])],
+                     "joint_position": _r(opening), "joint_position_std_m": _r(DRAWER_SIGMA_M, 5),
+                     "grasp": {"position": _r(pos), "quat_wxyz": _r(_quat_yaw(yaw), 5), "size": _r(half),
+                               "approach": _r(into, 5), "entry": _r(into, 5), "closing": _r(closing, 5)}}
+            out.append({"name": drawer_entity_name(look.name, drawer.name), "kind": "articulation",
+                        "position": _r(pos), "quat_wxyz": _r(_quat_yaw(yaw), 5), "size": _r(half),
+                        "attributes": attrs})
+        return out
 
     def _fixture_entity(self, look: FixtureLook, plane: Plane, stamp: float) -> tuple[dict, dict]:
         """The snapshot entity of a tracked fixture (``kind: fixture``; its box the place

@@ -17,6 +17,7 @@ check_holding             succeed only while the object is held
 hold                      keep still for a simulated duration
 compute_affordance_grasp  grasp poses for the part an entity declares graspable
 articulate_hinge          turn a held handle about its entity's hinge
+articulate_slide          pull or push a held handle along its entity's slide (a drawer)
 tool_move                 straight tcp motion by an offset in the tool frame
 compute_place_as_held     place poses keeping the hand's orientation (hooked objects)
 noop                      succeed after n ticks, touching no target (control.py)
@@ -29,7 +30,7 @@ game_*                    game primitives (explore, goto, collect, hunt, place, 
 ========================  ==========================================================
 """
 
-from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
+from .affordance import ArticulateHinge, ArticulateSlide, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .base import Primitive, PrimitiveFailure
 from .contact import ComputePush, GuardedMove, Push
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
@@ -67,6 +68,7 @@ PRIMITIVES = {
     "hold": Hold,
     "compute_affordance_grasp": ComputeAffordanceGrasp,
     "articulate_hinge": ArticulateHinge,
+    "articulate_slide": ArticulateSlide,
     "tool_move": ToolMove,
     "compute_place_as_held": ComputePlaceAsHeld,
     "noop": Noop,

@@ -7,10 +7,12 @@ the part), ``closing`` (world unit vector the fingers close along), ``entry`` (t
 direction the hand moves in to reach the grasp; default ``approach``) and ``free_axis``
 (a round part's axis: the grasp leaves rotation about it free). An articulated
 entity (kind ``articulation``) gives its joint: ``joint_type`` ``hinge``,
-``joint_position`` (rad), hinge ``anchor`` (3,) m and ``axis`` (3,) unit, world frame.
+``joint_position`` (rad), hinge ``anchor`` (3,) m and ``axis`` (3,) unit, world frame; or
+``joint_type`` ``slide`` (a drawer), ``joint_position`` (m), ``axis`` (3,) world unit direction
+the joint grows along and ``range_m`` [lo, hi] m.
 Skills built from these leaves therefore carry no knowledge of a particular
 environment: a kettle handle, a microwave door bar or a cabinet handle are all
-"a part to grasp" and "a hinge to turn".
+"a part to grasp", "a hinge to turn" and "a slide to pull".
 """
 
 from __future__ import annotations
@@ -32,14 +34,15 @@ from .execution import _Tracking
 from .motion import execution_limits, ik_options
 from .perception import entity_pose
 
-__all__ = ["ComputeAffordanceGrasp", "ArticulateHinge", "ComputePlaceAsHeld", "ToolMove"]
+__all__ = ["ComputeAffordanceGrasp", "ArticulateHinge", "ArticulateSlide", "ComputePlaceAsHeld", "ToolMove"]
 
 
-def _turn_to(attrs: dict, fraction: float) -> float | None:
-    """The turn (rad, the joint's sign) that takes a hinge whose entity ``attrs`` report its
-    ``joint_position`` and ``range_rad`` [lo, hi] to ``lo + fraction (hi - lo)``; None when
-    either is not reported (a perceived joint not seen)."""
-    q0, travel = attrs.get("joint_position"), attrs.get("range_rad")
+def _turn_to(attrs: dict, fraction: float, travel_key: str = "range_rad") -> float | None:
+    """The motion (the joint's unit and sign: rad for a hinge, m for a slide) that takes a
+    joint whose entity ``attrs`` report its ``joint_position`` and travel ``attrs[travel_key]``
+    [lo, hi] (``range_rad``, ``range_m``) to ``lo + fraction (hi - lo)``; None when either is
+    not reported (a perceived joint not seen)."""
+    q0, travel = attrs.get("joint_position"), attrs.get(travel_key)
     if q0 is None or travel is None:
         return None
     lo, hi = (float(v) for v in travel)
@@ -80,11 +83,12 @@ class ComputeAffordanceGrasp(Primitive):
         approach_height_m: pre-grasp distance, m.
         affordance: which declared part to use: ``grasp`` (close the fingers on it) or
             ``hook`` (slide closed fingers under it and carry it on their top face).
-        turn_to_fraction: the hinge the part turns about will next be turned to this
-            fraction of the entity's ``range_rad`` from its ``joint_position``
-            (:class:`ArticulateHinge`): a hand is taken only when the arm also reaches the
-            grasp turned that far, and its joint margin is the lesser of the two (a knob
-            turned by 1 rad takes a wrist that has 1 rad to spare).
+        turn_to_fraction: the joint the part moves with will next be moved to this
+            fraction of its travel from its ``joint_position`` (a hinge's ``range_rad``:
+            :class:`ArticulateHinge`; a slide's ``range_m``: :class:`ArticulateSlide`): a hand is
+            taken only when the arm also reaches the grasp moved that far, and its joint margin
+            is the lesser of the two (a knob turned by 1 rad takes a wrist that has 1 rad to
+            spare; a drawer pulled 16 cm, an arm that reaches 16 cm further).
         snapshot, grasp, pregrasp: blackboard keys (observation in; (4, 4) world tcp poses out).
     """
 
@@ -192,12 +196,19 @@ class ComputeAffordanceGrasp(Primitive):
                               grasp=G[:3, 3].round(4).tolist(), approach=G[:3, 2].round(4).tolist())
 
     def _turned(self, ent: dict, G: np.ndarray) -> np.ndarray | None:
-        """The (4, 4) tcp pose ``G`` turned about ``ent``'s hinge as far as
-        ``turn_to_fraction`` asks from its reported position; None when no turn is asked or
-        the entity does not report its hinge, position and travel."""
+        """The (4, 4) tcp pose ``G`` turned about ``ent``'s hinge (or pulled along its slide) as
+        far as ``turn_to_fraction`` asks from its reported position; None when no motion is
+        asked or the entity does not report its joint, position and travel."""
         attrs = ent.get("attributes") or {}
-        if self.turn_to_fraction is None or attrs.get("joint_type") != "hinge":
+        if self.turn_to_fraction is None or attrs.get("joint_type") not in ("hinge", "slide"):
             return None
+        if attrs["joint_type"] == "slide":
+            delta = _turn_to(attrs, self.turn_to_fraction, "range_m")
+            if delta is None:
+                return None
+            out = G.copy()
+            out[:3, 3] += delta * _unit(attrs["axis"])
+            return out
         delta = _turn_to(attrs, self.turn_to_fraction)
         if delta is None:
             return None
@@ -292,6 +303,103 @@ class ArticulateHinge(_Tracking):
         with ctx.profiler.section("timing"):
             traj = retime(np.array(path), vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
         ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_rad=round(delta, 4),
+                         joint_position=attrs.get("joint_position"), waypoints=len(path))
+        self._start(traj)
+
+    def step(self):
+        return Status.SUCCESS if self._done else self._advance()
+
+
+def _unit(v) -> np.ndarray:
+    a = np.asarray(v, dtype=float)
+    return a / np.linalg.norm(a)
+
+
+class ArticulateSlide(_Tracking):
+    """Pull (or push) a held handle along its entity's slide by ``delta_m``, or to
+    ``to_fraction`` of the joint's travel: a drawer.
+
+    The tcp moves in a straight line along the slide's ``axis`` (orientation kept), Cartesian
+    IK every ``step_m``, timed with toppra at ``velocity_scale`` of the joint limits and
+    streamed with the tracking check. A drawer that resists (not held, at its stop, blocked)
+    shows up as a tracking failure or, after success, as an opening the verifier finds
+    unchanged.
+
+    Args:
+        object: the articulated entity (any entity whose attributes declare ``joint_type:
+            slide`` with ``axis`` (3,) world unit, ``joint_position`` m and ``range_m`` [lo, hi]
+            m: a perceived drawer).
+        delta_m: signed motion along the slide's axis, m (the joint's own sign).
+        to_fraction: instead of ``delta_m``: move to ``lo + to_fraction (hi - lo)`` of the
+            entity's ``range_m`` from the ``joint_position`` it reports (perceived: the
+            observation before the grasp); a failure ``perception.affordance`` when it reports
+            either not.
+        step_m: largest motion between consecutive IK waypoints, m.
+        velocity_scale: fraction (0, 1] of the joint velocity limits.
+        snapshot: blackboard key of the observation holding the slide.
+
+    Raises:
+        ValueError: not exactly one of ``delta_m`` and ``to_fraction``, or a value out of range.
+    """
+
+    def __init__(self, name: str, *, object: str, delta_m: float | None = None, to_fraction: float | None = None,
+                 step_m: float = 0.02, velocity_scale: float = 0.3, snapshot: str = "snapshot"):
+        super().__init__(name)
+        if (delta_m is None) == (to_fraction is None):
+            raise ValueError("give exactly one of delta_m and to_fraction")
+        if to_fraction is not None and (not isinstance(to_fraction, (int, float)) or not 0.0 <= to_fraction <= 1.0):
+            raise ValueError(f"to_fraction must be a number in [0, 1], got {to_fraction!r}")
+        if delta_m is not None and (not isinstance(delta_m, (int, float)) or not math.isfinite(delta_m)
+                                    or delta_m == 0 or abs(delta_m) > 1.0):
+            raise ValueError(f"delta_m must be a non-zero number of metres within 1 m, got {delta_m!r}")
+        if not 0 < step_m <= 0.1:
+            raise ValueError(f"step_m must be in (0, 0.1] m, got {step_m}")
+        if not 0 < velocity_scale <= 1:
+            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
+        self.object, self.step_m = object, float(step_m)
+        self.delta_m = float(delta_m) if delta_m is not None else None
+        self.to_fraction = float(to_fraction) if to_fraction is not None else None
+        self.velocity_scale, self.snapshot_key = float(velocity_scale), snapshot
+        self.reads(snapshot)
+
+    def on_enter(self):
+        ctx = self.ctx
+        target = ctx.target
+        self._done = False
+        ent = _entity(self.get(self.snapshot_key), self.object)
+        attrs = ent.get("attributes") or {}
+        if attrs.get("joint_type") != "slide":
+            raise PrimitiveFailure("perception.affordance", f"{self.object!r} is not a sliding articulation "
+                                                            f"(kind {ent.get('kind')!r}, joint {attrs.get('joint_type')!r})")
+        delta = self.delta_m
+        if self.to_fraction is not None:
+            delta = _turn_to(attrs, self.to_fraction, "range_m")
+            if delta is None:
+                raise PrimitiveFailure("perception.affordance", f"{self.object!r}: its joint position or travel is not "
+                                                                "known (the joint was not seen), so a move to a fraction "
+                                                                "of the travel cannot be planned")
+            if abs(delta) < 1e-3:
+                ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_m=0.0,
+                                 joint_position=attrs.get("joint_position"), waypoints=0)
+                self._done = True
+                return
+        assert delta is not None
+        axis = _unit(attrs["axis"])
+        T0 = target.tcp_pose()
+        n = max(1, int(math.ceil(abs(delta) / self.step_m)))
+        q = target.arm_qpos()
+        path = [q]
+        with ctx.profiler.section("ik"):
+            for k in range(1, n + 1):
+                Tk = T0.copy()
+                Tk[:3, 3] += axis * (delta * k / n)
+                segment = cartesian_path(target.model, q_start=q, T_goal=Tk, **ik_options(target))
+                path.extend(segment[1:])
+                q = segment[-1]
+        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
+        with ctx.profiler.section("timing"):
+            traj = retime(np.array(path), vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
+        ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_m=round(delta, 4),
                          joint_position=attrs.get("joint_position"), waypoints=len(path))
         self._start(traj)
 

@@ -17,7 +17,7 @@ import inspect
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from .affordance import ArticulateHinge, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
+from .affordance import ArticulateHinge, ArticulateSlide, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
@@ -126,7 +126,8 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "object": ("str", "", "entity whose declared part to grasp"),
         "approach_height_m": ("float", "m", "pre-grasp distance along the approach"),
         "affordance": ("str", "", "which declared affordance (e.g. grasp, handle)"),
-        "turn_to_fraction": ("float", "", "the hinge turns next to this fraction of its travel: a hand with room for it"),
+        "turn_to_fraction": ("float", "", "the joint (hinge or slide) moves next to this fraction of its travel: a hand "
+                                           "with room for it"),
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
         "grasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp grasp pose"),
         "pregrasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-grasp pose"),
@@ -136,6 +137,14 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "delta_rad": ("float", "rad", "signed hinge rotation (or to_fraction)"),
         "to_fraction": ("float", "", "turn to this fraction of the hinge's travel from its reported position"),
         "step_rad": ("float", "rad", "rotation per tracked waypoint"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+    },
+    ArticulateSlide: {
+        "object": ("str", "", "articulated entity (its slide is declared by the target or perceived: a drawer)"),
+        "delta_m": ("float", "m", "signed motion along the slide's axis (or to_fraction)"),
+        "to_fraction": ("float", "", "move to this fraction of the slide's travel from its reported position"),
+        "step_m": ("float", "m", "motion per IK waypoint"),
         "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
     },

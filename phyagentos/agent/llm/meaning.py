@@ -93,9 +93,16 @@ _STAY = re.compile(r"\bwhere\s+(it|they|he|she)\s*(is|are|'s|'re|was|were)\b|\bi
                    r"\bthe\s+way\s+(it|they)\s+(is|are|was|were)\b")
 _NOTHING = re.compile(r"\b(do\s+nothing|nothing|don'?t\s+do\s+anything|do\s+not\s+do\s+anything|stay\s+still)\b")
 _AND_SPLIT = re.compile(r"\s*(?:,\s*and\s+|,\s+|\s+and\s+|\s+but\s+)(?=(?:then\s+)?(?:do\s+not|don'?t|never|turn|"
-                        r"switch|" + "|".join(sorted(_VERBS)) + r")\b)")
+                        r"switch|open|close|shut|" + "|".join(sorted(_VERBS)) + r")\b)")
 #: "turn on the stove", "switch the stove off": a knob to turn (the verb ``turn_on`` / ``turn_off``).
 _TURN = re.compile(r"^(?:please\s+)?(?:turn|switch)\s+(?:(on|off)\s+(.+)|(.+?)\s+(on|off))$")
+#: "open the middle drawer of the cabinet", "close the top drawer": a part to slide or swing (the verb
+#: ``open`` / ``close``; "shut" is "close").
+_OPEN = re.compile(r"^(?:please\s+)?(open|close|shut)\s+(?:up\s+)?(.+)$")
+#: Words for which of a fixture's drawers (the word before "drawer"), as the drawer's name.
+_DRAWER_WORDS = {"top": "top", "upper": "top", "uppermost": "top", "topmost": "top", "middle": "middle",
+                 "center": "middle", "centre": "middle", "bottom": "bottom", "lower": "bottom", "lowest": "bottom",
+                 "bottommost": "bottom"}
 _ELLIPSIS = re.compile(r"\s*(?:,\s*and\s+|\s+and\s+|,\s+)(?=the\s+[a-z0-9_ ]+?\s+(?:in|into|on|onto|to)\s)")
 
 #: Common words of languages other than English (function words a request cannot avoid).
@@ -170,6 +177,11 @@ class Intent:
     count: int | None = None
     by_colour: bool = False
     excluded: tuple[str, ...] = ()
+    #: ``open`` / ``close``: which part of the object ("middle" of "the middle drawer of the cabinet"; None: the
+    #: object itself, or a drawer not told apart)
+    part: str | None = None
+    #: ``open`` / ``close``: the kind of part named ("drawer"; None: the object itself)
+    part_kind: str | None = None
 
     def movers(self) -> tuple[str, ...]:
         """The objects the clause's steps act on (a count: the first ``count`` candidates, in the scene's order)."""
@@ -211,7 +223,7 @@ class Meaning:
             if it.verb == "leave":
                 continue
             skills = (("pick",) if it.verb == "hold" else ("turn_knob",) if it.verb in ("turn_on", "turn_off")
-                      else ("pick_and_place",))
+                      else ("slide_drawer",) if it.verb in ("open", "close") else ("pick_and_place",))
             for obj in it.movers():
                 out.append(Clause(it.text, obj, self.destinations_for(it, obj, world) or None, skills=skills))
         return out
@@ -226,6 +238,7 @@ class Meaning:
             want = self.destinations_for(it, obj, world)
             what = {"hold": f"pick up and hold {obj}", "stack": f"stack {obj} on {' or '.join(it.destinations)}",
                     "turn_on": f"turn {obj} on", "turn_off": f"turn {obj} off",
+                    "open": f"open {_part_phrase(it, obj)}", "close": f"close {_part_phrase(it, obj)}",
                     "move": f"move {obj} into {' or '.join(want) if want else 'a region'}"}[it.verb]
             if step is None:
                 out.append(f"{quote(it.text)} asks to {what}, and no step does")
@@ -696,6 +709,16 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             part = part[: -len(WHERE_POSSIBLE) - 1]
         low = part.lower()
         words = _tokens(low)
+        opened = _OPEN.match(" ".join(words))
+        if opened:  # a drawer (or another part) to open or close: of any declared thing, a fixture too
+            intent, problems = _read_open(part, opened.group(1), _tokens(opened.group(2)), world, previous)
+            if problems:
+                meaning.problems += problems
+                continue
+            assert intent is not None
+            meaning.intents.append(intent)
+            previous, acted = intent.objects, True
+            continue
         turn = _TURN.match(" ".join(words))
         if turn:  # a knob to turn: the thing named is any declared thing, a fixture too
             state = turn.group(1) or turn.group(4)
@@ -814,6 +837,48 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         acted = acted or verb_word is not None
     _settle(meaning)
     return meaning
+
+
+def _part_phrase(it: Intent, obj: str) -> str:
+    """"the middle drawer of wooden_cabinet_1" (or just the object) for a message."""
+    if it.part_kind is None:
+        return obj
+    return f"the {it.part + ' ' if it.part else ''}{it.part_kind} of {obj}"
+
+
+def _read_open(text: str, verb: str, named: list[str], world: World,
+               previous: tuple[str, ...]) -> tuple[Intent | None, list[tuple[str, str]]]:
+    """The ``open`` / ``close`` intent of clause ``text`` whose object phrase is ``named``:
+    ``the middle drawer of the cabinet`` names the drawer ``middle`` (:data:`_DRAWER_WORDS`) of
+    the one thing ``cabinet`` names (any declared thing, a fixture too); without ``of ...`` the
+    drawer is of the one thing its kind belongs to (:data:`_PART_OF`: a cabinet); a phrase with
+    no drawer names the thing itself. Returns ``(intent, problems)``."""
+    state = "close" if verb in ("close", "shut") else "open"
+    names = {o.name for o in world.objects}
+    things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
+                   regions=(), source=world.source)
+    kind = next((w for w in named if w in _PART_OF), None)
+    part = None
+    if kind is not None:
+        k = named.index(kind)
+        before = [w for w in named[:k] if w not in ("the", "a", "an", "its", "their", "please")]
+        if len(before) > 1 or (before and before[0] not in _DRAWER_WORDS):
+            return None, [("not_understood", f"{quote(text)}: which {kind} is {' '.join(before)!r}? (say top, middle "
+                                             f"or bottom {kind})")]
+        part = _DRAWER_WORDS[before[0]] if before else None
+        after = named[k + 1:]
+        whole = after[after.index("of") + 1:] if "of" in after else [_PART_OF[kind]]
+        if "of" not in after and [w for w in after if w not in _STOP]:
+            return None, [("not_understood", f"{quote(text)}: the {kind} of what? ({' '.join(after)!r} after it)")]
+        objects, count, problems = _read_objects(whole, things, previous)
+        kind = "drawer" if kind in ("drawer", "drawers") else kind
+    else:
+        objects, count, problems = _read_objects(named, things, previous)
+    if not problems and len(objects) != 1:
+        problems = [("not_understood", f"{quote(text)}: {state} one thing at a time")]
+    if problems:
+        return None, problems
+    return Intent(text, state, objects, part=part, part_kind=kind), []
 
 
 def _settle(meaning: Meaning) -> None:

@@ -480,6 +480,112 @@ def _knob_look(target, name: str, cloud, heights: np.ndarray, centre_xy: np.ndar
     return {**rough.as_dict(), "rest_yaw_rad": rest}
 
 
+def _drawer_joints(target, name: str) -> list[int]:
+    """The joint ids of fixture ``name``'s drawers: slide joints along a horizontal axis on
+    bodies of its model, in the model's order."""
+    m, d = target.model, target.data
+    root = int(m.body_rootid[m.body(target.env.env.get_object(name).root_body).id])
+    return [j for j in range(m.njnt) if int(m.body_rootid[int(m.jnt_bodyid[j])]) == root
+            and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE and abs(float(d.xaxis[j][2])) < 0.01]
+
+
+def _geom_half(m: mujoco.MjModel, d: mujoco.MjData, g: int, direction: np.ndarray) -> float:
+    """Half the extent (m) of geom ``g``'s bounding box along world ``direction`` (3,) unit."""
+    R = d.geom_xmat[g].reshape(3, 3)
+    return float(np.abs(R.T @ direction) @ m.geom_aabb[g, 3:])
+
+
+def drawer_opening(target, name: str, joint: int) -> tuple[float, np.ndarray, tuple[float, float]]:
+    """``(opening m, u (2,) world unit opening direction, travel (lo, hi) m)`` of fixture
+    ``name``'s drawer on slide ``joint``, from the simulator (ground truth: the look generator
+    and scoring only): the joint mapped so that it grows as the drawer's handle moves away from
+    the fixture's footprint centre."""
+    m, d = target.model, target.data
+    sign = drawer_sign(target, name, joint)
+    axis = d.xaxis[joint][:2]
+    q = float(d.qpos[m.jnt_qposadr[joint]])
+    lo, hi = (sign * float(v) for v in m.jnt_range[joint])
+    return sign * q, sign * axis / np.linalg.norm(axis), (min(lo, hi), max(lo, hi))
+
+
+def drawer_sign(target, name: str, joint: int) -> float:
+    """+1 when slide ``joint`` of fixture ``name`` grows as its drawer comes out (its handle
+    moving away from the fixture's footprint centre along the joint's axis), else -1; from the
+    simulator (the look generator and scoring only)."""
+    d = target.data
+    lo_box, hi_box = fixture_boxes(target)[name]
+    centre = 0.5 * (lo_box[:2] + hi_box[:2])
+    handle = _handle_geom(target, joint)
+    return 1.0 if float((d.geom_xpos[handle][:2] - centre) @ d.xaxis[joint][:2]) >= 0 else -1.0
+
+
+def _handle_geom(target, joint: int) -> int:
+    """The collision geom of the drawer on slide ``joint`` that stands farthest out from the
+    fixture along the slide (its handle's bar)."""
+    m, d = target.model, target.data
+    b = int(m.jnt_bodyid[joint])
+    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == b and m.geom_contype[g]]
+    body = d.xpos[b][:2]
+    axis = d.xaxis[joint][:2]
+    # the handle is at one end of the slide: the geom farthest from the body's origin along it
+    return max(geoms, key=lambda g: abs(float((d.geom_xpos[g][:2] - body) @ axis)))
+
+
+def _drawer_looks(target, name: str, cloud, heights: np.ndarray, centre_xy: np.ndarray,
+                  half_xy: np.ndarray) -> list[dict[str, Any]]:
+    """Fixture ``name``'s ``drawers`` (:class:`~phyagentos.perception.fixtures.DrawerLook`)
+    from its model (each slide's axis and travel, its handle bar's place and length, the
+    drawer's width and top) and the cloud (the handle's outer face, by the perceiver's own
+    :func:`~phyagentos.perception.fixtures.drawer_reading` less the opening the simulator
+    reports: this is the look generator; ``back_m`` how far its rearmost point lies behind the
+    footprint centre along the drawer's axis (:func:`_back`; ``half_xy`` (2,) world m the
+    footprint's half extents, drawers shut)); drawers whose handle is not read are left out."""
+    from phyagentos.perception.fixtures import DrawerLook, drawer_reading  # noqa: PLC0415
+
+    m, d = target.model, target.data
+    out = []
+    for j in _drawer_joints(target, name):
+        opening, u, travel = drawer_opening(target, name, j)
+        h = _handle_geom(target, j)
+        v3 = np.array([-u[1], u[0], 0.0])
+        shut = d.geom_xpos[h][:2] - u * opening
+        near = np.linalg.norm(cloud.points[:, :2] - shut, axis=1) <= 0.15
+        if int(near.sum()) < 10:
+            continue
+        ground = float(np.median(cloud.points[near, 2] - heights[near]))
+        b = int(m.jnt_bodyid[j])
+        geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == b and m.geom_contype[g]]
+        across = [float(d.geom_xpos[g][:2] @ v3[:2]) for g in geoms]
+        halves = [_geom_half(m, d, g, v3) for g in geoms]
+        mid = 0.5 * (min(a - w for a, w in zip(across, halves)) + max(a + w for a, w in zip(across, halves)))
+        top = max(float(d.geom_xpos[g][2]) + _geom_half(m, d, g, np.array([0.0, 0.0, 1.0])) for g in geoms)
+        rough = DrawerLook(_drawer_name(m.joint(j).name, name), (float(shut[0] - centre_xy[0]), float(shut[1] - centre_xy[1])),
+                           float(d.geom_xpos[h][2]) - ground, _geom_half(m, d, h, v3), (float(u[0]), float(u[1])),
+                           travel, 0.0, max(a + w for a, w in zip(across, halves)) - mid, top - ground,
+                           _back(cloud.points, heights, centre_xy, half_xy, u))
+        reading = drawer_reading(cloud.points, heights, rough, centre_xy)
+        if reading is None:
+            continue
+        out.append({**rough.as_dict(), "face_m": reading[0] - opening})
+    return out
+
+
+def _back(points: np.ndarray, heights: np.ndarray, centre_xy: np.ndarray, half_xy: np.ndarray, u: np.ndarray) -> float:
+    """How far (m) the rearmost point of a body (the points of ``points`` (N, 3) world m within
+    its footprint ``centre_xy`` +- ``half_xy`` (2,) grown 1 cm, at least 5 mm above the support)
+    lies behind ``centre_xy`` along ``u`` (2,) world unit: the estimator
+    :func:`~phyagentos.perception.fixtures.detect_fixtures` uses for a body with drawers out."""
+    near = np.all(np.abs(points[:, :2] - centre_xy) <= np.asarray(half_xy, float) + 0.01, axis=1) & (heights > 0.005)
+    return float(np.asarray(centre_xy, float) @ u - (points[near, :2] @ u).min())
+
+
+def _drawer_name(joint: str, fixture: str) -> str:
+    """A drawer's name from its slide's joint name: LIBERO's ``wooden_cabinet_1_top_level`` is
+    ``top``."""
+    short = joint[len(fixture) + 1:] if joint.startswith(fixture + "_") else joint
+    return short[:-len("_level")] if short.endswith("_level") else short
+
+
 def _median_axis(yaws: Sequence[float]) -> float:
     """Median of axis directions ``yaws`` (rad, each defined mod pi), in [-pi/2, pi/2): each is
     taken within pi/2 of the first before the median."""
@@ -523,6 +629,12 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
                 if adr is not None:
                     d.qpos[adr[0]:adr[0] + 3] = (_AWAY + 2.0 * j, _AWAY, 1.0)
                     d.qvel[adr[1]:adr[1] + 6] = 0.0
+            boxes = fixture_boxes(target)
+            for name in cats:  # drawers shut: the look is the fixture's shut shape (some tasks start one open)
+                if name in boxes:
+                    for j in _drawer_joints(target, name):
+                        d.qpos[m.jnt_qposadr[j]] = 0.0
+                        d.qvel[m.jnt_dofadr[j]] = 0.0
             mujoco.mj_forward(m, d)
             target.hold(duration_s=settle_s)
             frames = [target.capture(s) for s in target.camera_names()]
@@ -550,6 +662,9 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
                 knob = _knob_look(target, name, cloud, heights, p)
                 if knob is not None:
                     look["knob"] = knob
+                drawers = _drawer_looks(target, name, cloud, heights, p, body.half_xy_world)
+                if drawers:
+                    look["drawers"] = drawers
                 seen.setdefault(cats[name], []).append(look)
     finally:
         target.reset(seed=target.init_index)
@@ -572,5 +687,33 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
                             "top_m": round(float(np.median([k["top_m"] for k in knobs])), 4),
                             "rest_yaw_rad": round(_median_axis([k["rest_yaw_rad"] for k in knobs]), 4),
                             "range_rad": [round(float(v), 4) for v in knobs[0]["range_rad"]]}
+        drawers = _median_drawers([g.get("drawers", []) for g in got])
+        if drawers:
+            look["drawers"] = drawers
         out[cat] = look
+    return out
+
+
+def _median_drawers(seen: Sequence[Sequence[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """Each drawer's look (by name, in the order first seen) as the medians of its numbers over
+    the scenes that read it; a drawer read in fewer than 2 scenes is left out."""
+    by_name: dict[str, list[dict[str, Any]]] = {}
+    for scene in seen:
+        for dr in scene:
+            by_name.setdefault(dr["name"], []).append(dr)
+    out = []
+    for name, looks in by_name.items():
+        if len(looks) < 2:
+            continue
+        one: dict[str, Any] = {"name": name}
+        for key, value in looks[0].items():
+            if key == "name":
+                continue
+            if key == "travel_m":
+                one[key] = [round(float(v), 4) for v in value]  # the model's
+            elif isinstance(value, list):
+                one[key] = [round(float(v), 4) for v in np.median([dr[key] for dr in looks], axis=0)]
+            else:
+                one[key] = round(float(np.median([dr[key] for dr in looks])), 4)
+        out.append(one)
     return out

@@ -1,0 +1,148 @@
+"""Opening and closing a drawer (issue 28, "open the middle drawer of the cabinet"): the
+drawer's look, its reading from the handle, the drawer entity a perceiver reports, the
+verifier's band on a slide, the slide primitive's arguments and the Goal Planner's clause.
+
+The drawer opened through ``phyagentos run`` on a generated LIBERO scene, judged by the
+verifier and LIBERO's checker, is pinned in ``tests/test_libero_drawer.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phyagentos.agent.criteria import evaluate, parse_criteria
+from phyagentos.agent.llm.meaning import read_request
+from phyagentos.bench.libero import (
+    CLOSED_MAX_FRACTION,
+    OPENED_MIN_FRACTION,
+    BenchError,
+    instruction_nodes,
+    planner_world,
+)
+from phyagentos.perception import PerceptionError
+from phyagentos.perception.fixtures import DRAWER_SIGMA_M, DrawerLook, FixtureLook, drawer_reading
+from phyagentos.primitives.affordance import ArticulateSlide
+
+# LIBERO's wooden cabinet's middle drawer as measured on generated scenes (bench/libero_drawer.py)
+MIDDLE = {"name": "middle", "handle_offset_m": [0.0053, 0.1019], "height_m": 0.1154, "half_length_m": 0.0444,
+          "axis_xy": [0.0, 1.0], "travel_m": [-0.01, 0.16], "face_m": 0.008, "half_width_m": 0.1093,
+          "top_m": 0.1526, "back_m": 0.111}
+CENTRE = np.array([0.03, -0.25])
+
+
+def _box(lo, hi, n, rng):
+    return rng.uniform(lo, hi, size=(n, 3))
+
+
+def _drawer_cloud(opening: float, *, handle: bool = True, seed: int = 0):
+    """Points (N, 3) and heights (N,) of the middle drawer's front and handle ``opening`` m out
+    (the support at z = 0.9), the drawer's axis +y from the body's centre :data:`CENTRE`."""
+    rng = np.random.default_rng(seed)
+    hx, hy = CENTRE + np.array(MIDDLE["handle_offset_m"]) + np.array([0.0, opening])
+    parts = [_box([CENTRE[0] - 0.1, hy - 0.035, 0.9 + 0.08], [CENTRE[0] + 0.1, hy - 0.02, 0.9 + 0.15], 800, rng)]
+    if handle:  # the bar: 8.9 cm along x, 1.6 cm deep, 1.6 cm tall
+        parts.append(_box([hx - 0.0444, hy - 0.008, 0.9 + 0.1074], [hx + 0.0444, hy + 0.008, 0.9 + 0.1234], 300, rng))
+    pts = np.vstack(parts)
+    return pts, pts[:, 2] - 0.9
+
+
+def test_a_handle_reads_as_the_opening_the_drawer_stands_at():
+    drawer = DrawerLook.from_dict(MIDDLE, "wooden_cabinet_1")
+    for opening in (0.0, 0.05, 0.12, 0.16):
+        pts, h = _drawer_cloud(opening)
+        read, n = drawer_reading(pts, h, drawer, CENTRE)
+        assert n >= 5 and abs(read - opening) < 0.005, (opening, read)
+
+
+def test_a_drawer_front_without_its_handle_gives_no_reading():
+    drawer = DrawerLook.from_dict(MIDDLE, "wooden_cabinet_1")
+    pts, h = _drawer_cloud(0.1, handle=False)  # the arm hides the handle: the front alone is not read as it
+    assert drawer_reading(pts, h, drawer, CENTRE) is None
+    can = np.random.default_rng(1).uniform([0.02, -0.14, 1.005], [0.05, -0.11, 1.03], size=(200, 3))
+    assert drawer_reading(can, can[:, 2] - 0.9, drawer, CENTRE) is None  # narrower than the handle
+
+
+def test_a_malformed_drawer_look_is_refused_with_the_valid_keys():
+    with pytest.raises(PerceptionError, match="each drawer must be a mapping with keys"):
+        DrawerLook.from_dict({"name": "top"}, "cab")
+    with pytest.raises(PerceptionError, match="unit axis_xy"):
+        DrawerLook.from_dict({**MIDDLE, "axis_xy": [0.0, 2.0]}, "cab")
+    with pytest.raises(PerceptionError, match="a drawer name is used twice"):
+        FixtureLook.from_dict({"name": "cab", "size_m": [0.26, 0.22, 0.23], "drawers": [MIDDLE, MIDDLE]})
+    look = FixtureLook.from_dict({"name": "cab", "class": "wooden_cabinet", "size_m": [0.26, 0.22, 0.23],
+                                  "drawers": [MIDDLE]})
+    assert look is not None and look.drawers == (DrawerLook.from_dict(MIDDLE, "cab"),)
+    assert DrawerLook.from_dict(look.drawers[0].as_dict(), "cab") == look.drawers[0]
+
+
+def _snap(q, std=DRAWER_SIGMA_M):
+    attrs = {"joint_type": "slide", "axis": [0.0, 1.0, 0.0], "range_m": [-0.01, 0.16]}
+    if q is not None:
+        attrs.update(joint_position=q, joint_position_std_m=std)
+    return {"entities": [{"name": "drawer", "kind": "articulation", "position": [0, 0, 1.0], "size": [0.04, 0.01, 0.01],
+                          "attributes": attrs}]}
+
+
+def test_open_and_shut_are_judged_on_the_read_opening_with_its_two_sigma_band():
+    opened = parse_criteria({"articulated": {"object": "drawer", "min_fraction": OPENED_MIN_FRACTION}})[0]
+    shut = parse_criteria({"articulated": {"object": "drawer", "max_fraction": CLOSED_MAX_FRACTION}})[0]
+    bound = -0.01 + OPENED_MIN_FRACTION * 0.17  # 0.126 m out
+
+    def status(crit, q, **kw):
+        return evaluate(crit, _snap(0.0), _snap(q, **kw)).status
+
+    assert status(opened, 0.159) == "satisfied"
+    assert status(opened, bound + 0.01) == "unknown"  # within 2 sigma of the bound: look again
+    assert status(opened, 0.0) == "unsatisfied"
+    assert status(opened, None) == "unknown"  # the handle was not read
+    assert status(shut, 0.0) == "satisfied"
+    assert status(shut, 0.159) == "unsatisfied"
+    assert status(shut, 0.04) == "unknown"
+
+
+def test_the_slide_takes_exactly_one_of_a_distance_and_a_fraction_of_the_travel():
+    ArticulateSlide("s", object="drawer", to_fraction=1.0)
+    ArticulateSlide("s", object="drawer", delta_m=-0.1)
+    with pytest.raises(ValueError, match="exactly one of delta_m and to_fraction"):
+        ArticulateSlide("s", object="drawer", delta_m=0.1, to_fraction=0.5)
+    with pytest.raises(ValueError, match="exactly one of delta_m and to_fraction"):
+        ArticulateSlide("s", object="drawer")
+    with pytest.raises(ValueError, match=r"to_fraction must be a number in \[0, 1\]"):
+        ArticulateSlide("s", object="drawer", to_fraction=1.5)
+    with pytest.raises(ValueError, match="delta_m must be a non-zero number of metres within 1 m"):
+        ArticulateSlide("s", object="drawer", delta_m=3.0)
+
+
+def test_open_and_close_name_a_drawer_of_the_thing_it_belongs_to():
+    world = planner_world({"akita_black_bowl_1": "akita_black_bowl"},
+                          {"wooden_cabinet_1": "wooden_cabinet", "flat_stove_1": "flat_stove"})
+    cases = {
+        "open the middle drawer of the cabinet": [("open", ("wooden_cabinet_1",), "middle")],
+        "open the top drawer": [("open", ("wooden_cabinet_1",), "top")],
+        "shut the lower drawer of the wooden cabinet": [("close", ("wooden_cabinet_1",), "bottom")],
+        "turn on the stove and open the top drawer": [("turn_on", ("flat_stove_1",), None),
+                                                       ("open", ("wooden_cabinet_1",), "top")],
+    }
+    for text, want in cases.items():
+        meaning = read_request(text, world, relations=True)
+        assert not meaning.problems, (text, meaning.problems)
+        assert [(i.verb, i.objects, i.part) for i in meaning.intents] == want, text
+    meaning = read_request("open the big drawer", world)
+    assert meaning.problems and "say top, middle or bottom drawer" in meaning.problems[0][1]
+
+
+def test_libero_plans_a_drawer_slide_to_its_stop_accepted_on_the_read_opening():
+    objects, fixtures = {"akita_black_bowl_1": "akita_black_bowl"}, {"wooden_cabinet_1": "wooden_cabinet"}
+    (node,) = instruction_nodes("open the middle drawer of the cabinet", objects, fixtures)
+    assert (node["skill"], node["params"]) == ("slide_drawer", {"object": "wooden_cabinet_1_middle_drawer",
+                                                                 "to_fraction": 1.0})
+    assert node["accept"] == [{"articulated": {"object": "wooden_cabinet_1_middle_drawer",
+                                               "min_fraction": OPENED_MIN_FRACTION}}]
+    # LIBERO's Close wants the drawer fully shut: not told from a centimetre out by the reading, so refused
+    with pytest.raises(BenchError, match="a close could not be verified"):
+        instruction_nodes("close the top drawer of the cabinet", objects, fixtures)
+    with pytest.raises(BenchError, match="which drawer of wooden_cabinet_1"):
+        instruction_nodes("open the drawer", objects, fixtures)
+    with pytest.raises(BenchError, match="only drawers are opened and closed here"):
+        instruction_nodes("open the cabinet", objects, fixtures)

@@ -172,6 +172,13 @@ DRAWER_HANDLE_HALF_M = 0.008
 #: cm, clearing a plate lying 3.5 cm in front of the handle (generated libero_goal scenes;
 #: ``bench/libero_drawer.py``), and the upper finger stays clear of the drawer above.
 DRAWER_APPROACH_PITCH_RAD = math.radians(10.0)
+#: A drawer's walls, as the fixture's own points (:meth:`Perceiver._drawer_points`): its front
+#: and handle this deep inward from the handle's outer face, its sides this thick, its floor
+#: this far below the handle's centre and lower, m (LIBERO's cabinet drawers: the handle stands
+#: 2.4 cm proud of a 1.5 cm front; the floor is about 3 cm below the handle's centre).
+DRAWER_FRONT_M = 0.045
+DRAWER_WALL_M = 0.02
+DRAWER_FLOOR_M = 0.025
 
 
 def _quat_yaw(yaw: float) -> list[float]:
@@ -680,16 +687,23 @@ class Perceiver:
     def _drawer_points(p: np.ndarray, heights: np.ndarray, drawer: DrawerLook, s: FixtureSighting,
                        opening: float) -> np.ndarray:
         """(N,) bool: the points of ``p`` (N, 3) world m (``heights`` (N,) m above the support)
-        on ``drawer`` of sighting ``s`` standing ``opening`` m out: across its width (plus
-        :data:`FIXTURE_EDGE_M`), up to its top (plus :data:`FIXTURE_MARGIN_M`), from inside its
-        shut handle out to its handle's outer face (plus :data:`DRAWER_WINDOW_M`)."""
+        on the walls of ``drawer`` of sighting ``s`` standing ``opening`` m out: within its box
+        (across its width plus :data:`FIXTURE_EDGE_M`, up to its top plus
+        :data:`FIXTURE_MARGIN_M`, from inside its shut handle out to its handle's outer face plus
+        :data:`DRAWER_WINDOW_M`), its front and handle (:data:`DRAWER_FRONT_M` inward from the
+        handle's face), its sides (:data:`DRAWER_WALL_M` inward) and its floor
+        (:data:`DRAWER_FLOOR_M` below the handle's centre and lower). What stands inside it (a
+        bowl in an open drawer) is not the fixture's."""
         c0, u, v = drawer.frame(s.position[:2], s.turn)
         rel = p[:, :2] - c0
         along, across = rel @ u, rel @ v
-        return ((np.abs(across) <= drawer.half_width_m + FIXTURE_EDGE_M)
-                & (heights <= drawer.top_m + FIXTURE_MARGIN_M)
-                & (along >= drawer.travel_m[0] - DRAWER_WINDOW_M)
-                & (along <= opening + drawer.face_m + DRAWER_WINDOW_M))
+        face = opening + drawer.face_m
+        box = ((np.abs(across) <= drawer.half_width_m + FIXTURE_EDGE_M)
+               & (heights <= drawer.top_m + FIXTURE_MARGIN_M)
+               & (along >= drawer.travel_m[0] - DRAWER_WINDOW_M) & (along <= face + DRAWER_WINDOW_M))
+        walls = ((along >= face - DRAWER_FRONT_M) | (np.abs(across) >= drawer.half_width_m - DRAWER_WALL_M)
+                 | (heights <= drawer.height_m - DRAWER_FLOOR_M))
+        return box & walls
 
     def _drawer_entities(self, look: FixtureLook, plane: Plane, stamp: float) -> list[dict]:
         """One ``kind: articulation`` entity per drawer of ``look`` whose handle was read in this

@@ -6,10 +6,10 @@
 For each task the fixtures' looks are measured first
 (:func:`~phyagentos.targets.libero.descriptors.measure_fixture_looks`: each fixture alone on
 generated scenes; a cabinet's ``drawers`` from its model). Then, for each seed (from 72000:
-never an init state), LIBERO's placement sampler builds a scene and, for each opening, every
-drawer of the cabinet is set that far out (the simulator: this is the scene generator), the
-world settles 0.2 s, and a fresh perceiver, given the fixtures with their looks, observes both
-cameras at the start pose. Scored per drawer: whether the cabinet is found, whether the
+never an init state), LIBERO's placement sampler builds a scene and, for each drawer and each
+opening, that drawer is set that far out and the others shut (the simulator: this is the scene
+generator; all shut once), the world settles 0.2 s, and a fresh perceiver, given the fixtures
+with their looks, observes both cameras at the start pose. Scored per drawer: whether the cabinet is found, whether the
 drawer's entity is reported (its handle read), and the error of its perceived opening
 (``attributes.joint_position``) against the simulator's. Ground truth is read here for the
 generator and the scoring only.
@@ -43,12 +43,12 @@ from phyagentos.targets.libero.descriptors import (
 SEED = 72000
 
 
-def _set_openings(target, cabinet: str, joints: list[int], opening: float) -> dict[int, float]:
-    """Set every drawer of ``cabinet`` ``opening`` m out, settle 0.2 s; each drawer's true
-    opening after (m)."""
+def _set_openings(target, cabinet: str, joints: list[int], moved: int, opening: float) -> dict[int, float]:
+    """Set drawer ``moved`` (a joint id) of ``cabinet`` ``opening`` m out and the others shut,
+    settle 0.2 s; each drawer's true opening after (m)."""
     m, d = target.model, target.data
     for j in joints:
-        d.qpos[m.jnt_qposadr[j]] = drawer_sign(target, cabinet, j) * opening
+        d.qpos[m.jnt_qposadr[j]] = drawer_sign(target, cabinet, j) * (opening if j == moved else 0.0)
         d.qvel[m.jnt_dofadr[j]] = 0.0
     mujoco.mj_forward(m, d)
     target.hold(duration_s=0.2)
@@ -76,8 +76,8 @@ def main(argv: list[str] | None = None) -> int:
             for k in range(args.seeds):
                 seed = SEED + k
                 target.generate_scene(seed)
-                for opening in openings:
-                    truth = _set_openings(target, cabinet, joints, opening)
+                for moved, opening in ((j, o) for j in joints for o in openings if o > 0 or j == joints[0]):
+                    truth = _set_openings(target, cabinet, joints, moved, opening)
                     perceiver = Perceiver(target.perception_config(), declared)
                     snap = perceiver.observe([target.capture(s) for s in target.camera_names()],
                                              target.proprioception(), robot_capsules=robot_capsules(target))

@@ -63,6 +63,25 @@ def test_a_drawer_front_without_its_handle_gives_no_reading():
     assert drawer_reading(can, can[:, 2] - 0.9, drawer, CENTRE) is None  # narrower than the handle
 
 
+def test_a_bowl_in_front_of_the_bottom_drawer_is_not_read_as_its_handle():
+    bottom = DrawerLook.from_dict({**MIDDLE, "name": "bottom", "height_m": 0.0461, "top_m": 0.084}, "wooden_cabinet_1")
+    rng = np.random.default_rng(2)
+    hx, hy = CENTRE + np.array(MIDDLE["handle_offset_m"])
+    front = _box([CENTRE[0] - 0.1, hy - 0.035, 0.9 + 0.01], [CENTRE[0] + 0.1, hy - 0.02, 0.9 + 0.08], 800, rng)
+    handle = _box([hx - 0.0444, hy - 0.008, 0.9 + 0.038], [hx + 0.0444, hy + 0.008, 0.9 + 0.054], 300, rng)
+    # a black bowl's wall (radius 6.5 cm, 2.5-5.5 cm high) standing 15 cm out from the shut handle
+    t = rng.uniform(0, 2 * np.pi, 1500)
+    r = rng.uniform(0.06, 0.065, 1500)
+    bowl = np.column_stack([hx + r * np.cos(t), hy + 0.15 + r * np.sin(t), 0.9 + rng.uniform(0.025, 0.055, 1500)])
+    for parts, want in (([front, handle, bowl], 0.0), ([front, bowl], None)):
+        pts = np.vstack(parts)
+        got = drawer_reading(pts, pts[:, 2] - 0.9, bottom, CENTRE)
+        if want is None:
+            assert got is None
+        else:
+            assert got is not None and abs(got[0] - want) < 0.005, got
+
+
 def test_a_malformed_drawer_look_is_refused_with_the_valid_keys():
     with pytest.raises(PerceptionError, match="each drawer must be a mapping with keys"):
         DrawerLook.from_dict({"name": "top"}, "cab")

@@ -55,7 +55,8 @@ from phyagentos.perception.errors import PerceptionError
 
 __all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
            "drawer_entity_name", "DRAWER_BAND_M", "DRAWER_BEYOND_M", "DRAWER_FRONT_FRACTION", "DRAWER_ABOVE_M",
-           "DRAWER_LEVEL_TOL_M", "DRAWER_STRAIGHT_TOL_M", "DRAWER_WINDOW_M", "DRAWER_MIN_POINTS", "DRAWER_MIN_SPAN",
+           "DRAWER_LEVEL_TOL_M", "DRAWER_STRAIGHT_TOL_M", "DRAWER_FRONT_BEHIND_M", "DRAWER_FRONT_MIN_POINTS",
+           "DRAWER_FRONT_SPAN_M", "DRAWER_WINDOW_M", "DRAWER_MIN_POINTS", "DRAWER_MIN_SPAN",
            "DRAWER_SIGMA_M", "fixtures_from_declared", "segments", "bodies",
            "detect_fixtures", "find_by_knob", "knob_band", "knob_reading", "patch_cover", "JOIN_GAP_M", "SIZE_TOL_FRACTION",
            "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS", "KNOB_RADIUS_M", "KNOB_BAND", "KNOB_MIN_POINTS",
@@ -225,6 +226,15 @@ DRAWER_FRONT_FRACTION = 0.3
 #: bar standing in front of it (a bowl by the bottom drawer), and the handle is looked for
 #: behind it, m.
 DRAWER_ABOVE_M = 0.025
+#: A handle has its drawer's front behind it: on one side of the handle at least (from 1 cm
+#: past its ends to 5 mm inside the drawer's sides), within 2.5 cm of its level and this far
+#: behind the slice's outer face (m, LIBERO's cabinet: the front's face 2.4 cm behind the
+#: handle's), at least :data:`DRAWER_FRONT_MIN_POINTS` points spanning
+#: :data:`DRAWER_FRONT_SPAN_M` across whose face is straight (:func:`_straight`): a bowl's rim
+#: in front of the cabinet has its own wall behind it, curving away.
+DRAWER_FRONT_BEHIND_M = (0.015, 0.05)
+DRAWER_FRONT_MIN_POINTS = 5
+DRAWER_FRONT_SPAN_M = 0.03
 #: The handle's outer face is straight: the outermost points of its 1 cm bins across lie within
 #: this of each other, m (:func:`_straight`).
 DRAWER_STRAIGHT_TOL_M = 0.005
@@ -348,6 +358,10 @@ def drawer_reading(points: np.ndarray, heights: np.ndarray, drawer: DrawerLook, 
               & (np.abs(across_all) <= drawer.half_length_m + DRAWER_BEYOND_M)
               & (np.abs(heights - drawer.height_m) <= DRAWER_BAND_M))
     a_beyond = along[beyond]
+    # beside the handle, at its level: the drawer's front, which stands behind a handle's face
+    front = ((np.abs(across_all) >= drawer.half_length_m + 0.01) & (np.abs(across_all) <= drawer.half_width_m - 0.005)
+             & (np.abs(heights - drawer.height_m) <= DRAWER_BAND_M + 0.01))
+    a_front, x_front = along[front], across_all[front]
     # the same slice just above the band: a bar ends there, a bowl or a can goes on
     above = ((np.abs(across_all) <= drawer.half_length_m) & (heights > drawer.height_m + DRAWER_BAND_M + 0.005)
              & (heights <= drawer.height_m + DRAWER_BAND_M + DRAWER_ABOVE_M))
@@ -370,6 +384,12 @@ def drawer_reading(points: np.ndarray, heights: np.ndarray, drawer: DrawerLook, 
             wide = int(((a_beyond <= hi) & (a_beyond > hi - 2 * _DRAWER_SLICE_M)).sum())
             if wide > DRAWER_FRONT_FRACTION * int(sel.sum()):
                 return None  # as wide as the drawer's front: the handle is hidden (the arm) or gone
+            behind = (a_front <= hi - DRAWER_FRONT_BEHIND_M[0]) & (a_front >= hi - DRAWER_FRONT_BEHIND_M[1])
+            if not any(int(side.sum()) >= DRAWER_FRONT_MIN_POINTS and float(np.ptp(x_front[side])) >= DRAWER_FRONT_SPAN_M
+                       and _straight(a_front, x_front, side, float(a_front[side].max()))
+                       for side in (behind & (x_front < 0), behind & (x_front > 0))):
+                k += 1  # no flat drawer front beside it (a bowl's rim in front of the cabinet): look behind it
+                continue
             return float(np.percentile(a[sel], 90)) - drawer.face_m, int(sel.sum())
         k += 1
     return None

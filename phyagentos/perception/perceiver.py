@@ -690,7 +690,7 @@ class Perceiver:
         on the walls of ``drawer`` of sighting ``s`` standing ``opening`` m out: within its box
         (across its width plus :data:`FIXTURE_EDGE_M`, up to its top plus
         :data:`FIXTURE_MARGIN_M`, from inside its shut handle out to its handle's outer face plus
-        :data:`DRAWER_WINDOW_M`), its front and handle (:data:`DRAWER_FRONT_M` inward from the
+        :data:`FIXTURE_MARGIN_M`), its front and handle (:data:`DRAWER_FRONT_M` inward from the
         handle's face), its sides (:data:`DRAWER_WALL_M` inward) and its floor
         (:data:`DRAWER_FLOOR_M` below the handle's centre and lower). What stands inside it (a
         bowl in an open drawer) is not the fixture's."""
@@ -700,7 +700,7 @@ class Perceiver:
         face = opening + drawer.face_m
         box = ((np.abs(across) <= drawer.half_width_m + FIXTURE_EDGE_M)
                & (heights <= drawer.top_m + FIXTURE_MARGIN_M)
-               & (along >= drawer.travel_m[0] - DRAWER_WINDOW_M) & (along <= face + DRAWER_WINDOW_M))
+               & (along >= drawer.travel_m[0] - DRAWER_WINDOW_M) & (along <= face + FIXTURE_MARGIN_M))
         walls = ((along >= face - DRAWER_FRONT_M) | (np.abs(across) >= drawer.half_width_m - DRAWER_WALL_M)
                  | (heights <= drawer.height_m - DRAWER_FLOOR_M))
         return box & walls

@@ -215,7 +215,94 @@ class ComputeAffordanceGrasp(Primitive):
         return _about_hinge(G, np.asarray(attrs["anchor"], dtype=float), np.asarray(attrs["axis"], dtype=float), delta)
 
 
-class ArticulateHinge(_Tracking):
+def _unit(v) -> np.ndarray:
+    a = np.asarray(v, dtype=float)
+    return a / np.linalg.norm(a)
+
+
+class _Articulate(_Tracking):
+    """What :class:`ArticulateHinge` and :class:`ArticulateSlide` share: the motion asked
+    (``delta`` in the joint's unit, or ``to_fraction`` of the travel the entity reports), the
+    entity's joint read from the observation, the IK waypoints timed with toppra and streamed.
+    Subclasses set :attr:`JOINT` (the ``joint_type`` they move), :attr:`TRAVEL_KEY`,
+    :attr:`UNIT` and :attr:`MAX_DELTA`, and build the tcp waypoints in :meth:`poses`.
+    """
+
+    JOINT = ""
+    TRAVEL_KEY = ""
+    UNIT = ""
+    MAX_DELTA = math.inf
+
+    def __init__(self, name: str, *, object: str, delta: float | None, to_fraction: float | None, step: float,
+                 max_step: float, velocity_scale: float, snapshot: str):
+        super().__init__(name)
+        d = f"delta_{self.UNIT}"
+        if (delta is None) == (to_fraction is None):
+            raise ValueError(f"give exactly one of {d} and to_fraction")
+        if to_fraction is not None and (not isinstance(to_fraction, (int, float)) or not 0.0 <= to_fraction <= 1.0):
+            raise ValueError(f"to_fraction must be a number in [0, 1], got {to_fraction!r}")
+        if delta is not None and (not isinstance(delta, (int, float)) or not math.isfinite(delta) or delta == 0
+                                  or abs(delta) > self.MAX_DELTA):
+            unit = {"rad": "radians", "m": "metres"}[self.UNIT]
+            within = f" within {self.MAX_DELTA:g} {self.UNIT}" if math.isfinite(self.MAX_DELTA) else ""
+            raise ValueError(f"{d} must be a non-zero number of {unit}{within}, got {delta!r}")
+        if not 0 < step <= max_step:
+            raise ValueError(f"step_{self.UNIT} must be in (0, {max_step:g}], got {step}")
+        if not 0 < velocity_scale <= 1:
+            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
+        self.object, self.step_size = object, float(step)
+        self.delta = float(delta) if delta is not None else None
+        self.to_fraction = float(to_fraction) if to_fraction is not None else None
+        self.velocity_scale, self.snapshot_key = float(velocity_scale), snapshot
+        self.reads(snapshot)
+
+    def poses(self, T0: np.ndarray, attrs: dict, delta: float) -> list[np.ndarray]:
+        """(4, 4) world tcp poses from the grasp ``T0`` along the joint moved by ``delta``, at
+        most :attr:`step_size` apart, the last one the motion's end (not ``T0``)."""
+        raise NotImplementedError
+
+    def on_enter(self):
+        ctx = self.ctx
+        target = ctx.target
+        self._done = False
+        ent = _entity(self.get(self.snapshot_key), self.object)
+        attrs = ent.get("attributes") or {}
+        if attrs.get("joint_type") != self.JOINT:
+            raise PrimitiveFailure("perception.affordance", f"{self.object!r} is not a {self.JOINT} articulation "
+                                                            f"(kind {ent.get('kind')!r}, joint {attrs.get('joint_type')!r})")
+        delta = self.delta
+        key = f"delta_{self.UNIT}"
+        if self.to_fraction is not None:
+            delta = _turn_to(attrs, self.to_fraction, self.TRAVEL_KEY)
+            if delta is None:
+                raise PrimitiveFailure("perception.affordance", f"{self.object!r}: its joint position or travel is not "
+                                                                "known (the joint was not seen), so a motion to a "
+                                                                "fraction of the travel cannot be planned")
+            if abs(delta) < 1e-3:
+                ctx.trace.record("articulate", leaf=self.name, object=self.object, **{key: 0.0},
+                                 joint_position=attrs.get("joint_position"), waypoints=0)
+                self._done = True
+                return
+        assert delta is not None
+        q = target.arm_qpos()
+        path = [q]
+        with ctx.profiler.section("ik"):
+            for Tk in self.poses(target.tcp_pose(), attrs, delta):
+                segment = cartesian_path(target.model, q_start=q, T_goal=Tk, **ik_options(target))
+                path.extend(segment[1:])
+                q = segment[-1]
+        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
+        with ctx.profiler.section("timing"):
+            traj = retime(np.array(path), vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
+        ctx.trace.record("articulate", leaf=self.name, object=self.object, **{key: round(delta, 4)},
+                         joint_position=attrs.get("joint_position"), waypoints=len(path))
+        self._start(traj)
+
+    def step(self):
+        return Status.SUCCESS if self._done else self._advance()
+
+
+class ArticulateHinge(_Articulate):
     """Turn a held handle about its entity's hinge by ``delta_rad``, or to ``to_fraction``
     of the joint's travel.
 
@@ -238,50 +325,19 @@ class ArticulateHinge(_Tracking):
         step_rad: largest rotation between consecutive poses, rad.
         velocity_scale: fraction (0, 1] of the joint velocity limits.
         snapshot: blackboard key of the observation holding the hinge.
+
+    Raises:
+        ValueError: not exactly one of ``delta_rad`` and ``to_fraction``, or a value out of range.
     """
+
+    JOINT, TRAVEL_KEY, UNIT = "hinge", "range_rad", "rad"
 
     def __init__(self, name: str, *, object: str, delta_rad: float | None = None, to_fraction: float | None = None,
                  step_rad: float = 0.05, velocity_scale: float = 0.5, snapshot: str = "snapshot"):
-        super().__init__(name)
-        if (delta_rad is None) == (to_fraction is None):
-            raise ValueError("give exactly one of delta_rad and to_fraction")
-        if to_fraction is not None and (not isinstance(to_fraction, (int, float)) or not 0.0 <= to_fraction <= 1.0):
-            raise ValueError(f"to_fraction must be a number in [0, 1], got {to_fraction!r}")
-        if delta_rad is not None and (not isinstance(delta_rad, (int, float)) or not math.isfinite(delta_rad)
-                                      or delta_rad == 0):
-            raise ValueError(f"delta_rad must be a non-zero number of radians, got {delta_rad!r}")
-        if not 0 < step_rad <= 0.5:
-            raise ValueError(f"step_rad must be in (0, 0.5], got {step_rad}")
-        if not 0 < velocity_scale <= 1:
-            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
-        self.object, self.step_rad = object, float(step_rad)
-        self.delta_rad = float(delta_rad) if delta_rad is not None else None
-        self.to_fraction = float(to_fraction) if to_fraction is not None else None
-        self.velocity_scale, self.snapshot_key = float(velocity_scale), snapshot
-        self.reads(snapshot)
+        super().__init__(name, object=object, delta=delta_rad, to_fraction=to_fraction, step=step_rad, max_step=0.5,
+                         velocity_scale=velocity_scale, snapshot=snapshot)
 
-    def on_enter(self):
-        ctx = self.ctx
-        target = ctx.target
-        self._done = False
-        ent = _entity(self.get(self.snapshot_key), self.object)
-        attrs = ent.get("attributes") or {}
-        if attrs.get("joint_type") != "hinge":
-            raise PrimitiveFailure("perception.affordance", f"{self.object!r} is not a hinged articulation "
-                                                            f"(kind {ent.get('kind')!r}, joint {attrs.get('joint_type')!r})")
-        delta = self.delta_rad
-        if self.to_fraction is not None:
-            delta = _turn_to(attrs, self.to_fraction)
-            if delta is None:
-                raise PrimitiveFailure("perception.affordance", f"{self.object!r}: its joint position or travel is not "
-                                                                "known (the joint was not seen), so a turn to a fraction "
-                                                                "of the travel cannot be planned")
-            if abs(delta) < 1e-3:
-                ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_rad=0.0,
-                                 joint_position=attrs.get("joint_position"), waypoints=0)
-                self._done = True
-                return
-        assert delta is not None
+    def poses(self, T0: np.ndarray, attrs: dict, delta: float) -> list[np.ndarray]:
         anchor = np.asarray(attrs["anchor"], dtype=float)
         axis = np.asarray(attrs["axis"], dtype=float)
         # A handle that is a bar parallel to the hinge turns inside the closed fingers (its
@@ -289,33 +345,11 @@ class ArticulateHinge(_Tracking):
         # orientation spares the wrist the whole door angle.
         free = (attrs.get("grasp") or {}).get("free_axis")
         follow = 0.0 if free is not None and abs(float(np.dot(free, axis))) > 0.99 else 1.0
-        T0 = target.tcp_pose()
-        n = max(1, int(math.ceil(abs(delta) / self.step_rad)))
-        q = target.arm_qpos()
-        path = [q]
-        with ctx.profiler.section("ik"):
-            for k in range(1, n + 1):
-                Tk = _about_hinge(T0, anchor, axis, delta * k / n, follow=follow)
-                segment = cartesian_path(target.model, q_start=q, T_goal=Tk, **ik_options(target))
-                path.extend(segment[1:])
-                q = segment[-1]
-        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
-        with ctx.profiler.section("timing"):
-            traj = retime(np.array(path), vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
-        ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_rad=round(delta, 4),
-                         joint_position=attrs.get("joint_position"), waypoints=len(path))
-        self._start(traj)
-
-    def step(self):
-        return Status.SUCCESS if self._done else self._advance()
+        n = max(1, int(math.ceil(abs(delta) / self.step_size)))
+        return [_about_hinge(T0, anchor, axis, delta * k / n, follow=follow) for k in range(1, n + 1)]
 
 
-def _unit(v) -> np.ndarray:
-    a = np.asarray(v, dtype=float)
-    return a / np.linalg.norm(a)
-
-
-class ArticulateSlide(_Tracking):
+class ArticulateSlide(_Articulate):
     """Pull (or push) a held handle along its entity's slide by ``delta_m``, or to
     ``to_fraction`` of the joint's travel: a drawer.
 
@@ -342,69 +376,22 @@ class ArticulateSlide(_Tracking):
         ValueError: not exactly one of ``delta_m`` and ``to_fraction``, or a value out of range.
     """
 
+    JOINT, TRAVEL_KEY, UNIT, MAX_DELTA = "slide", "range_m", "m", 1.0
+
     def __init__(self, name: str, *, object: str, delta_m: float | None = None, to_fraction: float | None = None,
                  step_m: float = 0.02, velocity_scale: float = 0.3, snapshot: str = "snapshot"):
-        super().__init__(name)
-        if (delta_m is None) == (to_fraction is None):
-            raise ValueError("give exactly one of delta_m and to_fraction")
-        if to_fraction is not None and (not isinstance(to_fraction, (int, float)) or not 0.0 <= to_fraction <= 1.0):
-            raise ValueError(f"to_fraction must be a number in [0, 1], got {to_fraction!r}")
-        if delta_m is not None and (not isinstance(delta_m, (int, float)) or not math.isfinite(delta_m)
-                                    or delta_m == 0 or abs(delta_m) > 1.0):
-            raise ValueError(f"delta_m must be a non-zero number of metres within 1 m, got {delta_m!r}")
-        if not 0 < step_m <= 0.1:
-            raise ValueError(f"step_m must be in (0, 0.1] m, got {step_m}")
-        if not 0 < velocity_scale <= 1:
-            raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
-        self.object, self.step_m = object, float(step_m)
-        self.delta_m = float(delta_m) if delta_m is not None else None
-        self.to_fraction = float(to_fraction) if to_fraction is not None else None
-        self.velocity_scale, self.snapshot_key = float(velocity_scale), snapshot
-        self.reads(snapshot)
+        super().__init__(name, object=object, delta=delta_m, to_fraction=to_fraction, step=step_m, max_step=0.1,
+                         velocity_scale=velocity_scale, snapshot=snapshot)
 
-    def on_enter(self):
-        ctx = self.ctx
-        target = ctx.target
-        self._done = False
-        ent = _entity(self.get(self.snapshot_key), self.object)
-        attrs = ent.get("attributes") or {}
-        if attrs.get("joint_type") != "slide":
-            raise PrimitiveFailure("perception.affordance", f"{self.object!r} is not a sliding articulation "
-                                                            f"(kind {ent.get('kind')!r}, joint {attrs.get('joint_type')!r})")
-        delta = self.delta_m
-        if self.to_fraction is not None:
-            delta = _turn_to(attrs, self.to_fraction, "range_m")
-            if delta is None:
-                raise PrimitiveFailure("perception.affordance", f"{self.object!r}: its joint position or travel is not "
-                                                                "known (the joint was not seen), so a move to a fraction "
-                                                                "of the travel cannot be planned")
-            if abs(delta) < 1e-3:
-                ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_m=0.0,
-                                 joint_position=attrs.get("joint_position"), waypoints=0)
-                self._done = True
-                return
-        assert delta is not None
+    def poses(self, T0: np.ndarray, attrs: dict, delta: float) -> list[np.ndarray]:
         axis = _unit(attrs["axis"])
-        T0 = target.tcp_pose()
-        n = max(1, int(math.ceil(abs(delta) / self.step_m)))
-        q = target.arm_qpos()
-        path = [q]
-        with ctx.profiler.section("ik"):
-            for k in range(1, n + 1):
-                Tk = T0.copy()
-                Tk[:3, 3] += axis * (delta * k / n)
-                segment = cartesian_path(target.model, q_start=q, T_goal=Tk, **ik_options(target))
-                path.extend(segment[1:])
-                q = segment[-1]
-        vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
-        with ctx.profiler.section("timing"):
-            traj = retime(np.array(path), vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
-        ctx.trace.record("articulate", leaf=self.name, object=self.object, delta_m=round(delta, 4),
-                         joint_position=attrs.get("joint_position"), waypoints=len(path))
-        self._start(traj)
-
-    def step(self):
-        return Status.SUCCESS if self._done else self._advance()
+        n = max(1, int(math.ceil(abs(delta) / self.step_size)))
+        out = []
+        for k in range(1, n + 1):
+            Tk = T0.copy()
+            Tk[:3, 3] += axis * (delta * k / n)
+            out.append(Tk)
+        return out
 
 
 class ComputePlaceAsHeld(Primitive):

@@ -140,6 +140,10 @@ def test_open_and_close_name_a_drawer_of_the_thing_it_belongs_to():
         "open the middle drawer of the cabinet": [("open", ("wooden_cabinet_1",), "middle")],
         "open the top drawer": [("open", ("wooden_cabinet_1",), "top")],
         "shut the lower drawer of the wooden cabinet": [("close", ("wooden_cabinet_1",), "bottom")],
+        "open the wooden cabinet's bottom drawer": [("open", ("wooden_cabinet_1",), "bottom")],
+        "open the cabinet\u2019s middle drawer": [("open", ("wooden_cabinet_1",), "middle")],  # LIBERO-PRO's lan
+        "Open the middle layer of the drawer": [("open", ("wooden_cabinet_1",), "middle")],  # LIBERO-PRO's swap
+        "open the top tier of the drawers": [("open", ("wooden_cabinet_1",), "top")],
         "turn on the stove and open the top drawer": [("turn_on", ("flat_stove_1",), None),
                                                        ("open", ("wooden_cabinet_1",), "top")],
     }

@@ -100,6 +100,8 @@ _TURN = re.compile(r"^(?:please\s+)?(?:turn|switch)\s+(?:(on|off)\s+(.+)|(.+?)\s
 #: ``open`` / ``close``; "shut" is "close").
 _OPEN = re.compile(r"^(?:please\s+)?(open|close|shut)\s+(?:up\s+)?(.+)$")
 #: Words for which of a fixture's drawers (the word before "drawer"), as the drawer's name.
+#: "the middle layer of the drawer": a drawer as a level of the chest the word "drawer" stands for.
+_LEVEL_WORDS = {"layer", "level", "tier", "row"}
 _DRAWER_WORDS = {"top": "top", "upper": "top", "uppermost": "top", "topmost": "top", "middle": "middle",
                  "center": "middle", "centre": "middle", "bottom": "bottom", "lower": "bottom", "lowest": "bottom",
                  "bottommost": "bottom"}
@@ -851,8 +853,10 @@ def _read_open(text: str, verb: str, named: list[str], world: World,
     """The ``open`` / ``close`` intent of clause ``text`` whose object phrase is ``named``:
     ``the middle drawer of the cabinet`` names the drawer ``middle`` (:data:`_DRAWER_WORDS`) of
     the one thing ``cabinet`` names (any declared thing, a fixture too); without ``of ...`` the
-    drawer is of the one thing its kind belongs to (:data:`_PART_OF`: a cabinet); a phrase with
-    no drawer names the thing itself. Returns ``(intent, problems)``."""
+    drawer is of the one thing its kind belongs to (:data:`_PART_OF`: a cabinet); "the cabinet's
+    middle drawer" names its owner before the possessive, and "the middle layer of the drawer"
+    (:data:`_LEVEL_WORDS`) takes "drawer" for the chest of drawers; a phrase with no drawer names
+    the thing itself. Returns ``(intent, problems)``."""
     state = "close" if verb in ("close", "shut") else "open"
     names = {o.name for o in world.objects}
     things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
@@ -862,12 +866,18 @@ def _read_open(text: str, verb: str, named: list[str], world: World,
     if kind is not None:
         k = named.index(kind)
         before = [w for w in named[:k] if w not in ("the", "a", "an", "its", "their", "please")]
+        owner: list[str] = []
+        if "s" in before:  # "the cabinet's middle drawer": the owner before the possessive
+            i = before.index("s")
+            owner, before = before[:i], before[i + 1:]
+        if len(before) == 3 and before[1] in _LEVEL_WORDS and before[2] == "of":
+            before = before[:1]  # "the middle layer of the drawer": the drawer stands for the chest of them
         if len(before) > 1 or (before and before[0] not in _DRAWER_WORDS):
             return None, [("not_understood", f"{quote(text)}: which {kind} is {' '.join(before)!r}? (say top, middle "
                                              f"or bottom {kind})")]
         part = _DRAWER_WORDS[before[0]] if before else None
         after = named[k + 1:]
-        whole = after[after.index("of") + 1:] if "of" in after else [_PART_OF[kind]]
+        whole = after[after.index("of") + 1:] if "of" in after else owner or [_PART_OF[kind]]
         if "of" not in after and [w for w in after if w not in _STOP]:
             return None, [("not_understood", f"{quote(text)}: the {kind} of what? ({' '.join(after)!r} after it)")]
         objects, count, problems = _read_objects(whole, things, previous)

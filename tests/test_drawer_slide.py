@@ -21,7 +21,7 @@ from phyagentos.bench.libero import (
     planner_world,
 )
 from phyagentos.perception import PerceptionError
-from phyagentos.perception.fixtures import DRAWER_SIGMA_M, DrawerLook, FixtureLook, drawer_reading
+from phyagentos.perception.fixtures import DRAWER_SIGMA_M, DrawerLook, FixtureLook, drawer_reading, find_by_drawers
 from phyagentos.primitives.affordance import ArticulateSlide
 
 # LIBERO's wooden cabinet's middle drawer as measured on generated scenes (bench/libero_drawer.py)
@@ -80,6 +80,41 @@ def test_a_bowl_in_front_of_the_bottom_drawer_is_not_read_as_its_handle():
             assert got is None
         else:
             assert got is not None and abs(got[0] - want) < 0.005, got
+
+
+def _cabinet(*, handles: bool, seed: int = 3):
+    """A LIBERO-like cabinet (its look, and points (N, 3) with heights (N,) over the support
+    at z = 0.9) centred at :data:`CENTRE`, its drawers shut, with a tall rack standing against
+    its left side (one segment with it: its footprint fits no look)."""
+    rng = np.random.default_rng(seed)
+    drawers = [{**MIDDLE, "name": n, "height_m": h, "top_m": t}
+               for n, h, t in (("top", 0.1889, 0.2223), ("middle", 0.1154, 0.1526), ("bottom", 0.0461, 0.084))]
+    look = FixtureLook.from_dict({"name": "cab", "class": "wooden_cabinet", "size_m": [0.2569, 0.2207, 0.2272],
+                                  "drawers": drawers})
+    cx, cy = CENTRE
+    hx, hy = CENTRE + np.array(MIDDLE["handle_offset_m"])
+    parts = [_box([cx - 0.128, cy - 0.111, 0.9 + 0.222], [cx + 0.128, hy - 0.02, 0.9 + 0.227], 3000, rng),  # top
+             _box([cx - 0.128 - 0.14, cy - 0.07, 0.9], [cx - 0.129, cy + 0.07, 0.9 + 0.32], 3000, rng)]  # the rack
+    for d in drawers:
+        parts.append(_box([cx - 0.105, hy - 0.035, 0.9 + d["height_m"] - 0.03], [cx + 0.105, hy - 0.024,
+                                                                                 0.9 + d["height_m"] + 0.03], 800, rng))
+        if handles:
+            parts.append(_box([hx - 0.0444, hy - 0.008, 0.9 + d["height_m"] - 0.008],
+                              [hx + 0.0444, hy + 0.008, 0.9 + d["height_m"] + 0.008], 300, rng))
+    pts = np.vstack(parts)
+    return look, pts, pts[:, 2] - 0.9
+
+
+def test_a_cabinet_segmented_with_the_rack_beside_it_is_found_by_its_drawers_handles():
+    assert look_found_at(*_cabinet(handles=True)) is not None
+    centre = look_found_at(*_cabinet(handles=True))
+    assert np.linalg.norm(centre - CENTRE) < 0.01, centre
+    assert look_found_at(*_cabinet(handles=False)) is None  # no handles: nothing says which part is the cabinet
+
+
+def look_found_at(look, pts, h):
+    sighting = find_by_drawers(pts, h, look)
+    return None if sighting is None else sighting.position[:2]
 
 
 def test_a_malformed_drawer_look_is_refused_with_the_valid_keys():

@@ -61,7 +61,9 @@ __all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_r
            "detect_fixtures", "find_by_knob", "knob_band", "knob_reading", "patch_cover", "JOIN_GAP_M", "SIZE_TOL_FRACTION",
            "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS", "KNOB_RADIUS_M", "KNOB_BAND", "KNOB_MIN_POINTS",
            "KNOB_SEEN_POINTS", "KNOB_MIN_ELONGATION", "KNOB_ALONG_STD_M", "KNOB_ACROSS_STD_MAX_M", "KNOB_TOP_TOL_M", "KNOB_SIGMA_RAD",
-           "KNOB_SEARCH_GRID_M", "KNOB_BODY_COVER", "KNOB_TALL_COVER", "KNOB_SURFACE_COVER", "PATCH_COVER", "PATCH_TOL_M", "TURNS"]
+           "KNOB_SEARCH_GRID_M", "KNOB_BODY_COVER",
+           "find_by_drawers", "DRAWER_FOUND_MIN", "DRAWER_FOUND_SHUT_M", "KNOB_TALL_COVER", "KNOB_SURFACE_COVER",
+           "PATCH_COVER", "PATCH_TOL_M", "TURNS"]
 
 #: Fewest points (on the perceiver's voxel grid) of a fixture's segment.
 MIN_POINTS = 200
@@ -706,6 +708,76 @@ def find_by_knob(points: np.ndarray, heights: np.ndarray, look: FixtureLook) -> 
     return best[1] if best is not None else None
 
 
+#: A fixture found by its drawers (:func:`find_by_drawers`) needs this many of its drawers read
+#: shut (within :data:`DRAWER_FOUND_SHUT_M`) where the look puts them.
+DRAWER_FOUND_MIN = 2
+DRAWER_FOUND_SHUT_M = 0.015
+
+
+def find_by_drawers(points: np.ndarray, heights: np.ndarray, look: FixtureLook) -> FixtureSighting | None:
+    """A fixture with ``drawers`` found by its handles where its body did not fit a look (it is
+    segmented together with something standing against it: LIBERO's cabinet with the wine
+    rack). Every :data:`KNOB_SEARCH_GRID_M` cell over the points in a drawer's handle band is
+    tried as that handle's shut centre; a handle read there (:func:`drawer_reading`) puts the
+    body's footprint centre at the cell less the handle's offset, moved along the drawers'
+    axis by the opening read and across it to the middle of the handle's outer slice; the body
+    is taken where at least :data:`DRAWER_FOUND_MIN` of its drawers then read shut within
+    :data:`DRAWER_FOUND_SHUT_M` and :data:`KNOB_BODY_COVER` of its footprint (``back_m`` deep
+    along the axis, the look's other side across it) holds points at least half its top high;
+    the most drawers read, then the best covered, wins. Drawers all out at the first sighting
+    are not found this way. ``points`` (N, 3) world m, ``heights`` (N,) m above the support;
+    the sighting's ``error`` is 1 - its cover."""
+    if not look.drawers or len({d.axis_xy for d in look.drawers}) != 1:
+        return None
+    u = np.asarray(look.drawers[0].axis_xy, float)
+    v = np.array([-u[1], u[0]])
+    half_u = look.drawers[0].back_m
+    half_v = 0.5 * max(look.size_m[:2], key=lambda side: abs(side - 2.0 * half_u))
+    yaw = math.atan2(float(v[1]), float(v[0]))
+    half = np.array([half_v, half_u])
+    raised = points[heights >= 0.5 * look.size_m[2], :2]
+    tried: set[tuple[int, int]] = set()
+    best: tuple[tuple[int, float], FixtureSighting] | None = None
+    for drawer in look.drawers:
+        band = np.abs(heights - drawer.height_m) <= DRAWER_BAND_M
+        if int(band.sum()) < DRAWER_MIN_POINTS:
+            continue
+        for cell in np.unique(np.floor(points[band, :2] / KNOB_SEARCH_GRID_M).astype(int), axis=0):
+            centre = (cell + 0.5) * KNOB_SEARCH_GRID_M - np.asarray(drawer.handle_offset_m, float)
+            reading = drawer_reading(points, heights, drawer, centre)
+            if reading is None:
+                continue
+            centre = centre + u * reading[0]
+            c0, _, _ = drawer.frame(centre)
+            near = ((np.abs(heights - drawer.height_m) <= DRAWER_BAND_M)
+                    & (np.abs((points[:, :2] - c0) @ u - drawer.face_m) <= 2 * _DRAWER_SLICE_M)
+                    & (np.abs((points[:, :2] - c0) @ v) <= drawer.half_length_m + 0.01))
+            if int(near.sum()) < 5:
+                continue
+            across = (points[near, :2] - c0) @ v
+            centre = centre + v * 0.5 * float(across.min() + across.max())
+            key = tuple(np.round(centre / 0.005).astype(int))
+            if key in tried:
+                continue
+            tried.add(key)  # type: ignore[arg-type]
+            shut = sum(1 for d in look.drawers
+                       if (r := drawer_reading(points, heights, d, centre)) is not None and abs(r[0]) <= DRAWER_FOUND_SHUT_M)
+            if shut < DRAWER_FOUND_MIN:
+                continue
+            local = _in_frame(raised, centre, yaw)
+            cover = _grid_fraction(local[np.all(np.abs(local) <= half, axis=1)], half)
+            if cover < KNOB_BODY_COVER or (best is not None and (shut, cover) <= best[0]):
+                continue
+            foot = np.all(np.abs(_in_frame(points[:, :2], centre, yaw)) <= half, axis=1)
+            ground = float(np.median(points[foot, 2] - heights[foot]))
+            c, sn = abs(math.cos(yaw)), abs(math.sin(yaw))
+            hw = np.array([c * half[0] + sn * half[1], sn * half[0] + c * half[1]])
+            best = ((shut, cover), FixtureSighting(look.name, np.array([centre[0], centre[1], ground + 0.5 * look.size_m[2]]),
+                                                   yaw, np.array([half[0], half[1], 0.5 * look.size_m[2]]), hw,
+                                                   look.size_m[2], int(foot.sum()), 1.0 - min(1.0, cover), "drawers"))
+    return best[1] if best is not None else None
+
+
 def _tall_cover(points: np.ndarray, heights: np.ndarray, look: FixtureLook, centre: np.ndarray, yaw: float,
                 axis: np.ndarray, turn: float = 0.0) -> float:
     """Fraction of the footprint cells (:data:`KNOB_SEARCH_GRID_M`) of a body of ``look`` at
@@ -800,9 +872,10 @@ def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLo
             continue
         out[sighting.name] = sighting
         used |= parts
-    for look in looks:  # a fixture with a knob that no segment fits: found by its knob
-        if look.knob is not None and look.name not in out:
-            found = find_by_knob(points, heights, look)
+    for look in looks:  # a fixture with a knob or drawers that no segment fits: found by them
+        if look.name not in out and (look.knob is not None or look.drawers):
+            found = (find_by_knob(points, heights, look) if look.knob is not None
+                     else find_by_drawers(points, heights, look))
             if found is not None:
                 out[look.name] = found
     return out

@@ -736,6 +736,26 @@ def find_by_drawers(points: np.ndarray, heights: np.ndarray, look: FixtureLook) 
     yaw = math.atan2(float(v[1]), float(v[0]))
     half = np.array([half_v, half_u])
     raised = points[heights >= 0.5 * look.size_m[2], :2]
+    # every reading looks only at heights from below the lowest handle's front to above the
+    # highest handle (drawer_reading's bands): the search reads the points there once
+    levels = [d.height_m for d in look.drawers]
+    slab = ((heights >= min(levels) - DRAWER_BAND_M - 0.011)
+            & (heights <= max(levels) + DRAWER_BAND_M + DRAWER_ABOVE_M + 0.001))
+    all_points, all_heights = points, heights
+    order = np.argsort(points[slab, 0])
+    points, heights = points[slab][order], heights[slab][order]
+    xs = points[:, 0]
+    # ... and only within reach of the handle it reads (drawer_reading's windows): a reach of that
+    # square about the handle's shut centre, on the points sorted by x
+    reach = max(math.hypot(max(d.travel_m[1] + d.face_m, -d.travel_m[0]) + DRAWER_WINDOW_M, d.half_width_m)
+                for d in look.drawers) + 0.01
+
+    def read(d: DrawerLook, centre: np.ndarray) -> tuple[float, int] | None:
+        c0 = d.frame(centre)[0]
+        lo, hi = np.searchsorted(xs, [c0[0] - reach, c0[0] + reach])
+        near = np.abs(points[lo:hi, 1] - c0[1]) <= reach
+        return drawer_reading(points[lo:hi][near], heights[lo:hi][near], d, centre)
+
     tried: set[tuple[int, int]] = set()
     best: tuple[tuple[int, float], FixtureSighting] | None = None
     for drawer in look.drawers:
@@ -744,32 +764,33 @@ def find_by_drawers(points: np.ndarray, heights: np.ndarray, look: FixtureLook) 
             continue
         for cell in np.unique(np.floor(points[band, :2] / KNOB_SEARCH_GRID_M).astype(int), axis=0):
             centre = (cell + 0.5) * KNOB_SEARCH_GRID_M - np.asarray(drawer.handle_offset_m, float)
-            reading = drawer_reading(points, heights, drawer, centre)
+            reading = read(drawer, centre)
             if reading is None:
                 continue
             centre = centre + u * reading[0]
             c0, _, _ = drawer.frame(centre)
-            near = ((np.abs(heights - drawer.height_m) <= DRAWER_BAND_M)
-                    & (np.abs((points[:, :2] - c0) @ u - drawer.face_m) <= 2 * _DRAWER_SLICE_M)
-                    & (np.abs((points[:, :2] - c0) @ v) <= drawer.half_length_m + 0.01))
+            lo, hi = np.searchsorted(xs, [c0[0] - reach, c0[0] + reach])
+            rel, h = points[lo:hi, :2] - c0, heights[lo:hi]
+            near = ((np.abs(h - drawer.height_m) <= DRAWER_BAND_M) & (np.abs(rel @ u - drawer.face_m) <= 2 * _DRAWER_SLICE_M)
+                    & (np.abs(rel @ v) <= drawer.half_length_m + 0.01))
             if int(near.sum()) < 5:
                 continue
-            across = (points[near, :2] - c0) @ v
+            across = rel[near] @ v
             centre = centre + v * 0.5 * float(across.min() + across.max())
-            key = tuple(np.round(centre / 0.005).astype(int))
+            key = (int(round(float(centre[0]) / 0.005)), int(round(float(centre[1]) / 0.005)))
             if key in tried:
                 continue
-            tried.add(key)  # type: ignore[arg-type]
+            tried.add(key)
             shut = sum(1 for d in look.drawers
-                       if (r := drawer_reading(points, heights, d, centre)) is not None and abs(r[0]) <= DRAWER_FOUND_SHUT_M)
+                       if (r := read(d, centre)) is not None and abs(r[0]) <= DRAWER_FOUND_SHUT_M)
             if shut < DRAWER_FOUND_MIN:
                 continue
             local = _in_frame(raised, centre, yaw)
             cover = _grid_fraction(local[np.all(np.abs(local) <= half, axis=1)], half)
             if cover < KNOB_BODY_COVER or (best is not None and (shut, cover) <= best[0]):
                 continue
-            foot = np.all(np.abs(_in_frame(points[:, :2], centre, yaw)) <= half, axis=1)
-            ground = float(np.median(points[foot, 2] - heights[foot]))
+            foot = np.all(np.abs(_in_frame(all_points[:, :2], centre, yaw)) <= half, axis=1)
+            ground = float(np.median(all_points[foot, 2] - all_heights[foot]))
             c, sn = abs(math.cos(yaw)), abs(math.sin(yaw))
             hw = np.array([c * half[0] + sn * half[1], sn * half[0] + c * half[1]])
             best = ((shut, cover), FixtureSighting(look.name, np.array([centre[0], centre[1], ground + 0.5 * look.size_m[2]]),

@@ -42,6 +42,12 @@ def test_looks_are_measured_for_every_category_on_generated_scenes(world):
     lo, hi = object_boxes(target)[BASKET]  # the basket's true bounding box (its mesh)
     assert 0.7 * (hi[2] - lo[2]) < basket[2] < 1.1 * (hi[2] - lo[2])
     assert looks["butter"]["shape"] == "box" and looks["alphabet_soup"]["shape"] == "cylinder"
+    for cat, look in looks.items():  # how each look varies with the view: a range holding its size
+        lo, hi = (np.asarray(r) for r in look["size_range_m"])
+        assert np.all(lo <= np.asarray(look["size_m"])) and np.all(np.asarray(look["size_m"]) <= hi), cat
+        assert 0.99 <= sum(look["shapes"].values()) <= 1.01, cat
+    milk = looks["milk"]["size_range_m"]  # a carton seen face-on is shallower than at an angle
+    assert milk[1][1] - milk[0][1] > 0.005 and milk[1][2] - milk[0][2] < 0.015
 
 
 def test_perception_on_a_generated_scene_names_no_object_wrongly_and_finds_most_within_15_mm(world):

@@ -231,6 +231,44 @@ def test_association_gates_wrong_colours_and_withholds_ambiguous_matches():
     assert a.matches == {} and a.ambiguous
 
 
+def test_a_size_within_the_looks_range_and_a_shape_it_was_seen_as_cost_less():
+    """A carton seen face-on is shallower than its median look and its gable top sometimes
+    reads as a cylinder: a look with ``size_range_m`` and ``shapes`` prices those sightings
+    by how the look varies, a plain look by its single size and shape."""
+    cfg = PerceptionConfig.default()
+    plain = ObjectDescriptor("milk", shape="box", colour_rgb=(0.4, 0.15, 0.1), size_m=(0.055, 0.048, 0.134))
+    spread = ObjectDescriptor("milk", shape="box", colour_rgb=(0.4, 0.15, 0.1), size_m=(0.055, 0.048, 0.134),
+                              size_range_m=((0.052, 0.030, 0.129), (0.058, 0.052, 0.137)),
+                              shapes={"box": 0.8, "cylinder": 0.2})
+    face_on = _det((0.4, 0.15, 0.1), "box", (0.027, 0.016, 0.067))  # 5.4 x 3.2 x 13.4 cm
+    round_top = _det((0.4, 0.15, 0.1), "cylinder", (0.027, 0.024, 0.067))
+    too_big = _det((0.4, 0.15, 0.1), "box", (0.05, 0.03, 0.067))  # 10 cm long: outside the range too
+    C = cost_matrix([face_on, round_top, too_big], [plain, spread], cfg)
+    assert C[0, 1] < 0.05 < C[0, 0]  # 1.6 cm shallower: within the range, not the single size
+    assert C[1, 1] == pytest.approx(cfg.association.shape_cost * 0.75, abs=0.05)  # seen so 1 time in 5
+    assert C[1, 0] >= cfg.association.shape_cost
+    assert C[2, 1] > 1.0  # outside the range it costs what it is outside by
+    rounded = ObjectDescriptor("basket", shapes={"box": 0.667, "cylinder": 0.167, "sphere": 0.167})  # 1.001
+    assert rounded.shape_mismatch("box") == 0.0
+    no_shape = ObjectDescriptor("thing", size_m=(0.05, 0.04, 0.1))
+    assert no_shape.shape_mismatch("cylinder") is None and plain.shape_mismatch("box") == 0.0
+
+
+@pytest.mark.parametrize("kw, needle", [
+    (dict(size_range_m=((0.05, 0.04, 0.1), (0.06, 0.05, 0.12))), "must hold size_m"),
+    (dict(size_m=(0.055, 0.045, 0.11), size_range_m=((0.05, 0.04), (0.06, 0.05))), "two rows of 3"),
+    (dict(size_m=(0.055, 0.045, 0.11), size_range_m=((0.06, 0.05, 0.12), (0.05, 0.04, 0.1))), "must hold size_m"),
+    (dict(shapes={"cone": 0.5}), "'box', 'cylinder', 'sphere'"),
+    (dict(shapes={"box": 0.8, "cylinder": 0.4}), "sum to at most 1"),
+    (dict(shapes={"box": 0.667, "cylinder": 0.35}), "sum to at most 1"),
+    (dict(shapes=["box"]), "mapping"),
+])
+def test_a_looks_spread_is_checked_before_use(kw, needle):
+    with pytest.raises(PerceptionError) as exc:
+        ObjectDescriptor("carton", **kw)
+    assert needle in str(exc.value)
+
+
 def test_holding_needs_a_consistent_opening_effort_and_load_after_lift():
     cfg = PerceptionConfig.default()
     lifted = np.eye(4)

@@ -6,7 +6,10 @@ Cost of detection i for descriptor j (only the attributes the descriptor declare
   declared colour, Delta L* weighted by ``lightness_weight`` (shading and lighting change
   L* most), divided by ``colour_scale_lab``;
 * size: mean absolute error of the sorted full dimensions (or of the largest one) / ``size_scale_m``;
-* shape: ``shape_cost`` when the classes differ;
+  with a declared ``size_range_m``, only the part outside the range counts;
+* shape: ``shape_cost`` when the classes differ; with declared ``shapes`` (the fraction of a
+  look's sightings per shape), ``shape_cost`` times ``1 -`` the detection's shape's fraction
+  over the most frequent one's (:meth:`~.descriptors.ObjectDescriptor.shape_mismatch`);
 * track: distance to the descriptor's current track / ``position_scale_m``, capped at 1
   (tie-breaker between otherwise identical objects; objects do move between observations).
 
@@ -57,10 +60,9 @@ def _size_error(det: Detection, desc: ObjectDescriptor) -> float | None:
         return None
     full = 2.0 * np.asarray(det.half_extents, float)
     measured = np.array([max(full[0], full[1]), min(full[0], full[1]), full[2]])
-    want = desc.size_vector()
-    if want is None:
+    if desc.size_vector() is None:
         return abs(float(measured.max()) - float(desc.size_m))
-    return float(np.mean(np.abs(measured - want)))
+    return desc.size_error(measured)
 
 
 def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDescriptor],
@@ -77,8 +79,9 @@ def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDes
             err = _size_error(det, desc)
             if err is not None:
                 c += err / ac.size_scale_m
-            if desc.shape is not None and desc.shape != det.shape:
-                c += ac.shape_cost
+            mismatch = desc.shape_mismatch(det.shape)
+            if mismatch:
+                c += ac.shape_cost * mismatch
             tp = track_positions[j] if j < len(track_positions) else None
             if tp is not None:
                 c += min(1.0, float(np.linalg.norm(det.position[:2] - tp[:2])) / ac.position_scale_m)

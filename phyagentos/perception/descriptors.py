@@ -5,6 +5,13 @@ CONTRACT_9 section 3: ``name``, optional ``class``, ``shape`` (box | cylinder | 
 the object's *full* dimensions in metres: three numbers (x, y, z: edge lengths; diameter for
 round footprints; the order of x and y does not matter) or one number (its largest
 dimension). This matches ``MuJoCoArmTarget.describe_declared`` (``2 * half_extents``).
+
+A look measured from many sightings (LIBERO's, :mod:`phyagentos.targets.libero.descriptors`)
+may also say how it varies with the view: ``size_range_m`` (the smallest and the largest full
+size it was seen with: a carton seen face-on measures 3 cm deep, seen at 45 degrees 5 cm) and
+``shapes`` (the fraction of sightings classified as each shape: a carton's gable top reads as a
+cylinder one time in five). Association then costs a size within the range nothing and a shape
+by how rarely it was seen (:mod:`phyagentos.perception.association`).
 """
 
 from __future__ import annotations
@@ -124,6 +131,10 @@ class ObjectDescriptor:
         where: which of several identical declared objects this one is, by a spatial relation
             (:class:`SpatialReference`; a mapping is converted), or None. Association resolves
             it on the perceived positions of its landmarks until the object has a track.
+        size_range_m: ``((long, short, height) smallest, (long, short, height) largest)`` full
+            size seen, m, or None; needs ``size_m`` (3 numbers) within it.
+        shapes: ``{shape: fraction of sightings}`` (fractions in [0, 1], summing to at most 1),
+            or None; when given it prices a shape instead of ``shape``.
 
     Raises:
         PerceptionError: empty name, unknown shape or colour name, values out of range, a
@@ -136,6 +147,8 @@ class ObjectDescriptor:
     colour_rgb: tuple[float, float, float] | None = None
     size_m: tuple[float, float, float] | float | None = None
     where: SpatialReference | None = None
+    size_range_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    shapes: Mapping[str, float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -184,16 +197,73 @@ class ObjectDescriptor:
             if self.name in ref.of:
                 raise PerceptionError(f"{where}: its spatial reference names the object itself as a landmark")
             object.__setattr__(self, "where", ref)
+        self._check_spread(where)
+
+    def _check_spread(self, where: str) -> None:
+        """Validate and normalise ``size_range_m`` and ``shapes``."""
+        r = self.size_range_m
+        if r is not None:
+            try:
+                lo, hi = (tuple(float(v) for v in row) for row in r)
+            except (TypeError, ValueError):
+                raise PerceptionError(f"{where}: size_range_m must be two rows of 3 numbers (smallest, largest "
+                                      f"full size, m), got {r!r}") from None
+            want = self.size_vector()
+            if len(lo) != 3 or len(hi) != 3 or not all(math.isfinite(v) and v > 0 for v in lo + hi):
+                raise PerceptionError(f"{where}: size_range_m must be two rows of 3 positive numbers (m), got {r!r}")
+            if want is None or not all(a - 1e-9 <= w <= b + 1e-9 for a, w, b in zip(lo, want, hi)):
+                raise PerceptionError(f"{where}: size_range_m {r!r} must hold size_m (3 numbers, sorted long, "
+                                      f"short, height: {None if want is None else want.tolist()})")
+            object.__setattr__(self, "size_range_m", (lo, hi))
+        sh = self.shapes
+        if sh is not None:
+            if not isinstance(sh, Mapping) or not sh:
+                raise PerceptionError(f"{where}: shapes must be a mapping {{shape: fraction}}, got {sh!r}")
+            unknown = set(sh) - set(SHAPES)
+            if unknown:
+                raise PerceptionError(f"{where}: shapes: {format_choices(unknown)} not one of {format_choices(SHAPES)}")
+            try:
+                fr = {k: float(v) for k, v in sh.items()}
+            except (TypeError, ValueError):
+                raise PerceptionError(f"{where}: shapes: fractions must be numbers, got {sh!r}") from None
+            if not all(0.0 <= v <= 1.0 for v in fr.values()) or sum(fr.values()) > 1.0 + 0.01:  # fractions rounded to 3 places
+                raise PerceptionError(f"{where}: shapes: fractions must lie in [0, 1] and sum to at most 1, got {sh!r}")
+            object.__setattr__(self, "shapes", fr)
+
+    def shape_mismatch(self, shape: str) -> float | None:
+        """How much a detection classified ``shape`` disagrees with this look, 0..1: with
+        ``shapes``, ``1 -`` its fraction over the most frequent shape's (the look's usual shape
+        costs nothing, one never seen as much as a plain mismatch); else 1 for a shape other
+        than ``shape``, 0 for the same; None when no shape is declared."""
+        if self.shapes is not None:
+            most = max(self.shapes.values())
+            return 1.0 - float(self.shapes.get(shape, 0.0)) / most if most > 0 else 0.0
+        if self.shape is None:
+            return None
+        return 0.0 if shape == self.shape else 1.0
+
+    def size_error(self, measured: np.ndarray) -> float | None:
+        """Mean absolute error (m) of ``measured`` (3,) full size sorted (long, short,
+        height) against the declared size: outside ``size_range_m`` when given (0 within it),
+        else against ``size_m``; None without a 3-number size."""
+        want = self.size_vector()
+        if want is None:
+            return None
+        m = np.asarray(measured, float)
+        if self.size_range_m is not None:
+            lo, hi = (np.asarray(v, float) for v in self.size_range_m)
+            return float(np.mean(np.maximum(0.0, np.maximum(lo - m, m - hi))))
+        return float(np.mean(np.abs(m - want)))
 
     def looks_like(self, other: "ObjectDescriptor") -> bool:
         """Same declared look (class, shape, colour, size): association cannot tell the two apart."""
-        return (self.cls, self.shape, self.colour_rgb, self.size_m) == (other.cls, other.shape, other.colour_rgb,
-                                                                         other.size_m)
+        return (self.cls, self.shape, self.colour_rgb, self.size_m, self.size_range_m, self.shapes) == (
+            other.cls, other.shape, other.colour_rgb, other.size_m, other.size_range_m, other.shapes)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "ObjectDescriptor":
         """From a declared-object mapping (keys ``name``, ``class``, ``shape``, ``colour`` or
-        ``colour_rgb``, ``size_m``, ``where``; other keys such as ``mass`` are rejected: never
+        ``colour_rgb``, ``size_m``, ``where``, ``size_range_m``, ``shapes``; other keys such as ``mass`` are rejected: never
         declared).
 
         Raises:
@@ -201,7 +271,8 @@ class ObjectDescriptor:
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared object must be a mapping, got {type(d).__name__}")
-        valid = {"name", "class", "cls", "shape", "colour", "colour_rgb", "color", "color_rgb", "size_m", "where"}
+        valid = {"name", "class", "cls", "shape", "colour", "colour_rgb", "color", "color_rgb", "size_m", "where",
+                 "size_range_m", "shapes"}
         unknown = set(d) - valid
         if unknown:
             raise PerceptionError(
@@ -210,7 +281,8 @@ class ObjectDescriptor:
             )
         colour = next((d[k] for k in ("colour_rgb", "colour", "color_rgb", "color") if d.get(k) is not None), None)
         return cls(name=d.get("name"), cls=d.get("class", d.get("cls")), shape=d.get("shape"),
-                   colour_rgb=colour, size_m=d.get("size_m"), where=d.get("where"))
+                   colour_rgb=colour, size_m=d.get("size_m"), where=d.get("where"),
+                   size_range_m=d.get("size_range_m"), shapes=d.get("shapes"))
 
     def size_vector(self) -> np.ndarray | None:
         """(3,) full size sorted as (long horizontal, short horizontal, height), or None."""

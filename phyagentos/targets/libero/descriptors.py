@@ -23,7 +23,11 @@ Agent plane) holds the segment's centre, when exactly one does and the segment i
 than that object (a segment spanning two objects is not a look). A category's descriptor
 (``{shape, colour, size_m}``, size the full extents, m, long side first) is the median over
 its labelled segments of :data:`SCENES` scenes; the most frequent shape is declared only when
-at least :data:`SHAPE_AGREEMENT` of the segments agree on it.
+at least :data:`SHAPE_AGREEMENT` of the segments agree on it. How the look varies with the
+view is kept too: ``size_range_m`` (the :data:`SIZE_PERCENTILES` of the sizes of its whole
+sightings, :data:`WHOLE_HEIGHT_FRACTION`) and ``shapes``
+(the fraction of segments classified as each shape), which association prices instead of
+the single size and shape (:mod:`phyagentos.perception.descriptors`).
 
 :func:`perception_accuracy` scores the perceiver with declared looks on further generated
 scenes against the same truth, per category (``bench/libero_perception.py``).
@@ -45,7 +49,7 @@ from phyagentos.errors import TargetError
 
 __all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "object_boxes", "place_objects",
            "set_touching", "label_segments", "perception_accuracy", "FIXTURE_PLACE_SITES", "FIXTURE_SCENES",
-           "FIXTURE_SEED", "FIXTURE_CROP_M", "KNOB_MAX_WIDTH_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
+           "FIXTURE_SEED", "FIXTURE_CROP_M", "SIZE_PERCENTILES", "KNOB_MAX_WIDTH_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +60,14 @@ AREA_Y_M: tuple[float, float] = (-0.3, 0.3)
 #: Least gap between two objects' bounding circles, m.
 GAP_M = 0.015
 #: Generated scenes per world the looks are measured on.
-SCENES = 6
+SCENES = 10
+#: Percentiles of a category's measured full sizes that bound its ``size_range_m`` (a size
+#: between them costs association nothing: a carton seen face-on is shallower than one seen
+#: at an angle); the 10th and 90th, so that one odd segment does not widen it.
+SIZE_PERCENTILES: tuple[float, float] = (10.0, 90.0)
+#: Segments at least this fraction of a category's median height are whole sightings, the
+#: only ones its ``size_range_m`` is taken from (a look's height does not change with the view).
+WHOLE_HEIGHT_FRACTION = 0.9
 #: Generator seeds start here (not init states; the evaluation scripts use other seeds).
 GENERATOR_SEED = 12345
 #: A category's shape is declared only when at least this fraction of its labelled segments
@@ -285,9 +296,9 @@ def _observe(target, config, declared=()) -> dict:
 
 def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_SEED, config=None,
                         settle_s: float = 1.0) -> dict[str, dict[str, Any]]:
-    """``{category: {"shape"?, "colour" (3,) sRGB 0..1, "size_m" (3,) m}}`` for every object
-    category of ``target``'s task, measured on ``scenes`` generated cluttered scenes (module
-    docstring) with perception configuration ``config`` (default: the target's
+    """``{category: {"shape"?, "colour" (3,) sRGB 0..1, "size_m" (3,) m, "size_range_m" (2, 3)
+    m, "shapes" {shape: fraction}}}`` for every object category of ``target``'s task, measured
+    on ``scenes`` generated cluttered scenes (module docstring) with perception configuration ``config`` (default: the target's
     :meth:`perception_config`); ``target`` is reset afterwards. A category labelled in fewer
     than 2 scenes is left out (logged).
 
@@ -321,8 +332,17 @@ def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_S
             continue
         shapes = [lk["shape"] for lk in got]
         mode = max(set(shapes), key=shapes.count)
+        sizes = np.array([lk["size_m"] for lk in got])
+        median = np.median(sizes, axis=0)
+        # the range from whole sightings only: a segment cut short by a neighbour hiding its
+        # lower part is not a view of the object (a can seen 4 cm tall of its 8)
+        whole = sizes[sizes[:, 2] >= WHOLE_HEIGHT_FRACTION * median[2]]
         out[cat] = {"colour": [round(float(c), 3) for c in np.median([lk["colour"] for lk in got], axis=0)],
-                    "size_m": [round(float(c), 4) for c in np.median([lk["size_m"] for lk in got], axis=0)]}
+                    "size_m": [round(float(c), 4) for c in median],
+                    "size_range_m": [[round(float(min(c, w)) if q < 50 else float(max(c, w)), 4)
+                                      for c, w in zip(np.percentile(whole, q, axis=0), median)]
+                                     for q in SIZE_PERCENTILES],
+                    "shapes": {s: round(shapes.count(s) / len(shapes), 3) for s in sorted(set(shapes))}}
         if shapes.count(mode) >= SHAPE_AGREEMENT * len(shapes):  # else the shape is no cue: not declared
             out[cat]["shape"] = mode
     return out

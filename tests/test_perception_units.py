@@ -252,6 +252,10 @@ def test_a_size_within_the_looks_range_and_a_shape_it_was_seen_as_cost_less():
     assert rounded.shape_mismatch("box") == 0.0
     no_shape = ObjectDescriptor("thing", size_m=(0.05, 0.04, 0.1))
     assert no_shape.shape_mismatch("cylinder") is None and plain.shape_mismatch("box") == 0.0
+    assert spread.shapes == (("box", 0.8), ("cylinder", 0.2)) and hash(spread) == hash(
+        ObjectDescriptor.from_dict({"name": "milk", "shape": "box", "colour_rgb": [0.4, 0.15, 0.1],
+                                    "size_m": [0.055, 0.048, 0.134], "shapes": {"cylinder": 0.2, "box": 0.8},
+                                    "size_range_m": [[0.052, 0.030, 0.129], [0.058, 0.052, 0.137]]}))
 
 
 @pytest.mark.parametrize("kw, needle", [

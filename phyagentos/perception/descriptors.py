@@ -134,7 +134,8 @@ class ObjectDescriptor:
         size_range_m: ``((long, short, height) smallest, (long, short, height) largest)`` full
             size seen, m, or None; needs ``size_m`` (3 numbers) within it.
         shapes: ``{shape: fraction of sightings}`` (fractions in [0, 1], summing to at most 1),
-            or None; when given it prices a shape instead of ``shape``.
+            or None; when given it prices a shape instead of ``shape``. Kept as sorted
+            ``(shape, fraction)`` pairs (the descriptor stays hashable).
 
     Raises:
         PerceptionError: empty name, unknown shape or colour name, values out of range, a
@@ -148,7 +149,7 @@ class ObjectDescriptor:
     size_m: tuple[float, float, float] | float | None = None
     where: SpatialReference | None = None
     size_range_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
-    shapes: Mapping[str, float] | None = None
+    shapes: Mapping[str, float] | tuple[tuple[str, float], ...] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -228,7 +229,7 @@ class ObjectDescriptor:
                 raise PerceptionError(f"{where}: shapes: fractions must be numbers, got {sh!r}") from None
             if not all(0.0 <= v <= 1.0 for v in fr.values()) or sum(fr.values()) > 1.0 + 0.01:  # fractions rounded to 3 places
                 raise PerceptionError(f"{where}: shapes: fractions must lie in [0, 1] and sum to at most 1, got {sh!r}")
-            object.__setattr__(self, "shapes", fr)
+            object.__setattr__(self, "shapes", tuple(sorted(fr.items())))  # hashable, as the descriptor is
 
     def shape_mismatch(self, shape: str) -> float | None:
         """How much a detection classified ``shape`` disagrees with this look, 0..1: with
@@ -236,8 +237,9 @@ class ObjectDescriptor:
         costs nothing, one never seen as much as a plain mismatch); else 1 for a shape other
         than ``shape``, 0 for the same; None when no shape is declared."""
         if self.shapes is not None:
-            most = max(self.shapes.values())
-            return 1.0 - float(self.shapes.get(shape, 0.0)) / most if most > 0 else 0.0
+            fractions = dict(self.shapes)
+            most = max(fractions.values())
+            return 1.0 - float(fractions.get(shape, 0.0)) / most if most > 0 else 0.0
         if self.shape is None:
             return None
         return 0.0 if shape == self.shape else 1.0

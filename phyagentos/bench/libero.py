@@ -70,7 +70,8 @@ SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
 #: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
 _PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer")
 #: How the cached looks were measured (a cache measured otherwise is measured again).
-_LOOKS_METHOD = "generated_clutter_v4"  # v3: objects kept off the fixtures; v4: 10 scenes, size range, shapes
+_LOOKS_METHOD = "generated_clutter_v5"  # v3: objects kept off the fixtures; v4: 10 scenes, size range, shapes;
+# v5: sightings pooled over every world measured
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
 _FIXTURE_LOOKS_METHOD = "generated_alone_v4"  # v4: drawers
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
@@ -539,20 +540,47 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
 
 
 def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
-    """Appearance descriptors of the categories of ``tasks`` (measured on generated cluttered
-    scenes, :mod:`phyagentos.targets.libero.descriptors`), cached per workspace in
-    ``libero/descriptors.yaml``; a task whose categories are all cached builds nothing.
+    """Appearance descriptors of the object categories of ``tasks``, cached per workspace in
+    ``libero/descriptors.yaml``: each task's world is built once and its categories sighted
+    on generated cluttered scenes (:func:`~phyagentos.targets.libero.descriptors.descriptor_samples`);
+    a category's look pools its sightings in every world measured
+    (:func:`~phyagentos.targets.libero.descriptors.looks_from_samples`): a milk carton beside
+    other neighbours, in another world, reads as a cylinder more often. A task not yet measured
+    has every world measured again, pooled (the cache keeps looks, not sightings).
 
     Raises:
         BenchError: a world could not be built or rendered to measure them.
     """
-    from phyagentos.targets.libero.descriptors import measure_descriptors  # noqa: PLC0415
+    from phyagentos.targets.libero import LiberoScene, LiberoTarget, resolve_task  # noqa: PLC0415
+    from phyagentos.targets.libero.descriptors import descriptor_samples, looks_from_samples  # noqa: PLC0415
 
-    return _cached_looks(workspace_dir / "libero" / "descriptors.yaml", _LOOKS_METHOD, suite, tasks,
-                         categories=lambda problem: set(problem.objects.values()), measure=measure_descriptors,
-                         what="object descriptors",
-                         header="# Looks of LIBERO's object categories, measured on generated cluttered scenes by the\n"
-                                "# project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n")
+    path = workspace_dir / "libero" / "descriptors.yaml"
+    cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
+    measured = set(cache.get("_measured_tasks", [])) if cache.get("_method") == _LOOKS_METHOD else set()
+    wanted = {f"{suite}/{i}" for i in tasks}
+    if measured and wanted <= measured:
+        return {k: v for k, v in cache.items() if not k.startswith("_")}
+    worlds = sorted(measured | wanted)
+    samples: dict[str, list[dict[str, Any]]] = {}
+    for n, key in enumerate(worlds, 1):
+        name, index = key.rsplit("/", 1)
+        logger.info("LIBERO bench: sighting the object categories of %s on generated scenes (world %d of %d)",
+                    key, n, len(worlds))
+        try:
+            resolve_task(name, int(index))
+            with LiberoTarget("libero_descriptors", LiberoScene(suite=name, task=int(index)), seed=0) as target:
+                for cat, got in descriptor_samples(target).items():
+                    samples.setdefault(cat, []).extend(got)
+        except TargetError as exc:
+            raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
+    looks = looks_from_samples(samples)
+    doc = {**looks, "_method": _LOOKS_METHOD, "_measured_tasks": worlds}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, "# Looks of LIBERO's object categories, measured on generated cluttered scenes by the\n"
+                            "# project's perceiver (phyagentos.targets.libero.descriptors), each category's\n"
+                            "# sightings pooled over the worlds listed in _measured_tasks; never an init state.\n"
+                      + yaml.safe_dump(doc, sort_keys=True))
+    return looks
 
 
 def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:

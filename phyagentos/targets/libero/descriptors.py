@@ -47,7 +47,7 @@ import numpy as np
 
 from phyagentos.errors import TargetError
 
-__all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "object_boxes", "place_objects",
+__all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "descriptor_samples", "looks_from_samples", "object_boxes", "place_objects",
            "set_touching", "label_segments", "perception_accuracy", "FIXTURE_PLACE_SITES", "FIXTURE_SCENES",
            "FIXTURE_SEED", "FIXTURE_CROP_M", "SIZE_PERCENTILES", "KNOB_MAX_WIDTH_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
 
@@ -294,13 +294,14 @@ def _observe(target, config, declared=()) -> dict:
     return Perceiver(config, declared).observe(frames, target.proprioception(), robot_capsules=robot_capsules(target))
 
 
-def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_SEED, config=None,
-                        settle_s: float = 1.0) -> dict[str, dict[str, Any]]:
-    """``{category: {"shape"?, "colour" (3,) sRGB 0..1, "size_m" (3,) m, "size_range_m" (2, 3)
-    m, "shapes" {shape: fraction}}}`` for every object category of ``target``'s task, measured
-    on ``scenes`` generated cluttered scenes (module docstring) with perception configuration ``config`` (default: the target's
-    :meth:`perception_config`); ``target`` is reset afterwards. A category labelled in fewer
-    than 2 scenes is left out (logged).
+def descriptor_samples(target, *, scenes: int = SCENES, seed: int = GENERATOR_SEED, config=None,
+                       settle_s: float = 1.0) -> dict[str, list[dict[str, Any]]]:
+    """Every labelled sighting of ``target``'s task's object categories on ``scenes``
+    generated cluttered scenes (module docstring): ``{category: [{"shape", "colour" (3,)
+    sRGB 0..1, "size_m" (3,) full size m, long side first}]}``, with perception
+    configuration ``config`` (default: the target's :meth:`perception_config`); ``target``
+    is reset afterwards. Pool several worlds' sightings and make looks of them with
+    :func:`looks_from_samples`.
 
     Raises:
         TargetError: the target is closed or cannot render.
@@ -308,7 +309,7 @@ def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_S
     if config is None:
         config = target.perception_config()
     cats = target._problem.objects
-    looks: dict[str, list[dict[str, Any]]] = {}
+    samples: dict[str, list[dict[str, Any]]] = {c: [] for c in set(cats.values())}
     try:
         for k in range(scenes):
             place_objects(target, seed + k, settle_s=settle_s)
@@ -317,18 +318,26 @@ def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_S
             for i, name in label_segments(snap["entities"], boxes).items():
                 e = snap["entities"][i]
                 half = sorted((float(e["size"][0]), float(e["size"][1])), reverse=True) + [float(e["size"][2])]
-                looks.setdefault(cats[name], []).append({"shape": e["attributes"].get("shape", "box"),
-                                                         "colour": e["attributes"]["colour_rgb"],
-                                                         "size_m": [2.0 * h for h in half]})
-    except TargetError:
-        raise
+                samples[cats[name]].append({"shape": e["attributes"].get("shape", "box"),
+                                            "colour": [float(c) for c in e["attributes"]["colour_rgb"]],
+                                            "size_m": [2.0 * h for h in half]})
     finally:
         target.reset(seed=target.init_index)
+    return samples
+
+
+def looks_from_samples(samples: dict[str, list[dict[str, Any]]]) -> dict[str, dict[str, Any]]:
+    """``{category: {"shape"?, "colour" (3,) sRGB 0..1, "size_m" (3,) m, "size_range_m" (2, 3)
+    m, "shapes" {shape: fraction}}}`` of the sightings ``samples``
+    (:func:`descriptor_samples`, one world's or several pooled): the medians, the range of
+    the whole sightings (:data:`SIZE_PERCENTILES`, :data:`WHOLE_HEIGHT_FRACTION`), the shape
+    fractions, and the most frequent shape where :data:`SHAPE_AGREEMENT` of them agree. A
+    category with fewer than 2 sightings is left out (logged)."""
     out: dict[str, dict[str, Any]] = {}
-    for cat in sorted(set(cats.values())):
-        got = looks.get(cat, [])
+    for cat in sorted(samples):
+        got = samples[cat]
         if len(got) < 2:
-            log.warning("LIBERO descriptor of %s: labelled in %d of %d generated scenes; left out", cat, len(got), scenes)
+            log.warning("LIBERO descriptor of %s: labelled in %d generated scenes; left out", cat, len(got))
             continue
         shapes = [lk["shape"] for lk in got]
         mode = max(set(shapes), key=shapes.count)
@@ -337,15 +346,27 @@ def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_S
         # the range from whole sightings only: a segment cut short by a neighbour hiding its
         # lower part is not a view of the object (a can seen 4 cm tall of its 8)
         whole = sizes[sizes[:, 2] >= WHOLE_HEIGHT_FRACTION * median[2]]
+        lo, hi = (np.percentile(whole, q, axis=0) for q in SIZE_PERCENTILES)
         out[cat] = {"colour": [round(float(c), 3) for c in np.median([lk["colour"] for lk in got], axis=0)],
                     "size_m": [round(float(c), 4) for c in median],
-                    "size_range_m": [[round(float(min(c, w)) if q < 50 else float(max(c, w)), 4)
-                                      for c, w in zip(np.percentile(whole, q, axis=0), median)]
-                                     for q in SIZE_PERCENTILES],
+                    "size_range_m": [[round(float(v), 4) for v in np.minimum(lo, median)],
+                                     [round(float(v), 4) for v in np.maximum(hi, median)]],
                     "shapes": {s: round(shapes.count(s) / len(shapes), 3) for s in sorted(set(shapes))}}
         if shapes.count(mode) >= SHAPE_AGREEMENT * len(shapes):  # else the shape is no cue: not declared
             out[cat]["shape"] = mode
     return out
+
+
+def measure_descriptors(target, *, scenes: int = SCENES, seed: int = GENERATOR_SEED, config=None,
+                        settle_s: float = 1.0) -> dict[str, dict[str, Any]]:
+    """The looks (:func:`looks_from_samples`) of ``target``'s task's object categories from
+    its own world's sightings on ``scenes`` generated cluttered scenes
+    (:func:`descriptor_samples`); ``target`` is reset afterwards.
+
+    Raises:
+        TargetError: the target is closed or cannot render.
+    """
+    return looks_from_samples(descriptor_samples(target, scenes=scenes, seed=seed, config=config, settle_s=settle_s))
 
 
 def perception_accuracy(target, looks: dict[str, dict[str, Any]], seeds: Sequence[int], *, config=None,

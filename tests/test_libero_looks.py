@@ -1,0 +1,42 @@
+"""A LIBERO look from its sightings (``looks_from_samples``): pooled over worlds, with how it
+varies with the view; no simulator needed."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from phyagentos.perception import ObjectDescriptor
+from phyagentos.targets.libero.descriptors import SIZE_PERCENTILES, looks_from_samples
+
+
+def _seen(shape: str, size, colour=(0.4, 0.15, 0.1)) -> dict:
+    return {"shape": shape, "colour": list(colour), "size_m": list(size)}
+
+
+def test_a_looks_shape_fractions_and_size_range_pool_every_worlds_sightings():
+    # world A sees the carton face-on (3 cm deep) and always as a box; world B at an angle, its
+    # gable top read as a cylinder twice in five
+    world_a = [_seen("box", (0.055, 0.030 + 0.001 * k, 0.135)) for k in range(5)]
+    world_b = [_seen("cylinder" if k < 2 else "box", (0.055, 0.050 + 0.001 * k, 0.134)) for k in range(5)]
+    looks = looks_from_samples({"milk": world_a + world_b})
+    milk = looks["milk"]
+    assert milk["shapes"] == {"box": 0.8, "cylinder": 0.2} and milk["shape"] == "box"
+    lo, hi = milk["size_range_m"]
+    assert lo[1] < 0.032 and hi[1] > 0.052  # both views' depths are in the range
+    assert lo[1] <= milk["size_m"][1] <= hi[1]
+    assert ObjectDescriptor.from_dict({"name": "milk_1", **milk}).size_range_m is not None  # a valid look
+
+
+def test_a_sighting_cut_short_by_a_neighbour_does_not_widen_the_range():
+    whole = [_seen("cylinder", (0.068, 0.068, 0.080)) for _ in range(9)]
+    cut = [_seen("cylinder", (0.024, 0.024, 0.039))]  # a can seen 4 cm tall of its 8
+    lo, hi = looks_from_samples({"alphabet_soup": whole + cut})["alphabet_soup"]["size_range_m"]
+    assert np.allclose(lo, [0.068, 0.068, 0.080]) and np.allclose(hi, lo)
+    assert SIZE_PERCENTILES == (10.0, 90.0)
+
+
+def test_a_category_sighted_once_has_no_look_and_a_split_shape_vote_declares_none():
+    looks = looks_from_samples({"plate": [_seen("cylinder", (0.2, 0.2, 0.02))],
+                                "caddy": [_seen(s, (0.2, 0.1, 0.08)) for s in ("box", "cylinder") * 3]})
+    assert "plate" not in looks
+    assert "shape" not in looks["caddy"] and looks["caddy"]["shapes"] == {"box": 0.5, "cylinder": 0.5}

@@ -49,8 +49,22 @@ from phyagentos.agent.verifier import PredicateVerifier, load_evidence
 from phyagentos.bench.random_world import random_episodes, with_limits
 from phyagentos.bench.report import verifier_markdown
 from phyagentos.bench.self_evolution import run_pass
-from phyagentos.bench.verifier_scoring import confusion, load_ground_truth, score_session
+from phyagentos.bench.verifier_scoring import confusion, judged_ground_truth, load_ground_truth, score_session
 from phyagentos.protocol import Workspace
+
+
+def _acting(ws: Workspace, rec):
+    """The acting ancestor an *another view* child (``recovery.skill`` ``observe``) judges
+    again: the nearest ancestor of another skill with evidence; None for any other session."""
+    if rec.recovery is None or rec.recovery.skill != "observe":
+        return None
+    parent = rec.parent_session_id
+    while parent:
+        anc = ws.load_session(parent)
+        if anc.skill != "observe" and anc.attempts and anc.attempts[-1].evidence:
+            return anc
+        parent = anc.parent_session_id
+    return None
 
 
 def _replayed(ws: Workspace, rec, attempt) -> dict:
@@ -60,15 +74,10 @@ def _replayed(ws: Workspace, rec, attempt) -> dict:
     satisfied and no safety event, as in :meth:`SessionVerifier.verify`."""
     evidence = load_evidence(ws.root / attempt.evidence)
     judged = rec
-    if rec.recovery is not None and rec.recovery.skill == "observe":
-        parent = rec.parent_session_id
-        while parent:
-            anc = ws.load_session(parent)
-            if anc.skill != "observe" and anc.attempts and anc.attempts[-1].evidence:
-                base = load_evidence(ws.root / anc.attempts[-1].evidence)
-                evidence, judged = replace(base, terminal=evidence.terminal), anc
-                break
-            parent = anc.parent_session_id
+    anc = _acting(ws, rec)
+    if anc is not None:
+        base = load_evidence(ws.root / anc.attempts[-1].evidence)
+        evidence, judged = replace(base, terminal=evidence.terminal), anc
     outcomes = PredicateVerifier().judge(judged, evidence)
     safety = any(str(e.get("code", "")).startswith("safety.") for e in evidence.events)
     ok = bool(outcomes) and all(o.status == "satisfied" for o in outcomes) and not safety
@@ -90,12 +99,20 @@ def score_pass(workspace: Path, session_ids=None, *, replay: bool = False) -> li
         if attempt is None or attempt.verdict is None:
             continue
         gt = load_ground_truth(ws.root / attempt.evidence) if attempt.evidence else None
+        anc = _acting(ws, rec)
+        if anc is not None:  # scored against the acting session's start, as it is judged
+            gt = judged_ground_truth(gt, load_ground_truth(ws.root / anc.attempts[-1].evidence))
         verdict = _replayed(ws, rec, attempt) if replay else attempt.verdict.model_dump()
         scores.append({"session_id": sid, "node": rec.node, "skill": rec.skill, "verdict": verdict["verdict"],
                        "cause": attempt.verdict.diagnosis.cause if attempt.verdict.diagnosis else None,
                        "reasons": {c["predicate"]: c["reason"] for c in verdict.get("criteria") or ()},
                        **score_session(accept=rec.accept, verdict=verdict, gt=gt)})
     return scores
+
+
+def _pct(v) -> str:
+    """A rate in %, or ``-`` when nothing was scored (every such criterion unscorable)."""
+    return "-" if v is None else f"{v}%"
 
 
 def _ci(v) -> str:
@@ -120,8 +137,8 @@ def report(v: dict, scores: list[dict], out: Path, extra: dict) -> None:
         print(f"{name:<12}" + "".join(f"{row[k]:>15}" for k in v["criterion_matrix"]))
     print(f"\n{'criterion':<12}{'scored':>8}{'false success':>16}{'95% CI':>18}{'false failure':>16}{'95% CI':>18}")
     for name, r in sorted(v["per_predicate_rates"].items()):
-        print(f"{name:<12}{r['scored']:>8}{r['false_success_pct']:>15}%{_ci(r['false_success_ci95_pct']):>18}"
-              f"{r['false_failure_pct']:>15}%{_ci(r['false_failure_ci95_pct']):>18}")
+        print(f"{name:<12}{r['scored']:>8}{_pct(r['false_success_pct']):>16}{_ci(r['false_success_ci95_pct']):>18}"
+              f"{_pct(r['false_failure_pct']):>16}{_ci(r['false_failure_ci95_pct']):>18}")
     hb = list(extra.get("heartbeat_timeout_sessions") or ())
     if hb:
         print(f"\nsessions that ended on a runner heartbeat timeout (machine load, never verified, not scored): "

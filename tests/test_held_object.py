@@ -278,3 +278,45 @@ def test_a_featherweight_bottle_is_within_two_sigma_of_an_empty_hand_so_the_load
     est = estimate_held(ev, "cube")
     assert est.status == "unknown" and "of an empty hand" in est.reason
     assert judge(ev)["holding"].status != "satisfied"
+
+
+def _seen_lifted(tmp_path, *, initial_conf, aim_conf, end_conf, rise=0.15, empty_at_start=True, name="seen"):
+    """A pick whose wrist has no sensor (LIBERO's hand) and whose cameras see the cube in the
+    hand at the end; the initial snapshot saw it at ``initial_conf`` (None: not at all), the
+    grasp's own observation at ``aim_conf``."""
+    trace = _without_wrist_sensor(pick_trace(rise=rise))
+    trace[1]["objects"]["cube"]["confidence"] = aim_conf
+    if not empty_at_start:
+        trace[0] = {**trace[0], "opening_m": 0.017, "effort_n": 8.5}
+    top = (AT[0], AT[1], AT[2] + rise)
+    terminal = {"stamp_s": 6.0, "entities": [cube(top, conf=end_conf, std=0.005),
+                                              *hand(top, 0.019, 9.5, 0.0)], "relations": []}
+    for e in terminal["entities"]:
+        e["attributes"].pop("wrist_force_n", None)
+    initial = [] if initial_conf is None else [cube(conf=initial_conf)]
+    return bundle(tmp_path, {"stamp_s": 0.0, "entities": initial, "relations": []}, terminal, trace,
+                  status="completed", name=name)
+
+
+@pytest.mark.parametrize("initial_conf", [0.36, None])
+def test_a_weak_initial_sighting_is_replaced_by_the_grasps_confident_view(tmp_path, initial_conf):
+    """Recorded pattern (LIBERO, libero_object task 0): the initial snapshot saw the can at 0.36
+    against its look-alike, the pick's own observation at 0.84, the view after the lift at
+    0.84; the hand has no wrist sensor. The rise from the grasp's view decides."""
+    ev = _seen_lifted(tmp_path, initial_conf=initial_conf, aim_conf=0.84, end_conf=0.84)
+    assert evaluate(parse_criteria({"lifted": "cube"})[0], ev.initial, ev.terminal).status == "unknown"
+    out = judge(ev)
+    assert out["lifted"].status == "satisfied" and "grasp's observation" in out["lifted"].reason
+    not_lifted = _seen_lifted(tmp_path, initial_conf=initial_conf, aim_conf=0.84, end_conf=0.84, rise=0.0, name="low")
+    assert judge(not_lifted)["lifted"].status == "unsatisfied"
+
+
+@pytest.mark.parametrize("kw, why", [
+    (dict(aim_conf=0.45, end_conf=0.84), "the grasp aimed at a sighting no better than a coin flip"),
+    (dict(aim_conf=0.84, end_conf=0.4), "the end view does not see it confidently"),
+    (dict(aim_conf=0.84, end_conf=0.84, empty_at_start=False), "the hand may have held it at the start"),
+])
+def test_the_grasps_view_stands_in_only_when_it_and_the_end_view_are_confident(tmp_path, kw, why):
+    ev = _seen_lifted(tmp_path, initial_conf=0.36, **kw)
+    assert judge(ev)["lifted"].status == "unknown", why
+    assert SessionVerifier().verify(session(), ev).verdict != "success", why

@@ -8,6 +8,7 @@ import yaml
 from phyagentos.app.orchestrator import run_goal_graph
 from phyagentos.bench.verifier_scoring import (
     confusion,
+    judged_ground_truth,
     load_ground_truth,
     score_session,
     truth_of_criteria,
@@ -93,6 +94,19 @@ def test_truth_is_judged_exactly_on_ground_truth(run):
     lowered = {**gt, "terminal": {**gt["terminal"], "held": []}}
     assert {c.name: t for c, t in truth_of_criteria(pick.accept, lowered)}["holding"] is False
     assert [t for _, t in truth_of_criteria({"still": {}}, gt)] == [None]  # no joint state in ground truth
+
+
+def test_an_another_view_child_is_scored_from_the_acting_sessions_start(run):
+    """The another-view child starts with the object already raised; it judges the acting
+    pick's criteria, so its truth takes the pick's initial state (else a confirmed lift
+    would count as self-deception)."""
+    (pick, _), ws = run
+    gt = load_ground_truth(ws.root / pick.attempts[-1].evidence)
+    child = {**gt, "initial": gt["terminal"]}  # what the child's own ground truth records
+    assert {c.name: t for c, t in truth_of_criteria(pick.accept, child)}["lifted"] is False
+    judged = judged_ground_truth(child, gt)
+    assert {c.name: t for c, t in truth_of_criteria(pick.accept, judged)}["lifted"] is True
+    assert judged_ground_truth(child, None) is child and judged_ground_truth(None, gt) is None
 
 
 def test_wilson_intervals_bound_the_rates():

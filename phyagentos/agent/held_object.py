@@ -292,6 +292,37 @@ def _unseen(snapshot: Mapping, obj: str) -> bool:
     return ent is None or confidence(ent) < CONFIDENCE_MIN
 
 
+def _lift_seen_from_the_grasp_view(outcome: CriterionOutcome, evidence: Any, obj: str) -> CriterionOutcome | None:
+    """``lifted(obj)`` judged by the cameras when the session's initial snapshot missed ``obj``
+    or saw it too weakly (below :data:`CONFIDENCE_MIN`) but the observation the grasp aimed at saw it
+    confidently (:func:`_aim`: the skill's own view before the fingers touched it, e.g. one
+    that fused a second frame) and the terminal snapshot sees it confidently: the rise is the
+    terminal centre's height over the aimed-at centre's, with the 2-sigma rule of
+    :mod:`phyagentos.agent.criteria`. Only when the hand was empty at the session's start (a
+    hand that held it then may have dropped it before the grasp). ``None``: this path does
+    not apply (the initial sighting was confident, or any condition fails), and
+    the held-object model is asked as before."""
+    init, end = _entity(evidence.initial, obj), _entity(evidence.terminal, obj)
+    if (init is not None and confidence(init) >= CONFIDENCE_MIN) or end is None or confidence(end) < CONFIDENCE_MIN:
+        return None
+    trace = tuple(evidence.trace or ())
+    close = _last_close(trace, obj)
+    aim, s0 = _aim(trace, close, obj) if close is not None else (None, None)
+    if aim is None or s0 is None or not _empty_hand_at_start(trace):
+        return None
+    c = outcome.criterion
+    dz = float(end["position"][2]) - aim[2]
+    need = float(c.args["min_height"])
+    m = 2.0 * math.hypot(s0, sigma(end))
+    detail = (f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m) from where the grasp's observation saw it "
+              f"(the initial snapshot had no sighting of it at {CONFIDENCE_MIN} or more)")
+    if dz >= need + m:
+        return CriterionOutcome(c, "satisfied", f"{obj} lifted: {detail}", outcome.evidence)
+    if dz < need - m:
+        return CriterionOutcome(c, "unsatisfied", f"{obj} not lifted: {detail}", outcome.evidence)
+    return CriterionOutcome(c, "unknown", f"{obj} lifted? undecided within the uncertainty: {detail}", outcome.evidence)
+
+
 def refine(outcome: CriterionOutcome, evidence: Any) -> CriterionOutcome:
     """``outcome`` decided by the held-object model where the cameras left it ``unknown``.
 
@@ -303,7 +334,9 @@ def refine(outcome: CriterionOutcome, evidence: Any) -> CriterionOutcome:
 
     - ``holding(obj)``: ``satisfied`` when the model says held, ``unsatisfied`` when it
       says not held, else still ``unknown`` (with the model's reason appended);
-    - ``lifted(obj, min_height)``: when held, the carried centre's rise above the initial
+    - ``lifted(obj, min_height)``: seen confidently at the end but too weakly in the initial
+      snapshot, the rise from where the grasp's own observation saw it
+      (:func:`_lift_seen_from_the_grasp_view`); else, when held, the carried centre's rise above the initial
       perceived centre ``dz`` is judged with the 2-sigma rule of
       :mod:`phyagentos.agent.criteria` (``sigma = sqrt(sigma_initial^2 + sigma_held^2)``);
       without a confident initial sighting the grasp's observation stands in for it, but
@@ -318,6 +351,8 @@ def refine(outcome: CriterionOutcome, evidence: Any) -> CriterionOutcome:
     if outcome.status != "unknown" and not (c.name == "holding" and outcome.status == "unsatisfied"
                                             and _unseen(evidence.terminal, obj)):
         return outcome
+    if c.name == "lifted" and (seen := _lift_seen_from_the_grasp_view(outcome, evidence, obj)) is not None:
+        return seen
     est = estimate_held(evidence, obj)
     if c.name == "holding":
         if est.status == "unknown":

@@ -46,7 +46,7 @@ from phyagentos.geometry import quat_to_matrix
 from phyagentos.yamlsource import read_yaml
 
 __all__ = ["wilson_interval", "GROUND_TRUTH_FILE", "truth_snapshot", "truth_of_criteria", "score_session", "confusion",
-           "load_ground_truth"]
+           "load_ground_truth", "judged_ground_truth"]
 
 GROUND_TRUTH_FILE = "ground_truth.yaml"
 _SESSION_CELLS = ("true_success", "false_success", "true_failure", "false_failure")
@@ -61,6 +61,18 @@ def load_ground_truth(bundle_dir: Path) -> dict[str, Any] | None:
     except (OSError, BenchError):
         return None
     return data if isinstance(data, dict) else None
+
+
+def judged_ground_truth(gt: Mapping[str, Any] | None, acting_gt: Mapping[str, Any] | None) -> Mapping[str, Any] | None:
+    """The ground truth an *another view* child's verdict is about: its own terminal state
+    with the initial state of the acting session whose criteria it judges again (the
+    coordinator judges the acting session's evidence with the child's terminal snapshot,
+    :mod:`phyagentos.agent.coordinator`). Scored against its own initial state, a confirmed
+    ``lifted`` would be false: the child starts with the object already raised. ``gt``
+    unchanged when either is missing."""
+    if not gt or not acting_gt or acting_gt.get("initial") is None:
+        return gt
+    return {**gt, "initial": acting_gt["initial"]}
 
 
 def _vertical_half_extent(shape: str | None, half_extents, quat_wxyz) -> float:

@@ -40,3 +40,36 @@ def test_a_category_sighted_once_has_no_look_and_a_split_shape_vote_declares_non
                                 "caddy": [_seen(s, (0.2, 0.1, 0.08)) for s in ("box", "cylinder") * 3]})
     assert "plate" not in looks
     assert "shape" not in looks["caddy"] and looks["caddy"]["shapes"] == {"box": 0.5, "cylinder": 0.5}
+
+
+def test_each_world_is_sighted_once_per_workspace_and_shared_by_its_perturbed_suites(tmp_path, monkeypatch):
+    """The bench pools each category's sightings over the run's worlds; a world (its scene,
+    objects and fixtures) is measured once and LIBERO-PRO's swapped suite reuses it."""
+    import phyagentos.targets.libero as libero
+    import phyagentos.targets.libero.descriptors as descriptors
+    from phyagentos.bench.libero import _descriptors
+
+    built: list[tuple[str, int]] = []
+
+    class World:
+        def __init__(self, name, scene, seed):
+            built.append((scene.suite, scene.task))
+            self.cats = libero.parse_bddl(libero.resolve_task(scene.suite, scene.task).bddl_path).objects
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+    def sightings(target):
+        return {c: [_seen("box", (0.05, 0.03 + 0.002 * k, 0.1)) for k in range(4)] for c in set(target.cats.values())}
+
+    monkeypatch.setattr(libero, "LiberoTarget", World)
+    monkeypatch.setattr(descriptors, "descriptor_samples", sightings)
+    looks = _descriptors(tmp_path, "libero_object", [0, 1])
+    assert built == [("libero_object", 0), ("libero_object", 1)] and "milk" in looks
+    _descriptors(tmp_path, "libero_object", [0, 1, 2])
+    assert built[2:] == [("libero_object", 2)]  # only the new world
+    swapped = _descriptors(tmp_path, "libero_object_swap", [0, 2])
+    assert len(built) == 3 and set(swapped) <= set(looks) | set(_descriptors(tmp_path, "libero_object", [2]))

@@ -37,6 +37,7 @@ every session's ``ground_truth.yaml``: ``env.check_success()``), with per-task
 
 from __future__ import annotations
 
+import json
 import logging
 import re
 from pathlib import Path
@@ -540,46 +541,63 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
 
 
 def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
-    """Appearance descriptors of the object categories of ``tasks``, cached per workspace in
-    ``libero/descriptors.yaml``: each task's world is built once and its categories sighted
-    on generated cluttered scenes (:func:`~phyagentos.targets.libero.descriptors.descriptor_samples`);
-    a category's look pools its sightings in every world measured
+    """Appearance descriptors of the object categories of ``tasks``: each category's look
+    pools its sightings in every world of ``tasks``
     (:func:`~phyagentos.targets.libero.descriptors.looks_from_samples`): a milk carton beside
-    other neighbours, in another world, reads as a cylinder more often. A task not yet measured
-    has every world measured again, pooled (the cache keeps looks, not sightings).
+    other neighbours, in another world, reads as a cylinder more often.
+
+    A world is its scene and its declared objects and fixtures: LIBERO-PRO's swapped or
+    reworded suites share their standard suite's worlds. Each world's sightings on generated
+    cluttered scenes (:func:`~phyagentos.targets.libero.descriptors.descriptor_samples`) are
+    measured once per workspace and kept in ``libero/descriptor_sightings.json``; the pooled
+    looks are written to ``libero/descriptors.yaml`` for people to read. A
+    ``descriptors.yaml`` of the current method whose ``_measured_tasks`` cover ``tasks`` is
+    used as it is (looks given: nothing is built).
 
     Raises:
         BenchError: a world could not be built or rendered to measure them.
     """
-    from phyagentos.targets.libero import LiberoScene, LiberoTarget, resolve_task  # noqa: PLC0415
+    from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
     from phyagentos.targets.libero.descriptors import descriptor_samples, looks_from_samples  # noqa: PLC0415
 
-    path = workspace_dir / "libero" / "descriptors.yaml"
-    cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
-    measured = set(cache.get("_measured_tasks", [])) if cache.get("_method") == _LOOKS_METHOD else set()
-    wanted = {f"{suite}/{i}" for i in tasks}
-    if measured and wanted <= measured:
-        return {k: v for k, v in cache.items() if not k.startswith("_")}
-    worlds = sorted(measured | wanted)
-    samples: dict[str, list[dict[str, Any]]] = {}
-    for n, key in enumerate(worlds, 1):
+    root = workspace_dir / "libero"
+    looks_path, sightings_path = root / "descriptors.yaml", root / "descriptor_sightings.json"
+    wanted = [f"{suite}/{i}" for i in tasks]
+    given = (yaml.safe_load(looks_path.read_text(encoding="utf-8")) or {}) if looks_path.is_file() else {}
+    if given.get("_method") == _LOOKS_METHOD and set(wanted) <= set(given.get("_measured_tasks", [])):
+        return {k: v for k, v in given.items() if not k.startswith("_")}
+    store = json.loads(sightings_path.read_text(encoding="utf-8")) if sightings_path.is_file() else {}
+    worlds: dict[str, dict[str, Any]] = store.get("worlds", {}) if store.get("method") == _LOOKS_METHOD else {}
+    keys = []
+    for n, key in enumerate(wanted, 1):
         name, index = key.rsplit("/", 1)
-        logger.info("LIBERO bench: sighting the object categories of %s on generated scenes (world %d of %d)",
-                    key, n, len(worlds))
         try:
-            resolve_task(name, int(index))
-            with LiberoTarget("libero_descriptors", LiberoScene(suite=name, task=int(index)), seed=0) as target:
-                for cat, got in descriptor_samples(target).items():
-                    samples.setdefault(cat, []).extend(got)
+            problem = parse_bddl(resolve_task(name, int(index)).bddl_path)
         except TargetError as exc:
             raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
+        world = json.dumps([problem.scene, sorted(problem.objects.items()), sorted(problem.fixtures.items())])
+        keys.append(world)
+        if world in worlds:
+            continue
+        logger.info("LIBERO bench: sighting the object categories of %s on generated scenes (task %d of %d)",
+                    key, n, len(wanted))
+        try:
+            with LiberoTarget("libero_descriptors", LiberoScene(suite=name, task=int(index)), seed=0) as target:
+                worlds[world] = {"measured_as": key, "sightings": descriptor_samples(target)}
+        except TargetError as exc:
+            raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
+        root.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(sightings_path, json.dumps({"method": _LOOKS_METHOD, "worlds": worlds}))
+    samples: dict[str, list[dict[str, Any]]] = {}
+    for world in dict.fromkeys(keys):  # each world once, however many tasks share it
+        for cat, got in worlds[world]["sightings"].items():
+            samples.setdefault(cat, []).extend(got)
     looks = looks_from_samples(samples)
-    doc = {**looks, "_method": _LOOKS_METHOD, "_measured_tasks": worlds}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, "# Looks of LIBERO's object categories, measured on generated cluttered scenes by the\n"
-                            "# project's perceiver (phyagentos.targets.libero.descriptors), each category's\n"
-                            "# sightings pooled over the worlds listed in _measured_tasks; never an init state.\n"
-                      + yaml.safe_dump(doc, sort_keys=True))
+    root.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(looks_path, "# Looks of LIBERO's object categories, measured on generated cluttered scenes by the\n"
+                                  "# project's perceiver (phyagentos.targets.libero.descriptors), each category's\n"
+                                  "# sightings pooled over the worlds of _measured_tasks; never an init state.\n"
+                      + yaml.safe_dump({**looks, "_method": _LOOKS_METHOD, "_measured_tasks": wanted}, sort_keys=True))
     return looks
 
 

@@ -310,12 +310,19 @@ def _lift_seen_from_the_grasp_view(outcome: CriterionOutcome, evidence: Any, obj
     aim, s0 = _aim(trace, close, obj) if close is not None else (None, None)
     if aim is None or s0 is None or not _empty_hand_at_start(trace):
         return None
+    return _rise(outcome, obj, float(end["position"][2]) - aim[2], math.hypot(s0, sigma(end)),
+                 f"from where the grasp's observation saw it (the initial snapshot had no sighting of it at "
+                 f"{CONFIDENCE_MIN} or more)")
+
+
+def _rise(outcome: CriterionOutcome, obj: str, dz: float, s: float, why: str) -> CriterionOutcome:
+    """``lifted``'s verdict on a rise ``dz`` (m) with 1-sigma ``s`` (m): the 2-sigma rule of
+    :mod:`phyagentos.agent.criteria` against the criterion's ``min_height``; ``why`` says
+    where the heights came from."""
     c = outcome.criterion
-    dz = float(end["position"][2]) - aim[2]
     need = float(c.args["min_height"])
-    m = 2.0 * math.hypot(s0, sigma(end))
-    detail = (f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m) from where the grasp's observation saw it "
-              f"(the initial snapshot had no sighting of it at {CONFIDENCE_MIN} or more)")
+    m = 2.0 * s
+    detail = f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m)" + (why if why.startswith(";") else f" {why}")
     if dz >= need + m:
         return CriterionOutcome(c, "satisfied", f"{obj} lifted: {detail}", outcome.evidence)
     if dz < need - m:
@@ -379,12 +386,5 @@ def refine(outcome: CriterionOutcome, evidence: Any) -> CriterionOutcome:
             return CriterionOutcome(c, "unknown", f"{outcome.reason}; {obj} has no confident initial position",
                                     outcome.evidence)
         z0 = aim[2]
-    dz = est.position_m[2] - z0
-    need = float(c.args["min_height"])
-    m = 2.0 * math.hypot(s0, float(est.position_std_m or 0.0))
-    detail = f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m); {est.reason}"
-    if dz >= need + m:
-        return CriterionOutcome(c, "satisfied", f"{obj} lifted: {detail}", outcome.evidence)
-    if dz < need - m:
-        return CriterionOutcome(c, "unsatisfied", f"{obj} not lifted: {detail}", outcome.evidence)
-    return CriterionOutcome(c, "unknown", f"{obj} lifted? undecided within the uncertainty: {detail}", outcome.evidence)
+    return _rise(outcome, obj, est.position_m[2] - z0, math.hypot(s0, float(est.position_std_m or 0.0)),
+                 f"; {est.reason}")

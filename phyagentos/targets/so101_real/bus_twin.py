@@ -301,6 +301,13 @@ class BusTwin:
         with self._lock:
             return self._data.body(name).xpos.copy()
 
+    def moving(self) -> list[int]:
+        """Each servo's ``Moving`` flag (1: still turning or still ramping to its goal), in
+        joint order, after stepping the physics up to now."""
+        with self._lock:
+            self._advance(refresh=True)
+            return [self._by_joint(n).get("Moving") for n in MOTOR_NAMES]
+
     def torque_enabled(self) -> list[int]:
         """Torque_Enable of each servo, in joint order."""
         with self._lock:

@@ -49,22 +49,14 @@ from phyagentos.agent.verifier import PredicateVerifier, load_evidence
 from phyagentos.bench.random_world import random_episodes, with_limits
 from phyagentos.bench.report import verifier_markdown
 from phyagentos.bench.self_evolution import run_pass
-from phyagentos.bench.verifier_scoring import confusion, judged_ground_truth, load_ground_truth, score_session
+from phyagentos.bench.verifier_scoring import (
+    acting_ancestor,
+    confusion,
+    judged_ground_truth,
+    load_ground_truth,
+    score_session,
+)
 from phyagentos.protocol import Workspace
-
-
-def _acting(ws: Workspace, rec):
-    """The acting ancestor an *another view* child (``recovery.skill`` ``observe``) judges
-    again: the nearest ancestor of another skill with evidence; None for any other session."""
-    if rec.recovery is None or rec.recovery.skill != "observe":
-        return None
-    parent = rec.parent_session_id
-    while parent:
-        anc = ws.load_session(parent)
-        if anc.skill != "observe" and anc.attempts and anc.attempts[-1].evidence:
-            return anc
-        parent = anc.parent_session_id
-    return None
 
 
 def _replayed(ws: Workspace, rec, attempt) -> dict:
@@ -74,7 +66,7 @@ def _replayed(ws: Workspace, rec, attempt) -> dict:
     satisfied and no safety event, as in :meth:`SessionVerifier.verify`."""
     evidence = load_evidence(ws.root / attempt.evidence)
     judged = rec
-    anc = _acting(ws, rec)
+    anc = acting_ancestor(rec, ws.load_session)
     if anc is not None:
         base = load_evidence(ws.root / anc.attempts[-1].evidence)
         evidence, judged = replace(base, terminal=evidence.terminal), anc
@@ -99,7 +91,7 @@ def score_pass(workspace: Path, session_ids=None, *, replay: bool = False) -> li
         if attempt is None or attempt.verdict is None:
             continue
         gt = load_ground_truth(ws.root / attempt.evidence) if attempt.evidence else None
-        anc = _acting(ws, rec)
+        anc = acting_ancestor(rec, ws.load_session)
         if anc is not None:  # scored against the acting session's start, as it is judged
             gt = judged_ground_truth(gt, load_ground_truth(ws.root / anc.attempts[-1].evidence))
         verdict = _replayed(ws, rec, attempt) if replay else attempt.verdict.model_dump()

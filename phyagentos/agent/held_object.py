@@ -311,18 +311,18 @@ def _lift_seen_from_the_grasp_view(outcome: CriterionOutcome, evidence: Any, obj
     if aim is None or s0 is None or not _empty_hand_at_start(trace):
         return None
     return _rise(outcome, obj, float(end["position"][2]) - aim[2], math.hypot(s0, sigma(end)),
-                 f"from where the grasp's observation saw it (the initial snapshot had no sighting of it at "
+                 f" from where the grasp's observation saw it (the initial snapshot had no sighting of it at "
                  f"{CONFIDENCE_MIN} or more)")
 
 
 def _rise(outcome: CriterionOutcome, obj: str, dz: float, s: float, why: str) -> CriterionOutcome:
     """``lifted``'s verdict on a rise ``dz`` (m) with 1-sigma ``s`` (m): the 2-sigma rule of
     :mod:`phyagentos.agent.criteria` against the criterion's ``min_height``; ``why`` says
-    where the heights came from."""
+    where the heights came from (appended to the reason as it is)."""
     c = outcome.criterion
     need = float(c.args["min_height"])
     m = 2.0 * s
-    detail = f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m)" + (why if why.startswith(";") else f" {why}")
+    detail = f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m){why}"
     if dz >= need + m:
         return CriterionOutcome(c, "satisfied", f"{obj} lifted: {detail}", outcome.evidence)
     if dz < need - m:

@@ -38,7 +38,7 @@ import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from phyagentos.errors import BenchError
 from phyagentos.protocol import Workspace
@@ -47,7 +47,7 @@ from phyagentos.yamlsource import read_yaml
 
 from .episode import OUTCOME_FILE, load_episode
 from .taxonomy import CATEGORIES, classify
-from .verifier_scoring import confusion, judged_ground_truth, score_session
+from .verifier_scoring import acting_ancestor, confusion, judged_ground_truth, score_session
 
 __all__ = ["EpisodeRecord", "collect_episode", "build_report", "write_report", "load_report", "verifier_markdown"]
 
@@ -80,21 +80,6 @@ def _bundle(root: Path, evidence: str | None) -> dict:
     except (OSError, BenchError) as exc:
         _unreadable(path, exc)
         return {}
-
-
-def _acting(session, by_id: Mapping[str, Any]):
-    """The acting ancestor (in ``by_id``) an *another view* child (``recovery.skill``
-    ``observe``) judges again: the nearest ancestor of another skill with evidence; None for
-    any other session."""
-    if session.recovery is None or session.recovery.skill != "observe":
-        return None
-    parent = session.parent_session_id
-    while parent in by_id:
-        anc = by_id[parent]
-        if anc.skill != "observe" and anc.attempts and anc.attempts[-1].evidence:
-            return anc
-        parent = anc.parent_session_id
-    return None
 
 
 def _terminal(root: Path, evidence: str | None) -> dict:
@@ -168,7 +153,7 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         rows.append(row)
         terminal = _terminal(directory, attempt.evidence if attempt else None)
         if attempt is not None and attempt.verdict is not None:
-            acting = _acting(s, by_id)  # an another-view child is scored from the acting session's start
+            acting = acting_ancestor(s, by_id.get)  # an another-view child is scored from the acting session's start
             truth = (judged_ground_truth(terminal, _terminal(directory, acting.attempts[-1].evidence))
                      if acting is not None else terminal)
             scored = score_session(accept=s.accept, verdict=attempt.verdict.model_dump(), gt=truth or None)

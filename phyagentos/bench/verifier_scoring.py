@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -46,7 +46,7 @@ from phyagentos.geometry import quat_to_matrix
 from phyagentos.yamlsource import read_yaml
 
 __all__ = ["wilson_interval", "GROUND_TRUTH_FILE", "truth_snapshot", "truth_of_criteria", "score_session", "confusion",
-           "load_ground_truth", "judged_ground_truth"]
+           "load_ground_truth", "judged_ground_truth", "acting_ancestor"]
 
 GROUND_TRUTH_FILE = "ground_truth.yaml"
 _SESSION_CELLS = ("true_success", "false_success", "true_failure", "false_failure")
@@ -61,6 +61,20 @@ def load_ground_truth(bundle_dir: Path) -> dict[str, Any] | None:
     except (OSError, BenchError):
         return None
     return data if isinstance(data, dict) else None
+
+
+def acting_ancestor(session: Any, lookup: Callable[[str], Any]) -> Any:
+    """The acting ancestor an *another view* child (``recovery.skill`` ``observe``) judges
+    again: the nearest ancestor of another skill with evidence, found through ``lookup``
+    (session id -> session record, or None when unknown); None for any other session."""
+    if session.recovery is None or session.recovery.skill != "observe":
+        return None
+    parent = session.parent_session_id
+    while parent and (anc := lookup(parent)) is not None:
+        if anc.skill != "observe" and anc.attempts and anc.attempts[-1].evidence:
+            return anc
+        parent = anc.parent_session_id
+    return None
 
 
 def judged_ground_truth(gt: Mapping[str, Any] | None, acting_gt: Mapping[str, Any] | None) -> Mapping[str, Any] | None:

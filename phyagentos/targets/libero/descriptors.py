@@ -50,7 +50,8 @@ from phyagentos.errors import TargetError
 __all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "descriptor_samples", "looks_from_samples",
            "object_boxes", "place_objects",
            "set_touching", "label_segments", "perception_accuracy", "FIXTURE_PLACE_SITES", "FIXTURE_SCENES",
-           "FIXTURE_SEED", "FIXTURE_CROP_M", "SIZE_PERCENTILES", "KNOB_MAX_WIDTH_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
+           "FIXTURE_SEED", "FIXTURE_CROP_M", "SIZE_PERCENTILES",
+           "WHOLE_HEIGHT_FRACTION", "KNOB_MAX_WIDTH_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
 
 log = logging.getLogger(__name__)
 

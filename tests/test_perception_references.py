@@ -13,6 +13,7 @@ from phyagentos.perception.association import (
     associate,
     cost_matrix,
     forbid_except,
+    part_landmark,
     resolve_reference,
 )
 from phyagentos.perception.cloud import Plane
@@ -134,6 +135,38 @@ def test_a_bowl_on_a_perceived_cabinet_is_not_taken_for_the_bowl_on_an_unperceiv
     res = resolve_reference(desc, [0, 1], dets, {"wooden_cabinet_1": cabinet}, CFG, look_alikes=2)
     assert dets[res.detection] is on_cabinet and "over wooden_cabinet_1's footprint" in res.reason
 
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_in_the_top_drawer_is_the_look_alike_inside_that_open_drawer_not_the_one_on_the_cabinet(order):
+    """libero_spatial task 4 ("the black bowl in the top drawer of the wooden cabinet"): the
+    other bowl stands on the cabinet's top, over its footprint too; the drawer's inside (the
+    perceiver's landmark for an open drawer) tells them apart, and a drawer not seen open
+    decides nothing."""
+    on_top = _det(BLACK, (0.02, -0.28, 1.153), half=(0.056, 0.05, 0.026), bottom=0.227, low=0.23)
+    in_drawer = _det(BLACK, (0.09, -0.15, 1.089), half=(0.052, 0.052, 0.025), bottom=0.164, low=0.165)
+    cabinet = Landmark("wooden_cabinet_1", np.array([0.02, -0.275, 1.014]), np.array([0.128, 0.11, 0.1136]), -0.45,
+                       "box", 0.0)
+    inside = Landmark("wooden_cabinet_1_top_drawer", np.array([0.10, -0.14, 0.982]), np.array([0.09, 0.06, 0.082]),
+                      -0.45, "box", 0.0)
+    dets = [on_top, in_drawer] if order == 0 else [in_drawer, on_top]
+    desc = _bowl("bowl_1", {"relation": "in", "of": ["wooden_cabinet_1"], "part": "top drawer"})
+    marks = {"wooden_cabinet_1": cabinet, "wooden_cabinet_1_top_drawer": inside}
+    res = resolve_reference(desc, [0, 1], dets, marks, CFG, look_alikes=2)
+    assert dets[res.detection] is in_drawer and "inside wooden_cabinet_1_top_drawer" in res.reason
+    res = resolve_reference(desc, [0, 1], dets, {"wooden_cabinet_1": cabinet}, CFG, look_alikes=2)
+    assert res.detection is None and "top drawer of wooden_cabinet_1 is not seen open" in res.reason
+    # a bowl on the table under the open drawer is not in it
+    under = _det(BLACK, (0.10, -0.14, 0.93), half=(0.052, 0.052, 0.025))
+    res = resolve_reference(desc, [0, 1], [under, on_top], marks, CFG, look_alikes=2)
+    assert res.detection is None and "0 candidates inside" in res.reason
+
+
+def test_only_a_drawer_part_narrows_a_reference():
+    assert part_landmark("wooden_cabinet_1", "top drawer") == "wooden_cabinet_1_top_drawer"
+    assert part_landmark("wooden_cabinet_1", "bottom drawer") == "wooden_cabinet_1_bottom_drawer"
+    assert part_landmark("wooden_cabinet_1", None) is None
+    assert part_landmark("wooden_cabinet_1", "top") is None
+    assert part_landmark("microwave_1", "door") is None
 
 def test_table_center_uses_the_perceived_table_centre():
     dets = [_det(BLACK, (0.20, 0.25, 0.03)), _det(BLACK, (0.02, -0.01, 0.03))]

@@ -50,6 +50,9 @@ __all__ = [
     "RIM_POINTS",
     "open_container",
     "rim_graspable",
+    "partly_seen_rim_graspable",
+    "near_long_axis",
+    "PARTLY_SEEN_RIM_ANGLE_RAD",
     "rim_grasp_candidates",
 ]
 
@@ -106,6 +109,50 @@ def rim_graspable(category: str | None, shape: str | None, half_extents: Sequenc
         return False
     he = np.asarray(half_extents, dtype=float).reshape(-1)
     return bool(2.0 * float(min(he[0], he[1])) > max_width_m - 0.004)
+
+
+def partly_seen_rim_graspable(category: str | None, shape: str | None, half_extents: Sequence[float], *,
+                              max_width_m: float = DEFAULT_MAX_GRASP_WIDTH_M) -> bool:
+    """Whether an open container seen only in part is still taken by its rim: its category is
+    one of :data:`RIM_GRASP_CATEGORIES` and its perceived box (``shape`` box) is not round
+    (:func:`open_container` refuses it) but its long side is too wide to take across and it is
+    lower than 0.9 times that side. A bowl in LIBERO's open drawer or on the cabinet's top, its
+    far side hidden by the drawer's front or the cabinet's edge, is seen 11.3 cm long and 8-9 cm
+    across: the long side is the rim's diameter, the short side is cut (``half_extents`` (3,)
+    m). Such a rim is taken only near the ends of its long side
+    (:func:`near_long_axis`), where a centre misplaced across it moves the rim point along
+    the wall, not through it."""
+    he = np.asarray(half_extents, dtype=float).reshape(-1)
+    if he.shape != (3,) or not np.all(np.isfinite(he)) or shape != "box":
+        return False
+    if not (_category_words(category) & set(RIM_GRASP_CATEGORIES)) or open_container(category, shape, he):
+        return False
+    hi = float(max(he[0], he[1]))
+    return bool(2.0 * hi > max_width_m - 0.004 and 2.0 * he[2] < 0.9 * 2.0 * hi)
+
+
+#: Rim points of a partly seen container (:func:`partly_seen_rim_graspable`) lie within this
+#: angle of the ends of its perceived long side, rad: a centre off by e across it puts such a
+#: point at most e sin(35 deg) = 0.57 e off the wall radially (a 1.5 cm cut: 9 mm, inside the
+#: open fingers' reach either side of the wall).
+PARTLY_SEEN_RIM_ANGLE_RAD = float(np.radians(35.0))
+
+
+def near_long_axis(plans: Sequence[GraspPlan], T_object: np.ndarray, *,
+                   max_angle_rad: float = PARTLY_SEEN_RIM_ANGLE_RAD) -> tuple[GraspPlan, ...]:
+    """The rim ``plans`` whose rim point (the grasp's tcp) lies within ``max_angle_rad`` of
+    either end of the footprint's long side (the x axis of ``T_object``, (4, 4) world pose of
+    the perceived box whose ``hx >= hy``), in their order."""
+    c = np.asarray(T_object, dtype=float)[:2, 3]
+    ax = np.asarray(T_object, dtype=float)[:2, 0]
+    ax = ax / max(float(np.linalg.norm(ax)), 1e-9)
+    out = []
+    for plan in plans:
+        d = np.asarray(plan.grasp, dtype=float)[:2, 3] - c
+        n = float(np.linalg.norm(d))
+        if n > 1e-9 and abs(float(d @ ax)) / n >= np.cos(max_angle_rad):
+            out.append(plan)
+    return tuple(out)
 
 
 def rim_grasp_candidates(

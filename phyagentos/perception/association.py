@@ -220,6 +220,17 @@ def _off_table(det: Detection, config: PerceptionConfig) -> bool:
     return max(float(det.bottom_m), float(det.low_m)) >= config.association.off_table_m
 
 
+def part_landmark(of: str, part: str | None) -> str | None:
+    """The landmark name of a drawer named as the part of a fixture (``of``
+    ``wooden_cabinet_1``, ``part`` ``top drawer`` -> ``wooden_cabinet_1_top_drawer``, the
+    perceiver's entity of that drawer, whose inside is its landmark while it stands open), or
+    ``None`` when ``part`` names no drawer (the reference is to the whole landmark)."""
+    words = (part or "").split()
+    if len(words) != 2 or words[1] != "drawer":
+        return None
+    return f"{of}_{words[0]}_drawer"
+
+
 def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detections: Sequence[Detection],
                       landmarks: Mapping[str, Landmark], config: PerceptionConfig, *,
                       look_alikes: int = 1, table_centre_xy: np.ndarray | None = None) -> ReferenceResolution:
@@ -242,7 +253,9 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
     footprint radius; ``table_center`` -- the smallest distance to ``table_centre_xy``; each
     picks the best candidate when the runner-up scores at least ``relation_margin_m`` worse.
     ``on``/``in`` a perceived landmark: the one candidate over its footprint (raised off the
-    table, for ``on``); a landmark not perceived (a fixture without a look, or one not seen):
+    table, for ``on``); ``in`` a drawer of it (``part`` ``top drawer``: :func:`part_landmark`):
+    the one candidate off the table over the inside of that drawer, which must be seen
+    standing open (a landmark the perceiver adds for each open drawer); a landmark not perceived (a fixture without a look, or one not seen):
     the one candidate off the table (bottom at least ``off_table_m`` above it) and resting on
     no other perceived landmark (a bowl on the cabinet is not on the stove) while the others
     rest on the table -- being on or in something other than the table is what perception
@@ -294,8 +307,18 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
                                    f"{rel}: scores {ranked[0][1]:.3f} m"
                                    + (f", runner-up {ranked[1][1]:.3f} m" if len(ranked) > 1 else ""), table)
     # on / in
-    lm_seen = landmarks.get(ref.of[0])
     off = {i: _off_table(detections[i], config) for i in cands}
+    drawer = part_landmark(ref.of[0], ref.part)
+    if drawer is not None:  # "in the top drawer of the cabinet": inside that drawer, standing open, only
+        inside = landmarks.get(drawer)
+        if inside is None:
+            return unresolved(f"{rel}: the {ref.part} of {ref.of[0]} is not seen open")
+        ok = [i for i in cands if _over(detections[i], inside) and off[i]]
+        table = tuple((i, 0.0 if i in ok else 1.0) for i in cands)
+        if len(ok) != 1:
+            return unresolved(f"{rel}: {len(ok)} candidates inside {drawer}", table)
+        return ReferenceResolution(desc.name, rel, ok[0], f"{rel}: the one candidate inside {drawer}", table)
+    lm_seen = landmarks.get(ref.of[0])
     if lm_seen is not None:
         ok = [i for i in cands if _over(detections[i], lm_seen) and (rel == "in" or off[i])]
         how = f"over {lm_seen.name}'s footprint" + (" and off the table" if rel == "on" else "")

@@ -47,7 +47,8 @@ class SpatialReference:
             the table when the landmark is not perceived), ``table_center`` (nearest the centre
             of the perceived table top; no landmark).
         of: the landmarks' declared names (objects or fixtures), as many as the relation takes.
-        part: the part of the landmark meant (``top drawer``), informative only.
+        part: the part of the landmark meant (``top drawer``): a drawer narrows ``in`` to that
+            drawer's inside (:func:`~.association.part_landmark`); other parts are informative.
 
     Raises:
         PerceptionError: an unknown relation (the valid ones listed), the wrong number of

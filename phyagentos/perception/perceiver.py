@@ -179,6 +179,12 @@ DRAWER_APPROACH_PITCH_RAD = math.radians(10.0)
 DRAWER_FRONT_M = 0.045
 DRAWER_WALL_M = 0.02
 DRAWER_FLOOR_M = 0.025
+#: The body's front stands this far behind a drawer's shut handle centre, m (LIBERO's cabinet: the
+#: handle 2.4 cm proud of the front, :data:`~phyagentos.perception.fixtures.DRAWER_FRONT_BEHIND_M`).
+DRAWER_CARCASS_M = 0.024
+#: A drawer standing this far out (m) or more has a floor things rest on (a support for
+#: stacking, :meth:`Perceiver._drawer_floor`): LIBERO's drawers open 16 cm; a bowl takes 11.
+DRAWER_OPEN_SUPPORT_M = 0.03
 
 
 def _quat_yaw(yaw: float) -> list[float]:
@@ -663,11 +669,19 @@ class Perceiver:
                 axis = look.knob.axis_xy(s.position[:2], s.turn)
                 own |= ((np.linalg.norm(p[:, :2] - axis, axis=1) <= KNOB_RADIUS_M)
                         & (heights <= look.knob.top_m + FIXTURE_MARGIN_M))
+            in_drawer = np.zeros(len(cloud), dtype=bool)
             for drawer in look.drawers:  # read in every observation; what stands out of the body is the fixture's
                 reading = drawer_reading(p, heights, drawer, s.position[:2], s.turn)
                 if reading is not None:
                     self.drawer_readings[(look.name, drawer.name)] = reading
-                    own |= self._drawer_points(p, heights, drawer, s, reading[0])
+                    walls = self._drawer_points(p, heights, drawer, s, reading[0])
+                    own |= walls
+                    if reading[0] >= DRAWER_OPEN_SUPPORT_M:  # what stands in it rests on its floor, and is not the body's
+                        mid, half, yaw = self._drawer_floor(drawer, s, reading[0])
+                        pos = np.array([mid[0], mid[1], plane.z_at(mid) + half[2]])
+                        dets.append(Detection(pos, yaw, half, "box", np.zeros(3), np.zeros(3), 0, 0, DRAWER_SIGMA_M,
+                                              math.pi, 1.0, 0.0))
+                        in_drawer |= self._drawer_inside(p, heights, drawer, s, reading[0]) & ~walls
             local = _in_frame(p[:, :2], s.position[:2], s.yaw)
             over = np.all(np.abs(local) <= s.half_extents[:2] + FIXTURE_EDGE_M, axis=1)
             keep |= over
@@ -675,7 +689,7 @@ class Perceiver:
             on_patch = np.all(np.abs(p[:, :2] - centre) <= half, axis=1)
             top = look.size_m[2]  # the model's top (the sighting's may include what stands on it)
             limit = np.where(on_patch, min(surface, top), top) + FIXTURE_MARGIN_M
-            own |= over & (heights <= limit)
+            own |= over & (heights <= limit) & ~in_drawer
             hz = max(0.5 * surface, 1e-3)
             pos = np.array([centre[0], centre[1], plane.z_at(centre) + hz])
             dets.append(Detection(pos, 0.0, np.array([half[0], half[1], hz]), "box", np.zeros(3), np.zeros(3), 0, 0,
@@ -704,6 +718,47 @@ class Perceiver:
         walls = ((along >= face - DRAWER_FRONT_M) | (np.abs(across) >= drawer.half_width_m - DRAWER_WALL_M)
                  | (heights <= drawer.height_m - DRAWER_FLOOR_M))
         return box & walls
+
+    @staticmethod
+    def _drawer_inside(p: np.ndarray, heights: np.ndarray, drawer: DrawerLook, s: FixtureSighting,
+                       opening: float) -> np.ndarray:
+        """(N,) bool: the points of ``p`` (N, 3) world m (``heights`` (N,) m above the support)
+        over the part of ``drawer`` (of sighting ``s``, ``opening`` m out) that stands out of
+        the body: between its side walls, from the body's front (:data:`DRAWER_CARCASS_M`
+        behind the shut handle's centre) to its front wall, above its floor and under the
+        fixture's top plus :data:`FIXTURE_MARGIN_M`. The body's footprint is measured with the
+        drawers shut and reaches past the body's front to the handles; a bowl at the back of
+        an open drawer stands in that margin and is no part of the body."""
+        c0, u, v = drawer.frame(s.position[:2], s.turn)
+        rel = p[:, :2] - c0
+        along, across = rel @ u, rel @ v
+        return ((np.abs(across) <= drawer.half_width_m - DRAWER_WALL_M)
+                & (along >= -DRAWER_CARCASS_M) & (along <= opening + drawer.face_m - DRAWER_FRONT_M)
+                & (heights > drawer.height_m - DRAWER_FLOOR_M))
+
+    @staticmethod
+    def _drawer_floor(drawer: DrawerLook, s: FixtureSighting, opening: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """The floor of ``drawer`` (of sighting ``s``) standing ``opening`` m out as a box
+        ``(centre (2,) world m, half extents (3,) m, yaw rad)`` whose top is the floor
+        (:data:`DRAWER_FLOOR_M` below the handle's centre, m above the support): across the
+        drawer between its side walls (:data:`DRAWER_WALL_M`) and along its axis from behind its
+        front (:data:`DRAWER_FRONT_M` inward from the handle's face) back to the body's back face
+        (``back_m`` behind the body's centre, shut). A pseudo-detection for stacking (a bowl in
+        an open drawer rests on its floor, not on the table under it: its box would reach down
+        to the table and look like nothing declared) and the landmark of "in the top drawer"."""
+        c0, u, v = drawer.frame(s.position[:2], s.turn)
+        front = opening + drawer.face_m - DRAWER_FRONT_M
+        back = float((np.asarray(s.position[:2]) - c0) @ u) - drawer.back_m + opening
+        mid = c0 + u * 0.5 * (front + back)
+        half_along = max(0.5 * (front - back), 0.005)
+        half_across = max(drawer.half_width_m - DRAWER_WALL_M, 0.005)
+        floor = max(drawer.height_m - DRAWER_FLOOR_M, 2e-3)
+        yaw = math.atan2(float(u[1]), float(u[0]))
+        if half_along >= half_across:
+            half = np.array([half_along, half_across, 0.5 * floor])
+        else:  # the footprint's long side is its x axis
+            half, yaw = np.array([half_across, half_along, 0.5 * floor]), yaw + 0.5 * math.pi
+        return mid, half, (yaw + 0.5 * math.pi) % math.pi - 0.5 * math.pi
 
     def _drawer_entities(self, look: FixtureLook, plane: Plane, stamp: float) -> list[dict]:
         """One ``kind: articulation`` entity per drawer of ``look`` whose handle was read in this
@@ -823,6 +878,13 @@ class Perceiver:
                 top = look.place_height_m if look.place_height_m is not None else look.size_m[2]
                 landmarks[look.name] = Landmark(look.name, s.position, np.array([s.half_extents[0], s.half_extents[1],
                                                                                   0.5 * top]), s.yaw, "box", 0.0)
+                for drawer in look.drawers:  # an open drawer's inside, for "in the top drawer of the cabinet"
+                    reading = self.drawer_readings.get((look.name, drawer.name))
+                    if reading is not None and reading[0] >= DRAWER_OPEN_SUPPORT_M:
+                        mid, half, yaw = self._drawer_floor(drawer, s, reading[0])
+                        name = drawer_entity_name(look.name, drawer.name)
+                        landmarks[name] = Landmark(name, np.array([mid[0], mid[1], s.position[2]]), half, yaw, "box",
+                                                   0.0)
         chosen: set[int] = set()
         for j in pending:
             desc = self.declared[j]

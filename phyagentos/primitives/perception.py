@@ -18,7 +18,13 @@ from phyagentos.motion.grasp import (
     place_pose,
     top_down_grasp_candidates,
 )
-from phyagentos.motion.rim_grasp import DEFAULT_RIM_WALL_M, rim_grasp_candidates, rim_graspable
+from phyagentos.motion.rim_grasp import (
+    DEFAULT_RIM_WALL_M,
+    near_long_axis,
+    partly_seen_rim_graspable,
+    rim_grasp_candidates,
+    rim_graspable,
+)
 from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
@@ -120,6 +126,11 @@ class Observe(Primitive):
 #: skill's approach height (the recovery ``another_approach`` asks for 0.15 m against the
 #: default 0.10 m: the same move, without spending a session on the failure).
 HIGHER_APPROACH_M = 0.05
+#: Lower pre-grasp heights (m above the grasp) a rim grasp tries, in order, when from the skill's
+#: approach height no rim point is usable and some were refused only because their pre-grasp is
+#: out of the arm's reach (a bowl in LIBERO's open top drawer, 0.8 m from the base: the pre-grasp
+#: 10 cm above its rim is past the Panda's reach while the grasp is not).
+LOWER_APPROACH_M = (0.06, 0.04)
 #: How far (m) an across grasp whose fingertips would enter the support is raised, in these
 #: steps, while the finger pads still reach :data:`MIN_PAD_OVERLAP_M` down the object's side.
 #: The support a camera sees need not be where things rest: LIBERO-90's living-room table is
@@ -189,7 +200,11 @@ class ComputeGrasp(Primitive):
     first, those whose open outer finger would come down on another perceived object last,
     and only those whose grasp and pre-grasp the arm reaches (IK from the current joints)
     are kept. The close then expects the wall's thickness between the fingers, not the
-    bowl's diameter.
+    bowl's diameter. A container seen only in part (a box whose long side is the rim's
+    diameter, its far side hidden: :func:`~phyagentos.motion.rim_grasp.partly_seen_rim_graspable`)
+    is taken by its rim too, at points near the ends of the long side only. When no rim point
+    is usable from ``approach_height_m`` and some pre-grasps were out of reach while their
+    grasps are not, the pre-grasp is tried lower (:data:`LOWER_APPROACH_M`).
 
     Args:
         object: entity name.
@@ -235,6 +250,12 @@ class ComputeGrasp(Primitive):
         extra = {}
         if rim_graspable(category, shape, half, max_width_m=max_width):
             plan, extra = self._rim_plan(snapshot, T_obj, half, max_width)
+        elif partly_seen_rim_graspable(category, shape, half, max_width_m=max_width):
+            # seen in part (its far side hidden): the long side is the rim's diameter
+            hi = float(max(half[0], half[1]))
+            plan, extra = self._rim_plan(snapshot, T_obj, np.array([hi, hi, float(half[2])]), max_width,
+                                         long_axis=True)
+            extra["partly_seen"] = True
         else:
             plan, extra = self._across_plan(T_obj, half, shape if shape in ("box", "cylinder", "sphere") else "box",
                                             max_width)
@@ -308,7 +329,21 @@ class ComputeGrasp(Primitive):
                 return raised, dz, None
         return plan, 0.0, why
 
-    def _rim_plan(self, snapshot: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float):
+    def _reaches(self, pose: np.ndarray) -> bool:
+        """Whether the arm has an IK solution clear of the scene for the (4, 4) world tcp
+        ``pose`` alone (touching the object being grasped allowed)."""
+        try:
+            own = self.ctx.target.object_body(self.object)
+        except Exception:  # noqa: BLE001 - a target without object bodies
+            own = None
+        try:
+            _, pairs, _ = clear_ik(self.ctx, pose, allow=own, margin_m=0.0)
+        except IKError:
+            return False
+        return not pairs
+
+    def _rim_plan(self, snapshot: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float, *,
+                  long_axis: bool = False):
         """The rim grasp (candidate ``self.candidate`` among the usable ones) and the trace
         fields that say so.
 
@@ -319,7 +354,9 @@ class ComputeGrasp(Primitive):
         base as the preferred side (the shorter reach; the base does not move, so the
         ranking is the same before and after the move to the pre-grasp). Re-computed with
         a pre-grasp already chosen (``RecomputeGrasp`` after a re-observation), the usable
-        point nearest that pre-grasp is kept: the refinement never switches sides.
+        point nearest that pre-grasp is kept, from that pre-grasp's height: the refinement
+        never switches sides. ``long_axis``: only the points near the ends of the perceived
+        box's long side (a container seen in part, ``half`` already made round).
         """
         target = self.ctx.target
         wall = self.rim_wall_m
@@ -338,30 +375,51 @@ class ComputeGrasp(Primitive):
             others.append((p[:2], float(max(size[0], size[1])), float(p[2] + size[2])))
         model = target.model
         base = target.data.xpos[model.jnt_bodyid[model.joint(target.arm_joint_names[0]).id]][:2].copy()
-        plans = rim_grasp_candidates(T_obj, half, wall_m=wall, approach_height_m=self.approach_height_m,
-                                     current_yaw_rad=hand_yaw(T_tcp),
-                                     current_q7_rad=float(q[6]) if q.shape == (7,) else None,
-                                     prefer_xy=base, max_width_m=max_width, keep_clear=others)
         try:
             previous = np.asarray(self.get(self.pregrasp_key), dtype=float)
         except PrimitiveFailure:
             previous = None
-        if previous is not None and previous.shape == (4, 4):
-            plans = tuple(sorted(plans, key=lambda pl: float(np.linalg.norm(pl.pregrasp[:3, 3] - previous[:3, 3]))))
+        if previous is not None and previous.shape != (4, 4):
+            previous = None
         want = 0 if previous is not None else self.candidate
+
+        def candidates(height: float):
+            plans = rim_grasp_candidates(T_obj, half, wall_m=wall, approach_height_m=height,
+                                         current_yaw_rad=hand_yaw(T_tcp),
+                                         current_q7_rad=float(q[6]) if q.shape == (7,) else None,
+                                         prefer_xy=base, max_width_m=max_width, keep_clear=others)
+            return near_long_axis(plans, T_obj) if long_axis else plans
+
+        # from the skill's approach height; where only pre-grasps were out of reach, lower ones;
+        # re-computed, from the height of the pre-grasp the arm went to
+        if previous is not None:
+            rim_z = float(candidates(self.approach_height_m)[0].grasp[2, 3])
+            heights = [max(min(LOWER_APPROACH_M), float(previous[2, 3]) - rim_z)]
+        else:
+            heights = [self.approach_height_m, *(h for h in LOWER_APPROACH_M if h < self.approach_height_m)]
         usable, why = [], []
-        for i, plan in enumerate(plans):
-            bad = _unusable(self.ctx, self.object, plan)
-            if bad is not None:
-                why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad): {bad[:160]}")
-                continue
-            usable.append((i, plan))
-            if len(usable) > want:
+        for height in heights:
+            plans = candidates(height)
+            if previous is not None:
+                plans = tuple(sorted(plans, key=lambda pl: float(np.linalg.norm(pl.pregrasp[:3, 3] - previous[:3, 3]))))
+            out_of_reach = False
+            for i, plan in enumerate(plans):
+                bad = _unusable(self.ctx, self.object, plan)
+                if bad is not None:
+                    out_of_reach |= bad.stage == "pre-grasp" and not bad.collides and self._reaches(plan.grasp)
+                    why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad) from {height:.2f} m: {bad[:160]}")
+                    continue
+                usable.append((i, plan))
+                if len(usable) > want:
+                    break
+            if usable or not out_of_reach:
                 break
         if not usable:
             raise IKError(f"no rim grasp of {self.object!r} is reachable: " + "; ".join(why))
         i, plan = usable[want % len(usable)]
-        return plan, {"grasp_kind": "rim", "rim_point": i, "wall_m": round(wall, 4), "rim_points_refused": len(why)}
+        low = {"approach_height_m": round(height, 3)} if abs(height - self.approach_height_m) > 1e-6 else {}
+        return plan, {"grasp_kind": "rim", "rim_point": i, "wall_m": round(wall, 4), "rim_points_refused": len(why),
+                      **low}
 
 
 def place_yaws(current_rad: float) -> list[float]:

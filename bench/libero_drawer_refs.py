@@ -27,7 +27,7 @@ import numpy as np
 from _harness import index_range, parser, write_json
 
 from phyagentos.bench.libero import _descriptors, _fixture_looks, instruction_plan
-from phyagentos.primitives.observation import make_perceiver, perceive_now
+from phyagentos.primitives.observation import make_perceiver, perceive_now, robot_capsules
 from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task
 from phyagentos.targets.libero.descriptors import _free_adr, object_boxes
 
@@ -54,14 +54,17 @@ def _record(path: Path, target, declared: dict, truth: dict) -> None:
     arrays = {}
     for k, f in enumerate(frames):
         i = f.intrinsics
-        arrays[f"rgb{k}"], arrays[f"depth{k}"] = f.rgb, f.depth_m.astype(np.float32)
+        # depth in 0.1 mm steps (uint16: up to 6.5 m), as the test reads it back
+        arrays[f"rgb{k}"], arrays[f"depth{k}"] = f.rgb, np.round(f.depth_m * 1e4).clip(0, 65535).astype(np.uint16)
         arrays[f"T{k}"] = f.T_world_camera
         arrays[f"K{k}"] = np.array([i.width, i.height, i.fx, i.fy, i.cx, i.cy])
     meta = {"sensors": [f.sensor for f in frames], "frame_ids": [f.frame_id for f in frames],
             "stamp_s": frames[0].stamp_s, "joint_names": list(pr.joint_names),
             "joint_positions": pr.joint_positions.tolist(), "gripper_opening_m": pr.gripper_opening_m,
             "tcp_pose": pr.tcp_pose.tolist(), "declared": declared, "truth": truth,
-            "table_z": float(target._support_top_z())}
+            "table_z": float(target._support_top_z()),
+            "perception_config": target.perception_config().model_dump(mode="json"),
+            "robot_capsules": [[list(c.p0), list(c.p1), c.radius_m] for c in robot_capsules(target)]}
     np.savez_compressed(path, meta=json.dumps(meta), **arrays)
 
 

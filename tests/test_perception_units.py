@@ -316,3 +316,35 @@ def test_a_track_is_remembered_only_where_something_nearer_hides_it_and_no_camer
     assert _occluded_in(t, [face]) == () and _occluded_in(t, [behind]) == ()
     assert _occluded_in(t, [wall, behind]) == ()  # one camera sees the spot free: not remembered
     assert _occluded_in(t, [away]) == ()  # out of every view: nothing to go on
+
+
+def _container_points(curve: float, seed: int = 0):
+    """Points (N, 2) and heights (N,) of a round container's inside (floor 1 cm up, rising
+    ``curve`` m per m^2 of squared radius, 5 cm radius) with an 8.5 x 4.5 cm box lying in it
+    whose top face stands at 4.8 cm (the face's mask returned too)."""
+    rng = np.random.default_rng(seed)
+    r = 0.05 * np.sqrt(rng.uniform(0, 1, 3000))
+    a = rng.uniform(0, 2 * np.pi, 3000)
+    xy = np.column_stack([r * np.cos(a), r * np.sin(a)])
+    h = 0.01 + curve * r ** 2
+    in_box = (np.abs(xy[:, 0]) <= 0.0425) & (np.abs(xy[:, 1]) <= 0.0225)
+    h[in_box] = 0.048 + rng.normal(0, 0.001, int(in_box.sum()))  # the box's top hides the floor under it
+    return xy, h, in_box
+
+
+def test_an_item_in_a_bowl_rests_up_its_curved_inside_and_on_a_baskets_flat_floor():
+    from phyagentos.perception.perceiver import _rest_height
+
+    # a bowl: the inside rises 1.8 cm from the centre to 4.8 cm out (8 m^-1), so the box's ends
+    # (4.8 cm from the centre at its corners) rest about 1.8 cm above the lowest floor point
+    xy, h, face = _container_points(8.0)
+    rest = _rest_height(xy, h, np.ones(len(h), bool), face, np.zeros(2), float(np.percentile(h, 5)), 0.048)
+    corner2 = 0.0425 ** 2 + 0.0225 ** 2
+    assert 0.018 < rest <= 0.01 + 8.0 * corner2 + 0.001  # up the slope, at most where its corners are
+    assert 0.048 - rest - 0.02 < 0.006  # the box's 2 cm height, 4 mm short at most (was 1.8 cm off the floor)
+    # a basket's flat floor: it rests on the floor
+    xy, h, face = _container_points(0.0)
+    floor = float(np.percentile(h, 5))
+    assert _rest_height(xy, h, np.ones(len(h), bool), face, np.zeros(2), floor, 0.048) == pytest.approx(0.01, abs=0.002)
+    # nothing of the inside seen beside the item: the floor
+    assert _rest_height(xy, h, face.copy(), face, np.zeros(2), floor, 0.048) == floor

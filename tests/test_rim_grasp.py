@@ -20,7 +20,10 @@ from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, PAD_DEPTH_ABOVE_TCP_M
 from phyagentos.motion.rim_grasp import (
     DEFAULT_RIM_WALL_M,
     RIM_GRIP_DEPTH_M,
+    PARTLY_SEEN_RIM_ANGLE_RAD,
+    near_long_axis,
     open_container,
+    partly_seen_rim_graspable,
     rim_grasp_candidates,
     rim_graspable,
 )
@@ -308,3 +311,47 @@ def test_ik_whose_solution_collides_tries_the_ready_configuration_and_a_swung_el
     far[:3, 3] = (3.0, 0.0, 0.2)
     with pytest.raises(IKError):
         motion.clear_ik(ctx, far)
+
+
+def test_a_partly_seen_bowl_is_rim_graspable_but_a_cut_box_or_a_narrow_one_is_not():
+    # LIBERO's bowl in the open drawer, its far side behind the drawer's front: 11.3 x 8.1 cm
+    assert partly_seen_rim_graspable("akita_black_bowl", "box", (0.0567, 0.0405, 0.025))
+    assert not rim_graspable("akita_black_bowl", "box", (0.0567, 0.0405, 0.025))  # not round: the plain rule refuses
+    assert not partly_seen_rim_graspable("akita_black_bowl", "cylinder", HALF)  # round: the plain rule takes it
+    assert not partly_seen_rim_graspable("cookies", "box", (0.0567, 0.0405, 0.025))  # no container
+    assert not partly_seen_rim_graspable("bowl", "box", (0.035, 0.02, 0.02))  # narrow enough to take across
+    assert not partly_seen_rim_graspable("bowl", "box", (0.06, 0.03, 0.07))  # taller than wide: no dish
+
+
+def test_only_rim_points_near_the_ends_of_the_long_side_are_kept():
+    T = bowl_at(0.5, 0.1)
+    T[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # the long side along world y
+    plans = rim_grasp_candidates(T, HALF)
+    kept = near_long_axis(plans, T)
+    assert 0 < len(kept) < len(plans)
+    for plan in kept:
+        d = plan.grasp[:2, 3] - T[:2, 3]
+        assert abs(d[1]) / np.linalg.norm(d) >= math.cos(PARTLY_SEEN_RIM_ANGLE_RAD) - 1e-9
+
+
+def test_compute_grasp_takes_a_partly_seen_bowl_by_its_rim_near_its_long_side(franka):
+    ent = _entity("bowl_1", "akita_black_bowl", "box", (0.0567, 0.0405, 0.025))
+    board, records = _run_compute_grasp(franka, ent)
+    [rec] = records
+    assert rec["grasp_kind"] == "rim" and rec["partly_seen"] is True
+    d = board["grasp_pose"][:2, 3] - np.array([0.45, -0.25])
+    assert abs(d[0]) / np.linalg.norm(d) >= math.cos(PARTLY_SEEN_RIM_ANGLE_RAD) - 1e-9  # the box's long side is x
+    assert float(np.linalg.norm(d)) == pytest.approx(0.0567 - DEFAULT_RIM_WALL_M / 2, abs=1e-6)
+
+
+def test_a_pre_grasp_out_of_reach_is_tried_lower_when_the_grasp_is_in_reach(franka):
+    """A bowl raised 0.45 m (a high shelf, a top drawer) at 0.72 m: from 10 cm above its rim
+    no pre-grasp is reachable, from 4 cm one is."""
+    ent = _entity("bowl_1", "akita_black_bowl", "cylinder", HALF, xy=(0.72, 0.0))
+    ent["position"][2] = 0.45
+    board, records = _run_compute_grasp(franka, ent)
+    [rec] = records
+    # every one of the 16 rim points was refused from 10 cm before a lower pre-grasp was tried
+    assert rec["approach_height_m"] in (0.06, 0.04) and rec["rim_points_refused"] >= 16
+    G, P = board["grasp_pose"], board["pregrasp_pose"]
+    assert P[2, 3] - G[2, 3] == pytest.approx(rec["approach_height_m"], abs=1e-6)

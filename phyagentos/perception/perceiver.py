@@ -131,6 +131,12 @@ CONTENT_CLEARANCE_M = 0.015
 #: Spread of a contained object's top above the floor about its perceived height, m: the
 #: lining's folds (about 1 cm) and the height perceived on the open table (within ~1 cm).
 CONTENT_HEIGHT_SIGMA_M = 0.015
+#: Interior points of a container (beside what lies in it) needed to read its inside where an
+#: object's ends rest (:func:`_rest_height`); with fewer, it is taken to rest on the floor.
+REST_FIT_MIN_POINTS = 20
+#: Half the width of the ring of the inside read there, m, and the height percentile read.
+REST_RING_M = 0.01
+REST_RING_PERCENTILE = 25.0
 #: The least look confidence that the hand's release point may corroborate
 #: (:func:`_corroborated`): a segment that hardly looks like the object is not made it. A can
 #: or a bottle let go into LIBERO-90's basket shows only its top between the walls and matched
@@ -1250,7 +1256,8 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
     5 mm height bin more than :data:`CONTENT_CLEARANCE_M` above the floor. The object is seen
     there when that top stands the object's perceived height above the floor (within 2 cm),
     is flat (height RMS <= 7 mm) and spans at least 60 % of the object's short side both
-    ways: a lining fold or a wall's rim fails one of these. Confidence exp(-err^2 / 2
+    ways: a lining fold or a wall's rim fails one of these. "Above the floor" is above where it
+    rests (:func:`_rest_height`): the floor of a basket, higher up the curved inside of a bowl. Confidence exp(-err^2 / 2
     :data:`CONTENT_HEIGHT_SIGMA_M`^2) x (1 - exp(-points / 30)).
 
     Returns ``(container index, centre (3,), confidence, points, cameras)`` or None.
@@ -1290,7 +1297,8 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
             (_, _), (width, length), _ = cv2.minAreaRect(cloud.points[idx[face], :2].astype(np.float32))
             log.debug("released %s in segment %d: floor %.3f top %.3f (height %.3f) face std %.4f, %d points, "
                       "span %.3f x %.3f m", t.name, k, floor, top, height, float(np.std(h[face])), int(face.sum()), width, length)
-            if top - floor < CONTENT_CLEARANCE_M or abs(top - floor - height) > 0.02:
+            rest = _rest_height(cloud.points[idx, :2], h, interior, face, det.position[:2], floor, top)
+            if top - floor < CONTENT_CLEARANCE_M or abs(top - rest - height) > 0.02:
                 continue
             if float(np.std(h[face])) > 0.007:
                 continue
@@ -1298,13 +1306,43 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
             if min(width, length) < 0.6 * short_obj:
                 continue
             n = int(face.sum())
-            err = abs(top - floor - height)
+            err = abs(top - rest - height)
             conf = math.exp(-0.5 * (err / CONTENT_HEIGHT_SIGMA_M) ** 2) * (1.0 - math.exp(-n / 30.0))
             pos = np.array([centre[0], centre[1], 0.0])
             pos[2] = float(np.median(cloud.points[idx[face], 2] - h[face])) + floor + t.half_extents[2]  # on the floor
             cams = tuple(sensors[int(i)] for i in np.unique(cloud.camera[idx[face]]))
             return k, pos, conf, n, cams
     return None
+
+def _rest_height(xy: np.ndarray, h: np.ndarray, interior: np.ndarray, face: np.ndarray, centre_xy: np.ndarray,
+                 floor: float, top: float) -> float:
+    """The height (m above the support plane) at which an object whose top face is ``face``
+    rests inside a container: its floor where the floor is flat (a basket), higher where the
+    inside curves up (a bowl: an 8.5 cm cream cheese box in LIBERO's 11 cm akita bowl rests on
+    the sloped walls, 1.8 cm above the lowest floor point).
+
+    The object's bottom touches the inside at its top face's corner farthest from the
+    container's centre ``centre_xy`` (2,) world m, at distance ``r``. The inside there is the
+    :data:`REST_RING_PERCENTILE` th height percentile (the object's own sides, seen beside its
+    top face, stand above the inside: the lower part of the ring is the inside) of the
+    container's interior points (``interior`` (N,) bool over ``xy`` (N, 2)
+    world m and ``h`` (N,) m) within :data:`REST_RING_M` of that distance from the centre that
+    are not the object's (lower than ``top`` - 1 cm and outside its top face's rectangle grown
+    by 1 cm): a ring the object's ends stand on, beside it. ``floor``: the interior's 5th height
+    percentile, returned when fewer than :data:`REST_FIT_MIN_POINTS` such points are seen or
+    the ring lies lower."""
+    rect = cv2.minAreaRect(xy[face].astype(np.float32))
+    corners = cv2.boxPoints(rect).astype(float)
+    grown = cv2.boxPoints((rect[0], (rect[1][0] + 0.02, rect[1][1] + 0.02), rect[2])).astype(np.float32)
+    inner = np.flatnonzero(interior & (h < top - 0.01))
+    own = np.array([cv2.pointPolygonTest(grown, (float(x), float(y)), False) >= 0 for x, y in xy[inner]], bool)
+    keep = inner[~own] if own.size else inner
+    r_end = float(np.sqrt(np.max(np.sum((corners - centre_xy) ** 2, axis=1))))
+    ring = keep[np.abs(np.linalg.norm(xy[keep] - centre_xy, axis=1) - r_end) <= REST_RING_M]
+    if ring.size < REST_FIT_MIN_POINTS:
+        return floor
+    return max(floor, float(np.percentile(h[ring], REST_RING_PERCENTILE)))
+
 
 def _occluded_in(t: Track, frames: Sequence[CameraFrame]) -> tuple[str, ...]:
     """Cameras in which something nearer hides the centre of track ``t``; empty when any

@@ -200,6 +200,7 @@ def test_compute_grasp_takes_a_bowl_by_its_rim_and_the_close_expects_the_wall(fr
     assert abs(_wrap(hand_yaw(G) - hand_yaw(franka.tcp_pose()))) < 1e-6
     planned = franka.runtime_notes["planned_grasp"]
     assert planned == {"object": "bowl_1", "width_m": DEFAULT_RIM_WALL_M, "kind": "rim"}
+    assert board["look_closer"] is False  # seen whole: no second look asked for
     # a skill parameter overrides the assumed wall
     _run_compute_grasp(franka, ent, rim_wall_m=0.005)
     assert franka.runtime_notes["planned_grasp"]["width_m"] == 0.005
@@ -339,6 +340,7 @@ def test_compute_grasp_takes_a_partly_seen_bowl_by_its_rim_near_its_long_side(fr
     board, records = _run_compute_grasp(franka, ent)
     [rec] = records
     assert rec["grasp_kind"] == "rim" and rec["partly_seen"] is True
+    assert board["look_closer"] is True  # the pick looks again from its pre-grasp (Observe or_if)
     d = board["grasp_pose"][:2, 3] - np.array([0.45, -0.25])
     assert abs(d[0]) / np.linalg.norm(d) >= math.cos(PARTLY_SEEN_RIM_ANGLE_RAD) - 1e-9  # the box's long side is x
     assert float(np.linalg.norm(d)) == pytest.approx(0.0567 - DEFAULT_RIM_WALL_M / 2, abs=1e-6)

@@ -86,6 +86,10 @@ class Observe(Primitive):
         samples: observations fused (>= 1; each with fresh frames); 0 skips the
             observation and keeps what ``out`` holds (a tree can then offer a
             re-observation that a session switches on by parameter).
+        or_if: blackboard key of a flag (written earlier in the tree) that makes a skipped
+            observation (``samples`` 0) take one sample: ``ComputeGrasp``'s ``look_closer``,
+            raised when the object was seen only in part, so the pick looks again from its
+            pre-grasp, its wrist camera over the object. ``None``: ``samples`` alone decides.
 
     The trace records ``observe`` {leaf, samples, stamp_s, objects: {name: {position,
     confidence, position_std_m}}, unknown}: perceived objects only, never simulator truth.
@@ -93,15 +97,25 @@ class Observe(Primitive):
 
     TOOLS = ("snapshot",)
 
-    def __init__(self, name: str, *, out: str = "snapshot", samples: int = 1):
+    def __init__(self, name: str, *, out: str = "snapshot", samples: int = 1, or_if: str | None = None):
         super().__init__(name)
         if not isinstance(samples, int) or isinstance(samples, bool) or samples < 0:
             raise ValueError(f"samples must be an integer >= 0, got {samples!r}")
-        self.out, self.samples = out, samples
+        if or_if is not None and (not isinstance(or_if, str) or not or_if):
+            raise ValueError(f"or_if must be a blackboard key or null, got {or_if!r}")
+        self.out, self.samples, self.or_if = out, samples, or_if
         self.writes(out)
+        if or_if is not None:
+            self.reads(or_if)
 
     def step(self):
-        if self.samples == 0:
+        samples = self.samples
+        if samples == 0 and self.or_if is not None:
+            try:
+                samples = 1 if self.get(self.or_if) else 0
+            except PrimitiveFailure:  # never raised earlier in the tree: nothing asks for a look
+                samples = 0
+        if samples == 0:
             return
         ctx = self.ctx
         target = ctx.target
@@ -111,13 +125,13 @@ class Observe(Primitive):
                 ctx.perceiver = make_perceiver(target)
             ctx.observations += 1
             with ctx.profiler.section("perception"):
-                snapshot = perceive_now(target, ctx.perceiver, samples=self.samples, evidence_dir=ctx.evidence_dir,
+                snapshot = perceive_now(target, ctx.perceiver, samples=samples, evidence_dir=ctx.evidence_dir,
                                         evidence_rel=ctx.evidence_rel, tag=f"{ctx.observations:02d}_{self.name}")
         if snapshot is None:
-            snapshot = (target.perceive(samples=self.samples) if capabilities_of(target).has_sensor("perception")
+            snapshot = (target.perceive(samples=samples) if capabilities_of(target).has_sensor("perception")
                         else target.snapshot())
         self.set(self.out, snapshot)
-        self.ctx.trace.record("observe", leaf=self.name, samples=self.samples, **observe_record(snapshot))
+        self.ctx.trace.record("observe", leaf=self.name, samples=samples, **observe_record(snapshot))
         if self.ctx.on_observation is not None:
             self.ctx.on_observation(snapshot)
 
@@ -219,6 +233,9 @@ class ComputeGrasp(Primitive):
             :data:`~phyagentos.motion.rim_grasp.DEFAULT_RIM_WALL_M`.
         snapshot: blackboard key of the observation.
         grasp, pregrasp: blackboard keys written with (4, 4) world poses of the tcp.
+        look_closer: blackboard key written True when the object was seen only in part (the
+            rim of a partly seen container), else False: the pick's re-observation at the
+            pre-grasp (``Observe`` ``or_if``) then takes place.
 
     Raises (as failures): ``IKError`` when the object is too wide and no container, or no
     rim point is reachable (the message lists why for each).
@@ -226,7 +243,7 @@ class ComputeGrasp(Primitive):
 
     def __init__(self, name: str, *, object: str, approach_height_m: float = 0.10, candidate: int = 0,
                  rim_wall_m: float | None = None, snapshot: str = "snapshot", grasp: str = "grasp_pose",
-                 pregrasp: str = "pregrasp_pose"):
+                 pregrasp: str = "pregrasp_pose", look_closer: str = "look_closer"):
         super().__init__(name)
         if approach_height_m <= 0:
             raise ValueError(f"approach_height_m must be > 0, got {approach_height_m}")
@@ -237,8 +254,9 @@ class ComputeGrasp(Primitive):
         self.rim_wall_m = None if rim_wall_m is None else float(rim_wall_m)
         self.object, self.approach_height_m, self.candidate = object, float(approach_height_m), candidate
         self.snapshot_key, self.grasp_key, self.pregrasp_key = snapshot, grasp, pregrasp
+        self.look_closer_key = look_closer
         self.reads(snapshot)
-        self.writes(grasp, pregrasp)
+        self.writes(grasp, pregrasp, look_closer)
 
     def step(self):
         snapshot = self.get(self.snapshot_key)
@@ -262,6 +280,7 @@ class ComputeGrasp(Primitive):
         plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m, kind=extra.get("grasp_kind", "across"))
         self.set(self.grasp_key, plan.grasp)
         self.set(self.pregrasp_key, plan.pregrasp)
+        self.set(self.look_closer_key, bool(extra.get("partly_seen")))
         self.ctx.trace.record("grasp_pose", leaf=self.name, object=self.object, candidate=self.candidate,
                               observed_position=T_obj[:3, 3].round(4).tolist(), grasp=plan.grasp[:3, 3].round(4).tolist(),
                               yaw_rad=round(plan.yaw_rad, 4), **extra)

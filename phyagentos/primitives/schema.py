@@ -66,6 +66,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
     Observe: {
         "out": (*_KEY[:2], "blackboard key written with the snapshot"),
         "samples": ("int", "", "perception frames averaged (0 = skip the observation)"),
+        "or_if": (*_KEY[:2], "blackboard flag that makes a skipped observation take one sample (null: none)"),
     },
     ComputeGrasp: {
         "object": ("str", "", "scene object to grasp"),
@@ -75,6 +76,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
         "grasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp grasp pose"),
         "pregrasp": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-grasp pose"),
+        "look_closer": (*_KEY[:2], "blackboard flag written True when the object was seen only in part"),
     },
     ComputePlace: {
         "object": ("str", "", "the held object"),

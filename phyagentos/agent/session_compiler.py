@@ -52,7 +52,8 @@ class SessionCompiler:
     def compile_node(self, node: GoalNode, *, parent: SessionRecord | None = None,
                      parameters: dict[str, Any] | None = None, limits: dict[str, float] | None = None,
                      context: SessionContext | None = None, recovery: Revision | None = None,
-                     skill: str | None = None, target: str | None = None) -> SessionRecord:
+                     skill: str | None = None, target: str | None = None,
+                     runtime: str | None = None) -> SessionRecord:
         """Build and submit the session for ``node`` (a child of ``parent`` on replan).
 
         Args:
@@ -62,6 +63,9 @@ class SessionCompiler:
             recovery: the revision a replanned child runs with.
             skill: run this skill instead of the node's (``observe`` for another view).
             target: run on this target instead of the node's (a re-target revision).
+            runtime: run with this SkillRuntime instead of the node's (a revision that
+                switches to a skill of another runtime: a builtin re-grasp of a policy
+                node, another view of it).
 
         Raises:
             VerifierError: the node's acceptance criteria do not parse (checked
@@ -87,7 +91,7 @@ class SessionCompiler:
             parent_session_id=parent.session_id if parent else None,
             depends_on=list(node.depends_on),
             skill=skill or node.skill,
-            skill_runtime=node.runtime,
+            skill_runtime=runtime or node.runtime,
             target=target or node.target,
             parameters=dict(parameters if parameters is not None else node.params),
             accept=node.accept,

@@ -19,6 +19,7 @@ from phyagentos.protocol import SessionRecord
 from phyagentos.protocol.lifecycle import SessionLifecycle
 
 from .memory import LessonBook
+from .recovery import POLICY_STRATEGIES
 from .skill_catalog import skill_catalog
 
 if TYPE_CHECKING:
@@ -84,8 +85,11 @@ class Replanning:
             rec = ws.load_session(session_id)
             rec.child_session_ids.append(child.session_id)
             SessionLifecycle(rec, persist=ws.save_session).fire("replanned", reason=f"child {child.session_id}")
-        # another view only looks again (no correction to learn); a skill switch or re-target is one
-        if self.consolidate and revision is not None and verdict.diagnosis is not None and revision.skill != "observe":
+        # another view only looks again (no correction to learn); a skill switch or re-target is one.
+        # The policy ladder's variants answer what this episode left undone (a prompt for the steps
+        # that remain, a re-grasp of this object): no correction for another episode to learn either
+        if self.consolidate and revision is not None and verdict.diagnosis is not None and revision.skill != "observe" \
+                and revision.strategy not in POLICY_STRATEGIES:
             LessonBook(ws).propose(parent=acting, child=child, diagnosis=verdict.diagnosis, revision=revision,
                                    conditions=self._conditions(acting))
         return 1

@@ -12,12 +12,14 @@ import secrets
 from datetime import datetime, timezone
 from typing import Any
 
+from phyagentos.errors import VerifierError
 from phyagentos.protocol import Limits, Revision, SessionContext, SessionRecord, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 
 from .criteria import parse_criteria
 from .goal_graph import GoalGraph, GoalNode
 from .model_calls import with_calls
+from .recovery import RECOVERY_VARIANTS_PARAM, check_recovery_variants
 
 __all__ = ["SessionCompiler", "new_run_id"]
 
@@ -68,11 +70,18 @@ class SessionCompiler:
                 node, another view of it).
 
         Raises:
-            VerifierError: the node's acceptance criteria do not parse (checked
-                here so a bad criterion never reaches the runtime).
+            VerifierError: the node's acceptance criteria do not parse, or its
+                ``recovery_variants`` name no policy recovery variants (checked here so a
+                bad criterion never reaches the runtime, nor a bad ladder its verdict).
             ProtocolError: the submit path refused the record.
         """
         parse_criteria(node.accept, where=f"{self.graph.path}:{node.line} accept")
+        variants = (parameters if parameters is not None else node.params).get(RECOVERY_VARIANTS_PARAM)
+        if variants is not None:  # read by the policy ladder after a failed verdict: refused now, not then
+            try:
+                check_recovery_variants(variants)
+            except ValueError as exc:
+                raise VerifierError(f"{self.graph.path}:{node.line} params.{RECOVERY_VARIANTS_PARAM}: {exc}") from None
         if recovery is not None and context is not None and context.model_calls:
             # a child inherits its parent's context, but of the model calls only the plan's: the
             # parent's own attempt and revision calls stay the parent's

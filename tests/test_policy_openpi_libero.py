@@ -301,7 +301,10 @@ def test_a_libero_policy_node_runs_through_sessions_to_the_verifiers_verdict_wit
         report = run_goal_graph(graph, tmp_path / "ws", seed=0, use_memory=False, consolidate=False)
     assert not report.succeeded  # a fixed chunk does not pick the soup up
     sessions = report.sessions
-    assert sessions[0].verdict == "failure", report.to_dict()
+    # the policy ladder's first rung: the same prompt again, from the current state; the retry
+    # spends what is left of the budget, and its failure ends the ladder (a child would end at once)
+    assert [s.verdict for s in sessions] == ["replan", "failure"], report.to_dict()
+    assert sessions[1].strategy == "retry_from_current_state" and "no recovery strategy left" in sessions[1].reason
     ws = Workspace.open(tmp_path / "ws")
     steps = []
     for s in sessions:
@@ -312,7 +315,7 @@ def test_a_libero_policy_node_runs_through_sessions_to_the_verifiers_verdict_wit
         gt = yaml.safe_load((tmp_path / "ws" / rec.attempts[-1].evidence / "ground_truth.yaml").read_text())
         steps.append(gt["benchmark"]["control_steps"])
         assert gt["benchmark"]["success"] is False
-    # the first session ran its two chunks; every later one continued from that state and the
+    # the first session ran its two chunks; the retry continued from that state and the
     # episode never went past LIBERO's budget of 15 control steps
-    assert steps[0] == 10 and all(b >= a for a, b in zip(steps, steps[1:])) and max(steps) <= 15
-    assert len(policy.received) >= 2
+    assert steps == [10, 15]
+    assert len(policy.received) == 3 and {p["prompt"] for p in policy.received} == {language}

@@ -56,7 +56,43 @@ ik_unreachable,        none: the pose computed from the perceived object is out 
 safety_intervention,   reach (no other parameter brings it closer), a safety stop is
 runtime_error          never retried automatically, an error in the software is not
                        fixed by a different strategy
+any other cause, in a  the policy ladder (below): retry_from_current_state;
+prompt-driven policy   corrected_prompt (``prompt``: what the evidence leaves of the
+node's lineage         instruction); builtin_regrasp (skill ``pick``, runtime
+                       ``builtin``), then resume_after_regrasp (the policy, the
+                       remaining step's prompt). perception_unknown takes its
+                       another_view first; timeout, safety_intervention and
+                       runtime_error get nothing there
 =====================  ==========================================================
+
+**The policy ladder** (issue 29; docs/libero.md, "The policy flow"). A session whose
+skill's runtime is ``policy`` and that has a ``prompt`` (a vision-language-action policy:
+``libero_policy``) has no strategy parameters to revise; its lineage walks the paper's
+recovery variants instead, each once, in the order the node's ``recovery_variants``
+parameter names them (default :data:`POLICY_VARIANTS`; ``[retry]`` reproduces a retry-only
+baseline, ``[]`` no recovery), all within the episode's step budget:
+
+- ``retry`` (:data:`RETRY`): the policy again from the current state, the same prompt;
+- ``corrected_prompt`` (:data:`CORRECTED_PROMPT`): the node's instruction decomposed by
+  the Goal Planner's rule reader over the declared scene, each step judged on the failed
+  attempt's perceived evidence (:mod:`.instruction_steps`), and the child's ``prompt`` the
+  first step left, worded as LIBERO words it (``place the alphabet soup in the basket``
+  when the soup is held); skipped when the instruction is not read, every step is done,
+  or the prompt would be the one just tried;
+- ``builtin_regrasp`` (:data:`BUILTIN_REGRASP`): the child runs the builtin ``pick`` of the
+  object the first step left acquires (``Revision.skill``/``runtime``: ``pick`` on the
+  ``builtin`` runtime, same target and world); its child, whatever the pick's verdict,
+  resumes the policy (:data:`RESUME_AFTER_REGRASP`: the node's skill and runtime again,
+  ``prompt`` the step left by the pick's evidence). Skipped when that object is already
+  held or no step acquires one, or when the failed attempt's trace says fewer control steps
+  are left than a builtin pick takes (:data:`REGRASP_STEPS`).
+
+No rung is taken once the failed policy attempt's trace says the step budget is spent
+(``runtime_end``'s ``control_steps`` and ``step_budget``). The ladder is bounded by its
+rungs, not by the verifier's ``max_replans`` (:meth:`RecoveryPlanner.replan_budget`).
+Every revision records the strategy, the cause it answers and why (the prompt, what the
+evidence showed of each step, the steps left); none becomes a lesson (what it corrects is
+this episode's progress, not a strategy for another).
 
 **Another arm.** Given a target chooser (:class:`~phyagentos.agent.retarget.TargetChooser`, wired by
 the composition root: ``phyagentos run`` and ``plan --run`` do), a cause of the arm's own reach or
@@ -92,19 +128,25 @@ so lessons do not keep them.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from typing import Any, Callable, Collection, Mapping, Sequence
 
 from phyagentos.protocol import Diagnosis, Revision, SessionRecord, Workspace
 
+from .instruction_steps import HELD, same_prompt
 from .skill_catalog import SkillInfo, skill_catalog
 
 __all__ = ["Strategy", "LADDERS", "RecoveryPlanner", "SITUATIONAL", "CLEARANCE_Z_M", "RE_PICK", "ACQUIRING_SKILLS",
            "ANOTHER_VIEW_SAMPLES", "PARAMETER_CAPABILITIES", "CapabilityLookup", "beyond_target", "MEMORY",
-           "targets_capabilities"]
+           "targets_capabilities", "POLICY_VARIANTS", "POLICY_STRATEGIES", "RETRY", "CORRECTED_PROMPT",
+           "BUILTIN_REGRASP", "RESUME_AFTER_REGRASP", "RECOVERY_VARIANTS_PARAM", "REGRASP_STEPS",
+           "prompt_policy_session", "check_recovery_variants"]
 
 #: ``proposed_by`` of a revision taken from a lesson held in the session's context.
 MEMORY = "memory"
+
+logger = logging.getLogger(__name__)
 
 #: Parameters a revision sets because of where the failed attempt left the world.
 SITUATIONAL: Mapping[str, Any] = {"backoff_m": 0.10, "settle_s": 0.5}
@@ -265,6 +307,58 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
 }
 
 
+#: The policy flow's recovery variants (module doc, "The policy ladder"), in ladder order.
+POLICY_VARIANTS = ("retry", "corrected_prompt", "builtin_regrasp")
+#: Strategy names the policy ladder records (``Revision.strategy``); the re-grasp takes two rungs.
+RETRY, CORRECTED_PROMPT = "retry_from_current_state", "corrected_prompt"
+BUILTIN_REGRASP, RESUME_AFTER_REGRASP = "builtin_regrasp", "resume_after_regrasp"
+POLICY_STRATEGIES = frozenset({RETRY, CORRECTED_PROMPT, BUILTIN_REGRASP, RESUME_AFTER_REGRASP})
+#: Each variant's rungs, in order.
+_RUNGS: Mapping[str, tuple[str, ...]] = {"retry": (RETRY,), "corrected_prompt": (CORRECTED_PROMPT,),
+                                         "builtin_regrasp": (BUILTIN_REGRASP, RESUME_AFTER_REGRASP)}
+#: The skill parameter of a policy node that names its variants (a list of :data:`POLICY_VARIANTS`).
+RECOVERY_VARIANTS_PARAM = "recovery_variants"
+#: Control steps (LIBERO's 20 Hz) a builtin re-grasp is expected to need: a builtin pick on the
+#: LIBERO target spends about 135 (docs/libero.md: transfer, approach, close, lift at its joint
+#: speeds), plus a margin. The builtin runtime does not stop at the budget, so the ladder takes the
+#: re-grasp only with at least this many left.
+REGRASP_STEPS = 150
+#: Causes after which a policy lineage gets no revision: a safety stop, an error in the software (a
+#: stalled server, a refused connection), the session's deadline (the episode's own budget bounds it).
+_POLICY_EXCLUDED = frozenset({"safety_intervention", "runtime_error", "timeout"})
+
+
+def prompt_policy_session(session: SessionRecord, history: Sequence[SessionRecord] = ()) -> SessionRecord | None:
+    """The nearest session of ``session``'s lineage (itself first) that ran a prompt-driven policy
+    skill (runtime ``policy``, a ``prompt`` parameter), or ``None``: the policy ladder's lineage."""
+    for rec in [session, *reversed(history)]:
+        if rec.skill_runtime == "policy" and isinstance(rec.parameters.get("prompt"), str):
+            return rec
+    return None
+
+
+def _lineage(session: SessionRecord, history: Sequence[SessionRecord]) -> list[SessionRecord]:
+    """``history`` then ``session``, each session once (an another view's judgement passes the
+    acting session with the view's lineage, which holds it already)."""
+    out: dict[str, SessionRecord] = {}
+    for rec in [*history, session]:
+        out.setdefault(rec.session_id, rec)
+    return list(out.values())
+
+
+def _budget_left(evidence: Any) -> int | None:
+    """Control steps left of the episode's step budget after the attempt whose evidence this is,
+    from the policy runtime's ``runtime_end`` trace record (``control_steps`` since the target's
+    reset, ``step_budget``); ``None``: the trace does not say (no budget, another runtime)."""
+    for record in reversed(list(getattr(evidence, "trace", None) or ())):
+        if record.get("kind") == "runtime_end":
+            steps, budget = record.get("control_steps"), record.get("step_budget")
+            if isinstance(steps, int) and isinstance(budget, int):
+                return budget - steps
+            return None
+    return None
+
+
 def _ladder_start(history: Sequence[SessionRecord], cause: str) -> int:
     """Index of the first rung the next revision for ``cause`` may take: past every replan for
     that cause along the lineage, and past the highest rung one of them took (rungs it skipped
@@ -284,6 +378,24 @@ def _previous_causes(history: Sequence[SessionRecord]) -> list[str]:
     return causes
 
 
+def check_recovery_variants(variants: Any) -> tuple[str, ...]:
+    """``variants`` (a policy node's ``recovery_variants``: a list, or one name) as a tuple, each
+    one of :data:`POLICY_VARIANTS` once.
+
+    Raises:
+        ValueError: not a list of names, an unknown variant (the known ones listed), or one named twice.
+    """
+    out = (variants,) if isinstance(variants, str) else tuple(variants) if isinstance(variants, (list, tuple)) else None
+    if out is None or not all(isinstance(v, str) for v in out):
+        raise ValueError(f"{RECOVERY_VARIANTS_PARAM} must be a list of {list(POLICY_VARIANTS)}, got {variants!r}")
+    unknown = [v for v in out if v not in POLICY_VARIANTS]
+    if unknown:
+        raise ValueError(f"unknown policy recovery variant(s) {unknown}; the variants: {list(POLICY_VARIANTS)}")
+    if len(set(out)) != len(out):
+        raise ValueError(f"policy recovery variants named twice: {list(out)}")
+    return out
+
+
 class RecoveryPlanner:
     """Chooses the revision of a ``replan`` verdict.
 
@@ -295,14 +407,26 @@ class RecoveryPlanner:
         capabilities: target name -> its TARGETS.md capabilities; a revision leaves out the
             parameters the session's target cannot act on (:func:`beyond_target`). ``None``:
             every declared parameter is offered.
+        policy_variants: the policy ladder's variants, in order, for a node whose parameters do
+            not name them (``recovery_variants``); a subset of :data:`POLICY_VARIANTS`.
+        regrasp_skill: the builtin skill of the re-grasp (its manifest's runtime is the child's).
+        regrasp_steps: control steps the re-grasp needs left of the step budget (:data:`REGRASP_STEPS`).
+
+    Raises:
+        ValueError: a variant not in :data:`POLICY_VARIANTS`, or named twice.
     """
 
     def __init__(self, ladders: Mapping[str, Sequence[Strategy]] | None = None,
                  skills: Mapping[str, SkillInfo] | None = None, retarget: Any = None,
-                 capabilities: CapabilityLookup | None = None):
+                 capabilities: CapabilityLookup | None = None, *,
+                 policy_variants: Sequence[str] = POLICY_VARIANTS, regrasp_skill: str = "pick",
+                 regrasp_steps: int = REGRASP_STEPS):
         self.ladders = dict(LADDERS if ladders is None else ladders)
         self.capabilities = capabilities
         self._skills = skills
+        self.policy_variants = check_recovery_variants(policy_variants)
+        self.regrasp_skill = regrasp_skill
+        self.regrasp_steps = int(regrasp_steps)
         self._upstream_skill = "pick"
         #: a :class:`~phyagentos.agent.retarget.TargetChooser` (``choose(session, cause=...) -> Selection``),
         #: or ``None``: no re-target
@@ -315,7 +439,8 @@ class RecoveryPlanner:
         return self._skills
 
     def plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
-             history: Sequence[SessionRecord] = (), upstream: str | None = None) -> Revision | None:
+             history: Sequence[SessionRecord] = (), upstream: str | None = None,
+             evidence: Any = None) -> Revision | None:
         """The revision for ``session``'s child, or ``None`` when no strategy is left.
 
         Args:
@@ -325,7 +450,22 @@ class RecoveryPlanner:
                 move along the ladder.
             upstream: for ``precondition_unmet``, the goal node upstream that acquires
                 the object (the coordinator finds it in the DAG); ``None``: no re-pick.
+            evidence: the failed attempt's :class:`~phyagentos.agent.verifier.EvidenceBundle`
+                (the policy ladder reads its perceived snapshots and its trace's step count);
+                ``None``: the policy ladder's corrected prompt and re-grasp are not offered.
+
+        Raises:
+            ValueError: a policy node's ``recovery_variants`` is malformed (the Session Compiler
+                refuses such a node before it runs).
         """
+        policy = prompt_policy_session(session, history)
+        if policy is not None:
+            if diagnosis.cause in _POLICY_EXCLUDED:
+                return None
+            viewed = any(rec.recovery is not None and rec.recovery.skill == "observe"
+                         for rec in _lineage(session, history))
+            if diagnosis.cause != "perception_unknown" or viewed:  # else: another view first (below)
+                return self._policy_plan(session, diagnosis, history, policy, evidence)
         if diagnosis.cause == "precondition_unmet":
             if upstream is None or _previous_causes(history).count(diagnosis.cause) >= 1:
                 return None  # nothing upstream to redo, or a re-pick already did not help
@@ -366,9 +506,107 @@ class RecoveryPlanner:
             if not strategy.skill and float(diagnosis.facts.get("tcp_end_z_m", 1.0)) < CLEARANCE_Z_M:
                 values.update({k: v for k, v in SITUATIONAL.items() if k in allowed and current.get(k) != v})
             return Revision(strategy=strategy.name, cause=diagnosis.cause, step=step + 1, parameters=values,
-                            limits=limits, skill=strategy.skill,
+                            limits=limits, skill=strategy.skill, runtime=self._runtime_of(strategy.skill),
                             rationale=f"addresses {diagnosis.cause}: {diagnosis.summary} -> {strategy.description}")
         return self._switch_target(session, diagnosis, history, step=len(ladder) + 1)
+
+    def _runtime_of(self, skill: str | None) -> str | None:
+        """The runtime ``skill``'s manifest names (``None``: no skill, or not known)."""
+        info = self.skills.get(skill) if skill else None
+        return info.runtime if info is not None else None
+
+    def rungs(self, policy: SessionRecord) -> tuple[str, ...]:
+        """The policy ladder's rungs (strategy names, in order) for the lineage of policy session
+        ``policy``: its ``recovery_variants`` parameter's, else :attr:`policy_variants`.
+
+        Raises:
+            ValueError: an unknown variant, or one named twice.
+        """
+        named = policy.parameters.get(RECOVERY_VARIANTS_PARAM)
+        variants = self.policy_variants if named is None else check_recovery_variants(named)
+        return tuple(r for v in variants for r in _RUNGS[v])
+
+    def replan_budget(self, session: SessionRecord, history: Sequence[SessionRecord] = ()) -> int | None:
+        """The replans ``session``'s lineage may take, or ``None`` (the verifier's ``max_replans``
+        applies): for a prompt-driven policy's lineage, one per rung of its ladder (the re-grasp
+        two) plus the another views it took (a view only looks again)."""
+        policy = prompt_policy_session(session, history)
+        if policy is None:
+            return None
+        views = sum(1 for rec in _lineage(session, history) if rec.skill == "observe")
+        return len(self.rungs(policy)) + views
+
+    def _policy_plan(self, session: SessionRecord, diagnosis: Diagnosis, history: Sequence[SessionRecord],
+                     policy: SessionRecord, evidence: Any) -> Revision | None:
+        """The next rung of the policy ladder (module doc) for ``session``'s child, or ``None``."""
+        lineage = _lineage(session, history)
+        rungs = self.rungs(policy)
+        taken = [rec.recovery.step for rec in lineage if rec.recovery is not None
+                 and rec.recovery.strategy in POLICY_STRATEGIES]
+        left = _budget_left(evidence)
+        if left is not None and left <= 0:
+            return None  # the episode's budget is spent: a child would end at once
+        root = next(rec for rec in lineage if rec.skill_runtime == "policy" and isinstance(rec.parameters.get("prompt"),
+                                                                                          str))
+        instruction, tried = str(root.parameters["prompt"]), str(policy.parameters["prompt"])
+        why = f"addresses {diagnosis.cause}: {diagnosis.summary} -> "
+        budget = f" ({left} control steps left of the episode's budget)" if left is not None else ""
+        after_regrasp = session.recovery is not None and session.recovery.strategy == BUILTIN_REGRASP
+        for index in range(max(taken, default=0), len(rungs)):
+            rung, step = rungs[index], index + 1
+            if after_regrasp != (rung == RESUME_AFTER_REGRASP):
+                continue  # the continuation follows a re-grasp, and only it
+            if rung == RESUME_AFTER_REGRASP:
+                left_over = self._remaining(instruction, session, evidence, tried=tried)
+                if isinstance(left_over, str):
+                    return None  # nothing left that a prompt names (every step done, or not read)
+                return Revision(strategy=rung, cause=diagnosis.cause, step=step, skill=policy.skill,
+                                runtime=policy.skill_runtime, parameters={"prompt": left_over.prompt},
+                                rationale=f"{why}after the builtin re-grasp the policy continues with prompt "
+                                          f"{left_over.prompt!r} ({left_over.progress}){budget}")
+            if rung == RETRY:
+                return Revision(strategy=rung, cause=diagnosis.cause, step=step,
+                                rationale=f"{why}run the policy again from the current state with the same prompt "
+                                          f"{tried!r}{budget}")
+            left_over = self._remaining(instruction, session, evidence, tried=tried)
+            if isinstance(left_over, str):
+                logger.info("session %s: %s skipped: %s", session.session_id, rung, left_over)
+                continue
+            if rung == CORRECTED_PROMPT:
+                if same_prompt(left_over.prompt, tried):
+                    continue  # the prompt just tried: it would change nothing
+                return Revision(strategy=rung, cause=diagnosis.cause, step=step,
+                                parameters={"prompt": left_over.prompt},
+                                rationale=f"{why}prompt {left_over.prompt!r}: what the evidence leaves of "
+                                          f"{instruction!r} ({left_over.progress}){budget}")
+            if rung == BUILTIN_REGRASP:
+                obj = left_over.step.acquires
+                if obj is None or left_over.status == HELD:
+                    continue  # no object to take, or it is in the hand already
+                if left is not None and left < self.regrasp_steps:
+                    continue  # a builtin pick would run past the budget
+                return Revision(strategy=rung, cause=diagnosis.cause, step=step, skill=self.regrasp_skill,
+                                runtime=self._runtime_of(self.regrasp_skill), parameters={"object": obj},
+                                rationale=f"{why}builtin {self.regrasp_skill} of {obj} (the step "
+                                          f"{left_over.step.prompt()!r} acquires it; {left_over.progress}), then the "
+                                          f"policy continues with the step left{budget}")
+        return None
+
+    @staticmethod
+    def _remaining(instruction: str, session: SessionRecord, evidence: Any, *, tried: str):
+        """:func:`~.instruction_steps.remaining_prompt` of ``instruction`` on ``evidence`` over
+        ``session``'s declared scene, or why there is none (a string)."""
+        from .declared import declared_scene  # noqa: PLC0415
+        from .instruction_steps import InstructionNotRead, decompose, remaining_prompt, step_status  # noqa: PLC0415
+
+        if evidence is None:
+            return "no evidence to judge the steps on"
+        try:
+            steps = decompose(instruction, declared_scene(session.scene))
+        except InstructionNotRead as exc:
+            return f"the instruction's steps are not read: {exc}"
+        left_over = remaining_prompt(steps, step_status(steps, evidence), tried=tried)
+        return left_over if left_over is not None else "the evidence shows every step done"
 
     def _settable(self, skill: str, target: str) -> frozenset[str]:
         """The optional (strategy) parameters of ``skill`` that ``target`` can act on."""

@@ -1,9 +1,14 @@
 """Replanning for an :class:`~phyagentos.agent.coordinator.AgentCoordinator`: a session in
-``awaiting_replan`` gets an immutable child session with its revision (parameters, skill,
-limits, another view, a re-target), the correction it tries proposed as a lesson
-candidate; a revision that re-opens an upstream node compiles a re-pick of that node
+``awaiting_replan`` gets an immutable child session with its revision (parameters, skill
+and its runtime, limits, another view, a re-target), the correction it tries proposed as a
+lesson candidate; a revision that re-opens an upstream node compiles a re-pick of that node
 instead, and the node's child once the re-pick succeeded (mixed into the coordinator as
-:class:`Replanning`)."""
+:class:`Replanning`).
+
+A child that switches skill runs on that skill's runtime (``Revision.runtime``, else its
+manifest's): a builtin ``pick`` re-grasp of a ``policy`` node runs ``builtin``; a revision
+naming the node's own skill again (the policy's continuation after that re-grasp) continues
+the parameters of the lineage's nearest session of the node's skill."""
 
 from __future__ import annotations
 
@@ -14,6 +19,8 @@ from phyagentos.protocol import SessionRecord
 from phyagentos.protocol.lifecycle import SessionLifecycle
 
 from .memory import LessonBook
+from .recovery import POLICY_STRATEGIES
+from .skill_catalog import skill_catalog
 
 if TYPE_CHECKING:
     from phyagentos.protocol import Workspace
@@ -55,10 +62,14 @@ class Replanning:
         if revision is not None and revision.reopen:
             return self._reopen(rec, revision)
         history = self.lineage(rec)
-        # an another-view session's child continues the acting session's parameters
-        acting = rec if rec.skill != "observe" else next((h for h in reversed(history) if h.skill != "observe"), rec)
         node = self.graph.get_node(rec.node)
-        if revision is not None and revision.skill:
+        # back to the node's own skill after a switch (the policy's continuation after a builtin
+        # re-grasp): the child continues the nearest session that ran the node's skill
+        back = revision is not None and revision.skill == node.skill and rec.skill != node.skill
+        # an another-view session's child continues the acting session's parameters
+        acting = next((h for h in reversed([*history, rec])
+                       if (h.skill == node.skill if back else h.skill != "observe")), rec)
+        if revision is not None and revision.skill and not back:
             skill, params = revision.skill, dict(revision.parameters)
         else:  # the acting session's skill: the node's, or the one an earlier revision switched to
             skill = acting.skill if acting.skill != node.skill else None
@@ -68,16 +79,35 @@ class Replanning:
         target = revision.target if revision is not None and revision.target else \
             (acting.target if acting.target != node.target else None)
         child = self.compiler.compile_node(node, parent=rec, parameters=params, limits=limits, context=acting.context,
-                                           recovery=revision, skill=skill, target=target)
+                                           recovery=revision, skill=skill, target=target,
+                                           runtime=self._child_runtime(skill, revision, acting))
         with ws.session_lock(session_id):
             rec = ws.load_session(session_id)
             rec.child_session_ids.append(child.session_id)
             SessionLifecycle(rec, persist=ws.save_session).fire("replanned", reason=f"child {child.session_id}")
-        # another view only looks again (no correction to learn); a skill switch or re-target is one
-        if self.consolidate and revision is not None and verdict.diagnosis is not None and revision.skill != "observe":
+        # another view only looks again (no correction to learn); a skill switch or re-target is one.
+        # The policy ladder's variants answer what this episode left undone (a prompt for the steps
+        # that remain, a re-grasp of this object): no correction for another episode to learn either
+        if self.consolidate and revision is not None and verdict.diagnosis is not None and revision.skill != "observe" \
+                and revision.strategy not in POLICY_STRATEGIES:
             LessonBook(ws).propose(parent=acting, child=child, diagnosis=verdict.diagnosis, revision=revision,
                                    conditions=self._conditions(acting))
         return 1
+
+    @staticmethod
+    def _child_runtime(skill: str | None, revision, acting: SessionRecord) -> str | None:
+        """The SkillRuntime of a child that runs ``skill`` (``None``: the node's skill, and its
+        runtime): the revision's ``runtime``, else the acting session's when it continues its
+        switched skill, else the runtime the skill's manifest names (an ``observe`` child of a
+        ``policy`` node runs ``builtin``: preflight refuses a skill on another runtime than its own)."""
+        if skill is None:
+            return None
+        if revision is not None and revision.runtime:
+            return revision.runtime
+        if skill == acting.skill:
+            return acting.skill_runtime
+        info = skill_catalog().get(skill)
+        return info.runtime if info is not None else None
 
     def _reopen(self, rec: SessionRecord, revision) -> int:
         """Re-open ``revision.reopen`` upstream of ``rec`` (a re-pick); ``rec``'s node runs

@@ -67,6 +67,7 @@ from .recovery import (
     CapabilityLookup,
     RecoveryPlanner,
     beyond_target,
+    prompt_policy_session,
 )
 from .retarget import RETARGET_CAUSES, TargetChooser
 from .skill_catalog import SkillInfo, skill_catalog
@@ -145,9 +146,11 @@ class Reviser(Protocol):
     """What the SessionVerifier calls for the revision of a ``replan`` verdict."""
 
     def plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
-             history: Sequence[SessionRecord] = (), upstream: str | None = None) -> Revision | None:
+             history: Sequence[SessionRecord] = (), upstream: str | None = None,
+             evidence: Any = None) -> Revision | None:
         """The revision for ``session``'s child, or ``None`` (the verdict becomes ``failure``). ``upstream``:
-        the goal node upstream that acquires the session's object (for a re-pick), if any."""
+        the goal node upstream that acquires the session's object (for a re-pick), if any; ``evidence``: the
+        failed attempt's evidence bundle (``None``: not given)."""
         ...
 
 
@@ -211,6 +214,11 @@ class ModelReviser:
             self._skills = skill_catalog()
         return self._skills
 
+    def replan_budget(self, session: SessionRecord, history: Sequence[SessionRecord] = ()) -> int | None:
+        """The fallback's bound on ``session``'s lineage (:meth:`RecoveryPlanner.replan_budget`), or
+        ``None`` (the verifier's ``max_replans``)."""
+        return self.fallback.replan_budget(session, history) if self.fallback is not None else None
+
     def calls_for(self, session_id: str) -> list[ModelCallRecord]:
         """The model calls made to revise ``session_id`` (taken once: the coordinator puts them in its context)."""
         return self._records.pop(session_id, [])
@@ -268,9 +276,14 @@ class ModelReviser:
     # -- planning --------------------------------------------------------------
 
     def plan(self, session: SessionRecord, diagnosis: Diagnosis, *,
-             history: Sequence[SessionRecord] = (), upstream: str | None = None) -> Revision | None:
+             history: Sequence[SessionRecord] = (), upstream: str | None = None,
+             evidence: Any = None) -> Revision | None:
         """See :class:`Reviser`. Never raises for a bad model answer: it falls back (and records why).
-        No model call is made when no revision could change the outcome, nor twice for one attempt."""
+        No model call is made when no revision could change the outcome, nor twice for one attempt.
+        A prompt-driven policy's lineage (:func:`~phyagentos.agent.recovery.prompt_policy_session`)
+        gets the fallback's policy ladder: the model has no menu of prompts."""
+        if self.fallback is not None and prompt_policy_session(session, history) is not None:
+            return self.fallback.plan(session, diagnosis, history=history, upstream=upstream, evidence=evidence)
         key = (session.session_id, len(session.attempts), diagnosis.cause)
         if key in self._given:
             return self._given[key]

@@ -12,12 +12,14 @@ import secrets
 from datetime import datetime, timezone
 from typing import Any
 
+from phyagentos.errors import VerifierError
 from phyagentos.protocol import Limits, Revision, SessionContext, SessionRecord, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 
 from .criteria import parse_criteria
 from .goal_graph import GoalGraph, GoalNode
 from .model_calls import with_calls
+from .recovery import RECOVERY_VARIANTS_PARAM, check_recovery_variants
 
 __all__ = ["SessionCompiler", "new_run_id"]
 
@@ -52,7 +54,8 @@ class SessionCompiler:
     def compile_node(self, node: GoalNode, *, parent: SessionRecord | None = None,
                      parameters: dict[str, Any] | None = None, limits: dict[str, float] | None = None,
                      context: SessionContext | None = None, recovery: Revision | None = None,
-                     skill: str | None = None, target: str | None = None) -> SessionRecord:
+                     skill: str | None = None, target: str | None = None,
+                     runtime: str | None = None) -> SessionRecord:
         """Build and submit the session for ``node`` (a child of ``parent`` on replan).
 
         Args:
@@ -62,13 +65,23 @@ class SessionCompiler:
             recovery: the revision a replanned child runs with.
             skill: run this skill instead of the node's (``observe`` for another view).
             target: run on this target instead of the node's (a re-target revision).
+            runtime: run with this SkillRuntime instead of the node's (a revision that
+                switches to a skill of another runtime: a builtin re-grasp of a policy
+                node, another view of it).
 
         Raises:
-            VerifierError: the node's acceptance criteria do not parse (checked
-                here so a bad criterion never reaches the runtime).
+            VerifierError: the node's acceptance criteria do not parse, or its
+                ``recovery_variants`` name no policy recovery variants (checked here so a
+                bad criterion never reaches the runtime, nor a bad ladder its verdict).
             ProtocolError: the submit path refused the record.
         """
         parse_criteria(node.accept, where=f"{self.graph.path}:{node.line} accept")
+        variants = (parameters if parameters is not None else node.params).get(RECOVERY_VARIANTS_PARAM)
+        if variants is not None:  # read by the policy ladder after a failed verdict: refused now, not then
+            try:
+                check_recovery_variants(variants)
+            except ValueError as exc:
+                raise VerifierError(f"{self.graph.path}:{node.line} params.{RECOVERY_VARIANTS_PARAM}: {exc}") from None
         if recovery is not None and context is not None and context.model_calls:
             # a child inherits its parent's context, but of the model calls only the plan's: the
             # parent's own attempt and revision calls stay the parent's
@@ -87,7 +100,7 @@ class SessionCompiler:
             parent_session_id=parent.session_id if parent else None,
             depends_on=list(node.depends_on),
             skill=skill or node.skill,
-            skill_runtime=node.runtime,
+            skill_runtime=runtime or node.runtime,
             target=target or node.target,
             parameters=dict(parameters if parameters is not None else node.params),
             accept=node.accept,

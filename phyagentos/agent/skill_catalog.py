@@ -24,13 +24,15 @@ __all__ = ["SkillInfo", "skill_catalog"]
 class SkillInfo:
     """A skill's parameter names: ``required`` (the task) and ``optional`` (strategy);
     ``acquires`` / ``releases``: the parameter naming the object the skill leaves in,
-    or takes out of, its target's gripper (``None``: no such effect)."""
+    or takes out of, its target's gripper (``None``: no such effect); ``runtime``: the
+    SkillRuntime its manifest names (``builtin``, ``policy``, ``agent``; ``None``: not given)."""
 
     name: str
     required: frozenset[str]
     optional: frozenset[str]
     acquires: str | None = None
     releases: str | None = None
+    runtime: str | None = None
 
     @property
     def parameters(self) -> frozenset[str]:
@@ -55,6 +57,7 @@ def _load(directory: str) -> dict[str, SkillInfo]:
         if data["name"] in out:
             continue  # shadowed by an earlier folder of the search path
         out[data["name"]] = SkillInfo(name=data["name"], required=required, optional=frozenset(params) - required,
+                                      runtime=data["runtime"] if isinstance(data.get("runtime"), str) else None,
                                       **effect)
     return out
 

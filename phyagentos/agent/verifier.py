@@ -13,7 +13,8 @@ from evidence, never from a controller's return code alone:
   ``perception_unknown``. Never ``success``;
 - a criterion unsatisfied -> ``replan`` while the session's replan budget lasts, the
   failure is not a safety stop, and a recovery strategy is left for the diagnosed
-  cause; else ``failure``.
+  cause; else ``failure``. The recovery gets the evidence bundle too (the policy ladder
+  reads what it leaves of the instruction's steps).
 
 The snapshots are the runtime's *perceived* snapshots; the verifier never reads the
 simulator's privileged channel.
@@ -169,7 +170,9 @@ class SessionVerifier:
 
     Args:
         verifiers: judges run in order; all their outcomes count.
-        max_replans: replan budget along one lineage (root session + children).
+        max_replans: replan budget along one lineage (root session + children); a recovery
+            that bounds a lineage itself (``replan_budget``: the policy ladder's rungs) sets it
+            for that lineage.
         recovery: chooses the revision of a ``replan`` verdict (default: the built-in
             strategies for the shipped skills); a cause with no strategy left turns
             the verdict into ``failure``.
@@ -236,11 +239,21 @@ class SessionVerifier:
         elif runtime_error:
             detail = f"{detail} (runtime reported {runtime_error})"
         detail = f"{detail}; diagnosis {diagnosis.cause}: {diagnosis.summary}"
-        if depth >= self.max_replans:
+        limit = self._replan_limit(session, history)
+        if depth >= limit:
             return verdict("failure", f"unsatisfied after {depth} replans: {detail}", diagnosis=diagnosis)
-        revision = self.recovery.plan(session, diagnosis, history=history, upstream=self.upstream(session))
+        revision = self.recovery.plan(session, diagnosis, history=history, upstream=self.upstream(session),
+                                      evidence=evidence)
         if revision is None:
             return verdict("failure", f"no recovery strategy left for {diagnosis.cause}: {detail}",
                            diagnosis=diagnosis)
-        return verdict("replan", f"{detail}; replan {depth + 1}/{self.max_replans} "
+        return verdict("replan", f"{detail}; replan {depth + 1}/{limit} "
                                  f"with {revision.strategy}", diagnosis=diagnosis, revision=revision)
+
+    def _replan_limit(self, session: SessionRecord, history: Sequence[SessionRecord]) -> int:
+        """Replans ``session``'s lineage may take: the recovery's own bound for it where it states
+        one (``replan_budget``: a prompt-driven policy's ladder, one per rung), else
+        :attr:`max_replans`."""
+        budget = getattr(self.recovery, "replan_budget", None)
+        own = budget(session, history) if budget is not None else None
+        return self.max_replans if own is None else int(own)

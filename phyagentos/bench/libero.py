@@ -203,23 +203,15 @@ def _nodes(steps: list[tuple[str, str, str | None]],
     return nodes
 
 
-_PALETTE_WORDS = {"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey", "gray"}
-
-
 def planner_world(objects: dict[str, str], fixtures: dict[str, str]):
     """The Goal Planner's :class:`~phyagentos.agent.llm.World` of a LIBERO task, from its
-    declared things only: every declared object is an object a request may move, and every
-    declared object and fixture a destination (a ``region`` of the reader). Colours are the
-    palette words of a declared name (``akita_black_bowl_1``: black); no position (nothing
-    perceived when a plan is made)."""
-    from phyagentos.agent.llm.world import Entity, World  # noqa: PLC0415
+    declared things only (:func:`~phyagentos.agent.llm.world.world_from_declared`): every
+    declared object is an object a request may move, and every declared object and fixture a
+    destination (a ``region`` of the reader). Colours are the palette words of a declared name
+    (``akita_black_bowl_1``: black); no position (nothing perceived when a plan is made)."""
+    from phyagentos.agent.llm.world import world_from_declared  # noqa: PLC0415
 
-    def entity(name: str, kind: str) -> Entity:
-        colour = next((w for w in name.split("_") if w in _PALETTE_WORDS), None)
-        return Entity(name=name, kind=kind, position=None, colour="grey" if colour == "gray" else colour)
-
-    return World(objects=tuple(entity(n, "object") for n in objects),
-                 regions=tuple(entity(n, "region") for n in (*objects, *fixtures)), source="LIBERO declared")
+    return world_from_declared(list(objects), list(fixtures), source="LIBERO declared")
 
 
 def _planner_steps(language: str, objects: dict[str, str],

@@ -292,6 +292,10 @@ class Revision(ProtocolModel):
                                                 "another view of the same world); None: the node's skill.")
     reopen: str | None = Field(None, description="Upstream goal node re-opened before this node runs again "
                                                  "(e.g. re-pick after the object was released).")
+    runtime: str | None = Field(None, description="SkillRuntime the child runs with instead of the node's (with "
+                                                  "skill: the switched skill's own, e.g. 'builtin' for a re-grasp "
+                                                  "of a policy node); None: the node's, or the switched skill's "
+                                                  "manifest runtime.")
     proposed_by: str = Field("rules", description="The reviser that proposed it: rules or model.")
     target: str | None = Field(None, description="Target the child runs on instead of the node's (a re-target to "
                                                  "another capable target, chosen by the SkillRuntime-Target "

@@ -253,6 +253,9 @@ class _Rollout:
         self.deadline, self.heartbeat = deadline, heartbeat
         self.guard: SafetyGuard = ctx.guard
         self.history: deque = deque(maxlen=settings.history)
+        #: the episode's step budget in control steps (``None``: none), once :meth:`run` knows it
+        self.step_budget: int | None = None
+        self.steps_run = 0
 
     def run(self) -> RunOutcome:
         ctx, s = self.ctx, self.s
@@ -266,7 +269,7 @@ class _Rollout:
         t_start = float(target.sim_time)
         inferences = 0
         client = None
-        budget = self._budget()
+        budget = self.step_budget = self._budget()
         self.steps_run = 0
         output_max_m = float(target.osc_limits()["output_max"][0]) if self.osc else 0.0
         try:
@@ -413,8 +416,19 @@ class _Rollout:
         logger.warning("policy session halted: %s: %s", code, message)
 
     def _end(self, status: str, code: str | None, message: str, inferences: int) -> RunOutcome:
+        """Record the end (``runtime_end``; with a step budget also ``control_steps``, the
+        target's control steps since its reset, and ``step_budget``, so that the Agent sees
+        what is left of the episode) and return the outcome."""
         if status == "failed" and code is not None:
             self.ctx.fail(code, "policy", message)
-        self.ctx.trace.record("runtime_end", status=status, ticks=inferences, message=message)
+        budget: dict[str, int] = {}
+        if self.step_budget is not None:
+            try:
+                since_reset = self._control_steps_since_reset()
+            except PhyAgentOSError:  # a target that failed cannot say; this session's own count stands in
+                since_reset = None
+            budget = {"control_steps": since_reset if since_reset is not None else self.steps_run,
+                      "step_budget": int(self.step_budget)}
+        self.ctx.trace.record("runtime_end", status=status, ticks=inferences, message=message, **budget)
         return RunOutcome(status=status, error_code=code, failed_primitive="policy" if status == "failed" else None,
                           message=message, ticks=inferences)

@@ -19,7 +19,7 @@ from typing import Any, Mapping, Sequence
 from .policy import NAME_PATTERN, InjectionFinding, screen_text
 
 __all__ = ["Entity", "World", "PALETTE", "colour_name", "world_from_scene", "world_from_environment",
-           "perceived_world"]
+           "world_from_declared", "perceived_world"]
 
 #: Colour names for rgba values (nearest in RGB).
 PALETTE: Mapping[str, tuple[float, float, float]] = {
@@ -107,6 +107,25 @@ def world_from_scene(scene: Mapping[str, Any], *, source: str = "scene") -> Worl
         regions.append(Entity(name=r["name"], kind="region", position=(float(r["center"][0]), float(r["center"][1])),
                               colour=colour_name(r.get("rgba")), size_m=2 * max(r.get("half_extents", [0.05, 0.05])[:2])))
     return World(objects=objects, regions=tuple(regions), source=source, rejected=tuple(rejected))
+
+
+#: Colour words a declared name may carry (``akita_black_bowl_1``: black); "gray" reads as grey.
+_NAME_COLOURS = frozenset(PALETTE) | {"gray"}
+
+
+def world_from_declared(objects: Sequence[str], fixtures: Sequence[str] = (), *, source: str = "declared") -> World:
+    """A :class:`World` of declared names only (a LIBERO task's objects and fixtures): every
+    object is an object a request may move, and every object and fixture a destination (a
+    ``region`` of the reader). Colours are the palette words of a name (``akita_black_bowl_1``:
+    black); no position (nothing perceived when it is read). Used by the LIBERO plan and the
+    policy flow's prompt decomposition (:mod:`phyagentos.agent.instruction_steps`)."""
+
+    def entity(name: str, kind: str) -> Entity:
+        colour = next((w for w in name.split("_") if w in _NAME_COLOURS), None)
+        return Entity(name=name, kind=kind, position=None, colour="grey" if colour == "gray" else colour)
+
+    return World(objects=tuple(entity(n, "object") for n in objects),
+                 regions=tuple(entity(n, "region") for n in (*objects, *fixtures)), source=source)
 
 
 def world_from_environment(entities: Sequence[Mapping[str, Any]], *, source: str = "ENVIRONMENT.md") -> World:

@@ -19,8 +19,8 @@ from phyagentos.errors import IKError
 from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, PAD_DEPTH_ABOVE_TCP_M, hand_yaw
 from phyagentos.motion.rim_grasp import (
     DEFAULT_RIM_WALL_M,
-    RIM_GRIP_DEPTH_M,
     PARTLY_SEEN_RIM_ANGLE_RAD,
+    RIM_GRIP_DEPTH_M,
     near_long_axis,
     open_container,
     partly_seen_rim_graspable,

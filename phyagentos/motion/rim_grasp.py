@@ -125,7 +125,7 @@ def partly_seen_rim_graspable(category: str | None, shape: str | None, half_exte
     he = np.asarray(half_extents, dtype=float).reshape(-1)
     if he.shape != (3,) or not np.all(np.isfinite(he)) or shape != "box":
         return False
-    if not (_category_words(category) & set(RIM_GRASP_CATEGORIES)) or open_container(category, shape, he):
+    if not (_category_words(category) & set(RIM_GRASP_CATEGORIES)) or open_container(category, shape, half_extents):
         return False
     hi = float(max(he[0], he[1]))
     return bool(2.0 * hi > max_width_m - 0.004 and 2.0 * he[2] < 0.9 * 2.0 * hi)

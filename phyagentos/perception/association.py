@@ -257,9 +257,9 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
     the one candidate off the table over the inside of that drawer, which must be seen
     standing open (a landmark the perceiver adds for each open drawer); a landmark not
     perceived (a fixture without a look, or one not seen): the one candidate off the table
-    (bottom at least ``off_table_m`` above it) and resting on no other perceived landmark (a bowl on the cabinet is not on the stove) while the others
-    rest on the table -- being on or in something other than the table is what perception
-    can see.
+    (bottom at least ``off_table_m`` above it) and resting on no other perceived landmark (a
+    bowl on the cabinet is not on the stove) while the others rest on the table -- being on or
+    in something other than the table is what perception can see.
 
     Returns:
         The resolution; ``detection`` None (the object stays unseen) with the reason when a

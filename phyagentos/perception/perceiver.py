@@ -730,16 +730,18 @@ class Perceiver:
                        opening: float) -> np.ndarray:
         """(N,) bool: the points of ``p`` (N, 3) world m (``heights`` (N,) m above the support)
         over the part of ``drawer`` (of sighting ``s``, ``opening`` m out) that stands out of
-        the body: between its side walls, from the body's front (:data:`DRAWER_CARCASS_M`
-        behind the shut handle's centre) to its front wall, above its floor and under the
-        fixture's top plus :data:`FIXTURE_MARGIN_M`. The body's footprint is measured with the
-        drawers shut and reaches past the body's front to the handles; a bowl at the back of
-        an open drawer stands in that margin and is no part of the body."""
+        the body: between its side walls, from :data:`FIXTURE_MARGIN_M` in front of the body's
+        front (:data:`DRAWER_CARCASS_M` behind the shut handle's centre; the front's own face,
+        the rail over the drawer, stays the body's: kept, it joined the bowl into a segment
+        that looked like nothing) to its front wall, above its floor. The body's footprint is
+        measured with the drawers shut and reaches past the body's front to the handles; a bowl
+        at the back of an open drawer stands in that margin and is no part of the body."""
         c0, u, v = drawer.frame(s.position[:2], s.turn)
         rel = p[:, :2] - c0
         along, across = rel @ u, rel @ v
         return ((np.abs(across) <= drawer.half_width_m - DRAWER_WALL_M)
-                & (along >= -DRAWER_CARCASS_M) & (along <= opening + drawer.face_m - DRAWER_FRONT_M)
+                & (along >= -DRAWER_CARCASS_M + FIXTURE_MARGIN_M)
+                & (along <= opening + drawer.face_m - DRAWER_FRONT_M)
                 & (heights > drawer.height_m - DRAWER_FLOOR_M))
 
     @staticmethod

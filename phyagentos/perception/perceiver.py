@@ -133,7 +133,7 @@ CONTENT_CLEARANCE_M = 0.015
 CONTENT_HEIGHT_SIGMA_M = 0.015
 #: Interior points of a container (beside what lies in it) needed to read its inside where an
 #: object's ends rest (:func:`_rest_height`); with fewer, it is taken to rest on the floor.
-REST_FIT_MIN_POINTS = 20
+REST_RING_MIN_POINTS = 20
 #: Half the width of the ring of the inside read there, m, and the height percentile read.
 REST_RING_M = 0.01
 REST_RING_PERCENTILE = 25.0
@@ -1259,8 +1259,8 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
     there when that top stands the object's perceived height above the floor (within 2 cm),
     is flat (height RMS <= 7 mm) and spans at least 60 % of the object's short side both
     ways: a lining fold or a wall's rim fails one of these. "Above the floor" is above where it
-    rests (:func:`_rest_height`): the floor of a basket, higher up the curved inside of a bowl. Confidence exp(-err^2 / 2
-    :data:`CONTENT_HEIGHT_SIGMA_M`^2) x (1 - exp(-points / 30)).
+    rests (:func:`_rest_height`): the floor of a basket, higher up the curved inside of a bowl.
+    Confidence exp(-err^2 / 2 :data:`CONTENT_HEIGHT_SIGMA_M`^2) x (1 - exp(-points / 30)).
 
     Returns ``(container index, centre (3,), confidence, points, cameras)`` or None.
     """
@@ -1316,6 +1316,7 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
             return k, pos, conf, n, cams
     return None
 
+
 def _rest_height(xy: np.ndarray, h: np.ndarray, interior: np.ndarray, face: np.ndarray, centre_xy: np.ndarray,
                  floor: float, top: float) -> float:
     """The height (m above the support plane) at which an object whose top face is ``face``
@@ -1331,17 +1332,21 @@ def _rest_height(xy: np.ndarray, h: np.ndarray, interior: np.ndarray, face: np.n
     world m and ``h`` (N,) m) within :data:`REST_RING_M` of that distance from the centre that
     are not the object's (lower than ``top`` - 1 cm and outside its top face's rectangle grown
     by 1 cm): a ring the object's ends stand on, beside it. ``floor``: the interior's 5th height
-    percentile, returned when fewer than :data:`REST_FIT_MIN_POINTS` such points are seen or
+    percentile, returned when fewer than :data:`REST_RING_MIN_POINTS` such points are seen or
     the ring lies lower."""
     rect = cv2.minAreaRect(xy[face].astype(np.float32))
     corners = cv2.boxPoints(rect).astype(float)
     grown = cv2.boxPoints((rect[0], (rect[1][0] + 0.02, rect[1][1] + 0.02), rect[2])).astype(np.float32)
     inner = np.flatnonzero(interior & (h < top - 0.01))
-    own = np.array([cv2.pointPolygonTest(grown, (float(x), float(y)), False) >= 0 for x, y in xy[inner]], bool)
-    keep = inner[~own] if own.size else inner
+    # inside the grown rectangle: the projections on two adjacent edges fall within them
+    g0, e1, e2 = grown[0].astype(float), (grown[1] - grown[0]).astype(float), (grown[3] - grown[0]).astype(float)
+    d = xy[inner] - g0
+    a, b = d @ e1, d @ e2
+    own = (a >= 0.0) & (a <= e1 @ e1) & (b >= 0.0) & (b <= e2 @ e2)
+    keep = inner[~own]
     r_end = float(np.sqrt(np.max(np.sum((corners - centre_xy) ** 2, axis=1))))
     ring = keep[np.abs(np.linalg.norm(xy[keep] - centre_xy, axis=1) - r_end) <= REST_RING_M]
-    if ring.size < REST_FIT_MIN_POINTS:
+    if ring.size < REST_RING_MIN_POINTS:
         return floor
     return max(floor, float(np.percentile(h[ring], REST_RING_PERCENTILE)))
 

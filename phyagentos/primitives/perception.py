@@ -180,16 +180,22 @@ class Blocked(str):
         return out
 
 
+def _object_body(ctx, obj: str) -> str | None:
+    """The simulator body of object ``obj`` that a grasp may touch, or None (a target
+    without object bodies)."""
+    try:
+        return ctx.target.object_body(obj)
+    except Exception:  # noqa: BLE001 - a target without object bodies
+        return None
+
+
 def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, np.ndarray]) -> Blocked | None:
     """Why the arm cannot reach ``above`` then ``at`` (``(label, (4, 4) world tcp pose)``):
     no IK solution clear of collisions (:func:`~.motion.clear_ik`, SolveIK's seeds) for the
     pose above (the planner's goal: its margin), or for the pose at the object from there
     (reached by a straight move, touching object ``obj`` by design: only penetration of
     anything else counts). ``None`` when both are reachable and clear, else a :class:`Blocked`."""
-    try:
-        own = ctx.target.object_body(obj)
-    except Exception:  # noqa: BLE001 - a target without object bodies
-        own = None
+    own = _object_body(ctx, obj)
     q = None
     for (label, pose), allow, margin in ((above, None, PLANNING_MARGIN_M), (at, own, 0.0)):
         try:
@@ -352,11 +358,7 @@ class ComputeGrasp(Primitive):
         """Whether the arm has an IK solution clear of the scene for the (4, 4) world tcp
         ``pose`` alone (touching the object being grasped allowed)."""
         try:
-            own = self.ctx.target.object_body(self.object)
-        except Exception:  # noqa: BLE001 - a target without object bodies
-            own = None
-        try:
-            _, pairs, _ = clear_ik(self.ctx, pose, allow=own, margin_m=0.0)
+            _, pairs, _ = clear_ik(self.ctx, pose, allow=_object_body(self.ctx, self.object), margin_m=0.0)
         except IKError:
             return False
         return not pairs
@@ -425,7 +427,9 @@ class ComputeGrasp(Primitive):
             for i, plan in enumerate(plans):
                 bad = _unusable(self.ctx, self.object, plan)
                 if bad is not None:
-                    out_of_reach |= bad.stage == "pre-grasp" and not bad.collides and self._reaches(plan.grasp)
+                    # one rim point whose grasp alone is reachable is enough to try lower pre-grasps
+                    out_of_reach = out_of_reach or (bad.stage == "pre-grasp" and not bad.collides
+                                                    and self._reaches(plan.grasp))
                     why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad) from {height:.2f} m: {bad[:160]}")
                     continue
                 usable.append((i, plan))

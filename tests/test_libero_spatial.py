@@ -77,6 +77,9 @@ def test_other_wordings_of_the_relations_read_the_same():
         ("lift bowl from stove and put it on plate", {"relation": "on", "of": ["flat_stove_1"]}),
         ("pick up the black bowl on top of the ramekin and place it on the plate", {"relation": "on", "of": [RAMEKIN]}),
         ("put the black bowl next to the ramekin on the plate", {"relation": "next_to", "of": [RAMEKIN]}),
+        ("pick up the black bowl on the left and place it on the plate", {"relation": "left"}),
+        ("put the right black bowl on the plate", {"relation": "right"}),
+        ("pick up the leftmost bowl and put it on the plate", {"relation": "left"}),
     ]:
         nodes, refs = instruction_plan(text, problem.objects, problem.fixtures)
         assert refs == {BOWL: where}, text
@@ -84,7 +87,7 @@ def test_other_wordings_of_the_relations_read_the_same():
 
 
 @pytest.mark.parametrize("text,why", [
-    ("pick up the black bowl on the left and place it on the plate", "a place relative to the viewer"),
+    ("pick up the black bowl on the front and place it on the plate", "a place relative to the viewer"),
     ("pick up the black bowl at the back and place it on the plate", "not a relation the rules read"),
     ("pick up the black bowl next to the sink and place it on the plate", "'the sink' names nothing declared"),
     ("pick up the black bowl between the plate and place it on the plate", "'between' needs two landmarks"),

@@ -19,7 +19,8 @@ from phyagentos.perception.association import (
 from phyagentos.perception.cloud import Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.detect import Detection
-from phyagentos.perception.perceiver import Perceiver, table_centre
+from phyagentos.perception.frames import CameraFrame, CameraIntrinsics
+from phyagentos.perception.perceiver import Perceiver, table_centre, viewer_right
 
 BLACK, WHITE, RED = (0.08, 0.08, 0.08), (0.95, 0.95, 0.95), (0.85, 0.15, 0.12)
 BOWL_SIZE = (0.12, 0.12, 0.05)
@@ -177,6 +178,55 @@ def test_table_center_uses_the_perceived_table_centre():
     assert res.detection == 0
     res = resolve_reference(desc, [0, 1], dets, {}, CFG, look_alikes=2, table_centre_xy=None)
     assert res.detection is None and "centre is not perceived" in res.reason
+
+
+@pytest.mark.parametrize("order", [(0, 1), (1, 0)])
+def test_left_and_right_are_the_viewers_as_the_scene_camera_shows_the_table(order):
+    # LIBERO's agentview stands across the table from the robot: its image right is world +y
+    dets = [_det(BLACK, (0.10, -0.20, 0.03)), _det(BLACK, (-0.05, 0.15, 0.03))]
+    dets = [dets[i] for i in order]
+    left, right = order.index(0), order.index(1)
+    facing_robot = np.array([0.0, 1.0])
+    for side, want in (("left", left), ("right", right)):
+        res = resolve_reference(_bowl("bowl_1", {"relation": side}), [0, 1], dets, {}, CFG, look_alikes=2,
+                                viewer_right_xy=facing_robot)
+        assert res.detection == want, res.reason
+    # the same table seen from behind the robot: the sides swap
+    res = resolve_reference(_bowl("bowl_1", {"relation": "left"}), [0, 1], dets, {}, CFG, look_alikes=2,
+                            viewer_right_xy=-facing_robot)
+    assert res.detection == right
+
+
+def test_a_side_is_not_picked_when_the_twins_stand_level_or_no_camera_is_known():
+    dets = [_det(BLACK, (0.10, 0.01, 0.03)), _det(BLACK, (-0.20, 0.02, 0.03))]  # 1 cm apart across the view
+    desc = _bowl("bowl_1", {"relation": "right"})
+    res = resolve_reference(desc, [0, 1], dets, {}, CFG, look_alikes=2, viewer_right_xy=np.array([0.0, 1.0]))
+    assert res.detection is None and "within" in res.reason
+    res = resolve_reference(desc, [0, 1], dets, {}, CFG, look_alikes=2, viewer_right_xy=None)
+    assert res.detection is None and "left and right" in res.reason
+    # the look-alike not seen may be the one meant
+    res = resolve_reference(desc, [0], dets, {}, CFG, look_alikes=2, viewer_right_xy=np.array([0.0, 1.0]))
+    assert res.detection is None and "look-alikes seen" in res.reason
+
+
+def test_the_viewers_right_is_the_named_cameras_image_x_axis_on_the_table():
+    def frame(sensor, R):
+        T = np.eye(4)
+        T[:3, :3] = R
+        return CameraFrame(sensor=sensor, frame_id=f"{sensor}_optical", stamp_s=0.0,
+                           intrinsics=CameraIntrinsics(width=4, height=4, fx=2.0, fy=2.0, cx=2.0, cy=2.0),
+                           T_world_camera=T, rgb=np.zeros((4, 4, 3), np.uint8), depth_m=None)
+
+    # optical frame: x right, y down, z forward; looking along world -x, tilted down
+    tilt = np.radians(30.0)
+    z = np.array([-np.cos(tilt), 0.0, -np.sin(tilt)])
+    x = np.array([0.0, 1.0, 0.0])
+    across = frame("agentview", np.column_stack([x, np.cross(z, x), z]))
+    down = frame("wrist", np.column_stack([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))  # x straight up
+    assert viewer_right([across, down]) == pytest.approx([0.0, 1.0])
+    assert viewer_right([down, across]) is None  # the first camera's x axis is vertical
+    assert viewer_right([down, across], "agentview") == pytest.approx([0.0, 1.0])
+    assert viewer_right([across], "overview") is None
 
 
 def test_table_centre_is_the_middle_of_the_perceived_table_top():

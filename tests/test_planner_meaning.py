@@ -350,3 +350,50 @@ def test_a_node_after_a_look_first_observe_may_move_to_a_target_that_reaches_it(
     chooser = TargetChooser(ws)
     assert RecoveryPlanner(retarget=chooser).plan(after_pick, unreachable) is None
     assert "depends on s0_pick" in chooser.choose(after_pick, cause="ik_unreachable").reasons["*"]
+
+
+# -- the viewer's left and right among identical objects (LIBERO: "the left plate") ------------------------
+
+
+def _mugs_and_plates(porcelain_colour):
+    from phyagentos.agent.llm.world import Entity, World
+
+    def e(name, colour=None):
+        return Entity(name=name, kind="object", position=None, colour=colour)
+
+    objects = (e("porcelain_mug_1", porcelain_colour), e("red_coffee_mug_1", "red"),
+               e("white_yellow_mug_1", "white"), e("plate_1"), e("plate_2"))
+    return World(objects=objects, regions=objects, source="test")
+
+
+def test_the_left_and_the_right_plate_bind_the_twins_to_the_viewers_sides():
+    m = read_request("put the white mug on the left plate and put the yellow and white mug on the right plate",
+                     _mugs_and_plates("white"), relations=True)
+    assert not m.problems
+    assert [(i.objects, i.destinations) for i in m.intents] == [(("porcelain_mug_1",), ("plate_1",)),
+                                                                 (("white_yellow_mug_1",), ("plate_2",))]
+    assert m.where == {"plate_1": {"relation": "left"}, "plate_2": {"relation": "right"}}
+
+
+def test_a_colour_named_that_an_object_of_unknown_colour_may_have_is_ambiguous():
+    # the porcelain mug's colour is in no word of its name: "the white mug" may be it or the white-and-yellow one
+    m = read_request("put the white mug on the left plate", _mugs_and_plates(None), relations=True)
+    assert any("could be any of white_yellow_mug_1, porcelain_mug_1" in msg for _, msg in m.problems)
+    m = read_request("put the yellow and white mug on the right plate", _mugs_and_plates(None), relations=True)
+    assert not m.problems and m.intents[0].objects == ("white_yellow_mug_1",)
+
+
+def test_a_side_word_reads_before_and_after_the_noun_and_only_among_twins():
+    from phyagentos.agent.llm.world import world_from_declared
+
+    world = world_from_declared(["akita_black_bowl_1", "akita_black_bowl_2", "wooden_tray_1"])
+    for text in ("pick up the black bowl on the left and put it in the tray", "put the left bowl in the tray",
+                 "move the leftmost black bowl into the tray"):
+        m = read_request(text, world, relations=True)
+        assert not m.problems, text
+        assert m.intents[0].objects == ("akita_black_bowl_1",) and m.where == {"akita_black_bowl_1": {"relation": "left"}}
+    # without relations (a caller that cannot hand one to perception) the side is not read
+    assert read_request("put the left bowl in the tray", world).problems
+    # regions named left and right are regions, not a side of twins
+    m = read_request("put the red cube in the left bin", world_from_scene(SCENE), relations=True)
+    assert not m.problems and m.intents[0].destinations == ("left_bin",) and not m.where

@@ -28,6 +28,10 @@ __all__ = [
     "GraspPlan",
     "top_down_grasp",
     "top_down_grasp_candidates",
+    "slid_grasp",
+    "slide_offsets",
+    "OFF_CENTRE_STEPS_M",
+    "PAD_HALF_WIDTH_M",
     "place_pose",
     "top_down_rotation",
     "top_down_plan",
@@ -41,6 +45,13 @@ __all__ = [
 FINGERTIP_BELOW_TCP_M = 0.015
 #: Depth of the finger pads above the tcp before the finger base starts, metres.
 PAD_DEPTH_ABOVE_TCP_M = 0.035
+#: Half the width of a finger pad across the closing direction (along tcp x), m: robosuite's
+#: Panda hand pads are boxes 16 mm wide (``gripper0_finger*_pad_collision``, half size 8 mm).
+PAD_HALF_WIDTH_M = 0.008
+#: How far (m) an across grasp of a box may slide from the centre along the side it holds, in
+#: this order, when no centred grasp is clear of the scene (a neighbour standing beside the
+#: box along the closing direction meets the hand, not the box).
+OFF_CENTRE_STEPS_M = (0.015, 0.025)
 #: Franka joint 7 range, rad.
 JOINT7_RANGE_RAD = (-2.8973, 2.8973)
 
@@ -191,6 +202,32 @@ def top_down_grasp_candidates(
         out.append(top_down_plan(T[0, 3], T[1, 3], z, _wrap(current_yaw_rad + delta),
                                  approach_height_m=approach_height_m, width_m=width))
     return tuple(out)
+
+
+def slide_offsets(plan: GraspPlan, T_object: np.ndarray, half_extents: Sequence[float], *,
+                  steps_m: Sequence[float] = OFF_CENTRE_STEPS_M, keep_m: float = 0.005) -> tuple[float, ...]:
+    """The offsets (m, along the hand's x axis, signed, in the order ``+s, -s`` per step of
+    ``steps_m``) by which ``plan`` may slide along the side of a box it holds with both pads
+    still on the box: ``|offset| <= e - PAD_HALF_WIDTH_M - keep_m``, ``e`` the box's extent
+    (half size) along the hand's x axis through its centre, from ``T_object`` ((4, 4) world
+    pose) and ``half_extents`` ((3,) m). An object whose extent leaves no room gives ``()``."""
+    R = np.asarray(T_object, dtype=float)[:3, :3]
+    x = np.asarray(plan.grasp, dtype=float)[:3, 0]
+    extent = float(np.abs(R.T @ x) @ np.asarray(half_extents, dtype=float))
+    room = extent - PAD_HALF_WIDTH_M - keep_m
+    return tuple(o for s in steps_m if 0.0 < s <= room for o in (s, -s))
+
+
+def slid_grasp(plan: GraspPlan, offset_m: float) -> GraspPlan:
+    """``plan`` with its grasp and pre-grasp moved ``offset_m`` (m) along the hand's x axis
+    (across the closing direction; the yaw, height and width unchanged)."""
+    x = np.asarray(plan.grasp, dtype=float)[:3, 0]
+    G, P = np.array(plan.grasp, dtype=float), np.array(plan.pregrasp, dtype=float)
+    G[:3, 3] += offset_m * x
+    P[:3, 3] += offset_m * x
+    G.setflags(write=False)
+    P.setflags(write=False)
+    return GraspPlan(grasp=G, pregrasp=P, yaw_rad=plan.yaw_rad, width_m=plan.width_m)
 
 
 def top_down_grasp(

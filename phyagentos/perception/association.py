@@ -233,7 +233,8 @@ def part_landmark(of: str, part: str | None) -> str | None:
 
 def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detections: Sequence[Detection],
                       landmarks: Mapping[str, Landmark], config: PerceptionConfig, *,
-                      look_alikes: int = 1, table_centre_xy: np.ndarray | None = None) -> ReferenceResolution:
+                      look_alikes: int = 1, table_centre_xy: np.ndarray | None = None,
+                      viewer_right_xy: np.ndarray | None = None) -> ReferenceResolution:
     """Which detection the spatial reference ``desc.where`` picks out, from perceived positions only.
 
     Args:
@@ -247,10 +248,15 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
         look_alikes: how many declared objects look like ``desc`` (itself included): fewer
             candidates than that and the one meant may be the one not seen, so nothing is picked.
         table_centre_xy: (2,) centre of the perceived table top, world m, or None (not known).
+        viewer_right_xy: (2,) unit vector, world frame: the viewer's right on the table (the
+            scene camera's image x axis, horizontal), or None (no camera seen).
 
     The relations: ``between`` -- the smallest distance to the segment joining the two
     landmarks' centres; ``next_to`` -- the smallest distance to the landmark's centre less its
-    footprint radius; ``table_center`` -- the smallest distance to ``table_centre_xy``; each
+    footprint radius; ``table_center`` -- the smallest distance to ``table_centre_xy``;
+    ``left`` / ``right`` -- the furthest along the viewer's left / right (``viewer_right_xy``:
+    LIBERO's instructions name left and right as its agentview camera shows the table, e.g.
+    LIBERO-90's "the left plate" is the plate at table y -0.3 m, seen on the image's left); each
     picks the best candidate when the runner-up scores at least ``relation_margin_m`` worse.
     ``on``/``in`` a perceived landmark: the one candidate over its footprint (raised off the
     table, for ``on``); ``in`` a drawer of it (``part`` ``top drawer``: :func:`part_landmark`):
@@ -281,11 +287,18 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
     if len(cands) < look_alikes:
         return unresolved(f"{len(cands)} of the {look_alikes} look-alikes seen: the one meant may be the one not seen")
     missing = [n for n in ref.of if n not in landmarks]
-    if rel in ("between", "next_to", "table_center"):
+    if rel in ("between", "next_to", "table_center", "left", "right"):
         if missing:
             return unresolved(f"landmark(s) {', '.join(missing)} not perceived")
         xy = {i: np.asarray(detections[i].position[:2], float) for i in cands}
-        if rel == "between":
+        if rel in ("left", "right"):
+            if viewer_right_xy is None:
+                return unresolved("no camera says where the viewer's left and right are")
+            r = np.asarray(viewer_right_xy, float)[:2]
+            r = r / max(float(np.linalg.norm(r)), 1e-9)
+            sign = -1.0 if rel == "right" else 1.0  # smaller is better: the furthest that way
+            scores = {i: sign * float(np.dot(p, r)) for i, p in xy.items()}
+        elif rel == "between":
             a, b = (np.asarray(landmarks[n].position[:2], float) for n in ref.of)
             scores = {i: _segment_distance(p, a, b) for i, p in xy.items()}
         elif rel == "next_to":

@@ -180,6 +180,10 @@ class AssociationConfig(_Section):
         0.02, le=10.0, gt=0, description="A detection whose bottom (or lowest points) is this far above the "
                                          "support plane is off the table (on or in something), m."
     )
+    viewer_camera: str | None = Field(
+        None, description="The camera whose image left and right are the viewer's (a spatial reference 'the plate "
+                          "on the left'); null: the first camera of each observation (sensors.yaml order)."
+    )
 
 
 class FusionConfig(_Section):

@@ -31,7 +31,8 @@ __all__ = ["ObjectDescriptor", "SpatialReference", "SHAPES", "COLOUR_NAMES", "WH
 SHAPES: tuple[str, ...] = ("box", "cylinder", "sphere")
 
 #: Relations a :class:`SpatialReference` may use, with how many landmarks each names.
-WHERE_RELATIONS: dict[str, int] = {"between": 2, "next_to": 1, "on": 1, "in": 1, "table_center": 0}
+WHERE_RELATIONS: dict[str, int] = {"between": 2, "next_to": 1, "on": 1, "in": 1, "table_center": 0, "left": 0,
+                                   "right": 0}
 
 
 @dataclass(frozen=True)
@@ -45,7 +46,9 @@ class SpatialReference:
             segment joining their centres), ``next_to`` one (nearest it), ``on`` one (over its
             footprint and raised off the table), ``in`` one (within its footprint; raised off
             the table when the landmark is not perceived), ``table_center`` (nearest the centre
-            of the perceived table top; no landmark).
+            of the perceived table top; no landmark), ``left`` / ``right`` (furthest to the
+            viewer's left / right, as the scene camera sees the table: the plate on the left;
+            no landmark).
         of: the landmarks' declared names (objects or fixtures), as many as the relation takes.
         part: the part of the landmark meant (``top drawer``): a drawer narrows ``in`` to that
             drawer's inside (:func:`~.association.part_landmark`); other parts are informative.

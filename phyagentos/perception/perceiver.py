@@ -271,6 +271,10 @@ class Perceiver:
         #: Centre (2,) of the support plane's perceived extent (world m) at the last
         #: :meth:`object_cloud`, when a spatial reference needs it, else None.
         self.table_centre_xy: np.ndarray | None = None
+        #: The viewer's right on the table (2,) unit vector, world frame: the horizontal part of
+        #: the image x axis of ``association.viewer_camera`` (else the first camera) at the last
+        #: :meth:`object_cloud`, or None (no such camera, or one looking straight down its x).
+        self.viewer_right_xy: np.ndarray | None = None
         #: How each spatial reference was resolved at the last :meth:`observe`, by object name.
         self.last_references: dict[str, ReferenceResolution] = {}
         #: The object cloud of the last :meth:`observe` (stage 2: points above the support
@@ -399,6 +403,7 @@ class Perceiver:
             log.warning("perception: support plane not fitted (too few table points); using z = %.3f m",
                         cfg.table.expected_height_m)
         self.table_centre_xy = None
+        self.viewer_right_xy = viewer_right(frames, cfg.association.viewer_camera)
         if plane.fitted and any(d.where is not None and d.where.relation == "table_center" for d in self.declared):
             self.table_centre_xy = table_centre(coarse.points, plane, cfg)
         parts = []
@@ -900,7 +905,7 @@ class Perceiver:
             cands = [i for i in range(len(dets)) if C[i, j] <= cfg.association.gate_cost and i not in chosen
                      and (i not in taken or taken[i] in alike)]
             res = resolve_reference(desc, cands, dets, landmarks, cfg, look_alikes=len(alike),
-                                    table_centre_xy=self.table_centre_xy)
+                                    table_centre_xy=self.table_centre_xy, viewer_right_xy=self.viewer_right_xy)
             self.last_references[desc.name] = res
             log.info("perception: %s %s %s: %s", desc.name, desc.where.relation if desc.where else "",
                      list(desc.where.of) if desc.where else [],
@@ -1136,6 +1141,20 @@ def table_centre(points: np.ndarray, plane: Plane, config: PerceptionConfig) -> 
         return None
     lo, hi = np.percentile(points[on, :2], [2.0, 98.0], axis=0)
     return 0.5 * (lo + hi)
+
+
+def viewer_right(frames: Sequence[CameraFrame], camera: str | None = None) -> np.ndarray | None:
+    """The viewer's right on the table: the horizontal part of the image x axis (optical frame:
+    x right, y down, z forward) of camera ``camera`` among ``frames`` (None: the first frame),
+    as a (2,) unit vector in the world frame; None when there is no such frame or its x axis
+    is within 0.1 of vertical. A camera facing the robot from across the table (LIBERO's
+    agentview) has its right towards world +y."""
+    frame = next((f for f in frames if camera is None or f.sensor == camera), None)
+    if frame is None:
+        return None
+    x = np.asarray(frame.T_world_camera, dtype=float)[:2, 0]
+    n = float(np.linalg.norm(x))
+    return None if n < 0.1 else x / n
 
 
 def _corroborated(conf: float, det: Detection, placed_xy: np.ndarray, config: PerceptionConfig) -> float:

@@ -16,6 +16,8 @@ from phyagentos.motion.grasp import (
     FINGERTIP_BELOW_TCP_M,
     hand_yaw,
     place_pose,
+    slid_grasp,
+    slide_offsets,
     top_down_grasp_candidates,
 )
 from phyagentos.motion.rim_grasp import (
@@ -300,8 +302,13 @@ class ComputeGrasp(Primitive):
         neighbours); when none is clear either way, candidate ``self.candidate`` as before (the
         planner then says why). Re-computed with a pre-grasp already chosen (``RecomputeGrasp``
         after a closer look), the candidate whose hand yaw is nearest that pre-grasp's, at its
-        height: the refinement never turns the hand. Returns the plan and the trace fields
-        that say so."""
+        height: the refinement never turns the hand. When no centred grasp of a box is clear
+        from either height, the same candidates slid along the side they hold
+        (:func:`~phyagentos.motion.grasp.slide_offsets`: :data:`~phyagentos.motion.grasp.OFF_CENTRE_STEPS_M`,
+        both pads still on the box): a carton standing beside a cream cheese box along the
+        closing direction meets the hand, not the box, and a grasp 2.5 cm to one side clears
+        it. A re-computed grasp keeps the slide of the pre-grasp it refines. Returns the plan
+        and the trace fields that say so."""
         try:
             previous = np.asarray(self.get(self.pregrasp_key), dtype=float)
         except PrimitiveFailure:
@@ -315,22 +322,38 @@ class ComputeGrasp(Primitive):
             plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape, max_width_m=max_width)
             yaw = hand_yaw(previous)
             best = min(range(len(plans)), key=lambda k: abs(_wrap_rad(hand_yaw(plans[k].grasp) - yaw)))
-            plan, raised, _ = self._clear_of_support(plans[best], T_obj, half)  # as high as the first plan's, if need be
+            plan = plans[best]
+            slid = 0.0
+            if shape == "box":  # the slide of the pre-grasp the arm went to, while both pads stay on the box
+                along = float(np.dot(previous[:3, 3] - plan.pregrasp[:3, 3], plan.grasp[:3, 0]))
+                fits = [o for o in slide_offsets(plan, T_obj, half, steps_m=(abs(along),)) if o * along > 0]
+                slid = fits[0] if abs(along) > 0.002 and fits else 0.0
+                plan = slid_grasp(plan, slid) if slid else plan
+            plan, raised, _ = self._clear_of_support(plan, T_obj, half)  # as high as the first plan's, if need be
             used = {"candidate_used": best} if best != self.candidate % len(plans) else {}
-            return plan, {**used, **({"raised_m": raised} if raised else {})}
+            return plan, {**used, **({"raised_m": raised} if raised else {}),
+                          **({"slid_m": round(slid, 4)} if slid else {})}
         refused = []
         first = None
-        for height in (self.approach_height_m, self.approach_height_m + HIGHER_APPROACH_M):
-            plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape, max_width_m=max_width)
-            first = first or plans[self.candidate % len(plans)]
-            for k in range(len(plans)):
-                i = (self.candidate + k) % len(plans)
-                plan, raised, why = self._clear_of_support(plans[i], T_obj, half)
-                if why is None:
-                    used = {"candidates_refused": refused, "candidate_used": i, "approach_height_m": round(height, 3)}
-                    used = {**(used if refused else {}), **({"raised_m": raised} if raised else {})}
-                    return plan, used
-                refused.append(f"candidate {i} from {height:.2f} m: {why}")
+        heights = (self.approach_height_m, self.approach_height_m + HIGHER_APPROACH_M)
+        for slide in ((False, True) if shape == "box" else (False,)):
+            for height in heights:
+                plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape,
+                                                  max_width_m=max_width)
+                first = first or plans[self.candidate % len(plans)]
+                for k in range(len(plans)):
+                    i = (self.candidate + k) % len(plans)
+                    for offset in (slide_offsets(plans[i], T_obj, half) if slide else (0.0,)):
+                        plan, raised, why = self._clear_of_support(slid_grasp(plans[i], offset) if offset else plans[i],
+                                                                   T_obj, half)
+                        if why is None:
+                            used = {"candidates_refused": refused, "candidate_used": i,
+                                    "approach_height_m": round(height, 3)}
+                            used = {**(used if refused else {}), **({"raised_m": raised} if raised else {}),
+                                    **({"slid_m": round(offset, 4)} if offset else {})}
+                            return plan, used
+                        slid_by = f" slid {offset * 100:+.1f} cm" if offset else ""
+                        refused.append(f"candidate {i}{slid_by} from {height:.2f} m: {why}")
         return first, {"candidates_refused": refused}
 
     def _clear_of_support(self, plan, T_obj: np.ndarray, half: np.ndarray):

@@ -302,6 +302,12 @@ def _name_parts(e: Entity) -> set[str]:
     return set(e.name.split("_")) - _KIND - _REGION_KIND - _STOP - _VERBS - set(_PREPOSITIONS)
 
 
+def _name_colours(e: Entity) -> set[str]:
+    """The palette words of an entity's name (``white_yellow_mug_1``: white, yellow)."""
+    return set(e.name.split("_")) & {"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey",
+                                     "gray"}
+
+
 def _filter(words: Sequence[str], cands: Sequence[Entity], world: World) -> tuple[list[Entity], list[str]]:
     """The candidates ``words`` (an object phrase) allow, and what in the words matched nothing."""
     ws = list(words)
@@ -312,13 +318,23 @@ def _filter(words: Sequence[str], cands: Sequence[Entity], world: World) -> tupl
     misses: list[str] = []
     colours = [w for w in ws if w in _colours(world) or w in {"red", "green", "blue", "yellow", "orange", "purple",
                                                                "white", "black", "grey", "gray"}]
+    uncoloured: list[Entity] = []
     if colours:
+        # an object of no known colour may be the one meant when the coloured ones that match carry a
+        # colour not named ("the white mug" beside a white_yellow_mug and a porcelain mug of no colour word)
+        extra = [e for e in out if e.colour in colours and _name_colours(e) - set(colours)]
+        uncoloured = [e for e in out if e.colour is None] if extra else []
         out = [e for e in out if e.colour in colours]
+        # "the white mug": one that is white and nothing else named before a white-and-yellow one
+        exact = [e for e in out if not _name_colours(e) - set(colours)]
+        out = exact or out
         if not out:
             misses.append(f"nothing {'/'.join(colours)}")
     parts = [w for w in ws if any(w in _name_parts(e) for e in cands) and w not in colours]
     if parts:
         out = [e for e in out if set(parts) & _name_parts(e)]
+        uncoloured = [e for e in uncoloured if set(parts) & _name_parts(e)]
+    out += uncoloured
     sizes = [_SIZE_WORDS[w] for w in ws if w in _SIZE_WORDS]
     if sizes and out:
         labelled = [e for e in out if e.size in sizes]
@@ -415,7 +431,8 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
         # whose name has every word the phrase names, when exactly one has
         said = {w for w in content if any(w in _name_parts(e) for e in found)}
         whole = [e for e in found if said and said <= _name_parts(e)]
-        if len(whole) == 1:
+        # not when a colour named may be that of one whose colour is unknown (a porcelain mug, "the white mug")
+        if len(whole) == 1 and not (said & _name_colours(whole[0]) and any(e.colour is None for e in found)):
             found = whole
     names = tuple(e.name for e in found)
     if count is not None:
@@ -513,8 +530,12 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
 
 #: The spatial relations a referring expression may use (``read_request(..., relations=True)``):
 #: ``between`` two landmarks, ``next_to`` one, ``on`` one, ``in`` one (optionally a ``part`` of it such as its
-#: top drawer), ``table_center`` (no landmark: the middle of the table the objects stand on).
-RELATIONS = ("between", "next_to", "on", "in", "table_center")
+#: top drawer), ``table_center`` (no landmark: the middle of the table the objects stand on), ``left`` /
+#: ``right`` (no landmark: the one furthest to the viewer's left / right).
+RELATIONS = ("between", "next_to", "on", "in", "table_center", "left", "right")
+#: words that name the viewer's side of one of several identical objects ("the left plate", "the
+#: black bowl on the left"), and the relation they stand for: as the scene camera shows the table
+_SIDES = {"left": "left", "leftmost": "left", "right": "right", "rightmost": "right"}
 #: words that begin a relation after an object phrase, and the relation they begin
 _RELATION_START = {"between": "between", "next": "next_to", "beside": "next_to", "near": "next_to",
                    "nearest": "next_to", "closest": "next_to", "by": "next_to", "on": "on", "atop": "on",
@@ -547,6 +568,20 @@ def _twins(words: list[str], world: World) -> tuple[str, ...]:
     if misses or len(found) < 2 or len({_stem(e.name) for e in found}) != 1:
         return ()
     return tuple(e.name for e in found)
+
+
+def _side_twins(words: list[str], world: World) -> tuple[str | None, tuple[str, ...]]:
+    """``(left | right, the identical objects)`` when ``words`` name several identical objects with one
+    side word among them (``the left plate``, ``the rightmost bowl``, ``the black bowl on the left``);
+    else ``(None, ())``."""
+    sides = [w for w in words if w in _SIDES]
+    if len(sides) != 1:
+        return None, ()
+    rest = [w for w in words if w not in _SIDES]
+    if rest[-2:] == ["on", "the"] or rest[-3:-1] == ["on", "the"] and rest[-1] in ("side", "hand"):
+        rest = rest[:rest.index("on")]  # "the black bowl on the left (side)"
+    twins = _twins(rest, world)
+    return (_SIDES[sides[0]], twins) if twins else (None, ())
 
 
 def _matches_part(word: str, parts: set[str]) -> bool:
@@ -644,6 +679,38 @@ def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tu
     return where, []
 
 
+def _free_twin(twins: tuple[str, ...], bound: Mapping[str, dict], phrase: list[str]):
+    """The first of ``twins`` not yet bound to a reference, or the problem list saying none is left."""
+    free = [n for n in twins if n not in bound]
+    if not free:
+        return [("not_understood", f"{quote(' '.join(phrase))}: every one of {', '.join(twins)} is already picked "
+                                   f"out by another part of the request")]
+    return free[0]
+
+
+def _side_reference(body: list[str], world: World, verb: str | None, bound: Mapping[str, dict]):
+    """``(object, {"relation": left | right}, destination words, preposition)`` when the object words of
+    ``body`` (up to a move's first destination preposition after ``on the left``) name one side of several
+    identical objects (``the left bowl``, ``the black bowl on the left``); a problem list when every one of
+    them is bound already; else None."""
+    end = len(body)
+    if verb in _MOVE:
+        start = 0
+        for i, w in enumerate(body):  # skip "on the left (side)" of the object phrase itself
+            if w == "on" and body[i + 1:i + 3] in (["the", "left"], ["the", "right"]):
+                start = i + 3 + (1 if body[i + 3:i + 4] in (["side"], ["hand"]) else 0)
+                break
+        end = next((i for i in range(max(start, 1), len(body)) if body[i] in _DEST_PREPOSITIONS), len(body))
+    side, twins = _side_twins(body[:end], world)
+    if side is None:
+        return None
+    name = _free_twin(twins, bound, body[:end])
+    if isinstance(name, list):
+        return name
+    dest, prep = (body[end + 1:], body[end]) if end < len(body) else ([], None)
+    return name, {"relation": side}, dest, prep
+
+
 def _reference(body: list[str], world: World, verb: str | None, bound: Mapping[str, dict]):
     """A referring expression at the start of a clause's object words: ``the <words naming several
     identical objects> <relation> <landmark(s)>`` (then, for a move, ``<preposition> <destination>``).
@@ -653,6 +720,9 @@ def _reference(body: list[str], world: World, verb: str | None, bound: Mapping[s
     preposition)``: the object is the first of the identical declared names not yet bound to another
     reference (which of two identical names stands for the thing the relation picks out is the reader's
     label; perception decides which physical object that is)."""
+    side = _side_reference(body, world, verb, bound)
+    if side is not None:
+        return side
     k = next((i for i, w in enumerate(body) if w in _RELATION_START and i > 0), None)
     if k is None:
         return None
@@ -802,7 +872,16 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             previous = objects
             continue
         kind, dests, by_colour, why = ("region", (), False, [])
-        if dest_words:
+        side, twins = _side_twins(dest_words, world) if relations and dest_words else (None, ())
+        dest_where: dict[str, dict] = {}
+        if side is not None:  # "on the left plate": one of two identical plates, the one perception sees left
+            bound = {**meaning.where, **({ref[0]: ref[1]} if ref is not None else {})}
+            name = _free_twin(tuple(t for t in twins if t not in objects), bound, dest_words)
+            if isinstance(name, list):
+                why = name
+            else:
+                dests, dest_where = (name,), {name: {"relation": side}}
+        elif dest_words:
             kind, dests, by_colour, why = _read_destination(dest_words, prep, world, previous, objects)
         problems += why
         if verb_word is None and (not dest_words or not acted or set(words) & {"is", "are", "was", "were"}):
@@ -835,6 +914,7 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded))
         if ref is not None:
             meaning.where[ref[0]] = ref[1]
+        meaning.where.update(dest_where)
         previous = objects if count is None else objects[:count]
         acted = acted or verb_word is not None
     _settle(meaning)

@@ -320,3 +320,18 @@ def test_the_grasps_view_stands_in_only_when_it_and_the_end_view_are_confident(t
     ev = _seen_lifted(tmp_path, initial_conf=0.36, **kw)
     assert judge(ev)["lifted"].status == "unknown", why
     assert SessionVerifier().verify(session(), ev).verdict != "success", why
+
+
+def test_a_grasp_by_the_rim_closes_on_the_wall_so_its_aim_is_the_rim_point_and_it_carries_the_centre(tmp_path):
+    """A mug or bowl taken by its rim: the tcp closes on the wall, 4-5 cm from the perceived centre,
+    which is more than the capture radius from it; the rim point the grasp aimed at is where the
+    fingers must have closed, and the container's centre is what is carried."""
+    rim = (AT[0], AT[1] - 0.045, AT[2])
+    trace = pick_trace(close_at=rim)
+    g = next(r for r in trace if r["kind"] == "grasp_pose")
+    ev = occluded(tmp_path, trace, tcp_end=(rim[0], rim[1], rim[2] + 0.15), name="across")
+    assert estimate_held(ev, "cube").status == "unknown"  # an across grasp 4.5 cm off the object: not captured
+    g.update({"grasp_kind": "rim", "grasp": list(rim)})
+    ev = occluded(tmp_path, trace, tcp_end=(rim[0], rim[1], rim[2] + 0.15), name="rim")
+    est = estimate_held(ev, "cube")
+    assert est.status == "held" and est.position_m == pytest.approx((AT[0], AT[1], AT[2] + 0.15), abs=1e-6)

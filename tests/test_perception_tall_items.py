@@ -197,3 +197,25 @@ def test_the_release_point_is_kept_across_sessions_and_forgotten_when_the_item_i
     q.tracks["cream_cheese_1"].seen_now = False  # hidden by the closing fingers
     q._update_holding(_proprio(opening=0.0224, effort=20.0, tcp=_tcp((0.01, 0.25, 0.02))), 5.0)
     assert q.tracks["cream_cheese_1"].held and q.tracks["cream_cheese_1"].placed_xy is None
+
+
+# ---- a mug held by its wall -----------------------------------------------------------------------
+
+def test_a_mug_held_by_its_thick_wall_is_in_the_hand_and_a_bowls_thin_wall_band_is_not_its():
+    """LIBERO's mugs have 5-8 mm walls (the bowl's is 2.6 mm): closed on a red coffee mug's wall the
+    fingers stood 14-16 mm apart (LIBERO-90 task 66, a training task), outside the bowl wall's band."""
+    from phyagentos.perception import Perceiver
+    from phyagentos.perception.tracks import Track
+
+    mug = {"name": "red_coffee_mug_1", "class": "red_coffee_mug", "shape": "box", "colour": [0.36, 0.15, 0.15],
+           "size_m": [0.11, 0.094, 0.148]}
+    bowl = {**mug, "name": "akita_black_bowl_1", "class": "akita_black_bowl", "size_m": [0.112, 0.112, 0.05]}
+    mug_seen = _det((0.0, -0.10, 0.074), (0.055, 0.047, 0.074), low=0.0, shape="box")
+    bowl_seen = _det((0.0, -0.10, 0.025), (0.056, 0.056, 0.025), low=0.0, shape="cylinder")
+    for decl, seen, gap, held in ((mug, mug_seen, 0.0156, True), (bowl, bowl_seen, 0.0156, False),
+                                  (bowl, bowl_seen, 0.0042, True)):
+        r = float(min(seen.half_extents[:2]))
+        at_rim = _proprio(opening=gap / 2, effort=8.0, tcp=_tcp((0.0, -0.10 - r, 2 * seen.half_extents[2] - 0.012)))
+        p = Perceiver(CFG, [decl])
+        p.tracks[decl["name"]] = Track.start(decl["name"], seen, 0.9, 1.0, ("agentview",))
+        assert (p._hand_evidence(p.tracks[decl["name"]], at_rim) is not None) is held, (decl["class"], gap)

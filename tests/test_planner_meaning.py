@@ -397,3 +397,14 @@ def test_a_side_word_reads_before_and_after_the_noun_and_only_among_twins():
     # regions named left and right are regions, not a side of twins
     m = read_request("put the red cube in the left bin", world_from_scene(SCENE), relations=True)
     assert not m.problems and m.intents[0].destinations == ("left_bin",) and not m.where
+
+
+def test_a_porcelain_mug_is_the_white_mug_of_a_libero_scene():
+    from phyagentos.agent.llm.world import world_from_declared
+
+    world = world_from_declared(["porcelain_mug_1", "red_coffee_mug_1", "white_yellow_mug_1", "plate_1", "plate_2"])
+    m = read_request("put the white mug on the left plate and put the yellow and white mug on the right plate", world,
+                     relations=True)
+    assert not m.problems
+    assert [i.objects for i in m.intents] == [("porcelain_mug_1",), ("white_yellow_mug_1",)]
+    assert m.where == {"plate_1": {"relation": "left"}, "plate_2": {"relation": "right"}}

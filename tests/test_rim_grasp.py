@@ -16,12 +16,14 @@ import numpy as np
 import pytest
 
 from phyagentos.errors import IKError
-from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, PAD_DEPTH_ABOVE_TCP_M, hand_yaw
+from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, PAD_DEPTH_ABOVE_TCP_M, GraspPlan, hand_yaw, slide_offsets
 from phyagentos.motion.rim_grasp import (
+    DEFAULT_HANDLED_WALL_M,
     DEFAULT_RIM_WALL_M,
     PARTLY_SEEN_RIM_ANGLE_RAD,
     RIM_GRIP_DEPTH_M,
     near_long_axis,
+    near_short_axis,
     open_container,
     partly_seen_rim_graspable,
     rim_grasp_candidates,
@@ -270,11 +272,42 @@ def test_an_across_grasp_the_arm_cannot_reach_clear_gives_way_to_the_next_candid
     first = board["grasp_pose"].copy()
     monkeypatch.setattr(perception, "_unusable", lambda target, plan, checks: "pre-grasp collides: wall")
     board, records = _run_compute_grasp(franka, ent)
-    assert "candidate_used" not in records[0] and len(records[0]["candidates_refused"]) == 4  # 2 x 2 heights
+    refused = records[0]["candidates_refused"]
+    # 2 candidates x 2 heights centred, then slid 1.5 cm either way along the 6 cm side (2.5 cm would take
+    # a pad off the box)
+    assert "candidate_used" not in records[0] and len(refused) == 4 + 8
+    assert sum(" slid +1.5 cm " in r for r in refused) == 4 and not any("2.5 cm" in r for r in refused)
     assert not np.allclose(board["grasp_pose"], first)  # candidate 0 again, as asked
     monkeypatch.undo()
     _, records = _run_compute_grasp(franka, ent)  # nothing in the way in the default scene
     assert "candidates_refused" not in records[0]
+
+
+def test_when_no_centred_grasp_is_clear_the_grasp_slides_along_the_side_it_holds(franka, monkeypatch):
+    """A carton beside a cream cheese box along the closing direction meets the hand: a grasp slid
+    along the box's long side, both pads still on it, clears it; a re-computed grasp keeps the slide."""
+    import phyagentos.primitives.perception as perception
+
+    ent = _entity("cream_cheese_1", "cream_cheese", "box", (0.042, 0.022, 0.016))
+    centred = _run_compute_grasp(franka, ent)[0]["grasp_pose"].copy()
+
+    def unusable(ctx, obj, plan):  # only a grasp 2.5 cm to one side of the centre is clear
+        x = plan.grasp[:3, 0]
+        along = float(np.dot(plan.grasp[:3, 3] - centred[:3, 3], x))
+        return None if along < -0.02 else "pre-grasp collides: gripper0_right_gripper-milk_1_main"
+
+    monkeypatch.setattr(perception, "_unusable", unusable)
+    board, records = _run_compute_grasp(franka, ent)
+    [rec] = records
+    assert rec["slid_m"] == pytest.approx(-0.025)
+    G = board["grasp_pose"]
+    assert float(np.dot(G[:3, 3] - centred[:3, 3], G[:3, 0])) == pytest.approx(-0.025, abs=1e-9)
+    assert G[2, 3] == pytest.approx(centred[2, 3]) and hand_yaw(G) == pytest.approx(hand_yaw(centred))
+    # re-observed from that pre-grasp: the refinement keeps the slide
+    board, records = _run_compute_grasp(franka, ent, board=board)
+    assert records[0]["slid_m"] == pytest.approx(-0.025)
+    # a box too short for the pads to slide on is never slid
+    assert slide_offsets(GraspPlan(G, G, 0.0, 0.04), np.eye(4), (0.012, 0.012, 0.02)) == ()
 
 
 def test_ik_whose_solution_collides_tries_the_ready_configuration_and_a_swung_elbow(franka, monkeypatch):
@@ -357,3 +390,42 @@ def test_a_pre_grasp_out_of_reach_is_tried_lower_when_the_grasp_is_in_reach(fran
     assert rec["approach_height_m"] in (0.06, 0.04) and rec["rim_points_refused"] >= 16
     G, P = board["grasp_pose"], board["pregrasp_pose"]
     assert P[2, 3] - G[2, 3] == pytest.approx(rec["approach_height_m"], abs=1e-6)
+
+
+# --------------------------------------------------------------------- mugs: a handled open container
+
+# LIBERO-90's red coffee mug as perceived on its generated scenes (bench descriptors): 11.0 x 9.4 cm
+# with the handle, 14.8 cm tall
+MUG = (0.055, 0.047, 0.074)
+
+
+def test_a_mug_is_taken_by_its_rim_whatever_its_height_and_its_handle():
+    assert rim_graspable("red_coffee_mug", "box", MUG)
+    assert rim_graspable("porcelain_mug", "cylinder", (0.048, 0.048, 0.062))
+    assert not rim_graspable("red_coffee_mug", "box", (0.07, 0.035, 0.074))  # not a mug's footprint
+    assert not rim_graspable("red_coffee_mug", "box", (0.035, 0.03, 0.05))  # fits across: taken across
+    assert not rim_graspable("bowl", "box", MUG)  # a bowl that tall is no dish
+
+
+def test_only_rim_points_near_the_ends_of_a_mugs_short_side_are_kept():
+    for T in (bowl_at(0.5, 0.1), np.array([[0.0, -1.0, 0.0, 0.5], [1.0, 0.0, 0.0, 0.1], [0.0, 0.0, 1.0, 0.07],
+                                           [0.0, 0.0, 0.0, 1.0]])):
+        plans = rim_grasp_candidates(T, (MUG[1], MUG[1], MUG[2]))
+        kept = near_short_axis(plans, T, MUG)
+        assert 0 < len(kept) < len(plans)
+        short = T[:2, 1]  # the box's y side is the short one (hx > hy)
+        for plan in kept:
+            d = plan.grasp[:2, 3] - T[:2, 3]
+            assert abs(float(d @ short)) / np.linalg.norm(d) >= math.cos(PARTLY_SEEN_RIM_ANGLE_RAD) - 1e-9
+
+
+def test_compute_grasp_takes_a_mug_by_its_rim_away_from_the_handle_and_expects_its_thicker_wall(franka):
+    ent = _entity("red_coffee_mug_1", "red_coffee_mug", "box", MUG)
+    board, records = _run_compute_grasp(franka, ent)
+    [rec] = records
+    assert rec["grasp_kind"] == "rim" and rec["wall_m"] == DEFAULT_HANDLED_WALL_M
+    d = board["grasp_pose"][:2, 3] - np.array([0.45, -0.25])
+    assert abs(d[1]) / np.linalg.norm(d) >= math.cos(PARTLY_SEEN_RIM_ANGLE_RAD) - 1e-9  # the short side is y
+    assert float(np.linalg.norm(d)) == pytest.approx(MUG[1] - DEFAULT_HANDLED_WALL_M / 2, abs=1e-6)
+    assert franka.runtime_notes["planned_grasp"] == {"object": "red_coffee_mug_1", "width_m": DEFAULT_HANDLED_WALL_M,
+                                                     "kind": "rim"}

@@ -142,3 +142,29 @@ def test_a_slip_during_a_place_re_opens_the_pick_with_a_firmer_grip(tmp_path):
     assert v.verdict == "replan" and v.revision.reopen == "pick_cube"
     assert v.revision.strategy == "firmer_grip" and v.revision.parameters == {"grip_force_n": 40.0}
     assert v.revision.cause == "object_slipped"
+
+
+def _ent(name, pos, size, conf, std=0.002):
+    return {"name": name, "kind": "object", "position": list(pos), "quat_wxyz": [1, 0, 0, 0], "size": list(size),
+            "attributes": {"source": "perceived", "confidence": conf, "position_std_m": std}}
+
+
+@pytest.mark.parametrize("plate_end,status", [
+    (((0.003, -0.002, 0.45), 0.12), "satisfied"),   # seen weakly where it was: it stands in
+    (((0.08, 0.0, 0.45), 0.12), "unknown"),         # seen weakly 8 cm away: it may have been pushed
+    (None, "unknown"),                               # not seen at all: nothing says it did not move
+    (((0.003, -0.002, 0.45), 0.9), "satisfied"),   # seen confidently: judged on that sighting
+])
+def test_a_plate_hidden_by_the_mug_set_on_it_stands_where_it_was_seen_confidently(plate_end, status):
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    plate0 = _ent("plate_1", (0.0, 0.0, 0.45), (0.1, 0.1, 0.01), 0.95)
+    mug = _ent("mug_1", (0.0, 0.0, 0.46 + 0.06), (0.045, 0.045, 0.06), 0.9)
+    initial = {"entities": [plate0], "relations": []}
+    ents = [mug] + ([] if plate_end is None else [_ent("plate_1", plate_end[0], (0.05, 0.03, 0.01), plate_end[1])])
+    terminal = {"entities": ents, "relations": []}
+    [c] = parse_criteria({"on": {"object": "mug_1", "support": "plate_1"}})
+    out = evaluate(c, initial, terminal)
+    assert out.status == status, out.reason
+    if status == "satisfied" and plate_end[1] < 0.5:
+        assert "where the initial snapshot saw it" in out.reason

@@ -35,7 +35,10 @@ when perception reports one: the object was seen standing inside the container's
 (its walls may hide it from other views; perception then reports it ``remembered``); the
 centre must lie in the container's footprint by 2 sigma. An entity absent from a snapshot, or with
 ``confidence`` below :data:`CONFIDENCE_MIN`, makes the criterion ``unknown``: never
-guessed, never ``success``.
+guessed, never ``success``. One stand-in: the support of ``on`` hidden by what was set on it
+(a plate under a mug, seen only as the ring around it) is taken where the initial snapshot saw
+it confidently, when the terminal snapshot still sees it, however weakly, within
+:data:`SUPPORT_STILL_M` plus 2 sigma of that place (it did not move).
 """
 
 from __future__ import annotations
@@ -55,6 +58,9 @@ REST_TOL_M = 0.01
 #: Perceived entities and relations below this confidence do not count: a criterion
 #: naming one is ``unknown``. 0.5: an association no better than a coin flip.
 CONFIDENCE_MIN = 0.5
+#: How far (m, beyond 2 sigma) a support of ``on`` seen weakly at the end may be from where the
+#: initial snapshot saw it confidently, and still stand in for it (a plate hidden by the mug set on it).
+SUPPORT_STILL_M = 0.01
 #: Per-finger opening above which a closed gripper holds *something*, m (CONTRACT_9
 #: section 3: holding needs more than ~2 mm).
 CLOSED_OPENING_M = 0.002
@@ -327,14 +333,26 @@ def _eval_inside(c, initial, terminal, refs):
     return _band(c, refs, inside and held is False, outside, obj, f"inside {region}", detail)
 
 
+def _still_support(initial: Mapping, terminal: Mapping, support: str) -> Mapping | None:
+    """The initial snapshot's confident sighting of ``support`` when the terminal snapshot sees it
+    only weakly (below :data:`CONFIDENCE_MIN`: hidden by what was set on it) within
+    :data:`SUPPORT_STILL_M` + 2 sigma of it, horizontally; else None."""
+    e0, e1 = _entities(initial).get(support), _entities(terminal).get(support)
+    if e0 is None or e1 is None or confidence(e0) < CONFIDENCE_MIN or confidence(e1) >= CONFIDENCE_MIN:
+        return None
+    d = math.hypot(e1["position"][0] - e0["position"][0], e1["position"][1] - e0["position"][1])
+    return e0 if d <= SUPPORT_STILL_M + 2.0 * math.hypot(sigma(e0), sigma(e1)) else None
+
+
 def _eval_on(c, initial, terminal, refs):
     obj, support = c.args["object"], c.args["support"]
-    if (miss := _need(c, refs, ("terminal", terminal, obj), ("terminal", terminal, support))):
+    still = _still_support(initial, terminal, support)
+    if (miss := _need(c, refs, ("terminal", terminal, obj), *(() if still else (("terminal", terminal, support),)))):
         return miss
     if (held_in := _contained(c, refs, terminal, obj, support)) is not None:  # a container: resting in it
         return held_in
     ents = _entities(terminal)
-    o, s = ents[obj], ents[support]
+    o, s = ents[obj], still or ents[support]
     m = 2.0 * math.hypot(sigma(o), sigma(s))
     # the support's top face is at its centre + half height
     top = s["position"][2] + s["size"][2]
@@ -347,7 +365,8 @@ def _eval_on(c, initial, terminal, refs):
     inside = dz <= REST_TOL_M + m and dx <= sx - m and dy <= sy - m and held is False
     outside = dz > REST_TOL_M + m or dx > sx + m or dy > sy + m or bool(held)
     return _band(c, refs, inside, outside, obj, f"on {support}",
-                 f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m")
+                 f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
+                 + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))
 
 
 def _eval_still(c, initial, terminal, refs):

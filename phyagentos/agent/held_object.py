@@ -10,7 +10,8 @@ aimed at, and the perceived snapshots -- and decides:
 
 the gripper closed on ``obj`` (a ``close`` command for it, ``closed_on_something``), the
 fingers were then at the object's perceived position (horizontal distance between the tcp
-and the perceived centre at most :data:`CAPTURE_RADIUS_M`), the opening per finger stays
+and the perceived centre at most :data:`CAPTURE_RADIUS_M`; for a grasp by a container's rim,
+``grasp_kind`` rim, between the tcp and the rim point the grasp aimed at), the opening per finger stays
 above the empty-closed width with a 2-sigma margin (``> CLOSED_OPENING_M + 2 *
 OPENING_STD_M``) and is no wider than the perceived object (largest horizontal half
 extent + :data:`WIDTH_MARGIN_M`), nothing opened the gripper and no slip shows (no
@@ -213,7 +214,10 @@ def estimate_held(evidence: Any, obj: str) -> HeldEstimate:
     if aim is None:
         return unknown(f"no perceived position of {obj} before the close")
     obs_std = float(obs_std if obs_std is not None else (sigma(init) if init is not None else 0.0))
-    dxy = math.hypot(aim[0] - T_close[0, 3], aim[1] - T_close[1, 3])
+    # a grasp by a container's rim closes on the wall, at the rim point it aimed at, not the centre
+    rim = next((r for r in reversed(trace[:close]) if r.get("kind") == "grasp_pose" and r.get("object") == obj), {})
+    at = rim["grasp"] if rim.get("grasp_kind") == "rim" and rim.get("grasp") is not None else aim
+    dxy = math.hypot(float(at[0]) - T_close[0, 3], float(at[1]) - T_close[1, 3])
     if dxy > CAPTURE_RADIUS_M + 2 * obs_std:
         return unknown(f"the fingers closed {100 * dxy:.1f} cm from where {obj} was seen", capture_m=dxy)
     if init is not None and init.get("size"):

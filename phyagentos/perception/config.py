@@ -217,6 +217,11 @@ class HoldingConfig(_Section):
         description="Assumed wall of an open container (a bowl) held by its rim, m: what the fingers then close on "
                     "(motion.rim_grasp.DEFAULT_RIM_WALL_M: the LIBERO akita bowl's 2.6 mm wall).",
     )
+    handled_wall_m: float = Field(
+        0.007, le=0.05, gt=0,
+        description="Assumed wall of a container with a handle (a mug) held by its rim, m "
+                    "(motion.rim_grasp.DEFAULT_HANDLED_WALL_M: LIBERO's mugs, 4.9-8.2 mm).",
+    )
 
 
 class RelationsConfig(_Section):

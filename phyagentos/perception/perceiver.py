@@ -986,8 +986,13 @@ class Perceiver:
         tcp = proprio.tcp_pose[:3, 3]
         width = width_in_hand(t.half_extents, t.yaw, t.shape, proprio)
         rim = self._rim_container(t)
-        if rim:  # an open container (a bowl) may be held by its wall: whichever the gap is nearer
-            width = min((width, hc.rim_wall_m), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
+        wall = hc.rim_wall_m
+        if rim:  # an open container (a bowl, a mug) may be held by its wall: whichever the gap is nearer
+            from phyagentos.motion.rim_grasp import handled  # noqa: PLC0415
+
+            desc = next((d for d in self.declared if d.name == t.name), None)
+            wall = hc.handled_wall_m if desc is not None and handled(desc.cls) else hc.rim_wall_m
+            width = min((width, wall), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
         ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
                               grasp_height_m=self._grasp_height_m, config=self.config)
         if ev.confidence <= 0.0:
@@ -996,7 +1001,7 @@ class Perceiver:
             # capture: the object was last seen right under/between the fingers, or (held
             # by its wall) the tcp is on its rim
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
-            on_rim = rim and width == hc.rim_wall_m and \
+            on_rim = rim and width == wall and \
                 abs(dxy - float(min(t.half_extents[0], t.half_extents[1]))) <= hc.capture_radius_m / 2.0
             if dxy > hc.capture_radius_m and not on_rim:
                 return None

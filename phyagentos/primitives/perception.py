@@ -21,8 +21,11 @@ from phyagentos.motion.grasp import (
     top_down_grasp_candidates,
 )
 from phyagentos.motion.rim_grasp import (
+    DEFAULT_HANDLED_WALL_M,
     DEFAULT_RIM_WALL_M,
+    handled,
     near_long_axis,
+    near_short_axis,
     partly_seen_rim_graspable,
     rim_grasp_candidates,
     rim_graspable,
@@ -237,8 +240,9 @@ class ComputeGrasp(Primitive):
             reachable rim point). A candidate whose pre-grasp or grasp the arm cannot
             reach clear of the scene gives way to the next one that it can.
         rim_wall_m: assumed wall thickness of a container taken by its rim, m; None: the
-            perceiver's ``holding.rim_wall_m`` (perception.yaml), else
-            :data:`~phyagentos.motion.rim_grasp.DEFAULT_RIM_WALL_M`.
+            perceiver's ``holding.rim_wall_m`` (``holding.handled_wall_m`` for a mug;
+            perception.yaml), else :data:`~phyagentos.motion.rim_grasp.DEFAULT_RIM_WALL_M`
+            (:data:`~phyagentos.motion.rim_grasp.DEFAULT_HANDLED_WALL_M`).
         snapshot: blackboard key of the observation.
         grasp, pregrasp: blackboard keys written with (4, 4) world poses of the tcp.
         look_closer: blackboard key written True when the object was seen only in part (the
@@ -275,7 +279,11 @@ class ComputeGrasp(Primitive):
         category = declared_class(self.ctx.target, self.object, ent)
         extra = {}
         if rim_graspable(category, shape, half, max_width_m=max_width):
-            plan, extra = self._rim_plan(snapshot, T_obj, half, max_width)
+            # a mug: near the ends of the short side, away from its handle, as round as its body
+            lo = float(min(half[0], half[1]))
+            body = np.array([lo, lo, float(half[2])]) if handled(category) else half
+            plan, extra = self._rim_plan(snapshot, T_obj, body, max_width,
+                                         short_axis_of=half if handled(category) else None)
         elif partly_seen_rim_graspable(category, shape, half, max_width_m=max_width):
             # seen in part (its far side hidden): the long side is the rim's diameter
             hi = float(max(half[0], half[1]))
@@ -387,7 +395,7 @@ class ComputeGrasp(Primitive):
         return not pairs
 
     def _rim_plan(self, snapshot: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float, *,
-                  long_axis: bool = False):
+                  long_axis: bool = False, short_axis_of: np.ndarray | None = None):
         """The rim grasp (candidate ``self.candidate`` among the usable ones) and the trace
         fields that say so.
 
@@ -400,14 +408,18 @@ class ComputeGrasp(Primitive):
         a pre-grasp already chosen (``RecomputeGrasp`` after a re-observation), the usable
         point nearest that pre-grasp is kept, from that pre-grasp's height: the refinement
         never switches sides. ``long_axis``: only the points near the ends of the perceived
-        box's long side (a container seen in part, ``half`` already made round).
+        box's long side (a container seen in part, ``half`` already made round);
+        ``short_axis_of``: the perceived (3,) half extents of a handled container (a mug,
+        ``half`` its round body), whose points are kept near the ends of the short side only.
         """
         target = self.ctx.target
         wall = self.rim_wall_m
+        mug = short_axis_of is not None
         if wall is None:
             perceiver = getattr(self.ctx, "perceiver", None)
-            wall = getattr(getattr(getattr(perceiver, "config", None), "holding", None), "rim_wall_m", None)
-        wall = float(wall) if wall is not None else DEFAULT_RIM_WALL_M
+            wall = getattr(getattr(getattr(perceiver, "config", None), "holding", None),
+                           "handled_wall_m" if mug else "rim_wall_m", None)
+        wall = float(wall) if wall is not None else (DEFAULT_HANDLED_WALL_M if mug else DEFAULT_RIM_WALL_M)
         T_tcp = np.asarray(target.tcp_pose(), dtype=float)
         q = np.asarray(target.arm_qpos(), dtype=float)
         others = []
@@ -432,6 +444,8 @@ class ComputeGrasp(Primitive):
                                          current_yaw_rad=hand_yaw(T_tcp),
                                          current_q7_rad=float(q[6]) if q.shape == (7,) else None,
                                          prefer_xy=base, max_width_m=max_width, keep_clear=others)
+            if short_axis_of is not None:
+                return near_short_axis(plans, T_obj, short_axis_of)
             return near_long_axis(plans, T_obj) if long_axis else plans
 
         # from the skill's approach height; where only pre-grasps were out of reach, lower ones;

@@ -111,17 +111,23 @@ def world_from_scene(scene: Mapping[str, Any], *, source: str = "scene") -> Worl
 
 #: Colour words a declared name may carry (``akita_black_bowl_1``: black); "gray" reads as grey.
 _NAME_COLOURS = frozenset(PALETTE) | {"gray"}
+#: Words of a declared name that say its colour without a colour word: a porcelain mug is white
+#: (LIBERO-90, a training suite, calls ``porcelain_mug_1`` "the white mug": task 67).
+IMPLIED_COLOURS: Mapping[str, str] = {"porcelain": "white"}
 
 
 def world_from_declared(objects: Sequence[str], fixtures: Sequence[str] = (), *, source: str = "declared") -> World:
     """A :class:`World` of declared names only (a LIBERO task's objects and fixtures): every
     object is an object a request may move, and every object and fixture a destination (a
     ``region`` of the reader). Colours are the palette words of a name (``akita_black_bowl_1``:
-    black); no position (nothing perceived when it is read). Used by the LIBERO plan and the
+    black), else one a word of it implies (:data:`IMPLIED_COLOURS`: ``porcelain_mug_1``:
+    white); no position (nothing perceived when it is read). Used by the LIBERO plan and the
     policy flow's prompt decomposition (:mod:`phyagentos.agent.instruction_steps`)."""
 
     def entity(name: str, kind: str) -> Entity:
-        colour = next((w for w in name.split("_") if w in _NAME_COLOURS), None)
+        words = name.split("_")
+        colour = next((w for w in words if w in _NAME_COLOURS), None) or next(
+            (IMPLIED_COLOURS[w] for w in words if w in IMPLIED_COLOURS), None)
         return Entity(name=name, kind=kind, position=None, colour="grey" if colour == "gray" else colour)
 
     return World(objects=tuple(entity(n, "object") for n in objects),

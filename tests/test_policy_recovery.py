@@ -131,7 +131,7 @@ def test_a_twin_is_placed_without_its_reference_once_it_is_in_the_hand():
 @pytest.mark.parametrize("suite,task,why", [
     ("libero_10", 9, "no step closes"),          # "... and close it"
     ("libero_goal", 5, "unknown_object"),        # push
-    ("libero_10", 6, "'right' names nothing there"),  # "to the right of the plate": not a place yet
+    ("libero_10", 6, "beside a landmark is not judged here yet"),  # "to the right of the plate"
 ])
 def test_instructions_the_rules_do_not_read_are_refused_with_the_reason(suite, task, why):
     with pytest.raises(InstructionNotRead, match=why):

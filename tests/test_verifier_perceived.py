@@ -168,3 +168,31 @@ def test_a_plate_hidden_by_the_mug_set_on_it_stands_where_it_was_seen_confidentl
     assert out.status == status, out.reason
     if status == "satisfied" and plate_end[1] < 0.5:
         assert "where the initial snapshot saw it" in out.reason
+
+
+VIEW = {"viewer": {"right_xy": [0.0, 1.0]}}  # LIBERO's agentview: the image's right is world +y
+
+
+@pytest.mark.parametrize("pudding,status", [
+    ((0.15, 0.11, 0.47), "satisfied"),    # 4 cm right of the plate's edge, on the table
+    ((0.15, -0.11, 0.47), "unsatisfied"),  # on its left
+    ((0.15, 0.0, 0.48), "unsatisfied"),   # on the plate
+    ((0.15, 0.30, 0.47), "unsatisfied"),  # across the table
+    ((0.28, 0.11, 0.47), "unsatisfied"),  # right of it but far behind
+    ((0.15, 0.072, 0.47), "unknown"),     # its centre within 2 sigma of the plate's edge
+])
+def test_beside_is_the_viewers_side_of_the_landmark_next_to_it_on_the_same_surface(pudding, status):
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    plate = _ent("plate_1", (0.15, 0.0, 0.45), (0.069, 0.069, 0.01), 0.9)
+    pud = _ent("chocolate_pudding_1", pudding, (0.03, 0.022, 0.03), 0.9, std=0.002)
+    terminal = {"entities": [plate, pud], "relations": [], **VIEW}
+    [c] = parse_criteria({"beside": {"object": "chocolate_pudding_1", "landmark": "plate_1", "side": "right"}})
+    out = evaluate(c, {"entities": [plate]}, terminal)
+    assert out.status == status, out.reason
+    # the same pudding seen from behind the robot is on the plate's other side
+    if status == "satisfied":
+        flipped = {**terminal, "viewer": {"right_xy": [0.0, -1.0]}}
+        assert evaluate(c, {"entities": [plate]}, flipped).status == "unsatisfied"
+        without = {k: v for k, v in terminal.items() if k != "viewer"}
+        assert "viewer's left and right" in evaluate(c, {"entities": [plate]}, without).reason

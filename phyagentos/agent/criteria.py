@@ -8,6 +8,7 @@ name to arguments, parsed without ``eval``::
       lifted: {object: cube, min_height: 0.05}   # cube rose >= 5 cm (terminal - initial z)
       inside: {object: cube, region: goal}       # cube rests inside the region footprint
       on: {object: blue, support: red}           # blue rests on red
+      beside: {object: pudding, landmark: plate, side: right}  # on the viewer's right of the plate
       released: cube                             # the gripper does not hold cube
       still: {max_joint_motion_rad: 0.01}        # the arm did not move
       unchanged: {object: red, tol_m: 0.01}      # red did not move
@@ -61,6 +62,11 @@ CONFIDENCE_MIN = 0.5
 #: How far (m, beyond 2 sigma) a support of ``on`` seen weakly at the end may be from where the
 #: initial snapshot saw it confidently, and still stand in for it (a plate hidden by the mug set on it).
 SUPPORT_STILL_M = 0.01
+#: ``beside``: the object's centre lies at most this far (m) beyond the landmark's edge on the
+#: side named: next to it, not across the table.
+BESIDE_REACH_M = 0.10
+#: ``beside``: the sides a landmark has, as the scene camera shows the table.
+SIDES = ("left", "right")
 #: Per-finger opening above which a closed gripper holds *something*, m (CONTRACT_9
 #: section 3: holding needs more than ~2 mm).
 CLOSED_OPENING_M = 0.002
@@ -95,6 +101,7 @@ _SIGNATURES: dict[str, tuple[tuple[str, ...], dict[str, Any], str | None]] = {
     "lifted": (("object",), {"min_height": 0.05}, "object"),
     "inside": (("object", "region"), {}, None),
     "on": (("object", "support"), {}, None),
+    "beside": (("object", "landmark", "side"), {}, None),
     "still": ((), {"max_joint_motion_rad": 0.01}, None),
     "unchanged": (("object",), {"tol_m": 0.01}, "object"),
     "articulated": (("object",), {"min": -math.inf, "max": math.inf, "min_fraction": -math.inf,
@@ -369,6 +376,54 @@ def _eval_on(c, initial, terminal, refs):
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))
 
 
+def _yaw(ent: Mapping) -> float:
+    w, x, y, z = (list(ent.get("quat_wxyz") or (1.0, 0.0, 0.0, 0.0)) + [0.0] * 4)[:4]
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _extent(ent: Mapping, d: tuple[float, float]) -> float:
+    """Half extent (m) of ``ent``'s box along the horizontal unit vector ``d``."""
+    a = _yaw(ent)
+    hx, hy = float(ent["size"][0]), float(ent["size"][1])
+    return abs(d[0] * math.cos(a) + d[1] * math.sin(a)) * hx + abs(-d[0] * math.sin(a) + d[1] * math.cos(a)) * hy
+
+
+def _eval_beside(c, initial, terminal, refs):
+    """``object`` set down on the table on the viewer's ``side`` of ``landmark``: its centre beyond the
+    landmark's edge that way by 2 sigma, at most :data:`BESIDE_REACH_M` beyond it, level with the landmark
+    across (within its half extent), its bottom at the landmark's bottom (both on the same surface), let
+    go. The viewer's right is the perceived snapshot's ``viewer.right_xy`` (the scene camera's image x
+    axis on the table); without it, unknown."""
+    obj, landmark, side = c.args["object"], c.args["landmark"], c.args["side"]
+    if side not in SIDES:
+        return CriterionOutcome(c, "unknown", f"side {side!r} is not one of {format_choices(SIDES)}", refs)
+    still = _still_support(initial, terminal, landmark)
+    if (miss := _need(c, refs, ("terminal", terminal, obj), *(() if still else (("terminal", terminal, landmark),)))):
+        return miss
+    right = (terminal.get("viewer") or {}).get("right_xy")
+    if not right or len(right) != 2:
+        return CriterionOutcome(c, "unknown", "the snapshot says nothing of the viewer's left and right", refs)
+    n = math.hypot(float(right[0]), float(right[1])) or 1.0
+    sign = 1.0 if side == "right" else -1.0
+    d = (sign * float(right[0]) / n, sign * float(right[1]) / n)
+    across = (-d[1], d[0])
+    o, lm = _entities(terminal)[obj], still or _entities(terminal)[landmark]
+    rel = (o["position"][0] - lm["position"][0], o["position"][1] - lm["position"][1])
+    along = rel[0] * d[0] + rel[1] * d[1]
+    lateral = abs(rel[0] * across[0] + rel[1] * across[1])
+    edge, width = _extent(lm, d), _extent(lm, across)
+    dz = abs((o["position"][2] - o["size"][2]) - (lm["position"][2] - lm["size"][2]))
+    m = 2.0 * math.hypot(sigma(o), sigma(lm))
+    held, _ = _held(terminal, obj)
+    inside = (edge + m < along <= edge + BESIDE_REACH_M - m and lateral <= width - m
+              and dz <= REST_TOL_M + m and held is False)
+    outside = (along < edge - m or along > edge + BESIDE_REACH_M + m or lateral > width + m
+               or dz > REST_TOL_M + m or bool(held))
+    return _band(c, refs, inside, outside, obj, f"on the {side} of {landmark}",
+                 f"{along:.3f} m its way from the centre (edge {edge:.3f}, reach {BESIDE_REACH_M}), {lateral:.3f} m "
+                 f"across (<= {width:.3f}), bottoms {dz:.3f} m apart, 2 sigma {m:.3f} m")
+
+
 def _eval_still(c, initial, terminal, refs):
     def joints(snap):
         for e in snap.get("entities", []):
@@ -463,6 +518,7 @@ _EVALUATORS: dict[str, Callable] = {
     "lifted": _eval_lifted,
     "inside": _eval_inside,
     "on": _eval_on,
+    "beside": _eval_beside,
     "still": _eval_still,
     "unchanged": _eval_unchanged,
     "articulated": _eval_articulated,

@@ -274,6 +274,9 @@ def decompose(instruction: str, declared: Mapping[str, Any] | None) -> tuple[Ins
                     steps.append(InstructionStep(HOLD, obj, noun=_noun(obj, tokens, names), reference=ref))
                     continue
                 dests = [d for d in intent.destinations if d != obj]
+                if intent.beside is not None:
+                    raise InstructionNotRead(f"{intent.text!r} sets {obj} down beside {dests[0]}: a step beside a "
+                                             f"landmark is not judged here yet")
                 if len(dests) != 1:
                     raise InstructionNotRead(f"{intent.text!r} puts {obj} on {len(dests)} destinations: say which one")
                 where = f"{_preposition(clause, dests[0], names)} {_noun(dests[0], tokens, names)}"

@@ -165,7 +165,8 @@ def _nodes(steps: list[tuple[str, str, str | None]],
            skill_params: Mapping[str, Mapping[str, Any]] | None = None) -> list[dict[str, Any]]:
     """Goal-graph nodes of ``[(action, object, destination or None)]``, each after the one
     before: ``move`` / ``hold``: a ``pick`` of the object, then (``move``) a ``place`` on its
-    destination; ``turn_on``: a ``turn_knob`` of the object to :data:`TURN_ON_FRACTION` of its
+    destination; ``beside_left`` / ``beside_right``: the same, the ``place`` setting it down on
+    the viewer's left / right of the destination (``beside``) and accepted on ``beside``; ``turn_on``: a ``turn_knob`` of the object to :data:`TURN_ON_FRACTION` of its
     knob's travel; ``open`` / ``close``: a ``slide_drawer`` of the drawer named by the
     destination slot (its entity name,
     :func:`~phyagentos.perception.fixtures.drawer_entity_name`) to :data:`OPEN_FRACTION` /
@@ -195,10 +196,14 @@ def _nodes(steps: list[tuple[str, str, str | None]],
         nodes.append({"id": pick_id, "skill": "pick", "params": {**fixed.get("pick", {}), "object": obj},
                       "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
                       "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+        side = action.removeprefix("beside_") if action.startswith("beside_") else None
         if dest is not None:
+            rests = ({"beside": {"object": obj, "landmark": dest, "side": side}} if side
+                     else {"on": {"object": obj, "support": dest}})
             nodes.append({"id": place_id, "skill": "place",
-                          "params": {**fixed.get("place", {}), "object": obj, "region": dest},
-                          "accept": [{"on": {"object": obj, "support": dest}}, {"released": obj}],
+                          "params": {**fixed.get("place", {}), "object": obj, "region": dest,
+                                     **({"beside": side} if side else {})},
+                          "accept": [rests, {"released": obj}],
                           "depends_on": [pick_id], "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
     return nodes
 
@@ -254,7 +259,8 @@ def _planner_steps(language: str, objects: dict[str, str],
             if intent.verb != "hold" and len(dests) != 1:
                 raise BenchError(f"instruction {language!r} refused: {intent.text!r} puts {obj} "
                                  + (f"on one of {format_choices(dests)}: say which" if dests else "nowhere"))
-            steps.append(("hold", obj, None) if intent.verb == "hold" else ("move", obj, dests[0]))
+            steps.append(("hold", obj, None) if intent.verb == "hold"
+                         else (f"beside_{intent.beside}" if intent.beside else "move", obj, dests[0]))
     if not steps:
         raise BenchError(f"instruction {language!r} refused: nothing to move")
     return steps, dict(meaning.where)

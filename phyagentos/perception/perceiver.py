@@ -646,6 +646,7 @@ class Perceiver:
             "support_plane": {"normal": _r(plane.normal, 5), "offset_m": _r(plane.offset_m, 5), "fitted": plane.fitted},
             **({"references": {n: r.to_dict(dets) for n, r in self.last_references.items()}}
                if self.last_references else {}),
+            **({"viewer": {"right_xy": _r(self.viewer_right_xy, 5)}} if self.viewer_right_xy is not None else {}),
         }
 
     # ------------------------------------------------------------------ fixtures

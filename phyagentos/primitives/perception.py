@@ -157,6 +157,9 @@ LOWER_APPROACH_M = (0.06, 0.04)
 #: a 1.8 cm cream cheese box is perceived 3.1 cm tall and a grasp set 1.9 cm above the seen
 #: table put the fingertips 5 mm into the real one (LIBERO-90 task 47, a training task).
 GRASP_RAISE_STEPS_M = (0.004, 0.008, 0.012, 0.016)
+#: How far (m) an object set down beside a landmark ("to the right of the plate") stands clear of
+#: the landmark's perceived edge: a place lands within about 5 mm of where it was aimed.
+BESIDE_GAP_M = 0.015
 #: The least depth (m) below the object's top at which the fingertips of a raised grasp close.
 MIN_PAD_OVERLAP_M = 0.01
 
@@ -502,6 +505,9 @@ class ComputePlace(Primitive):
         region: target region entity, or another object to stack on (its top face
             is then the support surface).
         approach_height_m: pre-place height above the place pose, m.
+        beside: ``left`` / ``right``: set the object down beside ``region`` (a landmark: an
+            object or a fixture) on the viewer's side, not on it (:meth:`_beside_point`); None:
+            on / in it.
         snapshot: blackboard key of the observation (object pose in hand, region).
         place, preplace: blackboard keys written with (4, 4) world tcp poses.
 
@@ -516,8 +522,12 @@ class ComputePlace(Primitive):
     """
 
     def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,
-                 snapshot: str = "snapshot", place: str = "place_pose", preplace: str = "preplace_pose"):
+                 beside: str | None = None, snapshot: str = "snapshot", place: str = "place_pose",
+                 preplace: str = "preplace_pose"):
         super().__init__(name)
+        if beside not in (None, "left", "right"):
+            raise ValueError(f"beside must be left, right or null, got {beside!r}")
+        self.beside = beside
         self.object, self.region, self.approach_height_m = object, region, float(approach_height_m)
         self.snapshot_key, self.place_key, self.preplace_key = snapshot, place, preplace
         self.reads(snapshot)
@@ -535,10 +545,13 @@ class ComputePlace(Primitive):
         kind = next((e.get("kind") for e in snapshot.get("entities", []) if e["name"] == self.region), "region")
         surface_z = (float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half) if kind in ("object", "fixture")
                      else float(T_region[2, 3]))
+        centre = T_region[:3, 3]
+        if self.beside is not None:  # on the surface the landmark stands on, clear of it on the viewer's side
+            centre, surface_z = self._beside_point(snapshot, T_region, region_half, half, kind)
         rejected: list[dict] = []
         chosen = None
         for yaw in place_yaws(hand_yaw(self.ctx.target.tcp_pose())):
-            T_place = place_pose(T_region[:3, 3], half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
+            T_place = place_pose(centre, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
             T_pre = T_place.copy()
             T_pre[2, 3] += self.approach_height_m
             why = self._blocked(T_pre, T_place)
@@ -551,7 +564,32 @@ class ComputePlace(Primitive):
         self.set(self.place_key, T_place)
         self.set(self.preplace_key, T_pre)
         self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist(),
-                              yaw_rad=round(float(yaw), 3), rejected_yaws=rejected)
+                              yaw_rad=round(float(yaw), 3), rejected_yaws=rejected,
+                              **({"beside": self.beside} if self.beside else {}))
+
+    def _beside_point(self, snapshot: dict, T_region: np.ndarray, region_half: np.ndarray, half: np.ndarray,
+                      kind: str) -> tuple[np.ndarray, float]:
+        """``((3,) world point, surface z m)`` where the held object goes down beside the landmark
+        ``region`` on the viewer's ``beside`` side: from the landmark's centre along the viewer's
+        right (the snapshot's ``viewer.right_xy``; negated for left) by the landmark's half extent
+        that way, the held object's largest horizontal half extent and :data:`BESIDE_GAP_M`; on the
+        surface the landmark stands on (its bottom; a region's own height).
+
+        Raises:
+            PrimitiveFailure: ``perception.no_viewer`` when the snapshot says nothing of the
+                viewer's left and right.
+        """
+        right = (snapshot.get("viewer") or {}).get("right_xy")
+        if not right or len(right) != 2:
+            raise PrimitiveFailure("perception.no_viewer", f"{self.name}: the observation says nothing of the viewer's "
+                                                           f"left and right, so {self.beside} of {self.region} is unknown")
+        d = np.array([float(right[0]), float(right[1]), 0.0])
+        d *= (1.0 if self.beside == "right" else -1.0) / max(float(np.linalg.norm(d)), 1e-9)
+        extent = float(np.abs(T_region[:3, :3].T @ d) @ np.asarray(region_half, dtype=float))
+        reach = extent + float(max(half[0], half[1])) + BESIDE_GAP_M
+        bottom = (float(T_region[2, 3] - np.abs(T_region[2, :3]) @ region_half) if kind in ("object", "fixture")
+                  else float(T_region[2, 3]))
+        return T_region[:3, 3] + reach * d, bottom
 
     def _blocked(self, T_pre: np.ndarray, T_place: np.ndarray) -> str | None:
         """Why the arm cannot hold the object at ``T_pre`` and ``T_place`` ((4, 4) world tcp

@@ -184,6 +184,9 @@ class Intent:
     part: str | None = None
     #: ``open`` / ``close``: the kind of part named ("drawer"; None: the object itself)
     part_kind: str | None = None
+    #: ``move``: set down beside its one destination, on the viewer's ``left`` / ``right`` of it ("to the right
+    #: of the plate"), not on it (read only with ``read_request(..., relations=True)``); None: in / on it
+    beside: str | None = None
 
     def movers(self) -> tuple[str, ...]:
         """The objects the clause's steps act on (a count: the first ``count`` candidates, in the scene's order)."""
@@ -679,6 +682,22 @@ def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tu
     return where, []
 
 
+def _beside(words: list[str], prep: str | None, world: World, movers: tuple[str, ...]):
+    """``(left | right, landmark)`` of a destination ``to the left / right of <landmark>`` (``on the right side
+    of``, ``at the left of`` too), a problem list when the landmark names nothing declared (or several), else
+    None (not such a destination)."""
+    ws = [w for w in words if w != "the"]
+    if prep not in ("to", "on", "at") or len(ws) < 3 or ws[0] not in ("left", "right"):
+        return None
+    rest = ws[1:]
+    if rest[0] in ("side", "hand"):
+        rest = rest[1:]
+    if not rest or rest[0] != "of" or len(rest) < 2:
+        return None
+    name, why = _landmark(rest[1:], world, movers)
+    return why if why else (ws[0], name)
+
+
 def _free_twin(twins: tuple[str, ...], bound: Mapping[str, dict], phrase: list[str]):
     """The first of ``twins`` not yet bound to a reference, or the problem list saying none is left."""
     free = [n for n in twins if n not in bound]
@@ -874,7 +893,13 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         kind, dests, by_colour, why = ("region", (), False, [])
         side, twins = _side_twins(dest_words, world) if relations and dest_words else (None, ())
         dest_where: dict[str, dict] = {}
-        if side is not None:  # "on the left plate": one of two identical plates, the one perception sees left
+        beside = _beside(dest_words, prep, world, objects) if relations and dest_words else None
+        if beside is not None:  # "to the right of the plate": on the table, on the viewer's right of the plate
+            if isinstance(beside, list):
+                why = beside
+            else:
+                dests = (beside[1],)
+        elif side is not None:  # "on the left plate": one of two identical plates, the one perception sees left
             bound = {**meaning.where, **({ref[0]: ref[1]} if ref is not None else {})}
             name = _free_twin(tuple(t for t in twins if t not in objects), bound, dest_words)
             if isinstance(name, list):
@@ -911,7 +936,8 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         if problems:
             meaning.problems += problems
             continue
-        meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded))
+        meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded,
+                                      beside=beside[0] if isinstance(beside, tuple) else None))
         if ref is not None:
             meaning.where[ref[0]] = ref[1]
         meaning.where.update(dest_where)

@@ -1,0 +1,100 @@
+"""Setting an object down beside a landmark, on the viewer's side ("put the chocolate pudding to
+the right of the plate": LIBERO-10 task 6, LIBERO-90 tasks 37, 69, 70): the reader, the LIBERO
+plan's nodes and ``ComputePlace``'s place point."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from phyagentos.agent.llm.meaning import read_request
+from phyagentos.agent.llm.world import world_from_declared
+from phyagentos.bench.libero import instruction_plan
+
+WORLD = world_from_declared(["porcelain_mug_1", "chocolate_pudding_1", "plate_1"], ["living_room_table"])
+
+
+@pytest.mark.parametrize("text,side", [
+    ("put the chocolate pudding to the right of the plate", "right"),
+    ("put the chocolate pudding to the left of the plate", "left"),
+    ("place the chocolate pudding on the right side of the plate", "right"),
+])
+def test_to_the_right_of_a_landmark_is_a_move_beside_it(text, side):
+    m = read_request(text, WORLD, relations=True)
+    assert not m.problems
+    [it] = m.intents
+    assert (it.verb, it.objects, it.destinations, it.beside) == ("move", ("chocolate_pudding_1",), ("plate_1",), side)
+    assert read_request("put the chocolate pudding on the plate", WORLD, relations=True).intents[0].beside is None
+
+
+def test_beside_a_landmark_that_names_nothing_is_refused_with_the_reason():
+    m = read_request("put the chocolate pudding to the right of the sink", WORLD, relations=True)
+    assert m.problems and "names nothing declared" in m.problems[0][1]
+
+
+def test_the_libero_plan_places_beside_and_accepts_on_beside():
+    nodes, refs = instruction_plan("put the white mug on the plate and put the chocolate pudding to the right of the "
+                                   "plate", {"porcelain_mug_1": "porcelain_mug", "chocolate_pudding_1": "chocolate_pudding",
+                                             "plate_1": "plate"}, {"living_room_table": "living_room_table"})
+    assert [n["id"] for n in nodes] == ["pick_porcelain_mug_1", "place_porcelain_mug_1", "pick_chocolate_pudding_1",
+                                        "place_chocolate_pudding_1"]
+    assert nodes[1]["accept"][0] == {"on": {"object": "porcelain_mug_1", "support": "plate_1"}}
+    assert "beside" not in nodes[1]["params"]
+    assert nodes[3]["params"]["beside"] == "right" and nodes[3]["params"]["region"] == "plate_1"
+    assert nodes[3]["accept"][0] == {"beside": {"object": "chocolate_pudding_1", "landmark": "plate_1", "side": "right"}}
+    assert refs == {}
+
+
+@pytest.fixture(scope="module")
+def franka():
+    from phyagentos.targets import MuJoCoTarget
+    from phyagentos.targets.scene import SceneSpec
+
+    t = MuJoCoTarget("beside", SceneSpec.default(), seed=0)
+    yield t
+    t.close()
+
+
+def _compute_place(target, snapshot, **params):
+    from phyagentos.primitives.perception import ComputePlace
+
+    leaf = ComputePlace("ComputePlace", object="pudding", region="plate", **params)
+    board = {"snapshot": snapshot}
+    records = []
+    leaf.ctx = SimpleNamespace(target=target, perceiver=None,
+                               trace=SimpleNamespace(record=lambda kind, **f: records.append({"kind": kind, **f})))
+    leaf.get = board.__getitem__
+    leaf.set = board.__setitem__
+    leaf._blocked = lambda T_pre, T_place: None  # reach is another test's; here the point
+    leaf.step()
+    return board, records
+
+
+def _snapshot(tcp, viewer):
+    plate = {"name": "plate", "kind": "object", "position": [0.5, 0.0, 0.01], "quat_wxyz": [1, 0, 0, 0],
+             "size": [0.07, 0.07, 0.01]}
+    held = {"name": "pudding", "kind": "object", "position": [float(tcp[0, 3]), float(tcp[1, 3]), float(tcp[2, 3]) - 0.03],
+            "quat_wxyz": [1, 0, 0, 0], "size": [0.03, 0.02, 0.03]}
+    return {"entities": [plate, held], **({"viewer": {"right_xy": viewer}} if viewer else {})}
+
+
+def test_compute_place_sets_the_object_down_clear_of_the_landmark_on_the_viewers_side(franka):
+    from phyagentos.primitives.base import PrimitiveFailure
+    from phyagentos.primitives.perception import BESIDE_GAP_M
+
+    tcp = np.asarray(franka.tcp_pose())
+    on, _ = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]))
+    beside, records = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), beside="right")
+    shift = beside["place_pose"][:3, 3] - on["place_pose"][:3, 3]
+    # 7 cm (the plate) + 3 cm (the pudding's largest half extent) + the gap, along the viewer's right (+y)
+    assert shift[:2] == pytest.approx([0.0, 0.07 + 0.03 + BESIDE_GAP_M], abs=1e-9)
+    assert shift[2] == pytest.approx(-0.02, abs=1e-9)  # on the table the plate stands on, not on the plate's top
+    assert records[0]["beside"] == "right"
+    left, _ = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), beside="left")
+    assert (left["place_pose"][:3, 3] - on["place_pose"][:3, 3])[1] == pytest.approx(-(0.1 + BESIDE_GAP_M), abs=1e-9)
+    with pytest.raises(PrimitiveFailure, match="viewer's left and right"):
+        _compute_place(franka, _snapshot(tcp, None), beside="right")
+    with pytest.raises(ValueError, match="beside must be"):
+        _compute_place(franka, _snapshot(tcp, None), beside="behind")

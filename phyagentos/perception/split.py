@@ -33,7 +33,8 @@ the points is rejected), fitted as any segment (:func:`~.detect.fit_cluster`), s
 (:func:`~.detect.stack`: the upper part of a step rests on the lower) and scored against
 the declared looks (:func:`~.association.cost_matrix`). A partition is *admissible* when it
 has at least two parts, every part matches some declared look at a cost of at most
-``clustering.split_max_cost`` and no part is itself oversized. The admissible partition with
+``clustering.split_max_cost`` and no part is itself oversized (as fitted: a mug's handle
+lengthens its points' rectangle by a fifth, not the fitted body the looks were measured as). The admissible partition with
 the smallest summed cost is taken, unless another admissible partition that cuts the segment
 differently (another number of parts, or a part whose centre lies more than
 :data:`SAME_PART_M` from every part of the best) scores within
@@ -289,9 +290,11 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
             costs = cost_matrix(stacked, sized, config).min(axis=1)
             if float(costs.max()) > cc.split_max_cost:
                 continue
-            for e, d in zip(exts, stacked):
-                e[2] = d.top_m - d.bottom_m  # a part resting on another: its own height
-            if any(oversized(e, sized, config) for e in exts):
+            # each part as fitted, the way the declared looks were measured (a mug's handle lengthens
+            # its points' rectangle, not its fitted body), resting on another at its own height
+            fitted = [np.array([2.0 * float(max(d.half_extents[:2])), 2.0 * float(min(d.half_extents[:2])),
+                                d.top_m - d.bottom_m]) for d in stacked]
+            if any(oversized(e, sized, config) for e in fitted):
                 continue
             scored.append((float(costs.sum()), kind, z, parts, idxs, costs))
     if not scored:

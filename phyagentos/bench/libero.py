@@ -166,8 +166,9 @@ def _nodes(steps: list[tuple[str, str, str | None]],
     """Goal-graph nodes of ``[(action, object, destination or None)]``, each after the one
     before: ``move`` / ``hold``: a ``pick`` of the object, then (``move``) a ``place`` on its
     destination; ``beside_left`` / ``beside_right``: the same, the ``place`` setting it down on
-    the viewer's left / right of the destination (``beside``) and accepted on ``beside``; ``turn_on``: a ``turn_knob`` of the object to :data:`TURN_ON_FRACTION` of its
-    knob's travel; ``open`` / ``close``: a ``slide_drawer`` of the drawer named by the
+    the viewer's left / right of the destination (``beside``) and accepted on ``beside``;
+    ``turn_on``: a ``turn_knob`` of the object to :data:`TURN_ON_FRACTION` of its knob's
+    travel; ``open`` / ``close``: a ``slide_drawer`` of the drawer named by the
     destination slot (its entity name,
     :func:`~phyagentos.perception.fixtures.drawer_entity_name`) to :data:`OPEN_FRACTION` /
     :data:`CLOSE_FRACTION` of its travel. ``skill_params``: strategy parameters per skill written into every node of

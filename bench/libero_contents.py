@@ -19,16 +19,15 @@ from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 
 import mujoco
 import numpy as np
 from _harness import index_range, parser, write_json
+from _libero_scene import generated_scene
 
 from phyagentos.agent.criteria import evaluate, parse_criteria
-from phyagentos.bench.libero import _descriptors, _fixture_looks
 from phyagentos.primitives.observation import make_perceiver, perceive_now
-from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task
+from phyagentos.targets.libero import LiberoTarget
 from phyagentos.targets.libero.descriptors import _free_adr, object_boxes
 
 SUITE, TASK = "libero_goal", 6
@@ -61,15 +60,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="drop the item this far beside the bowl (m; the hand is still said to let it go over the "
                          "bowl's centre): a control, nothing may be judged in the bowl")
     args = ap.parse_args(argv)
-    ws = Path(args.workspace)
-    (ws / "libero").mkdir(parents=True, exist_ok=True)
-    looks = _descriptors(ws, SUITE, [TASK])
-    fixture_looks = _fixture_looks(ws, SUITE, [TASK])
-    problem = parse_bddl(resolve_task(SUITE, TASK).bddl_path)
-    declared = problem.declared()
-    objects = tuple({**o, **looks.get(o["class"], {})} for o in declared["objects"])
-    fixtures = tuple({**f, **fixture_looks.get(f["class"], {})} for f in declared["fixtures"])
-    scene = LiberoScene(suite=SUITE, task=TASK, generated=True, objects=objects, fixtures=fixtures)
+    scene = generated_scene(args.workspace, SUITE, TASK)
     criteria = parse_criteria([{"on": {"object": ITEM, "support": BOWL}}])
     rows = []
     seeds = index_range(args.seeds)

@@ -25,10 +25,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 from _harness import index_range, parser, write_json
+from _libero_scene import generated_scene
 
-from phyagentos.bench.libero import _descriptors, _fixture_looks, instruction_plan
+from phyagentos.bench.libero import instruction_plan
 from phyagentos.primitives.observation import make_perceiver, perceive_now, robot_capsules
-from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task
+from phyagentos.targets.libero import LiberoTarget, parse_bddl, resolve_task
 from phyagentos.targets.libero.descriptors import _free_adr, object_boxes
 
 SUITE, TASK = "libero_spatial", 4
@@ -74,19 +75,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workspace", default="/tmp/ws_spatial", help="where the looks are cached")
     ap.add_argument("--record", default=None, help="write the first scene's frames here (.npz)")
     args = ap.parse_args(argv)
-    ws = Path(args.workspace)
-    (ws / "libero").mkdir(parents=True, exist_ok=True)
-    looks = _descriptors(ws, SUITE, [TASK])
-    fixture_looks = _fixture_looks(ws, SUITE, [TASK])
     task = resolve_task(SUITE, TASK)
     problem = parse_bddl(task.bddl_path)
     _, where = instruction_plan(task.instruction, problem.objects, problem.fixtures)
-    declared = problem.declared()
-    objects = tuple({**o, **looks.get(o["class"], {}), **({"where": where[o["name"]]} if o["name"] in where else {})}
-                    for o in declared["objects"])
-    fixtures = tuple({**f, **fixture_looks.get(f["class"], {})} for f in declared["fixtures"])
+    scene = generated_scene(args.workspace, SUITE, TASK, where=where)
     rows = []
-    scene = LiberoScene(suite=SUITE, task=TASK, generated=True, objects=objects, fixtures=fixtures)
     seeds = index_range(args.seeds)
     with LiberoTarget("drawer_refs", scene, seed=seeds[0]) as target:
         for n, seed in enumerate(seeds):
@@ -96,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
             _set_bowls(target)
             truth = {b: (0.5 * (lo + hi)).round(4).tolist() for b, (lo, hi) in object_boxes(target).items() if b in BOWLS}
             if args.record and n == 0:
-                _record(Path(args.record), target, {"objects": list(objects), "fixtures": list(fixtures)}, truth)
+                _record(Path(args.record), target, {"objects": list(scene.objects), "fixtures": list(scene.fixtures)}, truth)
             snap = perceive_now(target, make_perceiver(target))
             ref = (snap.get("references") or {}).get(BOWLS[0], {})
             seen = {e["name"]: e for e in snap["entities"] if e["kind"] == "object"}

@@ -17,16 +17,15 @@ from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 
 import mujoco
 import numpy as np
 from _harness import index_range, parser, write_json
+from _libero_scene import generated_scene
 
 from phyagentos.agent.criteria import evaluate, parse_criteria
-from phyagentos.bench.libero import _descriptors, _fixture_looks
 from phyagentos.primitives.observation import make_perceiver, perceive_now
-from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task
+from phyagentos.targets.libero import LiberoTarget
 from phyagentos.targets.libero.descriptors import _free_adr, object_boxes
 
 
@@ -53,16 +52,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="90000-90009")
     ap.add_argument("--workspace", default="/tmp/ws_10", help="where the looks are cached")
     args = ap.parse_args(argv)
-    ws = Path(args.workspace)
-    (ws / "libero").mkdir(parents=True, exist_ok=True)
-    looks = _descriptors(ws, args.suite, [args.task])
-    fixture_looks = _fixture_looks(ws, args.suite, [args.task])
-    declared = parse_bddl(resolve_task(args.suite, args.task).bddl_path).declared()
-    objects = tuple({**o, **looks.get(o["class"], {})} for o in declared["objects"])
-    fixtures = tuple({**f, **fixture_looks.get(f["class"], {})} for f in declared["fixtures"])
+    scene = generated_scene(args.workspace, args.suite, args.task)
     [on] = parse_criteria({"on": {"object": args.object, "support": args.support}})
     rows = []
-    scene = LiberoScene(suite=args.suite, task=args.task, generated=True, objects=objects, fixtures=fixtures)
     seeds = index_range(args.seeds)
     with LiberoTarget("stacked", scene, seed=seeds[0]) as target:
         for seed in seeds:

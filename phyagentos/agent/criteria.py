@@ -376,16 +376,12 @@ def _eval_on(c, initial, terminal, refs):
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))
 
 
-def _yaw(ent: Mapping) -> float:
-    w, x, y, z = (list(ent.get("quat_wxyz") or (1.0, 0.0, 0.0, 0.0)) + [0.0] * 4)[:4]
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
 def _extent(ent: Mapping, d: tuple[float, float]) -> float:
-    """Half extent (m) of ``ent``'s box along the horizontal unit vector ``d``."""
-    a = _yaw(ent)
-    hx, hy = float(ent["size"][0]), float(ent["size"][1])
-    return abs(d[0] * math.cos(a) + d[1] * math.sin(a)) * hx + abs(-d[0] * math.sin(a) + d[1] * math.cos(a)) * hy
+    """Half extent (m) of ``ent``'s box (``quat_wxyz``, half ``size``) along the horizontal unit vector ``d``."""
+    from phyagentos.geometry import quat_to_matrix  # noqa: PLC0415 - numpy only where a beside is judged
+
+    R = quat_to_matrix(ent.get("quat_wxyz") or (1.0, 0.0, 0.0, 0.0))
+    return float(abs(R.T @ (d[0], d[1], 0.0)) @ [float(h) for h in ent["size"]])
 
 
 def _eval_beside(c, initial, terminal, refs):

@@ -986,13 +986,8 @@ class Perceiver:
         hc = self.config.holding
         tcp = proprio.tcp_pose[:3, 3]
         width = width_in_hand(t.half_extents, t.yaw, t.shape, proprio)
-        rim = self._rim_container(t)
-        wall = hc.rim_wall_m
-        if rim:  # an open container (a bowl, a mug) may be held by its wall: whichever the gap is nearer
-            from phyagentos.motion.rim_grasp import handled  # noqa: PLC0415
-
-            desc = next((d for d in self.declared if d.name == t.name), None)
-            wall = hc.handled_wall_m if desc is not None and handled(desc.cls) else hc.rim_wall_m
+        wall = self._rim_wall(t)
+        if wall is not None:  # an open container (a bowl, a mug) may be held by its wall: whichever the gap is nearer
             width = min((width, wall), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
         ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
                               grasp_height_m=self._grasp_height_m, config=self.config)
@@ -1002,7 +997,7 @@ class Perceiver:
             # capture: the object was last seen right under/between the fingers, or (held
             # by its wall) the tcp is on its rim
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
-            on_rim = rim and width == wall and \
+            on_rim = wall is not None and width == wall and \
                 abs(dxy - float(min(t.half_extents[0], t.half_extents[1]))) <= hc.capture_radius_m / 2.0
             if dxy > hc.capture_radius_m and not on_rim:
                 return None
@@ -1075,7 +1070,7 @@ class Perceiver:
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
             if np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
-            elif self._rim_container(t) and abs(dxy - float(min(t.half_extents[:2]))) <= hc.capture_radius_m / 2.0:
+            elif self._rim_wall(t) is not None and abs(dxy - float(min(t.half_extents[:2]))) <= hc.capture_radius_m / 2.0:
                 # held by its wall (the tcp is over its rim), maybe lifted since: the lift rises
                 # straight up, so the horizontal offset holds; at the close the tcp was the rim
                 # grasp's depth below the rim (motion.rim_grasp.RIM_GRIP_DEPTH_M)
@@ -1095,14 +1090,18 @@ class Perceiver:
         self._held = name
         return name, conf
 
-    def _rim_container(self, t: Track) -> bool:
-        """Whether track ``t`` is an open container (a bowl: its declared class and perceived
-        shape and size, :func:`~phyagentos.motion.rim_grasp.open_container`) that a hand
-        may hold by its wall."""
-        from phyagentos.motion.rim_grasp import open_container  # noqa: PLC0415 - only when something may be held
+    def _rim_wall(self, t: Track) -> float | None:
+        """The wall (m) a hand holding track ``t`` by its rim closes on -- ``holding.handled_wall_m``
+        for a mug, ``holding.rim_wall_m`` for another open container (its declared class and
+        perceived shape and size, :func:`~phyagentos.motion.rim_grasp.open_container`) -- or None:
+        ``t`` is no open container."""
+        from phyagentos.motion.rim_grasp import handled, open_container  # noqa: PLC0415 - only when something may be held
 
         desc = next((d for d in self.declared if d.name == t.name), None)
-        return desc is not None and open_container(desc.cls, t.shape, t.half_extents)
+        if desc is None or not open_container(desc.cls, t.shape, t.half_extents):
+            return None
+        hc = self.config.holding
+        return hc.handled_wall_m if handled(desc.cls) else hc.rim_wall_m
 
     def _relations(self, geo: dict[str, dict], regions, holding_rel, supports: Mapping[str, dict] | None = None) -> list[dict]:
         """Relations among the perceived entities (``geo``: their boxes), with the declared

@@ -282,11 +282,10 @@ class ComputeGrasp(Primitive):
         category = declared_class(self.ctx.target, self.object, ent)
         extra = {}
         if rim_graspable(category, shape, half, max_width_m=max_width):
-            # a mug: near the ends of the short side, away from its handle, as round as its body
+            mug = handled(category)  # near the ends of its short side, away from its handle, as round as its body
             lo = float(min(half[0], half[1]))
-            body = np.array([lo, lo, float(half[2])]) if handled(category) else half
-            plan, extra = self._rim_plan(snapshot, T_obj, body, max_width,
-                                         short_axis_of=half if handled(category) else None)
+            body = np.array([lo, lo, float(half[2])]) if mug else half
+            plan, extra = self._rim_plan(snapshot, T_obj, body, max_width, short_axis_of=half if mug else None)
         elif partly_seen_rim_graspable(category, shape, half, max_width_m=max_width):
             # seen in part (its far side hidden): the long side is the rim's diameter
             hi = float(max(half[0], half[1]))

@@ -27,7 +27,10 @@ Uncertainty (the formula): with sigma the entity's ``position_std_m`` (for a pre
 over two perceived entities or two snapshots, sigma = sqrt(sigma_a^2 + sigma_b^2)), a
 criterion is ``satisfied`` only when it holds with a margin of 2 sigma (``inside``: the
 centre lies in the region's footprint shrunk by 2 sigma and rests within
-``REST_TOL_M + 2 sigma`` of its surface; ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
+``REST_TOL_M + 2 sigma`` of its surface; ``on`` a perceived support: the centre in its
+footprint shrunk by 2 sigma, the bottom from :data:`SUPPORT_FLOOR_M` above the support's
+bottom (and at most :data:`DISH_DEPTH_M` below its top: a dish's floor) up to ``REST_TOL_M``
+above its top, by 2 sigma; ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
 rose >= min_height + 2 sigma), ``unsatisfied`` only when it fails by more than 2 sigma,
 and ``unknown`` in between (at 2 sigma a Gaussian error crosses the boundary with
 probability <= 2.3 %, one-sided). ``on`` and ``inside`` with a container (a perceived
@@ -51,11 +54,21 @@ from typing import Any, Callable, Mapping
 from phyagentos.errors import VerifierError, format_choices
 
 __all__ = ["Criterion", "CriterionOutcome", "parse_criteria", "PREDICATES", "evaluate", "confidence", "sigma",
-           "CONFIDENCE_MIN", "REST_TOL_M", "CLOSED_OPENING_M", "SQUEEZE_EFFORT_N"]
+           "CONFIDENCE_MIN", "REST_TOL_M", "SUPPORT_FLOOR_M", "DISH_DEPTH_M", "CLOSED_OPENING_M", "SQUEEZE_EFFORT_N"]
 
 # Tolerances, metres. A resting box's centre sits at its half height above its
 # support; 1 cm absorbs contact penetration and settling.
 REST_TOL_M = 0.01
+#: An object resting on a support has its bottom at least this far (m) above the support's
+#: bottom: a dish's floor lies below its rim (LIBERO's plate holds a mug 7.9-9.2 mm over the
+#: table), the table beside it does not. Below perception's own threshold for an object
+#: standing on something hidden (``perceiver.HIDDEN_SUPPORT_M``, 4 mm), so what perception
+#: raises is not undone here.
+SUPPORT_FLOOR_M = 0.003
+#: ... and at most this far (m) below the support's top (its rim): the depth of a dish's floor
+#: under its rim (LIBERO's plate: 2.2 cm); an object deeper down in a tall support's footprint
+#: is in it (a bowl in the cabinet's open drawer is not on the cabinet).
+DISH_DEPTH_M = 0.03
 #: Perceived entities and relations below this confidence do not count: a criterion
 #: naming one is ``unknown``. 0.5: an association no better than a coin flip.
 CONFIDENCE_MIN = 0.5
@@ -361,16 +374,20 @@ def _eval_on(c, initial, terminal, refs):
     ents = _entities(terminal)
     o, s = ents[obj], still or ents[support]
     m = 2.0 * math.hypot(sigma(o), sigma(s))
-    # the support's top face is at its centre + half height
+    # the support's top face is at its centre + half height; a dish's floor (a plate's) lies
+    # below its rim: the object's bottom may rest up to DISH_DEPTH_M below that top, never
+    # down at the table the support stands on
     top = s["position"][2] + s["size"][2]
+    floor = max(s["position"][2] - s["size"][2] + SUPPORT_FLOOR_M, top - DISH_DEPTH_M)
     z = o["position"][2]
-    dz = abs(z - (top + o["size"][2]))
+    bottom = z - o["size"][2]
     sx, sy = s["size"][:2]
     dx = abs(o["position"][0] - s["position"][0])
     dy = abs(o["position"][1] - s["position"][1])
     held, _ = _held(terminal, obj)
-    inside = dz <= REST_TOL_M + m and dx <= sx - m and dy <= sy - m and held is False
-    outside = dz > REST_TOL_M + m or dx > sx + m or dy > sy + m or bool(held)
+    rests = floor <= bottom <= top + REST_TOL_M + m  # floor: a height threshold, not widened by the horizontal sigma
+    inside = rests and dx <= sx - m and dy <= sy - m and held is False
+    outside = bottom > top + REST_TOL_M + m or bottom < floor - m or dx > sx + m or dy > sy + m or bool(held)
     return _band(c, refs, inside, outside, obj, f"on {support}",
                  f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))

@@ -6,10 +6,12 @@ Cost of detection i for descriptor j (only the attributes the descriptor declare
   declared colour, Delta L* weighted by ``lightness_weight`` (shading and lighting change
   L* most), divided by ``colour_scale_lab``;
 * size: mean absolute error of the sorted full dimensions (or of the largest one) / ``size_scale_m``;
-  with a declared ``size_range_m``, only the part outside the range counts;
+  with a declared ``size_range_m``, only the part outside the range counts; for a detection
+  cut by the image border (``truncated``, :mod:`.truncation`) only the part above it;
 * shape: ``shape_cost`` when the classes differ; with declared ``shapes`` (the fraction of a
   look's sightings per shape), ``shape_cost`` times ``1 -`` the detection's shape's fraction
   over the most frequent one's (:meth:`~.descriptors.ObjectDescriptor.shape_mismatch`);
+  nothing for a truncated detection (its shape is the part's);
 * track: distance to the descriptor's current track / ``position_scale_m``, capped at 1
   (tie-breaker between otherwise identical objects; objects do move between observations).
 
@@ -40,7 +42,7 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection
 
-__all__ = ["Association", "Landmark", "ReferenceResolution", "cost_matrix", "associate", "match_confidence",
+__all__ = ["FORBIDDEN_COST", "Association", "Landmark", "ReferenceResolution", "cost_matrix", "associate", "match_confidence",
            "resolve_reference", "forbid_except"]
 
 log = logging.getLogger(__name__)
@@ -61,8 +63,9 @@ def _size_error(det: Detection, desc: ObjectDescriptor) -> float | None:
     full = 2.0 * np.asarray(det.half_extents, float)
     measured = np.array([max(full[0], full[1]), min(full[0], full[1]), full[2]])
     if desc.size_vector() is None:
-        return abs(float(measured.max()) - float(desc.size_m))
-    return desc.size_error(measured)
+        err = float(measured.max()) - float(desc.size_m)
+        return max(0.0, err) if det.truncated else abs(err)
+    return desc.size_error(measured, at_least=det.truncated)
 
 
 def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDescriptor],
@@ -79,7 +82,7 @@ def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDes
             err = _size_error(det, desc)
             if err is not None:
                 c += err / ac.size_scale_m
-            mismatch = desc.shape_mismatch(det.shape)
+            mismatch = None if det.truncated else desc.shape_mismatch(det.shape)
             if mismatch:
                 c += ac.shape_cost * mismatch
             tp = track_positions[j] if j < len(track_positions) else None
@@ -90,6 +93,8 @@ def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDes
 
 
 _FORBIDDEN = 1e6
+#: A cost above any gate: the pair is never associated.
+FORBIDDEN_COST = _FORBIDDEN
 
 
 def _padded(C: np.ndarray, gate: float) -> np.ndarray:

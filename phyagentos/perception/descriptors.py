@@ -248,17 +248,22 @@ class ObjectDescriptor:
             return None
         return 0.0 if shape == self.shape else 1.0
 
-    def size_error(self, measured: np.ndarray) -> float | None:
+    def size_error(self, measured: np.ndarray, *, at_least: bool = False) -> float | None:
         """Mean absolute error (m) of ``measured`` (3,) full size sorted (long, short,
         height) against the declared size: outside ``size_range_m`` when given (0 within it),
-        else against ``size_m``; None without a 3-number size."""
+        else against ``size_m``; None without a 3-number size. ``at_least``: ``measured``
+        is a lower bound (an object seen in part, cut by the image border): only a measured
+        size above the declared one counts."""
         want = self.size_vector()
         if want is None:
             return None
         m = np.asarray(measured, float)
         if self.size_range_m is not None:
             lo, hi = (np.asarray(v, float) for v in self.size_range_m)
-            return float(np.mean(np.maximum(0.0, np.maximum(lo - m, m - hi))))
+            under = np.zeros_like(m) if at_least else lo - m
+            return float(np.mean(np.maximum(0.0, np.maximum(under, m - hi))))
+        if at_least:
+            return float(np.mean(np.maximum(0.0, m - want)))
         return float(np.mean(np.abs(m - want)))
 
     def looks_like(self, other: "ObjectDescriptor") -> bool:

@@ -57,6 +57,11 @@ class Detection:
         view_agreement: 0..1, how well the per-camera centres agree (1 for one camera).
         bottom_m: bottom height above the support plane, m (0 for objects on the table).
         low_m: height of the cluster's lowest points (2nd percentile) above the plane, m.
+        cut_direction: (2,) world horizontal unit vector towards where the segment runs out of
+            view, when its points reach the image border in every camera that saw it
+            (:func:`phyagentos.perception.truncation.cut_direction`), else None: the object
+            may go on beyond what was seen, so its size is a lower bound, its shape that of
+            the part seen and its centre short of the object's on that side.
     """
 
     position: np.ndarray
@@ -72,6 +77,12 @@ class Detection:
     view_agreement: float
     bottom_m: float
     low_m: float = 0.0
+    cut_direction: np.ndarray | None = None
+
+    @property
+    def truncated(self) -> bool:
+        """Cut by the image border (``cut_direction`` known): seen only in part."""
+        return self.cut_direction is not None
 
     @property
     def top_m(self) -> float:

@@ -64,6 +64,10 @@ class Track:
     #: (2,) world x, y (m) where the hand let the object go, from proprioception; kept until
     #: the object is held again or seen confidently away from it, else None.
     placed_xy: np.ndarray | None = None
+    #: Its height (m), kept since it was seen standing on something hidden under it (let go
+    #: onto a plate the cameras no longer see): its later sightings reaching down to the table
+    #: are its own height on that support; None otherwise.
+    standing_height_m: float | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
@@ -79,14 +83,19 @@ class Track:
         dt = max(0.0, stamp_s - self.last_seen_s)
         return self.var_xy + config.fusion.process_noise_m_per_sqrt_s ** 2 * dt
 
+    def within_gate(self, det: Detection, stamp_s: float, config: PerceptionConfig) -> bool:
+        """Whether ``det``'s centre lies within ``fusion.innovation_gate_sigma`` sigmas of the
+        track's predicted position (horizontal; both variances summed)."""
+        var_p = self.predicted_var(stamp_s, config)
+        innov = float(np.linalg.norm(det.position[:2] - self.position[:2]))
+        return innov <= config.fusion.innovation_gate_sigma * math.sqrt(var_p + det.position_std_m ** 2)
+
     def update(self, det: Detection, confidence: float, stamp_s: float, cameras: tuple[str, ...],
                config: PerceptionConfig) -> bool:
         """Fuse a new detection; returns False when it restarted the track instead."""
         var_p = self.predicted_var(stamp_s, config)
         var_m = det.position_std_m ** 2
-        innov = float(np.linalg.norm(det.position[:2] - self.position[:2]))
-        gate = config.fusion.innovation_gate_sigma * math.sqrt(var_p + var_m)
-        if self.held or innov > gate or det.shape != self.shape and self.observations < 2:
+        if self.held or not self.within_gate(det, stamp_s, config) or det.shape != self.shape and self.observations < 2:
             fresh = Track.start(self.name, det, confidence, stamp_s, cameras)
             self.__dict__.update(fresh.__dict__)
             return False

@@ -1,0 +1,117 @@
+"""Objects cut by the image border: seen only in part because they reach out of the view.
+
+A segment whose pixels run up to the border of every camera that saw it may go on beyond
+what was seen (a plate at the edge of the table, half out of the agentview frame). Its
+measured footprint is then a lower bound, its fitted shape is the shape of what was seen,
+not of the object (half a disc fits a box), and its centre lies nearer the image centre than
+the object's. Object detection benchmarks keep the same flag for the same reason (KITTI's
+``truncated``; Geiger et al. 2012). Association (:func:`~phyagentos.perception.association.cost_matrix`)
+then asks a truncated segment's size only not to exceed a look, and not to have the look's
+shape.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from phyagentos.perception.cloud import Cloud, transform
+from phyagentos.perception.frames import CameraFrame
+
+__all__ = ["BORDER_PX", "EDGE_PERCENTILE", "MIN_CAMERA_POINTS", "complete_round", "cut_direction"]
+
+#: A segment's pixel within this many pixels of the image border (after the camera's point
+#: stride) touches the border: the strided grid's last row or column lies up to ``stride - 1``
+#: pixels inside the border.
+BORDER_PX = 1.5
+
+#: Percentile of the seen points taken as an edge (robust to a stray point), %.
+EDGE_PERCENTILE = 2.0
+
+#: Cameras with fewer of a segment's points than this are not counted as having seen it
+#: (the same count :meth:`~phyagentos.perception.perceiver.Perceiver` uses for a detection's
+#: ``cameras``).
+MIN_CAMERA_POINTS = 5
+
+
+def _at_border(points_world: np.ndarray, frame: CameraFrame, stride: int) -> np.ndarray:
+    """(N,) bool: which of (N, 3) world points project within ``BORDER_PX + stride - 1``
+    pixels of ``frame``'s image border (pinhole projection, Hartley & Zisserman eq. 6.2)."""
+    T_cam_world = np.linalg.inv(frame.T_world_camera)
+    pc = transform(T_cam_world, points_world.astype(np.float64))
+    z = pc[:, 2]
+    out = np.zeros(len(points_world), dtype=bool)
+    ok = z > 1e-6
+    if not np.any(ok):
+        return out
+    intr = frame.intrinsics
+    u = intr.fx * pc[ok, 0] / z[ok] + intr.cx
+    v = intr.fy * pc[ok, 1] / z[ok] + intr.cy
+    margin = BORDER_PX + max(0, stride - 1)
+    out[ok] = (u <= margin) | (v <= margin) | (u >= intr.width - 1 - margin) | (v >= intr.height - 1 - margin)
+    return out
+
+
+def cut_direction(cloud: Cloud, index: np.ndarray, frames: Sequence[CameraFrame],
+                  strides: Sequence[int]) -> np.ndarray | None:
+    """Where a segment cut by the image border goes out of view, or None when it is not cut.
+
+    A segment is cut when at least one camera saw it (``MIN_CAMERA_POINTS`` points or more)
+    and, in each camera that did, some of its points lie at the image border.
+
+    Args:
+        cloud: the observation's object cloud (``cloud.camera`` indexes ``frames``).
+        index: (K,) indices into ``cloud`` of the segment's points.
+        frames: the observation's camera frames, in the cloud's camera order.
+        strides: (len(frames),) pixel stride each camera's points were sampled at.
+
+    Returns:
+        (2,) unit vector in the world's horizontal plane from the centroid of the segment's
+        points towards the centroid of those at the border (the side the object may go on
+        beyond what was seen), or None.
+    """
+    idx = np.asarray(index)
+    if idx.size == 0:
+        return None
+    cams = cloud.camera[idx]
+    border: list[np.ndarray] = []
+    for c in np.unique(cams):
+        mine = idx[cams == c]
+        if mine.size < MIN_CAMERA_POINTS or int(c) >= len(frames):
+            continue
+        at = _at_border(cloud.points[mine], frames[int(c)], int(strides[int(c)]))
+        if not np.any(at):
+            return None  # one camera saw all of it
+        border.append(cloud.points[mine[at], :2])
+    if not border:
+        return None
+    d = np.mean(np.concatenate(border), axis=0) - np.mean(cloud.points[idx, :2], axis=0)
+    n = float(np.linalg.norm(d))
+    return d / n if n > 1e-6 else None
+
+
+def complete_round(points_xy: np.ndarray, cut: np.ndarray, radius_m: float) -> np.ndarray:
+    """The centre of a round object of known radius seen only in part.
+
+    The side of the seen part away from the cut is the object's own edge; the centre lies one
+    radius from it, towards the cut. Across the cut, a disc cut by a straight border is seen
+    symmetric about the line through its centre, so the centre lies midway across what was
+    seen.
+
+    Args:
+        points_xy: (N, 2) world x, y of the seen part's points, m.
+        cut: (2,) unit vector towards where it runs out of view (:func:`cut_direction`).
+        radius_m: the object's radius (its look's), m.
+
+    Returns:
+        (2,) world x, y of the centre, m; never further from the cut than the seen part's own
+        centroid.
+    """
+    pts = np.asarray(points_xy, float)
+    d = np.asarray(cut, float) / max(float(np.linalg.norm(cut)), 1e-12)
+    e = np.array([-d[1], d[0]])
+    a, b = pts @ d, pts @ e
+    along = max(float(np.percentile(a, EDGE_PERCENTILE)) + float(radius_m), float(np.mean(a)))
+    across = 0.5 * (float(np.percentile(b, EDGE_PERCENTILE)) + float(np.percentile(b, 100.0 - EDGE_PERCENTILE)))
+    return along * d + across * e

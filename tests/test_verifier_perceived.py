@@ -196,3 +196,32 @@ def test_beside_is_the_viewers_side_of_the_landmark_next_to_it_on_the_same_surfa
         assert evaluate(c, {"entities": [plate]}, flipped).status == "unsatisfied"
         without = {k: v for k, v in terminal.items() if k != "viewer"}
         assert "viewer's left and right" in evaluate(c, {"entities": [plate]}, without).reason
+
+
+@pytest.mark.parametrize("bottom,status", [
+    (0.0085, "satisfied"),    # on the plate's floor, 8.5 mm up, under its 3 cm rim
+    (0.030, "satisfied"),     # on its rim top
+    (0.0, "unknown"),         # down at the table inside the plate's footprint: not resting on it, not clearly off
+    (0.055, "unsatisfied"),   # 2.5 cm above the rim: not resting
+])
+def test_on_a_dish_rests_anywhere_from_its_floor_to_its_rim(bottom, status):
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    table = 0.425
+    plate = _ent("plate_1", (0.0, -0.3, table + 0.015), (0.069, 0.069, 0.015), 0.95, std=0.005)
+    mug = _ent("mug_1", (0.005, -0.295, table + bottom + 0.06), (0.048, 0.048, 0.06), 0.9)
+    snap = {"entities": [plate, mug], "relations": []}
+    [c] = parse_criteria({"on": {"object": "mug_1", "support": "plate_1"}})
+    out = evaluate(c, snap, snap)
+    assert out.status == status, out.reason
+
+
+def test_an_object_far_down_in_a_tall_supports_footprint_is_not_on_it():
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    # the cabinet's top at 0.655 m; a bowl in its open top drawer, 10 cm below that top
+    cabinet = _ent("wooden_cabinet_1", (0.0, 0.0, 0.425 + 0.115), (0.12, 0.2, 0.115), 0.9)
+    bowl = _ent("bowl_1", (0.0, 0.05, 0.555 + 0.025), (0.065, 0.065, 0.025), 0.9)
+    snap = {"entities": [cabinet, bowl], "relations": []}
+    [c] = parse_criteria({"on": {"object": "bowl_1", "support": "wooden_cabinet_1"}})
+    assert evaluate(c, snap, snap).status == "unsatisfied"

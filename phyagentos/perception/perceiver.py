@@ -146,6 +146,9 @@ REST_RING_PERCENTILE = 25.0
 #: its look at 0.025-0.034, 1-2 cm from where the hand opened (LIBERO-90 tasks 49, 54: training
 #: tasks); 0.1 left every one of them unjudged.
 RELEASE_LOOK_FLOOR = 0.02
+#: Fraction of a look's footprint a detection cut by the image border must show to be named
+#: at full confidence (:func:`_seen_fraction`).
+SEEN_ENOUGH = 0.5
 #: Position sigma (m) at least of a round object's centre completed from the part of it seen
 #: (the seen far edge's spread and the look's radius range).
 COMPLETED_STD_M = 0.005
@@ -529,10 +532,12 @@ class Perceiver:
                      if n in let_go or t.inside_of is not None}
         matched: dict[int, str] = {}
         for i, (j, cost, margin) in assoc.matches.items():
-            if dets[i].truncated:  # a round object seen in part: its centre from its look's size
+            seen = 1.0
+            if dets[i].truncated:  # seen in part: a round one's centre from its look's size
+                seen = _seen_fraction(dets[i], self.declared[j])
                 dets[i] = _completed(dets[i], self.declared[j], cloud.points[clusters[i][1], :2])
             det = dets[i]
-            conf = match_confidence(cost, margin, cfg) * _detection_confidence(det)
+            conf = match_confidence(cost, margin, cfg) * _detection_confidence(det) * seen
             name = names[j]
             if self._hand_outweighs(name, det, conf, proprio):
                 log.debug("perception: %s in the closing hand; a weak look-alike (confidence %.2f) at %s left unknown",
@@ -551,9 +556,15 @@ class Perceiver:
                           "the track kept, the segment left unknown", name, conf, _r(det.position))
                 continue
             if name in self.tracks:
-                self.tracks[name].update(det, conf, stamp, det_cams[i], cfg)
-                self.tracks[name].held = False
                 t = self.tracks[name]
+                # a weak sighting where a confident track stands (part of it, the rest hidden or
+                # out of the frame) says no less than not seeing it at all would (remembered)
+                keep = t.confidence * REMEMBERED_CONFIDENCE if (
+                    conf < cfg.relations.min_confidence <= t.confidence and not t.held and t.released_s is None
+                    and t.within_gate(det, stamp, cfg)) else 0.0
+                t.update(det, conf, stamp, det_cams[i], cfg)
+                t.confidence = max(t.confidence, keep)
+                t.held = False
                 away = placed is not None and float(np.linalg.norm(t.position[:2] - placed)) > cfg.holding.capture_radius_m
                 # kept while the object is where it was let go (or seen there only weakly)
                 t.placed_xy = None if placed is None or (away and conf >= cfg.relations.min_confidence) \
@@ -1260,6 +1271,17 @@ def _corroborated(conf: float, det: Detection, placed_xy: np.ndarray, config: Pe
         return conf
     w = math.exp(-0.5 * (d / (0.5 * radius)) ** 2)
     return 1.0 - (1.0 - conf) * (1.0 - w)
+
+
+def _seen_fraction(det: Detection, look: ObjectDescriptor) -> float:
+    """Confidence factor of a detection cut by the image border: 1 when at least half of its
+    look's footprint (long x short side) was seen, else the fraction seen over one half. A
+    sliver at the border says less about what it is than half a plate does."""
+    size = look.size_vector()
+    if size is None or size[0] * size[1] <= 0.0:
+        return 1.0
+    seen = 4.0 * float(det.half_extents[0]) * float(det.half_extents[1]) / float(size[0] * size[1])
+    return min(1.0, seen / SEEN_ENOUGH)
 
 
 def _completed(det: Detection, look: ObjectDescriptor, points_xy: np.ndarray) -> Detection:

@@ -26,8 +26,9 @@ __all__ = ["BORDER_PX", "EDGE_PERCENTILE", "MIN_CAMERA_POINTS", "complete_round"
 #: pixels inside the border.
 BORDER_PX = 1.5
 
-#: Percentile of the seen points taken as an edge (robust to a stray point), %.
-EDGE_PERCENTILE = 2.0
+#: Percentile of the seen points taken as an edge, %: robust to a stray point, and shallow: a
+#: disc's 2nd percentile lies 4-7 mm inside its edge (the cap there holds 2 % of its points).
+EDGE_PERCENTILE = 0.5
 
 #: Cameras with fewer of a segment's points than this are not counted as having seen it
 #: (the same count :meth:`~phyagentos.perception.perceiver.Perceiver` uses for a detection's

@@ -1,0 +1,163 @@
+"""Objects cut by the image border: told by their pixels at the border, matched with their seen
+size as a lower bound, a round one completed from its look, and never allowed to move a track
+they do not look like (phyagentos.perception.truncation and the perceiver's use of it)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phyagentos.perception import ObjectDescriptor, PerceptionConfig, Perceiver
+from phyagentos.perception import perceiver as perceiver_module
+from phyagentos.perception.association import cost_matrix
+from phyagentos.perception.cloud import Cloud
+from phyagentos.perception.colour import srgb_to_lab
+from phyagentos.perception.detect import Detection
+from phyagentos.perception.frames import CameraFrame, CameraIntrinsics
+from phyagentos.perception.truncation import complete_round, cut_direction
+
+PINK = (0.85, 0.6, 0.6, 1.0)
+
+
+def _camera(width=64, height=48):
+    """A pinhole camera at the origin looking along world +z (its optical frame is the world's)."""
+    intr = CameraIntrinsics(width=width, height=height, fx=50.0, fy=50.0, cx=(width - 1) / 2, cy=(height - 1) / 2)
+    return CameraFrame(sensor="cam", frame_id="cam_optical", stamp_s=0.0, intrinsics=intr, T_world_camera=np.eye(4),
+                       rgb=np.zeros((height, width, 3), np.uint8), depth_m=np.ones((height, width), np.float32))
+
+
+def _cloud_at_pixels(frame, us, vs, depth=1.0):
+    k = frame.intrinsics
+    us, vs = np.asarray(us, float), np.asarray(vs, float)
+    pts = np.stack([(us - k.cx) / k.fx * depth, (vs - k.cy) / k.fy * depth, np.full(us.shape, depth)], axis=1)
+    n = len(pts)
+    return Cloud(pts, np.zeros((n, 3), np.uint8), np.full(n, depth), np.zeros(n, np.int16))
+
+
+def test_a_segment_reaching_the_image_border_is_cut_towards_that_border():
+    cam = _camera()
+    uu, vv = np.meshgrid(np.arange(0, 12), np.arange(20, 28))
+    cloud = _cloud_at_pixels(cam, uu.ravel(), vv.ravel())
+    d = cut_direction(cloud, np.arange(len(cloud)), [cam], [1])
+    assert d is not None and d[0] < -0.99  # the left border: image -u is world -x here
+    inside = _cloud_at_pixels(cam, uu.ravel() + 20, vv.ravel())
+    assert cut_direction(inside, np.arange(len(inside)), [cam], [1]) is None
+
+
+def test_a_segment_one_camera_sees_whole_is_not_cut():
+    cam = _camera()
+    uu, vv = np.meshgrid(np.arange(0, 12), np.arange(20, 28))
+    at_border = _cloud_at_pixels(cam, uu.ravel(), vv.ravel())
+    whole = _cloud_at_pixels(cam, uu.ravel() + 20, vv.ravel())
+    both = Cloud(np.vstack([at_border.points, whole.points]), np.zeros((2 * len(whole), 3), np.uint8),
+                 np.ones(2 * len(whole)), np.r_[np.zeros(len(whole), np.int16), np.ones(len(whole), np.int16)])
+    # the second camera's points are the same segment seen whole (a second view of it)
+    assert cut_direction(both, np.arange(len(both)), [cam, cam], [1, 1]) is None
+    assert cut_direction(both, np.arange(len(whole)), [cam, cam], [1, 1]) is not None
+
+
+@pytest.mark.parametrize("visible_from", [-0.05, 0.0, 0.03])
+def test_a_round_object_seen_in_part_is_completed_from_its_far_edge_and_radius(visible_from):
+    rng = np.random.default_rng(0)
+    r = 0.07
+    pts = rng.uniform(-r, r, size=(4000, 2))
+    pts = pts[(np.hypot(pts[:, 0], pts[:, 1]) <= r) & (pts[:, 0] <= -visible_from)] + [0.3, -0.2]
+    # out of view on the +x side beyond x = -visible_from
+    centre = complete_round(pts, np.array([1.0, 0.0]), r)
+    assert np.linalg.norm(centre - [0.3, -0.2]) < 0.004, centre
+
+
+def _det(half, shape="box", cut=(1.0, 0.0)):
+    rgb = np.array(PINK[:3])
+    return Detection(position=np.array([0.5, 0.3, 0.44]), yaw=0.0, half_extents=np.array(half, float), shape=shape,
+                     colour_rgb=rgb, colour_lab=srgb_to_lab(rgb[None])[0], points=300, cameras=1,
+                     position_std_m=0.002, yaw_std_rad=0.1, view_agreement=1.0, bottom_m=0.0,
+                     cut_direction=None if cut is None else np.array(cut))
+
+
+def test_a_cut_detection_is_matched_with_its_size_as_a_lower_bound_and_no_shape():
+    plate = ObjectDescriptor("plate_1", shape="cylinder", colour_rgb=PINK[:3], size_m=(0.138, 0.138, 0.03))
+    cfg = PerceptionConfig.default()
+    half_seen = cost_matrix([_det((0.069, 0.03, 0.015))], [plate], cfg)[0, 0]
+    whole_view = cost_matrix([_det((0.069, 0.03, 0.015), cut=None)], [plate], cfg)[0, 0]
+    too_big = cost_matrix([_det((0.12, 0.03, 0.015))], [plate], cfg)[0, 0]
+    assert half_seen < 0.3 < whole_view  # half a plate, box-shaped, at the border: a plate
+    assert too_big > half_seen + 1.0  # bigger than the look: no plate, cut or not
+
+
+# ------------------------------------------------------------------ rendered (MuJoCo)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    from phyagentos.perception.synthetic import DEFAULT_CAMERAS, SyntheticScene
+
+    s = SyntheticScene([], cameras=DEFAULT_CAMERAS, pool_per_shape=3)
+    yield s
+    s.close()
+
+
+def _observe(scene, perceiver, stamp_s=0.0, cameras=("front",)):
+    from phyagentos.perception.synthetic import CameraNoise
+
+    frames = [scene.capture(c, noise=CameraNoise(), rng=np.random.default_rng(0), stamp_s=stamp_s) for c in cameras]
+    snap = perceiver.observe(frames, scene.proprioception(stamp_s=stamp_s))
+    return {e["name"]: e for e in snap["entities"]}, snap
+
+
+PLATE = ObjectDescriptor("plate", shape="cylinder", colour_rgb=PINK[:3], size_m=(0.14, 0.14, 0.024))
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("y", [0.36, 0.40])
+def test_a_plate_half_out_of_the_frame_is_named_with_its_true_centre(scene, monkeypatch, y):
+    from phyagentos.perception.synthetic import SyntheticObject
+
+    scene.place([SyntheticObject("plate", "cylinder", (0.07, 0.07, 0.012), (0.55, y), rgba=PINK)])
+    ents, _ = _observe(scene, Perceiver(PerceptionConfig.default(), [PLATE]))
+    e = ents["plate"]
+    assert e["kind"] == "object" and e["attributes"]["confidence"] > 0.8
+    assert np.hypot(e["position"][0] - 0.55, e["position"][1] - y) < 0.007
+    # without the border's cut: the part seen is no plate (or one centred 1-3 cm short)
+    monkeypatch.setattr(perceiver_module, "cut_direction", lambda *a, **k: None)
+    old, _ = _observe(scene, Perceiver(PerceptionConfig.default(), [PLATE]))
+    assert "plate" not in old or old["plate"]["attributes"]["confidence"] < 0.5
+
+
+@pytest.mark.sim
+def test_a_sliver_at_the_border_is_named_only_weakly(scene):
+    from phyagentos.perception.synthetic import SyntheticObject
+
+    scene.place([SyntheticObject("plate", "cylinder", (0.07, 0.07, 0.012), (0.55, 0.45), rgba=PINK)])
+    ents, _ = _observe(scene, Perceiver(PerceptionConfig.default(), [PLATE]))
+    assert ents["plate"]["attributes"]["confidence"] < 0.5
+
+
+@pytest.mark.sim
+def test_the_right_plate_is_told_from_the_left_one_it_took(scene):
+    from phyagentos.perception.synthetic import SyntheticObject
+
+    scene.place([SyntheticObject("a", "cylinder", (0.07, 0.07, 0.012), (0.55, -0.18), rgba=PINK),
+                 SyntheticObject("b", "cylinder", (0.07, 0.07, 0.012), (0.55, 0.18), rgba=PINK)])
+    looks = [ObjectDescriptor(n, shape="cylinder", colour_rgb=PINK[:3], size_m=(0.14, 0.14, 0.024),
+                              where={"relation": side}) for n, side in (("plate_1", "left"), ("plate_2", "right"))]
+    ents, snap = _observe(scene, Perceiver(PerceptionConfig.default(), looks))
+    assert snap["references"]["plate_1"]["resolved"] and snap["references"]["plate_2"]["resolved"], snap["references"]
+    # the front camera looks along world -x: its image's right is world +y
+    assert ents["plate_2"]["position"][1] > 0.1 > -0.1 > ents["plate_1"]["position"][1]
+
+
+@pytest.mark.sim
+def test_a_weak_look_elsewhere_never_moves_a_confident_track(scene):
+    from phyagentos.perception.synthetic import SyntheticObject
+
+    p = Perceiver(PerceptionConfig.default(), [PLATE])
+    scene.place([SyntheticObject("plate", "cylinder", (0.07, 0.07, 0.012), (0.50, -0.10), rgba=PINK)])
+    first, _ = _observe(scene, p, cameras=("front", "side"))
+    assert first["plate"]["attributes"]["confidence"] > 0.8
+    # the plate gone; a smaller, browner disc 25 cm away looks only a little like it
+    scene.place([SyntheticObject("plate", "cylinder", (0.05, 0.05, 0.012), (0.55, 0.15), rgba=(0.7, 0.45, 0.35, 1))])
+    second, _ = _observe(scene, p, stamp_s=1.0, cameras=("front", "side"))
+    assert "plate" not in second or np.hypot(second["plate"]["position"][0] - 0.55,
+                                             second["plate"]["position"][1] - 0.15) > 0.1
+    assert p.tracks["plate"].confidence > 0.8 and np.allclose(p.tracks["plate"].position[:2], (0.50, -0.10), atol=0.01)

@@ -161,3 +161,26 @@ def test_a_weak_look_elsewhere_never_moves_a_confident_track(scene):
     assert "plate" not in second or np.hypot(second["plate"]["position"][0] - 0.55,
                                              second["plate"]["position"][1] - 0.15) > 0.1
     assert p.tracks["plate"].confidence > 0.8 and np.allclose(p.tracks["plate"].position[:2], (0.50, -0.10), atol=0.01)
+
+
+def test_a_weak_sighting_where_a_confident_track_stands_keeps_the_remembered_confidence():
+    from phyagentos.perception.tracks import REMEMBERED_CONFIDENCE, Track
+
+    cfg = PerceptionConfig.default()
+    det = _det((0.069, 0.03, 0.015), cut=(0.0, 1.0))
+
+    def track():
+        return Track.start("plate_1", det, 0.95, 0.0, ("agentview",))
+
+    # part of the plate seen where it stands, weakly: the rest hidden or out of the frame
+    kept = track()
+    kept.update(det, 0.1, 1.0, ("agentview",), cfg, weak_below=0.5)
+    assert kept.confidence == pytest.approx(0.95 * REMEMBERED_CONFIDENCE)
+    plain = track()
+    plain.update(det, 0.1, 1.0, ("agentview",), cfg)  # without: agreeing sightings only fuse
+    assert plain.confidence < 0.6
+    # elsewhere, the weak sighting restarts the track at its own confidence
+    far = track()
+    moved = Detection(**{**det.__dict__, "position": det.position + [0.3, 0.0, 0.0]})
+    far.update(moved, 0.1, 1.0, ("agentview",), cfg, weak_below=0.5)
+    assert far.confidence == pytest.approx(0.1)

@@ -225,3 +225,20 @@ def test_an_object_far_down_in_a_tall_supports_footprint_is_not_on_it():
     snap = {"entities": [cabinet, bowl], "relations": []}
     [c] = parse_criteria({"on": {"object": "bowl_1", "support": "wooden_cabinet_1"}})
     assert evaluate(c, snap, snap).status == "unsatisfied"
+
+
+@pytest.mark.parametrize("offset,status", [
+    (0.008, "satisfied"),    # well inside: level on the plate's floor
+    (0.028, "unknown"),      # its base reaches the rim within the uncertainty
+    (0.045, "unsatisfied"),  # its base over the rim: it leans on it
+])
+def test_down_in_a_dish_the_objects_base_must_lie_inside_the_rim(offset, status):
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    table = 0.425
+    plate = _ent("plate_1", (0.0, 0.3, table + 0.015), (0.069, 0.069, 0.015), 0.95, std=0.005)
+    mug = _ent("mug_1", (0.0, 0.3 - offset, table + 0.012 + 0.058), (0.052, 0.037, 0.058), 0.9)
+    snap = {"entities": [plate, mug], "relations": []}
+    [c] = parse_criteria({"on": {"object": "mug_1", "support": "plate_1"}})
+    out = evaluate(c, snap, snap)
+    assert out.status == status, out.reason

@@ -14,7 +14,6 @@ import re
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -89,12 +88,15 @@ def start_view(workspace: Path) -> tuple[subprocess.Popen, str, str]:
     return proc, url.rstrip("/"), token
 
 
-def browser() -> webdriver.Chrome:
+def browser(profile_dir: Path) -> webdriver.Chrome:
+    """Headless Chromium with its profile in ``profile_dir`` (a test's own temporary directory,
+    so nothing is left behind in /tmp)."""
     options = Options()
     options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
     for flag in CHROMIUM_FLAGS:
         options.add_argument(flag)
-    options.add_argument(f"--user-data-dir={tempfile.mkdtemp(prefix='phyagentos-chromium-')}")
+    profile_dir.mkdir(parents=True, exist_ok=True)
+    options.add_argument(f"--user-data-dir={profile_dir}")
     return webdriver.Chrome(service=Service(shutil.which("chromedriver") or "/usr/bin/chromedriver"), options=options)
 
 
@@ -116,7 +118,7 @@ def live(tmp_path_factory):
     view, url, token = start_view(ws_dir)
     run = subprocess.Popen([*CLI, "run", str(graph), "--workspace", str(ws_dir)], stdout=subprocess.DEVNULL,
                            stderr=open(root / "run.log", "wb"), cwd=ROOT)
-    driver = browser()
+    driver = browser(root / "chromium")
     try:
         yield {"ws": Workspace.open(ws_dir), "url": url, "token": token, "driver": driver, "run": run, "root": root}
     finally:

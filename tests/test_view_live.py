@@ -49,7 +49,7 @@ def replanned(tmp_path_factory):
     sessions = {s.state: s for s in ws.list_sessions()}
     assert set(sessions) == {"replanned", "succeeded"}, sessions
     view, url, _token = start_view(ws_dir)
-    driver = browser()
+    driver = browser(root / "chromium")
     try:
         yield {"ws": ws, "url": url, "driver": driver, "failed": sessions["replanned"],
                "child": sessions["succeeded"], "view": view}
@@ -226,7 +226,7 @@ def test_the_index_with_1000_runs_stays_cheap_under_churn_and_is_paged(tmp_path)
         ws.runs.register(RunRecord(run_id=f"r{i:05d}", goal_graph="g.yaml", graph_file="",
                                    submitted_at=utc_now_iso()), "version: 1\nname: g\nnodes: []\n")
     view, url, _ = start_view(tmp_path / "ws")
-    driver = browser()
+    driver = browser(tmp_path / "chromium")
     try:
         driver.get(url + "/")
         wait_for(lambda: driver.find_element(By.CSS_SELECTOR, ".pager").get_attribute("data-pages") == "20",
@@ -288,7 +288,7 @@ def test_pause_and_estop_in_force_show_on_the_run_and_session_pages(tmp_path):
     (sid, state, ident), = ws.active_sessions()
     assert state == "pending"
     view, url, _ = start_view(ws_dir)
-    driver = browser()
+    driver = browser(tmp_path / "chromium")
     try:
         driver.get(url + "/")
         pause = wait_for(lambda: driver.find_element(By.CSS_SELECTOR, "button.sig[data-kind=pause]"), timeout=15,

@@ -30,7 +30,8 @@ centre lies in the region's footprint shrunk by 2 sigma and rests within
 ``REST_TOL_M + 2 sigma`` of its surface; ``on`` a perceived support: the centre in its
 footprint shrunk by 2 sigma, the bottom from :data:`SUPPORT_FLOOR_M` above the support's
 bottom (and at most :data:`DISH_DEPTH_M` below its top: a dish's floor) up to ``REST_TOL_M``
-above its top, by 2 sigma; ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
+above its top, by 2 sigma; below the top (in a dish), within :data:`DISH_CENTRE_M` of the
+support's centre too, else it leans on the rim; ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
 rose >= min_height + 2 sigma), ``unsatisfied`` only when it fails by more than 2 sigma,
 and ``unknown`` in between (at 2 sigma a Gaussian error crosses the boundary with
 probability <= 2.3 %, one-sided). ``on`` and ``inside`` with a container (a perceived
@@ -54,7 +55,7 @@ from typing import Any, Callable, Mapping
 from phyagentos.errors import VerifierError, format_choices
 
 __all__ = ["Criterion", "CriterionOutcome", "parse_criteria", "PREDICATES", "evaluate", "confidence", "sigma",
-           "CONFIDENCE_MIN", "REST_TOL_M", "SUPPORT_FLOOR_M", "DISH_DEPTH_M", "CLOSED_OPENING_M", "SQUEEZE_EFFORT_N"]
+           "CONFIDENCE_MIN", "REST_TOL_M", "SUPPORT_FLOOR_M", "DISH_DEPTH_M", "DISH_CENTRE_M", "CLOSED_OPENING_M", "SQUEEZE_EFFORT_N"]
 
 # Tolerances, metres. A resting box's centre sits at its half height above its
 # support; 1 cm absorbs contact penetration and settling.
@@ -69,6 +70,12 @@ SUPPORT_FLOOR_M = 0.003
 #: under its rim (LIBERO's plate: 2.2 cm); an object deeper down in a tall support's footprint
 #: is in it (a bowl in the cabinet's open drawer is not on the cabinet).
 DISH_DEPTH_M = 0.03
+#: Down in a dish (its bottom below the rim's top), an object rests level within this of the
+#: dish's centre (m, by 2 sigma); further out it leans on the rim. Measured on LIBERO's plate
+#: (LIBERO-10 task 4, LIBERO-90 tasks 67 and 68): mugs set 1.0-2.5 cm off its centre stood
+#: level, one 3.7 cm off leant 7 degrees on the rim; LIBERO's own ``On`` asks 3 cm
+#: (``check_ontop`` in its ``base_object_states.py``).
+DISH_CENTRE_M = 0.025
 #: Perceived entities and relations below this confidence do not count: a criterion
 #: naming one is ``unknown``. 0.5: an association no better than a coin flip.
 CONFIDENCE_MIN = 0.5
@@ -386,8 +393,12 @@ def _eval_on(c, initial, terminal, refs):
     dy = abs(o["position"][1] - s["position"][1])
     held, _ = _held(terminal, obj)
     rests = floor <= bottom <= top + REST_TOL_M + m  # floor: a height threshold, not widened by the horizontal sigma
-    inside = rests and dx <= sx - m and dy <= sy - m and held is False
-    outside = bottom > top + REST_TOL_M + m or bottom < floor - m or dx > sx + m or dy > sy + m or bool(held)
+    # down in a dish (below its rim): level only near its centre, else it leans on the rim
+    in_dish = bottom < top - REST_TOL_M
+    off = math.hypot(dx, dy)
+    inside = rests and dx <= sx - m and dy <= sy - m and held is False and (not in_dish or off <= DISH_CENTRE_M - m)
+    outside = (bottom > top + REST_TOL_M + m or bottom < floor - m or dx > sx + m or dy > sy + m or bool(held)
+               or in_dish and off > DISH_CENTRE_M + m)
     return _band(c, refs, inside, outside, obj, f"on {support}",
                  f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))

@@ -19,7 +19,12 @@ import numpy as np
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import Detection
 
-__all__ = ["Track", "yaw_period"]
+__all__ = ["REMEMBERED_CONFIDENCE", "Track", "yaw_period"]
+
+#: An object not seen now but hidden where it was is reported at its track's confidence times
+#: this (the perceiver's ``remembered``); a weak sighting of part of it where it stands keeps at
+#: least as much (:meth:`Track.update`'s ``weak_below``).
+REMEMBERED_CONFIDENCE = 0.9
 
 
 def yaw_period(half_extents: np.ndarray, shape: str) -> float:
@@ -91,11 +96,20 @@ class Track:
         return innov <= config.fusion.innovation_gate_sigma * math.sqrt(var_p + det.position_std_m ** 2)
 
     def update(self, det: Detection, confidence: float, stamp_s: float, cameras: tuple[str, ...],
-               config: PerceptionConfig) -> bool:
-        """Fuse a new detection; returns False when it restarted the track instead."""
+               config: PerceptionConfig, *, weak_below: float = 0.0) -> bool:
+        """Fuse a new detection; returns False when it restarted the track instead.
+
+        ``weak_below``: a sighting less confident than this, within the gate of a track held
+        at least that confidently and not in the hand, is part of the object where it stands
+        (the rest hidden, or out of the frame); it leaves the track at least
+        :data:`REMEMBERED_CONFIDENCE` times its confidence, as not seeing it at all behind
+        something would. 0 (the default): agreeing sightings only fuse."""
         var_p = self.predicted_var(stamp_s, config)
         var_m = det.position_std_m ** 2
-        if self.held or not self.within_gate(det, stamp_s, config) or det.shape != self.shape and self.observations < 2:
+        within = self.within_gate(det, stamp_s, config)
+        keep = self.confidence * REMEMBERED_CONFIDENCE if (
+            confidence < weak_below <= self.confidence and not self.held and within) else 0.0
+        if self.held or not within or det.shape != self.shape and self.observations < 2:
             fresh = Track.start(self.name, det, confidence, stamp_s, cameras)
             self.__dict__.update(fresh.__dict__)
             return False
@@ -118,7 +132,7 @@ class Track:
         self.colour_rgb = (n * self.colour_rgb + det.colour_rgb) / (n + 1)
         self.points, self.bottom_m, self.cameras = det.points, det.bottom_m, cameras
         # agreeing sightings raise confidence: 1 - (1 - c_now)(1 - c_before / 2)
-        self.confidence = 1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence)
+        self.confidence = max(1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence), keep)
         self.last_seen_s = stamp_s
         self.observations = n + 1
         return True

@@ -551,6 +551,10 @@ class Perceiver:
                     log.debug("perception: %s seen at confidence %.2f %.3f m from where the hand let it go: %.2f",
                               name, look, float(np.linalg.norm(det.position[:2] - placed)), conf)
             look_conf = match_confidence(float(looks_only[i, j]), margin, cfg) * _detection_confidence(det)
+            if det.truncated and name not in self.tracks and conf < cfg.relations.min_confidence:
+                log.debug("perception: a part at the image border looks weakly like %s (confidence %.2f) at %s: "
+                          "left unknown", name, conf, _r(det.position))
+                continue  # a weak part alone names nothing
             if self._weak_elsewhere(name, det, look_conf, stamp):
                 log.debug("perception: %s seen weakly (confidence %.2f) at %s, away from its confident track: "
                           "the track kept, the segment left unknown", name, conf, _r(det.position))
@@ -919,15 +923,16 @@ class Perceiver:
         where part of that object is: its centre within the object's footprint radius (its
         look's, else its track's larger horizontal extent) plus 3 sigma of both positions.
         A part seen at the border confirms an object where it was and never moves it (the far
-        edge of the table, seen by the wrist camera, is not the plate last seen 20 cm away);
-        held and released objects are found by the hand's own rules."""
+        edge of the table, seen by the wrist camera, is not the plate last seen 20 cm away, nor
+        the can just let go into the basket); a held object is found by the hand's own rules.
+        (A released object's track stands where the hand let it go.)"""
         out = C
         for i, det in enumerate(dets):
             if not det.truncated:
                 continue
             for j, desc in enumerate(self.declared):
                 t = self.tracks.get(desc.name)
-                if t is None or t.held or t.released_s is not None:
+                if t is None or t.held:
                     continue
                 size = desc.size_vector()
                 radius = 0.5 * float(size[0]) if size is not None else float(np.max(t.half_extents[:2]))

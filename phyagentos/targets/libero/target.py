@@ -57,6 +57,8 @@ World frame: LIBERO's (z up, metres); the robot base is at robosuite's ``robot0_
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import functools
 import logging
 import math
@@ -263,6 +265,26 @@ def _process_xml(xml: str, *, tcp_pos: Sequence[float], tcp_quat: Sequence[float
     if not placed:  # pragma: no cover - robosuite's Panda changed
         raise TargetError(f"robosuite's model has no body {_LAST_LINK!r} to fix the tool site to")
     return ET.tostring(root, encoding="unicode")
+
+
+@contextmanager
+def _global_numpy_seed(seed: int):
+    """numpy's global generator seeded with ``seed`` inside the block, restored after it.
+
+    LIBERO places its fixtures (the stove, the cabinet, the rack) with robosuite's placement
+    samplers, which draw from numpy's global generator on every ``env.reset()``; a fixed init
+    state sets the objects' joints but not the fixtures, so without a seed the stove stands
+    up to 2 cm elsewhere from one run to the next (its BDDL region). LIBERO's own evaluation
+    seeds the environment once (``env.seed``); seeding each reset with the init-state index
+    makes an episode's world a function of its task and init state alone, whatever the worker
+    or the order (measured: the stove's body 1-1.7 cm apart between two unseeded resets of
+    libero_goal task 7 init 0, identical with the seed)."""
+    state = np.random.get_state()
+    np.random.seed(int(seed))
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
 
 
 def _make_env(task: LiberoTask):
@@ -508,7 +530,8 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
                 self._env.seed(int(seed or 0))
                 self._env.reset()
             else:
-                self._env.reset()
+                with _global_numpy_seed(self._init_index):  # the fixtures' layout: one per init state
+                    self._env.reset()
                 self._env.set_init_state(np.array(self._states[self._init_index]))
             for _ in range(self._scene.settle_steps):
                 self._env.step(_NOOP_ACTION)

@@ -192,3 +192,16 @@ def test_a_weak_sighting_where_a_confident_track_stands_keeps_the_remembered_con
     moved = Detection(**{**det.__dict__, "position": det.position + [0.3, 0.0, 0.0]})
     far.update(moved, 0.1, 1.0, ("agentview",), cfg, weak_below=0.5)
     assert far.confidence == pytest.approx(0.1)
+
+
+def test_a_part_at_the_border_never_makes_a_whole_sighting_ambiguous():
+    can = ObjectDescriptor("soup_1", shape="cylinder", colour_rgb=PINK[:3], size_m=(0.066, 0.066, 0.1))
+    whole = Detection(**{**_det((0.033, 0.033, 0.05), shape="cylinder", cut=None).__dict__})
+    part = _det((0.03, 0.012, 0.05))  # its look's colour, cut by the border elsewhere
+    p = Perceiver(PerceptionConfig.default(), [can])
+    C = cost_matrix([whole, part], [can], p.config)
+    assert C[1, 0] < p.config.association.gate_cost  # the part alone would do
+    assoc = p._associate_whole_first(C, [whole, part])
+    assert assoc.matches.keys() == {0} and assoc.ambiguous == ()
+    alone = p._associate_whole_first(C[1:], [part])
+    assert alone.matches.keys() == {0}  # with no whole sighting, the part names it

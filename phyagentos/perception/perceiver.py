@@ -62,6 +62,7 @@ import numpy as np
 
 from phyagentos.perception.association import (
     FORBIDDEN_COST,
+    Association,
     Landmark,
     ReferenceResolution,
     associate,
@@ -522,7 +523,7 @@ class Perceiver:
         looks_only = cost_matrix(dets, self.declared, cfg)  # without the tracks' tie-breaker
         C = self._truncated_where_tracked(C, dets)
         C = self._resolve_references(C, dets, stamp)
-        assoc = associate(C, cfg)
+        assoc = self._associate_whole_first(C, dets)
         for t in self.tracks.values():
             t.seen_now = False
         # objects the hand held or let go since they were last seen, or seen inside a container,
@@ -903,6 +904,27 @@ class Perceiver:
         return out
 
     # ------------------------------------------------------------------ spatial references
+
+    def _associate_whole_first(self, C: np.ndarray, dets: list[Detection]) -> Association:
+        """The association, detections seen whole first: a part cut by the image border
+        (``truncated``) may take only a declared object that no whole detection is within the
+        gate of -- a part is weaker evidence than a whole sighting and must never make a whole
+        one ambiguous (a can's label at the border beside the can itself)."""
+        cfg = self.config
+        cut = [i for i, d in enumerate(dets) if d.truncated]
+        if not cut or C.size == 0:
+            return associate(C, cfg)
+        whole_rows = [i for i in range(len(dets)) if i not in cut]
+        first = C.copy()
+        first[cut, :] = FORBIDDEN_COST
+        a1 = associate(first, cfg)
+        explained = [j for j in range(C.shape[1]) if np.any(C[whole_rows, j] <= cfg.association.gate_cost)]
+        second = C.copy()
+        second[whole_rows, :] = FORBIDDEN_COST
+        second[:, explained] = FORBIDDEN_COST
+        a2 = associate(second, cfg)
+        return Association({**a1.matches, **a2.matches},
+                           tuple(i for i in a1.ambiguous if i not in cut) + tuple(i for i in a2.ambiguous if i in cut))
 
     def _weak_elsewhere(self, name: str, det: Detection, conf: float, stamp: float) -> bool:
         """A match whose look alone (``conf``: colour, size and shape, without the distance to

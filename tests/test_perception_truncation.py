@@ -205,3 +205,15 @@ def test_a_part_at_the_border_never_makes_a_whole_sighting_ambiguous():
     assert assoc.matches.keys() == {0} and assoc.ambiguous == ()
     alone = p._associate_whole_first(C[1:], [part])
     assert alone.matches.keys() == {0}  # with no whole sighting, the part names it
+
+
+def test_an_objects_height_known_when_it_was_let_go_survives_a_restarted_track():
+    from phyagentos.perception.tracks import Track
+
+    cfg = PerceptionConfig.default()
+    det = _det((0.048, 0.048, 0.062), shape="cylinder", cut=None)
+    t = Track.start("mug_1", det, 0.9, 0.0, ("agentview",))
+    t.known_height_m = 0.1232
+    moved = Detection(**{**det.__dict__, "position": det.position + [0.2, 0.0, 0.0]})
+    assert t.update(moved, 0.9, 1.0, ("agentview",), cfg) is False  # seen elsewhere: restarted
+    assert t.known_height_m == 0.1232 and np.allclose(t.position, moved.position)

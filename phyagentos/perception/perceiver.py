@@ -588,9 +588,10 @@ class Perceiver:
             if container is None and name in let_go:
                 container = _container_around(i, dets, matched)
             t.inside_of = _still_inside(container, dets[i], dets, matched, height_m=tracked_h.get(name))
-            known_h = tracked_h.get(name) if name in let_go else t.standing_height_m
+            if name in let_go and name in tracked_h:
+                t.known_height_m = tracked_h[name]  # its height when the hand let it go
+            known_h = t.known_height_m
             raised = known_h is not None and dets[i].bottom_m <= 1e-6 and dets[i].top_m - known_h > HIDDEN_SUPPORT_M
-            t.standing_height_m = known_h if raised else None
             if raised and name not in tracked_h:
                 tracked_h[name] = float(known_h)
             if (t.inside_of is not None or raised) and name in tracked_h and dets[i].bottom_m <= 1e-6:

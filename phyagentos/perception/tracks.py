@@ -69,10 +69,11 @@ class Track:
     #: (2,) world x, y (m) where the hand let the object go, from proprioception; kept until
     #: the object is held again or seen confidently away from it, else None.
     placed_xy: np.ndarray | None = None
-    #: Its height (m), kept since it was seen standing on something hidden under it (let go
-    #: onto a plate the cameras no longer see): its later sightings reaching down to the table
-    #: are its own height on that support; None otherwise.
-    standing_height_m: float | None = None
+    #: Its height (m) as known when the hand last let it go (kept when the track restarts: it
+    #: is as tall wherever it is seen): a later sighting that reaches down to the table with its
+    #: top higher than that stands on something hidden under it (a plate under the mug set on
+    #: it); None for an object never let go.
+    known_height_m: float | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
@@ -111,6 +112,7 @@ class Track:
             confidence < weak_below <= self.confidence and not self.held and within) else 0.0
         if self.held or not within or det.shape != self.shape and self.observations < 2:
             fresh = Track.start(self.name, det, confidence, stamp_s, cameras)
+            fresh.known_height_m = self.known_height_m  # moved or taken, it is as tall as it was
             self.__dict__.update(fresh.__dict__)
             return False
         k = var_p / (var_p + var_m)

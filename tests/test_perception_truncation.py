@@ -201,9 +201,9 @@ def test_a_part_at_the_border_never_makes_a_whole_sighting_ambiguous():
     p = Perceiver(PerceptionConfig.default(), [can])
     C = cost_matrix([whole, part], [can], p.config)
     assert C[1, 0] < p.config.association.gate_cost  # the part alone would do
-    assoc = p._associate_whole_first(C, [whole, part])
+    assoc = p._associate_parts_weighed(C, [whole, part])
     assert assoc.matches.keys() == {0} and assoc.ambiguous == ()
-    alone = p._associate_whole_first(C[1:], [part])
+    alone = p._associate_parts_weighed(C[1:], [part])
     assert alone.matches.keys() == {0}  # with no whole sighting, the part names it
 
 

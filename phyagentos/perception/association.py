@@ -42,8 +42,8 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection
 
-__all__ = ["FORBIDDEN_COST", "Association", "Landmark", "ReferenceResolution", "cost_matrix", "associate", "match_confidence",
-           "resolve_reference", "forbid_except"]
+__all__ = ["FORBIDDEN_COST", "Association", "Landmark", "ReferenceResolution", "cost_matrix", "track_costs",
+           "associate", "match_confidence", "resolve_reference", "forbid_except"]
 
 log = logging.getLogger(__name__)
 
@@ -85,11 +85,23 @@ def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDes
             mismatch = None if det.truncated else desc.shape_mismatch(det.shape)
             if mismatch:
                 c += ac.shape_cost * mismatch
-            tp = track_positions[j] if j < len(track_positions) else None
-            if tp is not None:
-                c += min(1.0, float(np.linalg.norm(det.position[:2] - tp[:2])) / ac.position_scale_m)
             C[i, j] = c
-    return C
+    return C + track_costs(detections, len(descriptors), config, track_positions) if track_positions else C
+
+
+def track_costs(detections: Sequence[Detection], n_descriptors: int, config: PerceptionConfig,
+                track_positions: Sequence[np.ndarray | None]) -> np.ndarray:
+    """(n_detections, n_descriptors) the tracks' tie-breaker alone: the horizontal distance (m)
+    from each detection to each descriptor's track / ``position_scale_m``, capped at 1; 0
+    where a descriptor has no track (``None``, or beyond ``track_positions``)."""
+    ac = config.association
+    T = np.zeros((len(detections), n_descriptors))
+    for j, tp in enumerate(track_positions[:n_descriptors]):
+        if tp is None:
+            continue
+        for i, det in enumerate(detections):
+            T[i, j] = min(1.0, float(np.linalg.norm(det.position[:2] - tp[:2])) / ac.position_scale_m)
+    return T
 
 
 _FORBIDDEN = 1e6

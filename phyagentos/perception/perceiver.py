@@ -70,6 +70,7 @@ from phyagentos.perception.association import (
     forbid_except,
     match_confidence,
     resolve_reference,
+    track_costs,
 )
 from phyagentos.perception.cloud import (
     Cloud,
@@ -150,7 +151,7 @@ RELEASE_LOOK_FLOOR = 0.02
 #: Fraction of a look's footprint a detection cut by the image border must show to be named
 #: at full confidence (:func:`_seen_fraction`).
 SEEN_ENOUGH = 0.5
-#: Extra association cost of a detection cut by the image border (:meth:`Perceiver._associate_whole_first`):
+#: Extra association cost of a detection cut by the image border (:meth:`Perceiver._associate_parts_weighed`):
 #: twice the ambiguity margin (0.5), so a whole sighting whose look costs up to one margin
 #: more than a part's still wins it unambiguously. With the cut's relaxed size and shape alone,
 #: parts at the border made 56 of 280 objects of libero_object's generated scenes (LIBERO's
@@ -525,11 +526,11 @@ class Perceiver:
         # ---- association (tracks seen before break ties)
         names = [d.name for d in self.declared]
         track_pos = [self.tracks[n].position if n in self.tracks and not self.tracks[n].held else None for n in names]
-        C = cost_matrix(dets, self.declared, cfg, track_pos)
         looks_only = cost_matrix(dets, self.declared, cfg)  # without the tracks' tie-breaker
+        C = looks_only + track_costs(dets, len(self.declared), cfg, track_pos)
         C = self._truncated_where_tracked(C, dets)
         C = self._resolve_references(C, dets, stamp)
-        assoc = self._associate_whole_first(C, dets)
+        assoc = self._associate_parts_weighed(C, dets)
         for t in self.tracks.values():
             t.seen_now = False
         # objects the hand held or let go since they were last seen, or seen inside a container,
@@ -912,7 +913,7 @@ class Perceiver:
 
     # ------------------------------------------------------------------ spatial references
 
-    def _associate_whole_first(self, C: np.ndarray, dets: list[Detection]) -> Association:
+    def _associate_parts_weighed(self, C: np.ndarray, dets: list[Detection]) -> Association:
         """The association with a part cut by the image border (``truncated``) costing
         :data:`PART_COST` more than its look: a part is weaker evidence than a whole sighting
         and must never make a whole one ambiguous (a can's label at the border beside the can
@@ -1537,11 +1538,12 @@ def _occluded_in(t: Track, frames: Sequence[CameraFrame]) -> tuple[str, ...]:
     hidden: list[str] = []
     for f in frames:
         T = f.T_world_camera
+        T_inv = np.linalg.inv(T)
         o = T[:3, 3]
         k = f.intrinsics
         hides = False
         for spot in spots:
-            q = np.linalg.inv(T) @ np.append(spot, 1.0)
+            q = T_inv @ np.append(spot, 1.0)
             if q[2] <= 0.05:
                 continue
             u, v = k.fx * q[0] / q[2] + k.cx, k.fy * q[1] / q[2] + k.cy

@@ -201,7 +201,7 @@ def test_compute_grasp_takes_a_bowl_by_its_rim_and_the_close_expects_the_wall(fr
     # the hand turns as little as it can
     assert abs(_wrap(hand_yaw(G) - hand_yaw(franka.tcp_pose()))) < 1e-6
     planned = franka.runtime_notes["planned_grasp"]
-    assert planned == {"object": "bowl_1", "width_m": DEFAULT_RIM_WALL_M, "kind": "rim"}
+    assert planned == {"object": "bowl_1", "width_m": DEFAULT_RIM_WALL_M, "kind": "rim", "preshape_m": None}
     assert board["look_closer"] is False  # seen whole: no second look asked for
     # a skill parameter overrides the assumed wall
     _run_compute_grasp(franka, ent, rim_wall_m=0.005)
@@ -329,7 +329,7 @@ def test_ik_whose_solution_collides_tries_the_ready_configuration_and_a_swung_el
         def colliding_pairs(self, q):
             return (("ketchup_1_main", "robot0_link5"),) if abs(q[2] - first[2]) < 0.2 else ()
 
-    monkeypatch.setattr(motion, "session_checker", lambda ctx, margin_m=0.0: Checker())
+    monkeypatch.setattr(motion, "session_checker", lambda ctx, margin_m=0.0, opening_m=None: Checker())
     sol, pairs, seed = motion.clear_ik(ctx, pose)
     assert pairs == () and seed.startswith("swivel") and abs(sol.q[2] - first[2]) >= 0.2
 
@@ -337,7 +337,7 @@ def test_ik_whose_solution_collides_tries_the_ready_configuration_and_a_swung_el
         def colliding_pairs(self, q):
             return (("wall", "robot0_link4"),)
 
-    monkeypatch.setattr(motion, "session_checker", lambda ctx, margin_m=0.0: Everywhere())
+    monkeypatch.setattr(motion, "session_checker", lambda ctx, margin_m=0.0, opening_m=None: Everywhere())
     sol, pairs, seed = motion.clear_ik(ctx, pose)
     assert seed == "current" and pairs == (("wall", "robot0_link4"),)
     np.testing.assert_allclose(sol.q, first, atol=1e-6)
@@ -428,4 +428,4 @@ def test_compute_grasp_takes_a_mug_by_its_rim_away_from_the_handle_and_expects_i
     assert abs(d[1]) / np.linalg.norm(d) >= math.cos(PARTLY_SEEN_RIM_ANGLE_RAD) - 1e-9  # the short side is y
     assert float(np.linalg.norm(d)) == pytest.approx(MUG[1] - DEFAULT_HANDLED_WALL_M / 2, abs=1e-6)
     assert franka.runtime_notes["planned_grasp"] == {"object": "red_coffee_mug_1", "width_m": DEFAULT_HANDLED_WALL_M,
-                                                     "kind": "rim"}
+                                                     "kind": "rim", "preshape_m": None}

@@ -205,6 +205,12 @@ class CollisionChecker:
         self._buf_q_tcp = np.empty(4)
         self._buf_q_obj = np.empty(4)
         self._buf_p_obj = np.empty(3)
+        # the gripper's slide joints (a parallel gripper's fingers): (qpos address, +1 or -1),
+        # the sign of the side of zero their range lies on
+        self._finger_qadr = tuple((int(m.jnt_qposadr[j]), 1.0 if m.jnt_range[j, 1] > 0.0 else -1.0)
+                                  for j in range(m.njnt)
+                                  if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE
+                                  and int(m.jnt_bodyid[j]) in self.gripper_bodies)
         self.n_checks = 0
         mujoco.mj_kinematics(m, self.data)
 
@@ -236,6 +242,30 @@ class CollisionChecker:
         if q.shape != (self.model.nq,):
             raise PlanningError(f"qpos_full must have shape ({self.model.nq},), got {q.shape}")
         self.data.qpos[:] = q
+
+    def set_gripper_opening(self, opening_m: float) -> bool:
+        """Stand the gripper's fingers ``opening_m`` (m per finger, >= 0) open in the checked
+        world, as a hand pre-shaped before an approach will be (the world state's own opening
+        until the next :meth:`set_world_state`).
+
+        The fingers are the gripper's slide joints (a parallel gripper: the Franka Hand's two,
+        robosuite's Panda gripper's two); one whose range lies at or above zero stands at
+        ``+opening_m``, one below zero at ``-opening_m`` (each joint's value is its finger's
+        travel from closed, as both models define them). Returns ``False``, changing nothing,
+        for a gripper without slide joints (the SO-101's revolute jaw): the check then keeps
+        the world's opening.
+
+        Raises:
+            PlanningError: a negative or non-finite opening.
+        """
+        o = float(opening_m)
+        if not (math.isfinite(o) and o >= 0.0):
+            raise PlanningError(f"opening_m must be a finite number >= 0 m, got {opening_m!r}")
+        if not self._finger_qadr:
+            return False
+        for adr, sign in self._finger_qadr:
+            self.data.qpos[adr] = sign * o
+        return True
 
     def attach(self, object_name: str, T_tcp_object: np.ndarray) -> None:
         """Carry ``object_name`` rigidly at ``T_tcp_object`` (4, 4) in the tcp frame.

@@ -51,6 +51,7 @@ __all__ = [
     "DEFAULT_RIM_WALL_M",
     "DEFAULT_HANDLED_WALL_M",
     "RIM_GRIP_DEPTH_M",
+    "RIM_PRESHAPE_CLEARANCE_M",
     "RIM_GRASP_CATEGORIES",
     "RIM_POINTS",
     "open_container",
@@ -77,6 +78,12 @@ DEFAULT_HANDLED_WALL_M = 0.007
 #: bowl's 3.7 cm tall wall and 1 cm above where its floor starts (module docstring); the
 #: pads hold the top 2.7 cm of the wall.
 RIM_GRIP_DEPTH_M = 0.012
+#: How far each finger pad stands off the wall (m) when the hand goes down to a rim pre-shaped
+#: instead of fully open (``compute_grasp`` does so only where the open hand's fingers meet
+#: something, e.g. the walls of a drawer a bowl stands in): 2.0 cm open per finger on a 3 mm
+#: wall, half the Franka Hand's stroke. It covers the perceived rim's error (a few mm) and the
+#: wall's lean over the depth the fingertips go down (2.7 cm at 14.5 deg: 7 mm) twice over.
+RIM_PRESHAPE_CLEARANCE_M = 0.0185
 #: Words of a declared class that name an open container with a wall to take.
 RIM_GRASP_CATEGORIES = ("bowl", "mug", "cup")
 #: Words of a declared class that name an open container with a handle on its side.

@@ -11,6 +11,7 @@ import math
 import numpy as np
 from py_trees.common import Status
 
+from phyagentos.errors import IKError
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.retime import Trajectory, retime
 from phyagentos.targets.contract import MuJoCoBacked, capabilities_of
@@ -29,8 +30,11 @@ from .grasp_sense import (
 )
 from .motion import execution_limits, ik_options, session_checker
 
-__all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "CheckHolding"]
+__all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "CheckHolding", "REACH_STEP_M"]
 
+#: The step (m) by which a :class:`CartesianMove` with ``at_least_m`` shortens a line that
+#: leaves the arm's reach.
+REACH_STEP_M = 0.01
 GRIPPER_OPEN_M = 0.04  # Franka Hand: 0.04 m per finger (80 mm stroke), datasheet
 
 
@@ -128,6 +132,31 @@ class _Tracking(Primitive):
         return Status.SUCCESS
 
 
+    def _path(self, T_start: np.ndarray, T_goal: np.ndarray) -> np.ndarray:
+        """The joint path of the line to ``T_goal``; with :attr:`at_least_m`, of the longest
+        line along it in :data:`REACH_STEP_M` steps that the arm reaches."""
+        target = self.ctx.target
+        try:
+            return cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
+        except IKError as exc:
+            if self.at_least_m is None:
+                raise
+            full = float(np.linalg.norm(self.offset))
+            reach = full - REACH_STEP_M
+            while reach >= self.at_least_m - 1e-9:
+                T = T_goal.copy()
+                T[:3, 3] = T_start[:3, 3] + self.offset * (reach / full)
+                try:
+                    path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T, **ik_options(target))
+                except IKError:
+                    reach -= REACH_STEP_M
+                    continue
+                self.ctx.trace.record("reach_limited", leaf=self.name, asked_m=round(full, 4), moved_m=round(reach, 4),
+                                      reason=str(exc)[:200])
+                return path
+            raise
+
+
 class ExecuteTrajectory(_Tracking):
     """Execute the Trajectory at blackboard key ``trajectory`` with a tracking check.
 
@@ -159,10 +188,19 @@ class CartesianMove(_Tracking):
         velocity_scale: fraction (0, 1] of the joint velocity limits (slow near contact).
         check_collisions: re-check the timed motion against the scene. Off for
             approaches that must end in contact with the object being grasped.
+        at_least_m: with ``offset``: where the line leaves the arm's reach (no IK solution
+            on it), the move ends as far along it as the arm reaches, in steps of
+            :data:`REACH_STEP_M`, when that is at least this far (m; more than the offset:
+            all of it); ``None``: the whole offset or an ``ik.unreachable`` failure. A lift
+            of a bowl out of a drawer near the edge of the Panda's workspace rises what it
+            can (traced ``reach_limited``).
+
+    Raises (as failures): ``IKError`` when the line (or, with ``at_least_m``, its first
+    ``at_least_m``) leaves the arm's reach.
     """
 
     def __init__(self, name: str, *, to: str | None = None, offset=None, velocity_scale: float = 0.3,
-                 check_collisions: bool = False):
+                 check_collisions: bool = False, at_least_m: float | None = None):
         super().__init__(name)
         if (to is None) == (offset is None):
             raise ValueError("give exactly one of 'to' (blackboard pose key) or 'offset' ([dx, dy, dz] in m)")
@@ -172,7 +210,15 @@ class CartesianMove(_Tracking):
                 raise ValueError(f"offset must be 3 finite numbers in m, got {offset!r}")
         if not 0 < velocity_scale <= 1:
             raise ValueError(f"velocity_scale must be in (0, 1], got {velocity_scale}")
+        if at_least_m is not None:
+            if offset is None:
+                raise ValueError("at_least_m applies to an 'offset' move only")
+            if not (isinstance(at_least_m, (int, float)) and not isinstance(at_least_m, bool)
+                    and math.isfinite(float(at_least_m)) and float(at_least_m) >= 0.0):
+                raise ValueError(f"at_least_m must be a number of m >= 0 or null, got {at_least_m!r}")
         self.to, self.offset = to, offset
+        # more than the offset asks: the whole offset
+        self.at_least_m = None if at_least_m is None else min(float(at_least_m), float(np.linalg.norm(offset)))
         self.velocity_scale, self.check_collisions = float(velocity_scale), bool(check_collisions)
         if to is not None:
             self.reads(to)
@@ -187,7 +233,7 @@ class CartesianMove(_Tracking):
             T_goal = T_start.copy()
             T_goal[:3, 3] += self.offset
         with ctx.profiler.section("ik"):
-            path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
+            path = self._path(T_start, T_goal)
         vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
         with ctx.profiler.section("timing"):
             checker = session_checker(ctx) if self.check_collisions else None
@@ -200,10 +246,15 @@ class CartesianMove(_Tracking):
 
 
 class Gripper(Primitive):
-    """Open or close the gripper; closing on ``object`` checks the grasp by proprioception.
+    """Open, pre-shape or close the gripper; closing on ``object`` checks the grasp by
+    proprioception.
 
     Args:
-        command: ``open`` or ``close``.
+        command: ``open``, ``close`` or ``preshape``: open each finger only as far as the
+            grasp of ``object`` planned last asks (``preshape_m`` of the planned grasp, by
+            :class:`~phyagentos.primitives.perception.ComputeGrasp`: a rim grasp whose fully
+            open fingers would meet something beside the object); nothing happens (no time
+            passes, nothing is traced) when that grasp goes down fully open.
         object: when closing, the object that must end up between the fingers. The
             grasp is judged from the robot's own sensing (never simulator contacts): the
             fingers stop above 2 mm per finger, within the object's perceived width (as
@@ -217,7 +268,7 @@ class Gripper(Primitive):
     """
 
     TOOLS = ("set_gripper",)
-    COMMANDS = ("close", "open")
+    COMMANDS = ("close", "open", "preshape")
 
     def __init__(self, name: str, *, command: str, object: str | None = None, force_n: float | None = None):
         super().__init__(name)
@@ -228,9 +279,25 @@ class Gripper(Primitive):
         self.command, self.object = command, object
         self.force_n = float(force_n) if force_n is not None and command == "close" else None
 
+    def _preshape(self) -> None:
+        """Open each finger ``preshape_m`` of the planned grasp of ``object`` (none: nothing)."""
+        ctx, target = self.ctx, self.ctx.target
+        planned = target.runtime_notes.get("planned_grasp") or {}
+        opening = planned.get("preshape_m")
+        if opening is None or planned.get("object") != self.object:
+            return
+        with ctx.profiler.section("simulation"):
+            result = target.set_gripper(opening_m=float(opening))
+        ctx.trace.record("gripper", leaf=self.name, command=self.command, object=self.object,
+                         opening_m=round(float(result.opening_m), 5), effort_n=None, stalled=bool(result.stalled),
+                         closed_on_something=False, force_n=None)
+
     def step(self):
         ctx = self.ctx
         target = ctx.target
+        if self.command == "preshape":
+            self._preshape()
+            return
         sensed = capabilities_of(target).has_sensor("proprioception")
         b = belief(target)
         if sensed:

@@ -189,12 +189,15 @@ def mass_estimate_kg(load_n: float | None) -> float | None:
     return max(0.0, load_n / GRAVITY_M_S2)
 
 
-def plan_grasp(target, *, object: str, width_m: float | None, kind: str = "across") -> None:
+def plan_grasp(target, *, object: str, width_m: float | None, kind: str = "across",
+               preshape_m: float | None = None) -> None:
     """Remember the grasp the robot is about to make (object, the width the fingers will
     close on, m, and ``kind``: ``across`` the object or by its ``rim``, where the width is
-    the container's wall), for the close that follows."""
+    the container's wall; ``preshape_m``: how far open per finger, m, the hand goes down to
+    it, ``None`` fully open), for the pre-shape and the close that follow."""
     target.runtime_notes["planned_grasp"] = {"object": object, "width_m": None if width_m is None else float(width_m),
-                                             "kind": str(kind)}
+                                             "kind": str(kind),
+                                             "preshape_m": None if preshape_m is None else float(preshape_m)}
 
 
 def min_opening_m(width_m: float | None) -> float:

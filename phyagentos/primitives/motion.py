@@ -84,8 +84,11 @@ def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> t
     return vel, acc
 
 
-def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
-    """A collision checker synced to the target's current world.
+def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = None) -> CollisionChecker:
+    """A collision checker synced to the target's current world; with ``opening_m`` (m per
+    finger) its fingers stand that far open instead of as they are
+    (:meth:`~phyagentos.motion.collision.CollisionChecker.set_gripper_opening`: a hand
+    pre-shaped before it approaches).
 
     Whatever the gripper holds is attached at its current offset so transfers are
     checked with the object in hand. Checkers are cached per target and margin:
@@ -106,6 +109,8 @@ def session_checker(ctx, *, margin_m: float = 0.0) -> CollisionChecker:
                                                         if c.model_source is target.model), None))
         cache[margin_m] = checker
     checker.set_world_state(target.data.qpos)
+    if opening_m is not None:
+        checker.set_gripper_opening(opening_m)
     checker.detach()
     # What to attach: the object the robot believes it closed on (proprioception); a
     # hooked object nothing closed on (kitchen hook) falls back to the collision model's
@@ -154,14 +159,15 @@ SWIVEL_SEEDS_RAD: tuple[tuple[float, float, float], ...] = (
 
 
 def clear_ik(ctx, pose: np.ndarray, *, q_seed=None, position_tol_m: float = 1e-3, orientation_tol_rad: float = 1e-2,
-             allow: str | None = None, margin_m: float = PLANNING_MARGIN_M):
+             allow: str | None = None, margin_m: float = PLANNING_MARGIN_M, opening_m: float | None = None):
     """IK for the (4, 4) world tcp ``pose`` whose configuration is clear of the scene.
 
     Seeds, in order: ``q_seed`` (default the current joints), the target's ready
     configuration ``home_qpos``, then (7 joints) that configuration with the elbow swung
     (:data:`SWIVEL_SEEDS_RAD`). The first converged solution clear of collisions (the
     session's checker with clearance ``margin_m``, default the planner's, the held object
-    attached; pairs naming body ``allow`` ignored) is returned; when none is clear, the first converged one. Returns ``(solution,
+    attached; pairs naming body ``allow`` ignored; the fingers ``opening_m`` m open each when
+    given, else as they are) is returned; when none is clear, the first converged one. Returns ``(solution,
     colliding pairs of it, seed)``, seed ``"current"`` (or ``"given"``), ``"home_qpos"`` or
     ``"swivel <k>"``.
 
@@ -172,7 +178,7 @@ def clear_ik(ctx, pose: np.ndarray, *, q_seed=None, position_tol_m: float = 1e-3
     opts = ik_options(target, orientation_tol_rad)
     opts.setdefault("orientation_tol_rad", orientation_tol_rad)
     try:
-        checker = session_checker(ctx, margin_m=margin_m)
+        checker = session_checker(ctx, margin_m=margin_m, opening_m=opening_m)
     except Exception:  # noqa: BLE001 - a target without a collision model: IK only
         checker = None
     home = np.asarray(target.home_qpos, dtype=float)

@@ -23,6 +23,7 @@ from phyagentos.motion.grasp import (
 from phyagentos.motion.rim_grasp import (
     DEFAULT_HANDLED_WALL_M,
     DEFAULT_RIM_WALL_M,
+    RIM_PRESHAPE_CLEARANCE_M,
     handled,
     near_long_axis,
     near_short_axis,
@@ -168,10 +169,11 @@ def _wrap_rad(a: float) -> float:
     return float((a + np.pi) % (2.0 * np.pi) - np.pi)
 
 
-def _unusable(ctx, obj: str, plan) -> Blocked | None:
+def _unusable(ctx, obj: str, plan, *, opening_m: float | None = None) -> Blocked | None:
     """Why the arm cannot take grasp ``plan`` of object ``obj`` (:func:`reach_blocked` of its
-    pre-grasp, then its grasp); ``None`` when it can."""
-    return reach_blocked(ctx, obj, ("pre-grasp", plan.pregrasp), ("grasp", plan.grasp))
+    pre-grasp, then its grasp; the fingers ``opening_m`` m open each at the grasp when given,
+    else as they are); ``None`` when it can."""
+    return reach_blocked(ctx, obj, ("pre-grasp", plan.pregrasp), ("grasp", plan.grasp), opening_m=opening_m)
 
 
 class Blocked(str):
@@ -197,17 +199,19 @@ def _object_body(ctx, obj: str) -> str | None:
         return None
 
 
-def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, np.ndarray]) -> Blocked | None:
+def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, np.ndarray], *,
+                  opening_m: float | None = None) -> Blocked | None:
     """Why the arm cannot reach ``above`` then ``at`` (``(label, (4, 4) world tcp pose)``):
     no IK solution clear of collisions (:func:`~.motion.clear_ik`, SolveIK's seeds) for the
     pose above (the planner's goal: its margin), or for the pose at the object from there
     (reached by a straight move, touching object ``obj`` by design: only penetration of
-    anything else counts). ``None`` when both are reachable and clear, else a :class:`Blocked`."""
+    anything else counts; the fingers ``opening_m`` m open each when given: a hand pre-shaped
+    after the pose above). ``None`` when both are reachable and clear, else a :class:`Blocked`."""
     own = _object_body(ctx, obj)
     q = None
-    for (label, pose), allow, margin in ((above, None, PLANNING_MARGIN_M), (at, own, 0.0)):
+    for (label, pose), allow, margin, opening in ((above, None, PLANNING_MARGIN_M, None), (at, own, 0.0, opening_m)):
         try:
-            sol, pairs, _ = clear_ik(ctx, pose, q_seed=q, allow=allow, margin_m=margin)
+            sol, pairs, _ = clear_ik(ctx, pose, q_seed=q, allow=allow, margin_m=margin, opening_m=opening)
         except IKError as exc:
             return Blocked(f"{label}: {str(exc)[:100]}", stage=label, collides=False)
         if pairs:
@@ -295,7 +299,8 @@ class ComputeGrasp(Primitive):
         else:
             plan, extra = self._across_plan(T_obj, half, shape if shape in ("box", "cylinder", "sphere") else "box",
                                             max_width)
-        plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m, kind=extra.get("grasp_kind", "across"))
+        plan_grasp(self.ctx.target, object=self.object, width_m=plan.width_m, kind=extra.get("grasp_kind", "across"),
+                   preshape_m=extra.get("preshape_m"))
         self.set(self.grasp_key, plan.grasp)
         self.set(self.pregrasp_key, plan.pregrasp)
         self.set(self.look_closer_key, bool(extra.get("partly_seen")))
@@ -458,30 +463,41 @@ class ComputeGrasp(Primitive):
         else:
             heights = [self.approach_height_m, *(h for h in LOWER_APPROACH_M if h < self.approach_height_m)]
         usable, why = [], []
-        for height in heights:
-            plans = candidates(height)
-            if previous is not None:
-                plans = tuple(sorted(plans, key=lambda pl: float(np.linalg.norm(pl.pregrasp[:3, 3] - previous[:3, 3]))))
-            out_of_reach = False
-            for i, plan in enumerate(plans):
-                bad = _unusable(self.ctx, self.object, plan)
-                if bad is not None:
-                    # one rim point whose grasp alone is reachable is enough to try lower pre-grasps
-                    out_of_reach = out_of_reach or (bad.stage == "pre-grasp" and not bad.collides
-                                                    and self._reaches(plan.grasp))
-                    why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad) from {height:.2f} m: {bad[:160]}")
-                    continue
-                usable.append((i, plan))
-                if len(usable) > want:
+        # the hand fully open; where only fingers in the way refused every rim point (a bowl in
+        # a drawer whose walls stand within the open hand's reach), pre-shaped to the wall
+        preshape = min(0.5 * max_width, 0.5 * wall + RIM_PRESHAPE_CLEARANCE_M)
+        for opening in (None, preshape):
+            collided = False
+            for height in heights:
+                plans = candidates(height)
+                if previous is not None:
+                    plans = tuple(sorted(plans, key=lambda pl: float(np.linalg.norm(pl.pregrasp[:3, 3]
+                                                                                    - previous[:3, 3]))))
+                out_of_reach = False
+                for i, plan in enumerate(plans):
+                    bad = _unusable(self.ctx, self.object, plan, opening_m=opening)
+                    if bad is not None:
+                        # one rim point whose grasp alone is reachable is enough to try lower pre-grasps
+                        out_of_reach = out_of_reach or (bad.stage == "pre-grasp" and not bad.collides
+                                                        and self._reaches(plan.grasp))
+                        collided = collided or (bad.stage == "grasp" and bad.collides)
+                        hand = f" hand {opening * 100:.1f} cm open" if opening is not None else ""
+                        why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad) from {height:.2f} m{hand}: {bad[:160]}")
+                        continue
+                    usable.append((i, plan))
+                    if len(usable) > want:
+                        break
+                if usable or not out_of_reach:
                     break
-            if usable or not out_of_reach:
+            if usable or not collided:
                 break
         if not usable:
             raise IKError(f"no rim grasp of {self.object!r} is reachable: " + "; ".join(why))
         i, plan = usable[want % len(usable)]
         low = {"approach_height_m": round(height, 3)} if abs(height - self.approach_height_m) > 1e-6 else {}
+        shaped = {"preshape_m": round(opening, 4)} if opening is not None else {}
         return plan, {"grasp_kind": "rim", "rim_point": i, "wall_m": round(wall, 4), "rim_points_refused": len(why),
-                      **low}
+                      **low, **shaped}
 
 
 def place_yaws(current_rad: float) -> list[float]:

@@ -10,6 +10,8 @@ declared looks can separate them. The truth is read by the test only.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -204,3 +206,115 @@ def test_a_mug_with_its_handle_set_on_a_plate_splits_from_the_plate_and_rests_on
     assert abs(ents["mug_1"]["position"][2] - body.centre[2]) < 0.012, ents["mug_1"]["position"]
     assert any(r["subject"] == "mug_1" and r["relation"] == "on" and r["object"] == "plate_1"
                for r in snap["relations"]), snap["relations"]
+
+
+def _spherical(centre_z: float, r: float, z_lo: float, z_hi: float, step: float = 0.004):
+    """Points (world m) of a sphere of radius ``r`` centred ``centre_z`` above the plane z = 0,
+    from ``z_lo`` up to ``z_hi``, grey."""
+    from phyagentos.perception.cloud import Cloud
+
+    pts = []
+    for z in np.arange(z_lo, z_hi + 1e-9, step):
+        ring = math.sqrt(max(r * r - (z - centre_z) ** 2, 0.0))
+        n = max(int(2 * math.pi * ring / step), 6)
+        pts += [(ring * math.cos(2 * math.pi * k / n), ring * math.sin(2 * math.pi * k / n), z) for k in range(n)]
+    p = np.array(pts, dtype=np.float32)
+    n = p.shape[0]
+    return Cloud(p, np.full((n, 3), 90, np.uint8), np.full(n, 0.8, np.float32), np.zeros(n, np.int16))
+
+
+def test_a_round_part_resting_on_something_is_a_sphere_only_if_as_tall_as_it_is_wide():
+    """A bowl's outer wall, raised 4.5 cm on a ramekin, is a spherical cap 5 cm tall and 10 cm
+    across: measured from the table it is as tall as a 10 cm ball and was fitted as one (a
+    bowl 10 cm across, not its 11 cm rim); measured from where it rests (a step's cut) it is a
+    cap. A ball resting on a plate 2.5 cm up stays a ball."""
+    from phyagentos.perception.cloud import Plane
+    from phyagentos.perception.detect import fit_cluster
+
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 1000, True)
+    focal = np.array([400.0])
+    cap = _spherical(0.095, 0.05, 0.045, 0.095)  # a bowl: the lower half of the sphere, up to its rim
+    h = cap.points[:, 2].astype(np.float64)
+    assert fit_cluster(cap, h, plane, CFG, focal).shape == "sphere"  # from the table: as tall as a ball
+    det = fit_cluster(cap, h, plane, CFG, focal, rests_at_m=0.045)
+    assert det is not None and det.shape != "sphere", det.shape
+    ball = _spherical(0.065, 0.04, 0.065 - 0.7 * 0.04, 0.065 + 0.04)
+    det = fit_cluster(ball, ball.points[:, 2].astype(np.float64), plane, CFG, focal, rests_at_m=0.025)
+    assert det is not None and det.shape == "sphere", det.shape
+
+
+def _det(xy, half, bottom=0.0, *, covered=False, colour=(0.3, 0.3, 0.3), shape="cylinder"):
+    from phyagentos.perception.colour import srgb_to_lab
+    from phyagentos.perception.detect import Detection
+
+    half = np.asarray(half, float)
+    pos = np.array([xy[0], xy[1], bottom + half[2]])
+    rgb = np.asarray(colour, float)
+    return Detection(pos, 0.0, half, shape, rgb, srgb_to_lab(np.array([rgb]))[0], 500, 2, 0.002, np.pi, 1.0, bottom,
+                     low_m=bottom, covered=covered)
+
+
+def test_the_upper_part_of_a_step_rests_at_the_cut_and_only_what_it_overhangs_is_covered():
+    """A bowl 11 cm across cut at 4.3 cm over a 9 cm ramekin's crescent: the bowl rests at the
+    cut, the ramekin is covered. A bottle's 1.8 cm body cut over its own 4 cm base covers nothing
+    (narrower than what shows below it); nor does an upper part beside a lower one."""
+    from phyagentos.perception.cloud import Plane
+    from phyagentos.perception.split import _rested
+
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 1000, True)
+    bowl, ramekin = _det((0.0, 0.0), (0.056, 0.056, 0.047)), _det((0.0, -0.015), (0.046, 0.031, 0.0215))
+    rested = _rested([bowl, ramekin], [True, False], 0.043, plane)
+    assert rested[0].bottom_m == pytest.approx(0.043) and rested[0].top_m == pytest.approx(bowl.top_m)
+    assert rested[0].position[2] == pytest.approx(0.5 * (0.043 + bowl.top_m))
+    assert rested[1].covered and not rested[0].covered
+    neck, base = _det((0.0, 0.0), (0.009, 0.009, 0.079)), _det((0.0, 0.0), (0.021, 0.009, 0.0095))
+    assert not _rested([neck, base], [True, False], 0.019, plane)[1].covered
+    far = _det((0.2, 0.0), (0.056, 0.056, 0.047))
+    assert not _rested([far, ramekin], [True, False], 0.043, plane)[1].covered
+
+
+def test_a_covered_part_counts_its_footprint_as_a_lower_bound_down_to_half_its_look():
+    from phyagentos.perception.association import COVERED_MIN_SHOWN, cost_matrix
+
+    ramekin = ObjectDescriptor("ramekin_1", shape="cylinder", colour_rgb=(0.3, 0.3, 0.3), size_m=(0.09, 0.09, 0.043))
+    crescent = dict(xy=(0.0, 0.0), half=(0.046, 0.031, 0.0215))
+    seen = cost_matrix([_det(**crescent, shape="box")], [ramekin], CFG)[0, 0]
+    covered = cost_matrix([_det(**crescent, shape="box", covered=True)], [ramekin], CFG)[0, 0]
+    # neither the short side nor the shape count: only the 2 mm its long side shows beyond the look's
+    assert covered < seen and covered == pytest.approx(0.002 / 3.0 / CFG.association.size_scale_m, abs=1e-6)
+    # less than half of a side showing costs what is missing of that half; the height counts as ever
+    sliver = cost_matrix([_det((0.0, 0.0), (0.046, 0.015, 0.0215), covered=True)], [ramekin], CFG)[0, 0]
+    missing = (COVERED_MIN_SHOWN * 0.09 - 0.03 + 0.002) / 3.0 / CFG.association.size_scale_m
+    assert sliver == pytest.approx(missing, abs=1e-6)
+    short = cost_matrix([_det((0.0, 0.0), (0.046, 0.031, 0.01), covered=True)], [ramekin], CFG)[0, 0]
+    assert short == pytest.approx((0.043 - 0.02 + 0.002) / 3.0 / CFG.association.size_scale_m, abs=1e-6)
+
+
+def test_one_object_cut_in_two_that_match_one_look_is_no_stack():
+    """A bowl's rim over its narrower body matches the bowl's look twice: no split of it."""
+    from phyagentos.perception.association import cost_matrix
+    from phyagentos.perception.split import _covered_alike
+
+    bowls = [ObjectDescriptor(f"bowl_{k}", shape="cylinder", colour_rgb=(0.3, 0.3, 0.3), size_m=(0.112, 0.112, 0.05))
+             for k in (1, 2)]
+    box = ObjectDescriptor("box_1", shape="box", colour_rgb=(0.45, 0.27, 0.12), size_m=(0.085, 0.064, 0.021))
+    rim, body = _det((0.0, 0.0), (0.056, 0.056, 0.016), 0.034), _det((0.0, 0.0), (0.04, 0.04, 0.017), covered=True)
+    looks = [*bowls, box]
+    assert _covered_alike([rim, body], cost_matrix([rim, body], looks, CFG), looks)
+    under = _det((0.0, 0.0), (0.042, 0.031, 0.0105), covered=True, colour=(0.45, 0.27, 0.12), shape="box")
+    assert not _covered_alike([rim, under], cost_matrix([rim, under], looks, CFG), looks)
+
+
+def test_cuts_of_one_step_that_differ_only_below_it_cut_alike():
+    """What shows of a covered part moves and breaks up as the cut above it moves; the parts
+    seen whole decide whether two partitions cut alike."""
+    from phyagentos.perception.split import _alike
+
+    bowl = _det((0.0, 0.0), (0.056, 0.056, 0.02), 0.03)
+    one = [bowl, _det((0.005, -0.01), (0.03, 0.03, 0.015), covered=True)]
+    two = [bowl, _det((0.04, 0.0), (0.017, 0.017, 0.005), covered=True), _det((-0.04, 0.0), (0.017, 0.017, 0.005),
+                                                                              covered=True)]
+    assert _alike(one, two) and _alike(two, one)
+    moved = [_det((0.05, 0.0), (0.056, 0.056, 0.02), 0.03), one[1]]
+    assert not _alike(one, moved)  # the part seen whole is elsewhere
+    assert not _alike(one, [bowl, _det((0.005, -0.01), (0.03, 0.03, 0.015))])  # nothing covered in one of them

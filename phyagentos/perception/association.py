@@ -7,11 +7,14 @@ Cost of detection i for descriptor j (only the attributes the descriptor declare
   L* most), divided by ``colour_scale_lab``;
 * size: mean absolute error of the sorted full dimensions (or of the largest one) / ``size_scale_m``;
   with a declared ``size_range_m``, only the part outside the range counts; for a detection
-  cut by the image border (``truncated``, :mod:`.truncation`) only the part above it;
+  cut by the image border (``truncated``, :mod:`.truncation`) only the part above it; for the
+  lower part of a stack covered by what rests on it (``covered``, :mod:`.split`), its
+  footprint's sides only below :data:`COVERED_MIN_SHOWN` of the look's and above it, its
+  height as any;
 * shape: ``shape_cost`` when the classes differ; with declared ``shapes`` (the fraction of a
   look's sightings per shape), ``shape_cost`` times ``1 -`` the detection's shape's fraction
   over the most frequent one's (:meth:`~.descriptors.ObjectDescriptor.shape_mismatch`);
-  nothing for a truncated detection (its shape is the part's);
+  nothing for a truncated or covered detection (its shape is the part's);
 * track: distance to the descriptor's current track / ``position_scale_m``, capped at 1
   (tie-breaker between otherwise identical objects; objects do move between observations).
 
@@ -42,7 +45,7 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection
 
-__all__ = ["FORBIDDEN_COST", "Association", "Landmark", "ReferenceResolution", "cost_matrix", "track_costs",
+__all__ = ["FORBIDDEN_COST", "COVERED_MIN_SHOWN", "Association", "Landmark", "ReferenceResolution", "cost_matrix", "track_costs",
            "associate", "match_confidence", "resolve_reference", "forbid_except"]
 
 log = logging.getLogger(__name__)
@@ -64,8 +67,14 @@ def _size_error(det: Detection, desc: ObjectDescriptor) -> float | None:
     measured = np.array([max(full[0], full[1]), min(full[0], full[1]), full[2]])
     if desc.size_vector() is None:
         err = float(measured.max()) - float(desc.size_m)
-        return max(0.0, err) if det.truncated else abs(err)
-    return desc.size_error(measured, at_least=det.truncated)
+        return max(0.0, err) if det.truncated or det.covered else abs(err)
+    if det.truncated:  # cut by the border: every dimension a lower bound
+        return desc.size_error(measured, at_least=True)
+    if det.covered:  # its footprint a lower bound, at least COVERED_MIN_SHOWN of each side showing; its height not
+        err = desc.size_error(measured, at_least=(True, True, False))
+        want = desc.size_vector()
+        return err + float(np.sum(np.maximum(0.0, COVERED_MIN_SHOWN * want[:2] - measured[:2]))) / 3.0
+    return desc.size_error(measured)
 
 
 def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDescriptor],
@@ -82,7 +91,7 @@ def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDes
             err = _size_error(det, desc)
             if err is not None:
                 c += err / ac.size_scale_m
-            mismatch = None if det.truncated else desc.shape_mismatch(det.shape)
+            mismatch = None if det.truncated or det.covered else desc.shape_mismatch(det.shape)
             if mismatch:
                 c += ac.shape_cost * mismatch
             C[i, j] = c
@@ -104,6 +113,12 @@ def track_costs(detections: Sequence[Detection], n_descriptors: int, config: Per
     return T
 
 
+#: The lower part of a stack (``Detection.covered``) shows at least this fraction of each side
+#: of its look's footprint: what rests on it hides its top and its far side, not its near face
+#: (a bowl on a ramekin leaves a crescent 9 x 6 cm of the ramekin's 9 cm; a cookie box under a
+#: bowl shows 8.3 x 6.2 cm of its 8.5 x 6.4). Its sides count only below this fraction of the
+#: look's and above the look's.
+COVERED_MIN_SHOWN = 0.5
 _FORBIDDEN = 1e6
 #: A cost above any gate: the pair is never associated.
 FORBIDDEN_COST = _FORBIDDEN

@@ -248,23 +248,23 @@ class ObjectDescriptor:
             return None
         return 0.0 if shape == self.shape else 1.0
 
-    def size_error(self, measured: np.ndarray, *, at_least: bool = False) -> float | None:
+    def size_error(self, measured: np.ndarray, *, at_least: bool | Sequence[bool] = False) -> float | None:
         """Mean absolute error (m) of ``measured`` (3,) full size sorted (long, short,
         height) against the declared size: outside ``size_range_m`` when given (0 within it),
         else against ``size_m``; None without a 3-number size. ``at_least``: ``measured``
         is a lower bound (an object seen in part, cut by the image border): only a measured
-        size above the declared one counts."""
+        size above the declared one counts; a (3,) mask: so for those dimensions only (the
+        lower part of a stack, covered by what rests on it: its footprint, not its height)."""
         want = self.size_vector()
         if want is None:
             return None
         m = np.asarray(measured, float)
+        lower = np.broadcast_to(np.asarray(at_least, dtype=bool), m.shape)
         if self.size_range_m is not None:
             lo, hi = (np.asarray(v, float) for v in self.size_range_m)
-            under = np.zeros_like(m) if at_least else lo - m
+            under = np.where(lower, 0.0, lo - m)
             return float(np.mean(np.maximum(0.0, np.maximum(under, m - hi))))
-        if at_least:
-            return float(np.mean(np.maximum(0.0, m - want)))
-        return float(np.mean(np.abs(m - want)))
+        return float(np.mean(np.where(lower, np.maximum(0.0, m - want), np.abs(m - want))))
 
     def looks_like(self, other: "ObjectDescriptor") -> bool:
         """Same declared look (class, shape, colour, size): association cannot tell the two apart."""

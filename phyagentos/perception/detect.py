@@ -37,6 +37,9 @@ log = logging.getLogger(__name__)
 
 #: ``shape.colour_from: vivid`` keeps this most chromatic fraction of a segment's points.
 _VIVID_FRACTION = 1.0 / 3.0
+#: A detection whose lowest points (2nd percentile) stand this far above ``object_min_height_m``
+#: may rest on another (:func:`stack`), m.
+RAISED_LOW_M = 0.008
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,11 @@ class Detection:
             (:func:`phyagentos.perception.truncation.cut_direction`), else None: the object
             may go on beyond what was seen, so its size is a lower bound, its shape that of
             the part seen and its centre short of the object's on that side.
+        covered: the lower part of a stack split at a height step
+            (:func:`phyagentos.perception.split.split_cluster`) with a part resting on it:
+            its top and its far side are hidden under that part, so its footprint is a lower
+            bound and its shape that of what shows; never what a spatial reference picks out
+            (what stands on it does).
     """
 
     position: np.ndarray
@@ -78,6 +86,7 @@ class Detection:
     bottom_m: float
     low_m: float = 0.0
     cut_direction: np.ndarray | None = None
+    covered: bool = False
 
     @property
     def truncated(self) -> bool:
@@ -196,11 +205,16 @@ def _rect(xy: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
 
 
 def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
-                focal_px: np.ndarray) -> Detection | None:
+                focal_px: np.ndarray, *, rests_at_m: float | None = None) -> Detection | None:
     """Fit one cluster (its points ``cloud`` and their ``heights`` above ``plane``).
 
     ``focal_px``: (n_cameras,) focal lengths (px / stride) used for the lateral resolution
-    term of the uncertainty. Returns None when the cluster has no usable top face.
+    term of the uncertainty. ``rests_at_m``: the height (m above ``plane``) it is known to rest
+    at (the upper part of a height step, at the cut: :func:`phyagentos.perception.split.split_cluster`),
+    else None: the sphere test takes its height from there (a bowl's wall raised 4.5 cm on a
+    ramekin is a cap 5 cm tall, not a 10 cm ball); the fit itself stands on the plane, as
+    every fit, until :func:`stack` or the split raises it. Returns None when the cluster has
+    no usable top face.
     """
     sc, fc = config.shape, config.fusion
     h = heights
@@ -229,7 +243,8 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
         # leave a larger residual (measured on 223 rendered objects: residual / limit is
         # 0.32-1.0 for spheres, >= 0.96 for cylinders, >= 1.3 for boxes; docs/perception.md)
         limit = sc.sphere_residual * r + sc.sphere_noise_factor * float(config.depth_sigma_m(range_m))
-        diam_ok = abs(height - 2.0 * r) / (2.0 * r) < sc.sphere_height_tolerance
+        own = height if rests_at_m is None else max(top - float(rests_at_m), 1e-3)
+        diam_ok = abs(own - 2.0 * r) / (2.0 * r) < sc.sphere_height_tolerance
         if rms < limit and diam_ok:
             shape, sphere_c = "sphere", c
     if shape == "sphere":
@@ -312,7 +327,7 @@ def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list
     order = sorted(range(len(out)), key=lambda i: out[i].top_m)
     for i in order:
         a = out[i]
-        if a.low_m < config.table.object_min_height_m + 0.008:
+        if a.low_m < config.table.object_min_height_m + RAISED_LOW_M:
             continue
         for j in order:
             b = out[j]

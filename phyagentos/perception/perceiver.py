@@ -1016,7 +1016,7 @@ class Perceiver:
             # a look-alike already picked by its own reference is still a candidate here (the
             # left plate is one of the two plates "the right plate" is told from), never the pick
             cands = [i for i in range(len(dets)) if C[i, j] <= cfg.association.gate_cost
-                     and (i not in taken or taken[i] in alike)]
+                     and (i not in taken or taken[i] in alike) and not dets[i].covered]
             res = resolve_reference(desc, cands, dets, landmarks, cfg, look_alikes=len(alike),
                                     table_centre_xy=self.table_centre_xy, viewer_right_xy=self.viewer_right_xy)
             if res.detection is not None and res.detection in chosen:

@@ -29,22 +29,30 @@ boxes face to face show none, and nothing tells them apart.
 
 Each part is cut into its connected pieces on the same grid (pieces under
 ``clustering.min_points`` are dropped; a partition dropping more than :data:`MAX_DROPPED` of
-the points is rejected), fitted as any segment (:func:`~.detect.fit_cluster`), stacked
-(:func:`~.detect.stack`: the upper part of a step rests on the lower) and scored against
-the declared looks (:func:`~.association.cost_matrix`). A partition is *admissible* when it
+the points is rejected), fitted as any segment (:func:`~.detect.fit_cluster`; a step's
+upper part then raised to rest at the cut), stacked (:func:`~.detect.stack`) and scored against the
+declared looks (:func:`~.association.cost_matrix`). A step's lower part under an upper part
+at least as wide as what shows of it is *covered* (``Detection.covered``: a ramekin under a
+bowl shows a crescent; its footprint counts as a lower bound, down to
+:data:`~.association.COVERED_MIN_SHOWN` of its look's). A partition is *admissible* when it
 has at least two parts, every part matches some declared look at a cost of at most
-``clustering.split_max_cost`` and no part is itself oversized (as fitted: a mug's handle
-lengthens its points' rectangle by a fifth, not the fitted body the looks were measured as). The admissible partition with
-the smallest summed cost is taken, unless another admissible partition that cuts the segment
-differently (another number of parts, or a part whose centre lies more than
-:data:`SAME_PART_M` from every part of the best) scores within
+``clustering.split_max_cost`` (a covered part at :data:`COVERED_COST_FRACTION` of it), no
+covered part best matches the look of the part resting on it (one object cut in two: a
+bowl's rim over its narrower body) and no part is itself oversized (as fitted: a mug's handle
+lengthens its points' rectangle by a fifth, not the fitted body the looks were measured as).
+The admissible partition with the smallest summed cost is taken, unless another admissible
+partition that cuts the segment differently (another number of parts seen whole, or one of
+them whose centre lies more than :data:`SAME_PART_M` from every such part of the best; what
+shows of covered parts moves and breaks up as the cut moves and does not count) scores within
 ``association.ambiguity_margin`` of it: then nothing is split and the segment stays one
-(unknown) detection -- an ambiguous split is never guessed.
+(unknown) detection -- an ambiguous split is never guessed. A covered part is never what a
+spatial reference picks out (what stands on it is).
 """
 
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from typing import Sequence
 
 import cv2
@@ -58,6 +66,7 @@ from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection, fit_cluster, stack
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
+           "COVERED_COST_FRACTION",
            "extent", "footprint_cut", "oversized", "split_cluster", "split_clusters"]
 
 log = logging.getLogger(__name__)
@@ -72,6 +81,12 @@ MAX_DROPPED = 0.15
 SAME_PART_M = 0.02
 #: The colour partition: its two k-means centres at least this far apart (CIELAB, L* halved).
 MIN_COLOUR_SPLIT_LAB = 20.0
+#: A covered part (the lower part of a step, under what rests on it: ``Detection.covered``) is
+#: admissible at this fraction of ``clustering.split_max_cost``: its footprint counts only as a
+#: lower bound and its shape not at all, so its colour and height must agree more closely (a
+#: bowl's ramekin or cookie box under it: 0.2-0.5; a mug's own foot cut under its body,
+#: passing for a pudding box: 0.96-1.03 of the 1.5).
+COVERED_COST_FRACTION = 0.5
 #: The colour partition: labels smoothed over this many nearest neighbours.
 COLOUR_NEIGHBOURS = 9
 
@@ -279,16 +294,31 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
         if any(oversized(np.array([e[0], e[1], 0.0]), sized, config) for e in exts):
             continue  # a footprint larger than every declared object's (a fixture's): no need to fit
         parts, idxs = [], []
-        for idx in idxs_all:
-            det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
+        # a step's upper part rests at the cut: its sphere test from there, then raised to it (its
+        # lowest points need not show over what shows of the part under it: a bowl sitting in a
+        # ramekin's mouth, the ramekin's far side hidden under it)
+        upper = [kind == "step" and float(heights[idx].min()) > z for idx in idxs_all]
+        for idx, above in zip(idxs_all, upper):
+            det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px,
+                              rests_at_m=z if above else None)
             if det is None:
                 break
             parts.append(det)
             idxs.append(idx)
         else:
+            if kind == "step":
+                parts = _rested(parts, upper, z, plane)
             stacked = stack(parts, plane, config)
-            costs = cost_matrix(stacked, sized, config).min(axis=1)
-            if float(costs.max()) > cc.split_max_cost:
+            full = cost_matrix(stacked, sized, config)
+            costs = full.min(axis=1)
+            log.debug("split: %s at %.3f m: %d parts, costs %s, sizes %s, shapes %s", kind, z, len(parts),
+                      np.round(costs, 2).tolist(), [np.round(2 * d.half_extents, 3).tolist() for d in stacked],
+                      [d.shape for d in stacked])
+            # a covered part is scored on less (its footprint a lower bound, no shape): what is
+            # scored must agree twice as closely
+            limits = np.array([COVERED_COST_FRACTION * cc.split_max_cost if d.covered else cc.split_max_cost
+                               for d in stacked])
+            if bool(np.any(costs > limits)) or _covered_alike(stacked, full, sized):
                 continue
             # each part as fitted, the way the declared looks were measured (a mug's handle lengthens
             # its points' rectangle, not its fitted body), resting on another at its own height
@@ -307,18 +337,62 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
         if other[0] - best[0] >= margin:
             break
         if not _alike(best[3], other[3]):
-            log.debug("split: ambiguous: %s at %.3f m (cost %.2f) and %s at %.3f m (cost %.2f) cut differently",
-                      best[1], best[2], best[0], other[1], other[2], other[0])
+            log.debug("split: ambiguous: %s at %.3f m (cost %.2f) and %s at %.3f m (cost %.2f) cut differently: %s; %s",
+                      best[1], best[2], best[0], other[1], other[2], other[0],
+                      [(np.round(p.position[:2], 3).tolist(), p.covered) for p in best[3]],
+                      [(np.round(p.position[:2], 3).tolist(), p.covered) for p in other[3]])
             return None
     log.debug("split: %s at %.3f m into %d parts, costs %s", best[1], best[2], len(best[3]),
               [round(float(c), 2) for c in best[5]])
     return list(zip(best[3], best[4]))
 
 
+def _rested(parts: list[Detection], upper: list[bool], z: float, plane: Plane) -> list[Detection]:
+    """The parts of a height-step partition at ``z`` (m above ``plane``) as the step has them:
+    each part above the cut (``upper``) rests at the cut, its bottom raised there; each part
+    below it that lies under an upper part at least as wide as what shows of it -- the upper
+    part's centre over its footprint, its half extent at least the lower part's -- is
+    ``covered``: its top and far side hidden, its footprint a lower bound (a ramekin under a
+    bowl shows a crescent). A bottle's neck over its own base covers nothing; a plate shows its
+    rim all round a mug on it."""
+    out = list(parts)
+    for k, d in enumerate(parts):
+        if upper[k]:
+            half = d.half_extents.copy()
+            half[2] = max(0.5 * (d.top_m - z), 1e-3)
+            pos = d.position.copy()
+            pos[2] = plane.z_at(pos[:2]) + z + half[2]
+            out[k] = replace(d, bottom_m=z, half_extents=half, position=pos)
+            continue
+        reach = float(max(d.half_extents[:2]))
+        if any(upper[j] and float(max(parts[j].half_extents[:2])) >= reach
+               and float(np.linalg.norm(parts[j].position[:2] - d.position[:2])) <= reach for j in range(len(parts))):
+            out[k] = replace(d, covered=True)
+    return out
+
+
+def _covered_alike(parts: Sequence[Detection], costs: np.ndarray, descriptors: Sequence[ObjectDescriptor]) -> bool:
+    """Whether a covered part best matches the same look as a part of the step resting on it
+    (``costs``: the parts' (n_parts, n_descriptors) association costs): one object cut in two
+    (a bowl's rim over its narrower body, a burner's ring under a bowl passing for its twin).
+    A look-alike nested under its twin shows nothing of its own to tell the two apart."""
+    best = [descriptors[int(np.argmin(row))] for row in costs]
+    upper = [k for k, d in enumerate(parts) if not d.covered and d.bottom_m > 0.0]
+    return any(best[k].looks_like(best[u]) for k, d in enumerate(parts) if d.covered for u in upper)
+
+
 def _alike(a: Sequence[Detection], b: Sequence[Detection]) -> bool:
-    if len(a) != len(b):
+    """Two partitions cut alike: the parts seen whole as many in each, each within
+    :data:`SAME_PART_M` of one of the other, and covered parts in both or in neither. What lies
+    under a part resting on it shows only in pieces, which grow, move and break up as the cut
+    above them moves: their count and centres do not tell two cuts apart (the cookie box
+    under a bowl: one piece of it 5 cm across cut at 3 cm, the 3.5 cm end that shows past the
+    bowl cut at 1 cm)."""
+    whole_a, whole_b = [p for p in a if not p.covered], [q for q in b if not q.covered]
+    if len(whole_a) != len(whole_b) or any(p.covered for p in a) != any(q.covered for q in b):
         return False
-    return all(min(float(np.linalg.norm(p.position[:2] - q.position[:2])) for q in b) <= SAME_PART_M for p in a)
+    return all(any(float(np.linalg.norm(p.position[:2] - q.position[:2])) <= SAME_PART_M for q in whole_b)
+               for p in whole_a)
 
 
 def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Cloud, heights: np.ndarray, plane: Plane,

@@ -113,10 +113,14 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "offset": ("[dx, dy, dz] | null", "m", "world-frame tcp displacement, orientation kept"),
         "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
         "check_collisions": ("bool", "", "re-check the timed motion against the scene"),
+        "at_least_m": ("float | null", "m", "with `offset`: where the line leaves the arm's reach, end as far "
+                                           "along it as reached when that is at least this far (null: all or fail)"),
     },
     Gripper: {
-        "command": ("open | close", "", "what to do"),
-        "object": ("str | null", "", "when closing: the object that must end up between the fingers"),
+        "command": ("open | close | preshape", "", "what to do (preshape: open only as far as the planned "
+                                                  "grasp of `object` asks; nothing when it asks fully open)"),
+        "object": ("str | null", "", "when closing: the object that must end up between the fingers; when "
+                                     "pre-shaping: the object whose planned grasp sets the opening"),
         "force_n": ("float | null", "N", "when closing: grip force per finger (null: close on position)"),
     },
     CheckHolding: {

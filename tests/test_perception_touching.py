@@ -306,8 +306,8 @@ def test_one_object_cut_in_two_that_match_one_look_is_no_stack():
 
 
 def test_cuts_of_one_step_that_differ_only_below_it_cut_alike():
-    """What shows of a covered part moves and breaks up as the cut above it moves; the parts
-    seen whole decide whether two partitions cut alike."""
+    """What shows below a step moves, breaks up and is covered or not as the cut above it
+    moves; the parts resting on others decide whether two cuts of a step cut alike."""
     from phyagentos.perception.split import _alike
 
     bowl = _det((0.0, 0.0), (0.056, 0.056, 0.02), 0.03)
@@ -317,4 +317,8 @@ def test_cuts_of_one_step_that_differ_only_below_it_cut_alike():
     assert _alike(one, two) and _alike(two, one)
     moved = [_det((0.05, 0.0), (0.056, 0.056, 0.02), 0.03), one[1]]
     assert not _alike(one, moved)  # the part seen whole is elsewhere
-    assert not _alike(one, [bowl, _det((0.005, -0.01), (0.03, 0.03, 0.015))])  # nothing covered in one of them
+    # the plate under it seen whole at one cut, as its near crescent at another
+    assert _alike(one, [bowl, _det((0.0, 0.0), (0.069, 0.069, 0.009))])
+    below = _det((0.2, 0.0), (0.03, 0.03, 0.015))
+    assert not _alike(one, [bowl, below])  # what is below is elsewhere
+    assert not _alike(one, [_det((0.0, 0.0), (0.056, 0.056, 0.02)), one[1]])  # no step in the other

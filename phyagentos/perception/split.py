@@ -29,10 +29,12 @@ boxes face to face show none, and nothing tells them apart.
 
 Each part is cut into its connected pieces on the same grid (pieces under
 ``clustering.min_points`` are dropped; a partition dropping more than :data:`MAX_DROPPED` of
-the points is rejected), fitted as any segment (:func:`~.detect.fit_cluster`; a step's
-upper part then raised to rest at the cut), stacked (:func:`~.detect.stack`) and scored against the
-declared looks (:func:`~.association.cost_matrix`). A step's lower part under an upper part
-at least as wide as what shows of it is *covered* (``Detection.covered``: a ramekin under a
+the points is rejected), fitted as any segment (:func:`~.detect.fit_cluster`), stacked
+(:func:`~.detect.stack`) and scored against the declared looks
+(:func:`~.association.cost_matrix`). Only when no partition is admissible so are the
+partitions scored again *as stacks*: a step's upper part rests at the cut (its sphere test
+from there, then raised to it) and a lower part under an upper part at least as wide as
+what shows of it is *covered* (``Detection.covered``: a ramekin under a
 bowl shows a crescent; its footprint counts as a lower bound, down to
 :data:`~.association.COVERED_MIN_SHOWN` of its look's). A partition is *admissible* when it
 has at least two parts, every part matches some declared look at a cost of at most
@@ -41,9 +43,10 @@ covered part best matches the look of the part resting on it (one object cut in 
 bowl's rim over its narrower body) and no part is itself oversized (as fitted: a mug's handle
 lengthens its points' rectangle by a fifth, not the fitted body the looks were measured as).
 The admissible partition with the smallest summed cost is taken, unless another admissible
-partition that cuts the segment differently (another number of parts seen whole, or one of
-them whose centre lies more than :data:`SAME_PART_M` from every such part of the best; what
-shows of covered parts moves and breaks up as the cut moves and does not count) scores within
+partition that cuts the segment differently (another number of parts, or one whose centre
+lies more than :data:`SAME_PART_M` from every part of the best; for a step, the parts resting
+on others so and those below only overlapping: what shows below a step moves and breaks up as
+the cut moves) scores within
 ``association.ambiguity_margin`` of it: then nothing is split and the segment stays one
 (unknown) detection -- an ambiguous split is never guessed. A covered part is never what a
 spatial reference picks out (what stands on it is).
@@ -284,49 +287,12 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
         return None
     if not oversized(extent(cloud.points, heights), sized, config):
         return None
-    scored = []
-    for kind, z, labels in _partitions(cloud, heights, config):
-        n_parts = int(labels.max()) + 1
-        if n_parts < 2 or np.count_nonzero(labels < 0) > MAX_DROPPED * len(cloud):
-            continue
-        idxs_all = [np.flatnonzero(labels == k) for k in range(n_parts)]
-        exts = [extent(cloud.points[i], heights[i]) for i in idxs_all]
-        if any(oversized(np.array([e[0], e[1], 0.0]), sized, config) for e in exts):
-            continue  # a footprint larger than every declared object's (a fixture's): no need to fit
-        parts, idxs = [], []
-        # a step's upper part rests at the cut: its sphere test from there, then raised to it (its
-        # lowest points need not show over what shows of the part under it: a bowl sitting in a
-        # ramekin's mouth, the ramekin's far side hidden under it)
-        upper = [kind == "step" and float(heights[idx].min()) > z for idx in idxs_all]
-        for idx, above in zip(idxs_all, upper):
-            det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px,
-                              rests_at_m=z if above else None)
-            if det is None:
-                break
-            parts.append(det)
-            idxs.append(idx)
-        else:
-            if kind == "step":
-                parts = _rested(parts, upper, z, plane)
-            stacked = stack(parts, plane, config)
-            full = cost_matrix(stacked, sized, config)
-            costs = full.min(axis=1)
-            log.debug("split: %s at %.3f m: %d parts, costs %s, sizes %s, shapes %s", kind, z, len(parts),
-                      np.round(costs, 2).tolist(), [np.round(2 * d.half_extents, 3).tolist() for d in stacked],
-                      [d.shape for d in stacked])
-            # a covered part is scored on less (its footprint a lower bound, no shape): what is
-            # scored must agree twice as closely
-            limits = np.array([COVERED_COST_FRACTION * cc.split_max_cost if d.covered else cc.split_max_cost
-                               for d in stacked])
-            if bool(np.any(costs > limits)) or _covered_alike(stacked, full, sized):
-                continue
-            # each part as fitted, the way the declared looks were measured (a mug's handle lengthens
-            # its points' rectangle, not its fitted body), resting on another at its own height
-            fitted = [np.array([2.0 * float(max(d.half_extents[:2])), 2.0 * float(min(d.half_extents[:2])),
-                                d.top_m - d.bottom_m]) for d in stacked]
-            if any(oversized(e, sized, config) for e in fitted):
-                continue
-            scored.append((float(costs.sum()), kind, z, parts, idxs, costs))
+    partitions = list(_partitions(cloud, heights, config))
+    # as fitted first; only where nothing is admissible so, again as stacks (a step's upper part
+    # resting at the cut, the part under it covered): a stack the plain fit explains stays as it was
+    scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=False)
+    if not scored:
+        scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=True)
     if not scored:
         log.debug("split: oversized segment of %d points, no admissible partition", len(cloud))
         return None
@@ -345,6 +311,58 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     log.debug("split: %s at %.3f m into %d parts, costs %s", best[1], best[2], len(best[3]),
               [round(float(c), 2) for c in best[5]])
     return list(zip(best[3], best[4]))
+
+
+def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
+                focal_px: np.ndarray, sized: Sequence[ObjectDescriptor], *, stacks: bool) -> list:
+    """``[(summed cost, kind, z, parts, index arrays, costs)]`` of the admissible ``partitions``
+    (module docstring). ``stacks``: a step's upper part rests at the cut (its sphere test from
+    there, then raised to it: its lowest points need not show over what shows of the part under
+    it, a bowl sitting in a ramekin's mouth) and the part under it may be covered
+    (:func:`_rested`), admissible at :data:`COVERED_COST_FRACTION` of the cost limit and never
+    of the look resting on it (:func:`_covered_alike`)."""
+    cc = config.clustering
+    scored = []
+    for kind, z, labels in partitions:
+        n_parts = int(labels.max()) + 1
+        if n_parts < 2 or np.count_nonzero(labels < 0) > MAX_DROPPED * len(cloud):
+            continue
+        idxs_all = [np.flatnonzero(labels == k) for k in range(n_parts)]
+        exts = [extent(cloud.points[i], heights[i]) for i in idxs_all]
+        if any(oversized(np.array([e[0], e[1], 0.0]), sized, config) for e in exts):
+            continue  # a footprint larger than every declared object's (a fixture's): no need to fit
+        parts, idxs = [], []
+        upper = [stacks and kind == "step" and float(heights[idx].min()) > z for idx in idxs_all]
+        for idx, above in zip(idxs_all, upper):
+            det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px,
+                              rests_at_m=z if above else None)
+            if det is None:
+                break
+            parts.append(det)
+            idxs.append(idx)
+        else:
+            if any(upper):
+                parts = _rested(parts, upper, z, plane)
+            stacked = stack(parts, plane, config)
+            full = cost_matrix(stacked, sized, config)
+            costs = full.min(axis=1)
+            log.debug("split: %s at %.3f m%s: %d parts, costs %s, sizes %s, shapes %s", kind, z,
+                      " (as a stack)" if stacks else "", len(parts), np.round(costs, 2).tolist(),
+                      [np.round(2 * d.half_extents, 3).tolist() for d in stacked], [d.shape for d in stacked])
+            # a covered part is scored on less (its footprint a lower bound, no shape): what is
+            # scored must agree twice as closely
+            limits = np.array([COVERED_COST_FRACTION * cc.split_max_cost if d.covered else cc.split_max_cost
+                               for d in stacked])
+            if bool(np.any(costs > limits)) or _covered_alike(stacked, full, sized):
+                continue
+            # each part as fitted, the way the declared looks were measured (a mug's handle lengthens
+            # its points' rectangle, not its fitted body), resting on another at its own height
+            fitted = [np.array([2.0 * float(max(d.half_extents[:2])), 2.0 * float(min(d.half_extents[:2])),
+                                d.top_m - d.bottom_m]) for d in stacked]
+            if any(oversized(e, sized, config) for e in fitted):
+                continue
+            scored.append((float(costs.sum()), kind, z, parts, idxs, costs))
+    return scored
 
 
 def _rested(parts: list[Detection], upper: list[bool], z: float, plane: Plane) -> list[Detection]:
@@ -382,17 +400,31 @@ def _covered_alike(parts: Sequence[Detection], costs: np.ndarray, descriptors: S
 
 
 def _alike(a: Sequence[Detection], b: Sequence[Detection]) -> bool:
-    """Two partitions cut alike: the parts seen whole as many in each, each within
-    :data:`SAME_PART_M` of one of the other, and covered parts in both or in neither. What lies
-    under a part resting on it shows only in pieces, which grow, move and break up as the cut
-    above them moves: their count and centres do not tell two cuts apart (the cookie box
-    under a bowl: one piece of it 5 cm across cut at 3 cm, the 3.5 cm end that shows past the
-    bowl cut at 1 cm)."""
-    whole_a, whole_b = [p for p in a if not p.covered], [q for q in b if not q.covered]
-    if len(whole_a) != len(whole_b) or any(p.covered for p in a) != any(q.covered for q in b):
+    """Two partitions cut alike. Without a part resting on another (columns, colour,
+    footprint): as many parts, each within :data:`SAME_PART_M` of one of the other's. With
+    parts resting on others (a height step, ``bottom_m`` > 0): the resting parts so, and every
+    part below each overlapping the footprint of a part below in the other. What shows below a
+    step grows, moves, breaks up and is covered or not as the cut above it moves (the cookie
+    box under a bowl: one piece 5 cm across cut at 3 cm, the 3.5 cm end past the bowl cut at
+    1 cm; a plate under a bowl: its whole ring or its near crescent): its count and centres do
+    not tell two cuts apart."""
+    up_a, up_b = [p for p in a if p.bottom_m > 0.0], [q for q in b if q.bottom_m > 0.0]
+    if bool(up_a) != bool(up_b):
         return False
-    return all(any(float(np.linalg.norm(p.position[:2] - q.position[:2])) <= SAME_PART_M for q in whole_b)
-               for p in whole_a)
+
+    def near(p: Detection, q: Detection) -> bool:
+        return float(np.linalg.norm(p.position[:2] - q.position[:2])) <= SAME_PART_M
+
+    def overlap(p: Detection, q: Detection) -> bool:
+        d = float(np.linalg.norm(p.position[:2] - q.position[:2]))
+        return d <= max(SAME_PART_M, float(max(p.half_extents[:2])) + float(max(q.half_extents[:2])))
+
+    if not up_a:
+        return len(a) == len(b) and all(any(near(p, q) for q in b) for p in a)
+    low_a, low_b = [p for p in a if p.bottom_m <= 0.0], [q for q in b if q.bottom_m <= 0.0]
+    return (len(up_a) == len(up_b) and all(any(near(p, q) for q in up_b) for p in up_a)
+            and all(any(overlap(p, q) for q in low_b) for p in low_a)
+            and all(any(overlap(q, p) for p in low_a) for q in low_b))
 
 
 def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Cloud, heights: np.ndarray, plane: Plane,

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 import py_trees
 import pytest
+from test_rim_grasp import _run_compute_grasp  # the same ComputeGrasp harness on a Franka
 
 from phyagentos.errors import IKError, PlanningError
 from phyagentos.motion.collision import CollisionChecker
@@ -63,27 +64,6 @@ def test_the_collision_models_fingers_stand_as_far_open_as_asked(franka):
     assert _finger_gap(checker) == pytest.approx(wide, abs=1e-6)
     with pytest.raises(PlanningError, match="opening_m must be a finite number >= 0 m"):
         checker.set_gripper_opening(-0.01)
-
-
-def _run_compute_grasp(target, entity, board=None):
-    from phyagentos.primitives.base import PrimitiveFailure
-    from phyagentos.primitives.perception import ComputeGrasp
-
-    leaf = ComputeGrasp("ComputeGrasp", object=entity["name"])
-    board = {"snapshot": {"entities": [entity]}} if board is None else board
-    records = []
-    leaf.ctx = SimpleNamespace(target=target, perceiver=None,
-                               trace=SimpleNamespace(record=lambda kind, **f: records.append({"kind": kind, **f})))
-
-    def get(key):
-        if key not in board:
-            raise PrimitiveFailure("skill.blackboard", f"blackboard key {key!r} was never written")
-        return board[key]
-
-    leaf.get = get
-    leaf.set = board.__setitem__
-    leaf.step()
-    return board, records
 
 
 def _bowl(xy=(0.45, -0.25)):

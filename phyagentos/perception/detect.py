@@ -31,7 +31,7 @@ from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 
-__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect", "detect_clusters", "stack"]
+__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect", "detect_clusters", "stack", "resting_at"]
 
 log = logging.getLogger(__name__)
 
@@ -337,14 +337,21 @@ def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list
                 continue
             if _footprint_margin(a.position[:2], b.position, b.yaw, b.half_extents, b.shape) < -0.005:
                 continue
-            bottom = b.top_m
-            half = a.half_extents.copy()
-            half[2] = max(0.5 * (a.top_m - bottom), 1e-3)
-            pos = a.position.copy()
-            pos[2] = plane.z_at(pos[:2]) + bottom + half[2]
-            out[i] = replace(a, bottom_m=bottom, half_extents=half, position=pos)
+            out[i] = resting_at(a, b.top_m, plane)
             break
     return out
+
+
+def resting_at(det: Detection, bottom_m: float, plane: Plane) -> Detection:
+    """``det`` with its bottom raised to ``bottom_m`` (m above ``plane``), its top kept: its
+    height shrinks and its centre rises accordingly (an object resting on another)."""
+    from dataclasses import replace
+
+    half = det.half_extents.copy()
+    half[2] = max(0.5 * (det.top_m - bottom_m), 1e-3)
+    pos = det.position.copy()
+    pos[2] = plane.z_at(pos[:2]) + bottom_m + half[2]
+    return replace(det, bottom_m=bottom_m, half_extents=half, position=pos)
 
 
 def detect_clusters(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,

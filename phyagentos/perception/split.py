@@ -66,7 +66,7 @@ from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
-from phyagentos.perception.detect import Detection, fit_cluster, stack
+from phyagentos.perception.detect import Detection, fit_cluster, resting_at, stack
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
            "COVERED_COST_FRACTION",
@@ -376,11 +376,7 @@ def _rested(parts: list[Detection], upper: list[bool], z: float, plane: Plane) -
     out = list(parts)
     for k, d in enumerate(parts):
         if upper[k]:
-            half = d.half_extents.copy()
-            half[2] = max(0.5 * (d.top_m - z), 1e-3)
-            pos = d.position.copy()
-            pos[2] = plane.z_at(pos[:2]) + z + half[2]
-            out[k] = replace(d, bottom_m=z, half_extents=half, position=pos)
+            out[k] = resting_at(d, z, plane)
             continue
         reach = float(max(d.half_extents[:2]))
         if any(upper[j] and float(max(parts[j].half_extents[:2])) >= reach

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -319,8 +319,6 @@ def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list
     rests on it: its bottom becomes the other's top and its height shrinks accordingly.
     Heights are m above ``plane``; returns a new list in the same order.
     """
-    from dataclasses import replace
-
     from phyagentos.perception.relations import _footprint_margin
 
     out = list(dets)
@@ -345,8 +343,6 @@ def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list
 def resting_at(det: Detection, bottom_m: float, plane: Plane) -> Detection:
     """``det`` with its bottom raised to ``bottom_m`` (m above ``plane``), its top kept: its
     height shrinks and its centre rises accordingly (an object resting on another)."""
-    from dataclasses import replace
-
     half = det.half_extents.copy()
     half[2] = max(0.5 * (det.top_m - bottom_m), 1e-3)
     pos = det.position.copy()

@@ -288,11 +288,13 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     if not oversized(extent(cloud.points, heights), sized, config):
         return None
     partitions = list(_partitions(cloud, heights, config))
-    # as fitted first; only where nothing is admissible so, again as stacks (a step's upper part
-    # resting at the cut, the part under it covered): a stack the plain fit explains stays as it was
-    scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=False)
+    # as fitted first; only where nothing is admissible so, the steps again as stacks (the upper
+    # part resting at the cut, the part under it covered): a stack the plain fit explains stays
+    # as it was. The parts fitted alike in both passes are fitted once.
+    fits: dict[tuple[int, int], Detection | None] = {}
+    scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=False, fits=fits)
     if not scored:
-        scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=True)
+        scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=True, fits=fits)
     if not scored:
         log.debug("split: oversized segment of %d points, no admissible partition", len(cloud))
         return None
@@ -314,16 +316,21 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
 
 
 def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
-                focal_px: np.ndarray, sized: Sequence[ObjectDescriptor], *, stacks: bool) -> list:
+                focal_px: np.ndarray, sized: Sequence[ObjectDescriptor], *, stacks: bool,
+                fits: dict[tuple[int, int], Detection | None]) -> list:
     """``[(summed cost, kind, z, parts, index arrays, costs)]`` of the admissible ``partitions``
     (module docstring). ``stacks``: a step's upper part rests at the cut (its sphere test from
     there, then raised to it: its lowest points need not show over what shows of the part under
     it, a bowl sitting in a ramekin's mouth) and the part under it may be covered
     (:func:`_rested`), admissible at :data:`COVERED_COST_FRACTION` of the cost limit and never
-    of the look resting on it (:func:`_covered_alike`)."""
+    of the look resting on it (:func:`_covered_alike`); only steps are scored so, the other
+    partitions come out as in the plain pass. ``fits``: ``{(partition, part): fit}`` of the
+    parts fitted on the plane, shared by the two passes."""
     cc = config.clustering
     scored = []
-    for kind, z, labels in partitions:
+    for n, (kind, z, labels) in enumerate(partitions):
+        if stacks and kind != "step":
+            continue
         n_parts = int(labels.max()) + 1
         if n_parts < 2 or np.count_nonzero(labels < 0) > MAX_DROPPED * len(cloud):
             continue
@@ -333,9 +340,13 @@ def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, con
             continue  # a footprint larger than every declared object's (a fixture's): no need to fit
         parts, idxs = [], []
         upper = [stacks and kind == "step" and float(heights[idx].min()) > z for idx in idxs_all]
-        for idx, above in zip(idxs_all, upper):
-            det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px,
-                              rests_at_m=z if above else None)
+        for k, (idx, above) in enumerate(zip(idxs_all, upper)):
+            if above:
+                det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px, rests_at_m=z)
+            else:
+                if (n, k) not in fits:
+                    fits[(n, k)] = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
+                det = fits[(n, k)]
             if det is None:
                 break
             parts.append(det)
@@ -346,9 +357,10 @@ def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, con
             stacked = stack(parts, plane, config)
             full = cost_matrix(stacked, sized, config)
             costs = full.min(axis=1)
-            log.debug("split: %s at %.3f m%s: %d parts, costs %s, sizes %s, shapes %s", kind, z,
-                      " (as a stack)" if stacks else "", len(parts), np.round(costs, 2).tolist(),
-                      [np.round(2 * d.half_extents, 3).tolist() for d in stacked], [d.shape for d in stacked])
+            if log.isEnabledFor(logging.DEBUG):
+                log.debug("split: %s at %.3f m%s: %d parts, costs %s, sizes %s, shapes %s", kind, z,
+                          " (as a stack)" if stacks else "", len(parts), np.round(costs, 2).tolist(),
+                          [np.round(2 * d.half_extents, 3).tolist() for d in stacked], [d.shape for d in stacked])
             # a covered part is scored on less (its footprint a lower bound, no shape): what is
             # scored must agree twice as closely
             limits = np.array([COVERED_COST_FRACTION * cc.split_max_cost if d.covered else cc.split_max_cost

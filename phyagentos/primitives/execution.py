@@ -132,31 +132,6 @@ class _Tracking(Primitive):
         return Status.SUCCESS
 
 
-    def _path(self, T_start: np.ndarray, T_goal: np.ndarray) -> np.ndarray:
-        """The joint path of the line to ``T_goal``; with :attr:`at_least_m`, of the longest
-        line along it in :data:`REACH_STEP_M` steps that the arm reaches."""
-        target = self.ctx.target
-        try:
-            return cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
-        except IKError as exc:
-            if self.at_least_m is None:
-                raise
-            full = float(np.linalg.norm(self.offset))
-            reach = full - REACH_STEP_M
-            while reach >= self.at_least_m - 1e-9:
-                T = T_goal.copy()
-                T[:3, 3] = T_start[:3, 3] + self.offset * (reach / full)
-                try:
-                    path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T, **ik_options(target))
-                except IKError:
-                    reach -= REACH_STEP_M
-                    continue
-                self.ctx.trace.record("reach_limited", leaf=self.name, asked_m=round(full, 4), moved_m=round(reach, 4),
-                                      reason=str(exc)[:200])
-                return path
-            raise
-
-
 class ExecuteTrajectory(_Tracking):
     """Execute the Trajectory at blackboard key ``trajectory`` with a tracking check.
 
@@ -243,6 +218,30 @@ class CartesianMove(_Tracking):
 
     def step(self):
         return self._advance()
+
+    def _path(self, T_start: np.ndarray, T_goal: np.ndarray) -> np.ndarray:
+        """The joint path of the line to ``T_goal``; with :attr:`at_least_m`, of the longest
+        line along it in :data:`REACH_STEP_M` steps that the arm reaches."""
+        target = self.ctx.target
+        try:
+            return cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T_goal, **ik_options(target))
+        except IKError as exc:
+            if self.at_least_m is None:
+                raise
+            full = float(np.linalg.norm(self.offset))
+            reach = full - REACH_STEP_M
+            while reach >= self.at_least_m - 1e-9:
+                T = T_goal.copy()
+                T[:3, 3] = T_start[:3, 3] + self.offset * (reach / full)
+                try:
+                    path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T, **ik_options(target))
+                except IKError:
+                    reach -= REACH_STEP_M
+                    continue
+                self.ctx.trace.record("reach_limited", leaf=self.name, asked_m=round(full, 4), moved_m=round(reach, 4),
+                                      reason=str(exc)[:200])
+                return path
+            raise
 
 
 class Gripper(Primitive):

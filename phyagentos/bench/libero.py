@@ -8,7 +8,10 @@ bench workspace (``<workspace>/libero/<suite>/suite.yaml``, one goal graph per t
 - tasks: LIBERO's task indices (``--tasks 0,1``) become the suite's task ids ``t0``, ``t1``;
 - seeds: LIBERO's init-state indices (``--seeds 0-49``; default
   :data:`~phyagentos.targets.libero.catalog.DEFAULT_INIT_SUBSET`, the first 10 of 50),
-  written into each episode's scene as ``init`` (the suite task's ``seed_to_scene``).
+  written into each episode's scene as ``init`` (the suite task's ``seed_to_scene``); with
+  ``generated`` (``phyagentos bench ... --generated``) the seeds instead seed LIBERO's own
+  placement sampler (``scene.generated``: a fresh scene of the task, never an evaluation init
+  state), the development split on which the runtime is diagnosed and tuned.
 
 Everything is checked before anything is built: an unknown suite, task or init-state index
 is a :class:`~phyagentos.errors.BenchError` with the valid choices (``phyagentos bench``
@@ -415,6 +418,7 @@ def load_skill_defaults(path: str | Path) -> dict[str, dict[str, Any]]:
 def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[str, ...] | None = None,
                          seeds: tuple[int, ...] | None = None,
                          skill_defaults: Mapping[str, Mapping[str, Any]] | None = None,
+                         generated: bool = False,
                          ) -> tuple[Path, tuple[str, ...], tuple[int, ...]]:
     """Write the bench suite of LIBERO suite ``suite`` into the bench workspace.
 
@@ -426,6 +430,10 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         seeds: LIBERO init-state indices; default the first 10.
         skill_defaults: strategy parameters per skill for every planned node of that skill
             (:func:`load_skill_defaults`); default :data:`SKILL_DEFAULTS`.
+        generated: the episodes are scenes of LIBERO's placement sampler seeded with each of
+            ``seeds`` (any non-negative integers) instead of the task's fixed init states:
+            same instruction, objects and checker, fresh placements; for development, never
+            reported as a LIBERO score.
 
     Returns:
         ``(suite file, task ids, seeds)`` for :func:`~phyagentos.bench.run_bench`.
@@ -469,7 +477,10 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         except TargetError as exc:  # a suite that ships a broken init file for one task (libero_10_with_milk)
             unplanned.append(f"task {i} ({catalogue[i].instruction}): not runnable: {exc}")
             continue
-        bad = [s for s in seeds if not 0 <= s < n_init]
+        bad = [s for s in seeds if not 0 <= s < (2 ** 31 if generated else n_init)]
+        if bad and generated:
+            raise BenchError(f"LIBERO sampler seed {bad[0]} out of range", problems=[
+                f"a generated scene's seed is an integer in 0-{2 ** 31 - 1}, got {bad[0]}"])
         if bad:
             raise BenchError(f"LIBERO task {suite}/{i} has no init state {bad[0]}", problems=[
                 f"unknown init state(s) {', '.join(map(str, bad))} of {suite}/{i}; valid init states: 0-{n_init - 1} "
@@ -489,7 +500,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         raise BenchError(f"no chosen task of {suite} has a goal graph", problems=unplanned)
     for line in unplanned:
         logger.warning("LIBERO bench: not planned: %s", line)
-    root = Path(workspace_dir) / "libero" / suite
+    root = Path(workspace_dir) / "libero" / (f"{suite}_generated" if generated else suite)
     # suite and graph names are identifiers: libero_object_temp_x0.1 -> libero_object_temp_x0_1
     ident = "".join(c if c.isalnum() or c == "_" else "_" for c in suite)
     root.mkdir(parents=True, exist_ok=True)
@@ -511,21 +522,26 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
                    for o in declared["objects"] if o["class"] in looks or o["name"] in named]
         graph = {"version": 1, "name": f"{ident}_t{i}", "description": task.instruction,
                  "defaults": {"target": LIBERO_TARGET},
-                 "scene": {"suite": suite, "task": i, "objects": objects,
+                 "scene": {"suite": suite, "task": i, **({"generated": True} if generated else {}), "objects": objects,
                            # a fixture with a measured look is perceived (places onto it)
                            "fixtures": [{**f, **fixture_looks.get(f["class"], {})} for f in declared["fixtures"]]},
                  "nodes": nodes}
         path = root / f"t{i}.yaml"
         atomic_write_text(path, f"# LIBERO {suite} task {i}: {task.instruction!r} (the task's instruction), planned\n"
                                 f"# by the Goal Planner's rule reader (phyagentos.bench.libero) from the instruction\n"
-                                f"# and the declared objects; the episode's init state is written into scene.init.\n"
+                                f"# and the declared objects; "
+                                + ("each episode's scene is LIBERO's sampler seeded with the episode seed.\n" if generated
+                                   else "the episode's init state is written into scene.init.\n")
                           + yaml.safe_dump(graph, sort_keys=False))
         entries.append({"id": f"t{i}", "description": task.instruction, "goal_graph": path.name, "target": LIBERO_TARGET,
-                        "seed_to_scene": "init", "safety": {"workspace_box": workspace_box(problem.scene)}})
+                        **({} if generated else {"seed_to_scene": "init"}),
+                        "safety": {"workspace_box": workspace_box(problem.scene)}})
+    episodes_from = ("scenes of its placement sampler (generated, not its init states: a development run)"
+                     if generated else "its fixed init states")
     suite_doc = {"version": 1, "name": ident, "episodes": len(DEFAULT_INIT_SUBSET),
-                 "description": f"LIBERO {suite}: tasks from LIBERO's instructions, episodes from its fixed init "
-                                f"states, judged by LIBERO's checker" + (f"; not planned: {len(unplanned)} task(s)"
-                                                                          if unplanned else ""),
+                 "description": f"LIBERO {suite}: tasks from LIBERO's instructions, episodes from {episodes_from}, "
+                                f"judged by LIBERO's checker" + (f"; not planned: {len(unplanned)} task(s)"
+                                                                 if unplanned else ""),
                  "tasks": entries}
     suite_path = root / "suite.yaml"
     atomic_write_text(suite_path, yaml.safe_dump(suite_doc, sort_keys=False))

@@ -101,6 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="LIBERO suites: YAML {skill: {parameter: value}} of strategy parameters written into every "
                             "planned pick and place node (default: the LIBERO bench's, chosen on LIBERO-90; a file "
                             "holding {} runs the trees' own defaults)")
+    bench.add_argument("--generated", action="store_true",
+                       help="LIBERO suites: episodes are scenes of LIBERO's placement sampler seeded with --seeds, not "
+                            "its init states (a development split: same tasks and checker, never a LIBERO score)")
 
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
     val.add_argument("goal_graph", type=goal_graph_arg, help="goal graph file, or a shipped example's name")
@@ -204,14 +207,15 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
     suite = args.suite
     from phyagentos.bench.libero import is_libero_suite, load_skill_defaults, prepare_libero_suite  # noqa: PLC0415
 
-    if args.skill_defaults is not None and not is_libero_suite(suite):
-        err.print(f"[red]--skill-defaults applies to LIBERO suites only, not {suite!r}[/red]")
-        return EXIT_BAD_INPUT
+    for flag, given in (("--skill-defaults", args.skill_defaults is not None), ("--generated", args.generated)):
+        if given and not is_libero_suite(suite):
+            err.print(f"[red]{flag} applies to LIBERO suites only, not {suite!r}[/red]")
+            return EXIT_BAD_INPUT
     if is_libero_suite(suite):  # LIBERO's own suite names, task indices and init states (docs/libero.md)
         try:
             fixed = load_skill_defaults(args.skill_defaults) if args.skill_defaults is not None else None
             suite, tasks, seeds = prepare_libero_suite(suite, args.workspace, tasks=tasks, seeds=seeds,
-                                                       skill_defaults=fixed)
+                                                       skill_defaults=fixed, generated=args.generated)
         except BenchError as exc:
             err.print(f"[red]{str(exc).splitlines()[0]}[/red]")
             for line in exc.problems:
@@ -232,7 +236,8 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
 
     try:
         with progress:
-            result = run_bench(suite, args.workspace, episodes=args.episodes, seeds=seeds, split=args.split,
+            result = run_bench(suite, args.workspace, episodes=args.episodes, seeds=seeds,
+                               split="generated" if args.generated else args.split,
                                tasks=tasks, workers=args.workers, memory=args.memory, executor=args.executor,
                                on_compiled=compiled, on_episode=episode_done,
                                heartbeat_timeout_s=args.heartbeat_timeout, queue_timeout_s=args.queue_timeout)

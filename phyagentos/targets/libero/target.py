@@ -364,6 +364,8 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         arm_dofs = [int(m.jnt_dofadr[m.joint(n).id]) for n in ARM_JOINT_NAMES]
         self._kv = 2.0 * np.sqrt(_KP * m.dof_armature[arm_dofs])
         self._robot_bodies = [b for b in range(m.nbody) if m.body(b).name.startswith(("robot0_", "gripper0_"))]
+        # the bodies' frames as compiled: a generated scene starts from them (generate_scene)
+        self._compiled_frames = (m.body_pos.copy(), m.body_quat.copy())
         self._servo(m, True)
         self._init_arm(model, data, ARM_JOINT_NAMES, tcp_site=TCP_SITE, arm_actuators=self._motor, seed=seed)
         self._ff_gain = self._kv / _KP
@@ -527,8 +529,7 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         self._servo(m, False)
         try:
             if self._init_index is None:
-                self._env.seed(int(seed or 0))
-                self._env.reset()
+                self._sample_scene(int(seed or 0))
             else:
                 with _global_numpy_seed(self._init_index):  # the fixtures' layout: one per init state
                     self._env.reset()
@@ -556,14 +557,26 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         m = self._model
         self._servo(m, False)
         try:
-            self._env.seed(int(seed))
-            self._env.reset()
+            self._sample_scene(int(seed))
             for _ in range(self._scene.settle_steps):
                 self._env.step(_NOOP_ACTION)
         finally:
             self._servo(m, True)
         self._data.ctrl[self._arm_act] = np.clip(self.arm_qpos(), self._ctrl_lo[self._arm_act], self._ctrl_hi[self._arm_act])
         mujoco.mj_forward(m, self._data)
+
+    def _sample_scene(self, seed: int) -> None:
+        """``env.reset()`` seeded with ``seed``, its fixtures first put back where the model
+        compiled them. LIBERO's sampler places an object on a fixture's region at the fixture's
+        sampled position *plus* the region site's world position
+        (``libero/envs/regions/base_region_sampler.py``, ``SiteRegionRandomSampler.sample``),
+        which holds only while the fixture still stands at its compiled frame: without the
+        put-back a second reset set the bowl of libero_spatial task 7 40 cm off the stove
+        (measured, seed 500: x -0.664 m instead of -0.256 m), and the same seed gave two scenes."""
+        m = self._model
+        m.body_pos[:], m.body_quat[:] = self._compiled_frames
+        self._env.seed(seed)
+        self._env.reset()
 
     def close(self) -> None:
         """Free the world (robosuite's sim, the renderers) and return the freed heap pages to

@@ -167,6 +167,8 @@ def test_bad_skill_defaults_exit_2_before_anything_is_built(tmp_path):
     assert result.returncode == 2 and "pick has no strategy parameter 'lift_speed'" in " ".join(result.stderr.split())
     result = _bench("tabletop", "--skill-defaults", str(f), "--workspace", str(tmp_path / "ws"), cwd=tmp_path)
     assert result.returncode == 2 and "applies to LIBERO suites only" in result.stderr
+    result = _bench("tabletop", "--generated", "--workspace", str(tmp_path / "ws"), cwd=tmp_path)
+    assert result.returncode == 2 and "--generated applies to LIBERO suites only" in result.stderr
     assert not (tmp_path / "ws").exists()
 
 

@@ -115,10 +115,9 @@ def test_two_references_bind_the_two_identical_names():
     assert [n["id"] for n in nodes] == [f"pick_{BOWL}", f"place_{BOWL}", f"pick_{TWIN}", f"place_{TWIN}"]
 
 
-def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placement(tmp_path):
-    """prepare_libero_suite writes the reference into the episode's declared scene; the looks
-    caches (objects' and fixtures') are given (measuring them needs the simulator), so nothing
-    is built."""
+def _workspace_with_looks(tmp_path):
+    """A bench workspace whose looks caches (objects' and fixtures') are given (measuring them
+    needs the simulator), so that preparing the suite builds nothing."""
     ws = tmp_path / "ws"
     (ws / "libero").mkdir(parents=True)
     look = {"shape": "cylinder", "colour": [0.1, 0.1, 0.1], "size_m": [0.12, 0.12, 0.05]}
@@ -134,6 +133,12 @@ def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placemen
     (ws / "libero" / "fixture_looks.yaml").write_text(yaml.safe_dump(
         {"_method": _FIXTURE_LOOKS_METHOD, "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
          **{c: fixture_look for c in fixture_cats}}))
+    return ws
+
+
+def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placement(tmp_path):
+    """prepare_libero_suite writes the reference into the episode's declared scene."""
+    ws = _workspace_with_looks(tmp_path)
     suite, ids, seeds = prepare_libero_suite("libero_spatial", ws, tasks=("0", "4"), seeds=(0,))
     assert ids == ("t0", "t4")
     g0 = yaml.safe_load((suite.parent / "t0.yaml").read_text())
@@ -155,3 +160,24 @@ def test_the_suite_declares_the_reference_on_the_bowl_and_never_an_init_placemen
     from phyagentos.perception import ObjectDescriptor
 
     assert ObjectDescriptor.from_dict(objects[BOWL]).where.relation == "between"
+
+
+def test_a_generated_run_seeds_libero_s_sampler_instead_of_naming_init_states(tmp_path):
+    """``--generated``: the same graphs with ``scene.generated`` and no init state, in a suite
+    of their own (never mistaken for the measured one); any non-negative seed is valid, an init
+    index is not required."""
+    from phyagentos.bench.compiler import plan_episodes
+    from phyagentos.bench.suite import load_suite
+
+    ws = _workspace_with_looks(tmp_path)
+    suite, ids, seeds = prepare_libero_suite("libero_spatial", ws, tasks=("7",), seeds=(500, 70001), generated=True)
+    assert suite.parent.name == "libero_spatial_generated" and seeds == (500, 70001)
+    doc = yaml.safe_load(suite.read_text())
+    assert "seed_to_scene" not in doc["tasks"][0] and "placement sampler" in doc["description"]
+    eps = plan_episodes(load_suite(suite), bench_id="b", seeds=seeds, split="generated", memory="off",
+                        protocol="measurement")
+    assert [(e.seed, e.scene["generated"], "init" in e.scene) for e in eps] == [(500, True, False), (70001, True, False)]
+    with pytest.raises(BenchError, match="has no init state 70001"):
+        prepare_libero_suite("libero_spatial", ws, tasks=("7",), seeds=(70001,))
+    with pytest.raises(BenchError, match="sampler seed -1 out of range"):
+        prepare_libero_suite("libero_spatial", ws, tasks=("7",), seeds=(-1,), generated=True)

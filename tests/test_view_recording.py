@@ -106,6 +106,18 @@ def test_without_record_nothing_is_recorded_but_the_tree_is_published(tmp_path):
     assert "video" not in files and files["tree"] == "tree.json"
 
 
+def test_a_recording_without_a_camera_named_takes_the_targets_own_view():
+    """LIBERO's world has no ``overview`` camera: ``--record`` alone records its agentview."""
+    from phyagentos.runtime.recording import default_camera
+    from phyagentos.targets.libero.sensing import LiberoSensing
+    from phyagentos.targets.mujoco_arm.sensors import ArmSensors
+
+    assert RecordingConfig.parse("all").camera == "" and RecordingConfig.parse(RecordingConfig().to_env()) == RecordingConfig()
+    assert default_camera(LiberoSensing) == "agentview"
+    assert default_camera(ArmSensors) == "overview"
+    assert default_camera(object()) == "overview"  # nothing to render by default: the tabletops' name
+
+
 def test_recording_configuration_round_trips_and_rejects_bad_values():
     cfg = RecordingConfig.parse("failures,camera=top,fps=5,width=640,height=480")
     assert cfg == RecordingConfig(mode="failures", camera="top", fps=5.0, width=640, height=480)

@@ -29,7 +29,9 @@ def _add_record(parser: argparse.ArgumentParser, *, default_mode: str) -> None:
     parser.add_argument("--record", nargs="?", const=default_mode, choices=("all", "failures"),
                         help=f"write evidence/<session>/video.mp4 (+ frames.npz with qpos per frame); 'failures' keeps "
                              f"only sessions whose verdict is not success (bare --record: {default_mode})")
-    parser.add_argument("--record-camera", default="overview", help="camera to record (default: the target's overview)")
+    parser.add_argument("--record-camera", default="",
+                        help="camera to record (default: the target's own view: overview on the built tabletops, "
+                             "agentview on LIBERO)")
     parser.add_argument("--record-fps", type=float, default=10.0,
                         help="frames per second of simulated time (default 10)")
 

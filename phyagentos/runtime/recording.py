@@ -6,7 +6,7 @@ an instant whenever ``1/fps`` seconds of *simulated* time have passed since the 
 (targets without a simulation clock use wall time; a frame can only be captured between
 ticks, so a skill whose ticks advance 0.1 s gets at most 10 distinct frames per second).
 For a MuJoCo target the hook only copies the state (``qpos`` and mocap poses); a
-background thread renders the declared camera (default ``overview``) from that state
+background thread renders the declared camera (default the target's own view) from that state
 with its own ``MjData`` and renderer and pipes the frames to the ffmpeg binary shipped in
 the ``imageio-ffmpeg`` wheel (H.264 in MP4; no system ffmpeg). Rendering is therefore never
 in the control loop; the session's end waits for the backlog. When one tick advances
@@ -28,6 +28,7 @@ once the verdicts are in (the runner cannot know the verdict: that is the verifi
 from __future__ import annotations
 
 import contextlib
+import inspect
 import logging
 import os
 import queue
@@ -44,7 +45,7 @@ from phyagentos.protocol import dump_yaml
 from phyagentos.protocol.atomic import atomic_write_text
 from phyagentos.yamlsource import read_yaml
 
-__all__ = ["ENV_VAR", "RECORD_MODES", "RecordingConfig", "SessionRecorder", "prune_recordings"]
+__all__ = ["ENV_VAR", "RECORD_MODES", "RecordingConfig", "SessionRecorder", "default_camera", "prune_recordings"]
 
 logger = logging.getLogger(__name__)
 
@@ -58,20 +59,32 @@ VIDEO_FILE = "video.mp4"
 FRAMES_FILE = "frames.npz"
 
 
+def default_camera(target: Any) -> str:
+    """The camera ``target`` renders when none is named: the default of its
+    ``render(camera=...)`` (``overview`` where it has none)."""
+    try:
+        default = inspect.signature(target.render).parameters["camera"].default
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return "overview"
+    return default if isinstance(default, str) and default else "overview"
+
+
 @dataclass(frozen=True)
 class RecordingConfig:
     """What to record and how.
 
     Attributes:
         mode: one of :data:`RECORD_MODES`.
-        camera: the target camera to render (MuJoCo camera name).
+        camera: the target camera to render (MuJoCo camera name); ``""``: the one the
+            target renders by default (the default of its ``render(camera=)``: ``overview``
+            on the built tabletops, ``agentview`` on LIBERO).
         fps: frames per second of simulated time (also the video's playback rate,
             so the video plays at real-time speed of the simulation).
         width, height: frame size in pixels (multiples of 16 for H.264).
     """
 
     mode: str = "off"
-    camera: str = "overview"
+    camera: str = ""
     fps: float = 10.0
     width: int = 320
     height: int = 240
@@ -92,7 +105,8 @@ class RecordingConfig:
 
     def to_env(self) -> str:
         """The ``PHYAGENTOS_RECORD`` value that :meth:`from_env` parses back."""
-        return f"{self.mode},camera={self.camera},fps={self.fps:g},width={self.width},height={self.height}"
+        camera = f",camera={self.camera}" if self.camera else ""
+        return f"{self.mode}{camera},fps={self.fps:g},width={self.width},height={self.height}"
 
     @classmethod
     def parse(cls, text: str) -> "RecordingConfig":
@@ -340,6 +354,8 @@ class SessionRecorder:
 
         from phyagentos.targets.contract import MuJoCoBacked, RendersImages  # noqa: PLC0415
 
+        if not config.camera:
+            config = replace(config, camera=default_camera(target))
         recipe = _model_recipe(target, seed)
         if recipe is None and not isinstance(target, RendersImages):
             raise RecordingError(f"target {target.name!r} cannot render; nothing to record")

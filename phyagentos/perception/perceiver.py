@@ -507,7 +507,7 @@ class Perceiver:
         focal = np.array([f.intrinsics.fx / cfg.stride_for(f.intrinsics.width) for f in frames])
         clusters = detect_clusters(cloud, heights, plane, cfg, focal)
         if self.declared:  # a cluster larger than every declared object: the touching objects it holds
-            clusters = split_clusters(clusters, cloud, heights, plane, cfg, focal, self.declared)
+            clusters = split_clusters(clusters, cloud, heights, plane, cfg, focal, self.declared, supports=fixture_dets)
         # an object resting on a fixture's place patch stands on it (the patch as a support)
         dets = _stack([d for d, _ in clusters] + fixture_dets, plane, cfg)[:len(clusters)]
         hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]

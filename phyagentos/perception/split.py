@@ -263,7 +263,8 @@ def _colour_halves(cloud: Cloud) -> np.ndarray | None:
 
 
 def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig, focal_px: np.ndarray,
-                  descriptors: Sequence[ObjectDescriptor]) -> list[tuple[Detection, np.ndarray]] | None:
+                  descriptors: Sequence[ObjectDescriptor], *,
+                  rests_at_m: float = 0.0) -> list[tuple[Detection, np.ndarray]] | None:
     """Split one oversized segment into the declared objects that touch in it.
 
     Args:
@@ -273,6 +274,9 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
         config: ``clustering.split_*``, ``association`` and the fitting parameters are used.
         focal_px: (n_cameras,) focal lengths, px per stride (as :func:`~.detect.fit_cluster`).
         descriptors: the declared objects (their looks; never a pose).
+        rests_at_m: the height (m above ``plane``) the segment rests at: the top of a
+            fixture's place patch under it (:func:`split_clusters`); its height counts from
+            there when telling whether it is oversized.
 
     Returns:
         ``[(detection, index array into cloud)]`` of the parts (fitted as any segment, not
@@ -285,7 +289,7 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     sized = list(descriptors)
     if cc.split_max_cost <= 0 or len(cloud) < 2 * cc.min_points or not sized:
         return None
-    if not oversized(extent(cloud.points, heights), sized, config):
+    if not oversized(extent(cloud.points, heights) - np.array([0.0, 0.0, rests_at_m]), sized, config):
         return None
     partitions = list(_partitions(cloud, heights, config))
     # as fitted first; only where nothing is admissible so, the steps again as stacks (the upper
@@ -436,14 +440,21 @@ def _alike(a: Sequence[Detection], b: Sequence[Detection]) -> bool:
 
 
 def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Cloud, heights: np.ndarray, plane: Plane,
-                   config: PerceptionConfig, focal_px: np.ndarray,
-                   descriptors: Sequence[ObjectDescriptor]) -> list[tuple[Detection, np.ndarray]]:
+                   config: PerceptionConfig, focal_px: np.ndarray, descriptors: Sequence[ObjectDescriptor], *,
+                   supports: Sequence[Detection] = ()) -> list[tuple[Detection, np.ndarray]]:
     """``clusters`` (``(detection, index array into cloud)``, as
     :func:`~.detect.detect_clusters` gives) with each oversized one replaced by its parts
-    (:func:`split_cluster`; index arrays into ``cloud``); the others unchanged, in order."""
+    (:func:`split_cluster`; index arrays into ``cloud``); the others unchanged, in order.
+
+    ``supports``: the fixtures' place patches (pseudo-detections). A segment that rests on one
+    (:func:`~.detect.stack`) is oversized by its height above the patch: a bowl on a stove's
+    burner, its base hidden among the burner's own points, stands 8 cm above the table and
+    5 cm above the burner; measured from the table it was cut in two at half its height."""
     out: list[tuple[Detection, np.ndarray]] = []
     for det, idx in clusters:
-        parts = split_cluster(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors)
+        rests_at = stack([det, *supports], plane, config)[0].bottom_m if supports else 0.0
+        parts = split_cluster(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors,
+                              rests_at_m=rests_at)
         if parts is None:
             out.append((det, idx))
         else:

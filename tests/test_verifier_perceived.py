@@ -242,3 +242,25 @@ def test_down_in_a_dish_the_objects_base_must_lie_inside_the_rim(offset, status)
     [c] = parse_criteria({"on": {"object": "mug_1", "support": "plate_1"}})
     out = evaluate(c, snap, snap)
     assert out.status == status, out.reason
+
+
+@pytest.mark.parametrize("obj,offset,status", [
+    ("bowl", 0.010, "satisfied"),    # a bowl as wide as the plate's middle, near its centre
+    ("bowl", 0.061, "unsatisfied"),  # 6 cm off at the rim's height: on the rim and the table (LIBERO said no)
+    ("bowl", 0.027, "unknown"),      # at the edge of the middle within the uncertainty
+    ("box", 0.040, "satisfied"),     # a small box 4 cm off: its whole footprint still over the plate
+    ("box", 0.076, "unsatisfied"),   # its footprint past the plate's edge
+])
+def test_on_a_flat_support_the_objects_footprint_lies_over_it_or_it_stands_near_its_middle(obj, offset, status):
+    """Found on the development split (``bench --generated``, libero_spatial task 7, seed 501): a
+    bowl let go 6 cm off the plate's centre was judged on it; LIBERO's checker counted it off."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    table = 0.425
+    plate = _ent("plate_1", (0.0, 0.3, table + 0.009), (0.082, 0.082, 0.009), 0.95, std=0.0015)
+    size = (0.056, 0.056, 0.025) if obj == "bowl" else (0.02, 0.015, 0.01)
+    thing = _ent(obj, (0.0, 0.3 + offset, table + 0.018 + size[2]), size, 0.9, std=0.0015)
+    snap = {"entities": [plate, thing], "relations": []}
+    [c] = parse_criteria({"on": {"object": obj, "support": "plate_1"}})
+    out = evaluate(c, snap, snap)
+    assert out.status == status, out.reason

@@ -31,7 +31,9 @@ centre lies in the region's footprint shrunk by 2 sigma and rests within
 footprint shrunk by 2 sigma, the bottom from :data:`SUPPORT_FLOOR_M` above the support's
 bottom (and at most :data:`DISH_DEPTH_M` below its top: a dish's floor) up to ``REST_TOL_M``
 above its top, by 2 sigma; below the top (in a dish), within :data:`DISH_CENTRE_M` of the
-support's centre too, else it leans on the rim; ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
+support's centre too, else it leans on the rim; on a flat support (no taller than
+:data:`DISH_DEPTH_M`: a plate) with its whole footprint over it, or within
+:data:`DISH_CENTRE_M` of its centre where it is as wide; ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
 rose >= min_height + 2 sigma), ``unsatisfied`` only when it fails by more than 2 sigma,
 and ``unknown`` in between (at 2 sigma a Gaussian error crosses the boundary with
 probability <= 2.3 %, one-sided). ``on`` and ``inside`` with a container (a perceived
@@ -393,12 +395,17 @@ def _eval_on(c, initial, terminal, refs):
     dy = abs(o["position"][1] - s["position"][1])
     held, _ = _held(terminal, obj)
     rests = floor <= bottom <= top + REST_TOL_M + m  # floor: a height threshold, not widened by the horizontal sigma
-    # down in a dish (below its rim): level only near its centre, else it leans on the rim
+    # down in a dish (below its rim): level only near its centre, else it leans on the rim; on a
+    # flat support (a plate, no taller than a dish is deep): its whole footprint over it, or
+    # within DISH_CENTRE_M of its centre when it is as wide (a bowl set off a plate's middle
+    # rests on its rim and the table)
     in_dish = bottom < top - REST_TOL_M
+    flat = 2.0 * s["size"][2] <= DISH_DEPTH_M
+    reach = DISH_CENTRE_M if in_dish else (max(DISH_CENTRE_M, min(sx, sy) - min(o["size"][:2])) if flat else math.inf)
     off = math.hypot(dx, dy)
-    inside = rests and dx <= sx - m and dy <= sy - m and held is False and (not in_dish or off <= DISH_CENTRE_M - m)
+    inside = rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m
     outside = (bottom > top + REST_TOL_M + m or bottom < floor - m or dx > sx + m or dy > sy + m or bool(held)
-               or in_dish and off > DISH_CENTRE_M + m)
+               or off > reach + m)
     return _band(c, refs, inside, outside, obj, f"on {support}",
                  f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))

@@ -305,6 +305,26 @@ def test_the_perceiver_leaves_both_bowls_unseen_when_the_landmark_is_not_seen():
     assert p.last_references["bowl_1"].detection is None
 
 
+def test_a_landmark_named_only_weakly_picks_out_nothing():
+    """A brown thing of the ramekin's size where the ramekin should be is the ramekin's best
+    match, at confidence 0.25: "the bowl next to the ramekin" is not read off it (on the
+    development split a cookie box under the other bowl passed for the ramekin at 0.21, and
+    the wrong bowl was picked)."""
+    near = _det(BLACK, (0.52, 0.12, 0.03))
+    far = _det(BLACK, (0.40, -0.25, 0.03))
+    not_a_ramekin = _det((0.55, 0.35, 0.2), (0.60, 0.20, 0.02), half=(0.04, 0.04, 0.02))
+    plate = _det(RED, (0.45, -0.05, 0.01), half=(0.1, 0.1, 0.01))
+    dets = [near, not_a_ramekin, far, plate]
+    p = _perceiver({"relation": "next_to", "of": ["ramekin_1"]})
+    got = _assign(p, dets)
+    assert "bowl_1" not in got and "bowl_2" not in got
+    assert p.last_references["bowl_1"].detection is None
+    # the same layout with the ramekin's own look: resolved
+    dets[1] = _det(WHITE, (0.60, 0.20, 0.02), half=(0.04, 0.04, 0.02))
+    p = _perceiver({"relation": "next_to", "of": ["ramekin_1"]})
+    assert dets[_assign(p, dets)["bowl_1"]] is near
+
+
 def test_with_one_lookalike_in_view_neither_bowl_is_named():
     """The landmark is seen but only one black bowl: it may be the one meant or the other, so
     neither name is given to it."""

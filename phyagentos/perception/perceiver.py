@@ -151,6 +151,11 @@ RELEASE_LOOK_FLOOR = 0.02
 #: Fraction of a look's footprint a detection cut by the image border must show to be named
 #: at full confidence (:func:`_seen_fraction`).
 SEEN_ENOUGH = 0.5
+#: A detection serves as a spatial reference's landmark only when it is named at least this
+#: confidently (the verifier's floor, ``agent.criteria.CONFIDENCE_MIN``): on the development
+#: split (libero_spatial task 5, sampler seed 501) a cookie box under the other bowl was named
+#: the ramekin at 0.21, and "the bowl on the ramekin" picked out the wrong bowl.
+LANDMARK_MIN_CONFIDENCE = 0.5
 #: Extra association cost of a detection cut by the image border (:meth:`Perceiver._associate_parts_weighed`):
 #: twice the ambiguity margin (0.5), so a whole sighting whose look costs up to one margin
 #: more than a part's still wins it unambiguously. With the cut's relaxed size and shape alone,
@@ -988,10 +993,13 @@ class Perceiver:
         first_pass = C
         for j in pending:
             first_pass = forbid_except(first_pass, j, None)
-        taken = {i: j for i, (j, _, _) in associate(first_pass, cfg).matches.items()}
+        matches = associate(first_pass, cfg).matches
+        taken = {i: j for i, (j, _, _) in matches.items()}
         landmarks: dict[str, Landmark] = {}
-        for i, j in taken.items():
+        for i, (j, cost, margin) in matches.items():
             d = dets[i]
+            if match_confidence(cost, margin, cfg) * _detection_confidence(d) < LANDMARK_MIN_CONFIDENCE:
+                continue  # named no better than a coin flip: what it would pick out is a guess
             landmarks[names[j]] = Landmark(names[j], d.position, d.half_extents, d.yaw, d.shape, d.bottom_m)
         for n, t in self.tracks.items():
             if n not in landmarks and not t.held and t.released_s is None and stamp - t.last_seen_s <= REMEMBER_S:

@@ -14,7 +14,8 @@ One :meth:`Perceiver.observe` call runs the pipeline on every frame of one obser
    stacking (an object whose lowest points sit on another's top rests on it);
 4. association to the declared descriptors (``association``); unmatched or ambiguous
    clusters become ``unknown_<k>``; an object declared with a spatial reference (``where``)
-   and not tracked yet is resolved first on the landmarks the others' association found
+   and not tracked yet is resolved first on the landmarks the others' association found,
+   named at :data:`LANDMARK_MIN_CONFIDENCE` or more
    (:func:`~phyagentos.perception.association.resolve_reference`; the snapshot's
    ``references`` says how), and once tracked keeps its identity by its track;
 5. tracks: fusion over observations (``tracks``);
@@ -978,7 +979,7 @@ class Perceiver:
         the one detection its relation picks out (or for none).
 
         The other declared objects are associated first (without those objects); their matches
-        (and tracks seen in the last :data:`REMEMBER_S` s, not held) and the perceived fixtures
+        named at :data:`LANDMARK_MIN_CONFIDENCE` or more (and tracks seen in the last :data:`REMEMBER_S` s, not held) and the perceived fixtures
         (their bodies' footprints, topped by their place surfaces) are the landmarks. The
         candidates are the detections within the gate for the object that no other-looking
         object took. An unresolved reference leaves its untracked look-alikes unassociated as

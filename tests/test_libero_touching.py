@@ -107,3 +107,22 @@ def test_generated_scenes_set_no_object_down_on_a_fixture(world):
             for flo, fhi in fixtures:
                 overlap = np.minimum(hi[:2], fhi[:2]) - np.maximum(lo[:2], flo[:2])
                 assert np.any(overlap <= 0.0), (seed, name, lo, hi, flo, fhi)
+
+
+def test_a_bowl_set_on_the_plate_beside_the_other_bowl_leaves_the_plate_named(world):
+    """Three touching: the other bowl rim to rim with the plate, the bowl set on the plate. The
+    segment is cut in two at the footprint's neck, then the bowl-on-plate part again at its
+    height step; before, that part was named after its top and the plate was not seen (the
+    place of libero_spatial task 2 could not be judged on the development split)."""
+    target, cfg = world
+    twin, plate = "akita_black_bowl_2", "plate_1"
+    assert set(place_objects(target, 60022, names=[BOWL, twin, plate])) == {BOWL, twin, plate}
+    assert set_touching(target, twin, plate, "beside", 60022)
+    assert set_touching(target, BOWL, plate, "on", 60022)
+    cats = target._problem.objects
+    declared = [{"name": n, "class": cats[n], **LOOKS[cats[n]]} for n in (BOWL, plate)]
+    ents = {e["name"]: e for e in _observe(target, cfg, declared)["entities"]}
+    boxes = object_boxes(target)
+    e = ents.get(plate)
+    assert e is not None and e["kind"] == "object" and e["attributes"]["confidence"] > 0.5, e
+    assert _centre_error(e, boxes[plate]) < 0.015, (e["position"], boxes[plate])

@@ -69,7 +69,7 @@ from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection, fit_cluster, resting_at, stack
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
-           "COVERED_COST_FRACTION",
+           "COVERED_COST_FRACTION", "SPLIT_DEPTH",
            "extent", "footprint_cut", "oversized", "split_cluster", "split_clusters"]
 
 log = logging.getLogger(__name__)
@@ -439,9 +439,14 @@ def _alike(a: Sequence[Detection], b: Sequence[Detection]) -> bool:
             and all(any(overlap(q, p) for p in low_a) for q in low_b))
 
 
+#: Levels of splitting: the parts of a split segment whose footprint is oversized are split
+#: once more (three objects touching), not further.
+SPLIT_DEPTH = 2
+
+
 def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Cloud, heights: np.ndarray, plane: Plane,
                    config: PerceptionConfig, focal_px: np.ndarray, descriptors: Sequence[ObjectDescriptor], *,
-                   supports: Sequence[Detection] = ()) -> list[tuple[Detection, np.ndarray]]:
+                   supports: Sequence[Detection] = (), depth: int = SPLIT_DEPTH) -> list[tuple[Detection, np.ndarray]]:
     """``clusters`` (``(detection, index array into cloud)``, as
     :func:`~.detect.detect_clusters` gives) with each oversized one replaced by its parts
     (:func:`split_cluster`; index arrays into ``cloud``); the others unchanged, in order.
@@ -449,7 +454,13 @@ def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Clou
     ``supports``: the fixtures' place patches (pseudo-detections). A segment that rests on one
     (:func:`~.detect.stack`) is oversized by its height above the patch: a bowl on a stove's
     burner, its base hidden among the burner's own points, stands 8 cm above the table and
-    5 cm above the burner; measured from the table it was cut in two at half its height."""
+    5 cm above the burner; measured from the table it was cut in two at half its height.
+
+    A part that is oversized itself, its height counted from what it rests on (the other
+    parts, the patches), is split again (with ``depth`` 2, the default; 1: not): three objects
+    touching (a bowl set in a plate, the plate's rim against the other bowl) are cut in two,
+    then the bowl from the plate; a bowl cut from the cookie box it stands on is not cut
+    again."""
     out: list[tuple[Detection, np.ndarray]] = []
     for det, idx in clusters:
         rests_at = stack([det, *supports], plane, config)[0].bottom_m if supports else 0.0
@@ -457,6 +468,13 @@ def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Clou
                               rests_at_m=rests_at)
         if parts is None:
             out.append((det, idx))
+        elif depth > 1:  # again where a part is oversized, its height from what it rests on
+            dets = [d for d, _ in parts]
+            rest = stack([*dets, *supports], plane, config)[:len(dets)]
+            for (d, i), r in zip(parts, rest):
+                sub = split_cluster(cloud.select(idx[i]), heights[idx[i]], plane, config, focal_px, descriptors,
+                                    rests_at_m=r.bottom_m)
+                out.extend([(d, idx[i])] if sub is None else [(e, idx[i][k]) for e, k in sub])
         else:
             out.extend((d, idx[i]) for d, i in parts)
     return out

@@ -90,8 +90,8 @@ def test_an_object_resting_on_a_box_is_split_at_the_height_step_and_rests_on_it(
 
 def test_three_objects_touching_a_bowl_on_a_plate_against_a_ramekin_are_all_named(scene):
     """A bowl set on a plate whose rim touches a ramekin beside it: one segment of three, each
-    named at its centre and the bowl on the plate. (Here the colours already cut the plate from
-    the bowl; in LIBERO's world, where they do not, the bowl-on-plate part is cut again:
+    named at its centre and the bowl on the plate. (In this synthetic scene the plate is named
+    without a second cut of the bowl-on-plate part; in LIBERO's world it takes one:
     tests/test_libero_touching.py.)"""
     plate = SyntheticObject("plate_1", "cylinder", (0.08, 0.08, 0.0095), (0.50, 0.02), rgba=WHITE)
     bowl = SyntheticObject("bowl_1", "cylinder", (0.055, 0.055, 0.025), (0.50, 0.02), rgba=GREY, z_base_m=0.019)

@@ -979,8 +979,9 @@ class Perceiver:
         the one detection its relation picks out (or for none).
 
         The other declared objects are associated first (without those objects); their matches
-        named at :data:`LANDMARK_MIN_CONFIDENCE` or more (and tracks seen in the last :data:`REMEMBER_S` s, not held) and the perceived fixtures
-        (their bodies' footprints, topped by their place surfaces) are the landmarks. The
+        named at :data:`LANDMARK_MIN_CONFIDENCE` or more (and tracks seen in the last
+        :data:`REMEMBER_S` s, not held) and the perceived fixtures (their bodies' footprints,
+        topped by their place surfaces) are the landmarks. The
         candidates are the detections within the gate for the object that no other-looking
         object took. An unresolved reference leaves its untracked look-alikes unassociated as
         well (naming one "the other" would say which one is meant). Records the resolutions in

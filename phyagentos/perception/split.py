@@ -439,8 +439,8 @@ def _alike(a: Sequence[Detection], b: Sequence[Detection]) -> bool:
             and all(any(overlap(q, p) for p in low_a) for q in low_b))
 
 
-#: Levels of splitting: the parts of a split segment whose footprint is oversized are split
-#: once more (three objects touching), not further.
+#: Levels of splitting (:func:`split_clusters`): the parts of a split segment that are
+#: oversized themselves are split once more (three objects touching), never further.
 SPLIT_DEPTH = 2
 
 
@@ -456,8 +456,8 @@ def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Clou
     burner, its base hidden among the burner's own points, stands 8 cm above the table and
     5 cm above the burner; measured from the table it was cut in two at half its height.
 
-    A part that is oversized itself, its height counted from what it rests on (the other
-    parts, the patches), is split again (with ``depth`` 2, the default; 1: not): three objects
+    With ``depth`` 2 (the default; 1: one level only), a part that is oversized itself, its
+    height counted from what it rests on (the other parts, the patches), is split again: three objects
     touching (a bowl set in a plate, the plate's rim against the other bowl) are cut in two,
     then the bowl from the plate; a bowl cut from the cookie box it stands on is not cut
     again."""

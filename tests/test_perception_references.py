@@ -325,6 +325,25 @@ def test_a_landmark_named_only_weakly_picks_out_nothing():
     assert dets[_assign(p, dets)["bowl_1"]] is near
 
 
+def test_a_weak_track_of_the_landmark_picks_out_nothing_either():
+    """The ramekin named weakly at a reset (a track at 0.21, where the cookie box is) and not
+    seen now: its track is no landmark, so "the bowl next to the ramekin" stays unresolved (on
+    the development split this track picked out the wrong bowl at the pick's observation)."""
+    from phyagentos.perception.tracks import Track
+
+    near = _det(BLACK, (0.52, 0.12, 0.03))
+    far = _det(BLACK, (0.40, -0.25, 0.03))
+    plate = _det(RED, (0.45, -0.05, 0.01), half=(0.1, 0.1, 0.01))
+    dets = [near, far, plate]
+    for conf, resolved in ((0.21, False), (0.9, True)):
+        p = _perceiver({"relation": "next_to", "of": ["ramekin_1"]})
+        p.tracks["ramekin_1"] = Track.start("ramekin_1", _det(WHITE, (0.60, 0.20, 0.02), half=(0.04, 0.04, 0.02)),
+                                            conf, 0.0, ("front",))
+        got = _assign(p, dets)
+        assert (p.last_references["bowl_1"].detection is not None) == resolved, (conf, p.last_references)
+        assert resolved == ("bowl_1" in got and dets[got["bowl_1"]] is near)
+
+
 def test_with_one_lookalike_in_view_neither_bowl_is_named():
     """The landmark is seen but only one black bowl: it may be the one meant or the other, so
     neither name is given to it."""

@@ -155,7 +155,9 @@ SEEN_ENOUGH = 0.5
 #: A detection serves as a spatial reference's landmark only when it is named at least this
 #: confidently (the verifier's floor, ``agent.criteria.CONFIDENCE_MIN``): on the development
 #: split (libero_spatial task 5, sampler seed 501) a cookie box under the other bowl was named
-#: the ramekin at 0.21, and "the bowl on the ramekin" picked out the wrong bowl.
+#: the ramekin at 0.21, and "the bowl on the ramekin" picked out the wrong bowl -- at the
+#: next observation too, where that weak sighting was the ramekin's track. A track serves only
+#: at this confidence as well.
 LANDMARK_MIN_CONFIDENCE = 0.5
 #: Extra association cost of a detection cut by the image border (:meth:`Perceiver._associate_parts_weighed`):
 #: twice the ambiguity margin (0.5), so a whole sighting whose look costs up to one margin
@@ -979,8 +981,8 @@ class Perceiver:
         the one detection its relation picks out (or for none).
 
         The other declared objects are associated first (without those objects); their matches
-        named at :data:`LANDMARK_MIN_CONFIDENCE` or more (and tracks seen in the last
-        :data:`REMEMBER_S` s, not held) and the perceived fixtures (their bodies' footprints,
+        named at :data:`LANDMARK_MIN_CONFIDENCE` or more (and tracks held at that confidence,
+        seen in the last :data:`REMEMBER_S` s, not held) and the perceived fixtures (their bodies' footprints,
         topped by their place surfaces) are the landmarks. The
         candidates are the detections within the gate for the object that no other-looking
         object took. An unresolved reference leaves its untracked look-alikes unassociated as
@@ -1004,7 +1006,8 @@ class Perceiver:
                 continue  # named no better than a coin flip: what it would pick out is a guess
             landmarks[names[j]] = Landmark(names[j], d.position, d.half_extents, d.yaw, d.shape, d.bottom_m)
         for n, t in self.tracks.items():
-            if n not in landmarks and not t.held and t.released_s is None and stamp - t.last_seen_s <= REMEMBER_S:
+            if (n not in landmarks and not t.held and t.released_s is None and stamp - t.last_seen_s <= REMEMBER_S
+                    and t.confidence >= LANDMARK_MIN_CONFIDENCE):
                 landmarks[n] = Landmark(n, t.position, t.half_extents, t.yaw, t.shape, t.bottom_m)
         for look in self.fixtures:  # a perceived fixture: its body's footprint, its top where things rest on it
             if look.name in self.fixture_tracks:

@@ -401,7 +401,7 @@ def _eval_on(c, initial, terminal, refs):
     # rests on its rim and the table)
     in_dish = bottom < top - REST_TOL_M
     flat = 2.0 * s["size"][2] <= DISH_DEPTH_M
-    reach = DISH_CENTRE_M if in_dish else (max(DISH_CENTRE_M, min(sx, sy) - min(o["size"][:2])) if flat else math.inf)
+    reach = DISH_CENTRE_M if in_dish else (max(DISH_CENTRE_M, min(sx, sy) - max(o["size"][:2])) if flat else math.inf)
     off = math.hypot(dx, dy)
     inside = rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m
     outside = (bottom > top + REST_TOL_M + m or bottom < floor - m or dx > sx + m or dy > sy + m or bool(held)

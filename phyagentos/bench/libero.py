@@ -469,6 +469,10 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         raise BenchError(str(exc), problems=[str(exc)]) from None
     indices = _task_indices(suite, tasks, len(catalogue))
     seeds = tuple(seeds) if seeds is not None else DEFAULT_INIT_SUBSET
+    bad_seeds = [s for s in seeds if generated and not 0 <= s < 2 ** 31]
+    if bad_seeds:  # a sampler seed, the same for every task
+        raise BenchError(f"LIBERO sampler seed {bad_seeds[0]} out of range", problems=[
+            f"a generated scene's seed is an integer in 0-{2 ** 31 - 1}, got {bad_seeds[0]}"])
     unplanned = []
     runnable = []
     for i in indices:
@@ -477,10 +481,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
         except TargetError as exc:  # a suite that ships a broken init file for one task (libero_10_with_milk)
             unplanned.append(f"task {i} ({catalogue[i].instruction}): not runnable: {exc}")
             continue
-        bad = [s for s in seeds if not 0 <= s < (2 ** 31 if generated else n_init)]
-        if bad and generated:
-            raise BenchError(f"LIBERO sampler seed {bad[0]} out of range", problems=[
-                f"a generated scene's seed is an integer in 0-{2 ** 31 - 1}, got {bad[0]}"])
+        bad = [] if generated else [s for s in seeds if not 0 <= s < n_init]
         if bad:
             raise BenchError(f"LIBERO task {suite}/{i} has no init state {bad[0]}", problems=[
                 f"unknown init state(s) {', '.join(map(str, bad))} of {suite}/{i}; valid init states: 0-{n_init - 1} "

@@ -4,6 +4,7 @@ varies with the view; no simulator needed."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from phyagentos.perception import ObjectDescriptor
 from phyagentos.targets.libero.descriptors import SIZE_PERCENTILES, looks_from_samples
@@ -73,3 +74,23 @@ def test_each_world_is_sighted_once_per_workspace_and_shared_by_its_perturbed_su
     assert built[2:] == [("libero_object", 2)]  # only the new world
     swapped = _descriptors(tmp_path, "libero_object_swap", [0, 2])
     assert len(built) == 3 and set(swapped) <= set(looks) | set(_descriptors(tmp_path, "libero_object", [2]))
+
+
+def test_a_category_that_shows_a_handle_gets_its_model_origin_along_it_and_one_that_seldom_does_not():
+    mug = [{**_seen("cylinder", (0.11, 0.10, 0.12)), "handle_origin_m": 0.016 + 0.001 * (k % 3)} for k in range(6)]
+    mug += [_seen("box", (0.11, 0.09, 0.12)) for _ in range(2)]  # the handle hidden twice in eight
+    bowl = [_seen("cylinder", (0.11, 0.11, 0.05)) for _ in range(7)] + [{**_seen("cylinder", (0.12, 0.11, 0.05)),
+                                                                         "handle_origin_m": 0.03}]
+    looks = looks_from_samples({"white_yellow_mug": mug, "akita_black_bowl": bowl})
+    assert looks["white_yellow_mug"]["handle_origin_m"] == pytest.approx(0.017)
+    assert "handle_origin_m" not in looks["akita_black_bowl"]
+    desc = ObjectDescriptor.from_dict({"name": "white_yellow_mug_1", **looks["white_yellow_mug"]})
+    assert desc.handle_origin_m == pytest.approx(0.017)
+
+
+@pytest.mark.parametrize("bad", [-0.01, 0.5, "near", float("nan")])
+def test_a_handle_origin_out_of_range_is_a_clear_error(bad):
+    from phyagentos.perception import PerceptionError
+
+    with pytest.raises(PerceptionError, match="handle_origin_m"):
+        ObjectDescriptor.from_dict({"name": "mug_1", "handle_origin_m": bad})

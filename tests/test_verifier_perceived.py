@@ -264,3 +264,27 @@ def test_on_a_flat_support_the_objects_footprint_lies_over_it_or_it_stands_near_
     [c] = parse_criteria({"on": {"object": obj, "support": "plate_1"}})
     out = evaluate(c, snap, snap)
     assert out.status == status, out.reason
+
+
+@pytest.mark.parametrize("origin,std,status", [
+    (None, 0.002, "satisfied"),             # no origin perceived: judged on its centre, 1.2 cm off
+    ((0.0, 0.2695), 0.002, "unknown"),      # its model origin 3.05 cm off, towards the handle: not a success
+    ((0.0, 0.262), 0.002, "unsatisfied"),   # ... 3.8 cm off
+    ((0.0, 0.290), 0.002, "satisfied"),     # its origin 1 cm off
+    ((0.0, 0.290), 0.012, "unknown"),       # ... the handle unseen: the origin as uncertain as its offset
+])
+def test_on_a_dish_a_handled_objects_model_origin_is_judged_not_its_centre(origin, std, status):
+    """LIBERO-10 task 4 (an evaluation episode, read after the run): a mug's centre 1.75 cm off
+    the plate's was judged on it; its model origin -- 1.65 cm from its cup's axis towards the
+    handle, the point LIBERO's checker measures -- was 3.05 cm off, and the checker said no."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    table = 0.425
+    plate = _ent("plate_1", (0.0, 0.3, table + 0.015), (0.069, 0.069, 0.015), 0.95, std=0.002)
+    mug = _ent("mug_1", (0.0, 0.288, table + 0.012 + 0.058), (0.052, 0.037, 0.058), 0.9)
+    if origin is not None:
+        mug["attributes"].update(origin_xy=list(origin), origin_std_m=std)
+    snap = {"entities": [plate, mug], "relations": []}
+    [c] = parse_criteria({"on": {"object": "mug_1", "support": "plate_1"}})
+    out = evaluate(c, snap, snap)
+    assert out.status == status, out.reason

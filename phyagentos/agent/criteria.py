@@ -402,12 +402,21 @@ def _eval_on(c, initial, terminal, refs):
     in_dish = bottom < top - REST_TOL_M
     flat = 2.0 * s["size"][2] <= DISH_DEPTH_M
     reach = DISH_CENTRE_M if in_dish else (max(DISH_CENTRE_M, min(sx, sy) - max(o["size"][:2])) if flat else math.inf)
-    off = math.hypot(dx, dy)
-    inside = rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m
+    # how far off the support's centre: from the object's model origin where perception gives
+    # it (a mug's: its cup's axis, moved towards its handle), else from its centre
+    origin = (o.get("attributes") or {}).get("origin_xy")
+    if isinstance(origin, (list, tuple)) and len(origin) == 2:
+        off = math.hypot(float(origin[0]) - s["position"][0], float(origin[1]) - s["position"][1])
+        m_off = 2.0 * math.hypot(_attr(o, "origin_std_m", sigma(o)), sigma(s))
+    else:
+        off, m_off = math.hypot(dx, dy), m
+    inside = rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m_off
     outside = (bottom > top + REST_TOL_M + m or bottom < floor - m or dx > sx + m or dy > sy + m or bool(held)
-               or off > reach + m)
+               or off > reach + m_off)
     return _band(c, refs, inside, outside, obj, f"on {support}",
                  f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
+                 + (f"; its origin {off:.3f} m off the centre (reach {reach:.3f}, 2 sigma {m_off:.3f})"
+                    if isinstance(origin, (list, tuple)) and len(origin) == 2 else "")
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))
 
 

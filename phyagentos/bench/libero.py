@@ -74,8 +74,8 @@ SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
 #: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
 _PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer")
 #: How the cached looks were measured (a cache measured otherwise is measured again).
-_LOOKS_METHOD = "generated_clutter_v5"  # v3: objects kept off the fixtures; v4: 10 scenes, size range, shapes;
-# v5: sightings pooled over every world measured
+_LOOKS_METHOD = "generated_clutter_v6"  # v3: objects kept off the fixtures; v4: 10 scenes, size range, shapes;
+# v5: sightings pooled over every world measured; v6: handle_origin_m (a mug's model origin along its handle)
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
 _FIXTURE_LOOKS_METHOD = "generated_alone_v4"  # v4: drawers
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).

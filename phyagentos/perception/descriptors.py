@@ -26,7 +26,11 @@ from phyagentos.errors import format_choices
 from phyagentos.perception.errors import PerceptionError
 
 __all__ = ["ObjectDescriptor", "SpatialReference", "SHAPES", "COLOUR_NAMES", "WHERE_RELATIONS",
-           "descriptors_from_declared"]
+           "MAX_HANDLE_ORIGIN_M", "descriptors_from_declared"]
+
+#: The largest ``handle_origin_m`` a descriptor may give, m: an object's origin half a table's
+#: reach off its body is a mistake in the look, not a handle.
+MAX_HANDLE_ORIGIN_M = 0.1
 
 SHAPES: tuple[str, ...] = ("box", "cylinder", "sphere")
 
@@ -140,6 +144,10 @@ class ObjectDescriptor:
         shapes: ``{shape: fraction of sightings}`` (fractions in [0, 1], summing to at most 1),
             or None; when given it prices a shape instead of ``shape``. Kept as sorted
             ``(shape, fraction)`` pairs (the descriptor stays hashable).
+        handle_origin_m: for an object with a handle (a mug), how far its model's origin -- the
+            point its pose names, the one a task's checker measures -- lies from its round
+            body's axis towards the handle, m (>= 0), or None. Perception then reports where
+            that point is (``origin_xy``, :mod:`phyagentos.perception.handle`).
 
     Raises:
         PerceptionError: empty name, unknown shape or colour name, values out of range, a
@@ -154,6 +162,7 @@ class ObjectDescriptor:
     where: SpatialReference | None = None
     size_range_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     shapes: Mapping[str, float] | tuple[tuple[str, float], ...] | None = None
+    handle_origin_m: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -203,6 +212,15 @@ class ObjectDescriptor:
                 raise PerceptionError(f"{where}: its spatial reference names the object itself as a landmark")
             object.__setattr__(self, "where", ref)
         self._check_spread(where)
+        h = self.handle_origin_m
+        if h is not None:
+            try:
+                h = float(h)
+            except (TypeError, ValueError):
+                raise PerceptionError(f"{where}: handle_origin_m must be a number (m), got {self.handle_origin_m!r}") from None
+            if not (math.isfinite(h) and 0.0 <= h <= MAX_HANDLE_ORIGIN_M):
+                raise PerceptionError(f"{where}: handle_origin_m must be in [0, {MAX_HANDLE_ORIGIN_M}] m, got {h!r}")
+            object.__setattr__(self, "handle_origin_m", h)
 
     def _check_spread(self, where: str) -> None:
         """Validate and normalise ``size_range_m`` and ``shapes``."""
@@ -274,8 +292,8 @@ class ObjectDescriptor:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "ObjectDescriptor":
         """From a declared-object mapping (keys ``name``, ``class``, ``shape``, ``colour`` or
-        ``colour_rgb``, ``size_m``, ``where``, ``size_range_m``, ``shapes``; other keys such as ``mass`` are rejected: never
-        declared).
+        ``colour_rgb``, ``size_m``, ``where``, ``size_range_m``, ``shapes``, ``handle_origin_m``; other keys such
+        as ``mass`` are rejected: never declared).
 
         Raises:
             PerceptionError: not a mapping, an unknown key, or a bad value.
@@ -283,7 +301,7 @@ class ObjectDescriptor:
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared object must be a mapping, got {type(d).__name__}")
         valid = {"name", "class", "cls", "shape", "colour", "colour_rgb", "color", "color_rgb", "size_m", "where",
-                 "size_range_m", "shapes"}
+                 "size_range_m", "shapes", "handle_origin_m"}
         unknown = set(d) - valid
         if unknown:
             raise PerceptionError(
@@ -293,7 +311,7 @@ class ObjectDescriptor:
         colour = next((d[k] for k in ("colour_rgb", "colour", "color_rgb", "color") if d.get(k) is not None), None)
         return cls(name=d.get("name"), cls=d.get("class", d.get("cls")), shape=d.get("shape"),
                    colour_rgb=colour, size_m=d.get("size_m"), where=d.get("where"),
-                   size_range_m=d.get("size_range_m"), shapes=d.get("shapes"))
+                   size_range_m=d.get("size_range_m"), shapes=d.get("shapes"), handle_origin_m=d.get("handle_origin_m"))
 
     def size_vector(self) -> np.ndarray | None:
         """(3,) full size sorted as (long horizontal, short horizontal, height), or None."""

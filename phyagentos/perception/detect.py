@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
+from phyagentos.perception.handle import RoundBody, round_body
 
 __all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect", "detect_clusters", "stack", "resting_at"]
 
@@ -65,6 +66,8 @@ class Detection:
             (:func:`phyagentos.perception.truncation.cut_direction`), else None: the object
             may go on beyond what was seen, so its size is a lower bound, its shape that of
             the part seen and its centre short of the object's on that side.
+        body: the round body with a handle its footprint shows (a mug's cup and handle:
+            :func:`phyagentos.perception.handle.round_body`), else None.
         covered: the lower part of a stack split at a height step
             (:func:`phyagentos.perception.split.split_cluster`) with a part resting on it:
             its top and its far side are hidden under that part, so its footprint is a lower
@@ -87,6 +90,7 @@ class Detection:
     low_m: float = 0.0
     cut_direction: np.ndarray | None = None
     covered: bool = False
+    body: RoundBody | None = None
 
     @property
     def truncated(self) -> bool:
@@ -307,7 +311,7 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
         position=position, yaw=float(yaw), half_extents=half, shape=shape, colour_rgb=colour,
         colour_lab=med_lab, points=int(cloud.points.shape[0]), cameras=len(per_var),
         position_std_m=pos_std, yaw_std_rad=yaw_std, view_agreement=agreement, bottom_m=bottom,
-        low_m=low,
+        low_m=low, body=None if shape == "sphere" else round_body(cloud.points[:, :2], centre_xy),
     )
 
 

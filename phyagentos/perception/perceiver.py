@@ -108,6 +108,7 @@ from phyagentos.perception.fixtures import (
     knob_reading,
 )
 from phyagentos.perception.frames import CameraFrame, Proprioception
+from phyagentos.perception.handle import RoundBody
 from phyagentos.perception.relations import (
     _footprint_margin,
     holding_evidence,
@@ -332,6 +333,9 @@ class Perceiver:
                     d[k] = np.asarray(d[k], dtype=float).tolist()
             d["cameras"] = list(d.get("cameras") or ())
             d["shape_votes"] = {str(k): int(v) for k, v in (d.get("shape_votes") or {}).items()}
+            if t.body is not None:
+                d["body"] = {"axis_xy": t.body.axis_xy.tolist(), "radius_m": float(t.body.radius_m),
+                             "handle_xy": t.body.handle_xy.tolist()}
             tracks[name] = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in d.items()}
         return {"tracks": tracks, "baseline_n": self._baseline_n, "held": self._held,
                 "grasp_height_m": self._grasp_height_m, "fixtures": self.export_fixtures()}
@@ -387,8 +391,12 @@ class Perceiver:
                     d[k] = np.asarray(d[k], dtype=float)
             d["cameras"] = tuple(d.get("cameras") or ())
             try:
+                if d.get("body") is not None:
+                    b = d["body"]
+                    d["body"] = RoundBody(np.asarray(b["axis_xy"], float), float(b["radius_m"]),
+                                          np.asarray(b["handle_xy"], float))
                 tracks[name] = Track(**d)
-            except TypeError as exc:
+            except (TypeError, KeyError, ValueError) as exc:
                 raise PerceptionError(f"perception state: track {name!r} has an unexpected layout: {exc}") from None
         self.tracks = tracks
         self.restore_fixtures(state.get("fixtures") or {})
@@ -656,6 +664,7 @@ class Perceiver:
                     extra.update(remembered=True, occluded_in=list(remembered[name]), last_seen_s=_r(t.last_seen_s, 6))
                     conf *= REMEMBERED_CONFIDENCE
                 std = math.sqrt(t.predicted_var(stamp, cfg))
+                extra.update(self._body_attributes(name, t.position, _pose(t.position, t.yaw), t.body, std))
                 ent = self._entity(name, "object", t.position, t.yaw, t.half_extents, t.shape, t.colour_rgb,
                                    conf, std, math.sqrt(t.var_yaw), t.points, () if name in remembered else t.cameras,
                                    evidence_paths, source="remembered" if name in remembered else "perceived",
@@ -673,7 +682,9 @@ class Perceiver:
             entities.append(self._entity(name, "unknown", det.position, det.yaw, det.half_extents, det.shape,
                                          det.colour_rgb, conf, det.position_std_m, det.yaw_std_rad, det.points,
                                          det_cams[i], evidence_paths, source="perceived",
-                                         extra={"ambiguous": i in assoc.ambiguous}))
+                                         extra={"ambiguous": i in assoc.ambiguous,
+                                                **self._body_attributes(name, det.position, np.eye(4), det.body,
+                                                                        det.position_std_m)}))
             geo[name] = _geo(det.position, det.yaw, det.half_extents, det.shape, det.bottom_m, plane,
                              det.position_std_m)
         for ent in entities:
@@ -1082,10 +1093,33 @@ class Perceiver:
         pos = T[:3, 3]
         yaw = math.atan2(T[1, 0], T[0, 0]) if t.grasp_offset is not None else t.yaw
         std = math.sqrt(t.var_xy + 0.005 ** 2)
+        body = self._body_attributes(t.name, pos, T, t.body if t.grasp_offset is not None else None, std)
         ent = self._entity(t.name, "object", pos, yaw, t.half_extents, t.shape, t.colour_rgb,
                            hold_conf * max(t.confidence, 0.5), std, math.sqrt(t.var_yaw) + 0.1, 0, (), None,
-                           source="proprioception", extra={"held": True, "last_seen_s": _r(t.last_seen_s, 6)})
+                           source="proprioception", extra={"held": True, "last_seen_s": _r(t.last_seen_s, 6), **body})
         return ent
+
+    def _body_attributes(self, name: str, position: np.ndarray, T_obj: np.ndarray, body: RoundBody | None,
+                         std: float) -> dict:
+        """An object's round body and handle as entity attributes: ``axis_xy`` (2,) and
+        ``handle_xy`` (2,) world (m; a unit vector) when ``body`` (in the object's frame, the
+        object's pose ``T_obj`` (4, 4) world) is known; and, for an object declared with
+        ``handle_origin_m``, where its model's origin stands: ``origin_xy`` (2,) world, m, the
+        axis that far towards the handle, with ``origin_std_m`` (1 sigma, m) -- the entity's
+        centre ``position`` with the handle's offset added to its uncertainty when the handle
+        was not seen (:mod:`phyagentos.perception.handle`)."""
+        out: dict = {}
+        seen = None if body is None else body.placed(T_obj)
+        if seen is not None:
+            out.update(axis_xy=_r(seen.axis_xy), handle_xy=_r(seen.handle_xy))
+        desc = next((d for d in self.declared if d.name == name), None)
+        off = None if desc is None else desc.handle_origin_m
+        if off is not None:
+            if seen is not None:
+                out.update(origin_xy=_r(seen.axis_xy + off * seen.handle_xy), origin_std_m=_r(std, 5))
+            else:
+                out.update(origin_xy=_r(np.asarray(position, float)[:2]), origin_std_m=_r(math.hypot(std, off), 5))
+        return out
 
     def _robot_entities(self, proprio: Proprioception) -> list[dict]:
         T = proprio.tcp_pose
@@ -1192,10 +1226,7 @@ class Perceiver:
             self.tracks[other].held = False
         t = self.tracks[name]
         if not t.held:
-            T_obj = np.eye(4)
-            T_obj[:3, 3] = t.position
-            c, s = math.cos(t.yaw), math.sin(t.yaw)
-            T_obj[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+            T_obj = _pose(t.position, t.yaw)
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
             if np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
@@ -1341,6 +1372,15 @@ def _completed(det: Detection, look: ObjectDescriptor, points_xy: np.ndarray) ->
     half = np.array([radius, radius, det.half_extents[2]])
     return replace(det, position=position, half_extents=half, yaw=0.0, shape="cylinder",
                    position_std_m=max(det.position_std_m, COMPLETED_STD_M))
+
+
+def _pose(position: np.ndarray, yaw: float) -> np.ndarray:
+    """(4, 4) world pose of an object at ``position`` (3,) m, turned ``yaw`` rad about world z."""
+    T = np.eye(4)
+    c, s = math.cos(yaw), math.sin(yaw)
+    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    T[:3, 3] = position
+    return T
 
 
 def _detection_confidence(det: Detection) -> float:

@@ -18,6 +18,7 @@ import numpy as np
 
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import Detection
+from phyagentos.perception.handle import RoundBody
 
 __all__ = ["REMEMBERED_CONFIDENCE", "Track", "yaw_period"]
 
@@ -74,6 +75,9 @@ class Track:
     #: top higher than that stands on something hidden under it (a plate under the mug set on
     #: it); None for an object never let go.
     known_height_m: float | None = None
+    #: The round body with a handle its latest sighting showed, in the object's frame (its
+    #: position and yaw: :meth:`~phyagentos.perception.handle.RoundBody.local`), else None.
+    body: RoundBody | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
@@ -82,7 +86,8 @@ class Track:
         return cls(name=name, position=det.position.copy(), var_xy=det.position_std_m ** 2, yaw=det.yaw,
                    var_yaw=det.yaw_std_rad ** 2, half_extents=det.half_extents.copy(), shape=det.shape,
                    colour_rgb=det.colour_rgb.copy(), points=det.points, confidence=confidence,
-                   last_seen_s=stamp_s, bottom_m=det.bottom_m, cameras=cameras, shape_votes={det.shape: 1})
+                   last_seen_s=stamp_s, bottom_m=det.bottom_m, cameras=cameras, shape_votes={det.shape: 1},
+                   body=None if det.body is None else det.body.local(det.position[:2], det.yaw))
 
     def predicted_var(self, stamp_s: float, config: PerceptionConfig) -> float:
         """Position variance (m^2) grown by the random walk since the last sighting."""
@@ -133,6 +138,8 @@ class Track:
         self.half_extents = (n * self.half_extents + det.half_extents) / (n + 1)
         self.colour_rgb = (n * self.colour_rgb + det.colour_rgb) / (n + 1)
         self.points, self.bottom_m, self.cameras = det.points, det.bottom_m, cameras
+        if det.body is not None:  # the latest sighting of it; one that missed the handle keeps the last
+            self.body = det.body.local(det.position[:2], det.yaw)
         # agreeing sightings raise confidence: 1 - (1 - c_now)(1 - c_before / 2)
         self.confidence = max(1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence), keep)
         self.last_seen_s = stamp_s

@@ -38,7 +38,7 @@ from .grasp_sense import plan_grasp
 from .motion import PLANNING_MARGIN_M, clear_ik
 from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
-__all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "declared_class"]
+__all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "origin_pose", "declared_class"]
 
 
 def declared_class(target, name: str, entity: dict | None = None) -> str | None:
@@ -76,6 +76,23 @@ def entity_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
             return T, np.asarray(ent.get("size") or (0.0, 0.0, 0.0), dtype=float)
     seen = sorted(e["name"] for e in snapshot.get("entities", []))
     raise PrimitiveFailure("perception.not_found", f"{name!r} is not in the observation; seen: {seen}")
+
+
+def origin_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`entity_pose` of entity ``name`` with its position moved, on the ground plane, to
+    its model origin where perception gives one (``attributes.origin_xy``, (2,) world m: a
+    mug's, its cup's axis moved towards its handle, :mod:`phyagentos.perception.handle`): the
+    point a place sets on the spot, as the verifier's ``on`` judges it.
+
+    Raises:
+        PrimitiveFailure: ``perception.not_found`` listing the entities seen.
+    """
+    T, half = entity_pose(snapshot, name)
+    ent = next(e for e in snapshot.get("entities", []) if e["name"] == name)
+    origin = (ent.get("attributes") or {}).get("origin_xy")
+    if isinstance(origin, (list, tuple)) and len(origin) == 2:
+        T[:2, 3] = [float(origin[0]), float(origin[1])]
+    return T, half
 
 
 class Observe(Primitive):
@@ -551,7 +568,9 @@ class ComputePlace(Primitive):
     def step(self):
         snapshot = self.get(self.snapshot_key)
         T_region, region_half = entity_pose(snapshot, self.region)
-        T_obj, half = entity_pose(snapshot, self.object)
+        # on or in it: the object's origin goes to the centre (a mug's, not its cup's centre);
+        # beside it: its footprint's centre, clear of the landmark by its half extents
+        T_obj, half = (entity_pose if self.beside is not None else origin_pose)(snapshot, self.object)
         T_tcp_obj = np.linalg.inv(self.ctx.target.tcp_pose()) @ T_obj
         # A region is a patch on its support surface (its z: 0 on the tabletop, a burner's
         # height in the kitchen); an object used as the support (stacking), or a perceived

@@ -17,7 +17,7 @@ import numpy as np
 from phyagentos.motion.grasp import place_pose, top_down_rotation
 
 from .base import Primitive, PrimitiveFailure
-from .perception import entity_pose
+from .perception import entity_pose, origin_pose
 
 __all__ = ["ComputePlaceAt", "slot_grid", "slot_offset"]
 
@@ -93,7 +93,7 @@ class ComputePlaceAt(Primitive):
     def step(self):
         snapshot = self.get(self.snapshot_key)
         T_region, region_half = entity_pose(snapshot, self.region)
-        T_obj, half = entity_pose(snapshot, self.object)
+        T_obj, half = origin_pose(snapshot, self.object)  # the object's origin goes to the spot
         offset = self.offset_m if self.offset_m is not None else slot_offset(region_half, self.slot, self.slots)
         T_tcp_obj = np.linalg.inv(self.ctx.target.tcp_pose()) @ T_obj
         # the footprint of the object as it will stand: the place pose is top-down at yaw 0, so

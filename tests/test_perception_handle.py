@@ -1,0 +1,75 @@
+"""A round body with a handle (``phyagentos.perception.handle``): a mug's cup axis and handle
+from its footprint's points; a plain round thing or a box shows none. Synthetic footprints
+sampled as a depth camera sees them from above (a rim ring, the inside of the wall, a handle
+loop), with depth noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from phyagentos.perception.handle import RoundBody, round_body
+
+
+def _mug(axis=(0.10, -0.05), r=0.042, handle_deg=30.0, handle_len=0.028, noise=0.0008, seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(0.0, 2.0 * math.pi, 1500)
+    rad = r - rng.uniform(0.0, 0.008, a.size)  # the rim and the inside of its wall
+    ring = np.column_stack([np.cos(a), np.sin(a)]) * rad[:, None]
+    u = np.array([math.cos(math.radians(handle_deg)), math.sin(math.radians(handle_deg))])
+    v = np.array([-u[1], u[0]])
+    t = rng.uniform(r, r + handle_len, 250)  # the handle's loop, 1.2 cm wide
+    handle = t[:, None] * u + rng.uniform(-0.006, 0.006, t.size)[:, None] * v
+    pts = np.vstack([ring, handle]) + np.asarray(axis)
+    return pts + rng.normal(0.0, noise, pts.shape)
+
+
+def test_a_mugs_axis_and_handle_come_from_its_outline_not_its_rectangles_centre():
+    axis = np.array([0.10, -0.05])
+    pts = _mug(axis=axis, handle_deg=30.0)
+    rect_guess = 0.5 * (pts.min(axis=0) + pts.max(axis=0))  # pulled towards the handle
+    assert np.linalg.norm(rect_guess - axis) > 0.008
+    body = round_body(pts, rect_guess)
+    assert body is not None
+    assert np.linalg.norm(body.axis_xy - axis) < 0.002
+    assert abs(body.radius_m - 0.042) < 0.004
+    assert math.degrees(math.acos(float(body.handle_xy @ [math.cos(math.radians(30)), math.sin(math.radians(30))]))) < 5
+
+
+@pytest.mark.parametrize("deg", [-150.0, -60.0, 95.0, 180.0])
+def test_the_handle_is_found_whichever_way_it_points(deg):
+    body = round_body(_mug(handle_deg=deg, seed=3), np.array([0.10, -0.05]))
+    assert body is not None
+    want = np.array([math.cos(math.radians(deg)), math.sin(math.radians(deg))])
+    assert float(body.handle_xy @ want) > math.cos(math.radians(5))
+
+
+def test_a_round_thing_without_a_handle_and_a_box_show_none():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0.0, 2.0 * math.pi, 1500)
+    bowl = np.column_stack([np.cos(a), np.sin(a)]) * rng.uniform(0.045, 0.054, a.size)[:, None]
+    assert round_body(bowl, np.zeros(2)) is None
+    box = rng.uniform(-1.0, 1.0, (1500, 2)) * [0.04, 0.04]  # a square box top, 8 cm a side
+    assert round_body(box, np.zeros(2)) is None
+    carton = rng.uniform(-1.0, 1.0, (1500, 2)) * [0.06, 0.025]
+    assert round_body(carton, np.zeros(2)) is None
+    assert round_body(bowl[:10], np.zeros(2)) is None  # too few points
+
+
+def test_a_body_in_its_objects_frame_follows_the_object_when_it_moves():
+    body = RoundBody(np.array([0.30, 0.10]), 0.04, np.array([1.0, 0.0]))
+    local = body.local(np.array([0.31, 0.10]), yaw=math.pi / 2)  # the object's centre 1 cm towards the handle
+    np.testing.assert_allclose(local.placed(_pose((0.31, 0.10), math.pi / 2)).axis_xy, body.axis_xy, atol=1e-12)
+    moved = local.placed(_pose((0.0, 0.5), math.pi))  # the object turned a half turn more, elsewhere
+    np.testing.assert_allclose(moved.axis_xy, [0.0, 0.49], atol=1e-12)
+    np.testing.assert_allclose(moved.handle_xy, [0.0, 1.0], atol=1e-12)
+
+
+def _pose(xy, yaw) -> np.ndarray:
+    T = np.eye(4)
+    c, s = math.cos(yaw), math.sin(yaw)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:2, 3] = xy
+    return T

@@ -73,3 +73,24 @@ def _pose(xy, yaw) -> np.ndarray:
     T[:2, :2] = [[c, -s], [s, c]]
     T[:2, 3] = xy
     return T
+
+
+def test_a_track_keeps_a_hidden_handle_where_it_last_pointed_when_its_round_sighting_resets_the_yaw():
+    """A mug let go turned a quarter turn (its track's yaw from the hand) is seen next with the
+    handle behind its cup: a round sighting (yaw 0) keeps the handle pointing where it did."""
+    from phyagentos.perception import PerceptionConfig
+    from phyagentos.perception.detect import Detection
+    from phyagentos.perception.tracks import Track
+
+    def det(body=None):
+        return Detection(position=np.array([0.30, 0.10, 0.05]), yaw=0.0, half_extents=np.array([0.045, 0.045, 0.05]),
+                         shape="cylinder", colour_rgb=np.full(3, 0.5), colour_lab=np.zeros(3), points=800, cameras=2,
+                         position_std_m=0.003, yaw_std_rad=math.pi, view_agreement=1.0, bottom_m=0.0, body=body)
+
+    seen = RoundBody(np.array([0.29, 0.10]), 0.042, np.array([1.0, 0.0]))
+    t = Track.start("mug_1", det(seen), 0.9, 0.0, ("agentview",))
+    t.yaw = math.pi / 2  # let go a quarter turn round: the handle now points along +y
+    assert t.update(det(), 0.9, 1.0, ("agentview",), PerceptionConfig.default())
+    world = t.body.placed(_pose(t.position[:2], t.yaw))
+    np.testing.assert_allclose(world.handle_xy, [0.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(world.axis_xy - t.position[:2], [0.0, -0.01], atol=1e-9)

@@ -86,6 +86,13 @@ class RoundBody:
         R_t = np.array([[c, s], [-s, c]])
         return RoundBody(R_t @ (self.axis_xy - np.asarray(position_xy, float)[:2]), self.radius_m, R_t @ self.handle_xy)
 
+    def turned(self, angle_rad: float) -> "RoundBody":
+        """This body turned ``angle_rad`` (rad) about its frame's z axis (re-expressed in a frame
+        turned by ``-angle_rad``)."""
+        c, s = math.cos(angle_rad), math.sin(angle_rad)
+        R = np.array([[c, -s], [s, c]])
+        return RoundBody(R @ self.axis_xy, self.radius_m, R @ self.handle_xy)
+
     def placed(self, T: np.ndarray) -> "RoundBody":
         """This body (given in an object's frame) in the world, the object's pose being ``T``
         ((4, 4) world from object); the handle's direction as it shows on the ground plane."""

@@ -1211,8 +1211,10 @@ class Perceiver:
                 t.held = False  # released (or lost): unknown until seen again
                 t.released_s = stamp
                 t.inside_of = None
-                if t.grasp_offset is not None:  # where the hand let it go (a prior for the next sighting)
-                    t.position = (proprio.tcp_pose @ t.grasp_offset)[:3, 3].copy()
+                if t.grasp_offset is not None:  # where and how turned the hand let it go (a prior for the next sighting)
+                    T_let = proprio.tcp_pose @ t.grasp_offset
+                    t.position = T_let[:3, 3].copy()
+                    t.yaw = math.atan2(T_let[1, 0], T_let[0, 0])
                     t.placed_xy = t.position[:2].copy()
                 t.var_xy = max(t.var_xy, 0.03 ** 2)
                 t.confidence *= 0.5

@@ -120,6 +120,7 @@ class Track:
             fresh.known_height_m = self.known_height_m  # moved or taken, it is as tall as it was
             self.__dict__.update(fresh.__dict__)
             return False
+        yaw_before = self.yaw
         k = var_p / (var_p + var_m)
         self.position[:2] = self.position[:2] + k * (det.position[:2] - self.position[:2])
         self.position[2] = det.position[2]
@@ -138,8 +139,10 @@ class Track:
         self.half_extents = (n * self.half_extents + det.half_extents) / (n + 1)
         self.colour_rgb = (n * self.colour_rgb + det.colour_rgb) / (n + 1)
         self.points, self.bottom_m, self.cameras = det.points, det.bottom_m, cameras
-        if det.body is not None:  # the latest sighting of it; one that missed the handle keeps the last
+        if det.body is not None:  # the latest sighting of it
             self.body = det.body.local(det.position[:2], det.yaw)
+        elif self.body is not None:  # one that missed the handle keeps the last, turned as it stood
+            self.body = self.body.turned(yaw_before - self.yaw)
         # agreeing sightings raise confidence: 1 - (1 - c_now)(1 - c_before / 2)
         self.confidence = max(1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence), keep)
         self.last_seen_s = stamp_s

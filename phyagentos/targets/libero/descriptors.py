@@ -84,9 +84,9 @@ GENERATOR_SEED = 12345
 SHAPE_AGREEMENT = 0.8
 #: A category gets ``handle_origin_m`` only when at least this fraction of its labelled
 #: segments show a handle. A mug's handle pointing away from the scene camera hides behind its
-#: cup (LIBERO-10 task 4's mugs showed it in 5 of 9 generated sightings); a bowl's outline,
-#: now and then merged with a neighbour's edge, showed one in none of 30, an unnamed segment in
-#: 2 of 24 (generated LIBERO-10, libero_spatial and libero_object scenes, seeds 500-502).
+#: cup (LIBERO-10 task 4's mugs showed it in 5 of 9 sightings on these scenes, every one of 15 on
+#: the sampler's scenes, seeds 500-502); the black bowl showed one in none of 9, unnamed segments
+#: in 2 of 51 (the sampler's libero_goal, libero_spatial and LIBERO-10 scenes, seeds 500-502).
 HANDLE_AGREEMENT = 0.3
 _AWAY = 20.0  # m: where objects that found no free spot wait (far outside every camera's view)
 #: A segment is an object's look only when its footprint's long side is at most this factor

@@ -587,8 +587,17 @@ class Perceiver:
                 t = self.tracks[name]
                 # a weak sighting where a confident track stands (part of it, the rest hidden or
                 # out of the frame) says no less than not seeing it at all would (remembered)
+                # the handle as the hand turned it (about the object's centre, world axes), for a
+                # sighting that misses it
+                carried = None
+                if t.held and t.body is not None and t.grasp_offset is not None:
+                    turn = proprio.tcp_pose @ t.grasp_offset
+                    turn[:3, 3] = 0.0
+                    carried = t.body.placed(turn)
                 t.update(det, conf, stamp, det_cams[i], cfg,
                          weak_below=0.0 if t.released_s is not None else cfg.relations.min_confidence)
+                if carried is not None and det.body is None:
+                    t.body = carried.local(np.zeros(2), t.yaw)
                 t.held = False
                 away = placed is not None and float(np.linalg.norm(t.position[:2] - placed)) > cfg.holding.capture_radius_m
                 # kept while the object is where it was let go (or seen there only weakly)

@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
-from phyagentos.perception.handle import RoundBody, round_body
+from phyagentos.perception.handle import UPPER_FRACTION, RoundBody, round_body
 
 __all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect", "detect_clusters", "stack", "resting_at"]
 
@@ -311,7 +311,8 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
         position=position, yaw=float(yaw), half_extents=half, shape=shape, colour_rgb=colour,
         colour_lab=med_lab, points=int(cloud.points.shape[0]), cameras=len(per_var),
         position_std_m=pos_std, yaw_std_rad=yaw_std, view_agreement=agreement, bottom_m=bottom,
-        low_m=low, body=None if shape == "sphere" else round_body(cloud.points[:, :2], centre_xy),
+        low_m=low, body=None if shape == "sphere" else round_body(cloud.points[h >= low + UPPER_FRACTION * (top - low), :2],
+                                                                  centre_xy),
     )
 
 

@@ -34,6 +34,7 @@ import numpy as np
 __all__ = [
     "RoundBody",
     "round_body",
+    "UPPER_FRACTION",
     "OUTLINE_BINS",
     "CIRCLE_TOL_M",
     "ROUNDS",
@@ -44,6 +45,10 @@ __all__ = [
     "HANDLE_SPAN_FRACTION",
 ]
 
+#: The outline is taken from the points of a segment higher than this fraction of its height
+#: above its lowest (2nd percentile): a mug set on a plate, split from it, keeps a ring of the
+#: plate's rim at the plate's height, which a circle through the outline would follow.
+UPPER_FRACTION = 0.4
 #: Angular sectors of the outline (10 degrees each).
 OUTLINE_BINS = 36
 #: An outline sector lies on the circle within this (or 2.5 times the sectors' median

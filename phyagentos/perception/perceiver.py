@@ -583,10 +583,17 @@ class Perceiver:
                 log.debug("perception: %s seen weakly (confidence %.2f) at %s, away from its confident track: "
                           "the track kept, the segment left unknown", name, conf, _r(det.position))
                 continue
-            if name in self.tracks:
+            if name in self.tracks and det.truncated and not self.tracks[name].held \
+                    and not self.tracks[name].within_gate(det, stamp, cfg):
+                # a part at the border, admissible where the object is (_truncated_where_tracked),
+                # completed off its track: it confirms the object where it was and never moves it
+                # (a mug on a plate half out of the frame, completed 2.8 cm off where the wrist
+                # camera had seen it whole)
+                log.debug("perception: %s seen in part at the border, completed %.3f m from its track: kept there",
+                          name, float(np.linalg.norm(det.position[:2] - self.tracks[name].position[:2])))
+                self.tracks[name].last_seen_s = stamp
+            elif name in self.tracks:
                 t = self.tracks[name]
-                # a weak sighting where a confident track stands (part of it, the rest hidden or
-                # out of the frame) says no less than not seeing it at all would (remembered)
                 # the handle as the hand turned it (about the object's centre, world axes), for a
                 # sighting that misses it
                 carried = None
@@ -594,6 +601,8 @@ class Perceiver:
                     turn = proprio.tcp_pose @ t.grasp_offset
                     turn[:3, 3] = 0.0
                     carried = t.body.placed(turn)
+                # a weak sighting where a confident track stands (part of it, the rest hidden or
+                # out of the frame) says no less than not seeing it at all would (remembered)
                 t.update(det, conf, stamp, det_cams[i], cfg,
                          weak_below=0.0 if t.released_s is not None else cfg.relations.min_confidence)
                 if carried is not None and det.body is None:

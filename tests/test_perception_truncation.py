@@ -142,6 +142,24 @@ def test_a_sliver_at_the_border_alone_names_nothing_but_confirms_a_tracked_objec
 
 
 @pytest.mark.sim
+def test_a_part_at_the_border_completed_off_a_confident_track_never_moves_it(scene):
+    """The wrist camera saw the plate whole; the scene camera, with half of it out of the frame,
+    completes it 2 cm away (LIBERO-10 task 4: a mug on the left plate): the part confirms the
+    plate where it was and does not restart its track there."""
+    from phyagentos.perception.synthetic import SyntheticObject
+
+    scene.place([SyntheticObject("plate", "cylinder", (0.07, 0.07, 0.012), (0.55, 0.40), rgba=PINK)])
+    p = Perceiver(PerceptionConfig.default(), [PLATE])
+    _observe(scene, p, cameras=("front", "side"))
+    t = p.tracks["plate"]
+    t.position[:2] = (0.55, 0.38)  # where the whole sighting put it, 2 cm from where the part completes it
+    t.var_xy = 0.002 ** 2
+    ents, _ = _observe(scene, p, stamp_s=0.5)
+    assert ents["plate"]["attributes"]["confidence"] > 0.5
+    assert np.allclose(p.tracks["plate"].position[:2], (0.55, 0.38), atol=1e-9)
+
+
+@pytest.mark.sim
 def test_the_right_plate_is_told_from_the_left_one_it_took(scene):
     from phyagentos.perception.synthetic import SyntheticObject
 

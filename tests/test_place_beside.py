@@ -98,3 +98,23 @@ def test_compute_place_sets_the_object_down_clear_of_the_landmark_on_the_viewers
         _compute_place(franka, _snapshot(tcp, None), beside="right")
     with pytest.raises(ValueError, match="beside must be"):
         _compute_place(franka, _snapshot(tcp, None), beside="behind")
+
+
+def test_a_held_mug_is_set_down_midway_between_its_model_origin_and_its_cups_axis_on_the_centre(franka):
+    """``on`` judges a mug by its model origin (``origin_xy``); a cup set with that origin on a
+    plate's centre leans on the rim (its axis 1.65 cm off): the place aims midway. Beside a
+    landmark, the footprint's centre keeps its place."""
+    tcp = np.asarray(franka.tcp_pose())
+    plain, _ = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]))
+    snap = _snapshot(tcp, [0.0, 1.0])
+    p = snap["entities"][1]["position"]
+    snap["entities"][1]["attributes"] = {"axis_xy": [p[0] - 0.004, p[1]], "origin_xy": [p[0] + 0.0125, p[1]]}
+    mug, _ = _compute_place(franka, snap)
+    # the point midway (4.25 mm towards +x from the centre) goes to the plate's centre: the hand 4.25 mm back
+    assert (mug["place_pose"][:3, 3] - plain["place_pose"][:3, 3]) == pytest.approx([-0.00425, 0.0, 0.0], abs=1e-5)
+    del snap["entities"][1]["attributes"]["axis_xy"]  # no axis: the origin itself
+    origin_only, _ = _compute_place(franka, snap)
+    assert (origin_only["place_pose"][:3, 3] - plain["place_pose"][:3, 3]) == pytest.approx([-0.0125, 0.0, 0.0], abs=1e-5)
+    beside, _ = _compute_place(franka, snap, beside="right")
+    plain_beside, _ = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), beside="right")
+    assert beside["place_pose"][:3, 3] == pytest.approx(plain_beside["place_pose"][:3, 3], abs=1e-9)

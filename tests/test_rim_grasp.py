@@ -429,3 +429,18 @@ def test_compute_grasp_takes_a_mug_by_its_rim_away_from_the_handle_and_expects_i
     assert float(np.linalg.norm(d)) == pytest.approx(MUG[1] - DEFAULT_HANDLED_WALL_M / 2, abs=1e-6)
     assert franka.runtime_notes["planned_grasp"] == {"object": "red_coffee_mug_1", "width_m": DEFAULT_HANDLED_WALL_M,
                                                      "kind": "rim", "preshape_m": None}
+
+
+def test_a_round_mug_whose_handle_was_seen_is_taken_across_the_handle_about_its_cups_axis(franka):
+    """Seen round (a cylinder, yaw 0), the footprint says nothing of where the handle is: the
+    rim point may land on it. With the cup's axis and the handle's direction perceived
+    (``perception.handle``), the rim points lie across the handle, the cup's radius from its axis."""
+    half = (0.048, 0.048, 0.062)
+    ent = _entity("porcelain_mug_1", "porcelain_mug", "cylinder", half)
+    ent["attributes"].update(axis_xy=[0.457, -0.25], handle_xy=[1.0, 0.0])  # the centre 7 mm towards the handle (+x)
+    board, records = _run_compute_grasp(franka, ent)
+    [rec] = records
+    assert rec["grasp_kind"] == "rim" and rec.get("about_axis") is True
+    d = board["grasp_pose"][:2, 3] - np.array([0.457, -0.25])
+    assert abs(d[1]) / np.linalg.norm(d) >= math.cos(PARTLY_SEEN_RIM_ANGLE_RAD) - 1e-9  # across the handle's +x
+    assert float(np.linalg.norm(d)) == pytest.approx(half[1] - DEFAULT_HANDLED_WALL_M / 2, abs=1e-6)

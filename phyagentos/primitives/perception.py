@@ -78,20 +78,47 @@ def entity_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     raise PrimitiveFailure("perception.not_found", f"{name!r} is not in the observation; seen: {seen}")
 
 
+def _body_frame(T_obj: np.ndarray, ent: dict) -> np.ndarray | None:
+    """``T_obj`` ((4, 4) world) moved onto the entity's round body's axis (``attributes.axis_xy``)
+    and turned about world z so that its x axis points to the handle (``attributes.handle_xy``):
+    a mug's frame for a rim grasp across its handle; None when perception gave neither."""
+    a = ent.get("attributes") or {}
+    axis, handle = a.get("axis_xy"), a.get("handle_xy")
+    if not (isinstance(axis, (list, tuple)) and len(axis) == 2 and isinstance(handle, (list, tuple)) and len(handle) == 2):
+        return None
+    u = np.array([float(handle[0]), float(handle[1]), 0.0])
+    n = float(np.linalg.norm(u))
+    if n <= 0.0:
+        return None
+    u /= n
+    T = np.array(T_obj, dtype=float)
+    T[:3, :3] = np.column_stack([u, [-u[1], u[0], 0.0], [0.0, 0.0, 1.0]])
+    T[:2, 3] = [float(axis[0]), float(axis[1])]
+    return T
+
+
 def origin_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     """:func:`entity_pose` of entity ``name`` with its position moved, on the ground plane, to
-    its model origin where perception gives one (``attributes.origin_xy``, (2,) world m: a
-    mug's, its cup's axis moved towards its handle, :mod:`phyagentos.perception.handle`): the
-    point a place sets on the spot, as the verifier's ``on`` judges it.
+    the point a place sets on the spot: for an object whose model origin perception gives
+    (``attributes.origin_xy``, (2,) world m: a mug's, its cup's axis moved towards its handle,
+    :mod:`phyagentos.perception.handle`), midway between that origin and its body's axis
+    (``attributes.axis_xy``) -- the verifier's ``on`` judges the origin, and the body must
+    stand on a dish's floor, not lean on its rim: set with their origins on a plate's centre,
+    LIBERO's mugs (axis 1.65 cm away) leant 5-6 degrees on its rim, and their tops, seen 1 cm
+    off, left the verdict undecided --; the origin where the axis is not given.
 
     Raises:
         PrimitiveFailure: ``perception.not_found`` listing the entities seen.
     """
     T, half = entity_pose(snapshot, name)
     ent = next(e for e in snapshot.get("entities", []) if e["name"] == name)
-    origin = (ent.get("attributes") or {}).get("origin_xy")
+    a = ent.get("attributes") or {}
+    origin, axis = a.get("origin_xy"), a.get("axis_xy")
     if isinstance(origin, (list, tuple)) and len(origin) == 2:
-        T[:2, 3] = [float(origin[0]), float(origin[1])]
+        xy = np.array([float(origin[0]), float(origin[1])])
+        if isinstance(axis, (list, tuple)) and len(axis) == 2:
+            xy = 0.5 * (xy + np.array([float(axis[0]), float(axis[1])]))
+        T[:2, 3] = xy
     return T, half
 
 
@@ -306,7 +333,13 @@ class ComputeGrasp(Primitive):
             mug = handled(category)  # near the ends of its short side, away from its handle, as round as its body
             lo = float(min(half[0], half[1]))
             body = np.array([lo, lo, float(half[2])]) if mug else half
-            plan, extra = self._rim_plan(snapshot, T_obj, body, max_width, short_axis_of=half if mug else None)
+            short = half if mug else None
+            if mug and (turned := _body_frame(T_obj, ent)) is not None:
+                # its cup's axis and handle seen: the rim points across the handle, about the axis
+                T_obj, short = turned, np.array([lo + 1.0, lo, float(half[2])])
+                extra["about_axis"] = True
+            plan, rim = self._rim_plan(snapshot, T_obj, body, max_width, short_axis_of=short)
+            extra.update(rim)
         elif partly_seen_rim_graspable(category, shape, half, max_width_m=max_width):
             # seen in part (its far side hidden): the long side is the rim's diameter
             hi = float(max(half[0], half[1]))

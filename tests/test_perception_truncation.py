@@ -235,3 +235,24 @@ def test_an_objects_height_known_when_it_was_let_go_survives_a_restarted_track()
     moved = Detection(**{**det.__dict__, "position": det.position + [0.2, 0.0, 0.0]})
     assert t.update(moved, 0.9, 1.0, ("agentview",), cfg) is False  # seen elsewhere: restarted
     assert t.known_height_m == 0.1232 and np.allclose(t.position, moved.position)
+
+
+@pytest.mark.sim
+def test_an_object_let_go_seen_short_on_a_piece_stands_its_known_height_below_its_top(scene):
+    """LIBERO-10 task 6: the mug just set on the plate was seen 9.2 cm tall of its 12.3, stacked on
+    a piece split off below it (its handle's foot and the plate's rim), so "not on the plate".
+    Its height known from the hand, its bottom is its top less that height."""
+    from phyagentos.perception.synthetic import SyntheticObject
+
+    mug = ObjectDescriptor("mug", shape="cylinder", colour_rgb=(0.15, 0.35, 0.85), size_m=(0.08, 0.08, 0.12))
+    scene.place([SyntheticObject("piece", "box", (0.05, 0.05, 0.015), (0.55, 0.05), rgba=PINK),
+                 SyntheticObject("mug", "cylinder", (0.04, 0.04, 0.045), (0.55, 0.05), rgba=(0.15, 0.35, 0.85, 1),
+                                 z_base_m=0.03)])
+    p = Perceiver(PerceptionConfig.default(), [mug])
+    seen, _ = _observe(scene, p, cameras=("front", "side"))
+    assert seen["mug"]["position"][2] == pytest.approx(0.03 + 0.045, abs=0.006)  # as seen: on the piece
+    p.tracks["mug"].known_height_m = 0.12  # let go by the hand, 12 cm tall
+    again, _ = _observe(scene, p, stamp_s=1.0, cameras=("front", "side"))
+    top = 0.03 + 0.09
+    assert again["mug"]["position"][2] == pytest.approx(top - 0.06, abs=0.006)
+    assert again["mug"]["size"][2] == pytest.approx(0.06, abs=1e-6)

@@ -307,12 +307,14 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
         yaw_std = math.sqrt(fc.yaw_floor_rad ** 2 + (2.0 * pix_m / long_side) ** 2 / len(per_var))
     else:
         yaw_std = math.pi
+    # a round body with a handle, from the outline of the upper part (handle.UPPER_FRACTION)
+    upper = h >= low + UPPER_FRACTION * (top - low)
+    body = None if shape == "sphere" else round_body(cloud.points[upper, :2], centre_xy)
     return Detection(
         position=position, yaw=float(yaw), half_extents=half, shape=shape, colour_rgb=colour,
         colour_lab=med_lab, points=int(cloud.points.shape[0]), cameras=len(per_var),
         position_std_m=pos_std, yaw_std_rad=yaw_std, view_agreement=agreement, bottom_m=bottom,
-        low_m=low, body=None if shape == "sphere" else round_body(cloud.points[h >= low + UPPER_FRACTION * (top - low), :2],
-                                                                  centre_xy),
+        low_m=low, body=body,
     )
 
 

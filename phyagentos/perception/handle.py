@@ -3,7 +3,8 @@
 A mug's footprint is its round cup and, on one side, its handle. The minimum-area rectangle
 of its points (:func:`phyagentos.perception.detect.fit_cluster`) centres it between the two,
 0.6-0.8 cm off the cup's axis towards the handle on LIBERO's mugs, and a round fit throws the
-handle's direction away. This module finds both from the footprint's outline, RGB-D only:
+handle's direction away. This module finds both from the footprint's outline, RGB-D only
+(``fit_cluster`` passes the points of the segment's upper part, :data:`UPPER_FRACTION`):
 
 1. about a first guess of the centre, the outline is the farthest point in each of
    :data:`OUTLINE_BINS` angular sectors;

@@ -102,10 +102,10 @@ def origin_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     the point a place sets on the spot: for an object whose model origin perception gives
     (``attributes.origin_xy``, (2,) world m: a mug's, its cup's axis moved towards its handle,
     :mod:`phyagentos.perception.handle`), midway between that origin and its body's axis
-    (``attributes.axis_xy``) -- the verifier's ``on`` judges the origin, and the body must
-    stand on a dish's floor, not lean on its rim: set with their origins on a plate's centre,
-    LIBERO's mugs (axis 1.65 cm away) leant 5-6 degrees on its rim, and their tops, seen 1 cm
-    off, left the verdict undecided --; the origin where the axis is not given.
+    (``attributes.axis_xy``), or the origin where the axis is not given. The verifier's ``on``
+    judges the origin, and the body must stand on a dish's floor, not lean on its rim: set with
+    their origins on a plate's centre, LIBERO's mugs (axis 1.65 cm away) leant 5-6 degrees on
+    its rim, and their tops, seen 1 cm off, left the verdict undecided.
 
     Raises:
         PrimitiveFailure: ``perception.not_found`` listing the entities seen.
@@ -601,8 +601,9 @@ class ComputePlace(Primitive):
     def step(self):
         snapshot = self.get(self.snapshot_key)
         T_region, region_half = entity_pose(snapshot, self.region)
-        # on or in it: the object's origin goes to the centre (a mug's, not its cup's centre);
-        # beside it: its footprint's centre, clear of the landmark by its half extents
+        # on or in it: the point origin_pose names goes to the centre (a mug's: midway between its
+        # model origin and its cup's axis); beside it: its footprint's centre, clear of the
+        # landmark by its half extents
         T_obj, half = (entity_pose if self.beside is not None else origin_pose)(snapshot, self.object)
         T_tcp_obj = np.linalg.inv(self.ctx.target.tcp_pose()) @ T_obj
         # A region is a patch on its support surface (its z: 0 on the tabletop, a burner's

@@ -93,7 +93,7 @@ class ComputePlaceAt(Primitive):
     def step(self):
         snapshot = self.get(self.snapshot_key)
         T_region, region_half = entity_pose(snapshot, self.region)
-        T_obj, half = origin_pose(snapshot, self.object)  # the object's origin goes to the spot
+        T_obj, half = origin_pose(snapshot, self.object)  # the point it names goes to the spot
         offset = self.offset_m if self.offset_m is not None else slot_offset(region_half, self.slot, self.slots)
         T_tcp_obj = np.linalg.inv(self.ctx.target.tcp_pose()) @ T_obj
         # the footprint of the object as it will stand: the place pose is top-down at yaw 0, so

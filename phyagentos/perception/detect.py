@@ -32,7 +32,8 @@ from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.handle import UPPER_FRACTION, RoundBody, round_body
 
-__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "detect", "detect_clusters", "stack", "resting_at"]
+__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "with_round_body", "detect", "detect_clusters", "stack",
+           "resting_at"]
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +68,7 @@ class Detection:
             may go on beyond what was seen, so its size is a lower bound, its shape that of
             the part seen and its centre short of the object's on that side.
         body: the round body with a handle its footprint shows (a mug's cup and handle:
-            :func:`phyagentos.perception.handle.round_body`), else None.
+            :func:`with_round_body`), else None.
         covered: the lower part of a stack split at a height step
             (:func:`phyagentos.perception.split.split_cluster`) with a part resting on it:
             its top and its far side are hidden under that part, so its footprint is a lower
@@ -307,15 +308,26 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
         yaw_std = math.sqrt(fc.yaw_floor_rad ** 2 + (2.0 * pix_m / long_side) ** 2 / len(per_var))
     else:
         yaw_std = math.pi
-    # a round body with a handle, from the outline of the upper part (handle.UPPER_FRACTION)
-    upper = h >= low + UPPER_FRACTION * (top - low)
-    body = None if shape == "sphere" else round_body(cloud.points[upper, :2], centre_xy)
     return Detection(
         position=position, yaw=float(yaw), half_extents=half, shape=shape, colour_rgb=colour,
         colour_lab=med_lab, points=int(cloud.points.shape[0]), cameras=len(per_var),
         position_std_m=pos_std, yaw_std_rad=yaw_std, view_agreement=agreement, bottom_m=bottom,
-        low_m=low, body=body,
+        low_m=low,
     )
+
+
+def with_round_body(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detection:
+    """``det`` (fitted to the points ``cloud`` with their ``heights`` above the plane, m) with
+    the round body and handle its footprint shows (``Detection.body``), from the outline of its
+    upper part (:data:`phyagentos.perception.handle.UPPER_FRACTION` of its height above its
+    lowest points) about its centre; a sphere has none. Run on the final detections only (a
+    split tries hundreds of candidate parts)."""
+    if det.shape == "sphere" or heights.size < 5:
+        return det
+    top, low = (float(v) for v in np.percentile(heights, [98, 2]))
+    upper = heights >= low + UPPER_FRACTION * (top - low)
+    body = round_body(cloud.points[upper, :2], det.position[:2])
+    return det if body is None else replace(det, body=body)
 
 
 def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list[Detection]:

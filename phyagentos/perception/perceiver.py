@@ -88,7 +88,7 @@ from phyagentos.perception.cloud import (
 )
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
-from phyagentos.perception.detect import Detection, detect_clusters
+from phyagentos.perception.detect import Detection, detect_clusters, with_round_body
 from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
@@ -542,6 +542,7 @@ class Perceiver:
         strides = [cfg.stride_for(f.intrinsics.width) for f in frames]
         dets = [replace(d, cut_direction=cut) if (cut := cut_direction(cloud, idx, frames, strides)) is not None
                 else d for d, (_, idx) in zip(dets, clusters)]
+        dets = [with_round_body(d, cloud.select(idx), heights[idx]) for d, (_, idx) in zip(dets, clusters)]
         t2 = time.perf_counter()
         sensors = [f.sensor for f in frames]
         det_cams = [self._cameras_of(cloud, heights, d, sensors) for d in dets]

@@ -405,7 +405,9 @@ def _eval_on(c, initial, terminal, refs):
     # how far off the support's centre: from the object's model origin where perception gives
     # it (a mug's: its cup's axis, moved towards its handle), else from its centre
     origin = (o.get("attributes") or {}).get("origin_xy")
-    if isinstance(origin, (list, tuple)) and len(origin) == 2:
+    if not (isinstance(origin, (list, tuple)) and len(origin) == 2):
+        origin = None
+    if origin is not None:
         off = math.hypot(float(origin[0]) - s["position"][0], float(origin[1]) - s["position"][1])
         m_off = 2.0 * math.hypot(_attr(o, "origin_std_m", sigma(o)), sigma(s))
     else:
@@ -416,7 +418,7 @@ def _eval_on(c, initial, terminal, refs):
     return _band(c, refs, inside, outside, obj, f"on {support}",
                  f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
                  + (f"; its origin {off:.3f} m off the centre (reach {reach:.3f}, 2 sigma {m_off:.3f})"
-                    if isinstance(origin, (list, tuple)) and len(origin) == 2 else "")
+                    if origin is not None else "")
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))
 
 

@@ -78,22 +78,26 @@ def entity_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     raise PrimitiveFailure("perception.not_found", f"{name!r} is not in the observation; seen: {seen}")
 
 
+def _xy_attribute(ent: dict, key: str) -> np.ndarray | None:
+    """The entity's ``attributes[key]`` as a (2,) array (world x, y), or None when absent or not
+    two numbers."""
+    v = (ent.get("attributes") or {}).get(key)
+    if not (isinstance(v, (list, tuple)) and len(v) == 2):
+        return None
+    return np.array([float(v[0]), float(v[1])])
+
+
 def _body_frame(T_obj: np.ndarray, ent: dict) -> np.ndarray | None:
     """``T_obj`` ((4, 4) world) moved onto the entity's round body's axis (``attributes.axis_xy``)
     and turned about world z so that its x axis points to the handle (``attributes.handle_xy``):
     a mug's frame for a rim grasp across its handle; None when perception gave neither."""
-    a = ent.get("attributes") or {}
-    axis, handle = a.get("axis_xy"), a.get("handle_xy")
-    if not (isinstance(axis, (list, tuple)) and len(axis) == 2 and isinstance(handle, (list, tuple)) and len(handle) == 2):
+    axis, handle = _xy_attribute(ent, "axis_xy"), _xy_attribute(ent, "handle_xy")
+    if axis is None or handle is None or float(np.linalg.norm(handle)) <= 0.0:
         return None
-    u = np.array([float(handle[0]), float(handle[1]), 0.0])
-    n = float(np.linalg.norm(u))
-    if n <= 0.0:
-        return None
-    u /= n
+    u = np.array([handle[0], handle[1], 0.0]) / float(np.linalg.norm(handle))
     T = np.array(T_obj, dtype=float)
     T[:3, :3] = np.column_stack([u, [-u[1], u[0], 0.0], [0.0, 0.0, 1.0]])
-    T[:2, 3] = [float(axis[0]), float(axis[1])]
+    T[:2, 3] = axis
     return T
 
 
@@ -112,13 +116,9 @@ def origin_pose(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     """
     T, half = entity_pose(snapshot, name)
     ent = next(e for e in snapshot.get("entities", []) if e["name"] == name)
-    a = ent.get("attributes") or {}
-    origin, axis = a.get("origin_xy"), a.get("axis_xy")
-    if isinstance(origin, (list, tuple)) and len(origin) == 2:
-        xy = np.array([float(origin[0]), float(origin[1])])
-        if isinstance(axis, (list, tuple)) and len(axis) == 2:
-            xy = 0.5 * (xy + np.array([float(axis[0]), float(axis[1])]))
-        T[:2, 3] = xy
+    origin, axis = _xy_attribute(ent, "origin_xy"), _xy_attribute(ent, "axis_xy")
+    if origin is not None:
+        T[:2, 3] = origin if axis is None else 0.5 * (origin + axis)
     return T, half
 
 

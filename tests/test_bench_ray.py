@@ -32,3 +32,13 @@ def test_ray_executor_runs_the_episodes_through_the_same_session_path(tmp_path):
         states = {s.session_id: s.state for s in ws.list_sessions()}
         assert {s["session_id"]: s["state"] for s in ep["sessions"]} == states
         assert all(state in ("succeeded", "failed", "replanned") for state in states.values())
+
+
+def test_ray_workers_run_at_normal_priority_and_keep_the_gl_backend(monkeypatch):
+    # Ray starts task workers at nice 15; an episode's supervisor and runner then starve beside
+    # ordinary load (tests/test_bench_ray.py above: 308 s beside two busy loops, 57 s at nice 0).
+    from phyagentos.bench.executor import _ray_env
+
+    monkeypatch.setenv("MUJOCO_GL", "osmesa")
+    env = _ray_env()
+    assert env["RAY_worker_niceness"] == "0" and env["MUJOCO_GL"] == "osmesa"

@@ -65,6 +65,19 @@ def _local(directories: Sequence[Path], workers: int, memory: MemoryPolicy,
     return outcomes
 
 
+def _ray_env() -> dict[str, str]:
+    """Environment of the Ray workers: the GL backend's variables, and Ray's worker niceness
+    set to 0. Ray starts its task workers at nice 15 (``core_worker.cc``: "Adjusted worker
+    niceness to 15"), which suits short tasks beside a busy driver, not an episode whose
+    runner must keep its heartbeat: beside two nice-0 busy loops on this 2-core machine, the
+    two nice-15 workers of ``tests/test_bench_ray.py`` were starved for 4.5 minutes after
+    their episodes' work (308 s against 59 s beside one loop). Ray's own job manager sets
+    the same variable to 0 for its job drivers (``ray.dashboard.modules.job.job_manager``)."""
+    env = {k: v for k, v in os.environ.items() if k.startswith(("MUJOCO_", "PYOPENGL_"))}
+    env["RAY_worker_niceness"] = "0"
+    return env
+
+
 def _ray(directories: Sequence[Path], workers: int, memory: MemoryPolicy,
          on_done: Callable[[EpisodeOutcome], None]) -> list[EpisodeOutcome]:
     try:
@@ -75,8 +88,7 @@ def _ray(directories: Sequence[Path], workers: int, memory: MemoryPolicy,
     started_here = not ray.is_initialized()
     if started_here:
         # A local instance unless RAY_ADDRESS names a cluster; workers share this file system.
-        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False,
-                 runtime_env={"env_vars": {k: v for k, v in os.environ.items() if k.startswith(("MUJOCO_", "PYOPENGL_"))}})
+        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, runtime_env={"env_vars": _ray_env()})
     try:
         remote = ray.remote(num_cpus=1)(run_episode)
         refs = {remote.remote(str(d), memory=memory): d for d in directories}

@@ -71,15 +71,38 @@ def test_two_identical_bowls_or_an_uncovered_verb_are_refused_not_guessed():
         instruction_nodes("put the ketchup on the plate", goal.objects, goal.fixtures)
 
 
-def test_on_top_of_the_drawer_is_the_cabinet_top_and_into_the_drawer_is_refused():
+def test_on_top_of_the_drawer_is_the_cabinet_top_and_into_a_named_drawer_is_its_inside():
     swap = resolve_task("libero_goal_swap", 2)  # LIBERO-PRO's words for "on top of the cabinet"
     assert swap.instruction == "Put the wine bottle on the top of the drawer"
     problem = parse_bddl(swap.bddl_path)
     nodes = instruction_nodes(swap.instruction, problem.objects, problem.fixtures)
     assert nodes[1]["params"] == {"object": "wine_bottle_1", "region": "wooden_cabinet_1"}
-    for inside in ("put the bowl in the top drawer", "put the bowl into the drawer"):
-        with pytest.raises(BenchError, match="unknown_destination: the destination 'the (top )?drawer'"):
-            instruction_nodes(inside, problem.objects, problem.fixtures)
+    nodes = instruction_nodes("put the bowl in the top drawer", problem.objects, problem.fixtures)
+    assert nodes[1]["params"] == {"object": "akita_black_bowl_1", "region": "wooden_cabinet_1_top_drawer"}
+    with pytest.raises(BenchError, match="which drawer\\? \\(the top, middle or bottom drawer of one thing\\)"):
+        instruction_nodes("put the bowl into the drawer", problem.objects, problem.fixtures)
+
+
+def test_open_a_drawer_and_put_the_bowl_inside_places_it_on_that_drawers_floor():
+    goal = resolve_task("libero_goal", 3)
+    problem = parse_bddl(goal.bddl_path)
+    assert goal.language == "open the top drawer and put the bowl inside"
+    nodes = instruction_nodes(goal.language, problem.objects, problem.fixtures)
+    assert [(n["skill"], n["params"].get("object"), n["params"].get("region")) for n in nodes] == [
+        ("slide_drawer", "wooden_cabinet_1_top_drawer", None), ("pick", "akita_black_bowl_1", None),
+        ("place", "akita_black_bowl_1", "wooden_cabinet_1_top_drawer")]
+    assert nodes[1]["depends_on"] == [nodes[0]["id"]]
+    assert nodes[2]["accept"] == [{"on": {"object": "akita_black_bowl_1", "support": "wooden_cabinet_1_top_drawer"}},
+                                  {"released": "akita_black_bowl_1"}]
+    for words in ("open the top drawer of the cabinet and put the bowl in it",  # LIBERO-90 task 8
+                  "open the top drawer and put the bowl into the drawer", "open the top drawer and put the bowl in there"):
+        assert [n["params"].get("region") for n in instruction_nodes(words, problem.objects, problem.fixtures)] == [
+            None, None, "wooden_cabinet_1_top_drawer"], words
+    # "inside" with no drawer opened just before names nothing: refused, never guessed
+    with pytest.raises(BenchError, match="says where to put nothing"):
+        instruction_nodes("turn on the stove and put the bowl inside", problem.objects, problem.fixtures)
+    with pytest.raises(BenchError, match="plate_1 is not a fixture; fixtures: "):
+        instruction_nodes("put the bowl in the top drawer of the plate", problem.objects, problem.fixtures)
 
 
 def test_turn_on_the_stove_turns_its_knob_to_mid_travel_and_turn_off_is_refused():

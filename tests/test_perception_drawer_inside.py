@@ -74,3 +74,72 @@ def test_without_the_drawers_look_the_bowl_is_not_named_rather_than_guessed():
     seen, snap = _observe(declared, meta, frames, proprio)
     assert not snap["references"]["akita_black_bowl_1"]["resolved"]
     assert "akita_black_bowl_1" not in seen and "akita_black_bowl_2" not in seen
+
+
+def _hide(frames, centre, radius_m):
+    """The frames with no depth return where the scene lies within ``radius_m`` of ``centre``
+    (3,) world m: something standing between the cameras and it, as the arm's links do."""
+    out = []
+    for f in frames:
+        K = f.intrinsics
+        vv, uu = np.mgrid[0:K.height, 0:K.width]
+        d = f.depth_m
+        pc = np.stack([(uu - K.cx) / K.fx * d, (vv - K.cy) / K.fy * d, d], axis=-1)
+        pw = pc @ f.T_world_camera[:3, :3].T + f.T_world_camera[:3, 3]
+        depth = np.where(np.linalg.norm(pw - np.asarray(centre), axis=-1) < radius_m, 0.0, d).astype(np.float32)
+        out.append(CameraFrame(f.sensor, f.frame_id, f.stamp_s, K, f.T_world_camera, f.rgb, depth))
+    return out
+
+
+def test_an_open_drawer_is_a_floor_to_set_things_in_and_the_bowl_in_it_rests_on_it():
+    """The open top drawer's entity is its floor out of the cabinet's body (its top the floor,
+    16 cm up), ``support`` true: a place the place primitive sets a held thing into; the bowl
+    standing in it is judged on it by the verifier's ``on`` on this observation alone."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    frames, proprio, meta = _recorded()
+    seen, snap = _observe(meta["declared"], meta, frames, proprio)
+    drawer = seen["wooden_cabinet_1_top_drawer"]
+    attrs = drawer["attributes"]
+    assert attrs["support"] is True and attrs["source"] == "perceived" and attrs["joint_position"] > 0.1
+    top = drawer["position"][2] + drawer["size"][2] - meta["table_z"]
+    assert top == pytest.approx(0.164, abs=0.01)
+    # turned with the cabinet: its long side across the opening axis, the handle 3.7 cm past its front
+    axis = np.asarray(attrs["axis"][:2])
+    w, _, _, z = drawer["quat_wxyz"]
+    long_side = np.array([np.cos(2 * np.arctan2(z, w)), np.sin(2 * np.arctan2(z, w))])
+    assert abs(long_side @ axis) < 0.01
+    half_along = drawer["size"][1]
+    handle = (np.asarray(attrs["grasp"]["position"][:2]) - drawer["position"][:2]) @ axis
+    assert handle - half_along == pytest.approx(0.037, abs=0.005)
+    (on,) = parse_criteria([{"on": {"object": "akita_black_bowl_1", "support": "wooden_cabinet_1_top_drawer"}}])
+    judged = evaluate(on, snap, snap)
+    assert judged.status == "satisfied", judged.reason
+    # the bowl on the cabinet's top is on no drawer
+    (twin,) = parse_criteria([{"on": {"object": "akita_black_bowl_2", "support": "wooden_cabinet_1_top_drawer"}}])
+    assert evaluate(twin, snap, snap).status == "unsatisfied"
+
+
+def test_a_drawer_whose_handle_is_hidden_is_remembered_as_a_place_never_as_a_reading():
+    """Its handle hidden (no depth return there: a held bowl or the arm in front of it), the open
+    drawer is reported where it was last read, ``remembered``, still a place to set things in, but
+    without ``joint_position``: the ``articulated`` criterion cannot judge an opening on it. The
+    memory crosses sessions with the perceiver's state."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    frames, proprio, meta = _recorded()
+    p = Perceiver(PerceptionConfig.model_validate(meta["perception_config"]), meta["declared"])
+    capsules = [RobotCapsule(p0=tuple(a), p1=tuple(b), radius_m=r) for a, b, r in meta["robot_capsules"]]
+    first = {e["name"]: e for e in p.observe(frames, proprio, robot_capsules=capsules)["entities"]}
+    read = first["wooden_cabinet_1_top_drawer"]
+    later = Perceiver(PerceptionConfig.model_validate(meta["perception_config"]), meta["declared"])
+    later.restore_state(p.export_state())
+    hidden = _hide(frames, read["attributes"]["grasp"]["position"], 0.2)
+    snap = later.observe(hidden, proprio, robot_capsules=capsules)
+    drawer = {e["name"]: e for e in snap["entities"]}["wooden_cabinet_1_top_drawer"]
+    attrs = drawer["attributes"]
+    assert attrs["source"] == "remembered" and attrs["support"] is True and "joint_position" not in attrs
+    assert drawer["position"] == pytest.approx(read["position"], abs=1e-3)  # (its height from the table fit again)
+    (opened,) = parse_criteria([{"articulated": {"object": "wooden_cabinet_1_top_drawer", "min_fraction": 0.8}}])
+    judged = evaluate(opened, snap, snap)
+    assert judged.status == "unknown" and "no joint_position" in judged.reason

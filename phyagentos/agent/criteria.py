@@ -373,6 +373,19 @@ def _still_support(initial: Mapping, terminal: Mapping, support: str) -> Mapping
     return e0 if d <= SUPPORT_STILL_M + 2.0 * math.hypot(sigma(e0), sigma(e1)) else None
 
 
+def _in_frame_of(ent: Mapping, dx: float, dy: float) -> tuple[float, float]:
+    """``(|dx'|, |dy'|)``, m: the horizontal offset (``dx``, ``dy``) world m along the x and y axes
+    of ``ent``'s box, turned by its yaw about z (``quat_wxyz``; a box turned with what it stands
+    for, such as a drawer's floor in a turned cabinet); the world axes for an unturned box."""
+    q = ent.get("quat_wxyz")
+    if not q or len(q) != 4:
+        return abs(dx), abs(dy)
+    w, x, y, z = (float(v) for v in q)
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    c, s = math.cos(yaw), math.sin(yaw)
+    return abs(c * dx + s * dy), abs(-s * dx + c * dy)
+
+
 def _eval_on(c, initial, terminal, refs):
     obj, support = c.args["object"], c.args["support"]
     still = _still_support(initial, terminal, support)
@@ -391,8 +404,7 @@ def _eval_on(c, initial, terminal, refs):
     z = o["position"][2]
     bottom = z - o["size"][2]
     sx, sy = s["size"][:2]
-    dx = abs(o["position"][0] - s["position"][0])
-    dy = abs(o["position"][1] - s["position"][1])
+    dx, dy = _in_frame_of(s, o["position"][0] - s["position"][0], o["position"][1] - s["position"][1])
     held, _ = _held(terminal, obj)
     rests = floor <= bottom <= top + REST_TOL_M + m  # floor: a height threshold, not widened by the horizontal sigma
     # down in a dish (below its rim): level only near its centre, else it leans on the rim; on a

@@ -353,6 +353,11 @@ class GoalPlanner:
             why = (f"the request names {', '.join(unknown)}, which the scene ({world.source}) does not have; "
                    f"it has {', '.join(_describe(world))}")
             return result(status="refused", refusal="unknown_object", refused_by="grounding", reason=why)
+        into_part = next((i for i in meaning.intents if i.verb == "move" and i.part_kind is not None), None)
+        if into_part is not None and not meaning.problems:
+            meaning.problems.append(("not_understood", f"{quote(into_part.text)}: into the {into_part.part} "
+                                                       f"{into_part.part_kind} of {into_part.destinations[0]}: the "
+                                                       f"model's plans place on regions and objects, not inside a part"))
         if meaning.problems:
             code = meaning.problems[0][0]
             return result(status="refused", refusal=code,

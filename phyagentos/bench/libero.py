@@ -258,6 +258,9 @@ def _planner_steps(language: str, objects: dict[str, str],
         if intent.verb in ("open", "close"):
             steps.append(_slide_step(language, intent, fixtures))
             continue
+        if intent.part_kind is not None:  # into a drawer: the drawer's own entity is the place
+            steps += [("move", obj, _drawer_name(language, intent, fixtures)) for obj in intent.movers()]
+            continue
         for obj in intent.movers():
             dests = [d for d in intent.destinations if d != obj]
             if intent.verb != "hold" and len(dests) != 1:
@@ -270,6 +273,28 @@ def _planner_steps(language: str, objects: dict[str, str],
     return steps, dict(meaning.where)
 
 
+def _drawer_name(language: str, intent, fixtures: dict[str, str] | None = None) -> str:
+    """The entity name of the drawer ``intent`` names (``wooden_cabinet_1_top_drawer``:
+    :func:`~phyagentos.perception.fixtures.drawer_entity_name`).
+
+    Raises:
+        BenchError: a part that is not a drawer, or a drawer not told by top, middle or bottom.
+    """
+    from phyagentos.perception.fixtures import drawer_entity_name  # noqa: PLC0415
+
+    obj = intent.objects[0] if intent.verb in ("open", "close") else intent.destinations[0]
+    if intent.part_kind != "drawer":
+        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: only drawers are opened and closed "
+                         f"here (a door has no skill yet)")
+    if fixtures is not None and obj not in fixtures:
+        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: {obj} is not a fixture; fixtures: "
+                         f"{format_choices(fixtures)}")
+    if intent.part is None:
+        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: which drawer of {obj}? (top, middle "
+                         f"or bottom)")
+    return drawer_entity_name(obj, intent.part)
+
+
 def _slide_step(language: str, intent, fixtures: dict[str, str]) -> tuple[str, str, str]:
     """``(open | close, fixture, drawer entity name)`` of an ``open`` / ``close`` clause.
 
@@ -280,23 +305,14 @@ def _slide_step(language: str, intent, fixtures: dict[str, str]) -> tuple[str, s
             :data:`~phyagentos.perception.fixtures.DRAWER_SIGMA_M` cannot tell from a drawer a
             centimetre out, so it could not be verified).
     """
-    from phyagentos.perception.fixtures import DRAWER_SIGMA_M, drawer_entity_name  # noqa: PLC0415
+    from phyagentos.perception.fixtures import DRAWER_SIGMA_M  # noqa: PLC0415
 
-    obj = intent.objects[0]
-    if intent.part_kind != "drawer":
-        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: only drawers are opened and closed "
-                         f"here (a door has no skill yet)")
-    if obj not in fixtures:
-        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: {obj} is not a fixture; fixtures: "
-                         f"{format_choices(fixtures)}")
-    if intent.part is None:
-        raise BenchError(f"instruction {language!r} refused: {intent.text!r}: which drawer of {obj}? (top, middle "
-                         f"or bottom)")
+    name = _drawer_name(language, intent, fixtures)
     if intent.verb == "close":
         raise BenchError(f"instruction {language!r} refused: {intent.text!r}: a drawer fully shut is not told from one "
                          f"a centimetre out by its perceived handle (1-sigma {DRAWER_SIGMA_M} m), so a close could not "
                          f"be verified against LIBERO's")
-    return intent.verb, obj, drawer_entity_name(obj, intent.part)
+    return intent.verb, intent.objects[0], name
 
 
 def instruction_nodes(language: str, objects: dict[str, str], fixtures: dict[str, str]) -> list[dict[str, Any]]:

@@ -236,6 +236,8 @@ DRAWER_CARCASS_M = 0.024
 DRAWER_OPEN_SUPPORT_M = 0.03
 
 
+
+
 def _quat_yaw(yaw: float) -> list[float]:
     return [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
 
@@ -306,6 +308,9 @@ class Perceiver:
         #: Each drawer's reading in the last observation: ``{(fixture, drawer): (opening m,
         #: points)}`` (absent: its handle not read there; never remembered).
         self.drawer_readings: dict[tuple[str, str], tuple[float, int]] = {}
+        #: (fixture, drawer) -> (opening m, stamp s) of the drawer's last reading: where an open
+        #: drawer's floor still is while the arm (or what it holds) hides its handle
+        self.drawer_seen: dict[tuple[str, str], tuple[float, float]] = {}
         self._baseline_n: float | None = None
         self._held: str | None = None
         self._grasp_height_m: float | None = None
@@ -349,12 +354,14 @@ class Perceiver:
 
     def export_fixtures(self) -> dict:
         """The fixtures' last sightings as plain data (``{name: {position, yaw, half_extents,
-        half_xy_world, top_m, points, error, found_by, turn, stamp_s, confidence}}``, m, rad,
-        s), for :meth:`restore_fixtures`."""
+        half_xy_world, top_m, points, error, found_by, turn, stamp_s, confidence, drawers}}``, m,
+        rad, s; ``drawers``: ``{drawer: [opening m, stamp s]}`` of each drawer's last reading), for
+        :meth:`restore_fixtures`."""
         return {n: {"position": s.position.tolist(), "yaw": float(s.yaw), "half_extents": s.half_extents.tolist(),
                     "half_xy_world": s.half_xy_world.tolist(), "top_m": float(s.top_m), "points": int(s.points),
                     "error": float(s.error), "found_by": s.found_by, "turn": float(s.turn), "stamp_s": float(t),
-                    "confidence": float(c)}
+                    "confidence": float(c),
+                    "drawers": {d: [float(o), float(ts)] for (f, d), (o, ts) in self.drawer_seen.items() if f == n}}
                 for n, (s, t, c) in self.fixture_tracks.items()}
 
     def restore_fixtures(self, data: Mapping[str, Any]) -> None:
@@ -366,6 +373,7 @@ class Perceiver:
         """
         looks = {f.name for f in self.fixtures}
         self.fixture_tracks = {}
+        self.drawer_seen = {}
         for name, d in (data or {}).items():
             if name not in looks:
                 continue
@@ -375,6 +383,8 @@ class Perceiver:
                                            float(d["top_m"]), int(d["points"]), float(d["error"]),
                                            str(d.get("found_by", "size")), float(d.get("turn", 0.0)))
                 self.fixture_tracks[name] = (sighting, float(d["stamp_s"]), float(d["confidence"]))
+                for drawer, (opening, ts) in (d.get("drawers") or {}).items():
+                    self.drawer_seen[(name, str(drawer))] = (float(opening), float(ts))
             except (KeyError, TypeError, ValueError) as exc:
                 raise PerceptionError(f"perception state: fixture {name!r} has an unexpected layout: {exc}") from None
 
@@ -788,6 +798,7 @@ class Perceiver:
                 reading = drawer_reading(p, heights, drawer, s.position[:2], s.turn)
                 if reading is not None:
                     self.drawer_readings[(look.name, drawer.name)] = reading
+                    self.drawer_seen[(look.name, drawer.name)] = (reading[0], stamp)
                     walls = self._drawer_points(p, heights, drawer, s, reading[0])
                     own |= walls
                     if reading[0] >= DRAWER_OPEN_SUPPORT_M:  # what stands in it rests on its floor, and is not the body's
@@ -853,7 +864,8 @@ class Perceiver:
                 & (heights > drawer.height_m - DRAWER_FLOOR_M))
 
     @staticmethod
-    def _drawer_floor(drawer: DrawerLook, s: FixtureSighting, opening: float) -> tuple[np.ndarray, np.ndarray, float]:
+    def _drawer_floor(drawer: DrawerLook, s: FixtureSighting, opening: float, *,
+                      exposed: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
         """The floor of ``drawer`` (of sighting ``s``) standing ``opening`` m out as a box
         ``(centre (2,) world m, half extents (3,) m, yaw rad)`` whose top is the floor
         (:data:`DRAWER_FLOOR_M` below the handle's centre, m above the support): across the
@@ -861,10 +873,14 @@ class Perceiver:
         front (:data:`DRAWER_FRONT_M` inward from the handle's face) back to the body's back face
         (``back_m`` behind the body's centre, shut). A pseudo-detection for stacking (a bowl in
         an open drawer rests on its floor, not on the table under it: its box would reach down
-        to the table and look like nothing declared) and the landmark of "in the top drawer"."""
+        to the table and look like nothing declared) and the landmark of "in the top drawer".
+        ``exposed``: only the part out of the body (from :data:`DRAWER_CARCASS_M` behind the shut
+        handle's centre), where a thing can be set down from above."""
         c0, u, v = drawer.frame(s.position[:2], s.turn)
         front = opening + drawer.face_m - DRAWER_FRONT_M
         back = float((np.asarray(s.position[:2]) - c0) @ u) - drawer.back_m + opening
+        if exposed:
+            back = max(back, -DRAWER_CARCASS_M)
         mid = c0 + u * 0.5 * (front + back)
         half_along = max(0.5 * (front - back), 0.005)
         half_across = max(drawer.half_width_m - DRAWER_WALL_M, 0.005)
@@ -878,17 +894,25 @@ class Perceiver:
 
     def _drawer_entities(self, look: FixtureLook, plane: Plane, stamp: float) -> list[dict]:
         """One ``kind: articulation`` entity per drawer of ``look`` whose handle was read in this
-        observation (module docstring): its box the handle where it stands, ``attributes`` the
+        observation (module docstring): its box the floor of the drawer out of the body, its top
+        the floor's surface (``attributes.support`` true: a place to set things into, "put the bowl
+        in the top drawer"; turned with the drawer, its x axis the floor's longer side), where the
+        drawer stands :data:`DRAWER_OPEN_SUPPORT_M` or more out; else the handle where it stands.
+        ``attributes`` the
         slide (``joint_type``, ``axis`` (3,) world unit opening direction, ``range_m`` [lo, hi],
         ``joint_position`` m out of shut, ``joint_position_std_m``) and the handle as its
-        ``grasp`` (``approach`` and ``entry`` into the drawer, ``closing`` vertical)."""
+        ``grasp`` (``approach`` and ``entry`` into the drawer, ``closing`` vertical). A drawer
+        read before whose handle is hidden now (by the arm, or the bowl it carries) is reported
+        where it was last read, ``source: remembered``, without ``joint_position``: a box to set
+        things into, never a reading to judge an opening by."""
         s = self.fixture_tracks[look.name][0]
         out = []
         for drawer in look.drawers:
             reading = self.drawer_readings.get((look.name, drawer.name))
-            if reading is None:
+            seen = self.drawer_seen.get((look.name, drawer.name))
+            if reading is None and seen is None:
                 continue
-            opening, points = reading
+            opening, points = reading if reading is not None else (seen[0], 0)  # type: ignore[index]
             c0, u, v = drawer.frame(s.position[:2], s.turn)
             centre = c0 + u * opening
             ground = plane.z_at(centre)
@@ -905,8 +929,18 @@ class Perceiver:
                      "joint_position": _r(opening), "joint_position_std_m": _r(DRAWER_SIGMA_M, 5),
                      "grasp": {"position": _r(pos), "quat_wxyz": _r(_quat_yaw(yaw), 5), "size": _r(half),
                                "approach": _r(into, 5), "entry": _r(into, 5), "closing": _r(closing, 5)}}
+            if reading is None:  # its handle hidden now: where it was last read; no joint reading to judge
+                assert seen is not None
+                for key in ("joint_position", "joint_position_std_m"):
+                    attrs.pop(key)
+                attrs.update(source="remembered", remembered=True, last_seen_s=_r(seen[1], 6))
+            box_pos, box_half, box_yaw = pos, half, yaw
+            if opening >= DRAWER_OPEN_SUPPORT_M:  # its floor out of the body: a place things are set into
+                mid, box_half, box_yaw = self._drawer_floor(drawer, s, opening, exposed=True)
+                box_pos = [float(mid[0]), float(mid[1]), plane.z_at(mid) + float(box_half[2])]
+                attrs["support"] = True
             out.append({"name": drawer_entity_name(look.name, drawer.name), "kind": "articulation",
-                        "position": _r(pos), "quat_wxyz": _r(_quat_yaw(yaw), 5), "size": _r(half),
+                        "position": _r(box_pos), "quat_wxyz": _r(_quat_yaw(box_yaw), 5), "size": _r(box_half),
                         "attributes": attrs})
         return out
 

@@ -562,6 +562,12 @@ def place_yaws(current_rad: float) -> list[float]:
     return out
 
 
+
+#: Room left on each side of an object set into a drawer, m (:meth:`ComputePlace._check_into`):
+#: about the 2-sigma of a perceived position (1 cm), halved, so a place the verifier could never
+#: confirm is not tried.
+INTO_MARGIN_M = 0.005
+
 class ComputePlace(Primitive):
     """Place and pre-place tcp poses that set the held object down inside ``region``.
 
@@ -610,9 +616,12 @@ class ComputePlace(Primitive):
         # height in the kitchen); an object used as the support (stacking), or a perceived
         # fixture (its box is its place patch: the stove's burner, the cabinet's top), offers
         # its top face: centre z plus its vertical half extent.
-        kind = next((e.get("kind") for e in snapshot.get("entities", []) if e["name"] == self.region), "region")
-        surface_z = (float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half) if kind in ("object", "fixture")
-                     else float(T_region[2, 3]))
+        ent = next((e for e in snapshot.get("entities", []) if e["name"] == self.region), {})
+        kind = ent.get("kind", "region")
+        if kind == "articulation":  # into a drawer: onto its floor out of the body, which must take the object
+            self._check_into(ent, T_region, region_half, T_obj, half)
+        surface_z = (float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half)
+                     if kind in ("object", "fixture", "articulation") else float(T_region[2, 3]))
         centre = T_region[:3, 3]
         if self.beside is not None:  # on the surface the landmark stands on, clear of it on the viewer's side
             centre, surface_z = self._beside_point(snapshot, T_region, region_half, half, kind)
@@ -634,6 +643,26 @@ class ComputePlace(Primitive):
         self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist(),
                               yaw_rad=round(float(yaw), 3), rejected_yaws=rejected,
                               **({"beside": self.beside} if self.beside else {}))
+
+    def _check_into(self, ent: dict, T_region: np.ndarray, region_half: np.ndarray, T_obj: np.ndarray,
+                    half: np.ndarray) -> None:
+        """Raise unless the articulated ``region`` (a drawer) offers a floor (``attributes.support``:
+        open far enough that its floor stands out of the body) whose footprint (``T_region`` (4, 4)
+        world pose, ``region_half`` (3,) m) takes the object's (``T_obj`` (4, 4), ``half`` (3,) m;
+        as it is held now, about z) with :data:`INTO_MARGIN_M` to spare each side.
+
+        Raises:
+            PrimitiveFailure: ``perception.not_open`` (no floor out of the body), ``perception.too_small``.
+        """
+        attrs = ent.get("attributes") or {}
+        if not attrs.get("support"):
+            raise PrimitiveFailure("perception.not_open", f"{self.region!r} offers no floor to set {self.object!r} on "
+                                   f"(open {attrs.get('joint_position', '?')} m: a drawer must stand out of its body)")
+        need = np.abs(T_region[:3, :3].T @ T_obj[:3, :3])[:2] @ np.asarray(half, dtype=float) + INTO_MARGIN_M
+        if np.any(need > np.asarray(region_half[:2], dtype=float)):
+            raise PrimitiveFailure("perception.too_small", f"{self.object!r} needs {np.round(2 * need, 3).tolist()} m "
+                                   f"(x, y; {INTO_MARGIN_M} m spare each side); {self.region!r} offers "
+                                   f"{np.round(2 * np.asarray(region_half[:2]), 3).tolist()} m out of its body")
 
     def _beside_point(self, snapshot: dict, T_region: np.ndarray, region_half: np.ndarray, half: np.ndarray,
                       kind: str) -> tuple[np.ndarray, float]:

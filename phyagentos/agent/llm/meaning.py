@@ -39,7 +39,7 @@ detected, before any model call (docs/agent.md, "Languages").
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
 
 from phyagentos.untrusted import quote
@@ -180,9 +180,10 @@ class Intent:
     by_colour: bool = False
     excluded: tuple[str, ...] = ()
     #: ``open`` / ``close``: which part of the object ("middle" of "the middle drawer of the cabinet"; None: the
-    #: object itself, or a drawer not told apart)
+    #: object itself, or a drawer not told apart); ``move``: the drawer of the one destination whose inside the
+    #: objects go into ("in the top drawer of the cabinet", "open the top drawer and put the bowl inside")
     part: str | None = None
-    #: ``open`` / ``close``: the kind of part named ("drawer"; None: the object itself)
+    #: ``open`` / ``close`` / ``move``: the kind of part named ("drawer"; None: the object itself)
     part_kind: str | None = None
     #: ``move``: set down beside its one destination, on the viewer's ``left`` / ``right`` of it ("to the right
     #: of the plate"), not on it (read only with ``read_request(..., relations=True)``); None: in / on it
@@ -793,8 +794,10 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
                                                    f"'once you've ...') with no action after or before it"))
         return meaning
     previous: tuple[str, ...] = ()
+    last_open: Intent | None = None  # the clause before opened this (a drawer: "... and put the bowl inside")
     acted = False  # an earlier clause had a verb of its own (a later one may elide it)
     for part in _parts(text, world):
+        just_opened, last_open = last_open, None
         possible = part.endswith(" " + WHERE_POSSIBLE)
         if possible:
             part = part[: -len(WHERE_POSSIBLE) - 1]
@@ -809,6 +812,7 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             assert intent is not None
             meaning.intents.append(intent)
             previous, acted = intent.objects, True
+            last_open = intent if intent.verb == "open" else None
             continue
         turn = _TURN.match(" ".join(words))
         if turn:  # a knob to turn: the thing named is any declared thing, a fixture too
@@ -891,6 +895,7 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             previous = objects
             continue
         kind, dests, by_colour, why = ("region", (), False, [])
+        into: str | None = None  # which drawer, when the destination is a drawer's inside
         side, twins = _side_twins(dest_words, world) if relations and dest_words else (None, ())
         dest_where: dict[str, dict] = {}
         beside = _beside(dest_words, prep, world, objects) if relations and dest_words else None
@@ -906,9 +911,17 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
                 why = name
             else:
                 dests, dest_where = (name,), {name: {"relation": side}}
+        elif (drawer := _into_drawer(part, dest_words, prep, world, previous, just_opened)) is not None:
+            # the inside of a drawer ("in the top drawer of the cabinet"; "inside" / "in it" after opening one)
+            if isinstance(drawer, list):
+                why = drawer
+            else:
+                dests, into = (drawer[0],), drawer[1]
         elif dest_words:
             kind, dests, by_colour, why = _read_destination(dest_words, prep, world, previous, objects)
         problems += why
+        if into is not None:
+            dest_words = dest_words or [prep or "inside"]  # a destination, though no words name it again
         if verb_word is None and (not dest_words or not acted or set(words) & {"is", "are", "was", "were"}):
             # no verb: an elided one ("..., and the blue cube in the right bin") only after a clause that had
             # one; "is the red cube in the left bin?" is a question, not a move
@@ -937,6 +950,7 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             meaning.problems += problems
             continue
         meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded,
+                                      part=into, part_kind="drawer" if into is not None else None,
                                       beside=beside[0] if isinstance(beside, tuple) else None))
         if ref is not None:
             meaning.where[ref[0]] = ref[1]
@@ -964,37 +978,74 @@ def _read_open(text: str, verb: str, named: list[str], world: World,
     (:data:`_LEVEL_WORDS`) takes "drawer" for the chest of drawers; a phrase with no drawer names
     the thing itself. Returns ``(intent, problems)``."""
     state = "close" if verb in ("close", "shut") else "open"
-    names = {o.name for o in world.objects}
-    things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
-                   regions=(), source=world.source)
-    kind = next((w for w in named if w in _PART_OF), None)
-    part = None
-    if kind is not None:
-        k = named.index(kind)
-        before = [w for w in named[:k] if w not in ("the", "a", "an", "its", "their", "please")]
-        owner: list[str] = []
-        if "s" in before:  # "the cabinet's middle drawer": the owner before the possessive
-            i = before.index("s")
-            owner, before = before[:i], before[i + 1:]
-        if len(before) == 3 and before[1] in _LEVEL_WORDS and before[2] == "of":
-            before = before[:1]  # "the middle layer of the drawer": the drawer stands for the chest of them
-        if len(before) > 1 or (before and before[0] not in _DRAWER_WORDS):
-            return None, [("not_understood", f"{quote(text)}: which {kind} is {' '.join(before)!r}? (say top, middle "
-                                             f"or bottom {kind})")]
-        part = _DRAWER_WORDS[before[0]] if before else None
-        after = named[k + 1:]
-        whole = after[after.index("of") + 1:] if "of" in after else owner or [_PART_OF[kind]]
-        if "of" not in after and [w for w in after if w not in _STOP]:
-            return None, [("not_understood", f"{quote(text)}: the {kind} of what? ({' '.join(after)!r} after it)")]
-        objects, count, problems = _read_objects(whole, things, previous)
-        kind = "drawer" if kind in ("drawer", "drawers") else kind
-    else:
-        objects, count, problems = _read_objects(named, things, previous)
+    objects, part, kind, problems = _read_part(text, named, world, previous)
     if not problems and len(objects) != 1:
         problems = [("not_understood", f"{quote(text)}: {state} one thing at a time")]
     if problems:
         return None, problems
     return Intent(text, state, objects, part=part, part_kind=kind), []
+
+
+def _read_part(text: str, named: list[str], world: World, previous: tuple[str, ...]
+               ) -> tuple[tuple[str, ...], str | None, str | None, list[tuple[str, str]]]:
+    """``(objects, part, part_kind, problems)`` of the phrase ``named`` (the words of clause
+    ``text`` naming a thing or a part of one): ``the middle drawer of the cabinet`` is the
+    drawer ``middle`` (:data:`_DRAWER_WORDS`) of the one thing ``cabinet`` names (any declared
+    thing, a fixture too); without ``of ...`` the drawer is of the one thing its kind belongs to
+    (:data:`_PART_OF`: a cabinet); "the cabinet's middle drawer" names its owner before the
+    possessive, and "the middle layer of the drawer" (:data:`_LEVEL_WORDS`) takes "drawer" for
+    the chest of drawers; a phrase with no drawer names the thing itself (part and kind None)."""
+    names = {o.name for o in world.objects}
+    things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
+                   regions=(), source=world.source)
+    kind = next((w for w in named if w in _PART_OF), None)
+    part = None
+    if kind is None:
+        objects, _, problems = _read_objects(named, things, previous)
+        return objects, None, None, problems
+    k = named.index(kind)
+    before = [w for w in named[:k] if w not in ("the", "a", "an", "its", "their", "please")]
+    owner: list[str] = []
+    if "s" in before:  # "the cabinet's middle drawer": the owner before the possessive
+        i = before.index("s")
+        owner, before = before[:i], before[i + 1:]
+    if len(before) == 3 and before[1] in _LEVEL_WORDS and before[2] == "of":
+        before = before[:1]  # "the middle layer of the drawer": the drawer stands for the chest of them
+    if len(before) > 1 or (before and before[0] not in _DRAWER_WORDS):
+        return (), None, kind, [("not_understood", f"{quote(text)}: which {kind} is {' '.join(before)!r}? (say top, "
+                                                   f"middle or bottom {kind})")]
+    part = _DRAWER_WORDS[before[0]] if before else None
+    after = named[k + 1:]
+    whole = after[after.index("of") + 1:] if "of" in after else owner or [_PART_OF[kind]]
+    if "of" not in after and [w for w in after if w not in _STOP]:
+        return (), None, kind, [("not_understood", f"{quote(text)}: the {kind} of what? ({' '.join(after)!r} after "
+                                                   f"it)")]
+    objects, _, problems = _read_objects(whole, things, previous)
+    return objects, part, ("drawer" if kind in ("drawer", "drawers") else kind), problems
+
+
+def _into_drawer(text: str, dest_words: list[str], prep: str | None, world: World, previous: tuple[str, ...],
+                 opened: Intent | None) -> tuple[str, str] | list[tuple[str, str]] | None:
+    """``(fixture, drawer)`` when a move's destination is the inside of a drawer: "in / into
+    the top drawer of the cabinet", or, right after a clause that opened a drawer, "inside",
+    "in it", "into it", "in there", "inside the drawer" (that drawer: ``opened``). A list of
+    problems when it names a drawer but not which one; ``None`` when the destination is no
+    drawer's inside ("on top of the drawer" is the cabinet's top: :data:`_PART_OF`)."""
+    if prep not in ("in", "into", "inside"):
+        return None
+    ws = [w for w in dest_words if w not in ("the", "a", "an")]
+    back = opened is not None and opened.part_kind == "drawer" and opened.part is not None
+    if back and set(ws) <= {"it", "there", "drawer", "inside", "of"} and not (ws and ws[0] == "of"):
+        assert opened is not None and opened.part is not None
+        return opened.objects[0], opened.part
+    if not set(ws) & {"drawer", "drawers"} or "top" in ws and "of" in ws[ws.index("top") + 1:ws.index("top") + 2]:
+        return None
+    objects, part, kind, problems = _read_part(text, dest_words, world, previous)
+    if problems:
+        return problems
+    if len(objects) != 1 or part is None:
+        return [("not_understood", f"{quote(text)}: which drawer? (the top, middle or bottom drawer of one thing)")]
+    return objects[0], part
 
 
 def _settle(meaning: Meaning) -> None:
@@ -1014,9 +1065,9 @@ def _settle(meaning: Meaning) -> None:
         for i, it in enumerate(intents[:k]):
             if it.verb != "leave" and len(it.objects) > 1 and set(leave.objects) & set(it.objects):
                 kept = tuple(o for o in it.objects if o not in leave.objects)
-                intents[i] = Intent(it.text, it.verb, kept, it.destinations,
-                                    it.count if it.count is None or it.count < len(kept) else None, it.by_colour,
-                                    it.excluded + tuple(o for o in leave.objects if o in it.objects))
+                intents[i] = replace(it, objects=kept,
+                                     count=it.count if it.count is None or it.count < len(kept) else None,
+                                     excluded=it.excluded + tuple(o for o in leave.objects if o in it.objects))
     for leave in [it for it in intents if it.verb == "leave"]:
         both = [o for it in intents if it.verb != "leave" for o in it.movers() if o in leave.objects]
         if both:

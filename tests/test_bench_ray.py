@@ -31,7 +31,7 @@ def test_ray_executor_runs_the_episodes_through_the_same_session_path(tmp_path):
         ws = Workspace.open(result.run_dir / ep["directory"])
         states = {s.session_id: s.state for s in ws.list_sessions()}
         assert {s["session_id"]: s["state"] for s in ep["sessions"]} == states
-        assert all(state in ("succeeded", "failed", "replanned") for state in states.values())
+        assert all(state in ("succeeded", "failed", "replanned") for state in states.values()), states
 
 
 def test_ray_workers_run_at_normal_priority_and_keep_the_gl_backend(monkeypatch):

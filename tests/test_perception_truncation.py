@@ -256,3 +256,22 @@ def test_an_object_let_go_seen_short_on_a_piece_stands_its_known_height_below_it
     top = 0.03 + 0.09
     assert again["mug"]["position"][2] == pytest.approx(top - 0.06, abs=0.006)
     assert again["mug"]["size"][2] == pytest.approx(0.06, abs=1e-6)
+
+
+def test_a_weak_look_far_from_where_the_hand_let_an_object_go_is_not_that_object():
+    """LIBERO-10 task 1: the cream cheese let go into the basket, hidden by its walls, was matched
+    at confidence 0.23 to a segment 39 cm away; the look for it inside the basket never ran. A
+    weak match beyond RELEASE_REACH_M of the release point is refused; a near one, or a
+    confident one anywhere (a can that rolled off), is taken."""
+    from phyagentos.perception.tracks import Track
+
+    p = Perceiver(PerceptionConfig.default(), [ObjectDescriptor("cream_cheese_1", shape="box")])
+    det = _det((0.042, 0.022, 0.015), cut=None)
+    p.tracks["cream_cheese_1"] = t = Track.start("cream_cheese_1", det, 0.95, 0.0, ("agentview",))
+    t.held = True
+    placed = det.position[:2] + [0.0, 0.39]
+    reach = perceiver_module.RELEASE_REACH_M
+    assert p._weak_elsewhere("cream_cheese_1", det, 0.23, 1.0, placed)
+    near = Detection(**{**det.__dict__, "position": det.position + [0.0, 0.39 - 0.8 * reach, 0.0]})
+    assert not p._weak_elsewhere("cream_cheese_1", near, 0.23, 1.0, placed)
+    assert not p._weak_elsewhere("cream_cheese_1", det, 0.9, 1.0, placed)

@@ -148,9 +148,9 @@ def test_skill_defaults_go_into_every_node_of_their_skill_and_the_tasks_own_para
     nodes, _ = instruction_plan(task.language, problem.objects, problem.fixtures, skill_params=fixed)
     assert [n["params"] for n in nodes] == [
         {"approach_velocity_scale": 0.6, "object": "cream_cheese_1"},
-        {"lower_velocity_scale": 0.5, "object": "cream_cheese_1", "region": "basket_1", "slot": 0, "slots": 2},
+        {"lower_velocity_scale": 0.5, "object": "cream_cheese_1", "region": "basket_1"},
         {"approach_velocity_scale": 0.6, "object": "butter_1"},
-        {"lower_velocity_scale": 0.5, "object": "butter_1", "region": "basket_1", "slot": 1, "slots": 2}]
+        {"lower_velocity_scale": 0.5, "object": "butter_1", "region": "basket_1"}]
     plain, _ = instruction_plan(task.language, problem.objects, problem.fixtures)
     assert plain[0]["params"] == {"object": "cream_cheese_1"}
     f = tmp_path / "d.yaml"

@@ -170,8 +170,6 @@ def _nodes(steps: list[tuple[str, str, str | None]],
     before: ``move`` / ``hold``: a ``pick`` of the object, then (``move``) a ``place`` on its
     destination; ``beside_left`` / ``beside_right``: the same, the ``place`` setting it down on
     the viewer's left / right of the destination (``beside``) and accepted on ``beside``;
-    several objects moved into one destination each get their own cell of it (``slot`` of
-    ``slots``, in the order named);
     ``turn_on``: a ``turn_knob`` of the object to :data:`TURN_ON_FRACTION` of its knob's
     travel; ``open`` / ``close``: a ``slide_drawer`` of the drawer named by the
     destination slot (its entity name,
@@ -180,12 +178,6 @@ def _nodes(steps: list[tuple[str, str, str | None]],
     that skill (:data:`SKILL_DEFAULTS`); the task's own parameters (object, region) win."""
     fixed = skill_params or {}
     nodes: list[dict[str, Any]] = []
-    # several objects into one container ("put both the alphabet soup and the tomato sauce in the
-    # basket"): each its own cell of the inside, so that the first does not take the middle
-    sharing: dict[str, list[str]] = {}
-    for action, obj, dest in steps:
-        if action == "move" and dest is not None:
-            sharing.setdefault(dest, []).append(obj)
     for action, obj, dest in steps:
         after = [nodes[-1]["id"]] if nodes else []
         if action == "turn_on":
@@ -212,11 +204,9 @@ def _nodes(steps: list[tuple[str, str, str | None]],
         if dest is not None:
             rests = ({"beside": {"object": obj, "landmark": dest, "side": side}} if side
                      else {"on": {"object": obj, "support": dest}})
-            cells = sharing.get(dest, []) if not side else []
             nodes.append({"id": place_id, "skill": "place",
                           "params": {**fixed.get("place", {}), "object": obj, "region": dest,
-                                     **({"beside": side} if side else {}),
-                                     **({"slot": cells.index(obj), "slots": len(cells)} if len(cells) > 1 else {})},
+                                     **({"beside": side} if side else {})},
                           "accept": [rests, {"released": obj}],
                           "depends_on": [pick_id], "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
     return nodes

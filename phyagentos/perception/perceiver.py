@@ -602,7 +602,8 @@ class Perceiver:
                 log.debug("perception: a part at the image border looks weakly like %s (confidence %.2f) at %s: "
                           "left unknown", name, conf, _r(det.position))
                 continue  # a weak part alone names nothing
-            if self._weak_elsewhere(name, det, look_conf, stamp, placed):
+            # (let go: judged on the sighting's confidence where it was let go, _corroborated's)
+            if self._weak_elsewhere(name, det, look_conf if placed is None else conf, stamp, placed):
                 log.debug("perception: %s seen weakly (confidence %.2f) at %s, away from its confident track: "
                           "the track kept, the segment left unknown", name, conf, _r(det.position))
                 continue
@@ -1025,8 +1026,9 @@ class Perceiver:
         track is kept; it is reported only while something nearer hides it (``remembered``).
         An object that looks itself somewhere else was moved: its track restarts there.
 
-        An object the hand let go (``placed``: (2,) world x, y m where it did) is where it was
-        let go, or near: a weak match more than :data:`RELEASE_REACH_M` from there is not it
+        An object the hand let go (``placed``: (2,) world x, y m where it did; ``conf`` then the
+        sighting's confidence with that place weighed in) is where it was let go, or near: a
+        weak match more than :data:`RELEASE_REACH_M` from there is not it
         either (LIBERO-10 task 1: the cream cheese let go in the basket, whose walls hid it from
         the scene camera, was matched at confidence 0.23 to a segment 39 cm away at the table's
         edge, and the look for it inside the basket's segment never ran)."""

@@ -118,3 +118,50 @@ def test_a_held_mug_is_set_down_midway_between_its_model_origin_and_its_cups_axi
     beside, _ = _compute_place(franka, snap, beside="right")
     plain_beside, _ = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), beside="right")
     assert beside["place_pose"][:3, 3] == pytest.approx(plain_beside["place_pose"][:3, 3], abs=1e-9)
+
+
+def _basket_snapshot(tcp, inside=None, on_top=None):
+    basket = {"name": "plate", "kind": "object", "position": [0.5, 0.0, 0.07], "quat_wxyz": [1, 0, 0, 0],
+              "size": [0.08, 0.07, 0.07]}  # (named "plate" for _compute_place): a basket 14 cm deep
+    held = {"name": "pudding", "kind": "object", "position": [float(tcp[0, 3]), float(tcp[1, 3]), float(tcp[2, 3]) - 0.03],
+            "quat_wxyz": [1, 0, 0, 0], "size": [0.03, 0.02, 0.03]}
+    ents = [basket, held]
+    if inside is not None:  # a can standing on the basket's floor
+        ents.append({"name": "can", "kind": "object", "position": [*inside, 0.05], "quat_wxyz": [1, 0, 0, 0],
+                     "size": [0.034, 0.034, 0.046]})
+    if on_top is not None:  # a lid resting on the rim: not inside
+        ents.append({"name": "lid", "kind": "unknown", "position": [*on_top, 0.145], "quat_wxyz": [1, 0, 0, 0],
+                     "size": [0.03, 0.03, 0.005]})
+    return {"entities": ents}
+
+
+def test_into_a_container_with_a_can_inside_the_object_goes_beside_the_can_not_on_it(franka):
+    tcp = np.asarray(franka.tcp_pose())
+    empty, _ = _compute_place(franka, _basket_snapshot(tcp))
+    beside_can, records = _compute_place(franka, _basket_snapshot(tcp, inside=(0.49, 0.0)))
+    shift = beside_can["place_pose"][:3, 3] - empty["place_pose"][:3, 3]
+    assert records[0]["occupants"] == [[0.49, 0.0]] and records[0]["clearance_m"] > 0.0
+    assert abs(shift[0]) > 0.02 and shift[2] == pytest.approx(0.0, abs=1e-9)  # moved along the floor, same height
+    # something resting on the rim is not inside: the middle as before
+    lid, records = _compute_place(franka, _basket_snapshot(tcp, on_top=(0.5, 0.0)))
+    assert "occupants" not in records[0]
+    assert lid["place_pose"][:3, 3] == pytest.approx(empty["place_pose"][:3, 3], abs=1e-9)
+
+
+def test_into_a_drawer_needs_its_floor_out_of_the_body_and_room_for_the_object(franka):
+    from phyagentos.primitives.base import PrimitiveFailure
+
+    tcp = np.asarray(franka.tcp_pose())
+    on_plate, _ = _compute_place(franka, _snapshot(tcp, None))  # the plate's top at 0.02 m
+    snap = _snapshot(tcp, None)
+    drawer = snap["entities"][0]
+    drawer.update(kind="articulation", size=[0.07, 0.05, 0.08], attributes={"joint_position": 0.15, "support": True})
+    placed, _ = _compute_place(franka, snap)
+    # set on its box's top (the floor's surface, 0.09 m), not at its centre
+    assert placed["place_pose"][2, 3] - on_plate["place_pose"][2, 3] == pytest.approx(0.07, abs=1e-9)
+    drawer["attributes"] = {"joint_position": 0.01}  # shut: no floor out of the body
+    with pytest.raises(PrimitiveFailure, match="offers no floor to set 'pudding' on"):
+        _compute_place(franka, snap)
+    drawer.update(attributes={"joint_position": 0.05, "support": True}, size=[0.02, 0.05, 0.08])
+    with pytest.raises(PrimitiveFailure, match=r"'pudding' needs .* offers \[0.04, 0.1\] m out of its body"):
+        _compute_place(franka, snap)

@@ -533,10 +533,9 @@ class ComputeGrasp(Primitive):
                 for i, plan in enumerate(plans):
                     bad = _unusable(self.ctx, self.object, plan, opening_m=opening)
                     if bad is not None:
-                        # one rim point whose grasp alone is reachable and clear is enough to try lower
-                        # pre-grasps: one out of reach, or one that meets something overhead (an open
-                        # drawer reaching over the bowl: libero_goal task 3)
-                        out_of_reach = out_of_reach or (bad.stage == "pre-grasp" and self._reaches(plan.grasp))
+                        # one rim point whose grasp alone is reachable is enough to try lower pre-grasps
+                        out_of_reach = out_of_reach or (bad.stage == "pre-grasp" and not bad.collides
+                                                        and self._reaches(plan.grasp))
                         collided = collided or (bad.stage == "grasp" and bad.collides)
                         hand = f" hand {opening * 100:.1f} cm open" if opening is not None else ""
                         why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad) from {height:.2f} m{hand}: {bad[:160]}")

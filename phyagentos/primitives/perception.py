@@ -189,13 +189,10 @@ class Observe(Primitive):
             self.ctx.on_observation(snapshot)
 
 
-#: How much higher (m) a pick's pre-grasp is tried, in turn, when no grasp candidate is clear from
-#: the skill's approach height (the recovery ``another_approach`` asks for 0.15 m against the
-#: default 0.10 m, and itself tries 0.20 m: the same moves, without spending a session on the
-#: failure: LIBERO-10 task 1's cream cheese among the cartons failed the first pick so in the 4
-#: development scenes and the 10 evaluation inits, and the recovery took it from 0.20 m; the
-#: first session cost up to 70 of the 520 control steps).
-HIGHER_APPROACH_M = (0.05, 0.10)
+#: How much higher (m) a pick's pre-grasp is tried when no grasp candidate is clear from the
+#: skill's approach height (the recovery ``another_approach`` asks for 0.15 m against the
+#: default 0.10 m: the same move, without spending a session on the failure).
+HIGHER_APPROACH_M = 0.05
 #: Lower pre-grasp heights (m above the grasp) a rim grasp tries, in order, when from the skill's
 #: approach height no rim point is usable and some were refused only because their pre-grasp is
 #: out of the arm's reach (a bowl in LIBERO's open top drawer, 0.8 m from the base: the pre-grasp
@@ -369,7 +366,7 @@ class ComputeGrasp(Primitive):
         number) or, when the arm cannot reach it clear of the scene (:func:`_unusable`: a
         pre-grasp whose forearm passes through a neighbouring bottle), the next one that it
         can, in candidate order; when none is clear at ``approach_height_m``, the same from
-        each of :data:`HIGHER_APPROACH_M` higher (an object near the base, the elbow folded over the
+        :data:`HIGHER_APPROACH_M` higher (an object near the base, the elbow folded over the
         neighbours); when none is clear either way, candidate ``self.candidate`` as before (the
         planner then says why). Re-computed with a pre-grasp already chosen (``RecomputeGrasp``
         after a closer look), the candidate whose hand yaw is nearest that pre-grasp's, at its
@@ -406,7 +403,7 @@ class ComputeGrasp(Primitive):
                           **({"slid_m": round(slid, 4)} if slid else {})}
         refused = []
         first = None
-        heights = (self.approach_height_m, *(self.approach_height_m + dh for dh in HIGHER_APPROACH_M))
+        heights = (self.approach_height_m, self.approach_height_m + HIGHER_APPROACH_M)
         for slide in ((False, True) if shape == "box" else (False,)):
             for height in heights:
                 plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape,

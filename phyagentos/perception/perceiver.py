@@ -241,8 +241,6 @@ DRAWER_CARCASS_M = 0.024
 DRAWER_OPEN_SUPPORT_M = 0.03
 
 
-
-
 def _quat_yaw(yaw: float) -> list[float]:
     return [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
 

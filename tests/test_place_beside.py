@@ -120,34 +120,6 @@ def test_a_held_mug_is_set_down_midway_between_its_model_origin_and_its_cups_axi
     assert beside["place_pose"][:3, 3] == pytest.approx(plain_beside["place_pose"][:3, 3], abs=1e-9)
 
 
-def _basket_snapshot(tcp, inside=None, on_top=None):
-    basket = {"name": "plate", "kind": "object", "position": [0.5, 0.0, 0.07], "quat_wxyz": [1, 0, 0, 0],
-              "size": [0.08, 0.07, 0.07]}  # (named "plate" for _compute_place): a basket 14 cm deep
-    held = {"name": "pudding", "kind": "object", "position": [float(tcp[0, 3]), float(tcp[1, 3]), float(tcp[2, 3]) - 0.03],
-            "quat_wxyz": [1, 0, 0, 0], "size": [0.03, 0.02, 0.03]}
-    ents = [basket, held]
-    if inside is not None:  # a can standing on the basket's floor
-        ents.append({"name": "can", "kind": "object", "position": [*inside, 0.05], "quat_wxyz": [1, 0, 0, 0],
-                     "size": [0.034, 0.034, 0.046]})
-    if on_top is not None:  # a lid resting on the rim: not inside
-        ents.append({"name": "lid", "kind": "unknown", "position": [*on_top, 0.145], "quat_wxyz": [1, 0, 0, 0],
-                     "size": [0.03, 0.03, 0.005]})
-    return {"entities": ents}
-
-
-def test_into_a_container_with_a_can_inside_the_object_goes_beside_the_can_not_on_it(franka):
-    tcp = np.asarray(franka.tcp_pose())
-    empty, _ = _compute_place(franka, _basket_snapshot(tcp))
-    beside_can, records = _compute_place(franka, _basket_snapshot(tcp, inside=(0.49, 0.0)))
-    shift = beside_can["place_pose"][:3, 3] - empty["place_pose"][:3, 3]
-    assert records[0]["occupants"] == [[0.49, 0.0]] and records[0]["clearance_m"] > 0.0
-    assert abs(shift[0]) > 0.02 and shift[2] == pytest.approx(0.0, abs=1e-9)  # moved along the floor, same height
-    # something resting on the rim is not inside: the middle as before
-    lid, records = _compute_place(franka, _basket_snapshot(tcp, on_top=(0.5, 0.0)))
-    assert "occupants" not in records[0]
-    assert lid["place_pose"][:3, 3] == pytest.approx(empty["place_pose"][:3, 3], abs=1e-9)
-
-
 def test_into_a_drawer_needs_its_floor_out_of_the_body_and_room_for_the_object(franka):
     from phyagentos.primitives.base import PrimitiveFailure
 

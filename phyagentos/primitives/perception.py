@@ -6,13 +6,11 @@ simulator's ground truth, so perception error shows up as it would on hardware.
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 
 from phyagentos.errors import IKError
-from phyagentos.motion.free_spot import free_spot, slot_offset
 from phyagentos.motion.grasp import (
     DEFAULT_MAX_GRASP_WIDTH_M,
     FINGERTIP_BELOW_TCP_M,
@@ -21,7 +19,6 @@ from phyagentos.motion.grasp import (
     slid_grasp,
     slide_offsets,
     top_down_grasp_candidates,
-    top_down_rotation,
 )
 from phyagentos.motion.rim_grasp import (
     DEFAULT_HANDLED_WALL_M,
@@ -566,14 +563,10 @@ def place_yaws(current_rad: float) -> list[float]:
 
 
 
-#: A container's wall, m: its inside is its footprint less this on each side, and what stands
-#: inside it has its bottom at least this far below its top (LIBERO's basket: 1 cm wicker).
-CONTAINER_WALL_M = 0.01
 #: Room left on each side of an object set into a drawer, m (:meth:`ComputePlace._check_into`):
 #: about the 2-sigma of a perceived position (1 cm), halved, so a place the verifier could never
 #: confirm is not tried.
 INTO_MARGIN_M = 0.005
-
 
 class ComputePlace(Primitive):
     """Place and pre-place tcp poses that set the held object down inside ``region``.
@@ -586,9 +579,6 @@ class ComputePlace(Primitive):
         beside: ``left`` / ``right``: set the object down beside ``region`` (a landmark: an
             object or a fixture) on the viewer's side, not on it (:meth:`_beside_point`); None:
             on / in it.
-        slot, slots: into a container that takes ``slots`` objects in all, this one's cell
-            (0-based; :func:`~phyagentos.motion.free_spot.slot_offset` over its inside); default
-            0 of 1: its middle.
         snapshot: blackboard key of the observation (object pose in hand, region).
         place, preplace: blackboard keys written with (4, 4) world tcp poses.
 
@@ -600,25 +590,15 @@ class ComputePlace(Primitive):
     collision checker, the held object attached): a bowl held by its rim, the hand 5.6 cm
     off its centre, is set down beside a cabinet with the hand on the side away from it.
     When none is clear, yaw 0 (the planner then reports the collision).
-
-    Into a container (an object or a drawer) that holds things already, or that is to take
-    ``slots`` > 1 objects, the spot is :func:`~phyagentos.motion.free_spot.free_spot`'s: the
-    footprint clearest of what stands inside (:meth:`_occupants`), nearest this object's cell.
     """
 
     def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,
-                 beside: str | None = None, slot: int = 0, slots: int = 1, snapshot: str = "snapshot",
-                 place: str = "place_pose", preplace: str = "preplace_pose"):
+                 beside: str | None = None, snapshot: str = "snapshot", place: str = "place_pose",
+                 preplace: str = "preplace_pose"):
         super().__init__(name)
         if beside not in (None, "left", "right"):
             raise ValueError(f"beside must be left, right or null, got {beside!r}")
-        if isinstance(slots, bool) or not isinstance(slots, int) or slots < 1:
-            raise ValueError(f"slots must be a whole number >= 1, got {slots!r}")
-        if isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < slots:
-            raise ValueError(f"slot must be a whole number in [0, {slots - 1}], got {slot!r}")
-        if beside is not None and slots > 1:
-            raise ValueError("give 'beside' or 'slot' with 'slots', not both")
-        self.beside, self.slot, self.slots = beside, slot, slots
+        self.beside = beside
         self.object, self.region, self.approach_height_m = object, region, float(approach_height_m)
         self.snapshot_key, self.place_key, self.preplace_key = snapshot, place, preplace
         self.reads(snapshot)
@@ -645,27 +625,10 @@ class ComputePlace(Primitive):
         centre = T_region[:3, 3]
         if self.beside is not None:  # on the surface the landmark stands on, clear of it on the viewer's side
             centre, surface_z = self._beside_point(snapshot, T_region, region_half, half, kind)
-        occupants = self._occupants(snapshot, T_region, region_half) if self.beside is None else []
-        inner = np.maximum(np.asarray(region_half[:2], float) - CONTAINER_WALL_M, 0.0)
-        cell = None
-        if self.slots > 1:  # this object's cell of the container's inside
-            cell = centre[:2] + T_region[:2, :2] @ slot_offset(inner, self.slot, self.slots)
-        spots: dict[float, tuple[np.ndarray, float]] = {}
-        yaws = place_yaws(hand_yaw(self.ctx.target.tcp_pose()))
-        if occupants or cell is not None:  # the free spot for each hand yaw's footprint, nearest its cell
-            for yaw in yaws:
-                R = top_down_rotation(yaw) @ T_tcp_obj[:3, :3]
-                found = free_spot(centre[:2], math.atan2(T_region[1, 0], T_region[0, 0]), inner,
-                                  np.abs(R[:2, :]) @ np.asarray(half, float), occupants, prefer_xy=cell)
-                if found is not None:
-                    spots[yaw] = (np.array([found[0][0], found[0][1], centre[2]]), float(found[1]))
-            # the yaws whose footprint stands clear of what is inside first, then the least overlap
-            yaws = sorted(yaws, key=lambda y: -min(spots[y][1], 0.0) if y in spots else math.inf)
         rejected: list[dict] = []
         chosen = None
-        for yaw in yaws:
-            at = spots[yaw][0] if yaw in spots else centre
-            T_place = place_pose(at, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
+        for yaw in place_yaws(hand_yaw(self.ctx.target.tcp_pose())):
+            T_place = place_pose(centre, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
             T_pre = T_place.copy()
             T_pre[2, 3] += self.approach_height_m
             why = self._blocked(T_pre, T_place)
@@ -679,31 +642,7 @@ class ComputePlace(Primitive):
         self.set(self.preplace_key, T_pre)
         self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist(),
                               yaw_rad=round(float(yaw), 3), rejected_yaws=rejected,
-                              **({"beside": self.beside} if self.beside else {}),
-                              **({"occupants": [o[0].round(4).tolist() for o in occupants],
-                                  "clearance_m": round(spots[yaw][1], 4) if yaw in spots else None}
-                                 if occupants else {}),
-                              **({"slot": self.slot, "slots": self.slots} if self.slots > 1 else {}))
-
-    def _occupants(self, snapshot: dict, T_region: np.ndarray, region_half: np.ndarray) -> list[tuple]:
-        """``[(centre (2,), half extents (2,))]`` world m of the perceived things standing inside
-        the region (a container: their centre within its footprint, their bottom more than
-        :data:`CONTAINER_WALL_M` below its top), along the world axes; empty for a region that
-        is not an object or fixture (a patch on the table)."""
-        kind = next((e.get("kind") for e in snapshot.get("entities", []) if e["name"] == self.region), "region")
-        if kind not in ("object", "articulation"):
-            return []
-        top = float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half)
-        out = []
-        for e in snapshot.get("entities", []):
-            if e["name"] in (self.object, self.region) or e.get("kind") not in ("object", "unknown"):
-                continue
-            T, h = entity_pose(snapshot, e["name"])
-            local = T_region[:3, :3].T @ (T[:3, 3] - T_region[:3, 3])
-            bottom = float(T[2, 3] - np.abs(T[2, :3]) @ h)
-            if np.all(np.abs(local[:2]) <= np.asarray(region_half[:2], float)) and bottom < top - CONTAINER_WALL_M:
-                out.append((T[:2, 3].copy(), np.abs(T[:2, :3]) @ h))
-        return out
+                              **({"beside": self.beside} if self.beside else {}))
 
     def _check_into(self, ent: dict, T_region: np.ndarray, region_half: np.ndarray, T_obj: np.ndarray,
                     half: np.ndarray) -> None:

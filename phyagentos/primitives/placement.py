@@ -10,15 +10,45 @@ the region (``place.outside_region``). Stacking on another object stays
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from phyagentos.motion.free_spot import slot_grid, slot_offset
 from phyagentos.motion.grasp import place_pose, top_down_rotation
 
 from .base import Primitive, PrimitiveFailure
 from .perception import entity_pose, origin_pose
 
 __all__ = ["ComputePlaceAt", "slot_grid", "slot_offset"]
+
+
+def slot_grid(region_half_extents, slots: int) -> tuple[int, int]:
+    """``(columns, rows)`` of the cells :func:`slot_offset` lays ``slots`` objects out in:
+    columns along the region's longer horizontal axis, as many as keep the cells closest to
+    square (``ceil(sqrt(slots * long / short))``, at most ``slots``), rows across it. Two
+    objects in any region, or three in a strip, stand in one row; three or four in a square
+    region stand two by two."""
+    hx, hy = float(region_half_extents[0]), float(region_half_extents[1])
+    long, short = max(hx, hy), min(hx, hy)
+    cols = min(slots, max(1, math.ceil(math.sqrt(slots * long / short)))) if short > 0 else slots
+    return cols, math.ceil(slots / cols)
+
+
+def slot_offset(region_half_extents, slot: int, slots: int) -> np.ndarray:
+    """``(2,)`` m offset from a region's centre of cell ``slot`` (0-based) of ``slots``.
+
+    The cells split the region evenly into the grid of :func:`slot_grid` (x is the longer
+    axis on a tie) and are numbered along the longer axis first, row by row.
+    """
+    hx, hy = float(region_half_extents[0]), float(region_half_extents[1])
+    axis = 0 if hx >= hy else 1
+    cols, rows = slot_grid((hx, hy), slots)
+    col, row = slot % cols, slot // cols
+    half_long, half_short = (hx, hy)[axis], (hx, hy)[1 - axis]
+    out = np.zeros(2)
+    out[axis] = -half_long + (2 * col + 1) * half_long / cols
+    out[1 - axis] = -half_short + (2 * row + 1) * half_short / rows
+    return out
 
 
 class ComputePlaceAt(Primitive):

@@ -124,3 +124,21 @@ def test_per_predicate_rates_count_unknown_while_met_as_false_failure():
     r = v["per_predicate_rates"]["lifted"]
     assert r["scored"] == 4 and r["false_failure_pct"] == 50.0 and r["false_success_pct"] == 0.0
     assert v["false_failure_ci95_pct"] == wilson_interval(1, 1)
+
+
+def test_an_object_without_extents_in_ground_truth_leaves_on_unscorable_not_unmet():
+    """LIBERO's ground truth has positions and orientations, no extents: ``on`` cannot be
+    judged on it (LIBERO's own checker is the reference there). Scored with zero extents it
+    was never met, and every confirmed place counted as a false success (26 % of LIBERO-10's
+    sessions at 7e40e83)."""
+    state = {"objects": {"mug_1": {"position": [0.0, 0.0, 0.46], "quat_wxyz": [1, 0, 0, 0]},
+                         "plate_1": {"position": [0.0, 0.0, 0.43], "quat_wxyz": [1, 0, 0, 0]}}, "held": []}
+    gt = {"initial": state, "terminal": state}
+    truths = dict((c.name, t) for c, t in truth_of_criteria(
+        [{"on": {"object": "mug_1", "support": "plate_1"}}, {"released": "mug_1"}], gt))
+    assert truths == {"on": None, "released": True}
+    sized = {"objects": {n: {**o, "half_extents": [0.04, 0.04, 0.015 if n == "plate_1" else 0.045]}
+                         for n, o in state["objects"].items()}, "held": []}
+    sized["objects"]["mug_1"]["position"] = [0.0, 0.0, 0.43 + 0.015 + 0.045]
+    assert dict((c.name, t) for c, t in truth_of_criteria(
+        [{"on": {"object": "mug_1", "support": "plate_1"}}], {"initial": sized, "terminal": sized})) == {"on": True}

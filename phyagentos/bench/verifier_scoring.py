@@ -111,7 +111,9 @@ def truth_snapshot(state: Mapping[str, Any] | None, scene: Mapping[str, Any] | N
 
     Args:
         state: ``ground_truth.yaml``'s ``initial`` or ``terminal`` (objects with
-            ``position`` (3,) m, ``quat_wxyz``, ``half_extents`` (3,) m; ``held``).
+            ``position`` (3,) m, ``quat_wxyz``, ``half_extents`` (3,) m where known; ``held``).
+            An object without extents gets no ``size``: a criterion that needs one is then
+            not computable (:func:`truth_of_criteria` gives ``None``).
         scene: its ``scene_record`` (regions with ``center`` (2,) and ``half_extents`` (2,) m,
             obstacles), for the regions the criteria name.
     """
@@ -120,15 +122,20 @@ def truth_snapshot(state: Mapping[str, Any] | None, scene: Mapping[str, Any] | N
     for name, o in (state.get("objects") or {}).items():
         if not isinstance(o, Mapping) or o.get("position") is None:
             continue
-        size = o.get("half_extents") or o.get("size") or [0.0, 0.0, 0.0]
-        if o.get("quat_wxyz") is not None and len(size) == 3:
-            # the vertical half extent in the world frame (what the resting height and
-            # perception's measured size go by): a box lying on its side rests on another
-            # half extent than its own z
-            size = [float(size[0]), float(size[1]), _vertical_half_extent(o.get("shape"), size, o["quat_wxyz"])]
-        ents.append({"name": name, "kind": "object", "position": list(o["position"]),
-                     "quat_wxyz": list(o.get("quat_wxyz", [1, 0, 0, 0])), "size": list(size),
-                     "attributes": {"confidence": 1.0, "position_std_m": 0.0}})
+        ent: dict[str, Any] = {"name": name, "kind": "object", "position": list(o["position"]),
+                               "quat_wxyz": list(o.get("quat_wxyz", [1, 0, 0, 0])),
+                               "attributes": {"confidence": 1.0, "position_std_m": 0.0}}
+        size = o.get("half_extents") or o.get("size")
+        if size is not None:
+            # (an object whose ground truth has no extents, LIBERO's: the criteria that need
+            # them -- on, inside, beside -- are not computable from it, never "unmet")
+            if o.get("quat_wxyz") is not None and len(size) == 3:
+                # the vertical half extent in the world frame (what the resting height and
+                # perception's measured size go by): a box lying on its side rests on another
+                # half extent than its own z
+                size = [float(size[0]), float(size[1]), _vertical_half_extent(o.get("shape"), size, o["quat_wxyz"])]
+            ent["size"] = list(size)
+        ents.append(ent)
         if o.get("joint_position") is not None:
             ents[-1]["attributes"]["joint_position"] = o["joint_position"]
     for r in (scene or {}).get("regions") or ():

@@ -275,10 +275,12 @@ def _planner_steps(language: str, objects: dict[str, str],
 
 def _drawer_name(language: str, intent, fixtures: dict[str, str] | None = None) -> str:
     """The entity name of the drawer ``intent`` names (``wooden_cabinet_1_top_drawer``:
-    :func:`~phyagentos.perception.fixtures.drawer_entity_name`).
+    :func:`~phyagentos.perception.fixtures.drawer_entity_name`): of the thing an open or close
+    acts on, or of a move's one destination (into the drawer).
 
     Raises:
-        BenchError: a part that is not a drawer, or a drawer not told by top, middle or bottom.
+        BenchError: a part that is not a drawer, a thing that is not one of ``fixtures`` (when
+            given), or a drawer not told by top, middle or bottom.
     """
     from phyagentos.perception.fixtures import drawer_entity_name  # noqa: PLC0415
 

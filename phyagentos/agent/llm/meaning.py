@@ -1041,6 +1041,8 @@ def _into_drawer(text: str, dest_words: list[str], prep: str | None, world: Worl
     if not set(ws) & {"drawer", "drawers"} or "top" in ws and "of" in ws[ws.index("top") + 1:ws.index("top") + 2]:
         return None
     objects, part, kind, problems = _read_part(text, dest_words, world, previous)
+    if any(code == "unknown_object" for code, _ in problems):
+        return None  # no thing with drawers here: the destination names nothing (_read_destination says so)
     if problems:
         return problems
     if len(objects) != 1 or part is None:

@@ -17,8 +17,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["quat_to_matrix", "matrix_to_quat", "quat_multiply", "yaw_quat", "look_at_quat", "rotation_about",
-           "pose_matrix"]
+__all__ = ["quat_to_matrix", "matrix_to_quat", "quat_multiply", "yaw_quat", "quat_yaw", "look_at_quat",
+           "rotation_about", "pose_matrix"]
 
 
 def quat_to_matrix(q: Sequence[float]) -> np.ndarray:
@@ -78,6 +78,14 @@ def quat_multiply(a: Sequence[float], b: Sequence[float]) -> list[float]:
 def yaw_quat(yaw: float) -> list[float]:
     """``[w, x, y, z]`` of a rotation by ``yaw`` rad about +z."""
     return [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
+
+
+def quat_yaw(q: Sequence[float]) -> float:
+    """Yaw, rad in (-pi, pi], of the quaternion ``q`` ``(w, x, y, z)``: the heading of its
+    rotated x axis in the world's xy plane (the inverse of :func:`yaw_quat` for a turn about z;
+    ZYX Euler angles' first, e.g. Diebel, "Representing Attitude", 2006, eq. 290)."""
+    w, x, y, z = (float(v) for v in q)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def look_at_quat(eye: Sequence[float], target: Sequence[float], up: Sequence[float] = (0.0, 0.0, 1.0)) -> list[float]:

@@ -377,11 +377,12 @@ def _in_frame_of(ent: Mapping, dx: float, dy: float) -> tuple[float, float]:
     """``(|dx'|, |dy'|)``, m: the horizontal offset (``dx``, ``dy``) world m along the x and y axes
     of ``ent``'s box, turned by its yaw about z (``quat_wxyz``; a box turned with what it stands
     for, such as a drawer's floor in a turned cabinet); the world axes for an unturned box."""
+    from phyagentos.geometry import quat_yaw  # noqa: PLC0415 - numpy only where a turned support is judged
+
     q = ent.get("quat_wxyz")
     if not q or len(q) != 4:
         return abs(dx), abs(dy)
-    w, x, y, z = (float(v) for v in q)
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    yaw = quat_yaw(q)
     c, s = math.cos(yaw), math.sin(yaw)
     return abs(c * dx + s * dy), abs(-s * dx + c * dy)
 

@@ -562,11 +562,11 @@ def place_yaws(current_rad: float) -> list[float]:
     return out
 
 
-
 #: Room left on each side of an object set into a drawer, m (:meth:`ComputePlace._check_into`):
 #: about the 2-sigma of a perceived position (1 cm), halved, so a place the verifier could never
 #: confirm is not tried.
 INTO_MARGIN_M = 0.005
+
 
 class ComputePlace(Primitive):
     """Place and pre-place tcp poses that set the held object down inside ``region``.

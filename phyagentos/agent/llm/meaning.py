@@ -1038,7 +1038,8 @@ def _into_drawer(text: str, dest_words: list[str], prep: str | None, world: Worl
     if back and set(ws) <= {"it", "there", "drawer", "inside", "of"} and not (ws and ws[0] == "of"):
         assert opened is not None and opened.part is not None
         return opened.objects[0], opened.part
-    if not set(ws) & {"drawer", "drawers"} or "top" in ws and "of" in ws[ws.index("top") + 1:ws.index("top") + 2]:
+    top_of = "top" in ws and ws[ws.index("top") + 1:ws.index("top") + 2] == ["of"]  # "the top of the drawer"
+    if not set(ws) & {"drawer", "drawers"} or top_of:
         return None
     objects, part, kind, problems = _read_part(text, dest_words, world, previous)
     if any(code == "unknown_object" for code, _ in problems):

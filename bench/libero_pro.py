@@ -1,7 +1,8 @@
 """LIBERO-PRO next to LIBERO: each perturbation family beside its standard suite, by LIBERO's checker.
 
     .venv/bin/python bench/libero_pro.py [--suites libero_object,libero_object_swap,...] [--tasks 0-9]
-        [--seeds 0] [--workspace ws/libero_pro] [--out bench/results/libero_pro.json] [--merge]
+        [--seeds 0] [--workers 1] [--heartbeat-timeout 180] [--workspace ws/libero_pro]
+        [--out bench/results/libero_pro.json] [--merge]
     .venv/bin/python bench/libero_pro.py --check-builds [--suites ...]   # every family builds?
 
 Every suite runs through the same command a user types, ``phyagentos bench <suite> --json``
@@ -107,13 +108,19 @@ def _refusals(suite: str, tasks: list[int]) -> dict[int, str]:
     return out
 
 
-def run_suite(suite: str, workspace: Path, tasks: str, seeds: str, *, timeout_s: float) -> dict:
-    """One ``phyagentos bench <suite> --json`` run and its row (see the module docstring)."""
+def run_suite(suite: str, workspace: Path, tasks: str, seeds: str, *, timeout_s: float, workers: int = 1,
+              heartbeat_timeout_s: float = 180) -> dict:
+    """One ``phyagentos bench <suite> --json`` run and its row (see the module docstring).
+
+    ``workers`` episodes run at once (the bench's ``--workers``); ``heartbeat_timeout_s`` is the
+    bench's ``--heartbeat-timeout`` in s (raise it on a loaded machine, where a runner's beat lags).
+    """
     base, family, kind = perturbation_family(suite)
     n_tasks = len(tasks.split(","))
     n_seeds = len(parse_seeds(seeds))
     cmd = [sys.executable, "-m", "phyagentos.cli", "bench", suite, "--workspace", str(workspace), "--tasks", tasks,
-           "--seeds", seeds, "--json", "--heartbeat-timeout", "180", "--queue-timeout", "3000"]
+           "--seeds", seeds, "--json", "--workers", str(workers), "--heartbeat-timeout", f"{heartbeat_timeout_s:g}",
+           "--queue-timeout", "3000"]
     t0 = time.monotonic()
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=timeout_s)
     wall = round(time.monotonic() - t0, 1)
@@ -225,6 +232,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="0", help="LIBERO init-state indices, e.g. 0 or 0-2")
     ap.add_argument("--workspace", type=Path, default=ROOT / "ws" / "libero_pro")
     ap.add_argument("--timeout", type=float, default=7200, help="seconds per suite")
+    ap.add_argument("--workers", type=int, default=1, help="episodes at once per suite (the bench's --workers)")
+    ap.add_argument("--heartbeat-timeout", type=float, default=180,
+                    help="s without a runner's beat before its session is failed (the bench's option)")
     ap.add_argument("--check-builds", action="store_true", help="build one world per suite instead of running it")
     ap.add_argument("--merge", action="store_true", help="keep the rows of --out's other suites (same tasks and "
                                                          "seeds) and replace those run now")
@@ -247,7 +257,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for suite in suites:
         print(f"{suite}: phyagentos bench {suite} --tasks {tasks} --seeds {args.seeds} ...", file=sys.stderr, flush=True)
-        rows.append(run_suite(suite, args.workspace, tasks, args.seeds, timeout_s=args.timeout))
+        rows.append(run_suite(suite, args.workspace, tasks, args.seeds, timeout_s=args.timeout, workers=args.workers,
+                              heartbeat_timeout_s=args.heartbeat_timeout))
     if args.merge and args.out.is_file():
         before = json.loads(args.out.read_text(encoding="utf-8"))
         if (before.get("tasks"), before.get("seeds")) == (tasks, args.seeds):

@@ -288,3 +288,30 @@ def test_on_a_dish_a_handled_objects_model_origin_is_judged_not_its_centre(origi
     [c] = parse_criteria({"on": {"object": "mug_1", "support": "plate_1"}})
     out = evaluate(c, snap, snap)
     assert out.status == status, out.reason
+
+
+@pytest.mark.parametrize("open_depth,inside_relation,status", [
+    (None, False, "satisfied"),   # a solid top at that height (a box, a cabinet's top): resting on it
+    (0.012, False, "satisfied"),  # an open top no deeper than a dish (a plate): resting on its rim is on it
+    (0.075, False, "unknown"),    # a basket 7.5 cm deep: on its rim, or seen only above its walls
+    (0.075, True, "satisfied"),   # ... seen inside it by perception: in it
+])
+def test_at_the_rim_of_a_deep_open_container_an_object_is_not_in_it_unless_seen_inside(open_depth, inside_relation,
+                                                                                       status):
+    """LIBERO-10 task 1, init 1 (7e40e83's free spot, since reverted): the butter came to rest
+    on the basket's rim; `on` said set, LIBERO's `In` did not. Perception's open depth now tells
+    a basket's rim from a solid top."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    table = 0.425
+    basket = _ent("basket_1", (0.0, 0.2, table + 0.04), (0.1, 0.08, 0.04), 0.95, std=0.003)
+    if open_depth is not None:
+        basket["attributes"]["open_depth_m"] = open_depth
+    butter = _ent("butter_1", (0.06, 0.2, table + 0.08 + 0.012), (0.05, 0.025, 0.012), 0.9)  # bottom on the rim
+    rel = [{"subject": "butter_1", "relation": "inside", "object": "basket_1", "confidence": 0.8}]
+    snap = {"entities": [basket, butter], "relations": rel if inside_relation else []}
+    [c] = parse_criteria({"on": {"object": "butter_1", "support": "basket_1"}})
+    out = evaluate(c, snap, snap)
+    assert out.status == status, out.reason
+    if status == "unknown":
+        assert "rim of an open container" in out.reason

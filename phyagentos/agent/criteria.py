@@ -40,7 +40,11 @@ probability <= 2.3 %, one-sided). ``on`` and ``inside`` with a container (a perc
 object, e.g. a basket) are judged on the perceived relation ``inside(object, container)``
 when perception reports one: the object was seen standing inside the container's segment
 (its walls may hide it from other views; perception then reports it ``remembered``); the
-centre must lie in the container's footprint by 2 sigma. An entity absent from a snapshot, or with
+centre must lie in the container's footprint by 2 sigma. Without that relation, an object
+resting at the rim's height of an open container deeper than :data:`DISH_DEPTH_M`
+(``attributes.open_depth_m``, perceived: a basket) is never ``on`` it: it lies on the rim
+(LIBERO's ``In`` does not count that), or shows only its part above the walls (in it, but not
+seen so: ``unknown`` until it is). An entity absent from a snapshot, or with
 ``confidence`` below :data:`CONFIDENCE_MIN`, makes the criterion ``unknown``: never
 guessed, never ``success``. One stand-in: the support of ``on`` hidden by what was set on it
 (a plate under a mug, seen only as the ring around it) is taken where the initial snapshot saw
@@ -413,6 +417,11 @@ def _eval_on(c, initial, terminal, refs):
     # within DISH_CENTRE_M of its centre when it is as wide (a bowl set off a plate's middle
     # rests on its rim and the table)
     in_dish = bottom < top - REST_TOL_M
+    # an open container deeper than a dish (perception's ``open_depth_m``: a basket) is not
+    # stood on: what rests at its rim's height lies on the rim, or shows only its part above
+    # the walls; in it is what perception sees inside it (the inside relation, above)
+    depth = _attr(s, "open_depth_m", 0.0)
+    on_rim = depth > DISH_DEPTH_M and not in_dish
     flat = 2.0 * s["size"][2] <= DISH_DEPTH_M
     reach = DISH_CENTRE_M if in_dish else (max(DISH_CENTRE_M, min(sx, sy) - max(o["size"][:2])) if flat else math.inf)
     # how far off the support's centre: from the object's model origin where perception gives
@@ -425,13 +434,15 @@ def _eval_on(c, initial, terminal, refs):
         m_off = 2.0 * math.hypot(_attr(o, "origin_std_m", sigma(o)), sigma(s))
     else:
         off, m_off = math.hypot(dx, dy), m
-    inside = rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m_off
+    inside = rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m_off and not on_rim
     outside = (bottom > top + REST_TOL_M + m or bottom < floor - m or dx > sx + m or dy > sy + m or bool(held)
                or off > reach + m_off)
     return _band(c, refs, inside, outside, obj, f"on {support}",
                  f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
                  + (f"; its origin {off:.3f} m off the centre (reach {reach:.3f}, 2 sigma {m_off:.3f})"
                     if origin is not None else "")
+                 + (f"; at the rim of an open container {depth:.3f} m deep: in it only where seen inside it"
+                    if on_rim else "")
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))
 
 

@@ -32,8 +32,8 @@ from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.handle import UPPER_FRACTION, RoundBody, round_body
 
-__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "with_round_body", "detect", "detect_clusters", "stack",
-           "resting_at"]
+__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "open_depth", "with_open_depth", "with_round_body", "detect", "detect_clusters",
+           "stack", "resting_at"]
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +42,18 @@ _VIVID_FRACTION = 1.0 / 3.0
 #: A detection whose lowest points (2nd percentile) stand this far above ``object_min_height_m``
 #: may rest on another (:func:`stack`), m.
 RAISED_LOW_M = 0.008
+#: An open top (:func:`open_depth`): the inside is the footprint's inscribed ellipse shrunk by
+#: this on every side (the walls and the rim on them), m; the walls' ring is the rest of it.
+OPEN_WALL_M = 0.015
+#: ... read where at least this many of the segment's points fall inside ...
+OPEN_MIN_POINTS = 25
+#: ... its floor the inside's heights at this percentile (a few points of noise below it) ...
+OPEN_FLOOR_PERCENTILE = 5.0
+#: ... and the walls stand to within this of the top (m) in at least :data:`OPEN_RIM_SECTORS`
+#: of the eight 45-degree sectors about the centre that hold wall points: the rim goes round
+#: (a mug merged with the plate under it has only the plate's low edge there).
+OPEN_RIM_TOL_M = 0.015
+OPEN_RIM_SECTORS = 6
 
 
 @dataclass(frozen=True)
@@ -69,6 +81,8 @@ class Detection:
             the part seen and its centre short of the object's on that side.
         body: the round body with a handle its footprint shows (a mug's cup and handle:
             :func:`with_round_body`), else None.
+        open_depth_m: how far its inside's floor lies below its top, m, where it is an open
+            container (a basket, a bowl: :func:`open_depth`); 0 for a solid top.
         covered: the lower part of a stack split at a height step
             (:func:`phyagentos.perception.split.split_cluster`) with a part resting on it:
             its top and its far side are hidden under that part, so its footprint is a lower
@@ -92,6 +106,7 @@ class Detection:
     cut_direction: np.ndarray | None = None
     covered: bool = False
     body: RoundBody | None = None
+    open_depth_m: float = 0.0
 
     @property
     def truncated(self) -> bool:
@@ -314,6 +329,46 @@ def fit_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Percept
         position_std_m=pos_std, yaw_std_rad=yaw_std, view_agreement=agreement, bottom_m=bottom,
         low_m=low,
     )
+
+
+def open_depth(xy: np.ndarray, heights: np.ndarray, centre: np.ndarray, yaw: float, half_xy: np.ndarray,
+               top_m: float) -> float:
+    """How far the floor inside an open container lies below its top, m; 0 for a solid top.
+
+    ``xy``: (N, 2) world x, y of a segment's points, m; ``heights``: (N,) their heights above
+    the support plane, m; ``centre`` (2,), ``yaw`` (rad about world z) and ``half_xy`` (2,) m:
+    its footprint's rectangle; ``top_m``: its top above the plane, m. The inside is the ellipse
+    inscribed in the footprint shrunk by :data:`OPEN_WALL_M` (at least 1 cm across each half
+    axis, and :data:`OPEN_MIN_POINTS` points in it), its floor their
+    :data:`OPEN_FLOOR_PERCENTILE` th height percentile. It counts only where the walls' points
+    outside that ellipse reach to within :data:`OPEN_RIM_TOL_M` of the top all round (in at
+    least :data:`OPEN_RIM_SECTORS` of the eight sectors that hold wall points): a rim, not an
+    object standing on a flat one (a mug on a plate, seen as one segment)."""
+    a, b = float(half_xy[0]) - OPEN_WALL_M, float(half_xy[1]) - OPEN_WALL_M
+    if min(a, b) < 0.01 or xy.shape[0] < OPEN_MIN_POINTS:
+        return 0.0
+    c, s = math.cos(yaw), math.sin(yaw)
+    d = xy - np.asarray(centre, dtype=float)[:2]
+    u, v = (c * d[:, 0] + s * d[:, 1]) / a, (-s * d[:, 0] + c * d[:, 1]) / b
+    inner = u * u + v * v < 1.0
+    if int(inner.sum()) < OPEN_MIN_POINTS:
+        return 0.0
+    floor = float(np.percentile(heights[inner], OPEN_FLOOR_PERCENTILE))
+    sector = ((np.arctan2(v, u) + math.pi) / (math.pi / 4.0)).astype(int) % 8
+    wall, hw = sector[~inner], heights[~inner]
+    held = [k for k in range(8) if np.any(wall == k)]
+    rim = sum(1 for k in held if float(hw[wall == k].max()) >= top_m - OPEN_RIM_TOL_M)
+    if rim < OPEN_RIM_SECTORS:
+        return 0.0
+    return max(0.0, top_m - floor)
+
+
+def with_open_depth(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detection:
+    """``det`` (fitted to the points ``cloud`` with their ``heights`` above the plane, m) with
+    its :attr:`Detection.open_depth_m` (:func:`open_depth` over its footprint and top). Run on
+    the final detections only, as :func:`with_round_body`."""
+    depth = open_depth(cloud.points[:, :2], heights, det.position[:2], det.yaw, det.half_extents[:2], det.top_m)
+    return replace(det, open_depth_m=depth) if depth > 0.0 else det
 
 
 def with_round_body(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detection:

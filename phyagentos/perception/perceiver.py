@@ -88,7 +88,7 @@ from phyagentos.perception.cloud import (
 )
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
-from phyagentos.perception.detect import Detection, detect_clusters, with_round_body
+from phyagentos.perception.detect import Detection, detect_clusters, with_open_depth, with_round_body
 from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
@@ -127,6 +127,9 @@ log = logging.getLogger(__name__)
 
 _OBSTACLE_MARGIN_M = 0.01
 
+#: An object's open top is reported (``attributes.open_depth_m``) from this depth on, m: below
+#: it, a solid top's own relief.
+OPEN_DEPTH_REPORT_M = 0.01
 #: Contents of containers: a segment whose footprint's short side is at least this long may
 #: hold things (LIBERO's basket: 16 cm; its cans and boxes: <= 8.5 cm long, 5 cm short).
 CONTAINER_MIN_SIDE_M = 0.10
@@ -555,7 +558,7 @@ class Perceiver:
         strides = [cfg.stride_for(f.intrinsics.width) for f in frames]
         dets = [replace(d, cut_direction=cut) if (cut := cut_direction(cloud, idx, frames, strides)) is not None
                 else d for d, (_, idx) in zip(dets, clusters)]
-        dets = [with_round_body(d, cloud.select(idx), heights[idx]) for d, (_, idx) in zip(dets, clusters)]
+        dets = [_shaped(d, cloud.select(idx), heights[idx]) for d, (_, idx) in zip(dets, clusters)]
         t2 = time.perf_counter()
         sensors = [f.sensor for f in frames]
         det_cams = [self._cameras_of(cloud, heights, d, sensors) for d in dets]
@@ -701,6 +704,8 @@ class Perceiver:
                 ent = self._held_entity(t, proprio, holding_rel[1] if holding_rel else 0.0)
             else:
                 extra = {"inside_of": t.inside_of} if t.inside_of else {}
+                if t.open_depth_m >= OPEN_DEPTH_REPORT_M:  # an open container: how deep its inside is
+                    extra["open_depth_m"] = _r(t.open_depth_m)
                 conf = t.confidence
                 if name in remembered:
                     extra.update(remembered=True, occluded_in=list(remembered[name]), last_seen_s=_r(t.last_seen_s, 6))
@@ -1507,6 +1512,11 @@ def _hangs_from_hand(det: Detection, proprio: Proprioception, config: Perception
     dxy = float(np.hypot(det.position[0] - tcp[0], det.position[1] - tcp[1]))
     # or the tcp is over its footprint (a bowl held by its rim hangs beside the tcp)
     return dxy <= max(hc.capture_radius_m, float(max(det.half_extents[0], det.half_extents[1])) + 0.01)
+
+
+def _shaped(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detection:
+    """A final detection with the round body and handle and the open top its points show."""
+    return with_open_depth(with_round_body(det, cloud, heights), cloud, heights)
 
 
 def _container_around(i: int, dets: list[Detection], matched: dict[int, str]) -> str | None:

@@ -78,6 +78,9 @@ class Track:
     #: The round body with a handle its latest sighting showed, in the object's frame (its
     #: position and yaw: :meth:`~phyagentos.perception.handle.RoundBody.local`), else None.
     body: RoundBody | None = None
+    #: How far its inside's floor lies below its top in its latest sighting, m (an open
+    #: container's: :attr:`~phyagentos.perception.detect.Detection.open_depth_m`); 0 for a solid top.
+    open_depth_m: float = 0.0
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
@@ -87,7 +90,8 @@ class Track:
                    var_yaw=det.yaw_std_rad ** 2, half_extents=det.half_extents.copy(), shape=det.shape,
                    colour_rgb=det.colour_rgb.copy(), points=det.points, confidence=confidence,
                    last_seen_s=stamp_s, bottom_m=det.bottom_m, cameras=cameras, shape_votes={det.shape: 1},
-                   body=None if det.body is None else det.body.local(det.position[:2], det.yaw))
+                   body=None if det.body is None else det.body.local(det.position[:2], det.yaw),
+                   open_depth_m=det.open_depth_m)
 
     def predicted_var(self, stamp_s: float, config: PerceptionConfig) -> float:
         """Position variance (m^2) grown by the random walk since the last sighting."""
@@ -139,6 +143,7 @@ class Track:
         self.half_extents = (n * self.half_extents + det.half_extents) / (n + 1)
         self.colour_rgb = (n * self.colour_rgb + det.colour_rgb) / (n + 1)
         self.points, self.bottom_m, self.cameras = det.points, det.bottom_m, cameras
+        self.open_depth_m = det.open_depth_m
         if det.body is not None:  # the latest sighting of it
             self.body = det.body.local(det.position[:2], det.yaw)
         elif self.body is not None:  # one that missed the handle keeps the last, turned as it stood

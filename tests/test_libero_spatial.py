@@ -80,6 +80,15 @@ def test_other_wordings_of_the_relations_read_the_same():
         ("pick up the black bowl on the left and place it on the plate", {"relation": "left"}),
         ("put the right black bowl on the plate", {"relation": "right"}),
         ("pick up the leftmost bowl and put it on the plate", {"relation": "left"}),
+        # a drawer named without its cabinet is the one thing with drawers's; "from" it is in it
+        ("grab the black bowl from the middle drawer and set it on the plate",
+         {"relation": "in", "of": ["wooden_cabinet_1"], "part": "middle drawer"}),
+        ("fetch the black bowl in the top drawer and put it on the plate",
+         {"relation": "in", "of": ["wooden_cabinet_1"], "part": "top drawer"}),
+        ("pick the black bowl from the cabinet's bottom drawer and put it on the plate",
+         {"relation": "in", "of": ["wooden_cabinet_1"], "part": "bottom drawer"}),
+        ("lift the black bowl from the top drawer of the wooden cabinet and put it on the plate",
+         {"relation": "in", "of": ["wooden_cabinet_1"], "part": "top drawer"}),
     ]:
         nodes, refs = instruction_plan(text, problem.objects, problem.fixtures)
         assert refs == {BOWL: where}, text
@@ -92,6 +101,8 @@ def test_other_wordings_of_the_relations_read_the_same():
     ("pick up the black bowl next to the sink and place it on the plate", "'the sink' names nothing declared"),
     ("pick up the black bowl between the plate and place it on the plate", "'between' needs two landmarks"),
     ("pick up the black bowl next the plate and place it on the plate", "'next' without 'to'"),
+    ("pick up the black bowl from the top drawer of the sink and place it on the plate", "'the sink' names nothing"),
+    ("pick up the black bowl from the drawer thing and place it on the plate", "the drawer of what"),
 ])
 def test_unreadable_relations_are_refused_with_the_reason(text, why):
     problem = _problem()

@@ -649,6 +649,27 @@ def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tu
         return None, [("not_understood", f"{phrase}: '{words[0]}' a place other than the table's centre is not a "
                                           f"relation the rules read (between, next to, on, in a declared thing; "
                                           f"the table's centre)")]
+    drawer = next((i for i, w in enumerate(rest) if w in _PART_OF), None)
+    if kind in ("in", "from") and drawer is not None and "of" not in rest[:drawer]:
+        # "in / from the top drawer of the wooden cabinet"; without "of ..." the drawer is of the
+        # one thing drawers belong to (_PART_OF: "take the bowl from the top drawer")
+        after = rest[drawer + 1:]
+        if "of" in after and [w for w in after[:after.index("of")] if w not in _STOP]:
+            return None, [("not_understood", f"{phrase}: the {rest[drawer]} of what? "
+                                              f"({' '.join(after[:after.index('of')])!r} before 'of')")]
+        before = [w for w in rest[:drawer] if w not in ("the", "a", "an")]
+        owner = after[after.index("of") + 1:] if "of" in after else [_PART_OF[rest[drawer]]]
+        if "s" in before:  # "the cabinet's top drawer": the owner before the possessive
+            owner, before = before[:before.index("s")], before[before.index("s") + 1:]
+        elif "of" not in after and [w for w in after if w not in _STOP]:
+            return None, [("not_understood", f"{phrase}: the {rest[drawer]} of what? ({' '.join(after)!r} after it)")]
+        part = " ".join(before + [rest[drawer]])
+        name, why = _landmark(owner, world, twins)
+        if why and "of" not in after and "s" not in rest[:drawer]:
+            return None, [(why[0][0], f"{phrase}: the {rest[drawer]} of no declared thing ({why[0][1]})")]
+        if why:
+            return None, why
+        return {"relation": "in", "of": [name], "part": part}, []
     if kind == "from":  # "lift the bowl from the stove": the one resting on it
         kind = "on"
     if kind == "between":

@@ -315,3 +315,28 @@ def test_at_the_rim_of_a_deep_open_container_an_object_is_not_in_it_unless_seen_
     assert out.status == status, out.reason
     if status == "unknown":
         assert "rim of an open container" in out.reason
+
+
+@pytest.mark.parametrize("open_depth,dy,held,status", [
+    (0.073, 0.0, False, "satisfied"),     # down in the basket, inside its walls
+    (0.073, 0.055, False, "unknown"),     # its centre nearer a wall than its own half width: leaning on it?
+    (0.073, 0.12, False, "unsatisfied"),  # its centre beyond the basket's footprint: beside it
+    (0.073, 0.0, True, "unsatisfied"),    # still in the hand
+    (None, 0.0, False, "unsatisfied"),    # a solid block that tall: far below its top is not on it
+])
+def test_down_in_a_deep_open_container_an_object_within_its_walls_is_in_it(open_depth, dy, held, status):
+    """libero_object's development split (seed 501): a can set in the basket, seen there as its own
+    segment down to the floor, was judged "not on basket_1" (its bottom far below the rim, where a
+    dish's floor would be) and picked out again. Perception's open depth says the basket's inside
+    goes down that far."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    basket = _ent("basket_1", (0.0, 0.25, 0.07), (0.087, 0.08, 0.07), 0.8, std=0.003)
+    if open_depth is not None:
+        basket["attributes"]["open_depth_m"] = open_depth
+    soup = _ent("alphabet_soup_1", (-0.02, 0.25 + dy, 0.049), (0.023, 0.023, 0.049), 0.8, std=0.0027)
+    rel = [{"subject": "gripper", "relation": "holding", "object": "alphabet_soup_1", "confidence": 0.9}] if held else []
+    snap = {"entities": [basket, soup], "relations": rel}
+    [c] = parse_criteria({"on": {"object": "alphabet_soup_1", "support": "basket_1"}})
+    out = evaluate(c, snap, snap)
+    assert out.status == status, out.reason

@@ -44,7 +44,10 @@ centre must lie in the container's footprint by 2 sigma. Without that relation, 
 resting at the rim's height of an open container deeper than :data:`DISH_DEPTH_M`
 (``attributes.open_depth_m``, perceived: a basket) is never ``on`` it: it lies on the rim
 (LIBERO's ``In`` does not count that), or shows only its part above the walls (in it, but not
-seen so: ``unknown`` until it is). An entity absent from a snapshot, or with
+seen so: ``unknown`` until it is). Down in such a container (its bottom below the rim by 2
+sigma) it is ``on`` it when its centre lies its own short half width inside the footprint by
+2 sigma (within the walls), wherever its base (perception sees the floor only as far down as
+its views reach). An entity absent from a snapshot, or with
 ``confidence`` below :data:`CONFIDENCE_MIN`, makes the criterion ``unknown``: never
 guessed, never ``success``. One stand-in: the support of ``on`` hidden by what was set on it
 (a plate under a mug, seen only as the ring around it) is taken where the initial snapshot saw
@@ -421,7 +424,14 @@ def _eval_on(c, initial, terminal, refs):
     # stood on: what rests at its rim's height lies on the rim, or shows only its part above
     # the walls; in it is what perception sees inside it (the inside relation, above)
     depth = _attr(s, "open_depth_m", 0.0)
-    on_rim = depth > DISH_DEPTH_M and not in_dish
+    deep = depth > DISH_DEPTH_M
+    on_rim = deep and not in_dish
+    # ... and down in one, an object stands inside its walls: its centre at least its own short
+    # half width in from them (by 2 sigma), wherever on the floor (perception reads the floor
+    # only as far down as it sees it, and an object's base there is hidden: no floor bound)
+    short = float(min(o["size"][0], o["size"][1]))
+    down_in = (deep and bottom < top - REST_TOL_M - m and dx <= sx - short - m and dy <= sy - short - m
+               and held is False)
     flat = 2.0 * s["size"][2] <= DISH_DEPTH_M
     reach = DISH_CENTRE_M if in_dish else (max(DISH_CENTRE_M, min(sx, sy) - max(o["size"][:2])) if flat else math.inf)
     # how far off the support's centre: from the object's model origin where perception gives
@@ -434,15 +444,17 @@ def _eval_on(c, initial, terminal, refs):
         m_off = 2.0 * math.hypot(_attr(o, "origin_std_m", sigma(o)), sigma(s))
     else:
         off, m_off = math.hypot(dx, dy), m
-    inside = rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m_off and not on_rim
-    outside = (bottom > top + REST_TOL_M + m or bottom < floor - m or dx > sx + m or dy > sy + m or bool(held)
-               or off > reach + m_off)
+    inside = (rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m_off and not on_rim
+              or down_in)
+    outside = (bottom > top + REST_TOL_M + m or (bottom < floor - m and not deep) or dx > sx + m or dy > sy + m
+               or bool(held) or (off > reach + m_off and not deep))
     return _band(c, refs, inside, outside, obj, f"on {support}",
                  f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
                  + (f"; its origin {off:.3f} m off the centre (reach {reach:.3f}, 2 sigma {m_off:.3f})"
                     if origin is not None else "")
                  + (f"; at the rim of an open container {depth:.3f} m deep: in it only where seen inside it"
                     if on_rim else "")
+                 + (f"; down in an open container at least {depth:.3f} m deep, inside its walls" if down_in else "")
                  + (f"; {support} where the initial snapshot saw it (seen weakly there now)" if still else ""))
 
 

@@ -32,8 +32,8 @@ from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.handle import UPPER_FRACTION, RoundBody, round_body
 
-__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "open_depth", "with_open_depth", "with_round_body", "detect", "detect_clusters",
-           "stack", "resting_at"]
+__all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "open_depth", "with_open_depth", "with_round_body",
+           "detect", "detect_clusters", "stack", "resting_at"]
 
 log = logging.getLogger(__name__)
 
@@ -81,13 +81,13 @@ class Detection:
             the part seen and its centre short of the object's on that side.
         body: the round body with a handle its footprint shows (a mug's cup and handle:
             :func:`with_round_body`), else None.
-        open_depth_m: how far its inside's floor lies below its top, m, where it is an open
-            container (a basket, a bowl: :func:`open_depth`); 0 for a solid top.
         covered: the lower part of a stack split at a height step
             (:func:`phyagentos.perception.split.split_cluster`) with a part resting on it:
             its top and its far side are hidden under that part, so its footprint is a lower
             bound and its shape that of what shows; never what a spatial reference picks out
             (what stands on it does).
+        open_depth_m: how far its inside's floor lies below its top, m, where it is an open
+            container (a basket, a bowl: :func:`with_open_depth`); 0 for a solid top.
     """
 
     position: np.ndarray

@@ -61,8 +61,8 @@ def test_liberopro_suites_validate_and_list_by_family():
 @pytest.mark.parametrize("suite,task,expect", [
     ("libero_object_swapp", "0", "LIBERO-PRO's and others installed: 'libero_10_lan'"),
     ("libero_object_env", "0", "cannot be run: 10 of its 10 BDDL files are not shipped"),
-    # "take the black bowl from the top drawer ...": a drawer of no declared thing
-    ("libero_spatial_lan", "4", "no chosen task of libero_spatial_lan has a goal graph"),
+    # "move the plate to the stove's front": a push, which no skill does
+    ("libero_goal_lan", "5", "no chosen task of libero_goal_lan has a goal graph"),
 ])
 def test_a_bad_liberopro_suite_exits_2_with_nothing_built(tmp_path, suite, task, expect):
     result = _bench(suite, "--tasks", task, "--seeds", "0", "--workspace", str(tmp_path / "ws"), "--json", cwd=tmp_path)

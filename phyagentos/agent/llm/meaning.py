@@ -651,25 +651,17 @@ def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tu
                                           f"the table's centre)")]
     drawer = next((i for i, w in enumerate(rest) if w in _PART_OF), None)
     if kind in ("in", "from") and drawer is not None and "of" not in rest[:drawer]:
-        # "in / from the top drawer of the wooden cabinet"; without "of ..." the drawer is of the
-        # one thing drawers belong to (_PART_OF: "take the bowl from the top drawer")
-        after = rest[drawer + 1:]
-        if "of" in after and [w for w in after[:after.index("of")] if w not in _STOP]:
-            return None, [("not_understood", f"{phrase}: the {rest[drawer]} of what? "
-                                              f"({' '.join(after[:after.index('of')])!r} before 'of')")]
-        before = [w for w in rest[:drawer] if w not in ("the", "a", "an")]
-        owner = after[after.index("of") + 1:] if "of" in after else [_PART_OF[rest[drawer]]]
-        if "s" in before:  # "the cabinet's top drawer": the owner before the possessive
-            owner, before = before[:before.index("s")], before[before.index("s") + 1:]
-        elif "of" not in after and [w for w in after if w not in _STOP]:
-            return None, [("not_understood", f"{phrase}: the {rest[drawer]} of what? ({' '.join(after)!r} after it)")]
-        part = " ".join(before + [rest[drawer]])
+        # "in / from the top drawer of the wooden cabinet", "from the top drawer" (of the one
+        # thing drawers belong to): a part of the landmark; "from" a drawer is in it
+        part_kind, part, owner, why = _split_part(" ".join(words), rest)
+        if why:
+            return None, why
         name, why = _landmark(owner, world, twins)
-        if why and "of" not in after and "s" not in rest[:drawer]:
+        if why and owner == [_PART_OF[rest[drawer]]]:
             return None, [(why[0][0], f"{phrase}: the {rest[drawer]} of no declared thing ({why[0][1]})")]
         if why:
             return None, why
-        return {"relation": "in", "of": [name], "part": part}, []
+        return {"relation": "in", "of": [name], "part": f"{part} {part_kind}" if part else part_kind}, []
     if kind == "from":  # "lift the bowl from the stove": the one resting on it
         kind = "on"
     if kind == "between":
@@ -1012,18 +1004,32 @@ def _read_part(text: str, named: list[str], world: World, previous: tuple[str, .
     """``(objects, part, part_kind, problems)`` of the phrase ``named`` (the words of clause
     ``text`` naming a thing or a part of one): ``the middle drawer of the cabinet`` is the
     drawer ``middle`` (:data:`_DRAWER_WORDS`) of the one thing ``cabinet`` names (any declared
-    thing, a fixture too); without ``of ...`` the drawer is of the one thing its kind belongs to
-    (:data:`_PART_OF`: a cabinet); "the cabinet's middle drawer" names its owner before the
-    possessive, and "the middle layer of the drawer" (:data:`_LEVEL_WORDS`) takes "drawer" for
-    the chest of drawers; a phrase with no drawer names the thing itself (part and kind None)."""
+    thing, a fixture too); a phrase with no drawer names the thing itself (part and kind None).
+    How the words split: :func:`_split_part`."""
     names = {o.name for o in world.objects}
     things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
                    regions=(), source=world.source)
-    kind = next((w for w in named if w in _PART_OF), None)
-    part = None
+    kind, part, owner, problems = _split_part(text, named)
     if kind is None:
         objects, _, problems = _read_objects(named, things, previous)
         return objects, None, None, problems
+    if problems:
+        return (), None, kind, problems
+    objects, _, problems = _read_objects(owner, things, previous)
+    return objects, part, ("drawer" if kind in ("drawer", "drawers") else kind), problems
+
+
+def _split_part(text: str, named: list[str]) -> tuple[str | None, str | None, list[str], list[tuple[str, str]]]:
+    """``(kind, part, owner words, problems)`` of the words ``named`` (of clause ``text``) that
+    may name a part of a thing: ``kind`` the part word (:data:`_PART_OF`: drawer) or None when
+    there is none; ``part`` its level (:data:`_DRAWER_WORDS`: top, middle, bottom) or None; the
+    owner the words after "of", or those before a possessive ("the cabinet's middle drawer"),
+    else the one thing its kind belongs to (a cabinet); "the middle layer of the drawer"
+    (:data:`_LEVEL_WORDS`) takes "drawer" for the chest of drawers. Problems: a level that is
+    none of those, or words after the part that are no "of ..."."""
+    kind = next((w for w in named if w in _PART_OF), None)
+    if kind is None:
+        return None, None, [], []
     k = named.index(kind)
     before = [w for w in named[:k] if w not in ("the", "a", "an", "its", "their", "please")]
     owner: list[str] = []
@@ -1033,16 +1039,14 @@ def _read_part(text: str, named: list[str], world: World, previous: tuple[str, .
     if len(before) == 3 and before[1] in _LEVEL_WORDS and before[2] == "of":
         before = before[:1]  # "the middle layer of the drawer": the drawer stands for the chest of them
     if len(before) > 1 or (before and before[0] not in _DRAWER_WORDS):
-        return (), None, kind, [("not_understood", f"{quote(text)}: which {kind} is {' '.join(before)!r}? (say top, "
-                                                   f"middle or bottom {kind})")]
+        return kind, None, [], [("not_understood", f"{quote(text)}: which {kind} is {' '.join(before)!r}? (say "
+                                                   f"top, middle or bottom {kind})")]
     part = _DRAWER_WORDS[before[0]] if before else None
     after = named[k + 1:]
-    whole = after[after.index("of") + 1:] if "of" in after else owner or [_PART_OF[kind]]
     if "of" not in after and [w for w in after if w not in _STOP]:
-        return (), None, kind, [("not_understood", f"{quote(text)}: the {kind} of what? ({' '.join(after)!r} after "
-                                                   f"it)")]
-    objects, _, problems = _read_objects(whole, things, previous)
-    return objects, part, ("drawer" if kind in ("drawer", "drawers") else kind), problems
+        return kind, part, [], [("not_understood", f"{quote(text)}: the {kind} of what? ({' '.join(after)!r} "
+                                                   f"after it)")]
+    return kind, part, after[after.index("of") + 1:] if "of" in after else owner or [_PART_OF[kind]], []
 
 
 def _into_drawer(text: str, dest_words: list[str], prep: str | None, world: World, previous: tuple[str, ...],

@@ -23,5 +23,5 @@ def generated_scene(workspace: str | Path, suite: str, task: int, *,
     where = where or {}
     objects = tuple({**o, **looks.get(o["class"], {}), **({"where": where[o["name"]]} if o["name"] in where else {})}
                     for o in declared["objects"])
-    fixtures = tuple({**f, **fixture_looks.get(f["class"], {})} for f in declared["fixtures"])
+    fixtures = tuple({**f, **fixture_looks[task].get(f["class"], {})} for f in declared["fixtures"])
     return LiberoScene(suite=suite, task=task, generated=True, objects=objects, fixtures=fixtures)

@@ -133,17 +133,19 @@ def _workspace_with_looks(tmp_path):
     (ws / "libero").mkdir(parents=True)
     look = {"shape": "cylinder", "colour": [0.1, 0.1, 0.1], "size_m": [0.12, 0.12, 0.05]}
     cats = set(_problem().objects.values())
-    from phyagentos.bench.libero import _FIXTURE_LOOKS_METHOD, _LOOKS_METHOD
+    from phyagentos.bench.libero import _FIXTURE_LOOKS_METHOD, _LOOKS_METHOD, _fixture_world
 
     cache = {"_method": _LOOKS_METHOD, "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
              **{c: look for c in cats}}
     (ws / "libero" / "descriptors.yaml").write_text(yaml.safe_dump(cache))
     fixture_look = {"size_m": [0.26, 0.22, 0.23], "place": {"offset_m": [0.0, -0.015], "half_extents_m": [0.125, 0.094],
                                                             "height_m": 0.227}}
-    fixture_cats = {c for c in _problem().fixtures.values() if c != "table"}
-    (ws / "libero" / "fixture_looks.yaml").write_text(yaml.safe_dump(
-        {"_method": _FIXTURE_LOOKS_METHOD, "_measured_tasks": [f"libero_spatial/{i}" for i in range(10)],
-         **{c: fixture_look for c in fixture_cats}}))
+    worlds = {}
+    for i in range(10):  # libero_spatial's worlds (one cabinet pose for all ten, as it happens)
+        problem = parse_bddl(resolve_task("libero_spatial", i).bddl_path)
+        worlds[_fixture_world(problem)] = {"measured_as": f"libero_spatial/{i}",
+                                           "looks": {c: fixture_look for c in problem.fixtures.values() if c != "table"}}
+    (ws / "libero" / "fixture_looks.yaml").write_text(yaml.safe_dump({"_method": _FIXTURE_LOOKS_METHOD, "worlds": worlds}))
     return ws
 
 
@@ -192,3 +194,27 @@ def test_a_generated_run_seeds_libero_s_sampler_instead_of_naming_init_states(tm
         prepare_libero_suite("libero_spatial", ws, tasks=("7",), seeds=(70001,))
     with pytest.raises(BenchError, match="sampler seed -1 out of range"):
         prepare_libero_suite("libero_spatial", ws, tasks=("7",), seeds=(-1,), generated=True)
+
+
+def test_a_fixture_look_serves_only_the_world_it_was_measured_in(tmp_path):
+    """A fixture's look holds world-frame directions (a drawer's axis, its place patch's
+    offset): libero_goal's cabinet (yaw pi) and libero_spatial_swap task 3's (moved to the
+    plate's region, unrotated) are not libero_spatial's, so each gets its own look; a
+    reworded suite shares its standard suite's world."""
+    from phyagentos.bench.libero import _fixture_looks, _fixture_world
+
+    ws = _workspace_with_looks(tmp_path)
+    spatial = _fixture_world(_problem(0))
+    goal = _fixture_world(parse_bddl(resolve_task("libero_goal", 0).bddl_path))
+    swapped = _fixture_world(parse_bddl(resolve_task("libero_spatial_swap", 3).bddl_path))
+    assert len({spatial, goal, swapped}) == 3
+    assert _fixture_world(parse_bddl(resolve_task("libero_spatial_lan", 0).bddl_path)) == spatial
+    path = ws / "libero" / "fixture_looks.yaml"
+    cache = yaml.safe_load(path.read_text())
+    goal_look = {"size_m": [0.26, 0.22, 0.23], "drawers": [{"name": "top", "axis": [-1.0, 0.0]}]}
+    cache["worlds"][goal] = {"measured_as": "libero_goal/0",
+                             "looks": {"wooden_cabinet": goal_look, "flat_stove": {}, "wine_rack": {}}}
+    path.write_text(yaml.safe_dump(cache))
+    looks = _fixture_looks(ws, "libero_goal", [0, 1])  # both measured: nothing is built
+    assert looks[0]["wooden_cabinet"] == looks[1]["wooden_cabinet"] == goal_look
+    assert _fixture_looks(ws, "libero_spatial_lan", [0])[0]["wooden_cabinet"]["place"]["height_m"] == 0.227

@@ -77,7 +77,7 @@ _PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer")
 _LOOKS_METHOD = "generated_clutter_v6"  # v3: objects kept off the fixtures; v4: 10 scenes, size range, shapes;
 # v5: sightings pooled over every world measured; v6: handle_origin_m (a mug's model origin along its handle)
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
-_FIXTURE_LOOKS_METHOD = "generated_alone_v4"  # v4: drawers
+_FIXTURE_LOOKS_METHOD = "generated_alone_v5"  # v4: drawers; v5: kept per world, not per category
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:
@@ -543,7 +543,7 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
                  "defaults": {"target": LIBERO_TARGET},
                  "scene": {"suite": suite, "task": i, **({"generated": True} if generated else {}), "objects": objects,
                            # a fixture with a measured look is perceived (places onto it)
-                           "fixtures": [{**f, **fixture_looks.get(f["class"], {})} for f in declared["fixtures"]]},
+                           "fixtures": [{**f, **fixture_looks[i].get(f["class"], {})} for f in declared["fixtures"]]},
                  "nodes": nodes}
         path = root / f"t{i}.yaml"
         atomic_write_text(path, f"# LIBERO {suite} task {i}: {task.instruction!r} (the task's instruction), planned\n"
@@ -635,57 +635,64 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str,
     return looks
 
 
-def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
-    """Looks of the fixture categories of ``tasks`` (:func:`~phyagentos.targets.libero.descriptors.measure_fixture_looks`:
-    each fixture alone on generated scenes, with its place patch), cached per workspace in
-    ``libero/fixture_looks.yaml``; a task whose fixture categories are all cached builds
-    nothing.
+def _fixture_world(problem) -> str:
+    """The world a fixture's look belongs to (a JSON key): the scene class, the declared
+    fixtures, and the region and yaw range each fixture is placed in. A look carries
+    world-frame directions (a drawer's axis and handle offset), so a category's look in one
+    world is not its look in another (libero_spatial's cabinet stands at yaw 2.66-2.72 rad,
+    libero_goal's at pi). Bench bookkeeping only: the key picks which measured look a task
+    declares and never reaches the Agent plane."""
+    placed = {}
+    for atom in problem.init:
+        if len(atom) == 3 and atom[1] in problem.fixtures:
+            region = next((r for name, r in problem.regions.items()
+                           if atom[2] in (name, f"{r.get('target', '')}_{name}")), None)
+            placed[atom[1]] = [atom[2], region]
+    return json.dumps([problem.scene, sorted(problem.fixtures.items()), placed], sort_keys=True)
+
+
+def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[int, dict[str, dict[str, Any]]]:
+    """``{task: {fixture category: look}}`` for ``tasks``
+    (:func:`~phyagentos.targets.libero.descriptors.measure_fixture_looks`: each fixture alone
+    on generated scenes of the task's world, with its place patch, knob and drawers).
+
+    Looks are kept per world (:func:`_fixture_world`) in ``libero/fixture_looks.yaml``
+    (``{_method, worlds: {key: {measured_as, looks}}}``): a task whose world was measured
+    before, by any suite (LIBERO-PRO's swapped or reworded suites share their standard
+    suite's worlds), builds nothing; a cache measured by another method is measured again.
+    Written atomically after every world.
 
     Raises:
         BenchError: a world could not be built or rendered to measure them.
     """
-    from phyagentos.targets.libero.descriptors import is_support, measure_fixture_looks  # noqa: PLC0415
-
-    return _cached_looks(workspace_dir / "libero" / "fixture_looks.yaml", _FIXTURE_LOOKS_METHOD, suite, tasks,
-                         categories=lambda problem: {c for c in problem.fixtures.values() if not is_support(c)},
-                         measure=measure_fixture_looks, what="fixture looks",
-                         header="# Looks of LIBERO's fixture categories (size, top, place patch), measured on generated\n"
-                                "# scenes by the project's perceiver (phyagentos.targets.libero.descriptors); never an init state.\n")
-
-
-def _cached_looks(path: Path, method: str, suite: str, tasks: list[int], *, categories, measure, what: str,
-                  header: str) -> dict[str, dict[str, Any]]:
-    """The looks cache at ``path`` (YAML: ``{category: look, _method, _measured_tasks}``),
-    measured again from scratch when it was measured by another ``method``; each task of
-    ``tasks`` whose ``categories(problem)`` are not all cached gets one world built and
-    ``measure(target)`` run on it (a category already cached keeps its look). Written
-    atomically after every task. Returns ``{category: look}``.
-
-    Raises:
-        BenchError: a world could not be built or rendered (``what`` names the looks).
-    """
     from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
+    from phyagentos.targets.libero.descriptors import measure_fixture_looks  # noqa: PLC0415
 
+    path = workspace_dir / "libero" / "fixture_looks.yaml"
     cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
-    if cache.get("_method") != method:  # measured another way: measure again
-        cache = {"_method": method}
-    measured = set(cache.get("_measured_tasks", []))
+    worlds: dict[str, dict[str, Any]] = cache.get("worlds", {}) if cache.get("_method") == _FIXTURE_LOOKS_METHOD else {}
+    out: dict[int, dict[str, dict[str, Any]]] = {}
     for i in tasks:
         key = f"{suite}/{i}"
-        if key in measured or categories(parse_bddl(resolve_task(suite, i).bddl_path)) <= set(cache):
-            continue
-        logger.info("LIBERO bench: measuring the %s of %s on generated scenes", what, key)
         try:
-            with LiberoTarget(f"libero_{path.stem}", LiberoScene(suite=suite, task=i), seed=0) as target:
-                for cat, look in measure(target).items():
-                    cache.setdefault(cat, look)
+            problem = parse_bddl(resolve_task(suite, i).bddl_path)
         except TargetError as exc:
-            raise BenchError(f"LIBERO {key}: {what} could not be measured: {exc}") from exc
-        measured.add(key)
-        cache["_measured_tasks"] = sorted(measured)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(path, header + yaml.safe_dump(cache, sort_keys=True))
-    return {k: v for k, v in cache.items() if not k.startswith("_")}
+            raise BenchError(f"LIBERO {key}: fixture looks could not be measured: {exc}") from exc
+        world = _fixture_world(problem)
+        if world not in worlds:
+            logger.info("LIBERO bench: measuring the fixture looks of %s on generated scenes", key)
+            try:
+                with LiberoTarget("libero_fixture_looks", LiberoScene(suite=suite, task=i), seed=0) as target:
+                    worlds[world] = {"measured_as": key, "looks": measure_fixture_looks(target)}
+            except TargetError as exc:
+                raise BenchError(f"LIBERO {key}: fixture looks could not be measured: {exc}") from exc
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(path, "# Looks of LIBERO's fixtures (size, top, place patch, knob, drawers) per world, measured\n"
+                                    "# on generated scenes by the project's perceiver (phyagentos.targets.libero.descriptors),\n"
+                                    "# each fixture alone; never an init state.\n"
+                              + yaml.safe_dump({"_method": _FIXTURE_LOOKS_METHOD, "worlds": worlds}, sort_keys=True))
+        out[i] = worlds[world]["looks"]
+    return out
 
 
 def _ensure_target(workspace_dir: Path) -> None:

@@ -85,3 +85,40 @@ def test_the_operation_menu_offers_only_granted_operations_and_never_a_repeat():
     assert set(ops) == {"set_gripper", "observe"}
     assert ops["set_gripper"]["properties"]["opening_m"]["enum"] == [0.02, 0.04]
     assert "finish" in {v["properties"]["operation"]["enum"][0] for v in operation_menu(("observe",))["anyOf"]}
+
+
+def test_the_runner_stays_alive_while_the_model_loads_and_thinks(tmp_path):
+    """A heartbeat shorter than the model's load and think time: the runner beats while it
+    waits on the model (SkillContext.alive from a helper thread), so the WatchdogSupervisor
+    does not end a working session with ``heartbeat.runner``."""
+    graph = yaml.safe_load(write_graph(tmp_path / "g.yaml").read_text())
+    graph["nodes"][0]["limits"] = {"heartbeat_timeout_s": 1.5}
+    (tmp_path / "g.yaml").write_text(yaml.safe_dump(graph))
+    report = run_goal_graph(tmp_path / "g.yaml", tmp_path / "ws", seed=0)
+    (summary,) = report.sessions
+    rec = Workspace.open(tmp_path / "ws").load_session(summary.session_id)
+    attempt = rec.attempts[0]
+    assert attempt.outcome == "completed", attempt.error
+    calls = [c for c in rec.context.model_calls if c.role == "agent_runtime"]
+    assert calls and sum(c.latency_s for c in calls) > 1.5  # the model's time alone outlasts one heartbeat
+
+
+def test_beating_stamps_while_the_body_runs_and_never_past_its_bound(monkeypatch):
+    import time
+
+    from phyagentos.runtime import agent_runtime
+
+    monkeypatch.setattr(agent_runtime, "THINKING_BEAT_S", 0.02)
+    stamps: list[float] = []
+    with agent_runtime._beating(lambda: stamps.append(time.monotonic()), until=time.monotonic() + 10.0):
+        time.sleep(0.2)
+    ended = time.monotonic()
+    n = len(stamps)
+    assert n >= 3 and stamps[-1] <= ended
+    time.sleep(0.1)
+    assert len(stamps) == n  # the helper is gone with the body
+    stamps.clear()
+    bound = time.monotonic() + 0.06
+    with agent_runtime._beating(lambda: stamps.append(time.monotonic()), until=bound):
+        time.sleep(0.25)  # a model call that hangs past the session's time goes stale
+    assert stamps and all(t < bound + 0.02 for t in stamps)

@@ -126,6 +126,10 @@ class SkillContext:
             tick (a tree), its first inference (a policy, after connecting) or its first
             model step (an agent); the SessionRunner records the attempt's
             ``actuation_started_at`` there.
+        alive: stamps the runner's heartbeat and nothing else (no target call, no render,
+            no checkpoint), so it is safe from a helper thread: a SkillRuntime waiting on
+            something other than the target (a language model loading or thinking) calls it
+            to show the runner is working, not stuck. ``None`` outside a SessionRunner.
     """
 
     target: Any
@@ -145,6 +149,7 @@ class SkillContext:
     evidence_rel: str | None = None
     observations: int = 0
     on_actuation_start: Callable[[], None] | None = None
+    alive: Callable[[], None] | None = None
 
     def actuation_starts(self) -> None:
         """Tell the session that its skill's first tick (or first step) follows now

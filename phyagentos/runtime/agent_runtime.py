@@ -29,8 +29,10 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
 import time
-from typing import Any, Callable, Mapping
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
@@ -57,7 +59,37 @@ _SYSTEM = ("You control a robot arm through operations. Each turn choose ONE ope
            "closer. Choose finish only when every part of the goal is done. Never repeat an operation that "
            "already succeeded.")
 
+#: How often the runner's heartbeat is stamped while the model is loaded or thinks, s
+#: (a tenth of the supervisor's default 10 s heartbeat timeout).
+THINKING_BEAT_S = 1.0
+
 _client_cache: dict[str, LLMClient] = {}
+
+
+@contextmanager
+def _beating(alive: Callable[[], None] | None, *, until: float) -> Iterator[None]:
+    """Stamp ``alive`` (:attr:`~phyagentos.primitives.context.SkillContext.alive`: the runner's
+    heartbeat alone, safe from another thread) every :data:`THINKING_BEAT_S` from a helper thread while the body
+    runs (a model being loaded or choosing the next operation: the runner is working, not
+    stuck), never past ``until`` (``time.monotonic()`` s: the session's deadline or wall
+    budget), so a model call that hangs beyond the session's time still goes stale and the
+    WatchdogSupervisor ends the session with ``heartbeat.runner``."""
+    if alive is None:
+        yield
+        return
+    done = threading.Event()
+
+    def beat() -> None:
+        while not done.wait(THINKING_BEAT_S) and time.monotonic() < until:
+            alive()
+
+    helper = threading.Thread(target=beat, name="agent-runtime-thinking", daemon=True)
+    helper.start()
+    try:
+        yield
+    finally:
+        done.set()
+        helper.join()
 
 
 def _default_client() -> LLMClient:
@@ -138,7 +170,8 @@ class AgentSkillRuntime:
         done: set[tuple[str, Any]] = set()
         start_q = np.asarray(ctx.target.arm_qpos(), dtype=float)
         try:
-            client = self.client_factory()
+            with _beating(getattr(ctx, "alive", None), until=min(deadline, time.monotonic() + max_wall)):
+                client = self.client_factory()
         except LLMError as exc:
             return RunOutcome(status="error", error_code="agent.model_unavailable", message=str(exc))
         history: list[str] = []
@@ -160,12 +193,13 @@ class AgentSkillRuntime:
             prompt = "\n".join([f"Goal: {goal}", f"Now: {obs}", "Done so far: " + ("; ".join(history) or "nothing"),
                                 "Next operation?"])
             try:
-                reply = client.complete([{"role": "system", "content": _SYSTEM}, {"role": "user", "content": prompt}],
-                                        # ``finish`` is offered once something was done: a session never ends
-                                        # without acting; nothing already done is offered again.
-                                        schema=operation_menu(granted, allow_finish=bool(history),
-                                                              done=frozenset(done)),
-                                        max_tokens=40, purpose="act")
+                with _beating(getattr(ctx, "alive", None), until=min(deadline, started + max_wall)):
+                    reply = client.complete([{"role": "system", "content": _SYSTEM}, {"role": "user", "content": prompt}],
+                                            # ``finish`` is offered once something was done: a session never
+                                            # ends without acting; nothing already done is offered again.
+                                            schema=operation_menu(granted, allow_finish=bool(history),
+                                                                  done=frozenset(done)),
+                                            max_tokens=40, purpose="act")
             except LLMError as exc:
                 ctx.trace.record("agent_step", step=step, ok=False, error=str(exc))
                 return RunOutcome(status="failed", error_code="agent.model_error", message=str(exc), ticks=step)

@@ -423,6 +423,7 @@ class SessionRunner:
                 self._actuation_started_at = utc_now()
 
             ctx.on_actuation_start = actuation_starts
+            ctx.alive = self._beat  # shared memory stamps only: safe from a runtime's helper thread
             # [view hook, issue 13] live tree.json (<= 10 Hz, no fsync) and, under --record, the video.
             ctx.tree_observer = TreeStatusPublisher(evidence_dir / "tree.json", session_id=rec.session_id,
                                                     sim_clock=lambda: target.sim_time)

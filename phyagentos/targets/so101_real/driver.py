@@ -126,9 +126,11 @@ _READ_WAIT_S = 0.002
 
 
 def default_timeout_margin_ms(port: str) -> float:
-    """0 for a serial device; 300 ms for a pseudo-terminal (``/dev/pts/N``, a bus twin), whose
-    servos are a thread of some process on a possibly busy machine, not microcontrollers."""
-    return 300.0 if os.path.realpath(port).startswith("/dev/pts/") else 0.0
+    """0 for a serial device; 1000 ms for a pseudo-terminal (``/dev/pts/N``, a bus twin), whose
+    servos are a thread of some process on a possibly busy machine, not microcontrollers
+    (300 ms was measured too short: a full test run on a loaded 2-core machine starved the
+    twin through three 300 ms timeouts in a row, 2026-11-26)."""
+    return 1000.0 if os.path.realpath(port).startswith("/dev/pts/") else 0.0
 
 
 class FeetechBus:

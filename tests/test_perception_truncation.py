@@ -304,8 +304,9 @@ def test_a_can_let_go_onto_something_hidden_in_a_basket_is_matched_with_its_heig
     """LIBERO-10 task 0 (development run): the tomato sauce can let go into the basket stood on the
     alphabet soup lying in it; seen from the rim up and fitted down to the table it was 18 cm tall
     for its look's 9.1, and it named nothing (a false failure of the place). Where the hand let it
-    go, its measured height is an upper bound; a tall segment 9 cm away (the basket's wall), an
-    object never let go and one still in the hand keep the height error."""
+    go (and at its next looks, its height known from the hand), its measured height is an upper
+    bound; a tall segment 9 cm away (the basket's wall), an object never let go and one still in
+    the hand keep the height error."""
     from phyagentos.perception.tracks import Track
 
     red = (0.23, 0.12, 0.05)
@@ -326,6 +327,7 @@ def test_a_can_let_go_onto_something_hidden_in_a_basket_is_matched_with_its_heig
     assert raw[0, 0] > cfg.association.gate_cost  # as tall as 18 cm: no sauce can
     upright = seen(0.0, height=0.0914)
     p.tracks["tomato_sauce_1"] = t = Track.start("tomato_sauce_1", upright, 0.95, 0.0, ("agentview",))
+    assert t.known_height_m is None
     for state in ("never let go", "held"):
         t.held = state == "held"
         assert np.array_equal(p._hidden_base_where_let_go(raw, dets), raw), state
@@ -333,5 +335,7 @@ def test_a_can_let_go_onto_something_hidden_in_a_basket_is_matched_with_its_heig
     got = p._hidden_base_where_let_go(raw, dets)
     assert got[0, 0] < 0.5 and got[1, 0] == raw[1, 0]
     assert got[0, 0] == pytest.approx(cost_matrix([upright], [sauce], cfg)[0, 0], abs=0.05)
+    t.released_s, t.known_height_m = None, 0.0914  # matched so since: its height known from the hand
+    assert np.array_equal(p._hidden_base_where_let_go(raw, dets), got)
     short = [seen(0.002, height=0.06)]  # seen shorter than its look: that still counts
     assert p._hidden_base_where_let_go(cost_matrix(short, [sauce], cfg), short)[0, 0] > 0.5

@@ -1053,7 +1053,8 @@ class Perceiver:
 
     def _hidden_base_where_let_go(self, C: np.ndarray, dets: list[Detection]) -> np.ndarray:
         """``C`` with the height of a detection standing on the plane taken as an upper bound
-        for an object the hand let go (or last seen inside a container) where that object is:
+        for an object the hand let go (its height known since, or last seen inside a
+        container) where that object is:
         its centre within the look's footprint radius of the track's position plus
         :data:`HIDDEN_BASE_SLACK_M` and 3 sigma of the detection (not the track's sigma, which a
         release makes wide). Its base may be hidden by a container's walls with something
@@ -1062,12 +1063,15 @@ class Perceiver:
         from the rim up and fitted down to the table, it was 18 cm tall for its look's 9.1
         and named nothing). Only a measured height below the look's counts then; the
         footprint, colour and shape count as ever. Once matched, the track puts its bottom
-        its height below the seen top (the rules after association)."""
+        its height below the seen top (the rules after association); the next look, the
+        container perhaps not named, still knows it (the sauce's second look went to the soup
+        lying hidden under it, which kept the allowance as being inside the basket)."""
         out = C
         for j, desc in enumerate(self.declared):
             t = self.tracks.get(desc.name)
             size = desc.size_vector()
-            if t is None or t.held or size is None or (t.released_s is None and t.inside_of is None):
+            if t is None or t.held or size is None or (t.released_s is None and t.inside_of is None
+                                                           and t.known_height_m is None):
                 continue
             tallest = float(desc.size_range_m[1][2]) if desc.size_range_m is not None else float(size[2])
             reach = 0.5 * float(size[0]) + HIDDEN_BASE_SLACK_M  # not the track's sigma: a release is uncertain

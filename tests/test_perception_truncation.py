@@ -339,3 +339,38 @@ def test_a_can_let_go_onto_something_hidden_in_a_basket_is_matched_with_its_heig
     assert np.array_equal(p._hidden_base_where_let_go(raw, dets), got)
     short = [seen(0.002, height=0.06)]  # seen shorter than its look: that still counts
     assert p._hidden_base_where_let_go(cost_matrix(short, [sauce], cfg), short)[0, 0] > 0.5
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("known_container", [None, "basket_1"])
+def test_an_object_found_let_go_in_a_segment_named_nothing_is_looked_for_there_again(scene, monkeypatch,
+                                                                                    known_container):
+    """LIBERO-10 task 0 (development run): the sauce let go into the basket was found standing
+    in the basket's segment, but that segment was named nothing (ambiguous); it was then neither
+    let go nor inside anything, so no later look searched the basket for it again and it was
+    absent from the terminal snapshot (a false failure). Found in an unnamed segment, it stays
+    let go; found in a container it is known to be inside, it is inside it."""
+    from phyagentos.perception.synthetic import SyntheticObject
+    from phyagentos.perception.tracks import Track
+
+    scene.place([SyntheticObject("crate", "box", (0.08, 0.08, 0.07), (0.55, 0.05), rgba=(0.6, 0.58, 0.5, 1))])
+    sauce = ObjectDescriptor("tomato_sauce_1", shape="cylinder", colour_rgb=(0.23, 0.12, 0.05), size_m=(0.067, 0.067, 0.091))
+    p = Perceiver(PerceptionConfig.default(), [sauce])
+    p.tracks["tomato_sauce_1"] = t = Track.start(
+        "tomato_sauce_1", _det((0.034, 0.034, 0.046), shape="cylinder", cut=None), 0.9, 0.0, ("front",))
+    t.released_s, t.inside_of = 0.5, known_container
+    calls = []
+
+    def found(track, cloud, heights, dets, indices, sensors):
+        calls.append(track.name)
+        return 0, np.array([0.55, 0.05, 0.1]), 0.8, 120, ("front",)
+
+    monkeypatch.setattr(perceiver_module, "_released_inside", found)
+    ents, _ = _observe(scene, p, stamp_s=1.0)
+    assert ents["tomato_sauce_1"]["attributes"]["source"] == "perceived" and calls == ["tomato_sauce_1"]
+    if known_container is None:  # the crate is named nothing: look there again next time
+        assert t.released_s == 0.5 and t.inside_of is None
+        ents, _ = _observe(scene, p, stamp_s=2.0)
+        assert calls == ["tomato_sauce_1"] * 2 and ents["tomato_sauce_1"]["attributes"]["source"] == "perceived"
+    else:
+        assert t.released_s is None and t.inside_of == known_container

@@ -686,8 +686,14 @@ class Perceiver:
             t.position[2] = plane.z_at(position[:2]) + t.bottom_m + t.half_extents[2]
             t.var_xy = max(dets[k].position_std_m, CONTAINER_WALL_M / 2.0) ** 2
             t.confidence, t.points, t.cameras, t.last_seen_s = conf, points, cams, stamp
-            t.seen_now, t.released_s = True, None
-            t.inside_of = next((n for i, n in matched.items() if i == k), None)
+            t.seen_now = True
+            # inside the container that segment was named as, else the one it was inside before;
+            # a segment named nothing (the basket with a can standing out of it, ambiguous) keeps
+            # the object let go, so the next look searches that segment for it again (LIBERO-10
+            # task 0: found there once, then lost for good: no longer let go, inside nothing)
+            t.inside_of = next((n for i, n in matched.items() if i == k), t.inside_of)
+            if t.inside_of is not None:
+                t.released_s = None
         t3 = time.perf_counter()
 
         # ---- remembered: seen since its release, hidden now behind something nearer

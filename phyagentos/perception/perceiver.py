@@ -1059,19 +1059,20 @@ class Perceiver:
 
     def _hidden_base_where_let_go(self, C: np.ndarray, dets: list[Detection]) -> np.ndarray:
         """``C`` with the height of a detection standing on the plane taken as an upper bound
-        for an object the hand let go (its height known since, or last seen inside a
-        container) where that object is:
-        its centre within the look's footprint radius of the track's position plus
-        :data:`HIDDEN_BASE_SLACK_M` and 3 sigma of the detection (not the track's sigma, which a
-        release makes wide). Its base may be hidden by a container's walls with something
-        under it that the cameras do not see either (LIBERO-10 task 0, development traces: a
-        tomato sauce can let go into the basket stood on the alphabet soup lying in it; seen
-        from the rim up and fitted down to the table, it was 18 cm tall for its look's 9.1
-        and named nothing). Only a measured height below the look's counts then; the
-        footprint, colour and shape count as ever. Once matched, the track puts its bottom
-        its height below the seen top (the rules after association); the next look, the
-        container perhaps not named, still knows it (the sauce's second look went to the soup
-        lying hidden under it, which kept the allowance as being inside the basket)."""
+        for an object the hand let go (or last seen inside a container, or whose height is
+        known from the hand since) where that object is: the detection's centre within the
+        look's footprint radius plus :data:`HIDDEN_BASE_SLACK_M` and 3 sigma of the detection
+        from the track's position (not the track's sigma, which a release makes wide).
+
+        Its base may be hidden by a container's walls, with something under it that the
+        cameras do not see either (LIBERO-10 task 0, development traces: a tomato sauce can
+        let go into the basket stood on the alphabet soup lying in it; seen from the rim up
+        and fitted down to the table, it was 18 cm tall for its look's 9.1 and named
+        nothing). Only a measured height below the look's counts then; footprint, colour and
+        shape count as ever. Once matched, the track puts its bottom its height below the
+        seen top (the rules after association). The allowance lasts while the height is
+        known: the can's next look, the basket unnamed, had gone to the soup hidden under it.
+        """
         out = C
         for j, desc in enumerate(self.declared):
             t = self.tracks.get(desc.name)

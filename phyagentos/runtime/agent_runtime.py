@@ -68,12 +68,13 @@ _client_cache: dict[str, LLMClient] = {}
 
 @contextmanager
 def _beating(alive: Callable[[], None] | None, *, until: float) -> Iterator[None]:
-    """Stamp ``alive`` (:attr:`~phyagentos.primitives.context.SkillContext.alive`: the runner's
-    heartbeat alone, safe from another thread) every :data:`THINKING_BEAT_S` from a helper thread while the body
-    runs (a model being loaded or choosing the next operation: the runner is working, not
-    stuck), never past ``until`` (``time.monotonic()`` s: the session's deadline or wall
-    budget), so a model call that hangs beyond the session's time still goes stale and the
-    WatchdogSupervisor ends the session with ``heartbeat.runner``."""
+    """Stamp ``alive`` (:attr:`~phyagentos.primitives.context.SkillContext.alive`: the
+    runner's heartbeat alone, safe from another thread) every :data:`THINKING_BEAT_S` s from
+    a helper thread while the body runs (a model being loaded or choosing the next
+    operation: the runner is working, not stuck), never past ``until`` (``time.monotonic()``
+    s: the session's deadline or wall budget), so a model call that hangs beyond the
+    session's time still goes stale and the WatchdogSupervisor ends the session with
+    ``heartbeat.runner``."""
     if alive is None:
         yield
         return

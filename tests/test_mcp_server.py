@@ -115,3 +115,14 @@ def test_mcp_server_over_http_on_localhost(tmp_path):
         proc.wait(timeout=20)
     assert "send_signal" in {t.name for t in tools}
     assert "pick_and_place" in {s["name"] for s in json.loads(skills.content[0].text)}
+
+
+def test_a_null_optional_argument_is_its_default_and_a_null_required_one_is_refused(tmp_path):
+    """Found by the fuzz test: ``send_signal`` with ``reason: null`` escaped as pydantic's error."""
+    ws = Workspace.create(tmp_path / "ws")
+    registry = ToolRegistry(ws)
+    registry.call("send_signal", {"kind": "pause", "reason": None, "session_id": None})
+    (sig,) = Workspace.open(tmp_path / "ws").read("RUNTIME_SIGNAL").data.signals
+    assert (sig.kind, sig.reason) == ("pause", "")
+    with pytest.raises(ToolError, match="required argument 'kind' is null; it must be string"):
+        registry.call("send_signal", {"kind": None})

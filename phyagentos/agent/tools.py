@@ -95,6 +95,9 @@ def _check_args(tool: Tool, args: Mapping[str, Any]) -> None:
     for name in schema.get("required", []):
         if name not in args:
             raise ToolError(f"{tool.name}: missing required argument {name!r}")
+        if args[name] is None:
+            raise ToolError(f"{tool.name}: required argument {name!r} is null; it must be "
+                            f"{props.get(name, {}).get('type', 'given')}")
     _check_shape(tool, args)
     for name, value in args.items():
         spec = props[name]
@@ -230,6 +233,8 @@ class ToolRegistry:
         tool = self.get(name)
         args = dict(arguments or {})
         _check_args(tool, args)
+        # an optional argument sent as null (JSON clients do) is an argument not given: its default
+        args = {k: v for k, v in args.items() if v is not None}
         if tool.screened:
             findings = [f for text in _strings(args) for f in screen_text(text, source=f"tool {name}")]
             if findings:

@@ -57,7 +57,7 @@ __all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_r
            "drawer_entity_name", "DRAWER_BAND_M", "DRAWER_BEYOND_M", "DRAWER_FRONT_FRACTION", "DRAWER_ABOVE_M",
            "DRAWER_LEVEL_TOL_M", "DRAWER_STRAIGHT_TOL_M", "DRAWER_FRONT_BEHIND_M", "DRAWER_FRONT_MIN_POINTS",
            "DRAWER_FRONT_SPAN_M", "DRAWER_WINDOW_M", "DRAWER_MIN_POINTS", "DRAWER_MIN_SPAN",
-           "DRAWER_SIGMA_M", "fixtures_from_declared", "segments", "bodies",
+           "DRAWER_SIGMA_M", "DRAWER_STOP_SIGMA_M", "fixtures_from_declared", "segments", "bodies",
            "detect_fixtures", "find_by_knob", "knob_band", "knob_reading", "patch_cover", "JOIN_GAP_M", "SIZE_TOL_FRACTION",
            "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS", "KNOB_RADIUS_M", "KNOB_BAND", "KNOB_MIN_POINTS",
            "KNOB_SEEN_POINTS", "KNOB_MIN_ELONGATION", "KNOB_ALONG_STD_M", "KNOB_ACROSS_STD_MAX_M", "KNOB_TOP_TOL_M", "KNOB_SIGMA_RAD",
@@ -249,6 +249,12 @@ DRAWER_LEVEL_TOL_M = 0.006
 #: short, every reading within 2 sigma: there the body's visible depth moves its footprint centre
 #: against the handle with where the sampler sets the cabinet).
 DRAWER_SIGMA_M = 0.01
+#: 1-sigma uncertainty of a drawer read shut because the hand pushed it into its shut stop
+#: (:meth:`~phyagentos.perception.Perceiver.note_drawer_stop`), m: the hand held the handle and
+#: its position is the arm's forward kinematics (millimetres); a drawer at its stop has no play
+#: along its axis (LIBERO's cabinet drawer rests 1.7 mm past its joint's zero under 5 to 60 N,
+#: scratch measurement in docs/libero.md, "Closing a drawer").
+DRAWER_STOP_SIGMA_M = 0.002
 _DRAWER_SLICE_M = 0.005
 
 

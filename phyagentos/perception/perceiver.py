@@ -94,6 +94,7 @@ from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.fixtures import (
     DRAWER_SIGMA_M,
+    DRAWER_STOP_SIGMA_M,
     DRAWER_WINDOW_M,
     KNOB_RADIUS_M,
     KNOB_SIGMA_RAD,
@@ -323,6 +324,10 @@ class Perceiver:
         #: (fixture, drawer) -> (opening m, stamp s) of the drawer's last reading: where an open
         #: drawer's floor still is while the arm (or what it holds) hides its handle
         self.drawer_seen: dict[tuple[str, str], tuple[float, float]] = {}
+        #: (fixture, drawer) -> stamp s of the push that met its shut stop
+        #: (:meth:`note_drawer_stop`): read shut, to the contact's 1-sigma, while its handle is
+        #: read within 2 sigma of shut
+        self.drawer_stops: dict[tuple[str, str], float] = {}
         self._baseline_n: float | None = None
         self._held: str | None = None
         self._grasp_height_m: float | None = None
@@ -340,6 +345,36 @@ class Perceiver:
         #: The object cloud of the last :meth:`observe` (stage 2: points above the support
         #: plane, cropped and masked, on the voxel grid; world frame, m), or None before one.
         self.last_cloud: Cloud | None = None
+
+    def _drawer_key(self, entity: str) -> tuple[str, str]:
+        for look in self.fixtures:
+            for drawer in look.drawers:
+                if drawer_entity_name(look.name, drawer.name) == entity:
+                    return look.name, drawer.name
+        names = [drawer_entity_name(f.name, d.name) for f in self.fixtures for d in f.drawers]
+        raise PerceptionError(f"{entity!r} is no drawer of a declared fixture; drawers: {names or 'none'}")
+
+    def note_drawer_stop(self, entity: str, *, stamp_s: float) -> None:
+        """Record that the hand, holding drawer ``entity``'s handle, pushed it into its shut stop
+        at ``stamp_s`` s (:class:`~phyagentos.primitives.affordance.ArticulateSlide`, pushed
+        home). From then on, while its handle is read within 2 sigma
+        (:data:`~phyagentos.perception.fixtures.DRAWER_SIGMA_M`) of shut, the drawer is
+        reported at shut (``joint_position`` 0) with 1-sigma
+        :data:`~phyagentos.perception.fixtures.DRAWER_STOP_SIGMA_M` and ``at_stop: shut``; a
+        reading further out forgets it (the drawer was moved).
+
+        Raises:
+            PerceptionError: ``entity`` is no drawer of a declared fixture (the drawers listed).
+        """
+        self.drawer_stops[self._drawer_key(entity)] = float(stamp_s)
+
+    def forget_drawer_stop(self, entity: str) -> None:
+        """Forget what :meth:`note_drawer_stop` recorded of ``entity`` (it is being moved); an
+        entity that is no declared drawer has nothing to forget."""
+        try:
+            self.drawer_stops.pop(self._drawer_key(entity), None)
+        except PerceptionError:
+            pass
 
     # ------------------------------------------------------------------ state
 
@@ -367,13 +402,15 @@ class Perceiver:
     def export_fixtures(self) -> dict:
         """The fixtures' last sightings as plain data (``{name: {position, yaw, half_extents,
         half_xy_world, top_m, points, error, found_by, turn, stamp_s, confidence, drawers}}``, m,
-        rad, s; ``drawers``: ``{drawer: [opening m, stamp s]}`` of each drawer's last reading), for
+        rad, s; ``drawers``: ``{drawer: [opening m, stamp s]}`` of each drawer's last reading;
+        ``stops``: ``{drawer: stamp s}`` of each drawer pushed into its shut stop), for
         :meth:`restore_fixtures`."""
         return {n: {"position": s.position.tolist(), "yaw": float(s.yaw), "half_extents": s.half_extents.tolist(),
                     "half_xy_world": s.half_xy_world.tolist(), "top_m": float(s.top_m), "points": int(s.points),
                     "error": float(s.error), "found_by": s.found_by, "turn": float(s.turn), "stamp_s": float(t),
                     "confidence": float(c),
-                    "drawers": {d: [float(o), float(ts)] for (f, d), (o, ts) in self.drawer_seen.items() if f == n}}
+                    "drawers": {d: [float(o), float(ts)] for (f, d), (o, ts) in self.drawer_seen.items() if f == n},
+                    "stops": {d: float(ts) for (f, d), ts in self.drawer_stops.items() if f == n}}
                 for n, (s, t, c) in self.fixture_tracks.items()}
 
     def restore_fixtures(self, data: Mapping[str, Any]) -> None:
@@ -386,6 +423,7 @@ class Perceiver:
         looks = {f.name for f in self.fixtures}
         self.fixture_tracks = {}
         self.drawer_seen = {}
+        self.drawer_stops = {}
         for name, d in (data or {}).items():
             if name not in looks:
                 continue
@@ -397,6 +435,8 @@ class Perceiver:
                 self.fixture_tracks[name] = (sighting, float(d["stamp_s"]), float(d["confidence"]))
                 for drawer, (opening, ts) in (d.get("drawers") or {}).items():
                     self.drawer_seen[(name, str(drawer))] = (float(opening), float(ts))
+                for drawer, ts in (d.get("stops") or {}).items():
+                    self.drawer_stops[(name, str(drawer))] = float(ts)
             except (KeyError, TypeError, ValueError) as exc:
                 raise PerceptionError(f"perception state: fixture {name!r} has an unexpected layout: {exc}") from None
 
@@ -934,6 +974,13 @@ class Perceiver:
             if reading is None and seen is None:
                 continue
             opening, points = reading if reading is not None else (seen[0], 0)  # type: ignore[index]
+            stop = self.drawer_stops.get((look.name, drawer.name))
+            if stop is not None and reading is not None and abs(opening) > 2.0 * DRAWER_SIGMA_M:
+                del self.drawer_stops[(look.name, drawer.name)]  # read out of shut: it was moved since
+                stop = None
+            pushed_home = stop is not None and reading is not None
+            if pushed_home:
+                opening = 0.0
             c0, u, v = drawer.frame(s.position[:2], s.turn)
             centre = c0 + u * opening
             ground = plane.z_at(centre)
@@ -947,9 +994,12 @@ class Perceiver:
                      "confidence": 1.0, "position_std_m": _r(DRAWER_SIGMA_M, 5), "points": int(points),
                      "last_seen_s": _r(stamp, 6), "joint_type": "slide", "axis": _r([u[0], u[1], 0.0], 5),
                      "range_m": [_r(drawer.travel_m[0]), _r(drawer.travel_m[1])],
-                     "joint_position": _r(opening), "joint_position_std_m": _r(DRAWER_SIGMA_M, 5),
+                     "joint_position": _r(opening),
+                     "joint_position_std_m": _r(DRAWER_STOP_SIGMA_M if pushed_home else DRAWER_SIGMA_M, 5),
                      "grasp": {"position": _r(pos), "quat_wxyz": _r(_quat_yaw(yaw), 5), "size": _r(half),
                                "approach": _r(into, 5), "entry": _r(into, 5), "closing": _r(closing, 5)}}
+            if pushed_home:  # read shut from the push that met its stop, the handle where a shut one is read
+                attrs.update(at_stop="shut", stop_s=_r(stop, 6), handle_read_m=_r(reading[0]))  # type: ignore[index]
             if reading is None:  # its handle hidden now: where it was last read; no joint reading to judge
                 assert seen is not None
                 for key in ("joint_position", "joint_position_std_m"):

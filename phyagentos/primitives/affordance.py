@@ -349,6 +349,15 @@ class ArticulateHinge(_Articulate):
         return [_about_hinge(T0, anchor, axis, delta * k / n, follow=follow) for k in range(1, n + 1)]
 
 
+#: A push to the shut stop met it when the hand ends at least this far short of where it was
+#: sent, m: the servo's lag in free motion after settling is under a millimetre (its tracking
+#: tolerance bounds it in motion), so 4 mm short is something holding the hand back.
+STOP_LAG_M = 0.004
+#: Smallest band, m, about where a slide was read shut in which a stop met is taken for the shut
+#: stop (a reported joint is exact: the band is then the hand's own play on the handle).
+STOP_BAND_MIN_M = 0.005
+
+
 class ArticulateSlide(_Articulate):
     """Pull (or push) a held handle along its entity's slide by ``delta_m``, or to
     ``to_fraction`` of the joint's travel: a drawer.
@@ -358,6 +367,20 @@ class ArticulateSlide(_Articulate):
     streamed with the tracking check. A drawer that resists (not held, at its stop, blocked)
     shows up as a tracking failure or, after success, as an opening the verifier finds
     unchanged.
+
+    **Pushed home** (``push_to_stop_m`` > 0, with ``to_fraction`` 0): the hand goes on
+    ``push_to_stop_m`` past the shut end it was sent to, so it meets the drawer's shut stop
+    wherever within the reading's band the drawer really is, and the motion ends where the
+    stop holds it (a tracking failure there, or a settle that ends :data:`STOP_LAG_M` or more
+    short, is the stop, not a fault). The hand's travel from the grasp to the stop (joint
+    encoders, forward kinematics: millimetres) is compared with the travel the reading asked
+    (``joint_position`` less the shut end, 0): within the reading's 2 sigma (at least
+    :data:`STOP_BAND_MIN_M`) the stop is the shut stop, and the session's perceiver is told
+    (:meth:`~phyagentos.perception.Perceiver.note_drawer_stop`: the drawer is read shut from
+    then on, to the contact's 1-sigma, while its handle stays where a shut one is read);
+    stopped shorter, it is blocked (``execution.blocked``: a bowl standing out of the drawer);
+    never held back, or held back past the band, the perceiver is told nothing and the
+    verifier judges the handle alone, which cannot confirm "shut". Traced as ``slide_stop``.
 
     Args:
         object: the articulated entity (any entity whose attributes declare ``joint_type:
@@ -371,20 +394,34 @@ class ArticulateSlide(_Articulate):
         step_m: largest motion between consecutive IK waypoints, m.
         velocity_scale: fraction (0, 1] of the joint velocity limits.
         snapshot: blackboard key of the observation holding the slide.
+        push_to_stop_m: keyword-only; how far past the shut end the hand is sent, m, in [0,
+            0.1]; 0: no push (the motion ends where it was sent). Needs ``to_fraction`` 0.
 
     Raises:
-        ValueError: not exactly one of ``delta_m`` and ``to_fraction``, or a value out of range.
+        ValueError: not exactly one of ``delta_m`` and ``to_fraction``, a value out of range, or
+            ``push_to_stop_m`` without ``to_fraction`` 0.
     """
 
     JOINT, TRAVEL_KEY, UNIT, MAX_DELTA = "slide", "range_m", "m", 1.0
 
     def __init__(self, name: str, *, object: str, delta_m: float | None = None, to_fraction: float | None = None,
-                 step_m: float = 0.02, velocity_scale: float = 0.3, snapshot: str = "snapshot"):
+                 step_m: float = 0.02, velocity_scale: float = 0.3, snapshot: str = "snapshot",
+                 push_to_stop_m: float = 0.0):
         super().__init__(name, object=object, delta=delta_m, to_fraction=to_fraction, step=step_m, max_step=0.1,
                          velocity_scale=velocity_scale, snapshot=snapshot)
+        if isinstance(push_to_stop_m, bool) or not isinstance(push_to_stop_m, (int, float)) \
+                or not 0.0 <= push_to_stop_m <= 0.1:
+            raise ValueError(f"push_to_stop_m must be a number of metres in [0, 0.1], got {push_to_stop_m!r}")
+        if push_to_stop_m > 0 and self.to_fraction != 0.0:
+            raise ValueError("push_to_stop_m pushes a drawer home: it needs to_fraction 0 (the shut end), got "
+                             f"to_fraction {self.to_fraction!r}")
+        self.push_to_stop_m = float(push_to_stop_m)
+        self._push: dict | None = None
 
     def poses(self, T0: np.ndarray, attrs: dict, delta: float) -> list[np.ndarray]:
         axis = _unit(attrs["axis"])
+        if self._push is not None:  # on past the shut end, into the stop
+            delta -= self.push_to_stop_m
         n = max(1, int(math.ceil(abs(delta) / self.step_size)))
         out = []
         for k in range(1, n + 1):
@@ -392,6 +429,55 @@ class ArticulateSlide(_Articulate):
             Tk[:3, 3] += axis * (delta * k / n)
             out.append(Tk)
         return out
+
+    def on_enter(self):
+        self._push = None
+        perceiver = getattr(self.ctx, "perceiver", None)
+        if perceiver is not None and hasattr(perceiver, "forget_drawer_stop"):
+            perceiver.forget_drawer_stop(self.object)  # it is moved now: what was known of its stop no longer holds
+        if self.push_to_stop_m > 0:
+            attrs = _entity(self.get(self.snapshot_key), self.object).get("attributes") or {}
+            q, travel = attrs.get("joint_position"), attrs.get("range_m")
+            if q is not None and travel is not None and attrs.get("axis") is not None:
+                sigma = float(attrs.get("joint_position_std_m") or 0.0)
+                self._push = {"expected_m": float(q), "band_m": max(2.0 * sigma, STOP_BAND_MIN_M),
+                              "axis": _unit(attrs["axis"]), "start": self.ctx.target.tcp_pose()[:3, 3].copy(),
+                              "commanded_m": float(q) - float(travel[0]) + self.push_to_stop_m}
+        super().on_enter()
+
+    def step(self):
+        if self._push is None or self._done:
+            return super().step()
+        try:
+            status = super().step()
+        except PrimitiveFailure as exc:
+            if exc.code != "execution.tracking":
+                raise
+            return self._at_stop(str(exc))
+        return self._at_stop("") if status == Status.SUCCESS else status
+
+    def _at_stop(self, tracking: str) -> Status:
+        """End a push home (class docstring): where the hand stands against what held it back."""
+        push, target = self._push, self.ctx.target
+        assert push is not None
+        moved = float(np.dot(push["start"] - target.tcp_pose()[:3, 3], push["axis"]))  # toward shut, m
+        short = push["commanded_m"] - moved
+        stopped = short >= STOP_LAG_M
+        at_shut = stopped and abs(moved - push["expected_m"]) <= push["band_m"]
+        if stopped:
+            target.settle(target.arm_qpos(), settle_s=0.2)  # stop pushing: the drawer stays at its stop
+        self.ctx.trace.record("slide_stop", leaf=self.name, object=self.object, moved_m=round(moved, 4),
+                              commanded_m=round(push["commanded_m"], 4), read_m=round(push["expected_m"], 4),
+                              band_m=round(push["band_m"], 4), stopped=stopped, at_shut=at_shut,
+                              tracking=tracking or None)
+        if stopped and moved < push["expected_m"] - push["band_m"]:
+            raise PrimitiveFailure("execution.blocked",
+                                   f"{self.object!r} stopped {push['expected_m'] - moved:.3f} m short of where it was "
+                                   f"read shut (band {push['band_m']:.3f} m): something holds it out")
+        perceiver = getattr(self.ctx, "perceiver", None)
+        if at_shut and perceiver is not None and hasattr(perceiver, "note_drawer_stop"):
+            perceiver.note_drawer_stop(self.object, stamp_s=float(target.sim_time or 0.0))
+        return Status.SUCCESS
 
 
 class ComputePlaceAsHeld(Primitive):

@@ -154,6 +154,8 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "step_m": ("float", "m", "motion per IK waypoint"),
         "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "push_to_stop_m": ("float", "m", "with to_fraction 0: push on this far past shut into the drawer's stop; "
+                                         "met within the reading's band, the perceiver reads it shut"),
     },
     ToolMove: {
         "offset": ("[dx, dy, dz]", "m", "tcp displacement in the tool frame"),

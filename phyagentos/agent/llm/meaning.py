@@ -808,9 +808,13 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         return meaning
     previous: tuple[str, ...] = ()
     last_open: Intent | None = None  # the clause before opened this (a drawer: "... and put the bowl inside")
+    # the drawer the clause before named, ``(thing, level)``: what "close it" after "put the bowl in the bottom
+    # drawer" closes (a bowl is not closed)
+    last_drawer: tuple[str, str] | None = None
     acted = False  # an earlier clause had a verb of its own (a later one may elide it)
     for part in _parts(text, world):
         just_opened, last_open = last_open, None
+        named_drawer, last_drawer = last_drawer, None
         possible = part.endswith(" " + WHERE_POSSIBLE)
         if possible:
             part = part[: -len(WHERE_POSSIBLE) - 1]
@@ -818,7 +822,8 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         words = _tokens(low)
         opened = _OPEN.match(" ".join(words))
         if opened:  # a drawer (or another part) to open or close: of any declared thing, a fixture too
-            intent, problems = _read_open(part, opened.group(1), _tokens(opened.group(2)), world, previous)
+            intent, problems = _read_open(part, opened.group(1), _tokens(opened.group(2)), world, previous,
+                                          named_drawer)
             if problems:
                 meaning.problems += problems
                 continue
@@ -826,6 +831,8 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             meaning.intents.append(intent)
             previous, acted = intent.objects, True
             last_open = intent if intent.verb == "open" else None
+            if intent.part_kind == "drawer" and intent.part is not None:
+                last_drawer = (intent.objects[0], intent.part)
             continue
         turn = _TURN.match(" ".join(words))
         if turn:  # a knob to turn: the thing named is any declared thing, a fixture too
@@ -965,6 +972,8 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded,
                                       part=into, part_kind="drawer" if into is not None else None,
                                       beside=beside[0] if isinstance(beside, tuple) else None))
+        if into is not None:
+            last_drawer = (dests[0], into)
         if ref is not None:
             meaning.where[ref[0]] = ref[1]
         meaning.where.update(dest_where)
@@ -982,15 +991,22 @@ def _part_phrase(it: Intent, obj: str) -> str:
 
 
 def _read_open(text: str, verb: str, named: list[str], world: World,
-               previous: tuple[str, ...]) -> tuple[Intent | None, list[tuple[str, str]]]:
+               previous: tuple[str, ...], drawer: tuple[str, str] | None = None
+               ) -> tuple[Intent | None, list[tuple[str, str]]]:
     """The ``open`` / ``close`` intent of clause ``text`` whose object phrase is ``named``:
     ``the middle drawer of the cabinet`` names the drawer ``middle`` (:data:`_DRAWER_WORDS`) of
     the one thing ``cabinet`` names (any declared thing, a fixture too); without ``of ...`` the
     drawer is of the one thing its kind belongs to (:data:`_PART_OF`: a cabinet); "the cabinet's
     middle drawer" names its owner before the possessive, and "the middle layer of the drawer"
     (:data:`_LEVEL_WORDS`) takes "drawer" for the chest of drawers; a phrase with no drawer names
-    the thing itself. Returns ``(intent, problems)``."""
+    the thing itself. ``drawer``: ``(thing, level)`` of the drawer the clause before named ("put
+    the bowl in the bottom drawer of the cabinet"): "it", "that" or "the drawer" then mean that
+    drawer ("... and close it": a drawer is what is closed, not the bowl). Returns ``(intent,
+    problems)``."""
     state = "close" if verb in ("close", "shut") else "open"
+    if drawer is not None and named and set(named) <= {"it", "that", "the", "drawer", "up"} and (
+            set(named) & {"it", "that", "drawer"}):
+        return Intent(text, state, (drawer[0],), part=drawer[1], part_kind="drawer"), []
     objects, part, kind, problems = _read_part(text, named, world, previous)
     if not problems and len(objects) != 1:
         problems = [("not_understood", f"{quote(text)}: {state} one thing at a time")]

@@ -329,3 +329,34 @@ def test_a_drawer_pushed_into_its_stop_is_read_shut_until_its_handle_is_read_out
     with pytest.raises(PerceptionError, match="no drawer of a declared fixture; drawers: "
                                               r"\['wooden_cabinet_1_middle_drawer'\]"):
         perceiver.note_drawer_stop("wooden_cabinet_1_top_drawer", stamp_s=1.0)
+
+
+def test_a_close_left_undecided_is_pushed_home_once_more_not_looked_at_again():
+    from phyagentos.agent.recovery import RecoveryPlanner  # noqa: PLC0415
+    from phyagentos.protocol import Diagnosis, SessionRecord, Verdict  # noqa: PLC0415
+    from phyagentos.protocol.lifecycle import utc_now  # noqa: PLC0415
+    from phyagentos.protocol.schemas import Attempt  # noqa: PLC0415
+
+    now = utc_now()
+    unknown = Diagnosis(cause="perception_unknown", category="perception",
+                        summary="articulated? undecided within the perception uncertainty")
+
+    def session(**params):
+        return SessionRecord(session_id="r1-close-1", run_id="r1", node="close", skill="slide_drawer", target="libero",
+                             parameters={"object": "wooden_cabinet_1_top_drawer", "to_fraction": 0.0, **params},
+                             accept={"articulated": {"object": "wooden_cabinet_1_top_drawer", "max": 0.005}},
+                             created_at=now, updated_at=now)
+
+    planner = RecoveryPlanner()
+    first = session(push_to_stop_m=CLOSE_PUSH_M)
+    again = planner.plan(first, unknown)
+    assert again is not None and again.strategy == "push_home_again" and again.skill is None
+    assert again.parameters == {"push_to_stop_m": round(CLOSE_PUSH_M + 0.01, 3)}
+    # once: a second undecided push gets nothing more from this ladder
+    replanned = first.model_copy(update={"attempts": [Attempt(number=1, started_at=now, verdict=Verdict(
+        verdict="replan", reason=again.rationale, diagnosis=unknown, revision=again, at=now))]})
+    later = planner.plan(session(push_to_stop_m=0.03), unknown, history=[replanned])
+    assert later is None or later.strategy != "push_home_again"
+    # a slide without a push (an open) still looks again
+    view = planner.plan(session(), unknown)
+    assert view is not None and view.strategy == "another_view" and view.skill == "observe"

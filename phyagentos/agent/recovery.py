@@ -16,6 +16,10 @@ cause                  ladder (strategy: parameters)
 perception_unknown     another_view: a child of skill ``observe`` looks again
                        (``samples`` 4) and the criteria are judged on that view;
                        once, then ``failure``
+perception_unknown of  push_home_again: the drawer pushed home once more, 1 cm
+a drawer pushed home   deeper (``push_to_stop_m`` + 0.01), from where it stands now:
+                       the stop met from near shut is judged against a reading taken
+                       there (another view would read the same handle); once
 object_not_seen        average_frames: observe_samples 4 (once)
 perception_error       average_frames: observe_samples 16;
                        average_and_re_observe: observe_samples 32, reobserve_samples 16
@@ -229,6 +233,10 @@ ACQUIRING_SKILLS = frozenset({"pick", "policy_pick"})
 RETARGET_CAUSES = frozenset({"ik_unreachable", "planning_failed", "start_in_collision"})
 
 
+#: The skill parameter of a drawer pushed home (``slide_drawer``'s ``push_to_stop_m``, m): a
+#: session with it above 0 whose verdict is unknown takes ``perception_unknown/push_home``.
+PUSH_PARAM = "push_to_stop_m"
+
 #: Frames the ``another_view`` child fuses. Each frame renders and segments every camera
 #: (about 0.3-0.7 s for two RGB-D cameras on the shared 2-core machine); 4 frames keep an
 #: observation well inside the runner's 10 s heartbeat timeout.
@@ -238,6 +246,12 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
     "perception_unknown": (
         Strategy("another_view", f"look again ({ANOTHER_VIEW_SAMPLES} frames) and judge on that view",
                  {"samples": ANOTHER_VIEW_SAMPLES}, skill="observe"),
+    ),
+    # a close whose stop was met outside the reading's band (the reading off by more than 2
+    # sigma): a second push starts near shut, where the band is judged against a fresh reading
+    "perception_unknown/push_home": (
+        Strategy("push_home_again", "push the drawer home once more, 1 cm deeper, from where it stands now",
+                 lambda current: {PUSH_PARAM: round(min(float(current.get(PUSH_PARAM) or 0.0) + 0.01, 0.1), 3)}),
     ),
     "goal_in_collision": (
         Strategy("another_approach", "approach the goal from 15 cm (pick: with the next grasp direction), "
@@ -489,6 +503,8 @@ class RecoveryPlanner:
                                               f"node again")
             return None
         variant = diagnosis.facts.get("variant")
+        if diagnosis.cause == "perception_unknown" and float(session.parameters.get(PUSH_PARAM) or 0.0) > 0:
+            variant = "push_home"
         ladder = self.ladders.get(f"{diagnosis.cause}/{variant}", self.ladders.get(diagnosis.cause, ()))
         current = dict(session.parameters)
         start = _ladder_start(history, diagnosis.cause)

@@ -1,7 +1,12 @@
 """How well perception reads LIBERO's cabinet drawers, on generated scenes (issue 28).
 
     .venv/bin/python bench/libero_drawer.py [--tasks libero_goal/0,libero_90/0] [--seeds 3]
-        [--openings 0,0.04,0.08,0.12,0.16] [--out bench/results/libero_drawer.json]
+        [--openings 0,0.04,0.08,0.12,0.16] [--stop] [--out bench/results/libero_drawer.json]
+
+``--stop``: where each drawer rests when pushed home (the model's shut stop, what a close's
+push meets: docs/libero.md, "Closing a drawer"): set 8 cm out, then pushed toward shut along
+its joint with 5, 20 and 60 N for 1 s each; its opening after each, m (negative: past the
+joint's zero).
 
 For each task the fixtures' looks are measured first
 (:func:`~phyagentos.targets.libero.descriptors.measure_fixture_looks`: each fixture alone on
@@ -55,12 +60,46 @@ def _set_openings(target, cabinet: str, joints: list[int], moved: int, opening: 
     return {j: drawer_opening(target, cabinet, j)[0] for j in joints}
 
 
+def _pushed_home(target, cabinet: str, joints: list[int], forces=(5.0, 20.0, 60.0)) -> list[dict]:
+    """Each drawer of ``cabinet`` set 8 cm out, then pushed toward shut with each of ``forces``
+    N (a generalised force on its slide) for 1 s: its opening after each, m."""
+    m, d = target.model, target.data
+    rows = []
+    for j in joints:
+        _set_openings(target, cabinet, joints, j, 0.08)
+        sign = drawer_sign(target, cabinet, j)  # the joint's sign of "out"
+        for force in forces:
+            for _ in range(int(round(1.0 / m.opt.timestep))):
+                d.qfrc_applied[m.jnt_dofadr[j]] = -sign * force
+                mujoco.mj_step(m, d)
+            d.qfrc_applied[m.jnt_dofadr[j]] = 0.0
+            rows.append({"drawer": drawer_entity_name(cabinet, _drawer_name(m.joint(j).name, cabinet)),
+                         "force_n": force, "rest_m": round(drawer_opening(target, cabinet, j)[0], 5)})
+            print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = parser(__doc__, "libero_drawer")
     ap.add_argument("--tasks", default="libero_goal/0,libero_90/0")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--openings", default="0,0.04,0.08,0.12,0.16")
+    ap.add_argument("--stop", action="store_true", help="only where each drawer rests pushed home")
     args = ap.parse_args(argv)
+    if args.stop:
+        stops = []
+        for spec in args.tasks.split(","):
+            suite, task = spec.split("/")
+            with LiberoTarget("libero_drawer", LiberoScene(suite=suite, task=int(task)), seed=0) as target:
+                target.reset(seed=0)
+                cabinet = next(n for n, c in target._problem.fixtures.items() if "cabinet" in c)
+                stops += [{"task": spec, **r} for r in _pushed_home(target, cabinet, _drawer_joints(target, cabinet))]
+        print("| task | drawer | force (N) | rests at (m out of shut) |")
+        print("|---|---|---|---|")
+        for r in stops:
+            print(f"| {r['task']} | {r['drawer']} | {r['force_n']:g} | {r['rest_m']:+.4f} |")
+        write_json(args.out, {"stops": stops, "tasks": args.tasks})
+        return 0
     openings = [float(a) for a in args.openings.split(",")]
     t0 = time.perf_counter()
     rows: list[dict] = []

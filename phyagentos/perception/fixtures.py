@@ -252,8 +252,8 @@ DRAWER_SIGMA_M = 0.01
 #: 1-sigma uncertainty of a drawer read shut because the hand pushed it into its shut stop
 #: (:meth:`~phyagentos.perception.Perceiver.note_drawer_stop`), m: the hand held the handle and
 #: its position is the arm's forward kinematics (millimetres); a drawer at its stop has no play
-#: along its axis (LIBERO's cabinet drawer rests 1.7 mm past its joint's zero under 5 to 60 N,
-#: scratch measurement in docs/libero.md, "Closing a drawer").
+#: along its axis (LIBERO's cabinet drawers rest 1.7 mm past their joint's zero under 5, 20 and
+#: 60 N alike: ``bench/libero_drawer.py --stop``, docs/libero.md, "Closing a drawer").
 DRAWER_STOP_SIGMA_M = 0.002
 _DRAWER_SLICE_M = 0.005
 

@@ -360,3 +360,66 @@ def test_a_close_left_undecided_is_pushed_home_once_more_not_looked_at_again():
     # a slide without a push (an open) still looks again
     view = planner.plan(session(), unknown)
     assert view is not None and view.strategy == "another_view" and view.skill == "observe"
+
+
+class _Hand:
+    """Just what a push home's end reads of a target: the tcp where the stop held it."""
+
+    sim_time = 4.0
+
+    def __init__(self, y: float):
+        self.y, self.settled = y, []
+
+    def tcp_pose(self):
+        pose = np.eye(4)
+        pose[1, 3] = self.y
+        return pose
+
+    def arm_qpos(self):
+        return np.zeros(7)
+
+    def settle(self, q, *, settle_s):
+        self.settled.append(settle_s)
+
+
+class _Trace:
+    def __init__(self):
+        self.records = []
+
+    def record(self, kind, **fields):
+        self.records.append({"kind": kind, **fields})
+
+
+def _pushed(read_m: float, moved_m: float):
+    """A push home of a drawer read ``read_m`` out (axis +y, sent 6 cm past shut), ended with the
+    hand ``moved_m`` toward shut: (the trace's ``slide_stop``, the stamps the perceiver was given)."""
+    from types import SimpleNamespace  # noqa: PLC0415
+
+    from phyagentos.primitives.affordance import STOP_LAG_M  # noqa: PLC0415
+
+    slide = ArticulateSlide("s", object="wooden_cabinet_1_top_drawer", to_fraction=0.0, push_to_stop_m=0.02)
+    noted = []
+    slide.ctx = SimpleNamespace(target=_Hand(0.5 - moved_m), trace=_Trace(), perceiver=SimpleNamespace(
+        note_drawer_stop=lambda name, *, stamp_s: noted.append((name, stamp_s))))
+    slide._push = {"expected_m": read_m, "band_m": 2 * DRAWER_SIGMA_M, "axis": np.array([0.0, 1.0, 0.0]),
+                   "start": np.array([0.0, 0.5, 0.0]), "commanded_m": read_m + 0.01 + 0.05}
+    assert read_m + 0.06 - moved_m >= STOP_LAG_M  # these hands were all held back
+    slide._at_stop("")
+    (stop,) = [r for r in slide.ctx.trace.records if r["kind"] == "slide_stop"]
+    return stop, noted
+
+
+def test_a_stop_is_the_shut_stop_within_the_band_or_past_it_by_the_handles_play_never_short_of_it():
+    from phyagentos.primitives.affordance import HANDLE_PLAY_M  # noqa: PLC0415
+    from phyagentos.primitives.base import PrimitiveFailure  # noqa: PLC0415
+
+    for moved in (0.13, 0.15, 0.17, 0.15 + 0.02 + HANDLE_PLAY_M - 0.001):  # read 15 cm out
+        stop, noted = _pushed(0.15, moved)
+        assert stop["at_shut"] and noted == [("wooden_cabinet_1_top_drawer", 4.0)], moved
+    # held back further in than the band and the play allow: no stop is noted (the verifier
+    # then has the handle alone, which cannot confirm shut)
+    stop, noted = _pushed(0.15, 0.15 + 0.02 + HANDLE_PLAY_M + 0.003)
+    assert stop["stopped"] and not stop["at_shut"] and not noted
+    # held back short of the band: something holds the drawer out
+    with pytest.raises(PrimitiveFailure, match="stopped 0.030 m short of where it was read shut"):
+        _pushed(0.15, 0.12)

@@ -401,7 +401,7 @@ class Perceiver:
 
     def export_fixtures(self) -> dict:
         """The fixtures' last sightings as plain data (``{name: {position, yaw, half_extents,
-        half_xy_world, top_m, points, error, found_by, turn, stamp_s, confidence, drawers}}``, m,
+        half_xy_world, top_m, points, error, found_by, turn, stamp_s, confidence, drawers, stops}}``, m,
         rad, s; ``drawers``: ``{drawer: [opening m, stamp s]}`` of each drawer's last reading;
         ``stops``: ``{drawer: stamp s}`` of each drawer pushed into its shut stop), for
         :meth:`restore_fixtures`."""

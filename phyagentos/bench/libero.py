@@ -268,7 +268,7 @@ def _planner_steps(language: str, objects: dict[str, str],
             steps.append(("turn_on", obj, None))
             continue
         if intent.verb in ("open", "close"):
-            steps.append(_slide_step(language, intent, fixtures))
+            steps.append((intent.verb, intent.objects[0], _drawer_name(language, intent, fixtures)))
             continue
         if intent.part_kind is not None:  # into a drawer: the drawer's own entity is the place
             steps += [("move", obj, _drawer_name(language, intent, fixtures)) for obj in intent.movers()]
@@ -307,16 +307,6 @@ def _drawer_name(language: str, intent, fixtures: dict[str, str] | None = None) 
         raise BenchError(f"instruction {language!r} refused: {intent.text!r}: which drawer of {obj}? (top, middle "
                          f"or bottom)")
     return drawer_entity_name(obj, intent.part)
-
-
-def _slide_step(language: str, intent, fixtures: dict[str, str]) -> tuple[str, str, str]:
-    """``(open | close, fixture, drawer entity name)`` of an ``open`` / ``close`` clause.
-
-    Raises:
-        BenchError: the clause names no drawer (a door: no skill opens one here), a thing that
-            is not a fixture, or a drawer not told by top, middle or bottom.
-    """
-    return intent.verb, intent.objects[0], _drawer_name(language, intent, fixtures)
 
 
 def instruction_nodes(language: str, objects: dict[str, str], fixtures: dict[str, str]) -> list[dict[str, Any]]:

@@ -31,9 +31,10 @@ from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.handle import UPPER_FRACTION, RoundBody, round_body
+from phyagentos.perception.top_knob import Knob, top_knob
 
 __all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "open_depth", "with_open_depth", "with_round_body",
-           "detect", "detect_clusters", "stack", "resting_at"]
+           "with_top_knob", "detect", "detect_clusters", "stack", "resting_at"]
 
 log = logging.getLogger(__name__)
 
@@ -88,6 +89,9 @@ class Detection:
             (what stands on it does).
         open_depth_m: how far its inside's floor lies below its top, m, where it is an open
             container (a basket, a bowl: :func:`with_open_depth`); 0 for a solid top.
+        top_knob: the small part standing on its top (a moka pot's lid knob:
+            :func:`with_top_knob`), else None. Its top is above :attr:`top_m`, which is the
+            segment's 98th percentile height (the body's top).
     """
 
     position: np.ndarray
@@ -107,6 +111,7 @@ class Detection:
     covered: bool = False
     body: RoundBody | None = None
     open_depth_m: float = 0.0
+    top_knob: Knob | None = None
 
     @property
     def truncated(self) -> bool:
@@ -383,6 +388,15 @@ def with_round_body(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detect
     upper = heights >= low + UPPER_FRACTION * (top - low)
     body = round_body(cloud.points[upper, :2], det.position[:2])
     return det if body is None else replace(det, body=body)
+
+
+def with_top_knob(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detection:
+    """``det`` (fitted to the points ``cloud`` with their ``heights`` above the plane, m) with
+    the knob standing on its top (:attr:`Detection.top_knob`,
+    :func:`~phyagentos.perception.top_knob.top_knob`); run on the final detections only, as
+    :func:`with_round_body`."""
+    knob = top_knob(cloud.points[:, :2], heights)
+    return det if knob is None else replace(det, top_knob=knob)
 
 
 def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list[Detection]:

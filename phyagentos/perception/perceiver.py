@@ -88,7 +88,8 @@ from phyagentos.perception.cloud import (
 )
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
-from phyagentos.perception.detect import Detection, detect_clusters, with_open_depth, with_round_body
+from phyagentos.perception.detect import Detection, detect_clusters, with_open_depth, with_round_body, with_top_knob
+from phyagentos.perception.top_knob import turned
 from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
@@ -378,7 +379,7 @@ class Perceiver:
 
     # ------------------------------------------------------------------ state
 
-    _TRACK_ARRAYS = ("position", "half_extents", "colour_rgb", "grasp_offset", "placed_xy")
+    _TRACK_ARRAYS = ("position", "half_extents", "colour_rgb", "grasp_offset", "placed_xy", "top_knob")
 
     def export_state(self) -> dict:
         """What this perceiver believes, as plain YAML/JSON-ready data: the tracks, the held
@@ -764,6 +765,11 @@ class Perceiver:
                     conf *= REMEMBERED_CONFIDENCE
                 std = math.sqrt(t.predicted_var(stamp, cfg))
                 extra.update(self._body_attributes(name, t.position, _pose(t.position, t.yaw), t.body, std))
+                if t.top_knob is not None:  # a knob on its top: where, how high, how wide (world, m)
+                    k = np.asarray(t.top_knob, dtype=float)
+                    extra.update(top_knob_xy=_r(self._top_knob_xy(t)),
+                                 top_knob_z_m=_r(float(t.position[2] + t.half_extents[2] + k[2])),
+                                 top_knob_radius_m=_r(float(k[3])))
                 ent = self._entity(name, "object", t.position, t.yaw, t.half_extents, t.shape, t.colour_rgb,
                                    conf, std, math.sqrt(t.var_yaw), t.points, () if name in remembered else t.cameras,
                                    evidence_paths, source="remembered" if name in remembered else "perceived",
@@ -1345,6 +1351,9 @@ class Perceiver:
         wall = self._rim_wall(t)
         if wall is not None:  # an open container (a bowl, a mug) may be held by its wall: whichever the gap is nearer
             width = min((width, wall), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
+        knob = None if t.top_knob is None else 2.0 * float(t.top_knob[3])
+        if knob is not None:  # an object with a knob on top may be held by it (a moka pot): as the wall
+            width = min((width, knob), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
         ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
                               grasp_height_m=self._grasp_height_m, config=self.config)
         if ev.confidence <= 0.0:
@@ -1434,6 +1443,14 @@ class Perceiver:
                 z_close = float(t.position[2] + t.half_extents[2]) - RIM_GRIP_DEPTH_M
                 T_obj[2, 3] = t.position[2] + max(0.0, float(tcp[2]) - z_close)
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
+            elif t.top_knob is not None and float(np.linalg.norm(self._top_knob_xy(t) - tcp[:2])) <= hc.capture_radius_m / 2.0:
+                # held by its knob, maybe lifted since: at the close the tcp stood the knob
+                # grasp's height over the object's top (motion.knob_grasp.top_knob_grasp_z)
+                from phyagentos.motion.top_knob_grasp import top_knob_grasp_z  # noqa: PLC0415
+
+                z_close = top_knob_grasp_z(float(t.position[2] + t.half_extents[2]))
+                T_obj[2, 3] = t.position[2] + max(0.0, float(tcp[2]) - z_close)
+                t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
             else:  # grasped earlier, already moved: assume a centred grasp
                 off = np.linalg.inv(proprio.tcp_pose) @ T_obj
                 off[:3, 3] = 0.0
@@ -1444,6 +1461,11 @@ class Perceiver:
             conf *= 1.0 - candidates[1][0] / (candidates[0][0] + 1e-9) * 0.5
         self._held = name
         return name, conf
+
+    @staticmethod
+    def _top_knob_xy(t: Track) -> np.ndarray:
+        """(2,) world x, y (m) of track ``t``'s knob on its top (``t.top_knob`` must be set)."""
+        return t.position[:2] + turned(np.asarray(t.top_knob, dtype=float)[:2], t.yaw)
 
     def _rim_wall(self, t: Track) -> float | None:
         """The wall (m) a hand holding track ``t`` by its rim closes on -- ``holding.handled_wall_m``
@@ -1625,8 +1647,9 @@ def _hangs_from_hand(det: Detection, proprio: Proprioception, config: Perception
 
 
 def _shaped(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detection:
-    """A final detection with the round body and handle and the open top its points show."""
-    return with_open_depth(with_round_body(det, cloud, heights), cloud, heights)
+    """A final detection with the round body and handle, the open top and the knob on top its
+    points show."""
+    return with_top_knob(with_open_depth(with_round_body(det, cloud, heights), cloud, heights), cloud, heights)
 
 
 def _container_around(i: int, dets: list[Detection], matched: dict[int, str]) -> str | None:

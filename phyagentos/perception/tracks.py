@@ -19,6 +19,7 @@ import numpy as np
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import Detection
 from phyagentos.perception.handle import RoundBody
+from phyagentos.perception.top_knob import turned
 
 __all__ = ["REMEMBERED_CONFIDENCE", "Track", "yaw_period"]
 
@@ -34,6 +35,14 @@ def yaw_period(half_extents: np.ndarray, shape: str) -> float:
         return 2.0 * math.pi
     hx, hy = float(half_extents[0]), float(half_extents[1])
     return math.pi / 2.0 if abs(hx - hy) < 0.1 * max(hx, hy) else math.pi
+
+
+def _local_top_knob(det: Detection) -> np.ndarray | None:
+    """``det``'s knob in its frame (:attr:`Track.top_knob`'s layout), or None."""
+    k = det.top_knob
+    if k is None:
+        return None
+    return np.r_[turned(k.xy - det.position[:2], -det.yaw), k.top_m - det.top_m, k.radius_m]
 
 
 def _wrap(a: float, period: float) -> float:
@@ -81,6 +90,11 @@ class Track:
     #: How far its inside's floor lies below its top in its latest sighting, m (an open
     #: container's: :attr:`~phyagentos.perception.detect.Detection.open_depth_m`); 0 for a solid top.
     open_depth_m: float = 0.0
+    #: The knob on its top (:attr:`~phyagentos.perception.detect.Detection.top_knob`) in its latest
+    #: sighting that showed one, in the object's frame: (4,) its centre's x, y from the object's
+    #: centre along the object's axes (m), how far its top rises above the object's (m), and its
+    #: radius (m); else None.
+    top_knob: np.ndarray | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
@@ -91,7 +105,7 @@ class Track:
                    colour_rgb=det.colour_rgb.copy(), points=det.points, confidence=confidence,
                    last_seen_s=stamp_s, bottom_m=det.bottom_m, cameras=cameras, shape_votes={det.shape: 1},
                    body=None if det.body is None else det.body.local(det.position[:2], det.yaw),
-                   open_depth_m=det.open_depth_m)
+                   open_depth_m=det.open_depth_m, top_knob=_local_top_knob(det))
 
     def predicted_var(self, stamp_s: float, config: PerceptionConfig) -> float:
         """Position variance (m^2) grown by the random walk since the last sighting."""
@@ -148,6 +162,10 @@ class Track:
             self.body = det.body.local(det.position[:2], det.yaw)
         elif self.body is not None:  # one that missed the handle keeps the last, turned as it stood
             self.body = self.body.turned(yaw_before - self.yaw)
+        if det.top_knob is not None:
+            self.top_knob = _local_top_knob(det)
+        elif self.top_knob is not None:  # as the body: the last one seen, turned as it stood
+            self.top_knob = np.r_[turned(self.top_knob[:2], yaw_before - self.yaw), self.top_knob[2:]]
         # agreeing sightings raise confidence: 1 - (1 - c_now)(1 - c_before / 2)
         self.confidence = max(1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence), keep)
         self.last_seen_s = stamp_s

@@ -31,6 +31,7 @@ from phyagentos.motion.rim_grasp import (
     rim_grasp_candidates,
     rim_graspable,
 )
+from phyagentos.motion.top_knob_grasp import top_knob_grasp_candidates, top_knob_graspable, top_knob_preshape_m
 from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
@@ -278,7 +279,10 @@ class ComputeGrasp(Primitive):
     are kept. The close then expects the wall's thickness between the fingers, not the
     bowl's diameter. A container seen only in part (a box whose long side is the rim's
     diameter, its far side hidden: :func:`~phyagentos.motion.rim_grasp.partly_seen_rim_graspable`)
-    is taken by its rim too, at points near the ends of the long side only. When no rim point
+    is taken by its rim too, at points near the ends of the long side only. An object too wide
+    (or nearly: :func:`~phyagentos.motion.top_knob_grasp.top_knob_graspable`) with a knob on its top
+    that perception reports (a moka pot's lid) is taken by the knob, the hand pre-shaped to it
+    (:meth:`_top_knob_plan`). When no rim point
     is usable from ``approach_height_m`` and some pre-grasps were out of reach while their
     grasps are not, the pre-grasp is tried lower (:data:`LOWER_APPROACH_M`).
 
@@ -346,6 +350,8 @@ class ComputeGrasp(Primitive):
             plan, extra = self._rim_plan(snapshot, T_obj, np.array([hi, hi, float(half[2])]), max_width,
                                          long_axis=True)
             extra["partly_seen"] = True
+        elif top_knob_graspable(ent.get("attributes") or {}, half, shape=shape, max_width_m=max_width):
+            plan, extra = self._top_knob_plan(ent["attributes"], T_obj, half, max_width)
         else:
             plan, extra = self._across_plan(T_obj, half, shape if shape in ("box", "cylinder", "sphere") else "box",
                                             max_width)
@@ -420,6 +426,52 @@ class ComputeGrasp(Primitive):
                         slid_by = f" slid {offset * 100:+.1f} cm" if offset else ""
                         refused.append(f"candidate {i}{slid_by} from {height:.2f} m: {why}")
         return first, {"candidates_refused": refused}
+
+    def _top_knob_plan(self, attrs: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float):
+        """The knob grasp (:func:`~phyagentos.motion.top_knob_grasp.top_knob_grasp_candidates`):
+        candidate ``self.candidate`` among those the arm reaches clear of the scene with the
+        hand pre-shaped to the knob (:func:`_unusable`), the next usable one in order when it
+        does not; re-computed with a pre-grasp already chosen (``RecomputeGrasp``), the one
+        whose yaw is nearest that pre-grasp's, from its height. Returns the plan and the trace
+        fields (``grasp_kind: top_knob``).
+
+        Raises:
+            IKError: no candidate is usable (the message lists why for each).
+        """
+        R = np.asarray(T_obj, dtype=float)[:3, :3]
+        axis = R[:2, 0] if half[0] >= half[1] else R[:2, 1]
+        top = float(T_obj[2, 3] + np.abs(R[2, :]) @ np.asarray(half, dtype=float))
+        radius = float(attrs.get("top_knob_radius_m") or 0.006)
+        preshape = top_knob_preshape_m(radius, max_width_m=max_width)
+        T_tcp = np.asarray(self.ctx.target.tcp_pose(), dtype=float)
+        q = np.asarray(self.ctx.target.arm_qpos(), dtype=float)
+
+        def candidates(height: float):
+            return top_knob_grasp_candidates(attrs["top_knob_xy"], float(attrs["top_knob_z_m"]), radius, body_top_z_m=top,
+                                         long_axis_yaw_rad=float(np.arctan2(axis[1], axis[0])),
+                                         approach_height_m=height, current_yaw_rad=hand_yaw(T_tcp),
+                                         current_q7_rad=float(q[6]) if q.shape == (7,) else None)
+
+        fields = {"grasp_kind": "top_knob", "preshape_m": round(preshape, 4), "top_knob_xy": list(attrs["top_knob_xy"]),
+                  "top_knob_z_m": attrs["top_knob_z_m"]}
+        try:
+            previous = np.asarray(self.get(self.pregrasp_key), dtype=float)
+        except PrimitiveFailure:
+            previous = None
+        if previous is not None and previous.shape == (4, 4):  # refined: the same side, from the same height
+            plans = candidates(self.approach_height_m)
+            plans = candidates(max(self.approach_height_m, float(previous[2, 3] - plans[0].grasp[2, 3])))
+            yaw = hand_yaw(previous)
+            return min(plans, key=lambda pl: abs(_wrap_rad(pl.yaw_rad - yaw))), fields
+        plans = candidates(self.approach_height_m)
+        why = []
+        for k in range(len(plans)):
+            i = (self.candidate + k) % len(plans)
+            bad = _unusable(self.ctx, self.object, plans[i], opening_m=preshape)
+            if bad is None:
+                return plans[i], {**fields, **({"candidate_used": i, "candidates_refused": why} if why else {})}
+            why.append(f"knob candidate {i} (yaw {plans[i].yaw_rad:.2f} rad): {bad[:160]}")
+        raise IKError(f"no knob grasp of {self.object!r} is reachable: " + "; ".join(why))
 
     def _clear_of_support(self, plan, T_obj: np.ndarray, half: np.ndarray):
         """``(plan, raised m, why)``: ``plan`` when the arm reaches it clear (:func:`_unusable`);

@@ -1,0 +1,88 @@
+"""A knob on top: found from points, and the grasp that takes an object too wide by it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from phyagentos.errors import IKError
+from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, hand_yaw
+from phyagentos.motion.top_knob_grasp import (
+    KNOB_PREFERRED_MARGIN_M,
+    KNOB_TIP_CLEARANCE_M,
+    top_knob_grasp_candidates,
+    top_knob_graspable,
+    top_knob_preshape_m,
+)
+from phyagentos.perception.top_knob import KNOB_MAX_RADIUS_M, top_knob
+
+RNG = np.random.default_rng(7)
+
+
+def _box_points(centre, half, top, *, step=0.004, noise=0.001):
+    """(N, 2) xy and (N,) heights of a box's top face and sides, as a depth camera samples them."""
+    cx, cy = centre
+    hx, hy = half
+    xs, ys = np.meshgrid(np.arange(cx - hx, cx + hx, step), np.arange(cy - hy, cy + hy, step))
+    xy = [np.column_stack([xs.ravel(), ys.ravel()])]
+    h = [np.full(xs.size, top)]
+    for z in np.arange(0.0, top, step):  # the near side
+        x = np.arange(cx - hx, cx + hx, step)
+        xy.append(np.column_stack([x, np.full(x.size, cy - hy)]))
+        h.append(np.full(x.size, z))
+    xy, h = np.concatenate(xy), np.concatenate(h)
+    return xy + RNG.normal(0, noise, xy.shape), h + RNG.normal(0, noise, h.shape)
+
+
+def test_a_knob_standing_on_a_lid_is_found_where_it_stands():
+    body_xy, body_h = _box_points((0.10, -0.20), (0.034, 0.033), 0.133)
+    knob_xy, knob_h = _box_points((0.102, -0.199), (0.005, 0.006), 0.152, step=0.002)
+    keep = knob_h > 0.130  # the knob's own points: the part above the lid
+    knob = top_knob(np.r_[body_xy, knob_xy[keep]], np.r_[body_h, knob_h[keep]])
+    assert knob is not None
+    # within the knob's half width: its near side, which the camera sees too, pulls the median
+    assert np.linalg.norm(knob.xy - (0.102, -0.199)) < 0.006
+    assert abs(knob.top_m - 0.152) < 0.003 and knob.radius_m <= KNOB_MAX_RADIUS_M
+
+
+def test_a_flat_top_or_an_open_rim_is_no_knob():
+    assert top_knob(*_box_points((0.0, 0.0), (0.035, 0.035), 0.10)) is None  # a box's top
+    a = np.linspace(0, 2 * math.pi, 200, endpoint=False)
+    ring = np.column_stack([0.05 * np.cos(a), 0.05 * np.sin(a)])
+    floor = RNG.uniform(-0.03, 0.03, (300, 2))
+    assert top_knob(np.r_[ring, floor], np.r_[np.full(200, 0.05), np.full(300, 0.01)]) is None  # a bowl
+
+
+def test_a_lone_post_with_no_body_under_it_is_no_knob():
+    xy, h = _box_points((0.0, 0.0), (0.005, 0.005), 0.15, step=0.002)
+    assert top_knob(xy, h) is None
+
+
+def test_only_an_object_too_wide_or_nearly_is_taken_by_its_knob():
+    attrs = {"top_knob_xy": [0.1, -0.2], "top_knob_z_m": 1.06, "top_knob_radius_m": 0.006}
+    wide = 0.5 * (0.08 - 0.004 - KNOB_PREFERRED_MARGIN_M) + 0.002
+    assert top_knob_graspable(attrs, (0.06, wide, 0.07))
+    assert not top_knob_graspable(attrs, (0.06, wide - 0.004, 0.07))  # the across grasp has room
+    assert not top_knob_graspable({}, (0.06, 0.05, 0.07))  # no knob seen
+    assert not top_knob_graspable(attrs, (0.05, 0.05, 0.05), shape="sphere")
+
+
+def test_the_fingertips_stay_above_the_lid_and_close_across_the_short_side_first():
+    plans = top_knob_grasp_candidates((0.1, -0.2), 1.052, 0.006, body_top_z_m=1.033, long_axis_yaw_rad=0.3,
+                                  approach_height_m=0.1, current_yaw_rad=0.0)
+    assert len(plans) == 4
+    for p in plans:
+        assert p.grasp[2, 3] - FINGERTIP_BELOW_TCP_M == pytest.approx(1.033 + KNOB_TIP_CLEARANCE_M)
+        assert np.allclose(p.grasp[:2, 3], (0.1, -0.2)) and p.pregrasp[2, 3] == pytest.approx(p.grasp[2, 3] + 0.1)
+        assert p.width_m == pytest.approx(0.012)
+    # the hand's x (the pads' width) along the long axis first: the fingers close across the short side
+    assert abs(math.sin(hand_yaw(plans[0].grasp) - 0.3)) < 1e-9
+    assert abs(math.cos(hand_yaw(plans[2].grasp) - 0.3)) < 1e-9
+    assert top_knob_preshape_m(0.006) == pytest.approx(0.026)
+
+
+def test_a_knob_too_low_for_the_pads_is_refused_with_why():
+    with pytest.raises(IKError, match="pads would hold"):
+        top_knob_grasp_candidates((0.0, 0.0), 1.038, 0.006, body_top_z_m=1.033, long_axis_yaw_rad=0.0)

@@ -57,6 +57,20 @@ def test_put_both_moves_the_two_named_objects_in_the_order_given():
     assert nodes[2]["depends_on"] == ["place_cream_cheese_1"]
 
 
+def test_both_of_a_plural_moves_each_onto_its_own_slot_of_a_fixture_and_into_a_basket_to_its_centre():
+    task = resolve_task("libero_10", 8)  # put both moka pots on the stove
+    problem = parse_bddl(task.bddl_path)
+    nodes = instruction_nodes(task.language, problem.objects, problem.fixtures)
+    assert [(n["id"], n["params"].get("slot")) for n in nodes] == [
+        ("pick_moka_pot_1", None), ("place_moka_pot_1", [0, 2]), ("pick_moka_pot_2", None), ("place_moka_pot_2", [1, 2])]
+    basket = resolve_task("libero_10", 1)
+    problem = parse_bddl(basket.bddl_path)
+    assert all("slot" not in n["params"] for n in instruction_nodes(basket.language, problem.objects, problem.fixtures))
+    with pytest.raises(BenchError, match="'both' names two; the scene has 1"):
+        instruction_nodes("put both moka pots on the stove", {"moka_pot_1": "moka_pot"},
+                          {"flat_stove_1": "flat_stove", "kitchen_table": "kitchen_table"})
+
+
 def test_two_identical_bowls_or_an_uncovered_verb_are_refused_not_guessed():
     task = resolve_task("libero_spatial", 1)  # the black bowl next to the ramekin: two black bowls
     problem = parse_bddl(task.bddl_path)

@@ -137,3 +137,29 @@ def test_into_a_drawer_needs_its_floor_out_of_the_body_and_room_for_the_object(f
     drawer.update(attributes={"joint_position": 0.05, "support": True}, size=[0.02, 0.05, 0.08])
     with pytest.raises(PrimitiveFailure, match=r"'pudding' needs .* offers \[0.04, 0.1\] m out of its body"):
         _compute_place(franka, snap)
+
+
+def test_objects_sharing_a_region_go_down_side_by_side_in_their_slots_across_their_narrow_side(franka):
+    """"Put both moka pots on the stove": slot k of n along the region's axis across which the
+    held object is narrower, at least its width plus the gap apart, centred, inside the edge."""
+    from phyagentos.primitives.perception import SLOT_EDGE_M, SLOT_GAP_M
+
+    tcp = np.asarray(franka.tcp_pose())
+    centre, _ = _compute_place(franka, _snapshot(tcp, None))
+    snap = _snapshot(tcp, None)
+    snap["entities"][0]["size"] = [0.075, 0.075, 0.01]  # a 15 cm square patch (LIBERO's stove)
+    snap["entities"][1]["size"] = [0.03, 0.02, 0.03]  # 6 x 4 cm, held as seen (x long)
+    shifts = []
+    for k in (0, 1):
+        slotted, _ = _compute_place(franka, snap, slot=[k, 2])
+        shifts.append(slotted["place_pose"][:3, 3] - centre["place_pose"][:3, 3])
+    # along y (the object's narrow side): the region's halves (7.5 cm apart) are wider than 4 cm + gap
+    assert shifts[0] == pytest.approx([0.0, -0.0375, 0.0], abs=1e-6)
+    assert shifts[1] == pytest.approx([0.0, 0.0375, 0.0], abs=1e-6)
+    snap["entities"][1]["size"] = [0.05, 0.04, 0.03]  # 10 x 8 cm: its width plus the gap apart
+    wide, _ = _compute_place(franka, snap, slot=[1, 2])
+    assert (wide["place_pose"][:3, 3] - centre["place_pose"][:3, 3])[1] == pytest.approx(0.04 + SLOT_GAP_M / 2, abs=2e-4)
+    far, _ = _compute_place(franka, snap, slot=[2, 3])  # three do not fit: the last stays inside the edge
+    assert (far["place_pose"][:3, 3] - centre["place_pose"][:3, 3])[1] == pytest.approx(0.075 - SLOT_EDGE_M, abs=1e-6)
+    with pytest.raises(ValueError, match="slot must be"):
+        _compute_place(franka, snap, slot=[2, 2])

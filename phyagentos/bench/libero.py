@@ -40,11 +40,12 @@ every session's ``ground_truth.yaml``: ``env.check_success()``), with per-task
 
 from __future__ import annotations
 
+from collections import Counter
 import json
 import logging
 import re
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Collection, Mapping
 
 import yaml
 
@@ -175,7 +176,8 @@ CLOSE_PUSH_M, CLOSED_MIN_M, CLOSED_MAX_M = 0.02, -0.01, 0.005
 
 
 def _nodes(steps: list[tuple[str, str, str | None]],
-           skill_params: Mapping[str, Mapping[str, Any]] | None = None) -> list[dict[str, Any]]:
+           skill_params: Mapping[str, Mapping[str, Any]] | None = None, *,
+           fixtures: Collection[str] = ()) -> list[dict[str, Any]]:
     """Goal-graph nodes of ``[(action, object, destination or None)]``, each after the one
     before: ``move`` / ``hold``: a ``pick`` of the object, then (``move``) a ``place`` on its
     destination; ``beside_left`` / ``beside_right``: the same, the ``place`` setting it down on
@@ -186,8 +188,12 @@ def _nodes(steps: list[tuple[str, str, str | None]],
     :data:`OPEN_FRACTION` of its travel, or pushed home (:data:`CLOSE_FRACTION`,
     :data:`CLOSE_PUSH_M` past it). ``skill_params``: strategy parameters per skill written into
     every node of that skill (:data:`SKILL_DEFAULTS`); the task's own parameters (object,
-    region) win."""
+    region) win. Objects moved onto one fixture of ``fixtures`` (its place patch: "put both moka
+    pots on the stove") are set down side by side, each in its ``slot`` of the patch, in the
+    order named; into a container (an object: the basket) they go to its centre."""
     fixed = skill_params or {}
+    sharing = Counter(dest for action, _, dest in steps if action == "move" and dest in set(fixtures))
+    taken: Counter = Counter()
     nodes: list[dict[str, Any]] = []
     for action, obj, dest in steps:
         after = [nodes[-1]["id"]] if nodes else []
@@ -218,9 +224,12 @@ def _nodes(steps: list[tuple[str, str, str | None]],
                      else {"on": {"object": obj, "support": dest}})
             nodes.append({"id": place_id, "skill": "place",
                           "params": {**fixed.get("place", {}), "object": obj, "region": dest,
-                                     **({"beside": side} if side else {})},
+                                     **({"beside": side} if side else {}),
+                                     **({"slot": [taken[dest], sharing[dest]]} if sharing[dest] > 1 and not side
+                                        else {})},
                           "accept": [rests, {"released": obj}],
                           "depends_on": [pick_id], "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+            taken[dest] += 1
     return nodes
 
 
@@ -356,7 +365,7 @@ def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str,
         BenchError: as :func:`instruction_nodes`.
     """
     steps, where = _planner_steps(language, objects, fixtures)
-    return _nodes(steps, skill_params), where
+    return _nodes(steps, skill_params, fixtures=fixtures), where
 
 
 def _twin(a: str, b: str, objects: dict[str, str]) -> bool:

@@ -19,6 +19,7 @@ from phyagentos.motion.grasp import (
     slid_grasp,
     slide_offsets,
     top_down_grasp_candidates,
+    top_down_rotation,
 )
 from phyagentos.motion.rim_grasp import (
     DEFAULT_HANDLED_WALL_M,
@@ -620,6 +621,14 @@ def place_yaws(current_rad: float) -> list[float]:
 INTO_MARGIN_M = 0.005
 
 
+#: Room left between two objects set in neighbouring slots of one region, m
+#: (:meth:`ComputePlace._slot_point`): about the 2-sigma of a perceived size.
+SLOT_GAP_M = 0.01
+#: A slot's centre stays this far inside its region's edge, m: the 2-sigma of a perceived
+#: position (about 1 cm) and a little.
+SLOT_EDGE_M = 0.015
+
+
 class ComputePlace(Primitive):
     """Place and pre-place tcp poses that set the held object down inside ``region``.
 
@@ -631,6 +640,8 @@ class ComputePlace(Primitive):
         beside: ``left`` / ``right``: set the object down beside ``region`` (a landmark: an
             object or a fixture) on the viewer's side, not on it (:meth:`_beside_point`); None:
             on / in it.
+        slot: ``[k, n]``: the region takes ``n`` objects side by side, this one in slot ``k``
+            (:meth:`_slot_point`: "put both moka pots on the stove"); None: at its centre.
         snapshot: blackboard key of the observation (object pose in hand, region).
         place, preplace: blackboard keys written with (4, 4) world tcp poses.
 
@@ -645,12 +656,18 @@ class ComputePlace(Primitive):
     """
 
     def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,
-                 beside: str | None = None, snapshot: str = "snapshot", place: str = "place_pose",
+                 beside: str | None = None, slot=None, snapshot: str = "snapshot", place: str = "place_pose",
                  preplace: str = "preplace_pose"):
         super().__init__(name)
         if beside not in (None, "left", "right"):
             raise ValueError(f"beside must be left, right or null, got {beside!r}")
-        self.beside = beside
+        if slot is not None and not (isinstance(slot, (list, tuple)) and len(slot) == 2
+                                     and all(isinstance(v, int) and not isinstance(v, bool) for v in slot)
+                                     and 0 <= slot[0] < slot[1]):
+            raise ValueError(f"slot must be [k, n] with integers 0 <= k < n, or null; got {slot!r}")
+        if slot is not None and beside is not None:
+            raise ValueError("slot and beside exclude each other: a slot is on the region, beside is next to it")
+        self.beside, self.slot = beside, (None if slot is None else (int(slot[0]), int(slot[1])))
         self.object, self.region, self.approach_height_m = object, region, float(approach_height_m)
         self.snapshot_key, self.place_key, self.preplace_key = snapshot, place, preplace
         self.reads(snapshot)
@@ -680,7 +697,8 @@ class ComputePlace(Primitive):
         rejected: list[dict] = []
         chosen = None
         for yaw in place_yaws(hand_yaw(self.ctx.target.tcp_pose())):
-            T_place = place_pose(centre, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
+            spot = centre if self.slot is None else self._slot_point(T_region, region_half, T_tcp_obj, half, yaw)
+            T_place = place_pose(spot, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
             T_pre = T_place.copy()
             T_pre[2, 3] += self.approach_height_m
             why = self._blocked(T_pre, T_place)
@@ -715,6 +733,25 @@ class ComputePlace(Primitive):
             raise PrimitiveFailure("perception.too_small", f"{self.object!r} needs {np.round(2 * need, 3).tolist()} m "
                                    f"(x, y; {INTO_MARGIN_M} m spare each side); {self.region!r} offers "
                                    f"{np.round(2 * np.asarray(region_half[:2]), 3).tolist()} m out of its body")
+
+    def _slot_point(self, T_region: np.ndarray, region_half: np.ndarray, T_tcp_obj: np.ndarray, half: np.ndarray,
+                    yaw: float) -> np.ndarray:
+        """(3,) world point where slot ``k`` of ``n`` (:attr:`slot`) of the region puts the held
+        object's centre, set down with hand yaw ``yaw`` (rad): the n slots stand in a row along the
+        region's horizontal axis (``T_region`` (4, 4) world, ``region_half`` (3,) m) across
+        which the object, so turned, is narrower; they share the region's length there, and
+        stand at least the object's width plus :data:`SLOT_GAP_M` apart, centred; no centre
+        nearer the region's edge than :data:`SLOT_EDGE_M` (the verifier's ``on`` judges the
+        centre within the region by 2 sigma)."""
+        k, n = self.slot  # type: ignore[misc]
+        Ro = top_down_rotation(yaw) @ np.asarray(T_tcp_obj, dtype=float)[:3, :3]
+        axes = [np.asarray(T_region[:3, j], dtype=float) for j in (0, 1)]
+        extents = [float(np.abs(Ro.T @ a) @ np.asarray(half, dtype=float)) for a in axes]
+        j = int(np.argmin(extents))
+        room = float(region_half[j])
+        spacing = max(2.0 * room / n, 2.0 * extents[j] + SLOT_GAP_M)
+        offset = float(np.clip((k - 0.5 * (n - 1)) * spacing, -(room - SLOT_EDGE_M), room - SLOT_EDGE_M))
+        return np.asarray(T_region[:3, 3], dtype=float) + offset * axes[j]
 
     def _beside_point(self, snapshot: dict, T_region: np.ndarray, region_half: np.ndarray, half: np.ndarray,
                       kind: str) -> tuple[np.ndarray, float]:

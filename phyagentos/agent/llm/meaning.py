@@ -399,6 +399,12 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
         joined = _conjunction(words, world)
         if joined:
             return joined, None, []
+    # "both moka pots": a plural of a word of the declared names stands for that word, and for
+    # every object it names
+    singular = _singulars(words, cands)
+    if singular:
+        words = [singular.get(w, w) for w in words]
+        content = [singular.get(w, w) for w in content]
     count = None
     for i, w in enumerate(words):
         nxt = words[i + 1:i + 3]
@@ -422,7 +428,8 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
         return (), None, [("unknown_object", f"{quote(' '.join(words))}: {', '.join(repr(w) for w in unknown)} names "
                                              f"no object of the scene (it has {', '.join(e.name for e in cands)})")]
     found, misses = _filter(content, cands, world)
-    plural = any(w in _KIND and w.endswith(("s", "es")) for w in words) or set(words) & _ALL or "ones" in words
+    plural = (any(w in _KIND and w.endswith(("s", "es")) for w in words) or set(words) & _ALL or "ones" in words
+              or bool(singular))
     if misses and not found:
         return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene "
                                              f"({'; '.join(misses)})")]
@@ -444,9 +451,27 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
             return (), None, [("not_understood", f"{quote(' '.join(words))} asks for {count}; the scene has "
                                                  f"{len(names)}: {', '.join(names)}")]
         return names, (count if count < len(names) else None), []
+    if "both" in words and len(names) != 2:
+        return (), None, [("not_understood", f"{quote(' '.join(words))}: 'both' names two; the scene has "
+                                             f"{len(names)}: {', '.join(names)}")]
     if plural or len(names) == 1:
         return names, None, []
     return (), None, [("not_understood", f"{quote(' '.join(words))} could be any of {', '.join(names)}: say which")]
+
+
+def _singulars(words: Sequence[str], cands: Sequence[Entity]) -> dict[str, str]:
+    """``{plural: singular}`` for each word of ``words`` that is no word of the candidates'
+    names but, less its ``s`` or ``es``, is one (``pots`` -> ``pot`` for ``moka_pot_1``)."""
+    parts = {p for e in cands for p in e.name.split("_")}
+    out = {}
+    for w in words:
+        if w in parts or w in _KIND:
+            continue
+        for cut in ("es", "s"):
+            if w.endswith(cut) and len(w) > len(cut) + 1 and w[:-len(cut)] in parts:
+                out[w] = w[:-len(cut)]
+                break
+    return out
 
 
 def _read_destination(words: list[str], prep: str, world: World, previous: tuple[str, ...],

@@ -231,6 +231,25 @@ def test_association_gates_wrong_colours_and_withholds_ambiguous_matches():
     assert a.matches == {} and a.ambiguous
 
 
+def test_identical_objects_nothing_tells_apart_are_both_named_and_their_tracks_keep_who_is_who():
+    """"Both moka pots": two declared look-alikes, two sightings. As rivals each match's margin
+    is nil and neither is named; as an interchangeable group a swap between them is no rival,
+    and the track cost decides which is which."""
+    from phyagentos.perception.association import track_costs
+
+    cfg = PerceptionConfig.default()
+    pots = [ObjectDescriptor(f"pot_{k}", shape="box", colour_rgb="red", size_m=(0.08, 0.08, 0.15)) for k in (1, 2)]
+    dets = [_det((0.9, 0.2, 0.15), "box", (0.04, 0.04, 0.075), pos=(0.5, 0.1, 0.075)),
+            _det((0.9, 0.2, 0.15), "box", (0.04, 0.04, 0.075), pos=(0.5, -0.1, 0.075))]
+    C = cost_matrix(dets, pots, cfg)
+    assert associate(C, cfg).matches == {}
+    named = associate(C, cfg, interchangeable=[[0, 1]])
+    assert sorted(j for j, _, _ in named.matches.values()) == [0, 1] and not named.ambiguous
+    # pot_1 was tracked where the second sighting is: it keeps its name there
+    C = C + track_costs(dets, 2, cfg, [np.array([0.5, -0.1, 0.075]), np.array([0.5, 0.1, 0.075])])
+    assert {i: j for i, (j, _, _) in associate(C, cfg, interchangeable=[[0, 1]]).matches.items()} == {0: 1, 1: 0}
+
+
 def test_a_size_within_the_looks_range_and_a_shape_it_was_seen_as_cost_less():
     """A carton seen face-on is shallower than its median look and its gable top sometimes
     reads as a cylinder: a look with ``size_range_m`` and ``shapes`` prices those sightings

@@ -16,7 +16,7 @@ from phyagentos.motion.top_knob_grasp import (
     top_knob_graspable,
     top_knob_preshape_m,
 )
-from phyagentos.perception.top_knob import KNOB_MAX_RADIUS_M, top_knob
+from phyagentos.perception.top_knob import KNOB_MAX_RADIUS_M, reach_axis, top_knob
 
 RNG = np.random.default_rng(7)
 
@@ -45,6 +45,17 @@ def test_a_knob_standing_on_a_lid_is_found_where_it_stands():
     # within the knob's half width: its near side, which the camera sees too, pulls the median
     assert np.linalg.norm(knob.xy - (0.102, -0.199)) < 0.006
     assert abs(knob.top_m - 0.152) < 0.003 and knob.radius_m <= KNOB_MAX_RADIUS_M
+    assert abs(knob.base_m - 0.133) < 0.003  # the lid it stands on
+
+
+def test_a_knob_seen_close_from_above_still_stands_on_the_lid_below_it():
+    """From the wrist camera over it, the knob's top face is sampled densely: the segment's top
+    is the knob's, and the body's top under it is read around it."""
+    body_xy, body_h = _box_points((0.0, 0.0), (0.034, 0.033), 0.133)
+    knob_xy, knob_h = _box_points((0.0, 0.0), (0.005, 0.006), 0.152, step=0.0007)
+    keep = knob_h > 0.130
+    knob = top_knob(np.r_[body_xy, knob_xy[keep]], np.r_[body_h, knob_h[keep]])
+    assert knob is not None and abs(knob.top_m - 0.152) < 0.003 and abs(knob.base_m - 0.133) < 0.003
 
 
 def test_a_flat_top_or_an_open_rim_is_no_knob():
@@ -86,3 +97,35 @@ def test_the_fingertips_stay_above_the_lid_and_close_across_the_short_side_first
 def test_a_knob_too_low_for_the_pads_is_refused_with_why():
     with pytest.raises(IKError, match="pads would hold"):
         top_knob_grasp_candidates((0.0, 0.0), 1.038, 0.006, body_top_z_m=1.033, long_axis_yaw_rad=0.0)
+
+
+def test_the_way_a_pot_reaches_farthest_from_its_knob_is_its_handles_axis_and_a_disc_has_none():
+    a = np.linspace(0, 2 * math.pi, 300, endpoint=False)
+    disc = np.column_stack([0.04 * np.cos(a), 0.04 * np.sin(a)])
+    handle = np.column_stack([RNG.uniform(-0.006, 0.006, 40), RNG.uniform(0.065, 0.08, 40)])
+    spout = np.column_stack([RNG.uniform(-0.006, 0.006, 20), RNG.uniform(-0.057, -0.045, 20)])
+    turn = np.array([[math.cos(0.3), -math.sin(0.3)], [math.sin(0.3), math.cos(0.3)]])
+    axis = reach_axis(np.r_[disc, handle, spout] @ turn.T)
+    assert axis is not None and abs(math.sin(axis - (0.5 * math.pi + 0.3))) < math.sin(math.radians(3))
+    assert reach_axis(disc) is None
+
+
+def _pot(centre):
+    body_xy, body_h = _box_points(centre, (0.034, 0.033), 0.133)
+    knob_xy, knob_h = _box_points((centre[0], centre[1] + 0.001), (0.005, 0.006), 0.152, step=0.002)
+    keep = knob_h > 0.130
+    return np.r_[body_xy, knob_xy[keep]], np.r_[body_h, knob_h[keep]]
+
+
+def test_two_pots_side_by_side_in_one_segment_show_two_knobs_and_one_pot_one():
+    """Two moka pots set next to each other on a stove join in one segment; the split finds
+    one knob on each (its ``knobs`` partition), and a lone pot or a flat top none to split by."""
+    from phyagentos.perception.split import top_knobs
+
+    (a_xy, a_h), (b_xy, b_h) = _pot((0.0, 0.0)), _pot((0.0, 0.085))
+    knobs = top_knobs(np.r_[a_xy, b_xy], np.r_[a_h, b_h])
+    assert len(knobs) == 2
+    # each within its knob's half width (the near sides the camera sees pull the median)
+    assert sorted(float(k[1]) for k in knobs) == [pytest.approx(0.001, abs=0.006), pytest.approx(0.086, abs=0.006)]
+    assert len(top_knobs(a_xy, a_h)) == 1
+    assert top_knobs(*_box_points((0.0, 0.0), (0.07, 0.035), 0.1)) == []

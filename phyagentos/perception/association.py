@@ -142,13 +142,20 @@ def _total(P: np.ndarray) -> float:
     return float(P[r, c].sum())
 
 
-def associate(C: np.ndarray, config: PerceptionConfig) -> Association:
+def associate(C: np.ndarray, config: PerceptionConfig, *,
+              interchangeable: Sequence[Sequence[int]] = ()) -> Association:
     """Gated, margin-checked optimal assignment on the cost matrix ``C``.
 
     The margin of a match (i, j) is how much the best assignment that does *not* give
     descriptor j to detection i costs more than the optimum (every detection may stay
     unknown and every descriptor unseen at ``gate_cost``): a look-alike whose own detection
-    is explained better elsewhere is no rival, two that could swap at little cost are."""
+    is explained better elsewhere is no rival, two that could swap at little cost are.
+    ``interchangeable``: groups of descriptor indices that nothing tells apart and nothing asks
+    to (identical objects, none named by a spatial reference: "both moka pots"); for a match
+    that looks like them (``exp(-cost^2 / 2)`` at least ``relations.min_confidence``) the
+    margin of (i, j) is then that of the best assignment giving detection i to no member of
+    j's group, so a swap between them is no rival, and the track cost in ``C`` keeps each
+    one's identity."""
     ac = config.association
     if C.size == 0:
         return Association({}, ())
@@ -165,7 +172,10 @@ def associate(C: np.ndarray, config: PerceptionConfig) -> Association:
         if c > ac.gate_cost:
             continue
         forbid = P.copy()
-        forbid[i, j] = _FORBIDDEN
+        # a twin's swap is no rival only for a sighting that looks like them (a good match by
+        # its look): two alike boxes merged into one segment name neither
+        group = next((list(g) for g in interchangeable if j in g), [j])
+        forbid[i, group if math.exp(-0.5 * c * c) >= config.relations.min_confidence else [j]] = _FORBIDDEN
         margin = max(0.0, _total(forbid) - best)
         if margin < ac.ambiguity_margin:
             # every detection within the margin for this descriptor is a candidate: none is named

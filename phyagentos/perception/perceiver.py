@@ -11,9 +11,13 @@ One :meth:`Perceiver.observe` call runs the pipeline on every frame of one obser
 3. detections: DBSCAN on position + colour, one fitted primitive per cluster (``detect``);
    a cluster larger than every declared object is split into the touching objects it holds
    at a height step or around a taller part, when that is unambiguous (``split``);
-   stacking (an object whose lowest points sit on another's top rests on it);
+   stacking (an object whose lowest points sit on another's top rests on it); each final
+   detection's round body and handle, open top and knob on top (``top_knob``: reported as
+   ``attributes.top_knob_*``);
 4. association to the declared descriptors (``association``); unmatched or ambiguous
-   clusters become ``unknown_<k>``; an object declared with a spatial reference (``where``)
+   clusters become ``unknown_<k>``; identical declared objects none of which has a spatial
+   reference are interchangeable (both named, their tracks keep which is which; a held one's
+   track is at the hand); an object declared with a spatial reference (``where``)
    and not tracked yet is resolved first on the landmarks the others' association found,
    named at :data:`LANDMARK_MIN_CONFIDENCE` or more
    (:func:`~phyagentos.perception.association.resolve_reference`; the snapshot's
@@ -613,6 +617,10 @@ class Perceiver:
         # ---- association (tracks seen before break ties)
         names = [d.name for d in self.declared]
         track_pos = [self.tracks[n].position if n in self.tracks and not self.tracks[n].held else None for n in names]
+        for group in self._interchangeable():  # a held twin is where the hand is, not anywhere: the other keeps its name
+            for j in group:
+                if names[j] in self.tracks and self.tracks[names[j]].held:
+                    track_pos[j] = np.asarray(proprio.tcp_pose[:3, 3], dtype=float)
         looks_only = self._hidden_base_where_let_go(cost_matrix(dets, self.declared, cfg), dets)  # no tie-breaker
         C = looks_only + track_costs(dets, len(self.declared), cfg, track_pos)
         C = self._truncated_where_tracked(C, dets)
@@ -767,9 +775,12 @@ class Perceiver:
                 extra.update(self._body_attributes(name, t.position, _pose(t.position, t.yaw), t.body, std))
                 if t.top_knob is not None:  # a knob on its top: where, how high, how wide (world, m)
                     k = np.asarray(t.top_knob, dtype=float)
-                    extra.update(top_knob_xy=_r(self._top_knob_xy(t)),
-                                 top_knob_z_m=_r(float(t.position[2] + t.half_extents[2] + k[2])),
-                                 top_knob_radius_m=_r(float(k[3])))
+                    top = float(t.position[2] + t.half_extents[2])
+                    extra.update(top_knob_xy=_r(self._top_knob_xy(t)), top_knob_z_m=_r(top + float(k[2])),
+                                 top_knob_radius_m=_r(float(k[3])), top_knob_base_z_m=_r(top - float(k[4])))
+                    if math.isfinite(float(k[5])):
+                        a = float(k[5]) + t.yaw
+                        extra["top_knob_axis_xy"] = _r([math.cos(a), math.sin(a)])
                 ent = self._entity(name, "object", t.position, t.yaw, t.half_extents, t.shape, t.colour_rgb,
                                    conf, std, math.sqrt(t.var_yaw), t.points, () if name in remembered else t.cameras,
                                    evidence_paths, source="remembered" if name in remembered else "perceived",
@@ -1080,12 +1091,27 @@ class Perceiver:
         beside its twin in the drawer). The matches keep the look's own cost (``C``) for their
         confidence."""
         cut = [i for i, d in enumerate(dets) if d.truncated]
+        twins = self._interchangeable()
         if not cut or C.size == 0:
-            return associate(C, self.config)
+            return associate(C, self.config, interchangeable=twins)
         weighed = C.copy()
         weighed[cut, :] += PART_COST
-        a = associate(weighed, self.config)
+        a = associate(weighed, self.config, interchangeable=twins)
         return Association({i: (j, float(C[i, j]), margin) for i, (j, _, margin) in a.matches.items()}, a.ambiguous)
+
+    def _interchangeable(self) -> list[list[int]]:
+        """Groups (indices into the declared objects) of two or more identical declared objects
+        (:meth:`~phyagentos.perception.descriptors.ObjectDescriptor.looks_like`) none of which
+        is declared with a spatial reference: which is which is the perceiver's to fix (by their
+        tracks), not a request's (:func:`~phyagentos.perception.association.associate`)."""
+        groups: list[list[int]] = []
+        for j, d in enumerate(self.declared):
+            if any(j in g for g in groups):
+                continue
+            g = [k for k, e in enumerate(self.declared) if e.looks_like(d)]
+            if len(g) > 1 and all(self.declared[k].where is None for k in g):
+                groups.append(g)
+        return groups
 
     def _weak_elsewhere(self, name: str, det: Detection, conf: float, stamp: float,
                         placed: np.ndarray | None = None) -> bool:
@@ -1448,7 +1474,7 @@ class Perceiver:
                 # grasp's height over the object's top (motion.knob_grasp.top_knob_grasp_z)
                 from phyagentos.motion.top_knob_grasp import top_knob_grasp_z  # noqa: PLC0415
 
-                z_close = top_knob_grasp_z(float(t.position[2] + t.half_extents[2]))
+                z_close = top_knob_grasp_z(float(t.position[2] + t.half_extents[2] - t.top_knob[4]))
                 T_obj[2, 3] = t.position[2] + max(0.0, float(tcp[2]) - z_close)
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
             else:  # grasped earlier, already moved: assume a centred grasp

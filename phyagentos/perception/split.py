@@ -17,6 +17,10 @@ segment's top, every 5 mm (at most :data:`MAX_LEVELS`):
   each connected group of the points above ``z`` (on a :data:`GRID_M` grid of the ground
   plane) with every point below ``z`` inside its footprint's convex hull, the rest apart;
 
+and once, **knobs** (objects side by side, each with a knob on its top: two moka pots on a
+stove): where two or more knobs stand on the segment's top (:func:`top_knobs`), each point goes
+to the nearest;
+
 and once, **colour** (objects of clearly different colours: a black bowl on a white
 ramekin): two k-means groups in CIELAB (L* halved), labels smoothed over the nearest
 neighbours, when the group centres lie at least :data:`MIN_COLOUR_SPLIT_LAB` apart;
@@ -67,6 +71,7 @@ from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection, fit_cluster, resting_at, stack
+from phyagentos.perception.top_knob import KNOB_MAX_RADIUS_M, KNOB_MIN_POINTS, KNOB_SLICE_M, KNOB_TOP_RANK, top_knob
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
            "COVERED_COST_FRACTION", "SPLIT_DEPTH",
@@ -92,6 +97,9 @@ MIN_COLOUR_SPLIT_LAB = 20.0
 COVERED_COST_FRACTION = 0.5
 #: The colour partition: labels smoothed over this many nearest neighbours.
 COLOUR_NEIGHBOURS = 9
+#: A knob among a segment's top points is looked at with the points within this of it, m: its
+#: lid around it (LIBERO's moka pot: 3.3-4 cm from the knob to the body's side).
+KNOB_SPLIT_RADIUS_M = 0.035
 
 
 def extent(points: np.ndarray, heights: np.ndarray) -> np.ndarray:
@@ -170,6 +178,11 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
                     k += 1
         return labels
 
+    knobs = top_knobs(xy, heights, grow=grow)
+    if len(knobs) >= 2:  # nearest knob: the side of the bisector each point stands on
+        d = np.stack([np.hypot(*(xy - k).T) for k in knobs])
+        nearest = np.argmin(d, axis=0)
+        yield "knobs", float("nan"), pieces_of([np.flatnonzero(nearest == i) for i in range(len(knobs))])
     labels = _colour_halves(cloud)
     if labels is not None:
         yield "colour", float("nan"), pieces_of([np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)])
@@ -198,6 +211,38 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
             groups.append(g)
         groups.append(np.flatnonzero(rest))
         yield "columns", float(z), pieces_of(groups)
+
+
+def top_knobs(xy: np.ndarray, heights: np.ndarray, *, grow: int = 1) -> list[np.ndarray]:
+    """(2,) centres (m, world x, y) of the knobs standing on a segment's top (two moka pots
+    side by side), or ``[]``: the points within :data:`~.top_knob.KNOB_SLICE_M` of the
+    segment's top (:data:`~.top_knob.KNOB_TOP_RANK` th highest point), in connected pieces on
+    the split's grid (``xy`` (N, 2) m, ``heights`` (N,) m above the plane; pieces join across
+    ``grow`` cells), each a knob by :func:`~.top_knob.top_knob` on the points within
+    :data:`KNOB_SPLIT_RADIUS_M` of it; two within twice
+    :data:`~.top_knob.KNOB_MAX_RADIUS_M` of each other are one."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    h = np.asarray(heights, dtype=float)
+    if h.size < KNOB_MIN_POINTS + KNOB_TOP_RANK:
+        return []
+    top = float(np.partition(h, h.size - KNOB_TOP_RANK)[h.size - KNOB_TOP_RANK])
+    upper = np.flatnonzero(h >= top - KNOB_SLICE_M)
+    if upper.size < 2 * KNOB_MIN_POINTS:
+        return []
+    origin = xy[upper].min(axis=0) - (grow + 1) * GRID_M
+    ncell = np.floor((xy[upper].max(axis=0) - origin) / GRID_M).astype(int) + 3 + 2 * grow
+    lab = _pieces(xy[upper], origin, (int(ncell[1]), int(ncell[0])), grow)
+    out: list[np.ndarray] = []
+    for v in np.unique(lab):
+        sel = upper[lab == v]
+        if sel.size < KNOB_MIN_POINTS:
+            continue
+        c = np.median(xy[sel], axis=0)
+        near = np.hypot(*(xy - c).T) <= KNOB_SPLIT_RADIUS_M
+        knob = top_knob(xy[near], h[near])
+        if knob is not None and all(float(np.linalg.norm(knob.xy - o)) > 2.0 * KNOB_MAX_RADIUS_M for o in out):
+            out.append(knob.xy)
+    return out
 
 
 def footprint_cut(xy: np.ndarray) -> tuple[float, np.ndarray]:
@@ -264,7 +309,7 @@ def _colour_halves(cloud: Cloud) -> np.ndarray | None:
 
 def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig, focal_px: np.ndarray,
                   descriptors: Sequence[ObjectDescriptor], *,
-                  rests_at_m: float = 0.0) -> list[tuple[Detection, np.ndarray]] | None:
+                  rests_at_m: float = 0.0, patch_m: float = 0.0) -> list[tuple[Detection, np.ndarray]] | None:
     """Split one oversized segment into the declared objects that touch in it.
 
     Args:
@@ -277,6 +322,8 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
         rests_at_m: the height (m above ``plane``) the segment rests at: the top of a
             fixture's place patch under it (:func:`split_clusters`); its height counts from
             there when telling whether it is oversized.
+        patch_m: the height (m above ``plane``) of a fixture's place patch the segment stands
+            on (0: none): its parts are scored resting at least there (:func:`_admissible`).
 
     Returns:
         ``[(detection, index array into cloud)]`` of the parts (fitted as any segment, not
@@ -296,9 +343,11 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     # part resting at the cut, the part under it covered): a stack the plain fit explains stays
     # as it was. The parts fitted alike in both passes are fitted once.
     fits: dict[tuple[int, int], Detection | None] = {}
-    scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=False, fits=fits)
+    scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=False, fits=fits,
+                         patch_m=patch_m)
     if not scored:
-        scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=True, fits=fits)
+        scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=True, fits=fits,
+                             patch_m=patch_m)
     if not scored:
         log.debug("split: oversized segment of %d points, no admissible partition", len(cloud))
         return None
@@ -321,7 +370,7 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
 
 def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
                 focal_px: np.ndarray, sized: Sequence[ObjectDescriptor], *, stacks: bool,
-                fits: dict[tuple[int, int], Detection | None]) -> list:
+                fits: dict[tuple[int, int], Detection | None], patch_m: float = 0.0) -> list:
     """``[(summed cost, kind, z, parts, index arrays, costs)]`` of the admissible ``partitions``
     (module docstring). ``stacks``: a step's upper part rests at the cut (its sphere test from
     there, then raised to it: its lowest points need not show over what shows of the part under
@@ -329,7 +378,10 @@ def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, con
     (:func:`_rested`), admissible at :data:`COVERED_COST_FRACTION` of the cost limit and never
     of the look resting on it (:func:`_covered_alike`); only steps are scored so, the other
     partitions come out as in the plain pass. ``fits``: ``{(partition, part): fit}`` of the
-    parts fitted on the plane, shared by the two passes."""
+    parts fitted on the plane, shared by the two passes. ``patch_m``: the height (m above
+    ``plane``) of the fixture's place patch the segment stands on: a part resting lower is scored
+    resting there (two moka pots side by side on the stove are as tall as their look above
+    the burner, not above the table)."""
     cc = config.clustering
     scored = []
     for n, (kind, z, labels) in enumerate(partitions):
@@ -359,6 +411,8 @@ def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, con
             if any(upper):
                 parts = _rested(parts, upper, z, plane)
             stacked = stack(parts, plane, config)
+            if patch_m > 0.0:
+                stacked = [resting_at(d, patch_m, plane) if d.bottom_m < patch_m else d for d in stacked]
             full = cost_matrix(stacked, sized, config)
             costs = full.min(axis=1)
             if log.isEnabledFor(logging.DEBUG):
@@ -465,7 +519,7 @@ def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Clou
     for det, idx in clusters:
         rests_at = stack([det, *supports], plane, config)[0].bottom_m if supports else 0.0
         parts = split_cluster(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors,
-                              rests_at_m=rests_at)
+                              rests_at_m=rests_at, patch_m=rests_at)
         if parts is None:
             out.append((det, idx))
         elif depth > 1:  # again where a part is oversized, its height from what it rests on

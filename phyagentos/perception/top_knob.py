@@ -14,7 +14,9 @@ part from RGB-D points only (:func:`top_knob`):
 3. it stands *above* the body: the points from :data:`KNOB_SLICE_M` to
    :data:`KNOB_BODY_BAND_M` further down reach out at least :data:`KNOB_BODY_RATIO` times as far
    (a bottle's neck widening into its shoulders passes too; a flat top, a rim or a ridge never
-   does, their top slice being as wide as the object).
+   does, their top slice being as wide as the object);
+4. the body's top under it is read around it (``base_m``), and the direction in which the
+   object reaches farthest from it (``axis_rad``, :func:`reach_axis`: a pot's handle).
 
 Measured on generated LIBERO-10 task 2 scenes (LIBERO's sampler, seeds 500-502, never an init
 state): 28 points above the lid after the voxel filter, their median 5.9-6.9 mm from the knob
@@ -38,6 +40,10 @@ __all__ = [
     "KNOB_MAX_RADIUS_M",
     "KNOB_BODY_BAND_M",
     "KNOB_BODY_RATIO",
+    "KNOB_BASE_CLEARANCE_M",
+    "AXIS_REACH_FRACTION",
+    "AXIS_MIN_RESULTANT",
+    "reach_axis",
 ]
 
 #: The segment's top is its this-th highest point (1-based): a stray depth sample or two above
@@ -55,6 +61,14 @@ KNOB_MAX_RADIUS_M = 0.012
 KNOB_BODY_BAND_M = 0.02
 #: ... and reaches out at least this many times the knob's radius.
 KNOB_BODY_RATIO = 2.5
+#: The body's top is read this far out from the knob's edge and beyond, m.
+KNOB_BASE_CLEARANCE_M = 0.006
+#: The object's reach axis is that of its points at least this fraction of its farthest
+#: point's distance from the knob (LIBERO's moka pot: its handle reaches 8 cm, its spout 5.7,
+#: its body 4).
+AXIS_REACH_FRACTION = 0.8
+#: ... when their doubled directions' mean resultant is at least this (1: all on one line).
+AXIS_MIN_RESULTANT = 0.8
 
 
 @dataclass(frozen=True)
@@ -65,11 +79,20 @@ class Knob:
         xy: (2,) its centre, m (the median of its points, horizontally).
         top_m: its top above the support plane, m.
         radius_m: 90 % of its points lie this close to ``xy``, m.
+        base_m: the top of the body it stands on above the support plane, m: the 98th
+            percentile height of the points farther than ``radius_m`` plus
+            :data:`KNOB_BASE_CLEARANCE_M` from ``xy`` (the segment's own top is the knob's
+            where a camera above sees the knob well).
+        axis_rad: the direction (rad about world z, modulo pi) in which the object reaches
+            farthest from the knob (a moka pot's handle and spout: its knob's faces line up
+            with it), or None where no direction stands out (:func:`reach_axis`).
     """
 
     xy: np.ndarray
     top_m: float
     radius_m: float
+    base_m: float
+    axis_rad: float | None = None
 
 
 def top_knob(points_xy: np.ndarray, heights: np.ndarray) -> Knob | None:
@@ -93,7 +116,29 @@ def top_knob(points_xy: np.ndarray, heights: np.ndarray) -> Knob | None:
     reach = float(np.percentile(np.hypot(*(xy[band] - centre).T), 90))
     if reach < KNOB_BODY_RATIO * max(radius, 0.004):
         return None
-    return Knob(xy=centre, top_m=top, radius_m=max(radius, 0.004))
+    around = np.hypot(*(xy - centre).T) > max(radius, 0.004) + KNOB_BASE_CLEARANCE_M
+    base = float(np.percentile(h[around], 98)) if int(around.sum()) >= KNOB_MIN_POINTS else top - KNOB_SLICE_M
+    return Knob(xy=centre, top_m=top, radius_m=max(radius, 0.004), base_m=min(base, top), axis_rad=reach_axis(xy - centre))
+
+
+def reach_axis(offsets_xy: np.ndarray) -> float | None:
+    """The direction (rad about z, in [-pi/2, pi/2)) of the farthest points of ``offsets_xy``
+    ((N, 2) m from a centre): those at least :data:`AXIS_REACH_FRACTION` of the farthest's
+    distance out, their directions averaged modulo pi (doubled angles); None when fewer than
+    :data:`KNOB_MIN_POINTS` or their doubled angles' mean resultant is below
+    :data:`AXIS_MIN_RESULTANT` (a round or square body reaches as far every way)."""
+    d = np.asarray(offsets_xy, dtype=float).reshape(-1, 2)
+    r = np.hypot(d[:, 0], d[:, 1])
+    if r.size == 0:
+        return None
+    far = r >= AXIS_REACH_FRACTION * float(np.percentile(r, 99))
+    if int(far.sum()) < KNOB_MIN_POINTS:
+        return None
+    a = 2.0 * np.arctan2(d[far, 1], d[far, 0])
+    c, s_ = float(np.mean(np.cos(a))), float(np.mean(np.sin(a)))
+    if math.hypot(c, s_) < AXIS_MIN_RESULTANT:
+        return None
+    return float((0.5 * math.atan2(s_, c) + 0.5 * math.pi) % math.pi - 0.5 * math.pi)
 
 
 def turned(local_xy: np.ndarray, angle_rad: float) -> np.ndarray:

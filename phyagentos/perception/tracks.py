@@ -42,7 +42,8 @@ def _local_top_knob(det: Detection) -> np.ndarray | None:
     k = det.top_knob
     if k is None:
         return None
-    return np.r_[turned(k.xy - det.position[:2], -det.yaw), k.top_m - det.top_m, k.radius_m]
+    axis = np.nan if k.axis_rad is None else k.axis_rad - det.yaw
+    return np.r_[turned(k.xy - det.position[:2], -det.yaw), k.top_m - det.top_m, k.radius_m, det.top_m - k.base_m, axis]
 
 
 def _wrap(a: float, period: float) -> float:
@@ -91,9 +92,10 @@ class Track:
     #: container's: :attr:`~phyagentos.perception.detect.Detection.open_depth_m`); 0 for a solid top.
     open_depth_m: float = 0.0
     #: The knob on its top (:attr:`~phyagentos.perception.detect.Detection.top_knob`) in its latest
-    #: sighting that showed one, in the object's frame: (4,) its centre's x, y from the object's
-    #: centre along the object's axes (m), how far its top rises above the object's (m), and its
-    #: radius (m); else None.
+    #: sighting that showed one, in the object's frame: (6,) its centre's x, y from the object's
+    #: centre along the object's axes (m), how far its top rises above the object's (m), its
+    #: radius (m), how far the body's top under it lies below the object's top (m), and its
+    #: reach axis from the object's x axis (rad, modulo pi; nan: none); else None.
     top_knob: np.ndarray | None = None
 
     @classmethod
@@ -165,7 +167,8 @@ class Track:
         if det.top_knob is not None:
             self.top_knob = _local_top_knob(det)
         elif self.top_knob is not None:  # as the body: the last one seen, turned as it stood
-            self.top_knob = np.r_[turned(self.top_knob[:2], yaw_before - self.yaw), self.top_knob[2:]]
+            turn = yaw_before - self.yaw
+            self.top_knob = np.r_[turned(self.top_knob[:2], turn), self.top_knob[2:5], self.top_knob[5] + turn]
         # agreeing sightings raise confidence: 1 - (1 - c_now)(1 - c_before / 2)
         self.confidence = max(1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence), keep)
         self.last_seen_s = stamp_s

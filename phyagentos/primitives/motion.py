@@ -112,12 +112,14 @@ def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = Non
     if opening_m is not None:
         checker.set_gripper_opening(opening_m)
     checker.detach()
-    # What to attach: the object the robot believes it closed on (proprioception); a
-    # hooked object nothing closed on (kitchen hook) falls back to the collision model's
-    # own contact state. The collision model is the runtime's, never the Agent's.
+    # What to attach: what the collision model's own contact state says the hand holds (the
+    # model is the target's world: one of two identical moka pots, named by perception as
+    # the other, is the one in the hand); where it says nothing (a bowl's rim between the
+    # pads), the object the robot believes it closed on (proprioception). The collision model
+    # is the runtime's, never the Agent's.
     from .grasp_sense import belief  # noqa: PLC0415
 
-    obj = belief(target).object or held_object(target)
+    obj = held_object(target) or belief(target).object
     if obj is not None:
         checker.attach(target.object_body(obj), np.linalg.inv(target.tcp_pose()) @ target.object_pose(obj))
     return checker

@@ -80,17 +80,18 @@ def test_only_an_object_too_wide_or_nearly_is_taken_by_its_knob():
     assert not top_knob_graspable(attrs, (0.05, 0.05, 0.05), shape="sphere")
 
 
-def test_the_fingertips_stay_above_the_lid_and_close_across_the_short_side_first():
-    plans = top_knob_grasp_candidates((0.1, -0.2), 1.052, 0.006, body_top_z_m=1.033, long_axis_yaw_rad=0.3,
-                                  approach_height_m=0.1, current_yaw_rad=0.0)
+def test_the_fingertips_stay_above_the_lid_and_the_hand_squares_up_to_the_knob_as_a_place_sets_down():
+    plans = top_knob_grasp_candidates((0.1, -0.2), 1.052, 0.006, body_top_z_m=1.033, long_axis_yaw_rad=1.3,
+                                  approach_height_m=0.1)
     assert len(plans) == 4
     for p in plans:
         assert p.grasp[2, 3] - FINGERTIP_BELOW_TCP_M == pytest.approx(1.033 + KNOB_TIP_CLEARANCE_M)
         assert np.allclose(p.grasp[:2, 3], (0.1, -0.2)) and p.pregrasp[2, 3] == pytest.approx(p.grasp[2, 3] + 0.1)
         assert p.width_m == pytest.approx(0.012)
-    # the hand's x (the pads' width) along the long axis first: the fingers close across the short side
-    assert abs(math.sin(hand_yaw(plans[0].grasp) - 0.3)) < 1e-9
-    assert abs(math.cos(hand_yaw(plans[2].grasp) - 0.3)) < 1e-9
+        # square to the knob's faces: the hand's x along the handle's axis or across it
+        assert abs(math.sin(2.0 * (hand_yaw(p.grasp) - 1.3))) < 1e-9
+    # the one nearest yaw 0 first (a place tries yaw 0 first: the object goes down as it stood)
+    assert hand_yaw(plans[0].grasp) == pytest.approx(1.3 - 0.5 * math.pi)
     assert top_knob_preshape_m(0.006) == pytest.approx(0.026)
 
 

@@ -88,19 +88,20 @@ def top_knob_grasp_candidates(
     body_top_z_m: float,
     long_axis_yaw_rad: float,
     approach_height_m: float = 0.10,
-    current_yaw_rad: float = 0.0,
+    prefer_yaw_rad: float = 0.0,
     current_q7_rad: float | None = None,
+    current_yaw_rad: float = 0.0,
 ) -> tuple[GraspPlan, ...]:
     """Top-down grasps of a knob, best first.
 
-    The tcp stands over ``top_knob_xy`` ((2,) world, m), its fingertips
+    The tcp stands over ``knob_xy`` ((2,) world, m), its fingertips
     (:data:`~phyagentos.motion.grasp.FINGERTIP_BELOW_TCP_M` below it)
-    :data:`KNOB_TIP_CLEARANCE_M` above ``body_top_z_m`` (world z of the object's top, m).
-    The fingers close across the object's short side first (the hand's x along
-    ``long_axis_yaw_rad``, rad: the footprint's long axis, where a pot's handle and spout
-    stand, is then under the pads' width, not the fingers), then along it; each pair of yaws
-    180 deg apart, the one nearer ``current_yaw_rad`` first, those that would push joint 7
-    (``current_q7_rad``) out of its range dropped. ``width_m`` is the knob's diameter.
+    :data:`KNOB_TIP_CLEARANCE_M` above ``body_top_z_m`` (world z of the object's top, m). The
+    fingers close across the knob's faces, which line up with ``long_axis_yaw_rad`` (rad: the
+    way the object reaches farthest, its handle): four yaws 90 deg apart, the one nearest
+    ``prefer_yaw_rad`` first (0, the first yaw a place tries: the object then goes down as it
+    stood), those that would push joint 7 (``current_q7_rad``, the hand's yaw now
+    ``current_yaw_rad``) out of its range dropped. ``width_m`` is the knob's diameter.
 
     Raises:
         IKError: the knob rises less than :data:`KNOB_MIN_PAD_OVERLAP_M` above where the
@@ -113,18 +114,16 @@ def top_knob_grasp_candidates(
         raise IKError(f"the knob rises {(float(knob_top_z_m) - float(body_top_z_m)) * 1000:.1f} mm above the "
                       f"object's top; the pads would hold {max(held, 0.0) * 1000:.1f} mm of it, "
                       f"{KNOB_MIN_PAD_OVERLAP_M * 1000:.0f} mm needed")
-    out: list[GraspPlan] = []
-    for base in (long_axis_yaw_rad, long_axis_yaw_rad + 0.5 * math.pi):
-        deltas = []
-        for yaw in (base, base + math.pi):
-            delta = _wrap(yaw - current_yaw_rad)
-            if current_q7_rad is not None and not (JOINT7_RANGE_RAD[0] + 0.05 <= current_q7_rad - delta
-                                                   <= JOINT7_RANGE_RAD[1] - 0.05):
-                continue
-            deltas.append(delta)
-        for delta in sorted(deltas, key=abs):
-            out.append(top_down_plan(float(xy[0]), float(xy[1]), z, _wrap(current_yaw_rad + delta),
-                                     approach_height_m=approach_height_m, width_m=2.0 * float(knob_radius_m)))
-    if not out:
+    yaws = []
+    for k in range(4):
+        yaw = _wrap(long_axis_yaw_rad + 0.5 * math.pi * k)
+        delta = _wrap(yaw - current_yaw_rad)
+        if current_q7_rad is not None and not (JOINT7_RANGE_RAD[0] + 0.05 <= current_q7_rad - delta
+                                               <= JOINT7_RANGE_RAD[1] - 0.05):
+            continue
+        yaws.append(yaw)
+    if not yaws:
         raise IKError("no knob grasp yaw keeps joint 7 inside its range")
-    return tuple(out)
+    yaws.sort(key=lambda a: abs(_wrap(a - prefer_yaw_rad)))
+    return tuple(top_down_plan(float(xy[0]), float(xy[1]), z, yaw, approach_height_m=approach_height_m,
+                               width_m=2.0 * float(knob_radius_m)) for yaw in yaws)

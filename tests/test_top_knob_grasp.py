@@ -130,3 +130,26 @@ def test_two_pots_side_by_side_in_one_segment_show_two_knobs_and_one_pot_one():
     assert sorted(float(k[1]) for k in knobs) == [pytest.approx(0.001, abs=0.006), pytest.approx(0.086, abs=0.006)]
     assert len(top_knobs(a_xy, a_h)) == 1
     assert top_knobs(*_box_points((0.0, 0.0), (0.07, 0.035), 0.1)) == []
+
+
+def test_a_tracks_knob_stays_where_it_was_seen_when_a_sighting_names_the_box_yaw_a_quarter_turn_off():
+    """A square-ish box's yaw is known modulo its period: a sighting may call it a quarter turn
+    off what the track holds. The knob is kept in the track's own frame, so it is placed where
+    it was seen, not turned with the sighting's name for the yaw."""
+    from phyagentos.perception.colour import srgb_to_lab
+    from phyagentos.perception.config import PerceptionConfig
+    from phyagentos.perception.detect import Detection
+    from phyagentos.perception.top_knob import Knob
+    from phyagentos.perception.tracks import Track, turned
+
+    def det(yaw, half):
+        return Detection(position=np.array([0.05, 0.02, 0.07]), yaw=yaw, half_extents=np.array(half), shape="box",
+                         colour_rgb=np.array([0.6, 0.6, 0.6]), colour_lab=srgb_to_lab(np.array([[0.6, 0.6, 0.6]]))[0],
+                         points=500, cameras=2, position_std_m=0.002, yaw_std_rad=0.05, view_agreement=1.0,
+                         bottom_m=0.0, top_knob=Knob(xy=np.array([0.05, 0.034]), top_m=0.152, radius_m=0.007,
+                                                     base_m=0.133))
+
+    t = Track.start("pot", det(0.0, (0.04, 0.039, 0.07)), 0.9, 0.0, ("agentview",))
+    t.update(det(0.5 * math.pi - 1e-3, (0.04, 0.039, 0.07)), 0.9, 0.1, ("agentview",), PerceptionConfig.default())
+    placed = t.position[:2] + turned(t.top_knob[:2], t.yaw)
+    assert placed == pytest.approx([0.05, 0.034], abs=1e-6)

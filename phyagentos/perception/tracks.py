@@ -37,13 +37,16 @@ def yaw_period(half_extents: np.ndarray, shape: str) -> float:
     return math.pi / 2.0 if abs(hx - hy) < 0.1 * max(hx, hy) else math.pi
 
 
-def _local_top_knob(det: Detection) -> np.ndarray | None:
-    """``det``'s knob in its frame (:attr:`Track.top_knob`'s layout), or None."""
+def _local_top_knob(det: Detection, position: np.ndarray, yaw: float) -> np.ndarray | None:
+    """``det``'s knob in the frame of a track at ``position`` ((3,) world, m) turned ``yaw``
+    (rad): :attr:`Track.top_knob`'s layout; None when ``det`` shows none. The track's own
+    pose, not the sighting's: a box's fused yaw may differ from a sighting's by its period."""
     k = det.top_knob
     if k is None:
         return None
-    axis = np.nan if k.axis_rad is None else k.axis_rad - det.yaw
-    return np.r_[turned(k.xy - det.position[:2], -det.yaw), k.top_m - det.top_m, k.radius_m, det.top_m - k.base_m, axis]
+    axis = np.nan if k.axis_rad is None else k.axis_rad - yaw
+    return np.r_[turned(k.xy - np.asarray(position, dtype=float)[:2], -yaw), k.top_m - det.top_m, k.radius_m,
+                 det.top_m - k.base_m, axis]
 
 
 def _wrap(a: float, period: float) -> float:
@@ -107,7 +110,7 @@ class Track:
                    colour_rgb=det.colour_rgb.copy(), points=det.points, confidence=confidence,
                    last_seen_s=stamp_s, bottom_m=det.bottom_m, cameras=cameras, shape_votes={det.shape: 1},
                    body=None if det.body is None else det.body.local(det.position[:2], det.yaw),
-                   open_depth_m=det.open_depth_m, top_knob=_local_top_knob(det))
+                   open_depth_m=det.open_depth_m, top_knob=_local_top_knob(det, det.position, det.yaw))
 
     def predicted_var(self, stamp_s: float, config: PerceptionConfig) -> float:
         """Position variance (m^2) grown by the random walk since the last sighting."""
@@ -165,7 +168,7 @@ class Track:
         elif self.body is not None:  # one that missed the handle keeps the last, turned as it stood
             self.body = self.body.turned(yaw_before - self.yaw)
         if det.top_knob is not None:
-            self.top_knob = _local_top_knob(det)
+            self.top_knob = _local_top_knob(det, self.position, self.yaw)
         elif self.top_knob is not None:  # as the body: the last one seen, turned as it stood
             turn = yaw_before - self.yaw
             self.top_knob = np.r_[turned(self.top_knob[:2], turn), self.top_knob[2:5], self.top_knob[5] + turn]

@@ -152,10 +152,10 @@ def associate(C: np.ndarray, config: PerceptionConfig, *,
     is explained better elsewhere is no rival, two that could swap at little cost are.
     ``interchangeable``: groups of descriptor indices that nothing tells apart and nothing asks
     to (identical objects, none named by a spatial reference: "both moka pots"); for a match
-    that looks like them (``exp(-cost^2 / 2)`` at least ``relations.min_confidence``) the
-    margin of (i, j) is then that of the best assignment giving detection i to no member of
-    j's group, so a swap between them is no rival, and the track cost in ``C`` keeps each
-    one's identity."""
+    that looks like them (a cost no higher than ``clustering.split_max_cost``, at which a
+    split's part is accepted) the margin of (i, j) is then that of the best assignment giving
+    detection i to no member of j's group, so a swap between them is no rival, and the track
+    cost in ``C`` keeps each one's identity."""
     ac = config.association
     if C.size == 0:
         return Association({}, ())
@@ -172,10 +172,10 @@ def associate(C: np.ndarray, config: PerceptionConfig, *,
         if c > ac.gate_cost:
             continue
         forbid = P.copy()
-        # a twin's swap is no rival only for a sighting that looks like them (a good match by
-        # its look): two alike boxes merged into one segment name neither
+        # a twin's swap is no rival only for a sighting that looks like them (within the cost a
+        # split's part is accepted at): two alike boxes merged into one segment name neither
         group = next((list(g) for g in interchangeable if j in g), [j])
-        forbid[i, group if math.exp(-0.5 * c * c) >= config.relations.min_confidence else [j]] = _FORBIDDEN
+        forbid[i, group if c <= config.clustering.split_max_cost else [j]] = _FORBIDDEN
         margin = max(0.0, _total(forbid) - best)
         if margin < ac.ambiguity_margin:
             # every detection within the margin for this descriptor is a candidate: none is named

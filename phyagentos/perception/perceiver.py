@@ -1471,7 +1471,7 @@ class Perceiver:
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
             elif t.top_knob is not None and float(np.linalg.norm(self._top_knob_xy(t) - tcp[:2])) <= hc.capture_radius_m / 2.0:
                 # held by its knob, maybe lifted since: at the close the tcp stood the knob
-                # grasp's height over the object's top (motion.knob_grasp.top_knob_grasp_z)
+                # grasp's height over the object's top (motion.top_knob_grasp.top_knob_grasp_z)
                 from phyagentos.motion.top_knob_grasp import top_knob_grasp_z  # noqa: PLC0415
 
                 z_close = top_knob_grasp_z(float(t.position[2] + t.half_extents[2] - t.top_knob[4]))

@@ -7,6 +7,7 @@ simulator's ground truth, so perception error shows up as it would on hardware.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Sequence
 
 import numpy as np
 
@@ -444,11 +445,15 @@ class ComputeGrasp(Primitive):
         # gives it (a moka pot's knob is a box), or the way the object reaches farthest from
         # the knob (its handle and spout), else the footprint's long side (its rectangle may
         # stand turned on the octagon)
-        handle = _xy_attribute({"attributes": attrs}, "handle_xy")
-        if handle is None or float(np.linalg.norm(handle)) <= 0.0:  # else the way it reaches farthest from the knob
-            handle = _xy_attribute({"attributes": attrs}, "top_knob_axis_xy")
-        seen_handle = handle is not None and float(np.linalg.norm(handle)) > 0.0
-        axis = handle if seen_handle else (R[:2, 0] if half[0] >= half[1] else R[:2, 1])
+        axis, axis_from = None, "footprint"
+        for key, source in (("handle_xy", "handle"), ("top_knob_axis_xy", "reach")):
+            v = _xy_attribute({"attributes": attrs}, key)
+            if v is not None and float(np.linalg.norm(v)) > 0.0:
+                axis, axis_from = v, source
+                break
+        seen_axis = axis is not None
+        if axis is None:
+            axis = R[:2, 0] if half[0] >= half[1] else R[:2, 1]
         top = float(attrs.get("top_knob_base_z_m") or T_obj[2, 3] + np.abs(R[2, :]) @ np.asarray(half, dtype=float))
         radius = float(attrs.get("top_knob_radius_m") or 0.006)
         preshape = top_knob_preshape_m(radius, max_width_m=max_width)
@@ -456,15 +461,15 @@ class ComputeGrasp(Primitive):
         q = np.asarray(self.ctx.target.arm_qpos(), dtype=float)
 
         def candidates(height: float):
-            return top_knob_grasp_candidates(attrs["top_knob_xy"], float(attrs["top_knob_z_m"]), radius, body_top_z_m=top,
-                                         long_axis_yaw_rad=float(np.arctan2(axis[1], axis[0])),
-                                         approach_height_m=height, current_yaw_rad=hand_yaw(T_tcp),
-                                         current_q7_rad=float(q[6]) if q.shape == (7,) else None)
+            return top_knob_grasp_candidates(attrs["top_knob_xy"], float(attrs["top_knob_z_m"]), radius,
+                                             body_top_z_m=top, long_axis_yaw_rad=float(np.arctan2(axis[1], axis[0])),
+                                             approach_height_m=height, current_yaw_rad=hand_yaw(T_tcp),
+                                             current_q7_rad=float(q[6]) if q.shape == (7,) else None)
 
         fields = {"grasp_kind": "top_knob", "preshape_m": round(preshape, 4), "top_knob_xy": list(attrs["top_knob_xy"]),
-                  "top_knob_z_m": attrs["top_knob_z_m"], "axis_from": "handle" if seen_handle else "footprint",
-                  # the handle unseen: the wrist camera looks from the pre-grasp (it sees the handle there)
-                  "look_closer": not seen_handle}
+                  "top_knob_z_m": attrs["top_knob_z_m"], "axis_from": axis_from,
+                  # no axis seen: the wrist camera looks from the pre-grasp (it sees the handle there)
+                  "look_closer": not seen_axis}
         try:
             previous = np.asarray(self.get(self.pregrasp_key), dtype=float)
         except PrimitiveFailure:
@@ -672,7 +677,8 @@ class ComputePlace(Primitive):
     """
 
     def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,
-                 beside: str | None = None, slot=None, snapshot: str = "snapshot", place: str = "place_pose",
+                 beside: str | None = None, slot: Sequence[int] | None = None, snapshot: str = "snapshot",
+                 place: str = "place_pose",
                  preplace: str = "preplace_pose"):
         super().__init__(name)
         if beside not in (None, "left", "right"):

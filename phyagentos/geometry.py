@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 __all__ = ["quat_to_matrix", "matrix_to_quat", "quat_multiply", "yaw_quat", "quat_yaw", "look_at_quat",
-           "rotation_about", "pose_matrix"]
+           "rotation_about", "pose_matrix", "turned_xy"]
 
 
 def quat_to_matrix(q: Sequence[float]) -> np.ndarray:
@@ -136,6 +136,13 @@ def pose_matrix(position: Sequence[float], rotation: Sequence[float] | np.ndarra
                          f"{r.shape}")
     T[:3, 3] = np.asarray(position, dtype=float).reshape(3)
     return T
+
+
+def turned_xy(xy: Sequence[float], angle: float) -> np.ndarray:
+    """(2,) ``xy`` (m) turned ``angle`` rad about the vertical (counter-clockwise seen from above)."""
+    c, s = math.cos(angle), math.sin(angle)
+    x, y = float(xy[0]), float(xy[1])
+    return np.array([c * x - s * y, s * x + c * y])
 
 
 def _unit(q: Sequence[float]) -> tuple[float, float, float, float]:

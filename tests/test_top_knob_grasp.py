@@ -136,11 +136,12 @@ def test_a_tracks_knob_stays_where_it_was_seen_when_a_sighting_names_the_box_yaw
     """A square-ish box's yaw is known modulo its period: a sighting may call it a quarter turn
     off what the track holds. The knob is kept in the track's own frame, so it is placed where
     it was seen, not turned with the sighting's name for the yaw."""
+    from phyagentos.geometry import turned_xy
     from phyagentos.perception.colour import srgb_to_lab
     from phyagentos.perception.config import PerceptionConfig
     from phyagentos.perception.detect import Detection
     from phyagentos.perception.top_knob import Knob
-    from phyagentos.perception.tracks import Track, turned
+    from phyagentos.perception.tracks import Track
 
     def det(yaw, half):
         return Detection(position=np.array([0.05, 0.02, 0.07]), yaw=yaw, half_extents=np.array(half), shape="box",
@@ -151,5 +152,5 @@ def test_a_tracks_knob_stays_where_it_was_seen_when_a_sighting_names_the_box_yaw
 
     t = Track.start("pot", det(0.0, (0.04, 0.039, 0.07)), 0.9, 0.0, ("agentview",))
     t.update(det(0.5 * math.pi - 1e-3, (0.04, 0.039, 0.07)), 0.9, 0.1, ("agentview",), PerceptionConfig.default())
-    placed = t.position[:2] + turned(t.top_knob[:2], t.yaw)
+    placed = t.position[:2] + turned_xy(t.top_knob[:2], t.yaw)
     assert placed == pytest.approx([0.05, 0.034], abs=1e-6)

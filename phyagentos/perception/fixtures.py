@@ -48,6 +48,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from phyagentos.errors import format_choices
+from phyagentos.geometry import turned_xy
 from phyagentos.perception.cloud import Cloud
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import _rect, cluster
@@ -165,7 +166,7 @@ class KnobLook:
     def axis_xy(self, centre_xy: np.ndarray, turn: float = 0.0) -> np.ndarray:
         """(2,) world m: the knob's axis on a body centred at ``centre_xy`` standing ``turn``
         rad from how its look was measured."""
-        return np.asarray(centre_xy, float) + _turned(self.offset_m, turn)
+        return np.asarray(centre_xy, float) + turned_xy(self.offset_m, turn)
 
 
 def knob_band(points: np.ndarray, heights: np.ndarray, knob: KnobLook, centre_xy: np.ndarray,
@@ -316,8 +317,8 @@ class DrawerLook:
         """``(handle centre shut (2,), opening direction u (2,), across v (2,))``, world m, of
         this drawer on a body centred at ``centre_xy`` standing ``turn`` rad from how its look
         was measured."""
-        u = _turned(self.axis_xy, turn)
-        return np.asarray(centre_xy, float) + _turned(self.handle_offset_m, turn), u, np.array([-u[1], u[0]])
+        u = turned_xy(self.axis_xy, turn)
+        return np.asarray(centre_xy, float) + turned_xy(self.handle_offset_m, turn), u, np.array([-u[1], u[0]])
 
 
 def drawer_entity_name(fixture: str, drawer: str) -> str:
@@ -483,15 +484,8 @@ class FixtureLook:
         half = np.asarray(self.place_half_m, float)
         if abs(math.sin(turn)) > math.sqrt(0.5):  # a quarter turn: the patch's sides trade axes
             half = half[::-1].copy()
-        return (np.asarray(centre_xy, float) + _turned(self.place_offset_m, turn), half,
+        return (np.asarray(centre_xy, float) + turned_xy(self.place_offset_m, turn), half,
                 float(self.place_height_m or 0.0))
-
-
-def _turned(offset: Sequence[float], turn: float) -> np.ndarray:
-    """(2,) ``offset`` (world m, as the look was measured) turned by ``turn`` rad about the vertical."""
-    c, s = math.cos(turn), math.sin(turn)
-    x, y = float(offset[0]), float(offset[1])
-    return np.array([c * x - s * y, s * x + c * y])
 
 
 def _floats(value: Any, n: int, what: str) -> tuple[float, ...]:
@@ -685,7 +679,7 @@ def find_by_knob(points: np.ndarray, heights: np.ndarray, look: FixtureLook) -> 
     best: tuple[float, FixtureSighting] | None = None
     cells = np.unique(np.floor(bp[:, :2] / KNOB_SEARCH_GRID_M).astype(int), axis=0)
     for turn in TURNS:
-        off = _turned(knob.offset_m, turn)
+        off = turned_xy(knob.offset_m, turn)
         yaw = math.atan2(off[1], off[0]) if np.linalg.norm(off) > 1e-3 else turn
         for cell in cells:
             axis = (cell + 0.5) * KNOB_SEARCH_GRID_M

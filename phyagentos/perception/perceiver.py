@@ -93,7 +93,7 @@ from phyagentos.perception.cloud import (
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor, descriptors_from_declared
 from phyagentos.perception.detect import Detection, detect_clusters, with_open_depth, with_round_body, with_top_knob
-from phyagentos.perception.top_knob import turned
+from phyagentos.geometry import turned_xy
 from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
@@ -617,7 +617,8 @@ class Perceiver:
         # ---- association (tracks seen before break ties)
         names = [d.name for d in self.declared]
         track_pos = [self.tracks[n].position if n in self.tracks and not self.tracks[n].held else None for n in names]
-        for group in self._interchangeable():  # a held twin is where the hand is, not anywhere: the other keeps its name
+        twins = self._interchangeable()
+        for group in twins:  # a held twin is where the hand is, not anywhere: the other keeps its name
             for j in group:
                 if names[j] in self.tracks and self.tracks[names[j]].held:
                     track_pos[j] = np.asarray(proprio.tcp_pose[:3, 3], dtype=float)
@@ -625,7 +626,7 @@ class Perceiver:
         C = looks_only + track_costs(dets, len(self.declared), cfg, track_pos)
         C = self._truncated_where_tracked(C, dets)
         C = self._resolve_references(C, dets, stamp)
-        assoc = self._associate_parts_weighed(C, dets)
+        assoc = self._associate_parts_weighed(C, dets, twins)
         for t in self.tracks.values():
             t.seen_now = False
         # objects the hand held or let go since they were last seen, or seen inside a container,
@@ -1082,16 +1083,16 @@ class Perceiver:
 
     # ------------------------------------------------------------------ spatial references
 
-    def _associate_parts_weighed(self, C: np.ndarray, dets: list[Detection]) -> Association:
+    def _associate_parts_weighed(self, C: np.ndarray, dets: list[Detection],
+                                 twins: Sequence[Sequence[int]] = ()) -> Association:
         """The association with a part cut by the image border (``truncated``) costing
         :data:`PART_COST` more than its look: a part is weaker evidence than a whole sighting
         and must never make a whole one ambiguous (a can's label at the border beside the can
         itself), while it still names what nothing whole explains (the plate half out of the
         frame) or tells look-alikes apart (the bowl on the cabinet, cut by the image's top,
         beside its twin in the drawer). The matches keep the look's own cost (``C``) for their
-        confidence."""
+        confidence. ``twins``: the interchangeable groups (:meth:`_interchangeable`)."""
         cut = [i for i, d in enumerate(dets) if d.truncated]
-        twins = self._interchangeable()
         if not cut or C.size == 0:
             return associate(C, self.config, interchangeable=twins)
         weighed = C.copy()
@@ -1491,7 +1492,7 @@ class Perceiver:
     @staticmethod
     def _top_knob_xy(t: Track) -> np.ndarray:
         """(2,) world x, y (m) of track ``t``'s knob on its top (``t.top_knob`` must be set)."""
-        return t.position[:2] + turned(np.asarray(t.top_knob, dtype=float)[:2], t.yaw)
+        return t.position[:2] + turned_xy(np.asarray(t.top_knob, dtype=float)[:2], t.yaw)
 
     def _rim_wall(self, t: Track) -> float | None:
         """The wall (m) a hand holding track ``t`` by its rim closes on -- ``holding.handled_wall_m``

@@ -34,7 +34,6 @@ import numpy as np
 __all__ = [
     "Knob",
     "top_knob",
-    "turned",
     "KNOB_TOP_RANK",
     "KNOB_SLICE_M",
     "KNOB_MIN_POINTS",
@@ -140,9 +139,3 @@ def reach_axis(offsets_xy: np.ndarray) -> float | None:
     if math.hypot(c, s_) < AXIS_MIN_RESULTANT:
         return None
     return float((0.5 * math.atan2(s_, c) + 0.5 * math.pi) % math.pi - 0.5 * math.pi)
-
-
-def turned(local_xy: np.ndarray, angle_rad: float) -> np.ndarray:
-    """(2,) ``local_xy`` turned ``angle_rad`` rad about z."""
-    c, s = math.cos(angle_rad), math.sin(angle_rad)
-    return np.array([[c, -s], [s, c]]) @ np.asarray(local_xy, dtype=float)

@@ -19,7 +19,7 @@ import numpy as np
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import Detection
 from phyagentos.perception.handle import RoundBody
-from phyagentos.perception.top_knob import turned
+from phyagentos.geometry import turned_xy
 
 __all__ = ["REMEMBERED_CONFIDENCE", "Track", "yaw_period"]
 
@@ -45,7 +45,7 @@ def _local_top_knob(det: Detection, position: np.ndarray, yaw: float) -> np.ndar
     if k is None:
         return None
     axis = np.nan if k.axis_rad is None else k.axis_rad - yaw
-    return np.r_[turned(k.xy - np.asarray(position, dtype=float)[:2], -yaw), k.top_m - det.top_m, k.radius_m,
+    return np.r_[turned_xy(k.xy - np.asarray(position, dtype=float)[:2], -yaw), k.top_m - det.top_m, k.radius_m,
                  det.top_m - k.base_m, axis]
 
 
@@ -166,12 +166,12 @@ class Track:
         if det.body is not None:  # the latest sighting of it
             self.body = det.body.local(det.position[:2], det.yaw)
         elif self.body is not None:  # one that missed the handle keeps the last, turned as it stood
-            self.body = self.body.turned(yaw_before - self.yaw)
+            self.body = self.body.turned_xy(yaw_before - self.yaw)
         if det.top_knob is not None:
             self.top_knob = _local_top_knob(det, self.position, self.yaw)
         elif self.top_knob is not None:  # as the body: the last one seen, turned as it stood
             turn = yaw_before - self.yaw
-            self.top_knob = np.r_[turned(self.top_knob[:2], turn), self.top_knob[2:5], self.top_knob[5] + turn]
+            self.top_knob = np.r_[turned_xy(self.top_knob[:2], turn), self.top_knob[2:5], self.top_knob[5] + turn]
         # agreeing sightings raise confidence: 1 - (1 - c_now)(1 - c_before / 2)
         self.confidence = max(1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence), keep)
         self.last_seen_s = stamp_s

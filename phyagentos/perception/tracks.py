@@ -166,7 +166,7 @@ class Track:
         if det.body is not None:  # the latest sighting of it
             self.body = det.body.local(det.position[:2], det.yaw)
         elif self.body is not None:  # one that missed the handle keeps the last, turned as it stood
-            self.body = self.body.turned_xy(yaw_before - self.yaw)
+            self.body = self.body.turned(yaw_before - self.yaw)
         if det.top_knob is not None:
             self.top_knob = _local_top_knob(det, self.position, self.yaw)
         elif self.top_knob is not None:  # as the body: the last one seen, turned as it stood

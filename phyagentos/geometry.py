@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 __all__ = ["quat_to_matrix", "matrix_to_quat", "quat_multiply", "yaw_quat", "quat_yaw", "look_at_quat",
-           "rotation_about", "pose_matrix", "turned_xy"]
+           "rotation_about", "pose_matrix", "turned_xy", "VIEWER_SIDES", "viewer_side_xy"]
 
 
 def quat_to_matrix(q: Sequence[float]) -> np.ndarray:
@@ -143,6 +143,34 @@ def turned_xy(xy: Sequence[float], angle: float) -> np.ndarray:
     c, s = math.cos(angle), math.sin(angle)
     x, y = float(xy[0]), float(xy[1])
     return np.array([c * x - s * y, s * x + c * y])
+
+
+#: The sides of a thing as a viewer sees it on the table: ``left`` / ``right`` (the camera image's x
+#: axis), ``front`` (towards the viewer) and ``back`` (away from it).
+VIEWER_SIDES = ("left", "right", "front", "back")
+
+
+def viewer_side_xy(right_xy: Sequence[float], side: str) -> np.ndarray:
+    """(2,) unit vector on the table, world frame, pointing to the viewer's ``side`` of a thing.
+
+    ``right_xy`` is the viewer's right on the table (the scene camera's image x axis projected
+    on it, any length). With z up, a camera's right is its forward direction crossed with up,
+    so towards the viewer (``front``) is the right turned a quarter turn clockwise seen from
+    above: ``(right_y, -right_x)``.
+
+    Raises:
+        ValueError: ``side`` is not one of :data:`VIEWER_SIDES`, or ``right_xy`` is not two finite
+            numbers, not both 0.
+    """
+    if side not in VIEWER_SIDES:
+        raise ValueError(f"side must be one of {', '.join(VIEWER_SIDES)}, got {side!r}")
+    r = np.asarray(right_xy, dtype=float).reshape(-1)
+    n = float(np.linalg.norm(r)) if r.shape == (2,) else float("nan")
+    if not (math.isfinite(n) and n > 1e-12):
+        raise ValueError(f"right_xy must be 2 finite numbers, not both 0, got {right_xy!r}")
+    r = r / n
+    front = np.array([r[1], -r[0]])
+    return {"right": r, "left": -r, "front": front, "back": -front}[side]
 
 
 def _unit(q: Sequence[float]) -> tuple[float, float, float, float]:

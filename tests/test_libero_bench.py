@@ -79,8 +79,11 @@ def test_two_identical_bowls_or_an_uncovered_verb_are_refused_not_guessed():
     with pytest.raises(BenchError, match="could be any of akita_black_bowl_1, akita_black_bowl_2: say which"):
         instruction_nodes("put the black bowl on the plate", problem.objects, problem.fixtures)
     goal = parse_bddl(resolve_task("libero_goal", 7).bddl_path)
-    with pytest.raises(BenchError, match="refused by the Goal Planner's rules: unknown_object: 'push the plate'"):
-        instruction_nodes("push the plate to the front of the stove", goal.objects, goal.fixtures)
+    with pytest.raises(BenchError, match="refused by the Goal Planner's rules: unknown_object: 'pour the wine bottle'"):
+        instruction_nodes("pour the wine bottle into the bowl", goal.objects, goal.fixtures)
+    # a push is a verb the plan covers now, to a side of one thing only (tests/test_push_beside.py)
+    with pytest.raises(BenchError, match="a push goes to a side of one thing"):
+        instruction_nodes("push the plate onto the stove", goal.objects, goal.fixtures)
     with pytest.raises(BenchError, match="'ketchup' names no object of the scene"):
         instruction_nodes("put the ketchup on the plate", goal.objects, goal.fixtures)
 
@@ -180,7 +183,10 @@ def test_skill_defaults_go_into_every_node_of_their_skill_and_the_tasks_own_para
 @pytest.mark.parametrize("text,expect", [
     ("pick:\n  approach_velocity_scale: 0.6\n  lift_speed: 1.0\n", "d.yaml:3: pick has no strategy parameter 'lift_speed'; "
                                                                    "valid: 'approach_height_m'"),
-    ("pick: {}\npush: {distance_m: 0.1}\n", "d.yaml:2: unknown skill 'push'; a LIBERO plan's skills: 'pick', 'place'"),
+    ("pick: {}\nwipe: {speed: 0.1}\n", "d.yaml:2: unknown skill 'wipe'; a LIBERO plan's skills: 'pick', 'place'"),
+    # what a node does is the plan's (a push's destination, a place beside a thing), not a default's
+    ("push: {distance_m: 0.1}\n", "d.yaml:1: push has no strategy parameter 'distance_m'"),
+    ("place: {beside: left}\n", "d.yaml:1: place has no strategy parameter 'beside'"),
     ("pick: {object: milk_1}\n", "pick has no strategy parameter 'object'"),
     ("place: [0.3]\n", "d.yaml:1: place must map parameter names to values, got list"),
     ("pick: {lift_m: [0.1]}\n", "pick.lift_m must be a scalar, got list"),
@@ -247,8 +253,9 @@ def test_a_success_reached_after_liberos_step_budget_counts_as_neither_first_nor
     (("libero_object", "--tasks", "0,12"), "valid tasks: 0-9"),
     (("libero_object", "--tasks", "0", "--seeds", "3,50"), "valid init states: 0-49"),
     (("libero_objects",), "LIBERO's suites: 'libero_10', 'libero_goal', 'libero_object', 'libero_spatial'"),
-    # task 5, "push the plate to the front of the stove": no skill pushes (task 0's drawer is planned since the drawers)
-    (("libero_goal", "--tasks", "5"), "refused by the Goal Planner's rules"),
+    # task 5, "pick up the book and place it in the back compartment of the caddy": no compartment is read
+    # (libero_goal's task 5, the push, was refused here until the push was planned)
+    (("libero_10", "--tasks", "5"), "refused by the Goal Planner's rules"),
 ])
 def test_bad_libero_input_exits_2_with_the_valid_choices_and_nothing_built(tmp_path, args, expect):
     result = _bench(*args, "--workspace", str(tmp_path / "ws"), "--json", cwd=tmp_path)

@@ -91,11 +91,12 @@ CONFIDENCE_MIN = 0.5
 #: How far (m, beyond 2 sigma) a support of ``on`` seen weakly at the end may be from where the
 #: initial snapshot saw it confidently, and still stand in for it (a plate hidden by the mug set on it).
 SUPPORT_STILL_M = 0.01
-#: ``beside``: the object's centre lies at most this far (m) beyond the landmark's edge on the
-#: side named: next to it, not across the table.
+#: ``beside``: the gap (m) between the landmark's edge and the object's near face on the side
+#: named is at most this: next to it, not across the table.
 BESIDE_REACH_M = 0.10
-#: ``beside``: the sides a landmark has, as the scene camera shows the table.
-SIDES = ("left", "right")
+#: ``beside``: the sides a landmark has, as the scene camera shows the table
+#: (:data:`phyagentos.geometry.VIEWER_SIDES`: left, right, front towards the viewer, back).
+SIDES = ("left", "right", "front", "back")
 #: Per-finger opening above which a closed gripper holds *something*, m (CONTRACT_9
 #: section 3: holding needs more than ~2 mm).
 CLOSED_OPENING_M = 0.002
@@ -466,12 +467,25 @@ def _extent(ent: Mapping, d: tuple[float, float]) -> float:
     return float(abs(R.T @ (d[0], d[1], 0.0)) @ [float(h) for h in ent["size"]])
 
 
+def _body(ent: Mapping) -> Mapping:
+    """``ent`` as a landmark: a fixture's whole body (``attributes.body``: position, yaw, size) where
+    perception reports one (its entity's box is its place patch: the stove's burner), else itself."""
+    body = (ent.get("attributes") or {}).get("body")
+    if not (isinstance(body, Mapping) and len(body.get("position") or ()) == 3 and len(body.get("size") or ()) == 3):
+        return ent
+    half_yaw = 0.5 * float(body.get("yaw") or 0.0)
+    return {**ent, "position": list(body["position"]), "size": list(body["size"]),
+            "quat_wxyz": [math.cos(half_yaw), 0.0, 0.0, math.sin(half_yaw)]}
+
+
 def _eval_beside(c, initial, terminal, refs):
-    """``object`` set down on the table on the viewer's ``side`` of ``landmark``: its centre beyond the
-    landmark's edge that way by 2 sigma, at most :data:`BESIDE_REACH_M` beyond it, level with the landmark
-    across (within its half extent), its bottom at the landmark's bottom (both on the same surface), let
-    go. The viewer's right is the perceived snapshot's ``viewer.right_xy`` (the scene camera's image x
-    axis on the table); without it, unknown."""
+    """``object`` on the table on the viewer's ``side`` of ``landmark`` (left, right, front: towards the
+    viewer, back): its centre beyond the landmark's edge that way by 2 sigma (a fixture's whole body,
+    not its place patch: :func:`_body`), its near face at most :data:`BESIDE_REACH_M` beyond that edge,
+    level with the landmark across (within its half extent), its bottom at the landmark's bottom (both
+    on the same surface), not held. The viewer's right is the perceived snapshot's ``viewer.right_xy``
+    (the scene camera's image x axis on the table; the other sides from it:
+    :func:`phyagentos.geometry.viewer_side_xy`); without it, unknown."""
     obj, landmark, side = c.args["object"], c.args["landmark"], c.args["side"]
     if side not in SIDES:
         return CriterionOutcome(c, "unknown", f"side {side!r} is not one of {format_choices(SIDES)}", refs)
@@ -481,25 +495,30 @@ def _eval_beside(c, initial, terminal, refs):
     right = (terminal.get("viewer") or {}).get("right_xy")
     if not right or len(right) != 2:
         return CriterionOutcome(c, "unknown", "the snapshot says nothing of the viewer's left and right", refs)
-    n = math.hypot(float(right[0]), float(right[1])) or 1.0
-    sign = 1.0 if side == "right" else -1.0
-    d = (sign * float(right[0]) / n, sign * float(right[1]) / n)
+    if not math.hypot(float(right[0]), float(right[1])) > 0:
+        return CriterionOutcome(c, "unknown", "the snapshot's viewer.right_xy is zero", refs)
+    from phyagentos.geometry import viewer_side_xy  # noqa: PLC0415 - numpy only where a beside is judged
+
+    dx, dy = viewer_side_xy(right, side)
+    d = (float(dx), float(dy))
     across = (-d[1], d[0])
-    o, lm = _entities(terminal)[obj], still or _entities(terminal)[landmark]
+    o, lm = _entities(terminal)[obj], _body(still or _entities(terminal)[landmark])
     rel = (o["position"][0] - lm["position"][0], o["position"][1] - lm["position"][1])
     along = rel[0] * d[0] + rel[1] * d[1]
     lateral = abs(rel[0] * across[0] + rel[1] * across[1])
-    edge, width = _extent(lm, d), _extent(lm, across)
+    edge, width, face = _extent(lm, d), _extent(lm, across), _extent(o, d)
     dz = abs((o["position"][2] - o["size"][2]) - (lm["position"][2] - lm["size"][2]))
     m = 2.0 * math.hypot(sigma(o), sigma(lm))
     held, _ = _held(terminal, obj)
-    inside = (edge + m < along <= edge + BESIDE_REACH_M - m and lateral <= width - m
+    gap = along - face - edge
+    inside = (edge + m < along and gap <= BESIDE_REACH_M - m and lateral <= width - m
               and dz <= REST_TOL_M + m and held is False)
-    outside = (along < edge - m or along > edge + BESIDE_REACH_M + m or lateral > width + m
+    outside = (along < edge - m or gap > BESIDE_REACH_M + m or lateral > width + m
                or dz > REST_TOL_M + m or bool(held))
     return _band(c, refs, inside, outside, obj, f"on the {side} of {landmark}",
-                 f"{along:.3f} m its way from the centre (edge {edge:.3f}, reach {BESIDE_REACH_M}), {lateral:.3f} m "
-                 f"across (<= {width:.3f}), bottoms {dz:.3f} m apart, 2 sigma {m:.3f} m")
+                 f"{along:.3f} m its way from the centre (edge {edge:.3f}; its near face {gap:.3f} m beyond it, "
+                 f"reach {BESIDE_REACH_M}), {lateral:.3f} m across (<= {width:.3f}), bottoms {dz:.3f} m apart, "
+                 f"2 sigma {m:.3f} m")
 
 
 def _eval_still(c, initial, terminal, refs):

@@ -26,12 +26,13 @@ Each task's goal graph comes from its instruction
 (:attr:`~phyagentos.targets.libero.catalog.LiberoTask.instruction`: ``task.language``, or on
 LIBERO-PRO's suites the BDDL ``:language`` line they perturb) and the task's declared objects
 and fixtures (BDDL ``:objects`` / ``:fixtures``: names and categories) by the Goal Planner's
-rule reader (:func:`instruction_nodes`), never from the BDDL ``:goal``. It reads the
-pick-and-place requests in any wording its verb and preposition classes cover; a phrase must
-name exactly one declared thing by the words of its name, so two identical objects (two
-black bowls told apart by a spatial relation) are refused, as is every other verb (open,
-close, turn on, push): those tasks are listed as refused, with the reason, and counted in
-the suite file (``planning``).
+rule reader (:func:`instruction_nodes`), never from the BDDL ``:goal``. It reads moves (put,
+place, pick up ... in / on / beside a thing), drawers opened and closed, a stove turned on and
+pushes to a side of a thing, in any wording its verb and preposition classes cover; a phrase
+must name one declared thing by the words of its name, or one of identical things by a
+spatial relation that perception resolves. What it cannot read or no skill does (a door,
+turning a knob off) is refused: those tasks are listed as refused, with the reason, and
+counted in the suite file (``planning``).
 
 The report's ``ground_truth`` block carries LIBERO's verdict per episode (``benchmark`` in
 every session's ``ground_truth.yaml``: ``env.check_success()``), with per-task
@@ -73,7 +74,11 @@ SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
     "place": {"lower_velocity_scale": 1.0},
 }
 #: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
-_PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer")
+_PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer", "push")
+#: Optional parameters that say what a node does, not how: the plan sets them per task, and
+#: ``--skill-defaults`` may not (a push's destination, a place beside or in a slot).
+_TASK_PARAMS = {"place": frozenset({"beside", "slot"}),
+                "push": frozenset({"direction", "distance_m", "landmark", "side"})}
 #: How the cached looks were measured (a cache measured otherwise is measured again).
 _LOOKS_METHOD = "generated_clutter_v6"  # v3: objects kept off the fixtures; v4: 10 scenes, size range, shapes;
 # v5: sightings pooled over every world measured; v6: handle_origin_m (a mug's model origin along its handle)
@@ -180,8 +185,10 @@ def _nodes(steps: list[tuple[str, str, str | None]],
            fixtures: Collection[str] = ()) -> list[dict[str, Any]]:
     """Goal-graph nodes of ``[(action, object, destination or None)]``, each after the one
     before: ``move`` / ``hold``: a ``pick`` of the object, then (``move``) a ``place`` on its
-    destination; ``beside_left`` / ``beside_right``: the same, the ``place`` setting it down on
-    the viewer's left / right of the destination (``beside``) and accepted on ``beside``;
+    destination; ``beside_<side>`` (side ``left`` / ``right`` / ``front`` / ``back``, as the
+    scene camera shows the table): the same, the ``place`` setting it down on that side of the
+    destination (``beside``) and accepted on ``beside``; ``push_<side>``: a ``push`` of the
+    object along the table to that side of the destination, accepted on ``beside``;
     ``turn_on``: a ``turn_knob`` of the object to :data:`TURN_ON_FRACTION` of its knob's
     travel; ``open`` / ``close``: a ``slide_drawer`` of the drawer named by the destination
     slot (its entity name, :func:`~phyagentos.perception.fixtures.drawer_entity_name`) to
@@ -212,6 +219,13 @@ def _nodes(steps: list[tuple[str, str, str | None]],
                                      **({"to_fraction": OPEN_FRACTION} if opening
                                         else {"to_fraction": CLOSE_FRACTION, "push_to_stop_m": CLOSE_PUSH_M})},
                           "accept": [{"articulated": {"object": dest, **accept}}],
+                          "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+            continue
+        if action.startswith("push_"):
+            side = action.removeprefix("push_")
+            nodes.append({"id": f"push_{obj}", "skill": "push",
+                          "params": {**fixed.get("push", {}), "object": obj, "landmark": dest, "side": side},
+                          "accept": [{"beside": {"object": obj, "landmark": dest, "side": side}}],
                           "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
             continue
         pick_id, place_id = f"pick_{obj}", f"place_{obj}"
@@ -288,6 +302,7 @@ def _planner_steps(language: str, objects: dict[str, str],
                 raise BenchError(f"instruction {language!r} refused: {intent.text!r} puts {obj} "
                                  + (f"on one of {format_choices(dests)}: say which" if dests else "nowhere"))
             steps.append(("hold", obj, None) if intent.verb == "hold"
+                         else (f"push_{intent.beside}", obj, dests[0]) if intent.verb == "push"
                          else (f"beside_{intent.beside}" if intent.beside else "move", obj, dests[0]))
     if not steps:
         raise BenchError(f"instruction {language!r} refused: nothing to move")
@@ -423,7 +438,7 @@ def load_skill_defaults(path: str | Path) -> dict[str, dict[str, Any]]:
             raise BenchError(f"{where}: unknown skill {skill!r}; a LIBERO plan's skills: {format_choices(_PLANNED_SKILLS)}")
         if not isinstance(params, dict):
             raise BenchError(f"{where}: {skill} must map parameter names to values, got {_kind(params)}")
-        valid = catalog[skill].optional
+        valid = [name for name in catalog[skill].optional if name not in _TASK_PARAMS.get(skill, ())]
         for name, value in params.items():
             at = format_location(p, line_of(params, name))
             if name not in valid:

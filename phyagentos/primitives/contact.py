@@ -26,6 +26,7 @@ import mujoco
 import numpy as np
 from py_trees.common import Status
 
+from phyagentos.geometry import VIEWER_SIDES, viewer_side_xy
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
 from phyagentos.motion.retime import Trajectory, retime
@@ -34,9 +35,23 @@ from phyagentos.targets.contract import MuJoCoBacked
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
 from .motion import execution_limits, ik_options
-from .perception import entity_pose
+from .perception import beside_point, entity_pose, reach_blocked
 
-__all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n"]
+__all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n", "MIN_PUSH_M", "FINGER_HALF_THICKNESS_M",
+           "PUSH_LEANS_RAD"]
+
+#: The least push (m) :class:`ComputePush` makes towards a landmark's side: an object already
+#: there is pushed this much more, so the push still touches it.
+MIN_PUSH_M = 0.01
+#: Half the thickness (m) of the closed fingers' pushing face along the push: the tcp stands this
+#: far behind the fingertips' front (the value the push had used since it was written).
+FINGER_HALF_THICKNESS_M = 0.01
+#: How far (rad) the hand may lean over the object it pushes, tried in this order: upright first;
+#: leaning, the hand's body stands over the object and away from what stands behind it (a plate
+#: 3 cm from a cabinet's side: the upright hand's body would be in the cabinet). Leaning, the
+#: fingers' face presses the object down as well as along (at 0.6 rad: 0.56 N down per N along,
+#: which a table's friction below 1.5 lets slide).
+PUSH_LEANS_RAD = (0.0, 0.3, 0.6)
 
 
 def contact_force_n(model: mujoco.MjModel, data: mujoco.MjData, *, ignore_bodies: frozenset[int] = frozenset()
@@ -262,35 +277,71 @@ class GuardedMove(_ContactMotion):
 
 
 class ComputePush(Primitive):
-    """Start and pre-start tcp poses to push ``object`` along ``direction`` with the closed hand.
+    """Start and pre-start tcp poses to push ``object`` along the table with the closed hand.
 
-    The tcp goes ``clearance_m`` behind the object's face (measured along ``direction``
-    from the observed centre, its footprint's half diagonal), top-down with the fingers
-    across the direction, low enough that the closed fingertips meet the object but stay
-    ``tip_clearance_m`` above the table.
+    Either along ``direction`` by ``distance_m``, or to the viewer's ``side`` of ``landmark``
+    (``push the plate to the front of the stove``): to where :func:`~.perception.beside_point`
+    sets an object down there, its footprint :data:`~.perception.BESIDE_GAP_M` clear of the
+    landmark's, level with the landmark's centre across; the direction and distance are then
+    those from the object's perceived centre to that point.
+
+    The tcp starts ``clearance_m`` behind the object's face (its extent along the direction from
+    the perceived centre: its box's, or its radius when perceived round), the fingers across the
+    direction, low enough that the closed fingertips meet the object but stay
+    ``tip_clearance_m`` above the surface it stands on (its box's bottom); the push ends where
+    the face has moved the distance. The hand is top-down, or leans over the object by the
+    first of :data:`PUSH_LEANS_RAD` whose start and pre-start poses the arm reaches clear of
+    collisions (:func:`~.perception.reach_blocked`; none clear: upright, and the planner
+    reports the collision).
 
     Args:
         object: the object to push.
-        direction: ``[dx, dy]`` world-frame push direction (normalised here).
+        direction: ``[dx, dy]`` world-frame push direction (normalised here); with ``distance_m``.
         distance_m: how far the object should move, m.
+        landmark: the thing to push the object beside (an object or a fixture); with ``side``.
+        side: ``left`` / ``right`` / ``front`` (towards the viewer) / ``back``
+            (:data:`~phyagentos.geometry.VIEWER_SIDES`).
         clearance_m: gap between the fingertips and the object at the start, m.
-        approach_height_m: pre-start height above the start, m.
-        tip_clearance_m: fingertips above the table, m.
+        approach_height_m: how far the pre-start stands back from the start along the hand's
+            axis (straight above it when upright; over the object when leaning), m.
+        tip_clearance_m: fingertips above the surface the object stands on, m.
         snapshot: blackboard key of the observation.
         start, prestart, goal: blackboard keys written with (4, 4) world tcp poses (goal:
             where the hand ends the push).
+
+    Raises:
+        ValueError: neither or both of (``direction``, ``distance_m``) and (``landmark``,
+            ``side``), a direction that is not 2 finite numbers, a distance not > 0, a side not
+            one of :data:`~phyagentos.geometry.VIEWER_SIDES`.
+        PrimitiveFailure: (at the step) ``perception.not_found`` / ``perception.no_viewer`` as
+            :func:`~.perception.beside_point`.
     """
 
-    def __init__(self, name: str, *, object: str, direction, distance_m: float, clearance_m: float = 0.02,
+    def __init__(self, name: str, *, object: str, direction=None, distance_m: float | None = None,
+                 landmark: str | None = None, side: str | None = None, clearance_m: float = 0.02,
                  approach_height_m: float = 0.10, tip_clearance_m: float = 0.005, snapshot: str = "snapshot",
                  start: str = "push_start_pose", prestart: str = "push_prestart_pose", goal: str = "push_goal_pose"):
         super().__init__(name)
-        d = np.asarray(direction, dtype=float)
-        if d.shape != (2,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
-            raise ValueError(f"direction must be 2 finite numbers, not both 0, got {direction!r}")
-        if not distance_m > 0:
-            raise ValueError(f"distance_m must be > 0 m, got {distance_m!r}")
-        self.object, self.direction, self.distance_m = object, d / np.linalg.norm(d), float(distance_m)
+        along, beside = (direction, distance_m), (landmark, side)
+        if (all(v is None for v in along)) == (all(v is None for v in beside)) \
+                or any(v is None for v in along) != all(v is None for v in along) \
+                or any(v is None for v in beside) != all(v is None for v in beside):
+            raise ValueError(f"{name}: give either direction and distance_m, or landmark and side; got "
+                             f"direction={direction!r}, distance_m={distance_m!r}, landmark={landmark!r}, "
+                             f"side={side!r}")
+        self.landmark, self.side = landmark, side
+        self.direction, self.distance_m = None, None
+        if landmark is None:
+            d = np.asarray(direction, dtype=float)
+            if d.shape != (2,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
+                raise ValueError(f"direction must be 2 finite numbers, not both 0, got {direction!r}")
+            if not (isinstance(distance_m, (int, float)) and distance_m > 0):
+                raise ValueError(f"distance_m must be > 0 m, got {distance_m!r}")
+            self.direction, self.distance_m = d / np.linalg.norm(d), float(distance_m)
+        elif side not in VIEWER_SIDES:
+            raise ValueError(f"side must be one of {', '.join(VIEWER_SIDES)}, got {side!r}")
+
+        self.object = object
         self.clearance_m, self.approach_height_m = float(clearance_m), float(approach_height_m)
         self.tip_clearance_m = float(tip_clearance_m)
         self.snapshot_key, self.start_key, self.prestart_key, self.goal_key = snapshot, start, prestart, goal
@@ -298,24 +349,65 @@ class ComputePush(Primitive):
         self.writes(start, prestart, goal)
 
     def step(self):
-        T_obj, half = entity_pose(self.get(self.snapshot_key), self.object)
-        back = float(np.hypot(half[0], half[1])) + self.clearance_m + 0.01  # + half a finger's thickness
-        xy = T_obj[:2, 3] - back * self.direction
-        z = max(float(T_obj[2, 3]), FINGERTIP_BELOW_TCP_M + self.tip_clearance_m)
+        snapshot = self.get(self.snapshot_key)
+        T_obj, half = entity_pose(snapshot, self.object)
+        half = np.asarray(half, dtype=float)
+        attrs = next(e for e in snapshot["entities"] if e["name"] == self.object).get("attributes") or {}
+        round_ = attrs.get("shape") == "cylinder"
+
+        def extent(d: np.ndarray) -> float:  # half extent along the horizontal unit vector d (a round one's radius)
+            if round_:
+                return float(max(half[0], half[1]))
+            return float(np.abs(T_obj[:3, :3].T @ np.array([d[0], d[1], 0.0])) @ half)
+
+
+        if self.landmark is not None:
+            side_xy = viewer_side_xy((snapshot.get("viewer") or {}).get("right_xy") or (1.0, 0.0), self.side)
+            goal, _ = beside_point(snapshot, self.landmark, self.side, extent(side_xy), who=self.name)
+            move = goal[:2] - T_obj[:2, 3]
+            distance = float(np.linalg.norm(move))
+            # already there (within a centimetre): a centimetre more towards that side, so the push still
+            # touches what it was asked to push
+            direction = move / distance if distance >= MIN_PUSH_M else side_xy
+            distance = max(distance, MIN_PUSH_M)
+        else:
+            direction, distance = self.direction, self.distance_m
+        back = extent(direction) + self.clearance_m + FINGER_HALF_THICKNESS_M
+        xy = T_obj[:2, 3] - back * direction
+        bottom = float(T_obj[2, 3] - np.abs(T_obj[2, :3]) @ half)
+        z = max(float(T_obj[2, 3]), bottom + FINGERTIP_BELOW_TCP_M + self.tip_clearance_m)
         # fingers close along the tcp y axis; put that axis across the push direction
-        yaw = float(np.arctan2(self.direction[1], self.direction[0]))
-        T = np.eye(4)
-        T[:3, :3] = top_down_rotation(yaw)
-        T[:3, 3] = [xy[0], xy[1], z]
-        P = T.copy()
-        P[2, 3] += self.approach_height_m
+        yaw = float(np.arctan2(direction[1], direction[0]))
+        rejected: list[dict] = []
+        chosen = None
+        for lean in PUSH_LEANS_RAD:
+            c, s = np.cos(lean), np.sin(lean)
+            T = np.eye(4)  # leaning: turned about the fingers' closing axis, the fingertips behind the hand
+            T[:3, :3] = top_down_rotation(yaw) @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+            T[:3, 3] = [xy[0], xy[1], z]
+            P = T.copy()  # back along the hand's own axis: straight above, or over the object when leaning
+            P[:3, 3] -= self.approach_height_m * T[:3, 2]
+            why = self._blocked(P, T)
+            if why is None:
+                chosen = (lean, T, P)
+                break
+            rejected.append({"lean_rad": lean, "why": str(why)})
+            chosen = chosen or (lean, T, P)  # none clear: upright, and the planner says why
+        lean, T, P = chosen  # type: ignore[misc]
         G = T.copy()  # the hand travels the gap, then the object's distance
-        G[:2, 3] += (back - float(np.hypot(half[0], half[1])) - 0.01 + self.distance_m) * self.direction
+        G[:2, 3] += (self.clearance_m + distance) * direction
         self.set(self.start_key, T)
         self.set(self.prestart_key, P)
         self.set(self.goal_key, G)
         self.ctx.trace.record("push_pose", object=self.object, start=T[:3, 3].round(4).tolist(),
-                              direction=self.direction.round(4).tolist())
+                              direction=np.round(direction, 4).tolist(), distance_m=round(distance, 4),
+                              lean_rad=lean, rejected_leans=rejected,
+                              **({"landmark": self.landmark, "side": self.side} if self.landmark else {}))
+
+    def _blocked(self, T_pre: np.ndarray, T_start: np.ndarray):
+        """Why the arm cannot stand at ``T_pre`` and then ``T_start`` ((4, 4) world tcp poses:
+        :func:`~.perception.reach_blocked`); ``None`` when it can."""
+        return reach_blocked(self.ctx, self.object, ("push prestart", T_pre), ("push start", T_start))
 
 
 class Push(_ContactMotion):

@@ -12,6 +12,7 @@ from typing import Sequence
 import numpy as np
 
 from phyagentos.errors import IKError
+from phyagentos.geometry import VIEWER_SIDES, viewer_side_xy
 from phyagentos.motion.grasp import (
     DEFAULT_MAX_GRASP_WIDTH_M,
     FINGERTIP_BELOW_TCP_M,
@@ -41,7 +42,8 @@ from .grasp_sense import plan_grasp
 from .motion import PLANNING_MARGIN_M, clear_ik
 from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
-__all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "origin_pose", "declared_class"]
+__all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "origin_pose", "declared_class", "beside_point",
+           "landmark_box"]
 
 
 def declared_class(target, name: str, entity: dict | None = None) -> str | None:
@@ -650,6 +652,57 @@ SLOT_GAP_M = 0.01
 SLOT_EDGE_M = 0.025
 
 
+def landmark_box(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """``((4, 4) world pose, (3,) half extents in m)`` of the thing ``name`` as a landmark: a
+    fixture's whole body (``attributes.body``: its position, yaw and size) where perception
+    reports one, since its entity's box is its place patch (the stove's burner, the cabinet's
+    top); else its entity's box (:func:`entity_pose`).
+
+    Raises:
+        PrimitiveFailure: ``perception.not_found`` listing the entities seen.
+    """
+    T, half = entity_pose(snapshot, name)
+    ent = next(e for e in snapshot.get("entities", []) if e["name"] == name)
+    body = (ent.get("attributes") or {}).get("body")
+    if isinstance(body, dict) and len(body.get("position") or ()) == 3 and len(body.get("size") or ()) == 3:
+        yaw = float(body.get("yaw") or 0.0)
+        c, s = np.cos(yaw), np.sin(yaw)
+        T = np.eye(4)
+        T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+        T[:3, 3] = np.asarray(body["position"], dtype=float)
+        half = np.asarray(body["size"], dtype=float)
+    return T, half
+
+
+def beside_point(snapshot: dict, landmark: str, side: str, reach_m: float, *, who: str = "beside"
+                 ) -> tuple[np.ndarray, float]:
+    """``((3,) world point, surface z m)`` where an object goes down (or is pushed to) beside
+    ``landmark`` on the viewer's ``side`` of it: from the landmark's centre along that side
+    (:func:`~phyagentos.geometry.viewer_side_xy` of the snapshot's ``viewer.right_xy``) by the
+    landmark's half extent that way (a fixture's whole body: :func:`landmark_box`), ``reach_m``
+    (the object's own extent that way, m) and :data:`BESIDE_GAP_M`; on the surface the
+    landmark stands on (its bottom; a region's own height).
+
+    Raises:
+        PrimitiveFailure: ``perception.no_viewer`` when the snapshot says nothing of the
+            viewer's left and right; ``perception.not_found`` (:func:`entity_pose`) when the
+            landmark is not seen.
+    """
+    T_region, region_half = landmark_box(snapshot, landmark)
+    right = (snapshot.get("viewer") or {}).get("right_xy")
+    if not right or len(right) != 2 or not np.hypot(float(right[0]), float(right[1])) > 0:
+        raise PrimitiveFailure("perception.no_viewer", f"{who}: the observation says nothing of the viewer's "
+                                                       f"left and right, so the {side} of {landmark} is unknown")
+    d = np.array([*viewer_side_xy(right, side), 0.0])
+    extent = float(np.abs(T_region[:3, :3].T @ d) @ np.asarray(region_half, dtype=float))
+    reach = extent + float(reach_m) + BESIDE_GAP_M
+    ent = next((e for e in snapshot.get("entities", []) if e["name"] == landmark), {})
+    bottom = (float(T_region[2, 3] - np.abs(T_region[2, :3]) @ region_half)
+              if ent.get("kind", "region") in ("object", "fixture") else float(T_region[2, 3]))
+    centre = T_region[:3, 3].copy()
+    return centre + reach * d, bottom
+
+
 class ComputePlace(Primitive):
     """Place and pre-place tcp poses that set the held object down inside ``region``.
 
@@ -658,9 +711,9 @@ class ComputePlace(Primitive):
         region: target region entity, or another object to stack on (its top face
             is then the support surface).
         approach_height_m: pre-place height above the place pose, m.
-        beside: ``left`` / ``right``: set the object down beside ``region`` (a landmark: an
-            object or a fixture) on the viewer's side, not on it (:meth:`_beside_point`); None:
-            on / in it.
+        beside: ``left`` / ``right`` / ``front`` / ``back``: set the object down beside ``region``
+            (a landmark: an object or a fixture) on that side as the viewer sees it, not on it
+            (:func:`beside_point`); None: on / in it.
         slot: ``[k, n]``: the region takes ``n`` objects side by side, this one in slot ``k``
             (:meth:`_slot_point`: "put both moka pots on the stove"); None: at its centre.
         snapshot: blackboard key of the observation (object pose in hand, region).
@@ -681,8 +734,8 @@ class ComputePlace(Primitive):
                  place: str = "place_pose",
                  preplace: str = "preplace_pose"):
         super().__init__(name)
-        if beside not in (None, "left", "right"):
-            raise ValueError(f"beside must be left, right or null, got {beside!r}")
+        if beside is not None and beside not in VIEWER_SIDES:
+            raise ValueError(f"beside must be one of {', '.join(VIEWER_SIDES)} or null, got {beside!r}")
         if slot is not None and not (isinstance(slot, (list, tuple)) and len(slot) == 2
                                      and all(isinstance(v, int) and not isinstance(v, bool) for v in slot)
                                      and 0 <= slot[0] < slot[1]):
@@ -715,7 +768,8 @@ class ComputePlace(Primitive):
                      if kind in ("object", "fixture", "articulation") else float(T_region[2, 3]))
         centre = T_region[:3, 3]
         if self.beside is not None:  # on the surface the landmark stands on, clear of it on the viewer's side
-            centre, surface_z = self._beside_point(snapshot, T_region, region_half, half, kind)
+            centre, surface_z = beside_point(snapshot, self.region, self.beside, float(max(half[0], half[1])),
+                                             who=self.name)
         rejected: list[dict] = []
         chosen = None
         for yaw in place_yaws(hand_yaw(self.ctx.target.tcp_pose())):
@@ -774,30 +828,6 @@ class ComputePlace(Primitive):
         spacing = max(2.0 * room / n, 2.0 * extents[j] + SLOT_GAP_M)
         offset = float(np.clip((k - 0.5 * (n - 1)) * spacing, -(room - SLOT_EDGE_M), room - SLOT_EDGE_M))
         return np.asarray(T_region[:3, 3], dtype=float) + offset * axes[j]
-
-    def _beside_point(self, snapshot: dict, T_region: np.ndarray, region_half: np.ndarray, half: np.ndarray,
-                      kind: str) -> tuple[np.ndarray, float]:
-        """``((3,) world point, surface z m)`` where the held object goes down beside the landmark
-        ``region`` on the viewer's ``beside`` side: from the landmark's centre along the viewer's
-        right (the snapshot's ``viewer.right_xy``; negated for left) by the landmark's half extent
-        that way, the held object's largest horizontal half extent and :data:`BESIDE_GAP_M`; on the
-        surface the landmark stands on (its bottom; a region's own height).
-
-        Raises:
-            PrimitiveFailure: ``perception.no_viewer`` when the snapshot says nothing of the
-                viewer's left and right.
-        """
-        right = (snapshot.get("viewer") or {}).get("right_xy")
-        if not right or len(right) != 2:
-            raise PrimitiveFailure("perception.no_viewer", f"{self.name}: the observation says nothing of the viewer's "
-                                                           f"left and right, so {self.beside} of {self.region} is unknown")
-        d = np.array([float(right[0]), float(right[1]), 0.0])
-        d *= (1.0 if self.beside == "right" else -1.0) / max(float(np.linalg.norm(d)), 1e-9)
-        extent = float(np.abs(T_region[:3, :3].T @ d) @ np.asarray(region_half, dtype=float))
-        reach = extent + float(max(half[0], half[1])) + BESIDE_GAP_M
-        bottom = (float(T_region[2, 3] - np.abs(T_region[2, :3]) @ region_half) if kind in ("object", "fixture")
-                  else float(T_region[2, 3]))
-        return T_region[:3, 3] + reach * d, bottom
 
     def _blocked(self, T_pre: np.ndarray, T_place: np.ndarray) -> str | None:
         """Why the arm cannot hold the object at ``T_pre`` and ``T_place`` ((4, 4) world tcp

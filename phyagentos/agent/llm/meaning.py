@@ -8,7 +8,8 @@ is read into clauses (:func:`read_request`), each with
 
 * a **verb** class: ``move`` (put/place/move/set/drop/bring/sort ... *in* a region),
   ``stack`` (stack ... on, or put ... on/onto another object), ``hold`` (pick up, lift,
-  grab, hold ... with no destination) or ``leave`` (leave ... where it is, don't move,
+  grab, hold ... with no destination), ``push`` (push/shove/nudge ... to a side of a landmark:
+  "push the plate to the front of the stove") or ``leave`` (leave ... where it is, don't move,
   do nothing);
 * the **objects** it means, resolved on the scene: names, colours, sizes, comparatives and
   superlatives (``the bigger block`` is the one with the largest footprint among those the
@@ -55,7 +56,12 @@ _MOVE = {"put", "place", "move", "set", "drop", "bring", "transfer", "carry", "s
 _HOLD = {"hold", "lift", "grab", "grasp", "raise", "pick", "take", "get", "fetch"}
 _STACK = {"stack", "pile"}
 _LEAVE = {"leave"}
-_VERBS = _MOVE | _HOLD | _STACK | _LEAVE | {"keep"}
+#: along the table with the closed hand, to a side of a landmark ("push the plate to the front of the stove")
+_PUSH = {"push", "shove", "nudge"}
+_VERBS = _MOVE | _HOLD | _STACK | _LEAVE | _PUSH | {"keep"}
+#: the sides of a landmark a destination may name, as the scene camera shows the table: its ``left`` /
+#: ``right``, its ``front`` (towards the viewer) and its ``back`` (away from it)
+_LANDMARK_SIDES = ("left", "right", "front", "back")
 _NEGATION = re.compile(r"\b(do\s+not|don'?t|never)\b")
 _PREPOSITIONS = ("into", "in", "onto", "on", "to", "inside", "at")
 _STACK_PREPOSITIONS = {"on", "onto"}
@@ -166,7 +172,7 @@ def detect_language(text: str, names: Sequence[str] = ()) -> str | None:
 
 @dataclass(frozen=True)
 class Intent:
-    """One clause as read: ``verb`` (``move``/``stack``/``hold``/``leave``, or ``turn_on``/``turn_off``: the
+    """One clause as read: ``verb`` (``move``/``stack``/``hold``/``push``/``leave``, or ``turn_on``/``turn_off``: the
     knob of the one object named, a declared thing or fixture), ``objects`` it means (in the
     scene's order), ``count`` (a count quantifier: that many of ``objects`` -- the candidates), ``destinations``
     (region names, or one object to stack on; empty for hold/leave), ``by_colour`` (each object to the region
@@ -186,7 +192,9 @@ class Intent:
     #: ``open`` / ``close`` / ``move``: the kind of part named ("drawer"; None: the object itself)
     part_kind: str | None = None
     #: ``move``: set down beside its one destination, on the viewer's ``left`` / ``right`` of it ("to the right
-    #: of the plate"), not on it (read only with ``read_request(..., relations=True)``); None: in / on it
+    #: of the plate"), or in ``front`` of it (towards the viewer) / at its ``back``, not on it; ``push``: the side
+    #: of its one destination it is pushed to (read only with ``read_request(..., relations=True)``); None: in /
+    #: on it
     beside: str | None = None
 
     def movers(self) -> tuple[str, ...]:
@@ -229,7 +237,8 @@ class Meaning:
             if it.verb == "leave":
                 continue
             skills = (("pick",) if it.verb == "hold" else ("turn_knob",) if it.verb in ("turn_on", "turn_off")
-                      else ("slide_drawer",) if it.verb in ("open", "close") else ("pick_and_place",))
+                      else ("slide_drawer",) if it.verb in ("open", "close") else ("push",) if it.verb == "push"
+                      else ("pick_and_place",))
             for obj in it.movers():
                 out.append(Clause(it.text, obj, self.destinations_for(it, obj, world) or None, skills=skills))
         return out
@@ -245,7 +254,8 @@ class Meaning:
             what = {"hold": f"pick up and hold {obj}", "stack": f"stack {obj} on {' or '.join(it.destinations)}",
                     "turn_on": f"turn {obj} on", "turn_off": f"turn {obj} off",
                     "open": f"open {_part_phrase(it, obj)}", "close": f"close {_part_phrase(it, obj)}",
-                    "move": f"move {obj} into {' or '.join(want) if want else 'a region'}"}[it.verb]
+                    "move": f"move {obj} into {' or '.join(want) if want else 'a region'}",
+                    "push": f"push {obj} to the {it.beside} of {' or '.join(want)}"}[it.verb]
             if step is None:
                 out.append(f"{quote(it.text)} asks to {what}, and no step does")
                 continue
@@ -258,6 +268,9 @@ class Meaning:
             elif it.verb == "hold" and (step.skill != "pick" or dest is not None or k != len(acting) - 1):
                 out.append(f"{quote(it.text)} asks to {what} (a pick, last); the step is {step.skill} of "
                            f"{step.object} to {dest or 'nothing'}")
+            elif it.verb == "push" and (step.skill != "push" or dest not in want):
+                out.append(f"{quote(it.text)} asks to {what}; the step is {step.skill} of {step.object} to "
+                           f"{dest or 'nothing'}")
             elif it.verb == "stack" and (dest is None or f"on_{dest}" not in want):
                 out.append(f"{quote(it.text)} asks to {what}; the step puts it {'in ' + dest if dest else 'nowhere'}")
             elif it.verb == "move" and (dest is None or (want and dest not in want)
@@ -722,11 +735,14 @@ def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tu
 
 
 def _beside(words: list[str], prep: str | None, world: World, movers: tuple[str, ...]):
-    """``(left | right, landmark)`` of a destination ``to the left / right of <landmark>`` (``on the right side
-    of``, ``at the left of`` too), a problem list when the landmark names nothing declared (or several), else
-    None (not such a destination)."""
+    """``(side, landmark)`` of a destination ``to the left / right / front / back of <landmark>`` (``on the
+    right side of``, ``at the left of``, ``in front of`` too; side one of :data:`_LANDMARK_SIDES`), a problem list
+    when the landmark names nothing declared (or several), else None (not such a destination)."""
     ws = [w for w in words if w != "the"]
-    if prep not in ("to", "on", "at") or len(ws) < 3 or ws[0] not in ("left", "right"):
+    if ws[:1] == ["rear"]:
+        ws = ["back", *ws[1:]]
+    if (prep not in ("to", "on", "at") and not (prep == "in" and ws[:1] == ["front"])) or len(ws) < 3 \
+            or ws[0] not in _LANDMARK_SIDES:
         return None
     rest = ws[1:]
     if rest[0] in ("side", "hand"):
@@ -752,7 +768,7 @@ def _side_reference(body: list[str], world: World, verb: str | None, bound: Mapp
     identical objects (``the left bowl``, ``the black bowl on the left``); a problem list when every one of
     them is bound already; else None."""
     end = len(body)
-    if verb in _MOVE:
+    if verb in _MOVE | _PUSH:
         start = 0
         for i, w in enumerate(body):  # skip "on the left (side)" of the object phrase itself
             if w == "on" and body[i + 1:i + 3] in (["the", "left"], ["the", "right"]):
@@ -790,7 +806,7 @@ def _reference(body: list[str], world: World, verb: str | None, bound: Mapping[s
     rel = body[k:]
     dest: list[str] = []
     prep: str | None = None
-    if verb in _MOVE:
+    if verb in _MOVE | _PUSH:
         # the destination follows the landmark's phrase: its last destination preposition
         skip = 3 if rel[:2] == ["next", "to"] or rel[:3] == ["on", "top", "of"] else 1
         cut = max((i for i, w in enumerate(rel) if i >= skip + 1 and w in _DEST_PREPOSITIONS), default=None)
@@ -891,7 +907,7 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         stay = _STAY.search(low)
         # "the black bowl next to the plate" (one of two identical bowls): read only when asked for
         ref = (_reference(body, world, verb_word, meaning.where)
-               if relations and verb_word in _MOVE | _HOLD and not negated and not stay else None)
+               if relations and verb_word in _MOVE | _HOLD | _PUSH and not negated and not stay else None)
         if isinstance(ref, list):
             meaning.problems += ref
             continue
@@ -977,7 +993,12 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             problems.append(("not_understood", f"{quote(part)} asks to stack, but names no object to stack on"))
         elif verb_word in _MOVE and not dest_words:
             problems.append(("not_understood", f"{quote(part)} says where to put nothing: no destination"))
-        verb = "hold" if not dest_words else ("stack" if kind == "object" else "move")
+        elif verb_word in _PUSH and not isinstance(beside, tuple) and not problems:
+            problems.append(("not_understood", f"{quote(part)}: a push goes to a side of one thing (to the left, "
+                                               f"right, front or back of it: 'push the plate to the front of the "
+                                               f"stove')"))
+        verb = ("push" if verb_word in _PUSH else "hold" if not dest_words
+                else "stack" if kind == "object" else "move")
         if not problems and verb == "stack" and count is None and len(objects) > 1:
             problems.append(("not_understood", f"{quote(part)} stacks several objects on one: say the order"))
         if not problems and by_colour:

@@ -1,0 +1,174 @@
+"""Pushing an object to a side of a landmark ("push the plate to the front of the stove":
+libero_goal task 5), and the sides a landmark has as the viewer sees the table: the reader,
+the LIBERO plan's node, the verifier's ``beside`` and ``ComputePush``'s start and goal."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from phyagentos.agent.criteria import SIDES, evaluate, parse_criteria
+from phyagentos.agent.llm.meaning import read_request
+from phyagentos.agent.llm.world import world_from_declared
+from phyagentos.bench.libero import instruction_plan
+from phyagentos.geometry import VIEWER_SIDES, viewer_side_xy
+
+GOAL_OBJECTS = {"akita_black_bowl_1": "akita_black_bowl", "cream_cheese_1": "cream_cheese",
+                "wine_bottle_1": "wine_bottle", "plate_1": "plate"}
+GOAL_FIXTURES = {"main_table": "table", "wooden_cabinet_1": "wooden_cabinet", "flat_stove_1": "flat_stove",
+                 "wine_rack_1": "wine_rack"}
+WORLD = world_from_declared(list(GOAL_OBJECTS), list(GOAL_FIXTURES))
+
+
+def test_the_viewers_front_is_towards_the_camera_and_the_sides_follow_its_right():
+    # LIBERO's agentview camera looks along -x: its right on the table is +y, towards it is +x
+    assert viewer_side_xy([0.0, 2.0], "front") == pytest.approx([1.0, 0.0])
+    assert viewer_side_xy([0.0, 2.0], "back") == pytest.approx([-1.0, 0.0])
+    assert viewer_side_xy([0.0, 2.0], "left") == pytest.approx([0.0, -1.0])
+    assert viewer_side_xy([0.0, 2.0], "right") == pytest.approx([0.0, 1.0])
+    assert SIDES == VIEWER_SIDES
+    with pytest.raises(ValueError, match="left, right, front, back"):
+        viewer_side_xy([0.0, 1.0], "behind")
+    with pytest.raises(ValueError, match="not both 0"):
+        viewer_side_xy([0.0, 0.0], "front")
+
+
+@pytest.mark.parametrize("text,side", [
+    ("push the plate to the front of the stove", "front"),
+    ("Push the plate in front of the stove", "front"),
+    ("shove the plate to the left of the stove", "left"),
+    ("nudge the plate to the back of the stove", "back"),
+])
+def test_a_push_to_a_side_of_a_landmark_is_read_as_a_push_beside_it(text, side):
+    m = read_request(text, WORLD, relations=True)
+    assert not m.problems
+    [it] = m.intents
+    assert (it.verb, it.objects, it.destinations, it.beside) == ("push", ("plate_1",), ("flat_stove_1",), side)
+
+
+@pytest.mark.parametrize("text", ["push the plate", "push the plate onto the stove"])
+def test_a_push_that_names_no_side_of_a_thing_is_refused_with_the_reason(text):
+    m = read_request(text, WORLD, relations=True)
+    assert not m.intents and "a push goes to a side of one thing" in m.problems[0][1]
+
+
+def test_a_move_to_the_front_of_a_landmark_is_a_place_beside_it_on_the_viewers_side():
+    m = read_request("put the cream cheese in front of the bowl", WORLD, relations=True)
+    [it] = m.intents
+    assert (it.verb, it.destinations, it.beside) == ("move", ("akita_black_bowl_1",), "front")
+    # "at the front on the plate" names a place on the plate, not a side of it: not read as beside
+    assert not read_request("put the bowl at the front on the plate", WORLD, relations=True).intents
+
+
+def test_the_libero_plan_pushes_to_the_side_and_accepts_on_beside():
+    nodes, refs = instruction_plan("push the plate to the front of the stove", GOAL_OBJECTS, GOAL_FIXTURES)
+    [node] = nodes
+    assert node["skill"] == "push" and node["depends_on"] == []
+    assert node["params"] == {"object": "plate_1", "landmark": "flat_stove_1", "side": "front"}
+    assert node["accept"] == [{"beside": {"object": "plate_1", "landmark": "flat_stove_1", "side": "front"}}]
+    assert refs == {}
+
+
+def _scene(plate_xy, *, plate_half=0.069):
+    stove = {"name": "flat_stove_1", "kind": "fixture", "position": [-0.30, 0.20, 0.92], "quat_wxyz": [1, 0, 0, 0],
+             "size": [0.15, 0.095, 0.02], "attributes": {"confidence": 0.9, "position_std_m": 0.004}}
+    plate = {"name": "plate_1", "kind": "object", "position": [plate_xy[0], plate_xy[1], 0.91],
+             "quat_wxyz": [1, 0, 0, 0], "size": [plate_half, plate_half, 0.01],
+             "attributes": {"confidence": 0.9, "position_std_m": 0.004}}
+    return {"entities": [stove, plate], "relations": [], "viewer": {"right_xy": [0.0, 1.0]}}
+
+
+def _beside(snapshot, side="front"):
+    [c] = parse_criteria({"beside": {"object": "plate_1", "landmark": "flat_stove_1", "side": side}})
+    return evaluate(c, snapshot, snapshot)
+
+
+def test_beside_counts_its_reach_from_the_objects_near_face_so_a_plate_fits_in_front():
+    # the stove's front edge at x = -0.15; a plate 13.8 cm across, its near face 1.5 cm beyond that edge
+    assert _beside(_scene([-0.15 + 0.015 + 0.069, 0.20])).status == "satisfied"
+    # its near face 8 cm beyond the edge: still next to it (its centre 14.9 cm beyond); 13 cm: across the table
+    assert _beside(_scene([-0.15 + 0.08 + 0.069, 0.20])).status == "satisfied"
+    assert _beside(_scene([-0.15 + 0.13 + 0.069, 0.20])).status == "unsatisfied"
+    # behind the stove (away from the viewer), or off to its side: not in front of it
+    assert _beside(_scene([-0.45 - 0.015 - 0.069, 0.20])).status == "unsatisfied"
+    assert _beside(_scene([-0.45 - 0.015 - 0.069, 0.20]), side="back").status == "satisfied"
+    assert _beside(_scene([-0.15 + 0.015 + 0.069, 0.20 + 0.15])).status == "unsatisfied"
+
+
+def _compute_push(snapshot, blocked=None, **params):
+    from phyagentos.primitives.contact import ComputePush
+
+    leaf = ComputePush("ComputePush", object="plate_1", **params)
+    board = {"snapshot": snapshot}
+    records = []
+    leaf.ctx = SimpleNamespace(trace=SimpleNamespace(record=lambda kind, **f: records.append({"kind": kind, **f})))
+    leaf.get = board.__getitem__
+    leaf.set = board.__setitem__
+    leaf._blocked = blocked or (lambda T_pre, T_start: None)  # reach is the planner's; here the poses
+    leaf.step()
+    return board, records[0]
+
+
+def test_compute_push_aims_the_plate_at_the_landmarks_side_and_starts_behind_its_face():
+    from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M
+    from phyagentos.primitives.contact import FINGER_HALF_THICKNESS_M
+    from phyagentos.primitives.perception import BESIDE_GAP_M
+
+    board, record = _compute_push(_scene([0.05, -0.03]), landmark="flat_stove_1", side="front", clearance_m=0.02)
+    goal = np.array([-0.15 + 0.069 + BESIDE_GAP_M, 0.20])  # its footprint the gap clear of the stove, centred across
+    move = goal - [0.05, -0.03]
+    d = move / np.linalg.norm(move)
+    assert record["direction"] == pytest.approx(d, abs=1e-4)
+    assert record["distance_m"] == pytest.approx(np.linalg.norm(move), abs=1e-4)
+    start, end = board["push_start_pose"], board["push_goal_pose"]
+    face = 0.069 * (abs(d[0]) + abs(d[1]))  # the plate's box along the diagonal push
+    assert start[:2, 3] == pytest.approx(np.array([0.05, -0.03]) - (face + 0.02 + FINGER_HALF_THICKNESS_M) * d, abs=1e-6)
+    # the closed fingertips 5 mm above the table the plate stands on (0.90), not at the plate's centre height
+    assert start[2, 3] == pytest.approx(0.90 + FINGERTIP_BELOW_TCP_M + 0.005, abs=1e-9)
+    # the face ends where the plate's face must be: the hand travels the gap and the distance
+    assert (end[:2, 3] - start[:2, 3]) == pytest.approx((0.02 + np.linalg.norm(move)) * d, abs=1e-6)
+    assert board["push_prestart_pose"][2, 3] == pytest.approx(start[2, 3] + 0.10)
+    # the fingers (tcp y) across the push
+    assert abs(float(start[:3, 1] @ np.array([d[0], d[1], 0.0]))) < 1e-9
+
+
+def test_compute_push_takes_a_direction_and_distance_or_a_landmark_and_side_not_both():
+    from phyagentos.primitives.contact import ComputePush
+
+    with pytest.raises(ValueError, match="either direction and distance_m, or landmark and side"):
+        ComputePush("p", object="plate_1")
+    with pytest.raises(ValueError, match="either direction and distance_m, or landmark and side"):
+        ComputePush("p", object="plate_1", direction=[1, 0], distance_m=0.1, landmark="flat_stove_1", side="front")
+    with pytest.raises(ValueError, match="either direction and distance_m, or landmark and side"):
+        ComputePush("p", object="plate_1", landmark="flat_stove_1")
+    with pytest.raises(ValueError, match="side must be one of left, right, front, back"):
+        ComputePush("p", object="plate_1", landmark="flat_stove_1", side="under")
+
+
+def test_compute_push_leans_the_hand_over_the_object_when_the_upright_hand_would_collide():
+    from phyagentos.primitives.contact import PUSH_LEANS_RAD
+
+    tried = []
+
+    def blocked(T_pre, T_start):  # the upright hand's body meets what stands behind the plate
+        lean = float(np.arccos(np.clip(-T_start[2, 2], -1.0, 1.0)))
+        tried.append(round(lean, 6))
+        return None if lean > 0.2 else "push prestart collides: gripper-cabinet"
+
+    board, record = _compute_push(_scene([0.05, -0.03]), blocked=blocked, landmark="flat_stove_1", side="front")
+    assert tried == [0.0, round(PUSH_LEANS_RAD[1], 6)] and record["lean_rad"] == PUSH_LEANS_RAD[1]
+    assert record["rejected_leans"][0]["why"].startswith("push prestart collides")
+    d = np.array([*record["direction"], 0.0])
+    start, pre = board["push_start_pose"], board["push_prestart_pose"]
+    approach = start[:3, 2]  # the hand's axis, towards the fingertips: down and back from the push
+    assert approach @ d == pytest.approx(-np.sin(PUSH_LEANS_RAD[1]), abs=1e-3)
+    assert approach[2] == pytest.approx(-np.cos(PUSH_LEANS_RAD[1]), abs=1e-9)
+    # the fingers still close across the push; the pre-start stands back along the hand's axis, over the plate
+    assert abs(float(start[:3, 1] @ d)) < 1e-4  # the traced direction is rounded to 0.1 mm
+    assert pre[:3, 3] - start[:3, 3] == pytest.approx(-0.10 * approach, abs=1e-9)
+    # every lean blocked: upright, and the planner reports the collision
+    _, upright = _compute_push(_scene([0.05, -0.03]), blocked=lambda a, b: "collides",
+                               landmark="flat_stove_1", side="front")
+    assert upright["lean_rad"] == 0.0 and len(upright["rejected_leans"]) == len(PUSH_LEANS_RAD)

@@ -13,6 +13,7 @@ import yaml
 
 from phyagentos.bench.compiler import plan_episodes
 from phyagentos.bench.libero import (
+    FIRST_PICK_STILL_MAX_S,
     SKILL_DEFAULTS,
     instruction_nodes,
     instruction_plan,
@@ -43,7 +44,8 @@ def test_an_object_instruction_becomes_a_pick_then_a_place_on_the_declared_baske
     problem = parse_bddl(task.bddl_path)
     nodes = instruction_nodes(task.language, problem.objects, problem.fixtures)
     assert [(n["id"], n["skill"], n["params"]) for n in nodes] == [
-        ("pick_bbq_sauce_1", "pick", {"object": "bbq_sauce_1"}),
+        # the episode's first pick waits for the world just reset to come to rest (tests/test_wait_still.py)
+        ("pick_bbq_sauce_1", "pick", {"still_max_s": FIRST_PICK_STILL_MAX_S, "object": "bbq_sauce_1"}),
         ("place_bbq_sauce_1", "place", {"object": "bbq_sauce_1", "region": "basket_1"})]
     assert nodes[1]["depends_on"] == ["pick_bbq_sauce_1"]
     assert nodes[1]["accept"] == [{"on": {"object": "bbq_sauce_1", "support": "basket_1"}}, {"released": "bbq_sauce_1"}]
@@ -164,12 +166,12 @@ def test_skill_defaults_go_into_every_node_of_their_skill_and_the_tasks_own_para
     fixed = {"pick": {"approach_velocity_scale": 0.6, "object": "not this"}, "place": {"lower_velocity_scale": 0.5}}
     nodes, _ = instruction_plan(task.language, problem.objects, problem.fixtures, skill_params=fixed)
     assert [n["params"] for n in nodes] == [
-        {"approach_velocity_scale": 0.6, "object": "cream_cheese_1"},
+        {"approach_velocity_scale": 0.6, "still_max_s": FIRST_PICK_STILL_MAX_S, "object": "cream_cheese_1"},
         {"lower_velocity_scale": 0.5, "object": "cream_cheese_1", "region": "basket_1"},
         {"approach_velocity_scale": 0.6, "object": "butter_1"},
         {"lower_velocity_scale": 0.5, "object": "butter_1", "region": "basket_1"}]
     plain, _ = instruction_plan(task.language, problem.objects, problem.fixtures)
-    assert plain[0]["params"] == {"object": "cream_cheese_1"}
+    assert plain[0]["params"] == {"still_max_s": FIRST_PICK_STILL_MAX_S, "object": "cream_cheese_1"}
     f = tmp_path / "d.yaml"
     f.write_text("pick:\n  approach_velocity_scale: 0.6\n  lift_velocity_scale: 1.0\nplace: {lower_velocity_scale: 0.6}\n")
     assert load_skill_defaults(f) == {"pick": {"approach_velocity_scale": 0.6, "lift_velocity_scale": 1.0},

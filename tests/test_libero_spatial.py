@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from phyagentos.agent.llm.meaning import read_request
-from phyagentos.bench.libero import instruction_nodes, instruction_plan, planner_world, prepare_libero_suite
+from phyagentos.bench.libero import FIRST_PICK_STILL_MAX_S, instruction_nodes, instruction_plan, planner_world, prepare_libero_suite
 from phyagentos.errors import BenchError
 from phyagentos.targets.libero import parse_bddl, resolve_task
 from phyagentos.targets.libero.catalog import suite_tasks
@@ -45,7 +45,7 @@ def test_every_libero_spatial_instruction_plans_a_pick_and_place_with_its_refere
     assert task.instruction == text  # LIBERO's own wording, from its catalogue
     problem = parse_bddl(task.bddl_path)
     nodes, refs = instruction_plan(task.instruction, problem.objects, problem.fixtures)
-    assert [(n["skill"], n["params"]) for n in nodes] == [("pick", {"object": BOWL}),
+    assert [(n["skill"], n["params"]) for n in nodes] == [("pick", {"still_max_s": FIRST_PICK_STILL_MAX_S, "object": BOWL}),
                                                           ("place", {"object": BOWL, "region": PLATE})]
     assert refs == {BOWL: where}
     assert instruction_nodes(task.instruction, problem.objects, problem.fixtures) == nodes
@@ -65,7 +65,8 @@ def test_the_reader_reads_relations_only_when_asked_and_the_plain_reading_is_unc
         instruction_nodes("put the black bowl on the plate", problem.objects, problem.fixtures)
     # an object that is not one of several identical ones is read as before ("on" is its destination)
     nodes = instruction_nodes("pick up the ramekin and place it on the plate", problem.objects, problem.fixtures)
-    assert [n["params"] for n in nodes] == [{"object": RAMEKIN}, {"object": RAMEKIN, "region": PLATE}]
+    assert [n["params"] for n in nodes] == [{"still_max_s": FIRST_PICK_STILL_MAX_S, "object": RAMEKIN},
+                                              {"object": RAMEKIN, "region": PLATE}]
 
 
 def test_other_wordings_of_the_relations_read_the_same():

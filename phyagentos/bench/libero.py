@@ -54,8 +54,9 @@ from phyagentos.errors import BenchError, TargetError, format_choices, format_lo
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
 
-__all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "SKILL_DEFAULTS", "workspace_box", "is_libero_suite", "instruction_nodes",
-           "instruction_plan", "load_skill_defaults", "prepare_libero_suite", "target_entry"]
+__all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "SKILL_DEFAULTS", "FIRST_PICK_STILL_MAX_S", "workspace_box",
+           "is_libero_suite", "instruction_nodes", "instruction_plan", "load_skill_defaults", "prepare_libero_suite",
+           "target_entry"]
 
 logger = logging.getLogger(__name__)
 
@@ -73,6 +74,13 @@ SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
     "pick": {"approach_velocity_scale": 1.0, "lift_velocity_scale": 1.0},
     "place": {"lower_velocity_scale": 1.0},
 }
+#: The episode's first pick waits up to this long (simulated s) for its cameras to see the scene
+#: at rest (``pick``'s ``still_max_s``, the ``wait_still`` primitive). LIBERO evaluations step 10
+#: times (0.5 s) after ``set_init_state``; in LIBERO-10 task 1's living room the ketchup, milk and
+#: orange juice are still falling then (0.87-1.05 m high at 0.5 s, at rest on the 0.44 m table
+#: about 1 s later), and the first pick's pre-grasp collided with them in the air. The steps it
+#: waits count against the episode's budget like any other.
+FIRST_PICK_STILL_MAX_S = 1.5
 #: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
 _PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer", "push")
 #: Optional parameters that say what a node does, not how: the plan sets them per task, and
@@ -229,7 +237,9 @@ def _nodes(steps: list[tuple[str, str, str | None]],
                           "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
             continue
         pick_id, place_id = f"pick_{obj}", f"place_{obj}"
-        nodes.append({"id": pick_id, "skill": "pick", "params": {**fixed.get("pick", {}), "object": obj},
+        # the episode's first pick waits for the world just reset to come to rest (its cameras say)
+        still = {} if nodes else {"still_max_s": FIRST_PICK_STILL_MAX_S}
+        nodes.append({"id": pick_id, "skill": "pick", "params": {**fixed.get("pick", {}), **still, "object": obj},
                       "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
                       "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
         side = action.removeprefix("beside_") if action.startswith("beside_") else None

@@ -15,6 +15,7 @@ cartesian_move            straight-line tcp approach / lift / retreat
 gripper                   open / close (closing checks the grasp)
 check_holding             succeed only while the object is held
 hold                      keep still for a simulated duration
+wait_still                keep still until the cameras see the scene at rest
 compute_affordance_grasp  grasp poses for the part an entity declares graspable
 articulate_hinge          turn a held handle about its entity's hinge
 articulate_slide          pull or push a held handle along its entity's slide (a drawer)
@@ -35,7 +36,7 @@ from .base import Primitive, PrimitiveFailure
 from .contact import ComputePush, GuardedMove, Push
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
 from .control import Noop
-from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
+from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
 from .game import GAME_PRIMITIVES
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
@@ -66,6 +67,7 @@ PRIMITIVES = {
     "gripper": Gripper,
     "check_holding": CheckHolding,
     "hold": Hold,
+    "wait_still": WaitStill,
     "compute_affordance_grasp": ComputeAffordanceGrasp,
     "articulate_hinge": ArticulateHinge,
     "articulate_slide": ArticulateSlide,

@@ -29,8 +29,10 @@ from .grasp_sense import (
     wrist_load_n,
 )
 from .motion import execution_limits, ik_options, session_checker
+from .observation import has_cameras
 
-__all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "CheckHolding", "REACH_STEP_M"]
+__all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "WaitStill", "CheckHolding", "REACH_STEP_M",
+           "STILL_DEPTH_M", "STILL_PIXELS", "STILL_RANGE_M"]
 
 #: The step (m) by which a :class:`CartesianMove` with ``at_least_m`` shortens a line that
 #: leaves the arm's reach.
@@ -363,6 +365,98 @@ class Hold(Primitive):
             self.ctx.target.hold(self._q, duration_s=dt)
         self._remaining -= dt
         return Status.RUNNING if self._remaining > 1e-9 else Status.SUCCESS
+
+
+#: ``wait_still``: a pixel whose depth changed by more than this (m) between two looks moved
+#: (a scene at rest renders the same depth twice; things still settling move millimetres).
+STILL_DEPTH_M = 0.005
+#: ``wait_still``: the scene moves when more than this many pixels of one camera moved (after
+#: an erosion by 3 x 3 pixels: a moving thing is a blob, while single pixels of depth flicker
+#: from render to render).
+STILL_PIXELS = 20
+#: ``wait_still``: only returns nearer than this (m) count: the workspace. Beyond it, LIBERO's
+#: scene camera (OSMesa) returns depths that differ by 1-5 cm from one render of a still room to
+#: the next (measured: about 9000 of 65536 pixels, median 2.3 m away; none nearer than 1.5 m once
+#: the scene was at rest).
+STILL_RANGE_M = 1.5
+
+
+class WaitStill(Primitive):
+    """Hold the arm where it is until the cameras see the scene at rest, at most ``max_s`` of
+    simulated time (a world just reset may still be settling: LIBERO's living-room scenes
+    drop tall cartons and bottles from up to 0.6 m above the table, and they land about a
+    second after the reset).
+
+    Each look captures the depth of every camera, holds ``step_s`` and captures again; the
+    scene is at rest when no camera that stayed where it was (a hand camera moves with the
+    held arm's sway) has more than :data:`STILL_PIXELS` pixels whose depth changed by more
+    than :data:`STILL_DEPTH_M` (both returns valid and nearer than :data:`STILL_RANGE_M`; blobs
+    only, after a 3 x 3 erosion). Only the target's own
+    cameras are used: nothing of the simulator's state. ``max_s`` 0 (the default) does
+    nothing; a target without cameras holds nothing either. When the scene still moves after
+    ``max_s``, the leaf succeeds all the same (the observation after it says what is where).
+
+    Args:
+        max_s: the longest wait, simulated s (>= 0).
+        step_s: the time between the two captures of a look, simulated s (> 0).
+
+    The trace records ``wait_still`` {leaf, waited_s, still, moving_pixels}.
+    """
+
+    TOOLS = ("hold",)
+
+    def __init__(self, name: str, *, max_s: float = 0.0, step_s: float = 0.1):
+        super().__init__(name)
+        if not isinstance(max_s, (int, float)) or isinstance(max_s, bool) or not math.isfinite(max_s) or max_s < 0:
+            raise ValueError(f"max_s must be a number >= 0, got {max_s!r}")
+        if not isinstance(step_s, (int, float)) or isinstance(step_s, bool) or not step_s > 0:
+            raise ValueError(f"step_s must be a number > 0, got {step_s!r}")
+        self.max_s, self.step_s = float(max_s), float(step_s)
+
+    def _frames(self) -> list:
+        target = self.ctx.target
+        with self.ctx.profiler.section("perception"):
+            return [target.capture(name) for name in target.camera_names()]
+
+    @staticmethod
+    def _moving(before, after) -> int:
+        """The most pixels that moved in one camera between two captures; a camera that moved
+        itself (its pose 1 mm or 1 mrad apart: one on the hand, the arm held by a compliant
+        controller) sees everything move, and does not count."""
+        import cv2  # noqa: PLC0415 - OpenCV only where a wait looks
+
+        most = 0
+        for a, b in zip(before, after):
+            if a.depth_m is None or b.depth_m is None:
+                continue
+            Ta, Tb = np.asarray(a.T_world_camera), np.asarray(b.T_world_camera)
+            if np.abs(Ta[:3, 3] - Tb[:3, 3]).max() > 1e-3 or np.abs(Ta[:3, :3] - Tb[:3, :3]).max() > 1e-3:
+                continue
+            da, db = a.depth_m, b.depth_m
+            moved = ((da > 0) & (db > 0) & (np.minimum(da, db) < STILL_RANGE_M)
+                     & (np.abs(da - db) > STILL_DEPTH_M)).astype(np.uint8)
+            most = max(most, int(np.count_nonzero(cv2.erode(moved, np.ones((3, 3), np.uint8)))))
+        return most
+
+    def step(self):
+        target = self.ctx.target
+        if self.max_s <= 0.0 or not has_cameras(target):
+            return Status.SUCCESS
+        q = target.arm_qpos()
+        waited, moving = 0.0, 0
+        before = self._frames()
+        while True:
+            with self.ctx.profiler.section("simulation"):
+                target.hold(q, duration_s=self.step_s)
+            waited += self.step_s
+            after = self._frames()
+            moving = self._moving(before, after)
+            if moving <= STILL_PIXELS or waited >= self.max_s - 1e-9:
+                break
+            before = after
+        self.ctx.trace.record("wait_still", leaf=self.name, waited_s=round(waited, 3), still=moving <= STILL_PIXELS,
+                              moving_pixels=moving)
+        return Status.SUCCESS
 
 
 class CheckHolding(Primitive):

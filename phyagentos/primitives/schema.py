@@ -20,7 +20,7 @@ from typing import Any, Mapping
 from .affordance import ArticulateHinge, ArticulateSlide, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
-from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold
+from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
 from .game.survival import GameSurvive
 from .game.tasks import GameCollect, GameExplore, GameGoto, GameHunt, GameMake, GameObserve, GamePlace, GameSleep
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
@@ -129,6 +129,10 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
     },
     Hold: {
         "duration_s": ("float", "s", "simulated time to keep still"),
+    },
+    WaitStill: {
+        "max_s": ("float", "s", "the longest wait for the cameras to see the scene at rest (0: no wait)"),
+        "step_s": ("float", "s", "simulated time between the two captures of a look"),
     },
     ComputeAffordanceGrasp: {
         "object": ("str", "", "entity whose declared part to grasp"),

@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 from py_trees.common import Status
 
-from phyagentos.geometry import VIEWER_SIDES, viewer_side_xy
+from phyagentos.geometry import VIEWER_SIDES
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
 from phyagentos.motion.retime import Trajectory, retime
@@ -35,7 +35,7 @@ from phyagentos.targets.contract import MuJoCoBacked
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
 from .motion import execution_limits, ik_options
-from .perception import beside_point, entity_pose, reach_blocked
+from .perception import beside_point, entity_pose, reach_blocked, viewer_side
 
 __all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n", "MIN_PUSH_M", "FINGER_HALF_THICKNESS_M",
            "PUSH_LEANS_RAD"]
@@ -322,10 +322,10 @@ class ComputePush(Primitive):
                  approach_height_m: float = 0.10, tip_clearance_m: float = 0.005, snapshot: str = "snapshot",
                  start: str = "push_start_pose", prestart: str = "push_prestart_pose", goal: str = "push_goal_pose"):
         super().__init__(name)
-        along, beside = (direction, distance_m), (landmark, side)
-        if (all(v is None for v in along)) == (all(v is None for v in beside)) \
-                or any(v is None for v in along) != all(v is None for v in along) \
-                or any(v is None for v in beside) != all(v is None for v in beside):
+        pairs = ((direction, distance_m), (landmark, side))
+        given = [all(v is not None for v in pair) for pair in pairs]
+        partial = any(any(v is not None for v in pair) and not full for pair, full in zip(pairs, given))
+        if sum(given) != 1 or partial:
             raise ValueError(f"{name}: give either direction and distance_m, or landmark and side; got "
                              f"direction={direction!r}, distance_m={distance_m!r}, landmark={landmark!r}, "
                              f"side={side!r}")
@@ -340,7 +340,6 @@ class ComputePush(Primitive):
             self.direction, self.distance_m = d / np.linalg.norm(d), float(distance_m)
         elif side not in VIEWER_SIDES:
             raise ValueError(f"side must be one of {', '.join(VIEWER_SIDES)}, got {side!r}")
-
         self.object = object
         self.clearance_m, self.approach_height_m = float(clearance_m), float(approach_height_m)
         self.tip_clearance_m = float(tip_clearance_m)
@@ -360,9 +359,8 @@ class ComputePush(Primitive):
                 return float(max(half[0], half[1]))
             return float(np.abs(T_obj[:3, :3].T @ np.array([d[0], d[1], 0.0])) @ half)
 
-
         if self.landmark is not None:
-            side_xy = viewer_side_xy((snapshot.get("viewer") or {}).get("right_xy") or (1.0, 0.0), self.side)
+            side_xy = viewer_side(snapshot, self.side, who=self.name, of=self.landmark)
             goal, _ = beside_point(snapshot, self.landmark, self.side, extent(side_xy), who=self.name)
             move = goal[:2] - T_obj[:2, 3]
             distance = float(np.linalg.norm(move))

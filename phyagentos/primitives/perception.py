@@ -43,7 +43,7 @@ from .motion import PLANNING_MARGIN_M, clear_ik
 from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
 __all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "origin_pose", "declared_class", "beside_point",
-           "landmark_box"]
+           "landmark_box", "viewer_side"]
 
 
 def declared_class(target, name: str, entity: dict | None = None) -> str | None:
@@ -674,6 +674,21 @@ def landmark_box(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     return T, half
 
 
+def viewer_side(snapshot: dict, side: str, *, who: str, of: str) -> np.ndarray:
+    """(2,) unit vector on the table (world frame) towards the viewer's ``side`` of a thing, from
+    the snapshot's ``viewer.right_xy`` (:func:`~phyagentos.geometry.viewer_side_xy`).
+
+    Raises:
+        PrimitiveFailure: ``perception.no_viewer`` when the snapshot says nothing of the viewer's
+            left and right (``who``: the leaf asking; ``of``: the thing whose side it is).
+    """
+    right = (snapshot.get("viewer") or {}).get("right_xy")
+    if not right or len(right) != 2 or not np.hypot(float(right[0]), float(right[1])) > 0:
+        raise PrimitiveFailure("perception.no_viewer", f"{who}: the observation says nothing of the viewer's "
+                                                       f"left and right, so the {side} of {of} is unknown")
+    return viewer_side_xy(right, side)
+
+
 def beside_point(snapshot: dict, landmark: str, side: str, reach_m: float, *, who: str = "beside"
                  ) -> tuple[np.ndarray, float]:
     """``((3,) world point, surface z m)`` where an object goes down (or is pushed to) beside
@@ -689,18 +704,13 @@ def beside_point(snapshot: dict, landmark: str, side: str, reach_m: float, *, wh
             landmark is not seen.
     """
     T_region, region_half = landmark_box(snapshot, landmark)
-    right = (snapshot.get("viewer") or {}).get("right_xy")
-    if not right or len(right) != 2 or not np.hypot(float(right[0]), float(right[1])) > 0:
-        raise PrimitiveFailure("perception.no_viewer", f"{who}: the observation says nothing of the viewer's "
-                                                       f"left and right, so the {side} of {landmark} is unknown")
-    d = np.array([*viewer_side_xy(right, side), 0.0])
+    d = np.array([*viewer_side(snapshot, side, who=who, of=landmark), 0.0])
     extent = float(np.abs(T_region[:3, :3].T @ d) @ np.asarray(region_half, dtype=float))
     reach = extent + float(reach_m) + BESIDE_GAP_M
     ent = next((e for e in snapshot.get("entities", []) if e["name"] == landmark), {})
     bottom = (float(T_region[2, 3] - np.abs(T_region[2, :3]) @ region_half)
               if ent.get("kind", "region") in ("object", "fixture") else float(T_region[2, 3]))
-    centre = T_region[:3, 3].copy()
-    return centre + reach * d, bottom
+    return T_region[:3, 3] + reach * d, bottom
 
 
 class ComputePlace(Primitive):

@@ -30,7 +30,9 @@ def test_every_shipped_skill_builds_its_tree(library):
         manifest = skills.get(name)
         if manifest.runtime != "builtin":
             continue  # policy skills have no tree (tests/test_policy_*.py)
-        params = {k: d.get("example", "x") for k, d in manifest.params.items() if d.get("required")}
+        # the required parameters, and the optional ones the manifest gives an example of (a push
+        # says where to by one of two pairs: its manifest's examples are direction and distance_m)
+        params = {k: d.get("example", "x") for k, d in manifest.params.items() if d.get("required") or "example" in d}
         root = library.build(manifest.tree, params)
         assert isinstance(root, py_trees.behaviour.Behaviour)
 

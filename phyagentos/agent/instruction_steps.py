@@ -285,6 +285,9 @@ def decompose(instruction: str, declared: Mapping[str, Any] | None) -> tuple[Ins
                     dests = [f"{dests[0]}_{intent.part}_drawer"]
                 steps.append(InstructionStep(MOVE, obj, destination=dests[0], noun=_noun(obj, tokens, names),
                                              reference=ref, where=where))
+        elif intent.verb == "push":
+            raise InstructionNotRead(f"{intent.text!r} pushes {intent.objects[0]} beside "
+                                     f"{intent.destinations[0]}: a push is not a step here yet")
         else:
             raise InstructionNotRead(f"{intent.text!r}: no step {intent.verb}s here"
                                      + (" (only drawers are opened)" if intent.verb == "open" else ""))

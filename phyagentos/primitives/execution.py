@@ -438,24 +438,28 @@ class WaitStill(Primitive):
             most = max(most, int(np.count_nonzero(cv2.erode(moved, np.ones((3, 3), np.uint8)))))
         return most
 
+    def on_enter(self):
+        self._active = self.max_s > 0.0 and has_cameras(self.ctx.target)
+        self._q = self.ctx.target.arm_qpos() if self._active else None
+        self._before = self._frames() if self._active else None
+        self._waited = 0.0
+
     def step(self):
-        target = self.ctx.target
-        if self.max_s <= 0.0 or not has_cameras(target):
+        """One look per tick: hold ``step_s``, capture again, compare (the runner's heartbeat
+        and cancellation go on between looks)."""
+        if not self._active:
             return Status.SUCCESS
-        q = target.arm_qpos()
-        waited, moving = 0.0, 0
-        before = self._frames()
-        while True:
-            with self.ctx.profiler.section("simulation"):
-                target.hold(q, duration_s=self.step_s)
-            waited += self.step_s
-            after = self._frames()
-            moving = self._moving(before, after)
-            if moving <= STILL_PIXELS or waited >= self.max_s - 1e-9:
-                break
-            before = after
-        self.ctx.trace.record("wait_still", leaf=self.name, waited_s=round(waited, 3), still=moving <= STILL_PIXELS,
-                              moving_pixels=moving)
+        target = self.ctx.target
+        with self.ctx.profiler.section("simulation"):
+            target.hold(self._q, duration_s=self.step_s)
+        self._waited += self.step_s
+        after = self._frames()
+        moving = self._moving(self._before, after)
+        if moving > STILL_PIXELS and self._waited < self.max_s - 1e-9:
+            self._before = after
+            return Status.RUNNING
+        self.ctx.trace.record("wait_still", leaf=self.name, waited_s=round(self._waited, 3),
+                              still=moving <= STILL_PIXELS, moving_pixels=moving)
         return Status.SUCCESS
 
 

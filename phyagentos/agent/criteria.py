@@ -473,9 +473,10 @@ def _body(ent: Mapping) -> Mapping:
     body = (ent.get("attributes") or {}).get("body")
     if not (isinstance(body, Mapping) and len(body.get("position") or ()) == 3 and len(body.get("size") or ()) == 3):
         return ent
-    half_yaw = 0.5 * float(body.get("yaw") or 0.0)
+    from phyagentos.geometry import yaw_quat  # noqa: PLC0415 - numpy only where a beside is judged
+
     return {**ent, "position": list(body["position"]), "size": list(body["size"]),
-            "quat_wxyz": [math.cos(half_yaw), 0.0, 0.0, math.sin(half_yaw)]}
+            "quat_wxyz": yaw_quat(float(body.get("yaw") or 0.0))}
 
 
 def _eval_beside(c, initial, terminal, refs):

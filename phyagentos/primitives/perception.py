@@ -12,7 +12,7 @@ from typing import Sequence
 import numpy as np
 
 from phyagentos.errors import IKError
-from phyagentos.geometry import VIEWER_SIDES, viewer_side_xy
+from phyagentos.geometry import VIEWER_SIDES, pose_matrix, viewer_side_xy, yaw_quat
 from phyagentos.motion.grasp import (
     DEFAULT_MAX_GRASP_WIDTH_M,
     FINGERTIP_BELOW_TCP_M,
@@ -665,11 +665,7 @@ def landmark_box(snapshot: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     ent = next(e for e in snapshot.get("entities", []) if e["name"] == name)
     body = (ent.get("attributes") or {}).get("body")
     if isinstance(body, dict) and len(body.get("position") or ()) == 3 and len(body.get("size") or ()) == 3:
-        yaw = float(body.get("yaw") or 0.0)
-        c, s = np.cos(yaw), np.sin(yaw)
-        T = np.eye(4)
-        T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-        T[:3, 3] = np.asarray(body["position"], dtype=float)
+        T = pose_matrix(body["position"], yaw_quat(float(body.get("yaw") or 0.0)))
         half = np.asarray(body["size"], dtype=float)
     return T, half
 

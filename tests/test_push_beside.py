@@ -113,11 +113,12 @@ def _compute_push(snapshot, blocked=None, **params):
 
 def test_compute_push_aims_the_plate_at_the_landmarks_side_and_starts_behind_its_face():
     from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M
-    from phyagentos.primitives.contact import FINGER_HALF_THICKNESS_M
-    from phyagentos.primitives.perception import BESIDE_GAP_M
+    from phyagentos.primitives.contact import FINGER_HALF_THICKNESS_M, PUSH_BESIDE_GAP_M
 
     board, record = _compute_push(_scene([0.05, -0.03]), landmark="flat_stove_1", side="front", clearance_m=0.02)
-    goal = np.array([-0.15 + 0.069 + BESIDE_GAP_M, 0.20])  # its footprint the gap clear of the stove, centred across
+    # its footprint the push's gap clear of the stove (mid the verifier's reach), centred across (nothing there)
+    goal = np.array([-0.15 + 0.069 + PUSH_BESIDE_GAP_M, 0.20])
+    assert record["shift_m"] == 0.0
     move = goal - [0.05, -0.03]
     d = move / np.linalg.norm(move)
     assert record["direction"] == pytest.approx(d, abs=1e-4)
@@ -159,7 +160,7 @@ def test_compute_push_leans_the_hand_over_the_object_when_the_upright_hand_would
 
     board, record = _compute_push(_scene([0.05, -0.03]), blocked=blocked, landmark="flat_stove_1", side="front")
     assert tried == [0.0, round(PUSH_LEANS_RAD[1], 6)] and record["lean_rad"] == PUSH_LEANS_RAD[1]
-    assert record["rejected_leans"][0]["why"].startswith("push prestart collides")
+    assert record["rejected"][0]["why"].startswith("push prestart collides") and not record["edge_on"]
     d = np.array([*record["direction"], 0.0])
     start, pre = board["push_start_pose"], board["push_prestart_pose"]
     approach = start[:3, 2]  # the hand's axis, towards the fingertips: down and back from the push
@@ -168,7 +169,69 @@ def test_compute_push_leans_the_hand_over_the_object_when_the_upright_hand_would
     # the fingers still close across the push; the pre-start stands back along the hand's axis, over the plate
     assert abs(float(start[:3, 1] @ d)) < 1e-4  # the traced direction is rounded to 0.1 mm
     assert pre[:3, 3] - start[:3, 3] == pytest.approx(-0.10 * approach, abs=1e-9)
-    # every lean blocked: upright, and the planner reports the collision
-    _, upright = _compute_push(_scene([0.05, -0.03]), blocked=lambda a, b: "collides",
-                               landmark="flat_stove_1", side="front")
-    assert upright["lean_rad"] == 0.0 and len(upright["rejected_leans"]) == len(PUSH_LEANS_RAD)
+    # everything blocked: upright, fingers across, and the planner reports the collision
+    board, upright = _compute_push(_scene([0.05, -0.03]), blocked=lambda a, b: "collides",
+                                   landmark="flat_stove_1", side="front")
+    assert upright["lean_rad"] == 0.0 and not upright["edge_on"]
+    assert len(upright["rejected"]) == 2 * 2 * len(PUSH_LEANS_RAD)  # two clearances, across and edge-on
+    assert upright["clearance_m"] == 0.02
+    assert abs(float(board["push_start_pose"][:3, 1] @ d)) < 1e-4
+
+
+def test_compute_push_turns_the_hand_edge_on_when_no_lean_is_clear():
+    from phyagentos.primitives.contact import CLOSED_FINGERS_DEPTH_M, PUSH_LEANS_RAD
+
+    def blocked(T_pre, T_start):  # only a hand whose fingers close along the push passes
+        return None if abs(float(T_start[:3, 1] @ np.array([*d, 0.0]))) > 0.99 else "push start collides: hand-cabinet"
+
+    _, first = _compute_push(_scene([0.05, -0.03]), blocked=lambda a, b: None, landmark="flat_stove_1", side="front")
+    d = np.asarray(first["direction"], dtype=float)
+    d /= np.linalg.norm(d)
+    board, record = _compute_push(_scene([0.05, -0.03]), blocked=blocked, landmark="flat_stove_1", side="front")
+    assert record["edge_on"] and record["lean_rad"] == 0.0
+    assert [r["lean_rad"] for r in record["rejected"]] == list(PUSH_LEANS_RAD)
+    start, pre, end = board["push_start_pose"], board["push_prestart_pose"], board["push_goal_pose"]
+    assert start[:3, 2] == pytest.approx([0.0, 0.0, -1.0], abs=1e-9)  # upright
+    # the closed fingers' outer face stands the clearance behind the plate's face
+    face = 0.069 * (abs(d[0]) + abs(d[1]))
+    assert start[:2, 3] == pytest.approx(np.array([0.05, -0.03]) - (face + 0.02 + CLOSED_FINGERS_DEPTH_M) * d,
+                                         abs=2e-4)
+    assert pre[:3, 3] == pytest.approx(start[:3, 3] + [0.0, 0.0, 0.10], abs=1e-9)
+    assert (end[:2, 3] - start[:2, 3]) @ d == pytest.approx(0.02 + record["distance_m"], abs=2e-4)  # rounded traces
+
+
+def test_compute_push_comes_closer_to_the_object_when_no_start_at_the_skills_clearance_is_clear():
+    from phyagentos.primitives.contact import FINGER_HALF_THICKNESS_M, PUSH_LEANS_RAD, TIGHT_CLEARANCE_M
+
+    plate = np.array([0.05, -0.03])
+    face = {}
+
+    def blocked(T_pre, T_start):  # the cabinet stands 3 cm behind the plate's face: only a close start fits
+        gap = float(np.linalg.norm(T_start[:2, 3] - plate)) - face["plate"]
+        return None if gap < 0.02 else f"push start collides: finger-cabinet ({gap:.3f} m)"
+
+    _, first = _compute_push(_scene(list(plate)), landmark="flat_stove_1", side="front")
+    d = np.asarray(first["direction"], dtype=float)
+    face["plate"] = 0.069 * (abs(d[0]) + abs(d[1])) / np.linalg.norm(d)
+    board, record = _compute_push(_scene(list(plate)), blocked=blocked, landmark="flat_stove_1", side="front")
+    assert record["clearance_m"] == TIGHT_CLEARANCE_M and not record["edge_on"] and record["lean_rad"] == 0.0
+    assert len(record["rejected"]) == 2 * len(PUSH_LEANS_RAD)  # every start at the skill's 2 cm first
+    start, end = board["push_start_pose"], board["push_goal_pose"]
+    gap = float(np.linalg.norm(start[:2, 3] - plate)) - face["plate"]
+    assert gap == pytest.approx(TIGHT_CLEARANCE_M + FINGER_HALF_THICKNESS_M, abs=3e-4)
+    # the hand still ends where the plate's face must be: it travels the smaller gap
+    assert float(np.linalg.norm(end[:2, 3] - start[:2, 3])) == pytest.approx(
+        TIGHT_CLEARANCE_M + record["distance_m"], abs=2e-4)
+
+
+@pytest.mark.parametrize("edge_on", [False, True])
+def test_a_leaning_push_puts_the_hands_body_over_the_object_whichever_way_the_fingers_close(edge_on):
+    from phyagentos.primitives.contact import _push_rotation
+
+    d = np.array([-0.6, 0.8, 0.0])
+    R = _push_rotation(float(np.arctan2(d[1], d[0])), d, edge_on=edge_on, lean_rad=0.6)
+    assert np.allclose(R.T @ R, np.eye(3), atol=1e-12) and np.linalg.det(R) == pytest.approx(1.0)
+    assert R[:, 2] @ d == pytest.approx(-np.sin(0.6))  # the axis to the fingertips points back from the push
+    assert R[2, 2] == pytest.approx(-np.cos(0.6))
+    closing = R[:, 1]  # across the push; edge-on, along it (tilted with the lean)
+    assert abs(closing @ d) == pytest.approx(np.cos(0.6) if edge_on else 0.0, abs=1e-9)

@@ -42,9 +42,11 @@ perception_error       perception    the grasp missed and the observation it use
 object_moved           perception    the grasp missed and the object is now perceived more
                                      than :data:`MOVED_TOL_M` (+ 2 sigma) from where the
                                      grasp aimed
-grasp_missed           execution     the gripper closed to an opening below
+grasp_missed           execution     the gripper closed on an object to an opening below
                                      :data:`MISSED_OPENING_M` (on nothing), or
-                                     ``grasp.missed``, perception consistent
+                                     ``grasp.missed``, perception consistent (a hand
+                                     closed with no object to take, to push or hook
+                                     with, grasps nothing by design)
 perception_unknown     perception    a criterion could not be judged: the object was not
                                      seen, or only with low confidence
 object_not_seen        perception    ``perception.*`` error: the skill's own observation did
@@ -228,7 +230,9 @@ def diagnose(session: SessionRecord, evidence: Any, *, unknown: Sequence[str] = 
     facts["object"] = obj
     eT = _entity(evidence.terminal, obj) if obj else None
     trace = list(evidence.trace)
-    closes = [i for i, r in enumerate(trace) if r.get("kind") == "gripper" and r.get("command") == "close"]
+    # a close names the object it takes; one with none closes the empty hand to push or hook with
+    closes = [i for i, r in enumerate(trace)
+              if r.get("kind") == "gripper" and r.get("command") == "close" and r.get("object")]
     last_close = trace[closes[-1]] if closes else None
     held_at_start = bool(obj) and _holding(evidence.initial, obj)
     held_at_end = bool(obj) and _holding(evidence.terminal, obj)

@@ -50,6 +50,8 @@ placement_off          average_frames: observe_samples 16;
 timeout                longer_deadline: execution_timeout_s x 2
 criteria_unmet         careful_retry: observe_samples 8, reobserve_samples 8,
                        transfer_velocity_scale 0.5
+criteria_unmet of a    push_again_slower: velocity_scale x 0.5: the push again from
+push                   where the object stands now (once)
 object_slipped in a    the object is no longer in the hand: the upstream pick is
 non-acquiring skill    re-opened with the slip ladder's grip step (``Revision.reopen``)
 precondition_unmet     re_pick_upstream: the object was released upstream; the
@@ -314,6 +316,12 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
     "timeout": (
         Strategy("longer_deadline", "double the execution deadline", limits={"execution_timeout_s": 2.0}),
     ),
+    # a push that left the object short of (or past) where it was to go: push it again, slower,
+    # from where it stands now (the push's start and length come from the new observation)
+    "criteria_unmet/push": (
+        Strategy("push_again_slower", "push the object again from where it stands now, at half the speed",
+                 lambda current: {"velocity_scale": round(0.5 * float(current.get("velocity_scale") or 0.05), 4)}),
+    ),
     "criteria_unmet": (
         Strategy("careful_retry", "average 8 frames, look again before grasping, transfer at half speed",
                  {"observe_samples": 8, "reobserve_samples": 8, "transfer_velocity_scale": 0.5}),
@@ -505,6 +513,8 @@ class RecoveryPlanner:
         variant = diagnosis.facts.get("variant")
         if diagnosis.cause == "perception_unknown" and float(session.parameters.get(PUSH_PARAM) or 0.0) > 0:
             variant = "push_home"
+        elif diagnosis.cause == "criteria_unmet" and session.skill == "push":
+            variant = "push"
         ladder = self.ladders.get(f"{diagnosis.cause}/{variant}", self.ladders.get(diagnosis.cause, ()))
         current = dict(session.parameters)
         start = _ladder_start(history, diagnosis.cause)

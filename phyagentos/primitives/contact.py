@@ -35,10 +35,11 @@ from phyagentos.targets.contract import MuJoCoBacked
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
 from .motion import execution_limits, ik_options
-from .perception import beside_point, entity_pose, reach_blocked, viewer_side
+from .perception import BESIDE_GAP_M, beside_point, entity_pose, landmark_box, reach_blocked, viewer_side
 
 __all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n", "MIN_PUSH_M", "FINGER_HALF_THICKNESS_M",
-           "PUSH_LEANS_RAD"]
+           "CLOSED_FINGERS_DEPTH_M", "PUSH_LEANS_RAD", "TIGHT_CLEARANCE_M", "PUSH_BESIDE_GAP_M", "PUSH_MAX_SHIFT",
+           "FREE_MARGIN_M", "free_shift"]
 
 #: The least push (m) :class:`ComputePush` makes towards a landmark's side: an object already
 #: there is pushed this much more, so the push still touches it.
@@ -52,6 +53,27 @@ FINGER_HALF_THICKNESS_M = 0.01
 #: fingers' face presses the object down as well as along (at 0.6 rad: 0.56 N down per N along,
 #: which a table's friction below 1.5 lets slide).
 PUSH_LEANS_RAD = (0.0, 0.3, 0.6)
+#: How far (m) the closed fingertips reach from the tcp along the fingers' closing axis: the
+#: pushing face when the hand is turned edge-on (its closing axis along the push). robosuite's
+#: Panda hand: each closed finger's pad and tip stand 1.3-1.8 cm out from the centre plane
+#: (measured on the collision meshes in the tcp frame, LIBERO's model).
+CLOSED_FINGERS_DEPTH_M = 0.018
+#: The gap (m) between the fingers and the object's face at the start when the skill's
+#: clearance leaves no start clear: 8 mm still lets the hand come down without touching it
+#: (LIBERO's plates stand 3-4.5 cm from the cabinet's side in libero_goal task 5).
+TIGHT_CLEARANCE_M = 0.008
+#: How far (m) a pushed object's near face is aimed beyond a landmark's edge ("to the front of
+#: the stove"): the middle of the verifier's ``beside`` reach (0.10 m,
+#: :data:`phyagentos.agent.criteria.BESIDE_REACH_M`), since a push lands less surely than a place
+#: (:data:`~.perception.BESIDE_GAP_M`, 1.5 cm): the object slides on or stops short by a few cm.
+PUSH_BESIDE_GAP_M = 0.05
+#: The farthest a pushed object's aim point moves across the side, from level with the
+#: landmark's centre, to a spot clear of what stands there: this fraction of the landmark's half
+#: extent across (the verifier's ``beside`` allows the whole half extent less its 2 sigma).
+PUSH_MAX_SHIFT = 0.5
+#: Clearance (m) between a pushed object's footprint at its aim point and any other perceived
+#: object's (both as discs: a footprint's circumscribed circle).
+FREE_MARGIN_M = 0.01
 
 
 def contact_force_n(model: mujoco.MjModel, data: mujoco.MjData, *, ignore_bodies: frozenset[int] = frozenset()
@@ -276,6 +298,69 @@ class GuardedMove(_ContactMotion):
         return Status.SUCCESS
 
 
+def free_shift(point_xy, across_xy, radius_m: float, obstacles, *, max_shift_m: float,
+               step_m: float = 0.005, margin_m: float = FREE_MARGIN_M) -> float:
+    """The shift (m, along the (2,) unit ``across_xy``) nearest 0 that puts a disc of
+    ``radius_m`` centred at ``point_xy + shift * across_xy`` at least ``margin_m`` clear of every
+    obstacle disc (``obstacles``: ``((2,) centre, radius m)`` pairs, world frame), within
+    ``|shift| <= max_shift_m``, tried in ``step_m`` steps (the positive side first at each
+    size); 0.0 when no shift clears them (the aim point stays level with the landmark)."""
+    p, a = np.asarray(point_xy, dtype=float)[:2], np.asarray(across_xy, dtype=float)[:2]
+    obstacles = [(np.asarray(c, dtype=float)[:2], float(r)) for c, r in obstacles]
+    n = int(np.floor(max(0.0, max_shift_m) / step_m + 1e-9))
+    for k in range(n + 1):
+        for shift in ((0.0,) if k == 0 else (k * step_m, -k * step_m)):
+            q = p + shift * a
+            if all(float(np.linalg.norm(q - c)) >= radius_m + r + margin_m for c, r in obstacles):
+                return float(shift)
+    return 0.0
+
+
+def _footprint_radius(half: np.ndarray, T_obj: np.ndarray, round_: bool) -> float:
+    """Radius (m) of the circle round a perceived footprint: a round one's radius, else its
+    box's horizontal half diagonal (``half`` (3,) half extents in the object's frame)."""
+    if round_:
+        return float(max(half[0], half[1]))
+    corner = np.abs(T_obj[:2, :3]) @ np.asarray(half, dtype=float)
+    return float(np.hypot(corner[0], corner[1]))
+
+
+def _obstacles(snapshot: dict, *, skip) -> list[tuple[np.ndarray, float]]:
+    """``((2,) centre, radius m)`` of every perceived object and unknown thing on the table
+    but those named in ``skip``, as discs round their footprints (a round one's radius, else its
+    box's half diagonal; the world frame)."""
+    out = []
+    for e in snapshot.get("entities", []):
+        if e.get("name") in skip or e.get("kind") not in ("object", "unknown"):
+            continue
+        size = np.asarray(e.get("size") or (0.0, 0.0, 0.0), dtype=float)
+        round_ = (e.get("attributes") or {}).get("shape") == "cylinder"
+        radius = float(max(size[0], size[1])) if round_ else float(np.hypot(size[0], size[1]))
+        out.append((np.asarray(e["position"], dtype=float)[:2], radius))
+    return out
+
+
+def _push_rotation(yaw: float, direction: np.ndarray, *, edge_on: bool, lean_rad: float) -> np.ndarray:
+    """(3, 3) world rotation of the tcp pushing along the (3,) horizontal unit ``direction``:
+    top-down at ``yaw`` (rad, the fingers' closing axis, tcp y, across the push) or turned a
+    quarter turn (``edge_on``: that axis along the push), then leant by ``lean_rad`` about the
+    horizontal tcp axis across the push, the hand's body forward over the object and the
+    fingertips behind it."""
+    R = top_down_rotation(yaw + (np.pi / 2 if edge_on else 0.0))
+    if lean_rad == 0.0:
+        return R
+    c, s = np.cos(lean_rad), np.sin(lean_rad)
+    for sign in (1.0, -1.0):
+        if edge_on:  # about tcp x
+            L = np.array([[1.0, 0.0, 0.0], [0.0, c, -sign * s], [0.0, sign * s, c]])
+        else:  # about tcp y
+            L = np.array([[c, 0.0, -sign * s], [0.0, 1.0, 0.0], [sign * s, 0.0, c]])
+        out = R @ L
+        if float(out[:, 2] @ direction) < 0.0:  # the hand's axis (to the fingertips) points back
+            return out
+    raise AssertionError("unreachable: one of the two leans points the hand's axis back")
+
+
 class ComputePush(Primitive):
     """Start and pre-start tcp poses to push ``object`` along the table with the closed hand.
 
@@ -291,8 +376,11 @@ class ComputePush(Primitive):
     ``tip_clearance_m`` above the surface it stands on (its box's bottom); the push ends where
     the face has moved the distance. The hand is top-down, or leans over the object by the
     first of :data:`PUSH_LEANS_RAD` whose start and pre-start poses the arm reaches clear of
-    collisions (:func:`~.perception.reach_blocked`; none clear: upright, and the planner
-    reports the collision).
+    collisions (:func:`~.perception.reach_blocked`). When none is clear the hand is turned
+    edge-on, upright, its closing axis along the push: the hand's body is then 6.2 cm across the
+    push instead of 20.8 (robosuite's Panda), which passes between a plate and a cabinet 3 cm
+    from it; the closed fingers' outer face pushes (:data:`CLOSED_FINGERS_DEPTH_M`). None of
+    them clear: upright, fingers across, and the planner reports the collision.
 
     Args:
         object: the object to push.
@@ -359,9 +447,19 @@ class ComputePush(Primitive):
                 return float(max(half[0], half[1]))
             return float(np.abs(T_obj[:3, :3].T @ np.array([d[0], d[1], 0.0])) @ half)
 
+        shift = 0.0
         if self.landmark is not None:
             side_xy = viewer_side(snapshot, self.side, who=self.name, of=self.landmark)
-            goal, _ = beside_point(snapshot, self.landmark, self.side, extent(side_xy), who=self.name)
+            goal, _ = beside_point(snapshot, self.landmark, self.side,
+                                   extent(side_xy) + PUSH_BESIDE_GAP_M - BESIDE_GAP_M, who=self.name)
+            T_lm, lm_half = landmark_box(snapshot, self.landmark)
+            across = np.array([-side_xy[1], side_xy[0]])
+            width = float(np.abs(T_lm[:3, :3].T @ np.array([across[0], across[1], 0.0])) @ lm_half)
+            shift = free_shift(goal[:2], across, _footprint_radius(half, T_obj, round_),
+                               _obstacles(snapshot, skip=(self.object, self.landmark)),
+                               max_shift_m=PUSH_MAX_SHIFT * width)
+            goal = goal.copy()
+            goal[:2] += shift * across
             move = goal[:2] - T_obj[:2, 3]
             distance = float(np.linalg.norm(move))
             # already there (within a centimetre): a centimetre more towards that side, so the push still
@@ -370,37 +468,46 @@ class ComputePush(Primitive):
             distance = max(distance, MIN_PUSH_M)
         else:
             direction, distance = self.direction, self.distance_m
-        back = extent(direction) + self.clearance_m + FINGER_HALF_THICKNESS_M
-        xy = T_obj[:2, 3] - back * direction
         bottom = float(T_obj[2, 3] - np.abs(T_obj[2, :3]) @ half)
         z = max(float(T_obj[2, 3]), bottom + FINGERTIP_BELOW_TCP_M + self.tip_clearance_m)
-        # fingers close along the tcp y axis; put that axis across the push direction
+        # fingers close along the tcp y axis: across the push direction, or along it when turned edge-on
         yaw = float(np.arctan2(direction[1], direction[0]))
         rejected: list[dict] = []
         chosen = None
-        for lean in PUSH_LEANS_RAD:
-            c, s = np.cos(lean), np.sin(lean)
-            T = np.eye(4)  # leaning: turned about the fingers' closing axis, the fingertips behind the hand
-            T[:3, :3] = top_down_rotation(yaw) @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+        d3 = np.array([direction[0], direction[1], 0.0])
+        for clearance, edge_on, lean in self._candidates():
+            face = CLOSED_FINGERS_DEPTH_M if edge_on else FINGER_HALF_THICKNESS_M
+            xy = T_obj[:2, 3] - (extent(direction) + clearance + face) * direction
+            T = np.eye(4)
+            T[:3, :3] = _push_rotation(yaw, d3, edge_on=edge_on, lean_rad=lean)
             T[:3, 3] = [xy[0], xy[1], z]
             P = T.copy()  # back along the hand's own axis: straight above, or over the object when leaning
             P[:3, 3] -= self.approach_height_m * T[:3, 2]
             why = self._blocked(P, T)
             if why is None:
-                chosen = (lean, T, P)
+                chosen = (clearance, edge_on, lean, T, P)
                 break
-            rejected.append({"lean_rad": lean, "why": str(why)})
-            chosen = chosen or (lean, T, P)  # none clear: upright, and the planner says why
-        lean, T, P = chosen  # type: ignore[misc]
+            rejected.append({"clearance_m": clearance, "edge_on": edge_on, "lean_rad": lean, "why": str(why)})
+            chosen = chosen or (clearance, edge_on, lean, T, P)  # none clear: the first, and the planner says why
+        clearance, edge_on, lean, T, P = chosen  # type: ignore[misc]
         G = T.copy()  # the hand travels the gap, then the object's distance
-        G[:2, 3] += (self.clearance_m + distance) * direction
+        G[:2, 3] += (clearance + distance) * direction
         self.set(self.start_key, T)
         self.set(self.prestart_key, P)
         self.set(self.goal_key, G)
         self.ctx.trace.record("push_pose", object=self.object, start=T[:3, 3].round(4).tolist(),
                               direction=np.round(direction, 4).tolist(), distance_m=round(distance, 4),
-                              lean_rad=lean, rejected_leans=rejected,
-                              **({"landmark": self.landmark, "side": self.side} if self.landmark else {}))
+                              clearance_m=clearance, edge_on=edge_on, lean_rad=lean, rejected=rejected,
+                              **({"landmark": self.landmark, "side": self.side, "shift_m": round(shift, 4)}
+                                 if self.landmark else {}))
+
+    def _candidates(self) -> list[tuple[float, bool, float]]:
+        """``(clearance m, edge_on, lean rad)`` of the start poses, in the order tried: the
+        skill's clearance first, the hand across then edge-on, each upright then leaning
+        (:data:`PUSH_LEANS_RAD`); then the same with :data:`TIGHT_CLEARANCE_M` where that is less
+        (a plate 3 cm from a cabinet's side leaves the fingers no 2 cm gap)."""
+        clearances = [self.clearance_m] + ([TIGHT_CLEARANCE_M] if TIGHT_CLEARANCE_M < self.clearance_m else [])
+        return [(c, e, lean) for c in clearances for e in (False, True) for lean in PUSH_LEANS_RAD]
 
     def _blocked(self, T_pre: np.ndarray, T_start: np.ndarray):
         """Why the arm cannot stand at ``T_pre`` and then ``T_start`` ((4, 4) world tcp poses:

@@ -235,3 +235,43 @@ def test_a_leaning_push_puts_the_hands_body_over_the_object_whichever_way_the_fi
     assert R[2, 2] == pytest.approx(-np.cos(0.6))
     closing = R[:, 1]  # across the push; edge-on, along it (tilted with the lean)
     assert abs(closing @ d) == pytest.approx(np.cos(0.6) if edge_on else 0.0, abs=1e-9)
+
+
+def test_free_shift_moves_the_aim_across_to_the_nearest_spot_clear_of_what_stands_there():
+    from phyagentos.primitives.contact import free_shift
+
+    across = np.array([0.0, 1.0])
+    # nothing in the way: the aim stays where it is
+    assert free_shift([0.0, 0.0], across, 0.05, [], max_shift_m=0.1) == 0.0
+    # a 2 cm disc 6 cm off to the right: a 5 cm disc clears it (with the 1 cm margin) 2 cm to the left
+    assert free_shift([0.0, 0.0], across, 0.05, [([0.0, 0.06], 0.02)], max_shift_m=0.1) == pytest.approx(-0.02)
+    # dead ahead: the positive side is tried first at each size
+    assert free_shift([0.0, 0.0], across, 0.05, [([0.0, 0.0], 0.02)], max_shift_m=0.1) == pytest.approx(0.08)
+    # no shift within reach clears it: the aim stays level with the landmark
+    assert free_shift([0.0, 0.0], across, 0.05, [([0.0, 0.0], 0.02)], max_shift_m=0.05) == 0.0
+
+
+def test_compute_push_aims_the_plate_clear_of_a_cream_cheese_beside_the_stove():
+    from phyagentos.primitives.contact import FREE_MARGIN_M, PUSH_BESIDE_GAP_M
+
+    scene = _scene([0.05, -0.03])
+    scene["entities"][1]["attributes"]["shape"] = "cylinder"  # a plate is round: its radius, not a box's diagonal
+    # libero_goal's cream cheese stands in front of the stove, to the viewer's left of its centre
+    cheese = {"name": "cream_cheese_1", "kind": "object", "position": [-0.05, 0.12, 0.93],
+              "quat_wxyz": [1, 0, 0, 0], "size": [0.02, 0.03, 0.02], "attributes": {"confidence": 0.9}}
+    scene["entities"].append(cheese)
+    board, record = _compute_push(scene, landmark="flat_stove_1", side="front")
+    goal_x = -0.15 + 0.069 + PUSH_BESIDE_GAP_M
+    shift = record["shift_m"]
+    assert shift > 0.0  # towards the viewer's right (+y), away from the cheese
+    aim = np.array([goal_x, 0.20 + shift])
+    clear = 0.069 + np.hypot(0.02, 0.03) + FREE_MARGIN_M
+    assert np.linalg.norm(aim - [-0.05, 0.12]) >= clear - 1e-9
+    assert np.linalg.norm(aim - [0.0, 0.005] - [-0.05, 0.12]) < clear  # the nearest such step
+    move = aim - [0.05, -0.03]
+    assert record["direction"] == pytest.approx(move / np.linalg.norm(move), abs=1e-4)
+    # still in front of the stove: within half its width of its centre across
+    assert shift <= 0.5 * 0.095
+    # a fixture is the landmark's world, not a thing on the table: no shift round it
+    cheese["kind"] = "fixture"
+    assert _compute_push(scene, landmark="flat_stove_1", side="front")[1]["shift_m"] == 0.0

@@ -265,3 +265,27 @@ def test_judges_compose_behind_one_interface(tmp_path):
     assert alone.verdict == "success"
     assert both.verdict == "replan" and both.verifier == "predicates+upright"
     assert [(c.name, c.status) for c in both.criteria][-1] == ("upright", "unsatisfied")
+
+
+def test_a_push_that_closed_the_empty_hand_is_no_missed_grasp_and_pushes_again_slower(tmp_path):
+    from phyagentos.protocol import Diagnosis
+
+    # a push closes its empty hand to push with: the close names no object and grasps nothing by design
+    push_close = {"kind": "gripper", "command": "close", "opening_m": 0.0002, "effort_n": 0.0, "stalled": False,
+                  "closed_on_something": False}
+    accept = {"inside": {"object": "cube", "region": "goal"}}
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, 0.1, 0.02)), [observe((0.5, -0.2, 0.02)), push_close],
+                status="completed")
+    push = session(skill="push", accept=accept, params={"object": "cube", "direction": [0, 1], "distance_m": 0.45})
+    d = diagnose(push, ev)
+    assert d.cause == "criteria_unmet" and d.cause != "grasp_missed"
+    rev = RecoveryPlanner().plan(push, d)
+    # the push again from where the cube stands now, at half the skill's default speed (0.05)
+    assert rev.strategy == "push_again_slower" and rev.parameters == {"velocity_scale": 0.025}
+    # the same close naming the object it takes is a missed grasp
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, -0.2, 0.02)),
+                [observe((0.5, -0.2, 0.02)), {**push_close, "object": "cube"}], status="completed", name="t")
+    assert diagnose(session(), ev).cause == "grasp_missed"
+    # a pick whose criteria are unmet keeps the careful retry
+    assert RecoveryPlanner().plan(session(), Diagnosis(cause="criteria_unmet", category="verifier",
+                                                       summary="x")).strategy == "careful_retry"

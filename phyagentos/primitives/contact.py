@@ -366,21 +366,24 @@ class ComputePush(Primitive):
 
     Either along ``direction`` by ``distance_m``, or to the viewer's ``side`` of ``landmark``
     (``push the plate to the front of the stove``): to where :func:`~.perception.beside_point`
-    sets an object down there, its footprint :data:`~.perception.BESIDE_GAP_M` clear of the
-    landmark's, level with the landmark's centre across; the direction and distance are then
-    those from the object's perceived centre to that point.
+    sets an object down there, its footprint :data:`PUSH_BESIDE_GAP_M` clear of the landmark's
+    (the middle of the verifier's reach: a push lands less surely than a place), level with the
+    landmark's centre across, or moved across by :func:`free_shift` to the nearest spot clear of
+    every other perceived object (at most :data:`PUSH_MAX_SHIFT` of the landmark's half width);
+    the direction and distance are then those from the object's perceived centre to that point.
 
     The tcp starts ``clearance_m`` behind the object's face (its extent along the direction from
     the perceived centre: its box's, or its radius when perceived round), the fingers across the
     direction, low enough that the closed fingertips meet the object but stay
     ``tip_clearance_m`` above the surface it stands on (its box's bottom); the push ends where
-    the face has moved the distance. The hand is top-down, or leans over the object by the
-    first of :data:`PUSH_LEANS_RAD` whose start and pre-start poses the arm reaches clear of
-    collisions (:func:`~.perception.reach_blocked`). When none is clear the hand is turned
-    edge-on, upright, its closing axis along the push: the hand's body is then 6.2 cm across the
-    push instead of 20.8 (robosuite's Panda), which passes between a plate and a cabinet 3 cm
-    from it; the closed fingers' outer face pushes (:data:`CLOSED_FINGERS_DEPTH_M`). None of
-    them clear: upright, fingers across, and the planner reports the collision.
+    the face has moved the distance. The start poses are tried in order (:meth:`_candidates`)
+    until one's start and pre-start the arm reaches clear of collisions
+    (:func:`~.perception.reach_blocked`): the hand top-down, then leaning over the object by
+    each of :data:`PUSH_LEANS_RAD`; then the same turned edge-on, its closing axis along the
+    push (the hand's body is then 6.2 cm across the push instead of 20.8, robosuite's Panda,
+    and the closed fingers' outer face pushes: :data:`CLOSED_FINGERS_DEPTH_M`); then all of
+    those :data:`TIGHT_CLEARANCE_M` behind the face. None of them clear: upright, fingers
+    across, and the planner reports the collision.
 
     Args:
         object: the object to push.

@@ -316,26 +316,23 @@ def free_shift(point_xy, across_xy, radius_m: float, obstacles, *, max_shift_m: 
     return 0.0
 
 
-def _footprint_radius(half: np.ndarray, T_obj: np.ndarray, round_: bool) -> float:
+def _disc_radius(half, round_: bool) -> float:
     """Radius (m) of the circle round a perceived footprint: a round one's radius, else its
-    box's horizontal half diagonal (``half`` (3,) half extents in the object's frame)."""
-    if round_:
-        return float(max(half[0], half[1]))
-    corner = np.abs(T_obj[:2, :3]) @ np.asarray(half, dtype=float)
-    return float(np.hypot(corner[0], corner[1]))
+    box's horizontal half diagonal (``half`` (3,) half extents in the object's frame; the
+    circle is the same whatever the box's yaw)."""
+    return float(max(half[0], half[1])) if round_ else float(np.hypot(half[0], half[1]))
 
 
 def _obstacles(snapshot: dict, *, skip) -> list[tuple[np.ndarray, float]]:
     """``((2,) centre, radius m)`` of every perceived object and unknown thing on the table
-    but those named in ``skip``, as discs round their footprints (a round one's radius, else its
-    box's half diagonal; the world frame)."""
+    but those named in ``skip``, as discs round their footprints (:func:`_disc_radius`; the
+    world frame)."""
     out = []
     for e in snapshot.get("entities", []):
         if e.get("name") in skip or e.get("kind") not in ("object", "unknown"):
             continue
         size = np.asarray(e.get("size") or (0.0, 0.0, 0.0), dtype=float)
-        round_ = (e.get("attributes") or {}).get("shape") == "cylinder"
-        radius = float(max(size[0], size[1])) if round_ else float(np.hypot(size[0], size[1]))
+        radius = _disc_radius(size, (e.get("attributes") or {}).get("shape") == "cylinder")
         out.append((np.asarray(e["position"], dtype=float)[:2], radius))
     return out
 
@@ -458,7 +455,7 @@ class ComputePush(Primitive):
             T_lm, lm_half = landmark_box(snapshot, self.landmark)
             across = np.array([-side_xy[1], side_xy[0]])
             width = float(np.abs(T_lm[:3, :3].T @ np.array([across[0], across[1], 0.0])) @ lm_half)
-            shift = free_shift(goal[:2], across, _footprint_radius(half, T_obj, round_),
+            shift = free_shift(goal[:2], across, _disc_radius(half, round_),
                                _obstacles(snapshot, skip=(self.object, self.landmark)),
                                max_shift_m=PUSH_MAX_SHIFT * width)
             goal = goal.copy()

@@ -209,6 +209,49 @@ def test_estop_reaches_the_bus_within_one_control_period(twin, cal_file):
         arm.close()
 
 
+def test_an_estop_reaches_the_bus_from_the_engaging_thread_while_the_control_loop_is_stuck(twin, cal_file):
+    latch = EStopLatch()
+    arm = SO101Arm(twin.port, calibration=Calibration.load(cal_file), estop=latch, control_period_s=0.02)
+    arm.connect()
+    stuck, release = threading.Event(), threading.Event()
+
+    def on_period(k, _q):  # the loop's thread held up mid-motion (a starved or busy process)
+        if k == 5:
+            stuck.set()
+            release.wait(5.0)
+
+    try:
+        result = {}
+        th = threading.Thread(target=lambda: result.setdefault("r", arm.follow(_ramp(arm, 0, 0.6, 60),
+                                                                               on_period=on_period)))
+        th.start()
+        assert stuck.wait(5.0)
+        arm.read()  # every goal the loop sent is served by now
+        writes = twin.goal_writes
+        latch.engage("test", source="test")
+        # the hold goals went out in this thread, before engage returned: the loop has not run since
+        latency = arm.estop_handled_at - latch.engaged_at
+        assert 0 <= latency <= arm.dt, latency
+        arm.read()
+        held = twin.goal_writes  # the hold goals (one sync write: a count per servo)
+        assert held > writes and arm.stopped == "safety.estop"
+        release.set()
+        th.join(timeout=10)
+        res = result["r"]
+        # the loop, let go, sends nothing more and ends on the e-stop
+        assert res.code == "safety.estop" and not res.completed and res.periods == 6
+        arm.read()
+        assert twin.goal_writes == held
+        assert sum(e["code"] == "safety.estop" and e["outcome"] == "hold" for e in arm.guard.events) == 1
+    finally:
+        release.set()
+        arm.close()
+    # closed, the arm no longer listens: a later e-stop does not touch its port
+    latch.clear()
+    latch.engage("again", source="test")
+    assert arm.estop_handled_at < latch.engaged_at
+
+
 def test_guard_rejects_out_of_range_and_jumping_goals_before_the_bus(twin, cal_file):
     arm = SO101Arm(twin.port, calibration=Calibration.load(cal_file))
     arm.connect()

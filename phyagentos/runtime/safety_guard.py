@@ -85,24 +85,49 @@ class EStopLatch:
 
     Thread-safe; :meth:`is_set` is a single attribute read so the streaming loops can
     check it every control period. ``engaged_at`` is ``time.perf_counter()`` at the
-    engage call (used to measure e-stop latency).
+    engage call (used to measure e-stop latency). Listeners (:meth:`add_listener`) are
+    called with the reason in the engaging thread, so a driver can put the stop on its
+    bus at once, whether or not its control loop is being scheduled.
     """
 
     def __init__(self) -> None:
         self._event = threading.Event()
         self._lock = threading.Lock()
+        self._listeners: list[Callable[[str], None]] = []
         self.reason = ""
         self.source = ""
         self.engaged_at: float | None = None
 
-    def engage(self, reason: str = "", *, source: str = "operator") -> None:
-        """Engage the e-stop (idempotent: the first reason is kept)."""
+    def add_listener(self, fn: Callable[[str], None]) -> None:
+        """Call ``fn(reason)`` in the engaging thread each time the latch is engaged (not on
+        an engage while it already is). A listener that raises is logged; the e-stop stays
+        engaged and the other listeners are still called."""
         with self._lock:
-            if not self._event.is_set():
-                logger.warning("e-stop engaged by %s: %s", source, reason)  # before: setting is the signal
-                self.reason, self.source = reason, source
-                self.engaged_at = time.perf_counter()
-                self._event.set()
+            if fn not in self._listeners:
+                self._listeners.append(fn)
+
+    def remove_listener(self, fn: Callable[[str], None]) -> None:
+        """Stop calling ``fn`` (no error when it was not added)."""
+        with self._lock:
+            if fn in self._listeners:
+                self._listeners.remove(fn)
+
+    def engage(self, reason: str = "", *, source: str = "operator") -> None:
+        """Engage the e-stop (idempotent: the first reason is kept), then call the
+        listeners (first engage only)."""
+        with self._lock:
+            if self._event.is_set():
+                return
+            logger.warning("e-stop engaged by %s: %s", source, reason)  # before: setting is the signal
+            self.reason, self.source = reason, source
+            self.engaged_at = time.perf_counter()
+            self._event.set()
+            listeners = list(self._listeners)
+        for fn in listeners:
+            try:
+                fn(reason)
+            except Exception:  # noqa: BLE001 - the latch is engaged whatever a listener does
+                logger.exception("e-stop listener %r failed", fn)
 
     def clear(self) -> None:
         """Release the latch (an operator decision; never done by the runtime itself)."""

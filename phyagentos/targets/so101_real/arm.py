@@ -5,7 +5,10 @@
 period of :meth:`SO101Arm.follow`:
 
 1. the e-stop latch is checked (and polled every millisecond while the loop waits for
-   the next period, so an e-stop reaches the bus within one period);
+   the next period, so an e-stop reaches the bus within one period); a latch that takes
+   listeners (:class:`~phyagentos.runtime.safety_guard.EStopLatch`) has the stop put on the
+   bus by the thread that engages it, at once, whether or not this loop is being scheduled
+   (the bus work of both is serialised by one lock);
 2. one GROUP_SYNC_READ of the state block; the reading is converted to radians and
    checked (range, load, status bits, temperature);
 3. the period's goal is checked (calibrated range, step, velocity) and sent as one
@@ -24,6 +27,7 @@ then the jaw angle).
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from dataclasses import dataclass, field, replace
 
@@ -65,7 +69,9 @@ class SO101Arm:
         calibration: the arm's :class:`Calibration` (ids, offsets, ranges).
         limits: bus guard limits and ``stop_policy``.
         control_period_s: the period of :meth:`follow`, s.
-        estop: an e-stop latch (anything with ``is_set()``), checked every period.
+        estop: an e-stop latch (anything with ``is_set()``), checked every period; one with
+            ``add_listener`` / ``remove_listener`` also applies the stop from the engaging
+            thread while the arm is connected.
         dry_run: read only: never torque on, never a goal on the bus.
     """
 
@@ -78,6 +84,9 @@ class SO101Arm:
         self.limits = limits or BusLimits()
         self.dt = float(control_period_s)
         self.guard = BusSafetyGuard(calibration.safe_ranges_rad(), self.limits, self.dt)
+        self._bus_lock = threading.RLock()  # one bus transaction at a time: the loop's and an e-stop's
+        self._connected = False
+        self._estop = None
         self.estop = estop
         self.dry_run = bool(dry_run)
         self.last_q: np.ndarray | None = None
@@ -116,12 +125,44 @@ class SO101Arm:
         self.goal_q = self.calibration.to_radians(goals)
         self._jaw_steps = int(goals[5])
         self.guard.sync(self.goal_q)
+        self._connected = True
+        self._listen(True)
         return found
 
     def close(self) -> None:
         """Close the port. The servos keep their last goal (holding); torque is not dropped,
         so the arm does not fall when the program ends (``release()`` first for that)."""
-        self.bus.close()
+        self._listen(False)
+        self._connected = False
+        with self._bus_lock:
+            self.bus.close()
+
+    # -- e-stop ---------------------------------------------------------------------------
+    @property
+    def estop(self):
+        """The e-stop latch (``None``: none); setting it moves the listener to the new one."""
+        return self._estop
+
+    @estop.setter
+    def estop(self, latch) -> None:
+        self._listen(False)
+        self._estop = latch
+        self._listen(True)
+
+    def _listen(self, on: bool) -> None:
+        """(Un)register :meth:`_on_estop` with the latch, where it takes listeners (only while
+        connected: a closed port has no bus to stop)."""
+        latch = self._estop
+        if latch is None or not hasattr(latch, "add_listener"):
+            return
+        if on and self._connected:
+            latch.add_listener(self._on_estop)
+        elif not on:
+            latch.remove_listener(self._on_estop)
+
+    def _on_estop(self, reason: str) -> None:
+        """The latch's listener: the stop on the bus from the engaging thread."""
+        self._apply_stop("safety.estop", f"e-stop engaged: {reason}" if reason else "e-stop engaged")
 
     def release(self) -> None:
         """Torque off on every servo (the arm goes limp)."""
@@ -141,7 +182,8 @@ class SO101Arm:
         """One checked sync read: ``(q (6,) rad, BusState)``. A bus failure or a reading
         violation stops the arm (policy) and raises (:class:`BusError` / :class:`BusSafetyStop`)."""
         try:
-            return self._read_checked()
+            with self._bus_lock:
+                return self._read_checked()
         except BusError as exc:
             self._apply_stop(exc.code, str(exc))
             raise
@@ -152,16 +194,17 @@ class SO101Arm:
     def send(self, q_goal) -> np.ndarray:
         """Check and send one goal (6,) rad; returns the admitted goal. A rejection sends
         nothing and raises :class:`BusSafetyStop` (outcome ``reject``)."""
-        q = self.guard.check_goal(q_goal)
-        self._prev_sent = q
-        if not self.dry_run:
-            steps = self.calibration.to_steps(q)
-            self._jaw_steps = int(steps[5])
-            try:
-                self.bus.sync_write_goals(steps)
-            except BusError as exc:
-                self._apply_stop(exc.code, str(exc))
-                raise
+        with self._bus_lock:  # checked and sent as one: an e-stop between them would be overtaken
+            q = self.guard.check_goal(q_goal)
+            self._prev_sent = q
+            if not self.dry_run:
+                steps = self.calibration.to_steps(q)
+                self._jaw_steps = int(steps[5])
+                try:
+                    self.bus.sync_write_goals(steps)
+                except BusError as exc:
+                    self._apply_stop(exc.code, str(exc))
+                    raise
         return q
 
     def engage_estop(self, reason: str = "e-stop") -> None:
@@ -180,6 +223,10 @@ class SO101Arm:
         return self.guard.stopped
 
     def _apply_stop(self, code: str, message: str, *, already_latched: bool = False) -> None:
+        with self._bus_lock:  # the loop's thread or the e-stop's: the first one applies it
+            self._apply_stop_locked(code, message, already_latched=already_latched)
+
+    def _apply_stop_locked(self, code: str, message: str, *, already_latched: bool) -> None:
         first = self.guard.stopped is None or already_latched
         if not already_latched:
             self.guard.stop(code, message)

@@ -224,28 +224,25 @@ class SO101Arm:
 
     def _apply_stop(self, code: str, message: str, *, already_latched: bool = False) -> None:
         with self._bus_lock:  # the loop's thread or the e-stop's: the first one applies it
-            self._apply_stop_locked(code, message, already_latched=already_latched)
-
-    def _apply_stop_locked(self, code: str, message: str, *, already_latched: bool) -> None:
-        first = self.guard.stopped is None or already_latched
-        if not already_latched:
-            self.guard.stop(code, message)
-        self._prev_sent = None
-        if not first or self.dry_run:
-            return
-        try:
-            if self.limits.stop_policy == "torque_off":
-                self.bus.torque(False)
-            elif self.last_state is not None:  # arm where it is; the jaw keeps squeezing what it holds
-                goals = [int(p) for p in self.last_state.position]
-                if self._jaw_steps is not None:
-                    goals[5] = self._jaw_steps
-                self.bus.sync_write_goals(goals)
-            self.guard.event(code, self.limits.stop_policy, f"stop applied on the bus ({self.limits.stop_policy})")
-        except BusError as exc:  # the bus itself is gone: nothing more can be sent
-            self.guard.event("bus.stop_failed", "stop", f"could not apply {self.limits.stop_policy}: {exc}")
-        if code == "safety.estop":
-            self.estop_handled_at = time.perf_counter()
+            first = self.guard.stopped is None or already_latched
+            if not already_latched:
+                self.guard.stop(code, message)
+            self._prev_sent = None
+            if not first or self.dry_run:
+                return
+            try:
+                if self.limits.stop_policy == "torque_off":
+                    self.bus.torque(False)
+                elif self.last_state is not None:  # arm where it is; the jaw keeps squeezing what it holds
+                    goals = [int(p) for p in self.last_state.position]
+                    if self._jaw_steps is not None:
+                        goals[5] = self._jaw_steps
+                    self.bus.sync_write_goals(goals)
+                self.guard.event(code, self.limits.stop_policy, f"stop applied on the bus ({self.limits.stop_policy})")
+            except BusError as exc:  # the bus itself is gone: nothing more can be sent
+                self.guard.event("bus.stop_failed", "stop", f"could not apply {self.limits.stop_policy}: {exc}")
+            if code == "safety.estop":
+                self.estop_handled_at = time.perf_counter()
 
     # -- streaming --------------------------------------------------------------------------
     def _wait(self, deadline: float) -> bool:

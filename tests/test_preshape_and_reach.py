@@ -79,12 +79,12 @@ def test_a_rim_the_open_fingers_cannot_reach_is_taken_with_the_hand_preshaped(fr
     real = perception._unusable
     asked = []
 
-    def unusable(ctx, obj, plan, *, opening_m=None):
+    def unusable(ctx, obj, plan, *, opening_m=None, close_to_m=None):
         asked.append(opening_m)
         if opening_m is None:
             return perception.Blocked("grasp collides: gripper0_rightfinger-wooden_cabinet_1_cabinet_top",
                                       stage="grasp", collides=True)
-        return real(ctx, obj, plan, opening_m=opening_m)
+        return real(ctx, obj, plan, opening_m=opening_m, close_to_m=close_to_m)
 
     monkeypatch.setattr(perception, "_unusable", unusable)
     board, [rec] = _run_compute_grasp(franka, _bowl())

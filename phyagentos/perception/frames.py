@@ -174,6 +174,12 @@ class Proprioception:
         wrist_force_n: (3,) N in the wrist sensor frame, or None without an F/T sensor.
         wrist_torque_nm: (3,) N*m in the wrist sensor frame, or None.
         tcp_pose: (4, 4) forward kinematics of the tool site in the world frame.
+        finger_offsets_m: (2,) m: how far each finger stands from the tcp along the closing
+            axis (tcp y), the finger on the tcp's +y side first, then the one on its -y side,
+            each 0 at the middle and positive when open; ``None`` for a hand that reports only
+            its opening (fingers coupled, as the Franka Hand's are). A hand whose fingers are
+            driven apart (robosuite's Panda gripper in LIBERO: one position servo per finger)
+            tells from it which finger stopped on something.
 
     Raises:
         PerceptionError: mismatched lengths, wrong shapes or non-finite values.
@@ -189,6 +195,7 @@ class Proprioception:
     wrist_force_n: np.ndarray | None
     wrist_torque_nm: np.ndarray | None
     tcp_pose: np.ndarray
+    finger_offsets_m: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         owner = "Proprioception"
@@ -207,3 +214,9 @@ class Proprioception:
             if v is not None:
                 _array(owner, name, v, (3,))
         _rigid(owner, "tcp_pose", self.tcp_pose)
+        if self.finger_offsets_m is not None:
+            f = self.finger_offsets_m
+            if not isinstance(f, tuple) or len(f) != 2:
+                raise PerceptionError(f"{owner}.finger_offsets_m must be a tuple of 2 numbers (m) or None, got {f!r}")
+            for k, v in enumerate(f):
+                _finite_number(owner, f"finger_offsets_m[{k}]", v)

@@ -120,12 +120,15 @@ def _tcp_fields(p) -> dict:
 def proprio_record(target, p, *, phase: str, leaf: str) -> dict:
     """The ``proprio`` trace entry of CONTRACT_9 section 5 for sample ``p``: opening (m per
     finger), finger effort (N), wrist force (3,) N and load (N), and the tcp pose in the
-    world frame from forward kinematics (``tcp_position_m`` (3,) m, ``tcp_quat_wxyz`` (4,))."""
+    world frame from forward kinematics (``tcp_position_m`` (3,) m, ``tcp_quat_wxyz`` (4,)); and
+    ``finger_offsets_m`` (2,) m where the hand reports each finger."""
     load = wrist_load_n(target, p)
+    fingers = getattr(p, "finger_offsets_m", None)
+    each = {} if fingers is None else {"finger_offsets_m": [round(float(x), 5) for x in fingers]}
     return {"leaf": leaf, "phase": phase, "stamp_s": round(float(p.stamp_s), 4),
             "opening_m": round(float(p.gripper_opening_m), 5), "effort_n": round(float(p.gripper_effort_n), 3),
             "wrist_force_n": None if p.wrist_force_n is None else [round(float(x), 3) for x in p.wrist_force_n],
-            "wrist_load_n": None if load is None else round(load, 3), **_tcp_fields(p)}
+            "wrist_load_n": None if load is None else round(load, 3), **_tcp_fields(p), **each}
 
 
 def holding_problem(target, p, *, expected: str | None = None, after_lift: bool = False) -> str | None:

@@ -39,7 +39,7 @@ from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import plan_grasp
-from .motion import PLANNING_MARGIN_M, clear_ik
+from .motion import PLANNING_MARGIN_M, clear_ik, session_checker
 from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
 __all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "origin_pose", "declared_class", "beside_point",
@@ -218,11 +218,13 @@ def _wrap_rad(a: float) -> float:
     return float((a + np.pi) % (2.0 * np.pi) - np.pi)
 
 
-def _unusable(ctx, obj: str, plan, *, opening_m: float | None = None) -> Blocked | None:
+def _unusable(ctx, obj: str, plan, *, opening_m: float | None = None, close_to_m: float | None = None) -> Blocked | None:
     """Why the arm cannot take grasp ``plan`` of object ``obj`` (:func:`reach_blocked` of its
     pre-grasp, then its grasp; the fingers ``opening_m`` m open each at the grasp when given,
-    else as they are); ``None`` when it can."""
-    return reach_blocked(ctx, obj, ("pre-grasp", plan.pregrasp), ("grasp", plan.grasp), opening_m=opening_m)
+    else as they are; with ``close_to_m``, their close down to that opening too); ``None``
+    when it can."""
+    return reach_blocked(ctx, obj, ("pre-grasp", plan.pregrasp), ("grasp", plan.grasp), opening_m=opening_m,
+                         close_to_m=close_to_m)
 
 
 class Blocked(str):
@@ -249,13 +251,17 @@ def _object_body(ctx, obj: str) -> str | None:
 
 
 def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, np.ndarray], *,
-                  opening_m: float | None = None) -> Blocked | None:
+                  opening_m: float | None = None, close_to_m: float | None = None) -> Blocked | None:
     """Why the arm cannot reach ``above`` then ``at`` (``(label, (4, 4) world tcp pose)``):
     no IK solution clear of collisions (:func:`~.motion.clear_ik`, SolveIK's seeds) for the
     pose above (the planner's goal: its margin), or for the pose at the object from there
     (reached by a straight move, touching object ``obj`` by design: only penetration of
     anything else counts; the fingers ``opening_m`` m open each when given: a hand pre-shaped
-    after the pose above). ``None`` when both are reachable and clear, else a :class:`Blocked`."""
+    after the pose above). With ``close_to_m`` (m per finger), the fingers' close at the pose
+    at the object is checked too, at openings :data:`CLOSE_SWEEP_STEP_M` apart from where they
+    start down to ``close_to_m``: a finger that would meet anything but ``obj`` on its way in
+    (a drawer's wall beside a bowl's rim, outside the open hand) blocks it (stage ``close``).
+    ``None`` when all is reachable and clear, else a :class:`Blocked`."""
     own = _object_body(ctx, obj)
     q = None
     for (label, pose), allow, margin, opening in ((above, None, PLANNING_MARGIN_M, None), (at, own, 0.0, opening_m)):
@@ -267,6 +273,38 @@ def reach_blocked(ctx, obj: str, above: tuple[str, np.ndarray], at: tuple[str, n
             return Blocked(f"{label} collides: {', '.join('-'.join(pr) for pr in pairs[:3])}", stage=label,
                            collides=True)
         q = sol.q
+    if close_to_m is not None and q is not None:
+        return _close_blocked(ctx, own, q, opening_m, float(close_to_m))
+    return None
+
+
+#: The close of a grasp is checked at finger openings this far apart, m: under the thickness of
+#: the Franka Hand's finger pads (8 mm), so no wall a finger could pass through lies between two
+#: checks.
+CLOSE_SWEEP_STEP_M = 0.005
+
+
+def _close_blocked(ctx, own: str | None, q: np.ndarray, opening_m: float | None, close_to_m: float) -> Blocked | None:
+    """Why the fingers cannot close from ``opening_m`` (m per finger; ``None``: as they are)
+    to ``close_to_m`` with the arm at ``q`` (n,) rad: the first opening, every
+    :data:`CLOSE_SWEEP_STEP_M`, at which they meet anything but body ``own``; ``None`` when
+    they can (or the target has no collision model)."""
+    try:
+        start = float(opening_m) if opening_m is not None else float(ctx.target.gripper_opening())
+    except Exception:  # noqa: BLE001 - a target that reports no opening: nothing to sweep
+        return None
+    if start <= close_to_m:
+        return None
+    n = int(np.ceil((start - close_to_m) / CLOSE_SWEEP_STEP_M - 1e-9))
+    for o in np.linspace(start, close_to_m, n + 1)[1:]:
+        try:
+            checker = session_checker(ctx, margin_m=0.0, opening_m=float(o))
+        except Exception:  # noqa: BLE001 - a target without a collision model
+            return None
+        pairs = [pr for pr in checker.colliding_pairs(q) if own not in pr]
+        if pairs:
+            return Blocked(f"close collides {o * 1000:.0f} mm open: {', '.join('-'.join(pr) for pr in pairs[:3])}",
+                           stage="close", collides=True)
     return None
 
 
@@ -533,7 +571,8 @@ class ComputeGrasp(Primitive):
 
         A rim point is usable when the arm reaches its pre-grasp and grasp clear of the
         scene (:func:`_unusable`: the planner's collision model and margin; at the grasp,
-        contact with the bowl itself is expected). Points are
+        contact with the bowl itself is expected) and its fingers close on the wall without
+        meeting anything else on their way in (``close_to_m``: half the wall). Points are
         ranked by :func:`~phyagentos.motion.rim_grasp.rim_grasp_candidates` with the arm's
         base as the preferred side (the shorter reach; the base does not move, so the
         ranking is the same before and after the move to the pre-grasp). Re-computed with
@@ -600,12 +639,12 @@ class ComputeGrasp(Primitive):
                                                                                     - previous[:3, 3]))))
                 out_of_reach = False
                 for i, plan in enumerate(plans):
-                    bad = _unusable(self.ctx, self.object, plan, opening_m=opening)
+                    bad = _unusable(self.ctx, self.object, plan, opening_m=opening, close_to_m=0.5 * wall)
                     if bad is not None:
                         # one rim point whose grasp alone is reachable is enough to try lower pre-grasps
                         out_of_reach = out_of_reach or (bad.stage == "pre-grasp" and not bad.collides
                                                         and self._reaches(plan.grasp))
-                        collided = collided or (bad.stage == "grasp" and bad.collides)
+                        collided = collided or (bad.stage in ("grasp", "close") and bad.collides)
                         hand = f" hand {opening * 100:.1f} cm open" if opening is not None else ""
                         why.append(f"rim point {i} (yaw {plan.yaw_rad:.2f} rad) from {height:.2f} m{hand}: {bad[:160]}")
                         continue

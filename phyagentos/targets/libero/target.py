@@ -483,6 +483,15 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         q = self._data.qpos[self._finger_qadr]
         return float(0.5 * (q[0] - q[1]))
 
+    def _finger_offsets_m(self) -> tuple[float, float]:
+        """Each finger's opening, m, the one on the tcp's +y side first: robosuite's Panda
+        gripper drives its two finger joints with a position servo each, and
+        ``finger_joint1`` moves the left finger along the tcp's +y axis, ``finger_joint2``
+        (negative when open) the right one along -y (the finger bodies in the tcp frame;
+        pinned by ``tests/test_rim_close_sweep.py``)."""
+        q = self._data.qpos[self._finger_qadr]
+        return (float(q[0]), float(-q[1]))
+
     def _gripper_effort_n(self) -> float:
         """Squeeze of the two finger servos, N per finger (0 when free)."""
         f = self._data.actuator_force[self._finger_act]

@@ -284,6 +284,13 @@ class ArmSensors:
                            intrinsics=CameraIntrinsics.from_fovy(w, h, float(m.cam_fovy[cid])),
                            T_world_camera=T, rgb=rgb, depth_m=depth)
 
+    def _finger_offsets_m(self) -> tuple[float, float] | None:
+        """Each finger's distance from the tcp along its y axis, m (+y finger first), for
+        :attr:`Proprioception.finger_offsets_m <phyagentos.perception.frames.Proprioception.finger_offsets_m>`;
+        ``None`` here: the base reports the opening only (a target whose fingers move apart
+        overrides it)."""
+        return None
+
     def _gripper_effort_n(self) -> float:
         """Finger actuator force, N (squeeze; 0 when free). Subclasses with fingers override."""
         return 0.0
@@ -349,6 +356,6 @@ class ArmSensors:
             joint_velocities=self.arm_qvel(), joint_efforts=d.actuator_force[self._arm_act].copy(),
             gripper_opening_m=float(self.gripper_opening()), gripper_effort_n=float(self._gripper_effort_n()),
             wrist_force_n=None if ww is None else ww[0], wrist_torque_nm=None if ww is None else ww[1],
-            tcp_pose=self.tcp_pose(),
+            tcp_pose=self.tcp_pose(), finger_offsets_m=self._finger_offsets_m(),
         )
 

@@ -42,7 +42,7 @@ def test_a_bowl_wider_than_the_gripper_is_lifted_by_its_rim_and_the_held_width_c
     rep = run_generated_graph(
         tmp_path, name="rim_pick", description="pick up the black bowl next to the ramekin", suite="libero_spatial",
         task=1, objects=objects, fixtures=[{"name": "main_table", "class": "table"}],
-        nodes=[{"id": "pick", "skill": "pick", "params": {"object": "akita_black_bowl_1"},
+        nodes=[{"id": "pick", "skill": "pick", "params": {"object": "akita_black_bowl_1", "rim_liftoff_m": 0.02},
                 "accept": [{"holding": "akita_black_bowl_1"}, {"lifted": {"object": "akita_black_bowl_1", "min_height": 0.05}}]}],
         workspace_box=workspace_box("LIBERO_Tabletop_Manipulation"), seed=108)
     first = rep["sessions"][0]
@@ -60,6 +60,12 @@ def test_a_bowl_wider_than_the_gripper_is_lifted_by_its_rim_and_the_held_width_c
     close = next(r for r in trace if r["kind"] == "gripper" and r["command"] == "close")
     assert close["closed_on_something"] and 0.0008 < close["opening_m"] < 0.012
     assert any(r["kind"] == "load" and r["leaf"] == "CheckHolding" for r in trace)
+    # a rim grasp rises its first 2 cm slowly (rim_liftoff_m), then the rest of the lift
+    moves = [r for r in trace if r["kind"] == "execute_start" and r["leaf"] in ("LiftOff", "Lift")]
+    assert [r["leaf"] for r in moves] == ["LiftOff", "Lift"] and moves[0]["duration_s"] > 0
+    lifting = [r["tcp_position_m"][2] for r in trace if r["kind"] == "proprio" and r.get("leaf") == "LiftOff"]
+    at_close = next(r for r in trace if r["kind"] == "proprio" and r.get("phase") == "after_close")["tcp_position_m"][2]
+    assert lifting and 0.0 < max(lifting) - at_close <= 0.02 + 0.003
     assert not any(r["kind"] == "failure" for r in trace)
     # what really happened (the privileged record, read by this test only): a bowl rose with the hand
     truth = yaml.safe_load((evidence / "ground_truth.yaml").read_text())

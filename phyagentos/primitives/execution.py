@@ -171,14 +171,21 @@ class CartesianMove(_Tracking):
             all of it); ``None``: the whole offset or an ``ik.unreachable`` failure. A lift
             of a bowl out of a drawer near the edge of the Panda's workspace rises what it
             can (traced ``reach_limited``).
+        grasp_kind: move only after a grasp of this kind was planned (``rim``, ``across``,
+            ... as :func:`~phyagentos.primitives.grasp_sense.plan_grasp` records it); after
+            another, or none, the leaf succeeds at once: no time passes, nothing is traced.
+            ``None``: always.
 
     Raises (as failures): ``IKError`` when the line (or, with ``at_least_m``, its first
     ``at_least_m``) leaves the arm's reach.
     """
 
     def __init__(self, name: str, *, to: str | None = None, offset=None, velocity_scale: float = 0.3,
-                 check_collisions: bool = False, at_least_m: float | None = None):
+                 check_collisions: bool = False, at_least_m: float | None = None, grasp_kind: str | None = None):
         super().__init__(name)
+        if grasp_kind is not None and not isinstance(grasp_kind, str):
+            raise ValueError(f"grasp_kind must be a grasp kind's name (e.g. rim) or null, got {grasp_kind!r}")
+        self.grasp_kind = grasp_kind
         if (to is None) == (offset is None):
             raise ValueError("give exactly one of 'to' (blackboard pose key) or 'offset' ([dx, dy, dz] in m)")
         if offset is not None:
@@ -200,7 +207,16 @@ class CartesianMove(_Tracking):
         if to is not None:
             self.reads(to)
 
+    def _skipped(self) -> bool:
+        """Whether :attr:`grasp_kind` rules this move out (the planned grasp is of another kind)."""
+        if self.grasp_kind is None:
+            return False
+        planned = self.ctx.target.runtime_notes.get("planned_grasp") or {}
+        return planned.get("kind") != self.grasp_kind
+
     def on_enter(self):
+        if self._skipped():
+            return
         ctx = self.ctx
         target = ctx.target
         T_start = target.tcp_pose()
@@ -219,6 +235,8 @@ class CartesianMove(_Tracking):
         self._start(traj)
 
     def step(self):
+        if self._skipped():
+            return Status.SUCCESS
         return self._advance()
 
     def _path(self, T_start: np.ndarray, T_goal: np.ndarray) -> np.ndarray:

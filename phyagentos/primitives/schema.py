@@ -116,6 +116,8 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "check_collisions": ("bool", "", "re-check the timed motion against the scene"),
         "at_least_m": ("float | null", "m", "with `offset`: where the line leaves the arm's reach, end as far "
                                            "along it as reached when that is at least this far (null: all or fail)"),
+        "grasp_kind": ("str | null", "", "move only after a grasp of this kind was planned (rim, across, ...); "
+                                         "else succeed at once (null: always)"),
     },
     Gripper: {
         "command": ("open | close | preshape", "", "what to do (preshape: open only as far as the planned "

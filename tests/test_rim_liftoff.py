@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import py_trees
 import pytest
+from test_preshape_and_reach import _lift  # a CartesianMove ticked to its end on a Franka
 
-from phyagentos.primitives import SkillContext
 from phyagentos.primitives.execution import CartesianMove
 from phyagentos.primitives.grasp_sense import plan_grasp
 from phyagentos.targets import MuJoCoTarget
@@ -26,22 +26,12 @@ def franka():
     t.close()
 
 
-def _run(target, leaf) -> tuple[SkillContext, py_trees.common.Status]:
-    ctx = SkillContext(target=target)
-    leaf.setup(context=ctx)
-    for _ in range(2000):
-        leaf.tick_once()
-        if leaf.status != py_trees.common.Status.RUNNING:
-            break
-    return ctx, leaf.status
-
-
 @pytest.mark.parametrize("planned", [None, "across"])
 def test_a_rim_only_move_after_another_grasp_does_nothing(franka, planned):
     if planned is not None:
         plan_grasp(franka, object="cube", width_m=0.04, kind=planned)
     z0, t0 = float(franka.tcp_pose()[2, 3]), franka.sim_time
-    ctx, status = _run(franka, CartesianMove("LiftOff", offset=[0.0, 0.0, 0.02], grasp_kind="rim"))
+    ctx, status = _lift(franka, offset=[0.0, 0.0, 0.02], grasp_kind="rim")
     assert status == py_trees.common.Status.SUCCESS
     assert ctx.trace.records == [] and franka.sim_time == t0
     assert float(franka.tcp_pose()[2, 3]) == pytest.approx(z0, abs=1e-6)
@@ -50,7 +40,7 @@ def test_a_rim_only_move_after_another_grasp_does_nothing(franka, planned):
 def test_a_rim_only_move_after_a_rim_grasp_moves(franka):
     plan_grasp(franka, object="bowl_1", width_m=0.003, kind="rim")
     z0 = float(franka.tcp_pose()[2, 3])
-    ctx, status = _run(franka, CartesianMove("LiftOff", offset=[0.0, 0.0, 0.02], velocity_scale=0.3, grasp_kind="rim"))
+    ctx, status = _lift(franka, offset=[0.0, 0.0, 0.02], grasp_kind="rim")
     assert status == py_trees.common.Status.SUCCESS, ctx.failure
     assert [r["kind"] for r in ctx.trace.records][:1] == ["execute_start"]
     assert float(franka.tcp_pose()[2, 3]) - z0 == pytest.approx(0.02, abs=2e-3)

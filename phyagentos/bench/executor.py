@@ -2,7 +2,8 @@
 
 ``local`` (default): a :class:`concurrent.futures.ProcessPoolExecutor` with ``workers``
 processes started with ``spawn`` (a clean interpreter: no MuJoCo or OpenGL state
-inherited from the parent). Each worker runs whole episodes, one at a time; for each it
+inherited from the parent); a worker ends itself and its children when the bench process
+goes away, however it ended. Each worker runs whole episodes, one at a time; for each it
 builds its own WatchdogSupervisor and AgentCoordinator on the episode's workspace, so
 an episode's sessions (including verifier-triggered child sessions) stay on one worker
 and its world state never crosses processes.
@@ -16,6 +17,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Callable, Sequence
@@ -32,8 +34,24 @@ logger = logging.getLogger(__name__)
 EXECUTORS: tuple[str, ...] = ("local", "ray")
 
 
+def _exit_with_parent(parent: multiprocessing.process.BaseProcess) -> None:
+    """Wait for the bench process ``parent`` to go away, then end this worker and the
+    processes it started (an episode's session runners): a bench killed with SIGTERM or
+    SIGKILL (a CI timeout, ``timeout``, a supervisor) otherwise left its pool's workers running
+    the episodes they held, and their runners, 1.5-3 GB each on LIBERO."""
+    parent.join()
+    logger.warning("bench worker %d: the bench process is gone; stopping", os.getpid())
+    for child in multiprocessing.active_children():
+        child.terminate()
+    os._exit(1)
+
+
 def _worker_init(log_level: int) -> None:
     import phyagentos  # noqa: F401,PLC0415 - selects the headless GL backend before mujoco loads
+
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        threading.Thread(target=_exit_with_parent, args=(parent,), name="bench-parent-watch", daemon=True).start()
 
     logging.basicConfig(level=log_level, format="%(processName)s %(name)s: %(message)s")
     logging.getLogger("transitions").setLevel(max(log_level, logging.WARNING))

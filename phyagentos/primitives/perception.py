@@ -295,12 +295,13 @@ def _close_blocked(ctx, own: str | None, q: np.ndarray, opening_m: float | None,
         return None
     if start <= close_to_m:
         return None
+    try:
+        checker = session_checker(ctx, margin_m=0.0)  # the world synced once; only the fingers move below
+    except Exception:  # noqa: BLE001 - a target without a collision model
+        return None
     n = int(np.ceil((start - close_to_m) / CLOSE_SWEEP_STEP_M - 1e-9))
     for o in np.linspace(start, close_to_m, n + 1)[1:]:
-        try:
-            checker = session_checker(ctx, margin_m=0.0, opening_m=float(o))
-        except Exception:  # noqa: BLE001 - a target without a collision model
-            return None
+        checker.set_gripper_opening(float(o))
         pairs = [pr for pr in checker.colliding_pairs(q) if own not in pr]
         if pairs:
             return Blocked(f"close collides {o * 1000:.0f} mm open: {', '.join('-'.join(pr) for pr in pairs[:3])}",

@@ -323,6 +323,90 @@ def test_one_object_cut_in_two_that_match_one_look_is_no_stack():
     assert not _covered_alike([rim, under], cost_matrix([rim, under], looks, CFG), looks)
 
 
+def test_what_a_stack_taller_than_one_bowl_covers_is_the_other_look_that_explains_it():
+    """A black bowl on a ramekin, the ramekin's side darkened in the bowl's shadow: the covered
+    part matches the bowl's look best, but the two stand 10 cm where one bowl stands 5, and the
+    ramekin's look explains it within the covered limit: a stack, not one bowl cut in two, the
+    part under it scored as the ramekin. The
+    same covered part under a bowl's rim at one bowl's height stays one bowl cut in two, and so
+    does the taller stack when no other look explains what is under it."""
+    from phyagentos.perception.association import cost_matrix
+    from phyagentos.perception.split import COVERED_COST_FRACTION, _covered_alike, _part_costs
+
+    bowls = [ObjectDescriptor(f"bowl_{k}", shape="cylinder", colour_rgb=(0.3, 0.3, 0.3), size_m=(0.112, 0.112, 0.05))
+             for k in (1, 2)]
+    ramekin = ObjectDescriptor("ramekin_1", shape="cylinder", colour_rgb=(0.36, 0.36, 0.36), size_m=(0.09, 0.09, 0.05))
+    looks = [*bowls, ramekin]
+    bowl_on_top = _det((0.0, 0.0), (0.056, 0.056, 0.025), 0.052)
+    shadowed_side = _det((0.0, 0.0), (0.028, 0.028, 0.026), covered=True)
+    costs = cost_matrix([bowl_on_top, shadowed_side], looks, CFG)
+    limit = COVERED_COST_FRACTION * CFG.clustering.split_max_cost
+    assert int(np.argmin(costs[1])) in (0, 1) and costs[1, 2] <= limit  # the bowl's look best, the ramekin's within
+    assert _covered_alike([bowl_on_top, shadowed_side], costs, looks)  # without the heights: one bowl cut in two
+    assert not _covered_alike([bowl_on_top, shadowed_side], costs, looks, CFG)
+    # and what is under it is scored as the ramekin it is taken for, not as the bowl it looks like best
+    assert _part_costs([bowl_on_top, shadowed_side], costs, looks, CFG).tolist() == [costs[0].min(), costs[1, 2]]
+    # a bowl's rim over its own body: the two stand one bowl's height
+    rim = _det((0.0, 0.0), (0.056, 0.056, 0.012), 0.026)
+    at_one_height = cost_matrix([rim, shadowed_side], looks, CFG)
+    assert _covered_alike([rim, shadowed_side], at_one_height, looks, CFG)
+    # nothing but the bowls' look explains what is under it: still no stack
+    assert _covered_alike([bowl_on_top, shadowed_side], costs[:, :2], bowls, CFG)
+
+
+def test_a_stack_is_scored_as_a_stack_where_the_plain_fits_cut_it_ambiguously(monkeypatch):
+    """Where the admissible partitions as fitted cut the segment differently at alike costs,
+    the steps are scored again as stacks, beside them: a stack that beats them all by the
+    ambiguity margin is taken, one that another cut scores alike is not; a covered part is
+    taken for another object than the look it matches best only where no stack is admissible
+    without that; where the plain fits decide, the stacks are never scored."""
+    from phyagentos.perception import split
+    from phyagentos.perception.cloud import Plane
+
+    cloud = _slab(0.06, 0.06, 0.1)
+    heights = cloud.points[:, 2].astype(np.float64)
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 1000, True)
+    looks = [ObjectDescriptor("bowl_1", shape="cylinder", colour_rgb=(0.3, 0.3, 0.3), size_m=(0.112, 0.112, 0.05))]
+    idx = np.arange(len(cloud))
+    side_a = [_det((0.0, 0.0), (0.05, 0.05, 0.05)), _det((0.02, 0.026), (0.038, 0.038, 0.025))]
+    side_b = [_det((0.0, 0.0), (0.05, 0.05, 0.05)), _det((0.0, -0.03), (0.038, 0.038, 0.03))]
+    stack = [_det((0.0, 0.0), (0.056, 0.056, 0.025), 0.05), _det((0.0, 0.0), (0.028, 0.028, 0.025), covered=True)]
+    plain = [(2.68, "step", 0.05, side_a, [idx, idx], np.array([1.35, 1.33])),
+             (2.97, "step", 0.06, side_b, [idx, idx], np.array([1.5, 1.47]))]
+    calls = []
+
+    strict: list = []  # the stacks admissible with nothing covered taken for another object
+
+    def admissible(partitions, *a, stacks, other_under=False, **k):
+        calls.append(stacks)
+        if not stacks:
+            return list(plain)
+        return strict if not other_under else [(0.34, "step", 0.05, stack, [idx, idx], np.array([0.14, 0.2]))]
+
+    monkeypatch.setattr(split, "_partitions", lambda c, h, cfg: iter([]))
+    monkeypatch.setattr(split, "_admissible", admissible)
+    parts = split.split_cluster(cloud, heights, plane, CFG, np.array([400.0]), looks)
+    assert calls == [False, True, True] and parts is not None  # no stack strictly: the covered part another object
+    assert [d.covered for d, _ in parts] == [False, True]
+    calls.clear()
+    strict.append((0.4, "step", 0.047, stack, [idx, idx], np.array([0.2, 0.2])))
+    parts = split.split_cluster(cloud, heights, plane, CFG, np.array([400.0]), looks)
+    assert calls == [False, True] and parts is not None  # a strict stack: the other tier is never scored
+    strict.clear()
+    calls.clear()
+    # two side-by-side cuts, alike as fitted and within the margin of the stack: no cut is taken
+    along_x = [_det((0.0, 0.03), (0.056, 0.03, 0.05)), _det((0.0, -0.03), (0.056, 0.03, 0.05))]
+    along_y = [_det((0.03, 0.0), (0.03, 0.056, 0.05)), _det((-0.03, 0.0), (0.03, 0.056, 0.05))]
+    plain = [(0.5, "columns", 0.05, along_x, [idx, idx], np.array([0.25, 0.25])),
+             (0.6, "footprint", 0.0, along_y, [idx, idx], np.array([0.3, 0.3]))]
+    assert split.split_cluster(cloud, heights, plane, CFG, np.array([400.0]), looks) is None
+    assert calls == [False, True, True]
+    calls.clear()
+    plain = plain[:1]  # one admissible cut as fitted: taken, no stacks scored
+    parts = split.split_cluster(cloud, heights, plane, CFG, np.array([400.0]), looks)
+    assert calls == [False] and [round(float(d.position[1]), 2) for d, _ in parts] == [0.03, -0.03]
+
+
 def test_cuts_of_one_step_that_differ_only_below_it_cut_alike():
     """What shows below a step moves, breaks up and is covered or not as the cut above it
     moves; the parts resting on others decide whether two cuts of a step cut alike."""

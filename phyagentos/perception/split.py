@@ -35,17 +35,21 @@ Each part is cut into its connected pieces on the same grid (pieces under
 ``clustering.min_points`` are dropped; a partition dropping more than :data:`MAX_DROPPED` of
 the points is rejected), fitted as any segment (:func:`~.detect.fit_cluster`), stacked
 (:func:`~.detect.stack`) and scored against the declared looks
-(:func:`~.association.cost_matrix`). Only when no partition is admissible so are the
-partitions scored again *as stacks*: a step's upper part rests at the cut (its sphere test
-from there, then raised to it) and a lower part under an upper part at least as wide as
-what shows of it is *covered* (``Detection.covered``: a ramekin under a
-bowl shows a crescent; its footprint counts as a lower bound, down to
-:data:`~.association.COVERED_MIN_SHOWN` of its look's). A partition is *admissible* when it
+(:func:`~.association.cost_matrix`). Only when no partition is admissible so, or the
+admissible ones cut it differently at alike costs, are the steps scored again *as stacks*,
+beside the partitions admissible as fitted (and only where no stack is admissible, once
+more, a covered part allowed to be another object: :func:`_part_costs`): a step's upper
+part rests at the cut (its sphere test from there, then raised to it) and a lower part
+under an upper part at least as wide as what shows of it is *covered*
+(``Detection.covered``: a ramekin under a bowl shows a crescent; its footprint counts as a
+lower bound, down to :data:`~.association.COVERED_MIN_SHOWN` of its look's). A partition is *admissible* when it
 has at least two parts, every part matches some declared look at a cost of at most
 ``clustering.split_max_cost`` (a covered part at :data:`COVERED_COST_FRACTION` of it), no
 covered part best matches the look of the part resting on it (one object cut in two: a
-bowl's rim over its narrower body) and no part is itself oversized (as fitted: a mug's handle
-lengthens its points' rectangle by a fifth, not the fitted body the looks were measured as).
+bowl's rim over its narrower body; in that last pass, not when the step stands taller than
+that look and another look explains the covered part: :func:`_covered_alike`) and no part is
+itself oversized (as fitted: a mug's handle lengthens its points' rectangle by a fifth, not
+the fitted body the looks were measured as).
 The admissible partition with the smallest summed cost is taken, unless another admissible
 partition that cuts the segment differently (another number of parts, or one whose centre
 lies more than :data:`SAME_PART_M` from every part of the best; for a step, the parts resting
@@ -339,19 +343,42 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     if not oversized(extent(cloud.points, heights) - np.array([0.0, 0.0, rests_at_m]), sized, config):
         return None
     partitions = list(_partitions(cloud, heights, config))
-    # as fitted first; only where nothing is admissible so, the steps again as stacks (the upper
-    # part resting at the cut, the part under it covered): a stack the plain fit explains stays
-    # as it was. The parts fitted alike in both passes are fitted once.
+    # as fitted first; only where nothing is admissible so, or what is admissible cuts it
+    # differently at alike costs, the steps again as stacks (the upper part resting at the cut,
+    # the part under it covered), scored beside the cuts admissible as fitted: a stack the
+    # plain fit explains stays as it was. The parts fitted alike in both passes are fitted once.
     fits: dict[tuple[int, int], Detection | None] = {}
     scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=False, fits=fits,
                          patch_m=patch_m)
-    if not scored:
-        scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=True, fits=fits,
-                             patch_m=patch_m)
-    if not scored:
-        log.debug("split: oversized segment of %d points, no admissible partition", len(cloud))
+    best = _unambiguous(scored, config)
+    if best is None:
+        # the stacks beside what is admissible as fitted (an ambiguity between a step and another
+        # kind of cut stays one). A covered part that best matches the look of what rests on it
+        # is no other object; only where no stack is admissible so, it is one when the step
+        # stands taller than that look and another look explains it (:func:`_part_costs`)
+        for other_under in (False, True):
+            stacks = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=True,
+                                 fits=fits, patch_m=patch_m, other_under=other_under)
+            if stacks:
+                break
+        scored = scored + stacks
+        best = _unambiguous(scored, config)
+    if best is None:
+        if not scored:
+            log.debug("split: oversized segment of %d points, no admissible partition", len(cloud))
         return None
-    scored.sort(key=lambda s: s[0])
+    log.debug("split: %s at %.3f m into %d parts, costs %s", best[1], best[2], len(best[3]),
+              [round(float(c), 2) for c in best[5]])
+    return list(zip(best[3], best[4]))
+
+
+def _unambiguous(scored: list, config: PerceptionConfig):
+    """The admissible partition (:func:`_admissible`'s tuple) with the smallest summed cost,
+    or None: none is admissible, or another that cuts the segment differently (:func:`_alike`)
+    scores within ``association.ambiguity_margin`` of it."""
+    if not scored:
+        return None
+    scored = sorted(scored, key=lambda s: s[0])
     best = scored[0]
     margin = config.association.ambiguity_margin
     for other in scored[1:]:
@@ -363,14 +390,13 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
                       [(np.round(p.position[:2], 3).tolist(), p.covered) for p in best[3]],
                       [(np.round(p.position[:2], 3).tolist(), p.covered) for p in other[3]])
             return None
-    log.debug("split: %s at %.3f m into %d parts, costs %s", best[1], best[2], len(best[3]),
-              [round(float(c), 2) for c in best[5]])
-    return list(zip(best[3], best[4]))
+    return best
 
 
 def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
                 focal_px: np.ndarray, sized: Sequence[ObjectDescriptor], *, stacks: bool,
-                fits: dict[tuple[int, int], Detection | None], patch_m: float = 0.0) -> list:
+                fits: dict[tuple[int, int], Detection | None], patch_m: float = 0.0,
+                other_under: bool = False) -> list:
     """``[(summed cost, kind, z, parts, index arrays, costs)]`` of the admissible ``partitions``
     (module docstring). ``stacks``: a step's upper part rests at the cut (its sphere test from
     there, then raised to it: its lowest points need not show over what shows of the part under
@@ -381,7 +407,8 @@ def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, con
     parts fitted on the plane, shared by the two passes. ``patch_m``: the height (m above
     ``plane``) of the fixture's place patch the segment stands on: a part resting lower is scored
     resting there (two moka pots side by side on the stove are as tall as their look above
-    the burner, not above the table)."""
+    the burner, not above the table). ``other_under``: a covered part may be another object than
+    the look it best matches (:func:`_part_costs` given ``config``)."""
     cc = config.clustering
     scored = []
     for n, (kind, z, labels) in enumerate(partitions):
@@ -414,16 +441,17 @@ def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, con
             if patch_m > 0.0:
                 stacked = [resting_at(d, patch_m, plane) if d.bottom_m < patch_m else d for d in stacked]
             full = cost_matrix(stacked, sized, config)
-            costs = full.min(axis=1)
+            costs = _part_costs(stacked, full, sized, config if other_under else None)
             if log.isEnabledFor(logging.DEBUG):
                 log.debug("split: %s at %.3f m%s: %d parts, costs %s, sizes %s, shapes %s", kind, z,
-                          " (as a stack)" if stacks else "", len(parts), np.round(costs, 2).tolist(),
+                          " (as a stack)" if stacks else "", len(parts),
+                          "one object cut in two" if costs is None else np.round(costs, 2).tolist(),
                           [np.round(2 * d.half_extents, 3).tolist() for d in stacked], [d.shape for d in stacked])
             # a covered part is scored on less (its footprint a lower bound, no shape): what is
             # scored must agree twice as closely
             limits = np.array([COVERED_COST_FRACTION * cc.split_max_cost if d.covered else cc.split_max_cost
                                for d in stacked])
-            if bool(np.any(costs > limits)) or _covered_alike(stacked, full, sized):
+            if costs is None or bool(np.any(costs > limits)):
                 continue
             # each part as fitted, the way the declared looks were measured (a mug's handle lengthens
             # its points' rectangle, not its fitted body), resting on another at its own height
@@ -455,14 +483,60 @@ def _rested(parts: list[Detection], upper: list[bool], z: float, plane: Plane) -
     return out
 
 
-def _covered_alike(parts: Sequence[Detection], costs: np.ndarray, descriptors: Sequence[ObjectDescriptor]) -> bool:
+def _covered_alike(parts: Sequence[Detection], costs: np.ndarray, descriptors: Sequence[ObjectDescriptor],
+                   config: PerceptionConfig | None = None) -> bool:
     """Whether a covered part best matches the same look as a part of the step resting on it
     (``costs``: the parts' (n_parts, n_descriptors) association costs): one object cut in two
     (a bowl's rim over its narrower body, a burner's ring under a bowl passing for its twin).
-    A look-alike nested under its twin shows nothing of its own to tell the two apart."""
+    A look-alike nested under its twin shows nothing of its own to tell the two apart. Not so
+    where :func:`_part_costs` (given ``config``) finds another object under it."""
+    return _part_costs(parts, costs, descriptors, config) is None
+
+
+def _part_costs(parts: Sequence[Detection], costs: np.ndarray, descriptors: Sequence[ObjectDescriptor],
+                config: PerceptionConfig | None = None) -> np.ndarray | None:
+    """(n_parts,) each part's cost, its best look's in ``costs`` (the parts' (n_parts,
+    n_descriptors) association costs), or None when a covered part best matches a look alike
+    the look of a part of the step resting on it (:func:`_covered_alike`).
+
+    Given ``config``, a covered part is another object, scored by the best look not alike the
+    upper part's, where the step stands taller than the upper part's look allows (its top above
+    the covered part's bottom by more than that look's tallest height grown as
+    :func:`oversized` grows it) and that look matches it within :data:`COVERED_COST_FRACTION`
+    of ``clustering.split_max_cost``: a black bowl on a ramekin, the ramekin's side darkened in
+    the bowl's shadow, matches the bowl's look at 0.26 and the ramekin's at 0.59, and the two
+    stand 10 cm where one bowl stands 5 (libero_spatial task 5's resets)."""
     best = [descriptors[int(np.argmin(row))] for row in costs]
+    out = costs.min(axis=1).astype(float)
     upper = [k for k, d in enumerate(parts) if not d.covered and d.bottom_m > 0.0]
-    return any(best[k].looks_like(best[u]) for k, d in enumerate(parts) if d.covered for u in upper)
+    for k, d in enumerate(parts):
+        if not d.covered:
+            continue
+        for u in upper:
+            if not best[k].looks_like(best[u]):
+                continue
+            if config is None or not _taller_than_look(parts[u].top_m - d.bottom_m, best[u], config):
+                return None
+            other = [float(costs[k, j]) for j, look in enumerate(descriptors) if not look.looks_like(best[u])]
+            if not other or min(other) > COVERED_COST_FRACTION * config.clustering.split_max_cost:
+                return None
+            out[k] = min(other)
+    return out
+
+
+def _taller_than_look(height_m: float, desc: ObjectDescriptor, config: PerceptionConfig) -> bool:
+    """Whether ``height_m`` (m) exceeds the tallest ``desc`` is seen, grown by
+    ``clustering.split_size_tolerance`` of it plus ``clustering.split_size_margin_m`` (as
+    :func:`oversized`); a look without a height is never exceeded."""
+    if desc.size_range_m is not None:
+        tallest = float(desc.size_range_m[1][2])
+    else:
+        want = desc.size_vector()
+        if want is None:
+            return False
+        tallest = float(want[2])
+    cc = config.clustering
+    return height_m > (1.0 + cc.split_size_tolerance) * tallest + cc.split_size_margin_m
 
 
 def _alike(a: Sequence[Detection], b: Sequence[Detection]) -> bool:

@@ -316,9 +316,10 @@ def test_an_object_seen_resting_in_a_container_is_not_found_higher_up_its_walls(
     """LIBERO-10 task 1: the butter seen on the basket's floor from the wrist camera was then
     "found" 4.4 cm higher from the ready pose, where the basket's far wall shows over the near
     one, at 0.51; the next look found nothing and it left the snapshot (a false failure). A find
-    more than CONTENT_RISE_M above where an object rested inside a container, not moved since,
-    is not it: the track is kept (and reported remembered where something hides it); a find at
-    its height moves it."""
+    more than CONTENT_RISE_M above where an object rested inside a container, seen there at 0.5
+    or more and not moved since, is not it: the track is kept (and reported remembered where
+    something hides it); a find at its height moves it, and so does any find of a track only
+    weakly seen where it rested."""
     from phyagentos.perception.synthetic import SyntheticObject
     from phyagentos.perception.tracks import Track
 
@@ -342,6 +343,11 @@ def test_an_object_seen_resting_in_a_container_is_not_found_higher_up_its_walls(
     at["z"] = float(where[2]) + 0.5 * perceiver_module.CONTENT_RISE_M
     _observe(scene, p, stamp_s=3.0)
     assert t.bottom_m == pytest.approx(rested + 0.5 * perceiver_module.CONTENT_RISE_M) and t.last_seen_s == 3.0
+    # a weak find is no rest (the sauce can found weakly on the floor, then standing on the soup)
+    t.confidence, risen = 0.44, t.bottom_m + perceiver_module.CONTENT_RISE_M + 0.024
+    at["z"] += perceiver_module.CONTENT_RISE_M + 0.024
+    _observe(scene, p, stamp_s=4.0)
+    assert t.bottom_m == pytest.approx(risen) and t.last_seen_s == 4.0
 
 
 @pytest.mark.sim

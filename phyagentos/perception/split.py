@@ -346,8 +346,8 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     # as fitted first; only where nothing is admissible so, or what is admissible cuts it
     # differently at alike costs, the steps again as stacks (the upper part resting at the cut,
     # the part under it covered), scored beside the cuts admissible as fitted: a stack the
-    # plain fit explains stays as it was. The parts fitted alike in both passes are fitted once.
-    fits: dict[tuple[int, int], Detection | None] = {}
+    # plain fit explains stays as it was. Each part is fitted once, however many passes score it.
+    fits: dict[tuple[int, int, bool], Detection | None] = {}
     scored = _admissible(partitions, cloud, heights, plane, config, focal_px, sized, stacks=False, fits=fits,
                          patch_m=patch_m)
     best = _unambiguous(scored, config)
@@ -395,7 +395,7 @@ def _unambiguous(scored: list, config: PerceptionConfig):
 
 def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,
                 focal_px: np.ndarray, sized: Sequence[ObjectDescriptor], *, stacks: bool,
-                fits: dict[tuple[int, int], Detection | None], patch_m: float = 0.0,
+                fits: dict[tuple[int, int, bool], Detection | None], patch_m: float = 0.0,
                 other_under: bool = False) -> list:
     """``[(summed cost, kind, z, parts, index arrays, costs)]`` of the admissible ``partitions``
     (module docstring). ``stacks``: a step's upper part rests at the cut (its sphere test from
@@ -403,8 +403,8 @@ def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, con
     it, a bowl sitting in a ramekin's mouth) and the part under it may be covered
     (:func:`_rested`), admissible at :data:`COVERED_COST_FRACTION` of the cost limit and never
     of the look resting on it (:func:`_covered_alike`); only steps are scored so, the other
-    partitions come out as in the plain pass. ``fits``: ``{(partition, part): fit}`` of the
-    parts fitted on the plane, shared by the two passes. ``patch_m``: the height (m above
+    partitions come out as in the plain pass. ``fits``: ``{(partition, part, resting at the
+    cut): fit}`` of the parts fitted, shared by every pass. ``patch_m``: the height (m above
     ``plane``) of the fixture's place patch the segment stands on: a part resting lower is scored
     resting there (two moka pots side by side on the stove are as tall as their look above
     the burner, not above the table). ``other_under``: a covered part may be another object than
@@ -424,12 +424,10 @@ def _admissible(partitions, cloud: Cloud, heights: np.ndarray, plane: Plane, con
         parts, idxs = [], []
         upper = [stacks and kind == "step" and float(heights[idx].min()) > z for idx in idxs_all]
         for k, (idx, above) in enumerate(zip(idxs_all, upper)):
-            if above:
-                det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px, rests_at_m=z)
-            else:
-                if (n, k) not in fits:
-                    fits[(n, k)] = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
-                det = fits[(n, k)]
+            if (n, k, above) not in fits:
+                fits[(n, k, above)] = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px,
+                                                  **({"rests_at_m": z} if above else {}))
+            det = fits[(n, k, above)]
             if det is None:
                 break
             parts.append(det)

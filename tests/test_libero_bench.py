@@ -255,9 +255,9 @@ def test_a_success_reached_after_liberos_step_budget_counts_as_neither_first_nor
     (("libero_object", "--tasks", "0,12"), "valid tasks: 0-9"),
     (("libero_object", "--tasks", "0", "--seeds", "3,50"), "valid init states: 0-49"),
     (("libero_objects",), "LIBERO's suites: 'libero_10', 'libero_goal', 'libero_object', 'libero_spatial'"),
-    # task 5, "pick up the book and place it in the back compartment of the caddy": no compartment is read
-    # (libero_goal's task 5, the push, was refused here until the push was planned)
-    (("libero_10", "--tasks", "5"), "refused by the Goal Planner's rules"),
+    # task 9, "put the yellow and white mug in the microwave and close it": a door has no skill (LIBERO-10's
+    # task 5, the caddy's back compartment, and libero_goal's task 5, the push, were refused here until planned)
+    (("libero_10", "--tasks", "9"), "only drawers are opened and closed here"),
 ])
 def test_bad_libero_input_exits_2_with_the_valid_choices_and_nothing_built(tmp_path, args, expect):
     result = _bench(*args, "--workspace", str(tmp_path / "ws"), "--json", cwd=tmp_path)

@@ -280,9 +280,9 @@ def decompose(instruction: str, declared: Mapping[str, Any] | None) -> tuple[Ins
                 if len(dests) != 1:
                     raise InstructionNotRead(f"{intent.text!r} puts {obj} on {len(dests)} destinations: say which one")
                 where = f"{_preposition(clause, dests[0], names)} {_noun(dests[0], tokens, names)}"
-                if intent.part_kind == "drawer":  # into the drawer's inside: the drawer entity is the destination
-                    where = f"in the {intent.part} drawer of the {_noun(dests[0], tokens, names)}"
-                    dests = [f"{dests[0]}_{intent.part}_drawer"]
+                if intent.part_kind in ("drawer", "compartment"):  # into a part's inside: its entity is the destination
+                    where = f"in the {intent.part} {intent.part_kind} of the {_noun(dests[0], tokens, names)}"
+                    dests = [f"{dests[0]}_{intent.part}_{intent.part_kind}"]
                 steps.append(InstructionStep(MOVE, obj, destination=dests[0], noun=_noun(obj, tokens, names),
                                              reference=ref, where=where))
         elif intent.verb == "push":

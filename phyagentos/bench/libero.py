@@ -101,7 +101,7 @@ _TASK_PARAMS = {"place": frozenset({"beside", "slot"}),
 _LOOKS_METHOD = "generated_clutter_v6"  # v3: objects kept off the fixtures; v4: 10 scenes, size range, shapes;
 # v5: sightings pooled over every world measured; v6: handle_origin_m (a mug's model origin along its handle)
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
-_FIXTURE_LOOKS_METHOD = "generated_alone_v5"  # v4: drawers; v5: kept per world, not per category
+_FIXTURE_LOOKS_METHOD = "generated_alone_v6"  # v4: drawers; v5: kept per world, not per category; v6: compartments
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:
@@ -312,6 +312,12 @@ def _planner_steps(language: str, objects: dict[str, str],
             continue
         if intent.verb in ("open", "close"):
             steps.append((intent.verb, intent.objects[0], _drawer_name(language, intent, fixtures)))
+            continue
+        if intent.part_kind == "compartment":  # into a compartment: its own entity is the place
+            from phyagentos.perception.fixtures import compartment_entity_name  # noqa: PLC0415
+
+            steps += [("move", obj, compartment_entity_name(intent.destinations[0], intent.part))
+                      for obj in intent.movers()]
             continue
         if intent.part_kind is not None:  # into a drawer: the drawer's own entity is the place
             steps += [("move", obj, _drawer_name(language, intent, fixtures)) for obj in intent.movers()]

@@ -18,7 +18,11 @@ above the support, half_length_m: half the handle's length across the drawer, ax
 unit direction the drawer opens along, travel_m: [lo, hi] the opening's range (m the drawer stands
 out from shut; the model's joint mapped so that it grows outward), face_m: the handle's outer
 face along ``axis_xy`` from its centre as the cameras see it}]``, all at turn 0 and from the
-fixture's model: :func:`drawer_reading` reads each opening from where its handle stands.
+fixture's model: :func:`drawer_reading` reads each opening from where its handle stands. A
+fixture with compartments (LIBERO's desk caddy) declares ``compartments: [{name (the model's word),
+offset_m: [dx, dy] (world frame, from the body's footprint centre), half_extents_m: [hx, hy] (world
+axes), height_m: its floor above the support}]``, at turn 0 and from the model; the perceiver
+names each by the viewer's side of the fixture it lies on (:func:`compartment_sides`).
 
 :func:`detect_fixtures` finds them in the object cloud (all heights up to the raised crop),
 segmented by the perceiver's own clustering (position and colour,
@@ -55,7 +59,8 @@ from phyagentos.perception.detect import _rect, cluster
 from phyagentos.perception.errors import PerceptionError
 
 __all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
-           "drawer_entity_name", "DRAWER_BAND_M", "DRAWER_BEYOND_M", "DRAWER_FRONT_FRACTION", "DRAWER_ABOVE_M",
+           "drawer_entity_name", "CompartmentLook", "compartment_sides", "compartment_entity_name",
+           "DRAWER_BAND_M", "DRAWER_BEYOND_M", "DRAWER_FRONT_FRACTION", "DRAWER_ABOVE_M",
            "DRAWER_LEVEL_TOL_M", "DRAWER_STRAIGHT_TOL_M", "DRAWER_FRONT_BEHIND_M", "DRAWER_FRONT_MIN_POINTS",
            "DRAWER_FRONT_SPAN_M", "DRAWER_WINDOW_M", "DRAWER_MIN_POINTS", "DRAWER_MIN_SPAN",
            "DRAWER_SIGMA_M", "DRAWER_STOP_SIGMA_M", "fixtures_from_declared", "segments", "bodies",
@@ -321,6 +326,84 @@ class DrawerLook:
         return np.asarray(centre_xy, float) + turned_xy(self.handle_offset_m, turn), u, np.array([-u[1], u[0]])
 
 
+@dataclass(frozen=True)
+class CompartmentLook:
+    """One compartment of a fixture (LIBERO's desk caddy has four): an open box among its walls
+    that things are set into; m, world frame at turn 0, from the fixture's model.
+
+    ``model_name`` is the model's own word for it (kept to match measurements only): the
+    perceiver names a compartment by the viewer's side of the fixture it lies on
+    (:func:`compartment_sides`), as a person asking for "the back compartment" sees it."""
+
+    model_name: str
+    offset_m: tuple[float, float]
+    half_extents_m: tuple[float, float]
+    height_m: float
+
+    KEYS = ("name", "offset_m", "half_extents_m", "height_m")
+
+    @classmethod
+    def from_dict(cls, d: Any, fixture: str) -> "CompartmentLook":
+        """From a mapping with the keys :attr:`KEYS`: ``name`` the model's word for it,
+        ``offset_m`` (2,) from the body's footprint centre to the compartment's centre,
+        ``half_extents_m`` (2,) its footprint's half extents on the world axes, ``height_m`` its
+        floor above the support.
+
+        Raises:
+            PerceptionError: a missing or unknown key (the valid ones listed) or a malformed value.
+        """
+        if not isinstance(d, Mapping) or set(d) != set(cls.KEYS):
+            raise PerceptionError(f"fixture {fixture!r}: each compartment must be a mapping with keys "
+                                  f"{format_choices(cls.KEYS)}, got {d!r}")
+        name = d["name"]
+        if not isinstance(name, str) or not name:
+            raise PerceptionError(f"fixture {fixture!r}: a compartment needs a non-empty name, got {name!r}")
+        what = f"fixture {fixture!r}: compartment {name!r}"
+        off = _floats(d["offset_m"], 2, f"{what}: offset_m")
+        half = _floats(d["half_extents_m"], 2, f"{what}: half_extents_m")
+        height = _floats([d["height_m"]], 1, f"{what}: height_m")[0]
+        if min(half) <= 0 or height < 0:
+            raise PerceptionError(f"{what}: half_extents_m must be > 0 and height_m >= 0, got {d!r}")
+        return cls(name, off, half, height)  # type: ignore[arg-type]
+
+    def box(self, centre_xy: np.ndarray, turn: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """``(centre (2,), half extents on the world axes (2,))``, m, of this compartment in a body
+        centred at ``centre_xy`` standing ``turn`` rad (0 or pi, or a quarter turn: the sides
+        trade axes) from how its look was measured."""
+        half = np.asarray(self.half_extents_m, float)
+        if abs(math.sin(turn)) > math.sqrt(0.5):
+            half = half[::-1].copy()
+        return np.asarray(centre_xy, float) + turned_xy(self.offset_m, turn), half
+
+
+def compartment_sides(offsets_xy: Sequence[np.ndarray], right_xy: np.ndarray) -> list[str | None]:
+    """The viewer's side each compartment lies on (``left`` / ``right`` / ``front`` / ``back``,
+    :data:`~phyagentos.geometry.VIEWER_SIDES`), from its centre's offset (2,) from the fixture's
+    footprint centre, world m, and the viewer's right on the table ``right_xy`` (2,): the side
+    whose direction the offset points along most. Where two compartments take one side, the
+    one farther that way keeps it and the other is named by none (``None``): a name must pick
+    one compartment."""
+    from phyagentos.geometry import VIEWER_SIDES, viewer_side_xy  # noqa: PLC0415
+
+    dirs = {side: viewer_side_xy(right_xy, side) for side in VIEWER_SIDES}
+    best = []
+    for off in offsets_xy:
+        scores = {side: float(np.dot(np.asarray(off, float)[:2], u)) for side, u in dirs.items()}
+        side = max(scores, key=scores.__getitem__)
+        best.append((side, scores[side]))
+    out: list[str | None] = []
+    for i, (side, score) in enumerate(best):
+        rivals = [sc for j, (sd, sc) in enumerate(best) if j != i and sd == side]
+        out.append(side if all(score > sc for sc in rivals) else None)
+    return out
+
+
+def compartment_entity_name(fixture: str, side: str) -> str:
+    """The snapshot entity name of ``fixture``'s compartment on the viewer's ``side``:
+    ``desk_caddy_1`` 's ``back`` is ``desk_caddy_1_back_compartment``."""
+    return f"{fixture}_{side}_compartment"
+
+
 def drawer_entity_name(fixture: str, drawer: str) -> str:
     """The snapshot entity name of ``fixture``'s drawer ``drawer``: ``wooden_cabinet_1`` 's
     ``top`` is ``wooden_cabinet_1_top_drawer``."""
@@ -431,18 +514,19 @@ class FixtureLook:
     place_height_m: float | None = None
     knob: KnobLook | None = None
     drawers: tuple[DrawerLook, ...] = ()
+    compartments: tuple[CompartmentLook, ...] = ()
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "FixtureLook | None":
-        """From a declared fixture ``{name, class, size_m?, place?, knob?, drawers?}``; ``None`` when it has no
-        look (``size_m``): such a fixture is not perceived.
+        """From a declared fixture ``{name, class, size_m?, place?, knob?, drawers?, compartments?}``; ``None``
+        when it has no look (``size_m``): such a fixture is not perceived.
 
         Raises:
             PerceptionError: an unknown key (the valid ones listed) or a malformed value.
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared fixture must be a mapping, got {type(d).__name__}")
-        valid = ("name", "class", "size_m", "place", "knob", "drawers")
+        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments")
         unknown = set(d) - set(valid)
         name = d.get("name")
         if unknown:
@@ -460,9 +544,13 @@ class FixtureLook:
         drawers = tuple(DrawerLook.from_dict(r, name) for r in raw_drawers)
         if len({dr.name for dr in drawers}) != len(drawers):
             raise PerceptionError(f"fixture {name!r}: a drawer name is used twice: {[dr.name for dr in drawers]}")
+        raw_comps = d.get("compartments") or ()
+        if not isinstance(raw_comps, Sequence) or isinstance(raw_comps, str):
+            raise PerceptionError(f"fixture {name!r}: compartments must be a list, got {raw_comps!r}")
+        comps = tuple(CompartmentLook.from_dict(r, name) for r in raw_comps)
         place = d.get("place")
         if place is None:
-            return cls(name, d.get("class"), size, knob=knob, drawers=drawers)
+            return cls(name, d.get("class"), size, knob=knob, drawers=drawers, compartments=comps)
         if not isinstance(place, Mapping) or set(place) != {"offset_m", "half_extents_m", "height_m"}:
             raise PerceptionError(f"fixture {name!r}: place must be a mapping with keys "
                                   f"{format_choices(('offset_m', 'half_extents_m', 'height_m'))}, got {place!r}")
@@ -471,7 +559,7 @@ class FixtureLook:
         height = _floats([place["height_m"]], 1, f"fixture {name!r}: place.height_m")[0]
         if min(half) <= 0 or height < 0:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
-        return cls(name, d.get("class"), size, off, half, height, knob, drawers)  # type: ignore[arg-type]
+        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps)  # type: ignore[arg-type]
 
     def place_patch(self, centre_xy: np.ndarray, half_xy: np.ndarray,
                     turn: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:

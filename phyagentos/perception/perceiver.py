@@ -107,6 +107,8 @@ from phyagentos.perception.fixtures import (
     FixtureLook,
     FixtureSighting,
     _in_frame,
+    compartment_entity_name,
+    compartment_sides,
     detect_fixtures,
     drawer_entity_name,
     drawer_reading,
@@ -833,6 +835,9 @@ class Perceiver:
                 ent, supports[look.name] = self._fixture_entity(look, plane, stamp)
                 entities.append(ent)
                 entities.extend(self._drawer_entities(look, plane, stamp))
+                for comp, box in self._compartment_entities(look, plane, stamp):
+                    entities.append(comp)
+                    supports[comp["name"]] = box
         entities.extend(self._robot_entities(proprio))
 
         relations = self._relations(geo, region_list, holding_rel, supports)
@@ -1051,6 +1056,39 @@ class Perceiver:
             out.append({"name": drawer_entity_name(look.name, drawer.name), "kind": "articulation",
                         "position": _r(box_pos), "quat_wxyz": _r(_quat_yaw(box_yaw), 5), "size": _r(box_half),
                         "attributes": attrs})
+        return out
+
+    def _compartment_entities(self, look: FixtureLook, plane: Plane, stamp: float) -> list[tuple[dict, dict]]:
+        """One ``kind: fixture`` entity per compartment of tracked fixture ``look`` that the
+        viewer's sides name (:func:`~phyagentos.perception.fixtures.compartment_sides`; none
+        without a scene camera), with the box for :meth:`_relations`: named
+        ``<fixture>_<side>_compartment``, its box the compartment's footprint from its floor down
+        to the support (its top the floor's surface: ``attributes.support`` true, a place to set
+        things into, "in the back compartment of the caddy"; ``part_of`` the fixture,
+        ``compartment`` the side, ``open_depth_m`` from the floor up to the fixture's perceived
+        top). It stands where the fixture does (``source`` and ``last_seen_s`` the fixture's)."""
+        if not look.compartments or self.viewer_right_xy is None:
+            return []
+        s, seen_s, conf = self.fixture_tracks[look.name]
+        boxes = [c.box(s.position[:2], s.turn) for c in look.compartments]
+        sides = compartment_sides([centre - s.position[:2] for centre, _ in boxes], self.viewer_right_xy)
+        now = seen_s == stamp
+        out = []
+        for comp, (centre, half), side in zip(look.compartments, boxes, sides):
+            if side is None:
+                continue
+            ground = plane.z_at(centre)
+            hz = 0.5 * comp.height_m
+            pos = np.array([centre[0], centre[1], ground + hz])
+            attrs = {"source": "perceived" if now else "remembered", "class": "compartment", "part_of": look.name,
+                     "compartment": side, "support": True, "confidence": _r(min(1.0, max(0.0, conf)), 3),
+                     "position_std_m": _r(FIXTURE_STD_M, 5), "last_seen_s": _r(seen_s, 6),
+                     "open_depth_m": _r(max(0.0, float(s.top_m) - comp.height_m))}
+            if not now:
+                attrs["remembered"] = True
+            ent = {"name": compartment_entity_name(look.name, side), "kind": "fixture", "position": _r(pos),
+                   "quat_wxyz": [1.0, 0.0, 0.0, 0.0], "size": _r([half[0], half[1], hz]), "attributes": attrs}
+            out.append((ent, _geo(pos, 0.0, np.array([half[0], half[1], hz]), "box", 0.0, plane, FIXTURE_STD_M)))
         return out
 
     def _fixture_entity(self, look: FixtureLook, plane: Plane, stamp: float) -> tuple[dict, dict]:

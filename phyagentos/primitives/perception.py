@@ -683,6 +683,16 @@ def place_yaws(current_rad: float) -> list[float]:
 INTO_MARGIN_M = 0.005
 
 
+#: Yaws a place into a compartment tries beyond :func:`place_yaws`, rad apart
+#: (:meth:`ComputePlace._fitting_yaws`): 5 degrees.
+FIT_YAW_STEP_RAD = float(np.radians(5.0))
+#: The held object's bottom clears a compartment's walls by this much at the pre-place, m.
+COMPARTMENT_CLEAR_M = 0.02
+#: A place into a compartment whose hand would meet the walls is raised this much at a time
+#: (:meth:`ComputePlace._let_down`), m.
+LET_DOWN_STEP_M = 0.01
+
+
 #: Room left between two objects set in neighbouring slots of one region, m
 #: (:meth:`ComputePlace._slot_point`): about the 2-sigma of a perceived size.
 SLOT_GAP_M = 0.01
@@ -808,8 +818,17 @@ class ComputePlace(Primitive):
         # its top face: centre z plus its vertical half extent.
         ent = next((e for e in snapshot.get("entities", []) if e["name"] == self.region), {})
         kind = ent.get("kind", "region")
+        attrs = ent.get("attributes") or {}
+        compartment = kind == "fixture" and attrs.get("class") == "compartment"
+        yaws = place_yaws(hand_yaw(self.ctx.target.tcp_pose()))
+        approach = self.approach_height_m
         if kind == "articulation":  # into a drawer: onto its floor out of the body, which must take the object
             self._check_into(ent, T_region, region_half, T_obj, half)
+        if compartment:  # among walls: turned to fit between them, let down from above their top
+            yaws = self._fitting_yaws(yaws, T_region, region_half, T_tcp_obj, half)
+            # the held object's bottom over the walls' top, though it may hang up to its half height
+            # lower in the hand than its perceived pose says (a book taken near its top)
+            approach = max(approach, float(attrs.get("open_depth_m") or 0.0) + COMPARTMENT_CLEAR_M + float(half[2]))
         surface_z = (float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half)
                      if kind in ("object", "fixture", "articulation") else float(T_region[2, 3]))
         centre = T_region[:3, 3]
@@ -818,12 +837,14 @@ class ComputePlace(Primitive):
                                              who=self.name)
         rejected: list[dict] = []
         chosen = None
-        for yaw in place_yaws(hand_yaw(self.ctx.target.tcp_pose())):
+        for yaw in yaws:
             spot = centre if self.slot is None else self._slot_point(T_region, region_half, T_tcp_obj, half, yaw)
             T_place = place_pose(spot, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
             T_pre = T_place.copy()
-            T_pre[2, 3] += self.approach_height_m
+            T_pre[2, 3] += approach
             why = self._blocked(T_pre, T_place)
+            if why is not None and compartment and why.stage == "place" and why.collides:
+                T_place, why = self._let_down(T_pre, T_place, why)
             if why is None:
                 chosen = (yaw, T_place, T_pre)
                 break
@@ -835,6 +856,55 @@ class ComputePlace(Primitive):
         self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist(),
                               yaw_rad=round(float(yaw), 3), rejected_yaws=rejected,
                               **({"beside": self.beside} if self.beside else {}))
+
+    def _let_down(self, T_pre: np.ndarray, T_place: np.ndarray, why: Blocked) -> tuple[np.ndarray, Blocked | None]:
+        """The place pose into a compartment raised by :data:`LET_DOWN_STEP_M` at a time, from
+        ``T_place`` ((4, 4) world tcp pose, where the object would rest on the floor) towards
+        the pre-place ``T_pre``, to the lowest at which the hand clears the walls (the object is
+        then let go above the floor and the walls guide it down); ``(pose, None)``, or
+        ``(T_place, why)`` when none below :data:`COMPARTMENT_CLEAR_M` under the pre-place is."""
+        T = T_place.copy()
+        while T[2, 3] + LET_DOWN_STEP_M <= T_pre[2, 3] - COMPARTMENT_CLEAR_M:
+            T[2, 3] += LET_DOWN_STEP_M
+            if self._blocked(T_pre, T) is None:
+                self.ctx.trace.record("place_let_down", object=self.object, region=self.region,
+                                      raised_m=round(float(T[2, 3] - T_place[2, 3]), 3))
+                return T, None
+        return T_place, why
+
+    def _fitting_yaws(self, yaws: list[float], T_region: np.ndarray, region_half: np.ndarray,
+                      T_tcp_obj: np.ndarray, half: np.ndarray) -> list[float]:
+        """The hand yaws (rad) at which the held object (``T_tcp_obj`` (4, 4) its pose in the tcp
+        frame, ``half`` (3,) m) set down top-down fits within the compartment's footprint
+        (``T_region`` (4, 4) world, ``region_half`` (3,) m, its inside between the walls): those
+        of ``yaws`` that fit, in their order, then the others every :data:`FIT_YAW_STEP_RAD`
+        that fit, the roomiest first (a book into a caddy's slot turns its spine along the
+        slot). No margin is asked beyond the perceived sizes: the walls guide the object in, and
+        the pre-place and place poses are then checked for collisions with the object attached.
+
+        Raises:
+            PrimitiveFailure: ``perception.too_small`` when it fits at no yaw (its least footprint
+                and the compartment's in the message).
+        """
+        room = np.asarray(region_half[:2], dtype=float)
+
+        def spare(yaw: float) -> float:  # the least room left on a side, m (< 0: does not fit)
+            Ro = top_down_rotation(yaw) @ np.asarray(T_tcp_obj, dtype=float)[:3, :3]
+            need = np.abs(T_region[:3, :3].T @ Ro)[:2] @ np.asarray(half, dtype=float)
+            return float(np.min(room - need))
+
+        grid = [float(a) for a in np.arange(-np.pi + FIT_YAW_STEP_RAD, np.pi + 1e-9, FIT_YAW_STEP_RAD)]
+        first = [y for y in yaws if spare(y) >= 0.0]
+        rest = sorted((y for y in grid if spare(y) >= 0.0 and all(abs(y - f) > 1e-6 for f in first)),
+                      key=lambda y: -spare(y))
+        if not first and not rest:
+            least = min(grid, key=lambda y: -spare(y))
+            Ro = top_down_rotation(least) @ np.asarray(T_tcp_obj, dtype=float)[:3, :3]
+            need = np.abs(T_region[:3, :3].T @ Ro)[:2] @ np.asarray(half, dtype=float)
+            raise PrimitiveFailure("perception.too_small", f"{self.object!r} needs at least "
+                                   f"{np.round(2 * need, 3).tolist()} m (x, y); "
+                                   f"{self.region!r} offers {np.round(2 * room, 3).tolist()} m")
+        return first + rest
 
     def _check_into(self, ent: dict, T_region: np.ndarray, region_half: np.ndarray, T_obj: np.ndarray,
                     half: np.ndarray) -> None:
@@ -875,7 +945,7 @@ class ComputePlace(Primitive):
         offset = float(np.clip((k - 0.5 * (n - 1)) * spacing, -(room - SLOT_EDGE_M), room - SLOT_EDGE_M))
         return np.asarray(T_region[:3, 3], dtype=float) + offset * axes[j]
 
-    def _blocked(self, T_pre: np.ndarray, T_place: np.ndarray) -> str | None:
+    def _blocked(self, T_pre: np.ndarray, T_place: np.ndarray) -> Blocked | None:
         """Why the arm cannot hold the object at ``T_pre`` and ``T_place`` ((4, 4) world tcp
         poses; :func:`reach_blocked`, the held object attached); ``None`` when it can."""
         return reach_blocked(self.ctx, self.object, ("preplace", T_pre), ("place", T_place))

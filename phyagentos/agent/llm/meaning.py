@@ -187,9 +187,11 @@ class Intent:
     excluded: tuple[str, ...] = ()
     #: ``open`` / ``close``: which part of the object ("middle" of "the middle drawer of the cabinet"; None: the
     #: object itself, or a drawer not told apart); ``move``: the drawer of the one destination whose inside the
-    #: objects go into ("in the top drawer of the cabinet", "open the top drawer and put the bowl inside")
+    #: objects go into ("in the top drawer of the cabinet", "open the top drawer and put the bowl inside"), or its
+    #: compartment on the viewer's side ("back" of "in the back compartment of the caddy")
     part: str | None = None
-    #: ``open`` / ``close`` / ``move``: the kind of part named ("drawer"; None: the object itself)
+    #: ``open`` / ``close`` / ``move``: the kind of part named ("drawer", or "compartment" for a move; None: the
+    #: object itself)
     part_kind: str | None = None
     #: ``move``: set down beside its one destination, on the viewer's ``left`` / ``right`` of it ("to the right
     #: of the plate"), or in ``front`` of it (towards the viewer) / at its ``back``, not on it; ``push``: the side
@@ -956,7 +958,8 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             previous = objects
             continue
         kind, dests, by_colour, why = ("region", (), False, [])
-        into: str | None = None  # which drawer, when the destination is a drawer's inside
+        into: str | None = None  # which drawer (or compartment), when the destination is a part's inside
+        into_kind = "drawer"
         side, twins = _side_twins(dest_words, world) if relations and dest_words else (None, ())
         dest_where: dict[str, dict] = {}
         beside = _beside(dest_words, prep, world, objects) if relations and dest_words else None
@@ -978,6 +981,12 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
                 why = drawer
             else:
                 dests, into = (drawer[0],), drawer[1]
+        elif (room := _into_compartment(part, dest_words, prep, world, previous)) is not None:
+            # a compartment of a thing, by the viewer's side ("in the back compartment of the caddy")
+            if isinstance(room, list):
+                why = room
+            else:
+                dests, into, into_kind = (room[0],), room[1], "compartment"
         elif dest_words:
             kind, dests, by_colour, why = _read_destination(dest_words, prep, world, previous, objects)
         problems += why
@@ -1016,9 +1025,9 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
             meaning.problems += problems
             continue
         meaning.intents.append(Intent(part, verb, objects, dests, count, by_colour, excluded,
-                                      part=into, part_kind="drawer" if into is not None else None,
+                                      part=into, part_kind=into_kind if into is not None else None,
                                       beside=beside[0] if isinstance(beside, tuple) else None))
-        if into is not None:
+        if into is not None and into_kind == "drawer":
             last_drawer = (dests[0], into)
         if ref is not None:
             meaning.where[ref[0]] = ref[1]
@@ -1136,6 +1145,43 @@ def _into_drawer(text: str, dest_words: list[str], prep: str | None, world: Worl
     if len(objects) != 1 or part is None:
         return [("not_understood", f"{quote(text)}: which drawer? (the top, middle or bottom drawer of one thing)")]
     return objects[0], part
+
+
+#: "the back compartment of the caddy": words for a compartment, and for which one (the viewer's
+#: side of the thing it is in: :data:`~phyagentos.geometry.VIEWER_SIDES`).
+_COMPARTMENT_WORDS = {"compartment", "compartments", "section", "slot"}
+_COMPARTMENT_SIDES = {"back": "back", "rear": "back", "front": "front", "left": "left", "right": "right"}
+
+
+def _into_compartment(text: str, dest_words: list[str], prep: str | None, world: World, previous: tuple[str, ...]
+                      ) -> tuple[str, str] | list[tuple[str, str]] | None:
+    """``(thing, side)`` when a move's destination is a compartment of one declared thing (a
+    fixture too): "in / into the back compartment of the caddy" (``side`` one of
+    :data:`_COMPARTMENT_SIDES`'s values, the viewer's side of the thing it lies on, which is how
+    perception names compartments). A list of problems when it names a compartment but not
+    which one, or of no one thing; ``None`` when the destination is no compartment."""
+    if prep not in ("in", "into", "inside"):
+        return None
+    ws = [w for w in dest_words if w not in ("the", "a", "an", "its")]
+    k = next((i for i, w in enumerate(ws) if w in _COMPARTMENT_WORDS), None)
+    if k is None:
+        return None
+    before, after = ws[:k], ws[k + 1:]
+    sides = [_COMPARTMENT_SIDES[w] for w in before if w in _COMPARTMENT_SIDES]
+    if len(sides) != 1 or len(before) != 1:
+        return [("not_understood", f"{quote(text)}: which {ws[k]}? (say the front, back, left or right {ws[k]} "
+                                   f"of one thing)")]
+    if not after or after[0] != "of" or len(after) < 2:
+        return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of what?")]
+    names = {o.name for o in world.objects}
+    things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
+                   regions=(), source=world.source)
+    objects, _, problems = _read_objects(after[1:], things, previous)
+    if problems:
+        return problems
+    if len(objects) != 1:
+        return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of one thing")]
+    return objects[0], sides[0]
 
 
 def _settle(meaning: Meaning) -> None:

@@ -58,7 +58,9 @@ __all__ = ["AREA_X_M", "AREA_Y_M", "GAP_M", "SCENES", "measure_descriptors", "de
            "object_boxes", "place_objects",
            "set_touching", "label_segments", "perception_accuracy", "FIXTURE_PLACE_SITES", "FIXTURE_SCENES",
            "FIXTURE_SEED", "FIXTURE_CROP_M", "SIZE_PERCENTILES",
-           "WHOLE_HEIGHT_FRACTION", "HANDLE_AGREEMENT", "KNOB_MAX_WIDTH_M", "is_support", "fixture_boxes", "measure_fixture_looks"]
+           "WHOLE_HEIGHT_FRACTION", "HANDLE_AGREEMENT", "KNOB_MAX_WIDTH_M", "COMPARTMENT_SITE_SUFFIX",
+           "COMPARTMENT_WALL_RAY_M", "is_support", "fixture_boxes",
+           "measure_fixture_looks"]
 
 log = logging.getLogger(__name__)
 
@@ -466,6 +468,80 @@ def fixture_boxes(target) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+#: LIBERO's sites that bound a fixture's compartments end so (the desk caddy's ``back``,
+#: ``front``, ``left`` and ``right_contain_region``: where its ``In`` counts a thing in them).
+COMPARTMENT_SITE_SUFFIX = "_contain_region"
+
+
+def _compartment_looks(target, name: str, centre_xy: np.ndarray, plane) -> list[dict[str, Any]]:
+    """Fixture ``name``'s ``compartments`` from its model: per site named
+    ``<name>_<word>`` + :data:`COMPARTMENT_SITE_SUFFIX`, ``{name: word, offset_m: (2,) the
+    site's centre from the perceived footprint centre ``centre_xy`` (world axes), half_extents_m:
+    (2,) as :func:`_site_box`, height_m: the compartment's floor above the support plane
+    (``plane``: the perceiver's), found by a ray cast straight down the site's centre onto the
+    fixture's own geoms}``, m. The word is the model's name for it (used only to match the
+    scenes); the perceiver names compartments by the viewer's sides. The footprint is the
+    compartment's inside between its walls where rays across it, :data:`COMPARTMENT_WALL_RAY_M`
+    above the floor, meet them (the site's extent on an open side). Sites that are not level,
+    or whose ray down meets nothing of the fixture, are left out."""
+    m, d = target.model, target.data
+    root = int(m.body_rootid[m.body(target.env.env.get_object(name).root_body).id])
+    prefix = f"{name}_"
+    out = []
+    for i in range(m.nsite):
+        site = m.site(i).name
+        if not (site.startswith(prefix) and site.endswith(COMPARTMENT_SITE_SUFFIX)):
+            continue
+        box = _site_box(target, site)
+        if box is None:
+            continue
+        centre, half = box
+        top = np.array([centre[0], centre[1], float(d.site_xpos[i][2]) + float(m.site_size[i][2])])
+        hit = _ray_to(m, d, root, top, np.array([0.0, 0.0, -1.0]))
+        if hit is None:
+            continue
+        floor_z = float(top[2] - hit)
+        # the walls: rays across at 3 cm above the floor; an open side keeps the site's extent
+        mid = np.array([centre[0], centre[1], floor_z + COMPARTMENT_WALL_RAY_M])
+        lo, hi = centre - half, centre + half
+        for axis in (0, 1):
+            for sign, bound in ((1.0, hi), (-1.0, lo)):
+                u = np.zeros(3)
+                u[axis] = sign
+                reach = _ray_to(m, d, root, mid, u)
+                if reach is not None:
+                    bound[axis] = centre[axis] + sign * reach
+        centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        out.append({"name": site[len(prefix):-len(COMPARTMENT_SITE_SUFFIX)],
+                    "offset_m": (centre - np.asarray(centre_xy, float)[:2]).tolist(),
+                    "half_extents_m": half.tolist(),
+                    "height_m": floor_z - float(plane.z_at(centre))})
+    return out
+
+
+#: How far above a compartment's floor its walls are found (:func:`_compartment_looks`), m.
+COMPARTMENT_WALL_RAY_M = 0.03
+
+
+def _ray_to(m: mujoco.MjModel, d: mujoco.MjData, root: int, start: np.ndarray, direction: np.ndarray,
+            reach_m: float = 0.5) -> float | None:
+    """Distance (m) from ``start`` (3,) along the unit ``direction`` (3,) to the first geom of
+    the body tree rooted at ``root`` (through any other body's), within ``reach_m``; None when
+    there is none."""
+    hit = np.zeros(1, dtype=np.int32)
+    travelled, p = 0.0, np.asarray(start, dtype=float).copy()
+    for _ in range(8):
+        dist = mujoco.mj_ray(m, d, p, direction, None, 1, -1, hit)
+        if dist < 0 or travelled + dist > reach_m:
+            return None
+        travelled += dist
+        if int(m.body_rootid[m.geom_bodyid[hit[0]]]) == root:
+            return travelled
+        p = p + (dist + 1e-4) * direction
+        travelled += 1e-4
+    return None
+
+
 def _place_site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray] | None:
     """``(centre xy (2,), half extents on the world axes (2,))`` of fixture ``name``'s place
     site (:data:`FIXTURE_PLACE_SITES`), world m; None for a category without one or a site
@@ -479,9 +555,15 @@ def _place_site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray] | 
     suffix = FIXTURE_PLACE_SITES.get(cat)
     if suffix is None:
         return None
+    return _site_box(target, f"{name}_{suffix}")
+
+
+def _site_box(target, site: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(centre xy (2,), half extents on the world axes (2,))`` of LIBERO site ``site``, world
+    m (as :func:`_place_site` describes); None for a site that is not level."""
     m, d = target.model, target.data
-    sid = m.site(f"{name}_{suffix}").id
-    a, b = (float(v) for v in np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)[:2])
+    sid = m.site(site).id
+    a, b = (float(v) for v in np.asarray(target.env.env.object_sites_dict[site].size, float)[:2])
     R = d.site_xmat[sid].reshape(3, 3)
     if abs(R[2, 2]) < 0.99:
         return None
@@ -729,6 +811,9 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
                 drawers = _drawer_looks(target, name, cloud, heights, p, body.half_xy_world)
                 if drawers:
                     look["drawers"] = drawers
+                compartments = _compartment_looks(target, name, p, plane)
+                if compartments:
+                    look["compartments"] = compartments
                 seen.setdefault(cats[name], []).append(look)
     finally:
         target.reset(seed=target.init_index)
@@ -754,6 +839,9 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
         drawers = _median_drawers([g.get("drawers", []) for g in got])
         if drawers:
             look["drawers"] = drawers
+        compartments = _median_drawers([g.get("compartments", []) for g in got])
+        if compartments:
+            look["compartments"] = compartments
         out[cat] = look
     return out
 

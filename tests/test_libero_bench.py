@@ -124,6 +124,26 @@ def test_open_a_drawer_and_put_the_bowl_inside_places_it_on_that_drawers_floor()
         instruction_nodes("put the bowl in the top drawer of the plate", problem.objects, problem.fixtures)
 
 
+def test_into_a_compartment_of_the_caddy_places_on_that_compartment_named_by_the_viewers_side():
+    task = resolve_task("libero_10", 5)
+    problem = parse_bddl(task.bddl_path)
+    assert task.language == "pick up the book and place it in the back compartment of the caddy"
+    nodes = instruction_nodes(task.language, problem.objects, problem.fixtures)
+    assert [(n["skill"], n["params"].get("object"), n["params"].get("region")) for n in nodes] == [
+        ("pick", "black_book_1", None), ("place", "black_book_1", "desk_caddy_1_back_compartment")]
+    assert nodes[1]["accept"] == [{"on": {"object": "black_book_1", "support": "desk_caddy_1_back_compartment"}},
+                                  {"released": "black_book_1"}]
+    for words, side in (("put the book into the left compartment of the caddy", "left"),
+                        ("place the book in the caddy's rear compartment", "back"),
+                        ("put the book in the front slot of the desk caddy", "front")):
+        assert instruction_nodes(words, problem.objects, problem.fixtures)[1]["params"]["region"] == \
+            f"desk_caddy_1_{side}_compartment", words
+    with pytest.raises(BenchError, match="which compartment\\? \\(say the front, back, left or right compartment"):
+        instruction_nodes("put the book in the compartment of the caddy", problem.objects, problem.fixtures)
+    with pytest.raises(BenchError, match="the back compartment of what\\?"):
+        instruction_nodes("put the book in the back compartment", problem.objects, problem.fixtures)
+
+
 def test_turn_on_the_stove_turns_its_knob_to_mid_travel_and_turn_off_is_refused():
     goal = parse_bddl(resolve_task("libero_goal", 7).bddl_path)  # turn on the stove
     nodes = instruction_nodes(resolve_task("libero_goal", 7).language, goal.objects, goal.fixtures)

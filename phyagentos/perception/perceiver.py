@@ -253,6 +253,10 @@ DRAWER_APPROACH_PITCH_RAD = math.radians(10.0)
 #: 2.4 cm proud of a 1.5 cm front; the floor is about 3 cm below the handle's centre).
 DRAWER_FRONT_M = 0.045
 DRAWER_WALL_M = 0.02
+#: Points this far or more inside a compartment's walls (its footprint from the fixture's look:
+#: the inside between them), above its floor, are what stands in it, not the fixture's, m: the
+#: voxel grid's 5 mm and the 2-3 mm of a wall's depth edge.
+COMPARTMENT_WALL_M = 0.008
 DRAWER_FLOOR_M = 0.025
 #: How far from where the hand let an object go a weak sighting of it may stand, m
 #: (:meth:`Perceiver._weak_elsewhere`): its own footprint (LIBERO's largest, the 11 cm bowls and
@@ -911,6 +915,15 @@ class Perceiver:
                         dets.append(Detection(pos, yaw, half, "box", np.zeros(3), np.zeros(3), 0, 0, DRAWER_SIGMA_M,
                                               math.pi, 1.0, 0.0))
                         in_drawer |= self._drawer_inside(p, heights, drawer, s, reading[0]) & ~walls
+            for comp in look.compartments:  # what stands in a compartment rests on its floor, and is not the body's
+                centre_c, half_c = comp.box(s.position[:2], s.turn)
+                inner = np.maximum(half_c - COMPARTMENT_WALL_M, 0.0)
+                in_drawer |= (np.all(np.abs(p[:, :2] - centre_c) <= inner, axis=1)
+                              & (heights > comp.height_m + FIXTURE_MARGIN_M))
+                hz_c = max(0.5 * comp.height_m, 1e-3)
+                dets.append(Detection(np.array([centre_c[0], centre_c[1], plane.z_at(centre_c) + hz_c]), 0.0,
+                                      np.array([half_c[0], half_c[1], hz_c]), "box", np.zeros(3), np.zeros(3), 0, 0,
+                                      FIXTURE_STD_M, math.pi, 1.0, 0.0))
             local = _in_frame(p[:, :2], s.position[:2], s.yaw)
             over = np.all(np.abs(local) <= s.half_extents[:2] + FIXTURE_EDGE_M, axis=1)
             keep |= over
@@ -1065,8 +1078,10 @@ class Perceiver:
         ``<fixture>_<side>_compartment``, its box the compartment's footprint from its floor down
         to the support (its top the floor's surface: ``attributes.support`` true, a place to set
         things into, "in the back compartment of the caddy"; ``part_of`` the fixture,
-        ``compartment`` the side, ``open_depth_m`` from the floor up to the fixture's perceived
-        top). It stands where the fixture does (``source`` and ``last_seen_s`` the fixture's)."""
+        ``compartment`` the side, ``walls_m`` how far its walls rise over its floor: the fixture's
+        top in its look less the floor). It stands where the fixture does (``source`` and
+        ``last_seen_s`` the fixture's). What stands in it is perceived as an object
+        (:meth:`_perceive_fixtures` keeps the points inside its walls)."""
         if not look.compartments or self.viewer_right_xy is None:
             return []
         s, seen_s, conf = self.fixture_tracks[look.name]
@@ -1083,7 +1098,7 @@ class Perceiver:
             attrs = {"source": "perceived" if now else "remembered", "class": "compartment", "part_of": look.name,
                      "compartment": side, "support": True, "confidence": _r(min(1.0, max(0.0, conf)), 3),
                      "position_std_m": _r(FIXTURE_STD_M, 5), "last_seen_s": _r(seen_s, 6),
-                     "open_depth_m": _r(max(0.0, float(s.top_m) - comp.height_m))}
+                     "walls_m": _r(max(0.0, float(look.size_m[2]) - comp.height_m))}
             if not now:
                 attrs["remembered"] = True
             ent = {"name": compartment_entity_name(look.name, side), "kind": "fixture", "position": _r(pos),

@@ -828,7 +828,7 @@ class ComputePlace(Primitive):
             yaws = self._fitting_yaws(yaws, T_region, region_half, T_tcp_obj, half)
             # the held object's bottom over the walls' top, though it may hang up to its half height
             # lower in the hand than its perceived pose says (a book taken near its top)
-            approach = max(approach, float(attrs.get("open_depth_m") or 0.0) + COMPARTMENT_CLEAR_M + float(half[2]))
+            approach = max(approach, float(attrs.get("walls_m") or 0.0) + COMPARTMENT_CLEAR_M + float(half[2]))
         surface_z = (float(T_region[2, 3] + np.abs(T_region[2, :3]) @ region_half)
                      if kind in ("object", "fixture", "articulation") else float(T_region[2, 3]))
         centre = T_region[:3, 3]

@@ -1156,7 +1156,8 @@ _COMPARTMENT_SIDES = {"back": "back", "rear": "back", "front": "front", "left": 
 def _into_compartment(text: str, dest_words: list[str], prep: str | None, world: World, previous: tuple[str, ...]
                       ) -> tuple[str, str] | list[tuple[str, str]] | None:
     """``(thing, side)`` when a move's destination is a compartment of one declared thing (a
-    fixture too): "in / into the back compartment of the caddy" (``side`` one of
+    fixture too): "in / into the back compartment of the caddy", "in the caddy's back
+    compartment" (``side`` one of
     :data:`_COMPARTMENT_SIDES`'s values, the viewer's side of the thing it lies on, which is how
     perception names compartments). A list of problems when it names a compartment but not
     which one, or of no one thing; ``None`` when the destination is no compartment."""
@@ -1167,16 +1168,25 @@ def _into_compartment(text: str, dest_words: list[str], prep: str | None, world:
     if k is None:
         return None
     before, after = ws[:k], ws[k + 1:]
+    owner: list[str] = []
+    if "s" in before:  # "the caddy's back compartment": the owner before the possessive
+        i = before.index("s")
+        owner, before = before[:i], before[i + 1:]
     sides = [_COMPARTMENT_SIDES[w] for w in before if w in _COMPARTMENT_SIDES]
     if len(sides) != 1 or len(before) != 1:
         return [("not_understood", f"{quote(text)}: which {ws[k]}? (say the front, back, left or right {ws[k]} "
                                    f"of one thing)")]
-    if not after or after[0] != "of" or len(after) < 2:
-        return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of what?")]
+    if not owner:
+        if not after or after[0] != "of" or len(after) < 2:
+            return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of what?")]
+        owner = after[1:]
+    elif after:
+        return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of {' '.join(owner)}, then "
+                                   f"{' '.join(after)!r}?")]
     names = {o.name for o in world.objects}
     things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
                    regions=(), source=world.source)
-    objects, _, problems = _read_objects(after[1:], things, previous)
+    objects, _, problems = _read_objects(owner, things, previous)
     if problems:
         return problems
     if len(objects) != 1:

@@ -477,13 +477,13 @@ def _compartment_looks(target, name: str, centre_xy: np.ndarray, plane) -> list[
     """Fixture ``name``'s ``compartments`` from its model: per site named
     ``<name>_<word>`` + :data:`COMPARTMENT_SITE_SUFFIX`, ``{name: word, offset_m: (2,) the
     site's centre from the perceived footprint centre ``centre_xy`` (world axes), half_extents_m:
-    (2,) as :func:`_site_box`, height_m: the compartment's floor above the support plane
+    (2,) on the world axes, height_m: the compartment's floor above the support plane
     (``plane``: the perceiver's), found by a ray cast straight down the site's centre onto the
     fixture's own geoms}``, m. The word is the model's name for it (used only to match the
     scenes); the perceiver names compartments by the viewer's sides. The footprint is the
     compartment's inside between its walls where rays across it, :data:`COMPARTMENT_WALL_RAY_M`
-    above the floor, meet them (the site's extent on an open side). Sites that are not level,
-    or whose ray down meets nothing of the fixture, are left out."""
+    above the floor, meet them (the site's extent on the world axes, as LIBERO's ``In`` reads it,
+    on an open side). Sites whose ray down meets nothing of the fixture are left out."""
     m, d = target.model, target.data
     root = int(m.body_rootid[m.body(target.env.env.get_object(name).root_body).id])
     prefix = f"{name}_"
@@ -492,11 +492,11 @@ def _compartment_looks(target, name: str, centre_xy: np.ndarray, plane) -> list[
         site = m.site(i).name
         if not (site.startswith(prefix) and site.endswith(COMPARTMENT_SITE_SUFFIX)):
             continue
-        box = _site_box(target, site)
-        if box is None:
-            continue
-        centre, half = box
-        top = np.array([centre[0], centre[1], float(d.site_xpos[i][2]) + float(m.site_size[i][2])])
+        # the site's extent on the world axes as LIBERO's In reads it (SiteObject.in_box: |R| size);
+        # the front compartment's site stands turned a quarter about x
+        ext = np.abs(d.site_xmat[i].reshape(3, 3)) @ np.asarray(target.env.env.object_sites_dict[site].size, float)
+        centre, half = d.site_xpos[i][:2].copy(), ext[:2].copy()
+        top = np.array([centre[0], centre[1], float(d.site_xpos[i][2]) + float(ext[2])])
         hit = _ray_to(m, d, root, top, np.array([0.0, 0.0, -1.0]))
         if hit is None:
             continue

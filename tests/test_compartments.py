@@ -1,0 +1,84 @@
+"""Compartments of a fixture (LIBERO's desk caddy): their look from the model, their names by the
+viewer's side, and a place that turns the held object to fit between their walls."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from phyagentos.motion.grasp import top_down_rotation
+from phyagentos.perception.errors import PerceptionError
+from phyagentos.perception.fixtures import (
+    CompartmentLook,
+    FixtureLook,
+    compartment_entity_name,
+    compartment_sides,
+)
+from phyagentos.primitives.base import PrimitiveFailure
+from phyagentos.primitives.perception import ComputePlace
+
+#: The desk caddy's look as the LIBERO bench measures it (LIBERO-10 task 5's world, turned pi).
+CADDY = {"name": "desk_caddy_1", "class": "desk_caddy", "size_m": [0.4377, 0.1528, 0.1738],
+         "compartments": [
+             {"name": "right", "offset_m": [-0.0043, 0.1387], "half_extents_m": [0.0616, 0.0645], "height_m": 0.0207},
+             {"name": "left", "offset_m": [-0.0049, -0.1398], "half_extents_m": [0.0617, 0.0649], "height_m": 0.0203},
+             {"name": "back", "offset_m": [-0.0369, -0.0015], "half_extents_m": [0.0289, 0.0633], "height_m": 0.0203}]}
+#: LIBERO's scene camera looks along -x: the viewer's right is +y.
+RIGHT_XY = np.array([0.0, 1.0])
+
+
+def test_compartments_are_named_by_the_viewers_side_of_the_fixture_they_lie_on():
+    look = FixtureLook.from_dict(CADDY)
+    assert [c.model_name for c in look.compartments] == ["right", "left", "back"]
+    offsets = [c.box(np.zeros(2))[0] for c in look.compartments]
+    assert compartment_sides(offsets, RIGHT_XY) == ["right", "left", "back"]
+    # seen from the other side of the table every name turns: the model's back is the viewer's front
+    assert compartment_sides(offsets, -RIGHT_XY) == ["left", "right", "front"]
+    # the caddy turned a half turn: its compartments' boxes turn with it
+    turned = [c.box(np.zeros(2), math.pi)[0] for c in look.compartments]
+    assert compartment_sides(turned, RIGHT_XY) == ["left", "right", "front"]
+    assert compartment_entity_name("desk_caddy_1", "back") == "desk_caddy_1_back_compartment"
+
+
+def test_two_compartments_on_one_side_leave_the_nearer_unnamed():
+    offsets = [np.array([-0.03, 0.0]), np.array([-0.08, 0.01]), np.array([0.0, 0.12])]
+    assert compartment_sides(offsets, RIGHT_XY) == [None, "back", "right"]
+
+
+def test_a_malformed_compartment_is_refused_with_its_keys():
+    bad = {**CADDY, "compartments": [{"name": "back", "offset_m": [0.0, 0.0], "half_extents_m": [0.0, 0.06],
+                                      "height_m": 0.02}]}
+    with pytest.raises(PerceptionError, match="half_extents_m must be > 0"):
+        FixtureLook.from_dict(bad)
+    with pytest.raises(PerceptionError, match="keys 'half_extents_m', 'height_m', 'name', 'offset_m'"):
+        CompartmentLook.from_dict({"name": "back"}, "desk_caddy_1")
+    with pytest.raises(PerceptionError, match="compartments must be a list"):
+        FixtureLook.from_dict({**CADDY, "compartments": "back"})
+
+
+def _place() -> ComputePlace:
+    return ComputePlace("PlaceInSlot", object="black_book_1", region="desk_caddy_1_back_compartment")
+
+
+def test_a_book_set_into_a_slot_turns_its_spine_along_the_slot():
+    slot = np.eye(4)  # the back compartment: 5.8 cm along x, 12.7 cm along y
+    slot_half = np.array([0.0289, 0.0633, 0.0101])
+    book_half = np.array([0.0577, 0.0166, 0.0703])  # held as picked: its long side along the tcp's x
+    held = np.eye(4)
+    yaws = _place()._fitting_yaws([0.0, -0.7, math.pi / 4], slot, slot_half, held, book_half)
+    assert yaws, yaws
+    for yaw in yaws:  # every yaw offered sets the book's long side within the slot's long side
+        R = top_down_rotation(yaw) @ held[:3, :3]
+        need = np.abs(R)[:2] @ book_half
+        assert np.all(need <= slot_half[:2] + 1e-9), (yaw, need)
+    R = top_down_rotation(yaws[0]) @ held[:3, :3]
+    assert abs(abs(R[1, 0]) - 1.0) < 0.01  # the roomiest: the spine square along the slot (world y)
+
+
+def test_an_object_wider_than_the_slot_at_every_turn_is_refused_before_anything_moves():
+    with pytest.raises(PrimitiveFailure, match="needs at least .* offers \\[0.058, 0.127\\] m") as err:
+        _place()._fitting_yaws([0.0], np.eye(4), np.array([0.0289, 0.0633, 0.01]), np.eye(4),
+                               np.array([0.05, 0.05, 0.05]))  # a 10 cm mug
+    assert err.value.code == "perception.too_small"

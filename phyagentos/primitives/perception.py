@@ -783,6 +783,14 @@ class ComputePlace(Primitive):
     collision checker, the held object attached): a bowl held by its rim, the hand 5.6 cm
     off its centre, is set down beside a cabinet with the hand on the side away from it.
     When none is clear, yaw 0 (the planner then reports the collision).
+
+    Into a compartment (a perceived ``class: compartment`` fixture entity, its box the floor
+    between its walls: "in the back compartment of the caddy") only the yaws at which the held
+    object's footprint fits between the walls are tried (:meth:`_fitting_yaws`;
+    ``perception.too_small`` when none does), the pre-place stands high enough for the object
+    to clear the walls (``walls_m`` + :data:`COMPARTMENT_CLEAR_M` + its half height, since it
+    may hang that much lower in the hand than perceived), and where the hand would meet the
+    walls at the floor the object is let go higher (:meth:`_let_down`).
     """
 
     def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,

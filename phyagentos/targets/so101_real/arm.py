@@ -14,6 +14,12 @@ period of :meth:`SO101Arm.follow`:
 3. the period's goal is checked (calibrated range, step, velocity) and sent as one
    GROUP_SYNC_WRITE of ``Goal_Position``.
 
+Periods are paced on ``time.perf_counter``. A period that would start more than one period
+late (this process was descheduled, the bus answered late) starts now instead: the missed
+periods are not made up by sending their goals back to back (:meth:`SO101Arm._slot`), so
+the servos never get several periods of motion within milliseconds and the guard's
+velocity check, which takes goals to be one period apart, holds.
+
 Any stop (a reading violation, a bus failure, the e-stop) applies the declared
 ``stop_policy`` at once (``hold``: arm goals := last good measured positions, the jaw keeps
 its goal so a held object stays held; ``torque_off``)
@@ -50,7 +56,9 @@ class FollowResult:
     """Outcome of :meth:`SO101Arm.follow`: ``completed``; ``periods`` run; ``code`` and
     ``reason`` of a stop (empty when completed); ``max_tracking_error_rad`` (measured vs
     the goal sent one period earlier, arm joints); ``overruns`` periods whose bus work
-    took longer than the period; ``io_s`` per-period read+write durations, s."""
+    took longer than the period; ``late`` periods that started more than a period late
+    (the schedule moved on to now: the motion ends that much later); ``io_s`` per-period
+    read+write durations, s."""
 
     completed: bool
     periods: int
@@ -58,6 +66,7 @@ class FollowResult:
     reason: str = ""
     max_tracking_error_rad: float = 0.0
     overruns: int = 0
+    late: int = 0
     io_s: list = field(default_factory=list)
 
 
@@ -262,6 +271,7 @@ class SO101Arm:
         the twin there). Stops on the e-stop, a guard violation, a bus failure or a
         tracking error above ``tracking_tol_rad`` (arm joints, against the goal sent one
         period earlier; a stall or a collision). Never raises for those: the result says.
+        A period more than one period late starts now (:meth:`_slot`): no catch-up burst.
         """
         Q = np.asarray(Q, dtype=float)
         if Q.ndim != 2 or Q.shape[1] != 6:
@@ -270,6 +280,7 @@ class SO101Arm:
         t_next = self._period_start()
         prev_goal = self._prev_sent
         for k in range(len(Q)):
+            t_next = self._slot(t_next, res)
             if self._wait(t_next):
                 self._apply_stop("safety.estop", "e-stop engaged")
                 return self._end(res, "safety.estop", "e-stop engaged")
@@ -300,9 +311,27 @@ class SO101Arm:
     def _period_start(self) -> float:
         """When the next period starts: the paced slot after the previous call's last period,
         or now when that slot is more than a period in the past (the caller paused)."""
+        return self._slot(self._next_period)
+
+    def _slot(self, t: float | None, res: FollowResult | None = None) -> float:
+        """The start of a period, perf_counter s: ``t``, or now when ``t`` is more than one
+        period in the past (this loop, or the bus's answer, was held up: a descheduled
+        process, a busy machine); such a period is counted in ``res.late``.
+
+        Missed periods are not made up. Sending their goals back to back would hand the
+        servos several periods of motion within a few milliseconds: they lunge at full speed
+        (load near its limit, a tracking error that is only the lunge's), and the guard's
+        velocity check, which takes goals to be one period apart, would not see it. The
+        motion resumes where it stopped, one goal per period; it ends that much later.
+        """
         now = time.perf_counter()
-        nxt = self._next_period
-        return nxt if nxt is not None and nxt > now - self.dt else now
+        if t is None or t > now - self.dt:
+            return now if t is None else t
+        if res is not None:
+            res.late += 1
+            log.debug("so101 arm: period %d started %.0f ms late; the schedule moves on to now",
+                      res.periods, (now - t) * 1000.0)
+        return now
 
     def settle(self, q_goal, *, timeout_s: float = 1.0, tol_rad: float = 0.03, on_period=None) -> FollowResult:
         """Hold goal ``q_goal`` (6,) until the arm joints are within ``tol_rad`` or
@@ -312,6 +341,7 @@ class SO101Arm:
         res = FollowResult(completed=False, periods=0)
         t_next = self._period_start()
         for k in range(n):
+            t_next = self._slot(t_next, res)
             if self._wait(t_next):
                 self._apply_stop("safety.estop", "e-stop engaged")
                 return self._end(res, "safety.estop", "e-stop engaged")

@@ -253,11 +253,11 @@ DRAWER_APPROACH_PITCH_RAD = math.radians(10.0)
 #: 2.4 cm proud of a 1.5 cm front; the floor is about 3 cm below the handle's centre).
 DRAWER_FRONT_M = 0.045
 DRAWER_WALL_M = 0.02
+DRAWER_FLOOR_M = 0.025
 #: Points this far or more inside a compartment's walls (its footprint from the fixture's look:
 #: the inside between them), above its floor, are what stands in it, not the fixture's, m: the
 #: voxel grid's 5 mm and the 2-3 mm of a wall's depth edge.
 COMPARTMENT_WALL_M = 0.008
-DRAWER_FLOOR_M = 0.025
 #: How far from where the hand let an object go a weak sighting of it may stand, m
 #: (:meth:`Perceiver._weak_elsewhere`): its own footprint (LIBERO's largest, the 11 cm bowls and
 #: the 8.5 cm cream cheese box) and a short tumble; a confident sighting farther away is still
@@ -901,7 +901,7 @@ class Perceiver:
                 axis = look.knob.axis_xy(s.position[:2], s.turn)
                 own |= ((np.linalg.norm(p[:, :2] - axis, axis=1) <= KNOB_RADIUS_M)
                         & (heights <= look.knob.top_m + FIXTURE_MARGIN_M))
-            in_drawer = np.zeros(len(cloud), dtype=bool)
+            contents = np.zeros(len(cloud), dtype=bool)
             for drawer in look.drawers:  # read in every observation; what stands out of the body is the fixture's
                 reading = drawer_reading(p, heights, drawer, s.position[:2], s.turn)
                 if reading is not None:
@@ -914,11 +914,11 @@ class Perceiver:
                         pos = np.array([mid[0], mid[1], plane.z_at(mid) + half[2]])
                         dets.append(Detection(pos, yaw, half, "box", np.zeros(3), np.zeros(3), 0, 0, DRAWER_SIGMA_M,
                                               math.pi, 1.0, 0.0))
-                        in_drawer |= self._drawer_inside(p, heights, drawer, s, reading[0]) & ~walls
+                        contents |= self._drawer_inside(p, heights, drawer, s, reading[0]) & ~walls
             for comp in look.compartments:  # what stands in a compartment rests on its floor, and is not the body's
                 centre_c, half_c = comp.box(s.position[:2], s.turn)
                 inner = np.maximum(half_c - COMPARTMENT_WALL_M, 0.0)
-                in_drawer |= (np.all(np.abs(p[:, :2] - centre_c) <= inner, axis=1)
+                contents |= (np.all(np.abs(p[:, :2] - centre_c) <= inner, axis=1)
                               & (heights > comp.height_m + FIXTURE_MARGIN_M))
                 hz_c = max(0.5 * comp.height_m, 1e-3)
                 dets.append(Detection(np.array([centre_c[0], centre_c[1], plane.z_at(centre_c) + hz_c]), 0.0,
@@ -931,7 +931,7 @@ class Perceiver:
             on_patch = np.all(np.abs(p[:, :2] - centre) <= half, axis=1)
             top = look.size_m[2]  # the model's top (the sighting's may include what stands on it)
             limit = np.where(on_patch, min(surface, top), top) + FIXTURE_MARGIN_M
-            own |= over & (heights <= limit) & ~in_drawer
+            own |= over & (heights <= limit) & ~contents
             hz = max(0.5 * surface, 1e-3)
             pos = np.array([centre[0], centre[1], plane.z_at(centre) + hz])
             dets.append(Detection(pos, 0.0, np.array([half[0], half[1], hz]), "box", np.zeros(3), np.zeros(3), 0, 0,

@@ -555,15 +555,9 @@ def _place_site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray] | 
     suffix = FIXTURE_PLACE_SITES.get(cat)
     if suffix is None:
         return None
-    return _site_box(target, f"{name}_{suffix}")
-
-
-def _site_box(target, site: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(centre xy (2,), half extents on the world axes (2,))`` of LIBERO site ``site``, world
-    m (as :func:`_place_site` describes); None for a site that is not level."""
     m, d = target.model, target.data
-    sid = m.site(site).id
-    a, b = (float(v) for v in np.asarray(target.env.env.object_sites_dict[site].size, float)[:2])
+    sid = m.site(f"{name}_{suffix}").id
+    a, b = (float(v) for v in np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)[:2])
     R = d.site_xmat[sid].reshape(3, 3)
     if abs(R[2, 2]) < 0.99:
         return None

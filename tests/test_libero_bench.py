@@ -140,8 +140,15 @@ def test_into_a_compartment_of_the_caddy_places_on_that_compartment_named_by_the
             f"desk_caddy_1_{side}_compartment", words
     with pytest.raises(BenchError, match="which compartment\\? \\(say the front, back, left or right compartment"):
         instruction_nodes("put the book in the compartment of the caddy", problem.objects, problem.fixtures)
+    # LIBERO-PRO's rewording (libero_10_lan task 5) names no owner: the compartment is the one caddy's
+    lan = resolve_task("libero_10_lan", 5)
+    assert lan.instruction == "pick up the book and place in back compartment"
+    assert instruction_nodes(lan.instruction, problem.objects, problem.fixtures)[1]["params"]["region"] == \
+        "desk_caddy_1_back_compartment"
+    with pytest.raises(BenchError, match="the back compartment of what\\? \\(no one caddy here\\)"):
+        instruction_nodes("put the book in the back compartment", problem.objects, {"study_table": "study_table"})
     with pytest.raises(BenchError, match="the back compartment of what\\?"):
-        instruction_nodes("put the book in the back compartment", problem.objects, problem.fixtures)
+        instruction_nodes("put the book in the back compartment for", problem.objects, problem.fixtures)
 
 
 def test_turn_on_the_stove_turns_its_knob_to_mid_travel_and_turn_off_is_refused():

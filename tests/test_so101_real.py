@@ -175,7 +175,7 @@ def test_every_injected_fault_stops_the_arm_with_a_clear_code(twin, cal_file, fa
 @pytest.mark.parametrize("tracking_tol_rad", [0.15, float("inf")])
 def test_a_stall_of_the_twin_mid_motion_is_not_made_up_in_a_burst_nor_stops_the_arm(twin, cal_file,
                                                                                     tracking_tol_rad):
-    """The twin's threads held up for 0.3 s, twice, while shoulder_pan moves at the real
+    """The twin's threads held up for 0.4 s, twice, while shoulder_pan moves at the real
     target's velocity limit (1.5 rad/s): its process descheduled on a busy machine, so the
     bus answers late. The loop starts the late period now and goes on one goal per period;
     it does not send the periods it missed back to back, which made the servo lunge (several
@@ -200,17 +200,17 @@ def test_a_stall_of_the_twin_mid_motion_is_not_made_up_in_a_burst_nor_stops_the_
 
     def on_period(k, _q):
         loads.append(np.abs(arm.last_state.load[:5]))
-        if k in (8, 20):  # mid-motion; the next period's read waits for the twin
-            hold_up_the_twin(0.3)
+        if k in (8, 24):  # mid-motion; the next period's read waits for the twin
+            hold_up_the_twin(0.4)
 
     try:
-        Q = _ramp(arm, 0, 0.9, 30)
+        Q = _ramp(arm, 0, 1.2, 40)
         res = arm.follow(Q, tracking_tol_rad=tracking_tol_rad, on_period=on_period)
         assert res.completed, (res.code, res.reason)
-        assert res.late >= 2  # the stalls were felt; the schedule moved on instead of catching up
         assert arm.settle(Q[-1], timeout_s=1.5).completed
         assert arm.stopped is None and not arm.guard.events
         assert np.max(loads) < arm.limits.max_load_permille, np.max(loads, axis=0)
+        assert res.late >= 2  # the stalls were felt: the schedule moved on instead of catching up
     finally:
         arm.close()
 

@@ -1151,13 +1151,16 @@ def _into_drawer(text: str, dest_words: list[str], prep: str | None, world: Worl
 #: side of the thing it is in: :data:`~phyagentos.geometry.VIEWER_SIDES`).
 _COMPARTMENT_WORDS = {"compartment", "compartments", "section", "slot"}
 _COMPARTMENT_SIDES = {"back": "back", "rear": "back", "front": "front", "left": "left", "right": "right"}
+#: The thing a compartment named without its owner is of, as a drawer's is a cabinet
+#: (:data:`_PART_OF`): "place it in the back compartment" is the caddy's, where one is declared.
+_COMPARTMENT_OF = "caddy"
 
 
 def _into_compartment(text: str, dest_words: list[str], prep: str | None, world: World, previous: tuple[str, ...]
                       ) -> tuple[str, str] | list[tuple[str, str]] | None:
     """``(thing, side)`` when a move's destination is a compartment of one declared thing (a
     fixture too): "in / into the back compartment of the caddy", "in the caddy's back
-    compartment" (``side`` one of
+    compartment", "in back compartment" (of the one :data:`_COMPARTMENT_OF`) (``side`` one of
     :data:`_COMPARTMENT_SIDES`'s values, the viewer's side of the thing it lies on, which is how
     perception names compartments). A list of problems when it names a compartment but not
     which one, or of no one thing; ``None`` when the destination is no compartment."""
@@ -1176,8 +1179,11 @@ def _into_compartment(text: str, dest_words: list[str], prep: str | None, world:
     if len(sides) != 1 or len(before) != 1:
         return [("not_understood", f"{quote(text)}: which {ws[k]}? (say the front, back, left or right {ws[k]} "
                                    f"of one thing)")]
-    if not owner:
-        if not after or after[0] != "of" or len(after) < 2:
+    default = not owner and not after  # "place it in the back compartment": of the one caddy
+    if default:
+        owner = [_COMPARTMENT_OF]
+    elif not owner:
+        if after[0] != "of" or len(after) < 2:
             return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of what?")]
         owner = after[1:]
     elif after:
@@ -1187,6 +1193,8 @@ def _into_compartment(text: str, dest_words: list[str], prep: str | None, world:
     things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
                    regions=(), source=world.source)
     objects, _, problems = _read_objects(owner, things, previous)
+    if default and (problems or len(objects) != 1):
+        return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of what? (no one {_COMPARTMENT_OF} here)")]
     if problems:
         return problems
     if len(objects) != 1:

@@ -29,6 +29,11 @@ from phyagentos.targets.libero import parse_bddl, resolve_task, step_budget
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def _steps(nodes: list[dict]) -> list[tuple]:
+    """``(skill, object, region)`` of each planned node."""
+    return [(n["skill"], n["params"].get("object"), n["params"].get("region")) for n in nodes]
+
+
 def _bench(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "phyagentos.cli", "bench", *args], capture_output=True, text=True,
                           cwd=cwd, timeout=1200, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
@@ -107,7 +112,7 @@ def test_open_a_drawer_and_put_the_bowl_inside_places_it_on_that_drawers_floor()
     problem = parse_bddl(goal.bddl_path)
     assert goal.language == "open the top drawer and put the bowl inside"
     nodes = instruction_nodes(goal.language, problem.objects, problem.fixtures)
-    assert [(n["skill"], n["params"].get("object"), n["params"].get("region")) for n in nodes] == [
+    assert _steps(nodes) == [
         ("slide_drawer", "wooden_cabinet_1_top_drawer", None), ("pick", "akita_black_bowl_1", None),
         ("place", "akita_black_bowl_1", "wooden_cabinet_1_top_drawer")]
     assert nodes[1]["depends_on"] == [nodes[0]["id"]]
@@ -125,12 +130,10 @@ def test_open_a_drawer_and_put_the_bowl_inside_places_it_on_that_drawers_floor()
 
 
 def test_into_a_compartment_of_the_caddy_places_on_that_compartment_named_by_the_viewers_side():
-    task = resolve_task("libero_10", 5)
-    problem = parse_bddl(task.bddl_path)
-    assert task.language == "pick up the book and place it in the back compartment of the caddy"
-    nodes = instruction_nodes(task.language, problem.objects, problem.fixtures)
-    assert [(n["skill"], n["params"].get("object"), n["params"].get("region")) for n in nodes] == [
-        ("pick", "black_book_1", None), ("place", "black_book_1", "desk_caddy_1_back_compartment")]
+    problem = parse_bddl(resolve_task("libero_10", 5).bddl_path)
+    nodes = instruction_nodes("pick up the book and place it in the back compartment of the caddy", problem.objects,
+                              problem.fixtures)  # task 5's own words
+    assert _steps(nodes) == [("pick", "black_book_1", None), ("place", "black_book_1", "desk_caddy_1_back_compartment")]
     assert nodes[1]["accept"] == [{"on": {"object": "black_book_1", "support": "desk_caddy_1_back_compartment"}},
                                   {"released": "black_book_1"}]
     for words, side in (("put the book into the left compartment of the caddy", "left"),

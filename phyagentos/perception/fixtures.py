@@ -264,6 +264,22 @@ DRAWER_STOP_SIGMA_M = 0.002
 _DRAWER_SLICE_M = 0.005
 
 
+def _part_name(d: Any, keys: tuple[str, ...], fixture: str, kind: str) -> tuple[str, str]:
+    """``(name, "fixture 'f': <kind> 'name'")`` of a declared part of ``fixture`` (a drawer, a
+    compartment): ``d`` must be a mapping with exactly ``keys``, its ``name`` a non-empty string.
+
+    Raises:
+        PerceptionError: otherwise (the valid keys listed).
+    """
+    if not isinstance(d, Mapping) or set(d) != set(keys):
+        raise PerceptionError(f"fixture {fixture!r}: each {kind} must be a mapping with keys "
+                              f"{format_choices(keys)}, got {d!r}")
+    name = d["name"]
+    if not isinstance(name, str) or not name:
+        raise PerceptionError(f"fixture {fixture!r}: a {kind} needs a non-empty name, got {name!r}")
+    return name, f"fixture {fixture!r}: {kind} {name!r}"
+
+
 @dataclass(frozen=True)
 class DrawerLook:
     """One drawer of a fixture (module docstring): where its handle stands shut, how it opens;
@@ -292,13 +308,7 @@ class DrawerLook:
         Raises:
             PerceptionError: a missing or unknown key (the valid ones listed) or a malformed value.
         """
-        if not isinstance(d, Mapping) or set(d) != set(cls.KEYS):
-            raise PerceptionError(f"fixture {fixture!r}: each drawer must be a mapping with keys "
-                                  f"{format_choices(cls.KEYS)}, got {d!r}")
-        name = d["name"]
-        if not isinstance(name, str) or not name:
-            raise PerceptionError(f"fixture {fixture!r}: a drawer needs a non-empty name, got {name!r}")
-        what = f"fixture {fixture!r}: drawer {name!r}"
+        name, what = _part_name(d, cls.KEYS, fixture, "drawer")
         off = _floats(d["handle_offset_m"], 2, f"{what}: handle_offset_m")
         axis = np.asarray(_floats(d["axis_xy"], 2, f"{what}: axis_xy"))
         lo, hi = _floats(d["travel_m"], 2, f"{what}: travel_m")
@@ -352,13 +362,7 @@ class CompartmentLook:
         Raises:
             PerceptionError: a missing or unknown key (the valid ones listed) or a malformed value.
         """
-        if not isinstance(d, Mapping) or set(d) != set(cls.KEYS):
-            raise PerceptionError(f"fixture {fixture!r}: each compartment must be a mapping with keys "
-                                  f"{format_choices(cls.KEYS)}, got {d!r}")
-        name = d["name"]
-        if not isinstance(name, str) or not name:
-            raise PerceptionError(f"fixture {fixture!r}: a compartment needs a non-empty name, got {name!r}")
-        what = f"fixture {fixture!r}: compartment {name!r}"
+        name, what = _part_name(d, cls.KEYS, fixture, "compartment")
         off = _floats(d["offset_m"], 2, f"{what}: offset_m")
         half = _floats(d["half_extents_m"], 2, f"{what}: half_extents_m")
         height = _floats([d["height_m"]], 1, f"{what}: height_m")[0]

@@ -352,3 +352,21 @@ def test_the_book_goes_into_the_caddys_left_compartment_and_our_verdict_sees_it_
     assert place[0]["verdict"] == "success", place
     assert place[0]["truth"]["criteria"][0]["predicate"].startswith(
         "on(object=black_book_1, support=desk_caddy_1_left_compartment")
+
+
+def test_the_yellow_and_white_mug_is_one_mug_beside_a_yellow_distractor_and_no_plan_moves_a_thing_twice():
+    # LIBERO-PRO's libero_10_with_mug task 4 adds a yellow mug: "the yellow and white mug" still
+    # names the white_yellow_mug, not the yellow mug and the white one (which moved the white mug twice)
+    task = resolve_task("libero_10_with_mug", 4)
+    problem = parse_bddl(task.bddl_path)
+    assert "libero_mug_yellow_1" in problem.objects
+    nodes = instruction_nodes(task.language, problem.objects, problem.fixtures)
+    assert [(n["params"]["object"], n["params"]["region"]) for n in nodes if n["skill"] == "place"] == [
+        ("porcelain_mug_1", "plate_1"), ("white_yellow_mug_1", "plate_2")]
+    # "the yellow mug and the white mug" is both of them
+    both = instruction_nodes("put the yellow mug and the white mug on the right plate", problem.objects,
+                             problem.fixtures)
+    assert [n["params"]["object"] for n in both if n["skill"] == "place"] == ["libero_mug_yellow_1", "porcelain_mug_1"]
+    with pytest.raises(BenchError, match="acts twice on the same thing \\(pick_porcelain_mug_1, place_porcelain_mug_1\\)"):
+        instruction_nodes("put the white mug on the left plate and put the white mug on the right plate",
+                          problem.objects, problem.fixtures)

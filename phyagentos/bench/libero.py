@@ -406,7 +406,13 @@ def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str,
         BenchError: as :func:`instruction_nodes`.
     """
     steps, where = _planner_steps(language, objects, fixtures)
-    return _nodes(steps, skill_params, fixtures=fixtures), where
+    nodes = _nodes(steps, skill_params, fixtures=fixtures)
+    ids = [n["id"] for n in nodes]
+    twice = sorted({i for i in ids if ids.count(i) > 1})
+    if twice:  # one object moved twice (a misreading, or a request no single plan of moves serves)
+        raise BenchError(f"instruction {language!r} refused: it acts twice on the same thing ({', '.join(twice)}); "
+                         f"say each step's object once")
+    return nodes, where
 
 
 def _twin(a: str, b: str, objects: dict[str, str]) -> bool:

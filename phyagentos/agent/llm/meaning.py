@@ -317,14 +317,17 @@ def _colours(world: World) -> set[str]:
     return {e.colour for e in world.objects + world.regions if e.colour}
 
 
+#: The palette words an object's name may carry (``white_yellow_mug_1``: white, yellow).
+_PALETTE = frozenset({"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey", "gray"})
+
+
 def _name_parts(e: Entity) -> set[str]:
     return set(e.name.split("_")) - _KIND - _REGION_KIND - _STOP - _VERBS - set(_PREPOSITIONS)
 
 
 def _name_colours(e: Entity) -> set[str]:
     """The palette words of an entity's name (``white_yellow_mug_1``: white, yellow)."""
-    return set(e.name.split("_")) & {"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey",
-                                     "gray"}
+    return set(e.name.split("_")) & _PALETTE
 
 
 def _filter(words: Sequence[str], cands: Sequence[Entity], world: World) -> tuple[list[Entity], list[str]]:
@@ -378,8 +381,10 @@ def _filter(words: Sequence[str], cands: Sequence[Entity], world: World) -> tupl
 
 def _conjunction(words: list[str], world: World) -> tuple[str, ...] | None:
     """The objects of ``the X and the Y`` (``both`` allowed), in the order named, when each
-    part refers to exactly one object and no two to the same; else ``None`` (the phrase is
-    read whole: "the yellow and white mug" is one mug)."""
+    part refers to exactly one object and no two to the same, and the parts before the last
+    are not colours alone joined before one object's name ("the yellow and white mug" is one
+    mug, the white_yellow_mug, even beside a yellow mug and a white one; "the yellow mug and the
+    white mug" is two); else ``None`` (the phrase is read whole)."""
     groups: list[list[str]] = [[]]
     for w in words:
         if w == "and":
@@ -387,6 +392,12 @@ def _conjunction(words: list[str], world: World) -> tuple[str, ...] | None:
         elif w != "both":
             groups[-1].append(w)
     if len(groups) < 2 or not all(groups):
+        return None
+    # colours joined before one noun ("the yellow and white mug"): one object, when exactly one
+    # object's name has every word, though a yellow mug and a white one stand beside it
+    content = [w for w in words if w not in _STOP and w not in ("and", "both")]
+    if (all(w in _PALETTE for g in groups[:-1] for w in g if w not in _STOP)
+            and sum(1 for e in world.objects if set(content) <= _name_parts(e)) == 1):
         return None
     names = []
     for g in groups:

@@ -892,9 +892,7 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         if turn:  # a knob to turn: the thing named is any declared thing, a fixture too
             state = turn.group(1) or turn.group(4)
             named = _tokens(turn.group(2) or turn.group(3))
-            names = {o.name for o in world.objects}
-            things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
-                           regions=(), source=world.source)
+            things = _things(world)
             objects, count, problems = _read_objects(named, things, previous)
             if not problems and len(objects) != 1:
                 problems = [("not_understood", f"{quote(part)}: turn one thing {state} at a time")]
@@ -1088,9 +1086,7 @@ def _read_part(text: str, named: list[str], world: World, previous: tuple[str, .
     drawer ``middle`` (:data:`_DRAWER_WORDS`) of the one thing ``cabinet`` names (any declared
     thing, a fixture too); a phrase with no drawer names the thing itself (part and kind None).
     How the words split: :func:`_split_part`."""
-    names = {o.name for o in world.objects}
-    things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
-                   regions=(), source=world.source)
+    things = _things(world)
     kind, part, owner, problems = _split_part(text, named)
     if kind is None:
         objects, _, problems = _read_objects(named, things, previous)
@@ -1167,6 +1163,14 @@ _COMPARTMENT_SIDES = {"back": "back", "rear": "back", "front": "front", "left": 
 _COMPARTMENT_OF = "caddy"
 
 
+def _things(world: World) -> World:
+    """``world`` with its regions among its objects (a region's name not already an object's):
+    every declared thing a part (a drawer, a compartment) may belong to, fixtures too."""
+    names = {o.name for o in world.objects}
+    return World(objects=world.objects + tuple(r for r in world.regions if r.name not in names), regions=(),
+                 source=world.source)
+
+
 def _into_compartment(text: str, dest_words: list[str], prep: str | None, world: World, previous: tuple[str, ...]
                       ) -> tuple[str, str] | list[tuple[str, str]] | None:
     """``(thing, side)`` when a move's destination is a compartment of one declared thing (a
@@ -1200,9 +1204,7 @@ def _into_compartment(text: str, dest_words: list[str], prep: str | None, world:
     elif after:
         return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of {' '.join(owner)}, then "
                                    f"{' '.join(after)!r}?")]
-    names = {o.name for o in world.objects}
-    things = World(objects=world.objects + tuple(r for r in world.regions if r.name not in names),
-                   regions=(), source=world.source)
+    things = _things(world)
     objects, _, problems = _read_objects(owner, things, previous)
     if default and (problems or len(objects) != 1):
         return [("not_understood", f"{quote(text)}: the {sides[0]} {ws[k]} of what? (no one {_COMPARTMENT_OF} here)")]

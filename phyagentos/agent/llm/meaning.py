@@ -99,19 +99,24 @@ _STAY = re.compile(r"\bwhere\s+(it|they|he|she)\s*(is|are|'s|'re|was|were)\b|\bi
                    r"\bthe\s+way\s+(it|they)\s+(is|are|was|were)\b")
 _NOTHING = re.compile(r"\b(do\s+nothing|nothing|don'?t\s+do\s+anything|do\s+not\s+do\s+anything|stay\s+still)\b")
 _AND_SPLIT = re.compile(r"\s*(?:,\s*and\s+|,\s+|\s+and\s+|\s+but\s+)(?=(?:then\s+)?(?:do\s+not|don'?t|never|turn|"
-                        r"switch|open|close|shut|" + "|".join(sorted(_VERBS)) + r")\b)")
+                        r"switch|open|close|shut|(?:slide|pull|swing)\s+(?:open|shut|closed?)|" + "|".join(sorted(_VERBS)) + r")\b)")
 #: "turn on the stove", "switch the stove off": a knob to turn (the verb ``turn_on`` / ``turn_off``).
 _TURN = re.compile(r"^(?:please\s+)?(?:turn|switch)\s+(?:(on|off)\s+(.+)|(.+?)\s+(on|off))$")
 #: "open the middle drawer of the cabinet", "close the top drawer": a part to slide or swing (the verb
 #: ``open`` / ``close``; "shut" is "close").
-_OPEN = re.compile(r"^(?:please\s+)?(open|close|shut)\s+(?:up\s+)?(.+)$")
+#: "slide open", "pull open", "push shut" / "push closed": the verb's manner, the same open or close.
+_OPEN = re.compile(r"^(?:please\s+)?(?:(?:slide|pull|push|swing)\s+(?=open\b|shut\b|close\b))?(open|close|shut)"
+                   r"\s+(?:up\s+)?(.+)$")
 #: Words for which of a fixture's drawers (the word before "drawer"), as the drawer's name.
 #: "the middle layer of the drawer": a drawer as a level of the chest the word "drawer" stands for.
 _LEVEL_WORDS = {"layer", "level", "tier", "row"}
 _DRAWER_WORDS = {"top": "top", "upper": "top", "uppermost": "top", "topmost": "top", "middle": "middle",
                  "center": "middle", "centre": "middle", "bottom": "bottom", "lower": "bottom", "lowest": "bottom",
                  "bottommost": "bottom"}
-_ELLIPSIS = re.compile(r"\s*(?:,\s*and\s+|\s+and\s+|,\s+)(?=the\s+[a-z0-9_ ]+?\s+(?:in|into|on|onto|to)\s)")
+#: "..., and the X in Y" / "... and X on Y" (the article may be dropped: "place white mug on left plate and
+#: yellow-white mug on right plate"): a clause whose verb is the one before it
+_ELLIPSIS = re.compile(r"\s*(?:,\s*and\s+|\s+and\s+|,\s+)(?=(?:the\s+)?[a-z0-9_][a-z0-9_ -]*?\s+"
+                       r"(?:in|into|on|onto|to)\s)")
 
 #: Common words of languages other than English (function words a request cannot avoid).
 _LANGUAGES: dict[str, set[str]] = {
@@ -309,7 +314,15 @@ def _parts(request: str, world: World) -> list[str]:
             # over a conjunction of objects, not an elided verb
             if len(pieces) > 1 and not set(_tokens(pieces[0])) & set(_PREPOSITIONS):
                 pieces = [p]
-            out += pieces
+            # "... and yellow and white mug on the right plate": a later piece with no destination
+            # is a conjunction inside the next one's object phrase, not a clause of its own
+            joined: list[str] = []
+            for i, q in enumerate(pieces):
+                if joined and i > 1 and not set(_tokens(joined[-1])) & set(_PREPOSITIONS):
+                    joined[-1] = f"{joined[-1]} and {q}"
+                else:
+                    joined.append(q)
+            out += joined
     return [p.strip(" ,;") for p in out if p.strip(" ,;")]
 
 
@@ -747,13 +760,26 @@ def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tu
     return where, []
 
 
-def _beside(words: list[str], prep: str | None, world: World, movers: tuple[str, ...]):
+def _beside(words: list[str], prep: str | None, world: World, movers: tuple[str, ...],
+            last: str | None = None):
     """``(side, landmark)`` of a destination ``to the left / right / front / back of <landmark>`` (``on the
-    right side of``, ``at the left of``, ``in front of`` too; side one of :data:`_LANDMARK_SIDES`), a problem list
-    when the landmark names nothing declared (or several), else None (not such a destination)."""
+    right side of``, ``at the left of``, ``in front of``, the possessive ``to the stove's front`` too; side
+    one of :data:`_LANDMARK_SIDES`), a problem list when the landmark names nothing declared (or several),
+    else None (not such a destination). A side with no landmark (``and the chocolate pudding to the right``)
+    is beside ``last``, the thing the clause before set its object on or beside, when there is one (it names
+    no other landmark); with none it is no such destination (a place relative to the viewer)."""
     ws = [w for w in words if w != "the"]
     if ws[:1] == ["rear"]:
         ws = ["back", *ws[1:]]
+    if ws[-1:] == ["side"] or ws[-1:] == ["hand"]:
+        ws = ws[:-1]  # "to the stove's left side", "on the right hand"
+    if ws and ws[-1] == "rear":
+        ws = [*ws[:-1], "back"]
+    if len(ws) >= 3 and ws[-2] == "s" and ws[-1] in _LANDMARK_SIDES:
+        ws = [ws[-1], "of", *ws[:-2]]  # "to the stove's front": the front of the stove
+    if (prep in ("to", "on", "at") and ws in ([s] for s in _LANDMARK_SIDES) and last is not None
+            and last not in movers):
+        return ws[0], last
     if (prep not in ("to", "on", "at") and not (prep == "in" and ws[:1] == ["front"])) or len(ws) < 3 \
             or ws[0] not in _LANDMARK_SIDES:
         return None
@@ -971,7 +997,9 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
         into_kind = "drawer"
         side, twins = _side_twins(dest_words, world) if relations and dest_words else (None, ())
         dest_where: dict[str, dict] = {}
-        beside = _beside(dest_words, prep, world, objects) if relations and dest_words else None
+        last = (meaning.intents[-1].destinations[0] if meaning.intents and meaning.intents[-1].verb in ("move", "stack")
+                and len(meaning.intents[-1].destinations) == 1 else None)
+        beside = _beside(dest_words, prep, world, objects, last) if relations and dest_words else None
         if beside is not None:  # "to the right of the plate": on the table, on the viewer's right of the plate
             if isinstance(beside, list):
                 why = beside

@@ -90,6 +90,11 @@ def test_other_wordings_of_the_relations_read_the_same():
          {"relation": "in", "of": ["wooden_cabinet_1"], "part": "bottom drawer"}),
         ("lift the black bowl from the top drawer of the wooden cabinet and put it on the plate",
          {"relation": "in", "of": ["wooden_cabinet_1"], "part": "top drawer"}),
+        # a level of a chest of drawers is its drawer (LIBERO-PRO's swap words it so)
+        ("take the black bowl in the middle layer of the cabinet and put it on the plate",
+         {"relation": "in", "of": ["wooden_cabinet_1"], "part": "middle drawer"}),
+        ("pick the black bowl from the top tier of the wooden cabinet and set it on the plate",
+         {"relation": "in", "of": ["wooden_cabinet_1"], "part": "top drawer"}),
     ]:
         nodes, refs = instruction_plan(text, problem.objects, problem.fixtures)
         assert refs == {BOWL: where}, text

@@ -160,6 +160,10 @@ def test_in_the_top_drawer_is_the_look_alike_inside_that_open_drawer_not_the_one
     under = _det(BLACK, (0.10, -0.14, 0.93), half=(0.052, 0.052, 0.025))
     res = resolve_reference(desc, [0, 1], [under, on_top], marks, CFG, look_alikes=2)
     assert res.detection is None and "0 candidates inside" in res.reason
+    # a level read as no drawer is never widened to the whole cabinet (whose one raised bowl is on its top)
+    shelf = _bowl("bowl_1", {"relation": "in", "of": ["wooden_cabinet_1"], "part": "top shelf"})
+    res = resolve_reference(shelf, [0, 1], dets, marks, CFG, look_alikes=2)
+    assert res.detection is None and "top shelf of wooden_cabinet_1 is not a part perception reads" in res.reason
 
 
 def test_only_a_drawer_part_narrows_a_reference():

@@ -262,6 +262,11 @@ def _off_table(det: Detection, config: PerceptionConfig) -> bool:
     return max(float(det.bottom_m), float(det.low_m)) >= config.association.off_table_m
 
 
+#: Words that name a level of a landmark (a part of it at one height): a reference to one that
+#: names no drawer is left unresolved by :func:`resolve_reference`, not read as the whole landmark.
+_LEVELS = frozenset({"top", "middle", "bottom", "upper", "lower", "layer", "level", "tier", "shelf"})
+
+
 def part_landmark(of: str, part: str | None) -> str | None:
     """The landmark name of a drawer named as the part of a fixture (``of``
     ``wooden_cabinet_1``, ``part`` ``top drawer`` -> ``wooden_cabinet_1_top_drawer``, the
@@ -364,6 +369,11 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
     # on / in
     off = {i: _off_table(detections[i], config) for i in cands}
     drawer = part_landmark(ref.of[0], ref.part)
+    if drawer is None and set((ref.part or "").split()) & _LEVELS:
+        # "the top layer of the cabinet" read as no drawer: never widened to the whole landmark (the bowl
+        # standing on the cabinet is not the one in its top drawer)
+        return unresolved(f"{rel}: the {ref.part} of {ref.of[0]} is not a part perception reads (a drawer: "
+                          f"top, middle or bottom drawer)")
     if drawer is not None:  # "in the top drawer of the cabinet": inside that drawer, standing open, only
         inside = landmarks.get(drawer)
         if inside is None:

@@ -55,7 +55,8 @@ class SpatialReference:
             no landmark).
         of: the landmarks' declared names (objects or fixtures), as many as the relation takes.
         part: the part of the landmark meant (``top drawer``): a drawer narrows ``in`` to that
-            drawer's inside (:func:`~.association.part_landmark`); other parts are informative.
+            drawer's inside (:func:`~.association.part_landmark`); a level that is no drawer
+            (``top shelf``) leaves the reference unresolved; other parts are informative.
 
     Raises:
         PerceptionError: an unknown relation (the valid ones listed), the wrong number of

@@ -713,6 +713,12 @@ def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tu
         return None, [("not_understood", f"{phrase}: '{words[0]}' a place other than the table's centre is not a "
                                           f"relation the rules read (between, next to, on, in a declared thing; "
                                           f"the table's centre)")]
+    level = next((i for i, w in enumerate(rest) if w in _LEVEL_WORDS and 0 < i and rest[i - 1] in _DRAWER_WORDS
+                  and rest[i + 1:i + 2] == ["of"] and set(rest[i + 2:]) & set(_PART_OF.values())), None)
+    if kind in ("in", "from") and level is not None:
+        # "in the top layer of the wooden cabinet": a level of a chest of drawers is its drawer
+        rest = [*rest[:level], "drawer", *rest[level + 1:]]
+        words = [words[0], *rest]
     drawer = next((i for i, w in enumerate(rest) if w in _PART_OF), None)
     if kind in ("in", "from") and drawer is not None and "of" not in rest[:drawer]:
         # "in / from the top drawer of the wooden cabinet", "from the top drawer" (of the one

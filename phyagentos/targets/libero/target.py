@@ -107,10 +107,16 @@ _GRIP_SITE = "gripper0_grip_site"
 #: kg m^2). The tabletop Franka's 870 / 120 lag its heavy rotors by up to 0.09 rad.
 _KP = np.array([2000.0] * 4 + [1000.0] * 3)
 #: Joint speeds and accelerations the motion stack plans with: these fractions of the
-#: Panda's datasheet speeds and of the motion package's accelerations. robosuite's wrist
-#: motors stop at 12 N m: at 0.4 / 1.0 joint 7 saturated at 1.04 rad/s in a pick and lagged
-#: 0.05 rad; at 0.25 / 0.5 the tracking stays within 0.01 rad.
-VELOCITY_SCALE = 0.25
+#: Panda's datasheet speeds (per joint, (7,)) and of the motion package's accelerations.
+#: robosuite's Panda motors stop at 80 N m (joints 1-5) and 12 N m (6-7, its `robot.xml`):
+#: with every joint at 0.4 / 1.0, joint 7 saturated at 1.04 rad/s in a pick and lagged 0.05
+#: rad; at 0.25 / 0.5 the tracking stays within 0.01 rad. The shoulder and elbow (joints 1-4)
+#: plan at 0.4: a long transfer (the plate beside the robot's base, LIBERO-PRO's swapped
+#: scenes) is the elbow's, and at 0.25 it alone took 3.4-4.6 s; swept on the development
+#: split (LIBERO's sampler, seeds 500-501 of libero_spatial, libero_goal and libero_object,
+#: 500 of LIBERO-10; docs/libero.md, fifteenth pass): 0.25, 0.4 and 0.55 succeed on the same
+#: episodes, 0.4 takes libero_spatial's first successes 10 control steps sooner, 0.55 one more.
+VELOCITY_SCALE: tuple[float, ...] = (0.4, 0.4, 0.4, 0.4, 0.25, 0.25, 0.25)
 ACCELERATION_SCALE = 0.5
 #: LIBERO's do-nothing action: zero OSC pose delta (6,) and the gripper open (-1).
 _NOOP_ACTION = np.array([0.0] * 6 + [-1.0])
@@ -498,9 +504,9 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         return float(max(0.0, 0.5 * (-f[0] + f[1])))
 
     def velocity_limits(self) -> np.ndarray:
-        """``(7,)`` rad/s: the Franka's datasheet joint speed limits scaled by
+        """``(7,)`` rad/s: the Franka's datasheet joint speed limits scaled per joint by
         :data:`VELOCITY_SCALE` (what the servos track within 0.01 rad)."""
-        return VELOCITY_SCALE * np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
+        return np.asarray(VELOCITY_SCALE) * np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
 
     def acceleration_limits(self) -> np.ndarray:
         """``(7,)`` rad/s^2: the motion package's limits scaled by :data:`ACCELERATION_SCALE`."""

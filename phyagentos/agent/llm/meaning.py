@@ -99,7 +99,8 @@ _STAY = re.compile(r"\bwhere\s+(it|they|he|she)\s*(is|are|'s|'re|was|were)\b|\bi
                    r"\bthe\s+way\s+(it|they)\s+(is|are|was|were)\b")
 _NOTHING = re.compile(r"\b(do\s+nothing|nothing|don'?t\s+do\s+anything|do\s+not\s+do\s+anything|stay\s+still)\b")
 _AND_SPLIT = re.compile(r"\s*(?:,\s*and\s+|,\s+|\s+and\s+|\s+but\s+)(?=(?:then\s+)?(?:do\s+not|don'?t|never|turn|"
-                        r"switch|open|close|shut|(?:slide|pull|swing)\s+(?:open|shut|closed?)|" + "|".join(sorted(_VERBS)) + r")\b)")
+                        r"switch|open|close|shut|(?:slide|pull|swing)\s+(?:open|shut|closed?)|"
+                        + "|".join(sorted(_VERBS)) + r")\b)")
 #: "turn on the stove", "switch the stove off": a knob to turn (the verb ``turn_on`` / ``turn_off``).
 _TURN = re.compile(r"^(?:please\s+)?(?:turn|switch)\s+(?:(on|off)\s+(.+)|(.+?)\s+(on|off))$")
 #: "open the middle drawer of the cabinet", "close the top drawer": a part to slide or swing (the verb
@@ -777,14 +778,13 @@ def _beside(words: list[str], prep: str | None, world: World, movers: tuple[str,
     ws = [w for w in words if w != "the"]
     if ws[:1] == ["rear"]:
         ws = ["back", *ws[1:]]
-    if ws[-1:] == ["side"] or ws[-1:] == ["hand"]:
+    if ws[-1:] in (["side"], ["hand"]):
         ws = ws[:-1]  # "to the stove's left side", "on the right hand"
     if ws and ws[-1] == "rear":
         ws = [*ws[:-1], "back"]
     if len(ws) >= 3 and ws[-2] == "s" and ws[-1] in _LANDMARK_SIDES:
         ws = [ws[-1], "of", *ws[:-2]]  # "to the stove's front": the front of the stove
-    if (prep in ("to", "on", "at") and ws in ([s] for s in _LANDMARK_SIDES) and last is not None
-            and last not in movers):
+    if prep in ("to", "on", "at") and len(ws) == 1 and ws[0] in _LANDMARK_SIDES and last not in (None, *movers):
         return ws[0], last
     if (prep not in ("to", "on", "at") and not (prep == "in" and ws[:1] == ["front"])) or len(ws) < 3 \
             or ws[0] not in _LANDMARK_SIDES:

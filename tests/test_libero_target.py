@@ -215,3 +215,26 @@ def test_the_fixtures_stand_where_the_init_state_puts_them_whatever_came_before(
         np.testing.assert_array_equal(np.random.get_state()[1][:4], state)  # the global generator restored
     finally:
         t.close()
+
+
+def test_the_declared_finger_geometry_is_the_models_fingers_rounded_to_the_side_of_caution(target):
+    m, d = target.model, target.data
+    mujoco.mj_forward(m, d)
+    tcp = m.site(target.tcp_site).id
+    p, z = d.site_xpos[tcp], d.site_xmat[tcp].reshape(3, 3)[:, 2]  # z: out of the hand
+    lowest, pads = [], []
+    for g in range(m.ngeom):
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or ""
+        R = d.geom_xmat[g].reshape(3, 3)
+        if name in ("gripper0_finger1_collision", "gripper0_finger2_collision"):
+            mesh = m.geom_dataid[g]
+            verts = m.mesh_vert[m.mesh_vertadr[mesh]:m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+            lowest.append(float(((verts @ R.T + d.geom_xpos[g] - p) @ z).max()))
+        if name in ("gripper0_finger1_pad_collision", "gripper0_finger2_pad_collision"):
+            centre, half = float((d.geom_xpos[g] - p) @ z), float(np.abs(z @ R) @ m.geom_size[g])
+            pads.append((centre + half, half - centre))  # (bottom below the tcp, top above it)
+    assert len(lowest) == 2 and len(pads) == 2
+    tip, pad_bottom, _ = target.finger_geometry_m
+    assert max(lowest) <= tip <= max(lowest) + 0.001  # the tip no higher than the fingers reach
+    assert min(b for b, _ in pads) - 0.001 <= pad_bottom <= min(b for b, _ in pads)
+    assert min(t for _, t in pads) > 0.01  # the pads reach a centimetre up the tcp's side

@@ -395,6 +395,27 @@ def test_top_down_grasp_keeps_the_fingertips_off_the_table():
     assert G[2, 3] >= 0.015 + 0.004 - 1e-12
 
 
+def test_a_flat_box_is_held_by_the_pads_of_a_hand_whose_fingers_reach_less_far_below_the_tcp():
+    # robosuite's Panda (LiberoTarget.finger_geometry_m): the fingers end 9.5 mm below the tcp and
+    # the pads span 4 mm below to 11 mm above it; a cream cheese box 1.8 cm tall on the table
+    T_obj = np.eye(4)
+    T_obj[2, 3] = 0.009
+    panda = (0.0095, 0.004, 0.035)
+    z_franka = top_down_grasp_candidates(T_obj, (0.043, 0.0215, 0.009))[0].grasp[2, 3]
+    z_panda = top_down_grasp_candidates(T_obj, (0.043, 0.0215, 0.009), fingers_m=panda)[0].grasp[2, 3]
+    assert z_franka == pytest.approx(0.015 + 0.004)
+    assert z_panda == pytest.approx(0.0095 + 0.004)  # the fingertips 4 mm over the table
+    def pads_on(z):  # how much of the Panda's pads (4 mm below to 11 mm above the tcp) lies along the box's side, m
+        return min(0.018, z + 0.011) - max(0.0, z - panda[1])
+    assert pads_on(z_franka) < 0.003 < 0.008 < pads_on(z_panda)
+    # a box 6 cm tall is held at its centre by either hand; one 10 cm tall no deeper than the finger base
+    T_obj[2, 3] = 0.03
+    assert top_down_grasp_candidates(T_obj, (0.03, 0.03, 0.03), fingers_m=panda)[0].grasp[2, 3] == pytest.approx(0.03)
+    assert top_down_grasp_candidates(T_obj, (0.03, 0.03, 0.03))[0].grasp[2, 3] == pytest.approx(0.03)
+    T_obj[2, 3] = 0.05
+    assert top_down_grasp_candidates(T_obj, (0.03, 0.03, 0.05), fingers_m=panda)[0].grasp[2, 3] == pytest.approx(0.065)
+
+
 def test_place_pose_puts_the_held_object_over_the_region_just_above_the_table():
     T_tcp_obj = np.eye(4)
     T_tcp_obj[2, 3] = 0.002  # object 2 mm further along the tcp z (below the tcp)

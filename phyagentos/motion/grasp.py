@@ -38,6 +38,7 @@ __all__ = [
     "hand_yaw",
     "FINGERTIP_BELOW_TCP_M",
     "PAD_DEPTH_ABOVE_TCP_M",
+    "FRANKA_FINGERS",
     "JOINT7_RANGE_RAD",
 ]
 
@@ -45,6 +46,10 @@ __all__ = [
 FINGERTIP_BELOW_TCP_M = 0.015
 #: Depth of the finger pads above the tcp before the finger base starts, metres.
 PAD_DEPTH_ABOVE_TCP_M = 0.035
+#: The Franka Hand's fingers along the tcp's z, m: ``(lowest point below the tcp, pad bottom
+#: below it, depth above it before the finger base)`` (a target's ``finger_geometry_m`` when it
+#: declares none; the tabletop Franka's tcp).
+FRANKA_FINGERS: tuple[float, float, float] = (FINGERTIP_BELOW_TCP_M, FINGERTIP_BELOW_TCP_M, PAD_DEPTH_ABOVE_TCP_M)
 #: Half the width of a finger pad across the closing direction (along tcp x), m: robosuite's
 #: Panda hand pads are boxes 16 mm wide (``gripper0_finger*_pad_collision``, half size 8 mm).
 PAD_HALF_WIDTH_M = 0.008
@@ -119,6 +124,7 @@ def top_down_grasp_candidates(
     tip_clearance_m: float = 0.004,
     shape: str = "box",
     max_width_m: float = DEFAULT_MAX_GRASP_WIDTH_M,
+    fingers_m: Sequence[float] | None = None,
 ) -> tuple[GraspPlan, ...]:
     """All symmetric top-down grasps of an upright box (or a cylinder / sphere), best first.
 
@@ -140,6 +146,10 @@ def top_down_grasp_candidates(
         approach_height_m: pregrasp offset above the grasp along world z, metres.
         max_width_m: the widest object the gripper takes, m (the target's
             ``max_grasp_width_m``; 8 cm: the Franka Hand); 4 mm of it are clearance.
+        fingers_m: ``(lowest finger point below the tcp, pad bottom below it, depth above it
+            before the finger base)``, m: the target's ``finger_geometry_m`` (default
+            :data:`FRANKA_FINGERS`). The tcp goes no lower than the fingertips' clearance over
+            the support, nor so low that the object's top meets the finger base.
 
     Raises:
         IKError: the box is not upright, too wide for the gripper (``max_width_m``), or no yaw
@@ -196,7 +206,8 @@ def top_down_grasp_candidates(
     ext_z = float(np.abs(R[2, :]) @ he)
     bottom = T[2, 3] - ext_z if support_z_m is None else support_z_m
     top = T[2, 3] + ext_z
-    z = max(T[2, 3], bottom + FINGERTIP_BELOW_TCP_M + tip_clearance_m, top - PAD_DEPTH_ABOVE_TCP_M)
+    tip_m, _, base_m = FRANKA_FINGERS if fingers_m is None else fingers_m
+    z = max(T[2, 3], bottom + tip_m + tip_clearance_m, top - base_m)
     out = []
     for delta in deltas:
         out.append(top_down_plan(T[0, 3], T[1, 3], z, _wrap(current_yaw_rad + delta),

@@ -15,7 +15,7 @@ from phyagentos.errors import IKError
 from phyagentos.geometry import VIEWER_SIDES, pose_matrix, viewer_side_xy, yaw_quat
 from phyagentos.motion.grasp import (
     DEFAULT_MAX_GRASP_WIDTH_M,
-    FINGERTIP_BELOW_TCP_M,
+    FRANKA_FINGERS,
     hand_yaw,
     place_pose,
     slid_grasp,
@@ -431,9 +431,10 @@ class ComputeGrasp(Primitive):
             # re-computed from the pre-grasp the arm went to (RecomputeGrasp after a closer
             # look): the same side and height, refined; never another candidate
             plans = top_down_grasp_candidates(T_obj, half, approach_height_m=self.approach_height_m, shape=shape,
-                                              max_width_m=max_width)
+                                              max_width_m=max_width, fingers_m=self._fingers)
             height = max(self.approach_height_m, float(previous[2, 3] - plans[0].grasp[2, 3]))
-            plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape, max_width_m=max_width)
+            plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape, max_width_m=max_width,
+                                              fingers_m=self._fingers)
             yaw = hand_yaw(previous)
             best = min(range(len(plans)), key=lambda k: abs(_wrap_rad(hand_yaw(plans[k].grasp) - yaw)))
             plan = plans[best]
@@ -453,7 +454,7 @@ class ComputeGrasp(Primitive):
         for slide in ((False, True) if shape == "box" else (False,)):
             for height in heights:
                 plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape,
-                                                  max_width_m=max_width)
+                                                  max_width_m=max_width, fingers_m=self._fingers)
                 first = first or plans[self.candidate % len(plans)]
                 for k in range(len(plans)):
                     i = (self.candidate + k) % len(plans)
@@ -535,20 +536,25 @@ class ComputeGrasp(Primitive):
             why.append(f"knob candidate {i} (yaw {plans[i].yaw_rad:.2f} rad): {bad[:160]}")
         raise IKError(f"no knob grasp of {self.object!r} is reachable: " + "; ".join(why))
 
+    @property
+    def _fingers(self) -> tuple[float, float, float]:
+        """The target's ``finger_geometry_m`` (m along the tcp's z), else the Franka Hand's."""
+        return tuple(getattr(self.ctx.target, "finger_geometry_m", None) or FRANKA_FINGERS)  # type: ignore[return-value]
+
     def _clear_of_support(self, plan, T_obj: np.ndarray, half: np.ndarray):
         """``(plan, raised m, why)``: ``plan`` when the arm reaches it clear (:func:`_unusable`);
         when only its grasp collides (the fingertips in what the object stands on), the same
         grasp raised by the first step of :data:`GRASP_RAISE_STEPS_M` that is clear while the
-        fingertips (:data:`~phyagentos.motion.grasp.FINGERTIP_BELOW_TCP_M` below the tcp) still
-        close :data:`MIN_PAD_OVERLAP_M` below the object's top (the perceived centre plus its
+        finger pads' bottom (the target's ``finger_geometry_m``) still closes
+        :data:`MIN_PAD_OVERLAP_M` below the object's top (the perceived centre plus its
         vertical half extent); else ``plan`` and why not."""
         why = _unusable(self.ctx, self.object, plan)
         if not (isinstance(why, Blocked) and why.stage == "grasp" and why.collides):
             return plan, 0.0, why
         top = float(T_obj[2, 3] + np.abs(T_obj[2, :3]) @ np.asarray(half, dtype=float))
         for dz in GRASP_RAISE_STEPS_M:
-            if float(plan.grasp[2, 3]) + dz - FINGERTIP_BELOW_TCP_M > top - MIN_PAD_OVERLAP_M:
-                break  # the fingertips would close less than MIN_PAD_OVERLAP_M below its top
+            if float(plan.grasp[2, 3]) + dz - self._fingers[1] > top - MIN_PAD_OVERLAP_M:
+                break  # the pads would close less than MIN_PAD_OVERLAP_M below its top
             up = np.eye(4)
             up[2, 3] = dz
             raised = replace(plan, grasp=up @ plan.grasp, pregrasp=up @ plan.pregrasp)

@@ -276,6 +276,13 @@ class Target(abc.ABC):
     #: (a game, a mobile base). Grasp planning and the graph preflight refuse wider objects
     #: before anything moves. Arms set their own (the Franka Hand: 0.08).
     max_grasp_width_m: ClassVar[float | None] = None
+    #: Where the gripper's fingers reach along the tool frame's z (out of the hand), m:
+    #: ``(lowest point of the fingers below the tcp, bottom of the finger pads below it, how far
+    #: above it an object's top may rise before the finger base)``. Top-down grasps set the tcp
+    #: so the fingertips clear the support and the pads close on the object's side; ``None``:
+    #: the Franka Hand's with the tcp of the tabletop Franka
+    #: (:data:`~phyagentos.motion.grasp.FRANKA_FINGERS`).
+    finger_geometry_m: ClassVar[tuple[float, float, float] | None] = None
     #: The runtime's own notes about this robot (plain data: the grasp it believes it holds,
     #: the objects it has perceived; :mod:`phyagentos.primitives.grasp_sense`). ``{}`` after
     #: ``__init__``; a driver that checkpoints its state saves them with it.

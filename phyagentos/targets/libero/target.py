@@ -324,6 +324,15 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
                                       sensors=("proprioception", "rgb", "depth", "contacts"),
                                       simulated_ground_truth=True, articulated_fixtures=True)
     SENSORS_KEY = "libero"
+    #: The Franka Hand's fingers along this tcp's z (robosuite's ``gripper0_grip_site``, lower
+    #: on the fingers than the tabletop Franka's tcp), m, from the model: the finger meshes
+    #: (``gripper0_finger*_collision``) reach 9.2 mm below the tcp and the friction pads
+    #: (``gripper0_finger*_pad_collision``, boxes 16 mm tall) span 4.4 mm below to 11.6 mm
+    #: above it; rounded to the side of caution (the tip lower, the pads shorter); the finger
+    #: base as the Franka Hand's default (3.5 cm). With the defaults (1.5 cm, 1.5 cm) a flat
+    #: box's grasp stood so high that the pads closed over it (a 1.8 cm cream cheese box: 0 to
+    #: 3 mm of pad on it, then a slip).
+    finger_geometry_m = (0.0095, 0.004, 0.035)
     #: A world with its renderer and collision models holds 1.5-2 GB: a runner closes it when
     #: it moves on to another workspace (a bench episode's), instead of keeping it idle.
     KEEP_WHEN_IDLE = False

@@ -204,6 +204,63 @@ def test_holding_follows_the_tcp_from_proprioception_and_not_from_contacts(scene
     assert _entities(snap)["cube"]["attributes"]["source"] == "perceived"
 
 
+def test_a_hold_seen_only_after_the_lift_keeps_where_the_hand_closed_on_the_object(scene):
+    """The hand closed 15 mm below the cube's centre and lifted before anyone looked: the held
+    cube is reported 15 mm above the tcp (from the close's note), not centred on it."""
+    import dataclasses
+
+    tcp = scene.tcp_pose()
+    cube = SyntheticObject("cube", "box", (0.02, 0.02, 0.02), (float(tcp[0, 3]), float(tcp[1, 3])), rgba=RED)
+    below = 0.015
+    rng = np.random.default_rng(11)
+    reports = {}
+    for noted in (False, True):
+        scene.place([cube])
+        scene.set_fingers(0.04)
+        p = Perceiver(PerceptionConfig.default(), [_desc(cube)])
+        p.observe(_frames(scene, rng), scene.proprioception(stamp_s=0.0))
+        T_close = tcp.copy()
+        T_close[:3, 3] = (*cube.position, 0.02 - below)  # the tcp at the close, on the table
+        if noted:
+            closed = scene.proprioception(gripper_effort_n=25.0, stamp_s=0.5)
+            p.note_grasp_close(dataclasses.replace(closed, tcp_pose=T_close))
+        # lifted to where the tcp stands now, the cube 15 mm above it (tcp z points down)
+        scene.move_object("cube", tuple(tcp[:3, 3] - below * tcp[:3, 2]))
+        scene.set_fingers(0.02)
+        snap = p.observe(_frames(scene, rng, stamp_s=1.0),
+                         scene.proprioception(gripper_effort_n=25.0, wrist_force_n=(0.0, 0.0, -2.0), stamp_s=1.0))
+        e = _entities(snap)["cube"]
+        assert e["attributes"]["held"]
+        reports[noted] = np.subtract(e["position"], tcp[:3, 3])
+    assert np.linalg.norm(reports[True] - (-below * tcp[:3, 2])) < 0.003
+    assert np.linalg.norm(reports[False]) < 0.003  # without the note: assumed centred, as before
+
+
+def test_the_close_note_survives_export_and_is_forgotten_once_the_hand_opens(scene):
+    import dataclasses
+    import json
+
+    cube = SyntheticObject("cube", "box", (0.02, 0.02, 0.02), (0.52, -0.04), rgba=RED)
+    scene.place([cube])
+    p = Perceiver(PerceptionConfig.default(), [_desc(cube)])
+    closed = scene.proprioception(gripper_effort_n=25.0, stamp_s=0.5)
+    p.note_grasp_close(closed)
+    state = json.loads(json.dumps(p.export_state()))
+    assert state["closed_at"]["stamp_s"] == 0.5
+    q = Perceiver(PerceptionConfig.default(), [_desc(cube)])
+    q.restore_state(state)
+    assert q.export_state()["closed_at"] == state["closed_at"]
+    q.update_proprioception(scene.proprioception(gripper_effort_n=0.0, stamp_s=1.0))  # the hand opened
+    assert q.export_state()["closed_at"] is None
+    from phyagentos.perception import PerceptionError
+
+    bad = dict(state, closed_at={"tcp_pose": [[1.0, 0.0], [0.0, 1.0]], "stamp_s": 0.5})
+    with pytest.raises(PerceptionError, match="closed_at"):
+        q.restore_state(bad)
+    with pytest.raises(PerceptionError, match="Proprioception"):
+        p.note_grasp_close(dataclasses.asdict(closed))
+
+
 def test_observe_rejects_frames_without_depth(scene):
     from phyagentos.perception import CameraFrame, PerceptionError
 

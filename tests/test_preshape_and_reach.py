@@ -167,3 +167,43 @@ def test_at_least_is_checked_before_anything_moves():
         CartesianMove("Lift", offset=[0.0, 0.0, 0.15], at_least_m=-0.01)
     # more than the offset asks: all of it
     assert CartesianMove("Lift", offset=[0.0, 0.0, 0.15], at_least_m=0.5).at_least_m == pytest.approx(0.15)
+
+
+def test_a_close_on_the_object_tells_the_perceiver_where_the_hand_closed(franka, monkeypatch):
+    """A hold seen only after the lift needs where the hand closed (the object's pose in the
+    hand): the close, judged on the object by the hand's own sensing, notes its tcp pose to the
+    session's perceiver and keeps the perceiver's state for the next session; a close on
+    nothing notes nothing."""
+    import dataclasses
+
+    notes = []
+
+    class Perceiver:
+        def note_grasp_close(self, proprio):
+            notes.append(proprio)
+
+        def export_state(self):
+            return {"closed_at": {"tcp_pose": notes[-1].tcp_pose.tolist(), "stamp_s": notes[-1].stamp_s}}
+
+    real = franka.proprioception
+    squeezing = {"on": False}
+
+    def proprioception():
+        p = real()
+        return dataclasses.replace(p, gripper_opening_m=0.02, gripper_effort_n=20.0) if squeezing["on"] else p
+
+    def set_gripper(*, opening_m, **kw):
+        squeezing["on"] = opening_m == 0.0
+        return SimpleNamespace(opening_m=0.02 if squeezing["on"] else opening_m, stalled=squeezing["on"])
+
+    monkeypatch.setattr(franka, "proprioception", proprioception)
+    monkeypatch.setattr(franka, "set_gripper", set_gripper)
+    franka.runtime_notes["planned_grasp"] = {"object": "cube_1", "width_m": 0.04}
+    ctx = SkillContext(target=franka, perceiver=Perceiver())
+    for leaf in (Gripper("CloseOnNothing", command="close"), Gripper("CloseOnObject", command="close", object="cube_1")):
+        leaf.setup(context=ctx)
+        leaf.tick_once()
+        assert leaf.status == py_trees.common.Status.SUCCESS
+    [noted] = notes  # only the close on the object
+    np.testing.assert_allclose(noted.tcp_pose, franka.tcp_pose())
+    assert franka.runtime_notes["perception"]["closed_at"]["stamp_s"] == noted.stamp_s

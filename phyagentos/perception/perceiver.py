@@ -351,6 +351,9 @@ class Perceiver:
         self._baseline_n: float | None = None
         self._held: str | None = None
         self._grasp_height_m: float | None = None
+        #: (tcp pose (4, 4) in the world frame, stamp s) where the hand last closed on
+        #: something (:meth:`note_grasp_close`); None while it is open.
+        self._closed_at: tuple[np.ndarray, float] | None = None
         self._last_plane: Plane | None = None
         self.last_timing_ms: dict[str, float] = {}
         #: Centre (2,) of the support plane's perceived extent (world m) at the last
@@ -416,8 +419,10 @@ class Perceiver:
                 d["body"] = {"axis_xy": t.body.axis_xy.tolist(), "radius_m": float(t.body.radius_m),
                              "handle_xy": t.body.handle_xy.tolist()}
             tracks[name] = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in d.items()}
+        closed = None if self._closed_at is None else {"tcp_pose": self._closed_at[0].tolist(),
+                                                       "stamp_s": float(self._closed_at[1])}
         return {"tracks": tracks, "baseline_n": self._baseline_n, "held": self._held,
-                "grasp_height_m": self._grasp_height_m, "fixtures": self.export_fixtures()}
+                "grasp_height_m": self._grasp_height_m, "closed_at": closed, "fixtures": self.export_fixtures()}
 
     def export_fixtures(self) -> dict:
         """The fixtures' last sightings as plain data (``{name: {position, yaw, half_extents,
@@ -492,6 +497,12 @@ class Perceiver:
         self._baseline_n = state.get("baseline_n")
         self._held = state.get("held") if state.get("held") in tracks else None
         self._grasp_height_m = state.get("grasp_height_m")
+        closed = state.get("closed_at")
+        try:
+            self._closed_at = None if closed is None else (
+                _checked_pose(np.asarray(closed["tcp_pose"], dtype=float)), float(closed["stamp_s"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise PerceptionError(f"perception state: closed_at has an unexpected layout: {exc}") from None
 
     # ------------------------------------------------------------------ proprioception
 
@@ -507,8 +518,25 @@ class Perceiver:
             self._baseline_n = f if self._baseline_n is None else 0.5 * (self._baseline_n + f)
         if free:
             self._grasp_height_m = None
+            self._closed_at = None
         elif self._grasp_height_m is None:
             self._grasp_height_m = float(proprio.tcp_pose[2, 3])
+
+    def note_grasp_close(self, proprio: Proprioception) -> None:
+        """The hand has just closed on something (the skill's gripper close, judged by its own
+        sensing): keep its tcp pose and stamp. A hold this perceiver notices only later (the
+        first look after the lift) then takes the object's pose in the hand from where the hand
+        closed and where the object was last seen before it, for any grasp (across a box, on a
+        bowl's wall, on a knob), instead of assuming the object centred on the tcp. Forgotten
+        when the hand is next sampled open (:meth:`update_proprioception`).
+
+        Raises:
+            PerceptionError: ``proprio`` is not a :class:`Proprioception`.
+        """
+        if not isinstance(proprio, Proprioception):
+            raise PerceptionError(f"proprio must be a Proprioception, got {type(proprio).__name__}")
+        self.update_proprioception(proprio)
+        self._closed_at = (np.array(proprio.tcp_pose, dtype=float), float(proprio.stamp_s))
 
     # ------------------------------------------------------------------ pipeline stages
 
@@ -1549,7 +1577,13 @@ class Perceiver:
         if not t.held:
             T_obj = _pose(t.position, t.yaw)
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
-            if np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
+            closed = self._closed_at
+            if closed is not None and t.last_seen_s <= closed[1] and float(np.linalg.norm(
+                    t.position[:2] - closed[0][:2, 3])) <= hc.capture_radius_m + float(max(t.half_extents[:2])):
+                # last seen before the hand closed, where it closed: its pose in the hand is
+                # what it was then (the hand has moved since, maybe lifted)
+                t.grasp_offset = np.linalg.inv(closed[0]) @ T_obj
+            elif np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
             elif self._rim_wall(t) is not None and abs(dxy - float(min(t.half_extents[:2]))) <= hc.capture_radius_m / 2.0:
                 # held by its wall (the tcp is over its rim), maybe lifted since: the lift rises
@@ -1714,6 +1748,13 @@ def _pose(position: np.ndarray, yaw: float) -> np.ndarray:
     c, s = math.cos(yaw), math.sin(yaw)
     T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
     T[:3, 3] = position
+    return T
+
+
+def _checked_pose(T: np.ndarray) -> np.ndarray:
+    """``T`` if it is a finite (4, 4) homogeneous transform, else ValueError."""
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)) or not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"a pose must be a finite (4, 4) homogeneous transform, got shape {T.shape}")
     return T
 
 

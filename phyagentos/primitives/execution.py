@@ -29,7 +29,7 @@ from .grasp_sense import (
     wrist_load_n,
 )
 from .motion import execution_limits, ik_options, session_checker
-from .observation import has_cameras
+from .observation import has_cameras, save_tracks
 
 __all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "WaitStill", "CheckHolding", "REACH_STEP_M",
            "STILL_DEPTH_M", "STILL_PIXELS", "STILL_RANGE_M"]
@@ -360,6 +360,11 @@ class Gripper(Primitive):
                                                    f"not {self.object!r} ({width * 1000:.0f} mm)")
         b.set(object=self.object, width_m=width, closed_opening_m=float(p1.gripper_opening_m), lifted_load_n=None,
               slipped=False, last_sample_s=float(p1.stamp_s))
+        perceiver = getattr(ctx, "perceiver", None)
+        if perceiver is not None and hasattr(perceiver, "note_grasp_close"):
+            # where the hand closed: the object's pose in the hand, for a hold seen only after the lift
+            perceiver.note_grasp_close(p1)
+            save_tracks(target, perceiver)
 
 
 class Hold(Primitive):

@@ -204,14 +204,16 @@ def test_holding_follows_the_tcp_from_proprioception_and_not_from_contacts(scene
     assert _entities(snap)["cube"]["attributes"]["source"] == "perceived"
 
 
-def test_a_hold_seen_only_after_the_lift_keeps_where_the_hand_closed_on_the_object(scene):
-    """The hand closed 15 mm below the cube's centre and lifted before anyone looked: the held
-    cube is reported 15 mm above the tcp (from the close's note), not centred on it."""
+def test_a_hold_seen_only_after_the_lift_keeps_where_across_the_hand_it_closed_on_the_object(scene):
+    """The hand closed 15 mm along its fingers off the cube's centre (and 5 mm below it), then
+    lifted before anyone looked: the held cube is reported 15 mm off the tcp along the fingers,
+    from the close's note, at the tcp's height (how high it sits keeps the centred rule)."""
     import dataclasses
 
     tcp = scene.tcp_pose()
+    along = 0.015
+    x_axis = tcp[:3, 0]  # along the fingers (tcp y is the closing direction)
     cube = SyntheticObject("cube", "box", (0.02, 0.02, 0.02), (float(tcp[0, 3]), float(tcp[1, 3])), rgba=RED)
-    below = 0.015
     rng = np.random.default_rng(11)
     reports = {}
     for noted in (False, True):
@@ -219,20 +221,20 @@ def test_a_hold_seen_only_after_the_lift_keeps_where_the_hand_closed_on_the_obje
         scene.set_fingers(0.04)
         p = Perceiver(PerceptionConfig.default(), [_desc(cube)])
         p.observe(_frames(scene, rng), scene.proprioception(stamp_s=0.0))
-        T_close = tcp.copy()
-        T_close[:3, 3] = (*cube.position, 0.02 - below)  # the tcp at the close, on the table
+        T_close = tcp.copy()  # the tcp at the close: 15 mm along the fingers from the cube, 5 mm below its centre
+        T_close[:3, 3] = np.array([*cube.position, 0.015]) - along * x_axis
         if noted:
             closed = scene.proprioception(gripper_effort_n=25.0, stamp_s=0.5)
             p.note_grasp_close(dataclasses.replace(closed, tcp_pose=T_close))
-        # lifted to where the tcp stands now, the cube 15 mm above it (tcp z points down)
-        scene.move_object("cube", tuple(tcp[:3, 3] - below * tcp[:3, 2]))
+        # lifted to where the tcp stands now, the cube 15 mm along the fingers from it
+        scene.move_object("cube", tuple(tcp[:3, 3] + along * x_axis))
         scene.set_fingers(0.02)
         snap = p.observe(_frames(scene, rng, stamp_s=1.0),
                          scene.proprioception(gripper_effort_n=25.0, wrist_force_n=(0.0, 0.0, -2.0), stamp_s=1.0))
         e = _entities(snap)["cube"]
         assert e["attributes"]["held"]
         reports[noted] = np.subtract(e["position"], tcp[:3, 3])
-    assert np.linalg.norm(reports[True] - (-below * tcp[:3, 2])) < 0.003
+    assert np.linalg.norm(reports[True] - along * x_axis) < 0.003
     assert np.linalg.norm(reports[False]) < 0.003  # without the note: assumed centred, as before
 
 

@@ -525,10 +525,17 @@ class Perceiver:
     def note_grasp_close(self, proprio: Proprioception) -> None:
         """The hand has just closed on something (the skill's gripper close, judged by its own
         sensing): keep its tcp pose and stamp. A hold this perceiver notices only later (the
-        first look after the lift) then takes the object's pose in the hand from where the hand
+        first look after the lift) then takes where the object sits across and along the
+        fingers (the tcp frame's x and y) and how it is turned in the hand from where the hand
         closed and where the object was last seen before it, for any grasp (across a box, on a
-        bowl's wall, on a knob), instead of assuming the object centred on the tcp. Forgotten
-        when the hand is next sampled open (:meth:`update_proprioception`).
+        bowl's wall, on a knob), instead of assuming it centred on the tcp. How high it sits
+        (the tcp frame's z) is kept as before: centred for a grasp across, the grasp's depth
+        for a rim or a knob. The places measured on LIBERO rely on that height: a wine bottle
+        taken near its neck hangs 4.6 cm below the tcp, and taken as centred it is set down
+        with the hand 4.6 cm lower, which is what put it into the rack's slope (libero_goal
+        task 9) and kept the cabinet's top within reach (task 2); with the true height both
+        failed (docs/libero.md, sixteenth pass). Forgotten when the hand is next sampled open
+        (:meth:`update_proprioception`).
 
         Raises:
             PerceptionError: ``proprio`` is not a :class:`Proprioception`.
@@ -1577,13 +1584,7 @@ class Perceiver:
         if not t.held:
             T_obj = _pose(t.position, t.yaw)
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
-            closed = self._closed_at
-            if closed is not None and t.last_seen_s <= closed[1] and float(np.linalg.norm(
-                    t.position[:2] - closed[0][:2, 3])) <= hc.capture_radius_m + float(max(t.half_extents[:2])):
-                # last seen before the hand closed, where it closed: its pose in the hand is
-                # what it was then (the hand has moved since, maybe lifted)
-                t.grasp_offset = np.linalg.inv(closed[0]) @ T_obj
-            elif np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
+            if np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
             elif self._rim_wall(t) is not None and abs(dxy - float(min(t.half_extents[:2]))) <= hc.capture_radius_m / 2.0:
                 # held by its wall (the tcp is over its rim), maybe lifted since: the lift rises
@@ -1605,6 +1606,15 @@ class Perceiver:
             else:  # grasped earlier, already moved: assume a centred grasp
                 off = np.linalg.inv(proprio.tcp_pose) @ T_obj
                 off[:3, 3] = 0.0
+                t.grasp_offset = off
+            closed = self._closed_at
+            if closed is not None and t.last_seen_s <= closed[1] and float(np.linalg.norm(
+                    t.position[:2] - closed[0][:2, 3])) <= hc.capture_radius_m + float(max(t.half_extents[:2])):
+                # last seen before the hand closed, where it closed: where it sits across and
+                # along the fingers is where it sat then (the hand has moved since, maybe
+                # lifted); how high it sits stays the rule's above (see note_grasp_close)
+                off = np.linalg.inv(closed[0]) @ _pose(t.position, t.yaw)
+                off[2, 3] = t.grasp_offset[2, 3]
                 t.grasp_offset = off
             t.held = True
             t.placed_xy = None

@@ -57,7 +57,7 @@ def franka():
     t.close()
 
 
-def _compute_place(target, snapshot, **params):
+def _compute_place(target, snapshot, blocked=None, **params):
     from phyagentos.primitives.perception import ComputePlace
 
     leaf = ComputePlace("ComputePlace", object="pudding", region="plate", **params)
@@ -67,7 +67,7 @@ def _compute_place(target, snapshot, **params):
                                trace=SimpleNamespace(record=lambda kind, **f: records.append({"kind": kind, **f})))
     leaf.get = board.__getitem__
     leaf.set = board.__setitem__
-    leaf._blocked = lambda T_pre, T_place: None  # reach is another test's; here the point
+    leaf._blocked = blocked or (lambda T_pre, T_place: None)  # reach is another test's; here the point
     leaf.step()
     return board, records
 
@@ -163,3 +163,33 @@ def test_objects_sharing_a_region_go_down_side_by_side_in_their_slots_across_the
     assert (far["place_pose"][:3, 3] - centre["place_pose"][:3, 3])[1] == pytest.approx(0.075 - SLOT_EDGE_M, abs=1e-6)
     with pytest.raises(ValueError, match="slot must be"):
         _compute_place(franka, snap, slot=[2, 2])
+
+
+def test_a_preplace_out_of_reach_at_every_yaw_is_tried_lower_and_a_colliding_one_is_not(franka):
+    """Every yaw's pre-place 10 cm up is past the arm's reach (IK, no collision): the pre-place
+    comes down to the first of LOWER_APPROACH_M the arm reaches; a pre-place refused for a
+    collision is not lowered (the planner reports it, as before)."""
+    from phyagentos.primitives.perception import LOWER_APPROACH_M, Blocked
+
+    tcp = np.asarray(franka.tcp_pose())
+    place_z = {}
+
+    def out_of_reach_above(limit):
+        def blocked(T_pre, T_place):
+            place_z.setdefault("z", float(T_place[2, 3]))
+            if float(T_pre[2, 3]) > float(T_place[2, 3]) + limit + 1e-9:
+                return Blocked("preplace: IK did not converge", stage="preplace", collides=False)
+            return None
+        return blocked
+
+    board, [rec] = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), blocked=out_of_reach_above(0.05))
+    approach = board["preplace_pose"][2, 3] - board["place_pose"][2, 3]
+    assert approach == pytest.approx(max(h for h in LOWER_APPROACH_M if h <= 0.05), abs=1e-9)
+    assert {r["approach_m"] for r in rec["rejected_yaws"]} == {0.1} | {h for h in LOWER_APPROACH_M if h > 0.05}
+
+    def collides(T_pre, T_place):
+        return Blocked("preplace collides: gripper0_hand-cabinet", stage="preplace", collides=True)
+
+    board, [rec] = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), blocked=collides)
+    assert board["preplace_pose"][2, 3] - board["place_pose"][2, 3] == pytest.approx(0.10, abs=1e-9)
+    assert {r["approach_m"] for r in rec["rejected_yaws"]} == {0.1}

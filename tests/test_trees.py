@@ -119,3 +119,12 @@ root:
 def test_unknown_tree_lists_valid_trees(library):
     with pytest.raises(SkillError, match="valid trees: .*'pick'"):
         library.build("juggle")
+
+
+def test_the_place_retreat_rises_as_high_as_the_arm_reaches_at_least_min_retreat_m(library):
+    for tree in ("place", "place_at"):
+        params = {"object": "cube", "region": "goal"}
+        retreat = next(n for n in library.build(tree, params).iterate() if n.name == "Retreat")
+        assert retreat.at_least_m == 0.04 and retreat.offset.tolist() == [0.0, 0.0, 0.10]
+        lower = next(n for n in library.build(tree, {**params, "min_retreat_m": 0.06}).iterate() if n.name == "Retreat")
+        assert lower.at_least_m == 0.06

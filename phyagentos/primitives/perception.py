@@ -788,7 +788,10 @@ class ComputePlace(Primitive):
     pre-place and place poses the arm reaches without collision (IK and the planner's
     collision checker, the held object attached): a bowl held by its rim, the hand 5.6 cm
     off its centre, is set down beside a cabinet with the hand on the side away from it.
-    When none is clear, yaw 0 (the planner then reports the collision).
+    When none is clear, yaw 0 (the planner then reports the collision). Where every yaw was
+    refused only because its pre-place is out of the arm's reach (a wine bottle held near its
+    neck over the top of a cabinet 0.69 m from the base), the pre-place is tried lower
+    (:data:`LOWER_APPROACH_M`; the held object is lowered the rest of the way in a straight line).
 
     Into a compartment (a perceived ``class: compartment`` fixture entity, its box the floor
     between its walls: "in the back compartment of the caddy") only the yaws at which the held
@@ -850,21 +853,29 @@ class ComputePlace(Primitive):
             centre, surface_z = beside_point(snapshot, self.region, self.beside, float(max(half[0], half[1])),
                                              who=self.name)
         rejected: list[dict] = []
-        chosen = None
-        for yaw in yaws:
-            spot = centre if self.slot is None else self._slot_point(T_region, region_half, T_tcp_obj, half, yaw)
-            T_place = place_pose(spot, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
-            T_pre = T_place.copy()
-            T_pre[2, 3] += approach
-            why = self._blocked(T_pre, T_place)
-            if why is not None and compartment and why.stage == "place" and why.collides:
-                T_place, why = self._let_down(T_pre, T_place, why)
-            if why is None:
-                chosen = (yaw, T_place, T_pre)
+        chosen = clear = None
+        # from the skill's approach height; where every pre-place was only out of the arm's
+        # reach (no collision, the place itself reachable or not tried), from lower ones
+        lower = [h for h in LOWER_APPROACH_M if h < approach and not compartment]
+        for height in (approach, *lower):
+            reach_only = True
+            for yaw in yaws:
+                spot = centre if self.slot is None else self._slot_point(T_region, region_half, T_tcp_obj, half, yaw)
+                T_place = place_pose(spot, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
+                T_pre = T_place.copy()
+                T_pre[2, 3] += height
+                why = self._blocked(T_pre, T_place)
+                if why is not None and compartment and why.stage == "place" and why.collides:
+                    T_place, why = self._let_down(T_pre, T_place, why)
+                if why is None:
+                    clear = (yaw, T_place, T_pre)
+                    break
+                reach_only = reach_only and why.stage == "preplace" and not why.collides
+                rejected.append({"yaw_rad": round(yaw, 3), "approach_m": round(height, 3), "why": why})
+                chosen = chosen or (yaw, T_place, T_pre)  # none clear: the first (yaw 0), as before
+            if clear is not None or not reach_only:
                 break
-            rejected.append({"yaw_rad": round(yaw, 3), "why": why})
-            chosen = chosen or (yaw, T_place, T_pre)  # none clear: the first (yaw 0), as before
-        yaw, T_place, T_pre = chosen  # type: ignore[misc]
+        yaw, T_place, T_pre = clear or chosen  # type: ignore[misc]
         self.set(self.place_key, T_place)
         self.set(self.preplace_key, T_pre)
         self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist(),

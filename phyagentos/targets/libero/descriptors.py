@@ -744,7 +744,11 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
     (``config``, default the target's, its height crop raised to :data:`FIXTURE_CROP_M`)
     clustered as :func:`~phyagentos.perception.fixtures.bodies` does; the largest body
     whose footprint centre lies in exactly one fixture's true footprint (grown 1 cm) is
-    that fixture's. ``place``: its :data:`FIXTURE_PLACE_SITES` site relative to the body (offset
+    that fixture's (:func:`_fixture_look`). A fixture left with no body of its own (it stands
+    against another and their body's centre lies in both footprints: LIBERO-PRO's
+    ``libero_goal_swap`` puts the stove against the wine rack, and the stove had no look in
+    any generated scene) is seen again in that scene with every other fixture moved out of
+    view too. ``place``: its :data:`FIXTURE_PLACE_SITES` site relative to the body (offset
     of the centres, the site's half extents) and the surface the cameras see there (the
     :data:`~phyagentos.perception.fixtures.TOP_PERCENTILE` th percentile of the heights of the
     points over the site, m above the support plane). ``knob``: a fixture's rotary control
@@ -752,7 +756,7 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
     over the scenes; a category seen in fewer than 2 is left out (logged). ``target`` is
     reset afterwards."""
     from phyagentos.perception import Perceiver  # noqa: PLC0415
-    from phyagentos.perception.fixtures import MIN_POINTS, TOP_PERCENTILE, bodies  # noqa: PLC0415
+    from phyagentos.perception.fixtures import bodies  # noqa: PLC0415
     from phyagentos.primitives.observation import robot_capsules  # noqa: PLC0415
 
     if config is None:
@@ -787,28 +791,30 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
                 hits = [n for n, (lo, hi) in truth.items() if np.all(p >= lo[:2] - 0.01) and np.all(p <= hi[:2] + 0.01)]
                 if len(hits) == 1 and (hits[0] not in largest or body.points > largest[hits[0]].points):
                     largest[hits[0]] = body
-            for name, body in largest.items():
-                p = body.position[:2]
-                look: dict[str, Any] = {"size_m": [2.0 * float(body.half_extents[0]), 2.0 * float(body.half_extents[1]),
-                                                   body.top_m]}
-                site = _place_site(target, name, cats[name])
-                if site is not None:  # the patch the site bounds; its surface as the cameras see it
-                    centre, half = site
-                    on = np.all(np.abs(cloud.points[:, :2] - centre) <= half, axis=1)
-                    if int(on.sum()) < MIN_POINTS:
-                        continue
-                    look["place"] = {"offset_m": (centre - p).tolist(), "half_extents_m": half.tolist(),
-                                     "height_m": float(np.percentile(heights[on], TOP_PERCENTILE))}
-                knob = _knob_look(target, name, cloud, heights, p)
-                if knob is not None:
-                    look["knob"] = knob
-                drawers = _drawer_looks(target, name, cloud, heights, p, body.half_xy_world)
-                if drawers:
-                    look["drawers"] = drawers
-                compartments = _compartment_looks(target, name, p, plane)
-                if compartments:
-                    look["compartments"] = compartments
-                seen.setdefault(cats[name], []).append(look)
+            roots = _fixture_roots(target, boxes)
+            home = {n: m.body_pos[b].copy() for n, b in roots.items()}
+            for name in roots:
+                if name in largest:
+                    look = _fixture_look(target, name, cats[name], cloud, heights, plane, config, body=largest[name])
+                else:  # no body of its own: it stands against another; seen again with the others out of view
+                    try:
+                        for k2, (other, b) in enumerate(roots.items()):
+                            if other != name:
+                                m.body_pos[b] = home[other] + np.array([_AWAY + 3.0 * k2, -_AWAY, 0.0])
+                        mujoco.mj_forward(m, d)
+                        alone = [target.capture(s) for s in target.camera_names()]
+                        c2, h2, pl2 = Perceiver(config).object_cloud(alone, target.proprioception(),
+                                                                     robot_capsules=robot_capsules(target))
+                        look = _fixture_look(target, name, cats[name], c2, h2, pl2, config)
+                    finally:
+                        for other, b in roots.items():
+                            m.body_pos[b] = home[other]
+                        mujoco.mj_forward(m, d)
+                    if look is not None:
+                        log.info("LIBERO fixture look of %s: measured with the other fixtures out of view "
+                                 "(it stands against one)", cats[name])
+                if look is not None:
+                    seen.setdefault(cats[name], []).append(look)
     finally:
         target.reset(seed=target.init_index)
     out: dict[str, dict[str, Any]] = {}
@@ -838,6 +844,53 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
             look["compartments"] = compartments
         out[cat] = look
     return out
+
+
+def _fixture_roots(target, boxes: Mapping[str, Any]) -> dict[str, int]:
+    """``{fixture: its model's root body id}`` of the declared fixtures in ``boxes`` (those
+    :func:`fixture_boxes` found: not the support)."""
+    m = target.model
+    return {name: int(m.body_rootid[m.body(target.env.env.get_object(name).root_body).id]) for name in boxes}
+
+
+def _fixture_look(target, name: str, cat: str, cloud, heights: np.ndarray, plane, config, *,
+                  body=None) -> dict[str, Any] | None:
+    """Fixture ``name``'s look (category ``cat``) in one generated scene, from the perceiver's
+    ``cloud`` and ``heights`` (m above the support ``plane``): ``body`` (a
+    :func:`~phyagentos.perception.fixtures.bodies` body), else the largest body whose footprint
+    centre lies in its true footprint grown 1 cm (a fixture seen in parts, the rack's racks and
+    base: the largest), with its place patch, knob, drawers and compartments; None when no
+    body lies there or its place patch shows too few points."""
+    from phyagentos.perception.fixtures import MIN_POINTS, TOP_PERCENTILE, bodies  # noqa: PLC0415
+
+    if body is None:
+        lo, hi = fixture_boxes(target)[name]
+        inside = [b for b in bodies(cloud, heights, config)
+                  if np.all(b.position[:2] >= lo[:2] - 0.01) and np.all(b.position[:2] <= hi[:2] + 0.01)]
+        if not inside:
+            return None
+        body = max(inside, key=lambda b: b.points)
+    p = body.position[:2]
+    look: dict[str, Any] = {"size_m": [2.0 * float(body.half_extents[0]), 2.0 * float(body.half_extents[1]),
+                                       body.top_m]}
+    site = _place_site(target, name, cat)
+    if site is not None:  # the patch the site bounds; its surface as the cameras see it
+        centre, half = site
+        on = np.all(np.abs(cloud.points[:, :2] - centre) <= half, axis=1)
+        if int(on.sum()) < MIN_POINTS:
+            return None
+        look["place"] = {"offset_m": (centre - p).tolist(), "half_extents_m": half.tolist(),
+                         "height_m": float(np.percentile(heights[on], TOP_PERCENTILE))}
+    knob = _knob_look(target, name, cloud, heights, p)
+    if knob is not None:
+        look["knob"] = knob
+    drawers = _drawer_looks(target, name, cloud, heights, p, body.half_xy_world)
+    if drawers:
+        look["drawers"] = drawers
+    compartments = _compartment_looks(target, name, p, plane)
+    if compartments:
+        look["compartments"] = compartments
+    return look
 
 
 def _median_drawers(seen: Sequence[Sequence[dict[str, Any]]]) -> list[dict[str, Any]]:

@@ -340,3 +340,29 @@ def test_down_in_a_deep_open_container_an_object_within_its_walls_is_in_it(open_
     [c] = parse_criteria({"on": {"object": "alphabet_soup_1", "support": "basket_1"}})
     out = evaluate(c, snap, snap)
     assert out.status == status, out.reason
+
+
+@pytest.mark.parametrize("walls_m,dy,status", [
+    (0.06, 0.008, "satisfied"),    # upright in the slot, 8 mm off its middle: the walls hold it
+    (0.06, 0.000, "satisfied"),
+    (0.06, 0.060, "unsatisfied"),  # its centre past the floor's edge
+    (None, 0.008, "unknown"),      # the same floor without walls: a wide thing near the middle of a flat support
+])
+def test_on_a_floor_between_walls_the_object_stands_anywhere_between_them(walls_m, dy, status):
+    """LIBERO-90 task 74's book in the caddy's left compartment (5.8 cm wide): as a flat support's
+    rule, a book 11 cm long is as wide as the floor, so it had to stand within 2.5 cm of the middle
+    less 2 sigma of both (0.5 cm at the trace's 2 cm), and a book 5 mm off was undecided; the walls
+    hold it upright."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    floor_z = 0.9
+    slot = _ent("desk_caddy_1_left_compartment", (-0.39, -0.28, floor_z - 0.002), (0.029, 0.06, 0.002), 0.9, std=0.0099)
+    slot["kind"] = "fixture"
+    slot["attributes"].update({"class": "compartment", "support": True,
+                               **({"walls_m": walls_m} if walls_m is not None else {})})
+    slot["quat_wxyz"] = [0.7071068, 0.0, 0.0, 0.7071068]  # turned a quarter: its narrow side along world y
+    book = _ent("black_book_1", (-0.39, -0.28 + dy, floor_z + 0.069), (0.055, 0.0085, 0.069), 0.95, std=0.001)
+    snap = {"entities": [slot, book], "relations": []}
+    [c] = parse_criteria({"on": {"object": "black_book_1", "support": "desk_caddy_1_left_compartment"}})
+    out = evaluate(c, snap, snap)
+    assert out.status == status, out.reason

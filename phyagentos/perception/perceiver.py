@@ -405,8 +405,10 @@ class Perceiver:
 
     def export_state(self) -> dict:
         """What this perceiver believes, as plain YAML/JSON-ready data: the tracks, the held
-        object, the open-gripper wrist-force baseline and the grasp height (so a later
-        session, maybe in another process, continues it with :meth:`restore_state`)."""
+        object, the open-gripper wrist-force baseline, the grasp height and where the hand last
+        closed (``closed_at``: ``{tcp_pose: (4, 4) world, stamp_s}``, :meth:`note_grasp_close`;
+        None while open), so a later session, maybe in another process, continues it with
+        :meth:`restore_state`."""
         tracks = {}
         for name, t in self.tracks.items():
             d = dict(vars(t))

@@ -115,7 +115,7 @@ from phyagentos.perception.fixtures import (
     fixtures_from_declared,
     knob_reading,
 )
-from phyagentos.perception.frames import CameraFrame, Proprioception
+from phyagentos.perception.frames import CameraFrame, Proprioception, _rigid
 from phyagentos.perception.handle import RoundBody
 from phyagentos.perception.relations import (
     _footprint_margin,
@@ -501,10 +501,12 @@ class Perceiver:
         self._grasp_height_m = state.get("grasp_height_m")
         closed = state.get("closed_at")
         try:
-            self._closed_at = None if closed is None else (
-                _checked_pose(np.asarray(closed["tcp_pose"], dtype=float)), float(closed["stamp_s"]))
+            noted = None if closed is None else (np.asarray(closed["tcp_pose"], dtype=float), float(closed["stamp_s"]))
         except (KeyError, TypeError, ValueError) as exc:
             raise PerceptionError(f"perception state: closed_at has an unexpected layout: {exc}") from None
+        if noted is not None:
+            _rigid("perception state", "closed_at.tcp_pose", noted[0])
+        self._closed_at = noted
 
     # ------------------------------------------------------------------ proprioception
 
@@ -1760,13 +1762,6 @@ def _pose(position: np.ndarray, yaw: float) -> np.ndarray:
     c, s = math.cos(yaw), math.sin(yaw)
     T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
     T[:3, 3] = position
-    return T
-
-
-def _checked_pose(T: np.ndarray) -> np.ndarray:
-    """``T`` if it is a finite (4, 4) homogeneous transform, else ValueError."""
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)) or not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
-        raise ValueError(f"a pose must be a finite (4, 4) homogeneous transform, got shape {T.shape}")
     return T
 
 

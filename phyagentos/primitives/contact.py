@@ -39,7 +39,8 @@ from .perception import BESIDE_GAP_M, beside_point, entity_pose, landmark_box, r
 
 __all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n", "MIN_PUSH_M", "FINGER_HALF_THICKNESS_M",
            "CLOSED_FINGERS_DEPTH_M", "PUSH_LEANS_RAD", "TIGHT_CLEARANCE_M", "PUSH_BESIDE_GAP_M", "PUSH_MAX_SHIFT",
-           "FREE_MARGIN_M", "free_shift"]
+           "FREE_MARGIN_M", "free_shift", "PUSH_STRATEGIES", "PRESS_MAX_HEIGHT_M", "PRESS_START_ABOVE_M",
+           "PRESS_CONTACT_N", "PRESS_DEPTH_M", "PRESS_MIN_TIP_FRICTION"]
 
 #: The least push (m) :class:`ComputePush` makes towards a landmark's side: an object already
 #: there is pushed this much more, so the push still touches it.
@@ -74,6 +75,34 @@ PUSH_MAX_SHIFT = 0.5
 #: Clearance (m) between a pushed object's footprint at its aim point and any other perceived
 #: object's (both as discs: a footprint's circumscribed circle).
 FREE_MARGIN_M = 0.01
+#: How :class:`ComputePush` may move the object: ``auto`` (pressed from above when it is low
+#: (:data:`PRESS_MAX_HEIGHT_M`) and the fingertips grip (:data:`PRESS_MIN_TIP_FRICTION`), from
+#: behind otherwise or where no press start is clear), ``behind`` (only from behind), ``above``
+#: (only pressed from above).
+PUSH_STRATEGIES = ("auto", "behind", "above")
+#: The highest object (m, its perceived height) ``auto`` presses from above: the closed fingers
+#: then stand in it or on it by at most this much, well under the Panda's 4.5 cm from knuckle to
+#: fingertip, and a press at its centre cannot tip it (LIBERO's plate: 1.9 cm; its cream cheese
+#: box: 1.8 cm; a bowl, 5.1 cm, is pushed from behind).
+PRESS_MAX_HEIGHT_M = 0.03
+#: The least friction of the fingertips (the target's ``fingertip_friction``) with which ``auto``
+#: presses from above. Dragged by fingertips pressing with F, an object of weight mg slides along
+#: when mu_tip F > mu_support (mg + F) (Coulomb's law at both contacts): the tips must grip it
+#: better than its support holds it, and the press makes up the weight. The support's friction
+#: is not known to the robot; a dish on a table's is mostly below 1 (LIBERO's plate on its table:
+#: 0.95), so fingertips of 1.0 (robosuite's Panda's finger meshes) carry LIBERO's 11.5 g plate with
+#: a press above 2.1 N. A target that declares no friction is never pressed in ``auto``; a drag
+#: that slips leaves the object short, which the look after the push reports.
+PRESS_MIN_TIP_FRICTION = 1.0
+#: Fingertips (m) above the object's perceived top where a press from above starts its descent.
+PRESS_START_ABOVE_M = 0.01
+#: Contact force (N) at which the descent of a press from above stops: it has landed on the object.
+PRESS_CONTACT_N = 2.0
+#: How far (m) below where it landed the hand is held while it drags the object: on LIBERO's
+#: Panda (its joint servos) 2 mm pressed the plate with 8-17 N, and the fingertips (friction 1.0
+#: against the plate-table's 0.95, robosuite's and LIBERO's models) carried the 11.5 g plate
+#: with them (development scenes of libero_goal task 5, seeds 500, 503, 504).
+PRESS_DEPTH_M = 0.002
 
 
 def contact_force_n(model: mujoco.MjModel, data: mujoco.MjData, *, ignore_bodies: frozenset[int] = frozenset()
@@ -151,9 +180,10 @@ class _ContactMotion(_Tracking):
             self.reads(to)
         self.writes("contact")
 
-    def _plan(self) -> None:
-        """Plan the straight line to ``to`` / by ``offset`` and start streaming it; held
-        objects' contacts are ignored when measuring the force.
+    def _plan(self, T_goal: np.ndarray | None = None) -> None:
+        """Plan the straight line to ``to`` / by ``offset`` (or to the (4, 4) world tcp pose
+        ``T_goal`` when given) and start streaming it; held objects' contacts are ignored when
+        measuring the force.
 
         Raises:
             PrimitiveFailure: ``contact.unsupported`` on a target without a MuJoCo model
@@ -164,7 +194,9 @@ class _ContactMotion(_Tracking):
         if not isinstance(target, MuJoCoBacked):
             raise PrimitiveFailure("contact.unsupported", f"target {target.name!r} reports no contact forces")
         T_start = target.tcp_pose()
-        if self.to is not None:
+        if T_goal is not None:
+            T_goal = np.asarray(T_goal, dtype=float)
+        elif self.to is not None:
             T_goal = np.asarray(self.get(self.to), dtype=float)
         else:
             T_goal = T_start.copy()
@@ -382,6 +414,17 @@ class ComputePush(Primitive):
     those :data:`TIGHT_CLEARANCE_M` behind the face. None of them clear: upright, fingers
     across, and the planner reports the collision.
 
+    **Pressed from above** (``strategy``, :data:`PUSH_STRATEGIES`): a low object (a plate, a flat
+    box; :data:`PRESS_MAX_HEIGHT_M`) is moved with the closed fingertips pressed on it at its
+    perceived centre, the hand's closing axis along the way (its narrow side across it), so no
+    room is needed behind it (a plate against a cabinet's side). The start stands
+    :data:`PRESS_START_ABOVE_M` above the object's top; :class:`Push` lowers from there until
+    it lands (:data:`PRESS_CONTACT_N`) and drags the object to the goal,
+    :data:`PRESS_DEPTH_M` below where it landed. Its pre-start is straight above the start; the
+    end of the drag (and straight above it) must be reachable clear of everything but the
+    object too. ``press`` is then written with ``{contact_n, depth_m, descent_m}``, else
+    ``None``. In ``auto`` the presses are tried first, then the starts behind.
+
     Args:
         object: the object to push.
         direction: ``[dx, dy]`` world-frame push direction (normalised here); with ``distance_m``.
@@ -389,6 +432,7 @@ class ComputePush(Primitive):
         landmark: the thing to push the object beside (an object or a fixture); with ``side``.
         side: ``left`` / ``right`` / ``front`` (towards the viewer) / ``back``
             (:data:`~phyagentos.geometry.VIEWER_SIDES`).
+        strategy: one of :data:`PUSH_STRATEGIES`.
         clearance_m: gap between the fingertips and the object at the start, m.
         approach_height_m: how far the pre-start stands back from the start along the hand's
             axis (straight above it when upright; over the object when leaning), m.
@@ -396,20 +440,26 @@ class ComputePush(Primitive):
         snapshot: blackboard key of the observation.
         start, prestart, goal: blackboard keys written with (4, 4) world tcp poses (goal:
             where the hand ends the push).
+        press: blackboard key written with the press from above (a dict) or ``None``.
 
     Raises:
         ValueError: neither or both of (``direction``, ``distance_m``) and (``landmark``,
             ``side``), a direction that is not 2 finite numbers, a distance not > 0, a side not
-            one of :data:`~phyagentos.geometry.VIEWER_SIDES`.
+            one of :data:`~phyagentos.geometry.VIEWER_SIDES`, a strategy not one of
+            :data:`PUSH_STRATEGIES`.
         PrimitiveFailure: (at the step) ``perception.not_found`` / ``perception.no_viewer`` as
             :func:`~.perception.beside_point`.
     """
 
     def __init__(self, name: str, *, object: str, direction=None, distance_m: float | None = None,
-                 landmark: str | None = None, side: str | None = None, clearance_m: float = 0.02,
-                 approach_height_m: float = 0.10, tip_clearance_m: float = 0.005, snapshot: str = "snapshot",
-                 start: str = "push_start_pose", prestart: str = "push_prestart_pose", goal: str = "push_goal_pose"):
+                 landmark: str | None = None, side: str | None = None, strategy: str = "auto",
+                 clearance_m: float = 0.02, approach_height_m: float = 0.10, tip_clearance_m: float = 0.005,
+                 snapshot: str = "snapshot", start: str = "push_start_pose", prestart: str = "push_prestart_pose",
+                 goal: str = "push_goal_pose", press: str = "push_press"):
         super().__init__(name)
+        if strategy not in PUSH_STRATEGIES:
+            raise ValueError(f"{name}: strategy must be one of {', '.join(PUSH_STRATEGIES)}, got {strategy!r}")
+        self.strategy = strategy
         pairs = ((direction, distance_m), (landmark, side))
         given = [all(v is not None for v in pair) for pair in pairs]
         partial = any(any(v is not None for v in pair) and not full for pair, full in zip(pairs, given))
@@ -432,8 +482,9 @@ class ComputePush(Primitive):
         self.clearance_m, self.approach_height_m = float(clearance_m), float(approach_height_m)
         self.tip_clearance_m = float(tip_clearance_m)
         self.snapshot_key, self.start_key, self.prestart_key, self.goal_key = snapshot, start, prestart, goal
+        self.press_key = press
         self.reads(snapshot)
-        self.writes(start, prestart, goal)
+        self.writes(start, prestart, goal, press)
 
     def step(self):
         snapshot = self.get(self.snapshot_key)
@@ -468,38 +519,84 @@ class ComputePush(Primitive):
             distance = max(distance, MIN_PUSH_M)
         else:
             direction, distance = self.direction, self.distance_m
-        bottom = float(T_obj[2, 3] - np.abs(T_obj[2, :3]) @ half)
+        height = 2.0 * float(np.abs(T_obj[2, :3]) @ half)
+        bottom = float(T_obj[2, 3]) - height / 2.0
+        tips = getattr(getattr(self.ctx, "target", None), "fingertip_friction", None)
+        press_first = self.strategy == "above" or (
+            self.strategy == "auto" and height <= PRESS_MAX_HEIGHT_M and tips is not None
+            and tips >= PRESS_MIN_TIP_FRICTION)
+        rejected: list[dict] = []
+        chosen = None
+        poses = []
+        if press_first:
+            poses += self._press_poses(T_obj[:3, 3], bottom + height, direction, distance)
+        if self.strategy != "above":
+            poses += self._behind_poses(T_obj, bottom, extent(direction), direction)
+        for info, T, P, G, press in poses:
+            why = self._blocked(P, T)
+            if why is None and press is not None:
+                G_up = G.copy()
+                G_up[2, 3] += self.approach_height_m
+                why = self._end_blocked(G_up, G)
+            if why is None:
+                chosen = (info, T, P, G, press)
+                break
+            rejected.append({**info, "why": str(why)})
+            chosen = chosen or (info, T, P, G, press)  # none clear: the first, and the planner says why
+        info, T, P, G, press = chosen  # type: ignore[misc]
+        if press is None:  # the hand travels the gap, then the object's distance
+            G[:2, 3] += (info["clearance_m"] + distance) * direction
+        if press is not None:
+            press = {**press, "descent_m": round(float(T[2, 3] - FINGERTIP_BELOW_TCP_M - bottom), 4)}
+        self.set(self.start_key, T)
+        self.set(self.prestart_key, P)
+        self.set(self.goal_key, G)
+        self.set(self.press_key, press)
+        self.ctx.trace.record("push_pose", object=self.object, start=T[:3, 3].round(4).tolist(),
+                              direction=np.round(direction, 4).tolist(), distance_m=round(distance, 4),
+                              **info, rejected=rejected,
+                              **({"landmark": self.landmark, "side": self.side, "shift_m": round(shift, 4)}
+                                 if self.landmark else {}))
+
+    def _press_poses(self, centre, top: float, direction: np.ndarray, distance: float) -> list:
+        """``(info, start, prestart, goal, press)`` of the presses from above, in the order tried:
+        the hand's closing axis along the way (either way round: the wrist's other angle), then
+        across it; the start over ``centre`` ((3,) world, m) with the fingertips
+        :data:`PRESS_START_ABOVE_M` above ``top`` (m), the pre-start straight above, the goal
+        ``distance`` m along the (2,) unit ``direction`` (the object moves with the hand)."""
+        yaw = float(np.arctan2(direction[1], direction[0]))
+        out = []
+        for turn, edge_on in ((np.pi / 2, True), (-np.pi / 2, True), (0.0, False), (np.pi, False)):
+            T = np.eye(4)
+            T[:3, :3] = top_down_rotation(yaw + turn)
+            T[:3, 3] = [centre[0], centre[1], top + PRESS_START_ABOVE_M + FINGERTIP_BELOW_TCP_M]
+            P, G = T.copy(), T.copy()
+            P[2, 3] += self.approach_height_m
+            G[:2, 3] += distance * direction
+            info = {"press": True, "edge_on": edge_on, "turn_rad": round(turn, 4), "clearance_m": 0.0, "lean_rad": 0.0}
+            out.append((info, T, P, G, {"contact_n": PRESS_CONTACT_N, "depth_m": PRESS_DEPTH_M}))
+        return out
+
+    def _behind_poses(self, T_obj: np.ndarray, bottom: float, reach: float, direction: np.ndarray) -> list:
+        """``(info, start, prestart, goal, None)`` of the starts behind the object
+        (:meth:`_candidates`), ``reach`` m its extent along the (2,) unit ``direction`` from its
+        centre; the goal is the start (the caller moves it by the gap and the distance)."""
         z = max(float(T_obj[2, 3]), bottom + FINGERTIP_BELOW_TCP_M + self.tip_clearance_m)
         # fingers close along the tcp y axis: across the push direction, or along it when turned edge-on
         yaw = float(np.arctan2(direction[1], direction[0]))
-        rejected: list[dict] = []
-        chosen = None
         d3 = np.array([direction[0], direction[1], 0.0])
+        out = []
         for clearance, edge_on, lean in self._candidates():
             face = CLOSED_FINGERS_DEPTH_M if edge_on else FINGER_HALF_THICKNESS_M
-            xy = T_obj[:2, 3] - (extent(direction) + clearance + face) * direction
+            xy = T_obj[:2, 3] - (reach + clearance + face) * direction
             T = np.eye(4)
             T[:3, :3] = _push_rotation(yaw, d3, edge_on=edge_on, lean_rad=lean)
             T[:3, 3] = [xy[0], xy[1], z]
             P = T.copy()  # back along the hand's own axis: straight above, or over the object when leaning
             P[:3, 3] -= self.approach_height_m * T[:3, 2]
-            why = self._blocked(P, T)
-            if why is None:
-                chosen = (clearance, edge_on, lean, T, P)
-                break
-            rejected.append({"clearance_m": clearance, "edge_on": edge_on, "lean_rad": lean, "why": str(why)})
-            chosen = chosen or (clearance, edge_on, lean, T, P)  # none clear: the first, and the planner says why
-        clearance, edge_on, lean, T, P = chosen  # type: ignore[misc]
-        G = T.copy()  # the hand travels the gap, then the object's distance
-        G[:2, 3] += (clearance + distance) * direction
-        self.set(self.start_key, T)
-        self.set(self.prestart_key, P)
-        self.set(self.goal_key, G)
-        self.ctx.trace.record("push_pose", object=self.object, start=T[:3, 3].round(4).tolist(),
-                              direction=np.round(direction, 4).tolist(), distance_m=round(distance, 4),
-                              clearance_m=clearance, edge_on=edge_on, lean_rad=lean, rejected=rejected,
-                              **({"landmark": self.landmark, "side": self.side, "shift_m": round(shift, 4)}
-                                 if self.landmark else {}))
+            info = {"press": False, "clearance_m": clearance, "edge_on": edge_on, "lean_rad": lean}
+            out.append((info, T, P, T.copy(), None))
+        return out
 
     def _candidates(self) -> list[tuple[float, bool, float]]:
         """``(clearance m, edge_on, lean rad)`` of the start poses, in the order tried: the
@@ -514,9 +611,20 @@ class ComputePush(Primitive):
         :func:`~.perception.reach_blocked`); ``None`` when it can."""
         return reach_blocked(self.ctx, self.object, ("push prestart", T_pre), ("push start", T_start))
 
+    def _end_blocked(self, T_above: np.ndarray, T_end: np.ndarray):
+        """Why the arm cannot end a press from above at ``T_end`` and lift straight up from there
+        to ``T_above`` ((4, 4) world tcp poses); ``None`` when it can."""
+        return reach_blocked(self.ctx, self.object, ("press end above", T_above), ("press end", T_end))
+
 
 class Push(_ContactMotion):
     """Push: a straight tcp motion (to a blackboard pose or by an ``offset``) that must touch something.
+
+    With a press from above on the blackboard (``press``, written by :class:`ComputePush`:
+    ``{contact_n, depth_m, descent_m}``), the push first lowers the hand straight down, at most
+    ``descent_m`` m, until it presses with ``contact_n`` N (``contact.missing`` when it lands on
+    nothing), then drags the object: the same straight motion, its height ``depth_m`` m below
+    where the hand landed.
 
     Args:
         to: blackboard key of the (4, 4) world tcp pose where the push ends; or
@@ -528,28 +636,74 @@ class Push(_ContactMotion):
             ``contact.excessive_force`` when the robot presses harder, N (checked after
             every physics step).
         expect_contact: fail with ``contact.missing`` if nothing was touched.
+        press: blackboard key of the press from above (``None`` or a missing key: no press).
 
     Blackboard: writes ``contact`` with ``{max_force_n, touched}``.
     """
 
     def __init__(self, name: str, *, to: str | None = None, offset=None, velocity_scale: float = 0.05,
-                 tracking_tol_rad: float = 0.15, max_force_n: float = 40.0, expect_contact: bool = True):
+                 tracking_tol_rad: float = 0.15, max_force_n: float = 40.0, expect_contact: bool = True,
+                 press: str | None = None):
         super().__init__(name)
         self._motion_args(to=to, offset=offset, velocity_scale=velocity_scale, tracking_tol_rad=tracking_tol_rad,
                           force_limit_n=max_force_n, force_name="max_force_n", expect_contact=expect_contact,
                           allow_to=True)
         self.max_force_n = float(max_force_n)
+        self.press_key = press
+        if press is not None:
+            self.reads(press)
 
     def on_enter(self):
-        self._plan()
-        self._ignore = frozenset()  # a push counts every contact, a held object's too
         self._peak, self._touched = 0.0, set()
+        press = self.get(self.press_key) if self.press_key is not None else None
+        self._press = dict(press) if press else None
+        if self._press is None:
+            self._plan_push()
+            return
+        T = self.ctx.target.tcp_pose()
+        T[2, 3] -= float(self._press["descent_m"])
+        self._plan_push(T)
+
+    def _plan_push(self, T_goal: np.ndarray | None = None) -> None:
+        self._plan(T_goal)
+        self._ignore = frozenset()  # a push counts every contact, a held object's too (fingertips pressed on it)
 
     def _sample(self, force: float, touched: tuple[str, ...]) -> None:
         self._peak = max(self._peak, force)
         self._touched.update(t for t in touched if t not in ("table", "floor"))
 
+    def _landed(self) -> Status:
+        """The descent of a press from above: drag from where the hand landed, or fail."""
+        target = self.ctx.target
+        press = self._press
+        s = self._stream(lambda force: force >= press["contact_n"])
+        if s.stopped or (not s.completed and s.touched):
+            target.halt()
+            T_now = target.tcp_pose()
+            if self.to is not None:
+                G = np.asarray(self.get(self.to), dtype=float).copy()
+            else:
+                G = T_now.copy()
+                G[:3, 3] += self.offset
+            G[2, 3] = T_now[2, 3] - float(press["depth_m"])
+            self.ctx.trace.record("press", leaf=self.name, force_n=round(s.force_n, 3), touched=list(s.touched),
+                                  landed_z=round(float(T_now[2, 3]), 4))
+            self._press = None
+            self._plan_push(G)
+            return Status.RUNNING
+        if not s.completed:
+            raise PrimitiveFailure("execution.tracking",
+                                   f"press blocked without contact: tracking error {s.max_tracking_error_rad:.3f} "
+                                   f"rad exceeded {self.tracking_tol_rad} rad")
+        if self._t < self._traj.duration - 1e-9:
+            return Status.RUNNING
+        target.halt()
+        raise PrimitiveFailure("contact.missing", f"lowered {press['descent_m']:.3f} m to press and touched nothing "
+                                                  f"(expected {press['contact_n']} N)")
+
     def step(self):
+        if self._press is not None:
+            return self._landed()
         ctx = self.ctx
         target = ctx.target
         s = self._stream(lambda force: force > self.max_force_n)

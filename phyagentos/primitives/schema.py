@@ -256,6 +256,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "distance_m": ("float | null", "m", "how far the object should move (with direction)"),
         "landmark": ("str | null", "", "push the object beside this thing instead (with side)"),
         "side": ("str | null", "", "left / right / front (towards the viewer) / back of the landmark"),
+        "strategy": ("str", "", "auto (a low object pressed from above, else from behind), behind or above"),
         "clearance_m": ("float", "m", "gap between the fingertips and the object at the start"),
         "approach_height_m": ("float", "m", "pre-start pose back from the start along the hand's axis"),
         "tip_clearance_m": ("float", "m", "fingertips above the surface the object stands on"),
@@ -263,6 +264,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "start": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp start pose"),
         "prestart": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-start pose"),
         "goal": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pose where the push ends"),
+        "press": (*_KEY[:2], "blackboard key written with the press from above (or null)"),
     },
     Push: {
         "to": ("str | null", "", "blackboard key of the (4, 4) world tcp pose where the push ends (or `offset`)"),
@@ -271,6 +273,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "tracking_tol_rad": ("float", "rad", "joint tracking error tolerated while pushing"),
         "max_force_n": ("float", "N", "effort limit: fail with contact.excessive_force above it"),
         "expect_contact": ("bool", "", "fail with contact.missing if nothing was touched"),
+        "press": ("str | null", "", "blackboard key of a press from above (lower until it lands, then drag)"),
     },
     GuardedMove: {
         "offset": ("[dx, dy, dz]", "m", "world-frame tcp displacement: the farthest the motion goes"),

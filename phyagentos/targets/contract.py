@@ -283,6 +283,11 @@ class Target(abc.ABC):
     #: the Franka Hand's with the tcp of the tabletop Franka
     #: (:data:`~phyagentos.motion.grasp.FRANKA_FINGERS`).
     finger_geometry_m: ClassVar[tuple[float, float, float] | None] = None
+    #: Sliding friction coefficient of the fingertips, the part of the closed fingers that
+    #: meets a surface below them (the robot's own; MuJoCo's ``geom_friction[0]``); ``None``: not
+    #: declared. A push presses a low object from above and drags it only with fingertips that
+    #: grip (:data:`~phyagentos.primitives.contact.PRESS_MIN_TIP_FRICTION`).
+    fingertip_friction: ClassVar[float | None] = None
     #: The runtime's own notes about this robot (plain data: the grasp it believes it holds,
     #: the objects it has perceived; :mod:`phyagentos.primitives.grasp_sense`). ``{}`` after
     #: ``__init__``; a driver that checkpoints its state saves them with it.

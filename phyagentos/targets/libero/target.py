@@ -333,6 +333,9 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
     #: box's grasp stood so high that the pads closed over it (a 1.8 cm cream cheese box: 0 to
     #: 3 mm of pad on it, then a slip).
     finger_geometry_m = (0.0095, 0.004, 0.035)
+    #: robosuite's Panda's finger collision meshes (``gripper0_finger*_collision``), the lowest
+    #: part of the closed fingers: friction 1.0 (its pads, 2.0, stand 4.8 mm higher).
+    fingertip_friction = 1.0
     #: A world with its renderer and collision models holds 1.5-2 GB: a runner closes it when
     #: it moves on to another workspace (a bench episode's), instead of keeping it idle.
     KEEP_WHEN_IDLE = False

@@ -120,3 +120,74 @@ def test_a_guarded_move_stops_within_one_physics_step_of_the_force_limit(target)
     reader.register_key(key="contact", access=py_trees.common.Access.READ)
     assert reader.contact["force_n"] >= limit and reader.contact["touched"] == ["cube"]
     assert reader.contact["sim_time_s"] - calls[first][1] <= target.model.opt.timestep + 1e-12
+
+
+def _tick_with(leaf, ctx, board: dict, limit: int = 600):
+    """:func:`_tick_until_done` with blackboard values written first (what earlier leaves
+    of a tree would have written)."""
+    py_trees.blackboard.Blackboard.clear()
+    leaf.setup(context=ctx)
+    for key, value in board.items():
+        py_trees.blackboard.Blackboard.set(f"/{key}", value)
+    for _ in range(limit):
+        leaf.tick_once()
+        if leaf.status != py_trees.common.Status.RUNNING:
+            return leaf.status
+    raise AssertionError("leaf never finished")
+
+
+def _over(target, ctx, name: str, *, above_m: float):
+    """The closed hand straight over object ``name``, its tcp (at the fingertips) ``above_m`` m
+    above the object's top."""
+    target.set_gripper(opening_m=0.0)
+    T_obj = target.object_pose(name)
+    top = T_obj[2, 3] + target.scene.object(name).half_extents[2]
+    T = target.tcp_pose()
+    over = [T_obj[0, 3] - T[0, 3], T_obj[1, 3] - T[1, 3], 0.0]
+    assert _tick_until_done(GuardedMove("Over", offset=over, velocity_scale=0.5, expect_contact=False), ctx) \
+        == py_trees.common.Status.SUCCESS
+    down = top + above_m - target.tcp_pose()[2, 3]
+    assert _tick_until_done(GuardedMove("Down", offset=[0.0, 0.0, down], velocity_scale=0.5, expect_contact=False),
+                            ctx) == py_trees.common.Status.SUCCESS
+    return T_obj[:3, 3].copy(), top
+
+
+@pytest.fixture
+def tile_target():
+    """A flat tile (10 by 10 by 2 cm, 50 g) where the default scene's cube stands."""
+    from phyagentos.targets.scene import ObjectSpec
+
+    spec = SceneSpec(objects=(ObjectSpec(name="tile", half_extents=(0.05, 0.05, 0.01), position=(0.5, -0.2),
+                                         mass=0.05),))
+    t = MuJoCoTarget("contact", spec, seed=0)
+    yield t
+    t.close()
+
+
+def test_a_push_pressed_from_above_lands_on_the_object_then_drags_it_along(tile_target):
+    from phyagentos.primitives.contact import Push
+
+    target = tile_target
+    ctx = SkillContext(target=target)
+    start, top = _over(target, ctx, "tile", above_m=0.015)
+    press = {"contact_n": 2.0, "depth_m": 0.002, "descent_m": 0.05}
+    status = _tick_with(Push("Drag", offset=[0.0, 0.06, 0.0], velocity_scale=0.2, press="push_press"), ctx,
+                        {"push_press": press})
+    assert status == py_trees.common.Status.SUCCESS, ctx.failure
+    moved = target.object_pose("tile")[:3, 3] - start
+    assert moved[1] > 0.04 and abs(moved[0]) < 0.01  # carried along under the fingertips, not left behind
+    assert abs(moved[2]) < 0.003  # dragged along the table, not tipped or lifted
+    [landed] = [r for r in ctx.trace.records if r["kind"] == "press"]
+    assert landed["force_n"] >= 2.0 and landed["touched"] == ["tile"]
+    assert landed["landed_z"] == pytest.approx(top, abs=0.006)  # on its top, not its side
+
+
+def test_a_press_from_above_that_lands_on_nothing_fails_with_contact_missing(target):
+    from phyagentos.primitives.contact import Push
+
+    ctx = SkillContext(target=target)
+    z0 = target.tcp_pose()[2, 3]
+    press = {"contact_n": 2.0, "depth_m": 0.002, "descent_m": 0.03}
+    status = _tick_with(Push("Drag", offset=[0.0, 0.06, 0.0], press="push_press"), ctx, {"push_press": press})
+    assert status == py_trees.common.Status.FAILURE and ctx.failure["code"] == "contact.missing"
+    assert target.tcp_pose()[2, 3] == pytest.approx(z0 - 0.03, abs=0.005)  # lowered, never dragged

@@ -26,6 +26,7 @@ import mujoco
 import numpy as np
 from py_trees.common import Status
 
+from phyagentos.errors import IKError
 from phyagentos.geometry import VIEWER_SIDES
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
@@ -34,8 +35,18 @@ from phyagentos.targets.contract import MuJoCoBacked
 
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
-from .motion import execution_limits, ik_options
-from .perception import BESIDE_GAP_M, beside_point, entity_pose, landmark_box, reach_blocked, viewer_side
+from .motion import clear_ik, execution_limits, ik_options
+from .perception import (
+    BESIDE_GAP_M,
+    LOWER_APPROACH_M,
+    Blocked,
+    _object_body,
+    beside_point,
+    entity_pose,
+    landmark_box,
+    reach_blocked,
+    viewer_side,
+)
 
 __all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n", "MIN_PUSH_M", "FINGER_HALF_THICKNESS_M",
            "CLOSED_FINGERS_DEPTH_M", "PUSH_LEANS_RAD", "TIGHT_CLEARANCE_M", "PUSH_BESIDE_GAP_M", "PUSH_MAX_SHIFT",
@@ -64,14 +75,15 @@ CLOSED_FINGERS_DEPTH_M = 0.018
 #: (LIBERO's plates stand 3-4.5 cm from the cabinet's side in libero_goal task 5).
 TIGHT_CLEARANCE_M = 0.008
 #: How far (m) a pushed object's near face is aimed beyond a landmark's edge ("to the front of
-#: the stove"): the middle of the verifier's ``beside`` reach (0.10 m,
-#: :data:`phyagentos.agent.criteria.BESIDE_REACH_M`), since a push lands less surely than a place
-#: (:data:`~.perception.BESIDE_GAP_M`, 1.5 cm): the object slides on or stops short by a few cm.
-PUSH_BESIDE_GAP_M = 0.05
+#: the stove"): the middle of what the verifier's ``beside`` accepts (0 to its 8 cm reach less 2
+#: sigma, :data:`phyagentos.agent.criteria.BESIDE_REACH_M`), since a push lands less surely than a
+#: place (:data:`~.perception.BESIDE_GAP_M`, 1.5 cm): the object slides on or stops short by a few cm.
+PUSH_BESIDE_GAP_M = 0.03
 #: The farthest a pushed object's aim point moves across the side, from level with the
 #: landmark's centre, to a spot clear of what stands there: this fraction of the landmark's half
-#: extent across (the verifier's ``beside`` allows the whole half extent less its 2 sigma).
-PUSH_MAX_SHIFT = 0.5
+#: extent across (the verifier's ``beside`` accepts half of it less its 2 sigma:
+#: :data:`phyagentos.agent.criteria.BESIDE_CENTRED`).
+PUSH_MAX_SHIFT = 0.25
 #: Clearance (m) between a pushed object's footprint at its aim point and any other perceived
 #: object's (both as discs: a footprint's circumscribed circle).
 FREE_MARGIN_M = 0.01
@@ -102,7 +114,7 @@ PRESS_CONTACT_N = 2.0
 #: Panda (its joint servos) 2 mm pressed the plate with 8-17 N, and the fingertips (friction 1.0
 #: against the plate-table's 0.95, robosuite's and LIBERO's models) carried the 11.5 g plate
 #: with them (development scenes of libero_goal task 5, seeds 500, 503, 504).
-PRESS_DEPTH_M = 0.002
+PRESS_DEPTH_M = 0.004
 
 
 def contact_force_n(model: mujoco.MjModel, data: mujoco.MjData, *, ignore_bodies: frozenset[int] = frozenset()
@@ -209,7 +221,8 @@ class _ContactMotion(_Tracking):
         with ctx.profiler.section("timing"):
             traj = retime(path, vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
         held = target.held_objects()
-        self._ignore = frozenset(int(target.model.body(n).id) for n in held)
+        body = getattr(target, "object_body", lambda n: n)  # LIBERO's object "plate_1" is body "plate_1_main"
+        self._ignore = frozenset(int(target.model.body(body(n)).id) for n in held)
         self._start(traj)
 
     def _stream(self, over_limit: Callable[[float], bool]) -> _Slice:
@@ -336,16 +349,21 @@ def free_shift(point_xy, across_xy, radius_m: float, obstacles, *, max_shift_m: 
     ``radius_m`` centred at ``point_xy + shift * across_xy`` at least ``margin_m`` clear of every
     obstacle disc (``obstacles``: ``((2,) centre, radius m)`` pairs, world frame), within
     ``|shift| <= max_shift_m``, tried in ``step_m`` steps (the positive side first at each
-    size); 0.0 when no shift clears them (the aim point stays level with the landmark)."""
+    size). When no shift clears them, the one whose nearest obstacle is farthest (the nearest
+    to 0 of equals): the pushed object then meets less of what stands there."""
     p, a = np.asarray(point_xy, dtype=float)[:2], np.asarray(across_xy, dtype=float)[:2]
     obstacles = [(np.asarray(c, dtype=float)[:2], float(r)) for c, r in obstacles]
     n = int(np.floor(max(0.0, max_shift_m) / step_m + 1e-9))
+    best, best_room = 0.0, -np.inf
     for k in range(n + 1):
         for shift in ((0.0,) if k == 0 else (k * step_m, -k * step_m)):
             q = p + shift * a
-            if all(float(np.linalg.norm(q - c)) >= radius_m + r + margin_m for c, r in obstacles):
+            room = min((float(np.linalg.norm(q - c)) - radius_m - r for c, r in obstacles), default=np.inf)
+            if room >= margin_m - 1e-9:
                 return float(shift)
-    return 0.0
+            if room > best_room + 1e-12:
+                best, best_room = float(shift), room
+    return best
 
 
 def _disc_radius(half, round_: bool) -> float:
@@ -420,10 +438,12 @@ class ComputePush(Primitive):
     room is needed behind it (a plate against a cabinet's side). The start stands
     :data:`PRESS_START_ABOVE_M` above the object's top; :class:`Push` lowers from there until
     it lands (:data:`PRESS_CONTACT_N`) and drags the object to the goal,
-    :data:`PRESS_DEPTH_M` below where it landed. Its pre-start is straight above the start; the
-    end of the drag (and straight above it) must be reachable clear of everything but the
-    object too. ``press`` is then written with ``{contact_n, depth_m, descent_m}``, else
-    ``None``. In ``auto`` the presses are tried first, then the starts behind.
+    :data:`PRESS_DEPTH_M` below where it landed. Its pre-start is straight above the start
+    (``approach_height_m``, then lower: :data:`~.perception.LOWER_APPROACH_M`, where the hand
+    turned along the way meets a fixture above); the drag's way (a third, two thirds, the end)
+    and straight above its end must be reachable clear of everything but the object too.
+    ``press`` is then written with ``{contact_n, depth_m, descent_m}``, else ``None``. In
+    ``auto`` the presses are tried first, then the starts behind.
 
     Args:
         object: the object to push.
@@ -433,6 +453,8 @@ class ComputePush(Primitive):
         side: ``left`` / ``right`` / ``front`` (towards the viewer) / ``back``
             (:data:`~phyagentos.geometry.VIEWER_SIDES`).
         strategy: one of :data:`PUSH_STRATEGIES`.
+        press_carry: the fraction (0, 1] of the hand's way a pressed object makes (it creeps
+            under the fingertips); the hand drags it ``1 / press_carry`` times the distance.
         clearance_m: gap between the fingertips and the object at the start, m.
         approach_height_m: how far the pre-start stands back from the start along the hand's
             axis (straight above it when upright; over the object when leaning), m.
@@ -453,13 +475,15 @@ class ComputePush(Primitive):
 
     def __init__(self, name: str, *, object: str, direction=None, distance_m: float | None = None,
                  landmark: str | None = None, side: str | None = None, strategy: str = "auto",
-                 clearance_m: float = 0.02, approach_height_m: float = 0.10, tip_clearance_m: float = 0.005,
+                 press_carry: float = 1.0, clearance_m: float = 0.02, approach_height_m: float = 0.10, tip_clearance_m: float = 0.005,
                  snapshot: str = "snapshot", start: str = "push_start_pose", prestart: str = "push_prestart_pose",
                  goal: str = "push_goal_pose", press: str = "push_press"):
         super().__init__(name)
         if strategy not in PUSH_STRATEGIES:
             raise ValueError(f"{name}: strategy must be one of {', '.join(PUSH_STRATEGIES)}, got {strategy!r}")
-        self.strategy = strategy
+        if not (isinstance(press_carry, (int, float)) and 0.0 < press_carry <= 1.0):
+            raise ValueError(f"{name}: press_carry must be in (0, 1], got {press_carry!r}")
+        self.strategy, self.press_carry = strategy, float(press_carry)
         pairs = ((direction, distance_m), (landmark, side))
         given = [all(v is not None for v in pair) for pair in pairs]
         partial = any(any(v is not None for v in pair) and not full for pair, full in zip(pairs, given))
@@ -533,11 +557,14 @@ class ComputePush(Primitive):
         if self.strategy != "above":
             poses += self._behind_poses(T_obj, bottom, extent(direction), direction)
         for info, T, P, G, press in poses:
+            if press is not None and info["approach_m"] != self.approach_height_m and not (
+                    rejected and str(rejected[-1]["why"]).startswith("push prestart")):
+                continue  # a lower pre-start only where the one above was what blocked
             why = self._blocked(P, T)
             if why is None and press is not None:
                 G_up = G.copy()
                 G_up[2, 3] += self.approach_height_m
-                why = self._end_blocked(G_up, G)
+                why = self._way_blocked(T, G, G_up)
             if why is None:
                 chosen = (info, T, P, G, press)
                 break
@@ -561,20 +588,25 @@ class ComputePush(Primitive):
     def _press_poses(self, centre, top: float, direction: np.ndarray, distance: float) -> list:
         """``(info, start, prestart, goal, press)`` of the presses from above, in the order tried:
         the hand's closing axis along the way (either way round: the wrist's other angle), then
-        across it; the start over ``centre`` ((3,) world, m) with the fingertips
-        :data:`PRESS_START_ABOVE_M` above ``top`` (m), the pre-start straight above, the goal
-        ``distance`` m along the (2,) unit ``direction`` (the object moves with the hand)."""
+        across it, each with its pre-start ``approach_height_m`` and then
+        :data:`~.perception.LOWER_APPROACH_M` straight above the start; the start over ``centre``
+        ((3,) world, m) with the fingertips :data:`PRESS_START_ABOVE_M` above ``top`` (m), the goal
+        ``distance / press_carry`` m along the (2,) unit ``direction`` (the object moves with the
+        hand, less its creep)."""
         yaw = float(np.arctan2(direction[1], direction[0]))
+        heights = [self.approach_height_m, *(h for h in LOWER_APPROACH_M if h < self.approach_height_m)]
         out = []
         for turn, edge_on in ((np.pi / 2, True), (-np.pi / 2, True), (0.0, False), (np.pi, False)):
-            T = np.eye(4)
-            T[:3, :3] = top_down_rotation(yaw + turn)
-            T[:3, 3] = [centre[0], centre[1], top + PRESS_START_ABOVE_M + FINGERTIP_BELOW_TCP_M]
-            P, G = T.copy(), T.copy()
-            P[2, 3] += self.approach_height_m
-            G[:2, 3] += distance * direction
-            info = {"press": True, "edge_on": edge_on, "turn_rad": round(turn, 4), "clearance_m": 0.0, "lean_rad": 0.0}
-            out.append((info, T, P, G, {"contact_n": PRESS_CONTACT_N, "depth_m": PRESS_DEPTH_M}))
+            for height in heights:
+                T = np.eye(4)
+                T[:3, :3] = top_down_rotation(yaw + turn)
+                T[:3, 3] = [centre[0], centre[1], top + PRESS_START_ABOVE_M + FINGERTIP_BELOW_TCP_M]
+                P, G = T.copy(), T.copy()
+                P[2, 3] += height
+                G[:2, 3] += distance / self.press_carry * direction
+                info = {"press": True, "edge_on": edge_on, "turn_rad": round(turn, 4), "approach_m": height,
+                        "clearance_m": 0.0, "lean_rad": 0.0}
+                out.append((info, T, P, G, {"contact_n": PRESS_CONTACT_N, "depth_m": PRESS_DEPTH_M}))
         return out
 
     def _behind_poses(self, T_obj: np.ndarray, bottom: float, reach: float, direction: np.ndarray) -> list:
@@ -611,10 +643,31 @@ class ComputePush(Primitive):
         :func:`~.perception.reach_blocked`); ``None`` when it can."""
         return reach_blocked(self.ctx, self.object, ("push prestart", T_pre), ("push start", T_start))
 
-    def _end_blocked(self, T_above: np.ndarray, T_end: np.ndarray):
-        """Why the arm cannot end a press from above at ``T_end`` and lift straight up from there
-        to ``T_above`` ((4, 4) world tcp poses); ``None`` when it can."""
+    def _way_blocked(self, T_start: np.ndarray, T_end: np.ndarray, T_above: np.ndarray):
+        """Why the arm cannot drag from ``T_start`` to ``T_end`` and lift straight up to
+        ``T_above`` ((4, 4) world tcp poses): the poses a third and two thirds of the way and at
+        its end each reached (IK seeded from the one before) clear of everything but the object,
+        then the pose above the end; ``None`` when it can."""
+        q = None
+        for label, f in (("press way 1/3", 1.0 / 3.0), ("press way 2/3", 2.0 / 3.0), ("press end", 1.0)):
+            T = T_start.copy()
+            T[:3, 3] += f * (T_end[:3, 3] - T_start[:3, 3])
+            why, q = self._reach(label, T, q)
+            if why is not None:
+                return why
         return reach_blocked(self.ctx, self.object, ("press end above", T_above), ("press end", T_end))
+
+    def _reach(self, label: str, T: np.ndarray, q_seed):
+        """``(why blocked or None, the solution's joints)`` of one pose of the drag's way."""
+        try:
+            sol, pairs, _ = clear_ik(self.ctx, T, q_seed=q_seed, allow=_object_body(self.ctx, self.object),
+                                     margin_m=0.0)
+        except IKError as exc:
+            return Blocked(f"{label}: {str(exc)[:100]}", stage=label, collides=False), None
+        if pairs:
+            return Blocked(f"{label} collides: {', '.join('-'.join(pr) for pr in pairs[:3])}", stage=label,
+                           collides=True), None
+        return None, sol.q
 
 
 class Push(_ContactMotion):

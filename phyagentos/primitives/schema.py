@@ -257,6 +257,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "landmark": ("str | null", "", "push the object beside this thing instead (with side)"),
         "side": ("str | null", "", "left / right / front (towards the viewer) / back of the landmark"),
         "strategy": ("str", "", "auto (a low object pressed from above, else from behind), behind or above"),
+        "press_carry": ("float", "", "fraction (0, 1] of the hand's way a pressed object makes (its creep)"),
         "clearance_m": ("float", "m", "gap between the fingertips and the object at the start"),
         "approach_height_m": ("float", "m", "pre-start pose back from the start along the hand's axis"),
         "tip_clearance_m": ("float", "m", "fingertips above the surface the object stands on"),

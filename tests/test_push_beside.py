@@ -333,13 +333,13 @@ def test_a_press_whose_end_the_arm_cannot_reach_gives_way_to_a_start_behind():
     board, record = _compute_push(_scene([0.05, -0.03]), way_blocked=way_blocked, landmark="flat_stove_1",
                                   side="front")
     assert not record["press"] and record["lean_rad"] == 0.0 and board["push_press"] is None
-    assert [r["press"] for r in record["rejected"]] == [True] * 4  # both edge-on turns, then both across
+    assert [r["press"] for r in record["rejected"]] == [True] * 8  # along, half way round, then across
     assert all(r["why"] == "press end: IK did not converge" for r in record["rejected"])
-    assert len(ends) == 4 and np.allclose(ends[0], ends[3])
+    assert len(ends) == 8 and np.allclose(ends[0], ends[7])
     # nothing clear at all: the first press, and the planner says why
     board, record = _compute_push(_scene([0.05, -0.03]), blocked=lambda a, b: "collides", landmark="flat_stove_1",
                                   side="front")
-    assert record["press"] and len(record["rejected"]) == 4 + 2 * 2 * len(PUSH_LEANS_RAD)
+    assert record["press"] and len(record["rejected"]) == 8 + 2 * 2 * len(PUSH_LEANS_RAD)
 
 
 def test_a_push_strategy_is_one_of_the_three():
@@ -347,3 +347,21 @@ def test_a_push_strategy_is_one_of_the_three():
 
     with pytest.raises(ValueError, match="strategy must be one of auto, behind, above"):
         ComputePush("p", object="plate_1", landmark="flat_stove_1", side="front", strategy="sideways")
+
+
+def test_a_press_whose_pre_start_meets_a_fixture_above_comes_down_from_lower():
+    def blocked(T_pre, T_start):  # the hand turned along the way meets the cabinet's top 10 cm up, not 6
+        return "push prestart collides: hand-cabinet_top" if T_pre[2, 3] - T_start[2, 3] > 0.07 else None
+
+    board, record = _compute_push(_scene([0.05, -0.03]), blocked=blocked, landmark="flat_stove_1", side="front")
+    assert record["press"] and record["approach_m"] == 0.06 and record["turn_rad"] == pytest.approx(np.pi / 2, abs=1e-4)
+    assert [r["approach_m"] for r in record["rejected"]] == [0.10]
+    start, pre = board["push_start_pose"], board["push_prestart_pose"]
+    assert pre[:3, 3] == pytest.approx(start[:3, 3] + [0.0, 0.0, 0.06], abs=1e-9)
+
+    # a start that is itself blocked is not tried again from lower: the next turn is
+    def start_blocked(T_pre, T_start):
+        return "push start collides: finger-bowl" if abs(float(T_start[:3, 1] @ [0.0, 1.0, 0.0])) > 0.9 else None
+
+    _, record = _compute_push(_scene([0.05, -0.03]), blocked=start_blocked, landmark="flat_stove_1", side="front")
+    assert all(r["approach_m"] == 0.10 for r in record["rejected"])

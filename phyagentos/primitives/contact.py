@@ -51,7 +51,7 @@ from .perception import (
 __all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n", "MIN_PUSH_M", "FINGER_HALF_THICKNESS_M",
            "CLOSED_FINGERS_DEPTH_M", "PUSH_LEANS_RAD", "TIGHT_CLEARANCE_M", "PUSH_BESIDE_GAP_M", "PUSH_MAX_SHIFT",
            "FREE_MARGIN_M", "free_shift", "PUSH_STRATEGIES", "PRESS_MAX_HEIGHT_M", "PRESS_START_ABOVE_M",
-           "PRESS_CONTACT_N", "PRESS_DEPTH_M", "PRESS_MIN_TIP_FRICTION"]
+           "PRESS_CONTACT_N", "PRESS_DEPTH_M", "PRESS_MIN_TIP_FRICTION", "PRESS_TURNS"]
 
 #: The least push (m) :class:`ComputePush` makes towards a landmark's side: an object already
 #: there is pushed this much more, so the push still touches it.
@@ -106,6 +106,13 @@ PRESS_MAX_HEIGHT_M = 0.03
 #: a press above 2.1 N. A target that declares no friction is never pressed in ``auto``; a drag
 #: that slips leaves the object short, which the look after the push reports.
 PRESS_MIN_TIP_FRICTION = 1.0
+#: The hand's turns (rad about the vertical, from the closing axis across the way) tried for a press
+#: from above, in order, with whether the closing axis then lies along the way (``edge_on``): along
+#: it either way round (the hand's narrow side across the way; the wrist reaches one of the two),
+#: then half way (its long side 7.4 cm out each way instead of 10.4: a plate between a cabinet's
+#: side and a bowl, where along meets the cabinet above and across sweeps the bowl), then across.
+PRESS_TURNS = ((np.pi / 2, True), (-np.pi / 2, True), (np.pi / 4, False), (-np.pi / 4, False),
+               (3 * np.pi / 4, False), (-3 * np.pi / 4, False), (0.0, False), (np.pi, False))
 #: Fingertips (m) above the object's perceived top where a press from above starts its descent.
 PRESS_START_ABOVE_M = 0.01
 #: Contact force (N) at which the descent of a press from above stops: it has landed on the object.
@@ -586,9 +593,8 @@ class ComputePush(Primitive):
                                  if self.landmark else {}))
 
     def _press_poses(self, centre, top: float, direction: np.ndarray, distance: float) -> list:
-        """``(info, start, prestart, goal, press)`` of the presses from above, in the order tried:
-        the hand's closing axis along the way (either way round: the wrist's other angle), then
-        across it, each with its pre-start ``approach_height_m`` and then
+        """``(info, start, prestart, goal, press)`` of the presses from above, in the order tried
+        (:data:`PRESS_TURNS`), each with its pre-start ``approach_height_m`` and then
         :data:`~.perception.LOWER_APPROACH_M` straight above the start; the start over ``centre``
         ((3,) world, m) with the fingertips :data:`PRESS_START_ABOVE_M` above ``top`` (m), the goal
         ``distance / press_carry`` m along the (2,) unit ``direction`` (the object moves with the
@@ -596,7 +602,7 @@ class ComputePush(Primitive):
         yaw = float(np.arctan2(direction[1], direction[0]))
         heights = [self.approach_height_m, *(h for h in LOWER_APPROACH_M if h < self.approach_height_m)]
         out = []
-        for turn, edge_on in ((np.pi / 2, True), (-np.pi / 2, True), (0.0, False), (np.pi, False)):
+        for turn, edge_on in PRESS_TURNS:
             for height in heights:
                 T = np.eye(4)
                 T[:3, :3] = top_down_rotation(yaw + turn)

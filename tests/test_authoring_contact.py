@@ -155,11 +155,12 @@ def _over(target, ctx, name: str, *, above_m: float):
 
 @pytest.fixture
 def tile_target():
-    """A flat tile (10 by 10 by 2 cm, 50 g) where the default scene's cube stands."""
+    """A flat tile (10 by 10 by 2 cm, 50 g) where the default scene's cube stands, and the cube
+    25 cm to its side."""
     from phyagentos.targets.scene import ObjectSpec
 
     spec = SceneSpec(objects=(ObjectSpec(name="tile", half_extents=(0.05, 0.05, 0.01), position=(0.5, -0.2),
-                                         mass=0.05),))
+                                         mass=0.05), ObjectSpec(name="cube", position=(0.5, 0.05))))
     t = MuJoCoTarget("contact", spec, seed=0)
     yield t
     t.close()
@@ -174,7 +175,7 @@ def test_a_push_pressed_from_above_lands_on_the_object_then_drags_it_along(tile_
     target = tile_target
     ctx = SkillContext(target=target)
     start, top = _over(target, ctx, "tile", above_m=0.03)
-    press = {"contact_n": 2.0, "depth_m": 0.008, "descent_m": 0.05}
+    press = {"contact_n": 2.0, "depth_m": 0.008, "descent_m": 0.05, "object": "tile"}
     status = _tick_with(Push("Drag", offset=[0.0, 0.06, 0.0], velocity_scale=0.2, press="push_press"), ctx,
                         {"push_press": press})
     assert status == py_trees.common.Status.SUCCESS, ctx.failure
@@ -184,6 +185,21 @@ def test_a_push_pressed_from_above_lands_on_the_object_then_drags_it_along(tile_
     [landed] = [r for r in ctx.trace.records if r["kind"] == "press"]
     assert landed["force_n"] >= 2.0 and landed["touched"] == ["tile"]
     assert landed["landed_z"] == pytest.approx(top + 0.015, abs=0.006)  # the fingertips (1.5 cm below the tcp) on its top
+
+
+def test_a_press_that_lands_on_another_object_fails_before_it_drags_anything(tile_target):
+    from phyagentos.primitives.contact import Push
+
+    target = tile_target
+    ctx = SkillContext(target=target)
+    cube, _ = _over(target, ctx, "cube", above_m=0.03)
+    tile = target.object_pose("tile")[:3, 3].copy()
+    press = {"contact_n": 2.0, "depth_m": 0.008, "descent_m": 0.05, "object": "tile"}
+    status = _tick_with(Push("Drag", offset=[0.0, 0.06, 0.0], press="push_press"), ctx, {"push_press": press})
+    assert status == py_trees.common.Status.FAILURE and ctx.failure["code"] == "execution.collision"
+    assert "cube" in ctx.failure["message"]
+    assert np.linalg.norm(target.object_pose("cube")[:2, 3] - cube[:2]) < 0.005  # pressed, never dragged
+    assert np.linalg.norm(target.object_pose("tile")[:3, 3] - tile) < 1e-3
 
 
 def test_the_same_push_without_a_press_passes_over_the_tile_and_moves_nothing(tile_target):

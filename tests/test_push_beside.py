@@ -290,7 +290,14 @@ def test_a_low_object_is_pressed_from_above_at_its_centre_and_dragged_to_the_aim
     from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M
     from phyagentos.primitives.contact import PRESS_CONTACT_N, PRESS_DEPTH_M, PRESS_START_ABOVE_M
 
-    board, record = _compute_push(_scene([0.05, -0.03]), landmark="flat_stove_1", side="front")
+    ways = []
+    board, record = _compute_push(_scene([0.05, -0.03]), landmark="flat_stove_1", side="front",
+                                  way_blocked=lambda a, b, c: ways.append((a, b, c)))
+    # the way is checked as low as the drag may go (the fingertips on the plate's bottom, 0.90), so a
+    # neighbour as high as the hand's body is met there, not passed over at the start's height
+    [(low, low_end, above)] = ways
+    assert low[2, 3] == low_end[2, 3] == pytest.approx(0.90 + FINGERTIP_BELOW_TCP_M + PRESS_DEPTH_M, abs=1e-9)
+    assert low[:2, 3] == pytest.approx(board["push_start_pose"][:2, 3]) and above[2, 3] > low[2, 3] + 0.09
     assert record["press"] and record["rejected"] == []
     d = np.array([*record["direction"], 0.0])
     start, pre, end = board["push_start_pose"], board["push_prestart_pose"], board["push_goal_pose"]
@@ -302,7 +309,7 @@ def test_a_low_object_is_pressed_from_above_at_its_centre_and_dragged_to_the_aim
     # the plate moves with the hand: its centre ends where the hand does
     assert end[:2, 3] - start[:2, 3] == pytest.approx(record["distance_m"] * d[:2], abs=2e-4)
     press = board["push_press"]
-    assert press["contact_n"] == PRESS_CONTACT_N and press["depth_m"] == PRESS_DEPTH_M
+    assert press["contact_n"] == PRESS_CONTACT_N and press["depth_m"] == PRESS_DEPTH_M and press["object"] == "plate_1"
     assert press["descent_m"] == pytest.approx(0.02 + PRESS_START_ABOVE_M, abs=1e-4)  # down to its bottom at most
 
 

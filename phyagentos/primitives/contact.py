@@ -373,6 +373,25 @@ def free_shift(point_xy, across_xy, radius_m: float, obstacles, *, max_shift_m: 
     return best
 
 
+def _not_of(target, touched, obj: str | None) -> list[str]:
+    """The geoms of ``touched`` (names, as :func:`contact_force_n` gives them) that are not part of
+    object ``obj`` (its body and those under it; ``target.object_body`` names the body); ``[]``
+    when ``obj`` is ``None`` or the target names no object bodies."""
+    if obj is None:
+        return []
+    m = target.model
+    try:
+        root = int(m.body(getattr(target, "object_body", lambda n: n)(obj)).rootid[0])
+    except Exception:  # noqa: BLE001 - a target without object bodies: nothing to tell apart
+        return []
+    out = []
+    for name in touched:
+        g = int(name[4:]) if name.startswith("geom") and name[4:].isdigit() else m.geom(name).id
+        if int(m.body_rootid[m.geom_bodyid[g]]) != root:
+            out.append(name)
+    return out
+
+
 def _disc_radius(half, round_: bool) -> float:
     """Radius (m) of the circle round a perceived footprint: a round one's radius, else its
     box's horizontal half diagonal (``half`` (3,) half extents in the object's frame; the
@@ -449,7 +468,7 @@ class ComputePush(Primitive):
     (``approach_height_m``, then lower: :data:`~.perception.LOWER_APPROACH_M`, where the hand
     turned along the way meets a fixture above); the drag's way (a third, two thirds, the end)
     and straight above its end must be reachable clear of everything but the object too.
-    ``press`` is then written with ``{contact_n, depth_m, descent_m}``, else ``None``. In
+    ``press`` is then written with ``{contact_n, depth_m, descent_m, object}``, else ``None``. In
     ``auto`` the presses are tried first, then the starts behind.
 
     Args:
@@ -571,7 +590,11 @@ class ComputePush(Primitive):
             if why is None and press is not None:
                 G_up = G.copy()
                 G_up[2, 3] += self.approach_height_m
-                why = self._way_blocked(T, G, G_up)
+                low = bottom + FINGERTIP_BELOW_TCP_M + PRESS_DEPTH_M - T[2, 3]  # the drag's height at the lowest
+                T_low, G_low = T.copy(), G.copy()
+                T_low[2, 3] += low
+                G_low[2, 3] += low
+                why = self._way_blocked(T_low, G_low, G_up)
             if why is None:
                 chosen = (info, T, P, G, press)
                 break
@@ -581,7 +604,8 @@ class ComputePush(Primitive):
         if press is None:  # the hand travels the gap, then the object's distance
             G[:2, 3] += (info["clearance_m"] + distance) * direction
         if press is not None:
-            press = {**press, "descent_m": round(float(T[2, 3] - FINGERTIP_BELOW_TCP_M - bottom), 4)}
+            press = {**press, "descent_m": round(float(T[2, 3] - FINGERTIP_BELOW_TCP_M - bottom), 4),
+                     "object": self.object}
         self.set(self.start_key, T)
         self.set(self.prestart_key, P)
         self.set(self.goal_key, G)
@@ -651,11 +675,14 @@ class ComputePush(Primitive):
 
     def _way_blocked(self, T_start: np.ndarray, T_end: np.ndarray, T_above: np.ndarray):
         """Why the arm cannot drag from ``T_start`` to ``T_end`` and lift straight up to
-        ``T_above`` ((4, 4) world tcp poses): the poses a third and two thirds of the way and at
-        its end each reached (IK seeded from the one before) clear of everything but the object,
-        then the pose above the end; ``None`` when it can."""
+        ``T_above`` ((4, 4) world tcp poses; the drag's at the lowest it may go, the fingertips
+        on the object's bottom, so a neighbour as high as the hand's body counts): the poses
+        where it lands, a third and two thirds of the way and at its end each reached (IK seeded
+        from the one before) clear of everything but the object, then the pose above the end;
+        ``None`` when it can."""
         q = None
-        for label, f in (("press way 1/3", 1.0 / 3.0), ("press way 2/3", 2.0 / 3.0), ("press end", 1.0)):
+        for label, f in (("press landing", 0.0), ("press way 1/3", 1.0 / 3.0), ("press way 2/3", 2.0 / 3.0),
+                         ("press end", 1.0)):
             T = T_start.copy()
             T[:3, 3] += f * (T_end[:3, 3] - T_start[:3, 3])
             why, q = self._reach(label, T, q)
@@ -680,10 +707,10 @@ class Push(_ContactMotion):
     """Push: a straight tcp motion (to a blackboard pose or by an ``offset``) that must touch something.
 
     With a press from above on the blackboard (``press``, written by :class:`ComputePush`:
-    ``{contact_n, depth_m, descent_m}``), the push first lowers the hand straight down, at most
-    ``descent_m`` m, until it presses with ``contact_n`` N (``contact.missing`` when it lands on
-    nothing), then drags the object: the same straight motion, its height ``depth_m`` m below
-    where the hand landed.
+    ``{contact_n, depth_m, descent_m, object}``), the push first lowers the hand straight down, at
+    most ``descent_m`` m, until it presses with ``contact_n`` N (``contact.missing`` when it lands
+    on nothing, ``execution.collision`` when it lands on anything but ``object``), then drags the
+    object: the same straight motion, its height ``depth_m`` m below where the hand landed.
 
     Args:
         to: blackboard key of the (4, 4) world tcp pose where the push ends; or
@@ -738,6 +765,10 @@ class Push(_ContactMotion):
         s = self._stream(lambda force: force >= press["contact_n"])
         if s.stopped or (not s.completed and s.touched):
             target.halt()
+            others = _not_of(target, s.touched, press.get("object"))
+            if others:
+                raise PrimitiveFailure("execution.collision",
+                                       f"the press landed on {others}, not on {press['object']} alone")
             T_now = target.tcp_pose()
             if self.to is not None:
                 G = np.asarray(self.get(self.to), dtype=float).copy()

@@ -113,7 +113,7 @@ def _compute_push(snapshot, blocked=None, way_blocked=None, tips=1.0, **params):
     leaf.get = board.__getitem__
     leaf.set = board.__setitem__
     leaf._blocked = blocked or (lambda T_pre, T_start: None)  # reach is the planner's; here the poses
-    leaf._way_blocked = way_blocked or (lambda T_start, T_end, T_above: None)
+    leaf._way_blocked = way_blocked or (lambda T_land, T_start, T_end, T_above: None)
     leaf.step()
     return board, records[0]
 
@@ -292,12 +292,12 @@ def test_a_low_object_is_pressed_from_above_at_its_centre_and_dragged_to_the_aim
 
     ways = []
     board, record = _compute_push(_scene([0.05, -0.03]), landmark="flat_stove_1", side="front",
-                                  way_blocked=lambda a, b, c: ways.append((a, b, c)))
-    # the way is checked as low as the drag may go (the fingertips on the plate's bottom, 0.90), so a
-    # neighbour as high as the hand's body is met there, not passed over at the start's height
-    [(low, low_end, above)] = ways
-    assert low[2, 3] == low_end[2, 3] == pytest.approx(0.90 + FINGERTIP_BELOW_TCP_M + PRESS_DEPTH_M, abs=1e-9)
-    assert low[:2, 3] == pytest.approx(board["push_start_pose"][:2, 3]) and above[2, 3] > low[2, 3] + 0.09
+                                  way_blocked=lambda *poses: ways.append(poses))
+    # the landing is checked as low as the press may go (the fingertips on the plate's bottom, 0.90), so a
+    # neighbour as high as the hand's body is met there; the drag at the start's height, over the plate
+    [(land, start, end, above)] = ways
+    assert land[2, 3] == pytest.approx(0.90 + FINGERTIP_BELOW_TCP_M + PRESS_DEPTH_M, abs=1e-9)
+    assert land[:2, 3] == pytest.approx(start[:2, 3]) and start[2, 3] == end[2, 3] and above[2, 3] > end[2, 3] + 0.09
     assert record["press"] and record["rejected"] == []
     d = np.array([*record["direction"], 0.0])
     start, pre, end = board["push_start_pose"], board["push_prestart_pose"], board["push_goal_pose"]
@@ -333,7 +333,7 @@ def test_a_press_whose_end_the_arm_cannot_reach_gives_way_to_a_start_behind():
 
     ends = []
 
-    def way_blocked(T_start, T_end, T_above):
+    def way_blocked(T_land, T_start, T_end, T_above):
         ends.append(T_end[:3, 3].copy())
         return "press end: IK did not converge"
 

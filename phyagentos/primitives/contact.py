@@ -590,11 +590,9 @@ class ComputePush(Primitive):
             if why is None and press is not None:
                 G_up = G.copy()
                 G_up[2, 3] += self.approach_height_m
-                low = bottom + FINGERTIP_BELOW_TCP_M + PRESS_DEPTH_M - T[2, 3]  # the drag's height at the lowest
-                T_low, G_low = T.copy(), G.copy()
-                T_low[2, 3] += low
-                G_low[2, 3] += low
-                why = self._way_blocked(T_low, G_low, G_up)
+                T_land = T.copy()  # as low as the press may land: the fingertips on the object's bottom
+                T_land[2, 3] = bottom + FINGERTIP_BELOW_TCP_M + PRESS_DEPTH_M
+                why = self._way_blocked(T_land, T, G, G_up)
             if why is None:
                 chosen = (info, T, P, G, press)
                 break
@@ -673,18 +671,21 @@ class ComputePush(Primitive):
         :func:`~.perception.reach_blocked`); ``None`` when it can."""
         return reach_blocked(self.ctx, self.object, ("push prestart", T_pre), ("push start", T_start))
 
-    def _way_blocked(self, T_start: np.ndarray, T_end: np.ndarray, T_above: np.ndarray):
-        """Why the arm cannot drag from ``T_start`` to ``T_end`` and lift straight up to
-        ``T_above`` ((4, 4) world tcp poses; the drag's at the lowest it may go, the fingertips
-        on the object's bottom, so a neighbour as high as the hand's body counts): the poses
-        where it lands, a third and two thirds of the way and at its end each reached (IK seeded
-        from the one before) clear of everything but the object, then the pose above the end;
-        ``None`` when it can."""
+    def _way_blocked(self, T_land: np.ndarray, T_start: np.ndarray, T_end: np.ndarray, T_above: np.ndarray):
+        """Why the arm cannot press and drag: land at ``T_land`` (as low as the press may go, the
+        fingertips on the object's bottom: a neighbour as high as the hand's body beside it counts),
+        then drag from ``T_start`` to ``T_end`` (at the start's height, the fingertips over the
+        object's top: what stands lower in its way is the object's to push, not the hand's to
+        meet) and lift straight up to ``T_above`` ((4, 4) world tcp poses). The landing, the poses a
+        third and two thirds of the way and its end are each reached (IK seeded from the one before)
+        clear of everything but the object, then the pose above the end; ``None`` when it can."""
         q = None
-        for label, f in (("press landing", 0.0), ("press way 1/3", 1.0 / 3.0), ("press way 2/3", 2.0 / 3.0),
-                         ("press end", 1.0)):
+        poses = [("press landing", T_land)]
+        for label, f in (("press way 1/3", 1.0 / 3.0), ("press way 2/3", 2.0 / 3.0), ("press end", 1.0)):
             T = T_start.copy()
             T[:3, 3] += f * (T_end[:3, 3] - T_start[:3, 3])
+            poses.append((label, T))
+        for label, T in poses:
             why, q = self._reach(label, T, q)
             if why is not None:
                 return why

@@ -22,8 +22,10 @@ stove): where two or more knobs stand on the segment's top (:func:`top_knobs`), 
 to the nearest;
 
 and once, **colour** (objects of clearly different colours: a black bowl on a white
-ramekin): two k-means groups in CIELAB (L* halved), labels smoothed over the nearest
-neighbours, when the group centres lie at least :data:`MIN_COLOUR_SPLIT_LAB` apart;
+ramekin): a k-means group in CIELAB (L* halved), k = 2 and k = 3 (an object of two tones, a
+plate's white well and red rim, keeps both against a dark box touching it), against the rest,
+where its centre lies at least :data:`MIN_COLOUR_SPLIT_LAB` from every other group's, labels
+smoothed over the nearest neighbours;
 
 and once, **footprint** (two round objects side by side of about the same height and
 colour: a bowl against a ramekin): the points' ground-plane positions cut at the *neck* of
@@ -187,8 +189,7 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
         d = np.stack([np.hypot(*(xy - k).T) for k in knobs])
         nearest = np.argmin(d, axis=0)
         yield "knobs", float("nan"), pieces_of([np.flatnonzero(nearest == i) for i in range(len(knobs))])
-    labels = _colour_halves(cloud)
-    if labels is not None:
+    for labels in _colour_cuts(cloud):
         yield "colour", float("nan"), pieces_of([np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)])
     if len(cloud) >= 2 * min_points and config.clustering.split_max_neck_ratio > 0:
         ratio, labels = footprint_cut(xy)
@@ -289,26 +290,44 @@ def footprint_cut(xy: np.ndarray) -> tuple[float, np.ndarray]:
     return (float(width[neck - lo_k]) / widest if widest > 0 else 1.0), labels
 
 
-def _colour_halves(cloud: Cloud) -> np.ndarray | None:
-    """(N,) 0/1: two colour groups of the points (k-means, k = 2, on CIELAB with L* halved:
-    shading changes lightness most), each label then set to the majority of the point's
-    :data:`COLOUR_NEIGHBOURS` nearest neighbours (twice: specks join their surroundings);
-    None when the two group centres lie less than :data:`MIN_COLOUR_SPLIT_LAB` apart."""
+def _colour_cuts(cloud: Cloud) -> list[np.ndarray]:
+    """Colour cuts of the points: each ``(N,)`` 0/1, a colour group against the rest.
+
+    K-means in CIELAB (L* halved: shading changes lightness most), with k = 2 and with
+    k = 3; a group is cut from the rest when its centre lies at least
+    :data:`MIN_COLOUR_SPLIT_LAB` from every other group's centre (with k = 2: the two
+    halves). The three groups let an object of two tones keep both: a plate's white well and
+    its red rim are the 2-means' best cut when a dark box touches the plate (centres 16-19
+    apart, rejected), the box alone the third group, 22-28 from each. Each cut's labels are
+    then set to the majority of the point's :data:`COLOUR_NEIGHBOURS` nearest neighbours
+    (twice: specks join their surroundings); a cut met twice is given once."""
     from scipy.spatial import cKDTree  # noqa: PLC0415
 
     lab = srgb_to_lab(cloud.rgb).astype(np.float32)
     lab[:, 0] *= 0.5
-    cv2.setRNGSeed(0)
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.5)
-    _, labels, centres = cv2.kmeans(lab, 2, None, crit, 3, cv2.KMEANS_PP_CENTERS)
-    if float(np.linalg.norm(centres[0] - centres[1])) < MIN_COLOUR_SPLIT_LAB:
-        return None
-    labels = labels.ravel().astype(np.int64)
-    k = min(COLOUR_NEIGHBOURS, len(cloud))
-    _, nn = cKDTree(cloud.points).query(cloud.points, k=k)
-    for _ in range(2):
-        labels = (labels[nn].mean(axis=1) > 0.5).astype(np.int64)
-    return labels
+    cuts: list[np.ndarray] = []
+    for k in (2, 3):
+        if len(cloud) < k:
+            break
+        cv2.setRNGSeed(0)
+        _, groups, centres = cv2.kmeans(lab, k, None, crit, 3, cv2.KMEANS_PP_CENTERS)
+        groups = groups.ravel()
+        for g in range(k if k > 2 else 1):
+            far = np.linalg.norm(np.delete(centres, g, axis=0) - centres[g], axis=1)
+            if float(far.min()) >= MIN_COLOUR_SPLIT_LAB:
+                cuts.append((groups != g).astype(np.int64))  # k = 2: the labels as k-means gives them
+    if not cuts:
+        return []
+    n = min(COLOUR_NEIGHBOURS, len(cloud))
+    _, nn = cKDTree(cloud.points).query(cloud.points, k=n)
+    out: list[np.ndarray] = []
+    for labels in cuts:
+        for _ in range(2):
+            labels = (labels[nn].mean(axis=1) > 0.5).astype(np.int64)
+        if not any(np.array_equal(labels, o) or np.array_equal(labels, 1 - o) for o in out):
+            out.append(labels)
+    return out
 
 
 def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig, focal_px: np.ndarray,

@@ -29,7 +29,7 @@ from py_trees.common import Status
 from phyagentos.errors import IKError
 from phyagentos.geometry import VIEWER_SIDES
 from phyagentos.motion.cartesian import cartesian_path
-from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, top_down_rotation
+from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, FRANKA_FINGERS, top_down_rotation
 from phyagentos.motion.retime import Trajectory, retime
 from phyagentos.targets.contract import MuJoCoBacked
 
@@ -571,7 +571,9 @@ class ComputePush(Primitive):
             direction, distance = self.direction, self.distance_m
         height = 2.0 * float(np.abs(T_obj[2, :3]) @ half)
         bottom = float(T_obj[2, 3]) - height / 2.0
-        tips = getattr(getattr(self.ctx, "target", None), "fingertip_friction", None)
+        target = getattr(self.ctx, "target", None)
+        tip_m = float((getattr(target, "finger_geometry_m", None) or FRANKA_FINGERS)[0])  # tcp above the fingertips
+        tips = getattr(target, "fingertip_friction", None)
         press_first = self.strategy == "above" or (
             self.strategy == "auto" and height <= PRESS_MAX_HEIGHT_M and tips is not None
             and tips >= PRESS_MIN_TIP_FRICTION)
@@ -579,7 +581,7 @@ class ComputePush(Primitive):
         chosen = None
         poses = []
         if press_first:
-            poses += self._press_poses(T_obj[:3, 3], bottom + height, direction, distance)
+            poses += self._press_poses(T_obj[:3, 3], bottom + height, direction, distance, tip_m)
         if self.strategy != "above":
             poses += self._behind_poses(T_obj, bottom, extent(direction), direction)
         for info, T, P, G, press in poses:
@@ -591,7 +593,7 @@ class ComputePush(Primitive):
                 G_up = G.copy()
                 G_up[2, 3] += self.approach_height_m
                 T_land = T.copy()  # as low as the press may land: the fingertips on the object's bottom
-                T_land[2, 3] = bottom + FINGERTIP_BELOW_TCP_M + PRESS_DEPTH_M
+                T_land[2, 3] = bottom + tip_m + PRESS_DEPTH_M
                 why = self._way_blocked(T_land, T, G, G_up)
             if why is None:
                 chosen = (info, T, P, G, press)
@@ -602,7 +604,7 @@ class ComputePush(Primitive):
         if press is None:  # the hand travels the gap, then the object's distance
             G[:2, 3] += (info["clearance_m"] + distance) * direction
         if press is not None:
-            press = {**press, "descent_m": round(float(T[2, 3] - FINGERTIP_BELOW_TCP_M - bottom), 4),
+            press = {**press, "descent_m": round(float(T[2, 3] - tip_m - bottom), 4),
                      "object": self.object}
         self.set(self.start_key, T)
         self.set(self.prestart_key, P)
@@ -614,11 +616,12 @@ class ComputePush(Primitive):
                               **({"landmark": self.landmark, "side": self.side, "shift_m": round(shift, 4)}
                                  if self.landmark else {}))
 
-    def _press_poses(self, centre, top: float, direction: np.ndarray, distance: float) -> list:
+    def _press_poses(self, centre, top: float, direction: np.ndarray, distance: float, tip_m: float) -> list:
         """``(info, start, prestart, goal, press)`` of the presses from above, in the order tried
         (:data:`PRESS_TURNS`), each with its pre-start ``approach_height_m`` and then
         :data:`~.perception.LOWER_APPROACH_M` straight above the start; the start over ``centre``
-        ((3,) world, m) with the fingertips :data:`PRESS_START_ABOVE_M` above ``top`` (m), the goal
+        ((3,) world, m) with the fingertips (``tip_m`` m below the tcp: the target's
+        ``finger_geometry_m``) :data:`PRESS_START_ABOVE_M` above ``top`` (m), the goal
         ``distance / press_carry`` m along the (2,) unit ``direction`` (the object moves with the
         hand, less its creep)."""
         yaw = float(np.arctan2(direction[1], direction[0]))
@@ -628,7 +631,7 @@ class ComputePush(Primitive):
             for height in heights:
                 T = np.eye(4)
                 T[:3, :3] = top_down_rotation(yaw + turn)
-                T[:3, 3] = [centre[0], centre[1], top + PRESS_START_ABOVE_M + FINGERTIP_BELOW_TCP_M]
+                T[:3, 3] = [centre[0], centre[1], top + PRESS_START_ABOVE_M + tip_m]
                 P, G = T.copy(), T.copy()
                 P[2, 3] += height
                 G[:2, 3] += distance / self.press_carry * direction

@@ -290,6 +290,21 @@ class _ContactMotion(_Tracking):
     def _sample(self, force: float, touched: tuple[str, ...]) -> None:
         """Called after every physics step with the contact force (N) and touched geoms."""
 
+    def _touched_down(self, s: _Slice, what: str) -> bool:
+        """Whether slice ``s`` of a motion that stops on contact ended on it (its force limit
+        reached, or blocked while touching something).
+
+        Raises:
+            PrimitiveFailure: ``execution.tracking`` when ``what`` was blocked touching nothing.
+        """
+        if s.stopped or (not s.completed and s.touched):
+            return True
+        if not s.completed:
+            raise PrimitiveFailure("execution.tracking",
+                                   f"{what} blocked without contact: tracking error {s.max_tracking_error_rad:.3f} "
+                                   f"rad exceeded {self.tracking_tol_rad} rad")
+        return False
+
 
 class GuardedMove(_ContactMotion):
     """Straight-line tcp motion by a world ``offset`` that stops on contact.
@@ -332,12 +347,8 @@ class GuardedMove(_ContactMotion):
     def step(self):
         target = self.ctx.target
         s = self._stream(lambda force: force >= self.max_contact_force_n)
-        if s.stopped or (not s.completed and s.touched):
+        if self._touched_down(s, "the move"):
             return self._contact(s.force_n, s.touched)
-        if not s.completed:
-            raise PrimitiveFailure("execution.tracking",
-                                   f"blocked without contact: tracking error {s.max_tracking_error_rad:.3f} rad "
-                                   f"exceeded {self.tracking_tol_rad} rad")
         if self._t < self._traj.duration - 1e-9:
             return Status.RUNNING
         if s.touched:
@@ -768,7 +779,7 @@ class Push(_ContactMotion):
         target = self.ctx.target
         press = self._press
         s = self._stream(lambda force: force >= press["contact_n"])
-        if s.stopped or (not s.completed and s.touched):
+        if self._touched_down(s, "the press"):
             target.halt()
             others = _not_of(target, s.touched, press.get("object"))
             if others:
@@ -786,10 +797,6 @@ class Push(_ContactMotion):
             self._press = None
             self._plan_push(G)
             return Status.RUNNING
-        if not s.completed:
-            raise PrimitiveFailure("execution.tracking",
-                                   f"press blocked without contact: tracking error {s.max_tracking_error_rad:.3f} "
-                                   f"rad exceeded {self.tracking_tol_rad} rad")
         if self._t < self._traj.duration - 1e-9:
             return Status.RUNNING
         target.halt()

@@ -589,35 +589,16 @@ class ComputePush(Primitive):
         press_first = self.strategy == "above" or (
             self.strategy == "auto" and height <= PRESS_MAX_HEIGHT_M and tips is not None
             and tips >= PRESS_MIN_TIP_FRICTION)
-        rejected: list[dict] = []
-        chosen = None
         poses = []
         if press_first:
             poses += self._press_poses(T_obj[:3, 3], bottom + height, direction, distance, tip_m)
         if self.strategy != "above":
             poses += self._behind_poses(T_obj, bottom, extent(direction), direction)
-        for info, T, P, G, press in poses:
-            if press is not None and info["approach_m"] != self.approach_height_m and not (
-                    rejected and str(rejected[-1]["why"]).startswith("push prestart")):
-                continue  # a lower pre-start only where the one above was what blocked
-            why = self._blocked(P, T)
-            if why is None and press is not None:
-                G_up = G.copy()
-                G_up[2, 3] += self.approach_height_m
-                T_land = T.copy()  # as low as the press may land: the fingertips on the object's bottom
-                T_land[2, 3] = bottom + tip_m + PRESS_DEPTH_M
-                why = self._way_blocked(T_land, T, G, G_up)
-            if why is None:
-                chosen = (info, T, P, G, press)
-                break
-            rejected.append({**info, "why": str(why)})
-            chosen = chosen or (info, T, P, G, press)  # none clear: the first, and the planner says why
-        info, T, P, G, press = chosen  # type: ignore[misc]
+        (info, T, P, G, press), rejected = self._choose(poses, bottom + tip_m + PRESS_DEPTH_M)
         if press is None:  # the hand travels the gap, then the object's distance
             G[:2, 3] += (info["clearance_m"] + distance) * direction
-        if press is not None:
-            press = {**press, "descent_m": round(float(T[2, 3] - tip_m - bottom), 4),
-                     "object": self.object}
+        else:
+            press = {**press, "descent_m": round(float(T[2, 3] - tip_m - bottom), 4), "object": self.object}
         self.set(self.start_key, T)
         self.set(self.prestart_key, P)
         self.set(self.goal_key, G)
@@ -627,6 +608,29 @@ class ComputePush(Primitive):
                               **info, rejected=rejected,
                               **({"landmark": self.landmark, "side": self.side, "shift_m": round(shift, 4)}
                                  if self.landmark else {}))
+
+    def _choose(self, poses: list, land_z: float) -> tuple[tuple, list[dict]]:
+        """The first of ``poses`` (:meth:`_press_poses`, :meth:`_behind_poses`) the arm reaches
+        clear, and why each before it was refused; none clear: the first, and the planner says
+        why. A press's lower pre-start is tried only where the one above was what blocked; a
+        press lands with the tcp at ``land_z`` (m, world) at the lowest."""
+        rejected: list[dict] = []
+        chosen = None
+        for info, T, P, G, press in poses:
+            if press is not None and info["approach_m"] != self.approach_height_m and not (
+                    rejected and str(rejected[-1]["why"]).startswith("push prestart")):
+                continue
+            why = self._blocked(P, T)
+            if why is None and press is not None:
+                G_up, T_land = G.copy(), T.copy()
+                G_up[2, 3] += self.approach_height_m
+                T_land[2, 3] = land_z
+                why = self._way_blocked(T_land, T, G, G_up)
+            if why is None:
+                return (info, T, P, G, press), rejected
+            rejected.append({**info, "why": str(why)})
+            chosen = chosen or (info, T, P, G, press)
+        return chosen, rejected
 
     def _press_poses(self, centre, top: float, direction: np.ndarray, distance: float, tip_m: float) -> list:
         """``(info, start, prestart, goal, press)`` of the presses from above, in the order tried

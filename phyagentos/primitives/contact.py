@@ -513,9 +513,9 @@ class ComputePush(Primitive):
 
     def __init__(self, name: str, *, object: str, direction=None, distance_m: float | None = None,
                  landmark: str | None = None, side: str | None = None, strategy: str = "auto",
-                 press_carry: float = 1.0, clearance_m: float = 0.02, approach_height_m: float = 0.10, tip_clearance_m: float = 0.005,
-                 snapshot: str = "snapshot", start: str = "push_start_pose", prestart: str = "push_prestart_pose",
-                 goal: str = "push_goal_pose", press: str = "push_press"):
+                 press_carry: float = 1.0, clearance_m: float = 0.02, approach_height_m: float = 0.10,
+                 tip_clearance_m: float = 0.005, snapshot: str = "snapshot", start: str = "push_start_pose",
+                 prestart: str = "push_prestart_pose", goal: str = "push_goal_pose", press: str = "push_press"):
         super().__init__(name)
         if strategy not in PUSH_STRATEGIES:
             raise ValueError(f"{name}: strategy must be one of {', '.join(PUSH_STRATEGIES)}, got {strategy!r}")
@@ -691,13 +691,14 @@ class ComputePush(Primitive):
         return reach_blocked(self.ctx, self.object, ("push prestart", T_pre), ("push start", T_start))
 
     def _way_blocked(self, T_land: np.ndarray, T_start: np.ndarray, T_end: np.ndarray, T_above: np.ndarray):
-        """Why the arm cannot press and drag: land at ``T_land`` (as low as the press may go, the
-        fingertips on the object's bottom: a neighbour as high as the hand's body beside it counts),
-        then drag from ``T_start`` to ``T_end`` (at the start's height, the fingertips over the
-        object's top: what stands lower in its way is the object's to push, not the hand's to
-        meet) and lift straight up to ``T_above`` ((4, 4) world tcp poses). The landing, the poses a
-        third and two thirds of the way and its end are each reached (IK seeded from the one before)
-        clear of everything but the object, then the pose above the end; ``None`` when it can."""
+        """Why the arm cannot press and drag: land at ``T_land`` (as low as a press lands, the
+        fingertips :data:`PRESS_DEPTH_M` above the object's bottom, on a plate's floor: a neighbour
+        as high as the hand's body beside it counts), then drag from ``T_start`` to ``T_end`` (at
+        the start's height, the fingertips over the object's top: what stands lower in its way is
+        the object's to push, not the hand's to meet) and lift straight up to ``T_above`` ((4, 4)
+        world tcp poses). The landing, the poses a third and two thirds of the way and its end are
+        each reached (IK seeded from the one before) clear of everything but the object, then the
+        pose above the end; ``None`` when it can."""
         q = None
         poses = [("press landing", T_land)]
         for label, f in (("press way 1/3", 1.0 / 3.0), ("press way 2/3", 2.0 / 3.0), ("press end", 1.0)):

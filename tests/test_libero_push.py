@@ -6,20 +6,19 @@ state) sets the plate 2.7 cm from the wooden cabinet's side, where no hand fits 
 start of the push from behind collides with the cabinet (as in 6 of 16 development scenes). The
 push presses the plate from above at its perceived centre instead and drags it. The looks are
 the ones the bench measures on generated scenes (``generated_clutter_v3``); the skill parameters
-are the LIBERO bench's (``bench/libero_skill_defaults/fast.yaml``).
+are the LIBERO bench's (``SKILL_DEFAULTS``).
 """
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 import yaml
 from libero_generated_pick import run_generated_graph
 from test_libero_goal_pick import LOOKS, SCENE
 
-from phyagentos.bench.libero import workspace_box
+from phyagentos.bench.libero import SKILL_DEFAULTS, workspace_box
 
 pytestmark = pytest.mark.sim
 
@@ -41,9 +40,8 @@ def test_the_plate_against_the_cabinet_is_dragged_to_the_front_of_the_stove(tmp_
 
     task = resolve_task("libero_goal", 5)
     problem = parse_bddl(task.bddl_path)
-    fast = yaml.safe_load((Path(__file__).resolve().parent.parent / "bench/libero_skill_defaults/fast.yaml").read_text())
     nodes, _ = instruction_plan(task.instruction, problem.objects, problem.fixtures,
-                                skill_params={"push": fast["push"]})
+                                skill_params={"push": SKILL_DEFAULTS["push"]})
     assert [n["skill"] for n in nodes] == ["push"]
     objects = [{"name": n, "class": c, **LOOKS[c]} for n, c in problem.objects.items()]
     rep = run_generated_graph(tmp_path, name="push_plate", description=task.instruction, suite="libero_goal", task=5,

@@ -229,8 +229,7 @@ class _ContactMotion(_Tracking):
         with ctx.profiler.section("timing"):
             traj = retime(path, vel_limits=vel, acc_limits=acc, dt=target.model.opt.timestep)
         held = target.held_objects()
-        body = getattr(target, "object_body", lambda n: n)  # LIBERO's object "plate_1" is body "plate_1_main"
-        self._ignore = frozenset(int(target.model.body(body(n)).id) for n in held)
+        self._ignore = frozenset(int(target.model.body(_body_name(target, n)).id) for n in held)
         self._start(traj)
 
     def _stream(self, over_limit: Callable[[float], bool]) -> _Slice:
@@ -385,6 +384,12 @@ def free_shift(point_xy, across_xy, radius_m: float, obstacles, *, max_shift_m: 
     return best
 
 
+def _body_name(target, obj: str) -> str:
+    """The model body of object ``obj``: the target's ``object_body`` (LIBERO's object
+    ``plate_1`` is body ``plate_1_main``), else the object's own name."""
+    return target.object_body(obj) if hasattr(target, "object_body") else obj
+
+
 def _not_of(target, touched, obj: str | None) -> list[str]:
     """The geoms of ``touched`` (names, as :func:`contact_force_n` gives them) that are not part of
     object ``obj`` (its body and those under it; ``target.object_body`` names the body); ``[]``
@@ -393,7 +398,7 @@ def _not_of(target, touched, obj: str | None) -> list[str]:
         return []
     m = target.model
     try:
-        root = int(m.body(getattr(target, "object_body", lambda n: n)(obj)).rootid[0])
+        root = int(m.body(_body_name(target, obj)).rootid[0])
     except Exception:  # noqa: BLE001 - a target without object bodies: nothing to tell apart
         return []
     out = []

@@ -286,14 +286,12 @@ def test_compute_push_aims_the_plate_clear_of_a_cream_cheese_beside_the_stove():
     assert _compute_push(scene, landmark="flat_stove_1", side="front")[1]["shift_m"] == 0.0
 
 
-def test_a_low_object_is_pressed_from_above_just_ahead_of_its_centre_and_dragged_to_the_aim():
+def test_a_low_object_is_pressed_from_above_at_its_centre_and_dragged_to_the_aim():
     from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M
-    from phyagentos.primitives.contact import PRESS_CONTACT_N, PRESS_DEPTH_M, PRESS_LEAD, PRESS_START_ABOVE_M
+    from phyagentos.primitives.contact import PRESS_CONTACT_N, PRESS_DEPTH_M, PRESS_START_ABOVE_M
 
     ways = []
-    scene = _scene([0.05, -0.03])
-    scene["entities"][1]["attributes"]["shape"] = "cylinder"  # perceived round, as LIBERO's plate is
-    board, record = _compute_push(scene, landmark="flat_stove_1", side="front",
+    board, record = _compute_push(_scene([0.05, -0.03]), landmark="flat_stove_1", side="front",
                                   way_blocked=lambda *poses: ways.append(poses))
     # the landing is checked as low as the press may go (the fingertips on the plate's bottom, 0.90), so a
     # neighbour as high as the hand's body is met there; the drag at the start's height, over the plate
@@ -303,13 +301,8 @@ def test_a_low_object_is_pressed_from_above_just_ahead_of_its_centre_and_dragged
     assert record["press"] and record["rejected"] == []
     d = np.array([*record["direction"], 0.0])
     start, pre, end = board["push_start_pose"], board["push_prestart_pose"], board["push_goal_pose"]
-    # over the plate a fifth of its radius (6.9 cm) ahead of its centre along the way, so its rim stands just
-    # ahead of the fingertips; the fingertips 1 cm above its top (0.92), the hand upright
-    assert PRESS_LEAD == pytest.approx(0.2)
-    lead = np.array([0.05, -0.03, 0.0]) + 0.2 * 0.069 * d
-    assert start[:3, 3] == pytest.approx([lead[0], lead[1], 0.92 + PRESS_START_ABOVE_M + FINGERTIP_BELOW_TCP_M],
-                                         abs=1e-5)  # the recorded direction is rounded to 1e-4
-    assert 0.013 < np.linalg.norm(start[:2, 3] - [0.05, -0.03]) + 0.018 < 0.036  # the closed fingers short of the rim
+    # over the plate's centre, the fingertips 1 cm above its top (0.92), the hand upright
+    assert start[:3, 3] == pytest.approx([0.05, -0.03, 0.92 + PRESS_START_ABOVE_M + FINGERTIP_BELOW_TCP_M], abs=1e-9)
     assert start[:3, 2] == pytest.approx([0.0, 0.0, -1.0], abs=1e-9)
     assert abs(float(start[:3, 1] @ d)) == pytest.approx(1.0, abs=1e-4)  # closing axis along the way: narrow across
     assert pre[:3, 3] == pytest.approx(start[:3, 3] + [0.0, 0.0, 0.10], abs=1e-9)

@@ -51,7 +51,7 @@ from .perception import (
 __all__ = ["GuardedMove", "Push", "ComputePush", "contact_force_n", "MIN_PUSH_M", "FINGER_HALF_THICKNESS_M",
            "CLOSED_FINGERS_DEPTH_M", "PUSH_LEANS_RAD", "TIGHT_CLEARANCE_M", "PUSH_BESIDE_GAP_M", "PUSH_MAX_SHIFT",
            "FREE_MARGIN_M", "free_shift", "PUSH_STRATEGIES", "PRESS_MAX_HEIGHT_M", "PRESS_START_ABOVE_M",
-           "PRESS_CONTACT_N", "PRESS_DEPTH_M", "PRESS_MIN_TIP_FRICTION", "PRESS_TURNS", "PRESS_LEAD"]
+           "PRESS_CONTACT_N", "PRESS_DEPTH_M", "PRESS_MIN_TIP_FRICTION", "PRESS_TURNS"]
 
 #: The least push (m) :class:`ComputePush` makes towards a landmark's side: an object already
 #: there is pushed this much more, so the push still touches it.
@@ -113,19 +113,6 @@ PRESS_MIN_TIP_FRICTION = 1.0
 #: side and a bowl, where along meets the cabinet above and across sweeps the bowl), then across.
 PRESS_TURNS = ((np.pi / 2, True), (-np.pi / 2, True), (np.pi / 4, False), (-np.pi / 4, False),
                (3 * np.pi / 4, False), (-3 * np.pi / 4, False), (0.0, False), (np.pi, False))
-#: How far ahead of the object's perceived centre a press from above lands: this fraction of its
-#: extent along the way (its radius when perceived round). Dragged at its centre, an object held
-#: only by the fingertips' friction creeps back under them, and slips further when it shoves a
-#: neighbour along (LIBERO's plate against the cream cheese: 0.54-0.79 of the hand's way in 6 of 32
-#: development scenes of libero_goal task 5, seeds 500-531, 0.84-0.90 in the rest). Ahead of the
-#: centre, a dish's wall stands just ahead of the fingertips (LIBERO's plate, radius 6.9 cm: a flat
-#: floor, then the rim's collision panels sloping up at 19.6 degrees from 3.6 cm out; the closed
-#: fingers edge-on reach 1.8 cm ahead of the tcp, so they stand 4 mm short of it): a little creep
-#: brings the wall against them, and it is pushed. Per newton at such a wall the plate gets about
-#: 0.7 N of net push; friction alone leaves 0.05 N per newton pressed (Coulomb's law at the
-#: fingertips, 1.0, and the table, 0.95). A flat box is towed from ahead of its centre, which keeps
-#: it straight behind the hand rather than turning it.
-PRESS_LEAD = 0.2
 #: Fingertips (m) above the object's perceived top where a press from above starts its descent.
 PRESS_START_ABOVE_M = 0.01
 #: Contact force (N) at which the descent of a press from above stops: it has landed on the object.
@@ -489,8 +476,8 @@ class ComputePush(Primitive):
     across, and the planner reports the collision.
 
     **Pressed from above** (``strategy``, :data:`PUSH_STRATEGIES`): a low object (a plate, a flat
-    box; :data:`PRESS_MAX_HEIGHT_M`) is moved with the closed fingertips pressed on it a little
-    ahead of its perceived centre (:data:`PRESS_LEAD`), the hand's closing axis along the way (its narrow side across it), so no
+    box; :data:`PRESS_MAX_HEIGHT_M`) is moved with the closed fingertips pressed on it at its
+    perceived centre, the hand's closing axis along the way (its narrow side across it), so no
     room is needed behind it (a plate against a cabinet's side). The start stands
     :data:`PRESS_START_ABOVE_M` above the object's top; :class:`Push` lowers from there until
     it lands (:data:`PRESS_CONTACT_N`) and drags the object to the goal,
@@ -609,8 +596,7 @@ class ComputePush(Primitive):
             and tips >= PRESS_MIN_TIP_FRICTION)
         poses = []
         if press_first:
-            centre = T_obj[:3, 3] + PRESS_LEAD * extent(direction) * np.array([direction[0], direction[1], 0.0])
-            poses += self._press_poses(centre, bottom + height, direction, distance, tip_m)
+            poses += self._press_poses(T_obj[:3, 3], bottom + height, direction, distance, tip_m)
         if self.strategy != "above":
             poses += self._behind_poses(T_obj, bottom, extent(direction), direction)
         (info, T, P, G, press), rejected = self._choose(poses, bottom + tip_m + PRESS_DEPTH_M)
@@ -655,9 +641,8 @@ class ComputePush(Primitive):
         """``(info, start, prestart, goal, press)`` of the presses from above, in the order tried
         (:data:`PRESS_TURNS`), each with its pre-start ``approach_height_m`` and then
         :data:`~.perception.LOWER_APPROACH_M` straight above the start; the start over ``centre``
-        ((3,) world, m: where the press lands, :data:`PRESS_LEAD` ahead of the object's) with the
-        fingertips (``tip_m`` m below the tcp: the target's ``finger_geometry_m``)
-        :data:`PRESS_START_ABOVE_M` above ``top`` (m), the goal
+        ((3,) world, m) with the fingertips (``tip_m`` m below the tcp: the target's
+        ``finger_geometry_m``) :data:`PRESS_START_ABOVE_M` above ``top`` (m), the goal
         ``distance / press_carry`` m along the (2,) unit ``direction`` (the object moves with the
         hand, less its creep)."""
         yaw = float(np.arctan2(direction[1], direction[0]))

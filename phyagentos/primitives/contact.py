@@ -121,8 +121,10 @@ PRESS_CONTACT_N = 2.0
 #: margin grows with the press (the fingertips' friction over the support's, times the force):
 #: on LIBERO's Panda (its joint servos) 4 mm pressed LIBERO's plate with about 20 N and it stalled
 #: against the cream cheese it shoves along in 4 of 16 development scenes of libero_goal task 5
-#: (seeds 500-515), where 6 mm (21-29 N, under the push's 40 N limit) carried it in 16 of 16.
-PRESS_DEPTH_M = 0.006
+#: (seeds 500-515), where 6 mm (21-29 N) carried it in 16 of 16. On seeds 500-531, 6 mm let it
+#: stall (0.54-0.79 of the hand's way) in 6 of 32, LIBERO's checker counting 29; 8 mm (25-39 N)
+#: in 1, LIBERO counting 31 (one drag met the push's 40 N limit, at 46 N, shoving the cheese).
+PRESS_DEPTH_M = 0.008
 
 
 def contact_force_n(model: mujoco.MjModel, data: mujoco.MjData, *, ignore_bodies: frozenset[int] = frozenset()

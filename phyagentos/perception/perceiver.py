@@ -203,6 +203,12 @@ HIDDEN_SUPPORT_M = 0.004
 #: (3 cm) instead, a fragment of the basket's wall 9 cm away took the tomato sauce can's name
 #: (LIBERO-10 task 0, development run).
 HIDDEN_BASE_SLACK_M = 0.015
+#: Sigma (m) of where an object let go is, from where the hand let it go.
+RELEASE_SIGMA_M = 0.03
+#: A segment resting on another whose bottom stands no more than this below a tracked object's
+#: top (m), over its footprint, rests on that object: it is not that object
+#: (:meth:`Perceiver._not_on_itself`). The split's step cuts every 5 mm.
+ON_ITSELF_MARGIN_M = 0.01
 #: An object let go whose sighting, raised off the table on some other segment, is more than
 #: this shorter than its known height (m) has its lower part cut off or hidden (a mug on a
 #: plate, its handle's foot and the plate's rim split off as a piece it was stacked on): its
@@ -678,7 +684,7 @@ class Perceiver:
                     track_pos[j] = np.asarray(proprio.tcp_pose[:3, 3], dtype=float)
         looks_only = self._hidden_base_where_let_go(cost_matrix(dets, self.declared, cfg), dets)  # no tie-breaker
         C = looks_only + track_costs(dets, len(self.declared), cfg, track_pos)
-        C = self._truncated_where_tracked(C, dets)
+        C = self._not_on_itself(self._truncated_where_tracked(C, dets, proprio), dets)
         C = self._resolve_references(C, dets, stamp)
         assoc = self._associate_parts_weighed(C, dets, twins)
         for t in self.tracks.values():
@@ -1305,13 +1311,43 @@ class Perceiver:
                 out[i, j] = float(cost_matrix([replace(det, half_extents=half)], [desc], self.config)[0, 0])
         return out
 
-    def _truncated_where_tracked(self, C: np.ndarray, dets: list[Detection]) -> np.ndarray:
+    def _not_on_itself(self, C: np.ndarray, dets: list[Detection]) -> np.ndarray:
+        """``C`` with a detection resting on another segment (``bottom_m`` > 0) inadmissible
+        for an object tracked where it rests: the object not held nor let go since last seen,
+        the detection's centre within the object's tracked footprint (its larger horizontal
+        half extent) and its bottom no more than :data:`ON_ITSELF_MARGIN_M` below the
+        object's tracked top. What rests there stands on that object: something set on it,
+        not the object lifted onto itself. LIBERO-10 task 0 (generated scenes): the tomato
+        sauce let go onto the alphabet soup standing in the basket shows the wrist camera,
+        straight above, only its lid, grey like the soup's look; the upper part split off the
+        stack went to the soup (its old release point lifting 0.26 to 1.00), the soup's track
+        climbed onto the sauce and was lost at the next look."""
+        out = C
+        for j, desc in enumerate(self.declared):
+            t = self.tracks.get(desc.name)
+            if t is None or t.held or t.released_s is not None:
+                continue
+            top = float(t.bottom_m) + 2.0 * float(t.half_extents[2])
+            reach = float(max(t.half_extents[0], t.half_extents[1]))
+            for i, det in enumerate(dets):
+                if det.bottom_m <= 1e-6 or det.bottom_m < top - ON_ITSELF_MARGIN_M \
+                        or float(np.linalg.norm(det.position[:2] - t.position[:2])) > reach:
+                    continue
+                if out is C:
+                    out = C.copy()
+                out[i, j] = FORBIDDEN_COST
+        return out
+
+    def _truncated_where_tracked(self, C: np.ndarray, dets: list[Detection],
+                                 proprio: Proprioception | None = None) -> np.ndarray:
         """``C`` with a detection cut by the image border admissible for a tracked object only
         where part of that object is: its centre within the object's footprint radius (its
         look's, else its track's larger horizontal extent) plus 3 sigma of both positions.
         A part seen at the border confirms an object where it was and never moves it (the far
         edge of the table, seen by the wrist camera, is not the plate last seen 20 cm away, nor
-        the can just let go into the basket); a held object is found by the hand's own rules.
+        the can just let go into the basket); a held object is found by the hand's own rules,
+        except one the hand lets go now (``proprio`` given), which is where the hand let it go
+        (:meth:`_release_point`, with the release's sigma, :data:`RELEASE_SIGMA_M`).
         (A released object's track stands where the hand let it go.)"""
         out = C
         for i, det in enumerate(dets):
@@ -1319,12 +1355,18 @@ class Perceiver:
                 continue
             for j, desc in enumerate(self.declared):
                 t = self.tracks.get(desc.name)
-                if t is None or t.held:
+                if t is None:
                     continue
+                where, sigma = t.position[:2], math.sqrt(t.var_xy)
+                if t.held:
+                    where = None if proprio is None else self._release_point(desc.name, proprio)
+                    if where is None:
+                        continue
+                    sigma = max(sigma, RELEASE_SIGMA_M)
                 size = desc.size_vector()
                 radius = 0.5 * float(size[0]) if size is not None else float(np.max(t.half_extents[:2]))
-                reach = radius + 3.0 * (math.sqrt(t.var_xy) + det.position_std_m)
-                if float(np.linalg.norm(det.position[:2] - t.position[:2])) > reach:
+                reach = radius + 3.0 * (sigma + det.position_std_m)
+                if float(np.linalg.norm(det.position[:2] - where)) > reach:
                     if out is C:
                         out = C.copy()
                     out[i, j] = FORBIDDEN_COST
@@ -1574,7 +1616,7 @@ class Perceiver:
                     t.position = T_let[:3, 3].copy()
                     t.yaw = math.atan2(T_let[1, 0], T_let[0, 0])
                     t.placed_xy = t.position[:2].copy()
-                t.var_xy = max(t.var_xy, 0.03 ** 2)
+                t.var_xy = max(t.var_xy, RELEASE_SIGMA_M ** 2)
                 t.confidence *= 0.5
                 t.grasp_offset = None
         if not candidates:

@@ -209,6 +209,11 @@ RELEASE_SIGMA_M = 0.03
 #: top (m), over its footprint, rests on that object: it is not that object
 #: (:meth:`Perceiver._not_on_itself`). The split's step cuts every 5 mm.
 ON_ITSELF_MARGIN_M = 0.01
+#: A segment standing on the table over a tracked object with a solid top, whose top stands
+#: higher than the object's by more than this fraction of the object's height, is the object
+#: with something set on it, not the object (:meth:`Perceiver._not_on_itself`): a sighting's top
+#: wanders by millimetres, not by half an object.
+ON_ITSELF_RISE = 0.5
 #: An object let go whose sighting, raised off the table on some other segment, is more than
 #: this shorter than its known height (m) has its lower part cut off or hidden (a mug on a
 #: plate, its handle's foot and the plate's rim split off as a piece it was stacked on): its
@@ -1351,26 +1356,44 @@ class Perceiver:
         return out
 
     def _not_on_itself(self, C: np.ndarray, dets: list[Detection]) -> np.ndarray:
-        """``C`` with a detection resting on another segment (``bottom_m`` > 0) inadmissible
-        for an object tracked where it rests: the object not held nor let go since last seen,
-        the detection's centre within the object's tracked footprint (its larger horizontal
-        half extent) and its bottom no more than :data:`ON_ITSELF_MARGIN_M` below the
-        object's tracked top. What rests there stands on that object: something set on it,
-        not the object lifted onto itself. LIBERO-10 task 0 (generated scenes): the tomato
-        sauce let go onto the alphabet soup standing in the basket shows the wrist camera,
-        straight above, only its lid, grey like the soup's look; the upper part split off the
-        stack went to the soup (its old release point lifting 0.26 to 1.00), the soup's track
-        climbed onto the sauce and was lost at the next look."""
+        """``C`` with a detection inadmissible for an object tracked where it stands when it is
+        something set on that object: the object not held nor let go since last seen, the
+        detection's centre within the object's tracked footprint (its larger horizontal half
+        extent), and either
+
+        - resting on another segment (``bottom_m`` > 0), its bottom no more than
+          :data:`ON_ITSELF_MARGIN_M` below the object's tracked top; or
+        - standing on the table, not cut by the image border, its top above the object's top
+          by more than :data:`ON_ITSELF_RISE` of the object's height (its height when the hand
+          last let it go, else its track's), for an object with a solid top (an open
+          container's contents may stand above its rim).
+
+        Nothing lifts an object onto itself. LIBERO-10 task 0: the tomato sauce let go onto the
+        alphabet soup standing in the basket shows the wrist camera, straight above, only its
+        lid, grey like the soup's look. On generated scenes the upper part split off the stack
+        went to the soup (its old release point lifting 0.26 to 1.00); in the bench's own
+        episodes the whole stack, standing on the table and 7 cm taller than the soup's top,
+        went to it as a can whose base the walls hide (stage 6b). Either way the soup's track
+        climbed onto the sauce, and at the next look both were lost."""
         out = C
         for j, desc in enumerate(self.declared):
             t = self.tracks.get(desc.name)
             if t is None or t.held or t.released_s is not None:
                 continue
+            height = float(t.known_height_m or 2.0 * float(t.half_extents[2]))
             top = float(t.bottom_m) + 2.0 * float(t.half_extents[2])
             reach = float(max(t.half_extents[0], t.half_extents[1]))
+            solid = t.open_depth_m < OPEN_DEPTH_REPORT_M
             for i, det in enumerate(dets):
-                if det.bottom_m <= 1e-6 or det.bottom_m < top - ON_ITSELF_MARGIN_M \
-                        or float(np.linalg.norm(det.position[:2] - t.position[:2])) > reach:
+                if float(np.linalg.norm(det.position[:2] - t.position[:2])) > reach:
+                    continue
+                if det.bottom_m > 1e-6:
+                    on_it = det.bottom_m >= top - ON_ITSELF_MARGIN_M
+                else:
+                    det_top = float(det.bottom_m) + 2.0 * float(det.half_extents[2])
+                    on_it = solid and not det.truncated and det_top > top + max(ON_ITSELF_MARGIN_M,
+                                                                               ON_ITSELF_RISE * height)
+                if not on_it:
                     continue
                 if out is C:
                     out = C.copy()

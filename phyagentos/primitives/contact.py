@@ -121,9 +121,10 @@ PRESS_CONTACT_N = 2.0
 #: margin grows with the press (the fingertips' friction over the support's, times the force):
 #: on LIBERO's Panda (its joint servos) 4 mm pressed LIBERO's plate with about 20 N and it stalled
 #: against the cream cheese it shoves along in 4 of 16 development scenes of libero_goal task 5
-#: (seeds 500-515), where 6 mm (21-29 N) carried it in 16 of 16. On seeds 500-531, 6 mm let it
-#: stall (0.54-0.79 of the hand's way) in 6 of 32, LIBERO's checker counting 29; 8 mm (25-39 N)
-#: in 1, LIBERO counting 31 (one drag met the push's 40 N limit, at 46 N, shoving the cheese).
+#: (seeds 500-515), where 6 mm (21-29 N) carried it in 16 of 16. On seeds 500-531 the plate made
+#: less than 0.8 of the hand's way in 5 of 32 drags at 6 mm (0.54-0.79; LIBERO's checker counting
+#: 29) and in 2 at 8 mm (0.60, 0.77; 25-39 N; LIBERO counting 31; one drag met the push's 40 N
+#: limit, at 46 N, shoving the cheese).
 PRESS_DEPTH_M = 0.008
 
 

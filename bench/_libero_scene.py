@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from phyagentos.bench.libero import _descriptors, _fixture_looks
+from phyagentos.primitives.observation import make_perceiver
 from phyagentos.targets.libero import LiberoScene, parse_bddl, resolve_task
 
 
@@ -25,3 +26,12 @@ def generated_scene(workspace: str | Path, suite: str, task: int, *,
                     for o in declared["objects"])
     fixtures = tuple({**f, **fixture_looks[task].get(f["class"], {})} for f in declared["fixtures"])
     return LiberoScene(suite=suite, task=task, generated=True, objects=objects, fixtures=fixtures)
+
+
+def fresh_perceiver(target, seed: int):
+    """Generate the sampler's scene ``seed`` in ``target`` (a
+    :class:`~phyagentos.targets.libero.LiberoTarget`) and return a new perceiver for it, with
+    nothing remembered from the scene before."""
+    target.generate_scene(seed)
+    target.runtime_notes.pop("perception", None)
+    return make_perceiver(target)

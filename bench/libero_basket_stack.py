@@ -31,13 +31,13 @@ import time
 import mujoco
 import numpy as np
 from _harness import index_range, parser, write_json
-from _libero_scene import generated_scene
+from _libero_scene import fresh_perceiver, generated_scene
 
 from phyagentos.agent.criteria import evaluate, parse_criteria
 from phyagentos.motion.ik import solve_ik
 from phyagentos.perception.perceiver import _pose
 from phyagentos.primitives.motion import ik_options
-from phyagentos.primitives.observation import make_perceiver, perceive_now
+from phyagentos.primitives.observation import perceive_now
 from phyagentos.targets.libero import LiberoTarget
 from phyagentos.targets.libero.descriptors import _free_adr, object_boxes
 
@@ -119,9 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         for seed in seeds:
             for case in cases:
                 t0 = time.perf_counter()
-                target.generate_scene(seed)
-                target.runtime_notes.pop("perception", None)  # a new scene: nothing remembered from the last
-                perceiver = make_perceiver(target)
+                perceiver = fresh_perceiver(target, seed)
                 start = perceive_now(target, perceiver)
                 blo, bhi = object_boxes(target)[BASKET]
                 middle = 0.5 * (blo + bhi)

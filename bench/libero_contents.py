@@ -23,10 +23,10 @@ import time
 import mujoco
 import numpy as np
 from _harness import index_range, parser, write_json
-from _libero_scene import generated_scene
+from _libero_scene import fresh_perceiver, generated_scene
 
 from phyagentos.agent.criteria import evaluate, parse_criteria
-from phyagentos.primitives.observation import make_perceiver, perceive_now
+from phyagentos.primitives.observation import perceive_now
 from phyagentos.targets.libero import LiberoTarget
 from phyagentos.targets.libero.descriptors import _free_adr, object_boxes
 
@@ -67,9 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     with LiberoTarget("contents", scene, seed=seeds[0]) as target:
         for seed in seeds:
             t0 = time.perf_counter()
-            target.generate_scene(seed)
-            target.runtime_notes.pop("perception", None)  # a new scene: nothing remembered from the last
-            perceiver = make_perceiver(target)
+            perceiver = fresh_perceiver(target, seed)
             before = perceive_now(target, perceiver)
             row = {"seed": seed, "tracked": ITEM in perceiver.tracks}
             if row["tracked"]:

@@ -1372,7 +1372,7 @@ class Perceiver:
         alphabet soup standing in the basket shows the wrist camera, straight above, only its
         lid, grey like the soup's look. On generated scenes the upper part split off the stack
         went to the soup (its old release point lifting 0.26 to 1.00); in the bench's own
-        episodes the whole stack, standing on the table and 7 cm taller than the soup's top,
+        episodes the whole stack, standing on the table and a can taller than the soup,
         went to it as a can whose base the walls hide (stage 6b). Either way the soup's track
         climbed onto the sauce, and at the next look both were lost."""
         out = C

@@ -16,22 +16,11 @@ import json
 import pytest
 import yaml
 from libero_generated_pick import run_generated_graph
-from test_libero_goal_pick import LOOKS, SCENE
+from test_libero_goal_pick import FIXTURE_LOOKS, LOOKS, SCENE
 
 from phyagentos.bench.libero import SKILL_DEFAULTS, workspace_box
 
 pytestmark = pytest.mark.sim
-
-# the fixtures' looks of libero_goal's world as the bench measures them (measure_fixture_looks,
-# generated_alone_v7): the stove is the push's landmark, found by its look
-FIXTURE_LOOKS = {
-    "flat_stove": {"size_m": [0.2966, 0.1905, 0.0318],
-                   "place": {"offset_m": [0.0497, 0.0001], "half_extents_m": [0.075, 0.075], "height_m": 0.0312},
-                   "knob": {"offset_m": [-0.1003, 0.0001], "top_m": 0.0605, "rest_yaw_rad": -0.0249,
-                            "range_rad": [-0.005, 2.1]}},
-    "wine_rack": {"size_m": [0.2743, 0.1419, 0.3201]},
-    "wooden_cabinet": {"size_m": [0.2569, 0.2207, 0.2272]},
-}
 
 
 def test_the_plate_against_the_cabinet_is_dragged_to_the_front_of_the_stove(tmp_path):

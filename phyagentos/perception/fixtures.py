@@ -58,7 +58,7 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import _rect, cluster
 from phyagentos.perception.errors import PerceptionError
 
-__all__ = ["FixtureLook", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
+__all__ = ["FixtureLook", "RootLook", "ROOT_YAW_MAX_RAD", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
            "drawer_entity_name", "CompartmentLook", "compartment_sides", "compartment_entity_name",
            "DRAWER_BAND_M", "DRAWER_BEYOND_M", "DRAWER_FRONT_FRACTION", "DRAWER_ABOVE_M",
            "DRAWER_LEVEL_TOL_M", "DRAWER_STRAIGHT_TOL_M", "DRAWER_FRONT_BEHIND_M", "DRAWER_FRONT_MIN_POINTS",
@@ -506,6 +506,60 @@ def _straight(a: np.ndarray, across: np.ndarray, sel: np.ndarray, hi: float) -> 
     return bool(tops.max() - tops.min() <= DRAWER_STRAIGHT_TOL_M)
 
 
+#: A fixture perceived turned by more than this from how its look was measured (beyond the
+#: turn of 0 or pi), rad, keeps its look's yaw for its model frame (:meth:`RootLook.pose`): a
+#: footprint's long side is read within a few degrees (LIBERO's fixtures stand square to the
+#: world), while a nearly square one's can swap sides.
+ROOT_YAW_MAX_RAD = math.radians(20.0)
+
+
+@dataclass(frozen=True)
+class RootLook:
+    """Where a fixture's model frame stands from its perceived body, measured on generated
+    scenes (``phyagentos.targets.libero.descriptors``): ``offset_m`` (3,) world m from the
+    footprint's centre on the support to the frame's origin and ``yaw_rad`` the frame's yaw,
+    both at turn 0; ``body_yaw_rad`` the body's long side's yaw then (rad, an axis). The height
+    is taken from the support, not the body's centre: what the cameras see of a fixture's top
+    changes with what stands on it or comes out of it (an open drawer), its base does not."""
+
+    offset_m: tuple[float, float, float]
+    yaw_rad: float
+    body_yaw_rad: float
+
+    @classmethod
+    def from_dict(cls, d: Any, fixture: str) -> "RootLook":
+        """From ``{offset_m: [x, y, z], yaw_rad, body_yaw_rad}``.
+
+        Raises:
+            PerceptionError: another key set or a malformed value.
+        """
+        keys = {"offset_m", "yaw_rad", "body_yaw_rad"}
+        if not isinstance(d, Mapping) or set(d) != keys:
+            raise PerceptionError(f"fixture {fixture!r}: root must be a mapping with keys {format_choices(keys)}, "
+                                  f"got {d!r}")
+        off = _floats(d["offset_m"], 3, f"fixture {fixture!r}: root.offset_m")
+        yaw, body_yaw = _floats([d["yaw_rad"], d["body_yaw_rad"]], 2, f"fixture {fixture!r}: root yaws (rad)")
+        return cls(off, yaw, body_yaw)  # type: ignore[arg-type]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The mapping :meth:`from_dict` reads."""
+        return {"offset_m": list(self.offset_m), "yaw_rad": self.yaw_rad, "body_yaw_rad": self.body_yaw_rad}
+
+    def pose(self, position: np.ndarray, body_yaw: float, turn: float, top_m: float) -> tuple[np.ndarray, float]:
+        """``(origin (3,) world m, yaw rad)`` of the model frame of a body perceived centred at
+        ``position`` (3,) (z at half its top ``top_m`` m above the support), its long side at
+        ``body_yaw`` rad, standing ``turn`` rad (0 or pi) from how the look was measured: the
+        look's offset and yaw turned by ``turn`` and by how far the long side stands from the
+        look's (an axis: within pi / 2; beyond :data:`ROOT_YAW_MAX_RAD` taken as 0)."""
+        delta = (float(body_yaw) - self.body_yaw_rad + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+        if abs(delta) > ROOT_YAW_MAX_RAD:
+            delta = 0.0
+        a = float(turn) + delta
+        xy = np.asarray(position, float)[:2] + turned_xy(self.offset_m[:2], a)
+        yaw = (self.yaw_rad + a + math.pi) % (2.0 * math.pi) - math.pi
+        return np.array([xy[0], xy[1], float(position[2]) - 0.5 * float(top_m) + self.offset_m[2]]), yaw
+
+
 @dataclass(frozen=True)
 class FixtureLook:
     """A declared fixture with its measured look (module docstring); lengths in m."""
@@ -519,6 +573,7 @@ class FixtureLook:
     knob: KnobLook | None = None
     drawers: tuple[DrawerLook, ...] = ()
     compartments: tuple[CompartmentLook, ...] = ()
+    root: RootLook | None = None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "FixtureLook | None":
@@ -530,7 +585,7 @@ class FixtureLook:
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared fixture must be a mapping, got {type(d).__name__}")
-        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments")
+        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root")
         unknown = set(d) - set(valid)
         name = d.get("name")
         if unknown:
@@ -552,9 +607,10 @@ class FixtureLook:
         if not isinstance(raw_comps, Sequence) or isinstance(raw_comps, str):
             raise PerceptionError(f"fixture {name!r}: compartments must be a list, got {raw_comps!r}")
         comps = tuple(CompartmentLook.from_dict(r, name) for r in raw_comps)
+        root = RootLook.from_dict(d["root"], name) if d.get("root") is not None else None
         place = d.get("place")
         if place is None:
-            return cls(name, d.get("class"), size, knob=knob, drawers=drawers, compartments=comps)
+            return cls(name, d.get("class"), size, knob=knob, drawers=drawers, compartments=comps, root=root)
         if not isinstance(place, Mapping) or set(place) != {"offset_m", "half_extents_m", "height_m"}:
             raise PerceptionError(f"fixture {name!r}: place must be a mapping with keys "
                                   f"{format_choices(('offset_m', 'half_extents_m', 'height_m'))}, got {place!r}")
@@ -563,7 +619,7 @@ class FixtureLook:
         height = _floats([place["height_m"]], 1, f"fixture {name!r}: place.height_m")[0]
         if min(half) <= 0 or height < 0:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
-        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps)  # type: ignore[arg-type]
+        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps, root)  # type: ignore[arg-type]
 
     def place_patch(self, centre_xy: np.ndarray, half_xy: np.ndarray,
                     turn: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:

@@ -1179,7 +1179,10 @@ class Perceiver:
                  "position_std_m": _r(FIXTURE_STD_M, 5), "points": int(s.points) if now else 0,
                  "last_seen_s": _r(seen_s, 6), "surface_m": _r(surface),
                  "body": {"position": _r(s.position), "yaw": _r(s.yaw), "size": _r(s.half_extents),
-                          "top_m": _r(s.top_m)}}
+                          "top_m": _r(s.top_m), "turn": _r(s.turn)}}
+        if look.root is not None:  # where its model's frame stands: the planning world puts its model there
+            origin, yaw = look.root.pose(s.position, s.yaw, s.turn, s.top_m)
+            attrs["body"]["root"] = {"position": _r(origin), "yaw": _r(yaw)}
         if not now:
             attrs["remembered"] = True
         if look.knob is not None:

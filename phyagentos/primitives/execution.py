@@ -16,6 +16,7 @@ from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.retime import Trajectory, retime
 from phyagentos.targets.contract import MuJoCoBacked, capabilities_of
 
+from . import planning_world
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import (
     MIN_EFFORT_N,
@@ -345,6 +346,7 @@ class Gripper(Primitive):
                          stalled=bool(result.stalled), closed_on_something=bool(closed_on), force_n=self.force_n)
         ctx.trace.record("proprio", **proprio_record(target, p1, phase=f"after_{self.command}", leaf=self.name))
         if self.command == "open":
+            planning_world.note_release(target)  # what the hand held stays where it let it go
             base = b.baseline_force_n
             b.clear()
             if base is not None:

@@ -17,6 +17,7 @@ from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.planner import plan_path
 from phyagentos.motion.retime import retime
 
+from . import planning_world
 from .base import Primitive
 
 __all__ = ["ReadyConfiguration", "SolveIK", "clear_ik", "SWIVEL_SEEDS_RAD",
@@ -108,20 +109,29 @@ def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = Non
                                    share_model_of=next((c for c in cache.values()
                                                         if c.model_source is target.model), None))
         cache[margin_m] = checker
-    checker.set_world_state(target.data.qpos)
+    perceived = planning_world.plans_in_perceived_world(target)
+    if perceived:  # what the robot perceived (LIBERO), never where the simulator has put things
+        planning_world.apply(target, checker)
+    else:  # the tabletop worlds the project builds itself: the simulator's state
+        checker.set_world_state(target.data.qpos)
     if opening_m is not None:
         checker.set_gripper_opening(opening_m)
     checker.detach()
-    # What to attach: what the collision model's own contact state says the hand holds (the
-    # model is the target's world: one of two identical moka pots, named by perception as
-    # the other, is the one in the hand); where it says nothing (a bowl's rim between the
-    # pads), the object the robot believes it closed on (proprioception). The collision model
-    # is the runtime's, never the Agent's.
+    # What to attach. In the perceived world: what its last look saw in the hand, else the
+    # object the robot believes it closed on (proprioception); both by perception's names, as
+    # the world places everything. In the simulator's: what the hand's contacts say it holds
+    # (one of two identical moka pots, named by perception as the other, is the one in the
+    # hand), else the belief. The collision model is the runtime's, never the Agent's.
     from .grasp_sense import belief  # noqa: PLC0415
 
-    obj = held_object(target) or belief(target).object
-    if obj is not None:
-        checker.attach(target.object_body(obj), np.linalg.inv(target.tcp_pose()) @ target.object_pose(obj))
+    if perceived:
+        obj = planning_world.held(target) or belief(target).object
+        T = planning_world.in_hand(target, obj) if obj is not None else None
+    else:
+        obj = held_object(target) or belief(target).object
+        T = np.linalg.inv(target.tcp_pose()) @ target.object_pose(obj) if obj is not None else None
+    if obj is not None and T is not None:
+        checker.attach(target.object_body(obj), T)
     return checker
 
 

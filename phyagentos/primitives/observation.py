@@ -23,6 +23,8 @@ import numpy as np
 
 from phyagentos.targets.contract import capabilities_of
 
+from . import planning_world
+
 __all__ = ["has_cameras", "make_perceiver", "perceive_now", "robot_capsules", "observe_record", "save_tracks",
            "save_cloud", "MAX_SAVED_CLOUD_POINTS"]
 
@@ -187,6 +189,7 @@ def perceive_now(target, perceiver, *, samples: int = 1, evidence_dir: Path | No
                                      "attributes": {"source": "declared"}})
     snap.setdefault("sim_time_s", snap.get("stamp_s"))
     save_tracks(target, perceiver)
+    planning_world.note_observation(target, snap)  # the motion planner's world: what was just seen
     return snap
 
 

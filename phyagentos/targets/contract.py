@@ -80,6 +80,9 @@ deriving from it and implementing its abstract members):
                        recordings of a target without a MuJoCo model
 :class:`OscControlled` ``osc_step``, ``osc_proprio``, ``osc_limits``: an operational-space
                        controller (the ``osc_pose_delta_chunk`` action form)
+:class:`PlansInPer-    ``planning_bodies()``: motion planning checks collisions in a world
+ceivedWorld`           built from what the robot perceived, not the simulator's state
+                       (:mod:`phyagentos.primitives.planning_world`)
 =====================  ==================================================================
 
 Registering a driver: see :mod:`phyagentos.targets.registry` and ``docs/targets.md``.
@@ -107,6 +110,8 @@ __all__ = [
     "ExecutionResult",
     "MuJoCoBacked",
     "OscControlled",
+    "PlanningBodies",
+    "PlansInPerceivedWorld",
     "RendersImages",
     "Target",
     "TargetCapabilities",
@@ -541,6 +546,41 @@ class RendersImages(abc.ABC):
         Raises:
             TargetError: an unknown camera, or no rendering backend (e.g. no OpenGL).
         """
+
+
+@dataclass(frozen=True)
+class PlanningBodies:
+    """Where the things a perceiver reports go in a target's MuJoCo model, for motion planning
+    in a world built from perception (:mod:`phyagentos.primitives.planning_world`). Names only:
+    the model's geometry is the robot's knowledge of its objects and fixtures (their meshes ship
+    with the assets), never where the simulator has put them.
+
+    Attributes:
+        robot_joints: the robot's joints (arm and hand): their positions are its encoders'.
+        objects: ``{entity name: root body name}`` of the movable objects (a free joint each).
+        fixtures: ``{entity name: root body name}`` of the fixtures (bodies fixed in the
+            model), set where the perceiver reports their model frame
+            (``attributes.body.root``).
+        slides: ``{articulation entity name: (joint name, sign)}``: a drawer's slide, set to
+            ``sign`` times the perceived opening (``attributes.joint_position``, m).
+    """
+
+    robot_joints: tuple[str, ...]
+    objects: Mapping[str, str]
+    fixtures: Mapping[str, str]
+    slides: Mapping[str, tuple[str, float]]
+
+
+class PlansInPerceivedWorld(abc.ABC):
+    """A MuJoCo-backed target whose motion planning checks collisions in the world its robot
+    perceived (an optional capability: check with ``isinstance(target, PlansInPerceivedWorld)``):
+    each perceived object's and fixture's model where it was seen, what was not seen left out.
+    Without it the planner's world is the simulator's state (the tabletop worlds the project
+    builds itself)."""
+
+    @abc.abstractmethod
+    def planning_bodies(self) -> PlanningBodies:
+        """Where perceived things go in the model (:class:`PlanningBodies`)."""
 
 
 class OscControlled(abc.ABC):

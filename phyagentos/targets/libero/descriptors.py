@@ -842,6 +842,9 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
         compartments = _median_drawers([g.get("compartments", []) for g in got])
         if compartments:
             look["compartments"] = compartments
+        roots = [g["root"] for g in got if "root" in g]
+        if len(roots) >= 2:
+            look["root"] = _median_root(roots)
         out[cat] = look
     return out
 
@@ -890,7 +893,36 @@ def _fixture_look(target, name: str, cat: str, cloud, heights: np.ndarray, plane
     compartments = _compartment_looks(target, name, p, plane)
     if compartments:
         look["compartments"] = compartments
+    look["root"] = _root_look(target, name, body)
     return look
+
+
+def _root_look(target, name: str, body) -> dict[str, Any]:
+    """Where fixture ``name``'s model frame (its root body) stands from its perceived ``body``
+    (a :class:`~phyagentos.perception.fixtures.FixtureSighting`) in a generated scene, as
+    :class:`~phyagentos.perception.fixtures.FixtureLook` ``root`` reads it: ``offset_m`` (3,)
+    world m from the footprint's centre on the support (the body's centre less half its top)
+    to the root's origin, ``yaw_rad`` the root's yaw and ``body_yaw_rad`` the body's long
+    side's (rad). With it the perceiver puts the fixture's model where it sees the fixture, for
+    the planning world (:mod:`phyagentos.primitives.planning_world`); the look generator reads
+    the simulator here, on generated scenes only."""
+    m, d = target.model, target.data
+    root = _fixture_roots(target, {name: None})[name]
+    R = d.xmat[root].reshape(3, 3)
+    base = np.asarray(body.position, dtype=float) - np.array([0.0, 0.0, 0.5 * float(body.top_m)])
+    return {"offset_m": (d.xpos[root] - base).tolist(), "yaw_rad": math.atan2(R[1, 0], R[0, 0]),
+            "body_yaw_rad": float(body.yaw)}
+
+
+def _median_root(roots: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The medians of ``roots`` (:func:`_root_look` of one fixture in several scenes): the
+    offset per axis; the yaws as angles (each within pi of the first; the body's long side
+    within pi / 2, an axis)."""
+    y0 = float(roots[0]["yaw_rad"])
+    yaw = float(np.median([y0 + (float(r["yaw_rad"]) - y0 + math.pi) % (2.0 * math.pi) - math.pi for r in roots]))
+    return {"offset_m": [round(float(v), 4) for v in np.median([r["offset_m"] for r in roots], axis=0)],
+            "yaw_rad": round((yaw + math.pi) % (2.0 * math.pi) - math.pi, 4),
+            "body_yaw_rad": round(_median_axis([float(r["body_yaw_rad"]) for r in roots]), 4)}
 
 
 def _median_drawers(seen: Sequence[Sequence[dict[str, Any]]]) -> list[dict[str, Any]]:

@@ -28,7 +28,7 @@ class LiberoSensing:
         keys = ("name", "class", "shape", "colour", "size_m", "size_range_m", "shapes", "handle_origin_m", "where")
         objects = ([{k: o[k] for k in keys if k in o} for o in self._scene.objects] if self._scene.objects
                    else self._problem.declared()["objects"])
-        look = ("name", "class", "size_m", "place", "knob", "drawers", "compartments")
+        look = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root")
         fixtures = ([{k: o[k] for k in look if k in o} for o in self._scene.fixtures]
                     if self._scene.fixtures else self._problem.declared()["fixtures"])
         return {"objects": objects, "fixtures": fixtures, "regions": [], "obstacles": []}

@@ -71,7 +71,7 @@ import numpy as np
 from phyagentos.errors import TargetError, format_choices
 
 from ..base import ExecutionResult
-from ..contract import TargetCapabilities
+from ..contract import PlanningBodies, PlansInPerceivedWorld, TargetCapabilities
 from ..heap import trim_heap
 from ..mujoco_arm import K_ENV, K_FINGER, K_OBJECT, K_ROBOT, GripperResult, MuJoCoArmTarget, mat_quat
 from .osc import CONTROL_PERIOD_S, OSC_ACTION_DIM, LiberoOsc
@@ -303,7 +303,7 @@ def _make_env(task: LiberoTask):
                       hard_reset=False, ignore_done=True)
 
 
-class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
+class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, PlansInPerceivedWorld):
     """A LIBERO task world (suite, task, init state) with a joint-servo Panda.
 
     Args:
@@ -460,6 +460,7 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
                 if b == 0 or root == "floor" or "table" in root:
                     support.add(g)
         self._gkind, self._gobj, self._gside = kind, gobj, side
+        self._planning: PlanningBodies | None = None
         self._support_geoms = frozenset(support)
         self._U_cache: dict[frozenset, np.ndarray] = {}
         self.ROBOT_BASE = tuple(float(x) for x in self._data.body("robot0_base").xpos)
@@ -490,6 +491,32 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget):
         if b is None:
             raise TargetError(f"unknown object {name!r}; objects: {format_choices(self._obj_names)}")
         return self._model.body(b).name
+
+    def planning_bodies(self) -> PlanningBodies:
+        """Where perceived things go in this world's model, for a planning world built from
+        perception (:class:`~phyagentos.targets.contract.PlanningBodies`): the robot's joints
+        (``robot0_*`` and ``gripper0_*`` bodies), each BDDL object's root body, each fixture's
+        root body but the support's, and each drawer's slide with the sign that makes it grow
+        as the drawer comes out (the model's geometry: its handle's side of the fixture)."""
+        if self._planning is None:
+            from phyagentos.perception.fixtures import drawer_entity_name  # noqa: PLC0415
+
+            from .descriptors import _drawer_joints, _drawer_name, _fixture_roots, drawer_sign, is_support  # noqa: PLC0415
+
+            m = self._model
+            robot = set(self._robot_bodies)
+            joints = tuple(m.joint(j).name for j in range(m.njnt) if int(m.jnt_bodyid[j]) in robot)
+            fixtures = {n: None for n, cat in self._problem.fixtures.items() if not is_support(cat)}
+            roots = _fixture_roots(self, fixtures)
+            slides = {}
+            for name in roots:
+                for j in _drawer_joints(self, name):
+                    jn = m.joint(j).name
+                    slides[drawer_entity_name(name, _drawer_name(jn, name))] = (jn, drawer_sign(self, name, j))
+            self._planning = PlanningBodies(robot_joints=joints,
+                                            objects={n: self.object_body(n) for n in self._obj_names},
+                                            fixtures={n: m.body(b).name for n, b in roots.items()}, slides=slides)
+        return self._planning
 
     @property
     def home_qpos(self) -> np.ndarray:

@@ -1,0 +1,252 @@
+"""The planning world: what the Runtime plane's motion planner checks collisions against, built
+from what the robot perceived.
+
+A target that is :class:`~phyagentos.targets.contract.PlansInPerceivedWorld` (LIBERO) plans in
+this world instead of the simulator's state, which holds privileged truth (true object poses,
+initial placements: ``DESIGN.md``, "What each plane may know"). The world is its model with:
+
+- the robot's joints at its encoders' readings;
+- each object the last observation reported (``kind: object``) as its model placed at the
+  perceived box: the model's collision geometry centred on the box's centre, turned so that
+  the model's long side lies along the box's (:func:`object_root_pose`); an object held in the
+  hand (``attributes.held``) stays where the hand holds it, and where the hand lets it go;
+- each fixture where the perceiver reports its model frame (``attributes.body.root``, from
+  the fixture's look measured on generated scenes: :class:`~phyagentos.perception.fixtures.RootLook`);
+- each drawer at its perceived opening (``attributes.joint_position``; the last reading when
+  the handle was hidden, shut before any);
+- anything not perceived left out (parked far below the floor), every other joint at the
+  model's default.
+
+The model's geometry is the robot's knowledge of its objects and fixtures (their meshes ship
+with the benchmark's assets); nothing here reads where the simulator has put them. A target
+without the capability keeps planning in the simulator's state (the tabletop worlds the project
+builds itself; :func:`phyagentos.primitives.motion.session_checker`).
+
+The world is kept in ``target.runtime_notes`` (plain data the target checkpoints), so it
+outlives a session and a runner restart, like the perceiver's tracks.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import weakref
+from typing import Any, Mapping
+
+import mujoco
+import numpy as np
+
+from phyagentos.targets.contract import PlansInPerceivedWorld
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "WORLD_NOTE",
+    "PARK_M",
+    "ELONGATED_RATIO",
+    "plans_in_perceived_world",
+    "note_observation",
+    "note_release",
+    "held",
+    "in_hand",
+    "apply",
+    "object_root_pose",
+]
+
+#: ``target.runtime_notes`` key of the perceived planning world.
+WORLD_NOTE = "planning_world"
+#: What was not perceived is parked this far from the world's origin (m, x and y; and as far
+#: below the floor): out of every reach, so the planner never meets it.
+PARK_M = 50.0
+#: A footprint whose long side exceeds its short one by this ratio has a long side to align
+#: (:func:`object_root_pose`); a rounder one keeps the perceived box's yaw.
+ELONGATED_RATIO = 1.15
+
+_GEOMETRY: "weakref.WeakKeyDictionary[Any, dict[str, tuple[np.ndarray, np.ndarray]]]" = weakref.WeakKeyDictionary()
+
+
+def plans_in_perceived_world(target) -> bool:
+    """Whether ``target``'s motion planning checks collisions in the perceived world."""
+    return isinstance(target, PlansInPerceivedWorld)
+
+
+def _root_geometry(target, body: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(centre (3,), half extents (3,))`` m of the bounding box of the collision geoms of
+    every body under root body ``body``, in that root body's frame: the object's model (its
+    geometry relative to its own frame does not change as the simulator moves it)."""
+    cache = _GEOMETRY.setdefault(target, {})
+    if body not in cache:
+        m, d = target.model, target.data
+        root = m.body(body).id
+        Rr, pr = d.xmat[root].reshape(3, 3), d.xpos[root]
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for g in range(m.ngeom):
+            if int(m.body_rootid[int(m.geom_bodyid[g])]) != root or not (m.geom_contype[g] or m.geom_conaffinity[g]):
+                continue
+            Rg = Rr.T @ d.geom_xmat[g].reshape(3, 3)
+            c = Rr.T @ (d.geom_xpos[g] - pr) + Rg @ m.geom_aabb[g, :3]
+            h = np.abs(Rg) @ m.geom_aabb[g, 3:]
+            lo, hi = np.minimum(lo, c - h), np.maximum(hi, c + h)
+        if not np.all(np.isfinite(lo)):
+            lo, hi = np.zeros(3), np.zeros(3)
+        cache[body] = (0.5 * (lo + hi), 0.5 * (hi - lo))
+    return cache[body]
+
+
+def _yaw_of(quat_wxyz) -> float:
+    w, x, y, z = (float(v) for v in quat_wxyz)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _rz(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def object_root_pose(target, body: str, entity: Mapping[str, Any]) -> np.ndarray:
+    """(4, 4) world pose of object root body ``body`` placed at a perceived ``entity`` (its
+    ``position`` (3,) m, the box's centre; ``quat_wxyz``, a yaw; ``size`` (3,) half extents, m):
+    upright, the model's collision box centred on the perceived one, and, where both footprints
+    have a long side (:data:`ELONGATED_RATIO`), the model's long side along the perceived box's
+    (either way round: a box's yaw is read modulo pi); else the perceived yaw."""
+    centre, half = _root_geometry(target, body)
+    size = np.asarray(entity.get("size") or (0.0, 0.0, 0.0), dtype=float)
+    psi = _yaw_of(entity.get("quat_wxyz") or (1.0, 0.0, 0.0, 0.0))
+    yaw = psi
+    model_long = max(half[0], half[1]) > ELONGATED_RATIO * max(min(half[0], half[1]), 1e-6)
+    seen_long = max(size[0], size[1]) > ELONGATED_RATIO * max(min(size[0], size[1]), 1e-6)
+    if model_long and seen_long:
+        seen_axis = psi if size[0] >= size[1] else psi + 0.5 * math.pi
+        yaw = seen_axis - (0.0 if half[0] >= half[1] else 0.5 * math.pi)
+    R = _rz(yaw)
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = np.asarray(entity["position"], dtype=float) - R @ centre
+    return T
+
+
+def _record(target) -> dict[str, Any]:
+    return target.runtime_notes.setdefault(WORLD_NOTE, {"objects": {}, "fixtures": {}, "slides": {}})
+
+
+def note_observation(target, snapshot: Mapping[str, Any]) -> None:
+    """Keep the world ``snapshot`` (a perceived snapshot, the robot's pose now) reports, for
+    :func:`apply`: every object and fixture as just perceived (what it does not report is no
+    longer in the world), each drawer's opening where it was read (else as last read). Does
+    nothing for a target that plans in the simulator's state."""
+    if not plans_in_perceived_world(target):
+        return
+    bodies = target.planning_bodies()
+    ents = {e.get("name"): e for e in snapshot.get("entities", []) if isinstance(e, Mapping)}
+    T_tcp = np.asarray(target.tcp_pose(), dtype=float)
+    objects: dict[str, Any] = {}
+    for name, body in bodies.objects.items():
+        e = ents.get(name)
+        if e is None or e.get("kind") != "object" or e.get("position") is None:
+            continue
+        T = object_root_pose(target, body, e)
+        held = bool((e.get("attributes") or {}).get("held"))
+        objects[name] = {"T": T.reshape(-1).tolist(),
+                         "in_hand": (np.linalg.inv(T_tcp) @ T).reshape(-1).tolist() if held else None}
+    fixtures: dict[str, Any] = {}
+    for name in bodies.fixtures:
+        root = (((ents.get(name) or {}).get("attributes") or {}).get("body") or {}).get("root")
+        if root is not None:
+            fixtures[name] = {"position": [float(v) for v in root["position"]], "yaw": float(root["yaw"])}
+    rec = _record(target)
+    slides = dict(rec.get("slides") or {})
+    for ent, (joint, sign) in bodies.slides.items():
+        q = ((ents.get(ent) or {}).get("attributes") or {}).get("joint_position")
+        if q is not None:
+            slides[joint] = float(sign) * float(q)
+    rec.update(objects=objects, fixtures=fixtures, slides=slides)
+
+
+def note_release(target) -> None:
+    """The hand has opened: an object the world holds in it stays where the hand let it go."""
+    if not plans_in_perceived_world(target):
+        return
+    objects = _record(target).get("objects") or {}
+    T_tcp = np.asarray(target.tcp_pose(), dtype=float)
+    for o in objects.values():
+        if o.get("in_hand") is not None:
+            o["T"] = (T_tcp @ np.asarray(o["in_hand"], dtype=float).reshape(4, 4)).reshape(-1).tolist()
+            o["in_hand"] = None
+
+
+def held(target) -> str | None:
+    """The object the planning world holds in the hand (its last look saw it held, and the
+    hand has not opened since), else ``None``."""
+    for name, o in (_record(target).get("objects") or {}).items():
+        if o.get("in_hand") is not None:
+            return name
+    return None
+
+
+def in_hand(target, obj: str) -> np.ndarray | None:
+    """(4, 4) pose of object ``obj``'s root body in the tcp frame as the planning world holds
+    it: where the last observation saw it held, else (closed on since, not yet seen in the
+    hand) where it was seen from where the hand is now; ``None`` when it was not perceived."""
+    o = (_record(target).get("objects") or {}).get(obj)
+    if o is None:
+        return None
+    if o.get("in_hand") is not None:
+        return np.asarray(o["in_hand"], dtype=float).reshape(4, 4)
+    return np.linalg.inv(np.asarray(target.tcp_pose(), dtype=float)) @ np.asarray(o["T"], dtype=float).reshape(4, 4)
+
+
+def _quat(R: np.ndarray) -> np.ndarray:
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R).reshape(-1))
+    return q
+
+
+def apply(target, checker) -> dict[str, list[str]]:
+    """Set ``checker`` (a :class:`~phyagentos.motion.collision.CollisionChecker` on
+    ``target``'s model) to the perceived planning world (module docstring); returns the
+    ``placed`` and ``parked`` object and fixture names."""
+    bodies = target.planning_bodies()
+    rec = _record(target)
+    m = checker.model
+    q = m.qpos0.copy()
+    live = target.data.qpos
+    for jn in bodies.robot_joints:
+        j = m.joint(jn).id
+        adr = int(m.jnt_qposadr[j])
+        n = {int(mujoco.mjtJoint.mjJNT_FREE): 7, int(mujoco.mjtJoint.mjJNT_BALL): 4}.get(int(m.jnt_type[j]), 1)
+        q[adr:adr + n] = live[adr:adr + n]
+    placed, parked = [], []
+    objects = rec.get("objects") or {}
+    for k, (name, body) in enumerate(bodies.objects.items()):
+        b = m.body(body).id
+        adr = int(m.jnt_qposadr[int(m.body_jntadr[b])])
+        o = objects.get(name)
+        if o is None:
+            q[adr:adr + 3] = (PARK_M + 2.0 * k, PARK_M, -PARK_M)
+            q[adr + 3:adr + 7] = (1.0, 0.0, 0.0, 0.0)
+            parked.append(name)
+            continue
+        T = np.asarray(o["T"], dtype=float).reshape(4, 4)
+        q[adr:adr + 3] = T[:3, 3]
+        q[adr + 3:adr + 7] = _quat(T[:3, :3])
+        placed.append(name)
+    for joint, value in (rec.get("slides") or {}).items():
+        q[int(m.jnt_qposadr[m.joint(joint).id])] = float(value)
+    checker.set_world_state(q)
+    fixtures = rec.get("fixtures") or {}
+    for k, (name, body) in enumerate(bodies.fixtures.items()):
+        b = m.body(body).id
+        f = fixtures.get(name)
+        if f is None:
+            m.body_pos[b] = (PARK_M + 2.0 * k, -PARK_M, -PARK_M)
+            parked.append(name)
+            warned = rec.setdefault("unseen_fixtures", [])
+            if name not in warned:  # once per fixture and world: the planner does not know it is there
+                warned.append(name)
+                log.warning("planning world: fixture %r is not perceived (no look declared, or not seen yet), so the "
+                            "motion planner does not know it is there; declare its look (docs/libero.md)", name)
+            continue
+        m.body_pos[b] = f["position"]
+        m.body_quat[b] = _quat(_rz(float(f["yaw"])))
+        placed.append(name)
+    return {"placed": placed, "parked": parked}

@@ -139,6 +139,9 @@ def test_a_drawer_stands_at_its_read_opening_and_keeps_it_while_its_handle_is_hi
     hidden = {"entities": [e for e in snap["entities"] if e["name"] != "wooden_cabinet_1_top_drawer"]}
     planning_world.note_observation(target, hidden)
     assert session_checker(SimpleNamespace(target=target)).data.qpos[adr] == pytest.approx(sign * read)
+    # the hand pulled it further (articulate_slide tells the world how far its handle travelled)
+    planning_world.note_slide(target, "wooden_cabinet_1_top_drawer", 0.16)
+    assert session_checker(SimpleNamespace(target=target)).data.qpos[adr] == pytest.approx(sign * 0.16)
     d.qpos[adr] = 0.0
     mujoco.mj_forward(m, d)
 

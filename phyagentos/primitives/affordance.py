@@ -29,6 +29,7 @@ from phyagentos.motion.grasp import top_down_grasp_candidates
 from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.retime import retime
 
+from . import planning_world
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
 from .motion import execution_limits, ik_options
@@ -440,6 +441,11 @@ class ArticulateSlide(_Articulate):
 
     def on_enter(self):
         self._push = None
+        attrs = _entity(self.get(self.snapshot_key), self.object).get("attributes") or {}
+        q, axis = attrs.get("joint_position"), attrs.get("axis")
+        # where the drawer was read and where the hand starts: the planning world follows the drawer
+        self._moved_from = ((float(q), _unit(axis), self.ctx.target.tcp_pose()[:3, 3].copy())
+                            if q is not None and axis is not None else None)
         perceiver = getattr(self.ctx, "perceiver", None)
         if perceiver is not None and hasattr(perceiver, "forget_drawer_stop"):
             perceiver.forget_drawer_stop(self.object)  # it is moved now: what was known of its stop no longer holds
@@ -454,15 +460,32 @@ class ArticulateSlide(_Articulate):
         super().on_enter()
 
     def step(self):
-        if self._push is None or self._done:
-            return super().step()
         try:
-            status = super().step()
-        except PrimitiveFailure as exc:
-            if exc.code != "execution.tracking":
-                raise
-            return self._at_stop(str(exc))
-        return self._at_stop("") if status == Status.SUCCESS else status
+            if self._push is None or self._done:
+                status = super().step()
+            else:
+                try:
+                    status = super().step()
+                except PrimitiveFailure as exc:
+                    if exc.code != "execution.tracking":
+                        raise
+                    status = self._at_stop(str(exc))
+                else:
+                    status = self._at_stop("") if status == Status.SUCCESS else status
+        except PrimitiveFailure:
+            self._note_moved()
+            raise
+        if status != Status.RUNNING:
+            self._note_moved()
+        return status
+
+    def _note_moved(self) -> None:
+        """Tell the planning world where the drawer is now: read where the motion began, moved
+        as far as the hand holding its handle moved along its axis (the joint encoders)."""
+        if self._moved_from is not None:
+            q0, axis, start = self._moved_from
+            moved = float(np.dot(self.ctx.target.tcp_pose()[:3, 3] - start, axis))
+            planning_world.note_slide(self.ctx.target, self.object, q0 + moved)
 
     def _at_stop(self, tracking: str) -> Status:
         """End a push home (class docstring): where the hand stands against what held it back."""

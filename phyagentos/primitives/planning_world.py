@@ -13,7 +13,8 @@ initial placements: ``DESIGN.md``, "What each plane may know"). The world is its
 - each fixture where the perceiver reports its model frame (``attributes.body.root``, from
   the fixture's look measured on generated scenes: :class:`~phyagentos.perception.fixtures.RootLook`);
 - each drawer at its perceived opening (``attributes.joint_position``; the last reading when
-  the handle was hidden, shut before any);
+  the handle was hidden, shut before any), and where the hand has moved it since
+  (:func:`note_slide`);
 - anything not perceived left out (parked far below the floor), every other joint at the
   model's default.
 
@@ -47,6 +48,7 @@ __all__ = [
     "plans_in_perceived_world",
     "note_observation",
     "note_release",
+    "note_slide",
     "held",
     "in_hand",
     "apply",
@@ -172,6 +174,17 @@ def note_release(target) -> None:
         if o.get("in_hand") is not None:
             o["T"] = (T_tcp @ np.asarray(o["in_hand"], dtype=float).reshape(4, 4)).reshape(-1).tolist()
             o["in_hand"] = None
+
+
+def note_slide(target, entity: str, opening_m: float) -> None:
+    """Drawer ``entity`` stands ``opening_m`` m out now (the hand moved it: what its joint
+    encoders say the held handle travelled), until a look reads it again."""
+    if not plans_in_perceived_world(target):
+        return
+    slide = target.planning_bodies().slides.get(entity)
+    if slide is not None:
+        joint, sign = slide
+        _record(target).setdefault("slides", {})[joint] = float(sign) * float(opening_m)
 
 
 def held(target) -> str | None:

@@ -7,8 +7,9 @@ initial placements: ``DESIGN.md``, "What each plane may know"). The world is its
 
 - the robot's joints at its encoders' readings;
 - each object the last observation reported (``kind: object``) as its model placed at the
-  perceived box: the model's collision geometry centred on the box's centre, turned so that
-  the model's long side lies along the box's (:func:`object_root_pose`); an object held in the
+  perceived box: the model's collision geometry centred on the box's centre, stood on the model
+  axis that fits the perceived height and turned so that the model's long side lies along the
+  box's (:func:`object_root_pose`); an object held in the
   hand (``attributes.held``) stays where the hand holds it, and where the hand lets it go;
 - each fixture where the perceiver reports its model frame (``attributes.body.root``, from
   the fixture's look measured on generated scenes: :class:`~phyagentos.perception.fixtures.RootLook`);
@@ -45,6 +46,7 @@ __all__ = [
     "WORLD_NOTE",
     "PARK_M",
     "ELONGATED_RATIO",
+    "STAND_TIE_M",
     "plans_in_perceived_world",
     "note_observation",
     "note_release",
@@ -105,22 +107,52 @@ def _rz(yaw: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+#: Two ways of standing an object's model up whose fits to the perceived box differ by less than
+#: this (m, summed over its three sides) are a tie: its own z axis up is kept (most models stand so).
+STAND_TIE_M = 0.005
+
+
+def _standing(half: np.ndarray, size: np.ndarray) -> int:
+    """Which axis of the model (0, 1, 2: its frame's x, y, z) stands vertical for a perceived
+    box of half extents ``size`` (3,) (its height ``size[2]``): the one whose model half extent
+    ``half`` (3,) fits the perceived height, the other two the footprint's sides (smaller with
+    smaller), best; its z axis where another fits within :data:`STAND_TIE_M`. LIBERO's bottles
+    and cartons are modelled lying (their frames' x axis stands up as the sampler sets them)."""
+    foot = np.sort(np.asarray(size[:2], dtype=float))
+
+    def cost(k: int) -> float:
+        rest = np.sort(np.delete(half, k))
+        return abs(float(half[k]) - float(size[2])) + float(np.abs(rest - foot).sum())
+
+    best = min(range(3), key=cost)
+    return 2 if cost(2) <= cost(best) + STAND_TIE_M else best
+
+
 def object_root_pose(target, body: str, entity: Mapping[str, Any]) -> np.ndarray:
     """(4, 4) world pose of object root body ``body`` placed at a perceived ``entity`` (its
     ``position`` (3,) m, the box's centre; ``quat_wxyz``, a yaw; ``size`` (3,) half extents, m):
-    upright, the model's collision box centred on the perceived one, and, where both footprints
-    have a long side (:data:`ELONGATED_RATIO`), the model's long side along the perceived box's
-    (either way round: a box's yaw is read modulo pi); else the perceived yaw."""
+    the model's collision box centred on the perceived one, standing on the model axis that fits
+    the perceived height (:func:`_standing`), and, where both footprints have a long side
+    (:data:`ELONGATED_RATIO`), the model's long horizontal side along the perceived box's (either
+    way round: a box's yaw is read modulo pi); else the model's first horizontal axis along the
+    perceived yaw."""
     centre, half = _root_geometry(target, body)
     size = np.asarray(entity.get("size") or (0.0, 0.0, 0.0), dtype=float)
     psi = _yaw_of(entity.get("quat_wxyz") or (1.0, 0.0, 0.0, 0.0))
-    yaw = psi
-    model_long = max(half[0], half[1]) > ELONGATED_RATIO * max(min(half[0], half[1]), 1e-6)
+    up = _standing(half, size)
+    i, j = (a for a in range(3) if a != up)
+    heading = psi
     seen_long = max(size[0], size[1]) > ELONGATED_RATIO * max(min(size[0], size[1]), 1e-6)
-    if model_long and seen_long:
-        seen_axis = psi if size[0] >= size[1] else psi + 0.5 * math.pi
-        yaw = seen_axis - (0.0 if half[0] >= half[1] else 0.5 * math.pi)
-    R = _rz(yaw)
+    if max(half[i], half[j]) > ELONGATED_RATIO * max(min(half[i], half[j]), 1e-6) and seen_long:
+        heading = psi if size[0] >= size[1] else psi + 0.5 * math.pi
+        if half[j] > half[i]:
+            i, j = j, i  # the model's long horizontal side takes the perceived long side's heading
+    R = np.zeros((3, 3))
+    R[:, up] = (0.0, 0.0, 1.0)
+    R[:, i] = (math.cos(heading), math.sin(heading), 0.0)
+    R[:, j] = np.cross(R[:, up], R[:, i])
+    if np.linalg.det(R) < 0:
+        R[:, j] = -R[:, j]
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = np.asarray(entity["position"], dtype=float) - R @ centre

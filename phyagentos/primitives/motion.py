@@ -86,13 +86,16 @@ def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> t
 
 
 def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = None) -> CollisionChecker:
-    """A collision checker synced to the target's current world; with ``opening_m`` (m per
-    finger) its fingers stand that far open instead of as they are
+    """A collision checker synced to the world the target plans in: for a
+    :class:`~phyagentos.targets.contract.PlansInPerceivedWorld` target (LIBERO) the world its
+    robot perceived (:mod:`phyagentos.primitives.planning_world`), else the simulator's state;
+    with ``opening_m`` (m per finger) its fingers stand that far open instead of as they are
     (:meth:`~phyagentos.motion.collision.CollisionChecker.set_gripper_opening`: a hand
     pre-shaped before it approaches).
 
-    Whatever the gripper holds is attached at its current offset so transfers are
-    checked with the object in hand. Checkers are cached per target and margin:
+    Whatever the gripper holds is attached at its offset in the hand (perceived, or the
+    simulator's for a world that plans in its state) so transfers are checked with the
+    object in hand. Checkers are cached per target and margin:
     building one copies the model (~15 ms), and a target outlives its sessions. The
     checkers of one target share one copy (a LIBERO world's is about 250 MB, most of it
     textures: one copy, not one per margin).

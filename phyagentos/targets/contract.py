@@ -71,19 +71,20 @@ Optional hooks (the defaults on :class:`Target`, used when a driver does not ove
 Optional capabilities (mix-in ABCs, checked with ``isinstance``; a driver declares one by
 deriving from it and implementing its abstract members):
 
-=====================  ==================================================================
-:class:`MuJoCoBacked`  ``model``, ``data``, ``scene``, ``arm_joint_names``, ``tcp_site``:
-                       the recorder replays its states, the evidence writer renders them
-                       in the background, contact primitives read its forces, the view
-                       rebuilds it
-:class:`RendersImages` ``render(camera, width, height, *, shadows)``: evidence images and
-                       recordings of a target without a MuJoCo model
-:class:`OscControlled` ``osc_step``, ``osc_proprio``, ``osc_limits``: an operational-space
-                       controller (the ``osc_pose_delta_chunk`` action form)
-:class:`PlansInPer-    ``planning_bodies()``: motion planning checks collisions in a world
-ceivedWorld`           built from what the robot perceived, not the simulator's state
-                       (:mod:`phyagentos.primitives.planning_world`)
-=====================  ==================================================================
+=============================== ==========================================================
+:class:`MuJoCoBacked`           ``model``, ``data``, ``scene``, ``arm_joint_names``,
+                                ``tcp_site``: the recorder replays its states, the evidence
+                                writer renders them in the background, contact primitives
+                                read its forces, the view rebuilds it
+:class:`RendersImages`          ``render(camera, width, height, *, shadows)``: evidence images
+                                and recordings of a target without a MuJoCo model
+:class:`OscControlled`          ``osc_step``, ``osc_proprio``, ``osc_limits``: an
+                                operational-space controller (the ``osc_pose_delta_chunk``
+                                action form)
+:class:`PlansInPerceivedWorld`  ``planning_bodies()``: motion planning checks collisions in a
+                                world built from what the robot perceived, not the
+                                simulator's state (:mod:`phyagentos.primitives.planning_world`)
+=============================== ==========================================================
 
 Registering a driver: see :mod:`phyagentos.targets.registry` and ``docs/targets.md``.
 """

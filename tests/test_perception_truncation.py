@@ -472,6 +472,16 @@ def _two_cans():
     return p
 
 
+def _only_the_first_refused_the_soup(p, dets):
+    """``_not_on_itself`` forbids the first of ``dets`` the soup (track 0) and changes nothing
+    else; returns the cost matrix before it."""
+    raw = cost_matrix(dets, p.declared, p.config)
+    got = p._not_on_itself(raw, dets)
+    assert got[0, 0] >= perceiver_module.FORBIDDEN_COST and got[0, 1] == raw[0, 1]
+    assert np.array_equal(got[1:], raw[1:])
+    return raw
+
+
 def test_a_segment_resting_on_a_tracked_objects_top_is_not_that_object():
     """LIBERO-10 task 0 (generated scenes, seeds 95000-95019): the tomato sauce let go onto the
     alphabet soup standing in the basket shows the wrist camera, straight above, only its lid, grey
@@ -484,10 +494,7 @@ def test_a_segment_resting_on_a_tracked_objects_top_is_not_that_object():
     low = _can(0.003, 0.262, 0.05, 0.05)  # resting half way down the soup: not on its top
     aside = _can(0.09, 0.262, 0.125, 0.058)  # resting on something else 9 cm away
     dets = [lid, low, aside]
-    raw = cost_matrix(dets, p.declared, p.config)
-    got = p._not_on_itself(raw, dets)
-    assert got[0, 0] >= perceiver_module.FORBIDDEN_COST and got[0, 1] == raw[0, 1]
-    assert np.array_equal(got[1:], raw[1:])
+    raw = _only_the_first_refused_the_soup(p, dets)
     soup = p.tracks["alphabet_soup_1"]
     for held, released in ((True, None), (False, 3.0)):  # taken or let go since: it may stand anywhere
         soup.held, soup.released_s = held, released
@@ -506,10 +513,7 @@ def test_a_stack_standing_on_the_table_half_an_object_taller_than_a_tracked_obje
     taller = _can(0.003, 0.262, 0.0, 0.099 + 0.02)  # the soup and the basket's floor, 2 cm taller
     cut = _can(0.003, 0.262, 0.0, 0.184, truncated=True)
     dets = [whole, taller, cut]
-    raw = cost_matrix(dets, p.declared, p.config)
-    got = p._not_on_itself(raw, dets)
-    assert got[0, 0] >= perceiver_module.FORBIDDEN_COST and got[0, 1] == raw[0, 1]
-    assert np.array_equal(got[1:], raw[1:])
+    raw = _only_the_first_refused_the_soup(p, dets)
     soup = p.tracks["alphabet_soup_1"]
     soup.known_height_m = 0.20  # as tall as the stack when the hand last let it go: nothing is on it
     assert np.array_equal(p._not_on_itself(raw, dets), raw)

@@ -461,23 +461,25 @@ class ArticulateSlide(_Articulate):
 
     def step(self):
         try:
-            if self._push is None or self._done:
-                status = super().step()
-            else:
-                try:
-                    status = super().step()
-                except PrimitiveFailure as exc:
-                    if exc.code != "execution.tracking":
-                        raise
-                    status = self._at_stop(str(exc))
-                else:
-                    status = self._at_stop("") if status == Status.SUCCESS else status
+            status = self._slide()
         except PrimitiveFailure:
             self._note_moved()
             raise
         if status != Status.RUNNING:
             self._note_moved()
         return status
+
+    def _slide(self) -> Status:
+        """One tick of the motion; a push home ends where the stop holds the hand (:meth:`_at_stop`)."""
+        if self._push is None or self._done:
+            return super().step()
+        try:
+            status = super().step()
+        except PrimitiveFailure as exc:
+            if exc.code != "execution.tracking":
+                raise
+            return self._at_stop(str(exc))
+        return self._at_stop("") if status == Status.SUCCESS else status
 
     def _note_moved(self) -> None:
         """Tell the planning world where the drawer is now: read where the motion began, moved

@@ -13,12 +13,18 @@ import py_trees
 import pytest
 
 from phyagentos.cli import main
+from phyagentos.motion.grasp import FRANKA_FINGERS
 from phyagentos.primitives import SkillContext
 from phyagentos.primitives.contact import GuardedMove
 from phyagentos.targets import MuJoCoTarget
 from phyagentos.targets.scene import SceneSpec
 
 DATA = Path(__file__).resolve().parent / "data_authoring"
+#: The tabletop Franka's finger bodies: what the contact leaves report as touched when the
+#: closed hand presses with its fingertips.
+FINGERS = ["panda0_leftfinger", "panda0_rightfinger"]
+#: The tabletop Franka's fingertips below its tcp, m.
+FRANKA_TIP_M = FRANKA_FINGERS[0]
 
 
 def test_a_user_touch_skill_presses_on_the_cube_and_stops_at_the_force_limit(tmp_path, capsys):
@@ -33,7 +39,8 @@ def test_a_user_touch_skill_presses_on_the_cube_and_stops_at_the_force_limit(tmp
     assert report["succeeded"]
     [trace] = list((ws / "evidence").glob("*/trace.jsonl"))
     [contact] = [json.loads(line) for line in trace.read_text().splitlines() if '"contact"' in line]
-    assert contact["touched"] == ["cube"] and contact["force_n"] >= 5.0
+    # the robot's own parts that touched (a real arm's force sensing names no other body)
+    assert contact["touched"] == FINGERS and contact["force_n"] >= 5.0
     assert 0.03 < contact["travelled_m"] < 0.09  # stopped on the cube's top, not at the end of the offset
 
 
@@ -75,7 +82,21 @@ def test_a_compliant_push_moves_the_cube_into_the_region_through_the_cli(tmp_pat
     assert report["succeeded"]  # the verifier found the cube inside the goal region 10 cm away
     [trace] = list((ws / "evidence").glob("*/trace.jsonl"))
     [push] = [json.loads(line) for line in trace.read_text().splitlines() if '"kind": "push"' in line]
-    assert push["touched"] == ["cube"] and 0.0 < push["max_force_n"] <= 40.0
+    assert push["touched"] and set(push["touched"]) <= set(FINGERS) and 0.0 < push["max_force_n"] <= 40.0
+
+
+def _touching(target, body: str) -> set[str]:
+    """The bodies in contact with body ``body`` now, from the simulator's contact pairs (ground
+    truth: the test's to read, never the skills')."""
+    m, d = target.model, target.data
+    b = m.body(body).id
+    out = set()
+    for i in range(d.ncon):
+        pair = (int(m.geom_bodyid[d.contact[i].geom1]), int(m.geom_bodyid[d.contact[i].geom2]))
+        if b in pair:
+            other = pair[1] if pair[0] == b else pair[0]
+            out.add(m.body(other).name)
+    return out - {"world"}
 
 
 def _record_steps(target):
@@ -119,7 +140,9 @@ def test_a_guarded_move_stops_within_one_physics_step_of_the_force_limit(target)
     assert first == len(calls) - 1  # no physics step after the limit was reached
     reader = py_trees.blackboard.Client(name="reader")
     reader.register_key(key="contact", access=py_trees.common.Access.READ)
-    assert reader.contact["force_n"] >= limit and reader.contact["touched"] == ["cube"]
+    assert reader.contact["force_n"] >= limit and reader.contact["touched"] == FINGERS
+    # the simulator's contacts (ground truth, for this test): it was the cube the fingers pressed
+    assert _touching(target, "cube") == set(FINGERS)
     assert reader.contact["sim_time_s"] - calls[first][1] <= target.model.opt.timestep + 1e-12
 
 
@@ -175,7 +198,8 @@ def test_a_push_pressed_from_above_lands_on_the_object_then_drags_it_along(tile_
     target = tile_target
     ctx = SkillContext(target=target)
     start, top = _over(target, ctx, "tile", above_m=0.03)
-    press = {"contact_n": 2.0, "depth_m": 0.008, "descent_m": 0.05, "object": "tile"}
+    press = {"contact_n": 2.0, "depth_m": 0.008, "descent_m": 0.05, "object": "tile", "top_m": top,
+             "tip_m": FRANKA_TIP_M}
     status = _tick_with(Push("Drag", offset=[0.0, 0.06, 0.0], velocity_scale=0.2, press="push_press"), ctx,
                         {"push_press": press})
     assert status == py_trees.common.Status.SUCCESS, ctx.failure
@@ -183,7 +207,7 @@ def test_a_push_pressed_from_above_lands_on_the_object_then_drags_it_along(tile_
     assert moved[1] > 0.03 and abs(moved[0]) < 0.01  # carried along under the fingertips, most of the way
     assert abs(moved[2]) < 0.003  # dragged along the table, not tipped or lifted
     [landed] = [r for r in ctx.trace.records if r["kind"] == "press"]
-    assert landed["force_n"] >= 2.0 and landed["touched"] == ["tile"]
+    assert landed["force_n"] >= 2.0 and landed["touched"] == FINGERS
     assert landed["landed_z"] == pytest.approx(top + 0.015, abs=0.006)  # the fingertips (1.5 cm below the tcp) on its top
 
 
@@ -194,10 +218,12 @@ def test_a_press_that_lands_on_another_object_fails_before_it_drags_anything(til
     ctx = SkillContext(target=target)
     cube, _ = _over(target, ctx, "cube", above_m=0.03)
     tile = target.object_pose("tile")[:3, 3].copy()
-    press = {"contact_n": 2.0, "depth_m": 0.008, "descent_m": 0.05, "object": "tile"}
+    tile_top = float(tile[2]) + target.scene.object("tile").half_extents[2]  # as perceived: 2 cm below the cube's
+    press = {"contact_n": 2.0, "depth_m": 0.008, "descent_m": 0.05, "object": "tile", "top_m": tile_top,
+             "tip_m": FRANKA_TIP_M}
     status = _tick_with(Push("Drag", offset=[0.0, 0.06, 0.0], press="push_press"), ctx, {"push_press": press})
     assert status == py_trees.common.Status.FAILURE and ctx.failure["code"] == "execution.collision"
-    assert "cube" in ctx.failure["message"]
+    assert "above tile's perceived top" in ctx.failure["message"]
     assert np.linalg.norm(target.object_pose("cube")[:2, 3] - cube[:2]) < 0.005  # pressed, never dragged
     assert np.linalg.norm(target.object_pose("tile")[:3, 3] - tile) < 1e-3
 

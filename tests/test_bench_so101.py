@@ -23,7 +23,7 @@ def test_so101_target_builds_the_tabletop_scene_with_a_tool_frame_like_the_frank
         assert arm.tcp_pose()[2, 2] == pytest.approx(-1.0, abs=0.01)
         opened = arm.set_gripper(opening_m=0.04)
         closed = arm.set_gripper(opening_m=0.0)
-        assert opened.opening_m > 0.03 and closed.opening_m < 0.002 and closed.grasped is None
+        assert opened.opening_m > 0.03 and closed.opening_m < 0.002 and not closed.stalled
 
 
 def test_the_same_pick_and_place_graph_runs_on_the_so101_by_changing_only_the_target(tmp_path):

@@ -43,9 +43,14 @@ def test_the_plate_against_the_cabinet_is_dragged_to_the_front_of_the_stove(tmp_
     pose = next(r for r in trace if r.get("kind") == "push_pose")
     assert pose["press"] and pose["direction"][1] > 0.8  # pressed from above, dragged away from the cabinet
     [landed] = [r for r in trace if r.get("kind") == "press"]
-    assert landed["touched"] and all(t.startswith("plate_1") for t in landed["touched"])  # on the plate, not a neighbour
+    # the robot's own parts touched (its force sensing names nothing else): the fingers
+    assert landed["touched"] and all("finger" in t for t in landed["touched"])
     # LIBERO's checker (the privileged record, read by this test only): the plate in front of the stove
     truth = yaml.safe_load((ws / first["evidence"] / "ground_truth.yaml").read_text())
+    # on the plate's floor (5 mm above its origin here), not on a neighbour's top (the cream cheese
+    # box stands 1.8 cm, a bowl's rim 5.1 cm) nor on the plate's rim (1.9 cm)
+    plate_z = truth["initial"]["objects"]["plate_1"]["position"][2]
+    assert plate_z < landed["tips_z"] < plate_z + 0.01
     moved = [b - a for a, b in zip(truth["initial"]["objects"]["plate_1"]["position"],
                                    truth["terminal"]["objects"]["plate_1"]["position"])]
     assert moved[1] > 0.15 and abs(moved[2]) < 0.005  # dragged along the table, not lifted or tipped

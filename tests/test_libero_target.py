@@ -238,3 +238,27 @@ def test_the_declared_finger_geometry_is_the_models_fingers_rounded_to_the_side_
     assert max(lowest) <= tip <= max(lowest) + 0.001  # the tip no higher than the fingers reach
     assert min(b for b, _ in pads) - 0.001 <= pad_bottom <= min(b for b, _ in pads)
     assert min(t for _, t in pads) > 0.01  # the pads reach a centimetre up the tcp's side
+
+
+def test_a_session_handle_on_libero_hands_out_the_perceived_world_never_the_simulators(target):
+    """A runtime that asks its TargetSessionHandle for a snapshot (a policy or agent session)
+    gets what the cameras and the perceiver make of the scene, not the simulator's poses, and
+    the target's observation carries no simulator state beyond the robot's own."""
+    from phyagentos.protocol.schemas import SafetyConfig
+    from phyagentos.runtime.safety_guard import EStopLatch, SafetyGuard
+    from phyagentos.runtime.target_handle import TargetSessionHandle
+
+    target.reset(seed=3)
+    guard = SafetyGuard.for_target(target, SafetyConfig(), events=[], estop=EStopLatch(), flow="agent")
+    handle = TargetSessionHandle(target, ("observe", "snapshot"), guard=guard)
+    seen = handle.call("snapshot")
+    truth = {e["name"]: e["position"] for e in target.snapshot()["entities"] if e["kind"] == "object"}
+    assert {"proprioception", "unseen", "remembered"} <= set(seen)  # the perceiver's snapshot
+    # what the cameras saw: segments (named only where a declared look matches them; this bare
+    # target declares none), each with the perceiver's confidence, none at a simulator pose
+    things = [e for e in seen["entities"] if e["kind"] in ("object", "unknown")]
+    assert len(things) >= 5 and all("confidence" in e["attributes"] for e in things)
+    assert set(truth) <= {e["name"] for e in things} | set(seen["unseen"])
+    for e in things:
+        assert not any(np.allclose(e["position"], p, atol=1e-6) for p in truth.values())
+    assert set(target.observe()) == {"time", "arm_qpos", "arm_qvel", "gripper_opening_m", "tcp_pose", "env_steps"}

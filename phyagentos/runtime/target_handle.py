@@ -78,6 +78,7 @@ class TargetSessionHandle:
         self.events = guard.events
         self.state: dict[str, Any] = {}
         self.calls = 0
+        self._perceiver: Any = None
         self._handlers: dict[str, Callable[..., Any]] = {
             "observe": self._observe, "query_state": self._query_state, "snapshot": self._snapshot,
             "render": self._render, "move_joints": self._move_joints, "set_gripper": self._set_gripper,
@@ -134,7 +135,18 @@ class TargetSessionHandle:
         return self._target.query_state()
 
     def _snapshot(self) -> dict:
-        return self._target.snapshot()
+        """What the session may know of the world: on a target with cameras, what a perceiver
+        makes of one look (:func:`~phyagentos.primitives.observation.perceive_now`; the
+        simulator's poses are ground truth, for scoring only, never handed to a session);
+        otherwise the target's own snapshot (a game's symbolic view, a camera-less world)."""
+        from phyagentos.primitives.observation import has_cameras, make_perceiver, perceive_now  # noqa: PLC0415
+
+        target = self._target
+        if not has_cameras(target):
+            return target.snapshot()
+        if self._perceiver is None:  # one per session: its tracks carry from look to look
+            self._perceiver = make_perceiver(target)
+        return perceive_now(target, self._perceiver)
 
     def _render(self, camera: str = "overview", width: int = 224, height: int = 224) -> np.ndarray:
         for name, v in (("width", width), ("height", height)):

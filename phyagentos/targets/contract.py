@@ -213,8 +213,10 @@ class ExecutionResult:
         max_tracking_error_rad: largest ``|q - q_ref|`` over joints and time steps, rad.
         sim_time_s: target time spent executing (simulated seconds for simulations).
         steps: control steps taken.
-        contacts: unexpected contact pairs seen during execution (sorted name pairs,
-            e.g. ``('obstacle:wall', 'panda0_link7')``); empty when none.
+        contacts: the robot's parts that met something unexpected during execution
+            (sorted robot body names, e.g. ``('panda0_link7',)``, or ``'held object'`` where
+            what the hand holds met an obstacle); empty when none. What they met is never
+            named: a real arm senses where a collision is on itself, not what it hit.
         reason: empty when completed, otherwise why execution stopped.
         code: empty unless the target itself stopped the motion for a reason it can name:
             then an error code (``<family>.<detail>``, ``protocol/errorcodes``), e.g.
@@ -226,7 +228,7 @@ class ExecutionResult:
     max_tracking_error_rad: float
     sim_time_s: float
     steps: int
-    contacts: tuple[tuple[str, str], ...] = ()
+    contacts: tuple[str, ...] = ()
     reason: str = ""
     code: str = ""
 
@@ -237,7 +239,7 @@ class ExecutionResult:
             "max_tracking_error_rad": self.max_tracking_error_rad,
             "sim_time_s": self.sim_time_s,
             "steps": self.steps,
-            "contacts": [list(c) for c in self.contacts],
+            "contacts": list(self.contacts),
             "reason": self.reason,
             "code": self.code,
         }

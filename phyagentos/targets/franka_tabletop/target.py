@@ -234,8 +234,7 @@ class MuJoCoTarget(MuJoCoArmTarget):
             if k + 1 >= n_min and still >= int(round(0.05 / ts)):
                 break
         opening = self.gripper_opening()
-        held = self.held_objects()
-        return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002, grasped=held[0] if held else None)
+        return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002)
 
     # -- perception and perturbations (phyagentos.targets.perturbations) ---------------
     @property

@@ -449,8 +449,7 @@ class FrankaKitchenTarget(MuJoCoArmTarget):
                 break
             prev = now
         opening = self.gripper_opening()
-        held = self.held_objects()
-        return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002, grasped=held[0] if held else None)
+        return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002)
 
     # -- contacts and observation -----------------------------------------------------
     def held_objects(self) -> tuple[str, ...]:

@@ -756,18 +756,19 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
                 prev = now
         self._advance(steps)
         opening = self.gripper_opening()
-        held = self.held_objects()
-        return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002, grasped=held[0] if held else None)
+        return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002)
 
     def observe(self) -> dict:
         """Proprioceptive observation: ``time`` s, ``arm_qpos`` (7,) rad, ``arm_qvel`` (7,)
-        rad/s, ``gripper_opening_m``, ``tcp_pose`` (4, 4) world, ``qpos`` (nq,) (for collision
-        checkers), ``env_steps`` (physics steps since reset). No object poses: those are
-        perceived from the cameras (:meth:`capture`)."""
+        rad/s, ``gripper_opening_m``, ``tcp_pose`` (4, 4) world, ``env_steps`` (physics steps
+        since reset). No object poses, and not the simulator's whole ``qpos`` (its free joints
+        are the objects' true poses): objects are perceived from the cameras (:meth:`capture`),
+        and the motion planner's world is built from what was perceived
+        (:meth:`planning_bodies`)."""
         self._check_open()
         return {"time": self.sim_time, "arm_qpos": self.arm_qpos(), "arm_qvel": self.arm_qvel(),
                 "gripper_opening_m": self.gripper_opening(), "tcp_pose": self.tcp_pose(),
-                "qpos": self._data.qpos.copy(), "env_steps": self._env_steps}
+                "env_steps": self._env_steps}
 
     def query_state(self) -> dict:
         """JSON-ready: target name/kind, ``sim_time_s``, ``arm_qpos``, ``gripper_opening_m``,

@@ -93,18 +93,21 @@ class ArmContacts:
                 for i in np.nonzero(hit)[0]:
                     bad_pairs.add((int(g[i, 0]), int(g[i, 1])))
 
-    def _geom_label(self, g: int) -> str:
+    def _robot_part(self, a: int, b: int) -> str:
+        """The robot's side of an unexpected contact between geoms ``a`` and ``b``: the robot
+        body that met something (its own link's name), or ``"held object"`` where what the
+        hand holds met an obstacle. What it met is not named: a real arm's collision sensing
+        (joint torques, a wrist force sensor) says where on the robot, never what it hit."""
         m = self._model
-        k = self._gkind[g]
-        if k in (K_ROBOT, K_FINGER):
-            return m.body(int(m.geom_bodyid[g])).name
-        if k == K_OBJECT:
-            return self._obj_names[int(self._gobj[g])]
-        return m.geom(g).name or m.body(int(m.geom_bodyid[g])).name
+        for g in (a, b):
+            if self._gkind[g] in (K_ROBOT, K_FINGER):
+                return m.body(int(m.geom_bodyid[g])).name
+        return "held object"
 
-    def _contact_names(self, bad_pairs: set) -> tuple[tuple[str, str], ...]:
-        out = tuple(sorted({tuple(sorted((self._geom_label(a), self._geom_label(b)))) for a, b in bad_pairs}))
+    def _contact_names(self, bad_pairs: set) -> tuple[str, ...]:
+        """Sorted robot parts (:meth:`_robot_part`) of the unexpected contacts in ``bad_pairs``."""
+        out = tuple(sorted({self._robot_part(a, b) for a, b in bad_pairs}))
         if out:
-            log.info("unexpected contacts during execution: %s", out)
-        return out  # type: ignore[return-value]
+            log.info("unexpected contacts during execution, on: %s", out)
+        return out
 

@@ -43,15 +43,16 @@ class GripperResult:
         opening_m: measured opening per finger after settling, metres (0 .. 0.04).
         stalled: the fingers stopped more than 2 mm short of the commanded opening
             (something is between them).
-        grasped: name of the object touching both finger pads, else ``None``.
+
+    What is between the fingers is not named: a real hand's encoders say only how far it
+    closed. The simulator's answer (:meth:`held_objects`) is ground truth, for scoring and tests.
     """
 
     opening_m: float
     stalled: bool
-    grasped: str | None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"opening_m": self.opening_m, "stalled": self.stalled, "grasped": self.grasped}
+        return {"opening_m": self.opening_m, "stalled": self.stalled}
 
 
 class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, BaseRolloutTarget, MuJoCoBacked,

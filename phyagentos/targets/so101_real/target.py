@@ -292,8 +292,7 @@ class SO101RealTarget(SO101Target):
                 break
             prev = jaw
         opening = self.gripper_opening()
-        held = self.held_objects()
-        return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002, grasped=held[0] if held else None)
+        return GripperResult(opening_m=opening, stalled=abs(opening - o) > 0.002)
 
     def _gripper_effort_n(self) -> float:
         """Grip force, N: the jaw servo's measured ``Present_Load`` (0.1 % of 3.35 N m) over the

@@ -26,6 +26,7 @@ from phyagentos.bench.libero import (
 )
 from phyagentos.perception import PerceptionError
 from phyagentos.perception.fixtures import (
+    DRAWER_HANDLE_PLAY_M,
     DRAWER_SIGMA_M,
     DRAWER_STOP_SIGMA_M,
     DrawerLook,
@@ -329,6 +330,46 @@ def test_a_drawer_pushed_into_its_stop_is_read_shut_until_its_handle_is_read_out
     with pytest.raises(PerceptionError, match="no drawer of a declared fixture; drawers: "
                                               r"\['wooden_cabinet_1_middle_drawer'\]"):
         perceiver.note_drawer_stop("wooden_cabinet_1_top_drawer", stamp_s=1.0)
+
+
+def test_a_drawer_the_hand_pulled_open_reads_at_least_its_felt_opening_while_its_handle_is_hidden():
+    perceiver, drawer = _perceiver_with_a_cabinet()
+    name = "wooden_cabinet_1_middle_drawer"
+    drawer(0.0)
+    assert "joint_position" not in drawer(None)  # read shut, then hidden: nothing to judge
+    perceiver.note_drawer_opened(name, opening_m=0.158, stamp_s=3.0)
+    attrs = drawer(None)  # hidden since the hand let go: the hand's travel, less the bar's play
+    assert attrs["joint_position"] == pytest.approx(0.158 - DRAWER_HANDLE_PLAY_M, abs=1e-3)
+    assert (attrs["joint_source"], attrs["joint_position_bound"], attrs["source"]) == ("hand", "lower", "remembered")
+    assert attrs["joint_position_std_m"] == DRAWER_SIGMA_M and attrs["support"]  # its floor is out: a place
+    # the verifier confirms "opened" on it, never "shut", and refutes "shut"
+    crit = {"opened": {"articulated": {"object": name, "min_fraction": OPENED_MIN_FRACTION}},
+            "shut": {"articulated": {"object": name, "max_fraction": CLOSED_MAX_FRACTION}},
+            "half": {"articulated": {"object": name, "min": 0.05, "max": 0.2}}}
+    snap = {"entities": [{"name": name, "kind": "articulation", "position": [0, 0, 1], "size": [0.1, 0.1, 0.01],
+                          "attributes": attrs}]}
+    status = {k: evaluate(parse_criteria(v)[0], snap, snap).status for k, v in crit.items()}
+    assert status == {"opened": "satisfied", "shut": "unsatisfied", "half": "unknown"}
+    low = {**attrs, "joint_position": 0.02}  # "at least 2 cm" says nothing against shut or opened
+    snap["entities"][0]["attributes"] = low
+    assert [evaluate(parse_criteria(crit[k])[0], snap, snap).status for k in ("opened", "shut")] == ["unknown",
+                                                                                                     "unknown"]
+    # carried to a later session with the fixtures
+    later, later_drawer = _perceiver_with_a_cabinet()
+    later.restore_fixtures(perceiver.export_fixtures())
+    assert later_drawer(None)["joint_source"] == "hand"
+    # a reading of the handle supersedes it, now and after (read at 2.0 s < 3.0 s: kept; here read anew)
+    attrs = drawer(0.12)
+    assert attrs["joint_position"] == 0.12 and "joint_source" not in attrs
+    perceiver.drawer_seen[("wooden_cabinet_1", "middle")] = (0.12, 4.0)
+    attrs = drawer(None)
+    assert "joint_position" not in attrs  # read after the hand let go, hidden again: remembered only
+    # a new motion of the drawer forgets it
+    perceiver.note_drawer_opened(name, opening_m=0.158, stamp_s=5.0)
+    perceiver.forget_drawer_stop(name)
+    assert not perceiver.drawer_felt
+    with pytest.raises(PerceptionError, match="no drawer of a declared fixture"):
+        perceiver.note_drawer_opened("wooden_cabinet_1_top_drawer", opening_m=0.1, stamp_s=1.0)
 
 
 def test_a_close_left_undecided_is_pushed_home_once_more_not_looked_at_again():

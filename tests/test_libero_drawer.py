@@ -51,6 +51,10 @@ def test_opening_the_middle_drawer_is_confirmed_on_its_handle_and_libero_agrees(
     # what really happened (the privileged record, read by this test only): LIBERO's checker agrees
     truth = yaml.safe_load((evidence / "ground_truth.yaml").read_text())
     assert truth["scene_record"]["generated"] is True and truth["benchmark"]["success"] is True
+    # the hand kept the handle to the end of the pull: the perceiver was told where it let go
+    trace = [json.loads(line) for line in (evidence / "trace.jsonl").read_text().splitlines()]
+    (felt,) = [t for t in trace if t["kind"] == "slide_felt"]
+    assert felt["held"] and 0.14 < felt["opening_m"] <= 0.17 and abs(felt["from_m"]) < 0.01
 
 
 def _white_drawer(name: str, height: float, top: float) -> dict:

@@ -586,6 +586,12 @@ def _eval_articulated(c, initial, terminal, refs):
     # a reported one is exact
     m = 2.0 * float(attrs.get("joint_position_std_rad") or attrs.get("joint_position_std_m") or 0.0)
     q = float(q)
+    if attrs.get("joint_position_bound") == "lower":
+        # the joint is at least q (a drawer the hand pulled open, its handle unseen since): it can
+        # confirm an opening, or refute a bound it already passes, never confirm a joint below a max
+        return _band(c, refs, lo <= q - m and math.isinf(hi), q - m > hi, obj, "articulated",
+                     f"joint at least {q:.3f} (2 sigma {m:.3f}, {attrs.get('joint_source', 'a bound')}) "
+                     f"against [{lo:.3f}, {hi:.3f}]")
     return _band(c, refs, lo <= q - m and q + m <= hi, q + m < lo or q - m > hi, obj, "articulated",
                  f"joint at {q:.3f} (2 sigma {m:.3f}) against [{lo:.3f}, {hi:.3f}]")
 

@@ -261,6 +261,13 @@ DRAWER_SIGMA_M = 0.01
 #: along its axis (LIBERO's cabinet drawers rest 1.7 mm past their joint's zero under 5, 20 and
 #: 60 N alike: ``bench/libero_drawer.py --stop``, docs/libero.md, "Closing a drawer").
 DRAWER_STOP_SIGMA_M = 0.002
+#: How far the hand's travel may exceed a drawer's while the closed fingers pull its handle, m:
+#: the bar's play between them (measured pushing the wooden cabinet's top drawer into its stop:
+#: it held the hand after 9.9 and 10.2 mm, LIBERO-90 task 0, inits 0 and 1, the training set;
+#: docs/libero.md, "Closing a drawer"). A drawer the hand pulled open
+#: (:meth:`~phyagentos.perception.Perceiver.note_drawer_opened`) is at least its travel less
+#: this out.
+DRAWER_HANDLE_PLAY_M = 0.012
 _DRAWER_SLICE_M = 0.005
 
 

@@ -98,6 +98,7 @@ from phyagentos.perception.detect import stack as _stack
 from phyagentos.perception.split import split_clusters
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.fixtures import (
+    DRAWER_HANDLE_PLAY_M,
     DRAWER_SIGMA_M,
     DRAWER_STOP_SIGMA_M,
     DRAWER_WINDOW_M,
@@ -359,6 +360,10 @@ class Perceiver:
         #: (:meth:`note_drawer_stop`): read shut, to the contact's 1-sigma, while its handle is
         #: read within 2 sigma of shut
         self.drawer_stops: dict[tuple[str, str], float] = {}
+        #: (fixture, drawer) -> (opening m, stamp s) the hand felt when it let go of the handle
+        #: of a drawer it pulled open (:meth:`note_drawer_opened`): what the drawer reads while
+        #: its handle is hidden and not read since
+        self.drawer_felt: dict[tuple[str, str], tuple[float, float]] = {}
         self._baseline_n: float | None = None
         self._held: str | None = None
         self._grasp_height_m: float | None = None
@@ -402,13 +407,33 @@ class Perceiver:
         """
         self.drawer_stops[self._drawer_key(entity)] = float(stamp_s)
 
+    def note_drawer_opened(self, entity: str, *, opening_m: float, stamp_s: float) -> None:
+        """Record that the hand, holding drawer ``entity``'s handle, pulled it open and stood,
+        at ``stamp_s`` s, ``opening_m`` m out of shut by its joint encoders: the reading the pull
+        began from plus the hand's travel along the drawer's axis
+        (:class:`~phyagentos.primitives.affordance.ArticulateSlide`). The drawer is then at least
+        ``opening_m`` less the bar's play in the fingers
+        (:data:`~phyagentos.perception.fixtures.DRAWER_HANDLE_PLAY_M`) out: the hand pulled it that
+        far, and backing off the released handle only pulls it further. While its handle is
+        hidden and not read since, the drawer is reported there, with the starting reading's
+        1-sigma and ``joint_position_bound: lower`` (a verifier may confirm "open at least",
+        never "shut"); a reading of the handle supersedes it.
+
+        Raises:
+            PerceptionError: ``entity`` is no drawer of a declared fixture (the drawers listed).
+        """
+        self.drawer_felt[self._drawer_key(entity)] = (float(opening_m) - DRAWER_HANDLE_PLAY_M, float(stamp_s))
+
     def forget_drawer_stop(self, entity: str) -> None:
-        """Forget what :meth:`note_drawer_stop` recorded of ``entity`` (it is being moved); an
-        entity that is no declared drawer has nothing to forget."""
+        """Forget what :meth:`note_drawer_stop` and :meth:`note_drawer_opened` recorded of
+        ``entity`` (it is being moved); an entity that is no declared drawer has nothing to
+        forget."""
         try:
-            self.drawer_stops.pop(self._drawer_key(entity), None)
+            key = self._drawer_key(entity)
         except PerceptionError:
-            pass
+            return
+        self.drawer_stops.pop(key, None)
+        self.drawer_felt.pop(key, None)
 
     # ------------------------------------------------------------------ state
 
@@ -441,14 +466,16 @@ class Perceiver:
         """The fixtures' last sightings as plain data (``{name: {position, yaw, half_extents,
         half_xy_world, top_m, points, error, found_by, turn, stamp_s, confidence, drawers, stops}}``, m,
         rad, s; ``drawers``: ``{drawer: [opening m, stamp s]}`` of each drawer's last reading;
-        ``stops``: ``{drawer: stamp s}`` of each drawer pushed into its shut stop), for
+        ``stops``: ``{drawer: stamp s}`` of each drawer pushed into its shut stop; ``felt``:
+        ``{drawer: [opening m, stamp s]}`` of each drawer the hand pulled open), for
         :meth:`restore_fixtures`."""
         return {n: {"position": s.position.tolist(), "yaw": float(s.yaw), "half_extents": s.half_extents.tolist(),
                     "half_xy_world": s.half_xy_world.tolist(), "top_m": float(s.top_m), "points": int(s.points),
                     "error": float(s.error), "found_by": s.found_by, "turn": float(s.turn), "stamp_s": float(t),
                     "confidence": float(c),
                     "drawers": {d: [float(o), float(ts)] for (f, d), (o, ts) in self.drawer_seen.items() if f == n},
-                    "stops": {d: float(ts) for (f, d), ts in self.drawer_stops.items() if f == n}}
+                    "stops": {d: float(ts) for (f, d), ts in self.drawer_stops.items() if f == n},
+                    "felt": {d: [float(o), float(ts)] for (f, d), (o, ts) in self.drawer_felt.items() if f == n}}
                 for n, (s, t, c) in self.fixture_tracks.items()}
 
     def restore_fixtures(self, data: Mapping[str, Any]) -> None:
@@ -462,6 +489,7 @@ class Perceiver:
         self.fixture_tracks = {}
         self.drawer_seen = {}
         self.drawer_stops = {}
+        self.drawer_felt = {}
         for name, d in (data or {}).items():
             if name not in looks:
                 continue
@@ -475,6 +503,8 @@ class Perceiver:
                     self.drawer_seen[(name, str(drawer))] = (float(opening), float(ts))
                 for drawer, ts in (d.get("stops") or {}).items():
                     self.drawer_stops[(name, str(drawer))] = float(ts)
+                for drawer, (opening, ts) in (d.get("felt") or {}).items():
+                    self.drawer_felt[(name, str(drawer))] = (float(opening), float(ts))
             except (KeyError, TypeError, ValueError) as exc:
                 raise PerceptionError(f"perception state: fixture {name!r} has an unexpected layout: {exc}") from None
 
@@ -1080,15 +1110,21 @@ class Perceiver:
         ``grasp`` (``approach`` and ``entry`` into the drawer, ``closing`` vertical). A drawer
         read before whose handle is hidden now (by the arm, or the bowl it carries) is reported
         where it was last read, ``source: remembered``, without ``joint_position``: a box to set
-        things into, never a reading to judge an opening by."""
+        things into, never a reading to judge an opening by; unless the hand pulled it open
+        since that reading (:meth:`note_drawer_opened`): then it is reported where the hand
+        felt it, ``joint_source: hand``, with ``joint_position_bound: lower``."""
         s = self.fixture_tracks[look.name][0]
         out = []
         for drawer in look.drawers:
             reading = self.drawer_readings.get((look.name, drawer.name))
             seen = self.drawer_seen.get((look.name, drawer.name))
-            if reading is None and seen is None:
+            felt = self.drawer_felt.get((look.name, drawer.name))
+            if reading is not None or felt is None or (seen is not None and seen[1] > felt[1]):
+                felt = None  # a reading now, or one since the hand let go, says more
+            if reading is None and seen is None and felt is None:
                 continue
-            opening, points = reading if reading is not None else (seen[0], 0)  # type: ignore[index]
+            opening, points = (reading if reading is not None else (felt[0], 0) if felt is not None
+                               else (seen[0], 0))  # type: ignore[index]
             stop = self.drawer_stops.get((look.name, drawer.name))
             if stop is not None and reading is not None and abs(opening) > 2.0 * DRAWER_SIGMA_M:
                 del self.drawer_stops[(look.name, drawer.name)]  # read out of shut: it was moved since
@@ -1115,7 +1151,10 @@ class Perceiver:
                                "approach": _r(into, 5), "entry": _r(into, 5), "closing": _r(closing, 5)}}
             if pushed_home:  # read shut from the push that met its stop, the handle where a shut one is read
                 attrs.update(at_stop="shut", stop_s=_r(stop, 6), handle_read_m=_r(reading[0]))  # type: ignore[index]
-            if reading is None:  # its handle hidden now: where it was last read; no joint reading to judge
+            if reading is None and felt is not None:  # hidden, pulled open since it was last read
+                attrs.update(source="remembered", remembered=True, last_seen_s=_r(seen[1], 6) if seen else None,
+                             joint_source="hand", joint_position_bound="lower", felt_s=_r(felt[1], 6))
+            elif reading is None:  # its handle hidden now: where it was last read; no joint reading to judge
                 assert seen is not None
                 for key in ("joint_position", "joint_position_std_m"):
                     attrs.pop(key)

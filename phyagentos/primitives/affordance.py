@@ -28,11 +28,15 @@ from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.grasp import top_down_grasp_candidates
 from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.retime import retime
+from phyagentos.perception.fixtures import DRAWER_HANDLE_PLAY_M
+from phyagentos.targets.contract import capabilities_of
 
 from . import planning_world
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
+from .grasp_sense import MIN_EFFORT_N, min_opening_m
 from .motion import execution_limits, ik_options
+from .observation import save_tracks
 from .perception import entity_pose
 
 __all__ = ["ComputeAffordanceGrasp", "ArticulateHinge", "ArticulateSlide", "ComputePlaceAsHeld", "ToolMove"]
@@ -363,7 +367,7 @@ STOP_BAND_MIN_M = 0.005
 #: and 1, the training set: the drawer already at its stop). The hand's travel may exceed the
 #: drawer's by this much, so a stop met up to this much beyond the reading's band is still the
 #: shut stop; it never widens the side a jam (a drawer held out, short of shut) falls on.
-HANDLE_PLAY_M = 0.012
+HANDLE_PLAY_M = DRAWER_HANDLE_PLAY_M
 
 
 class ArticulateSlide(_Articulate):
@@ -466,8 +470,29 @@ class ArticulateSlide(_Articulate):
             self._note_moved()
             raise
         if status != Status.RUNNING:
-            self._note_moved()
+            opening = self._note_moved()
+            if status == Status.SUCCESS and self._push is None and opening is not None:
+                self._note_opened(opening)
         return status
+
+    def _note_opened(self, opening: float) -> None:
+        """A pull that opened the drawer, ended with the fingers still closed on its handle (the
+        hand's own encoders: opening and effort, :mod:`.grasp_sense`): tell the session's
+        perceiver where the hand let the drawer stand
+        (:meth:`~phyagentos.perception.Perceiver.note_drawer_opened`), for a look that cannot
+        read the handle. A pull that lost the handle, or a push, tells it nothing."""
+        assert self._moved_from is not None
+        target, perceiver = self.ctx.target, getattr(self.ctx, "perceiver", None)
+        if opening <= self._moved_from[0] or perceiver is None or not hasattr(perceiver, "note_drawer_opened") \
+                or not capabilities_of(target).has_sensor("proprioception"):
+            return
+        p = target.proprioception()
+        held = p.gripper_opening_m > min_opening_m(None) and p.gripper_effort_n > MIN_EFFORT_N
+        self.ctx.trace.record("slide_felt", leaf=self.name, object=self.object, opening_m=round(opening, 4),
+                              from_m=round(self._moved_from[0], 4), held=bool(held))
+        if held:
+            perceiver.note_drawer_opened(self.object, opening_m=opening, stamp_s=float(target.sim_time or 0.0))
+            save_tracks(target, perceiver)
 
     def _slide(self) -> Status:
         """One tick of the motion; a push home ends where the stop holds the hand (:meth:`_at_stop`)."""
@@ -481,13 +506,16 @@ class ArticulateSlide(_Articulate):
             return self._at_stop(str(exc))
         return self._at_stop("") if status == Status.SUCCESS else status
 
-    def _note_moved(self) -> None:
+    def _note_moved(self) -> float | None:
         """Tell the planning world where the drawer is now: read where the motion began, moved
-        as far as the hand holding its handle moved along its axis (the joint encoders)."""
-        if self._moved_from is not None:
-            q0, axis, start = self._moved_from
-            moved = float(np.dot(self.ctx.target.tcp_pose()[:3, 3] - start, axis))
-            planning_world.note_slide(self.ctx.target, self.object, q0 + moved)
+        as far as the hand holding its handle moved along its axis (the joint encoders).
+        Returns that opening, m (``None``: the drawer was not read where the motion began)."""
+        if self._moved_from is None:
+            return None
+        q0, axis, start = self._moved_from
+        moved = float(np.dot(self.ctx.target.tcp_pose()[:3, 3] - start, axis))
+        planning_world.note_slide(self.ctx.target, self.object, q0 + moved)
+        return q0 + moved
 
     def _at_stop(self, tracking: str) -> Status:
         """End a push home (class docstring): where the hand stands against what held it back."""

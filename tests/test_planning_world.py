@@ -202,7 +202,30 @@ def test_a_malformed_root_look_is_refused_with_its_keys():
                                "root": {"offset_m": [0, 0], "yaw_rad": 0.0, "body_yaw_rad": 0.0}})
 
 
-def test_the_tabletop_world_keeps_planning_in_its_own_state():
-    from phyagentos.targets import MuJoCoTarget
+def test_the_tabletop_plans_around_its_objects_where_it_saw_them_and_its_declared_workcell():
+    from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget
 
-    assert not issubclass(MuJoCoTarget, PlansInPerceivedWorld)
+    with MuJoCoTarget("tabletop", DEFAULT_SCENE, seed=0) as target:
+        assert isinstance(target, PlansInPerceivedWorld)
+        bodies = target.planning_bodies()
+        assert set(bodies.objects) == set(DEFAULT_SCENE.object_names) and not bodies.fixtures and not bodies.slides
+        assert len(bodies.robot_joints) == 9 and all(j.startswith("robot:panda0_") for j in bodies.robot_joints)
+        ctx = SimpleNamespace(target=target)
+        checker = session_checker(ctx)  # nothing seen yet: no cube in the planner's world
+        mujoco.mj_kinematics(checker.model, checker.data)
+        cube = target.model.body("cube").id
+        assert checker.data.xpos[cube][2] < -10.0
+        perceive_now(target, make_perceiver(target))
+        seen = target.data.xpos[cube].copy()
+        checker = session_checker(ctx)
+        mujoco.mj_kinematics(checker.model, checker.data)
+        assert np.linalg.norm(checker.data.xpos[cube] - seen) < 0.01  # where the cameras put it, within 1 cm
+        adr = int(target.model.jnt_qposadr[int(target.model.body_jntadr[cube])])
+        target.data.qpos[adr:adr + 3] = (0.3, 0.3, 0.5)  # the simulator moves it; nobody looked
+        mujoco.mj_forward(target.model, target.data)
+        checker = session_checker(ctx)
+        mujoco.mj_kinematics(checker.model, checker.data)
+        assert np.linalg.norm(checker.data.xpos[cube] - seen) < 0.01
+        # the declared workcell (the wall) is the model's, where the user declared it
+        wall = next(g for g in range(target.model.ngeom) if target.model.geom(g).name.startswith("obstacle"))
+        np.testing.assert_allclose(checker.data.geom_xpos[wall], target.data.geom_xpos[wall], atol=1e-9)

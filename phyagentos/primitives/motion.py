@@ -87,7 +87,8 @@ def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> t
 
 def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = None) -> CollisionChecker:
     """A collision checker synced to the world the target plans in: for a
-    :class:`~phyagentos.targets.contract.PlansInPerceivedWorld` target (LIBERO) the world its
+    :class:`~phyagentos.targets.contract.PlansInPerceivedWorld` target (LIBERO, the tabletop
+    scenes) the world its
     robot perceived (:mod:`phyagentos.primitives.planning_world`), else the simulator's state;
     with ``opening_m`` (m per finger) its fingers stand that far open instead of as they are
     (:meth:`~phyagentos.motion.collision.CollisionChecker.set_gripper_opening`: a hand
@@ -113,9 +114,9 @@ def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = Non
                                                         if c.model_source is target.model), None))
         cache[margin_m] = checker
     perceived = planning_world.plans_in_perceived_world(target)
-    if perceived:  # what the robot perceived (LIBERO), never where the simulator has put things
+    if perceived:  # what the robot perceived, never where the simulator has put things
         planning_world.apply(target, checker)
-    else:  # the tabletop worlds the project builds itself: the simulator's state
+    else:  # a target without the capability (FrankaKitchen): the simulator's state
         checker.set_world_state(target.data.qpos)
     if opening_m is not None:
         checker.set_gripper_opening(opening_m)

@@ -1,9 +1,10 @@
 """The planning world: what the Runtime plane's motion planner checks collisions against, built
 from what the robot perceived.
 
-A target that is :class:`~phyagentos.targets.contract.PlansInPerceivedWorld` (LIBERO) plans in
-this world instead of the simulator's state, which holds privileged truth (true object poses,
-initial placements: ``DESIGN.md``, "What each plane may know"). The world is its model with:
+A target that is :class:`~phyagentos.targets.contract.PlansInPerceivedWorld` (LIBERO, and the
+tabletop scenes: the Franka's and the SO-101's) plans in this world instead of the simulator's
+state, which holds privileged truth (true object poses, initial placements: ``DESIGN.md``,
+"What each plane may know"). The world is its model with:
 
 - the robot's joints at its encoders' readings;
 - each object the last observation reported (``kind: object``) as its model placed at the
@@ -20,9 +21,10 @@ initial placements: ``DESIGN.md``, "What each plane may know"). The world is its
   model's default.
 
 The model's geometry is the robot's knowledge of its objects and fixtures (their meshes ship
-with the benchmark's assets); nothing here reads where the simulator has put them. A target
-without the capability keeps planning in the simulator's state (the tabletop worlds the project
-builds itself; :func:`phyagentos.primitives.motion.session_checker`).
+with the benchmark's assets; a tabletop scene's shapes are the user's declaration, and its
+table, walls and bins a known workcell); nothing here reads where the simulator has put them.
+A target without the capability keeps planning in the simulator's state (FrankaKitchen;
+:func:`phyagentos.primitives.motion.session_checker`).
 
 The world is kept in ``target.runtime_notes`` (plain data the target checkpoints), so it
 outlives a session and a runner restart, like the perceiver's tracks.

@@ -578,8 +578,7 @@ class PlansInPerceivedWorld(abc.ABC):
     """A MuJoCo-backed target whose motion planning checks collisions in the world its robot
     perceived (an optional capability: check with ``isinstance(target, PlansInPerceivedWorld)``):
     each perceived object's and fixture's model where it was seen, what was not seen left out.
-    Without it the planner's world is the simulator's state (the tabletop worlds the project
-    builds itself)."""
+    Without it the planner's world is the simulator's state (FrankaKitchen's)."""
 
     @abc.abstractmethod
     def planning_bodies(self) -> PlanningBodies:

@@ -25,7 +25,7 @@ import numpy as np
 from phyagentos.errors import TargetError
 
 from ..base import ExecutionResult
-from ..contract import TargetCapabilities
+from ..contract import PlanningBodies, PlansInPerceivedWorld, TargetCapabilities
 from ..mujoco_arm import GripperResult, MuJoCoArmTarget
 from ..scene import (
     ARM_JOINT_NAMES,
@@ -51,7 +51,7 @@ _TOOLS = ("observe", "move_joints", "set_gripper", "hold", "snapshot")
 MAX_GRIP_FORCE_N = 70.0
 
 
-class MuJoCoTarget(MuJoCoArmTarget):
+class MuJoCoTarget(MuJoCoArmTarget, PlansInPerceivedWorld):
     """A simulated Franka Panda on a table, built from a :class:`SceneSpec`.
 
     What is particular to the Franka: its model (:func:`~phyagentos.targets.scene.build_scene`),
@@ -125,6 +125,13 @@ class MuJoCoTarget(MuJoCoArmTarget):
         from phyagentos.motion.retime import actuator_velocity_limits  # noqa: PLC0415
 
         return actuator_velocity_limits(self._model, ARM_JOINT_NAMES, torque_fraction=torque_fraction)
+
+    def planning_bodies(self) -> PlanningBodies:
+        """Where perceived things go in this scene's model: the robot's joints and each declared
+        object's body (:meth:`~phyagentos.targets.mujoco_arm.MuJoCoArmTarget._tabletop_planning_bodies`):
+        the motion planner checks collisions against the objects where the robot perceived them,
+        never where the simulator has put them."""
+        return self._tabletop_planning_bodies()
 
     # -- lifecycle --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, settle_s: float = 0.3) -> dict:

@@ -22,7 +22,7 @@ from phyagentos.geometry import pose_matrix
 
 from ..base import BaseRolloutTarget
 from ..camera_noise import CameraNoise
-from ..contract import ExecutionResult, MuJoCoBacked, RendersImages, TargetCapabilities
+from ..contract import ExecutionResult, MuJoCoBacked, PlanningBodies, RendersImages, TargetCapabilities
 from .checkpoints import ArmCheckpoints
 from .common import K_ENV, K_FINGER, K_OBJECT, K_ROBOT
 from .common import floats as _floats
@@ -198,7 +198,25 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
                 kind[g] = K_ENV
         self._gkind, self._gobj, self._gside = kind, gobj, side
         self._support_geoms = frozenset((m.geom(TABLE_GEOM).id, m.geom(FLOOR_GEOM).id))
+        self._robot_root = robot_root
         self._U_cache: dict[frozenset, np.ndarray] = {}
+
+    def _tabletop_planning_bodies(self) -> PlanningBodies:
+        """Where perceived things go in a tabletop scene's model, for a planning world built
+        from perception (:class:`~phyagentos.targets.contract.PlanningBodies`): the robot's
+        joints (every joint under its root body), each declared object's body (its free joint;
+        its shape is the scene's declaration, its pose the perceiver's), no fixtures and no
+        slides: the table, walls and bins are the scene the user declared, a known workcell.
+
+        Raises:
+            TargetError: the target was not built from a tabletop scene.
+        """
+        if getattr(self, "_robot_root", None) is None:
+            raise TargetError(f"target {self.name!r} has no tabletop scene to plan in")
+        m = self._model
+        joints = tuple(m.joint(j).name for j in range(m.njnt) if self._is_under(int(m.jnt_bodyid[j]), self._robot_root))
+        return PlanningBodies(robot_joints=joints, objects={n: m.body(b).name for n, b in self._obj_body.items()},
+                              fixtures={}, slides={})
 
     def _is_under(self, b: int, root: int) -> bool:
         while b > 0:

@@ -229,3 +229,54 @@ def test_the_tabletop_plans_around_its_objects_where_it_saw_them_and_its_declare
         # the declared workcell (the wall) is the model's, where the user declared it
         wall = next(g for g in range(target.model.ngeom) if target.model.geom(g).name.startswith("obstacle"))
         np.testing.assert_allclose(checker.data.geom_xpos[wall], target.data.geom_xpos[wall], atol=1e-9)
+
+
+def test_unnamed_segments_are_boxes_in_the_tabletop_planners_world_but_not_pieces_of_objects_or_the_held():
+    from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget
+    from phyagentos.targets.scene import UNSEEN_SLOTS
+
+    def ent(name, kind, xyz, half):
+        return {"name": name, "kind": kind, "position": list(xyz), "size": list(half), "quat_wxyz": [1, 0, 0, 0]}
+
+    tcp = np.array([0.4, 0.0, 0.3])
+    entities = [ent("cube", "object", (0.5, -0.2, 0.02), (0.02, 0.02, 0.02)),
+                ent("unknown_0", "unknown", (0.5, -0.143, 0.025), (0.02, 0.03, 0.025)),  # 0.7 cm clear of the cube
+                ent("unknown_1", "unknown", (0.5, -0.171, 0.02), (0.01, 0.01, 0.02)),  # touching it: a piece of it
+                ent("unknown_2", "unknown", (0.4, 0.0, 0.29), (0.02, 0.02, 0.02)),  # in the hand
+                ent("unknown_3", "unknown", (0.3, 0.3, 0.01), (0.01, 0.01, 0.01))]
+    unseen = planning_world._unseen(entities, tcp, 8)
+    assert [u["position"] for u in unseen] == [[0.5, -0.143, 0.025], [0.3, 0.3, 0.01]]  # the larger first
+    assert len(planning_world._unseen(entities, tcp, 1)) == 1 and planning_world._unseen(entities, tcp, 0) == []
+    with MuJoCoTarget("tabletop", DEFAULT_SCENE, seed=0) as target:
+        assert len(target.planning_bodies().unseen_slots) == UNSEEN_SLOTS
+        ctx = SimpleNamespace(target=target)
+        link5 = target.data.xpos[target.model.body("panda0_link5").id]
+        q = target.arm_qpos()
+        assert session_checker(ctx).is_valid(q)
+        planning_world._record(target)["unseen"] = [{"position": link5.tolist(), "size": [0.06, 0.06, 0.06],
+                                                     "yaw": 0.3}]
+        pairs = session_checker(ctx).colliding_pairs(q)  # a box the cameras saw where the arm stands
+        assert ("panda0_link5", "unseen_slot0") in pairs
+        # the simulation never meets the spare boxes, wherever the planner put them
+        target.hold(duration_s=0.2)
+        m, d = target.model, target.data
+        slots = {m.body(f"unseen_slot{i}").id for i in range(UNSEEN_SLOTS)}
+        assert not any(int(m.geom_bodyid[d.contact[i].geom1]) in slots or int(m.geom_bodyid[d.contact[i].geom2]) in slots
+                       for i in range(d.ncon))
+
+
+def test_a_drawn_objects_planning_model_takes_the_perceived_shape_and_size_not_the_simulators():
+    from phyagentos.targets import DEFAULT_SCENE, MuJoCoTarget
+
+    with MuJoCoTarget("tabletop", DEFAULT_SCENE, seed=0) as target:
+        assert target.planning_bodies().perceived_shapes
+        snapshot = perceive_now(target, make_perceiver(target))
+        (cube,) = [e for e in snapshot["entities"] if e["name"] == "cube"]
+        checker = session_checker(SimpleNamespace(target=target))
+        g = target.model.geom("cube").id
+        np.testing.assert_allclose(checker.model.geom_size[g], np.maximum(cube["size"], 1e-3))
+        assert np.allclose(target.model.geom_size[g], 0.02)  # the simulation's cube is untouched
+        planning_world._record(target)["objects"]["cube"].update(shape="sphere", size=[0.03, 0.03, 0.03])
+        checker = session_checker(SimpleNamespace(target=target))
+        assert checker.model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE and checker.model.geom_size[g][0] == 0.03
+        assert target.model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX

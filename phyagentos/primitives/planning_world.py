@@ -17,6 +17,15 @@ state, which holds privileged truth (true object poses, initial placements: ``DE
 - each drawer at its perceived opening (``attributes.joint_position``; the last reading when
   the handle was hidden, shut before any), and where the hand has moved it since
   (:func:`note_slide`);
+- where the target's object models are stand-ins (``PlanningBodies.perceived_shapes``: a
+  randomised tabletop world draws each object's shape and size, so its model's are the
+  simulator's), each object's primitive geom takes the perceived shape (box, cylinder, sphere)
+  and size, centred on the perceived box, turned by its yaw (a mesh the user declared keeps its
+  mesh);
+- where the target offers spare boxes (``PlanningBodies.unseen_slots``: the tabletop scenes),
+  each segment perception saw but could not name (``kind: unknown``: an undeclared thing on the
+  table) as a box of its perceived size and yaw, the largest first; not one that lies within
+  :data:`FRAGMENT_GAP_M` of a named object (a piece of it) or around the hand (what it holds);
 - anything not perceived left out (parked far below the floor), every other joint at the
   model's default.
 
@@ -49,6 +58,7 @@ __all__ = [
     "PARK_M",
     "ELONGATED_RATIO",
     "STAND_TIE_M",
+    "FRAGMENT_GAP_M",
     "plans_in_perceived_world",
     "note_observation",
     "note_release",
@@ -108,6 +118,15 @@ def _rz(yaw: float) -> np.ndarray:
     c, s = math.cos(yaw), math.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
+
+#: An unnamed segment (``kind: unknown``) whose footprint comes this close (m: the centres'
+#: distance less each footprint's larger half side) to a named object's is taken for a piece of
+#: that object and kept out of the planner's world: it would otherwise stand in the way of the
+#: object's own grasp.
+FRAGMENT_GAP_M = 0.005
+#: An unnamed segment whose centre lies within its footprint's radius and this much more (m) of
+#: the tcp is what the hand holds or touches, not an obstacle.
+HAND_CLEAR_M = 0.03
 
 #: Two ways of standing an object's model up whose fits to the perceived box differ by less than
 #: this (m, summed over its three sides) are a tie: its own z axis up is kept (most models stand so).
@@ -180,10 +199,19 @@ def note_observation(target, snapshot: Mapping[str, Any]) -> None:
         e = ents.get(name)
         if e is None or e.get("kind") != "object" or e.get("position") is None:
             continue
-        T = object_root_pose(target, body, e)
-        held = bool((e.get("attributes") or {}).get("held"))
+        attrs = e.get("attributes") or {}
+        if bodies.perceived_shapes:  # the box as perceived: its centre, its yaw
+            T = np.eye(4)
+            T[:3, :3] = _rz(_yaw_of(e.get("quat_wxyz") or (1.0, 0.0, 0.0, 0.0)))
+            T[:3, 3] = np.asarray(e["position"], dtype=float)
+        else:
+            T = object_root_pose(target, body, e)
+        held = bool(attrs.get("held"))
         objects[name] = {"T": T.reshape(-1).tolist(),
                          "in_hand": (np.linalg.inv(T_tcp) @ T).reshape(-1).tolist() if held else None}
+        if bodies.perceived_shapes:
+            objects[name].update(shape=str(attrs.get("shape") or "box"),
+                                 size=[float(v) for v in (e.get("size") or (0.01, 0.01, 0.01))])
     fixtures: dict[str, Any] = {}
     for name in bodies.fixtures:
         root = (((ents.get(name) or {}).get("attributes") or {}).get("body") or {}).get("root")
@@ -195,7 +223,36 @@ def note_observation(target, snapshot: Mapping[str, Any]) -> None:
         q = ((ents.get(ent) or {}).get("attributes") or {}).get("joint_position")
         if q is not None:
             slides[joint] = float(sign) * float(q)
-    rec.update(objects=objects, fixtures=fixtures, slides=slides)
+    rec.update(objects=objects, fixtures=fixtures, slides=slides,
+               unseen=_unseen(ents.values(), T_tcp[:3, 3], len(bodies.unseen_slots)))
+
+
+def _unseen(entities, tcp: np.ndarray, slots: int) -> list[dict[str, Any]]:
+    """The unnamed segments (``kind: unknown``) the planner keeps clear of, as
+    ``{position (3,), size (3,) half extents, yaw}`` (m, rad, world), the ``slots`` largest: not
+    a piece of a named object (:data:`FRAGMENT_GAP_M`), not around the hand at ``tcp`` (3,)
+    (:data:`HAND_CLEAR_M`)."""
+    if slots <= 0:
+        return []
+    named, unknown = [], []
+    for e in entities:
+        if not isinstance(e, Mapping) or e.get("position") is None or e.get("size") is None:
+            continue
+        p, size = np.asarray(e["position"], dtype=float), np.asarray(e["size"], dtype=float)
+        if e.get("kind") == "object":
+            named.append((p[:2], float(max(size[0], size[1]))))
+        elif e.get("kind") == "unknown":
+            unknown.append((p, size, _yaw_of(e.get("quat_wxyz") or (1.0, 0.0, 0.0, 0.0))))
+    out = []
+    for p, size, yaw in unknown:
+        r = float(max(size[0], size[1]))
+        if any(float(np.linalg.norm(p[:2] - c)) - r - rc < FRAGMENT_GAP_M for c, rc in named):
+            continue
+        if float(np.linalg.norm(p - tcp)) < float(np.hypot(size[0], size[1])) + HAND_CLEAR_M:
+            continue
+        out.append({"position": p.tolist(), "size": size.tolist(), "yaw": yaw})
+    out.sort(key=lambda u: -float(np.prod(u["size"])))
+    return out[:slots]
 
 
 def note_release(target) -> None:
@@ -248,6 +305,33 @@ def _quat(R: np.ndarray) -> np.ndarray:
     return q
 
 
+_PRIMITIVES = {int(mujoco.mjtGeom.mjGEOM_BOX), int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_SPHERE)}
+
+
+def _shape_geom(m: mujoco.MjModel, body: int, shape: str, size: np.ndarray) -> None:
+    """Give body ``body``'s one primitive geom (in the planner's model copy ``m``) the perceived
+    ``shape`` (``box``, ``cylinder``, ``sphere``; anything else a box) and ``size`` (3,) half
+    extents, m; a body whose geom is a mesh (a declared file) keeps it."""
+    g = int(m.body_geomadr[body])
+    if int(m.body_geomnum[body]) != 1 or int(m.geom_type[g]) not in _PRIMITIVES:
+        return
+    h = np.maximum(np.asarray(size, dtype=float), 1e-3)
+    r = float(max(h[0], h[1]))
+    if shape == "sphere":
+        m.geom_type[g], m.geom_size[g] = mujoco.mjtGeom.mjGEOM_SPHERE, (float(h.max()), 0.0, 0.0)
+        m.geom_aabb[g] = (0.0, 0.0, 0.0, *([float(h.max())] * 3))
+        m.geom_rbound[g] = float(h.max())
+    elif shape == "cylinder":
+        m.geom_type[g], m.geom_size[g] = mujoco.mjtGeom.mjGEOM_CYLINDER, (r, float(h[2]), 0.0)
+        m.geom_aabb[g] = (0.0, 0.0, 0.0, r, r, float(h[2]))
+        m.geom_rbound[g] = float(math.hypot(r, h[2]))
+    else:
+        m.geom_type[g], m.geom_size[g] = mujoco.mjtGeom.mjGEOM_BOX, h
+        m.geom_aabb[g] = (0.0, 0.0, 0.0, *h)
+        m.geom_rbound[g] = float(np.linalg.norm(h))
+    m.geom_pos[g], m.geom_quat[g] = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)
+
+
 def apply(target, checker) -> dict[str, list[str]]:
     """Set ``checker`` (a :class:`~phyagentos.motion.collision.CollisionChecker` on
     ``target``'s model) to the perceived planning world (module docstring); returns the
@@ -276,10 +360,30 @@ def apply(target, checker) -> dict[str, list[str]]:
         T = np.asarray(o["T"], dtype=float).reshape(4, 4)
         q[adr:adr + 3] = T[:3, 3]
         q[adr + 3:adr + 7] = _quat(T[:3, :3])
+        if bodies.perceived_shapes and o.get("size") is not None:
+            _shape_geom(m, b, str(o.get("shape") or "box"), np.asarray(o["size"], dtype=float))
         placed.append(name)
     for joint, value in (rec.get("slides") or {}).items():
         q[int(m.jnt_qposadr[m.joint(joint).id])] = float(value)
     checker.set_world_state(q)
+    unseen = rec.get("unseen") or []
+    for k, slot in enumerate(bodies.unseen_slots):
+        b = m.body(slot).id
+        g, mid = int(m.body_geomadr[b]), int(m.body_mocapid[b])
+        # the simulation's collision bits keep the slot out of every contact, down to MuJoCo's
+        # per-body filter; the planner's copy lets it meet the robot like the scene's bodies
+        m.body_contype[b], m.body_conaffinity[b] = 1, 1
+        if k < len(unseen):
+            u = unseen[k]
+            size = np.maximum(np.asarray(u["size"], dtype=float), 1e-3)
+            m.geom_size[g] = size
+            m.geom_rbound[g] = float(np.linalg.norm(size))
+            m.geom_aabb[g] = (0.0, 0.0, 0.0, *size)
+            checker.data.mocap_pos[mid] = u["position"]
+            checker.data.mocap_quat[mid] = _quat(_rz(float(u["yaw"])))
+            placed.append(slot)
+        else:
+            checker.data.mocap_pos[mid] = (PARK_M + 2.0 * k, PARK_M, -PARK_M)
     fixtures = rec.get("fixtures") or {}
     for k, (name, body) in enumerate(bodies.fixtures.items()):
         b = m.body(body).id

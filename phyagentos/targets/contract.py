@@ -566,12 +566,21 @@ class PlanningBodies:
             (``attributes.body.root``).
         slides: ``{articulation entity name: (joint name, sign)}``: a drawer's slide, set to
             ``sign`` times the perceived opening (``attributes.joint_position``, m).
+        unseen_slots: mocap bodies with one box geom each, which the planner sizes and places
+            on the segments perception saw but could not name (``kind: unknown``); empty: such
+            segments are not in the planner's world.
+        perceived_shapes: the objects' models are stand-ins whose one primitive geom (box,
+            cylinder or sphere) takes the perceived shape and size (a randomised world draws
+            them: the model's are the simulator's); ``False``: the model's geometry is the
+            robot's own knowledge of the object (LIBERO's assets).
     """
 
     robot_joints: tuple[str, ...]
     objects: Mapping[str, str]
     fixtures: Mapping[str, str]
     slides: Mapping[str, tuple[str, float]]
+    unseen_slots: tuple[str, ...] = ()
+    perceived_shapes: bool = False
 
 
 class PlansInPerceivedWorld(abc.ABC):

@@ -74,6 +74,9 @@ __all__ = [
     "GRIPPER_MAX_OPENING_M",
     "TABLE_GEOM",
     "FLOOR_GEOM",
+    "UNSEEN_SLOTS",
+    "UNSEEN_SLOT_BIT",
+    "unseen_slot_name",
     "region_geom_name",
     "obstacle_geom_name",
     "object_joint_name",
@@ -105,6 +108,17 @@ OBJECT_SHAPES: tuple[str, ...] = ("box", "cylinder", "sphere")
 SCENE_OBJECT_SHAPES: tuple[str, ...] = OBJECT_SHAPES + ("mesh",)
 TABLE_GEOM = "table"
 FLOOR_GEOM = "floor"
+#: Spare boxes in every tabletop scene for the motion planner's perceived world
+#: (:mod:`phyagentos.primitives.planning_world`): each takes one segment perception saw but
+#: could not name (``kind: unknown``, an undeclared thing on the table), so the planner keeps
+#: clear of it. Mocap bodies parked under the table, in geom group 5 and transparent (no
+#: camera renders them), with the collision bit :data:`UNSEEN_SLOT_BIT` that no other geom's
+#: affinity has: the simulation never lets them touch anything; the planner's copy of the model
+#: turns them on.
+UNSEEN_SLOTS = 8
+#: The collision type of the spare boxes (:data:`UNSEEN_SLOTS`): a bit no simulated geom's
+#: ``conaffinity`` carries.
+UNSEEN_SLOT_BIT = 8
 GRIPPER_MAX_OPENING_M = 0.04
 
 #: Ready configuration (rad): tcp about 0.46 m in front of the base, 0.37 m above the
@@ -558,6 +572,11 @@ _OBJECT_GEOM = {"box": mujoco.mjtGeom.mjGEOM_BOX, "cylinder": mujoco.mjtGeom.mjG
                 "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
 
 
+def unseen_slot_name(i: int) -> str:
+    """Body and geom name of spare box ``i`` (:data:`UNSEEN_SLOTS`)."""
+    return f"unseen_slot{i}"
+
+
 def _object_geom_size(o: ObjectSpec) -> list[float]:
     """MuJoCo geom size of ``o``: box half extents, cylinder (radius, half height), sphere radius."""
     hx, hy, hz = o.half_extents
@@ -619,6 +638,12 @@ def add_tabletop_world(ms: mujoco.MjSpec, spec: SceneSpec, *, legs: bool = False
                               friction=[o.friction, 0.005, 0.0001], condim=4, solref=[0.004, 1.0],
                               solimp=[0.95, 0.99, 0.001, 0.5, 2.0], material=f"material:{o.name}")
         g.mass = o.mass
+    for i in range(UNSEEN_SLOTS):
+        # under the table, within the scene's bounds: a body outside them would widen the model's extent,
+        # and with it the cameras' near clipping plane (MuJoCo scales znear by stat.extent)
+        body = wb.add_body(name=unseen_slot_name(i), mocap=True, pos=[0.4, 0.0, -0.5 * _TABLE_HEIGHT_M])
+        body.add_geom(name=unseen_slot_name(i), type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.01, 0.01, 0.01],
+                      rgba=[0.0, 0.0, 0.0, 0.0], group=5, contype=UNSEEN_SLOT_BIT, conaffinity=0, mass=0.0)
 
 
 def _add_wrist_sensors(ms: mujoco.MjSpec) -> None:

@@ -206,7 +206,11 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
         from perception (:class:`~phyagentos.targets.contract.PlanningBodies`): the robot's
         joints (every joint under its root body), each declared object's body (its free joint;
         its shape is the scene's declaration, its pose the perceiver's), no fixtures and no
-        slides: the table, walls and bins are the scene the user declared, a known workcell.
+        slides: the table, walls and bins are the scene the user declared, a known workcell; and
+        the scene's spare boxes (:data:`~phyagentos.targets.scene.UNSEEN_SLOTS`) for the
+        segments perception could not name. Every object of a primitive shape takes the
+        perceived shape and size (``perceived_shapes``: a randomised world draws them, so the
+        model's are the simulator's, not the robot's).
 
         Raises:
             TargetError: the target was not built from a tabletop scene.
@@ -215,8 +219,12 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
             raise TargetError(f"target {self.name!r} has no tabletop scene to plan in")
         m = self._model
         joints = tuple(m.joint(j).name for j in range(m.njnt) if self._is_under(int(m.jnt_bodyid[j]), self._robot_root))
+        from ..scene import UNSEEN_SLOTS, unseen_slot_name  # noqa: PLC0415
+
+        slots = tuple(unseen_slot_name(i) for i in range(UNSEEN_SLOTS)
+                      if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, unseen_slot_name(i)) >= 0)
         return PlanningBodies(robot_joints=joints, objects={n: m.body(b).name for n, b in self._obj_body.items()},
-                              fixtures={}, slides={})
+                              fixtures={}, slides={}, unseen_slots=slots, perceived_shapes=True)
 
     def _is_under(self, b: int, root: int) -> bool:
         while b > 0:

@@ -100,6 +100,18 @@ def test_the_handle_exposes_only_the_manifest_and_records_refusals(target):
     assert state["target"] == "flows" and handle.state["sim_time_s"] == state["sim_time_s"] and beats == [1]
 
 
+def test_the_handle_passes_on_the_robots_state_and_the_perceived_world_never_the_simulators(target):
+    handle, _ = handle_for(target, operations=("observe", "query_state", "snapshot"))
+    assert {"objects", "relations"} <= set(target.query_state())  # the simulation's own account
+    for op in ("observe", "query_state"):
+        assert not {"objects", "relations"} & set(handle.call(op))
+    assert not {"objects", "relations"} & set(handle.state)
+    seen = handle.call("snapshot")  # what the cameras and the perceiver make of the scene
+    assert {"proprioception", "unseen"} <= set(seen)
+    cube = next(e for e in seen["entities"] if e["name"] == "cube")
+    assert cube["attributes"]["source"] == "perceived" and "confidence" in cube["attributes"]
+
+
 def test_the_handle_validates_arguments_before_anything_moves(target):
     handle, _ = handle_for(target)
     t0 = target.sim_time

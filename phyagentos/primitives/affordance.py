@@ -395,6 +395,12 @@ class ArticulateSlide(_Articulate):
     never held back, or held back past the band, the perceiver is told nothing and the
     verifier judges the handle alone, which cannot confirm "shut". Traced as ``slide_stop``.
 
+    **Pulled open**: a pull that ends with the fingers still closed on the handle (the hand's
+    encoders) tells the session's perceiver where the hand let the drawer stand, the reading it
+    began from plus the hand's travel along the axis
+    (:meth:`~phyagentos.perception.Perceiver.note_drawer_opened`: a lower bound while the handle
+    stays hidden). Traced as ``slide_felt``.
+
     Args:
         object: the articulated entity (any entity whose attributes declare ``joint_type:
             slide`` with ``axis`` (3,) world unit, ``joint_position`` m and ``range_m`` [lo, hi]

@@ -742,8 +742,8 @@ class Push(_ContactMotion):
     ``{contact_n, depth_m, descent_m, object, top_m, tip_m}``), the push first lowers the hand
     straight down, at most ``descent_m`` m, until it presses with ``contact_n`` N
     (``contact.missing`` when it lands on nothing, ``execution.collision`` when the fingertips
-    stop more than :data:`PRESS_LANDED_ABOVE_TOP_M` above ``object``'s perceived top ``top_m``:
-    they met something else first), then drags the
+    stop more than :data:`PRESS_LANDED_ABOVE_TOP_M` above ``object``'s perceived top ``top_m``,
+    where the press gives it: they met something else first), then drags the
     object: the same straight motion, its height ``depth_m`` m below where the hand landed.
 
     Args:

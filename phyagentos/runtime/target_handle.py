@@ -31,12 +31,15 @@ from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime
 
 from .safety_guard import SafetyGuard
 
-__all__ = ["TargetSessionHandle", "ALWAYS_ALLOWED"]
+__all__ = ["TargetSessionHandle", "ALWAYS_ALLOWED", "WORLD_KEYS"]
 
 logger = logging.getLogger(__name__)
 
 #: Stopping is never withheld.
 ALWAYS_ALLOWED = ("halt",)
+#: Keys of a target's ``query_state()`` a session handle never passes on: a simulation's own
+#: account of the world (object poses, the contacts' relations), ground truth.
+WORLD_KEYS = frozenset({"objects", "relations"})
 
 
 def _floats(value: Any, n: int, what: str) -> np.ndarray:
@@ -113,7 +116,7 @@ class TargetSessionHandle:
             self._refuse("handle.bad_arguments", operation, str(exc))
         self.calls += 1
         if operation != "halt":
-            self.state = self._target.query_state()
+            self.state = self._robot_state()
         if self._trace is not None:
             self._trace.record("handle_call", operation=operation, ok=True, wall_ms=round((time.perf_counter() - t0) * 1e3, 3))
         if self._heartbeat is not None:
@@ -128,11 +131,18 @@ class TargetSessionHandle:
         raise TargetError(message)
 
     # -- operations -------------------------------------------------------------------
+    def _robot_state(self) -> dict:
+        """The target's ``query_state()`` without what a simulation knows of the world
+        (:data:`WORLD_KEYS`: a tabletop target reports its objects' true poses and contact
+        relations there, ground truth); what the session may know of the world is the perceived
+        ``snapshot``."""
+        return {k: v for k, v in self._target.query_state().items() if k not in WORLD_KEYS}
+
     def _observe(self) -> dict:
-        return self._target.query_state()
+        return self._robot_state()
 
     def _query_state(self) -> dict:
-        return self._target.query_state()
+        return self._robot_state()
 
     def _snapshot(self) -> dict:
         """What the session may know of the world: on a target with cameras, what a perceiver

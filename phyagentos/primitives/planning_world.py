@@ -59,6 +59,7 @@ __all__ = [
     "ELONGATED_RATIO",
     "STAND_TIE_M",
     "FRAGMENT_GAP_M",
+    "HAND_CLEAR_M",
     "plans_in_perceived_world",
     "note_observation",
     "note_release",

@@ -341,7 +341,8 @@ class GuardedMove(_ContactMotion):
         expect_contact: fail with ``contact.missing`` when the whole offset is travelled
             without touching anything.
 
-    Blackboard: writes ``contact`` with ``{force_n, touched, travelled_m}``.
+    Blackboard: writes ``contact`` with ``{force_n, touched, travelled_m}`` (``touched``: the
+    robot's parts in contact, :func:`contact_force_n`).
     """
 
     def __init__(self, name: str, *, offset, velocity_scale: float = 0.05, tracking_tol_rad: float = 0.05,
@@ -758,7 +759,8 @@ class Push(_ContactMotion):
         expect_contact: fail with ``contact.missing`` if nothing was touched.
         press: blackboard key of the press from above (``None`` or a missing key: no press).
 
-    Blackboard: writes ``contact`` with ``{max_force_n, touched}``.
+    Blackboard: writes ``contact`` with ``{max_force_n, touched}`` (``touched``: the robot's parts
+    that touched anything during the push, the table's contacts included).
     """
 
     def __init__(self, name: str, *, to: str | None = None, offset=None, velocity_scale: float = 0.05,

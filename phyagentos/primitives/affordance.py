@@ -34,7 +34,7 @@ from phyagentos.targets.contract import capabilities_of
 from . import planning_world
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
-from .grasp_sense import MIN_EFFORT_N, min_opening_m
+from .grasp_sense import closed_on_something
 from .motion import execution_limits, ik_options
 from .observation import save_tracks
 from .perception import entity_pose
@@ -493,7 +493,7 @@ class ArticulateSlide(_Articulate):
                 or not capabilities_of(target).has_sensor("proprioception"):
             return
         p = target.proprioception()
-        held = p.gripper_opening_m > min_opening_m(None) and p.gripper_effort_n > MIN_EFFORT_N
+        held = closed_on_something(p)
         self.ctx.trace.record("slide_felt", leaf=self.name, object=self.object, opening_m=round(opening, 4),
                               from_m=round(self._moved_from[0], 4), held=bool(held))
         if held:

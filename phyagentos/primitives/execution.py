@@ -19,12 +19,11 @@ from phyagentos.targets.contract import MuJoCoBacked, capabilities_of
 from . import planning_world
 from .base import Primitive, PrimitiveFailure
 from .grasp_sense import (
-    MIN_EFFORT_N,
     WIDTH_MARGIN_M,
     belief,
+    closed_on_something,
     holding_problem,
     mass_estimate_kg,
-    min_opening_m,
     proprio_record,
     sample_while_holding,
     wrist_load_n,
@@ -340,7 +339,7 @@ class Gripper(Primitive):
         planned = target.runtime_notes.get("planned_grasp") or {}
         width = planned.get("width_m") if self.object is not None and planned.get("object") == self.object else None
         # a rim grasp closes on a thin wall: "nothing between the fingers" is judged against it
-        closed_on = p1.gripper_opening_m > min_opening_m(width) and p1.gripper_effort_n > MIN_EFFORT_N
+        closed_on = closed_on_something(p1, width)
         ctx.trace.record("gripper", leaf=self.name, command=self.command, object=self.object,
                          opening_m=round(float(p1.gripper_opening_m), 5), effort_n=round(float(p1.gripper_effort_n), 3),
                          stalled=bool(result.stalled), closed_on_something=bool(closed_on), force_n=self.force_n)
@@ -511,7 +510,7 @@ class CheckHolding(Primitive):
         b = belief(target)
         planned = target.runtime_notes.get("planned_grasp") or {}
         width = planned.get("width_m") if planned.get("object") == self.object else None
-        if b.object is None and p.gripper_opening_m > min_opening_m(width) and p.gripper_effort_n > MIN_EFFORT_N:
+        if b.object is None and closed_on_something(p, width):
             # a session that starts holding (place after pick in a fresh runtime): adopt it
             b.set(object=self.object, width_m=width, closed_opening_m=float(p.gripper_opening_m), slipped=False)
         self.ctx.trace.record("proprio", **proprio_record(target, p, phase="check_holding", leaf=self.name))

@@ -28,7 +28,7 @@ from phyagentos.targets.contract import capabilities_of
 __all__ = ["GraspBelief", "MIN_OPENING_M", "MIN_EFFORT_N", "SLIP_OPENING_DROP_M", "SLIP_LOAD_DROP_FRACTION",
            "MIN_LOAD_FOR_SLIP_N", "GRAVITY_M_S2", "belief", "wrist_load_n", "proprio_record", "holding_problem",
            "sample_while_holding", "mass_estimate_kg", "WIDTH_MARGIN_M", "MIN_HELD_LOAD_N", "plan_grasp",
-           "min_opening_m"]
+           "min_opening_m", "closed_on_something"]
 
 #: Opening per finger below which a close found nothing between the fingers, m.
 MIN_OPENING_M = 0.002
@@ -211,3 +211,10 @@ def min_opening_m(width_m: float | None) -> float:
     if width_m is None or not math.isfinite(float(width_m)) or width_m <= 0:
         return MIN_OPENING_M
     return min(MIN_OPENING_M, 0.25 * float(width_m))
+
+
+def closed_on_something(p, width_m: float | None = None) -> bool:
+    """Whether the hand's encoders say its closed fingers hold something: proprioception ``p``'s
+    opening per finger above :func:`min_opening_m` for an expected held width ``width_m`` (m;
+    None: unknown) and its squeeze above :data:`MIN_EFFORT_N`."""
+    return bool(p.gripper_opening_m > min_opening_m(width_m) and p.gripper_effort_n > MIN_EFFORT_N)

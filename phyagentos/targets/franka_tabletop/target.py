@@ -25,8 +25,8 @@ import numpy as np
 from phyagentos.errors import TargetError
 
 from ..base import ExecutionResult
-from ..contract import PlanningBodies, PlansInPerceivedWorld, TargetCapabilities
-from ..mujoco_arm import GripperResult, MuJoCoArmTarget
+from ..contract import TargetCapabilities
+from ..mujoco_arm import GripperResult, MuJoCoArmTarget, PlansOnTheTabletop
 from ..scene import (
     ARM_JOINT_NAMES,
     DEFAULT_SCENE,
@@ -51,7 +51,7 @@ _TOOLS = ("observe", "move_joints", "set_gripper", "hold", "snapshot")
 MAX_GRIP_FORCE_N = 70.0
 
 
-class MuJoCoTarget(MuJoCoArmTarget, PlansInPerceivedWorld):
+class MuJoCoTarget(PlansOnTheTabletop, MuJoCoArmTarget):
     """A simulated Franka Panda on a table, built from a :class:`SceneSpec`.
 
     What is particular to the Franka: its model (:func:`~phyagentos.targets.scene.build_scene`),
@@ -125,13 +125,6 @@ class MuJoCoTarget(MuJoCoArmTarget, PlansInPerceivedWorld):
         from phyagentos.motion.retime import actuator_velocity_limits  # noqa: PLC0415
 
         return actuator_velocity_limits(self._model, ARM_JOINT_NAMES, torque_fraction=torque_fraction)
-
-    def planning_bodies(self) -> PlanningBodies:
-        """Where perceived things go in this scene's model: the robot's joints and each declared
-        object's body (:meth:`~phyagentos.targets.mujoco_arm.MuJoCoArmTarget._tabletop_planning_bodies`):
-        the motion planner checks collisions against the objects where the robot perceived them,
-        never where the simulator has put them."""
-        return self._tabletop_planning_bodies()
 
     # -- lifecycle --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, settle_s: float = 0.3) -> dict:

@@ -23,7 +23,7 @@ from phyagentos.geometry import matrix_to_quat as mat_quat
 from phyagentos.geometry import pose_matrix
 
 from .common import K_ENV, K_FINGER, K_NONE, K_OBJECT, K_ROBOT
-from .core import GripperResult, MuJoCoArmTarget
+from .core import GripperResult, MuJoCoArmTarget, PlansOnTheTabletop
 
-__all__ = ["MuJoCoArmTarget", "GripperResult", "pose_matrix", "mat_quat", "K_NONE", "K_ENV", "K_ROBOT", "K_FINGER",
-           "K_OBJECT"]
+__all__ = ["MuJoCoArmTarget", "GripperResult", "PlansOnTheTabletop", "pose_matrix", "mat_quat", "K_NONE", "K_ENV",
+           "K_ROBOT", "K_FINGER", "K_OBJECT"]

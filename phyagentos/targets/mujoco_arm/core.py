@@ -22,7 +22,14 @@ from phyagentos.geometry import pose_matrix
 
 from ..base import BaseRolloutTarget
 from ..camera_noise import CameraNoise
-from ..contract import ExecutionResult, MuJoCoBacked, PlanningBodies, RendersImages, TargetCapabilities
+from ..contract import (
+    ExecutionResult,
+    MuJoCoBacked,
+    PlanningBodies,
+    PlansInPerceivedWorld,
+    RendersImages,
+    TargetCapabilities,
+)
 from .checkpoints import ArmCheckpoints
 from .common import K_ENV, K_FINGER, K_OBJECT, K_ROBOT
 from .common import floats as _floats
@@ -199,32 +206,8 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
         self._gkind, self._gobj, self._gside = kind, gobj, side
         self._support_geoms = frozenset((m.geom(TABLE_GEOM).id, m.geom(FLOOR_GEOM).id))
         self._robot_root = robot_root
+        self._planning: PlanningBodies | None = None  # built on first use (:class:`PlansOnTheTabletop`)
         self._U_cache: dict[frozenset, np.ndarray] = {}
-
-    def _tabletop_planning_bodies(self) -> PlanningBodies:
-        """Where perceived things go in a tabletop scene's model, for a planning world built
-        from perception (:class:`~phyagentos.targets.contract.PlanningBodies`): the robot's
-        joints (every joint under its root body), each declared object's body (its free joint;
-        its shape is the scene's declaration, its pose the perceiver's), no fixtures and no
-        slides: the table, walls and bins are the scene the user declared, a known workcell; and
-        the scene's spare boxes (:data:`~phyagentos.targets.scene.UNSEEN_SLOTS`) for the
-        segments perception could not name. Every object of a primitive shape takes the
-        perceived shape and size (``perceived_shapes``: a randomised world draws them, so the
-        model's are the simulator's, not the robot's).
-
-        Raises:
-            TargetError: the target was not built from a tabletop scene.
-        """
-        if getattr(self, "_robot_root", None) is None:
-            raise TargetError(f"target {self.name!r} has no tabletop scene to plan in")
-        m = self._model
-        joints = tuple(m.joint(j).name for j in range(m.njnt) if self._is_under(int(m.jnt_bodyid[j]), self._robot_root))
-        from ..scene import UNSEEN_SLOTS, unseen_slot_name  # noqa: PLC0415
-
-        slots = tuple(unseen_slot_name(i) for i in range(UNSEEN_SLOTS)
-                      if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, unseen_slot_name(i)) >= 0)
-        return PlanningBodies(robot_joints=joints, objects={n: m.body(b).name for n, b in self._obj_body.items()},
-                              fixtures={}, slides={}, unseen_slots=slots, perceived_shapes=True)
 
     def _is_under(self, b: int, root: int) -> bool:
         while b > 0:
@@ -607,3 +590,38 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
 
     def _tool_snapshot(self) -> dict:
         return self.snapshot()
+
+
+class PlansOnTheTabletop(PlansInPerceivedWorld):
+    """A tabletop scene's target (mixed in before :class:`MuJoCoArmTarget`, whose
+    ``_init_tabletop`` indexed the scene) whose motion planner checks collisions in the world
+    its robot perceived (:mod:`phyagentos.primitives.planning_world`)."""
+
+    def planning_bodies(self) -> PlanningBodies:
+        """Where perceived things go in a tabletop scene's model, for a planning world built
+        from perception (:class:`~phyagentos.targets.contract.PlanningBodies`): the robot's
+        joints (every joint under its root body), each declared object's body (its free joint;
+        its pose the perceiver's), no fixtures and no slides: the table, walls and bins are the
+        scene the user declared, a known workcell; and the scene's spare boxes
+        (:data:`~phyagentos.targets.scene.UNSEEN_SLOTS`) for the segments perception could not
+        name. Every object of a primitive shape takes the perceived shape and size
+        (``perceived_shapes``: a randomised world draws them, so the model's are the
+        simulator's, not the robot's). Built once per scene.
+
+        Raises:
+            TargetError: the target was not built from a tabletop scene.
+        """
+        if getattr(self, "_robot_root", None) is None:
+            raise TargetError(f"target {self.name!r} has no tabletop scene to plan in")  # type: ignore[attr-defined]
+        if self._planning is None:
+            from ..scene import UNSEEN_SLOTS, unseen_slot_name  # noqa: PLC0415
+
+            m = self._model  # type: ignore[attr-defined]
+            joints = tuple(m.joint(j).name for j in range(m.njnt)
+                           if self._is_under(int(m.jnt_bodyid[j]), self._robot_root))  # type: ignore[attr-defined]
+            slots = tuple(unseen_slot_name(i) for i in range(UNSEEN_SLOTS)
+                          if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, unseen_slot_name(i)) >= 0)
+            self._planning = PlanningBodies(robot_joints=joints,
+                                            objects={n: m.body(b).name for n, b in self._obj_body.items()},  # type: ignore[attr-defined]
+                                            fixtures={}, slides={}, unseen_slots=slots, perceived_shapes=True)
+        return self._planning

@@ -49,8 +49,8 @@ from phyagentos.geometry import matrix_to_quat as mat_quat
 from phyagentos.geometry import yaw_quat
 
 from ..base import ExecutionResult
-from ..contract import PlanningBodies, PlansInPerceivedWorld, TargetCapabilities
-from ..mujoco_arm import GripperResult, MuJoCoArmTarget
+from ..contract import TargetCapabilities
+from ..mujoco_arm import GripperResult, MuJoCoArmTarget, PlansOnTheTabletop
 from ..scene import DEFAULT_SCENE, ObjectSpec, RegionSpec, SceneSpec, add_tabletop_world
 
 __all__ = ["SO101Target", "build_so101_scene", "so101_asset_path", "ARM_JOINT_NAMES", "GRIPPER_JOINT", "MOUNT_XY",
@@ -239,7 +239,7 @@ class _JawMap:
         return float(np.interp(angle, self.angles, self.gaps))
 
 
-class SO101Target(MuJoCoArmTarget, PlansInPerceivedWorld):
+class SO101Target(PlansOnTheTabletop, MuJoCoArmTarget):
     """The SO-101 on the tabletop, built from the same :class:`SceneSpec` as the Franka's.
 
     What is particular to the SO-101: its model (:func:`build_so101_scene`), the jaw
@@ -310,13 +310,6 @@ class SO101Target(MuJoCoArmTarget, PlansInPerceivedWorld):
         return _JawMap(angles=angles, gaps=gaps)
 
     # -- perception -----------------------------------------------------------------
-    def planning_bodies(self) -> PlanningBodies:
-        """Where perceived things go in this scene's model: the robot's joints and each declared
-        object's body (:meth:`~phyagentos.targets.mujoco_arm.MuJoCoArmTarget._tabletop_planning_bodies`):
-        the motion planner checks collisions against the objects where the robot perceived them,
-        never where the simulator has put them."""
-        return self._tabletop_planning_bodies()
-
     def perception_config(self):
         """The perception defaults with the gripper box fitted to the SO-101's hand
         (:data:`PERCEPTION_GRIPPER_BOX`), used when the workspace has no ``perception.yaml``."""

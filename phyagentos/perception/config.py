@@ -122,6 +122,15 @@ class ClusteringConfig(_Section):
         1.0, le=1000.0, gt=0, description="Intensity (r+g+b)/768 difference that counts as one eps."
     )
     min_points: int = Field(25, le=1_000_000, ge=1, description="Smaller clusters are dropped as noise.")
+    glimpse_min_points: int = Field(
+        12, le=1_000_000, ge=0,
+        description="Left-over object points (in no segment) connected at glimpse_radius_m, at least this many and "
+                    "glimpse_clearance_m from every segment, are a glimpse: never named, but a rival that leaves a "
+                    "declared look-alike unseen (perception.glimpse; 0: no glimpses).",
+    )
+    glimpse_radius_m: float = Field(0.015, le=1.0, gt=0, description="Neighbour distance of a glimpse's points, m.")
+    glimpse_clearance_m: float = Field(
+        0.03, le=1.0, ge=0, description="A glimpse lies at least this far (horizontally) from every segment, m.")
     split_max_cost: float = Field(
         1.5, le=1000.0, ge=0,
         description="A segment larger than every declared object is split into parts (perception.split) only when "

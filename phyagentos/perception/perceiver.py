@@ -117,6 +117,7 @@ from phyagentos.perception.fixtures import (
     knob_reading,
 )
 from phyagentos.perception.frames import CameraFrame, Proprioception, _rigid
+from phyagentos.perception.glimpse import Glimpse, carry_over, glimpses, rival
 from phyagentos.perception.handle import RoundBody
 from phyagentos.perception.relations import (
     _footprint_margin,
@@ -343,8 +344,11 @@ class Perceiver:
         self.reset()
 
     def reset(self) -> None:
-        """Forget every track, the wrist-force baseline and the held object."""
+        """Forget every track, the glimpses, the wrist-force baseline and the held object."""
         self.tracks: dict[str, Track] = {}
+        #: What was seen in part and never named, kept while its place is hidden
+        #: (:func:`~phyagentos.perception.glimpse.carry_over`): rivals for a look-alike's name.
+        self.glimpses: list[Glimpse] = []
         #: Each fixture's last sighting and its time, s: ``{name: (sighting, stamp, confidence)}``.
         self.fixture_tracks: dict[str, tuple[FixtureSighting, float, float]] = {}
         #: Each knob's reading in the last observation: ``{fixture name: (bar yaw rad, points)}``
@@ -441,9 +445,10 @@ class Perceiver:
 
     def export_state(self) -> dict:
         """What this perceiver believes, as plain YAML/JSON-ready data: the tracks, the held
-        object, the open-gripper wrist-force baseline, the grasp height and where the hand last
+        object, the open-gripper wrist-force baseline, the grasp height, where the hand last
         closed (``closed_at``: ``{tcp_pose: (4, 4) world, stamp_s}``, :meth:`note_grasp_close`;
-        None while open), so a later session, maybe in another process, continues it with
+        None while open) and the glimpses kept (``glimpses``: :meth:`~phyagentos.perception.glimpse.Glimpse.to_dict`),
+        so a later session, maybe in another process, continues it with
         :meth:`restore_state`."""
         tracks = {}
         for name, t in self.tracks.items():
@@ -460,7 +465,8 @@ class Perceiver:
         closed = None if self._closed_at is None else {"tcp_pose": self._closed_at[0].tolist(),
                                                        "stamp_s": float(self._closed_at[1])}
         return {"tracks": tracks, "baseline_n": self._baseline_n, "held": self._held,
-                "grasp_height_m": self._grasp_height_m, "closed_at": closed, "fixtures": self.export_fixtures()}
+                "grasp_height_m": self._grasp_height_m, "closed_at": closed, "fixtures": self.export_fixtures(),
+                "glimpses": [g.to_dict() for g in self.glimpses]}
 
     def export_fixtures(self) -> dict:
         """The fixtures' last sightings as plain data (``{name: {position, yaw, half_extents,
@@ -536,6 +542,10 @@ class Perceiver:
             except (TypeError, KeyError, ValueError) as exc:
                 raise PerceptionError(f"perception state: track {name!r} has an unexpected layout: {exc}") from None
         self.tracks = tracks
+        try:
+            self.glimpses = [Glimpse.from_dict(g) for g in state.get("glimpses") or ()]
+        except (TypeError, KeyError, ValueError) as exc:
+            raise PerceptionError(f"perception state: a glimpse has an unexpected layout: {exc}") from None
         self.restore_fixtures(state.get("fixtures") or {})
         self._baseline_n = state.get("baseline_n")
         self._held = state.get("held") if state.get("held") in tracks else None
@@ -695,6 +705,11 @@ class Perceiver:
             clusters = split_clusters(clusters, cloud, heights, plane, cfg, focal, self.declared, supports=fixture_dets)
         # an object resting on a fixture's place patch stands on it (the patch as a support)
         dets = _stack([d for d, _ in clusters] + fixture_dets, plane, cfg)[:len(clusters)]
+        # what no segment holds but may be another object (a rival for a look-alike's name)
+        seg_xy = cloud.points[np.concatenate([idx for _, idx in clusters]), :2] if clusters else np.zeros((0, 2))
+        self.glimpses = carry_over(self.glimpses, glimpses(cloud, heights, [idx for _, idx in clusters], cfg),
+                                   seg_xy, frames, cfg)
+        found_glimpses = self.glimpses
         hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
         if hanging:  # the part of the held object below the fingers: the hand's, not a thing on the table
             log.debug("perception: %d segment(s) hang from the closed hand: %s", len(hanging),
@@ -731,6 +746,8 @@ class Perceiver:
                      if n in let_go or t.inside_of is not None}
         matched: dict[int, str] = {}
         for i, (j, cost, margin) in assoc.matches.items():
+            if self._glimpse_rivals(self.declared[j], dets[i], float(looks_only[i, j]), found_glimpses, stamp):
+                continue
             seen = 1.0
             if dets[i].truncated:  # seen in part: a round one's centre from its look's size
                 seen = _seen_fraction(dets[i], self.declared[j])
@@ -1257,6 +1274,22 @@ class Perceiver:
 
     # ------------------------------------------------------------------ spatial references
 
+    def _glimpse_rivals(self, desc: ObjectDescriptor, det: Detection, look_cost: float, found: Sequence[Glimpse],
+                        stamp: float) -> bool:
+        """Whether a glimpse (:mod:`~phyagentos.perception.glimpse`) matches ``name``'s look about
+        as well as ``det`` (its sighting, at ``look_cost``) does, so that naming ``det`` would be a
+        guess: the sighting is then left unknown, whatever track the name had (a track begun while
+        the arm hid the glimpse is no better than a guess). The object in the hand is named."""
+        t = self.tracks.get(desc.name)
+        if t is not None and t.held:
+            return False
+        g = rival(look_cost, desc, found, self.config)
+        if g is None:
+            return False
+        log.debug("perception: %s looks alike at %s (cost %.2f) and at a glimpse of %d points at %s: left unknown",
+                  desc.name, _r(det.position), look_cost, g.points, _r(g.position))
+        return True
+
     def _associate_parts_weighed(self, C: np.ndarray, dets: list[Detection],
                                  twins: Sequence[Sequence[int]] = ()) -> Association:
         """The association with a part cut by the image border (``truncated``) costing
@@ -1672,15 +1705,20 @@ class Perceiver:
 
     def _hand_outweighs(self, name: str, det: Detection, conf: float, proprio: Proprioception) -> bool:
         """Whether the hand's evidence outweighs an association of ``det`` with ``name`` at
-        confidence ``conf``: the association is weak (below ``relations.min_confidence``, the
-        least confidence at which a relation such as "on the table" is reported), ``det`` lies
-        outside the capture radius of the tcp, and the closed hand squeezes something of
-        ``name``'s width where ``name`` was last seen (:meth:`_hand_evidence`). A confident
-        sighting elsewhere still rules the hand out. (A look-alike part of a fixture uncovered
+        confidence ``conf``: ``det`` lies outside the capture radius of the tcp, the closed hand
+        squeezes something of ``name``'s width where ``name`` was last seen (:meth:`_hand_evidence`),
+        and either the association is weak (below ``relations.min_confidence``, the least
+        confidence at which a relation such as "on the table" is reported) or ``name`` is held
+        already. A confident sighting elsewhere rules out a hand that has not held the object;
+        an object held since it was picked does not leave a hand still closed on its width, so
+        a confident sighting elsewhere is a look-alike. (A look-alike part of a fixture uncovered
         when the arm moves, e.g. a strip of libero_goal's stove the size of the cream cheese,
-        was taken for the picked cream cheese at 0.23-0.35 and vetoed a hold LIBERO confirmed.)"""
+        was taken for the picked cream cheese at 0.23-0.35 and vetoed a hold LIBERO confirmed;
+        on the randomised tabletop a blue distractor sphere in the blue region, seen at 0.75, was
+        taken for the blue sphere still in the hand after the place's planning failed, and
+        confirmed the sort: a false success, seed 30015.)"""
         t = self.tracks.get(name)
-        if t is None or conf >= self.config.relations.min_confidence:
+        if t is None or (conf >= self.config.relations.min_confidence and not t.held):
             return False
         if float(np.linalg.norm(det.position[:2] - proprio.tcp_pose[:2, 3])) <= self.config.holding.capture_radius_m:
             return False

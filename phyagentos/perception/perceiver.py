@@ -706,9 +706,10 @@ class Perceiver:
         # an object resting on a fixture's place patch stands on it (the patch as a support)
         dets = _stack([d for d, _ in clusters] + fixture_dets, plane, cfg)[:len(clusters)]
         # what no segment holds but may be another object (a rival for a look-alike's name)
-        seg_xy = cloud.points[np.concatenate([idx for _, idx in clusters]), :2] if clusters else np.zeros((0, 2))
-        self.glimpses = carry_over(self.glimpses, glimpses(cloud, heights, [idx for _, idx in clusters], cfg),
-                                   seg_xy, frames, cfg)
+        seg_lab = [d.colour_lab for d, _ in clusters]
+        seen_now = glimpses(cloud, heights, [idx for _, idx in clusters], cfg, seg_lab)
+        self.glimpses = carry_over(self.glimpses, seen_now, [cloud.points[idx, :2] for _, idx in clusters], frames,
+                                   cfg, seg_lab)
         found_glimpses = self.glimpses
         hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
         if hanging:  # the part of the held object below the fingers: the hand's, not a thing on the table
@@ -745,8 +746,10 @@ class Perceiver:
         tracked_h = {n: self._look_height(n, 2.0 * float(t.half_extents[2])) for n, t in self.tracks.items()
                      if n in let_go or t.inside_of is not None}
         matched: dict[int, str] = {}
+        contested = set(assoc.ambiguous)  # look-alikes left unknown: rivals while hidden later
         for i, (j, cost, margin) in assoc.matches.items():
             if self._glimpse_rivals(self.declared[j], dets[i], float(looks_only[i, j]), found_glimpses, stamp):
+                contested.add(i)
                 continue
             seen = 1.0
             if dets[i].truncated:  # seen in part: a round one's centre from its look's size
@@ -921,6 +924,9 @@ class Perceiver:
                 geo[name] = _geo(t.position, t.yaw, t.half_extents, t.shape, t.bottom_m, plane, std)
                 geo[name]["inside_of"] = t.inside_of
             entities.append(ent)
+        # a look-alike left unknown stays a rival where it stood while the arm hides it (the
+        # next observation drops it where a segment stands there again: carry_over)
+        self.glimpses += [_as_glimpse(dets[i]) for i in sorted(contested) if i not in matched and i not in in_pieces]
         k = 0
         for i, det in enumerate(dets):
             if i in matched or i in in_pieces:
@@ -1279,10 +1285,13 @@ class Perceiver:
         """Whether a glimpse (:mod:`~phyagentos.perception.glimpse`) matches ``name``'s look about
         as well as ``det`` (its sighting, at ``look_cost``) does, so that naming ``det`` would be a
         guess: the sighting is then left unknown, whatever track the name had (a track begun while
-        the arm hid the glimpse is no better than a guess). The object in the hand is named."""
+        the arm hid the glimpse is no better than a guess). ``found`` holds the glimpses seen now
+        and those kept (:func:`~phyagentos.perception.glimpse.carry_over`), with the look-alike
+        segments left unknown before whose place is hidden now. The object in the hand, and an
+        object declared with a spatial reference (its relation picks it out), are named."""
         t = self.tracks.get(desc.name)
-        if t is not None and t.held:
-            return False
+        if desc.where is not None or (t is not None and t.held):
+            return False  # a spatial reference names it, not its look; or it is in the hand
         g = rival(look_cost, desc, found, self.config)
         if g is None:
             return False
@@ -1947,6 +1956,15 @@ def _pose(position: np.ndarray, yaw: float) -> np.ndarray:
     T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
     T[:3, 3] = position
     return T
+
+
+def _as_glimpse(det: Detection) -> Glimpse:
+    """A segment left unknown as a look-alike, kept as a rival (:class:`~phyagentos.perception.glimpse.Glimpse`)."""
+    full = 2.0 * np.asarray(det.half_extents, float)
+    size = np.array([max(full[0], full[1]), min(full[0], full[1]), full[2]])
+    rgb = np.asarray(det.colour_rgb, float)
+    return Glimpse(position=np.asarray(det.position, float).copy(), size_m=size, colour_rgb=rgb,
+                   colour_lab=np.asarray(det.colour_lab, float), points=int(det.points))
 
 
 def _detection_confidence(det: Detection) -> float:

@@ -67,6 +67,18 @@ def test_a_segments_ragged_edge_is_no_glimpse_and_too_few_points_are_none():
     assert glimpses(cloud, cloud.points[:, 2], [np.arange(200)], none) == []
 
 
+def test_a_flat_patch_at_table_level_is_no_glimpse():
+    """LIBERO-10 task 2: 18 dark points 7 mm high at the stove's foot rivalled the moka pot."""
+    rng = np.random.default_rng(3)
+    seg = _blob((0.05, -0.01, 0.05), 300, 0.03, rng)
+    patch = np.column_stack([rng.uniform(-0.055, -0.005, 18), rng.uniform(-0.244, -0.204, 18),
+                             rng.uniform(0.001, 0.007, 18)])
+    cloud = _cloud(np.vstack([seg, patch]), np.full((318, 3), 36))
+    assert glimpses(cloud, cloud.points[:, 2], [np.arange(300)], PerceptionConfig.default()) == []
+    low = _config(glimpse_min_height_m=0.0)
+    assert len(glimpses(cloud, cloud.points[:, 2], [np.arange(300)], low)) == 1
+
+
 def test_another_colour_beside_a_segment_is_a_glimpse_not_its_edge():
     rng = np.random.default_rng(2)
     box = _blob((0.667, -0.012, 0.012), 150, 0.013, rng)

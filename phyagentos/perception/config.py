@@ -129,6 +129,10 @@ class ClusteringConfig(_Section):
                     "declared look-alike unseen (perception.glimpse; 0: no glimpses).",
     )
     glimpse_radius_m: float = Field(0.015, le=1.0, gt=0, description="Neighbour distance of a glimpse's points, m.")
+    glimpse_min_height_m: float = Field(
+        0.015, le=1.0, ge=0,
+        description="A glimpse rises at least this far above the support plane (98th percentile of its points), m: "
+                    "lower left-overs are table-level clutter (a shadow's edge, a fixture's foot), not an object.")
     glimpse_clearance_m: float = Field(
         0.03, le=1.0, ge=0, description="A glimpse lies at least this far (horizontally) from every segment, m.")
     split_max_cost: float = Field(

@@ -4,8 +4,7 @@ Cost of detection i for descriptor j (only the attributes the descriptor declare
 
 * colour: Delta E*ab (CIE 1976) between the detection's median top-face colour and the
   declared colour, Delta L* weighted by ``lightness_weight`` (shading and lighting change
-  L* most), divided by ``colour_scale_lab``; the least over the declared colour scaled by an
-  illumination gain within ``colour_gain_max`` (:func:`colour_cost`);
+  L* most), divided by ``colour_scale_lab``;
 * size: mean absolute error of the sorted full dimensions (or of the largest one) / ``size_scale_m``;
   with a declared ``size_range_m``, only the part outside the range counts; for a detection
   cut by the image border (``truncated``, :mod:`.truncation`) only the part above it; for the
@@ -46,8 +45,7 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection
 
-__all__ = ["FORBIDDEN_COST", "COVERED_MIN_SHOWN", "GAIN_SAMPLES", "Association", "Landmark", "ReferenceResolution",
-           "colour_cost", "declared_labs", "cost_matrix", "track_costs",
+__all__ = ["FORBIDDEN_COST", "COVERED_MIN_SHOWN", "Association", "Landmark", "ReferenceResolution", "cost_matrix", "track_costs",
            "associate", "match_confidence", "resolve_reference", "forbid_except"]
 
 log = logging.getLogger(__name__)
@@ -79,58 +77,23 @@ def _size_error(det: Detection, desc: ObjectDescriptor) -> float | None:
     return desc.size_error(measured)
 
 
-#: Gains sampled between 1 / ``colour_gain_max`` and ``colour_gain_max`` (log-spaced) for the
-#: declared colour's brightest-matching version (:func:`colour_cost`).
-GAIN_SAMPLES = 17
-
-
-def declared_labs(colour_rgb, config: PerceptionConfig) -> np.ndarray:
-    """(k, 3) CIELAB of a declared sRGB colour (3,) in [0, 1] under each illumination gain
-    :func:`colour_cost` allows: the colour times each gain, clipped at 1 as a camera clips;
-    (1, 3) with ``association.colour_gain_max`` 1."""
-    rgb = np.asarray(colour_rgb, dtype=np.float64).reshape(1, 3)
-    g_max = config.association.colour_gain_max
-    if g_max <= 1.0:
-        return srgb_to_lab(rgb)
-    gains = np.geomspace(1.0 / g_max, g_max, GAIN_SAMPLES)[:, None]
-    return srgb_to_lab(np.clip(gains * rgb, 0.0, 1.0))
-
-
-def colour_cost(lab: np.ndarray, want: np.ndarray, config: PerceptionConfig) -> float:
-    """Association colour cost of a perceived CIELAB colour ``lab`` (3,) against a declared
-    colour's ``want`` (k, 3) (:func:`declared_labs`): the least Delta E*ab (CIE 1976; Delta L*
-    weighted by ``lightness_weight``) over the illumination gains, / ``colour_scale_lab``.
-
-    A declared colour is the material's; the light on it and the camera's exposure scale what
-    is seen (the tabletop's lights, and its camera model's per-episode gain in [0.6, 1.4]:
-    :mod:`phyagentos.targets.camera_noise`; the default ``colour_gain_max`` is that bound). Lab's a* and b* move with that scale, so a
-    material of another hue seen at the declared brightness can match better than the object
-    itself seen brighter: a blue sphere (material 0.1, 0.2, 0.8) seen as (0.13, 0.24, 0.96)
-    costs 0.60 plainly, a distractor (0.15, 0.3, 0.85) seen as (0.20, 0.38, 0.99) 0.45, and the
-    distractor was named (randomised tabletop, seed 30034). Over gains to 1.4 they cost 0.05
-    and 0.43: the hue decides, or the margin leaves both unknown. A look measured from renders of the same scene (LIBERO's) needs no gain:
-    ``colour_gain_max`` 1."""
-    ac = config.association
-    d = lab_distance(np.asarray(lab, float)[None, :], np.asarray(want, float), lightness_weight=ac.lightness_weight)
-    return float(np.min(d)) / ac.colour_scale_lab
-
-
 def cost_matrix(detections: Sequence[Detection], descriptors: Sequence[ObjectDescriptor],
                 config: PerceptionConfig, track_positions: Sequence[np.ndarray | None] = ()) -> np.ndarray:
     """(n_detections, n_descriptors) association costs (see the module docstring)."""
+    ac = config.association
     C = np.zeros((len(detections), len(descriptors)))
-    desc_lab = [None if d.colour_rgb is None else declared_labs(d.colour_rgb, config) for d in descriptors]
+    desc_lab = [None if d.colour_rgb is None else srgb_to_lab(np.array([d.colour_rgb]))[0] for d in descriptors]
     for i, det in enumerate(detections):
         for j, desc in enumerate(descriptors):
             c = 0.0
             if desc_lab[j] is not None:
-                c += colour_cost(det.colour_lab, desc_lab[j], config)
+                c += float(lab_distance(det.colour_lab, desc_lab[j], lightness_weight=ac.lightness_weight)) / ac.colour_scale_lab
             err = _size_error(det, desc)
             if err is not None:
-                c += err / config.association.size_scale_m
+                c += err / ac.size_scale_m
             mismatch = None if det.truncated or det.covered else desc.shape_mismatch(det.shape)
             if mismatch:
-                c += config.association.shape_cost * mismatch
+                c += ac.shape_cost * mismatch
             C[i, j] = c
     return C + track_costs(detections, len(descriptors), config, track_positions) if track_positions else C
 

@@ -175,11 +175,6 @@ class ShapeConfig(_Section):
 
 class AssociationConfig(_Section):
     colour_scale_lab: float = Field(25.0, le=1000.0, gt=0, description="Delta E*ab per unit cost.")
-    colour_gain_max: float = Field(
-        1.4, le=10.0, ge=1.0,
-        description="A declared colour is matched at its best over illumination gains from 1 / this to this "
-                    "(the light on a material and the camera's exposure scale what is seen; 1: as declared). "
-                    "perception.association.colour_cost.")
     lightness_weight: float = Field(0.35, le=1000.0, ge=0, description="Weight of Delta L* (shading).")
     size_scale_m: float = Field(0.01, le=10.0, gt=0, description="Size error (m) per unit cost.")
     shape_cost: float = Field(2.0, le=1000.0, ge=0, description="Cost of a shape mismatch.")

@@ -46,7 +46,6 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from phyagentos.perception.association import colour_cost, declared_labs
 from phyagentos.perception.cloud import Cloud, transform
 from phyagentos.perception.colour import lab_distance, srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
@@ -181,7 +180,8 @@ def glimpse_cost(g: Glimpse, desc: ObjectDescriptor, config: PerceptionConfig) -
     ac = config.association
     c = 0.0
     if desc.colour_rgb is not None:
-        c += colour_cost(g.colour_lab, declared_labs(desc.colour_rgb, config), config)
+        want = srgb_to_lab(np.array([desc.colour_rgb], dtype=np.float64))[0]
+        c += float(lab_distance(g.colour_lab, want, lightness_weight=ac.lightness_weight)) / ac.colour_scale_lab
     if desc.size_m is not None:
         if desc.size_vector() is None:
             c += max(0.0, float(g.size_m.max()) - float(desc.size_m)) / ac.size_scale_m

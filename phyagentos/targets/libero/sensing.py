@@ -50,8 +50,7 @@ class LiberoSensing:
     PERCEPTION_OVERRIDES: dict[str, dict[str, Any]] = {
         "clustering": {"chromaticity_scale": 2.0, "lightness_scale": 10.0, "eps_m": 0.015},
         "shape": {"colour_from": "vivid"},
-        # its looks are measured from renders under its own lights: matched as measured, no gain
-        "association": {"shape_cost": 0.5, "colour_gain_max": 1.0},
+        "association": {"shape_cost": 0.5},
         "holding": {"min_effort_n": 1.0},
     }
 

@@ -124,9 +124,10 @@ class ClusteringConfig(_Section):
     min_points: int = Field(25, le=1_000_000, ge=1, description="Smaller clusters are dropped as noise.")
     glimpse_min_points: int = Field(
         12, le=1_000_000, ge=0,
-        description="Left-over object points (in no segment) connected at glimpse_radius_m, at least this many and "
-                    "glimpse_clearance_m from every segment, are a glimpse: never named, but a rival that leaves a "
-                    "declared look-alike unseen (perception.glimpse; 0: no glimpses).",
+        description="Left-over object points (in no segment) connected at glimpse_radius_m, at least this many, "
+                    "rising glimpse_min_height_m and glimpse_clearance_m from every segment of their colour, are a "
+                    "glimpse: never named, but a rival that leaves a declared look-alike unseen (perception.glimpse; "
+                    "0: no glimpses).",
     )
     glimpse_radius_m: float = Field(0.015, le=1.0, gt=0, description="Neighbour distance of a glimpse's points, m.")
     glimpse_min_height_m: float = Field(

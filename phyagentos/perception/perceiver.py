@@ -1282,7 +1282,7 @@ class Perceiver:
 
     def _glimpse_rivals(self, desc: ObjectDescriptor, det: Detection, look_cost: float, found: Sequence[Glimpse],
                         stamp: float) -> bool:
-        """Whether a glimpse (:mod:`~phyagentos.perception.glimpse`) matches ``name``'s look about
+        """Whether a glimpse (:mod:`~phyagentos.perception.glimpse`) matches ``desc``'s look about
         as well as ``det`` (its sighting, at ``look_cost``) does, so that naming ``det`` would be a
         guess: the sighting is then left unknown, whatever track the name had (a track begun while
         the arm hid the glimpse is no better than a guess). ``found`` holds the glimpses seen now

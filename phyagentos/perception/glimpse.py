@@ -37,7 +37,6 @@ camera sees past its place to what lies behind (:func:`seen_empty`).
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -50,6 +49,7 @@ from phyagentos.perception.cloud import Cloud, transform
 from phyagentos.perception.colour import lab_distance, srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
+from phyagentos.perception.detect import Detection
 from phyagentos.perception.frames import CameraFrame
 
 __all__ = ["EDGE_COLOUR_COST", "EDGE_M", "Glimpse", "SEEN_EMPTY_M", "carry_over", "glimpses", "glimpse_cost", "rival", "seen_empty"]
@@ -67,8 +67,6 @@ EDGE_M = 0.01
 #: A camera sees a remembered glimpse's place empty where its depth there lies at least this
 #: much beyond the glimpse's centre, m (it sees the table behind where the thing stood).
 SEEN_EMPTY_M = 0.02
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -96,12 +94,30 @@ class Glimpse:
                 "colour_rgb": [float(v) for v in self.colour_rgb], "points": int(self.points)}
 
     @classmethod
+    def of_detection(cls, det: Detection) -> "Glimpse":
+        """A segment left unknown as a look-alike, kept as a rival: its centre, its sorted full
+        size (long, short, height), its top-face colour and point count."""
+        full = 2.0 * np.asarray(det.half_extents, float)
+        return cls(position=np.asarray(det.position, float).copy(),
+                   size_m=np.array([max(full[0], full[1]), min(full[0], full[1]), full[2]]),
+                   colour_rgb=np.asarray(det.colour_rgb, float), colour_lab=np.asarray(det.colour_lab, float),
+                   points=int(det.points))
+
+    @classmethod
     def from_dict(cls, d) -> "Glimpse":
         """The glimpse :meth:`to_dict` wrote. Raises KeyError, TypeError or ValueError on another layout."""
         rgb = np.asarray(d["colour_rgb"], dtype=np.float64).reshape(3)
         return cls(position=np.asarray(d["position"], dtype=np.float64).reshape(3),
                    size_m=np.asarray(d["size_m"], dtype=np.float64).reshape(3), colour_rgb=rgb,
                    colour_lab=srgb_to_lab(rgb[None, :])[0], points=int(d["points"]))
+
+
+def _like_colour(lab_a: np.ndarray, lab_b: np.ndarray, config: PerceptionConfig) -> bool:
+    """Whether two CIELAB colours (3,) are alike: an association colour cost at most
+    :data:`EDGE_COLOUR_COST`."""
+    ac = config.association
+    return float(lab_distance(lab_a, lab_b, lightness_weight=ac.lightness_weight)) / ac.colour_scale_lab \
+        <= EDGE_COLOUR_COST
 
 
 def glimpses(cloud: Cloud, heights: np.ndarray, segments: Sequence[np.ndarray],
@@ -141,7 +157,6 @@ def glimpses(cloud: Cloud, heights: np.ndarray, segments: Sequence[np.ndarray],
         owner[np.asarray(idx, dtype=np.int64)] = s_i
     seg_pts = np.flatnonzero(used)
     seg_tree = cKDTree(cloud.points[seg_pts, :2].astype(np.float64)) if seg_pts.size else None
-    ac = config.association
     out = []
     for k in np.flatnonzero(np.bincount(comp) >= cc.glimpse_min_points):
         members = left[comp == k]
@@ -157,9 +172,7 @@ def glimpses(cloud: Cloud, heights: np.ndarray, segments: Sequence[np.ndarray],
             close = np.unique(owner[seg_pts[at[near < cc.glimpse_clearance_m]]])
             if segment_lab is None and close.size:
                 continue  # a segment's own ragged edge
-            if segment_lab is not None and any(
-                    float(lab_distance(lab, segment_lab[int(c)], lightness_weight=ac.lightness_weight))
-                    / ac.colour_scale_lab <= EDGE_COLOUR_COST for c in close):
+            if segment_lab is not None and any(_like_colour(lab, segment_lab[int(c)], config) for c in close):
                 continue  # a segment's own ragged edge
         top = float(np.percentile(heights[members], 98))
         if top < cc.glimpse_min_height_m:
@@ -243,17 +256,17 @@ def carry_over(previous: Sequence[Glimpse], current: Sequence[Glimpse], segment_
             (:data:`EDGE_COLOUR_COST`, with ``segment_lab``) or ``segment_lab`` is None.
         segment_lab: (3,) CIELAB colour of each segment, or None.
     """
+    kept = list(current)
+    if not previous:
+        return kept
     clear = config.clustering.glimpse_clearance_m
-    ac = config.association
     trees = [cKDTree(np.asarray(xy, dtype=np.float64)) for xy in segment_xy if len(xy)]
     labs = [lab for xy, lab in zip(segment_xy, segment_lab or [None] * len(segment_xy)) if len(xy)]
-    kept = list(current)
     for g in previous:
         if any(float(np.linalg.norm(g.position[:2] - c.position[:2])) < clear for c in current):
             continue
-        if any(tree.query(g.position[:2], k=1)[0] < clear and (
-                lab is None or float(lab_distance(g.colour_lab, lab, lightness_weight=ac.lightness_weight))
-                / ac.colour_scale_lab <= EDGE_COLOUR_COST) for tree, lab in zip(trees, labs)):
+        if any(tree.query(g.position[:2], k=1)[0] < clear and (lab is None or _like_colour(g.colour_lab, lab, config))
+               for tree, lab in zip(trees, labs)):
             continue
         if seen_empty(g, frames):
             continue

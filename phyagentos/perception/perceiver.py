@@ -926,7 +926,7 @@ class Perceiver:
             entities.append(ent)
         # a look-alike left unknown stays a rival where it stood while the arm hides it (the
         # next observation drops it where a segment stands there again: carry_over)
-        self.glimpses += [_as_glimpse(dets[i]) for i in sorted(contested) if i not in matched and i not in in_pieces]
+        self.glimpses += [Glimpse.of_detection(dets[i]) for i in sorted(contested) if i not in matched and i not in in_pieces]
         k = 0
         for i, det in enumerate(dets):
             if i in matched or i in in_pieces:
@@ -1956,15 +1956,6 @@ def _pose(position: np.ndarray, yaw: float) -> np.ndarray:
     T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
     T[:3, 3] = position
     return T
-
-
-def _as_glimpse(det: Detection) -> Glimpse:
-    """A segment left unknown as a look-alike, kept as a rival (:class:`~phyagentos.perception.glimpse.Glimpse`)."""
-    full = 2.0 * np.asarray(det.half_extents, float)
-    size = np.array([max(full[0], full[1]), min(full[0], full[1]), full[2]])
-    rgb = np.asarray(det.colour_rgb, float)
-    return Glimpse(position=np.asarray(det.position, float).copy(), size_m=size, colour_rgb=rgb,
-                   colour_lab=np.asarray(det.colour_lab, float), points=int(det.points))
 
 
 def _detection_confidence(det: Detection) -> float:

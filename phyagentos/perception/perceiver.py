@@ -119,6 +119,7 @@ from phyagentos.perception.fixtures import (
 from phyagentos.perception.frames import CameraFrame, Proprioception, _rigid
 from phyagentos.perception.glimpse import Glimpse, carry_over, glimpses, rival
 from phyagentos.perception.handle import RoundBody
+from phyagentos.perception.hang import base_profile, hang_offset, scene_camera_mask
 from phyagentos.perception.relations import (
     _footprint_margin,
     holding_evidence,
@@ -441,7 +442,8 @@ class Perceiver:
 
     # ------------------------------------------------------------------ state
 
-    _TRACK_ARRAYS = ("position", "half_extents", "colour_rgb", "grasp_offset", "placed_xy", "top_knob")
+    _TRACK_ARRAYS = ("position", "half_extents", "colour_rgb", "grasp_offset", "placed_xy", "top_knob", "hang_tcp",
+                    "base_profile_m")
 
     def export_state(self) -> dict:
         """What this perceiver believes, as plain YAML/JSON-ready data: the tracks, the held
@@ -712,6 +714,7 @@ class Perceiver:
                                    cfg, seg_lab)
         found_glimpses = self.glimpses
         hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
+        hanging_part = cloud.select(np.concatenate([clusters[i][1] for i in hanging])) if hanging else None
         if hanging:  # the part of the held object below the fingers: the hand's, not a thing on the table
             log.debug("perception: %d segment(s) hang from the closed hand: %s", len(hanging),
                       [_r(dets[i].position) for i in hanging])
@@ -818,6 +821,16 @@ class Perceiver:
             self.tracks[name].seen_now = True
             self.tracks[name].released_s = None
             matched[i] = name
+        off_hand = scene_camera_mask(cloud.camera, np.array([f.T_world_camera[:3, 3] for f in frames]),
+                                     proprio.tcp_pose[:3, 3])
+        for i, name in matched.items():  # a round body's base, as the cameras off the hand see it standing
+            body = dets[i].body
+            if body is not None and dets[i].bottom_m <= 1e-6:
+                idx = np.asarray(clusters[i][1])
+                idx = idx[off_hand[idx]]
+                prof = base_profile(cloud.points[idx], axis_xy=body.axis_xy, outline_radius_m=body.radius_m)
+                if prof is not None:
+                    self.tracks[name].base_profile_m = prof
         for i, name in matched.items():  # seen again: still inside the container it was in (or let go into)?
             t = self.tracks[name]
             container = t.inside_of
@@ -851,6 +864,8 @@ class Perceiver:
 
         # ---- holding (a release noticed now is looked for in this very observation)
         holding_rel = self._update_holding(proprio, stamp)
+        if holding_rel is not None and hanging_part is not None:
+            self._read_hang(holding_rel[0], hanging_part, frames, proprio)
 
         # released objects (or ones seen inside a container before) not seen on their own: inside a
         # container segment where the hand let them go (where they were seen)?
@@ -1639,8 +1654,32 @@ class Perceiver:
         body = self._body_attributes(t.name, pos, T, t.body if t.grasp_offset is not None else None, std)
         ent = self._entity(t.name, "object", pos, yaw, t.half_extents, t.shape, t.colour_rgb,
                            hold_conf * max(t.confidence, 0.5), std, math.sqrt(t.var_yaw) + 0.1, 0, (), None,
-                           source="proprioception", extra={"held": True, "last_seen_s": _r(t.last_seen_s, 6), **body})
+                           source="proprioception", extra={"held": True, "last_seen_s": _r(t.last_seen_s, 6), **body,
+                                                           **({} if t.hang_tcp is None else
+                                                              {"hang_m": _r(float(np.linalg.norm(t.hang_tcp)), 4)})})
         return ent
+
+    def _read_hang(self, name: str, part: Cloud, frames: Sequence[CameraFrame], proprio: Proprioception) -> None:
+        """Carry held track ``name`` where its base hangs (:mod:`~phyagentos.perception.hang`): a
+        round body held by its rim (its track has a round body and its base's profile) whose part below the fingers
+        (``part``, the hanging segments' points) the cameras off the hand show is moved, in the
+        tcp frame, by the shift of its fitted base from where its carried pose puts it; the
+        shift since the grasp is kept (``Track.hang_tcp``) and reported as ``hang_m``."""
+        t = self.tracks.get(name)
+        if t is None or not t.held or t.body is None or t.grasp_offset is None or t.base_profile_m is None:
+            return
+        tcp = proprio.tcp_pose
+        off_hand = scene_camera_mask(part.camera, np.array([f.T_world_camera[:3, 3] for f in frames]), tcp[:3, 3])
+        T = tcp @ t.grasp_offset
+        shift = hang_offset(part.points[off_hand], axis_xy=t.body.placed(T).axis_xy, profile=t.base_profile_m)
+        if shift is None:
+            return
+        T[:2, 3] += shift
+        t.grasp_offset = np.linalg.inv(tcp) @ T
+        moved = tcp[:3, :3].T @ np.array([shift[0], shift[1], 0.0])
+        t.hang_tcp = moved if t.hang_tcp is None else np.asarray(t.hang_tcp, dtype=float) + moved
+        log.debug("perception: %s hangs %.4f m from its carried pose (%.4f m since the grasp)", name,
+                  float(np.hypot(*shift)), float(np.linalg.norm(t.hang_tcp)))
 
     def _body_attributes(self, name: str, position: np.ndarray, T_obj: np.ndarray, body: RoundBody | None,
                          std: float) -> dict:
@@ -1770,6 +1809,7 @@ class Perceiver:
                 t.var_xy = max(t.var_xy, RELEASE_SIGMA_M ** 2)
                 t.confidence *= 0.5
                 t.grasp_offset = None
+                t.hang_tcp = None
         if not candidates:
             self._held = None
             return None
@@ -1815,6 +1855,7 @@ class Perceiver:
                 t.grasp_offset = off
             t.held = True
             t.placed_xy = None
+            t.hang_tcp = None
         if len(candidates) > 1:
             conf *= 1.0 - candidates[1][0] / (candidates[0][0] + 1e-9) * 0.5
         self._held = name

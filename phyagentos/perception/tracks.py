@@ -100,6 +100,14 @@ class Track:
     #: radius (m), how far the body's top under it lies below the object's top (m), and its
     #: reach axis from the object's x axis (rad, modulo pi; nan: none); else None.
     top_knob: np.ndarray | None = None
+    #: (3,) m, in the tcp frame: how far the held body's base was found to hang from the pose it
+    #: had when the fingers closed (:mod:`~phyagentos.perception.hang`), since that grasp; None
+    #: while not held or not read.
+    hang_tcp: np.ndarray | None = None
+    #: Its round body's base, slice by slice up from the table, as the cameras off the hand saw
+    #: it standing (:func:`~phyagentos.perception.hang.base_profile`: (6,) radii, m, 0 where
+    #: unseen), else None.
+    base_profile_m: np.ndarray | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,

@@ -23,7 +23,9 @@ One :meth:`Perceiver.observe` call runs the pipeline on every frame of one obser
    (:func:`~phyagentos.perception.association.resolve_reference`; the snapshot's
    ``references`` says how), and once tracked keeps its identity by its track;
 5. tracks: fusion over observations (``tracks``);
-6. holding from proprioception (the held object's pose follows the tcp), then relations.
+6. holding from proprioception (the held object's pose follows the tcp; a round body held by its
+   rim goes where the cameras off the hand see its base hang, :mod:`~phyagentos.perception.hang`,
+   its base's profile read while it stood), then relations.
 
 Declared fixtures with a measured look (``fixtures: [{name, class, size_m, place?}]``,
 :mod:`~phyagentos.perception.fixtures`) are found before stage 3 on a cloud whose height crop

@@ -9,14 +9,17 @@ One LIBERO-10 world (task 4: three mugs, two plates); looks and scenes generated
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
+import mujoco
 import numpy as np
 import pytest
 
+from phyagentos.motion.rim_grasp import RIM_GRIP_DEPTH_M
 from phyagentos.perception import Perceiver
 from phyagentos.primitives.observation import robot_capsules
 from phyagentos.targets.libero import LiberoScene, LiberoTarget
-from phyagentos.targets.libero.descriptors import measure_descriptors, place_objects
+from phyagentos.targets.libero.descriptors import _free_adr, measure_descriptors, place_objects
 
 pytestmark = pytest.mark.sim
 
@@ -36,6 +39,18 @@ def _observe(target, perceiver):
                              robot_capsules=robot_capsules(target))
 
 
+def _generated_scene(world, seed: int):
+    """The world's objects set down by ``place_objects(seed)`` and seen once by a new perceiver:
+    ``(target, categories, declared, perceiver, objects perceived by name)``."""
+    target, looks = world
+    cats = target._problem.objects
+    declared = [{"name": n, "class": c, **looks.get(c, {})} for n, c in cats.items()]
+    place_objects(target, seed)
+    perceiver = Perceiver(target.perception_config(), declared)
+    ents = {e["name"]: e for e in _observe(target, perceiver)["entities"] if e["kind"] == "object"}
+    return target, cats, declared, perceiver, ents
+
+
 def test_the_mugs_looks_put_their_origin_along_the_handle_and_the_plates_have_none(world):
     _, looks = world
     for mug in MUGS:
@@ -44,19 +59,14 @@ def test_the_mugs_looks_put_their_origin_along_the_handle_and_the_plates_have_no
 
 
 def test_a_perceived_mugs_origin_is_where_its_model_frame_is_and_survives_a_new_perceiver(world):
-    target, looks = world
-    cats = target._problem.objects
-    declared = [{"name": n, "class": c, **looks.get(c, {})} for n, c in cats.items()]
-    place_objects(target, 70101)
-    first = Perceiver(target.perception_config(), declared)
-    ents = {e["name"]: e for e in _observe(target, first)["entities"] if e["kind"] == "object"}
+    target, cats, declared, first, ents = _generated_scene(world, 70101)
     judged = 0
     for name, cat in cats.items():
         if cat not in MUGS or name not in ents:
             continue
         a = ents[name]["attributes"]
         if "handle_xy" not in a:  # the handle hidden: the origin is the centre, as uncertain as the handle's reach
-            assert a["origin_xy"] == ents[name]["position"][:2] and a["origin_std_m"] >= looks[cat]["handle_origin_m"]
+            assert a["origin_xy"] == ents[name]["position"][:2] and a["origin_std_m"] >= world[1][cat]["handle_origin_m"]
             continue
         truth = target.data.xpos[target._obj_body[name]][:2]
         centre_err = float(np.linalg.norm(np.subtract(ents[name]["position"][:2], truth)))
@@ -79,18 +89,7 @@ def test_a_mug_held_by_its_rim_is_carried_where_its_base_hangs_not_where_it_stoo
     off the hand see its base hanging, and the held entity goes there (``perception.hang``). The
     mug is hung here by the test (its pose set in the simulator, turned about where the pads
     would hold it), the hand's closing on its rim told the perceiver by proprioception."""
-    import mujoco
-    from dataclasses import replace
-
-    from phyagentos.motion.rim_grasp import RIM_GRIP_DEPTH_M
-    from phyagentos.targets.libero.descriptors import _free_adr
-
-    target, looks = world
-    cats = target._problem.objects
-    declared = [{"name": n, "class": c, **looks.get(c, {})} for n, c in cats.items()]
-    place_objects(target, 70102)
-    p = Perceiver(target.perception_config(), declared)
-    ents = {e["name"]: e for e in _observe(target, p)["entities"] if e["kind"] == "object"}
+    target, cats, declared, p, ents = _generated_scene(world, 70102)
     name = next(n for n, c in cats.items() if c in MUGS and n in ents and p.tracks[n].body is not None
                 and p.tracks[n].base_profile_m is not None)
     standing = ents[name]

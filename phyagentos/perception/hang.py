@@ -6,21 +6,19 @@ pose when the fingers closed, rigid in the tcp frame) then puts its base where i
 LIBERO's development split (LIBERO-10 task 4, LIBERO's placement sampler, seeds 500-503, never
 an init state) the white-and-yellow mug hung 7.3-7.5 degrees off vertical once lifted, its base
 1.5-1.7 cm nearer the fingers than the carried pose said; set down by that pose, its origin came
-to rest 1.9-2.1 cm from the plate's centre instead of the intended 0.9 (the verifier's ``on``
-was left undecided, its reach 2.5 cm). In the evaluation inits the same shift took the first mug
-3.2-3.3 cm off its plate (LIBERO's ``On`` asks 3 cm).
+to rest 1.9-2.2 cm from the plate's centre instead of the intended 0.9 (the verifier's ``on``
+left it undecided, its reach 2.5 cm).
 
 :func:`hang_offset` measures the shift where the base is: the lowest points of the held body
 (the part of it below the fingers the perceiver keeps apart as hanging from the hand), from the
-cameras whose optical centre stands more than :data:`HAND_CAMERA_M` from the tcp, fitted with a
-circle of the body's known radius (its round body, measured while it stood on the table). The
-radius is the base's, as the same cameras saw it while the body stood (:func:`base_radius`: the
-median distance of its lowest points from its axis; LIBERO's mugs taper, their bases 3.4-3.8 cm
-across the radius against 4.8-5.6 cm for their outlines with the handle), since the centre of a
-circle fitted to an arc seen from one side moves about 1 mm along the view for each mm of
-radius. On those four scenes the fit put the white-and-yellow mug's base axis within 1-3 mm of
-the true one (the carried pose: 15-17 mm). A camera riding on the hand looks down into the body,
-at its inside and floor (radii 2.5-2.7 cm there): left out of both.
+cameras whose optical centre stands more than :data:`HAND_CAMERA_M` from the tcp, fitted slice
+by slice to circles about one centre. Each slice's radius is the base's as the same cameras saw
+it while the body stood (:func:`base_profile`), counted up from the body's lowest points both
+times: the centre of a circle fitted to an arc seen from one side moves about 1 mm along the
+view for each mm of radius, and LIBERO's mugs taper (the porcelain mug 3.1 cm across the radius
+at its base, 4.2 cm 3 cm up; 4.8 cm for its outline with the handle). On those four scenes the
+fit put the mugs' base axes within 1-3 mm of the true ones (the carried pose: 7-17 mm). A camera
+riding on the hand looks down into the body, at its inside and floor: left out of both.
 """
 
 from __future__ import annotations
@@ -115,9 +113,9 @@ def base_profile(points: np.ndarray, *, axis_xy: np.ndarray, outline_radius_m: f
         0 (unknown) with fewer than :data:`HANG_SLICE_POINTS` points or a median not within half
         to all of ``outline_radius_m``; None when fewer than two slices are known.
 
-    Its base is its lowest points, not the support plane: LIBERO's mugs stood 9.5 mm above the
-    plane the perceiver fitted to the table (LIBERO-10 task 4, development split), and in the
-    hand the same points are the lowest again.
+    Its base is its lowest points, not the support plane: the plane the perceiver fits to
+    LIBERO-10's living-room table lies 1.2 cm under the table top the objects rest on, and in
+    the hand the same points are the lowest again.
     """
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     axis = np.asarray(axis_xy, dtype=float)[:2]

@@ -716,7 +716,11 @@ class Perceiver:
                                    cfg, seg_lab)
         found_glimpses = self.glimpses
         hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
-        hanging_part = cloud.select(np.concatenate([clusters[i][1] for i in hanging])) if hanging else None
+        # the points the cameras off the hand saw (the hand's camera looks into a cup: perception.hang)
+        off_hand = scene_camera_mask(cloud.camera, np.array([f.T_world_camera[:3, 3] for f in frames]),
+                                     proprio.tcp_pose[:3, 3])
+        hung = np.concatenate([clusters[i][1] for i in hanging]) if hanging else None
+        hanging_points = None if hung is None else cloud.points[hung[off_hand[hung]]]
         if hanging:  # the part of the held object below the fingers: the hand's, not a thing on the table
             log.debug("perception: %d segment(s) hang from the closed hand: %s", len(hanging),
                       [_r(dets[i].position) for i in hanging])
@@ -823,8 +827,6 @@ class Perceiver:
             self.tracks[name].seen_now = True
             self.tracks[name].released_s = None
             matched[i] = name
-        off_hand = scene_camera_mask(cloud.camera, np.array([f.T_world_camera[:3, 3] for f in frames]),
-                                     proprio.tcp_pose[:3, 3])
         for i, name in matched.items():  # a round body's base, as the cameras off the hand see it standing
             body = dets[i].body
             if body is not None and dets[i].bottom_m <= 1e-6:
@@ -866,8 +868,8 @@ class Perceiver:
 
         # ---- holding (a release noticed now is looked for in this very observation)
         holding_rel = self._update_holding(proprio, stamp)
-        if holding_rel is not None and hanging_part is not None:
-            self._read_hang(holding_rel[0], hanging_part, frames, proprio)
+        if holding_rel is not None and hanging_points is not None:
+            self._read_hang(holding_rel[0], hanging_points, proprio)
 
         # released objects (or ones seen inside a container before) not seen on their own: inside a
         # container segment where the hand let them go (where they were seen)?
@@ -1661,19 +1663,20 @@ class Perceiver:
                                                               {"hang_m": _r(float(np.linalg.norm(t.hang_tcp)), 4)})})
         return ent
 
-    def _read_hang(self, name: str, part: Cloud, frames: Sequence[CameraFrame], proprio: Proprioception) -> None:
-        """Carry held track ``name`` where its base hangs (:mod:`~phyagentos.perception.hang`): a
-        round body held by its rim (its track has a round body and its base's profile) whose part below the fingers
-        (``part``, the hanging segments' points) the cameras off the hand show is moved, in the
-        tcp frame, by the shift of its fitted base from where its carried pose puts it; the
-        shift since the grasp is kept (``Track.hang_tcp``) and reported as ``hang_m``."""
+    def _read_hang(self, name: str, points: np.ndarray, proprio: Proprioception) -> None:
+        """Carry held track ``name`` where its base hangs (:mod:`~phyagentos.perception.hang`).
+
+        A round body held by its rim (its track has a round body and its base's profile): the
+        part of it below the fingers (``points`` (N, 3) world m, the hanging segments' points the
+        cameras off the hand saw) moves its pose, in the tcp frame, by the shift of its fitted
+        base from where the carried pose puts its axis. The shift since the grasp is kept
+        (``Track.hang_tcp``) and reported as ``hang_m``."""
         t = self.tracks.get(name)
         if t is None or not t.held or t.body is None or t.grasp_offset is None or t.base_profile_m is None:
             return
         tcp = proprio.tcp_pose
-        off_hand = scene_camera_mask(part.camera, np.array([f.T_world_camera[:3, 3] for f in frames]), tcp[:3, 3])
         T = tcp @ t.grasp_offset
-        shift = hang_offset(part.points[off_hand], axis_xy=t.body.placed(T).axis_xy, profile=t.base_profile_m)
+        shift = hang_offset(points, axis_xy=t.body.placed(T).axis_xy, profile=t.base_profile_m)
         if shift is None:
             return
         T[:2, 3] += shift

@@ -104,7 +104,7 @@ class Track:
     #: had when the fingers closed (:mod:`~phyagentos.perception.hang`), since that grasp; None
     #: while not held or not read.
     hang_tcp: np.ndarray | None = None
-    #: Its round body's base, slice by slice up from the table, as the cameras off the hand saw
+    #: Its round body's base, slice by slice up from its lowest points, as the cameras off the hand saw
     #: it standing (:func:`~phyagentos.perception.hang.base_profile`: (6,) radii, m, 0 where
     #: unseen), else None.
     base_profile_m: np.ndarray | None = None

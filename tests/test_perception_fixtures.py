@@ -113,3 +113,35 @@ def test_a_fixture_without_a_look_is_not_perceived_and_a_bad_look_lists_the_vali
         FixtureLook.from_dict({"name": "flat_stove_1", "size_m": [0.3, 0.2, 0.03], "place": {"offset_m": [0, 0]}})
     with pytest.raises(PerceptionError, match="3 finite numbers"):
         FixtureLook.from_dict({"name": "flat_stove_1", "size_m": [0.3, 0.2]})
+
+
+def test_a_fixtures_fixed_parts_beyond_the_body_its_look_fits_are_its_own_and_a_bad_model_box_is_refused():
+    """The wine rack is fitted by its racks (27 x 14 cm); its base and front bar stand 5 cm
+    further out (``model_box``, its model's fixed parts in its root frame, numbers from
+    LIBERO's rack): the points there are the rack's, a plate's rim 2 cm beyond them is not."""
+    import math
+
+    from phyagentos.perception.fixtures import FixtureSighting
+
+    rack = {"name": "wine_rack_1", "class": "wine_rack", "size_m": [0.2743, 0.1419, 0.3201],
+            "root": {"offset_m": [-0.0003, -0.0088, 0.02], "yaw_rad": -math.pi, "body_yaw_rad": 0.0011}}
+    look = FixtureLook.from_dict({**rack, "model_box": {"lo": [-0.135, -0.1315], "hi": [0.135, 0.1341]}})
+    seen = FixtureSighting("wine_rack_1", np.array([-0.257, -0.249, 1.06]), 0.0, np.array([0.137, 0.071, 0.16]),
+                           np.array([0.137, 0.071]), 0.32, 1000, 0.1)
+    # the base's front edge (5 cm in front of the fitted body), a plate's rim 2 cm past it, the
+    # body's centre, a point 20 cm beside the rack
+    pts = np.array([[-0.30, -0.128], [-0.30, -0.105], [-0.257, -0.249], [-0.45, -0.25]])
+    assert look.in_model(pts, seen, edge_m=0.005).tolist() == [True, False, True, False]
+    # stood the other way round, the box turns with it, and so does its root's offset from the
+    # body's centre (0.9 cm): its front and back edges move 2 cm forward
+    turned = FixtureSighting(**{**seen.__dict__, "turn": math.pi})
+    ends = np.array([[-0.30, -0.115], [-0.30, -0.385]])
+    assert look.in_model(ends, seen).tolist() == [False, True]
+    assert look.in_model(ends, turned).tolist() == [True, False]
+    assert not FixtureLook.from_dict(rack).in_model(pts, seen).any()  # no model box: nothing beyond the body
+    with pytest.raises(PerceptionError, match="lo, hi|'hi', 'lo'|hi, lo"):
+        FixtureLook.from_dict({**rack, "model_box": {"lo": [0, 0]}})
+    with pytest.raises(PerceptionError, match="below"):
+        FixtureLook.from_dict({**rack, "model_box": {"lo": [0.1, 0.0], "hi": [0.0, 0.1]}})
+    with pytest.raises(PerceptionError, match="needs the fixture's root"):
+        FixtureLook.from_dict({k: v for k, v in rack.items() if k != "root"} | {"model_box": {"lo": [0, 0], "hi": [1, 1]}})

@@ -102,8 +102,9 @@ _LOOKS_METHOD = "generated_clutter_v6"  # v3: objects kept off the fixtures; v4:
 # v5: sightings pooled over every world measured; v6: handle_origin_m (a mug's model origin along its handle)
 #: How the cached fixture looks were measured (:func:`_fixture_looks`).
 # v4: drawers; v5: per world; v6: compartments; v7: a fixture against another seen alone; v8: its
-# model frame (root: the planning world puts the fixture's model there)
-_FIXTURE_LOOKS_METHOD = "generated_alone_v8"
+# model frame (root: the planning world puts the fixture's model there); v9: the footprint of its
+# fixed parts (model_box: the points over it are the fixture's)
+_FIXTURE_LOOKS_METHOD = "generated_alone_v9"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:

@@ -581,18 +581,22 @@ class FixtureLook:
     drawers: tuple[DrawerLook, ...] = ()
     compartments: tuple[CompartmentLook, ...] = ()
     root: RootLook | None = None
+    model_box: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "FixtureLook | None":
-        """From a declared fixture ``{name, class, size_m?, place?, knob?, drawers?, compartments?}``; ``None``
-        when it has no look (``size_m``): such a fixture is not perceived.
+        """From a declared fixture ``{name, class, size_m?, place?, knob?, drawers?, compartments?,
+        root?, model_box?}``; ``None`` when it has no look (``size_m``): such a fixture is not
+        perceived. ``model_box``: ``{lo: [x, y], hi: [x, y]}``, m, the footprint of the fixture's
+        fixed parts (its model's meshes, no drawer, door or knob) in its model frame; it needs
+        ``root`` (where that frame stands from the perceived body).
 
         Raises:
             PerceptionError: an unknown key (the valid ones listed) or a malformed value.
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared fixture must be a mapping, got {type(d).__name__}")
-        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root")
+        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root", "model_box")
         unknown = set(d) - set(valid)
         name = d.get("name")
         if unknown:
@@ -615,9 +619,11 @@ class FixtureLook:
             raise PerceptionError(f"fixture {name!r}: compartments must be a list, got {raw_comps!r}")
         comps = tuple(CompartmentLook.from_dict(r, name) for r in raw_comps)
         root = RootLook.from_dict(d["root"], name) if d.get("root") is not None else None
+        box = _model_box(d.get("model_box"), name, root)
         place = d.get("place")
         if place is None:
-            return cls(name, d.get("class"), size, knob=knob, drawers=drawers, compartments=comps, root=root)
+            return cls(name, d.get("class"), size, knob=knob, drawers=drawers, compartments=comps, root=root,
+                       model_box=box)
         if not isinstance(place, Mapping) or set(place) != {"offset_m", "half_extents_m", "height_m"}:
             raise PerceptionError(f"fixture {name!r}: place must be a mapping with keys "
                                   f"{format_choices(('offset_m', 'half_extents_m', 'height_m'))}, got {place!r}")
@@ -626,7 +632,20 @@ class FixtureLook:
         height = _floats([place["height_m"]], 1, f"fixture {name!r}: place.height_m")[0]
         if min(half) <= 0 or height < 0:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
-        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps, root)  # type: ignore[arg-type]
+        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps, root, box)  # type: ignore[arg-type]
+
+    def in_model(self, points_xy: np.ndarray, sighting: "FixtureSighting", *, edge_m: float = 0.0) -> np.ndarray:
+        """(N,) bool: which of ``points_xy`` (N, 2) world m lie over the footprint of the
+        fixture's fixed parts (``model_box`` grown by ``edge_m``), its model frame put where
+        ``sighting`` says (:meth:`RootLook.pose`); all False without a model box."""
+        xy = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+        if self.model_box is None or self.root is None:
+            return np.zeros(len(xy), dtype=bool)
+        origin, yaw = self.root.pose(sighting.position, sighting.yaw, sighting.turn, sighting.top_m)
+        local = _in_frame(xy, origin[:2], yaw)
+        lo, hi = np.asarray(self.model_box[0]) - edge_m, np.asarray(self.model_box[1]) + edge_m
+        return np.all((local >= lo) & (local <= hi), axis=1)
+
 
     def place_patch(self, centre_xy: np.ndarray, half_xy: np.ndarray,
                     turn: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
@@ -641,6 +660,26 @@ class FixtureLook:
             half = half[::-1].copy()
         return (np.asarray(centre_xy, float) + turned_xy(self.place_offset_m, turn), half,
                 float(self.place_height_m or 0.0))
+
+
+def _model_box(raw: Any, fixture: str, root: RootLook | None) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """A declared ``model_box`` (:meth:`FixtureLook.from_dict`) as ``((lo_x, lo_y), (hi_x, hi_y))``, or None.
+
+    Raises:
+        PerceptionError: not ``{lo, hi}``, ``lo`` not below ``hi``, or no ``root`` to place it.
+    """
+    if raw is None:
+        return None
+    if not isinstance(raw, Mapping) or set(raw) != {"lo", "hi"}:
+        raise PerceptionError(f"fixture {fixture!r}: model_box must be a mapping with keys "
+                              f"{format_choices(('lo', 'hi'))}, got {raw!r}")
+    lo = _floats(raw["lo"], 2, f"fixture {fixture!r}: model_box.lo")
+    hi = _floats(raw["hi"], 2, f"fixture {fixture!r}: model_box.hi")
+    if not all(a < b for a, b in zip(lo, hi)):
+        raise PerceptionError(f"fixture {fixture!r}: model_box.lo must lie below model_box.hi, got {raw!r}")
+    if root is None:
+        raise PerceptionError(f"fixture {fixture!r}: a model_box needs the fixture's root (where its model frame stands)")
+    return lo, hi  # type: ignore[return-value]
 
 
 def _floats(value: Any, n: int, what: str) -> tuple[float, ...]:

@@ -845,6 +845,10 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
         roots = [g["root"] for g in got if "root" in g]
         if len(roots) >= 2:
             look["root"] = _median_root(roots)
+            boxes = [g["model_box"] for g in got if "model_box" in g]
+            if boxes:  # the model's, the same in every scene
+                look["model_box"] = {k: [round(float(v), 4) for v in np.median([b[k] for b in boxes], axis=0)]
+                                     for k in ("lo", "hi")}
         out[cat] = look
     return out
 
@@ -894,7 +898,48 @@ def _fixture_look(target, name: str, cat: str, cloud, heights: np.ndarray, plane
     if compartments:
         look["compartments"] = compartments
     look["root"] = _root_look(target, name, body)
+    box = _fixed_parts_box(target, name)
+    if box is not None:
+        look["model_box"] = box
     return look
+
+
+def _moves(m: mujoco.MjModel, body: int, root: int) -> bool:
+    """Whether ``body`` hangs from ``root`` through a joint (a drawer, a door, a knob)."""
+    while body != root and body > 0:
+        if int(m.body_jntnum[body]) > 0:
+            return True
+        body = int(m.body_parentid[body])
+    return False
+
+
+def _fixed_parts_box(target, name: str) -> dict[str, list[float]] | None:
+    """``{lo: [x, y], hi: [x, y]}``, m: the footprint of fixture ``name``'s fixed parts (the
+    visual geoms of its bodies that no joint moves: not a drawer, door or knob; a mesh by its
+    vertices, another geom by its box) in its model's root frame, or None (no such geom). The
+    perceiver counts the points over it as the fixture's own (:meth:`FixtureLook.in_model`):
+    a fixture seen in parts (the wine rack's racks, base and front bar) is fitted by its largest
+    body, and the rest would stand in the object cloud. Read from the model, for the look."""
+    m, d = target.model, target.data
+    root = _fixture_roots(target, {name: None})[name]
+    R, o = d.xmat[root].reshape(3, 3), d.xpos[root]
+    pts = []
+    for g in range(m.ngeom):
+        b = int(m.geom_bodyid[g])
+        if int(m.body_rootid[b]) != root or m.geom_group[g] == 0 or _moves(m, b, root):
+            continue
+        if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+            mesh = int(m.geom_dataid[g])
+            v = m.mesh_vert[m.mesh_vertadr[mesh]:m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+        else:
+            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+            v = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        w = d.geom_xpos[g] + v @ d.geom_xmat[g].reshape(3, 3).T
+        pts.append((w - o) @ R)
+    if not pts:
+        return None
+    local = np.vstack(pts)[:, :2]
+    return {"lo": local.min(axis=0).tolist(), "hi": local.max(axis=0).tolist()}
 
 
 def _root_look(target, name: str, body) -> dict[str, Any]:

@@ -831,6 +831,10 @@ class Perceiver:
             self.tracks[name].seen_now = True
             self.tracks[name].released_s = None
             matched[i] = name
+        for i, name in matched.items():  # how far off the plane it stands, where it stands on it
+            t = self.tracks[name]
+            if dets[i].bottom_m <= 1e-6 and t.inside_of is None and not t.held and name != self._held:
+                self.tracks[name].note_rest_gap(heights[np.asarray(clusters[i][1])], cfg.table.object_min_height_m)
         for i, name in matched.items():  # a round body's base, as the cameras off the hand see it standing
             body = dets[i].body
             if body is not None and dets[i].bottom_m <= 1e-6:
@@ -880,7 +884,8 @@ class Perceiver:
         for name, t in self.tracks.items():
             if t.seen_now or t.held or (t.released_s is None and t.inside_of is None):
                 continue
-            hit = _released_inside(t, cloud, heights, dets, [idx for _, idx in clusters], sensors)
+            hit = _released_inside(t, cloud, heights, dets, [idx for _, idx in clusters], sensors,
+                                   height_m=t.standing_height_m())
             if hit is None:
                 continue
             k, position, conf, points, cams = hit
@@ -2101,7 +2106,8 @@ def _still_inside(container: str | None, det: Detection, dets: list[Detection], 
 
 
 def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Detection], indices: list[np.ndarray],
-                     sensors: list[str]) -> tuple[int, np.ndarray, float, int, tuple[str, ...]] | None:
+                     sensors: list[str], *, height_m: float | None = None
+                     ) -> tuple[int, np.ndarray, float, int, tuple[str, ...]] | None:
     """Is object ``t`` standing inside a container segment where the hand let it go (or where
     it was last seen inside one)?
 
@@ -2118,11 +2124,13 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
     ways: a lining fold or a wall's rim fails one of these. "Above the floor" is above where it
     rests (:func:`_rest_height`): the floor of a basket, higher up the curved inside of a bowl.
     Confidence exp(-err^2 / 2 :data:`CONTENT_HEIGHT_SIGMA_M`^2) x (1 - exp(-points / 30)).
+    ``height_m``: the object's own height (m; :meth:`~.tracks.Track.standing_height_m`), else
+    its track's.
 
     Returns ``(container index, centre (3,), confidence, points, cameras)`` or None.
     """
     radius = float(max(t.half_extents[0], t.half_extents[1]))
-    height = 2.0 * float(t.half_extents[2])
+    height = 2.0 * float(t.half_extents[2]) if height_m is None else float(height_m)
     p0 = np.asarray(t.position[:2], float)
     for k, (det, idx) in enumerate(zip(dets, indices)):
         short = float(min(det.half_extents[0], det.half_extents[1]))

@@ -161,3 +161,26 @@ def test_a_position_shifted_world_builds_with_its_objects_elsewhere():
     moved = [k for k in poses["libero_object"]
              if np.linalg.norm(poses["libero_object"][k][:2] - poses["libero_object_temp_x0.1"][k][:2]) > 0.02]
     assert moved, poses
+
+
+@pytest.mark.sim
+def test_a_distractor_kept_far_off_the_table_does_not_move_the_tables_height():
+    """``libero_10_with_milk`` task 6, init 0, keeps its milk carton 7 m away and 8.6 m up. The
+    support's height, taken under the objects' mean position, fell off the table to the floor's
+    0 m: the support plane was never fitted and nothing was perceived (0 / 2, every pick
+    ``object_not_seen``). Under each object, the median: the living-room table's 0.437 m, and
+    the perceiver fits it and sees the mugs and the plates."""
+    from phyagentos.perception import Perceiver  # noqa: PLC0415
+    from phyagentos.primitives.observation import robot_capsules  # noqa: PLC0415
+    from phyagentos.targets.libero import LiberoScene, LiberoTarget  # noqa: PLC0415
+
+    with LiberoTarget("libero", LiberoScene(suite="libero_10_with_milk", task=6, init=0), seed=0) as target:
+        far = target.ground_truth()["objects"]["milk_1"]["position"]
+        assert np.hypot(far[0], far[1]) > 5.0  # the init state as shipped
+        config = target.perception_config()
+        assert config.table.expected_height_m == pytest.approx(0.437, abs=0.002)
+        snap = Perceiver(config, target.describe_declared()).observe(
+            [target.capture(c) for c in target.camera_names()], target.proprioception(),
+            robot_capsules=robot_capsules(target))
+    assert snap["support_plane"]["fitted"] and abs(snap["support_plane"]["offset_m"] - 0.437) < 0.02
+    assert sum(e["kind"] in ("object", "unknown") for e in snap["entities"]) >= 3

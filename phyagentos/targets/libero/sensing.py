@@ -71,25 +71,28 @@ class LiberoSensing:
         return PerceptionConfig.model_validate(doc)
 
     def _support_top_z(self) -> float:
-        """World z of the top of the support the objects stand on, m: the highest top among
-        the support geoms (floor, table) under the objects' mean position at the last reset
-        (the scene's layout, not a pose an Agent reads)."""
+        """World z of the top of the support the objects stand on, m: under each object (its
+        position at the last reset), the highest top among the support geoms (floor, table)
+        there; the median over the objects (the scene's layout, not a pose an Agent reads). Not
+        under their mean position: LIBERO-PRO's ``libero_10_with_milk`` keeps its milk carton
+        7 m away and 8.6 m up in some init states, and the mean fell off the table (the floor's
+        0 m then made every object a wall of points, and nothing was perceived)."""
         m, d = self._model, self._data
-        xy = np.mean([d.xpos[b][:2] for b in self._obj_body.values()], axis=0) if self._obj_body else np.zeros(2)
-        best = None
+        boxes = []
         for g in self._support_geoms:
             c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
             corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
             w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
-            lo, hi = w.min(axis=0), w.max(axis=0)
-            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE:
-                top = float(d.geom_xpos[g][2])
-            elif np.all(xy >= lo[:2]) and np.all(xy <= hi[:2]):
-                top = float(hi[2])
-            else:
-                continue
-            best = top if best is None else max(best, top)
-        return 0.0 if best is None else best
+            plane = m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE
+            boxes.append((w.min(axis=0), w.max(axis=0), float(d.geom_xpos[g][2]) if plane else None))
+        places = [d.xpos[b][:2] for b in self._obj_body.values()] or [np.zeros(2)]
+        tops = []
+        for xy in places:
+            under = [top if top is not None else float(hi[2]) for lo, hi, top in boxes
+                     if top is not None or (np.all(xy >= lo[:2]) and np.all(xy <= hi[:2]))]
+            if under:
+                tops.append(max(under))
+        return float(np.median(tops)) if tops else 0.0
 
     @property
     def _capture_option(self) -> mujoco.MjvOption:

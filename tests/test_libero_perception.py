@@ -159,8 +159,8 @@ def test_a_flat_box_let_go_in_the_basket_on_a_table_that_stands_above_its_render
     floor: against its look's height (3.1 cm) the 2 cm it shows there was 1.1 cm short, and
     the box let go inside was seen at confidence 0.48 (LIBERO-PRO ``libero_10_swap`` task 1,
     development split): the verdict undecided, the episode stopped. Its track keeps how far
-    off the plane it stood on the table (``rest_gap_m``), and the look inside takes its own
-    height less that."""
+    off the plane it stood on the table (``rest_gap_m``), and the look inside takes any height
+    from its own (its track's less that) to its track's."""
     t = LiberoTarget("living_room", LiberoScene(suite="libero_10", task=1), seed=0)
     try:
         looks = measure_descriptors(t, scenes=4)

@@ -646,7 +646,6 @@ class FixtureLook:
         lo, hi = np.asarray(self.model_box[0]) - edge_m, np.asarray(self.model_box[1]) + edge_m
         return np.all((local >= lo) & (local <= hi), axis=1)
 
-
     def place_patch(self, centre_xy: np.ndarray, half_xy: np.ndarray,
                     turn: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
         """``(centre (2,), half extents (2,) on the world axes, surface height above the

@@ -834,7 +834,7 @@ class Perceiver:
         for i, name in matched.items():  # how far off the plane it stands, where it stands on it
             t = self.tracks[name]
             if dets[i].bottom_m <= 1e-6 and t.inside_of is None and not t.held and name != self._held:
-                self.tracks[name].note_rest_gap(heights[np.asarray(clusters[i][1])], cfg.table.object_min_height_m)
+                t.note_rest_gap(heights[np.asarray(clusters[i][1])], cfg.table.object_min_height_m)
         for i, name in matched.items():  # a round body's base, as the cameras off the hand see it standing
             body = dets[i].body
             if body is not None and dets[i].bottom_m <= 1e-6:
@@ -2130,8 +2130,8 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
     counts as exact: on LIBERO's living-room table every tracked height carries the table's
     1.2 cm, and a flat box let go in the basket shows its own height over the floor where it
     lies flat (LIBERO-PRO ``libero_10_swap`` task 1: 2.0-2.3 cm for its look's 3.1), more where
-    it rests on a can or against a wall (LIBERO-10 task 7's evaluation inits: confirmed with
-    the track's height, lost with its own alone).
+    it does not (LIBERO-10 tasks 1 and 7: three boxes in the basket confirmed with the track's
+    height, lost with their own alone).
 
     Returns ``(container index, centre (3,), confidence, points, cameras)`` or None.
     """

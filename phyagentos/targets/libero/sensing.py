@@ -75,8 +75,8 @@ class LiberoSensing:
         position at the last reset), the highest top among the support geoms (floor, table)
         there; the median over the objects (the scene's layout, not a pose an Agent reads). Not
         under their mean position: LIBERO-PRO's ``libero_10_with_milk`` keeps its milk carton
-        7 m away and 8.6 m up in some init states, and the mean fell off the table (the floor's
-        0 m then made every object a wall of points, and nothing was perceived)."""
+        7 m away and 8.6 m up in some init states, and the mean fell off the table: the prior
+        was the floor's 0 m, the table's plane was never fitted and nothing was perceived."""
         m, d = self._model, self._data
         boxes = []
         for g in self._support_geoms:

@@ -330,7 +330,7 @@ def test_an_object_seen_resting_in_a_container_is_not_found_higher_up_its_walls(
     t.released_s, t.inside_of = 0.5, "basket_1"
     at = {"z": 0.0}
 
-    def found(track, cloud, heights, dets, indices, sensors, *, own_height_m=None):
+    def found(track, cloud, heights, dets, indices, sensors):
         return 0, np.array([0.55, 0.05, at["z"]]), 0.8, 120, ("front",)
 
     monkeypatch.setattr(perceiver_module, "_released_inside", found)
@@ -434,7 +434,7 @@ def test_an_object_found_let_go_in_a_segment_named_nothing_is_looked_for_there_a
     t.released_s, t.inside_of = 0.5, known_container
     calls = []
 
-    def found(track, cloud, heights, dets, indices, sensors, *, own_height_m=None):
+    def found(track, cloud, heights, dets, indices, sensors):
         calls.append(track.name)
         return 0, np.array([0.55, 0.05, 0.1]), 0.8, 120, ("front",)
 

@@ -831,10 +831,6 @@ class Perceiver:
             self.tracks[name].seen_now = True
             self.tracks[name].released_s = None
             matched[i] = name
-        for i, name in matched.items():  # how far off the plane it stands, where it stands on it
-            t = self.tracks[name]
-            if dets[i].bottom_m <= 1e-6 and t.inside_of is None and not t.held and name != self._held:
-                t.note_rest_gap(heights[np.asarray(clusters[i][1])], cfg.table.object_min_height_m)
         for i, name in matched.items():  # a round body's base, as the cameras off the hand see it standing
             body = dets[i].body
             if body is not None and dets[i].bottom_m <= 1e-6:
@@ -884,8 +880,7 @@ class Perceiver:
         for name, t in self.tracks.items():
             if t.seen_now or t.held or (t.released_s is None and t.inside_of is None):
                 continue
-            hit = _released_inside(t, cloud, heights, dets, [idx for _, idx in clusters], sensors,
-                                   own_height_m=t.standing_height_m())
+            hit = _released_inside(t, cloud, heights, dets, [idx for _, idx in clusters], sensors)
             if hit is None:
                 continue
             k, position, conf, points, cams = hit
@@ -2106,8 +2101,7 @@ def _still_inside(container: str | None, det: Detection, dets: list[Detection], 
 
 
 def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Detection], indices: list[np.ndarray],
-                     sensors: list[str], *, own_height_m: float | None = None
-                     ) -> tuple[int, np.ndarray, float, int, tuple[str, ...]] | None:
+                     sensors: list[str]) -> tuple[int, np.ndarray, float, int, tuple[str, ...]] | None:
     """Is object ``t`` standing inside a container segment where the hand let it go (or where
     it was last seen inside one)?
 
@@ -2119,25 +2113,16 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
     within the object's footprint radius + 2 cm of the release point, then within its radius
     of the top face found there. The top face: the points within 1 cm of the most populated
     5 mm height bin more than :data:`CONTENT_CLEARANCE_M` above the floor. The object is seen
-    there when that top stands the object's height above the floor (within 2 cm: ``err``, how
-    far it lies outside ``[own_height_m, its track's height]``),
+    there when that top stands the object's perceived height above the floor (within 2 cm),
     is flat (height RMS <= 7 mm) and spans at least 60 % of the object's short side both
     ways: a lining fold or a wall's rim fails one of these. "Above the floor" is above where it
     rests (:func:`_rest_height`): the floor of a basket, higher up the curved inside of a bowl.
     Confidence exp(-err^2 / 2 :data:`CONTENT_HEIGHT_SIGMA_M`^2) x (1 - exp(-points / 30)).
-    ``own_height_m``: its own height, m (:meth:`~.tracks.Track.standing_height_m`: its track's
-    less the gap it stood over on the table), else its track's. Any height between the two
-    counts as exact: on LIBERO's living-room table every tracked height carries the table's
-    1.2 cm, and a flat box let go in the basket shows its own height over the floor where it
-    lies flat (LIBERO-PRO ``libero_10_swap`` task 1: 2.0-2.3 cm for its look's 3.1), more where
-    it does not (LIBERO-10 tasks 1 and 7: three boxes in the basket confirmed with the track's
-    height, lost with their own alone).
 
     Returns ``(container index, centre (3,), confidence, points, cameras)`` or None.
     """
     radius = float(max(t.half_extents[0], t.half_extents[1]))
     height = 2.0 * float(t.half_extents[2])
-    own = height if own_height_m is None else min(float(own_height_m), height)
     p0 = np.asarray(t.position[:2], float)
     for k, (det, idx) in enumerate(zip(dets, indices)):
         short = float(min(det.half_extents[0], det.half_extents[1]))
@@ -2172,8 +2157,7 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
             log.debug("released %s in segment %d: floor %.3f top %.3f (height %.3f) face std %.4f, %d points, "
                       "span %.3f x %.3f m", t.name, k, floor, top, height, float(np.std(h[face])), int(face.sum()), width, length)
             rest = _rest_height(cloud.points[idx, :2], h, interior, face, det.position[:2], floor, top)
-            err = max(0.0, own - (top - rest), (top - rest) - height)
-            if top - floor < CONTENT_CLEARANCE_M or err > 0.02:
+            if top - floor < CONTENT_CLEARANCE_M or abs(top - rest - height) > 0.02:
                 continue
             if float(np.std(h[face])) > 0.007:
                 continue
@@ -2181,6 +2165,7 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
             if min(width, length) < 0.6 * short_obj:
                 continue
             n = int(face.sum())
+            err = abs(top - rest - height)
             conf = math.exp(-0.5 * (err / CONTENT_HEIGHT_SIGMA_M) ** 2) * (1.0 - math.exp(-n / 30.0))
             pos = np.array([centre[0], centre[1], 0.0])
             pos[2] = float(np.median(cloud.points[idx[face], 2] - h[face])) + floor + t.half_extents[2]  # on the floor

@@ -21,17 +21,12 @@ from phyagentos.perception.detect import Detection
 from phyagentos.perception.handle import RoundBody
 from phyagentos.geometry import turned_xy
 
-__all__ = ["REMEMBERED_CONFIDENCE", "REST_GAP_MIN_M", "Track", "yaw_period"]
+__all__ = ["REMEMBERED_CONFIDENCE", "Track", "yaw_period"]
 
 #: An object not seen now but hidden where it was is reported at its track's confidence times
 #: this (the perceiver's ``remembered``); a weak sighting of part of it where it stands keeps at
 #: least as much (:meth:`Track.update`'s ``weak_below``).
 REMEMBERED_CONFIDENCE = 0.9
-#: Lowest points standing no more than this above the cloud's cut are on the plane, m: the
-#: voxel grid and the depth noise at the foot of a thing standing on a table (LIBERO's
-#: kitchen tables: 0.0-0.4 mm; its living-room table, whose rendered top lies 1.2 cm under
-#: the surface things rest on: 3-10 mm on generated scenes).
-REST_GAP_MIN_M = 0.003
 
 
 def yaw_period(half_extents: np.ndarray, shape: str) -> float:
@@ -113,13 +108,6 @@ class Track:
     #: it standing (:func:`~phyagentos.perception.hang.base_profile`: (6,) radii, m, 0 where
     #: unseen), else None.
     base_profile_m: np.ndarray | None = None
-    #: How far above the support plane its lowest points stood while it stood on the support,
-    #: m: the least over its sightings (a neighbour hiding its foot only raises one), 0 where
-    #: that lies within the cloud's own cut above the plane; None until seen standing. A table
-    #: whose rendered top lies under the surface things rest on (LIBERO's living-room table:
-    #: 1.2 cm) adds this to every height read from the plane, but not to one read inside a
-    #: container, from its floor (:meth:`Perceiver.observe`'s look for a released object).
-    rest_gap_m: float | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
@@ -131,25 +119,6 @@ class Track:
                    last_seen_s=stamp_s, bottom_m=det.bottom_m, cameras=cameras, shape_votes={det.shape: 1},
                    body=None if det.body is None else det.body.local(det.position[:2], det.yaw),
                    open_depth_m=det.open_depth_m, top_knob=_local_top_knob(det, det.position, det.yaw))
-
-    def note_rest_gap(self, heights: np.ndarray, cut_m: float) -> None:
-        """Fold in one sighting standing on the support: ``heights`` (N,) m above the support
-        plane of its points, the cloud cut ``cut_m`` m above the plane (``table.object_min_height_m``).
-        Its lowest point (the third lowest: a stray return or two below it) counts where it
-        stands more than :data:`REST_GAP_MIN_M` above the cut, else the gap is 0 (the object
-        reaches down to the cut: it stands on the plane)."""
-        h = np.sort(np.asarray(heights, dtype=float))
-        if h.size < 3:
-            return
-        low = float(h[2])
-        gap = low if low - float(cut_m) > REST_GAP_MIN_M else 0.0
-        self.rest_gap_m = gap if self.rest_gap_m is None else min(self.rest_gap_m, gap)
-
-    def standing_height_m(self) -> float:
-        """Its own height, m: its track's height less :attr:`rest_gap_m` (the part of it that is
-        the gap under it), at least half its track's height."""
-        height = 2.0 * float(self.half_extents[2])
-        return max(height - float(self.rest_gap_m or 0.0), 0.5 * height)
 
     def predicted_var(self, stamp_s: float, config: PerceptionConfig) -> float:
         """Position variance (m^2) grown by the random walk since the last sighting."""
@@ -180,7 +149,6 @@ class Track:
         if self.held or not within or det.shape != self.shape and self.observations < 2:
             fresh = Track.start(self.name, det, confidence, stamp_s, cameras)
             fresh.known_height_m = self.known_height_m  # moved or taken, it is as tall as it was
-            fresh.rest_gap_m = self.rest_gap_m  # and stands as far off the plane where it stands on it
             self.__dict__.update(fresh.__dict__)
             return False
         yaw_before = self.yaw

@@ -120,11 +120,21 @@ def _root_box(target, root: int, *, visual_only: bool = False) -> tuple[np.ndarr
     for g in range(m.ngeom):
         if int(m.body_rootid[int(m.geom_bodyid[g])]) != root or (visual_only and m.geom_group[g] == 0):
             continue
-        c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-        corners = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        w = d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T
+        w = _geom_points(m, d, g, mesh=False)
         lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
     return lo, hi
+
+
+def _geom_points(m: mujoco.MjModel, d: mujoco.MjData, g: int, *, mesh: bool = True) -> np.ndarray:
+    """(N, 3) world points, m, that bound geom ``g`` as it stands: a mesh's vertices (``mesh``),
+    else the 8 corners of its ``geom_aabb`` box (in the geom's frame, turned with it)."""
+    if mesh and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+        k = int(m.geom_dataid[g])
+        local = m.mesh_vert[m.mesh_vertadr[k]:m.mesh_vertadr[k] + m.mesh_vertnum[k]]
+    else:
+        c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+        local = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    return d.geom_xpos[g] + local @ d.geom_xmat[g].reshape(3, 3).T
 
 
 def _mesh_box(target, root: int) -> tuple[np.ndarray, np.ndarray]:
@@ -137,9 +147,7 @@ def _mesh_box(target, root: int) -> tuple[np.ndarray, np.ndarray]:
         if int(m.body_rootid[int(m.geom_bodyid[g])]) != root or m.geom_group[g] == 0 \
                 or m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH:
             continue
-        mesh = int(m.geom_dataid[g])
-        v = m.mesh_vert[m.mesh_vertadr[mesh]:m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
-        pts.append(d.geom_xpos[g] + v @ d.geom_xmat[g].reshape(3, 3).T)
+        pts.append(_geom_points(m, d, g))
     if not pts:
         return _root_box(target, root, visual_only=True)
     allp = np.vstack(pts)
@@ -928,14 +936,7 @@ def _fixed_parts_box(target, name: str) -> dict[str, list[float]] | None:
         b = int(m.geom_bodyid[g])
         if int(m.body_rootid[b]) != root or m.geom_group[g] == 0 or _moves(m, b, root):
             continue
-        if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
-            mesh = int(m.geom_dataid[g])
-            v = m.mesh_vert[m.mesh_vertadr[mesh]:m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
-        else:
-            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-            v = c + h * np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        w = d.geom_xpos[g] + v @ d.geom_xmat[g].reshape(3, 3).T
-        pts.append((w - o) @ R)
+        pts.append((_geom_points(m, d, g) - o) @ R)
     if not pts:
         return None
     local = np.vstack(pts)[:, :2]

@@ -293,9 +293,9 @@ def test_a_match_far_from_where_an_object_was_let_go_is_not_it_when_it_shows_in_
     probed = []
 
     def shows(found):
-        def probe(track, cloud, heights, dets, indices, sensors):
+        def probe(track, cloud, heights, dets, indices, sensors, others=()):
             probed.append(np.round(track.position[:2], 4).tolist())
-            return (0, np.array([*placed, 0.46]), 0.96, 200, ("wrist",)) if found else None
+            return (0, np.array([*placed, 0.46]), 0.96, 200, ("wrist",), 0.03) if found else None
         return probe
 
     args = (None, np.zeros(0), [det], [], ["agentview"])
@@ -330,8 +330,8 @@ def test_an_object_seen_resting_in_a_container_is_not_found_higher_up_its_walls(
     t.released_s, t.inside_of = 0.5, "basket_1"
     at = {"z": 0.0}
 
-    def found(track, cloud, heights, dets, indices, sensors):
-        return 0, np.array([0.55, 0.05, at["z"]]), 0.8, 120, ("front",)
+    def found(track, cloud, heights, dets, indices, sensors, others=()):
+        return 0, np.array([0.55, 0.05, at["z"]]), 0.8, 120, ("front",), 0.03
 
     monkeypatch.setattr(perceiver_module, "_released_inside", found)
     _observe(scene, p, stamp_s=1.0)  # just let go: found where it rests, wherever that is
@@ -434,9 +434,9 @@ def test_an_object_found_let_go_in_a_segment_named_nothing_is_looked_for_there_a
     t.released_s, t.inside_of = 0.5, known_container
     calls = []
 
-    def found(track, cloud, heights, dets, indices, sensors):
+    def found(track, cloud, heights, dets, indices, sensors, others=()):
         calls.append(track.name)
-        return 0, np.array([0.55, 0.05, 0.1]), 0.8, 120, ("front",)
+        return 0, np.array([0.55, 0.05, 0.1]), 0.8, 120, ("front",), 0.03
 
     monkeypatch.setattr(perceiver_module, "_released_inside", found)
     ents, _ = _observe(scene, p, stamp_s=1.0)

@@ -367,3 +367,99 @@ def test_an_item_in_a_bowl_rests_up_its_curved_inside_and_on_a_baskets_flat_floo
     assert _rest_height(xy, h, np.ones(len(h), bool), face, np.zeros(2), floor, 0.048) == pytest.approx(0.01, abs=0.002)
     # nothing of the inside seen beside the item: the floor
     assert _rest_height(xy, h, face.copy(), face, np.zeros(2), floor, 0.048) == floor
+
+
+def _basket_with(faces, seed: int = 0, fold_m: float = 0.0):
+    """A synthetic basket segment seen from above: its lining 2.5 cm over the support plane
+    (2 mm noise) between walls 15 cm high, its footprint 17 x 16 cm at the origin, and
+    ``faces`` ``[(centre (2,), half (2,), shape, top m)]`` lying in it (each hides the lining
+    under it; with ``fold_m``, the lining within 5-15 mm of the first face stands that much
+    higher: pressed up round it). Returns the cloud, the heights (the plane is z = 0), the
+    basket's detection and its point indices."""
+    from phyagentos.perception.cloud import Cloud
+    from phyagentos.perception.colour import srgb_to_lab
+
+    rng = np.random.default_rng(seed)
+    xy = np.column_stack([rng.uniform(-0.085, 0.085, 9000), rng.uniform(-0.08, 0.08, 9000)])
+    h = 0.025 + rng.normal(0.0, 0.002, len(xy))
+    wall = (np.abs(xy[:, 0]) > 0.075) | (np.abs(xy[:, 1]) > 0.07)
+    h[wall] = 0.15
+    if faces and fold_m:
+        (cx, cy), (hx, hy) = faces[0][0], faces[0][1]
+        gap = np.maximum(np.abs(xy[:, 0] - cx) - hx, np.abs(xy[:, 1] - cy) - hy)
+        h[(gap > 0.005) & (gap < 0.015) & ~wall] += fold_m
+    for centre, half, shape, top in faces:
+        d = xy - np.asarray(centre)
+        over = (np.linalg.norm(d, axis=1) <= half[0]) if shape != "box" else \
+            (np.abs(d[:, 0]) <= half[0]) & (np.abs(d[:, 1]) <= half[1])
+        h[over] = top + rng.normal(0.0, 0.001, int(over.sum()))
+    pts = np.column_stack([xy, h])
+    cloud = Cloud(pts, np.zeros((len(pts), 3), np.uint8), np.ones(len(pts)), np.zeros(len(pts), np.int16))
+    rgb = np.array([0.5, 0.5, 0.45])
+    basket = Detection(position=np.array([0.0, 0.0, 0.075]), yaw=0.0, half_extents=np.array([0.085, 0.08, 0.075]),
+                       shape="box", colour_rgb=rgb, colour_lab=srgb_to_lab(rgb[None])[0], points=len(pts), cameras=1,
+                       position_std_m=0.002, yaw_std_rad=0.05, view_agreement=1.0, bottom_m=0.0)
+    return cloud, h, basket, np.arange(len(pts))
+
+
+def _let_go(name: str, half, shape: str, at):
+    from phyagentos.perception.colour import srgb_to_lab
+    from phyagentos.perception.tracks import Track
+
+    rgb = np.array([0.3, 0.3, 0.4])
+    det = Detection(position=np.array([at[0], at[1], half[2]]), yaw=0.0, half_extents=np.array(half, float),
+                    shape=shape, colour_rgb=rgb, colour_lab=srgb_to_lab(rgb[None])[0], points=300, cameras=1,
+                    position_std_m=0.002, yaw_std_rad=0.05, view_agreement=1.0, bottom_m=0.0)
+    t = Track.start(name, det, 0.95, 0.0, ("wrist",))
+    t.released_s = 1.0
+    return t
+
+
+def test_a_box_sunk_below_a_baskets_lining_is_found_where_it_rests():
+    """libero_10_swap task 1: the cream cheese box let go into the basket showed its top 2.2
+    cm over the lining's 5th percentile, though it is 3.1 cm tall (it sinks 0.9 cm below the
+    lining seen round it), so its look was 0.43-0.48 and its place went unjudged. It may rest
+    anywhere from the floor to the inside read beside it: found, at the floor."""
+    from phyagentos.perception.perceiver import _released_inside
+
+    # its top 3.1 cm over where it rests, 1.6 cm under the lining folded up round it (0.8 cm)
+    cloud, h, basket, idx = _basket_with([((0.0, 0.0), (0.0425, 0.0225), "box", 0.047)], fold_m=0.008)
+    cheese = _let_go("cream_cheese_1", (0.0425, 0.0225, 0.0155), "box", (0.003, 0.0))
+    hit = _released_inside(cheese, cloud, h, [basket], [idx], ["wrist"])
+    assert hit is not None
+    k, pos, conf, points, cams, top = hit
+    assert conf > 0.8 and top == pytest.approx(0.047, abs=0.003)  # read off the ring alone: 0.68
+    assert 0.016 - 0.002 <= pos[2] - 0.0155 <= 0.025  # resting no higher than the floor
+
+
+def test_a_can_that_rolled_off_is_not_found_on_the_face_of_another_in_the_basket():
+    """LIBERO-10 task 0: the tomato sauce let go beside the alphabet soup standing in the
+    basket rolled off; the look where it was let go found the soup's top at the sauce's height
+    (a false success). The points over another object seen where it stands, up to just over its
+    top, are that object's own."""
+    from phyagentos.perception.perceiver import _released_inside
+
+    soup_top = 0.025 + 0.0916
+    cloud, h, basket, idx = _basket_with([((0.03, 0.0), (0.034, 0.034), "cylinder", soup_top)])
+    sauce = _let_go("tomato_sauce_1", (0.034, 0.034, 0.0457), "cylinder", (0.0, 0.0))
+    assert _released_inside(sauce, cloud, h, [basket], [idx], ["wrist"]) is not None  # unguarded: the soup's face
+    soup = (np.array([0.03, 0.0]), np.array([0.034, 0.034]), 0.0, "cylinder", soup_top)
+    assert _released_inside(sauce, cloud, h, [basket], [idx], ["wrist"], [soup]) is None
+
+
+def test_a_box_let_go_onto_another_in_the_basket_is_found_resting_on_it():
+    """LIBERO-10 task 1: the butter set down where the cream cheese box lies in the basket
+    rests on the box; its face, higher over the box's footprint than the box's own top, is
+    the butter's, resting on the box's top."""
+    from phyagentos.perception.perceiver import _released_inside
+
+    cheese_top = 0.047
+    butter_top = cheese_top + 0.0304
+    cloud, h, basket, idx = _basket_with([((0.0, 0.0), (0.0425, 0.0225), "box", cheese_top),
+                                          ((0.0, 0.002), (0.0395, 0.0209), "box", butter_top)])
+    butter = _let_go("butter_1", (0.0395, 0.0209, 0.0152), "box", (0.0, 0.0))
+    cheese = (np.array([0.0, 0.0]), np.array([0.0425, 0.0225]), 0.0, "box", cheese_top)
+    assert _released_inside(butter, cloud, h, [basket], [idx], ["wrist"]) is None  # too high for the floor
+    hit = _released_inside(butter, cloud, h, [basket], [idx], ["wrist"], [cheese])
+    assert hit is not None and hit[2] > 0.9
+    assert hit[1][2] == pytest.approx(cheese_top + 0.0152, abs=0.004)  # on the box

@@ -163,6 +163,18 @@ CONTENT_RISE_M = 0.02
 #: Spread of a contained object's top above the floor about its perceived height, m: the
 #: lining's folds (about 1 cm) and the height perceived on the open table (within ~1 cm).
 CONTENT_HEIGHT_SIGMA_M = 0.015
+#: In a look for a released object (:func:`_released_inside`), the points over the footprint of
+#: another object perceived where it stands, grown by this on every side, m (half the 2 cm
+#: search margin around the release point) ...
+OTHER_FOOTPRINT_M = 0.01
+#: ... and no higher than this over its perceived top, m, are that object's own (its top face
+#: and sides); higher ones are something resting on it (a butter let go onto a cream cheese
+#: box in a basket shows its top 1.6 cm over the box's). 1 cm: twice the 5 mm height bins in
+#: which a face is found.
+OTHER_TOP_M = 0.01
+#: Another object's footprint: ``(centre (2,) world m, half extents (2,) m, yaw rad, shape,
+#: top m above the support plane)``.
+Footprint = tuple[np.ndarray, np.ndarray, float, str, float]
 #: Interior points of a container (beside what lies in it) needed to read its inside where an
 #: object's ends rest (:func:`_rest_height`); with fewer, it is taken to rest on the floor.
 REST_RING_MIN_POINTS = 20
@@ -876,14 +888,17 @@ class Perceiver:
             self._read_hang(holding_rel[0], hanging_points, proprio)
 
         # released objects (or ones seen inside a container before) not seen on their own: inside a
-        # container segment where the hand let them go (where they were seen)?
-        for name, t in self.tracks.items():
+        # container segment where the hand let them go (where they were seen)? Those let go first:
+        # what stands where the hand just opened is what it let go, on whatever was there before
+        # (a butter let go onto a cream cheese box in a basket: the box's own face is hidden now)
+        for name, t in sorted(self.tracks.items(), key=lambda kv: kv[1].released_s is None):
             if t.seen_now or t.held or (t.released_s is None and t.inside_of is None):
                 continue
-            hit = _released_inside(t, cloud, heights, dets, [idx for _, idx in clusters], sensors)
+            hit = _released_inside(t, cloud, heights, dets, [idx for _, idx in clusters], sensors,
+                                   self._other_footprints(name))
             if hit is None:
                 continue
-            k, position, conf, points, cams = hit
+            k, position, conf, points, cams, face_top = hit
             bottom = float(position[2] - t.half_extents[2] - plane.z_at(position[:2]))
             if t.released_s is None and t.confidence >= cfg.relations.min_confidence \
                     and bottom > t.bottom_m + CONTENT_RISE_M:
@@ -894,7 +909,7 @@ class Perceiver:
             t.position[2] = plane.z_at(position[:2]) + t.bottom_m + t.half_extents[2]
             t.var_xy = max(dets[k].position_std_m, CONTAINER_WALL_M / 2.0) ** 2
             t.confidence, t.points, t.cameras, t.last_seen_s = conf, points, cams, stamp
-            t.seen_now = True
+            t.seen_now, t.face_top_m = True, face_top
             # inside the container that segment was named as, else the one it was inside before;
             # a segment named nothing (the basket with a can standing out of it, ambiguous) keeps
             # the object let go, so the next look searches that segment for it again (LIBERO-10
@@ -1427,7 +1442,24 @@ class Perceiver:
         if placed is None or t is None or float(np.linalg.norm(det.position[:2] - placed)) <= RELEASE_REACH_M:
             return False
         at_release = replace(t, position=np.array([placed[0], placed[1], t.position[2]], dtype=float))
-        return _released_inside(at_release, cloud, heights, dets, [idx for _, idx in clusters], sensors) is not None
+        return _released_inside(at_release, cloud, heights, dets, [idx for _, idx in clusters], sensors,
+                                self._other_footprints(name)) is not None
+
+    def _other_footprints(self, name: str) -> list[Footprint]:
+        """The footprints and tops of the objects other than ``name`` perceived where they stand
+        (tracked at ``relations.min_confidence`` or more, seen now, or found between a
+        container's walls, whatever the confidence: a face is one object's), neither held nor
+        let go since, and no container or support themselves (their short side under
+        :data:`CONTAINER_MIN_SIDE_M`: a basket's or a plate's footprint holds what is set in or
+        on it). The top: the face seen between a container's walls where it was found there,
+        else its bottom plus its height."""
+        threshold = self.config.relations.min_confidence
+        return [(t.position[:2].copy(), t.half_extents[:2].copy(), float(t.yaw), t.shape,
+                 float(t.bottom_m + 2.0 * t.half_extents[2]) if t.face_top_m is None else t.face_top_m)
+                for n, t in self.tracks.items()
+                if n != name and not t.held and t.released_s is None
+                and (t.confidence >= threshold or t.seen_now or t.face_top_m is not None)
+                and 2.0 * float(min(t.half_extents[0], t.half_extents[1])) < CONTAINER_MIN_SIDE_M]
 
     def _hidden_base_where_let_go(self, C: np.ndarray, dets: list[Detection]) -> np.ndarray:
         """``C`` with the height of a detection standing on the plane taken as an upper bound
@@ -2101,9 +2133,17 @@ def _still_inside(container: str | None, det: Detection, dets: list[Detection], 
 
 
 def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Detection], indices: list[np.ndarray],
-                     sensors: list[str]) -> tuple[int, np.ndarray, float, int, tuple[str, ...]] | None:
+                     sensors: list[str], others: Sequence[Footprint] = ()
+                     ) -> tuple[int, np.ndarray, float, int, tuple[str, ...], float] | None:
     """Is object ``t`` standing inside a container segment where the hand let it go (or where
     it was last seen inside one)?
+
+    One face, one object: the points over ``others`` (the footprints of the other objects
+    perceived where they stand, grown by :data:`OTHER_FOOTPRINT_M`) up to :data:`OTHER_TOP_M`
+    over their tops are never ``t``'s: a can let go beside another in a basket that rolled off
+    must not be found on the other's top (LIBERO-10 task 0: the tomato sauce on the alphabet
+    soup's face). A face higher over one of them is ``t`` resting on it: its top is then
+    another place it may rest.
 
     An object set down in a basket touches its lining and walls and joins the basket's
     segment; from above, only its top shows between the walls. For a detection whose
@@ -2113,13 +2153,19 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
     within the object's footprint radius + 2 cm of the release point, then within its radius
     of the top face found there. The top face: the points within 1 cm of the most populated
     5 mm height bin more than :data:`CONTENT_CLEARANCE_M` above the floor. The object is seen
-    there when that top stands the object's perceived height above the floor (within 2 cm),
-    is flat (height RMS <= 7 mm) and spans at least 60 % of the object's short side both
-    ways: a lining fold or a wall's rim fails one of these. "Above the floor" is above where it
-    rests (:func:`_rest_height`): the floor of a basket, higher up the curved inside of a bowl.
-    Confidence exp(-err^2 / 2 :data:`CONTENT_HEIGHT_SIGMA_M`^2) x (1 - exp(-points / 30)).
+    there when that top stands the object's perceived height above where it rests (within 2
+    cm), is flat (height RMS <= 7 mm) and spans at least 60 % of the object's short side both
+    ways: a lining fold or a wall's rim fails one of these. Where it rests lies between the
+    floor and the inside read beside it (:func:`_rest_height`): on a bowl's curved inside it
+    rests on the ring beside it, but in a basket it sinks below the lining seen around it
+    (LIBERO's basket: a cream cheese box 1.7 cm below the ring, 0.9 cm below the floor's 5th
+    percentile; the err is then the distance of ``top - height`` from ``[floor, ring]``, or from
+    the top of another object under the face's centre). The object's centre is reported at its
+    height over where it rests. Confidence exp(-err^2 / 2 :data:`CONTENT_HEIGHT_SIGMA_M`^2) x
+    (1 - exp(-points / 30)).
 
-    Returns ``(container index, centre (3,), confidence, points, cameras)`` or None.
+    Returns ``(container index, centre (3,) world m, confidence, points, cameras, the top face's
+    height m above the support plane)`` or None.
     """
     radius = float(max(t.half_extents[0], t.half_extents[1]))
     height = 2.0 * float(t.half_extents[2])
@@ -2138,9 +2184,10 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
         if int(interior.sum()) < 25:
             continue
         floor = float(np.percentile(h[interior], 5))
+        mine = interior & ~_others_own(cloud.points[idx, :2], h, others)
         centre = p0
         for grow in (0.02, 0.0):  # search around the release point, then around the top face found
-            disc = interior & (np.linalg.norm(cloud.points[idx, :2] - centre, axis=1) < radius + grow)
+            disc = mine & (np.linalg.norm(cloud.points[idx, :2] - centre, axis=1) < radius + grow)
             above = h[disc][h[disc] > floor + CONTENT_CLEARANCE_M]
             if above.size < 25:
                 break
@@ -2157,7 +2204,13 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
             log.debug("released %s in segment %d: floor %.3f top %.3f (height %.3f) face std %.4f, %d points, "
                       "span %.3f x %.3f m", t.name, k, floor, top, height, float(np.std(h[face])), int(face.sum()), width, length)
             rest = _rest_height(cloud.points[idx, :2], h, interior, face, det.position[:2], floor, top)
-            if top - floor < CONTENT_CLEARANCE_M or abs(top - rest - height) > 0.02:
+            bottom = top - height
+            # where it may rest: from the floor to the ring beside it, or on another object under it
+            rests = [float(np.clip(bottom, floor, rest)),
+                     *(o[4] for o in others if _over_footprints(centre[None, :], [o], 0.0)[0])]
+            on = min(rests, key=lambda r: abs(bottom - r))
+            err = abs(bottom - on)
+            if top - floor < CONTENT_CLEARANCE_M or err > 0.02:
                 continue
             if float(np.std(h[face])) > 0.007:
                 continue
@@ -2165,13 +2218,38 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
             if min(width, length) < 0.6 * short_obj:
                 continue
             n = int(face.sum())
-            err = abs(top - rest - height)
             conf = math.exp(-0.5 * (err / CONTENT_HEIGHT_SIGMA_M) ** 2) * (1.0 - math.exp(-n / 30.0))
             pos = np.array([centre[0], centre[1], 0.0])
-            pos[2] = float(np.median(cloud.points[idx[face], 2] - h[face])) + floor + t.half_extents[2]  # on the floor
+            pos[2] = float(np.median(cloud.points[idx[face], 2] - h[face])) + on + t.half_extents[2]  # where it rests
             cams = tuple(sensors[int(i)] for i in np.unique(cloud.camera[idx[face]]))
-            return k, pos, conf, n, cams
+            return k, pos, conf, n, cams, top
     return None
+
+
+def _others_own(xy: np.ndarray, h: np.ndarray, others: Sequence[Footprint]) -> np.ndarray:
+    """(N,) bool: which of the points ``xy`` (N, 2) world m at heights ``h`` (N,) m above the
+    support plane are another object's own: over its footprint grown by
+    :data:`OTHER_FOOTPRINT_M` and no higher than :data:`OTHER_TOP_M` over its top."""
+    out = np.zeros(len(xy), dtype=bool)
+    for o in others:
+        out |= _over_footprints(xy, [o], OTHER_FOOTPRINT_M) & (h <= o[4] + OTHER_TOP_M)
+    return out
+
+
+def _over_footprints(xy: np.ndarray, footprints: Sequence[Footprint], grow_m: float) -> np.ndarray:
+    """(N,) bool: which of the points ``xy`` (N, 2) world m lie over any of ``footprints``
+    (:data:`Footprint`; a non-box is a disc of radius ``half[0]``) grown by ``grow_m`` m on
+    every side."""
+    out = np.zeros(len(xy), dtype=bool)
+    for centre, half, yaw, shape, _ in footprints:
+        d = xy - np.asarray(centre, dtype=float)[:2]
+        if shape != "box":
+            out |= np.linalg.norm(d, axis=1) <= float(half[0]) + grow_m
+            continue
+        c, s_ = math.cos(yaw), math.sin(yaw)
+        u, v = c * d[:, 0] + s_ * d[:, 1], -s_ * d[:, 0] + c * d[:, 1]
+        out |= (np.abs(u) <= float(half[0]) + grow_m) & (np.abs(v) <= float(half[1]) + grow_m)
+    return out
 
 
 def _rest_height(xy: np.ndarray, h: np.ndarray, interior: np.ndarray, face: np.ndarray, centre_xy: np.ndarray,

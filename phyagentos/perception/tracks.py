@@ -108,6 +108,10 @@ class Track:
     #: it standing (:func:`~phyagentos.perception.hang.base_profile`: (6,) radii, m, 0 where
     #: unseen), else None.
     base_profile_m: np.ndarray | None = None
+    #: The height (m above the support plane) of its top face as last found between a
+    #: container's walls (the perceiver's look for a released object, which reports the object
+    #: where it rests, not where that face puts it); None once it is seen on its own.
+    face_top_m: float | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
@@ -170,7 +174,7 @@ class Track:
         self.half_extents = (n * self.half_extents + det.half_extents) / (n + 1)
         self.colour_rgb = (n * self.colour_rgb + det.colour_rgb) / (n + 1)
         self.points, self.bottom_m, self.cameras = det.points, det.bottom_m, cameras
-        self.open_depth_m = det.open_depth_m
+        self.open_depth_m, self.face_top_m = det.open_depth_m, None
         if det.body is not None:  # the latest sighting of it
             self.body = det.body.local(det.position[:2], det.yaw)
         elif self.body is not None:  # one that missed the handle keeps the last, turned as it stood

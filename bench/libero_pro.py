@@ -18,6 +18,13 @@ valid names). Per suite:
   its signal at the end of a session before any recovery session / at the end of any session;
 - ``drop_first_pts`` / ``drop_final_pts``: the standard suite's rate minus this suite's, in
   percentage points (positive: worse than standard), when the standard suite is in the run;
+- ``not_runnable``: chosen tasks the suite ships no init state for (``libero_10_with_milk``'s
+  tasks 3 and 4: LIBERO-PRO's files hold none), counted as failures above, as LIBERO counts
+  every task; and ``on_tasks_run``: where there are some, the same drops over the tasks the
+  suite can run only, each against the standard suite's same task (matched by LIBERO's task
+  name less its scene prefix; absent when one does not match): ``tasks``, ``first_pct``,
+  ``final_pct``, ``standard_first_pct``, ``standard_final_pct``, ``drop_first_pts``,
+  ``drop_final_pts``;
 - ``false_successes`` / ``false_failures``: episodes whose final verdict (ours: every node's
   last session succeeded) says success where LIBERO's checker at the episode's end says no,
   and the reverse (an episode is comparable only at its end: a pick session's own success is
@@ -86,6 +93,54 @@ def _check_suites(names: list[str]) -> list[str]:
     return problems
 
 
+def task_stem(name: str) -> str:
+    """A LIBERO task name less its scene prefix, "pick the" read as "pick up the": how a
+    perturbed suite's task is matched to its standard suite's (``FLOOR_SCENE1_put_both_moka_pots_on_the_stove``
+    and ``KITCHEN_SCENE8_put_both_moka_pots_on_the_stove``)."""
+    return re.sub(r"^[A-Z_]+SCENE\d+_", "", name).replace("pick_the_", "pick_up_the_")
+
+
+def _tasks_of(suite: str, tasks: list[int]) -> tuple[dict[str, str], list[int]]:
+    """``({"t<i>": task stem}, [tasks with no init state])`` for the chosen tasks of ``suite``."""
+    from phyagentos.targets.libero import load_init_states, resolve_task  # noqa: PLC0415
+
+    stems, empty = {}, []
+    for i in tasks:
+        task = resolve_task(suite, i)
+        stems[f"t{i}"] = task_stem(task.name)
+        try:
+            load_init_states(task)
+        except TargetError:
+            empty.append(i)
+    return stems, empty
+
+
+def on_tasks_run(row: dict, standard: dict) -> dict | None:
+    """The drops of perturbed suite ``row`` against ``standard`` (both :func:`run_suite` rows,
+    percentages over ``seeds`` init states per task) over the tasks ``row`` can run only, each
+    matched to the standard task of the same :func:`task_stem`; None when ``row`` can run
+    every chosen task, or when one of its tasks has no match. A refused task counts as a
+    failure here too: only a task with no init state to run is left out."""
+    if not row.get("not_runnable"):
+        return None
+    by_stem = {v: k for k, v in standard.get("task_names", {}).items()}
+    run = [k for k in row.get("task_names", {}) if int(k[1:]) not in row["not_runnable"]]
+    pairs = [(k, by_stem.get(row["task_names"][k])) for k in run]
+    if not pairs or any(ref is None for _, ref in pairs):
+        return None
+    n = len(pairs) * int(row["seeds"])
+
+    def rate(r: dict, keys: list[str], what: str) -> float:
+        return _pct(sum(r.get("per_task", {}).get(k, {}).get(what, 0) for k in keys), n)
+
+    mine, ref = [k for k, _ in pairs], [k for _, k in pairs]
+    out = {"tasks": len(pairs), "first_pct": rate(row, mine, "first"), "final_pct": rate(row, mine, "final"),
+           "standard_first_pct": rate(standard, ref, "first"), "standard_final_pct": rate(standard, ref, "final")}
+    out["drop_first_pts"] = round(out["standard_first_pct"] - out["first_pct"], 1)
+    out["drop_final_pts"] = round(out["standard_final_pct"] - out["final_pct"], 1)
+    return out
+
+
 def _episode_rows(report_json: Path) -> list[dict]:
     return json.loads(report_json.read_text(encoding="utf-8"))["episodes"]
 
@@ -126,6 +181,7 @@ def run_suite(suite: str, workspace: Path, tasks: str, seeds: str, *, timeout_s:
     wall = round(time.monotonic() - t0, 1)
     row = {"suite": suite, "standard": base, "family": family, "kind": kind, "tasks": n_tasks, "seeds": n_seeds,
            "episodes": n_tasks * n_seeds, "exit_code": proc.returncode, "wall_s": wall, "command": " ".join(cmd[1:])}
+    row["task_names"], row["not_runnable"] = _tasks_of(suite, [int(t) for t in tasks.split(",")])
     planning_file = workspace / "libero" / suite / "planning.yaml"
     if proc.returncode == EXIT_BAD_INPUT:  # refused before anything ran: nothing planned, or an error
         refused = _refusals(suite, [int(t) for t in tasks.split(",")])
@@ -174,9 +230,6 @@ def check_builds(suites: list[str], out: Path) -> int:
         suite_tasks,
     )
 
-    def stem(name: str) -> str:  # LIBERO's scene prefix and "pick the" / "pick up the" aside
-        return re.sub(r"^[A-Z_]+SCENE\d+_", "", name).replace("pick_the_", "pick_up_the_")
-
     def build(suite: str, task: int) -> tuple[dict, float]:
         t0 = time.monotonic()
         with LiberoTarget("libero", LiberoScene(suite=suite, task=task, init=0), seed=0) as target:
@@ -197,7 +250,7 @@ def check_builds(suites: list[str], out: Path) -> int:
             row["init_states"] = list(load_init_states(task).shape)
             objs, row["build_s"] = build(suite, 0)
             row["built"] = True
-            ref_index = next((t.index for t in suite_tasks(base) if stem(t.name) == stem(task.name)), None)
+            ref_index = next((t.index for t in suite_tasks(base) if task_stem(t.name) == task_stem(task.name)), None)
             if ref_index is not None and base != suite:
                 key = (base, str(ref_index))
                 if key not in standard:
@@ -271,16 +324,22 @@ def main(argv: list[str] | None = None) -> int:
         if ref is not None and r is not ref:
             r["drop_first_pts"] = round(ref["first_pct"] - r["first_pct"], 1)
             r["drop_final_pts"] = round(ref["final_pct"] - r["final_pct"], 1)
+            matched = on_tasks_run(r, ref)
+            if matched is not None:
+                r["on_tasks_run"] = matched
     out = {"tasks": tasks, "seeds": args.seeds, "workspace": str(args.workspace), "suites": rows, "anchors": ANCHORS}
     write_json(args.out, out, indent=1, say=False)
-    head = ("suite", "family", "planned/refused", "First", "Final", "drop First/Final (pts)", "false succ.",
-            "false fail.", "wall s")
+    head = ("suite", "family", "planned/refused", "First", "Final", "drop First/Final (pts)",
+            "on the tasks it can run", "false succ.", "false fail.", "wall s")
     table = []
     for r in rows:
         drop = (f"{r['drop_first_pts']:+.1f} / {r['drop_final_pts']:+.1f}" if "drop_first_pts" in r else "-")
+        m = r.get("on_tasks_run")
+        run = (f"{m['tasks']} tasks: {m['drop_first_pts']:+.1f} / {m['drop_final_pts']:+.1f}" if m
+               else f"no init states: tasks {', '.join(map(str, r['not_runnable']))}" if r.get("not_runnable") else "-")
         table.append((r["suite"], f"{r['family']} ({r['kind']})", f"{r.get('planned', '?')}/{r.get('refused', '?')}",
                       f"{r.get('first', '?')}/{r['episodes']} ({r['first_pct']:.0f}%)",
-                      f"{r.get('final', '?')}/{r['episodes']} ({r['final_pct']:.0f}%)", drop,
+                      f"{r.get('final', '?')}/{r['episodes']} ({r['final_pct']:.0f}%)", drop, run,
                       r.get("false_successes", "?"), r.get("false_failures", "?"), f"{r['wall_s']:.0f}"))
     print_table(head, table)
     print(f"anchors ({ANCHORS['source']}): VLAs under task perturbations {ANCHORS['vla_task_perturbation_success']}; "

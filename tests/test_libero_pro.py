@@ -184,3 +184,40 @@ def test_a_distractor_kept_far_off_the_table_does_not_move_the_tables_height():
             robot_capsules=robot_capsules(target))
     assert snap["support_plane"]["fitted"] and abs(snap["support_plane"]["offset_m"] - 0.437) < 0.02
     assert sum(e["kind"] in ("object", "unknown") for e in snap["entities"]) >= 3
+
+
+def _libero_pro_bench():
+    import importlib.util
+
+    sys.path.insert(0, str(ROOT / "bench"))  # its own `from _harness import ...`
+    spec = importlib.util.spec_from_file_location("libero_pro_bench", ROOT / "bench" / "libero_pro.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_family_with_tasks_it_cannot_run_is_also_compared_on_the_tasks_it_can():
+    """libero_10_with_milk ships no init state for its tasks 3 and 4 (LIBERO-PRO's files are
+    empty) and orders its tasks otherwise than libero_10: its drop counts those as failures, as
+    LIBERO counts every task, and is also given over the tasks it can run, each against the
+    standard task of the same name (less the scene prefix)."""
+    bench = _libero_pro_bench()
+    milk, empty = bench._tasks_of("libero_10_with_milk", list(range(10)))
+    standard, none = bench._tasks_of("libero_10", list(range(10)))
+    assert empty == [3, 4] and none == []
+    assert sorted(milk.values()) == sorted(standard.values())  # the same ten tasks, in another order
+    assert milk["t1"] == standard["t8"] == "put_both_moka_pots_on_the_stove"
+    per = {"t0": {"first": 2, "final": 2}, "t1": {"first": 1, "final": 2}}  # t2 ... refused or failed: absent
+    row = {"seeds": 2, "task_names": milk, "not_runnable": empty, "per_task": per}
+    ref = {"seeds": 2, "task_names": standard, "not_runnable": [],
+           "per_task": {"t5": {"first": 2, "final": 2}, "t8": {"first": 2, "final": 2},
+                        "t0": {"first": 2, "final": 2}, "t1": {"first": 2, "final": 2}}}
+    m = bench.on_tasks_run(row, ref)
+    # 8 tasks run (16 episodes): 3 / 16 First against 4 / 16 on the standard's same 8 tasks (its
+    # t5 and t8 counted; its t0 and t1, the two with_milk cannot run, left out)
+    assert m["tasks"] == 8
+    assert (m["first_pct"], m["standard_first_pct"], m["drop_first_pts"]) == (18.8, 25.0, 6.2)
+    assert (m["final_pct"], m["drop_final_pts"]) == (25.0, 0.0)
+    assert bench.on_tasks_run({**row, "not_runnable": []}, ref) is None  # every task run: the plain drop
+    unmatched = {**row, "task_names": {**milk, "t0": "a_task_the_standard_suite_lacks"}}
+    assert bench.on_tasks_run(unmatched, ref) is None

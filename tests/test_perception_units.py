@@ -415,14 +415,14 @@ def _let_go(name: str, half, shape: str, at):
     return t
 
 
-def test_a_box_sunk_below_a_baskets_lining_is_found_where_it_rests():
+def test_a_box_in_a_basket_may_rest_on_the_floor_below_the_lining_pressed_up_round_it():
     """libero_10_swap task 1: the cream cheese box let go into the basket showed its top 2.2
-    cm over the lining's 5th percentile, though it is 3.1 cm tall (it sinks 0.9 cm below the
-    lining seen round it), so its look was 0.43-0.48 and its place went unjudged. It may rest
-    anywhere from the floor to the inside read beside it: found, at the floor."""
+    cm over the lining's 5th percentile and 1.4 cm over the lining read round it (pressed up
+    0.8 cm), its look 3.1 cm tall, so it was found at 0.43-0.48 against the ring alone and its
+    place went unjudged. It may rest anywhere from the floor to the ring: found, on the floor."""
     from phyagentos.perception.perceiver import _released_inside
 
-    # its top 3.1 cm over where it rests, 1.6 cm under the lining folded up round it (0.8 cm)
+    # its top 2.2 cm over the floor, 1.4 cm over the lining pressed up 0.8 cm round it; its look 3.1 cm
     cloud, h, basket, idx = _basket_with([((0.0, 0.0), (0.0425, 0.0225), "box", 0.047)], fold_m=0.008)
     cheese = _let_go("cream_cheese_1", (0.0425, 0.0225, 0.0155), "box", (0.003, 0.0))
     hit = _released_inside(cheese, cloud, h, [basket], [idx], ["wrist"])

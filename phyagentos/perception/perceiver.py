@@ -124,6 +124,7 @@ from phyagentos.perception.handle import RoundBody
 from phyagentos.perception.hang import base_profile, hang_offset, scene_camera_mask
 from phyagentos.perception.relations import (
     _footprint_margin,
+    _footprint_margins,
     holding_evidence,
     inside_confidence,
     normal_cdf,
@@ -2209,7 +2210,8 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
             bottom = top - height
             # where it may rest: from the floor to the ring beside it, or on another object under it
             rests = [float(np.clip(bottom, floor, rest)),
-                     *(o[4] for o in others if _over_footprints(centre[None, :], [o], 0.0)[0])]
+                     *(o_top for o_xy, o_half, o_yaw, o_shape, o_top in others
+                       if _footprint_margin(centre, o_xy, o_yaw, o_half, o_shape) >= 0.0)]
             on = min(rests, key=lambda r: abs(bottom - r))
             err = abs(bottom - on)
             if top - floor < CONTENT_CLEARANCE_M or err > 0.02:
@@ -2233,24 +2235,8 @@ def _others_own(xy: np.ndarray, h: np.ndarray, others: Sequence[Footprint]) -> n
     support plane are another object's own: over its footprint grown by
     :data:`OTHER_FOOTPRINT_M` and no higher than :data:`OTHER_TOP_M` over its top."""
     out = np.zeros(len(xy), dtype=bool)
-    for o in others:
-        out |= _over_footprints(xy, [o], OTHER_FOOTPRINT_M) & (h <= o[4] + OTHER_TOP_M)
-    return out
-
-
-def _over_footprints(xy: np.ndarray, footprints: Sequence[Footprint], grow_m: float) -> np.ndarray:
-    """(N,) bool: which of the points ``xy`` (N, 2) world m lie over any of ``footprints``
-    (:data:`Footprint`; a non-box is a disc of radius ``half[0]``) grown by ``grow_m`` m on
-    every side."""
-    out = np.zeros(len(xy), dtype=bool)
-    for centre, half, yaw, shape, _ in footprints:
-        d = xy - np.asarray(centre, dtype=float)[:2]
-        if shape != "box":
-            out |= np.linalg.norm(d, axis=1) <= float(half[0]) + grow_m
-            continue
-        c, s_ = math.cos(yaw), math.sin(yaw)
-        u, v = c * d[:, 0] + s_ * d[:, 1], -s_ * d[:, 0] + c * d[:, 1]
-        out |= (np.abs(u) <= float(half[0]) + grow_m) & (np.abs(v) <= float(half[1]) + grow_m)
+    for centre, half, yaw, shape, top in others:
+        out |= (_footprint_margins(xy, centre, yaw, half, shape) >= -OTHER_FOOTPRINT_M) & (h <= top + OTHER_TOP_M)
     return out
 
 

@@ -76,13 +76,22 @@ def inside_confidence(position: np.ndarray, std_m: float, region: Region) -> flo
     return normal_cdf(margin / max(std_m, 1e-4))
 
 
-def _footprint_margin(xy: np.ndarray, centre: np.ndarray, yaw: float, half: np.ndarray, shape: str) -> float:
-    d = xy - centre[:2]
+def _footprint_margins(xy: np.ndarray, centre: np.ndarray, yaw: float, half: np.ndarray, shape: str) -> np.ndarray:
+    """(N,) how far, m, each of the points ``xy`` ((N, 2) or (2,) world) lies inside the
+    footprint at ``centre`` ((2,) or (3,) world, m) turned ``yaw`` (rad) with half extents
+    ``half`` (m): a box's least margin over its two axes, else a disc of radius ``half[0]``'s;
+    negative outside."""
+    d = np.asarray(xy, dtype=float).reshape(-1, 2) - np.asarray(centre, dtype=float)[:2]
     if shape != "box":
-        return float(half[0] - np.linalg.norm(d))
+        return float(half[0]) - np.linalg.norm(d, axis=1)
     c, s = math.cos(yaw), math.sin(yaw)
-    local = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
-    return float(min(half[0] - abs(local[0]), half[1] - abs(local[1])))
+    u, v = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    return np.minimum(float(half[0]) - np.abs(u), float(half[1]) - np.abs(v))
+
+
+def _footprint_margin(xy: np.ndarray, centre: np.ndarray, yaw: float, half: np.ndarray, shape: str) -> float:
+    """:func:`_footprint_margins` of the one point ``xy`` (2,) world, m."""
+    return float(_footprint_margins(xy, centre, yaw, half, shape)[0])
 
 
 def on_confidence(upper: Mapping[str, Any], lower: Mapping[str, Any], config: PerceptionConfig) -> float:

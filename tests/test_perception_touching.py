@@ -242,22 +242,42 @@ def _spherical(centre_z: float, r: float, z_lo: float, z_hi: float, step: float 
 
 
 def test_a_round_part_resting_on_something_is_a_sphere_only_if_as_tall_as_it_is_wide():
-    """A bowl's outer wall, raised 4.5 cm on a ramekin, is a spherical cap 5 cm tall and 10 cm
-    across: measured from the table it is as tall as a 10 cm ball and was fitted as one (a
-    bowl 10 cm across, not its 11 cm rim); measured from where it rests (a step's cut) it is a
-    cap. A ball resting on a plate 2.5 cm up stays a ball."""
+    """A dome 5 cm tall and 10 cm across, raised 6 cm on something, is as tall as a 10 cm ball
+    measured from the table and was fitted as one; measured from where it rests (a step's cut)
+    it is a cap. A ball resting on a plate 2.5 cm up stays a ball."""
     from phyagentos.perception.cloud import Plane
     from phyagentos.perception.detect import fit_cluster
 
     plane = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 1000, True)
     focal = np.array([400.0])
-    cap = _spherical(0.095, 0.05, 0.045, 0.095)  # a bowl: the lower half of the sphere, up to its rim
-    h = cap.points[:, 2].astype(np.float64)
-    assert fit_cluster(cap, h, plane, CFG, focal).shape == "sphere"  # from the table: as tall as a ball
-    det = fit_cluster(cap, h, plane, CFG, focal, rests_at_m=0.045)
+    dome = _spherical(0.06, 0.05, 0.06, 0.11)  # the upper half of a sphere, standing on a cut 6 cm up
+    h = dome.points[:, 2].astype(np.float64)
+    assert fit_cluster(dome, h, plane, CFG, focal).shape == "sphere"  # from the table: as tall as a ball
+    det = fit_cluster(dome, h, plane, CFG, focal, rests_at_m=0.06)
     assert det is not None and det.shape != "sphere", det.shape
     ball = _spherical(0.065, 0.04, 0.065 - 0.7 * 0.04, 0.065 + 0.04)
     det = fit_cluster(ball, ball.points[:, 2].astype(np.float64), plane, CFG, focal, rests_at_m=0.025)
+    assert det is not None and det.shape == "sphere", det.shape
+
+
+def test_a_bowl_whose_surface_is_a_sphere_seen_from_within_is_no_ball():
+    """A bowl's wall, raised 4.5 cm on a ramekin, is the lower half of a sphere 10 cm across up
+    to its rim: as tall as a 10 cm ball from the table, and its points fit one, but its centre
+    stands 5 cm above where its points' median does (a ball seen from above has them round or
+    above its centre). Not a sphere, from the table or from the cut; the same points moved up
+    by a radius, the upper half, are a ball."""
+    from phyagentos.perception.cloud import Plane
+    from phyagentos.perception.detect import fit_cluster
+
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 1000, True)
+    focal = np.array([400.0])
+    cap = _spherical(0.095, 0.05, 0.045, 0.095)
+    h = cap.points[:, 2].astype(np.float64)
+    for rests_at in (None, 0.045):
+        det = fit_cluster(cap, h, plane, CFG, focal, rests_at_m=rests_at)
+        assert det is not None and det.shape != "sphere", (rests_at, det.shape)
+    up = _spherical(0.05, 0.05, 0.05, 0.10)  # a ball's upper half, resting on the table
+    det = fit_cluster(up, up.points[:, 2].astype(np.float64), plane, CFG, focal)
     assert det is not None and det.shape == "sphere", det.shape
 
 

@@ -168,6 +168,11 @@ class ShapeConfig(_Section):
     sphere_height_tolerance: float = Field(
         0.2, le=1000.0, gt=0, description="|height - diameter| / diameter below this for a sphere."
     )
+    sphere_bulge_min: float = Field(
+        0.25, le=1000.0, ge=0,
+        description="A sphere's points' median height stands at least -this x r above its fitted centre "
+                    "(a ball seen from above bulges towards the cameras; a bowl's inside does not).",
+    )
     colour_from: Literal["top", "all", "vivid"] = Field(
         "top", description="Median colour of the top-face points (top), of every point of the segment (all), or "
                            "of its most chromatic third (vivid)."

@@ -25,6 +25,13 @@ valid names). Per suite:
   name less its scene prefix; absent when one does not match): ``tasks``, ``first_pct``,
   ``final_pct``, ``standard_first_pct``, ``standard_final_pct``, ``drop_first_pts``,
   ``drop_final_pts``;
+- ``unsettled``: the episodes whose init state did not hold still ({episode: {object: m}}, the
+  objects whose ground position moved more than 2 cm over LIBERO's settle steps,
+  ``init_settle`` in each session's ``ground_truth.yaml``: some of LIBERO-PRO's init states
+  put two objects in one place and the settle throws them apart, a bowl off the table), and
+  ``at_rest``: ``episodes``, ``first`` and ``final`` over the rest; with the standard suite in
+  the run, ``drop_first_pts`` / ``drop_final_pts`` of those against the standard's own at
+  rest (a comparison beside the plain drop, which counts every episode as LIBERO does);
 - ``false_successes`` / ``false_failures``: episodes whose final verdict (ours: every node's
   last session succeeded) says success where LIBERO's checker at the episode's end says no,
   and the reverse (an episode is comparable only at its end: a pick session's own success is
@@ -113,6 +120,18 @@ def _tasks_of(suite: str, tasks: list[int]) -> tuple[dict[str, str], list[int]]:
         except TargetError:
             empty.append(i)
     return stems, empty
+
+
+def at_rest(episodes: list[dict]) -> tuple[dict[str, dict[str, float]], dict[str, int]]:
+    """``(unsettled, at_rest)`` of a bench run's episode rows (``report.json``): the episodes
+    whose init state did not hold still ({episode id: {object: m moved}}, from each episode's
+    ``init_settle``) and ``{"episodes", "first", "final"}`` counted over the others (an episode
+    without a settle record counts as at rest)."""
+    unsettled = {e["episode_id"]: dict((e.get("init_settle") or {}).get("moved_m") or {}) for e in episodes
+                 if (e.get("init_settle") or {}).get("moved_m")}
+    rest = [e for e in episodes if e["episode_id"] not in unsettled]
+    return unsettled, {"episodes": len(rest), "first": sum(1 for e in rest if e.get("env_first_success")),
+                       "final": sum(1 for e in rest if e.get("env_final_success"))}
 
 
 def on_tasks_run(row: dict, standard: dict) -> dict | None:
@@ -204,6 +223,7 @@ def run_suite(suite: str, workspace: Path, tasks: str, seeds: str, *, timeout_s:
                false_successes=sum(1 for e in episodes if e["final_success"] and e.get("env_success") is False),
                false_failures=sum(1 for e in episodes if not e["final_success"] and e.get("env_success")),
                harness_errors=len(rep.get("harness_errors") or []), report=rep["report"],
+               **dict(zip(("unsettled", "at_rest"), at_rest(episodes))),
                per_task={t: {"first": v["first_successes"], "final": v["final_successes"], "episodes": v["episodes"]}
                          for t, v in rep["ground_truth"]["per_task"].items()})
     return row
@@ -327,19 +347,28 @@ def main(argv: list[str] | None = None) -> int:
             matched = on_tasks_run(r, ref)
             if matched is not None:
                 r["on_tasks_run"] = matched
+            mine, theirs = r.get("at_rest"), ref.get("at_rest")
+            if mine and theirs and mine["episodes"] and theirs["episodes"]:
+                for what in ("first", "final"):
+                    mine[f"drop_{what}_pts"] = round(_pct(theirs[what], theirs["episodes"])
+                                                     - _pct(mine[what], mine["episodes"]), 1)
     out = {"tasks": tasks, "seeds": args.seeds, "workspace": str(args.workspace), "suites": rows, "anchors": ANCHORS}
     write_json(args.out, out, indent=1, say=False)
     head = ("suite", "family", "planned/refused", "First", "Final", "drop First/Final (pts)",
-            "on the tasks it can run", "false succ.", "false fail.", "wall s")
+            "on the tasks it can run", "on inits at rest", "false succ.", "false fail.", "wall s")
     table = []
     for r in rows:
         drop = (f"{r['drop_first_pts']:+.1f} / {r['drop_final_pts']:+.1f}" if "drop_first_pts" in r else "-")
         m = r.get("on_tasks_run")
         run = (f"{m['tasks']} tasks: {m['drop_first_pts']:+.1f} / {m['drop_final_pts']:+.1f}" if m
                else f"no init states: tasks {', '.join(map(str, r['not_runnable']))}" if r.get("not_runnable") else "-")
+        a = r.get("at_rest") or {}
+        rest = (f"{a['first']}/{a['final']} of {a['episodes']}"
+                + (f": {a['drop_first_pts']:+.1f} / {a['drop_final_pts']:+.1f}" if "drop_first_pts" in a else "")
+                if a else "-")
         table.append((r["suite"], f"{r['family']} ({r['kind']})", f"{r.get('planned', '?')}/{r.get('refused', '?')}",
                       f"{r.get('first', '?')}/{r['episodes']} ({r['first_pct']:.0f}%)",
-                      f"{r.get('final', '?')}/{r['episodes']} ({r['final_pct']:.0f}%)", drop, run,
+                      f"{r.get('final', '?')}/{r['episodes']} ({r['final_pct']:.0f}%)", drop, run, rest,
                       r.get("false_successes", "?"), r.get("false_failures", "?"), f"{r['wall_s']:.0f}"))
     print_table(head, table)
     print(f"anchors ({ANCHORS['source']}): VLAs under task perturbations {ANCHORS['vla_task_perturbation_success']}; "

@@ -164,6 +164,7 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
                                  "control_steps": gt.get("control_steps"), "step_budget": gt.get("step_budget"),
                                  "within_budget": bool(gt.get("within_budget", True)),
                                  "first_success_step": gt.get("first_success_step"),
+                                 "init_settle": gt.get("init_settle"),
                                  "source": gt.get("source", ""), "task": gt.get("task"),
                                  "recovery": s.parent_session_id is not None,
                                  "agree": (verdict == "success") == bool(gt["success"])})
@@ -191,6 +192,8 @@ def collect_episode(directory: Path, run_dir: Path) -> EpisodeRecord:
         "first_success": first, "final_success": final, "rescued": final and not first,
         "sessions": rows, "n_sessions": len(rows), "sim_time_s": round(sim_time, 4), "ticks": ticks,
         "failures": failures, "ground_truth": ground_truth, "heartbeat_timeout_sessions": heartbeat,
+        # how far the objects moved while the init state settled (the first signal that says)
+        "init_settle": next((g["init_settle"] for g in ground_truth if g.get("init_settle") is not None), None),
         **env_outcome(ground_truth),
     }
     return EpisodeRecord(data)

@@ -48,7 +48,10 @@ class LiberoPrivileged:
         (LIBERO's for the suite, :data:`~phyagentos.targets.libero.catalog.STEP_BUDGETS`; ``None``
         for a suite without one), ``within_budget`` (``control_steps <= step_budget``; True
         without a budget) and ``first_success_step`` (the control step since the reset at which
-        LIBERO's checker first held, :meth:`_advance`; ``None``: not yet)."""
+        LIBERO's checker first held, :meth:`_advance`; ``None``: not yet) and ``init_settle``
+        (how far the objects moved over the reset's settle steps from where the init state put
+        them: ``moved_max_m`` and ``moved_m`` {name: m} above
+        :data:`~phyagentos.targets.libero.target.SETTLE_MOVED_M`; ``None`` for a generated scene)."""
         self._check_open()
         ok = self.check_success()
         steps = self.control_steps
@@ -57,7 +60,7 @@ class LiberoPrivileged:
                 "suite": self._scene.suite, "task": str(self._scene.task), "task_name": self._task.name,
                 "init_state": self._init_index, "tasks": {str(self._scene.task): ok}, "success": ok,
                 "control_steps": steps, "step_budget": budget, "within_budget": budget is None or steps <= budget,
-                "first_success_step": self._first_success_step}
+                "first_success_step": self._first_success_step, "init_settle": self._init_settle}
 
     def _robosuite_object_observations(self) -> dict[str, list[float]]:
         obs = self._env.env._get_observations(force_update=True)

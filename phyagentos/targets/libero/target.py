@@ -87,13 +87,17 @@ from .catalog import (
 )
 
 __all__ = ["LiberoScene", "LiberoTarget", "SETTLE_STEPS", "ARM_JOINT_NAMES", "TCP_SITE", "CONTROL_PERIOD_S",
-           "VELOCITY_SCALE", "ACCELERATION_SCALE", "OSC_ACTION_DIM"]
+           "VELOCITY_SCALE", "ACCELERATION_SCALE", "OSC_ACTION_DIM", "SETTLE_MOVED_M"]
 
 log = logging.getLogger(__name__)
 
 #: Control steps of LIBERO's own controller after ``set_init_state`` (LIBERO's and openpi's
 #: evaluations wait 10 steps with the do-nothing action while objects settle).
 SETTLE_STEPS = 10
+#: An object whose ground position moves more than this (m) over the settle steps did not rest
+#: where its init state put it (LIBERO's own init states drop objects a few cm straight down; some
+#: of LIBERO-PRO's put two objects in one place, and the settle throws them apart).
+SETTLE_MOVED_M = 0.02
 ARM_JOINT_NAMES: tuple[str, ...] = tuple(f"robot0_joint{i}" for i in range(1, 8))
 FINGER_JOINT_NAMES: tuple[str, ...] = ("gripper0_finger_joint1", "gripper0_finger_joint2")
 FINGER_BODIES: tuple[tuple[str, ...], tuple[str, ...]] = (("gripper0_leftfinger", "gripper0_finger_joint1_tip"),
@@ -391,6 +395,7 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
         self._index_world(m)
         self._env_steps = 0
         self._first_success_step: int | None = None
+        self._init_settle: dict[str, Any] | None = None
         self._reset_count = 0
         self.reset(seed=seed)
 
@@ -588,10 +593,12 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
                 with _global_numpy_seed(self._init_index):  # the fixtures' layout: one per init state
                     self._env.reset()
                 self._env.set_init_state(np.array(self._states[self._init_index]))
+            before = {n: self.object_pose(n)[:2, 3].copy() for n in self._obj_names}
             for _ in range(self._scene.settle_steps):
                 self._env.step(_NOOP_ACTION)
         finally:
             self._servo(m, True)
+        self._init_settle = None if self._init_index is None else self._settle_record(before)
         self._env_steps = 0
         self._first_success_step = None
         self._reset_count += 1
@@ -602,6 +609,15 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
         d.ctrl[self._arm_act] = np.clip(q, lo, hi)
         mujoco.mj_forward(m, d)
         return self.observe()
+
+    def _settle_record(self, before: dict[str, np.ndarray]) -> dict[str, Any]:
+        """How far each object's ground position (x, y, m, world frame) moved over the settle
+        steps from where the init state put it: ``moved_max_m`` (the largest move) and
+        ``moved_m`` {name: m} for moves above :data:`SETTLE_MOVED_M`. Privileged (the true
+        poses): :meth:`benchmark_signals` only."""
+        moved = {n: float(np.linalg.norm(self.object_pose(n)[:2, 3] - p)) for n, p in before.items()}
+        return {"moved_max_m": round(max(moved.values(), default=0.0), 4),
+                "moved_m": {n: round(d, 4) for n, d in sorted(moved.items()) if d > SETTLE_MOVED_M}}
 
     def generate_scene(self, seed: int) -> None:
         """A fresh scene from LIBERO's own placement sampler (``env.reset()`` seeded with
@@ -786,11 +802,12 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
 
     def _state_meta(self) -> dict[str, Any]:
         return {"init_index": self._init_index, "env_steps": self._env_steps, "home": self._home.tolist(),
-                "first_success_step": self._first_success_step}
+                "first_success_step": self._first_success_step, "init_settle": self._init_settle}
 
     def _restore_meta(self, meta: dict[str, Any]) -> None:
         self._init_index = None if meta["init_index"] is None else int(meta["init_index"])
         self._env_steps = int(meta["env_steps"])
         step = meta.get("first_success_step")
         self._first_success_step = None if step is None else int(step)
+        self._init_settle = meta.get("init_settle")
         self._home = np.asarray(meta["home"], dtype=float)

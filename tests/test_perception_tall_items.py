@@ -219,3 +219,26 @@ def test_a_mug_held_by_its_thick_wall_is_in_the_hand_and_a_bowls_thin_wall_band_
         p = Perceiver(CFG, [decl])
         p.tracks[decl["name"]] = Track.start(decl["name"], seen, 0.9, 1.0, ("agentview",))
         assert (p._hand_evidence(p.tracks[decl["name"]], at_rim) is not None) is held, (decl["class"], gap)
+
+
+def test_a_bowl_seen_in_part_is_held_by_its_wall_a_radius_from_its_seen_centre_along_its_long_side():
+    """A bowl at the back of an open drawer, partly under the cabinet's body, is seen 11.2 by
+    6.4 cm (its long side the rim's diameter). The hand closed on its wall 5.5 cm from that
+    centre, near an end of the long side (the rim grasp of a container seen in part): held. Taken
+    as a box of 6.4 cm, it was no open container and nothing held it (libero_spatial task 4's
+    development split, 3 of 6 lifted bowls unconfirmed). A box of that size is not held at a
+    4 mm gap; neither is the bowl by a hand 12 cm from it."""
+    from phyagentos.perception import Perceiver
+    from phyagentos.perception.tracks import Track
+
+    bowl = {"name": "akita_black_bowl_1", "class": "akita_black_bowl", "shape": "cylinder",
+            "colour": [0.5, 0.51, 0.5], "size_m": [0.1128, 0.1128, 0.0506]}
+    box = {**bowl, "name": "cookies_1", "class": "cookies", "shape": "box"}
+    seen = _det((0.094, -0.125, 1.089), (0.0562, 0.0326, 0.0252), low=0.164, bottom=0.164, shape="box", yaw=0.8)
+    long_axis = np.array([np.cos(0.8), np.sin(0.8)])
+    for decl, distance, held in ((bowl, 0.0546, True), (box, 0.0546, False), (bowl, 0.12, False)):
+        xy = seen.position[:2] - distance * long_axis
+        at_rim = _proprio(opening=0.0021, effort=8.0, tcp=_tcp((xy[0], xy[1], 1.108)))
+        p = Perceiver(CFG, [decl])
+        p.tracks[decl["name"]] = Track.start(decl["name"], seen, 0.9, 1.0, ("agentview",))
+        assert (p._hand_evidence(p.tracks[decl["name"]], at_rim) is not None) is held, (decl["class"], distance)

@@ -68,9 +68,11 @@ def _size_error(det: Detection, desc: ObjectDescriptor) -> float | None:
     if desc.size_vector() is None:
         err = float(measured.max()) - float(desc.size_m)
         return max(0.0, err) if det.truncated or det.covered else abs(err)
-    if det.truncated:  # cut by the border: every dimension a lower bound
+    if det.truncated and not det.cut_by_body:  # cut by the border: every dimension a lower bound
         return desc.size_error(measured, at_least=True)
-    if det.covered:  # its footprint a lower bound, at least COVERED_MIN_SHOWN of each side showing; its height not
+    if det.covered or det.cut_by_body:
+        # under what rests on it, or cut by a cabinet's body (in its open drawer): its footprint a
+        # lower bound, at least COVERED_MIN_SHOWN of each side showing; its height as measured
         err = desc.size_error(measured, at_least=(True, True, False))
         want = desc.size_vector()
         return err + float(np.sum(np.maximum(0.0, COVERED_MIN_SHOWN * want[:2] - measured[:2]))) / 3.0

@@ -80,6 +80,12 @@ class Detection:
             (:func:`phyagentos.perception.truncation.cut_direction`), else None: the object
             may go on beyond what was seen, so its size is a lower bound, its shape that of
             the part seen and its centre short of the object's on that side.
+        cut_by_body: ``cut_direction`` is where a cabinet's body, whose points are the
+            fixture's own, cuts off what stands in its open drawer behind its front
+            (:meth:`phyagentos.perception.perceiver.Perceiver._cut_by_carcass`), not the image
+            border: its size counts as a lower bound, but the part seen is kept as seen (never
+            completed to its look: the rim of a container seen in part is taken near the ends
+            of its seen long side).
         body: the round body with a handle its footprint shows (a mug's cup and handle:
             :func:`with_round_body`), else None.
         covered: the lower part of a stack split at a height step
@@ -108,6 +114,7 @@ class Detection:
     bottom_m: float
     low_m: float = 0.0
     cut_direction: np.ndarray | None = None
+    cut_by_body: bool = False
     covered: bool = False
     body: RoundBody | None = None
     open_depth_m: float = 0.0
@@ -115,7 +122,8 @@ class Detection:
 
     @property
     def truncated(self) -> bool:
-        """Cut by the image border (``cut_direction`` known): seen only in part."""
+        """Cut by the image border or a cabinet's body (``cut_direction`` known): seen only
+        in part."""
         return self.cut_direction is not None
 
     @property

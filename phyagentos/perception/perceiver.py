@@ -299,6 +299,14 @@ RELEASE_REACH_M = 0.15
 #: The body's front stands this far behind a drawer's shut handle centre, m (LIBERO's cabinet: the
 #: handle 2.4 cm proud of the front, :data:`~phyagentos.perception.fixtures.DRAWER_FRONT_BEHIND_M`).
 DRAWER_CARCASS_M = 0.024
+#: A segment cut by the cabinet's body (:meth:`Perceiver._cut_by_carcass`) has this many points
+#: or more within this far (m) in front of the body's front, inside an open drawer: a sliver of
+#: rim, at the agentview's 3 mm pixels and the cloud's 5 mm voxels.
+CARCASS_CUT_MIN_POINTS = 5
+CARCASS_CUT_BAND_M = 0.01
+#: ... and this far (m) or more above the drawer's floor: a strip of the floor 1-2 mm over the
+#: floor's cut at the drawer's mouth is cut off there too, and would pass for a part of anything.
+CARCASS_CUT_RISE_M = 0.01
 #: A drawer standing this far out (m) or more has a floor things rest on (a support for
 #: stacking, :meth:`Perceiver._drawer_floor`): LIBERO's drawers open 16 cm; a bowl takes 11.
 DRAWER_OPEN_SUPPORT_M = 0.03
@@ -377,6 +385,10 @@ class Perceiver:
         #: Each drawer's reading in the last observation: ``{(fixture, drawer): (opening m,
         #: points)}`` (absent: its handle not read there; never remembered).
         self.drawer_readings: dict[tuple[str, str], tuple[float, int]] = {}
+        #: The open drawers' mouths of this observation (:meth:`_cut_by_carcass`): (the drawer's
+        #: frame origin (2,), its axis (2,), across (2,), where the body's front stands along it,
+        #: half the inside's width, its floor's height), m, world frame.
+        self._mouths: list[tuple[np.ndarray, np.ndarray, np.ndarray, float, float, float]] = []
         #: (fixture, drawer) -> (opening m, stamp s) of the drawer's last reading: where an open
         #: drawer's floor still is while the arm (or what it holds) hides its handle
         self.drawer_seen: dict[tuple[str, str], tuple[float, float]] = {}
@@ -744,8 +756,7 @@ class Perceiver:
             clusters = [c for i, c in enumerate(clusters) if i not in hanging]
             dets = [d for i, d in enumerate(dets) if i not in hanging]
         strides = [cfg.stride_for(f.intrinsics.width) for f in frames]
-        dets = [replace(d, cut_direction=cut) if (cut := cut_direction(cloud, idx, frames, strides)) is not None
-                else d for d, (_, idx) in zip(dets, clusters)]
+        dets = [self._seen_cut(d, cloud, heights, idx, frames, strides) for d, (_, idx) in zip(dets, clusters)]
         dets = [_shaped(d, cloud.select(idx), heights[idx]) for d, (_, idx) in zip(dets, clusters)]
         t2 = time.perf_counter()
         sensors = [f.sensor for f in frames]
@@ -780,7 +791,8 @@ class Perceiver:
             seen = 1.0
             if dets[i].truncated:  # seen in part: a round one's centre from its look's size
                 seen = _seen_fraction(dets[i], self.declared[j])
-                dets[i] = _completed(dets[i], self.declared[j], cloud.points[clusters[i][1], :2])
+                if not dets[i].cut_by_body:  # (in a drawer: the rim seen, grasped near its long side's ends)
+                    dets[i] = _completed(dets[i], self.declared[j], cloud.points[clusters[i][1], :2])
             det = dets[i]
             conf = match_confidence(cost, margin, cfg) * _detection_confidence(det) * seen
             name = names[j]
@@ -1041,6 +1053,7 @@ class Perceiver:
         dets = []
         self.knob_readings = {}
         self.drawer_readings = {}
+        self._mouths = []
         for look in self.fixtures:
             if look.name not in self.fixture_tracks:
                 continue
@@ -1066,6 +1079,9 @@ class Perceiver:
                         dets.append(Detection(pos, yaw, half, "box", np.zeros(3), np.zeros(3), 0, 0, DRAWER_SIGMA_M,
                                               math.pi, 1.0, 0.0))
                         contents |= self._drawer_inside(p, heights, drawer, s, reading[0]) & ~walls
+                        c0, u, v = drawer.frame(s.position[:2], s.turn)
+                        self._mouths.append((c0, u, v, -DRAWER_CARCASS_M + FIXTURE_MARGIN_M,
+                                             drawer.half_width_m - DRAWER_WALL_M, drawer.height_m - DRAWER_FLOOR_M))
             for comp in look.compartments:  # what stands in a compartment rests on its floor, and is not the body's
                 centre_c, half_c = comp.box(s.position[:2], s.turn)
                 inner = np.maximum(half_c - COMPARTMENT_WALL_M, 0.0)
@@ -1092,6 +1108,36 @@ class Perceiver:
                                   FIXTURE_STD_M, math.pi, 1.0, 0.0))
         keep &= ~own
         return cloud.select(keep), heights[keep], dets
+
+    def _seen_cut(self, det: Detection, cloud: Cloud, heights: np.ndarray, index: np.ndarray,
+                  frames: Sequence[CameraFrame], strides: Sequence[int]) -> Detection:
+        """``det`` (segment ``index`` of ``cloud``) with where it is cut off: by the image
+        border (:func:`~phyagentos.perception.truncation.cut_direction`), else by the cabinet's
+        body (:meth:`_cut_by_carcass`, ``cut_by_body``); unchanged when neither cuts it."""
+        cut = cut_direction(cloud, index, frames, strides)
+        if cut is not None:
+            return replace(det, cut_direction=cut)
+        cut = self._cut_by_carcass(cloud.points[index], heights[index])
+        return det if cut is None else replace(det, cut_direction=cut, cut_by_body=True)
+
+    def _cut_by_carcass(self, points: np.ndarray, heights: np.ndarray) -> np.ndarray | None:
+        """Where a segment in an open drawer goes on into the cabinet's body, or None: the
+        body's points are the fixture's own, so what stands in the drawer behind the body's
+        front is cut off there as the image border cuts (:mod:`~phyagentos.perception.truncation`;
+        a bowl at the back of LIBERO's open top drawer was seen 6.4 of its 11.3 cm across and
+        named at 0.08-0.45). Cut when :data:`CARCASS_CUT_MIN_POINTS` of its ``points`` (N, 3)
+        world m (``heights`` (N,) m above the support) or more lie within
+        :data:`CARCASS_CUT_BAND_M` in front of the body's front between the drawer's side walls,
+        :data:`CARCASS_CUT_RISE_M` or more above its floor (a thing standing in it, not a sliver
+        of the floor); the (2,) world unit vector is the drawer's axis into the body."""
+        for c0, u, v, front, half_width, floor in self._mouths:
+            rel = points[:, :2] - c0
+            along, across = rel @ u, rel @ v
+            at = ((along >= front) & (along <= front + CARCASS_CUT_BAND_M) & (np.abs(across) <= half_width)
+                  & (heights >= floor + CARCASS_CUT_RISE_M))
+            if int(np.count_nonzero(at)) >= CARCASS_CUT_MIN_POINTS:
+                return -np.asarray(u, dtype=float)
+        return None
 
     @staticmethod
     def _drawer_points(p: np.ndarray, heights: np.ndarray, drawer: DrawerLook, s: FixtureSighting,
@@ -1791,7 +1837,7 @@ class Perceiver:
             # by its wall) the tcp is on its rim
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
             on_rim = wall is not None and width == wall and \
-                abs(dxy - float(min(t.half_extents[0], t.half_extents[1]))) <= hc.capture_radius_m / 2.0
+                abs(dxy - float(self._rim_radius(t))) <= hc.capture_radius_m / 2.0
             if dxy > hc.capture_radius_m and not on_rim:
                 return None
         return ev
@@ -1868,7 +1914,7 @@ class Perceiver:
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
             if np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
-            elif self._rim_wall(t) is not None and abs(dxy - float(min(t.half_extents[:2]))) <= hc.capture_radius_m / 2.0:
+            elif (rim := self._rim_radius(t)) is not None and abs(dxy - rim) <= hc.capture_radius_m / 2.0:
                 # held by its wall (the tcp is over its rim), maybe lifted since: the lift rises
                 # straight up, so the horizontal offset holds; at the close the tcp was the rim
                 # grasp's depth below the rim (motion.rim_grasp.RIM_GRIP_DEPTH_M)
@@ -1914,15 +1960,33 @@ class Perceiver:
     def _rim_wall(self, t: Track) -> float | None:
         """The wall (m) a hand holding track ``t`` by its rim closes on -- ``holding.handled_wall_m``
         for a mug, ``holding.rim_wall_m`` for another open container (its declared class and
-        perceived shape and size, :func:`~phyagentos.motion.rim_grasp.open_container`) -- or None:
-        ``t`` is no open container."""
-        from phyagentos.motion.rim_grasp import handled, open_container  # noqa: PLC0415 - only when something may be held
+        perceived shape and size, :meth:`_rim_radius`) -- or None: ``t`` is no open container."""
+        from phyagentos.motion.rim_grasp import handled  # noqa: PLC0415 - only when something may be held
 
-        desc = next((d for d in self.declared if d.name == t.name), None)
-        if desc is None or not open_container(desc.cls, t.shape, t.half_extents):
+        if self._rim_radius(t) is None:
             return None
         hc = self.config.holding
+        desc = next(d for d in self.declared if d.name == t.name)
         return hc.handled_wall_m if handled(desc.cls) else hc.rim_wall_m
+
+    def _rim_radius(self, t: Track) -> float | None:
+        """How far (m) from track ``t``'s perceived centre a hand holding it by its rim stands:
+        its shorter half side for an open container seen whole
+        (:func:`~phyagentos.motion.rim_grasp.open_container`; a mug's cup without its handle),
+        its longer one for one seen in part (:func:`~phyagentos.motion.rim_grasp.partly_seen_rim_graspable`:
+        the long side is the rim's diameter; a bowl at the back of an open drawer, seen 11.2 by
+        6.4 cm); None for anything else."""
+        from phyagentos.motion.grasp import DEFAULT_MAX_GRASP_WIDTH_M  # noqa: PLC0415
+        from phyagentos.motion.rim_grasp import open_container, partly_seen_rim_graspable  # noqa: PLC0415
+
+        desc = next((d for d in self.declared if d.name == t.name), None)
+        if desc is None:
+            return None
+        if open_container(desc.cls, t.shape, t.half_extents):
+            return float(min(t.half_extents[:2]))
+        if partly_seen_rim_graspable(desc.cls, t.shape, t.half_extents, max_width_m=DEFAULT_MAX_GRASP_WIDTH_M):
+            return float(max(t.half_extents[:2]))
+        return None
 
     def _relations(self, geo: dict[str, dict], regions, holding_rel, supports: Mapping[str, dict] | None = None) -> list[dict]:
         """Relations among the perceived entities (``geo``: their boxes), with the declared

@@ -26,7 +26,7 @@ valid names). Per suite:
   ``final_pct``, ``standard_first_pct``, ``standard_final_pct``, ``drop_first_pts``,
   ``drop_final_pts``;
 - ``unsettled``: the episodes whose init state did not hold still ({episode: {object: m}}, the
-  objects whose ground position moved more than 2 cm over LIBERO's settle steps,
+  objects whose ground position moved more than 10 cm over LIBERO's settle steps,
   ``init_settle`` in each session's ``ground_truth.yaml``: some of LIBERO-PRO's init states
   put two objects in one place and the settle throws them apart, a bowl off the table), and
   ``at_rest``: ``episodes``, ``first`` and ``final`` over the rest; with the standard suite in

@@ -228,7 +228,7 @@ def test_an_init_state_that_throws_objects_apart_is_told_from_one_at_rest():
     """libero_spatial_with_mug task 8, init 0, puts its yellow mug where the plate's side is:
     over LIBERO's settle steps the black bowl meant is thrown off the table, more than 20 cm
     (the instruction's bowl then is nowhere on it). The standard suite's init state drops its
-    objects straight down and none moves 2 cm. Both told in the benchmark signals
+    objects into place and none is thrown 10 cm. Both told in the benchmark signals
     (``init_settle``), from the true poses, for scoring."""
     from phyagentos.targets.libero import LiberoScene, LiberoTarget  # noqa: PLC0415
 
@@ -236,13 +236,13 @@ def test_an_init_state_that_throws_objects_apart_is_told_from_one_at_rest():
     for suite in ("libero_spatial", "libero_spatial_with_mug"):
         with LiberoTarget("libero", LiberoScene(suite=suite, task=8, init=0), seed=0) as target:
             settle[suite] = target.ground_truth()["benchmark"]["init_settle"]
-    assert settle["libero_spatial"]["moved_m"] == {} and settle["libero_spatial"]["moved_max_m"] < 0.02
+    assert settle["libero_spatial"]["moved_m"] == {} and settle["libero_spatial"]["moved_max_m"] < 0.1
     assert settle["libero_spatial_with_mug"]["moved_m"].get("akita_black_bowl_1", 0.0) > 0.2, settle
 
 
 def test_episodes_from_an_init_state_not_at_rest_are_counted_apart():
     """The comparison at rest leaves out the episodes whose init state threw an object more
-    than 2 cm; an episode with no settle record (a generated scene) counts as at rest."""
+    than 10 cm; an episode with no settle record (a generated scene) counts as at rest."""
     bench = _libero_pro_bench()
     eps = [{"episode_id": "t0-s0", "init_settle": {"moved_max_m": 0.004, "moved_m": {}},
             "env_first_success": True, "env_final_success": True},

@@ -94,10 +94,12 @@ log = logging.getLogger(__name__)
 #: Control steps of LIBERO's own controller after ``set_init_state`` (LIBERO's and openpi's
 #: evaluations wait 10 steps with the do-nothing action while objects settle).
 SETTLE_STEPS = 10
-#: An object whose ground position moves more than this (m) over the settle steps did not rest
-#: where its init state put it (LIBERO's own init states drop objects a few cm straight down; some
-#: of LIBERO-PRO's put two objects in one place, and the settle throws them apart).
-SETTLE_MOVED_M = 0.02
+#: An object whose ground position moves more than this (m) over the settle steps was thrown
+#: from where its init state put it: some of LIBERO-PRO's init states put two objects in one
+#: place and the settle throws them apart (libero_spatial_with_mug task 8 init 0: the bowl off
+#: the table). LIBERO's own init states drop objects a few cm and let bowls slide into place (up
+#: to 5.4 cm on libero_spatial's inits 0-9; LIBERO-10 task 0's cream cheese 22 and 44 cm in 2 of 10).
+SETTLE_MOVED_M = 0.10
 ARM_JOINT_NAMES: tuple[str, ...] = tuple(f"robot0_joint{i}" for i in range(1, 8))
 FINGER_JOINT_NAMES: tuple[str, ...] = ("gripper0_finger_joint1", "gripper0_finger_joint2")
 FINGER_BODIES: tuple[tuple[str, ...], tuple[str, ...]] = (("gripper0_leftfinger", "gripper0_finger_joint1_tip"),

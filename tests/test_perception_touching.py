@@ -263,9 +263,9 @@ def test_a_round_part_resting_on_something_is_a_sphere_only_if_as_tall_as_it_is_
 def test_a_bowl_whose_surface_is_a_sphere_seen_from_within_is_no_ball():
     """A bowl's wall, raised 4.5 cm on a ramekin, is the lower half of a sphere 10 cm across up
     to its rim: as tall as a 10 cm ball from the table, and its points fit one, but its centre
-    stands 5 cm above where its points' median does (a ball seen from above has them round or
-    above its centre). Not a sphere, from the table or from the cut; the same points moved up
-    by a radius, the upper half, are a ball."""
+    stands above them, half a radius over their median (a ball seen from above has them round
+    or above its centre). Not a sphere, from the table or from the cut; a ball's upper half
+    standing on the table is one."""
     from phyagentos.perception.cloud import Plane
     from phyagentos.perception.detect import fit_cluster
 

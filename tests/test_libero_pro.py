@@ -187,13 +187,20 @@ def test_a_distractor_kept_far_off_the_table_does_not_move_the_tables_height():
 
 
 def _libero_pro_bench():
+    """bench/libero_pro.py loaded from its file, its ``from _harness import ...`` served from
+    bench/_harness.py's. bench/ is never put on this process's sys.path: it would shadow
+    packages for every test after it in the worker (bench/crafter.py is the game's name)."""
     import importlib.util
 
-    sys.path.insert(0, str(ROOT / "bench"))  # its own `from _harness import ...`
-    spec = importlib.util.spec_from_file_location("libero_pro_bench", ROOT / "bench" / "libero_pro.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    def load(name: str, path: Path):
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    if "_harness" not in sys.modules:
+        sys.modules["_harness"] = load("_harness", ROOT / "bench" / "_harness.py")
+    return load("libero_pro_bench", ROOT / "bench" / "libero_pro.py")
 
 
 def test_a_family_with_tasks_it_cannot_run_is_also_compared_on_the_tasks_it_can():

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from phyagentos.bench.libero import instruction_nodes, is_libero_suite
+from phyagentos.bench.libero import instruction_assumptions, instruction_nodes, is_libero_suite
 from phyagentos.errors import BenchError, TargetError
 from phyagentos.targets.libero import (
     available_suites,
@@ -259,3 +259,29 @@ def test_episodes_from_an_init_state_not_at_rest_are_counted_apart():
     unsettled, rest = bench.at_rest(eps)
     assert unsettled == {"t0-s1": {"bowl_1": 0.31}}
     assert rest == {"episodes": 2, "first": 1, "final": 2}
+
+
+def test_a_replaced_objects_old_modifier_is_set_aside_and_said_only_where_one_thing_fits():
+    # LIBERO-PRO's object family swaps the wine bottle for a white one and keeps the words
+    task = resolve_task("libero_goal_object", 9)
+    assert task.instruction == "Put the wine bottle on the rack"
+    problem = parse_bddl(task.bddl_path)
+    assert "white_bottle_1" in problem.objects and not any("wine" in o for o in problem.objects)
+    nodes = instruction_nodes(task.instruction, problem.objects, problem.fixtures)
+    assert [(n["skill"], n["params"]["object"]) for n in nodes] == [("pick", "white_bottle_1"),
+                                                                    ("place", "white_bottle_1")]
+    assert instruction_assumptions(task.instruction, problem.objects, problem.fixtures) == [
+        "'the wine bottle': 'wine' names nothing here; read as white_bottle_1, the one bottle"]
+    # a word before the article is no modifier, the noun itself is not set aside, and with two
+    # bottles the rest names no one thing: refused as before
+    for text, why in (("pour the wine bottle onto the rack", "'pour', 'wine' names no object"),
+                      ("put the wine jug on the rack", "'wine', 'jug' names no object")):
+        with pytest.raises(BenchError, match=why):
+            instruction_nodes(text, problem.objects, problem.fixtures)
+    two = {**problem.objects, "green_bottle_1": "green_bottle"}
+    with pytest.raises(BenchError, match="'wine' names no object"):
+        instruction_nodes(task.instruction, two, problem.fixtures)
+    # the standard task names its own bottle: nothing set aside
+    standard = resolve_task("libero_goal", 9)
+    std = parse_bddl(standard.bddl_path)
+    assert instruction_assumptions(standard.instruction, std.objects, std.fixtures) == []

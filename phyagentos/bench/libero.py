@@ -55,7 +55,8 @@ from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
 
 __all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "SKILL_DEFAULTS", "FIRST_PICK_STILL_MAX_S", "workspace_box",
-           "is_libero_suite", "instruction_nodes", "instruction_plan", "load_skill_defaults", "prepare_libero_suite",
+           "is_libero_suite", "instruction_nodes", "instruction_plan", "instruction_assumptions", "load_skill_defaults",
+           "prepare_libero_suite",
            "target_entry"]
 
 logger = logging.getLogger(__name__)
@@ -291,6 +292,8 @@ def _planner_steps(language: str, objects: dict[str, str],
 
     world = planner_world(objects, fixtures)
     meaning = read_request(language, world, relations=True)
+    for note in meaning.assumed:  # a modifier of no declared name set aside (LIBERO-PRO's replaced objects)
+        logger.warning("LIBERO bench: instruction %r: %s", language, note)
     if meaning.language is not None:
         raise BenchError(f"instruction {language!r} refused: {meaning.language}; the Goal Planner reads English only")
     if meaning.problems:
@@ -336,6 +339,16 @@ def _planner_steps(language: str, objects: dict[str, str],
     if not steps:
         raise BenchError(f"instruction {language!r} refused: nothing to move")
     return steps, dict(meaning.where)
+
+
+def instruction_assumptions(language: str, objects: dict[str, str], fixtures: dict[str, str]) -> list[str]:
+    """What the Goal Planner's rule reader set aside reading ``language`` over the declared
+    things (:attr:`phyagentos.agent.llm.meaning.Meaning.assumed`: a modifier of no declared
+    name before a noun that names one object, "the wine bottle" read as ``white_bottle_1``),
+    each said in a sentence; empty when it set nothing aside."""
+    from phyagentos.agent.llm.meaning import read_request  # noqa: PLC0415
+
+    return list(read_request(language, planner_world(objects, fixtures), relations=True).assumed)
 
 
 def _drawer_name(language: str, intent, fixtures: dict[str, str] | None = None) -> str:
@@ -618,6 +631,8 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     planning = {"suite": suite, "planner": "goal_planner_rules", "planned": [i for i, *_ in planned],
                 "skill_defaults": fixed,
                 "spatial_references": {i: where for i, *_, where in planned if where},
+                "assumed": {i: notes for i, task, problem, *_ in planned
+                            if (notes := instruction_assumptions(task.instruction, problem.objects, problem.fixtures))},
                 "refused": {int(line.split()[1]): line for line in unplanned}}
     atomic_write_text(root / "planning.yaml", "# Which chosen tasks the Goal Planner's rules planned and which they refused (why).\n"
                       + yaml.safe_dump(planning, sort_keys=False, allow_unicode=True))

@@ -76,7 +76,7 @@ from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
-from phyagentos.perception.detect import Detection, fit_cluster, resting_at, stack
+from phyagentos.perception.detect import Detection, fit_cluster, one_body, resting_at, stack
 from phyagentos.perception.top_knob import KNOB_MAX_RADIUS_M, KNOB_MIN_POINTS, KNOB_SLICE_M, KNOB_TOP_RANK, top_knob
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
@@ -351,8 +351,9 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     Returns:
         ``[(detection, index array into cloud)]`` of the parts (fitted as any segment, not
         stacked yet), or None: the segment is not oversized, splitting is off
-        (``split_max_cost`` 0), no partition is admissible, or two admissible partitions
-        that cut it differently score alike (module docstring). Never a guess.
+        (``split_max_cost`` 0), no partition is admissible, two admissible partitions
+        that cut it differently score alike (module docstring), or two of the chosen parts
+        are one body's lit and shaded sides (:func:`~.detect.one_body`). Never a guess.
     """
 
     cc = config.clustering
@@ -385,6 +386,13 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
     if best is None:
         if not scored:
             log.debug("split: oversized segment of %d points, no admissible partition", len(cloud))
+        return None
+    parts = list(best[3])
+    if any(one_body(a, b) for k, a in enumerate(parts) for b in parts[k + 1:]):
+        # two parts in one place, of one colour but for its lightness: one body's lit and shaded
+        # sides (LIBERO-PRO's green bottle, a little wider than its look), not two objects
+        log.debug("split: the parts of an oversized segment of %d points are one body's sides: kept whole",
+                  len(cloud))
         return None
     log.debug("split: %s at %.3f m into %d parts, costs %s", best[1], best[2], len(best[3]),
               [round(float(c), 2) for c in best[5]])

@@ -19,6 +19,12 @@ is read into clauses (:func:`read_request`), each with
 * the **destination**: a region (by name words and colour), an object to stack on, the
   region of the object's own colour (``matching``/``its colour``), or ``where it is``.
 
+One thing is read past: a word of no declared name between the article and a noun that
+names exactly one object (``the wine bottle`` where the only bottle is ``white_bottle_1``:
+LIBERO-PRO's replaced objects keep their old words) is **set aside** and said so
+(:attr:`Meaning.assumed`); before the article (``pour the wine bottle``), as the noun itself
+(``the kettle``), or with two bottles there, it is a problem as before.
+
 What the rules cannot account for is a **problem**, and the planner refuses with it before
 any model call: a destination the scene does not have (``the kitchen sink``: its words name
 nothing there), a reference that picks no object or several where one is meant (``the
@@ -39,6 +45,7 @@ detected, before any model call (docs/agent.md, "Languages").
 
 from __future__ import annotations
 
+import contextvars
 import re
 from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
@@ -224,6 +231,9 @@ class Meaning:
     #: objects picked out by a spatial relation (``read_request(..., relations=True)``): the declared name the
     #: reader bound the reference to -> ``{"relation": ..., "of": [landmark names], "part": ...}``
     where: dict[str, dict] = field(default_factory=dict)
+    #: words the reader set aside, each said in a sentence: a modifier of no declared name before a noun that
+    #: names one object ("'the wine bottle': 'wine' names nothing here; read as white_bottle_1, the one bottle")
+    assumed: list[str] = field(default_factory=list)
 
     @property
     def nothing_to_do(self) -> bool:
@@ -422,6 +432,38 @@ def _conjunction(words: list[str], world: World) -> tuple[str, ...] | None:
     return tuple(names) if len(set(names)) == len(names) else None
 
 
+#: What :func:`read_request` set aside while reading (:func:`_set_aside`); None outside a reading.
+_ASSUMED: contextvars.ContextVar[list[str] | None] = contextvars.ContextVar("meaning_assumed", default=None)
+
+
+def _set_aside(words: list[str], unknown: list[str], world: World,
+               previous: tuple[str, ...]) -> tuple[str, ...] | None:
+    """The one object an object phrase names with its ``unknown`` words set aside, or None.
+
+    Only modifiers are set aside: every unknown word stands after the phrase's last article
+    (``the``, ``a``, ``an``) and before its last word, the noun, which is a word of a declared
+    name; the phrase asks for one thing (no quantifier, no plural, no conjunction); and the rest
+    names exactly one object with no problem. Said in :data:`_ASSUMED`."""
+    articles = [i for i, w in enumerate(words) if w in ("the", "a", "an")]
+    start = articles[-1] + 1 if articles else 0
+    noun = len(words) - 1
+    if noun < 1 or words[noun] in unknown or "and" in words or set(words) & (_ALL | set(_COUNTS) - {"a", "an"}):
+        return None
+    if not all(start <= i < noun for i, w in enumerate(words) if w in unknown):
+        return None
+    rest = [w for w in words if w not in unknown]
+    objects, count, problems = _read_objects(rest, world, previous)
+    if problems or count is not None or len(objects) != 1:
+        return None
+    said = ", ".join(repr(w) for w in unknown)
+    note = (f"{quote(' '.join(words))}: {said} {'names' if len(unknown) == 1 else 'name'} nothing here; read as "
+            f"{objects[0]}, the one {words[noun]}")
+    assumed = _ASSUMED.get()
+    if assumed is not None and note not in assumed:
+        assumed.append(note)
+    return objects
+
+
 def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> tuple[tuple[str, ...], int | None,
                                                                                        list[str]]:
     """(objects, count, problems) of an object phrase; ``count`` is set for a count quantifier."""
@@ -464,6 +506,8 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
              | {"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey", "gray"}
              | {p for e in cands for p in e.name.split("_")} | {e.name for e in cands} | {"by", "colour", "color"})
     unknown = [w for w in content if w not in known]
+    if unknown and not singular and (aside := _set_aside(words, unknown, world, previous)) is not None:
+        return aside, None, []
     if unknown:
         return (), None, [("unknown_object", f"{quote(' '.join(words))}: {', '.join(repr(w) for w in unknown)} names "
                                              f"no object of the scene (it has {', '.join(e.name for e in cands)})")]
@@ -886,6 +930,15 @@ def read_request(request: str, world: World, *, relations: bool = False) -> Mean
     meaning.language = detect_language(request, world.names)
     if meaning.language is not None:
         return meaning
+    token = _ASSUMED.set(meaning.assumed)
+    try:
+        return _read(meaning, request, world, relations)
+    finally:
+        _ASSUMED.reset(token)
+
+
+def _read(meaning: Meaning, request: str, world: World, relations: bool) -> Meaning:
+    """:func:`read_request`'s reading of ``request`` into ``meaning`` (its language already checked)."""
     text = meaning.text = normalise(request)
     if text == DANGLING:
         meaning.text = request

@@ -182,6 +182,19 @@ def test_a_plan_that_does_something_other_than_asked_is_refused_with_what_is_una
     assert meaning.unaccounted(extra[:1], world) == []
 
 
+def test_a_modifier_of_no_declared_name_is_set_aside_and_said_only_before_a_noun_that_names_one_thing():
+    world = world_from_scene(SCENE)
+    meaning = read_request("put the shiny red cube in the left bin", world)
+    assert not meaning.problems and [(i.verb, i.objects) for i in meaning.intents] == [("move", ("red_cube",))]
+    assert meaning.assumed == ["'the shiny red cube': 'shiny' names nothing here; read as red_cube, the one cube"]
+    # two cubes for "the shiny cube", a word before the article, an unknown noun: refused, nothing set aside
+    for text, why in (("put the shiny cube in the left bin", "'shiny' names no object"),
+                      ("polish the red cube in the left bin", "'polish' names no object"),
+                      ("put the red kettle in the left bin", "'kettle' names no object")):
+        meaning = read_request(text, world)
+        assert meaning.problems and why in meaning.problems[0][1] and not meaning.assumed, (text, meaning.problems)
+
+
 def test_what_the_rules_cannot_account_for_is_refused_before_any_model_call(planner):
     for text, why in [("put the cube in the left bin", "could be any of red_cube, blue_cube"),
                       ("tidy up the table", "'table' names no object"),

@@ -336,6 +336,8 @@ class GoalPlanner:
                                "excluded": list(i.excluded)} for i in meaning.intents]
         context["clauses"] = [{"text": c.text, "object": c.object, "destinations": c.destinations,
                                "skills": c.skills} for c in clauses]
+        if meaning.assumed:  # words the reader set aside (a modifier of no declared name), said with the plan
+            context["assumed"] = list(meaning.assumed)
         part = (lambda t: f"clause {t!r}: ") if len(clauses) > 1 else (lambda t: "")
 
         def result(**fields) -> PlanResult:

@@ -338,8 +338,9 @@ def main(argv: list[str] | None = None) -> int:
             now = {r["suite"] for r in rows}
             rows = [r for r in before["suites"] if r["suite"] not in now] + rows
     standard = {r["suite"]: r for r in rows if r["kind"] == "standard"}
-    for r in rows:
+    for r in rows:  # every row's rates first: a standard run now comes after the rows --merge kept
         r["first_pct"], r["final_pct"] = _pct(r.get("first", 0), r["episodes"]), _pct(r.get("final", 0), r["episodes"])
+    for r in rows:
         ref = standard.get(r["standard"])
         if ref is not None and r is not ref:
             r["drop_first_pts"] = round(ref["first_pct"] - r["first_pct"], 1)

@@ -4,6 +4,7 @@ task starts from a different state than the standard one."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -285,3 +286,26 @@ def test_a_replaced_objects_old_modifier_is_set_aside_and_said_only_where_one_th
     standard = resolve_task("libero_goal", 9)
     std = parse_bddl(standard.bddl_path)
     assert instruction_assumptions(standard.instruction, std.objects, std.fixtures) == []
+
+
+def test_a_standard_suite_run_again_with_merge_is_compared_with_the_families_kept(tmp_path, monkeypatch):
+    # bench/libero_pro.py --merge: the kept rows come first, the standard run now after them
+    bench = _libero_pro_bench()
+
+    def row(suite, family, kind, first):
+        return {"suite": suite, "standard": "libero_goal", "family": family, "kind": kind, "episodes": 20,
+                "first": first, "final": first, "planned": 10, "refused": 0, "false_successes": 0,
+                "false_failures": 0, "wall_s": 1.0, "seeds": 2, "task_names": {}, "not_runnable": [],
+                "per_task": {}, "at_rest": {"episodes": 20, "first": first, "final": first}}
+
+    out = tmp_path / "pro.json"
+    out.write_text(json.dumps({"tasks": "0,1,2,3,4,5,6,7,8,9", "seeds": "0-1",
+                               "suites": [row("libero_goal", "standard", "standard", 16),
+                                          row("libero_goal_swap", "swap", "position", 14)]}), encoding="utf-8")
+    monkeypatch.setattr(bench, "run_suite", lambda suite, *a, **k: row(suite, "standard", "standard", 17))
+    assert bench.main(["--suites", "libero_goal", "--tasks", "0-9", "--seeds", "0-1", "--merge",
+                       "--out", str(out), "--workspace", str(tmp_path / "ws")]) == 0
+    rows = {r["suite"]: r for r in json.loads(out.read_text(encoding="utf-8"))["suites"]}
+    assert rows["libero_goal"]["first"] == 17  # replaced by the run now
+    assert rows["libero_goal_swap"]["drop_first_pts"] == 15.0  # against the standard run now: 85 - 70
+    assert rows["libero_goal_swap"]["at_rest"]["drop_first_pts"] == 15.0

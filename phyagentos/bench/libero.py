@@ -56,8 +56,7 @@ from phyagentos.protocol.atomic import atomic_write_text
 
 __all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "SKILL_DEFAULTS", "FIRST_PICK_STILL_MAX_S", "workspace_box",
            "is_libero_suite", "instruction_nodes", "instruction_plan", "instruction_assumptions", "load_skill_defaults",
-           "prepare_libero_suite",
-           "target_entry"]
+           "prepare_libero_suite", "target_entry"]
 
 logger = logging.getLogger(__name__)
 

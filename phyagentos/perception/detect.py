@@ -493,7 +493,7 @@ def detect_clusters(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Per
 #: chromaticities ``rgb / (r + g + b)`` differ by at most this in every channel...
 ONE_BODY_CHROMA = 0.04
 #: ... and that colour is chromatic: its chromaticity's channels span at least this (grey,
-#: black and white things, whose chromaticities all sit at a third, are never joined).
+#: black and white things, whose chromaticities all sit at a third, are never one body by colour).
 ONE_BODY_MIN_SATURATION = 0.15
 
 

@@ -1,4 +1,4 @@
-"""One body's lit and shaded sides are never split apart (``perception.detect.one_body``).
+"""One body's lit and shaded sides are never split apart (``perception.split.one_body``).
 
 LIBERO-PRO's libero_goal_object swaps the wine bottle for a green glass bottle 1.6 cm across,
 seen a little wider than its look. The split of touching objects cut it by colour into its lit
@@ -14,7 +14,8 @@ import numpy as np
 from phyagentos.perception import ObjectDescriptor, PerceptionConfig
 from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.colour import srgb_to_lab
-from phyagentos.perception.detect import Detection, one_body
+from phyagentos.perception.detect import Detection
+from phyagentos.perception.split import one_body
 
 LIT, SHADED = (0.17, 0.46, 0.17), (0.08, 0.21, 0.08)
 GREY_LIT, GREY_SHADED = (0.80, 0.80, 0.80), (0.35, 0.35, 0.35)

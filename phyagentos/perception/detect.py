@@ -34,7 +34,7 @@ from phyagentos.perception.handle import UPPER_FRACTION, RoundBody, round_body
 from phyagentos.perception.top_knob import Knob, top_knob
 
 __all__ = ["Detection", "dbscan", "cluster", "fit_cluster", "open_depth", "with_open_depth", "with_round_body",
-           "with_top_knob", "detect", "detect_clusters", "one_body", "stack", "resting_at"]
+           "with_top_knob", "detect", "detect_clusters", "stack", "resting_at"]
 
 log = logging.getLogger(__name__)
 
@@ -479,47 +479,13 @@ def detect_clusters(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Per
                     focal_px: np.ndarray) -> list[tuple[Detection, np.ndarray]]:
     """``(detection, index array into cloud)`` per cluster (see :func:`fit_cluster`). A
     cluster holding touching objects is split afterwards, against the declared objects
-    (:func:`phyagentos.perception.split.split_clusters`), never into one body's lit and shaded
-    sides (:func:`one_body`)."""
+    (:func:`phyagentos.perception.split.split_clusters`)."""
     out = []
     for idx in cluster(cloud, config):
         det = fit_cluster(cloud.select(idx), heights[idx], plane, config, focal_px)
         if det is not None:
             out.append((det, idx))
     return out
-
-
-#: Two segments are one body's lit and shaded sides (:func:`one_body`) when their colours'
-#: chromaticities ``rgb / (r + g + b)`` differ by at most this in every channel...
-ONE_BODY_CHROMA = 0.04
-#: ... and that colour is chromatic: its chromaticity's channels span at least this (grey,
-#: black and white things, whose chromaticities all sit at a third, are never one body by colour).
-ONE_BODY_MIN_SATURATION = 0.15
-
-
-def one_body(a: Detection, b: Detection) -> bool:
-    """Whether detections ``a`` and ``b`` are one object's lit and shaded sides: one chromatic
-    colour (:data:`ONE_BODY_CHROMA`, :data:`ONE_BODY_MIN_SATURATION`) over one footprint (the
-    centres nearer than the larger's horizontal half size, the smaller at least half as large)
-    and one height range (they overlap over half the shorter one's height). Two things cannot
-    stand in one place at one height; a thing in a container or on another is smaller, or
-    higher. The split of touching objects (:func:`phyagentos.perception.split.split_cluster`)
-    never cuts a segment into such parts: LIBERO-PRO's ``white_bottle`` (libero_goal_object, a
-    green glass bottle 1.6 cm across, seen 1.8 cm: wider than its look) was cut by colour into
-    its sides, (0.08, 0.21, 0.08) and (0.17, 0.46, 0.17) in sRGB, both rivals for its name and
-    neither named."""
-    ca = np.asarray(a.colour_rgb, float) + 1e-3
-    cb = np.asarray(b.colour_rgb, float) + 1e-3
-    ca, cb = ca / ca.sum(), cb / cb.sum()
-    if float(np.max(np.abs(ca - cb))) > ONE_BODY_CHROMA or float(np.ptp(ca)) < ONE_BODY_MIN_SATURATION:
-        return False
-    ra, rb = float(np.max(a.half_extents[:2])), float(np.max(b.half_extents[:2]))
-    if min(ra, rb) < 0.5 * max(ra, rb):
-        return False
-    if float(np.linalg.norm(np.asarray(a.position[:2]) - np.asarray(b.position[:2]))) > max(ra, rb):
-        return False
-    overlap = min(a.top_m, b.top_m) - max(a.bottom_m, b.bottom_m)
-    return overlap > 0.5 * min(a.top_m - a.bottom_m, b.top_m - b.bottom_m)
 
 
 def detect(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig,

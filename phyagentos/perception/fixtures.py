@@ -22,7 +22,10 @@ fixture's model: :func:`drawer_reading` reads each opening from where its handle
 fixture with compartments (LIBERO's desk caddy) declares ``compartments: [{name (the model's word),
 offset_m: [dx, dy] (world frame, from the body's footprint centre), half_extents_m: [hx, hy] (world
 axes), height_m: its floor above the support}]``, at turn 0 and from the model; the perceiver
-names each by the viewer's side of the fixture it lies on (:func:`compartment_sides`).
+names each by the viewer's side of the fixture it lies on (:func:`compartment_sides`). A
+fixture with a door on a vertical hinge declares ``door:`` (:class:`~phyagentos.perception.door.DoorLook`,
+in its model frame, which needs ``root``); it is fitted without its open door
+(:func:`without_door`).
 
 :func:`detect_fixtures` finds them in the object cloud (all heights up to the raised crop),
 segmented by the perceiver's own clustering (position and colour,
@@ -56,6 +59,7 @@ from phyagentos.geometry import turned_xy
 from phyagentos.perception.cloud import Cloud
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import _rect, cluster
+from phyagentos.perception.door import DoorLook, thin_parts_removed
 from phyagentos.perception.errors import PerceptionError
 
 __all__ = ["FixtureLook", "RootLook", "ROOT_YAW_MAX_RAD", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
@@ -68,7 +72,8 @@ __all__ = ["FixtureLook", "RootLook", "ROOT_YAW_MAX_RAD", "FixtureSighting", "Kn
            "SIZE_TOL_M", "TOP_PERCENTILE", "MIN_POINTS", "KNOB_RADIUS_M", "KNOB_BAND", "KNOB_MIN_POINTS",
            "KNOB_SEEN_POINTS", "KNOB_MIN_ELONGATION", "KNOB_ALONG_STD_M", "KNOB_ACROSS_STD_MAX_M", "KNOB_TOP_TOL_M", "KNOB_SIGMA_RAD",
            "KNOB_SEARCH_GRID_M", "KNOB_BODY_COVER",
-           "find_by_drawers", "DRAWER_FOUND_MIN", "DRAWER_FOUND_SHUT_M", "KNOB_TALL_COVER", "KNOB_SURFACE_COVER",
+           "find_by_drawers", "without_door", "edge_yaw", "EDGE_YAW_SPAN_RAD", "EDGE_YAW_STEP_RAD", "EDGE_BIN_M",
+           "DRAWER_FOUND_MIN", "DRAWER_FOUND_SHUT_M", "KNOB_TALL_COVER", "KNOB_SURFACE_COVER",
            "PATCH_COVER", "PATCH_TOL_M", "TURNS"]
 
 #: Fewest points (on the perceiver's voxel grid) of a fixture's segment.
@@ -582,21 +587,23 @@ class FixtureLook:
     compartments: tuple[CompartmentLook, ...] = ()
     root: RootLook | None = None
     model_box: tuple[tuple[float, float], tuple[float, float]] | None = None
+    door: DoorLook | None = None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "FixtureLook | None":
         """From a declared fixture ``{name, class, size_m?, place?, knob?, drawers?, compartments?,
-        root?, model_box?}``; ``None`` when it has no look (``size_m``): such a fixture is not
+        root?, model_box?, door?}``; ``None`` when it has no look (``size_m``): such a fixture is not
         perceived. ``model_box``: ``{lo: [x, y], hi: [x, y]}``, m, the footprint of the fixture's
         fixed parts (its model's meshes, no drawer, door or knob) in its model frame; it needs
-        ``root`` (where that frame stands from the perceived body).
+        ``root`` (where that frame stands from the perceived body), as does ``door``
+        (:class:`~phyagentos.perception.door.DoorLook`, in that frame).
 
         Raises:
             PerceptionError: an unknown key (the valid ones listed) or a malformed value.
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared fixture must be a mapping, got {type(d).__name__}")
-        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root", "model_box")
+        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root", "model_box", "door")
         unknown = set(d) - set(valid)
         name = d.get("name")
         if unknown:
@@ -620,10 +627,13 @@ class FixtureLook:
         comps = tuple(CompartmentLook.from_dict(r, name) for r in raw_comps)
         root = RootLook.from_dict(d["root"], name) if d.get("root") is not None else None
         box = _model_box(d.get("model_box"), name, root)
+        door = DoorLook.from_dict(d["door"], name) if d.get("door") is not None else None
+        if door is not None and root is None:
+            raise PerceptionError(f"fixture {name!r}: a door needs the fixture's root (where its model frame stands)")
         place = d.get("place")
         if place is None:
             return cls(name, d.get("class"), size, knob=knob, drawers=drawers, compartments=comps, root=root,
-                       model_box=box)
+                       model_box=box, door=door)
         if not isinstance(place, Mapping) or set(place) != {"offset_m", "half_extents_m", "height_m"}:
             raise PerceptionError(f"fixture {name!r}: place must be a mapping with keys "
                                   f"{format_choices(('offset_m', 'half_extents_m', 'height_m'))}, got {place!r}")
@@ -632,7 +642,7 @@ class FixtureLook:
         height = _floats([place["height_m"]], 1, f"fixture {name!r}: place.height_m")[0]
         if min(half) <= 0 or height < 0:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
-        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps, root, box)  # type: ignore[arg-type]
+        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps, root, box, door)  # type: ignore[arg-type]
 
     def in_model(self, points_xy: np.ndarray, sighting: "FixtureSighting", *, edge_m: float = 0.0) -> np.ndarray:
         """(N,) bool: which of ``points_xy`` (N, 2) world m lie over the footprint of the
@@ -777,6 +787,56 @@ def _without_drawers(points: np.ndarray, heights: np.ndarray, idx: np.ndarray,
     body = _body(points, heights, keep)
     xy = body.position[:2] + u * (back + 0.5 * depth - float(body.position[:2] @ u))
     return replace(body, position=np.array([xy[0], xy[1], body.position[2]]))
+
+
+def without_door(points: np.ndarray, heights: np.ndarray, idx: np.ndarray) -> FixtureSighting | None:
+    """The body of segment ``idx`` without its thin parts seen from above
+    (:func:`~phyagentos.perception.door.thin_parts_removed`): a fixture whose door stands open
+    (the slab, 2.4 cm thick on LIBERO's microwave, and its handle's bar) fitted by its body
+    alone, as its look was measured (door shut: the slab then lies against the body's front
+    and is kept). The footprint is turned to the yaw its straight edges show
+    (:func:`edge_yaw`), not the minimum-area rectangle's: the cameras see a wedge of such a
+    body's top, whose rectangle leans by a few degrees, which the hinge, 19 cm from the
+    middle, turns into a centimetre. ``None`` when too little is left."""
+    keep = idx[thin_parts_removed(points[idx, :2])]
+    if keep.size < MIN_POINTS:
+        return None
+    body = _body(points, heights, keep)
+    xy = points[keep, :2]
+    yaw = edge_yaw(xy, body.yaw)
+    local = _in_frame(xy, np.zeros(2), yaw)
+    lo, hi = local.min(axis=0), local.max(axis=0)
+    half = 0.5 * (hi - lo)
+    centre = turned_xy(0.5 * (lo + hi), yaw)
+    if half[1] > half[0]:  # the long side first, as every footprint
+        half, yaw = half[::-1].copy(), yaw + 0.5 * math.pi
+    yaw = (yaw + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+    c, s = abs(math.cos(yaw)), abs(math.sin(yaw))
+    return replace(body, position=np.array([centre[0], centre[1], body.position[2]]), yaw=yaw,
+                   half_extents=np.array([half[0], half[1], body.half_extents[2]]),
+                   half_xy_world=np.array([c * half[0] + s * half[1], s * half[0] + c * half[1]]))
+
+
+#: :func:`edge_yaw`: how far from the first guess (rad) and in what steps the yaw is tried, and
+#: the histogram's bin, m.
+EDGE_YAW_SPAN_RAD, EDGE_YAW_STEP_RAD, EDGE_BIN_M = 0.15, 0.0025, 0.004
+
+
+def edge_yaw(xy: np.ndarray, guess: float) -> float:
+    """The yaw (rad) within :data:`EDGE_YAW_SPAN_RAD` of ``guess`` (a long side's) at which
+    the points ``xy`` (N, 2) world m line up best along a long side: the fullest bin
+    (:data:`EDGE_BIN_M`) of their coordinates across it (a straight edge, a face seen edge-on,
+    is a peak; the long side's, the longest edge, rather than a short side's or a ridge on the
+    top that a short side's histogram would also count)."""
+    pts = np.asarray(xy, float)
+    best, best_yaw = -1.0, float(guess)
+    for a in np.arange(-EDGE_YAW_SPAN_RAD, EDGE_YAW_SPAN_RAD + 1e-9, EDGE_YAW_STEP_RAD):
+        yaw = float(guess) + float(a)
+        v = _in_frame(pts, np.zeros(2), yaw)[:, 1]
+        score = float(np.bincount(np.floor((v - v.min()) / EDGE_BIN_M).astype(int)).max())
+        if score > best:
+            best, best_yaw = score, yaw
+    return best_yaw
 
 
 def _adjacent(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> bool:
@@ -1068,7 +1128,8 @@ def detect_fixtures(cloud: Cloud, heights: np.ndarray, looks: Sequence[FixtureLo
     for parts, idx in cands:
         whole = _body(points, heights, idx)
         for look in looks:
-            body = _without_drawers(points, heights, idx, look) if look.drawers else whole
+            body = (_without_drawers(points, heights, idx, look) if look.drawers
+                    else without_door(points, heights, idx) if look.door is not None else whole)
             if body is None:
                 continue
             seen = (2.0 * float(body.half_extents[0]), 2.0 * float(body.half_extents[1]), body.top_m)

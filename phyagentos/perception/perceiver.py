@@ -51,7 +51,12 @@ its own (:func:`~phyagentos.perception.fixtures.drawer_entity_name`: ``wooden_ca
 ``axis`` (3,) the world direction it opens along, ``range_m``, ``joint_position`` (m out of
 shut) with ``joint_position_std_m``, and its handle as the ``grasp`` (approached along the
 axis pitched :data:`DRAWER_APPROACH_PITCH_RAD` down, the fingers closing across the bar);
-reported only while its handle is read.
+reported only while its handle is read. A fixture's door on a vertical hinge (``door`` in its
+look: LIBERO's microwave) swings, so it is read from its slab in every observation
+(:func:`~phyagentos.perception.door.door_reading`; the slab and its handle are the fixture's own
+points) and reported as a hinge in the fixture entity's attributes, its joint as the door's
+opening (rad, 0 shut), with what a push along its sweep needs (``door``); the body is found
+with the open door left out (:func:`~phyagentos.perception.fixtures.without_door`).
 
 The Perceiver keeps per-session state (tracks, the open-gripper wrist-force baseline, the
 held object); :meth:`reset` clears it. It never reads simulator state.
@@ -118,6 +123,7 @@ from phyagentos.perception.fixtures import (
     fixtures_from_declared,
     knob_reading,
 )
+from phyagentos.perception.door import DOOR_SIGMA_RAD, DOOR_STOP_SIGMA_RAD, door_points, door_reading
 from phyagentos.perception.frames import CameraFrame, Proprioception, _rigid
 from phyagentos.perception.glimpse import Glimpse, carry_over, glimpses, rival
 from phyagentos.perception.handle import RoundBody
@@ -342,6 +348,12 @@ def _obstacle_boxes(obstacles) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+#: How far around a door's slab and handle, at its reading, points are the fixture's own, m
+#: (:func:`~phyagentos.perception.door.door_points`): its depth noise and the reading's error
+#: at its free edge (0.03 rad over 26 cm is 8 mm).
+DOOR_OWN_MARGIN_M = 0.02
+
+
 class Perceiver:
     """Per-session perception: ``Perceiver(config, declared)``.
 
@@ -400,6 +412,12 @@ class Perceiver:
         #: of a drawer it pulled open (:meth:`note_drawer_opened`): what the drawer reads while
         #: its handle is hidden and not read since
         self.drawer_felt: dict[tuple[str, str], tuple[float, float]] = {}
+        #: Each door's reading in the last observation: ``{fixture: (joint rad, points)}``
+        #: (absent: not read there) and its last one, ``{fixture: (joint rad, stamp s)}``.
+        self.door_readings: dict[str, tuple[float, int]] = {}
+        self.door_seen: dict[str, tuple[float, float]] = {}
+        #: fixture -> stamp s of the push that met its door's shut stop (:meth:`note_door_stop`)
+        self.door_stops: dict[str, float] = {}
         self._baseline_n: float | None = None
         self._held: str | None = None
         self._grasp_height_m: float | None = None
@@ -460,6 +478,27 @@ class Perceiver:
         """
         self.drawer_felt[self._drawer_key(entity)] = (float(opening_m) - DRAWER_HANDLE_PLAY_M, float(stamp_s))
 
+    def note_door_stop(self, fixture: str, *, stamp_s: float) -> None:
+        """Record that the hand pushed ``fixture``'s door into its shut stop at ``stamp_s`` s
+        (:class:`~phyagentos.primitives.door.PushDoor`). From then on, while the door is not read
+        or is read within 2 sigma (:data:`~phyagentos.perception.door.DOOR_SIGMA_RAD`) of shut,
+        it is reported shut (``joint_position``, its opening, 0) with 1-sigma
+        :data:`~phyagentos.perception.door.DOOR_STOP_SIGMA_RAD` and ``at_stop: shut``; a reading
+        further open forgets it (the door was moved).
+
+        Raises:
+            PerceptionError: ``fixture`` is no declared fixture with a door (those listed).
+        """
+        doors = [f.name for f in self.fixtures if f.door is not None]
+        if fixture not in doors:
+            raise PerceptionError(f"{fixture!r} is no declared fixture with a door; fixtures with a door: "
+                                  f"{doors or 'none'}")
+        self.door_stops[fixture] = float(stamp_s)
+
+    def forget_door_stop(self, fixture: str) -> None:
+        """Forget what :meth:`note_door_stop` recorded of ``fixture`` (its door is being moved)."""
+        self.door_stops.pop(fixture, None)
+
     def forget_drawer_stop(self, entity: str) -> None:
         """Forget what :meth:`note_drawer_stop` and :meth:`note_drawer_opened` recorded of
         ``entity`` (it is being moved); an entity that is no declared drawer has nothing to
@@ -506,15 +545,19 @@ class Perceiver:
         half_xy_world, top_m, points, error, found_by, turn, stamp_s, confidence, drawers, stops}}``, m,
         rad, s; ``drawers``: ``{drawer: [opening m, stamp s]}`` of each drawer's last reading;
         ``stops``: ``{drawer: stamp s}`` of each drawer pushed into its shut stop; ``felt``:
-        ``{drawer: [opening m, stamp s]}`` of each drawer the hand pulled open), for
-        :meth:`restore_fixtures`."""
+        ``{drawer: [opening m, stamp s]}`` of each drawer the hand pulled open; ``door``:
+        ``[joint rad, stamp s]`` of its door's last reading and ``door_stop``: stamp s of the
+        push that met its shut stop, where it has them), for :meth:`restore_fixtures`."""
         return {n: {"position": s.position.tolist(), "yaw": float(s.yaw), "half_extents": s.half_extents.tolist(),
                     "half_xy_world": s.half_xy_world.tolist(), "top_m": float(s.top_m), "points": int(s.points),
                     "error": float(s.error), "found_by": s.found_by, "turn": float(s.turn), "stamp_s": float(t),
                     "confidence": float(c),
                     "drawers": {d: [float(o), float(ts)] for (f, d), (o, ts) in self.drawer_seen.items() if f == n},
                     "stops": {d: float(ts) for (f, d), ts in self.drawer_stops.items() if f == n},
-                    "felt": {d: [float(o), float(ts)] for (f, d), (o, ts) in self.drawer_felt.items() if f == n}}
+                    "felt": {d: [float(o), float(ts)] for (f, d), (o, ts) in self.drawer_felt.items() if f == n},
+                    **({"door": [float(self.door_seen[n][0]), float(self.door_seen[n][1])]} if n in self.door_seen
+                       else {}),
+                    **({"door_stop": float(self.door_stops[n])} if n in self.door_stops else {})}
                 for n, (s, t, c) in self.fixture_tracks.items()}
 
     def restore_fixtures(self, data: Mapping[str, Any]) -> None:
@@ -529,6 +572,8 @@ class Perceiver:
         self.drawer_seen = {}
         self.drawer_stops = {}
         self.drawer_felt = {}
+        self.door_seen = {}
+        self.door_stops = {}
         for name, d in (data or {}).items():
             if name not in looks:
                 continue
@@ -544,6 +589,10 @@ class Perceiver:
                     self.drawer_stops[(name, str(drawer))] = float(ts)
                 for drawer, (opening, ts) in (d.get("felt") or {}).items():
                     self.drawer_felt[(name, str(drawer))] = (float(opening), float(ts))
+                if d.get("door") is not None:
+                    self.door_seen[name] = (float(d["door"][0]), float(d["door"][1]))
+                if d.get("door_stop") is not None:
+                    self.door_stops[name] = float(d["door_stop"])
             except (KeyError, TypeError, ValueError) as exc:
                 raise PerceptionError(f"perception state: fixture {name!r} has an unexpected layout: {exc}") from None
 
@@ -1053,6 +1102,7 @@ class Perceiver:
         dets = []
         self.knob_readings = {}
         self.drawer_readings = {}
+        self.door_readings = {}
         self._mouths = []
         for look in self.fixtures:
             if look.name not in self.fixture_tracks:
@@ -1065,6 +1115,16 @@ class Perceiver:
                 axis = look.knob.axis_xy(s.position[:2], s.turn)
                 own |= ((np.linalg.norm(p[:, :2] - axis, axis=1) <= KNOB_RADIUS_M)
                         & (heights <= look.knob.top_m + FIXTURE_MARGIN_M))
+            if look.door is not None and look.root is not None:  # read in every observation; the slab is its own
+                origin, yaw = look.root.pose(s.position, s.yaw, s.turn, s.top_m)
+                reading = door_reading(p, look.door, origin, yaw,
+                                       off_body=~look.in_model(p[:, :2], s, edge_m=FIXTURE_MARGIN_M))
+                if reading is not None:
+                    self.door_readings[look.name] = reading
+                    self.door_seen[look.name] = (reading[0], stamp)
+                q_door = reading[0] if reading is not None else (self.door_seen.get(look.name) or (None,))[0]
+                if q_door is not None:
+                    own |= door_points(p, look.door, origin, yaw, q_door, margin_m=DOOR_OWN_MARGIN_M)
             contents = np.zeros(len(cloud), dtype=bool)
             for drawer in look.drawers:  # read in every observation; what stands out of the body is the fixture's
                 reading = drawer_reading(p, heights, drawer, s.position[:2], s.turn)
@@ -1337,9 +1397,56 @@ class Perceiver:
             attrs["remembered"] = True
         if look.knob is not None:
             attrs.update(self._knob_attributes(look, s, plane))
+        elif look.door is not None and look.root is not None:
+            attrs.update(self._door_attributes(look, s))
         ent = {"name": look.name, "kind": "fixture", "position": _r(pos), "quat_wxyz": [1.0, 0.0, 0.0, 0.0],
                "size": _r([half[0], half[1], hz]), "attributes": attrs}
         return ent, _geo(pos, 0.0, np.array([half[0], half[1], hz]), "box", 0.0, plane, FIXTURE_STD_M)
+
+    def _door_attributes(self, look: FixtureLook, s: FixtureSighting) -> dict[str, Any]:
+        """A fixture's door as the entity attributes of a hinge, its joint as the door's
+        *opening* (rad, 0 shut, growing as it opens, whatever the model's sign: as a drawer's
+        opening): ``joint_type``, ``anchor`` (3,) world m at the slab's mid-height, ``axis`` (3,)
+        world unit (the door turns about it as it opens), ``range_rad`` [0, travel], the opening
+        read in this observation (``joint_position`` rad, ``joint_position_std_rad``
+        :data:`~phyagentos.perception.door.DOOR_SIGMA_RAD`; absent when not read now), or 0 from
+        a push that met its shut stop (:meth:`note_door_stop`: ``at_stop: shut``, 1-sigma
+        :data:`~phyagentos.perception.door.DOOR_STOP_SIGMA_RAD`), and ``door``: what a push along
+        its sweep needs (world frame: ``shut_yaw_rad`` the direction hinge to free edge when
+        shut, ``turn`` +1 / -1 the door's yaw per unit of opening, ``outer``, ``width_m``,
+        ``thickness_m``, ``mid_m``, ``z_m`` [bottom, top] world m, ``handle_r_m``,
+        ``handle_out_m``: :class:`~phyagentos.perception.door.DoorLook`)."""
+        door = look.door
+        assert door is not None and look.root is not None
+        origin, yaw = look.root.pose(s.position, s.yaw, s.turn, s.top_m)
+        hinge = door.hinge_xy(origin, yaw)
+        z0, z1 = float(origin[2]) + door.z_m[0], float(origin[2]) + door.z_m[1]
+        towards = 1.0 if door.open_rad > door.shut_rad else -1.0
+        turn = door.sign * towards
+        out: dict[str, Any] = {"joint_type": "hinge", "axis": [0.0, 0.0, turn],
+                               "range_rad": [0.0, _r(abs(door.open_rad - door.shut_rad), 4)],
+                               "anchor": _r([hinge[0], hinge[1], 0.5 * (z0 + z1)]),
+                               "door": {"shut_yaw_rad": _r(door.door_yaw(door.shut_rad, yaw), 5), "turn": turn,
+                                        "outer": door.outer, "width_m": _r(door.width_m),
+                                        "thickness_m": _r(door.thickness_m), "mid_m": _r(door.mid_m),
+                                        "z_m": [_r(z0), _r(z1)], "handle_r_m": (None if door.handle_r_m is None
+                                                                               else _r(door.handle_r_m)),
+                                        "handle_out_m": _r(door.handle_out_m)}}
+        reading = self.door_readings.get(look.name)
+        opening = None if reading is None else towards * (reading[0] - door.shut_rad)
+        stop = self.door_stops.get(look.name)
+        if stop is not None and opening is not None and abs(opening) > 2.0 * DOOR_SIGMA_RAD:
+            del self.door_stops[look.name]  # read open: it was moved since
+            stop = None
+        if stop is not None:
+            out.update(joint_position=0.0, joint_position_std_rad=DOOR_STOP_SIGMA_RAD, at_stop="shut",
+                       stop_s=_r(stop, 6))
+            if opening is not None:
+                out["door_read_rad"] = _r(opening, 4)
+        elif opening is not None:
+            out.update(joint_position=_r(opening, 4), joint_position_std_rad=DOOR_SIGMA_RAD,
+                       door_points=reading[1])  # type: ignore[index]
+        return out
 
     def _knob_attributes(self, look: FixtureLook, s: FixtureSighting, plane: Plane) -> dict[str, Any]:
         """A fixture's knob as the entity attributes of a hinge (``joint_type``, ``anchor``

@@ -26,6 +26,8 @@ guarded_move              straight tcp motion that stops on contact (contact.py)
 compute_place_at          place poses at an offset or slot inside a region (placement.py)
 compute_push              start poses to push an object with the closed hand (contact.py)
 push                      compliant push that must touch, with an effort limit (contact.py)
+compute_door_push         the start of a push that shuts a fixture's door (door.py)
+push_door                 sweep the closed fingers along a door's circle into its shut stop (door.py)
 game_*                    game primitives (explore, goto, collect, hunt, place, make,
                           sleep, survive) on a ``kind: game`` target (game/)
 ========================  ==========================================================
@@ -36,6 +38,7 @@ from .base import Primitive, PrimitiveFailure
 from .contact import ComputePush, GuardedMove, Push
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
 from .control import Noop
+from .door import ComputeDoorPush, PushDoor
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
 from .game import GAME_PRIMITIVES
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
@@ -78,5 +81,7 @@ PRIMITIVES = {
     "compute_place_at": ComputePlaceAt,
     "compute_push": ComputePush,
     "push": Push,
+    "compute_door_push": ComputeDoorPush,
+    "push_door": PushDoor,
     **GAME_PRIMITIVES,
 }

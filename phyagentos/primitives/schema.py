@@ -20,6 +20,7 @@ from typing import Any, Mapping
 from .affordance import ArticulateHinge, ArticulateSlide, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
+from .door import ComputeDoorPush, PushDoor
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
 from .game.survival import GameSurvive
 from .game.tasks import GameCollect, GameExplore, GameGoto, GameHunt, GameMake, GameObserve, GamePlace, GameSleep
@@ -275,6 +276,15 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "max_force_n": ("float", "N", "effort limit: fail with contact.excessive_force above it"),
         "expect_contact": ("bool", "", "fail with contact.missing if nothing was touched"),
         "press": ("str | null", "", "blackboard key of a press from above (lower until it lands, then drag)"),
+    },
+    ComputeDoorPush: {
+        "object": ("str", "", "the fixture whose door is shut (perceived: attributes.door and its hinge)"),
+        "approach_height_m": ("float", "m", "the pose written above the push's start"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+    },
+    PushDoor: {
+        "step_rad": ("float", "rad", "the door's joint between consecutive IK poses of the sweep"),
+        "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
     },
     GuardedMove: {
         "offset": ("[dx, dy, dz]", "m", "world-frame tcp displacement: the farthest the motion goes"),

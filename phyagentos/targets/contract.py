@@ -565,7 +565,8 @@ class PlanningBodies:
             model), set where the perceiver reports their model frame
             (``attributes.body.root``).
         slides: ``{articulation entity name: (joint name, sign)}``: a drawer's slide, set to
-            ``sign`` times the perceived opening (``attributes.joint_position``, m).
+            ``sign`` times the perceived opening (``attributes.joint_position``, m), or a
+            fixture's door's hinge (the fixture's name), set the same way (its opening, rad).
         unseen_slots: mocap bodies with one box geom each, which the planner sizes and places
             on the segments perception saw but could not name (``kind: unknown``); empty: such
             segments are not in the planner's world.

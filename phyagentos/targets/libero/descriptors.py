@@ -628,6 +628,75 @@ def _knob_look(target, name: str, cloud, heights: np.ndarray, centre_xy: np.ndar
     return {**rough.as_dict(), "rest_yaw_rad": rest}
 
 
+def _door_joint(target, name: str) -> int | None:
+    """The joint id of fixture ``name``'s door: a hinge about the world vertical on a body of
+    its model wider than :data:`KNOB_MAX_WIDTH_M` (LIBERO's microwave); None when it has none
+    (or several)."""
+    m, d = target.model, target.data
+    root = int(m.body_rootid[m.body(target.env.env.get_object(name).root_body).id])
+    knob = _knob_joint(target, name)
+    found = [j for j in range(m.njnt) if int(m.body_rootid[int(m.jnt_bodyid[j])]) == root and j != knob
+             and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and abs(float(d.xaxis[j][2])) >= 0.99
+             and any(int(m.geom_bodyid[g]) == int(m.jnt_bodyid[j]) for g in range(m.ngeom))]
+    return found[0] if len(found) == 1 else None
+
+
+def _door_shut(target, name: str) -> float | None:
+    """The joint value at which fixture ``name``'s door is shut: the end of its travel nearer
+    0 (the model's reference, where LIBERO's microwave door closes its body); None without a
+    door."""
+    j = _door_joint(target, name)
+    if j is None:
+        return None
+    lo, hi = (float(v) for v in target.model.jnt_range[j])
+    return lo if abs(lo) < abs(hi) else hi
+
+
+def _door_look(target, name: str) -> dict[str, Any] | None:
+    """Fixture ``name``'s ``door`` look (:class:`~phyagentos.perception.door.DoorLook`) from its
+    model, the door shut (the caller sets it so), in the model's root frame: the hinge's axis,
+    the slab (the door body's geom reaching farthest from the hinge) by its vertices' extent
+    along its long axis (their principal direction) and across it, the handle (a geom standing out beyond the slab's outer face
+    by more than 5 mm) by where it stands along the door. The outer side is the side of the
+    slab away from the fixed parts' centre. Read from the model, for the look; None without a
+    door."""
+    j = _door_joint(target, name)
+    if j is None:
+        return None
+    m, d = target.model, target.data
+    root = _fixture_roots(target, {name: None})[name]
+    R, o = d.xmat[root].reshape(3, 3), d.xpos[root]
+    hinge = ((d.xanchor[j] - o) @ R)[:2]
+    body = int(m.jnt_bodyid[j])
+    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == body]
+    local = {g: (_geom_points(m, d, g) - o) @ R for g in geoms}
+    slab = max(geoms, key=lambda g: float(np.max(np.linalg.norm(local[g][:, :2] - hinge, axis=1))))
+    pts = local[slab]
+    rel = pts[:, :2] - hinge
+    u = np.linalg.eigh(np.cov(rel.T))[1][:, -1]  # the slab's long axis, pointing to its free edge
+    u = u if float(np.mean(rel @ u)) > 0 else -u
+    n = np.array([-u[1], u[0]])  # u turned +90 degrees
+    fixed = _fixed_parts_box(target, name)
+    centre = (0.5 * (np.asarray(fixed["lo"]) + np.asarray(fixed["hi"])) if fixed is not None
+              else np.zeros(2)) - hinge
+    outer = -1.0 if float(centre @ n) > 0 else 1.0  # the outer normal points away from the fixed parts
+    across = outer * (rel @ n)
+    along = rel @ u
+    handle = [g for g in geoms if g != slab and float(np.max(outer * ((local[g][:, :2] - hinge) @ n))) > across.max() + 0.005]
+    lo, hi = (float(v) for v in m.jnt_range[j])
+    out: dict[str, Any] = {
+        "hinge_m": [float(v) for v in hinge], "shut_yaw_rad": math.atan2(float(u[1]), float(u[0])),
+        "sign": 1.0 if float((R.T @ d.xaxis[j])[2]) > 0 else -1.0, "range_rad": [lo, hi],
+        "shut_rad": lo if abs(lo) < abs(hi) else hi, "width_m": float(along.max()),
+        "thickness_m": float(across.max() - across.min()), "mid_m": float(0.5 * (across.max() + across.min())),
+        "outer": outer, "z_m": [float(pts[:, 2].min()), float(pts[:, 2].max())]}
+    if handle:
+        hp = np.vstack([local[g] for g in handle])[:, :2] - hinge
+        out["handle_r_m"] = float(np.median(hp @ u))
+        out["handle_out_m"] = float(np.max(outer * (hp @ n)))
+    return out
+
+
 def _drawer_joints(target, name: str) -> list[int]:
     """The joint ids of fixture ``name``'s drawers: slide joints along a horizontal axis on
     bodies of its model, in the model's order."""
@@ -782,11 +851,15 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
                     d.qpos[adr[0]:adr[0] + 3] = (_AWAY + 2.0 * j, _AWAY, 1.0)
                     d.qvel[adr[1]:adr[1] + 6] = 0.0
             boxes = fixture_boxes(target)
-            for name in cats:  # drawers shut: the look is the fixture's shut shape (some tasks start one open)
+            for name in cats:  # drawers and doors shut: the look is the fixture's shut shape (some tasks start one open)
                 if name in boxes:
                     for j in _drawer_joints(target, name):
                         d.qpos[m.jnt_qposadr[j]] = 0.0
                         d.qvel[m.jnt_dofadr[j]] = 0.0
+                    door, shut = _door_joint(target, name), _door_shut(target, name)
+                    if door is not None and shut is not None:  # a door too: the look is the shut body
+                        d.qpos[m.jnt_qposadr[door]] = shut
+                        d.qvel[m.jnt_dofadr[door]] = 0.0
             mujoco.mj_forward(m, d)
             target.hold(duration_s=settle_s)
             frames = [target.capture(s) for s in target.camera_names()]
@@ -850,6 +923,10 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
         compartments = _median_drawers([g.get("compartments", []) for g in got])
         if compartments:
             look["compartments"] = compartments
+        doors = [g["door"] for g in got if "door" in g]
+        if doors:  # the model's, the same in every scene
+            look["door"] = {k: (round(float(v), 4) if isinstance(v, float) else [round(float(x), 4) for x in v]
+                                if isinstance(v, list) else v) for k, v in doors[0].items()}
         roots = [g["root"] for g in got if "root" in g]
         if len(roots) >= 2:
             look["root"] = _median_root(roots)
@@ -885,6 +962,15 @@ def _fixture_look(target, name: str, cat: str, cloud, heights: np.ndarray, plane
         if not inside:
             return None
         body = max(inside, key=lambda b: b.points)
+    door = _door_look(target, name)
+    if door is not None:  # fitted as the perceiver fits a fixture with a door (its thin parts left out)
+        from phyagentos.perception.fixtures import segments, without_door  # noqa: PLC0415
+
+        segs = segments(cloud, config)  # the segment ``body`` was fitted to (bodies() fits them in this order)
+        seg = next((idx for idx, b in zip(segs, bodies(cloud, heights, config))
+                    if b.points == body.points and np.allclose(b.position, body.position)), None)
+        fitted = without_door(cloud.points, heights, seg) if seg is not None else None
+        body = fitted if fitted is not None else body
     p = body.position[:2]
     look: dict[str, Any] = {"size_m": [2.0 * float(body.half_extents[0]), 2.0 * float(body.half_extents[1]),
                                        body.top_m]}
@@ -905,6 +991,8 @@ def _fixture_look(target, name: str, cat: str, cloud, heights: np.ndarray, plane
     compartments = _compartment_looks(target, name, p, plane)
     if compartments:
         look["compartments"] = compartments
+    if door is not None:
+        look["door"] = door
     look["root"] = _root_look(target, name, body)
     box = _fixed_parts_box(target, name)
     if box is not None:

@@ -504,11 +504,14 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
         perception (:class:`~phyagentos.targets.contract.PlanningBodies`): the robot's joints
         (``robot0_*`` and ``gripper0_*`` bodies), each BDDL object's root body, each fixture's
         root body but the support's, and each drawer's slide with the sign that makes it grow
-        as the drawer comes out (the model's geometry: its handle's side of the fixture)."""
+        as the drawer comes out (the model's geometry: its handle's side of the fixture), and
+        each door's hinge (under the fixture's own name) with the sign that makes the model's
+        joint follow the door's perceived opening (rad, 0 shut)."""
         if self._planning is None:
             from phyagentos.perception.fixtures import drawer_entity_name  # noqa: PLC0415
 
-            from .descriptors import _drawer_joints, _drawer_name, _fixture_roots, drawer_sign, is_support  # noqa: PLC0415
+            from .descriptors import (  # noqa: PLC0415
+                _door_joint, _door_shut, _drawer_joints, _drawer_name, _fixture_roots, drawer_sign, is_support)
 
             m = self._model
             robot = set(self._robot_bodies)
@@ -520,6 +523,10 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
                 for j in _drawer_joints(self, name):
                     jn = m.joint(j).name
                     slides[drawer_entity_name(name, _drawer_name(jn, name))] = (jn, drawer_sign(self, name, j))
+                door = _door_joint(self, name)
+                if door is not None and _door_shut(self, name) == 0.0:  # the opening (rad) turns it toward its far end
+                    lo, hi = (float(v) for v in m.jnt_range[door])
+                    slides[name] = (m.joint(door).name, 1.0 if abs(hi) > abs(lo) else -1.0)
             self._planning = PlanningBodies(robot_joints=joints,
                                             objects={n: self.object_body(n) for n in self._obj_names},
                                             fixtures={n: m.body(b).name for n, b in roots.items()}, slides=slides)

@@ -1,0 +1,260 @@
+"""A fixture's door on a vertical hinge (LIBERO's microwave): its look and its reading.
+
+A fixture with a door declares ``door:`` in its look (:class:`DoorLook`), measured on the
+fixture's model with the door shut (``phyagentos.targets.libero.descriptors``), every length in
+the fixture's *model frame* (its root body's frame, which the perceiver puts where it sees the
+fixture: :class:`~phyagentos.perception.fixtures.RootLook`):
+
+- ``hinge_m`` (2,): where the hinge's vertical axis stands, m;
+- ``shut_yaw_rad``: the direction from the hinge to the door's free edge with the door shut;
+- ``sign`` (+1 or -1): the door's direction turns by ``sign x`` the joint's change (the joint's
+  axis is up, +1, or down, -1);
+- ``range_rad`` [lo, hi] the joint's travel and ``shut_rad`` the end of it at which the door
+  is shut;
+- ``width_m`` (hinge to free edge), ``thickness_m`` and ``mid_m``: the slab's mid-plane's
+  offset from the hinge line along the door's outer normal (the side away from the body when
+  shut), m;
+- ``outer`` (+1 or -1): the outer normal is the door's direction turned by ``outer x 90``
+  degrees (counter-clockwise seen from above for +1);
+- ``z_m`` [bottom, top] of the slab above the model frame's origin, m;
+- ``handle_r_m``: how far from the hinge along the door its handle stands (m; ``None``: no
+  handle), and ``handle_out_m`` how far it stands out from the hinge line along the outer
+  normal.
+
+:func:`door_reading` reads the joint's position from the points of the slab's upper part
+(clear of what stands on the table below it) within the door's sweep about the hinge, off the
+fixture's fixed parts; :func:`thin_parts_removed` lets a fixture's body be fitted without its
+open door (a slab seen edge-on from above: a band one or two grid cells wide).
+
+Nothing here reads a simulator.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from phyagentos.errors import format_choices
+from phyagentos.perception.errors import PerceptionError
+
+__all__ = ["DoorLook", "door_reading", "door_points", "thin_parts_removed", "DOOR_SIGMA_RAD", "DOOR_STOP_SIGMA_RAD",
+           "DOOR_MIN_POINTS", "DOOR_BAND_M", "DOOR_LINE_M", "DOOR_SWEEP", "THIN_CELL_M", "THIN_CELLS"]
+
+#: 1-sigma of a door's joint read from its points (:func:`door_reading`), rad: read on
+#: LIBERO-90 task 33's generated scenes 500-503 (LIBERO's sampler, the door 1.38-1.82 rad open),
+#: -0.030, -0.017, +0.011 and +0.010 rad from the simulator's joint (the fixture's perceived
+#: yaw within 0.004 rad, its hinge within 3 mm).
+DOOR_SIGMA_RAD = 0.03
+#: 1-sigma of a door pushed into its shut stop, rad: where the joint's stop holds it. Pressed
+#: with the hand, LIBERO's microwave door went 0.013-0.023 rad past its stop and came back
+#: to it (0.000) when the hand left (LIBERO-90 task 33, generated scenes 500-502).
+DOOR_STOP_SIGMA_RAD = 0.005
+#: Fewest points a reading needs.
+DOOR_MIN_POINTS = 25
+#: The slab's band read, m below its top: its upper part only (a mug, 10 cm tall, stands
+#: below it on LIBERO's table; the door rises 18.5 cm), and 5 mm under the top edge.
+DOOR_BAND_M = (0.07, 0.005)
+#: The part of the door's width read, as fractions from the hinge: off the hinge's corner
+#: (the fixed parts) and short of the free edge (its handle stands off the face there).
+DOOR_SWEEP = (0.3, 0.8)
+#: How far from the first direction's line (m) a point is taken for the line fit of
+#: :func:`door_reading`: the slab's half thickness (1.2 cm) and its faces' depth noise.
+DOOR_LINE_M = 0.025
+#: Grid cell and opening size (cells) of :func:`thin_parts_removed`: a part thinner than
+#: ``THIN_CELLS`` cells seen from above (a door, 2.4 cm thick, a handle's bar) is removed.
+THIN_CELL_M = 0.01
+THIN_CELLS = 4
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _floats(value: Any, n: int, what: str) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise PerceptionError(f"{what} must be {n} numbers, got {value!r}") from None
+    if len(out) != n or not all(math.isfinite(v) for v in out):
+        raise PerceptionError(f"{what} must be {n} finite numbers, got {value!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class DoorLook:
+    """A fixture's door on a vertical hinge, in the fixture's model frame (module docstring);
+    lengths in m, angles in rad."""
+
+    hinge_m: tuple[float, float]
+    shut_yaw_rad: float
+    sign: float
+    range_rad: tuple[float, float]
+    shut_rad: float
+    width_m: float
+    thickness_m: float
+    mid_m: float
+    outer: float
+    z_m: tuple[float, float]
+    handle_r_m: float | None = None
+    handle_out_m: float = 0.0
+
+    KEYS = ("hinge_m", "shut_yaw_rad", "sign", "range_rad", "shut_rad", "width_m", "thickness_m", "mid_m", "outer",
+            "z_m", "handle_r_m", "handle_out_m")
+
+    @classmethod
+    def from_dict(cls, d: Any, fixture: str) -> "DoorLook":
+        """From the mapping :meth:`to_dict` writes.
+
+        Raises:
+            PerceptionError: a missing or unknown key (the valid ones listed), a malformed
+                number, a sign or side not +-1, a shut end not an end of the travel, or a
+                width, thickness or height span not positive.
+        """
+        where = f"fixture {fixture!r}: door"
+        required = set(cls.KEYS) - {"handle_r_m", "handle_out_m"}
+        if not isinstance(d, Mapping) or not required <= set(d) or not set(d) <= set(cls.KEYS):
+            raise PerceptionError(f"{where} must be a mapping with keys {format_choices(cls.KEYS)} (handle_r_m and "
+                                  f"handle_out_m optional), got {d!r}")
+        hinge = _floats(d["hinge_m"], 2, f"{where}.hinge_m")
+        travel = _floats(d["range_rad"], 2, f"{where}.range_rad")
+        z = _floats(d["z_m"], 2, f"{where}.z_m")
+        shut_yaw, sign, shut, width, thick, mid, outer, out = _floats(
+            [d["shut_yaw_rad"], d["sign"], d["shut_rad"], d["width_m"], d["thickness_m"], d["mid_m"], d["outer"],
+             d.get("handle_out_m", 0.0)], 8, f"{where} numbers")
+        handle = None if d.get("handle_r_m") is None else _floats([d["handle_r_m"]], 1, f"{where}.handle_r_m")[0]
+        if sign not in (1.0, -1.0) or outer not in (1.0, -1.0):
+            raise PerceptionError(f"{where}: sign and outer must each be 1 or -1, got {sign!r}, {outer!r}")
+        if not travel[0] < travel[1] or shut not in travel:
+            raise PerceptionError(f"{where}: range_rad must rise and shut_rad be one of its ends, got {travel!r} "
+                                  f"and {shut!r}")
+        if width <= 0 or thick <= 0 or not z[0] < z[1]:
+            raise PerceptionError(f"{where}: width_m and thickness_m must be > 0 and z_m rise, got {d!r}")
+        return cls(hinge, shut_yaw, sign, travel, shut, width, thick, mid, outer, z, handle, out)  # type: ignore[arg-type]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The mapping :meth:`from_dict` reads."""
+        out = {k: getattr(self, k) for k in self.KEYS}
+        for k in ("hinge_m", "range_rad", "z_m"):
+            out[k] = list(out[k])
+        return out
+
+    @property
+    def open_rad(self) -> float:
+        """The joint's end of travel at which the door stands open farthest, rad."""
+        return self.range_rad[0] if self.shut_rad == self.range_rad[1] else self.range_rad[1]
+
+    def hinge_xy(self, origin: np.ndarray, yaw: float) -> np.ndarray:
+        """(2,) world m: the hinge's axis for the model frame at ``origin`` (3,) world m turned
+        ``yaw`` rad."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        x, y = self.hinge_m
+        return np.asarray(origin, float)[:2] + np.array([c * x - s * y, s * x + c * y])
+
+    def door_yaw(self, q: float, yaw: float) -> float:
+        """World yaw (rad) of the direction from the hinge to the free edge at joint ``q``
+        (rad), the model frame turned ``yaw``."""
+        return _wrap(yaw + self.shut_yaw_rad + self.sign * (float(q) - self.shut_rad))
+
+    def joint_of(self, door_yaw: float, yaw: float) -> float:
+        """The joint position (rad) at which the door points along world ``door_yaw``; of
+        the two ways round, the one nearer the travel."""
+        a = _wrap(float(door_yaw) - yaw - self.shut_yaw_rad)
+        q = self.shut_rad + self.sign * a
+        lo, hi = self.range_rad
+        alt = q - 2.0 * math.pi if q > hi else q + 2.0 * math.pi
+        return q if max(lo - q, q - hi, 0.0) <= max(lo - alt, alt - hi, 0.0) else alt
+
+    def outer_normal(self, door_yaw: float) -> np.ndarray:
+        """(2,) world unit: the door's outer normal when it points along ``door_yaw``."""
+        a = float(door_yaw) + self.outer * 0.5 * math.pi
+        return np.array([math.cos(a), math.sin(a)])
+
+
+def door_reading(points: np.ndarray, door: DoorLook, origin: np.ndarray, yaw: float, *,
+                 off_body: np.ndarray | None = None) -> tuple[float, int] | None:
+    """``(joint position rad, points read)`` of ``door`` for the fixture's model frame at
+    ``origin`` (3,) world m turned ``yaw`` rad, from ``points`` (N, 3) world m; None when fewer
+    than :data:`DOOR_MIN_POINTS` are read.
+
+    The points read lie in the slab's upper band (:data:`DOOR_BAND_M` under its top), at
+    :data:`DOOR_SWEEP` of its width from the hinge, and (``off_body`` (N,) bool, optional) off
+    the fixture's fixed parts. A first direction is the median of their bearings about the
+    hinge, each taken on the slab's mid-plane (less the angle the mid-plane's offset makes at
+    its radius); the reading is the direction of the line through the points within
+    :data:`DOOR_LINE_M` of that one (their principal axis): a face seen, whichever it is, lies
+    along the door, where a bearing about the hinge leans by half the thickness over the
+    radius (0.05-0.07 rad on LIBERO's microwave, seen by its inner face). Mapped to the joint
+    (:meth:`DoorLook.joint_of`), kept within 0.2 rad of the travel.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    hinge = door.hinge_xy(origin, yaw)
+    top = float(origin[2]) + door.z_m[1]
+    sel = (p[:, 2] >= top - DOOR_BAND_M[0]) & (p[:, 2] <= top - DOOR_BAND_M[1])
+    if off_body is not None:
+        sel &= np.asarray(off_body, bool)
+    v = p[sel, :2] - hinge
+    r = np.linalg.norm(v, axis=1)
+    lo, hi = DOOR_SWEEP[0] * door.width_m, DOOR_SWEEP[1] * door.width_m
+    keep = (r >= lo) & (r <= hi)
+    v, r = v[keep], r[keep]
+    if len(v) < DOOR_MIN_POINTS:
+        return None
+    along = np.sqrt(np.maximum(r ** 2 - door.mid_m ** 2, 1e-9))
+    bearing = np.arctan2(v[:, 1], v[:, 0]) - np.arctan2(door.outer * door.mid_m, along)
+    qs = np.array([door.joint_of(float(b), yaw) for b in bearing])
+    ok = (qs >= door.range_rad[0] - 0.2) & (qs <= door.range_rad[1] + 0.2)
+    if int(ok.sum()) < DOOR_MIN_POINTS:
+        return None
+    first = door.door_yaw(float(np.median(qs[ok])), yaw)
+    u = np.array([math.cos(first), math.sin(first)])
+    line = v[np.abs(v @ np.array([-u[1], u[0]]) - door.outer * door.mid_m) <= DOOR_LINE_M]
+    if len(line) < DOOR_MIN_POINTS:
+        return None
+    axis = np.linalg.eigh(np.cov(line.T))[1][:, -1]
+    axis = axis if float(axis @ u) > 0 else -axis
+    q = door.joint_of(math.atan2(float(axis[1]), float(axis[0])), yaw)
+    if not door.range_rad[0] - 0.2 <= q <= door.range_rad[1] + 0.2:
+        return None
+    return float(q), int(len(line))
+
+
+def door_points(points: np.ndarray, door: DoorLook, origin: np.ndarray, yaw: float, q: float, *,
+                margin_m: float) -> np.ndarray:
+    """(N,) bool: which of ``points`` (N, 3) world m lie on ``door`` (its slab and handle,
+    grown by ``margin_m`` m) at joint ``q`` rad, for the fixture's model frame at ``origin``
+    (3,) world m turned ``yaw`` rad: the fixture's own points, not an object's."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    a = door.door_yaw(q, yaw)
+    u = np.array([math.cos(a), math.sin(a)])
+    n = door.outer_normal(a)
+    v = p[:, :2] - door.hinge_xy(origin, yaw)
+    along, across = v @ u, v @ n
+    half = 0.5 * door.thickness_m
+    reach = max(door.mid_m + half, door.handle_out_m)
+    z0, z1 = float(origin[2]) + door.z_m[0], float(origin[2]) + door.z_m[1]
+    return ((along >= -margin_m) & (along <= door.width_m + margin_m)
+            & (across >= door.mid_m - half - margin_m) & (across <= reach + margin_m)
+            & (p[:, 2] >= z0 - margin_m) & (p[:, 2] <= z1 + margin_m))
+
+
+def thin_parts_removed(xy: np.ndarray) -> np.ndarray:
+    """(N,) bool: which of ``xy`` (N, 2) world m lie in the largest part at least
+    :data:`THIN_CELLS` cells of :data:`THIN_CELL_M` across both ways (a morphological opening
+    of their occupancy grid, then its largest connected piece): a body's top, not a door or a
+    bar seen from above, nor the knot of a handle's stand-offs at a door's free end."""
+    from scipy.ndimage import binary_opening, label  # noqa: PLC0415
+
+    pts = np.asarray(xy, dtype=float).reshape(-1, 2)
+    if len(pts) == 0:
+        return np.zeros(0, dtype=bool)
+    ij = np.floor((pts - pts.min(axis=0)) / THIN_CELL_M).astype(int)
+    grid = np.zeros(tuple(ij.max(axis=0) + 1), dtype=bool)
+    grid[ij[:, 0], ij[:, 1]] = True
+    kept = binary_opening(grid, structure=np.ones((THIN_CELLS, THIN_CELLS), dtype=bool))
+    labels, n = label(kept, structure=np.ones((3, 3), dtype=bool))
+    if n > 1:
+        kept = labels == 1 + int(np.argmax(np.bincount(labels.ravel())[1:]))
+    return kept[ij[:, 0], ij[:, 1]]

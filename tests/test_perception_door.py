@@ -15,7 +15,7 @@ from phyagentos.perception.fixtures import without_door
 #: LIBERO's microwave door as its look is measured (model frame; the joint shut at 0, open to -2.094)
 DOOR = {"hinge_m": [-0.1725, -0.088], "shut_yaw_rad": 0.0, "sign": 1.0, "range_rad": [-2.094, 0.0], "shut_rad": 0.0,
         "width_m": 0.259, "thickness_m": 0.024, "mid_m": 0.013, "outer": -1.0, "z_m": [0.0035, 0.1885],
-        "handle_r_m": 0.2375, "handle_out_m": 0.064}
+        "handle_r_m": 0.2375, "handle_out_m": 0.054, "handle_z_m": [0.021, 0.171]}
 
 
 def _slab(door: DoorLook, origin: np.ndarray, yaw: float, q: float, *, step: float = 0.004) -> np.ndarray:

@@ -1117,8 +1117,7 @@ class Perceiver:
                         & (heights <= look.knob.top_m + FIXTURE_MARGIN_M))
             if look.door is not None and look.root is not None:  # read in every observation; the slab is its own
                 origin, yaw = look.root.pose(s.position, s.yaw, s.turn, s.top_m)
-                reading = door_reading(p, look.door, origin, yaw,
-                                       off_body=~look.in_model(p[:, :2], s, edge_m=FIXTURE_MARGIN_M))
+                reading = door_reading(p, look.door, origin, yaw)
                 if reading is not None:
                     self.door_readings[look.name] = reading
                     self.door_seen[look.name] = (reading[0], stamp)

@@ -690,10 +690,12 @@ def _door_look(target, name: str) -> dict[str, Any] | None:
         "shut_rad": lo if abs(lo) < abs(hi) else hi, "width_m": float(along.max()),
         "thickness_m": float(across.max() - across.min()), "mid_m": float(0.5 * (across.max() + across.min())),
         "outer": outer, "z_m": [float(pts[:, 2].min()), float(pts[:, 2].max())]}
-    if handle:
-        hp = np.vstack([local[g] for g in handle])[:, :2] - hinge
-        out["handle_r_m"] = float(np.median(hp @ u))
-        out["handle_out_m"] = float(np.max(outer * (hp @ n)))
+    if handle:  # its bar: the handle's geom standing out farthest, by its centre line
+        bar = max(handle, key=lambda g: float(np.max(outer * ((local[g][:, :2] - hinge) @ n))))
+        centre = ((d.geom_xpos[bar] - o) @ R)[:2] - hinge
+        out["handle_r_m"] = float(centre @ u)
+        out["handle_out_m"] = float(outer * (centre @ n))
+        out["handle_z_m"] = [float(local[bar][:, 2].min()), float(local[bar][:, 2].max())]
     return out
 
 

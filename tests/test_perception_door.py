@@ -97,3 +97,33 @@ def test_only_a_declared_fixture_with_a_door_is_noted_shut():
     assert p.export_fixtures() == {}  # not seen yet: nothing to export, the note waits for the sighting
     with pytest.raises(PerceptionError, match="microwave_1"):
         p.note_door_stop("stove_1", stamp_s=3.0)
+
+
+def test_the_room_behind_a_door_stands_where_the_fixture_does_and_names_its_keys_when_malformed():
+    from phyagentos.perception.door import InsideLook  # noqa: PLC0415
+
+    room = InsideLook.from_dict({"lo_m": [-0.1435, -0.089], "hi_m": [0.0635, 0.0805], "floor_m": 0.024,
+                                 "roof_m": 0.168, "mouth": [0.0, -1.0]}, "microwave_1")
+    centre, half, yaw, floor_z, roof_z, mouth = room.world(np.array([0.0, 0.35, 0.92]), math.pi)
+    # turned half a turn: its middle the other side of the origin, its mouth facing +y
+    assert np.allclose(centre, [0.04, 0.35 + 0.00425], atol=1e-6) and np.allclose(half, [0.1035, 0.08475])
+    assert (floor_z, roof_z) == pytest.approx((0.944, 1.088)) and np.allclose(mouth, [0.0, 1.0], atol=1e-9)
+    with pytest.raises(PerceptionError, match="mouth"):
+        InsideLook.from_dict({"lo_m": [0, 0], "hi_m": [1, 1], "floor_m": 0, "roof_m": 1}, "microwave_1")
+    with pytest.raises(PerceptionError, match="unit vector"):
+        InsideLook.from_dict({"lo_m": [0, 0], "hi_m": [1, 1], "floor_m": 0, "roof_m": 1, "mouth": [0, 2]}, "m")
+
+
+def test_a_thing_seen_through_a_rooms_mouth_is_not_too_shallow_for_its_look():
+    from phyagentos.perception.association import _size_error  # noqa: PLC0415
+    from phyagentos.perception.descriptors import ObjectDescriptor  # noqa: PLC0415
+    from phyagentos.perception.detect import Detection  # noqa: PLC0415
+
+    mug = ObjectDescriptor(name="white_yellow_mug_1", size_m=(0.1038, 0.1036, 0.1038))
+    # its front face only, 3.5 cm deep, as the wrist sees it from the microwave's mouth
+    face = Detection(np.array([0.0, 0.28, 0.997]), 0.0, np.array([0.048, 0.0177, 0.053]), "box", np.zeros(3),
+                     np.zeros(3), 1152, 1, 0.002, math.pi, 1.0, 0.0, cut_direction=np.array([0.0, 1.0]),
+                     cut_by_body=True)
+    through_mouth = Detection(**{**face.__dict__, "cut_by_room": True})
+    assert _size_error(through_mouth, mug) < 0.002
+    assert _size_error(face, mug) > 0.004  # cut by a drawer's carcass, half its depth would have to show

@@ -94,3 +94,12 @@ def test_a_track_keeps_a_hidden_handle_where_it_last_pointed_when_its_round_sigh
     world = t.body.placed(_pose(t.position[:2], t.yaw))
     np.testing.assert_allclose(world.handle_xy, [0.0, 1.0], atol=1e-9)
     np.testing.assert_allclose(world.axis_xy - t.position[:2], [0.0, -0.01], atol=1e-9)
+
+
+def test_a_handles_reach_is_where_its_outer_face_stands_from_the_axis():
+    axis = np.array([0.10, -0.05])
+    body = round_body(_mug(axis=axis, handle_deg=-90.0, handle_len=0.04, noise=0.0005, seed=5), axis + [0.0, -0.01])
+    assert body is not None and body.reach_m is not None
+    assert abs(body.reach_m - (0.042 + 0.04)) < 0.004  # the loop's outer end, 8.2 cm out
+    moved = body.local(np.array([0.1, -0.05]), 0.3).placed(np.eye(4))
+    assert moved.reach_m == body.reach_m  # a length: it moves with the body unchanged

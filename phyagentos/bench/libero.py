@@ -92,7 +92,8 @@ SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
 #: waits count against the episode's budget like any other.
 FIRST_PICK_STILL_MAX_S = 1.5
 #: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
-_PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer", "push", "close_door")
+_PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer", "push", "close_door", "pick_by_handle",
+                   "place_inside")
 #: Optional parameters that say what a node does, not how: the plan sets them per task, and
 #: ``--skill-defaults`` may not (a push's destination, a place beside or in a slot).
 _TASK_PARAMS = {"place": frozenset({"beside", "slot"}),
@@ -104,8 +105,8 @@ _LOOKS_METHOD = "generated_clutter_v6"  # v3: objects kept off the fixtures; v4:
 # v4: drawers; v5: per world; v6: compartments; v7: a fixture against another seen alone; v8: its
 # model frame (root: the planning world puts the fixture's model there); v9: the footprint of its
 # fixed parts (model_box: the points over it are the fixture's); v11: a door (door, its handle's bar), the
-# fixture measured with it shut
-_FIXTURE_LOOKS_METHOD = "generated_alone_v11"
+# fixture measured with it shut; v12: the room behind the door (inside)
+_FIXTURE_LOOKS_METHOD = "generated_alone_v12"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:
@@ -250,6 +251,19 @@ def _nodes(steps: list[tuple[str, str, str | None]],
                           "accept": [{"articulated": {"object": dest, **accept}}],
                           "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
             continue
+        if action == "move_inside":
+            assert dest is not None
+            pick_id, place_id = f"pick_{obj}", f"place_{obj}"
+            still = {} if nodes else {"still_max_s": FIRST_PICK_STILL_MAX_S}
+            nodes.append({"id": pick_id, "skill": "pick_by_handle",
+                          "params": {**fixed.get("pick_by_handle", {}), **still, "object": obj},
+                          "accept": [{"holding": obj}, {"lifted": {"object": obj, "min_height": 0.05}}],
+                          "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+            nodes.append({"id": place_id, "skill": "place_inside",
+                          "params": {**fixed.get("place_inside", {}), "object": obj, "region": dest},
+                          "accept": [{"on": {"object": obj, "support": dest}}, {"released": obj}],
+                          "depends_on": [pick_id], "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+            continue
         if action == "close_door":
             nodes.append({"id": f"close_{obj}", "skill": "close_door",
                           "params": {**fixed.get("close_door", {}), "object": obj},
@@ -330,6 +344,14 @@ def _planner_steps(language: str, objects: dict[str, str],
                                  f"fixture; fixtures: {format_choices(fixtures)}")
             steps.append(("turn_on", obj, None))
             continue
+        into = [d for a, _, d in steps if a == "move_inside"]
+        if (intent.verb == "close" and intent.part_kind is None and intent.objects[0] not in fixtures and into
+                and re.search(r"\b(it|that)\b", intent.text)):
+            # "... in the microwave and close it": the room's fixture is what is closed (a mug is not)
+            from phyagentos.perception.door import inside_entity_name  # noqa: PLC0415
+
+            steps.append(("close_door", next(f for f in fixtures if inside_entity_name(f) == into[-1]), None))
+            continue
         if intent.verb in ("open", "close") and intent.part_kind is None and intent.objects[0] in fixtures:
             # a fixture opened or closed as a whole: its door (a drawer is always named)
             if intent.verb == "open":
@@ -352,11 +374,11 @@ def _planner_steps(language: str, objects: dict[str, str],
             continue
         inside = [d for d in intent.destinations if d in fixtures]
         if inside and re.search(r"\b(in|into|inside)\b", intent.text):
-            # a fixture's inside as a whole (the microwave's, behind its door) is not one of its places:
-            # "on" it would set the thing on its top
-            raise BenchError(f"instruction {language!r} refused: {intent.text!r}: the inside of {inside[0]} is no "
-                             f"place here (a place is set down on a fixture's top, or into its drawer or "
-                             f"compartment; nothing sets a thing inside a fixture behind its door yet)")
+            # into a fixture as a whole: the room behind its door (the microwave's), its own entity the place
+            from phyagentos.perception.door import inside_entity_name  # noqa: PLC0415
+
+            steps += [("move_inside", obj, inside_entity_name(inside[0])) for obj in intent.movers()]
+            continue
         for obj in intent.movers():
             dests = [d for d in intent.destinations if d != obj]
             if intent.verb != "hold" and len(dests) != 1:

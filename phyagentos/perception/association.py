@@ -70,6 +70,8 @@ def _size_error(det: Detection, desc: ObjectDescriptor) -> float | None:
         return max(0.0, err) if det.truncated or det.covered else abs(err)
     if det.truncated and not det.cut_by_body:  # cut by the border: every dimension a lower bound
         return desc.size_error(measured, at_least=True)
+    if det.cut_by_room:  # seen through a room's mouth: its footprint a lower bound, its height as measured
+        return desc.size_error(measured, at_least=(True, True, False))
     if det.covered or det.cut_by_body:
         # under what rests on it, or cut by a cabinet's body (in its open drawer): its footprint a
         # lower bound, at least COVERED_MIN_SHOWN of each side showing; its height as measured

@@ -241,6 +241,11 @@ class HoldingConfig(_Section):
         description="Assumed wall of a container with a handle (a mug) held by its rim, m "
                     "(motion.rim_grasp.DEFAULT_HANDLED_WALL_M: LIBERO's mugs, 4.9-8.2 mm).",
     )
+    handle_bar_m: float = Field(
+        0.016, le=0.05, gt=0,
+        description="Assumed width of a handle's bar held across (a mug taken by its handle, "
+                    "motion.handle_grasp), m: LIBERO's mugs' model bars, 1.4-1.75 cm.",
+    )
 
 
 class RelationsConfig(_Section):

@@ -86,6 +86,10 @@ class Detection:
             border: its size counts as a lower bound, but the part seen is kept as seen (never
             completed to its look: the rim of a container seen in part is taken near the ends
             of its seen long side).
+        cut_by_room: with ``cut_by_body``: what cuts it off is the room behind a fixture's door
+            it stands in (:meth:`phyagentos.perception.perceiver.Perceiver._cut_by_room`), seen
+            only through the room's mouth: its depth into the room is hidden, whatever it is (a
+            round one is completed to its look along ``cut_direction``).
         body: the round body with a handle its footprint shows (a mug's cup and handle:
             :func:`with_round_body`), else None.
         covered: the lower part of a stack split at a height step
@@ -115,6 +119,7 @@ class Detection:
     low_m: float = 0.0
     cut_direction: np.ndarray | None = None
     cut_by_body: bool = False
+    cut_by_room: bool = False
     covered: bool = False
     body: RoundBody | None = None
     open_depth_m: float = 0.0

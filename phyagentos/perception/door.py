@@ -40,8 +40,9 @@ import numpy as np
 from phyagentos.errors import format_choices
 from phyagentos.perception.errors import PerceptionError
 
-__all__ = ["DoorLook", "door_reading", "door_points", "thin_parts_removed", "DOOR_SIGMA_RAD", "DOOR_STOP_SIGMA_RAD",
-           "DOOR_MIN_POINTS", "DOOR_BAND_M", "DOOR_LINE_M", "DOOR_SWEEP", "THIN_CELL_M", "THIN_CELLS"]
+__all__ = ["DoorLook", "InsideLook", "inside_entity_name", "door_reading", "door_points", "thin_parts_removed",
+           "DOOR_SIGMA_RAD", "DOOR_STOP_SIGMA_RAD", "DOOR_MIN_POINTS", "DOOR_BAND_M", "DOOR_LINE_M", "DOOR_SWEEP",
+           "THIN_CELL_M", "THIN_CELLS"]
 
 #: 1-sigma of a door's joint read from its points (:func:`door_reading`), rad: read on
 #: LIBERO-90 task 33's generated scenes 500-503 (LIBERO's sampler, the door 1.38-1.82 rad open),
@@ -177,6 +178,61 @@ class DoorLook:
         """(2,) world unit: the door's outer normal when it points along ``door_yaw``."""
         a = float(door_yaw) + self.outer * 0.5 * math.pi
         return np.array([math.cos(a), math.sin(a)])
+
+
+def inside_entity_name(fixture: str) -> str:
+    """The entity name of the room behind ``fixture``'s door: ``microwave_1_inside``."""
+    return f"{fixture}_inside"
+
+
+@dataclass(frozen=True)
+class InsideLook:
+    """The room behind a fixture's door, in the fixture's model frame (its root body's; m):
+    ``lo_m`` / ``hi_m`` (2,) the footprint's corners on the frame's axes, ``floor_m`` and
+    ``roof_m`` above the frame's origin, ``mouth`` (2,) the unit outward normal of the door's
+    side (measured on the model with the door shut: ``phyagentos.targets.libero.descriptors``)."""
+
+    lo_m: tuple[float, float]
+    hi_m: tuple[float, float]
+    floor_m: float
+    roof_m: float
+    mouth: tuple[float, float]
+
+    KEYS = ("lo_m", "hi_m", "floor_m", "roof_m", "mouth")
+
+    @classmethod
+    def from_dict(cls, d: Any, fixture: str) -> "InsideLook":
+        """From the mapping :meth:`to_dict` writes.
+
+        Raises:
+            PerceptionError: other keys, a malformed number, a footprint or height span that
+                does not rise, or a mouth that is not a unit vector.
+        """
+        where = f"fixture {fixture!r}: inside"
+        if not isinstance(d, Mapping) or set(d) != set(cls.KEYS):
+            raise PerceptionError(f"{where} must be a mapping with keys {format_choices(cls.KEYS)}, got {d!r}")
+        lo, hi = _floats(d["lo_m"], 2, f"{where}.lo_m"), _floats(d["hi_m"], 2, f"{where}.hi_m")
+        floor, roof = _floats([d["floor_m"], d["roof_m"]], 2, f"{where} floor_m, roof_m")
+        mouth = _floats(d["mouth"], 2, f"{where}.mouth")
+        if not (lo[0] < hi[0] and lo[1] < hi[1] and floor < roof) or abs(math.hypot(*mouth) - 1.0) > 1e-3:
+            raise PerceptionError(f"{where}: lo_m must lie below hi_m, floor_m below roof_m, and mouth be a unit "
+                                  f"vector, got {d!r}")
+        return cls(lo, hi, floor, roof, mouth)  # type: ignore[arg-type]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The mapping :meth:`from_dict` reads."""
+        return {"lo_m": list(self.lo_m), "hi_m": list(self.hi_m), "floor_m": self.floor_m, "roof_m": self.roof_m,
+                "mouth": list(self.mouth)}
+
+    def world(self, origin: np.ndarray, yaw: float) -> tuple[np.ndarray, np.ndarray, float, float, float, np.ndarray]:
+        """``(centre (2,), half extents (2,) on the frame's axes, frame yaw, floor z, roof z,
+        mouth (2,))`` in the world (m, rad), the model frame at ``origin`` (3,) turned ``yaw``."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, -s], [s, c]])
+        lo, hi = np.asarray(self.lo_m, float), np.asarray(self.hi_m, float)
+        centre = np.asarray(origin, float)[:2] + rot @ (0.5 * (lo + hi))
+        z0 = float(origin[2])
+        return centre, 0.5 * (hi - lo), float(yaw), z0 + self.floor_m, z0 + self.roof_m, rot @ np.asarray(self.mouth)
 
 
 def door_reading(points: np.ndarray, door: DoorLook, origin: np.ndarray, yaw: float) -> tuple[float, int] | None:

@@ -59,7 +59,7 @@ from phyagentos.geometry import turned_xy
 from phyagentos.perception.cloud import Cloud
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import _rect, cluster
-from phyagentos.perception.door import DoorLook, thin_parts_removed
+from phyagentos.perception.door import DoorLook, InsideLook, thin_parts_removed
 from phyagentos.perception.errors import PerceptionError
 
 __all__ = ["FixtureLook", "RootLook", "ROOT_YAW_MAX_RAD", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
@@ -588,22 +588,25 @@ class FixtureLook:
     root: RootLook | None = None
     model_box: tuple[tuple[float, float], tuple[float, float]] | None = None
     door: DoorLook | None = None
+    inside: InsideLook | None = None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "FixtureLook | None":
         """From a declared fixture ``{name, class, size_m?, place?, knob?, drawers?, compartments?,
-        root?, model_box?, door?}``; ``None`` when it has no look (``size_m``): such a fixture is not
+        root?, model_box?, door?, inside?}``; ``None`` when it has no look (``size_m``): such a fixture is not
         perceived. ``model_box``: ``{lo: [x, y], hi: [x, y]}``, m, the footprint of the fixture's
         fixed parts (its model's meshes, no drawer, door or knob) in its model frame; it needs
         ``root`` (where that frame stands from the perceived body), as does ``door``
-        (:class:`~phyagentos.perception.door.DoorLook`, in that frame).
+        (:class:`~phyagentos.perception.door.DoorLook`, in that frame) and ``inside`` (the room
+        behind the door, :class:`~phyagentos.perception.door.InsideLook`).
 
         Raises:
             PerceptionError: an unknown key (the valid ones listed) or a malformed value.
         """
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared fixture must be a mapping, got {type(d).__name__}")
-        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root", "model_box", "door")
+        valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root", "model_box", "door",
+                 "inside")
         unknown = set(d) - set(valid)
         name = d.get("name")
         if unknown:
@@ -630,10 +633,13 @@ class FixtureLook:
         door = DoorLook.from_dict(d["door"], name) if d.get("door") is not None else None
         if door is not None and root is None:
             raise PerceptionError(f"fixture {name!r}: a door needs the fixture's root (where its model frame stands)")
+        inside = InsideLook.from_dict(d["inside"], name) if d.get("inside") is not None else None
+        if inside is not None and root is None:
+            raise PerceptionError(f"fixture {name!r}: an inside needs the fixture's root (where its model frame stands)")
         place = d.get("place")
         if place is None:
             return cls(name, d.get("class"), size, knob=knob, drawers=drawers, compartments=comps, root=root,
-                       model_box=box, door=door)
+                       model_box=box, door=door, inside=inside)
         if not isinstance(place, Mapping) or set(place) != {"offset_m", "half_extents_m", "height_m"}:
             raise PerceptionError(f"fixture {name!r}: place must be a mapping with keys "
                                   f"{format_choices(('offset_m', 'half_extents_m', 'height_m'))}, got {place!r}")
@@ -642,7 +648,8 @@ class FixtureLook:
         height = _floats([place["height_m"]], 1, f"fixture {name!r}: place.height_m")[0]
         if min(half) <= 0 or height < 0:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
-        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps, root, box, door)  # type: ignore[arg-type]
+        return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps, root, box, door,  # type: ignore[arg-type]
+                   inside)
 
     def in_model(self, points_xy: np.ndarray, sighting: "FixtureSighting", *, edge_m: float = 0.0) -> np.ndarray:
         """(N,) bool: which of ``points_xy`` (N, 2) world m lie over the footprint of the

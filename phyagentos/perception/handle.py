@@ -44,6 +44,7 @@ __all__ = [
     "MIN_HANDLE_POINTS",
     "HANDLE_SPAN_RAD",
     "HANDLE_SPAN_FRACTION",
+    "REACH_PERCENTILE",
 ]
 
 #: The outline is taken from the points of a segment higher than this fraction of its height
@@ -69,6 +70,9 @@ MIN_HANDLE_POINTS = 5
 #: handle is narrow; a box's corners point four ways; a stray depth sample may point anywhere).
 HANDLE_SPAN_RAD = math.radians(45.0)
 HANDLE_SPAN_FRACTION = 0.9
+#: A handle's reach is this percentile of its points' distance from the axis along its direction
+#: (its outer face, a stray depth sample aside).
+REACH_PERCENTILE = 95.0
 
 
 @dataclass(frozen=True)
@@ -79,25 +83,29 @@ class RoundBody:
         axis_xy: (2,) where the body's axis meets the ground plane, m.
         radius_m: the outline's radius, m.
         handle_xy: (2,) unit vector from the axis towards the handle.
+        reach_m: how far from the axis the handle reaches along ``handle_xy``, m (the
+            :data:`REACH_PERCENTILE` th percentile of its points' reach); None when not measured.
     """
 
     axis_xy: np.ndarray
     radius_m: float
     handle_xy: np.ndarray
+    reach_m: float | None = None
 
     def local(self, position_xy: np.ndarray, yaw: float) -> "RoundBody":
         """This body in the frame of an object at ``position_xy`` ((2,) world, m) turned
         ``yaw`` (rad about world z)."""
         c, s = math.cos(yaw), math.sin(yaw)
         R_t = np.array([[c, s], [-s, c]])
-        return RoundBody(R_t @ (self.axis_xy - np.asarray(position_xy, float)[:2]), self.radius_m, R_t @ self.handle_xy)
+        return RoundBody(R_t @ (self.axis_xy - np.asarray(position_xy, float)[:2]), self.radius_m, R_t @ self.handle_xy,
+                         self.reach_m)
 
     def turned(self, angle_rad: float) -> "RoundBody":
         """This body turned ``angle_rad`` (rad) about its frame's z axis (re-expressed in a frame
         turned by ``-angle_rad``)."""
         c, s = math.cos(angle_rad), math.sin(angle_rad)
         R = np.array([[c, -s], [s, c]])
-        return RoundBody(R @ self.axis_xy, self.radius_m, R @ self.handle_xy)
+        return RoundBody(R @ self.axis_xy, self.radius_m, R @ self.handle_xy, self.reach_m)
 
     def placed(self, T: np.ndarray) -> "RoundBody":
         """This body (given in an object's frame) in the world, the object's pose being ``T``
@@ -105,7 +113,8 @@ class RoundBody:
         T = np.asarray(T, float)
         u = T[:2, :2] @ self.handle_xy
         n = float(np.hypot(u[0], u[1]))
-        return RoundBody(T[:2, :2] @ self.axis_xy + T[:2, 3], self.radius_m, u / n if n > 0 else self.handle_xy)
+        return RoundBody(T[:2, :2] @ self.axis_xy + T[:2, 3], self.radius_m, u / n if n > 0 else self.handle_xy,
+                         self.reach_m)
 
 
 def _circle(p: np.ndarray) -> tuple[np.ndarray, float]:
@@ -161,4 +170,5 @@ def round_body(xy: np.ndarray, centre_xy: np.ndarray) -> RoundBody | None:
     cos = (d[out] @ u) / np.hypot(d[out][:, 0], d[out][:, 1])
     if float(np.mean(cos >= math.cos(HANDLE_SPAN_RAD))) < HANDLE_SPAN_FRACTION:
         return None
-    return RoundBody(axis_xy=c, radius_m=r, handle_xy=u)
+    reach = float(np.percentile(d[out] @ u, REACH_PERCENTILE))
+    return RoundBody(axis_xy=c, radius_m=r, handle_xy=u, reach_m=reach)

@@ -123,7 +123,13 @@ from phyagentos.perception.fixtures import (
     fixtures_from_declared,
     knob_reading,
 )
-from phyagentos.perception.door import DOOR_SIGMA_RAD, DOOR_STOP_SIGMA_RAD, door_points, door_reading
+from phyagentos.perception.door import (
+    DOOR_SIGMA_RAD,
+    DOOR_STOP_SIGMA_RAD,
+    door_points,
+    door_reading,
+    inside_entity_name,
+)
 from phyagentos.perception.frames import CameraFrame, Proprioception, _rigid
 from phyagentos.perception.glimpse import Glimpse, carry_over, glimpses, rival
 from phyagentos.perception.handle import RoundBody
@@ -401,6 +407,9 @@ class Perceiver:
         #: frame origin (2,), its axis (2,), across (2,), where the body's front stands along it,
         #: half the inside's width, its floor's height), m, world frame.
         self._mouths: list[tuple[np.ndarray, np.ndarray, np.ndarray, float, float, float]] = []
+        #: The rooms behind fixtures' doors of this observation (:meth:`_cut_by_room`): (centre (2,),
+        #: half extents (2,), yaw, floor z, roof z, mouth (2,)), m, world frame.
+        self._rooms: list[tuple[np.ndarray, np.ndarray, float, float, float, np.ndarray]] = []
         #: (fixture, drawer) -> (opening m, stamp s) of the drawer's last reading: where an open
         #: drawer's floor still is while the arm (or what it holds) hides its handle
         self.drawer_seen: dict[tuple[str, str], tuple[float, float]] = {}
@@ -532,7 +541,8 @@ class Perceiver:
             d["shape_votes"] = {str(k): int(v) for k, v in (d.get("shape_votes") or {}).items()}
             if t.body is not None:
                 d["body"] = {"axis_xy": t.body.axis_xy.tolist(), "radius_m": float(t.body.radius_m),
-                             "handle_xy": t.body.handle_xy.tolist()}
+                             "handle_xy": t.body.handle_xy.tolist(),
+                             "reach_m": None if t.body.reach_m is None else float(t.body.reach_m)}
             tracks[name] = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in d.items()}
         closed = None if self._closed_at is None else {"tcp_pose": self._closed_at[0].tolist(),
                                                        "stamp_s": float(self._closed_at[1])}
@@ -619,7 +629,8 @@ class Perceiver:
                 if d.get("body") is not None:
                     b = d["body"]
                     d["body"] = RoundBody(np.asarray(b["axis_xy"], float), float(b["radius_m"]),
-                                          np.asarray(b["handle_xy"], float))
+                                          np.asarray(b["handle_xy"], float),
+                                          None if b.get("reach_m") is None else float(b["reach_m"]))
                 tracks[name] = Track(**d)
             except (TypeError, KeyError, ValueError) as exc:
                 raise PerceptionError(f"perception state: track {name!r} has an unexpected layout: {exc}") from None
@@ -840,7 +851,7 @@ class Perceiver:
             seen = 1.0
             if dets[i].truncated:  # seen in part: a round one's centre from its look's size
                 seen = _seen_fraction(dets[i], self.declared[j])
-                if not dets[i].cut_by_body:  # (in a drawer: the rim seen, grasped near its long side's ends)
+                if not dets[i].cut_by_body or dets[i].cut_by_room:  # (in a drawer: the rim seen, grasped near its ends)
                     dets[i] = _completed(dets[i], self.declared[j], cloud.points[clusters[i][1], :2])
             det = dets[i]
             conf = match_confidence(cost, margin, cfg) * _detection_confidence(det) * seen
@@ -1054,6 +1065,10 @@ class Perceiver:
                 for comp, box in self._compartment_entities(look, plane, stamp):
                     entities.append(comp)
                     supports[comp["name"]] = box
+                room = self._inside_entity(look, plane, stamp)
+                if room is not None:
+                    entities.append(room[0])
+                    supports[room[0]["name"]] = room[1]
         entities.extend(self._robot_entities(proprio))
 
         relations = self._relations(geo, region_list, holding_rel, supports)
@@ -1104,6 +1119,7 @@ class Perceiver:
         self.drawer_readings = {}
         self.door_readings = {}
         self._mouths = []
+        self._rooms = []
         for look in self.fixtures:
             if look.name not in self.fixture_tracks:
                 continue
@@ -1125,6 +1141,17 @@ class Perceiver:
                 if q_door is not None:
                     own |= door_points(p, look.door, origin, yaw, q_door, margin_m=DOOR_OWN_MARGIN_M)
             contents = np.zeros(len(cloud), dtype=bool)
+            if look.inside is not None and look.root is not None:  # what stands behind the door rests on its floor
+                origin, yaw = look.root.pose(s.position, s.yaw, s.turn, s.top_m)
+                centre_i, half_i, yaw_i, floor_z, roof_z, mouth_i = look.inside.world(origin, yaw)
+                self._rooms.append((centre_i, half_i, yaw_i, floor_z, roof_z, mouth_i))
+                local_i = _in_frame(p[:, :2], centre_i, yaw_i)
+                contents |= (np.all(np.abs(local_i) <= np.maximum(half_i - FIXTURE_MARGIN_M, 0.0), axis=1)
+                             & (p[:, 2] > floor_z + FIXTURE_MARGIN_M) & (p[:, 2] < roof_z - FIXTURE_MARGIN_M))
+                hz_i = max(0.5 * (floor_z - plane.z_at(centre_i)), 1e-3)
+                dets.append(Detection(np.array([centre_i[0], centre_i[1], floor_z - hz_i]), yaw_i,
+                                      np.array([half_i[0], half_i[1], hz_i]), "box", np.zeros(3), np.zeros(3), 0, 0,
+                                      FIXTURE_STD_M, math.pi, 1.0, 0.0))
             for drawer in look.drawers:  # read in every observation; what stands out of the body is the fixture's
                 reading = drawer_reading(p, heights, drawer, s.position[:2], s.turn)
                 if reading is not None:
@@ -1172,12 +1199,30 @@ class Perceiver:
                   frames: Sequence[CameraFrame], strides: Sequence[int]) -> Detection:
         """``det`` (segment ``index`` of ``cloud``) with where it is cut off: by the image
         border (:func:`~phyagentos.perception.truncation.cut_direction`), else by the cabinet's
-        body (:meth:`_cut_by_carcass`, ``cut_by_body``); unchanged when neither cuts it."""
+        body (:meth:`_cut_by_carcass`, ``cut_by_body``) or a room's walls (:meth:`_cut_by_room`,
+        ``cut_by_body``); unchanged when none cuts it."""
         cut = cut_direction(cloud, index, frames, strides)
         if cut is not None:
             return replace(det, cut_direction=cut)
         cut = self._cut_by_carcass(cloud.points[index], heights[index])
-        return det if cut is None else replace(det, cut_direction=cut, cut_by_body=True)
+        if cut is not None:
+            return replace(det, cut_direction=cut, cut_by_body=True)
+        cut = self._cut_by_room(cloud.points[index])
+        return det if cut is None else replace(det, cut_direction=cut, cut_by_body=True, cut_by_room=True)
+
+    def _cut_by_room(self, points: np.ndarray) -> np.ndarray | None:
+        """Where a segment standing in the room behind a fixture's door goes on out of sight, or
+        None: the room's roof and walls hide all but what faces its mouth, so what stands in it
+        is seen only from there, its depth into the room a lower bound (a mug at the back of
+        LIBERO's microwave, seen from its mouth, shows its front, 3.5 of its 10.4 cm). Cut when
+        at least half of its ``points`` (N, 3) world m lie over the room's footprint between its
+        floor and its roof; the (2,) world unit vector points into the room (against its mouth)."""
+        for centre, half, yaw, floor_z, roof_z, mouth in self._rooms:
+            local = _in_frame(points[:, :2], centre, yaw)
+            inside = (np.all(np.abs(local) <= half, axis=1) & (points[:, 2] > floor_z) & (points[:, 2] < roof_z))
+            if points.shape[0] and float(np.mean(inside)) >= 0.5:
+                return -np.asarray(mouth, dtype=float)
+        return None
 
     def _cut_by_carcass(self, points: np.ndarray, heights: np.ndarray) -> np.ndarray | None:
         """Where a segment in an open drawer goes on into the cabinet's body, or None: the
@@ -1373,6 +1418,39 @@ class Perceiver:
                    "quat_wxyz": [1.0, 0.0, 0.0, 0.0], "size": _r([half[0], half[1], hz]), "attributes": attrs}
             out.append((ent, _geo(pos, 0.0, np.array([half[0], half[1], hz]), "box", 0.0, plane, FIXTURE_STD_M)))
         return out
+
+    def _inside_entity(self, look: FixtureLook, plane: Plane, stamp: float) -> tuple[dict, dict] | None:
+        """The room behind a tracked fixture's door (``inside`` in its look), as a ``kind:
+        fixture`` entity named :func:`~phyagentos.perception.door.inside_entity_name`, with the box
+        for :meth:`_relations`: its footprint from its floor down to the support (its top the
+        floor's surface: ``attributes.support`` true, a place to set things into, "in the
+        microwave"; ``part_of`` the fixture, ``mouth`` (3,) world unit the outward normal of the
+        door's side, ``roof_z_m`` the room's roof, world m, ``hinge_side`` +1 / -1 the side of the
+        mouth, along the mouth turned +90 degrees, its door hangs from). It stands where the
+        fixture does.
+        What stands in it is perceived as an object (:meth:`_perceive_fixtures` keeps the points
+        inside its walls); None without an inside."""
+        if look.inside is None or look.root is None:
+            return None
+        s, seen_s, conf = self.fixture_tracks[look.name]
+        origin, yaw = look.root.pose(s.position, s.yaw, s.turn, s.top_m)
+        centre, half, yaw_i, floor_z, roof_z, mouth = look.inside.world(origin, yaw)
+        hz = max(0.5 * (floor_z - plane.z_at(centre)), 1e-3)
+        pos = np.array([centre[0], centre[1], floor_z - hz])
+        now = seen_s == stamp
+        attrs = {"source": "perceived" if now else "remembered", "class": "inside", "part_of": look.name,
+                 "support": True, "confidence": _r(min(1.0, max(0.0, conf)), 3), "position_std_m": _r(FIXTURE_STD_M, 5),
+                 "last_seen_s": _r(seen_s, 6), "mouth": _r([mouth[0], mouth[1], 0.0], 5), "roof_z_m": _r(roof_z)}
+        if look.door is not None:  # which way across the mouth its door swings from (the hinge's side)
+            hinge = look.door.hinge_xy(origin, yaw)
+            across = np.array([-mouth[1], mouth[0]])
+            attrs["hinge_side"] = 1.0 if float((hinge - centre) @ across) > 0 else -1.0
+        if not now:
+            attrs["remembered"] = True
+        box = np.array([half[0], half[1], hz])
+        ent = {"name": inside_entity_name(look.name), "kind": "fixture", "position": _r(pos),
+               "quat_wxyz": _r(_quat_yaw(yaw_i), 5), "size": _r(box), "attributes": attrs}
+        return ent, _geo(pos, yaw_i, box, "box", 0.0, plane, FIXTURE_STD_M)
 
     def _fixture_entity(self, look: FixtureLook, plane: Plane, stamp: float) -> tuple[dict, dict]:
         """The snapshot entity of a tracked fixture (``kind: fixture``; its box the place
@@ -1882,7 +1960,8 @@ class Perceiver:
                          std: float) -> dict:
         """An object's round body and handle as entity attributes: ``axis_xy`` (2,) and
         ``handle_xy`` (2,) world (m; a unit vector) when ``body`` (in the object's frame, the
-        object's pose ``T_obj`` (4, 4) world) is known; and, for an object declared with
+        object's pose ``T_obj`` (4, 4) world) is known, with ``handle_reach_m`` how far from the
+        axis the handle reaches (m); and, for an object declared with
         ``handle_origin_m``, where its model's origin stands: ``origin_xy`` (2,) world, m, the
         axis that far towards the handle, with ``origin_std_m`` (1 sigma, m) -- the entity's
         centre ``position`` with the handle's offset added to its uncertainty when the handle
@@ -1891,6 +1970,8 @@ class Perceiver:
         seen = None if body is None else body.placed(T_obj)
         if seen is not None:
             out.update(axis_xy=_r(seen.axis_xy), handle_xy=_r(seen.handle_xy))
+            if seen.reach_m is not None:
+                out["handle_reach_m"] = _r(seen.reach_m)
         desc = next((d for d in self.declared if d.name == name), None)
         off = None if desc is None else desc.handle_origin_m
         if off is not None:
@@ -1922,9 +2003,10 @@ class Perceiver:
 
     def _hand_evidence(self, t: Track, proprio: Proprioception):
         """The closed hand's :class:`~phyagentos.perception.relations.HoldingEvidence` that it
-        holds track ``t`` (the gap matches its width, or a bowl's wall), or ``None``: no
-        squeeze at that width, or ``t`` not held before and not last seen where the fingers
-        closed (within ``holding.capture_radius_m`` of the tcp, or its rim under the tcp)."""
+        holds track ``t`` (the gap matches its width, a bowl's wall, or a mug's handle's bar:
+        ``holding.handle_bar_m``), or ``None``: no squeeze at that width, or ``t`` not held before
+        and not last seen where the fingers closed (within ``holding.capture_radius_m`` of the
+        tcp, its rim under the tcp, or its handle's grip point within half that)."""
         hc = self.config.holding
         tcp = proprio.tcp_pose[:3, 3]
         width = width_in_hand(t.half_extents, t.yaw, t.shape, proprio)
@@ -1934,6 +2016,9 @@ class Perceiver:
         knob = None if t.top_knob is None else 2.0 * float(t.top_knob[3])
         if knob is not None:  # an object with a knob on top may be held by it (a moka pot): as the wall
             width = min((width, knob), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
+        grip = self._handle_grip(t)
+        if grip is not None:  # a mug may be held by its handle's bar, across it (motion.handle_grasp)
+            width = min((width, hc.handle_bar_m), key=lambda w: abs(w - 2.0 * proprio.gripper_opening_m))
         ev = holding_evidence(proprio, width_m=width, baseline_n=self._baseline_n,
                               grasp_height_m=self._grasp_height_m, config=self.config)
         if ev.confidence <= 0.0:
@@ -1944,9 +2029,23 @@ class Perceiver:
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
             on_rim = wall is not None and width == wall and \
                 abs(dxy - float(self._rim_radius(t))) <= hc.capture_radius_m / 2.0
-            if dxy > hc.capture_radius_m and not on_rim:
+            on_handle = grip is not None and width == hc.handle_bar_m and \
+                float(np.linalg.norm(grip - tcp[:2])) <= hc.capture_radius_m / 2.0
+            if dxy > hc.capture_radius_m and not on_rim and not on_handle:
                 return None
         return ev
+
+    @staticmethod
+    def _handle_grip(t: Track) -> np.ndarray | None:
+        """(2,) world m where a hand takes track ``t`` by its handle
+        (:func:`~phyagentos.motion.handle_grasp.handle_grip_xy`), or None: no handle seen on it
+        with its reach."""
+        if t.body is None or t.body.reach_m is None:
+            return None
+        from phyagentos.motion.handle_grasp import handle_grip_xy  # noqa: PLC0415 - only when something may be held
+
+        seen = t.body.placed(_pose(t.position, t.yaw))
+        return handle_grip_xy(seen.axis_xy, seen.handle_xy, float(seen.reach_m))  # type: ignore[arg-type]
 
     def _hand_outweighs(self, name: str, det: Detection, conf: float, proprio: Proprioception) -> bool:
         """Whether the hand's evidence outweighs an association of ``det`` with ``name`` at
@@ -2178,10 +2277,16 @@ def _corroborated(conf: float, det: Detection, placed_xy: np.ndarray, config: Pe
 def _seen_fraction(det: Detection, look: ObjectDescriptor) -> float:
     """Confidence factor of a detection cut by the image border: 1 when at least half of its
     look's footprint (long x short side) was seen, else the fraction seen over one half. A
-    sliver at the border says less about what it is than half a plate does."""
+    sliver at the border says less about what it is than half a plate does. Seen through a
+    room's mouth (``cut_by_room``), its face is what can be seen: its width against the look's
+    long side and its height against the look's."""
     size = look.size_vector()
     if size is None or size[0] * size[1] <= 0.0:
         return 1.0
+    if det.cut_by_room:
+        seen = (2.0 * float(max(det.half_extents[:2])) / float(size[0])) * min(
+            1.0, 2.0 * float(det.half_extents[2]) / max(float(size[2]), 1e-6))
+        return min(1.0, seen / SEEN_ENOUGH)
     seen = 4.0 * float(det.half_extents[0]) * float(det.half_extents[1]) / float(size[0] * size[1])
     return min(1.0, seen / SEEN_ENOUGH)
 

@@ -28,6 +28,8 @@ compute_push              start poses to push an object with the closed hand (co
 push                      compliant push that must touch, with an effort limit (contact.py)
 compute_door_push         the start of a push that shuts a fixture's door (door.py)
 push_door                 sweep the closed fingers along a door's circle into its shut stop (door.py)
+compute_handle_grasp      grasp poses taking an object by its handle from outside (handle_grasp.py)
+compute_place_inside      place poses setting a held object inside a room through its mouth (inside.py)
 game_*                    game primitives (explore, goto, collect, hunt, place, make,
                           sleep, survive) on a ``kind: game`` target (game/)
 ========================  ==========================================================
@@ -41,6 +43,8 @@ from .control import Noop
 from .door import ComputeDoorPush, PushDoor
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
 from .game import GAME_PRIMITIVES
+from .handle_grasp import ComputeHandleGrasp
+from .inside import ComputePlaceInside
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
 from .placement import ComputePlaceAt
@@ -83,5 +87,7 @@ PRIMITIVES = {
     "push": Push,
     "compute_door_push": ComputeDoorPush,
     "push_door": PushDoor,
+    "compute_handle_grasp": ComputeHandleGrasp,
+    "compute_place_inside": ComputePlaceInside,
     **GAME_PRIMITIVES,
 }

@@ -24,6 +24,8 @@ from .door import ComputeDoorPush, PushDoor
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
 from .game.survival import GameSurvive
 from .game.tasks import GameCollect, GameExplore, GameGoto, GameHunt, GameMake, GameObserve, GamePlace, GameSleep
+from .handle_grasp import ComputeHandleGrasp
+from .inside import ComputePlaceInside
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
 from .placement import ComputePlaceAt
@@ -285,6 +287,22 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
     PushDoor: {
         "step_rad": ("float", "rad", "the door's joint between consecutive IK poses of the sweep"),
         "velocity_scale": ("float", "", "fraction (0, 1] of the joint velocity limits"),
+    },
+    ComputeHandleGrasp: {
+        "object": ("str", "", "the object taken by its handle (perceived: axis_xy, handle_xy, handle_reach_m)"),
+        "pitch_rad": ("float", "rad", "the hand's axis below the horizontal"),
+        "approach_height_m": ("float", "m", "the pre-grasp, back along the hand's axis"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+    },
+    ComputePlaceInside: {
+        "object": ("str", "", "the held object"),
+        "region": ("str", "", "the room it goes into (perceived: attributes.mouth and roof_z_m)"),
+        "clearance_m": ("float", "m", "gap left under the object"),
+        "entry_m": ("float", "m", "how far outside the mouth the object's far side starts"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+        "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
+        "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),
+        "view": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pose looking into the room"),
     },
     GuardedMove: {
         "offset": ("[dx, dy, dz]", "m", "world-frame tcp displacement: the farthest the motion goes"),

@@ -699,6 +699,42 @@ def _door_look(target, name: str) -> dict[str, Any] | None:
     return out
 
 
+def _inside_look(target, name: str, door: Mapping[str, Any]) -> dict[str, Any] | None:
+    """Fixture ``name``'s ``inside``: the room behind its ``door`` (:func:`_door_look`, the door
+    shut), from its model, in its root frame: rays from a point 4 cm behind the door's middle at
+    its mid-height, along the door both ways (the side walls), away from it (the back) and up and
+    down (the roof, the floor), to the fixture's own geoms; the front is the shut door's inner
+    face. ``{lo_m: [x, y], hi_m: [x, y], floor_m, roof_m, mouth: [x, y]}`` (m above the root's
+    origin; ``mouth`` the unit outward normal of the door's side). None when a ray meets
+    nothing (no room there) or the room lies askew of the frame's axes."""
+    m, d = target.model, target.data
+    root = _fixture_roots(target, {name: None})[name]
+    R, o = d.xmat[root].reshape(3, 3), d.xpos[root]
+    a = float(door["shut_yaw_rad"])
+    u = np.array([math.cos(a), math.sin(a)])
+    n = np.array([-u[1], u[0]]) if float(door["outer"]) > 0 else np.array([u[1], -u[0]])
+    if min(abs(u[0]), abs(u[1])) > 1e-3:
+        return None
+    front = float(door["mid_m"]) - 0.5 * float(door["thickness_m"])  # the inner face, along n from the hinge line
+    hinge = np.asarray(door["hinge_m"], float)
+    z_mid = 0.5 * (float(door["z_m"][0]) + float(door["z_m"][1]))
+    start_local = np.array([*(hinge + 0.5 * float(door["width_m"]) * u + (front - 0.04) * n), z_mid])
+    start = o + R @ start_local
+    reach = {}
+    for key, vec in (("along+", [*u, 0.0]), ("along-", [*(-u), 0.0]), ("back", [*(-n), 0.0]), ("up", [0.0, 0.0, 1.0]),
+                     ("down", [0.0, 0.0, -1.0])):
+        hit = _ray_to(m, d, root, start, R @ np.asarray(vec, float))
+        if hit is None:
+            return None
+        reach[key] = hit
+    c = start_local[:2]
+    corners = np.array([c + reach["along+"] * u, c - reach["along-"] * u, c - reach["back"] * n,
+                        hinge + front * n + 0.5 * float(door["width_m"]) * u])
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    return {"lo_m": lo.tolist(), "hi_m": hi.tolist(), "floor_m": float(z_mid - reach["down"]),
+            "roof_m": float(z_mid + reach["up"]), "mouth": n.tolist()}
+
+
 def _drawer_joints(target, name: str) -> list[int]:
     """The joint ids of fixture ``name``'s drawers: slide joints along a horizontal axis on
     bodies of its model, in the model's order."""
@@ -925,10 +961,11 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
         compartments = _median_drawers([g.get("compartments", []) for g in got])
         if compartments:
             look["compartments"] = compartments
-        doors = [g["door"] for g in got if "door" in g]
-        if doors:  # the model's, the same in every scene
-            look["door"] = {k: (round(float(v), 4) if isinstance(v, float) else [round(float(x), 4) for x in v]
-                                if isinstance(v, list) else v) for k, v in doors[0].items()}
+        for key in ("door", "inside"):  # the model's, the same in every scene
+            parts = [g[key] for g in got if key in g]
+            if parts:
+                look[key] = {k: (round(float(v), 4) if isinstance(v, float) else [round(float(x), 4) for x in v]
+                                 if isinstance(v, list) else v) for k, v in parts[0].items()}
         roots = [g["root"] for g in got if "root" in g]
         if len(roots) >= 2:
             look["root"] = _median_root(roots)
@@ -995,6 +1032,9 @@ def _fixture_look(target, name: str, cat: str, cloud, heights: np.ndarray, plane
         look["compartments"] = compartments
     if door is not None:
         look["door"] = door
+        inside = _inside_look(target, name, door)
+        if inside is not None:
+            look["inside"] = inside
     look["root"] = _root_look(target, name, body)
     box = _fixed_parts_box(target, name)
     if box is not None:

@@ -13,6 +13,18 @@ import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 
+#: KITCHEN_SCENE6's microwave (LIBERO-90 task 33, LIBERO-10 task 9) as ``measure_fixture_looks``
+#: measures it in that world: its body with the door shut, the door and the room behind it
+MICROWAVE = {"name": "microwave_1", "class": "microwave", "size_m": [0.3469, 0.1497, 0.2078],
+             "root": {"offset_m": [-0.0007, 0.0378, 0.02], "yaw_rad": 0.0, "body_yaw_rad": -0.0041},
+             "model_box": {"lo": [-0.1723, -0.1124], "hi": [0.1723, 0.1104]},
+             "door": {"hinge_m": [-0.1725, -0.088], "shut_yaw_rad": 0.0, "sign": 1.0, "range_rad": [-2.094, 0.0],
+                      "shut_rad": 0.0, "width_m": 0.259, "thickness_m": 0.024, "mid_m": 0.013, "outer": -1.0,
+                      "z_m": [0.0035, 0.1885], "handle_r_m": 0.2375, "handle_out_m": 0.054,
+                      "handle_z_m": [0.021, 0.171]},
+             "inside": {"lo_m": [-0.1435, -0.089], "hi_m": [0.0635, 0.0805], "floor_m": 0.024, "roof_m": 0.168,
+                        "mouth": [0.0, -1.0]}}
+
 
 def run_generated_pick(tmp_path: Path, *, name: str, description: str, suite: str, task: int,
                        looks: Mapping[str, Mapping[str, Any]], fixture: Mapping[str, str], obj: str,

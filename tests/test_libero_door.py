@@ -13,20 +13,11 @@ import json
 
 import pytest
 import yaml
-from libero_generated_pick import run_generated_graph
+from libero_generated_pick import MICROWAVE, run_generated_graph
 
 from phyagentos.bench.libero import workspace_box
 
 pytestmark = pytest.mark.sim
-
-#: LIBERO-90 task 33's microwave (KITCHEN_SCENE6), as ``measure_fixture_looks`` measures it in that world
-MICROWAVE = {"name": "microwave_1", "class": "microwave", "size_m": [0.3469, 0.1497, 0.2078],
-             "root": {"offset_m": [-0.0007, 0.0378, 0.02], "yaw_rad": 0.0, "body_yaw_rad": -0.0041},
-             "model_box": {"lo": [-0.1723, -0.1124], "hi": [0.1723, 0.1104]},
-             "door": {"hinge_m": [-0.1725, -0.088], "shut_yaw_rad": 0.0, "sign": 1.0, "range_rad": [-2.094, 0.0],
-                      "shut_rad": 0.0, "width_m": 0.259, "thickness_m": 0.024, "mid_m": 0.013, "outer": -1.0,
-                      "z_m": [0.0035, 0.1885], "handle_r_m": 0.2375, "handle_out_m": 0.054,
-                      "handle_z_m": [0.021, 0.171]}}
 
 
 def test_closing_the_microwave_pushes_its_door_into_the_stop_and_only_then_is_it_judged_shut(tmp_path):

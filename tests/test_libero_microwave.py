@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pytest
 import yaml
-from libero_generated_pick import run_generated_graph
+from libero_generated_pick import MICROWAVE, run_generated_graph
 
 from phyagentos.bench.libero import workspace_box
 
@@ -24,17 +24,6 @@ MUGS = [
     {"name": "white_yellow_mug_1", "class": "white_yellow_mug", "colour": [0.604, 0.527, 0.255], "handle_origin_m": 0.018,
      "size_m": [0.1038, 0.1036, 0.1038]},
 ]
-MICROWAVE = {"name": "microwave_1", "class": "microwave", "size_m": [0.3469, 0.1497, 0.2078],
-             "root": {"offset_m": [-0.0007, 0.0378, 0.02], "yaw_rad": 0.0, "body_yaw_rad": -0.0041},
-             "model_box": {"lo": [-0.1723, -0.1124], "hi": [0.1723, 0.1104]},
-             "door": {"hinge_m": [-0.1725, -0.088], "shut_yaw_rad": 0.0, "sign": 1.0, "range_rad": [-2.094, 0.0],
-                      "shut_rad": 0.0, "width_m": 0.259, "thickness_m": 0.024, "mid_m": 0.013, "outer": -1.0,
-                      "z_m": [0.0035, 0.1885], "handle_r_m": 0.2375, "handle_out_m": 0.054,
-                      "handle_z_m": [0.021, 0.171]},
-             "inside": {"lo_m": [-0.1435, -0.089], "hi_m": [0.0635, 0.0805], "floor_m": 0.024, "roof_m": 0.168,
-                        "mouth": [0.0, -1.0]}}
-
-
 def test_a_mug_taken_by_its_handle_goes_into_the_microwave_which_is_then_shut_and_libero_agrees(tmp_path):
     from phyagentos.bench.libero import instruction_nodes  # noqa: PLC0415
 

@@ -39,6 +39,7 @@ import numpy as np
 
 from phyagentos.errors import format_choices
 from phyagentos.perception.errors import PerceptionError
+from phyagentos.perception.values import finite_floats as _floats
 
 __all__ = ["DoorLook", "InsideLook", "inside_entity_name", "door_reading", "door_points", "thin_parts_removed",
            "DOOR_SIGMA_RAD", "DOOR_STOP_SIGMA_RAD", "DOOR_MIN_POINTS", "DOOR_BAND_M", "DOOR_LINE_M", "DOOR_SWEEP",
@@ -72,16 +73,6 @@ THIN_CELLS = 4
 
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def _floats(value: Any, n: int, what: str) -> tuple[float, ...]:
-    try:
-        out = tuple(float(v) for v in value)
-    except (TypeError, ValueError):
-        raise PerceptionError(f"{what} must be {n} numbers, got {value!r}") from None
-    if len(out) != n or not all(math.isfinite(v) for v in out):
-        raise PerceptionError(f"{what} must be {n} finite numbers, got {value!r}")
-    return out
 
 
 @dataclass(frozen=True)

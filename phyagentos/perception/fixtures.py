@@ -61,6 +61,7 @@ from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.detect import _rect, cluster
 from phyagentos.perception.door import DoorLook, InsideLook, thin_parts_removed
 from phyagentos.perception.errors import PerceptionError
+from phyagentos.perception.values import finite_floats as _floats
 
 __all__ = ["FixtureLook", "RootLook", "ROOT_YAW_MAX_RAD", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
            "drawer_entity_name", "CompartmentLook", "compartment_sides", "compartment_entity_name",
@@ -696,16 +697,6 @@ def _model_box(raw: Any, fixture: str, root: RootLook | None) -> tuple[tuple[flo
     if root is None:
         raise PerceptionError(f"fixture {fixture!r}: a model_box needs the fixture's root (where its model frame stands)")
     return lo, hi  # type: ignore[return-value]
-
-
-def _floats(value: Any, n: int, what: str) -> tuple[float, ...]:
-    try:
-        out = tuple(float(v) for v in value)
-    except (TypeError, ValueError):
-        raise PerceptionError(f"{what} must be {n} numbers, got {value!r}") from None
-    if len(out) != n or not all(math.isfinite(v) for v in out):
-        raise PerceptionError(f"{what} must be {n} finite numbers, got {value!r}")
-    return out
 
 
 def fixtures_from_declared(declared: Mapping[str, Any] | Sequence[Any]) -> list[FixtureLook]:

@@ -93,7 +93,7 @@ SKILL_DEFAULTS: Mapping[str, Mapping[str, Any]] = {
 FIRST_PICK_STILL_MAX_S = 1.5
 #: The skills a LIBERO plan is made of (the keys ``--skill-defaults`` may name).
 _PLANNED_SKILLS = ("pick", "place", "turn_knob", "slide_drawer", "push", "close_door", "pick_by_handle",
-                   "place_inside")
+                   "place_inside", "hook_drawer", "push_drawer")
 #: Optional parameters that say what a node does, not how: the plan sets them per task, and
 #: ``--skill-defaults`` may not (a push's destination, a place beside or in a slot).
 _TASK_PARAMS = {"place": frozenset({"beside", "slot"}),
@@ -251,6 +251,21 @@ def _nodes(steps: list[tuple[str, str, str | None]],
                           "accept": [{"articulated": {"object": dest, **accept}}],
                           "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
             continue
+        if action == "hook_open":
+            assert dest is not None
+            nodes.append({"id": f"open_{dest}", "skill": "hook_drawer",
+                          "params": {**fixed.get("hook_drawer", {}), "object": dest, "to_fraction": OPEN_FRACTION},
+                          "accept": [{"articulated": {"object": dest, "min_fraction": OPENED_MIN_FRACTION}}],
+                          "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+            continue
+        if action == "push_close":
+            assert dest is not None
+            nodes.append({"id": f"close_{dest}", "skill": "push_drawer",
+                          "params": {**fixed.get("push_drawer", {}), "object": dest, "to_fraction": CLOSE_FRACTION,
+                                     "push_to_stop_m": CLOSE_PUSH_M},
+                          "accept": [{"articulated": {"object": dest, "min": CLOSED_MIN_M, "max": CLOSED_MAX_M}}],
+                          "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
+            continue
         if action == "move_inside":
             assert dest is not None
             pick_id, place_id = f"pick_{obj}", f"place_{obj}"
@@ -361,7 +376,10 @@ def _planner_steps(language: str, objects: dict[str, str],
             steps.append(("close_door", intent.objects[0], None))
             continue
         if intent.verb in ("open", "close"):
-            steps.append((intent.verb, intent.objects[0], _drawer_name(language, intent, fixtures)))
+            drawer = _drawer_name(language, intent, fixtures)
+            hooked = intent.verb == "close" and any(a == "hook_open" and d == drawer for a, _, d in steps)
+            # a drawer this plan pulled by its front (its handle too low to grasp) is pushed shut by its handle
+            steps.append(("push_close" if hooked else intent.verb, intent.objects[0], drawer))
             continue
         if intent.part_kind == "compartment":  # into a compartment: its own entity is the place
             from phyagentos.perception.fixtures import compartment_entity_name  # noqa: PLC0415
@@ -370,7 +388,13 @@ def _planner_steps(language: str, objects: dict[str, str],
                       for obj in intent.movers()]
             continue
         if intent.part_kind is not None:  # into a drawer: the drawer's own entity is the place
-            steps += [("move", obj, _drawer_name(language, intent, fixtures)) for obj in intent.movers()]
+            drawer = _drawer_name(language, intent, fixtures)
+            if not any(a in ("open", "hook_open") and d == drawer for a, _, d in steps):
+                # pulled to its stop first by the inside of its front, as a hand would: a drawer left
+                # part-way out may not take the thing (LIBERO-10 task 3's bottom drawer, 14-15 of its
+                # 16 cm, and an 11 cm bowl); a shut one fails there (say "open" it: by its handle)
+                steps.append(("hook_open", intent.destinations[0], drawer))
+            steps += [("move", obj, drawer) for obj in intent.movers()]
             continue
         inside = [d for d in intent.destinations if d in fixtures]
         if inside and re.search(r"\b(in|into|inside)\b", intent.text):

@@ -299,6 +299,10 @@ DRAWER_APPROACH_PITCH_RAD = math.radians(10.0)
 DRAWER_FRONT_M = 0.045
 DRAWER_WALL_M = 0.02
 DRAWER_FLOOR_M = 0.025
+#: The inside of a drawer's front, this far inward from its handle's outer face, m: where the
+#: floor a thing is set onto begins (LIBERO's cabinet drawers, both models: 3.7 cm by their
+#: collision boxes; 1 mm more).
+DRAWER_FLOOR_FRONT_M = 0.038
 #: Points this far or more inside a compartment's walls (its footprint from the fixture's look:
 #: the inside between them), above its floor, are what stands in it, not the fixture's, m: the
 #: voxel grid's 5 mm and the 2-3 mm of a wall's depth edge.
@@ -1286,7 +1290,7 @@ class Perceiver:
 
     @staticmethod
     def _drawer_floor(drawer: DrawerLook, s: FixtureSighting, opening: float, *,
-                      exposed: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+                      exposed: bool = False, above_m: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
         """The floor of ``drawer`` (of sighting ``s``) standing ``opening`` m out as a box
         ``(centre (2,) world m, half extents (3,) m, yaw rad)`` whose top is the floor
         (:data:`DRAWER_FLOOR_M` below the handle's centre, m above the support): across the
@@ -1296,12 +1300,15 @@ class Perceiver:
         an open drawer rests on its floor, not on the table under it: its box would reach down
         to the table and look like nothing declared) and the landmark of "in the top drawer".
         ``exposed``: only the part out of the body (from :data:`DRAWER_CARCASS_M` behind the shut
-        handle's centre), where a thing can be set down from above."""
+        handle's centre) and in front of the drawer above (``above_m``: the outer face of what
+        stands over this drawer, m along its axis from its shut handle's centre: the handle of
+        the drawer above as it stands), where a thing lowered from above passes; its front
+        then the front's inside (:data:`DRAWER_FLOOR_FRONT_M` inward from the handle's face)."""
         c0, u, v = drawer.frame(s.position[:2], s.turn)
-        front = opening + drawer.face_m - DRAWER_FRONT_M
+        front = opening + drawer.face_m - (DRAWER_FLOOR_FRONT_M if exposed else DRAWER_FRONT_M)
         back = float((np.asarray(s.position[:2]) - c0) @ u) - drawer.back_m + opening
         if exposed:
-            back = max(back, -DRAWER_CARCASS_M)
+            back = max(back, -DRAWER_CARCASS_M, -math.inf if above_m is None else above_m)
         mid = c0 + u * 0.5 * (front + back)
         half_along = max(0.5 * (front - back), 0.005)
         half_across = max(drawer.half_width_m - DRAWER_WALL_M, 0.005)
@@ -1312,6 +1319,27 @@ class Perceiver:
         else:  # the footprint's long side is its x axis
             half, yaw = np.array([half_across, half_along, 0.5 * floor]), yaw + 0.5 * math.pi
         return mid, half, (yaw + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+
+    def _face_above(self, look: FixtureLook, drawer: DrawerLook, s: FixtureSighting) -> float | None:
+        """Where the outer face of the handle of the drawer right above ``drawer`` (of ``look``,
+        on sighting ``s``; the next higher one whose handle overlaps it across) stands, m along
+        ``drawer``'s opening axis from its shut handle's centre: that drawer's last reading, else
+        where the hand left it, else shut; ``None`` with no drawer above."""
+        c0, u, v = drawer.frame(s.position[:2], s.turn)
+        above = None
+        for other in look.drawers:
+            o0, ou, _ = other.frame(s.position[:2], s.turn)
+            if (other.height_m > drawer.height_m and float(ou @ u) > 0.99
+                    and abs(float((o0 - c0) @ v)) < drawer.half_width_m + other.half_length_m
+                    and (above is None or other.height_m < above.height_m)):
+                above = other
+        if above is None:
+            return None
+        key = (look.name, above.name)
+        known = self.drawer_readings.get(key) or self.drawer_felt.get(key) or self.drawer_seen.get(key)
+        opening = float(known[0]) if known is not None else 0.0
+        o0, ou, _ = above.frame(s.position[:2], s.turn)
+        return float((o0 - c0) @ u) + opening + above.face_m
 
     def _drawer_entities(self, look: FixtureLook, plane: Plane, stamp: float) -> list[dict]:
         """One ``kind: articulation`` entity per drawer of ``look`` whose handle was read in this
@@ -1376,7 +1404,8 @@ class Perceiver:
                 attrs.update(source="remembered", remembered=True, last_seen_s=_r(seen[1], 6))
             box_pos, box_half, box_yaw = pos, half, yaw
             if opening >= DRAWER_OPEN_SUPPORT_M:  # its floor out of the body: a place things are set into
-                mid, box_half, box_yaw = self._drawer_floor(drawer, s, opening, exposed=True)
+                mid, box_half, box_yaw = self._drawer_floor(drawer, s, opening, exposed=True,
+                                                            above_m=self._face_above(look, drawer, s))
                 box_pos = [float(mid[0]), float(mid[1]), plane.z_at(mid) + float(box_half[2])]
                 attrs["support"] = True
             out.append({"name": drawer_entity_name(look.name, drawer.name), "kind": "articulation",

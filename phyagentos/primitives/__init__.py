@@ -30,6 +30,7 @@ compute_door_push         the start of a push that shuts a fixture's door (door.
 push_door                 sweep the closed fingers along a door's circle into its shut stop (door.py)
 compute_handle_grasp      grasp poses taking an object by its handle from outside (handle_grasp.py)
 compute_place_inside      place poses setting a held object inside a room through its mouth (inside.py)
+compute_drawer_hook       poses hooking the closed fingers behind an open drawer's front (drawer_hook.py)
 game_*                    game primitives (explore, goto, collect, hunt, place, make,
                           sleep, survive) on a ``kind: game`` target (game/)
 ========================  ==========================================================
@@ -41,6 +42,7 @@ from .contact import ComputePush, GuardedMove, Push
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
 from .control import Noop
 from .door import ComputeDoorPush, PushDoor
+from .drawer_hook import ComputeDrawerHook
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
 from .game import GAME_PRIMITIVES
 from .handle_grasp import ComputeHandleGrasp
@@ -89,5 +91,6 @@ PRIMITIVES = {
     "push_door": PushDoor,
     "compute_handle_grasp": ComputeHandleGrasp,
     "compute_place_inside": ComputePlaceInside,
+    "compute_drawer_hook": ComputeDrawerHook,
     **GAME_PRIMITIVES,
 }

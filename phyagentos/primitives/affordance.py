@@ -415,6 +415,10 @@ class ArticulateSlide(_Articulate):
         snapshot: blackboard key of the observation holding the slide.
         push_to_stop_m: keyword-only; how far past the shut end the hand is sent, m, in [0,
             0.1]; 0: no push (the motion ends where it was sent). Needs ``to_fraction`` 0.
+        lead_m: keyword-only; how far the hand travels before what it moves moves with it, m, in
+            [0, 0.05]: the hand goes this much further (closed fingers hooked behind a drawer's
+            front, :mod:`.drawer_hook`, with this gap to it and on a little against the open
+            stop). 0: the hand holds the handle.
 
     Raises:
         ValueError: not exactly one of ``delta_m`` and ``to_fraction``, a value out of range, or
@@ -425,9 +429,12 @@ class ArticulateSlide(_Articulate):
 
     def __init__(self, name: str, *, object: str, delta_m: float | None = None, to_fraction: float | None = None,
                  step_m: float = 0.02, velocity_scale: float = 0.3, snapshot: str = "snapshot",
-                 push_to_stop_m: float = 0.0):
+                 push_to_stop_m: float = 0.0, lead_m: float = 0.0):
         super().__init__(name, object=object, delta=delta_m, to_fraction=to_fraction, step=step_m, max_step=0.1,
                          velocity_scale=velocity_scale, snapshot=snapshot)
+        if isinstance(lead_m, bool) or not isinstance(lead_m, (int, float)) or not 0.0 <= lead_m <= 0.05:
+            raise ValueError(f"lead_m must be a number of metres in [0, 0.05], got {lead_m!r}")
+        self.lead_m = float(lead_m)
         if isinstance(push_to_stop_m, bool) or not isinstance(push_to_stop_m, (int, float)) \
                 or not 0.0 <= push_to_stop_m <= 0.1:
             raise ValueError(f"push_to_stop_m must be a number of metres in [0, 0.1], got {push_to_stop_m!r}")
@@ -441,6 +448,7 @@ class ArticulateSlide(_Articulate):
         axis = _unit(attrs["axis"])
         if self._push is not None:  # on past the shut end, into the stop
             delta -= self.push_to_stop_m
+        delta += math.copysign(self.lead_m, delta)  # the gap the hand closes before the drawer moves
         n = max(1, int(math.ceil(abs(delta) / self.step_size)))
         out = []
         for k in range(1, n + 1):
@@ -486,14 +494,16 @@ class ArticulateSlide(_Articulate):
         hand's own encoders: opening and effort, :mod:`.grasp_sense`): tell the session's
         perceiver where the hand let the drawer stand
         (:meth:`~phyagentos.perception.Perceiver.note_drawer_opened`), for a look that cannot
-        read the handle. A pull that lost the handle, or a push, tells it nothing."""
+        read the handle. A pull that lost the handle, or a push, tells it nothing; a pull by the
+        closed fingers hooked behind the drawer's front (``lead_m``) tells it the hand's travel
+        less the lead (a lower bound: the fingers began no nearer the front than the lead)."""
         assert self._moved_from is not None
         target, perceiver = self.ctx.target, getattr(self.ctx, "perceiver", None)
         if opening <= self._moved_from[0] or perceiver is None or not hasattr(perceiver, "note_drawer_opened") \
                 or not capabilities_of(target).has_sensor("proprioception"):
             return
         p = target.proprioception()
-        held = closed_on_something(p)
+        held = closed_on_something(p) or self.lead_m > 0  # hooked behind the front: it moved at least so far
         self.ctx.trace.record("slide_felt", leaf=self.name, object=self.object, opening_m=round(opening, 4),
                               from_m=round(self._moved_from[0], 4), held=bool(held))
         if held:
@@ -520,6 +530,7 @@ class ArticulateSlide(_Articulate):
             return None
         q0, axis, start = self._moved_from
         moved = float(np.dot(self.ctx.target.tcp_pose()[:3, 3] - start, axis))
+        moved = math.copysign(max(abs(moved) - self.lead_m, 0.0), moved)  # the hand's lead moved no drawer
         planning_world.note_slide(self.ctx.target, self.object, q0 + moved)
         return q0 + moved
 
@@ -527,7 +538,7 @@ class ArticulateSlide(_Articulate):
         """End a push home (class docstring): where the hand stands against what held it back."""
         push, target = self._push, self.ctx.target
         assert push is not None
-        moved = float(np.dot(push["start"] - target.tcp_pose()[:3, 3], push["axis"]))  # toward shut, m
+        moved = float(np.dot(push["start"] - target.tcp_pose()[:3, 3], push["axis"])) - self.lead_m  # toward shut, m
         short = push["commanded_m"] - moved
         stopped = short >= STOP_LAG_M
         at_shut = stopped and -push["band_m"] <= moved - push["expected_m"] <= push["band_m"] + HANDLE_PLAY_M

@@ -1,0 +1,137 @@
+"""Pulling a drawer that stands out by the inside of its front, the closed fingers hooked behind it.
+
+A drawer whose handle stands too low for the hand's closing fingers (LIBERO's bottom drawer:
+its bar 4.6 cm over the table, the lower finger of an open Panda hand 4 cm under the tool
+point) is pulled by its front instead, once it stands out of its body: the closed fingers,
+pointing down, go into the drawer just behind its front and the hand moves out along the
+drawer's axis (:class:`~phyagentos.primitives.affordance.ArticulateSlide` with ``lead_m``:
+the fingers travel the gap to the front before the drawer moves).
+
+:class:`ComputeDrawerHook` writes the pose behind the front and the pose above it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from py_trees.common import Status
+
+from phyagentos.errors import IKError
+from phyagentos.motion.ik import solve_ik
+
+from .affordance import _entity
+from .base import Primitive, PrimitiveFailure
+from .door import FINGER_HALF_M
+
+__all__ = ["ComputeDrawerHook", "HOOK_CLEAR_M", "PUSH_LEAN_RAD"]
+
+#: How far behind the inside of the drawer's front the closed fingers go down, m: the drawer's
+#: perceived opening is good to a few millimetres (LIBERO's bottom drawer: read 2.3 mm short
+#: on a generated scene) and the planning world's drawer stands where it was read.
+HOOK_CLEAR_M = 0.008
+#: Pushed in, the fingers point this far (rad) from straight down towards the drawer's body: the
+#: hand, 6 cm over its tool point at the palm, then stands back from what is over the handle
+#: (pointing straight down at LIBERO's bottom drawer, the arm met the cabinet 7 cm into the push;
+#: at shut the palm would stand under the middle drawer's handle).
+PUSH_LEAN_RAD = 0.8
+
+
+class ComputeDrawerHook(Primitive):
+    """The pose from which the closed fingers slide ``object`` to ``to_fraction`` of its
+    travel without a grasp, and the pose above it.
+
+    Pulled out (``to_fraction`` at or beyond where the drawer was read): behind the inside of
+    its front. From the drawer entity as perceived (``kind: articulation``,
+    ``attributes.support``: its box the floor out of the body, whose edge along the opening
+    ``axis`` is the inside of the front): the tool point pointing down :data:`HOOK_CLEAR_M` plus
+    the closed fingers' half thickness (:data:`~phyagentos.primitives.door.FINGER_HALF_M`)
+    behind the front's inside. Pushed in: as far in front of the handle's outer face (its
+    ``grasp`` centre and half ``size`` along the axis). Level with the handle's centre, across
+    the drawer where its handle is, the fingers closing across the drawer; of the two such
+    hands the one the arm reaches nearer the current wrist. Writes ``grasp_pose`` ((4, 4) world
+    tcp) and ``pregrasp_pose`` (``approach_height_m`` above it).
+
+    Args:
+        object: the drawer (a perceived drawer entity).
+        to_fraction: where the drawer is to go, fraction of its travel ``range_m`` from shut.
+        approach_height_m: the pose above, m.
+
+    Raises:
+        ValueError: ``approach_height_m`` not positive, ``to_fraction`` not in [0, 1].
+        PrimitiveFailure: ``perception.not_open`` where a drawer to be pulled offers no floor out
+            of its body (shut: nothing to hook behind; pull it by its handle), ``perception.affordance``
+            where it is no drawer, ``ik.unreachable`` where the arm reaches neither hand.
+    """
+
+    def __init__(self, name: str, *, object: str, to_fraction: float = 1.0, approach_height_m: float = 0.08,
+                 snapshot: str = "snapshot"):
+        super().__init__(name)
+        if not approach_height_m > 0:
+            raise ValueError(f"approach_height_m must be > 0, got {approach_height_m!r}")
+        if isinstance(to_fraction, bool) or not isinstance(to_fraction, (int, float)) or not 0.0 <= to_fraction <= 1.0:
+            raise ValueError(f"to_fraction must be a number in [0, 1], got {to_fraction!r}")
+        self.object, self.approach_height_m, self.snapshot_key = object, float(approach_height_m), snapshot
+        self.to_fraction = float(to_fraction)
+        self.reads(snapshot)
+        self.writes("grasp_pose", "pregrasp_pose")
+
+    def step(self):
+        ent = _entity(self.get(self.snapshot_key), self.object)
+        attrs = ent.get("attributes") or {}
+        grasp = attrs.get("grasp") or {}
+        if attrs.get("joint_type") != "slide" or attrs.get("axis") is None or grasp.get("position") is None:
+            raise PrimitiveFailure("perception.affordance", f"{self.object!r} is no drawer (a slide with an axis and "
+                                                            f"a handle)")
+        u = np.asarray(attrs["axis"], dtype=float)[:2]
+        u = u / np.linalg.norm(u)
+        v = np.array([-u[1], u[0]])
+        handle = np.asarray(grasp["position"], dtype=float)
+        q, travel = attrs.get("joint_position"), attrs.get("range_m")
+        shutting = (q is not None and travel is not None
+                    and float(travel[0]) + self.to_fraction * (float(travel[1]) - float(travel[0])) < float(q))
+        if shutting:  # in front of the handle's outer face, pushing it in
+            face = float(handle[:2] @ u) + float((grasp.get("size") or [0.0, 0.0])[1])
+            along = face + FINGER_HALF_M + HOOK_CLEAR_M
+        else:  # behind the inside of the front, pulling it out
+            if not attrs.get("support"):
+                raise PrimitiveFailure("perception.not_open", f"{self.object!r} stands out {q} m: no floor out of its "
+                                                              f"body to hook the fingers behind its front")
+            w, x, y, z = (float(c) for c in ent["quat_wxyz"])
+            R_box = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z)],
+                              [2 * (x * y + w * z), 1 - 2 * (x * x + z * z)]])
+            centre = np.asarray(ent["position"], dtype=float)[:2]
+            front = float(centre @ u + np.abs(R_box.T @ u) @ np.asarray(ent["size"], dtype=float)[:2])
+            along = front - FINGER_HALF_M - HOOK_CLEAR_M
+        xy = u * along + v * float(handle[:2] @ v)
+        target = self.ctx.target
+        names, frame = tuple(target.arm_joint_names), target.tcp_site
+        wrist = target.tcp_pose()[:3, :3]
+        best = None
+        # pushed in, the fingers point in and down so the hand stays clear of what stands over the
+        # handle (the drawer above's handle, 6 cm over it when shut)
+        lean = PUSH_LEAN_RAD if shutting else 0.0
+        for sign in (1.0, -1.0):
+            closing = sign * np.array([v[0], v[1], 0.0])
+            down = np.array([-u[0] * np.sin(lean), -u[1] * np.sin(lean), -np.cos(lean)])
+            T = np.eye(4)
+            T[:3, :3] = np.column_stack([np.cross(closing, down), closing, down])
+            T[:3, 3] = [xy[0], xy[1], handle[2]]
+            try:
+                with self.ctx.profiler.section("ik"):
+                    solve_ik(target.model, q_seed=target.arm_qpos(), target=T, arm_joint_names=names, frame=frame)
+            except IKError:
+                continue
+            turn = float(np.arccos(np.clip((np.trace(wrist.T @ T[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+            if best is None or turn < best[0]:
+                best = (turn, T)
+        if best is None:
+            raise PrimitiveFailure("ik.unreachable", f"{self.object!r}: the arm reaches no hand behind its front at "
+                                                     f"{np.round([xy[0], xy[1], handle[2]], 3).tolist()} m")
+        T = best[1]
+        P = T.copy()
+        P[2, 3] += self.approach_height_m
+        self.set("grasp_pose", T)
+        self.set("pregrasp_pose", P)
+        self.ctx.trace.record("drawer_hook", leaf=self.name, object=self.object,
+                              opening_m=attrs.get("joint_position"), hook=np.round(T[:3, 3], 4).tolist(),
+                              pushing=shutting, turn_rad=round(best[0], 3))
+        return Status.SUCCESS

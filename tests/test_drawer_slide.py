@@ -269,10 +269,22 @@ def test_close_it_after_a_place_into_a_drawer_closes_that_drawer_not_what_was_pl
     nodes = instruction_nodes("put the black bowl in the bottom drawer of the cabinet and close it",
                               {"akita_black_bowl_1": "akita_black_bowl"},
                               {"white_cabinet_1": "white_cabinet", "wine_rack_1": "wine_rack"})
+    # the drawer, not opened in words, is pulled to its stop first by its front (the bottom drawer's
+    # handle is too low for the open hand), and pushed home by its handle with the closed fingers
     assert [(n["skill"], n["params"].get("region", n["params"]["object"])) for n in nodes] == [
-        ("pick", "akita_black_bowl_1"), ("place", "white_cabinet_1_bottom_drawer"),
-        ("slide_drawer", "white_cabinet_1_bottom_drawer")]
-    assert nodes[2]["params"]["push_to_stop_m"] == CLOSE_PUSH_M and nodes[2]["depends_on"] == [nodes[1]["id"]]
+        ("hook_drawer", "white_cabinet_1_bottom_drawer"), ("pick", "akita_black_bowl_1"),
+        ("place", "white_cabinet_1_bottom_drawer"), ("push_drawer", "white_cabinet_1_bottom_drawer")]
+    assert nodes[0]["params"]["to_fraction"] == 1.0
+    assert nodes[0]["accept"] == [{"articulated": {"object": "white_cabinet_1_bottom_drawer",
+                                                   "min_fraction": OPENED_MIN_FRACTION}}]
+    assert nodes[3]["params"]["push_to_stop_m"] == CLOSE_PUSH_M and nodes[3]["depends_on"] == [nodes[2]["id"]]
+    assert nodes[3]["accept"] == [{"articulated": {"object": "white_cabinet_1_bottom_drawer", "min": CLOSED_MIN_M,
+                                                   "max": CLOSED_MAX_M}}]
+    # opened in words first: by its handle, as asked, and closed the same way
+    nodes = instruction_nodes("open the top drawer of the cabinet and put the black bowl inside, then close it",
+                              {"akita_black_bowl_1": "akita_black_bowl"},
+                              {"white_cabinet_1": "white_cabinet", "wine_rack_1": "wine_rack"})
+    assert [n["skill"] for n in nodes] == ["slide_drawer", "pick", "place", "slide_drawer"]
 
 
 def _perceiver_with_a_cabinet():
@@ -431,20 +443,37 @@ class _Trace:
         self.records.append({"kind": kind, **fields})
 
 
-def _pushed(read_m: float, moved_m: float):
+def test_closed_fingers_against_a_drawer_go_their_lead_further_and_only_towards_the_end_they_are_sent_to():
+    pull = ArticulateSlide("s", object="drawer", to_fraction=1.0, lead_m=0.017)
+    assert pull._hand_motion(0.01) == pytest.approx(0.027)  # 1 cm short of the stop: 1 cm and the lead
+    assert pull._hand_motion(-0.005) == pytest.approx(0.017)  # read past the stop: still out, by the lead
+    push = ArticulateSlide("s", object="drawer", to_fraction=0.0, push_to_stop_m=0.02, lead_m=0.008)
+    assert push._hand_motion(-0.15) == pytest.approx(-0.158)
+    assert push._hand_motion(0.003) == pytest.approx(-0.008)  # read past shut: still in
+    half = ArticulateSlide("s", object="drawer", to_fraction=0.5, lead_m=0.01)
+    assert half._hand_motion(-0.02) == pytest.approx(-0.03) and half._hand_motion(0.02) == pytest.approx(0.03)
+    held = ArticulateSlide("s", object="drawer", to_fraction=1.0)  # a held handle: as read
+    assert held._hand_motion(-0.005) == -0.005
+    for bad in (-0.001, 0.06, True, "gap"):
+        with pytest.raises(ValueError, match=r"lead_m must be a number of metres in \[0, 0.05\]"):
+            ArticulateSlide("s", object="drawer", to_fraction=1.0, lead_m=bad)
+
+
+def _pushed(read_m: float, moved_m: float, lead_m: float = 0.0):
     """A push home of a drawer read ``read_m`` out (axis +y, sent 6 cm past shut), ended with the
     hand ``moved_m`` toward shut: (the trace's ``slide_stop``, the stamps the perceiver was given)."""
     from types import SimpleNamespace  # noqa: PLC0415
 
     from phyagentos.primitives.affordance import STOP_LAG_M  # noqa: PLC0415
 
-    slide = ArticulateSlide("s", object="wooden_cabinet_1_top_drawer", to_fraction=0.0, push_to_stop_m=0.02)
+    slide = ArticulateSlide("s", object="wooden_cabinet_1_top_drawer", to_fraction=0.0, push_to_stop_m=0.02,
+                            lead_m=lead_m)
     noted = []
     slide.ctx = SimpleNamespace(target=_Hand(0.5 - moved_m), trace=_Trace(), perceiver=SimpleNamespace(
         note_drawer_stop=lambda name, *, stamp_s: noted.append((name, stamp_s))))
     slide._push = {"expected_m": read_m, "band_m": 2 * DRAWER_SIGMA_M, "axis": np.array([0.0, 1.0, 0.0]),
                    "start": np.array([0.0, 0.5, 0.0]), "commanded_m": read_m + 0.01 + 0.05}
-    assert read_m + 0.06 - moved_m >= STOP_LAG_M  # these hands were all held back
+    assert read_m + 0.06 + lead_m - moved_m >= STOP_LAG_M  # these hands were all held back
     slide._at_stop("")
     (stop,) = [r for r in slide.ctx.trace.records if r["kind"] == "slide_stop"]
     return stop, noted
@@ -464,3 +493,67 @@ def test_a_stop_is_the_shut_stop_within_the_band_or_past_it_by_the_handles_play_
     # held back short of the band: something holds the drawer out
     with pytest.raises(PrimitiveFailure, match="stopped 0.030 m short of where it was read shut"):
         _pushed(0.15, 0.12)
+
+
+def test_a_push_home_by_the_closed_fingers_judges_the_drawers_travel_not_the_hands():
+    # the fingers began 8 mm before the handle: the hand's 0.158 m moved the drawer 0.15 m, as read
+    stop, noted = _pushed(0.15, 0.158, lead_m=0.008)
+    assert stop["at_shut"] and stop["moved_m"] == pytest.approx(0.15) and noted
+    # without the lead taken off, the same hand would be judged past the band and the play
+    from phyagentos.primitives.affordance import HANDLE_PLAY_M  # noqa: PLC0415
+
+    stop, noted = _pushed(0.15, 0.15 + 0.02 + HANDLE_PLAY_M + 0.003 + 0.008, lead_m=0.008)
+    assert not stop["at_shut"] and not noted
+
+
+#: LIBERO's white cabinet's middle and bottom drawers (LIBERO-10 task 3's world) as
+#: ``measure_fixture_looks`` measures them: the axis -y, the middle one's handle 6.9 cm above the bottom one's
+WHITE = [{"name": name, "handle_offset_m": [-0.0049, -0.0759], "height_m": height, "half_length_m": 0.0445,
+          "axis_xy": [0.0, -1.0], "travel_m": [-0.01, 0.16], "face_m": 0.008, "half_width_m": 0.1093,
+          "top_m": top, "back_m": 0.1005} for name, height, top in (("middle", 0.1154, 0.1527), ("bottom", 0.0461, 0.084))]
+
+
+def test_an_open_drawers_floor_ends_before_the_handle_of_the_drawer_above_and_its_walls_hold_what_is_on_it():
+    from phyagentos.perception import Perceiver  # noqa: PLC0415
+    from phyagentos.perception.cloud import Plane  # noqa: PLC0415
+    from phyagentos.perception.fixtures import FixtureSighting  # noqa: PLC0415
+    from phyagentos.perception.perceiver import DRAWER_FLOOR_FRONT_M  # noqa: PLC0415
+
+    look = {"name": "white_cabinet_1", "class": "white_cabinet", "size_m": [0.2676, 0.177, 0.227], "drawers": WHITE}
+    perceiver = Perceiver(declared={"objects": [], "fixtures": [look]})
+    centre = np.array([0.014, 0.272])
+    perceiver.fixture_tracks["white_cabinet_1"] = (
+        FixtureSighting("white_cabinet_1", np.array([centre[0], centre[1], 1.0]), 0.0, np.array([0.13, 0.09, 0.11]),
+                        np.array([0.13, 0.09]), 0.227, 500, 0.0), 1.0, 1.0)
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.9, 100, True)
+    shut_handle_y = centre[1] - 0.0759  # both handles, shut: 0.1961 m
+
+    def floor(bottom: float, middle: float | None) -> tuple[float, float, dict]:
+        perceiver.drawer_readings.clear()
+        perceiver.drawer_readings[("white_cabinet_1", "bottom")] = (bottom, 40)
+        if middle is not None:
+            perceiver.drawer_readings[("white_cabinet_1", "middle")] = (middle, 40)
+        ents = {e["name"]: e for e in perceiver._drawer_entities(perceiver.fixtures[0], plane, 1.0)}
+        ent = ents["white_cabinet_1_bottom_drawer"]
+        along = ent["size"][0] if abs(abs(ent["quat_wxyz"][0]) - 1.0) > 1e-6 else ent["size"][1]
+        return ent["position"][1] + along, ent["position"][1] - along, ent  # back (towards the body), front
+
+    back, front, ent = floor(0.16, 0.0)
+    # from the inside of its front (3.8 cm in from the handle's face) to the middle drawer's handle's face,
+    # not to the body 2.4 cm behind the shut handle's centre: 12.2 cm that an 11 cm bowl is lowered into
+    assert front == pytest.approx(shut_handle_y - 0.16 - 0.008 + DRAWER_FLOOR_FRONT_M, abs=1e-3)
+    assert back == pytest.approx(shut_handle_y - 0.008, abs=1e-3)
+    assert back - front == pytest.approx(0.122, abs=2e-3)
+    assert ent["attributes"]["support"] and ent["attributes"]["walls_m"] == pytest.approx(0.084 - 0.021, abs=2e-3)
+    # the middle drawer pulled out 5 cm stands over more of it; never read, it is taken as shut
+    assert floor(0.16, 0.05)[0] == pytest.approx(shut_handle_y - 0.058, abs=1e-3)
+    assert floor(0.16, None)[0] == pytest.approx(back, abs=1e-6)
+    # a bowl off the floor's centre by more than a plate allows still stands on it: its walls hold it
+    bowl = {"name": "bowl", "kind": "object", "position": [ent["position"][0] + 0.01, ent["position"][1] + 0.004,
+                                                             ent["position"][2] + ent["size"][2] + 0.025],
+            "size": [0.0564, 0.0564, 0.025], "attributes": {"confidence": 0.9, "position_std_m": 0.005}}
+    snap = {"entities": [bowl, ent]}
+    crit = parse_criteria({"on": {"object": "bowl", "support": "white_cabinet_1_bottom_drawer"}})[0]
+    assert evaluate(crit, snap, snap).status == "satisfied"
+    walled_off = {**ent, "attributes": {k: v for k, v in ent["attributes"].items() if k != "walls_m"}}
+    assert evaluate(crit, {"entities": [bowl, walled_off]}, {"entities": [bowl, walled_off]}).status != "satisfied"

@@ -102,7 +102,9 @@ def test_on_top_of_the_drawer_is_the_cabinet_top_and_into_a_named_drawer_is_its_
     nodes = instruction_nodes(swap.instruction, problem.objects, problem.fixtures)
     assert nodes[1]["params"] == {"object": "wine_bottle_1", "region": "wooden_cabinet_1"}
     nodes = instruction_nodes("put the bowl in the top drawer", problem.objects, problem.fixtures)
-    assert nodes[1]["params"] == {"object": "akita_black_bowl_1", "region": "wooden_cabinet_1_top_drawer"}
+    # pulled to its stop by its front first (not opened in words), then the bowl set onto its floor
+    assert [n["skill"] for n in nodes] == ["hook_drawer", "pick", "place"]
+    assert nodes[2]["params"] == {"object": "akita_black_bowl_1", "region": "wooden_cabinet_1_top_drawer"}
     with pytest.raises(BenchError, match="which drawer\\? \\(the top, middle or bottom drawer of one thing\\)"):
         instruction_nodes("put the bowl into the drawer", problem.objects, problem.fixtures)
 
@@ -237,8 +239,8 @@ def test_skill_defaults_go_into_every_node_of_their_skill_and_the_tasks_own_para
 @pytest.mark.parametrize("text,expect", [
     ("pick:\n  approach_velocity_scale: 0.6\n  lift_speed: 1.0\n", "d.yaml:3: pick has no strategy parameter 'lift_speed'; "
                                                                    "valid: 'approach_height_m'"),
-    ("pick: {}\nwipe: {speed: 0.1}\n", "d.yaml:2: unknown skill 'wipe'; a LIBERO plan's skills: 'close_door', 'pick', "
-                                     "'pick_by_handle', 'place'"),
+    ("pick: {}\nwipe: {speed: 0.1}\n", "d.yaml:2: unknown skill 'wipe'; a LIBERO plan's skills: 'close_door', "
+                                     "'hook_drawer', 'pick', 'pick_by_handle', 'place'"),
     # what a node does is the plan's (a push's destination, a place beside a thing), not a default's
     ("push: {distance_m: 0.1}\n", "d.yaml:1: push has no strategy parameter 'distance_m'"),
     ("place: {beside: left}\n", "d.yaml:1: place has no strategy parameter 'beside'"),

@@ -34,7 +34,7 @@ above its top, by 2 sigma; below the top (in a dish), within :data:`DISH_CENTRE_
 support's centre too, else it leans on the rim; on a flat support (no taller than
 :data:`DISH_DEPTH_M`: a plate) with its whole footprint over it, or within
 :data:`DISH_CENTRE_M` of its centre where it is as wide (not on a floor between walls, perception's
-``walls_m``: a compartment's walls hold what stands in it); ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
+``walls_m``: a compartment's or an open drawer's walls hold what stands in it); ``unchanged``: moved <= tol - 2 sigma; ``lifted``:
 rose >= min_height + 2 sigma), ``unsatisfied`` only when it fails by more than 2 sigma,
 and ``unknown`` in between (at 2 sigma a Gaussian error crosses the boundary with
 probability <= 2.3 %, one-sided). ``on`` and ``inside`` with a container (a perceived
@@ -442,7 +442,7 @@ def _eval_on(c, initial, terminal, refs):
     down_in = (deep and bottom < top - REST_TOL_M - m and dx <= sx - short - m and dy <= sy - short - m
                and held is False)
     flat = 2.0 * s["size"][2] <= DISH_DEPTH_M
-    # a floor between walls (a caddy's compartment, perception's ``walls_m``): the walls hold
+    # a floor between walls (a caddy's compartment, an open drawer: perception's ``walls_m``): the walls hold
     # what stands on it (a book upright in a slot 5.8 cm wide), nothing leans off it on a rim
     walled = _attr(s, "walls_m", 0.0) > 0.0
     reach = (DISH_CENTRE_M if in_dish else (max(DISH_CENTRE_M, min(sx, sy) - max(o["size"][:2])) if flat else math.inf)

@@ -1345,8 +1345,9 @@ class Perceiver:
         """One ``kind: articulation`` entity per drawer of ``look`` whose handle was read in this
         observation (module docstring): its box the floor of the drawer out of the body, its top
         the floor's surface (``attributes.support`` true: a place to set things into, "put the bowl
-        in the top drawer"; turned with the drawer, its x axis the floor's longer side), where the
-        drawer stands :data:`DRAWER_OPEN_SUPPORT_M` or more out; else the handle where it stands.
+        in the top drawer"; turned with the drawer, its x axis the floor's longer side; ``walls_m``
+        how far its walls rise over the floor), where the drawer stands
+        :data:`DRAWER_OPEN_SUPPORT_M` or more out; else the handle where it stands.
         ``attributes`` the
         slide (``joint_type``, ``axis`` (3,) world unit opening direction, ``range_m`` [lo, hi],
         ``joint_position`` m out of shut, ``joint_position_std_m``) and the handle as its
@@ -1407,7 +1408,8 @@ class Perceiver:
                 mid, box_half, box_yaw = self._drawer_floor(drawer, s, opening, exposed=True,
                                                             above_m=self._face_above(look, drawer, s))
                 box_pos = [float(mid[0]), float(mid[1]), plane.z_at(mid) + float(box_half[2])]
-                attrs["support"] = True
+                # its walls hold what stands on its floor, as a compartment's do (the verifier's ``on``)
+                attrs.update(support=True, walls_m=_r(max(0.0, drawer.top_m - 2.0 * float(box_half[2]))))
             out.append({"name": drawer_entity_name(look.name, drawer.name), "kind": "articulation",
                         "position": _r(box_pos), "quat_wxyz": _r(_quat_yaw(box_yaw), 5), "size": _r(box_half),
                         "attributes": attrs})

@@ -266,6 +266,11 @@ class _Articulate(_Tracking):
         most :attr:`step_size` apart, the last one the motion's end (not ``T0``)."""
         raise NotImplementedError
 
+    def _hand_motion(self, delta: float) -> float:
+        """The hand's motion (the joint's unit and sign) that moves the joint by ``delta`` to
+        ``to_fraction``: ``delta`` itself for a held handle."""
+        return delta
+
     def on_enter(self):
         ctx = self.ctx
         target = ctx.target
@@ -283,6 +288,7 @@ class _Articulate(_Tracking):
                 raise PrimitiveFailure("perception.affordance", f"{self.object!r}: its joint position or travel is not "
                                                                 "known (the joint was not seen), so a motion to a "
                                                                 "fraction of the travel cannot be planned")
+            delta = self._hand_motion(delta)
             if abs(delta) < 1e-3:
                 ctx.trace.record("articulate", leaf=self.name, object=self.object, **{key: 0.0},
                                  joint_position=attrs.get("joint_position"), waypoints=0)
@@ -448,7 +454,6 @@ class ArticulateSlide(_Articulate):
         axis = _unit(attrs["axis"])
         if self._push is not None:  # on past the shut end, into the stop
             delta -= self.push_to_stop_m
-        delta += math.copysign(self.lead_m, delta)  # the gap the hand closes before the drawer moves
         n = max(1, int(math.ceil(abs(delta) / self.step_size)))
         out = []
         for k in range(1, n + 1):
@@ -456,6 +461,18 @@ class ArticulateSlide(_Articulate):
             Tk[:3, 3] += axis * (delta * k / n)
             out.append(Tk)
         return out
+
+    def _hand_motion(self, delta: float) -> float:
+        """With ``lead_m`` (closed fingers against one face of the drawer): the hand goes the lead
+        further; sent to an end of the travel (``to_fraction`` 0 or 1) it moves only towards
+        that end, however far past it the drawer was read (a reading 5 mm beyond the open stop
+        would otherwise send fingers hooked behind the front the wrong way)."""
+        if self.lead_m == 0.0:
+            return delta
+        if self.to_fraction in (0.0, 1.0):
+            end = 1.0 if self.to_fraction == 1.0 else -1.0
+            return end * (max(end * delta, 0.0) + self.lead_m)
+        return delta + math.copysign(self.lead_m, delta)
 
     def on_enter(self):
         self._push = None
@@ -495,11 +512,13 @@ class ArticulateSlide(_Articulate):
         perceiver where the hand let the drawer stand
         (:meth:`~phyagentos.perception.Perceiver.note_drawer_opened`), for a look that cannot
         read the handle. A pull that lost the handle, or a push, tells it nothing; a pull by the
-        closed fingers hooked behind the drawer's front (``lead_m``) tells it the hand's travel
-        less the lead (a lower bound: the fingers began no nearer the front than the lead)."""
+        closed fingers hooked behind the drawer's front (``lead_m``) tells it where it was read
+        plus the hand's travel less the lead, even where that is no further out (a drawer read at
+        its stop: the fingers stay behind the front, so it stands at least where they ended)."""
         assert self._moved_from is not None
         target, perceiver = self.ctx.target, getattr(self.ctx, "perceiver", None)
-        if opening <= self._moved_from[0] or perceiver is None or not hasattr(perceiver, "note_drawer_opened") \
+        if (opening <= self._moved_from[0] and not self.lead_m) or perceiver is None \
+                or not hasattr(perceiver, "note_drawer_opened") \
                 or not capabilities_of(target).has_sensor("proprioception"):
             return
         p = target.proprioception()

@@ -36,11 +36,10 @@ PUSH_LEAN_RAD = 0.8
 
 
 class ComputeDrawerHook(Primitive):
-    """The pose from which the closed fingers slide ``object`` to ``to_fraction`` of its
-    travel without a grasp, and the pose above it.
+    """The pose from which the closed fingers slide ``object`` without a grasp, and the pose
+    above it.
 
-    Pulled out (``to_fraction`` at or beyond where the drawer was read): behind the inside of
-    its front. From the drawer entity as perceived (``kind: articulation``,
+    Pulled out (``pull``): behind the inside of its front. From the drawer entity as perceived (``kind: articulation``,
     ``attributes.support``: its box the floor out of the body, whose edge along the opening
     ``axis`` is the inside of the front): the tool point pointing down :data:`HOOK_CLEAR_M` plus
     the closed fingers' half thickness (:data:`~phyagentos.primitives.door.FINGER_HALF_M`)
@@ -52,25 +51,26 @@ class ComputeDrawerHook(Primitive):
 
     Args:
         object: the drawer (a perceived drawer entity).
-        to_fraction: where the drawer is to go, fraction of its travel ``range_m`` from shut.
+        pull: true to pull it out (behind its front), false to push it in (before its handle).
         approach_height_m: the pose above, m.
 
     Raises:
-        ValueError: ``approach_height_m`` not positive, ``to_fraction`` not in [0, 1].
+        ValueError: ``approach_height_m`` not positive, ``pull`` not a bool.
         PrimitiveFailure: ``perception.not_open`` where a drawer to be pulled offers no floor out
             of its body (shut: nothing to hook behind; pull it by its handle), ``perception.affordance``
             where it is no drawer, ``ik.unreachable`` where the arm reaches neither hand.
     """
 
-    def __init__(self, name: str, *, object: str, to_fraction: float = 1.0, approach_height_m: float = 0.08,
+    def __init__(self, name: str, *, object: str, pull: bool = True, approach_height_m: float = 0.08,
                  snapshot: str = "snapshot"):
         super().__init__(name)
         if not approach_height_m > 0:
             raise ValueError(f"approach_height_m must be > 0, got {approach_height_m!r}")
-        if isinstance(to_fraction, bool) or not isinstance(to_fraction, (int, float)) or not 0.0 <= to_fraction <= 1.0:
-            raise ValueError(f"to_fraction must be a number in [0, 1], got {to_fraction!r}")
+        if not isinstance(pull, bool):
+            raise ValueError(f"pull must be true (behind the front, pulling out) or false (in front of the handle, "
+                             f"pushing in), got {pull!r}")
         self.object, self.approach_height_m, self.snapshot_key = object, float(approach_height_m), snapshot
-        self.to_fraction = float(to_fraction)
+        self.pull = pull
         self.reads(snapshot)
         self.writes("grasp_pose", "pregrasp_pose")
 
@@ -85,9 +85,8 @@ class ComputeDrawerHook(Primitive):
         u = u / np.linalg.norm(u)
         v = np.array([-u[1], u[0]])
         handle = np.asarray(grasp["position"], dtype=float)
-        q, travel = attrs.get("joint_position"), attrs.get("range_m")
-        shutting = (q is not None and travel is not None
-                    and float(travel[0]) + self.to_fraction * (float(travel[1]) - float(travel[0])) < float(q))
+        q = attrs.get("joint_position")
+        shutting = not self.pull
         if shutting:  # in front of the handle's outer face, pushing it in
             face = float(handle[:2] @ u) + float((grasp.get("size") or [0.0, 0.0])[1])
             along = face + FINGER_HALF_M + HOOK_CLEAR_M

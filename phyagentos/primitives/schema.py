@@ -21,6 +21,7 @@ from .affordance import ArticulateHinge, ArticulateSlide, ComputeAffordanceGrasp
 from .contact import ComputePush, GuardedMove, Push
 from .control import Noop
 from .door import ComputeDoorPush, PushDoor
+from .drawer_hook import ComputeDrawerHook
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
 from .game.survival import GameSurvive
 from .game.tasks import GameCollect, GameExplore, GameGoto, GameHunt, GameMake, GameObserve, GamePlace, GameSleep
@@ -166,6 +167,8 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
         "push_to_stop_m": ("float", "m", "with to_fraction 0: push on this far past shut into the drawer's stop; "
                                          "met within the reading's band, the perceiver reads it shut"),
+        "lead_m": ("float", "m", "closed fingers against a face of the drawer, not holding it: the gap the hand "
+                                 "closes first (and, pulled, on against the stop); to an end, only towards it"),
     },
     ToolMove: {
         "offset": ("[dx, dy, dz]", "m", "tcp displacement in the tool frame"),
@@ -282,6 +285,13 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
     ComputeDoorPush: {
         "object": ("str", "", "the fixture whose door is shut (perceived: attributes.door and its hinge)"),
         "approach_height_m": ("float", "m", "the pose written above the push's start"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
+    },
+    ComputeDrawerHook: {
+        "object": ("str", "", "the drawer (perceived: its slide, handle and, pulled, its floor out of the body)"),
+        "pull": ("bool", "", "true: behind the inside of its front, to pull it out; false: before its handle, to "
+                             "push it in"),
+        "approach_height_m": ("float", "m", "the pose written above the fingers' place"),
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
     },
     PushDoor: {

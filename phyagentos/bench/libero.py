@@ -392,7 +392,7 @@ def _planner_steps(language: str, objects: dict[str, str],
             if not any(a in ("open", "hook_open") and d == drawer for a, _, d in steps):
                 # pulled to its stop first by the inside of its front, as a hand would: a drawer left
                 # part-way out may not take the thing (LIBERO-10 task 3's bottom drawer, 14-15 of its
-                # 16 cm, and an 11 cm bowl); a shut one fails there (say "open" it: by its handle)
+                # 16 cm, and an 11 cm bowl); a shut one is pulled by its handle (hook_drawer's fallback)
                 steps.append(("hook_open", intent.destinations[0], drawer))
             steps += [("move", obj, drawer) for obj in intent.movers()]
             continue

@@ -22,13 +22,12 @@ from py_trees.common import Status
 
 from phyagentos.errors import IKError
 from phyagentos.motion.cartesian import cartesian_path
-from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.retime import retime
 
 from .affordance import _entity
 from .base import Primitive, PrimitiveFailure
 from .execution import _Tracking
-from .motion import execution_limits, ik_options
+from .motion import execution_limits, ik_options, nearer_reachable_hand
 from .observation import save_tracks
 
 __all__ = ["ComputeDoorPush", "PushDoor", "PUSH_RADIUS_FRACTION", "HANDLE_CLEAR_M", "BELOW_TOP_M", "START_MARGIN_RAD",
@@ -130,31 +129,15 @@ class ComputeDoorPush(Primitive):
         shut_yaw = float(door["shut_yaw_rad"])
         start = _contact_xy(hinge, door, _door_yaw(door, o0), radius, face + FINGER_HALF_M + START_CLEAR_M)
         end = _contact_xy(hinge, door, shut_yaw, radius, face + FINGER_HALF_M - PRESS_M)
-        target = self.ctx.target
-        names, frame = tuple(target.arm_joint_names), target.tcp_site
-        wrist = target.tcp_pose()[:3, :3]
-        best = None
-        for sign in (1.0, -1.0):
-            y = sign * np.array([math.cos(shut_yaw), math.sin(shut_yaw), 0.0])
-            zax = np.array([0.0, 0.0, -1.0])
-            R = np.column_stack([np.cross(y, zax), y, zax])
-            S, E = np.eye(4), np.eye(4)
-            S[:3, :3] = E[:3, :3] = R
-            S[:3, 3], E[:3, 3] = [start[0], start[1], z], [end[0], end[1], z]
-            try:
-                with self.ctx.profiler.section("ik"):
-                    for T in (S, E):
-                        solve_ik(target.model, q_seed=target.arm_qpos(), target=T, arm_joint_names=names, frame=frame)
-            except IKError:
-                continue
-            turn = float(np.arccos(np.clip((np.trace(wrist.T @ R) - 1.0) / 2.0, -1.0, 1.0)))
-            if best is None or turn < best[0]:
-                best = (turn, S)
+        closing = np.array([math.cos(shut_yaw), math.sin(shut_yaw), 0.0])
+        ends = [np.array([start[0], start[1], z]), np.array([end[0], end[1], z])]
+        best = nearer_reachable_hand(self.ctx, closing, np.array([0.0, 0.0, -1.0]), ends)
         if best is None:
             raise PrimitiveFailure("ik.unreachable", f"{self.object!r}: the arm reaches neither hand along the push "
                                                      f"that shuts its door (from {np.round(start, 3).tolist()} to "
                                                      f"{np.round(end, 3).tolist()} m at z {z:.3f} m)")
-        S = best[1]
+        S = np.eye(4)
+        S[:3, :3], S[:3, 3] = best[1], ends[0]
         P = S.copy()
         P[2, 3] += self.approach_height_m
         self.set("grasp_pose", S)

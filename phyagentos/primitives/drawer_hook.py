@@ -15,12 +15,10 @@ from __future__ import annotations
 import numpy as np
 from py_trees.common import Status
 
-from phyagentos.errors import IKError
-from phyagentos.motion.ik import solve_ik
-
 from .affordance import _entity
 from .base import Primitive, PrimitiveFailure
 from .door import FINGER_HALF_M
+from .motion import nearer_reachable_hand
 
 __all__ = ["ComputeDrawerHook", "HOOK_CLEAR_M", "PUSH_LEAN_RAD"]
 
@@ -101,31 +99,18 @@ class ComputeDrawerHook(Primitive):
             front = float(centre @ u + np.abs(R_box.T @ u) @ np.asarray(ent["size"], dtype=float)[:2])
             along = front - FINGER_HALF_M - HOOK_CLEAR_M
         xy = u * along + v * float(handle[:2] @ v)
-        target = self.ctx.target
-        names, frame = tuple(target.arm_joint_names), target.tcp_site
-        wrist = target.tcp_pose()[:3, :3]
-        best = None
         # pushed in, the fingers point in and down so the hand stays clear of what stands over the
         # handle (the drawer above's handle, 6 cm over it when shut)
         lean = PUSH_LEAN_RAD if shutting else 0.0
-        for sign in (1.0, -1.0):
-            closing = sign * np.array([v[0], v[1], 0.0])
-            down = np.array([-u[0] * np.sin(lean), -u[1] * np.sin(lean), -np.cos(lean)])
-            T = np.eye(4)
-            T[:3, :3] = np.column_stack([np.cross(closing, down), closing, down])
-            T[:3, 3] = [xy[0], xy[1], handle[2]]
-            try:
-                with self.ctx.profiler.section("ik"):
-                    solve_ik(target.model, q_seed=target.arm_qpos(), target=T, arm_joint_names=names, frame=frame)
-            except IKError:
-                continue
-            turn = float(np.arccos(np.clip((np.trace(wrist.T @ T[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
-            if best is None or turn < best[0]:
-                best = (turn, T)
+        pointing = np.array([-u[0] * np.sin(lean), -u[1] * np.sin(lean), -np.cos(lean)])
+        point = np.array([xy[0], xy[1], handle[2]])
+        best = nearer_reachable_hand(self.ctx, np.array([v[0], v[1], 0.0]), pointing, [point])
         if best is None:
-            raise PrimitiveFailure("ik.unreachable", f"{self.object!r}: the arm reaches no hand behind its front at "
-                                                     f"{np.round([xy[0], xy[1], handle[2]], 3).tolist()} m")
-        T = best[1]
+            raise PrimitiveFailure("ik.unreachable", f"{self.object!r}: the arm reaches no hand "
+                                                     f"{'before its handle' if shutting else 'behind its front'} at "
+                                                     f"{np.round(point, 3).tolist()} m")
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = best[1], point
         P = T.copy()
         P[2, 3] += self.approach_height_m
         self.set("grasp_pose", T)

@@ -22,7 +22,7 @@ from .base import Primitive
 
 __all__ = ["ReadyConfiguration", "SolveIK", "clear_ik", "SWIVEL_SEEDS_RAD",
            "PlanPath", "RetimePath", "session_checker", "held_object", "execution_limits", "ik_options",
-           "PLANNING_MARGIN_M", "MAX_TRACED_WAYPOINTS", "traced_path", "start_contact_kind"]
+           "PLANNING_MARGIN_M", "MAX_TRACED_WAYPOINTS", "traced_path", "start_contact_kind", "nearer_reachable_hand"]
 
 
 def held_object(target) -> str | None:
@@ -42,6 +42,34 @@ PLANNING_MARGIN_M = 0.01
 
 #: Most waypoints of a planned path kept in the trace (``plan`` ``path_rad``).
 MAX_TRACED_WAYPOINTS = 64
+
+
+def nearer_reachable_hand(ctx, closing: np.ndarray, pointing: np.ndarray,
+                          points: list[np.ndarray]) -> tuple[float, np.ndarray] | None:
+    """Of the two hands whose tool z axis is ``pointing`` (3,) world unit and whose fingers close
+    along ``closing`` or its opposite (3,) world unit, at right angles to it, the one the arm
+    reaches (IK from the current joints, no collision check) at every point of ``points``
+    ((3,) world m, tool point), nearer the current wrist: ``(turn rad from the current hand,
+    (3, 3) world rotation)``; ``None`` where the arm reaches neither."""
+    target = ctx.target
+    names, frame = tuple(target.arm_joint_names), target.tcp_site
+    wrist = target.tcp_pose()[:3, :3]
+    best = None
+    for sign in (1.0, -1.0):
+        y = sign * np.asarray(closing, dtype=float)
+        R = np.column_stack([np.cross(y, pointing), y, np.asarray(pointing, dtype=float)])
+        try:
+            with ctx.profiler.section("ik"):
+                for p in points:
+                    T = np.eye(4)
+                    T[:3, :3], T[:3, 3] = R, p
+                    solve_ik(target.model, q_seed=target.arm_qpos(), target=T, arm_joint_names=names, frame=frame)
+        except IKError:
+            continue
+        turn = float(np.arccos(np.clip((np.trace(wrist.T @ R) - 1.0) / 2.0, -1.0, 1.0)))
+        if best is None or turn < best[0]:
+            best = (turn, R)
+    return best
 
 
 def traced_path(path: np.ndarray) -> list[list[float]]:

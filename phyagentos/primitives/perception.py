@@ -939,9 +939,9 @@ class ComputePlace(Primitive):
         """Raise unless the articulated ``region`` (a drawer) offers a floor (``attributes.support``:
         open far enough that its floor stands out of the body) whose footprint (``T_region`` (4, 4)
         world pose, ``region_half`` (3,) m) takes the object's (``T_obj`` (4, 4), ``half`` (3,) m;
-        as it is held now, about z; a ``shape: cylinder`` its larger horizontal half extent every
-        way, a bowl's rim being round whatever yaw its box was given) with :data:`INTO_MARGIN_M`
-        to spare each side.
+        as it is held now, about z; an upright ``shape: cylinder`` its larger horizontal half
+        extent every way, a bowl's rim being round whatever yaw its box was given) with
+        :data:`INTO_MARGIN_M` to spare each side.
 
         Raises:
             PrimitiveFailure: ``perception.not_open`` (no floor out of the body), ``perception.too_small``.
@@ -951,7 +951,8 @@ class ComputePlace(Primitive):
             raise PrimitiveFailure("perception.not_open", f"{self.region!r} offers no floor to set {self.object!r} on "
                                    f"(open {attrs.get('joint_position', '?')} m: a drawer must stand out of its body)")
         obj = next((e for e in self.get(self.snapshot_key).get("entities", []) if e["name"] == self.object), {})
-        if (obj.get("attributes") or {}).get("shape") == "cylinder":  # upright and round: its radius every way
+        if (obj.get("attributes") or {}).get("shape") == "cylinder" and abs(float(T_obj[2, 2])) > 0.9:
+            # upright and round: its radius every way
             need = np.full(2, float(max(half[0], half[1]))) + INTO_MARGIN_M
         else:
             need = np.abs(T_region[:3, :3].T @ T_obj[:3, :3])[:2] @ np.asarray(half, dtype=float) + INTO_MARGIN_M

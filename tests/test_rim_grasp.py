@@ -16,7 +16,15 @@ import numpy as np
 import pytest
 
 from phyagentos.errors import IKError
-from phyagentos.motion.grasp import FINGERTIP_BELOW_TCP_M, PAD_DEPTH_ABOVE_TCP_M, GraspPlan, hand_yaw, slide_offsets
+from phyagentos.motion.grasp import (
+    FINGERTIP_BELOW_TCP_M,
+    PAD_DEPTH_ABOVE_TCP_M,
+    GraspPlan,
+    hand_yaw,
+    slide_offsets,
+    top_down_rotation,
+    turn_offsets,
+)
 from phyagentos.motion.rim_grasp import (
     DEFAULT_HANDLED_WALL_M,
     DEFAULT_RIM_WALL_M,
@@ -274,9 +282,10 @@ def test_an_across_grasp_the_arm_cannot_reach_clear_gives_way_to_the_next_candid
     board, records = _run_compute_grasp(franka, ent)
     refused = records[0]["candidates_refused"]
     # 2 candidates x 2 heights centred, then slid 1.5 cm either way along the 6 cm side (2.5 cm would take
-    # a pad off the box)
-    assert "candidate_used" not in records[0] and len(refused) == 4 + 8
+    # a pad off the box), then turned 15 and 30 degrees either way (the 4 x 6 cm box still fits the stroke)
+    assert "candidate_used" not in records[0] and len(refused) == 4 + 8 + 16
     assert sum(" slid +1.5 cm " in r for r in refused) == 4 and not any("2.5 cm" in r for r in refused)
+    assert sum(" turned -30 deg " in r for r in refused) == 4
     assert not np.allclose(board["grasp_pose"], first)  # candidate 0 again, as asked
     monkeypatch.undo()
     _, records = _run_compute_grasp(franka, ent)  # nothing in the way in the default scene
@@ -308,6 +317,41 @@ def test_when_no_centred_grasp_is_clear_the_grasp_slides_along_the_side_it_holds
     assert records[0]["slid_m"] == pytest.approx(-0.025)
     # a box too short for the pads to slide on is never slid
     assert slide_offsets(GraspPlan(G, G, 0.0, 0.04), np.eye(4), (0.012, 0.012, 0.02)) == ()
+
+
+def test_when_neither_a_centred_nor_a_slid_grasp_is_clear_the_hand_turns_while_the_box_still_fits(
+        franka, monkeypatch):
+    """A basket beside a butter box along the closing direction meets the 20 cm hand whether the
+    grasp is centred or slid along the box (LIBERO-10 task 1, generated scene 506): turned about
+    the vertical the hand's end swings away while the box still fits the fingers' stroke; a
+    re-computed grasp keeps the turn; a box that would not fit turned is never turned."""
+    import phyagentos.primitives.perception as perception
+
+    ent = _entity("butter_1", "butter", "box", (0.0393, 0.0207, 0.0151))
+    centred = _run_compute_grasp(franka, ent)[0]["grasp_pose"].copy()
+
+    def unusable(ctx, obj, plan):  # clear only with the hand turned 25 degrees or more
+        turn = abs((hand_yaw(plan.grasp) - hand_yaw(centred) + np.pi / 2) % np.pi - np.pi / 2)
+        return None if turn > np.radians(25) else "pre-grasp collides: basket_1_main-gripper0_right_gripper"
+
+    monkeypatch.setattr(perception, "_unusable", unusable)
+    board, records = _run_compute_grasp(franka, ent)
+    [rec] = records
+    assert abs(rec["turned_rad"]) == pytest.approx(np.radians(30), abs=1e-3)
+    G = board["grasp_pose"]
+    np.testing.assert_allclose(G[:3, 3], centred[:3, 3], atol=1e-9)  # about the same tool point
+    assert abs(abs(hand_yaw(G) - hand_yaw(centred)) % np.pi - np.radians(30)) < 1e-6
+    across = 2 * (0.0207 * np.cos(np.radians(30)) + 0.0393 * np.sin(np.radians(30)))
+    assert franka.runtime_notes["planned_grasp"]["width_m"] == pytest.approx(across, abs=1e-4)
+    # re-observed from that pre-grasp: the refinement keeps the turn
+    board, records = _run_compute_grasp(franka, ent, board=board)
+    assert abs(records[0]["turned_rad"]) == pytest.approx(np.radians(30), abs=1e-3)
+    # a box whose turned width passes the stroke (8 cm less 4 mm) is never turned
+    across_y = np.eye(4)
+    across_y[:3, :3] = top_down_rotation(0.0)  # the fingers close along the box's y axis
+    wide = GraspPlan(across_y, across_y, 0.0, 0.07)
+    assert turn_offsets(wide, np.eye(4), (0.05, 0.035, 0.02)) == ()  # 7 cm across, 9.4 cm turned 15 degrees
+    assert len(turn_offsets(wide, np.eye(4), (0.0393, 0.0207, 0.02))) == 4  # 4.1 cm across, 7.5 cm turned 30
 
 
 def test_ik_whose_solution_collides_tries_the_ready_configuration_and_a_swung_elbow(franka, monkeypatch):

@@ -31,6 +31,9 @@ __all__ = [
     "slid_grasp",
     "slide_offsets",
     "OFF_CENTRE_STEPS_M",
+    "turned_grasp",
+    "turn_offsets",
+    "TURN_STEPS_RAD",
     "PAD_HALF_WIDTH_M",
     "place_pose",
     "top_down_rotation",
@@ -57,6 +60,11 @@ PAD_HALF_WIDTH_M = 0.008
 #: this order, when no centred grasp is clear of the scene (a neighbour standing beside the
 #: box along the closing direction meets the hand, not the box).
 OFF_CENTRE_STEPS_M = (0.015, 0.025)
+#: How far (rad) an across grasp of a box may turn about the vertical, in this order, when
+#: neither a centred nor a slid grasp is clear of the scene (the Panda hand, 20 cm along the
+#: closing direction, meets a basket standing beside a butter box that way; turned, its end
+#: swings away while the fingers still take the box, which turns to them as they close).
+TURN_STEPS_RAD = (math.radians(15.0), math.radians(30.0))
 #: Franka joint 7 range, rad.
 JOINT7_RANGE_RAD = (-2.8973, 2.8973)
 
@@ -239,6 +247,47 @@ def slid_grasp(plan: GraspPlan, offset_m: float) -> GraspPlan:
     G.setflags(write=False)
     P.setflags(write=False)
     return GraspPlan(grasp=G, pregrasp=P, yaw_rad=plan.yaw_rad, width_m=plan.width_m)
+
+
+def _across(T_object: np.ndarray, half_extents: Sequence[float], closing: np.ndarray) -> float:
+    """The box's extent (m) along the unit ``closing`` (3,) world direction."""
+    R = np.asarray(T_object, dtype=float)[:3, :3]
+    return float(2.0 * np.abs(R.T @ closing) @ np.asarray(half_extents, dtype=float))
+
+
+def _turn(T: np.ndarray, angle_rad: float) -> np.ndarray:
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    out = np.array(T, dtype=float)
+    out[:3, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ out[:3, :3]
+    out.setflags(write=False)
+    return out
+
+
+def turn_offsets(plan: GraspPlan, T_object: np.ndarray, half_extents: Sequence[float], *,
+                 steps_rad: Sequence[float] = TURN_STEPS_RAD,
+                 max_width_m: float = DEFAULT_MAX_GRASP_WIDTH_M) -> tuple[float, ...]:
+    """The turns (rad about world z, signed, in the order ``+s, -s`` per step of ``steps_rad``)
+    of ``plan`` at which the box (``T_object`` (4, 4) world pose, ``half_extents`` (3,) m) still
+    fits between the fingers: its extent along the turned closing direction (the hand's y axis)
+    at most ``max_width_m`` less the 4 mm of clearance :func:`top_down_grasp_candidates` keeps."""
+    out = []
+    for step in steps_rad:
+        for angle in (step, -step):
+            y = _turn(plan.grasp, angle)[:3, 1]
+            if 0.0 < step and _across(T_object, half_extents, y) <= max_width_m - 0.004:
+                out.append(angle)
+    return tuple(out)
+
+
+def turned_grasp(plan: GraspPlan, angle_rad: float, T_object: np.ndarray,
+                 half_extents: Sequence[float]) -> GraspPlan:
+    """``plan`` turned ``angle_rad`` (rad) about the vertical through its tool point, its
+    pre-grasp with it; its width (m) the box's extent (``T_object`` (4, 4) world pose,
+    ``half_extents`` (3,) m) along the turned closing direction."""
+    G = _turn(plan.grasp, angle_rad)
+    P = _turn(plan.pregrasp, angle_rad)
+    return GraspPlan(grasp=G, pregrasp=P, yaw_rad=float(plan.yaw_rad + angle_rad),
+                     width_m=_across(T_object, half_extents, G[:3, 1]))
 
 
 def top_down_grasp(

@@ -6,6 +6,7 @@ simulator's ground truth, so perception error shows up as it would on hardware.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import Sequence
 
@@ -22,6 +23,8 @@ from phyagentos.motion.grasp import (
     slide_offsets,
     top_down_grasp_candidates,
     top_down_rotation,
+    turn_offsets,
+    turned_grasp,
 )
 from phyagentos.motion.rim_grasp import (
     DEFAULT_HANDLED_WALL_M,
@@ -438,37 +441,49 @@ class ComputeGrasp(Primitive):
             yaw = hand_yaw(previous)
             best = min(range(len(plans)), key=lambda k: abs(_wrap_rad(hand_yaw(plans[k].grasp) - yaw)))
             plan = plans[best]
-            slid = 0.0
+            slid = turn = 0.0
             if shape == "box":  # the slide of the pre-grasp the arm went to, while both pads stay on the box
                 along = float(np.dot(previous[:3, 3] - plan.pregrasp[:3, 3], plan.grasp[:3, 0]))
                 fits = [o for o in slide_offsets(plan, T_obj, half, steps_m=(abs(along),)) if o * along > 0]
                 slid = fits[0] if abs(along) > 0.002 and fits else 0.0
                 plan = slid_grasp(plan, slid) if slid else plan
+                # ... and its turn, while the box still fits between the fingers
+                off = _wrap_rad(yaw - hand_yaw(plan.grasp))
+                turns = turn_offsets(plan, T_obj, half, steps_rad=(abs(off),), max_width_m=max_width)
+                turn = off if abs(off) > math.radians(1.0) and turns else 0.0
+                plan = turned_grasp(plan, turn, T_obj, half) if turn else plan
             plan, raised, _ = self._clear_of_support(plan, T_obj, half)  # as high as the first plan's, if need be
             used = {"candidate_used": best} if best != self.candidate % len(plans) else {}
             return plan, {**used, **({"raised_m": raised} if raised else {}),
-                          **({"slid_m": round(slid, 4)} if slid else {})}
+                          **({"slid_m": round(slid, 4)} if slid else {}),
+                          **({"turned_rad": round(turn, 3)} if turn else {})}
         refused = []
         first = None
         heights = (self.approach_height_m, self.approach_height_m + HIGHER_APPROACH_M)
-        for slide in ((False, True) if shape == "box" else (False,)):
+        for mode in (("centred", "slid", "turned") if shape == "box" else ("centred",)):
             for height in heights:
                 plans = top_down_grasp_candidates(T_obj, half, approach_height_m=height, shape=shape,
                                                   max_width_m=max_width, fingers_m=self._fingers)
                 first = first or plans[self.candidate % len(plans)]
                 for k in range(len(plans)):
                     i = (self.candidate + k) % len(plans)
-                    for offset in (slide_offsets(plans[i], T_obj, half) if slide else (0.0,)):
-                        plan, raised, why = self._clear_of_support(slid_grasp(plans[i], offset) if offset else plans[i],
-                                                                   T_obj, half)
+                    variants = ([(0.0, 0.0)] if mode == "centred"
+                                else [(o, 0.0) for o in slide_offsets(plans[i], T_obj, half)] if mode == "slid"
+                                else [(0.0, a) for a in turn_offsets(plans[i], T_obj, half, max_width_m=max_width)])
+                    for offset, turn in variants:
+                        base = slid_grasp(plans[i], offset) if offset else plans[i]
+                        plan, raised, why = self._clear_of_support(
+                            turned_grasp(base, turn, T_obj, half) if turn else base, T_obj, half)
                         if why is None:
                             used = {"candidates_refused": refused, "candidate_used": i,
                                     "approach_height_m": round(height, 3)}
                             used = {**(used if refused else {}), **({"raised_m": raised} if raised else {}),
-                                    **({"slid_m": round(offset, 4)} if offset else {})}
+                                    **({"slid_m": round(offset, 4)} if offset else {}),
+                                    **({"turned_rad": round(turn, 3)} if turn else {})}
                             return plan, used
-                        slid_by = f" slid {offset * 100:+.1f} cm" if offset else ""
-                        refused.append(f"candidate {i}{slid_by} from {height:.2f} m: {why}")
+                        how = (f" slid {offset * 100:+.1f} cm" if offset else "") + (
+                            f" turned {math.degrees(turn):+.0f} deg" if turn else "")
+                        refused.append(f"candidate {i}{how} from {height:.2f} m: {why}")
         return first, {"candidates_refused": refused}
 
     def _top_knob_plan(self, attrs: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float):

@@ -125,14 +125,15 @@ def test_an_open_drawer_is_a_floor_to_set_things_in_and_the_bowl_in_it_rests_on_
     assert attrs["support"] is True and attrs["source"] == "perceived" and attrs["joint_position"] > 0.1
     top = drawer["position"][2] + drawer["size"][2] - meta["table_z"]
     assert top == pytest.approx(0.164, abs=0.01)
-    # turned with the cabinet: its long side across the opening axis, the handle 3.7 cm past its front
+    # turned with the cabinet: its long side across the opening axis, the handle's centre 3.0 cm past the
+    # floor's front, the inside of the drawer's front (the model: 2.95 cm; 3.7 cm before the twenty-eighth pass)
     axis = np.asarray(attrs["axis"][:2])
     w, _, _, z = drawer["quat_wxyz"]
     long_side = np.array([np.cos(2 * np.arctan2(z, w)), np.sin(2 * np.arctan2(z, w))])
     assert abs(long_side @ axis) < 0.01
     half_along = drawer["size"][1]
     handle = (np.asarray(attrs["grasp"]["position"][:2]) - drawer["position"][:2]) @ axis
-    assert handle - half_along == pytest.approx(0.037, abs=0.005)
+    assert handle - half_along == pytest.approx(0.030, abs=0.005)
     (on,) = parse_criteria([{"on": {"object": "akita_black_bowl_1", "support": "wooden_cabinet_1_top_drawer"}}])
     judged = evaluate(on, snap, snap)
     assert judged.status == "satisfied", judged.reason

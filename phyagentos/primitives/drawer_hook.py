@@ -7,7 +7,11 @@ pointing down, go into the drawer just behind its front and the hand moves out a
 drawer's axis (:class:`~phyagentos.primitives.affordance.ArticulateSlide` with ``lead_m``:
 the fingers travel the gap to the front before the drawer moves).
 
-:class:`ComputeDrawerHook` writes the pose behind the front and the pose above it.
+It is pushed home the same way, without a grasp: the closed fingers, leaning in, before its
+handle's outer face (skill ``push_drawer``).
+
+:class:`ComputeDrawerHook` writes the pose behind the front (or before the handle) and the pose
+above it.
 """
 
 from __future__ import annotations

@@ -210,6 +210,12 @@ CLOSE_PUSH_M, CLOSED_MIN_M, CLOSED_MAX_M = 0.02, -0.01, 0.005
 DOOR_CLOSED_MIN_RAD, DOOR_CLOSED_MAX_RAD = -0.02, 0.02
 
 
+#: The skill of each drawer step of a LIBERO plan: by the handle, or (a drawer this plan pulls by
+#: its front, its handle too low for the open hand) by the closed fingers.
+_DRAWER_SKILLS = {"open": "slide_drawer", "close": "slide_drawer", "hook_open": "hook_drawer",
+                  "push_close": "push_drawer"}
+
+
 def _nodes(steps: list[tuple[str, str, str | None]],
            skill_params: Mapping[str, Mapping[str, Any]] | None = None, *,
            fixtures: Collection[str] = ()) -> list[dict[str, Any]]:
@@ -240,30 +246,16 @@ def _nodes(steps: list[tuple[str, str, str | None]],
                           "accept": [{"articulated": {"object": obj, "min_fraction": TURNED_ON_MIN_FRACTION}}],
                           "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
             continue
-        if action in ("open", "close"):
+        if action in _DRAWER_SKILLS:  # a drawer slid open or pushed home: by its handle, or by the fingers
             assert dest is not None
-            opening = action == "open"
+            opening = action in ("open", "hook_open")
+            skill = _DRAWER_SKILLS[action]
             accept = ({"min_fraction": OPENED_MIN_FRACTION} if opening else {"min": CLOSED_MIN_M, "max": CLOSED_MAX_M})
-            nodes.append({"id": f"{action}_{dest}", "skill": "slide_drawer",
-                          "params": {**fixed.get("slide_drawer", {}), "object": dest,
+            nodes.append({"id": f"{'open' if opening else 'close'}_{dest}", "skill": skill,
+                          "params": {**fixed.get(skill, {}), "object": dest,
                                      **({"to_fraction": OPEN_FRACTION} if opening
                                         else {"to_fraction": CLOSE_FRACTION, "push_to_stop_m": CLOSE_PUSH_M})},
                           "accept": [{"articulated": {"object": dest, **accept}}],
-                          "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
-            continue
-        if action == "hook_open":
-            assert dest is not None
-            nodes.append({"id": f"open_{dest}", "skill": "hook_drawer",
-                          "params": {**fixed.get("hook_drawer", {}), "object": dest, "to_fraction": OPEN_FRACTION},
-                          "accept": [{"articulated": {"object": dest, "min_fraction": OPENED_MIN_FRACTION}}],
-                          "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
-            continue
-        if action == "push_close":
-            assert dest is not None
-            nodes.append({"id": f"close_{dest}", "skill": "push_drawer",
-                          "params": {**fixed.get("push_drawer", {}), "object": dest, "to_fraction": CLOSE_FRACTION,
-                                     "push_to_stop_m": CLOSE_PUSH_M},
-                          "accept": [{"articulated": {"object": dest, "min": CLOSED_MIN_M, "max": CLOSED_MAX_M}}],
                           "depends_on": after, "limits": {"execution_timeout_s": _NODE_TIMEOUT_S}})
             continue
         if action == "move_inside":

@@ -270,13 +270,8 @@ def turn_offsets(plan: GraspPlan, T_object: np.ndarray, half_extents: Sequence[f
     of ``plan`` at which the box (``T_object`` (4, 4) world pose, ``half_extents`` (3,) m) still
     fits between the fingers: its extent along the turned closing direction (the hand's y axis)
     at most ``max_width_m`` less the 4 mm of clearance :func:`top_down_grasp_candidates` keeps."""
-    out = []
-    for step in steps_rad:
-        for angle in (step, -step):
-            y = _turn(plan.grasp, angle)[:3, 1]
-            if 0.0 < step and _across(T_object, half_extents, y) <= max_width_m - 0.004:
-                out.append(angle)
-    return tuple(out)
+    return tuple(angle for step in steps_rad if step > 0.0 for angle in (step, -step)
+                 if _across(T_object, half_extents, _turn(plan.grasp, angle)[:3, 1]) <= max_width_m - 0.004)
 
 
 def turned_grasp(plan: GraspPlan, angle_rad: float, T_object: np.ndarray,

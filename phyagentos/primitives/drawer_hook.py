@@ -23,6 +23,7 @@ from .affordance import _entity
 from .base import Primitive, PrimitiveFailure
 from .door import FINGER_HALF_M
 from .motion import nearer_reachable_hand
+from .perception import entity_pose
 
 __all__ = ["ComputeDrawerHook", "HOOK_CLEAR_M", "PUSH_LEAN_RAD"]
 
@@ -77,7 +78,8 @@ class ComputeDrawerHook(Primitive):
         self.writes("grasp_pose", "pregrasp_pose")
 
     def step(self):
-        ent = _entity(self.get(self.snapshot_key), self.object)
+        snapshot = self.get(self.snapshot_key)
+        ent = _entity(snapshot, self.object)
         attrs = ent.get("attributes") or {}
         grasp = attrs.get("grasp") or {}
         if attrs.get("joint_type") != "slide" or attrs.get("axis") is None or grasp.get("position") is None:
@@ -96,11 +98,8 @@ class ComputeDrawerHook(Primitive):
             if not attrs.get("support"):
                 raise PrimitiveFailure("perception.not_open", f"{self.object!r} stands out {q} m: no floor out of its "
                                                               f"body to hook the fingers behind its front")
-            w, x, y, z = (float(c) for c in ent["quat_wxyz"])
-            R_box = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z)],
-                              [2 * (x * y + w * z), 1 - 2 * (x * x + z * z)]])
-            centre = np.asarray(ent["position"], dtype=float)[:2]
-            front = float(centre @ u + np.abs(R_box.T @ u) @ np.asarray(ent["size"], dtype=float)[:2])
+            T_box, half = entity_pose(snapshot, self.object)
+            front = float(T_box[:2, 3] @ u + np.abs(T_box[:2, :2].T @ u) @ half[:2])
             along = front - FINGER_HALF_M - HOOK_CLEAR_M
         xy = u * along + v * float(handle[:2] @ v)
         # pushed in, the fingers point in and down so the hand stays clear of what stands over the

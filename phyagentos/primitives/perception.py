@@ -858,7 +858,8 @@ class ComputePlace(Primitive):
         yaws = place_yaws(hand_yaw(self.ctx.target.tcp_pose()))
         approach = self.approach_height_m
         if kind == "articulation":  # into a drawer: onto its floor out of the body, which must take the object
-            self._check_into(ent, T_region, region_half, T_obj, half)
+            held = next((e for e in snapshot.get("entities", []) if e["name"] == self.object), {})
+            self._check_into(ent, T_region, region_half, T_obj, half, held=held)
         if compartment:  # among walls: turned to fit between them, let down from above their top
             yaws = self._fitting_yaws(yaws, T_region, region_half, T_tcp_obj, half)
             # the held object's bottom over the walls' top, though it may hang up to its half height
@@ -950,10 +951,11 @@ class ComputePlace(Primitive):
         return first + rest
 
     def _check_into(self, ent: dict, T_region: np.ndarray, region_half: np.ndarray, T_obj: np.ndarray,
-                    half: np.ndarray) -> None:
+                    half: np.ndarray, *, held: dict) -> None:
         """Raise unless the articulated ``region`` (a drawer) offers a floor (``attributes.support``:
         open far enough that its floor stands out of the body) whose footprint (``T_region`` (4, 4)
-        world pose, ``region_half`` (3,) m) takes the object's (``T_obj`` (4, 4), ``half`` (3,) m;
+        world pose, ``region_half`` (3,) m) takes the object's (``T_obj`` (4, 4), ``half`` (3,) m,
+        ``held`` its entity;
         as it is held now, about z; an upright ``shape: cylinder`` its larger horizontal half
         extent every way, a bowl's rim being round whatever yaw its box was given) with
         :data:`INTO_MARGIN_M` to spare each side.
@@ -965,8 +967,7 @@ class ComputePlace(Primitive):
         if not attrs.get("support"):
             raise PrimitiveFailure("perception.not_open", f"{self.region!r} offers no floor to set {self.object!r} on "
                                    f"(open {attrs.get('joint_position', '?')} m: a drawer must stand out of its body)")
-        obj = next((e for e in self.get(self.snapshot_key).get("entities", []) if e["name"] == self.object), {})
-        if (obj.get("attributes") or {}).get("shape") == "cylinder" and abs(float(T_obj[2, 2])) > 0.9:
+        if (held.get("attributes") or {}).get("shape") == "cylinder" and abs(float(T_obj[2, 2])) > 0.9:
             # upright and round: its radius every way
             need = np.full(2, float(max(half[0], half[1]))) + INTO_MARGIN_M
         else:

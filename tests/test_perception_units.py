@@ -337,6 +337,25 @@ def test_a_track_is_remembered_only_where_something_nearer_hides_it_and_no_camer
     assert _occluded_in(t, [away]) == ()  # out of every view: nothing to go on
 
 
+def test_a_track_cut_off_by_the_frames_border_is_remembered_where_what_shows_of_it_is_its_own_surface():
+    from phyagentos.perception.perceiver import _occluded_in
+    from phyagentos.perception.tracks import Track
+
+    # a 10 cm cube 1 m ahead, the camera shifted so that its centre projects just past the
+    # frame's right border (u = 2 cx - 0.03 px): its left spots in the frame, the others out of it
+    t = Track(name="cube", position=np.array([0.0, 0.0, 1.0]), var_xy=1e-6, yaw=0.0, var_yaw=1e-3,
+              half_extents=np.array([0.05, 0.05, 0.05]), shape="box", colour_rgb=np.zeros(3), points=100,
+              confidence=0.9, last_seen_s=0.0, bottom_m=0.0)
+    at_edge = np.eye(4)
+    at_edge[0, 3] = -_intr().cx / _intr().fx * 1.0 + 0.0005
+    face = _frame(T_world_camera=at_edge, depth_m=np.full((48, 64), 0.96, np.float32))   # its own near face
+    behind = _frame(T_world_camera=at_edge, depth_m=np.full((48, 64), 1.5, np.float32))  # seen through: gone
+    assert _occluded_in(t, [face]) == ("overview",)
+    assert _occluded_in(t, [behind]) == ()
+    whole = _frame(depth_m=np.full((48, 64), 0.96, np.float32))  # the same face, all of it in the frame
+    assert _occluded_in(t, [whole]) == ()
+
+
 def _container_points(curve: float, seed: int = 0):
     """Points (N, 2) and heights (N,) of a round container's inside (floor 1 cm up, rising
     ``curve`` m per m^2 of squared radius, 5 cm radius) with an 8.5 x 4.5 cm box lying in it

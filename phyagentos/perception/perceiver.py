@@ -2581,14 +2581,18 @@ def _rest_height(xy: np.ndarray, h: np.ndarray, interior: np.ndarray, face: np.n
 
 
 def _occluded_in(t: Track, frames: Sequence[CameraFrame]) -> tuple[str, ...]:
-    """Cameras in which something nearer hides track ``t``; empty when any camera sees a spot
-    of it free or none hides one. The spots are its centre and four points half way to the
-    sides of its footprint (:data:`OCCLUSION_SPOTS`), at mid height: a plate whose centre is
-    out of the frame is hidden where the mug set on it stands. The ray to a spot enters the
-    object's box (its perceived centre, yaw and half extents) at some depth and leaves it at a
-    larger one: a return more than :data:`OCCLUSION_MARGIN_M` nearer than the entry is
-    something else in the way; one more than that beyond the exit sees the spot free (the
-    object is not there); one in between is a surface of its own."""
+    """Cameras in which something nearer hides track ``t``, or the frame's border cuts it off;
+    empty when any camera sees a spot of it free or none hides one. The spots are its centre
+    and four points half way to the sides of its footprint (:data:`OCCLUSION_SPOTS`), at mid
+    height: a plate whose centre is out of the frame is hidden where the mug set on it stands.
+    The ray to a spot enters the object's box (its perceived centre, yaw and half extents) at
+    some depth and leaves it at a larger one: a return more than :data:`OCCLUSION_MARGIN_M`
+    nearer than the entry is something else in the way; one more than that beyond the exit
+    sees the spot free (the object is not there); one in between is a surface of its own. A
+    camera whose frame holds some spots, each showing a surface of its own, and not others
+    (the border cuts the object off) hides the rest: what it sees is what remains of it there,
+    too little to be told as the object (LIBERO-10 task 4: a mug let go on the plate at the
+    scene camera's edge, seen whole from the wrist above it, then as a cut-off unknown)."""
     p = np.asarray(t.position, float)
     c, s_ = math.cos(t.yaw), math.sin(t.yaw)
     R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])  # object frame in the world
@@ -2600,13 +2604,14 @@ def _occluded_in(t: Track, frames: Sequence[CameraFrame]) -> tuple[str, ...]:
         T_inv = np.linalg.inv(T)
         o = T[:3, 3]
         k = f.intrinsics
-        hides = False
+        hides = cut = own = False
         for spot in spots:
             q = T_inv @ np.append(spot, 1.0)
             if q[2] <= 0.05:
                 continue
             u, v = k.fx * q[0] / q[2] + k.cx, k.fy * q[1] / q[2] + k.cy
             if not (0 <= u <= k.width - 1 and 0 <= v <= k.height - 1):
+                cut = True  # in front of the camera, out of its frame
                 continue
             r0, c0 = int(round(v)), int(round(u))
             win = f.depth_m[max(0, r0 - 1):r0 + 2, max(0, c0 - 1):c0 + 2]
@@ -2628,8 +2633,8 @@ def _occluded_in(t: Track, frames: Sequence[CameraFrame]) -> tuple[str, ...]:
                 hides = True
             elif seen > exit_depth + OCCLUSION_MARGIN_M:
                 return ()  # seen through where it would be: not there
-            # else a surface within its box: its own, seen but not segmented apart (a plate's
-            # floor around the mug set on it)
-        if hides:
+            else:  # a surface within its box: its own, seen but not segmented apart (a plate's
+                own = True  # floor around the mug set on it)
+        if hides or (cut and own):
             hidden.append(f.sensor)
     return tuple(hidden)

@@ -252,7 +252,8 @@ ON_ITSELF_RISE = 0.5
 #: standing 3.1 cm above the plate's floor.
 SEEN_SHORT_M = 0.01
 #: An object not seen now is still reported (``remembered``) for this long after its last
-#: sighting when every camera that could see it has something nearer in the way, s; its
+#: sighting when every camera that could see it has something nearer in the way or its frame's
+#: border cutting it off (:func:`_occluded_in`), s; its
 #: confidence is the track's times :data:`~phyagentos.perception.tracks.REMEMBERED_CONFIDENCE`.
 REMEMBER_S = 60.0
 #: A depth return this much nearer than where the ray enters the object's box is something
@@ -2633,8 +2634,10 @@ def _occluded_in(t: Track, frames: Sequence[CameraFrame]) -> tuple[str, ...]:
                 hides = True
             elif seen > exit_depth + OCCLUSION_MARGIN_M:
                 return ()  # seen through where it would be: not there
-            else:  # a surface within its box: its own, seen but not segmented apart (a plate's
-                own = True  # floor around the mug set on it)
+            else:
+                # a surface within its box: its own, seen but not segmented apart (a plate's
+                # floor around the mug set on it)
+                own = True
         if hides or (cut and own):
             hidden.append(f.sensor)
     return tuple(hidden)

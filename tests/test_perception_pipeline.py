@@ -207,7 +207,8 @@ def test_holding_follows_the_tcp_from_proprioception_and_not_from_contacts(scene
 def test_a_hold_seen_only_after_the_lift_keeps_where_across_the_hand_it_closed_on_the_object(scene):
     """The hand closed 15 mm along its fingers off the cube's centre (and 5 mm below it), then
     lifted before anyone looked: the held cube is reported 15 mm off the tcp along the fingers,
-    from the close's note, at the tcp's height (how high it sits keeps the centred rule)."""
+    from the close's note, at the tcp's height (how high it sits keeps the centred rule), and
+    the height at which the close found it along the tcp's z beside it (``grasp_z_tcp_m``)."""
     import dataclasses
 
     tcp = scene.tcp_pose()
@@ -215,7 +216,7 @@ def test_a_hold_seen_only_after_the_lift_keeps_where_across_the_hand_it_closed_o
     x_axis = tcp[:3, 0]  # along the fingers (tcp y is the closing direction)
     cube = SyntheticObject("cube", "box", (0.02, 0.02, 0.02), (float(tcp[0, 3]), float(tcp[1, 3])), rgba=RED)
     rng = np.random.default_rng(11)
-    reports = {}
+    reports, seen_z = {}, {}
     for noted in (False, True):
         scene.place([cube])
         scene.set_fingers(0.04)
@@ -234,8 +235,12 @@ def test_a_hold_seen_only_after_the_lift_keeps_where_across_the_hand_it_closed_o
         e = _entities(snap)["cube"]
         assert e["attributes"]["held"]
         reports[noted] = np.subtract(e["position"], tcp[:3, 3])
+        seen_z[noted] = e["attributes"].get("grasp_z_tcp_m")
     assert np.linalg.norm(reports[True] - along * x_axis) < 0.003
     assert np.linalg.norm(reports[False]) < 0.003  # without the note: assumed centred, as before
+    expected = float((np.linalg.inv(T_close) @ np.array([*cube.position, 0.02, 1.0]))[2])  # the cube's centre then
+    assert abs(expected) > 0.004 and seen_z[True] == pytest.approx(expected, abs=0.003)
+    assert seen_z[False] is None  # nothing seen at a close: nothing reported
 
 
 def test_the_close_note_survives_export_and_is_forgotten_once_the_hand_opens(scene):

@@ -63,7 +63,8 @@ from phyagentos.perception.door import DoorLook, InsideLook, thin_parts_removed
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.values import finite_floats as _floats
 
-__all__ = ["FixtureLook", "RootLook", "ROOT_YAW_MAX_RAD", "FixtureSighting", "KnobLook", "DrawerLook", "drawer_reading", "drawer_band",
+__all__ = ["FixtureLook", "LeanLook", "RootLook", "ROOT_YAW_MAX_RAD", "FixtureSighting", "KnobLook", "DrawerLook",
+           "drawer_reading", "drawer_band",
            "drawer_entity_name", "CompartmentLook", "compartment_sides", "compartment_entity_name",
            "DRAWER_BAND_M", "DRAWER_BEYOND_M", "DRAWER_FRONT_FRACTION", "DRAWER_ABOVE_M",
            "DRAWER_LEVEL_TOL_M", "DRAWER_STRAIGHT_TOL_M", "DRAWER_FRONT_BEHIND_M", "DRAWER_FRONT_MIN_POINTS",
@@ -527,6 +528,54 @@ ROOT_YAW_MAX_RAD = math.radians(20.0)
 
 
 @dataclass(frozen=True)
+class LeanLook:
+    """Where a thing is let go on a fixture whose place site is a ramp (LIBERO's wine rack:
+    a bottle lies back on its upper ramp, its base against the lip at its foot) and how it
+    is leant there; m and rad, world axes as measured.
+
+    Attributes:
+        offset_m: (2,) the crest (the lip's top) from the body's footprint centre.
+        height_m: the crest's height above the support.
+        toward_xy: (2,) unit: the way the ramp rises from the crest (the thing's top leans so).
+        angle_rad: the ramp's slope: how far from upright the thing is let go.
+    """
+
+    offset_m: tuple[float, float]
+    height_m: float
+    toward_xy: tuple[float, float]
+    angle_rad: float
+
+    @classmethod
+    def from_dict(cls, d: Any, fixture: str) -> "LeanLook":
+        """From ``{offset_m, height_m, toward_xy, angle_rad}``.
+
+        Raises:
+            PerceptionError: a missing or unknown key (the valid ones listed) or a malformed
+                value (``toward_xy`` not a unit vector, ``angle_rad`` outside (0, pi/2), a
+                negative height).
+        """
+        keys = ("offset_m", "height_m", "toward_xy", "angle_rad")
+        if not isinstance(d, Mapping) or set(d) != set(keys):
+            raise PerceptionError(f"fixture {fixture!r}: lean must be a mapping with keys {format_choices(keys)}, "
+                                  f"got {d!r}")
+        off = _floats(d["offset_m"], 2, f"fixture {fixture!r}: lean.offset_m")
+        height = _floats([d["height_m"]], 1, f"fixture {fixture!r}: lean.height_m")[0]
+        toward = _floats(d["toward_xy"], 2, f"fixture {fixture!r}: lean.toward_xy")
+        angle = _floats([d["angle_rad"]], 1, f"fixture {fixture!r}: lean.angle_rad")[0]
+        if height < 0 or abs(math.hypot(*toward) - 1.0) > 0.01 or not 0.0 < angle < 0.5 * math.pi:
+            raise PerceptionError(f"fixture {fixture!r}: lean needs height_m >= 0, a unit toward_xy and "
+                                  f"0 < angle_rad < pi/2, got {d!r}")
+        return cls(off, height, toward, angle)  # type: ignore[arg-type]
+
+    def at(self, centre_xy: np.ndarray, turn: float = 0.0) -> tuple[np.ndarray, float, np.ndarray]:
+        """``(crest xy (2,) world m, height above the support m, toward (2,) world unit)`` for a
+        body perceived with its footprint centred at ``centre_xy`` (2,), standing ``turn`` rad
+        from how the look was measured."""
+        return (np.asarray(centre_xy, float) + turned_xy(self.offset_m, turn), float(self.height_m),
+                turned_xy(self.toward_xy, turn))
+
+
+@dataclass(frozen=True)
 class RootLook:
     """Where a fixture's model frame stands from its perceived body, measured on generated
     scenes (``phyagentos.targets.libero.descriptors``): ``offset_m`` (3,) world m from the
@@ -590,13 +639,15 @@ class FixtureLook:
     model_box: tuple[tuple[float, float], tuple[float, float]] | None = None
     door: DoorLook | None = None
     inside: InsideLook | None = None
+    lean: LeanLook | None = None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "FixtureLook | None":
         """From a declared fixture ``{name, class, size_m?, place?, knob?, drawers?, compartments?,
-        root?, model_box?, door?, inside?}``; ``None`` when it has no look (``size_m``): such a fixture is not
-        perceived. ``model_box``: ``{lo: [x, y], hi: [x, y]}``, m, the footprint of the fixture's
-        fixed parts (its model's meshes, no drawer, door or knob) in its model frame; it needs
+        root?, model_box?, door?, inside?, lean?}``; ``None`` when it has no look (``size_m``): such a fixture
+        is not perceived. ``lean``: a :class:`LeanLook` (a ramp things are let go leant onto).
+        ``model_box``: ``{lo: [x, y], hi: [x, y]}``, m, the footprint of the fixture's fixed parts
+        (its model's meshes, no drawer, door or knob) in its model frame; it needs
         ``root`` (where that frame stands from the perceived body), as does ``door``
         (:class:`~phyagentos.perception.door.DoorLook`, in that frame) and ``inside`` (the room
         behind the door, :class:`~phyagentos.perception.door.InsideLook`).
@@ -607,7 +658,7 @@ class FixtureLook:
         if not isinstance(d, Mapping):
             raise PerceptionError(f"a declared fixture must be a mapping, got {type(d).__name__}")
         valid = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root", "model_box", "door",
-                 "inside")
+                 "inside", "lean")
         unknown = set(d) - set(valid)
         name = d.get("name")
         if unknown:
@@ -637,10 +688,11 @@ class FixtureLook:
         inside = InsideLook.from_dict(d["inside"], name) if d.get("inside") is not None else None
         if inside is not None and root is None:
             raise PerceptionError(f"fixture {name!r}: an inside needs the fixture's root (where its model frame stands)")
+        lean = LeanLook.from_dict(d["lean"], name) if d.get("lean") is not None else None
         place = d.get("place")
         if place is None:
             return cls(name, d.get("class"), size, knob=knob, drawers=drawers, compartments=comps, root=root,
-                       model_box=box, door=door, inside=inside)
+                       model_box=box, door=door, inside=inside, lean=lean)
         if not isinstance(place, Mapping) or set(place) != {"offset_m", "half_extents_m", "height_m"}:
             raise PerceptionError(f"fixture {name!r}: place must be a mapping with keys "
                                   f"{format_choices(('offset_m', 'half_extents_m', 'height_m'))}, got {place!r}")
@@ -650,7 +702,7 @@ class FixtureLook:
         if min(half) <= 0 or height < 0:
             raise PerceptionError(f"fixture {name!r}: place.half_extents_m must be > 0 and height_m >= 0, got {place!r}")
         return cls(name, d.get("class"), size, off, half, height, knob, drawers, comps, root, box, door,  # type: ignore[arg-type]
-                   inside)
+                   inside, lean)
 
     def in_model(self, points_xy: np.ndarray, sighting: "FixtureSighting", *, edge_m: float = 0.0) -> np.ndarray:
         """(N,) bool: which of ``points_xy`` (N, 2) world m lie over the footprint of the

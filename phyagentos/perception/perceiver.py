@@ -1502,6 +1502,10 @@ class Perceiver:
         if look.root is not None:  # where its model's frame stands: the planning world puts its model there
             origin, yaw = look.root.pose(s.position, s.yaw, s.turn, s.top_m)
             attrs["body"]["root"] = {"position": _r(origin), "yaw": _r(yaw)}
+        if look.lean is not None:  # a ramp: where a thing is let go leant onto it (world), and the lean
+            xy, height, toward = look.lean.at(s.position[:2], s.turn)
+            attrs["lean"] = {"position": _r([xy[0], xy[1], plane.z_at(xy) + height]), "toward_xy": _r(toward, 5),
+                             "angle_rad": _r(look.lean.angle_rad, 5)}
         if not now:
             attrs["remembered"] = True
         if look.knob is not None:
@@ -1962,7 +1966,9 @@ class Perceiver:
                            hold_conf * max(t.confidence, 0.5), std, math.sqrt(t.var_yaw) + 0.1, 0, (), None,
                            source="proprioception", extra={"held": True, "last_seen_s": _r(t.last_seen_s, 6), **body,
                                                            **({} if t.hang_tcp is None else
-                                                              {"hang_m": _r(float(np.linalg.norm(t.hang_tcp)), 4)})})
+                                                              {"hang_m": _r(float(np.linalg.norm(t.hang_tcp)), 4)}),
+                                                           **({} if t.grasp_z_tcp is None else
+                                                              {"grasp_z_tcp_m": _r(t.grasp_z_tcp, 4)})})
         return ent
 
     def _read_hang(self, name: str, points: np.ndarray, proprio: Proprioception) -> None:
@@ -2138,6 +2144,7 @@ class Perceiver:
                 t.confidence *= 0.5
                 t.grasp_offset = None
                 t.hang_tcp = None
+                t.grasp_z_tcp = None
         if not candidates:
             self._held = None
             return None
@@ -2173,12 +2180,15 @@ class Perceiver:
                 off[:3, 3] = 0.0
                 t.grasp_offset = off
             closed = self._closed_at
+            t.grasp_z_tcp = None
             if closed is not None and t.last_seen_s <= closed[1] and float(np.linalg.norm(
                     t.position[:2] - closed[0][:2, 3])) <= hc.capture_radius_m + float(max(t.half_extents[:2])):
                 # last seen before the hand closed, where it closed: where it sits across and
                 # along the fingers is where it sat then (the hand has moved since, maybe
-                # lifted); how high it sits stays the rule's above (see note_grasp_close)
+                # lifted); how high it sits stays the rule's above (see note_grasp_close), the
+                # height seen then reported beside it
                 off = np.linalg.inv(closed[0]) @ _pose(t.position, t.yaw)
+                t.grasp_z_tcp = float(off[2, 3])
                 off[2, 3] = t.grasp_offset[2, 3]
                 t.grasp_offset = off
             t.held = True

@@ -104,6 +104,11 @@ class Track:
     #: had when the fingers closed (:mod:`~phyagentos.perception.hang`), since that grasp; None
     #: while not held or not read.
     hang_tcp: np.ndarray | None = None
+    #: Where the held object's centre sat along the tcp's z axis (down the fingers), m, when the
+    #: hand closed on it, as seen before the close; None while not held or not seen then. Its
+    #: carried pose keeps the perceiver's rule for that height (centred for a grasp across:
+    #: :meth:`~phyagentos.perception.Perceiver.note_grasp_close`); this is reported beside it.
+    grasp_z_tcp: float | None = None
     #: Its round body's base, slice by slice up from its lowest points, as the cameras off the hand saw
     #: it standing (:func:`~phyagentos.perception.hang.base_profile`: (6,) radii, m, 0 where
     #: unseen), else None.

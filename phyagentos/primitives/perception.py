@@ -13,7 +13,7 @@ from typing import Sequence
 import numpy as np
 
 from phyagentos.errors import IKError
-from phyagentos.geometry import VIEWER_SIDES, pose_matrix, viewer_side_xy, yaw_quat
+from phyagentos.geometry import VIEWER_SIDES, pose_matrix, rotation_about, viewer_side_xy, yaw_quat
 from phyagentos.motion.grasp import (
     DEFAULT_MAX_GRASP_WIDTH_M,
     FRANKA_FINGERS,
@@ -717,6 +717,48 @@ COMPARTMENT_CLEAR_M = 0.02
 LET_DOWN_STEP_M = 0.01
 
 
+def _lean(attrs: dict) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """A perceived fixture's ramp (``attributes.lean``, perception's measured look: LIBERO's
+    wine rack) as ``(crest (3,) world m, toward (2,) world unit, angle rad)``; None without one
+    or when malformed."""
+    lean = attrs.get("lean")
+    if not isinstance(lean, dict):
+        return None
+    try:
+        pos = np.asarray(lean["position"], dtype=float).reshape(3)
+        toward = np.asarray(lean["toward_xy"], dtype=float).reshape(2)
+        angle = float(lean["angle_rad"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    n = float(np.linalg.norm(toward))
+    if not (np.all(np.isfinite(pos)) and n > 1e-6 and 0.0 < angle < 0.5 * math.pi):
+        return None
+    return pos, toward / n, angle
+
+
+def leant_place(T_place: np.ndarray, half: Sequence[float], T_tcp_obj: np.ndarray, *,
+                toward_xy: Sequence[float], angle_rad: float) -> np.ndarray:
+    """The top-down place pose ``T_place`` ((4, 4) world tcp pose holding the object, ``half``
+    (3,) m its half extents and ``T_tcp_obj`` (4, 4) its pose in the tcp frame) turned by
+    ``angle_rad`` about the centre of the object's base (its centre less its vertical half
+    extent) so that its top leans towards ``toward_xy`` (2,) world unit, and raised by its
+    horizontal half extent times the sine of the angle: the edge of its base on that side,
+    which the turn lowers, stays as high as the base was. Let go there, a bottle on LIBERO's
+    wine rack falls back onto the ramp and lies on it (:func:`_lean`; docs/libero.md,
+    thirtieth pass). Returns a new (4, 4) world tcp pose."""
+    u = np.array([float(toward_xy[0]), float(toward_xy[1]), 0.0])
+    axis = np.cross([0.0, 0.0, 1.0], u)
+    R = rotation_about(axis, float(angle_rad))
+    T_obj = np.asarray(T_place, float) @ np.asarray(T_tcp_obj, float)
+    h = np.asarray(half, float)
+    r = float(np.max(np.abs(T_obj[:2, :3]) @ h))
+    b = T_obj[:3, 3] - [0.0, 0.0, float(np.abs(T_obj[2, :3]) @ h)]
+    out = np.array(T_place, dtype=float, copy=True)
+    out[:3, :3] = R @ out[:3, :3]
+    out[:3, 3] = R @ (out[:3, 3] - b) + b + [0.0, 0.0, r * math.sin(float(angle_rad))]
+    return out
+
+
 #: Room left between two objects set in neighbouring slots of one region, m
 #: (:meth:`ComputePlace._slot_point`): about the 2-sigma of a perceived size.
 SLOT_GAP_M = 0.01
@@ -871,6 +913,18 @@ class ComputePlace(Primitive):
         if self.beside is not None:  # on the surface the landmark stands on, clear of it on the viewer's side
             centre, surface_z = beside_point(snapshot, self.region, self.beside, float(max(half[0], half[1])),
                                              who=self.name)
+        lean = _lean(attrs) if kind == "fixture" and self.beside is None and self.slot is None else None
+        if lean is not None:  # a ramp (a wine rack): over its crest, the hand's fingers across the lean first
+            centre, surface_z = lean[0], float(lean[0][2])
+            yaws = sorted(yaws, key=lambda y: abs(float(top_down_rotation(y)[:2, 1] @ lean[1])))
+            # turned about its base, the object's true height in the hand counts: the one seen
+            # when the hand closed (a bottle taken near its neck hangs lower than centred)
+            held_attrs = next((e.get("attributes") or {} for e in snapshot.get("entities", [])
+                               if e["name"] == self.object), {})
+            seen_z = held_attrs.get("grasp_z_tcp_m")
+            if isinstance(seen_z, (int, float)) and math.isfinite(seen_z):
+                T_tcp_obj = T_tcp_obj.copy()
+                T_tcp_obj[2, 3] = float(seen_z)
         rejected: list[dict] = []
         chosen = clear = None
         # from the skill's approach height; where every pre-place was only out of the arm's
@@ -881,6 +935,8 @@ class ComputePlace(Primitive):
             for yaw in yaws:
                 spot = centre if self.slot is None else self._slot_point(T_region, region_half, T_tcp_obj, half, yaw)
                 T_place = place_pose(spot, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
+                if lean is not None:
+                    T_place = leant_place(T_place, half, T_tcp_obj, toward_xy=lean[1], angle_rad=lean[2])
                 T_pre = T_place.copy()
                 T_pre[2, 3] += height
                 why = self._blocked(T_pre, T_place)
@@ -899,7 +955,9 @@ class ComputePlace(Primitive):
         self.set(self.preplace_key, T_pre)
         self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist(),
                               yaw_rad=round(float(yaw), 3), rejected_yaws=rejected,
-                              **({"beside": self.beside} if self.beside else {}))
+                              **({"beside": self.beside} if self.beside else {}),
+                              **({"lean_rad": round(lean[2], 3), "toward_xy": np.round(lean[1], 3).tolist()}
+                                 if lean is not None else {}))
 
     def _let_down(self, T_pre: np.ndarray, T_place: np.ndarray, why: Blocked) -> tuple[np.ndarray, Blocked | None]:
         """The place pose into a compartment raised by :data:`LET_DOWN_STEP_M` at a time, from

@@ -443,8 +443,19 @@ def perception_accuracy(target, looks: dict[str, dict[str, Any]], seeds: Sequenc
 #: The part of a fixture's model things are set down on: the site of LIBERO's object model
 #: (``libero/envs/objects/articulated_objects.py``, the fixture's XML in the asset wheels)
 #: that bounds it, by fixture category. The stove's ``cook_region`` is its burner plate; the
-#: cabinet's ``top_side`` its top face. A category not listed is placed onto its body's top.
-FIXTURE_PLACE_SITES: dict[str, str] = {"flat_stove": "cook_region", "wooden_cabinet": "top_side"}
+#: cabinet's ``top_side`` its top face; the wine rack's ``top_region`` lies tilted along the
+#: foot of its upper ramp (not a patch: :func:`_lean_look`). A category not listed is placed
+#: onto its body's top.
+FIXTURE_PLACE_SITES: dict[str, str] = {"flat_stove": "cook_region", "wooden_cabinet": "top_side",
+                                       "wine_rack": "top_region"}
+#: Spacing of the downward rays that profile a sloped place site, m.
+PROFILE_STEP_M = 0.002
+#: How far either side of a sloped site's crest the profile runs, m: the ramp's slope is the
+#: line through its heights from :data:`SLOPE_FROM_M` out to this.
+PROFILE_REACH_M = 0.06
+SLOPE_FROM_M = 0.02
+#: A side of a sloped site's crest rising at least this steeply (rad) is a ramp to lean on.
+MIN_LEAN_RAD = math.radians(10.0)
 #: Generated scenes a fixture's look is measured on (LIBERO places its fixtures within 2 cm,
 #: so a few scenes cover the viewpoints) and their first seed (not an init state).
 FIXTURE_SCENES = 3
@@ -574,6 +585,72 @@ def _place_site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray] | 
         a, b, c, s = b, a, s, c
     k = min(1.0, a / (a * c + b * s), b / (a * s + b * c))
     return d.site_xpos[sid][:2].copy(), np.array([k * a, k * b])
+
+
+def _ray_down(target, root: int, xy: np.ndarray, top_z: float) -> float | None:
+    """World z (m) where a ray straight down from ``xy`` (2,) at ``top_z`` first meets a
+    collision geom (LIBERO's group 0) of the body tree ``root``; None when it meets another
+    body first, or nothing."""
+    m, d = target.model, target.data
+    geomid = np.zeros(1, dtype=np.int32)
+    dist = mujoco.mj_ray(m, d, np.array([xy[0], xy[1], top_z]), np.array([0.0, 0.0, -1.0]),
+                         np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8), 1, -1, geomid)
+    if dist < 0 or int(m.body_rootid[m.geom_bodyid[int(geomid[0])]]) != root:
+        return None
+    return float(top_z - dist)
+
+
+def _lean_look(target, name: str, cat: str) -> dict[str, Any] | None:
+    """Where a thing is let go on fixture ``name`` (category ``cat``) whose place site
+    (:data:`FIXTURE_PLACE_SITES`) is sloped, and how it is leant: ``{"xy" (2,) world m, "z"
+    world m, "toward_xy" (2,) unit, "angle_rad"}``; None for a level site or none. LIBERO's
+    wine rack takes a bottle lying back on its upper ramp, its base against the lip at the
+    ramp's foot (the ``top_region`` site, tilted 62 degrees, lies along that foot). Downward
+    rays (:data:`PROFILE_STEP_M` apart, against the fixture's own collision geoms) profile
+    the surface across the site's short side through its centre: the crest (the lip's top)
+    is the highest point over the site's footprint; the side of it whose surface rises (a
+    line fitted from :data:`SLOPE_FROM_M` to :data:`PROFILE_REACH_M` out, at least
+    :data:`MIN_LEAN_RAD` steep) is the ramp, and ``angle_rad`` its slope. A thing let go over
+    the crest leant that far towards the ramp comes to rest lying on it (measured in the
+    simulator, a LIBERO wine bottle dropped on the rack of libero_goal task 9's scene: leant
+    30 or 40 degrees it came to rest at 49-52 degrees within 3 cm either side of where it
+    stood upright only within 0.7 cm, the lip's 1 cm top; docs/libero.md, thirtieth pass)."""
+    suffix = FIXTURE_PLACE_SITES.get(cat)
+    if suffix is None:
+        return None
+    m, d = target.model, target.data
+    sid = m.site(f"{name}_{suffix}").id
+    R = d.site_xmat[sid].reshape(3, 3)
+    if abs(R[2, 2]) >= 0.99:
+        return None
+    half = np.abs(R) @ np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)
+    centre = d.site_xpos[sid].copy()
+    root = int(m.body_rootid[m.body(target.env.env.get_object(name).root_body).id])
+    across = 0 if half[0] < half[1] else 1  # the footprint's short side: across the slope
+    axis = np.zeros(2)
+    axis[across] = 1.0
+    top = centre[2] + 0.5
+    offs = np.arange(-half[across], half[across] + 1e-9, PROFILE_STEP_M)
+    hits = [(o, _ray_down(target, root, centre[:2] + o * axis, top)) for o in offs]
+    hits = [(o, z) for o, z in hits if z is not None]
+    if not hits:
+        return None
+    crest_o, crest_z = max(hits, key=lambda h: h[1])
+    crest = centre[:2] + crest_o * axis
+    best: tuple[float, float] | None = None
+    for sign in (-1.0, 1.0):
+        out = np.arange(SLOPE_FROM_M, PROFILE_REACH_M + 1e-9, PROFILE_STEP_M)
+        prof = [(o, _ray_down(target, root, crest + sign * o * axis, top)) for o in out]
+        prof = [(o, z) for o, z in prof if z is not None]
+        if len(prof) < 5:
+            continue
+        slope = float(np.polyfit([o for o, _ in prof], [z for _, z in prof], 1)[0])
+        if slope > math.tan(MIN_LEAN_RAD) and (best is None or slope > best[1]):
+            best = (sign, slope)
+    if best is None:
+        return None
+    toward = best[0] * axis
+    return {"xy": crest, "z": crest_z, "toward_xy": toward, "angle_rad": math.atan(best[1])}
 
 
 #: A hinge about the vertical on a fixture body at most this wide is a knob, m (LIBERO's stove
@@ -949,6 +1026,13 @@ def measure_fixture_looks(target, *, scenes: int = FIXTURE_SCENES, seed: int = F
             look["place"] = {key: ([round(float(v), 4) for v in np.median([p[key] for p in places], axis=0)]
                                    if key != "height_m" else round(float(np.median([p[key] for p in places])), 4))
                              for key in ("offset_m", "half_extents_m", "height_m")}
+        leans = [g["lean"] for g in got if "lean" in g]
+        if len(leans) >= 2:
+            toward = np.median([ln["toward_xy"] for ln in leans], axis=0)
+            look["lean"] = {"offset_m": [round(float(v), 4) for v in np.median([ln["offset_m"] for ln in leans], axis=0)],
+                            "height_m": round(float(np.median([ln["height_m"] for ln in leans])), 4),
+                            "toward_xy": [round(float(v), 4) for v in toward / max(float(np.linalg.norm(toward)), 1e-9)],
+                            "angle_rad": round(float(np.median([ln["angle_rad"] for ln in leans])), 4)}
         knobs = [g["knob"] for g in got if "knob" in g]
         if len(knobs) >= 2:  # the travel is the model's; the rest are medians
             look["knob"] = {"offset_m": [round(float(v), 4) for v in np.median([k["offset_m"] for k in knobs], axis=0)],
@@ -1021,6 +1105,10 @@ def _fixture_look(target, name: str, cat: str, cloud, heights: np.ndarray, plane
             return None
         look["place"] = {"offset_m": (centre - p).tolist(), "half_extents_m": half.tolist(),
                          "height_m": float(np.percentile(heights[on], TOP_PERCENTILE))}
+    lean = _lean_look(target, name, cat)
+    if lean is not None:  # let go leant onto a ramp; what rests there rests at the crest's height
+        look["lean"] = {"offset_m": (lean["xy"] - p).tolist(), "height_m": lean["z"] - plane.z_at(lean["xy"]),
+                        "toward_xy": lean["toward_xy"].tolist(), "angle_rad": lean["angle_rad"]}
     knob = _knob_look(target, name, cloud, heights, p)
     if knob is not None:
         look["knob"] = knob

@@ -21,7 +21,7 @@ class LiberoSensing:
         ``objects`` and ``fixtures`` as the scene declares them (objects ``[{name, class,
         shape?, colour?, size_m?, size_range_m?, shapes?, handle_origin_m?, where?}]``; ``where``: the spatial reference the Agent plane
         read from the instruction, never the task's init placement; fixtures ``[{name, class,
-        size_m?, place?, knob?, drawers?, compartments?, root?, model_box?, door?, inside?}]``: a fixture's look,
+        size_m?, place?, knob?, drawers?, compartments?, root?, model_box?, door?, inside?, lean?}]``: a fixture's look,
         measured on its model on generated scenes,
         :mod:`phyagentos.perception.fixtures`), else every BDDL ``:objects`` /
         ``:fixtures`` entry as ``{name, class}`` (names and categories, as a user declares a
@@ -30,7 +30,7 @@ class LiberoSensing:
         objects = ([{k: o[k] for k in keys if k in o} for o in self._scene.objects] if self._scene.objects
                    else self._problem.declared()["objects"])
         look = ("name", "class", "size_m", "place", "knob", "drawers", "compartments", "root", "model_box", "door",
-                "inside")
+                "inside", "lean")
         fixtures = ([{k: o[k] for k in look if k in o} for o in self._scene.fixtures]
                     if self._scene.fixtures else self._problem.declared()["fixtures"])
         return {"objects": objects, "fixtures": fixtures, "regions": [], "obstacles": []}

@@ -17,9 +17,9 @@ import math
 import numpy as np
 import pytest
 
-from phyagentos.perception import PerceptionError
 from phyagentos.geometry import rotation_about
 from phyagentos.motion.grasp import place_pose, top_down_rotation
+from phyagentos.perception import PerceptionError
 from phyagentos.perception.fixtures import FixtureLook, LeanLook
 from phyagentos.primitives.perception import leant_place
 

@@ -853,6 +853,13 @@ class ComputePlace(Primitive):
     neck over the top of a cabinet 0.69 m from the base), the pre-place is tried lower
     (:data:`LOWER_APPROACH_M`; the held object is lowered the rest of the way in a straight line).
 
+    Onto a fixture with a ramp (perception's ``attributes.lean``: LIBERO's wine rack, whose
+    bottle lies back on its upper ramp against the lip at its foot) the object's base goes over
+    the lip's crest and the hand is turned about the base by the ramp's slope, the top leaning
+    up the ramp (:func:`leant_place`), the hand's fingers across the lean first (what falls
+    back onto the ramp then slips out between them); the object's height in the hand is the
+    one seen when the hand closed (``grasp_z_tcp_m``), where perception reports it.
+
     Into a compartment (a perceived ``class: compartment`` fixture entity, its box the floor
     between its walls: "in the back compartment of the caddy") only the yaws at which the held
     object's footprint fits between the walls are tried (:meth:`_fitting_yaws`;

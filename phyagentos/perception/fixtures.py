@@ -144,9 +144,7 @@ class KnobLook:
             PerceptionError: a missing or unknown key (the valid ones listed) or a malformed value.
         """
         keys = ("offset_m", "top_m", "rest_yaw_rad", "range_rad")
-        if not isinstance(d, Mapping) or set(d) != set(keys):
-            raise PerceptionError(f"fixture {fixture!r}: knob must be a mapping with keys {format_choices(keys)}, "
-                                  f"got {d!r}")
+        d = _keyed(d, keys, fixture, "knob")
         off = _floats(d["offset_m"], 2, f"fixture {fixture!r}: knob.offset_m")
         top = _floats([d["top_m"]], 1, f"fixture {fixture!r}: knob.top_m")[0]
         rest = _floats([d["rest_yaw_rad"]], 1, f"fixture {fixture!r}: knob.rest_yaw_rad")[0]
@@ -276,6 +274,19 @@ DRAWER_STOP_SIGMA_M = 0.002
 #: this out.
 DRAWER_HANDLE_PLAY_M = 0.012
 _DRAWER_SLICE_M = 0.005
+
+
+def _keyed(d: Any, keys: Sequence[str] | set[str], fixture: str, part: str) -> Mapping[str, Any]:
+    """``d``, a declared ``part`` of ``fixture`` (its knob, lean, root), checked to be a mapping
+    with exactly ``keys``.
+
+    Raises:
+        PerceptionError: otherwise (the valid keys listed).
+    """
+    if not isinstance(d, Mapping) or set(d) != set(keys):
+        raise PerceptionError(f"fixture {fixture!r}: {part} must be a mapping with keys {format_choices(keys)}, "
+                              f"got {d!r}")
+    return d
 
 
 def _part_name(d: Any, keys: tuple[str, ...], fixture: str, kind: str) -> tuple[str, str]:
@@ -555,9 +566,7 @@ class LeanLook:
                 negative height).
         """
         keys = ("offset_m", "height_m", "toward_xy", "angle_rad")
-        if not isinstance(d, Mapping) or set(d) != set(keys):
-            raise PerceptionError(f"fixture {fixture!r}: lean must be a mapping with keys {format_choices(keys)}, "
-                                  f"got {d!r}")
+        d = _keyed(d, keys, fixture, "lean")
         off = _floats(d["offset_m"], 2, f"fixture {fixture!r}: lean.offset_m")
         height = _floats([d["height_m"]], 1, f"fixture {fixture!r}: lean.height_m")[0]
         toward = _floats(d["toward_xy"], 2, f"fixture {fixture!r}: lean.toward_xy")
@@ -596,9 +605,7 @@ class RootLook:
             PerceptionError: another key set or a malformed value.
         """
         keys = {"offset_m", "yaw_rad", "body_yaw_rad"}
-        if not isinstance(d, Mapping) or set(d) != keys:
-            raise PerceptionError(f"fixture {fixture!r}: root must be a mapping with keys {format_choices(keys)}, "
-                                  f"got {d!r}")
+        d = _keyed(d, keys, fixture, "root")
         off = _floats(d["offset_m"], 3, f"fixture {fixture!r}: root.offset_m")
         yaw, body_yaw = _floats([d["yaw_rad"], d["body_yaw_rad"]], 2, f"fixture {fixture!r}: root yaws (rad)")
         return cls(off, yaw, body_yaw)  # type: ignore[arg-type]

@@ -46,7 +46,7 @@ from .motion import PLANNING_MARGIN_M, clear_ik, session_checker
 from .observation import has_cameras, make_perceiver, observe_record, perceive_now
 
 __all__ = ["Observe", "ComputeGrasp", "ComputePlace", "entity_pose", "origin_pose", "declared_class", "beside_point",
-           "landmark_box", "viewer_side"]
+           "landmark_box", "viewer_side", "leant_place"]
 
 
 def declared_class(target, name: str, entity: dict | None = None) -> str | None:

@@ -543,14 +543,15 @@ COMPARTMENT_WALL_RAY_M = 0.03
 
 
 def _ray_to(m: mujoco.MjModel, d: mujoco.MjData, root: int, start: np.ndarray, direction: np.ndarray,
-            reach_m: float = 0.5) -> float | None:
+            reach_m: float = 0.5, *, geomgroup: np.ndarray | None = None) -> float | None:
     """Distance (m) from ``start`` (3,) along the unit ``direction`` (3,) to the first geom of
     the body tree rooted at ``root`` (through any other body's), within ``reach_m``; None when
-    there is none."""
+    there is none. ``geomgroup``: MuJoCo's (6,) uint8 mask of the geom groups a ray sees
+    (None: all)."""
     hit = np.zeros(1, dtype=np.int32)
     travelled, p = 0.0, np.asarray(start, dtype=float).copy()
     for _ in range(8):
-        dist = mujoco.mj_ray(m, d, p, direction, None, 1, -1, hit)
+        dist = mujoco.mj_ray(m, d, p, direction, geomgroup, 1, -1, hit)
         if dist < 0 or travelled + dist > reach_m:
             return None
         travelled += dist
@@ -571,33 +572,40 @@ def _place_site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray] | 
     smaller when LIBERO's sampler turns it, as libero_spatial's cabinet by up to 0.45 rad).
     (The site's own z is not the surface: the stove's ``cook_region`` lies 0.75 cm above the
     table, inside its 3 cm burner, on which things rest.)"""
+    site = _site(target, name, cat)
+    if site is None or abs(site[1][2, 2]) < 0.99:
+        return None
+    centre, R, size = site
+    a, b = (float(v) for v in size[:2])
+    c, s = abs(R[0, 0]), abs(R[1, 0])
+    if s > c:  # turned by about a quarter: its long side along world y
+        a, b, c, s = b, a, s, c
+    k = min(1.0, a / (a * c + b * s), b / (a * s + b * c))
+    return centre[:2].copy(), np.array([k * a, k * b])
+
+
+def _site(target, name: str, cat: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``(centre (3,) world m, rotation (3, 3), half sizes (3,) m in its frame)`` of fixture
+    ``name``'s place site (:data:`FIXTURE_PLACE_SITES`), or None for a category without one."""
     suffix = FIXTURE_PLACE_SITES.get(cat)
     if suffix is None:
         return None
     m, d = target.model, target.data
     sid = m.site(f"{name}_{suffix}").id
-    a, b = (float(v) for v in np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)[:2])
-    R = d.site_xmat[sid].reshape(3, 3)
-    if abs(R[2, 2]) < 0.99:
-        return None
-    c, s = abs(R[0, 0]), abs(R[1, 0])
-    if s > c:  # turned by about a quarter: its long side along world y
-        a, b, c, s = b, a, s, c
-    k = min(1.0, a / (a * c + b * s), b / (a * s + b * c))
-    return d.site_xpos[sid][:2].copy(), np.array([k * a, k * b])
+    size = np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)
+    return d.site_xpos[sid].copy(), d.site_xmat[sid].reshape(3, 3).copy(), size
+
+
+#: LIBERO's collision geoms (group 0), as a ray's geom group mask.
+_COLLISION_GROUP = np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8)
 
 
 def _ray_down(target, root: int, xy: np.ndarray, top_z: float) -> float | None:
-    """World z (m) where a ray straight down from ``xy`` (2,) at ``top_z`` first meets a
-    collision geom (LIBERO's group 0) of the body tree ``root``; None when it meets another
-    body first, or nothing."""
-    m, d = target.model, target.data
-    geomid = np.zeros(1, dtype=np.int32)
-    dist = mujoco.mj_ray(m, d, np.array([xy[0], xy[1], top_z]), np.array([0.0, 0.0, -1.0]),
-                         np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8), 1, -1, geomid)
-    if dist < 0 or int(m.body_rootid[m.geom_bodyid[int(geomid[0])]]) != root:
-        return None
-    return float(top_z - dist)
+    """World z (m) where a ray straight down from ``xy`` (2,) at ``top_z`` meets a collision
+    geom of the body tree ``root`` (:func:`_ray_to`); None when it meets none."""
+    dist = _ray_to(target.model, target.data, root, np.array([xy[0], xy[1], top_z]), np.array([0.0, 0.0, -1.0]),
+                   reach_m=2.0, geomgroup=_COLLISION_GROUP)
+    return None if dist is None else float(top_z - dist)
 
 
 def _lean_look(target, name: str, cat: str) -> dict[str, Any] | None:
@@ -615,16 +623,12 @@ def _lean_look(target, name: str, cat: str) -> dict[str, Any] | None:
     simulator, a LIBERO wine bottle dropped on the rack of libero_goal task 9's scene: leant
     30 or 40 degrees it came to rest at 49-52 degrees within 3 cm either side of where it
     stood upright only within 0.7 cm, the lip's 1 cm top; docs/libero.md, thirtieth pass)."""
-    suffix = FIXTURE_PLACE_SITES.get(cat)
-    if suffix is None:
+    site = _site(target, name, cat)
+    if site is None or abs(site[1][2, 2]) >= 0.99:
         return None
-    m, d = target.model, target.data
-    sid = m.site(f"{name}_{suffix}").id
-    R = d.site_xmat[sid].reshape(3, 3)
-    if abs(R[2, 2]) >= 0.99:
-        return None
-    half = np.abs(R) @ np.asarray(target.env.env.object_sites_dict[f"{name}_{suffix}"].size, float)
-    centre = d.site_xpos[sid].copy()
+    centre, R, size = site
+    half = np.abs(R) @ size
+    m = target.model
     root = int(m.body_rootid[m.body(target.env.env.get_object(name).root_body).id])
     across = 0 if half[0] < half[1] else 1  # the footprint's short side: across the slope
     axis = np.zeros(2)
@@ -638,8 +642,8 @@ def _lean_look(target, name: str, cat: str) -> dict[str, Any] | None:
     crest_o, crest_z = max(hits, key=lambda h: h[1])
     crest = centre[:2] + crest_o * axis
     best: tuple[float, float] | None = None
+    out = np.arange(SLOPE_FROM_M, PROFILE_REACH_M + 1e-9, PROFILE_STEP_M)
     for sign in (-1.0, 1.0):
-        out = np.arange(SLOPE_FROM_M, PROFILE_REACH_M + 1e-9, PROFILE_STEP_M)
         prof = [(o, _ray_down(target, root, crest + sign * o * axis, top)) for o in out]
         prof = [(o, z) for o, z in prof if z is not None]
         if len(prof) < 5:
@@ -1106,7 +1110,7 @@ def _fixture_look(target, name: str, cat: str, cloud, heights: np.ndarray, plane
         look["place"] = {"offset_m": (centre - p).tolist(), "half_extents_m": half.tolist(),
                          "height_m": float(np.percentile(heights[on], TOP_PERCENTILE))}
     lean = _lean_look(target, name, cat)
-    if lean is not None:  # let go leant onto a ramp; what rests there rests at the crest's height
+    if lean is not None:  # a ramp: where a thing is let go leant onto it, from the body's centre
         look["lean"] = {"offset_m": (lean["xy"] - p).tolist(), "height_m": lean["z"] - plane.z_at(lean["xy"]),
                         "toward_xy": lean["toward_xy"].tolist(), "angle_rad": lean["angle_rad"]}
     knob = _knob_look(target, name, cloud, heights, p)

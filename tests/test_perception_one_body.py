@@ -79,3 +79,40 @@ def test_an_oversized_segment_whose_best_parts_are_one_body_is_kept_whole(monkey
     monkeypatch.setattr(split, "one_body", lambda a, b: False)
     parts = split.split_cluster(cloud, heights, plane, cfg, np.array([400.0]), bottle)
     assert parts is not None and [i.size for _, i in parts] == [lit.size, shaded.size]
+
+
+GREY, GREY_DARK = (0.78, 0.78, 0.78), (0.52, 0.52, 0.52)
+
+
+def test_two_parts_filling_one_place_are_one_body_whatever_their_colour():
+    from phyagentos.perception.split import one_place
+
+    # LIBERO-10 task 4: the white mug let go on a plate, cut by lightness into two mug-sized
+    # parts 2 mm apart over the same heights
+    a = _det((-0.007, -0.327), 0.0465, 0.13, colour=GREY)
+    b = _det((-0.009, -0.328), 0.0475, 0.133, colour=GREY_DARK)
+    assert one_place(a, b) and one_place(b, a)
+    # what stands in a container is smaller (the cream cheese in a bowl), on a thing higher
+    # (a bowl on a ramekin), beside it off its centre (two mugs touching)
+    assert not one_place(_det((0, 0), 0.07, 0.05, colour=GREY), _det((0.01, 0), 0.038, 0.02, bottom=0.01, colour=GREY_DARK))
+    assert not one_place(_det((0, 0), 0.045, 0.04, colour=GREY), _det((0, 0), 0.045, 0.04, bottom=0.035, colour=GREY_DARK))
+    assert not one_place(_det((0, 0), 0.047, 0.12, colour=GREY), _det((0.09, 0), 0.047, 0.12, colour=GREY_DARK))
+
+
+def test_a_partition_whose_parts_fill_one_place_is_not_admissible(monkeypatch):
+    from phyagentos.perception import split
+
+    cfg = PerceptionConfig.default()
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 1000, True)
+    cloud = _cylinder(0.047, 0.12, GREY, GREY_DARK)
+    heights = cloud.points[:, 2].astype(np.float64)
+    mug = [ObjectDescriptor("porcelain_mug_1", shape="cylinder", colour_rgb=GREY, size_m=(0.094, 0.094, 0.12)),
+           ObjectDescriptor("porcelain_mug_2", shape="cylinder", colour_rgb=GREY_DARK, size_m=(0.094, 0.094, 0.12))]
+    # the shading's groups interleaved round the body (each part spans its whole footprint)
+    sector = np.floor(36.0 * (np.arctan2(cloud.points[:, 1], cloud.points[:, 0]) + np.pi) / np.pi).astype(np.int64)
+    halves = ("colour", float("nan"), sector % 2)
+    args = ([halves], cloud, heights, plane, cfg, np.array([400.0]), mug)
+    assert split._admissible(*args, stacks=False, fits={}) == []
+    # the same halves are two look-alike mugs side by side to the scoring alone
+    monkeypatch.setattr(split, "one_place", lambda a, b: False)
+    assert len(split._admissible(*args, stacks=False, fits={})) == 1

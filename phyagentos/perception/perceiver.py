@@ -270,6 +270,11 @@ FIXTURE_LOAD_M = 0.35
 FIXTURE_MARGIN_M = 0.008
 #: A fixture's footprint grown by this for its own points (rect fit and depth edges), m.
 FIXTURE_EDGE_M = 0.015
+#: A covered sighting (``Detection.covered``) of a tracked object keeps the track where it is
+#: when its points lie within the track's footprint grown by this, m...
+COVERED_WITHIN_M = 0.01
+#: ... all but this fraction of them (:meth:`Perceiver._covered_within_track`).
+COVERED_OUTSIDE_FRACTION = 0.05
 #: A fixture's model footprint (:meth:`~.fixtures.FixtureLook.in_model`) grown by this for its own
 #: points, m: the voxel grid. Not the body's 1.5 cm: a plate standing 5 mm from the wine rack's
 #: base (LIBERO-PRO's ``libero_goal_swap``) would lose its rim.
@@ -895,6 +900,14 @@ class Perceiver:
                 # camera had seen it whole)
                 log.debug("perception: %s seen in part at the border, completed %.3f m from its track: kept there",
                           name, float(np.linalg.norm(det.position[:2] - self.tracks[name].position[:2])))
+                self.tracks[name].last_seen_s = stamp
+            elif name in self.tracks and det.covered and not self.tracks[name].held \
+                    and self._covered_within_track(self.tracks[name], cloud.points[clusters[i][1], :2]):
+                # what shows of it round what now rests on it, all within where it was seen whole:
+                # it confirms the object there and never moves it (a plate under the mug set on it,
+                # its crescent's centre 3.5 cm off the plate's)
+                log.debug("perception: %s seen covered at %s, within its track at %s: kept there",
+                          name, _r(det.position), _r(self.tracks[name].position))
                 self.tracks[name].last_seen_s = stamp
             elif name in self.tracks:
                 t = self.tracks[name]
@@ -1693,6 +1706,16 @@ class Perceiver:
         if t.held or t.released_s is not None or t.confidence < threshold:
             return False
         return not t.within_gate(det, stamp, self.config)
+
+    @staticmethod
+    def _covered_within_track(t: Track, xy: np.ndarray) -> bool:
+        """Whether the points ``xy`` (N, 2) world m of a covered sighting (``Detection.covered``:
+        the part of ``t`` showing round what rests on it) lie within the track's footprint, grown
+        by :data:`COVERED_WITHIN_M`, all but :data:`COVERED_OUTSIDE_FRACTION` of them."""
+        if len(xy) == 0:
+            return False
+        inside = _footprint_margins(xy, t.position, t.yaw, t.half_extents, t.shape) >= -COVERED_WITHIN_M
+        return float(np.mean(~inside)) <= COVERED_OUTSIDE_FRACTION
 
     def _inside_where_let_go(self, name: str, det: Detection, placed: np.ndarray | None, cloud: Cloud,
                              heights: np.ndarray, dets: list[Detection], clusters, sensors: list[str]) -> bool:

@@ -483,3 +483,42 @@ def test_a_dark_box_against_a_two_tone_plate_is_cut_off_by_colour_and_the_plate_
     for c in cuts:  # no cut parts the well from the rim
         well, rim = c[tone == 0], c[tone == 1]
         assert round(well.mean()) == round(rim.mean())
+
+
+@pytest.mark.parametrize("again_costs, cut_again", [((1.34, 1.31), False), ((0.3, 0.2), True)])
+def test_a_part_is_cut_again_only_where_its_parts_explain_it_better_than_it_whole(monkeypatch, again_costs, cut_again):
+    """LIBERO-10 task 6: a mug let go on a plate is cut from the plate (the mug at 0.84, the plate
+    at 0.04); cut again at a height step into parts at 1.34 and 1.31, it came out too short for
+    its look and unnamed. A part of a split is split again only where its parts' mean cost is
+    below its own (a bowl cut from a plate and a ramekin at 0.3 and 0.2 is)."""
+    from phyagentos.perception import split
+    from phyagentos.perception.cloud import Plane
+
+    cloud = _slab(0.06, 0.06, 0.12)
+    heights = cloud.points[:, 2].astype(np.float64)
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 1000, True)
+    looks = [ObjectDescriptor("mug_1", shape="cylinder", colour_rgb=(0.3, 0.3, 0.3), size_m=(0.096, 0.096, 0.12)),
+             ObjectDescriptor("plate_1", shape="cylinder", colour_rgb=(0.3, 0.3, 0.3), size_m=(0.14, 0.14, 0.015))]
+    n = len(cloud)
+    upper, lower = np.arange(n // 2), np.arange(n // 2, n)
+    mug, plate = _det((0.0, 0.0), (0.048, 0.048, 0.05), 0.02), _det((0.0, 0.0), (0.07, 0.07, 0.0075), covered=True)
+    high, low = _det((0.0, 0.0), (0.048, 0.048, 0.03), 0.07), _det((0.0, 0.0), (0.048, 0.048, 0.025), 0.02)
+    half = np.arange(len(upper) // 2)
+
+    def admissible(partitions, part_cloud, *a, stacks, **k):
+        if stacks:
+            return []
+        if len(part_cloud) == n:  # the segment: the mug cut from the plate
+            return [(0.88, "step", 0.02, [mug, plate], [upper, lower], np.array([0.84, 0.04]))]
+        if len(part_cloud) == len(upper):  # the mug part, cut again at a step
+            return [(sum(again_costs), "step", 0.07, [high, low], [half, np.arange(len(half), len(upper))],
+                     np.array(again_costs))]
+        return []
+
+    monkeypatch.setattr(split, "oversized", lambda *a, **k: True)
+    monkeypatch.setattr(split, "_partitions", lambda c, h, cfg: iter([]))
+    monkeypatch.setattr(split, "_admissible", admissible)
+    clusters = [(_det((0.0, 0.0), (0.07, 0.07, 0.06)), np.arange(n))]
+    out = split.split_clusters(clusters, cloud, heights, plane, CFG, np.array([400.0]), looks)
+    assert len(out) == (3 if cut_again else 2)
+    assert (out[0][0] is high) == cut_again and (out[0][0] is mug) != cut_again

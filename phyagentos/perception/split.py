@@ -421,6 +421,20 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
         are one body's lit and shaded sides (:func:`one_body`). Never a guess.
     """
 
+    scored = _split_scored(cloud, heights, plane, config, focal_px, descriptors, rests_at_m=rests_at_m,
+                           patch_m=patch_m)
+    return None if scored is None else scored[0]
+
+
+def _split_scored(cloud: Cloud, heights: np.ndarray, plane: Plane, config: PerceptionConfig, focal_px: np.ndarray,
+                  descriptors: Sequence[ObjectDescriptor], *, rests_at_m: float = 0.0, patch_m: float = 0.0,
+                  below_cost: float | None = None) -> tuple[list[tuple[Detection, np.ndarray]], np.ndarray] | None:
+    """:func:`split_cluster`'s parts with their costs ((n_parts,) each part's, as scored), or
+    None as it. ``below_cost``: the segment as one part already matches a look at this cost (a
+    part of a split before, split again by :func:`split_clusters`): its best partition is taken
+    only where its parts' mean cost is below it, explaining the points better than the part
+    whole does (a mug on a plate cut from the plate at 0.84, then cut again at a height step
+    into two parts at 1.34 and 1.31: left whole)."""
     cc = config.clustering
     sized = list(descriptors)
     if cc.split_max_cost <= 0 or len(cloud) < 2 * cc.min_points or not sized:
@@ -459,9 +473,13 @@ def split_cluster(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
         log.debug("split: the parts of an oversized segment of %d points are one body's sides: kept whole",
                   len(cloud))
         return None
+    if below_cost is not None and float(np.mean(best[5])) >= below_cost:
+        log.debug("split: a part matching a look at %.2f is not cut again into parts at %s", below_cost,
+                  [round(float(c), 2) for c in best[5]])
+        return None
     log.debug("split: %s at %.3f m into %d parts, costs %s", best[1], best[2], len(best[3]),
               [round(float(c), 2) for c in best[5]])
-    return list(zip(best[3], best[4]))
+    return list(zip(best[3], best[4])), np.asarray(best[5], float)
 
 
 def _unambiguous(scored: list, config: PerceptionConfig):
@@ -685,17 +703,19 @@ def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Clou
     out: list[tuple[Detection, np.ndarray]] = []
     for det, idx in clusters:
         rests_at = stack([det, *supports], plane, config)[0].bottom_m if supports else 0.0
-        parts = split_cluster(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors,
-                              rests_at_m=rests_at, patch_m=rests_at)
-        if parts is None:
+        scored = _split_scored(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors,
+                               rests_at_m=rests_at, patch_m=rests_at)
+        if scored is None:
             out.append((det, idx))
-        elif depth > 1:  # again where a part is oversized, its height from what it rests on
+            continue
+        parts, costs = scored
+        if depth > 1:  # again where a part is oversized, its height from what it rests on
             dets = [d for d, _ in parts]
             rest = stack([*dets, *supports], plane, config)[:len(dets)]
-            for (d, i), r in zip(parts, rest):
-                sub = split_cluster(cloud.select(idx[i]), heights[idx[i]], plane, config, focal_px, descriptors,
-                                    rests_at_m=r.bottom_m)
-                out.extend([(d, idx[i])] if sub is None else [(e, idx[i][k]) for e, k in sub])
+            for (d, i), r, cost in zip(parts, rest, costs):
+                sub = _split_scored(cloud.select(idx[i]), heights[idx[i]], plane, config, focal_px, descriptors,
+                                    rests_at_m=r.bottom_m, below_cost=float(cost))
+                out.extend([(d, idx[i])] if sub is None else [(e, idx[i][k]) for e, k in sub[0]])
         else:
             out.extend((d, idx[i]) for d, i in parts)
     return out

@@ -165,15 +165,26 @@ def test_children_of_the_runner_forkserver_start_with_its_imports_frozen():
     assert frozen > 100_000  # the runtime's imports: several hundred thousand objects
 
 
-def test_closing_a_watcher_does_not_wait_out_watchdogs_move_pairing_delay(tmp_path):
+def test_closing_a_watcher_does_not_wait_out_watchdogs_move_pairing_delay(tmp_path, monkeypatch):
     # A session file archived out of a watched directory leaves watchdog an unmatched
     # IN_MOVED_FROM that its emitter holds for 0.5 s before stop() can join it; close()
-    # hands that join to a daemon thread, which still finishes it.
+    # hands that join to a daemon thread, which still finishes it. The stop is held on a
+    # gate here, so close() is seen to return while it is pending (without the gate the
+    # stop can finish before the threads are listed: CI saw that).
     import os
     import threading
 
+    from phyagentos.protocol import watch
     from phyagentos.protocol.watch import WorkspaceWatcher
 
+    gate = threading.Event()
+    real_stop = watch._stop_observer
+
+    def gated_stop(observer) -> None:
+        gate.wait(10)
+        real_stop(observer)
+
+    monkeypatch.setattr(watch, "_stop_observer", gated_stop)
     (tmp_path / "archive").mkdir()
     watcher = WorkspaceWatcher(tmp_path, dirs=("sessions",))
     assert watcher.mode == "inotify"
@@ -184,7 +195,9 @@ def test_closing_a_watcher_does_not_wait_out_watchdogs_move_pairing_delay(tmp_pa
 
     watcher.close()
     stoppers = [t for t in threading.enumerate() if t.name == "phyagentos-watch-stop"]
-    assert watcher._observer is None and len(stoppers) == 1
+    assert watcher._observer is None and len(stoppers) == 1 and stoppers[0].is_alive()
+    assert observer.is_alive()  # close() returned before the stop
+    gate.set()
     stoppers[0].join(timeout=10)
     assert not observer.is_alive()
     watcher.notify()  # a late event after close is dropped, not an error

@@ -127,3 +127,35 @@ def test_a_thing_seen_through_a_rooms_mouth_is_not_too_shallow_for_its_look():
     through_mouth = Detection(**{**face.__dict__, "cut_by_room": True})
     assert _size_error(through_mouth, mug) < 0.002
     assert _size_error(face, mug) > 0.004  # cut by a drawer's carcass, half its depth would have to show
+
+
+def test_what_stands_in_a_room_rests_on_its_floor_though_the_mouths_lip_hides_its_foot():
+    # LIBERO-10 task 9 init 1: the wrist, looking in from the microwave's mouth, saw the mug's
+    # lowest points 2 cm over the floor (more than relations.on_gap_m); standing on the table it
+    # was 14.9 cm tall, too tall for the mug, and left unknown
+    from phyagentos.perception.config import PerceptionConfig  # noqa: PLC0415
+    from phyagentos.perception.detect import Detection, stack  # noqa: PLC0415
+    from phyagentos.perception.cloud import Plane  # noqa: PLC0415
+
+    cfg = PerceptionConfig.default()
+    plane = Plane(np.array([0.0, 0.0, 1.0]), 0.9, 1000, True)
+
+    def segment(xy, low_m, top_m):
+        return Detection(np.array([xy[0], xy[1], 0.9 + 0.5 * top_m]), 0.0, np.array([0.05, 0.05, 0.5 * top_m]),
+                         "cylinder", np.zeros(3), np.zeros(3), 1600, 1, 0.002, math.pi, 1.0, 0.0, low_m=low_m)
+
+    def floor(hidden_above_m):
+        return Detection(np.array([-0.047, 0.352, 0.922]), 0.0, np.array([0.104, 0.085, 0.022]), "box",
+                         np.zeros(3), np.zeros(3), 0, 0, 0.01, math.pi, 1.0, 0.0, hidden_above_m=hidden_above_m)
+
+    mug = segment((-0.007, 0.326), 0.0635, 0.149)
+    rested = stack([mug, floor(0.144)], plane, cfg)[0]
+    assert rested.bottom_m == pytest.approx(0.044) and rested.top_m == pytest.approx(0.149)
+    assert stack([mug, floor(0.0)], plane, cfg)[0].bottom_m == 0.0  # a plain support: on_gap_m only
+    outside = segment((-0.007, 0.15), 0.0635, 0.149)  # in front of the mouth, over no floor
+    assert stack([outside, floor(0.144)], plane, cfg)[0].bottom_m == 0.0
+    # a box in the room with the mug on it: within on_gap_m of the box's top, it rests on the box
+    box = Detection(np.array([-0.007, 0.326, 0.9 + 0.055]), 0.0, np.array([0.06, 0.06, 0.011]), "box",
+                    np.zeros(3), np.zeros(3), 900, 1, 0.002, 0.1, 1.0, 0.044, low_m=0.05)
+    on_box = segment((-0.007, 0.326), 0.07, 0.18)
+    assert stack([on_box, box, floor(0.144)], plane, cfg)[0].bottom_m == pytest.approx(0.066)

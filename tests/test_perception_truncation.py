@@ -212,6 +212,23 @@ def test_a_weak_sighting_where_a_confident_track_stands_keeps_the_remembered_con
     assert far.confidence == pytest.approx(0.1)
 
 
+def test_weak_sightings_in_a_row_never_wear_a_confident_track_below_the_remembered_confidence():
+    # a mug at the back of LIBERO's microwave, seen whole from its mouth (0.74), then only weakly
+    # by the scene camera frame after frame: each frame must not take the remembered share again
+    from phyagentos.perception.tracks import REMEMBERED_CONFIDENCE, Track
+
+    cfg = PerceptionConfig.default()
+    det = _det((0.069, 0.03, 0.015), cut=(0.0, 1.0))
+    t = Track.start("mug_1", det, 0.74, 0.0, ("robot0_eye_in_hand",))
+    for k in range(1, 8):
+        t.update(det, 0.33, 0.1 * k, ("agentview",), cfg, weak_below=0.5)
+        assert t.confidence == pytest.approx(0.74 * REMEMBERED_CONFIDENCE)
+    t.update(det, 0.9, 1.0, ("agentview",), cfg, weak_below=0.5)  # a confident sighting fuses as ever
+    assert t.confidence > 0.9 and t.confident_before is None
+    t.update(det, 0.2, 1.1, ("agentview",), cfg, weak_below=0.5)  # the next weak run starts from there
+    assert t.confidence == pytest.approx(t.confident_before * REMEMBERED_CONFIDENCE) and t.confident_before > 0.9
+
+
 def test_a_part_at_the_border_never_makes_a_whole_sighting_ambiguous():
     can = ObjectDescriptor("soup_1", shape="cylinder", colour_rgb=PINK[:3], size_m=(0.066, 0.066, 0.1))
     whole = Detection(**{**_det((0.033, 0.033, 0.05), shape="cylinder", cut=None).__dict__})

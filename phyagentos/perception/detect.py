@@ -102,6 +102,12 @@ class Detection:
         top_knob: the small part standing on its top (a moka pot's lid knob:
             :func:`with_top_knob`), else None. Its top is above :attr:`top_m`, which is the
             segment's 98th percentile height (the body's top).
+        hidden_above_m: as a support (a fixture's pseudo-detection), how far over its top the
+            foot of what rests on it may go unseen, m: a room's floor behind a fixture's door,
+            seen through the mouth over its front lip, has what stands on it rise from it
+            unseen (a mug at the back of LIBERO's microwave showed its lowest points 2 cm over
+            the floor), and nothing in the room floats. 0 for everything else: only
+            :attr:`~phyagentos.perception.config.RelationsConfig.on_gap_m` is allowed.
     """
 
     position: np.ndarray
@@ -124,6 +130,7 @@ class Detection:
     body: RoundBody | None = None
     open_depth_m: float = 0.0
     top_knob: Knob | None = None
+    hidden_above_m: float = 0.0
 
     @property
     def truncated(self) -> bool:
@@ -447,6 +454,8 @@ def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list
     A detection whose lowest points (``low_m``) are well above the table and within
     ``relations.on_gap_m`` of another detection's top, over that detection's footprint,
     rests on it: its bottom becomes the other's top and its height shrinks accordingly.
+    Failing that, it rests on a support whose :attr:`Detection.hidden_above_m` reaches its
+    lowest points (a room's floor, the foot of what stands on it hidden by the mouth's lip).
     Heights are m above ``plane``; returns a new list in the same order.
     """
     from phyagentos.perception.relations import _footprint_margin
@@ -457,16 +466,23 @@ def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list
         a = out[i]
         if a.low_m < config.table.object_min_height_m + RAISED_LOW_M:
             continue
+        under = None
         for j in order:
             b = out[j]
             if j == i or b.top_m >= a.top_m:
                 continue
-            if abs(a.low_m - b.top_m) > config.relations.on_gap_m:
+            rise = a.low_m - b.top_m
+            near = abs(rise) <= config.relations.on_gap_m
+            if not near and not 0.0 < rise <= b.hidden_above_m:
                 continue
             if _footprint_margin(a.position[:2], b.position, b.yaw, b.half_extents, b.shape) < -0.005:
                 continue
-            out[i] = resting_at(a, b.top_m, plane)
-            break
+            if near:
+                under = j
+                break
+            under = j if under is None else under
+        if under is not None:
+            out[i] = resting_at(a, out[under].top_m, plane)
     return out
 
 

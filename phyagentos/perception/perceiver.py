@@ -1169,7 +1169,7 @@ class Perceiver:
                 hz_i = max(0.5 * (floor_z - plane.z_at(centre_i)), 1e-3)
                 dets.append(Detection(np.array([centre_i[0], centre_i[1], floor_z - hz_i]), yaw_i,
                                       np.array([half_i[0], half_i[1], hz_i]), "box", np.zeros(3), np.zeros(3), 0, 0,
-                                      FIXTURE_STD_M, math.pi, 1.0, 0.0))
+                                      FIXTURE_STD_M, math.pi, 1.0, 0.0, hidden_above_m=max(0.0, roof_z - floor_z)))
             for drawer in look.drawers:  # read in every observation; what stands out of the body is the fixture's
                 reading = drawer_reading(p, heights, drawer, s.position[:2], s.turn)
                 if reading is not None:

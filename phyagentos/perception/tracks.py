@@ -117,6 +117,9 @@ class Track:
     #: container's walls (the perceiver's look for a released object, which reports the object
     #: where it rests, not where that face puts it); None once it is seen on its own.
     face_top_m: float | None = None
+    #: While weak sightings follow one another where it stands (:meth:`update`'s
+    #: ``weak_below``), the confidence it had before the first of them; None otherwise.
+    confident_before: float | None = None
 
     @classmethod
     def start(cls, name: str, det: Detection, confidence: float, stamp_s: float,
@@ -148,13 +151,17 @@ class Track:
         ``weak_below``: a sighting less confident than this, within the gate of a track held
         at least that confidently and not in the hand, is part of the object where it stands
         (the rest hidden, or out of the frame); it leaves the track at least
-        :data:`REMEMBERED_CONFIDENCE` times its confidence, as not seeing it at all behind
-        something would. 0 (the default): agreeing sightings only fuse."""
+        :data:`REMEMBERED_CONFIDENCE` times the confidence it had before the first of such
+        sightings in a row, as not seeing it at all behind something would, however many
+        frames see it so (each taking the remembered share of the last wore a mug in LIBERO's
+        microwave from 0.74 to 0.32 in seven frames). 0 (the default): agreeing sightings
+        only fuse."""
         var_p = self.predicted_var(stamp_s, config)
         var_m = det.position_std_m ** 2
         within = self.within_gate(det, stamp_s, config)
-        keep = self.confidence * REMEMBERED_CONFIDENCE if (
-            confidence < weak_below <= self.confidence and not self.held and within) else 0.0
+        before = self.confidence if self.confident_before is None else self.confident_before
+        weak = confidence < weak_below <= before and not self.held and within
+        keep = before * REMEMBERED_CONFIDENCE if weak else 0.0
         if self.held or not within or det.shape != self.shape and self.observations < 2:
             fresh = Track.start(self.name, det, confidence, stamp_s, cameras)
             fresh.known_height_m = self.known_height_m  # moved or taken, it is as tall as it was
@@ -191,6 +198,7 @@ class Track:
             self.top_knob = np.r_[turned_xy(self.top_knob[:2], turn), self.top_knob[2:5], self.top_knob[5] + turn]
         # agreeing sightings raise confidence: 1 - (1 - c_now)(1 - c_before / 2)
         self.confidence = max(1.0 - (1.0 - confidence) * (1.0 - 0.5 * self.confidence), keep)
+        self.confident_before = before if weak else None
         self.last_seen_s = stamp_s
         self.observations = n + 1
         return True

@@ -135,6 +135,7 @@ def test_what_stands_in_a_room_rests_on_its_floor_though_the_mouths_lip_hides_it
     # was 14.9 cm tall, too tall for the mug, and left unknown
     from phyagentos.perception.config import PerceptionConfig  # noqa: PLC0415
     from phyagentos.perception.detect import Detection, stack  # noqa: PLC0415
+    from phyagentos.perception.perceiver import ROOM_LIP_HIDES_M  # noqa: PLC0415
     from phyagentos.perception.cloud import Plane  # noqa: PLC0415
 
     cfg = PerceptionConfig.default()
@@ -149,13 +150,17 @@ def test_what_stands_in_a_room_rests_on_its_floor_though_the_mouths_lip_hides_it
                          np.zeros(3), np.zeros(3), 0, 0, 0.01, math.pi, 1.0, 0.0, hidden_above_m=hidden_above_m)
 
     mug = segment((-0.007, 0.326), 0.0635, 0.149)
-    rested = stack([mug, floor(0.144)], plane, cfg)[0]
+    rested = stack([mug, floor(ROOM_LIP_HIDES_M)], plane, cfg)[0]
     assert rested.bottom_m == pytest.approx(0.044) and rested.top_m == pytest.approx(0.149)
     assert stack([mug, floor(0.0)], plane, cfg)[0].bottom_m == 0.0  # a plain support: on_gap_m only
     outside = segment((-0.007, 0.15), 0.0635, 0.149)  # in front of the mouth, over no floor
-    assert stack([outside, floor(0.144)], plane, cfg)[0].bottom_m == 0.0
+    assert stack([outside, floor(ROOM_LIP_HIDES_M)], plane, cfg)[0].bottom_m == 0.0
+    # task 9 init 8: a sliver of the mug's far rim seen over its front, its lowest points 10 cm up,
+    # is not a thing standing on the floor (10.7 cm tall, it was a rival for the mug's name)
+    sliver = segment((-0.002, 0.341), 0.1457, 0.1513)
+    assert stack([sliver, floor(ROOM_LIP_HIDES_M)], plane, cfg)[0].bottom_m == 0.0
     # a box in the room with the mug on it: within on_gap_m of the box's top, it rests on the box
     box = Detection(np.array([-0.007, 0.326, 0.9 + 0.055]), 0.0, np.array([0.06, 0.06, 0.011]), "box",
                     np.zeros(3), np.zeros(3), 900, 1, 0.002, 0.1, 1.0, 0.044, low_m=0.05)
     on_box = segment((-0.007, 0.326), 0.07, 0.18)
-    assert stack([on_box, box, floor(0.144)], plane, cfg)[0].bottom_m == pytest.approx(0.066)
+    assert stack([on_box, box, floor(ROOM_LIP_HIDES_M)], plane, cfg)[0].bottom_m == pytest.approx(0.066)

@@ -106,7 +106,7 @@ class Detection:
             foot of what rests on it may go unseen, m: a room's floor behind a fixture's door,
             seen through the mouth over its front lip, has what stands on it rise from it
             unseen (a mug at the back of LIBERO's microwave showed its lowest points 2 cm over
-            the floor), and nothing in the room floats. 0 for everything else: only
+            the floor; the perceiver's ``ROOM_LIP_HIDES_M``). 0 for everything else: only
             :attr:`~phyagentos.perception.config.RelationsConfig.on_gap_m` is allowed.
     """
 

@@ -477,10 +477,11 @@ def stack(dets: list[Detection], plane: Plane, config: PerceptionConfig) -> list
                 continue
             if _footprint_margin(a.position[:2], b.position, b.yaw, b.half_extents, b.shape) < -0.005:
                 continue
-            if near:
+            if near:  # resting within on_gap_m of it beats a support whose hidden foot reaches
                 under = j
                 break
-            under = j if under is None else under
+            if under is None:
+                under = j
         if under is not None:
             out[i] = resting_at(a, out[under].top_m, plane)
     return out

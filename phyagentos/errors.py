@@ -17,6 +17,7 @@ __all__ = [
     "DocumentError",
     "LeaseError",
     "LockTimeout",
+    "SessionExistsError",
     "GoalGraphError",
     "LifecycleError",
     "SkillError",
@@ -93,6 +94,16 @@ class DocumentError(_Located, ProtocolError):
 class LeaseError(ProtocolError):
     """A session write presented a lease token that is no longer current: another
     supervisor took the session over after this one's lease expired (fencing)."""
+
+
+class SessionExistsError(ProtocolError):
+    """A submit named a session id that is already in the workspace (active or archived);
+    carries ``session_id`` and the ``path`` of the existing file."""
+
+    def __init__(self, message: str, *, session_id: str, path: object) -> None:
+        super().__init__(message)
+        self.session_id = session_id
+        self.path = path
 
 
 class LockTimeout(ProtocolError, TimeoutError):

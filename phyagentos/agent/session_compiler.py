@@ -12,7 +12,7 @@ import secrets
 from datetime import datetime, timezone
 from typing import Any
 
-from phyagentos.errors import VerifierError
+from phyagentos.errors import SessionExistsError, VerifierError
 from phyagentos.protocol import Limits, Revision, SessionContext, SessionRecord, Workspace
 from phyagentos.protocol.lifecycle import utc_now
 
@@ -73,7 +73,9 @@ class SessionCompiler:
             VerifierError: the node's acceptance criteria do not parse, or its
                 ``recovery_variants`` name no policy recovery variants (checked here so a
                 bad criterion never reaches the runtime, nor a bad ladder its verdict).
-            ProtocolError: the submit path refused the record.
+            ProtocolError: the submit path refused the record. The id of a session this
+                compiler already submitted (a stale listing of the run made its node look
+                ready) is not an error: that session is returned, nothing is written.
         """
         parse_criteria(node.accept, where=f"{self.graph.path}:{node.line} accept")
         variants = (parameters if parameters is not None else node.params).get(RECOVERY_VARIANTS_PARAM)
@@ -114,6 +116,18 @@ class SessionCompiler:
             created_at=now,
             updated_at=now,
         )
-        self.workspace.submit_session(record)
+        try:
+            self.workspace.submit_session(record)
+        except SessionExistsError:
+            # Session ids are derived (run, node, generation): the id being taken means this
+            # node's session was submitted already and the listing that made it look ready
+            # missed it. Submitting is idempotent; the existing session is the node's.
+            existing = self.workspace.load_session(record.session_id)
+            if (existing.run_id, existing.node, existing.parent_session_id) != (
+                    record.run_id, record.node, record.parent_session_id):
+                raise
+            logger.warning("session %s was submitted already (a listing of run %s missed it); not submitted "
+                           "again", record.session_id, self.run_id)
+            return existing
         logger.info("submitted session %s (node %s, skill %s)", record.session_id, node.id, record.skill)
         return record

@@ -94,16 +94,23 @@ class SessionQueries(WorkspaceParts):
         for sid, hinted in hint_states.items():
             if wanted is not None and hinted not in wanted and not (wanted & TERMINAL):
                 continue
+            known = True
             if run_id is not None:
                 ident = self._states.identity(sid, hinted)
-                if ident is None or ident.run_id != run_id:
+                if ident is not None and ident.run_id != run_id:
                     continue
+                # None: the hint moved under us (a state change renames it between the
+                # scan and this read; another process's session is not in this object's
+                # cache). The session file decides below.
+                known = ident is not None
             try:
                 record = self.load_session(sid)
             except ProtocolError as exc:
                 if isinstance(exc, DocumentError):
                     raise
                 continue  # hint written, file not yet (a submit in progress)
+            if not known and record.run_id != run_id:
+                continue
             if record.state != hinted and record.state not in TERMINAL:
                 self._repair_hint(sid)
             by_id[sid] = record

@@ -12,7 +12,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from phyagentos.errors import DocumentError, LeaseError, ProtocolError
+from phyagentos.errors import DocumentError, LeaseError, ProtocolError, SessionExistsError
 
 from ..codec import Document, read_document, write_document
 from ..runs import inside_workspace
@@ -157,7 +157,8 @@ class SessionStore(WorkspaceParts):
         validated record as written.
 
         Raises:
-            ProtocolError: not pending, duplicate id, invalid id or invalid data.
+            SessionExistsError: the id is taken (a :class:`ProtocolError`).
+            ProtocolError: not pending, invalid id or invalid data.
             DocumentError: SESSIONS.md is malformed (the session file is written first).
         """
         record = self._revalidate(record)
@@ -171,7 +172,8 @@ class SessionStore(WorkspaceParts):
         with self.session_lock(sid):
             existing = self.find_session_path(sid)
             if existing is not None:
-                raise ProtocolError(f"session {sid!r} already exists ({existing})")
+                raise SessionExistsError(f"session {sid!r} already exists ({existing})", session_id=sid,
+                                         path=existing)
             # The hint first: a session file without a hint would be invisible to claimers.
             self._states.create(record)
             try:

@@ -133,3 +133,24 @@ def test_the_runtime_names_what_an_invalid_start_touches():
     c.attached = "cube"
     assert start_contact_kind(c, (("cube", "wrist"),)) == "held_object"
     assert np.all([start_contact_kind(c, ()) == "environment"])
+
+
+def test_a_door_close_that_starts_against_the_door_backs_off_and_looks_from_clear_of_it():
+    """LIBERO-10 task 9, init 9: the look into the microwave left the hand against its door,
+    and the close could not plan from there. ``close_door`` declares the back-off, so the
+    first replan raises the hand, and it reads the door only after leaving the cameras' view
+    (from beside the door the slab was read as shut)."""
+    import yaml
+
+    from phyagentos.resources import trees_dir
+
+    d = Diagnosis(cause="start_in_collision", category="policy", summary="x", facts={"variant": "environment"})
+    close = session(skill="close_door", accept=[{"articulated": {"object": "microwave_1", "min": -0.02,
+                                                                  "max": 0.02}}], params={"object": "microwave_1"})
+    rev = RecoveryPlanner().plan(close, d)
+    assert rev is not None and rev.strategy == "back_off_first"
+    assert rev.parameters == {"backoff_m": 0.10, "settle_s": 0.5}
+    tree = yaml.safe_load((trees_dir() / "close_door.yaml").read_text())
+    names = [c.get("name") for c in tree["root"]["sequence"]["children"]]
+    assert names.index("BackOff") < names.index("ClearViewFirst") < names.index("ObserveScene") \
+        < names.index("ComputeDoorPush")

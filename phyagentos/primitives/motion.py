@@ -48,28 +48,37 @@ def nearer_reachable_hand(ctx, closing: np.ndarray, pointing: np.ndarray,
                           points: list[np.ndarray]) -> tuple[float, np.ndarray] | None:
     """Of the two hands whose tool z axis is ``pointing`` (3,) world unit and whose fingers close
     along ``closing`` or its opposite (3,) world unit, at right angles to it, the one the arm
-    reaches (IK from the current joints, no collision check) at every point of ``points``
-    ((3,) world m, tool point), nearer the current wrist: ``(turn rad from the current hand,
-    (3, 3) world rotation)``; ``None`` where the arm reaches neither."""
+    reaches (IK, no collision check) at every point of ``points`` ((3,) world m, tool point),
+    nearer the current wrist: ``(turn rad from the current hand, (3, 3) world rotation)``;
+    ``None`` where the arm reaches neither.
+
+    IK is seeded with the current joints; only when neither hand converges from there is each
+    tried again from the target's ready configuration ``home_qpos`` (as :func:`clear_ik` seeds):
+    the solver is local, and from a wrist wound far from the goal it stops short of poses the
+    arm reaches (LIBERO-10 task 9, init 9: the push that shuts the microwave, 4-15 cm short from
+    the joints the place left, reached from the ready configuration with either hand)."""
     target = ctx.target
     names, frame = tuple(target.arm_joint_names), target.tcp_site
     wrist = target.tcp_pose()[:3, :3]
-    best = None
-    for sign in (1.0, -1.0):
-        y = sign * np.asarray(closing, dtype=float)
-        R = np.column_stack([np.cross(y, pointing), y, np.asarray(pointing, dtype=float)])
-        try:
-            with ctx.profiler.section("ik"):
-                for p in points:
-                    T = np.eye(4)
-                    T[:3, :3], T[:3, 3] = R, p
-                    solve_ik(target.model, q_seed=target.arm_qpos(), target=T, arm_joint_names=names, frame=frame)
-        except IKError:
-            continue
-        turn = float(np.arccos(np.clip((np.trace(wrist.T @ R) - 1.0) / 2.0, -1.0, 1.0)))
-        if best is None or turn < best[0]:
-            best = (turn, R)
-    return best
+    for seed in (target.arm_qpos(), np.asarray(target.home_qpos, dtype=float)):
+        best = None
+        for sign in (1.0, -1.0):
+            y = sign * np.asarray(closing, dtype=float)
+            R = np.column_stack([np.cross(y, pointing), y, np.asarray(pointing, dtype=float)])
+            try:
+                with ctx.profiler.section("ik"):
+                    for p in points:
+                        T = np.eye(4)
+                        T[:3, :3], T[:3, 3] = R, p
+                        solve_ik(target.model, q_seed=seed, target=T, arm_joint_names=names, frame=frame)
+            except IKError:
+                continue
+            turn = float(np.arccos(np.clip((np.trace(wrist.T @ R) - 1.0) / 2.0, -1.0, 1.0)))
+            if best is None or turn < best[0]:
+                best = (turn, R)
+        if best is not None:
+            return best
+    return None
 
 
 def traced_path(path: np.ndarray) -> list[list[float]]:

@@ -522,3 +522,21 @@ def test_a_part_is_cut_again_only_where_its_parts_explain_it_better_than_it_whol
     out = split.split_clusters(clusters, cloud, heights, plane, CFG, np.array([400.0]), looks)
     assert len(out) == (3 if cut_again else 2)
     assert (out[0][0] is high) == cut_again and (out[0][0] is mug) != cut_again
+
+
+def test_two_cans_touching_within_a_larger_looks_size_are_still_split_when_no_look_names_them(scene):
+    """LIBERO-10 task 7, init 4: the alphabet soup and the tomato sauce stand touching, one
+    segment 14.4 by 6.8 cm, 9.2 cm tall; the basket's look (16 by 14.6 by 15 cm) is larger
+    in every dimension, so the segment was not oversized, never split, and named by nothing
+    (both cans unseen, the pick of one refused). A segment no look names is split when its
+    parts explain it better."""
+    a = SyntheticObject("soup_1", "cylinder", (0.034, 0.034, 0.046), (0.50, 0.0), rgba=BROWN)
+    b = SyntheticObject("sauce_1", "cylinder", (0.034, 0.034, 0.046), (0.50, 0.0685), rgba=WHITE)
+    basket = ObjectDescriptor("basket_1", shape="box", colour_rgb=GREY[:3], size_m=(0.16, 0.146, 0.15))
+    declared = [_desc(a), _desc(b), basket]
+    merged, _ = _observe(scene, [a, b], declared, NO_SPLIT)
+    assert "soup_1" not in merged and "sauce_1" not in merged and "basket_1" not in merged
+    ents, snap = _observe(scene, [a, b], declared)
+    for o in (a, b):
+        assert ents[o.name]["kind"] == "object" and _xy_error(ents[o.name], o) < 0.01, ents.get(o.name)
+    assert snap["unseen"] == ["basket_1"]

@@ -60,7 +60,9 @@ def nearer_reachable_hand(ctx, closing: np.ndarray, pointing: np.ndarray,
     target = ctx.target
     names, frame = tuple(target.arm_joint_names), target.tcp_site
     wrist = target.tcp_pose()[:3, :3]
-    for seed in (target.arm_qpos(), np.asarray(target.home_qpos, dtype=float)):
+    current, home = target.arm_qpos(), np.asarray(target.home_qpos, dtype=float)
+    seeds = (current,) if np.allclose(current, home) else (current, home)  # at the ready pose already: once
+    for seed in seeds:
         best = None
         for sign in (1.0, -1.0):
             y = sign * np.asarray(closing, dtype=float)

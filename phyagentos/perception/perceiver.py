@@ -275,9 +275,10 @@ FIXTURE_EDGE_M = 0.015
 COVERED_WITHIN_M = 0.01
 #: ... all but this fraction of them (:meth:`Perceiver._covered_within_track`).
 COVERED_OUTSIDE_FRACTION = 0.05
-#: A sighting of a tracked object narrower than the track by more than this along one of its
-#: axes, m, shows only part of it (the rest hidden behind the arm, the held object or the edge
-#: of a camera's view that another camera misses): its points within the track's footprint
+#: A sighting of a tracked object narrower by more than this along one of its axes, m, than
+#: both its track and its declared look (the smallest size the look was seen whole at) shows
+#: only part of it (the rest hidden behind the arm, the held object or the edge of a camera's
+#: view that another camera misses): its points within the track's footprint
 #: (:meth:`Perceiver._part_within_track`) confirm the object there and never move it. The voxel
 #: grid's size: whole sightings of one plate differ by 1-2 mm.
 PART_NARROWER_M = 0.004
@@ -1744,21 +1745,29 @@ class Perceiver:
         inside = _footprint_margins(xy, t.position, t.yaw, t.half_extents, t.shape) >= -COVERED_WITHIN_M
         return float(np.mean(~inside)) <= COVERED_OUTSIDE_FRACTION
 
-    @staticmethod
-    def _part_within_track(t: Track, det: Detection, xy: np.ndarray, proprio: Proprioception) -> bool:
+    def _part_within_track(self, t: Track, det: Detection, xy: np.ndarray, proprio: Proprioception) -> bool:
         """Whether ``det`` (its points ``xy``, (N, 2) world m) shows only part of the object of
         track ``t``, which stands where it was: ``t`` seen at least twice, neither held nor let
-        go near here since (``placed_xy``); ``det`` narrower than ``t`` by more than
-        :data:`PART_NARROWER_M` along an axis (half extents compared sorted, so a box's axes
-        need not agree) and wider along none; its points within the track's footprint
+        go near here since (``placed_xy``); ``det`` narrower by more than :data:`PART_NARROWER_M`
+        along an axis than both ``t`` and the object's declared look (the smallest whole size in
+        its ``size_range_m``, else its ``size_m``; half extents compared sorted, so a box's axes
+        need not agree) and wider than ``t`` along none; its points within the track's footprint
         (:meth:`_covered_within_track`); and the tcp more than :data:`PART_HAND_CLEAR_M` outside
         that footprint. A part's centre lies off the object's towards what shows (by half of
-        what is hidden), so fusing it would move a still object."""
+        what is hidden), so fusing it would move a still object. An object declared without
+        its three dimensions is never taken for a part (a track begun on too large a segment
+        would otherwise never take the true size)."""
         if t.held or t.placed_xy is not None or t.observations < 2 or len(xy) == 0:
+            return False
+        desc = next((d for d in self.declared if d.name == t.name), None)
+        whole = None if desc is None else (desc.size_range_m[0] if desc.size_range_m is not None else desc.size_m)
+        if not isinstance(whole, (tuple, list)) or len(whole) != 3:
             return False
         seen = np.sort(np.asarray(det.half_extents[:2], dtype=float))
         known = np.sort(np.asarray(t.half_extents[:2], dtype=float))
-        if not (np.any(known - seen > PART_NARROWER_M) and np.all(seen - known <= PART_NARROWER_M)):
+        look = np.sort(0.5 * np.asarray(whole[:2], dtype=float))
+        narrower = (known - seen > PART_NARROWER_M) & (look - seen > PART_NARROWER_M)
+        if not (np.any(narrower) and np.all(seen - known <= PART_NARROWER_M)):
             return False
         if not Perceiver._covered_within_track(t, xy):
             return False

@@ -2,11 +2,11 @@
 reaching outside where it stood, is fused as any sighting.
 
 LIBERO-10 task 4 init 5: while the porcelain mug was lifted, the plate it was to go on showed
-only in part (13 cm of its 14 cm across; the rest hidden); three such sightings moved the plate's
+only in part (11.8-12.8 cm of its 13.8 cm across; the rest hidden); three such sightings moved the plate's
 track 1.6 cm towards what showed, the mug was set down that far off the plate's true centre and
-its place was judged undecided. A sighting narrower than its track, all within the track's
-footprint, with the tcp clear of it, confirms the object there and never moves it
-(``Perceiver._part_within_track``).
+its place was judged undecided. A sighting narrower than both its track and its declared look,
+all within the track's footprint, with the tcp clear of it, confirms the object there and never
+moves it (``Perceiver._part_within_track``).
 
 The scene is the tabletop Franka with a static plate (:mod:`phyagentos.perception.synthetic`);
 the later looks' detections of the plate are replaced by what shows of it with a strip on one
@@ -49,14 +49,15 @@ def _look(scene, perceiver, seed, tcp_xy):
     return {e["name"]: e for e in snap["entities"]}
 
 
-def _third_look(scene, monkeypatch, *, tcp_xy, kept_rule: bool = True, moved_to=None) -> np.ndarray:
+def _third_look(scene, monkeypatch, *, tcp_xy, kept_rule: bool = True, moved_to=None,
+                size_m=(0.14, 0.14, 0.015)) -> np.ndarray:
     """The plate's perceived centre (2,) world m after two looks at it whole and three whose
     detection of it is what shows with its strip beyond :data:`HIDDEN_BEYOND_M` (world +y)
     hidden, fitted there (centre and half extents of what shows); the tcp at ``tcp_xy`` (2,)
     world m in those three; ``kept_rule`` False: the rule switched off; ``moved_to``: the
     plate stands there (2,) world m in the third look."""
     scene.place([PLATE])
-    declared = [ObjectDescriptor("plate_1", shape="cylinder", colour_rgb=PLATE.rgba[:3], size_m=(0.14, 0.14, 0.015))]
+    declared = [ObjectDescriptor("plate_1", shape="cylinder", colour_rgb=PLATE.rgba[:3], size_m=size_m)]
     perceiver = Perceiver(CFG, declared)
     far = (0.25, -0.35)
     for seed in (1, 2):
@@ -108,3 +109,14 @@ def test_a_part_reaching_outside_where_the_plate_stood_is_fused_as_any_sighting(
     moved_to = (PLATE.position[0], PLATE.position[1] - 0.04)
     seen = _third_look(scene, monkeypatch, tcp_xy=(0.25, -0.35), moved_to=moved_to)
     assert np.linalg.norm(seen - PLATE.position) > 0.015, seen
+
+
+def test_a_sighting_no_narrower_than_the_declared_look_or_of_an_object_declared_without_its_size_is_fused(
+        scene, monkeypatch):
+    # declared 12 cm across, the plate's track (seen 14 cm across) is larger than its look: a
+    # sighting as wide as the look is the object's true size, taken as it is
+    fused = _third_look(scene, monkeypatch, tcp_xy=(0.25, -0.35), size_m=(0.12, 0.12, 0.015))
+    assert np.linalg.norm(fused - PLATE.position) > 0.006, fused
+    # declared by its largest dimension only: no look to tell a part from the whole
+    fused = _third_look(scene, monkeypatch, tcp_xy=(0.25, -0.35), size_m=0.14)
+    assert np.linalg.norm(fused - PLATE.position) > 0.006, fused

@@ -82,3 +82,27 @@ def test_an_object_wider_than_the_slot_at_every_turn_is_refused_before_anything_
         _place()._fitting_yaws([0.0], np.eye(4), np.array([0.0289, 0.0633, 0.01]), np.eye(4),
                                np.array([0.05, 0.05, 0.05]))  # a 10 cm mug
     assert err.value.code == "perception.too_small"
+
+
+def test_a_bowl_perceived_as_a_box_needs_its_radius_every_way_of_an_open_drawer():
+    """LIBERO-10 task 3 init 5: the held bowl perceived as a box 11.3 by 11.0 cm, turned 4 degrees
+    against the bottom drawer, whose floor stands 12.2 cm out of the cabinet's body. As a box its
+    corners asked 12.3 cm (the place refused, ``perception.too_small``); a bowl is round, and asks
+    its larger half extent every way, 11.9 cm with the 3 mm to spare each side. A box of a thing
+    that is no open container still asks its turned corners."""
+    from types import SimpleNamespace
+
+    place = ComputePlace("PlaceIntoTheDrawer", object="akita_black_bowl_1", region="white_cabinet_1_bottom_drawer")
+    place.ctx = SimpleNamespace(target=None)
+    drawer = {"name": "white_cabinet_1_bottom_drawer", "attributes": {"support": True, "joint_position": 0.16}}
+    room = np.array([0.0895, 0.061, 0.0105])
+    turned = np.eye(4)  # upright, turned 3.8 degrees about the vertical
+    c, s = math.cos(math.radians(3.8)), math.sin(math.radians(3.8))
+    turned[:2, :2] = [[c, -s], [s, c]]
+    half = np.array([0.0565, 0.055, 0.025])
+    bowl = {"name": "akita_black_bowl_1", "attributes": {"class": "akita_black_bowl", "shape": "box"}}
+    place._check_into(drawer, np.eye(4), room, turned, half, held=bowl)  # fits: 11.9 cm of 12.2
+    box = {"name": "akita_black_bowl_1", "attributes": {"class": "butter", "shape": "box"}}
+    with pytest.raises(PrimitiveFailure, match=r"needs \[0.126, 0.123\] m") as err:
+        place._check_into(drawer, np.eye(4), room, turned, half, held=box)
+    assert err.value.code == "perception.too_small"

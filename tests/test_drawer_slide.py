@@ -94,6 +94,33 @@ def test_a_bowl_in_front_of_the_bottom_drawer_is_not_read_as_its_handle():
             assert got is not None and abs(got[0] - want) < 0.005, got
 
 
+def test_the_far_rim_of_a_bowl_just_beyond_an_open_drawers_handle_is_not_read_as_its_handle():
+    """LIBERO-10 task 3 init 5: the bottom drawer 15.5 cm out, a black bowl's far rim 5 mm beyond
+    its handle's face. Cut at a slice's outer edge, the rim's annulus reads as straight as a bar
+    and spans the handle's length, at the handle's level, with the drawer's front behind it: it
+    was read as the handle, 1.8 cm too far out, and the hook came down on the drawer's front. The
+    bowl goes on outward without a gap; a handle's face has air in front of it."""
+    bottom = DrawerLook.from_dict({**MIDDLE, "name": "bottom", "height_m": 0.0461, "top_m": 0.084}, "white_cabinet_1")
+    rng = np.random.default_rng(4)
+    opening = 0.155
+    hx, hy = CENTRE + np.array(MIDDLE["handle_offset_m"]) + np.array([0.0, opening])
+    front = _box([CENTRE[0] - 0.1, hy - 0.035, 0.9 + 0.01], [CENTRE[0] + 0.1, hy - 0.02, 0.9 + 0.08], 800, rng)
+    handle = _box([hx - 0.0444, hy - 0.008, 0.9 + 0.038], [hx + 0.0444, hy + 0.008, 0.9 + 0.054], 300, rng)
+    # the bowl's rim seen from above: an annulus 4.5-5.6 cm from its centre, 4.0-5.2 cm high, its
+    # outer edge 6 mm beyond the handle's face
+    centre_y = hy + 0.008 + 0.006 + 0.056
+    t = rng.uniform(0, 2 * np.pi, 6000)
+    r = np.sqrt(rng.uniform(0.045 ** 2, 0.056 ** 2, 6000))
+    rim = np.column_stack([hx + 0.01 + r * np.cos(t), centre_y + r * np.sin(t), 0.9 + rng.uniform(0.040, 0.052, 6000)])
+    pts = np.vstack([front, handle, rim])
+    got = drawer_reading(pts, pts[:, 2] - 0.9, bottom, CENTRE)
+    assert got is not None and abs(got[0] - opening) < 0.005, got
+    # the rim alone, the handle hidden: no reading, never the rim
+    pts = np.vstack([front, rim])
+    got = drawer_reading(pts, pts[:, 2] - 0.9, bottom, CENTRE)
+    assert got is None or abs(got[0] - opening) < 0.005, got
+
+
 def _cabinet(*, handles: bool, seed: int = 3):
     """A LIBERO-like cabinet (its look, and points (N, 3) with heights (N,) over the support
     at z = 0.9) centred at :data:`CENTRE`, its drawers shut, with a tall rack standing against

@@ -292,6 +292,39 @@ def test_an_across_grasp_the_arm_cannot_reach_clear_gives_way_to_the_next_candid
     assert "candidates_refused" not in records[0]
 
 
+def test_when_no_grasp_is_clear_the_first_refused_only_at_its_grasp_is_taken_not_a_blocked_pre_grasp(
+        franka, monkeypatch):
+    """A flat cream cheese box beside a milk carton (LIBERO-10 task 1 init 4): every pre-grasp
+    from 10 cm meets the carton, every grasp from 15 cm puts the fingertips in the table. The
+    planner cannot reach a blocked pre-grasp at all (``goal_in_collision``, a whole attempt
+    spent); a pre-grasp it reaches, whose straight approach stops on the table, is taken
+    instead: the first such candidate in the order they were tried, traced ``fallback``."""
+    import phyagentos.primitives.perception as perception
+    from phyagentos.primitives.perception import Blocked
+
+    ent = _entity("cream_cheese_1", "cream_cheese", "box", (0.042, 0.022, 0.016))
+    low = _run_compute_grasp(franka, ent)[0]["pregrasp_pose"].copy()
+
+    def unusable(ctx, obj, plan):
+        if plan.pregrasp[2, 3] < low[2, 3] + 0.01:  # from 10 cm: the carton at the pre-grasp
+            return Blocked("pre-grasp collides: gripper0_rightfinger-milk_1_main", stage="pre-grasp", collides=True)
+        return Blocked("grasp collides: gripper0_leftfinger-living_room_table_col", stage="grasp", collides=True)
+
+    monkeypatch.setattr(perception, "_unusable", unusable)
+    board, records = _run_compute_grasp(franka, ent)
+    [rec] = records
+    assert rec["candidate_used"] == 0 and rec["approach_height_m"] == pytest.approx(0.15)
+    assert rec["fallback"].startswith("candidate 0 from 0.15 m: grasp collides")
+    assert rec["candidates_refused"][0].startswith("candidate 0 from 0.10 m: pre-grasp collides")
+    assert board["pregrasp_pose"][2, 3] == pytest.approx(low[2, 3] + 0.05)
+    # every candidate blocked before its grasp: the candidate asked for, as before (the planner says why)
+    monkeypatch.setattr(perception, "_unusable", lambda ctx, obj, plan: Blocked(
+        "pre-grasp collides: gripper0_rightfinger-milk_1_main", stage="pre-grasp", collides=True))
+    board, records = _run_compute_grasp(franka, ent)
+    assert "candidate_used" not in records[0] and "fallback" not in records[0]
+    np.testing.assert_allclose(board["pregrasp_pose"], low, atol=1e-9)
+
+
 def test_when_no_centred_grasp_is_clear_the_grasp_slides_along_the_side_it_holds(franka, monkeypatch):
     """A carton beside a cream cheese box along the closing direction meets the hand: a grasp slid
     along the box's long side, both pads still on it, clears it; a re-computed grasp keeps the slide."""

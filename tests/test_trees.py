@@ -128,3 +128,45 @@ def test_the_place_retreat_rises_as_high_as_the_arm_reaches_at_least_min_retreat
         assert retreat.at_least_m == 0.04 and retreat.offset.tolist() == [0.0, 0.0, 0.10]
         lower = next(n for n in library.build(tree, {**params, "min_retreat_m": 0.06}).iterate() if n.name == "Retreat")
         assert lower.at_least_m == 0.06
+
+
+def test_give_way_ends_a_clean_up_so_the_selector_moves_on_with_the_failure_that_called_for_it(tmp_path):
+    """``give_way`` fails at once and records nothing: the clean-up sequence it ends fails, the
+    selector's next child runs, and the failure recorded before the clean-up stays the last."""
+    from phyagentos.primitives import SkillContext
+
+    lib = write(tmp_path, "t", "version: 1\nname: t\nroot:\n  selector:\n    children:\n"
+                               "      - sequence:\n          name: CleanUp\n          children:\n"
+                               "            - primitive: noop\n              name: Undo\n"
+                               "            - primitive: give_way\n              name: GiveWay\n"
+                               "      - primitive: noop\n        name: Next\n")
+    root = lib.build("t")
+    ctx = SkillContext(target=None)
+    ctx.fail("execution.tracking", "LowerToTheDrawer", "tracking error 0.050 rad exceeded 0.05 rad")
+    for node in root.iterate():
+        if hasattr(node, "ctx"):  # the primitives
+            node.setup(context=ctx)
+    root.tick_once()
+    while root.status == py_trees.common.Status.RUNNING:
+        root.tick_once()
+    nodes = {n.name: n for n in root.iterate()}
+    assert root.status == py_trees.common.Status.SUCCESS
+    assert nodes["CleanUp"].status == py_trees.common.Status.FAILURE
+    assert nodes["Undo"].status == py_trees.common.Status.SUCCESS and nodes["Next"].status == py_trees.common.Status.SUCCESS
+    assert ctx.failure["primitive"] == "LowerToTheDrawer"
+    assert [r["kind"] for r in ctx.trace.records if r["kind"] == "give_way"] == ["give_way"]
+
+
+def test_a_hook_whose_fingers_stop_on_the_way_down_is_raised_back_before_the_handle_is_tried(library):
+    """LIBERO-10 task 3 init 5: the hook's fingers stopped on the drawer's front and the handle's
+    branch planned from there, in contact (``start_in_collision``, no rung left): a failed
+    lowering is followed by a straight raise back to the pose above the hook, then the branch."""
+    root = library.build("hook_drawer", {"object": "white_cabinet_1_bottom_drawer"})
+    nodes = {n.name: n for n in root.iterate()}
+    lower = nodes["LowerOrRaiseBack"]
+    assert isinstance(lower, py_trees.composites.Selector)
+    assert [c.name for c in lower.children] == ["LowerToTheDrawer", "RaiseBackAndGiveWay"]
+    raise_back, give_way = nodes["RaiseBackAndGiveWay"].children
+    assert type(raise_back).__name__ == "CartesianMove" and raise_back.to == "pregrasp_pose"
+    assert type(give_way).__name__ == "GiveWay"
+    assert [c.name for c in root.children] == ["HookDrawer", "PullByTheHandle"]

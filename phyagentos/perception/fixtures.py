@@ -261,6 +261,14 @@ DRAWER_STRAIGHT_TOL_M = 0.005
 #: below the handle's centre, m (the cameras see the bar's top and front: its median is 0-9 mm
 #: above the centre; a plate's rim in front of LIBERO's bottom drawer reads 1.1 cm below it).
 DRAWER_LEVEL_TOL_M = 0.006
+#: A handle's outer face has air in front of it: band points across the slice's span from this
+#: far to this far beyond the slice's outermost point, m, more than :data:`DRAWER_AIR_FRACTION`
+#: of the slice's own, make the slice the back of a thing standing in front of the handle (the
+#: far rim of a bowl by LIBERO-10's bottom drawer, 5 mm from the handle's face at the rim's
+#: nearest: its arc, cut at the slice's outer edge, reads as straight as a bar; the bowl goes on
+#: outward without a gap, a handle's face does not), and the handle is looked for behind it.
+DRAWER_AIR_M = (0.001, 0.004)
+DRAWER_AIR_FRACTION = 0.1
 #: 1-sigma uncertainty of a drawer reading, m (``bench/libero_drawer.py`` on generated scenes,
 #: docs/libero.md, "Drawers": libero_goal's world 0.2-1.9 mm; LIBERO-90 task 0's world 8-16 mm
 #: short, every reading within 2 sigma: there the body's visible depth moves its footprint centre
@@ -507,6 +515,12 @@ def drawer_reading(points: np.ndarray, heights: np.ndarray, drawer: DrawerLook, 
                 continue
             if not _straight(a, across, sel, hi):
                 k += 1  # a rim's arc (a plate tilted against the drawer), not a bar's face: look behind it
+                continue
+            face = float(a[sel].max())
+            in_front = ((a > face + DRAWER_AIR_M[0]) & (a <= face + DRAWER_AIR_M[1])
+                        & (across >= float(across[sel].min())) & (across <= float(across[sel].max())))
+            if int(in_front.sum()) > DRAWER_AIR_FRACTION * int(sel.sum()):
+                k += 1  # no air in front of it: the back of a thing standing before the handle; look behind it
                 continue
             wide = int(((a_beyond <= hi) & (a_beyond > hi - 2 * _DRAWER_SLICE_M)).sum())
             if wide > DRAWER_FRONT_FRACTION * int(sel.sum()):

@@ -22,6 +22,7 @@ articulate_slide          pull or push a held handle along its entity's slide (a
 tool_move                 straight tcp motion by an offset in the tool frame
 compute_place_as_held     place poses keeping the hand's orientation (hooked objects)
 noop                      succeed after n ticks, touching no target (control.py)
+give_way                  fail at once, recording nothing: ends a clean-up branch (control.py)
 guarded_move              straight tcp motion that stops on contact (contact.py)
 compute_place_at          place poses at an offset or slot inside a region (placement.py)
 compute_push              start poses to push an object with the closed hand (contact.py)
@@ -40,7 +41,7 @@ from .affordance import ArticulateHinge, ArticulateSlide, ComputeAffordanceGrasp
 from .base import Primitive, PrimitiveFailure
 from .contact import ComputePush, GuardedMove, Push
 from .context import CancelToken, MotionSettings, Profiler, SkillContext, TraceRecorder
-from .control import Noop
+from .control import GiveWay, Noop
 from .door import ComputeDoorPush, PushDoor
 from .drawer_hook import ComputeDrawerHook
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
@@ -83,6 +84,7 @@ PRIMITIVES = {
     "tool_move": ToolMove,
     "compute_place_as_held": ComputePlaceAsHeld,
     "noop": Noop,
+    "give_way": GiveWay,
     "guarded_move": GuardedMove,
     "compute_place_at": ComputePlaceAt,
     "compute_push": ComputePush,

@@ -19,7 +19,7 @@ from typing import Any, Mapping
 
 from .affordance import ArticulateHinge, ArticulateSlide, ComputeAffordanceGrasp, ComputePlaceAsHeld, ToolMove
 from .contact import ComputePush, GuardedMove, Push
-from .control import Noop
+from .control import GiveWay, Noop
 from .door import ComputeDoorPush, PushDoor
 from .drawer_hook import ComputeDrawerHook
 from .execution import CartesianMove, CheckHolding, ExecuteTrajectory, Gripper, Hold, WaitStill
@@ -245,6 +245,7 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
     Noop: {
         "ticks": ("int", "", "ticks before succeeding (touches no target)"),
     },
+    GiveWay: {},
     ComputePlaceAt: {
         "object": ("str", "", "the held object"),
         "region": ("str", "", "region to set it down in"),

@@ -106,3 +106,31 @@ def test_a_bowl_perceived_as_a_box_needs_its_radius_every_way_of_an_open_drawer(
     with pytest.raises(PrimitiveFailure, match=r"needs \[0.126, 0.123\] m") as err:
         place._check_into(drawer, np.eye(4), room, turned, half, held=box)
     assert err.value.code == "perception.too_small"
+
+
+def test_two_pots_fitted_round_stand_in_a_row_across_their_handles():
+    """LIBERO-10 task 8 init 7: the held moka pot fitted as a cylinder 10.5 cm across (it is 12.7
+    cm along its handle, 7.4 across), so its extents along the stove's two axes tied and the row
+    of two slots ran along the handle; the first pot went 5 cm out to the stove's side and its
+    verdict was left undecided. With the handle that perception found, the row runs across it;
+    a box perceived longer one way keeps its row across its narrow side, handle or not."""
+    place = ComputePlace("PlaceOnTheStove", object="moka_pot_1", region="flat_stove_1", slot=[0, 2])
+    stove = np.eye(4)
+    stove_half = np.array([0.075, 0.075, 0.0157])
+    held = np.eye(4)  # the pot's frame as the tcp's, the hand set down at yaw 0
+    yaw = 0.0
+    handle_world = np.array([0.0123, -0.9999, 0.0])
+    handle_tcp = top_down_rotation(yaw)[:3, :3].T @ handle_world
+    round_half = np.array([0.0526, 0.0526, 0.068])
+    spot = place._slot_point(stove, stove_half, held, round_half, yaw, handle_tcp=handle_tcp)
+    assert abs(spot[1]) < 1e-9 and spot[0] == pytest.approx(-(0.075 - 0.025))  # along x, across the handle
+    # the handle along x: the row along y
+    turned = top_down_rotation(yaw)[:3, :3].T @ np.array([1.0, 0.0, 0.0])
+    spot = place._slot_point(stove, stove_half, held, round_half, yaw, handle_tcp=turned)
+    assert abs(spot[0]) < 1e-9 and abs(spot[1]) == pytest.approx(0.05)
+    # a box narrower along y keeps its row along y, whatever the handle says
+    box_half = np.array([0.064, 0.037, 0.068])
+    R = top_down_rotation(yaw)[:3, :3] @ held[:3, :3]
+    narrow = int(np.argmin([float(np.abs(R.T @ axis) @ box_half) for axis in np.eye(3)[:2]]))  # world x or y
+    spot = place._slot_point(stove, stove_half, held, box_half, yaw, handle_tcp=handle_tcp)
+    assert abs(spot[1 - narrow]) < 1e-9 and abs(spot[narrow]) > 0.03

@@ -52,9 +52,6 @@ class GiveWay(Primitive):
 
     TOOLS = ()
 
-    def __init__(self, name: str):
-        super().__init__(name)
-
     def step(self):
         self.ctx.trace.record("give_way", leaf=self.name)
         return Status.FAILURE

@@ -422,9 +422,9 @@ class ComputeGrasp(Primitive):
         under or beside the object, where the straight approach stops on contact: a flat cream
         cheese box beside a milk carton, whose pre-grasps from 10 cm meet the carton and whose
         grasps from 15 cm put the fingertips in the table, traced ``fallback``), else candidate
-        ``self.candidate`` as before (the planner then says why). Re-computed with a pre-grasp already chosen (``RecomputeGrasp``
-        after a closer look), the candidate whose hand yaw is nearest that pre-grasp's, at its
-        height: the refinement never turns the hand. When no centred grasp of a box is clear
+        ``self.candidate`` as before (the planner then says why). Re-computed with a pre-grasp
+        already chosen (``RecomputeGrasp`` after a closer look), the candidate whose hand yaw
+        is nearest that pre-grasp's, at its height: the refinement never turns the hand. When no centred grasp of a box is clear
         from either height, the same candidates slid along the side they hold
         (:func:`~phyagentos.motion.grasp.slide_offsets`: :data:`~phyagentos.motion.grasp.OFF_CENTRE_STEPS_M`,
         both pads still on the box): a carton standing beside a cream cheese box along the

@@ -489,13 +489,13 @@ class ComputeGrasp(Primitive):
                             return plan, used
                         how = (f" slid {offset * 100:+.1f} cm" if offset else "") + (
                             f" turned {math.degrees(turn):+.0f} deg" if turn else "")
-                        if fallback is None and isinstance(why, Blocked) and why.stage == "grasp":
-                            fallback = (plan, i, height, len(refused))
                         refused.append(f"candidate {i}{how} from {height:.2f} m: {why}")
+                        if fallback is None and isinstance(why, Blocked) and why.stage == "grasp":
+                            fallback = (plan, i, height, refused[-1])
         if fallback is not None:
-            plan, i, height, k = fallback
+            plan, i, height, line = fallback
             return plan, {"candidates_refused": refused, "candidate_used": i, "approach_height_m": round(height, 3),
-                          "fallback": refused[k]}
+                          "fallback": line}
         return first, {"candidates_refused": refused}
 
     def _top_knob_plan(self, attrs: dict, T_obj: np.ndarray, half: np.ndarray, max_width: float):
@@ -917,13 +917,13 @@ class ComputePlace(Primitive):
         # fixture (its box is its place patch: the stove's burner, the cabinet's top), offers
         # its top face: centre z plus its vertical half extent.
         ent = next((e for e in snapshot.get("entities", []) if e["name"] == self.region), {})
+        held = next((e for e in snapshot.get("entities", []) if e["name"] == self.object), {})
         kind = ent.get("kind", "region")
         attrs = ent.get("attributes") or {}
         compartment = kind == "fixture" and attrs.get("class") == "compartment"
         yaws = place_yaws(hand_yaw(self.ctx.target.tcp_pose()))
         approach = self.approach_height_m
         if kind == "articulation":  # into a drawer: onto its floor out of the body, which must take the object
-            held = next((e for e in snapshot.get("entities", []) if e["name"] == self.object), {})
             self._check_into(ent, T_region, region_half, T_obj, half, held=held)
         if compartment:  # among walls: turned to fit between them, let down from above their top
             yaws = self._fitting_yaws(yaws, T_region, region_half, T_tcp_obj, half)
@@ -942,16 +942,13 @@ class ComputePlace(Primitive):
             yaws = sorted(yaws, key=lambda y: abs(float(top_down_rotation(y)[:2, 1] @ lean[1])))
             # turned about its base, the object's true height in the hand counts: the one seen
             # when the hand closed (a bottle taken near its neck hangs lower than centred)
-            held_attrs = next((e.get("attributes") or {} for e in snapshot.get("entities", [])
-                               if e["name"] == self.object), {})
-            seen_z = held_attrs.get("grasp_z_tcp_m")
+            seen_z = (held.get("attributes") or {}).get("grasp_z_tcp_m")
             if isinstance(seen_z, (int, float)) and math.isfinite(seen_z):
                 T_tcp_obj = T_tcp_obj.copy()
                 T_tcp_obj[2, 3] = float(seen_z)
         handle_tcp = None  # the held object's handle, as perception found it, in the tcp frame
         if self.slot is not None:
-            held_ent = next((e for e in snapshot.get("entities", []) if e["name"] == self.object), {})
-            handle_xy = _xy_attribute(held_ent, "handle_xy")
+            handle_xy = _xy_attribute(held, "handle_xy")
             if handle_xy is not None:
                 handle_tcp = np.asarray(self.ctx.target.tcp_pose(), dtype=float)[:3, :3].T @ np.array(
                     [float(handle_xy[0]), float(handle_xy[1]), 0.0])

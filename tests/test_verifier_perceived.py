@@ -366,3 +366,31 @@ def test_on_a_floor_between_walls_the_object_stands_anywhere_between_them(walls_
     [c] = parse_criteria({"on": {"object": "black_book_1", "support": "desk_caddy_1_left_compartment"}})
     out = evaluate(c, snap, snap)
     assert out.status == status, out.reason
+
+
+@pytest.mark.parametrize("leant,held,status", [
+    ((0.013, 0.016, 0.99), False, "satisfied"),    # seen lying on the ramp where the hand let it go
+    ((0.013, 0.016, 0.30), False, "unknown"),      # seen so only weakly
+    ((0.013, 0.016, 0.99), True, "unsatisfied"),   # still in the hand
+    ((0.013, 0.12, 0.99), False, "unsatisfied"),   # its centre beyond the rack's footprint
+    (None, False, "unsatisfied"),                  # no such relation: judged upright, its bottom far below the top
+])
+def test_a_bottle_lying_on_the_racks_ramp_is_on_the_rack_only_where_perception_saw_it_so(leant, held, status):
+    """``on`` a fixture with a ramp (LIBERO's wine rack) is judged on perception's ``leant_on``
+    relation (``perception.lean``): the bottle lies back on the ramp, its box's bottom far below
+    the rack's top, where the upright test would fail it."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    rack = _ent("wine_rack_1", (-0.268, -0.242, 1.06), (0.138, 0.0705, 0.16), 0.99, std=0.01)
+    dx, dy, conf = leant or (0.013, 0.016, 0.0)
+    bottle = _ent("wine_bottle_1", (-0.268 + dx, -0.242 + dy, 1.212), (0.008, 0.008, 0.078), 0.99, std=0.01)
+    rels = [] if leant is None else [{"subject": "wine_bottle_1", "relation": "leant_on", "object": "wine_rack_1",
+                                      "confidence": conf}]
+    if held:
+        rels.append({"subject": "gripper", "relation": "holding", "object": "wine_bottle_1", "confidence": 0.95})
+    terminal = {"entities": [rack, bottle], "relations": rels}
+    [c] = parse_criteria({"on": {"object": "wine_bottle_1", "support": "wine_rack_1"}})
+    out = evaluate(c, {"entities": [rack]}, terminal)
+    assert out.status == status, out.reason
+    if leant is not None and conf >= 0.5 and not held:
+        assert "leant on wine_rack_1" in out.reason

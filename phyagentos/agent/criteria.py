@@ -41,7 +41,9 @@ probability <= 2.3 %, one-sided). ``on`` and ``inside`` with a container (a perc
 object, e.g. a basket) are judged on the perceived relation ``inside(object, container)``
 when perception reports one: the object was seen standing inside the container's segment
 (its walls may hide it from other views; perception then reports it ``remembered``); the
-centre must lie in the container's footprint by 2 sigma. Without that relation, an object
+centre must lie in the container's footprint by 2 sigma. ``on`` a fixture with a ramp (LIBERO's
+wine rack) is judged so on the perceived relation ``leant_on(object, fixture)``: the object seen
+lying on the ramp where the hand let it go (``perception.lean``). Without that relation, an object
 resting at the rim's height of an open container deeper than :data:`DISH_DEPTH_M`
 (``attributes.open_depth_m``, perceived: a basket) is never ``on`` it: it lies on the rim
 (LIBERO's ``In`` does not count that), or shows only its part above the walls (in it, but not
@@ -336,21 +338,23 @@ def _eval_lifted(c, initial, terminal, refs):
                  f"rose {dz:.3f} m (need >= {need}, 2 sigma {m:.3f} m)")
 
 
-def _contained(c, refs, terminal, obj, container) -> CriterionOutcome | None:
+def _contained(c, refs, terminal, obj, container, relation: str = "inside") -> CriterionOutcome | None:
     """The verdict of ``obj`` in/on ``container`` when perception reports the relation
     ``inside(obj, container)`` (the object was seen standing inside the container's segment,
-    e.g. from above, between its walls): satisfied when that relation's confidence is at
-    least :data:`CONFIDENCE_MIN`, the gripper has let go and the object's centre lies in the
-    container's footprint shrunk by 2 sigma; unsatisfied when it lies outside it by 2 sigma
-    or is still held; else unknown. ``None`` when no such relation is reported (the
-    geometric tests then decide)."""
-    rel = next((r for r in terminal.get("relations", []) if r.get("relation") == "inside"
+    e.g. from above, between its walls), or ``relation`` instead (``leant_on``: seen lying on
+    a fixture's ramp where the hand let it go, ``perception.lean``): satisfied when that
+    relation's confidence is at least :data:`CONFIDENCE_MIN`, the gripper has let go and the
+    object's centre lies in the container's footprint shrunk by 2 sigma; unsatisfied when it
+    lies outside it by 2 sigma or is still held; else unknown. ``None`` when no such relation
+    is reported (the geometric tests then decide)."""
+    rel = next((r for r in terminal.get("relations", []) if r.get("relation") == relation
                 and r.get("subject") == obj and r.get("object") == container), None)
     if rel is None:
         return None
+    verb = "inside" if relation == "inside" else relation.replace("_", " ")
     conf = float(rel.get("confidence", 1.0))
     if conf < CONFIDENCE_MIN:
-        return CriterionOutcome(c, "unknown", f"{obj} inside {container} perceived with confidence {conf:.2f} "
+        return CriterionOutcome(c, "unknown", f"{obj} {verb} {container} perceived with confidence {conf:.2f} "
                                 f"< {CONFIDENCE_MIN}", refs)
     ents = _entities(terminal)
     o, s = ents[obj], ents[container]
@@ -360,7 +364,7 @@ def _contained(c, refs, terminal, obj, container) -> CriterionOutcome | None:
     held, _ = _held(terminal, obj)
     src = (o.get("attributes") or {}).get("source", "perceived")
     return _band(c, refs, dx <= sx - m and dy <= sy - m and held is False, dx > sx + m or dy > sy + m or bool(held),
-                 obj, f"inside {container}", f"seen inside it (relation confidence {conf:.2f}, {src}); |dx|={dx:.3f} "
+                 obj, f"{verb} {container}", f"seen {verb} it (relation confidence {conf:.2f}, {src}); |dx|={dx:.3f} "
                  f"(<= {sx:.3f}), |dy|={dy:.3f} (<= {sy:.3f}), 2 sigma {m:.3f} m")
 
 
@@ -410,6 +414,8 @@ def _eval_on(c, initial, terminal, refs):
         return miss
     if (held_in := _contained(c, refs, terminal, obj, support)) is not None:  # a container: resting in it
         return held_in
+    if (leant := _contained(c, refs, terminal, obj, support, "leant_on")) is not None:  # lying on its ramp
+        return leant
     ents = _entities(terminal)
     o, s = ents[obj], still or ents[support]
     m = 2.0 * math.hypot(sigma(o), sigma(s))

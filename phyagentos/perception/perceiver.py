@@ -134,6 +134,7 @@ from phyagentos.perception.frames import CameraFrame, Proprioception, _rigid
 from phyagentos.perception.glimpse import Glimpse, carry_over, glimpses, rival
 from phyagentos.perception.handle import RoundBody
 from phyagentos.perception.hang import base_profile, hang_offset, scene_camera_mask
+from phyagentos.perception.lean import find_leant, leant_confidence, on_ramp
 from phyagentos.perception.relations import (
     _footprint_margin,
     _footprint_margins,
@@ -461,6 +462,9 @@ class Perceiver:
         #: something (:meth:`note_grasp_close`); None while it is open.
         self._closed_at: tuple[np.ndarray, float] | None = None
         self._last_plane: Plane | None = None
+        #: Objects found lying on a fixture's ramp in the last observation (:meth:`_leant_where_let_go`):
+        #: ``{object: (fixture, tilt from upright rad, confidence)}``.
+        self.leant: dict[str, tuple[str, float, float]] = {}
         self.last_timing_ms: dict[str, float] = {}
         #: Centre (2,) of the support plane's perceived extent (world m) at the last
         #: :meth:`object_cloud`, when a spatial reference needs it, else None.
@@ -814,6 +818,8 @@ class Perceiver:
         cloud, heights, plane = self.object_cloud(frames, proprio, obstacles=obstacles, robot_capsules=robot_capsules,
                                                   max_height_m=self.fixture_ceiling_m() if self.fixtures else None)
         fixture_dets: list[Detection] = []
+        full_cloud = cloud  # with the fixtures' own points: what lies on a ramp is among them
+        self.leant = {}
         if self.fixtures:
             cloud, heights, fixture_dets = self._perceive_fixtures(cloud, heights, plane, stamp)
         self._last_plane = plane
@@ -1035,6 +1041,11 @@ class Perceiver:
             t.inside_of = next((n for i, n in matched.items() if i == k), t.inside_of)
             if t.inside_of is not None:
                 t.released_s = None
+        # ... or lying on a fixture's ramp where the hand let them go (a bottle on the wine rack);
+        # still let go, so the next look searches the ramp for them again
+        for name, t in self.tracks.items():
+            if not (t.seen_now or t.held or t.released_s is None or t.placed_xy is None):
+                self._leant_where_let_go(name, t, full_cloud, plane, stamp, sensors)
         t3 = time.perf_counter()
 
         # ---- remembered: seen since its release, hidden now behind something nearer
@@ -1057,6 +1068,8 @@ class Perceiver:
                 ent = self._held_entity(t, proprio, holding_rel[1] if holding_rel else 0.0)
             else:
                 extra = {"inside_of": t.inside_of} if t.inside_of else {}
+                if name in self.leant:  # lying on a fixture's ramp: its box is its look's, upright
+                    extra.update(leant_on=self.leant[name][0], tilt_rad=_r(self.leant[name][1], 4))
                 if t.open_depth_m >= OPEN_DEPTH_REPORT_M:  # an open container: how deep its inside is
                     extra["open_depth_m"] = _r(t.open_depth_m)
                 conf = t.confidence
@@ -1117,6 +1130,8 @@ class Perceiver:
         entities.extend(self._robot_entities(proprio))
 
         relations = self._relations(geo, region_list, holding_rel, supports)
+        relations += [{"subject": name, "relation": "leant_on", "object": fixture, "confidence": _r(conf, 3)}
+                      for name, (fixture, _, conf) in self.leant.items()]
         unseen = [n for n in names if not (n in self.tracks and (self.tracks[n].seen_now or self.tracks[n].held))
                   and n not in remembered]
         t4 = time.perf_counter()
@@ -2185,6 +2200,52 @@ class Perceiver:
         if float(np.linalg.norm(det.position[:2] - proprio.tcp_pose[:2, 3])) <= self.config.holding.capture_radius_m:
             return False
         return self._hand_evidence(t, proprio) is not None
+
+    def _leant_where_let_go(self, name: str, t: Track, cloud: Cloud, plane: Plane, stamp: float,
+                            sensors: Sequence[str]) -> None:
+        """Look for ``name`` (track ``t``, let go at ``t.placed_xy`` and not seen since) lying on the
+        ramp of a perceived fixture with a lean (:mod:`~phyagentos.perception.lean`), in ``cloud``
+        (every point, the fixtures' own included). Found, at ``relations.min_confidence`` or more,
+        within the hold's capture radius plus its look's half length of where the hand let it go:
+        its track moves to the centroid of what shows (seen now, still let go) and
+        :attr:`leant` records the fixture, the tilt and the confidence. Else nothing changes."""
+        cfg = self.config
+        desc = next((d for d in self.declared if d.name == name), None)
+        size = desc.size_vector() if desc is not None else None
+        full = 2.0 * np.asarray(t.half_extents, float) if size is None else np.asarray(size, float)
+        colour = t.colour_rgb if desc is None or desc.colour_rgb is None else np.asarray(desc.colour_rgb, float)
+        best = None
+        for look in self.fixtures:
+            if look.lean is None or look.name not in self.fixture_tracks:
+                continue
+            s = self.fixture_tracks[look.name][0]
+            crest_xy, height, toward = look.lean.at(s.position[:2], s.turn)
+            crest = np.array([crest_xy[0], crest_xy[1], plane.z_at(crest_xy) + height])
+            mask = on_ramp(cloud.points, crest, toward, look.lean.angle_rad,
+                           (s.position[:2], s.yaw, s.half_extents[:2] + FIXTURE_EDGE_M))
+            sight = find_leant(cloud, mask, toward_xy=toward)
+            if sight is None or float(np.linalg.norm(sight.position[:2] - np.asarray(t.placed_xy, float))) > \
+                    cfg.holding.capture_radius_m + 0.5 * float(full.max()):
+                continue
+            conf = leant_confidence(sight, length_m=float(full.max()), width_m=float(full[:2].max()),
+                                    colour_rgb=colour, toward_xy=toward, slope_rad=look.lean.angle_rad,
+                                    colour_scale_lab=cfg.association.colour_scale_lab,
+                                    lightness_weight=cfg.association.lightness_weight)
+            if conf >= cfg.relations.min_confidence and (best is None or conf > best[2]):
+                best = (look.name, sight, conf)
+        if best is None:
+            return
+        fixture, sight, conf = best
+        log.debug("perception: %s lying on %s's ramp where the hand let it go (%d points, tilt %.0f deg, "
+                  "confidence %.2f)", name, fixture, sight.points, math.degrees(sight.tilt_rad), conf)
+        # the centroid of what shows lies within half the unseen length of the object's centre
+        std = max(FIXTURE_STD_M, 0.5 * max(0.0, float(full.max()) - sight.length_m))
+        t.position = sight.position.copy()
+        t.bottom_m = float(sight.lowest_z_m - plane.z_at(sight.position[:2]))
+        t.var_xy = std * std
+        t.confidence, t.points, t.last_seen_s, t.seen_now = conf, sight.points, stamp, True
+        t.cameras = tuple(sensors[i] for i in sight.cameras)
+        self.leant[name] = (fixture, sight.tilt_rad, conf)
 
     def _release_point(self, name: str, proprio: Proprioception) -> np.ndarray | None:
         """(2,) world x, y (m) where the hand let ``name`` go, or None: the hand held it and

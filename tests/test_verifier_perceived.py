@@ -394,3 +394,27 @@ def test_a_bottle_lying_on_the_racks_ramp_is_on_the_rack_only_where_perception_s
     assert out.status == status, out.reason
     if leant is not None and conf >= 0.5 and not held:
         assert "leant on wine_rack_1" in out.reason
+
+
+@pytest.mark.parametrize("origin,status", [
+    ((-0.008, -0.193), "satisfied"),   # its body 4.9 cm off the burner plate's centre, its handle over the edge
+    ((0.045, -0.200), "unsatisfied"),  # its body beyond the plate's edge (7.5 cm from the centre) by 2 sigma
+    ((0.012, -0.200), "unknown"),      # its body within 2 sigma of that edge
+    (None, "unknown"),                 # no origin: its box's centre, handle and all, within 2 sigma of the edge
+])
+def test_on_a_burner_plate_a_handled_objects_body_stands_over_it_not_its_box(origin, status):
+    """A moka pot's box includes its handle: set 4.9 cm off the centre of the stove's burner plate
+    (15 cm square), the box's centre stood 6.0 cm off, within 2 sigma of the edge, and the
+    verdict was undecided (LIBERO-10 task 8, the second pot: LIBERO's ``On`` asks the model
+    origin to lie within the site, ``SiteObject.under``). The footprint is judged at the
+    origin perception reports."""
+    from phyagentos.agent.criteria import evaluate, parse_criteria
+
+    stove = _ent("flat_stove_1", (-0.057, -0.198, 0.9155), (0.075, 0.075, 0.0155), 0.98, std=0.01)
+    pot = _ent("moka_pot_2", (0.003, -0.206, 0.999), (0.066, 0.036, 0.068), 0.95, std=0.001)
+    if origin is not None:
+        pot["attributes"].update(origin_xy=list(origin), origin_std_m=0.001)
+    terminal = {"entities": [stove, pot], "relations": []}
+    [c] = parse_criteria({"on": {"object": "moka_pot_2", "support": "flat_stove_1"}})
+    out = evaluate(c, {"entities": [stove]}, terminal)
+    assert out.status == status, out.reason

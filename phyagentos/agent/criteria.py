@@ -27,8 +27,9 @@ Uncertainty (the formula): with sigma the entity's ``position_std_m`` (for a pre
 over two perceived entities or two snapshots, sigma = sqrt(sigma_a^2 + sigma_b^2)), a
 criterion is ``satisfied`` only when it holds with a margin of 2 sigma (``inside``: the
 centre lies in the region's footprint shrunk by 2 sigma and rests within
-``REST_TOL_M + 2 sigma`` of its surface; ``on`` a perceived support: the centre in its
-footprint shrunk by 2 sigma, the bottom from :data:`SUPPORT_FLOOR_M` above the support's
+``REST_TOL_M + 2 sigma`` of its surface; ``on`` a perceived support: the centre (the model
+origin where perception reports one, ``origin_xy``: a moka pot's handle overhangs the burner
+plate its body stands on) in its footprint shrunk by 2 sigma, the bottom from :data:`SUPPORT_FLOOR_M` above the support's
 bottom (and at most :data:`DISH_DEPTH_M` below its top: a dish's floor) up to ``REST_TOL_M``
 above its top, by 2 sigma; below the top (in a dish), within :data:`DISH_CENTRE_M` of the
 support's centre too, else it leans on the rim; on a flat support (no taller than
@@ -458,19 +459,23 @@ def _eval_on(c, initial, terminal, refs):
     origin = (o.get("attributes") or {}).get("origin_xy")
     if not (isinstance(origin, (list, tuple)) and len(origin) == 2):
         origin = None
+    # ... and whether it stands over the support's footprint: from that origin too (a moka pot's
+    # handle overhangs a stove's burner plate its body stands on; LIBERO's ``On`` onto a site
+    # asks the same of the model origin: ``SiteObject.under``, libero/envs/objects/site_object.py)
     if origin is not None:
         off = math.hypot(float(origin[0]) - s["position"][0], float(origin[1]) - s["position"][1])
         m_off = 2.0 * math.hypot(_attr(o, "origin_std_m", sigma(o)), sigma(s))
+        fx, fy = _in_frame_of(s, float(origin[0]) - s["position"][0], float(origin[1]) - s["position"][1])
     else:
-        off, m_off = math.hypot(dx, dy), m
-    inside = (rests and dx <= sx - m and dy <= sy - m and held is False and off <= reach - m_off and not on_rim
-              or down_in)
-    outside = (bottom > top + REST_TOL_M + m or (bottom < floor - m and not deep) or dx > sx + m or dy > sy + m
-               or bool(held) or (off > reach + m_off and not deep))
+        off, m_off, fx, fy = math.hypot(dx, dy), m, dx, dy
+    inside = (rests and fx <= sx - m_off and fy <= sy - m_off and held is False and off <= reach - m_off
+              and not on_rim or down_in)
+    outside = (bottom > top + REST_TOL_M + m or (bottom < floor - m and not deep) or fx > sx + m_off
+               or fy > sy + m_off or bool(held) or (off > reach + m_off and not deep))
     return _band(c, refs, inside, outside, obj, f"on {support}",
                  f"|dx|={dx:.3f}, |dy|={dy:.3f}, z={z:.3f} (top {top:.3f}), 2 sigma {m:.3f} m"
-                 + (f"; its origin {off:.3f} m off the centre (reach {reach:.3f}, 2 sigma {m_off:.3f})"
-                    if origin is not None else "")
+                 + (f"; its origin {off:.3f} m off the centre, |dx|={fx:.3f}, |dy|={fy:.3f} (reach {reach:.3f}, "
+                    f"2 sigma {m_off:.3f})" if origin is not None else "")
                  + (f"; at the rim of an open container {depth:.3f} m deep: in it only where seen inside it"
                     if on_rim else "")
                  + (f"; down in an open container at least {depth:.3f} m deep, inside its walls" if down_in else "")

@@ -120,6 +120,27 @@ def test_a_held_mug_is_set_down_midway_between_its_model_origin_and_its_cups_axi
     assert beside["place_pose"][:3, 3] == pytest.approx(plain_beside["place_pose"][:3, 3], abs=1e-9)
 
 
+@pytest.mark.parametrize("conf,placed", [(0.16, False), (0.49, False), (0.5, True), (0.97, True), (None, True)])
+def test_nothing_is_set_down_on_an_object_perceived_only_weakly(franka, conf, placed):
+    """LIBERO-10 task 4 init 3: the left plate hidden by the held mug, a weak sighting 39 cm
+    away was named it at 0.16 and the mug let go on the bare table there. A support named
+    below the coin flip (0.5) is refused before anything moves; one reported without a
+    confidence (a declared region) is taken as before."""
+    from phyagentos.primitives.base import PrimitiveFailure
+
+    tcp = np.asarray(franka.tcp_pose())
+    snap = _snapshot(tcp, [0.0, 1.0])
+    if conf is not None:
+        snap["entities"][0]["attributes"] = {"confidence": conf}
+    if placed:
+        board, _ = _compute_place(franka, snap)
+        assert "place_pose" in board
+    else:
+        with pytest.raises(PrimitiveFailure, match="seen only at confidence") as err:
+            _compute_place(franka, snap)
+        assert err.value.code == "perception.not_found"
+
+
 def test_into_a_drawer_needs_its_floor_out_of_the_body_and_room_for_the_object(franka):
     from phyagentos.primitives.base import PrimitiveFailure
 

@@ -162,6 +162,19 @@ def test_a_held_object_rides_where_the_look_saw_it_in_the_hand_and_stays_where_t
     o = target.runtime_notes[planning_world.WORLD_NOTE]["objects"]["akita_black_bowl_1"]
     assert o["in_hand"] is None
     np.testing.assert_allclose(np.asarray(o["T"]).reshape(4, 4)[:3, 3] + centre, bowl["position"], atol=1e-9)
+    # a look that misses it (the wrist camera straight above it) leaves it where the hand let it go ...
+    planning_world.note_observation(target, {"entities": []})
+    o = target.runtime_notes[planning_world.WORLD_NOTE]["objects"]["akita_black_bowl_1"]
+    np.testing.assert_allclose(np.asarray(o["T"]).reshape(4, 4)[:3, 3] + centre, bowl["position"], atol=1e-9)
+    checker = session_checker(SimpleNamespace(target=target))
+    mujoco.mj_kinematics(checker.model, checker.data)
+    assert checker.data.xpos[target.model.body(target.object_body("akita_black_bowl_1")).id][2] > 0.5  # not parked
+    # ... until a look reports it: then where that look saw it, and once gone from a look, gone
+    seen = {**bowl, "position": [0.05, 0.1, bowl["position"][2]], "attributes": {}}
+    planning_world.note_observation(target, {"entities": [seen]})
+    assert not target.runtime_notes[planning_world.WORLD_NOTE]["objects"]["akita_black_bowl_1"].get("let_go")
+    planning_world.note_observation(target, {"entities": []})
+    assert "akita_black_bowl_1" not in target.runtime_notes[planning_world.WORLD_NOTE]["objects"]
 
 
 def test_a_long_object_is_turned_so_its_models_long_side_lies_along_the_perceived_box(goal_world):

@@ -11,7 +11,10 @@ state, which holds privileged truth (true object poses, initial placements: ``DE
   perceived box: the model's collision geometry centred on the box's centre, stood on the model
   axis that fits the perceived height and turned so that the model's long side lies along the
   box's (:func:`object_root_pose`); an object held in the
-  hand (``attributes.held``) stays where the hand holds it, and where the hand lets it go;
+  hand (``attributes.held``) stays where the hand holds it, and where the hand lets it go --
+  there until a look reports it again, however many looks miss it (the wrist camera straight
+  above a mug just let go on a plate did not see it, and the move out of the cameras' view,
+  planned without it, swept the fingers through it: LIBERO-10 task 4);
 - each fixture where the perceiver reports its model frame (``attributes.body.root``, from
   the fixture's look measured on generated scenes: :class:`~phyagentos.perception.fixtures.RootLook`);
 - each drawer at its perceived opening (``attributes.joint_position``; the last reading when
@@ -188,8 +191,9 @@ def _record(target) -> dict[str, Any]:
 def note_observation(target, snapshot: Mapping[str, Any]) -> None:
     """Keep the world ``snapshot`` (a perceived snapshot, the robot's pose now) reports, for
     :func:`apply`: every object and fixture as just perceived (what it does not report is no
-    longer in the world), each drawer's opening where it was read (else as last read). Does
-    nothing for a target that plans in the simulator's state."""
+    longer in the world, but for an object the hand let go and no look has reported since: it
+    stays where the hand let it go), each drawer's opening where it was read (else as last
+    read). Does nothing for a target that plans in the simulator's state."""
     if not plans_in_perceived_world(target):
         return
     bodies = target.planning_bodies()
@@ -219,6 +223,9 @@ def note_observation(target, snapshot: Mapping[str, Any]) -> None:
         if root is not None:
             fixtures[name] = {"position": [float(v) for v in root["position"]], "yaw": float(root["yaw"])}
     rec = _record(target)
+    for name, o in (rec.get("objects") or {}).items():  # let go, and not reported since
+        if name not in objects and o.get("let_go") and name in bodies.objects:
+            objects[name] = o
     slides = dict(rec.get("slides") or {})
     for ent, (joint, sign) in bodies.slides.items():
         q = ((ents.get(ent) or {}).get("attributes") or {}).get("joint_position")
@@ -257,7 +264,8 @@ def _unseen(entities, tcp: np.ndarray, slots: int) -> list[dict[str, Any]]:
 
 
 def note_release(target) -> None:
-    """The hand has opened: an object the world holds in it stays where the hand let it go."""
+    """The hand has opened: an object the world holds in it stays where the hand let it go, until
+    a look reports it (:func:`note_observation`)."""
     if not plans_in_perceived_world(target):
         return
     objects = _record(target).get("objects") or {}
@@ -265,7 +273,7 @@ def note_release(target) -> None:
     for o in objects.values():
         if o.get("in_hand") is not None:
             o["T"] = (T_tcp @ np.asarray(o["in_hand"], dtype=float).reshape(4, 4)).reshape(-1).tolist()
-            o["in_hand"] = None
+            o["in_hand"], o["let_go"] = None, True
 
 
 def note_slide(target, entity: str, opening_m: float) -> None:

@@ -80,23 +80,33 @@ def test_a_plate_seen_only_round_what_rests_on_it_is_kept_where_it_was_seen_whol
     assert np.linalg.norm(moved - PLATE.position) > 0.01, moved
 
 
-def test_a_covered_part_reaching_outside_where_it_was_seen_is_fused_as_any_sighting(scene, monkeypatch):
-    # the plate's part beyond its centre, shifted 4 cm on: it reaches past the track's footprint
-    shifted = SyntheticObject("plate_1", "cylinder", PLATE.half_extents, (0.50, 0.14), rgba=PLATE.rgba)
+def _moved_and_covered(scene, monkeypatch, moved: SyntheticObject):
+    """``(perceiver, entities by name)`` after a first look at the plate whole and a second at it
+    moved to ``moved``, every detection there reported covered (a support's part showing round
+    what rests on it)."""
     scene.place([PLATE])
     declared = [ObjectDescriptor("plate_1", shape="cylinder", colour_rgb=PLATE.rgba[:3], size_m=(0.14, 0.14, 0.015))]
     perceiver = Perceiver(CFG, declared)
     _look(scene, perceiver, seed=1)
-    scene.place([shifted])
+    scene.place([moved])
     split = perceiver_module.split_clusters
 
     def covered(clusters, cloud, *args, **kwargs):
         return [(replace(det, covered=True), idx) for det, idx in split(clusters, cloud, *args, **kwargs)]
 
     monkeypatch.setattr(perceiver_module, "split_clusters", covered)
-    seen = _look(scene, perceiver, seed=2)["plate_1"]
-    scene.place([PLATE])
-    assert np.linalg.norm(np.subtract(seen["position"][:2], shifted.position)) < 0.01, seen["position"]
+    try:
+        return perceiver, _look(scene, perceiver, seed=2)
+    finally:
+        monkeypatch.undo()
+        scene.place([PLATE])
+
+
+def test_a_covered_part_reaching_outside_where_it_was_seen_is_fused_as_any_sighting(scene, monkeypatch):
+    # the plate's part beyond its centre, shifted 4 cm on: it reaches past the track's footprint
+    shifted = SyntheticObject("plate_1", "cylinder", PLATE.half_extents, (0.50, 0.14), rgba=PLATE.rgba)
+    _, seen = _moved_and_covered(scene, monkeypatch, shifted)
+    assert np.linalg.norm(np.subtract(seen["plate_1"]["position"][:2], shifted.position)) < 0.01, seen["plate_1"]
 
 
 def test_a_covered_part_nowhere_near_where_the_object_was_seen_names_nothing(scene, monkeypatch):
@@ -106,20 +116,7 @@ def test_a_covered_part_nowhere_near_where_the_object_was_seen_names_nothing(sce
     with no point within the confident track's footprint, outside its gate, is left unknown
     (``Perceiver._covered_elsewhere``); the track stays where it was seen."""
     far = SyntheticObject("plate_1", "cylinder", PLATE.half_extents, (0.50, -0.20), rgba=PLATE.rgba)
-    scene.place([PLATE])
-    declared = [ObjectDescriptor("plate_1", shape="cylinder", colour_rgb=PLATE.rgba[:3], size_m=(0.14, 0.14, 0.015))]
-    perceiver = Perceiver(CFG, declared)
-    _look(scene, perceiver, seed=1)
-    scene.place([far])
-    split = perceiver_module.split_clusters
-
-    def covered(clusters, cloud, *args, **kwargs):
-        return [(replace(det, covered=True), idx) for det, idx in split(clusters, cloud, *args, **kwargs)]
-
-    monkeypatch.setattr(perceiver_module, "split_clusters", covered)
-    seen = _look(scene, perceiver, seed=2)
-    monkeypatch.undo()
-    scene.place([PLATE])
+    perceiver, seen = _moved_and_covered(scene, monkeypatch, far)
     assert "plate_1" not in seen or seen["plate_1"]["attributes"]["source"] == "remembered"
     assert np.linalg.norm(perceiver.tracks["plate_1"].position[:2] - PLATE.position) < 0.005
     unknown = [e for e in seen.values() if e["kind"] == "unknown"]

@@ -29,8 +29,9 @@ criterion is ``satisfied`` only when it holds with a margin of 2 sigma (``inside
 centre lies in the region's footprint shrunk by 2 sigma and rests within
 ``REST_TOL_M + 2 sigma`` of its surface; ``on`` a perceived support: the centre (the model
 origin where perception reports one, ``origin_xy``: a moka pot's handle overhangs the burner
-plate its body stands on) in its footprint shrunk by 2 sigma, the bottom from :data:`SUPPORT_FLOOR_M` above the support's
-bottom (and at most :data:`DISH_DEPTH_M` below its top: a dish's floor) up to ``REST_TOL_M``
+plate its body stands on) in its footprint shrunk by 2 sigma, the bottom from
+:data:`SUPPORT_FLOOR_M` above the support's bottom (and at most :data:`DISH_DEPTH_M` below its
+top: a dish's floor) up to ``REST_TOL_M``
 above its top, by 2 sigma; below the top (in a dish), within :data:`DISH_CENTRE_M` of the
 support's centre too, else it leans on the rim; on a flat support (no taller than
 :data:`DISH_DEPTH_M`: a plate) with its whole footprint over it, or within

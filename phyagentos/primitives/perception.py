@@ -919,7 +919,8 @@ class ComputePlace(Primitive):
     def step(self):
         snapshot = self.get(self.snapshot_key)
         T_region, region_half = entity_pose(snapshot, self.region)
-        self._check_support(snapshot)
+        ent = next((e for e in snapshot.get("entities", []) if e["name"] == self.region), {})
+        self._check_support(ent, snapshot)
         # on or in it: the point origin_pose names goes to the centre (a mug's: midway between its
         # model origin and its cup's axis); beside it: its footprint's centre, clear of the
         # landmark by its half extents
@@ -929,7 +930,6 @@ class ComputePlace(Primitive):
         # height in the kitchen); an object used as the support (stacking), or a perceived
         # fixture (its box is its place patch: the stove's burner, the cabinet's top), offers
         # its top face: centre z plus its vertical half extent.
-        ent = next((e for e in snapshot.get("entities", []) if e["name"] == self.region), {})
         held = next((e for e in snapshot.get("entities", []) if e["name"] == self.object), {})
         kind = ent.get("kind", "region")
         attrs = ent.get("attributes") or {}
@@ -1082,14 +1082,13 @@ class ComputePlace(Primitive):
                                    f"(x, y; {INTO_MARGIN_M} m spare each side); {self.region!r} offers "
                                    f"{np.round(2 * np.asarray(region_half[:2]), 3).tolist()} m out of its body")
 
-    def _check_support(self, snapshot: dict) -> None:
-        """Refuse to set anything on an object (``kind: object``) perceived below
-        :data:`SUPPORT_MIN_CONFIDENCE`.
+    def _check_support(self, ent: dict, snapshot: dict) -> None:
+        """Refuse to set anything on the region's entity ``ent`` when it is an object (``kind:
+        object``) perceived below :data:`SUPPORT_MIN_CONFIDENCE`.
 
         Raises:
             PrimitiveFailure: ``perception.not_found``, with the confidence and the entities seen.
         """
-        ent = next((e for e in snapshot.get("entities", []) if e.get("name") == self.region), {})
         conf = (ent.get("attributes") or {}).get("confidence")
         if ent.get("kind") == "object" and conf is not None and float(conf) < SUPPORT_MIN_CONFIDENCE:
             seen = sorted(e["name"] for e in snapshot.get("entities", []))

@@ -131,6 +131,23 @@ def test_into_a_microwave_a_mug_goes_by_its_handle_and_close_it_shuts_the_microw
                           problem.fixtures)
 
 
+def test_close_the_door_closes_the_thing_whose_door_it_is_and_an_owner_not_declared_is_refused():
+    # LIBERO-PRO's libero_10_lan task 9 words LIBERO-10's "... and close it" as "... and close door"
+    lan = resolve_task("libero_10_lan", 9)
+    problem = parse_bddl(lan.bddl_path)
+    standard = _steps(instruction_nodes(resolve_task("libero_10", 9).language, problem.objects, problem.fixtures))
+    assert standard[-1] == ("close_door", "microwave_1", None)
+    for words in (lan.instruction, "put the yellow and white mug in the microwave and shut the microwave's door",
+                  "put the yellow and white mug in the microwave and close the door of the microwave"):
+        assert _steps(instruction_nodes(words, problem.objects, problem.fixtures)) == standard, words
+    with pytest.raises(BenchError, match="which door is 'the red door'"):
+        instruction_nodes("put the yellow and white mug in the microwave and close the red door", problem.objects,
+                          problem.fixtures)
+    goal = parse_bddl(resolve_task("libero_goal", 0).bddl_path)  # a cabinet with drawers, no door
+    with pytest.raises(BenchError, match="'door' names no thing of the scene with a door \\(kinds with one: microwave"):
+        instruction_nodes("close the door", goal.objects, goal.fixtures)
+
+
 def test_open_a_drawer_and_put_the_bowl_inside_places_it_on_that_drawers_floor():
     goal = resolve_task("libero_goal", 3)
     problem = parse_bddl(goal.bddl_path)

@@ -62,8 +62,10 @@ def test_liberopro_suites_validate_and_list_by_family():
 @pytest.mark.parametrize("suite,task,expect", [
     ("libero_object_swapp", "0", "LIBERO-PRO's and others installed: 'libero_10_lan'"),
     ("libero_object_env", "0", "cannot be run: 10 of its 10 BDDL files are not shipped"),
-    # "place yellow and white mug in microwave and close door": nothing sets a thing inside the microwave
-    ("libero_10_lan", "9", "no chosen task of libero_10_lan has a goal graph"),
+    # "pick up the book and place it in the back compartment of the caddy" where a bowl replaced the book:
+    # "the book" names nothing of the scene (libero_10_lan's task 9, "... and close door", was this case
+    # until a door was read as its owner's: tests/test_libero_bench.py)
+    ("libero_10_object", "5", "no chosen task of libero_10_object has a goal graph"),
 ])
 def test_a_bad_liberopro_suite_exits_2_with_nothing_built(tmp_path, suite, task, expect):
     result = _bench(suite, "--tasks", task, "--seeds", "0", "--workspace", str(tmp_path / "ws"), "--json", cwd=tmp_path)

@@ -82,6 +82,9 @@ _REGION_SYNONYMS = {"box", "boxes"}
 #: cabinet whose drawer it is. Only a destination *on* the part reads as the whole ("into the
 #: drawer" is its inside, which no region stands for).
 _PART_OF = {"drawer": "cabinet", "drawers": "cabinet"}
+#: Kinds of thing with a door that is opened and closed as the thing itself ("close the door": LIBERO's
+#: microwave, whose closing is the fixture's articulated joint).
+_HAS_DOOR = ("microwave",)
 _STOP = {"the", "a", "an", "of", "please", "now", "then", "and", "carefully", "gently", "slowly", "up", "down",
          "that", "this", "these", "those", "which", "is", "are", "there", "too", "also", "just", "only", "again",
          "with", "your", "my", "robot", "arm", "gripper", "hand", "for", "me", "can", "you", "could", "would",
@@ -1155,6 +1158,9 @@ def _read_open(text: str, verb: str, named: list[str], world: World,
     drawer ("... and close it": a drawer is what is closed, not the bowl). Returns ``(intent,
     problems)``."""
     state = "close" if verb in ("close", "shut") else "open"
+    named, problems = _door_of(text, named, world)
+    if problems:
+        return None, problems
     if drawer is not None and named and set(named) <= {"it", "that", "the", "drawer", "up"} and (
             set(named) & {"it", "that", "drawer"}):
         return Intent(text, state, (drawer[0],), part=drawer[1], part_kind="drawer"), []
@@ -1164,6 +1170,33 @@ def _read_open(text: str, verb: str, named: list[str], world: World,
     if problems:
         return None, problems
     return Intent(text, state, objects, part=part, part_kind=kind), []
+
+
+def _door_of(text: str, named: list[str], world: World) -> tuple[list[str], list[tuple[str, str]]]:
+    """``(words, problems)``: the words naming what is opened or closed when ``named`` (of
+    clause ``text``) names a door: a door is its owner's, so "close the door", "close door",
+    "shut the microwave's door" and "close the door of the microwave" close the microwave.
+    Whose door: the words after "of", or before a possessive, else the one declared thing of a
+    kind with a door (:data:`_HAS_DOOR`); none or several of those is a problem (never guessed).
+    Words with no door are returned as they are."""
+    if "door" not in named:
+        return named, []
+    k = named.index("door")
+    before, after = named[:k], named[k + 1:]
+    if "of" in after:
+        return after[after.index("of") + 1:], []
+    if "s" in before:
+        return before[:before.index("s")], []
+    if [w for w in before + after if w not in _STOP]:
+        return named, [("not_understood", f"{quote(text)}: which door is {' '.join(named)!r}? (say the door of "
+                                          f"which thing)")]
+    owners = sorted(e.name for e in _things(world).objects if any(k in e.name.split("_") for k in _HAS_DOOR))
+    if len(owners) != 1:
+        return named, [("unknown_object" if not owners else "not_understood",
+                        f"{quote(text)}: 'door' names " + (f"one of {', '.join(owners)}: say which" if owners else
+                                                           "no thing of the scene with a door (kinds with one: "
+                                                           + ", ".join(_HAS_DOOR) + ")"))]
+    return [owners[0]], []
 
 
 def _read_part(text: str, named: list[str], world: World, previous: tuple[str, ...]

@@ -1175,10 +1175,11 @@ def _read_open(text: str, verb: str, named: list[str], world: World,
 def _door_of(text: str, named: list[str], world: World) -> tuple[list[str], list[tuple[str, str]]]:
     """``(words, problems)``: the words naming what is opened or closed when ``named`` (of
     clause ``text``) names a door: a door is its owner's, so "close the door", "close door",
-    "shut the microwave's door" and "close the door of the microwave" close the microwave.
-    Whose door: the words after "of", or before a possessive, else the one declared thing of a
-    kind with a door (:data:`_HAS_DOOR`); none or several of those is a problem (never guessed).
-    Words with no door are returned as they are."""
+    "shut the microwave's door", "the microwave door" and "close the door of the microwave" close
+    the microwave. Whose door: the words after "of", or before a possessive, or a kind with a door
+    named before it, else the one declared thing of a kind with a door (:data:`_HAS_DOOR`); none
+    or several of those, or other words about the door ("the red door"), is a problem (never
+    guessed). Words with no door are returned as they are."""
     if "door" not in named:
         return named, []
     k = named.index("door")
@@ -1187,10 +1188,12 @@ def _door_of(text: str, named: list[str], world: World) -> tuple[list[str], list
         return after[after.index("of") + 1:], []
     if "s" in before:
         return before[:before.index("s")], []
+    if set(before) & set(_HAS_DOOR) and not [w for w in after if w not in _STOP]:
+        return before, []  # "the microwave door"
     if [w for w in before + after if w not in _STOP]:
         return named, [("not_understood", f"{quote(text)}: which door is {' '.join(named)!r}? (say the door of "
                                           f"which thing)")]
-    owners = sorted(e.name for e in _things(world).objects if any(k in e.name.split("_") for k in _HAS_DOOR))
+    owners = sorted(e.name for e in _things(world).objects if set(e.name.split("_")) & set(_HAS_DOOR))
     if len(owners) != 1:
         return named, [("unknown_object" if not owners else "not_understood",
                         f"{quote(text)}: 'door' names " + (f"one of {', '.join(owners)}: say which" if owners else

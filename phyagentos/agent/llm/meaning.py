@@ -84,7 +84,7 @@ _REGION_SYNONYMS = {"box", "boxes"}
 _PART_OF = {"drawer": "cabinet", "drawers": "cabinet"}
 #: Kinds of thing with a door that is opened and closed as the thing itself ("close the door": LIBERO's
 #: microwave, whose closing is the fixture's articulated joint).
-_HAS_DOOR = ("microwave",)
+_HAS_DOOR = frozenset({"microwave"})
 _STOP = {"the", "a", "an", "of", "please", "now", "then", "and", "carefully", "gently", "slowly", "up", "down",
          "that", "this", "these", "those", "which", "is", "are", "there", "too", "also", "just", "only", "again",
          "with", "your", "my", "robot", "arm", "gripper", "hand", "for", "me", "can", "you", "could", "would",
@@ -1188,17 +1188,17 @@ def _door_of(text: str, named: list[str], world: World) -> tuple[list[str], list
         return after[after.index("of") + 1:], []
     if "s" in before:
         return before[:before.index("s")], []
-    if set(before) & set(_HAS_DOOR) and not [w for w in after if w not in _STOP]:
+    if _HAS_DOOR.intersection(before) and not [w for w in after if w not in _STOP]:
         return before, []  # "the microwave door"
     if [w for w in before + after if w not in _STOP]:
         return named, [("not_understood", f"{quote(text)}: which door is {' '.join(named)!r}? (say the door of "
                                           f"which thing)")]
-    owners = sorted(e.name for e in _things(world).objects if set(e.name.split("_")) & set(_HAS_DOOR))
+    owners = sorted(e.name for e in _things(world).objects if _HAS_DOOR.intersection(e.name.split("_")))
     if len(owners) != 1:
         return named, [("unknown_object" if not owners else "not_understood",
                         f"{quote(text)}: 'door' names " + (f"one of {', '.join(owners)}: say which" if owners else
                                                            "no thing of the scene with a door (kinds with one: "
-                                                           + ", ".join(_HAS_DOOR) + ")"))]
+                                                           + ", ".join(sorted(_HAS_DOOR)) + ")"))]
     return [owners[0]], []
 
 

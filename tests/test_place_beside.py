@@ -88,16 +88,46 @@ def test_compute_place_sets_the_object_down_clear_of_the_landmark_on_the_viewers
     on, _ = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]))
     beside, records = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), beside="right")
     shift = beside["place_pose"][:3, 3] - on["place_pose"][:3, 3]
-    # 7 cm (the plate) + 3 cm (the pudding's largest half extent) + the gap, along the viewer's right (+y)
-    assert shift[:2] == pytest.approx([0.0, 0.07 + 0.03 + BESIDE_GAP_M], abs=1e-9)
+    # 7 cm (the plate) + 2 cm (the pudding's half extent towards it at the yaw it goes down, its
+    # narrow side) + the gap, along the viewer's right (+y); to 0.1 mm: the hand stands 1 mrad
+    # off yaw 0 at home, so the held box is turned that much at the place
+    assert shift[:2] == pytest.approx([0.0, 0.07 + 0.02 + BESIDE_GAP_M], abs=1e-4)
+    assert records[0]["yaw_rad"] == pytest.approx(0.0)
     assert shift[2] == pytest.approx(-0.02, abs=1e-9)  # on the table the plate stands on, not on the plate's top
     assert records[0]["beside"] == "right"
     left, _ = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), beside="left")
-    assert (left["place_pose"][:3, 3] - on["place_pose"][:3, 3])[1] == pytest.approx(-(0.1 + BESIDE_GAP_M), abs=1e-9)
+    assert (left["place_pose"][:3, 3] - on["place_pose"][:3, 3])[1] == pytest.approx(-(0.09 + BESIDE_GAP_M), abs=1e-4)
     with pytest.raises(PrimitiveFailure, match="viewer's left and right"):
         _compute_place(franka, _snapshot(tcp, None), beside="right")
     with pytest.raises(ValueError, match="beside must be"):
         _compute_place(franka, _snapshot(tcp, None), beside="behind")
+
+
+def test_beside_a_landmark_the_narrow_side_turns_towards_it_and_each_yaw_keeps_the_gap(franka):
+    """LIBERO-PRO libero_10_object task 6 init 1: a pudding set down 1.5 cm plus its largest half
+    extent off the plate, whatever its turn, stood 1 mm past LIBERO's region. Held with its long
+    side across the viewer's right, the hand turns it a quarter (its 2 cm half towards the
+    plate); where those turns are blocked, the next yaw's point still keeps the object's near
+    face the gap off the plate at that yaw (3 cm then)."""
+    from phyagentos.primitives.perception import BESIDE_GAP_M, Blocked
+
+    tcp = np.asarray(franka.tcp_pose())
+    snap = _snapshot(tcp, [0.0, 1.0])
+    snap["entities"][1]["quat_wxyz"] = [np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)]  # its 6 cm along y
+    on, _ = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]))
+    turned, [rec] = _compute_place(franka, snap, beside="right")
+    assert abs(rec["yaw_rad"]) == pytest.approx(np.pi / 2, abs=1e-3)
+    assert turned["place_pose"][1, 3] - on["place_pose"][1, 3] == pytest.approx(0.07 + 0.02 + BESIDE_GAP_M, abs=1e-4)
+
+    def quarter_turns_blocked(T_pre, T_place):
+        if abs(abs(np.arctan2(T_place[1, 0], T_place[0, 0])) - np.pi / 2) < 1e-3:
+            return Blocked("place collides: gripper0_hand-plate", stage="place", collides=True)
+        return None
+
+    kept, [rec] = _compute_place(franka, snap, blocked=quarter_turns_blocked, beside="right")
+    assert {abs(r["yaw_rad"]) for r in rec["rejected_yaws"]} == {round(np.pi / 2, 3)}
+    assert rec["yaw_rad"] == pytest.approx(0.0)
+    assert kept["place_pose"][1, 3] - on["place_pose"][1, 3] == pytest.approx(0.07 + 0.03 + BESIDE_GAP_M, abs=1e-4)
 
 
 def test_a_held_mug_is_set_down_midway_between_its_model_origin_and_its_cups_axis_on_the_centre(franka):

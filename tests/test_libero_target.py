@@ -183,9 +183,11 @@ def test_a_libero_world_renders_both_cameras_and_the_evidence_image_with_one_gl_
     for r in target._renderers.values():  # start from no renderer
         r.close()
     target._renderers.clear()
+    from phyagentos.targets.mujoco_arm import sensors as target_sensors
+
     opened = []
-    real = mujoco.Renderer
-    monkeypatch.setattr(mujoco, "Renderer", lambda *a, **k: opened.append(k) or real(*a, **k))
+    real = target_sensors.Renderer  # the project's renderer (phyagentos.renderer), as the target opens it
+    monkeypatch.setattr(target_sensors, "Renderer", lambda *a, **k: opened.append(k) or real(*a, **k))
     target.capture("agentview")
     target.capture("wrist")
     width, height = EVIDENCE_IMAGE_SIZE

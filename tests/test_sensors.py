@@ -97,8 +97,10 @@ def test_a_target_opens_one_gl_context_for_every_image_size_and_renders_the_same
     # images of one target share one, and draw exactly what renderers of their own draw
     import mujoco
 
+    from phyagentos.targets.mujoco_arm import sensors as target_sensors
+
     opened = []
-    real = mujoco.Renderer
+    real = target_sensors.Renderer  # the project's renderer (phyagentos.renderer), as the target opens it
 
     def counting(*args, **kwargs):
         opened.append(kwargs.get("width"))
@@ -108,7 +110,7 @@ def test_a_target_opens_one_gl_context_for_every_image_size_and_renders_the_same
     for order in ("capture_first", "render_first"):
         with MuJoCoTarget("franka", seed=0) as t:
             t.configure_sensors([_camera("overview", width=256, height=256)])
-            monkeypatch.setattr(mujoco, "Renderer", counting)
+            monkeypatch.setattr(target_sensors, "Renderer", counting)
             if order == "render_first":
                 image = t.render("overview", width=320, height=240, shadows=False)
                 frame = t.capture("overview")
@@ -116,7 +118,7 @@ def test_a_target_opens_one_gl_context_for_every_image_size_and_renders_the_same
                 frame = t.capture("overview")
                 image = t.render("overview", width=320, height=240, shadows=False)
             t.capture("overview")
-            monkeypatch.setattr(mujoco, "Renderer", real)
+            monkeypatch.setattr(target_sensors, "Renderer", real)
             assert len(t._renderers) == 2
             reference = real(t.model, height=240, width=320)  # a renderer of its own
             reference.update_scene(t.data, camera="overview", scene_option=t._render_scene_option())

@@ -26,6 +26,7 @@ import numpy as np
 
 from phyagentos.perception.errors import PerceptionError
 from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioception
+from phyagentos.renderer import Renderer
 
 __all__ = [
     "SyntheticObject",
@@ -273,7 +274,7 @@ class SyntheticScene:
             raise PerceptionError(f"no camera {camera!r}; cameras: {[c.name for c in self.cameras]}")
         r = self._renderers.get((spec.width, spec.height))
         if r is None:
-            r = mujoco.Renderer(self.model, height=spec.height, width=spec.width)
+            r = Renderer(self.model, height=spec.height, width=spec.width)
             self._renderers[(spec.width, spec.height)] = r
         cid = self.model.camera(f"synthetic:{camera}").id
         r.disable_depth_rendering()

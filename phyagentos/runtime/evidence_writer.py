@@ -184,12 +184,14 @@ class EvidenceImageWriter:
         import mujoco  # noqa: PLC0415
         from PIL import Image  # noqa: PLC0415
 
+        from phyagentos.renderer import Renderer  # noqa: PLC0415
+
         width, height = EVIDENCE_IMAGE_SIZE
         try:
             if self._renderer is None or self._renderer[0] is not model:
                 if self._renderer is not None:
                     self._renderer[1].close()
-                self._renderer = (model, mujoco.Renderer(model, height=height, width=width), mujoco.MjData(model))
+                self._renderer = (model, Renderer(model, height=height, width=width), mujoco.MjData(model))
             _, renderer, data = self._renderer
             mujoco.mj_setState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
             mujoco.mj_forward(model, data)  # body, geom, camera and light poses of that state

@@ -286,6 +286,8 @@ def _render_main() -> int:
     try:
         import mujoco  # noqa: PLC0415
 
+        from phyagentos.renderer import Renderer  # noqa: PLC0415
+
         setup = receive()
         cfg = RecordingConfig.parse(setup["config"])
         recipe = setup["recipe"]
@@ -297,7 +299,7 @@ def _render_main() -> int:
         if model.nq != recipe["nq"]:
             raise RecordingError(f"rebuilt model has nq={model.nq}, the session's has {recipe['nq']}")
         data = mujoco.MjData(model)
-        renderer = mujoco.Renderer(model, height=cfg.height, width=cfg.width)
+        renderer = Renderer(model, height=cfg.height, width=cfg.width)
         writer = _write_frames(Path(setup["path"]), cfg)
         while (item := receive()) is not None:
             state, slots = item

@@ -31,6 +31,7 @@ import numpy as np
 from phyagentos.errors import PhyAgentOSError, TargetError, ViewError
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.sensors import read_sensors
+from phyagentos.renderer import Renderer
 from phyagentos.runtime.target_pool import scene_for
 from phyagentos.targets.contract import MuJoCoBacked
 from phyagentos.targets.registry import DRIVERS
@@ -530,7 +531,7 @@ class SceneRenderer:
         if self._renderer is None or self._renderer_model is not model:
             if self._renderer is not None:
                 self._renderer.close()
-            self._renderer = mujoco.Renderer(model, height=self.height, width=self.width)
+            self._renderer = Renderer(model, height=self.height, width=self.width)
             self._renderer_model = model
         cam = mujoco.MjvCamera()
         mujoco.mjv_defaultFreeCamera(model, cam)

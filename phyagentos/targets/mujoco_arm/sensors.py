@@ -15,6 +15,7 @@ import numpy as np
 from phyagentos.errors import TargetError, format_choices
 from phyagentos.geometry import pose_matrix
 from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioception
+from phyagentos.renderer import Renderer
 
 from ..camera_noise import CameraNoise
 
@@ -175,7 +176,7 @@ class ArmSensors:
             else:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")  # glfw warns before failing without a display
-                    r = self._renderers[key] = mujoco.Renderer(self._model, height=key[1], width=key[0])
+                    r = self._renderers[key] = Renderer(self._model, height=key[1], width=key[0])
         return r
 
     def _drop_renderers(self) -> None:

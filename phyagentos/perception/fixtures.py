@@ -338,6 +338,14 @@ class DrawerLook:
     KEYS = ("name", "handle_offset_m", "height_m", "half_length_m", "axis_xy", "travel_m", "face_m", "half_width_m",
             "top_m", "back_m")
 
+    @property
+    def bottom_m(self) -> float:
+        """Height of the drawer's underside above the support, m: its front stands as far below
+        the handle's centre as above it (LIBERO's cabinet drawers: fronts 6.8 cm tall, the handle
+        at their middle; the top drawer's underside 15.5 cm up, from 2 x 18.9 - 22.2), never
+        below the support."""
+        return max(0.0, 2.0 * self.height_m - self.top_m)
+
     @classmethod
     def from_dict(cls, d: Any, fixture: str) -> "DrawerLook":
         """From a mapping with the keys :attr:`KEYS` (module docstring; ``half_width_m``: half the

@@ -1313,18 +1313,22 @@ class Perceiver:
                        opening: float) -> np.ndarray:
         """(N,) bool: the points of ``p`` (N, 3) world m (``heights`` (N,) m above the support)
         on the walls of ``drawer`` of sighting ``s`` standing ``opening`` m out: within its box
-        (across its width plus :data:`FIXTURE_EDGE_M`, up to its top plus
-        :data:`FIXTURE_MARGIN_M`, from inside its shut handle out to its handle's outer face plus
-        :data:`FIXTURE_MARGIN_M`), its front and handle (:data:`DRAWER_FRONT_M` inward from the
-        handle's face), its sides (:data:`DRAWER_WALL_M` inward) and its floor
-        (:data:`DRAWER_FLOOR_M` below the handle's centre and lower). What stands inside it (a
-        bowl in an open drawer) is not the fixture's."""
+        (across its width plus :data:`FIXTURE_EDGE_M`, from its bottom (:meth:`DrawerLook.bottom_m`)
+        less :data:`FIXTURE_MARGIN_M` up to its top plus :data:`FIXTURE_MARGIN_M`, from inside its
+        shut handle out to its handle's outer face plus :data:`FIXTURE_MARGIN_M`), its front and
+        handle (:data:`DRAWER_FRONT_M` inward from the handle's face), its sides
+        (:data:`DRAWER_WALL_M` inward) and its floor (:data:`DRAWER_FLOOR_M` below the handle's
+        centre and lower). What stands inside it (a bowl in an open drawer) is not the fixture's,
+        nor what lies under it (a plate on the table under LIBERO's open top drawer, its bottom
+        15.5 cm up: with no floor to the box, the plate's rim under it went with the drawer and
+        the rest of the plate was named at 0.27, LIBERO-PRO's ``libero_spatial_swap`` task 4)."""
         c0, u, v = drawer.frame(s.position[:2], s.turn)
         rel = p[:, :2] - c0
         along, across = rel @ u, rel @ v
         face = opening + drawer.face_m
         box = ((np.abs(across) <= drawer.half_width_m + FIXTURE_EDGE_M)
                & (heights <= drawer.top_m + FIXTURE_MARGIN_M)
+               & (heights >= drawer.bottom_m - FIXTURE_MARGIN_M)
                & (along >= drawer.travel_m[0] - DRAWER_WINDOW_M) & (along <= face + FIXTURE_MARGIN_M))
         walls = ((along >= face - DRAWER_FRONT_M) | (np.abs(across) >= drawer.half_width_m - DRAWER_WALL_M)
                  | (heights <= drawer.height_m - DRAWER_FLOOR_M))

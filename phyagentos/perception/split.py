@@ -81,10 +81,10 @@ from phyagentos.perception.detect import Detection, fit_cluster, resting_at, sta
 from phyagentos.perception.top_knob import KNOB_MAX_RADIUS_M, KNOB_MIN_POINTS, KNOB_SLICE_M, KNOB_TOP_RANK, top_knob
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
-           "COVERED_COST_FRACTION", "SPLIT_DEPTH",
+           "COVERED_COST_FRACTION", "SPLIT_DEPTH", "DISC_RING_M", "DISC_MIN_FILL", "DISC_MIN_REST_M",
            "ONE_BODY_CHROMA", "ONE_BODY_MIN_SATURATION", "ONE_PLACE_RADIUS_RATIO", "ONE_PLACE_HEIGHT_M",
            "ONE_PLACE_CENTRE_FRACTION", "extent",
-           "footprint_cut", "one_body", "one_place", "oversized",
+           "disc_cut", "footprint_cut", "one_body", "one_place", "oversized",
            "split_cluster", "split_clusters"]
 
 log = logging.getLogger(__name__)
@@ -107,6 +107,12 @@ MIN_COLOUR_SPLIT_LAB = 20.0
 COVERED_COST_FRACTION = 0.5
 #: The colour partition: labels smoothed over this many nearest neighbours.
 COLOUR_NEIGHBOURS = 9
+#: The disc partition (:func:`disc_cut`): the ring around a disc whose points count against
+#: it, m; the fraction of the disc its points must fill; how much longer than the disc the
+#: segment must be (something else must be there), m.
+DISC_RING_M = 0.015
+DISC_MIN_FILL = 0.85
+DISC_MIN_REST_M = 0.03
 #: A knob among a segment's top points is looked at with the points within this of it, m: its
 #: lid around it (LIBERO's moka pot: 3.3-4 cm from the knob to the body's side).
 KNOB_SPLIT_RADIUS_M = 0.035
@@ -157,10 +163,11 @@ def _hull_mask(xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int]) -> np
     return cv2.dilate(m, np.ones((3, 3), np.uint8))
 
 
-def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
-    """Candidate partitions of one segment: ``(kind, z, labels (N,))`` with labels >= 0 the
-    parts and -1 the points left out (see the module docstring). Pieces join across gaps up
-    to about the clustering's ``eps_m``."""
+def _grid(cloud: Cloud, config: PerceptionConfig):
+    """The ground-plane grid a segment's partitions are drawn on: ``(xy (N, 2) m, origin (2,) m,
+    shape (rows, cols), grow (cells), cells (N, 2) each point's cell, pieces_of)``, where
+    ``pieces_of(groups)`` labels each group of point indices' connected pieces (pieces under
+    ``clustering.min_points`` left out, -1)."""
     min_points = config.clustering.min_points
     grow = max(1, int(np.ceil(config.clustering.eps_m / (2.0 * GRID_M))))
     xy = cloud.points[:, :2].astype(np.float64)
@@ -168,10 +175,6 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
     ncell = np.floor((xy.max(axis=0) - origin) / GRID_M).astype(int) + 3 + 2 * grow
     origin = origin - grow * GRID_M
     shape = (int(ncell[1]), int(ncell[0]))
-    top = float(np.percentile(heights, 98))
-    levels = np.arange(0.01, top - 0.01 + 1e-9, 0.005)
-    if levels.size > MAX_LEVELS:
-        levels = np.linspace(levels[0], levels[-1], MAX_LEVELS)
     cells = np.floor((xy - origin) / GRID_M).astype(np.int32) + 1
 
     def pieces_of(groups: list[np.ndarray]) -> np.ndarray:
@@ -187,6 +190,20 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
                     labels[sel] = k
                     k += 1
         return labels
+
+    return xy, origin, shape, grow, cells, pieces_of
+
+
+def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
+    """Candidate partitions of one segment: ``(kind, z, labels (N,))`` with labels >= 0 the
+    parts and -1 the points left out (see the module docstring). Pieces join across gaps up
+    to about the clustering's ``eps_m``."""
+    min_points = config.clustering.min_points
+    xy, origin, shape, grow, cells, pieces_of = _grid(cloud, config)
+    top = float(np.percentile(heights, 98))
+    levels = np.arange(0.01, top - 0.01 + 1e-9, 0.005)
+    if levels.size > MAX_LEVELS:
+        levels = np.linspace(levels[0], levels[-1], MAX_LEVELS)
 
     knobs = top_knobs(xy, heights, grow=grow)
     if len(knobs) >= 2:  # nearest knob: the side of the bisector each point stands on
@@ -220,6 +237,72 @@ def _partitions(cloud: Cloud, heights: np.ndarray, config: PerceptionConfig):
             groups.append(g)
         groups.append(np.flatnonzero(rest))
         yield "columns", float(z), pieces_of(groups)
+
+
+def disc_cut(xy: np.ndarray, diameter_m: float) -> tuple[np.ndarray, float] | None:
+    """Where a round object of ``diameter_m`` lies in a footprint of other things too.
+
+    The (N, 2) ground-plane positions ``xy`` (m) are put on the split's grid (:data:`GRID_M`,
+    occupied cells grown by one); each cell is scored as a disc's centre: the occupied
+    fraction of the disc of ``diameter_m`` less the occupied fraction of the
+    :data:`DISC_RING_M` ring around it. A round thing touching another fills its disc and
+    leaves its ring empty but where they touch; a disc moved into the other thing leaves the
+    round thing's far side in its ring (a plate against a box whose colour is its rim's, where
+    neither a colour nor a neck cuts them apart: LIBERO-PRO's ``libero_spatial_swap`` task 1).
+
+    Returns:
+        ``(centre (2,) m, filled fraction)`` of the best disc, or None: no disc is filled to
+        :data:`DISC_MIN_FILL`, or the footprint is not :data:`DISC_MIN_REST_M` longer than the disc
+        (nothing else there).
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    r_cells = 0.5 * diameter_m / GRID_M
+    ring_cells = DISC_RING_M / GRID_M
+    if xy.shape[0] < 10 or r_cells < 2:
+        return None
+    (_, _), (w, h), _ = cv2.minAreaRect(xy.astype(np.float32))
+    if max(w, h) < diameter_m + DISC_MIN_REST_M:
+        return None
+    pad = int(np.ceil(r_cells + ring_cells)) + 2
+    origin = xy.min(axis=0) - pad * GRID_M
+    cells = np.floor((xy - origin) / GRID_M).astype(np.int32)
+    shape = (int(cells[:, 1].max()) + pad + 1, int(cells[:, 0].max()) + pad + 1)
+    occ = np.zeros(shape, np.float32)
+    occ[cells[:, 1], cells[:, 0]] = 1.0
+    occ = cv2.dilate(occ, np.ones((3, 3), np.uint8))
+    k = int(np.ceil(r_cells + ring_cells))
+    yy, xx = np.mgrid[-k:k + 1, -k:k + 1]
+    rho = np.hypot(xx, yy)
+    inside, ring = rho <= r_cells, (rho > r_cells) & (rho <= r_cells + ring_cells)
+    kernel = inside / inside.sum() - ring / ring.sum()
+    score = cv2.filter2D(occ, cv2.CV_32F, kernel.astype(np.float32), borderType=cv2.BORDER_CONSTANT)
+    fill = cv2.filter2D(occ, cv2.CV_32F, (inside / inside.sum()).astype(np.float32), borderType=cv2.BORDER_CONSTANT)
+    row, col = np.unravel_index(int(np.argmax(score)), score.shape)
+    if float(fill[row, col]) < DISC_MIN_FILL:
+        return None
+    centre = origin + (np.array([col, row], dtype=np.float64) + 0.5) * GRID_M
+    return centre, float(fill[row, col])
+
+
+def _disc_partitions(cloud: Cloud, config: PerceptionConfig, descriptors: Sequence[ObjectDescriptor]):
+    """The disc partitions of one segment (module docstring): for each round declared look
+    (a cylinder's, its footprint's long side its diameter), the points within its disc
+    (:func:`disc_cut`, grown by :data:`GRID_M`) against the rest, as ``(kind, z, labels)``."""
+    xy, _, _, _, _, pieces_of = _grid(cloud, config)
+    seen: set[float] = set()
+    for desc in descriptors:
+        size = desc.size_vector()
+        if desc.shape != "cylinder" or size is None:
+            continue
+        diameter = round(float(max(size[0], size[1])), 3)
+        if diameter in seen:
+            continue
+        seen.add(diameter)
+        cut = disc_cut(xy, diameter)
+        if cut is None:
+            continue
+        near = np.hypot(*(xy - cut[0]).T) <= 0.5 * diameter + GRID_M
+        yield "disc", float("nan"), pieces_of([np.flatnonzero(near), np.flatnonzero(~near)])
 
 
 def top_knobs(xy: np.ndarray, heights: np.ndarray, *, grow: int = 1) -> list[np.ndarray]:
@@ -464,6 +547,12 @@ def _split_scored(cloud: Cloud, heights: np.ndarray, plane: Plane, config: Perce
             if stacks:
                 break
         scored = scored + stacks
+        best = _unambiguous(scored, config)
+    if best is None and not scored:
+        # last, where nothing else cut it admissibly: a round look's disc against the rest
+        # (a plate against a box of its rim's colour)
+        scored = _admissible(list(_disc_partitions(cloud, config, sized)), cloud, heights, plane, config, focal_px,
+                             sized, stacks=False, fits={}, patch_m=patch_m)
         best = _unambiguous(scored, config)
     if best is None:
         if not scored:

@@ -11,6 +11,10 @@ centres (scoring only), recorded by ``bench/libero_drawer_refs.py --record``.
 ``tests/data/libero_drawer_bowl_back_frames.npz``: the same, of the scene LIBERO's sampler made
 with seed 501 as the bench's ``--generated`` episodes see it (``--placement sampler``): the
 bowl at the back of the open drawer, its far side under the cabinet's body.
+
+``tests/data/libero_plate_under_drawer_frames.npz``: the first scene of ``bench/libero_drawer_refs.py
+--seeds 90000-90003 --plate-under`` (the bowls as in the first file, the plate then set on the table
+with its rim 2.5 cm in under the open top drawer's front).
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioc
 
 DATA = Path(__file__).parent / "data" / "libero_drawer_bowl_frames.npz"
 BACK = Path(__file__).parent / "data" / "libero_drawer_bowl_back_frames.npz"
+PLATE_UNDER = Path(__file__).parent / "data" / "libero_plate_under_drawer_frames.npz"
 
 
 def _recorded(path: Path = DATA):
@@ -95,6 +100,23 @@ def test_without_the_drawers_look_the_bowl_is_not_named_rather_than_guessed():
     seen, snap = _observe(declared, meta, frames, proprio)
     assert not snap["references"]["akita_black_bowl_1"]["resolved"]
     assert "akita_black_bowl_1" not in seen and "akita_black_bowl_2" not in seen
+
+
+def test_a_plate_under_the_open_drawer_keeps_its_rim_and_is_named(monkeypatch):
+    """The drawer's own points stop at its underside (15.5 cm up for the top drawer): the
+    plate's rim on the table under it is the plate's. With no floor to the drawer's box (the
+    behaviour before), the rim went with the drawer and the plate was not named."""
+    from phyagentos.perception.fixtures import DrawerLook
+
+    frames, proprio, meta = _recorded(PLATE_UNDER)
+    seen, _ = _observe(meta["declared"], meta, frames, proprio)
+    plate = seen.get("plate_1")
+    assert plate is not None and plate["kind"] == "object" and plate["attributes"]["confidence"] >= 0.9, plate
+    assert np.linalg.norm(np.subtract(plate["position"][:2], meta["truth"]["plate_1"][:2])) < 0.005
+    assert "akita_black_bowl_1" in seen  # the bowl in the drawer as before
+    monkeypatch.setattr(DrawerLook, "bottom_m", property(lambda self: 0.0))
+    seen, _ = _observe(meta["declared"], meta, frames, proprio)
+    assert "plate_1" not in seen or seen["plate_1"]["kind"] != "object", seen.get("plate_1")
 
 
 def _hide(frames, centre, radius_m):

@@ -81,7 +81,7 @@ from phyagentos.perception.detect import Detection, fit_cluster, resting_at, sta
 from phyagentos.perception.top_knob import KNOB_MAX_RADIUS_M, KNOB_MIN_POINTS, KNOB_SLICE_M, KNOB_TOP_RANK, top_knob
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
-           "COVERED_COST_FRACTION", "SPLIT_DEPTH", "DISC_RING_M", "DISC_MIN_FILL", "DISC_MIN_REST_M",
+           "COVERED_COST_FRACTION", "SPLIT_DEPTH", "DISC_MIN_EDGE", "DISC_MIN_FILL", "DISC_MIN_REST_M",
            "ONE_BODY_CHROMA", "ONE_BODY_MIN_SATURATION", "ONE_PLACE_RADIUS_RATIO", "ONE_PLACE_HEIGHT_M",
            "ONE_PLACE_CENTRE_FRACTION", "extent",
            "disc_cut", "footprint_cut", "one_body", "one_place", "oversized",
@@ -107,10 +107,10 @@ MIN_COLOUR_SPLIT_LAB = 20.0
 COVERED_COST_FRACTION = 0.5
 #: The colour partition: labels smoothed over this many nearest neighbours.
 COLOUR_NEIGHBOURS = 9
-#: The disc partition (:func:`disc_cut`): the ring around a disc whose points count against
-#: it, m; the fraction of the disc its points must fill; how much longer than the disc the
-#: segment must be (something else must be there), m.
-DISC_RING_M = 0.015
+#: The disc partition (:func:`disc_cut`): the fraction of a circle that must lie on the
+#: footprint's edge; the fraction of its disc its points must fill; how much longer than the
+#: disc the segment must be (something else must be there), m.
+DISC_MIN_EDGE = 0.4
 DISC_MIN_FILL = 0.85
 DISC_MIN_REST_M = 0.03
 #: A knob among a segment's top points is looked at with the points within this of it, m: its
@@ -243,42 +243,45 @@ def disc_cut(xy: np.ndarray, diameter_m: float) -> tuple[np.ndarray, float] | No
     """Where a round object of ``diameter_m`` lies in a footprint of other things too.
 
     The (N, 2) ground-plane positions ``xy`` (m) are put on the split's grid (:data:`GRID_M`,
-    occupied cells grown by one); each cell is scored as a disc's centre: the occupied
-    fraction of the disc of ``diameter_m`` less the occupied fraction of the
-    :data:`DISC_RING_M` ring around it. A round thing touching another fills its disc and
-    leaves its ring empty but where they touch; a disc moved into the other thing leaves the
-    round thing's far side in its ring (a plate against a box whose colour is its rim's, where
-    neither a colour nor a neck cuts them apart: LIBERO-PRO's ``libero_spatial_swap`` task 1).
+    gaps of a cell closed); the footprint's edge cells vote, as in a Hough transform for
+    circles of one radius, for every centre whose circle passes through them. A round thing
+    touching another keeps most of its outline on the footprint's edge (all but where they
+    touch); the best centre is where the most of a circle lies on that edge, taken when at
+    least :data:`DISC_MIN_EDGE` of the circle does and its points fill :data:`DISC_MIN_FILL` of
+    its disc (a plate against a box whose colour is its rim's, where neither a colour nor a neck
+    cuts them apart: LIBERO-PRO's ``libero_spatial_swap`` task 1).
 
     Returns:
-        ``(centre (2,) m, filled fraction)`` of the best disc, or None: no disc is filled to
-        :data:`DISC_MIN_FILL`, or the footprint is not :data:`DISC_MIN_REST_M` longer than the disc
+        ``(centre (2,) m, filled fraction)`` of the disc, or None: no circle is on the edge or
+        filled so, or the footprint is not :data:`DISC_MIN_REST_M` longer than the disc
         (nothing else there).
     """
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     r_cells = 0.5 * diameter_m / GRID_M
-    ring_cells = DISC_RING_M / GRID_M
     if xy.shape[0] < 10 or r_cells < 2:
         return None
     (_, _), (w, h), _ = cv2.minAreaRect(xy.astype(np.float32))
     if max(w, h) < diameter_m + DISC_MIN_REST_M:
         return None
-    pad = int(np.ceil(r_cells + ring_cells)) + 2
+    pad = int(np.ceil(r_cells)) + 3
     origin = xy.min(axis=0) - pad * GRID_M
     cells = np.floor((xy - origin) / GRID_M).astype(np.int32)
     shape = (int(cells[:, 1].max()) + pad + 1, int(cells[:, 0].max()) + pad + 1)
-    occ = np.zeros(shape, np.float32)
-    occ[cells[:, 1], cells[:, 0]] = 1.0
-    occ = cv2.dilate(occ, np.ones((3, 3), np.uint8))
-    k = int(np.ceil(r_cells + ring_cells))
+    occ = np.zeros(shape, np.uint8)
+    occ[cells[:, 1], cells[:, 0]] = 1
+    square = np.ones((3, 3), np.uint8)
+    occ = cv2.morphologyEx(occ, cv2.MORPH_CLOSE, square)
+    edge = (occ - cv2.erode(occ, square, borderType=cv2.BORDER_CONSTANT, borderValue=0)).astype(np.float32)
+    k = int(np.ceil(r_cells)) + 1
     yy, xx = np.mgrid[-k:k + 1, -k:k + 1]
     rho = np.hypot(xx, yy)
-    inside, ring = rho <= r_cells, (rho > r_cells) & (rho <= r_cells + ring_cells)
-    kernel = inside / inside.sum() - ring / ring.sum()
-    score = cv2.filter2D(occ, cv2.CV_32F, kernel.astype(np.float32), borderType=cv2.BORDER_CONSTANT)
-    fill = cv2.filter2D(occ, cv2.CV_32F, (inside / inside.sum()).astype(np.float32), borderType=cv2.BORDER_CONSTANT)
-    row, col = np.unravel_index(int(np.argmax(score)), score.shape)
-    if float(fill[row, col]) < DISC_MIN_FILL:
+    circle = (np.abs(rho - r_cells) <= 0.75).astype(np.float32)
+    disc = (rho <= r_cells).astype(np.float32)
+    votes = cv2.filter2D(edge, cv2.CV_32F, circle / circle.sum(), borderType=cv2.BORDER_CONSTANT)
+    fill = cv2.filter2D(occ.astype(np.float32), cv2.CV_32F, disc / disc.sum(), borderType=cv2.BORDER_CONSTANT)
+    votes[fill < DISC_MIN_FILL] = 0.0
+    row, col = np.unravel_index(int(np.argmax(votes)), votes.shape)
+    if float(votes[row, col]) < DISC_MIN_EDGE:
         return None
     centre = origin + (np.array([col, row], dtype=np.float64) + 0.5) * GRID_M
     return centre, float(fill[row, col])

@@ -6,6 +6,8 @@ view by name, category and look; the truth is read here, by the test, only."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -126,3 +128,57 @@ def test_a_bowl_set_on_the_plate_beside_the_other_bowl_leaves_the_plate_named(wo
     e = ents.get(plate)
     assert e is not None and e["kind"] == "object" and e["attributes"]["confidence"] > 0.5, e
     assert _centre_error(e, boxes[plate]) < 0.015, (e["position"], boxes[plate])
+
+
+def _lean_on_the_box(target, seed: int, over_m: float = 0.012) -> float:
+    """The plate set with its rim ``over_m`` over the cookie box's edge (a random side, seeded),
+    1 cm above the box's top, settled 1.5 s: it comes to rest with its rim on the box, tilted, as
+    LIBERO-PRO's ``libero_spatial_swap`` task 1 sets it. Returns the plate's tilt, degrees (a
+    scene generator: the true boxes are read here, by the test)."""
+    import mujoco
+
+    from phyagentos.targets.libero.descriptors import _free_adr
+
+    rng = np.random.default_rng(seed)
+    lo, hi = object_boxes(target)["cookies_1"]
+    u = np.array([math.cos(a := rng.uniform(0.0, 2.0 * math.pi)), math.sin(a)])
+    half = 0.5 * (hi - lo)[:2]
+    edge = min(half[0] / max(abs(u[0]), 1e-9), half[1] / max(abs(u[1]), 1e-9))
+    m, d = target.model, target.data
+    qa, _ = _free_adr(m, target._obj_body["plate_1"])
+    xy = 0.5 * (lo + hi)[:2] + u * (edge + 0.5 * LOOKS["plate"]["size_m"][0] - over_m)
+    d.qpos[qa:qa + 7] = [xy[0], xy[1], float(hi[2]) + 0.01, 1.0, 0.0, 0.0, 0.0]
+    d.qvel[:] = 0.0
+    mujoco.mj_forward(m, d)
+    target.hold(duration_s=1.5)
+    q = d.xquat[target._obj_body["plate_1"]]
+    return math.degrees(2.0 * math.acos(min(1.0, math.hypot(q[0], q[3]))))
+
+
+def test_a_plate_resting_tilted_on_the_cookie_box_is_named_with_it(world, monkeypatch):
+    """Its rim on the box, the plate lies 3.4 degrees tilted: the band within 6 mm of its top is
+    its raised side, a crescent, and the plate was named at 0.43 (by its disc, cut from the box;
+    not at all before that). Its top taken from its own slope, both are named where they are
+    (bench/libero_touching's seeds; seed 60007 of ten, 3 of the 6 tilted named, 0 before)."""
+    import phyagentos.perception.detect as detect
+
+    target, cfg = world
+    names = ["plate_1", "cookies_1"]
+    cats = target._problem.objects
+    declared = [{"name": n, "class": cats[n], **LOOKS[cats[n]]} for n in names]
+
+    def observe():
+        assert set(place_objects(target, 60007, names=names)) == set(names)
+        tilt = _lean_on_the_box(target, 60007)
+        return tilt, {e["name"]: e for e in _observe(target, cfg, declared)["entities"]}, object_boxes(target)
+
+    tilt, ents, boxes = observe()
+    assert tilt > 2.5, tilt
+    for name in names:
+        e = ents.get(name)
+        assert e is not None and e["kind"] == "object" and e["attributes"]["confidence"] >= 0.5, (name, e)
+        assert _centre_error(e, boxes[name]) < 0.01, (name, e["position"], boxes[name])
+    monkeypatch.setattr(detect, "_level_band", lambda points, heights, band, *a: band)
+    _, ents, _ = observe()
+    plate = ents.get("plate_1")
+    assert plate is None or plate["attributes"]["confidence"] < 0.5, plate

@@ -15,6 +15,7 @@ from phyagentos.perception.association import (
     forbid_except,
     part_landmark,
     resolve_reference,
+    track_costs,
 )
 from phyagentos.perception.cloud import Plane
 from phyagentos.perception.colour import srgb_to_lab
@@ -382,3 +383,46 @@ def test_a_tracked_bowl_keeps_its_identity_without_the_relation():
     got = _assign(p, later)
     assert got["bowl_1"] == 1 and got["bowl_2"] == 0
     assert p.last_references == {}  # no reference left to resolve
+
+
+def _tracked(name, pos, *, held=False):
+    from phyagentos.perception.tracks import Track
+
+    return Track(name, np.array(pos, float), 1e-6, 0.0, 1.0, np.array([0.056, 0.056, 0.025]), "cylinder",
+                 np.array(BLACK), 300, 0.99, 0.0, 0.0, held=held)
+
+
+def _hand_at(xyz):
+    from phyagentos.perception.frames import Proprioception
+
+    tcp = np.eye(4)
+    tcp[:3, 3] = xyz
+    return Proprioception(0.0, ("j1",), np.zeros(1), np.zeros(1), np.zeros(1), 0.0, 0.0, None, None, tcp)
+
+
+def test_a_held_bowl_with_a_reference_leaves_its_twin_on_the_table_its_name():
+    """"The black bowl between the plate and the ramekin" in the hand: its track ties
+    association where the hand is, so the one bowl seen on the table is its twin, named. With no
+    position for the held bowl (the behaviour before, kept for a held object that has no
+    look-alike), both bowls matched that sighting alike and it was left unknown."""
+    p = _perceiver({"relation": "between", "of": ["plate_1", "ramekin_1"]})
+    p.tracks["bowl_1"] = _tracked("bowl_1", (0.50, 0.10, 0.15), held=True)
+    p.tracks["bowl_2"] = _tracked("bowl_2", (0.40, -0.25, 0.03))
+    hand = _hand_at((0.50, 0.10, 0.18))
+    dets = [_det(BLACK, (0.40, -0.25, 0.03))]
+    pos = p.track_positions(hand)
+    assert np.allclose(pos[0], (0.50, 0.10, 0.18)) and np.allclose(pos[1], (0.40, -0.25, 0.03))
+    assert pos[2] is None and pos[3] is None  # untracked
+    names = [d.name for d in p.declared]
+    C = cost_matrix(dets, p.declared, CFG) + track_costs(dets, len(names), CFG, pos)
+    a = associate(C, CFG)
+    assert {names[j] for j, _, _ in a.matches.values()} == {"bowl_2"}
+    before = [None, pos[1], None, None]
+    C = cost_matrix(dets, p.declared, CFG) + track_costs(dets, len(names), CFG, before)
+    assert not associate(C, CFG).matches
+
+
+def test_a_held_object_with_no_look_alike_ties_nothing():
+    p = _perceiver(None)
+    p.tracks["plate_1"] = _tracked("plate_1", (0.50, 0.10, 0.15), held=True)
+    assert p.track_positions(_hand_at((0.5, 0.1, 0.2)))[3] is None

@@ -80,15 +80,32 @@ def _on(world, landmark: str, seed: int):
                for r in snap["relations"]), snap["relations"]
 
 
-def test_a_bowl_rim_to_rim_with_the_ramekin_is_cut_at_the_neck_of_their_footprint(world):
+def test_a_bowl_rim_to_rim_with_the_ramekin_is_cut_at_the_neck_of_their_footprint(world, monkeypatch):
     """Beside it, one height and both grey: unsplit by any height or colour, the footprint's
-    neck cut (``split_max_neck_ratio`` 0: the behaviour before) names both at their centres.
-    The seed is the bench's first ``beside`` scene of the ramekin."""
+    neck cut names both at their centres; with neither the neck cut (``split_max_neck_ratio``
+    0) nor the disc cut (the behaviour before both), neither is named. The seed is the bench's
+    first ``beside`` scene of the ramekin."""
+    import phyagentos.perception.split as split
+
     off = world[1].model_validate({**world[1].model_dump(), "clustering": {
         **world[1].clustering.model_dump(), "split_max_neck_ratio": 0.0}})
-    before, _, _ = _touching(world, "glazed_rim_porcelain_ramekin_1", "beside", 60000, off)
-    assert BOWL not in before and "glazed_rim_porcelain_ramekin_1" not in before
-    ents, _, boxes = _touching(world, "glazed_rim_porcelain_ramekin_1", "beside", 60000)
+    names = (BOWL, "glazed_rim_porcelain_ramekin_1")
+    with monkeypatch.context() as mp:
+        mp.setattr(split, "_disc_partitions", lambda *a, **k: iter(()))
+        before, _, _ = _touching(world, names[1], "beside", 60000, off)
+        assert BOWL not in before and names[1] not in before
+        ents, _, boxes = _touching(world, names[1], "beside", 60000)
+        for name in names:
+            assert ents[name]["kind"] == "object", ents.get(name)
+            assert _centre_error(ents[name], boxes[name]) < 0.015, (name, ents[name]["position"], boxes[name])
+
+
+def test_a_bowl_rim_to_rim_with_the_ramekin_is_cut_by_its_disc_where_no_neck_cut_is_taken(world):
+    """The same scene with the neck cut off: the bowl's disc, found on the footprint's edge,
+    cuts it from the ramekin, both named within 1.5 cm of their centres (1.3 mm when measured)."""
+    off = world[1].model_validate({**world[1].model_dump(), "clustering": {
+        **world[1].clustering.model_dump(), "split_max_neck_ratio": 0.0}})
+    ents, _, boxes = _touching(world, "glazed_rim_porcelain_ramekin_1", "beside", 60000, off)
     for name in (BOWL, "glazed_rim_porcelain_ramekin_1"):
         assert ents[name]["kind"] == "object", ents.get(name)
         assert _centre_error(ents[name], boxes[name]) < 0.015, (name, ents[name]["position"], boxes[name])
@@ -155,13 +172,14 @@ def _lean_on_the_box(target, seed: int, over_m: float = 0.012) -> float:
     return math.degrees(2.0 * math.acos(min(1.0, math.hypot(q[0], q[3]))))
 
 
-def test_a_plate_resting_tilted_on_the_cookie_box_is_named_with_it(world, monkeypatch):
-    """Its rim on the box, the plate lies 3.4 degrees tilted: the band within 6 mm of its top is
-    its raised side, a crescent, and the plate was named at 0.43 (by its disc, cut from the box;
-    not at all before that). Its top taken from its own slope, both are named where they are
-    (bench/libero_touching's seeds; seed 60007 of ten, 3 of the 6 tilted named, 0 before)."""
-    import phyagentos.perception.detect as detect
-
+def test_a_plate_resting_tilted_on_the_cookie_box_is_named_with_it(world):
+    """Its rim on the box, the plate lies about 3.4 degrees tilted: the band within 6 mm of its
+    top is its raised side, a crescent. Its top taken from its own slope (and cut from the box by
+    its disc), both are named where they are (bench/libero_touching's seeds; seed 60007 of ten,
+    3 of the 6 tilted named; before both changes the plate was unknown at 0.02 and the box unseen
+    here). The mechanism without the slope is pinned on synthetic points
+    (``tests/test_perception_plate_touching.py``): here the settled tilt, and with it the
+    sighting without the slope (0.43 or 0.62), depends on what the world simulated before."""
     target, cfg = world
     names = ["plate_1", "cookies_1"]
     cats = target._problem.objects
@@ -178,7 +196,3 @@ def test_a_plate_resting_tilted_on_the_cookie_box_is_named_with_it(world, monkey
         e = ents.get(name)
         assert e is not None and e["kind"] == "object" and e["attributes"]["confidence"] >= 0.5, (name, e)
         assert _centre_error(e, boxes[name]) < 0.01, (name, e["position"], boxes[name])
-    monkeypatch.setattr(detect, "_level_band", lambda points, heights, band, *a: band)
-    _, ents, _ = observe()
-    plate = ents.get("plate_1")
-    assert plate is None or plate["attributes"]["confidence"] < 0.5, plate

@@ -25,8 +25,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from libero_clouds import recorded_frames
+
 from phyagentos.perception import PerceptionConfig, Perceiver, RobotCapsule
-from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioception
+from phyagentos.perception.frames import CameraFrame
 
 DATA = Path(__file__).parent / "data" / "libero_drawer_bowl_frames.npz"
 BACK = Path(__file__).parent / "data" / "libero_drawer_bowl_back_frames.npz"
@@ -34,19 +36,7 @@ PLATE_UNDER = Path(__file__).parent / "data" / "libero_plate_under_drawer_frames
 
 
 def _recorded(path: Path = DATA):
-    z = np.load(path)
-    meta = json.loads(str(z["meta"]))
-    frames = []
-    for k, sensor in enumerate(meta["sensors"]):
-        w, h, fx, fy, cx, cy = z[f"K{k}"]
-        frames.append(CameraFrame(sensor, meta["frame_ids"][k], float(meta["stamp_s"]),
-                                  CameraIntrinsics(int(w), int(h), float(fx), float(fy), float(cx), float(cy)),
-                                  z[f"T{k}"], z[f"rgb{k}"], z[f"depth{k}"].astype(np.float32) / 1e4))
-    n = len(meta["joint_names"])
-    proprio = Proprioception(float(meta["stamp_s"]), tuple(meta["joint_names"]), np.asarray(meta["joint_positions"]),
-                             np.zeros(n), np.zeros(n), float(meta["gripper_opening_m"]), 0.0, None, None,
-                             np.asarray(meta["tcp_pose"]))
-    return frames, proprio, meta
+    return recorded_frames(path)
 
 
 def _observe(declared, meta, frames, proprio):

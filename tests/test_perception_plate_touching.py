@@ -13,17 +13,17 @@ the test only.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from libero_clouds import recorded_frames
+
 from phyagentos.perception import PerceptionConfig, Perceiver, RobotCapsule
 from phyagentos.perception.cloud import Cloud, Plane
 from phyagentos.perception.detect import fit_cluster
-from phyagentos.perception.frames import CameraFrame, CameraIntrinsics, Proprioception
 from phyagentos.perception.split import disc_cut
 
 DATA = Path(__file__).parent / "data" / "libero_plate_against_box_frames.npz"
@@ -95,19 +95,7 @@ def test_without_its_own_slope_a_tilted_plates_top_is_a_crescent(monkeypatch):
 
 
 def _recorded():
-    z = np.load(DATA)
-    meta = json.loads(str(z["meta"]))
-    frames = []
-    for k, sensor in enumerate(meta["sensors"]):
-        w, h, fx, fy, cx, cy = z[f"K{k}"]
-        frames.append(CameraFrame(sensor, meta["frame_ids"][k], float(meta["stamp_s"]),
-                                  CameraIntrinsics(int(w), int(h), float(fx), float(fy), float(cx), float(cy)),
-                                  z[f"T{k}"], z[f"rgb{k}"], z[f"depth{k}"].astype(np.float32) / 1e4))
-    n = len(meta["joint_names"])
-    proprio = Proprioception(float(meta["stamp_s"]), tuple(meta["joint_names"]), np.asarray(meta["joint_positions"]),
-                             np.zeros(n), np.zeros(n), float(meta["gripper_opening_m"]), 0.0, None, None,
-                             np.asarray(meta["tcp_pose"]))
-    return frames, proprio, meta
+    return recorded_frames(DATA)
 
 
 def _observe(meta, frames, proprio):

@@ -31,7 +31,12 @@ and once, **footprint** (two round objects side by side of about the same height
 colour: a bowl against a ramekin): the points' ground-plane positions cut at the *neck* of
 their footprint between two k-means groups (:func:`footprint_cut`), taken only where the
 neck is at most ``clustering.split_max_neck_ratio`` (0.6) of the narrower side's width: two
-boxes face to face show none, and nothing tells them apart.
+boxes face to face show none, and nothing tells them apart;
+
+and last, only where none of these (nor the stacks below) is admissible, **disc** (a round
+object against another that no colour, height or neck tells apart: a plate against a box of its
+rim's colour): for each round declared look, the disc of its diameter whose circle runs along
+the footprint's edge (:func:`disc_cut`) against the rest.
 
 Each part is cut into its connected pieces on the same grid (pieces under
 ``clustering.min_points`` are dropped; a partition dropping more than :data:`MAX_DROPPED` of

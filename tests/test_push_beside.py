@@ -372,3 +372,58 @@ def test_a_press_whose_pre_start_meets_a_fixture_above_comes_down_from_lower():
 
     _, record = _compute_push(_scene([0.05, -0.03]), blocked=start_blocked, landmark="flat_stove_1", side="front")
     assert all(r["approach_m"] == 0.10 for r in record["rejected"])
+
+
+# libero_goal's looks as the bench measures them on generated scenes (libero/descriptors.yaml,
+# generated_clutter_v3): the plate 13.9 cm across and flat, the bowl taken by its rim
+GOAL_LOOKS = {"plate": {"size_m": [0.1386, 0.1384, 0.0186], "shape": "cylinder"},
+              "akita_black_bowl": {"size_m": [0.113, 0.113, 0.0506], "shape": "cylinder"},
+              "cream_cheese": {"size_m": [0.0846, 0.0452, 0.0198], "shape": "box"},
+              "wine_bottle": {"size_m": [0.0164, 0.0164, 0.1568], "shape": "cylinder"}}
+
+
+def test_only_a_thing_no_grasp_takes_is_untakeable_by_its_measured_look():
+    from phyagentos.bench.libero import untakeable_objects
+
+    assert untakeable_objects(GOAL_OBJECTS, GOAL_LOOKS) == {"plate_1"}
+    # a category with no measured size is not guessed at
+    assert untakeable_objects(GOAL_OBJECTS, {"plate": {"colour": [0.9, 0.9, 0.9]}}) == frozenset()
+
+
+def test_a_move_beside_a_landmark_of_a_thing_the_hand_cannot_take_is_planned_as_the_push():
+    push, _ = instruction_plan("push the plate to the front of the stove", GOAL_OBJECTS, GOAL_FIXTURES)
+    # libero_goal_lan task 5's wording: a move, planned as the push once the plate's look is known
+    moved, _ = instruction_plan("move the plate to the stove's front", GOAL_OBJECTS, GOAL_FIXTURES,
+                                untakeable={"plate_1"})
+    assert moved == push
+    # without that knowledge (or for a thing the hand takes) it stays a pick and a place beside
+    carried, _ = instruction_plan("move the plate to the stove's front", GOAL_OBJECTS, GOAL_FIXTURES)
+    assert [n["skill"] for n in carried] == ["pick", "place"] and carried[1]["params"]["beside"] == "front"
+    cheese, _ = instruction_plan("move the cream cheese to the stove's front", GOAL_OBJECTS, GOAL_FIXTURES,
+                                 untakeable={"plate_1"})
+    assert [n["skill"] for n in cheese] == ["pick", "place"]
+    # a move onto the thing (not beside it) is never turned into a push: no push sets a thing on another
+    onto, _ = instruction_plan("put the plate on the stove", GOAL_OBJECTS, GOAL_FIXTURES, untakeable={"plate_1"})
+    assert [n["skill"] for n in onto] == ["pick", "place"]
+
+
+def test_the_libero_bench_plans_libero_goal_lan_task_5_as_a_push_from_the_measured_looks(tmp_path):
+    pytest.importorskip("libero")
+    import yaml
+
+    from phyagentos.bench import libero as bench
+    from phyagentos.targets.libero import parse_bddl, resolve_task
+
+    # the looks given, as a workspace that measured them before holds them: nothing is built
+    root = tmp_path / "libero"
+    root.mkdir()
+    (root / "descriptors.yaml").write_text(yaml.safe_dump(
+        {**GOAL_LOOKS, "_method": bench._LOOKS_METHOD, "_measured_tasks": ["libero_goal_lan/5"]}))
+    world = bench._fixture_world(parse_bddl(resolve_task("libero_goal_lan", 5).bddl_path))
+    (root / "fixture_looks.yaml").write_text(yaml.safe_dump(
+        {"_method": bench._FIXTURE_LOOKS_METHOD, "worlds": {world: {"measured_as": "libero_goal/5", "looks": {}}}}))
+    suite_path, ids, _ = bench.prepare_libero_suite("libero_goal_lan", tmp_path, tasks=("5",), seeds=(0,))
+    graph = yaml.safe_load((suite_path.parent / "t5.yaml").read_text())
+    [node] = graph["nodes"]
+    assert ids == ("t5",) and node["skill"] == "push"
+    assert node["params"] | {"object": "plate_1", "landmark": "flat_stove_1", "side": "front"} == node["params"]

@@ -56,7 +56,7 @@ from phyagentos.protocol.atomic import atomic_write_text
 
 __all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "SKILL_DEFAULTS", "FIRST_PICK_STILL_MAX_S", "workspace_box",
            "is_libero_suite", "instruction_nodes", "instruction_plan", "instruction_assumptions", "load_skill_defaults",
-           "prepare_libero_suite", "target_entry"]
+           "prepare_libero_suite", "target_entry", "untakeable_objects"]
 
 logger = logging.getLogger(__name__)
 
@@ -318,12 +318,15 @@ def planner_world(objects: dict[str, str], fixtures: dict[str, str]):
     return world_from_declared(list(objects), list(fixtures), source="LIBERO declared")
 
 
-def _planner_steps(language: str, objects: dict[str, str],
-                   fixtures: dict[str, str]) -> tuple[list[tuple[str, str, str | None]], dict[str, dict]]:
+def _planner_steps(language: str, objects: dict[str, str], fixtures: dict[str, str], *,
+                   untakeable: Collection[str] = ()) -> tuple[list[tuple[str, str, str | None]], dict[str, dict]]:
     """The Goal Planner's rule reader (:func:`phyagentos.agent.llm.meaning.read_request`):
     verbs and prepositions by class, objects and destinations by the words of their declared
-    names; every clause must be accounted for, one destination each. Returns the steps and the
-    spatial references (``{object: where}``) perception must resolve."""
+    names; every clause must be accounted for, one destination each. A move to a side of a
+    landmark ("move the plate to the stove's front") of an object of ``untakeable`` (no grasp
+    fits its declared look: :func:`untakeable_objects`) is a push there, as "push the plate to
+    the front of the stove" is. Returns the steps and the spatial references (``{object:
+    where}``) perception must resolve."""
     from phyagentos.agent.llm.meaning import read_request  # noqa: PLC0415
 
     world = planner_world(objects, fixtures)
@@ -402,7 +405,8 @@ def _planner_steps(language: str, objects: dict[str, str],
                 raise BenchError(f"instruction {language!r} refused: {intent.text!r} puts {obj} "
                                  + (f"on one of {format_choices(dests)}: say which" if dests else "nowhere"))
             steps.append(("hold", obj, None) if intent.verb == "hold"
-                         else (f"push_{intent.beside}", obj, dests[0]) if intent.verb == "push"
+                         else (f"push_{intent.beside}", obj, dests[0])
+                         if intent.verb == "push" or (intent.beside and obj in untakeable)
                          else (f"beside_{intent.beside}" if intent.beside else "move", obj, dests[0]))
     if not steps:
         raise BenchError(f"instruction {language!r} refused: nothing to move")
@@ -470,7 +474,8 @@ def instruction_nodes(language: str, objects: dict[str, str], fixtures: dict[str
 
 
 def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str, str], *,
-                     skill_params: Mapping[str, Mapping[str, Any]] | None = None) -> tuple[list[dict[str, Any]], dict[str, dict]]:
+                     skill_params: Mapping[str, Mapping[str, Any]] | None = None,
+                     untakeable: Collection[str] = ()) -> tuple[list[dict[str, Any]], dict[str, dict]]:
     """:func:`instruction_nodes` and the spatial references of the instruction: ``(nodes,
     {object: where})``.
 
@@ -485,11 +490,14 @@ def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str,
     resolves it on the positions it perceives. Never the BDDL ``:goal`` or ``:init``.
     ``skill_params``: strategy parameters per skill for every node of that skill
     (:data:`SKILL_DEFAULTS`, :func:`load_skill_defaults`; default none: the trees' own).
+    ``untakeable``: declared objects no grasp takes (:func:`untakeable_objects`): a move of
+    one to a side of a landmark is planned as a ``push`` there (default none: every move a
+    pick and a place).
 
     Raises:
         BenchError: as :func:`instruction_nodes`.
     """
-    steps, where = _planner_steps(language, objects, fixtures)
+    steps, where = _planner_steps(language, objects, fixtures, untakeable=untakeable)
     nodes = _nodes(steps, skill_params, fixtures=fixtures)
     ids = [n["id"] for n in nodes]
     twice = sorted({i for i in ids if ids.count(i) > 1})
@@ -497,6 +505,24 @@ def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str,
         raise BenchError(f"instruction {language!r} refused: it acts twice on the same thing ({', '.join(twice)}); "
                          f"say each step's object once")
     return nodes, where
+
+
+def untakeable_objects(objects: Mapping[str, str], looks: Mapping[str, Mapping[str, Any]]) -> frozenset[str]:
+    """The declared objects whose category's measured look no grasp of the hand takes
+    (:func:`~phyagentos.motion.takeable.takeable` on the look's ``size_m``, ``shape`` and the
+    category; the Franka Hand's 8 cm stroke, LIBERO's target declaring no other): LIBERO's
+    plate, 13.9 cm across and flat. ``objects``: declared ``{name: category}``; ``looks``:
+    ``{category: look}`` as :func:`_descriptors` measures them on generated scenes (never an
+    episode's state). An object whose category has no measured size is left out (takeable
+    as far as is known)."""
+    from phyagentos.motion.takeable import takeable  # noqa: PLC0415
+
+    out = set()
+    for name, category in objects.items():
+        look = looks.get(category) or {}
+        if look.get("size_m") is not None and not takeable(category, look.get("shape"), look["size_m"]):
+            out.add(name)
+    return frozenset(out)
 
 
 def _twin(a: str, b: str, objects: dict[str, str]) -> bool:
@@ -657,6 +683,12 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     root.mkdir(parents=True, exist_ok=True)
     looks = _descriptors(Path(workspace_dir), suite, [i for i, *_ in planned])
     fixture_looks = _fixture_looks(Path(workspace_dir), suite, [i for i, *_ in planned])
+    for k, (i, task, problem, nodes, where) in enumerate(planned):
+        # the looks known, a move beside a landmark of a thing no grasp takes is planned as a push
+        untakeable = untakeable_objects(problem.objects, looks)
+        if untakeable:
+            planned[k] = (i, task, problem, *instruction_plan(task.instruction, problem.objects, problem.fixtures,
+                                                              skill_params=fixed, untakeable=untakeable))
     entries = []
     for i, task, problem, nodes, where in planned:
         declared = problem.declared()

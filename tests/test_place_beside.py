@@ -4,10 +4,9 @@ plan's nodes and ``ComputePlace``'s place point."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
+from place_leaf import compute_place
 
 from phyagentos.agent.llm.meaning import read_request
 from phyagentos.agent.llm.world import world_from_declared
@@ -58,18 +57,7 @@ def franka():
 
 
 def _compute_place(target, snapshot, blocked=None, **params):
-    from phyagentos.primitives.perception import ComputePlace
-
-    leaf = ComputePlace("ComputePlace", object="pudding", region="plate", **params)
-    board = {"snapshot": snapshot}
-    records = []
-    leaf.ctx = SimpleNamespace(target=target, perceiver=None,
-                               trace=SimpleNamespace(record=lambda kind, **f: records.append({"kind": kind, **f})))
-    leaf.get = board.__getitem__
-    leaf.set = board.__setitem__
-    leaf._blocked = blocked or (lambda T_pre, T_place: None)  # reach is another test's; here the point
-    leaf.step()
-    return board, records
+    return compute_place(target, snapshot, blocked, object="pudding", region="plate", **params)
 
 
 def _snapshot(tcp, viewer):

@@ -1,0 +1,25 @@
+"""Running one ``ComputePlace`` leaf outside a tree, for the place tests: the leaf's blackboard
+is a dict, its trace a list, and whether a reach is blocked is the caller's (reach is tested
+elsewhere; these tests pin where the place goes)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+
+def compute_place(target, snapshot, blocked=None, *, object: str, region: str, **params):
+    """``(board, trace records)`` after one step of ``ComputePlace`` on ``snapshot``:
+    ``board["place_pose"]`` and ``board["preplace_pose"]`` are (4, 4) world tcp poses.
+    ``blocked(T_pre, T_place)``: a ``Blocked`` or None (default: nothing is blocked)."""
+    from phyagentos.primitives.perception import ComputePlace
+
+    leaf = ComputePlace("ComputePlace", object=object, region=region, **params)
+    board = {"snapshot": snapshot}
+    records: list[dict] = []
+    leaf.ctx = SimpleNamespace(target=target, perceiver=None,
+                               trace=SimpleNamespace(record=lambda kind, **f: records.append({"kind": kind, **f})))
+    leaf.get = board.__getitem__
+    leaf.set = board.__setitem__
+    leaf._blocked = blocked or (lambda T_pre, T_place: None)
+    leaf.step()
+    return board, records

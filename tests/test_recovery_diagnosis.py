@@ -155,6 +155,7 @@ def test_place_without_the_object_in_hand_is_an_unmet_precondition_that_reopens_
     ("execution.tracking", "Execute", "collision", "planned"),
     ("execution.tracking", "Lift", "collision", "cartesian"),
     ("target.error", None, "runtime_error", None),
+    ("contact.excessive_force", "PushObject", "collision", "contact"),
 ])
 def test_runtime_error_codes_map_onto_the_taxonomy(tmp_path, code, leaf, cause, variant):
     ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, -0.2, 0.02)), code=code, leaf=leaf)
@@ -289,3 +290,22 @@ def test_a_push_that_closed_the_empty_hand_is_no_missed_grasp_and_pushes_again_s
     # a pick whose criteria are unmet keeps the careful retry
     assert RecoveryPlanner().plan(session(), Diagnosis(cause="criteria_unmet", category="verifier",
                                                        summary="x")).strategy == "careful_retry"
+
+
+def test_a_push_stopped_at_its_effort_limit_is_an_obstruction_pushed_again_slower_once(tmp_path):
+    """libero_goal_swap task 5: the plate dragged into the cream cheese met 40.1 N against the
+    push's 40 N limit; a blocked push is a collision to recover from, not an error in the software."""
+    push_close = {"kind": "gripper", "command": "close", "opening_m": 0.0002, "effort_n": 0.0, "stalled": False,
+                  "closed_on_something": False}
+    accept = {"inside": {"object": "cube", "region": "goal"}}
+    ev = bundle(tmp_path, snap((0.5, -0.2, 0.02)), snap((0.5, -0.1, 0.02)), [observe((0.5, -0.2, 0.02)), push_close],
+                code="contact.excessive_force", leaf="PushObject")
+    push = session(skill="push", accept=accept, params={"object": "cube", "direction": [0, 1], "distance_m": 0.45})
+    d = diagnose(push, ev)
+    assert (d.cause, d.category, d.facts["variant"]) == ("collision", "execution", "contact")
+    rev = RecoveryPlanner().plan(push, d)
+    assert rev.strategy == "push_again_slower" and rev.parameters == {"velocity_scale": 0.025}
+    # once: the second stop at the limit along the lineage ends the ladder
+    child = session(skill="push", accept=accept, params={**push.parameters, "velocity_scale": 0.025},
+                    sid="r-pick_cube-2", parent=push.session_id)
+    assert RecoveryPlanner().plan(child, d, history=[_replanned(push, "collision")]) is None

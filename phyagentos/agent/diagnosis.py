@@ -30,7 +30,10 @@ goal_in_collision      policy        the planner reports the goal configuration 
                                      "goal configuration is invalid")
 planning_failed        policy        other ``planning.*``, ``timing.*``, ``motion.*`` error
 collision              execution     a tracking error during a motion (``facts.variant``:
-                                     ``planned`` transfer or ``cartesian`` straight move)
+                                     ``planned`` transfer or ``cartesian`` straight move),
+                                     or a contact motion stopped at its effort limit
+                                     (``contact.excessive_force``: a push that met more
+                                     than the object; ``facts.variant`` ``contact``)
 object_slipped         execution     while holding, a ``slip`` entry, the opening closing by
                                      more than :data:`SLIP_OPENING_DROP_M`, or the wrist load
                                      dropping below :data:`SLIP_LOAD_RATIO` of its level
@@ -323,6 +326,8 @@ def diagnose(session: SessionRecord, evidence: Any, *, unknown: Sequence[str] = 
                      f"(opening {facts.get('close_opening_m', 'n/a')} m)", facts, refs)
     if code.startswith("perception."):
         return _make("object_not_seen", f"{leaf or 'observation'}: {message}".strip(), facts, refs)
+    if code == "contact.excessive_force":  # met more than it was to move: an obstruction, not a software error
+        return _make("collision", f"{leaf or 'contact'}: {message}".strip(), {**facts, "variant": "contact"}, refs)
     if code:
         return _make("runtime_error", f"{code}: {message}".strip(), facts, refs)
     if unknown:

@@ -34,6 +34,8 @@ collision during a     slower_transfer: transfer_velocity_scale 0.5;
 planned motion         another_planner: planner BITstar, transfer_velocity_scale 0.5
 collision during a     another_approach_direction: grasp_candidate + 1;
 straight-line motion   another_approach_direction: grasp_candidate + 2, approach_height_m 0.15
+a push stopped at its  push_again_slower: velocity_scale x 0.5: the push again from
+effort limit           where the object stands now (once)
 goal_in_collision      planning revisions, never re-observation: another_approach:
                        approach_height_m 0.15 (pick: and the next grasp direction);
                        another_placement_pose: place_offset_m [-0.03, 0] (3 cm nearer
@@ -244,6 +246,13 @@ PUSH_PARAM = "push_to_stop_m"
 #: observation well inside the runner's 10 s heartbeat timeout.
 ANOTHER_VIEW_SAMPLES = 4
 
+#: A push again from where the object stands now, at half the speed (its start, direction and
+#: length come from the new observation): after a push left it short or past, or stopped at
+#: its effort limit.
+_PUSH_AGAIN_SLOWER = Strategy(
+    "push_again_slower", "push the object again from where it stands now, at half the speed",
+    lambda current: {"velocity_scale": round(0.5 * float(current.get("velocity_scale") or 0.05), 4)})
+
 LADDERS: Mapping[str, tuple[Strategy, ...]] = {
     "perception_unknown": (
         Strategy("another_view", f"look again ({ANOTHER_VIEW_SAMPLES} frames) and judge on that view",
@@ -297,6 +306,11 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
         Strategy("another_approach_direction", "turn the grasp once more and approach from 15 cm",
                  _next_candidate(2, approach_height_m=0.15)),
     ),
+    # a contact motion (a push) stopped at its effort limit: again from where things stand now,
+    # slower (the push's start, direction and length come from the new observation)
+    "collision/contact": (
+        _PUSH_AGAIN_SLOWER,
+    ),
     "start_in_collision": (
         Strategy("back_off_first", "raise the hand 10 cm and let the scene settle before planning, so the start "
                  "configuration clears what it touches", {"backoff_m": 0.10, "settle_s": 0.5}),
@@ -319,8 +333,7 @@ LADDERS: Mapping[str, tuple[Strategy, ...]] = {
     # a push that left the object short of (or past) where it was to go: push it again, slower,
     # from where it stands now (the push's start and length come from the new observation)
     "criteria_unmet/push": (
-        Strategy("push_again_slower", "push the object again from where it stands now, at half the speed",
-                 lambda current: {"velocity_scale": round(0.5 * float(current.get("velocity_scale") or 0.05), 4)}),
+        _PUSH_AGAIN_SLOWER,
     ),
     "criteria_unmet": (
         Strategy("careful_retry", "average 8 frames, look again before grasping, transfer at half speed",

@@ -1,7 +1,9 @@
-"""A place onto a fixture's top slid across it when something beside the fixture blocks its
+"""A place onto a fixture's top: slid across it when something beside the fixture blocks its
 centre (libero_goal_swap task 1: the wine rack's side over the stove's back half), never off
 the top's footprint, and never onto an object's top (LIBERO counts a thing on another only
-within 3 cm of its centre)."""
+within 3 cm of its centre); and set down by the height the object was seen at in the hand when
+it hangs lower than perception carries it (libero_goal task 2: the wine bottle taken by its
+neck, pressed 4.3 cm into the cabinet's top)."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ import numpy as np
 import pytest
 from place_leaf import compute_place
 
-from phyagentos.primitives.perception import SLIDE_EDGE_MARGIN_M, SLIDE_STEPS_M, Blocked
+from phyagentos.primitives.perception import HANG_MIN_M, SLIDE_EDGE_MARGIN_M, SLIDE_STEPS_M, Blocked
 
 
 @pytest.fixture(scope="module")
@@ -22,11 +24,13 @@ def franka():
     t.close()
 
 
-def _snapshot(tcp, *, kind="fixture", half=0.075):
+def _snapshot(tcp, *, kind="fixture", half=0.075, seen_z=None, fixture_class=None):
     stove = {"name": "stove", "kind": kind, "position": [0.5, 0.0, 0.01], "quat_wxyz": [1, 0, 0, 0],
-             "size": [half, half, 0.01], "attributes": {"confidence": 0.99}}
+             "size": [half, half, 0.01],
+             "attributes": {"confidence": 0.99, **({"class": fixture_class} if fixture_class else {})}}
     held = {"name": "bowl", "kind": "object", "position": [float(tcp[0, 3]), float(tcp[1, 3]), float(tcp[2, 3]) - 0.03],
-            "quat_wxyz": [1, 0, 0, 0], "size": [0.056, 0.056, 0.025], "attributes": {"confidence": 0.9}}
+            "quat_wxyz": [1, 0, 0, 0], "size": [0.056, 0.056, 0.025],
+            "attributes": {"confidence": 0.9, **({"grasp_z_tcp_m": seen_z} if seen_z is not None else {})}}
     return {"entities": [stove, held]}
 
 
@@ -76,3 +80,28 @@ def test_onto_an_object_or_where_only_reach_fails_the_place_does_not_slide(frank
 
     _, [rec] = compute_place(franka, _snapshot(tcp), out_of_reach, object="bowl", region="stove")
     assert "slid_m" not in rec
+
+
+def test_a_thing_seen_hanging_lower_in_the_hand_comes_down_on_its_base_onto_a_fixtures_top(franka):
+    tcp = np.asarray(franka.tcp_pose())
+    carried, [rec] = compute_place(franka, _snapshot(tcp), object="bowl", region="stove")
+    assert "hangs_lower_m" not in rec
+    # carried 3 cm under the tcp, seen 7.6 cm under it when the hand closed: the hand stops 4.6 cm higher
+    hung, [rec] = compute_place(franka, _snapshot(tcp, seen_z=0.076), object="bowl", region="stove")
+    assert rec["hangs_lower_m"] == pytest.approx(0.046, abs=1e-3)
+    assert (hung["place_pose"] - carried["place_pose"])[:3, 3] == pytest.approx([0.0, 0.0, 0.046], abs=1e-3)
+    assert hung["preplace_pose"][2, 3] - hung["place_pose"][2, 3] == pytest.approx(0.10)
+    # within HANG_MIN_M of where it is carried (a rim or knob grasp's own height): unchanged
+    near, [rec] = compute_place(franka, _snapshot(tcp, seen_z=0.03 + HANG_MIN_M - 0.005), object="bowl",
+                                region="stove")
+    assert "hangs_lower_m" not in rec and near["place_pose"] == pytest.approx(carried["place_pose"])
+
+
+def test_onto_an_object_or_into_a_compartment_the_carried_height_stands(franka):
+    tcp = np.asarray(franka.tcp_pose())
+    for kind, cls in (("object", None), ("fixture", "compartment")):
+        plain, _ = compute_place(franka, _snapshot(tcp, kind=kind, fixture_class=cls), object="bowl", region="stove")
+        seen, [rec] = compute_place(franka, _snapshot(tcp, kind=kind, seen_z=0.076, fixture_class=cls),
+                                    object="bowl", region="stove")
+        assert "hangs_lower_m" not in rec
+        assert seen["place_pose"][2, 3] == pytest.approx(plain["place_pose"][2, 3]), kind

@@ -204,10 +204,12 @@ def test_objects_sharing_a_region_go_down_side_by_side_in_their_slots_across_the
         _compute_place(franka, snap, slot=[2, 2])
 
 
-def test_a_preplace_out_of_reach_at_every_yaw_is_tried_lower_and_a_colliding_one_is_not(franka):
+def test_a_preplace_out_of_reach_at_every_yaw_is_tried_lower_and_one_blocked_at_every_height_keeps_the_first(franka):
     """Every yaw's pre-place 10 cm up is past the arm's reach (IK, no collision): the pre-place
-    comes down to the first of LOWER_APPROACH_M the arm reaches; a pre-place refused for a
-    collision is not lowered (the planner reports it, as before)."""
+    comes down to the first of LOWER_APPROACH_M the arm reaches. A pre-place that collides at
+    every height (lower ones tried too since a collision within the planner's margin may clear
+    lower down: tests/test_place_fixture_top.py) keeps the first, yaw 0 from the skill's
+    approach height (the planner reports the collision, as before)."""
     from phyagentos.primitives.perception import LOWER_APPROACH_M, Blocked
 
     tcp = np.asarray(franka.tcp_pose())
@@ -231,4 +233,5 @@ def test_a_preplace_out_of_reach_at_every_yaw_is_tried_lower_and_a_colliding_one
 
     board, [rec] = _compute_place(franka, _snapshot(tcp, [0.0, 1.0]), blocked=collides)
     assert board["preplace_pose"][2, 3] - board["place_pose"][2, 3] == pytest.approx(0.10, abs=1e-9)
-    assert {r["approach_m"] for r in rec["rejected_yaws"]} == {0.1}
+    assert rec["yaw_rad"] == pytest.approx(0.0)
+    assert {r["approach_m"] for r in rec["rejected_yaws"]} == {0.1, *LOWER_APPROACH_M}

@@ -897,8 +897,10 @@ class ComputePlace(Primitive):
     collision checker, the held object attached): a bowl held by its rim, the hand 5.6 cm
     off its centre, is set down beside a cabinet with the hand on the side away from it.
     When none is clear, yaw 0 (the planner then reports the collision). Where every yaw was
-    refused only because its pre-place is out of the arm's reach (a wine bottle held near its
-    neck over the top of a cabinet 0.69 m from the base), the pre-place is tried lower
+    refused only at its pre-place -- out of the arm's reach (a wine bottle held near its neck
+    over the top of a cabinet 0.69 m from the base) or, held 10 cm up, within the planner's
+    margin of something beside the place (a bowl over a plate beside the open top drawer it was
+    taken from: libero_spatial_swap task 4) -- the pre-place is tried lower
     (:data:`LOWER_APPROACH_M`; the held object is lowered the rest of the way in a straight line).
 
     Onto a fixture with a ramp (perception's ``attributes.lean``: LIBERO's wine rack, whose
@@ -1020,11 +1022,12 @@ class ComputePlace(Primitive):
                     [float(handle_xy[0]), float(handle_xy[1]), 0.0])
         rejected: list[dict] = []
         chosen = clear = None
-        # from the skill's approach height; where every pre-place was only out of the arm's
-        # reach (no collision, the place itself reachable or not tried), from lower ones
+        # from the skill's approach height; where only pre-places were refused (out of the arm's
+        # reach, or within the planner's margin of something; the place itself clear or not
+        # tried), from lower ones
         lower = [h for h in LOWER_APPROACH_M if h < approach and not compartment]
         for height in (approach, *lower):
-            reach_only = True
+            preplace_only = True
             for yaw in yaws:
                 if beside_reach is not None:  # clear of the landmark by the object's own extent at this yaw
                     spot, surface_z = beside_point(snapshot, self.region, self.beside, beside_reach(yaw), who=self.name)
@@ -1042,10 +1045,10 @@ class ComputePlace(Primitive):
                 if why is None:
                     clear = (yaw, T_place, T_pre)
                     break
-                reach_only = reach_only and why.stage == "preplace" and not why.collides
+                preplace_only = preplace_only and why.stage == "preplace"
                 rejected.append({"yaw_rad": round(yaw, 3), "approach_m": round(height, 3), "why": why})
                 chosen = chosen or (yaw, T_place, T_pre)  # none clear: the first (yaw 0), as before
-            if clear is not None or not reach_only:
+            if clear is not None or not preplace_only:
                 break
         slid = None
         if (clear is None and kind == "fixture" and not compartment and lean is None and self.beside is None

@@ -241,3 +241,23 @@ def test_a_bottle_lying_on_the_racks_ramp_is_seen_there_and_judged_on_the_rack_w
         first, snap, truth = snaps[case]
         assert not [r for r in snap["relations"] if r["relation"] == "leant_on"], case
         assert not truth and evaluate(on, first, snap).status != "satisfied", case
+
+
+def test_libero_pros_brown_rack_is_leant_on_as_the_wine_rack_it_replaces():
+    """``libero_goal_object`` task 9 puts the white bottle on a ``brown_rack``: the wine rack's
+    model in another colour, with the same ``top_region`` site. Without a place site its look had
+    no ramp, the bottle was set on the rack's top as on a shelf and fell off (both inits, once it
+    was set down by the height it hangs in the hand). Its ramp is measured as the wine rack's is."""
+    from phyagentos.targets.libero import LiberoScene
+    from phyagentos.targets.libero.descriptors import FIXTURE_PLACE_SITES, _lean_look
+    from phyagentos.targets.libero.target import LiberoTarget
+
+    assert FIXTURE_PLACE_SITES["brown_rack"] == FIXTURE_PLACE_SITES["wine_rack"]
+    t = LiberoTarget("brown", LiberoScene(suite="libero_goal_object", task=9, generated=True), seed=500)
+    try:
+        [rack] = [n for n, c in t._problem.fixtures.items() if c == "brown_rack"]
+        lean = _lean_look(t, rack, "brown_rack")
+    finally:
+        t.close()
+    assert lean is not None
+    assert math.degrees(lean["angle_rad"]) == pytest.approx(31.0, abs=3.0)

@@ -106,8 +106,9 @@ _LOOKS_METHOD = "generated_clutter_v6"  # v3: objects kept off the fixtures; v4:
 # model frame (root: the planning world puts the fixture's model there); v9: the footprint of its
 # fixed parts (model_box: the points over it are the fixture's); v11: a door (door, its handle's bar), the
 # fixture measured with it shut; v12: the room behind the door (inside); v13: a ramp's crest and
-# slope (lean: the wine rack)
-_FIXTURE_LOOKS_METHOD = "generated_alone_v13"
+# slope (lean: the wine rack); v14: LIBERO-PRO's replaced fixtures (brown_rack, yellow_stove,
+# yellow_cabinet) take their models' place sites
+_FIXTURE_LOOKS_METHOD = "generated_alone_v14"
 #: Seconds a LIBERO session may execute (the world steps at ~2-10x real time on 2 cores).
 _NODE_TIMEOUT_S = 600
 #: Where each of LIBERO's scene classes (a BDDL file's ``problem``) stands the robot:

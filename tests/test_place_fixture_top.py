@@ -127,3 +127,43 @@ def test_pre_places_that_only_collide_are_tried_lower_and_the_place_stays(franka
     assert lower["place_pose"] == pytest.approx(plain["place_pose"])
     assert lower["preplace_pose"][2, 3] - lower["place_pose"][2, 3] == pytest.approx(0.06)
     assert {r["approach_m"] for r in rec["rejected_yaws"]} == {0.1} and "slid_m" not in rec
+
+
+def test_a_place_raised_by_its_hang_keeps_a_lowering_the_arm_reaches(franka):
+    """libero_goal task 2 init 2: the bottle's place raised 4.6 cm put the straight lowering from
+    10 cm over it past the arm's reach (its two ends within it); the lowering is checked and the
+    pre-place tried lower. Without a hang the line is not checked (nothing changed there)."""
+    tcp = np.asarray(franka.tcp_pose())
+
+    def long_lines_out_of_reach(T_pre, T_place):
+        if T_pre[2, 3] - T_place[2, 3] > 0.07:
+            return Blocked("lowering: IK did not converge", stage="preplace", collides=False)
+        return None
+
+    board, [rec] = compute_place(franka, _snapshot(tcp, seen_z=0.076), object="bowl", region="stove",
+                                 line_blocked=long_lines_out_of_reach)
+    assert rec["hangs_lower_m"] == pytest.approx(0.046, abs=1e-3)
+    assert board["preplace_pose"][2, 3] - board["place_pose"][2, 3] == pytest.approx(0.06)
+    assert all(r["why"].startswith("lowering") for r in rec["rejected_yaws"])
+    board, [rec] = compute_place(franka, _snapshot(tcp), object="bowl", region="stove",
+                                 line_blocked=long_lines_out_of_reach)
+    assert board["preplace_pose"][2, 3] - board["place_pose"][2, 3] == pytest.approx(0.10)
+
+
+def test_the_lowering_check_runs_real_ik_along_the_line(franka):
+    """The leaf's own check on the tabletop Franka: a short lowering in front of it is in reach,
+    one ending far past the arm's reach is not."""
+    from types import SimpleNamespace
+
+    from phyagentos.primitives.perception import ComputePlace
+
+    leaf = ComputePlace("ComputePlace", object="bowl", region="stove")
+    leaf.ctx = SimpleNamespace(target=franka, perceiver=None, trace=SimpleNamespace(record=lambda *a, **k: None))
+    T_pre = np.asarray(franka.tcp_pose()).copy()
+    T_place = T_pre.copy()
+    T_place[2, 3] -= 0.05
+    assert leaf._line_blocked(T_pre, T_place) is None
+    T_far = T_pre.copy()
+    T_far[0, 3] += 1.5
+    why = leaf._line_blocked(T_pre, T_far)
+    assert why is not None and why.stage == "preplace" and not why.collides

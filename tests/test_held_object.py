@@ -335,3 +335,25 @@ def test_a_grasp_by_the_rim_closes_on_the_wall_so_its_aim_is_the_rim_point_and_i
     ev = occluded(tmp_path, trace, tcp_end=(rim[0], rim[1], rim[2] + 0.15), name="rim")
     est = estimate_held(ev, "cube")
     assert est.status == "held" and est.position_m == pytest.approx((AT[0], AT[1], AT[2] + 0.15), abs=1e-6)
+
+
+def test_a_grasp_by_a_mugs_handle_closes_on_the_handle_so_its_capture_is_judged_there(tmp_path):
+    """A mug taken by its handle (``pick_by_handle``): the fingers close on the handle's bar, 6.7 cm
+    from the cup's perceived centre (LIBERO-10's porcelain mug, libero_10_object task 9), beyond
+    the capture radius from it. The handle point the grasp planned is where they must have closed;
+    the mug's centre is what is carried, so ``lifted`` is judged from its rise. An across grasp
+    that closed there, and a handle grasp that closed 4 cm from its own handle point, are not
+    captured."""
+    bar = (AT[0] + 0.067, AT[1], AT[2])
+    trace = pick_trace(close_at=bar)
+    g = next(r for r in trace if r["kind"] == "grasp_pose")
+    ev = occluded(tmp_path, trace, tcp_end=(bar[0], bar[1], bar[2] + 0.15), name="across")
+    assert estimate_held(ev, "cube").status == "unknown"
+    g.update({"grasp_kind": "handle", "affordance": "handle", "grasp": list(bar)})
+    ev = occluded(tmp_path, trace, tcp_end=(bar[0], bar[1], bar[2] + 0.15), name="handle")
+    est = estimate_held(ev, "cube")
+    assert est.status == "held" and est.position_m == pytest.approx((AT[0], AT[1], AT[2] + 0.15), abs=1e-6)
+    assert judge(ev)["lifted"].status == "satisfied"
+    g.update({"grasp": [bar[0], bar[1] + 0.04, bar[2]]})
+    ev = occluded(tmp_path, trace, tcp_end=(bar[0], bar[1], bar[2] + 0.15), name="missed")
+    assert estimate_held(ev, "cube").status == "unknown"

@@ -10,6 +10,8 @@ the microwave on its model with its door shut).
 
 from __future__ import annotations
 
+import json
+
 import pytest
 import yaml
 from libero_generated_pick import MICROWAVE, run_generated_graph
@@ -39,6 +41,12 @@ def test_a_mug_taken_by_its_handle_goes_into_the_microwave_which_is_then_shut_an
     sessions = {s["node"]: s for s in rep["sessions"]}
     for node in ("pick_white_yellow_mug_1", "place_white_yellow_mug_1", "close_microwave_1"):
         assert sessions[node]["verdict"] == "success", (node, sessions[node]["reason"])
+    # the pick's trace names the grasp by the handle and the mug's centre it was seen at: the
+    # held-object model judges the close at the handle, and carries the centre
+    pick = tmp_path / "ws" / sessions["pick_white_yellow_mug_1"]["evidence"]
+    grasp = [json.loads(line) for line in (pick / "trace.jsonl").read_text().splitlines()
+             if '"grasp_pose"' in line]
+    assert grasp and grasp[-1]["grasp_kind"] == "handle" and len(grasp[-1]["observed_position"]) == 3
     place = tmp_path / "ws" / sessions["place_white_yellow_mug_1"]["evidence"]
     after = yaml.safe_load((place / "terminal.yaml").read_text())
     assert any(r["relation"] == "on" and r["subject"] == "white_yellow_mug_1" and r["object"] == "microwave_1_inside"

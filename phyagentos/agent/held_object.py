@@ -10,8 +10,9 @@ aimed at, and the perceived snapshots -- and decides:
 
 the gripper closed on ``obj`` (a ``close`` command for it, ``closed_on_something``), the
 fingers were then at the object's perceived position (horizontal distance between the tcp
-and the perceived centre at most :data:`CAPTURE_RADIUS_M`; for a grasp by a container's rim,
-``grasp_kind`` rim, between the tcp and the rim point the grasp aimed at), the opening per finger stays
+and the perceived centre at most :data:`CAPTURE_RADIUS_M`; for a grasp by a part of the object
+away from its centre, ``grasp_kind`` one of :data:`PART_GRASPS` (a container's rim, a mug's
+handle, a lid's knob), between the tcp and the point on that part the grasp aimed at), the opening per finger stays
 above the empty-closed width with a 2-sigma margin (``> CLOSED_OPENING_M + 2 *
 OPENING_STD_M``) and is no wider than the perceived object (largest horizontal half
 extent + :data:`WIDTH_MARGIN_M`), nothing opened the gripper and no slip shows (no
@@ -47,7 +48,7 @@ if TYPE_CHECKING:  # numpy is imported where a pose is computed: `run`'s cold st
 from .criteria import CLOSED_OPENING_M, CONFIDENCE_MIN, Criterion, CriterionOutcome, confidence, sigma
 from .diagnosis import slip_seen
 
-__all__ = ["HeldEstimate", "estimate_held", "refine", "OPENING_STD_M", "HOLD_STD_M", "CAPTURE_RADIUS_M",
+__all__ = ["HeldEstimate", "estimate_held", "refine", "OPENING_STD_M", "HOLD_STD_M", "CAPTURE_RADIUS_M", "PART_GRASPS",
            "WIDTH_MARGIN_M", "MIN_HELD_LOAD_N", "LOAD_STD_FLOOR_N", "LOAD_STD_FRACTION", "MAX_CARRIED_LOAD_N",
            "MIN_LIFT_FOR_LOAD_M", "EMPTY_EFFORT_N"]
 
@@ -61,6 +62,11 @@ HOLD_STD_M = 0.005
 #: The fingers closed on the object only if the tcp was within this horizontal distance of
 #: the perceived centre the grasp aimed at, m (half the Franka Hand's 8 cm stroke).
 CAPTURE_RADIUS_M = 0.02
+#: Grasps (the trace's ``grasp_pose`` ``grasp_kind``) that close on a part of the object away from its
+#: perceived centre: a container's wall at its rim (4-6 cm out on LIBERO's bowls), a mug's handle
+#: (6-8 cm out from its cup's axis), a lid's knob. Their capture is judged at the grasp point the
+#: skill planned from that part as perceived; the object's centre is still what is carried.
+PART_GRASPS = ("rim", "handle", "top_knob")
 #: An opening per finger wider than the object's largest perceived horizontal half
 #: extent by more than this means something else is between the fingers, m (the
 #: perceived sizes on randomised worlds are within about 5 mm of the object's).
@@ -214,9 +220,10 @@ def estimate_held(evidence: Any, obj: str) -> HeldEstimate:
     if aim is None:
         return unknown(f"no perceived position of {obj} before the close")
     obs_std = float(obs_std if obs_std is not None else (sigma(init) if init is not None else 0.0))
-    # a grasp by a container's rim closes on the wall, at the rim point it aimed at, not the centre
-    rim = next((r for r in reversed(trace[:close]) if r.get("kind") == "grasp_pose" and r.get("object") == obj), {})
-    at = rim["grasp"] if rim.get("grasp_kind") == "rim" and rim.get("grasp") is not None else aim
+    # a grasp by a part (a container's rim, a mug's handle) closes on that part, at the point it aimed at,
+    # not at the centre
+    planned = next((r for r in reversed(trace[:close]) if r.get("kind") == "grasp_pose" and r.get("object") == obj), {})
+    at = planned["grasp"] if planned.get("grasp_kind") in PART_GRASPS and planned.get("grasp") is not None else aim
     dxy = math.hypot(float(at[0]) - T_close[0, 3], float(at[1]) - T_close[1, 3])
     if dxy > CAPTURE_RADIUS_M + 2 * obs_std:
         return unknown(f"the fingers closed {100 * dxy:.1f} cm from where {obj} was seen", capture_m=dxy)

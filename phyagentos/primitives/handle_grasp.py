@@ -114,5 +114,6 @@ class ComputeHandleGrasp(Primitive):
         self.set("grasp_pose", G)
         self.set("pregrasp_pose", P)
         self.ctx.trace.record("grasp_pose", leaf=self.name, object=self.object, affordance="handle",
+                              grasp_kind="handle", observed_position=np.round(ent["position"], 4).tolist(),
                               grasp=G[:3, 3].round(4).tolist(), approach=G[:3, 2].round(4).tolist())
         return Status.SUCCESS

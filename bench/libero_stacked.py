@@ -43,6 +43,24 @@ def _set_on(target, obj: str, support: str) -> None:
     target.hold(duration_s=1.0)
 
 
+def _origin_error(target, name: str, ent: dict) -> dict:
+    """Where perception put a handled object's model origin (``attributes.origin_xy``) against
+    the body's true origin: ``origin_error_m`` (horizontal, m) and ``origin_along_handle_m`` (its
+    part along the perceived handle direction, m); with the body's true tilt from upright
+    (``tilt_deg``). Empty for an entity without an origin."""
+    a = ent.get("attributes") or {}
+    if a.get("origin_xy") is None or a.get("handle_xy") is None:
+        return {}
+    body = target.model.body(target.object_body(name)).id
+    true_xy = np.asarray(target.data.xpos[body][:2], dtype=float)
+    err = np.asarray(a["origin_xy"], dtype=float) - true_xy
+    u = np.asarray(a["handle_xy"], dtype=float)
+    z_axis = np.asarray(target.data.xmat[body], dtype=float).reshape(3, 3)[:, 2]
+    return {"origin_error_m": round(float(np.linalg.norm(err)), 4),
+            "origin_along_handle_m": round(float(err @ u / max(np.linalg.norm(u), 1e-9)), 4),
+            "tilt_deg": round(float(np.degrees(np.arccos(np.clip(z_axis[2], -1.0, 1.0)))), 2)}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = parser(__doc__, "libero_stacked")
     ap.add_argument("--suite", default="libero_10")
@@ -70,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
                 e = seen.get(n)
                 row[n] = None if e is None else {
                     "confidence": e["attributes"].get("confidence"),
-                    "error_m": round(float(np.linalg.norm(np.asarray(e["position"]) - truth[n])), 4)}
+                    "error_m": round(float(np.linalg.norm(np.asarray(e["position"]) - truth[n])), 4),
+                    **_origin_error(target, n, e)}
             verdict = evaluate(on, snap, snap)
             row.update({"on": verdict.status, "reason": verdict.reason, "s": round(time.perf_counter() - t0, 1)})
             rows.append(row)

@@ -1040,9 +1040,7 @@ class ComputePlace(Primitive):
                     T_place = leant_place(T_place, half, T_tcp_obj, toward_xy=lean[1], angle_rad=lean[2])
                 T_pre = T_place.copy()
                 T_pre[2, 3] += height
-                why = self._blocked(T_pre, T_place)
-                if why is None and hang is not None:  # raised by its hang: nearer the edge of the arm's reach
-                    why = self._line_blocked(T_pre, T_place)
+                why = self._place_blocked(T_pre, T_place, raised=hang is not None)
                 if why is not None and compartment and why.stage == "place" and why.collides:
                     T_place, why = self._let_down(T_pre, T_place, why)
                 if why is None:
@@ -1062,8 +1060,7 @@ class ComputePlace(Primitive):
                     T_place = place_pose(spot, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
                     T_pre = T_place.copy()
                     T_pre[2, 3] += approach
-                    if self._blocked(T_pre, T_place) is None and (
-                            hang is None or self._line_blocked(T_pre, T_place) is None):
+                    if self._place_blocked(T_pre, T_place, raised=hang is not None) is None:
                         clear, slid = (yaw, T_place, T_pre), offset
                         break
                 if clear is not None:
@@ -1244,6 +1241,14 @@ class ComputePlace(Primitive):
         spacing = max(2.0 * room / n, 2.0 * extents[j] + SLOT_GAP_M)
         offset = float(np.clip((k - 0.5 * (n - 1)) * spacing, -(room - SLOT_EDGE_M), room - SLOT_EDGE_M))
         return np.asarray(T_region[:3, 3], dtype=float) + offset * axes[j]
+
+    def _place_blocked(self, T_pre: np.ndarray, T_place: np.ndarray, *, raised: bool) -> Blocked | None:
+        """:meth:`_blocked`, and for a place ``raised`` by the object's hang (nearer the edge of
+        the arm's reach) then :meth:`_line_blocked`; ``None`` when neither blocks it."""
+        why = self._blocked(T_pre, T_place)
+        if why is None and raised:
+            why = self._line_blocked(T_pre, T_place)
+        return why
 
     def _line_blocked(self, T_pre: np.ndarray, T_place: np.ndarray) -> Blocked | None:
         """Why the straight lowering from ``T_pre`` to ``T_place`` ((4, 4) world tcp poses)

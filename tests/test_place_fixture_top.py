@@ -167,3 +167,38 @@ def test_the_lowering_check_runs_real_ik_along_the_line(franka):
     T_far[0, 3] += 1.5
     why = leaf._line_blocked(T_pre, T_far)
     assert why is not None and why.stage == "preplace" and not why.collides
+
+
+def test_a_pre_place_lowered_for_reach_keeps_a_lowering_the_arm_reaches(franka):
+    """libero_goal_swap task 9 init 0: the rack's pre-place, out of reach 10 cm over the place,
+    was tried lower; the straight lowering from the lower one left the arm's reach (1.8 mm at its
+    5th of 6 waypoints) at the first yaw. A lowered pre-place is near the reach's edge: its line
+    is checked, and a yaw whose line stays in reach is chosen."""
+    tcp = np.asarray(franka.tcp_pose())
+
+    def high_preplaces_out_of_reach(T_pre, T_place):
+        if T_pre[2, 3] - T_place[2, 3] > 0.07:
+            return Blocked("preplace: IK did not converge", stage="preplace", collides=False)
+        return None
+
+    first_yaw: list[float] = []
+
+    def first_yaws_line_out_of_reach(T_pre, T_place):
+        yaw = float(np.arctan2(T_place[1, 0], T_place[0, 0]))
+        first_yaw.append(first_yaw[0] if first_yaw else yaw)
+        if abs(yaw - first_yaw[0]) < 1e-6:
+            return Blocked("lowering: IK did not converge", stage="preplace", collides=False)
+        return None
+
+    board, [rec] = compute_place(franka, _snapshot(tcp), high_preplaces_out_of_reach, object="bowl",
+                                 region="stove", line_blocked=first_yaws_line_out_of_reach)
+    assert board["preplace_pose"][2, 3] - board["place_pose"][2, 3] == pytest.approx(0.06)
+    lowered = [r for r in rec["rejected_yaws"] if r["approach_m"] == pytest.approx(0.06)]
+    assert [r["why"][:8] for r in lowered] == ["lowering"]
+    chosen = float(np.arctan2(board["place_pose"][1, 0], board["place_pose"][0, 0]))
+    assert abs(chosen - first_yaw[0]) > 1e-3
+    # the skill's own approach height, not lowered: its line is not checked (as before)
+    board, [rec] = compute_place(franka, _snapshot(tcp), object="bowl", region="stove",
+                                 line_blocked=first_yaws_line_out_of_reach)
+    assert board["preplace_pose"][2, 3] - board["place_pose"][2, 3] == pytest.approx(0.10)
+    assert rec["rejected_yaws"] == []

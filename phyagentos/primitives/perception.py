@@ -1040,7 +1040,9 @@ class ComputePlace(Primitive):
                     T_place = leant_place(T_place, half, T_tcp_obj, toward_xy=lean[1], angle_rad=lean[2])
                 T_pre = T_place.copy()
                 T_pre[2, 3] += height
-                why = self._place_blocked(T_pre, T_place, raised=hang is not None)
+                # a place raised by the hang, or a pre-place lowered for the arm's reach: near the
+                # reach's edge, where a straight lowering can leave it between two ends within it
+                why = self._place_blocked(T_pre, T_place, near_edge=hang is not None or height < approach)
                 if why is not None and compartment and why.stage == "place" and why.collides:
                     T_place, why = self._let_down(T_pre, T_place, why)
                 if why is None:
@@ -1060,7 +1062,7 @@ class ComputePlace(Primitive):
                     T_place = place_pose(spot, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
                     T_pre = T_place.copy()
                     T_pre[2, 3] += approach
-                    if self._place_blocked(T_pre, T_place, raised=hang is not None) is None:
+                    if self._place_blocked(T_pre, T_place, near_edge=hang is not None) is None:
                         clear, slid = (yaw, T_place, T_pre), offset
                         break
                 if clear is not None:
@@ -1242,11 +1244,12 @@ class ComputePlace(Primitive):
         offset = float(np.clip((k - 0.5 * (n - 1)) * spacing, -(room - SLOT_EDGE_M), room - SLOT_EDGE_M))
         return np.asarray(T_region[:3, 3], dtype=float) + offset * axes[j]
 
-    def _place_blocked(self, T_pre: np.ndarray, T_place: np.ndarray, *, raised: bool) -> Blocked | None:
-        """:meth:`_blocked`, and for a place ``raised`` by the object's hang (nearer the edge of
-        the arm's reach) then :meth:`_line_blocked`; ``None`` when neither blocks it."""
+    def _place_blocked(self, T_pre: np.ndarray, T_place: np.ndarray, *, near_edge: bool) -> Blocked | None:
+        """:meth:`_blocked`, and for a place ``near_edge`` of the arm's reach (raised by the
+        object's hang, or its pre-place lowered because the skill's own was out of reach or
+        collided) then :meth:`_line_blocked`; ``None`` when neither blocks it."""
         why = self._blocked(T_pre, T_place)
-        if why is None and raised:
+        if why is None and near_edge:
             why = self._line_blocked(T_pre, T_place)
         return why
 
@@ -1256,7 +1259,9 @@ class ComputePlace(Primitive):
         as the ``Lower`` leaf moves) from the pre-place's clear IK solution; ``None`` when it
         stays in reach. A place raised by the object's hang (``HANG_MIN_M``) is checked so: LIBERO's
         wine bottle set on the cabinet's top 4.6 cm higher put the line's middle past the reach
-        its two ends were within (libero_goal task 2 init 2: 1.8 mm off at the 4th of 10 waypoints)."""
+        its two ends were within (libero_goal task 2 init 2: 1.8 mm off at the 4th of 10 waypoints),
+        and so is one from a pre-place lowered for reach (``libero_goal_swap`` task 9 init 0: the
+        bottle's lowering onto the rack 1.8 mm out at the 5th of 6 waypoints)."""
         target = self.ctx.target
         try:
             sol, _, _ = clear_ik(self.ctx, T_pre)

@@ -11,7 +11,6 @@ the microwave on its model with its door shut).
 from __future__ import annotations
 
 import json
-import math
 
 import pytest
 import yaml
@@ -56,28 +55,3 @@ def test_a_mug_taken_by_its_handle_goes_into_the_microwave_which_is_then_shut_an
     close = tmp_path / "ws" / sessions["close_microwave_1"]["evidence"]
     truth = yaml.safe_load((close / "ground_truth.yaml").read_text())
     assert truth["scene_record"]["generated"] is True and truth["benchmark"]["success"] is True
-
-
-def test_a_mug_lifted_by_its_handle_is_carried_where_its_cup_hangs_and_its_lift_confirmed(tmp_path):
-    """The porcelain mug taken by its handle (LIBERO-PRO's ``libero_10_object`` task 9 puts it in
-    the yellow and white mug's place; generated scene 504): the hand, pitched at the bar, rises
-    10 cm. Carried as if held by its rim, the mug read 7.1 cm of rise, 2.5 cm further out along
-    its handle than its cup hung (seen there as an unknown thing), and the lift was undecided."""
-    rep = run_generated_graph(
-        tmp_path, name="mug_by_handle", description="pick up the porcelain mug by its handle", suite="libero_10_object",
-        task=9, objects=[MUGS[0], {"name": "red_coffee_mug_1", "class": "red_coffee_mug", "colour": [0.345, 0.176, 0.173],
-                                   "handle_origin_m": 0.0186, "size_m": [0.0998, 0.091, 0.1358]}],
-        fixtures=[{"name": "kitchen_table", "class": "kitchen_table"}, MICROWAVE],
-        nodes=[{"id": "pick_porcelain_mug_1", "skill": "pick_by_handle", "params": {"object": "porcelain_mug_1"},
-                "accept": [{"holding": "porcelain_mug_1"}, {"lifted": {"object": "porcelain_mug_1", "min_height": 0.05}}]}],
-        workspace_box=workspace_box("LIBERO_Kitchen_Tabletop_Manipulation"), seed=504)
-    [pick] = rep["sessions"]
-    assert pick["verdict"] == "success", pick["reason"]
-    after = yaml.safe_load((tmp_path / "ws" / pick["evidence"] / "terminal.yaml").read_text())
-    mug = next(e for e in after["entities"] if e["name"] == "porcelain_mug_1")
-    assert mug["attributes"]["held"] is True
-    assert not [e for e in after["entities"] if e["kind"] == "unknown"]  # its cup is the hand's, not a rival
-    # what really happened (read by this test only): the carried origin within 1 cm of the mug's
-    truth = yaml.safe_load((tmp_path / "ws" / pick["evidence"] / "ground_truth.yaml").read_text())
-    true_xy = truth["terminal"]["robosuite_observations"]["porcelain_mug_1_pos"][:2]
-    assert math.dist(mug["attributes"]["origin_xy"], true_xy) < 0.01

@@ -709,8 +709,7 @@ class Perceiver:
         closed and where the object was last seen before it, for any grasp (across a box, on a
         bowl's wall, on a knob), instead of assuming it centred on the tcp. How high it sits
         (the tcp frame's z) is kept as before: centred for a grasp across, the grasp's depth
-        for a rim or a knob; for a handle (:meth:`_held_by_handle`) all of it is as it was at the
-        close (the hand pitched at the bar: its z is not the height). The places measured on LIBERO rely on that height: a wine bottle
+        for a rim or a knob. The places measured on LIBERO rely on that height: a wine bottle
         taken near its neck hangs 4.6 cm below the tcp, and taken as centred it is set down
         with the hand 4.6 cm lower, which is what put it into the rack's slope (libero_goal
         task 9) and kept the cabinet's top within reach (task 2); with the true height both
@@ -838,8 +837,7 @@ class Perceiver:
         self.glimpses = carry_over(self.glimpses, seen_now, [cloud.points[idx, :2] for _, idx in clusters], frames,
                                    cfg, seg_lab)
         found_glimpses = self.glimpses
-        carried = self._carried_xy(proprio)
-        hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg, carried_xy=carried)]
+        hanging = [i for i, d in enumerate(dets) if _hangs_from_hand(d, proprio, cfg)]
         # the points the cameras off the hand saw (the hand's camera looks into a cup: perception.hang)
         off_hand = scene_camera_mask(cloud.camera, np.array([f.T_world_camera[:3, 3] for f in frames]),
                                      proprio.tcp_pose[:3, 3])
@@ -2219,38 +2217,6 @@ class Perceiver:
                 return None
         return ev
 
-    def _held_by_handle(self, t: Track, tcp_xy: np.ndarray) -> bool:
-        """Whether a hand closed at ``tcp_xy`` ((2,) world m) takes track ``t`` by its handle's bar:
-        the handle's grip point (:meth:`_handle_grip`, from where ``t`` was last seen) within half
-        of ``holding.capture_radius_m``, and nearer than the rim (a rim grasp on the handle's side
-        stands 2-3 cm from the grip point of LIBERO's mugs, a handle grasp within a few mm)."""
-        grip = self._handle_grip(t)
-        if grip is None:
-            return False
-        d_grip = float(np.linalg.norm(grip - np.asarray(tcp_xy, dtype=float)[:2]))
-        if d_grip > self.config.holding.capture_radius_m / 2.0:
-            return False
-        rim = self._rim_radius(t)
-        dxy = float(np.linalg.norm(t.position[:2] - np.asarray(tcp_xy, dtype=float)[:2]))
-        return rim is None or d_grip < abs(dxy - float(rim))
-
-    def _carried_xy(self, proprio: Proprioception) -> list[np.ndarray]:
-        """(2,) world m where the hand carries what it holds: each held track's carried pose,
-        and, before a hold is noticed (the first look after the close), a track taken by its
-        handle where the hand closed (:meth:`note_grasp_close`), moved with the hand since. A mug
-        held by its handle hangs beside the hand by the handle's reach (6-7 cm from the tcp for
-        LIBERO's mugs), outside the hand's own reach of :func:`_hangs_from_hand`."""
-        tcp = np.asarray(proprio.tcp_pose, dtype=float)
-        out = [(tcp @ t.grasp_offset)[:2, 3] for t in self.tracks.values() if t.held and t.grasp_offset is not None]
-        closed = self._closed_at
-        if closed is None:
-            return out
-        for t in self.tracks.values():
-            if t.held or t.last_seen_s > closed[1] or not self._held_by_handle(t, closed[0][:2, 3]):
-                continue
-            out.append((tcp @ np.linalg.inv(closed[0]) @ _pose(t.position, t.yaw))[:2, 3])
-        return out
-
     @staticmethod
     def _handle_grip(t: Track) -> np.ndarray | None:
         """(2,) world m where a hand takes track ``t`` by its handle
@@ -2380,13 +2346,7 @@ class Perceiver:
         if not t.held:
             T_obj = _pose(t.position, t.yaw)
             dxy = float(np.linalg.norm(t.position[:2] - tcp[:2]))
-            by_handle = self._held_by_handle(t, tcp[:2])
-            if by_handle:
-                # held by its handle's bar, maybe lifted since: the lift rises straight up; at the
-                # close the tcp stood at the body's mid-height (primitives.handle_grasp)
-                T_obj[2, 3] = t.position[2] + max(0.0, float(tcp[2]) - float(t.position[2]))
-                t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
-            elif np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
+            if np.linalg.norm(t.position - tcp) < hc.capture_radius_m:
                 t.grasp_offset = np.linalg.inv(proprio.tcp_pose) @ T_obj
             elif (rim := self._rim_radius(t)) is not None and abs(dxy - rim) <= hc.capture_radius_m / 2.0:
                 # held by its wall (the tcp is over its rim), maybe lifted since: the lift rises
@@ -2419,8 +2379,7 @@ class Perceiver:
                 # height seen then reported beside it
                 off = np.linalg.inv(closed[0]) @ _pose(t.position, t.yaw)
                 t.grasp_z_tcp = float(off[2, 3])
-                if not by_handle:  # a hand pitched at a handle: its z is not the height, all of it holds
-                    off[2, 3] = t.grasp_offset[2, 3]
+                off[2, 3] = t.grasp_offset[2, 3]
                 t.grasp_offset = off
             t.held = True
             t.placed_xy = None
@@ -2616,8 +2575,7 @@ def width_in_hand(half_extents: np.ndarray, yaw: float, shape: str, proprio: Pro
     return min((width, 2.0 * float(half_extents[0]), 2.0 * float(half_extents[1])), key=lambda w: abs(w - gap))
 
 
-def _hangs_from_hand(det: Detection, proprio: Proprioception, config: PerceptionConfig, *,
-                     carried_xy: Sequence[np.ndarray] = ()) -> bool:
+def _hangs_from_hand(det: Detection, proprio: Proprioception, config: PerceptionConfig) -> bool:
     """``det`` is the part of a held object that hangs below the fingers (the gripper box
     masks only the fingers; a tall bottle grasped near its top shows its lower half): the
     fingers squeeze something (opening above ``holding.min_opening_m``, effort at least
@@ -2625,10 +2583,7 @@ def _hangs_from_hand(det: Detection, proprio: Proprioception, config: Perception
     ``holding.lift_height_m`` above the support plane with nothing under it (stacking gave
     it no support: ``bottom_m`` 0), and its centre lies within ``holding.capture_radius_m``
     of the tcp horizontally, or the tcp is over its footprint (its larger horizontal half
-    extent + 1 cm: a bowl held by its rim hangs beside the tcp), or within the capture radius of
-    where the hand carries what it holds (``carried_xy``, (2,) world m each: a mug held by its
-    handle hangs 6-7 cm beside the tcp; seen there as an unknown thing, it was a rival to itself
-    and its lift was left undecided). A rigid object off the support with nothing under it is carried,
+    extent + 1 cm: a bowl held by its rim hangs beside the tcp). A rigid object off the support with nothing under it is carried,
     and under a closed hand that squeezes it is carried by the hand; an object standing on
     the table shows points down to the plane and is never taken for it."""
     hc = config.holding
@@ -2639,10 +2594,7 @@ def _hangs_from_hand(det: Detection, proprio: Proprioception, config: Perception
     tcp = proprio.tcp_pose[:3, 3]
     dxy = float(np.hypot(det.position[0] - tcp[0], det.position[1] - tcp[1]))
     # or the tcp is over its footprint (a bowl held by its rim hangs beside the tcp)
-    if dxy <= max(hc.capture_radius_m, float(max(det.half_extents[0], det.half_extents[1])) + 0.01):
-        return True
-    return any(float(np.linalg.norm(det.position[:2] - np.asarray(c, dtype=float)[:2])) <= hc.capture_radius_m
-               for c in carried_xy)
+    return dxy <= max(hc.capture_radius_m, float(max(det.half_extents[0], det.half_extents[1])) + 0.01)
 
 
 def _shaped(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detection:

@@ -869,6 +869,9 @@ class Perceiver:
         # objects the hand held or let go since they were last seen, or seen inside a container,
         # with their tracked height (a released item's lower part may be hidden by the walls)
         let_go = {n for n, t in self.tracks.items() if t.held or t.released_s is not None}
+        # the container each was inside: a sighting that restarts its track (a can lying on the other
+        # in the basket, seen merged with the basket's wall) tests it again, as a move out would
+        was_inside = {n: t.inside_of for n, t in self.tracks.items()}
         tracked_h = {n: self._look_height(n, 2.0 * float(t.half_extents[2])) for n, t in self.tracks.items()
                      if n in let_go or t.inside_of is not None}
         matched: dict[int, str] = {}
@@ -975,12 +978,16 @@ class Perceiver:
                 prof = base_profile(cloud.points[idx], axis_xy=body.axis_xy, outline_radius_m=body.radius_m)
                 if prof is not None:
                     self.tracks[name].base_profile_m = prof
+        # a container holds what stands in it where its track puts it, fused over its sightings: a view
+        # of it cut by what was just let go into it (kept where its track stands), or short of its rim
+        # behind that, is not where its walls are
+        as_tracked = [_as_tracked(d, self.tracks[matched[k]]) if k in matched else d for k, d in enumerate(dets)]
         for i, name in matched.items():  # seen again: still inside the container it was in (or let go into)?
             t = self.tracks[name]
-            container = t.inside_of
+            container = t.inside_of if t.inside_of is not None else was_inside.get(name)
             if container is None and name in let_go:
-                container = _container_around(i, dets, matched)
-            t.inside_of = _still_inside(container, dets[i], dets, matched, height_m=tracked_h.get(name))
+                container = _container_around(i, as_tracked, matched)
+            t.inside_of = _still_inside(container, dets[i], as_tracked, matched, height_m=tracked_h.get(name))
             if name in let_go and name in tracked_h:
                 t.known_height_m = tracked_h[name]  # its height when the hand let it go
             known_h = t.known_height_m
@@ -2601,6 +2608,15 @@ def _shaped(det: Detection, cloud: Cloud, heights: np.ndarray) -> Detection:
     """A final detection with the round body and handle, the open top and the knob on top its
     points show."""
     return with_top_knob(with_open_depth(with_round_body(det, cloud, heights), cloud, heights), cloud, heights)
+
+
+def _as_tracked(det: Detection, track: Track) -> Detection:
+    """``det`` with the footprint (centre, yaw, half extents, shape) and bottom of ``track``: the
+    object as its sightings so far, this one included, put it (a part seen at the image's border
+    confirms a track where it stands and never moves it)."""
+    return replace(det, position=np.asarray(track.position, dtype=float).copy(), yaw=float(track.yaw),
+                   half_extents=np.asarray(track.half_extents, dtype=float).copy(), shape=track.shape,
+                   bottom_m=float(track.bottom_m))
 
 
 def _container_around(i: int, dets: list[Detection], matched: dict[int, str]) -> str | None:

@@ -107,6 +107,34 @@ def test_an_item_resting_on_the_rim_or_beside_the_basket_is_not_inside():
     assert _container_around(0, dets, matched) is None
 
 
+def test_a_can_let_go_onto_another_in_the_basket_is_inside_where_the_baskets_track_puts_its_rim():
+    """LIBERO-10 task 0 init 5: the tomato sauce let go into the basket lay on the alphabet soup,
+    its top 18.7 cm up; from its height when the hand let it go (9.1 cm) its bottom is 9.6 cm up.
+    The basket's sighting in that observation, cut short by the can lying over its wall, topped
+    at 11.5 cm where its track (its sightings fused) stands at 13.1: against the sighting the can
+    "rests on the rim" (not 2 cm below it) and was inside nothing, a false failure where LIBERO
+    counts it in. Against the basket as tracked it is inside; a can one whole height over the
+    rim is not, nor one beside the basket."""
+    from phyagentos.perception.perceiver import _as_tracked
+    from phyagentos.perception.tracks import Track
+
+    basket = Track.start("basket_1", _det((0.015, 0.259, 0.0655), (0.0826, 0.0735, 0.0655), low=0.002, shape="box"),
+                         0.95, 0.0, ("agentview",))
+    cut = _det((0.015, 0.259, 0.0575), (0.0826, 0.0735, 0.0575), low=0.002, shape="box")  # short of its rim
+    sauce = _det((-0.025, 0.2417, 0.1525), (0.034, 0.034, 0.0345), low=0.118, bottom=0.118)  # top 18.7 cm
+    matched = {0: "basket_1", 1: "tomato_sauce_1"}
+    assert _still_inside("basket_1", sauce, [cut, sauce], matched, height_m=0.0914) is None
+    tracked = [_as_tracked(cut, basket), sauce]
+    assert tracked[0].top_m == basket.bottom_m + 2.0 * basket.half_extents[2] == 0.131
+    assert _container_around(1, tracked, matched) == "basket_1"
+    assert _still_inside("basket_1", sauce, tracked, matched, height_m=0.0914) == "basket_1"
+    over = _det((-0.025, 0.2417, 0.197), (0.034, 0.034, 0.034), low=0.163, bottom=0.163)  # a height over its rim
+    assert _still_inside("basket_1", over, [tracked[0], over], matched, height_m=0.0914) is None
+    beside = _det((-0.025, 0.40, 0.046), (0.034, 0.034, 0.046), low=0.002)
+    assert _container_around(1, [tracked[0], beside], matched) is None
+    assert _still_inside("basket_1", beside, [tracked[0], beside], matched, height_m=0.0914) is None
+
+
 # ---- the closing hand against a weak look-alike elsewhere ---------------------------------------
 
 CHEESE = {"name": "cream_cheese_1", "class": "cream_cheese", "shape": "box", "colour": [0.26, 0.28, 0.43],

@@ -606,3 +606,36 @@ def test_parts_at_the_border_rivalling_only_for_a_tracked_object_confirm_it_wher
     p.tracks["basket_1"].held = False
     far_whole = Detection(**{**whole.__dict__, "position": whole.position + [0.0, 0.02, 0.0]})
     assert pieces(p, parts + [far_whole])[1] == {}
+
+
+@pytest.mark.sim
+def test_a_sighting_that_restarts_a_track_inside_a_container_tests_that_container_again(scene, monkeypatch):
+    """LIBERO-10 task 0 init 1: the sauce let go onto the soup in the basket was found inside the
+    basket from the wrist camera; the scene camera's next sighting, merged with the basket's wall,
+    disagreed with its track (a restart), and the restart forgot the basket: the look that judged
+    the place had the sauce inside nothing, a false failure where LIBERO counts it in. A restarted
+    track keeps the container it was inside for the test the new sighting gets (which a can taken
+    out of it fails as before)."""
+    from phyagentos.perception.synthetic import SyntheticObject
+    from phyagentos.perception.tracks import Track
+
+    scene.place([SyntheticObject("can", "cylinder", (0.034, 0.034, 0.046), (0.55, 0.05),
+                                 rgba=(0.23, 0.12, 0.05, 1))])
+    sauce = ObjectDescriptor("tomato_sauce_1", shape="cylinder", colour_rgb=(0.23, 0.12, 0.05), size_m=(0.068, 0.068, 0.092))
+    p = Perceiver(PerceptionConfig.default(), [sauce])
+    # tracked as a box once (one sighting): a cylinder now disagrees with it and restarts it
+    p.tracks["tomato_sauce_1"] = t = Track.start("tomato_sauce_1", _det((0.034, 0.03, 0.046), cut=None), 0.9, 0.0,
+                                                 ("front",))
+    t.position[:2] = (0.55, 0.05)
+    t.inside_of = "basket_1"
+    tested = []
+
+    def still_inside(container, det, dets, matched, *, height_m=None):
+        tested.append(container)
+        return container
+
+    monkeypatch.setattr(perceiver_module, "_still_inside", still_inside)
+    ents, _ = _observe(scene, p, stamp_s=1.0)
+    assert p.tracks["tomato_sauce_1"].shape == "cylinder" and p.tracks["tomato_sauce_1"].observations == 1  # restarted
+    assert tested == ["basket_1"] and p.tracks["tomato_sauce_1"].inside_of == "basket_1"
+    assert ents["tomato_sauce_1"]["attributes"]["inside_of"] == "basket_1"

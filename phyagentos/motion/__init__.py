@@ -8,6 +8,7 @@ poses are (4, 4) world transforms; joint vectors are (7,) in joint1..joint7 orde
 
 from .cartesian import cartesian_path, forward_kinematics, interpolate_pose
 from .collision import CollisionChecker
+from .dynamics import ArmDynamics
 from .grasp import (
     FINGERTIP_BELOW_TCP_M,
     JOINT7_RANGE_RAD,
@@ -47,6 +48,7 @@ __all__ = [
     # retime
     "Trajectory",
     "retime",
+    "ArmDynamics",
     "actuator_velocity_limits",
     "franka_limits",
     "FRANKA_VELOCITY_LIMITS",

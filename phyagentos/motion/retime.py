@@ -223,7 +223,7 @@ def _densify(P: np.ndarray) -> np.ndarray:
     return out
 
 
-def _toppra(P: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float, grid_step: float):
+def _toppra(P: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float, grid_step: float, dynamics=None):
     seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     path = ta.SplineInterpolator(s, P)
@@ -231,7 +231,12 @@ def _toppra(P: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float, grid_step: f
     grid = np.unique(np.concatenate([np.linspace(0.0, s[-1], n_grid), s]))
     pc_vel = constraint.JointVelocityConstraint(np.column_stack([-v, v]))
     pc_acc = constraint.JointAccelerationConstraint(np.column_stack([-a, a]))
-    inst = algo.TOPPRA([pc_vel, pc_acc], path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
+    constraints = [pc_vel, pc_acc]
+    if dynamics is not None:  # the actuators' torques, drag and inertia included (motion/dynamics.py)
+        lim = np.asarray(dynamics.torque_limits, dtype=float)
+        constraints.append(constraint.JointTorqueConstraint(dynamics.inverse, np.column_stack([-lim, lim]),
+                                                            np.zeros(len(lim))))
+    inst = algo.TOPPRA(constraints, path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
     _, sd, _ = inst.compute_parameterization(0.0, 0.0)
     if sd is None or np.any(~np.isfinite(sd)):
         raise TimingError(f"toppra could not parameterise the path (return code {inst.problem_data.return_code})")
@@ -280,6 +285,7 @@ def retime(
     resolution_rad: float = 0.02,
     max_densify: int = 3,
     grid_step_rad: float = 0.01,
+    dynamics=None,
 ) -> Trajectory:
     """Time-parameterise a joint path as fast as the limits allow, starting and ending at rest.
 
@@ -297,10 +303,15 @@ def retime(
         resolution_rad: joint change between collision-checked samples.
         max_densify: how many times the path may be densified after a collision.
         grid_step_rad: spacing of the TOPP-RA grid along the path arc length, rad.
+        dynamics: optional :class:`~phyagentos.motion.dynamics.ArmDynamics` of the arm in
+            its world: the timing then also keeps every joint's torque (inertia, gravity
+            not compensated, damping and a medium's drag) within its ``torque_limits`` at
+            the grid points (toppra's ``JointTorqueConstraint``, collocation).
 
     Returns:
         :class:`Trajectory` sampled every ``dt`` (the last interval may be shorter), with
-        every sampled ``|qd| <= vel_limits`` and ``|qdd| <= acc_limits``.
+        every sampled ``|qd| <= vel_limits`` and ``|qdd| <= acc_limits`` (and, with
+        ``dynamics``, the torques within its limits at the grid points).
 
     Raises:
         TimingError: bad inputs, toppra failure, or a trajectory still in collision
@@ -329,7 +340,7 @@ def retime(
     last_bad = None
     for attempt in range(max_densify + 1):
         try:
-            ts, q, qd, qdd = _toppra(P, v, a, dt, grid_step_rad)
+            ts, q, qd, qdd = _toppra(P, v, a, dt, grid_step_rad, dynamics)
         except TimingError:
             raise
         except Exception as exc:  # toppra raises assorted errors on degenerate input

@@ -124,6 +124,13 @@ def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> t
     return vel, acc
 
 
+def execution_dynamics(ctx):
+    """The target's :class:`~phyagentos.motion.dynamics.ArmDynamics` for timing a motion within
+    its actuators' torques (``target.arm_dynamics()``), or None where the target declares none."""
+    get = getattr(ctx.target, "arm_dynamics", None)
+    return get() if callable(get) else None
+
+
 def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = None) -> CollisionChecker:
     """A collision checker synced to the world the target plans in: for a
     :class:`~phyagentos.targets.contract.PlansInPerceivedWorld` target (LIBERO, the tabletop
@@ -382,6 +389,6 @@ class RetimePath(Primitive):
         with ctx.profiler.section("timing"):
             checker = session_checker(ctx)
             traj = retime(np.asarray(self.get(self.path_key)), vel_limits=vel, acc_limits=acc,
-                          dt=ctx.target.model.opt.timestep, checker=checker)
+                          dt=ctx.target.model.opt.timestep, checker=checker, dynamics=execution_dynamics(ctx))
         self.set(self.out, traj)
         ctx.trace.record("retime", duration_s=float(traj.duration), samples=int(len(traj.t)))

@@ -124,6 +124,13 @@ _KP = np.array([2000.0] * 4 + [1000.0] * 3)
 #: episodes, 0.4 takes libero_spatial's first successes 10 control steps sooner, 0.55 one more.
 VELOCITY_SCALE: tuple[float, ...] = (0.4, 0.4, 0.4, 0.4, 0.25, 0.25, 0.25)
 ACCELERATION_SCALE = 0.5
+#: The share of each arm actuator's force limit (robosuite's Panda: 80 N m for joints 1-5 as
+#: the servos run them, 12 N m for joints 6-7) that a motion's timing may ask of it,
+#: inertia, gravity not compensated and the air's drag included (:meth:`LiberoTarget.arm_dynamics`);
+#: the rest is the servo's, to pull its lag back. At the wrist's full 12 N m the servo has
+#: nothing left, and a transfer turning the hand at 0.65 rad/s lagged 0.05 rad (docs/libero.md,
+#: forty-fourth pass).
+TORQUE_SHARE = 0.75
 #: LIBERO's do-nothing action: zero OSC pose delta (6,) and the gripper open (-1).
 _NOOP_ACTION = np.array([0.0] * 6 + [-1.0])
 
@@ -393,6 +400,7 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
         self._servo(m, True)
         self._init_arm(model, data, ARM_JOINT_NAMES, tcp_site=TCP_SITE, arm_actuators=self._motor, seed=seed)
         self._ff_gain = self._kv / _KP
+        self._dynamics = None
         self._finger_qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in FINGER_JOINT_NAMES])
         self._index_world(m)
         self._env_steps = 0
@@ -560,6 +568,22 @@ class LiberoTarget(LiberoOsc, LiberoPrivileged, LiberoSensing, MuJoCoArmTarget, 
         """``(7,)`` rad/s: the Franka's datasheet joint speed limits scaled per joint by
         :data:`VELOCITY_SCALE` (what the servos track within 0.01 rad)."""
         return np.asarray(VELOCITY_SCALE) * np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
+
+    def arm_dynamics(self):
+        """The arm's :class:`~phyagentos.motion.dynamics.ArmDynamics` in this world, each
+        joint allowed :data:`TORQUE_SHARE` of its actuator's force limit: robosuite's world
+        is filled with air (``opt.density`` 1.2 kg/m^3) and its Panda's finger tips weigh
+        0.01 kg with 0.01 kg m^2 of inertia, so MuJoCo's inertia-box drag on them loads the
+        wrist with up to its whole 12 N m when the hand turns about its axis at 0.6 rad/s
+        while the shoulder swings it (measured on libero_object task 7's transfers). Built
+        once per target (a private data copy of the model)."""
+        if self._dynamics is None:
+            from phyagentos.motion.dynamics import ArmDynamics  # noqa: PLC0415
+
+            m = self._model
+            lim = np.abs(m.actuator_forcerange[self._arm_act, 1])
+            self._dynamics = ArmDynamics(m, ARM_JOINT_NAMES, torque_limits=TORQUE_SHARE * lim)
+        return self._dynamics
 
     def acceleration_limits(self) -> np.ndarray:
         """``(7,)`` rad/s^2: the motion package's limits scaled by :data:`ACCELERATION_SCALE`."""

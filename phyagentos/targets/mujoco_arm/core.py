@@ -553,6 +553,12 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
         """``('observe', 'move_joints', 'set_gripper', 'hold', 'snapshot')``."""
         return self.TOOLS
 
+    def arm_dynamics(self):
+        """The arm's :class:`~phyagentos.motion.dynamics.ArmDynamics` for timing motions within
+        its actuators' torques, or None (the default: speed and acceleration limits alone
+        keep this target's servos on their references)."""
+        return None
+
     def acceleration_limits(self) -> np.ndarray:
         """``(n,)`` rad/s^2 for trajectory timing (default: the motion package's limits)."""
         from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS  # noqa: PLC0415

@@ -360,7 +360,8 @@ class PlanPath(Primitive):
 
 
 class RetimePath(Primitive):
-    """Time-optimal trajectory along blackboard ``path`` under velocity/acceleration limits (toppra).
+    """Time-optimal trajectory along blackboard ``path`` under velocity/acceleration limits and,
+    where the target declares its arm's dynamics, within the actuators' torques (toppra).
 
     The timed trajectory is re-checked for collisions (toppra's spline can cut
     corners), with the held object attached.

@@ -172,7 +172,8 @@ class TargetSessionHandle:
         start = target.arm_qpos()
         dt = float(target.timestep)
         traj = retime(np.array([start, goal]), vel_limits=target.velocity_limits() * scale,
-                      acc_limits=np.array(DEFAULT_ACCELERATION_LIMITS) * scale, dt=dt)
+                      acc_limits=np.array(DEFAULT_ACCELERATION_LIMITS) * scale, dt=dt,
+                      dynamics=target.arm_dynamics() if callable(getattr(target, "arm_dynamics", None)) else None)
         # Bounds first: a goal outside the joint range is refused as such, not as the
         # spline's overshoot near it.
         guard.sync(start)

@@ -584,7 +584,8 @@ class MuJoCoArmTarget(ArmContacts, ArmWorldTruth, ArmSensors, ArmCheckpoints, Ba
         if not 0 < speed_scale <= 1.0:
             raise TargetError(f"move_joints: speed_scale must be in (0, 1], got {speed_scale}")
         traj = retime(np.array([self.arm_qpos(), qg]), vel_limits=self.velocity_limits() * speed_scale,
-                      acc_limits=self.acceleration_limits() * speed_scale, dt=self.timestep)
+                      acc_limits=self.acceleration_limits() * speed_scale, dt=self.timestep,
+                      dynamics=self.arm_dynamics())
         return self.execute_trajectory(traj, tracking_tol_rad=tracking_tol_rad).to_dict()
 
     def _tool_set_gripper(self, opening_m: float, settle_s: float = 0.5) -> dict:

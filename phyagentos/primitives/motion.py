@@ -16,6 +16,7 @@ from phyagentos.motion.collision import CollisionChecker
 from phyagentos.motion.ik import solve_ik
 from phyagentos.motion.planner import plan_path
 from phyagentos.motion.retime import retime
+from phyagentos.targets.contract import arm_dynamics_of
 
 from . import planning_world
 from .base import Primitive
@@ -126,9 +127,9 @@ def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> t
 
 def execution_dynamics(ctx):
     """The target's :class:`~phyagentos.motion.dynamics.ArmDynamics` for timing a motion within
-    its actuators' torques (``target.arm_dynamics()``), or None where the target declares none."""
-    get = getattr(ctx.target, "arm_dynamics", None)
-    return get() if callable(get) else None
+    its actuators' torques (:func:`~phyagentos.targets.contract.arm_dynamics_of`), or None
+    where the target declares none."""
+    return arm_dynamics_of(ctx.target)
 
 
 def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = None) -> CollisionChecker:

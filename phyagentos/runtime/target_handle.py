@@ -28,6 +28,7 @@ import numpy as np
 
 from phyagentos.errors import SafetyError, TargetError, format_choices
 from phyagentos.motion.retime import DEFAULT_ACCELERATION_LIMITS, retime
+from phyagentos.targets.contract import arm_dynamics_of
 
 from .safety_guard import SafetyGuard
 
@@ -173,7 +174,7 @@ class TargetSessionHandle:
         dt = float(target.timestep)
         traj = retime(np.array([start, goal]), vel_limits=target.velocity_limits() * scale,
                       acc_limits=np.array(DEFAULT_ACCELERATION_LIMITS) * scale, dt=dt,
-                      dynamics=target.arm_dynamics() if callable(getattr(target, "arm_dynamics", None)) else None)
+                      dynamics=arm_dynamics_of(target))
         # Bounds first: a goal outside the joint range is refused as such, not as the
         # spline's overshoot near it.
         guard.sync(start)

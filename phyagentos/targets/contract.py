@@ -102,6 +102,7 @@ if TYPE_CHECKING:
     import mujoco
     import numpy as np
 
+    from phyagentos.motion.dynamics import ArmDynamics
     from phyagentos.perception import PerceptionConfig
 
 __all__ = [
@@ -117,6 +118,7 @@ __all__ = [
     "Target",
     "TargetCapabilities",
     "TargetKind",
+    "arm_dynamics_of",
     "capabilities_of",
 ]
 
@@ -203,6 +205,15 @@ def capabilities_of(target_or_cls: Any) -> TargetCapabilities:
     cls = target_or_cls if isinstance(target_or_cls, type) else type(target_or_cls)
     return cls.CAPABILITIES if issubclass(cls, Target) else TargetCapabilities()
 
+
+
+def arm_dynamics_of(target: Any) -> ArmDynamics | None:
+    """The arm's :class:`~phyagentos.motion.dynamics.ArmDynamics` a target declares for timing
+    its motions within its actuators' torques (its ``arm_dynamics()``, a
+    :class:`~phyagentos.targets.mujoco_arm.MuJoCoArmTarget` hook), or None where it declares
+    none: speed and acceleration limits alone then time its motions."""
+    get = getattr(target, "arm_dynamics", None)
+    return get() if callable(get) else None
 
 @dataclass(frozen=True)
 class ExecutionResult:

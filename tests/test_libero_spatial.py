@@ -81,6 +81,12 @@ def test_other_wordings_of_the_relations_read_the_same():
         ("pick up the black bowl on the left and place it on the plate", {"relation": "left"}),
         ("put the right black bowl on the plate", {"relation": "right"}),
         ("pick up the leftmost bowl and put it on the plate", {"relation": "left"}),
+        # front and back as the scene camera sees the table (the front nearest it)
+        ("pick up the black bowl at the back and place it on the plate", {"relation": "back"}),
+        ("pick up the black bowl on the front and place it on the plate", {"relation": "front"}),
+        ("put the front black bowl on the plate", {"relation": "front"}),
+        # of two bowls, "in the middle" is the table's middle (a middle one is one of three or more)
+        ("pick up the black bowl in the middle and place it on the plate", {"relation": "table_center"}),
         # a drawer named without its cabinet is the one thing with drawers's; "from" it is in it
         ("grab the black bowl from the middle drawer and set it on the plate",
          {"relation": "in", "of": ["wooden_cabinet_1"], "part": "middle drawer"}),
@@ -102,8 +108,8 @@ def test_other_wordings_of_the_relations_read_the_same():
 
 
 @pytest.mark.parametrize("text,why", [
-    ("pick up the black bowl on the front and place it on the plate", "a place relative to the viewer"),
-    ("pick up the black bowl at the back and place it on the plate", "not a relation the rules read"),
+    ("pick up the black bowl in the corner and place it on the plate", "a place relative to the viewer"),
+    ("pick up the black bowl at the far end and place it on the plate", "not a relation the rules read"),
     ("pick up the black bowl next to the sink and place it on the plate", "'the sink' names nothing declared"),
     ("pick up the black bowl between the plate and place it on the plate", "'between' needs two landmarks"),
     ("pick up the black bowl next the plate and place it on the plate", "'next' without 'to'"),
@@ -224,3 +230,51 @@ def test_a_fixture_look_serves_only_the_world_it_was_measured_in(tmp_path):
     looks = _fixture_looks(ws, "libero_goal", [0, 1])  # both measured: nothing is built
     assert looks[0]["wooden_cabinet"] == looks[1]["wooden_cabinet"] == goal_look
     assert _fixture_looks(ws, "libero_spatial_lan", [0])[0]["wooden_cabinet"]["place"]["height_m"] == 0.227
+
+
+def _libero_90(i):
+    task = suite_tasks("libero_90")[i]
+    return task.instruction, parse_bddl(task.bddl_path)
+
+
+BOWL3 = "akita_black_bowl_3"
+
+
+@pytest.mark.parametrize("i,where,moves", [
+    # LIBERO-90 KITCHEN_SCENE2 (three identical black bowls and a plate): the bowls are told apart as the
+    # scene camera sees the table, the front one nearest it, the middle one between the other two
+    (12, {BOWL: {"relation": "back"}}, [(BOWL, PLATE)]),
+    (13, {BOWL: {"relation": "front"}}, [(BOWL, PLATE)]),
+    (14, {BOWL: {"relation": "middle"}}, [(BOWL, PLATE)]),
+    (15, {BOWL: {"relation": "middle"}}, [(BOWL, "wooden_cabinet_1")]),
+    (16, {BOWL: {"relation": "front"}, TWIN: {"relation": "middle"}}, [(BOWL, TWIN)]),
+    (17, {BOWL: {"relation": "middle"}, TWIN: {"relation": "back"}}, [(BOWL, TWIN)]),  # on the back black bowl
+])
+def test_liberos_front_back_and_middle_bowls_are_read_as_references_for_perception(i, where, moves):
+    text, problem = _libero_90(i)
+    nodes, refs = instruction_plan(text, problem.objects, problem.fixtures)
+    assert refs == where, text
+    assert [(n["params"]["object"], n["params"]["region"]) for n in nodes if n["skill"] == "place"] == moves, text
+
+
+def test_a_side_word_that_is_no_side_of_the_object_phrase_is_not_read_as_one():
+    text, problem = _libero_90(12)
+    objects, fixtures = problem.objects, problem.fixtures
+    # "back" as an adverb, not the object's side: refused, never read as the bowl at the back
+    with pytest.raises(BenchError, match="'back' names no object"):
+        instruction_nodes("put the black bowl back on the plate", objects, fixtures)
+    # "the back compartment" is a part of a destination, never a side of the object moved
+    _, two = _libero_90(3)  # two butters beside a black bowl and a pudding
+    with pytest.raises(BenchError, match="could be any of butter_1, butter_2"):
+        instruction_nodes("put the butter in the back of the cabinet", two.objects, two.fixtures)
+    nodes, refs = instruction_plan(suite_tasks("libero_90")[3].instruction, two.objects, two.fixtures)
+    assert refs == {"butter_1": {"relation": "back"}}
+    assert [n["skill"] for n in nodes] == ["hook_drawer", "pick", "place", "push_drawer"]
+
+
+def test_the_frying_pan_is_the_declared_frypan():
+    text, problem = _libero_90(18)
+    assert text == "put the frying pan on the stove"
+    nodes = instruction_nodes(text, problem.objects, problem.fixtures)
+    assert [(n["skill"], n["params"].get("object")) for n in nodes] == [("pick", "chefmate_8_frypan_1"),
+                                                                        ("place", "chefmate_8_frypan_1")]

@@ -426,3 +426,41 @@ def test_a_held_object_with_no_look_alike_ties_nothing():
     p = _perceiver(None)
     p.tracks["plate_1"] = _tracked("plate_1", (0.50, 0.10, 0.15), held=True)
     assert p.track_positions(_hand_at((0.5, 0.1, 0.2)))[3] is None
+
+
+@pytest.mark.parametrize("order", [(0, 1, 2), (2, 0, 1), (1, 2, 0)])
+def test_front_back_and_middle_are_read_across_the_table_as_the_scene_camera_sees_it(order):
+    # LIBERO-90's KITCHEN_SCENE2 (its regions, generated placements): the black bowl "at the front"
+    # stands nearest the agentview camera (+x, across the table from the robot), the one "at the back"
+    # nearest the robot, and "the middle black bowl" between them
+    front, middle, back = (0.10, 0.15, 0.9), (-0.05, 0.20, 0.9), (-0.15, 0.05, 0.9)
+    dets = [_det(BLACK, p) for p in (front, middle, back)]
+    dets = [dets[i] for i in order]
+    want = {"front": order.index(0), "middle": order.index(1), "back": order.index(2)}
+    facing_robot = np.array([0.0, 1.0])  # the agentview camera's right: world +y
+    for side, idx in want.items():
+        res = resolve_reference(_bowl("bowl_1", {"relation": side}), [0, 1, 2], dets, {}, CFG, look_alikes=3,
+                                viewer_right_xy=facing_robot)
+        assert res.detection == idx, (side, res.reason)
+    # seen from behind the robot, the front and the back swap; the middle one stays the middle one
+    for side, idx in (("front", want["back"]), ("back", want["front"]), ("middle", want["middle"])):
+        res = resolve_reference(_bowl("bowl_1", {"relation": side}), [0, 1, 2], dets, {}, CFG, look_alikes=3,
+                                viewer_right_xy=-facing_robot)
+        assert res.detection == idx, (side, res.reason)
+
+
+def test_a_middle_one_is_one_of_three_seen_and_clearly_between_the_others():
+    row = [_det(BLACK, (x, 0.0, 0.9)) for x in (-0.2, 0.0, 0.2)]
+    desc = _bowl("bowl_1", {"relation": "middle"})
+    res = resolve_reference(desc, [0, 1, 2], row, {}, CFG, look_alikes=3)
+    assert res.detection == 1 and "middle" in res.reason
+    # two seen of three: the middle one cannot be told (the third may stand anywhere)
+    res = resolve_reference(desc, [0, 2], row, {}, CFG, look_alikes=2)
+    assert res.detection is None and "one of at least three" in res.reason
+    # four in a row: two stand between the others, 2 cm apart in how central they are -> unresolved
+    four = [_det(BLACK, (x, 0.0, 0.9)) for x in (-0.3, -0.1, 0.12, 0.3)]
+    res = resolve_reference(desc, [0, 1, 2, 3], four, {}, CFG, look_alikes=4)
+    assert res.detection is None and "within" in res.reason
+    # front and back need the camera's view of the table, as left and right do
+    res = resolve_reference(_bowl("bowl_1", {"relation": "front"}), [0, 1, 2], row, {}, CFG, look_alikes=3)
+    assert res.detection is None and "front and back" in res.reason

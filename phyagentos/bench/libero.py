@@ -485,7 +485,8 @@ def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str,
     two ``akita_black_bowl``). The reader binds the bowl the relation picks out to one of the
     identical names (``akita_black_bowl_1``: an internal label; which physical bowl it is, is
     for perception to decide) and returns the relation, ``where`` =
-    ``{"relation": between | next_to | on | in | table_center, "of": [landmark names],
+    ``{"relation": between | next_to | on | in | table_center | left | right | front | back | middle,
+    "of": [landmark names],
     "part": "top drawer"?}``, which :func:`prepare_libero_suite` declares on that object in the
     episode's scene (:class:`~phyagentos.perception.ObjectDescriptor` ``where``): perception
     resolves it on the positions it perceives. Never the BDDL ``:goal`` or ``:init``.

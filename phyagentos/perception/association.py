@@ -40,6 +40,7 @@ from typing import Mapping, Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from phyagentos.geometry import viewer_side_xy
 from phyagentos.perception.colour import lab_distance, srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
@@ -307,8 +308,13 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
     footprint radius; ``table_center`` -- the smallest distance to ``table_centre_xy``;
     ``left`` / ``right`` -- the furthest along the viewer's left / right (``viewer_right_xy``:
     LIBERO's instructions name left and right as its agentview camera shows the table, e.g.
-    LIBERO-90's "the left plate" is the plate at table y -0.3 m, seen on the image's left); each
-    picks the best candidate when the runner-up scores at least ``relation_margin_m`` worse.
+    LIBERO-90's "the left plate" is the plate at table y -0.3 m, seen on the image's left);
+    ``front`` / ``back`` -- the nearest the viewer / the furthest from it along the viewer's
+    horizontal line of sight (:func:`~phyagentos.geometry.viewer_side_xy`; LIBERO-90's "the black bowl at the front"
+    stands nearest its agentview camera, on the table's far side from the robot); ``middle`` --
+    of at least three candidates, the one whose furthest fellow candidate is nearest (the one
+    between the others: LIBERO-90's "the middle black bowl" of three); each picks the best
+    candidate when the runner-up scores at least ``relation_margin_m`` worse.
     ``on``/``in`` a perceived landmark: the one candidate over its footprint (raised off the
     table, for ``on``); ``in`` a drawer of it (``part`` ``top drawer``: :func:`part_landmark`):
     the one candidate off the table over the inside of that drawer, which must be seen
@@ -338,17 +344,20 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
     if len(cands) < look_alikes:
         return unresolved(f"{len(cands)} of the {look_alikes} look-alikes seen: the one meant may be the one not seen")
     missing = [n for n in ref.of if n not in landmarks]
-    if rel in ("between", "next_to", "table_center", "left", "right"):
+    if rel in ("between", "next_to", "table_center", "left", "right", "front", "back", "middle"):
         if missing:
             return unresolved(f"landmark(s) {', '.join(missing)} not perceived")
         xy = {i: np.asarray(detections[i].position[:2], float) for i in cands}
-        if rel in ("left", "right"):
+        if rel in ("left", "right", "front", "back"):
             if viewer_right_xy is None:
-                return unresolved("no camera says where the viewer's left and right are")
-            r = np.asarray(viewer_right_xy, float)[:2]
-            r = r / max(float(np.linalg.norm(r)), 1e-9)
-            sign = -1.0 if rel == "right" else 1.0  # smaller is better: the furthest that way
-            scores = {i: sign * float(np.dot(p, r)) for i, p in xy.items()}
+                pair = "left and right" if rel in ("left", "right") else "front and back"
+                return unresolved(f"no camera says where the viewer's {pair} are")
+            towards = viewer_side_xy(np.asarray(viewer_right_xy, float)[:2], rel)
+            scores = {i: -float(np.dot(p, towards)) for i, p in xy.items()}  # smaller is better: furthest that way
+        elif rel == "middle":
+            if len(xy) < 3:
+                return unresolved(f"middle: {len(xy)} candidates seen; the middle one is one of at least three")
+            scores = {i: max(float(np.linalg.norm(p - q)) for j, q in xy.items() if j != i) for i, p in xy.items()}
         elif rel == "between":
             a, b = (np.asarray(landmarks[n].position[:2], float) for n in ref.of)
             scores = {i: _segment_distance(p, a, b) for i, p in xy.items()}

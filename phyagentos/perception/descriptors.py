@@ -36,7 +36,7 @@ SHAPES: tuple[str, ...] = ("box", "cylinder", "sphere")
 
 #: Relations a :class:`SpatialReference` may use, with how many landmarks each names.
 WHERE_RELATIONS: dict[str, int] = {"between": 2, "next_to": 1, "on": 1, "in": 1, "table_center": 0, "left": 0,
-                                   "right": 0}
+                                   "right": 0, "front": 0, "back": 0, "middle": 0}
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,10 @@ class SpatialReference:
             the table when the landmark is not perceived), ``table_center`` (nearest the centre
             of the perceived table top; no landmark), ``left`` / ``right`` (furthest to the
             viewer's left / right, as the scene camera sees the table: the plate on the left;
-            no landmark).
+            no landmark), ``front`` / ``back`` (nearest the viewer / furthest from it across
+            the table: the black bowl at the front; no landmark), ``middle`` (of three or more
+            look-alikes, the one whose furthest fellow is nearest: the middle black bowl; no
+            landmark).
         of: the landmarks' declared names (objects or fixtures), as many as the relation takes.
         part: the part of the landmark meant (``top drawer``): a drawer narrows ``in`` to that
             drawer's inside (:func:`~.association.part_landmark`); a level that is no drawer

@@ -157,8 +157,19 @@ _SCRIPTS = ((re.compile(r"[\u0400-\u04ff]"), "Cyrillic script"), (re.compile(r"[
             (re.compile(r"[\u0590-\u05ff]"), "Hebrew script"), (re.compile(r"[\u0900-\u097f]"), "Devanagari script"))
 
 
+#: two words people say for what a declared name writes as one (LIBERO's ``chefmate_8_frypan``: "the frying pan")
+_COMPOUNDS = {("frying", "pan"): "frypan", ("fry", "pan"): "frypan"}
+
+
 def _tokens(text: str) -> list[str]:
-    return re.findall(r"[a-z0-9_]+|[^\W\d_]+", text.lower())
+    words = re.findall(r"[a-z0-9_]+|[^\W\d_]+", text.lower())
+    out: list[str] = []
+    for w in words:
+        if out and (out[-1], w) in _COMPOUNDS:
+            out[-1] = _COMPOUNDS[(out[-1], w)]
+        else:
+            out.append(w)
+    return out
 
 
 def detect_language(text: str, names: Sequence[str] = ()) -> str | None:
@@ -647,11 +658,20 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
 #: The spatial relations a referring expression may use (``read_request(..., relations=True)``):
 #: ``between`` two landmarks, ``next_to`` one, ``on`` one, ``in`` one (optionally a ``part`` of it such as its
 #: top drawer), ``table_center`` (no landmark: the middle of the table the objects stand on), ``left`` /
-#: ``right`` (no landmark: the one furthest to the viewer's left / right).
-RELATIONS = ("between", "next_to", "on", "in", "table_center", "left", "right")
+#: ``right`` (no landmark: the one furthest to the viewer's left / right), ``front`` / ``back`` (no
+#: landmark: the one nearest the viewer / furthest from it), ``middle`` (no landmark: of three or more,
+#: the one between the others).
+RELATIONS = ("between", "next_to", "on", "in", "table_center", "left", "right", "front", "back", "middle")
 #: words that name the viewer's side of one of several identical objects ("the left plate", "the
-#: black bowl on the left"), and the relation they stand for: as the scene camera shows the table
-_SIDES = {"left": "left", "leftmost": "left", "right": "right", "rightmost": "right"}
+#: black bowl on the left", "the black bowl at the back", "the middle black bowl"), and the relation they
+#: stand for: as the scene camera shows the table (the front is nearest it)
+_SIDES = {"left": "left", "leftmost": "left", "right": "right", "rightmost": "right",
+          "front": "front", "frontmost": "front", "back": "back", "rear": "back", "backmost": "back",
+          "middle": "middle"}
+#: side words read only where they stand as a side of the object phrase: after its article ("the back black
+#: bowl") or in a closing "at / in / on the <side>" ("the black bowl at the back"), never elsewhere ("put the
+#: bowl back"); ``middle`` only among three or more identical objects (of two, "in the middle" is the table's)
+_DEPTH_SIDES = {"front", "frontmost", "back", "rear", "backmost", "middle"}
 #: words that begin a relation after an object phrase, and the relation they begin
 _RELATION_START = {"between": "between", "next": "next_to", "beside": "next_to", "near": "next_to",
                    "nearest": "next_to", "closest": "next_to", "by": "next_to", "on": "on", "atop": "on",
@@ -686,17 +706,28 @@ def _twins(words: list[str], world: World) -> tuple[str, ...]:
     return tuple(e.name for e in found)
 
 
+def _closing_side(words: list[str], k: int) -> bool:
+    """Whether the side word ``words[k]`` ends the phrase as ``at / in / on the <side> (side | hand)``."""
+    return k >= 2 and words[k - 2] in ("on", "at", "in") and words[k - 1] == "the" and (
+        k == len(words) - 1 or words[k + 1:] in (["side"], ["hand"]))
+
+
 def _side_twins(words: list[str], world: World) -> tuple[str | None, tuple[str, ...]]:
-    """``(left | right, the identical objects)`` when ``words`` name several identical objects with one
-    side word among them (``the left plate``, ``the rightmost bowl``, ``the black bowl on the left``);
-    else ``(None, ())``."""
+    """``(side, the identical objects)`` when ``words`` name several identical objects with one side word
+    among them (``the left plate``, ``the rightmost bowl``, ``the black bowl on the left``, ``the black bowl
+    at the back``, ``the middle black bowl`` of three; :data:`_SIDES`, :data:`_DEPTH_SIDES`); else
+    ``(None, ())``."""
     sides = [w for w in words if w in _SIDES]
     if len(sides) != 1:
         return None, ()
-    rest = [w for w in words if w not in _SIDES]
-    if rest[-2:] == ["on", "the"] or rest[-3:-1] == ["on", "the"] and rest[-1] in ("side", "hand"):
-        rest = rest[:rest.index("on")]  # "the black bowl on the left (side)"
+    k = words.index(sides[0])
+    closing = _closing_side(words, k)
+    if sides[0] in _DEPTH_SIDES and not (closing or k == 0 or (k == 1 and words[0] in ("the", "a", "an"))):
+        return None, ()
+    rest = words[:k - 2] if closing else [*words[:k], *words[k + 1:]]
     twins = _twins(rest, world)
+    if sides[0] == "middle" and len(twins) < 3:
+        return None, ()
     return (_SIDES[sides[0]], twins) if twins else (None, ())
 
 
@@ -855,17 +886,21 @@ def _free_twin(twins: tuple[str, ...], bound: Mapping[str, dict], phrase: list[s
 
 
 def _side_reference(body: list[str], world: World, verb: str | None, bound: Mapping[str, dict]):
-    """``(object, {"relation": left | right}, destination words, preposition)`` when the object words of
-    ``body`` (up to a move's first destination preposition after ``on the left``) name one side of several
-    identical objects (``the left bowl``, ``the black bowl on the left``); a problem list when every one of
-    them is bound already; else None."""
+    """``(object, {"relation": side}, destination words, preposition)`` when the object words of ``body`` (up
+    to a move's first destination preposition after a closing ``on the left`` / ``at the back``) name one side
+    of several identical objects (``the left bowl``, ``the black bowl on the left``, ``the black bowl at the
+    front``, ``the middle black bowl``: :func:`_side_twins`); a problem list when every one of them is bound
+    already; else None."""
     end = len(body)
-    if verb in _MOVE | _PUSH:
+    if verb in _MOVE | _PUSH | _STACK:
         start = 0
-        for i, w in enumerate(body):  # skip "on the left (side)" of the object phrase itself
-            if w == "on" and body[i + 1:i + 3] in (["the", "left"], ["the", "right"]):
-                start = i + 3 + (1 if body[i + 3:i + 4] in (["side"], ["hand"]) else 0)
-                break
+        for i, w in enumerate(body):  # skip "on the left (side)", "at the back" of the object phrase itself
+            if w in ("on", "at", "in") and body[i + 1:i + 2] == ["the"] and body[i + 2:i + 3] \
+                    and body[i + 2] in _SIDES:
+                after = i + 3 + (1 if body[i + 3:i + 4] in (["side"], ["hand"]) else 0)
+                if after == len(body) or body[after] in _DEST_PREPOSITIONS:
+                    start = after
+                    break
         end = next((i for i in range(max(start, 1), len(body)) if body[i] in _DEST_PREPOSITIONS), len(body))
     side, twins = _side_twins(body[:end], world)
     if side is None:
@@ -898,7 +933,7 @@ def _reference(body: list[str], world: World, verb: str | None, bound: Mapping[s
     rel = body[k:]
     dest: list[str] = []
     prep: str | None = None
-    if verb in _MOVE | _PUSH:
+    if verb in _MOVE | _PUSH | _STACK:
         # the destination follows the landmark's phrase: its last destination preposition
         skip = 3 if rel[:2] == ["next", "to"] or rel[:3] == ["on", "top", "of"] else 1
         cut = max((i for i, w in enumerate(rel) if i >= skip + 1 and w in _DEST_PREPOSITIONS), default=None)
@@ -1006,7 +1041,8 @@ def _read(meaning: Meaning, request: str, world: World, relations: bool) -> Mean
         stay = _STAY.search(low)
         # "the black bowl next to the plate" (one of two identical bowls): read only when asked for
         ref = (_reference(body, world, verb_word, meaning.where)
-               if relations and verb_word in _MOVE | _HOLD | _PUSH and not negated and not stay else None)
+               if relations and verb_word in _MOVE | _HOLD | _PUSH | _STACK and not negated and not stay
+               else None)
         if isinstance(ref, list):
             meaning.problems += ref
             continue
@@ -1074,6 +1110,7 @@ def _read(meaning: Meaning, request: str, world: World, relations: bool) -> Mean
                 why = name
             else:
                 dests, dest_where = (name,), {name: {"relation": side}}
+                kind = "object" if verb_word in _STACK else kind  # "stack the front bowl on the middle bowl"
         elif (drawer := _into_drawer(part, dest_words, prep, world, previous, just_opened)) is not None:
             # the inside of a drawer ("in the top drawer of the cabinet"; "inside" / "in it" after opening one)
             if isinstance(drawer, list):

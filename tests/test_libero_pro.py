@@ -144,6 +144,21 @@ def test_unplannable_instructions_are_refused_with_a_reason():
             instruction_nodes(text, problem.objects, problem.fixtures)
 
 
+def test_a_changed_tasks_everyday_names_for_a_frypan_and_a_mug_name_them():
+    # libero_10_task's own words: "the pan" is the scene's chefmate_8_frypan_1, "the cup" its only mug
+    for task, skills, obj in ((2, ["turn_knob", "pick", "place"], "chefmate_8_frypan_1"),
+                              (5, ["pick", "place"], "white_yellow_mug_1")):
+        t = resolve_task("libero_10_task", task)
+        problem = parse_bddl(t.bddl_path)
+        nodes = instruction_nodes(problem.language, problem.objects, problem.fixtures)
+        assert [n["skill"] for n in nodes] == skills, problem.language
+        assert nodes[-1]["params"]["object"] == obj
+    # a cup among two mugs is one of them: say which
+    problem = parse_bddl(resolve_task("libero_10", 4).bddl_path)  # a white mug and a yellow-and-white mug
+    with pytest.raises(BenchError, match="could be any of"):
+        instruction_nodes("put the cup on the left plate", problem.objects, problem.fixtures)
+
+
 def test_a_position_shifted_task_starts_from_other_init_states():
     standard, shifted = resolve_task("libero_object", 0), resolve_task("libero_object_temp_x0.1", 0)
     a, b = load_init_states(standard), load_init_states(shifted)

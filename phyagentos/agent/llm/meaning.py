@@ -359,8 +359,15 @@ def _colours(world: World) -> set[str]:
 _PALETTE = frozenset({"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey", "gray"})
 
 
+#: other words for a word of a declared name (LIBERO-PRO's changed tasks: "put the pan on it" for
+#: ``chefmate_8_frypan_1``, "pick up the cup" for ``white_yellow_mug_1``)
+_NAME_WORD_ALIASES: Mapping[str, frozenset[str]] = {"frypan": frozenset({"pan", "skillet"}),
+                                                    "mug": frozenset({"cup"})}
+
+
 def _name_parts(e: Entity) -> set[str]:
-    return set(e.name.split("_")) - _KIND - _REGION_KIND - _STOP - _VERBS - set(_PREPOSITIONS)
+    parts = set(e.name.split("_")) - _KIND - _REGION_KIND - _STOP - _VERBS - set(_PREPOSITIONS)
+    return parts | {alias for p in parts for alias in _NAME_WORD_ALIASES.get(p, ())}
 
 
 def _name_colours(e: Entity) -> set[str]:
@@ -518,7 +525,8 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
             break
     known = (_KIND | _ALL | set(_COUNTS) | _PRONOUNS | _STOP | set(_SIZE_WORDS) | _BIGGER | _SMALLER
              | {"red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey", "gray"}
-             | {p for e in cands for p in e.name.split("_")} | {e.name for e in cands} | {"by", "colour", "color"})
+             | {p for e in cands for p in e.name.split("_")} | {p for e in cands for p in _name_parts(e)}
+             | {e.name for e in cands} | {"by", "colour", "color"})
     unknown = [w for w in content if w not in known]
     if unknown and not singular and (aside := _set_aside(words, unknown, world, previous)) is not None:
         return aside, None, []

@@ -278,3 +278,12 @@ def test_the_frying_pan_is_the_declared_frypan():
     nodes = instruction_nodes(text, problem.objects, problem.fixtures)
     assert [(n["skill"], n["params"].get("object")) for n in nodes] == [("pick", "chefmate_8_frypan_1"),
                                                                         ("place", "chefmate_8_frypan_1")]
+
+
+def test_a_landmark_named_by_the_colour_its_name_implies_is_that_thing():
+    # LIBERO-90 task 34: "the white mug" is the porcelain mug, the only mug left once the one moved is set aside
+    text, problem = _libero_90(34)
+    assert text == "put the yellow and white mug to the front of the white mug"
+    nodes = instruction_nodes(text, problem.objects, problem.fixtures)
+    assert nodes[-1]["accept"][0] == {"beside": {"landmark": "porcelain_mug_1", "object": "white_yellow_mug_1",
+                                                 "side": "front"}}

@@ -758,7 +758,9 @@ def _landmark(words: list[str], world: World, exclude: Sequence[str]) -> tuple[s
     cands = [e for e in world.regions if e.name not in exclude]
     scored = []
     for e in cands:
-        parts = {p for p in e.name.split("_") if not p.isdigit()}
+        # its name's words and their other words (a cup: a mug), and a colour its name implies (a porcelain mug
+        # is white: "to the front of the white mug")
+        parts = {p for p in e.name.split("_") if not p.isdigit()} | _name_parts(e) | ({e.colour} if e.colour else set())
         specific = [w for w in content if w not in _LANDMARK_GENERIC]
         if not all(_matches_part(w, parts) for w in specific):
             continue

@@ -180,7 +180,8 @@ def test_into_a_compartment_of_the_caddy_places_on_that_compartment_named_by_the
                                   {"released": "black_book_1"}]
     for words, side in (("put the book into the left compartment of the caddy", "left"),
                         ("place the book in the caddy's rear compartment", "back"),
-                        ("put the book in the front slot of the desk caddy", "front")):
+                        ("put the book in the front slot of the desk caddy", "front"),
+                        ("place the book to the right compartment of the caddy", "right")):  # LIBERO-90 84's "to"
         assert instruction_nodes(words, problem.objects, problem.fixtures)[1]["params"]["region"] == \
             f"desk_caddy_1_{side}_compartment", words
     with pytest.raises(BenchError, match="which compartment\\? \\(say the front, back, left or right compartment"):

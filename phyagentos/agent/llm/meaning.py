@@ -1345,11 +1345,12 @@ def _into_compartment(text: str, dest_words: list[str], prep: str | None, world:
                       ) -> tuple[str, str] | list[tuple[str, str]] | None:
     """``(thing, side)`` when a move's destination is a compartment of one declared thing (a
     fixture too): "in / into the back compartment of the caddy", "in the caddy's back
-    compartment", "in back compartment" (of the one :data:`_COMPARTMENT_OF`) (``side`` one of
+    compartment", "in back compartment" (of the one :data:`_COMPARTMENT_OF`), "to the right
+    compartment of the caddy" (LIBERO-90's words) (``side`` one of
     :data:`_COMPARTMENT_SIDES`'s values, the viewer's side of the thing it lies on, which is how
     perception names compartments). A list of problems when it names a compartment but not
     which one, or of no one thing; ``None`` when the destination is no compartment."""
-    if prep not in ("in", "into", "inside"):
+    if prep not in ("in", "into", "inside", "to"):
         return None
     ws = [w for w in dest_words if w not in ("the", "a", "an", "its")]
     k = next((i for i, w in enumerate(ws) if w in _COMPARTMENT_WORDS), None)

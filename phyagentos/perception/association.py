@@ -40,7 +40,7 @@ from typing import Mapping, Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from phyagentos.geometry import viewer_side_xy
+from phyagentos.geometry import VIEWER_SIDES, viewer_side_xy
 from phyagentos.perception.colour import lab_distance, srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
@@ -344,11 +344,11 @@ def resolve_reference(desc: ObjectDescriptor, candidates: Sequence[int], detecti
     if len(cands) < look_alikes:
         return unresolved(f"{len(cands)} of the {look_alikes} look-alikes seen: the one meant may be the one not seen")
     missing = [n for n in ref.of if n not in landmarks]
-    if rel in ("between", "next_to", "table_center", "left", "right", "front", "back", "middle"):
+    if rel in ("between", "next_to", "table_center", "middle", *VIEWER_SIDES):
         if missing:
             return unresolved(f"landmark(s) {', '.join(missing)} not perceived")
         xy = {i: np.asarray(detections[i].position[:2], float) for i in cands}
-        if rel in ("left", "right", "front", "back"):
+        if rel in VIEWER_SIDES:
             if viewer_right_xy is None:
                 pair = "left and right" if rel in ("left", "right") else "front and back"
                 return unresolved(f"no camera says where the viewer's {pair} are")

@@ -14,7 +14,7 @@ from py_trees.common import Status
 from phyagentos.errors import IKError
 from phyagentos.motion.cartesian import cartesian_path
 from phyagentos.motion.retime import Trajectory, retime
-from phyagentos.targets.contract import MuJoCoBacked, capabilities_of
+from phyagentos.targets.contract import MuJoCoBacked, arm_dynamics_of, capabilities_of
 
 from . import planning_world
 from .base import Primitive, PrimitiveFailure
@@ -28,7 +28,7 @@ from .grasp_sense import (
     sample_while_holding,
     wrist_load_n,
 )
-from .motion import execution_dynamics, execution_limits, ik_options, session_checker
+from .motion import execution_limits, ik_options, session_checker
 from .observation import has_cameras, save_tracks
 
 __all__ = ["ExecuteTrajectory", "CartesianMove", "Gripper", "Hold", "WaitStill", "CheckHolding", "REACH_STEP_M",
@@ -231,7 +231,7 @@ class CartesianMove(_Tracking):
         with ctx.profiler.section("timing"):
             checker = session_checker(ctx) if self.check_collisions else None
             traj = retime(path, vel_limits=vel, acc_limits=acc,
-                          dt=target.model.opt.timestep, checker=checker, dynamics=execution_dynamics(ctx))
+                          dt=target.model.opt.timestep, checker=checker, dynamics=arm_dynamics_of(ctx.target))
         self._start(traj)
 
     def step(self):

@@ -125,13 +125,6 @@ def execution_limits(ctx, velocity_scale: float, acceleration_scale: float) -> t
     return vel, acc
 
 
-def execution_dynamics(ctx):
-    """The target's :class:`~phyagentos.motion.dynamics.ArmDynamics` for timing a motion within
-    its actuators' torques (:func:`~phyagentos.targets.contract.arm_dynamics_of`), or None
-    where the target declares none."""
-    return arm_dynamics_of(ctx.target)
-
-
 def session_checker(ctx, *, margin_m: float = 0.0, opening_m: float | None = None) -> CollisionChecker:
     """A collision checker synced to the world the target plans in: for a
     :class:`~phyagentos.targets.contract.PlansInPerceivedWorld` target (LIBERO, the tabletop
@@ -391,6 +384,6 @@ class RetimePath(Primitive):
         with ctx.profiler.section("timing"):
             checker = session_checker(ctx)
             traj = retime(np.asarray(self.get(self.path_key)), vel_limits=vel, acc_limits=acc,
-                          dt=ctx.target.model.opt.timestep, checker=checker, dynamics=execution_dynamics(ctx))
+                          dt=ctx.target.model.opt.timestep, checker=checker, dynamics=arm_dynamics_of(ctx.target))
         self.set(self.out, traj)
         ctx.trace.record("retime", duration_s=float(traj.duration), samples=int(len(traj.t)))

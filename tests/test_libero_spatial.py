@@ -278,6 +278,10 @@ def test_the_frying_pan_is_the_declared_frypan():
     nodes = instruction_nodes(text, problem.objects, problem.fixtures)
     assert [(n["skill"], n["params"].get("object")) for n in nodes] == [("pick", "chefmate_8_frypan_1"),
                                                                         ("place", "chefmate_8_frypan_1")]
+    # a refusal quotes the words the request said, not the one word the names write
+    with pytest.raises(BenchError, match="'the frying pan under the shelf': 'under', 'shelf' names no") as refused:
+        instruction_nodes("put the frying pan under the shelf on the stove", problem.objects, problem.fixtures)
+    assert "frypan under" not in str(refused.value)
 
 
 def test_a_landmark_named_by_the_colour_its_name_implies_is_that_thing():

@@ -161,15 +161,38 @@ _SCRIPTS = ((re.compile(r"[\u0400-\u04ff]"), "Cyrillic script"), (re.compile(r"[
 _COMPOUNDS = {("frying", "pan"): "frypan", ("fry", "pan"): "frypan"}
 
 
+class _Word(str):
+    """A token that stands for other words than its own: a compound (:data:`_COMPOUNDS`), equal to
+    and hashed as the one word the names write (``frypan``), with ``said`` the words it was said
+    as (``frying pan``), which messages quote (:func:`_said`)."""
+
+    said: str
+
+    def __new__(cls, word: str, said: str) -> "_Word":
+        out = super().__new__(cls, word)
+        out.said = said
+        return out
+
+
 def _tokens(text: str) -> list[str]:
     words = re.findall(r"[a-z0-9_]+|[^\W\d_]+", text.lower())
     out: list[str] = []
     for w in words:
         if out and (out[-1], w) in _COMPOUNDS:
-            out[-1] = _COMPOUNDS[(out[-1], w)]
+            out[-1] = _Word(_COMPOUNDS[(out[-1], w)], f"{_said_word(out[-1])} {w}")
         else:
             out.append(w)
     return out
+
+
+def _said_word(word: str) -> str:
+    return getattr(word, "said", word)
+
+
+def _said(words) -> str:
+    """``words`` (tokens) joined as the request said them: a compound as its own words ("the
+    frying pan", not "the frypan")."""
+    return " ".join(_said_word(w) for w in words)
 
 
 def detect_language(text: str, names: Sequence[str] = ()) -> str | None:
@@ -477,7 +500,7 @@ def _set_aside(words: list[str], unknown: list[str], world: World,
     if problems or count is not None or len(objects) != 1:
         return None
     said = ", ".join(repr(w) for w in unknown)
-    note = (f"{quote(' '.join(words))}: {said} {'names' if len(unknown) == 1 else 'name'} nothing here; read as "
+    note = (f"{quote(_said(words))}: {said} {'names' if len(unknown) == 1 else 'name'} nothing here; read as "
             f"{objects[0]}, the one {words[noun]}")
     assumed = _ASSUMED.get()
     if assumed is not None and note not in assumed:
@@ -518,7 +541,7 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
                 # "the smaller of the two blue cubes": the two are what is compared, one is meant
                 if (w not in ("a", "an", "one", "any") and len(_filter([x for x in words[i + 1:] if x not in _STOP],
                                                                    cands, world)[0]) != _COUNTS[w]):
-                    return (), None, [("not_understood", f"{quote(' '.join(words))}: the scene does not have "
+                    return (), None, [("not_understood", f"{quote(_said(words))}: the scene does not have "
                                                          f"{w} of them")]
                 continue
             count = _COUNTS[w]
@@ -531,18 +554,18 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
     if unknown and not singular and (aside := _set_aside(words, unknown, world, previous)) is not None:
         return aside, None, []
     if unknown:
-        return (), None, [("unknown_object", f"{quote(' '.join(words))}: {', '.join(repr(w) for w in unknown)} names "
+        return (), None, [("unknown_object", f"{quote(_said(words))}: {', '.join(repr(w) for w in unknown)} names "
                                              f"no object of the scene (it has {', '.join(e.name for e in cands)})")]
     found, misses = _filter(content, cands, world)
     plural = (any(w in _KIND and w.endswith(("s", "es")) for w in words) or set(words) & _ALL or "ones" in words
               or bool(singular))
     if misses and not found:
-        return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene "
+        return (), None, [("unknown_object", f"{quote(_said(words))} refers to no object of the scene "
                                              f"({'; '.join(misses)})")]
     if misses:
-        return (), None, [("not_understood", f"{quote(' '.join(words))}: {'; '.join(misses)}")]
+        return (), None, [("not_understood", f"{quote(_said(words))}: {'; '.join(misses)}")]
     if not found:
-        return (), None, [("unknown_object", f"{quote(' '.join(words))} refers to no object of the scene")]
+        return (), None, [("unknown_object", f"{quote(_said(words))} refers to no object of the scene")]
     if len(found) > 1 and count is None and not plural:
         # one object meant, several share a word ("the tomato sauce" beside a bbq sauce): the one
         # whose name has every word the phrase names, when exactly one has
@@ -554,15 +577,15 @@ def _read_objects(words: list[str], world: World, previous: tuple[str, ...]) -> 
     names = tuple(e.name for e in found)
     if count is not None:
         if count > len(names):
-            return (), None, [("not_understood", f"{quote(' '.join(words))} asks for {count}; the scene has "
+            return (), None, [("not_understood", f"{quote(_said(words))} asks for {count}; the scene has "
                                                  f"{len(names)}: {', '.join(names)}")]
         return names, (count if count < len(names) else None), []
     if "both" in words and len(names) != 2:
-        return (), None, [("not_understood", f"{quote(' '.join(words))}: 'both' names two; the scene has "
+        return (), None, [("not_understood", f"{quote(_said(words))}: 'both' names two; the scene has "
                                              f"{len(names)}: {', '.join(names)}")]
     if plural or len(names) == 1:
         return names, None, []
-    return (), None, [("not_understood", f"{quote(' '.join(words))} could be any of {', '.join(names)}: say which")]
+    return (), None, [("not_understood", f"{quote(_said(words))} could be any of {', '.join(names)}: say which")]
 
 
 def _singulars(words: Sequence[str], cands: Sequence[Entity]) -> dict[str, str]:
@@ -602,9 +625,9 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
                 return "object", (objs[0].name,), False, []
             if misses or not objs:
                 have = "; ".join(misses) or "it has " + ", ".join(e.name for e in others)
-                return "object", (), False, [("unknown_destination", f"stack on {quote(' '.join(words))}: no such "
+                return "object", (), False, [("unknown_destination", f"stack on {quote(_said(words))}: no such "
                                                                      f"object in the scene ({have})")]
-            return "object", (), False, [("not_understood", f"stack on {quote(' '.join(words))}: could be any of "
+            return "object", (), False, [("not_understood", f"stack on {quote(_said(words))}: could be any of "
                                          f"{', '.join(e.name for e in objs)}: say which")]
     regions = list(world.regions)
     top_of = any(a == "top" and b == "of" for a, b in zip(words, words[1:]))
@@ -618,7 +641,7 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
     if unknown:
         have = ", ".join(r.name for r in regions) or "no region"
         named = ", ".join(repr(w) for w in unknown)
-        return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))} is not in the "
+        return "region", (), False, [("unknown_destination", f"the destination {quote(_said(words))} is not in the "
                                                              f"scene ({named} names nothing there); it has {have}")]
     scored = []
     for r in regions:
@@ -631,16 +654,16 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
     if colours:
         scored = [(s, g, r) for s, g, r in scored if r.colour in colours or set(colours) & set(r.name.split("_"))]
         if not scored:
-            return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))} is not in "
+            return "region", (), False, [("unknown_destination", f"the destination {quote(_said(words))} is not in "
                                          f"the scene (no {'/'.join(colours)} region); it has "
                                          f"{', '.join(r.name for r in regions)}")]
     top = max((s for s, _, _ in scored), default=0)
     if not top and set(ws) & {"it", "them"}:
-        return "region", (), False, [("not_understood", f"{quote(' '.join(words))}: 'it' refers to nothing earlier "
+        return "region", (), False, [("not_understood", f"{quote(_said(words))}: 'it' refers to nothing earlier "
                                                         f"in the request")]
     if not top and not set(ws) & (_REGION_KIND | _REGION_SYNONYMS):
         # "in the gripper", "in there": words that name no region are not any region
-        return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))} names no "
+        return "region", (), False, [("unknown_destination", f"the destination {quote(_said(words))} names no "
                                                              f"region of the scene; it has "
                                                              f"{', '.join(r.name for r in regions) or 'none'}")]
     if top:
@@ -653,10 +676,10 @@ def _read_destination(words: list[str], prep: str, world: World, previous: tuple
         singular = bool(kind_words) and all(not w.endswith("s") for w in kind_words)
         definite = "the" in words and not set(words) & {"a", "an", "any", "either", "whichever", "one", "some"}
         if len(picked) > 1 and singular and definite:
-            return "region", (), False, [("not_understood", f"{quote(' '.join(words))} could be any of "
+            return "region", (), False, [("not_understood", f"{quote(_said(words))} could be any of "
                                                             f"{', '.join(picked)}: say which")]
     if not picked:
-        return "region", (), False, [("unknown_destination", f"the destination {quote(' '.join(words))}: the scene has "
+        return "region", (), False, [("unknown_destination", f"the destination {quote(_said(words))}: the scene has "
                                                              f"no region")]
     return "region", tuple(picked), False, []
 
@@ -748,7 +771,7 @@ def _landmark(words: list[str], world: World, exclude: Sequence[str]) -> tuple[s
     of its declared name (``cookie box`` -> ``cookies_1``: a plural name matches its singular, and words
     such as box or tray may name no part of it); ``(None, problems)`` when it names none or several."""
     content = [w for w in words if w not in _STOP and w not in ("of",)]
-    phrase = quote(" ".join(words))
+    phrase = quote(_said(words))
     if not content:
         return None, [("not_understood", f"{phrase}: the relation names no landmark")]
     if set(content) <= _EGOCENTRIC:
@@ -781,7 +804,7 @@ def _read_relation(words: list[str], world: World, twins: tuple[str, ...]) -> tu
                                                                                    list[tuple[str, str]]]:
     """``(where, problems)`` of a relation phrase (``next to the plate``, ``between the plate and the
     ramekin``, ``on the cookie box``, ``in the top drawer of the wooden cabinet``, ``from table center``)."""
-    phrase = quote(" ".join(words))
+    phrase = quote(_said(words))
     kind = _RELATION_START[words[0]]
     rest = words[1:]
     if words[0] == "next" or words[0] in ("closest", "nearest"):
@@ -890,7 +913,7 @@ def _free_twin(twins: tuple[str, ...], bound: Mapping[str, dict], phrase: list[s
     """The first of ``twins`` not yet bound to a reference, or the problem list saying none is left."""
     free = [n for n in twins if n not in bound]
     if not free:
-        return [("not_understood", f"{quote(' '.join(phrase))}: every one of {', '.join(twins)} is already picked "
+        return [("not_understood", f"{quote(_said(phrase))}: every one of {', '.join(twins)} is already picked "
                                    f"out by another part of the request")]
     return free[0]
 
@@ -952,10 +975,10 @@ def _reference(body: list[str], world: World, verb: str | None, bound: Mapping[s
         rel, dest, prep = rel[:cut], rel[cut + 1:], rel[cut]
     where, why = _read_relation(rel, world, twins)
     if why or where is None:
-        return why or [("not_understood", f"{quote(' '.join(rel))}: not a relation the rules read")]
+        return why or [("not_understood", f"{quote(_said(rel))}: not a relation the rules read")]
     free = [n for n in twins if n not in bound]
     if not free:
-        return [("not_understood", f"{quote(' '.join(body))}: every one of {', '.join(twins)} is already picked "
+        return [("not_understood", f"{quote(_said(body))}: every one of {', '.join(twins)} is already picked "
                                    f"out by another part of the request")]
     return free[0], where, dest, prep
 
@@ -1084,7 +1107,7 @@ def _read(meaning: Meaning, request: str, world: World, relations: bool) -> Mean
         excluded: tuple[str, ...] = ()
         if excluded_words and not problems:
             ex, _, why = _read_objects(excluded_words, world, ())
-            problems += [(code, f"except {quote(' '.join(excluded_words))}: {msg}") for code, msg in why]
+            problems += [(code, f"except {quote(_said(excluded_words))}: {msg}") for code, msg in why]
             excluded = ex
             objects = tuple(o for o in objects if o not in excluded)
             if not objects and not problems:

@@ -2148,9 +2148,10 @@ class Perceiver:
     def _body_attributes(self, name: str, position: np.ndarray, T_obj: np.ndarray, body: RoundBody | None,
                          std: float) -> dict:
         """An object's round body and handle as entity attributes: ``axis_xy`` (2,) and
-        ``handle_xy`` (2,) world (m; a unit vector) when ``body`` (in the object's frame, the
-        object's pose ``T_obj`` (4, 4) world) is known, with ``handle_reach_m`` how far from the
-        axis the handle reaches (m); and, for an object declared with
+        ``handle_xy`` (2,) world (m; a unit vector) and ``body_radius_m`` (the round body's
+        outline radius, m) when ``body`` (in the object's frame, the object's pose ``T_obj``
+        (4, 4) world) is known, with ``handle_reach_m`` how far from the axis the handle reaches
+        (m); and, for an object declared with
         ``handle_origin_m``, where its model's origin stands: ``origin_xy`` (2,) world, m, the
         axis that far towards the handle, with ``origin_std_m`` (1 sigma, m) -- the entity's
         centre ``position`` with the handle's offset added to its uncertainty when the handle
@@ -2158,7 +2159,7 @@ class Perceiver:
         out: dict = {}
         seen = None if body is None else body.placed(T_obj)
         if seen is not None:
-            out.update(axis_xy=_r(seen.axis_xy), handle_xy=_r(seen.handle_xy))
+            out.update(axis_xy=_r(seen.axis_xy), handle_xy=_r(seen.handle_xy), body_radius_m=_r(seen.radius_m))
             if seen.reach_m is not None:
                 out["handle_reach_m"] = _r(seen.reach_m)
         desc = next((d for d in self.declared if d.name == name), None)

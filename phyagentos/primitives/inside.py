@@ -9,7 +9,10 @@ hand that holds it (taken by its handle: :mod:`.handle_grasp`), to the back of t
 (``attributes.hinge_side``; centred without one: a door open less than a right angle leans
 over the mouth on its hinge's side, where the hand, 20 cm across its fingers, would meet it),
 just over the floor; the pre-place
-is straight out through the mouth until the whole object stands outside it.
+is straight out through the mouth until the whole object stands outside it. Whether it fits is
+judged by its footprint as perceived (:func:`footprint_reach`: a mug's round cup and handle, not
+the box round both, which can be turned to span more than the room is deep); where it goes, by
+its box.
 """
 
 from __future__ import annotations
@@ -23,7 +26,8 @@ from .affordance import _entity
 from .base import Primitive, PrimitiveFailure
 from .perception import entity_pose
 
-__all__ = ["ComputePlaceInside", "BACK_CLEAR_M", "ROOM_MARGIN_M", "VIEW_BACK_M", "VIEW_HEIGHT_M", "VIEW_PITCH_RAD"]
+__all__ = ["ComputePlaceInside", "footprint_reach", "UPRIGHT_COS", "BACK_CLEAR_M", "ROOM_MARGIN_M", "VIEW_BACK_M",
+           "VIEW_HEIGHT_M", "VIEW_PITCH_RAD"]
 
 #: The object's far side this far from the room's back wall, m: set deep, its near side (and a
 #: handle the hand holds there) stays clear of the door shutting the mouth.
@@ -38,11 +42,51 @@ ROOM_MARGIN_M = 0.005
 VIEW_BACK_M, VIEW_HEIGHT_M, VIEW_PITCH_RAD = 0.12, 0.12, 0.44
 
 
+#: An object counts as standing upright, for its round body's footprint, when its vertical axis
+#: is within about 25 degrees of the world's (the cosine): a mug carried level by its handle.
+UPRIGHT_COS = 0.9
+
+
+def footprint_reach(T_obj: np.ndarray, half: np.ndarray, attrs: dict):
+    """``reach(d)``: how far (m) the footprint of an object at ``T_obj`` ((4, 4) world pose of
+    its perceived box, ``half`` (3,) its half extents, m) reaches from the box's centre along
+    the horizontal world direction ``d`` ((2,) unit vector).
+
+    A round body with a handle (perception's ``axis_xy``, ``handle_xy``, ``handle_reach_m`` and
+    ``body_radius_m`` in ``attrs``: :mod:`phyagentos.perception.handle`), standing upright, is
+    its disc and the segment from its axis out to the handle's reach: from the axis,
+    ``max(radius, reach * (handle . d))``. Otherwise the box's projection on ``d``. The box of a
+    mug is the minimum-area rectangle round cup and handle, at whatever yaw that came out: LIBERO's
+    white and yellow mug, 10.7 by 10.4 cm, boxed at 50 degrees to its handle, spans 15.5 cm both
+    ways, where its cup (5.1 cm in radius) and its handle (8.4 cm from the axis) span 13.5 cm along
+    the handle and 10.3 across it (perceived on generated LIBERO-10 task 9 scenes)."""
+    T_obj = np.asarray(T_obj, dtype=float)
+    half = np.asarray(half, dtype=float)
+    try:
+        axis = np.asarray(attrs["axis_xy"], dtype=float).reshape(2)
+        handle = np.asarray(attrs["handle_xy"], dtype=float).reshape(2)
+        reach_m, radius = float(attrs["handle_reach_m"]), float(attrs["body_radius_m"])
+    except (KeyError, TypeError, ValueError):
+        axis = None
+    round_ = (axis is not None and abs(float(T_obj[2, 2])) >= UPRIGHT_COS and radius > 0.0 and reach_m >= 0.0
+              and np.all(np.isfinite(axis)) and float(np.linalg.norm(handle)) > 0.5)
+
+    def reach(d) -> float:
+        d = np.asarray(d, dtype=float)[:2]
+        if round_:
+            u = handle / float(np.linalg.norm(handle))
+            return float((axis - T_obj[:2, 3]) @ d) + max(radius, reach_m * float(u @ d))
+        return float(np.abs(T_obj[:3, :3].T @ np.array([d[0], d[1], 0.0])) @ half)
+
+    return reach
+
+
 class ComputePlaceInside(Primitive):
     """Place and pre-place tcp poses that set the held ``object`` down inside ``region`` (a
     room with a ``mouth``) keeping the hand's current orientation (module docstring): the
     object's lowest point ``clearance_m`` over the room's floor, to the back and away from the
-    door's hinge; the pre-place out along the
+    door's hinge (placed by its perceived box, its fit judged by its footprint:
+    :func:`footprint_reach`, a mug's cup and handle); the pre-place out along the
     mouth until the object's far side is ``entry_m`` outside it; and the pose the hand looks into
     the room from after letting go (:data:`VIEW_BACK_M`, :data:`VIEW_HEIGHT_M`,
     :data:`VIEW_PITCH_RAD`).
@@ -89,17 +133,27 @@ class ComputePlaceInside(Primitive):
         T_tcp = self.ctx.target.tcp_pose()
         T_tcp_obj = np.linalg.inv(T_tcp) @ T_obj
         R_o = T_obj[:3, :3]
-        along_o = float(np.abs(R_o.T @ np.array([mouth[0], mouth[1], 0.0])) @ half_o)
-        across_o = float(np.abs(R_o.T @ np.array([across[0], across[1], 0.0])) @ half_o)
+        reach = footprint_reach(T_obj, half_o, _entity(snapshot, self.object).get("attributes") or {})
+        # how far the object's footprint reaches from its centre to the room's back, to the mouth, and
+        # to either side (m): a mug's round cup and its handle, not the box round both turned
+        to_back, to_mouth = reach(-mouth), reach(mouth)
+        to_plus, to_minus = reach(across), reach(-across)
         up_o = float(np.abs(R_o[2, :]) @ half_o)
-        fits = (across_o + ROOM_MARGIN_M <= width and 2.0 * up_o + self.clearance_m + ROOM_MARGIN_M <= roof_z - floor_z
-                and 2.0 * along_o + BACK_CLEAR_M <= 2.0 * depth)
+        fits = (to_plus + to_minus + 2.0 * ROOM_MARGIN_M <= 2.0 * width
+                and 2.0 * up_o + self.clearance_m + ROOM_MARGIN_M <= roof_z - floor_z
+                and to_back + to_mouth + BACK_CLEAR_M <= 2.0 * depth)
         if not fits:
-            raise PrimitiveFailure("perception.too_small", f"{self.object!r} ({2 * along_o:.3f} x {2 * across_o:.3f} x "
-                                                      f"{2 * up_o:.3f} m as held) does not fit in {self.region!r} "
-                                                      f"({2 * depth:.3f} deep, {2 * width:.3f} wide, "
-                                                      f"{roof_z - floor_z:.3f} m under its roof)")
-        side = float(attrs.get("hinge_side") or 0.0)  # away from the door's hinge: the open door leans over that side
+            raise PrimitiveFailure("perception.too_small", f"{self.object!r} ({to_back + to_mouth:.3f} x "
+                                                      f"{to_plus + to_minus:.3f} x {2 * up_o:.3f} m as held) does not "
+                                                      f"fit in {self.region!r} ({2 * depth:.3f} deep, {2 * width:.3f} "
+                                                      f"wide, {roof_z - floor_z:.3f} m under its roof)")
+        # where it goes is reckoned by its box, as before: the box errs outward round a mug's cup
+        # and handle, and so set, to the back and away from the door's hinge (the open door leans
+        # over that side; centred without one), the cup stands a little nearer the mouth, in view
+        # of the look into the room, and the hand stays off the mouth's frame
+        box = footprint_reach(T_obj, half_o, {})
+        along_o, across_o = box(mouth), box(across)
+        side = float(attrs.get("hinge_side") or 0.0)
         shift = -side * max(0.0, width - across_o - ROOM_MARGIN_M)
         xy = back + (BACK_CLEAR_M + along_o) * mouth + (float((centre - back) @ across) + shift) * across
         p_obj = np.array([xy[0], xy[1], floor_z + up_o + self.clearance_m])

@@ -8,7 +8,8 @@ import pytest
 import yaml
 
 from phyagentos.agent.llm.meaning import read_request
-from phyagentos.bench.libero import FIRST_PICK_STILL_MAX_S, instruction_nodes, instruction_plan, planner_world, prepare_libero_suite
+from phyagentos.bench.libero import (FIRST_PICK_STILL_MAX_S, instruction_assumptions, instruction_nodes, instruction_plan,
+                                     planner_world, prepare_libero_suite)
 from phyagentos.errors import BenchError
 from phyagentos.targets.libero import parse_bddl, resolve_task
 from phyagentos.targets.libero.catalog import suite_tasks
@@ -282,6 +283,10 @@ def test_the_frying_pan_is_the_declared_frypan():
     with pytest.raises(BenchError, match="'the frying pan under the shelf': 'under', 'shelf' names no") as refused:
         instruction_nodes("put the frying pan under the shelf on the stove", problem.objects, problem.fixtures)
     assert "frypan under" not in str(refused.value)
+    # ... and so does a word set aside: "the one frying pan"
+    assert instruction_assumptions("put the cast iron frying pan on the stove", problem.objects,
+                                   problem.fixtures) == [
+        "'the cast iron frying pan': 'cast', 'iron' name nothing here; read as chefmate_8_frypan_1, the one frying pan"]
 
 
 def test_a_landmark_named_by_the_colour_its_name_implies_is_that_thing():

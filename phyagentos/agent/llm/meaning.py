@@ -501,7 +501,7 @@ def _set_aside(words: list[str], unknown: list[str], world: World,
         return None
     said = ", ".join(repr(w) for w in unknown)
     note = (f"{quote(_said(words))}: {said} {'names' if len(unknown) == 1 else 'name'} nothing here; read as "
-            f"{objects[0]}, the one {words[noun]}")
+            f"{objects[0]}, the one {_said_word(words[noun])}")
     assumed = _ASSUMED.get()
     if assumed is not None and note not in assumed:
         assumed.append(note)

@@ -347,7 +347,7 @@ def test_an_object_seen_resting_in_a_container_is_not_found_higher_up_its_walls(
     t.released_s, t.inside_of = 0.5, "basket_1"
     at = {"z": 0.0}
 
-    def found(track, cloud, heights, dets, indices, sensors, others=()):
+    def found(track, cloud, heights, dets, indices, sensors, others=(), *, tracked_top_m=None):
         return 0, np.array([0.55, 0.05, at["z"]]), 0.8, 120, ("front",), 0.03
 
     monkeypatch.setattr(perceiver_module, "_released_inside", found)
@@ -451,7 +451,7 @@ def test_an_object_found_let_go_in_a_segment_named_nothing_is_looked_for_there_a
     t.released_s, t.inside_of = 0.5, known_container
     calls = []
 
-    def found(track, cloud, heights, dets, indices, sensors, others=()):
+    def found(track, cloud, heights, dets, indices, sensors, others=(), *, tracked_top_m=None):
         calls.append(track.name)
         return 0, np.array([0.55, 0.05, 0.1]), 0.8, 120, ("front",), 0.03
 

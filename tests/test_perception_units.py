@@ -466,6 +466,28 @@ def test_a_can_that_rolled_off_is_not_found_on_the_face_of_another_in_the_basket
     assert _released_inside(sauce, cloud, h, [basket], [idx], ["wrist"], [soup]) is None
 
 
+def test_a_can_seen_on_another_in_the_basket_is_found_again_at_the_height_where_it_was_seen():
+    """LIBERO-10 task 0 (development seed 509): the tomato sauce stood on the alphabet soup in the
+    basket, its lid seen 7.0 cm over the soup's top; its look, 9.14 cm tall on LIBERO-10's
+    living-room table, put its base 2.1 cm into the soup, so every later look left it unfound and
+    the place unjudged. Seen inside before and not moved since, what stands at the height where
+    it was seen is it; a face 3 cm higher is not."""
+    from phyagentos.perception.perceiver import _released_inside
+
+    soup_top = 0.025 + 0.0916 - 0.012
+    sauce_top = soup_top + 0.070
+    cloud, h, basket, idx = _basket_with([((0.0, 0.0), (0.034, 0.034), "cylinder", soup_top),
+                                          ((0.02, 0.0), (0.034, 0.034), "cylinder", sauce_top)])
+    sauce = _let_go("tomato_sauce_1", (0.034, 0.034, 0.0457), "cylinder", (0.02, 0.0))
+    sauce.released_s, sauce.inside_of = None, "basket_1"  # seen inside it since
+    soup = (np.array([0.0, 0.0]), np.array([0.034, 0.034]), 0.0, "cylinder", soup_top)
+    assert _released_inside(sauce, cloud, h, [basket], [idx], ["wrist"], [soup]) is None  # its look: too short
+    hit = _released_inside(sauce, cloud, h, [basket], [idx], ["wrist"], [soup], tracked_top_m=sauce_top + 0.006)
+    assert hit is not None and hit[2] > 0.8 and hit[5] == pytest.approx(sauce_top, abs=0.003)
+    assert np.linalg.norm(hit[1][:2] - (0.02, 0.0)) < 0.01
+    assert _released_inside(sauce, cloud, h, [basket], [idx], ["wrist"], [soup], tracked_top_m=sauce_top + 0.03) is None
+
+
 def test_a_box_let_go_onto_another_in_the_basket_is_found_resting_on_it():
     """LIBERO-10 task 1: the butter set down where the cream cheese box lies in the basket
     rests on the box; its face, higher over the box's footprint than the box's own top, is

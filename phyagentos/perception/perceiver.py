@@ -1027,8 +1027,7 @@ class Perceiver:
         for name, t in sorted(self.tracks.items(), key=lambda kv: kv[1].released_s is None):
             if t.seen_now or t.held or (t.released_s is None and t.inside_of is None):
                 continue
-            seen_top = None if t.released_s is not None else \
-                (t.face_top_m if t.face_top_m is not None else float(t.bottom_m + 2.0 * t.half_extents[2]))
+            seen_top = None if t.released_s is not None else _seen_top(t)
             hit = _released_inside(t, cloud, heights, in_part, [idx for _, idx in clusters], sensors,
                                    self._other_footprints(name), tracked_top_m=seen_top)
             if hit is None:
@@ -1877,7 +1876,7 @@ class Perceiver:
         else its bottom plus its height."""
         threshold = self.config.relations.min_confidence
         return [(t.position[:2].copy(), t.half_extents[:2].copy(), float(t.yaw), t.shape,
-                 float(t.bottom_m + 2.0 * t.half_extents[2]) if t.face_top_m is None else t.face_top_m)
+                 _seen_top(t))
                 for n, t in self.tracks.items()
                 if n != name and not t.held and t.released_s is None
                 and (t.confidence >= threshold or t.seen_now or t.face_top_m is not None)
@@ -2664,6 +2663,12 @@ def _still_inside(container: str | None, det: Detection, dets: list[Detection], 
         return None
     low = det.low_m if height_m is None else min(det.low_m, det.top_m - height_m)
     return container if low < c.top_m - 0.02 else None
+
+
+def _seen_top(t: Track) -> float:
+    """Track ``t``'s top, m above the support plane: the face seen between a container's walls
+    where it was found there, else its bottom plus its height."""
+    return float(t.bottom_m + 2.0 * t.half_extents[2]) if t.face_top_m is None else float(t.face_top_m)
 
 
 def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Detection], indices: list[np.ndarray],

@@ -147,6 +147,34 @@ def oversized(ext: np.ndarray, descriptors: Sequence[ObjectDescriptor], config: 
     return bool(descriptors) and not any(_fits(ext, d, config) for d in descriptors)
 
 
+def outgrows_names(ext: np.ndarray, descriptors: Sequence[ObjectDescriptor], costs: np.ndarray,
+                   config: PerceptionConfig) -> bool:
+    """Whether a segment of extent ``ext`` (:func:`extent`, m) is larger than every declared
+    look that names it: those whose association cost ``costs`` (one per descriptor, as
+    :func:`~.association.cost_matrix` gives its row) is at most ``association.gate_cost``.
+    False where no look names it (that segment is judged by :func:`split_clusters`' unnamed
+    rule) or where a look that names it has no declared size."""
+    naming = [d for d, c in zip(descriptors, costs) if float(c) <= config.association.gate_cost]
+    return bool(naming) and not any(_fits(ext, d, config) for d in naming)
+
+
+def stand_apart(parts: Sequence[Detection], plane: Plane, config: PerceptionConfig) -> bool:
+    """Whether the parts of a split (fitted, not yet stacked) that rest at one level (their
+    bottoms, once stacked, within :data:`ONE_PLACE_HEIGHT_M`) stand apart: each pair's
+    centres at least the larger's footprint radius (largest horizontal half extent) apart,
+    so that neither centre lies inside the other's footprint. Two things on one surface cannot
+    overlap; parts that do are one body cut by its colour or shading."""
+    rested = stack(list(parts), plane, config)
+    for k, a in enumerate(rested):
+        for b in rested[k + 1:]:
+            if abs(a.bottom_m - b.bottom_m) > ONE_PLACE_HEIGHT_M:
+                continue
+            reach = max(float(np.max(a.half_extents[:2])), float(np.max(b.half_extents[:2])))
+            if float(np.linalg.norm(np.asarray(a.position[:2]) - np.asarray(b.position[:2]))) < reach:
+                return False
+    return True
+
+
 def _pieces(xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int], grow: int = 1) -> np.ndarray:
     """(N,) label of the 8-connected group of grid cells (:data:`GRID_M`) each point of
     ``xy`` (N, 2) falls in, the occupied cells dilated by ``grow`` cells (gaps up to about
@@ -814,15 +842,31 @@ def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Clou
         rests_at = rested.bottom_m if supports else 0.0
         scored = _split_scored(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors,
                                rests_at_m=rests_at, patch_m=rests_at)
-        if scored is None and descriptors and not oversized(
-                extent(cloud.points[idx], heights[idx]) - np.array([0.0, 0.0, rests_at]), descriptors, config):
+        ext = extent(cloud.points[idx], heights[idx]) - np.array([0.0, 0.0, rests_at])
+        if scored is None and descriptors and not oversized(ext, descriptors, config):
             # within some look's size, yet named by none (every look costs more than the
             # association's gate): objects touching may still make it up, each explaining its
             # part better than any look explains the whole
-            whole = float(cost_matrix([rested], list(descriptors), config).min())
-            if whole > config.association.gate_cost:
+            costs = cost_matrix([rested], list(descriptors), config)[0]
+            whole = float(costs.min())
+            gate = config.association.gate_cost
+            if whole > gate:
                 scored = _split_scored(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors,
                                        rests_at_m=rests_at, patch_m=rests_at, below_cost=whole, unnamed=True)
+            elif outgrows_names(ext, descriptors, costs, config):
+                # named only by looks it outgrows: a low thing against a tall one is fitted by the
+                # tall one's top and named as it, its own points spread past that look's size
+                # (LIBERO-10 task 1: the cream cheese box, 3 cm tall, against the orange juice
+                # carton fallen beside it, 14.1 by 7.2 cm of points named as the 5.6 by 4.7 cm
+                # carton): split as a segment larger than every look is
+                scored = _split_scored(cloud.select(idx), heights[idx], plane, config, focal_px, descriptors,
+                                       rests_at_m=rests_at, patch_m=rests_at, unnamed=True)
+                if scored is not None and not stand_apart([d for d, _ in scored[0]], plane, config):
+                    # one body cut in two (a ketchup bottle with a strip of low points at its foot,
+                    # cut by colour into two bottles 8 mm apart), not the things the rule is for
+                    log.debug("split: the parts of a segment outgrowing its names overlap where they stand: "
+                              "kept whole")
+                    scored = None
         if scored is None:
             out.append((det, idx))
             continue

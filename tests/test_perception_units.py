@@ -504,3 +504,33 @@ def test_a_box_let_go_onto_another_in_the_basket_is_found_resting_on_it():
     hit = _released_inside(butter, cloud, h, [basket], [idx], ["wrist"], [cheese])
     assert hit is not None and hit[2] > 0.9
     assert hit[1][2] == pytest.approx(cheese_top + 0.0152, abs=0.004)  # on the box
+
+
+def test_a_piece_seen_inside_a_container_is_never_a_second_sighting_of_it():
+    """LIBERO-10 task 1 (init 32): a strip of the basket's lining between its walls matched the
+    basket's look at 0.57 (both cut by the image border: no size judged short) against the whole
+    basket's 0.08, within the ambiguity margin: both were left unknown, and the place into the
+    basket found no basket. Nothing lies inside itself; what lies inside a container may still be
+    anything else, and a thing beside it or standing above its top is not inside it."""
+    from phyagentos.perception.association import FORBIDDEN_COST
+    from phyagentos.perception.perceiver import _not_inside_itself
+
+    cfg = PerceptionConfig.default()
+    basket = _det((0.6, 0.5, 0.3), half=(0.08, 0.075, 0.076), pos=(0.0, 0.245, 0.076))
+    strip = _det((0.6, 0.5, 0.3), half=(0.044, 0.008, 0.0155), pos=(0.004, 0.279, 0.0155))
+    can = _det((0.8, 0.1, 0.1), "cylinder", half=(0.034, 0.034, 0.046), pos=(0.0, 0.22, 0.046))
+    beside = _det((0.6, 0.5, 0.3), half=(0.03, 0.03, 0.02), pos=(0.0, 0.36, 0.02))
+    tall = _det((0.6, 0.5, 0.3), half=(0.02, 0.02, 0.1), pos=(0.0, 0.245, 0.1))
+    dets = [basket, strip, can, beside, tall]
+    # looks: basket_1, can_1
+    C = np.array([[0.08, 9.0], [0.57, 2.0], [8.0, 0.2], [0.9, 2.5], [1.2, 3.0]])
+    out = _not_inside_itself(C, dets, cfg.association.gate_cost)
+    assert out[1, 0] == FORBIDDEN_COST  # the strip inside the basket is not the basket
+    assert out[1, 1] == 2.0  # it may still be something else the basket does not explain
+    assert out[2, 1] == 0.2 and out[2, 0] == FORBIDDEN_COST  # the can inside: a can, never the basket
+    assert out[3, 0] == 0.9 and out[4, 0] == 1.2  # beside it, or higher than its top: not inside
+    assert C[1, 0] == 0.57  # the input is left as it was
+    before = associate(C[:2, :1], cfg)  # the basket and the strip, for the basket's name alone
+    assert 0 in before.ambiguous and 1 in before.ambiguous
+    after = associate(out[:2, :1], cfg)
+    assert after.matches[0][0] == 0 and not after.ambiguous

@@ -5,9 +5,11 @@ box or a ramekin) into one segment, which then matches no declared object. A seg
 *oversized* (:func:`oversized`) when its extent -- the long and short sides of the minimum-area
 rectangle of all its points' footprint and its height (98th percentile above the support
 plane) -- exceeds, in some dimension, every declared object's size by
-``clustering.split_size_tolerance`` of it plus ``clustering.split_size_margin_m``. Only then,
-and only against the declared looks (colour, size, shape as the user declares them), is it
-split (:func:`split_cluster`); nothing here reads a simulator.
+``clustering.split_size_tolerance`` of it plus ``clustering.split_size_margin_m``. Only then
+(or where no look names it, or where it is larger than every look that names it with enough
+of its points beyond its fitted top: :func:`split_clusters`), and only against the declared
+looks (colour, size, shape as the user declares them), is it split (:func:`split_cluster`);
+nothing here reads a simulator.
 
 Candidate partitions (RGB-D only), at cut heights ``z`` from 1 cm above the plane to 1 cm below the
 segment's top, every 5 mm (at most :data:`MAX_LEVELS`):
@@ -846,6 +848,12 @@ def split_clusters(clusters: Sequence[tuple[Detection, np.ndarray]], cloud: Clou
     within ``clustering.split_max_cost`` of a look, cost less on average than the whole does:
     two cans standing side by side (LIBERO-10 task 7, init 4: 14.4 by 6.8 cm, 9.2 cm tall)
     fit inside the basket's size and were never tried as touching objects.
+
+    So is one that the looks naming it are all smaller than (:func:`outgrows_names`), with at
+    least :data:`BEYOND_FIT_FRACTION` of its points beyond the footprint it was fitted to
+    (:func:`beyond_fit`), split as an oversized one is, unless the chosen parts resting at one
+    level overlap (:func:`stand_apart`): the cream cheese box against the orange juice carton
+    (LIBERO-10 task 1) was named as the carton, whose top the fit took.
 
     ``supports``: the fixtures' place patches (pseudo-detections). A segment that rests on one
     (:func:`~.detect.stack`) is oversized by its height above the patch: a bowl on a stove's

@@ -73,7 +73,6 @@ spatial reference picks out (what stands on it is).
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import replace
 from typing import Sequence
 
@@ -86,6 +85,7 @@ from phyagentos.perception.colour import srgb_to_lab
 from phyagentos.perception.config import PerceptionConfig
 from phyagentos.perception.descriptors import ObjectDescriptor
 from phyagentos.perception.detect import Detection, fit_cluster, resting_at, stack
+from phyagentos.perception.relations import _footprint_margins
 from phyagentos.perception.top_knob import KNOB_MAX_RADIUS_M, KNOB_MIN_POINTS, KNOB_SLICE_M, KNOB_TOP_RANK, top_knob
 
 __all__ = ["GRID_M", "MAX_LEVELS", "MAX_DROPPED", "SAME_PART_M", "MIN_COLOUR_SPLIT_LAB", "COLOUR_NEIGHBOURS",
@@ -175,12 +175,8 @@ def beyond_fit(points: np.ndarray, det: Detection) -> int:
     """How many of a cluster's (N, 3) world ``points`` lie outside the footprint it was fitted
     to (``det``'s rectangle from its top face, grown by :data:`BEYOND_FIT_MARGIN_M` each side):
     the points of something else standing against what named it."""
-    xy = np.asarray(points, float)[:, :2] - np.asarray(det.position[:2], float)
-    c, s_ = math.cos(det.yaw), math.sin(det.yaw)
-    u, v = c * xy[:, 0] + s_ * xy[:, 1], -s_ * xy[:, 0] + c * xy[:, 1]
-    out = (np.abs(u) > float(det.half_extents[0]) + BEYOND_FIT_MARGIN_M) | \
-        (np.abs(v) > float(det.half_extents[1]) + BEYOND_FIT_MARGIN_M)
-    return int(np.count_nonzero(out))
+    margins = _footprint_margins(np.asarray(points, float)[:, :2], det.position, det.yaw, det.half_extents, "box")
+    return int(np.count_nonzero(margins < -BEYOND_FIT_MARGIN_M))
 
 
 def stand_apart(parts: Sequence[Detection], plane: Plane, config: PerceptionConfig) -> bool:

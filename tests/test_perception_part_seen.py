@@ -6,7 +6,9 @@ only in part (11.8-12.8 cm of its 13.8 cm across; the rest hidden); three such s
 track 1.6 cm towards what showed, the mug was set down that far off the plate's true centre and
 its place was judged undecided. A sighting narrower than both its track and its declared look,
 all within the track's footprint, with the tcp clear of it, confirms the object there and never
-moves it (``Perceiver._part_within_track``).
+moves it (``Perceiver._part_within_track``). Clear of it is beside it, or high over it with
+nothing held (LIBERO-10 task 4, generated seeds 500 and 501: looking down at the mug just let go
+onto its plate, 22 cm over the plate's top, the plate seen round the mug moved 14 mm).
 
 The scene is the tabletop Franka with a static plate (:mod:`phyagentos.perception.synthetic`);
 the later looks' detections of the plate are replaced by what shows of it with a strip on one
@@ -15,6 +17,7 @@ side hidden, so only the perceiver's handling of a part is under test.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 
 import numpy as np
@@ -29,6 +32,8 @@ pytestmark = pytest.mark.sim
 CFG = PerceptionConfig.model_validate({"clustering": {"chromaticity_scale": 2.0, "lightness_scale": 10.0,
                                                       "eps_m": 0.015}})
 PLATE = SyntheticObject("plate_1", "cylinder", (0.07, 0.07, 0.0075), (0.50, 0.10), rgba=(0.85, 0.85, 0.88, 1))
+#: The plate's top, m (it rests on the table at z 0).
+TOP_M = 2 * PLATE.half_extents[2]
 #: The plate's strip beyond this, m from its centre along world y, hidden in the later looks.
 HIDDEN_BEYOND_M = 0.05
 
@@ -40,21 +45,24 @@ def scene():
     s.close()
 
 
-def _look(scene, perceiver, seed, tcp_xy):
+def _look(scene, perceiver, seed, tcp_xy, tcp_z=None):
     frames = [scene.capture(c, noise=CameraNoise(), rng=np.random.default_rng(seed)) for c in ("front", "side")]
     proprio = scene.proprioception()
     T = proprio.tcp_pose.copy()
     T[:2, 3] = tcp_xy
+    if tcp_z is not None:
+        T[2, 3] = tcp_z
     snap = perceiver.observe(frames, replace(proprio, tcp_pose=T))
     return {e["name"]: e for e in snap["entities"]}
 
 
-def _third_look(scene, monkeypatch, *, tcp_xy, kept_rule: bool = True, moved_to=None,
-                size_m=(0.14, 0.14, 0.015)) -> np.ndarray:
+def _third_look(scene, monkeypatch, *, tcp_xy, tcp_z=None, holding: bool = False, kept_rule: bool = True,
+                moved_to=None, size_m=(0.14, 0.14, 0.015)) -> np.ndarray:
     """The plate's perceived centre (2,) world m after two looks at it whole and three whose
     detection of it is what shows with its strip beyond :data:`HIDDEN_BEYOND_M` (world +y)
     hidden, fitted there (centre and half extents of what shows); the tcp at ``tcp_xy`` (2,)
-    world m in those three; ``kept_rule`` False: the rule switched off; ``moved_to``: the
+    world m in those three (at ``tcp_z`` m high, else the scene's 0.368 m); ``holding``: the
+    perceiver has a track held in the hand then; ``kept_rule`` False: the rule switched off; ``moved_to``: the
     plate stands there (2,) world m in the third look."""
     scene.place([PLATE])
     declared = [ObjectDescriptor("plate_1", shape="cylinder", colour_rgb=PLATE.rgba[:3], size_m=size_m)]
@@ -81,10 +89,14 @@ def _third_look(scene, monkeypatch, *, tcp_xy, kept_rule: bool = True, moved_to=
         return out
 
     monkeypatch.setattr(perceiver_module, "split_clusters", part)
+    if holding:  # something in the hand, off the table: the held track's own sightings do not matter
+        held = copy.copy(perceiver.tracks["plate_1"])
+        held.name, held.held = "mug_1", True
+        perceiver.tracks["mug_1"] = held
     if not kept_rule:
         monkeypatch.setattr(Perceiver, "_part_within_track", staticmethod(lambda *a: False))
     for seed in (3, 4, 5):  # three such sightings, as the lifted mug's
-        third = _look(scene, perceiver, seed, tcp_xy)["plate_1"]
+        third = _look(scene, perceiver, seed, tcp_xy, tcp_z)["plate_1"]
     monkeypatch.undo()
     scene.place([PLATE])
     return np.asarray(third["position"][:2])
@@ -99,8 +111,21 @@ def test_a_still_plate_seen_in_part_with_the_hand_clear_is_kept_where_it_was_see
 
 
 def test_a_part_seen_with_the_hand_at_the_plate_is_fused_as_any_sighting(scene, monkeypatch):
-    # the tcp over the plate: the hand may be moving it (a push, a grasp)
-    fused = _third_look(scene, monkeypatch, tcp_xy=PLATE.position)
+    # the tcp over the plate, 5 cm over its top: the hand may be moving it (a push, a grasp)
+    fused = _third_look(scene, monkeypatch, tcp_xy=PLATE.position, tcp_z=TOP_M + 0.05)
+    assert np.linalg.norm(fused - PLATE.position) > 0.006, fused
+
+
+def test_a_part_seen_with_the_empty_hand_high_over_the_plate_is_kept_where_it_was_seen_whole(scene, monkeypatch):
+    # the scene's tcp, 35 cm over the plate's top, over its centre: looking down at what was let go
+    # onto it, the hand reaches nothing there
+    kept = _third_look(scene, monkeypatch, tcp_xy=PLATE.position)
+    assert np.linalg.norm(kept - PLATE.position) < 0.003, kept
+    # 10 cm over its top is not high enough
+    fused = _third_look(scene, monkeypatch, tcp_xy=PLATE.position, tcp_z=TOP_M + 0.09)
+    assert np.linalg.norm(fused - PLATE.position) > 0.006, fused
+    # holding something, the hand high over the plate may be setting it down there, pushing it
+    fused = _third_look(scene, monkeypatch, tcp_xy=PLATE.position, holding=True)
     assert np.linalg.norm(fused - PLATE.position) > 0.006, fused
 
 

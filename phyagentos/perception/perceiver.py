@@ -284,8 +284,16 @@ COVERED_OUTSIDE_FRACTION = 0.05
 #: grid's size: whole sightings of one plate differ by 1-2 mm.
 PART_NARROWER_M = 0.004
 #: ... unless the tcp stands within this of the track's footprint, m (horizontally): a hand at
-#: the object may be moving it (a push, a grasp), and its sighting counts as it is.
+#: the object may be moving it (a push, a grasp), and its sighting counts as it is...
 PART_HAND_CLEAR_M = 0.03
+#: ... or, over the footprint, stands more than this above the track's top, m, holding nothing:
+#: a hand that high reaches nothing there (the Franka Hand's fingertips are 1.5 cm below its
+#: tcp, ``motion.grasp.FINGERTIP_BELOW_TCP_M``; pitched 50 degrees, as for a mug's handle, its
+#: fingers and knuckles reach about 8 cm below it), so what it hides is hidden, not moved
+#: (LIBERO-10 task 4, generated seeds 500 and 501: looking down at the mug just let go onto its
+#: plate from 22 cm over the plate's top, the plate seen round the mug moved 14 mm off where it
+#: stands).
+PART_HAND_ABOVE_M = 0.10
 #: A fixture's model footprint (:meth:`~.fixtures.FixtureLook.in_model`) grown by this for its own
 #: points, m: the voxel grid. Not the body's 1.5 cm: a plate standing 5 mm from the wine rack's
 #: base (LIBERO-PRO's ``libero_goal_swap``) would lose its rim.
@@ -1828,7 +1836,8 @@ class Perceiver:
         its ``size_range_m``, else its ``size_m``; half extents compared sorted, so a box's axes
         need not agree) and wider than ``t`` along none; its points within the track's footprint
         (:meth:`_covered_within_track`); and the tcp more than :data:`PART_HAND_CLEAR_M` outside
-        that footprint. A part's centre lies off the object's towards what shows (by half of
+        that footprint, or more than :data:`PART_HAND_ABOVE_M` above the track's top with no
+        object held. A part's centre lies off the object's towards what shows (by half of
         what is hidden), so fusing it would move a still object. An object declared without
         its three dimensions is never taken for a part (a track begun on too large a segment
         would otherwise never take the true size)."""
@@ -1847,7 +1856,11 @@ class Perceiver:
         if not Perceiver._covered_within_track(t, xy):
             return False
         hand = _footprint_margins(proprio.tcp_pose[:2, 3], t.position, t.yaw, t.half_extents, t.shape)
-        return float(hand[0]) < -PART_HAND_CLEAR_M
+        if float(hand[0]) < -PART_HAND_CLEAR_M:
+            return True
+        top = float(t.position[2] + t.half_extents[2])
+        holding = any(other.held for other in self.tracks.values())
+        return not holding and float(proprio.tcp_pose[2, 3]) > top + PART_HAND_ABOVE_M
 
     def _inside_where_let_go(self, name: str, det: Detection, placed: np.ndarray | None, cloud: Cloud,
                              heights: np.ndarray, dets: list[Detection], clusters, sensors: list[str]) -> bool:

@@ -286,13 +286,13 @@ PART_NARROWER_M = 0.004
 #: ... unless the tcp stands within this of the track's footprint, m (horizontally): a hand at
 #: the object may be moving it (a push, a grasp), and its sighting counts as it is...
 PART_HAND_CLEAR_M = 0.03
-#: ... or, over the footprint, stands more than this above the track's top, m, holding nothing:
-#: a hand that high reaches nothing there (the Franka Hand's fingertips are 1.5 cm below its
+#: ... or, over the footprint, stands more than this above the track's top, m, the fingers
+#: squeezing nothing: a hand that high reaches nothing there (the Franka Hand's fingertips are 1.5 cm below its
 #: tcp, ``motion.grasp.FINGERTIP_BELOW_TCP_M``; pitched 50 degrees, as for a mug's handle, its
 #: fingers and knuckles reach about 8 cm below it), so what it hides is hidden, not moved
 #: (LIBERO-10 task 4, generated seeds 500 and 501: looking down at the mug just let go onto its
-#: plate from 22 cm over the plate's top, the plate seen round the mug moved 14 mm off where it
-#: stands).
+#: plate from 22 cm over the plate's top, the plate seen round the mug moved 13-15 mm off where
+#: it stands; the mug's track was then still held, so the fingers, not the tracks, say so).
 PART_HAND_ABOVE_M = 0.10
 #: A fixture's model footprint (:meth:`~.fixtures.FixtureLook.in_model`) grown by this for its own
 #: points, m: the voxel grid. Not the body's 1.5 cm: a plate standing 5 mm from the wine rack's
@@ -1836,8 +1836,8 @@ class Perceiver:
         its ``size_range_m``, else its ``size_m``; half extents compared sorted, so a box's axes
         need not agree) and wider than ``t`` along none; its points within the track's footprint
         (:meth:`_covered_within_track`); and the tcp more than :data:`PART_HAND_CLEAR_M` outside
-        that footprint, or more than :data:`PART_HAND_ABOVE_M` above the track's top with no
-        object held. A part's centre lies off the object's towards what shows (by half of
+        that footprint, or more than :data:`PART_HAND_ABOVE_M` above the track's top, the
+        fingers squeezing nothing (:func:`_fingers_squeeze`). A part's centre lies off the object's towards what shows (by half of
         what is hidden), so fusing it would move a still object. An object declared without
         its three dimensions is never taken for a part (a track begun on too large a segment
         would otherwise never take the true size)."""
@@ -1859,8 +1859,7 @@ class Perceiver:
         if float(hand[0]) < -PART_HAND_CLEAR_M:
             return True
         top = float(t.position[2] + t.half_extents[2])
-        holding = any(other.held for other in self.tracks.values())
-        return not holding and float(proprio.tcp_pose[2, 3]) > top + PART_HAND_ABOVE_M
+        return not _fingers_squeeze(proprio, self.config) and float(proprio.tcp_pose[2, 3]) > top + PART_HAND_ABOVE_M
 
     def _inside_where_let_go(self, name: str, det: Detection, placed: np.ndarray | None, cloud: Cloud,
                              heights: np.ndarray, dets: list[Detection], clusters, sensors: list[str]) -> bool:
@@ -2605,6 +2604,14 @@ def width_in_hand(half_extents: np.ndarray, yaw: float, shape: str, proprio: Pro
     return min((width, 2.0 * float(half_extents[0]), 2.0 * float(half_extents[1])), key=lambda w: abs(w - gap))
 
 
+def _fingers_squeeze(proprio: Proprioception, config: PerceptionConfig) -> bool:
+    """Whether the fingers squeeze something now: open more than ``holding.min_opening_m`` (m per
+    finger) with at least ``holding.min_effort_n`` of effort (N); a hand open and still, or closed
+    on nothing, squeezes nothing."""
+    hc = config.holding
+    return proprio.gripper_opening_m > hc.min_opening_m and abs(proprio.gripper_effort_n) >= hc.min_effort_n
+
+
 def _hangs_from_hand(det: Detection, proprio: Proprioception, config: PerceptionConfig) -> bool:
     """``det`` is the part of a held object that hangs below the fingers (the gripper box
     masks only the fingers; a tall bottle grasped near its top shows its lower half): the
@@ -2617,7 +2624,7 @@ def _hangs_from_hand(det: Detection, proprio: Proprioception, config: Perception
     and under a closed hand that squeezes it is carried by the hand; an object standing on
     the table shows points down to the plane and is never taken for it."""
     hc = config.holding
-    if proprio.gripper_opening_m <= hc.min_opening_m or abs(proprio.gripper_effort_n) < hc.min_effort_n:
+    if not _fingers_squeeze(proprio, config):
         return False
     if det.low_m <= hc.lift_height_m or det.bottom_m > 1e-6:
         return False

@@ -287,12 +287,13 @@ PART_NARROWER_M = 0.004
 #: the object may be moving it (a push, a grasp), and its sighting counts as it is...
 PART_HAND_CLEAR_M = 0.03
 #: ... or, over the footprint, stands more than this above the track's top, m, the fingers
-#: squeezing nothing: a hand that high reaches nothing there (the Franka Hand's fingertips are 1.5 cm below its
-#: tcp, ``motion.grasp.FINGERTIP_BELOW_TCP_M``; pitched 50 degrees, as for a mug's handle, its
-#: fingers and knuckles reach about 8 cm below it), so what it hides is hidden, not moved
-#: (LIBERO-10 task 4, generated seeds 500 and 501: looking down at the mug just let go onto its
-#: plate from 22 cm over the plate's top, the plate seen round the mug moved 13-15 mm off where
-#: it stands; the mug's track was then still held, so the fingers, not the tracks, say so).
+#: squeezing nothing: the Franka Hand's fingertips are 1.5 cm below its tcp
+#: (``motion.grasp.FINGERTIP_BELOW_TCP_M``), so an empty hand that high touches nothing there and
+#: what it hides is hidden, not moved; the rest of the margin is for a hand pitched or turned
+#: (LIBERO-10 task 4, generated seeds 500-508: looking down at the mug just let go onto its plate
+#: from 22 cm over the plate's top, the plate seen round the mug moved 13-15 mm off where it
+#: stands; the mug's track was then still held, so the fingers, not the tracks, say whether
+#: something is held).
 PART_HAND_ABOVE_M = 0.10
 #: A fixture's model footprint (:meth:`~.fixtures.FixtureLook.in_model`) grown by this for its own
 #: points, m: the voxel grid. Not the body's 1.5 cm: a plate standing 5 mm from the wine rack's
@@ -1837,8 +1838,9 @@ class Perceiver:
         need not agree) and wider than ``t`` along none; its points within the track's footprint
         (:meth:`_covered_within_track`); and the tcp more than :data:`PART_HAND_CLEAR_M` outside
         that footprint, or more than :data:`PART_HAND_ABOVE_M` above the track's top, the
-        fingers squeezing nothing (:func:`_fingers_squeeze`). A part's centre lies off the object's towards what shows (by half of
-        what is hidden), so fusing it would move a still object. An object declared without
+        fingers squeezing nothing (:func:`_fingers_squeeze`). A part's centre lies off the
+        object's towards what shows (by half of what is hidden), so fusing it would move a still
+        object. An object declared without
         its three dimensions is never taken for a part (a track begun on too large a segment
         would otherwise never take the true size)."""
         if t.held or t.placed_xy is not None or t.observations < 2 or len(xy) == 0:

@@ -1840,9 +1840,8 @@ class Perceiver:
         that footprint, or more than :data:`PART_HAND_ABOVE_M` above the track's top, the
         fingers squeezing nothing (:func:`_fingers_squeeze`). A part's centre lies off the
         object's towards what shows (by half of what is hidden), so fusing it would move a still
-        object. An object declared without
-        its three dimensions is never taken for a part (a track begun on too large a segment
-        would otherwise never take the true size)."""
+        object. An object declared without its three dimensions is never taken for a part (a
+        track begun on too large a segment would otherwise never take the true size)."""
         if t.held or t.placed_xy is not None or t.observations < 2 or len(xy) == 0:
             return False
         desc = next((d for d in self.declared if d.name == t.name), None)

@@ -17,7 +17,7 @@ from phyagentos.perception.fixtures import (
     compartment_sides,
 )
 from phyagentos.primitives.base import PrimitiveFailure
-from phyagentos.primitives.perception import ComputePlace
+from phyagentos.primitives.perception import SLOT_GAP_M, ComputePlace
 
 #: The desk caddy's look as the LIBERO bench measures it (LIBERO-10 task 5's world, turned pi).
 CADDY = {"name": "desk_caddy_1", "class": "desk_caddy", "size_m": [0.4377, 0.1528, 0.1738],
@@ -134,3 +134,53 @@ def test_two_pots_fitted_round_stand_in_a_row_across_their_handles():
     narrow = int(np.argmin([float(np.abs(R.T @ axis) @ box_half) for axis in np.eye(3)[:2]]))  # world x or y
     spot = place._slot_point(stove, stove_half, held, box_half, yaw, handle_tcp=handle_tcp)
     assert abs(spot[1 - narrow]) < 1e-9 and abs(spot[narrow]) > 0.03
+
+
+#: LIBERO's basket as perceived whole (its outer box, m) and the perceiver's wall allowance.
+BASKET_HALF = np.array([0.0814, 0.0871, 0.076])
+
+
+def _basket_slots(half, *, round_, yaw=0.0):
+    from phyagentos.perception.detect import OPEN_WALL_M
+
+    place = ComputePlace("PlaceInTheBasket", object="can", region="basket_1", slot=[0, 2])
+    spots = []
+    for k in (0, 1):
+        place.slot = (k, 2)
+        spots.append(place._slot_point(np.eye(4), BASKET_HALF, np.eye(4), half, yaw, wall_m=OPEN_WALL_M,
+                                       round_=round_))
+    room = BASKET_HALF[:2] - OPEN_WALL_M
+    return np.array(spots), room
+
+
+def test_two_cans_too_wide_to_stand_side_by_side_in_a_basket_go_corner_to_corner_within_its_walls():
+    """LIBERO-10 "put both the alphabet soup and the tomato sauce in the basket": both went to the
+    basket's centre and the sauce was let go onto the soup, where it lay tilted (seen at
+    confidence 0.45-0.49 or not at all; once it fell out). Two cans 6.8 cm across do not fit side
+    by side in its 13.3 by 14.4 cm inside: they go to opposite corners, 1 cm apart, each within
+    the walls."""
+    can = np.array([0.0341, 0.0341, 0.0457])
+    spots, room = _basket_slots(can, round_=True)
+    d = spots[1, :2] - spots[0, :2]
+    assert np.linalg.norm(d) == pytest.approx(2 * 0.0341 + SLOT_GAP_M)  # as near the centre as keeps them apart
+    assert d[0] > 0.02 and d[1] > 0.02  # along the diagonal, not a row
+    assert np.allclose(spots[0], -spots[1])  # about the centre
+    for spot in spots:
+        assert np.all(np.abs(spot[:2]) + 0.0341 <= room + 1e-9)  # each footprint inside the walls
+    # a box of the same footprint reaches its corner along the diagonal: they go further apart
+    boxes, _ = _basket_slots(can, round_=False)
+    assert np.linalg.norm(boxes[1, :2] - boxes[0, :2]) > np.linalg.norm(d)
+    for spot in boxes:
+        assert np.all(np.abs(spot[:2]) + 0.0341 <= room + 1e-9)
+
+
+def test_two_boxes_that_fit_side_by_side_in_a_basket_stand_in_a_row_across_their_narrow_side():
+    cheese = np.array([0.0426, 0.0223, 0.0155])  # LIBERO's cream cheese, as perceived in the hand
+    spots, room = _basket_slots(cheese, round_=False)
+    R = top_down_rotation(0.0)[:3, :3]
+    extents = [float(np.abs(R.T @ axis) @ cheese) for axis in np.eye(3)[:2]]
+    narrow = int(np.argmin(extents))
+    assert np.allclose(spots[:, 1 - narrow], 0.0)  # one row, across the narrow side
+    assert abs(spots[1, narrow] - spots[0, narrow]) == pytest.approx(2 * extents[narrow] + SLOT_GAP_M)
+    for spot in spots:
+        assert np.all(np.abs(spot[:2]) + np.array(extents) <= room + 1e-9)

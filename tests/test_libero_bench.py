@@ -64,7 +64,7 @@ def test_put_both_moves_the_two_named_objects_in_the_order_given():
     assert nodes[2]["depends_on"] == ["place_cream_cheese_1"]
 
 
-def test_both_of_a_plural_moves_each_onto_its_own_slot_of_a_fixture_and_into_a_basket_to_its_centre():
+def test_both_of_a_plural_moves_each_onto_its_own_slot_of_a_fixture_or_a_basket():
     task = resolve_task("libero_10", 8)  # put both moka pots on the stove
     problem = parse_bddl(task.bddl_path)
     nodes = instruction_nodes(task.language, problem.objects, problem.fixtures)
@@ -72,7 +72,13 @@ def test_both_of_a_plural_moves_each_onto_its_own_slot_of_a_fixture_and_into_a_b
         ("pick_moka_pot_1", None), ("place_moka_pot_1", [0, 2]), ("pick_moka_pot_2", None), ("place_moka_pot_2", [1, 2])]
     basket = resolve_task("libero_10", 1)
     problem = parse_bddl(basket.bddl_path)
-    assert all("slot" not in n["params"] for n in instruction_nodes(basket.language, problem.objects, problem.fixtures))
+    nodes = instruction_nodes(basket.language, problem.objects, problem.fixtures)
+    assert [(n["id"], n["params"].get("slot")) for n in nodes] == [
+        ("pick_cream_cheese_1", None), ("place_cream_cheese_1", [0, 2]), ("pick_butter_1", None),
+        ("place_butter_1", [1, 2])]
+    single = resolve_task("libero_object", 0)  # one item into the basket: its centre
+    problem = parse_bddl(single.bddl_path)
+    assert all("slot" not in n["params"] for n in instruction_nodes(single.language, problem.objects, problem.fixtures))
     with pytest.raises(BenchError, match="'both' names two; the scene has 1"):
         instruction_nodes("put both moka pots on the stove", {"moka_pot_1": "moka_pot"},
                           {"flat_stove_1": "flat_stove", "kitchen_table": "kitchen_table"})
@@ -240,9 +246,9 @@ def test_skill_defaults_go_into_every_node_of_their_skill_and_the_tasks_own_para
     nodes, _ = instruction_plan(task.language, problem.objects, problem.fixtures, skill_params=fixed)
     assert [n["params"] for n in nodes] == [
         {"approach_velocity_scale": 0.6, "still_max_s": FIRST_PICK_STILL_MAX_S, "object": "cream_cheese_1"},
-        {"lower_velocity_scale": 0.5, "object": "cream_cheese_1", "region": "basket_1"},
+        {"lower_velocity_scale": 0.5, "object": "cream_cheese_1", "region": "basket_1", "slot": [0, 2]},
         {"approach_velocity_scale": 0.6, "object": "butter_1"},
-        {"lower_velocity_scale": 0.5, "object": "butter_1", "region": "basket_1"}]
+        {"lower_velocity_scale": 0.5, "object": "butter_1", "region": "basket_1", "slot": [1, 2]}]
     plain, _ = instruction_plan(task.language, problem.objects, problem.fixtures)
     assert plain[0]["params"] == {"still_max_s": FIRST_PICK_STILL_MAX_S, "object": "cream_cheese_1"}
     f = tmp_path / "d.yaml"

@@ -204,6 +204,33 @@ def test_objects_sharing_a_region_go_down_side_by_side_in_their_slots_across_the
         _compute_place(franka, snap, slot=[2, 2])
 
 
+def test_objects_sharing_an_open_container_go_down_within_its_walls_and_a_plate_keeps_its_row(franka):
+    """"Put both the alphabet soup and the tomato sauce in the basket": a region perception finds
+    open (``open_depth_m``: its floor below its top) shares its inside, the footprint less the
+    walls' allowance, and two cans too wide for a row go corner to corner; the same footprint
+    without an open top keeps the row across the whole of it."""
+    from phyagentos.perception.detect import OPEN_WALL_M
+    from phyagentos.primitives.perception import SLOT_GAP_M
+
+    tcp = np.asarray(franka.tcp_pose())
+    snap = _snapshot(tcp, None)
+    basket, can = snap["entities"]
+    basket.update(size=[0.0814, 0.0871, 0.076], position=[0.5, 0.0, 0.076], attributes={"open_depth_m": 0.065})
+    can.update(size=[0.0341, 0.0341, 0.0457], attributes={"shape": "cylinder"})
+    centre, _ = _compute_place(franka, snap)
+    spots = [(_compute_place(franka, snap, slot=[k, 2])[0]["place_pose"][:3, 3] - centre["place_pose"][:3, 3])
+             for k in (0, 1)]
+    room = np.array([0.0814, 0.0871]) - OPEN_WALL_M
+    for spot in spots:
+        assert np.all(np.abs(spot[:2]) + 0.0341 <= room + 2e-4)  # inside the walls (the hand's 1 mrad yaw)
+        assert abs(spot[0]) > 0.02 and abs(spot[1]) > 0.02  # corner to corner
+    assert np.linalg.norm(spots[1][:2] - spots[0][:2]) == pytest.approx(2 * 0.0341 + SLOT_GAP_M, abs=2e-4)
+    del basket["attributes"]  # a flat top of the same footprint: the row across its whole length
+    flat = [(_compute_place(franka, snap, slot=[k, 2])[0]["place_pose"][:3, 3] - centre["place_pose"][:3, 3])
+            for k in (0, 1)]
+    assert min(abs(flat[0][0]), abs(flat[0][1])) < 1e-3 and max(abs(flat[0][0]), abs(flat[0][1])) > 0.04
+
+
 def test_a_preplace_out_of_reach_at_every_yaw_is_tried_lower_and_one_blocked_at_every_height_keeps_the_first(franka):
     """Every yaw's pre-place 10 cm up is past the arm's reach (IK, no collision): the pre-place
     comes down to the first of LOWER_APPROACH_M the arm reaches. A pre-place that collides at

@@ -219,8 +219,7 @@ _DRAWER_SKILLS = {"open": "slide_drawer", "close": "slide_drawer", "hook_open": 
 
 
 def _nodes(steps: list[tuple[str, str, str | None]],
-           skill_params: Mapping[str, Mapping[str, Any]] | None = None, *,
-           fixtures: Collection[str] = ()) -> list[dict[str, Any]]:
+           skill_params: Mapping[str, Mapping[str, Any]] | None = None) -> list[dict[str, Any]]:
     """Goal-graph nodes of ``[(action, object, destination or None)]``, each after the one
     before: ``move`` / ``hold``: a ``pick`` of the object, then (``move``) a ``place`` on its
     destination; ``beside_<side>`` (side ``left`` / ``right`` / ``front`` / ``back``, as the
@@ -233,11 +232,13 @@ def _nodes(steps: list[tuple[str, str, str | None]],
     :data:`OPEN_FRACTION` of its travel, or pushed home (:data:`CLOSE_FRACTION`,
     :data:`CLOSE_PUSH_M` past it). ``skill_params``: strategy parameters per skill written into
     every node of that skill (:data:`SKILL_DEFAULTS`); the task's own parameters (object,
-    region) win. Objects moved onto one fixture of ``fixtures`` (its place patch: "put both moka
-    pots on the stove") are set down side by side, each in its ``slot`` of the patch, in the
-    order named; into a container (an object: the basket) they go to its centre."""
+    region) win. Objects moved onto one destination (a fixture's place patch: "put both moka
+    pots on the stove"; a container: "put both the alphabet soup and the tomato sauce in the
+    basket") are set down side by side, each in its ``slot`` of it, in the order named
+    (:class:`~phyagentos.primitives.perception.ComputePlace` lays the slots out by what it
+    perceives: a row on a flat top, within the walls of an open container)."""
     fixed = skill_params or {}
-    sharing = Counter(dest for action, _, dest in steps if action == "move" and dest in set(fixtures))
+    sharing = Counter(dest for action, _, dest in steps if action == "move" and dest is not None)
     taken: Counter = Counter()
     nodes: list[dict[str, Any]] = []
     for action, obj, dest in steps:
@@ -500,7 +501,7 @@ def instruction_plan(language: str, objects: dict[str, str], fixtures: dict[str,
         BenchError: as :func:`instruction_nodes`.
     """
     steps, where = _planner_steps(language, objects, fixtures, untakeable=untakeable)
-    nodes = _nodes(steps, skill_params, fixtures=fixtures)
+    nodes = _nodes(steps, skill_params)
     ids = [n["id"] for n in nodes]
     twice = sorted({i for i in ids if ids.count(i) > 1})
     if twice:  # one object moved twice (a misreading, or a request no single plan of moves serves)

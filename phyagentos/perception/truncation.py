@@ -19,7 +19,8 @@ import numpy as np
 from phyagentos.perception.cloud import Cloud, transform
 from phyagentos.perception.frames import CameraFrame
 
-__all__ = ["BORDER_PX", "EDGE_PERCENTILE", "MIN_CAMERA_POINTS", "complete_round", "cut_direction"]
+__all__ = ["BORDER_PX", "BOX_CUT_ALIGN", "EDGE_PERCENTILE", "MIN_CAMERA_POINTS", "complete_box", "complete_round",
+           "cut_direction"]
 
 #: A segment's pixel within this many pixels of the image border (after the camera's point
 #: stride) touches the border: the strided grid's last row or column lies up to ``stride - 1``
@@ -29,6 +30,11 @@ BORDER_PX = 1.5
 #: Percentile of the seen points taken as an edge, %: robust to a stray point, and shallow: a
 #: disc's 2nd percentile lies 4-7 mm inside its edge (the cap there holds 2 % of its points).
 EDGE_PERCENTILE = 0.5
+
+#: A box seen in part is completed along one of its own horizontal axes only where the cut runs
+#: within this cosine of it (about 30 degrees): a cut across a corner says too little of which
+#: side goes on.
+BOX_CUT_ALIGN = 0.866
 
 #: Cameras with fewer of a segment's points than this are not counted as having seen it
 #: (the same count :meth:`~phyagentos.perception.perceiver.Perceiver` uses for a detection's
@@ -116,3 +122,53 @@ def complete_round(points_xy: np.ndarray, cut: np.ndarray, radius_m: float) -> n
     along = max(float(np.percentile(a, EDGE_PERCENTILE)) + float(radius_m), float(np.mean(a)))
     across = 0.5 * (float(np.percentile(b, EDGE_PERCENTILE)) + float(np.percentile(b, 100.0 - EDGE_PERCENTILE)))
     return along * d + across * e
+
+
+def complete_box(points_xy: np.ndarray, cut: np.ndarray, centre_xy: np.ndarray, yaw_rad: float,
+                 half_xy: np.ndarray, size_xy: tuple[float, float]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The footprint of a box of known size seen only in part, or None where the part says too
+    little.
+
+    The box's axis that the cut runs along (within :data:`BOX_CUT_ALIGN`) is the one it goes on
+    beyond what was seen: the seen part's edge away from the cut is the box's own edge, and its
+    centre lies half the box's length that way from it, towards the cut. Across the cut it is
+    seen whole, so the centre there is the seen part's. Of the look's two horizontal sizes, the
+    one nearer the side seen whole lies across the cut, the other along it.
+
+    Args:
+        points_xy: (N, 2) world x, y of the seen part's points, m.
+        cut: (2,) unit vector towards where it runs out of view (:func:`cut_direction`).
+        centre_xy: (2,) world x, y of the seen part's fitted centre, m.
+        yaw_rad: the seen part's fitted yaw about world z, rad (its half extents' axes).
+        half_xy: (2,) the seen part's fitted half extents along those axes, m.
+        size_xy: the look's two horizontal full sizes, m (either order).
+
+    Returns:
+        ``((2,) world x, y of the centre, m, (2,) half extents along the same axes, m)``, or
+        None where the cut runs across a corner, no side goes on beyond the seen part by more
+        than :data:`EDGE_PERCENTILE`'s few millimetres, or the box's length is shorter than what
+        was seen (the part is no part of it).
+    """
+    d = np.asarray(cut, float) / max(float(np.linalg.norm(cut)), 1e-12)
+    c, s = float(np.cos(yaw_rad)), float(np.sin(yaw_rad))
+    axes = np.array([[c, s], [-s, c]])
+    align = axes @ d
+    i = int(np.argmax(np.abs(align)))
+    if abs(float(align[i])) < BOX_CUT_ALIGN:
+        return None
+    half = np.asarray(half_xy, float)
+    a, b = sorted((float(size_xy[0]), float(size_xy[1])))
+    across = 2.0 * float(half[1 - i])
+    length = b if abs(a - across) <= abs(b - across) else a  # the side seen whole is the nearer size
+    if length < 2.0 * float(half[i]):
+        return None
+    way = axes[i] * (1.0 if float(align[i]) > 0.0 else -1.0)  # the box's axis, towards the cut
+    pts = np.asarray(points_xy, float)
+    edge = float(np.percentile(pts @ way, EDGE_PERCENTILE))
+    centre = np.asarray(centre_xy, float)
+    along = edge + 0.5 * length - float(centre @ way)  # how far the centre moves towards the cut
+    if along <= 0.0 or along > 0.5 * length:
+        return None
+    out = half.copy()
+    out[i] = 0.5 * length
+    return centre + along * way, out

@@ -40,6 +40,7 @@ from phyagentos.motion.rim_grasp import (
     rim_graspable,
 )
 from phyagentos.motion.top_knob_grasp import top_knob_grasp_candidates, top_knob_graspable, top_knob_preshape_m
+from phyagentos.perception.detect import OPEN_WALL_M
 from phyagentos.targets.contract import capabilities_of
 
 from .base import Primitive, PrimitiveFailure
@@ -1015,6 +1016,10 @@ class ComputePlace(Primitive):
                 hang = float(seen_z) - float(T_tcp_obj[2, 3])
                 T_tcp_obj = T_tcp_obj.copy()
                 T_tcp_obj[2, 3] = float(seen_z)
+        # an open container (a basket, a bowl: perception found its inside's floor below its top):
+        # slots share its inside, within its walls
+        wall = OPEN_WALL_M if kind == "object" and float(attrs.get("open_depth_m") or 0.0) > 0.0 else 0.0
+        upright_round = (held.get("attributes") or {}).get("shape") == "cylinder" and abs(float(T_obj[2, 2])) > 0.9
         handle_tcp = None  # the held object's handle, as perception found it, in the tcp frame
         if self.slot is not None:
             handle_xy = _xy_attribute(held, "handle_xy")
@@ -1034,7 +1039,8 @@ class ComputePlace(Primitive):
                     spot, surface_z = beside_point(snapshot, self.region, self.beside, beside_reach(yaw), who=self.name)
                 else:
                     spot = (centre if self.slot is None
-                            else self._slot_point(T_region, region_half, T_tcp_obj, half, yaw, handle_tcp=handle_tcp))
+                            else self._slot_point(T_region, region_half, T_tcp_obj, half, yaw, handle_tcp=handle_tcp,
+                                                  wall_m=wall, round_=upright_round))
                 T_place = place_pose(spot, half, T_tcp_object=T_tcp_obj, surface_z_m=surface_z, yaw_rad=yaw)
                 if lean is not None:
                     T_place = leant_place(T_place, half, T_tcp_obj, toward_xy=lean[1], angle_rad=lean[2])
@@ -1218,7 +1224,8 @@ class ComputePlace(Primitive):
                                    f"{SUPPORT_MIN_CONFIDENCE}): no support to set {self.object!r} on; seen: {seen}")
 
     def _slot_point(self, T_region: np.ndarray, region_half: np.ndarray, T_tcp_obj: np.ndarray, half: np.ndarray,
-                    yaw: float, handle_tcp: np.ndarray | None = None) -> np.ndarray:
+                    yaw: float, handle_tcp: np.ndarray | None = None, wall_m: float = 0.0,
+                    round_: bool = False) -> np.ndarray:
         """(3,) world point where slot ``k`` of ``n`` (:attr:`slot`) of the region puts the held
         object's centre, set down with hand yaw ``yaw`` (rad): the n slots stand in a row along the
         region's horizontal axis (``T_region`` (4, 4) world, ``region_half`` (3,) m) across
@@ -1230,7 +1237,13 @@ class ComputePlace(Primitive):
         its direction in the tcp frame) is longer along its handle than its round fit says:
         the row then runs across the handle (LIBERO-10 task 8 init 7: a held moka pot fitted
         as a cylinder 10.5 cm across; the row ran along its 12.7 cm handle and the first pot
-        went to the stove's edge, its verdict undecided)."""
+        went to the stove's edge, its verdict undecided).
+
+        Inside an open container (``wall_m`` > 0, m: its walls' and rim's allowance, the
+        perceiver's own :data:`~phyagentos.perception.detect.OPEN_WALL_M`) the slots share its
+        inside, the footprint less ``wall_m`` on every side, and keep the object's whole footprint
+        within it (:meth:`_container_slot`; ``round_``: the held object is an upright cylinder,
+        its radius its extent every way)."""
         k, n = self.slot  # type: ignore[misc]
         Ro = top_down_rotation(yaw) @ np.asarray(T_tcp_obj, dtype=float)[:3, :3]
         axes = [np.asarray(T_region[:3, j], dtype=float) for j in (0, 1)]
@@ -1239,10 +1252,53 @@ class ComputePlace(Primitive):
         if handle_tcp is not None and abs(extents[0] - extents[1]) <= SLOT_ROUND_FRACTION * max(extents):
             handle = top_down_rotation(yaw) @ np.asarray(handle_tcp, dtype=float)
             j = int(np.argmin([abs(float(handle @ a)) for a in axes]))
+        if wall_m > 0.0:
+            return self._container_slot(T_region, region_half, Ro, half, j, wall_m, round_=round_)
         room = float(region_half[j])
         spacing = max(2.0 * room / n, 2.0 * extents[j] + SLOT_GAP_M)
         offset = float(np.clip((k - 0.5 * (n - 1)) * spacing, -(room - SLOT_EDGE_M), room - SLOT_EDGE_M))
         return np.asarray(T_region[:3, 3], dtype=float) + offset * axes[j]
+
+    def _container_slot(self, T_region: np.ndarray, region_half: np.ndarray, Ro: np.ndarray, half: np.ndarray,
+                        j: int, wall_m: float, *, round_: bool = False) -> np.ndarray:
+        """(3,) world point of slot ``k`` of ``n`` (:attr:`slot`) inside an open container
+        (``T_region`` (4, 4) world pose, ``region_half`` (3,) m its perceived outer half extents)
+        for the held object turned by ``Ro`` (3, 3, world from object) with ``half`` (3,) m half
+        extents (``round_``: an upright cylinder, whose extent along a diagonal is its radius,
+        not its box's corner). The inside is the footprint less ``wall_m`` (m) each side; the
+        object's centre may go ``reach`` = the inside less its own extent along each of the
+        container's axes.
+
+        The slots stand as near the centre as keeps the footprints :data:`SLOT_GAP_M` apart
+        (every other item assumed the held one's size): an item let go onto the rim falls out,
+        the worse thing to meet. In a row along axis ``j`` (across the object's narrow side,
+        :meth:`_slot_point`) where that row fits within the reach; else corner to corner along
+        the diagonal of the reach, as a person sets two cans in a basket too small for them side
+        by side (LIBERO's basket is about 12.4 by 13.5 cm inside at its floor, from its model;
+        the soup and the tomato sauce are perceived 6.8 cm across in the hand), at most the
+        reach's corners apart (the items then touch rather than stand one on the other: the
+        second let go onto the first lay tilted on it, seen at confidence 0.45-0.49 or not at
+        all, LIBERO-10 tasks 0 and 7, docs/libero.md)."""
+        k, n = self.slot  # type: ignore[misc]
+        centre = np.asarray(T_region[:3, 3], dtype=float)
+        if n == 1:
+            return centre
+        axes = [np.asarray(T_region[:3, i], dtype=float) for i in (0, 1)]
+        h = np.asarray(half, dtype=float)
+        extents = np.array([float(np.abs(Ro.T @ a) @ h) for a in axes])
+        room = np.maximum(np.asarray(region_half[:2], dtype=float) - float(wall_m), 0.0)
+        reach = np.maximum(room - extents, 0.0)
+        step = k - 0.5 * (n - 1)
+        least = 2.0 * extents[j] + SLOT_GAP_M
+        if (n - 1) * least <= 2.0 * reach[j]:  # a row fits
+            return centre + step * least * axes[j]
+        length = float(np.hypot(reach[0], reach[1]))
+        if length <= 0.0:
+            return centre
+        u = (reach[0] * axes[0] + reach[1] * axes[1]) / length  # along the diagonal, world
+        along = float(max(h[0], h[1])) if round_ else float(np.abs(Ro.T @ u) @ h)
+        spacing = min(2.0 * along + SLOT_GAP_M, 2.0 * length / (n - 1))
+        return centre + step * spacing * u
 
     def _place_blocked(self, T_pre: np.ndarray, T_place: np.ndarray, *, near_edge: bool) -> Blocked | None:
         """:meth:`_blocked`, and for a place ``near_edge`` of the arm's reach (raised by the

@@ -87,7 +87,8 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "region": ("str", "", "region (or object, to stack on) to set it down in"),
         "approach_height_m": ("float", "m", "pre-place height above the place pose"),
         "beside": ("str", "", "left / right: beside the region (a landmark) on the viewer's side, not on it; null: on it"),
-        "slot": ("list | null", "", "[k, n]: slot k of n side by side on the region; null: its centre"),
+        "slot": ("list | null", "", "[k, n]: slot k of n side by side on the region (within an open container's "
+                 "walls: a row, or corner to corner); null: its centre"),
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
         "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
         "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),

@@ -157,8 +157,9 @@ def test_two_cans_too_wide_to_stand_side_by_side_in_a_basket_go_corner_to_corner
     """LIBERO-10 "put both the alphabet soup and the tomato sauce in the basket": both went to the
     basket's centre and the sauce was let go onto the soup, where it lay tilted (seen at
     confidence 0.45-0.49 or not at all; once it fell out). Two cans 6.8 cm across do not fit side
-    by side in its 13.3 by 14.4 cm inside: they go to opposite corners, 1 cm apart, each within
-    the walls."""
+    by side in its 13.3 by 14.4 cm inside as perceived (the outer box less the walls' allowance;
+    11.8 by 13.0 cm at the floor by its model, where its walls lean in): they go to opposite
+    corners, 1 cm apart, each within the walls."""
     can = np.array([0.0341, 0.0341, 0.0457])
     spots, room = _basket_slots(can, round_=True)
     d = spots[1, :2] - spots[0, :2]

@@ -1274,8 +1274,9 @@ class ComputePlace(Primitive):
         the worse thing to meet. In a row along axis ``j`` (across the object's narrow side,
         :meth:`_slot_point`) where that row fits within the reach; else corner to corner along
         the diagonal of the reach, as a person sets two cans in a basket too small for them side
-        by side (LIBERO's basket is about 12.4 by 13.5 cm inside at its floor, from its model;
-        the soup and the tomato sauce are perceived 6.8 cm across in the hand), at most the
+        by side (LIBERO's basket is 11.8 by 13.0 cm between its walls at its floor, from its
+        model, wider up to its rim, where things are let go; the soup and the tomato sauce are
+        perceived 6.8 cm across in the hand), at most the
         reach's corners apart (the items then touch rather than stand one on the other: the
         second let go onto the first lay tilted on it, seen at confidence 0.45-0.49 or not at
         all, LIBERO-10 tasks 0 and 7, docs/libero.md)."""

@@ -2775,8 +2775,9 @@ def _released_inside(t: Track, cloud: Cloud, heights: np.ndarray, dets: list[Det
     point (``t.position``, from proprioception): its interior points (footprint shrunk by
     :data:`CONTAINER_WALL_M`), the floor (their 5th height percentile), the interior points
     within the object's footprint radius + 2 cm of the release point, then twice within its
-    radius of the top face found there (what slid on landing is followed). The top face: the points within 1 cm of the most populated
-    5 mm height bin more than :data:`CONTENT_CLEARANCE_M` above the floor. The object is seen
+    radius of the top face found there (what slid on landing is followed). The top face: the
+    points within 1 cm of the most populated 5 mm height bin more than
+    :data:`CONTENT_CLEARANCE_M` above the floor. The object is seen
     there when that top stands the object's perceived height above where it rests (within 2
     cm), is flat (height RMS <= 7 mm) and spans at least 60 % of the object's short side both
     ways: a lining fold or a wall's rim fails one of these. Where it rests lies between the

@@ -1253,19 +1253,22 @@ class ComputePlace(Primitive):
             handle = top_down_rotation(yaw) @ np.asarray(handle_tcp, dtype=float)
             j = int(np.argmin([abs(float(handle @ a)) for a in axes]))
         if wall_m > 0.0:
-            return self._container_slot(T_region, region_half, Ro, half, j, wall_m, round_=round_)
+            return self._container_slot(T_region, region_half, axes, extents, Ro, half, j, wall_m, round_=round_)
         room = float(region_half[j])
         spacing = max(2.0 * room / n, 2.0 * extents[j] + SLOT_GAP_M)
         offset = float(np.clip((k - 0.5 * (n - 1)) * spacing, -(room - SLOT_EDGE_M), room - SLOT_EDGE_M))
         return np.asarray(T_region[:3, 3], dtype=float) + offset * axes[j]
 
-    def _container_slot(self, T_region: np.ndarray, region_half: np.ndarray, Ro: np.ndarray, half: np.ndarray,
-                        j: int, wall_m: float, *, round_: bool = False) -> np.ndarray:
+    def _container_slot(self, T_region: np.ndarray, region_half: np.ndarray, axes: list[np.ndarray],
+                        extents: list[float], Ro: np.ndarray, half: np.ndarray, j: int, wall_m: float, *,
+                        round_: bool = False) -> np.ndarray:
         """(3,) world point of slot ``k`` of ``n`` (:attr:`slot`) inside an open container
-        (``T_region`` (4, 4) world pose, ``region_half`` (3,) m its perceived outer half extents)
-        for the held object turned by ``Ro`` (3, 3, world from object) with ``half`` (3,) m half
-        extents (``round_``: an upright cylinder, whose extent along a diagonal is its radius,
-        not its box's corner). The inside is the footprint less ``wall_m`` (m) each side; the
+        (``T_region`` (4, 4) world pose, ``region_half`` (3,) m its perceived outer half extents;
+        ``axes``: its two horizontal (3,) world unit axes, ``extents``: the held object's half
+        extent along each, m, as :meth:`_slot_point` found them) for the held object turned by
+        ``Ro`` (3, 3, world from object) with ``half`` (3,) m half extents (``round_``: an
+        upright cylinder, whose extent along a diagonal is its radius, not its box's corner).
+        The inside is the footprint less ``wall_m`` (m) each side; the
         object's centre may go ``reach`` = the inside less its own extent along each of the
         container's axes.
 
@@ -1276,17 +1279,13 @@ class ComputePlace(Primitive):
         the diagonal of the reach, as a person sets two cans in a basket too small for them side
         by side (LIBERO's basket is 11.8 by 13.0 cm between its walls at its floor, from its
         model, wider up to its rim, where things are let go; the soup and the tomato sauce are
-        perceived 6.8 cm across in the hand), at most the
-        reach's corners apart (the items then touch rather than stand one on the other: the
-        second let go onto the first lay tilted on it, seen at confidence 0.45-0.49 or not at
-        all, LIBERO-10 tasks 0 and 7, docs/libero.md)."""
+        perceived 6.8 cm across in the hand), at most the reach's corners apart (the items then
+        touch rather than stand one on the other: the second let go onto the first lay tilted on
+        it, seen at confidence 0.45-0.49 or not at all, LIBERO-10 tasks 0 and 7, docs/libero.md).
+        One slot of one is the centre (the row's only cell)."""
         k, n = self.slot  # type: ignore[misc]
         centre = np.asarray(T_region[:3, 3], dtype=float)
-        if n == 1:
-            return centre
-        axes = [np.asarray(T_region[:3, i], dtype=float) for i in (0, 1)]
         h = np.asarray(half, dtype=float)
-        extents = np.array([float(np.abs(Ro.T @ a) @ h) for a in axes])
         room = np.maximum(np.asarray(region_half[:2], dtype=float) - float(wall_m), 0.0)
         reach = np.maximum(room - extents, 0.0)
         step = k - 0.5 * (n - 1)

@@ -99,6 +99,33 @@ def test_two_parts_filling_one_place_are_one_body_whatever_their_colour():
     assert not one_place(_det((0, 0), 0.047, 0.12, colour=GREY), _det((0.09, 0), 0.047, 0.12, colour=GREY_DARK))
 
 
+def _box(xy, length, width, height, yaw=0.0, colour=GREY):
+    rgb = np.asarray(colour, float)
+    half = np.array([0.5 * length, 0.5 * width, 0.5 * height])
+    return Detection(np.array([xy[0], xy[1], 0.5 * height]), yaw, half, "box", rgb,
+                     srgb_to_lab(np.array([rgb]))[0], 300, 2, 0.002, 0.05, 1.0, 0.0, low_m=0.0)
+
+
+def test_a_two_coloured_body_cut_by_its_colours_fills_one_place():
+    from phyagentos.perception.split import footprint_within, one_place
+
+    # LIBERO-10 task 4, development seed 502: the yellow and white mug on its plate cut by its
+    # two colours into parts 10.4 by 6.9 and 11.0 by 8.4 cm, 3.3 cm apart, both as tall as the stack
+    yellow = _box((0.0209, 0.299), 0.110, 0.084, 0.123, yaw=0.4, colour=(0.55, 0.50, 0.20))
+    white = _box((-0.0119, 0.3049), 0.104, 0.069, 0.125, yaw=0.5, colour=GREY)
+    assert footprint_within(white, yellow) > 0.5
+    assert one_place(yellow, white) and one_place(white, yellow)
+    # two boxes side by side along their long sides, one height: their footprints only touch
+    a, b = _box((0.0, 0.0), 0.10, 0.04, 0.03), _box((0.0, 0.041), 0.10, 0.04, 0.03, colour=GREY_DARK)
+    assert footprint_within(a, b) < 0.05 and not one_place(a, b)
+    # a can in a basket, the basket's rim lower than the can's top: not one place
+    basket, can = _box((0.0, 0.0), 0.25, 0.16, 0.08), _det((0.03, 0.0), 0.033, 0.09, bottom=0.01)
+    assert not one_place(basket, can)
+    # a book standing in a caddy's compartment, its top at the caddy's: smaller than what holds it
+    caddy, book = _box((0.0, 0.0), 0.20, 0.12, 0.10), _box((0.0, 0.03), 0.14, 0.03, 0.10, colour=GREY_DARK)
+    assert footprint_within(book, caddy) == 1.0 and not one_place(caddy, book)
+
+
 def test_a_partition_whose_parts_fill_one_place_is_not_admissible(monkeypatch):
     from phyagentos.perception import split
 

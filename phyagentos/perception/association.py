@@ -10,7 +10,9 @@ Cost of detection i for descriptor j (only the attributes the descriptor declare
   cut by the image border (``truncated``, :mod:`.truncation`) only the part above it; for the
   lower part of a stack covered by what rests on it (``covered``, :mod:`.split`), its
   footprint's sides only below :data:`COVERED_MIN_SHOWN` of the look's and above it, its
-  height as any;
+  height as any; for the upper part of a stack whose foot may be hidden in what it stands in
+  (``foot_hidden_m``), its height only outside the range from its height as seen to that plus
+  the hidden depth;
 * shape: ``shape_cost`` when the classes differ; with declared ``shapes`` (the fraction of a
   look's sightings per shape), ``shape_cost`` times ``1 -`` the detection's shape's fraction
   over the most frequent one's (:meth:`~.descriptors.ObjectDescriptor.shape_mismatch`);
@@ -79,6 +81,12 @@ def _size_error(det: Detection, desc: ObjectDescriptor) -> float | None:
         err = desc.size_error(measured, at_least=(True, True, False))
         want = desc.size_vector()
         return err + float(np.sum(np.maximum(0.0, COVERED_MIN_SHOWN * want[:2] - measured[:2]))) / 3.0
+    if det.foot_hidden_m > 0.0:
+        # its foot in what it stands in (a mug in a plate's well): at least as tall as seen, at
+        # most by the hidden depth more
+        err = desc.size_error(measured, at_least=(False, False, True))
+        lo = float(desc.size_range_m[0][2]) if desc.size_range_m is not None else float(desc.size_vector()[2])
+        return err + max(0.0, lo - (float(measured[2]) + det.foot_hidden_m)) / 3.0
     return desc.size_error(measured)
 
 

@@ -102,6 +102,11 @@ class Detection:
         top_knob: the small part standing on its top (a moka pot's lid knob:
             :func:`with_top_knob`), else None. Its top is above :attr:`top_m`, which is the
             segment's 98th percentile height (the body's top).
+        foot_hidden_m: how far below :attr:`bottom_m` its foot may reach unseen, m: the upper
+            part of a height step standing within what shows all round it below the cut (a mug
+            in a plate's well, its base below the rim: :func:`phyagentos.perception.split._rested`),
+            so its whole height lies between its height as seen and that plus this. 0 for
+            everything else.
         hidden_above_m: as a support (a fixture's pseudo-detection), how far over its top the
             foot of what rests on it may go unseen, m: a room's floor behind a fixture's door,
             seen through the mouth over its front lip, has what stands on it rise from it
@@ -131,6 +136,7 @@ class Detection:
     open_depth_m: float = 0.0
     top_knob: Knob | None = None
     hidden_above_m: float = 0.0
+    foot_hidden_m: float = 0.0
 
     @property
     def truncated(self) -> bool:

@@ -21,7 +21,7 @@ from phyagentos.perception.detect import Detection
 from phyagentos.perception.handle import RoundBody
 from phyagentos.geometry import turned_xy
 
-__all__ = ["REMEMBERED_CONFIDENCE", "Track", "yaw_period"]
+__all__ = ["REMEMBERED_CONFIDENCE", "Track", "object_pose", "yaw_period"]
 
 #: An object not seen now but hidden where it was is reported at its track's confidence times
 #: this (the perceiver's ``remembered``); a weak sighting of part of it where it stands keeps at
@@ -165,6 +165,10 @@ class Track:
         if self.held or not within or det.shape != self.shape and self.observations < 2:
             fresh = Track.start(self.name, det, confidence, stamp_s, cameras)
             fresh.known_height_m = self.known_height_m  # moved or taken, it is as tall as it was
+            if not self.held and within and fresh.body is None and self.body is not None:
+                # restarted where it stood only for its shape (its second sighting, of another
+                # side): the handle its first showed stays where it was seen, in the world
+                fresh.body = self.body.placed(object_pose(self.position, self.yaw)).local(det.position[:2], det.yaw)
             self.__dict__.update(fresh.__dict__)
             return False
         yaw_before = self.yaw
@@ -202,3 +206,14 @@ class Track:
         self.last_seen_s = stamp_s
         self.observations = n + 1
         return True
+
+
+
+def object_pose(position: np.ndarray, yaw: float) -> np.ndarray:
+    """(4, 4) world pose of an object at ``position`` ((3,) world, m) turned ``yaw`` (rad about
+    world z)."""
+    T = np.eye(4)
+    c, s = math.cos(yaw), math.sin(yaw)
+    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    T[:3, 3] = position
+    return T

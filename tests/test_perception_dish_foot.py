@@ -59,6 +59,10 @@ def test_only_a_part_within_what_shows_all_round_it_may_hide_its_foot():
     # a wider part beside it, the upper part's centre off its footprint: nothing hides the foot
     upper, _ = _rested([mug, _part((0.10, 0.30), 0.060, 0.0, 0.030, PINK)], [True, False], 0.030, PLANE)
     assert upper.foot_hidden_m == 0.0
+    # a thing's own rim cut from its body: the body is deeper than what shows above it
+    rim = _part((0.01, 0.30), 0.045, 0.0, 0.148, YELLOW)
+    upper, lower = _rested([rim, _part((0.01, 0.30), 0.057, 0.0, 0.134, PINK)], [True, False], 0.134, PLANE)
+    assert not lower.covered and upper.foot_hidden_m == 0.0
     # a look taller than what shows and the whole stack together costs its height's excess
     tall = ObjectDescriptor("bottle_1", shape="cylinder", colour_rgb=YELLOW, size_m=(0.11, 0.11, 0.20))
     upper, _ = _rested([mug, _part((0.012, 0.302), 0.060, 0.0, 0.030, PINK)], [True, False], 0.030, PLANE)

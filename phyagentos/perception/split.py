@@ -762,9 +762,11 @@ def _rested(parts: list[Detection], upper: list[bool], z: float, plane: Plane) -
     bowl shows a crescent). A bottle's neck over its own base covers nothing; a plate shows its
     rim all round a mug on it. An upper part standing within a lower part that shows all round
     it (not covered, wider, the upper part's centre over its footprint) may have its foot
-    below the cut, hidden by that part's rim: its ``foot_hidden_m`` reaches down to the lower
-    part's bottom (a mug in a plate's well, its base 2-3 cm below the rim where the step is
-    cut: seen 9.5 cm tall for its look's 11.6)."""
+    below the cut, hidden by that part's rim, where that part is no deeper than what shows
+    above it: its ``foot_hidden_m`` reaches down to the lower part's bottom (a mug in a
+    plate's well, its base 2-3 cm below the rim where the step is cut: seen 9.5 cm tall for
+    its look's 11.6). A thing's own top cut from its body is no thing standing in a dish (the
+    red coffee mug's rim, 1.4 cm over its 13.4 cm body, would match any mug's height)."""
     out = list(parts)
     for k, d in enumerate(parts):
         if upper[k]:
@@ -781,8 +783,9 @@ def _rested(parts: list[Detection], upper: list[bool], z: float, plane: Plane) -
         around = [o for j, o in enumerate(out) if not upper[j] and not o.covered
                   and float(max(o.half_extents[:2])) > reach
                   and float(_footprint_margins(d.position[:2], o.position, o.yaw, o.half_extents, o.shape)[0]) >= 0.0]
-        if around:
-            rested = replace(rested, foot_hidden_m=max(0.0, z - min(o.bottom_m for o in around)))
+        depth = z - min((o.bottom_m for o in around), default=z)
+        if 0.0 < depth <= rested.top_m - z:  # a dish shallower than what shows above its rim
+            rested = replace(rested, foot_hidden_m=depth)
         out[k] = rested
     return out
 

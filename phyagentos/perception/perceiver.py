@@ -883,7 +883,8 @@ class Perceiver:
         twins = self._interchangeable()
         looks_only = self._hidden_base_where_let_go(cost_matrix(dets, self.declared, cfg), dets)  # no tie-breaker
         C = looks_only + track_costs(dets, len(self.declared), cfg, track_pos)
-        C = self._covered_where_tracked(C, dets, [cloud.points[idx, :2] for _, idx in clusters], stamp)
+        C = self._covered_where_tracked(C, dets, {i: cloud.points[idx, :2] for i, (_, idx) in enumerate(clusters)
+                                                  if dets[i].covered}, stamp)
         C = _not_inside_itself(self._not_on_itself(self._truncated_where_tracked(C, dets, proprio), dets), dets,
                                self.config.association.gate_cost)
         C = self._resolve_references(C, dets, stamp)
@@ -1811,12 +1812,12 @@ class Perceiver:
             return False
         return not t.within_gate(det, stamp, self.config)
 
-    def _covered_where_tracked(self, C: np.ndarray, dets: list[Detection], xys: Sequence[np.ndarray],
+    def _covered_where_tracked(self, C: np.ndarray, dets: list[Detection], xys: Mapping[int, np.ndarray],
                                stamp: float) -> np.ndarray:
         """``C`` with a covered detection (``Detection.covered``) admissible for a tracked object
-        only where it may be that object: not :meth:`_covered_elsewhere` (``xys``: each
-        detection's points, (N, 2) world m). What shows of a support round what rests on it is
-        judged on a relaxed look, so it is weighed only against the objects that may stand
+        only where it may be that object: not :meth:`_covered_elsewhere` (``xys``: each covered
+        detection's points by its index, (N, 2) world m). What shows of a support round what
+        rests on it is judged on a relaxed look, so it is weighed only against the objects that may stand
         there; a look-alike confidently tracked elsewhere is no rival for it. LIBERO-10 task 4
         (development seed 502): the yellow and white mug let go on the right plate, the plate's
         rim split off under it and matched to the right plate at 0.90 and to the left plate,

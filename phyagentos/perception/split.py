@@ -560,8 +560,9 @@ def one_place(a: Detection, b: Detection) -> bool:
     together (development seed 502), one named the mug, the plate left unseen."""
     if abs(a.bottom_m - b.bottom_m) > ONE_PLACE_HEIGHT_M or abs(a.top_m - b.top_m) > ONE_PLACE_HEIGHT_M:
         return False
-    small, large = (a, b) if _footprint_area(a) <= _footprint_area(b) else (b, a)
-    if _footprint_area(small) < ONE_PLACE_AREA_RATIO * _footprint_area(large):
+    sa, sb = _footprint_area(a), _footprint_area(b)
+    (area_s, small), (area_l, large) = ((sa, a), (sb, b)) if sa <= sb else ((sb, b), (sa, a))
+    if area_s < ONE_PLACE_AREA_RATIO * area_l:
         return False
     return footprint_within(small, large) > ONE_PLACE_OVERLAP
 

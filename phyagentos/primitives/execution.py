@@ -171,6 +171,10 @@ class CartesianMove(_Tracking):
             all of it); ``None``: the whole offset or an ``ik.unreachable`` failure. A lift
             of a bowl out of a drawer near the edge of the Panda's workspace rises what it
             can (traced ``reach_limited``).
+        offset_plus: with ``offset``: blackboard key of a length (m, >= 0) the move goes further
+            along the offset's direction, ``at_least_m`` too (a retreat from a place lowered
+            into a container rises by as much more as it was lowered: ``place_sunk_m`` of
+            :class:`~phyagentos.primitives.perception.ComputePlace`); ``None``: the offset alone.
         grasp_kind: move only after a grasp of this kind was planned (``rim``, ``across``,
             ... as :func:`~phyagentos.primitives.grasp_sense.plan_grasp` records it); after
             another, or none, the leaf succeeds at once: no time passes, nothing is traced.
@@ -181,7 +185,8 @@ class CartesianMove(_Tracking):
     """
 
     def __init__(self, name: str, *, to: str | None = None, offset=None, velocity_scale: float = 0.3,
-                 check_collisions: bool = False, at_least_m: float | None = None, grasp_kind: str | None = None):
+                 check_collisions: bool = False, at_least_m: float | None = None, grasp_kind: str | None = None,
+                 offset_plus: str | None = None):
         super().__init__(name)
         if grasp_kind is not None and not isinstance(grasp_kind, str):
             raise ValueError(f"grasp_kind must be a grasp kind's name (e.g. rim) or null, got {grasp_kind!r}")
@@ -200,12 +205,16 @@ class CartesianMove(_Tracking):
             if not (isinstance(at_least_m, (int, float)) and not isinstance(at_least_m, bool)
                     and math.isfinite(float(at_least_m)) and float(at_least_m) >= 0.0):
                 raise ValueError(f"at_least_m must be a number of m >= 0 or null, got {at_least_m!r}")
-        self.to, self.offset = to, offset
+        if offset_plus is not None and (offset is None or not np.any(offset)):
+            raise ValueError("offset_plus applies to a non-zero 'offset' move only")
+        self.to, self.offset, self.offset_plus = to, offset, offset_plus
         # more than the offset asks: the whole offset
         self.at_least_m = None if at_least_m is None else min(float(at_least_m), float(np.linalg.norm(offset)))
         self.velocity_scale, self.check_collisions = float(velocity_scale), bool(check_collisions)
         if to is not None:
             self.reads(to)
+        if offset_plus is not None:
+            self.reads(offset_plus)
 
     def _skipped(self) -> bool:
         """Whether :attr:`grasp_kind` rules this move out (the planned grasp is of another kind)."""
@@ -224,7 +233,7 @@ class CartesianMove(_Tracking):
             T_goal = np.asarray(self.get(self.to))
         else:
             T_goal = T_start.copy()
-            T_goal[:3, 3] += self.offset
+            T_goal[:3, 3] += self._offset()
         with ctx.profiler.section("ik"):
             path = self._path(T_start, T_goal)
         vel, acc = execution_limits(ctx, self.velocity_scale, self.velocity_scale)
@@ -239,6 +248,16 @@ class CartesianMove(_Tracking):
             return Status.SUCCESS
         return self._advance()
 
+    def _offset(self) -> np.ndarray:
+        """(3,) world m: :attr:`offset`, lengthened by the blackboard's :attr:`offset_plus`."""
+        if self.offset_plus is None:
+            return self.offset
+        plus = self.get(self.offset_plus)
+        if not isinstance(plus, (int, float)) or isinstance(plus, bool) or not math.isfinite(plus) or plus < 0.0:
+            raise PrimitiveFailure("skill.blackboard", f"{self.offset_plus!r} must be a length >= 0 in m, got {plus!r}")
+        full = float(np.linalg.norm(self.offset))
+        return self.offset * ((full + float(plus)) / full)
+
     def _path(self, T_start: np.ndarray, T_goal: np.ndarray) -> np.ndarray:
         """The joint path of the line to ``T_goal``; with :attr:`at_least_m`, of the longest
         line along it in :data:`REACH_STEP_M` steps that the arm reaches."""
@@ -248,11 +267,13 @@ class CartesianMove(_Tracking):
         except IKError as exc:
             if self.at_least_m is None:
                 raise
-            full = float(np.linalg.norm(self.offset))
+            offset = self._offset()
+            full = float(np.linalg.norm(offset))
+            at_least = self.at_least_m + (full - float(np.linalg.norm(self.offset)))
             reach = full - REACH_STEP_M
-            while reach >= self.at_least_m - 1e-9:
+            while reach >= at_least - 1e-9:
                 T = T_goal.copy()
-                T[:3, 3] = T_start[:3, 3] + self.offset * (reach / full)
+                T[:3, 3] = T_start[:3, 3] + offset * (reach / full)
                 try:
                     path = cartesian_path(target.model, q_start=target.arm_qpos(), T_goal=T, **ik_options(target))
                 except IKError:

@@ -751,6 +751,13 @@ COMPARTMENT_CLEAR_M = 0.02
 #: A place into a compartment whose hand would meet the walls is raised this much at a time
 #: (:meth:`ComputePlace._let_down`), m.
 LET_DOWN_STEP_M = 0.01
+#: Into an open container (perception's ``open_depth_m``: a basket) the held object is lowered
+#: between the walls until its base stands this far over the perceived floor, m, or as low as
+#: the hand clears them (:meth:`ComputePlace._sink`): the perceived floor is the 5th percentile
+#: of the inside's heights (a few mm of noise), and a can let go 2 cm up stays where it lands,
+#: where one let go at the rim (12 cm over LIBERO's basket floor) slid 3-5 cm on landing
+#: (LIBERO-10 task 0 inits 2 and 7, docs/libero.md, fifty-first pass).
+SINK_CLEAR_M = 0.02
 
 
 def _lean(attrs: dict) -> tuple[np.ndarray, np.ndarray, float] | None:
@@ -890,6 +897,8 @@ class ComputePlace(Primitive):
             (:meth:`_slot_point`: "put both moka pots on the stove"); None: at its centre.
         snapshot: blackboard key of the observation (object pose in hand, region).
         place, preplace: blackboard keys written with (4, 4) world tcp poses.
+        sunk: blackboard key written with how far (m, 0 but into an open container) the place
+            was lowered below the container's top (the retreat rises that much more).
 
     The object's pose in the tcp frame comes from the observation and the arm's
     proprioception, so a place session needs nothing from the pick session but
@@ -934,6 +943,11 @@ class ComputePlace(Primitive):
     ``slid_m``, the world xy offset). Never onto an object (LIBERO counts a thing on another
     only within 3 cm of its centre), beside a landmark, in a slot, a compartment or on a ramp.
 
+    Into an open container (perception's ``open_depth_m``: a basket; not beside it) the object
+    is lowered between the walls towards the perceived floor, as far as the hand clears them
+    (:meth:`_sink`; traced ``sunk_m``), and let go there rather than at the rim: a can let go at
+    the rim of LIBERO's basket fell 12 cm and slid on landing.
+
     Onto an object (stacking: a plate, a basket) only one perception names at
     :data:`SUPPORT_MIN_CONFIDENCE` or more: a weak sighting is no support (``perception.not_found``,
     before anything moves: the recovery looks again).
@@ -942,7 +956,7 @@ class ComputePlace(Primitive):
     def __init__(self, name: str, *, object: str, region: str, approach_height_m: float = 0.10,
                  beside: str | None = None, slot: Sequence[int] | None = None, snapshot: str = "snapshot",
                  place: str = "place_pose",
-                 preplace: str = "preplace_pose"):
+                 preplace: str = "preplace_pose", sunk: str = "place_sunk_m"):
         super().__init__(name)
         if beside is not None and beside not in VIEWER_SIDES:
             raise ValueError(f"beside must be one of {', '.join(VIEWER_SIDES)} or null, got {beside!r}")
@@ -954,9 +968,9 @@ class ComputePlace(Primitive):
             raise ValueError("slot and beside exclude each other: a slot is on the region, beside is next to it")
         self.beside, self.slot = beside, (None if slot is None else (int(slot[0]), int(slot[1])))
         self.object, self.region, self.approach_height_m = object, region, float(approach_height_m)
-        self.snapshot_key, self.place_key, self.preplace_key = snapshot, place, preplace
+        self.snapshot_key, self.place_key, self.preplace_key, self.sunk_key = snapshot, place, preplace, sunk
         self.reads(snapshot)
-        self.writes(place, preplace)
+        self.writes(place, preplace, sunk)
 
     def step(self):
         snapshot = self.get(self.snapshot_key)
@@ -1074,12 +1088,19 @@ class ComputePlace(Primitive):
                 if clear is not None:
                     break
         yaw, T_place, T_pre = clear or chosen  # type: ignore[misc]
+        sunk = 0.0
+        if clear is not None and wall > 0.0 and self.beside is None:
+            # into an open container: down between its walls, not let go at the rim
+            T_place, sunk = self._sink(T_pre, T_place, depth_m=float(attrs["open_depth_m"]),
+                                       hang_m=self._hang_in_hand(held, T_tcp_obj))
         self.set(self.place_key, T_place)
         self.set(self.preplace_key, T_pre)
+        self.set(self.sunk_key, sunk)
         self.ctx.trace.record("place_pose", object=self.object, region=self.region, place=T_place[:3, 3].round(4).tolist(),
                               yaw_rad=round(float(yaw), 3), rejected_yaws=rejected,
                               **({"slid_m": np.round(slid, 4).tolist()} if slid is not None else {}),
                               **({"hangs_lower_m": round(hang, 4)} if hang is not None else {}),
+                              **({"sunk_m": round(sunk, 4)} if sunk > 0.0 else {}),
                               **({"beside": self.beside} if self.beside else {}),
                               **({"lean_rad": round(lean[2], 3), "toward_xy": np.round(lean[1], 3).tolist()}
                                  if lean is not None else {}))
@@ -1126,6 +1147,35 @@ class ComputePlace(Primitive):
         def reach(yaw: float) -> float:
             return float(np.abs((top_down_rotation(yaw) @ Rt).T @ d) @ h)
         return reach
+
+    def _sink(self, T_pre: np.ndarray, T_place: np.ndarray, *, depth_m: float,
+              hang_m: float) -> tuple[np.ndarray, float]:
+        """The place pose into an open container lowered from ``T_place`` ((4, 4) world tcp
+        pose, the held object's base at the container's perceived top, clear of collisions)
+        towards its floor, ``depth_m`` (m, perception's ``open_depth_m``) below the top: the
+        lowest of the poses from the object's base :data:`SINK_CLEAR_M` over the floor (and
+        ``hang_m``, m, more: how much lower it may hang in the hand than carried) upward in
+        :data:`LET_DOWN_STEP_M` steps at which the hand and the object clear the walls and
+        the line down from ``T_pre`` stays in reach. Returns ``(pose, how far below T_place
+        in m)``; ``(T_place, 0.0)`` when none below it is clear."""
+        drop = depth_m - SINK_CLEAR_M - max(hang_m, 0.0)
+        steps = int(math.floor(drop / LET_DOWN_STEP_M + 1e-9))
+        for k in range(steps, 0, -1):
+            T = T_place.copy()
+            T[2, 3] -= k * LET_DOWN_STEP_M
+            if self._place_blocked(T_pre, T, near_edge=True) is None:
+                return T, k * LET_DOWN_STEP_M
+        return T_place, 0.0
+
+    @staticmethod
+    def _hang_in_hand(held: dict, T_tcp_obj: np.ndarray) -> float:
+        """How much lower (m, >= 0) the held object may hang in the hand than ``T_tcp_obj``
+        ((4, 4) its carried pose in the tcp frame) puts it: by the height perception saw it at
+        when the hand closed (``attributes.grasp_z_tcp_m``); 0 where that is not known."""
+        seen_z = (held.get("attributes") or {}).get("grasp_z_tcp_m")
+        if not isinstance(seen_z, (int, float)) or not math.isfinite(seen_z):
+            return 0.0
+        return max(0.0, float(seen_z) - float(T_tcp_obj[2, 3]))
 
     def _let_down(self, T_pre: np.ndarray, T_place: np.ndarray, why: Blocked) -> tuple[np.ndarray, Blocked | None]:
         """The place pose into a compartment raised by :data:`LET_DOWN_STEP_M` at a time, from

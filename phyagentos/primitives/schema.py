@@ -92,6 +92,8 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "snapshot": (*_KEY[:2], "blackboard key of the observation to use"),
         "place": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp place pose"),
         "preplace": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp pre-place pose"),
+        "sunk": (*_KEY[:2], "blackboard key written with how far (m) the place was lowered into an open "
+                            "container below its top (0 elsewhere)"),
     },
     SolveIK: {
         "pose": (*_KEY[:2], "blackboard key of the (4, 4) world tcp pose to reach"),
@@ -123,6 +125,8 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
                                            "along it as reached when that is at least this far (null: all or fail)"),
         "grasp_kind": ("str | null", "", "move only after a grasp of this kind was planned (rim, across, ...); "
                                          "else succeed at once (null: always)"),
+        "offset_plus": ("str | null", "", "with `offset`: blackboard key of a length in m the move goes further "
+                                          "along it (a retreat from a place sunk into a container); null: none"),
     },
     Gripper: {
         "command": ("open | close | preshape", "", "what to do (preshape: open only as far as the planned "

@@ -7,11 +7,13 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 
-def compute_place(target, snapshot, blocked=None, *, object: str, region: str, line_blocked=None, **params):
+def compute_place(target, snapshot, blocked=None, *, object: str, region: str, line_blocked=None, release_blocked=None,
+                  **params):
     """``(board, trace records)`` after one step of ``ComputePlace`` on ``snapshot``:
     ``board["place_pose"]`` and ``board["preplace_pose"]`` are (4, 4) world tcp poses.
-    ``blocked(T_pre, T_place)`` and ``line_blocked(T_pre, T_place)`` (the straight lowering):
-    a ``Blocked`` or None (default: nothing is blocked)."""
+    ``blocked(T_pre, T_place)``, ``line_blocked(T_pre, T_place)`` (the straight lowering) and
+    ``release_blocked(T_place)`` (the fingers opened there): a ``Blocked`` or None (default:
+    nothing is blocked)."""
     from phyagentos.primitives.perception import ComputePlace
 
     leaf = ComputePlace("ComputePlace", object=object, region=region, **params)
@@ -23,5 +25,6 @@ def compute_place(target, snapshot, blocked=None, *, object: str, region: str, l
     leaf.set = board.__setitem__
     leaf._blocked = blocked or (lambda T_pre, T_place: None)
     leaf._line_blocked = line_blocked or (lambda T_pre, T_place: None)
+    leaf._release_blocked = release_blocked or (lambda T_place: None)
     leaf.step()
     return board, records

@@ -102,6 +102,46 @@ def test_a_lowering_that_leaves_the_arms_reach_is_not_sunk_to(franka):
     assert board["place_sunk_m"] == pytest.approx(0.03, abs=1e-6)
 
 
+def test_the_object_goes_only_as_low_as_the_fingers_open_clear_of_the_container(franka):
+    """libero_goal task 6: let down 2 cm into the black bowl, the cream cheese's fingers opened
+    against the bowl's inside, and the retreat carried the bowl off the table."""
+    tcp = np.asarray(franka.tcp_pose())
+    rim, _ = compute_place(franka, _snapshot(tcp, depth=None), object="can", region="basket_1")
+    limit = float(rim["place_pose"][2, 3]) - 0.02
+
+    def release(T_place):
+        if T_place[2, 3] < limit - 1e-9:
+            return Blocked("release collides: gripper0_leftfinger-akita_black_bowl_1_main", stage="place",
+                           collides=True)
+        return None
+
+    board, _ = compute_place(franka, _snapshot(tcp), object="can", region="basket_1", release_blocked=release)
+    assert board["place_sunk_m"] == pytest.approx(0.02, abs=1e-6)
+    board, _ = compute_place(franka, _snapshot(tcp), object="can", region="basket_1",
+                             release_blocked=lambda T: Blocked("release collides", stage="place", collides=True))
+    assert board["place_sunk_m"] == 0.0  # nowhere below the rim: let go there, as before
+
+
+def test_the_fingers_open_check_finds_the_container_in_the_planning_world(franka):
+    """The real check, on the tabletop's own model: the hand's fingers opened fully at a pose
+    where one of them stands inside a box are refused; high over it, not."""
+    from types import SimpleNamespace
+
+    from phyagentos.primitives.perception import ComputePlace
+
+    leaf = ComputePlace("ComputePlace", object="can", region="basket_1")
+    leaf.ctx = SimpleNamespace(target=franka, perceiver=None)
+    assert leaf._release_blocked(np.asarray(franka.tcp_pose())) is None  # the ready pose, in the air
+    from phyagentos.primitives.motion import session_checker
+
+    checker = session_checker(leaf.ctx)
+    assert checker.full_opening_m == pytest.approx(0.04)  # the Franka Hand's, from its model's ranges
+    low = np.asarray(franka.tcp_pose()).copy()
+    low[2, 3] = 0.0  # the fingertips at the table's top: opened there they meet it
+    why = leaf._release_blocked(low)
+    assert why is not None and why.stage == "place"
+
+
 def test_an_object_that_may_hang_lower_in_the_hand_stops_higher(franka):
     tcp = np.asarray(franka.tcp_pose())
     snap = _snapshot(tcp)

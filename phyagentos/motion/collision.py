@@ -211,6 +211,9 @@ class CollisionChecker:
                                   for j in range(m.njnt)
                                   if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE
                                   and int(m.jnt_bodyid[j]) in self.gripper_bodies)
+        travel = [float(np.max(np.abs(m.jnt_range[j]))) for j in range(m.njnt)
+                  if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE and int(m.jnt_bodyid[j]) in self.gripper_bodies]
+        self._full_opening = min(travel) if travel else None
         self.n_checks = 0
         mujoco.mj_kinematics(m, self.data)
 
@@ -242,6 +245,13 @@ class CollisionChecker:
         if q.shape != (self.model.nq,):
             raise PlanningError(f"qpos_full must have shape ({self.model.nq},), got {q.shape}")
         self.data.qpos[:] = q
+
+    @property
+    def full_opening_m(self) -> float | None:
+        """How far the gripper's fingers open at most, m per finger (the least travel from
+        closed of its slide joints, by their ranges in the model: the Franka Hand's 0.04), or
+        ``None`` for a gripper without slide joints (the SO-101's revolute jaw)."""
+        return self._full_opening
 
     def set_gripper_opening(self, opening_m: float) -> bool:
         """Stand the gripper's fingers ``opening_m`` (m per finger, >= 0) open in the checked

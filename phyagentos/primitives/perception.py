@@ -758,6 +758,9 @@ LET_DOWN_STEP_M = 0.01
 #: where one let go at the rim (12 cm over LIBERO's basket floor) slid 3-5 cm on landing
 #: (LIBERO-10 task 0 inits 2 and 7, docs/libero.md, fifty-first pass).
 SINK_CLEAR_M = 0.02
+#: ... where the hand's fingers, opened fully there, stay this far (m) from everything but the
+#: object let go (:meth:`ComputePlace._release_blocked`): the perceived pose's few millimetres.
+RELEASE_MARGIN_M = 0.005
 
 
 def _lean(attrs: dict) -> tuple[np.ndarray, np.ndarray, float] | None:
@@ -1155,17 +1158,44 @@ class ComputePlace(Primitive):
         towards its floor, ``depth_m`` (m, perception's ``open_depth_m``) below the top: the
         lowest of the poses from the object's base :data:`SINK_CLEAR_M` over the floor (and
         ``hang_m``, m, more: how much lower it may hang in the hand than carried) upward in
-        :data:`LET_DOWN_STEP_M` steps at which the hand and the object clear the walls and
-        the line down from ``T_pre`` stays in reach. Returns ``(pose, how far below T_place
+        :data:`LET_DOWN_STEP_M` steps at which the hand and the object clear the walls, the
+        line down from ``T_pre`` stays in reach and the fingers open clear of them
+        (:meth:`_release_blocked`). Returns ``(pose, how far below T_place
         in m)``; ``(T_place, 0.0)`` when none below it is clear."""
         drop = depth_m - SINK_CLEAR_M - max(hang_m, 0.0)
         steps = int(math.floor(drop / LET_DOWN_STEP_M + 1e-9))
         for k in range(steps, 0, -1):
             T = T_place.copy()
             T[2, 3] -= k * LET_DOWN_STEP_M
-            if self._place_blocked(T_pre, T, near_edge=True) is None:
+            if self._place_blocked(T_pre, T, near_edge=True) is None and self._release_blocked(T) is None:
                 return T, k * LET_DOWN_STEP_M
         return T_place, 0.0
+
+    def _release_blocked(self, T_place: np.ndarray) -> Blocked | None:
+        """Why the hand cannot open at ``T_place`` ((4, 4) world tcp pose): its fingers, opened
+        fully (the gripper's ``open``, :attr:`~phyagentos.motion.collision.CollisionChecker.full_opening_m`),
+        come within :data:`RELEASE_MARGIN_M` of anything but the held object; ``None`` when they
+        do not (or the target has no collision model, or its gripper no slide joints). The
+        fingers' pose follows from the tcp pose alone, so any clear IK solution serves. Let down
+        2 cm into LIBERO's black bowl, the cream cheese's fingers opened against the bowl's
+        inside and the retreat carried the bowl off the table (libero_goal task 6, fifty-second
+        pass)."""
+        ctx = self.ctx
+        try:
+            full = session_checker(ctx, margin_m=RELEASE_MARGIN_M).full_opening_m
+        except Exception:  # noqa: BLE001 - a target without a collision model
+            return None
+        if full is None:
+            return None
+        try:
+            _, pairs, _ = clear_ik(ctx, T_place, allow=_object_body(ctx, self.object), margin_m=RELEASE_MARGIN_M,
+                                   opening_m=full)
+        except IKError as exc:
+            return Blocked(f"release: {str(exc)[:100]}", stage="place", collides=False)
+        if pairs:
+            return Blocked(f"release collides: {', '.join('-'.join(pr) for pr in pairs[:3])}", stage="place",
+                           collides=True)
+        return None
 
     @staticmethod
     def _hang_in_hand(held: dict, T_tcp_obj: np.ndarray) -> float:

@@ -756,7 +756,7 @@ LET_DOWN_STEP_M = 0.01
 #: the hand clears them (:meth:`ComputePlace._sink`): the perceived floor is the 5th percentile
 #: of the inside's heights (a few mm of noise), and a can let go 2 cm up stays where it lands,
 #: where one let go at the rim (12 cm over LIBERO's basket floor) slid 3-5 cm on landing
-#: (LIBERO-10 task 0 inits 2 and 7, docs/libero.md, fifty-first pass).
+#: (LIBERO-10 task 0 inits 2 and 7; docs/libero.md, "Let go low in the basket").
 SINK_CLEAR_M = 0.02
 #: ... where the hand's fingers, opened fully there, stay this far (m) from everything but the
 #: object let go (:meth:`ComputePlace._release_blocked`): the perceived pose's few millimetres.
@@ -947,9 +947,11 @@ class ComputePlace(Primitive):
     only within 3 cm of its centre), beside a landmark, in a slot, a compartment or on a ramp.
 
     Into an open container (perception's ``open_depth_m``: a basket; not beside it) the object
-    is lowered between the walls towards the perceived floor, as far as the hand clears them
-    (:meth:`_sink`; traced ``sunk_m``), and let go there rather than at the rim: a can let go at
-    the rim of LIBERO's basket fell 12 cm and slid on landing.
+    is lowered between the walls towards the perceived floor, as far as the hand clears them and
+    its fingers open clear of them (:meth:`_sink`, :meth:`_release_blocked`; traced ``sunk_m``),
+    and let go there rather than at the rim: a can let go at the rim of LIBERO's basket fell 12 cm
+    and slid on landing. Into LIBERO's black bowl the fingers would open against its inside, so
+    a thing is let go at its rim, as before.
 
     Onto an object (stacking: a plate, a basket) only one perception names at
     :data:`SUPPORT_MIN_CONFIDENCE` or more: a weak sighting is no support (``perception.not_found``,

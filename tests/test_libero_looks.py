@@ -76,6 +76,47 @@ def test_each_world_is_sighted_once_per_workspace_and_shared_by_its_perturbed_su
     assert len(built) == 3 and set(swapped) <= set(looks) | set(_descriptors(tmp_path, "libero_object", [2]))
 
 
+def test_the_bench_builds_each_world_once_for_its_descriptors_and_its_fixture_looks(tmp_path, monkeypatch):
+    """A suite's preparation measures a task's object sightings and fixture looks on one
+    LiberoTarget (closed before the next world is built, and at the end); a second preparation
+    in the same workspace builds none."""
+    import phyagentos.targets.libero as libero
+    import phyagentos.targets.libero.descriptors as descriptors
+    from phyagentos.bench.libero import prepare_libero_suite
+
+    events: list[tuple[str, int, str]] = []
+
+    class World:
+        def __init__(self, name, scene, seed):
+            self.key = (scene.suite, scene.task)
+            self.cats = libero.parse_bddl(libero.resolve_task(scene.suite, scene.task).bddl_path).objects
+            events.append((*self.key, "built"))
+
+        def close(self):
+            events.append((*self.key, "closed"))
+
+    def sightings(target):
+        events.append((*target.key, "descriptors"))
+        return {c: [_seen("box", (0.05, 0.03 + 0.002 * k, 0.1)) for k in range(4)] for c in set(target.cats.values())}
+
+    def fixture_looks(target):
+        events.append((*target.key, "fixture looks"))
+        return {}
+
+    monkeypatch.setattr(libero, "LiberoTarget", World)
+    monkeypatch.setattr(descriptors, "descriptor_samples", sightings)
+    monkeypatch.setattr(descriptors, "measure_fixture_looks", fixture_looks)
+    prepare_libero_suite("libero_object", tmp_path / "ws", tasks=("0", "1"), seeds=(0,))
+    # libero_object's tasks share one fixture world (the floor scene and its basket's region)
+    # and differ in their objects: task 1's world is built for its sightings alone
+    assert events == [("libero_object", 0, "built"), ("libero_object", 0, "descriptors"),
+                      ("libero_object", 0, "fixture looks"), ("libero_object", 0, "closed"),
+                      ("libero_object", 1, "built"), ("libero_object", 1, "descriptors"),
+                      ("libero_object", 1, "closed")]
+    prepare_libero_suite("libero_object", tmp_path / "ws", tasks=("0", "1"), seeds=(0,))
+    assert len(events) == 7  # both measured: nothing built
+
+
 def test_a_category_that_shows_a_handle_gets_its_model_origin_along_it_and_one_that_seldom_does_not():
     mug = [{**_seen("cylinder", (0.11, 0.10, 0.12)), "handle_origin_m": 0.016 + 0.001 * (k % 3)} for k in range(6)]
     mug += [_seen("box", (0.11, 0.09, 0.12)) for _ in range(2)]  # the handle hidden twice in eight

@@ -42,11 +42,12 @@ every session's ``ground_truth.yaml``: ``env.check_success()``), with per-task
 from __future__ import annotations
 
 from collections import Counter
+import contextlib
 import json
 import logging
 import re
 from pathlib import Path
-from typing import Any, Collection, Mapping
+from typing import Any, Collection, Iterator, Mapping
 
 import yaml
 
@@ -684,8 +685,13 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     # suite and graph names are identifiers: libero_object_temp_x0.1 -> libero_object_temp_x0_1
     ident = "".join(c if c.isalnum() or c == "_" else "_" for c in suite)
     root.mkdir(parents=True, exist_ok=True)
-    looks = _descriptors(Path(workspace_dir), suite, [i for i, *_ in planned])
-    fixture_looks = _fixture_looks(Path(workspace_dir), suite, [i for i, *_ in planned])
+    chosen = [i for i, *_ in planned]
+    with _WorldTargets() as world_targets:  # a world measured for both builds one LiberoTarget, not two
+        for i in chosen:
+            _descriptors(Path(workspace_dir), suite, [i], world_targets=world_targets)
+            _fixture_looks(Path(workspace_dir), suite, [i], world_targets=world_targets)
+    looks = _descriptors(Path(workspace_dir), suite, chosen)  # each world measured above: pooled, nothing built
+    fixture_looks = _fixture_looks(Path(workspace_dir), suite, chosen)
     for k, (i, task, problem, nodes, where) in enumerate(planned):
         # the looks known, a move beside a landmark of a thing no grasp takes is planned as a push
         untakeable = untakeable_objects(problem.objects, looks)
@@ -743,7 +749,70 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     return suite_path, tuple(e["id"] for e in entries), seeds
 
 
-def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str, dict[str, Any]]:
+class _WorldTargets:
+    """The LIBERO world being measured for looks, open once for both of its measurements.
+
+    :func:`_descriptors` and :func:`_fixture_looks` each measure a task's world on generated
+    scenes of a :class:`~phyagentos.targets.libero.LiberoTarget` of that task; building one
+    (robosuite's env, MuJoCo's compile, the renderer's upload of the world's textures) is
+    about a fifth of the two measurements' time (measured: libero_goal task 0, 48 s
+    separately, 38 s on one target, on 2 busy cores). Both leave the target reset to its
+    init state and re-seed its camera noise, so each measures on the shared target exactly
+    what it measures on a fresh one (the same looks, compared). One target is open at a
+    time (a LIBERO world holds 1.5-2.9 GB): asking for another task's world closes it.
+    Use as a context manager; :meth:`close` closes the open one.
+    """
+
+    def __init__(self) -> None:
+        self._key: tuple[str, int] | None = None
+        self._target: Any = None
+
+    def open(self, suite: str, task: int) -> Any:
+        """The open target of ``suite`` task ``task``, built if it is not the open one.
+
+        Raises:
+            TargetError: the world could not be built.
+        """
+        from phyagentos.targets.libero import LiberoScene, LiberoTarget  # noqa: PLC0415
+
+        if self._key != (suite, task):
+            self.close()
+            self._target = LiberoTarget("libero_looks", LiberoScene(suite=suite, task=task), seed=0)
+            self._key = (suite, task)
+        return self._target
+
+    def close(self) -> None:
+        """Close the open target, if any."""
+        target, self._target, self._key = self._target, None, None
+        if target is not None:
+            target.close()
+
+    def __enter__(self) -> _WorldTargets:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@contextlib.contextmanager
+def _world_target(world_targets: _WorldTargets | None, suite: str, task: int, name: str) -> Iterator[Any]:
+    """``world_targets``' target of ``suite`` task ``task`` (left open), or with none a
+    fresh LiberoTarget ``name`` closed on exit.
+
+    Raises:
+        TargetError: the world could not be built.
+    """
+    if world_targets is not None:
+        yield world_targets.open(suite, task)
+        return
+    from phyagentos.targets.libero import LiberoScene, LiberoTarget  # noqa: PLC0415
+
+    with LiberoTarget(name, LiberoScene(suite=suite, task=task), seed=0) as target:
+        yield target
+
+
+def _descriptors(workspace_dir: Path, suite: str, tasks: list[int], *,
+                 world_targets: _WorldTargets | None = None) -> dict[str, dict[str, Any]]:
     """Appearance descriptors of the object categories of ``tasks``: each category's look
     pools its sightings in every world of ``tasks``
     (:func:`~phyagentos.targets.libero.descriptors.looks_from_samples`): a milk carton beside
@@ -755,12 +824,13 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str,
     measured once per workspace and kept in ``libero/descriptor_sightings.json``; the pooled
     looks are written to ``libero/descriptors.yaml`` for people to read. A
     ``descriptors.yaml`` of the current method whose ``_measured_tasks`` cover ``tasks`` is
-    used as it is (looks given: nothing is built).
+    used as it is (looks given: nothing is built). A world to measure is built by ``world_targets``
+    (kept open for its fixture looks), else for this alone.
 
     Raises:
         BenchError: a world could not be built or rendered to measure them.
     """
-    from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
+    from phyagentos.targets.libero import parse_bddl, resolve_task  # noqa: PLC0415
     from phyagentos.targets.libero.descriptors import descriptor_samples, looks_from_samples  # noqa: PLC0415
 
     root = workspace_dir / "libero"
@@ -785,7 +855,7 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[str,
         logger.info("LIBERO bench: sighting the object categories of %s on generated scenes (task %d of %d)",
                     key, n, len(wanted))
         try:
-            with LiberoTarget("libero_descriptors", LiberoScene(suite=name, task=int(index)), seed=0) as target:
+            with _world_target(world_targets, name, int(index), "libero_descriptors") as target:
                 worlds[world] = {"measured_as": key, "sightings": descriptor_samples(target)}
         except TargetError as exc:
             raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
@@ -820,7 +890,8 @@ def _fixture_world(problem) -> str:
     return json.dumps([problem.scene, sorted(problem.fixtures.items()), placed], sort_keys=True)
 
 
-def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[int, dict[str, dict[str, Any]]]:
+def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int], *,
+                   world_targets: _WorldTargets | None = None) -> dict[int, dict[str, dict[str, Any]]]:
     """``{task: {fixture category: look}}`` for ``tasks``
     (:func:`~phyagentos.targets.libero.descriptors.measure_fixture_looks`: each fixture alone
     on generated scenes of the task's world, with its place patch, knob and drawers).
@@ -829,12 +900,13 @@ def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[in
     (``{_method, worlds: {key: {measured_as, looks}}}``): a task whose world was measured
     before, by any suite (LIBERO-PRO's swapped or reworded suites share their standard
     suite's worlds), builds nothing; a cache measured by another method is measured again.
-    Written atomically after every world.
+    Written atomically after every world. A world to measure is built by ``world_targets`` (the
+    one its descriptors were measured on, if open), else for this alone.
 
     Raises:
         BenchError: a world could not be built or rendered to measure them.
     """
-    from phyagentos.targets.libero import LiberoScene, LiberoTarget, parse_bddl, resolve_task  # noqa: PLC0415
+    from phyagentos.targets.libero import parse_bddl, resolve_task  # noqa: PLC0415
     from phyagentos.targets.libero.descriptors import measure_fixture_looks  # noqa: PLC0415
 
     path = workspace_dir / "libero" / "fixture_looks.yaml"
@@ -851,7 +923,7 @@ def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int]) -> dict[in
         if world not in worlds:
             logger.info("LIBERO bench: measuring the fixture looks of %s on generated scenes", key)
             try:
-                with LiberoTarget("libero_fixture_looks", LiberoScene(suite=suite, task=i), seed=0) as target:
+                with _world_target(world_targets, suite, i, "libero_fixture_looks") as target:
                     worlds[world] = {"measured_as": key, "looks": measure_fixture_looks(target)}
             except TargetError as exc:
                 raise BenchError(f"LIBERO {key}: fixture looks could not be measured: {exc}") from exc

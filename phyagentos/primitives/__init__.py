@@ -32,6 +32,8 @@ push_door                 sweep the closed fingers along a door's circle into it
 compute_handle_grasp      grasp poses taking an object by its handle from outside (handle_grasp.py)
 compute_place_inside      place poses setting a held object inside a room through its mouth (inside.py)
 compute_drawer_hook       poses hooking the closed fingers behind an open drawer's front (drawer_hook.py)
+object_seen               succeed when the observation names the object, fail quietly otherwise (search.py)
+compute_search_look       a look from nearer at an unnamed segment where the object may be (search.py)
 game_*                    game primitives (explore, goto, collect, hunt, place, make,
                           sleep, survive) on a ``kind: game`` target (game/)
 ========================  ==========================================================
@@ -51,6 +53,7 @@ from .inside import ComputePlaceInside
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
 from .placement import ComputePlaceAt
+from .search import ComputeSearchLook, ObjectSeen
 
 __all__ = [
     "PRIMITIVES",
@@ -94,5 +97,7 @@ PRIMITIVES = {
     "compute_handle_grasp": ComputeHandleGrasp,
     "compute_place_inside": ComputePlaceInside,
     "compute_drawer_hook": ComputeDrawerHook,
+    "object_seen": ObjectSeen,
+    "compute_search_look": ComputeSearchLook,
     **GAME_PRIMITIVES,
 }

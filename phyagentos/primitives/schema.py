@@ -30,6 +30,7 @@ from .inside import ComputePlaceInside
 from .motion import PlanPath, ReadyConfiguration, RetimePath, SolveIK
 from .perception import ComputeGrasp, ComputePlace, Observe
 from .placement import ComputePlaceAt
+from .search import ComputeSearchLook, ObjectSeen
 
 __all__ = ["ParamSpec", "PrimitiveSchema", "TABLES", "primitive_schema", "primitive_schemas", "REQUIRED"]
 
@@ -251,6 +252,17 @@ TABLES: dict[type, Mapping[str, tuple[str, str, str]]] = {
         "ticks": ("int", "", "ticks before succeeding (touches no target)"),
     },
     GiveWay: {},
+    ObjectSeen: {
+        "object": ("str", "", "scene object the observation should name"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation"),
+    },
+    ComputeSearchLook: {
+        "object": ("str", "", "the object looked for (named in the trace and the failure)"),
+        "max_looks": ("int", "", "looks aimed at most in one session (0: none)"),
+        "look_height_m": ("float", "m", "hand camera's height above the segment's top"),
+        "snapshot": (*_KEY[:2], "blackboard key of the observation"),
+        "out": (*_KEY[:2], "blackboard key written with the (4, 4) world tcp look pose"),
+    },
     ComputePlaceAt: {
         "object": ("str", "", "the held object"),
         "region": ("str", "", "region to set it down in"),

@@ -48,10 +48,14 @@ def test_a_segment_apart_from_everything_named_comes_before_a_piece_beside_a_nam
         _ent("mug_1", "object", (0.50, -0.20), size=(0.045, 0.045, 0.05), cls="mug"),
         _ent("unknown_0", "unknown", (0.52, -0.16), size=(0.02, 0.01, 0.04)),  # its handle, beside it
         _ent("unknown_1", "unknown", (0.40, 0.20), size=(0.015, 0.02, 0.04)),  # a sliver on its own
-        _ent("bowl_1", "unknown", (0.60, 0.00), cls="bowl"),  # a declared object seen weakly keeps its class
+        _ent("bowl_1", "unknown", (0.60, 0.00)),  # a declared object seen too weakly to be named keeps its name
+        _ent("plate_1", "unknown", (0.30, -0.30), cls="plate"),  # or its class
         _ent("tcp", "robot", (0.40, 0.21)), _ent("gripper", "gripper", (0.40, 0.21)),  # the robot: neither
     ]}
-    assert [e["name"] for e in unnamed_segments(snap)] == ["unknown_1", "unknown_0"]
+    assert [e["name"] for e in unnamed_segments(snap, declared={"mug_1", "bowl_1", "plate_1"})] == ["unknown_1",
+                                                                                                  "unknown_0"]
+    # without the declared names the weak bowl is a segment too (it has no class to tell it by)
+    assert "bowl_1" in [e["name"] for e in unnamed_segments(snap)]
     assert unnamed_segments({"entities": [_ent("mug_1", "object", (0.5, 0.0), cls="mug")]}) == []
 
 

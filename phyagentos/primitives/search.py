@@ -36,7 +36,7 @@ from phyagentos.motion.grasp import hand_yaw, top_down_rotation
 from .base import Primitive, PrimitiveFailure
 from .motion import clear_ik
 
-__all__ = ["ObjectSeen", "ComputeSearchLook", "unnamed_segments", "hand_camera_offset", "look_pose",
+__all__ = ["ObjectSeen", "ComputeSearchLook", "declared_names", "unnamed_segments", "hand_camera_offset", "look_pose",
            "LOOK_BOX_MARGIN_M", "LOOK_HEIGHT_M", "LOOK_REVISIT_M"]
 
 logger = logging.getLogger(__name__)
@@ -66,16 +66,31 @@ def _named(snapshot: dict, name: str) -> dict | None:
     return next((e for e in snapshot.get("entities", []) if e.get("name") == name), None)
 
 
-def unnamed_segments(snapshot: dict) -> list[dict]:
+def declared_names(target) -> frozenset[str]:
+    """Names of the objects and fixtures the target's scene declares (``describe_declared``);
+    empty when it declares none or cannot say."""
+    describe = getattr(target, "describe_declared", None)
+    if describe is None:
+        return frozenset()
+    try:
+        doc = describe()
+    except Exception:  # noqa: BLE001 - a target that cannot describe its scene declares nothing
+        return frozenset()
+    return frozenset(str(o["name"]) for key in ("objects", "fixtures") for o in doc.get(key) or () if o.get("name"))
+
+
+def unnamed_segments(snapshot: dict, *, declared: frozenset[str] | set[str] = frozenset()) -> list[dict]:
     """The snapshot's unnamed segments, most likely a hidden object's first: entities of kind
-    ``unknown`` that carry no class (a declared object perceived weakly keeps its name and
-    class and is not one), ordered by their horizontal clearance from the nearest named
+    ``unknown`` that are not a declared object or fixture (``declared``: their names; one
+    perceived below the confidence to be named keeps its name, kind ``unknown``, and is not
+    a segment) and carry no class, ordered by their horizontal clearance from the nearest named
     entity (its centre distance less that entity's larger horizontal half extent), largest
     first: a segment apart from everything named is more likely an object perception could
     not tell than a piece of one it did (a mug's handle beside its body). Robot parts are
     neither candidates nor neighbours."""
     ents = [e for e in snapshot.get("entities", []) if e.get("kind") not in _ROBOT_KINDS]
-    segs = [e for e in ents if e.get("kind") == "unknown" and not (e.get("attributes") or {}).get("class")]
+    segs = [e for e in ents if e.get("kind") == "unknown" and e.get("name") not in declared
+            and not (e.get("attributes") or {}).get("class")]
     named = [e for e in ents if e not in segs]
 
     def clearance(seg: dict) -> float:
@@ -168,7 +183,8 @@ class ObjectSeen(Primitive):
 
 class ComputeSearchLook(Primitive):
     """The tcp pose from which the hand camera looks down on an unnamed segment where
-    ``object`` may be hidden (:func:`unnamed_segments`, best first; those within
+    ``object`` may be hidden (:func:`unnamed_segments` of the target's :func:`declared_names`,
+    best first; those within
     :data:`LOOK_REVISIT_M` of a point this leaf already aimed at are passed over), reachable
     by the arm clear of the scene (IK from the current joints; hand yaws from the current
     one, a quarter turn either way, then half; the look height, then 0.7 of it) with the tcp
@@ -216,7 +232,7 @@ class ComputeSearchLook(Primitive):
             yaw0 = hand_yaw(np.asarray(target.tcp_pose(), dtype=float))
         except Exception:  # noqa: BLE001 - a target that reports no tcp pose: yaw 0 first
             yaw0 = 0.0
-        for seg in unnamed_segments(snapshot):
+        for seg in unnamed_segments(snapshot, declared=declared_names(target)):
             p = np.asarray(seg["position"], dtype=float)
             if any(float(np.linalg.norm(p[:2] - a[:2])) < LOOK_REVISIT_M for a in self._aimed):
                 continue

@@ -16,10 +16,12 @@ object stands, not the object. A person would lean over and look. These leaves d
     down on it from ``look_height_m``; raises ``perception.not_found`` when no segment is
     left to look at (or ``max_looks`` looks were taken).
 
-``pick`` runs them under a selector after its first observation: object seen, or up to
-``search_looks`` looks from nearer (move there, observe, seen?), or go on to the grasp
-computation, which then reports the object as not found. Only what perception reports is
-read; never the simulator's truth.
+The shipped tree ``look_for`` (``data/trees/look_for.yaml``) runs them under a selector:
+object seen, or up to ``looks`` looks from nearer (move there, observe, seen?), or go on;
+``pick`` uses it after its first observation (``search_looks``), ``place`` for its region.
+When no look names the object, the grasp or place computation that follows reports it not
+found, as it did without the looks. Only what perception reports is read; never the
+simulator's truth.
 """
 
 from __future__ import annotations

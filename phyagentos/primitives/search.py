@@ -33,6 +33,7 @@ import numpy as np
 from py_trees.common import Status
 
 from phyagentos.errors import IKError
+from phyagentos.geometry import pose_matrix
 from phyagentos.motion.grasp import hand_yaw, top_down_rotation
 
 from .base import Primitive, PrimitiveFailure
@@ -122,10 +123,8 @@ def hand_camera_offset(target) -> np.ndarray | None:
             cam, tcp = model.camera(spec.camera_name).id, model.site(site).id
         except KeyError:
             continue
-        T_cam, T_tcp = np.eye(4), np.eye(4)
-        T_cam[:3, :3], T_cam[:3, 3] = np.asarray(data.cam_xmat[cam]).reshape(3, 3), data.cam_xpos[cam]
-        T_tcp[:3, :3], T_tcp[:3, 3] = np.asarray(data.site_xmat[tcp]).reshape(3, 3), data.site_xpos[tcp]
-        return np.linalg.inv(T_tcp) @ T_cam
+        return np.linalg.inv(pose_matrix(data.site_xpos[tcp], data.site_xmat[tcp])) @ pose_matrix(
+            data.cam_xpos[cam], data.cam_xmat[cam])
     return None
 
 

@@ -68,11 +68,12 @@ def test_each_world_is_sighted_once_per_workspace_and_shared_by_its_perturbed_su
 
     monkeypatch.setattr(libero, "LiberoTarget", World)
     monkeypatch.setattr(descriptors, "descriptor_samples", sightings)
-    looks = _descriptors(tmp_path, "libero_object", [0, 1])
+    # measured here, not taken from the shipped looks (tests/test_shipped_looks.py)
+    looks = _descriptors(tmp_path, "libero_object", [0, 1], measure=True)
     assert built == [("libero_object", 0), ("libero_object", 1)] and "milk" in looks
-    _descriptors(tmp_path, "libero_object", [0, 1, 2])
+    _descriptors(tmp_path, "libero_object", [0, 1, 2], measure=True)
     assert built[2:] == [("libero_object", 2)]  # only the new world
-    swapped = _descriptors(tmp_path, "libero_object_swap", [0, 2])
+    swapped = _descriptors(tmp_path, "libero_object_swap", [0, 2], measure=True)
     assert len(built) == 3 and set(swapped) <= set(looks) | set(_descriptors(tmp_path, "libero_object", [2]))
 
 
@@ -106,15 +107,15 @@ def test_the_bench_builds_each_world_once_for_its_descriptors_and_its_fixture_lo
     monkeypatch.setattr(libero, "LiberoTarget", World)
     monkeypatch.setattr(descriptors, "descriptor_samples", sightings)
     monkeypatch.setattr(descriptors, "measure_fixture_looks", fixture_looks)
-    prepare_libero_suite("libero_object", tmp_path / "ws", tasks=("0", "1"), seeds=(0,))
+    prepare_libero_suite("libero_object", tmp_path / "ws", tasks=("0", "1"), seeds=(0,), measure_looks=True)
     # libero_object's tasks share one fixture world (the floor scene and its basket's region)
     # and differ in their objects: task 1's world is built for its sightings alone
     assert events == [("libero_object", 0, "built"), ("libero_object", 0, "descriptors"),
                       ("libero_object", 0, "fixture looks"), ("libero_object", 0, "closed"),
                       ("libero_object", 1, "built"), ("libero_object", 1, "descriptors"),
                       ("libero_object", 1, "closed")]
-    prepare_libero_suite("libero_object", tmp_path / "ws", tasks=("0", "1"), seeds=(0,))
-    assert len(events) == 7  # both measured: nothing built
+    prepare_libero_suite("libero_object", tmp_path / "ws", tasks=("0", "1"), seeds=(0,), measure_looks=True)
+    assert len(events) == 7  # both measured in this workspace: nothing built
 
 
 def test_a_category_that_shows_a_handle_gets_its_model_origin_along_it_and_one_that_seldom_does_not():

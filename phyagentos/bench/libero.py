@@ -55,6 +55,8 @@ from phyagentos.errors import BenchError, TargetError, format_choices, format_lo
 from phyagentos.protocol import Workspace
 from phyagentos.protocol.atomic import atomic_write_text
 
+from .shipped_looks import shipped_worlds
+
 __all__ = ["LIBERO_TARGET", "LIBERO_CELLS", "SKILL_DEFAULTS", "FIRST_PICK_STILL_MAX_S", "workspace_box",
            "is_libero_suite", "instruction_nodes", "instruction_plan", "instruction_assumptions", "load_skill_defaults",
            "prepare_libero_suite", "target_entry", "untakeable_objects"]
@@ -598,7 +600,7 @@ def load_skill_defaults(path: str | Path) -> dict[str, dict[str, Any]]:
 def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[str, ...] | None = None,
                          seeds: tuple[int, ...] | None = None,
                          skill_defaults: Mapping[str, Mapping[str, Any]] | None = None,
-                         generated: bool = False,
+                         generated: bool = False, measure_looks: bool = False,
                          ) -> tuple[Path, tuple[str, ...], tuple[int, ...]]:
     """Write the bench suite of LIBERO suite ``suite`` into the bench workspace.
 
@@ -614,6 +616,8 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
             ``seeds`` (any non-negative integers) instead of the task's fixed init states:
             same instruction, objects and checker, fresh placements; for development, never
             reported as a LIBERO score.
+        measure_looks: measure the looks of every chosen world on generated scenes here
+            instead of taking the shipped ones (:mod:`phyagentos.bench.shipped_looks`).
 
     Returns:
         ``(suite file, task ids, seeds)`` for :func:`~phyagentos.bench.run_bench`.
@@ -688,8 +692,8 @@ def prepare_libero_suite(suite: str, workspace_dir: str | Path, *, tasks: tuple[
     chosen = [i for i, *_ in planned]
     with _WorldTargets() as world_targets:  # a world measured for both builds one LiberoTarget, not two
         for i in chosen:
-            _descriptors(Path(workspace_dir), suite, [i], world_targets=world_targets)
-            _fixture_looks(Path(workspace_dir), suite, [i], world_targets=world_targets)
+            _descriptors(Path(workspace_dir), suite, [i], world_targets=world_targets, measure=measure_looks)
+            _fixture_looks(Path(workspace_dir), suite, [i], world_targets=world_targets, measure=measure_looks)
     looks = _descriptors(Path(workspace_dir), suite, chosen)  # each world measured above: pooled, nothing built
     fixture_looks = _fixture_looks(Path(workspace_dir), suite, chosen)
     for k, (i, task, problem, nodes, where) in enumerate(planned):
@@ -812,7 +816,7 @@ def _world_target(world_targets: _WorldTargets | None, suite: str, task: int, na
 
 
 def _descriptors(workspace_dir: Path, suite: str, tasks: list[int], *,
-                 world_targets: _WorldTargets | None = None) -> dict[str, dict[str, Any]]:
+                 world_targets: _WorldTargets | None = None, measure: bool = False) -> dict[str, dict[str, Any]]:
     """Appearance descriptors of the object categories of ``tasks``: each category's look
     pools its sightings in every world of ``tasks``
     (:func:`~phyagentos.targets.libero.descriptors.looks_from_samples`): a milk carton beside
@@ -824,8 +828,10 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int], *,
     measured once per workspace and kept in ``libero/descriptor_sightings.json``; the pooled
     looks are written to ``libero/descriptors.yaml`` for people to read. A
     ``descriptors.yaml`` of the current method whose ``_measured_tasks`` cover ``tasks`` is
-    used as it is (looks given: nothing is built). A world to measure is built by ``world_targets``
-    (kept open for its fixture looks), else for this alone.
+    used as it is (looks given: nothing is built). A world not in the workspace is taken from the
+    shipped looks (:mod:`phyagentos.bench.shipped_looks`, the same measurement made once) unless
+    ``measure``; a world to measure is built by ``world_targets`` (kept open for its fixture
+    looks), else for this alone.
 
     Raises:
         BenchError: a world could not be built or rendered to measure them.
@@ -837,10 +843,13 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int], *,
     looks_path, sightings_path = root / "descriptors.yaml", root / "descriptor_sightings.json"
     wanted = [f"{suite}/{i}" for i in tasks]
     given = (yaml.safe_load(looks_path.read_text(encoding="utf-8")) or {}) if looks_path.is_file() else {}
-    if given.get("_method") == _LOOKS_METHOD and set(wanted) <= set(given.get("_measured_tasks", [])):
+    if not measure and given.get("_method") == _LOOKS_METHOD and set(wanted) <= set(given.get("_measured_tasks", [])):
         return {k: v for k, v in given.items() if not k.startswith("_")}
     store = json.loads(sightings_path.read_text(encoding="utf-8")) if sightings_path.is_file() else {}
     worlds: dict[str, dict[str, Any]] = store.get("worlds", {}) if store.get("method") == _LOOKS_METHOD else {}
+    if measure:  # measured here, even where the workspace or the package has them
+        worlds = {w: e for w, e in worlds.items() if e.get("source") != "shipped"}
+    shipped = {} if measure else shipped_worlds("descriptors", _LOOKS_METHOD)
     keys = []
     for n, key in enumerate(wanted, 1):
         name, index = key.rsplit("/", 1)
@@ -852,13 +861,17 @@ def _descriptors(workspace_dir: Path, suite: str, tasks: list[int], *,
         keys.append(world)
         if world in worlds:
             continue
-        logger.info("LIBERO bench: sighting the object categories of %s on generated scenes (task %d of %d)",
-                    key, n, len(wanted))
-        try:
-            with _world_target(world_targets, name, int(index), "libero_descriptors") as target:
-                worlds[world] = {"measured_as": key, "sightings": descriptor_samples(target)}
-        except TargetError as exc:
-            raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
+        if world in shipped:
+            logger.info("LIBERO bench: the object categories of %s from the shipped looks", key)
+            worlds[world] = {**shipped[world], "source": "shipped"}
+        else:
+            logger.info("LIBERO bench: sighting the object categories of %s on generated scenes (task %d of %d)",
+                        key, n, len(wanted))
+            try:
+                with _world_target(world_targets, name, int(index), "libero_descriptors") as target:
+                    worlds[world] = {"measured_as": key, "sightings": descriptor_samples(target)}
+            except TargetError as exc:
+                raise BenchError(f"LIBERO {key}: object descriptors could not be measured: {exc}") from exc
         root.mkdir(parents=True, exist_ok=True)
         atomic_write_text(sightings_path, json.dumps({"method": _LOOKS_METHOD, "worlds": worlds}))
     samples: dict[str, list[dict[str, Any]]] = {}
@@ -890,8 +903,8 @@ def _fixture_world(problem) -> str:
     return json.dumps([problem.scene, sorted(problem.fixtures.items()), placed], sort_keys=True)
 
 
-def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int], *,
-                   world_targets: _WorldTargets | None = None) -> dict[int, dict[str, dict[str, Any]]]:
+def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int], *, world_targets: _WorldTargets | None = None,
+                   measure: bool = False) -> dict[int, dict[str, dict[str, Any]]]:
     """``{task: {fixture category: look}}`` for ``tasks``
     (:func:`~phyagentos.targets.libero.descriptors.measure_fixture_looks`: each fixture alone
     on generated scenes of the task's world, with its place patch, knob and drawers).
@@ -899,9 +912,11 @@ def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int], *,
     Looks are kept per world (:func:`_fixture_world`) in ``libero/fixture_looks.yaml``
     (``{_method, worlds: {key: {measured_as, looks}}}``): a task whose world was measured
     before, by any suite (LIBERO-PRO's swapped or reworded suites share their standard
-    suite's worlds), builds nothing; a cache measured by another method is measured again.
-    Written atomically after every world. A world to measure is built by ``world_targets`` (the
-    one its descriptors were measured on, if open), else for this alone.
+    suite's worlds), builds nothing; a cache measured by another method is measured again. A
+    world not in the workspace is taken from the shipped looks
+    (:mod:`phyagentos.bench.shipped_looks`) unless ``measure`` (then a world taken from them
+    before is measured too). Written atomically after every world. A world to measure is built
+    by ``world_targets`` (the one its descriptors were measured on, if open), else for this alone.
 
     Raises:
         BenchError: a world could not be built or rendered to measure them.
@@ -912,6 +927,9 @@ def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int], *,
     path = workspace_dir / "libero" / "fixture_looks.yaml"
     cache = (yaml.safe_load(path.read_text(encoding="utf-8")) or {}) if path.is_file() else {}
     worlds: dict[str, dict[str, Any]] = cache.get("worlds", {}) if cache.get("_method") == _FIXTURE_LOOKS_METHOD else {}
+    if measure:  # measured here, even where the package has them
+        worlds = {w: e for w, e in worlds.items() if e.get("source") != "shipped"}
+    shipped = {} if measure else shipped_worlds("fixtures", _FIXTURE_LOOKS_METHOD)
     out: dict[int, dict[str, dict[str, Any]]] = {}
     for i in tasks:
         key = f"{suite}/{i}"
@@ -921,12 +939,16 @@ def _fixture_looks(workspace_dir: Path, suite: str, tasks: list[int], *,
             raise BenchError(f"LIBERO {key}: fixture looks could not be measured: {exc}") from exc
         world = _fixture_world(problem)
         if world not in worlds:
-            logger.info("LIBERO bench: measuring the fixture looks of %s on generated scenes", key)
-            try:
-                with _world_target(world_targets, suite, i, "libero_fixture_looks") as target:
-                    worlds[world] = {"measured_as": key, "looks": measure_fixture_looks(target)}
-            except TargetError as exc:
-                raise BenchError(f"LIBERO {key}: fixture looks could not be measured: {exc}") from exc
+            if world in shipped:
+                logger.info("LIBERO bench: the fixture looks of %s from the shipped looks", key)
+                worlds[world] = {**shipped[world], "source": "shipped"}
+            else:
+                logger.info("LIBERO bench: measuring the fixture looks of %s on generated scenes", key)
+                try:
+                    with _world_target(world_targets, suite, i, "libero_fixture_looks") as target:
+                        worlds[world] = {"measured_as": key, "looks": measure_fixture_looks(target)}
+                except TargetError as exc:
+                    raise BenchError(f"LIBERO {key}: fixture looks could not be measured: {exc}") from exc
             path.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_text(path, "# Looks of LIBERO's fixtures (size, top, place patch, knob, drawers) per world, measured\n"
                                     "# on generated scenes by the project's perceiver (phyagentos.targets.libero.descriptors),\n"

@@ -104,6 +104,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--generated", action="store_true",
                        help="LIBERO suites: episodes are scenes of LIBERO's placement sampler seeded with --seeds, not "
                             "its init states (a development split: same tasks and checker, never a LIBERO score)")
+    bench.add_argument("--measure-looks", action="store_true",
+                       help="LIBERO suites: measure each world's object and fixture looks on generated scenes in this "
+                            "workspace instead of taking the looks shipped with the package (measured the same way "
+                            "once; another renderer or asset version may want its own)")
 
     val = sub.add_parser("validate", help="validate a goal graph and print its DAG")
     val.add_argument("goal_graph", type=goal_graph_arg, help="goal graph file, or a shipped example's name")
@@ -207,7 +211,8 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
     suite = args.suite
     from phyagentos.bench.libero import is_libero_suite, load_skill_defaults, prepare_libero_suite  # noqa: PLC0415
 
-    for flag, given in (("--skill-defaults", args.skill_defaults is not None), ("--generated", args.generated)):
+    for flag, given in (("--skill-defaults", args.skill_defaults is not None), ("--generated", args.generated),
+                        ("--measure-looks", args.measure_looks)):
         if given and not is_libero_suite(suite):
             err.print(f"[red]{flag} applies to LIBERO suites only, not {suite!r}[/red]")
             return EXIT_BAD_INPUT
@@ -215,7 +220,8 @@ def _cmd_bench(args, out: Console, err: Console) -> int:
         try:
             fixed = load_skill_defaults(args.skill_defaults) if args.skill_defaults is not None else None
             suite, tasks, seeds = prepare_libero_suite(suite, args.workspace, tasks=tasks, seeds=seeds,
-                                                       skill_defaults=fixed, generated=args.generated)
+                                                       skill_defaults=fixed, generated=args.generated,
+                                                       measure_looks=args.measure_looks)
         except BenchError as exc:
             err.print(f"[red]{str(exc).splitlines()[0]}[/red]")
             for line in exc.problems:
